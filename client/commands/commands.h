@@ -1,0 +1,21 @@
+// The `esg` CLI verbs. Each Register* adds one CLI11 subcommand to the app; its callback runs the
+// command and stores the process exit code in *exit_code (0 success, 1 runtime failure, 2 bad
+// arguments). Human-readable output by default, one JSON document on stdout with --json.
+#ifndef ESG_CLIENT_COMMANDS_COMMANDS_H_
+#define ESG_CLIENT_COMMANDS_COMMANDS_H_
+
+#include <string>
+
+#include "CLI/CLI.hpp"
+
+namespace esg::client {
+
+struct GlobalOptions {
+  std::string server = "127.0.0.1:50051";  // --server, before or after the verb
+};
+
+void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code);
+
+}  // namespace esg::client
+
+#endif  // ESG_CLIENT_COMMANDS_COMMANDS_H_
