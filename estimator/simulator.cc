@@ -1,0 +1,369 @@
+#include "estimator/simulator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/random.h"
+#include "estimator/rotation.h"
+#include "estimator/spin_axis.h"
+#include "estimator/status_macros.h"
+
+namespace esg::estimator {
+
+using Eigen::Matrix3d;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+
+namespace {
+
+// Random-stream ids (DeriveSeed). Gyro streams: kGyroStreamBase + 16 * id + offset.
+constexpr uint64_t kStarTrackerNoiseStream = 1;
+constexpr uint64_t kStarTrackerOutlierStream = 2;
+constexpr uint64_t kStarTrackerInvalidStream = 3;
+constexpr uint64_t kGyroStreamBase = 100;
+constexpr uint64_t kReadoutOffset = 0;
+constexpr uint64_t kVoltageOffset = 1;
+constexpr uint64_t kRandomWalkOffset = 2;
+
+constexpr double kMaxFrames = 1e7;
+constexpr double kMaxSteps = 1e10;
+
+uint64_t GyroStream(int id, uint64_t offset) { return kGyroStreamBase + 16 * id + offset; }
+
+absl::Status FiniteAtLeast(double x, double min, const std::string& field) {
+  if (!std::isfinite(x) || x < min) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: must be finite and >= %g, got %g", field, min, x));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Positive(double x, const std::string& field) {
+  if (!std::isfinite(x) || !(x > 0.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: must be finite and > 0, got %g", field, x));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status FiniteVector(const Vector3d& v, const std::string& field) {
+  if (!v.allFinite()) {
+    return absl::InvalidArgumentError(absl::StrFormat("%s: values must be finite", field));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status Probability(double p, const std::string& field) {
+  if (!(p >= 0.0 && p <= 1.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: must be a probability in [0, 1], got %g", field, p));
+  }
+  return absl::OkStatus();
+}
+
+int64_t NumFrames(const SimulationSpec& spec) {
+  // Frames at m * telemetry_step <= duration (1e-9 relative slack for rounding).
+  return static_cast<int64_t>(std::floor(spec.duration / spec.telemetry_step * (1.0 + 1e-12) +
+                                         1e-9)) + 1;
+}
+
+DriftCoefficients EffectiveCoefficients(const GyroTruth& truth, const GyroConfig& config) {
+  DriftCoefficients c = truth.drift.value_or(config.model);
+  const DisplacementTerms d =
+      DisplacementToC1C2(truth.rotor_displacement_k, truth.c10_per_m, truth.c20_per_m);
+  c.C1 += d.C1;
+  c.C2 += d.C2;
+  return c;
+}
+
+// Everything the loop needs per running gyro, computed once.
+struct GyroState {
+  int id = 0;
+  Matrix3d C_b_k;  // true mounting
+  Matrix3d C_k_b;
+  DriftCoefficients coefficients;
+  Vector3d h_in;
+  Vector3d dw_in_prev = Vector3d::Zero();  // last step's drift, for the midpoint predictor
+  Vector3d dw_rw_in = Vector3d::Zero();    // random-walk drift, inertial axes
+  double rw_intensity = 0.0;               // [rad/s/sqrt(s)]
+  double readout_noise = 0.0;
+  double voltage_noise = 0.0;
+  Vector3d u_offset_k;  // eq. (3) inverse of the displacement [V]
+  std::optional<GyroFault> fault;
+  Rng readout_rng;
+  Rng voltage_rng;
+  Rng rw_rng;
+
+  GyroState(int gyro_id, uint64_t seed)
+      : id(gyro_id),
+        readout_rng(DeriveSeed(seed, GyroStream(gyro_id, kReadoutOffset))),
+        voltage_rng(DeriveSeed(seed, GyroStream(gyro_id, kVoltageOffset))),
+        rw_rng(DeriveSeed(seed, GyroStream(gyro_id, kRandomWalkOffset))) {}
+
+  // Fault drift step in case axes at time t.
+  Vector3d FaultDrift_k(double t) const {
+    if (fault && fault->kind == GyroFault::Kind::kDriftStep && t >= fault->time) {
+      return fault->value;
+    }
+    return Vector3d::Zero();
+  }
+};
+
+}  // namespace
+
+Vector3d DefaultInitialSpinAxis(int id) {
+  switch (id) {
+    case 1:
+      return Vector3d(0.2, 0.3, 0.93).normalized();
+    case 2:
+      return Vector3d(0.93, 0.2, 0.3).normalized();
+    case 3:
+      return Vector3d(0.3, 0.93, 0.2).normalized();
+    default:
+      return Vector3d(-0.5, 0.5, 0.7).normalized();
+  }
+}
+
+bool GyroRuns(const SimulationSpec& spec, int id) {
+  if (id < 1 || id > kMaxGyros) return false;
+  const GyroTruth& truth = spec.gyros[id - 1];
+  if (truth.running.has_value()) return *truth.running;
+  if (spec.config.FindGyro(id) == nullptr) return false;
+  const auto& w = spec.config.working_pair;
+  const auto& r = spec.config.reserve_pair;
+  return id == w[0] || id == w[1] || id == r[0] || id == r[1];
+}
+
+absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
+  RETURN_IF_ERROR(ValidateConfig(spec.config));
+  if (spec.profile == nullptr) {
+    return absl::InvalidArgumentError("profile: an attitude profile is required");
+  }
+  RETURN_IF_ERROR(Positive(spec.duration, "duration"));
+  RETURN_IF_ERROR(Positive(spec.telemetry_step, "telemetry_step"));
+  RETURN_IF_ERROR(Positive(spec.integration_rate_hz, "integration_rate_hz"));
+  if (spec.duration / spec.telemetry_step > kMaxFrames) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "telemetry_step: %g s over %g s gives more than %g frames", spec.telemetry_step,
+        spec.duration, kMaxFrames));
+  }
+  if (spec.duration * spec.integration_rate_hz > kMaxSteps) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "integration_rate_hz: %g Hz over %g s gives more than %g steps", spec.integration_rate_hz,
+        spec.duration, kMaxSteps));
+  }
+  for (int id = 1; id <= kMaxGyros; ++id) {
+    const GyroTruth& g = spec.gyros[id - 1];
+    const std::string f = absl::StrFormat("gyros[%d] (gyro %d)", id - 1, id);
+    if (g.running.value_or(false) && spec.config.FindGyro(id) == nullptr) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(f, ".running: gyro ", id, " is not in the configuration"));
+    }
+    if (g.drift && !g.drift->AsVector().allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat(f, ".drift: values must be finite"));
+    }
+    RETURN_IF_ERROR(FiniteVector(g.rotor_displacement_k, f + ".rotor_displacement_k"));
+    if ((g.rotor_displacement_k.array().abs() >= spec.config.suspension.gap).any()) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.rotor_displacement_k: a component reaches the suspension gap %g m", f,
+          spec.config.suspension.gap));
+    }
+    if (!std::isfinite(g.c10_per_m) || !std::isfinite(g.c20_per_m)) {
+      return absl::InvalidArgumentError(absl::StrCat(f, ".c10_per_m/c20_per_m: must be finite"));
+    }
+    RETURN_IF_ERROR(FiniteAtLeast(g.voltage_noise, 0.0, f + ".voltage_noise"));
+    RETURN_IF_ERROR(FiniteVector(g.misalignment_b, f + ".misalignment_b"));
+    if (g.random_walk) RETURN_IF_ERROR(FiniteAtLeast(*g.random_walk, 0.0, f + ".random_walk"));
+    if (g.readout_noise) {
+      RETURN_IF_ERROR(FiniteAtLeast(*g.readout_noise, 0.0, f + ".readout_noise"));
+    }
+    if (g.fault) {
+      if (!std::isfinite(g.fault->time)) {
+        return absl::InvalidArgumentError(absl::StrCat(f, ".fault.time: must be finite"));
+      }
+      RETURN_IF_ERROR(FiniteVector(g.fault->value, f + ".fault.value"));
+    }
+    if (g.initial_h_k && (!g.initial_h_k->allFinite() || g.initial_h_k->norm() < 1e-9)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(f, ".initial_h_k: must be a finite non-zero vector"));
+    }
+  }
+  const StarTrackerTruth& st = spec.star_tracker;
+  if (st.noise) {
+    if (!st.noise->allFinite() || (st.noise->array() < 0.0).any()) {
+      return absl::InvalidArgumentError("star_tracker.noise: values must be finite and >= 0");
+    }
+  }
+  RETURN_IF_ERROR(Probability(st.outlier_probability, "star_tracker.outlier_probability"));
+  RETURN_IF_ERROR(FiniteAtLeast(st.outlier_size, 0.0, "star_tracker.outlier_size"));
+  RETURN_IF_ERROR(Probability(st.invalid_probability, "star_tracker.invalid_probability"));
+  for (size_t i = 0; i < st.outages.size(); ++i) {
+    const auto& [a, b] = st.outages[i];
+    if (!std::isfinite(a) || !std::isfinite(b) || !(a < b)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "star_tracker.outages[%d]: need finite start < end, got [%g, %g] s", i, a, b));
+    }
+  }
+  if (!std::isfinite(st.latency)) {
+    return absl::InvalidArgumentError("star_tracker.latency: must be finite");
+  }
+  RETURN_IF_ERROR(FiniteVector(st.misalignment_b, "star_tracker.misalignment_b"));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
+                                          const std::function<void(double fraction)>& progress) {
+  RETURN_IF_ERROR(ValidateSimulationSpec(spec));
+  const AttitudeProfile& profile = *spec.profile;
+  const SpacecraftConfig& config = spec.config;
+  const double dt = 1.0 / spec.integration_rate_hz;
+  const int64_t num_frames = NumFrames(spec);
+
+  SimulationResult result;
+  Recording& recording = result.recording;
+  recording.metadata["spacecraft_id"] = config.spacecraft_id;
+  recording.metadata["seed"] = absl::StrCat(spec.seed);
+  recording.metadata["profile"] = profile.Describe();
+  recording.metadata["source"] = "esg simulator";
+  recording.metadata["telemetry_step_s"] = absl::StrFormat("%.17g", spec.telemetry_step);
+  recording.metadata["integration_rate_hz"] = absl::StrFormat("%.17g", spec.integration_rate_hz);
+  recording.frames.reserve(num_frames);
+  result.truth.reserve(num_frames);
+
+  // Gyro set-up.
+  std::vector<GyroState> gyros;
+  const Matrix3d C_in_b0 = profile.Attitude(0.0).toRotationMatrix();
+  for (int id = 1; id <= kMaxGyros; ++id) {
+    if (!GyroRuns(spec, id)) continue;
+    const GyroTruth& truth = spec.gyros[id - 1];
+    const GyroConfig& gc = *config.FindGyro(id);
+    GyroState g(id, spec.seed);
+    g.C_b_k = ExpMatrix(truth.misalignment_b) * gc.C_b_k;
+    g.C_k_b = g.C_b_k.transpose();
+    g.coefficients = EffectiveCoefficients(truth, gc);
+    g.rw_intensity = truth.random_walk.value_or(config.random_walk);
+    g.readout_noise = truth.readout_noise.value_or(config.readout_noise);
+    g.voltage_noise = truth.voltage_noise;
+    const SuspensionConfig& s = config.suspension;
+    for (int axis = 0; axis < 3; ++axis) {
+      g.u_offset_k(axis) = OffsetVoltageFromDisplacement(
+          truth.rotor_displacement_k(axis), s.amplifier_gain, s.reference_voltage, s.gap);
+    }
+    g.fault = truth.fault;
+    const Vector3d h_k0 = truth.initial_h_k.value_or(DefaultInitialSpinAxis(id)).normalized();
+    g.h_in = (C_in_b0 * g.C_b_k * h_k0).normalized();
+    result.true_coefficients[id - 1] = g.coefficients;
+    gyros.push_back(std::move(g));
+  }
+
+  const StarTrackerTruth& st = spec.star_tracker;
+  const Vector3d st_noise = st.noise.value_or(config.star_tracker.noise);
+  const Quaterniond q_st_misalignment = ExpQuaternion(st.misalignment_b);
+  Rng st_noise_rng(DeriveSeed(spec.seed, kStarTrackerNoiseStream));
+  Rng st_outlier_rng(DeriveSeed(spec.seed, kStarTrackerOutlierStream));
+  Rng st_invalid_rng(DeriveSeed(spec.seed, kStarTrackerInvalidStream));
+
+  // One integration step [t0, t0 + h]: drift at the midpoint (attitude at t_mid, h_in
+  // extrapolated half a step with the previous drift), then h_in turned by dw_in * h.
+  auto step = [&](double t0, double h) {
+    const double t_mid = t0 + 0.5 * h;
+    const Matrix3d C_in_b = profile.Attitude(t_mid).toRotationMatrix();
+    const double sqrt_h = std::sqrt(h);
+    for (GyroState& g : gyros) {
+      const Matrix3d C_in_k = C_in_b * g.C_b_k;
+      const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
+      const Vector3d h_k = C_in_k.transpose() * h_mid;
+      const Vector3d dw_k = DriftRate_k(g.coefficients, h_k) + g.FaultDrift_k(t_mid);
+      const Vector3d dw_in = C_in_k * dw_k + g.dw_rw_in;
+      g.h_in = StepSpinAxis(g.h_in, dw_in, h);
+      g.dw_in_prev = dw_in;
+      if (g.rw_intensity > 0.0) g.dw_rw_in += (g.rw_intensity * sqrt_h) * g.rw_rng.Normal3();
+    }
+  };
+
+  const int64_t progress_every = std::max<int64_t>(1, num_frames / 100);
+  double t = 0.0;
+  int64_t grid_steps = 0;  // completed steps of the dt grid
+  for (int64_t m = 0; m < num_frames; ++m) {
+    const double t_m = static_cast<double>(m) * spec.telemetry_step;
+    // Integrate to t_m on the dt grid (a partial step where t_m falls between grid points).
+    while (t < t_m) {
+      double next_grid = static_cast<double>(grid_steps + 1) * dt;
+      if (std::abs(next_grid - t_m) <= 1e-9 * dt) next_grid = t_m;
+      const double t_next = std::min(next_grid, t_m);
+      step(t, t_next - t);
+      t = t_next;
+      if (t_next == next_grid) ++grid_steps;
+    }
+
+    TelemetryFrame frame;
+    TruthSample truth;
+    frame.time = spec.start + absl::Seconds(t_m);
+    truth.time = frame.time;
+    truth.q_in_b = profile.Attitude(t_m);
+    const Matrix3d C_b_in = truth.q_in_b.toRotationMatrix().transpose();
+
+    for (GyroState& g : gyros) {
+      GyroTruthSample gt;
+      gt.h_in = g.h_in;
+      gt.h_k = (g.C_k_b * (C_b_in * g.h_in)).normalized();
+      gt.C_b_k = g.C_b_k;
+      gt.dw_k = DriftRate_k(g.coefficients, gt.h_k) + g.FaultDrift_k(t_m) +
+                g.C_k_b * (C_b_in * g.dw_rw_in);
+      // Readout noise: a small rotation perpendicular to h_k (two draws, always).
+      const Vector3d e1 = AnyPerpendicular(gt.h_k);
+      const Vector3d e2 = gt.h_k.cross(e1);
+      const double n1 = g.readout_rng.Normal();
+      const double n2 = g.readout_rng.Normal();
+      Vector3d h_meas = ExpMatrix(g.readout_noise * (n1 * e1 + n2 * e2)) * gt.h_k;
+      if (g.fault && g.fault->kind == GyroFault::Kind::kReadoutJump && t_m >= g.fault->time) {
+        h_meas = ExpMatrix(g.fault->value) * h_meas;
+      }
+      GyroReading reading;
+      reading.h_k = h_meas.normalized();
+      const Vector3d u_k = g.u_offset_k + g.voltage_noise * g.voltage_rng.Normal3();
+      reading.u_k_mv = u_k / kVoltsPerMv;
+      frame.gyros[g.id - 1] = reading;
+      truth.gyros[g.id - 1] = gt;
+    }
+
+    // Star tracker: every stream draws the same amount per frame whatever is used.
+    const Vector3d n = st_noise_rng.Normal3();
+    const double outlier_draw = st_outlier_rng.Uniform();
+    const Vector3d outlier_axis = st_outlier_rng.UnitVector();
+    const double outlier_angle = st.outlier_size * st_outlier_rng.Uniform(1.0, 3.0);
+    const double invalid_draw = st_invalid_rng.Uniform();
+    const bool in_outage = std::any_of(st.outages.begin(), st.outages.end(), [&](const auto& o) {
+      return t_m >= o.first && t_m < o.second;
+    });
+    if (!in_outage) {
+      const Quaterniond q_true_lagged =
+          st.latency == 0.0 ? truth.q_in_b : profile.Attitude(t_m - st.latency);
+      Quaterniond q_meas =
+          q_true_lagged * q_st_misalignment * ExpQuaternion(st_noise.cwiseProduct(n));
+      if (outlier_draw < st.outlier_probability) {
+        q_meas = q_meas * ExpQuaternion(outlier_angle * outlier_axis);
+        truth.star_tracker_outlier = true;
+        truth.star_tracker_outlier_angle = outlier_angle;
+      }
+      StarTrackerReading reading;
+      reading.q_in_b = Canonical(q_meas.normalized());
+      reading.valid = !(invalid_draw < st.invalid_probability);
+      frame.star_tracker = reading;
+    }
+
+    recording.frames.push_back(std::move(frame));
+    result.truth.push_back(std::move(truth));
+    if (progress && m % progress_every == 0) {
+      progress(static_cast<double>(m) / static_cast<double>(num_frames));
+    }
+  }
+  if (progress) progress(1.0);
+  return result;
+}
+
+}  // namespace esg::estimator

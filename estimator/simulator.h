@@ -1,0 +1,159 @@
+// Seeded ESG / star-tracker telemetry simulator (DESIGN §1, §3, §4, §7; the paper's flight-test
+// setting, section 3: telemetry every 60 s, 8 Hz integration). It propagates each running gyro's
+// true inertial spin axis h_in with the drift model of eq. (1), (8)-(10) (DESIGN §3) plus a random
+// walk (model (11) style) and optional faults, and samples what the spacecraft telemeters: h_k with
+// readout noise, the suspension offset voltages of eq. (3) and the star-tracker quaternion.
+//
+// Truth model (all SI):
+// - Mounting: C_b_k_true = ExpMatrix(misalignment_b) * C_b_k(config), i.e. the case frame turned
+//   by the small rotation vector misalignment_b expressed in body axes.
+// - Drift: dw_k = DriftRate_k(coefficients, h_k) with coefficients = drift (default the config
+//   model) + DisplacementToC1C2(rotor_displacement_k, c10_per_m, c20_per_m) added to C1, C2;
+//   plus a fault drift step (case axes) after its time; plus the random-walk drift vector dw_rw_in
+//   (inertial axes), which starts at zero and takes an independent N(0, q dt I) step after every
+//   integration step (q = random_walk^2).
+// - Propagation: h_in stepped at integration_rate_hz with StepSpinAxis(h_in, dw_in, dt),
+//   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
+//   extrapolated half a step with the previous step's drift).
+// - Gyro reading at each telemetry time: h_k_meas = Exp(jump_k) Exp(n) h_k_true, n perpendicular to
+//   h_k_true with independent N(0, readout_noise^2) components on two perpendicular axes; jump_k is
+//   the readout_jump fault (zero before its time). Voltages u_k = eq. (3) inverse of the rotor
+//   displacement per case axis plus N(0, voltage_noise^2) each, written in mV.
+// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(n) [(x) Exp(o)],
+//   n = (noise_x N, noise_y N, noise_z N) about body axes, o an outlier with probability
+//   outlier_probability: uniformly random axis, angle uniform in [outlier_size, 3 outlier_size].
+//   Inside an outage no star-tracker field; with probability invalid_probability valid = false.
+// Every random source has its own stream (DeriveSeed(seed, stream)), and every stream draws the
+// same numbers per frame whether or not a sample is used, so turning on outliers, outages or
+// invalid flags never changes the gyro noise or the star-tracker noise.
+#ifndef ESG_ESTIMATOR_SIMULATOR_H_
+#define ESG_ESTIMATOR_SIMULATOR_H_
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/Geometry"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "estimator/attitude_profile.h"
+#include "estimator/conventions.h"
+#include "estimator/drift_model.h"
+#include "estimator/spacecraft_config.h"
+#include "estimator/telemetry.h"
+#include "estimator/units.h"
+
+namespace esg::estimator {
+
+// Paper sizes (section 1.1): C10 ~ 0.05 deg/h and C20 ~ 0.015 deg/h per um of rotor
+// displacement, so 3 um gives C ~ 0.2 deg/h.
+inline constexpr double kDefaultC10PerM = DegPerHourToRadPerSec(0.05) / kMetresPerUm;  // [rad/s/m]
+inline constexpr double kDefaultC20PerM = DegPerHourToRadPerSec(0.015) / kMetresPerUm;
+
+struct GyroFault {
+  enum class Kind {
+    kReadoutJump,  // value: rotation vector [rad] in case axes added to every reading from time on
+    kDriftStep,    // value: extra constant drift [rad/s] in case axes from time on
+  };
+  double time = 0.0;  // [s since the simulation start]
+  Kind kind = Kind::kReadoutJump;
+  Eigen::Vector3d value = Eigen::Vector3d::Zero();
+};
+
+struct GyroTruth {
+  // Whether the gyro runs. Default (nullopt): it runs when it is configured and belongs to the
+  // working or the reserve pair; so with the usual pairs {1,2}, {1,3} gyros 1-3 run and gyro 4,
+  // the cold spare, is off. A running gyro must be configured.
+  std::optional<bool> running;
+  // True drift coefficients [rad/s]; default the configuration's model.
+  std::optional<DriftCoefficients> drift;
+  // Rotor displacement from the suspension centre [m], case axes. Adds C1, C2 through
+  // DisplacementToC1C2 (eq. (8)-(10)) and offsets the suspension voltages through eq. (3).
+  Eigen::Vector3d rotor_displacement_k = Eigen::Vector3d::Zero();
+  double c10_per_m = kDefaultC10PerM;  // [rad/s per m]
+  double c20_per_m = kDefaultC20PerM;  // [rad/s per m]
+  double voltage_noise = 1e-3;         // 1-sigma per axis [V]
+  // Mounting misalignment, small rotation vector in body axes [rad] (see file comment).
+  Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();
+  // Random-walk intensity [rad/s/sqrt(s)]; default config.random_walk.
+  std::optional<double> random_walk;
+  // Readout noise 1-sigma per perpendicular axis [rad]; default config.readout_noise.
+  std::optional<double> readout_noise;
+  std::optional<GyroFault> fault;
+  // Spin axis in case axes at the start [1] (normalised). Default per gyro id (well separated
+  // even with identical mountings): 1: (0.2, 0.3, 0.93), 2: (0.93, 0.2, 0.3), 3: (0.3, 0.93, 0.2),
+  // 4: (-0.5, 0.5, 0.7), each normalised.
+  std::optional<Eigen::Vector3d> initial_h_k;
+};
+
+struct StarTrackerTruth {
+  // 1-sigma noise about body x, y, z [rad]; default config.star_tracker.noise.
+  std::optional<Eigen::Vector3d> noise;
+  double outlier_probability = 0.0;  // per sample, [0, 1]
+  double outlier_size = 0.0;         // [rad]; outlier angle uniform in [size, 3 size]
+  // Outages [start, end) in seconds since the simulation start: no star-tracker field.
+  std::vector<std::pair<double, double>> outages;
+  // [s]; positive: the quaternion stamped t is the attitude at t - latency.
+  double latency = 0.0;
+  // Star-tracker misalignment, rotation vector [rad] (see file comment).
+  Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();
+  double invalid_probability = 0.0;  // per sample, [0, 1]
+};
+
+struct SimulationSpec {
+  SpacecraftConfig config;
+  std::array<GyroTruth, kMaxGyros> gyros;  // index id - 1
+  StarTrackerTruth star_tracker;
+  ProfilePtr profile;  // required
+  absl::Time start = absl::FromUnixSeconds(1551398400);  // 2019-03-01T00:00:00Z
+  double duration = 86400.0;      // [s], > 0; frames at 0, step, 2 step ... <= duration
+  double telemetry_step = 60.0;   // [s]
+  double integration_rate_hz = 8.0;
+  uint64_t seed = 1;
+};
+
+struct GyroTruthSample {
+  Eigen::Vector3d h_in;     // true spin axis, inertial axes
+  Eigen::Vector3d h_k;      // true spin axis, case axes (noise-free)
+  Eigen::Vector3d dw_k;     // true total drift [rad/s], case axes (model + displacement +
+                            // random walk + fault step)
+  Eigen::Matrix3d C_b_k;    // true mounting
+};
+
+struct TruthSample {
+  absl::Time time;
+  Eigen::Quaterniond q_in_b;  // true attitude at time
+  std::array<std::optional<GyroTruthSample>, kMaxGyros> gyros;  // empty: gyro off
+  bool star_tracker_outlier = false;
+  double star_tracker_outlier_angle = 0.0;  // [rad]
+};
+
+struct SimulationResult {
+  // Metadata: spacecraft_id, seed, profile, source.
+  Recording recording;
+  std::vector<TruthSample> truth;  // one per frame
+  // Effective true drift coefficients per gyro (model + displacement terms) [rad/s]; empty: off.
+  std::array<std::optional<DriftCoefficients>, kMaxGyros> true_coefficients;
+};
+
+// Default starting spin axis in case axes for gyro `id` (see GyroTruth::initial_h_k).
+Eigen::Vector3d DefaultInitialSpinAxis(int id);
+
+// Whether gyro `id` runs under spec (GyroTruth::running rule).
+bool GyroRuns(const SimulationSpec& spec, int id);
+
+// Checks the spec; InvalidArgument naming the field (e.g. "duration: must be > 0 s, got -1").
+absl::Status ValidateSimulationSpec(const SimulationSpec& spec);
+
+// Runs the simulation. progress, when set, is called with the fraction done in [0, 1] about 100
+// times and once with 1. Errors: InvalidArgument from ValidateSimulationSpec.
+absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
+                                          const std::function<void(double fraction)>& progress = {});
+
+}  // namespace esg::estimator
+
+#endif  // ESG_ESTIMATOR_SIMULATOR_H_
