@@ -1,0 +1,535 @@
+// Proto <-> estimator conversions (see convert.h): configuration (DESIGN §7 JSON), drift model
+// (DESIGN §3), telemetry frames (DESIGN §7) and timestamps.
+#include "proto/convert.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/match.h"
+#include "absl/strings/str_format.h"
+#include "estimator/conventions.h"
+#include "estimator/rotation.h"
+#include "estimator/status_macros.h"
+#include "estimator/units.h"
+#include "google/protobuf/repeated_field.h"
+#include "google/protobuf/util/json_util.h"
+
+namespace esg::proto_convert {
+
+namespace {
+
+using ::google::protobuf::RepeatedField;
+
+// Abseil 20220623 in Debian has its own absl::string_view (not std::string_view).
+absl::string_view AbslView(std::string_view s) { return absl::string_view(s.data(), s.size()); }
+
+absl::Status FieldError(absl::string_view field, absl::string_view reason) {
+  return absl::InvalidArgumentError(absl::StrCat(field, ": ", reason));
+}
+
+// A 3-vector that may be empty (zero).
+absl::StatusOr<Eigen::Vector3d> OptionalVector3(const RepeatedField<double>& values,
+                                               absl::string_view field) {
+  if (values.empty()) return Eigen::Vector3d::Zero();
+  if (values.size() != 3) {
+    return FieldError(field, absl::StrFormat("expected 3 values, got %d", values.size()));
+  }
+  return Eigen::Vector3d(values[0], values[1], values[2]);
+}
+
+// Unit-converted values are written with 15 significant digits, so that a configuration file
+// reads 0.12 rather than 0.11999999999999998 after deg/h -> rad/s -> deg/h (the SI value read back
+// differs by at most 5e-16 relative, far below any physical meaning).
+double Tidy(double x) {
+  if (x == 0.0 || !std::isfinite(x)) return x;
+  char buf[32];
+  std::snprintf(buf, sizeof(buf), "%.15g", x);
+  return std::strtod(buf, nullptr);
+}
+
+double TidyDegPerHour(double x) { return Tidy(estimator::RadPerSecToDegPerHour(x)); }
+double TidyArcsec(double x) { return Tidy(estimator::RadToArcsec(x)); }
+
+void SetVector3(const Eigen::Vector3d& v, RepeatedField<double>* out) {
+  out->Clear();
+  for (int i = 0; i < 3; ++i) out->Add(v[i]);
+}
+
+absl::StatusOr<std::array<int, 2>> Pair(const RepeatedField<int32_t>& values,
+                                        absl::string_view field) {
+  if (values.size() != 2) {
+    return FieldError(field, absl::StrFormat("expected 2 gyro ids, got %d", values.size()));
+  }
+  return std::array<int, 2>{values[0], values[1]};
+}
+
+// Checks finiteness of every value, then the norm; renormalises beyond kRenormaliseAbove.
+template <int N>
+absl::StatusOr<Eigen::Matrix<double, N, 1>> UnitVector(const RepeatedField<double>& values,
+                                                       absl::string_view field) {
+  if (values.size() != N) {
+    return FieldError(field, absl::StrFormat("expected %d values, got %d", N, values.size()));
+  }
+  Eigen::Matrix<double, N, 1> v;
+  for (int i = 0; i < N; ++i) {
+    if (!std::isfinite(values[i])) {
+      return FieldError(absl::StrFormat("%s[%d]", field, i),
+                        absl::StrFormat("%g is not finite", values[i]));
+    }
+    v[i] = values[i];
+  }
+  const double norm = v.norm();
+  if (!(std::abs(norm - 1.0) <= kUnitNormTolerance)) {
+    return FieldError(field, absl::StrFormat("norm %.6g is not 1 (tolerance %g)", norm,
+                                             kUnitNormTolerance));
+  }
+  if (std::abs(norm - 1.0) > kRenormaliseAbove) v /= norm;
+  return v;
+}
+
+absl::Status AllFinite(const RepeatedField<double>& values, absl::string_view field) {
+  for (int i = 0; i < values.size(); ++i) {
+    if (!std::isfinite(values[i])) {
+      return FieldError(absl::StrFormat("%s[%d]", field, i),
+                        absl::StrFormat("%g is not finite", values[i]));
+    }
+  }
+  return absl::OkStatus();
+}
+
+// Protobuf 3.21 reports an unknown field as "(gyros[0]) bogus: Cannot find field." (or without the
+// parenthesised path at the top level); rewritten to the "<field>: <reason>" form of convert.h.
+std::string JsonErrorMessage(const std::string& message) {
+  constexpr absl::string_view kUnknown = ": Cannot find field.";
+  const absl::string_view m(message);
+  if (absl::EndsWith(m, kUnknown)) {
+    absl::string_view head = m.substr(0, m.size() - kUnknown.size());
+    std::string path;
+    if (absl::StartsWith(head, "(")) {
+      const size_t close = head.find(") ");
+      if (close != absl::string_view::npos) {
+        path = absl::StrCat(head.substr(1, close - 1), ".");
+        head = head.substr(close + 2);
+      }
+    }
+    return absl::StrCat(path, head, ": unknown field");
+  }
+  return absl::StrCat("config JSON: ", message);
+}
+
+// Re-indents protobuf's compact JSON: 2-space indent, one object member per line, arrays of
+// numbers on one line ("caseToBody": [1, 0, 0, 0, 1, 0, 0, 0, 1]), as a human would write the
+// DESIGN §7 file. Input is protobuf's own output, hence valid JSON.
+class JsonPrettyPrinter {
+ public:
+  explicit JsonPrettyPrinter(absl::string_view compact) : in_(compact) {}
+
+  std::string Print() {
+    Value(0);
+    out_ += '\n';
+    return std::move(out_);
+  }
+
+ private:
+  void Indent(int depth) { out_.append(2 * depth, ' '); }
+
+  // Copies a string token (with escapes) or a scalar.
+  void Scalar() {
+    if (in_[pos_] == '"') {
+      const size_t start = pos_++;
+      while (pos_ < in_.size() && in_[pos_] != '"') pos_ += in_[pos_] == '\\' ? 2 : 1;
+      ++pos_;
+      out_.append(in_.data() + start, pos_ - start);
+      return;
+    }
+    const size_t start = pos_;
+    while (pos_ < in_.size() && absl::string_view(",]}:").find(in_[pos_]) == absl::string_view::npos) ++pos_;
+    out_.append(in_.data() + start, pos_ - start);
+  }
+
+  // True when the array starting at pos_ ('[') holds no object or array.
+  bool FlatArray() const {
+    bool in_string = false;
+    for (size_t i = pos_ + 1; i < in_.size(); ++i) {
+      const char c = in_[i];
+      if (in_string) {
+        if (c == '\\') ++i;
+        else if (c == '"') in_string = false;
+      } else if (c == '"') {
+        in_string = true;
+      } else if (c == '[' || c == '{') {
+        return false;
+      } else if (c == ']') {
+        return true;
+      }
+    }
+    return true;
+  }
+
+  void Value(int depth) {
+    if (pos_ >= in_.size()) return;
+    const char c = in_[pos_];
+    if (c == '{' || c == '[') {
+      const char close = c == '{' ? '}' : ']';
+      const bool flat = c == '[' && FlatArray();
+      out_ += c;
+      ++pos_;
+      if (in_[pos_] == close) {
+        out_ += close;
+        ++pos_;
+        return;
+      }
+      bool first = true;
+      while (pos_ < in_.size()) {
+        if (!first) out_ += flat ? ", " : ",";
+        first = false;
+        if (!flat) {
+          out_ += '\n';
+          Indent(depth + 1);
+        }
+        if (c == '{') {
+          Scalar();  // key
+          ++pos_;    // ':'
+          out_ += ": ";
+        }
+        Value(depth + 1);
+        if (in_[pos_] == ',') {
+          ++pos_;
+          continue;
+        }
+        break;
+      }
+      if (!flat) {
+        out_ += '\n';
+        Indent(depth);
+      }
+      out_ += close;
+      ++pos_;
+      return;
+    }
+    Scalar();
+  }
+
+  absl::string_view in_;
+  size_t pos_ = 0;
+  std::string out_;
+};
+
+// Timestamp limits: 0001-01-01T00:00:00Z and 9999-12-31T23:59:59.999999999Z.
+constexpr int64_t kMinTimestampSeconds = -62135596800;
+constexpr int64_t kMaxTimestampSeconds = 253402300799;
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Drift model.
+
+absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
+                                                                 std::string_view field_name) {
+  const absl::string_view field = AbslView(field_name);
+  using estimator::DegPerHourToRadPerSec;
+  estimator::DriftCoefficients c;
+  c.k0 = DegPerHourToRadPerSec(proto.k0_deg_h());
+  ASSIGN_OR_RETURN(const Eigen::Vector3d c1_deg_h,
+                   OptionalVector3(proto.c1_deg_h(), absl::StrCat(field, ".c1DegH")));
+  ASSIGN_OR_RETURN(const Eigen::Vector3d c2_deg_h,
+                   OptionalVector3(proto.c2_deg_h(), absl::StrCat(field, ".c2DegH")));
+  ASSIGN_OR_RETURN(const Eigen::Vector3d mu_deg_h,
+                   OptionalVector3(proto.mu_deg_h(), absl::StrCat(field, ".muDegH")));
+  ASSIGN_OR_RETURN(const Eigen::Vector3d nu_deg_h,
+                   OptionalVector3(proto.nu_deg_h(), absl::StrCat(field, ".nuDegH")));
+  c.C1 = c1_deg_h.unaryExpr(&DegPerHourToRadPerSec);
+  c.C2 = c2_deg_h.unaryExpr(&DegPerHourToRadPerSec);
+  c.mu = mu_deg_h.unaryExpr(&DegPerHourToRadPerSec);
+  c.nu = nu_deg_h.unaryExpr(&DegPerHourToRadPerSec);
+  return c;
+}
+
+esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients) {
+  esg::v1::GyroDriftModel proto;
+  proto.set_k0_deg_h(TidyDegPerHour(coefficients.k0));
+  SetVector3(coefficients.C1.unaryExpr(&TidyDegPerHour), proto.mutable_c1_deg_h());
+  SetVector3(coefficients.C2.unaryExpr(&TidyDegPerHour), proto.mutable_c2_deg_h());
+  SetVector3(coefficients.mu.unaryExpr(&TidyDegPerHour), proto.mutable_mu_deg_h());
+  SetVector3(coefficients.nu.unaryExpr(&TidyDegPerHour), proto.mutable_nu_deg_h());
+  return proto;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Configuration.
+
+absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::SpacecraftConfig& proto) {
+  using estimator::ArcsecToRad;
+  estimator::SpacecraftConfig config;
+  config.spacecraft_id = proto.spacecraft_id();
+  for (int i = 0; i < proto.gyros_size(); ++i) {
+    const esg::v1::GyroConfig& g = proto.gyros(i);
+    const std::string prefix = absl::StrFormat("gyros[%d]", i);
+    estimator::GyroConfig gyro;
+    gyro.id = g.id();
+    if (g.case_to_body_size() != 9) {
+      return FieldError(absl::StrCat(prefix, ".caseToBody"),
+                        absl::StrFormat("expected 9 values (C_b_k row-major), got %d",
+                                        g.case_to_body_size()));
+    }
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) gyro.C_b_k(r, c) = g.case_to_body(3 * r + c);
+    }
+    ASSIGN_OR_RETURN(gyro.model, DriftModelFromProto(g.model(), absl::StrCat(prefix, ".model")));
+    ASSIGN_OR_RETURN(gyro.model_sigma,
+                     DriftModelFromProto(g.model_sigma(), absl::StrCat(prefix, ".modelSigma")));
+    gyro.misalignment_sigma = ArcsecToRad(g.misalignment_sigma_arcsec());
+    config.gyros.push_back(std::move(gyro));
+  }
+  ASSIGN_OR_RETURN(config.working_pair, Pair(proto.working_pair(), "workingPair"));
+  ASSIGN_OR_RETURN(config.reserve_pair, Pair(proto.reserve_pair(), "reservePair"));
+  ASSIGN_OR_RETURN(const Eigen::Vector3d noise_arcsec,
+                   OptionalVector3(proto.star_tracker().noise_arcsec(), "starTracker.noiseArcsec"));
+  config.star_tracker.noise = noise_arcsec.unaryExpr(&ArcsecToRad);
+  config.readout_noise = ArcsecToRad(proto.readout_noise_arcsec());
+  config.random_walk = estimator::DegPerHourSqrtHourToSi(proto.random_walk_deg_h_sqrt_h());
+
+  // Zero (absent) means the documented default, taken from the estimator's value types.
+  const estimator::SuspensionConfig default_suspension;
+  const esg::v1::SuspensionConfig& s = proto.suspension();
+  config.suspension.amplifier_gain =
+      s.amplifier_gain() != 0.0 ? s.amplifier_gain() : default_suspension.amplifier_gain;
+  config.suspension.reference_voltage = s.reference_voltage_v() != 0.0
+                                            ? s.reference_voltage_v()
+                                            : default_suspension.reference_voltage;
+  config.suspension.gap =
+      s.gap_um() != 0.0 ? s.gap_um() * estimator::kMetresPerUm : default_suspension.gap;
+
+  const estimator::FilterConfig default_filter;
+  const esg::v1::FilterConfig& f = proto.filter();
+  config.filter.integration_rate_hz = f.integration_rate_hz() != 0.0
+                                          ? f.integration_rate_hz()
+                                          : default_filter.integration_rate_hz;
+  config.filter.measurement_step =
+      f.measurement_step_s() != 0.0 ? f.measurement_step_s() : default_filter.measurement_step;
+  config.filter.innovation_kd =
+      f.innovation_kd() != 0.0 ? f.innovation_kd() : default_filter.innovation_kd;
+  config.filter.fault_threshold = ArcsecToRad(f.fault_threshold_arcsec());  // 0 = derived
+
+  RETURN_IF_ERROR(estimator::ValidateConfig(config));
+  return config;
+}
+
+esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& config) {
+  esg::v1::SpacecraftConfig proto;
+  proto.set_spacecraft_id(config.spacecraft_id);
+  for (const estimator::GyroConfig& gyro : config.gyros) {
+    esg::v1::GyroConfig* g = proto.add_gyros();
+    g->set_id(gyro.id);
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) g->add_case_to_body(gyro.C_b_k(r, c));  // exact, no unit
+    }
+    *g->mutable_model() = DriftModelToProto(gyro.model);
+    *g->mutable_model_sigma() = DriftModelToProto(gyro.model_sigma);
+    g->set_misalignment_sigma_arcsec(TidyArcsec(gyro.misalignment_sigma));
+  }
+  for (int id : config.working_pair) proto.add_working_pair(id);
+  for (int id : config.reserve_pair) proto.add_reserve_pair(id);
+  SetVector3(config.star_tracker.noise.unaryExpr(&TidyArcsec),
+             proto.mutable_star_tracker()->mutable_noise_arcsec());
+  proto.set_readout_noise_arcsec(TidyArcsec(config.readout_noise));
+  proto.set_random_walk_deg_h_sqrt_h(Tidy(estimator::SiToDegPerHourSqrtHour(config.random_walk)));
+  esg::v1::SuspensionConfig* s = proto.mutable_suspension();
+  s->set_amplifier_gain(config.suspension.amplifier_gain);
+  s->set_reference_voltage_v(config.suspension.reference_voltage);
+  s->set_gap_um(Tidy(config.suspension.gap / estimator::kMetresPerUm));
+  esg::v1::FilterConfig* f = proto.mutable_filter();
+  f->set_integration_rate_hz(config.filter.integration_rate_hz);
+  f->set_measurement_step_s(config.filter.measurement_step);
+  f->set_innovation_kd(config.filter.innovation_kd);
+  f->set_fault_threshold_arcsec(TidyArcsec(config.filter.fault_threshold));
+  return proto;
+}
+
+absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json) {
+  esg::v1::SpacecraftConfig proto;
+  google::protobuf::util::JsonParseOptions options;
+  options.ignore_unknown_fields = false;
+  const auto status = google::protobuf::util::JsonStringToMessage(
+      google::protobuf::StringPiece(json.data(), json.size()), &proto, options);
+  if (!status.ok()) {
+    return absl::InvalidArgumentError(
+        JsonErrorMessage(std::string(status.message().data(), status.message().size())));
+  }
+  return ConfigFromProto(proto);
+}
+
+std::string ConfigToJson(const estimator::SpacecraftConfig& config) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = false;  // JsonPrettyPrinter lays it out
+  options.always_print_primitive_fields = true;
+  options.preserve_proto_field_names = false;
+  std::string json;
+  // Printing a valid message cannot fail; an empty string signals the impossible case.
+  if (!google::protobuf::util::MessageToJsonString(ConfigToProto(config), &json, options).ok()) {
+    return std::string();
+  }
+  return JsonPrettyPrinter(json).Print();
+}
+
+absl::StatusOr<estimator::SpacecraftConfig> ReadConfigFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return absl::NotFoundError(
+        absl::StrCat("config file ", path, ": cannot open: ", std::strerror(errno)));
+  }
+  std::ostringstream content;
+  content << in.rdbuf();
+  if (in.bad()) return absl::UnavailableError(absl::StrCat("config file ", path, ": read failed"));
+  absl::StatusOr<estimator::SpacecraftConfig> config = ParseConfigJson(content.str());
+  if (!config.ok()) {
+    return absl::Status(config.status().code(), absl::StrCat(path, ": ", config.status().message()));
+  }
+  return config;
+}
+
+absl::Status WriteConfigFile(const std::string& path, const estimator::SpacecraftConfig& config) {
+  RETURN_IF_ERROR(estimator::ValidateConfig(config));
+  const std::string json = ConfigToJson(config);
+  if (json.empty()) return absl::InternalError("config: JSON printing failed");
+  const std::string tmp_path = path + ".tmp";
+  {
+    std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      return absl::UnavailableError(
+          absl::StrCat("config file ", tmp_path, ": cannot create: ", std::strerror(errno)));
+    }
+    out << json;
+    out.flush();
+    if (!out) {
+      return absl::UnavailableError(absl::StrCat("config file ", tmp_path, ": write failed"));
+    }
+  }
+  if (std::rename(tmp_path.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    std::remove(tmp_path.c_str());
+    return absl::UnavailableError(
+        absl::StrCat("config file ", path, ": cannot rename: ", std::strerror(err)));
+  }
+  return absl::OkStatus();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Telemetry frames.
+
+absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::TelemetryFrame& proto) {
+  estimator::TelemetryFrame frame;
+  if (!proto.has_time()) return FieldError("time", "missing");
+  absl::StatusOr<absl::Time> time = TimeFromProto(proto.time());
+  if (!time.ok()) return FieldError("time", time.status().message());
+  frame.time = *time;
+
+  for (int i = 0; i < proto.gyros_size(); ++i) {
+    const esg::v1::GyroReading& g = proto.gyros(i);
+    const std::string prefix = absl::StrFormat("gyros[%d]", i);
+    const int id = g.gyro_id();
+    if (id < 1 || id > estimator::kMaxGyros) {
+      return FieldError(absl::StrCat(prefix, ".gyro_id"),
+                        absl::StrFormat("%d is outside 1..%d", id, estimator::kMaxGyros));
+    }
+    std::optional<estimator::GyroReading>& slot = frame.gyros[id - 1];
+    if (slot.has_value()) {
+      return FieldError(absl::StrCat(prefix, ".gyro_id"),
+                        absl::StrFormat("gyro %d appears twice", id));
+    }
+    estimator::GyroReading reading;
+    ASSIGN_OR_RETURN(reading.h_k, UnitVector<3>(g.h_k(), absl::StrCat(prefix, ".h_k")));
+    if (!g.u_k_mv().empty()) {
+      const std::string field = absl::StrCat(prefix, ".u_k_mv");
+      if (g.u_k_mv_size() != 3) {
+        return FieldError(field, absl::StrFormat("expected 3 values or none, got %d",
+                                                 g.u_k_mv_size()));
+      }
+      RETURN_IF_ERROR(AllFinite(g.u_k_mv(), field));
+      reading.u_k_mv = Eigen::Vector3d(g.u_k_mv(0), g.u_k_mv(1), g.u_k_mv(2));
+    }
+    slot = std::move(reading);
+  }
+
+  if (proto.has_star_tracker()) {
+    const esg::v1::StarTrackerReading& st = proto.star_tracker();
+    estimator::StarTrackerReading reading;
+    reading.valid = st.valid();
+    if (st.valid()) {
+      ASSIGN_OR_RETURN(const Eigen::Vector4d q, UnitVector<4>(st.q_in_b(), "star_tracker.q_in_b"));
+      reading.q_in_b = estimator::QuaternionFromScalarFirst({q[0], q[1], q[2], q[3]});
+    } else if (!st.q_in_b().empty()) {
+      // Not carried, but a malformed value still points at a broken producer.
+      if (st.q_in_b_size() != 4) {
+        return FieldError("star_tracker.q_in_b",
+                          absl::StrFormat("expected 4 values or none, got %d", st.q_in_b_size()));
+      }
+      RETURN_IF_ERROR(AllFinite(st.q_in_b(), "star_tracker.q_in_b"));
+    }
+    frame.star_tracker = reading;
+  }
+  return frame;
+}
+
+esg::v1::TelemetryFrame FrameToProto(const estimator::TelemetryFrame& frame,
+                                     std::string spacecraft_id, int64_t sequence) {
+  esg::v1::TelemetryFrame proto;
+  proto.set_spacecraft_id(std::move(spacecraft_id));
+  proto.set_sequence(sequence);
+  *proto.mutable_time() = TimeToProto(frame.time);
+  for (int i = 0; i < estimator::kMaxGyros; ++i) {
+    const std::optional<estimator::GyroReading>& reading = frame.gyros[i];
+    if (!reading.has_value()) continue;
+    esg::v1::GyroReading* g = proto.add_gyros();
+    g->set_gyro_id(i + 1);
+    SetVector3(reading->h_k, g->mutable_h_k());
+    if (reading->u_k_mv.has_value()) SetVector3(*reading->u_k_mv, g->mutable_u_k_mv());
+  }
+  if (frame.star_tracker.has_value()) {
+    esg::v1::StarTrackerReading* st = proto.mutable_star_tracker();
+    st->set_valid(frame.star_tracker->valid);
+    if (frame.star_tracker->valid) {
+      for (double v : estimator::ToScalarFirst(frame.star_tracker->q_in_b)) st->add_q_in_b(v);
+    }
+  }
+  return proto;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Time.
+
+absl::StatusOr<absl::Time> TimeFromProto(const google::protobuf::Timestamp& timestamp) {
+  if (timestamp.seconds() < kMinTimestampSeconds || timestamp.seconds() > kMaxTimestampSeconds) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "seconds %d is outside 0001-01-01..9999-12-31", timestamp.seconds()));
+  }
+  if (timestamp.nanos() < 0 || timestamp.nanos() > 999999999) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("nanos %d is outside 0..999999999", timestamp.nanos()));
+  }
+  return absl::FromUnixSeconds(timestamp.seconds()) + absl::Nanoseconds(timestamp.nanos());
+}
+
+google::protobuf::Timestamp TimeToProto(absl::Time time) {
+  google::protobuf::Timestamp timestamp;
+  const absl::Time min_time = absl::FromUnixSeconds(kMinTimestampSeconds);
+  const absl::Time max_time =
+      absl::FromUnixSeconds(kMaxTimestampSeconds) + absl::Nanoseconds(999999999);
+  if (time < min_time) time = min_time;
+  if (time > max_time) time = max_time;
+  // Floor division: nanos stays in 0..999999999 for instants before 1970 too.
+  const int64_t seconds = absl::ToUnixSeconds(time);
+  const absl::Duration rest = time - absl::FromUnixSeconds(seconds);
+  timestamp.set_seconds(seconds);
+  timestamp.set_nanos(static_cast<int32_t>(absl::ToInt64Nanoseconds(rest)));
+  return timestamp;
+}
+
+}  // namespace esg::proto_convert

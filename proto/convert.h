@@ -1,0 +1,117 @@
+// Conversions between the esg.v1 wire messages and the estimator's SI value types: the only place
+// where proto and estimator types meet (STYLE §3.1). Covers the spacecraft configuration and its
+// JSON file (DESIGN §7), telemetry frames (DESIGN §7, same content as a recording CSV row), drift
+// models (DESIGN §3) and timestamps. Unit conversions go through estimator/units.h.
+//
+// Error contract: every validation failure is absl::InvalidArgumentError whose message starts with
+// the offending field, then ": ", then the reason, e.g.
+//     "gyros[0].model.c1DegH: expected 3 values, got 2"      (configuration: JSON field names)
+//     "gyros[1].h_k: norm 1.2 is not 1 (tolerance 0.001)"     (telemetry: proto field names)
+// so a caller can split it at the first ": " (TelemetryAck.rejection {field, reason}).
+#ifndef ESG_PROTO_CONVERT_H_
+#define ESG_PROTO_CONVERT_H_
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "esg/v1/attitude.pb.h"
+#include "esg/v1/spacecraft_config.pb.h"
+#include "esg/v1/telemetry.pb.h"
+#include "estimator/drift_model.h"
+#include "estimator/spacecraft_config.h"
+#include "estimator/telemetry.h"
+#include "google/protobuf/timestamp.pb.h"
+
+namespace esg::proto_convert {
+
+// A spin-axis direction-cosine vector or a star-tracker quaternion is accepted when
+// |norm - 1| <= kUnitNormTolerance. A real ESG readout or star-tracker output is unit to far
+// better than this; the tolerance only catches wrong units, swapped or missing components.
+inline constexpr double kUnitNormTolerance = 1e-3;
+// Accepted vectors whose norm differs from 1 by more than this are renormalised; closer ones are
+// kept as sent, so a value that was already unit round-trips bit for bit.
+inline constexpr double kRenormaliseAbove = 1e-12;
+
+// ---------------------------------------------------------------------------------------------
+// Spacecraft configuration (DESIGN §7).
+
+// Proto (deg/h, arcsec, V, um) -> SI (rad/s, rad, V, m). Applies the defaults documented in
+// spacecraft_config.proto (suspension 200 / 200 V / 30 um, filter 8 Hz / 60 s / k_d 5 when 0;
+// empty 3-vectors are zero), checks vector lengths (case_to_body 9, drift and noise vectors 0 or 3,
+// pairs 2), then runs estimator::ValidateConfig. InvalidArgument names the JSON field, e.g.
+// "gyros[0].caseToBody: expected 9 values, got 8" or "workingPair: gyro 4 is not among the
+// configured gyros".
+absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::SpacecraftConfig& proto);
+
+// SI -> proto, complete: every vector written with all its values, suspension and filter with
+// their effective values. Unit-converted values are rounded to 15 significant digits (a file
+// reads 0.12, not 0.11999999999999998), so ConfigFromProto(ConfigToProto(c)) equals c to a
+// relative 1e-15; the matrices, ids and dimensionless values are exact.
+esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& config);
+
+// Parses the configuration JSON (proto3 JSON mapping of esg.v1.SpacecraftConfig, DESIGN §7), then
+// ConfigFromProto. An unknown field is InvalidArgument "gyros[0].k0: unknown field"; malformed
+// JSON or a wrong JSON type is InvalidArgument "config JSON: <protobuf's message>" (which names
+// the field by its proto name, e.g. "(gyros[2].model.k0_deg_h): invalid value ...").
+absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json);
+
+// Pretty-printed JSON ending in a newline (2-space indent, arrays of numbers on one line,
+// lowerCamelCase names, every field printed including zeros) that ParseConfigJson reads back.
+// Doubles are printed so that they parse back to the same double. Empty only if protobuf fails to
+// print, which a message built by ConfigToProto cannot make it do.
+std::string ConfigToJson(const estimator::SpacecraftConfig& config);
+
+// File forms of the two above (the CLI's configuration files). ReadConfigFile: NotFound when the
+// file cannot be opened, InvalidArgument "<path>: <field>: <reason>" when its content is bad.
+// WriteConfigFile: InvalidArgument when ValidateConfig fails (nothing is written), Unavailable on
+// an I/O failure. Writes "<path>.tmp" then renames it over <path>.
+absl::StatusOr<estimator::SpacecraftConfig> ReadConfigFile(const std::string& path);
+absl::Status WriteConfigFile(const std::string& path, const estimator::SpacecraftConfig& config);
+
+// ---------------------------------------------------------------------------------------------
+// Drift model (DESIGN §3): GyroDriftModel [deg/h] <-> DriftCoefficients [rad/s]. Used for the
+// configuration and for CoefficientSnapshot.model / .sigma.
+
+// `field` prefixes error messages, e.g. "gyros[0].model" -> "gyros[0].model.c2DegH: expected 3
+// values, got 4". Empty vectors are zero. Values are not range-checked here.
+absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
+                                                                 std::string_view field);
+// Rounded to 15 significant digits like ConfigToProto.
+esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients);
+
+// ---------------------------------------------------------------------------------------------
+// Telemetry frames (DESIGN §7).
+
+// Validates and converts one frame. Checks: `time` present and valid; each gyro_id in 1..4 and
+// not repeated; h_k exactly 3 finite values with unit norm (kUnitNormTolerance); u_k_mv empty or
+// 3 finite values; star_tracker absent = outage; star_tracker.valid: q_in_b exactly 4 finite
+// values, unit norm; not valid: q_in_b empty or 4 finite values, not carried (the reading is
+// kept with valid = false and an identity quaternion). Accepted vectors are renormalised as
+// described at kRenormaliseAbove. spacecraft_id and sequence are not checked here (the caller
+// owns them). Errors: InvalidArgument "<field>: <reason>", field in proto names, e.g.
+// "gyros[1].h_k: norm 1.2 is not 1 (tolerance 0.001)", "star_tracker.q_in_b[2]: nan is not
+// finite", "gyros[2].gyro_id: gyro 3 appears twice".
+absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::TelemetryFrame& proto);
+
+// The reverse: gyros in id order, u_k_mv only when present, star_tracker only when present
+// (q_in_b empty when not valid). Quaternions are written as stored (no sign canonicalisation).
+esg::v1::TelemetryFrame FrameToProto(const estimator::TelemetryFrame& frame,
+                                     std::string spacecraft_id, int64_t sequence);
+
+// ---------------------------------------------------------------------------------------------
+// Time (UTC instants, conventions.h §9).
+
+// InvalidArgument when seconds lie outside 0001-01-01..9999-12-31 or nanos outside
+// 0..999999999 (the google.protobuf.Timestamp rules).
+absl::StatusOr<absl::Time> TimeFromProto(const google::protobuf::Timestamp& timestamp);
+// Truncates below 1 ns (absl::Time resolves 1/4 ns); instants outside the Timestamp range,
+// including absl::InfinitePast/InfiniteFuture, are clamped to its ends.
+google::protobuf::Timestamp TimeToProto(absl::Time time);
+
+}  // namespace esg::proto_convert
+
+#endif  // ESG_PROTO_CONVERT_H_

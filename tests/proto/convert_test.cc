@@ -1,0 +1,533 @@
+// Tests of proto/convert: the DESIGN §7 configuration JSON and its SI values, JSON and file round
+// trips, configuration errors naming the JSON field, telemetry frame conversion and validation,
+// timestamp helpers.
+#include "proto/convert.h"
+
+#include <cmath>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <string>
+
+#include "absl/strings/str_replace.h"
+#include "absl/time/time.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/testing/status_matchers.h"
+#include "tests/testing/temp_dir.h"
+
+namespace esg::proto_convert {
+namespace {
+
+using ::esg::testing::IsOk;
+using ::esg::testing::StatusIs;
+using ::testing::HasSubstr;
+
+// Independent of units.h on purpose: the expected values are computed from first principles.
+constexpr double kPi = std::numbers::pi;
+double DegHToRadS(double x) { return x * kPi / 180.0 / 3600.0; }
+double ArcsecToRadians(double x) { return x / 3600.0 * kPi / 180.0; }
+
+// The DESIGN §7 example with its "..." filled in by two more gyros (gyro 2 mounted turned 90 deg
+// about body z so that row-major order is visible, gyro 3 about body x).
+constexpr char kDesignJson[] = R"json({
+  "spacecraftId": "RDK-1",
+  "gyros": [
+    {"id": 1, "caseToBody": [1,0,0, 0,1,0, 0,0,1],
+     "model":      {"k0DegH": 0.12, "c1DegH": [0,0,0], "c2DegH": [0,0,0],
+                    "muDegH": [0,0,0], "nuDegH": [0,0,0]},
+     "modelSigma": {"k0DegH": 0.3,  "c1DegH": [0.1,0.1,0.1], "c2DegH": [0.1,0.1,0.1]}},
+    {"id": 2, "caseToBody": [0,-1,0, 1,0,0, 0,0,1],
+     "model":      {"k0DegH": -0.2, "c1DegH": [0.05,-0.02,0.01], "c2DegH": [0,0,0.03],
+                    "muDegH": [0,0,0], "nuDegH": [0,0,0]},
+     "modelSigma": {"k0DegH": 0.3,  "c1DegH": [0.1,0.1,0.1], "c2DegH": [0.1,0.1,0.1]}},
+    {"id": 3, "caseToBody": [1,0,0, 0,0,-1, 0,1,0],
+     "model":      {"k0DegH": 0.25},
+     "modelSigma": {"k0DegH": 0.3,  "c1DegH": [0.1,0.1,0.1], "c2DegH": [0.1,0.1,0.1]}}
+  ],
+  "workingPair": [1, 2],
+  "reservePair": [1, 3],
+  "starTracker": {"noiseArcsec": [5, 5, 30]},
+  "readoutNoiseArcsec": 3,
+  "randomWalkDegHSqrtH": 0.002
+})json";
+
+std::string DesignJsonWith(absl::string_view from, absl::string_view to) {
+  std::string json = kDesignJson;
+  const std::string replaced = absl::StrReplaceAll(json, {{from, to}});
+  EXPECT_NE(replaced, json) << "test bug: '" << from << "' not found in the example";
+  return replaced;
+}
+
+TEST(ConfigJson, DesignExampleParsesToSiValues) {
+  absl::StatusOr<estimator::SpacecraftConfig> parsed = ParseConfigJson(kDesignJson);
+  ASSERT_THAT(parsed, IsOk());
+  const estimator::SpacecraftConfig& c = *parsed;
+  EXPECT_EQ(c.spacecraft_id, "RDK-1");
+  ASSERT_EQ(c.gyros.size(), 3u);
+  EXPECT_EQ(c.gyros[0].id, 1);
+  EXPECT_EQ(c.gyros[2].id, 3);
+  // k0 0.12 deg/h -> rad/s (about 5.8e-7).
+  EXPECT_DOUBLE_EQ(c.gyros[0].model.k0, DegHToRadS(0.12));
+  EXPECT_NEAR(c.gyros[0].model.k0, 5.8178e-7, 1e-10);
+  EXPECT_DOUBLE_EQ(c.gyros[0].model_sigma.k0, DegHToRadS(0.3));
+  EXPECT_DOUBLE_EQ(c.gyros[0].model_sigma.C1.y(), DegHToRadS(0.1));
+  EXPECT_DOUBLE_EQ(c.gyros[0].model_sigma.C2.z(), DegHToRadS(0.1));
+  EXPECT_TRUE(c.gyros[0].model_sigma.mu.isZero(0.0));  // absent in the example -> 0
+  EXPECT_DOUBLE_EQ(c.gyros[1].model.k0, DegHToRadS(-0.2));
+  EXPECT_DOUBLE_EQ(c.gyros[1].model.C1.x(), DegHToRadS(0.05));
+  EXPECT_DOUBLE_EQ(c.gyros[1].model.C1.y(), DegHToRadS(-0.02));
+  EXPECT_DOUBLE_EQ(c.gyros[1].model.C2.z(), DegHToRadS(0.03));
+  EXPECT_TRUE(c.gyros[2].model.C1.isZero(0.0));  // empty vectors are zero
+  // caseToBody is C_b_k row-major: gyro 2's case x axis is body y.
+  EXPECT_EQ(c.gyros[1].C_b_k(0, 1), -1.0);
+  EXPECT_EQ(c.gyros[1].C_b_k(1, 0), 1.0);
+  EXPECT_TRUE((c.gyros[1].C_b_k * Eigen::Vector3d::UnitX()).isApprox(Eigen::Vector3d::UnitY()));
+  EXPECT_TRUE((c.gyros[2].C_b_k * Eigen::Vector3d::UnitY()).isApprox(Eigen::Vector3d::UnitZ()));
+  EXPECT_EQ(c.working_pair, (std::array<int, 2>{1, 2}));
+  EXPECT_EQ(c.reserve_pair, (std::array<int, 2>{1, 3}));
+  // Arcsec -> rad.
+  EXPECT_DOUBLE_EQ(c.star_tracker.noise.x(), ArcsecToRadians(5));
+  EXPECT_DOUBLE_EQ(c.star_tracker.noise.z(), ArcsecToRadians(30));
+  EXPECT_NEAR(c.star_tracker.noise.z(), 1.4544e-4, 1e-8);
+  EXPECT_DOUBLE_EQ(c.readout_noise, ArcsecToRadians(3));
+  // deg/h/sqrt(h) -> rad/s/sqrt(s): (0.002 deg/h) / sqrt(3600 s).
+  EXPECT_DOUBLE_EQ(c.random_walk, DegHToRadS(0.002) / std::sqrt(3600.0));
+  // Absent suspension and filter take the documented defaults.
+  EXPECT_DOUBLE_EQ(c.suspension.amplifier_gain, 200.0);
+  EXPECT_DOUBLE_EQ(c.suspension.reference_voltage, 200.0);
+  EXPECT_DOUBLE_EQ(c.suspension.gap, 30e-6);
+  EXPECT_DOUBLE_EQ(c.filter.integration_rate_hz, 8.0);
+  EXPECT_DOUBLE_EQ(c.filter.measurement_step, 60.0);
+  EXPECT_DOUBLE_EQ(c.filter.innovation_kd, 5.0);
+  EXPECT_EQ(c.filter.fault_threshold, 0.0);
+  EXPECT_EQ(c.gyros[0].misalignment_sigma, 0.0);
+}
+
+TEST(ConfigJson, ExtraFieldsBeyondDesignAreRead) {
+  const std::string json = DesignJsonWith(
+      R"("randomWalkDegHSqrtH": 0.002)",
+      R"("randomWalkDegHSqrtH": 0.002,
+         "suspension": {"amplifierGain": 150, "referenceVoltageV": 180, "gapUm": 25},
+         "filter": {"integrationRateHz": 4, "measurementStepS": 30, "innovationKd": 4.5,
+                    "faultThresholdArcsec": 60})");
+  const std::string with_misalignment =
+      absl::StrReplaceAll(json, {{R"("id": 2,)", R"("id": 2, "misalignmentSigmaArcsec": 20,)"}});
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(with_misalignment);
+  ASSERT_THAT(c, IsOk());
+  EXPECT_DOUBLE_EQ(c->suspension.amplifier_gain, 150.0);
+  EXPECT_DOUBLE_EQ(c->suspension.reference_voltage, 180.0);
+  EXPECT_DOUBLE_EQ(c->suspension.gap, 25e-6);
+  EXPECT_DOUBLE_EQ(c->filter.integration_rate_hz, 4.0);
+  EXPECT_DOUBLE_EQ(c->filter.measurement_step, 30.0);
+  EXPECT_DOUBLE_EQ(c->filter.innovation_kd, 4.5);
+  EXPECT_DOUBLE_EQ(c->filter.fault_threshold, ArcsecToRadians(60));
+  EXPECT_DOUBLE_EQ(c->gyros[1].misalignment_sigma, ArcsecToRadians(20));
+  EXPECT_EQ(c->gyros[0].misalignment_sigma, 0.0);
+}
+
+// A configuration with every field away from its default and irrational-looking values.
+estimator::SpacecraftConfig RichConfig() {
+  estimator::SpacecraftConfig c;
+  c.spacecraft_id = "SAT-7 \"Zvezda\" \\ [a,b] {c}";  // survives JSON escaping and layout
+  std::mt19937_64 rng(20190301);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  for (int id : {1, 2, 4}) {
+    estimator::GyroConfig g;
+    g.id = id;
+    Eigen::Quaterniond q(normal(rng), normal(rng), normal(rng), normal(rng));
+    g.C_b_k = q.normalized().toRotationMatrix();
+    g.model.k0 = 3e-6 * normal(rng);
+    g.model.C1 = 1e-6 * Eigen::Vector3d(normal(rng), normal(rng), normal(rng));
+    g.model.C2 = 1e-6 * Eigen::Vector3d(normal(rng), normal(rng), normal(rng));
+    g.model.mu = 1e-7 * Eigen::Vector3d(normal(rng), normal(rng), normal(rng));
+    g.model.nu = 1e-7 * Eigen::Vector3d(normal(rng), normal(rng), normal(rng));
+    g.model_sigma.k0 = 1.4e-6;
+    g.model_sigma.C1 = Eigen::Vector3d(4.8e-7, 4.9e-7, 5.0e-7);
+    g.model_sigma.nu = Eigen::Vector3d(1e-8, 0.0, 3e-8);
+    g.misalignment_sigma = 1e-4 * id;
+    c.gyros.push_back(g);
+  }
+  c.working_pair = {4, 1};
+  c.reserve_pair = {2, 4};
+  c.star_tracker.noise = Eigen::Vector3d(2.1e-5, 2.2e-5, 1.3e-4);
+  c.readout_noise = 1.7e-5;
+  c.random_walk = 1.23e-10;
+  c.suspension = {190.0, 210.0, 28.5e-6};
+  c.filter = {10.0, 30.0, 4.0, 2.9e-4};
+  return c;
+}
+
+void ExpectNear(double a, double b, const std::string& what) {
+  EXPECT_NEAR(a, b, 1e-14 * std::max(std::abs(a), std::abs(b))) << what;
+}
+
+void ExpectConfigsEqual(const estimator::SpacecraftConfig& a, const estimator::SpacecraftConfig& b) {
+  EXPECT_EQ(a.spacecraft_id, b.spacecraft_id);
+  ASSERT_EQ(a.gyros.size(), b.gyros.size());
+  for (size_t i = 0; i < a.gyros.size(); ++i) {
+    const std::string at = "gyro index " + std::to_string(i);
+    EXPECT_EQ(a.gyros[i].id, b.gyros[i].id);
+    EXPECT_EQ(a.gyros[i].C_b_k, b.gyros[i].C_b_k) << at;  // no unit conversion: exact
+    for (int k = 0; k < estimator::kNumDriftCoefficients; ++k) {
+      ExpectNear(a.gyros[i].model.AsVector()[k], b.gyros[i].model.AsVector()[k], at + " model");
+      ExpectNear(a.gyros[i].model_sigma.AsVector()[k], b.gyros[i].model_sigma.AsVector()[k],
+                 at + " sigma");
+    }
+    ExpectNear(a.gyros[i].misalignment_sigma, b.gyros[i].misalignment_sigma, at);
+  }
+  EXPECT_EQ(a.working_pair, b.working_pair);
+  EXPECT_EQ(a.reserve_pair, b.reserve_pair);
+  for (int k = 0; k < 3; ++k) {
+    ExpectNear(a.star_tracker.noise[k], b.star_tracker.noise[k], "noise");
+  }
+  ExpectNear(a.readout_noise, b.readout_noise, "readout_noise");
+  ExpectNear(a.random_walk, b.random_walk, "random_walk");
+  EXPECT_EQ(a.suspension.amplifier_gain, b.suspension.amplifier_gain);
+  EXPECT_EQ(a.suspension.reference_voltage, b.suspension.reference_voltage);
+  ExpectNear(a.suspension.gap, b.suspension.gap, "gap");
+  EXPECT_EQ(a.filter.integration_rate_hz, b.filter.integration_rate_hz);
+  EXPECT_EQ(a.filter.measurement_step, b.filter.measurement_step);
+  EXPECT_EQ(a.filter.innovation_kd, b.filter.innovation_kd);
+  ExpectNear(a.filter.fault_threshold, b.filter.fault_threshold, "fault_threshold");
+}
+
+TEST(ConfigJson, RoundTripConfigJsonConfigIsEqual) {
+  const estimator::SpacecraftConfig original = RichConfig();
+  ASSERT_THAT(estimator::ValidateConfig(original), IsOk());
+  const std::string json = ConfigToJson(original);
+  EXPECT_THAT(json, HasSubstr("\"k0DegH\""));
+  EXPECT_THAT(json, HasSubstr("\"caseToBody\""));
+  EXPECT_THAT(json, HasSubstr("\"randomWalkDegHSqrtH\""));
+  absl::StatusOr<estimator::SpacecraftConfig> parsed = ParseConfigJson(json);
+  ASSERT_THAT(parsed, IsOk()) << json;
+  ExpectConfigsEqual(original, *parsed);
+  // A second trip through JSON is textually stable.
+  EXPECT_EQ(ConfigToJson(*parsed), json);
+}
+
+TEST(ConfigJson, WrittenConfigIsCompleteEvenForZeros) {
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(kDesignJson);
+  ASSERT_THAT(c, IsOk());
+  const std::string json = ConfigToJson(*c);
+  // Zero-valued fields are printed, with the defaults that were applied.
+  EXPECT_THAT(json, HasSubstr("\"misalignmentSigmaArcsec\": 0"));
+  EXPECT_THAT(json, HasSubstr("\"faultThresholdArcsec\": 0"));
+  EXPECT_THAT(json, HasSubstr("\"amplifierGain\": 200"));
+  EXPECT_THAT(json, HasSubstr("\"gapUm\": 30\n"));
+  EXPECT_THAT(json, HasSubstr("\"k0DegH\": 0.12,"));
+  EXPECT_THAT(json, HasSubstr("\"muDegH\": [0, 0, 0]"));
+  EXPECT_THAT(json, HasSubstr("\"caseToBody\": [1, 0, 0, 0, 1, 0, 0, 0, 1]"));
+}
+
+TEST(ConfigFile, WriteThenReadGivesTheSameConfig) {
+  esg::testing::TempDir dir;
+  const std::string path = dir.File("sat7.json");
+  const estimator::SpacecraftConfig original = RichConfig();
+  ASSERT_THAT(WriteConfigFile(path, original), IsOk());
+  absl::StatusOr<estimator::SpacecraftConfig> read = ReadConfigFile(path);
+  ASSERT_THAT(read, IsOk());
+  ExpectConfigsEqual(original, *read);
+}
+
+TEST(ConfigFile, MissingFileIsNotFound) {
+  esg::testing::TempDir dir;
+  EXPECT_THAT(ReadConfigFile(dir.File("absent.json")),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("absent.json")));
+}
+
+TEST(ConfigFile, BadContentNamesFileAndField) {
+  esg::testing::TempDir dir;
+  const std::string path = dir.File("bad.json");
+  std::ofstream(path) << DesignJsonWith("\"readoutNoiseArcsec\": 3", "\"readoutNoiseArcsec\": -3");
+  EXPECT_THAT(ReadConfigFile(path),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::AllOf(HasSubstr("bad.json"), HasSubstr("readoutNoiseArcsec"))));
+}
+
+TEST(ConfigFile, InvalidConfigIsNotWritten) {
+  esg::testing::TempDir dir;
+  const std::string path = dir.File("never.json");
+  estimator::SpacecraftConfig c = RichConfig();
+  c.working_pair = {1, 3};  // gyro 3 is not configured
+  EXPECT_THAT(WriteConfigFile(path, c),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("workingPair")));
+  EXPECT_FALSE(std::ifstream(path).good());
+}
+
+struct BadConfigCase {
+  std::string name;
+  std::string from;
+  std::string to;
+  std::string expected_message;
+};
+
+class BadConfig : public ::testing::TestWithParam<BadConfigCase> {};
+
+TEST_P(BadConfig, IsInvalidArgumentNamingTheField) {
+  const BadConfigCase& c = GetParam();
+  EXPECT_THAT(ParseConfigJson(DesignJsonWith(c.from, c.to)),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(c.expected_message)));
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    ConfigJson, BadConfig,
+    ::testing::Values(
+        BadConfigCase{"NonRotationCaseToBody", "[0,-1,0, 1,0,0, 0,0,1]", "[0,-1,0, 1,0,0, 0,0,2]",
+                      "gyros[1].caseToBody: not a proper rotation"},
+        BadConfigCase{"ReflectionCaseToBody", "[0,-1,0, 1,0,0, 0,0,1]", "[0,-1,0, 1,0,0, 0,0,-1]",
+                      "gyros[1].caseToBody: not a proper rotation"},
+        BadConfigCase{"CaseToBodyWrongLength", "[1,0,0, 0,0,-1, 0,1,0]", "[1,0,0, 0,0,-1, 0,1]",
+                      "gyros[2].caseToBody: expected 9 values (C_b_k row-major), got 8"},
+        BadConfigCase{"VectorWrongLength", "\"c1DegH\": [0.05,-0.02,0.01]",
+                      "\"c1DegH\": [0.05,-0.02]", "gyros[1].model.c1DegH: expected 3 values, got 2"},
+        BadConfigCase{"NoiseWrongLength", "[5, 5, 30]", "[5, 5, 30, 1]",
+                      "starTracker.noiseArcsec: expected 3 values, got 4"},
+        BadConfigCase{"UnknownField", "\"id\": 1,", "\"id\": 1, \"k0\": 0.1,",
+                      "gyros[0].k0: unknown field"},
+        BadConfigCase{"UnknownTopLevelField", "\"readoutNoiseArcsec\": 3",
+                      "\"readoutNoiseArcsec\": 3, \"readoutNoise\": 3", "readoutNoise: unknown field"},
+        BadConfigCase{"DuplicateGyroId", "\"id\": 3,", "\"id\": 2,",
+                      "gyros[2].id: gyro 2 is configured twice"},
+        BadConfigCase{"GyroIdOutOfRange", "\"id\": 3,", "\"id\": 5,", "gyros[2].id: 5 is outside 1..4"},
+        BadConfigCase{"PairNamesMissingGyro", "\"reservePair\": [1, 3]", "\"reservePair\": [1, 4]",
+                      "reservePair: gyro 4 is not among the configured gyros"},
+        BadConfigCase{"PairWrongLength", "\"workingPair\": [1, 2]", "\"workingPair\": [1, 2, 3]",
+                      "workingPair: expected 2 gyro ids, got 3"},
+        BadConfigCase{"NegativeSigma", "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1]",
+                      "\"modelSigma\": {\"k0DegH\": -0.3,  \"c1DegH\": [0.1,0.1,0.1]",
+                      "gyros[0].modelSigma: values must be finite and >= 0"},
+        BadConfigCase{"NegativeNoise", "[5, 5, 30]", "[5, -5, 30]", "starTracker.noiseArcsec"},
+        BadConfigCase{"EmptySpacecraftId", "\"RDK-1\"", "\"\"", "spacecraftId: must not be empty"},
+        BadConfigCase{"WrongJsonType", "\"k0DegH\": 0.25", "\"k0DegH\": \"fast\"", "k0_deg_h"},
+        BadConfigCase{"NotJson", "\"workingPair\": [1, 2],", "\"workingPair\" [1, 2],",
+                      "config JSON"}),
+    [](const ::testing::TestParamInfo<BadConfigCase>& info) { return info.param.name; });
+
+// ---------------------------------------------------------------------------------------------
+// Telemetry frames.
+
+estimator::TelemetryFrame SampleFrame() {
+  estimator::TelemetryFrame f;
+  f.time = absl::FromUnixSeconds(1551398400) + absl::Nanoseconds(123456789);
+  estimator::GyroReading g1;
+  g1.h_k = Eigen::Vector3d(0.3, -0.4, 0.8).normalized();
+  g1.u_k_mv = Eigen::Vector3d(12.5, -33.25, 0.125);
+  estimator::GyroReading g3;
+  g3.h_k = Eigen::Vector3d(-0.1, 0.99, 0.07).normalized();  // no voltages telemetered
+  estimator::GyroReading g4;
+  g4.h_k = Eigen::Vector3d(0.577, 0.577, -0.578).normalized();
+  g4.u_k_mv = Eigen::Vector3d(-1.0 / 3.0, 2.0 / 7.0, 1e-9);
+  f.gyros[0] = g1;
+  f.gyros[2] = g3;
+  f.gyros[3] = g4;
+  estimator::StarTrackerReading st;
+  st.valid = true;
+  st.q_in_b = Eigen::Quaterniond(0.9, -0.1, 0.3, 0.2).normalized();
+  f.star_tracker = st;
+  return f;
+}
+
+void ExpectFramesEqual(const estimator::TelemetryFrame& a, const estimator::TelemetryFrame& b) {
+  EXPECT_EQ(a.time, b.time);
+  for (int i = 0; i < estimator::kMaxGyros; ++i) {
+    ASSERT_EQ(a.gyros[i].has_value(), b.gyros[i].has_value()) << "gyro " << i + 1;
+    if (!a.gyros[i].has_value()) continue;
+    EXPECT_EQ(a.gyros[i]->h_k, b.gyros[i]->h_k) << "gyro " << i + 1;
+    ASSERT_EQ(a.gyros[i]->u_k_mv.has_value(), b.gyros[i]->u_k_mv.has_value()) << "gyro " << i + 1;
+    if (a.gyros[i]->u_k_mv.has_value()) EXPECT_EQ(*a.gyros[i]->u_k_mv, *b.gyros[i]->u_k_mv);
+  }
+  ASSERT_EQ(a.star_tracker.has_value(), b.star_tracker.has_value());
+  if (a.star_tracker.has_value()) {
+    EXPECT_EQ(a.star_tracker->valid, b.star_tracker->valid);
+    if (a.star_tracker->valid) {
+      EXPECT_EQ(a.star_tracker->q_in_b.coeffs(), b.star_tracker->q_in_b.coeffs());
+    }
+  }
+}
+
+TEST(Frame, RoundTripIsExact) {
+  const estimator::TelemetryFrame original = SampleFrame();
+  const esg::v1::TelemetryFrame proto = FrameToProto(original, "RDK-1", 42);
+  EXPECT_EQ(proto.spacecraft_id(), "RDK-1");
+  EXPECT_EQ(proto.sequence(), 42);
+  ASSERT_EQ(proto.gyros_size(), 3);
+  EXPECT_EQ(proto.gyros(1).gyro_id(), 3);
+  EXPECT_TRUE(proto.gyros(1).u_k_mv().empty());
+  // Scalar first on the wire.
+  ASSERT_EQ(proto.star_tracker().q_in_b_size(), 4);
+  EXPECT_EQ(proto.star_tracker().q_in_b(0), original.star_tracker->q_in_b.w());
+  EXPECT_EQ(proto.star_tracker().q_in_b(3), original.star_tracker->q_in_b.z());
+  absl::StatusOr<estimator::TelemetryFrame> back = FrameFromProto(proto);
+  ASSERT_THAT(back, IsOk());
+  ExpectFramesEqual(original, *back);
+}
+
+TEST(Frame, OutageAndInvalidStarTrackerRoundTrip) {
+  estimator::TelemetryFrame outage = SampleFrame();
+  outage.star_tracker.reset();
+  const esg::v1::TelemetryFrame outage_proto = FrameToProto(outage, "RDK-1", 1);
+  EXPECT_FALSE(outage_proto.has_star_tracker());
+  absl::StatusOr<estimator::TelemetryFrame> outage_back = FrameFromProto(outage_proto);
+  ASSERT_THAT(outage_back, IsOk());
+  EXPECT_FALSE(outage_back->star_tracker.has_value());
+
+  estimator::TelemetryFrame invalid = SampleFrame();
+  invalid.star_tracker->valid = false;
+  const esg::v1::TelemetryFrame invalid_proto = FrameToProto(invalid, "RDK-1", 2);
+  EXPECT_TRUE(invalid_proto.has_star_tracker());
+  EXPECT_TRUE(invalid_proto.star_tracker().q_in_b().empty());
+  absl::StatusOr<estimator::TelemetryFrame> invalid_back = FrameFromProto(invalid_proto);
+  ASSERT_THAT(invalid_back, IsOk());
+  ASSERT_TRUE(invalid_back->star_tracker.has_value());
+  EXPECT_FALSE(invalid_back->star_tracker->valid);
+}
+
+TEST(Frame, SlightlyNonUnitVectorsAreAcceptedAndRenormalised) {
+  esg::v1::TelemetryFrame proto = FrameToProto(SampleFrame(), "RDK-1", 3);
+  for (double& v : *proto.mutable_gyros(0)->mutable_h_k()) v *= 1.0005;
+  for (double& v : *proto.mutable_star_tracker()->mutable_q_in_b()) v *= 0.9995;
+  absl::StatusOr<estimator::TelemetryFrame> frame = FrameFromProto(proto);
+  ASSERT_THAT(frame, IsOk());
+  EXPECT_NEAR(frame->gyros[0]->h_k.norm(), 1.0, 1e-15);
+  EXPECT_NEAR(frame->star_tracker->q_in_b.norm(), 1.0, 1e-15);
+}
+
+TEST(Frame, InvalidStarTrackerQuaternionIsNotCarriedButMustBeNumbers) {
+  esg::v1::TelemetryFrame proto = FrameToProto(SampleFrame(), "RDK-1", 3);
+  proto.mutable_star_tracker()->set_valid(false);  // quaternion still present, not unit-checked
+  for (double& v : *proto.mutable_star_tracker()->mutable_q_in_b()) v *= 3.0;
+  EXPECT_THAT(FrameFromProto(proto), IsOk());
+  proto.mutable_star_tracker()->set_q_in_b(1, std::nan(""));
+  EXPECT_THAT(FrameFromProto(proto), StatusIs(absl::StatusCode::kInvalidArgument,
+                                              HasSubstr("star_tracker.q_in_b[1]: nan is not finite")));
+}
+
+struct BadFrameCase {
+  std::string name;
+  std::function<void(esg::v1::TelemetryFrame*)> mutate;
+  std::string expected_message;
+};
+
+class BadFrame : public ::testing::TestWithParam<BadFrameCase> {};
+
+TEST_P(BadFrame, IsInvalidArgumentNamingTheField) {
+  esg::v1::TelemetryFrame proto = FrameToProto(SampleFrame(), "RDK-1", 7);
+  ASSERT_THAT(FrameFromProto(proto), IsOk());
+  GetParam().mutate(&proto);
+  EXPECT_THAT(FrameFromProto(proto), StatusIs(absl::StatusCode::kInvalidArgument,
+                                              HasSubstr(GetParam().expected_message)));
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Frame, BadFrame,
+    ::testing::Values(
+        BadFrameCase{"MissingTime", [](esg::v1::TelemetryFrame* f) { f->clear_time(); },
+                     "time: missing"},
+        BadFrameCase{"NanosOutOfRange",
+                     [](esg::v1::TelemetryFrame* f) { f->mutable_time()->set_nanos(1000000000); },
+                     "time: nanos 1000000000 is outside 0..999999999"},
+        BadFrameCase{"HkNormTooLarge",
+                     [](esg::v1::TelemetryFrame* f) {
+                       auto* h = f->mutable_gyros(1)->mutable_h_k();
+                       h->Set(0, 0.0);
+                       h->Set(1, 1.2);
+                       h->Set(2, 0.0);
+                     },
+                     "gyros[1].h_k: norm 1.2 is not 1 (tolerance 0.001)"},
+        BadFrameCase{"HkWrongLength",
+                     [](esg::v1::TelemetryFrame* f) { f->mutable_gyros(0)->mutable_h_k()->RemoveLast(); },
+                     "gyros[0].h_k: expected 3 values, got 2"},
+        BadFrameCase{"HkNaN",
+                     [](esg::v1::TelemetryFrame* f) {
+                       f->mutable_gyros(2)->set_h_k(2, std::numeric_limits<double>::quiet_NaN());
+                     },
+                     "gyros[2].h_k[2]: nan is not finite"},
+        BadFrameCase{"UkInfinite",
+                     [](esg::v1::TelemetryFrame* f) {
+                       f->mutable_gyros(0)->set_u_k_mv(1, std::numeric_limits<double>::infinity());
+                     },
+                     "gyros[0].u_k_mv[1]: inf is not finite"},
+        BadFrameCase{"UkWrongLength",
+                     [](esg::v1::TelemetryFrame* f) { f->mutable_gyros(0)->add_u_k_mv(1.0); },
+                     "gyros[0].u_k_mv: expected 3 values or none, got 4"},
+        BadFrameCase{"GyroIdZero", [](esg::v1::TelemetryFrame* f) { f->mutable_gyros(1)->set_gyro_id(0); },
+                     "gyros[1].gyro_id: 0 is outside 1..4"},
+        BadFrameCase{"GyroIdFive", [](esg::v1::TelemetryFrame* f) { f->mutable_gyros(1)->set_gyro_id(5); },
+                     "gyros[1].gyro_id: 5 is outside 1..4"},
+        BadFrameCase{"GyroIdRepeated",
+                     [](esg::v1::TelemetryFrame* f) { f->mutable_gyros(2)->set_gyro_id(1); },
+                     "gyros[2].gyro_id: gyro 1 appears twice"},
+        BadFrameCase{"QuaternionNotUnit",
+                     [](esg::v1::TelemetryFrame* f) {
+                       for (double& v : *f->mutable_star_tracker()->mutable_q_in_b()) v *= 0.5;
+                     },
+                     "star_tracker.q_in_b: norm 0.5 is not 1 (tolerance 0.001)"},
+        BadFrameCase{"QuaternionThreeValues",
+                     [](esg::v1::TelemetryFrame* f) {
+                       f->mutable_star_tracker()->mutable_q_in_b()->RemoveLast();
+                     },
+                     "star_tracker.q_in_b: expected 4 values, got 3"},
+        BadFrameCase{"QuaternionMissingWhenValid",
+                     [](esg::v1::TelemetryFrame* f) { f->mutable_star_tracker()->clear_q_in_b(); },
+                     "star_tracker.q_in_b: expected 4 values, got 0"}),
+    [](const ::testing::TestParamInfo<BadFrameCase>& info) { return info.param.name; });
+
+// ---------------------------------------------------------------------------------------------
+// Time.
+
+TEST(Time, RoundTripKeepsNanosecondsAndHandlesInstantsBefore1970) {
+  for (const absl::Time t :
+       {absl::FromUnixSeconds(1551398400) + absl::Nanoseconds(999999999),
+        absl::FromUnixSeconds(-1) + absl::Nanoseconds(250), absl::UnixEpoch(),
+        absl::FromUnixSeconds(-62135596800), absl::FromUnixSeconds(253402300799)}) {
+    const google::protobuf::Timestamp ts = TimeToProto(t);
+    EXPECT_GE(ts.nanos(), 0);
+    EXPECT_LE(ts.nanos(), 999999999);
+    absl::StatusOr<absl::Time> back = TimeFromProto(ts);
+    ASSERT_THAT(back, IsOk());
+    EXPECT_EQ(*back, t) << absl::FormatTime(t);
+  }
+  const google::protobuf::Timestamp before = TimeToProto(absl::FromUnixMillis(-1500));
+  EXPECT_EQ(before.seconds(), -2);
+  EXPECT_EQ(before.nanos(), 500000000);
+}
+
+TEST(Time, SubNanosecondIsTruncatedAndInfinitiesClamp) {
+  const absl::Time t = absl::FromUnixSeconds(10) + absl::Nanoseconds(5) + absl::Nanoseconds(1) / 4;
+  EXPECT_EQ(TimeToProto(t).nanos(), 5);
+  EXPECT_EQ(TimeToProto(absl::InfiniteFuture()).seconds(), 253402300799);
+  EXPECT_EQ(TimeToProto(absl::InfinitePast()).seconds(), -62135596800);
+}
+
+TEST(Time, OutOfRangeTimestampIsInvalid) {
+  google::protobuf::Timestamp ts;
+  ts.set_seconds(253402300800);
+  EXPECT_THAT(TimeFromProto(ts), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("seconds")));
+  ts.set_seconds(0);
+  ts.set_nanos(-1);
+  EXPECT_THAT(TimeFromProto(ts), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("nanos")));
+}
+
+TEST(DriftModel, ProtoRoundTripConvertsDegPerHour) {
+  estimator::DriftCoefficients c;
+  c.k0 = DegHToRadS(0.12);
+  c.C1 = Eigen::Vector3d(DegHToRadS(0.1), 0.0, DegHToRadS(-0.05));
+  const esg::v1::GyroDriftModel proto = DriftModelToProto(c);
+  EXPECT_NEAR(proto.k0_deg_h(), 0.12, 1e-15);
+  EXPECT_NEAR(proto.c1_deg_h(2), -0.05, 1e-15);
+  ASSERT_EQ(proto.mu_deg_h_size(), 3);
+  absl::StatusOr<estimator::DriftCoefficients> back = DriftModelFromProto(proto, "sigma");
+  ASSERT_THAT(back, IsOk());
+  EXPECT_TRUE(back->AsVector().isApprox(c.AsVector(), 1e-15));
+  esg::v1::GyroDriftModel bad = proto;
+  bad.add_nu_deg_h(0.0);
+  EXPECT_THAT(DriftModelFromProto(bad, "sigma"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("sigma.nuDegH: expected 3 values, got 4")));
+}
+
+}  // namespace
+}  // namespace esg::proto_convert
