@@ -86,6 +86,7 @@ struct GyroState {
   Matrix3d C_b_k;  // true mounting
   Matrix3d C_k_b;
   DriftCoefficients coefficients;
+  bool has_mu_nu = false;
   Vector3d h_in;
   Vector3d dw_in_prev = Vector3d::Zero();  // last step's drift, for the midpoint predictor
   Vector3d dw_rw_in = Vector3d::Zero();    // random-walk drift, inertial axes
@@ -112,6 +113,30 @@ struct GyroState {
     return Vector3d::Zero();
   }
 };
+
+// DriftRate_k in the combined form of DESIGN §3, dw = (h h^T - I) g(h) with
+// g = k0 h^3 + C1 + C2 h^2, plus the mu/nu terms only when present: the same value as
+// DriftRate_k to rounding, at a fraction of the cost (it runs 4 x 8 times per simulated second).
+Vector3d FastDriftRate_k(const DriftCoefficients& c, bool has_mu_nu, const Vector3d& h) {
+  const Vector3d h2 = h.cwiseAbs2();
+  const Vector3d g = c.k0 * h2.cwiseProduct(h) + c.C1 + c.C2.cwiseProduct(h2);
+  Vector3d dw = h * h.dot(g) - g;
+  if (has_mu_nu) dw += UnequalStiffnessTerm(h, c.mu, c.nu);
+  return dw;
+}
+
+// StepSpinAxis(h_in, dw_in, dt) by Rodrigues' formula with series coefficients for the tiny
+// angles of drift (|dw dt| ~ 1e-6 rad): no trigonometry per step. Falls back to StepSpinAxis
+// above 1e-3 rad, where the truncated series terms (theta^6 / 5040) would start to matter.
+Vector3d FastStepSpinAxis(const Vector3d& h_in, const Vector3d& dw_in, double dt) {
+  const Vector3d a = dw_in * dt;
+  const double theta2 = a.squaredNorm();
+  if (theta2 > 1e-6) return StepSpinAxis(h_in, dw_in, dt);
+  const double sin_over = 1.0 - theta2 / 6.0 * (1.0 - theta2 / 20.0);          // sin(t)/t
+  const double one_minus_cos_over = 0.5 - theta2 / 24.0 * (1.0 - theta2 / 30.0);  // (1-cos t)/t^2
+  const Vector3d axh = a.cross(h_in);
+  return (h_in + sin_over * axh + one_minus_cos_over * a.cross(axh)).normalized();
+}
 
 }  // namespace
 
@@ -245,6 +270,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     g.C_b_k = ExpMatrix(truth.misalignment_b) * gc.C_b_k;
     g.C_k_b = g.C_b_k.transpose();
     g.coefficients = EffectiveCoefficients(truth, gc);
+    g.has_mu_nu = !g.coefficients.mu.isZero(0.0) || !g.coefficients.nu.isZero(0.0);
     g.rw_intensity = truth.random_walk.value_or(config.random_walk);
     g.readout_noise = truth.readout_noise.value_or(config.readout_noise);
     g.voltage_noise = truth.voltage_noise;
@@ -274,12 +300,12 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     const Matrix3d C_in_b = profile.Attitude(t_mid).toRotationMatrix();
     const double sqrt_h = std::sqrt(h);
     for (GyroState& g : gyros) {
-      const Matrix3d C_in_k = C_in_b * g.C_b_k;
       const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
-      const Vector3d h_k = C_in_k.transpose() * h_mid;
-      const Vector3d dw_k = DriftRate_k(g.coefficients, h_k) + g.FaultDrift_k(t_mid);
-      const Vector3d dw_in = C_in_k * dw_k + g.dw_rw_in;
-      g.h_in = StepSpinAxis(g.h_in, dw_in, h);
+      const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
+      Vector3d dw_k = FastDriftRate_k(g.coefficients, g.has_mu_nu, h_k);
+      if (g.fault) dw_k += g.FaultDrift_k(t_mid);
+      const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
+      g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
       g.dw_in_prev = dw_in;
       if (g.rw_intensity > 0.0) g.dw_rw_in += (g.rw_intensity * sqrt_h) * g.rw_rng.Normal3();
     }

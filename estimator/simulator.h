@@ -12,7 +12,8 @@
 //   plus a fault drift step (case axes) after its time; plus the random-walk drift vector dw_rw_in
 //   (inertial axes), which starts at zero and takes an independent N(0, q dt I) step after every
 //   integration step (q = random_walk^2).
-// - Propagation: h_in stepped at integration_rate_hz with StepSpinAxis(h_in, dw_in, dt),
+// - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a rotation by
+//   dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
 //   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
 //   extrapolated half a step with the previous step's drift).
 // - Gyro reading at each telemetry time: h_k_meas = Exp(jump_k) Exp(n) h_k_true, n perpendicular to
