@@ -3,6 +3,7 @@
 #include <cmath>
 #include <set>
 
+#include "Eigen/LU"
 #include "absl/strings/str_format.h"
 #include "estimator/conventions.h"
 

@@ -1,0 +1,82 @@
+#include "estimator/calibration_model.h"
+
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+
+namespace esg::estimator {
+
+std::string ModelSpec::Name() const {
+  std::vector<std::string> parts;
+  if (c1c2) {
+    parts.push_back("10");
+  } else if (k0 || mu_nu) {
+    parts.push_back("1");
+  }
+  if (random_walk) parts.push_back("11");
+  return absl::StrJoin(parts, "+");
+}
+
+std::array<bool, kNumDriftCoefficients> ModelSpec::TermMask() const {
+  std::array<bool, kNumDriftCoefficients> mask{};
+  mask[kThetaK0] = k0;
+  for (int i = 0; i < 3; ++i) {
+    mask[kThetaC1 + i] = c1c2;
+    mask[kThetaC2 + i] = c1c2;
+    mask[kThetaMu + i] = mu_nu;
+    mask[kThetaNu + i] = mu_nu;
+  }
+  return mask;
+}
+
+absl::StatusOr<ModelSpec> ParseModel(absl::string_view name) {
+  ModelSpec spec;
+  if (name.empty()) return absl::InvalidArgumentError("model: empty (use 1, 10, 11 or e.g. 10+11)");
+  for (absl::string_view part : absl::StrSplit(name, '+')) {
+    part = absl::StripAsciiWhitespace(part);
+    if (part == "1") {
+      spec.k0 = true;
+      spec.mu_nu = true;
+    } else if (part == "10") {
+      spec.k0 = true;
+      spec.c1c2 = true;
+      spec.mu_nu = true;
+    } else if (part == "11") {
+      spec.random_walk = true;
+    } else {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "model: unknown term '%s' in '%s' (use 1, 10, 11 or a '+' set such as 10+11)", part,
+          name));
+    }
+  }
+  return spec;
+}
+
+DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro) {
+  DriftVector theta = gyro.model.AsVector();
+  const auto mask = spec.TermMask();
+  for (int i = 0; i < kNumDriftCoefficients; ++i) {
+    if (!mask[i]) theta(i) = 0.0;
+  }
+  return theta;
+}
+
+std::vector<int> FreeCoefficients(const ModelSpec& spec, const GyroConfig& gyro) {
+  std::vector<int> free;
+  const auto mask = spec.TermMask();
+  const DriftVector sigma = gyro.model_sigma.AsVector();
+  for (int i = 0; i < kNumDriftCoefficients; ++i) {
+    if (mask[i] && sigma(i) > 0.0) free.push_back(i);
+  }
+  return free;
+}
+
+const char* CoefficientName(int i) {
+  static const char* kNames[kNumDriftCoefficients] = {
+      "k0DegH",    "c1DegH[0]", "c1DegH[1]", "c1DegH[2]", "c2DegH[0]", "c2DegH[1]", "c2DegH[2]",
+      "muDegH[0]", "muDegH[1]", "muDegH[2]", "nuDegH[0]", "nuDegH[1]", "nuDegH[2]"};
+  return (i >= 0 && i < kNumDriftCoefficients) ? kNames[i] : "?";
+}
+
+}  // namespace esg::estimator

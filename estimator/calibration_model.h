@@ -1,0 +1,48 @@
+// Which drift model the filter calibrates (issue: models 1, 10, 11 of the paper) and which of its
+// coefficients are free. Model strings: "1" (eq. (1): k0, mu, nu), "10" (eq. (10): k0, C1, C2;
+// plus mu, nu of the full model when configured), "11" (random walk of the residual drift in
+// `int` axes only, eq. (11)), and "+"-joined sets such as "10+11" or "1+11".
+//
+// A coefficient of a term in the model is free (estimated) when its configured modelSigma is
+// positive, otherwise held at the configured value. Terms outside the model are zero.
+#ifndef ESG_ESTIMATOR_CALIBRATION_MODEL_H_
+#define ESG_ESTIMATOR_CALIBRATION_MODEL_H_
+
+#include <string>
+#include "absl/strings/string_view.h"
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "estimator/drift_model.h"
+#include "estimator/spacecraft_config.h"
+
+namespace esg::estimator {
+
+struct ModelSpec {
+  bool k0 = false;           // eq. (1), (10)
+  bool c1c2 = false;         // eq. (10)
+  bool mu_nu = false;        // eq. (1)
+  bool random_walk = false;  // eq. (11)
+
+  // Canonical name, e.g. "10+11".
+  std::string Name() const;
+  // Mask over theta (drift_model.h offsets): true where the term is in the model.
+  std::array<bool, kNumDriftCoefficients> TermMask() const;
+};
+
+// InvalidArgument naming the bad part, e.g. "model: unknown term '12' (use 1, 10, 11 or a '+' set)".
+absl::StatusOr<ModelSpec> ParseModel(absl::string_view name);
+
+// The model's coefficient vector for a gyro: configured values on the model's terms, zero
+// elsewhere [rad/s].
+DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro);
+
+// Indices into theta of the free coefficients of a gyro (term in the model and sigma > 0).
+std::vector<int> FreeCoefficients(const ModelSpec& spec, const GyroConfig& gyro);
+
+// Names of theta entries as in the JSON ("k0DegH", "c1DegH[0]", ...), for reports.
+const char* CoefficientName(int theta_index);
+
+}  // namespace esg::estimator
+
+#endif  // ESG_ESTIMATOR_CALIBRATION_MODEL_H_

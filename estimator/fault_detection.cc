@@ -1,0 +1,91 @@
+#include "estimator/fault_detection.h"
+
+#include <cmath>
+
+#include "Eigen/Cholesky"
+#include "estimator/rotation.h"
+
+namespace esg::estimator {
+
+const char* SubsystemName(Subsystem s) {
+  switch (s) {
+    case Subsystem::kNone:
+      return "none";
+    case Subsystem::kWorkingPair:
+      return "working_pair";
+    case Subsystem::kReservePair:
+      return "reserve_pair";
+    case Subsystem::kStarTracker:
+      return "star_tracker";
+  }
+  return "?";
+}
+
+MismatchTest TestMismatch(const Eigen::Quaterniond* q1, const Eigen::Quaterniond* q2,
+                          const Eigen::Quaterniond* q3, const std::array<double, 3>& allowed) {
+  // eq. (12): dL_12 = L1 o conj(L2), dL_13 = L1 o conj(L3), dL_23 = L2 o conj(L3).
+  MismatchTest t;
+  t.allowed = allowed;
+  const Eigen::Quaterniond* q[3] = {q1, q2, q3};
+  const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+  std::array<bool, 3> exceeded = {false, false, false};
+  for (int m = 0; m < 3; ++m) {
+    const auto* a = q[pairs[m][0]];
+    const auto* b = q[pairs[m][1]];
+    if (a == nullptr || b == nullptr) continue;
+    t.available[m] = true;
+    t.angle[m] = RotationAngle(*a, *b);
+    exceeded[m] = t.angle[m] >= allowed[m];
+  }
+  // Subsystem s is faulty when both mismatches that involve it exceed: 1 -> (12, 13),
+  // 2 -> (12, 23), 3 -> (13, 23).
+  if (exceeded[0] && exceeded[1]) {
+    t.faulty = Subsystem::kWorkingPair;
+  } else if (exceeded[0] && exceeded[2]) {
+    t.faulty = Subsystem::kReservePair;
+  } else if (exceeded[1] && exceeded[2]) {
+    t.faulty = Subsystem::kStarTracker;
+  }
+  return t;
+}
+
+InnovationTest TestInnovation(const Eigen::VectorXd& z, const Eigen::MatrixXd& S, double k_d) {
+  InnovationTest t;
+  const int n = static_cast<int>(z.size());
+  if (n == 0) return t;
+  Eigen::LLT<Eigen::MatrixXd> llt(S);
+  if (llt.info() != Eigen::Success) {
+    // Fall back to the printed diagonal form.
+    for (int i = 0; i < n; ++i) {
+      const double sigma = std::sqrt(std::max(S(i, i), 0.0));
+      const double ratio = sigma > 0 ? std::abs(z(i)) / sigma : INFINITY;
+      if (ratio > t.worst_ratio) {
+        t.worst_ratio = ratio;
+        t.worst_index = i;
+        t.worst_value = std::abs(z(i));
+        t.worst_threshold = k_d * sigma;
+      }
+    }
+    t.passed = t.worst_ratio <= k_d;
+    return t;
+  }
+  const Eigen::MatrixXd L = llt.matrixL();
+  Eigen::VectorXd w(n);
+  for (int i = 0; i < n; ++i) {
+    // Conditional innovation e_i = z_i - sum_{j<i} L_ij w_j with conditional sigma L_ii.
+    double e = z(i);
+    for (int j = 0; j < i; ++j) e -= L(i, j) * w(j);
+    w(i) = e / L(i, i);
+    const double ratio = std::abs(w(i));
+    if (ratio > t.worst_ratio) {
+      t.worst_ratio = ratio;
+      t.worst_index = i;
+      t.worst_value = std::abs(e);
+      t.worst_threshold = k_d * L(i, i);
+    }
+  }
+  t.passed = t.worst_ratio <= k_d;
+  return t;
+}
+
+}  // namespace esg::estimator

@@ -1,0 +1,255 @@
+// EstimationSession: the per-spacecraft estimation pipeline of DESIGN §5 (the paper's section 2):
+// an error-state extended Kalman filter over the running gyros, quasi-continuous correction by
+// the star tracker, calibration of the drift model (models 1, 10, 11), fault detection by eq. (12)
+// and (14), and long-gap prediction. Pure computation: frames in, reports out.
+//
+// FILTER STATE (error form, conventions.h: error = true - estimate), per running gyro g, in order
+// of the gyros (working pair first, reference gyro first):
+//   dh_g      2  spin-axis direction error in the gyro's tangent basis (t1_g, t2_g): t1 = e1 of
+//                the `int` frame (conventions.h) projected perpendicular to h_in_g, t2 = h_in_g x t1;
+//                for the reference gyro (t1, t2) = (e1, -e3), i.e. the paper's dh_int1_1 and
+//                -dh_int3_1 [rad]
+//   dw_int_g  2  residual random-walk drift, eq. (11), perpendicular to h_in_g in the same basis
+//                [rad/s] (only with model 11; the component along the spin axis moves nothing and
+//                is not a state)
+//   dtheta_g  n  errors of the free drift coefficients (k0, C1, C2, mu, nu that the model holds
+//                and whose modelSigma > 0) [rad/s]
+//   dphi_g    3  gyro-to-star-tracker misalignment, small rotation in body axes:
+//                C_b_k(true) = Exp(phi_g) C_b_k(config) [rad] (when misalignmentSigma > 0)
+// About 14 states per gyro, 42 for three running gyros with model 10+11.
+//
+// MEASUREMENTS every measurement step (60 s default), gyro readings interpolated (slerp) to the
+// integration rate (8 Hz default) between telemetry frames:
+//   z_avt  (per pair of healthy gyros) cos(theta_R) - cos(theta_S): predicted angle between the
+//          inertial spin axes against the measured angle between the body-frame axes (eq. (13));
+//   z_st   (2 per healthy gyro) T_g^T (h_et_in - h_in_g), h_et_in = C_in_b(star tracker) C_b_k
+//          h_k(measured): the star-tracker differences z2..z5 of eq. (13), in the gyro's basis.
+// The measurement noise covariance comes from one noise map (star-tracker noise about body axes,
+// readout noise of every gyro), so its correlations across components are exact.
+//
+// SESSION STATES
+//   NO_DATA      no frame with a valid star-tracker quaternion and a readable pair yet.
+//                -> CALIBRATING by AddFrame when such a frame initialises the filter.
+//   CALIBRATING  filter running; free coefficients still converging.
+//                -> CONVERGED when every free coefficient's sigma fell by less than 1% over the
+//                last hour (and 2 h have passed).
+//   CONVERGED    as CALIBRATING, coefficients settled.
+//   AUTONOMOUS   star-tracker data absent or rejected for the last 3 steps (or withheld by
+//                SetStarTrackerUse(false)): output from the gyros alone.
+//   FAULTED      the working pair was declared faulty (eq. (12)); output is on the reserve pair.
+// Invariants: (1) P is symmetric with a non-negative diagonal after every step; (2) every
+// h_in_g is a unit vector; (3) a rejected measurement never changes the state; (4) frames are
+// applied in strictly increasing time.
+#ifndef ESG_ESTIMATOR_SESSION_H_
+#define ESG_ESTIMATOR_SESSION_H_
+
+#include <array>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/Geometry"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "estimator/calibration_model.h"
+#include "estimator/drift_model.h"
+#include "estimator/spacecraft_config.h"
+#include "estimator/telemetry.h"
+
+namespace esg::estimator {
+
+class AttitudeProfile;
+
+enum class SessionState { kNoData, kCalibrating, kConverged, kAutonomous, kFaulted };
+const char* SessionStateName(SessionState s);
+
+// An event: a rejection or a switch, with the numbers that decided it.
+struct Event {
+  enum class Kind {
+    kStarTrackerInnovation,  // eq. (14) rejected the star-tracker measurements
+    kStarTrackerFault,       // eq. (12) named the star tracker
+    kWorkingPairFault,       // eq. (12) named the working pair: output switched to the reserve
+    kReservePairFault,       // eq. (12) named the reserve pair
+    kGyroDataRejected,       // eq. (14) rejected an autonomous measurement z_avt
+    kStarTrackerInvalid,     // the star tracker flagged its own sample invalid
+  };
+  Kind kind;
+  absl::Time time;         // measurement epoch
+  std::string subsystem;   // "star_tracker", "working_pair[1,2]", "gyro 2", ...
+  double value = 0.0;      // the tested quantity
+  double threshold = 0.0;  // its allowed value
+  std::string unit;        // of value and threshold ("arcsec", "1")
+  std::string message;
+};
+const char* EventKindName(Event::Kind kind);
+
+struct AttitudeEstimate {
+  absl::Time time;
+  Eigen::Quaterniond q_in_b = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d sigma_b = Eigen::Vector3d::Zero();  // 1-sigma about body x, y, z [rad]
+  std::array<int, 2> pair = {0, 0};                   // gyro ids it was computed from
+  bool valid = false;
+};
+
+struct GyroEstimate {
+  int id = 0;
+  DriftCoefficients coefficients;        // full current model values [rad/s]
+  DriftCoefficients sigma;               // 1-sigma, 0 where held [rad/s]
+  Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();        // [rad]
+  Eigen::Vector3d misalignment_sigma_b = Eigen::Vector3d::Zero();  // [rad]
+  Eigen::Vector2d residual_drift = Eigen::Vector2d::Zero();        // dw_int [rad/s]
+  Eigen::Vector2d residual_drift_sigma = Eigen::Vector2d::Zero();  // [rad/s]
+  Eigen::Vector3d h_in = Eigen::Vector3d::UnitZ();                 // predicted spin axis
+  Eigen::Vector2d spin_axis_sigma = Eigen::Vector2d::Zero();       // [rad]
+  bool faulty = false;
+};
+
+struct StepReport {
+  absl::Time time;
+  bool measurement_step = false;      // a measurement update was attempted at this frame
+  bool star_tracker_used = false;     // star-tracker measurements were applied
+  AttitudeEstimate attitude;          // output of the working (or reserve) pair
+  std::vector<Event> events;
+  // Star-tracker innovations of this step in the gyros' bases [rad] (empty if none formed).
+  Eigen::VectorXd star_tracker_innovation;
+  Eigen::VectorXd star_tracker_innovation_sigma;
+  // Autonomous innovations z_avt of this step [1] and their sigma.
+  Eigen::VectorXd autonomous_innovation;
+  Eigen::VectorXd autonomous_innovation_sigma;
+  SessionState state = SessionState::kNoData;
+};
+
+struct SessionOptions {
+  ModelSpec model;
+  // Initial 1-sigma of the residual drift dw_int [rad/s]; < 0 = derived (0.1 deg/h with model 11
+  // alone, 0.01 deg/h on top of a calibrated model).
+  double residual_drift_sigma = -1.0;
+  // Process the autonomous measurements z_avt (eq. (13)); off only for experiments.
+  bool use_autonomous_measurements = true;
+};
+
+// Everything needed to resume exactly (bit for bit) where a session stopped.
+struct SessionCheckpoint {
+  int version = 1;
+  std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
+};
+
+struct PredictedSample {
+  absl::Time time;
+  AttitudeEstimate attitude;
+  std::vector<std::pair<int, Eigen::Vector3d>> h_in;  // gyro id, predicted inertial spin axis
+};
+
+class EstimationSession {
+ public:
+  // InvalidArgument if the configuration is invalid or the model frees nothing it can estimate.
+  static absl::StatusOr<EstimationSession> Create(const SpacecraftConfig& config,
+                                                  const SessionOptions& options);
+
+  // Applies one frame (strictly after the previous one: OutOfRange otherwise). Propagates from
+  // the previous frame at the integration rate and, at a measurement step, runs eq. (12), the
+  // innovation test eq. (14) and the Joseph update. Rejections are events in the report, not
+  // errors. Internal if the numerics fail (the session is then unchanged).
+  absl::StatusOr<StepReport> AddFrame(const TelemetryFrame& frame);
+
+  // Withholds (false) or restores star-tracker measurements, as for a long-gap experiment.
+  void SetStarTrackerUse(bool use) { use_star_tracker_ = use; }
+
+  SessionState state() const { return state_; }
+  bool initialized() const { return initialized_; }
+  absl::Time last_frame_time() const { return last_time_; }
+  std::array<int, 2> working_pair() const { return working_pair_; }
+  const SpacecraftConfig& config() const { return config_; }
+  const SessionOptions& options() const { return options_; }
+
+  AttitudeEstimate CurrentAttitude() const;
+  std::vector<GyroEstimate> Gyros() const;
+  // sqrt(P/P0) of each free coefficient of gyro `id` (index into theta -> ratio).
+  std::vector<std::pair<int, double>> RelativeSigma(int id) const;
+
+  // Predicts from the current state without star tracker: at each time (after the last frame),
+  // the gyro readings are those the planned profile implies (q_in_b from `planned`, or an inertial
+  // hold of the current attitude when null); returns the attitude with its 1-sigma envelope and
+  // the predicted inertial spin axes. The session itself is not changed.
+  absl::StatusOr<std::vector<PredictedSample>> Predict(const std::vector<absl::Time>& times,
+                                                       const AttitudeProfile* planned,
+                                                       absl::Time planned_start) const;
+
+  SessionCheckpoint ExportCheckpoint() const;
+  // DataLoss if the checkpoint does not fit this configuration and model.
+  static absl::StatusOr<EstimationSession> FromCheckpoint(const SpacecraftConfig& config,
+                                                          const SessionOptions& options,
+                                                          const SessionCheckpoint& checkpoint);
+
+  // Filter internals, exposed read-only for tests and diagnostics.
+  const Eigen::MatrixXd& covariance() const { return P_; }
+  int state_size() const { return static_cast<int>(P_.rows()); }
+
+ private:
+  struct GyroState {
+    int id = 0;
+    Eigen::Matrix3d C_b_k_config;
+    Eigen::Vector3d h_in = Eigen::Vector3d::UnitZ();
+    Eigen::Vector3d t1 = Eigen::Vector3d::UnitX();  // tangent basis, t2 = h_in x t1
+    Eigen::Vector2d residual_drift = Eigen::Vector2d::Zero();
+    DriftVector theta = DriftVector::Zero();
+    std::vector<int> free;
+    Eigen::Vector3d phi_b = Eigen::Vector3d::Zero();
+    bool estimate_phi = false;
+    int offset = 0;  // first state index
+    bool faulty = false;
+    // Last reading (for interpolation to the integration rate).
+    bool has_reading = false;
+    Eigen::Vector3d h_k_last = Eigen::Vector3d::UnitZ();
+
+    Eigen::Vector3d t2() const { return h_in.cross(t1); }
+    Eigen::Matrix<double, 3, 2> T() const;
+    Eigen::Matrix3d C_b_k() const;
+    int size(bool random_walk) const {
+      return 2 + (random_walk ? 2 : 0) + static_cast<int>(free.size()) + (estimate_phi ? 3 : 0);
+    }
+    int rw_offset() const { return offset + 2; }
+  };
+
+  EstimationSession() = default;
+  absl::Status Initialize(const TelemetryFrame& frame);
+  absl::Status Propagate(const TelemetryFrame& frame);
+  absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
+  void ApplyCorrection(const Eigen::VectorXd& dx);
+  int ThetaOffset(const GyroState& g) const;
+  int PhiOffset(const GyroState& g) const;
+  GyroState* Find(int id);
+  const GyroState* Find(int id) const;
+  // Attitude of a pair from predicted h_in and the given case-frame readings (nullopt if either
+  // gyro has no reading), with its covariance in inertial axes when `covariance` is set.
+  std::optional<Eigen::Quaterniond> PairQuaternion(int a, int b, const Eigen::Vector3d& h_k_a,
+                                                   const Eigen::Vector3d& h_k_b,
+                                                   Eigen::Matrix3d* covariance_in) const;
+  AttitudeEstimate OutputAttitude(absl::Time time) const;
+  void UpdateState(const StepReport& report);
+
+  SpacecraftConfig config_;
+  SessionOptions options_;
+  std::vector<GyroState> gyros_;  // running gyros, working pair first
+  Eigen::MatrixXd P_;
+  Eigen::MatrixXd P0_;
+  bool initialized_ = false;
+  bool use_star_tracker_ = true;
+  absl::Time last_time_ = absl::InfinitePast();
+  absl::Time last_update_time_ = absl::InfinitePast();
+  absl::Time start_time_ = absl::InfinitePast();
+  std::array<int, 2> working_pair_ = {0, 0};
+  std::array<int, 2> reserve_pair_ = {0, 0};
+  SessionState state_ = SessionState::kNoData;
+  int steps_without_star_tracker_ = 0;
+  // Relative-sigma history for the convergence test: (time, max ratio change reference).
+  absl::Time convergence_mark_time_ = absl::InfinitePast();
+  Eigen::VectorXd convergence_mark_sigma_;
+  bool converged_ = false;
+};
+
+}  // namespace esg::estimator
+
+#endif  // ESG_ESTIMATOR_SESSION_H_
