@@ -1,0 +1,64 @@
+// Alert history with acknowledge/clear state and repeat collapsing (table alerts, schema.h;
+// DESIGN §7 "Time and alerts", after Yamcs/COSMOS/Open MCT). Each spacecraft's alerts are
+// numbered 1, 2, ... by the store in commit order; numbers are never reused.
+#ifndef ESG_STORAGE_ALERT_STORE_H_
+#define ESG_STORAGE_ALERT_STORE_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "storage/records.h"
+#include "storage/sqlite_db.h"
+
+namespace esg::storage {
+
+// Thread-safe (through Database). Methods without a Transaction argument run in their own
+// transaction; the overloads taking one join the caller's.
+class AlertStore {
+ public:
+  explicit AlertStore(Database* db) : db_(db) {}
+
+  // Stores a new alert and returns the sequence number assigned to it (record.sequence is
+  // ignored). The acknowledge/clear fields are stored as given (normally false/empty).
+  // InvalidArgument (naming the field) if spacecraft_id, severity or reason is empty,
+  // repeat_count < 1, or a time is not storable.
+  absl::StatusOr<int64_t> Append(const AlertRecord& record);
+  absl::StatusOr<int64_t> Append(Transaction& txn, const AlertRecord& record);
+
+  // Alerts with measurement_time >= since, ordered by (measurement_time, sequence) for one
+  // spacecraft, or by (measurement_time, spacecraft_id, sequence) over all spacecraft when
+  // spacecraft_id is empty. At most `limit` (> 0, else InvalidArgument).
+  absl::StatusOr<std::vector<AlertRecord>> Since(absl::string_view spacecraft_id, absl::Time since,
+                                                 int64_t limit);
+
+  // One alert; NotFound if missing.
+  absl::StatusOr<AlertRecord> Get(absl::string_view spacecraft_id, int64_t sequence);
+
+  // Marks the alert acknowledged by `operator_name` at `time` and returns the updated record.
+  // Acknowledging an acknowledged alert changes nothing (the first acknowledgement stands).
+  // NotFound if missing; InvalidArgument for an empty operator_name or unstorable time.
+  absl::StatusOr<AlertRecord> Acknowledge(absl::string_view spacecraft_id, int64_t sequence,
+                                          absl::string_view operator_name, absl::Time time);
+
+  // Marks the alert cleared (the condition is over) and returns the updated record.
+  // NotFound if missing.
+  absl::StatusOr<AlertRecord> Clear(absl::string_view spacecraft_id, int64_t sequence);
+
+  // Collapses a repeat into an existing alert: sets its repeat_count (the new total, >= 1) and
+  // its measurement_time to last_time (the latest occurrence). NotFound if missing;
+  // InvalidArgument for repeat_count < 1 or an unstorable time.
+  absl::Status UpdateRepeat(absl::string_view spacecraft_id, int64_t sequence,
+                            int64_t repeat_count, absl::Time last_time);
+  absl::Status UpdateRepeat(Transaction& txn, const AlertRepeat& repeat);
+
+ private:
+  Database* db_;  // not owned
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_ALERT_STORE_H_

@@ -1,0 +1,173 @@
+// Coefficient histories; contract in coefficient_store.h.
+#include "storage/coefficient_store.h"
+
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "estimator/status_macros.h"
+#include "estimator/units.h"
+#include "storage/schema.h"
+
+namespace esg::storage {
+namespace {
+
+// Fixed leading columns, then the 16 value columns, then the 16 sigma columns.
+constexpr int kNumLeadingColumns = 5;
+
+std::string AllColumns() {
+  return absl::StrCat(
+      "spacecraft_id, gyro_id, measurement_time_unix_ns, compute_time_unix_ns, model_name, ",
+      absl::StrJoin(kCoefficientColumns, ", "), ", ",
+      absl::StrJoin(kCoefficientSigmaColumns, ", "));
+}
+
+const std::string& InsertSql() {
+  static const std::string* const sql = [] {
+    std::string params;
+    for (int i = 1; i <= kNumLeadingColumns + 2 * kNumCoefficientValues; ++i) {
+      absl::StrAppend(&params, i == 1 ? "" : ", ", "?", i);
+    }
+    return new std::string(
+        absl::StrCat("INSERT INTO coefficients (", AllColumns(), ") VALUES (", params, ")"));
+  }();
+  return *sql;
+}
+
+const std::string& HistorySql(bool one_gyro) {
+  static const std::string* const all = new std::string(absl::StrCat(
+      "SELECT ", AllColumns(),
+      " FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
+      "AND measurement_time_unix_ns < ?3 ORDER BY measurement_time_unix_ns, gyro_id, id"));
+  static const std::string* const one = new std::string(absl::StrCat(
+      "SELECT ", AllColumns(),
+      " FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
+      "AND measurement_time_unix_ns < ?3 AND gyro_id = ?4 "
+      "ORDER BY measurement_time_unix_ns, gyro_id, id"));
+  return one_gyro ? *one : *all;
+}
+
+absl::Status Validate(const CoefficientRecord& r) {
+  RETURN_IF_ERROR(ValidateSpacecraftId(r.spacecraft_id, "coefficients.spacecraft_id"));
+  if (r.gyro_id < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("coefficients.gyro_id = ", r.gyro_id, ": must be >= 1"));
+  }
+  if (r.model_name.empty()) {
+    return absl::InvalidArgumentError("coefficients.model_name: empty");
+  }
+  if (r.values.size() != kNumCoefficientValues) {
+    return absl::InvalidArgumentError(absl::StrCat("coefficients.values: ", r.values.size(),
+                                                   " entries, expected ",
+                                                   kNumCoefficientValues));
+  }
+  if (!r.sigmas.empty() && r.sigmas.size() != kNumCoefficientValues) {
+    return absl::InvalidArgumentError(absl::StrCat("coefficients.sigmas: ", r.sigmas.size(),
+                                                   " entries, expected 0 or ",
+                                                   kNumCoefficientValues));
+  }
+  RETURN_IF_ERROR(ValidateStorableTime(r.measurement_time, "coefficients.measurement_time"));
+  return ValidateStorableTime(r.compute_time, "coefficients.compute_time");
+}
+
+}  // namespace
+
+std::vector<double> ToCoefficientValues(const estimator::DriftCoefficients& drift,
+                                        const Eigen::Vector3d& misalignment_b) {
+  using estimator::RadPerSecToDegPerHour;
+  std::vector<double> values(kNumCoefficientValues);
+  const estimator::DriftVector theta = drift.AsVector();
+  for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
+    values[i] = RadPerSecToDegPerHour(theta[i]);
+  }
+  for (int i = 0; i < 3; ++i) {
+    values[kCoefficientMisalignment + i] = estimator::RadToArcsec(misalignment_b[i]);
+  }
+  return values;
+}
+
+absl::Status FromCoefficientValues(absl::Span<const double> values,
+                                   estimator::DriftCoefficients* drift,
+                                   Eigen::Vector3d* misalignment_b) {
+  if (values.size() != kNumCoefficientValues) {
+    return absl::InvalidArgumentError(absl::StrCat("coefficient values: ", values.size(),
+                                                   " entries, expected ",
+                                                   kNumCoefficientValues));
+  }
+  estimator::DriftVector theta;
+  for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
+    theta[i] = estimator::DegPerHourToRadPerSec(values[i]);
+  }
+  *drift = estimator::DriftCoefficients::FromVector(theta);
+  for (int i = 0; i < 3; ++i) {
+    (*misalignment_b)[i] = estimator::ArcsecToRad(values[kCoefficientMisalignment + i]);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CoefficientStore::Append(const CoefficientRecord& record) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  RETURN_IF_ERROR(Append(txn, record));
+  return txn.Commit();
+}
+
+absl::Status CoefficientStore::Append(Transaction& txn, const CoefficientRecord& record) {
+  RETURN_IF_ERROR(Validate(record));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(InsertSql()));
+  st->BindText(1, record.spacecraft_id)
+      .BindInt64(2, record.gyro_id)
+      .BindInt64(3, TimeToUnixNanos(record.measurement_time))
+      .BindInt64(4, TimeToUnixNanos(record.compute_time))
+      .BindText(5, record.model_name);
+  for (int i = 0; i < kNumCoefficientValues; ++i) {
+    const int value_index = kNumLeadingColumns + 1 + i;
+    const int sigma_index = value_index + kNumCoefficientValues;
+    st->BindDouble(value_index, record.values[i]);
+    if (record.sigmas.empty()) {
+      st->BindNull(sigma_index);
+    } else {
+      st->BindDouble(sigma_index, record.sigmas[i]);
+    }
+  }
+  return st->Run();
+}
+
+absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
+    absl::string_view spacecraft_id, int gyro_id, absl::Time from, absl::Time to) {
+  if (gyro_id < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("gyro_id = ", gyro_id, ": must be >= 1, or 0 for all gyros"));
+  }
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(HistorySql(gyro_id != 0)));
+  st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(from)).BindInt64(3, TimeToUnixNanos(to));
+  if (gyro_id != 0) st->BindInt64(4, gyro_id);
+  std::vector<CoefficientRecord> out;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    CoefficientRecord r;
+    r.spacecraft_id = st->ColumnText(0);
+    r.gyro_id = static_cast<int>(st->ColumnInt64(1));
+    r.measurement_time = UnixNanosToTime(st->ColumnInt64(2));
+    r.compute_time = UnixNanosToTime(st->ColumnInt64(3));
+    r.model_name = st->ColumnText(4);
+    r.values.resize(kNumCoefficientValues);
+    bool any_sigma = false;
+    std::vector<double> sigmas(kNumCoefficientValues);
+    for (int i = 0; i < kNumCoefficientValues; ++i) {
+      const int value_column = kNumLeadingColumns + i;
+      const int sigma_column = value_column + kNumCoefficientValues;
+      r.values[i] = st->ColumnDoubleOrNaN(value_column);
+      sigmas[i] = st->ColumnDoubleOrNaN(sigma_column);
+      any_sigma = any_sigma || !st->ColumnIsNull(sigma_column);
+    }
+    if (any_sigma) r.sigmas = std::move(sigmas);
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
+}  // namespace esg::storage

@@ -1,0 +1,56 @@
+// Histories of estimated gyro model coefficients (table coefficients, one REAL column per
+// component in the layout of records.h: k0, C1, C2, mu, nu in deg/h, misalignment in arcsec;
+// DESIGN §3, eq. (1), (8)-(10)), plus the conversions between that layout and the estimator's
+// SI DriftCoefficients.
+#ifndef ESG_STORAGE_COEFFICIENT_STORE_H_
+#define ESG_STORAGE_COEFFICIENT_STORE_H_
+
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "absl/types/span.h"
+#include "estimator/drift_model.h"
+#include "storage/records.h"
+#include "storage/sqlite_db.h"
+
+namespace esg::storage {
+
+// Estimator values -> the 16-value layout of records.h: drift [rad/s] -> deg/h, misalignment
+// rotation vector about body axes [rad] -> arcsec. Also right for 1-sigma values.
+std::vector<double> ToCoefficientValues(const estimator::DriftCoefficients& drift,
+                                        const Eigen::Vector3d& misalignment_b);
+// The inverse. InvalidArgument unless values.size() == kNumCoefficientValues.
+absl::Status FromCoefficientValues(absl::Span<const double> values,
+                                   estimator::DriftCoefficients* drift,
+                                   Eigen::Vector3d* misalignment_b);
+
+// Thread-safe (through Database). Methods without a Transaction argument run in their own
+// transaction; the overloads taking one join the caller's.
+class CoefficientStore {
+ public:
+  explicit CoefficientStore(Database* db) : db_(db) {}
+
+  // Appends one estimate. InvalidArgument (naming the field) if spacecraft_id or model_name is
+  // empty, gyro_id < 1, values.size() != kNumCoefficientValues, sigmas is neither empty nor of
+  // that size, or a time is not storable. NaN values are stored as NULL and read back as NaN;
+  // empty sigmas are stored as NULLs, and sigmas that are all NULL read back as empty.
+  absl::Status Append(const CoefficientRecord& record);
+  absl::Status Append(Transaction& txn, const CoefficientRecord& record);
+
+  // Estimates of the spacecraft with from <= measurement_time < to, for one gyro or for all
+  // (gyro_id == 0), ordered by (measurement_time, gyro_id, insertion).
+  absl::StatusOr<std::vector<CoefficientRecord>> History(absl::string_view spacecraft_id,
+                                                         int gyro_id, absl::Time from,
+                                                         absl::Time to);
+
+ private:
+  Database* db_;  // not owned
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_COEFFICIENT_STORE_H_

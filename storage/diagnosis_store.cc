@@ -1,0 +1,88 @@
+// Diagnosis results; contract in diagnosis_store.h.
+#include "storage/diagnosis_store.h"
+
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "estimator/status_macros.h"
+#include "storage/schema.h"
+
+namespace esg::storage {
+namespace {
+
+#define ESG_DIAGNOSIS_COLUMNS                                                        \
+  "id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, " \
+  "verdict, report_json"
+constexpr char kSelectById[] = "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE id = ?1";
+constexpr char kSelectBySpacecraft[] =
+    "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE spacecraft_id = ?1 ORDER BY id";
+#undef ESG_DIAGNOSIS_COLUMNS
+
+DiagnosisRecord ReadRow(const Statement& st) {
+  DiagnosisRecord r;
+  r.id = st.ColumnInt64(0);
+  r.spacecraft_id = st.ColumnText(1);
+  r.from_time = UnixNanosToTime(st.ColumnInt64(2));
+  r.to_time = UnixNanosToTime(st.ColumnInt64(3));
+  r.compute_time = UnixNanosToTime(st.ColumnInt64(4));
+  r.verdict = st.ColumnText(5);
+  r.report_json = st.ColumnText(6);
+  return r;
+}
+
+}  // namespace
+
+absl::StatusOr<int64_t> DiagnosisStore::Put(const DiagnosisRecord& record) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(int64_t id, Put(txn, record));
+  RETURN_IF_ERROR(txn.Commit());
+  return id;
+}
+
+absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRecord& record) {
+  RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "diagnosis.spacecraft_id"));
+  if (record.verdict.empty()) return absl::InvalidArgumentError("diagnosis.verdict: empty");
+  RETURN_IF_ERROR(ValidateStorableTime(record.from_time, "diagnosis.from_time"));
+  RETURN_IF_ERROR(ValidateStorableTime(record.to_time, "diagnosis.to_time"));
+  RETURN_IF_ERROR(ValidateStorableTime(record.compute_time, "diagnosis.compute_time"));
+  if (record.to_time < record.from_time) {
+    return absl::InvalidArgumentError("diagnosis.to_time: earlier than from_time");
+  }
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, "
+                               "to_time_unix_ns, compute_time_unix_ns, verdict, report_json) "
+                               "VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
+  st->BindText(1, record.spacecraft_id)
+      .BindInt64(2, TimeToUnixNanos(record.from_time))
+      .BindInt64(3, TimeToUnixNanos(record.to_time))
+      .BindInt64(4, TimeToUnixNanos(record.compute_time))
+      .BindText(5, record.verdict)
+      .BindText(6, record.report_json);
+  RETURN_IF_ERROR(st->Run());
+  return txn.LastInsertRowId();
+}
+
+absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::List(
+    absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectBySpacecraft));
+  st->BindText(1, spacecraft_id);
+  std::vector<DiagnosisRecord> out;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    out.push_back(ReadRow(*st));
+  }
+  return out;
+}
+
+absl::StatusOr<DiagnosisRecord> DiagnosisStore::Get(int64_t id) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectById));
+  st->BindInt64(1, id);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  if (!row) return absl::NotFoundError(absl::StrCat("no diagnosis with id ", id));
+  return ReadRow(*st);
+}
+
+}  // namespace esg::storage

@@ -1,0 +1,41 @@
+// Results of model-discrepancy diagnoses (table diagnoses, schema.h; DESIGN §6): the verdict
+// over a time window and the full report as JSON, kept as a history per spacecraft.
+#ifndef ESG_STORAGE_DIAGNOSIS_STORE_H_
+#define ESG_STORAGE_DIAGNOSIS_STORE_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "storage/records.h"
+#include "storage/sqlite_db.h"
+
+namespace esg::storage {
+
+// Thread-safe (through Database). Methods without a Transaction argument run in their own
+// transaction; the overload taking one joins the caller's.
+class DiagnosisStore {
+ public:
+  explicit DiagnosisStore(Database* db) : db_(db) {}
+
+  // Stores a diagnosis and returns its id (unique across all spacecraft, increasing;
+  // record.id is ignored). InvalidArgument for an empty spacecraft_id or verdict, an unstorable
+  // time, or to_time < from_time.
+  absl::StatusOr<int64_t> Put(const DiagnosisRecord& record);
+  absl::StatusOr<int64_t> Put(Transaction& txn, const DiagnosisRecord& record);
+
+  // All diagnoses of the spacecraft, in id (insertion) order.
+  absl::StatusOr<std::vector<DiagnosisRecord>> List(absl::string_view spacecraft_id);
+
+  // One diagnosis; NotFound if missing.
+  absl::StatusOr<DiagnosisRecord> Get(int64_t id);
+
+ private:
+  Database* db_;  // not owned
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_DIAGNOSIS_STORE_H_

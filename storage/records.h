@@ -1,0 +1,130 @@
+// Plain value types stored by the SQLite stores (DESIGN §7 "Time and alerts", §8 storage/).
+// They carry no gRPC or proto types: the server converts. Times are UTC instants (absl::Time);
+// every record kept by the service carries the measurement epoch (the telemetry's own time) and,
+// where it is a computed product, the instant the service computed it.
+#ifndef ESG_STORAGE_RECORDS_H_
+#define ESG_STORAGE_RECORDS_H_
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "estimator/drift_model.h"
+
+namespace esg::storage {
+
+// One version of a spacecraft's configuration (DESIGN §7 JSON, stored verbatim).
+struct ConfigRecord {
+  std::string spacecraft_id;
+  std::string config_json;
+  absl::Time updated_time = absl::UnixEpoch();
+  int64_t version = 0;  // 1, 2, ... per spacecraft; assigned by ConfigStore::Put, ignored on input
+};
+
+// One accepted telemetry frame, kept so a session can be recalibrated or replayed.
+struct ArchivedFrame {
+  std::string spacecraft_id;
+  int64_t sequence = 0;  // the frame's sequence number in the spacecraft's stream (unique)
+  absl::Time measurement_time = absl::UnixEpoch();
+  std::string payload;   // serialized frame bytes, format chosen by the server
+};
+
+// Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, each stored
+// in its own column of table `coefficients` (sigma columns: "<name>_sigma_<unit>", e.g.
+// k0_sigma_deg_h). Drift terms follow estimator/drift_model.h (DESIGN §3, eq. (1), (8)-(10)):
+// k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of the gyro,
+// mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all in deg/h; then the misalignment, a small
+// rotation vector about body axes b in arcsec (as in SpacecraftConfig's misalignment_sigma).
+inline constexpr int kNumCoefficientValues = 16;
+inline constexpr int kCoefficientK0 = 0;
+inline constexpr int kCoefficientC1 = 1;
+inline constexpr int kCoefficientC2 = 4;
+inline constexpr int kCoefficientMu = 7;
+inline constexpr int kCoefficientNu = 10;
+inline constexpr int kCoefficientMisalignment = 13;
+static_assert(kCoefficientK0 == estimator::kThetaK0 && kCoefficientC1 == estimator::kThetaC1 &&
+                  kCoefficientC2 == estimator::kThetaC2 && kCoefficientMu == estimator::kThetaMu &&
+                  kCoefficientNu == estimator::kThetaNu &&
+                  kCoefficientMisalignment == estimator::kNumDriftCoefficients,
+              "the drift part of the coefficient layout is the estimator's theta");
+
+// Column names of the values, in layout order.
+inline constexpr std::array<absl::string_view, kNumCoefficientValues> kCoefficientColumns = {
+    "k0_deg_h",   "c1x_deg_h",  "c1y_deg_h",  "c1z_deg_h",  "c2x_deg_h",
+    "c2y_deg_h",  "c2z_deg_h",  "mu12_deg_h", "mu23_deg_h", "mu31_deg_h",
+    "nu23_deg_h", "nu31_deg_h", "nu12_deg_h", "misalignment_x_arcsec",
+    "misalignment_y_arcsec",    "misalignment_z_arcsec"};
+// Column names of the sigmas, in layout order.
+inline constexpr std::array<absl::string_view, kNumCoefficientValues> kCoefficientSigmaColumns = {
+    "k0_sigma_deg_h",   "c1x_sigma_deg_h",  "c1y_sigma_deg_h",  "c1z_sigma_deg_h",
+    "c2x_sigma_deg_h",  "c2y_sigma_deg_h",  "c2z_sigma_deg_h",  "mu12_sigma_deg_h",
+    "mu23_sigma_deg_h", "mu31_sigma_deg_h", "nu23_sigma_deg_h", "nu31_sigma_deg_h",
+    "nu12_sigma_deg_h", "misalignment_x_sigma_arcsec", "misalignment_y_sigma_arcsec",
+    "misalignment_z_sigma_arcsec"};
+
+// One estimate of one gyro's model coefficients.
+struct CoefficientRecord {
+  std::string spacecraft_id;
+  int gyro_id = 0;  // 1..4 as in the configuration
+  absl::Time measurement_time = absl::UnixEpoch();  // epoch of the telemetry the estimate uses
+  absl::Time compute_time = absl::UnixEpoch();
+  std::vector<double> values;  // kNumCoefficientValues, layout above; NaN = not estimated
+  std::vector<double> sigmas;  // 1-sigma, same layout, or empty when unknown; NaN = unknown
+  std::string model_name;      // e.g. "model10"
+};
+
+// One alert (DESIGN §7 "Time and alerts": Yamcs/COSMOS/Open MCT conventions).
+struct AlertRecord {
+  std::string spacecraft_id;
+  int64_t sequence = 0;   // 1, 2, ... per spacecraft; assigned by the store, ignored on input
+  std::string severity;   // e.g. "WATCH", "WARNING", "CRITICAL" (the server's vocabulary)
+  std::string reason;     // machine-readable reason code, e.g. "INNOVATION_TEST"
+  std::string subsystem;  // e.g. "gyro2", "star_tracker", "pair(1,2)"
+  double value = 0.0;     // the triggering value, in `unit`; NaN allowed
+  double threshold = 0.0;  // the threshold it was tested against, in `unit`; NaN allowed
+  std::string unit;       // e.g. "arcsec"
+  int64_t repeat_count = 1;  // occurrences collapsed into this alert, >= 1
+  absl::Time first_time = absl::UnixEpoch();        // measurement epoch of the first occurrence
+  absl::Time measurement_time = absl::UnixEpoch();  // measurement epoch of the latest occurrence
+  absl::Time compute_time = absl::UnixEpoch();
+  std::string message;
+  bool acknowledged = false;
+  std::string acknowledged_by;
+  absl::Time acknowledged_time = absl::InfinitePast();  // InfinitePast while not acknowledged
+  bool cleared = false;
+};
+
+// A repeat of an existing alert, collapsed into it (AlertStore::UpdateRepeat).
+struct AlertRepeat {
+  std::string spacecraft_id;
+  int64_t sequence = 0;
+  int64_t repeat_count = 1;                        // the new total, >= 1
+  absl::Time last_time = absl::UnixEpoch();        // measurement epoch of the latest occurrence
+};
+
+// The latest checkpoint of a spacecraft's estimation session (one per spacecraft).
+struct CheckpointRecord {
+  std::string spacecraft_id;
+  int64_t last_sequence = 0;  // sequence of the last frame the state includes
+  absl::Time measurement_time = absl::UnixEpoch();
+  absl::Time compute_time = absl::UnixEpoch();
+  std::string state_blob;     // serialized session state, format chosen by the server
+};
+
+// The result of one model-discrepancy diagnosis over [from_time, to_time) (DESIGN §6).
+struct DiagnosisRecord {
+  std::string spacecraft_id;
+  int64_t id = 0;  // assigned by DiagnosisStore::Put, ignored on input
+  absl::Time from_time = absl::UnixEpoch();
+  absl::Time to_time = absl::UnixEpoch();
+  absl::Time compute_time = absl::UnixEpoch();
+  std::string verdict;      // e.g. "gyro_misalignment", "unexplained"
+  std::string report_json;  // full report, stored verbatim
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_RECORDS_H_

@@ -1,0 +1,217 @@
+// Schema DDL and migrations; contract and version history in schema.h.
+#include "storage/schema.h"
+
+#include <cstdint>
+#include <iterator>
+#include <limits>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/status_macros.h"
+
+namespace esg::storage {
+namespace {
+
+// Version 1: the first layout. Frozen: never edit, append a migration instead.
+constexpr absl::string_view kSchemaV1 = R"sql(
+CREATE TABLE spacecraft_configs (
+  spacecraft_id        TEXT    NOT NULL,
+  version              INTEGER NOT NULL CHECK (version >= 1),
+  updated_time_unix_ns INTEGER NOT NULL,
+  config_json          TEXT    NOT NULL,
+  PRIMARY KEY (spacecraft_id, version)
+);
+
+CREATE TABLE telemetry_frames (
+  spacecraft_id            TEXT    NOT NULL,
+  sequence                 INTEGER NOT NULL,
+  measurement_time_unix_ns INTEGER NOT NULL,
+  payload                  BLOB    NOT NULL,
+  PRIMARY KEY (spacecraft_id, sequence)
+);
+CREATE INDEX telemetry_frames_by_time
+  ON telemetry_frames (spacecraft_id, measurement_time_unix_ns);
+
+CREATE TABLE coefficients (
+  id                          INTEGER PRIMARY KEY,
+  spacecraft_id               TEXT    NOT NULL,
+  gyro_id                     INTEGER NOT NULL CHECK (gyro_id >= 1),
+  measurement_time_unix_ns    INTEGER NOT NULL,
+  compute_time_unix_ns        INTEGER NOT NULL,
+  model_name                  TEXT    NOT NULL,
+  k0_deg_h                    REAL,
+  c1x_deg_h                   REAL,
+  c1y_deg_h                   REAL,
+  c1z_deg_h                   REAL,
+  c2x_deg_h                   REAL,
+  c2y_deg_h                   REAL,
+  c2z_deg_h                   REAL,
+  mu12_deg_h                  REAL,
+  mu23_deg_h                  REAL,
+  mu31_deg_h                  REAL,
+  nu23_deg_h                  REAL,
+  nu31_deg_h                  REAL,
+  nu12_deg_h                  REAL,
+  misalignment_x_arcsec       REAL,
+  misalignment_y_arcsec       REAL,
+  misalignment_z_arcsec       REAL,
+  k0_sigma_deg_h              REAL,
+  c1x_sigma_deg_h             REAL,
+  c1y_sigma_deg_h             REAL,
+  c1z_sigma_deg_h             REAL,
+  c2x_sigma_deg_h             REAL,
+  c2y_sigma_deg_h             REAL,
+  c2z_sigma_deg_h             REAL,
+  mu12_sigma_deg_h            REAL,
+  mu23_sigma_deg_h            REAL,
+  mu31_sigma_deg_h            REAL,
+  nu23_sigma_deg_h            REAL,
+  nu31_sigma_deg_h            REAL,
+  nu12_sigma_deg_h            REAL,
+  misalignment_x_sigma_arcsec REAL,
+  misalignment_y_sigma_arcsec REAL,
+  misalignment_z_sigma_arcsec REAL
+);
+CREATE INDEX coefficients_by_time
+  ON coefficients (spacecraft_id, measurement_time_unix_ns, gyro_id);
+
+CREATE TABLE alerts (
+  spacecraft_id            TEXT    NOT NULL,
+  sequence                 INTEGER NOT NULL CHECK (sequence >= 1),
+  severity                 TEXT    NOT NULL,
+  reason                   TEXT    NOT NULL,
+  subsystem                TEXT    NOT NULL,
+  value                    REAL,
+  threshold                REAL,
+  repeat_count             INTEGER NOT NULL CHECK (repeat_count >= 1),
+  first_time_unix_ns       INTEGER NOT NULL,
+  measurement_time_unix_ns INTEGER NOT NULL,
+  compute_time_unix_ns     INTEGER NOT NULL,
+  message                  TEXT    NOT NULL,
+  acknowledged             INTEGER NOT NULL DEFAULT 0,
+  acknowledged_by          TEXT,
+  acknowledged_time_unix_ns INTEGER,
+  cleared                  INTEGER NOT NULL DEFAULT 0,
+  PRIMARY KEY (spacecraft_id, sequence)
+);
+
+CREATE TABLE checkpoints (
+  spacecraft_id            TEXT    NOT NULL PRIMARY KEY,
+  last_sequence            INTEGER NOT NULL,
+  measurement_time_unix_ns INTEGER NOT NULL,
+  compute_time_unix_ns     INTEGER NOT NULL,
+  state_blob               BLOB    NOT NULL
+);
+)sql";
+
+// Version 2: alerts carry the unit of value/threshold; time-ordered alert queries across all
+// spacecraft get an index; diagnosis results are stored.
+constexpr absl::string_view kSchemaV2 = R"sql(
+ALTER TABLE alerts ADD COLUMN unit TEXT NOT NULL DEFAULT '';
+CREATE INDEX alerts_by_time ON alerts (measurement_time_unix_ns, spacecraft_id, sequence);
+
+CREATE TABLE diagnoses (
+  id                   INTEGER PRIMARY KEY,
+  spacecraft_id        TEXT    NOT NULL,
+  from_time_unix_ns    INTEGER NOT NULL,
+  to_time_unix_ns      INTEGER NOT NULL,
+  compute_time_unix_ns INTEGER NOT NULL,
+  verdict              TEXT    NOT NULL,
+  report_json          TEXT    NOT NULL
+);
+CREATE INDEX diagnoses_by_spacecraft ON diagnoses (spacecraft_id, id);
+)sql";
+
+// kMigrations[n] takes the schema from version n to n + 1.
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2};
+static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
+
+absl::StatusOr<int> ReadUserVersion(Transaction& txn) {
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("PRAGMA user_version"));
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  if (!row) return absl::InternalError("PRAGMA user_version returned no row");
+  const int64_t version = st->ColumnInt64(0);
+  st->Reset();
+  return static_cast<int>(version);
+}
+
+absl::Status CheckKnownVersion(int version, const Database& db) {
+  if (version > kCurrentSchemaVersion) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "database %s has schema version %d, newer than this program's %d: upgrade the program",
+        db.path(), version, kCurrentSchemaVersion));
+  }
+  if (version < 0) {
+    return absl::FailedPreconditionError(
+        absl::StrFormat("database %s has invalid schema version %d", db.path(), version));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<int> SchemaVersion(Database& db) {
+  ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
+  return ReadUserVersion(txn);
+}
+
+absl::Status MigrateTo(Database& db, int target_version) {
+  if (target_version < 0 || target_version > kCurrentSchemaVersion) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "target schema version = %d: must be in [0, %d]", target_version, kCurrentSchemaVersion));
+  }
+  // Cheap check first so that an up-to-date database needs no write lock.
+  ASSIGN_OR_RETURN(int version, SchemaVersion(db));
+  RETURN_IF_ERROR(CheckKnownVersion(version, db));
+  while (version < target_version) {
+    ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kImmediate));
+    // Another connection may have migrated meanwhile; trust only what the write lock sees.
+    ASSIGN_OR_RETURN(version, ReadUserVersion(txn));
+    RETURN_IF_ERROR(CheckKnownVersion(version, db));
+    if (version >= target_version) break;
+    RETURN_IF_ERROR(txn.Execute(kMigrations[version]));
+    RETURN_IF_ERROR(txn.Execute(absl::StrCat("PRAGMA user_version = ", version + 1)));
+    RETURN_IF_ERROR(txn.Commit());
+    ++version;
+  }
+  if (version > target_version) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "database %s has schema version %d, newer than the requested %d", db.path(), version,
+        target_version));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status MigrateToCurrent(Database& db) { return MigrateTo(db, kCurrentSchemaVersion); }
+
+int64_t TimeToUnixNanos(absl::Time t) {
+  if (t == absl::InfinitePast()) return std::numeric_limits<int64_t>::min();
+  if (t == absl::InfiniteFuture()) return std::numeric_limits<int64_t>::max();
+  // absl::ToUnixNanos floors, and saturates outside the int64 range.
+  return absl::ToUnixNanos(t);
+}
+
+absl::Time UnixNanosToTime(int64_t unix_ns) {
+  if (unix_ns == std::numeric_limits<int64_t>::min()) return absl::InfinitePast();
+  if (unix_ns == std::numeric_limits<int64_t>::max()) return absl::InfiniteFuture();
+  return absl::FromUnixNanos(unix_ns);
+}
+
+absl::Status ValidateSpacecraftId(absl::string_view id, absl::string_view field) {
+  if (id.empty()) return absl::InvalidArgumentError(absl::StrCat(field, ": empty"));
+  return absl::OkStatus();
+}
+
+absl::Status ValidateStorableTime(absl::Time t, absl::string_view field) {
+  static const absl::Time kEarliest =
+      absl::FromUnixNanos(std::numeric_limits<int64_t>::min() + 1);
+  static const absl::Time kLatest = absl::FromUnixNanos(std::numeric_limits<int64_t>::max() - 1);
+  if (t < kEarliest || t > kLatest) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " = ", absl::FormatTime(absl::RFC3339_full, t, absl::UTCTimeZone()),
+                     ": must be a finite instant between years 1678 and 2262"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace esg::storage

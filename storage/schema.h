@@ -1,0 +1,64 @@
+// The SQLite schema of the service database and its migrations, keyed on PRAGMA user_version
+// (DESIGN §8, storage/). Column encodings shared by every store are defined here too.
+//
+// Versions (user_version):
+//   0  empty file.
+//   1  spacecraft_configs, telemetry_frames, coefficients, alerts (without `unit`), checkpoints.
+//   2  alerts.unit; index alerts_by_time; diagnoses.               <- kCurrentSchemaVersion
+// Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
+// together with the new user_version, so a crash mid-migration leaves the previous version
+// intact. A migration's DDL is frozen once released: change the schema only by appending a
+// migration.
+//
+// Encodings:
+//   * instants: INTEGER columns named *_time_unix_ns, nanoseconds since 1970-01-01T00:00:00Z
+//     (absl::Time, UTC without leap seconds; sub-nanosecond parts are truncated toward the
+//     past). SQL users: datetime(measurement_time_unix_ns / 1e9, 'unixepoch').
+//   * a NaN double is stored as NULL (SQLite has no NaN) and read back as NaN.
+//   * booleans: INTEGER 0/1.
+//   * drift coefficients: one REAL column per component, named with its unit (records.h).
+#ifndef ESG_STORAGE_SCHEMA_H_
+#define ESG_STORAGE_SCHEMA_H_
+
+#include <cstdint>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "storage/sqlite_db.h"
+
+namespace esg::storage {
+
+inline constexpr int kCurrentSchemaVersion = 2;
+
+// PRAGMA user_version of the open database.
+absl::StatusOr<int> SchemaVersion(Database& db);
+
+// Brings the database to kCurrentSchemaVersion by running the missing migrations in order.
+// Idempotent; safe against another process migrating the same file at the same time (the
+// version is re-read inside each migration's write transaction). FailedPrecondition if the file
+// is newer than this code (user_version > kCurrentSchemaVersion) or its user_version is negative;
+// otherwise the errors of Database::Begin / Transaction::Execute.
+absl::Status MigrateToCurrent(Database& db);
+
+// Brings the database to exactly `target_version` (<= kCurrentSchemaVersion). For tests of the
+// migration path; production code calls MigrateToCurrent(). InvalidArgument for a target
+// outside [0, kCurrentSchemaVersion]; FailedPrecondition if the file is already newer.
+absl::Status MigrateTo(Database& db, int target_version);
+
+// Instant <-> INTEGER column. InfinitePast/InfiniteFuture map to INT64_MIN/INT64_MAX (useful as
+// open query bounds) and back.
+int64_t TimeToUnixNanos(absl::Time t);
+absl::Time UnixNanosToTime(int64_t unix_ns);
+
+// OK if `id` is a non-empty spacecraft id; otherwise InvalidArgument naming `field`.
+absl::Status ValidateSpacecraftId(absl::string_view id, absl::string_view field);
+
+// OK if `t` is finite and representable as int64 Unix nanoseconds (years 1678..2262);
+// otherwise InvalidArgument naming `field`.
+absl::Status ValidateStorableTime(absl::Time t, absl::string_view field);
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_SCHEMA_H_

@@ -1,0 +1,68 @@
+// Session checkpoints; contract in session_store.h.
+#include "storage/session_store.h"
+
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "estimator/status_macros.h"
+#include "storage/schema.h"
+
+namespace esg::storage {
+
+absl::Status SessionStore::PutCheckpoint(const CheckpointRecord& record) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  RETURN_IF_ERROR(PutCheckpoint(txn, record));
+  return txn.Commit();
+}
+
+absl::Status SessionStore::PutCheckpoint(Transaction& txn, const CheckpointRecord& record) {
+  RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "checkpoint.spacecraft_id"));
+  RETURN_IF_ERROR(ValidateStorableTime(record.measurement_time, "checkpoint.measurement_time"));
+  RETURN_IF_ERROR(ValidateStorableTime(record.compute_time, "checkpoint.compute_time"));
+  ASSIGN_OR_RETURN(
+      Statement * st,
+      txn.Prepare("INSERT OR REPLACE INTO checkpoints (spacecraft_id, last_sequence, "
+                  "measurement_time_unix_ns, compute_time_unix_ns, state_blob) "
+                  "VALUES (?1, ?2, ?3, ?4, ?5)"));
+  st->BindText(1, record.spacecraft_id)
+      .BindInt64(2, record.last_sequence)
+      .BindInt64(3, TimeToUnixNanos(record.measurement_time))
+      .BindInt64(4, TimeToUnixNanos(record.compute_time))
+      .BindBlob(5, record.state_blob);
+  return st->Run();
+}
+
+absl::StatusOr<CheckpointRecord> SessionStore::GetCheckpoint(absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT spacecraft_id, last_sequence, measurement_time_unix_ns, "
+                               "compute_time_unix_ns, state_blob FROM checkpoints "
+                               "WHERE spacecraft_id = ?1"));
+  st->BindText(1, spacecraft_id);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  if (!row) {
+    return absl::NotFoundError(absl::StrCat("no checkpoint for spacecraft '", spacecraft_id, "'"));
+  }
+  CheckpointRecord r;
+  r.spacecraft_id = st->ColumnText(0);
+  r.last_sequence = st->ColumnInt64(1);
+  r.measurement_time = UnixNanosToTime(st->ColumnInt64(2));
+  r.compute_time = UnixNanosToTime(st->ColumnInt64(3));
+  r.state_blob = st->ColumnBlob(4);
+  return r;
+}
+
+absl::StatusOr<std::vector<std::string>> SessionStore::ListSpacecraft() {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT spacecraft_id FROM checkpoints ORDER BY spacecraft_id"));
+  std::vector<std::string> out;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    out.push_back(st->ColumnText(0));
+  }
+  return out;
+}
+
+}  // namespace esg::storage

@@ -1,0 +1,42 @@
+// Per-spacecraft estimation-session checkpoints (table checkpoints, schema.h): the latest
+// serialized session state and the last telemetry sequence it includes, so a restarted server
+// resumes each session and replays archived frames after last_sequence (STYLE §3.4
+// "Persistence as data": the estimator exports the state, the server serializes it).
+#ifndef ESG_STORAGE_SESSION_STORE_H_
+#define ESG_STORAGE_SESSION_STORE_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "storage/records.h"
+#include "storage/sqlite_db.h"
+
+namespace esg::storage {
+
+// Thread-safe (through Database). Methods without a Transaction argument run in their own
+// transaction; the overloads taking one join the caller's.
+class SessionStore {
+ public:
+  explicit SessionStore(Database* db) : db_(db) {}
+
+  // Replaces the spacecraft's checkpoint (only the latest is kept). InvalidArgument for an
+  // empty spacecraft_id or an unstorable time.
+  absl::Status PutCheckpoint(const CheckpointRecord& record);
+  absl::Status PutCheckpoint(Transaction& txn, const CheckpointRecord& record);
+
+  // The spacecraft's checkpoint; NotFound if it has none.
+  absl::StatusOr<CheckpointRecord> GetCheckpoint(absl::string_view spacecraft_id);
+
+  // Ids of all spacecraft with a checkpoint, sorted (the sessions to resume at start-up).
+  absl::StatusOr<std::vector<std::string>> ListSpacecraft();
+
+ private:
+  Database* db_;  // not owned
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_SESSION_STORE_H_

@@ -1,0 +1,236 @@
+// RAII wrappers over one SQLite connection: Database (open, pragmas, serialized access),
+// Transaction (the only way to run cached prepared statements) and Statement. Every call returns
+// absl::Status; nothing throws or logs. DESIGN §8 (storage/), STYLE §3.3 (status codes).
+//
+// Durability contract (what an OK Transaction::Commit() guarantees)
+// ------------------------------------------------------------------
+// The connection always runs in WAL mode (journal_mode=WAL). Commit() returns OK only after
+// SQLite has appended the transaction's pages and a commit record to the "-wal" file with
+// write(2). What survives a failure then depends on DatabaseOptions::synchronous:
+//
+//   setting  | process crash (kill -9, abort) | OS crash or power loss
+//   ---------+--------------------------------+-----------------------------------------------
+//   kFull    | committed data survives        | committed data survives: the WAL is fsync'ed
+//   (default)|                                | at every commit, before Commit() returns
+//   kExtra   | same as kFull (in WAL mode EXTRA adds nothing over FULL for commits)
+//   kNormal  | committed data survives        | the last transactions before the failure may
+//            |                                | be rolled back (the WAL is fsync'ed only at
+//            |                                | checkpoints); the file stays consistent
+//   kOff     | committed data survives        | recent transactions may be lost and the file
+//            |                                | may be corrupted (no fsync at all)
+//
+// A process crash never loses a committed transaction in any setting, because the bytes are in
+// the OS page cache once write(2) returns. The default is kFull because the server acknowledges
+// telemetry to the ground station only after CommitBatch() and the ground station then discards
+// its copy: an acknowledged frame must also survive the host losing power, which only FULL
+// (or EXTRA) guarantees in WAL mode. The price is one fsync per transaction, which is why the
+// server commits frames in batches. "Survives" assumes the disk honours fsync (no lying write
+// cache). An uncommitted transaction (no Commit(), a failed Commit(), or a crash before Commit()
+// returned) is rolled back completely: readers never see part of a transaction.
+//
+// Thread safety
+// -------------
+// A Database is safe to share between threads. Access is serialized by an internal absl::Mutex:
+// a Transaction holds it from Begin() until Commit()/Rollback()/destruction, so the statements
+// of one transaction never interleave with another thread's. The connection is also opened with
+// SQLITE_OPEN_FULLMUTEX. A thread must not call Begin() or Execute() on a Database while it holds
+// a Transaction on it (FailedPrecondition). Separate Database objects (other threads or
+// processes) on the same file are isolated by SQLite's own locks; a writer waits up to
+// busy_timeout for another connection's write lock and then gets Unavailable.
+//
+// Error codes (StatusCodeForSqliteResult): SQLITE_BUSY/LOCKED -> Unavailable (retry allowed),
+// SQLITE_CORRUPT/NOTADB -> DataLoss, PRIMARY KEY/UNIQUE violation -> AlreadyExists, other
+// constraint violations -> InvalidArgument, SQLITE_FULL/NOMEM -> ResourceExhausted, I/O error
+// -> Unavailable, cannot open/read-only -> FailedPrecondition, SQL errors -> Internal.
+#ifndef ESG_STORAGE_SQLITE_DB_H_
+#define ESG_STORAGE_SQLITE_DB_H_
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/container/flat_hash_map.h"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/synchronization/mutex.h"
+#include "absl/time/time.h"
+
+struct sqlite3;
+struct sqlite3_stmt;
+
+namespace esg::storage {
+
+// PRAGMA synchronous levels; see the durability table above.
+enum class Synchronous { kOff = 0, kNormal = 1, kFull = 2, kExtra = 3 };
+
+struct DatabaseOptions {
+  // Durability of a commit; see the table in the file comment. kFull backs telemetry acks.
+  Synchronous synchronous = Synchronous::kFull;
+  // How long a statement waits for another connection's lock before returning Unavailable.
+  absl::Duration busy_timeout = absl::Seconds(5);
+  // If false, opening a path that does not exist returns NotFound. Parent directories are never
+  // created: the caller creates them.
+  bool create_if_missing = true;
+};
+
+// The absl::StatusCode for an SQLite (extended) result code other than SQLITE_OK/ROW/DONE.
+absl::StatusCode StatusCodeForSqliteResult(int result_code);
+
+class Database;
+class Transaction;
+
+// A prepared statement owned by the Database's cache and lent out by Transaction::Prepare().
+// Parameter indexes are 1-based (SQLite's "?1"), column indexes 0-based. Bind* never fails
+// immediately: the first bind error (index out of range, out of memory) is remembered and
+// returned by the next Step()/Run(), so binds can be chained:
+//   st->BindText(1, id).BindInt64(2, sequence);
+class Statement {
+ public:
+  Statement(const Statement&) = delete;
+  Statement& operator=(const Statement&) = delete;
+  ~Statement();
+
+  Statement& BindInt64(int index, int64_t value);
+  // A NaN binds as NULL (SQLite cannot store NaN); read it back with ColumnDoubleOrNaN().
+  Statement& BindDouble(int index, double value);
+  Statement& BindText(int index, absl::string_view value);
+  Statement& BindBlob(int index, absl::string_view bytes);
+  Statement& BindNull(int index);
+
+  // Advances the statement: true if a row is available through the Column* getters, false when
+  // the statement has finished. Errors as in the file comment.
+  absl::StatusOr<bool> Step();
+  // Runs a statement that returns no rows to completion (INSERT/UPDATE/DELETE/DDL). Returns
+  // Internal if it produces a row.
+  absl::Status Run();
+  // Rewinds the statement and clears all bindings and any remembered bind error.
+  void Reset();
+
+  // Column getters for the current row (valid after Step() returned true). A NULL reads as 0,
+  // 0.0 or "" except in ColumnDoubleOrNaN().
+  int ColumnCount() const;
+  bool ColumnIsNull(int column) const;
+  int64_t ColumnInt64(int column) const;
+  double ColumnDouble(int column) const;
+  double ColumnDoubleOrNaN(int column) const;
+  std::string ColumnText(int column) const;
+  std::string ColumnBlob(int column) const;
+
+  const std::string& sql() const { return sql_; }
+
+ private:
+  friend class Database;
+  Statement(sqlite3* db, sqlite3_stmt* stmt, std::string sql);
+  void NoteBindResult(int rc, int index);
+
+  sqlite3* db_;
+  sqlite3_stmt* stmt_;
+  std::string sql_;
+  absl::Status bind_status_;
+};
+
+// BEGIN DEFERRED takes SQLite's write lock at the first write (use for reads: WAL readers never
+// block and see a consistent snapshot); BEGIN IMMEDIATE takes it at Begin(), so lock contention
+// shows up there (waiting up to busy_timeout) and never as a failed upgrade half-way through.
+enum class TransactionMode { kDeferred, kImmediate };
+
+// An open SQL transaction holding exclusive use of its Database. Destroying it without a
+// successful Commit() rolls back everything it did. Movable, so Begin() can return it.
+class Transaction {
+ public:
+  Transaction(Transaction&& other) noexcept;
+  Transaction& operator=(Transaction&&) = delete;
+  Transaction(const Transaction&) = delete;
+  Transaction& operator=(const Transaction&) = delete;
+  ~Transaction();
+
+  // Runs one or more SQL statements that return no rows (DDL, PRAGMA assignments); not cached.
+  absl::Status Execute(absl::string_view sql);
+
+  // Returns the cached prepared statement for exactly one SQL statement `sql`, reset and with
+  // bindings cleared. The statement is compiled once per Database and reused; the pointer is
+  // valid while this transaction is open. Preparing the same SQL text again in the same
+  // transaction returns the same (reset) statement. InvalidArgument if `sql` holds more than one
+  // statement; Internal for SQL errors.
+  absl::StatusOr<Statement*> Prepare(absl::string_view sql);
+
+  // Rows inserted, updated or deleted by the most recently completed statement.
+  int64_t ChangedRows() const;
+  // Rowid of the most recent successful INSERT into a rowid table.
+  int64_t LastInsertRowId() const;
+
+  // Makes the transaction durable as described in the file comment. After Commit() returns the
+  // transaction is over either way: on error it has been rolled back and nothing is visible.
+  absl::Status Commit();
+  // Undoes the transaction. Calling it after the transaction ended is a no-op returning OK.
+  absl::Status Rollback();
+
+  bool active() const { return db_ != nullptr; }
+
+ private:
+  friend class Database;
+  explicit Transaction(Database* db) : db_(db) {}
+  void ResetUsedStatements();
+  void Release();
+
+  Database* db_;  // null once committed, rolled back or moved from
+  std::vector<Statement*> used_;
+};
+
+// One SQLite connection in WAL mode with the options above. Closing (destruction) requires that
+// no Transaction on it is alive.
+class Database {
+ public:
+  // Opens (creating if allowed) the database file at `path` and applies busy_timeout,
+  // journal_mode=WAL and synchronous. Errors: InvalidArgument (empty path or a non-positive
+  // busy_timeout), NotFound (missing file and !create_if_missing), DataLoss (the file is not an
+  // SQLite database or is corrupt), Unavailable (locked by another connection for longer than
+  // busy_timeout), FailedPrecondition (cannot open, e.g. missing parent directory, or WAL mode
+  // could not be enabled).
+  static absl::StatusOr<std::unique_ptr<Database>> Open(const std::string& path,
+                                                        const DatabaseOptions& options = {});
+
+  Database(const Database&) = delete;
+  Database& operator=(const Database&) = delete;
+  ~Database();
+
+  // Starts a transaction (see TransactionMode), waiting for other threads' transactions on this
+  // Database first. Unavailable if another connection holds the lock beyond busy_timeout;
+  // FailedPrecondition if the calling thread already holds a Transaction on this Database.
+  absl::StatusOr<Transaction> Begin(TransactionMode mode = TransactionMode::kImmediate);
+
+  // Runs SQL that returns no rows outside any explicit transaction (autocommit), e.g.
+  // "PRAGMA wal_checkpoint(TRUNCATE)". Same locking rules and errors as Begin().
+  absl::Status Execute(absl::string_view sql);
+
+  // PRAGMA quick_check: OK, or DataLoss naming the first problem SQLite reports.
+  absl::Status QuickCheck();
+
+  const std::string& path() const { return path_; }
+  const DatabaseOptions& options() const { return options_; }
+
+ private:
+  friend class Transaction;
+  Database(sqlite3* db, std::string path, const DatabaseOptions& options);
+
+  absl::Status Acquire();
+  void ReleaseLock();
+  absl::Status ExecLocked(absl::string_view sql);
+  absl::StatusOr<Statement*> PrepareLocked(absl::string_view sql);
+
+  sqlite3* const db_;
+  const std::string path_;
+  const DatabaseOptions options_;
+  absl::Mutex mu_;
+  std::atomic<std::thread::id> owner_{};  // thread holding mu_ through a Transaction
+  absl::flat_hash_map<std::string, std::unique_ptr<Statement>> cache_ ABSL_GUARDED_BY(mu_);
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_SQLITE_DB_H_

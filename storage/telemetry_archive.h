@@ -1,0 +1,62 @@
+// The archive of accepted telemetry frames (table telemetry_frames, schema.h): the server's
+// record of everything it acknowledged, so a session can be recalibrated or replayed.
+// "Accepted" means written by a committed transaction; see the durability contract in
+// sqlite_db.h. Frames are keyed by (spacecraft_id, sequence); a frame whose key is already
+// stored is a duplicate (a retransmission after a lost ack) and is ignored, never overwritten.
+#ifndef ESG_STORAGE_TELEMETRY_ARCHIVE_H_
+#define ESG_STORAGE_TELEMETRY_ARCHIVE_H_
+
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "storage/records.h"
+#include "storage/sqlite_db.h"
+
+namespace esg::storage {
+
+// Which frames of an AppendBatch call were new, in input order.
+struct AppendResult {
+  std::vector<int64_t> new_sequences;
+  // Already stored, or repeated earlier in the same batch. Their payloads were not compared.
+  std::vector<int64_t> duplicate_sequences;
+};
+
+// Thread-safe (through Database). Methods without a Transaction argument run in their own
+// transaction; the overloads taking one join the caller's.
+class TelemetryArchive {
+ public:
+  explicit TelemetryArchive(Database* db) : db_(db) {}
+
+  // Appends `frames` of one spacecraft in ONE transaction: when it returns OK, every frame of
+  // the batch is durable (the unit of an acknowledgement); on error none is. InvalidArgument if
+  // spacecraft_id is empty, a frame's spacecraft_id differs from it, or a measurement_time is
+  // not storable (the message names frames[i]).
+  absl::StatusOr<AppendResult> AppendBatch(absl::string_view spacecraft_id,
+                                           const std::vector<ArchivedFrame>& frames);
+  absl::StatusOr<AppendResult> AppendBatch(Transaction& txn, absl::string_view spacecraft_id,
+                                           const std::vector<ArchivedFrame>& frames);
+
+  // The highest stored sequence of the spacecraft, or nullopt if it has no frames.
+  absl::StatusOr<std::optional<int64_t>> HighestSequence(absl::string_view spacecraft_id);
+
+  // Up to `limit` (> 0, else InvalidArgument) frames with sequence >= from_sequence, ascending.
+  absl::StatusOr<std::vector<ArchivedFrame>> Read(absl::string_view spacecraft_id,
+                                                  int64_t from_sequence, int64_t limit);
+
+  // All frames with from <= measurement_time < to, in sequence order (InfinitePast /
+  // InfiniteFuture are open bounds). The whole range is loaded into memory.
+  absl::StatusOr<std::vector<ArchivedFrame>> ReadTimeRange(absl::string_view spacecraft_id,
+                                                           absl::Time from, absl::Time to);
+
+ private:
+  Database* db_;  // not owned
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_TELEMETRY_ARCHIVE_H_

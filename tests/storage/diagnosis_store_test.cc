@@ -1,0 +1,88 @@
+// Tests of storage/diagnosis_store.h: round trip, per-spacecraft listing, NotFound, errors.
+#include "storage/diagnosis_store.h"
+
+#include <memory>
+#include <string>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "storage/storage.h"
+#include "tests/storage/storage_test_util.h"
+#include "tests/testing/status_matchers.h"
+#include "tests/testing/temp_dir.h"
+
+namespace esg::storage {
+namespace {
+
+using ::esg::storage::testing::IsOkAndHolds;
+using ::esg::storage::testing::T;
+using ::esg::testing::IsOk;
+using ::esg::testing::StatusIs;
+using ::esg::testing::TempDir;
+using ::testing::ElementsAre;
+using ::testing::Field;
+using ::testing::HasSubstr;
+using ::testing::IsEmpty;
+
+DiagnosisRecord Diagnosis(const std::string& id, const std::string& verdict, double from_s) {
+  DiagnosisRecord d;
+  d.spacecraft_id = id;
+  d.from_time = T(from_s);
+  d.to_time = T(from_s + 86400);
+  d.compute_time = T(from_s + 90000);
+  d.verdict = verdict;
+  d.report_json = R"({"candidates":[{"name":")" + verdict + R"(","gain":0.8}]})";
+  return d;
+}
+
+TEST(DiagnosisStore, PutGetAndListRoundTrip) {
+  TempDir dir;
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+  ASSERT_THAT(storage, IsOk());
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  absl::StatusOr<int64_t> first = diagnoses.Put(Diagnosis("RDK-1", "gyro_misalignment", 0));
+  absl::StatusOr<int64_t> other = diagnoses.Put(Diagnosis("RDK-2", "unexplained", 0));
+  absl::StatusOr<int64_t> second = diagnoses.Put(Diagnosis("RDK-1", "unexplained", 86400));
+  ASSERT_THAT(first, IsOk());
+  ASSERT_THAT(other, IsOk());
+  ASSERT_THAT(second, IsOk());
+  EXPECT_LT(*first, *other);
+  EXPECT_LT(*other, *second);
+
+  absl::StatusOr<DiagnosisRecord> got = diagnoses.Get(*second);
+  ASSERT_THAT(got, IsOk());
+  const DiagnosisRecord expected = Diagnosis("RDK-1", "unexplained", 86400);
+  EXPECT_EQ(got->id, *second);
+  EXPECT_EQ(got->spacecraft_id, "RDK-1");
+  EXPECT_EQ(got->from_time, expected.from_time);
+  EXPECT_EQ(got->to_time, expected.to_time);
+  EXPECT_EQ(got->compute_time, expected.compute_time);
+  EXPECT_EQ(got->verdict, "unexplained");
+  EXPECT_EQ(got->report_json, expected.report_json);
+
+  EXPECT_THAT(diagnoses.List("RDK-1"),
+              IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, *first),
+                                       Field(&DiagnosisRecord::id, *second))));
+  EXPECT_THAT(diagnoses.List("nobody"), IsOkAndHolds(IsEmpty()));
+  EXPECT_THAT(diagnoses.Get(*second + 100),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
+}
+
+TEST(DiagnosisStore, RejectsInvalidRecords) {
+  TempDir dir;
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+  ASSERT_THAT(storage, IsOk());
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  EXPECT_THAT(diagnoses.Put(Diagnosis("RDK-1", "", 0)),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("verdict")));
+  DiagnosisRecord reversed = Diagnosis("RDK-1", "unexplained", 0);
+  std::swap(reversed.from_time, reversed.to_time);
+  EXPECT_THAT(diagnoses.Put(reversed),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("to_time")));
+  EXPECT_THAT(diagnoses.Put(Diagnosis("", "unexplained", 0)),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("spacecraft_id")));
+  EXPECT_THAT(diagnoses.List("RDK-1"), IsOkAndHolds(IsEmpty()));
+}
+
+}  // namespace
+}  // namespace esg::storage

@@ -1,0 +1,265 @@
+// Tests of storage/schema.h: fresh schema, migration of a hand-made version-1 file with data,
+// refusal of newer files, column naming, and the instant encoding.
+#include "storage/schema.h"
+
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "storage/records.h"
+#include "storage/sqlite_db.h"
+#include "storage/storage.h"
+#include "tests/storage/storage_test_util.h"
+#include "tests/testing/status_matchers.h"
+#include "tests/testing/temp_dir.h"
+
+namespace esg::storage {
+namespace {
+
+using ::esg::storage::testing::Alert;
+using ::esg::storage::testing::IsOkAndHolds;
+using ::esg::storage::testing::QueryInt;
+using ::esg::storage::testing::T;
+using ::esg::testing::IsOk;
+using ::esg::testing::StatusIs;
+using ::esg::testing::TempDir;
+using ::testing::ElementsAreArray;
+using ::testing::HasSubstr;
+using ::testing::IsSupersetOf;
+
+std::vector<std::string> Columns(Database& db, const std::string& table) {
+  std::vector<std::string> names;
+  absl::StatusOr<Transaction> txn = db.Begin(TransactionMode::kDeferred);
+  EXPECT_THAT(txn, IsOk());
+  if (!txn.ok()) return names;
+  absl::StatusOr<Statement*> st = txn->Prepare("SELECT name FROM pragma_table_info(?1)");
+  EXPECT_THAT(st, IsOk());
+  if (!st.ok()) return names;
+  (*st)->BindText(1, table);
+  while (true) {
+    absl::StatusOr<bool> row = (*st)->Step();
+    EXPECT_THAT(row, IsOk());
+    if (!row.ok() || !*row) break;
+    names.push_back((*st)->ColumnText(0));
+  }
+  return names;
+}
+
+std::vector<std::string> Tables(Database& db) {
+  std::vector<std::string> names;
+  absl::StatusOr<Transaction> txn = db.Begin(TransactionMode::kDeferred);
+  EXPECT_THAT(txn, IsOk());
+  if (!txn.ok()) return names;
+  absl::StatusOr<Statement*> st =
+      txn->Prepare("SELECT name FROM sqlite_schema WHERE type = 'table' ORDER BY name");
+  EXPECT_THAT(st, IsOk());
+  if (!st.ok()) return names;
+  while (true) {
+    absl::StatusOr<bool> row = (*st)->Step();
+    EXPECT_THAT(row, IsOk());
+    if (!row.ok() || !*row) break;
+    names.push_back((*st)->ColumnText(0));
+  }
+  return names;
+}
+
+// The version-1 layout written out independently of schema.cc, as an old program left it.
+std::string HandMadeV1Sql() {
+  std::vector<std::string> coefficient_columns;
+  for (absl::string_view c : kCoefficientColumns) coefficient_columns.push_back(absl::StrCat(c, " REAL"));
+  for (absl::string_view c : kCoefficientSigmaColumns) {
+    coefficient_columns.push_back(absl::StrCat(c, " REAL"));
+  }
+  return absl::StrCat(
+      "CREATE TABLE spacecraft_configs (spacecraft_id TEXT NOT NULL, version INTEGER NOT NULL, "
+      "updated_time_unix_ns INTEGER NOT NULL, config_json TEXT NOT NULL, "
+      "PRIMARY KEY (spacecraft_id, version));"
+      "CREATE TABLE telemetry_frames (spacecraft_id TEXT NOT NULL, sequence INTEGER NOT NULL, "
+      "measurement_time_unix_ns INTEGER NOT NULL, payload BLOB NOT NULL, "
+      "PRIMARY KEY (spacecraft_id, sequence));"
+      "CREATE TABLE coefficients (id INTEGER PRIMARY KEY, spacecraft_id TEXT NOT NULL, "
+      "gyro_id INTEGER NOT NULL, measurement_time_unix_ns INTEGER NOT NULL, "
+      "compute_time_unix_ns INTEGER NOT NULL, model_name TEXT NOT NULL, ",
+      absl::StrJoin(coefficient_columns, ", "),
+      ");"
+      "CREATE TABLE alerts (spacecraft_id TEXT NOT NULL, sequence INTEGER NOT NULL, "
+      "severity TEXT NOT NULL, reason TEXT NOT NULL, subsystem TEXT NOT NULL, value REAL, "
+      "threshold REAL, repeat_count INTEGER NOT NULL, first_time_unix_ns INTEGER NOT NULL, "
+      "measurement_time_unix_ns INTEGER NOT NULL, compute_time_unix_ns INTEGER NOT NULL, "
+      "message TEXT NOT NULL, acknowledged INTEGER NOT NULL DEFAULT 0, acknowledged_by TEXT, "
+      "acknowledged_time_unix_ns INTEGER, cleared INTEGER NOT NULL DEFAULT 0, "
+      "PRIMARY KEY (spacecraft_id, sequence));"
+      "CREATE TABLE checkpoints (spacecraft_id TEXT NOT NULL PRIMARY KEY, "
+      "last_sequence INTEGER NOT NULL, measurement_time_unix_ns INTEGER NOT NULL, "
+      "compute_time_unix_ns INTEGER NOT NULL, state_blob BLOB NOT NULL);"
+      // Data an old program wrote: one frame, one alert (no unit yet), one checkpoint.
+      "INSERT INTO telemetry_frames VALUES ('SC-OLD', 7, ",
+      TimeToUnixNanos(T(420)),
+      ", x'00ff');"
+      "INSERT INTO alerts (spacecraft_id, sequence, severity, reason, subsystem, value, "
+      "threshold, repeat_count, first_time_unix_ns, measurement_time_unix_ns, "
+      "compute_time_unix_ns, message) VALUES ('SC-OLD', 1, 'WARNING', 'PAIR_MISMATCH', 'gyro2', "
+      "12.0, 10.0, 3, ",
+      TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(180)), ", ", TimeToUnixNanos(T(181)),
+      ", 'old alert');"
+      "INSERT INTO checkpoints VALUES ('SC-OLD', 7, ",
+      TimeToUnixNanos(T(420)), ", ", TimeToUnixNanos(T(421)),
+      ", x'0102');"
+      "PRAGMA user_version = 1;");
+}
+
+TEST(Schema, FreshDatabaseIsMigratedToTheCurrentVersion) {
+  TempDir dir;
+  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(dir.File("a.db"));
+  ASSERT_THAT(db, IsOk());
+  EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(0));
+  ASSERT_THAT(MigrateToCurrent(**db), IsOk());
+  EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(Tables(**db), IsSupersetOf({"alerts", "checkpoints", "coefficients", "diagnoses",
+                                          "spacecraft_configs", "telemetry_frames"}));
+  // Idempotent.
+  EXPECT_THAT(MigrateToCurrent(**db), IsOk());
+  EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion));
+}
+
+TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
+  TempDir dir;
+  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(dir.File("a.db"));
+  ASSERT_THAT(db, IsOk());
+  ASSERT_THAT(MigrateToCurrent(**db), IsOk());
+  std::vector<std::string> expected = {"id",
+                                       "spacecraft_id",
+                                       "gyro_id",
+                                       "measurement_time_unix_ns",
+                                       "compute_time_unix_ns",
+                                       "model_name"};
+  for (absl::string_view c : kCoefficientColumns) expected.emplace_back(c);
+  for (absl::string_view c : kCoefficientSigmaColumns) expected.emplace_back(c);
+  EXPECT_THAT(Columns(**db, "coefficients"), ElementsAreArray(expected));
+  // Spot-check the documented names (records.h) so a reordering cannot pass silently.
+  EXPECT_EQ(kCoefficientColumns[kCoefficientK0], "k0_deg_h");
+  EXPECT_EQ(kCoefficientColumns[kCoefficientC1 + 2], "c1z_deg_h");
+  EXPECT_EQ(kCoefficientColumns[kCoefficientC2], "c2x_deg_h");
+  EXPECT_EQ(kCoefficientColumns[kCoefficientMu], "mu12_deg_h");
+  EXPECT_EQ(kCoefficientColumns[kCoefficientNu], "nu23_deg_h");
+  EXPECT_EQ(kCoefficientColumns[kCoefficientMisalignment + 1], "misalignment_y_arcsec");
+  EXPECT_EQ(kCoefficientSigmaColumns[kCoefficientNu + 2], "nu12_sigma_deg_h");
+}
+
+TEST(Schema, HandMadeVersion1FileIsMigratedWithItsData) {
+  TempDir dir;
+  const std::string path = dir.File("v1.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT((*db)->Execute(HandMadeV1Sql()), IsOk());
+    EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(1));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+
+  // Old data is intact; the new alert column has its default.
+  absl::StatusOr<AlertRecord> old_alert = (*storage)->alerts().Get("SC-OLD", 1);
+  ASSERT_THAT(old_alert, IsOk());
+  EXPECT_EQ(old_alert->reason, "PAIR_MISMATCH");
+  EXPECT_EQ(old_alert->repeat_count, 3);
+  EXPECT_EQ(old_alert->first_time, T(60));
+  EXPECT_EQ(old_alert->measurement_time, T(180));
+  EXPECT_EQ(old_alert->unit, "");
+  EXPECT_FALSE(old_alert->acknowledged);
+  EXPECT_THAT((*storage)->archive().HighestSequence("SC-OLD"),
+              IsOkAndHolds(std::optional<int64_t>(7)));
+  absl::StatusOr<CheckpointRecord> checkpoint = (*storage)->sessions().GetCheckpoint("SC-OLD");
+  ASSERT_THAT(checkpoint, IsOk());
+  EXPECT_EQ(checkpoint->state_blob, std::string("\x01\x02", 2));
+
+  // New features work on the migrated file: units on alerts, numbering continues, diagnoses.
+  absl::StatusOr<int64_t> next = (*storage)->alerts().Append(Alert("SC-OLD", 600));
+  EXPECT_THAT(next, IsOkAndHolds(2));
+  absl::StatusOr<AlertRecord> new_alert = (*storage)->alerts().Get("SC-OLD", 2);
+  ASSERT_THAT(new_alert, IsOk());
+  EXPECT_EQ(new_alert->unit, "arcsec");
+  DiagnosisRecord diagnosis;
+  diagnosis.spacecraft_id = "SC-OLD";
+  diagnosis.from_time = T(0);
+  diagnosis.to_time = T(3600);
+  diagnosis.compute_time = T(4000);
+  diagnosis.verdict = "unexplained";
+  diagnosis.report_json = "{}";
+  EXPECT_THAT((*storage)->diagnoses().Put(diagnosis), IsOk());
+}
+
+TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
+  TempDir dir;
+  absl::StatusOr<std::unique_ptr<Database>> stepwise = Database::Open(dir.File("s.db"));
+  absl::StatusOr<std::unique_ptr<Database>> fresh = Database::Open(dir.File("f.db"));
+  ASSERT_THAT(stepwise, IsOk());
+  ASSERT_THAT(fresh, IsOk());
+  ASSERT_THAT(MigrateTo(**stepwise, 1), IsOk());
+  EXPECT_THAT(SchemaVersion(**stepwise), IsOkAndHolds(1));
+  EXPECT_THAT(Columns(**stepwise, "alerts"), ::testing::Not(::testing::Contains("unit")));
+  ASSERT_THAT(MigrateToCurrent(**stepwise), IsOk());
+  ASSERT_THAT(MigrateToCurrent(**fresh), IsOk());
+  for (const std::string table : {"alerts", "diagnoses", "telemetry_frames", "checkpoints"}) {
+    EXPECT_THAT(Columns(**stepwise, table), ElementsAreArray(Columns(**fresh, table))) << table;
+  }
+  EXPECT_THAT(MigrateTo(**stepwise, kCurrentSchemaVersion + 1),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("target schema version")));
+  EXPECT_THAT(MigrateTo(**stepwise, 1),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("newer")));
+}
+
+TEST(Schema, NewerDatabaseThanTheCodeIsRefused) {
+  TempDir dir;
+  const std::string path = dir.File("future.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT((*db)->Execute(absl::StrCat("CREATE TABLE from_the_future (x); PRAGMA user_version = ",
+                                            kCurrentSchemaVersion + 1)),
+                IsOk());
+    EXPECT_THAT(MigrateToCurrent(**db),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("newer")));
+  }
+  EXPECT_THAT(Storage::Open(path),
+              StatusIs(absl::StatusCode::kFailedPrecondition,
+                       HasSubstr(absl::StrCat("schema version ", kCurrentSchemaVersion + 1))));
+  // The refused file was left alone.
+  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+  ASSERT_THAT(db, IsOk());
+  EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion + 1));
+  EXPECT_THAT(QueryInt(**db, "SELECT COUNT(*) FROM sqlite_schema WHERE name = 'alerts'"),
+              IsOkAndHolds(int64_t{0}));
+}
+
+TEST(Schema, InstantsRoundTripAsUnixNanoseconds) {
+  const absl::Time t = T(0.123456789);
+  EXPECT_EQ(TimeToUnixNanos(t), int64_t{1551398400123456789});
+  EXPECT_EQ(UnixNanosToTime(TimeToUnixNanos(t)), t);
+  // Sub-nanosecond parts are truncated toward the past, also before 1970.
+  EXPECT_EQ(TimeToUnixNanos(absl::UnixEpoch() - absl::Nanoseconds(1) / 4), -1);
+  EXPECT_EQ(TimeToUnixNanos(absl::InfinitePast()), std::numeric_limits<int64_t>::min());
+  EXPECT_EQ(TimeToUnixNanos(absl::InfiniteFuture()), std::numeric_limits<int64_t>::max());
+  EXPECT_EQ(UnixNanosToTime(std::numeric_limits<int64_t>::min()), absl::InfinitePast());
+  EXPECT_EQ(UnixNanosToTime(std::numeric_limits<int64_t>::max()), absl::InfiniteFuture());
+}
+
+TEST(Schema, OnlyFiniteRepresentableInstantsAreStorable) {
+  EXPECT_THAT(ValidateStorableTime(T(0), "x"), IsOk());
+  EXPECT_THAT(ValidateStorableTime(absl::InfiniteFuture(), "alert.first_time"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("alert.first_time")));
+  EXPECT_THAT(ValidateStorableTime(absl::FromUnixSeconds(int64_t{1} << 40), "t"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("1678 and 2262")));
+  EXPECT_THAT(ValidateSpacecraftId("", "frame.spacecraft_id"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("frame.spacecraft_id")));
+}
+
+}  // namespace
+}  // namespace esg::storage
