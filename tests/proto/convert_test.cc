@@ -264,6 +264,8 @@ struct BadConfigCase {
   std::string expected_message;
 };
 
+void PrintTo(const BadConfigCase& c, std::ostream* os) { *os << c.name; }
+
 class BadConfig : public ::testing::TestWithParam<BadConfigCase> {};
 
 TEST_P(BadConfig, IsInvalidArgumentNamingTheField) {
@@ -410,6 +412,8 @@ struct BadFrameCase {
   std::function<void(esg::v1::TelemetryFrame*)> mutate;
   std::string expected_message;
 };
+
+void PrintTo(const BadFrameCase& c, std::ostream* os) { *os << c.name; }
 
 class BadFrame : public ::testing::TestWithParam<BadFrameCase> {};
 

@@ -1,0 +1,492 @@
+// Recording CSV version 1 reader and writer (DESIGN §7); rules in recording_csv.h.
+#include "storage/recording_csv.h"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <system_error>
+#include <vector>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/time/time.h"
+#include "estimator/conventions.h"
+#include "estimator/rotation.h"
+
+namespace esg::storage {
+
+namespace {
+
+using estimator::kMaxGyros;
+
+// Vectors closer to unit norm than this are kept bit for bit (see recording_csv.h).
+constexpr double kRenormaliseAbove = 1e-12;
+// Written time format: RFC 3339 in UTC with `Z` and full sub-second precision.
+constexpr char kTimeFormat[] = "%Y-%m-%d%ET%H:%M:%E*SZ";
+
+constexpr int kNumGyroColumns = 6;  // hx hy hz ux uy uz
+constexpr int kNumStColumns = 5;    // q0 q1 q2 q3 valid
+constexpr int kNumColumns = 1 + kMaxGyros * kNumGyroColumns + kNumStColumns;
+
+// Required columns in DESIGN §7 order (also the written order).
+const std::array<std::string, kNumColumns>& ColumnNames() {
+  static const std::array<std::string, kNumColumns> names = [] {
+    std::array<std::string, kNumColumns> n;
+    int i = 0;
+    n[i++] = "time_utc";
+    for (int g = 1; g <= kMaxGyros; ++g) {
+      for (const char* suffix : {"hx", "hy", "hz", "ux", "uy", "uz"}) {
+        n[i++] = absl::StrCat("g", g, "_", suffix);
+      }
+    }
+    for (const char* name : {"st_q0", "st_q1", "st_q2", "st_q3", "st_valid"}) n[i++] = name;
+    return n;
+  }();
+  return names;
+}
+constexpr int kTimeColumn = 0;
+constexpr int GyroColumn(int gyro_index, int k) { return 1 + gyro_index * kNumGyroColumns + k; }
+constexpr int StColumn(int k) { return 1 + kMaxGyros * kNumGyroColumns + k; }
+
+struct Problem {
+  int line;
+  std::string column;  // empty when the problem concerns the whole line
+  std::string reason;
+};
+
+class ProblemList {
+ public:
+  void Add(int line, std::string column, std::string reason) {
+    problems_.push_back({line, std::move(column), std::move(reason)});
+  }
+  bool empty() const { return problems_.empty(); }
+  size_t size() const { return problems_.size(); }
+
+  absl::Status ToStatus() const {
+    std::string message = absl::StrFormat("recording CSV: %d problem%s", problems_.size(),
+                                          problems_.size() == 1 ? "" : "s");
+    const size_t shown = std::min<size_t>(problems_.size(), kMaxReportedProblems);
+    for (size_t i = 0; i < shown; ++i) {
+      const Problem& p = problems_[i];
+      if (p.column.empty()) {
+        absl::StrAppendFormat(&message, "\n  line %d: %s", p.line, p.reason);
+      } else {
+        absl::StrAppendFormat(&message, "\n  line %d, column %s: %s", p.line, p.column, p.reason);
+      }
+    }
+    if (shown < problems_.size()) {
+      absl::StrAppendFormat(&message, "\n  ... and %d more", problems_.size() - shown);
+    }
+    return absl::InvalidArgumentError(message);
+  }
+
+ private:
+  std::vector<Problem> problems_;
+};
+
+absl::string_view Trim(absl::string_view s) { return absl::StripAsciiWhitespace(s); }
+
+// Splits on ',' into `fields` (reused to avoid allocation), trimming each field.
+void SplitFields(absl::string_view line, std::vector<absl::string_view>* fields) {
+  fields->clear();
+  size_t start = 0;
+  while (true) {
+    const size_t comma = line.find(',', start);
+    if (comma == absl::string_view::npos) {
+      fields->push_back(Trim(line.substr(start)));
+      return;
+    }
+    fields->push_back(Trim(line.substr(start, comma - start)));
+    start = comma + 1;
+  }
+}
+
+// Field text for messages, shortened when long.
+std::string Quote(absl::string_view s) {
+  if (s.size() > 40) return absl::StrCat("'", s.substr(0, 37), "...'");
+  return absl::StrCat("'", s, "'");
+}
+
+// Parses a complete, finite number; on failure adds a problem and returns nullopt.
+std::optional<double> ParseNumber(absl::string_view text, int line, const std::string& column,
+                                  ProblemList* problems) {
+  absl::string_view digits = text;
+  if (!digits.empty() && digits.front() == '+') digits.remove_prefix(1);
+  double value = 0.0;
+  const auto [end, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), value);
+  if (ec == std::errc::result_out_of_range) {
+    problems->Add(line, column, absl::StrCat(Quote(text), " is out of the range of a double"));
+    return std::nullopt;
+  }
+  if (ec != std::errc() || end != digits.data() + digits.size() || digits.empty()) {
+    problems->Add(line, column, absl::StrCat(Quote(text), " is not a number"));
+    return std::nullopt;
+  }
+  if (!std::isfinite(value)) {
+    problems->Add(line, column, absl::StrCat(Quote(text), " is not finite"));
+    return std::nullopt;
+  }
+  return value;
+}
+
+// A group of N columns that is either all empty or all numbers.
+// Returns: nullopt on a problem (reported); an empty optional inside when all fields are empty.
+template <int N>
+std::optional<std::optional<Eigen::Matrix<double, N, 1>>> ParseGroup(
+    const std::vector<absl::string_view>& fields, const std::array<int, N>& columns,
+    const std::array<int, N>& field_index, int line, ProblemList* problems) {
+  const std::array<std::string, kNumColumns>& names = ColumnNames();
+  int empty_count = 0;
+  for (int k = 0; k < N; ++k) empty_count += fields[field_index[k]].empty() ? 1 : 0;
+  if (empty_count == N) return std::optional<Eigen::Matrix<double, N, 1>>();
+  if (empty_count > 0) {
+    std::vector<std::string> empty_names;
+    for (int k = 0; k < N; ++k) {
+      if (fields[field_index[k]].empty()) empty_names.push_back(names[columns[k]]);
+    }
+    problems->Add(line, absl::StrJoin(empty_names, ","),
+                  absl::StrFormat("empty while the rest of its group %s..%s has values",
+                                  names[columns.front()], names[columns.back()]));
+    return std::nullopt;
+  }
+  Eigen::Matrix<double, N, 1> v;
+  bool ok = true;
+  for (int k = 0; k < N; ++k) {
+    const std::optional<double> x =
+        ParseNumber(fields[field_index[k]], line, names[columns[k]], problems);
+    if (x.has_value()) {
+      v[k] = *x;
+    } else {
+      ok = false;
+    }
+  }
+  if (!ok) return std::nullopt;
+  return std::optional<Eigen::Matrix<double, N, 1>>(v);
+}
+
+// Checks |norm - 1| and renormalises beyond kRenormaliseAbove. False (reported) when off.
+template <int N>
+bool CheckUnit(Eigen::Matrix<double, N, 1>* v, const std::string& group, int line,
+               ProblemList* problems) {
+  const double norm = v->norm();
+  if (!(std::abs(norm - 1.0) <= kUnitNormTolerance)) {
+    problems->Add(line, group,
+                  absl::StrFormat("norm %.6g is not 1 (tolerance %g)", norm, kUnitNormTolerance));
+    return false;
+  }
+  if (std::abs(norm - 1.0) > kRenormaliseAbove) *v /= norm;
+  return true;
+}
+
+// Parses one metadata line "# key: value"; false for a free comment (no ':').
+bool ParseMetadata(absl::string_view line, std::string* key, std::string* value) {
+  absl::string_view body = line.substr(1);
+  const size_t colon = body.find(':');
+  if (colon == absl::string_view::npos) return false;
+  *key = std::string(Trim(body.substr(0, colon)));
+  *value = std::string(Trim(body.substr(colon + 1)));
+  return !key->empty();
+}
+
+void AppendNumber(double x, std::string* out) {
+  char buf[32];
+  const auto [end, ec] = std::to_chars(buf, buf + sizeof(buf), x);
+  out->append(buf, ec == std::errc() ? end : buf);
+}
+
+std::string CleanMetadata(absl::string_view s, bool is_key) {
+  std::string clean(s);
+  for (char& c : clean) {
+    if (c == '\n' || c == '\r') c = ' ';
+    if (is_key && c == ':') c = '_';
+  }
+  return std::string(Trim(clean));
+}
+
+}  // namespace
+
+absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text) {
+  // Abseil 20220623 in Debian has its own absl::string_view (not std::string_view).
+  const absl::string_view text(std_text.data(), std_text.size());
+  estimator::Recording recording;
+  ProblemList problems;
+  const std::array<std::string, kNumColumns>& names = ColumnNames();
+
+  std::map<std::string, int> metadata_line;  // key -> line, to report repeated keys
+  std::array<int, kNumColumns> field_index;  // column -> index in a row
+  size_t num_header_fields = 0;
+  bool have_header = false;
+  int header_line = 0;
+  std::optional<absl::Time> previous_time;
+  int previous_time_line = 0;
+  std::vector<absl::string_view> fields;
+  fields.reserve(kNumColumns + 8);
+
+  int line_no = 0;
+  size_t pos = 0;
+  while (pos < text.size()) {
+    size_t eol = text.find('\n', pos);
+    if (eol == absl::string_view::npos) eol = text.size();
+    absl::string_view line = text.substr(pos, eol - pos);
+    pos = eol + 1;
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    if (Trim(line).empty()) continue;
+
+    if (!have_header) {
+      if (line.front() == '#') {
+        std::string key, value;
+        if (!ParseMetadata(line, &key, &value)) continue;  // free comment
+        if (auto [it, inserted] = metadata_line.emplace(key, line_no); !inserted) {
+          problems.Add(line_no, "",
+                       absl::StrFormat("metadata key '%s' repeats line %d", key, it->second));
+          continue;
+        }
+        if (key == "format" && value != kRecordingCsvFormat) {
+          problems.Add(line_no, "",
+                       absl::StrFormat("unsupported format '%s' (this reader reads '%s')", value,
+                                       kRecordingCsvFormat));
+        }
+        recording.metadata[key] = value;
+        continue;
+      }
+      // Header.
+      have_header = true;
+      header_line = line_no;
+      SplitFields(line, &fields);
+      num_header_fields = fields.size();
+      std::map<absl::string_view, int> index_of;
+      for (size_t i = 0; i < fields.size(); ++i) {
+        if (!index_of.emplace(fields[i], static_cast<int>(i)).second && !fields[i].empty()) {
+          problems.Add(line_no, std::string(fields[i]), "column name appears twice in the header");
+        }
+      }
+      std::vector<std::string> missing;
+      for (int c = 0; c < kNumColumns; ++c) {
+        const auto it = index_of.find(names[c]);
+        if (it == index_of.end()) {
+          missing.push_back(names[c]);
+        } else {
+          field_index[c] = it->second;
+        }
+      }
+      if (!missing.empty()) {
+        problems.Add(line_no, "",
+                     absl::StrCat("header lacks required column", missing.size() == 1 ? "" : "s",
+                                  " ", absl::StrJoin(missing, ", ")));
+      }
+      if (!problems.empty()) return problems.ToStatus();  // rows cannot be interpreted
+      continue;
+    }
+
+    // Data row.
+    if (line.front() == '#') {
+      problems.Add(line_no, "", "comment or metadata line after the header");
+      continue;
+    }
+    SplitFields(line, &fields);
+    if (fields.size() != num_header_fields) {
+      problems.Add(line_no, "",
+                   absl::StrFormat("expected %d fields as in the header (line %d), got %d",
+                                   num_header_fields, header_line, fields.size()));
+      continue;
+    }
+    const size_t problems_before = problems.size();
+    estimator::TelemetryFrame frame;
+
+    // Time.
+    const absl::string_view time_text = fields[field_index[kTimeColumn]];
+    absl::Time time;
+    std::string time_error;
+    if (time_text.empty()) {
+      problems.Add(line_no, names[kTimeColumn], "empty (every row needs its time)");
+    } else if (!absl::ParseTime(absl::RFC3339_full, time_text, &time, &time_error)) {
+      problems.Add(line_no, names[kTimeColumn],
+                   absl::StrCat(Quote(time_text),
+                                " is not an RFC 3339 time such as 2019-03-01T00:00:00Z (",
+                                time_error, ")"));
+    } else {
+      if (previous_time.has_value() && time <= *previous_time) {
+        problems.Add(line_no, names[kTimeColumn],
+                     absl::StrFormat("%s is not after %s of line %d (times must increase)",
+                                     time_text, absl::FormatTime(kTimeFormat, *previous_time,
+                                                                 absl::UTCTimeZone()),
+                                     previous_time_line));
+      }
+      previous_time = time;
+      previous_time_line = line_no;
+      frame.time = time;
+    }
+
+    // Gyros.
+    for (int g = 0; g < kMaxGyros; ++g) {
+      const std::array<int, 3> h_columns = {GyroColumn(g, 0), GyroColumn(g, 1), GyroColumn(g, 2)};
+      const std::array<int, 3> u_columns = {GyroColumn(g, 3), GyroColumn(g, 4), GyroColumn(g, 5)};
+      const std::array<int, 3> h_fields = {field_index[h_columns[0]], field_index[h_columns[1]],
+                                           field_index[h_columns[2]]};
+      const std::array<int, 3> u_fields = {field_index[u_columns[0]], field_index[u_columns[1]],
+                                           field_index[u_columns[2]]};
+      auto h = ParseGroup<3>(fields, h_columns, h_fields, line_no, &problems);
+      auto u = ParseGroup<3>(fields, u_columns, u_fields, line_no, &problems);
+      if (!h.has_value() || !u.has_value()) continue;
+      if (!h->has_value()) {
+        if (u->has_value()) {
+          problems.Add(line_no, absl::StrFormat("g%d_ux..g%d_uz", g + 1, g + 1),
+                       absl::StrFormat("voltages given while gyro %d has no spin-axis reading "
+                                       "(g%d_hx..g%d_hz empty)",
+                                       g + 1, g + 1, g + 1));
+        }
+        continue;  // gyro off
+      }
+      Eigen::Vector3d h_k = **h;
+      if (!CheckUnit<3>(&h_k, absl::StrFormat("g%d_hx..g%d_hz", g + 1, g + 1), line_no,
+                        &problems)) {
+        continue;
+      }
+      estimator::GyroReading reading;
+      reading.h_k = h_k;
+      if (u->has_value()) reading.u_k_mv = **u;
+      frame.gyros[g] = reading;
+    }
+
+    // Star tracker.
+    const std::array<int, 4> q_columns = {StColumn(0), StColumn(1), StColumn(2), StColumn(3)};
+    const std::array<int, 4> q_fields = {field_index[q_columns[0]], field_index[q_columns[1]],
+                                         field_index[q_columns[2]], field_index[q_columns[3]]};
+    const std::string& valid_name = names[StColumn(4)];
+    const absl::string_view valid_text = fields[field_index[StColumn(4)]];
+    auto q = ParseGroup<4>(fields, q_columns, q_fields, line_no, &problems);
+    if (valid_text.empty()) {
+      if (q.has_value() && q->has_value()) {
+        problems.Add(line_no, valid_name, "empty while st_q0..st_q3 have values (give 0 or 1)");
+      }
+      // All empty: outage.
+    } else if (valid_text == "1") {
+      if (q.has_value()) {
+        if (!q->has_value()) {
+          problems.Add(line_no, "st_q0..st_q3", "empty while st_valid is 1");
+        } else {
+          Eigen::Vector4d q_in_b = **q;
+          if (CheckUnit<4>(&q_in_b, "st_q0..st_q3", line_no, &problems)) {
+            estimator::StarTrackerReading reading;
+            reading.valid = true;
+            reading.q_in_b =
+                estimator::QuaternionFromScalarFirst({q_in_b[0], q_in_b[1], q_in_b[2], q_in_b[3]});
+            frame.star_tracker = reading;
+          }
+        }
+      }
+    } else if (valid_text == "0") {
+      estimator::StarTrackerReading reading;  // quaternion not carried
+      reading.valid = false;
+      frame.star_tracker = reading;
+    } else {
+      problems.Add(line_no, valid_name, absl::StrCat(Quote(valid_text), " is not 0 or 1"));
+    }
+
+    if (problems.size() == problems_before) recording.frames.push_back(std::move(frame));
+  }
+
+  if (!have_header) {
+    problems.Add(line_no + 1, "", "no header line (expected time_utc,g1_hx,...,st_valid)");
+  }
+  if (!problems.empty()) return problems.ToStatus();
+  return recording;
+}
+
+absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return absl::NotFoundError(
+        absl::StrCat("recording ", path, ": cannot open: ", std::strerror(errno)));
+  }
+  std::ostringstream content;
+  content << in.rdbuf();
+  if (in.bad()) return absl::UnavailableError(absl::StrCat("recording ", path, ": read failed"));
+  absl::StatusOr<estimator::Recording> recording = ParseRecordingCsv(content.str());
+  if (!recording.ok()) {
+    return absl::Status(recording.status().code(),
+                        absl::StrCat(path, ": ", recording.status().message()));
+  }
+  return recording;
+}
+
+std::string FormatRecordingCsv(const estimator::Recording& recording) {
+  const std::array<std::string, kNumColumns>& names = ColumnNames();
+  std::string out;
+  out.reserve(256 + recording.frames.size() * 400);
+  absl::StrAppend(&out, "# format: ", kRecordingCsvFormat, "\n");
+  if (const auto it = recording.metadata.find("spacecraft_id"); it != recording.metadata.end()) {
+    absl::StrAppend(&out, "# spacecraft_id: ", CleanMetadata(it->second, false), "\n");
+  }
+  for (const auto& [key, value] : recording.metadata) {
+    if (key == "format" || key == "spacecraft_id") continue;
+    const std::string clean_key = CleanMetadata(key, true);
+    if (clean_key.empty()) continue;
+    absl::StrAppend(&out, "# ", clean_key, ": ", CleanMetadata(value, false), "\n");
+  }
+  absl::StrAppend(&out, absl::StrJoin(names, ","), "\n");
+
+  for (const estimator::TelemetryFrame& frame : recording.frames) {
+    out += absl::FormatTime(kTimeFormat, frame.time, absl::UTCTimeZone());
+    for (int g = 0; g < kMaxGyros; ++g) {
+      const std::optional<estimator::GyroReading>& reading = frame.gyros[g];
+      for (int k = 0; k < 3; ++k) {
+        out += ',';
+        if (reading.has_value()) AppendNumber(reading->h_k[k], &out);
+      }
+      for (int k = 0; k < 3; ++k) {
+        out += ',';
+        if (reading.has_value() && reading->u_k_mv.has_value()) {
+          AppendNumber((*reading->u_k_mv)[k], &out);
+        }
+      }
+    }
+    if (!frame.star_tracker.has_value()) {
+      out += ",,,,,";
+    } else if (!frame.star_tracker->valid) {
+      out += ",,,,,0";
+    } else {
+      for (double v : estimator::ToScalarFirst(frame.star_tracker->q_in_b)) {
+        out += ',';
+        AppendNumber(v, &out);
+      }
+      out += ",1";
+    }
+    out += '\n';
+  }
+  return out;
+}
+
+absl::Status WriteRecordingCsv(const std::string& path, const estimator::Recording& recording) {
+  const std::string text = FormatRecordingCsv(recording);
+  const std::string tmp_path = path + ".tmp";
+  {
+    std::ofstream out(tmp_path, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      return absl::UnavailableError(
+          absl::StrCat("recording ", tmp_path, ": cannot create: ", std::strerror(errno)));
+    }
+    out.write(text.data(), static_cast<std::streamsize>(text.size()));
+    out.flush();
+    if (!out) return absl::UnavailableError(absl::StrCat("recording ", tmp_path, ": write failed"));
+  }
+  if (std::rename(tmp_path.c_str(), path.c_str()) != 0) {
+    const int err = errno;
+    std::remove(tmp_path.c_str());
+    return absl::UnavailableError(
+        absl::StrCat("recording ", path, ": cannot rename: ", std::strerror(err)));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace esg::storage

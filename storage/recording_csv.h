@@ -1,0 +1,71 @@
+// Reader and writer of the telemetry recording CSV, version 1 (DESIGN §7): `# key: value` metadata
+// lines, a header, then one row per telemetry frame.
+//
+//     # format: esg-recording-csv 1
+//     # spacecraft_id: RDK-1
+//     time_utc,g1_hx,g1_hy,g1_hz,g1_ux,g1_uy,g1_uz,...,g4_uz,st_q0,st_q1,st_q2,st_q3,st_valid
+//     2019-03-01T00:00:00Z,0.6,0.8,0,12.5,-3,0.25,...
+//
+// Columns: gN_h* spin-axis direction cosines of gyro N in its case frame [1]; gN_u* suspension
+// offset voltages along its case axes [mV]; st_q0..st_q3 star-tracker q_in_b, scalar first;
+// st_valid 1 or 0. Times are RFC 3339 (written with `Z`, UTC).
+//
+// Reading rules (the contract the writer follows too):
+// - Lines starting with '#' before the header are metadata "# key: value" (kept in
+//   Recording::metadata, key and value trimmed); a '#' line without ':' is a free comment.
+//   A "format" entry other than "esg-recording-csv 1" is an error. Empty lines are skipped
+//   anywhere; '#' lines after the header are errors.
+// - The header names the columns; order is free, extra columns are ignored, every DESIGN §7
+//   column is required (the error lists the missing ones). Fields are trimmed of spaces; there
+//   is no quoting.
+// - An empty field means "no value". Gyro N: all three gN_h* empty = gyro absent from the frame
+//   (then its gN_u* must be empty too); all three gN_u* empty = u_k_mv absent; a partly empty
+//   group is an error. Star tracker: all five st_* empty = outage (star_tracker absent);
+//   st_valid 0 = reading present with valid = false, its quaternion (empty or 4 finite numbers)
+//   not carried; st_valid 1 = the 4 quaternion values required.
+// - Direction cosines and the valid quaternion need |norm - 1| <= kUnitNormTolerance (1e-3, far
+//   looser than any real readout; it catches swapped, missing or mis-scaled components). Accepted
+//   vectors are renormalised when their norm differs from 1 by more than 1e-12; closer ones are
+//   kept bit for bit, so a written recording reads back exactly.
+// - Times strictly increasing. Numbers must parse completely and be finite.
+// - Every problem is reported, never a row dropped: a file with any problem gives
+//   InvalidArgument listing all of them (up to kMaxReportedProblems, then "... and N more"),
+//   one per line as "line <n>, column <name>: <reason>".
+#ifndef ESG_STORAGE_RECORDING_CSV_H_
+#define ESG_STORAGE_RECORDING_CSV_H_
+
+#include <string>
+#include <string_view>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "estimator/telemetry.h"
+
+namespace esg::storage {
+
+inline constexpr char kRecordingCsvFormat[] = "esg-recording-csv 1";
+inline constexpr double kUnitNormTolerance = 1e-3;  // same as proto_convert::kUnitNormTolerance
+inline constexpr int kMaxReportedProblems = 50;
+
+// Parses CSV text. InvalidArgument with every problem found (see the rules above).
+absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view text);
+
+// Reads and parses a file. NotFound when it cannot be opened, Unavailable on a read failure,
+// InvalidArgument "<path>: ..." with the problems of ParseRecordingCsv.
+absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path);
+
+// Formats a recording: "# format: esg-recording-csv 1", then "# spacecraft_id: ..." when that
+// metadata entry exists, then the other metadata entries in key order (a stored "format" entry is
+// replaced; line breaks in keys or values become spaces, ':' in keys becomes '_'), the header in
+// DESIGN §7 order, one row per frame. Times are RFC 3339 UTC with `Z` and as many fractional
+// digits as needed to read back the same absl::Time; numbers in the shortest form that reads back
+// the same double. An invalid star-tracker reading is written with an empty quaternion and
+// st_valid 0. Values are written as given (a non-finite value would make the file unreadable).
+std::string FormatRecordingCsv(const estimator::Recording& recording);
+
+// Writes FormatRecordingCsv to path (through "<path>.tmp" and a rename). Unavailable on I/O failure.
+absl::Status WriteRecordingCsv(const std::string& path, const estimator::Recording& recording);
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_RECORDING_CSV_H_
