@@ -12,6 +12,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_format.h"
 #include "estimator/conventions.h"
@@ -104,8 +105,27 @@ absl::Status AllFinite(const RepeatedField<double>& values, absl::string_view fi
   return absl::OkStatus();
 }
 
-// Protobuf 3.21 reports an unknown field as "(gyros[0]) bogus: Cannot find field." (or without the
-// parenthesised path at the top level); rewritten to the "<field>: <reason>" form of convert.h.
+// proto field path -> JSON path: "gyros[2].model.k0_deg_h" -> "gyros[2].model.k0DegH" (the
+// default json_name rule: drop '_' and capitalise the next letter).
+std::string JsonPath(absl::string_view proto_path) {
+  std::string path;
+  path.reserve(proto_path.size());
+  bool capitalise = false;
+  for (const char c : proto_path) {
+    if (c == '_') {
+      capitalise = true;
+      continue;
+    }
+    path += capitalise ? absl::ascii_toupper(static_cast<unsigned char>(c)) : c;
+    capitalise = false;
+  }
+  return path;
+}
+
+// Protobuf 3.21 messages name the field by its proto path in parentheses: an unknown field reads
+// "(gyros[0]) bogus: Cannot find field." (no parentheses at the top level), a wrong type
+// "(gyros[2].model.k0_deg_h): invalid value "fast" for type TYPE_DOUBLE". Both are rewritten to
+// the "<JSON field>: <reason>" form of convert.h; other messages (syntax errors) are kept.
 std::string JsonErrorMessage(const std::string& message) {
   constexpr absl::string_view kUnknown = ": Cannot find field.";
   const absl::string_view m(message);
@@ -119,7 +139,13 @@ std::string JsonErrorMessage(const std::string& message) {
         head = head.substr(close + 2);
       }
     }
-    return absl::StrCat(path, head, ": unknown field");
+    return absl::StrCat(JsonPath(path), head, ": unknown field");
+  }
+  if (absl::StartsWith(m, "(")) {
+    const size_t close = m.find("): ");
+    if (close != absl::string_view::npos) {
+      return absl::StrCat(JsonPath(m.substr(1, close - 1)), m.substr(close + 1));
+    }
   }
   return absl::StrCat("config JSON: ", message);
 }

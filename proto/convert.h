@@ -54,9 +54,9 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
 esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& config);
 
 // Parses the configuration JSON (proto3 JSON mapping of esg.v1.SpacecraftConfig, DESIGN §7), then
-// ConfigFromProto. An unknown field is InvalidArgument "gyros[0].k0: unknown field"; malformed
-// JSON or a wrong JSON type is InvalidArgument "config JSON: <protobuf's message>" (which names
-// the field by its proto name, e.g. "(gyros[2].model.k0_deg_h): invalid value ...").
+// ConfigFromProto. InvalidArgument for an unknown field ("gyros[0].k0: unknown field"), a value of
+// the wrong JSON type ("gyros[2].model.k0DegH: invalid value "fast" for type TYPE_DOUBLE") and
+// malformed JSON ("config JSON: <protobuf's message>").
 absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json);
 
 // Pretty-printed JSON ending in a newline (2-space indent, arrays of numbers on one line,

@@ -303,7 +303,10 @@ INSTANTIATE_TEST_SUITE_P(
                       "gyros[0].modelSigma: values must be finite and >= 0"},
         BadConfigCase{"NegativeNoise", "[5, 5, 30]", "[5, -5, 30]", "starTracker.noiseArcsec"},
         BadConfigCase{"EmptySpacecraftId", "\"RDK-1\"", "\"\"", "spacecraftId: must not be empty"},
-        BadConfigCase{"WrongJsonType", "\"k0DegH\": 0.25", "\"k0DegH\": \"fast\"", "k0_deg_h"},
+        BadConfigCase{"WrongJsonType", "\"k0DegH\": 0.25", "\"k0DegH\": \"fast\"",
+                      "gyros[2].model.k0DegH: invalid value \"fast\""},
+        BadConfigCase{"WrongJsonTypeInArray", "\"workingPair\": [1, 2]",
+                      "\"workingPair\": [1, 2.5]", "workingPair[1]: invalid value 2.5"},
         BadConfigCase{"NotJson", "\"workingPair\": [1, 2],", "\"workingPair\" [1, 2],",
                       "config JSON"}),
     [](const ::testing::TestParamInfo<BadConfigCase>& info) { return info.param.name; });
@@ -339,7 +342,9 @@ void ExpectFramesEqual(const estimator::TelemetryFrame& a, const estimator::Tele
     if (!a.gyros[i].has_value()) continue;
     EXPECT_EQ(a.gyros[i]->h_k, b.gyros[i]->h_k) << "gyro " << i + 1;
     ASSERT_EQ(a.gyros[i]->u_k_mv.has_value(), b.gyros[i]->u_k_mv.has_value()) << "gyro " << i + 1;
-    if (a.gyros[i]->u_k_mv.has_value()) EXPECT_EQ(*a.gyros[i]->u_k_mv, *b.gyros[i]->u_k_mv);
+    if (a.gyros[i]->u_k_mv.has_value()) {
+      EXPECT_EQ(*a.gyros[i]->u_k_mv, *b.gyros[i]->u_k_mv);
+    }
   }
   ASSERT_EQ(a.star_tracker.has_value(), b.star_tracker.has_value());
   if (a.star_tracker.has_value()) {
