@@ -55,6 +55,9 @@ absl::StatusOr<ModelSpec> ParseModel(absl::string_view name) {
 
 DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro) {
   DriftVector theta = gyro.model.AsVector();
+  // Model (11) alone: the configured (bench) model is applied as it is and the random walk takes
+  // up what it leaves (the paper: model (11) stands alone when model (10) was not calibrated).
+  if (!spec.k0 && !spec.c1c2 && !spec.mu_nu) return theta;
   const auto mask = spec.TermMask();
   for (int i = 0; i < kNumDriftCoefficients; ++i) {
     if (!mask[i]) theta(i) = 0.0;
@@ -64,6 +67,7 @@ DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro) {
 
 std::vector<int> FreeCoefficients(const ModelSpec& spec, const GyroConfig& gyro) {
   std::vector<int> free;
+  // Model (11) alone estimates no coefficient (TermMask is all false then).
   const auto mask = spec.TermMask();
   const DriftVector sigma = gyro.model_sigma.AsVector();
   for (int i = 0; i < kNumDriftCoefficients; ++i) {

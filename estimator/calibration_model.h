@@ -4,7 +4,9 @@
 // `int` axes only, eq. (11)), and "+"-joined sets such as "10+11" or "1+11".
 //
 // A coefficient of a term in the model is free (estimated) when its configured modelSigma is
-// positive, otherwise held at the configured value. Terms outside the model are zero.
+// positive, otherwise held at the configured value. Terms outside the model are zero, except
+// with model "11" alone, where the configured (bench) model is applied as it is and nothing is
+// estimated but the random walk.
 #ifndef ESG_ESTIMATOR_CALIBRATION_MODEL_H_
 #define ESG_ESTIMATOR_CALIBRATION_MODEL_H_
 
@@ -34,7 +36,7 @@ struct ModelSpec {
 absl::StatusOr<ModelSpec> ParseModel(absl::string_view name);
 
 // The model's coefficient vector for a gyro: configured values on the model's terms, zero
-// elsewhere [rad/s].
+// elsewhere (all configured values for model "11" alone) [rad/s].
 DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro);
 
 // Indices into theta of the free coefficients of a gyro (term in the model and sigma > 0).

@@ -24,12 +24,15 @@ absl::Status CheckCovariance(const MatrixXd& P) {
   return absl::OkStatus();
 }
 
-absl::Status PropagateCovariance(const MatrixXd& Phi, const MatrixXd& Q, MatrixXd& P) {
-  MatrixXd candidate = Phi * P * Phi.transpose() + Q;
+absl::Status CommitCovariance(MatrixXd candidate, MatrixXd& P) {
   candidate = (0.5 * (candidate + candidate.transpose())).eval();
   if (absl::Status s = CheckCovariance(candidate); !s.ok()) return s;
   P = std::move(candidate);
   return absl::OkStatus();
+}
+
+absl::Status PropagateCovariance(const MatrixXd& Phi, const MatrixXd& Q, MatrixXd& P) {
+  return CommitCovariance(Phi * P * Phi.transpose() + Q, P);
 }
 
 absl::Status JosephUpdate(const MatrixXd& H, const VectorXd& z, const MatrixXd& R, MatrixXd& P,

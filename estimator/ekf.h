@@ -10,6 +10,9 @@
 
 namespace esg::estimator {
 
+// Symmetrises the candidate covariance and commits it to P when CheckCovariance passes.
+absl::Status CommitCovariance(Eigen::MatrixXd candidate, Eigen::MatrixXd& P);
+
 // P <- Phi P Phi^T + Q, then symmetrised.
 absl::Status PropagateCovariance(const Eigen::MatrixXd& Phi, const Eigen::MatrixXd& Q,
                                  Eigen::MatrixXd& P);

@@ -81,6 +81,8 @@ const char* EventKindName(Event::Kind kind) {
       return "GYRO_DATA_REJECTED";
     case Event::Kind::kStarTrackerInvalid:
       return "STAR_TRACKER_INVALID";
+    case Event::Kind::kFilterReset:
+      return "FILTER_RESET";
   }
   return "?";
 }
@@ -162,7 +164,7 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
     g.offset = offset;
     g.has_reading = true;
     g.h_k_last = frame.gyros[id - 1]->h_k.normalized();
-    g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();
+    g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();  // bases below need it
     offset += g.size(options_.model.random_walk);
     gyros_.push_back(std::move(g));
   }
@@ -175,29 +177,15 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
     g.t1 = t1.norm() > 0.1 ? t1.normalized() : AnyPerpendicular(g.h_in);
   }
 
-  // Prior covariance. The initial spin axes are rebuilt from the star tracker,
-  // h_in = C_in_b(st) C_b_k h_k, so their errors are the misalignment, the star-tracker noise
-  // (shared by all gyros) and the readout noise: dh_g = -H_phi,g phi_g - G_st,g n_st - G_r,g r_g
-  // with the Jacobians of the star-tracker measurement (see MeasurementUpdate).
+  // Prior covariance of the coefficients, residual drifts and misalignments, then the spin axes.
   const int n = offset;
   P_ = MatrixXd::Zero(n, n);
   const double sigma_rw0 =
       options_.residual_drift_sigma >= 0.0
           ? options_.residual_drift_sigma
           : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
-  const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
-  const Matrix3d Sigma_st = st_noise.cwiseAbs2().asDiagonal();
-  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
-  std::vector<Matrix23> G_st(gyros_.size());
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    GyroState& g = gyros_[i];
+  for (GyroState& g : gyros_) {
     const GyroConfig& gc = *config_.FindGyro(g.id);
-    const Matrix23 Tt = g.T().transpose();
-    const Vector3d h_b = g.C_b_k() * g.h_k_last;
-    const Matrix23 H_phi = Tt * C_in_b * Skew(h_b);
-    G_st[i] = -Tt * C_in_b * Skew(h_b);
-    const Matrix2d G_r = Tt * C_in_b * g.C_b_k() * TangentBasis(g.h_k_last);
-    P_.block<2, 2>(g.offset, g.offset) += sigma_r * sigma_r * G_r * G_r.transpose();
     if (options_.model.random_walk) {
       P_.block<2, 2>(g.rw_offset(), g.rw_offset()) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
     }
@@ -208,26 +196,66 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
     }
     if (g.estimate_phi) {
       const int po = PhiOffset(g);
-      const Matrix3d P_phi = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
-      P_.block<3, 3>(po, po) = P_phi;
-      const Matrix23 A = -H_phi;
-      P_.block<2, 2>(g.offset, g.offset) += A * P_phi * A.transpose();
-      P_.block<2, 3>(g.offset, po) = A * P_phi;
-      P_.block<3, 2>(po, g.offset) = (A * P_phi).transpose();
+      P_.block<3, 3>(po, po) = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
     }
   }
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    for (size_t j = 0; j < gyros_.size(); ++j) {
-      P_.block<2, 2>(gyros_[i].offset, gyros_[j].offset) += G_st[i] * Sigma_st * G_st[j].transpose();
-    }
-  }
-  P_ = (0.5 * (P_ + P_.transpose())).eval();
+  SpinAxesFromStarTracker(C_in_b);
   P0_ = P_;
   initialized_ = true;
   start_time_ = frame.time;
   last_update_time_ = frame.time;
   state_ = SessionState::kCalibrating;
   return CheckCovariance(P_);
+}
+
+void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {
+  // The spin axes rebuilt from the star tracker, h_in = C_in_b(st) C_b_k h_k, err by the
+  // misalignment, the star-tracker noise (shared by all gyros) and the readout noise:
+  // dh_g = -H_phi,g phi_g - G_st,g n_st - G_r,g r_g with the Jacobians of the star-tracker
+  // measurement (MeasurementUpdate).
+  const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
+  const Matrix3d Sigma_st = st_noise.cwiseAbs2().asDiagonal();
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  std::vector<Matrix23> G_st(gyros_.size());
+  for (GyroState& g : gyros_) {
+    g.h_in = (C_in_b * g.C_b_k() * g.h_k_last).normalized();
+    g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
+    P_.middleRows(g.offset, 2).setZero();
+    P_.middleCols(g.offset, 2).setZero();
+  }
+  // A maps the state to the spin-axis errors through the misalignments (zero on the spin axes).
+  const int n = state_size();
+  MatrixXd A = MatrixXd::Zero(n, n);
+  MatrixXd noise = MatrixXd::Zero(n, n);
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    GyroState& g = gyros_[i];
+    const Matrix23 Tt = g.T().transpose();
+    const Vector3d h_b = g.C_b_k() * g.h_k_last;
+    G_st[i] = -Tt * C_in_b * Skew(h_b);
+    if (g.estimate_phi) A.block<2, 3>(g.offset, PhiOffset(g)) = -Tt * C_in_b * Skew(h_b);
+    const Matrix2d G_r = Tt * C_in_b * g.C_b_k() * TangentBasis(g.h_k_last);
+    noise.block<2, 2>(g.offset, g.offset) += sigma_r * sigma_r * G_r * G_r.transpose();
+  }
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    for (size_t j = 0; j < gyros_.size(); ++j) {
+      noise.block<2, 2>(gyros_[i].offset, gyros_[j].offset) +=
+          G_st[i] * Sigma_st * G_st[j].transpose();
+    }
+  }
+  // dh = A x + n: P_dh,x = A P (for x not a spin axis), P_dh,dh = A P A^T + N.
+  const MatrixXd AP = A * P_;
+  const MatrixXd APAt = AP * A.transpose();
+  for (const GyroState& g : gyros_) {
+    P_.middleRows(g.offset, 2) = AP.middleRows(g.offset, 2);
+    P_.middleCols(g.offset, 2) = AP.middleRows(g.offset, 2).transpose();
+  }
+  for (const GyroState& a : gyros_) {
+    for (const GyroState& b : gyros_) {
+      P_.block<2, 2>(a.offset, b.offset) =
+          APAt.block<2, 2>(a.offset, b.offset) + noise.block<2, 2>(a.offset, b.offset);
+    }
+  }
+  P_ = (0.5 * (P_ + P_.transpose())).eval();
 }
 
 std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const Vector3d& h_k_a,
@@ -295,17 +323,24 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
 
 absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   const double span = Seconds(frame.time - last_time_);
-  const int substeps = std::max(1, static_cast<int>(std::ceil(span * config_.filter.integration_rate_hz - 1e-9)));
-  const double dt = span / substeps;
   const bool rw = options_.model.random_walk;
 
   // Readings at both ends (a gyro missing in the new frame holds its last reading).
   std::vector<Vector3d> h_k_begin(gyros_.size()), h_k_end(gyros_.size());
+  double max_turn = 0.0;  // largest angle a reading turns over the interval [rad]
   for (size_t i = 0; i < gyros_.size(); ++i) {
     const auto& reading = frame.gyros[gyros_[i].id - 1];
     h_k_begin[i] = gyros_[i].h_k_last;
     h_k_end[i] = reading.has_value() ? reading->h_k.normalized() : gyros_[i].h_k_last;
+    max_turn = std::max(max_turn, std::acos(std::clamp(h_k_begin[i].dot(h_k_end[i]), -1.0, 1.0)));
   }
+  // The configured integration rate (the paper's 8 Hz); prediction instead sizes substeps to
+  // the motion of the readings (one per 0.1 deg): the drift depends on time only through them.
+  const int substeps =
+      adaptive_integration_
+          ? std::max(1, static_cast<int>(std::ceil(max_turn / (0.1 * kRadPerDeg))))
+          : std::max(1, static_cast<int>(std::ceil(span * config_.filter.integration_rate_hz - 1e-9)));
+  const double dt = span / substeps;
   // Output pair for the body attitude used to carry case-frame drift to inertial axes.
   const std::array<int, 2> pair = working_pair_;
   int ia = -1, ib = -1;
@@ -339,9 +374,10 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   }
   // Transition over the interval: only the spin-axis errors move,
   // d(dh)/dt = T^T [(C_in_k B dtheta) x h] + J dw_int  (tangent basis held over the interval).
-  const int n = state_size();
-  MatrixXd Phi = MatrixXd::Identity(n, n);
-  MatrixXd Q = MatrixXd::Zero(n, n);
+  // Phi = I + E, where E is nonzero only in the spin-axis rows of each gyro, in the columns of its
+  // own residual drifts and free coefficients, which follow the spin-axis pair contiguously. So
+  // P <- P + E P + P E^T + E P E^T + Q costs O(n k) instead of O(n^3).
+  std::vector<MatrixXd> E(gyros_.size());
   const double q_rw = config_.random_walk;
   for (size_t i = 0; i < gyros_.size(); ++i) {
     GyroState& g = gyros_[i];
@@ -349,22 +385,39 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
     const Matrix23 Tt = g.T().transpose();
     const Matrix3d minus_hx = -Skew(g.h_in);  // v x h = -h x v
+    const int k = (rw ? 2 : 0) + static_cast<int>(g.free.size());
+    E[i] = MatrixXd::Zero(2, k);
+    if (rw) E[i].leftCols<2>() = kJ * span;
     for (size_t j = 0; j < g.free.size(); ++j) {
-      Phi.block<2, 1>(g.offset, ThetaOffset(g) + static_cast<int>(j)) =
-          Tt * minus_hx * M[i].col(g.free[j]);
-    }
-    if (rw) {
-      Phi.block<2, 2>(g.offset, g.rw_offset()) = kJ * span;
-      // Integrated random walk (eq. (11)) over the interval.
-      const double q2 = q_rw * q_rw;
-      Q.block<2, 2>(g.rw_offset(), g.rw_offset()) = q2 * span * Matrix2d::Identity();
-      Q.block<2, 2>(g.offset, g.rw_offset()) = q2 * span * span / 2.0 * kJ;
-      Q.block<2, 2>(g.rw_offset(), g.offset) = q2 * span * span / 2.0 * kJ.transpose();
-      Q.block<2, 2>(g.offset, g.offset) = q2 * span * span * span / 3.0 * Matrix2d::Identity();
+      E[i].col((rw ? 2 : 0) + static_cast<int>(j)) = Tt * minus_hx * M[i].col(g.free[j]);
     }
     g.h_k_last = h_k_end[i];
   }
-  return PropagateCovariance(Phi, Q, P_);
+  MatrixXd candidate = P_;
+  std::vector<MatrixXd> EP(gyros_.size());
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    EP[i] = E[i] * P_.middleRows(gyros_[i].offset + 2, E[i].cols());  // 2 x n
+  }
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    const int oi = gyros_[i].offset;
+    candidate.middleRows(oi, 2) += EP[i];
+    candidate.middleCols(oi, 2) += EP[i].transpose();
+    for (size_t j = 0; j < gyros_.size(); ++j) {
+      const int oj = gyros_[j].offset;
+      candidate.block<2, 2>(oi, oj) += EP[i].middleCols(oj + 2, E[j].cols()) * E[j].transpose();
+    }
+    if (rw) {
+      // Integrated random walk (eq. (11)) over the interval.
+      const GyroState& g = gyros_[i];
+      const double q2 = q_rw * q_rw;
+      candidate.block<2, 2>(g.rw_offset(), g.rw_offset()) += q2 * span * Matrix2d::Identity();
+      candidate.block<2, 2>(g.offset, g.rw_offset()) += q2 * span * span / 2.0 * kJ;
+      candidate.block<2, 2>(g.rw_offset(), g.offset) += q2 * span * span / 2.0 * kJ.transpose();
+      candidate.block<2, 2>(g.offset, g.offset) +=
+          q2 * span * span * span / 3.0 * Matrix2d::Identity();
+    }
+  }
+  return CommitCovariance(std::move(candidate), P_);
 }
 
 absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
@@ -375,7 +428,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
 
   const auto& st = frame.star_tracker;
-  bool st_available = use_star_tracker_ && st.has_value() && st->valid;
+  const bool st_present = use_star_tracker_ && st.has_value() && st->valid;
+  bool st_available = st_present;
   const Quaterniond q_st = st_available ? st->q_in_b.normalized() : Quaterniond::Identity();
 
   auto has_reading = [&](const GyroState& g) {
@@ -551,8 +605,26 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   }
   if (report.star_tracker_used) {
     steps_without_star_tracker_ = 0;
+    consecutive_rejections_ = 0;
   } else {
     ++steps_without_star_tracker_;
+    if (st_present) ++consecutive_rejections_;
+  }
+  if (consecutive_rejections_ >= kResetAfterRejections) {
+    // The star tracker has been present and rejected for kResetAfterRejections steps: a star
+    // tracker that is wrong that long flags itself invalid, a filter whose model misses part of
+    // the drift does not, so the filter is taken to be wrong (docs/decisions.md).
+    SpinAxesFromStarTracker(C_in_b_st);
+    report.events.push_back(Event{
+        Event::Kind::kFilterReset, frame.time, "filter",
+        static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
+        "steps",
+        absl::StrFormat("star-tracker data rejected for %d steps in a row: spin axes "
+                        "re-initialised from the star tracker (is the drift model missing a term?)",
+                        consecutive_rejections_)});
+    consecutive_rejections_ = 0;
+    steps_without_star_tracker_ = 0;
+    return CheckCovariance(P_);
   }
   if (keep.empty()) return absl::OkStatus();
   const int mk = static_cast<int>(keep.size());
@@ -716,6 +788,7 @@ absl::StatusOr<std::vector<PredictedSample>> EstimationSession::Predict(
   }
   EstimationSession s = *this;
   s.use_star_tracker_ = false;
+  s.adaptive_integration_ = true;
   const Quaterniond q_hold = CurrentAttitude().q_in_b;
   std::vector<PredictedSample> out;
   out.reserve(times.size());
@@ -785,6 +858,7 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   v.push_back(reserve_pair_[1]);
   v.push_back(static_cast<double>(state_));
   v.push_back(steps_without_star_tracker_);
+  v.push_back(consecutive_rejections_);
   v.push_back(converged_ ? 1 : 0);
   v.push_back(static_cast<double>(convergence_mark_sigma_.size()));
   put_vec(convergence_mark_sigma_);
@@ -849,6 +923,7 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   s.reserve_pair_ = {static_cast<int>(get()), static_cast<int>(get())};
   s.state_ = static_cast<SessionState>(static_cast<int>(get()));
   s.steps_without_star_tracker_ = static_cast<int>(get());
+  s.consecutive_rejections_ = static_cast<int>(get());
   s.converged_ = get() != 0;
   const int n_mark = static_cast<int>(get());
   if (n_mark < 0 || n_mark > 1000) return absl::DataLossError("checkpoint: bad convergence record");

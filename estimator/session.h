@@ -73,7 +73,11 @@ struct Event {
     kWorkingPairFault,       // eq. (12) named the working pair: output switched to the reserve
     kReservePairFault,       // eq. (12) named the reserve pair
     kGyroDataRejected,       // eq. (14) rejected an autonomous measurement z_avt
-    kStarTrackerInvalid,     // the star tracker flagged its own sample invalid
+    kStarTrackerInvalid,     // the star tracker flagged its own sample invalid (not raised per
+                             // sample; reserved for the service's outage alerts)
+    kFilterReset,            // star-tracker data rejected for kResetAfterRejections steps in a
+                             // row: the filter, not the star tracker, is taken to be wrong and the
+                             // spin axes are re-initialised from the star tracker
   };
   Kind kind;
   absl::Time time;         // measurement epoch
@@ -84,6 +88,10 @@ struct Event {
   std::string message;
 };
 const char* EventKindName(Event::Kind kind);
+
+// Consecutive measurement steps with star-tracker data present but rejected (eq. (12) or (14))
+// after which the filter re-initialises its spin axes from the star tracker (docs/decisions.md).
+inline constexpr int kResetAfterRejections = 10;
 
 struct AttitudeEstimate {
   absl::Time time;
@@ -215,6 +223,10 @@ class EstimationSession {
 
   EstimationSession() = default;
   absl::Status Initialize(const TelemetryFrame& frame);
+  // Sets every running gyro's h_in from the star tracker (h_in = C_in_b C_b_k h_k) and the
+  // spin-axis blocks of P to the matching prior (misalignment, shared star-tracker noise, readout);
+  // the other blocks of P are kept, cross terms with the spin axes are cleared.
+  void SpinAxesFromStarTracker(const Eigen::Matrix3d& C_in_b);
   absl::Status Propagate(const TelemetryFrame& frame);
   absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
   void ApplyCorrection(const Eigen::VectorXd& dx);
@@ -244,6 +256,10 @@ class EstimationSession {
   std::array<int, 2> reserve_pair_ = {0, 0};
   SessionState state_ = SessionState::kNoData;
   int steps_without_star_tracker_ = 0;
+  int consecutive_rejections_ = 0;
+  // Predict integrates with substeps sized to the motion of the readings instead of the
+  // configured rate (exact for an inertial hold, see Predict).
+  bool adaptive_integration_ = false;
   // Relative-sigma history for the convergence test: (time, max ratio change reference).
   absl::Time convergence_mark_time_ = absl::InfinitePast();
   Eigen::VectorXd convergence_mark_sigma_;

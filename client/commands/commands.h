@@ -15,6 +15,8 @@ struct GlobalOptions {
 };
 
 void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterCalibrate(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterGap(CLI::App& app, GlobalOptions& global, int* exit_code);
 
 }  // namespace esg::client
 

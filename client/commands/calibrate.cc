@@ -1,0 +1,323 @@
+// `esg calibrate` and `esg gap`: the estimator run offline over a recording (estimator/offline.h).
+// calibrate prints per gyro the final coefficients and their 1-sigma in the configuration's JSON
+// keys, the misalignments in arcsec, the rejections by kind and the events; gap calibrates up to
+// a time, runs autonomously to the end and reports the attitude error against the withheld star
+// tracker and its growth rate (the paper's Fig. 7/8 measure).
+// Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <string>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "absl/time/time.h"
+#include "client/commands/commands.h"
+#include "client/progress.h"
+#include "estimator/calibration_model.h"
+#include "estimator/offline.h"
+#include "estimator/units.h"
+#include "nlohmann/json.hpp"
+#include "proto/convert.h"
+#include "storage/recording_csv.h"
+
+namespace esg::client {
+namespace {
+
+using estimator::RadPerSecToDegPerHour;
+using estimator::RadToArcmin;
+using estimator::RadToArcsec;
+using json = nlohmann::ordered_json;
+
+struct Inputs {
+  estimator::SpacecraftConfig config;
+  estimator::Recording recording;
+  estimator::SessionOptions options;
+};
+
+struct CommonOptions {
+  std::string config_path;
+  std::string recording_path;
+  std::string model = "10+11";
+  std::optional<double> kd;
+  bool json = false;
+};
+
+void AddCommon(CLI::App* cmd, CommonOptions& o) {
+  cmd->add_option("--config", o.config_path, "spacecraft configuration JSON (DESIGN §7)")->required();
+  cmd->add_option("--recording", o.recording_path, "recording CSV (DESIGN §7)")->required();
+  cmd->add_option("--model", o.model, "drift model: 1, 10, 11 or a '+' set such as 10+11")
+      ->capture_default_str();
+  cmd->add_option("--kd", o.kd, "k_d of the innovation test, eq. (14) (default: configuration, 5)");
+  cmd->add_flag("--json", o.json, "one JSON document on stdout");
+}
+
+// Loads and checks the inputs; prints the problem and returns nullopt on bad input.
+std::optional<Inputs> Load(const CommonOptions& o) {
+  Inputs in;
+  auto config = proto_convert::ReadConfigFile(o.config_path);
+  if (!config.ok()) {
+    std::fprintf(stderr, "esg: --config %s: %s\n", o.config_path.c_str(),
+                 std::string(config.status().message()).c_str());
+    return std::nullopt;
+  }
+  in.config = *config;
+  if (o.kd.has_value()) {
+    if (!(*o.kd > 0.0)) {
+      std::fprintf(stderr, "esg: --kd: must be > 0, got %g\n", *o.kd);
+      return std::nullopt;
+    }
+    in.config.filter.innovation_kd = *o.kd;
+  }
+  auto model = estimator::ParseModel(o.model);
+  if (!model.ok()) {
+    std::fprintf(stderr, "esg: --%s\n", std::string(model.status().message()).c_str());
+    return std::nullopt;
+  }
+  in.options.model = *model;
+  auto recording = storage::ReadRecordingCsv(o.recording_path);
+  if (!recording.ok()) {
+    std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
+                 std::string(recording.status().message()).c_str());
+    return std::nullopt;
+  }
+  if (recording->frames.empty()) {
+    std::fprintf(stderr, "esg: --recording %s: no frames\n", o.recording_path.c_str());
+    return std::nullopt;
+  }
+  in.recording = std::move(*recording);
+  return in;
+}
+
+std::string Utc(absl::Time t) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
+}
+
+json Vec(const Eigen::Vector3d& v, double scale) {
+  return json::array({v.x() * scale, v.y() * scale, v.z() * scale});
+}
+
+const double kDegH = RadPerSecToDegPerHour(1.0);
+const double kArcsec = RadToArcsec(1.0);
+
+json ModelJson(const estimator::DriftCoefficients& c) {
+  return json{{"k0DegH", c.k0 * kDegH}, {"c1DegH", Vec(c.C1, kDegH)}, {"c2DegH", Vec(c.C2, kDegH)},
+              {"muDegH", Vec(c.mu, kDegH)}, {"nuDegH", Vec(c.nu, kDegH)}};
+}
+
+json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
+  json gyros = json::array();
+  for (const estimator::GyroEstimate& g : r.gyros) {
+    json rel = json::object();
+    for (const auto& [index, ratio] : r.relative_sigma.at(g.id)) {
+      rel[estimator::CoefficientName(index)] = ratio;
+    }
+    gyros.push_back(json{{"id", g.id},
+                         {"model", ModelJson(g.coefficients)},
+                         {"modelSigma", ModelJson(g.sigma)},
+                         {"misalignmentArcsec", Vec(g.misalignment_b, kArcsec)},
+                         {"misalignmentSigmaArcsec", Vec(g.misalignment_sigma_b, kArcsec)},
+                         {"relativeSigma", rel},
+                         {"residualDriftDegH", json::array({g.residual_drift.x() * kDegH,
+                                                            g.residual_drift.y() * kDegH})},
+                         {"faulty", g.faulty}});
+  }
+  json counts = json::object();
+  for (const auto& [kind, n] : r.event_counts) counts[estimator::EventKindName(kind)] = n;
+  json events = json::array();
+  for (const estimator::Event& e : r.events) {
+    events.push_back(json{{"time", Utc(e.time)},
+                          {"kind", estimator::EventKindName(e.kind)},
+                          {"subsystem", e.subsystem},
+                          {"value", e.value},
+                          {"threshold", e.threshold},
+                          {"unit", e.unit},
+                          {"message", e.message}});
+  }
+  return json{{"spacecraftId", in.config.spacecraft_id},
+              {"model", in.options.model.Name()},
+              {"frames", r.frames},
+              {"measurementSteps", r.measurement_steps},
+              {"starTrackerStepsUsed", r.star_tracker_steps_used},
+              {"state", estimator::SessionStateName(r.final_state)},
+              {"outputPair", json::array({r.final_attitude.pair[0], r.final_attitude.pair[1]})},
+              {"innovationRmsArcsec", r.innovation_rms * kArcsec},
+              {"gyros", gyros},
+              {"rejections", counts},
+              {"events", events}};
+}
+
+void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
+  const auto& frames = in.recording.frames;
+  std::printf("%s: model %s, %d frames over %.2f h, %d measurement steps, star tracker used in %d\n",
+              in.config.spacecraft_id.c_str(), in.options.model.Name().c_str(), r.frames,
+              absl::ToDoubleHours(frames.back().time - frames.front().time), r.measurement_steps,
+              r.star_tracker_steps_used);
+  std::printf("state %s, output pair [%d,%d], star-tracker innovation RMS %.2f arcsec\n",
+              estimator::SessionStateName(r.final_state), r.final_attitude.pair[0],
+              r.final_attitude.pair[1], r.innovation_rms * kArcsec);
+  for (const estimator::GyroEstimate& g : r.gyros) {
+    std::printf("gyro %d%s\n", g.id, g.faulty ? " (faulty, excluded)" : "");
+    auto row = [&](const char* name, double v, double s, int index) {
+      double ratio = -1;
+      for (const auto& [i, q] : r.relative_sigma.at(g.id)) {
+        if (i == index) ratio = q;
+      }
+      if (s > 0) {
+        std::printf("  %-10s %+9.5f +- %.5f deg/h   sqrt(P/P0) %.3f\n", name, v * kDegH, s * kDegH, ratio);
+      } else if (v != 0.0) {
+        std::printf("  %-10s %+9.5f (held)\n", name, v * kDegH);
+      }
+    };
+    const auto theta = g.coefficients.AsVector();
+    const auto sigma = g.sigma.AsVector();
+    for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
+      row(estimator::CoefficientName(i), theta(i), sigma(i), i);
+    }
+    std::printf("  misalignment [%+.1f %+.1f %+.1f] +- [%.1f %.1f %.1f] arcsec (body axes)\n",
+                g.misalignment_b.x() * kArcsec, g.misalignment_b.y() * kArcsec,
+                g.misalignment_b.z() * kArcsec, g.misalignment_sigma_b.x() * kArcsec,
+                g.misalignment_sigma_b.y() * kArcsec, g.misalignment_sigma_b.z() * kArcsec);
+  }
+  std::printf("rejections and switches:");
+  if (r.event_counts.empty()) std::printf(" none");
+  for (const auto& [kind, n] : r.event_counts) std::printf(" %s %d", estimator::EventKindName(kind), n);
+  std::printf("\n");
+  const size_t shown = std::min<size_t>(r.events.size(), 20);
+  for (size_t i = 0; i < shown; ++i) {
+    const auto& e = r.events[i];
+    std::printf("  %s %-24s %-18s %.1f > %.1f %s\n", Utc(e.time).c_str(),
+                estimator::EventKindName(e.kind), e.subsystem.c_str(), e.value, e.threshold,
+                e.unit.c_str());
+  }
+  if (r.events.size() > shown) std::printf("  ... and %zu more (--json lists all)\n", r.events.size() - shown);
+}
+
+int RunCalibrate(const CommonOptions& o) {
+  auto in = Load(o);
+  if (!in) return 2;
+  Progress progress("calibrate");
+  auto result = estimator::RunCalibration(in->config, in->options, in->recording.frames,
+                                          [&](double f) { progress(f); });
+  if (!result.ok()) {
+    std::fprintf(stderr, "esg calibrate: %s\n", std::string(result.status().message()).c_str());
+    return result.status().code() == absl::StatusCode::kInternal ? 1 : 2;
+  }
+  if (o.json) {
+    std::cout << CalibrationJson(*in, *result).dump(2) << "\n";
+  } else {
+    PrintCalibration(*in, *result);
+  }
+  return 0;
+}
+
+// --gap-start: an RFC 3339 time or hours from the first frame.
+std::optional<absl::Time> ParseGapStart(const std::string& text, absl::Time first) {
+  double hours = 0.0;
+  if (absl::SimpleAtod(text, &hours) && std::isfinite(hours)) {
+    return first + absl::Seconds(estimator::HoursToSeconds(hours));
+  }
+  absl::Time t;
+  std::string err;
+  if (absl::ParseTime(absl::RFC3339_full, text, &t, &err)) return t;
+  return std::nullopt;
+}
+
+struct GapOptions {
+  CommonOptions common;
+  std::string gap_start;
+  std::string series_csv;
+};
+
+int RunGap(const GapOptions& o) {
+  auto in = Load(o.common);
+  if (!in) return 2;
+  const auto gap_start = ParseGapStart(o.gap_start, in->recording.frames.front().time);
+  if (!gap_start) {
+    std::fprintf(stderr, "esg gap: --gap-start '%s': neither an RFC 3339 time nor hours from the start\n",
+                 o.gap_start.c_str());
+    return 2;
+  }
+  Progress progress("gap");
+  auto result = estimator::RunGap(in->config, in->options, in->recording.frames, *gap_start,
+                                  [&](double f) { progress(f); });
+  if (!result.ok()) {
+    std::fprintf(stderr, "esg gap: %s\n", std::string(result.status().message()).c_str());
+    return result.status().code() == absl::StatusCode::kInternal ? 1 : 2;
+  }
+  if (!o.series_csv.empty()) {
+    std::ofstream out(o.series_csv);
+    out << "time_utc,hours_since_gap,err_x_arcmin,err_y_arcmin,err_z_arcmin,err_arcmin,"
+           "sigma_x_arcmin,sigma_y_arcmin,sigma_z_arcmin\n";
+    for (const auto& s : result->samples) {
+      out << absl::StrFormat("%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", Utc(s.time),
+                             s.hours_since_gap, RadToArcmin(s.error_in.x()), RadToArcmin(s.error_in.y()),
+                             RadToArcmin(s.error_in.z()), RadToArcmin(s.angle), RadToArcmin(s.sigma_b.x()),
+                             RadToArcmin(s.sigma_b.y()), RadToArcmin(s.sigma_b.z()));
+    }
+    if (!out) {
+      std::fprintf(stderr, "esg gap: --series-csv %s: cannot write\n", o.series_csv.c_str());
+      return 1;
+    }
+  }
+  const double rate_deg_h = RadPerSecToDegPerHour(result->drift_rate);
+  if (o.common.json) {
+    json series = json::array();
+    for (const auto& s : result->samples) {
+      series.push_back(json{{"time", Utc(s.time)},
+                            {"hours", s.hours_since_gap},
+                            {"errorArcmin", Vec(s.error_in, RadToArcmin(1.0))},
+                            {"angleArcmin", RadToArcmin(s.angle)}});
+    }
+    json doc{{"spacecraftId", in->config.spacecraft_id},
+             {"model", in->options.model.Name()},
+             {"gapStart", Utc(*gap_start)},
+             {"gapHours", result->gap_hours},
+             {"driftRateDegH", rate_deg_h},
+             {"slopeDegH", Vec(result->slope_in, RadPerSecToDegPerHour(1.0))},
+             {"finalErrorArcmin", RadToArcmin(result->final_error)},
+             {"calibration", CalibrationJson(*in, result->calibration)},
+             {"series", series}};
+    std::cout << doc.dump(2) << "\n";
+  } else {
+    std::printf("%s: model %s calibrated up to %s, then %.2f h without the star tracker\n",
+                in->config.spacecraft_id.c_str(), in->options.model.Name().c_str(),
+                Utc(*gap_start).c_str(), result->gap_hours);
+    std::printf("drift-caused attitude error rate %.4f deg/h (inertial axes slope [%+.4f %+.4f %+.4f] deg/h)\n",
+                rate_deg_h, RadPerSecToDegPerHour(result->slope_in.x()),
+                RadPerSecToDegPerHour(result->slope_in.y()), RadPerSecToDegPerHour(result->slope_in.z()));
+    std::printf("error at the end of the gap %.2f arcmin\n", RadToArcmin(result->final_error));
+    std::printf("   hours   err_x'   err_y'   err_z'  |err|'\n");
+    const size_t step = std::max<size_t>(1, result->samples.size() / 24);
+    for (size_t i = 0; i < result->samples.size(); i += step) {
+      const auto& s = result->samples[i];
+      std::printf("  %6.2f %8.3f %8.3f %8.3f %7.3f\n", s.hours_since_gap, RadToArcmin(s.error_in.x()),
+                  RadToArcmin(s.error_in.y()), RadToArcmin(s.error_in.z()), RadToArcmin(s.angle));
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+
+void RegisterCalibrate(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  (void)global;  // offline verb: no server
+  auto options = std::make_shared<CommonOptions>();
+  CLI::App* cmd = app.add_subcommand("calibrate", "run the EKF over a recording and print the calibrated drift model");
+  AddCommon(cmd, *options);
+  cmd->callback([options, exit_code] { *exit_code = RunCalibrate(*options); });
+}
+
+void RegisterGap(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  (void)global;
+  auto options = std::make_shared<GapOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "gap", "calibrate up to --gap-start, then predict without the star tracker and compare");
+  AddCommon(cmd, options->common);
+  cmd->add_option("--gap-start", options->gap_start, "RFC 3339 time or hours from the first frame")->required();
+  cmd->add_option("--series-csv", options->series_csv, "write the error time series (arcmin) as CSV");
+  cmd->callback([options, exit_code] { *exit_code = RunGap(*options); });
+}
+
+}  // namespace esg::client
