@@ -3,6 +3,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -322,12 +323,12 @@ absl::Status Database::Acquire() {
   return absl::OkStatus();
 }
 
-void Database::ReleaseLock() ABSL_NO_THREAD_SAFETY_ANALYSIS {
+void Database::ReleaseLock() {
   owner_.store(std::thread::id(), std::memory_order_relaxed);
   mu_.Unlock();
 }
 
-absl::StatusOr<Transaction> Database::Begin(TransactionMode mode) ABSL_NO_THREAD_SAFETY_ANALYSIS {
+absl::StatusOr<Transaction> Database::Begin(TransactionMode mode) {
   absl::Status status = Acquire();
   if (!status.ok()) return status;
   status =
@@ -339,7 +340,7 @@ absl::StatusOr<Transaction> Database::Begin(TransactionMode mode) ABSL_NO_THREAD
   return Transaction(this);
 }
 
-absl::Status Database::Execute(absl::string_view sql) ABSL_NO_THREAD_SAFETY_ANALYSIS {
+absl::Status Database::Execute(absl::string_view sql) {
   absl::Status status = Acquire();
   if (!status.ok()) return status;
   status = ExecLocked(sql);
@@ -347,7 +348,7 @@ absl::Status Database::Execute(absl::string_view sql) ABSL_NO_THREAD_SAFETY_ANAL
   return status;
 }
 
-absl::Status Database::QuickCheck() ABSL_NO_THREAD_SAFETY_ANALYSIS {
+absl::Status Database::QuickCheck() {
   absl::StatusOr<Transaction> txn = Begin(TransactionMode::kDeferred);
   if (!txn.ok()) return txn.status();
   absl::StatusOr<Statement*> st = txn->Prepare("PRAGMA quick_check(1)");
@@ -361,7 +362,7 @@ absl::Status Database::QuickCheck() ABSL_NO_THREAD_SAFETY_ANALYSIS {
   return absl::OkStatus();
 }
 
-absl::Status Database::ExecLocked(absl::string_view sql) ABSL_NO_THREAD_SAFETY_ANALYSIS {
+absl::Status Database::ExecLocked(absl::string_view sql) {
   // sqlite3_exec needs a NUL-terminated string.
   const std::string text(sql);
   const int rc = sqlite3_exec(db_, text.c_str(), nullptr, nullptr, nullptr);
@@ -369,8 +370,7 @@ absl::Status Database::ExecLocked(absl::string_view sql) ABSL_NO_THREAD_SAFETY_A
   return absl::OkStatus();
 }
 
-absl::StatusOr<Statement*> Database::PrepareLocked(absl::string_view sql)
-    ABSL_NO_THREAD_SAFETY_ANALYSIS {
+absl::StatusOr<Statement*> Database::PrepareLocked(absl::string_view sql) {
   auto it = cache_.find(sql);
   if (it != cache_.end()) {
     it->second->Reset();
