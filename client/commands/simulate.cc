@@ -1,0 +1,282 @@
+// `esg simulate`: runs the seeded simulator (estimator/simulator.h) for a configuration, an
+// attitude profile and an optional scenario (client/scenario.h, docs/scenario.md), and writes the
+// recording CSV of DESIGN §7 (storage::WriteRecordingCsv). Optionally writes the configuration
+// used (--write-config) and the truth (--truth: time, true q_in_b, true h_in per gyro, the true
+// coefficients in the metadata) so experiments can compare estimates against it.
+// Exit codes: 0 success, 2 bad arguments (missing or bad files, bad values), 1 runtime failure.
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "absl/time/time.h"
+#include "client/commands/commands.h"
+#include "client/scenario.h"
+#include "estimator/rotation.h"
+#include "estimator/simulator.h"
+#include "estimator/units.h"
+#include "nlohmann/json.hpp"
+#include "proto/convert.h"
+#include "storage/recording_csv.h"
+
+namespace esg::client {
+namespace {
+
+using estimator::kMaxGyros;
+
+struct SimulateOptions {
+  std::string config_path;
+  std::string profile;
+  std::string scenario_path;
+  double hours = 0.0;
+  uint64_t seed = 0;
+  std::string out_path;
+  std::string write_config_path;
+  std::string start = "2019-03-01T00:00:00Z";
+  double telemetry_step = 60.0;
+  double integration_rate_hz = 8.0;
+  std::string truth_path;
+  bool json = false;
+};
+
+// Progress on stderr: a percentage updated in place on a terminal, otherwise a line every 10%.
+class Progress {
+ public:
+  Progress() : tty_(::isatty(STDERR_FILENO) == 1) {}
+  void operator()(double fraction) {
+    const int percent = static_cast<int>(std::floor(100.0 * fraction));
+    if (tty_) {
+      if (percent == last_) return;
+      std::fprintf(stderr, "\rsimulate: %3d%%", percent);
+      if (percent >= 100) std::fprintf(stderr, "\n");
+    } else {
+      const int decile = percent / 10 * 10;
+      if (decile == last_ || decile == 0) return;
+      std::fprintf(stderr, "simulate: %d%%\n", decile);
+      last_ = decile;
+      return;
+    }
+    last_ = percent;
+    std::fflush(stderr);
+  }
+
+ private:
+  bool tty_;
+  int last_ = -1;
+};
+
+std::string Num(double x) { return absl::StrFormat("%.17g", x); }
+
+// Coefficients in deg/h to 15 significant digits (0.015, not 0.014999999999999998).
+std::string VecDegH(const Eigen::Vector3d& v) {
+  return absl::StrFormat("[%.15g, %.15g, %.15g]", estimator::RadPerSecToDegPerHour(v.x()),
+                         estimator::RadPerSecToDegPerHour(v.y()),
+                         estimator::RadPerSecToDegPerHour(v.z()));
+}
+
+// Truth CSV: metadata lines (the recording's, plus the true coefficients [deg/h] and true
+// mountings per running gyro), then time_utc, q0..q3 (true q_in_b, scalar first), per gyro
+// gN_hin_x..z (true inertial spin axis; empty when off), st_outlier (0/1) and st_outlier_arcsec.
+absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationResult& result) {
+  std::ofstream out(path, std::ios::binary | std::ios::trunc);
+  if (!out) return absl::UnavailableError(absl::StrCat(path, ": cannot open for writing"));
+  out << "# format: esg-truth-csv 1\n";
+  for (const auto& [key, value] : result.recording.metadata) {
+    out << "# " << key << ": " << value << "\n";
+  }
+  for (int g = 0; g < kMaxGyros; ++g) {
+    if (!result.true_coefficients[g]) continue;
+    const estimator::DriftCoefficients& c = *result.true_coefficients[g];
+    out << absl::StrFormat("# g%d_true_k0_deg_h: %.15g\n", g + 1,
+                           estimator::RadPerSecToDegPerHour(c.k0));
+    out << absl::StrFormat("# g%d_true_c1_deg_h: %s\n", g + 1, VecDegH(c.C1));
+    out << absl::StrFormat("# g%d_true_c2_deg_h: %s\n", g + 1, VecDegH(c.C2));
+    out << absl::StrFormat("# g%d_true_mu_deg_h: %s\n", g + 1, VecDegH(c.mu));
+    out << absl::StrFormat("# g%d_true_nu_deg_h: %s\n", g + 1, VecDegH(c.nu));
+    if (!result.truth.empty() && result.truth.front().gyros[g]) {
+      const Eigen::Matrix3d& C = result.truth.front().gyros[g]->C_b_k;
+      out << absl::StrFormat("# g%d_true_case_to_body: [%s]\n", g + 1,
+                             absl::StrJoin({Num(C(0, 0)), Num(C(0, 1)), Num(C(0, 2)), Num(C(1, 0)),
+                                            Num(C(1, 1)), Num(C(1, 2)), Num(C(2, 0)), Num(C(2, 1)),
+                                            Num(C(2, 2))},
+                                           ", "));
+    }
+  }
+  out << "time_utc,q0,q1,q2,q3";
+  for (int g = 1; g <= kMaxGyros; ++g) {
+    out << absl::StrFormat(",g%d_hin_x,g%d_hin_y,g%d_hin_z", g, g, g);
+  }
+  out << ",st_outlier,st_outlier_arcsec\n";
+  for (const estimator::TruthSample& t : result.truth) {
+    const estimator::ScalarFirst q = estimator::ToScalarFirst(estimator::Canonical(t.q_in_b));
+    out << absl::FormatTime("%Y-%m-%d%ET%H:%M:%E*SZ", t.time, absl::UTCTimeZone()) << ","
+        << absl::StrJoin({Num(q[0]), Num(q[1]), Num(q[2]), Num(q[3])}, ",");
+    for (int g = 0; g < kMaxGyros; ++g) {
+      if (t.gyros[g]) {
+        const Eigen::Vector3d& h = t.gyros[g]->h_in;
+        out << "," << Num(h.x()) << "," << Num(h.y()) << "," << Num(h.z());
+      } else {
+        out << ",,,";
+      }
+    }
+    out << "," << (t.star_tracker_outlier ? 1 : 0) << ","
+        << Num(estimator::RadToArcsec(t.star_tracker_outlier_angle)) << "\n";
+  }
+  out.flush();
+  if (!out) return absl::UnavailableError(absl::StrCat(path, ": write failed"));
+  return absl::OkStatus();
+}
+
+// Bad input (exit 2) versus a failure while running (exit 1).
+int ExitCodeFor(const absl::Status& s) {
+  switch (s.code()) {
+    case absl::StatusCode::kInvalidArgument:
+    case absl::StatusCode::kNotFound:
+    case absl::StatusCode::kOutOfRange:
+    case absl::StatusCode::kFailedPrecondition:
+      return 2;
+    default:
+      return 1;
+  }
+}
+
+int Fail(const std::string& what, const absl::Status& s) {
+  std::cerr << "esg simulate: " << what << ": " << s.message() << "\n";
+  return ExitCodeFor(s);
+}
+
+int BadArgument(const std::string& message) {
+  std::cerr << "esg simulate: " << message << "\n";
+  return 2;
+}
+
+int RunSimulate(const SimulateOptions& o) {
+  // Argument checks first (exit 2).
+  if (!std::isfinite(o.hours) || !(o.hours > 0.0)) {
+    return BadArgument(absl::StrFormat("--hours: must be > 0, got %g", o.hours));
+  }
+  if (!std::isfinite(o.telemetry_step) || !(o.telemetry_step > 0.0)) {
+    return BadArgument(absl::StrFormat("--telemetry-step: must be > 0 s, got %g", o.telemetry_step));
+  }
+  if (!std::isfinite(o.integration_rate_hz) || !(o.integration_rate_hz > 0.0)) {
+    return BadArgument(
+        absl::StrFormat("--integration-rate: must be > 0 Hz, got %g", o.integration_rate_hz));
+  }
+  absl::Time start;
+  std::string parse_error;
+  if (!absl::ParseTime(absl::RFC3339_full, o.start, &start, &parse_error)) {
+    return BadArgument(absl::StrCat("--start: '", o.start,
+                                    "' is not an RFC 3339 time (e.g. 2019-03-01T00:00:00Z): ",
+                                    parse_error));
+  }
+
+  absl::StatusOr<estimator::SpacecraftConfig> config = proto_convert::ReadConfigFile(o.config_path);
+  if (!config.ok()) return Fail("--config", config.status());
+
+  Scenario scenario;
+  if (!o.scenario_path.empty()) {
+    absl::StatusOr<Scenario> s = ReadScenarioFile(o.scenario_path);
+    if (!s.ok()) return Fail("--scenario", s.status());
+    scenario = *std::move(s);
+  }
+
+  estimator::SimulationSpec spec;
+  spec.config = *std::move(config);
+  spec.start = start;
+  spec.duration = estimator::HoursToSeconds(o.hours);
+  spec.telemetry_step = o.telemetry_step;
+  spec.integration_rate_hz = o.integration_rate_hz;
+  spec.seed = o.seed;
+  if (absl::Status s = ApplyScenario(scenario, &spec); !s.ok()) return Fail("--scenario", s);
+  absl::StatusOr<estimator::ProfilePtr> profile =
+      MakeScenarioProfile(scenario, o.profile, spec.duration);
+  if (!profile.ok()) return Fail(o.profile.empty() ? "scenario profile" : "--profile", profile.status());
+  spec.profile = *profile;
+
+  Progress progress;
+  absl::StatusOr<estimator::SimulationResult> result =
+      estimator::Simulate(spec, [&progress](double f) { progress(f); });
+  if (!result.ok()) return Fail("simulation", result.status());
+  if (!o.scenario_path.empty()) {
+    result->recording.metadata["scenario"] =
+        scenario.description.empty() ? o.scenario_path : scenario.description;
+  }
+
+  if (absl::Status s = storage::WriteRecordingCsv(o.out_path, result->recording); !s.ok()) {
+    std::cerr << "esg simulate: --out: " << s.message() << "\n";
+    return 1;
+  }
+  if (!o.write_config_path.empty()) {
+    if (absl::Status s = proto_convert::WriteConfigFile(o.write_config_path, spec.config); !s.ok()) {
+      std::cerr << "esg simulate: --write-config: " << s.message() << "\n";
+      return 1;
+    }
+  }
+  if (!o.truth_path.empty()) {
+    if (absl::Status s = WriteTruthCsv(o.truth_path, *result); !s.ok()) {
+      std::cerr << "esg simulate: --truth: " << s.message() << "\n";
+      return 1;
+    }
+  }
+
+  std::vector<int> running;
+  for (int id = 1; id <= kMaxGyros; ++id) {
+    if (result->true_coefficients[id - 1]) running.push_back(id);
+  }
+  if (o.json) {
+    nlohmann::json j;
+    j["out"] = o.out_path;
+    j["frames"] = result->recording.frames.size();
+    j["hours"] = o.hours;
+    j["seed"] = o.seed;
+    j["profile"] = spec.profile->Describe();
+    j["runningGyros"] = running;
+    if (!o.truth_path.empty()) j["truth"] = o.truth_path;
+    std::cout << j.dump(2) << "\n";
+  } else {
+    std::cout << absl::StrFormat("wrote %d frames (%g h, gyros %s running, seed %d) to %s\n",
+                                 result->recording.frames.size(), o.hours,
+                                 absl::StrJoin(running, ","), o.seed, o.out_path);
+  }
+  return 0;
+}
+
+}  // namespace
+
+void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  (void)global;  // offline verb: no server
+  auto options = std::make_shared<SimulateOptions>();
+  CLI::App* sub = app.add_subcommand(
+      "simulate", "Simulate ESG and star-tracker telemetry into a recording CSV (DESIGN §7)");
+  sub->add_option("--config", options->config_path, "spacecraft configuration JSON (DESIGN §7)")
+      ->required();
+  sub->add_option("--profile", options->profile,
+                  "attitude profile: inertial, orbital, calibration, mixed (default: the "
+                  "scenario's, else calibration)");
+  sub->add_option("--scenario", options->scenario_path, "scenario JSON (docs/scenario.md)");
+  sub->add_option("--hours", options->hours, "simulated duration [h]")->required();
+  sub->add_option("--seed", options->seed, "random seed (same seed, same file)")->required();
+  sub->add_option("--out", options->out_path, "recording CSV to write")->required();
+  sub->add_option("--write-config", options->write_config_path,
+                  "also write the configuration used (JSON)");
+  sub->add_option("--start", options->start, "start time, RFC 3339 UTC")->capture_default_str();
+  sub->add_option("--telemetry-step", options->telemetry_step, "telemetry step [s]")
+      ->capture_default_str();
+  sub->add_option("--integration-rate", options->integration_rate_hz,
+                  "truth integration rate [Hz]")
+      ->capture_default_str();
+  sub->add_option("--truth", options->truth_path,
+                  "also write the truth CSV (true q_in_b, h_in per gyro, true coefficients)");
+  sub->add_flag("--json", options->json, "print the summary as one JSON document");
+  sub->callback([options, exit_code]() { *exit_code = RunSimulate(*options); });
+}
+
+}  // namespace esg::client

@@ -1,0 +1,419 @@
+#include "client/scenario.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "estimator/rotation.h"
+#include "estimator/status_macros.h"
+#include "estimator/units.h"
+#include "nlohmann/json.hpp"
+
+namespace esg::client {
+
+using estimator::GyroFault;
+using Eigen::Vector3d;
+using json = nlohmann::json;
+
+namespace {
+
+// Limits of the accepted values (generous: they catch unit mistakes, not physics).
+constexpr double kMaxDriftDegH = 100.0;
+constexpr double kMaxDisplacementUm = 20.0;
+constexpr double kMaxPerUmDegH = 10.0;
+constexpr double kMaxMisalignmentArcsec = 3600.0;
+constexpr double kMaxNoiseArcsec = 3600.0;
+constexpr double kMaxRandomWalkDegHSqrtH = 1.0;
+constexpr double kMaxVoltageNoiseMv = 1000.0;
+constexpr double kMaxHours = 1e5;
+
+absl::Status Invalid(const std::string& path, const std::string& reason) {
+  return absl::InvalidArgumentError(absl::StrCat(path, ": ", reason));
+}
+
+absl::Status CheckObject(const json& v, const std::string& path) {
+  if (!v.is_object()) return Invalid(path, absl::StrCat("expected an object, got ", v.type_name()));
+  return absl::OkStatus();
+}
+
+absl::Status CheckKeys(const json& obj, const std::string& path,
+                       const std::set<std::string>& allowed) {
+  for (auto it = obj.begin(); it != obj.end(); ++it) {
+    if (allowed.count(it.key()) == 0) {
+      return Invalid(path.empty() ? it.key() : absl::StrCat(path, ".", it.key()),
+                     absl::StrCat("unknown key; allowed keys here are ", absl::StrJoin(allowed, ", ")));
+    }
+  }
+  return absl::OkStatus();
+}
+
+std::string Key(const std::string& path, const std::string& key) {
+  return path.empty() ? key : absl::StrCat(path, ".", key);
+}
+
+absl::StatusOr<double> Number(const json& v, const std::string& path, double lo, double hi) {
+  if (!v.is_number()) return Invalid(path, absl::StrCat("expected a number, got ", v.type_name()));
+  const double x = v.get<double>();
+  if (!std::isfinite(x) || x < lo || x > hi) {
+    return Invalid(path, absl::StrFormat("%g is outside [%g, %g]", x, lo, hi));
+  }
+  return x;
+}
+
+absl::StatusOr<Vector3d> Vec3(const json& v, const std::string& path, double lo, double hi) {
+  if (!v.is_array() || v.size() != 3) {
+    return Invalid(path, absl::StrCat("expected an array of 3 numbers, got ",
+                                      v.is_array() ? absl::StrCat(v.size(), " values")
+                                                   : std::string(v.type_name())));
+  }
+  Vector3d out;
+  for (int i = 0; i < 3; ++i) {
+    ASSIGN_OR_RETURN(out(i), Number(v[i], absl::StrCat(path, "[", i, "]"), lo, hi));
+  }
+  return out;
+}
+
+absl::StatusOr<Vector3d> NonZeroVec3(const json& v, const std::string& path) {
+  ASSIGN_OR_RETURN(Vector3d out, Vec3(v, path, -1e6, 1e6));
+  if (out.norm() < 1e-9) return Invalid(path, "must not be the zero vector");
+  return out;
+}
+
+absl::StatusOr<bool> Bool(const json& v, const std::string& path) {
+  if (!v.is_boolean()) return Invalid(path, absl::StrCat("expected true or false, got ", v.type_name()));
+  return v.get<bool>();
+}
+
+absl::StatusOr<std::string> String(const json& v, const std::string& path) {
+  if (!v.is_string()) return Invalid(path, absl::StrCat("expected a string, got ", v.type_name()));
+  return v.get<std::string>();
+}
+
+Vector3d DegHToSi(const Vector3d& v) { return v.unaryExpr(&estimator::DegPerHourToRadPerSec); }
+
+absl::StatusOr<GyroFault> ParseFault(const json& v, const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"timeHours", "kind", "arcsec", "degH"}));
+  GyroFault fault;
+  if (!v.contains("timeHours")) return Invalid(Key(path, "timeHours"), "required");
+  ASSIGN_OR_RETURN(double hours, Number(v["timeHours"], Key(path, "timeHours"), 0.0, kMaxHours));
+  fault.time = estimator::HoursToSeconds(hours);
+  if (!v.contains("kind")) return Invalid(Key(path, "kind"), "required");
+  ASSIGN_OR_RETURN(std::string kind, String(v["kind"], Key(path, "kind")));
+  if (kind == "readout_jump") {
+    fault.kind = GyroFault::Kind::kReadoutJump;
+    if (v.contains("degH")) return Invalid(Key(path, "degH"), "not used by kind readout_jump (use arcsec)");
+    if (!v.contains("arcsec")) return Invalid(Key(path, "arcsec"), "required for kind readout_jump");
+    ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(v["arcsec"], Key(path, "arcsec"), -36000.0, 36000.0));
+    fault.value = estimator::kRadPerArcsec * arcsec;
+  } else if (kind == "drift_step") {
+    fault.kind = GyroFault::Kind::kDriftStep;
+    if (v.contains("arcsec")) return Invalid(Key(path, "arcsec"), "not used by kind drift_step (use degH)");
+    if (!v.contains("degH")) return Invalid(Key(path, "degH"), "required for kind drift_step");
+    ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(v["degH"], Key(path, "degH"), -kMaxDriftDegH, kMaxDriftDegH));
+    fault.value = DegHToSi(deg_h);
+  } else {
+    return Invalid(Key(path, "kind"),
+                   absl::StrCat("unknown kind '", kind, "'; valid kinds are readout_jump, drift_step"));
+  }
+  return fault;
+}
+
+absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(
+      v, path,
+      {"id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm", "k0DegH", "c1DegH",
+       "c2DegH", "muDegH", "nuDegH", "misalignmentArcsec", "randomWalkDegHSqrtH",
+       "readoutNoiseArcsec", "voltageNoiseMv", "initialSpinAxis", "fault"}));
+  ScenarioGyro g;
+  if (!v.contains("id")) return Invalid(Key(path, "id"), "required");
+  if (!v["id"].is_number_integer()) {
+    return Invalid(Key(path, "id"), absl::StrCat("expected an integer gyro id, got ", v["id"].dump()));
+  }
+  g.id = v["id"].get<int>();
+  if (g.id < 1 || g.id > estimator::kMaxGyros) {
+    return Invalid(Key(path, "id"), absl::StrFormat("%d is outside 1..%d", g.id, estimator::kMaxGyros));
+  }
+  for (auto it = v.begin(); it != v.end(); ++it) {
+    const std::string& k = it.key();
+    const json& x = it.value();
+    const std::string p = Key(path, k);
+    if (k == "id") continue;
+    if (k == "running") {
+      ASSIGN_OR_RETURN(g.running, Bool(x, p));
+    } else if (k == "rotorDisplacementUm") {
+      ASSIGN_OR_RETURN(Vector3d um, Vec3(x, p, -kMaxDisplacementUm, kMaxDisplacementUm));
+      g.rotor_displacement_k = estimator::kMetresPerUm * um;
+    } else if (k == "c10DegHPerUm" || k == "c20DegHPerUm") {
+      ASSIGN_OR_RETURN(double per_um, Number(x, p, -kMaxPerUmDegH, kMaxPerUmDegH));
+      const double per_m = estimator::DegPerHourToRadPerSec(per_um) / estimator::kMetresPerUm;
+      (k == "c10DegHPerUm" ? g.c10_per_m : g.c20_per_m) = per_m;
+    } else if (k == "k0DegH") {
+      ASSIGN_OR_RETURN(double k0, Number(x, p, -kMaxDriftDegH, kMaxDriftDegH));
+      g.k0 = estimator::DegPerHourToRadPerSec(k0);
+    } else if (k == "c1DegH" || k == "c2DegH" || k == "muDegH" || k == "nuDegH") {
+      ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(x, p, -kMaxDriftDegH, kMaxDriftDegH));
+      std::optional<Vector3d>& target =
+          k == "c1DegH" ? g.C1 : k == "c2DegH" ? g.C2 : k == "muDegH" ? g.mu : g.nu;
+      target = DegHToSi(deg_h);
+    } else if (k == "misalignmentArcsec") {
+      ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+      g.misalignment_b = estimator::kRadPerArcsec * arcsec;
+    } else if (k == "randomWalkDegHSqrtH") {
+      ASSIGN_OR_RETURN(double rw, Number(x, p, 0.0, kMaxRandomWalkDegHSqrtH));
+      g.random_walk = estimator::DegPerHourSqrtHourToSi(rw);
+    } else if (k == "readoutNoiseArcsec") {
+      ASSIGN_OR_RETURN(double arcsec, Number(x, p, 0.0, kMaxNoiseArcsec));
+      g.readout_noise = estimator::ArcsecToRad(arcsec);
+    } else if (k == "voltageNoiseMv") {
+      ASSIGN_OR_RETURN(double mv, Number(x, p, 0.0, kMaxVoltageNoiseMv));
+      g.voltage_noise = mv * estimator::kVoltsPerMv;
+    } else if (k == "initialSpinAxis") {
+      ASSIGN_OR_RETURN(g.initial_h_k, NonZeroVec3(x, p));
+    } else if (k == "fault") {
+      ASSIGN_OR_RETURN(g.fault, ParseFault(x, p));
+    }
+  }
+  return g;
+}
+
+absl::Status ParseStarTracker(const json& v, const std::string& path,
+                              estimator::StarTrackerTruth* st) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path,
+                            {"noiseArcsec", "latencyMs", "misalignmentArcsec", "outlierRate",
+                             "outlierArcmin", "outages", "invalidRate"}));
+  for (auto it = v.begin(); it != v.end(); ++it) {
+    const std::string& k = it.key();
+    const json& x = it.value();
+    const std::string p = Key(path, k);
+    if (k == "noiseArcsec") {
+      ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(x, p, 0.0, kMaxNoiseArcsec));
+      st->noise = estimator::kRadPerArcsec * arcsec;
+    } else if (k == "latencyMs") {
+      ASSIGN_OR_RETURN(double ms, Number(x, p, -10000.0, 10000.0));
+      st->latency = ms * 1e-3;
+    } else if (k == "misalignmentArcsec") {
+      ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+      st->misalignment_b = estimator::kRadPerArcsec * arcsec;
+    } else if (k == "outlierRate") {
+      ASSIGN_OR_RETURN(st->outlier_probability, Number(x, p, 0.0, 1.0));
+    } else if (k == "outlierArcmin") {
+      ASSIGN_OR_RETURN(double arcmin, Number(x, p, 0.0, 600.0));
+      st->outlier_size = estimator::ArcminToRad(arcmin);
+    } else if (k == "invalidRate") {
+      ASSIGN_OR_RETURN(st->invalid_probability, Number(x, p, 0.0, 1.0));
+    } else if (k == "outages") {
+      if (!x.is_array()) return Invalid(p, absl::StrCat("expected an array, got ", x.type_name()));
+      for (size_t i = 0; i < x.size(); ++i) {
+        const std::string pi = absl::StrCat(p, "[", i, "]");
+        RETURN_IF_ERROR(CheckObject(x[i], pi));
+        RETURN_IF_ERROR(CheckKeys(x[i], pi, {"startHours", "endHours"}));
+        if (!x[i].contains("startHours")) return Invalid(Key(pi, "startHours"), "required");
+        if (!x[i].contains("endHours")) return Invalid(Key(pi, "endHours"), "required");
+        ASSIGN_OR_RETURN(double start, Number(x[i]["startHours"], Key(pi, "startHours"), 0.0, kMaxHours));
+        ASSIGN_OR_RETURN(double end, Number(x[i]["endHours"], Key(pi, "endHours"), 0.0, kMaxHours));
+        if (!(end > start)) {
+          return Invalid(Key(pi, "endHours"),
+                         absl::StrFormat("%g must be after startHours %g", end, start));
+        }
+        st->outages.emplace_back(estimator::HoursToSeconds(start), estimator::HoursToSeconds(end));
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<Scenario> ParseTop(const json& root) {
+  RETURN_IF_ERROR(CheckObject(root, "scenario"));
+  RETURN_IF_ERROR(CheckKeys(
+      root, "",
+      {"description", "gyros", "starTracker", "readoutNoiseArcsec", "randomWalkDegHSqrtH",
+       "profile", "profileSeed", "inclinationDeg", "orbitPeriodMin", "raanDeg", "argLatitudeDeg",
+       "sunDirection", "spinPeriodMin", "segmentHours", "slewMin", "inertialQuaternion",
+       "mixedOrbitalHours", "mixedCalibrationHours", "mixedInertialHours"}));
+  Scenario s;
+  estimator::ProfileOptions& po = s.profile_options;
+  for (auto it = root.begin(); it != root.end(); ++it) {
+    const std::string& k = it.key();
+    const json& x = it.value();
+    if (k == "description") {
+      ASSIGN_OR_RETURN(s.description, String(x, k));
+    } else if (k == "gyros") {
+      if (!x.is_array()) return Invalid(k, absl::StrCat("expected an array, got ", x.type_name()));
+      std::set<int> ids;
+      for (size_t i = 0; i < x.size(); ++i) {
+        const std::string p = absl::StrCat("gyros[", i, "]");
+        ASSIGN_OR_RETURN(ScenarioGyro g, ParseGyro(x[i], p));
+        if (!ids.insert(g.id).second) {
+          return Invalid(Key(p, "id"), absl::StrCat("gyro ", g.id, " appears twice"));
+        }
+        s.gyros.push_back(std::move(g));
+      }
+    } else if (k == "starTracker") {
+      RETURN_IF_ERROR(ParseStarTracker(x, k, &s.star_tracker));
+    } else if (k == "readoutNoiseArcsec") {
+      ASSIGN_OR_RETURN(double arcsec, Number(x, k, 0.0, kMaxNoiseArcsec));
+      s.readout_noise = estimator::ArcsecToRad(arcsec);
+    } else if (k == "randomWalkDegHSqrtH") {
+      ASSIGN_OR_RETURN(double rw, Number(x, k, 0.0, kMaxRandomWalkDegHSqrtH));
+      s.random_walk = estimator::DegPerHourSqrtHourToSi(rw);
+    } else if (k == "profile") {
+      ASSIGN_OR_RETURN(std::string name, String(x, k));
+      const std::vector<std::string> names = estimator::NamedProfileNames();
+      if (std::find(names.begin(), names.end(), name) == names.end()) {
+        return Invalid(k, absl::StrCat("unknown profile '", name, "'; valid names are ",
+                                       absl::StrJoin(names, ", ")));
+      }
+      s.profile = name;
+    } else if (k == "profileSeed") {
+      if (!x.is_number_unsigned()) {
+        return Invalid(k, absl::StrCat("expected a non-negative integer, got ", x.dump()));
+      }
+      s.profile_seed = x.get<uint64_t>();
+    } else if (k == "inclinationDeg") {
+      ASSIGN_OR_RETURN(double deg, Number(x, k, 0.0, 180.0));
+      po.orbital.inclination = estimator::DegToRad(deg);
+    } else if (k == "orbitPeriodMin") {
+      ASSIGN_OR_RETURN(double min, Number(x, k, 1.0, 1e5));
+      po.orbital.period = min * estimator::kSecondsPerMinute;
+    } else if (k == "raanDeg") {
+      ASSIGN_OR_RETURN(double deg, Number(x, k, -360.0, 360.0));
+      po.orbital.raan = estimator::DegToRad(deg);
+    } else if (k == "argLatitudeDeg") {
+      ASSIGN_OR_RETURN(double deg, Number(x, k, -360.0, 360.0));
+      po.orbital.arg_latitude0 = estimator::DegToRad(deg);
+    } else if (k == "sunDirection") {
+      ASSIGN_OR_RETURN(Vector3d sun, NonZeroVec3(x, k));
+      po.calibration.sun_in = sun.normalized();
+    } else if (k == "spinPeriodMin") {
+      ASSIGN_OR_RETURN(double min, Number(x, k, 1.0, 1e5));
+      po.calibration.spin_period = min * estimator::kSecondsPerMinute;
+    } else if (k == "segmentHours") {
+      ASSIGN_OR_RETURN(double hours, Number(x, k, 0.01, kMaxHours));
+      po.calibration.segment_duration = estimator::HoursToSeconds(hours);
+    } else if (k == "slewMin") {
+      ASSIGN_OR_RETURN(double min, Number(x, k, 0.0, 600.0));
+      po.calibration.slew_duration = min * estimator::kSecondsPerMinute;
+    } else if (k == "inertialQuaternion") {
+      if (!x.is_array() || x.size() != 4) {
+        return Invalid(k, "expected an array of 4 numbers (q0, q1, q2, q3), scalar first");
+      }
+      estimator::ScalarFirst q;
+      for (int i = 0; i < 4; ++i) {
+        ASSIGN_OR_RETURN(q[i], Number(x[i], absl::StrCat(k, "[", i, "]"), -1.0, 1.0));
+      }
+      const Eigen::Quaterniond eq = estimator::QuaternionFromScalarFirst(q);
+      if (std::abs(eq.norm() - 1.0) > 1e-3) {
+        return Invalid(k, absl::StrFormat("norm %g is not 1 (tolerance 1e-3)", eq.norm()));
+      }
+      po.inertial_q_in_b = eq.normalized();
+    } else if (k == "mixedOrbitalHours" || k == "mixedCalibrationHours" ||
+               k == "mixedInertialHours") {
+      ASSIGN_OR_RETURN(double hours, Number(x, k, 0.01, kMaxHours));
+      double& target = k == "mixedOrbitalHours"       ? po.mixed_orbital_duration
+                       : k == "mixedCalibrationHours" ? po.mixed_calibration_duration
+                                                      : po.mixed_inertial_duration;
+      target = estimator::HoursToSeconds(hours);
+    }
+  }
+  const double slew = po.calibration.slew_duration;
+  if (slew > po.calibration.segment_duration) {
+    return Invalid("slewMin", absl::StrFormat("%g min is longer than segmentHours (%g h)",
+                                              slew / estimator::kSecondsPerMinute,
+                                              estimator::SecondsToHours(po.calibration.segment_duration)));
+  }
+  return s;
+}
+
+}  // namespace
+
+absl::StatusOr<Scenario> ParseScenarioJson(std::string_view text) {
+  try {
+    const json root = json::parse(text.begin(), text.end());
+    return ParseTop(root);
+  } catch (const json::exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat("scenario: malformed JSON: ", e.what()));
+  } catch (const std::exception& e) {
+    return absl::InvalidArgumentError(absl::StrCat("scenario: ", e.what()));
+  }
+}
+
+absl::StatusOr<Scenario> ReadScenarioFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open scenario file"));
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (in.bad()) return absl::UnavailableError(absl::StrCat(path, ": read failed"));
+  absl::StatusOr<Scenario> s = ParseScenarioJson(text.str());
+  if (!s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", s.status().message()));
+  }
+  return s;
+}
+
+absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* spec) {
+  for (estimator::GyroTruth& g : spec->gyros) {
+    if (scenario.readout_noise) g.readout_noise = scenario.readout_noise;
+    if (scenario.random_walk) g.random_walk = scenario.random_walk;
+  }
+  for (size_t i = 0; i < scenario.gyros.size(); ++i) {
+    const ScenarioGyro& s = scenario.gyros[i];
+    const estimator::GyroConfig* config = spec->config.FindGyro(s.id);
+    if (config == nullptr) {
+      return Invalid(absl::StrCat("gyros[", i, "].id"),
+                     absl::StrCat("gyro ", s.id, " is not in the configuration"));
+    }
+    estimator::GyroTruth& g = spec->gyros[s.id - 1];
+    if (s.running) g.running = s.running;
+    if (s.rotor_displacement_k) g.rotor_displacement_k = *s.rotor_displacement_k;
+    if (s.c10_per_m) g.c10_per_m = *s.c10_per_m;
+    if (s.c20_per_m) g.c20_per_m = *s.c20_per_m;
+    if (s.k0 || s.C1 || s.C2 || s.mu || s.nu) {
+      estimator::DriftCoefficients c = g.drift.value_or(config->model);
+      if (s.k0) c.k0 = *s.k0;
+      if (s.C1) c.C1 = *s.C1;
+      if (s.C2) c.C2 = *s.C2;
+      if (s.mu) c.mu = *s.mu;
+      if (s.nu) c.nu = *s.nu;
+      g.drift = c;
+    }
+    if (s.misalignment_b) g.misalignment_b = *s.misalignment_b;
+    if (s.random_walk) g.random_walk = s.random_walk;
+    if (s.readout_noise) g.readout_noise = s.readout_noise;
+    if (s.voltage_noise) g.voltage_noise = *s.voltage_noise;
+    if (s.initial_h_k) g.initial_h_k = s.initial_h_k;
+    if (s.fault) g.fault = s.fault;
+  }
+  estimator::StarTrackerTruth& st = spec->star_tracker;
+  const estimator::StarTrackerTruth& from = scenario.star_tracker;
+  if (from.noise) st.noise = from.noise;
+  st.outlier_probability = from.outlier_probability;
+  st.outlier_size = from.outlier_size;
+  st.outages = from.outages;
+  st.latency = from.latency;
+  st.misalignment_b = from.misalignment_b;
+  st.invalid_probability = from.invalid_probability;
+  return absl::OkStatus();
+}
+
+absl::StatusOr<estimator::ProfilePtr> MakeScenarioProfile(const Scenario& scenario,
+                                                          std::string_view name_override,
+                                                          double duration) {
+  std::string name = "calibration";
+  if (!name_override.empty()) {
+    name = std::string(name_override);
+  } else if (scenario.profile) {
+    name = *scenario.profile;
+  }
+  return estimator::MakeNamedProfile(name, duration, scenario.profile_seed,
+                                     scenario.profile_options);
+}
+
+}  // namespace esg::client

@@ -1,0 +1,78 @@
+// Simulation scenarios: a JSON file that changes the simulated truth away from the
+// configuration's model (true drift coefficients, rotor displacement, misalignments, faults,
+// star-tracker defects) and chooses the attitude profile. Format and example: docs/scenario.md.
+// Values are in the units their key names (deg/h, arcsec, um, ...), converted to SI here with
+// estimator/units.h; unknown keys and out-of-range values are InvalidArgument naming the key path,
+// e.g. "gyros[0].rotorDisplacementUm[1]: 50 is outside [-20, 20]".
+#ifndef ESG_CLIENT_SCENARIO_H_
+#define ESG_CLIENT_SCENARIO_H_
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "estimator/attitude_profile.h"
+#include "estimator/simulator.h"
+
+namespace esg::client {
+
+// Changes to one gyro's truth. Unset fields keep the simulator's defaults (the configuration's
+// model and noise settings). SI units.
+struct ScenarioGyro {
+  int id = 0;
+  std::optional<bool> running;
+  std::optional<Eigen::Vector3d> rotor_displacement_k;  // [m]
+  std::optional<double> c10_per_m;                      // [rad/s per m]
+  std::optional<double> c20_per_m;
+  // True coefficient values replacing the configuration's model, one by one [rad/s].
+  std::optional<double> k0;
+  std::optional<Eigen::Vector3d> C1, C2, mu, nu;
+  std::optional<Eigen::Vector3d> misalignment_b;  // [rad]
+  std::optional<double> random_walk;              // [rad/s/sqrt(s)]
+  std::optional<double> readout_noise;            // [rad]
+  std::optional<double> voltage_noise;            // [V]
+  std::optional<Eigen::Vector3d> initial_h_k;     // [1]
+  std::optional<estimator::GyroFault> fault;
+};
+
+struct Scenario {
+  std::string description;
+  std::optional<std::string> profile;  // a NamedProfileNames() entry
+  estimator::ProfileOptions profile_options;
+  std::optional<uint64_t> profile_seed;
+  std::vector<ScenarioGyro> gyros;
+  estimator::StarTrackerTruth star_tracker;  // noise unset = configuration's
+  std::optional<double> readout_noise;       // all gyros [rad]
+  std::optional<double> random_walk;         // all gyros [rad/s/sqrt(s)]
+};
+
+// Parses scenario JSON (docs/scenario.md). InvalidArgument "scenario: ..." for malformed JSON,
+// "<key path>: <reason>" for unknown keys, wrong types and out-of-range values.
+absl::StatusOr<Scenario> ParseScenarioJson(std::string_view json);
+
+// Reads and parses a file: NotFound when it cannot be opened, InvalidArgument "<path>: ..." for
+// bad content.
+absl::StatusOr<Scenario> ReadScenarioFile(const std::string& path);
+
+// Applies the gyro and star-tracker changes to spec (its config must be set): the top-level
+// readout noise and random walk go to every gyro first, then each gyro entry; coefficient values
+// replace the configuration model's one by one. InvalidArgument when an entry names a gyro that
+// is not in the configuration. The profile fields are not applied here (see MakeScenarioProfile).
+absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* spec);
+
+// The scenario's profile: `name_override` if not empty, else scenario.profile, else
+// "calibration"; built with MakeNamedProfile over `duration` [s] with the scenario's options and
+// profile seed.
+absl::StatusOr<estimator::ProfilePtr> MakeScenarioProfile(const Scenario& scenario,
+                                                          std::string_view name_override,
+                                                          double duration);
+
+}  // namespace esg::client
+
+#endif  // ESG_CLIENT_SCENARIO_H_

@@ -1,0 +1,154 @@
+// Scenario JSON (client/scenario.h, docs/scenario.md): units converted to SI, unknown keys and
+// out-of-range values named, changes applied on top of the configuration's model.
+#include "client/scenario.h"
+
+#include "estimator/rotation.h"
+#include "estimator/units.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/testing/status_matchers.h"
+
+namespace esg::client {
+namespace {
+
+using ::esg::testing::IsOk;
+using ::esg::testing::StatusIs;
+using ::testing::HasSubstr;
+using Eigen::Vector3d;
+namespace est = ::esg::estimator;
+
+est::SpacecraftConfig Config() {
+  est::SpacecraftConfig c;
+  c.spacecraft_id = "T";
+  for (int id = 1; id <= 3; ++id) {
+    est::GyroConfig g;
+    g.id = id;
+    g.model.k0 = est::DegPerHourToRadPerSec(0.1 * id);
+    g.model.C1 = est::DegPerHourToRadPerSec(0.01) * Vector3d(1, 2, 3);
+    c.gyros.push_back(g);
+  }
+  c.readout_noise = est::ArcsecToRad(3.0);
+  return c;
+}
+
+constexpr char kFull[] = R"({
+  "description": "displaced rotor on gyro 2, star tracker with defects",
+  "gyros": [{"id": 2, "rotorDisplacementUm": [0.5, -1.0, 0.3], "c10DegHPerUm": 0.05,
+             "c20DegHPerUm": 0.015, "k0DegH": 0.2, "c2DegH": [0.1, 0, -0.1],
+             "misalignmentArcsec": [10, -20, 30], "randomWalkDegHSqrtH": 0.002,
+             "running": true, "fault": {"timeHours": 5, "kind": "drift_step", "degH": [0, 0, 0.05]}},
+            {"id": 1, "fault": {"timeHours": 2.5, "kind": "readout_jump", "arcsec": [0, 60, 0]}}],
+  "starTracker": {"noiseArcsec": [4, 4, 25], "latencyMs": 300, "misalignmentArcsec": [5, 0, 0],
+                  "outlierRate": 0.01, "outlierArcmin": 2,
+                  "outages": [{"startHours": 3, "endHours": 4}], "invalidRate": 0.005},
+  "readoutNoiseArcsec": 2,
+  "profile": "orbital", "inclinationDeg": 51.6, "orbitPeriodMin": 92, "profileSeed": 9
+})";
+
+TEST(Scenario, ParsesEveryFieldIntoSi) {
+  auto s = ParseScenarioJson(kFull);
+  ASSERT_THAT(s, IsOk());
+  EXPECT_EQ(s->profile, "orbital");
+  EXPECT_EQ(s->profile_seed, 9u);
+  EXPECT_NEAR(s->profile_options.orbital.inclination, est::DegToRad(51.6), 1e-15);
+  EXPECT_NEAR(s->profile_options.orbital.period, 92 * 60.0, 1e-9);
+  ASSERT_EQ(s->gyros.size(), 2u);
+  const ScenarioGyro& g2 = s->gyros[0];
+  EXPECT_EQ(g2.id, 2);
+  EXPECT_LT((*g2.rotor_displacement_k - 1e-6 * Vector3d(0.5, -1.0, 0.3)).norm(), 1e-20);
+  EXPECT_NEAR(*g2.c10_per_m, est::DegPerHourToRadPerSec(0.05) / 1e-6, 1e-12);
+  EXPECT_NEAR(*g2.k0, est::DegPerHourToRadPerSec(0.2), 1e-20);
+  EXPECT_LT((*g2.misalignment_b - est::ArcsecToRad(1.0) * Vector3d(10, -20, 30)).norm(), 1e-20);
+  ASSERT_TRUE(g2.fault.has_value());
+  EXPECT_EQ(g2.fault->kind, est::GyroFault::Kind::kDriftStep);
+  EXPECT_EQ(g2.fault->time, 5 * 3600.0);
+  EXPECT_EQ(s->gyros[1].fault->kind, est::GyroFault::Kind::kReadoutJump);
+  EXPECT_NEAR(s->star_tracker.latency, 0.3, 1e-15);
+  EXPECT_NEAR(s->star_tracker.outlier_size, est::ArcminToRad(2.0), 1e-18);
+  ASSERT_EQ(s->star_tracker.outages.size(), 1u);
+  EXPECT_EQ(s->star_tracker.outages[0].first, 3 * 3600.0);
+  EXPECT_NEAR(*s->readout_noise, est::ArcsecToRad(2.0), 1e-20);
+}
+
+TEST(Scenario, ApplyMergesCoefficientsWithTheModelAndSetsTruth) {
+  auto s = ParseScenarioJson(kFull);
+  ASSERT_THAT(s, IsOk());
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  const est::GyroTruth& g2 = spec.gyros[1];
+  ASSERT_TRUE(g2.drift.has_value());
+  EXPECT_NEAR(g2.drift->k0, est::DegPerHourToRadPerSec(0.2), 1e-20);      // replaced
+  EXPECT_EQ(g2.drift->C1, spec.config.gyros[1].model.C1);                 // kept from the model
+  EXPECT_NEAR(g2.drift->C2.x(), est::DegPerHourToRadPerSec(0.1), 1e-20);  // replaced
+  EXPECT_EQ(g2.running, true);
+  EXPECT_NEAR(*g2.readout_noise, est::ArcsecToRad(2.0), 1e-20);  // top-level value, all gyros
+  EXPECT_NEAR(*spec.gyros[2].readout_noise, est::ArcsecToRad(2.0), 1e-20);
+  EXPECT_FALSE(spec.gyros[0].drift.has_value());
+  EXPECT_TRUE(spec.gyros[0].fault.has_value());
+  EXPECT_EQ(spec.star_tracker.outages.size(), 1u);
+  EXPECT_TRUE(spec.star_tracker.noise.has_value());
+  // The merged spec simulates.
+  auto profile = MakeScenarioProfile(*s, "", 3600.0);
+  ASSERT_THAT(profile, IsOk());
+  EXPECT_THAT((*profile)->Describe(), HasSubstr("orbital"));
+  spec.profile = *profile;
+  spec.duration = 3600.0;
+  EXPECT_THAT(est::Simulate(spec), IsOk());
+  // The command-line name wins over the scenario's.
+  auto inertial = MakeScenarioProfile(*s, "inertial", 3600.0);
+  ASSERT_THAT(inertial, IsOk());
+  EXPECT_THAT((*inertial)->Describe(), HasSubstr("inertial"));
+}
+
+TEST(Scenario, GyroNotInConfigurationIsAnError) {
+  auto s = ParseScenarioJson(R"({"gyros": [{"id": 4, "running": true}]})");
+  ASSERT_THAT(s, IsOk());
+  est::SimulationSpec spec;
+  spec.config = Config();
+  EXPECT_THAT(ApplyScenario(*s, &spec),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("gyros[0].id: gyro 4")));
+}
+
+TEST(Scenario, ErrorsNameTheKey) {
+  const std::pair<const char*, const char*> cases[] = {
+      {R"({"gyro": []})", "gyro: unknown key"},
+      {R"({"gyros": [{"id": 1, "k0": 0.2}]})", "gyros[0].k0: unknown key"},
+      {R"({"gyros": [{"k0DegH": 0.2}]})", "gyros[0].id: required"},
+      {R"({"gyros": [{"id": 5}]})", "gyros[0].id: 5 is outside 1..4"},
+      {R"({"gyros": [{"id": 1}, {"id": 1}]})", "gyros[1].id: gyro 1 appears twice"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [0, 50, 0]}]})",
+       "gyros[0].rotorDisplacementUm[1]: 50 is outside [-20, 20]"},
+      {R"({"gyros": [{"id": 1, "c1DegH": [0, 0]}]})",
+       "gyros[0].c1DegH: expected an array of 3 numbers, got 2 values"},
+      {R"({"gyros": [{"id": 1, "running": "yes"}]})", "gyros[0].running: expected true or false"},
+      {R"({"gyros": [{"id": 1, "fault": {"timeHours": 1, "kind": "explode"}}]})",
+       "gyros[0].fault.kind: unknown kind 'explode'"},
+      {R"({"gyros": [{"id": 1, "fault": {"timeHours": 1, "kind": "drift_step", "arcsec": [1, 2, 3]}}]})",
+       "gyros[0].fault.arcsec: not used by kind drift_step"},
+      {R"({"gyros": [{"id": 1, "randomWalkDegHSqrtH": -0.1}]})",
+       "gyros[0].randomWalkDegHSqrtH: -0.1 is outside [0, 1]"},
+      {R"({"starTracker": {"outages": [{"startHours": 4, "endHours": 3}]}})",
+       "starTracker.outages[0].endHours: 3 must be after startHours 4"},
+      {R"({"starTracker": {"latencyMs": "300"}})", "starTracker.latencyMs: expected a number"},
+      {R"({"profile": "tumbling"})", "profile: unknown profile 'tumbling'"},
+      {R"({"inclinationDeg": 200})", "inclinationDeg: 200 is outside [0, 180]"},
+      {R"({"segmentHours": 0.1, "slewMin": 10})", "slewMin: 10 min is longer than segmentHours"},
+      {R"({"profileSeed": -1})", "profileSeed: expected a non-negative integer"},
+      {R"([1, 2])", "scenario: expected an object"},
+      {R"({"gyros": [)", "scenario: malformed JSON"},
+  };
+  for (const auto& [json, message] : cases) {
+    EXPECT_THAT(ParseScenarioJson(json),
+                StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(message)))
+        << json;
+  }
+}
+
+TEST(Scenario, MissingFileIsNotFound) {
+  EXPECT_THAT(ReadScenarioFile("/nonexistent/scenario.json"),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("/nonexistent/scenario.json")));
+}
+
+}  // namespace
+}  // namespace esg::client

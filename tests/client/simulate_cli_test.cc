@@ -1,0 +1,183 @@
+// `esg simulate` run as a real process (the built binary, ESG_BINARY) into a temporary
+// directory: reproducible bytes, the documented examples, and exit code 2 with a message naming
+// the problem for bad arguments.
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "estimator/units.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "proto/convert.h"
+#include "storage/recording_csv.h"
+#include "tests/testing/status_matchers.h"
+#include "tests/testing/temp_dir.h"
+
+namespace esg::client {
+namespace {
+
+using ::esg::testing::IsOk;
+using ::esg::testing::TempDir;
+using ::testing::HasSubstr;
+
+struct RunResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void WriteFile(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+}
+
+// Runs `esg <args>` with stdout and stderr captured in files of dir.
+RunResult RunEsg(const TempDir& dir, const std::string& args) {
+  const std::string out = dir.File("stdout.txt"), err = dir.File("stderr.txt");
+  const std::string command =
+      std::string("'") + ESG_BINARY + "' " + args + " > '" + out + "' 2> '" + err + "'";
+  const int status = std::system(command.c_str());
+  RunResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = ReadFile(out);
+  r.err = ReadFile(err);
+  return r;
+}
+
+std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
+
+TEST(SimulateCli, SameSeedGivesSameFileBytesAndAReadableRecording) {
+  TempDir dir;
+  const std::string base = "simulate --config '" + Rdk1() + "' --hours 2 ";
+  RunResult a = RunEsg(dir, base + "--seed 7 --out '" + dir.File("a.csv") + "'");
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  EXPECT_THAT(a.out, HasSubstr("121 frames"));
+  RunResult b = RunEsg(dir, base + "--seed 7 --out '" + dir.File("b.csv") + "'");
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  RunResult c = RunEsg(dir, base + "--seed 8 --out '" + dir.File("c.csv") + "'");
+  ASSERT_EQ(c.exit_code, 0) << c.err;
+  const std::string bytes_a = ReadFile(dir.File("a.csv"));
+  EXPECT_GT(bytes_a.size(), 10000u);
+  EXPECT_EQ(bytes_a, ReadFile(dir.File("b.csv")));
+  EXPECT_NE(bytes_a, ReadFile(dir.File("c.csv")));
+
+  auto recording = storage::ReadRecordingCsv(dir.File("a.csv"));
+  ASSERT_THAT(recording, IsOk());
+  EXPECT_EQ(recording->metadata.at("spacecraft_id"), "RDK-1");
+  EXPECT_EQ(recording->metadata.at("seed"), "7");
+  ASSERT_EQ(recording->frames.size(), 121u);
+  for (const auto& frame : recording->frames) {
+    EXPECT_TRUE(frame.gyros[0] && frame.gyros[1] && frame.gyros[2]);
+    EXPECT_FALSE(frame.gyros[3].has_value());  // the cold spare
+    EXPECT_TRUE(frame.star_tracker.has_value());
+  }
+}
+
+TEST(SimulateCli, WritesConfigAndTruthWhenAsked) {
+  TempDir dir;
+  RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() +
+                                "' --hours 1 --seed 3 --telemetry-step 30 --integration-rate 4"
+                                " --start 2020-06-01T12:00:00Z --json --out '" +
+                                dir.File("rec.csv") + "' --write-config '" +
+                                dir.File("used.json") + "' --truth '" + dir.File("truth.csv") +
+                                "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("\"frames\": 121"));
+  auto original = proto_convert::ReadConfigFile(Rdk1());
+  auto used = proto_convert::ReadConfigFile(dir.File("used.json"));
+  ASSERT_THAT(original, IsOk());
+  ASSERT_THAT(used, IsOk());
+  EXPECT_EQ(proto_convert::ConfigToJson(*original), proto_convert::ConfigToJson(*used));
+  auto recording = storage::ReadRecordingCsv(dir.File("rec.csv"));
+  ASSERT_THAT(recording, IsOk());
+  EXPECT_EQ(recording->frames.front().time, absl::FromCivil(absl::CivilSecond(2020, 6, 1, 12, 0, 0),
+                                                           absl::UTCTimeZone()));
+  const std::string truth = ReadFile(dir.File("truth.csv"));
+  EXPECT_THAT(truth, HasSubstr("# g1_true_k0_deg_h: 0.25\n"));
+  EXPECT_THAT(truth, HasSubstr("time_utc,q0,q1,q2,q3,g1_hin_x"));
+  EXPECT_THAT(truth, HasSubstr("\n2020-06-01T12:00:30Z,"));
+}
+
+TEST(SimulateCli, DocumentedScenarioExamplesRun) {
+  const std::filesystem::path scenarios =
+      std::filesystem::path(ESG_SOURCE_DIR) / "deploy/examples/scenarios";
+  int count = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(scenarios)) {
+    if (entry.path().extension() != ".json") continue;
+    ++count;
+    TempDir dir;
+    RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" +
+                                  entry.path().string() + "' --hours 1 --seed 1 --out '" +
+                                  dir.File("rec.csv") + "'");
+    EXPECT_EQ(r.exit_code, 0) << entry.path() << ": " << r.err;
+    EXPECT_THAT(storage::ReadRecordingCsv(dir.File("rec.csv")), IsOk()) << entry.path();
+  }
+  EXPECT_GE(count, 3);
+}
+
+TEST(SimulateCli, BadArgumentsExitTwoNamingTheProblem) {
+  TempDir dir;
+  const std::string out = " --out '" + dir.File("x.csv") + "'";
+  const std::string config = " --config '" + Rdk1() + "'";
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  WriteFile(dir.File("unknown_key.json"), R"({"gyros": [{"id": 2, "rotorDisplacmentUm": [1, 0, 0]}]})");
+  WriteFile(dir.File("out_of_range.json"), R"({"starTracker": {"outlierRate": 1.5}})");
+  WriteFile(dir.File("malformed.json"), R"({"gyros": [)");
+  WriteFile(dir.File("bad_config.json"), R"({"spacecraftId": "X", "gyros": []})");
+  const Case cases[] = {
+      {"simulate --config '" + dir.File("missing.json") + "' --hours 1 --seed 1" + out,
+       "missing.json"},
+      {"simulate" + config + " --hours 0 --seed 1" + out, "--hours"},
+      {"simulate" + config + " --hours -3 --seed 1" + out, "--hours"},
+      {"simulate" + config + " --hours 1" + out, "--seed"},
+      {"simulate" + config + " --hours 1 --seed 1 --profile tumbling" + out,
+       "inertial, orbital, calibration, mixed"},
+      {"simulate" + config + " --hours 1 --seed 1 --start yesterday" + out, "--start"},
+      {"simulate" + config + " --hours 1 --seed 1 --telemetry-step 0" + out, "--telemetry-step"},
+      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("unknown_key.json") +
+           "'" + out,
+       "gyros[0].rotorDisplacmentUm: unknown key"},
+      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("out_of_range.json") +
+           "'" + out,
+       "starTracker.outlierRate: 1.5 is outside [0, 1]"},
+      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("malformed.json") +
+           "'" + out,
+       "malformed JSON"},
+      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("nope.json") + "'" +
+           out,
+       "nope.json"},
+      {"simulate --config '" + dir.File("bad_config.json") + "' --hours 1 --seed 1" + out,
+       "bad_config.json: workingPair"},
+  };
+  for (const Case& c : cases) {
+    RunResult r = RunEsg(dir, c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.err;
+    EXPECT_THAT(r.err, HasSubstr(c.message)) << c.args;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.File("x.csv")));
+}
+
+TEST(SimulateCli, UnwritableOutputIsARuntimeFailure) {
+  TempDir dir;
+  RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() + "' --hours 0.1 --seed 1 --out '" +
+                                dir.File("no/such/dir/x.csv") + "'");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("--out"));
+}
+
+}  // namespace
+}  // namespace esg::client
