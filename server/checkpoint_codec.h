@@ -1,0 +1,47 @@
+// The server's checkpoint of one spacecraft (storage CheckpointRecord::state_blob): the
+// calibration model, the apply-side counters, the alert-collapse tracks, and the estimator's
+// SessionCheckpoint values stored bit for bit (STYLE §3.4 "Persistence as data"), so a restart
+// resumes exactly where the last committed step left off (docs/service.md "Durability").
+#ifndef ESG_SERVER_CHECKPOINT_CODEC_H_
+#define ESG_SERVER_CHECKPOINT_CODEC_H_
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include "absl/strings/string_view.h"
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "estimator/session.h"
+
+namespace esg::server {
+
+// An alert still inside its collapse window: a new occurrence of the same (reason, subsystem)
+// within the window is a repeat of it (docs/service.md "Alerts").
+struct AlertTrack {
+  std::string reason;
+  std::string subsystem;
+  int64_t sequence = 0;      // assigned by the alert store
+  int64_t repeat_count = 1;
+  absl::Time last_time;      // measurement epoch of the latest occurrence
+};
+
+struct ServerCheckpoint {
+  std::string model;  // canonical model name, e.g. "10+11"
+  int64_t frames_applied = 0;
+  int64_t frames_apply_failed = 0;
+  int64_t star_tracker_rejections = 0;
+  std::vector<AlertTrack> alert_tracks;
+  // Absent: a fresh session (configured, nothing applied yet).
+  std::optional<estimator::SessionCheckpoint> session;
+};
+
+// Little-endian binary, starting with the magic "ESGSRV01".
+std::string EncodeCheckpoint(const ServerCheckpoint& checkpoint);
+// DataLoss for a blob that is not a complete checkpoint of this format.
+absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob);
+
+}  // namespace esg::server
+
+#endif  // ESG_SERVER_CHECKPOINT_CODEC_H_

@@ -1,0 +1,152 @@
+// The service's engine behind the gRPC layer (docs/service.md): the per-spacecraft registry,
+// telemetry ingest with group commit, the workers that apply archived frames to each
+// spacecraft's EstimationSession (DESIGN §5), alert collapsing and fan-out, and the queries.
+// No gRPC types except the esg.v1 messages; errors are absl::Status.
+//
+// DATA FLOW AND DURABILITY
+//   Ingest (any thread)  validate -> accept (sequence and time high-water marks advance)
+//                        -> committer queue.
+//   Committer (1 thread) takes everything queued, appends it to the telemetry archive in ONE
+//                        SQLite transaction (group commit; synchronous=FULL by default), then
+//                        raises each spacecraft's highest durable sequence and calls the ack
+//                        callbacks. An ack therefore always follows the durable commit.
+//   Workers (pool)       per spacecraft, one job at a time: apply durable frames in sequence
+//                        order to a copy of the session; commit the coefficient snapshots (every
+//                        measurement step), new alerts, repeats and clears, and the checkpoint
+//                        (session values + last applied sequence) in ONE transaction; then
+//                        install the copy. The checkpoint thus always matches the effects
+//                        stored, so a restart (load checkpoint, replay archive after its
+//                        sequence) applies no frame twice and loses none.
+// LOCK ORDER: Spacecraft::job_mu -> ingest_mu -> state_mu -> (storage's database lock);
+// the stream's own lock may be held while taking state_mu.
+#ifndef ESG_SERVER_ESTIMATION_CORE_H_
+#define ESG_SERVER_ESTIMATION_CORE_H_
+
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
+#include "absl/time/time.h"
+#include "esg/v1/estimation_service.pb.h"
+#include "estimator/calibration_model.h"
+#include "estimator/session.h"
+#include "estimator/spacecraft_config.h"
+#include "server/alert_hub.h"
+#include "server/checkpoint_codec.h"
+#include "storage/storage.h"
+
+namespace esg::server {
+
+struct CoreOptions {
+  int worker_threads = 2;
+  // Frames applied per worker job (and per apply transaction) at most.
+  int max_frames_per_job = 32;
+  // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
+  // one alert (repeat_count); an alert without a new occurrence for this long is cleared.
+  absl::Duration alert_collapse_window = absl::Minutes(30);
+  // Longest prediction horizon after the last applied frame (OutOfRange beyond).
+  absl::Duration max_prediction_horizon = absl::Hours(48);
+  // Most samples in one prediction.
+  int max_prediction_samples = 100000;
+};
+
+// Severity of an alert raised by a session event (docs/service.md "Alerts").
+esg::v1::AlertSeverity SeverityOf(estimator::Event::Kind kind);
+esg::v1::AlertReason ReasonOf(estimator::Event::Kind kind);
+esg::v1::Alert AlertToProto(const storage::AlertRecord& record);
+esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& record);
+
+class EstimationCore {
+ public:
+  // Loads every configured spacecraft from `storage` (configuration, checkpoint, archive high-water
+  // marks), starts the committer and the workers, and schedules the replay of archived frames
+  // after each checkpoint. Errors of the storage reads; DataLoss for a corrupt checkpoint.
+  static absl::StatusOr<std::unique_ptr<EstimationCore>> Start(storage::Storage* storage,
+                                                               const CoreOptions& options);
+  ~EstimationCore();
+
+  // Stops accepting frames, commits what is queued (acks go out), lets the workers apply the
+  // durable backlog until `drain_deadline`, then stops all threads. Idempotent.
+  void Stop(absl::Duration drain_deadline);
+
+  // ---- Ingest ----
+  // Validates one frame. Fills `*ack` (spacecraft_id, sequence, accepted, duplicate, rejection;
+  // highest_durable_sequence is filled by FillDurable when the ack is sent). Returns true when the
+  // ack must wait for durability: `on_durable` is then called exactly once, from the committer
+  // thread, after the commit that makes the frame durable. Returns false when the ack can be sent
+  // at once (a rejection, or a duplicate of a durable frame); `on_durable` is not called.
+  bool Ingest(const esg::v1::TelemetryFrame& frame, esg::v1::TelemetryAck* ack,
+              std::function<void()> on_durable);
+  void FillDurable(esg::v1::TelemetryAck* ack);
+
+  // ---- Configuration and queries ----
+  absl::StatusOr<esg::v1::ConfigureResponse> Configure(const esg::v1::ConfigureRequest& request);
+  absl::StatusOr<esg::v1::SessionInfo> GetSession(const std::string& spacecraft_id);
+  absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions();
+  absl::StatusOr<esg::v1::PredictResponse> Predict(const esg::v1::PredictRequest& request);
+  absl::StatusOr<esg::v1::HistoryResponse> History(const esg::v1::HistoryRequest& request);
+  absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);
+  // NotFound unless empty or configured.
+  absl::Status CheckSpacecraft(const std::string& spacecraft_id);
+
+  // Blocks until every durable frame of the spacecraft is applied (or `timeout`); for tests and
+  // the benchmark. DeadlineExceeded on timeout.
+  absl::Status WaitApplied(const std::string& spacecraft_id, absl::Duration timeout);
+
+  AlertHub& alert_hub() { return hub_; }
+  storage::Storage& storage() { return *storage_; }
+
+ private:
+  struct Setup;
+  struct Spacecraft;
+  struct CommitEntry;
+
+  explicit EstimationCore(storage::Storage* storage, const CoreOptions& options);
+  absl::Status Load();
+  std::shared_ptr<Spacecraft> Find(const std::string& spacecraft_id);
+  void Schedule(const std::shared_ptr<Spacecraft>& sc);
+  void CommitterLoop();
+  void WorkerLoop();
+  // Applies the next frames of one spacecraft; true when more remain.
+  bool RunJob(const std::shared_ptr<Spacecraft>& sc);
+  esg::v1::SessionInfo Summarize(Spacecraft& sc);
+
+  storage::Storage* const storage_;
+  const CoreOptions options_;
+  AlertHub hub_;
+
+  absl::Mutex registry_mu_;
+  std::map<std::string, std::shared_ptr<Spacecraft>> registry_ ABSL_GUARDED_BY(registry_mu_);
+  absl::Mutex configure_mu_;  // serialises Configure calls
+
+  // Committer.
+  absl::Mutex commit_mu_;
+  std::vector<CommitEntry> commit_queue_ ABSL_GUARDED_BY(commit_mu_);
+  bool commit_stop_ ABSL_GUARDED_BY(commit_mu_) = false;
+  bool ingest_closed_ ABSL_GUARDED_BY(commit_mu_) = false;
+  std::thread committer_;
+
+  // Worker pool.
+  absl::Mutex pool_mu_;
+  std::deque<std::shared_ptr<Spacecraft>> ready_ ABSL_GUARDED_BY(pool_mu_);
+  bool pool_stop_ ABSL_GUARDED_BY(pool_mu_) = false;
+  std::vector<std::thread> workers_;
+
+  absl::Mutex stop_mu_;
+  bool stopped_ ABSL_GUARDED_BY(stop_mu_) = false;
+};
+
+}  // namespace esg::server
+
+#endif  // ESG_SERVER_ESTIMATION_CORE_H_

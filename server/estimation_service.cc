@@ -1,0 +1,363 @@
+// Reactors of the esg.v1.EstimationService (see estimation_service.h, docs/service.md).
+#include "server/estimation_service.h"
+
+#include <deque>
+#include <map>
+#include <memory>
+#include <tuple>
+#include <utility>
+
+#include "absl/synchronization/mutex.h"
+#include "proto/convert.h"
+#include "server/grpc_status.h"
+
+namespace esg::server {
+namespace {
+
+// Unary rpcs: run `work` (returning absl::StatusOr<Response>) and finish.
+template <typename Response, typename Work>
+grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, absl::Status auth,
+                                Response* response, Work work) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  if (!auth.ok()) {
+    reactor->Finish(ToGrpcStatus(auth));
+    return reactor;
+  }
+  absl::StatusOr<Response> result = work();
+  if (result.ok()) *response = std::move(*result);
+  reactor->Finish(ToGrpcStatus(result.status()));
+  return reactor;
+}
+
+// ---- StreamTelemetry ------------------------------------------------------------------------
+// Acks leave in frame order; an ack waiting for durability holds back the ones behind it. At
+// most kMaxInFlight frames are waiting for their ack before the stream stops reading (flow
+// control back to the client).
+constexpr size_t kMaxInFlight = 4096;
+
+class TelemetryReactor
+    : public grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck> {
+ public:
+  TelemetryReactor(EstimationCore* core, const absl::Status& auth)
+      : core_(core), shared_(std::make_shared<Shared>()) {
+    shared_->reactor = this;
+    if (!auth.ok()) {
+      shared_->finished = true;
+      Finish(ToGrpcStatus(auth));
+      return;
+    }
+    StartRead(&frame_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      absl::MutexLock lock(&shared_->mu);
+      shared_->reads_done = true;
+      TryWrite(*shared_);
+      return;
+    }
+    auto slot = std::make_shared<Slot>();
+    {
+      absl::MutexLock lock(&shared_->mu);
+      shared_->slots.push_back(slot);
+    }
+    std::weak_ptr<Shared> weak = shared_;
+    const bool wait = core_->Ingest(frame_, &slot->ack, [weak, slot]() {
+      std::shared_ptr<Shared> shared = weak.lock();
+      if (shared == nullptr) return;
+      absl::MutexLock lock(&shared->mu);
+      slot->ready = true;
+      TryWrite(*shared);
+    });
+    absl::MutexLock lock(&shared_->mu);
+    if (!wait) slot->ready = true;
+    TryWrite(*shared_);
+    if (shared_->finished) return;
+    if (shared_->slots.size() < kMaxInFlight) {
+      StartRead(&frame_);
+    } else {
+      shared_->read_paused = true;
+    }
+  }
+
+  void OnWriteDone(bool ok) override {
+    absl::MutexLock lock(&shared_->mu);
+    shared_->writing = false;
+    if (!ok) {  // the client is gone
+      if (!shared_->finished) {
+        shared_->finished = true;
+        Finish(grpc::Status::CANCELLED);
+      }
+      return;
+    }
+    shared_->slots.pop_front();
+    if (shared_->read_paused && shared_->slots.size() < kMaxInFlight / 2 && !shared_->finished) {
+      shared_->read_paused = false;
+      StartRead(&frame_);
+    }
+    TryWrite(*shared_);
+  }
+
+  void OnCancel() override {
+    absl::MutexLock lock(&shared_->mu);
+    if (!shared_->finished) {
+      shared_->finished = true;
+      Finish(grpc::Status::CANCELLED);
+    }
+  }
+
+  void OnDone() override {
+    {
+      absl::MutexLock lock(&shared_->mu);
+      shared_->reactor = nullptr;
+    }
+    delete this;
+  }
+
+ private:
+  struct Slot {
+    esg::v1::TelemetryAck ack;
+    bool ready = false;  // guarded by Shared::mu
+  };
+  // State shared with the committer's callbacks, which may outlive the reactor.
+  struct Shared {
+    absl::Mutex mu;
+    TelemetryReactor* reactor ABSL_GUARDED_BY(mu) = nullptr;
+    std::deque<std::shared_ptr<Slot>> slots ABSL_GUARDED_BY(mu);
+    bool writing ABSL_GUARDED_BY(mu) = false;
+    bool reads_done ABSL_GUARDED_BY(mu) = false;
+    bool read_paused ABSL_GUARDED_BY(mu) = false;
+    bool finished ABSL_GUARDED_BY(mu) = false;
+  };
+
+  // Sends the next ack if it is ready, or finishes when everything is acknowledged.
+  static void TryWrite(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.finished || s.writing || s.reactor == nullptr) return;
+    if (!s.slots.empty()) {
+      Slot& front = *s.slots.front();
+      if (!front.ready) return;
+      if (front.ack.accepted()) s.reactor->core_->FillDurable(&front.ack);
+      s.writing = true;
+      s.reactor->StartWrite(&front.ack);
+      return;
+    }
+    if (s.reads_done) {
+      s.finished = true;
+      s.reactor->Finish(grpc::Status::OK);
+    }
+  }
+
+  EstimationCore* core_;
+  std::shared_ptr<Shared> shared_;
+  esg::v1::TelemetryFrame frame_;
+};
+
+// ---- SubscribeAlerts ------------------------------------------------------------------------
+// Subscribes to the live feed first, then replays the store, then releases the live alerts that
+// arrived meanwhile; every alert state (sequence, repeat_count, acknowledged, cleared) is sent at
+// most once and never after a newer state of the same alert.
+constexpr size_t kMaxQueuedAlerts = 100000;
+
+class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
+ public:
+  AlertReactor(EstimationCore* core, const esg::v1::AlertSubscription& request, absl::Status auth)
+      : core_(core), shared_(std::make_shared<Shared>()) {
+    shared_->reactor = this;
+    if (auth.ok()) auth = core->CheckSpacecraft(request.spacecraft_id());
+    absl::Time since = absl::InfiniteFuture();
+    if (auth.ok() && request.has_since()) {
+      absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.since());
+      if (t.ok()) {
+        since = *t;
+      } else {
+        auth = absl::InvalidArgumentError(std::string("since: ") + std::string(t.status().message()));
+      }
+    }
+    if (!auth.ok()) {
+      shared_->finished = true;
+      Finish(ToGrpcStatus(auth));
+      return;
+    }
+    std::weak_ptr<Shared> weak = shared_;
+    subscription_ = core->alert_hub().Subscribe(
+        request.spacecraft_id(),
+        [weak](const storage::AlertRecord& r) {
+          std::shared_ptr<Shared> s = weak.lock();
+          if (s == nullptr) return;
+          absl::MutexLock lock(&s->mu);
+          if (s->replaying) {
+            s->buffered.push_back(r);
+          } else {
+            Offer(*s, r);
+            TryWrite(*s);
+          }
+        },
+        [weak]() {
+          std::shared_ptr<Shared> s = weak.lock();
+          if (s == nullptr) return;
+          absl::MutexLock lock(&s->mu);
+          if (!s->finished && s->reactor != nullptr) {
+            s->finished = true;
+            s->reactor->Finish(ToGrpcStatus(absl::UnavailableError("the server is shutting down")));
+          }
+        });
+    std::vector<storage::AlertRecord> replay;
+    if (since != absl::InfiniteFuture()) {
+      absl::StatusOr<std::vector<storage::AlertRecord>> stored =
+          core->storage().alerts().Since(request.spacecraft_id(), since, kMaxQueuedAlerts);
+      if (!stored.ok()) {
+        absl::MutexLock lock(&shared_->mu);
+        shared_->finished = true;
+        Finish(ToGrpcStatus(stored.status()));
+        return;
+      }
+      replay = std::move(*stored);
+    }
+    absl::MutexLock lock(&shared_->mu);
+    for (const storage::AlertRecord& r : replay) Offer(*shared_, r);
+    for (const storage::AlertRecord& r : shared_->buffered) Offer(*shared_, r);
+    shared_->buffered.clear();
+    shared_->replaying = false;
+    TryWrite(*shared_);
+  }
+
+  void OnWriteDone(bool ok) override {
+    absl::MutexLock lock(&shared_->mu);
+    shared_->writing = false;
+    if (!ok) {
+      if (!shared_->finished) {
+        shared_->finished = true;
+        Finish(grpc::Status::CANCELLED);
+      }
+      return;
+    }
+    shared_->queue.pop_front();
+    TryWrite(*shared_);
+  }
+
+  void OnCancel() override {
+    absl::MutexLock lock(&shared_->mu);
+    if (!shared_->finished) {
+      shared_->finished = true;
+      Finish(grpc::Status::CANCELLED);
+    }
+  }
+
+  void OnDone() override {
+    if (subscription_ != 0) core_->alert_hub().Unsubscribe(subscription_);
+    {
+      absl::MutexLock lock(&shared_->mu);
+      shared_->reactor = nullptr;
+    }
+    delete this;
+  }
+
+ private:
+  using Version = std::tuple<int64_t, bool, bool>;  // repeat_count, acknowledged, cleared
+  struct Shared {
+    absl::Mutex mu;
+    AlertReactor* reactor ABSL_GUARDED_BY(mu) = nullptr;
+    bool replaying ABSL_GUARDED_BY(mu) = true;
+    std::vector<storage::AlertRecord> buffered ABSL_GUARDED_BY(mu);
+    std::deque<esg::v1::Alert> queue ABSL_GUARDED_BY(mu);
+    std::map<std::pair<std::string, int64_t>, Version> sent ABSL_GUARDED_BY(mu);
+    bool writing ABSL_GUARDED_BY(mu) = false;
+    bool finished ABSL_GUARDED_BY(mu) = false;
+  };
+
+  // Queues `r` unless the same or a newer state of that alert was already queued.
+  static void Offer(Shared& s, const storage::AlertRecord& r) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    const Version v{r.repeat_count, r.acknowledged, r.cleared};
+    auto [it, inserted] = s.sent.try_emplace({r.spacecraft_id, r.sequence}, v);
+    if (!inserted) {
+      const Version& old = it->second;
+      if (std::get<0>(v) <= std::get<0>(old) && std::get<1>(v) <= std::get<1>(old) &&
+          std::get<2>(v) <= std::get<2>(old)) {
+        return;  // not newer
+      }
+      it->second = Version{std::max(std::get<0>(v), std::get<0>(old)),
+                           std::get<1>(v) || std::get<1>(old), std::get<2>(v) || std::get<2>(old)};
+    }
+    if (s.queue.size() >= kMaxQueuedAlerts) {
+      if (!s.finished && s.reactor != nullptr) {
+        s.finished = true;
+        s.reactor->Finish(ToGrpcStatus(
+            absl::ResourceExhaustedError("alert subscriber too slow: queue limit reached")));
+      }
+      return;
+    }
+    s.queue.push_back(AlertToProto(r));
+  }
+
+  static void TryWrite(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.finished || s.writing || s.reactor == nullptr || s.queue.empty()) return;
+    s.writing = true;
+    s.reactor->StartWrite(&s.queue.front());
+  }
+
+  EstimationCore* core_;
+  std::shared_ptr<Shared> shared_;
+  int64_t subscription_ = 0;
+};
+
+}  // namespace
+
+absl::Status EstimationServiceImpl::Authorize(grpc::CallbackServerContext* context,
+                                              Role role) const {
+  if (auth_ == nullptr) return absl::OkStatus();
+  return auth_->Check(*context, role);
+}
+
+grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>*
+EstimationServiceImpl::StreamTelemetry(grpc::CallbackServerContext* context) {
+  return new TelemetryReactor(core_, Authorize(context, Role::kWrite));
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::ConfigureSpacecraft(
+    grpc::CallbackServerContext* context, const esg::v1::ConfigureRequest* request,
+    esg::v1::ConfigureResponse* response) {
+  return Unary(context, Authorize(context, Role::kWrite), response,
+               [&] { return core_->Configure(*request); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::GetSession(
+    grpc::CallbackServerContext* context, const esg::v1::GetSessionRequest* request,
+    esg::v1::SessionInfo* response) {
+  return Unary(context, Authorize(context, Role::kRead), response,
+               [&] { return core_->GetSession(request->spacecraft_id()); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
+    grpc::CallbackServerContext* context, const esg::v1::ListSessionsRequest* /*request*/,
+    esg::v1::ListSessionsResponse* response) {
+  return Unary(context, Authorize(context, Role::kRead), response,
+               [&] { return core_->ListSessions(); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
+    grpc::CallbackServerContext* context, const esg::v1::PredictRequest* request,
+    esg::v1::PredictResponse* response) {
+  return Unary(context, Authorize(context, Role::kRead), response,
+               [&] { return core_->Predict(*request); });
+}
+
+grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts(
+    grpc::CallbackServerContext* context, const esg::v1::AlertSubscription* request) {
+  return new AlertReactor(core_, *request, Authorize(context, Role::kRead));
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
+    grpc::CallbackServerContext* context, const esg::v1::AcknowledgeRequest* request,
+    esg::v1::Alert* response) {
+  return Unary(context, Authorize(context, Role::kWrite), response,
+               [&] { return core_->Acknowledge(*request); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
+    grpc::CallbackServerContext* context, const esg::v1::HistoryRequest* request,
+    esg::v1::HistoryResponse* response) {
+  return Unary(context, Authorize(context, Role::kRead), response,
+               [&] { return core_->History(*request); });
+}
+
+}  // namespace esg::server

@@ -1,0 +1,67 @@
+// esgd: the ESG attitude estimation service (docs/service.md). Parses flags, starts EsgServer,
+// waits for SIGTERM/SIGINT and shuts down gracefully (running calls get a deadline, the durable
+// backlog is applied, checkpoints are committed).
+#include <csignal>
+#include <cstdio>
+#include <string>
+
+#include "CLI/CLI.hpp"
+#include "absl/strings/str_cat.h"
+#include "server/log.h"
+#include "server/server.h"
+
+int main(int argc, char** argv) {
+  esg::server::ServerOptions options;
+  std::string sync = "full";
+  double shutdown_deadline_s = 5.0;
+  CLI::App app{"esgd: ESG attitude estimation service (gRPC esg.v1.EstimationService)"};
+  app.add_option("--listen", options.listen, "Address to serve on, host:port")
+      ->capture_default_str();
+  app.add_option("--db", options.db_path, "SQLite database file (directories are created)")
+      ->capture_default_str();
+  app.add_option("--tls-cert", options.tls_cert_file, "Server certificate chain (PEM)");
+  app.add_option("--tls-key", options.tls_key_file, "Server private key (PEM)");
+  app.add_option("--tls-client-ca", options.tls_client_ca_file,
+                 "CA bundle (PEM) for client certificates: enables mutual TLS");
+  app.add_option("--tokens", options.tokens_file,
+                 "Bearer-token file, lines `TOKEN ROLE[,ROLE]` (roles read, write)");
+  app.add_option("--sync", sync, "SQLite synchronous mode: full (power-loss safe acks) or normal")
+      ->check(CLI::IsMember({"full", "normal"}))
+      ->capture_default_str();
+  app.add_option("--workers", options.core.worker_threads,
+                 "Filter worker threads (0: one per core, at least 2)")
+      ->capture_default_str();
+  app.add_option("--shutdown-deadline", shutdown_deadline_s,
+                 "Seconds running calls get to finish at shutdown")
+      ->capture_default_str();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  options.synchronous =
+      sync == "normal" ? esg::storage::Synchronous::kNormal : esg::storage::Synchronous::kFull;
+
+  // Block the stop signals in every thread (gRPC's included), then wait for them here.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  absl::StatusOr<std::unique_ptr<esg::server::EsgServer>> server =
+      esg::server::EsgServer::Start(options);
+  if (!server.ok()) {
+    esg::server::Log("ERROR", absl::StrCat("cannot start: ", server.status().ToString()));
+    return 1;
+  }
+  // Tests and scripts read the bound port from this line.
+  std::printf("esgd listening on port %d\n", (*server)->port());
+  std::fflush(stdout);
+
+  int signal_number = 0;
+  sigwait(&signals, &signal_number);
+  esg::server::Log("INFO", absl::StrCat("signal ", signal_number, ": shutting down"));
+  (*server)->Shutdown(absl::Seconds(shutdown_deadline_s), absl::Seconds(30));
+  return 0;
+}

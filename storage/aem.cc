@@ -1,0 +1,371 @@
+// CCSDS AEM (KVN, ADM v2) writer and reader/validator (DESIGN §7 "Attitude product").
+#include "storage/aem.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <set>
+#include <vector>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "absl/time/civil_time.h"
+
+namespace esg::storage {
+namespace {
+
+constexpr double kUnitTolerance = 1e-6;
+
+absl::Status LineError(int line, absl::string_view what, absl::string_view reason) {
+  return absl::InvalidArgumentError(absl::StrCat("line ", line, ": ", what, ": ", reason));
+}
+
+bool ParseDigits(absl::string_view s, int* out) {
+  if (s.empty()) return false;
+  int v = 0;
+  for (char c : s) {
+    if (c < '0' || c > '9') return false;
+    v = v * 10 + (c - '0');
+  }
+  *out = v;
+  return true;
+}
+
+const std::set<std::string>& HeaderKeywords() {
+  static const auto* k = new std::set<std::string>{"CCSDS_AEM_VERS", "CREATION_DATE", "ORIGINATOR",
+                                                   "MESSAGE_ID", "CLASSIFICATION"};
+  return *k;
+}
+
+const std::set<std::string>& MetadataKeywords() {
+  static const auto* k = new std::set<std::string>{
+      "OBJECT_NAME",        "OBJECT_ID",        "CENTER_NAME",          "REF_FRAME_A",
+      "REF_FRAME_B",        "ATTITUDE_DIR",     "TIME_SYSTEM",          "START_TIME",
+      "USEABLE_START_TIME", "USEABLE_STOP_TIME", "STOP_TIME",           "ATTITUDE_TYPE",
+      "QUATERNION_TYPE",    "EULER_ROT_SEQ",    "ANGVEL_FRAME",         "RATE_FRAME",
+      "INTERPOLATION_METHOD", "INTERPOLATION_DEGREE"};
+  return *k;
+}
+
+const std::set<std::string>& TimeSystems() {
+  static const auto* k = new std::set<std::string>{
+      "GMST", "GPS", "MET", "MRT", "SCLK", "TAI", "TCB", "TDB", "TCG", "TT", "UT1", "UTC"};
+  return *k;
+}
+
+bool IsSpacecraftBodyFrame(absl::string_view frame) {
+  if (!absl::StartsWith(frame, "SC_BODY_")) return false;
+  int n = 0;
+  return ParseDigits(frame.substr(8), &n);
+}
+
+}  // namespace
+
+absl::StatusOr<absl::Time> ParseCcsdsTime(absl::string_view text) {
+  absl::string_view s = absl::StripAsciiWhitespace(text);
+  if (!s.empty() && s.back() == 'Z') s.remove_suffix(1);
+  const size_t t_pos = s.find('T');
+  auto bad = [&](absl::string_view why) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("'", text, "' is not a CCSDS ASCII time (", why, ")"));
+  };
+  if (t_pos == absl::string_view::npos) return bad("no 'T'");
+  const absl::string_view date = s.substr(0, t_pos);
+  const absl::string_view clock = s.substr(t_pos + 1);
+  const std::vector<absl::string_view> d = absl::StrSplit(date, '-');
+  int year = 0, month = 0, day = 0, doy = 0;
+  absl::CivilDay civil_day;
+  if (d.size() == 3 && d[0].size() == 4 && d[1].size() == 2 && d[2].size() == 2 &&
+      ParseDigits(d[0], &year) && ParseDigits(d[1], &month) && ParseDigits(d[2], &day)) {
+    civil_day = absl::CivilDay(year, month, day);
+    if (civil_day.month() != month || civil_day.day() != day || month < 1 || day < 1) {
+      return bad("invalid date");
+    }
+  } else if (d.size() == 2 && d[0].size() == 4 && d[1].size() == 3 && ParseDigits(d[0], &year) &&
+             ParseDigits(d[1], &doy)) {
+    civil_day = absl::CivilDay(year, 1, 1) + (doy - 1);
+    if (doy < 1 || civil_day.year() != year) return bad("invalid day of year");
+  } else {
+    return bad("date is neither YYYY-MM-DD nor YYYY-DDD");
+  }
+  const std::vector<absl::string_view> c = absl::StrSplit(clock, ':');
+  int hour = 0, minute = 0;
+  if (c.size() != 3 || c[0].size() != 2 || c[1].size() != 2 || !ParseDigits(c[0], &hour) ||
+      !ParseDigits(c[1], &minute) || hour > 23 || minute > 59) {
+    return bad("time of day is not hh:mm:ss");
+  }
+  absl::string_view sec_text = c[2];
+  const size_t dot = sec_text.find('.');
+  int sec = 0;
+  if (!ParseDigits(sec_text.substr(0, dot), &sec) || sec_text.substr(0, dot).size() != 2 ||
+      sec > 60) {
+    return bad("seconds");
+  }
+  absl::Duration fraction = absl::ZeroDuration();
+  if (dot != absl::string_view::npos) {
+    const absl::string_view frac = sec_text.substr(dot + 1);
+    if (frac.empty() || frac.size() > 18) return bad("fraction of a second");
+    int64_t digits = 0;
+    for (char ch : frac) {
+      if (ch < '0' || ch > '9') return bad("fraction of a second");
+      digits = digits * 10 + (ch - '0');
+    }
+    fraction = absl::Nanoseconds(static_cast<double>(digits) * std::pow(10.0, 9.0 - frac.size()));
+  }
+  const absl::CivilSecond cs(civil_day.year(), civil_day.month(), civil_day.day(), hour, minute,
+                             0);
+  return absl::FromCivil(cs, absl::UTCTimeZone()) + absl::Seconds(sec) + fraction;
+}
+
+std::string FormatCcsdsTime(absl::Time time) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E6S", time, absl::UTCTimeZone());
+}
+
+absl::StatusOr<std::string> WriteAem(const AemHeader& header,
+                                     const std::vector<AemSample>& samples) {
+  if (header.object_name.empty()) return absl::InvalidArgumentError("OBJECT_NAME: empty");
+  if (header.object_id.empty()) return absl::InvalidArgumentError("OBJECT_ID: empty");
+  if (header.originator.empty()) return absl::InvalidArgumentError("ORIGINATOR: empty");
+  if (samples.empty()) return absl::InvalidArgumentError("samples: an AEM needs at least one");
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const double n = samples[i].q_in_b.norm();
+    if (!std::isfinite(n) || std::abs(n - 1.0) > kUnitTolerance) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("samples[", i, "].q_in_b: norm ", n, " is not 1"));
+    }
+    if (i > 0 && samples[i].epoch <= samples[i - 1].epoch) {
+      return absl::InvalidArgumentError(absl::StrCat("samples[", i, "].epoch: ",
+                                                     FormatCcsdsTime(samples[i].epoch),
+                                                     " is not after the previous epoch"));
+    }
+  }
+  std::string out;
+  absl::StrAppend(&out, "CCSDS_AEM_VERS = 2.0\n");
+  absl::StrAppend(&out, "CREATION_DATE = ", FormatCcsdsTime(header.creation_date), "\n");
+  absl::StrAppend(&out, "ORIGINATOR = ", header.originator, "\n\n");
+  absl::StrAppend(&out, "META_START\n");
+  for (const std::string& comment : header.comments) {
+    absl::StrAppend(&out, "COMMENT ", comment, "\n");
+  }
+  absl::StrAppend(&out, "OBJECT_NAME = ", header.object_name, "\n");
+  absl::StrAppend(&out, "OBJECT_ID = ", header.object_id, "\n");
+  absl::StrAppend(&out, "REF_FRAME_A = EME2000\n");
+  absl::StrAppend(&out, "REF_FRAME_B = SC_BODY_1\n");
+  absl::StrAppend(&out, "TIME_SYSTEM = UTC\n");
+  absl::StrAppend(&out, "START_TIME = ", FormatCcsdsTime(samples.front().epoch), "\n");
+  absl::StrAppend(&out, "STOP_TIME = ", FormatCcsdsTime(samples.back().epoch), "\n");
+  absl::StrAppend(&out, "ATTITUDE_TYPE = QUATERNION\n");
+  absl::StrAppend(&out, "META_STOP\n\n");
+  absl::StrAppend(&out, "DATA_START\n");
+  for (const AemSample& s : samples) {
+    Eigen::Quaterniond q = s.q_in_b.normalized();
+    if (q.w() < 0) q.coeffs() = -q.coeffs();  // sign canonical at the output edge (QC >= 0)
+    absl::StrAppend(&out, FormatCcsdsTime(s.epoch),
+                    absl::StrFormat(" %.15f %.15f %.15f %.15f\n", q.x(), q.y(), q.z(), q.w()));
+  }
+  absl::StrAppend(&out, "DATA_STOP\n");
+  return out;
+}
+
+absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
+  enum class Where { kHeader, kMeta, kBetween, kData };
+  AemFile file;
+  Where where = Where::kHeader;
+  AemSegment segment;
+  std::set<std::string> seen;  // keywords of the current section
+  int line_number = 0;
+  int meta_start_line = 0;
+  bool first_keyword = true;
+
+  auto finish_metadata = [&](int line) -> absl::Status {
+    const std::map<std::string, std::string>& m = segment.metadata;
+    std::vector<std::string> required = {"OBJECT_NAME", "OBJECT_ID",  "REF_FRAME_A",
+                                         "REF_FRAME_B", "TIME_SYSTEM", "START_TIME",
+                                         "STOP_TIME",   "ATTITUDE_TYPE"};
+    const bool v1 = file.version == "1.0";
+    if (v1) required.push_back("ATTITUDE_DIR");
+    for (const std::string& k : required) {
+      if (!m.count(k)) return LineError(line, k, "required metadata keyword missing");
+    }
+    if (v1) {
+      const std::string& dir = m.at("ATTITUDE_DIR");
+      if (dir != "A2B" && dir != "B2A") return LineError(line, "ATTITUDE_DIR", "must be A2B or B2A");
+    } else {
+      for (const char* k : {"ATTITUDE_DIR", "QUATERNION_TYPE"}) {
+        if (m.count(k)) return LineError(line, k, "not allowed in ADM version 2.0");
+      }
+    }
+    const bool a_body = IsSpacecraftBodyFrame(m.at("REF_FRAME_A"));
+    const bool b_body = IsSpacecraftBodyFrame(m.at("REF_FRAME_B"));
+    if (a_body == b_body) {
+      return LineError(line, "REF_FRAME_A/REF_FRAME_B",
+                       absl::StrCat("exactly one must be a spacecraft body frame (SC_BODY_n), got ",
+                                    m.at("REF_FRAME_A"), " and ", m.at("REF_FRAME_B")));
+    }
+    if (!TimeSystems().count(m.at("TIME_SYSTEM"))) {
+      return LineError(line, "TIME_SYSTEM", absl::StrCat("unknown value ", m.at("TIME_SYSTEM")));
+    }
+    if (m.at("ATTITUDE_TYPE") != "QUATERNION") {
+      return LineError(line, "ATTITUDE_TYPE",
+                       absl::StrCat(m.at("ATTITUDE_TYPE"), " is not supported by this reader"));
+    }
+    if (v1) {
+      auto it = m.find("QUATERNION_TYPE");
+      if (it == m.end()) {
+        return LineError(line, "QUATERNION_TYPE", "required for quaternions in version 1.0");
+      }
+      if (it->second != "FIRST" && it->second != "LAST") {
+        return LineError(line, "QUATERNION_TYPE", "must be FIRST or LAST");
+      }
+    }
+    auto start = ParseCcsdsTime(m.at("START_TIME"));
+    if (!start.ok()) return LineError(line, "START_TIME", start.status().message());
+    auto stop = ParseCcsdsTime(m.at("STOP_TIME"));
+    if (!stop.ok()) return LineError(line, "STOP_TIME", stop.status().message());
+    if (*stop < *start) return LineError(line, "STOP_TIME", "before START_TIME");
+    segment.start_time = *start;
+    segment.stop_time = *stop;
+    for (const char* k : {"USEABLE_START_TIME", "USEABLE_STOP_TIME"}) {
+      auto it = m.find(k);
+      if (it == m.end()) continue;
+      auto t = ParseCcsdsTime(it->second);
+      if (!t.ok()) return LineError(line, k, t.status().message());
+      if (*t < *start || *t > *stop) return LineError(line, k, "outside START_TIME..STOP_TIME");
+    }
+    return absl::OkStatus();
+  };
+
+  for (absl::string_view raw : absl::StrSplit(text, '\n')) {
+    ++line_number;
+    const absl::string_view line = absl::StripAsciiWhitespace(raw);
+    if (line.empty()) continue;
+    if (absl::StartsWith(line, "COMMENT")) {
+      if (where == Where::kData && !segment.samples.empty()) {
+        return LineError(line_number, "COMMENT", "not allowed between data lines");
+      }
+      continue;
+    }
+    if (where == Where::kData) {
+      if (line == "DATA_STOP") {
+        if (segment.samples.empty()) return LineError(line_number, "DATA_STOP", "no data lines");
+        file.segments.push_back(std::move(segment));
+        segment = AemSegment();
+        where = Where::kHeader;  // another segment may follow (META_START)
+        seen.clear();
+        continue;
+      }
+      const std::vector<absl::string_view> f =
+          absl::StrSplit(line, absl::ByAnyChar(" \t,"), absl::SkipEmpty());
+      if (f.size() != 5) {
+        return LineError(line_number, "data",
+                         absl::StrCat("expected an epoch and 4 quaternion components, got ",
+                                      f.size(), " fields"));
+      }
+      auto epoch = ParseCcsdsTime(f[0]);
+      if (!epoch.ok()) return LineError(line_number, "epoch", epoch.status().message());
+      double v[4];
+      for (int i = 0; i < 4; ++i) {
+        if (!absl::SimpleAtod(f[i + 1], &v[i]) || !std::isfinite(v[i])) {
+          return LineError(line_number, "quaternion", absl::StrCat("'", f[i + 1], "' is not a number"));
+        }
+      }
+      if (!segment.samples.empty() && *epoch <= segment.samples.back().epoch) {
+        return LineError(line_number, "epoch",
+                         absl::StrCat(f[0], " is not after the previous epoch"));
+      }
+      if (*epoch < segment.start_time || *epoch > segment.stop_time) {
+        return LineError(line_number, "epoch",
+                         absl::StrCat(f[0], " is outside START_TIME..STOP_TIME"));
+      }
+      const bool scalar_first = file.version == "1.0" &&
+                                segment.metadata.at("QUATERNION_TYPE") == "FIRST";
+      Eigen::Quaterniond q = scalar_first ? Eigen::Quaterniond(v[0], v[1], v[2], v[3])
+                                          : Eigen::Quaterniond(v[3], v[0], v[1], v[2]);
+      if (std::abs(q.norm() - 1.0) > kUnitTolerance) {
+        return LineError(line_number, "quaternion", absl::StrCat("norm ", q.norm(), " is not 1"));
+      }
+      // Rotation from frame A to frame B; q_in_b when A is inertial (B2A in version 1 swaps).
+      bool a_inertial = !IsSpacecraftBodyFrame(segment.metadata.at("REF_FRAME_A"));
+      if (file.version == "1.0" && segment.metadata.at("ATTITUDE_DIR") == "B2A") {
+        a_inertial = !a_inertial;
+      }
+      segment.samples.push_back({*epoch, a_inertial ? q : q.conjugate()});
+      continue;
+    }
+    if (line == "META_START") {
+      if (where != Where::kHeader || first_keyword) {
+        return LineError(line_number, "META_START", "unexpected here");
+      }
+      if (file.segments.empty()) {
+        for (const char* k : {"CREATION_DATE", "ORIGINATOR"}) {
+          if (!file.header.count(k)) return LineError(line_number, k, "required header keyword missing");
+        }
+      }
+      where = Where::kMeta;
+      meta_start_line = line_number;
+      seen.clear();
+      continue;
+    }
+    if (line == "META_STOP") {
+      if (where != Where::kMeta) return LineError(line_number, "META_STOP", "without META_START");
+      if (absl::Status s = finish_metadata(line_number); !s.ok()) return s;
+      where = Where::kBetween;
+      continue;
+    }
+    if (line == "DATA_START") {
+      if (where != Where::kBetween) return LineError(line_number, "DATA_START", "not after META_STOP");
+      where = Where::kData;
+      continue;
+    }
+    // KEYWORD = value
+    const size_t eq = line.find('=');
+    if (eq == absl::string_view::npos) {
+      return LineError(line_number, "line", absl::StrCat("'", line, "' is not `KEYWORD = value`"));
+    }
+    const std::string key(absl::StripAsciiWhitespace(line.substr(0, eq)));
+    const std::string value(absl::StripAsciiWhitespace(line.substr(eq + 1)));
+    if (value.empty()) return LineError(line_number, key, "empty value");
+    if (first_keyword) {
+      if (key != "CCSDS_AEM_VERS") {
+        return LineError(line_number, key, "the first keyword must be CCSDS_AEM_VERS");
+      }
+      if (value != "1.0" && value != "2.0") {
+        return LineError(line_number, key, absl::StrCat("unsupported version ", value));
+      }
+      file.version = value;
+      first_keyword = false;
+      seen.insert(key);
+      continue;
+    }
+    if (!seen.insert(key).second) return LineError(line_number, key, "repeated");
+    if (where == Where::kHeader) {
+      if (!file.segments.empty() || !HeaderKeywords().count(key)) {
+        return LineError(line_number, key, "not a header keyword");
+      }
+      if (key == "CREATION_DATE") {
+        if (auto t = ParseCcsdsTime(value); !t.ok()) {
+          return LineError(line_number, key, t.status().message());
+        }
+      }
+      file.header[key] = value;
+    } else if (where == Where::kMeta) {
+      if (!MetadataKeywords().count(key)) {
+        return LineError(line_number, key, "not a metadata keyword");
+      }
+      segment.metadata[key] = value;
+    } else {
+      return LineError(line_number, key, "unexpected between META_STOP and DATA_START");
+    }
+  }
+  if (first_keyword) return LineError(line_number, "CCSDS_AEM_VERS", "missing");
+  if (where == Where::kMeta) return LineError(meta_start_line, "META_START", "no META_STOP");
+  if (where == Where::kBetween) return LineError(line_number, "DATA_START", "missing");
+  if (where == Where::kData) return LineError(line_number, "DATA_STOP", "missing");
+  if (file.segments.empty()) return LineError(line_number, "META_START", "no segment");
+  return file;
+}
+
+}  // namespace esg::storage

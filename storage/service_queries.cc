@@ -1,0 +1,49 @@
+// Counting and clearing queries of the service (see service_queries.h).
+#include "storage/service_queries.h"
+
+#include "absl/strings/str_cat.h"
+#include "estimator/status_macros.h"
+
+namespace esg::storage {
+
+absl::StatusOr<int64_t> CountArchivedFrames(Database& db, absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT COUNT(*) FROM telemetry_frames WHERE spacecraft_id = ?1"));
+  st->BindText(1, spacecraft_id);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  const int64_t n = row ? st->ColumnInt64(0) : 0;
+  RETURN_IF_ERROR(txn.Commit());
+  return n;
+}
+
+absl::StatusOr<AlertCounts> CountAlerts(Database& db, absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT COALESCE(SUM(cleared = 0), 0), "
+                               "COALESCE(SUM(acknowledged = 0), 0) FROM alerts "
+                               "WHERE spacecraft_id = ?1"));
+  st->BindText(1, spacecraft_id);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  AlertCounts counts;
+  if (row) {
+    counts.active = st->ColumnInt64(0);
+    counts.unacknowledged = st->ColumnInt64(1);
+  }
+  RETURN_IF_ERROR(txn.Commit());
+  return counts;
+}
+
+absl::Status ClearAlert(Transaction& txn, absl::string_view spacecraft_id, int64_t sequence) {
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("UPDATE alerts SET cleared = 1 "
+                                               "WHERE spacecraft_id = ?1 AND sequence = ?2"));
+  st->BindText(1, spacecraft_id).BindInt64(2, sequence);
+  RETURN_IF_ERROR(st->Run());
+  if (txn.ChangedRows() != 1) {
+    return absl::NotFoundError(
+        absl::StrCat("alert ", spacecraft_id, "/", sequence, " does not exist"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace esg::storage
