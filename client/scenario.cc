@@ -16,8 +16,8 @@
 
 namespace esg::client {
 
-using estimator::GyroFault;
 using Eigen::Vector3d;
+using estimator::GyroFault;
 using json = nlohmann::json;
 
 namespace {
@@ -45,8 +45,9 @@ absl::Status CheckKeys(const json& obj, const std::string& path,
                        const std::set<std::string>& allowed) {
   for (auto it = obj.begin(); it != obj.end(); ++it) {
     if (allowed.count(it.key()) == 0) {
-      return Invalid(path.empty() ? it.key() : absl::StrCat(path, ".", it.key()),
-                     absl::StrCat("unknown key; allowed keys here are ", absl::StrJoin(allowed, ", ")));
+      return Invalid(
+          path.empty() ? it.key() : absl::StrCat(path, ".", it.key()),
+          absl::StrCat("unknown key; allowed keys here are ", absl::StrJoin(allowed, ", ")));
     }
   }
   return absl::OkStatus();
@@ -85,7 +86,8 @@ absl::StatusOr<Vector3d> NonZeroVec3(const json& v, const std::string& path) {
 }
 
 absl::StatusOr<bool> Bool(const json& v, const std::string& path) {
-  if (!v.is_boolean()) return Invalid(path, absl::StrCat("expected true or false, got ", v.type_name()));
+  if (!v.is_boolean())
+    return Invalid(path, absl::StrCat("expected true or false, got ", v.type_name()));
   return v.get<bool>();
 }
 
@@ -107,19 +109,23 @@ absl::StatusOr<GyroFault> ParseFault(const json& v, const std::string& path) {
   ASSIGN_OR_RETURN(std::string kind, String(v["kind"], Key(path, "kind")));
   if (kind == "readout_jump") {
     fault.kind = GyroFault::Kind::kReadoutJump;
-    if (v.contains("degH")) return Invalid(Key(path, "degH"), "not used by kind readout_jump (use arcsec)");
-    if (!v.contains("arcsec")) return Invalid(Key(path, "arcsec"), "required for kind readout_jump");
+    if (v.contains("degH"))
+      return Invalid(Key(path, "degH"), "not used by kind readout_jump (use arcsec)");
+    if (!v.contains("arcsec"))
+      return Invalid(Key(path, "arcsec"), "required for kind readout_jump");
     ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(v["arcsec"], Key(path, "arcsec"), -36000.0, 36000.0));
     fault.value = estimator::kRadPerArcsec * arcsec;
   } else if (kind == "drift_step") {
     fault.kind = GyroFault::Kind::kDriftStep;
-    if (v.contains("arcsec")) return Invalid(Key(path, "arcsec"), "not used by kind drift_step (use degH)");
+    if (v.contains("arcsec"))
+      return Invalid(Key(path, "arcsec"), "not used by kind drift_step (use degH)");
     if (!v.contains("degH")) return Invalid(Key(path, "degH"), "required for kind drift_step");
-    ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(v["degH"], Key(path, "degH"), -kMaxDriftDegH, kMaxDriftDegH));
+    ASSIGN_OR_RETURN(Vector3d deg_h,
+                     Vec3(v["degH"], Key(path, "degH"), -kMaxDriftDegH, kMaxDriftDegH));
     fault.value = DegHToSi(deg_h);
   } else {
-    return Invalid(Key(path, "kind"),
-                   absl::StrCat("unknown kind '", kind, "'; valid kinds are readout_jump, drift_step"));
+    return Invalid(Key(path, "kind"), absl::StrCat("unknown kind '", kind,
+                                                   "'; valid kinds are readout_jump, drift_step"));
   }
   return fault;
 }
@@ -134,11 +140,13 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
   ScenarioGyro g;
   if (!v.contains("id")) return Invalid(Key(path, "id"), "required");
   if (!v["id"].is_number_integer()) {
-    return Invalid(Key(path, "id"), absl::StrCat("expected an integer gyro id, got ", v["id"].dump()));
+    return Invalid(Key(path, "id"),
+                   absl::StrCat("expected an integer gyro id, got ", v["id"].dump()));
   }
   g.id = v["id"].get<int>();
   if (g.id < 1 || g.id > estimator::kMaxGyros) {
-    return Invalid(Key(path, "id"), absl::StrFormat("%d is outside 1..%d", g.id, estimator::kMaxGyros));
+    return Invalid(Key(path, "id"),
+                   absl::StrFormat("%d is outside 1..%d", g.id, estimator::kMaxGyros));
   }
   for (auto it = v.begin(); it != v.end(); ++it) {
     const std::string& k = it.key();
@@ -159,11 +167,14 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       g.k0 = estimator::DegPerHourToRadPerSec(k0);
     } else if (k == "c1DegH" || k == "c2DegH" || k == "muDegH" || k == "nuDegH") {
       ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(x, p, -kMaxDriftDegH, kMaxDriftDegH));
-      std::optional<Vector3d>& target =
-          k == "c1DegH" ? g.C1 : k == "c2DegH" ? g.C2 : k == "muDegH" ? g.mu : g.nu;
+      std::optional<Vector3d>& target = k == "c1DegH"   ? g.C1
+                                        : k == "c2DegH" ? g.C2
+                                        : k == "muDegH" ? g.mu
+                                                        : g.nu;
       target = DegHToSi(deg_h);
     } else if (k == "misalignmentArcsec") {
-      ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+      ASSIGN_OR_RETURN(Vector3d arcsec,
+                       Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
       g.misalignment_b = estimator::kRadPerArcsec * arcsec;
     } else if (k == "randomWalkDegHSqrtH") {
       ASSIGN_OR_RETURN(double rw, Number(x, p, 0.0, kMaxRandomWalkDegHSqrtH));
@@ -200,7 +211,8 @@ absl::Status ParseStarTracker(const json& v, const std::string& path,
       ASSIGN_OR_RETURN(double ms, Number(x, p, -10000.0, 10000.0));
       st->latency = ms * 1e-3;
     } else if (k == "misalignmentArcsec") {
-      ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+      ASSIGN_OR_RETURN(Vector3d arcsec,
+                       Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
       st->misalignment_b = estimator::kRadPerArcsec * arcsec;
     } else if (k == "outlierRate") {
       ASSIGN_OR_RETURN(st->outlier_probability, Number(x, p, 0.0, 1.0));
@@ -217,7 +229,8 @@ absl::Status ParseStarTracker(const json& v, const std::string& path,
         RETURN_IF_ERROR(CheckKeys(x[i], pi, {"startHours", "endHours"}));
         if (!x[i].contains("startHours")) return Invalid(Key(pi, "startHours"), "required");
         if (!x[i].contains("endHours")) return Invalid(Key(pi, "endHours"), "required");
-        ASSIGN_OR_RETURN(double start, Number(x[i]["startHours"], Key(pi, "startHours"), 0.0, kMaxHours));
+        ASSIGN_OR_RETURN(double start,
+                         Number(x[i]["startHours"], Key(pi, "startHours"), 0.0, kMaxHours));
         ASSIGN_OR_RETURN(double end, Number(x[i]["endHours"], Key(pi, "endHours"), 0.0, kMaxHours));
         if (!(end > start)) {
           return Invalid(Key(pi, "endHours"),
@@ -325,9 +338,10 @@ absl::StatusOr<Scenario> ParseTop(const json& root) {
   }
   const double slew = po.calibration.slew_duration;
   if (slew > po.calibration.segment_duration) {
-    return Invalid("slewMin", absl::StrFormat("%g min is longer than segmentHours (%g h)",
-                                              slew / estimator::kSecondsPerMinute,
-                                              estimator::SecondsToHours(po.calibration.segment_duration)));
+    return Invalid("slewMin",
+                   absl::StrFormat("%g min is longer than segmentHours (%g h)",
+                                   slew / estimator::kSecondsPerMinute,
+                                   estimator::SecondsToHours(po.calibration.segment_duration)));
   }
   return s;
 }

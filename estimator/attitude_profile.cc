@@ -60,8 +60,8 @@ class ConstantSpinProfile final : public AttitudeProfile {
     // q_in_b0 (x) Exp(axis_b * rate * t): one sincos per call.
     const double half_angle = 0.5 * rate_ * t;
     const double s = std::sin(half_angle);
-    return q_in_b0_ * Quaterniond(std::cos(half_angle), s * axis_b_.x(), s * axis_b_.y(),
-                                  s * axis_b_.z());
+    return q_in_b0_ *
+           Quaterniond(std::cos(half_angle), s * axis_b_.x(), s * axis_b_.y(), s * axis_b_.z());
   }
   Vector3d Rate(double) const override { return rate_ * axis_b_; }
   std::string Describe() const override { return description_; }
@@ -94,9 +94,10 @@ class OrbitalProfile final : public AttitudeProfile {
   }
   Vector3d Rate(double) const override { return Vector3d(0.0, -rate_, 0.0); }
   std::string Describe() const override {
-    return absl::StrFormat("orbital(inclination %.4g deg, period %.6g min, raan %.4g deg, u0 %.4g deg)",
-                           RadToDeg(options_.inclination), options_.period / kSecondsPerMinute,
-                           RadToDeg(options_.raan), RadToDeg(options_.arg_latitude0));
+    return absl::StrFormat(
+        "orbital(inclination %.4g deg, period %.6g min, raan %.4g deg, u0 %.4g deg)",
+        RadToDeg(options_.inclination), options_.period / kSecondsPerMinute,
+        RadToDeg(options_.raan), RadToDeg(options_.arg_latitude0));
   }
 
  private:
@@ -177,8 +178,8 @@ absl::Status CheckOrbital(const OrbitalOptions& o) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<ProfilePtr> MakeSpin(const Quaterniond& q_in_b0, const Vector3d& axis_b,
-                                    double rate, std::string description) {
+absl::StatusOr<ProfilePtr> MakeSpin(const Quaterniond& q_in_b0, const Vector3d& axis_b, double rate,
+                                    std::string description) {
   if (!q_in_b0.coeffs().allFinite() || q_in_b0.norm() < 1e-9) {
     return absl::InvalidArgumentError("spin.q_in_b0: must be a finite non-zero quaternion");
   }
@@ -187,22 +188,25 @@ absl::StatusOr<ProfilePtr> MakeSpin(const Quaterniond& q_in_b0, const Vector3d& 
   }
   RETURN_IF_ERROR(CheckFinite(rate, "spin.rate"));
   if (description.empty()) {
-    description = absl::StrFormat("spin(axis_b %s, %.6g deg/s)",
-                                  FormatVector(axis_b.normalized()), RadToDeg(rate));
+    description = absl::StrFormat("spin(axis_b %s, %.6g deg/s)", FormatVector(axis_b.normalized()),
+                                  RadToDeg(rate));
   }
   return ProfilePtr(
       std::make_shared<ConstantSpinProfile>(q_in_b0, axis_b, rate, std::move(description)));
 }
 
 std::vector<Vector3d> DefaultSunAxes() {
-  return {Vector3d::UnitZ(),          Vector3d::UnitX(),
-          Vector3d::UnitY(),          Vector3d(1, 1, 1).normalized(),
-          Vector3d(-1, 1, -1).normalized(), -Vector3d::UnitZ()};
+  return {Vector3d::UnitZ(),
+          Vector3d::UnitX(),
+          Vector3d::UnitY(),
+          Vector3d(1, 1, 1).normalized(),
+          Vector3d(-1, 1, -1).normalized(),
+          -Vector3d::UnitZ()};
 }
 
 // Calibration segments starting with axis/phase index `first`; phases drawn from rng if given.
-absl::StatusOr<ProfilePtr> BuildCalibration(const CalibrationOptions& o, double duration,
-                                            int first, Rng* rng) {
+absl::StatusOr<ProfilePtr> BuildCalibration(const CalibrationOptions& o, double duration, int first,
+                                            Rng* rng) {
   if (!o.sun_in.allFinite() || o.sun_in.norm() < 1e-9) {
     return absl::InvalidArgumentError("calibration.sun_in: must be a finite non-zero vector");
   }
@@ -257,17 +261,17 @@ absl::StatusOr<ProfilePtr> BuildCalibration(const CalibrationOptions& o, double 
     // Body axis a_b onto the Sun line, then the spin phase about the Sun line.
     const Quaterniond q_align = Quaterniond::FromTwoVectors(a_b, sun_in);
     const Quaterniond q_i = ExpQuaternion(phase * sun_in) * q_align;
-    ASSIGN_OR_RETURN(ProfilePtr spin,
-                     MakeSpin(q_i, a_b, rate,
-                              absl::StrCat("sun-pointing spin about body ", FormatVector(a_b))));
+    ASSIGN_OR_RETURN(
+        ProfilePtr spin,
+        MakeSpin(q_i, a_b, rate, absl::StrCat("sun-pointing spin about body ", FormatVector(a_b))));
     segments.push_back({std::move(spin), o.segment_duration});
   }
-  return Sequence(std::move(segments), o.slew_duration,
-                  absl::StrFormat("calibration(sun_in %s, spin period %.6g min, orientation "
-                                  "every %.6g h, slew %.6g min, %d segments)",
-                                  FormatVector(sun_in), o.spin_period / kSecondsPerMinute,
-                                  SecondsToHours(o.segment_duration),
-                                  o.slew_duration / kSecondsPerMinute, n));
+  return Sequence(
+      std::move(segments), o.slew_duration,
+      absl::StrFormat("calibration(sun_in %s, spin period %.6g min, orientation "
+                      "every %.6g h, slew %.6g min, %d segments)",
+                      FormatVector(sun_in), o.spin_period / kSecondsPerMinute,
+                      SecondsToHours(o.segment_duration), o.slew_duration / kSecondsPerMinute, n));
 }
 
 Quaterniond RandomAttitude(Rng& rng) {
@@ -315,13 +319,13 @@ absl::StatusOr<ProfilePtr> Sequence(std::vector<ProfileSegment> segments, double
                           segments[i].duration));
     }
     if (i > 0 && slew_duration > segments[i].duration) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "sequence.slew_duration: %g s is longer than segment %d (%g s)", slew_duration, i,
-          segments[i].duration));
+      return absl::InvalidArgumentError(
+          absl::StrFormat("sequence.slew_duration: %g s is longer than segment %d (%g s)",
+                          slew_duration, i, segments[i].duration));
     }
   }
-  return ProfilePtr(
-      std::make_shared<SequenceProfile>(std::move(segments), slew_duration, std::move(description)));
+  return ProfilePtr(std::make_shared<SequenceProfile>(std::move(segments), slew_duration,
+                                                      std::move(description)));
 }
 
 absl::StatusOr<ProfilePtr> Calibration(const CalibrationOptions& options, double duration) {

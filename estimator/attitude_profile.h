@@ -59,12 +59,13 @@ absl::StatusOr<ProfilePtr> ConstantSpin(const Eigen::Quaterniond& q_in_b0,
 // The orbit plane is J2000-referred: right ascension of the ascending node raan [rad],
 // inclination [rad]; arg_latitude0 [rad] is the argument of latitude at t = 0 (0 at the ascending
 // node); the argument of latitude grows at 2 pi / period. The body rotates about body -y at the
-// orbit rate: w_b_in_b = (0, -2 pi / period, 0). InvalidArgument unless period > 0 and values finite.
+// orbit rate: w_b_in_b = (0, -2 pi / period, 0). InvalidArgument unless period > 0 and values
+// finite.
 struct OrbitalOptions {
   double inclination = DegToRad(97.5);  // [rad]; sun-synchronous-like
-  double period = 5640.0;                // [s] (94 min)
-  double raan = DegToRad(30.0);          // [rad]
-  double arg_latitude0 = 0.0;            // [rad]
+  double period = 5640.0;               // [s] (94 min)
+  double raan = DegToRad(30.0);         // [rad]
+  double arg_latitude0 = 0.0;           // [rad]
 };
 absl::StatusOr<ProfilePtr> Orbital(const OrbitalOptions& options);
 absl::StatusOr<ProfilePtr> Orbital(double inclination, double period, double raan,
@@ -104,9 +105,9 @@ struct CalibrationOptions {
   // Fixed inertial direction of the Sun (normalised by the builder). Default: right ascension
   // 30 deg, declination 12 deg (the Sun in late April): (cos 12 cos 30, cos 12 sin 30, sin 12).
   Eigen::Vector3d sun_in = Eigen::Vector3d(0.847101, 0.489074, 0.207912);
-  double spin_period = 3600.0;       // [s], the paper's 60 min
-  double segment_duration = 10800.0; // [s], the paper's 3 h
-  double slew_duration = 600.0;      // [s], part of each new segment
+  double spin_period = 3600.0;        // [s], the paper's 60 min
+  double segment_duration = 10800.0;  // [s], the paper's 3 h
+  double slew_duration = 600.0;       // [s], part of each new segment
   // Body axes pointed at the Sun in turn (normalised); default +z, +x, +y, unit(1,1,1),
   // unit(-1,1,-1), -z: the principal axes first, then oblique ones so that every gyro's spin axis
   // sweeps cones of different opening in its case frame.
@@ -125,8 +126,7 @@ struct ProfileOptions {
   OrbitalOptions orbital;
   CalibrationOptions calibration;
   // Attitude of `inertial` (and of the inertial holds in `mixed` before any seed is applied).
-  Eigen::Quaterniond inertial_q_in_b =
-      Eigen::Quaterniond(0.8, 0.2, -0.4, 0.4).normalized();
+  Eigen::Quaterniond inertial_q_in_b = Eigen::Quaterniond(0.8, 0.2, -0.4, 0.4).normalized();
   // `mixed`: durations of its orbital, calibration and inertial parts [s], repeated in this order
   // until the duration is covered; slews of calibration.slew_duration join them.
   double mixed_orbital_duration = 10800.0;

@@ -67,8 +67,9 @@ absl::Status Probability(double p, const std::string& field) {
 
 int64_t NumFrames(const SimulationSpec& spec) {
   // Frames at m * telemetry_step <= duration (1e-9 relative slack for rounding).
-  return static_cast<int64_t>(std::floor(spec.duration / spec.telemetry_step * (1.0 + 1e-12) +
-                                         1e-9)) + 1;
+  return static_cast<int64_t>(
+             std::floor(spec.duration / spec.telemetry_step * (1.0 + 1e-12) + 1e-9)) +
+         1;
 }
 
 DriftCoefficients EffectiveCoefficients(const GyroTruth& truth, const GyroConfig& config) {
@@ -132,7 +133,7 @@ Vector3d FastStepSpinAxis(const Vector3d& h_in, const Vector3d& dw_in, double dt
   const Vector3d a = dw_in * dt;
   const double theta2 = a.squaredNorm();
   if (theta2 > 1e-6) return StepSpinAxis(h_in, dw_in, dt);
-  const double sin_over = 1.0 - theta2 / 6.0 * (1.0 - theta2 / 20.0);          // sin(t)/t
+  const double sin_over = 1.0 - theta2 / 6.0 * (1.0 - theta2 / 20.0);             // sin(t)/t
   const double one_minus_cos_over = 0.5 - theta2 / 24.0 * (1.0 - theta2 / 30.0);  // (1-cos t)/t^2
   const Vector3d axh = a.cross(h_in);
   return (h_in + sin_over * axh + one_minus_cos_over * a.cross(axh)).normalized();
@@ -172,14 +173,14 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
   RETURN_IF_ERROR(Positive(spec.telemetry_step, "telemetry_step"));
   RETURN_IF_ERROR(Positive(spec.integration_rate_hz, "integration_rate_hz"));
   if (spec.duration / spec.telemetry_step > kMaxFrames) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "telemetry_step: %g s over %g s gives more than %g frames", spec.telemetry_step,
-        spec.duration, kMaxFrames));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("telemetry_step: %g s over %g s gives more than %g frames",
+                        spec.telemetry_step, spec.duration, kMaxFrames));
   }
   if (spec.duration * spec.integration_rate_hz > kMaxSteps) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "integration_rate_hz: %g Hz over %g s gives more than %g steps", spec.integration_rate_hz,
-        spec.duration, kMaxSteps));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("integration_rate_hz: %g Hz over %g s gives more than %g steps",
+                        spec.integration_rate_hz, spec.duration, kMaxSteps));
   }
   for (int id = 1; id <= kMaxGyros; ++id) {
     const GyroTruth& g = spec.gyros[id - 1];
@@ -193,9 +194,9 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
     }
     RETURN_IF_ERROR(FiniteVector(g.rotor_displacement_k, f + ".rotor_displacement_k"));
     if ((g.rotor_displacement_k.array().abs() >= spec.config.suspension.gap).any()) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "%s.rotor_displacement_k: a component reaches the suspension gap %g m", f,
-          spec.config.suspension.gap));
+      return absl::InvalidArgumentError(
+          absl::StrFormat("%s.rotor_displacement_k: a component reaches the suspension gap %g m", f,
+                          spec.config.suspension.gap));
     }
     if (!std::isfinite(g.c10_per_m) || !std::isfinite(g.c20_per_m)) {
       return absl::InvalidArgumentError(absl::StrCat(f, ".c10_per_m/c20_per_m: must be finite"));

@@ -12,17 +12,18 @@
 //   plus a fault drift step (case axes) after its time; plus the random-walk drift vector dw_rw_in
 //   (inertial axes), which starts at zero and takes an independent N(0, q dt I) step after every
 //   integration step (q = random_walk^2).
-// - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a rotation by
-//   dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
+// - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a
+//   rotation by dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
 //   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
 //   extrapolated half a step with the previous step's drift).
 // - Gyro reading at each telemetry time: h_k_meas = Exp(jump_k) Exp(n) h_k_true, n perpendicular to
 //   h_k_true with independent N(0, readout_noise^2) components on two perpendicular axes; jump_k is
 //   the readout_jump fault (zero before its time). Voltages u_k = eq. (3) inverse of the rotor
 //   displacement per case axis plus N(0, voltage_noise^2) each, written in mV.
-// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(n) [(x) Exp(o)],
-//   n = (noise_x N, noise_y N, noise_z N) about body axes, o an outlier with probability
-//   outlier_probability: uniformly random axis, angle uniform in [outlier_size, 3 outlier_size].
+// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(n)
+//   [(x) Exp(o)], n = (noise_x N, noise_y N, noise_z N) about body axes, o an outlier with
+//   probability outlier_probability: uniformly random axis, angle uniform in
+//   [outlier_size, 3 outlier_size].
 //   Inside an outage no star-tracker field; with probability invalid_probability valid = false.
 // Every random source has its own stream (DeriveSeed(seed, stream)), and every stream draws the
 // same numbers per frame whether or not a sample is used, so turning on outliers, outages or
@@ -109,25 +110,25 @@ struct SimulationSpec {
   SpacecraftConfig config;
   std::array<GyroTruth, kMaxGyros> gyros;  // index id - 1
   StarTrackerTruth star_tracker;
-  ProfilePtr profile;  // required
+  ProfilePtr profile;                                    // required
   absl::Time start = absl::FromUnixSeconds(1551398400);  // 2019-03-01T00:00:00Z
-  double duration = 86400.0;      // [s], > 0; frames at 0, step, 2 step ... <= duration
-  double telemetry_step = 60.0;   // [s]
+  double duration = 86400.0;     // [s], > 0; frames at 0, step, 2 step ... <= duration
+  double telemetry_step = 60.0;  // [s]
   double integration_rate_hz = 8.0;
   uint64_t seed = 1;
 };
 
 struct GyroTruthSample {
-  Eigen::Vector3d h_in;     // true spin axis, inertial axes
-  Eigen::Vector3d h_k;      // true spin axis, case axes (noise-free)
-  Eigen::Vector3d dw_k;     // true total drift [rad/s], case axes (model + displacement +
-                            // random walk + fault step)
-  Eigen::Matrix3d C_b_k;    // true mounting
+  Eigen::Vector3d h_in;   // true spin axis, inertial axes
+  Eigen::Vector3d h_k;    // true spin axis, case axes (noise-free)
+  Eigen::Vector3d dw_k;   // true total drift [rad/s], case axes (model + displacement +
+                          // random walk + fault step)
+  Eigen::Matrix3d C_b_k;  // true mounting
 };
 
 struct TruthSample {
   absl::Time time;
-  Eigen::Quaterniond q_in_b;  // true attitude at time
+  Eigen::Quaterniond q_in_b;                                    // true attitude at time
   std::array<std::optional<GyroTruthSample>, kMaxGyros> gyros;  // empty: gyro off
   bool star_tracker_outlier = false;
   double star_tracker_outlier_angle = 0.0;  // [rad]
@@ -152,8 +153,8 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec);
 
 // Runs the simulation. progress, when set, is called with the fraction done in [0, 1] about 100
 // times and once with 1. Errors: InvalidArgument from ValidateSimulationSpec.
-absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
-                                          const std::function<void(double fraction)>& progress = {});
+absl::StatusOr<SimulationResult> Simulate(
+    const SimulationSpec& spec, const std::function<void(double fraction)>& progress = {});
 
 }  // namespace esg::estimator
 

@@ -103,11 +103,11 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
     out << absl::StrFormat("# g%d_true_nu_deg_h: %s\n", g + 1, VecDegH(c.nu));
     if (!result.truth.empty() && result.truth.front().gyros[g]) {
       const Eigen::Matrix3d& C = result.truth.front().gyros[g]->C_b_k;
-      out << absl::StrFormat("# g%d_true_case_to_body: [%s]\n", g + 1,
-                             absl::StrJoin({Num(C(0, 0)), Num(C(0, 1)), Num(C(0, 2)), Num(C(1, 0)),
-                                            Num(C(1, 1)), Num(C(1, 2)), Num(C(2, 0)), Num(C(2, 1)),
-                                            Num(C(2, 2))},
-                                           ", "));
+      out << absl::StrFormat(
+          "# g%d_true_case_to_body: [%s]\n", g + 1,
+          absl::StrJoin({Num(C(0, 0)), Num(C(0, 1)), Num(C(0, 2)), Num(C(1, 0)), Num(C(1, 1)),
+                         Num(C(1, 2)), Num(C(2, 0)), Num(C(2, 1)), Num(C(2, 2))},
+                        ", "));
     }
   }
   out << "time_utc,q0,q1,q2,q3";
@@ -164,7 +164,8 @@ int RunSimulate(const SimulateOptions& o) {
     return BadArgument(absl::StrFormat("--hours: must be > 0, got %g", o.hours));
   }
   if (!std::isfinite(o.telemetry_step) || !(o.telemetry_step > 0.0)) {
-    return BadArgument(absl::StrFormat("--telemetry-step: must be > 0 s, got %g", o.telemetry_step));
+    return BadArgument(
+        absl::StrFormat("--telemetry-step: must be > 0 s, got %g", o.telemetry_step));
   }
   if (!std::isfinite(o.integration_rate_hz) || !(o.integration_rate_hz > 0.0)) {
     return BadArgument(
@@ -173,9 +174,9 @@ int RunSimulate(const SimulateOptions& o) {
   absl::Time start;
   std::string parse_error;
   if (!absl::ParseTime(absl::RFC3339_full, o.start, &start, &parse_error)) {
-    return BadArgument(absl::StrCat("--start: '", o.start,
-                                    "' is not an RFC 3339 time (e.g. 2019-03-01T00:00:00Z): ",
-                                    parse_error));
+    return BadArgument(
+        absl::StrCat("--start: '", o.start,
+                     "' is not an RFC 3339 time (e.g. 2019-03-01T00:00:00Z): ", parse_error));
   }
 
   absl::StatusOr<estimator::SpacecraftConfig> config = proto_convert::ReadConfigFile(o.config_path);
@@ -198,7 +199,8 @@ int RunSimulate(const SimulateOptions& o) {
   if (absl::Status s = ApplyScenario(scenario, &spec); !s.ok()) return Fail("--scenario", s);
   absl::StatusOr<estimator::ProfilePtr> profile =
       MakeScenarioProfile(scenario, o.profile, spec.duration);
-  if (!profile.ok()) return Fail(o.profile.empty() ? "scenario profile" : "--profile", profile.status());
+  if (!profile.ok())
+    return Fail(o.profile.empty() ? "scenario profile" : "--profile", profile.status());
   spec.profile = *profile;
 
   Progress progress;
@@ -215,7 +217,8 @@ int RunSimulate(const SimulateOptions& o) {
     return 1;
   }
   if (!o.write_config_path.empty()) {
-    if (absl::Status s = proto_convert::WriteConfigFile(o.write_config_path, spec.config); !s.ok()) {
+    if (absl::Status s = proto_convert::WriteConfigFile(o.write_config_path, spec.config);
+        !s.ok()) {
       std::cerr << "esg simulate: --write-config: " << s.message() << "\n";
       return 1;
     }
@@ -270,8 +273,7 @@ void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code) {
   sub->add_option("--start", options->start, "start time, RFC 3339 UTC")->capture_default_str();
   sub->add_option("--telemetry-step", options->telemetry_step, "telemetry step [s]")
       ->capture_default_str();
-  sub->add_option("--integration-rate", options->integration_rate_hz,
-                  "truth integration rate [Hz]")
+  sub->add_option("--integration-rate", options->integration_rate_hz, "truth integration rate [Hz]")
       ->capture_default_str();
   sub->add_option("--truth", options->truth_path,
                   "also write the truth CSV (true q_in_b, h_in per gyro, true coefficients)");

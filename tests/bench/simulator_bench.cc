@@ -16,8 +16,7 @@ SpacecraftConfig BenchConfig() {
   SpacecraftConfig c;
   c.spacecraft_id = "BENCH-1";
   const Vector3d mountings[4] = {Vector3d(0, 0, 0), Vector3d(0.0, DegToRad(90.0), 0.0),
-                                 Vector3d(DegToRad(-90.0), 0.0, 0.0),
-                                 Vector3d(0.5, 0.6, -0.7)};
+                                 Vector3d(DegToRad(-90.0), 0.0, 0.0), Vector3d(0.5, 0.6, -0.7)};
   for (int id = 1; id <= 4; ++id) {
     GyroConfig g;
     g.id = id;
@@ -46,8 +45,8 @@ void BM_Simulate24hFourGyrosCalibration(benchmark::State& state) {
     if (!result.ok()) state.SkipWithError(std::string(result.status().message()).c_str());
     benchmark::DoNotOptimize(result);
   }
-  state.counters["steps_per_s"] = benchmark::Counter(
-      spec.duration * spec.integration_rate_hz, benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["steps_per_s"] = benchmark::Counter(spec.duration * spec.integration_rate_hz,
+                                                     benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_Simulate24hFourGyrosCalibration)->Unit(benchmark::kMillisecond);
 

@@ -11,10 +11,10 @@
 namespace esg::client {
 namespace {
 
+using Eigen::Vector3d;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
-using Eigen::Vector3d;
 namespace est = ::esg::estimator;
 
 est::SpacecraftConfig Config() {

@@ -89,9 +89,8 @@ TEST(SimulateCli, WritesConfigAndTruthWhenAsked) {
   RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() +
                                 "' --hours 1 --seed 3 --telemetry-step 30 --integration-rate 4"
                                 " --start 2020-06-01T12:00:00Z --json --out '" +
-                                dir.File("rec.csv") + "' --write-config '" +
-                                dir.File("used.json") + "' --truth '" + dir.File("truth.csv") +
-                                "'");
+                                dir.File("rec.csv") + "' --write-config '" + dir.File("used.json") +
+                                "' --truth '" + dir.File("truth.csv") + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("\"frames\": 121"));
   auto original = proto_convert::ReadConfigFile(Rdk1());
@@ -101,8 +100,8 @@ TEST(SimulateCli, WritesConfigAndTruthWhenAsked) {
   EXPECT_EQ(proto_convert::ConfigToJson(*original), proto_convert::ConfigToJson(*used));
   auto recording = storage::ReadRecordingCsv(dir.File("rec.csv"));
   ASSERT_THAT(recording, IsOk());
-  EXPECT_EQ(recording->frames.front().time, absl::FromCivil(absl::CivilSecond(2020, 6, 1, 12, 0, 0),
-                                                           absl::UTCTimeZone()));
+  EXPECT_EQ(recording->frames.front().time,
+            absl::FromCivil(absl::CivilSecond(2020, 6, 1, 12, 0, 0), absl::UTCTimeZone()));
   const std::string truth = ReadFile(dir.File("truth.csv"));
   EXPECT_THAT(truth, HasSubstr("# g1_true_k0_deg_h: 0.25\n"));
   EXPECT_THAT(truth, HasSubstr("time_utc,q0,q1,q2,q3,g1_hin_x"));
@@ -117,9 +116,9 @@ TEST(SimulateCli, DocumentedScenarioExamplesRun) {
     if (entry.path().extension() != ".json") continue;
     ++count;
     TempDir dir;
-    RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" +
-                                  entry.path().string() + "' --hours 1 --seed 1 --out '" +
-                                  dir.File("rec.csv") + "'");
+    RunResult r =
+        RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" + entry.path().string() +
+                        "' --hours 1 --seed 1 --out '" + dir.File("rec.csv") + "'");
     EXPECT_EQ(r.exit_code, 0) << entry.path() << ": " << r.err;
     EXPECT_THAT(storage::ReadRecordingCsv(dir.File("rec.csv")), IsOk()) << entry.path();
   }
@@ -134,7 +133,8 @@ TEST(SimulateCli, BadArgumentsExitTwoNamingTheProblem) {
     std::string args;
     std::string message;
   };
-  WriteFile(dir.File("unknown_key.json"), R"({"gyros": [{"id": 2, "rotorDisplacmentUm": [1, 0, 0]}]})");
+  WriteFile(dir.File("unknown_key.json"),
+            R"({"gyros": [{"id": 2, "rotorDisplacmentUm": [1, 0, 0]}]})");
   WriteFile(dir.File("out_of_range.json"), R"({"starTracker": {"outlierRate": 1.5}})");
   WriteFile(dir.File("malformed.json"), R"({"gyros": [)");
   WriteFile(dir.File("bad_config.json"), R"({"spacecraftId": "X", "gyros": []})");
@@ -154,11 +154,10 @@ TEST(SimulateCli, BadArgumentsExitTwoNamingTheProblem) {
       {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("out_of_range.json") +
            "'" + out,
        "starTracker.outlierRate: 1.5 is outside [0, 1]"},
-      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("malformed.json") +
-           "'" + out,
-       "malformed JSON"},
-      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("nope.json") + "'" +
+      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("malformed.json") + "'" +
            out,
+       "malformed JSON"},
+      {"simulate" + config + " --hours 1 --seed 1 --scenario '" + dir.File("nope.json") + "'" + out,
        "nope.json"},
       {"simulate --config '" + dir.File("bad_config.json") + "' --hours 1 --seed 1" + out,
        "bad_config.json: workingPair"},

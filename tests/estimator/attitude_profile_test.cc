@@ -15,12 +15,12 @@
 namespace esg::estimator {
 namespace {
 
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
 using ::esg::testing::IsNearQuaternion;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
-using Eigen::Quaterniond;
-using Eigen::Vector3d;
 
 // Body rate from a central difference of q over +-h, independent of the profile's Rate().
 Vector3d FiniteDifferenceRate(const AttitudeProfile& p, double t, double h = 1e-3) {
@@ -135,9 +135,7 @@ TEST(AttitudeProfile, SlewsAreContinuousInAttitudeAndRate) {
       EXPECT_LT(((*p)->Rate(te - 0.05) - (*p)->Rate(te + 0.05)).norm(), 1e-6);
     }
     // The slew does move the attitude away from where the outgoing segment would be.
-    EXPECT_GT(RotationAngle((*p)->Attitude(tb + o.slew_duration),
-                            (*p)->Attitude(tb - 1.0)),
-              0.1);
+    EXPECT_GT(RotationAngle((*p)->Attitude(tb + o.slew_duration), (*p)->Attitude(tb - 1.0)), 0.1);
   }
 }
 
@@ -156,8 +154,8 @@ TEST(AttitudeProfile, SequenceBetweenHoldsIsEigenAxisSlew) {
   EXPECT_NEAR(w_mid.normalized().dot(axis), 1.0, 1e-9);
   EXPECT_NEAR(w_mid.norm(), 1.0 * 30.0 / 16.0 / 50.0, 1e-6);  // s'(1/2) = 30/16
   ExpectRatesMatchFiniteDifferences(**p, 300.0, 1e-6);
-  EXPECT_THAT(Sequence({}, 1.0), StatusIs(absl::StatusCode::kInvalidArgument,
-                                          HasSubstr("no segments")));
+  EXPECT_THAT(Sequence({}, 1.0),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("no segments")));
   EXPECT_THAT(Sequence({{InertialHold(qa), 10.0}, {InertialHold(qb), 10.0}}, 20.0),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("slew_duration")));
 }
@@ -194,16 +192,18 @@ TEST(AttitudeProfile, MixedRunsOrbitalCalibrationAndInertialInTurn) {
   ASSERT_THAT(p, IsOk());
   const double slew = o.calibration.slew_duration;
   // Orbital part: rate (0, -2 pi / period, 0).
-  EXPECT_LT(((*p)->Rate(HoursToSeconds(1.0)) - Vector3d(0, -2.0 * kPi / o.orbital.period, 0)).norm(),
-            1e-12);
+  EXPECT_LT(
+      ((*p)->Rate(HoursToSeconds(1.0)) - Vector3d(0, -2.0 * kPi / o.orbital.period, 0)).norm(),
+      1e-12);
   // Calibration part: spin at 2 pi / 60 min about the first Sun axis (+z).
-  EXPECT_LT(((*p)->Rate(HoursToSeconds(3.0) + slew + 10.0) -
-             Vector3d(0, 0, 2.0 * kPi / 3600.0)).norm(),
-            1e-12);
+  EXPECT_LT(
+      ((*p)->Rate(HoursToSeconds(3.0) + slew + 10.0) - Vector3d(0, 0, 2.0 * kPi / 3600.0)).norm(),
+      1e-12);
   // Inertial hold, then the orbital part again.
   EXPECT_LT((*p)->Rate(HoursToSeconds(9.0) + slew + 10.0).norm(), 1e-12);
   EXPECT_LT(((*p)->Rate(HoursToSeconds(12.0) + slew + 10.0) -
-             Vector3d(0, -2.0 * kPi / o.orbital.period, 0)).norm(),
+             Vector3d(0, -2.0 * kPi / o.orbital.period, 0))
+                .norm(),
             1e-12);
 }
 

@@ -14,10 +14,10 @@
 namespace esg::estimator {
 namespace {
 
-using ::esg::testing::IsNearQuaternion;
 using Eigen::Matrix3d;
 using Eigen::Quaterniond;
 using Eigen::Vector3d;
+using ::esg::testing::IsNearQuaternion;
 
 Quaterniond RandomQuaternion(Rng& rng) {
   const double w = rng.Normal();

@@ -19,20 +19,19 @@
 namespace esg::estimator {
 namespace {
 
+using Eigen::Matrix3d;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
 using ::esg::testing::IsNearQuaternion;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
-using Eigen::Matrix3d;
-using Eigen::Quaterniond;
-using Eigen::Vector3d;
 
 SpacecraftConfig TestConfig() {
   SpacecraftConfig c;
   c.spacecraft_id = "TEST-1";
   const Vector3d mountings[4] = {Vector3d(0, 0, 0), Vector3d(0.0, DegToRad(90.0), 0.0),
-                                 Vector3d(DegToRad(-90.0), 0.0, 0.0),
-                                 Vector3d(0.5, 0.6, -0.7)};
+                                 Vector3d(DegToRad(-90.0), 0.0, 0.0), Vector3d(0.5, 0.6, -0.7)};
   for (int id = 1; id <= 4; ++id) {
     GyroConfig g;
     g.id = id;
@@ -139,8 +138,8 @@ TEST(Simulator, ReadingsAgreeWithTruthAttitudeWithinReadoutNoise) {
   spec.gyros[1].misalignment_b = ArcsecToRad(1.0) * Vector3d(20, -10, 30);
   const SimulationResult r = RunSimulation(spec);
   const double sigma = spec.config.readout_noise;
-  const Matrix3d C_b_k2_true = ExpMatrix(spec.gyros[1].misalignment_b) *
-                               spec.config.FindGyro(2)->C_b_k;
+  const Matrix3d C_b_k2_true =
+      ExpMatrix(spec.gyros[1].misalignment_b) * spec.config.FindGyro(2)->C_b_k;
   double max_pair_error = 0.0;
   for (size_t m = 0; m < r.truth.size(); ++m) {
     const TruthSample& t = r.truth[m];
@@ -156,8 +155,7 @@ TEST(Simulator, ReadingsAgreeWithTruthAttitudeWithinReadoutNoise) {
       EXPECT_LT((t.gyros[g]->h_k - t.gyros[g]->C_b_k.transpose() * h_b_true).norm(), 1e-14);
     }
     // Pair attitude from the true inertial axes and the measured body axes.
-    auto q = PairAttitude(t.gyros[0]->h_in, t.gyros[1]->h_in,
-                          t.gyros[0]->C_b_k * f.gyros[0]->h_k,
+    auto q = PairAttitude(t.gyros[0]->h_in, t.gyros[1]->h_in, t.gyros[0]->C_b_k * f.gyros[0]->h_k,
                           t.gyros[1]->C_b_k * f.gyros[1]->h_k);
     ASSERT_THAT(q, IsOk());
     max_pair_error = std::max(max_pair_error, RotationAngle(*q, t.q_in_b));
@@ -195,8 +193,8 @@ TEST(Simulator, VoltagesMapBackToDisplacementThroughEq3) {
   const SuspensionConfig& s = spec.config.suspension;
   const double sigma_v = spec.gyros[1].voltage_noise;
   // One volt of offset is k d0 / U0 = 30 um, so sigma 1 mV is 0.03 um.
-  const double sigma_m = DisplacementFromOffsetVoltage(sigma_v, s.amplifier_gain,
-                                                       s.reference_voltage, s.gap);
+  const double sigma_m =
+      DisplacementFromOffsetVoltage(sigma_v, s.amplifier_gain, s.reference_voltage, s.gap);
   Vector3d mean = Vector3d::Zero();
   for (const TelemetryFrame& f : r.recording.frames) {
     const Vector3d u_mv = *f.gyros[1]->u_k_mv;
@@ -397,8 +395,8 @@ TEST(Simulator, StarTrackerMisalignmentIsABodyRotation) {
   const SimulationResult r = RunSimulation(spec);
   for (size_t m = 0; m < r.truth.size(); m += 7) {
     EXPECT_THAT(r.recording.frames[m].star_tracker->q_in_b,
-                IsNearQuaternion(r.truth[m].q_in_b * ExpQuaternion(spec.star_tracker.misalignment_b),
-                                 1e-14));
+                IsNearQuaternion(
+                    r.truth[m].q_in_b * ExpQuaternion(spec.star_tracker.misalignment_b), 1e-14));
   }
 }
 

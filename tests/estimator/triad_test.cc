@@ -12,13 +12,13 @@
 namespace esg::estimator {
 namespace {
 
+using Eigen::Matrix3d;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
 using ::esg::testing::IsNearQuaternion;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
-using Eigen::Matrix3d;
-using Eigen::Quaterniond;
-using Eigen::Vector3d;
 
 Quaterniond RandomQuaternion(Rng& rng) {
   const double w = rng.Normal();
