@@ -49,6 +49,19 @@ MismatchTest TestMismatch(const Eigen::Quaterniond* q1, const Eigen::Quaterniond
   return t;
 }
 
+double DirectionalAllowedAngle(const Eigen::Vector3d& dtheta, const Eigen::Matrix3d& Sigma, double k_d,
+                               double floor) {
+  const double angle = dtheta.norm();
+  Eigen::LLT<Eigen::Matrix3d> llt(0.5 * (Sigma + Sigma.transpose()));
+  if (angle == 0.0 || llt.info() != Eigen::Success) {
+    // No direction, or no usable covariance: the largest axis sigma.
+    return std::max(floor, k_d * std::sqrt(std::max(Sigma.diagonal().maxCoeff(), 0.0)));
+  }
+  const Eigen::Vector3d u = dtheta / angle;
+  const double info = u.dot(llt.solve(u));  // u^T Sigma^-1 u = 1 / sigma_u^2
+  return std::max(floor, k_d / std::sqrt(info));
+}
+
 InnovationTest TestInnovation(const Eigen::VectorXd& z, const Eigen::MatrixXd& S, double k_d) {
   InnovationTest t;
   const int n = static_cast<int>(z.size());

@@ -37,6 +37,14 @@ MismatchTest TestMismatch(const Eigen::Quaterniond* q_in_b_pair1, const Eigen::Q
                           const Eigen::Quaterniond* q_in_b_star_tracker,
                           const std::array<double, 3>& allowed);
 
+// The allowed angle of eq. (12) for a mismatch rotation vector dtheta [rad] whose covariance is
+// Sigma [rad^2]: k_d times the mismatch's sigma along its own direction u = dtheta/|dtheta|,
+// k_d / sqrt(u^T Sigma^-1 u), not below floor. The star tracker's boresight noise is six times its
+// cross-boresight noise, so one allowed angle for all directions would let a cross-boresight fault
+// of several arcminutes pass (docs/decisions.md).
+double DirectionalAllowedAngle(const Eigen::Vector3d& dtheta, const Eigen::Matrix3d& Sigma, double k_d,
+                               double floor);
+
 struct InnovationTest {
   bool passed = true;
   int worst_index = -1;          // component with the largest normalised innovation

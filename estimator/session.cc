@@ -452,15 +452,17 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     if (reserve_usable) q2 = PairQuaternion(a2->id, b2->id, a2->h_k_last, b2->h_k_last, &S2);
     const Matrix3d C_in_b_st = q_st.toRotationMatrix();
     const Matrix3d S_st = C_in_b_st * Matrix3d(st_noise.cwiseAbs2().asDiagonal()) * C_in_b_st.transpose();
-    auto allowed = [&](const Matrix3d& S) {
+    // Allowed angle of each mismatch (eq. (12)): the configured one, or k_d times the mismatch's
+    // sigma along its direction. The two pairs share the reference gyro; the sum of their
+    // covariances bounds that of their mismatch.
+    auto allowed = [&](const std::optional<Quaterniond>& a, const Quaterniond* b, const Matrix3d& S) {
+      if (!a.has_value() || b == nullptr) return 0.0;
       if (config_.filter.fault_threshold > 0.0) return config_.filter.fault_threshold;
-      Eigen::SelfAdjointEigenSolver<Matrix3d> es(0.5 * (S + S.transpose()));
-      return std::max(kMismatchFloor, kd * std::sqrt(std::max(es.eigenvalues().maxCoeff(), 0.0)));
+      return DirectionalAllowedAngle(LogQuaternion(*a * b->conjugate()), S, kd, kMismatchFloor);
     };
-    // The two pairs share the reference gyro; their mismatch covariance is bounded by the sum.
     const std::array<double, 3> allowed_angles = {
-        q1 && q2 ? allowed(S1 + S2) : 0.0, q1 ? allowed(S1 + S_st) : 0.0,
-        q2 ? allowed(S2 + S_st) : 0.0};
+        allowed(q1, q2 ? &*q2 : nullptr, S1 + S2), allowed(q1, st_available ? &q_st : nullptr, S1 + S_st),
+        allowed(q2, st_available ? &q_st : nullptr, S2 + S_st)};
     const MismatchTest mt = TestMismatch(q1 ? &*q1 : nullptr, q2 ? &*q2 : nullptr,
                                          st_available ? &q_st : nullptr, allowed_angles);
     auto event = [&](Event::Kind kind, std::string subsystem, int m, std::string message) {
@@ -570,6 +572,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     report.star_tracker_innovation_sigma = S.diagonal().head(n_st).cwiseSqrt();
     // eq. (14) on z2..z5.
     const InnovationTest t = TestInnovation(z.head(n_st), S.topLeftCorner(n_st, n_st), kd);
+    report.star_tracker_test_ratio = t.worst_ratio;
     if (t.passed) {
       for (int i = 0; i < n_st; ++i) keep.push_back(i);
       report.star_tracker_used = true;

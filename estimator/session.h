@@ -123,6 +123,8 @@ struct StepReport {
   // Star-tracker innovations of this step in the gyros' bases [rad] (empty if none formed).
   Eigen::VectorXd star_tracker_innovation;
   Eigen::VectorXd star_tracker_innovation_sigma;
+  // Largest normalised (sequentially conditioned) star-tracker innovation of eq. (14) [1].
+  double star_tracker_test_ratio = 0.0;
   // Autonomous innovations z_avt of this step [1] and their sigma.
   Eigen::VectorXd autonomous_innovation;
   Eigen::VectorXd autonomous_innovation_sigma;
