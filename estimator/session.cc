@@ -276,48 +276,54 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   if (!q0.has_value() || covariance_in == nullptr) return q0;
 
   // Attitude error dtheta_in (q_true = Exp(dtheta_in) q_est) against the state errors of the two
-  // gyros and their readout noise, by central differences.
+  // gyros and their readout noise, by one-sided differences (error ~ step, 1e-7 relative: this
+  // feeds a 1-sigma envelope; prediction evaluates it at every output sample).
   const int n = state_size();
   MatrixXd J = MatrixXd::Zero(3, n);
   Eigen::Matrix<double, 3, 4> J_r = Eigen::Matrix<double, 3, 4>::Zero();
-  auto diff = [&](const std::optional<Quaterniond>& qp, const std::optional<Quaterniond>& qm) {
-    if (!qp || !qm) return Vector3d::Zero().eval();
-    return ((LogQuaternion(*qp * q0->conjugate()) - LogQuaternion(*qm * q0->conjugate())) /
-            (2.0 * kJacobianStep))
-        .eval();
-  };
   const double e = kJacobianStep;
+  const Quaterniond q0_conj = q0->conjugate();
+  auto diff = [&](const std::optional<Quaterniond>& qp) {
+    if (!qp) return Vector3d::Zero().eval();
+    return (LogQuaternion(*qp * q0_conj) / e).eval();
+  };
   const Matrix32 Ta = ga->T(), Tb = gb->T();
   for (int i = 0; i < 2; ++i) {
     J.col(ga->offset + i) =
-        diff(attitude((ga->h_in + e * Ta.col(i)).normalized(), gb->h_in, C_a, C_b, h_k_a, h_k_b),
-             attitude((ga->h_in - e * Ta.col(i)).normalized(), gb->h_in, C_a, C_b, h_k_a, h_k_b));
+        diff(attitude((ga->h_in + e * Ta.col(i)).normalized(), gb->h_in, C_a, C_b, h_k_a, h_k_b));
     J.col(gb->offset + i) =
-        diff(attitude(ga->h_in, (gb->h_in + e * Tb.col(i)).normalized(), C_a, C_b, h_k_a, h_k_b),
-             attitude(ga->h_in, (gb->h_in - e * Tb.col(i)).normalized(), C_a, C_b, h_k_a, h_k_b));
+        diff(attitude(ga->h_in, (gb->h_in + e * Tb.col(i)).normalized(), C_a, C_b, h_k_a, h_k_b));
   }
   for (int i = 0; i < 3; ++i) {
-    const Vector3d d = e * Vector3d::Unit(i);
+    const Matrix3d R = ExpMatrix(e * Vector3d::Unit(i));
     if (ga->estimate_phi) {
-      J.col(PhiOffset(*ga) + i) =
-          diff(attitude(ga->h_in, gb->h_in, ExpMatrix(d) * C_a, C_b, h_k_a, h_k_b),
-               attitude(ga->h_in, gb->h_in, ExpMatrix(-d) * C_a, C_b, h_k_a, h_k_b));
+      J.col(PhiOffset(*ga) + i) = diff(attitude(ga->h_in, gb->h_in, R * C_a, C_b, h_k_a, h_k_b));
     }
     if (gb->estimate_phi) {
-      J.col(PhiOffset(*gb) + i) =
-          diff(attitude(ga->h_in, gb->h_in, C_a, ExpMatrix(d) * C_b, h_k_a, h_k_b),
-               attitude(ga->h_in, gb->h_in, C_a, ExpMatrix(-d) * C_b, h_k_a, h_k_b));
+      J.col(PhiOffset(*gb) + i) = diff(attitude(ga->h_in, gb->h_in, C_a, R * C_b, h_k_a, h_k_b));
     }
   }
   const Matrix32 Ua = TangentBasis(h_k_a), Ub = TangentBasis(h_k_b);
   for (int i = 0; i < 2; ++i) {
-    J_r.col(i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, (h_k_a + e * Ua.col(i)).normalized(), h_k_b),
-                      attitude(ga->h_in, gb->h_in, C_a, C_b, (h_k_a - e * Ua.col(i)).normalized(), h_k_b));
-    J_r.col(2 + i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, (h_k_b + e * Ub.col(i)).normalized()),
-                          attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, (h_k_b - e * Ub.col(i)).normalized()));
+    J_r.col(i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, (h_k_a + e * Ua.col(i)).normalized(), h_k_b));
+    J_r.col(2 + i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, (h_k_b + e * Ub.col(i)).normalized()));
+  }
+  // Only the columns of the two gyros are nonzero: J P J^T over those blocks.
+  std::vector<int> cols;
+  for (const GyroState* g : {ga, gb}) {
+    for (int k = 0; k < 2; ++k) cols.push_back(g->offset + k);
+    if (g->estimate_phi) {
+      for (int k = 0; k < 3; ++k) cols.push_back(PhiOffset(*g) + k);
+    }
+  }
+  const int m = static_cast<int>(cols.size());
+  Eigen::MatrixXd Js(3, m), Ps(m, m);
+  for (int i = 0; i < m; ++i) {
+    Js.col(i) = J.col(cols[i]);
+    for (int j = 0; j < m; ++j) Ps(i, j) = P_(cols[i], cols[j]);
   }
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
-  *covariance_in = J * P_ * J.transpose() + sigma_r * sigma_r * J_r * J_r.transpose();
+  *covariance_in = Js * Ps * Js.transpose() + sigma_r * sigma_r * J_r * J_r.transpose();
   return q0;
 }
 
