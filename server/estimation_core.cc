@@ -137,6 +137,8 @@ esg::v1::AlertSeverity SeverityOf(Event::Kind kind) {
       return esg::v1::ALERT_SEVERITY_WARNING;
     case Event::Kind::kStarTrackerInvalid:
       return esg::v1::ALERT_SEVERITY_INFO;
+    case Event::Kind::kFilterReset:
+      return esg::v1::ALERT_SEVERITY_DISTRESS;
   }
   return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
 }
@@ -155,6 +157,8 @@ esg::v1::AlertReason ReasonOf(Event::Kind kind) {
       return esg::v1::ALERT_REASON_GYRO_DATA_REJECTED;
     case Event::Kind::kStarTrackerInvalid:
       return esg::v1::ALERT_REASON_STAR_TRACKER_INVALID;
+    case Event::Kind::kFilterReset:
+      return esg::v1::ALERT_REASON_FILTER_RESET;
   }
   return esg::v1::ALERT_REASON_UNSPECIFIED;
 }

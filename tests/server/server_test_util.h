@@ -1,0 +1,126 @@
+// Helpers for the server and end-to-end tests: a real esgd (EsgServer) on 127.0.0.1:0 over a real
+// SQLite file in a TempDir, a simulated paper-setup recording as esg.v1 frames, and a streaming
+// client that sends frames and collects their acks over one StreamTelemetry call.
+#ifndef ESG_TESTS_SERVER_SERVER_TEST_UTIL_H_
+#define ESG_TESTS_SERVER_SERVER_TEST_UTIL_H_
+
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "esg/v1/estimation_service.grpc.pb.h"
+#include "estimator/attitude_profile.h"
+#include "estimator/simulator.h"
+#include "grpcpp/create_channel.h"
+#include "grpcpp/security/credentials.h"
+#include "gtest/gtest.h"
+#include "proto/convert.h"
+#include "server/server.h"
+#include "tests/testing/paper_setup.h"
+#include "tests/testing/temp_dir.h"
+
+namespace esg::testing {
+
+// The paper configuration with id `id`, C1/C2 held (k0 and misalignment estimated), as the proto.
+inline estimator::SpacecraftConfig ServerTestConfig(const std::string& id) {
+  estimator::SpacecraftConfig c = PaperConfig(/*estimate_c=*/true);
+  c.spacecraft_id = id;
+  return c;
+}
+
+struct SimulatedRun {
+  estimator::SpacecraftConfig config;
+  std::vector<esg::v1::TelemetryFrame> frames;  // sequences 1..n
+};
+
+// Simulates `hours` of the paper's calibration profile (60 s frames, seeded) for spacecraft `id`
+// with optional star-tracker outliers (probability per sample; 300-900 arcsec).
+inline SimulatedRun SimulateRun(const std::string& id, double hours, uint64_t seed = 7,
+                                double outlier_probability = 0.0) {
+  SimulatedRun run;
+  run.config = ServerTestConfig(id);
+  estimator::SimulationSpec spec;
+  spec.config = run.config;
+  spec.duration = estimator::HoursToSeconds(hours);
+  spec.seed = seed;
+  spec.star_tracker.outlier_probability = outlier_probability;
+  spec.star_tracker.outlier_size = estimator::ArcsecToRad(300);
+  auto profile = estimator::MakeNamedProfile("calibration", spec.duration);
+  EXPECT_TRUE(profile.ok()) << profile.status();
+  spec.profile = *profile;
+  auto result = estimator::Simulate(spec);
+  EXPECT_TRUE(result.ok()) << result.status();
+  int64_t sequence = 0;
+  for (const estimator::TelemetryFrame& f : result->recording.frames) {
+    run.frames.push_back(proto_convert::FrameToProto(f, id, ++sequence));
+  }
+  return run;
+}
+
+inline esg::v1::ConfigureRequest ConfigureRequestFor(const estimator::SpacecraftConfig& config,
+                                                     const std::string& model = "") {
+  esg::v1::ConfigureRequest request;
+  *request.mutable_config() = proto_convert::ConfigToProto(config);
+  request.set_model(model);
+  return request;
+}
+
+// An in-process server over a database in its own TempDir.
+class LoopbackServer {
+ public:
+  explicit LoopbackServer(server::ServerOptions options = {}, std::string db_path = "") {
+    options.listen = "127.0.0.1:0";
+    options.db_path = db_path.empty() ? dir_.File("var/esg.db") : db_path;
+    if (options.core.worker_threads <= 0) options.core.worker_threads = 2;
+    auto started = server::EsgServer::Start(options);
+    EXPECT_TRUE(started.ok()) << started.status();
+    if (started.ok()) server_ = std::move(*started);
+  }
+  ~LoopbackServer() {
+    if (server_) server_->Shutdown(absl::Seconds(1), absl::Seconds(1));
+  }
+  server::EsgServer* get() { return server_.get(); }
+  server::EstimationCore& core() { return server_->core(); }
+  std::string address() const { return "127.0.0.1:" + std::to_string(server_->port()); }
+  std::unique_ptr<esg::v1::EstimationService::Stub> Stub() const {
+    return esg::v1::EstimationService::NewStub(
+        grpc::CreateChannel(address(), grpc::InsecureChannelCredentials()));
+  }
+  const TempDir& dir() const { return dir_; }
+
+ private:
+  TempDir dir_;
+  std::unique_ptr<server::EsgServer> server_;
+};
+
+// Sends `frames` on one StreamTelemetry call while a second thread reads the acks; returns the
+// acks and the final status. `token`: bearer token metadata when non-empty.
+struct StreamResult {
+  std::vector<esg::v1::TelemetryAck> acks;
+  grpc::Status status;
+};
+inline StreamResult StreamFrames(esg::v1::EstimationService::Stub& stub,
+                                 const std::vector<esg::v1::TelemetryFrame>& frames,
+                                 const std::string& token = "") {
+  grpc::ClientContext context;
+  if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+  auto stream = stub.StreamTelemetry(&context);
+  StreamResult result;
+  std::thread reader([&] {
+    esg::v1::TelemetryAck ack;
+    while (stream->Read(&ack)) result.acks.push_back(ack);
+  });
+  for (const esg::v1::TelemetryFrame& f : frames) {
+    if (!stream->Write(f)) break;
+  }
+  stream->WritesDone();
+  reader.join();
+  result.status = stream->Finish();
+  return result;
+}
+
+}  // namespace esg::testing
+
+#endif  // ESG_TESTS_SERVER_SERVER_TEST_UTIL_H_
