@@ -89,6 +89,8 @@ InnovationTest TestInnovation(const Eigen::VectorXd& z, const Eigen::MatrixXd& S
     double e = z(i);
     for (int j = 0; j < i; ++j) e -= L(i, j) * w(j);
     w(i) = e / L(i, i);
+    t.nis += w(i) * w(i);
+    t.log_det_s += 2.0 * std::log(L(i, i));
     const double ratio = std::abs(w(i));
     if (ratio > t.worst_ratio) {
       t.worst_ratio = ratio;

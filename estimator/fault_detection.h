@@ -51,6 +51,10 @@ struct InnovationTest {
   double worst_ratio = 0.0;      // |e_i| / sigma_i of that component
   double worst_value = 0.0;      // |e_i| (units of z)
   double worst_threshold = 0.0;  // k_d sigma_i (units of z)
+  // Normalised innovation squared z^T S^-1 z and log det S: the innovation's Gaussian
+  // log-likelihood is -(nis + log_det_s + m log 2 pi) / 2.
+  double nis = 0.0;
+  double log_det_s = 0.0;
 };
 
 // eq. (14) over a vector z with innovation covariance S (sequential conditional form above).

@@ -579,6 +579,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     // eq. (14) on z2..z5.
     const InnovationTest t = TestInnovation(z.head(n_st), S.topLeftCorner(n_st, n_st), kd);
     report.star_tracker_test_ratio = t.worst_ratio;
+    report.star_tracker_nis = t.nis;
+    report.star_tracker_log_det_s = t.log_det_s;
     if (t.passed) {
       for (int i = 0; i < n_st; ++i) keep.push_back(i);
       report.star_tracker_used = true;

@@ -125,6 +125,10 @@ struct StepReport {
   Eigen::VectorXd star_tracker_innovation_sigma;
   // Largest normalised (sequentially conditioned) star-tracker innovation of eq. (14) [1].
   double star_tracker_test_ratio = 0.0;
+  // z^T S^-1 z and log det S of the star-tracker differences (before the eq. (14) decision), for
+  // likelihood-based model comparison; 0 when none were formed.
+  double star_tracker_nis = 0.0;
+  double star_tracker_log_det_s = 0.0;
   // Autonomous innovations z_avt of this step [1] and their sigma.
   Eigen::VectorXd autonomous_innovation;
   Eigen::VectorXd autonomous_innovation_sigma;
