@@ -1,0 +1,311 @@
+// End to end through esgd (docs/service.md): simulated telemetry -> gRPC ingest -> SQLite ->
+// estimation session -> coefficient history, against an offline EstimationSession over the same
+// frames; recovery after kill -9 of the real daemon; 100 concurrent spacecraft streams.
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <map>
+#include <thread>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "storage/coefficient_store.h"
+#include "tests/server/server_test_util.h"
+
+#ifndef ESGD_PATH
+#error "ESGD_PATH must name the esgd binary"
+#endif
+
+namespace esg::server {
+namespace {
+
+using ::esg::testing::ConfigureRequestFor;
+using ::esg::testing::LoopbackServer;
+using ::esg::testing::SimulateRun;
+using ::esg::testing::SimulatedRun;
+using ::esg::testing::StreamFrames;
+using ::esg::testing::TempDir;
+
+// The same frames through a session in this process (the filter is deterministic).
+struct OfflineRun {
+  std::optional<estimator::EstimationSession> session;
+  int measurement_steps = 0;
+};
+OfflineRun RunOffline(const SimulatedRun& run, const std::string& model = "10+11") {
+  OfflineRun out;
+  auto spec = estimator::ParseModel(model);
+  EXPECT_TRUE(spec.ok());
+  auto session = estimator::EstimationSession::Create(run.config, {*spec});
+  EXPECT_TRUE(session.ok()) << session.status();
+  out.session = std::move(*session);
+  for (const esg::v1::TelemetryFrame& proto : run.frames) {
+    auto frame = proto_convert::FrameFromProto(proto);
+    EXPECT_TRUE(frame.ok());
+    auto report = out.session->AddFrame(*frame);
+    EXPECT_TRUE(report.ok()) << report.status();
+    if (report.ok() && report->measurement_step) ++out.measurement_steps;
+  }
+  return out;
+}
+
+esg::v1::SessionInfo GetSession(esg::v1::EstimationService::Stub& stub, const std::string& id) {
+  grpc::ClientContext ctx;
+  esg::v1::GetSessionRequest request;
+  request.set_spacecraft_id(id);
+  esg::v1::SessionInfo info;
+  const grpc::Status status = stub.GetSession(&ctx, request, &info);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  return info;
+}
+
+std::vector<esg::v1::CoefficientSnapshot> History(esg::v1::EstimationService::Stub& stub,
+                                                  const std::string& id) {
+  grpc::ClientContext ctx;
+  esg::v1::HistoryRequest request;
+  request.set_spacecraft_id(id);
+  esg::v1::HistoryResponse response;
+  EXPECT_TRUE(stub.GetCoefficientHistory(&ctx, request, &response).ok());
+  return {response.snapshots().begin(), response.snapshots().end()};
+}
+
+// The last snapshot of each gyro equals the offline estimate (same conversion to deg/h and
+// arcsec as the store: bit for bit).
+void ExpectFinalEstimatesEqualOffline(const std::vector<esg::v1::CoefficientSnapshot>& history,
+                                      const OfflineRun& offline) {
+  std::map<int, esg::v1::CoefficientSnapshot> last;
+  for (const auto& s : history) last[s.gyro_id()] = s;
+  const std::vector<estimator::GyroEstimate> gyros = offline.session->Gyros();
+  ASSERT_EQ(last.size(), gyros.size());
+  for (const estimator::GyroEstimate& g : gyros) {
+    SCOPED_TRACE(::testing::Message() << "gyro " << g.id);
+    const std::vector<double> v = storage::ToCoefficientValues(g.coefficients, g.misalignment_b);
+    const std::vector<double> sigma = storage::ToCoefficientValues(g.sigma, g.misalignment_sigma_b);
+    const esg::v1::CoefficientSnapshot& s = last.at(g.id);
+    EXPECT_EQ(s.model().k0_deg_h(), v[storage::kCoefficientK0]);
+    EXPECT_EQ(s.sigma().k0_deg_h(), sigma[storage::kCoefficientK0]);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_EQ(s.model().c1_deg_h(i), v[storage::kCoefficientC1 + i]);
+      EXPECT_EQ(s.model().c2_deg_h(i), v[storage::kCoefficientC2 + i]);
+      EXPECT_EQ(s.misalignment_arcsec(i), v[storage::kCoefficientMisalignment + i]);
+      EXPECT_EQ(s.misalignment_sigma_arcsec(i), sigma[storage::kCoefficientMisalignment + i]);
+    }
+  }
+}
+
+void ExpectAttitudeEqualsOffline(const esg::v1::SessionInfo& info, const OfflineRun& offline) {
+  const estimator::ScalarFirst q = estimator::ToScalarFirst(
+      estimator::Canonical(offline.session->CurrentAttitude().q_in_b));
+  ASSERT_EQ(info.latest_attitude().q_in_b_size(), 4);
+  for (int i = 0; i < 4; ++i) EXPECT_EQ(info.latest_attitude().q_in_b(i), q[i]);
+}
+
+TEST(EndToEnd, StreamedCalibrationEqualsAnOfflineRunExactly) {
+  const SimulatedRun run = SimulateRun("E2E-1", 12.0, 21);
+  LoopbackServer server;
+  auto stub = server.Stub();
+  grpc::ClientContext ctx;
+  esg::v1::ConfigureResponse configured;
+  ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured).ok());
+  auto streamed = StreamFrames(*stub, run.frames);
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  ASSERT_EQ(streamed.acks.size(), run.frames.size());
+  ASSERT_TRUE(server.core().WaitApplied("E2E-1", absl::Seconds(120)).ok());
+
+  const OfflineRun offline = RunOffline(run);
+  const esg::v1::SessionInfo info = GetSession(*stub, "E2E-1");
+  EXPECT_EQ(info.frames_applied(), static_cast<int64_t>(run.frames.size()));
+  EXPECT_EQ(esg::v1::SessionState_Name(info.state()),
+            std::string("SESSION_STATE_") + estimator::SessionStateName(offline.session->state()));
+  ExpectAttitudeEqualsOffline(info, offline);
+  const auto history = History(*stub, "E2E-1");
+  EXPECT_EQ(history.size(), static_cast<size_t>(offline.measurement_steps) *
+                                offline.session->Gyros().size());
+  ExpectFinalEstimatesEqualOffline(history, offline);
+  // Calibration did something: k0's sigma fell well below its 0.3 deg/h prior.
+  EXPECT_LT(history.back().sigma().k0_deg_h(), 0.1);
+}
+
+// ---- The real daemon as a child process ----------------------------------------------------
+
+class Daemon {
+ public:
+  Daemon(const std::string& db, const std::string& log) {
+    int out[2];
+    EXPECT_EQ(pipe(out), 0);
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], STDOUT_FILENO);
+      const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+      if (err >= 0) dup2(err, STDERR_FILENO);
+      close(out[0]);
+      execl(ESGD_PATH, "esgd", "--listen", "127.0.0.1:0", "--db", db.c_str(), "--workers", "2",
+            static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(out[1]);
+    // Read "esgd listening on port N".
+    std::string line;
+    pollfd p{out[0], POLLIN, 0};
+    while (line.find('\n') == std::string::npos && poll(&p, 1, 30000) > 0) {
+      char buffer[256];
+      const ssize_t n = read(out[0], buffer, sizeof buffer);
+      if (n <= 0) break;
+      line.append(buffer, n);
+    }
+    close(out[0]);
+    const size_t at = line.find("port ");
+    EXPECT_NE(at, std::string::npos) << "esgd did not start: " << line;
+    if (at != std::string::npos) port_ = std::stoi(line.substr(at + 5));
+  }
+  ~Daemon() { Stop(SIGTERM); }
+  void Stop(int signal) {
+    if (pid_ <= 0) return;
+    kill(pid_, signal);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+  std::unique_ptr<esg::v1::EstimationService::Stub> Stub() const {
+    return esg::v1::EstimationService::NewStub(grpc::CreateChannel(
+        "127.0.0.1:" + std::to_string(port_), grpc::InsecureChannelCredentials()));
+  }
+  int port() const { return port_; }
+
+ private:
+  pid_t pid_ = -1;
+  int port_ = 0;
+};
+
+TEST(EndToEnd, KillNineMidStreamLosesNoAckedFrameAndAppliesNoneTwice) {
+  const SimulatedRun run = SimulateRun("CRASH-1", 8.0, 33);
+  const int64_t n = static_cast<int64_t>(run.frames.size());
+  TempDir dir;
+  const std::string db = dir.File("var/esg.db");
+  const std::string log = dir.File("esgd.log");
+  int64_t acked_durable = 0;
+  {
+    Daemon daemon(db, log);
+    ASSERT_GT(daemon.port(), 0);
+    auto stub = daemon.Stub();
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse r;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &r).ok());
+    // Stream everything; kill -9 once half of the frames are acknowledged.
+    grpc::ClientContext stream_ctx;
+    auto stream = stub->StreamTelemetry(&stream_ctx);
+    std::atomic<int64_t> acks{0};
+    std::atomic<int64_t> durable{0};
+    std::thread reader([&] {
+      esg::v1::TelemetryAck ack;
+      while (stream->Read(&ack)) {
+        EXPECT_TRUE(ack.accepted());
+        durable = std::max<int64_t>(durable, ack.highest_durable_sequence());
+        ++acks;
+      }
+    });
+    std::thread writer([&] {
+      for (const auto& f : run.frames) {
+        if (!stream->Write(f)) break;
+        if (f.sequence() % 8 == 0) absl::SleepFor(absl::Milliseconds(2));  // keep it mid-stream
+      }
+      stream->WritesDone();
+    });
+    while (acks < n / 2) absl::SleepFor(absl::Microseconds(200));
+    daemon.Stop(SIGKILL);
+    writer.join();
+    reader.join();
+    stream->Finish();
+    acked_durable = durable;
+    ASSERT_GE(acked_durable, n / 2);
+    ASSERT_LT(acked_durable, n) << "the kill came too late to test anything";
+  }
+  // Restart on the same database and resume from the last acknowledged durable sequence.
+  Daemon daemon(db, log);
+  ASSERT_GT(daemon.port(), 0);
+  auto stub = daemon.Stub();
+  esg::v1::SessionInfo info = GetSession(*stub, "CRASH-1");
+  EXPECT_GE(info.highest_durable_sequence(), acked_durable);  // no acknowledged frame lost
+  EXPECT_EQ(info.frames_accepted(), info.highest_durable_sequence());
+  const int64_t durable_after_restart = info.highest_durable_sequence();
+  std::vector<esg::v1::TelemetryFrame> rest(run.frames.begin() + acked_durable, run.frames.end());
+  auto resumed = StreamFrames(*stub, rest);
+  ASSERT_TRUE(resumed.status.ok()) << resumed.status.error_message();
+  ASSERT_EQ(resumed.acks.size(), rest.size());
+  int64_t duplicates = 0;
+  for (const auto& ack : resumed.acks) {
+    EXPECT_TRUE(ack.accepted());
+    duplicates += ack.duplicate() ? 1 : 0;
+  }
+  EXPECT_EQ(duplicates, durable_after_restart - acked_durable);
+  for (int i = 0; i < 6000; ++i) {  // at most 60 s
+    info = GetSession(*stub, "CRASH-1");
+    if (info.highest_applied_sequence() == n) break;
+    absl::SleepFor(absl::Milliseconds(10));
+  }
+  EXPECT_EQ(info.highest_applied_sequence(), n);
+  EXPECT_EQ(info.frames_accepted(), n);  // archive count
+  EXPECT_EQ(info.frames_applied(), n);   // each frame applied exactly once across the crash
+
+  // Final estimates equal an uninterrupted run; one snapshot per step and gyro (no replayed
+  // step stored twice).
+  const OfflineRun offline = RunOffline(run);
+  ExpectAttitudeEqualsOffline(info, offline);
+  const auto history = History(*stub, "CRASH-1");
+  EXPECT_EQ(history.size(), static_cast<size_t>(offline.measurement_steps) *
+                                offline.session->Gyros().size());
+  ExpectFinalEstimatesEqualOffline(history, offline);
+}
+
+TEST(EndToEnd, HundredConcurrentSpacecraftStreamsAreAllAckedAndArchived) {
+  constexpr int kSpacecraft = 100;
+  const SimulatedRun run = SimulateRun("LOAD", 59.0 / 60.0, 3);  // 60 frames
+  ASSERT_EQ(run.frames.size(), 60u);
+  LoopbackServer server;
+  auto stub = server.Stub();
+  for (int s = 0; s < kSpacecraft; ++s) {
+    estimator::SpacecraftConfig config = run.config;
+    config.spacecraft_id = "LOAD-" + std::to_string(s);
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse r;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(config), &r).ok());
+  }
+  std::vector<std::thread> clients;
+  std::vector<esg::testing::StreamResult> results(kSpacecraft);
+  for (int s = 0; s < kSpacecraft; ++s) {
+    clients.emplace_back([&, s] {
+      std::vector<esg::v1::TelemetryFrame> frames = run.frames;
+      for (auto& f : frames) f.set_spacecraft_id("LOAD-" + std::to_string(s));
+      auto own_stub = server.Stub();  // its own channel: a separate ground station
+      results[s] = StreamFrames(*own_stub, frames);
+    });
+  }
+  for (auto& t : clients) t.join();
+  for (int s = 0; s < kSpacecraft; ++s) {
+    SCOPED_TRACE(s);
+    ASSERT_TRUE(results[s].status.ok()) << results[s].status.error_message();
+    ASSERT_EQ(results[s].acks.size(), 60u);
+    for (const auto& ack : results[s].acks) ASSERT_TRUE(ack.accepted() && !ack.duplicate());
+    EXPECT_EQ(results[s].acks.back().highest_durable_sequence(), 60);
+  }
+  for (int s = 0; s < kSpacecraft; ++s) {
+    const std::string id = "LOAD-" + std::to_string(s);
+    ASSERT_TRUE(server.core().WaitApplied(id, absl::Seconds(120)).ok());
+    const esg::v1::SessionInfo info = GetSession(*stub, id);
+    EXPECT_EQ(info.frames_accepted(), 60);
+    EXPECT_EQ(info.frames_applied(), 60);
+  }
+  // Every session saw the same frames: identical estimates.
+  const esg::v1::SessionInfo first = GetSession(*stub, "LOAD-0");
+  const esg::v1::SessionInfo last = GetSession(*stub, "LOAD-99");
+  ASSERT_EQ(first.latest_attitude().q_in_b_size(), 4);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(first.latest_attitude().q_in_b(i), last.latest_attitude().q_in_b(i));
+  }
+}
+
+}  // namespace
+}  // namespace esg::server
