@@ -31,7 +31,7 @@
 //   NO_DATA      no frame with a valid star-tracker quaternion and a readable pair yet.
 //                -> CALIBRATING by AddFrame when such a frame initialises the filter.
 //   CALIBRATING  filter running; free coefficients still converging.
-//                -> CONVERGED when every free coefficient's sigma fell by less than 1% over the
+//                -> CONVERGED when every free coefficient's sigma fell by less than 5% over the
 //                last hour (and 2 h have passed).
 //   CONVERGED    as CALIBRATING, coefficients settled.
 //   AUTONOMOUS   star-tracker data absent or rejected for the last 3 steps (or withheld by
