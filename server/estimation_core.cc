@@ -2,6 +2,10 @@
 // queries (see estimation_core.h and docs/service.md).
 #include "server/estimation_core.h"
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -586,6 +590,11 @@ void EstimationCore::Schedule(const std::shared_ptr<Spacecraft>& sc) {
 }
 
 void EstimationCore::WorkerLoop() {
+  // The filter runs behind ingest by design: its threads yield the CPU to the ingest path
+  // (reactors, committer) so acknowledgements stay fast while a backlog is applied.
+  if (options_.worker_nice > 0) {
+    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), options_.worker_nice);
+  }
   for (;;) {
     std::shared_ptr<Spacecraft> sc;
     {

@@ -50,6 +50,9 @@ namespace esg::server {
 
 struct CoreOptions {
   int worker_threads = 2;
+  // Nice value of the worker threads (Linux, per thread): > 0 gives ingest and queries the CPU
+  // first; the filter catches up when the load drops. 0 leaves the priority unchanged.
+  int worker_nice = 10;
   // Frames applied per worker job (and per apply transaction) at most.
   int max_frames_per_job = 32;
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
