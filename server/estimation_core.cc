@@ -36,6 +36,8 @@ using estimator::TelemetryFrame;
 namespace {
 
 constexpr const char* kDefaultModel = "10+11";
+// Durable frames kept in memory for the filter; beyond this it reads the archive.
+constexpr size_t kMaxReadyFrames = 20000;
 
 const char* SeverityName(esg::v1::AlertSeverity s) {
   switch (s) {
@@ -566,7 +568,14 @@ void EstimationCore::CommitterLoop() {
         e.sc->last_durable_time = e.time;
       }
       ++e.sc->frames_accepted;
-      e.sc->ready.emplace(e.sequence, std::move(e.frame));
+      if (!e.sc->replay_from_archive) {
+        e.sc->ready.emplace(e.sequence, std::move(e.frame));
+        // A filter far behind ingest reads its backlog from the archive instead of memory.
+        if (e.sc->ready.size() > kMaxReadyFrames) {
+          e.sc->ready.clear();
+          e.sc->replay_from_archive = true;
+        }
+      }
       if (touched.empty() || touched.back() != e.sc) touched.push_back(e.sc);
     }
     for (const auto& sc : touched) Schedule(sc);
@@ -657,8 +666,12 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     }
     if (archived->empty()) {
       absl::MutexLock lock(&sc->state_mu);
-      if (sc->generation == generation) sc->replay_from_archive = false;
-      return true;  // continue from the in-memory queue
+      // Caught up only if nothing became durable meanwhile (the committer skips the in-memory
+      // queue while this flag is set).
+      if (sc->generation == generation && sc->highest_durable <= applied) {
+        sc->replay_from_archive = false;
+      }
+      return true;  // continue from the in-memory queue (or the archive again)
     }
     for (const storage::ArchivedFrame& a : *archived) {
       esg::v1::TelemetryFrame proto;
