@@ -9,6 +9,7 @@
 #include "estimator/attitude_profile.h"
 #include "estimator/ekf.h"
 #include "estimator/fault_detection.h"
+#include "estimator/measurements.h"
 #include "estimator/rotation.h"
 #include "estimator/spin_axis.h"
 #include "estimator/triad.h"
@@ -37,15 +38,6 @@ constexpr double kMismatchFloor = 2.0 * kRadPerArcsec;
 constexpr double kJacobianStep = 1e-7;
 // d(dh)/dt = J dw_int in the tangent basis: (T w) x h = w2 t1 - w1 t2.
 const Matrix2d kJ = (Matrix2d() << 0.0, 1.0, -1.0, 0.0).finished();
-
-// Orthonormal basis of the plane perpendicular to unit u, as columns.
-Matrix32 TangentBasis(const Vector3d& u) {
-  const Vector3d a = AnyPerpendicular(u);
-  Matrix32 U;
-  U.col(0) = a;
-  U.col(1) = u.cross(a);
-  return U;
-}
 
 double Seconds(absl::Duration d) { return absl::ToDoubleSeconds(d); }
 
@@ -536,15 +528,13 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   int row = 0;
   for (const GyroState* g : healthy) {
     if (!st_available) break;
-    const Matrix23 Tt = g->T().transpose();
-    const Matrix3d C_b_k = g->C_b_k();
-    const Vector3d h_b = C_b_k * g->h_k_last;
-    const Vector3d h_et_in = (C_in_b_st * h_b).normalized();
-    z.segment<2>(row) = Tt * (h_et_in - g->h_in);
-    H.block<2, 2>(row, g->offset) = Matrix2d::Identity();
-    if (g->estimate_phi) H.block<2, 3>(row, PhiOffset(*g)) = Tt * C_in_b_st * Skew(h_b);
-    G.block<2, 3>(row, 0) = -Tt * C_in_b_st * Skew(h_b);
-    G.block<2, 2>(row, noise_col(*g)) = Tt * C_in_b_st * C_b_k * TangentBasis(g->h_k_last);
+    const StarTrackerDifference d =
+        MakeStarTrackerDifference(g->h_in, g->T(), C_in_b_st, g->C_b_k(), g->h_k_last);
+    z.segment<2>(row) = d.z;
+    H.block<2, 2>(row, g->offset) = d.H_h;
+    if (g->estimate_phi) H.block<2, 3>(row, PhiOffset(*g)) = d.H_phi;
+    G.block<2, 3>(row, 0) = d.G_st;
+    G.block<2, 2>(row, noise_col(*g)) = d.G_readout;
     row += 2;
   }
   std::vector<std::pair<const GyroState*, const GyroState*>> avt_pairs;
@@ -552,17 +542,15 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     for (size_t j = i + 1; j < healthy.size(); ++j) {
       const GyroState& a = *healthy[i];
       const GyroState& b = *healthy[j];
-      const Matrix3d C_a = a.C_b_k(), C_b = b.C_b_k();
-      const Vector3d h_ba = C_a * a.h_k_last, h_bb = C_b * b.h_k_last;
-      // eq. (13): z_avt = cos(theta_R) - cos(theta_S).
-      z(row) = a.h_in.dot(b.h_in) - h_ba.dot(h_bb);
-      H.block<1, 2>(row, a.offset) = -(a.T().transpose() * b.h_in).transpose();
-      H.block<1, 2>(row, b.offset) = -(b.T().transpose() * a.h_in).transpose();
-      const Vector3d cross = h_ba.cross(h_bb);
-      if (a.estimate_phi) H.block<1, 3>(row, PhiOffset(a)) = cross.transpose();
-      if (b.estimate_phi) H.block<1, 3>(row, PhiOffset(b)) = -cross.transpose();
-      G.block<1, 2>(row, noise_col(a)) = -(h_bb.transpose() * C_a * TangentBasis(a.h_k_last));
-      G.block<1, 2>(row, noise_col(b)) = -(h_ba.transpose() * C_b * TangentBasis(b.h_k_last));
+      const AutonomousDifference d = MakeAutonomousDifference(
+          a.h_in, a.T(), a.C_b_k(), a.h_k_last, b.h_in, b.T(), b.C_b_k(), b.h_k_last);
+      z(row) = d.z;
+      H.block<1, 2>(row, a.offset) = d.H_h_a;
+      H.block<1, 2>(row, b.offset) = d.H_h_b;
+      if (a.estimate_phi) H.block<1, 3>(row, PhiOffset(a)) = d.H_phi_a;
+      if (b.estimate_phi) H.block<1, 3>(row, PhiOffset(b)) = d.H_phi_b;
+      G.block<1, 2>(row, noise_col(a)) = d.G_readout_a;
+      G.block<1, 2>(row, noise_col(b)) = d.G_readout_b;
       avt_pairs.emplace_back(&a, &b);
       ++row;
     }
