@@ -488,6 +488,16 @@ bool EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto, esg::v1::Telem
                              FormatUtc(sc->last_accepted_time), ", sequence ",
                              sc->highest_accepted, ")"));
   }
+  if (sc->last_accepted_time != absl::InfinitePast() &&
+      frame->time - sc->last_accepted_time > options_.max_frame_gap) {
+    // The filter integrates across a gap at the configured rate: an absurd gap (a wrong time
+    // tag) would occupy a worker for hours.
+    return reject_counted(
+        "time", absl::StrCat(FormatUtc(frame->time), " is more than ",
+                             absl::FormatDuration(options_.max_frame_gap),
+                             " after the previous accepted frame (", FormatUtc(sc->last_accepted_time),
+                             ")"));
+  }
   CommitEntry entry;
   entry.sc = sc;
   entry.sequence = proto.sequence();

@@ -58,6 +58,9 @@ struct CoreOptions {
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
   // one alert (repeat_count); an alert without a new occurrence for this long is cleared.
   absl::Duration alert_collapse_window = absl::Minutes(30);
+  // Largest accepted time step between consecutive frames of a spacecraft (rejected beyond:
+  // the filter integrates across a gap at the configured rate).
+  absl::Duration max_frame_gap = absl::Hours(24 * 7);
   // Longest prediction horizon after the last applied frame (OutOfRange beyond).
   absl::Duration max_prediction_horizon = absl::Hours(48);
   // Most samples in one prediction.

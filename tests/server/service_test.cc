@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <random>
 #include <set>
 #include <thread>
 
@@ -143,6 +144,8 @@ TEST(Service, MalformedFramesAreRejectedNamingTheFieldAndTheStreamGoesOn) {
        "gyros[3].gyro_id"},
       {"time not after previous", [&](auto& f) { *f.mutable_time() = good[0].time(); }, "time"},
       {"no time", [](auto& f) { f.clear_time(); }, "time"},
+      {"time 30 days later", [](auto& f) { f.mutable_time()->set_seconds(f.time().seconds() + 30 * 86400); },
+       "time"},
       {"unknown spacecraft", [](auto& f) { f.set_spacecraft_id("NOPE"); }, "spacecraft_id"},
       {"sequence 0", [](auto& f) { f.set_sequence(0); }, "sequence"},
   };
@@ -382,6 +385,60 @@ TEST(Service, PredictionReturnsTheEnvelopeAndAValidAem) {
   p.set_aem(false);
   grpc::ClientContext ctx4;
   ExpectCode(stub->PredictAttitude(&ctx4, p, &response), grpc::StatusCode::OUT_OF_RANGE, "to:");
+}
+
+TEST(Service, RandomlyCorruptedFramesNeverStopTheServer) {
+  LoopbackServer server;
+  auto stub = server.Stub();
+  const SimulatedRun& run = Run3h();
+  grpc::ClientContext ctx;
+  esg::v1::ConfigureResponse r;
+  ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &r).ok());
+  std::mt19937_64 rng(42);
+  const double specials[] = {std::nan(""), INFINITY, -INFINITY, 1e300, -1e-300, 0.0, -1.0, 2.0};
+  std::vector<esg::v1::TelemetryFrame> frames;
+  for (int i = 0; i < 400; ++i) {
+    esg::v1::TelemetryFrame f = run.frames[rng() % run.frames.size()];
+    switch (rng() % 8) {
+      case 0:
+        f.mutable_gyros(rng() % f.gyros_size())->set_h_k(rng() % 3, specials[rng() % 8]);
+        break;
+      case 1:
+        f.mutable_gyros(rng() % f.gyros_size())->set_gyro_id(static_cast<int>(rng() % 11) - 5);
+        break;
+      case 2:
+        f.mutable_star_tracker()->add_q_in_b(specials[rng() % 8]);
+        break;
+      case 3:
+        f.mutable_time()->set_seconds(static_cast<int64_t>(rng() % 400000000000ULL) - 100000000000LL);
+        f.mutable_time()->set_nanos(static_cast<int32_t>(rng() % 2000000000ULL) - 500000000);
+        break;
+      case 4:
+        f.set_sequence(static_cast<int64_t>(rng()));
+        break;
+      case 5:
+        f.mutable_gyros(rng() % f.gyros_size())->add_u_k_mv(specials[rng() % 8]);
+        break;
+      case 6:
+        f.clear_gyros();
+        break;
+      default:
+        f.set_spacecraft_id(rng() % 2 ? "" : std::string(1000, 'x'));
+        break;
+    }
+    frames.push_back(f);
+  }
+  auto result = StreamFrames(*stub, frames);
+  ASSERT_TRUE(result.status.ok()) << result.status.error_message();
+  EXPECT_EQ(result.acks.size(), frames.size());  // every frame answered
+  // Whatever was accepted is applied, and the server still answers.
+  ASSERT_TRUE(server.core().WaitApplied(run.config.spacecraft_id, absl::Seconds(60)).ok());
+  grpc::ClientContext ctx2;
+  esg::v1::ListSessionsResponse sessions;
+  ASSERT_TRUE(stub->ListSessions(&ctx2, {}, &sessions).ok());
+  ASSERT_EQ(sessions.sessions_size(), 1);
+  EXPECT_EQ(sessions.sessions(0).frames_applied() + sessions.sessions(0).frames_apply_failed(),
+            sessions.sessions(0).frames_accepted());
 }
 
 // Collects the alerts of one SubscribeAlerts call until cancelled.
