@@ -189,6 +189,33 @@ TEST(Session, TransientEndsWithin8Hours) {
   }
 }
 
+TEST(Session, NormalisedInnovationSquaredIsChiSquareConsistent) {
+  // NIS of the star-tracker differences (6 components for three gyros) averaged over a 24 h run:
+  // for a consistent filter the sum of n NIS values is chi-square with 6n degrees of freedom, so
+  // the mean is 6 with sigma sqrt(12/n); 3.3 sigma is the 99.9% two-sided bound. The first hour
+  // (initial transient) is left out.
+  for (uint64_t seed : {1, 2, 3}) {
+    const SimulationSpec spec = PaperFlight(seed, 24.0);
+    auto sim = Simulate(spec);
+    ASSERT_THAT(sim, IsOk());
+    EstimationSession session = *EstimationSession::Create(spec.config, Model("10+11"));
+    double sum = 0.0;
+    int n = 0;
+    for (size_t i = 0; i < sim->recording.frames.size(); ++i) {
+      auto report = session.AddFrame(sim->recording.frames[i]);
+      ASSERT_THAT(report, IsOk());
+      if (i <= 60 || !report->star_tracker_used) continue;
+      ASSERT_EQ(report->star_tracker_innovation.size(), 6);
+      sum += report->star_tracker_nis;
+      ++n;
+    }
+    ASSERT_GT(n, 1300);
+    const double mean = sum / n;
+    const double bound = 3.3 * std::sqrt(12.0 / n);
+    EXPECT_NEAR(mean, 6.0, bound) << "seed " << seed << " over " << n << " steps";
+  }
+}
+
 TEST(Session, CovarianceStaysSymmetricPositiveDefiniteOver48Hours) {
   SimulationSpec spec = PaperFlight(5, 48.0, "mixed");
   auto sim = Simulate(spec);
