@@ -86,7 +86,7 @@ class TelemetryReactor
     if (!ok) {  // the client is gone
       if (!shared_->finished) {
         shared_->finished = true;
-        Finish(grpc::Status::CANCELLED);
+        Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
       }
       return;
     }
@@ -102,7 +102,7 @@ class TelemetryReactor
     absl::MutexLock lock(&shared_->mu);
     if (!shared_->finished) {
       shared_->finished = true;
-      Finish(grpc::Status::CANCELLED);
+      Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
     }
   }
 
@@ -143,7 +143,7 @@ class TelemetryReactor
     }
     if (s.reads_done) {
       s.finished = true;
-      s.reactor->Finish(grpc::Status::OK);
+      s.reactor->Finish(ToGrpcStatus(absl::OkStatus()));
     }
   }
 
@@ -227,7 +227,7 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
     if (!ok) {
       if (!shared_->finished) {
         shared_->finished = true;
-        Finish(grpc::Status::CANCELLED);
+        Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
       }
       return;
     }
@@ -239,7 +239,7 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
     absl::MutexLock lock(&shared_->mu);
     if (!shared_->finished) {
       shared_->finished = true;
-      Finish(grpc::Status::CANCELLED);
+      Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
     }
   }
 
