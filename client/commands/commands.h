@@ -12,11 +12,25 @@ namespace esg::client {
 
 struct GlobalOptions {
   std::string server = "127.0.0.1:50051";  // --server, before or after the verb
+  // Server verbs only (client/esg_client.h): TLS PEM files and the bearer token (--token or
+  // $ESG_TOKEN).
+  std::string tls_ca;
+  std::string tls_cert;
+  std::string tls_key;
+  std::string token;
 };
 
 void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterCalibrate(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterGap(CLI::App& app, GlobalOptions& global, int* exit_code);
+
+// Server verbs (client/commands/server_*.cc, docs/cli.md).
+void RegisterConfigure(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterReplay(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterStatus(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code);
 
 }  // namespace esg::client
 

@@ -1,0 +1,227 @@
+// `esg alerts [--spacecraft ID] [--since T] [--follow] [--ack SEQ] [--operator NAME]`: the alerts
+// raised by the fault and innovation tests (eq. (12), (14)) and by rejected telemetry
+// (SubscribeAlerts), and their acknowledgement (AcknowledgeAlert).
+//
+// Listing: subscribes with `since` (default: every stored alert) and prints the latest state of
+// each alert. The service does not mark where the replay of stored alerts ends (the stream
+// carries alerts only, proto AlertSubscription), so without --follow the listing ends when no
+// alert has arrived for --replay-wait seconds (the server queues the whole replay at once, so the
+// gap inside it is far shorter). --follow keeps printing alert states as they arrive (one line,
+// or one JSON object per line with --json) until Ctrl-C.
+// --ack SEQ acknowledges alert SEQ of --spacecraft as --operator (default $USER) and prints it.
+// Exit codes: 0 success (also when stopped by Ctrl-C), 2 bad arguments, 1 server failure.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <deque>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/commands/commands.h"
+#include "client/commands/server_common.h"
+#include "proto/convert.h"
+
+namespace esg::client {
+namespace {
+
+constexpr char kVerb[] = "alerts";
+
+struct AlertsOptions {
+  std::string spacecraft_id;
+  std::string since;
+  bool follow = false;
+  std::optional<int64_t> ack;
+  std::string operator_name;
+  double replay_wait_s = 1.0;
+  bool json = false;
+};
+
+volatile std::sig_atomic_t g_interrupted = 0;
+extern "C" void OnInterrupt(int) { g_interrupted = 1; }
+
+std::string AlertLine(const esg::v1::Alert& a) {
+  std::string line = absl::StrFormat(
+      "%s #%d %-9s %-24s %-14s %.6g > %.6g %s, x%d, %s..%s", a.spacecraft_id(), a.sequence(),
+      SeverityName(a.severity()), ReasonName(a.reason()), a.subsystem(), a.value(), a.threshold(),
+      a.unit(), a.repeat_count(), FormatUtc(a.first_time(), a.has_first_time()),
+      FormatUtc(a.measurement_time(), a.has_measurement_time()));
+  if (a.acknowledged()) {
+    absl::StrAppend(&line, ", acknowledged by ", a.acknowledged_by(), " at ",
+                    FormatUtc(a.acknowledged_time(), a.has_acknowledged_time()));
+  }
+  if (a.cleared()) {
+    absl::StrAppend(&line, ", cleared");
+    if (a.has_cleared_time()) absl::StrAppend(&line, " at ", FormatUtc(a.cleared_time()));
+  }
+  if (!a.message().empty()) absl::StrAppend(&line, ": ", a.message());
+  return line;
+}
+
+int RunAcknowledge(const AlertsOptions& o, const GlobalOptions& global) {
+  if (o.spacecraft_id.empty()) return ReportBadArgument(kVerb, "--ack: needs --spacecraft");
+  if (*o.ack < 1) return ReportBadArgument(kVerb, absl::StrCat("--ack ", *o.ack, ": must be >= 1"));
+  std::string name = o.operator_name;
+  if (name.empty()) {
+    const char* user = std::getenv("USER");
+    if (user != nullptr) name = user;
+  }
+  if (name.empty()) return ReportBadArgument(kVerb, "--operator: required when $USER is not set");
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  esg::v1::AcknowledgeRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  request.set_sequence(*o.ack);
+  request.set_operator_name(name);
+  absl::StatusOr<esg::v1::Alert> alert = client->AcknowledgeAlert(request);
+  if (!alert.ok()) return ReportRpcError(kVerb, alert.status(), global);
+  if (o.json) {
+    std::cout << AlertJson(*alert).dump(2) << "\n";
+  } else {
+    std::printf("acknowledged: %s\n", AlertLine(*alert).c_str());
+  }
+  return kExitOk;
+}
+
+// Alerts read by a reader thread, handed to the main thread (which owns the output and the
+// decision to stop).
+struct Inbox {
+  std::mutex mu;
+  std::condition_variable cv;
+  std::deque<esg::v1::Alert> alerts;
+  bool done = false;
+};
+
+int RunList(const AlertsOptions& o, const GlobalOptions& global) {
+  esg::v1::AlertSubscription request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  absl::Time since = absl::InfinitePast();  // clamped to 0001-01-01: every stored alert
+  if (!o.since.empty()) {
+    const std::optional<absl::Time> t = ParseUtc(o.since);
+    if (!t) return ReportBadArgument(kVerb, "--since '" + o.since + "': not an RFC 3339 time");
+    since = *t;
+  }
+  if (!(o.replay_wait_s > 0.0)) {
+    return ReportBadArgument(kVerb,
+                             absl::StrCat("--replay-wait ", o.replay_wait_s, ": must be > 0"));
+  }
+  *request.mutable_since() = proto_convert::TimeToProto(since);
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+
+  std::unique_ptr<AlertStream> stream = client->SubscribeAlerts(request);
+  Inbox inbox;
+  std::thread reader([&] {
+    esg::v1::Alert alert;
+    while (stream->Read(&alert)) {
+      std::lock_guard<std::mutex> lock(inbox.mu);
+      inbox.alerts.push_back(alert);
+      inbox.cv.notify_one();
+    }
+    std::lock_guard<std::mutex> lock(inbox.mu);
+    inbox.done = true;
+    inbox.cv.notify_one();
+  });
+
+  void (*previous_handler)(int) = SIG_DFL;
+  if (o.follow) {
+    g_interrupted = 0;
+    previous_handler = std::signal(SIGINT, OnInterrupt);
+  }
+  // Latest state of each alert, in (spacecraft, sequence) order, for the listing.
+  std::map<std::pair<std::string, int64_t>, esg::v1::Alert> latest;
+  const auto idle = std::chrono::duration<double>(o.replay_wait_s);
+  auto last_activity = std::chrono::steady_clock::now();
+  bool cancelled = false;
+  for (;;) {
+    std::deque<esg::v1::Alert> batch;
+    bool done = false;
+    {
+      std::unique_lock<std::mutex> lock(inbox.mu);
+      inbox.cv.wait_for(lock, std::chrono::milliseconds(100),
+                        [&] { return inbox.done || !inbox.alerts.empty(); });
+      batch.swap(inbox.alerts);
+      done = inbox.done;
+    }
+    if (!batch.empty()) last_activity = std::chrono::steady_clock::now();
+    for (esg::v1::Alert& a : batch) {
+      if (o.follow) {
+        if (o.json) {
+          std::printf("%s\n", AlertJson(a).dump().c_str());
+        } else {
+          std::printf("%s\n", AlertLine(a).c_str());
+        }
+        std::fflush(stdout);
+      } else {
+        latest[{a.spacecraft_id(), a.sequence()}] = std::move(a);
+      }
+    }
+    if (done) break;
+    const bool stop =
+        o.follow ? g_interrupted != 0 : std::chrono::steady_clock::now() - last_activity > idle;
+    if (stop && !cancelled) {
+      cancelled = true;
+      stream->Cancel();  // the reader's Read returns false, then done
+    }
+  }
+  reader.join();
+  if (o.follow) std::signal(SIGINT, previous_handler);
+  const absl::Status status = stream->Finish();
+  if (!status.ok() && !(cancelled && absl::IsCancelled(status))) {
+    return ReportRpcError(kVerb, status, global);
+  }
+  if (o.follow) return kExitOk;
+
+  if (o.json) {
+    Json alerts = Json::array();
+    for (const auto& [key, a] : latest) alerts.push_back(AlertJson(a));
+    std::cout << Json{{"alerts", alerts}}.dump(2) << "\n";
+    return kExitOk;
+  }
+  int active = 0, unacknowledged = 0;
+  for (const auto& [key, a] : latest) {
+    std::printf("%s\n", AlertLine(a).c_str());
+    if (!a.cleared()) ++active;
+    if (!a.acknowledged()) ++unacknowledged;
+  }
+  std::printf("%zu alerts (%d active, %d unacknowledged)\n", latest.size(), active, unacknowledged);
+  return kExitOk;
+}
+
+}  // namespace
+
+void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  auto options = std::make_shared<AlertsOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      kVerb, "list, follow or acknowledge alerts (SubscribeAlerts, AcknowledgeAlert)");
+  cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id (default: all)");
+  cmd->add_option("--since", options->since,
+                  "stored alerts whose latest occurrence is at or after this RFC 3339 time "
+                  "(default: all stored)");
+  CLI::Option* follow = cmd->add_flag("--follow", options->follow,
+                                      "keep printing alerts as they change, until Ctrl-C");
+  cmd->add_option("--ack", options->ack, "acknowledge alert SEQ (needs --spacecraft)")
+      ->excludes(follow);
+  cmd->add_option("--operator", options->operator_name, "operator name for --ack (default: $USER)");
+  cmd->add_option("--replay-wait", options->replay_wait_s,
+                  "without --follow: stop after this many seconds without a new alert")
+      ->capture_default_str();
+  cmd->add_flag("--json", options->json,
+                "one JSON document on stdout (with --follow: one JSON object per line)");
+  cmd->callback([options, &global, exit_code] {
+    *exit_code =
+        options->ack.has_value() ? RunAcknowledge(*options, global) : RunList(*options, global);
+  });
+}
+
+}  // namespace esg::client

@@ -1,0 +1,206 @@
+// `esg history --spacecraft ID [--gyro N] [--from T] [--to T] [--csv]`: the stored coefficient
+// history of a spacecraft (GetCoefficientHistory): per measurement epoch and gyro the estimated
+// drift model of eq. (1), (10) in the case frame k [deg/h] with its 1-sigma, and the estimated
+// gyro-to-star-tracker misalignment about the body axes [arcsec] with its 1-sigma.
+// Output: a table (k0, C1, C2, mu, nu values and the misalignment), or with --csv one row per
+// snapshot with every value and sigma (columns in kCsvHeader), or with --json one document.
+// Exit codes: 0 success, 2 bad arguments, 1 server failure.
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/commands/commands.h"
+#include "client/commands/server_common.h"
+#include "proto/convert.h"
+
+namespace esg::client {
+namespace {
+
+constexpr char kVerb[] = "history";
+
+struct HistoryOptions {
+  std::string spacecraft_id;
+  int gyro_id = 0;
+  std::string from;
+  std::string to;
+  bool csv = false;
+  bool json = false;
+};
+
+// Column groups of GyroDriftModel: name stem per component, in the proto's component order
+// (spacecraft_config.proto: C1 = (C11, C12, C13) along the case axes x, y, z; mu = (mu12, mu23,
+// mu31); nu = (nu23, nu31, nu12)).
+struct Term {
+  const char* json_name;
+  std::vector<const char*> stems;
+};
+const std::vector<Term>& Terms() {
+  static const std::vector<Term> terms = {
+      {"k0DegH", {"k0"}},
+      {"c1DegH", {"c1x", "c1y", "c1z"}},
+      {"c2DegH", {"c2x", "c2y", "c2z"}},
+      {"muDegH", {"mu12", "mu23", "mu31"}},
+      {"nuDegH", {"nu23", "nu31", "nu12"}},
+  };
+  return terms;
+}
+
+// Values of term `t` of a model; missing components are 0 (an empty vector is zero).
+std::vector<double> TermValues(const esg::v1::GyroDriftModel& m, size_t t) {
+  auto three = [](const google::protobuf::RepeatedField<double>& v) {
+    std::vector<double> out(3, 0.0);
+    for (int i = 0; i < v.size() && i < 3; ++i) out[i] = v[i];
+    return out;
+  };
+  switch (t) {
+    case 0:
+      return {m.k0_deg_h()};
+    case 1:
+      return three(m.c1_deg_h());
+    case 2:
+      return three(m.c2_deg_h());
+    case 3:
+      return three(m.mu_deg_h());
+    default:
+      return three(m.nu_deg_h());
+  }
+}
+
+double At(const google::protobuf::RepeatedField<double>& v, int i) {
+  return i < v.size() ? v[i] : 0.0;
+}
+
+std::string CsvHeader() {
+  std::string header = "time_utc,gyro";
+  for (const Term& term : Terms()) {
+    for (const char* stem : term.stems)
+      absl::StrAppend(&header, ",", stem, "_deg_h,", stem, "_sigma_deg_h");
+  }
+  for (const char* axis : {"x", "y", "z"}) {
+    absl::StrAppend(&header, ",misalignment_", axis, "_arcsec,misalignment_", axis,
+                    "_sigma_arcsec");
+  }
+  return header + ",compute_time_utc";
+}
+
+std::string CsvRow(const esg::v1::CoefficientSnapshot& s) {
+  std::string row =
+      absl::StrCat(FormatUtc(s.measurement_time(), s.has_measurement_time()), ",", s.gyro_id());
+  for (size_t t = 0; t < Terms().size(); ++t) {
+    const std::vector<double> value = TermValues(s.model(), t);
+    const std::vector<double> sigma = TermValues(s.sigma(), t);
+    for (size_t i = 0; i < value.size(); ++i) {
+      absl::StrAppend(&row, absl::StrFormat(",%.10g,%.10g", value[i], sigma[i]));
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    absl::StrAppend(&row, absl::StrFormat(",%.6g,%.6g", At(s.misalignment_arcsec(), i),
+                                          At(s.misalignment_sigma_arcsec(), i)));
+  }
+  return absl::StrCat(row, ",", FormatUtc(s.compute_time(), s.has_compute_time()));
+}
+
+Json ModelJson(const esg::v1::GyroDriftModel& m) {
+  Json out = Json::object();
+  for (size_t t = 0; t < Terms().size(); ++t) {
+    const std::vector<double> v = TermValues(m, t);
+    out[Terms()[t].json_name] = t == 0 ? Json(v[0]) : Json(v);
+  }
+  return out;
+}
+
+Json SnapshotJson(const esg::v1::CoefficientSnapshot& s) {
+  auto three = [](const google::protobuf::RepeatedField<double>& v) {
+    return Json::array({At(v, 0), At(v, 1), At(v, 2)});
+  };
+  return Json{{"measurementTime", FormatUtc(s.measurement_time(), s.has_measurement_time())},
+              {"computeTime", FormatUtc(s.compute_time(), s.has_compute_time())},
+              {"gyro", s.gyro_id()},
+              {"model", ModelJson(s.model())},
+              {"modelSigma", ModelJson(s.sigma())},
+              {"misalignmentArcsec", three(s.misalignment_arcsec())},
+              {"misalignmentSigmaArcsec", three(s.misalignment_sigma_arcsec())}};
+}
+
+void PrintTable(const esg::v1::HistoryResponse& history) {
+  std::printf("%-22s %4s %18s  %-26s  %-26s  %-26s  %-26s  %s\n", "time_utc", "gyro", "k0 +- sigma",
+              "C1 x,y,z", "C2 x,y,z", "mu 12,23,31", "nu 23,31,12", "misalignment x,y,z [arcsec]");
+  for (const esg::v1::CoefficientSnapshot& s : history.snapshots()) {
+    std::string line = absl::StrFormat("%-22s %4d %+9.5f +-%7.5f",
+                                       FormatUtc(s.measurement_time(), s.has_measurement_time()),
+                                       s.gyro_id(), s.model().k0_deg_h(), s.sigma().k0_deg_h());
+    for (size_t t = 1; t < Terms().size(); ++t) {
+      const std::vector<double> v = TermValues(s.model(), t);
+      absl::StrAppend(&line, absl::StrFormat("  %+8.5f %+8.5f %+8.5f", v[0], v[1], v[2]));
+    }
+    absl::StrAppend(
+        &line, absl::StrFormat("  %+7.1f %+7.1f %+7.1f", At(s.misalignment_arcsec(), 0),
+                               At(s.misalignment_arcsec(), 1), At(s.misalignment_arcsec(), 2)));
+    std::printf("%s\n", line.c_str());
+  }
+  std::printf("%d snapshots (coefficients in deg/h, case frame k; --csv adds every 1-sigma)\n",
+              history.snapshots_size());
+}
+
+int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
+  if (o.csv && o.json) return ReportBadArgument(kVerb, "--csv and --json: give at most one");
+  if (o.gyro_id < 0 || o.gyro_id > 4) {
+    return ReportBadArgument(kVerb, absl::StrCat("--gyro ", o.gyro_id, ": must be 1..4 (0: all)"));
+  }
+  esg::v1::HistoryRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  request.set_gyro_id(o.gyro_id);
+  if (!o.from.empty()) {
+    const std::optional<absl::Time> from = ParseUtc(o.from);
+    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
+    *request.mutable_from() = proto_convert::TimeToProto(*from);
+  }
+  if (!o.to.empty()) {
+    const std::optional<absl::Time> to = ParseUtc(o.to);
+    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
+    *request.mutable_to() = proto_convert::TimeToProto(*to);
+  }
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  absl::StatusOr<esg::v1::HistoryResponse> history = client->GetCoefficientHistory(request);
+  if (!history.ok()) return ReportRpcError(kVerb, history.status(), global);
+
+  if (o.csv) {
+    std::printf("%s\n", CsvHeader().c_str());
+    for (const esg::v1::CoefficientSnapshot& s : history->snapshots()) {
+      std::printf("%s\n", CsvRow(s).c_str());
+    }
+  } else if (o.json) {
+    Json snapshots = Json::array();
+    for (const esg::v1::CoefficientSnapshot& s : history->snapshots()) {
+      snapshots.push_back(SnapshotJson(s));
+    }
+    std::cout << Json{{"spacecraftId", o.spacecraft_id}, {"snapshots", snapshots}}.dump(2) << "\n";
+  } else {
+    PrintTable(*history);
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  auto options = std::make_shared<HistoryOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      kVerb, "stored drift-coefficient history of a spacecraft (GetCoefficientHistory)");
+  cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id")->required();
+  cmd->add_option("--gyro", options->gyro_id, "gyro id 1..4 (default 0: all)");
+  cmd->add_option("--from", options->from, "first measurement time, RFC 3339 UTC");
+  cmd->add_option("--to", options->to, "last measurement time, RFC 3339 UTC");
+  cmd->add_flag("--csv", options->csv, "CSV on stdout, one row per snapshot with every 1-sigma");
+  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  cmd->callback([options, &global, exit_code] { *exit_code = RunHistory(*options, global); });
+}
+
+}  // namespace esg::client

@@ -1,0 +1,429 @@
+// `esg replay --recording F [--spacecraft ID] [--rate X] [--from-sequence N]`: streams a recording
+// CSV (DESIGN §7) to esgd through StreamTelemetry, frame sequence number = 1-based row index.
+//
+// Flow: at most --window frames are unacknowledged at any time; with --rate X the frames leave at
+// X times real time (frame epochs scaled), otherwise as fast as the window allows. Acks arrive in
+// frame order (estimation_service.proto); each is counted as accepted, duplicate (a frame the
+// server had already accepted: not processed again) or rejected (with the offending field).
+//
+// Resume: when the stream fails with a transient code (UNAVAILABLE, CANCELLED, ...: a network
+// failure, a server restart or a kill), the client backs off (0.25 s doubling to 4 s), waits
+// for the server, asks GetSession for highest_durable_sequence and continues with the frame
+// after max(last acknowledged, highest durable). Frames the server had made durable but whose
+// acks were lost are therefore not sent twice. After --max-retries consecutive failed attempts
+// without progress it gives up with the last status and the sequence to resume from.
+//
+// Exit codes: 0 success, 2 bad arguments or recording, 1 server failure, or rejected frames
+// without --allow-rejects.
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
+#include "client/commands/commands.h"
+#include "client/commands/server_common.h"
+#include "client/progress.h"
+#include "proto/convert.h"
+#include "storage/recording_csv.h"
+
+namespace esg::client {
+namespace {
+
+constexpr char kVerb[] = "replay";
+constexpr int kRejectionsShown = 5;
+constexpr int kRejectionsKept = 20;
+
+struct ReplayOptions {
+  std::string recording_path;
+  std::string spacecraft_id;
+  double rate = 0.0;
+  int64_t from_sequence = 1;
+  int window = 256;
+  int max_retries = 8;
+  bool allow_rejects = false;
+  bool wait = false;
+  double wait_timeout_s = 600.0;
+  bool json = false;
+};
+
+struct RejectedFrame {
+  int64_t sequence;
+  std::string field;
+  std::string reason;
+};
+
+struct Tally {
+  int64_t sent = 0;      // frames written to a stream (a frame resent after a failure counts again)
+  int64_t acked = 0;     // acknowledgements received
+  int64_t accepted = 0;  // acks: accepted, new
+  int64_t duplicates = 0;           // acks: accepted before, not processed again
+  int64_t rejected = 0;             // acks: rejected
+  int64_t durable_without_ack = 0;  // skipped on resume: durable on the server, ack lost
+  int reconnects = 0;
+  int64_t last_acked = 0;       // highest sequence acknowledged
+  int64_t last_accepted = 0;    // highest sequence acknowledged as accepted (incl. duplicate)
+  int64_t highest_durable = 0;  // from the latest ack or GetSession
+  std::vector<RejectedFrame> rejections;  // the first kRejectionsKept
+};
+
+// Codes after which the stream is worth re-opening.
+bool Transient(absl::StatusCode code) {
+  switch (code) {
+    case absl::StatusCode::kUnavailable:
+    case absl::StatusCode::kCancelled:
+    case absl::StatusCode::kDeadlineExceeded:
+    case absl::StatusCode::kAborted:
+    case absl::StatusCode::kInternal:
+    case absl::StatusCode::kUnknown:
+    case absl::StatusCode::kResourceExhausted:
+      return true;
+    default:
+      return false;
+  }
+}
+
+class Replayer {
+ public:
+  Replayer(const ReplayOptions& o, const estimator::Recording& recording, std::string spacecraft_id,
+           EsgClient* client)
+      : o_(o),
+        frames_(recording.frames),
+        id_(std::move(spacecraft_id)),
+        client_(client),
+        progress_("replay") {
+    tally_.last_acked = o.from_sequence - 1;
+  }
+
+  Tally& tally() { return tally_; }
+  int64_t frame_count() const { return static_cast<int64_t>(frames_.size()); }
+
+  // Streams frames [first, n] once. OK when every one is acknowledged.
+  absl::Status StreamFrom(int64_t first) {
+    std::unique_ptr<TelemetryStream> stream = client_->StreamTelemetry();
+    std::mutex mu;
+    std::condition_variable cv;
+    int64_t in_flight = 0;
+    bool stop = false;
+    std::thread writer([&] {
+      const auto wall_start = std::chrono::steady_clock::now();
+      const absl::Time time_start = frames_[first - 1].time;
+      bool complete = true;
+      for (int64_t seq = first; seq <= frame_count(); ++seq) {
+        std::unique_lock<std::mutex> lock(mu);
+        cv.wait(lock, [&] { return stop || in_flight < o_.window; });
+        if (stop) {
+          complete = false;
+          break;
+        }
+        if (o_.rate > 0.0) {
+          const double offset_s =
+              absl::ToDoubleSeconds(frames_[seq - 1].time - time_start) / o_.rate;
+          const auto due =
+              wall_start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                               std::chrono::duration<double>(offset_s));
+          if (cv.wait_until(lock, due, [&] { return stop; })) {
+            complete = false;
+            break;
+          }
+        }
+        ++in_flight;
+        lock.unlock();
+        if (!stream->Write(proto_convert::FrameToProto(frames_[seq - 1], id_, seq))) {
+          complete = false;
+          break;
+        }
+        std::lock_guard<std::mutex> relock(mu);
+        ++tally_.sent;
+      }
+      if (complete) stream->WritesDone();
+    });
+
+    esg::v1::TelemetryAck ack;
+    while (stream->Read(&ack)) {
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        --in_flight;
+        Count(ack);
+      }
+      cv.notify_all();
+      const int64_t total = frame_count() - o_.from_sequence + 1;
+      progress_(static_cast<double>(tally_.last_acked - o_.from_sequence + 1) / total);
+    }
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      stop = true;
+    }
+    cv.notify_all();
+    writer.join();
+    absl::Status status = stream->Finish();
+    if (status.ok() && tally_.last_acked < frame_count()) {
+      status = absl::UnavailableError(absl::StrCat("the stream ended after sequence ",
+                                                   tally_.last_acked, " of ", frame_count()));
+    }
+    return status;
+  }
+
+ private:
+  void Count(const esg::v1::TelemetryAck& ack) {
+    ++tally_.acked;
+    tally_.last_acked = std::max(tally_.last_acked, ack.sequence());
+    tally_.highest_durable = std::max(tally_.highest_durable, ack.highest_durable_sequence());
+    if (ack.accepted()) {
+      tally_.last_accepted = std::max(tally_.last_accepted, ack.sequence());
+      if (ack.duplicate()) {
+        ++tally_.duplicates;
+      } else {
+        ++tally_.accepted;
+      }
+      return;
+    }
+    ++tally_.rejected;
+    if (static_cast<int>(tally_.rejections.size()) < kRejectionsKept) {
+      tally_.rejections.push_back(
+          {ack.sequence(), ack.rejection().field(), ack.rejection().reason()});
+    }
+  }
+
+  const ReplayOptions& o_;
+  const std::vector<estimator::TelemetryFrame>& frames_;
+  const std::string id_;
+  EsgClient* const client_;
+  Progress progress_;
+  Tally tally_;
+};
+
+// Polls GetSession until every durable frame is applied to the session, or the timeout.
+absl::StatusOr<esg::v1::SessionInfo> WaitApplied(EsgClient& client, const std::string& id,
+                                                 absl::Duration timeout) {
+  const absl::Time deadline = absl::Now() + timeout;
+  for (;;) {
+    absl::StatusOr<esg::v1::SessionInfo> s = client.GetSession(id);
+    if (!s.ok()) return s.status();
+    if (s->highest_applied_sequence() >= s->highest_durable_sequence()) return s;
+    if (absl::Now() > deadline) {
+      return absl::DeadlineExceededError(absl::StrCat(
+          "--wait: applied up to sequence ", s->highest_applied_sequence(), " of ",
+          s->highest_durable_sequence(), " durable after ", absl::FormatDuration(timeout)));
+    }
+    absl::SleepFor(absl::Milliseconds(100));
+  }
+}
+
+int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
+  if (o.rate < 0.0 || !std::isfinite(o.rate)) {
+    return ReportBadArgument(
+        kVerb, absl::StrCat("--rate ", o.rate, ": must be >= 0 (0: as fast as possible)"));
+  }
+  if (o.window < 1)
+    return ReportBadArgument(kVerb, absl::StrCat("--window ", o.window, ": must be >= 1"));
+  if (o.max_retries < 0) {
+    return ReportBadArgument(kVerb,
+                             absl::StrCat("--max-retries ", o.max_retries, ": must be >= 0"));
+  }
+  absl::StatusOr<estimator::Recording> recording = storage::ReadRecordingCsv(o.recording_path);
+  if (!recording.ok()) {
+    return ReportBadArgument(
+        kVerb, absl::StrCat("--recording ", o.recording_path, ": ", recording.status().message()));
+  }
+  const int64_t n = static_cast<int64_t>(recording->frames.size());
+  if (n == 0) return ReportBadArgument(kVerb, "--recording " + o.recording_path + ": no frames");
+  std::string id = o.spacecraft_id;
+  if (id.empty()) {
+    auto it = recording->metadata.find("spacecraft_id");
+    if (it == recording->metadata.end() || it->second.empty()) {
+      return ReportBadArgument(
+          kVerb, "--spacecraft: required, the recording has no '# spacecraft_id:' line");
+    }
+    id = it->second;
+  }
+  if (o.from_sequence < 1 || o.from_sequence > n) {
+    return ReportBadArgument(
+        kVerb, absl::StrCat("--from-sequence ", o.from_sequence, ": must be in 1..", n,
+                            " (rows of the recording)"));
+  }
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  // Reachability and configuration first: a server that is down or does not know the spacecraft
+  // is an immediate, clear failure rather than a retry loop.
+  absl::StatusOr<esg::v1::SessionInfo> initial = client->GetSession(id);
+  if (!initial.ok()) return ReportRpcError(kVerb, initial.status(), global);
+
+  const absl::Time started = absl::Now();
+  Replayer replayer(o, *recording, id, client.get());
+  Tally& tally = replayer.tally();
+  int64_t next = o.from_sequence;
+  int failures = 0;  // consecutive attempts without progress
+  absl::Status last_error;
+  while (next <= n) {
+    const int64_t acked_before = tally.last_acked;
+    absl::Status status = replayer.StreamFrom(next);
+    if (status.ok()) break;
+    if (!Transient(status.code())) return ReportRpcError(kVerb, status, global);
+    if (tally.last_acked > acked_before) failures = 0;
+    // Reconnect: back off, then learn where the server's durable archive ends.
+    for (;;) {
+      ++failures;
+      last_error = status;
+      if (failures > o.max_retries) {
+        std::fprintf(
+            stderr,
+            "esg %s: gave up after %d reconnect attempts; acknowledged up to sequence %lld "
+            "of %lld (continue with --from-sequence %lld)\n",
+            kVerb, o.max_retries, static_cast<long long>(tally.last_acked),
+            static_cast<long long>(n), static_cast<long long>(tally.last_acked + 1));
+        return ReportRpcError(kVerb, last_error, global);
+      }
+      const absl::Duration backoff =
+          std::min(absl::Milliseconds(250) * (1 << std::min(failures - 1, 4)), absl::Seconds(4));
+      std::fprintf(stderr,
+                   "\nesg %s: stream failed (%s: %s); reconnecting in %s (attempt %d of %d)\n",
+                   kVerb, absl::StatusCodeToString(status.code()).c_str(),
+                   std::string(status.message()).c_str(), absl::FormatDuration(backoff).c_str(),
+                   failures, o.max_retries);
+      absl::SleepFor(backoff);
+      CallOptions call;
+      call.timeout = absl::Seconds(5);
+      call.wait_for_ready = true;  // wait for a restarting server instead of failing at once
+      absl::StatusOr<esg::v1::SessionInfo> session = client->GetSession(id, call);
+      if (session.ok()) {
+        const int64_t durable = session->highest_durable_sequence();
+        if (durable < tally.last_accepted) {
+          std::fprintf(stderr,
+                       "esg %s: warning: the server's durable sequence %lld is below the "
+                       "acknowledged %lld (was its database replaced?)\n",
+                       kVerb, static_cast<long long>(durable),
+                       static_cast<long long>(tally.last_accepted));
+        }
+        tally.highest_durable = durable;
+        const int64_t resume = std::max({tally.last_acked + 1, durable + 1, o.from_sequence});
+        tally.durable_without_ack +=
+            std::max<int64_t>(0, std::min(resume, n + 1) - (tally.last_acked + 1));
+        tally.last_acked = std::max(tally.last_acked, std::min(resume - 1, n));
+        next = resume;
+        ++tally.reconnects;
+        break;
+      }
+      if (!Transient(session.status().code()))
+        return ReportRpcError(kVerb, session.status(), global);
+      status = session.status();
+    }
+  }
+  const double elapsed_s = absl::ToDoubleSeconds(absl::Now() - started);
+
+  std::optional<esg::v1::SessionInfo> applied;
+  if (o.wait) {
+    absl::StatusOr<esg::v1::SessionInfo> s =
+        WaitApplied(*client, id, absl::Seconds(o.wait_timeout_s));
+    if (!s.ok()) return ReportRpcError(kVerb, s.status(), global);
+    applied = *s;
+    tally.highest_durable = std::max(tally.highest_durable, s->highest_durable_sequence());
+  }
+
+  if (o.json) {
+    Json rejections = Json::array();
+    for (const RejectedFrame& r : tally.rejections) {
+      rejections.push_back(
+          Json{{"sequence", r.sequence}, {"field", r.field}, {"reason", r.reason}});
+    }
+    Json doc{{"spacecraftId", id},
+             {"recording", o.recording_path},
+             {"frames", n},
+             {"fromSequence", o.from_sequence},
+             {"sent", tally.sent},
+             {"acked", tally.acked},
+             {"accepted", tally.accepted},
+             {"duplicates", tally.duplicates},
+             {"rejected", tally.rejected},
+             {"durableWithoutAck", tally.durable_without_ack},
+             {"reconnects", tally.reconnects},
+             {"highestDurableSequence", tally.highest_durable},
+             {"elapsedS", elapsed_s},
+             {"rejections", rejections}};
+    if (applied) {
+      doc["highestAppliedSequence"] = applied->highest_applied_sequence();
+      doc["session"] = SessionJson(*applied);
+    }
+    std::cout << doc.dump(2) << "\n";
+  } else {
+    std::printf(
+        "%s: %lld frames (sequences %lld..%lld) in %.1f s: sent %lld, acked %lld "
+        "(accepted %lld, duplicates %lld, rejected %lld)",
+        id.c_str(), static_cast<long long>(n - o.from_sequence + 1),
+        static_cast<long long>(o.from_sequence), static_cast<long long>(n), elapsed_s,
+        static_cast<long long>(tally.sent), static_cast<long long>(tally.acked),
+        static_cast<long long>(tally.accepted), static_cast<long long>(tally.duplicates),
+        static_cast<long long>(tally.rejected));
+    if (tally.durable_without_ack > 0) {
+      std::printf(", durable without ack %lld", static_cast<long long>(tally.durable_without_ack));
+    }
+    std::printf("; %d reconnects; server durable up to %lld\n", tally.reconnects,
+                static_cast<long long>(tally.highest_durable));
+    if (applied) {
+      std::printf("applied up to %lld (state %s, %lld frames applied, %lld failed)\n",
+                  static_cast<long long>(applied->highest_applied_sequence()),
+                  StateName(applied->state()).c_str(),
+                  static_cast<long long>(applied->frames_applied()),
+                  static_cast<long long>(applied->frames_apply_failed()));
+    }
+  }
+  if (tally.rejected > 0) {
+    std::fprintf(stderr, "esg %s: %lld frames rejected%s\n", kVerb,
+                 static_cast<long long>(tally.rejected),
+                 o.allow_rejects ? "" : " (exit 1; --allow-rejects to accept)");
+    for (int i = 0; i < static_cast<int>(tally.rejections.size()) && i < kRejectionsShown; ++i) {
+      const RejectedFrame& r = tally.rejections[i];
+      if (r.field.empty() && r.reason.empty()) {
+        // Against the contract (TelemetryAck.rejection is present when accepted = false).
+        std::fprintf(stderr, "  sequence %lld: not accepted, and the server gave no reason\n",
+                     static_cast<long long>(r.sequence));
+      } else {
+        std::fprintf(stderr, "  sequence %lld: %s: %s\n", static_cast<long long>(r.sequence),
+                     r.field.c_str(), r.reason.c_str());
+      }
+    }
+    if (tally.rejected > kRejectionsShown) {
+      std::fprintf(stderr, "  ... and %lld more\n",
+                   static_cast<long long>(tally.rejected - kRejectionsShown));
+    }
+    if (!o.allow_rejects) return kExitFailure;
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void RegisterReplay(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  auto options = std::make_shared<ReplayOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      kVerb, "stream a recording CSV to esgd (StreamTelemetry), resuming after failures");
+  cmd->add_option("--recording", options->recording_path, "recording CSV (DESIGN §7)")->required();
+  cmd->add_option("--spacecraft", options->spacecraft_id,
+                  "spacecraft id (default: the recording's '# spacecraft_id:')");
+  cmd->add_option("--rate", options->rate, "X times real time (0: as fast as the window allows)")
+      ->capture_default_str();
+  cmd->add_option("--from-sequence", options->from_sequence, "first row to send (1-based)")
+      ->capture_default_str();
+  cmd->add_option("--window", options->window, "frames in flight without an ack, at most")
+      ->capture_default_str();
+  cmd->add_option("--max-retries", options->max_retries,
+                  "consecutive reconnect attempts without progress before giving up")
+      ->capture_default_str();
+  cmd->add_flag("--allow-rejects", options->allow_rejects, "rejected frames do not make exit 1");
+  cmd->add_flag("--wait", options->wait,
+                "afterwards, wait until the server has applied every durable frame");
+  cmd->add_option("--wait-timeout", options->wait_timeout_s, "longest --wait [s]")
+      ->capture_default_str();
+  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  cmd->callback([options, &global, exit_code] { *exit_code = RunReplay(*options, global); });
+}
+
+}  // namespace esg::client

@@ -1,0 +1,98 @@
+// `esg status [--spacecraft ID]`: the state of one session (GetSession) or of all (ListSessions):
+// life-cycle state, calibration model, working and reserve pairs, last frame, ingest and apply
+// counters, star-tracker rejections (eq. (14), (12)), alert counts and the latest attitude with
+// its 1-sigma about the body axes.
+// Exit codes: 0 success, 2 bad arguments, 1 server failure (NOT_FOUND for an unknown spacecraft).
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <string>
+
+#include "client/commands/commands.h"
+#include "client/commands/server_common.h"
+
+namespace esg::client {
+namespace {
+
+constexpr char kVerb[] = "status";
+
+struct StatusOptions {
+  std::string spacecraft_id;
+  bool json = false;
+};
+
+std::string Ids(const google::protobuf::RepeatedField<int32_t>& ids) {
+  std::string out = "[";
+  for (int i = 0; i < ids.size(); ++i) out += (i ? "," : "") + std::to_string(ids[i]);
+  return out + "]";
+}
+
+void PrintSession(const esg::v1::SessionInfo& s) {
+  auto n = [](int64_t v) { return static_cast<long long>(v); };
+  std::printf("%s  %s  model %s\n", s.spacecraft_id().c_str(), StateName(s.state()).c_str(),
+              s.model().c_str());
+  std::printf("  working pair %s, reserve pair %s\n", Ids(s.working_pair()).c_str(),
+              Ids(s.reserve_pair()).c_str());
+  std::printf("  last frame %s (sequence %lld); durable up to %lld, applied up to %lld\n",
+              FormatUtc(s.last_frame_time(), s.has_last_frame_time()).c_str(), n(s.last_sequence()),
+              n(s.highest_durable_sequence()), n(s.highest_applied_sequence()));
+  std::printf(
+      "  frames: accepted %lld, rejected %lld, duplicates %lld, applied %lld, apply "
+      "failed %lld\n",
+      n(s.frames_accepted()), n(s.frames_rejected()), n(s.frames_duplicate()),
+      n(s.frames_applied()), n(s.frames_apply_failed()));
+  std::printf("  star-tracker rejections %lld; alerts active %lld, unacknowledged %lld\n",
+              n(s.star_tracker_rejections()), n(s.active_alerts()), n(s.unacknowledged_alerts()));
+  if (s.has_latest_attitude()) {
+    const esg::v1::AttitudeSample& a = s.latest_attitude();
+    std::printf("  attitude at %s: q_in_b", FormatUtc(a.time(), a.has_time()).c_str());
+    for (double q : a.q_in_b()) std::printf(" %+.9f", q);
+    std::printf(", 1-sigma body x,y,z");
+    for (double sigma : a.sigma_arcsec()) std::printf(" %.2f", sigma);
+    std::printf(" arcsec\n");
+  } else {
+    std::printf("  attitude: none yet\n");
+  }
+  std::printf("  last update %s\n",
+              FormatUtc(s.last_compute_time(), s.has_last_compute_time()).c_str());
+}
+
+int RunStatus(const StatusOptions& o, const GlobalOptions& global) {
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  if (!o.spacecraft_id.empty()) {
+    absl::StatusOr<esg::v1::SessionInfo> session = client->GetSession(o.spacecraft_id);
+    if (!session.ok()) return ReportRpcError(kVerb, session.status(), global);
+    if (o.json) {
+      std::cout << SessionJson(*session).dump(2) << "\n";
+    } else {
+      PrintSession(*session);
+    }
+    return kExitOk;
+  }
+  absl::StatusOr<esg::v1::ListSessionsResponse> list = client->ListSessions();
+  if (!list.ok()) return ReportRpcError(kVerb, list.status(), global);
+  if (o.json) {
+    Json sessions = Json::array();
+    for (const esg::v1::SessionInfo& s : list->sessions()) sessions.push_back(SessionJson(s));
+    std::cout << Json{{"sessions", sessions}}.dump(2) << "\n";
+  } else if (list->sessions().empty()) {
+    std::printf("no spacecraft configured on %s\n", global.server.c_str());
+  } else {
+    for (const esg::v1::SessionInfo& s : list->sessions()) PrintSession(s);
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void RegisterStatus(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  auto options = std::make_shared<StatusOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      kVerb, "state of one spacecraft's session, or of all (GetSession, ListSessions)");
+  cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id (default: all)");
+  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  cmd->callback([options, &global, exit_code] { *exit_code = RunStatus(*options, global); });
+}
+
+}  // namespace esg::client

@@ -1,0 +1,191 @@
+// The esgd stub wrapper of the CLI (see esg_client.h).
+#include "client/esg_client.h"
+
+#include <fstream>
+#include <sstream>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "grpc/grpc.h"
+#include "grpcpp/create_channel.h"
+#include "grpcpp/security/credentials.h"
+#include "grpcpp/support/channel_arguments.h"
+
+namespace esg::client {
+namespace {
+
+absl::StatusOr<std::string> ReadPem(const std::string& option, const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(option, " ", path, ": cannot read"));
+  std::ostringstream text;
+  text << in.rdbuf();
+  if (text.str().empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(option, " ", path, ": empty file"));
+  }
+  return text.str();
+}
+
+template <typename Response, typename Call>
+absl::StatusOr<Response> Unary(std::unique_ptr<grpc::ClientContext> context, Call call) {
+  Response response;
+  const grpc::Status status = call(context.get(), &response);
+  if (!status.ok()) return FromGrpcStatus(status);
+  return response;
+}
+
+}  // namespace
+
+absl::Status FromGrpcStatus(const grpc::Status& status) {
+  if (status.ok()) return absl::OkStatus();
+  // grpc::StatusCode and absl::StatusCode share their numeric values (0..16).
+  return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
+}
+
+// ---- TelemetryStream --------------------------------------------------------------------------
+
+TelemetryStream::TelemetryStream(
+    std::unique_ptr<grpc::ClientContext> context,
+    std::unique_ptr<grpc::ClientReaderWriter<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>>
+        stream)
+    : context_(std::move(context)), stream_(std::move(stream)) {}
+
+bool TelemetryStream::Write(const esg::v1::TelemetryFrame& frame) { return stream_->Write(frame); }
+bool TelemetryStream::WritesDone() { return stream_->WritesDone(); }
+bool TelemetryStream::Read(esg::v1::TelemetryAck* ack) { return stream_->Read(ack); }
+absl::Status TelemetryStream::Finish() { return FromGrpcStatus(stream_->Finish()); }
+void TelemetryStream::Cancel() { context_->TryCancel(); }
+
+// ---- AlertStream ------------------------------------------------------------------------------
+
+AlertStream::AlertStream(std::unique_ptr<grpc::ClientContext> context,
+                         std::unique_ptr<grpc::ClientReader<esg::v1::Alert>> reader)
+    : context_(std::move(context)), reader_(std::move(reader)) {}
+
+bool AlertStream::Read(esg::v1::Alert* alert) { return reader_->Read(alert); }
+absl::Status AlertStream::Finish() { return FromGrpcStatus(reader_->Finish()); }
+void AlertStream::Cancel() { context_->TryCancel(); }
+
+// ---- EsgClient --------------------------------------------------------------------------------
+
+absl::StatusOr<std::unique_ptr<EsgClient>> EsgClient::Create(const ClientOptions& options) {
+  if (options.server.empty()) return absl::InvalidArgumentError("--server: must not be empty");
+  if (options.tls_cert.empty() != options.tls_key.empty()) {
+    return absl::InvalidArgumentError(options.tls_cert.empty()
+                                          ? "--tls-key: given without --tls-cert"
+                                          : "--tls-cert: given without --tls-key");
+  }
+  std::shared_ptr<grpc::ChannelCredentials> credentials;
+  if (options.tls_ca.empty() && options.tls_cert.empty()) {
+    credentials = grpc::InsecureChannelCredentials();
+  } else {
+    grpc::SslCredentialsOptions ssl;
+    if (!options.tls_ca.empty()) {
+      absl::StatusOr<std::string> ca = ReadPem("--tls-ca", options.tls_ca);
+      if (!ca.ok()) return ca.status();
+      ssl.pem_root_certs = *std::move(ca);
+    }
+    if (!options.tls_cert.empty()) {
+      absl::StatusOr<std::string> cert = ReadPem("--tls-cert", options.tls_cert);
+      if (!cert.ok()) return cert.status();
+      absl::StatusOr<std::string> key = ReadPem("--tls-key", options.tls_key);
+      if (!key.ok()) return key.status();
+      ssl.pem_cert_chain = *std::move(cert);
+      ssl.pem_private_key = *std::move(key);
+    }
+    credentials = grpc::SslCredentials(ssl);
+  }
+  grpc::ChannelArguments args;
+  // A restarted server is found again quickly (gRPC's default backoff grows to 120 s).
+  args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, 200);
+  args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, 200);
+  args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
+  // Telemetry and predictions can be large; the server sets its own limit.
+  args.SetMaxReceiveMessageSize(64 * 1024 * 1024);
+  std::shared_ptr<grpc::Channel> channel =
+      grpc::CreateCustomChannel(options.server, credentials, args);
+  return std::unique_ptr<EsgClient>(new EsgClient(options, std::move(channel)));
+}
+
+EsgClient::EsgClient(ClientOptions options, std::shared_ptr<grpc::Channel> channel)
+    : options_(std::move(options)),
+      channel_(std::move(channel)),
+      stub_(esg::v1::EstimationService::NewStub(channel_)) {}
+
+std::unique_ptr<grpc::ClientContext> EsgClient::NewContext(bool unary,
+                                                           const CallOptions& call) const {
+  auto context = std::make_unique<grpc::ClientContext>();
+  if (!options_.token.empty()) {
+    context->AddMetadata("authorization", absl::StrCat("Bearer ", options_.token));
+  }
+  if (unary) {
+    const absl::Duration timeout =
+        call.timeout > absl::ZeroDuration() ? call.timeout : options_.rpc_timeout;
+    context->set_deadline(absl::ToChronoTime(absl::Now() + timeout));
+  }
+  context->set_wait_for_ready(call.wait_for_ready);
+  return context;
+}
+
+absl::StatusOr<esg::v1::ConfigureResponse> EsgClient::ConfigureSpacecraft(
+    const esg::v1::ConfigureRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::ConfigureResponse>(
+      NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ConfigureResponse* r) {
+        return stub_->ConfigureSpacecraft(c, request, r);
+      });
+}
+
+absl::StatusOr<esg::v1::SessionInfo> EsgClient::GetSession(const std::string& spacecraft_id,
+                                                           const CallOptions& call) {
+  esg::v1::GetSessionRequest request;
+  request.set_spacecraft_id(spacecraft_id);
+  return Unary<esg::v1::SessionInfo>(NewContext(true, call),
+                                     [&](grpc::ClientContext* c, esg::v1::SessionInfo* r) {
+                                       return stub_->GetSession(c, request, r);
+                                     });
+}
+
+absl::StatusOr<esg::v1::ListSessionsResponse> EsgClient::ListSessions(const CallOptions& call) {
+  esg::v1::ListSessionsRequest request;
+  return Unary<esg::v1::ListSessionsResponse>(
+      NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ListSessionsResponse* r) {
+        return stub_->ListSessions(c, request, r);
+      });
+}
+
+absl::StatusOr<esg::v1::PredictResponse> EsgClient::PredictAttitude(
+    const esg::v1::PredictRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::PredictResponse>(NewContext(true, call),
+                                         [&](grpc::ClientContext* c, esg::v1::PredictResponse* r) {
+                                           return stub_->PredictAttitude(c, request, r);
+                                         });
+}
+
+absl::StatusOr<esg::v1::Alert> EsgClient::AcknowledgeAlert(
+    const esg::v1::AcknowledgeRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::Alert>(NewContext(true, call),
+                               [&](grpc::ClientContext* c, esg::v1::Alert* r) {
+                                 return stub_->AcknowledgeAlert(c, request, r);
+                               });
+}
+
+absl::StatusOr<esg::v1::HistoryResponse> EsgClient::GetCoefficientHistory(
+    const esg::v1::HistoryRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::HistoryResponse>(NewContext(true, call),
+                                         [&](grpc::ClientContext* c, esg::v1::HistoryResponse* r) {
+                                           return stub_->GetCoefficientHistory(c, request, r);
+                                         });
+}
+
+std::unique_ptr<TelemetryStream> EsgClient::StreamTelemetry() {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  auto stream = stub_->StreamTelemetry(context.get());
+  return std::make_unique<TelemetryStream>(std::move(context), std::move(stream));
+}
+
+std::unique_ptr<AlertStream> EsgClient::SubscribeAlerts(const esg::v1::AlertSubscription& request) {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  auto reader = stub_->SubscribeAlerts(context.get(), request);
+  return std::make_unique<AlertStream>(std::move(context), std::move(reader));
+}
+
+}  // namespace esg::client

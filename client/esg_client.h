@@ -1,0 +1,135 @@
+// The `esg` CLI's connection to esgd: a thin wrapper of the esg.v1.EstimationService stub
+// (proto/esg/v1/estimation_service.proto, docs/service.md) whose unary calls return
+// absl::StatusOr<T> and whose streams are small classes with the same error contract. It owns the
+// channel options of the CLI: plaintext or TLS (CA bundle, optional client certificate for mTLS),
+// a bearer token sent as `authorization: Bearer <token>` metadata on every call, a per-call
+// deadline for unary calls, and a short reconnect backoff so that a client waiting for a restarted
+// server sees it come back within a second or two.
+//
+// Error contract: every failed call returns the gRPC status converted code for code to
+// absl::Status (the numeric values are identical, STYLE §3.3) with the server's message; a server
+// that cannot be reached gives Unavailable.
+#ifndef ESG_CLIENT_ESG_CLIENT_H_
+#define ESG_CLIENT_ESG_CLIENT_H_
+
+#include <memory>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "esg/v1/estimation_service.grpc.pb.h"
+#include "esg/v1/estimation_service.pb.h"
+#include "grpcpp/channel.h"
+#include "grpcpp/client_context.h"
+#include "grpcpp/support/sync_stream.h"
+
+namespace esg::client {
+
+struct ClientOptions {
+  std::string server = "127.0.0.1:50051";  // host:port
+  // PEM files. Any of them switches the channel to TLS: tls_ca is the CA bundle that signs the
+  // server certificate (empty: the system roots); tls_cert and tls_key, given together, are the
+  // client certificate and key presented for mutual TLS.
+  std::string tls_ca;
+  std::string tls_cert;
+  std::string tls_key;
+  // Bearer token (empty: none).
+  std::string token;
+  // Deadline of each unary call.
+  absl::Duration rpc_timeout = absl::Seconds(60);
+};
+
+// Per-call overrides of the unary calls.
+struct CallOptions {
+  // absl::ZeroDuration(): ClientOptions::rpc_timeout.
+  absl::Duration timeout = absl::ZeroDuration();
+  // Wait (up to the deadline) for the channel to connect instead of failing at once with
+  // Unavailable when the server is not reachable; used when waiting for a restarted server.
+  bool wait_for_ready = false;
+};
+
+// grpc::Status -> absl::Status, code for code.
+absl::Status FromGrpcStatus(const grpc::Status& status);
+
+// The bidirectional telemetry stream (StreamTelemetry). One thread may Write while another
+// Reads (gRPC's synchronous stream contract); Cancel may be called from any thread.
+class TelemetryStream {
+ public:
+  TelemetryStream(
+      std::unique_ptr<grpc::ClientContext> context,
+      std::unique_ptr<grpc::ClientReaderWriter<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>>
+          stream);
+  // False when the stream is broken; Read then returns false and Finish tells why.
+  bool Write(const esg::v1::TelemetryFrame& frame);
+  // Half-closes the stream after the last frame.
+  bool WritesDone();
+  // Next acknowledgement, in frame order; false at the end of the stream.
+  bool Read(esg::v1::TelemetryAck* ack);
+  // After Read returned false: the final status of the call.
+  absl::Status Finish();
+  // Aborts the call: pending and later Write/Read return false.
+  void Cancel();
+
+ private:
+  std::unique_ptr<grpc::ClientContext> context_;
+  std::unique_ptr<grpc::ClientReaderWriter<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>> stream_;
+};
+
+// The server-streaming alert subscription (SubscribeAlerts).
+class AlertStream {
+ public:
+  AlertStream(std::unique_ptr<grpc::ClientContext> context,
+              std::unique_ptr<grpc::ClientReader<esg::v1::Alert>> reader);
+  // Next alert; false at the end of the stream (server finished, error, or Cancel).
+  bool Read(esg::v1::Alert* alert);
+  // After Read returned false: the final status (Cancelled after Cancel).
+  absl::Status Finish();
+  // Thread safe; unblocks a pending Read.
+  void Cancel();
+
+ private:
+  std::unique_ptr<grpc::ClientContext> context_;
+  std::unique_ptr<grpc::ClientReader<esg::v1::Alert>> reader_;
+};
+
+class EsgClient {
+ public:
+  // Builds the channel (connection is lazy: an unreachable server shows up as Unavailable at the
+  // first call). InvalidArgument "--tls-cert: ..." / "--tls-key: ..." when only one of the two is
+  // given or --server is empty; NotFound "--tls-ca <path>: cannot read" for an unreadable PEM file.
+  static absl::StatusOr<std::unique_ptr<EsgClient>> Create(const ClientOptions& options);
+
+  const ClientOptions& options() const { return options_; }
+
+  absl::StatusOr<esg::v1::ConfigureResponse> ConfigureSpacecraft(
+      const esg::v1::ConfigureRequest& request, const CallOptions& call = {});
+  // NotFound when the spacecraft is not configured.
+  absl::StatusOr<esg::v1::SessionInfo> GetSession(const std::string& spacecraft_id,
+                                                  const CallOptions& call = {});
+  absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions(const CallOptions& call = {});
+  absl::StatusOr<esg::v1::PredictResponse> PredictAttitude(const esg::v1::PredictRequest& request,
+                                                           const CallOptions& call = {});
+  absl::StatusOr<esg::v1::Alert> AcknowledgeAlert(const esg::v1::AcknowledgeRequest& request,
+                                                  const CallOptions& call = {});
+  absl::StatusOr<esg::v1::HistoryResponse> GetCoefficientHistory(
+      const esg::v1::HistoryRequest& request, const CallOptions& call = {});
+
+  // Opens a telemetry stream (no deadline). Errors show up in TelemetryStream::Finish.
+  std::unique_ptr<TelemetryStream> StreamTelemetry();
+  // Opens an alert subscription (no deadline). Errors show up in AlertStream::Finish.
+  std::unique_ptr<AlertStream> SubscribeAlerts(const esg::v1::AlertSubscription& request);
+
+ private:
+  EsgClient(ClientOptions options, std::shared_ptr<grpc::Channel> channel);
+  // A context with the bearer token and, for unary calls, the deadline.
+  std::unique_ptr<grpc::ClientContext> NewContext(bool unary, const CallOptions& call) const;
+
+  ClientOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<esg::v1::EstimationService::Stub> stub_;
+};
+
+}  // namespace esg::client
+
+#endif  // ESG_CLIENT_ESG_CLIENT_H_

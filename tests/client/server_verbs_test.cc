@@ -1,0 +1,598 @@
+// The server verbs of `esg` (configure, replay, status, history, predict, alerts) run as real
+// processes against a real `esgd` (ESGD_BINARY) on 127.0.0.1 with a database in a temporary
+// directory: the whole operator flow over a simulated 6 h recording with star-tracker defects,
+// resuming a replay across `kill -9` of the server, rejected frames, bearer tokens, and the exit
+// codes (2 for bad arguments naming the option, 1 with UNAVAILABLE when no server listens).
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_split.h"
+#include "absl/time/time.h"
+#include "client/esg_client.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
+#include "proto/convert.h"
+#include "storage/aem.h"
+#include "storage/recording_csv.h"
+#include "tests/testing/status_matchers.h"
+#include "tests/testing/temp_dir.h"
+
+extern char** environ;
+
+namespace esg::client {
+namespace {
+
+using ::esg::testing::IsOk;
+using ::esg::testing::TempDir;
+using ::testing::HasSubstr;
+using ::testing::Not;
+using Json = nlohmann::json;
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+void WriteFile(const std::string& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+}
+
+std::string Quote(const std::string& s) { return "'" + s + "'"; }
+
+std::string FormatUtcForTest(absl::Time t) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ", t, absl::UTCTimeZone());
+}
+
+// A port nobody listens on right now: bind port 0, read the port, close.
+int FreePort() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = 0;
+  socklen_t len = sizeof(addr);
+  if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 ||
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) != 0) {
+    if (fd >= 0) ::close(fd);
+    return -1;
+  }
+  ::close(fd);
+  return ntohs(addr.sin_port);
+}
+
+// Starts `argv` with stdout and stderr redirected to files; returns the pid (or -1).
+pid_t Spawn(const std::vector<std::string>& argv, const std::string& out, const std::string& err) {
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, out.c_str(),
+                                   O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err.c_str(),
+                                   O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  std::vector<char*> args;
+  for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
+  args.push_back(nullptr);
+  pid_t pid = -1;
+  const int rc = posix_spawn(&pid, args[0], &actions, nullptr, args.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  return rc == 0 ? pid : -1;
+}
+
+// Exit code of a finished child, -1 when it did not exit normally.
+int WaitExit(pid_t pid) {
+  int status = 0;
+  if (::waitpid(pid, &status, 0) != pid) return -1;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+// A real esgd on 127.0.0.1:port with the database `db`.
+class Esgd {
+ public:
+  Esgd(const TempDir& dir, std::string db, int port, std::vector<std::string> extra = {})
+      : dir_(dir), db_(std::move(db)), port_(port), extra_(std::move(extra)) {}
+  ~Esgd() { Stop(SIGTERM); }
+
+  // Starts the daemon and waits for its "listening on port" line.
+  bool Start() {
+    ++starts_;
+    out_ = dir_.File("esgd_out_" + std::to_string(starts_) + ".txt");
+    err_ = dir_.File("esgd_err_" + std::to_string(starts_) + ".txt");
+    std::vector<std::string> argv = {ESGD_BINARY, "--listen", address(), "--db", db_};
+    argv.insert(argv.end(), extra_.begin(), extra_.end());
+    pid_ = Spawn(argv, out_, err_);
+    if (pid_ < 0) return false;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (std::chrono::steady_clock::now() < deadline) {
+      if (ReadFile(out_).find("esgd listening on port") != std::string::npos) return true;
+      int status = 0;
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return false;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return false;
+  }
+
+  // Sends `signal` and reaps the process.
+  void Stop(int signal) {
+    if (pid_ <= 0) return;
+    ::kill(pid_, signal);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  std::string log() const { return ReadFile(err_); }
+
+ private:
+  const TempDir& dir_;
+  std::string db_;
+  int port_;
+  std::vector<std::string> extra_;
+  pid_t pid_ = -1;
+  int starts_ = 0;
+  std::string out_, err_;
+};
+
+struct RunResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+  Json json() const { return Json::parse(out, nullptr, /*allow_exceptions=*/false); }
+};
+
+// Runs `env esg <args>` through the shell, stdout and stderr captured.
+RunResult RunEsg(const TempDir& dir, const std::string& args, const std::string& env = "") {
+  const std::string out = dir.File("esg_out.txt"), err = dir.File("esg_err.txt");
+  const std::string command = env + " " + Quote(ESG_BINARY) + " " + args + " > " + Quote(out) +
+                              " 2> " + Quote(err) + " < /dev/null";
+  const int status = std::system(command.c_str());
+  RunResult r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.out = ReadFile(out);
+  r.err = ReadFile(err);
+  return r;
+}
+
+std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
+
+std::vector<std::string> DataLines(const std::string& text, const std::string& prefix) {
+  std::vector<std::string> out;
+  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+    if (absl::StartsWith(line, prefix)) out.emplace_back(line);
+  }
+  return out;
+}
+
+// One simulated 6 h recording (60 s telemetry, star-tracker outliers, invalid samples and an
+// outage, orbital profile) shared by the tests.
+class ServerVerbs : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TempDir;
+    recording_path_ = dir_->File("rec.csv");
+    const RunResult r =
+        RunEsg(*dir_, "simulate --config " + Quote(Rdk1()) + " --scenario " +
+                          Quote(std::string(ESG_SOURCE_DIR) +
+                                "/deploy/examples/scenarios/star_tracker_defects.json") +
+                          " --hours 6 --seed 11 --out " + Quote(recording_path_));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    auto recording = storage::ReadRecordingCsv(recording_path_);
+    ASSERT_THAT(recording, IsOk());
+    recording_ = new estimator::Recording(*std::move(recording));
+  }
+  static void TearDownTestSuite() {
+    delete recording_;
+    delete dir_;
+  }
+  static int64_t Rows() { return static_cast<int64_t>(recording_->frames.size()); }
+
+  static TempDir* dir_;
+  static std::string recording_path_;
+  static estimator::Recording* recording_;
+};
+TempDir* ServerVerbs::dir_ = nullptr;
+std::string ServerVerbs::recording_path_;
+estimator::Recording* ServerVerbs::recording_ = nullptr;
+
+TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
+  TempDir dir;
+  Esgd server(dir, dir.File("esg.db"), FreePort());
+  ASSERT_TRUE(server.Start()) << server.log();
+  const std::string at = "--server " + server.address() + " ";
+  ASSERT_EQ(Rows(), 361);
+
+  // configure: created, then the same configuration again (accepted, nothing changes); --server
+  // also after the verb.
+  RunResult r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("RDK-1: created, model 10+11"));
+  r = RunEsg(dir, "configure --config " + Quote(Rdk1()) + " --json " + at);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.json()["created"], false);
+  EXPECT_EQ(r.json()["session"]["workingPair"], Json::array({1, 2}));
+
+  // replay: every row accepted once, then applied by the filter (--wait).
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err << server.log();
+  Json replay = r.json();
+  EXPECT_EQ(replay["spacecraftId"], "RDK-1");  // from the recording's metadata
+  EXPECT_EQ(replay["sent"], Rows());
+  EXPECT_EQ(replay["acked"], Rows());
+  EXPECT_EQ(replay["accepted"], Rows());
+  EXPECT_EQ(replay["duplicates"], 0);
+  EXPECT_EQ(replay["rejected"], 0);
+  EXPECT_EQ(replay["highestDurableSequence"], Rows());
+  EXPECT_EQ(replay["highestAppliedSequence"], Rows());
+
+  // status: the frames, the last frame and an attitude.
+  r = RunEsg(dir, at + "status --spacecraft RDK-1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json status = r.json();
+  EXPECT_EQ(status["framesAccepted"], Rows());
+  EXPECT_EQ(status["lastSequence"], Rows());
+  EXPECT_EQ(status["framesApplied"], Rows());
+  EXPECT_EQ(status["lastFrameTime"], FormatUtcForTest(recording_->frames.back().time));
+  EXPECT_NE(status["state"], "NO_DATA");
+  ASSERT_TRUE(status["latestAttitude"].is_object());
+  EXPECT_EQ(status["latestAttitude"]["qInB"].size(), 4u);
+  EXPECT_EQ(status["config"]["spacecraftId"], "RDK-1");
+  r = RunEsg(dir, at + "status");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("RDK-1"));
+  EXPECT_THAT(r.out, HasSubstr("accepted 361, rejected 0, duplicates 0, applied 361"));
+
+  // history --csv: one row per snapshot, inside the recording's time span, same column count.
+  r = RunEsg(dir, at + "history --spacecraft RDK-1 --csv");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  std::vector<std::string> lines = absl::StrSplit(r.out, '\n', absl::SkipEmpty());
+  ASSERT_GT(lines.size(), 10u);
+  EXPECT_THAT(lines[0], ::testing::StartsWith("time_utc,gyro,k0_deg_h,k0_sigma_deg_h,c1x_deg_h,"));
+  EXPECT_THAT(lines[0], HasSubstr(",misalignment_z_sigma_arcsec,"));
+  const size_t columns = std::vector<std::string>(absl::StrSplit(lines[0], ',')).size();
+  std::set<int> gyros;
+  for (size_t i = 1; i < lines.size(); ++i) {
+    const std::vector<std::string> cells = absl::StrSplit(lines[i], ',');
+    ASSERT_EQ(cells.size(), columns) << lines[i];
+    absl::Time t;
+    std::string error;
+    ASSERT_TRUE(absl::ParseTime(absl::RFC3339_full, cells[0], &t, &error)) << cells[0];
+    EXPECT_GE(t, recording_->frames.front().time);
+    EXPECT_LE(t, recording_->frames.back().time);
+    gyros.insert(std::stoi(cells[1]));
+    EXPECT_TRUE(std::isfinite(std::stod(cells[2]))) << lines[i];
+  }
+  EXPECT_TRUE(gyros.count(1) && gyros.count(2)) << "working-pair gyros have snapshots";
+  r = RunEsg(dir, at + "history --spacecraft RDK-1 --gyro 2 --csv");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::vector<std::string> gyro2 = DataLines(r.out, "20");
+  ASSERT_FALSE(gyro2.empty());
+  EXPECT_LT(gyro2.size(), lines.size() - 1);
+  for (const std::string& line : gyro2) EXPECT_THAT(line, HasSubstr("Z,2,"));
+
+  // predict: 1 h after the last frame every 10 min = 7 epochs, as a table and as an AEM that
+  // storage's reader accepts.
+  const absl::Time last = recording_->frames.back().time;
+  const std::string from = FormatUtcForTest(last + absl::Minutes(1));
+  const std::string to = FormatUtcForTest(last + absl::Minutes(61));
+  const std::string aem = dir.File("predict.aem");
+  r = RunEsg(dir, at + "predict --spacecraft RDK-1 --from " + from + " --to " + to +
+                      " --step 600 --aem " + Quote(aem));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(DataLines(r.out, "20").size(), 7u) << r.out;
+  auto parsed = storage::ParseAem(ReadFile(aem));
+  ASSERT_THAT(parsed, IsOk());
+  ASSERT_EQ(parsed->segments.size(), 1u);
+  EXPECT_EQ(parsed->segments[0].samples.size(), 7u);
+  EXPECT_EQ(parsed->segments[0].metadata.at("OBJECT_NAME"), "RDK-1");
+  r = RunEsg(
+      dir, at + "predict --spacecraft RDK-1 --from " + from + " --to " + to + " --step 600 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json predicted = r.json();
+  ASSERT_EQ(predicted["samples"].size(), 7u);
+  for (const Json& s : predicted["samples"]) {
+    double norm2 = 0.0;
+    for (double q : s["qInB"]) norm2 += q * q;
+    EXPECT_NEAR(norm2, 1.0, 1e-9);
+    ASSERT_EQ(s["sigmaArcsec"].size(), 3u);
+    for (double sigma : s["sigmaArcsec"]) EXPECT_GT(sigma, 0.0);
+    EXPECT_GE(s["spinAxes"].size(), 2u);
+  }
+  // A prediction inside the applied data is the server's OUT_OF_RANGE, exit 1.
+  r = RunEsg(dir, at + "predict --spacecraft RDK-1 --from " +
+                      FormatUtcForTest(recording_->frames.front().time) + " --to " + to +
+                      " --step 600");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg predict: OUT_OF_RANGE: from: "));
+
+  // alerts: the listing agrees with the session's counters; acknowledging one shows up.
+  r = RunEsg(dir, at + "alerts --spacecraft RDK-1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json alerts = r.json()["alerts"];
+  ASSERT_FALSE(alerts.empty()) << "the star-tracker defects raise alerts";
+  int active = 0, unacknowledged = 0;
+  std::set<std::string> reasons;
+  for (const Json& a : alerts) {
+    active += a["cleared"] ? 0 : 1;
+    unacknowledged += a["acknowledged"] ? 0 : 1;
+    reasons.insert(a["reason"].get<std::string>());
+  }
+  r = RunEsg(dir, at + "status --spacecraft RDK-1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.json()["activeAlerts"], active);
+  EXPECT_EQ(r.json()["unacknowledgedAlerts"], unacknowledged);
+  EXPECT_TRUE(std::any_of(reasons.begin(), reasons.end(), [](const std::string& reason) {
+    return absl::StartsWith(reason, "STAR_TRACKER_");
+  })) << alerts.dump();
+  const int64_t first = alerts[0]["sequence"];
+  r = RunEsg(
+      dir, at + "alerts --spacecraft RDK-1 --ack " + std::to_string(first) + " --operator tester");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("acknowledged by tester"));
+  r = RunEsg(dir, at + "alerts --spacecraft RDK-1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("RDK-1 #" + std::to_string(first) + " "));
+  EXPECT_THAT(r.out, HasSubstr(", acknowledged by tester at "));
+  EXPECT_THAT(r.out, HasSubstr(std::to_string(alerts.size()) + " alerts ("));
+  r = RunEsg(dir, at + "alerts --spacecraft RDK-1 --ack 99999 --operator tester");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg alerts: NOT_FOUND: "));
+}
+
+TEST_F(ServerVerbs, ReplayResumesAfterKillDashNineWithoutApplyingAnythingTwice) {
+  TempDir dir;
+  const int port = FreePort();
+  auto server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port);
+  ASSERT_TRUE(server->Start()) << server->log();
+  const std::string at = "--server " + server->address() + " ";
+  RunResult r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+
+  // 6 h at 3600x real time: about 6 s of streaming, killed after 60 durable frames.
+  const pid_t replay = Spawn({"/bin/sh", "-c",
+                              Quote(ESG_BINARY) + " " + at + "replay --recording " +
+                                  Quote(recording_path_) + " --rate 3600 --json"},
+                             dir.File("replay_out.txt"), dir.File("replay_err.txt"));
+  ASSERT_GT(replay, 0);
+  ClientOptions options;
+  options.server = server->address();
+  auto client = EsgClient::Create(options);
+  ASSERT_THAT(client, IsOk());
+  int64_t durable = 0;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (durable < 60 && std::chrono::steady_clock::now() < deadline) {
+    auto session = (*client)->GetSession("RDK-1");
+    if (session.ok()) durable = session->highest_durable_sequence();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  ASSERT_GE(durable, 60);
+  ASSERT_LT(durable, Rows()) << "the replay must still be running when the server is killed";
+  server->Stop(SIGKILL);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port);
+  ASSERT_TRUE(server->Start()) << server->log();
+
+  ASSERT_EQ(WaitExit(replay), 0) << ReadFile(dir.File("replay_err.txt"));
+  const Json first = Json::parse(ReadFile(dir.File("replay_out.txt")), nullptr, false);
+  EXPECT_GE(first["reconnects"], 1);
+  EXPECT_EQ(first["rejected"], 0);
+  // Each row made durable exactly once: acked as accepted, or found durable at the reconnect
+  // (its ack lost with the server); none sent again as a duplicate.
+  EXPECT_EQ(first["accepted"].get<int64_t>() + first["durableWithoutAck"].get<int64_t>(), Rows());
+  EXPECT_EQ(first["duplicates"], 0);
+  EXPECT_EQ(first["highestDurableSequence"], Rows());
+  EXPECT_THAT(ReadFile(dir.File("replay_err.txt")), HasSubstr("reconnecting"));
+
+  // The whole recording again: every frame is a duplicate, nothing new is accepted.
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json second = r.json();
+  EXPECT_EQ(second["duplicates"], Rows());
+  EXPECT_EQ(second["accepted"], 0);
+  EXPECT_EQ(second["rejected"], 0);
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("(accepted 0, duplicates 361, rejected 0)"));
+
+  r = RunEsg(dir, at + "status --spacecraft RDK-1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json status = r.json();
+  EXPECT_EQ(status["framesAccepted"], Rows());
+  EXPECT_EQ(status["lastSequence"], Rows());
+  EXPECT_EQ(status["highestAppliedSequence"], Rows());
+  EXPECT_EQ(status["framesApplied"], Rows()) << "a frame applied twice, or one lost";
+  EXPECT_GE(status["framesDuplicate"], 2 * Rows());
+}
+
+TEST_F(ServerVerbs, RejectedFramesAreReportedWithTheirFieldAndMakeExitOne) {
+  TempDir dir;
+  // A configuration without gyro 4 and a recording in which gyro 4 reports in rows 10, 20, 30.
+  auto config = proto_convert::ReadConfigFile(Rdk1());
+  ASSERT_THAT(config, IsOk());
+  std::erase_if(config->gyros, [](const estimator::GyroConfig& g) { return g.id == 4; });
+  for (const char* id : {"RDK-R", "RDK-S"}) {
+    config->spacecraft_id = id;
+    ASSERT_THAT(proto_convert::WriteConfigFile(dir.File(std::string(id) + ".json"), *config),
+                IsOk());
+  }
+  estimator::Recording recording = *recording_;
+  for (int row : {10, 20, 30})
+    recording.frames[row - 1].gyros[3] = recording.frames[row - 1].gyros[0];
+  ASSERT_THAT(storage::WriteRecordingCsv(dir.File("bad.csv"), recording), IsOk());
+
+  Esgd server(dir, dir.File("esg.db"), FreePort());
+  ASSERT_TRUE(server.Start()) << server.log();
+  const std::string at = "--server " + server.address() + " ";
+  for (const char* id : {"RDK-R", "RDK-S"}) {
+    RunResult r =
+        RunEsg(dir, at + "configure --config " + Quote(dir.File(std::string(id) + ".json")));
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+  }
+  RunResult r =
+      RunEsg(dir, at + "replay --spacecraft RDK-R --recording " + Quote(dir.File("bad.csv")));
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.out, HasSubstr("(accepted 358, duplicates 0, rejected 3)"));
+  EXPECT_THAT(r.err, HasSubstr("3 frames rejected"));
+  EXPECT_THAT(r.err, HasSubstr("sequence 10: gyros[3].gyro_id: gyro 4 is not configured"));
+  EXPECT_THAT(r.err, HasSubstr("sequence 30: "));
+
+  // --allow-rejects: the same report, exit 0; --from-sequence skips the first rows.
+  r = RunEsg(dir, at +
+                      "replay --spacecraft RDK-S --from-sequence 5 --allow-rejects --json "
+                      "--recording " +
+                      Quote(dir.File("bad.csv")));
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  const Json doc = r.json();
+  EXPECT_EQ(doc["acked"], Rows() - 4);
+  EXPECT_EQ(doc["rejected"], 3);
+  ASSERT_EQ(doc["rejections"].size(), 3u);
+  EXPECT_EQ(doc["rejections"][0]["sequence"], 10);
+  EXPECT_EQ(doc["rejections"][0]["field"], "gyros[3].gyro_id");
+  EXPECT_THAT(r.err, HasSubstr("3 frames rejected"));
+  r = RunEsg(dir, at + "status --spacecraft RDK-S --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.json()["framesAccepted"], Rows() - 4 - 3);
+  EXPECT_EQ(r.json()["framesRejected"], 3);
+}
+
+TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
+  TempDir dir;
+  WriteFile(dir.File("tokens"), "# test tokens\nw-token read,write\nr-token read\n");
+  Esgd server(dir, dir.File("esg.db"), FreePort(), {"--tokens", dir.File("tokens")});
+  ASSERT_TRUE(server.Start()) << server.log();
+  const std::string at = "--server " + server.address() + " ";
+  RunResult r = RunEsg(dir, at + "status", "env -u ESG_TOKEN");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg status: UNAUTHENTICATED: "));
+  r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()), "ESG_TOKEN=r-token");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg configure: PERMISSION_DENIED: "));
+  r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()) + " --token w-token",
+             "env -u ESG_TOKEN");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  r = RunEsg(dir, at + "status", "ESG_TOKEN=r-token");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("RDK-1  NO_DATA"));
+}
+
+// A CA, or a certificate signed by `ca` for 127.0.0.1, made with openssl.
+bool MakeCa(const TempDir& dir, const std::string& name) {
+  const std::string p = dir.File(name);
+  const std::string cmd = "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=" + name +
+                          " -keyout " + p + ".key -out " + p + ".crt >/dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+bool MakeCert(const TempDir& dir, const std::string& ca, const std::string& name) {
+  const std::string p = dir.File(name);
+  const std::string c = dir.File(ca);
+  WriteFile(p + ".ext", "subjectAltName=IP:127.0.0.1,DNS:localhost\n");
+  const std::string cmd =
+      "openssl req -newkey rsa:2048 -nodes -subj /CN=" + name + " -keyout " + p + ".key -out " + p +
+      ".csr >/dev/null 2>&1 && openssl x509 -req -in " + p + ".csr -CA " + c + ".crt -CAkey " + c +
+      ".key -CAcreateserial -days 2 -extfile " + p + ".ext -out " + p + ".crt >/dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+TEST_F(ServerVerbs, MutualTlsWithTheGlobalTlsOptions) {
+  if (std::system("openssl version >/dev/null 2>&1") != 0) GTEST_SKIP() << "openssl missing";
+  TempDir dir;
+  ASSERT_TRUE(MakeCa(dir, "ca"));
+  ASSERT_TRUE(MakeCert(dir, "ca", "server") && MakeCert(dir, "ca", "client"));
+  Esgd server(dir, dir.File("esg.db"), FreePort(),
+              {"--tls-cert", dir.File("server.crt"), "--tls-key", dir.File("server.key"),
+               "--tls-client-ca", dir.File("ca.crt")});
+  ASSERT_TRUE(server.Start()) << server.log();
+  const std::string at = "--server " + server.address() + " --tls-ca " + Quote(dir.File("ca.crt"));
+  const std::string client_cert = " --tls-cert " + Quote(dir.File("client.crt")) + " --tls-key " +
+                                  Quote(dir.File("client.key"));
+  RunResult r = RunEsg(dir, at + client_cert + " status");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("no spacecraft configured"));
+  r = RunEsg(dir, at + client_cert + " configure --config " + Quote(Rdk1()));
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  r = RunEsg(dir, at + " status");  // no client certificate: the handshake is refused
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg status: UNAVAILABLE: "));
+  r = RunEsg(dir, "--server " + server.address() + " status");  // plaintext
+  EXPECT_EQ(r.exit_code, 1);
+}
+
+TEST_F(ServerVerbs, ServerDownIsUnavailableWithTheAddress) {
+  TempDir dir;
+  const std::string address = "127.0.0.1:" + std::to_string(FreePort());
+  const std::vector<std::string> verbs = {"status",
+                                          "status --spacecraft RDK-1",
+                                          "replay --recording " + Quote(recording_path_),
+                                          "history --spacecraft RDK-1",
+                                          "alerts --spacecraft RDK-1",
+                                          "configure --config " + Quote(Rdk1())};
+  for (const std::string& verb : verbs) {
+    const RunResult r = RunEsg(dir, "--server " + address + " " + verb);
+    EXPECT_EQ(r.exit_code, 1) << verb;
+    EXPECT_THAT(r.err, HasSubstr(": UNAVAILABLE: server not reachable at " + address)) << verb;
+  }
+}
+
+TEST_F(ServerVerbs, BadArgumentsExitTwoNamingTheOption) {
+  TempDir dir;
+  const std::string at = "--server 127.0.0.1:1 ";
+  struct Case {
+    std::string args;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      {"replay", "--recording"},
+      {"replay --recording " + Quote(dir.File("missing.csv")), "--recording"},
+      {"replay --recording " + Quote(recording_path_) + " --from-sequence 0", "--from-sequence 0"},
+      {"replay --recording " + Quote(recording_path_) + " --rate -1", "--rate -1"},
+      {"configure --config " + Quote(dir.File("missing.json")), "--config"},
+      {"configure --config " + Quote(Rdk1()) + " --model 12", "model"},
+      {"predict --spacecraft RDK-1 --from yesterday --to 2019-03-01T07:00:00Z --step 60", "--from"},
+      {"predict --spacecraft RDK-1 --from 2019-03-01T07:00:00Z --to 2019-03-01T06:00:00Z --step 60",
+       "--to"},
+      {"predict --spacecraft RDK-1 --from 2019-03-01T07:00:00Z --to 2019-03-01T08:00:00Z --step 0",
+       "--step"},
+      {"predict --spacecraft RDK-1 --from 2019-03-01T07:00:00Z --to 2019-03-01T08:00:00Z",
+       "--step"},
+      {"history --spacecraft RDK-1 --gyro 7", "--gyro 7"},
+      {"history --gyro 1", "--spacecraft"},
+      {"alerts --since never", "--since"},
+      {"alerts --ack 3", "--spacecraft"},
+      {"status --bogus", "--bogus"},
+      {"--tls-cert " + Quote(Rdk1()) + " status", "--tls-cert"},
+      {"--tls-ca " + Quote(dir.File("missing.pem")) + " status", "--tls-ca"},
+  };
+  for (const Case& c : cases) {
+    const RunResult r = RunEsg(dir, at + c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.err;
+    EXPECT_THAT(r.err, HasSubstr(c.message)) << c.args;
+    EXPECT_THAT(r.err, Not(HasSubstr("UNAVAILABLE"))) << c.args;
+  }
+}
+
+}  // namespace
+}  // namespace esg::client
