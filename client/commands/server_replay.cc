@@ -47,7 +47,7 @@ struct ReplayOptions {
   std::string spacecraft_id;
   double rate = 0.0;
   int64_t from_sequence = 1;
-  int window = 256;
+  int window = 1024;
   int max_retries = 8;
   bool allow_rejects = false;
   bool wait = false;

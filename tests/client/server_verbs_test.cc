@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <set>
 #include <sstream>
@@ -348,11 +349,43 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
   EXPECT_TRUE(std::any_of(reasons.begin(), reasons.end(), [](const std::string& reason) {
     return absl::StartsWith(reason, "STAR_TRACKER_");
   })) << alerts.dump();
+  // --follow: the stored alerts first (one JSON object per line), then the acknowledgement made
+  // meanwhile as it happens; Ctrl-C ends it with exit 0.
+  const std::string follow_out = dir.File("follow_out.txt");
+  const pid_t follow = Spawn({ESG_BINARY, "--server", server.address(), "alerts", "--spacecraft",
+                              "RDK-1", "--follow", "--json"},
+                             follow_out, dir.File("follow_err.txt"));
+  ASSERT_GT(follow, 0);
+  auto wait_for = [&](const std::function<bool(const std::string&)>& done) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (!done(ReadFile(follow_out)) && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return done(ReadFile(follow_out));
+  };
+  EXPECT_TRUE(wait_for([&](const std::string& text) {
+    return static_cast<size_t>(std::count(text.begin(), text.end(), '\n')) >= alerts.size();
+  })) << ReadFile(follow_out);
+
   const int64_t first = alerts[0]["sequence"];
   r = RunEsg(
       dir, at + "alerts --spacecraft RDK-1 --ack " + std::to_string(first) + " --operator tester");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("acknowledged by tester"));
+
+  EXPECT_TRUE(wait_for([](const std::string& text) {
+    return text.find("\"acknowledgedBy\":\"tester\"") != std::string::npos;
+  })) << ReadFile(follow_out);
+  ::kill(follow, SIGINT);
+  EXPECT_EQ(WaitExit(follow), 0) << ReadFile(dir.File("follow_err.txt"));
+  const std::vector<std::string> followed =
+      absl::StrSplit(ReadFile(follow_out), '\n', absl::SkipEmpty());
+  EXPECT_EQ(followed.size(), alerts.size() + 1);
+  for (const std::string& line : followed) {
+    const Json alert = Json::parse(line, nullptr, /*allow_exceptions=*/false);
+    ASSERT_TRUE(alert.is_object()) << line;
+    EXPECT_EQ(alert["spacecraftId"], "RDK-1");
+  }
   r = RunEsg(dir, at + "alerts --spacecraft RDK-1");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("RDK-1 #" + std::to_string(first) + " "));
