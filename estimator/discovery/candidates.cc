@@ -1,0 +1,528 @@
+#include "estimator/discovery/candidates.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "Eigen/Eigenvalues"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/calibration_model.h"
+#include "estimator/discovery/statistics.h"
+#include "estimator/drift_model.h"
+#include "estimator/rotation.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+using Eigen::Vector3d;
+
+namespace {
+
+constexpr int kRandomWalkGridPoints = 5;  // factors 2, 4, ... 32 above the configured intensity
+// Reference intensity when the configuration has none: a tenth of the paper-era ESG's
+// residual-drift instability [deg/h/sqrt(h)].
+constexpr double kRandomWalkFloorDegHSqrtH = 0.0005;
+
+GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
+  for (GyroConfig& g : c.gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
+
+bool AllFree(const DriftVector& sigma, int first, int count) {
+  for (int i = first; i < first + count; ++i) {
+    if (!(sigma(i) > 0.0)) return false;
+  }
+  return true;
+}
+
+const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
+  for (const GyroEstimate& g : gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
+
+double DegH(double x) { return RadPerSecToDegPerHour(x); }
+
+void AddVectorParameters(const std::string& name, const Vector3d& value, const Vector3d& sigma,
+                         double scale, const std::string& unit, std::vector<Parameter>& out) {
+  for (int i = 0; i < 3; ++i) {
+    out.push_back(Parameter{absl::StrFormat("%s[%d]", name, i), value(i) * scale, sigma(i) * scale, unit});
+  }
+}
+
+bool Effective(const std::vector<Effect>& effects, Effect e) {
+  return effects.empty() || std::find(effects.begin(), effects.end(), e) != effects.end();
+}
+
+}  // namespace
+
+LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
+                                 const SpacecraftConfig& config) {
+  // Step i -> i+1: the star tracker's rotation r_st = Log(conj(q_st,i) q_st,i+1) spans
+  // [t_i - tau, t_i+1 - tau], the gyros' r_g (TRIAD on the spin axes) spans [t_i, t_i+1]; to first
+  // order r_st - r_g = -tau (w(t_i+1) - w(t_i)), body axes. Weighted by the star tracker's noise
+  // (twice its variance per step), robust to outliers (5 MAD), least squares in tau.
+  LatencyEstimate out;
+  const Vector3d noise = config.star_tracker.noise.cwiseMax(ArcsecToRad(0.1));
+  const Vector3d weight = (2.0 * noise.cwiseAbs2()).cwiseInverse();
+  std::vector<double> e, a, w;
+  for (size_t i = 0; i + 1 < frames.size(); ++i) {
+    const auto& s0 = frames[i].star_tracker;
+    const auto& s1 = frames[i + 1].star_tracker;
+    if (!s0 || !s1 || !s0->valid || !s1->valid) continue;
+    if (!rates.gyro_valid[i] || !rates.gyro_valid[i + 1] || !rates.gyro_step_valid[i]) continue;
+    const double dt = absl::ToDoubleSeconds(frames[i + 1].time - frames[i].time);
+    if (!(dt > 0)) continue;
+    const Vector3d r_st = LogQuaternion(s0->q_in_b.normalized().conjugate() * s1->q_in_b.normalized());
+    const Vector3d& r_g = rates.gyro_step[i];
+    const Vector3d dw = rates.gyro[i + 1] - rates.gyro[i];
+    for (int k = 0; k < 3; ++k) {
+      e.push_back(r_st(k) - r_g(k));
+      a.push_back(-dw(k));
+      w.push_back(weight(k));
+    }
+  }
+  auto solve = [&](const std::vector<bool>& use, double& tau, double& info) {
+    double num = 0.0, den = 0.0;
+    for (size_t j = 0; j < e.size(); ++j) {
+      if (!use[j]) continue;
+      num += a[j] * w[j] * e[j];
+      den += a[j] * w[j] * a[j];
+    }
+    info = den;
+    tau = den > 0 ? num / den : 0.0;
+  };
+  std::vector<bool> use(e.size(), true);
+  double tau = 0.0, info = 0.0;
+  solve(use, tau, info);
+  for (int iteration = 0; iteration < 2; ++iteration) {
+    std::vector<double> r(e.size());
+    for (size_t j = 0; j < e.size(); ++j) r[j] = std::abs(e[j] - a[j] * tau) * std::sqrt(w[j]);
+    std::vector<double> sorted = r;
+    if (sorted.empty()) break;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double mad = 1.4826 * sorted[sorted.size() / 2];
+    for (size_t j = 0; j < e.size(); ++j) use[j] = r[j] <= 5.0 * std::max(mad, 1e-12);
+    solve(use, tau, info);
+  }
+  // Residual scale for the sigma (the noise weights assume the configured noise).
+  double chi2 = 0.0;
+  int n = 0;
+  for (size_t j = 0; j < e.size(); ++j) {
+    if (!use[j]) continue;
+    chi2 += std::pow(e[j] - a[j] * tau, 2) * w[j];
+    ++n;
+  }
+  out.samples = n / 3;
+  if (!(info > 0) || n < 6) return out;
+  const double scale = std::sqrt(std::max(1.0, chi2 / std::max(1, n - 1)));
+  out.latency = tau;
+  out.sigma = scale / std::sqrt(info);
+  // Observable when the rate changes determine tau to better than 0.5 s.
+  out.observable = out.sigma < 0.5;
+  return out;
+}
+
+std::string CandidateName(const Candidate& c) {
+  if (c.gyro > 0) return absl::StrCat(EffectId(c.effect), "[", c.gyro, "]");
+  return EffectId(c.effect);
+}
+
+std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
+                                      const std::vector<Effect>& effects) {
+  std::vector<Candidate> out;
+  auto added = [&](const std::string& name) {
+    return std::find(model.added.begin(), model.added.end(), name) != model.added.end();
+  };
+  for (int id : gyros) {
+    const GyroConfig* g = model.config.FindGyro(id);
+    if (g == nullptr) continue;
+    const DriftVector sigma = g->model_sigma.AsVector();
+    if (Effective(effects, Effect::kRotorDisplacement) && !AllFree(sigma, kThetaC1, 6)) {
+      out.push_back({Effect::kRotorDisplacement, id});
+    }
+    if (Effective(effects, Effect::kFourthHarmonic) && !AllFree(sigma, kThetaK0, 1)) {
+      out.push_back({Effect::kFourthHarmonic, id});
+    }
+    if (Effective(effects, Effect::kUnequalStiffness) && !AllFree(sigma, kThetaMu, 6)) {
+      out.push_back({Effect::kUnequalStiffness, id});
+    }
+    if (Effective(effects, Effect::kGyroMisalignment) && !(g->misalignment_sigma > 0.0)) {
+      out.push_back({Effect::kGyroMisalignment, id});
+    }
+  }
+  // A rotation common to every gyro is already in the model when every running gyro's
+  // misalignment is estimated.
+  bool any_fixed_mounting = false;
+  for (int id : gyros) {
+    const GyroConfig* g = model.config.FindGyro(id);
+    if (g != nullptr && !(g->misalignment_sigma > 0.0)) any_fixed_mounting = true;
+  }
+  if (Effective(effects, Effect::kStarTrackerMisalignment) && any_fixed_mounting &&
+      !added(EffectId(Effect::kStarTrackerMisalignment))) {
+    out.push_back({Effect::kStarTrackerMisalignment, 0});
+  }
+  if (Effective(effects, Effect::kStarTrackerLatency) && !added(EffectId(Effect::kStarTrackerLatency))) {
+    out.push_back({Effect::kStarTrackerLatency, 0});
+  }
+  if (Effective(effects, Effect::kRandomWalkDrift) && model.options.model.random_walk &&
+      !added(EffectId(Effect::kRandomWalkDrift))) {
+    out.push_back({Effect::kRandomWalkDrift, 0});
+  }
+  return out;
+}
+
+ProfiledDeviance Profile(const ModelRun& run) {
+  const Deviance d = ComputeDeviance(run);
+  ProfiledDeviance p;
+  p.components = d.components;
+  p.steps = d.steps;
+  if (d.components == 0) return p;
+  p.dispersion = std::max(d.nis_sum / d.components, 1e-12);
+  const double log_det = d.value - d.nis_sum;
+  // -2 log L with S -> phi S, minimised over phi: N ln phi + sum log det S + N.
+  p.value = d.components * std::log(p.dispersion) + log_det + d.components;
+  return p;
+}
+
+void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
+                               int gyro, CandidateFit& fit) {
+  const GyroEstimate* e = FindEstimate(fit.run.gyros, gyro);
+  if (e == nullptr) return;
+  const Vector3d C1 = e->coefficients.C1, C2 = e->coefficients.C2;
+  const Vector3d s1 = e->sigma.C1, s2 = e->sigma.C2;
+  // DESIGN §3: C1 = (C10 + C20) lambda, C2 = -5 C20 lambda. lambda: dominant direction of the
+  // pair, sign with C1 . lambda > 0.
+  const Eigen::Matrix3d M = C1 * C1.transpose() + C2 * C2.transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(M);
+  Vector3d lambda = eig.eigenvectors().col(2);
+  if (C1.dot(lambda) < 0) lambda = -lambda;
+  const double a = C1.dot(lambda);  // C10 + C20
+  const double b = C2.dot(lambda);  // -5 C20
+  const double C20 = -b / 5.0, C10 = a - C20;
+  const double cos_line = (C1.norm() > 0 && C2.norm() > 0)
+                              ? std::abs(C1.dot(C2)) / (C1.norm() * C2.norm())
+                              : 1.0;
+  const double line_angle_deg = RadToDeg(std::acos(std::clamp(cos_line, -1.0, 1.0)));
+  // Collinearity test: components of C1, C2 off the common line against their sigmas,
+  // chi-square with 6 - 4 = 2 degrees of freedom (lambda: 2, C10 + C20 and C20: 2).
+  const Vector3d r1 = C1 - a * lambda, r2 = C2 - b * lambda;
+  double chi2 = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    if (s1(i) > 0) chi2 += r1(i) * r1(i) / (s1(i) * s1(i));
+    if (s2(i) > 0) chi2 += r2(i) * r2(i) / (s2(i) * s2(i));
+  }
+  const double p_collinear = ChiSquareSurvival(chi2, 2.0);
+  fit.fitted.push_back({"lineAngleDeg", line_angle_deg, 0.0, "deg"});
+  fit.fitted.push_back({"c10DegH", DegH(C10), 0.0, "deg/h"});
+  fit.fitted.push_back({"c20DegH", DegH(C20), 0.0, "deg/h"});
+  AddVectorParameters("lambda", lambda, Vector3d::Zero(), 1.0, "1", fit.fitted);
+  fit.notes.push_back(absl::StrFormat(
+      "C1 and C2 lie %.1f deg apart as lines (C1.C2 %s 0); a displaced rotor makes them collinear "
+      "(DESIGN §3): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f %.2f] "
+      "(case axes), off-line residual chi2 = %.1f on 2 dof, p = %.2g",
+      line_angle_deg, C1.dot(C2) < 0 ? "<" : ">=", DegH(C10), DegH(C20), lambda.x(), lambda.y(),
+      lambda.z(), chi2, p_collinear));
+  // eq. (3): displacement from the mean suspension offset voltages.
+  Vector3d sum = Vector3d::Zero(), sum2 = Vector3d::Zero();
+  int n = 0;
+  for (const TelemetryFrame& f : frames) {
+    const auto& r = f.gyros[gyro - 1];
+    if (!r.has_value() || !r->u_k_mv.has_value() || !r->u_k_mv->allFinite()) continue;
+    sum += *r->u_k_mv;
+    sum2 += r->u_k_mv->cwiseAbs2();
+    ++n;
+  }
+  if (n < 2) {
+    fit.notes.push_back("no suspension offset voltages in the recording: displacement not checked against eq. (3)");
+    return;
+  }
+  const Vector3d mean_mv = sum / n;
+  const Vector3d sd_mv = (sum2 / n - mean_mv.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
+  const SuspensionConfig& s = config.suspension;
+  Vector3d displacement_um;
+  for (int i = 0; i < 3; ++i) {
+    displacement_um(i) = DisplacementFromOffsetVoltage(mean_mv(i) * kVoltsPerMv, s.amplifier_gain,
+                                                       s.reference_voltage, s.gap) /
+                         kMetresPerUm;
+  }
+  AddVectorParameters("offsetVoltageMv", mean_mv, sd_mv / std::sqrt(static_cast<double>(n)), 1.0, "mV",
+                      fit.fitted);
+  AddVectorParameters("displacementUm", displacement_um, Vector3d::Zero(), 1.0, "um", fit.fitted);
+  const double size_um = displacement_um.norm();
+  fit.fitted.push_back({"displacementSizeUm", size_um, 0.0, "um"});
+  if (size_um > 0.0) {
+    const double cos_d = std::abs(displacement_um.normalized().dot(lambda));
+    const double angle_deg = RadToDeg(std::acos(std::clamp(cos_d, -1.0, 1.0)));
+    fit.fitted.push_back({"lambdaToVoltageAngleDeg", angle_deg, 0.0, "deg"});
+    fit.notes.push_back(absl::StrFormat(
+        "mean suspension offset voltages [%.1f %.1f %.1f] mV give by eq. (3) a rotor displacement "
+        "of [%.2f %.2f %.2f] um (|%.2f| um, k = %.0f, U0 = %.0f V, d0 = %.0f um), %.1f deg from the "
+        "fitted direction lambda",
+        mean_mv.x(), mean_mv.y(), mean_mv.z(), displacement_um.x(), displacement_um.y(),
+        displacement_um.z(), size_um, s.amplifier_gain, s.reference_voltage, s.gap / kMetresPerUm,
+        angle_deg));
+  }
+}
+
+absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {
+  const DiagnoseOptions& opt = *ctx.options;
+  CandidateFit fit;
+  fit.candidate = candidate;
+  fit.model = *ctx.model;
+  fit.model.added.push_back(CandidateName(candidate));
+  SpacecraftConfig& config = fit.model.config;
+  const std::vector<TelemetryFrame>& frames = *ctx.frames;
+  auto run_model = [&](const ModelState& m, ModelRun& out) -> absl::Status {
+    const std::vector<TelemetryFrame> corrected = CorrectStarTracker(frames, *ctx.rates, m.correction);
+    auto run = RunModel(m.config, m.options, corrected);
+    ++fit.runs;
+    if (!run.ok()) return run.status();
+    out = std::move(*run);
+    return absl::OkStatus();
+  };
+  auto set_sigma = [&](int first, int count, double sigma) {
+    GyroConfig* g = FindGyroMutable(config, candidate.gyro);
+    DriftVector s = g->model_sigma.AsVector();
+    for (int i = first; i < first + count; ++i) {
+      if (!(s(i) > 0.0)) s(i) = sigma;
+    }
+    g->model_sigma = DriftCoefficients::FromVector(s);
+  };
+
+  switch (candidate.effect) {
+    case Effect::kRotorDisplacement:
+    case Effect::kFourthHarmonic:
+    case Effect::kUnequalStiffness: {
+      if (FindGyroMutable(config, candidate.gyro) == nullptr) {
+        return absl::InvalidArgumentError(absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+      }
+      int first = kThetaC1, count = 6;
+      double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+      if (candidate.effect == Effect::kFourthHarmonic) {
+        first = kThetaK0;
+        count = 1;
+        sigma = DegPerHourToRadPerSec(opt.k0_sigma_deg_h);
+      } else if (candidate.effect == Effect::kUnequalStiffness) {
+        first = kThetaMu;
+        count = 6;
+        sigma = DegPerHourToRadPerSec(opt.mu_nu_sigma_deg_h);
+      }
+      const DriftVector before = FindGyroMutable(config, candidate.gyro)->model_sigma.AsVector();
+      set_sigma(first, count, sigma);
+      fit.parameters = 0;
+      for (int i = first; i < first + count; ++i) fit.parameters += before(i) > 0.0 ? 0 : 1;
+      if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
+      const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro);
+      if (e != nullptr) {
+        const DriftVector v = e->coefficients.AsVector(), sg = e->sigma.AsVector();
+        for (int i = first; i < first + count; ++i) {
+          fit.fitted.push_back({CoefficientName(i), DegH(v(i)), DegH(sg(i)), "deg/h"});
+        }
+        const DriftVector configured = ctx.model->config.FindGyro(candidate.gyro)->model.AsVector();
+        if (candidate.effect == Effect::kFourthHarmonic) {
+          fit.notes.push_back(absl::StrFormat("k0 of gyro %d calibrates to %.4f +- %.4f deg/h; the model held %.4f deg/h",
+                                              candidate.gyro, DegH(v(kThetaK0)), DegH(sg(kThetaK0)),
+                                              DegH(configured(kThetaK0))));
+        }
+      }
+      if (candidate.effect == Effect::kRotorDisplacement) {
+        DescribeRotorDisplacement(config, frames, candidate.gyro, fit);
+      }
+      return fit;
+    }
+    case Effect::kGyroMisalignment: {
+      GyroConfig* g = FindGyroMutable(config, candidate.gyro);
+      if (g == nullptr) return absl::InvalidArgumentError(absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+      g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+      fit.parameters = 3;
+      if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
+      if (const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro)) {
+        AddVectorParameters("misalignmentArcsec", e->misalignment_b, e->misalignment_sigma_b,
+                            RadToArcsec(1.0), "arcsec", fit.fitted);
+      }
+      return fit;
+    }
+    case Effect::kStarTrackerMisalignment: {
+      // Stage 1: every running gyro's misalignment free; the common part is the star tracker's.
+      ModelState free_all = fit.model;
+      for (int id : ctx.gyros) {
+        GyroConfig* g = FindGyroMutable(free_all.config, id);
+        if (g != nullptr && !(g->misalignment_sigma > 0.0)) {
+          g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+        }
+      }
+      ModelRun stage1;
+      if (absl::Status s = run_model(free_all, stage1); !s.ok()) return s;
+      Vector3d info = Vector3d::Zero(), weighted = Vector3d::Zero();
+      for (int id : ctx.gyros) {
+        const GyroEstimate* e = FindEstimate(stage1.gyros, id);
+        if (e == nullptr) continue;
+        for (int i = 0; i < 3; ++i) {
+          const double s = e->misalignment_sigma_b(i);
+          if (!(s > 0)) continue;
+          info(i) += 1.0 / (s * s);
+          weighted(i) += e->misalignment_b(i) / (s * s);
+        }
+      }
+      Vector3d m = Vector3d::Zero(), m_sigma = Vector3d::Zero();
+      for (int i = 0; i < 3; ++i) {
+        if (info(i) > 0) {
+          m(i) = -weighted(i) / info(i);  // phi_g = -m (see the file comment)
+          m_sigma(i) = 1.0 / std::sqrt(info(i));
+        }
+      }
+      // Commonality: the per-gyro estimates against their mean.
+      double chi2 = 0.0;
+      int dof = 0;
+      std::string per_gyro;
+      for (int id : ctx.gyros) {
+        const GyroEstimate* e = FindEstimate(stage1.gyros, id);
+        if (e == nullptr) continue;
+        absl::StrAppend(&per_gyro, absl::StrFormat(" gyro %d [%.1f %.1f %.1f]", id, RadToArcsec(e->misalignment_b.x()),
+                                                   RadToArcsec(e->misalignment_b.y()),
+                                                   RadToArcsec(e->misalignment_b.z())));
+        for (int i = 0; i < 3; ++i) {
+          const double s = e->misalignment_sigma_b(i);
+          if (s > 0) {
+            chi2 += std::pow((e->misalignment_b(i) - m(i)) / s, 2);
+            ++dof;
+          }
+        }
+      }
+      dof = std::max(1, dof - 3);
+      fit.notes.push_back(absl::StrFormat(
+          "with every gyro's mounting free the fitted misalignments are (arcsec, body axes):%s; "
+          "their spread about the common rotation: chi2 = %.1f on %d dof, p = %.2g",
+          per_gyro, chi2, dof, ChiSquareSurvival(chi2, dof)));
+      // Stage 2: the star tracker corrected by the common rotation, mountings as configured.
+      fit.model.correction.misalignment_b = ctx.model->correction.misalignment_b + m;
+      fit.parameters = 3;
+      fit.searched = true;
+      if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
+      AddVectorParameters("misalignmentArcsec", fit.model.correction.misalignment_b, m_sigma,
+                          RadToArcsec(1.0), "arcsec", fit.fitted);
+      return fit;
+    }
+    case Effect::kStarTrackerLatency: {
+      // A first, model-free estimate from the rates (LatencyFromRates), then a 1-D search of the
+      // filter's likelihood around it: the filter's response to a wrong latency is far from
+      // affine (each regime change leaves a step of w tau that eq. (14) rejects and resets
+      // absorb), so a search started at zero can stop in a false minimum.
+      const LatencyEstimate first = LatencyFromRates(*ctx.frames, *ctx.rates, ctx.model->config);
+      fit.parameters = 1;
+      fit.searched = true;
+      if (!first.observable) {
+        fit.parameters = 0;
+        fit.run = *ctx.model_run;
+        fit.notes.push_back("the body rate never changed enough to observe a star-tracker latency "
+                            "(in a steady rotation a latency is a constant misalignment)");
+        return fit;
+      }
+      fit.notes.push_back(absl::StrFormat(
+          "star-tracker against gyro step rotations over %d rate changes: latency %.0f +- %.0f ms "
+          "(model-free)",
+          first.samples, first.latency * 1e3, first.sigma * 1e3));
+      const double tau0 = ctx.model->correction.latency;
+      const double centre = tau0 + first.latency;
+      const double step = std::clamp(2.0 * first.sigma, 0.005, 0.05);
+      std::vector<double> taus;
+      for (int k = -2; k <= 2; ++k) taus.push_back(centre + k * step);
+      std::vector<double> value(taus.size());
+      std::vector<ModelRun> runs(taus.size());
+      for (size_t k = 0; k < taus.size(); ++k) {
+        ModelState m = fit.model;
+        m.correction.latency = taus[k];
+        if (absl::Status s = run_model(m, runs[k]); !s.ok()) return s;
+        value[k] = Profile(runs[k]).value;
+      }
+      size_t best = std::min_element(value.begin(), value.end()) - value.begin();
+      double tau = taus[best], tau_sigma = first.sigma;
+      double best_value = value[best];
+      fit.run = std::move(runs[best]);
+      if (best > 0 && best + 1 < taus.size()) {
+        const double x0 = taus[best - 1], x1 = taus[best], x2 = taus[best + 1];
+        const double y0 = value[best - 1], y1 = value[best], y2 = value[best + 1];
+        const double d01 = (y1 - y0) / (x1 - x0), d12 = (y2 - y1) / (x2 - x1);
+        const double curvature = 2.0 * (d12 - d01) / (x2 - x0);  // D''
+        if (curvature > 0) {
+          // -2 log L = const + (tau - tau_hat)^2 / sigma^2; D'(x) = d01 + D'' (x - (x0 + x1) / 2).
+          tau_sigma = std::sqrt(2.0 / curvature);
+          const double x_star = std::clamp(0.5 * (x0 + x1) - d01 / curvature, x0, x2);
+          if (std::abs(x_star - x1) > 1e-3) {
+            ModelState m = fit.model;
+            m.correction.latency = x_star;
+            ModelRun r;
+            if (absl::Status s = run_model(m, r); !s.ok()) return s;
+            const double v = Profile(r).value;
+            if (v < best_value) {
+              best_value = v;
+              tau = x_star;
+              fit.run = std::move(r);
+            }
+          }
+        }
+      }
+      fit.model.correction.latency = tau;
+      fit.fitted.push_back({"latencyMs", tau * 1e3, tau_sigma * 1e3, "ms"});
+      std::string grid_text;
+      for (size_t k = 0; k < taus.size(); ++k) {
+        absl::StrAppend(&grid_text, absl::StrFormat(" %.0f:%.1f", taus[k] * 1e3, value[k] - best_value));
+      }
+      fit.notes.push_back(absl::StrCat("filter likelihood around it (ms: -2 log L above the best):", grid_text));
+      return fit;
+    }
+    case Effect::kRandomWalkDrift: {
+      const double q0 = ctx.model->config.random_walk;
+      const double base = q0 > 0.0 ? q0 : DegPerHourSqrtHourToSi(kRandomWalkFloorDegHSqrtH);
+      std::vector<double> grid, value;
+      ModelRun best_run;
+      double best = 0.0;
+      int best_k = -1;
+      for (int k = 0; k < kRandomWalkGridPoints; ++k) {
+        const double q = base * std::pow(2.0, q0 > 0.0 ? k + 1 : k);
+        ModelState m = fit.model;
+        m.config.random_walk = q;
+        ModelRun r;
+        if (absl::Status s = run_model(m, r); !s.ok()) return s;
+        const double d = Profile(r).value;
+        grid.push_back(q);
+        value.push_back(d);
+        if (best_k < 0 || d < best) {
+          best = d;
+          best_k = k;
+          best_run = std::move(r);
+        }
+      }
+      fit.model.config.random_walk = grid[best_k];
+      fit.run = std::move(best_run);
+      fit.parameters = 1;
+      fit.searched = true;
+      // Parabola in log q through the best point and its neighbours for the reported intensity.
+      double q_hat = grid[best_k];
+      if (best_k > 0 && best_k + 1 < static_cast<int>(grid.size())) {
+        const double y0 = value[best_k - 1], y1 = value[best_k], y2 = value[best_k + 1];
+        const double curvature = y0 - 2 * y1 + y2;
+        if (curvature > 0) {
+          const double offset = 0.5 * (y0 - y2) / curvature;  // in grid steps (factor 2)
+          q_hat = grid[best_k] * std::pow(2.0, std::clamp(offset, -1.0, 1.0));
+        }
+      }
+      fit.fitted.push_back({"randomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q_hat), 0.0, "deg/h/sqrt(h)"});
+      fit.fitted.push_back({"configuredRandomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q0), 0.0, "deg/h/sqrt(h)"});
+      std::string grid_text;
+      for (size_t k = 0; k < grid.size(); ++k) {
+        absl::StrAppend(&grid_text, absl::StrFormat(" %.4g:%.1f", SiToDegPerHourSqrtHour(grid[k]),
+                                                    value[k] - value[best_k]));
+      }
+      fit.notes.push_back(absl::StrCat("likelihood over the intensity grid (deg/h/sqrt(h): -2 log L above the best):", grid_text));
+      return fit;
+    }
+  }
+  return absl::InternalError("unknown effect");
+}
+
+}  // namespace esg::estimator::discovery

@@ -1,0 +1,109 @@
+// The library of candidate effects (DESIGN §6) and how each is added to a model and fitted
+// (docs/discovery.md, "How each effect enters the model"):
+//   rotor_displacement (gyro g)   free C1, C2 of g with prior c_sigma (eq. (8)-(10))
+//   fourth_harmonic (gyro g)      free k0 of g with prior k0_sigma (eq. (1))
+//   unequal_stiffness (gyro g)    free mu, nu of g with prior mu_nu_sigma (eq. (1))
+//   gyro_misalignment (gyro g)    misalignment of g estimated with prior misalignment_sigma
+//   star_tracker_misalignment     one rotation m common to all gyros: first estimated as the
+//                                 information-weighted mean of free per-gyro misalignments, then
+//                                 the star tracker corrected by q_st (x) Exp(-m) (3 parameters)
+//   star_tracker_latency          one delay tau: q_st corrected by the body rate over tau
+//                                 (model_run.h); tau by prediction-error least squares on the
+//                                 innovations' finite-difference sensitivity (1 parameter)
+//   random_walk_drift             the common random-walk intensity, by a log-grid search of the
+//                                 likelihood above the configured one (1 parameter)
+// Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
+// rotation is not when every running gyro's misalignment is already estimated.
+#ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
+#define ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "estimator/discovery/diagnose.h"
+#include "estimator/discovery/model_run.h"
+#include "estimator/discovery/regimes.h"
+#include "estimator/session.h"
+#include "estimator/spacecraft_config.h"
+
+namespace esg::estimator::discovery {
+
+// A model: the filter configuration (free coefficients, misalignment priors, random walk) and
+// the star-tracker correction.
+struct ModelState {
+  SpacecraftConfig config;
+  SessionOptions options;
+  StarTrackerCorrection correction;
+  std::vector<std::string> added;  // descriptions of the effects added so far
+};
+
+struct Candidate {
+  Effect effect;
+  int gyro = 0;  // 0 for effects common to the spacecraft
+};
+std::string CandidateName(const Candidate& c);  // "rotor_displacement[2]"
+
+// The candidates `model` lacks among `effects` (all of DESIGN §6 when empty), for the running
+// gyros.
+std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
+                                      const std::vector<Effect>& effects);
+
+// What the discovery needs to fit a candidate: the recording, the measured rates, the current
+// model's full run and the options.
+struct FitContext {
+  const std::vector<TelemetryFrame>* frames = nullptr;
+  const BodyRates* rates = nullptr;
+  const ModelState* model = nullptr;
+  const ModelRun* model_run = nullptr;
+  const DiagnoseOptions* options = nullptr;
+  std::vector<int> gyros;
+};
+
+struct CandidateFit {
+  Candidate candidate;
+  ModelState model;  // the model with the effect added
+  ModelRun run;      // its full in-sample run
+  int parameters = 0;
+  bool searched = false;  // parameters fitted by search (BIC penalty) rather than freed with a prior
+  std::vector<Parameter> fitted;
+  std::vector<std::string> notes;
+  int runs = 0;  // filter runs spent
+};
+
+// Fits one candidate (1 to 5 filter runs, sequential; candidates run in parallel).
+// Errors: InvalidArgument for a gyro that is not configured; those of RunModel.
+absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& context);
+
+// Model-free first estimate of a star-tracker latency: the star tracker's rotation between
+// consecutive samples against the gyros' (TRIAD on the inertially fixed spin axes) differs by
+// -tau times the change of the body rate over the step. Observable only where the rate changes
+// (slews, regime changes): in a steady rotation a latency is a constant misalignment.
+struct LatencyEstimate {
+  bool observable = false;
+  double latency = 0.0;  // [s]
+  double sigma = 0.0;    // [s]
+  int samples = 0;       // steps used
+};
+LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
+                                 const SpacecraftConfig& config);
+
+// Profiled deviance of a run (ComputeDeviance, then the common noise scale phi = nis / m
+// profiled out: N ln(phi) + sum log det S + N), and phi.
+struct ProfiledDeviance {
+  double value = 0.0;
+  double dispersion = 1.0;
+  int components = 0;
+  int steps = 0;
+};
+ProfiledDeviance Profile(const ModelRun& run);
+
+// Physics of a fitted rotor displacement (DESIGN §3): C1 = (C10 + C20) lambda,
+// C2 = -5 C20 lambda; lambda the dominant common direction of C1 and C2, and the displacement
+// implied by the mean suspension offset voltages through eq. (3). Appended to `fit`.
+void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
+                               int gyro, CandidateFit& fit);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_

@@ -1,0 +1,292 @@
+#include "estimator/discovery/regimes.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "estimator/rotation.h"
+#include "estimator/triad.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+using Eigen::Matrix3d;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+
+namespace {
+
+// Body vectors of the spin axes of every gyro present in the frame (C_b_k h_k), by gyro index.
+std::array<std::optional<Vector3d>, kMaxGyros> BodySpinAxes(const SpacecraftConfig& config,
+                                                            const TelemetryFrame& frame) {
+  std::array<std::optional<Vector3d>, kMaxGyros> v;
+  for (const GyroConfig& g : config.gyros) {
+    const auto& r = frame.gyros[g.id - 1];
+    if (r.has_value() && r->h_k.allFinite() && r->h_k.norm() > 0.5) {
+      v[g.id - 1] = (g.C_b_k * r->h_k.normalized()).eval();
+    }
+  }
+  return v;
+}
+
+// Rotation vector of q_b1_b2 (body at frame a to body at frame b) from two inertially fixed spin
+// axes seen in both frames: v(a) = C_b1_b2 v(b). nullopt without two well separated gyros.
+std::optional<Vector3d> GyroStepRotation(const std::array<std::optional<Vector3d>, kMaxGyros>& a,
+                                         const std::array<std::optional<Vector3d>, kMaxGyros>& b) {
+  int best_i = -1, best_j = -1;
+  double best = 0.1;  // sin of the angle between the axes, at least ~6 deg
+  for (int i = 0; i < kMaxGyros; ++i) {
+    for (int j = i + 1; j < kMaxGyros; ++j) {
+      if (!a[i] || !a[j] || !b[i] || !b[j]) continue;
+      const double s = a[i]->cross(*a[j]).norm();
+      if (s > best) {
+        best = s;
+        best_i = i;
+        best_j = j;
+      }
+    }
+  }
+  if (best_i < 0) return std::nullopt;
+  // PairAttitude(u_a, u_b, w_a, w_b) returns q with u = C w; here u = v(a), w = v(b).
+  auto q = PairAttitude(*a[best_i], *a[best_j], *b[best_i], *b[best_j]);
+  if (!q.ok()) return std::nullopt;
+  return LogQuaternion(*q);
+}
+
+std::optional<Quaterniond> ValidStarTracker(const TelemetryFrame& f) {
+  if (!f.star_tracker.has_value() || !f.star_tracker->valid) return std::nullopt;
+  const Quaterniond& q = f.star_tracker->q_in_b;
+  if (!q.coeffs().allFinite() || q.norm() < 0.5) return std::nullopt;
+  return q.normalized();
+}
+
+// Central rate per frame from per-step rotation vectors (step i: frame i -> i+1).
+void CentralRates(const std::vector<std::optional<Vector3d>>& step_rotation,
+                  const std::vector<TelemetryFrame>& frames, std::vector<Vector3d>& rate,
+                  std::vector<bool>& valid) {
+  const size_t n = frames.size();
+  rate.assign(n, Vector3d::Zero());
+  valid.assign(n, false);
+  std::vector<std::optional<Vector3d>> step_rate(step_rotation.size());
+  for (size_t i = 0; i < step_rotation.size(); ++i) {
+    if (!step_rotation[i]) continue;
+    const double dt = absl::ToDoubleSeconds(frames[i + 1].time - frames[i].time);
+    if (dt > 0) step_rate[i] = (*step_rotation[i] / dt).eval();
+  }
+  for (size_t i = 0; i < n; ++i) {
+    const std::optional<Vector3d>* before = i > 0 ? &step_rate[i - 1] : nullptr;
+    const std::optional<Vector3d>* after = i + 1 < n ? &step_rate[i] : nullptr;
+    const bool b = before && before->has_value();
+    const bool a = after && after->has_value();
+    if (a && b) {
+      rate[i] = 0.5 * (**before + **after);
+    } else if (a) {
+      rate[i] = **after;
+    } else if (b) {
+      rate[i] = **before;
+    } else {
+      continue;
+    }
+    valid[i] = true;
+  }
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const size_t mid = v.size() / 2;
+  std::nth_element(v.begin(), v.begin() + mid, v.end());
+  return v[mid];
+}
+
+}  // namespace
+
+const char* RegimeName(Regime r) {
+  switch (r) {
+    case Regime::kInertialHold:
+      return "inertial_hold";
+    case Regime::kOrbital:
+      return "orbital";
+    case Regime::kRotation:
+      return "rotation";
+    case Regime::kSlew:
+      return "slew";
+  }
+  return "?";
+}
+
+BodyRates MeasureBodyRates(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames) {
+  BodyRates out;
+  const size_t n = frames.size();
+  std::vector<std::optional<Vector3d>> gyro_steps(n > 0 ? n - 1 : 0), st_steps(n > 0 ? n - 1 : 0);
+  std::array<std::optional<Vector3d>, kMaxGyros> prev_axes;
+  std::optional<Quaterniond> prev_q;
+  for (size_t i = 0; i < n; ++i) {
+    const auto axes = BodySpinAxes(config, frames[i]);
+    const auto q = ValidStarTracker(frames[i]);
+    if (i > 0) {
+      gyro_steps[i - 1] = GyroStepRotation(prev_axes, axes);
+      if (q && prev_q) st_steps[i - 1] = LogQuaternion(prev_q->conjugate() * *q);
+    }
+    prev_axes = axes;
+    prev_q = q;
+  }
+  CentralRates(gyro_steps, frames, out.gyro, out.gyro_valid);
+  out.gyro_step.assign(gyro_steps.size(), Vector3d::Zero());
+  out.gyro_step_valid.assign(gyro_steps.size(), false);
+  for (size_t i = 0; i < gyro_steps.size(); ++i) {
+    if (gyro_steps[i]) {
+      out.gyro_step[i] = *gyro_steps[i];
+      out.gyro_step_valid[i] = true;
+    }
+  }
+  CentralRates(st_steps, frames, out.star_tracker, out.star_tracker_valid);
+  out.best.assign(n, Vector3d::Zero());
+  for (size_t i = 0; i < n; ++i) {
+    if (out.gyro_valid[i]) {
+      out.best[i] = out.gyro[i];
+    } else if (out.star_tracker_valid[i]) {
+      out.best[i] = out.star_tracker[i];
+    }
+  }
+  return out;
+}
+
+std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
+                                    const RegimeOptions& options) {
+  std::vector<RegimeSpan> spans;
+  const int n = static_cast<int>(frames.size());
+  if (n == 0) return spans;
+  // Rate per frame: star tracker where available, else gyros (DESIGN §6).
+  std::vector<std::optional<Vector3d>> w(n);
+  for (int i = 0; i < n; ++i) {
+    if (rates.star_tracker_valid[i]) {
+      w[i] = rates.star_tracker[i];
+    } else if (rates.gyro_valid[i]) {
+      w[i] = rates.gyro[i];
+    }
+  }
+  // Classify each frame by the window centred on it (two pointers over time).
+  std::vector<Regime> label(n, Regime::kSlew);
+  std::vector<double> rate_of(n, 0.0);
+  std::vector<Vector3d> axis_of(n, Vector3d::Zero());
+  const absl::Duration half = absl::Seconds(options.window / 2.0);
+  int lo = 0, hi = 0;
+  for (int i = 0; i < n; ++i) {
+    while (frames[lo].time < frames[i].time - half) ++lo;
+    while (hi + 1 < n && frames[hi + 1].time <= frames[i].time + half) ++hi;
+    std::vector<double> mags;
+    std::vector<Vector3d> vecs;
+    for (int j = lo; j <= hi; ++j) {
+      if (!w[j]) continue;
+      mags.push_back(w[j]->norm());
+      vecs.push_back(*w[j]);
+    }
+    if (mags.size() < 3) continue;  // no rate: slew (unknown) until neighbours decide
+    const double med = Median(mags);
+    rate_of[i] = med;
+    if (med < options.hold_rate) {
+      label[i] = Regime::kInertialHold;
+      continue;
+    }
+    // Robust steadiness: the central 80% of magnitudes within +-steady_magnitude of the median,
+    // and the mean resultant of the unit axes (outlier steps excluded by magnitude).
+    std::vector<double> dev;
+    Vector3d resultant = Vector3d::Zero();
+    int used = 0;
+    for (size_t k = 0; k < mags.size(); ++k) {
+      dev.push_back(std::abs(mags[k] - med) / med);
+      if (std::abs(mags[k] - med) <= 0.5 * med) {
+        resultant += vecs[k] / mags[k];
+        ++used;
+      }
+    }
+    std::sort(dev.begin(), dev.end());
+    const double spread = dev[static_cast<size_t>(0.8 * (dev.size() - 1))];
+    const double steadiness = used > 0 ? resultant.norm() / used : 0.0;
+    axis_of[i] = used > 0 ? resultant.normalized() : Vector3d::Zero();
+    if (spread > options.steady_magnitude || steadiness < options.steady_axis) {
+      label[i] = Regime::kSlew;
+      continue;
+    }
+    const double period = 2.0 * kPi / med;
+    label[i] = (period >= options.orbital_period_min && period <= options.orbital_period_max)
+                   ? Regime::kOrbital
+                   : Regime::kRotation;
+  }
+  // Run-length spans.
+  struct Run {
+    Regime regime;
+    int first, last;
+  };
+  std::vector<Run> runs;
+  for (int i = 0; i < n; ++i) {
+    if (runs.empty() || runs.back().regime != label[i]) {
+      runs.push_back({label[i], i, i});
+    } else {
+      runs.back().last = i;
+    }
+  }
+  auto duration = [&](const Run& r) {
+    return absl::ToDoubleSeconds(frames[r.last].time - frames[r.first].time) +
+           (r.last + 1 < n ? absl::ToDoubleSeconds(frames[r.last + 1].time - frames[r.last].time) : 0.0);
+  };
+  // Fold short runs: between two runs of one regime into that regime, otherwise into a slew.
+  bool changed = true;
+  while (changed && runs.size() > 1) {
+    changed = false;
+    for (size_t k = 0; k < runs.size(); ++k) {
+      if (duration(runs[k]) >= options.min_span) continue;
+      const bool has_prev = k > 0, has_next = k + 1 < runs.size();
+      Regime to = Regime::kSlew;
+      if (has_prev && has_next && runs[k - 1].regime == runs[k + 1].regime) to = runs[k - 1].regime;
+      if (runs[k].regime != to) {
+        runs[k].regime = to;
+        changed = true;
+      }
+    }
+    // Merge neighbours of one regime.
+    std::vector<Run> merged;
+    for (const Run& r : runs) {
+      if (!merged.empty() && merged.back().regime == r.regime) {
+        merged.back().last = r.last;
+      } else {
+        merged.push_back(r);
+      }
+    }
+    if (merged.size() != runs.size()) changed = true;
+    runs = std::move(merged);
+    // A short run that stayed a slew next to slews is merged above; stop when nothing moves.
+    bool any_short_non_slew = false;
+    for (const Run& r : runs) {
+      if (duration(r) < options.min_span && r.regime != Regime::kSlew) any_short_non_slew = true;
+    }
+    if (!any_short_non_slew) break;
+  }
+  for (const Run& r : runs) {
+    RegimeSpan s;
+    s.regime = r.regime;
+    s.first_frame = r.first;
+    s.last_frame = r.last;
+    s.start = frames[r.first].time;
+    s.end = frames[r.last].time;
+    std::vector<double> mags;
+    Vector3d axis = Vector3d::Zero();
+    for (int i = r.first; i <= r.last; ++i) {
+      if (rate_of[i] > 0) mags.push_back(rate_of[i]);
+      axis += axis_of[i];
+    }
+    s.mean_rate = Median(mags);
+    if (s.regime != Regime::kInertialHold && axis.norm() > 0) s.axis_b = axis.normalized();
+    spans.push_back(s);
+  }
+  return spans;
+}
+
+int SpanOfFrame(const std::vector<RegimeSpan>& spans, int frame) {
+  for (size_t k = 0; k < spans.size(); ++k) {
+    if (frame >= spans[k].first_frame && frame <= spans[k].last_frame) return static_cast<int>(k);
+  }
+  return -1;
+}
+
+}  // namespace esg::estimator::discovery

@@ -1,0 +1,44 @@
+// Distribution functions and small robust fits for the discovery's significance tests (DESIGN §6):
+// chi-square tail probabilities and quantiles for likelihood-ratio tests, the F distribution
+// for tests with an estimated dispersion, Bonferroni levels, and a robust line fit.
+#ifndef ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
+#define ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
+
+#include <vector>
+
+namespace esg::estimator::discovery {
+
+// Regularised lower incomplete gamma P(a, x), a > 0, x >= 0 (series / continued fraction).
+double RegularizedGammaP(double a, double x);
+
+// P(X <= x) for X ~ chi-square with k > 0 degrees of freedom.
+double ChiSquareCdf(double x, double k);
+// P(X > x), accurate in the far tail (computed from Q directly).
+double ChiSquareSurvival(double x, double k);
+// x with ChiSquareCdf(x, k) = p, 0 < p < 1 (bisection on the survival function in log space).
+double ChiSquareQuantile(double p, double k);
+
+// Regularised incomplete beta I_x(a, b) (continued fraction).
+double RegularizedBeta(double x, double a, double b);
+// P(F > f) for F ~ F(d1, d2).
+double FSurvival(double f, double d1, double d2);
+
+// Standard normal upper tail P(Z > z).
+double NormalSurvival(double z);
+
+// Least-squares line y = a + b t with a robust second pass (points beyond 5 scaled MADs of the
+// first fit's residuals dropped); returns {a, b} and the residual standard deviation.
+struct RobustLine {
+  double intercept = 0.0;
+  double slope = 0.0;
+  double residual_sigma = 0.0;
+  int used = 0;
+};
+RobustLine FitRobustLine(const std::vector<double>& t, const std::vector<double>& y);
+
+// Lag-1 autocorrelation of a series (mean removed); 0 for fewer than 3 values.
+double Lag1Autocorrelation(const std::vector<double>& x);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
