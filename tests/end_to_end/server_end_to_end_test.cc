@@ -13,7 +13,9 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "server/checkpoint_codec.h"
 #include "storage/coefficient_store.h"
+#include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 
 #ifndef ESGD_PATH
@@ -258,6 +260,43 @@ TEST(EndToEnd, KillNineMidStreamLosesNoAckedFrameAndAppliesNoneTwice) {
   EXPECT_EQ(history.size(), static_cast<size_t>(offline.measurement_steps) *
                                 offline.session->Gyros().size());
   ExpectFinalEstimatesEqualOffline(history, offline);
+}
+
+TEST(EndToEnd, SigtermDrainsTheBacklogAndLeavesACheckpointOfEveryAckedFrame) {
+  const SimulatedRun run = SimulateRun("TERM-1", 6.0, 44);
+  const int64_t n = static_cast<int64_t>(run.frames.size());
+  TempDir dir;
+  const std::string db = dir.File("var/esg.db");
+  {
+    Daemon daemon(db, dir.File("esgd.log"));
+    ASSERT_GT(daemon.port(), 0);
+    auto stub = daemon.Stub();
+    {
+      grpc::ClientContext ctx;
+      esg::v1::ConfigureResponse r;
+      ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &r).ok());
+    }
+    auto streamed = StreamFrames(*stub, run.frames);
+    ASSERT_EQ(streamed.acks.size(), run.frames.size());
+    daemon.Stop(SIGTERM);  // right after the last ack: the filter may still be behind
+  }
+  // The daemon is gone; its database holds every frame and a checkpoint after the last one.
+  auto storage = storage::Storage::Open(db);
+  ASSERT_TRUE(storage.ok()) << storage.status();
+  auto checkpoint = (*storage)->sessions().GetCheckpoint("TERM-1");
+  ASSERT_TRUE(checkpoint.ok()) << checkpoint.status();
+  EXPECT_EQ(checkpoint->last_sequence, n);
+  auto highest = (*storage)->archive().HighestSequence("TERM-1");
+  ASSERT_TRUE(highest.ok());
+  EXPECT_EQ(highest->value_or(0), n);
+  auto server_checkpoint = DecodeCheckpoint(checkpoint->state_blob);
+  ASSERT_TRUE(server_checkpoint.ok()) << server_checkpoint.status();
+  EXPECT_EQ(server_checkpoint->frames_applied, n);
+  ASSERT_TRUE(server_checkpoint->session.has_value());
+  // The checkpoint is the uninterrupted run's state, value for value.
+  const OfflineRun offline = RunOffline(run);
+  const estimator::SessionCheckpoint expected = offline.session->ExportCheckpoint();
+  EXPECT_EQ(server_checkpoint->session->values, expected.values);
 }
 
 TEST(EndToEnd, HundredConcurrentSpacecraftStreamsAreAllAckedAndArchived) {
