@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   esg::client::RegisterSimulate(app, global, &exit_code);
   esg::client::RegisterCalibrate(app, global, &exit_code);
   esg::client::RegisterGap(app, global, &exit_code);
+  esg::client::RegisterDiagnose(app, global, &exit_code);
   esg::client::RegisterConfigure(app, global, &exit_code);
   esg::client::RegisterReplay(app, global, &exit_code);
   esg::client::RegisterStatus(app, global, &exit_code);

@@ -23,6 +23,7 @@ struct GlobalOptions {
 void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterCalibrate(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterGap(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code);
 
 // Server verbs (client/commands/server_*.cc, docs/cli.md).
 void RegisterConfigure(CLI::App& app, GlobalOptions& global, int* exit_code);

@@ -1,0 +1,177 @@
+#include "client/diagnosis_json.h"
+
+#include <cmath>
+
+#include "absl/time/time.h"
+#include "estimator/units.h"
+
+namespace esg::client {
+
+namespace {
+
+using estimator::discovery::CandidateScore;
+using estimator::discovery::DiagnosisReport;
+using estimator::discovery::Evidence;
+using estimator::discovery::Finding;
+using estimator::discovery::FitSummary;
+using estimator::discovery::GapSummary;
+using estimator::discovery::Mismatch;
+using estimator::discovery::Parameter;
+using json = nlohmann::ordered_json;
+
+std::string Utc(absl::Time t) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
+}
+
+// JSON has no infinities or NaN: they become null.
+json Number(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
+
+json ParameterJson(const Parameter& p) {
+  json j{{"name", p.name}, {"value", Number(p.value)}};
+  if (p.sigma > 0) j["sigma"] = Number(p.sigma);
+  j["unit"] = p.unit;
+  return j;
+}
+
+json EvidenceJson(const Evidence& e) {
+  json j{{"deltaDeviance", Number(e.delta_deviance)},
+         {"penalty", Number(e.penalty)},
+         {"parameters", e.parameters},
+         {"pValue", Number(e.lr_p_value)},
+         {"threshold", Number(e.threshold)},
+         {"round", e.round}};
+  if (e.held_out_dof > 0) {
+    j["heldOutNeesBefore"] = Number(e.held_out_nees_before);
+    j["heldOutNeesAfter"] = Number(e.held_out_nees_after);
+    j["heldOutDof"] = e.held_out_dof;
+  }
+  j["notes"] = e.notes;
+  return j;
+}
+
+json FindingJson(const Finding& f) {
+  json j{{"effect", f.effect}};
+  if (f.gyro > 0) j["gyro"] = f.gyro;
+  json params = json::array();
+  for (const Parameter& p : f.parameters) params.push_back(ParameterJson(p));
+  j["parameters"] = params;
+  j["explanation"] = f.explanation;
+  j["evidence"] = EvidenceJson(f.evidence);
+  return j;
+}
+
+json MismatchJson(const Mismatch& m, absl::Time t0) {
+  json j{{"found", m.found}};
+  if (m.gyro > 0) j["gyro"] = m.gyro;
+  if (m.span >= 0 || m.found) {
+    j["start"] = Utc(m.start);
+    j["end"] = Utc(m.end);
+    j["startHours"] = absl::ToDoubleHours(m.start - t0);
+    j["endHours"] = absl::ToDoubleHours(m.end - t0);
+    j["regime"] = m.regime;
+  }
+  j["sizeArcsec"] = Number(m.size_arcsec);
+  j["expectedArcsec"] = Number(m.expected_arcsec);
+  j["excess"] = Number(m.excess_deviance);
+  j["pValue"] = Number(m.p_value);
+  j["lag1Autocorrelation"] = Number(m.lag1_autocorrelation);
+  j["trendPerHour"] = Number(m.trend_per_hour);
+  j["source"] = m.source;
+  return j;
+}
+
+json GapJson(const GapSummary& g, absl::Time t0) {
+  json rates = json::array();
+  for (const auto& [id, rate] : g.gyro_drift_rate_deg_h) rates.push_back(json{{"gyro", id}, {"driftRateDegH", Number(rate)}});
+  return json{{"regime", g.regime},
+              {"start", Utc(g.start)},
+              {"end", Utc(g.end)},
+              {"startHours", absl::ToDoubleHours(g.start - t0)},
+              {"endHours", absl::ToDoubleHours(g.end - t0)},
+              {"driftRateDegH", Number(g.drift_rate_deg_h)},
+              {"finalErrorArcsec", Number(g.final_error_arcsec)},
+              {"nees", Number(g.nees)},
+              {"dof", g.dof},
+              {"gyros", rates}};
+}
+
+json FitJson(const FitSummary& f, absl::Time t0) {
+  json gaps = json::array();
+  for (const GapSummary& g : f.gaps) gaps.push_back(GapJson(g, t0));
+  return json{{"model", f.model},
+              {"residualRmsArcsec", Number(f.residual_rms_arcsec)},
+              {"gapDriftRateDegH", Number(f.gap_drift_rate_deg_h)},
+              {"deviance", Number(f.deviance)},
+              {"dispersion", Number(f.dispersion)},
+              {"heldOutNees", Number(f.held_out_nees)},
+              {"heldOutDof", f.held_out_dof},
+              {"gaps", gaps}};
+}
+
+json CandidateJson(const CandidateScore& c) {
+  json j{{"effect", c.effect}};
+  if (c.gyro > 0) j["gyro"] = c.gyro;
+  j["round"] = c.round;
+  j["parameters"] = c.parameters;
+  j["deltaDeviance"] = Number(c.delta_deviance);
+  j["penalty"] = Number(c.penalty);
+  j["score"] = Number(c.score);
+  j["pValue"] = Number(c.p_value);
+  j["significant"] = c.significant;
+  j["selected"] = c.selected;
+  return j;
+}
+
+}  // namespace
+
+json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
+  const absl::Time t0 = r.first_frame_time;
+  json findings = json::array();
+  for (const Finding& f : r.findings) findings.push_back(FindingJson(f));
+  json regimes = json::array();
+  for (const auto& s : r.regimes) {
+    json j{{"regime", estimator::discovery::RegimeName(s.regime)},
+           {"start", Utc(s.start)},
+           {"end", Utc(s.end)},
+           {"startHours", absl::ToDoubleHours(s.start - t0)},
+           {"endHours", absl::ToDoubleHours(s.end - t0)},
+           {"rateDegS", Number(estimator::RadToDeg(s.mean_rate))}};
+    if (!s.axis_b.isZero()) j["axisBody"] = json::array({s.axis_b.x(), s.axis_b.y(), s.axis_b.z()});
+    regimes.push_back(j);
+  }
+  json candidates = json::array();
+  for (const CandidateScore& c : r.candidates) candidates.push_back(CandidateJson(c));
+  json doc{{"verdict", r.verdict},
+           {"findings", findings},
+           {"mismatch", MismatchJson(r.mismatch, t0)},
+           {"fit", json{{"before", FitJson(r.before, t0)}, {"after", FitJson(r.after, t0)}}},
+           {"regimes", regimes},
+           {"candidates", candidates},
+           {"gyros", r.gyros},
+           {"firstFrame", Utc(t0)},
+           {"frames", r.frames},
+           {"filterRuns", r.filter_runs}};
+  if (include_series) {
+    auto residuals = [](const std::vector<estimator::discovery::ResidualPoint>& v) {
+      json a = json::array();
+      for (const auto& p : v) a.push_back(json::array({p.hours, p.gyro, p.residual_arcsec}));
+      return a;
+    };
+    auto held = [](const std::vector<estimator::discovery::HeldOutPoint>& v) {
+      json a = json::array();
+      for (const auto& p : v) a.push_back(json::array({p.hours, p.gap, p.error_arcsec}));
+      return a;
+    };
+    doc["series"] = json{{"residualsBefore", residuals(r.residuals_before)},
+                         {"residualsAfter", residuals(r.residuals_after)},
+                         {"heldOutBefore", held(r.held_out_before)},
+                         {"heldOutAfter", held(r.held_out_after)}};
+  }
+  return doc;
+}
+
+std::string DiagnosisToJson(const DiagnosisReport& report, bool include_series) {
+  return DiagnosisJsonValue(report, include_series).dump(2);
+}
+
+}  // namespace esg::client
