@@ -25,6 +25,11 @@ void AlertHub::Publish(const storage::AlertRecord& record) {
   }
 }
 
+int AlertHub::size() {
+  absl::MutexLock lock(&mu_);
+  return static_cast<int>(subscribers_.size());
+}
+
 void AlertHub::CloseAll() {
   std::vector<Closer> closers;
   {

@@ -28,6 +28,8 @@ class AlertHub {
   void Publish(const storage::AlertRecord& record);
   // Calls every subscriber's closer (they finish their streams).
   void CloseAll();
+  // Number of subscribers.
+  int size();
 
  private:
   struct Subscriber {

@@ -458,6 +458,27 @@ class AlertCollector {
       }
     });
   }
+  // Waits (up to 20 s) until the latest state received of every alert equals `expected`.
+  void WaitFor(const std::map<int64_t, esg::v1::Alert>& expected) {
+    const absl::Time deadline = absl::Now() + absl::Seconds(20);
+    while (absl::Now() < deadline) {
+      {
+        absl::MutexLock lock(&mu_);
+        std::map<int64_t, esg::v1::Alert> last;
+        for (const auto& a : alerts_) last[a.sequence()] = a;
+        if (last.size() == expected.size() &&
+            std::all_of(expected.begin(), expected.end(), [&](const auto& e) {
+              const esg::v1::Alert& got = last[e.first];
+              return got.repeat_count() == e.second.repeat_count() &&
+                     got.acknowledged() == e.second.acknowledged() &&
+                     got.cleared() == e.second.cleared();
+            })) {
+          return;
+        }
+      }
+      absl::SleepFor(absl::Milliseconds(5));
+    }
+  }
   std::vector<esg::v1::Alert> Stop() {
     context_.TryCancel();
     thread_.join();
@@ -474,44 +495,56 @@ class AlertCollector {
   std::vector<esg::v1::Alert> alerts_;
 };
 
-std::map<int64_t, esg::v1::Alert> Stored(esg::v1::EstimationService::Stub& stub,
-                                         const std::string& id) {
-  AlertCollector all(stub, id, 0);
-  absl::SleepFor(absl::Milliseconds(300));
+// Waits until the server holds exactly `n` alert subscriptions (a subscription reaches the server
+// asynchronously after the client starts the call).
+void WaitForSubscribers(EstimationCore& core, int n) {
+  const absl::Time deadline = absl::Now() + absl::Seconds(20);
+  while (core.alert_hub().size() != n && absl::Now() < deadline) {
+    absl::SleepFor(absl::Milliseconds(2));
+  }
+  ASSERT_EQ(core.alert_hub().size(), n);
+}
+
+std::map<int64_t, esg::v1::Alert> Stored(EstimationCore& core, const std::string& id) {
   std::map<int64_t, esg::v1::Alert> out;
-  for (const auto& a : all.Stop()) out[a.sequence()] = a;
+  auto records = core.storage().alerts().Since(id, absl::InfinitePast(), 100000);
+  EXPECT_TRUE(records.ok()) << records.status();
+  for (const auto& r : *records) out[r.sequence] = AlertToProto(r);
   return out;
 }
 
 TEST(Service, AlertSubscribersGetEveryAlertStateExactlyOnceAcrossReconnects) {
   LoopbackServer server;
   auto stub = server.Stub();
-  // Star-tracker outliers raise innovation alerts (eq. (14)).
+  // Star-tracker outliers raise alerts (eq. (12), (14)).
   const SimulatedRun run = SimulateRun("ALR-1", 3.0, 5, /*outlier_probability=*/0.08);
   grpc::ClientContext ctx;
   esg::v1::ConfigureResponse r;
   ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &r).ok());
 
   AlertCollector live(*stub, "", std::nullopt);  // all spacecraft, live only, from the start
+  AlertCollector early(*stub, "ALR-1", 0);
+  WaitForSubscribers(server.core(), 2);
   const size_t half = run.frames.size() / 2;
   std::vector<esg::v1::TelemetryFrame> first(run.frames.begin(), run.frames.begin() + half);
   std::vector<esg::v1::TelemetryFrame> second(run.frames.begin() + half, run.frames.end());
-  AlertCollector early(*stub, "ALR-1", 0);
-  absl::SleepFor(absl::Milliseconds(300));  // let both subscriptions reach the server
   ASSERT_EQ(StreamFrames(*stub, first).acks.size(), first.size());
   ASSERT_TRUE(server.core().WaitApplied("ALR-1", absl::Seconds(60)).ok());
-  std::vector<esg::v1::Alert> before = early.Stop();
+  early.WaitFor(Stored(server.core(), "ALR-1"));
+  const std::vector<esg::v1::Alert> before = early.Stop();
   // Reconnect while the second half streams: replay since the start, then live.
   std::thread streamer([&] { StreamFrames(*stub, second); });
   AlertCollector reconnected(*stub, "ALR-1", 0);
   streamer.join();
   ASSERT_TRUE(server.core().WaitApplied("ALR-1", absl::Seconds(60)).ok());
-  absl::SleepFor(absl::Milliseconds(300));
-  std::vector<esg::v1::Alert> after = reconnected.Stop();
-  std::vector<esg::v1::Alert> live_alerts = live.Stop();
-
-  const std::map<int64_t, esg::v1::Alert> stored = Stored(*stub, "ALR-1");
+  const std::map<int64_t, esg::v1::Alert> stored = Stored(server.core(), "ALR-1");
   ASSERT_GE(stored.size(), 2u) << "the outliers should raise alerts";
+  reconnected.WaitFor(stored);
+  live.WaitFor(stored);
+  const std::vector<esg::v1::Alert> after = reconnected.Stop();
+  const std::vector<esg::v1::Alert> live_alerts = live.Stop();
+  EXPECT_FALSE(before.empty());
+
   for (const auto* received : {&after, &live_alerts}) {
     // Every stored alert arrives; no state twice; the last state seen is the stored one.
     std::set<std::tuple<int64_t, int64_t, bool, bool>> states;
@@ -543,11 +576,11 @@ TEST(Service, AlertSubscribersGetEveryAlertStateExactlyOnceAcrossReconnects) {
       EXPECT_FALSE(a.subsystem().empty());
     }
   }
-  EXPECT_FALSE(before.empty());
 
   // Acknowledgement is recorded with the operator and streamed to subscribers.
+  WaitForSubscribers(server.core(), 0);  // the earlier streams are gone
   AlertCollector watcher(*stub, "ALR-1", std::nullopt);
-  absl::SleepFor(absl::Milliseconds(100));
+  WaitForSubscribers(server.core(), 1);
   grpc::ClientContext ctx2;
   esg::v1::AcknowledgeRequest ack;
   ack.set_spacecraft_id("ALR-1");
@@ -558,8 +591,8 @@ TEST(Service, AlertSubscribersGetEveryAlertStateExactlyOnceAcrossReconnects) {
   EXPECT_TRUE(acked.acknowledged());
   EXPECT_EQ(acked.acknowledged_by(), "duty-officer");
   EXPECT_TRUE(acked.has_acknowledged_time());
-  absl::SleepFor(absl::Milliseconds(300));
-  std::vector<esg::v1::Alert> watched = watcher.Stop();
+  watcher.WaitFor({{acked.sequence(), acked}});
+  const std::vector<esg::v1::Alert> watched = watcher.Stop();
   ASSERT_EQ(watched.size(), 1u);
   EXPECT_TRUE(watched[0].acknowledged());
   EXPECT_EQ(watched[0].sequence(), stored.begin()->first);
