@@ -118,6 +118,7 @@ json CandidateJson(const CandidateScore& c) {
   j["score"] = Number(c.score);
   j["pValue"] = Number(c.p_value);
   j["significant"] = c.significant;
+  j["homogeneous"] = c.homogeneous;
   j["selected"] = c.selected;
   return j;
 }

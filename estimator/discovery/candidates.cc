@@ -332,6 +332,17 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       if (candidate.effect == Effect::kRotorDisplacement) {
         DescribeRotorDisplacement(config, frames, candidate.gyro, fit);
       }
+      if (e != nullptr) {
+        ModelState fixed = *ctx.model;
+        GyroConfig* g = FindGyroMutable(fixed.config, candidate.gyro);
+        DriftVector v = g->model.AsVector();
+        const DriftVector fitted = e->coefficients.AsVector();
+        for (int i = first; i < first + count; ++i) v(i) = fitted(i);
+        g->model = DriftCoefficients::FromVector(v);
+        ModelRun r;
+        if (absl::Status st = run_model(fixed, r); !st.ok()) return st;
+        fit.fixed_run = std::move(r);
+      }
       return fit;
     }
     case Effect::kGyroMisalignment: {
@@ -343,6 +354,12 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       if (const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro)) {
         AddVectorParameters("misalignmentArcsec", e->misalignment_b, e->misalignment_sigma_b,
                             RadToArcsec(1.0), "arcsec", fit.fitted);
+        ModelState fixed = *ctx.model;
+        GyroConfig* gf = FindGyroMutable(fixed.config, candidate.gyro);
+        gf->C_b_k = ExpMatrix(e->misalignment_b) * gf->C_b_k;  // session.h: C_b_k = Exp(phi) C_b_k
+        ModelRun r;
+        if (absl::Status st = run_model(fixed, r); !st.ok()) return st;
+        fit.fixed_run = std::move(r);
       }
       return fit;
     }

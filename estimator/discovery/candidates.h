@@ -17,6 +17,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
 #define ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -64,6 +65,11 @@ struct CandidateFit {
   Candidate candidate;
   ModelState model;  // the model with the effect added
   ModelRun run;      // its full in-sample run
+  // For effects freed with a prior: a run with the parameters held from the start at their final
+  // estimates (the filter learns them causally, so `run` cannot show whether the fitted physics
+  // also holds early in the recording; this run can). Empty for searched effects, whose
+  // parameters are constant from the start already.
+  std::optional<ModelRun> fixed_run;
   int parameters = 0;
   bool searched = false;  // parameters fitted by search (BIC penalty) rather than freed with a prior
   std::vector<Parameter> fitted;

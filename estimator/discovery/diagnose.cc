@@ -426,6 +426,7 @@ bool Significant(double p, double alpha, int tests) { return p < alpha / std::ma
 // differences a 3% excess is already "significant"; these ask for a physically material one.
 constexpr double kMaterialNeesRatio = 4.0;    // held-out errors beyond 2x the filter's sigma
 constexpr double kMaterialDispersion = 1.5;   // star-tracker differences 1.22x their sigma
+constexpr int kQuarters = 4;                  // time blocks of the homogeneity test
 
 const Parameter* FindParameter(const std::vector<Parameter>& ps, const std::string& name) {
   for (const Parameter& p : ps) {
@@ -593,6 +594,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
 
   // Forward selection.
   HeldOutResult current_held_out = base_held_out;
+  bool time_localized = false;  // significant candidates, each only fitting part of the time
   for (int round = 0; round < options.max_effects; ++round) {
     const std::vector<Candidate> candidates = ListCandidates(model, report.gyros, options.effects);
     if (candidates.empty()) break;
@@ -629,7 +631,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       int index;
       double delta, penalty, score, p, threshold;
       bool significant;
+      std::array<double, kQuarters> quarters{};
+      bool homogeneous = true;
     };
+    const std::vector<double> current_steps = StepDeviance(current_run);
     std::vector<Scored> scored;
     for (size_t i = 0; i < candidates.size(); ++i) {
       if (!fits[i]->ok()) return fits[i]->status();
@@ -645,11 +650,37 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       s.p = ChiSquareSurvival(std::max(0.0, s.delta), k);
       s.threshold = ChiSquareQuantile(1.0 - options.alpha / candidates.size(), k);
       s.significant = f.parameters > 0 && Significant(s.p, options.alpha, static_cast<int>(candidates.size()));
+      // Homogeneity: the effects of the library are constant in time. With its parameters held
+      // from the start at their final values, an effect that makes the fit worse in a quarter of
+      // the recording by more than its cost there (k ln n_q, plus the chi-square quantile) while
+      // improving it elsewhere is fitting a change in time (a fault, a jump), not the physics it
+      // names.
+      const std::vector<double> cand_steps = StepDeviance(f.fixed_run ? *f.fixed_run : f.run);
+      std::array<int, kQuarters> steps_in{};
+      for (size_t j = 0; j < std::min(current_steps.size(), cand_steps.size()); ++j) {
+        const int q = std::min(kQuarters - 1, static_cast<int>(kQuarters * current_run.steps[j].frame / frames.size()));
+        s.quarters[q] += current_steps[j] - cand_steps[j];
+        ++steps_in[q];
+      }
+      for (int q = 0; q < kQuarters; ++q) {
+        const double cost = k * std::log(std::max(2, steps_in[q])) +
+                            ChiSquareQuantile(1.0 - options.alpha / kQuarters, k);
+        if (s.quarters[q] < -cost) s.homogeneous = false;
+      }
       scored.push_back(s);
     }
+    // Deterministic effects first: the random walk is the model's allowance for what no
+    // deterministic term explains, raised only when none of them does.
     std::vector<Scored> significant;
-    for (const Scored& s : scored) {
-      if (s.significant) significant.push_back(s);
+    bool inhomogeneous_only = false;
+    for (int pass = 0; pass < 2 && significant.empty(); ++pass) {
+      for (const Scored& s : scored) {
+        const bool rw = (**fits[s.index]).candidate.effect == Effect::kRandomWalkDrift;
+        if (s.significant && s.homogeneous && rw == (pass == 1)) significant.push_back(s);
+      }
+    }
+    if (significant.empty()) {
+      for (const Scored& s : scored) inhomogeneous_only |= s.significant;
     }
     std::sort(significant.begin(), significant.end(), [](const Scored& a, const Scored& b) { return a.score > b.score; });
     int chosen = -1;
@@ -693,10 +724,14 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       row.score = s.score;
       row.p_value = s.p;
       row.significant = s.significant;
+      row.homogeneous = s.homogeneous;
       row.selected = s.index == chosen;
       report.candidates.push_back(row);
     }
-    if (chosen < 0) break;
+    if (chosen < 0) {
+      time_localized = inhomogeneous_only;
+      break;
+    }
     CandidateFit& f = **fits[chosen];
     const Scored& s = *std::find_if(scored.begin(), scored.end(), [&](const Scored& x) { return x.index == chosen; });
     Finding finding;
@@ -726,6 +761,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                 ->second.nees));
       }
     }
+    finding.evidence.notes.push_back(absl::StrFormat(
+        "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (constant in time, "
+        "as a physical effect of the library is)",
+        s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3]));
     report.findings.push_back(std::move(finding));
     model = f.model;
     current_run = std::move(f.run);
@@ -770,7 +809,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   // material: errors beyond twice the claimed 1-sigma (NEES per degree of freedom above 4).
   const bool held_out_misfit = Significant(held_out_p, options.alpha, 2) &&
                                final_held_out.nees > kMaterialNeesRatio * final_held_out.dof;
-  const bool residual_misfit = remaining.found;
+  const bool residual_misfit = remaining.found || time_localized;
   // Noise beyond the configured one everywhere (no span stands out): material when the
   // star-tracker differences are kMaterialDispersion times their predicted variance.
   const double dispersion_z =
@@ -807,7 +846,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     }
     u.gyro = where.gyro;
     u.explanation = absl::StrFormat(
-        "%s: a mismatch no candidate of DESIGN §6 explains remains %s%s, %s to %s (%s span): %s",
+        "%s: a mismatch no candidate of DESIGN §6 explains remains %s%s, %s to %s (%s span): %s%s",
         report.findings.empty() ? "the configured model does not fit the recording"
                                 : "after adding the findings",
         where.gyro > 0 ? absl::StrCat("in gyro ", where.gyro) : std::string("in all gyros"),
@@ -819,7 +858,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                                             final_held_out.nees, final_held_out.dof, held_out_p)
                           : absl::StrFormat("star-tracker differences %.2f times their predicted variance "
                                             "throughout: the recording's noise exceeds the configured one",
-                                            current.dispersion));
+                                            current.dispersion),
+        time_localized ? "; the candidates that fit it improve only part of the recording and worsen "
+                         "the rest (a change in time such as a fault, not a constant effect)"
+                       : "");
     u.evidence.held_out_nees_after = final_held_out.nees;
     u.evidence.held_out_dof = final_held_out.dof;
     u.evidence.lr_p_value = residual_misfit ? where.p_value : (held_out_misfit ? held_out_p : 0.0);

@@ -171,6 +171,9 @@ struct CandidateScore {
   double score = 0.0;  // delta_deviance - penalty
   double p_value = 1.0;
   bool significant = false;
+  // Improves the fit throughout the recording rather than in part of it only (a physical effect
+  // of the library is constant in time).
+  bool homogeneous = true;
   bool selected = false;
 };
 
