@@ -22,7 +22,6 @@
 #ifndef ESG_SERVER_ESTIMATION_CORE_H_
 #define ESG_SERVER_ESTIMATION_CORE_H_
 
-#include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
