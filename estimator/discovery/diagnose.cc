@@ -670,17 +670,28 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       scored.push_back(s);
     }
     // Deterministic effects first: the random walk is the model's allowance for what no
-    // deterministic term explains, raised only when none of them does.
+    // deterministic term explains, raised only when none of them does. The best-scoring
+    // significant candidate must be homogeneous in time; when it is not, the mismatch is a change
+    // in time (the smaller candidates that pass are its spill-over into the other gyros through
+    // the shared star tracker), and the round stops with the mismatch unexplained.
     std::vector<Scored> significant;
     bool inhomogeneous_only = false;
-    for (int pass = 0; pass < 2 && significant.empty(); ++pass) {
+    for (int pass = 0; pass < 2 && significant.empty() && !inhomogeneous_only; ++pass) {
+      std::vector<Scored> pool;
       for (const Scored& s : scored) {
         const bool rw = (**fits[s.index]).candidate.effect == Effect::kRandomWalkDrift;
-        if (s.significant && s.homogeneous && rw == (pass == 1)) significant.push_back(s);
+        if (s.significant && rw == (pass == 1)) pool.push_back(s);
       }
-    }
-    if (significant.empty()) {
-      for (const Scored& s : scored) inhomogeneous_only |= s.significant;
+      if (pool.empty()) continue;
+      const auto top = std::max_element(pool.begin(), pool.end(),
+                                        [](const Scored& a, const Scored& b) { return a.score < b.score; });
+      if (!top->homogeneous) {
+        inhomogeneous_only = true;
+        break;
+      }
+      for (const Scored& s : pool) {
+        if (s.homogeneous) significant.push_back(s);
+      }
     }
     std::sort(significant.begin(), significant.end(), [](const Scored& a, const Scored& b) { return a.score > b.score; });
     int chosen = -1;
