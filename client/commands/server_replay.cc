@@ -5,13 +5,18 @@
 // X times real time (frame epochs scaled), otherwise as fast as the window allows. Acks arrive in
 // frame order (estimation_service.proto); each is counted as accepted, duplicate (a frame the
 // server had already accepted: not processed again) or rejected (with the offending field).
+// An ack that breaks the contract (accepted = false without a rejection) is not counted as a
+// rejection: such frames are sent again at the end and counted by the second answer (a stored
+// frame comes back as a duplicate), with a warning.
 //
 // Resume: when the stream fails with a transient code (UNAVAILABLE, CANCELLED, ...: a network
 // failure, a server restart or a kill), the client backs off (0.25 s doubling to 4 s), waits
 // for the server, asks GetSession for highest_durable_sequence and continues with the frame
 // after max(last acknowledged, highest durable). Frames the server had made durable but whose
 // acks were lost are therefore not sent twice. After --max-retries consecutive failed attempts
-// without progress it gives up with the last status and the sequence to resume from.
+// without progress it gives up with the last status and the sequence to resume from. A frame
+// refused with `frame: the server is shutting down` (a graceful stop) is such a failure too, not
+// a rejection: it is sent again.
 //
 // Exit codes: 0 success, 2 bad arguments or recording, 1 server failure, or rejected frames
 // without --allow-rejects.
@@ -27,6 +32,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "client/commands/commands.h"
@@ -68,6 +74,8 @@ struct Tally {
   int64_t duplicates = 0;           // acks: accepted before, not processed again
   int64_t rejected = 0;             // acks: rejected
   int64_t durable_without_ack = 0;  // skipped on resume: durable on the server, ack lost
+  int64_t ambiguous = 0;            // acks without a verdict (accepted = false, no rejection)
+  int64_t ambiguous_stored = 0;     // of those, found stored when sent again (counted in accepted)
   int reconnects = 0;
   int64_t last_acked = 0;       // highest sequence acknowledged
   int64_t last_accepted = 0;    // highest sequence acknowledged as accepted (incl. duplicate)
@@ -107,7 +115,31 @@ class Replayer {
   int64_t frame_count() const { return static_cast<int64_t>(frames_.size()); }
 
   // Streams frames [first, n] once. OK when every one is acknowledged.
-  absl::Status StreamFrom(int64_t first) {
+  absl::Status StreamFrom(int64_t first) { return Stream(first, nullptr); }
+
+  // Sends again the frames whose ack carried no verdict (accepted = false without a rejection,
+  // against the TelemetryAck contract): a stored frame now comes back as a duplicate, a refused
+  // one is rejected with its reason. Safe because the server never processes a frame twice.
+  absl::Status VerifyAmbiguous() {
+    std::vector<int64_t> sequences;
+    sequences.swap(ambiguous_);
+    if (sequences.empty()) return absl::OkStatus();
+    verifying_ = true;
+    absl::Status status = Stream(0, &sequences);
+    verifying_ = false;
+    return status;
+  }
+
+ private:
+  // Streams frames [first, n], or only `sequences` (without pacing) when given.
+  absl::Status Stream(int64_t first, const std::vector<int64_t>* sequences) {
+    server_stopping_ = false;
+    const int64_t count =
+        sequences != nullptr ? static_cast<int64_t>(sequences->size()) : frame_count() - first + 1;
+    auto sequence_at = [&](int64_t i) {
+      return sequences != nullptr ? (*sequences)[i] : first + i;
+    };
+    int64_t acks = 0;
     std::unique_ptr<TelemetryStream> stream = client_->StreamTelemetry();
     std::mutex mu;
     std::condition_variable cv;
@@ -115,16 +147,17 @@ class Replayer {
     bool stop = false;
     std::thread writer([&] {
       const auto wall_start = std::chrono::steady_clock::now();
-      const absl::Time time_start = frames_[first - 1].time;
+      const absl::Time time_start = frames_[sequence_at(0) - 1].time;
       bool complete = true;
-      for (int64_t seq = first; seq <= frame_count(); ++seq) {
+      for (int64_t i = 0; i < count; ++i) {
+        const int64_t seq = sequence_at(i);
         std::unique_lock<std::mutex> lock(mu);
         cv.wait(lock, [&] { return stop || in_flight < o_.window; });
         if (stop) {
           complete = false;
           break;
         }
-        if (o_.rate > 0.0) {
+        if (o_.rate > 0.0 && sequences == nullptr) {
           const double offset_s =
               absl::ToDoubleSeconds(frames_[seq - 1].time - time_start) / o_.rate;
           const auto due =
@@ -152,6 +185,7 @@ class Replayer {
       {
         std::lock_guard<std::mutex> lock(mu);
         --in_flight;
+        ++acks;
         Count(ack);
       }
       cv.notify_all();
@@ -165,15 +199,39 @@ class Replayer {
     cv.notify_all();
     writer.join();
     absl::Status status = stream->Finish();
-    if (status.ok() && tally_.last_acked < frame_count()) {
-      status = absl::UnavailableError(absl::StrCat("the stream ended after sequence ",
-                                                   tally_.last_acked, " of ", frame_count()));
+    if (status.ok() && server_stopping_) {
+      status = absl::UnavailableError("the server is shutting down");
+    } else if (status.ok() && acks < count) {
+      status = absl::UnavailableError(
+          absl::StrCat("the stream ended after ", acks, " acks for ", count, " frames"));
     }
     return status;
   }
 
- private:
   void Count(const esg::v1::TelemetryAck& ack) {
+    // A frame refused because the server is stopping was not judged: it and everything after it
+    // in this stream are sent again after the reconnect.
+    if (!ack.accepted() && ack.rejection().field() == "frame" &&
+        absl::StrContains(ack.rejection().reason(), "shutting down")) {
+      server_stopping_ = true;
+    }
+    if (server_stopping_) return;
+    const bool no_verdict =
+        !ack.accepted() && ack.rejection().field().empty() && ack.rejection().reason().empty();
+    if (verifying_) {
+      // The second answer for a frame whose first ack had no verdict.
+      if (ack.accepted()) {
+        ++tally_.accepted;
+        ++tally_.ambiguous_stored;
+        return;
+      }
+      ++tally_.rejected;
+      if (static_cast<int>(tally_.rejections.size()) < kRejectionsKept) {
+        tally_.rejections.push_back(
+            {ack.sequence(), ack.rejection().field(), ack.rejection().reason()});
+      }
+      return;
+    }
     ++tally_.acked;
     tally_.last_acked = std::max(tally_.last_acked, ack.sequence());
     tally_.highest_durable = std::max(tally_.highest_durable, ack.highest_durable_sequence());
@@ -184,6 +242,11 @@ class Replayer {
       } else {
         ++tally_.accepted;
       }
+      return;
+    }
+    if (no_verdict) {
+      ++tally_.ambiguous;
+      ambiguous_.push_back(ack.sequence());
       return;
     }
     ++tally_.rejected;
@@ -199,6 +262,9 @@ class Replayer {
   EsgClient* const client_;
   Progress progress_;
   Tally tally_;
+  bool server_stopping_ = false;    // this stream got a "server is shutting down" refusal
+  bool verifying_ = false;          // VerifyAmbiguous is running
+  std::vector<int64_t> ambiguous_;  // sequences whose ack had no verdict, to verify
 };
 
 // Polls GetSession until every durable frame is applied to the session, or the timeout.
@@ -317,6 +383,15 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
       status = session.status();
     }
   }
+  if (tally.ambiguous > 0) {
+    const absl::Status verified = replayer.VerifyAmbiguous();
+    if (!verified.ok()) return ReportRpcError(kVerb, verified, global);
+    std::fprintf(stderr,
+                 "esg %s: warning: %lld acks carried no verdict (accepted = false without a "
+                 "rejection, a server bug); sent again: %lld found stored\n",
+                 kVerb, static_cast<long long>(tally.ambiguous),
+                 static_cast<long long>(tally.ambiguous_stored));
+  }
   const double elapsed_s = absl::ToDoubleSeconds(absl::Now() - started);
 
   std::optional<esg::v1::SessionInfo> applied;
@@ -344,6 +419,8 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
              {"duplicates", tally.duplicates},
              {"rejected", tally.rejected},
              {"durableWithoutAck", tally.durable_without_ack},
+             {"acksWithoutVerdict", tally.ambiguous},
+             {"acksWithoutVerdictStored", tally.ambiguous_stored},
              {"reconnects", tally.reconnects},
              {"highestDurableSequence", tally.highest_durable},
              {"elapsedS", elapsed_s},

@@ -15,10 +15,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <set>
 #include <sstream>
 #include <string>
@@ -29,7 +32,10 @@
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
 #include "client/esg_client.h"
+#include "esg/v1/estimation_service.grpc.pb.h"
 #include "gmock/gmock.h"
+#include "grpcpp/server.h"
+#include "grpcpp/server_builder.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
@@ -189,15 +195,14 @@ std::vector<std::string> DataLines(const std::string& text, const std::string& p
   return out;
 }
 
-// An ack with accepted = false but no rejection breaks the TelemetryAck contract; seen
-// intermittently when esgd's Ingest fills `accepted` after handing the frame to the committer
-// (a race on the ack). Named here so that such a failure explains itself.
-constexpr char kReasonlessRejection[] = "not accepted, and the server gave no reason";
-std::string ReplayFailure(const std::string& err) {
-  if (err.find(kReasonlessRejection) == std::string::npos) return err;
-  return err +
-         "\nesgd acknowledged a frame with accepted = false and no rejection: the ack race "
-         "in EstimationCore::Ingest (accepted set after the frame was queued for commit)";
+// `esg replay` warns when esgd sent acks without a verdict (accepted = false, no rejection):
+// esgd's Ingest fills `accepted` after handing the frame to the committer, a race that shows up
+// now and then. The client sends such frames again and counts the second answer, so the tests
+// below still hold; the race is recorded as a test property and printed.
+void NoteAckRace(const std::string& err) {
+  if (err.find("acks carried no verdict") == std::string::npos) return;
+  ::testing::Test::RecordProperty("esgd_ack_race", "acks without a verdict seen");
+  std::fprintf(stderr, "note: esgd sent acks without a verdict (race in EstimationCore::Ingest)\n");
 }
 
 // One simulated 6 h recording (60 s telemetry, star-tracker outliers, invalid samples and an
@@ -250,7 +255,8 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
 
   // replay: every row accepted once, then applied by the filter (--wait).
   r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait --json");
-  ASSERT_EQ(r.exit_code, 0) << ReplayFailure(r.err) << server.log();
+  ASSERT_EQ(r.exit_code, 0) << r.err << server.log();
+  NoteAckRace(r.err);
   Json replay = r.json();
   EXPECT_EQ(replay["spacecraftId"], "RDK-1");  // from the recording's metadata
   EXPECT_EQ(replay["sent"], Rows());
@@ -407,19 +413,23 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
   EXPECT_THAT(r.err, HasSubstr("esg alerts: NOT_FOUND: "));
 }
 
-TEST_F(ServerVerbs, ReplayResumesAfterKillDashNineWithoutApplyingAnythingTwice) {
+// Streams the recording at 3600x real time (about 6 s), stops the server with `signal` after 60
+// durable frames, starts it again on the same port and database, and checks that the running
+// replay resumed and that every row was stored and applied exactly once.
+void ReplayAcrossServerStop(const std::string& recording_path, int64_t rows, int signal) {
   TempDir dir;
   const int port = FreePort();
-  auto server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port);
+  // A short deadline for running calls, so that a graceful stop does not wait 5 s for the stream.
+  const std::vector<std::string> esgd_args = {"--shutdown-deadline", "0.3"};
+  auto server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port, esgd_args);
   ASSERT_TRUE(server->Start()) << server->log();
   const std::string at = "--server " + server->address() + " ";
   RunResult r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()));
   ASSERT_EQ(r.exit_code, 0) << r.err;
 
-  // 6 h at 3600x real time: about 6 s of streaming, killed after 60 durable frames.
   const pid_t replay = Spawn({"/bin/sh", "-c",
                               Quote(ESG_BINARY) + " " + at + "replay --recording " +
-                                  Quote(recording_path_) + " --rate 3600 --json"},
+                                  Quote(recording_path) + " --rate 3600 --json"},
                              dir.File("replay_out.txt"), dir.File("replay_err.txt"));
   ASSERT_GT(replay, 0);
   ClientOptions options;
@@ -434,42 +444,52 @@ TEST_F(ServerVerbs, ReplayResumesAfterKillDashNineWithoutApplyingAnythingTwice) 
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
   }
   ASSERT_GE(durable, 60);
-  ASSERT_LT(durable, Rows()) << "the replay must still be running when the server is killed";
-  server->Stop(SIGKILL);
+  ASSERT_LT(durable, rows) << "the replay must still be running when the server stops";
+  server->Stop(signal);
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
-  server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port);
+  server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port, esgd_args);
   ASSERT_TRUE(server->Start()) << server->log();
 
-  ASSERT_EQ(WaitExit(replay), 0) << ReplayFailure(ReadFile(dir.File("replay_err.txt")));
+  ASSERT_EQ(WaitExit(replay), 0) << ReadFile(dir.File("replay_err.txt"));
+  NoteAckRace(ReadFile(dir.File("replay_err.txt")));
   const Json first = Json::parse(ReadFile(dir.File("replay_out.txt")), nullptr, false);
   EXPECT_GE(first["reconnects"], 1);
   EXPECT_EQ(first["rejected"], 0);
   // Each row made durable exactly once: acked as accepted, or found durable at the reconnect
-  // (its ack lost with the server); none sent again as a duplicate.
-  EXPECT_EQ(first["accepted"].get<int64_t>() + first["durableWithoutAck"].get<int64_t>(), Rows());
+  // (its ack lost with the server's stop); none sent again as a duplicate.
+  EXPECT_EQ(first["accepted"].get<int64_t>() + first["durableWithoutAck"].get<int64_t>(), rows);
   EXPECT_EQ(first["duplicates"], 0);
-  EXPECT_EQ(first["highestDurableSequence"], Rows());
+  EXPECT_EQ(first["highestDurableSequence"], rows);
   EXPECT_THAT(ReadFile(dir.File("replay_err.txt")), HasSubstr("reconnecting"));
 
   // The whole recording again: every frame is a duplicate, nothing new is accepted.
-  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait --json");
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path) + " --wait --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const Json second = r.json();
-  EXPECT_EQ(second["duplicates"], Rows());
+  EXPECT_EQ(second["duplicates"], rows);
   EXPECT_EQ(second["accepted"], 0);
   EXPECT_EQ(second["rejected"], 0);
-  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_));
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path));
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  EXPECT_THAT(r.out, HasSubstr("(accepted 0, duplicates 361, rejected 0)"));
+  EXPECT_THAT(r.out,
+              HasSubstr("(accepted 0, duplicates " + std::to_string(rows) + ", rejected 0)"));
 
   r = RunEsg(dir, at + "status --spacecraft RDK-1 --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const Json status = r.json();
-  EXPECT_EQ(status["framesAccepted"], Rows());
-  EXPECT_EQ(status["lastSequence"], Rows());
-  EXPECT_EQ(status["highestAppliedSequence"], Rows());
-  EXPECT_EQ(status["framesApplied"], Rows()) << "a frame applied twice, or one lost";
-  EXPECT_GE(status["framesDuplicate"], 2 * Rows());
+  EXPECT_EQ(status["framesAccepted"], rows);
+  EXPECT_EQ(status["lastSequence"], rows);
+  EXPECT_EQ(status["highestAppliedSequence"], rows);
+  EXPECT_EQ(status["framesApplied"], rows) << "a frame applied twice, or one lost";
+  EXPECT_GE(status["framesDuplicate"], 2 * rows);
+}
+
+TEST_F(ServerVerbs, ReplayResumesAfterKillDashNineWithoutApplyingAnythingTwice) {
+  ReplayAcrossServerStop(recording_path_, Rows(), SIGKILL);
+}
+
+TEST_F(ServerVerbs, ReplayResumesAfterGracefulServerRestart) {
+  ReplayAcrossServerStop(recording_path_, Rows(), SIGTERM);
 }
 
 TEST_F(ServerVerbs, RejectedFramesAreReportedWithTheirFieldAndMakeExitOne) {
@@ -583,6 +603,121 @@ TEST_F(ServerVerbs, MutualTlsWithTheGlobalTlsOptions) {
   EXPECT_THAT(r.err, HasSubstr("esg status: UNAVAILABLE: "));
   r = RunEsg(dir, "--server " + server.address() + " status");  // plaintext
   EXPECT_EQ(r.exit_code, 1);
+}
+
+// An in-process stand-in for esgd that breaks the ack contract on purpose, for the client's
+// defences: `no_verdict` sequences get, on first sight, accepted = false without a rejection
+// (yet are stored, like the esgd ack race); from `refuse_from` on, the first stream refuses
+// frames with "frame: the server is shutting down" (a graceful stop) and ends.
+class FakeService final : public esg::v1::EstimationService::Service {
+ public:
+  std::set<int64_t> no_verdict;
+  int64_t refuse_from = 0;
+
+  grpc::Status GetSession(grpc::ServerContext*, const esg::v1::GetSessionRequest* request,
+                          esg::v1::SessionInfo* response) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    response->set_spacecraft_id(request->spacecraft_id());
+    response->set_highest_durable_sequence(stored_.empty() ? 0 : *stored_.rbegin());
+    return grpc::Status::OK;
+  }
+
+  grpc::Status StreamTelemetry(
+      grpc::ServerContext*,
+      grpc::ServerReaderWriter<esg::v1::TelemetryAck, esg::v1::TelemetryFrame>* stream) override {
+    int stream_index = 0;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stream_index = ++streams_;
+    }
+    esg::v1::TelemetryFrame frame;
+    while (stream->Read(&frame)) {
+      esg::v1::TelemetryAck ack;
+      ack.set_spacecraft_id(frame.spacecraft_id());
+      ack.set_sequence(frame.sequence());
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        const int64_t seq = frame.sequence();
+        if (stored_.count(seq)) {
+          ack.set_accepted(true);
+          ack.set_duplicate(true);
+        } else if (stream_index == 1 && refuse_from > 0 && seq >= refuse_from) {
+          ack.mutable_rejection()->set_field("frame");
+          ack.mutable_rejection()->set_reason("the server is shutting down");
+        } else {
+          stored_.insert(seq);
+          ack.set_accepted(!no_verdict.count(seq));
+          no_verdict.erase(seq);
+        }
+        ack.set_highest_durable_sequence(*stored_.rbegin());
+      }
+      if (!stream->Write(ack)) break;
+    }
+    return grpc::Status::OK;
+  }
+
+  size_t stored() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return stored_.size();
+  }
+
+ private:
+  std::mutex mu_;
+  std::set<int64_t> stored_;
+  int streams_ = 0;
+};
+
+// Runs FakeService on 127.0.0.1 for the scope.
+class FakeServer {
+ public:
+  explicit FakeServer(FakeService* service) {
+    grpc::ServerBuilder builder;
+    builder.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port_);
+    builder.RegisterService(service);
+    server_ = builder.BuildAndStart();
+  }
+  ~FakeServer() {
+    if (server_) server_->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(1));
+  }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+
+ private:
+  int port_ = 0;
+  std::unique_ptr<grpc::Server> server_;
+};
+
+TEST_F(ServerVerbs, ReplaySendsAgainFramesWhoseAckHadNoVerdict) {
+  TempDir dir;
+  FakeService service;
+  service.no_verdict = {7, 8, 300};
+  FakeServer server(&service);
+  const RunResult r = RunEsg(
+      dir, "--server " + server.address() + " replay --json --recording " + Quote(recording_path_));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json doc = r.json();
+  EXPECT_EQ(doc["acksWithoutVerdict"], 3);
+  EXPECT_EQ(doc["acksWithoutVerdictStored"], 3);
+  EXPECT_EQ(doc["accepted"], Rows());
+  EXPECT_EQ(doc["rejected"], 0);
+  EXPECT_EQ(doc["duplicates"], 0);
+  EXPECT_EQ(service.stored(), static_cast<size_t>(Rows()));
+  EXPECT_THAT(r.err, HasSubstr("3 acks carried no verdict"));
+}
+
+TEST_F(ServerVerbs, ReplayTreatsAShuttingDownRefusalAsAStreamFailure) {
+  TempDir dir;
+  FakeService service;
+  service.refuse_from = 100;
+  FakeServer server(&service);
+  const RunResult r = RunEsg(
+      dir, "--server " + server.address() + " replay --json --recording " + Quote(recording_path_));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json doc = r.json();
+  EXPECT_EQ(doc["reconnects"], 1);
+  EXPECT_EQ(doc["accepted"], Rows());
+  EXPECT_EQ(doc["rejected"], 0);
+  EXPECT_EQ(service.stored(), static_cast<size_t>(Rows()));
+  EXPECT_THAT(r.err, HasSubstr("the server is shutting down"));
 }
 
 TEST_F(ServerVerbs, ServerDownIsUnavailableWithTheAddress) {
