@@ -391,31 +391,51 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     }
     g.h_k_last = h_k_end[i];
   }
-  MatrixXd candidate = P_;
+  // In place: AddFrame and Predict work on a copy of the session, so a failure here leaves the
+  // caller's session untouched. Only the spin-axis rows and columns (and the random-walk blocks)
+  // change; they are symmetrised and checked, the rest of P is untouched.
   std::vector<MatrixXd> EP(gyros_.size());
   for (size_t i = 0; i < gyros_.size(); ++i) {
-    EP[i] = E[i] * P_.middleRows(gyros_[i].offset + 2, E[i].cols());  // 2 x n
+    EP[i] = E[i] * P_.middleRows(gyros_[i].offset + 2, E[i].cols());  // 2 x n, from P before
   }
+  std::vector<std::vector<Matrix2d>> EPEt(gyros_.size(), std::vector<Matrix2d>(gyros_.size()));
   for (size_t i = 0; i < gyros_.size(); ++i) {
-    const int oi = gyros_[i].offset;
-    candidate.middleRows(oi, 2) += EP[i];
-    candidate.middleCols(oi, 2) += EP[i].transpose();
     for (size_t j = 0; j < gyros_.size(); ++j) {
-      const int oj = gyros_[j].offset;
-      candidate.block<2, 2>(oi, oj) += EP[i].middleCols(oj + 2, E[j].cols()) * E[j].transpose();
+      EPEt[i][j] = EP[i].middleCols(gyros_[j].offset + 2, E[j].cols()) * E[j].transpose();
+    }
+  }
+  for (size_t i = 0; i < gyros_.size(); ++i) P_.middleRows(gyros_[i].offset, 2) += EP[i];
+  for (size_t i = 0; i < gyros_.size(); ++i) P_.middleCols(gyros_[i].offset, 2) += EP[i].transpose();
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    const GyroState& g = gyros_[i];
+    for (size_t j = 0; j <= i; ++j) {
+      const int oi = g.offset, oj = gyros_[j].offset;
+      const Matrix2d block = 0.5 * (P_.block<2, 2>(oi, oj) + P_.block<2, 2>(oj, oi).transpose()) +
+                             0.5 * (EPEt[i][j] + EPEt[j][i].transpose());
+      P_.block<2, 2>(oi, oj) = block;
+      P_.block<2, 2>(oj, oi) = block.transpose();
     }
     if (rw) {
       // Integrated random walk (eq. (11)) over the interval.
-      const GyroState& g = gyros_[i];
       const double q2 = q_rw * q_rw;
-      candidate.block<2, 2>(g.rw_offset(), g.rw_offset()) += q2 * span * Matrix2d::Identity();
-      candidate.block<2, 2>(g.offset, g.rw_offset()) += q2 * span * span / 2.0 * kJ;
-      candidate.block<2, 2>(g.rw_offset(), g.offset) += q2 * span * span / 2.0 * kJ.transpose();
-      candidate.block<2, 2>(g.offset, g.offset) +=
-          q2 * span * span * span / 3.0 * Matrix2d::Identity();
+      P_.block<2, 2>(g.rw_offset(), g.rw_offset()) += q2 * span * Matrix2d::Identity();
+      P_.block<2, 2>(g.offset, g.rw_offset()) += q2 * span * span / 2.0 * kJ;
+      P_.block<2, 2>(g.rw_offset(), g.offset) += q2 * span * span / 2.0 * kJ.transpose();
+      P_.block<2, 2>(g.offset, g.offset) += q2 * span * span * span / 3.0 * Matrix2d::Identity();
     }
   }
-  return CommitCovariance(std::move(candidate), P_);
+  for (const GyroState& g : gyros_) {
+    const int rows = 2 + (rw ? 2 : 0);
+    if (!P_.middleRows(g.offset, rows).allFinite()) {
+      return absl::InternalError(absl::StrFormat("covariance of gyro %d is not finite after propagation", g.id));
+    }
+    for (int k = 0; k < rows; ++k) {
+      if (P_(g.offset + k, g.offset + k) < 0.0) {
+        return absl::InternalError(absl::StrFormat("covariance of gyro %d has a negative variance", g.id));
+      }
+    }
+  }
+  return absl::OkStatus();
 }
 
 absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
