@@ -1,0 +1,121 @@
+// Discovery (DESIGN §6, docs/discovery.md): speed and the confusion matrix.
+//
+// BM_Diagnose30h: one diagnosis of a 30 h recording at 60 s telemetry (rotor displacement in one
+// gyro: two selection rounds), both cores. Target under 60 s.
+//
+// BM_DiscoveryConfusionMatrix: ESG_DISCOVERY_SEEDS (default 10) simulated recordings per true
+// effect (tests/testing/discovery_scenarios.h: mostly orbital, outliers and an outage, the
+// effect in one gyro where that applies), each diagnosed; prints the verdict table to stdout and
+// reports per effect the share of correct verdicts (verdict and gyro right) as counters. Run:
+//   <build>/tests/bench/esg_bench --benchmark_filter=Confusion
+// (scripts/confusion_matrix.sh). Takes a few minutes.
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "benchmark/benchmark.h"
+#include "estimator/discovery/diagnose.h"
+#include "estimator/simulator.h"
+#include "estimator/units.h"
+#include "tests/testing/discovery_scenarios.h"
+
+namespace esg::estimator::discovery {
+namespace {
+
+void BM_Diagnose30h(benchmark::State& state) {
+  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("rotor_displacement", 1, 30.0);
+  const SimulationResult sim = *Simulate(spec);
+  DiagnoseOptions options;
+  options.threads = static_cast<int>(state.range(0));
+  int runs = 0;
+  for (auto _ : state) {
+    auto report = Diagnose(spec.config, sim.recording.frames, options);
+    if (!report.ok()) {
+      state.SkipWithError(std::string(report.status().message()).c_str());
+      return;
+    }
+    runs = report->filter_runs;
+    benchmark::DoNotOptimize(report);
+  }
+  state.counters["frames"] = static_cast<double>(sim.recording.frames.size());
+  state.counters["filter_runs"] = runs;
+}
+BENCHMARK(BM_Diagnose30h)->Arg(1)->Arg(2)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
+// Correct verdict for a scenario (discovery_scenarios.h names).
+bool Correct(const std::string& truth, int gyro, const DiagnosisReport& r) {
+  auto has = [&](const std::string& effect, int g) {
+    for (const Finding& f : r.findings) {
+      if (f.effect == effect && (g == 0 || f.gyro == g)) return true;
+    }
+    return false;
+  };
+  if (truth == "none") return r.verdict == kVerdictNone;
+  if (truth == "drift_step") return r.verdict == kVerdictUnexplained;
+  if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
+  const bool per_gyro = truth == "rotor_displacement" || truth == "fourth_harmonic" ||
+                        truth == "unequal_stiffness" || truth == "gyro_misalignment";
+  return r.verdict == truth && (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == gyro));
+}
+
+void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
+  const char* env = std::getenv("ESG_DISCOVERY_SEEDS");
+  const int seeds = env != nullptr ? std::max(1, std::atoi(env)) : 10;
+  std::vector<std::string> truths = ::esg::testing::DiscoveryEffects();
+  truths.push_back("two");
+  truths.push_back("drift_step");
+  const std::vector<std::string> verdicts = {
+      "none", "rotor_displacement", "fourth_harmonic", "unequal_stiffness", "gyro_misalignment",
+      "star_tracker_misalignment", "star_tracker_latency", "random_walk_drift", "unexplained"};
+  std::map<std::string, std::map<std::string, int>> table;
+  std::map<std::string, int> correct;
+  std::map<std::string, double> gap_ratio_sum;
+  for (auto _ : state) {
+    for (const std::string& truth : truths) {
+      for (int seed = 1; seed <= seeds; ++seed) {
+        const SimulationSpec spec = ::esg::testing::DiscoveryScenario(truth, 100 + seed, 30.0);
+        const SimulationResult sim = *Simulate(spec);
+        auto report = Diagnose(spec.config, sim.recording.frames, DiagnoseOptions{});
+        if (!report.ok()) {
+          state.SkipWithError(std::string(report.status().message()).c_str());
+          return;
+        }
+        ++table[truth][report->verdict];
+        const bool ok = Correct(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
+        correct[truth] += ok ? 1 : 0;
+        if (report->before.gap_drift_rate_deg_h > 0) {
+          gap_ratio_sum[truth] += report->after.gap_drift_rate_deg_h / report->before.gap_drift_rate_deg_h;
+        }
+        std::fprintf(stderr, "%-26s seed %3d: %-26s%s\n", truth.c_str(), 100 + seed, report->verdict.c_str(),
+                     ok ? "" : "  (wrong)");
+      }
+    }
+  }
+  // The table: rows true effect, columns verdict; then the share correct (verdict and gyro).
+  std::printf("\n| true effect \\ verdict |");
+  for (const std::string& v : verdicts) std::printf(" %s |", v.c_str());
+  std::printf(" correct | held-out drift after/before |\n|---|");
+  for (size_t i = 0; i < verdicts.size(); ++i) std::printf("---|");
+  std::printf("---|---|\n");
+  for (const std::string& truth : truths) {
+    std::printf("| %s |", truth.c_str());
+    for (const std::string& v : verdicts) {
+      const int n = table[truth][v];
+      std::printf(" %s |", n > 0 ? std::to_string(n).c_str() : "");
+    }
+    std::printf(" %d/%d (%.0f%%) | %.2f |\n", correct[truth], seeds, 100.0 * correct[truth] / seeds,
+                gap_ratio_sum[truth] / seeds);
+    state.counters["correct_" + truth] = static_cast<double>(correct[truth]) / seeds;
+  }
+  std::printf("\n(%d seeds per row, 30 h recordings; correct = verdict right, and the gyro for per-gyro "
+              "effects; `two` = rotor displacement and star-tracker misalignment both found; `drift_step` = "
+              "a fault outside the library, correct when unexplained)\n",
+              seeds);
+  std::fflush(stdout);
+}
+BENCHMARK(BM_DiscoveryConfusionMatrix)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
+
+}  // namespace
+}  // namespace esg::estimator::discovery
