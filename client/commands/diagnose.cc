@@ -275,6 +275,13 @@ std::string WritePlots(const disc::DiagnosisReport& r, const std::filesystem::pa
 }
 
 int RunDiagnose(const DiagnoseCliOptions& o) {
+  const auto effects = ParseEffects(o.effects);
+  if (!effects) {
+    std::fprintf(stderr, "esg: --effects '%s': unknown effect (use rotor_displacement, fourth_harmonic, "
+                 "unequal_stiffness, gyro_misalignment, star_tracker_misalignment, star_tracker_latency, "
+                 "random_walk_drift)\n", o.effects.c_str());
+    return 2;
+  }
   auto config = proto_convert::ReadConfigFile(o.config_path);
   if (!config.ok()) {
     std::fprintf(stderr, "esg: --config %s: %s\n", o.config_path.c_str(), std::string(config.status().message()).c_str());
@@ -284,13 +291,6 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
                  std::string(recording.status().message()).c_str());
-    return 2;
-  }
-  const auto effects = ParseEffects(o.effects);
-  if (!effects) {
-    std::fprintf(stderr, "esg: --effects '%s': unknown effect (use rotor_displacement, fourth_harmonic, "
-                 "unequal_stiffness, gyro_misalignment, star_tracker_misalignment, star_tracker_latency, "
-                 "random_walk_drift)\n", o.effects.c_str());
     return 2;
   }
   disc::DiagnoseOptions options;

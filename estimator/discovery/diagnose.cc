@@ -594,6 +594,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
 
   // Forward selection.
   HeldOutResult current_held_out = base_held_out;
+  bool held_out_current = true;  // current_held_out belongs to the current model
   bool time_localized = false;  // significant candidates, each only fitting part of the time
   for (int round = 0; round < options.max_effects; ++round) {
     const std::vector<Candidate> candidates = ListCandidates(model, report.gyros, options.effects);
@@ -723,6 +724,46 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         }
       }
     }
+    // Concealed effects: nothing significant in-sample (the residual-drift states absorb the
+    // effect where it was calibrated), yet the model mispredicts the held-out regimes. Then the
+    // candidates are scored by held-out prediction: the one whose held-out NEES falls the most,
+    // by more than the chi-square(k) quantile at the round's Bonferroni level, is taken.
+    bool held_out_selected = false;
+    if (chosen < 0 && !inhomogeneous_only && !held_out_current && !gaps.empty()) {
+      auto held = run_held_out(model);
+      if (!held.ok()) return held.status();
+      current_held_out = SummariseHeldOut(*held, gaps, report.regimes, frames);
+      held_out_current = true;
+    }
+    if (chosen < 0 && !inhomogeneous_only && current_held_out.dof > 0 &&
+        Significant(ChiSquareSurvival(current_held_out.nees, current_held_out.dof), options.alpha, 2) &&
+        current_held_out.nees > kMaterialNeesRatio * current_held_out.dof) {
+      say(0.05 + 0.8 * (round + 0.95) / options.max_effects, "held-out scoring of the candidates (concealed mismatch)");
+      std::vector<std::optional<absl::StatusOr<ModelRun>>> held(scored.size());
+      ParallelRun(options.threads, static_cast<int>(scored.size()), [&](int j) {
+        const CandidateFit& f = **fits[scored[j].index];
+        if (f.parameters == 0) return;
+        held[j] = RunModel(f.model.config, f.model.options, CorrectStarTracker(frames, rates, f.model.correction),
+                           held_out_options);
+      });
+      double best_drop = 0.0;
+      for (size_t j = 0; j < scored.size(); ++j) {
+        if (!held[j].has_value()) continue;
+        ++report.filter_runs;
+        if (!held[j]->ok()) return held[j]->status();
+        HeldOutResult r = SummariseHeldOut(**held[j], gaps, report.regimes, frames);
+        const int k = std::max(1, (**fits[scored[j].index]).parameters);
+        const double drop = current_held_out.nees - r.nees;
+        const double needed = ChiSquareQuantile(1.0 - options.alpha / scored.size(), k);
+        if (drop > needed && drop > best_drop && scored[j].homogeneous) {
+          best_drop = drop;
+          chosen = scored[j].index;
+        }
+        contenders.emplace_back(scored[j].index, std::move(r));
+      }
+      held_out_selected = chosen >= 0;
+      if (!held_out_selected) contenders.clear();
+    }
     for (const Scored& s : scored) {
       const CandidateFit& f = **fits[s.index];
       CandidateScore row;
@@ -757,13 +798,18 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     finding.evidence.round = round;
     finding.evidence.notes = f.notes;
     finding.explanation = Explain(finding, finding.evidence);
+    if (held_out_selected) {
+      finding.evidence.notes.insert(finding.evidence.notes.begin(),
+                                    "concealed: not significant in-sample (absorbed where calibrated), found by "
+                                    "held-out prediction across regimes");
+    }
     for (const auto& [index, r] : contenders) {
       if (index == chosen) {
         finding.evidence.held_out_nees_before = current_held_out.nees;
         finding.evidence.held_out_nees_after = r.nees;
         finding.evidence.held_out_dof = r.dof;
         current_held_out = r;
-      } else {
+      } else if (!held_out_selected) {
         finding.evidence.notes.push_back(absl::StrFormat(
             "%s fits the star tracker almost as well (score within %.0f) but predicts the held-out "
             "spans worse: held-out NEES %.1f against %.1f",
@@ -776,6 +822,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (constant in time, "
         "as a physical effect of the library is)",
         s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3]));
+    held_out_current = std::any_of(contenders.begin(), contenders.end(),
+                                   [&](const auto& c) { return c.first == chosen; });
     report.findings.push_back(std::move(finding));
     model = f.model;
     current_run = std::move(f.run);
@@ -785,7 +833,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   // The extended model: held-out run (the full run is current_run).
   say(0.9, "held-out prediction with the findings");
   HeldOutResult final_held_out = base_held_out;
-  if (!report.findings.empty() && !gaps.empty()) {
+  if (held_out_current) {
+    final_held_out = current_held_out;
+  } else if (!report.findings.empty() && !gaps.empty()) {
     auto held = run_held_out(model);
     if (!held.ok()) return held.status();
     final_held_out = SummariseHeldOut(*held, gaps, report.regimes, frames);
