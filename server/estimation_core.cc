@@ -498,21 +498,24 @@ bool EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto, esg::v1::Telem
                              " after the previous accepted frame (", FormatUtc(sc->last_accepted_time),
                              ")"));
   }
+  const absl::Time frame_time = frame->time;
   CommitEntry entry;
   entry.sc = sc;
   entry.sequence = proto.sequence();
-  entry.time = frame->time;
+  entry.time = frame_time;
   entry.payload = proto.SerializeAsString();
   entry.frame = std::move(*frame);
   entry.done = std::move(on_durable);
+  // The verdict goes into the ack before the entry is queued: the committer may commit and send
+  // this ack before push_back returns here.
+  ack->set_accepted(true);
   {
     absl::MutexLock commit(&commit_mu_);
     if (ingest_closed_) return reject("frame", "the server is shutting down");
     commit_queue_.push_back(std::move(entry));
   }
   sc->highest_accepted = proto.sequence();
-  sc->last_accepted_time = entry.time;
-  ack->set_accepted(true);
+  sc->last_accepted_time = frame_time;
   return true;
 }
 
