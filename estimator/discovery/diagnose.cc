@@ -553,6 +553,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   ModelRunOptions held_out_options;
   for (const Gap& g : gaps) held_out_options.withheld.emplace_back(g.first, g.last);
 
+  auto run_full_model = [&](const ModelState& m) -> absl::StatusOr<ModelRun> {
+    ++report.filter_runs;
+    return RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction));
+  };
   auto run_held_out = [&](const ModelState& m) -> absl::StatusOr<ModelRun> {
     ++report.filter_runs;
     return RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction), held_out_options);
@@ -695,6 +699,38 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       }
     }
     std::sort(significant.begin(), significant.end(), [](const Scored& a, const Scored& b) { return a.score > b.score; });
+    // A drift instability can be partly fitted by a deterministic term. When the random walk is
+    // significant too, the best deterministic candidate is tested on top of it (the nested
+    // comparison): if it adds nothing significant beyond the raised random walk, the random walk
+    // is the explanation.
+    std::string rw_note;
+    if (!significant.empty() && (**fits[significant.front().index]).candidate.effect != Effect::kRandomWalkDrift) {
+      const Scored* rw = nullptr;
+      for (const Scored& x : scored) {
+        if ((**fits[x.index]).candidate.effect == Effect::kRandomWalkDrift && x.significant && x.homogeneous) rw = &x;
+      }
+      if (rw != nullptr) {
+        const CandidateFit& det = **fits[significant.front().index];
+        const CandidateFit& walk = **fits[rw->index];
+        ModelState both = det.model;
+        both.config.random_walk = walk.model.config.random_walk;
+        auto run = run_full_model(both);
+        if (!run.ok()) return run.status();
+        const double gain = Profile(walk.run).value - Profile(*run).value;
+        const int k = std::max(1, det.parameters);
+        const double p_det = ChiSquareSurvival(std::max(0.0, gain), k);
+        rw_note = absl::StrFormat(
+            "on top of a random walk raised to %.4f deg/h/sqrt(h) it still improves -2 log L by %.1f (p = %.2g)",
+            SiToDegPerHourSqrtHour(walk.model.config.random_walk), gain, p_det);
+        if (!Significant(p_det, options.alpha, static_cast<int>(candidates.size()))) {
+          significant.assign(1, *rw);
+          rw_note = absl::StrFormat(
+              "%s fits part of it but adds nothing significant on top of the raised random walk "
+              "(-2 log L %.1f, p = %.2g)",
+              CandidateName(det.candidate), gain, p_det);
+        }
+      }
+    }
     int chosen = -1;
     std::vector<std::pair<int, HeldOutResult>> contenders;
     if (!significant.empty()) {
@@ -798,6 +834,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     finding.evidence.round = round;
     finding.evidence.notes = f.notes;
     finding.explanation = Explain(finding, finding.evidence);
+    if (!rw_note.empty()) finding.evidence.notes.push_back(rw_note);
     if (held_out_selected) {
       finding.evidence.notes.insert(finding.evidence.notes.begin(),
                                     "concealed: not significant in-sample (absorbed where calibrated), found by "
