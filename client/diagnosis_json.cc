@@ -82,7 +82,8 @@ json MismatchJson(const Mismatch& m, absl::Time t0) {
 
 json GapJson(const GapSummary& g, absl::Time t0) {
   json rates = json::array();
-  for (const auto& [id, rate] : g.gyro_drift_rate_deg_h) rates.push_back(json{{"gyro", id}, {"driftRateDegH", Number(rate)}});
+  for (const auto& [id, rate] : g.gyro_drift_rate_deg_h)
+    rates.push_back(json{{"gyro", id}, {"driftRateDegH", Number(rate)}});
   return json{{"regime", g.regime},
               {"start", Utc(g.start)},
               {"end", Utc(g.end)},

@@ -49,7 +49,8 @@ double DegH(double x) { return RadPerSecToDegPerHour(x); }
 void AddVectorParameters(const std::string& name, const Vector3d& value, const Vector3d& sigma,
                          double scale, const std::string& unit, std::vector<Parameter>& out) {
   for (int i = 0; i < 3; ++i) {
-    out.push_back(Parameter{absl::StrFormat("%s[%d]", name, i), value(i) * scale, sigma(i) * scale, unit});
+    out.push_back(
+        Parameter{absl::StrFormat("%s[%d]", name, i), value(i) * scale, sigma(i) * scale, unit});
   }
 }
 
@@ -76,7 +77,8 @@ LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, cons
     if (!rates.gyro_valid[i] || !rates.gyro_valid[i + 1] || !rates.gyro_step_valid[i]) continue;
     const double dt = absl::ToDoubleSeconds(frames[i + 1].time - frames[i].time);
     if (!(dt > 0)) continue;
-    const Vector3d r_st = LogQuaternion(s0->q_in_b.normalized().conjugate() * s1->q_in_b.normalized());
+    const Vector3d r_st =
+        LogQuaternion(s0->q_in_b.normalized().conjugate() * s1->q_in_b.normalized());
     const Vector3d& r_g = rates.gyro_step[i];
     const Vector3d dw = rates.gyro[i + 1] - rates.gyro[i];
     for (int k = 0; k < 3; ++k) {
@@ -165,7 +167,8 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
       !added(EffectId(Effect::kStarTrackerMisalignment))) {
     out.push_back({Effect::kStarTrackerMisalignment, 0});
   }
-  if (Effective(effects, Effect::kStarTrackerLatency) && !added(EffectId(Effect::kStarTrackerLatency))) {
+  if (Effective(effects, Effect::kStarTrackerLatency) &&
+      !added(EffectId(Effect::kStarTrackerLatency))) {
     out.push_back({Effect::kStarTrackerLatency, 0});
   }
   if (Effective(effects, Effect::kRandomWalkDrift) && model.options.model.random_walk &&
@@ -188,8 +191,9 @@ ProfiledDeviance Profile(const ModelRun& run) {
   return p;
 }
 
-void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
-                               int gyro, CandidateFit& fit) {
+void DescribeRotorDisplacement(const SpacecraftConfig& config,
+                               const std::vector<TelemetryFrame>& frames, int gyro,
+                               CandidateFit& fit) {
   const GyroEstimate* e = FindEstimate(fit.run.gyros, gyro);
   if (e == nullptr) return;
   const Vector3d C1 = e->coefficients.C1, C2 = e->coefficients.C2;
@@ -203,9 +207,8 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector
   const double a = C1.dot(lambda);  // C10 + C20
   const double b = C2.dot(lambda);  // -5 C20
   const double C20 = -b / 5.0, C10 = a - C20;
-  const double cos_line = (C1.norm() > 0 && C2.norm() > 0)
-                              ? std::abs(C1.dot(C2)) / (C1.norm() * C2.norm())
-                              : 1.0;
+  const double cos_line =
+      (C1.norm() > 0 && C2.norm() > 0) ? std::abs(C1.dot(C2)) / (C1.norm() * C2.norm()) : 1.0;
   const double line_angle_deg = RadToDeg(std::acos(std::clamp(cos_line, -1.0, 1.0)));
   // Collinearity test: components of C1, C2 off the common line against their sigmas,
   // chi-square with 6 - 4 = 2 degrees of freedom (lambda: 2, C10 + C20 and C20: 2).
@@ -222,7 +225,8 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector
   AddVectorParameters("lambda", lambda, Vector3d::Zero(), 1.0, "1", fit.fitted);
   fit.notes.push_back(absl::StrFormat(
       "C1 and C2 lie %.1f deg apart as lines (C1.C2 %s 0); a displaced rotor makes them collinear "
-      "(DESIGN §3): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f %.2f] "
+      "(DESIGN §3): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f "
+      "%.2f] "
       "(case axes), off-line residual chi2 = %.1f on 2 dof, p = %.2g",
       line_angle_deg, C1.dot(C2) < 0 ? "<" : ">=", DegH(C10), DegH(C20), lambda.x(), lambda.y(),
       lambda.z(), chi2, p_collinear));
@@ -237,7 +241,8 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector
     ++n;
   }
   if (n < 2) {
-    fit.notes.push_back("no suspension offset voltages in the recording: displacement not checked against eq. (3)");
+    fit.notes.push_back(
+        "no suspension offset voltages in the recording: displacement not checked against eq. (3)");
     return;
   }
   const Vector3d mean_mv = sum / n;
@@ -249,8 +254,8 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector
                                                        s.reference_voltage, s.gap) /
                          kMetresPerUm;
   }
-  AddVectorParameters("offsetVoltageMv", mean_mv, sd_mv / std::sqrt(static_cast<double>(n)), 1.0, "mV",
-                      fit.fitted);
+  AddVectorParameters("offsetVoltageMv", mean_mv, sd_mv / std::sqrt(static_cast<double>(n)), 1.0,
+                      "mV", fit.fitted);
   AddVectorParameters("displacementUm", displacement_um, Vector3d::Zero(), 1.0, "um", fit.fitted);
   const double size_um = displacement_um.norm();
   fit.fitted.push_back({"displacementSizeUm", size_um, 0.0, "um"});
@@ -260,7 +265,8 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector
     fit.fitted.push_back({"lambdaToVoltageAngleDeg", angle_deg, 0.0, "deg"});
     fit.notes.push_back(absl::StrFormat(
         "mean suspension offset voltages [%.1f %.1f %.1f] mV give by eq. (3) a rotor displacement "
-        "of [%.2f %.2f %.2f] um (|%.2f| um, k = %.0f, U0 = %.0f V, d0 = %.0f um), %.1f deg from the "
+        "of [%.2f %.2f %.2f] um (|%.2f| um, k = %.0f, U0 = %.0f V, d0 = %.0f um), %.1f deg from "
+        "the "
         "fitted direction lambda",
         mean_mv.x(), mean_mv.y(), mean_mv.z(), displacement_um.x(), displacement_um.y(),
         displacement_um.z(), size_um, s.amplifier_gain, s.reference_voltage, s.gap / kMetresPerUm,
@@ -277,7 +283,8 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
   SpacecraftConfig& config = fit.model.config;
   const std::vector<TelemetryFrame>& frames = *ctx.frames;
   auto run_model = [&](const ModelState& m, ModelRun& out) -> absl::Status {
-    const std::vector<TelemetryFrame> corrected = CorrectStarTracker(frames, *ctx.rates, m.correction);
+    const std::vector<TelemetryFrame> corrected =
+        CorrectStarTracker(frames, *ctx.rates, m.correction);
     auto run = RunModel(m.config, m.options, corrected);
     ++fit.runs;
     if (!run.ok()) return run.status();
@@ -298,7 +305,8 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
     case Effect::kFourthHarmonic:
     case Effect::kUnequalStiffness: {
       if (FindGyroMutable(config, candidate.gyro) == nullptr) {
-        return absl::InvalidArgumentError(absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+        return absl::InvalidArgumentError(
+            absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
       }
       int first = kThetaC1, count = 6;
       double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
@@ -324,9 +332,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
         }
         const DriftVector configured = ctx.model->config.FindGyro(candidate.gyro)->model.AsVector();
         if (candidate.effect == Effect::kFourthHarmonic) {
-          fit.notes.push_back(absl::StrFormat("k0 of gyro %d calibrates to %.4f +- %.4f deg/h; the model held %.4f deg/h",
-                                              candidate.gyro, DegH(v(kThetaK0)), DegH(sg(kThetaK0)),
-                                              DegH(configured(kThetaK0))));
+          fit.notes.push_back(absl::StrFormat(
+              "k0 of gyro %d calibrates to %.4f +- %.4f deg/h; the model held %.4f deg/h",
+              candidate.gyro, DegH(v(kThetaK0)), DegH(sg(kThetaK0)), DegH(configured(kThetaK0))));
         }
       }
       if (candidate.effect == Effect::kRotorDisplacement) {
@@ -347,7 +355,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
     }
     case Effect::kGyroMisalignment: {
       GyroConfig* g = FindGyroMutable(config, candidate.gyro);
-      if (g == nullptr) return absl::InvalidArgumentError(absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+      if (g == nullptr)
+        return absl::InvalidArgumentError(
+            absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
       g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
       fit.parameters = 3;
       if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
@@ -399,7 +409,8 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       for (int id : ctx.gyros) {
         const GyroEstimate* e = FindEstimate(stage1.gyros, id);
         if (e == nullptr) continue;
-        absl::StrAppend(&per_gyro, absl::StrFormat(" gyro %d [%.1f %.1f %.1f]", id, RadToArcsec(e->misalignment_b.x()),
+        absl::StrAppend(&per_gyro, absl::StrFormat(" gyro %d [%.1f %.1f %.1f]", id,
+                                                   RadToArcsec(e->misalignment_b.x()),
                                                    RadToArcsec(e->misalignment_b.y()),
                                                    RadToArcsec(e->misalignment_b.z())));
         for (int i = 0; i < 3; ++i) {
@@ -435,8 +446,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       if (!first.observable) {
         fit.parameters = 0;
         fit.run = *ctx.model_run;
-        fit.notes.push_back("the body rate never changed enough to observe a star-tracker latency "
-                            "(in a steady rotation a latency is a constant misalignment)");
+        fit.notes.push_back(
+            "the body rate never changed enough to observe a star-tracker latency "
+            "(in a steady rotation a latency is a constant misalignment)");
         return fit;
       }
       fit.notes.push_back(absl::StrFormat(
@@ -487,9 +499,11 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       fit.fitted.push_back({"latencyMs", tau * 1e3, tau_sigma * 1e3, "ms"});
       std::string grid_text;
       for (size_t k = 0; k < taus.size(); ++k) {
-        absl::StrAppend(&grid_text, absl::StrFormat(" %.0f:%.1f", taus[k] * 1e3, value[k] - best_value));
+        absl::StrAppend(&grid_text,
+                        absl::StrFormat(" %.0f:%.1f", taus[k] * 1e3, value[k] - best_value));
       }
-      fit.notes.push_back(absl::StrCat("filter likelihood around it (ms: -2 log L above the best):", grid_text));
+      fit.notes.push_back(
+          absl::StrCat("filter likelihood around it (ms: -2 log L above the best):", grid_text));
       return fit;
     }
     case Effect::kRandomWalkDrift: {
@@ -528,14 +542,18 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
           q_hat = grid[best_k] * std::pow(2.0, std::clamp(offset, -1.0, 1.0));
         }
       }
-      fit.fitted.push_back({"randomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q_hat), 0.0, "deg/h/sqrt(h)"});
-      fit.fitted.push_back({"configuredRandomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q0), 0.0, "deg/h/sqrt(h)"});
+      fit.fitted.push_back(
+          {"randomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q_hat), 0.0, "deg/h/sqrt(h)"});
+      fit.fitted.push_back(
+          {"configuredRandomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q0), 0.0, "deg/h/sqrt(h)"});
       std::string grid_text;
       for (size_t k = 0; k < grid.size(); ++k) {
         absl::StrAppend(&grid_text, absl::StrFormat(" %.4g:%.1f", SiToDegPerHourSqrtHour(grid[k]),
                                                     value[k] - value[best_k]));
       }
-      fit.notes.push_back(absl::StrCat("likelihood over the intensity grid (deg/h/sqrt(h): -2 log L above the best):", grid_text));
+      fit.notes.push_back(absl::StrCat(
+          "likelihood over the intensity grid (deg/h/sqrt(h): -2 log L above the best):",
+          grid_text));
       return fit;
     }
   }

@@ -71,7 +71,8 @@ struct CandidateFit {
   // parameters are constant from the start already.
   std::optional<ModelRun> fixed_run;
   int parameters = 0;
-  bool searched = false;  // parameters fitted by search (BIC penalty) rather than freed with a prior
+  bool searched =
+      false;  // parameters fitted by search (BIC penalty) rather than freed with a prior
   std::vector<Parameter> fitted;
   std::vector<std::string> notes;
   int runs = 0;  // filter runs spent
@@ -107,8 +108,9 @@ ProfiledDeviance Profile(const ModelRun& run);
 // Physics of a fitted rotor displacement (DESIGN §3): C1 = (C10 + C20) lambda,
 // C2 = -5 C20 lambda; lambda the dominant common direction of C1 and C2, and the displacement
 // implied by the mean suspension offset voltages through eq. (3). Appended to `fit`.
-void DescribeRotorDisplacement(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
-                               int gyro, CandidateFit& fit);
+void DescribeRotorDisplacement(const SpacecraftConfig& config,
+                               const std::vector<TelemetryFrame>& frames, int gyro,
+                               CandidateFit& fit);
 
 }  // namespace esg::estimator::discovery
 

@@ -64,7 +64,9 @@ void ParallelRun(int threads, int count, const std::function<void(int)>& job) {
 
 double Hours(absl::Time t, absl::Time t0) { return absl::ToDoubleHours(t - t0); }
 
-std::string Utc(absl::Time t) { return absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", t, absl::UTCTimeZone()); }
+std::string Utc(absl::Time t) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", t, absl::UTCTimeZone());
+}
 
 // The user's model in the form the discovery extends: every term of eq. (1), (10) is in the
 // filter, held at its configured value unless freed; terms outside the user's model are held at
@@ -111,8 +113,8 @@ struct Gap {
   int last = 0;
 };
 
-std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans, const std::vector<TelemetryFrame>& frames,
-                            const DiagnoseOptions& opt) {
+std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans,
+                            const std::vector<TelemetryFrame>& frames, const DiagnoseOptions& opt) {
   std::vector<Gap> gaps;
   if (frames.empty()) return gaps;
   const absl::Time t0 = frames.front().time, t1 = frames.back().time;
@@ -120,12 +122,14 @@ std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans, const std::vec
   const double earliest_h = std::max(3.0, 0.15 * total_h);
   auto st_count = [&](int a, int b) {
     int n = 0;
-    for (int i = a; i <= b; ++i) n += frames[i].star_tracker.has_value() && frames[i].star_tracker->valid;
+    for (int i = a; i <= b; ++i)
+      n += frames[i].star_tracker.has_value() && frames[i].star_tracker->valid;
     return n;
   };
   auto gap_of = [&](int k) -> std::optional<Gap> {
     const RegimeSpan& s = spans[k];
-    if (s.regime == Regime::kSlew || s.hours() < 1.0 || Hours(s.start, t0) < earliest_h) return std::nullopt;
+    if (s.regime == Regime::kSlew || s.hours() < 1.0 || Hours(s.start, t0) < earliest_h)
+      return std::nullopt;
     Gap g{k, s.first_frame, s.first_frame};
     const absl::Time stop = s.start + absl::Seconds(HoursToSeconds(opt.max_gap_hours));
     while (g.last + 1 <= s.last_frame && frames[g.last + 1].time <= stop) ++g.last;
@@ -149,7 +153,8 @@ std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans, const std::vec
   for (int k = 0; k < static_cast<int>(spans.size()); ++k) {
     if (!gap_of(k) || spans[k].regime == dominant) continue;
     auto it = longest.find(spans[k].regime);
-    if (it == longest.end() || spans[k].hours() > spans[it->second].hours()) longest[spans[k].regime] = k;
+    if (it == longest.end() || spans[k].hours() > spans[it->second].hours())
+      longest[spans[k].regime] = k;
   }
   for (const auto& [r, k] : longest) order.push_back(k);
   for (int k = static_cast<int>(spans.size()) - 1; k >= 0; --k) {
@@ -161,7 +166,8 @@ std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans, const std::vec
     bool clear = true;
     for (const Gap& other : gaps) {
       // At least an hour of star-tracker data between gaps to re-calibrate.
-      const absl::Time a0 = frames[g.first].time - absl::Hours(1), a1 = frames[g.last].time + absl::Hours(1);
+      const absl::Time a0 = frames[g.first].time - absl::Hours(1),
+                       a1 = frames[g.last].time + absl::Hours(1);
       if (!(frames[other.last].time < a0 || frames[other.first].time > a1)) clear = false;
     }
     if (clear) gaps.push_back(g);
@@ -209,7 +215,8 @@ HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps
       if (s.span != static_cast<int>(k)) continue;
       t.push_back(s.seconds);
       for (int i = 0; i < 3; ++i) y[i].push_back(s.error_in(i));
-      out.points.push_back({Hours(frames[s.frame].time, t0), static_cast<int>(k), RadToArcsec(s.error_in.norm())});
+      out.points.push_back(
+          {Hours(frames[s.frame].time, t0), static_cast<int>(k), RadToArcsec(s.error_in.norm())});
       g.final_error_arcsec = RadToArcsec(s.error_in.norm());
       for (const HeldOutGyroError& e : s.gyros) {
         gt[e.id].push_back(s.seconds);
@@ -250,7 +257,8 @@ HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps
         g.nees += growth.squaredNorm() / var;
         g.dof += 2;
       }
-      g.gyro_drift_rate_deg_h.emplace_back(id, RadPerSecToDegPerHour(growth.norm() / std::max(T, 1.0)));
+      g.gyro_drift_rate_deg_h.emplace_back(id,
+                                           RadPerSecToDegPerHour(growth.norm() / std::max(T, 1.0)));
     }
     out.nees += g.nees;
     out.dof += g.dof;
@@ -273,7 +281,8 @@ double ResidualRmsArcsec(const ModelRun& run) {
   return n > 0 ? RadToArcsec(std::sqrt(s / n)) : 0.0;
 }
 
-std::vector<ResidualPoint> ResidualSeries(const ModelRun& run, const std::vector<TelemetryFrame>& frames) {
+std::vector<ResidualPoint> ResidualSeries(const ModelRun& run,
+                                          const std::vector<TelemetryFrame>& frames) {
   std::vector<ResidualPoint> out;
   const absl::Time t0 = frames.front().time;
   for (const StepRecord& r : run.steps) {
@@ -298,9 +307,9 @@ struct Cell {
   int gyro = 0;
   int span = 0;
   double sum_w = 0.0;
-  int n = 0;             // gyro-steps
-  double sum_z2 = 0.0;   // [rad^2]
-  double sum_s2 = 0.0;   // [rad^2]
+  int n = 0;                             // gyro-steps
+  double sum_z2 = 0.0;                   // [rad^2]
+  double sum_s2 = 0.0;                   // [rad^2]
   std::array<std::vector<double>, 2> u;  // normalised innovations per component, time order
   std::vector<double> hours;
 };
@@ -424,9 +433,9 @@ bool Significant(double p, double alpha, int tests) { return p < alpha / std::ma
 
 // Materiality bounds of the goodness-of-fit checks (docs/discovery.md): with ~10^4 star-tracker
 // differences a 3% excess is already "significant"; these ask for a physically material one.
-constexpr double kMaterialNeesRatio = 4.0;    // held-out errors beyond 2x the filter's sigma
-constexpr double kMaterialDispersion = 1.5;   // star-tracker differences 1.22x their sigma
-constexpr int kQuarters = 4;                  // time blocks of the homogeneity test
+constexpr double kMaterialNeesRatio = 4.0;   // held-out errors beyond 2x the filter's sigma
+constexpr double kMaterialDispersion = 1.5;  // star-tracker differences 1.22x their sigma
+constexpr int kQuarters = 4;                 // time blocks of the homogeneity test
 
 const Parameter* FindParameter(const std::vector<Parameter>& ps, const std::string& name) {
   for (const Parameter& p : ps) {
@@ -435,13 +444,14 @@ const Parameter* FindParameter(const std::vector<Parameter>& ps, const std::stri
   return nullptr;
 }
 
-std::string VectorText(const std::vector<Parameter>& ps, const std::string& name, const char* format) {
+std::string VectorText(const std::vector<Parameter>& ps, const std::string& name,
+                       const char* format) {
   std::vector<std::string> parts;
   for (int i = 0; i < 3; ++i) {
     const Parameter* p = FindParameter(ps, absl::StrFormat("%s[%d]", name, i));
     if (p == nullptr) return "";
     parts.push_back(p->sigma > 0 ? absl::StrFormat("%s+-%s", absl::StrFormat(format, p->value),
-                                                      absl::StrFormat(format, p->sigma))
+                                                   absl::StrFormat(format, p->sigma))
                                  : absl::StrFormat(format, p->value));
   }
   return absl::StrCat("[", absl::StrJoin(parts, ", "), "]");
@@ -449,9 +459,9 @@ std::string VectorText(const std::vector<Parameter>& ps, const std::string& name
 
 // The physics of a finding in the units people use (DESIGN §6).
 std::string Explain(const Finding& f, const Evidence& e) {
-  const std::string stats = absl::StrFormat(
-      "the likelihood improves by %.1f (-2 log L) for %d parameter%s, p = %.2g", e.delta_deviance,
-      e.parameters, e.parameters == 1 ? "" : "s", e.lr_p_value);
+  const std::string stats =
+      absl::StrFormat("the likelihood improves by %.1f (-2 log L) for %d parameter%s, p = %.2g",
+                      e.delta_deviance, e.parameters, e.parameters == 1 ? "" : "s", e.lr_p_value);
   const auto& ps = f.parameters;
   if (f.effect == "rotor_displacement") {
     const Parameter* angle = FindParameter(ps, "lineAngleDeg");
@@ -461,44 +471,52 @@ std::string Explain(const Finding& f, const Evidence& e) {
         "C2 = %s deg/h, %.0f deg apart as lines%s; %s",
         f.gyro, VectorText(ps, "c1DegH", "%.3f"), VectorText(ps, "c2DegH", "%.3f"),
         angle ? angle->value : 0.0,
-        size ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))", size->value)
-             : "",
+        size
+            ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))",
+                              size->value)
+            : "",
         stats);
   }
   if (f.effect == "fourth_harmonic") {
     const Parameter* k0 = FindParameter(ps, "k0DegH");
-    return absl::StrFormat("gyro %d: the 4th-harmonic coefficient k0 (eq. (1)) is missing or wrong: it "
-                           "calibrates to %.4f +- %.4f deg/h; %s",
-                           f.gyro, k0 ? k0->value : 0.0, k0 ? k0->sigma : 0.0, stats);
+    return absl::StrFormat(
+        "gyro %d: the 4th-harmonic coefficient k0 (eq. (1)) is missing or wrong: it "
+        "calibrates to %.4f +- %.4f deg/h; %s",
+        f.gyro, k0 ? k0->value : 0.0, k0 ? k0->sigma : 0.0, stats);
   }
   if (f.effect == "unequal_stiffness") {
-    return absl::StrFormat("gyro %d: unequal suspension stiffness (eq. (1)): mu = %s deg/h, nu = %s deg/h; %s",
-                           f.gyro, VectorText(ps, "muDegH", "%.3f"), VectorText(ps, "nuDegH", "%.3f"), stats);
+    return absl::StrFormat(
+        "gyro %d: unequal suspension stiffness (eq. (1)): mu = %s deg/h, nu = %s deg/h; %s", f.gyro,
+        VectorText(ps, "muDegH", "%.3f"), VectorText(ps, "nuDegH", "%.3f"), stats);
   }
   if (f.effect == "gyro_misalignment") {
-    return absl::StrFormat("gyro %d case axes are misaligned to the body by %s arcsec (rotation vector, "
-                           "body axes); %s",
-                           f.gyro, VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
+    return absl::StrFormat(
+        "gyro %d case axes are misaligned to the body by %s arcsec (rotation vector, "
+        "body axes); %s",
+        f.gyro, VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
   }
   if (f.effect == "star_tracker_misalignment") {
-    return absl::StrFormat("the star tracker is misaligned to the body by %s arcsec (rotation vector, body "
-                           "axes), common to all gyros; %s",
-                           VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
+    return absl::StrFormat(
+        "the star tracker is misaligned to the body by %s arcsec (rotation vector, body "
+        "axes), common to all gyros; %s",
+        VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
   }
   if (f.effect == "star_tracker_latency") {
     const Parameter* tau = FindParameter(ps, "latencyMs");
-    return absl::StrFormat("the star-tracker time tag is %s by %.0f +- %.0f ms (the attitude it reports is "
-                           "that of %.0f ms %s); %s",
-                           tau && tau->value < 0 ? "early" : "late", tau ? std::abs(tau->value) : 0.0,
-                           tau ? tau->sigma : 0.0, tau ? std::abs(tau->value) : 0.0,
-                           tau && tau->value < 0 ? "later" : "earlier", stats);
+    return absl::StrFormat(
+        "the star-tracker time tag is %s by %.0f +- %.0f ms (the attitude it reports is "
+        "that of %.0f ms %s); %s",
+        tau && tau->value < 0 ? "early" : "late", tau ? std::abs(tau->value) : 0.0,
+        tau ? tau->sigma : 0.0, tau ? std::abs(tau->value) : 0.0,
+        tau && tau->value < 0 ? "later" : "earlier", stats);
   }
   if (f.effect == "random_walk_drift") {
     const Parameter* q = FindParameter(ps, "randomWalkDegHSqrtH");
     const Parameter* q0 = FindParameter(ps, "configuredRandomWalkDegHSqrtH");
-    return absl::StrFormat("the drift is less stable than configured: random-walk intensity %.4f "
-                           "deg/h/sqrt(h) against %.4f configured; %s",
-                           q ? q->value : 0.0, q0 ? q0->value : 0.0, stats);
+    return absl::StrFormat(
+        "the drift is less stable than configured: random-walk intensity %.4f "
+        "deg/h/sqrt(h) against %.4f configured; %s",
+        q ? q->value : 0.0, q0 ? q0->value : 0.0, stats);
   }
   return stats;
 }
@@ -511,19 +529,22 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                                          const DiagnoseProgressFn& progress) {
   if (absl::Status s = ValidateConfig(config); !s.ok()) return s;
   if (frames.size() < 10) {
-    return absl::InvalidArgumentError(absl::StrFormat("recording: %d frames, at least 10 needed", frames.size()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("recording: %d frames, at least 10 needed", frames.size()));
   }
   for (size_t i = 1; i < frames.size(); ++i) {
     if (!(frames[i].time > frames[i - 1].time)) {
-      return absl::InvalidArgumentError(absl::StrFormat("recording: frame %d (%s) is not after frame %d", i,
-                                                        Utc(frames[i].time), i - 1));
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "recording: frame %d (%s) is not after frame %d", i, Utc(frames[i].time), i - 1));
     }
   }
   if (!(options.alpha > 0.0 && options.alpha < 1.0)) {
-    return absl::InvalidArgumentError(absl::StrFormat("alpha: must be in (0, 1), got %g", options.alpha));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("alpha: must be in (0, 1), got %g", options.alpha));
   }
   int st_frames = 0;
-  for (const TelemetryFrame& f : frames) st_frames += f.star_tracker.has_value() && f.star_tracker->valid;
+  for (const TelemetryFrame& f : frames)
+    st_frames += f.star_tracker.has_value() && f.star_tracker->valid;
   if (st_frames < 10) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "recording: %d valid star-tracker samples; the comparison needs at least 10", st_frames));
@@ -544,7 +565,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     if (2 * n >= static_cast<int>(frames.size())) report.gyros.push_back(g.id);
   }
   if (report.gyros.size() < 2) {
-    return absl::InvalidArgumentError("recording: fewer than two configured gyros report in half of the frames");
+    return absl::InvalidArgumentError(
+        "recording: fewer than two configured gyros report in half of the frames");
   }
   say(0.0, "regimes");
   const BodyRates rates = MeasureBodyRates(config, frames);
@@ -559,7 +581,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   };
   auto run_held_out = [&](const ModelState& m) -> absl::StatusOr<ModelRun> {
     ++report.filter_runs;
-    return RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction), held_out_options);
+    return RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction),
+                    held_out_options);
   };
 
   // The user's model: full run and held-out run in parallel.
@@ -568,10 +591,11 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   std::optional<absl::StatusOr<ModelRun>> base_full, base_held;
   ParallelRun(options.threads, 2, [&](int i) {
     if (i == 0) {
-      base_full = RunModel(model.config, model.options, CorrectStarTracker(frames, rates, model.correction));
+      base_full = RunModel(model.config, model.options,
+                           CorrectStarTracker(frames, rates, model.correction));
     } else if (!gaps.empty()) {
-      base_held = RunModel(model.config, model.options, CorrectStarTracker(frames, rates, model.correction),
-                           held_out_options);
+      base_held = RunModel(model.config, model.options,
+                           CorrectStarTracker(frames, rates, model.correction), held_out_options);
     }
   });
   report.filter_runs += gaps.empty() ? 1 : 2;
@@ -599,7 +623,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   // Forward selection.
   HeldOutResult current_held_out = base_held_out;
   bool held_out_current = true;  // current_held_out belongs to the current model
-  bool time_localized = false;  // significant candidates, each only fitting part of the time
+  bool time_localized = false;   // significant candidates, each only fitting part of the time
   for (int round = 0; round < options.max_effects; ++round) {
     const std::vector<Candidate> candidates = ListCandidates(model, report.gyros, options.effects);
     if (candidates.empty()) break;
@@ -654,7 +678,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       const int k = std::max(1, f.parameters);
       s.p = ChiSquareSurvival(std::max(0.0, s.delta), k);
       s.threshold = ChiSquareQuantile(1.0 - options.alpha / candidates.size(), k);
-      s.significant = f.parameters > 0 && Significant(s.p, options.alpha, static_cast<int>(candidates.size()));
+      s.significant =
+          f.parameters > 0 && Significant(s.p, options.alpha, static_cast<int>(candidates.size()));
       // Homogeneity: the effects of the library are constant in time. With its parameters held
       // from the start at their final values, an effect that makes the fit worse in a quarter of
       // the recording by more than its cost there (k ln n_q, plus the chi-square quantile) while
@@ -663,7 +688,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       const std::vector<double> cand_steps = StepDeviance(f.fixed_run ? *f.fixed_run : f.run);
       std::array<int, kQuarters> steps_in{};
       for (size_t j = 0; j < std::min(current_steps.size(), cand_steps.size()); ++j) {
-        const int q = std::min(kQuarters - 1, static_cast<int>(kQuarters * current_run.steps[j].frame / frames.size()));
+        const int q =
+            std::min(kQuarters - 1,
+                     static_cast<int>(kQuarters * current_run.steps[j].frame / frames.size()));
         s.quarters[q] += current_steps[j] - cand_steps[j];
         ++steps_in[q];
       }
@@ -688,8 +715,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         if (s.significant && rw == (pass == 1)) pool.push_back(s);
       }
       if (pool.empty()) continue;
-      const auto top = std::max_element(pool.begin(), pool.end(),
-                                        [](const Scored& a, const Scored& b) { return a.score < b.score; });
+      const auto top =
+          std::max_element(pool.begin(), pool.end(),
+                           [](const Scored& a, const Scored& b) { return a.score < b.score; });
       if (!top->homogeneous) {
         inhomogeneous_only = true;
         break;
@@ -698,16 +726,20 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         if (s.homogeneous) significant.push_back(s);
       }
     }
-    std::sort(significant.begin(), significant.end(), [](const Scored& a, const Scored& b) { return a.score > b.score; });
+    std::sort(significant.begin(), significant.end(),
+              [](const Scored& a, const Scored& b) { return a.score > b.score; });
     // A drift instability can be partly fitted by a deterministic term. When the random walk is
     // significant too, the best deterministic candidate is tested on top of it (the nested
     // comparison): if it adds nothing significant beyond the raised random walk, the random walk
     // is the explanation.
     std::string rw_note;
-    if (!significant.empty() && (**fits[significant.front().index]).candidate.effect != Effect::kRandomWalkDrift) {
+    if (!significant.empty() &&
+        (**fits[significant.front().index]).candidate.effect != Effect::kRandomWalkDrift) {
       const Scored* rw = nullptr;
       for (const Scored& x : scored) {
-        if ((**fits[x.index]).candidate.effect == Effect::kRandomWalkDrift && x.significant && x.homogeneous) rw = &x;
+        if ((**fits[x.index]).candidate.effect == Effect::kRandomWalkDrift && x.significant &&
+            x.homogeneous)
+          rw = &x;
       }
       if (rw != nullptr) {
         const CandidateFit& det = **fits[significant.front().index];
@@ -720,7 +752,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         const int k = std::max(1, det.parameters);
         const double p_det = ChiSquareSurvival(std::max(0.0, gain), k);
         rw_note = absl::StrFormat(
-            "on top of a random walk raised to %.4f deg/h/sqrt(h) it still improves -2 log L by %.1f (p = %.2g)",
+            "on top of a random walk raised to %.4f deg/h/sqrt(h) it still improves -2 log L by "
+            "%.1f (p = %.2g)",
             SiToDegPerHourSqrtHour(walk.model.config.random_walk), gain, p_det);
         if (!Significant(p_det, options.alpha, static_cast<int>(candidates.size()))) {
           significant.assign(1, *rw);
@@ -741,11 +774,13 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         if (s.score >= significant.front().score - kDecisiveDeviance) close.push_back(s.index);
       }
       if (close.size() > 1 && !gaps.empty()) {
-        say(0.05 + 0.8 * (round + 0.95) / options.max_effects, "held-out comparison of close candidates");
+        say(0.05 + 0.8 * (round + 0.95) / options.max_effects,
+            "held-out comparison of close candidates");
         std::vector<std::optional<absl::StatusOr<ModelRun>>> held(close.size());
         ParallelRun(options.threads, static_cast<int>(close.size()), [&](int j) {
           const ModelState& m = (**fits[close[j]]).model;
-          held[j] = RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction), held_out_options);
+          held[j] = RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction),
+                             held_out_options);
         });
         report.filter_runs += static_cast<int>(close.size());
         double best = 1e300;
@@ -772,15 +807,17 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       held_out_current = true;
     }
     if (chosen < 0 && !inhomogeneous_only && current_held_out.dof > 0 &&
-        Significant(ChiSquareSurvival(current_held_out.nees, current_held_out.dof), options.alpha, 2) &&
+        Significant(ChiSquareSurvival(current_held_out.nees, current_held_out.dof), options.alpha,
+                    2) &&
         current_held_out.nees > kMaterialNeesRatio * current_held_out.dof) {
-      say(0.05 + 0.8 * (round + 0.95) / options.max_effects, "held-out scoring of the candidates (concealed mismatch)");
+      say(0.05 + 0.8 * (round + 0.95) / options.max_effects,
+          "held-out scoring of the candidates (concealed mismatch)");
       std::vector<std::optional<absl::StatusOr<ModelRun>>> held(scored.size());
       ParallelRun(options.threads, static_cast<int>(scored.size()), [&](int j) {
         const CandidateFit& f = **fits[scored[j].index];
         if (f.parameters == 0) return;
-        held[j] = RunModel(f.model.config, f.model.options, CorrectStarTracker(frames, rates, f.model.correction),
-                           held_out_options);
+        held[j] = RunModel(f.model.config, f.model.options,
+                           CorrectStarTracker(frames, rates, f.model.correction), held_out_options);
       });
       double best_drop = 0.0;
       for (size_t j = 0; j < scored.size(); ++j) {
@@ -821,7 +858,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       break;
     }
     CandidateFit& f = **fits[chosen];
-    const Scored& s = *std::find_if(scored.begin(), scored.end(), [&](const Scored& x) { return x.index == chosen; });
+    const Scored& s = *std::find_if(scored.begin(), scored.end(),
+                                    [&](const Scored& x) { return x.index == chosen; });
     Finding finding;
     finding.effect = EffectId(f.candidate.effect);
     finding.gyro = f.candidate.gyro;
@@ -836,9 +874,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     finding.explanation = Explain(finding, finding.evidence);
     if (!rw_note.empty()) finding.evidence.notes.push_back(rw_note);
     if (held_out_selected) {
-      finding.evidence.notes.insert(finding.evidence.notes.begin(),
-                                    "concealed: not significant in-sample (absorbed where calibrated), found by "
-                                    "held-out prediction across regimes");
+      finding.evidence.notes.insert(
+          finding.evidence.notes.begin(),
+          "concealed: not significant in-sample (absorbed where calibrated), found by "
+          "held-out prediction across regimes");
     }
     for (const auto& [index, r] : contenders) {
       if (index == chosen) {
@@ -851,14 +890,16 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
             "%s fits the star tracker almost as well (score within %.0f) but predicts the held-out "
             "spans worse: held-out NEES %.1f against %.1f",
             CandidateName((**fits[index]).candidate), kDecisiveDeviance, r.nees,
-            std::find_if(contenders.begin(), contenders.end(), [&](const auto& c) { return c.first == chosen; })
-                ->second.nees));
+            std::find_if(contenders.begin(), contenders.end(), [&](const auto& c) {
+              return c.first == chosen;
+            })->second.nees));
       }
     }
-    finding.evidence.notes.push_back(absl::StrFormat(
-        "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (constant in time, "
-        "as a physical effect of the library is)",
-        s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3]));
+    finding.evidence.notes.push_back(
+        absl::StrFormat("improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, "
+                        "%.1f (constant in time, "
+                        "as a physical effect of the library is)",
+                        s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3]));
     held_out_current = std::any_of(contenders.begin(), contenders.end(),
                                    [&](const auto& c) { return c.first == chosen; });
     report.findings.push_back(std::move(finding));
@@ -900,7 +941,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   const std::vector<bool> outlier = OutlierFrames(current_run, static_cast<int>(frames.size()));
   const CellReference reference = Reference(Cells(current_run, report.regimes, frames, outlier));
   report.mismatch = Locate(base_run, report.regimes, frames, outlier, reference, options.alpha);
-  const Mismatch remaining = Locate(current_run, report.regimes, frames, outlier, reference, options.alpha);
+  const Mismatch remaining =
+      Locate(current_run, report.regimes, frames, outlier, reference, options.alpha);
   const double held_out_p =
       final_held_out.dof > 0 ? ChiSquareSurvival(final_held_out.nees, final_held_out.dof) : 1.0;
   // The held-out statistic leans on the filter's own prediction sigma, so it must also be
@@ -922,7 +964,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       // The held-out span that misses most.
       const GapSummary* worst = nullptr;
       for (const GapSummary& g : final_held_out.gaps) {
-        if (g.dof > 0 && (worst == nullptr || g.nees / g.dof > worst->nees / worst->dof)) worst = &g;
+        if (g.dof > 0 && (worst == nullptr || g.nees / g.dof > worst->nees / worst->dof))
+          worst = &g;
       }
       if (worst != nullptr) {
         where.found = true;
@@ -948,18 +991,21 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         report.findings.empty() ? "the configured model does not fit the recording"
                                 : "after adding the findings",
         where.gyro > 0 ? absl::StrCat("in gyro ", where.gyro) : std::string("in all gyros"),
-        where.source.empty() ? "" : absl::StrCat(" (", where.source, ")"), Utc(where.start), Utc(where.end),
-        where.regime,
-        residual_misfit ? absl::StrFormat("residual RMS %.1f arcsec against %.1f expected (p = %.2g)",
-                                          where.size_arcsec, where.expected_arcsec, where.p_value)
-        : held_out_misfit ? absl::StrFormat("held-out prediction error NEES %.1f on %d dof (p = %.2g)",
-                                            final_held_out.nees, final_held_out.dof, held_out_p)
-                          : absl::StrFormat("star-tracker differences %.2f times their predicted variance "
-                                            "throughout: the recording's noise exceeds the configured one",
-                                            current.dispersion),
-        time_localized ? "; the candidates that fit it improve only part of the recording and worsen "
-                         "the rest (a change in time such as a fault, not a constant effect)"
-                       : "");
+        where.source.empty() ? "" : absl::StrCat(" (", where.source, ")"), Utc(where.start),
+        Utc(where.end), where.regime,
+        residual_misfit
+            ? absl::StrFormat("residual RMS %.1f arcsec against %.1f expected (p = %.2g)",
+                              where.size_arcsec, where.expected_arcsec, where.p_value)
+        : held_out_misfit
+            ? absl::StrFormat("held-out prediction error NEES %.1f on %d dof (p = %.2g)",
+                              final_held_out.nees, final_held_out.dof, held_out_p)
+            : absl::StrFormat("star-tracker differences %.2f times their predicted variance "
+                              "throughout: the recording's noise exceeds the configured one",
+                              current.dispersion),
+        time_localized
+            ? "; the candidates that fit it improve only part of the recording and worsen "
+              "the rest (a change in time such as a fault, not a constant effect)"
+            : "");
     u.evidence.held_out_nees_after = final_held_out.nees;
     u.evidence.held_out_dof = final_held_out.dof;
     u.evidence.lr_p_value = residual_misfit ? where.p_value : (held_out_misfit ? held_out_p : 0.0);

@@ -86,7 +86,7 @@ struct DiagnoseOptions {
 };
 
 struct Parameter {
-  std::string name;   // e.g. "c1DegH[0]", "latencyMs"
+  std::string name;  // e.g. "c1DegH[0]", "latencyMs"
   double value = 0.0;
   double sigma = 0.0;  // 1-sigma, 0 if not available
   std::string unit;    // "deg/h", "arcsec", "ms", "um", "deg", "deg/h/sqrt(h)", "1"
@@ -134,7 +134,7 @@ struct Mismatch {
   // (0 for white residuals) and robust slope [1/h].
   double lag1_autocorrelation = 0.0;
   double trend_per_hour = 0.0;
-  std::string source;            // "in-sample residuals" or "held-out prediction"
+  std::string source;  // "in-sample residuals" or "held-out prediction"
 };
 
 struct GapSummary {
@@ -150,8 +150,8 @@ struct GapSummary {
 };
 
 struct FitSummary {
-  std::string model;                // description
-  double residual_rms_arcsec = 0.0;  // star-tracker innovations, accepted in-sample steps
+  std::string model;                  // description
+  double residual_rms_arcsec = 0.0;   // star-tracker innovations, accepted in-sample steps
   double gap_drift_rate_deg_h = 0.0;  // RMS over the held-out spans of the attitude error rate
   double deviance = 0.0;              // profiled -2 log L (+ const)
   double dispersion = 0.0;            // mean nis per component (1 if the noise model is right)
@@ -190,7 +190,7 @@ struct HeldOutPoint {
 };
 
 struct DiagnosisReport {
-  std::string verdict;  // effect id, "none" or "unexplained"
+  std::string verdict;            // effect id, "none" or "unexplained"
   std::vector<Finding> findings;  // most important first
   Mismatch mismatch;              // of the user's model
   FitSummary before;              // the user's model

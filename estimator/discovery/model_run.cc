@@ -24,7 +24,8 @@ std::vector<TelemetryFrame> CorrectStarTracker(const std::vector<TelemetryFrame>
     if (!st.has_value()) continue;
     const Vector3d w_b = i < rates.best.size() ? rates.best[i] : Vector3d::Zero();
     // q_in_b(t) = q_st(t) (x) Exp(-m) (x) Exp(w_b tau)  (model_run.h).
-    st->q_in_b = (st->q_in_b.normalized() * q_mis * ExpQuaternion(w_b * correction.latency)).normalized();
+    st->q_in_b =
+        (st->q_in_b.normalized() * q_mis * ExpQuaternion(w_b * correction.latency)).normalized();
   }
   return out;
 }
@@ -41,7 +42,8 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
   std::vector<int> withheld_span(n, -1);
   for (size_t k = 0; k < run_options.withheld.size(); ++k) {
     const auto [a, b] = run_options.withheld[k];
-    for (int i = std::max(0, a); i <= std::min(n - 1, b); ++i) withheld_span[i] = static_cast<int>(k);
+    for (int i = std::max(0, a); i <= std::min(n - 1, b); ++i)
+      withheld_span[i] = static_cast<int>(k);
   }
   std::map<int, Matrix3d> C_b_k_config;
   for (const GyroConfig& g : config.gyros) C_b_k_config[g.id] = g.C_b_k;
@@ -55,7 +57,8 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
     const bool st_valid = frame.star_tracker.has_value() && frame.star_tracker->valid;
     for (const Event& e : report->events) {
       if (e.kind == Event::Kind::kFilterReset) ++run.resets;
-      if (e.kind == Event::Kind::kStarTrackerInnovation || e.kind == Event::Kind::kStarTrackerFault) {
+      if (e.kind == Event::Kind::kStarTrackerInnovation ||
+          e.kind == Event::Kind::kStarTrackerFault) {
         ++run.rejections;
       }
     }

@@ -27,7 +27,7 @@ namespace esg::estimator::discovery {
 // q_in_b(t) = q_st(t) (x) Exp(-misalignment_b) (x) Exp(w_b_in_b(t) latency), to first order in
 // the latency (the rate w_b_in_b measured from the gyros, regimes.h).
 struct StarTrackerCorrection {
-  double latency = 0.0;                                     // [s], positive: stamped late
+  double latency = 0.0;                                      // [s], positive: stamped late
   Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();  // [rad]
   bool IsZero() const { return latency == 0.0 && misalignment_b.isZero(0.0); }
 };
@@ -65,7 +65,7 @@ struct HeldOutGyroError {
 
 struct HeldOutSample {
   int frame = 0;
-  int span = 0;         // index into ModelRunOptions::withheld
+  int span = 0;          // index into ModelRunOptions::withheld
   double seconds = 0.0;  // since the span's first frame
   // Attitude error in inertial axes, q_st = Exp(error_in) (x) q_est (conventions.h) [rad].
   Eigen::Vector3d error_in = Eigen::Vector3d::Zero();
@@ -99,11 +99,11 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
 // tracker present but no differences formed (eq. (12) named the star tracker) count cap(m) plus
 // the run's previous log det S, so every model is scored on the same steps.
 struct Deviance {
-  double value = 0.0;       // sum of the per-step terms
-  double nis_sum = 0.0;     // sum of min(nis, cap) over the steps
-  int components = 0;       // sum of m
+  double value = 0.0;    // sum of the per-step terms
+  double nis_sum = 0.0;  // sum of min(nis, cap) over the steps
+  int components = 0;    // sum of m
   int steps = 0;
-  int capped = 0;           // steps at the cap
+  int capped = 0;  // steps at the cap
 };
 inline constexpr double kOutlierP = 1e-4;
 Deviance ComputeDeviance(const ModelRun& run, double outlier_p = kOutlierP);

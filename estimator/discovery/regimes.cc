@@ -114,7 +114,8 @@ const char* RegimeName(Regime r) {
   return "?";
 }
 
-BodyRates MeasureBodyRates(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames) {
+BodyRates MeasureBodyRates(const SpacecraftConfig& config,
+                           const std::vector<TelemetryFrame>& frames) {
   BodyRates out;
   const size_t n = frames.size();
   std::vector<std::optional<Vector3d>> gyro_steps(n > 0 ? n - 1 : 0), st_steps(n > 0 ? n - 1 : 0);
@@ -151,8 +152,8 @@ BodyRates MeasureBodyRates(const SpacecraftConfig& config, const std::vector<Tel
   return out;
 }
 
-std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
-                                    const RegimeOptions& options) {
+std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
+                                    const BodyRates& rates, const RegimeOptions& options) {
   std::vector<RegimeSpan> spans;
   const int n = static_cast<int>(frames.size());
   if (n == 0) return spans;
@@ -228,7 +229,8 @@ std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames, c
   }
   auto duration = [&](const Run& r) {
     return absl::ToDoubleSeconds(frames[r.last].time - frames[r.first].time) +
-           (r.last + 1 < n ? absl::ToDoubleSeconds(frames[r.last + 1].time - frames[r.last].time) : 0.0);
+           (r.last + 1 < n ? absl::ToDoubleSeconds(frames[r.last + 1].time - frames[r.last].time)
+                           : 0.0);
   };
   // Fold short runs: between two runs of one regime into that regime, otherwise into a slew.
   bool changed = true;

@@ -39,7 +39,8 @@ struct BodyRates {
   std::vector<bool> gyro_step_valid;
 };
 
-BodyRates MeasureBodyRates(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames);
+BodyRates MeasureBodyRates(const SpacecraftConfig& config,
+                           const std::vector<TelemetryFrame>& frames);
 
 enum class Regime { kInertialHold, kOrbital, kRotation, kSlew };
 const char* RegimeName(Regime r);  // "inertial_hold", "orbital", "rotation", "slew"
@@ -67,7 +68,7 @@ struct RegimeSpan {
   int last_frame = 0;   // inclusive
   absl::Time start;
   absl::Time end;
-  double mean_rate = 0.0;                        // median |w| over the span [rad/s]
+  double mean_rate = 0.0;                            // median |w| over the span [rad/s]
   Eigen::Vector3d axis_b = Eigen::Vector3d::Zero();  // mean rate axis (body), zero for a hold
   double hours() const { return absl::ToDoubleHours(end - start); }
 };
@@ -75,8 +76,8 @@ struct RegimeSpan {
 // Cuts the recording into regime spans, covering every frame, in time order. The rate per frame
 // is the star tracker's where available (DESIGN §6), the gyros' otherwise; classification uses
 // medians over the window, so outliers and outages do not split spans.
-std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
-                                    const RegimeOptions& options = {});
+std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
+                                    const BodyRates& rates, const RegimeOptions& options = {});
 
 // Index of the span that contains frame i (spans from FindRegimes), -1 if none.
 int SpanOfFrame(const std::vector<RegimeSpan>& spans, int frame);

@@ -57,7 +57,8 @@ bool Correct(const std::string& truth, int gyro, const DiagnosisReport& r) {
   if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
   const bool per_gyro = truth == "rotor_displacement" || truth == "fourth_harmonic" ||
                         truth == "unequal_stiffness" || truth == "gyro_misalignment";
-  return r.verdict == truth && (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == gyro));
+  return r.verdict == truth &&
+         (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == gyro));
 }
 
 void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
@@ -66,9 +67,15 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   std::vector<std::string> truths = ::esg::testing::DiscoveryEffects();
   truths.push_back("two");
   truths.push_back("drift_step");
-  const std::vector<std::string> verdicts = {
-      "none", "rotor_displacement", "fourth_harmonic", "unequal_stiffness", "gyro_misalignment",
-      "star_tracker_misalignment", "star_tracker_latency", "random_walk_drift", "unexplained"};
+  const std::vector<std::string> verdicts = {"none",
+                                             "rotor_displacement",
+                                             "fourth_harmonic",
+                                             "unequal_stiffness",
+                                             "gyro_misalignment",
+                                             "star_tracker_misalignment",
+                                             "star_tracker_latency",
+                                             "random_walk_drift",
+                                             "unexplained"};
   std::map<std::string, std::map<std::string, int>> table;
   std::map<std::string, int> correct;
   std::map<std::string, double> gap_ratio_sum;
@@ -86,10 +93,11 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
         const bool ok = Correct(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
         correct[truth] += ok ? 1 : 0;
         if (report->before.gap_drift_rate_deg_h > 0) {
-          gap_ratio_sum[truth] += report->after.gap_drift_rate_deg_h / report->before.gap_drift_rate_deg_h;
+          gap_ratio_sum[truth] +=
+              report->after.gap_drift_rate_deg_h / report->before.gap_drift_rate_deg_h;
         }
-        std::fprintf(stderr, "%-26s seed %3d: %-26s%s\n", truth.c_str(), 100 + seed, report->verdict.c_str(),
-                     ok ? "" : "  (wrong)");
+        std::fprintf(stderr, "%-26s seed %3d: %-26s%s\n", truth.c_str(), 100 + seed,
+                     report->verdict.c_str(), ok ? "" : "  (wrong)");
       }
     }
   }
@@ -109,10 +117,12 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                 gap_ratio_sum[truth] / seeds);
     state.counters["correct_" + truth] = static_cast<double>(correct[truth]) / seeds;
   }
-  std::printf("\n(%d seeds per row, 30 h recordings; correct = verdict right, and the gyro for per-gyro "
-              "effects; `two` = rotor displacement and star-tracker misalignment both found; `drift_step` = "
-              "a fault outside the library, correct when unexplained)\n",
-              seeds);
+  std::printf(
+      "\n(%d seeds per row, 30 h recordings; correct = verdict right, and the gyro for per-gyro "
+      "effects; `two` = rotor displacement and star-tracker misalignment both found; `drift_step` "
+      "= "
+      "a fault outside the library, correct when unexplained)\n",
+      seeds);
   std::fflush(stdout);
 }
 BENCHMARK(BM_DiscoveryConfusionMatrix)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();

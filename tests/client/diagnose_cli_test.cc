@@ -41,7 +41,8 @@ void WriteFile(const std::string& path, const std::string& text) {
 
 RunResult RunEsg(const TempDir& dir, const std::string& args) {
   const std::string out = dir.File("stdout.txt"), err = dir.File("stderr.txt");
-  const std::string command = std::string("'") + ESG_BINARY + "' " + args + " > '" + out + "' 2> '" + err + "'";
+  const std::string command =
+      std::string("'") + ESG_BINARY + "' " + args + " > '" + out + "' 2> '" + err + "'";
   const int status = std::system(command.c_str());
   RunResult r;
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -81,8 +82,9 @@ TEST(DiagnoseCli, NamesTheMissingEffectAndWritesTheReport) {
                                   dir.File("scenario.json") + "' --hours 24 --seed 3 --out '" +
                                   dir.File("rec.csv") + "'");
   ASSERT_EQ(sim.exit_code, 0) << sim.err;
-  RunResult r = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
-                                dir.File("rec.csv") + "' --json --out '" + dir.File("report") + "'");
+  RunResult r =
+      RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
+                      dir.File("rec.csv") + "' --json --out '" + dir.File("report") + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.err, HasSubstr("diagnose:"));
   EXPECT_THAT(r.err, HasSubstr("round 1"));
@@ -94,7 +96,8 @@ TEST(DiagnoseCli, NamesTheMissingEffectAndWritesTheReport) {
   EXPECT_EQ(finding.at("gyro"), 2);
   EXPECT_THAT(finding.at("explanation").get<std::string>(), HasSubstr("C1"));
   bool has_c1 = false;
-  for (const auto& p : finding.at("parameters")) has_c1 |= p.at("name") == "c1DegH[0]" && p.at("unit") == "deg/h";
+  for (const auto& p : finding.at("parameters"))
+    has_c1 |= p.at("name") == "c1DegH[0]" && p.at("unit") == "deg/h";
   EXPECT_TRUE(has_c1);
   EXPECT_TRUE(finding.at("evidence").contains("pValue"));
   EXPECT_EQ(doc.at("mismatch").at("gyro"), 2);
@@ -120,13 +123,14 @@ TEST(DiagnoseCli, NamesTheMissingEffectAndWritesTheReport) {
 TEST(DiagnoseCli, BadArgumentsExitTwoNamingTheOption) {
   TempDir dir;
   WriteFile(dir.File("config.json"), kConfig);
-  RunResult missing = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
-                                      dir.File("absent.csv") + "'");
+  RunResult missing = RunEsg(dir, "diagnose --config '" + dir.File("config.json") +
+                                      "' --recording '" + dir.File("absent.csv") + "'");
   EXPECT_EQ(missing.exit_code, 2);
   EXPECT_THAT(missing.err, HasSubstr("--recording"));
   WriteFile(dir.File("rec.csv"), "time_utc,st_q0,st_q1,st_q2,st_q3,st_valid\n");
-  RunResult effect = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
-                                     dir.File("rec.csv") + "' --effects rotor_displacment");
+  RunResult effect =
+      RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
+                      dir.File("rec.csv") + "' --effects rotor_displacment");
   EXPECT_EQ(effect.exit_code, 2);
   EXPECT_THAT(effect.err, HasSubstr("--effects"));
   RunResult no_config = RunEsg(dir, "diagnose --recording '" + dir.File("rec.csv") + "'");

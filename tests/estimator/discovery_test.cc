@@ -5,13 +5,11 @@
 // after, `none` on a recording the model explains, `unexplained` for a fault the library does not
 // hold, two effects in one recording; and the pieces: distribution functions, regimes from the
 // body rate, the model-free latency estimate, the star-tracker correction.
-#include "estimator/discovery/diagnose.h"
-
 #include <cmath>
 
 #include "absl/strings/str_format.h"
-
 #include "estimator/discovery/candidates.h"
+#include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
 #include "estimator/discovery/statistics.h"
@@ -102,13 +100,16 @@ TEST(DiscoveryRegimes, FindsOrbitalHoldAndRotationFromTheData) {
   EXPECT_EQ(regime_at(10.4), Regime::kRotation);
   EXPECT_EQ(regime_at(13.0), Regime::kOrbital);
   for (const RegimeSpan& s : spans) {
-    if (s.regime == Regime::kOrbital) EXPECT_NEAR(s.mean_rate, 2 * kPi / 5640.0, 0.01 * 2 * kPi / 5640.0);
-    if (s.regime == Regime::kRotation) EXPECT_NEAR(s.mean_rate, 2 * kPi / 3600.0, 0.01 * 2 * kPi / 3600.0);
+    if (s.regime == Regime::kOrbital)
+      EXPECT_NEAR(s.mean_rate, 2 * kPi / 5640.0, 0.01 * 2 * kPi / 5640.0);
+    if (s.regime == Regime::kRotation)
+      EXPECT_NEAR(s.mean_rate, 2 * kPi / 3600.0, 0.01 * 2 * kPi / 3600.0);
   }
   // Every frame belongs to exactly one span, in order.
   EXPECT_EQ(spans.front().first_frame, 0);
   EXPECT_EQ(spans.back().last_frame, static_cast<int>(frames.size()) - 1);
-  for (size_t k = 1; k < spans.size(); ++k) EXPECT_EQ(spans[k].first_frame, spans[k - 1].last_frame + 1);
+  for (size_t k = 1; k < spans.size(); ++k)
+    EXPECT_EQ(spans[k].first_frame, spans[k - 1].last_frame + 1);
 }
 
 TEST(DiscoveryLatency, ModelFreeEstimateFromRateChanges) {
@@ -157,7 +158,8 @@ TEST(DiscoveryModelRun, StarTrackerCorrectionUndoesMisalignment) {
 
 TEST(Diagnose, RejectsBadInput) {
   const SpacecraftConfig config = ::esg::testing::DiscoveryConfig();
-  EXPECT_THAT(Diagnose(config, {}, DiagnoseOptions{}), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("frames")));
+  EXPECT_THAT(Diagnose(config, {}, DiagnoseOptions{}),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("frames")));
   SimulationSpec spec = DiscoveryScenario("none", 1, 6.0);
   auto sim = Simulate(spec);
   ASSERT_THAT(sim, IsOk());
@@ -182,7 +184,8 @@ TEST(Diagnose, NothingMissingGivesNone) {
   // common) and
   // none is significant.
   EXPECT_EQ(report->candidates.size(), 12u);
-  for (const CandidateScore& c : report->candidates) EXPECT_FALSE(c.significant) << c.effect << " " << c.gyro;
+  for (const CandidateScore& c : report->candidates)
+    EXPECT_FALSE(c.significant) << c.effect << " " << c.gyro;
   EXPECT_GE(report->before.gaps.size(), 2u);  // held-out spans in the hold and the rotation
 }
 
@@ -251,7 +254,8 @@ TEST(Diagnose, FaultOutsideTheLibraryIsUnexplainedNotForced) {
   EXPECT_EQ(report->findings.back().gyro, ::esg::testing::AffectedGyro(seed));
   // Candidates fit it only in part of the recording.
   bool any_inhomogeneous = false;
-  for (const CandidateScore& c : report->candidates) any_inhomogeneous |= c.significant && !c.homogeneous;
+  for (const CandidateScore& c : report->candidates)
+    any_inhomogeneous |= c.significant && !c.homogeneous;
   EXPECT_TRUE(any_inhomogeneous);
 }
 

@@ -24,7 +24,8 @@ inline estimator::SpacecraftConfig DiscoveryConfig() {
   c.spacecraft_id = "DISC-1";
   const double k0_deg_h[4] = {0.25, -0.18, 0.31, 0.2};
   const Eigen::Vector3d mount[4] = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0, -kPi / 2, 0),
-                                    Eigen::Vector3d(0, 0, kPi / 2), Eigen::Vector3d(1.0, 0.5, -0.7)};
+                                    Eigen::Vector3d(0, 0, kPi / 2),
+                                    Eigen::Vector3d(1.0, 0.5, -0.7)};
   for (int i = 0; i < 4; ++i) {
     GyroConfig g;
     g.id = i + 1;
@@ -54,7 +55,8 @@ inline estimator::ProfilePtr MostlyOrbitalProfile(double hours, uint64_t seed) {
     return *Orbital(oo);
   };
   segments.push_back({orbital(0.0), 8 * unit});
-  segments.push_back({InertialHold(Eigen::Quaterniond(0.8, 0.2, -0.4, 0.4 + 0.01 * seed).normalized()), 3 * unit});
+  segments.push_back(
+      {InertialHold(Eigen::Quaterniond(0.8, 0.2, -0.4, 0.4 + 0.01 * seed).normalized()), 3 * unit});
   segments.push_back({orbital(1.0), 8 * unit});
   segments.push_back({*ConstantSpin(Eigen::Quaterniond(0.3, 0.5, 0.1, -0.8).normalized(),
                                     Eigen::Vector3d(1, 0.2, 0.5), 2 * kPi / 3600.0),
@@ -68,8 +70,14 @@ inline estimator::ProfilePtr MostlyOrbitalProfile(double hours, uint64_t seed) {
 // "random_walk_drift", "two" (rotor displacement and star-tracker misalignment), "drift_step"
 // (a fault the library does not hold: expected `unexplained`).
 inline std::vector<std::string> DiscoveryEffects() {
-  return {"none", "rotor_displacement", "fourth_harmonic", "unequal_stiffness", "gyro_misalignment",
-          "star_tracker_misalignment", "star_tracker_latency", "random_walk_drift"};
+  return {"none",
+          "rotor_displacement",
+          "fourth_harmonic",
+          "unequal_stiffness",
+          "gyro_misalignment",
+          "star_tracker_misalignment",
+          "star_tracker_latency",
+          "random_walk_drift"};
 }
 
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
@@ -90,7 +98,8 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
   const double deg_h = DegPerHourToRadPerSec(1.0);
   // Rotor displaced 1.4 um: C1 ~ 0.09, C2 ~ 0.1 deg/h with the paper's C10, C20 per um.
   const Eigen::Vector3d displacement = Eigen::Vector3d(0.8e-6, -1.0e-6, 0.6e-6);
-  if (effect == "rotor_displacement" || effect == "two") s.gyros[g].rotor_displacement_k = displacement;
+  if (effect == "rotor_displacement" || effect == "two")
+    s.gyros[g].rotor_displacement_k = displacement;
   if (effect == "fourth_harmonic") {
     // The model holds k0 at its bench value; the true one is 0.1 deg/h off.
     s.config.gyros[g].model_sigma.k0 = 0.0;
@@ -108,7 +117,8 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     s.gyros[g].misalignment_b = Eigen::Vector3d(ArcsecToRad(30), ArcsecToRad(-20), ArcsecToRad(15));
   }
   if (effect == "star_tracker_misalignment" || effect == "two") {
-    s.star_tracker.misalignment_b = Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-25), ArcsecToRad(10));
+    s.star_tracker.misalignment_b =
+        Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-25), ArcsecToRad(10));
   }
   if (effect == "star_tracker_latency") s.star_tracker.latency = 0.3;
   if (effect == "random_walk_drift") {
