@@ -240,7 +240,18 @@ std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
       if (duration(runs[k]) >= options.min_span) continue;
       const bool has_prev = k > 0, has_next = k + 1 < runs.size();
       Regime to = Regime::kSlew;
-      if (has_prev && has_next && runs[k - 1].regime == runs[k + 1].regime) to = runs[k - 1].regime;
+      // A short interruption between two runs of one regime belongs to it, unless the rotation
+      // axis changed across it (a slew between two rotations about different body axes).
+      auto run_axis = [&](const Run& r) {
+        Vector3d a = Vector3d::Zero();
+        for (int i = r.first; i <= r.last; ++i) a += axis_of[i];
+        return a.norm() > 0 ? a.normalized() : a;
+      };
+      if (has_prev && has_next && runs[k - 1].regime == runs[k + 1].regime &&
+          (runs[k - 1].regime == Regime::kInertialHold ||
+           run_axis(runs[k - 1]).dot(run_axis(runs[k + 1])) > std::cos(options.max_axis_change))) {
+        to = runs[k - 1].regime;
+      }
       if (runs[k].regime != to) {
         runs[k].regime = to;
         changed = true;

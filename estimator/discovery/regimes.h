@@ -60,6 +60,9 @@ struct RegimeOptions {
   // Runs shorter than this are folded into the neighbouring slew (or, between two runs of one
   // regime, into that regime) [s].
   double min_span = 1200.0;
+  // Two runs of one regime separated by a short interruption stay separate spans when their mean
+  // rate axes differ by more than this [rad] (the calibration profile's reorientations).
+  double max_axis_change = DegToRad(20.0);
 };
 
 struct RegimeSpan {
