@@ -74,7 +74,9 @@ json MismatchJson(const Mismatch& m, absl::Time t0) {
   j["expectedArcsec"] = Number(m.expected_arcsec);
   j["excess"] = Number(m.excess_deviance);
   j["pValue"] = Number(m.p_value);
+  if (m.axis > 0) j["axis"] = m.axis;
   j["lag1Autocorrelation"] = Number(m.lag1_autocorrelation);
+  j["whitenessPValue"] = Number(m.whiteness_p_value);
   j["trendPerHour"] = Number(m.trend_per_hour);
   j["source"] = m.source;
   return j;

@@ -419,6 +419,15 @@ Mismatch Locate(const ModelRun& run, const std::vector<RegimeSpan>& spans,
   m.excess_deviance = worst->sum_w - worst->n * ref.mean;
   m.lag1_autocorrelation =
       0.5 * (Lag1Autocorrelation(worst->u[0]) + Lag1Autocorrelation(worst->u[1]));
+  // Mean of two lag-1 estimates, each ~ N(0, 1/n) for white residuals.
+  m.whiteness_p_value =
+      2.0 * NormalSurvival(std::abs(m.lag1_autocorrelation) * std::sqrt(2.0 * worst->n));
+  double e0 = 0.0, e1 = 0.0;
+  for (int k = 0; k < worst->n; ++k) {
+    e0 += worst->u[0][k] * worst->u[0][k];
+    e1 += worst->u[1][k] * worst->u[1][k];
+  }
+  if (m.gyro > 0) m.axis = e0 >= e1 ? 1 : 2;
   std::vector<double> w(worst->n);
   for (int k = 0; k < worst->n; ++k) {
     w[k] = std::min(worst->u[0][k] * worst->u[0][k], kResidualClip) +

@@ -133,7 +133,11 @@ struct Mismatch {
   // Whiteness and trend of that gyro's normalised residuals in the span: lag-1 autocorrelation
   // (0 for white residuals) and robust slope [1/h].
   double lag1_autocorrelation = 0.0;
+  double whiteness_p_value = 1.0;  // of the lag-1 autocorrelation (r sqrt(n) ~ N(0, 1))
   double trend_per_hour = 0.0;
+  // The star-tracker difference component (1 or 2: the gyro's tangent axes, the paper's
+  // dh_int1 and dh_int3 for the reference gyro) carrying the larger excess; 0 if not one gyro.
+  int axis = 0;
   std::string source;  // "in-sample residuals" or "held-out prediction"
 };
 
