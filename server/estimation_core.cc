@@ -16,6 +16,8 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/time/clock.h"
+#include "estimator/discovery/diagnose.h"
+#include "proto/diagnosis_json.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
@@ -1172,6 +1174,94 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
     ASSIGN_OR_RETURN(std::string text, storage::WriteAem(header, aem_samples));
     response.set_aem_text(std::move(text));
   }
+  return response;
+}
+
+namespace {
+
+esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecord& r) {
+  esg::v1::DiagnosisResult out;
+  out.set_id(r.id);
+  out.set_spacecraft_id(r.spacecraft_id);
+  out.set_verdict(r.verdict);
+  out.set_report_json(r.report_json);
+  *out.mutable_first_frame_time() = proto_convert::TimeToProto(r.from_time);
+  *out.mutable_last_frame_time() = proto_convert::TimeToProto(r.to_time);
+  *out.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
+    const esg::v1::DiagnoseRequest& request,
+    const std::function<void(double fraction, const std::string& stage)>& progress) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
+  if (sc == nullptr) return NotConfigured(request.spacecraft_id());
+  absl::Time from = absl::InfinitePast();
+  absl::Time to = absl::InfiniteFuture();
+  if (request.has_from()) {
+    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
+  }
+  if (request.has_to()) {
+    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
+    if (to <= from) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("to: ", FormatUtc(to), " is not after from ", FormatUtc(from)));
+    }
+  }
+  std::shared_ptr<const Setup> setup;
+  {
+    absl::MutexLock state(&sc->state_mu);
+    setup = sc->setup;
+  }
+  if (setup == nullptr) return NotConfigured(request.spacecraft_id());
+  estimator::discovery::DiagnoseOptions options;
+  options.model = request.model().empty() ? setup->model_name : request.model();
+  if (absl::StatusOr<estimator::ModelSpec> m = estimator::ParseModel(options.model); !m.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("model: ", m.status().message()));
+  }
+  ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
+                   storage_->archive().ReadTimeRange(sc->id, from, to));
+  if (archived.empty()) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "no archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ", FormatUtc(to), ")"));
+  }
+  std::vector<TelemetryFrame> frames;
+  frames.reserve(archived.size());
+  for (const storage::ArchivedFrame& a : archived) {
+    esg::v1::TelemetryFrame proto;
+    if (!proto.ParseFromString(a.payload)) {
+      return absl::DataLossError(absl::StrCat("archived frame ", a.sequence, " of '", sc->id,
+                                              "' does not parse"));
+    }
+    ASSIGN_OR_RETURN(TelemetryFrame frame, proto_convert::FrameFromProto(proto));
+    frames.push_back(std::move(frame));
+  }
+  ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
+                   estimator::discovery::Diagnose(setup->config, frames, options, progress));
+  storage::DiagnosisRecord record;
+  record.spacecraft_id = sc->id;
+  record.from_time = frames.front().time;
+  record.to_time = frames.back().time;
+  record.compute_time = absl::Now();
+  record.verdict = report.verdict;
+  record.report_json = proto_convert::DiagnosisToJson(report);
+  ASSIGN_OR_RETURN(record.id, storage_->diagnoses().Put(record));
+  esg::v1::DiagnosisResult result = DiagnosisResultFromRecord(record);
+  result.set_frames(static_cast<int64_t>(frames.size()));
+  return result;
+}
+
+absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
+    const esg::v1::ListDiagnosesRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  ASSIGN_OR_RETURN(std::vector<storage::DiagnosisRecord> records,
+                   storage_->diagnoses().List(request.spacecraft_id()));
+  esg::v1::ListDiagnosesResponse response;
+  for (const storage::DiagnosisRecord& r : records) *response.add_diagnoses() = DiagnosisResultFromRecord(r);
   return response;
 }
 

@@ -101,6 +101,16 @@ class EstimationCore {
   absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions();
   absl::StatusOr<esg::v1::PredictResponse> Predict(const esg::v1::PredictRequest& request);
   absl::StatusOr<esg::v1::HistoryResponse> History(const esg::v1::HistoryRequest& request);
+
+  // Model-discrepancy diagnosis (DESIGN §6, estimator/discovery/diagnose.h) over the archived
+  // telemetry of a spacecraft in [from, to); the result is stored (DiagnosisStore) and returned.
+  // Long-running (seconds): call it off the gRPC threads. NotFound for an unknown spacecraft,
+  // InvalidArgument for a bad span or model, FailedPrecondition when the span holds no frames.
+  absl::StatusOr<esg::v1::DiagnosisResult> Diagnose(
+      const esg::v1::DiagnoseRequest& request,
+      const std::function<void(double fraction, const std::string& stage)>& progress);
+  absl::StatusOr<esg::v1::ListDiagnosesResponse> ListDiagnoses(
+      const esg::v1::ListDiagnosesRequest& request);
   absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);
   // NotFound unless empty or configured.
   absl::Status CheckSpacecraft(const std::string& spacecraft_id);

@@ -4,6 +4,7 @@
 #include <deque>
 #include <map>
 #include <memory>
+#include <thread>
 #include <tuple>
 #include <utility>
 
@@ -302,6 +303,89 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
 
 }  // namespace
 
+// Diagnose: the diagnosis runs on its own thread (it takes seconds; gRPC threads must not
+// block). Progress updates are coalesced: at most one write in flight, the newest update waiting.
+// The final update carries the result; an error finishes the call with its status.
+class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate> {
+ public:
+  DiagnoseReactor(EstimationCore* core, esg::v1::DiagnoseRequest request, absl::Status auth) {
+    if (!auth.ok()) {
+      Finish(ToGrpcStatus(auth));
+      return;
+    }
+    worker_ = std::thread([this, core, request = std::move(request)] {
+      absl::StatusOr<esg::v1::DiagnosisResult> result = core->Diagnose(
+          request, [this](double fraction, const std::string& stage) { Post(fraction, stage); });
+      absl::MutexLock lock(&mu_);
+      worker_done_ = true;
+      if (result.ok()) {
+        final_.set_progress(1.0);
+        final_.set_stage("done");
+        *final_.mutable_result() = std::move(*result);
+        have_final_ = true;
+      } else {
+        status_ = result.status();
+      }
+      MaybeWriteLocked();
+    });
+  }
+
+  void OnWriteDone(bool ok) override {
+    absl::MutexLock lock(&mu_);
+    writing_ = false;
+    if (!ok) broken_ = true;  // the client went away; finish once the worker is done
+    MaybeWriteLocked();
+  }
+
+  void OnDone() override {
+    if (worker_.joinable()) worker_.join();
+    delete this;
+  }
+
+ private:
+  void Post(double fraction, const std::string& stage) {
+    absl::MutexLock lock(&mu_);
+    pending_.set_progress(fraction);
+    pending_.set_stage(stage);
+    have_pending_ = true;
+    MaybeWriteLocked();
+  }
+
+  void MaybeWriteLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    if (writing_ || finished_) return;
+    if (!broken_ && have_pending_) {
+      current_ = pending_;
+      have_pending_ = false;
+      writing_ = true;
+      StartWrite(&current_);
+      return;
+    }
+    if (!worker_done_) return;
+    if (!broken_ && have_final_) {
+      current_ = final_;
+      have_final_ = false;
+      writing_ = true;
+      StartWrite(&current_);
+      return;
+    }
+    finished_ = true;
+    Finish(ToGrpcStatus(broken_ ? absl::CancelledError("the client went away") : status_));
+  }
+
+  absl::Mutex mu_;
+  esg::v1::DiagnoseUpdate pending_ ABSL_GUARDED_BY(mu_);
+  esg::v1::DiagnoseUpdate final_ ABSL_GUARDED_BY(mu_);
+  esg::v1::DiagnoseUpdate current_;  // the update being written
+  bool have_pending_ ABSL_GUARDED_BY(mu_) = false;
+  bool have_final_ ABSL_GUARDED_BY(mu_) = false;
+  bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool worker_done_ ABSL_GUARDED_BY(mu_) = false;
+  bool broken_ ABSL_GUARDED_BY(mu_) = false;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  absl::Status status_ ABSL_GUARDED_BY(mu_);
+  std::thread worker_;
+};
+
 absl::Status EstimationServiceImpl::Authorize(grpc::CallbackServerContext* context,
                                               Role role) const {
   if (auth_ == nullptr) return absl::OkStatus();
@@ -358,6 +442,18 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
     esg::v1::HistoryResponse* response) {
   return Unary(context, Authorize(context, Role::kRead), response,
                [&] { return core_->History(*request); });
+}
+
+grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagnose(
+    grpc::CallbackServerContext* context, const esg::v1::DiagnoseRequest* request) {
+  return new DiagnoseReactor(core_, *request, Authorize(context, Role::kRead));
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(
+    grpc::CallbackServerContext* context, const esg::v1::ListDiagnosesRequest* request,
+    esg::v1::ListDiagnosesResponse* response) {
+  return Unary(context, Authorize(context, Role::kRead), response,
+               [&] { return core_->ListDiagnoses(*request); });
 }
 
 }  // namespace esg::server

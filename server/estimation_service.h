@@ -38,6 +38,11 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerUnaryReactor* GetCoefficientHistory(grpc::CallbackServerContext* context,
                                                   const esg::v1::HistoryRequest* request,
                                                   esg::v1::HistoryResponse* response) override;
+  grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* Diagnose(
+      grpc::CallbackServerContext* context, const esg::v1::DiagnoseRequest* request) override;
+  grpc::ServerUnaryReactor* ListDiagnoses(grpc::CallbackServerContext* context,
+                                          const esg::v1::ListDiagnosesRequest* request,
+                                          esg::v1::ListDiagnosesResponse* response) override;
 
  private:
   absl::Status Authorize(grpc::CallbackServerContext* context, Role role) const;

@@ -1,7 +1,7 @@
 // `esg diagnose`: find the physics a model left out (DESIGN §6, estimator/discovery/diagnose.h).
 // Runs the discovery over a recording with the configuration as the user's model, prints the
 // verdict, the findings with their physics and the fit before and after (or one JSON document
-// with --json, client/diagnosis_json.h), and with --out DIR writes a Markdown report with gnuplot
+// with --json, proto/diagnosis_json.h), and with --out DIR writes a Markdown report with gnuplot
 // plots: residuals before and after, held-out attitude error before and after (the paper's
 // Fig. 7/8 measure), and where the mismatch sits in time and regime. Progress goes to stderr.
 // Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
@@ -27,7 +27,7 @@
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
-#include "client/diagnosis_json.h"
+#include "proto/diagnosis_json.h"
 #include "estimator/units.h"
 #include "proto/convert.h"
 #include "storage/recording_csv.h"
@@ -374,7 +374,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
     const std::string md = WritePlots(*report, o.out_dir, plotted);
     if (!WriteFile(std::filesystem::path(o.out_dir) / "report.md", md) ||
         !WriteFile(std::filesystem::path(o.out_dir) / "diagnosis.json",
-                   DiagnosisToJson(*report, true))) {
+                   proto_convert::DiagnosisToJson(*report, true))) {
       std::fprintf(stderr, "esg diagnose: --out %s: cannot write the report\n", o.out_dir.c_str());
       return 1;
     }
@@ -383,7 +383,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
     std::fprintf(stderr, "diagnose: report written to %s/report.md\n", o.out_dir.c_str());
   }
   if (o.json) {
-    std::cout << DiagnosisToJson(*report) << "\n";
+    std::cout << proto_convert::DiagnosisToJson(*report) << "\n";
   } else {
     PrintHuman(*report);
   }

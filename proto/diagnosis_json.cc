@@ -1,11 +1,11 @@
-#include "client/diagnosis_json.h"
+#include "proto/diagnosis_json.h"
 
 #include <cmath>
 
 #include "absl/time/time.h"
 #include "estimator/units.h"
 
-namespace esg::client {
+namespace esg::proto_convert {
 
 namespace {
 
@@ -178,4 +178,4 @@ std::string DiagnosisToJson(const DiagnosisReport& report, bool include_series) 
   return DiagnosisJsonValue(report, include_series).dump(2);
 }
 
-}  // namespace esg::client
+}  // namespace esg::proto_convert

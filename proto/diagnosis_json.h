@@ -1,18 +1,18 @@
 // JSON form of a model-discrepancy diagnosis (estimator/discovery/diagnose.h, DESIGN §6), shared
-// by `esg diagnose --json` and, later, the server's Diagnose RPC: `verdict`, `findings` (most
+// by `esg diagnose --json` and the server's Diagnose RPC (stored in SQLite beside the coefficient histories): `verdict`, `findings` (most
 // important first, each with `effect`, `gyro` where it applies, `parameters`, `explanation`,
 // `evidence`), `mismatch` (where: gyro, time span, regime, size), `fit.before` and `fit.after`
 // (each with `residualRmsArcsec` and `gapDriftRateDegH`), the regimes found and every candidate
 // tried. Times are RFC 3339 UTC; units are in the key names (docs/discovery.md).
-#ifndef ESG_CLIENT_DIAGNOSIS_JSON_H_
-#define ESG_CLIENT_DIAGNOSIS_JSON_H_
+#ifndef ESG_PROTO_DIAGNOSIS_JSON_H_
+#define ESG_PROTO_DIAGNOSIS_JSON_H_
 
 #include <string>
 
 #include "estimator/discovery/diagnose.h"
 #include "nlohmann/json.hpp"
 
-namespace esg::client {
+namespace esg::proto_convert {
 
 // The document as a JSON value (ordered keys). With `include_series`, also the residual and
 // held-out time series of the plots (large: one entry per gyro and step).
@@ -23,6 +23,6 @@ nlohmann::ordered_json DiagnosisJsonValue(const estimator::discovery::DiagnosisR
 std::string DiagnosisToJson(const estimator::discovery::DiagnosisReport& report,
                             bool include_series = false);
 
-}  // namespace esg::client
+}  // namespace esg::proto_convert
 
-#endif  // ESG_CLIENT_DIAGNOSIS_JSON_H_
+#endif  // ESG_PROTO_DIAGNOSIS_JSON_H_
