@@ -15,6 +15,7 @@
 #include "proto/convert.h"
 #include "storage/recording_csv.h"
 #include "tests/testing/status_matchers.h"
+#include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
 
 namespace esg::client {
@@ -24,35 +25,12 @@ using ::esg::testing::IsOk;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
-};
+using ::esg::testing::ReadFile;
+using ::esg::testing::RunResult;
+using ::esg::testing::WriteFile;
 
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void WriteFile(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-}
-
-// Runs `esg <args>` with stdout and stderr captured in files of dir.
 RunResult RunEsg(const TempDir& dir, const std::string& args) {
-  const std::string out = dir.File("stdout.txt"), err = dir.File("stderr.txt");
-  const std::string command =
-      std::string("'") + ESG_BINARY + "' " + args + " > '" + out + "' 2> '" + err + "'";
-  const int status = std::system(command.c_str());
-  RunResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = ReadFile(out);
-  r.err = ReadFile(err);
-  return r;
+  return ::esg::testing::RunBinary(dir, ESG_BINARY, args);
 }
 
 std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
