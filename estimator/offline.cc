@@ -4,56 +4,10 @@
 #include <cmath>
 
 #include "absl/strings/str_format.h"
+#include "estimator/line_fit.h"
 #include "estimator/rotation.h"
 
 namespace esg::estimator {
-
-namespace {
-
-struct LineFit {
-  double slope = 0.0;
-  double intercept = 0.0;
-};
-
-LineFit FitLine(const std::vector<double>& t, const std::vector<double>& y,
-                const std::vector<bool>& use) {
-  double n = 0, st = 0, sy = 0, stt = 0, sty = 0;
-  for (size_t i = 0; i < t.size(); ++i) {
-    if (!use[i]) continue;
-    n += 1;
-    st += t[i];
-    sy += y[i];
-    stt += t[i] * t[i];
-    sty += t[i] * y[i];
-  }
-  LineFit f;
-  const double den = n * stt - st * st;
-  if (n < 2 || den == 0.0) return f;
-  f.slope = (n * sty - st * sy) / den;
-  f.intercept = (sy - f.slope * st) / n;
-  return f;
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
-  return v[v.size() / 2];
-}
-
-}  // namespace
-
-double FitSlope(const std::vector<double>& t, const std::vector<double>& y) {
-  std::vector<bool> use(t.size(), true);
-  LineFit f = FitLine(t, y, use);
-  std::vector<double> residual(t.size());
-  for (size_t i = 0; i < t.size(); ++i) residual[i] = std::abs(y[i] - (f.intercept + f.slope * t[i]));
-  const double mad = Median(residual);
-  if (mad > 0.0) {
-    for (size_t i = 0; i < t.size(); ++i) use[i] = residual[i] <= 5.0 * 1.4826 * mad;
-    f = FitLine(t, y, use);
-  }
-  return f.slope;
-}
 
 absl::StatusOr<CalibrationResult> RunCalibration(const SpacecraftConfig& config,
                                                  const SessionOptions& options,
@@ -146,7 +100,7 @@ absl::StatusOr<GapResult> RunGap(const SpacecraftConfig& config, const SessionOp
   if (result.samples.size() < 3) {
     return absl::InvalidArgumentError("gap-start: fewer than 3 star-tracker samples in the gap to compare with");
   }
-  for (int k = 0; k < 3; ++k) result.slope_in(k) = FitSlope(t, y[k]);
+  for (int k = 0; k < 3; ++k) result.slope_in(k) = FitRobustLine(t, y[k]).slope;
   result.drift_rate = result.slope_in.norm();
   result.final_error = result.samples.back().angle;
   result.gap_hours = result.samples.back().hours_since_gap;

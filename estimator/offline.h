@@ -58,8 +58,8 @@ struct GapSample {
 struct GapResult {
   CalibrationResult calibration;  // state at the gap start
   std::vector<GapSample> samples;
-  // Least-squares slope of each inertial error component against time (with intercept), robust
-  // to star-tracker outliers (samples beyond 5 MAD of a first fit are dropped and refitted),
+  // Slope of each inertial error component against time (line_fit.h FitRobustLine: robust
+  // to star-tracker outliers),
   // [rad/s]; its norm is the drift-caused error rate of the paper's Fig. 7/8.
   Eigen::Vector3d slope_in = Eigen::Vector3d::Zero();
   double drift_rate = 0.0;  // |slope_in| [rad/s]
@@ -74,9 +74,6 @@ absl::StatusOr<GapResult> RunGap(const SpacecraftConfig& config, const SessionOp
                                  const std::vector<TelemetryFrame>& frames, absl::Time gap_start,
                                  const ProgressFn& progress = {});
 
-// Least-squares line fit of y against t (with intercept); the slope [y/s]. Robust variant drops
-// points beyond 5 median absolute deviations of the first fit's residuals and refits.
-double FitSlope(const std::vector<double>& t, const std::vector<double>& y);
 
 }  // namespace esg::estimator
 

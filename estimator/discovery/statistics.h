@@ -6,6 +6,8 @@
 
 #include <vector>
 
+#include "estimator/line_fit.h"
+
 namespace esg::estimator::discovery {
 
 // Regularised lower incomplete gamma P(a, x), a > 0, x >= 0 (series / continued fraction).
@@ -26,15 +28,9 @@ double FSurvival(double f, double d1, double d2);
 // Standard normal upper tail P(Z > z).
 double NormalSurvival(double z);
 
-// Least-squares line y = a + b t with a robust second pass (points beyond 5 scaled MADs of the
-// first fit's residuals dropped); returns {a, b} and the residual standard deviation.
-struct RobustLine {
-  double intercept = 0.0;
-  double slope = 0.0;
-  double residual_sigma = 0.0;
-  int used = 0;
-};
-RobustLine FitRobustLine(const std::vector<double>& t, const std::vector<double>& y);
+// The robust line fit lives in estimator/line_fit.h (shared with the offline gap runs).
+using ::esg::estimator::FitRobustLine;
+using ::esg::estimator::RobustLine;
 
 // Lag-1 autocorrelation of a series (mean removed); 0 for fewer than 3 values.
 double Lag1Autocorrelation(const std::vector<double>& x);
