@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "absl/strings/str_format.h"
 #include "estimator/line_fit.h"
@@ -66,7 +67,9 @@ absl::StatusOr<GapResult> RunGap(const SpacecraftConfig& config, const SessionOp
   }
   const std::vector<TelemetryFrame> calibration(frames.begin(), split);
   const double n_total = static_cast<double>(frames.size());
-  EstimationSession session = *EstimationSession::Create(config, options);
+  auto created = EstimationSession::Create(config, options);
+  if (!created.ok()) return created.status();
+  EstimationSession session = std::move(*created);
   auto calibrated = RunCalibration(
       config, options, calibration,
       progress ? ProgressFn([&](double f) { progress(f * calibration.size() / n_total); }) : ProgressFn(),

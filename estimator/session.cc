@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 
-#include "Eigen/Eigenvalues"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/attitude_profile.h"

@@ -345,6 +345,17 @@ TEST(Session, FrameNotAfterThePreviousIsOutOfRange) {
   EXPECT_EQ(session.ExportCheckpoint().values, before);  // unchanged
 }
 
+TEST(Offline, GapWithAnInvalidConfigurationReturnsTheErrorNamingTheField) {
+  const SimulationSpec spec = PaperFlight(2, 1.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  SpacecraftConfig bad = spec.config;
+  bad.working_pair = {1, 9};
+  EXPECT_THAT(RunGap(bad, Model("10+11"), sim->recording.frames,
+                     sim->recording.frames[30].time),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("workingPair")));
+}
+
 TEST(Session, PredictionEnvelopeCoversTheTruthAcrossAGap) {
   // Calibrate 10 h, then predict 6 h ahead along the true attitude profile: the predicted spin
   // axes stay within 3 sigma of the true ones and the envelope grows with time.
