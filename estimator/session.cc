@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -333,10 +334,19 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   }
   // The configured integration rate (the paper's 8 Hz); prediction instead sizes substeps to
   // the motion of the readings (one per 0.1 deg): the drift depends on time only through them.
-  const int substeps =
-      adaptive_integration_
-          ? std::max(1, static_cast<int>(std::ceil(max_turn / (0.1 * kRadPerDeg))))
-          : std::max(1, static_cast<int>(std::ceil(span * config_.filter.integration_rate_hz - 1e-9)));
+  // Counted in double: the span is the caller's (a library user may send a frame years after the
+  // previous one, or at absl::InfiniteFuture), so the count is checked before it becomes an int.
+  const double substeps_wanted =
+      adaptive_integration_ ? std::ceil(max_turn / (0.1 * kRadPerDeg))
+                            : std::ceil(span * config_.filter.integration_rate_hz - 1e-9);
+  if (!(substeps_wanted <= static_cast<double>(std::numeric_limits<int>::max()))) {
+    return absl::OutOfRangeError(absl::StrFormat(
+        "frame time %s: propagating %g s at filter.integrationRateHz %g needs %g steps, more "
+        "than %d",
+        absl::FormatTime(frame.time), span, config_.filter.integration_rate_hz, substeps_wanted,
+        std::numeric_limits<int>::max()));
+  }
+  const int substeps = std::max(1, static_cast<int>(substeps_wanted));
   const double dt = span / substeps;
   // Output pair for the body attitude used to carry case-frame drift to inertial axes.
   const std::array<int, 2> pair = working_pair_;

@@ -4,8 +4,12 @@
 #include <set>
 
 #include "Eigen/LU"
+#include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/conventions.h"
+#include "estimator/status_macros.h"
 
 namespace esg::estimator {
 
@@ -17,8 +21,6 @@ const GyroConfig* SpacecraftConfig::FindGyro(int id) const {
 }
 
 namespace {
-
-bool AllFinite(const DriftCoefficients& c) { return c.AsVector().allFinite(); }
 
 absl::Status CheckPair(const SpacecraftConfig& config, const std::array<int, 2>& pair,
                        const char* field) {
@@ -36,16 +38,63 @@ absl::Status CheckPair(const SpacecraftConfig& config, const std::array<int, 2>&
   return absl::OkStatus();
 }
 
+bool WithinLimit(double value_si, const ConfigLimit& limit) {
+  constexpr double kSlack = 1e-12;  // relative: the SI round trip of a bound typed in the JSON
+  const double v = limit.from_si(value_si);
+  return v >= limit.min - kSlack * std::abs(limit.min) &&
+         v <= limit.max + kSlack * std::abs(limit.max);  // false for NaN
+}
+
+absl::Status LimitError(double value_si, const ConfigLimit& limit, absl::string_view field) {
+  return absl::InvalidArgumentError(absl::StrFormat("%s: %g is outside [%g, %g] %s (%s)", field,
+                                                    limit.from_si(value_si), limit.min, limit.max,
+                                                    limit.unit, limit.reason));
+}
+
 }  // namespace
 
-absl::Status ValidateConfig(const SpacecraftConfig& config) {
-  if (config.spacecraft_id.empty()) {
-    return absl::InvalidArgumentError("spacecraftId: must not be empty");
+absl::Status ValidateIdentifier(absl::string_view value, absl::string_view field) {
+  // Quoted, escaped, at most kIdentifierQuoteLength characters of the value.
+  const auto quoted = [&value]() {
+    const bool cut = value.size() > static_cast<size_t>(kIdentifierQuoteLength);
+    return absl::StrCat("\"", absl::CHexEscape(value.substr(0, kIdentifierQuoteLength)),
+                        cut ? "\"..." : "\"");
+  };
+  static_assert(kMaxIdentifierLength == 64, "kRule states the length");
+  constexpr absl::string_view kRule =
+      "an identifier is 1..64 characters from [A-Za-z0-9._:-], starting with a letter or digit";
+  if (value.empty()) return absl::InvalidArgumentError(absl::StrCat(field, ": must not be empty"));
+  if (value.size() > static_cast<size_t>(kMaxIdentifierLength)) {
+    return absl::InvalidArgumentError(absl::StrFormat("%s: %d characters (%s) is too long: %s",
+                                                      field, value.size(), quoted(), kRule));
   }
+  for (size_t i = 0; i < value.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(value[i]);
+    const bool alnum = absl::ascii_isalnum(c);
+    if (alnum || (i > 0 && (c == '.' || c == '_' || c == ':' || c == '-'))) continue;
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s: character '%s' at index %d of %s is not allowed: %s", field,
+                        absl::CHexEscape(value.substr(i, 1)), i, quoted(), kRule));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CheckLimit(double value_si, const ConfigLimit& limit, absl::string_view field) {
+  if (WithinLimit(value_si, limit)) return absl::OkStatus();
+  return LimitError(value_si, limit, field);
+}
+
+absl::Status ValidateConfig(const SpacecraftConfig& config) {
+  const ConfigLimits& L = kConfigLimits;
+  RETURN_IF_ERROR(ValidateIdentifier(config.spacecraft_id, "spacecraftId"));
   if (config.gyros.size() < 2 || config.gyros.size() > static_cast<size_t>(kMaxGyros)) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "gyros: between 2 and %d gyros are needed, got %d", kMaxGyros, config.gyros.size()));
   }
+  // JSON names of the 13 drift coefficients, in DriftCoefficients::AsVector() order.
+  static constexpr const char* kCoefficientNames[kNumDriftCoefficients] = {
+      "k0DegH",    "c1DegH[0]", "c1DegH[1]", "c1DegH[2]", "c2DegH[0]", "c2DegH[1]", "c2DegH[2]",
+      "muDegH[0]", "muDegH[1]", "muDegH[2]", "nuDegH[0]", "nuDegH[1]", "nuDegH[2]"};
   std::set<int> ids;
   for (size_t i = 0; i < config.gyros.size(); ++i) {
     const GyroConfig& g = config.gyros[i];
@@ -59,52 +108,46 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
     }
     const Eigen::Matrix3d should_be_identity = g.C_b_k.transpose() * g.C_b_k;
     if (!g.C_b_k.allFinite() || !should_be_identity.isIdentity(1e-6) ||
-        g.C_b_k.determinant() < 0.0) {
+        !(g.C_b_k.determinant() > 0.0)) {
       return absl::InvalidArgumentError(absl::StrFormat(
           "gyros[%d].caseToBody: not a proper rotation matrix (orthonormal to 1e-6, det +1)", i));
     }
-    if (!AllFinite(g.model)) {
-      return absl::InvalidArgumentError(absl::StrFormat("gyros[%d].model: non-finite value", i));
+    const DriftVector model = g.model.AsVector(), sigma = g.model_sigma.AsVector();
+    for (int k = 0; k < kNumDriftCoefficients; ++k) {  // field names built only on failure
+      if (!WithinLimit(model[k], L.drift_coefficient)) {
+        return LimitError(model[k], L.drift_coefficient,
+                          absl::StrFormat("gyros[%d].model.%s", i, kCoefficientNames[k]));
+      }
     }
-    if (!AllFinite(g.model_sigma) || (g.model_sigma.AsVector().array() < 0.0).any()) {
-      return absl::InvalidArgumentError(
-          absl::StrFormat("gyros[%d].modelSigma: values must be finite and >= 0", i));
+    for (int k = 0; k < kNumDriftCoefficients; ++k) {
+      if (!WithinLimit(sigma[k], L.drift_sigma)) {
+        return LimitError(sigma[k], L.drift_sigma,
+                          absl::StrFormat("gyros[%d].modelSigma.%s", i, kCoefficientNames[k]));
+      }
     }
-    if (!std::isfinite(g.misalignment_sigma) || g.misalignment_sigma < 0.0) {
-      return absl::InvalidArgumentError(
-          absl::StrFormat("gyros[%d].misalignmentSigmaArcsec: must be finite and >= 0", i));
-    }
+    RETURN_IF_ERROR(CheckLimit(g.misalignment_sigma, L.misalignment_sigma,
+                               absl::StrFormat("gyros[%d].misalignmentSigmaArcsec", i)));
   }
   if (auto s = CheckPair(config, config.working_pair, "workingPair"); !s.ok()) return s;
   if (auto s = CheckPair(config, config.reserve_pair, "reservePair"); !s.ok()) return s;
-  if (!config.star_tracker.noise.allFinite() || (config.star_tracker.noise.array() < 0.0).any()) {
-    return absl::InvalidArgumentError("starTracker.noiseArcsec: values must be finite and >= 0");
+  for (int k = 0; k < 3; ++k) {
+    RETURN_IF_ERROR(CheckLimit(config.star_tracker.noise[k], L.star_tracker_noise,
+                               absl::StrFormat("starTracker.noiseArcsec[%d]", k)));
   }
-  if (!std::isfinite(config.readout_noise) || config.readout_noise < 0.0) {
-    return absl::InvalidArgumentError("readoutNoiseArcsec: must be finite and >= 0");
-  }
-  if (!std::isfinite(config.random_walk) || config.random_walk < 0.0) {
-    return absl::InvalidArgumentError("randomWalkDegHSqrtH: must be finite and >= 0");
-  }
+  RETURN_IF_ERROR(CheckLimit(config.readout_noise, L.readout_noise, "readoutNoiseArcsec"));
+  RETURN_IF_ERROR(CheckLimit(config.random_walk, L.random_walk, "randomWalkDegHSqrtH"));
   const SuspensionConfig& s = config.suspension;
-  if (!(s.amplifier_gain > 0.0) || !(s.reference_voltage > 0.0) || !(s.gap > 0.0) ||
-      !std::isfinite(s.amplifier_gain + s.reference_voltage + s.gap)) {
-    return absl::InvalidArgumentError(
-        "suspension: amplifierGain, referenceVoltageV and gapUm must be finite and > 0");
-  }
+  RETURN_IF_ERROR(CheckLimit(s.amplifier_gain, L.amplifier_gain, "suspension.amplifierGain"));
+  RETURN_IF_ERROR(
+      CheckLimit(s.reference_voltage, L.reference_voltage, "suspension.referenceVoltageV"));
+  RETURN_IF_ERROR(CheckLimit(s.gap, L.gap, "suspension.gapUm"));
   const FilterConfig& f = config.filter;
-  if (!(f.integration_rate_hz > 0.0) || !std::isfinite(f.integration_rate_hz)) {
-    return absl::InvalidArgumentError("filter.integrationRateHz: must be finite and > 0");
-  }
-  if (!(f.measurement_step > 0.0) || !std::isfinite(f.measurement_step)) {
-    return absl::InvalidArgumentError("filter.measurementStepS: must be finite and > 0");
-  }
-  if (!(f.innovation_kd > 0.0) || !std::isfinite(f.innovation_kd)) {
-    return absl::InvalidArgumentError("filter.innovationKd: must be finite and > 0");
-  }
-  if (!std::isfinite(f.fault_threshold) || f.fault_threshold < 0.0) {
-    return absl::InvalidArgumentError("filter.faultThresholdArcsec: must be finite and >= 0");
-  }
+  RETURN_IF_ERROR(
+      CheckLimit(f.integration_rate_hz, L.integration_rate, "filter.integrationRateHz"));
+  RETURN_IF_ERROR(CheckLimit(f.measurement_step, L.measurement_step, "filter.measurementStepS"));
+  RETURN_IF_ERROR(CheckLimit(f.innovation_kd, L.innovation_kd, "filter.innovationKd"));
+  RETURN_IF_ERROR(
+      CheckLimit(f.fault_threshold, L.fault_threshold, "filter.faultThresholdArcsec"));
   return absl::OkStatus();
 }
 

@@ -6,11 +6,14 @@
 
 #include <array>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "Eigen/Core"
 #include "absl/status/status.h"
+#include "absl/strings/string_view.h"
 #include "estimator/drift_model.h"
+#include "estimator/units.h"
 
 namespace esg::estimator {
 
@@ -62,8 +65,132 @@ struct SpacecraftConfig {
   const GyroConfig* FindGyro(int id) const;
 };
 
-// Checks ids, pairs, matrices (rotation to 1e-6), finite and non-negative values. The message of
-// an InvalidArgument names the field, e.g. "gyros[1].caseToBody: not a rotation matrix".
+// ---------------------------------------------------------------------------------------------
+// Input limits (docs/service.md "Limits"). Every bound below is inclusive and stated in the units
+// of the JSON field it guards (spacecraft_config.proto), with the physical reason that sets it.
+// The bounds are a factor of about 30-100 beyond the paper's values (k0 a few tenths of deg/h,
+// C1/C2 up to 0.2 deg/h, priors 0.3 and 0.1 deg/h, star tracker 5/5/30 arcsec, readout 3 arcsec,
+// 8 Hz, 60 s, k_d 4..6), so any real ESG system fits, while a value in the wrong unit, a typo or a
+// hostile value that would make the filter run away is refused.
+
+// A spacecraft or station identifier: 1..64 characters from [A-Za-z0-9._:-], starting with a
+// letter or digit.
+inline constexpr int kMaxIdentifierLength = 64;
+// Characters of a refused value quoted in its error message (escaped with absl::CHexEscape).
+inline constexpr int kIdentifierQuoteLength = 32;
+
+// One numeric configuration limit: value in [min, max] of `unit`. A value equal to a bound in the
+// JSON's unit passes even after the SI round trip (relative slack 1e-12); NaN and infinities fail.
+struct ConfigLimit {
+  const char* field;  // JSON field, "[]" where an index goes: "gyros[].model.k0DegH"
+  double min;
+  double max;
+  const char* unit;             // unit of min, max and the JSON field, e.g. "deg/h"
+  double (*from_si)(double);    // SI value of spacecraft_config.h -> `unit`
+  const char* typical;          // default or the paper's value, for the documentation
+  const char* reason;           // why these bounds; ends the error message
+};
+
+// The one table of numeric limits, read by ValidateConfig and by the documentation (All()).
+struct ConfigLimits {
+  ConfigLimit drift_coefficient;
+  ConfigLimit drift_sigma;
+  ConfigLimit misalignment_sigma;
+  ConfigLimit star_tracker_noise;
+  ConfigLimit readout_noise;
+  ConfigLimit random_walk;
+  ConfigLimit amplifier_gain;
+  ConfigLimit reference_voltage;
+  ConfigLimit gap;
+  ConfigLimit integration_rate;
+  ConfigLimit measurement_step;
+  ConfigLimit innovation_kd;
+  ConfigLimit fault_threshold;
+
+  // Every limit above, in declaration order.
+  constexpr std::array<ConfigLimit, 13> All() const {
+    return {drift_coefficient, drift_sigma,      misalignment_sigma, star_tracker_noise,
+            readout_noise,     random_walk,      amplifier_gain,     reference_voltage,
+            gap,               integration_rate, measurement_step,   innovation_kd,
+            fault_threshold};
+  }
+};
+
+namespace config_limits_internal {
+constexpr double Identity(double x) { return x; }
+constexpr double MetresToUm(double x) { return x / kMetresPerUm; }
+}  // namespace config_limits_internal
+
+inline constexpr ConfigLimits kConfigLimits = {
+    .drift_coefficient = {"gyros[].model.{k0,c1,c2,mu,nu}DegH", -10.0, 10.0, "deg/h",
+                          &RadPerSecToDegPerHour,
+                          "k0 0.2..0.3, C1/C2 up to 0.2, mu/nu about 0.01",
+                          "the paper's k0 is a few tenths of deg/h and C1, C2 reach 0.2 deg/h; "
+                          "10 deg/h is 30-50 times that"},
+    .drift_sigma = {"gyros[].modelSigma.{k0,c1,c2,mu,nu}DegH", 0.0, 10.0, "deg/h",
+                    &RadPerSecToDegPerHour, "0.3 (k0), 0.1 (C1, C2, mu, nu)",
+                    "the paper's priors are 0.3 deg/h (k0) and 0.1 deg/h (C); 10 deg/h is "
+                    "30-100 times that and wider than any real coefficient"},
+    .misalignment_sigma = {"gyros[].misalignmentSigmaArcsec", 0.0, 3600.0, "arcsec",
+                           &RadToArcsec, "30 (example), 60 (diagnosis prior)",
+                           "the misalignment is a small-angle error state; 1 deg is 60-120 times "
+                           "the usual prior"},
+    .star_tracker_noise = {"starTracker.noiseArcsec[]", 0.0, 3600.0, "arcsec", &RadToArcsec,
+                           "5, 5, 30",
+                           "a star tracker is good to arcseconds; at 1 deg (120 times the "
+                           "paper's worst axis) it carries no information on arcsec-level drift"},
+    .readout_noise = {"readoutNoiseArcsec", 0.0, 300.0, "arcsec", &RadToArcsec, "3",
+                      "an ESG spin-axis readout is good to a few arcsec (3 in the paper); "
+                      "300 arcsec is 100 times that"},
+    .random_walk = {"randomWalkDegHSqrtH", 0.0, 1.0, "deg/h/sqrt(h)", &SiToDegPerHourSqrtHour,
+                    "0.0015 (0.0005..0.003)",
+                    "a residual drift wandering by 1 deg/h within an hour exceeds the whole "
+                    "modelled drift of an ESG (a few tenths of deg/h)"},
+    .amplifier_gain = {"suspension.amplifierGain", 1.0, 10000.0, "1",
+                       &config_limits_internal::Identity, "200",
+                       "eq. (3) readout gain; 50 times the default, below 1 it is no amplifier"},
+    .reference_voltage = {"suspension.referenceVoltageV", 1.0, 10000.0, "V",
+                          &config_limits_internal::Identity, "200",
+                          "suspension voltages are hundreds of volts; 10 kV across a "
+                          "tens-of-um gap would break down"},
+    .gap = {"suspension.gapUm", 1.0, 1000.0, "um", &config_limits_internal::MetresToUm, "30",
+            "ESG electrode gaps are tens of um; 1 mm is 33 times the default"},
+    .integration_rate = {"filter.integrationRateHz", 0.1, 100.0, "Hz",
+                         &config_limits_internal::Identity, "8 (the paper), 0.2 in diagnosis",
+                         "the propagation step must resolve the drift as the spin axes move (at "
+                         "least one step per 10 s) and stay affordable (at most 100 per second, "
+                         "12 times the paper's 8 Hz: 6.05e7 steps for a 7-day gap)"},
+    .measurement_step = {"filter.measurementStepS", 1.0, 3600.0, "s",
+                         &config_limits_internal::Identity, "60",
+                         "star-tracker errors are correlated over about a second, so faster "
+                         "updates count one error twice; slower than hourly (60 times the "
+                         "paper's 60 s) leaves the tests of eq. (12) and (14) hours apart"},
+    .innovation_kd = {"filter.innovationKd", 2.0, 20.0, "1", &config_limits_internal::Identity,
+                      "5 (the paper: 4..6)",
+                      "below 2 eq. (14) rejects about 5% of good samples per axis, above 20 it "
+                      "rejects no outlier"},
+    .fault_threshold = {"filter.faultThresholdArcsec", 0.0, 648000.0, "arcsec", &RadToArcsec,
+                        "0 (derived from the noise), 180 deg in diagnosis",
+                        "a mismatch angle between two attitudes is at most 180 deg; 0 derives "
+                        "the threshold from the noise"},
+};
+static_assert(sizeof(ConfigLimits) == std::tuple_size_v<decltype(kConfigLimits.All())> *
+                                          sizeof(ConfigLimit),
+              "ConfigLimits::All() must list every limit");
+
+// InvalidArgument "<field>: ..." unless `value` satisfies the identifier rule above. The message
+// quotes at most kIdentifierQuoteLength characters of the value with non-printable bytes escaped
+// (absl::CHexEscape), so no raw control character or huge value ever reaches a message.
+absl::Status ValidateIdentifier(absl::string_view value, absl::string_view field);
+
+// InvalidArgument "<field>: <value> is outside [min, max] <unit> (<reason>)" unless the SI value
+// `value_si`, converted with limit.from_si, lies within `limit`.
+absl::Status CheckLimit(double value_si, const ConfigLimit& limit, absl::string_view field);
+
+// Checks the spacecraft id (ValidateIdentifier), gyro ids and pairs, caseToBody (a proper
+// rotation: orthonormal to 1e-6, det +1) and every numeric field against kConfigLimits. The
+// message of an InvalidArgument names the JSON field, e.g. "gyros[1].caseToBody: not a proper
+// rotation matrix ..." or "filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (...)".
 absl::Status ValidateConfig(const SpacecraftConfig& config);
 
 }  // namespace esg::estimator

@@ -452,6 +452,8 @@ absl::Status WriteConfigFile(const std::string& path, const estimator::Spacecraf
 
 absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::TelemetryFrame& proto) {
   estimator::TelemetryFrame frame;
+  // First, so that no other message of this frame carries a hostile id further.
+  RETURN_IF_ERROR(estimator::ValidateIdentifier(proto.spacecraft_id(), "spacecraft_id"));
   if (!proto.has_time()) return FieldError("time", "missing");
   absl::StatusOr<absl::Time> time = TimeFromProto(proto.time());
   if (!time.ok()) return FieldError("time", time.status().message());

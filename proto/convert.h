@@ -42,9 +42,10 @@ inline constexpr double kRenormaliseAbove = 1e-12;
 // Proto (deg/h, arcsec, V, um) -> SI (rad/s, rad, V, m). Applies the defaults documented in
 // spacecraft_config.proto (suspension 200 / 200 V / 30 um, filter 8 Hz / 60 s / k_d 5 when 0;
 // empty 3-vectors are zero), checks vector lengths (case_to_body 9, drift and noise vectors 0 or 3,
-// pairs 2), then runs estimator::ValidateConfig. InvalidArgument names the JSON field, e.g.
-// "gyros[0].caseToBody: expected 9 values, got 8" or "workingPair: gyro 4 is not among the
-// configured gyros".
+// pairs 2), then runs estimator::ValidateConfig (identifier rule for spacecraftId, the ranges of
+// estimator::kConfigLimits). InvalidArgument names the JSON field, e.g.
+// "gyros[0].caseToBody: expected 9 values, got 8", "workingPair: gyro 4 is not among the
+// configured gyros" or "filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (...)".
 absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::SpacecraftConfig& proto);
 
 // SI -> proto, complete: every vector written with all its values, suspension and filter with
@@ -86,15 +87,17 @@ esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& co
 // ---------------------------------------------------------------------------------------------
 // Telemetry frames (DESIGN §7).
 
-// Validates and converts one frame. Checks: `time` present and valid; each gyro_id in 1..4 and
-// not repeated; h_k exactly 3 finite values with unit norm (kUnitNormTolerance); u_k_mv empty or
-// 3 finite values; star_tracker absent = outage; star_tracker.valid: q_in_b exactly 4 finite
-// values, unit norm; not valid: q_in_b empty or 4 finite values, not carried (the reading is
-// kept with valid = false and an identity quaternion). Accepted vectors are renormalised as
-// described at kRenormaliseAbove. spacecraft_id and sequence are not checked here (the caller
-// owns them). Errors: InvalidArgument "<field>: <reason>", field in proto names, e.g.
-// "gyros[1].h_k: norm 1.2 is not 1 (tolerance 0.001)", "star_tracker.q_in_b[2]: nan is not
-// finite", "gyros[2].gyro_id: gyro 3 appears twice".
+// Validates and converts one frame. Checks, in this order: spacecraft_id satisfies
+// estimator::ValidateIdentifier (1..64 characters from [A-Za-z0-9._:-]; whether it is configured
+// is the caller's, as is `sequence`); `time` present and valid; each gyro_id in 1..4 and not
+// repeated; h_k exactly 3 finite values with unit norm (kUnitNormTolerance); u_k_mv empty or 3
+// finite values; star_tracker absent = outage; star_tracker.valid: q_in_b exactly 4 finite values,
+// unit norm; not valid: q_in_b empty or 4 finite values, not carried (the reading is kept with
+// valid = false and an identity quaternion). Accepted vectors are renormalised as described at
+// kRenormaliseAbove. Errors: InvalidArgument "<field>: <reason>", field in proto names, e.g.
+// "spacecraft_id: character '\n' at index 5 of ...", "gyros[1].h_k: norm 1.2 is not 1
+// (tolerance 0.001)", "star_tracker.q_in_b[2]: nan is not finite", "gyros[2].gyro_id: gyro 3
+// appears twice".
 absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::TelemetryFrame& proto);
 
 // The reverse: gyros in id order, u_k_mv only when present, star_tracker only when present

@@ -4,6 +4,7 @@
 #include "proto/convert.h"
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <limits>
@@ -131,7 +132,7 @@ TEST(ConfigJson, ExtraFieldsBeyondDesignAreRead) {
 // A configuration with every field away from its default and irrational-looking values.
 estimator::SpacecraftConfig RichConfig() {
   estimator::SpacecraftConfig c;
-  c.spacecraft_id = "SAT-7 \"Zvezda\" \\ [a,b] {c}";  // survives JSON escaping and layout
+  c.spacecraft_id = "SAT-7.Zvezda:b_1";  // every punctuation the identifier rule allows
   std::mt19937_64 rng(20190301);
   std::normal_distribution<double> normal(0.0, 1.0);
   for (int id : {1, 2, 4}) {
@@ -300,9 +301,27 @@ INSTANTIATE_TEST_SUITE_P(
                       "workingPair: expected 2 gyro ids, got 3"},
         BadConfigCase{"NegativeSigma", "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1]",
                       "\"modelSigma\": {\"k0DegH\": -0.3,  \"c1DegH\": [0.1,0.1,0.1]",
-                      "gyros[0].modelSigma: values must be finite and >= 0"},
+                      "gyros[0].modelSigma.k0DegH: -0.3 is outside [0, 10] deg/h"},
         BadConfigCase{"NegativeNoise", "[5, 5, 30]", "[5, -5, 30]", "starTracker.noiseArcsec"},
         BadConfigCase{"EmptySpacecraftId", "\"RDK-1\"", "\"\"", "spacecraftId: must not be empty"},
+        BadConfigCase{"SpacecraftIdWithNewline", "\"RDK-1\"", "\"RDK-1\\n\"",
+                      "spacecraftId: character '\\n' at index 5"},
+        BadConfigCase{"SpacecraftIdWithTerminalEscape", "\"RDK-1\"", "\"RDK\\u001b[2J\"",
+                      "spacecraftId: character '\\x1b' at index 3"},
+        BadConfigCase{"SpacecraftIdTooLong", "\"RDK-1\"", "\"" + std::string(65, 'R') + "\"",
+                      "spacecraftId: 65 characters"},
+        BadConfigCase{"ReportedIntegrationRate", "\"randomWalkDegHSqrtH\": 0.002",
+                      "\"randomWalkDegHSqrtH\": 0.002, \"filter\": {\"integrationRateHz\": 3e7}",
+                      "filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (the propagation "
+                      "step must resolve"},
+        BadConfigCase{"InnovationKdBelowTwo", "\"randomWalkDegHSqrtH\": 0.002",
+                      "\"randomWalkDegHSqrtH\": 0.002, \"filter\": {\"innovationKd\": 1.5}",
+                      "filter.innovationKd: 1.5 is outside [2, 20] 1"},
+        BadConfigCase{"DriftCoefficientTooLarge", "\"c1DegH\": [0.05,-0.02,0.01]",
+                      "\"c1DegH\": [0.05,-0.02,11]",
+                      "gyros[1].model.c1DegH[2]: 11 is outside [-10, 10] deg/h"},
+        BadConfigCase{"RandomWalkTooLarge", "\"randomWalkDegHSqrtH\": 0.002",
+                      "\"randomWalkDegHSqrtH\": 2", "randomWalkDegHSqrtH: 2 is outside [0, 1]"},
         BadConfigCase{"WrongJsonType", "\"k0DegH\": 0.25", "\"k0DegH\": \"fast\"",
                       "gyros[2].model.k0DegH: invalid value \"fast\""},
         BadConfigCase{"WrongJsonTypeInArray", "\"workingPair\": [1, 2]",
@@ -435,6 +454,18 @@ INSTANTIATE_TEST_SUITE_P(
     ::testing::Values(
         BadFrameCase{"MissingTime", [](esg::v1::TelemetryFrame* f) { f->clear_time(); },
                      "time: missing"},
+        BadFrameCase{"EmptySpacecraftId",
+                     [](esg::v1::TelemetryFrame* f) { f->clear_spacecraft_id(); },
+                     "spacecraft_id: must not be empty"},
+        BadFrameCase{"SpacecraftIdWithNewline",
+                     [](esg::v1::TelemetryFrame* f) { f->set_spacecraft_id("RDK-1\nFAKE LOG LINE"); },
+                     "spacecraft_id: character '\\n' at index 5 of \"RDK-1\\nFAKE LOG LINE\""},
+        BadFrameCase{"SpacecraftIdWithTerminalEscape",
+                     [](esg::v1::TelemetryFrame* f) { f->set_spacecraft_id("RDK\x1b[2J"); },
+                     "spacecraft_id: character '\\x1b' at index 3"},
+        BadFrameCase{"SpacecraftIdTooLong",
+                     [](esg::v1::TelemetryFrame* f) { f->set_spacecraft_id(std::string(65, 'R')); },
+                     "spacecraft_id: 65 characters"},
         BadFrameCase{"NanosOutOfRange",
                      [](esg::v1::TelemetryFrame* f) { f->mutable_time()->set_nanos(1000000000); },
                      "time: nanos 1000000000 is outside 0..999999999"},
@@ -483,6 +514,36 @@ INSTANTIATE_TEST_SUITE_P(
                      [](esg::v1::TelemetryFrame* f) { f->mutable_star_tracker()->clear_q_in_b(); },
                      "star_tracker.q_in_b: expected 4 values, got 0"}),
     [](const ::testing::TestParamInfo<BadFrameCase>& info) { return info.param.name; });
+
+TEST(Frame, HugeSpacecraftIdIsRefusedFirstWithAShortPrintableMessage) {
+  esg::v1::TelemetryFrame proto = FrameToProto(SampleFrame(), "RDK-1", 7);
+  proto.set_spacecraft_id(std::string(8 << 20, '\n'));  // the reported 8 MB id, of newlines
+  proto.clear_time();                                    // a second fault, reported after the id
+  const absl::StatusOr<estimator::TelemetryFrame> frame = FrameFromProto(proto);
+  ASSERT_THAT(frame, StatusIs(absl::StatusCode::kInvalidArgument,
+                              ::testing::StartsWith("spacecraft_id: 8388608 characters")));
+  const absl::string_view message = frame.status().message();
+  EXPECT_LT(message.size(), 400u);
+  for (const char c : message) {
+    EXPECT_TRUE(c >= 0x20 && c < 0x7f) << "byte " << static_cast<int>(c) << " in the message";
+  }
+}
+
+// Every example configuration shipped in deploy/examples passes the limits (located from this
+// file: tests/proto/ -> repository root).
+TEST(ConfigFile, DeployExamplesAreValid) {
+  const std::filesystem::path examples =
+      std::filesystem::path(__FILE__).parent_path().parent_path().parent_path() / "deploy" /
+      "examples";
+  ASSERT_TRUE(std::filesystem::is_directory(examples)) << examples;
+  int read = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(examples)) {
+    if (entry.path().extension() != ".json") continue;  // scenarios/ holds simulator files
+    EXPECT_THAT(ReadConfigFile(entry.path().string()), IsOk()) << entry.path();
+    ++read;
+  }
+  EXPECT_GE(read, 1);
+}
 
 // ---------------------------------------------------------------------------------------------
 // Time.

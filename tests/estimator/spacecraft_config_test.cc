@@ -1,0 +1,298 @@
+// Input limits of the spacecraft configuration (estimator/spacecraft_config.h): the identifier
+// rule, every range of kConfigLimits at and just beyond its bounds, caseToBody, and the session's
+// refusal of a propagation whose step count would not fit an int.
+#include "estimator/spacecraft_config.h"
+
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
+#include "absl/strings/str_cat.h"
+#include "estimator/calibration_model.h"
+#include "estimator/rotation.h"
+#include "estimator/session.h"
+#include "estimator/simulator.h"
+#include "estimator/units.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/testing/paper_setup.h"
+#include "tests/testing/status_matchers.h"
+
+namespace esg::estimator {
+namespace {
+
+using ::esg::testing::IsOk;
+using ::esg::testing::StatusIs;
+using ::testing::AllOf;
+using ::testing::HasSubstr;
+using ::testing::Not;
+using ::testing::StartsWith;
+
+// True when every byte is printable ASCII (no control character, no byte >= 0x80).
+bool PrintableAscii(absl::string_view s) {
+  for (const char c : s) {
+    const unsigned char u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u >= 0x7f) return false;
+  }
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Identifier rule.
+
+TEST(Identifier, IdsUsedByTheProjectAndEdgeCasesAreAccepted) {
+  const std::vector<std::string> ids = {"RDK-1",     "SC-A", "TEST-1", "LOAD-99", "DISC-CLI",
+                                        "E2E-1",     "X",    "0",      "a.b_c:d-e",
+                                        "station_3", std::string(kMaxIdentifierLength, 'A')};
+  for (const std::string& id : ids) {
+    EXPECT_THAT(ValidateIdentifier(id, "spacecraftId"), IsOk()) << id;
+  }
+}
+
+TEST(Identifier, RefusedValuesNameTheFieldAndTheRule) {
+  struct Case {
+    std::string value;
+    std::string expected;  // substring of the message after "station_id: "
+  };
+  const Case cases[] = {
+      {"", "must not be empty"},
+      {std::string(kMaxIdentifierLength + 1, 'A'), "65 characters"},
+      {"RDK-1\n", "character '\\n' at index 5"},
+      {"RDK\x1b[31m", "character '\\x1b' at index 3"},
+      {"RDK 1", "character ' ' at index 3"},
+      {"RDK/1", "character '/' at index 3"},
+      {"-RDK", "character '-' at index 0"},
+      {".hidden", "character '.' at index 0"},
+      {std::string("RD\0K", 4), "character '\\x00' at index 2"},
+      {"RDK-1\xc3\xa9", "character '\\xc3' at index 5"},  // "RDK-1é" in UTF-8
+      {"SAT-7 \"Zvezda\"", "character ' ' at index 5"},
+  };
+  for (const Case& c : cases) {
+    const absl::Status s = ValidateIdentifier(c.value, "station_id");
+    EXPECT_THAT(s, StatusIs(absl::StatusCode::kInvalidArgument,
+                            AllOf(StartsWith("station_id: "), HasSubstr(c.expected))))
+        << absl::CHexEscape(c.value);
+    EXPECT_TRUE(PrintableAscii(s.message())) << absl::CHexEscape(s.message());
+    if (!c.value.empty()) EXPECT_THAT(std::string(s.message()), HasSubstr("[A-Za-z0-9._:-]"));
+  }
+}
+
+TEST(Identifier, MessageOfAHugeHostileValueIsShortAndPrintable) {
+  for (const char fill : {'x', '\n', '\x1b', '\xff'}) {
+    const std::string huge(1 << 20, fill);
+    const absl::Status s = ValidateIdentifier(huge, "spacecraftId");
+    ASSERT_FALSE(s.ok());
+    EXPECT_THAT(std::string(s.message()),
+                AllOf(StartsWith("spacecraftId: "), HasSubstr("1048576 characters")));
+    EXPECT_LT(s.message().size(), 400u);  // 32 quoted characters, escaped to at most 4 bytes each
+    EXPECT_TRUE(PrintableAscii(s.message())) << absl::CHexEscape(s.message());
+  }
+  // A bad character late in a value of legal length: still at most 32 characters quoted.
+  const std::string late = std::string(60, 'A') + "\n";
+  const absl::Status s = ValidateIdentifier(late, "spacecraft_id");
+  EXPECT_THAT(std::string(s.message()), HasSubstr("at index 60 of \"" + std::string(32, 'A') + "\"..."));
+  EXPECT_TRUE(PrintableAscii(s.message()));
+}
+
+TEST(Identifier, ValidateConfigAppliesItToSpacecraftId) {
+  SpacecraftConfig c = testing::PaperConfig();
+  ASSERT_THAT(ValidateConfig(c), IsOk());
+  c.spacecraft_id = "RDK-1\n";
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("spacecraftId: character '\\n' at index 5")));
+  c.spacecraft_id = std::string(60 << 20, 'R');  // the reported 60 MB id
+  const absl::Status s = ValidateConfig(c);
+  EXPECT_THAT(s, StatusIs(absl::StatusCode::kInvalidArgument, StartsWith("spacecraftId: ")));
+  EXPECT_LT(s.message().size(), 400u);
+  c.spacecraft_id = "";
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          HasSubstr("spacecraftId: must not be empty")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Numeric limits.
+
+TEST(ConfigLimits, TableIsCompleteAndThePaperConfigurationIsWellInside) {
+  for (const ConfigLimit& l : kConfigLimits.All()) {
+    EXPECT_LT(l.min, l.max) << l.field;
+    EXPECT_NE(std::string(l.reason), "") << l.field;
+    EXPECT_NE(std::string(l.typical), "") << l.field;
+    EXPECT_NE(std::string(l.unit), "") << l.field;
+  }
+  EXPECT_THAT(ValidateConfig(testing::PaperConfig()), IsOk());
+  // The defaults of FilterConfig and SuspensionConfig are inside their limits by construction.
+  const FilterConfig f;
+  const SuspensionConfig s;
+  EXPECT_THAT(CheckLimit(f.integration_rate_hz, kConfigLimits.integration_rate, "r"), IsOk());
+  EXPECT_THAT(CheckLimit(f.measurement_step, kConfigLimits.measurement_step, "m"), IsOk());
+  EXPECT_THAT(CheckLimit(f.innovation_kd, kConfigLimits.innovation_kd, "k"), IsOk());
+  EXPECT_THAT(CheckLimit(s.amplifier_gain, kConfigLimits.amplifier_gain, "a"), IsOk());
+  EXPECT_THAT(CheckLimit(s.reference_voltage, kConfigLimits.reference_voltage, "v"), IsOk());
+  EXPECT_THAT(CheckLimit(s.gap, kConfigLimits.gap, "g"), IsOk());
+  // The diagnosis runs the filter at 0.2 Hz with the eq. (12) test off (180 deg threshold).
+  EXPECT_THAT(CheckLimit(0.2, kConfigLimits.integration_rate, "r"), IsOk());
+  EXPECT_THAT(CheckLimit(kPi, kConfigLimits.fault_threshold, "t"), IsOk());
+}
+
+// One field of the configuration under one limit: sets the SI value.
+struct LimitCase {
+  std::string field;  // the JSON path the message must name
+  const ConfigLimit* limit;
+  double (*to_si)(double);  // limit's unit -> SI
+  std::function<void(SpacecraftConfig&, double)> set;
+};
+
+void PrintTo(const LimitCase& c, std::ostream* os) { *os << c.field; }
+
+double Same(double x) { return x; }
+double UmToMetres(double x) { return x * kMetresPerUm; }
+
+class LimitBound : public ::testing::TestWithParam<LimitCase> {};
+
+TEST_P(LimitBound, BoundsAreAcceptedAndValuesJustBeyondAreRefusedNamingTheField) {
+  const LimitCase& c = GetParam();
+  const ConfigLimit& l = *c.limit;
+  auto validate = [&](double value_in_unit) {
+    SpacecraftConfig config = testing::PaperConfig();
+    c.set(config, c.to_si(value_in_unit));
+    return ValidateConfig(config);
+  };
+  // The bounds themselves, typed in the JSON's unit, pass the SI round trip.
+  EXPECT_THAT(validate(l.min), IsOk()) << l.min;
+  EXPECT_THAT(validate(l.max), IsOk()) << l.max;
+  // 1e-6 (relative, or absolute at 0) beyond either bound is refused, naming the field.
+  const double below = l.min - 1e-6 * std::max(std::abs(l.min), 1.0);
+  const double above = l.max + 1e-6 * std::max(std::abs(l.max), 1.0);
+  const auto named = AllOf(StartsWith(c.field + ": "), HasSubstr(" is outside ["),
+                           HasSubstr(absl::StrCat("] ", l.unit, " (")));
+  EXPECT_THAT(validate(below), StatusIs(absl::StatusCode::kInvalidArgument, named)) << below;
+  EXPECT_THAT(validate(above), StatusIs(absl::StatusCode::kInvalidArgument, named)) << above;
+  EXPECT_THAT(validate(std::numeric_limits<double>::quiet_NaN()),
+              StatusIs(absl::StatusCode::kInvalidArgument, named));
+  EXPECT_THAT(validate(std::numeric_limits<double>::infinity()),
+              StatusIs(absl::StatusCode::kInvalidArgument, named));
+}
+
+const ConfigLimits& L = kConfigLimits;
+
+INSTANTIATE_TEST_SUITE_P(
+    ConfigLimits, LimitBound,
+    ::testing::Values(
+        LimitCase{"gyros[0].model.k0DegH", &L.drift_coefficient, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[0].model.k0 = v; }},
+        LimitCase{"gyros[1].model.c1DegH[2]", &L.drift_coefficient, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[1].model.C1[2] = v; }},
+        LimitCase{"gyros[2].model.c2DegH[0]", &L.drift_coefficient, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[2].model.C2[0] = v; }},
+        LimitCase{"gyros[3].model.muDegH[1]", &L.drift_coefficient, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[3].model.mu[1] = v; }},
+        LimitCase{"gyros[0].model.nuDegH[2]", &L.drift_coefficient, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[0].model.nu[2] = v; }},
+        LimitCase{"gyros[0].modelSigma.k0DegH", &L.drift_sigma, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[0].model_sigma.k0 = v; }},
+        LimitCase{"gyros[1].modelSigma.c1DegH[0]", &L.drift_sigma, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[1].model_sigma.C1[0] = v; }},
+        LimitCase{"gyros[2].modelSigma.c2DegH[1]", &L.drift_sigma, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[2].model_sigma.C2[1] = v; }},
+        LimitCase{"gyros[3].modelSigma.nuDegH[1]", &L.drift_sigma, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.gyros[3].model_sigma.nu[1] = v; }},
+        LimitCase{"gyros[2].misalignmentSigmaArcsec", &L.misalignment_sigma, &ArcsecToRad,
+                  [](SpacecraftConfig& c, double v) { c.gyros[2].misalignment_sigma = v; }},
+        LimitCase{"starTracker.noiseArcsec[0]", &L.star_tracker_noise, &ArcsecToRad,
+                  [](SpacecraftConfig& c, double v) { c.star_tracker.noise[0] = v; }},
+        LimitCase{"starTracker.noiseArcsec[1]", &L.star_tracker_noise, &ArcsecToRad,
+                  [](SpacecraftConfig& c, double v) { c.star_tracker.noise[1] = v; }},
+        LimitCase{"starTracker.noiseArcsec[2]", &L.star_tracker_noise, &ArcsecToRad,
+                  [](SpacecraftConfig& c, double v) { c.star_tracker.noise[2] = v; }},
+        LimitCase{"readoutNoiseArcsec", &L.readout_noise, &ArcsecToRad,
+                  [](SpacecraftConfig& c, double v) { c.readout_noise = v; }},
+        LimitCase{"randomWalkDegHSqrtH", &L.random_walk, &DegPerHourSqrtHourToSi,
+                  [](SpacecraftConfig& c, double v) { c.random_walk = v; }},
+        LimitCase{"suspension.amplifierGain", &L.amplifier_gain, &Same,
+                  [](SpacecraftConfig& c, double v) { c.suspension.amplifier_gain = v; }},
+        LimitCase{"suspension.referenceVoltageV", &L.reference_voltage, &Same,
+                  [](SpacecraftConfig& c, double v) { c.suspension.reference_voltage = v; }},
+        LimitCase{"suspension.gapUm", &L.gap, &UmToMetres,
+                  [](SpacecraftConfig& c, double v) { c.suspension.gap = v; }},
+        LimitCase{"filter.integrationRateHz", &L.integration_rate, &Same,
+                  [](SpacecraftConfig& c, double v) { c.filter.integration_rate_hz = v; }},
+        LimitCase{"filter.measurementStepS", &L.measurement_step, &Same,
+                  [](SpacecraftConfig& c, double v) { c.filter.measurement_step = v; }},
+        LimitCase{"filter.innovationKd", &L.innovation_kd, &Same,
+                  [](SpacecraftConfig& c, double v) { c.filter.innovation_kd = v; }},
+        LimitCase{"filter.faultThresholdArcsec", &L.fault_threshold, &ArcsecToRad,
+                  [](SpacecraftConfig& c, double v) { c.filter.fault_threshold = v; }}),
+    [](const ::testing::TestParamInfo<LimitCase>& info) {
+      std::string name;
+      for (const char ch : info.param.field) {
+        if (absl::ascii_isalnum(static_cast<unsigned char>(ch))) name += ch;
+      }
+      return name;
+    });
+
+TEST(ConfigLimits, ReportedIntegrationRateIsRefusedWithItsReason) {
+  SpacecraftConfig c = testing::PaperConfig();
+  c.filter.integration_rate_hz = 3e7;
+  EXPECT_THAT(ValidateConfig(c),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       StartsWith("filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (the "
+                                  "propagation step must resolve")));
+}
+
+TEST(ConfigLimits, CaseToBodyMustBeAProperRotation) {
+  SpacecraftConfig c = testing::PaperConfig();
+  c.gyros[1].C_b_k(0, 0) += 1e-8;  // orthonormal to 1e-6: accepted
+  EXPECT_THAT(ValidateConfig(c), IsOk());
+  c.gyros[1].C_b_k(0, 0) += 1e-4;
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[1].caseToBody: not a proper rotation")));
+  c = testing::PaperConfig();
+  c.gyros[2].C_b_k.row(2) *= -1.0;  // a reflection: orthonormal, det -1
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[2].caseToBody: not a proper rotation")));
+  c = testing::PaperConfig();
+  c.gyros[0].C_b_k(1, 2) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[0].caseToBody")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The session does not rely on its caller to bound a frame gap: a step count beyond int is
+// refused (it used to overflow static_cast<int>: undefined behaviour).
+
+TEST(SessionStepCount, AGapTooLongToCountInAnIntIsOutOfRangeAndLeavesTheSessionUnchanged) {
+  SimulationSpec spec;
+  spec.config = testing::PaperConfig();
+  spec.duration = 600.0;
+  spec.seed = 5;
+  spec.profile = *MakeNamedProfile("calibration", spec.duration, spec.seed);
+  absl::StatusOr<SimulationResult> sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const std::vector<TelemetryFrame>& frames = sim->recording.frames;
+  ASSERT_GE(frames.size(), 3u);
+  SessionOptions options;
+  options.model = *ParseModel("10+11");
+  absl::StatusOr<EstimationSession> session = EstimationSession::Create(spec.config, options);
+  ASSERT_THAT(session, IsOk());
+  ASSERT_THAT(session->AddFrame(frames[0]), IsOk());
+  ASSERT_THAT(session->AddFrame(frames[1]), IsOk());
+  const auto before = session->ExportCheckpoint().values;
+
+  // 100 years at 8 Hz: 2.5e10 steps.
+  TelemetryFrame far = frames[2];
+  far.time = frames[1].time + absl::Hours(24 * 365 * 100);
+  EXPECT_THAT(session->AddFrame(far),
+              StatusIs(absl::StatusCode::kOutOfRange,
+                       AllOf(HasSubstr("filter.integrationRateHz 8"), HasSubstr("steps"))));
+  far.time = absl::InfiniteFuture();
+  EXPECT_THAT(session->AddFrame(far), StatusIs(absl::StatusCode::kOutOfRange, HasSubstr("steps")));
+  EXPECT_EQ(session->ExportCheckpoint().values, before);
+  EXPECT_THAT(session->AddFrame(frames[2]), IsOk());  // still usable
+}
+
+}  // namespace
+}  // namespace esg::estimator
