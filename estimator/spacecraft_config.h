@@ -85,10 +85,10 @@ struct ConfigLimit {
   const char* field;  // JSON field, "[]" where an index goes: "gyros[].model.k0DegH"
   double min;
   double max;
-  const char* unit;             // unit of min, max and the JSON field, e.g. "deg/h"
-  double (*from_si)(double);    // SI value of spacecraft_config.h -> `unit`
-  const char* typical;          // default or the paper's value, for the documentation
-  const char* reason;           // why these bounds; ends the error message
+  const char* unit;           // unit of min, max and the JSON field, e.g. "deg/h"
+  double (*from_si)(double);  // SI value of spacecraft_config.h -> `unit`
+  const char* typical;        // default or the paper's value, for the documentation
+  const char* reason;         // why these bounds; ends the error message
 };
 
 // The one table of numeric limits, read by ValidateConfig and by the documentation (All()).
@@ -151,8 +151,8 @@ inline constexpr ConfigLimits kConfigLimits = {
                        "eq. (3) readout gain; 50 times the default, below 1 it is no amplifier"},
     .reference_voltage = {"suspension.referenceVoltageV", 1.0, 10000.0, "V",
                           &config_limits_internal::Identity, "200",
-                          "suspension voltages are hundreds of volts; 10 kV across a "
-                          "tens-of-um gap would break down"},
+                          "ESG suspension voltages are hundreds of volts; 10 kV is 50 times "
+                          "the default"},
     .gap = {"suspension.gapUm", 1.0, 1000.0, "um", &config_limits_internal::MetresToUm, "30",
             "ESG electrode gaps are tens of um; 1 mm is 33 times the default"},
     .integration_rate = {"filter.integrationRateHz", 0.1, 100.0, "Hz",
@@ -168,7 +168,7 @@ inline constexpr ConfigLimits kConfigLimits = {
     .innovation_kd = {"filter.innovationKd", 2.0, 20.0, "1", &config_limits_internal::Identity,
                       "5 (the paper: 4..6)",
                       "below 2 eq. (14) rejects about 5% of good samples per axis, above 20 it "
-                      "rejects no outlier"},
+                      "lets through outliers of many arcmin"},
     .fault_threshold = {"filter.faultThresholdArcsec", 0.0, 648000.0, "arcsec", &RadToArcsec,
                         "0 (derived from the noise), 180 deg in diagnosis",
                         "a mismatch angle between two attitudes is at most 180 deg; 0 derives "
