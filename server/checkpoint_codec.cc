@@ -3,13 +3,15 @@
 #include "server/checkpoint_codec.h"
 
 #include <cstring>
+#include <limits>
 
 #include "absl/strings/str_cat.h"
 
 namespace esg::server {
 namespace {
 
-constexpr absl::string_view kMagic = "ESGSRV01";
+constexpr absl::string_view kMagicV1 = "ESGSRV01";
+constexpr absl::string_view kMagic = "ESGSRV02";
 
 class Writer {
  public:
@@ -19,7 +21,9 @@ class Writer {
     I64(static_cast<int64_t>(s.size()));
     out_.append(s.data(), s.size());
   }
-  void Time(absl::Time t) { I64(absl::ToUnixNanos(t)); }
+  void Time(absl::Time t) {
+    I64(t == absl::InfinitePast() ? std::numeric_limits<int64_t>::min() : absl::ToUnixNanos(t));
+  }
   std::string& out() { return out_; }
 
  private:
@@ -42,7 +46,7 @@ class Reader {
   bool Time(absl::Time* t) {
     int64_t ns = 0;
     if (!I64(&ns)) return false;
-    *t = absl::FromUnixNanos(ns);
+    *t = ns == std::numeric_limits<int64_t>::min() ? absl::InfinitePast() : absl::FromUnixNanos(ns);
     return true;
   }
   bool done() const { return pos_ == in_.size(); }
@@ -65,6 +69,12 @@ std::string EncodeCheckpoint(const ServerCheckpoint& c) {
   Writer w;
   w.out().append(kMagic.data(), kMagic.size());
   w.Str(c.model);
+  w.Time(c.applied_time);
+  w.Str(c.applied_station);
+  w.I64(c.applied_sequence);
+  w.Time(c.effects_written_until);
+  w.Str(c.quarantine_reason);
+  w.I64(c.rebuilding ? 1 : 0);
   w.I64(c.frames_applied);
   w.I64(c.frames_apply_failed);
   w.I64(c.star_tracker_rejections);
@@ -89,11 +99,24 @@ absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob) {
   const auto bad = [](absl::string_view what) {
     return absl::DataLossError(absl::StrCat("server checkpoint: ", what));
   };
-  if (blob.substr(0, kMagic.size()) != kMagic) return bad("unknown format (magic)");
+  const bool v1 = blob.substr(0, kMagicV1.size()) == kMagicV1;
+  if (!v1 && blob.substr(0, kMagic.size()) != kMagic) return bad("unknown format (magic)");
   Reader r(blob.substr(kMagic.size()));
   ServerCheckpoint c;
   int64_t n_tracks = 0;
-  if (!r.Str(&c.model) || !r.I64(&c.frames_applied) || !r.I64(&c.frames_apply_failed) ||
+  if (!r.Str(&c.model)) return bad("truncated header");
+  if (v1) {
+    c.cursor_from_sequence = true;
+  } else {
+    int64_t rebuilding = 0;
+    if (!r.Time(&c.applied_time) || !r.Str(&c.applied_station) || !r.I64(&c.applied_sequence) ||
+        !r.Time(&c.effects_written_until) || !r.Str(&c.quarantine_reason) ||
+        !r.I64(&rebuilding)) {
+      return bad("truncated apply cursor");
+    }
+    c.rebuilding = rebuilding != 0;
+  }
+  if (!r.I64(&c.frames_applied) || !r.I64(&c.frames_apply_failed) ||
       !r.I64(&c.star_tracker_rejections) || !r.I64(&n_tracks) || n_tracks < 0 ||
       n_tracks > 100000) {
     return bad("truncated header");
@@ -112,6 +135,7 @@ absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob) {
     estimator::SessionCheckpoint s;
     int64_t version = 0, n = 0;
     if (!r.I64(&version) || !r.I64(&n) || n < 0 ||
+        static_cast<uint64_t>(n) > r.remaining() / sizeof(double) ||
         static_cast<size_t>(n) * sizeof(double) != r.remaining()) {
       return bad("truncated session values");
     }

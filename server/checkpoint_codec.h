@@ -29,6 +29,22 @@ struct AlertTrack {
 
 struct ServerCheckpoint {
   std::string model;  // canonical model name, e.g. "10+11"
+  // The apply cursor: the measurement time of the last applied frame (InfinitePast: none), and
+  // that frame's identity (for display).
+  absl::Time applied_time = absl::InfinitePast();
+  std::string applied_station;
+  int64_t applied_sequence = 0;
+  // Coefficient snapshots and alerts up to this measurement time are already stored: a session
+  // rebuilt from the archive does not write them again (InfinitePast: nothing stored before).
+  absl::Time effects_written_until = absl::InfinitePast();
+  // Why the session is quarantined (docs/service.md "Session states"); empty: it is not.
+  std::string quarantine_reason;
+  // Quarantined while being rebuilt from the archive (ends by itself when caught up); false
+  // with a reason: the filter is stopped until a reconfiguration.
+  bool rebuilding = false;
+  // Decoded from the first format, which kept no apply time: the caller derives it from the
+  // stored last sequence (station "default").
+  bool cursor_from_sequence = false;
   int64_t frames_applied = 0;
   int64_t frames_apply_failed = 0;
   int64_t star_tracker_rejections = 0;
@@ -37,9 +53,10 @@ struct ServerCheckpoint {
   std::optional<estimator::SessionCheckpoint> session;
 };
 
-// Little-endian binary, starting with the magic "ESGSRV01".
+// Little-endian binary, starting with the magic "ESGSRV02" (format 2: with the apply cursor and
+// the effects watermark). Blobs of format 1 ("ESGSRV01") are still read.
 std::string EncodeCheckpoint(const ServerCheckpoint& checkpoint);
-// DataLoss for a blob that is not a complete checkpoint of this format.
+// DataLoss for a blob that is not a complete checkpoint of a known format.
 absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob);
 
 }  // namespace esg::server

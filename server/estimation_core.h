@@ -1,22 +1,29 @@
 // The service's engine behind the gRPC layer (docs/service.md): the per-spacecraft registry,
-// telemetry ingest with group commit, the workers that apply archived frames to each
-// spacecraft's EstimationSession (DESIGN §5), alert collapsing and fan-out, and the queries.
-// No gRPC types except the esg.v1 messages; errors are absl::Status.
+// telemetry ingest under the ingest contract (docs/service.md "Ingest contract") with group
+// commit, the workers that apply archived frames to each spacecraft's EstimationSession, alert
+// collapsing and fan-out, quarantine, and the queries. No gRPC types except the esg.v1
+// messages; errors are absl::Status. The implementation is spread over files by job:
+// estimation_core.cc (start, load, quarantine, configure, stop), ingest.cc, committer.cc,
+// apply_worker.cc, core_queries.cc, prediction.cc; core_internal.h holds the records.
 //
 // DATA FLOW AND DURABILITY
-//   Ingest (any thread)  validate -> accept (sequence and time high-water marks advance)
+//   Ingest (any thread)  validate -> decide (new, duplicate, conflict, late) -> accept (the
+//                        station's sequence and the spacecraft's time high-water marks advance)
 //                        -> committer queue.
 //   Committer (1 thread) takes everything queued, appends it to the telemetry archive in ONE
 //                        SQLite transaction (group commit; synchronous=FULL by default), then
-//                        raises each spacecraft's highest durable sequence and calls the ack
-//                        callbacks. An ack therefore always follows the durable commit.
-//   Workers (pool)       per spacecraft, one job at a time: apply durable frames in sequence
-//                        order to a copy of the session; commit the coefficient snapshots (every
-//                        measurement step), new alerts, repeats and clears, and the checkpoint
-//                        (session values + last applied sequence) in ONE transaction; then
+//                        raises each station's highest durable sequence and calls the ack
+//                        callbacks. An ack therefore always follows the durable commit. A failed
+//                        commit fails the streams of its frames with UNAVAILABLE (never an ack),
+//                        rolls the high-water marks back to the durable ones, and refuses ingest
+//                        until a probe write succeeds (health NOT_SERVING meanwhile).
+//   Workers (pool)       per spacecraft, one job at a time: apply durable frames in measurement-
+//                        time order to a copy of the session; commit the coefficient snapshots
+//                        (every measurement step), new alerts, repeats and clears, and the
+//                        checkpoint (session values + apply cursor) in ONE transaction; then
 //                        install the copy. The checkpoint thus always matches the effects
 //                        stored, so a restart (load checkpoint, replay archive after its
-//                        sequence) applies no frame twice and loses none.
+//                        cursor) applies no frame twice and loses none.
 // LOCK ORDER: Spacecraft::job_mu -> ingest_mu -> state_mu -> (storage's database lock);
 // the stream's own lock may be held while taking state_mu.
 #ifndef ESG_SERVER_ESTIMATION_CORE_H_
@@ -42,6 +49,7 @@
 #include "estimator/session.h"
 #include "estimator/spacecraft_config.h"
 #include "server/alert_hub.h"
+#include "server/proto_mapping.h"
 #include "server/checkpoint_codec.h"
 #include "storage/storage.h"
 
@@ -64,13 +72,23 @@ struct CoreOptions {
   absl::Duration max_prediction_horizon = absl::Hours(48);
   // Most samples in one prediction.
   int max_prediction_samples = 100000;
+  // Largest serialized telemetry frame accepted (a frame of four gyros is about 300 bytes).
+  int64_t max_frame_bytes = 8192;
+  // Frames queued for the archive, in bytes, over all streams; beyond, a stream fails with
+  // RESOURCE_EXHAUSTED and the client resumes from its highest durable sequence.
+  int64_t max_commit_backlog_bytes = 64 << 20;
+  // Durable frames kept in memory per spacecraft for the filter; beyond, it reads the archive.
+  int64_t max_ready_bytes = 16 << 20;
+  // Accepted measurement times: [earliest_frame_time, latest_frame_time).
+  absl::Time earliest_frame_time = absl::UnixEpoch();
+  absl::Time latest_frame_time = absl::FromCivil(absl::CivilSecond(2200, 1, 1, 0, 0, 0),
+                                                 absl::UTCTimeZone());
+  // Consecutive filter failures (Internal or DataLoss from the estimator) that quarantine a
+  // spacecraft.
+  int quarantine_after_failures = 1;
+  // Period of the probe write while storage cannot commit.
+  absl::Duration storage_probe_period = absl::Seconds(1);
 };
-
-// Severity of an alert raised by a session event (docs/service.md "Alerts").
-esg::v1::AlertSeverity SeverityOf(estimator::Event::Kind kind);
-esg::v1::AlertReason ReasonOf(estimator::Event::Kind kind);
-esg::v1::Alert AlertToProto(const storage::AlertRecord& record);
-esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& record);
 
 class EstimationCore {
  public:
@@ -85,15 +103,26 @@ class EstimationCore {
   // durable backlog until `drain_deadline`, then stops all threads. Idempotent.
   void Stop(absl::Duration drain_deadline);
 
-  // ---- Ingest ----
-  // Validates one frame. Fills `*ack` (spacecraft_id, sequence, accepted, duplicate, rejection;
-  // highest_durable_sequence is filled by FillDurable when the ack is sent). Returns true when the
-  // ack must wait for durability: `on_durable` is then called exactly once, from the committer
-  // thread, after the commit that makes the frame durable. Returns false when the ack can be sent
-  // at once (a rejection, or a duplicate of a durable frame); `on_durable` is not called.
-  bool Ingest(const esg::v1::TelemetryFrame& frame, esg::v1::TelemetryAck* ack,
-              std::function<void()> on_durable);
+  // ---- Ingest (ingest.cc; docs/service.md "Ingest contract") ----
+  // Decides one frame. Fills `*ack` (spacecraft_id, station_id, sequence, accepted, duplicate,
+  // rejection with its code; highest_durable_sequence is filled by FillDurable when the ack is
+  // sent). Returns true when the ack must wait for durability: `on_durable` is then called
+  // exactly once, from the committer thread, with OK after the commit that makes the frame
+  // durable, or with the error that kept it from storage (the stream must then fail with it:
+  // no ack). Returns false when the ack can be sent at once (a refusal, or a duplicate of a
+  // durable frame); `on_durable` is not called. A non-OK result fails the stream without an ack
+  // for this frame: Unavailable while storage cannot commit or the server stops,
+  // ResourceExhausted when the commit backlog is full.
+  absl::StatusOr<bool> Ingest(const esg::v1::TelemetryFrame& frame, esg::v1::TelemetryAck* ack,
+                              std::function<void(absl::Status)> on_durable);
   void FillDurable(esg::v1::TelemetryAck* ack);
+
+  // Storage health: called with false and the reason when a commit fails, with true when a
+  // later commit or probe succeeds (the server maps it to the health service). Set before
+  // traffic starts; called from the committer thread.
+  void SetStorageHealthListener(std::function<void(bool ok, const std::string& reason)> listener);
+  // Empty while storage commits; else why it cannot.
+  std::string StorageFault();
 
   // ---- Configuration and queries ----
   absl::StatusOr<esg::v1::ConfigureResponse> Configure(const esg::v1::ConfigureRequest& request);
@@ -129,6 +158,18 @@ class EstimationCore {
 
   explicit EstimationCore(storage::Storage* storage, const CoreOptions& options);
   absl::Status Load();
+  // Loads one configured spacecraft; a checkpoint that cannot be used quarantines it (rebuilt
+  // from the archive where possible) instead of failing the start. Errors: storage reads only.
+  absl::Status LoadSpacecraft(const storage::ConfigRecord& record);
+  // Ingest helpers (ingest.cc).
+  absl::StatusOr<std::optional<storage::ArchivedFrame>> FindStoredFrame(
+      Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
+      bool by_identity) ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.ingest_mu);
+  // Committer helpers (committer.cc).
+  absl::Status CommitFrames(const std::vector<CommitEntry>& batch);
+  void FailBatch(std::vector<CommitEntry>& batch, const absl::Status& error);
+  void SetStorageFault(const std::string& reason);
+  bool ProbeStorage();
   std::shared_ptr<Spacecraft> Find(const std::string& spacecraft_id);
   void Schedule(const std::shared_ptr<Spacecraft>& sc);
   void CommitterLoop();
@@ -148,6 +189,11 @@ class EstimationCore {
   // Committer.
   absl::Mutex commit_mu_;
   std::vector<CommitEntry> commit_queue_ ABSL_GUARDED_BY(commit_mu_);
+  int64_t commit_queue_bytes_ ABSL_GUARDED_BY(commit_mu_) = 0;
+  // Why storage cannot commit (empty: it can). Ingest is refused while set.
+  std::string storage_fault_ ABSL_GUARDED_BY(commit_mu_);
+  absl::Mutex listener_mu_;
+  std::function<void(bool, const std::string&)> storage_listener_ ABSL_GUARDED_BY(listener_mu_);
   bool commit_stop_ ABSL_GUARDED_BY(commit_mu_) = false;
   bool ingest_closed_ ABSL_GUARDED_BY(commit_mu_) = false;
   std::thread committer_;

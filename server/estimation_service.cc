@@ -63,17 +63,29 @@ class TelemetryReactor
       shared_->slots.push_back(slot);
     }
     std::weak_ptr<Shared> weak = shared_;
-    const bool wait = core_->Ingest(frame_, &slot->ack, [weak, slot]() {
-      std::shared_ptr<Shared> shared = weak.lock();
-      if (shared == nullptr) return;
-      absl::MutexLock lock(&shared->mu);
-      slot->ready = true;
-      TryWrite(*shared);
-    });
+    const absl::StatusOr<bool> wait =
+        core_->Ingest(frame_, &slot->ack, [weak, slot](absl::Status stored) {
+          std::shared_ptr<Shared> shared = weak.lock();
+          if (shared == nullptr) return;
+          absl::MutexLock lock(&shared->mu);
+          if (stored.ok()) {
+            slot->ready = true;
+          } else {
+            // Not stored: the stream fails once the acks before this frame are out; the client
+            // resumes from its highest durable sequence.
+            slot->failure = std::move(stored);
+          }
+          TryWrite(*shared);
+        });
     absl::MutexLock lock(&shared_->mu);
-    if (!wait) slot->ready = true;
+    if (!wait.ok()) {
+      slot->failure = wait.status();
+    } else if (!*wait) {
+      slot->ready = true;
+    }
     TryWrite(*shared_);
     if (shared_->finished) return;
+    if (!wait.ok()) return;  // no more reads: the stream ends with this frame's failure
     if (shared_->slots.size() < kMaxInFlight) {
       StartRead(&frame_);
     } else {
@@ -118,7 +130,8 @@ class TelemetryReactor
  private:
   struct Slot {
     esg::v1::TelemetryAck ack;
-    bool ready = false;  // guarded by Shared::mu
+    bool ready = false;     // guarded by Shared::mu
+    absl::Status failure;   // guarded by Shared::mu; not OK: fail the stream here, no ack
   };
   // State shared with the committer's callbacks, which may outlive the reactor.
   struct Shared {
@@ -136,6 +149,11 @@ class TelemetryReactor
     if (s.finished || s.writing || s.reactor == nullptr) return;
     if (!s.slots.empty()) {
       Slot& front = *s.slots.front();
+      if (!front.failure.ok()) {
+        s.finished = true;
+        s.reactor->Finish(ToGrpcStatus(front.failure));
+        return;
+      }
       if (!front.ready) return;
       if (front.ack.accepted()) s.reactor->core_->FillDurable(&front.ack);
       s.writing = true;

@@ -5,6 +5,7 @@
 
 #include <cstdio>
 #include <string>
+#include "absl/strings/str_format.h"
 #include "absl/strings/string_view.h"
 
 #include "absl/time/clock.h"
@@ -12,10 +13,23 @@
 
 namespace esg::server {
 
+// One line per message: control characters (C0 and DEL) in `message` (an id
+// or a reason quoting client input) are written as escapes, so no client can forge a log line
+// or send escape sequences to an operator's terminal.
 inline void Log(absl::string_view level, absl::string_view message) {
+  std::string text;
+  text.reserve(message.size());
+  for (const char c : message) {
+    const unsigned char u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u == 0x7f) {
+      text += absl::StrFormat("\\x%02x", u);
+    } else {
+      text += c;
+    }
+  }
   const std::string line =
       absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ ", absl::Now(), absl::UTCTimeZone()) +
-      std::string(level) + " esgd: " + std::string(message) + "\n";
+      std::string(level) + " esgd: " + text + "\n";
   std::fputs(line.c_str(), stderr);
 }
 

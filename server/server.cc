@@ -94,6 +94,11 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   }
   if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
     health->SetServingStatus("esg.v1.EstimationService", true);
+    // NOT_SERVING while storage cannot commit (docs/service.md "Storage faults").
+    s->core_->SetStorageHealthListener([health](bool ok, const std::string&) {
+      health->SetServingStatus("esg.v1.EstimationService", ok);
+      health->SetServingStatus("", ok);
+    });
   }
   Log("INFO", absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
                            options.db_path, s->auth_ ? ", bearer tokens required" : "",

@@ -25,9 +25,15 @@ struct ConfigRecord {
 };
 
 // One accepted telemetry frame, kept so a session can be recalibrated or replayed.
+// The station of a frame that names none (docs/service.md "Ingest contract").
+inline constexpr char kDefaultStation[] = "default";
+
+// One archived frame. Identity: (spacecraft_id, station_id, sequence). The measurement time is
+// unique per spacecraft too, and orders the frames for the filter.
 struct ArchivedFrame {
   std::string spacecraft_id;
-  int64_t sequence = 0;  // the frame's sequence number in the spacecraft's stream (unique)
+  std::string station_id = kDefaultStation;
+  int64_t sequence = 0;  // the frame's sequence number in its station's stream
   absl::Time measurement_time = absl::UnixEpoch();
   std::string payload;   // serialized frame bytes, format chosen by the server
 };

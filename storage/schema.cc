@@ -122,8 +122,34 @@ CREATE TABLE diagnoses (
 CREATE INDEX diagnoses_by_spacecraft ON diagnoses (spacecraft_id, id);
 )sql";
 
+// Version 3: a frame is identified by (spacecraft, station, sequence); existing frames belong to
+// the station "default"; the measurement time is unique per spacecraft and orders the frames
+// for the filter. service_state holds the service's own small facts (the storage probe).
+constexpr absl::string_view kSchemaV3 = R"sql(
+CREATE TABLE telemetry_frames_v3 (
+  spacecraft_id            TEXT    NOT NULL,
+  station_id               TEXT    NOT NULL,
+  sequence                 INTEGER NOT NULL,
+  measurement_time_unix_ns INTEGER NOT NULL,
+  payload                  BLOB    NOT NULL,
+  PRIMARY KEY (spacecraft_id, station_id, sequence)
+);
+INSERT INTO telemetry_frames_v3
+  SELECT spacecraft_id, 'default', sequence, measurement_time_unix_ns, payload
+  FROM telemetry_frames;
+DROP TABLE telemetry_frames;
+ALTER TABLE telemetry_frames_v3 RENAME TO telemetry_frames;
+CREATE UNIQUE INDEX telemetry_frames_by_time
+  ON telemetry_frames (spacecraft_id, measurement_time_unix_ns);
+
+CREATE TABLE service_state (
+  key   TEXT PRIMARY KEY,
+  value ANY
+);
+)sql";
+
 // kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2};
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -1,10 +1,12 @@
 // The SQLite schema of the service database and its migrations, keyed on PRAGMA user_version
-// (DESIGN §8, storage/). Column encodings shared by every store are defined here too.
+// (docs/service.md "Durability and recovery"). Column encodings shared by every store are defined here too.
 //
 // Versions (user_version):
 //   0  empty file.
 //   1  spacecraft_configs, telemetry_frames, coefficients, alerts (without `unit`), checkpoints.
-//   2  alerts.unit; index alerts_by_time; diagnoses.               <- kCurrentSchemaVersion
+//   2  alerts.unit; index alerts_by_time; diagnoses.
+//   3  telemetry_frames keyed by (spacecraft, station, sequence), unique measurement time per
+//      spacecraft; frames stored before belong to station "default".  <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
 // intact. A migration's DDL is frozen once released: change the schema only by appending a
@@ -30,7 +32,7 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 2;
+inline constexpr int kCurrentSchemaVersion = 3;
 
 // PRAGMA user_version of the open database.
 absl::StatusOr<int> SchemaVersion(Database& db);

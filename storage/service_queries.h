@@ -1,4 +1,4 @@
-// Small queries the gRPC service needs beyond the stores' APIs (DESIGN §8 storage/): counts for
+// Small queries the gRPC service needs beyond the stores' APIs (docs/service.md): counts for
 // session summaries and clearing an alert inside the caller's transaction. Same tables and
 // error contract as the stores (sqlite_db.h).
 #ifndef ESG_STORAGE_SERVICE_QUERIES_H_
@@ -8,6 +8,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "absl/strings/string_view.h"
 #include "storage/sqlite_db.h"
 
@@ -21,6 +22,15 @@ struct AlertCounts {
   int64_t unacknowledged = 0;  // not acknowledged
 };
 absl::StatusOr<AlertCounts> CountAlerts(Database& db, absl::string_view spacecraft_id);
+
+// The latest measurement time of any stored coefficient snapshot or alert of the spacecraft
+// (InfinitePast when there is none): what a session rebuilt from the archive must not store
+// again.
+absl::StatusOr<absl::Time> LatestEffectTime(Database& db, absl::string_view spacecraft_id);
+
+// A small write that proves the database can commit (table service_state); the error of the
+// commit otherwise.
+absl::Status ProbeWrite(Database& db, absl::Time now);
 
 // Marks the alert cleared (the condition is over) inside `txn`. NotFound if it does not exist.
 absl::Status ClearAlert(Transaction& txn, absl::string_view spacecraft_id, int64_t sequence);

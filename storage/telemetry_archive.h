@@ -1,12 +1,16 @@
 // The archive of accepted telemetry frames (table telemetry_frames, schema.h): the server's
 // record of everything it acknowledged, so a session can be recalibrated or replayed.
 // "Accepted" means written by a committed transaction; see the durability contract in
-// sqlite_db.h. Frames are keyed by (spacecraft_id, sequence); a frame whose key is already
-// stored is a duplicate (a retransmission after a lost ack) and is ignored, never overwritten.
+// sqlite_db.h. Frames are keyed by (spacecraft_id, station_id, sequence) and their measurement
+// time is unique per spacecraft; a frame whose key or time is already stored is ignored, never
+// overwritten (the server decides beforehand whether it is a duplicate or a conflict:
+// docs/service.md "Ingest contract"). The filter reads frames in measurement-time order.
 #ifndef ESG_STORAGE_TELEMETRY_ARCHIVE_H_
 #define ESG_STORAGE_TELEMETRY_ARCHIVE_H_
 
 #include <cstdint>
+#include <map>
+#include <string>
 #include <optional>
 #include <vector>
 
@@ -22,7 +26,7 @@ namespace esg::storage {
 // Which frames of an AppendBatch call were new, in input order.
 struct AppendResult {
   std::vector<int64_t> new_sequences;
-  // Already stored, or repeated earlier in the same batch. Their payloads were not compared.
+  // Key or time already stored, or repeated earlier in the same batch. Payloads not compared.
   std::vector<int64_t> duplicate_sequences;
 };
 
@@ -41,14 +45,35 @@ class TelemetryArchive {
   absl::StatusOr<AppendResult> AppendBatch(Transaction& txn, absl::string_view spacecraft_id,
                                            const std::vector<ArchivedFrame>& frames);
 
-  // The highest stored sequence of the spacecraft, or nullopt if it has no frames.
+  // The highest stored sequence of the spacecraft over all stations, or nullopt if it has no
+  // frames.
   absl::StatusOr<std::optional<int64_t>> HighestSequence(absl::string_view spacecraft_id);
 
-  // Up to `limit` (> 0, else InvalidArgument) frames with sequence >= from_sequence, ascending.
+  // Per station of the spacecraft, its highest stored sequence.
+  absl::StatusOr<std::map<std::string, int64_t>> HighestSequences(absl::string_view spacecraft_id);
+
+  // The frame with the latest measurement time, or nullopt.
+  absl::StatusOr<std::optional<ArchivedFrame>> Latest(absl::string_view spacecraft_id);
+
+  // The frame stored under (spacecraft, station, sequence), or nullopt.
+  absl::StatusOr<std::optional<ArchivedFrame>> Find(absl::string_view spacecraft_id,
+                                                    absl::string_view station_id,
+                                                    int64_t sequence);
+  // The frame of the spacecraft measured at `time`, or nullopt.
+  absl::StatusOr<std::optional<ArchivedFrame>> FindAtTime(absl::string_view spacecraft_id,
+                                                          absl::Time time);
+
+  // Up to `limit` (> 0, else InvalidArgument) frames with sequence >= from_sequence, ascending
+  // by sequence, over all stations.
   absl::StatusOr<std::vector<ArchivedFrame>> Read(absl::string_view spacecraft_id,
                                                   int64_t from_sequence, int64_t limit);
 
-  // All frames with from <= measurement_time < to, in sequence order (InfinitePast /
+  // Up to `limit` (> 0) frames measured strictly after `after` (InfinitePast: from the first),
+  // ascending by measurement time: the filter's order.
+  absl::StatusOr<std::vector<ArchivedFrame>> ReadAfter(absl::string_view spacecraft_id,
+                                                       absl::Time after, int64_t limit);
+
+  // All frames with from <= measurement_time < to, in measurement-time order (InfinitePast /
   // InfiniteFuture are open bounds). The whole range is loaded into memory.
   absl::StatusOr<std::vector<ArchivedFrame>> ReadTimeRange(absl::string_view spacecraft_id,
                                                            absl::Time from, absl::Time to);

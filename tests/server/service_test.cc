@@ -122,7 +122,9 @@ TEST(Service, MalformedFramesAreRejectedNamingTheFieldAndTheStreamGoesOn) {
     const char* name;
     std::function<void(esg::v1::TelemetryFrame&)> mutate;
     const char* field;
+    grpc::StatusCode code = grpc::StatusCode::INVALID_ARGUMENT;
   };
+  using grpc::StatusCode;
   const Case cases[] = {
       {"NaN", [](auto& f) { f.mutable_gyros(0)->set_h_k(1, std::nan("")); }, "gyros[0].h_k"},
       {"non-unit h",
@@ -142,12 +144,27 @@ TEST(Service, MalformedFramesAreRejectedNamingTheFieldAndTheStreamGoesOn) {
          g->set_gyro_id(4);
        },
        "gyros[3].gyro_id"},
-      {"time not after previous", [&](auto& f) { *f.mutable_time() = good[0].time(); }, "time"},
+      // The time of a stored frame with other content: a conflict, not a duplicate.
+      {"time of a stored frame", [&](auto& f) { *f.mutable_time() = good[0].time(); }, "time",
+       StatusCode::ALREADY_EXISTS},
       {"no time", [](auto& f) { f.clear_time(); }, "time"},
-      {"time 30 days later", [](auto& f) { f.mutable_time()->set_seconds(f.time().seconds() + 30 * 86400); },
-       "time"},
-      {"unknown spacecraft", [](auto& f) { f.set_spacecraft_id("NOPE"); }, "spacecraft_id"},
+      {"time 30 days later",
+       [](auto& f) { f.mutable_time()->set_seconds(f.time().seconds() + 30 * 86400); }, "time",
+       StatusCode::OUT_OF_RANGE},
+      {"unknown spacecraft", [](auto& f) { f.set_spacecraft_id("NOPE"); }, "spacecraft_id",
+       StatusCode::NOT_FOUND},
       {"sequence 0", [](auto& f) { f.set_sequence(0); }, "sequence"},
+      {"year 2300 (not storable)",
+       [](auto& f) { f.mutable_time()->set_seconds(10486540800); }, "time",
+       StatusCode::OUT_OF_RANGE},
+      {"year 1600", [](auto& f) { f.mutable_time()->set_seconds(-11676096000); }, "time",
+       StatusCode::OUT_OF_RANGE},
+      {"station id with a newline", [](auto& f) { f.set_station_id("A\nB"); }, "station_id"},
+      {"spacecraft id of 65 characters",
+       [](auto& f) { f.set_spacecraft_id(std::string(65, 'X')); }, "spacecraft_id"},
+      {"frame of 9000 bytes",
+       [](auto& f) { f.mutable_gyros(0)->mutable_u_k_mv()->Resize(1125, 0.0); }, "frame",
+       StatusCode::RESOURCE_EXHAUSTED},
   };
   std::vector<esg::v1::TelemetryFrame> frames = {good[0]};
   for (const Case& c : cases) {
@@ -167,6 +184,7 @@ TEST(Service, MalformedFramesAreRejectedNamingTheFieldAndTheStreamGoesOn) {
     EXPECT_FALSE(ack.accepted());
     EXPECT_THAT(ack.rejection().field(), HasSubstr(cases[i].field));
     EXPECT_FALSE(ack.rejection().reason().empty());
+    EXPECT_EQ(ack.rejection().code(), static_cast<int>(cases[i].code));
   }
   EXPECT_TRUE(result.acks[std::size(cases) + 1].accepted());
   EXPECT_TRUE(result.acks[std::size(cases) + 2].accepted());
@@ -177,7 +195,10 @@ TEST(Service, MalformedFramesAreRejectedNamingTheFieldAndTheStreamGoesOn) {
   esg::v1::SessionInfo info;
   ASSERT_TRUE(stub->GetSession(&ctx2, get, &info).ok());
   EXPECT_EQ(info.frames_accepted(), 3);
-  EXPECT_EQ(info.frames_rejected(), static_cast<int64_t>(std::size(cases)) - 1);  // not NOPE's
+  // Neither the unknown spacecraft's nor the invalid ids' (refused before the spacecraft is
+  // known) nor the oversized frame's; the conflict is counted apart.
+  EXPECT_EQ(info.frames_rejected(), static_cast<int64_t>(std::size(cases)) - 5);
+  EXPECT_EQ(info.frames_conflicting(), 1);
 }
 
 TEST(Service, MalformedRequestsGetTheirCodeAndNameTheField) {

@@ -1,0 +1,311 @@
+// The filter workers (see estimation_core.h "DATA FLOW AND DURABILITY"): per spacecraft, one job
+// at a time applies durable frames in measurement-time order to a copy of the session and
+// commits the effects with the checkpoint in one transaction. A filter failure quarantines the
+// spacecraft; a session rebuilt from the archive leaves quarantine when it has caught up.
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <set>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
+#include "estimator/status_macros.h"
+#include "proto/convert.h"
+#include "server/alert_collapse.h"
+#include "server/core_internal.h"
+#include "server/estimation_core.h"
+#include "server/log.h"
+#include "storage/coefficient_store.h"
+#include "storage/service_queries.h"
+
+namespace esg::server {
+
+using estimator::EstimationSession;
+using estimator::Event;
+using estimator::TelemetryFrame;
+
+namespace {
+
+constexpr const char* kQuarantineReason = "SESSION_QUARANTINED";
+
+// A frame of the job: its identity, and the decoded frame (absent when undecodable).
+struct JobFrame {
+  absl::Time time;
+  std::string station;
+  int64_t sequence = 0;
+  std::optional<TelemetryFrame> frame;
+};
+
+}  // namespace
+
+void EstimationCore::Schedule(const std::shared_ptr<Spacecraft>& sc) {
+  absl::MutexLock lock(&pool_mu_);
+  if (sc->scheduled) {
+    sc->wake = true;
+    return;
+  }
+  sc->scheduled = true;
+  ready_.push_back(sc);
+}
+
+void EstimationCore::WorkerLoop() {
+  // The filter runs behind ingest by design: its threads yield the CPU to the ingest path
+  // (reactors, committer) so acknowledgements stay fast while a backlog is applied.
+  if (options_.worker_nice > 0) {
+    setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), options_.worker_nice);
+  }
+  for (;;) {
+    std::shared_ptr<Spacecraft> sc;
+    {
+      absl::MutexLock lock(&pool_mu_);
+      pool_mu_.Await(absl::Condition(
+          +[](EstimationCore* c) ABSL_EXCLUSIVE_LOCKS_REQUIRED(c->pool_mu_) {
+            return !c->ready_.empty() || c->pool_stop_;
+          },
+          this));
+      if (pool_stop_) return;
+      sc = ready_.front();
+      ready_.pop_front();
+      sc->wake = false;
+    }
+    const bool more = RunJob(sc);
+    absl::MutexLock lock(&pool_mu_);
+    if (more || sc->wake) {
+      sc->wake = false;
+      ready_.push_back(sc);
+    } else {
+      sc->scheduled = false;
+    }
+  }
+}
+
+bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
+  absl::MutexLock job(&sc->job_mu);
+  std::optional<EstimationSession> session;
+  ServerCheckpoint apply;
+  std::shared_ptr<const Setup> setup;
+  int64_t generation = 0;
+  bool from_archive = false;
+  std::vector<AlertOccurrence> service_alerts;
+  std::vector<JobFrame> frames;
+  {
+    absl::MutexLock lock(&sc->state_mu);
+    session = sc->session;
+    apply = sc->apply;
+    setup = sc->setup;
+    generation = sc->generation;
+    from_archive = sc->replay_from_archive;
+    service_alerts.swap(sc->service_alerts);
+    sc->ready.erase(sc->ready.begin(), sc->ready.upper_bound(apply.applied_time));
+    const bool stopped = !apply.quarantine_reason.empty() && !apply.rebuilding;
+    if (!from_archive && !stopped) {
+      for (auto it = sc->ready.begin();
+           it != sc->ready.end() && static_cast<int>(frames.size()) < options_.max_frames_per_job;
+           ++it) {
+        frames.push_back({it->first, it->second.station, it->second.sequence, it->second.frame});
+      }
+    }
+    if (stopped || setup == nullptr || !session.has_value()) {
+      frames.clear();
+      from_archive = false;
+    }
+  }
+  const bool filter_runs = setup != nullptr && session.has_value() &&
+                           (apply.quarantine_reason.empty() || apply.rebuilding);
+  bool rebuild_done = false;
+  if (filter_runs && from_archive) {
+    absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
+        storage_->archive().ReadAfter(sc->id, apply.applied_time, options_.max_frames_per_job);
+    if (!archived.ok()) {
+      Log("ERROR", absl::StrCat(sc->id, ": archive read failed: ", archived.status().ToString()));
+      absl::MutexLock lock(&sc->state_mu);
+      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
+                                service_alerts.end());
+      absl::SleepFor(absl::Milliseconds(200));
+      return true;
+    }
+    if (archived->empty()) {
+      absl::MutexLock lock(&sc->state_mu);
+      // Caught up only if nothing became durable meanwhile (the committer skips the in-memory
+      // queue while this flag is set).
+      if (sc->generation == generation && sc->last_durable_time <= apply.applied_time) {
+        sc->replay_from_archive = false;
+        rebuild_done = apply.rebuilding;
+      }
+      if (!rebuild_done && service_alerts.empty()) return true;
+    }
+    for (const storage::ArchivedFrame& a : *archived) {
+      esg::v1::TelemetryFrame proto;
+      absl::StatusOr<TelemetryFrame> frame =
+          proto.ParseFromString(a.payload) ? proto_convert::FrameFromProto(proto)
+                                           : absl::DataLossError("the payload does not parse");
+      JobFrame f{a.measurement_time, a.station_id, a.sequence, std::nullopt};
+      if (frame.ok()) {
+        f.frame = std::move(*frame);
+      } else {
+        Log("ERROR", absl::StrCat(sc->id, ": archived frame (station ", a.station_id,
+                                  ", sequence ", a.sequence,
+                                  ") cannot be decoded: ", frame.status().ToString()));
+      }
+      frames.push_back(std::move(f));
+    }
+  }
+  if (frames.empty() && service_alerts.empty() && !rebuild_done) return false;
+
+  // Apply (no lock held: readers keep using the installed session meanwhile).
+  const absl::Time now = absl::Now();
+  std::vector<storage::CoefficientRecord> coefficients;
+  AlertCollapser alerts(sc->id, apply.alert_tracks, options_.alert_collapse_window, now);
+  // A rebuilt session does not store again what is already stored.
+  const absl::Time written = apply.effects_written_until;
+  for (const AlertOccurrence& o : service_alerts) alerts.Add(o);
+  for (JobFrame& f : frames) {
+    if (!f.frame.has_value()) {
+      apply.applied_time = f.time;
+      apply.applied_station = f.station;
+      apply.applied_sequence = f.sequence;
+      ++apply.frames_apply_failed;
+      if (f.time > written) {
+        alerts.Add({"ARCHIVED_FRAME_UNREADABLE", "WARNING", absl::StrCat("station ", f.station),
+                    f.time, static_cast<double>(f.sequence), 0.0, "sequence",
+                    "an archived frame cannot be decoded; the filter skipped it"});
+      }
+      continue;
+    }
+    const TelemetryFrame& frame = *f.frame;
+    absl::StatusOr<estimator::StepReport> report = session->AddFrame(frame);
+    if (!report.ok()) {
+      const absl::StatusCode code = report.status().code();
+      Log("WARN", absl::StrCat(sc->id, ": frame (station ", f.station, ", sequence ", f.sequence,
+                               ") not applied: ", report.status().ToString()));
+      if (code == absl::StatusCode::kInternal || code == absl::StatusCode::kDataLoss) {
+        // The filter itself failed: stop before this frame (the checkpoint stays at the last
+        // good one) and quarantine; the others and the server go on.
+        apply.quarantine_reason = absl::StrCat(
+            "the filter failed at the frame of ", FormatUtc(f.time), " (station ", f.station,
+            ", sequence ", f.sequence, "): ", report.status().message(),
+            "; the filter is stopped until ConfigureSpacecraft with replace=true");
+        apply.rebuilding = false;
+        alerts.Add({kQuarantineReason, "DISTRESS", "session", f.time, 0.0, 0.0, "",
+                    apply.quarantine_reason});
+        Log("ERROR", absl::StrCat("spacecraft ", sc->id, " quarantined: ",
+                                  apply.quarantine_reason));
+        break;
+      }
+      apply.applied_time = f.time;
+      apply.applied_station = f.station;
+      apply.applied_sequence = f.sequence;
+      ++apply.frames_apply_failed;
+      continue;
+    }
+    apply.applied_time = f.time;
+    apply.applied_station = f.station;
+    apply.applied_sequence = f.sequence;
+    ++apply.frames_applied;
+    if (report->measurement_step && frame.star_tracker.has_value() &&
+        frame.star_tracker->valid && !report->star_tracker_used) {
+      ++apply.star_tracker_rejections;
+    }
+    if (report->measurement_step && frame.time > written) {
+      for (const estimator::GyroEstimate& g : session->Gyros()) {
+        storage::CoefficientRecord r;
+        r.spacecraft_id = sc->id;
+        r.gyro_id = g.id;
+        r.measurement_time = frame.time;
+        r.compute_time = now;
+        r.values = storage::ToCoefficientValues(g.coefficients, g.misalignment_b);
+        r.sigmas = storage::ToCoefficientValues(g.sigma, g.misalignment_sigma_b);
+        r.model_name = absl::StrCat("model", setup->model_name);
+        coefficients.push_back(std::move(r));
+      }
+    }
+    alerts.Advance(frame.time);
+    for (const Event& event : report->events) {
+      if (event.time <= written) continue;
+      alerts.Add({estimator::EventKindName(event.kind), SeverityName(SeverityOf(event.kind)),
+                  event.subsystem, event.time, event.value, event.threshold, event.unit,
+                  event.message});
+    }
+  }
+  if (rebuild_done) {
+    Log("INFO", absl::StrCat("spacecraft ", sc->id, " rebuilt from the archive; quarantine over"));
+    apply.quarantine_reason.clear();
+    apply.rebuilding = false;
+    alerts.End(kQuarantineReason, "session");
+  }
+
+  // Commit the effects and the checkpoint in one transaction.
+  ServerCheckpoint to_store = apply;
+  std::vector<int64_t> new_sequences;
+  const absl::Status status = [&]() -> absl::Status {
+    ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
+    for (const storage::CoefficientRecord& r : coefficients) {
+      RETURN_IF_ERROR(storage_->coefficients().Append(txn, r));
+    }
+    for (const storage::AlertRecord& a : alerts.new_alerts()) {
+      ASSIGN_OR_RETURN(int64_t seq, storage_->alerts().Append(txn, a));
+      new_sequences.push_back(seq);
+    }
+    for (const auto& [seq, rep] : alerts.repeats()) {
+      RETURN_IF_ERROR(storage_->alerts().UpdateRepeat(txn, rep));
+    }
+    for (int64_t seq : alerts.clears()) RETURN_IF_ERROR(storage::ClearAlert(txn, sc->id, seq));
+    to_store.alert_tracks = alerts.Tracks(new_sequences);
+    storage::CheckpointRecord cp;
+    cp.spacecraft_id = sc->id;
+    cp.last_sequence = apply.applied_sequence;
+    cp.measurement_time = session.has_value() && session->last_frame_time() != absl::InfinitePast()
+                              ? session->last_frame_time()
+                              : absl::UnixEpoch();
+    cp.compute_time = now;
+    if (session.has_value()) to_store.session = session->ExportCheckpoint();
+    cp.state_blob = EncodeCheckpoint(to_store);
+    RETURN_IF_ERROR(storage_->sessions().PutCheckpoint(txn, cp));
+    return txn.Commit();
+  }();
+  if (!status.ok()) {
+    Log("ERROR", absl::StrCat(sc->id, ": apply commit failed, will retry: ", status.ToString()));
+    {
+      absl::MutexLock lock(&sc->state_mu);
+      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
+                                service_alerts.end());
+      if (rebuild_done && sc->generation == generation) sc->replay_from_archive = true;
+    }
+    absl::SleepFor(absl::Milliseconds(200));
+    return true;
+  }
+  apply.alert_tracks = to_store.alert_tracks;
+  std::vector<storage::AlertRecord> published = alerts.new_alerts();
+  for (size_t k = 0; k < published.size(); ++k) published[k].sequence = new_sequences[k];
+  bool more = false;
+  {
+    absl::MutexLock lock(&sc->state_mu);
+    if (sc->generation != generation) return true;
+    sc->session = std::move(session);
+    sc->apply = std::move(apply);
+    sc->last_compute_time = now;
+    const bool stopped = !sc->apply.quarantine_reason.empty() && !sc->apply.rebuilding;
+    auto end = sc->ready.upper_bound(sc->apply.applied_time);
+    for (auto it = sc->ready.begin(); it != end; ++it) {
+      sc->ready_bytes -= static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());
+    }
+    sc->ready.erase(sc->ready.begin(), end);
+    more = !stopped && (sc->replay_from_archive || !sc->ready.empty() ||
+                        !sc->service_alerts.empty());
+  }
+  // Publish the committed changes.
+  absl::MutexLock publish(&sc->publish_mu);
+  for (const storage::AlertRecord& a : published) hub_.Publish(a);
+  std::set<int64_t> changed(alerts.clears().begin(), alerts.clears().end());
+  for (const auto& [seq, rep] : alerts.repeats()) changed.insert(seq);
+  for (int64_t seq : changed) {
+    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
+    if (r.ok()) hub_.Publish(*r);
+  }
+  return more;
+}
+
+}  // namespace esg::server

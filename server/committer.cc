@@ -1,0 +1,162 @@
+// Group commit of accepted frames to the telemetry archive (see estimation_core.h "DATA FLOW AND
+// DURABILITY" and docs/service.md "Storage faults"): one transaction for everything queued, acks
+// only after it committed; a failed commit fails the senders' streams with UNAVAILABLE and holds
+// ingest until a probe write succeeds.
+#include <map>
+#include <set>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
+#include "estimator/status_macros.h"
+#include "server/core_internal.h"
+#include "server/estimation_core.h"
+#include "server/log.h"
+#include "storage/service_queries.h"
+
+namespace esg::server {
+
+absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch) {
+  std::map<Spacecraft*, std::vector<storage::ArchivedFrame>> frames;
+  for (const CommitEntry& e : batch) {
+    if (e.barrier) continue;
+    storage::ArchivedFrame f;
+    f.spacecraft_id = e.sc->id;
+    f.station_id = e.station;
+    f.sequence = e.sequence;
+    f.measurement_time = e.time;
+    f.payload = e.payload;
+    frames[e.sc.get()].push_back(std::move(f));
+  }
+  if (frames.empty()) return absl::OkStatus();
+  ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
+  for (auto& [sc, list] : frames) {
+    ASSIGN_OR_RETURN(storage::AppendResult r, storage_->archive().AppendBatch(txn, sc->id, list));
+    if (!r.duplicate_sequences.empty()) {
+      // Ingest decided these frames were new; the archive disagrees. Storing nothing for them
+      // and acknowledging them would be a false acknowledgement.
+      return absl::InternalError(absl::StrCat(
+          sc->id, ": ", r.duplicate_sequences.size(),
+          " frames decided new are already archived (first sequence ",
+          r.duplicate_sequences.front(), ")"));
+    }
+  }
+  return txn.Commit();
+}
+
+void EstimationCore::SetStorageFault(const std::string& reason) {
+  bool changed = false;
+  {
+    absl::MutexLock lock(&commit_mu_);
+    changed = storage_fault_ != reason;
+    storage_fault_ = reason;
+  }
+  if (!changed) return;
+  if (reason.empty()) {
+    Log("INFO", "storage commits again: ingest resumed");
+  } else {
+    Log("ERROR", absl::StrCat("storage cannot commit: ", reason,
+                              "; ingest refused with UNAVAILABLE until it can"));
+  }
+  absl::MutexLock lock(&listener_mu_);
+  if (storage_listener_) storage_listener_(reason.empty(), reason);
+}
+
+// Fails every entry of `batch` (and of the queue behind it, which was accepted against the
+// same high-water marks): their streams end with `error`, nothing of them is stored, and the
+// marks of their spacecraft fall back to what is durable, so that the senders resume exactly
+// from highest_durable_sequence + 1.
+void EstimationCore::FailBatch(std::vector<CommitEntry>& batch, const absl::Status& error) {
+  {
+    absl::MutexLock lock(&commit_mu_);
+    for (CommitEntry& e : commit_queue_) batch.push_back(std::move(e));
+    commit_queue_.clear();
+    commit_queue_bytes_ = 0;
+  }
+  std::set<Spacecraft*> rolled_back;
+  for (const CommitEntry& e : batch) {
+    if (!rolled_back.insert(e.sc.get()).second) continue;
+    absl::MutexLock ingest(&e.sc->ingest_mu);
+    absl::MutexLock state(&e.sc->state_mu);
+    e.sc->highest_accepted = e.sc->highest_durable;
+    e.sc->last_accepted_time = e.sc->last_durable_time;
+    e.sc->pending.clear();
+    e.sc->pending_ids.clear();
+  }
+  for (CommitEntry& e : batch) {
+    if (e.done) e.done(error);
+  }
+}
+
+bool EstimationCore::ProbeStorage() {
+  const absl::Status probe = storage::ProbeWrite(storage_->database(), absl::Now());
+  if (probe.ok()) SetStorageFault("");
+  return probe.ok();
+}
+
+void EstimationCore::CommitterLoop() {
+  for (;;) {
+    std::vector<CommitEntry> batch;
+    bool faulted = false;
+    {
+      absl::MutexLock lock(&commit_mu_);
+      commit_mu_.AwaitWithTimeout(
+          absl::Condition(
+              +[](EstimationCore* c) ABSL_EXCLUSIVE_LOCKS_REQUIRED(c->commit_mu_) {
+                return !c->commit_queue_.empty() || c->commit_stop_;
+              },
+              this),
+          options_.storage_probe_period);
+      faulted = !storage_fault_.empty();
+      if (commit_queue_.empty() && commit_stop_) return;
+      batch.swap(commit_queue_);
+      commit_queue_bytes_ = 0;
+    }
+    if (batch.empty()) {
+      if (faulted) ProbeStorage();
+      continue;
+    }
+    const absl::Status status = CommitFrames(batch);
+    if (!status.ok()) {
+      const std::string reason(status.ToString());
+      SetStorageFault(reason);
+      FailBatch(batch, absl::UnavailableError(absl::StrCat(
+                           "storage: the commit failed (", reason,
+                           "); these frames are not stored: resume from "
+                           "highest_durable_sequence + 1 when the service is SERVING again")));
+      continue;
+    }
+    if (faulted) SetStorageFault("");
+    std::vector<std::shared_ptr<Spacecraft>> touched;
+    for (CommitEntry& e : batch) {
+      if (e.barrier) continue;
+      // Durable marks first, then out of the pending set, under both locks: an ingest that
+      // finds the frame archived also finds it counted durable.
+      absl::MutexLock ingest(&e.sc->ingest_mu);
+      absl::MutexLock lock(&e.sc->state_mu);
+      e.sc->pending.erase(e.time);
+      e.sc->pending_ids.erase({e.station, e.sequence});
+      int64_t& durable = e.sc->highest_durable[e.station];
+      durable = std::max(durable, e.sequence);
+      e.sc->last_durable_time = std::max(e.sc->last_durable_time, e.time);
+      ++e.sc->frames_accepted;
+      if (!e.sc->replay_from_archive) {
+        e.sc->ready_bytes += static_cast<int64_t>(sizeof(ReadyFrame) + e.station.size());
+        e.sc->ready.emplace(e.time, ReadyFrame{e.station, e.sequence, std::move(e.frame)});
+        // A filter far behind ingest reads its backlog from the archive instead of memory.
+        if (e.sc->ready_bytes > options_.max_ready_bytes) {
+          e.sc->ready.clear();
+          e.sc->ready_bytes = 0;
+          e.sc->replay_from_archive = true;
+        }
+      }
+      if (touched.empty() || touched.back() != e.sc) touched.push_back(e.sc);
+    }
+    for (const auto& sc : touched) Schedule(sc);
+    for (CommitEntry& e : batch) {
+      if (e.done) e.done(absl::OkStatus());
+    }
+  }
+}
+
+}  // namespace esg::server

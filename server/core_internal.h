@@ -1,0 +1,118 @@
+// The per-spacecraft records of EstimationCore, shared by the files that implement it
+// (estimation_core.cc: lifecycle, load and configuration; ingest.cc: the ingest contract;
+// committer.cc: group commit; apply_worker.cc: the filter workers; core_queries.cc and
+// prediction.cc: the queries). Not part of the server's interface.
+#ifndef ESG_SERVER_CORE_INTERNAL_H_
+#define ESG_SERVER_CORE_INTERNAL_H_
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/status/status.h"
+#include "absl/synchronization/mutex.h"
+#include "absl/time/time.h"
+#include "esg/v1/spacecraft_config.pb.h"
+#include "estimator/calibration_model.h"
+#include "estimator/session.h"
+#include "estimator/spacecraft_config.h"
+#include "server/alert_collapse.h"
+#include "server/checkpoint_codec.h"
+#include "server/estimation_core.h"
+
+namespace esg::server {
+
+inline constexpr const char* kDefaultModel = "10+11";
+
+// NotFound "spacecraft_id: 'X' is not configured" (X escaped and shortened).
+absl::Status NotConfigured(const std::string& spacecraft_id);
+
+struct EstimationCore::Setup {
+  estimator::SpacecraftConfig config;
+  esg::v1::SpacecraftConfig proto;
+  estimator::ModelSpec model;
+  std::string model_name;
+  std::string config_json;
+  std::array<bool, estimator::kMaxGyros> configured{};
+};
+
+// A frame accepted and queued for the archive, not yet durable.
+struct PendingFrame {
+  std::string station;
+  int64_t sequence = 0;
+  std::string payload;  // as it will be stored
+};
+
+// A durable frame waiting for the filter.
+struct ReadyFrame {
+  std::string station;
+  int64_t sequence = 0;
+  estimator::TelemetryFrame frame;
+};
+
+struct EstimationCore::Spacecraft {
+  explicit Spacecraft(std::string spacecraft_id) : id(std::move(spacecraft_id)) {}
+  const std::string id;
+
+  // Held for a whole worker job and by a reconfiguration.
+  absl::Mutex job_mu;
+
+  // ---- Ingest side ----
+  absl::Mutex ingest_mu ABSL_ACQUIRED_AFTER(job_mu);
+  // Null when the stored configuration cannot be used (quarantined): frames are refused.
+  std::shared_ptr<const Setup> ingest_setup ABSL_GUARDED_BY(ingest_mu);
+  std::map<std::string, int64_t> highest_accepted ABSL_GUARDED_BY(ingest_mu);  // per station
+  absl::Time last_accepted_time ABSL_GUARDED_BY(ingest_mu) = absl::InfinitePast();
+  std::map<absl::Time, PendingFrame> pending ABSL_GUARDED_BY(ingest_mu);  // by measurement time
+  std::map<std::pair<std::string, int64_t>, absl::Time> pending_ids ABSL_GUARDED_BY(ingest_mu);
+  int64_t frames_rejected ABSL_GUARDED_BY(ingest_mu) = 0;
+  int64_t frames_duplicate ABSL_GUARDED_BY(ingest_mu) = 0;
+  int64_t frames_conflicting ABSL_GUARDED_BY(ingest_mu) = 0;
+
+  // ---- Durable and applied state ----
+  absl::Mutex state_mu ABSL_ACQUIRED_AFTER(ingest_mu);
+  std::shared_ptr<const Setup> setup ABSL_GUARDED_BY(state_mu);  // null: see ingest_setup
+  std::map<std::string, int64_t> highest_durable ABSL_GUARDED_BY(state_mu);  // per station
+  absl::Time last_durable_time ABSL_GUARDED_BY(state_mu) = absl::InfinitePast();
+  int64_t frames_accepted ABSL_GUARDED_BY(state_mu) = 0;
+  std::map<absl::Time, ReadyFrame> ready ABSL_GUARDED_BY(state_mu);  // durable, not applied
+  int64_t ready_bytes ABSL_GUARDED_BY(state_mu) = 0;
+  std::optional<estimator::EstimationSession> session ABSL_GUARDED_BY(state_mu);
+  // Counters, alert tracks, apply cursor and quarantine (its `session` is unused).
+  ServerCheckpoint apply ABSL_GUARDED_BY(state_mu);
+  int64_t generation ABSL_GUARDED_BY(state_mu) = 0;
+  bool replay_from_archive ABSL_GUARDED_BY(state_mu) = true;
+  absl::Time last_compute_time ABSL_GUARDED_BY(state_mu) = absl::InfinitePast();
+  // Alerts raised outside the filter (ingest conflicts, quarantine at load), stored by the next
+  // worker job.
+  std::vector<AlertOccurrence> service_alerts ABSL_GUARDED_BY(state_mu);
+
+  // Orders alert publication (worker) with acknowledgements (rpc threads).
+  absl::Mutex publish_mu;
+
+  // Worker scheduling, guarded by EstimationCore::pool_mu_.
+  bool scheduled = false;
+  bool wake = false;
+};
+
+struct EstimationCore::CommitEntry {
+  std::shared_ptr<Spacecraft> sc;
+  bool barrier = false;  // no frame: completes with the next commit (duplicate of a pending frame)
+  std::string station;
+  int64_t sequence = 0;
+  absl::Time time;
+  std::string payload;
+  estimator::TelemetryFrame frame;
+  std::function<void(absl::Status)> done;
+};
+
+}  // namespace esg::server
+
+#endif  // ESG_SERVER_CORE_INTERNAL_H_

@@ -1,0 +1,243 @@
+// The queries of the service: session summaries, coefficient history, alert acknowledgement,
+// and the model-discrepancy diagnosis over archived telemetry (see estimation_core.h).
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
+#include "estimator/discovery/diagnose.h"
+#include "estimator/status_macros.h"
+#include "proto/convert.h"
+#include "proto/diagnosis_json.h"
+#include "server/core_internal.h"
+#include "server/estimation_core.h"
+#include "storage/service_queries.h"
+
+namespace esg::server {
+
+using estimator::EstimationSession;
+using estimator::TelemetryFrame;
+
+esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
+  esg::v1::SessionInfo info;
+  info.set_spacecraft_id(sc.id);
+  {
+    absl::MutexLock lock(&sc.ingest_mu);
+    info.set_frames_rejected(sc.frames_rejected);
+    info.set_frames_duplicate(sc.frames_duplicate);
+    info.set_frames_conflicting(sc.frames_conflicting);
+    if (sc.last_accepted_time != absl::InfinitePast()) {
+      *info.mutable_last_frame_time() = proto_convert::TimeToProto(sc.last_accepted_time);
+    }
+  }
+  std::optional<EstimationSession> session;
+  {
+    absl::MutexLock lock(&sc.state_mu);
+    // The single-station fields describe the default station; `stations` lists every one.
+    auto it = sc.highest_durable.find(storage::kDefaultStation);
+    info.set_highest_durable_sequence(it == sc.highest_durable.end() ? 0 : it->second);
+    info.set_last_sequence(it == sc.highest_durable.end() ? 0 : it->second);
+    for (const auto& [station, sequence] : sc.highest_durable) {
+      esg::v1::StationSequence* s = info.add_stations();
+      s->set_station_id(station);
+      s->set_highest_durable_sequence(sequence);
+    }
+    info.set_highest_applied_sequence(sc.apply.applied_sequence);
+    info.set_quarantine_reason(sc.apply.quarantine_reason);
+    info.set_rebuilding(!sc.apply.quarantine_reason.empty() && sc.apply.rebuilding);
+    info.set_frames_accepted(sc.frames_accepted);
+    info.set_frames_applied(sc.apply.frames_applied);
+    info.set_frames_apply_failed(sc.apply.frames_apply_failed);
+    info.set_star_tracker_rejections(sc.apply.star_tracker_rejections);
+    if (sc.setup != nullptr) {
+      info.set_model(sc.setup->model_name);
+      *info.mutable_config() = sc.setup->proto;
+      for (int id : sc.setup->config.reserve_pair) info.add_reserve_pair(id);
+    }
+    if (sc.last_compute_time != absl::InfinitePast()) {
+      *info.mutable_last_compute_time() = proto_convert::TimeToProto(sc.last_compute_time);
+    }
+    session = sc.session;
+  }
+  if (!info.quarantine_reason().empty()) info.set_state(esg::v1::SESSION_STATE_QUARANTINED);
+  if (session.has_value()) {
+    if (info.quarantine_reason().empty()) info.set_state(StateToProto(session->state()));
+    for (int id : session->working_pair()) info.add_working_pair(id);
+    const estimator::AttitudeEstimate attitude = session->CurrentAttitude();
+    if (session->initialized() && attitude.valid) {
+      std::vector<std::pair<int, Eigen::Vector3d>> h_in;
+      for (const estimator::GyroEstimate& g : session->Gyros()) h_in.emplace_back(g.id, g.h_in);
+      FillSample(attitude.time, attitude, h_in, info.mutable_latest_attitude());
+    }
+  }
+  absl::StatusOr<storage::AlertCounts> counts = storage::CountAlerts(storage_->database(), sc.id);
+  if (counts.ok()) {
+    info.set_active_alerts(counts->active);
+    info.set_unacknowledged_alerts(counts->unacknowledged);
+  }
+  return info;
+}
+
+absl::StatusOr<esg::v1::SessionInfo> EstimationCore::GetSession(const std::string& spacecraft_id) {
+  if (spacecraft_id.empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  std::shared_ptr<Spacecraft> sc = Find(spacecraft_id);
+  if (sc == nullptr) return NotConfigured(spacecraft_id);
+  return Summarize(*sc);
+}
+
+absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions() {
+  std::vector<std::shared_ptr<Spacecraft>> all;
+  {
+    absl::MutexLock lock(&registry_mu_);
+    for (auto& [id, sc] : registry_) all.push_back(sc);
+  }
+  esg::v1::ListSessionsResponse response;
+  for (auto& sc : all) *response.add_sessions() = Summarize(*sc);
+  return response;
+}
+
+namespace {
+
+esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecord& r) {
+  esg::v1::DiagnosisResult out;
+  out.set_id(r.id);
+  out.set_spacecraft_id(r.spacecraft_id);
+  out.set_verdict(r.verdict);
+  out.set_report_json(r.report_json);
+  *out.mutable_first_frame_time() = proto_convert::TimeToProto(r.from_time);
+  *out.mutable_last_frame_time() = proto_convert::TimeToProto(r.to_time);
+  *out.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
+    const esg::v1::DiagnoseRequest& request,
+    const std::function<void(double fraction, const std::string& stage)>& progress) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
+  if (sc == nullptr) return NotConfigured(request.spacecraft_id());
+  absl::Time from = absl::InfinitePast();
+  absl::Time to = absl::InfiniteFuture();
+  if (request.has_from()) {
+    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
+  }
+  if (request.has_to()) {
+    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
+    if (to <= from) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("to: ", FormatUtc(to), " is not after from ", FormatUtc(from)));
+    }
+  }
+  std::shared_ptr<const Setup> setup;
+  {
+    absl::MutexLock state(&sc->state_mu);
+    setup = sc->setup;
+  }
+  if (setup == nullptr) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "spacecraft_id: '", sc->id, "' has no usable configuration (quarantined)"));
+  }
+  estimator::discovery::DiagnoseOptions options;
+  options.model = request.model().empty() ? setup->model_name : request.model();
+  if (absl::StatusOr<estimator::ModelSpec> m = estimator::ParseModel(options.model); !m.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("model: ", m.status().message()));
+  }
+  ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
+                   storage_->archive().ReadTimeRange(sc->id, from, to));
+  if (archived.empty()) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "no archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ", FormatUtc(to), ")"));
+  }
+  std::vector<TelemetryFrame> frames;
+  frames.reserve(archived.size());
+  for (const storage::ArchivedFrame& a : archived) {
+    esg::v1::TelemetryFrame proto;
+    if (!proto.ParseFromString(a.payload)) {
+      return absl::DataLossError(absl::StrCat("archived frame ", a.sequence, " of '", sc->id,
+                                              "' does not parse"));
+    }
+    ASSIGN_OR_RETURN(TelemetryFrame frame, proto_convert::FrameFromProto(proto));
+    frames.push_back(std::move(frame));
+  }
+  ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
+                   estimator::discovery::Diagnose(setup->config, frames, options, progress));
+  storage::DiagnosisRecord record;
+  record.spacecraft_id = sc->id;
+  record.from_time = frames.front().time;
+  record.to_time = frames.back().time;
+  record.compute_time = absl::Now();
+  record.verdict = report.verdict;
+  record.report_json = proto_convert::DiagnosisToJson(report);
+  ASSIGN_OR_RETURN(record.id, storage_->diagnoses().Put(record));
+  esg::v1::DiagnosisResult result = DiagnosisResultFromRecord(record);
+  result.set_frames(static_cast<int64_t>(frames.size()));
+  return result;
+}
+
+absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
+    const esg::v1::ListDiagnosesRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  ASSIGN_OR_RETURN(std::vector<storage::DiagnosisRecord> records,
+                   storage_->diagnoses().List(request.spacecraft_id()));
+  esg::v1::ListDiagnosesResponse response;
+  for (const storage::DiagnosisRecord& r : records) *response.add_diagnoses() = DiagnosisResultFromRecord(r);
+  return response;
+}
+
+absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
+    const esg::v1::HistoryRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  if (request.gyro_id() < 0 || request.gyro_id() > estimator::kMaxGyros) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("gyro_id: must be 0 (all) or 1..4, got ", request.gyro_id()));
+  }
+  absl::Time from = absl::InfinitePast();
+  absl::Time to = absl::InfiniteFuture();
+  if (request.has_from()) {
+    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
+  }
+  if (request.has_to()) {
+    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
+    if (to < from) {
+      return absl::InvalidArgumentError(absl::StrCat("to: ", FormatUtc(to), " is before from ",
+                                                     FormatUtc(from)));
+    }
+    to += absl::Nanoseconds(1);  // inclusive
+  }
+  ASSIGN_OR_RETURN(std::vector<storage::CoefficientRecord> records,
+                   storage_->coefficients().History(request.spacecraft_id(), request.gyro_id(),
+                                                    from, to));
+  esg::v1::HistoryResponse response;
+  for (const storage::CoefficientRecord& r : records) *response.add_snapshots() = SnapshotToProto(r);
+  return response;
+}
+
+absl::StatusOr<esg::v1::Alert> EstimationCore::Acknowledge(
+    const esg::v1::AcknowledgeRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
+  if (sc == nullptr) return NotConfigured(request.spacecraft_id());
+  if (request.sequence() < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("sequence: must be >= 1, got ", request.sequence()));
+  }
+  if (request.operator_name().empty()) {
+    return absl::InvalidArgumentError("operator_name: must not be empty");
+  }
+  absl::MutexLock publish(&sc->publish_mu);
+  absl::StatusOr<storage::AlertRecord> before = storage_->alerts().Get(sc->id, request.sequence());
+  if (absl::IsNotFound(before.status())) {
+    return absl::NotFoundError(absl::StrCat("sequence: alert ", request.sequence(),
+                                            " of spacecraft '", sc->id, "' does not exist"));
+  }
+  ASSIGN_OR_RETURN(storage::AlertRecord record,
+                   storage_->alerts().Acknowledge(sc->id, request.sequence(),
+                                                  request.operator_name(), absl::Now()));
+  if (before.ok() && !before->acknowledged) hub_.Publish(record);
+  return AlertToProto(record);
+}
+
+}  // namespace esg::server

@@ -1,0 +1,285 @@
+// The ingest contract (docs/service.md "Ingest contract"): each frame is validated and then
+// decided as new, an exact duplicate, a conflict or late, before anything is queued for the
+// archive. An acknowledgement that says "accepted" is sent only after the commit that stores
+// the frame (committer.cc).
+#include <utility>
+
+#include "absl/strings/escaping.h"
+#include "absl/strings/str_cat.h"
+#include "estimator/spacecraft_config.h"
+#include "estimator/status_macros.h"
+#include "google/protobuf/io/coded_stream.h"
+#include "google/protobuf/io/zero_copy_stream_impl_lite.h"
+#include "proto/convert.h"
+#include "server/core_internal.h"
+#include "server/estimation_core.h"
+#include "server/log.h"
+
+namespace esg::server {
+namespace {
+
+std::string Serialize(const esg::v1::TelemetryFrame& frame) {
+  std::string out;
+  {
+    google::protobuf::io::StringOutputStream stream(&out);
+    google::protobuf::io::CodedOutputStream coded(&stream);
+    coded.SetSerializationDeterministic(true);
+    frame.SerializeToCodedStream(&coded);
+  }
+  return out;
+}
+
+// The frame as stored: its station made explicit, serialized deterministically.
+std::string StoredPayload(const esg::v1::TelemetryFrame& proto, const std::string& station) {
+  esg::v1::TelemetryFrame copy = proto;
+  copy.set_station_id(station);
+  return Serialize(copy);
+}
+
+// The measurement a payload carries, without the identity of the frame that carried it.
+std::string Measurement(const std::string& payload) {
+  esg::v1::TelemetryFrame frame;
+  if (!frame.ParseFromString(payload)) return "\xff unparsable";
+  frame.clear_station_id();
+  frame.clear_sequence();
+  return Serialize(frame);
+}
+
+// Shown in messages: at most 64 characters, non-printable bytes escaped.
+std::string Shown(const std::string& id) {
+  return absl::StrCat(absl::CHexEscape(id.substr(0, 64)), id.size() > 64 ? "..." : "");
+}
+
+}  // namespace
+
+absl::StatusOr<std::optional<storage::ArchivedFrame>> EstimationCore::FindStoredFrame(
+    Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
+    bool by_identity) {
+  // Accepted but not yet durable: still in memory.
+  if (by_identity) {
+    auto it = sc.pending_ids.find({station, sequence});
+    if (it != sc.pending_ids.end()) time = it->second;
+  }
+  if (auto p = sc.pending.find(time); p != sc.pending.end() &&
+                                      (!by_identity || (p->second.station == station &&
+                                                        p->second.sequence == sequence))) {
+    storage::ArchivedFrame f;
+    f.spacecraft_id = sc.id;
+    f.station_id = p->second.station;
+    f.sequence = p->second.sequence;
+    f.measurement_time = p->first;
+    f.payload = p->second.payload;
+    return std::optional<storage::ArchivedFrame>(std::move(f));
+  }
+  if (by_identity) return storage_->archive().Find(sc.id, station, sequence);
+  return storage_->archive().FindAtTime(sc.id, time);
+}
+
+absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto,
+                                            esg::v1::TelemetryAck* ack,
+                                            std::function<void(absl::Status)> on_durable) {
+  const std::string station =
+      proto.station_id().empty() ? std::string(storage::kDefaultStation) : proto.station_id();
+  // Echo the identity, shortened when it is not a valid identifier (the ack must stay small).
+  ack->set_spacecraft_id(proto.spacecraft_id().size() <= 64 ? proto.spacecraft_id()
+                                                              : proto.spacecraft_id().substr(0, 64));
+  ack->set_station_id(station.size() <= 64 ? station : station.substr(0, 64));
+  ack->set_sequence(proto.sequence());
+  auto refuse = [&](absl::StatusCode code, std::string field, std::string reason) {
+    ack->set_accepted(false);
+    ack->mutable_rejection()->set_field(std::move(field));
+    ack->mutable_rejection()->set_reason(std::move(reason));
+    ack->mutable_rejection()->set_code(static_cast<int>(code));
+    return false;
+  };
+  auto refuse_status = [&](const absl::Status& status) {
+    const esg::v1::Rejection r = RejectionFromStatus(status);
+    return refuse(status.code(), r.field(), r.reason());
+  };
+  {
+    absl::MutexLock commit(&commit_mu_);
+    if (ingest_closed_) return absl::UnavailableError("the server is shutting down");
+    if (!storage_fault_.empty()) {
+      return absl::UnavailableError(absl::StrCat(
+          "storage: cannot commit (", storage_fault_,
+          "); no frame is acknowledged until it can: resume from highest_durable_sequence + 1"));
+    }
+  }
+  if (absl::Status id = estimator::ValidateIdentifier(proto.spacecraft_id(), "spacecraft_id");
+      !id.ok()) {
+    return refuse_status(id);
+  }
+  if (absl::Status id = estimator::ValidateIdentifier(station, "station_id"); !id.ok()) {
+    return refuse_status(id);
+  }
+  const int64_t frame_bytes = static_cast<int64_t>(proto.ByteSizeLong());
+  if (frame_bytes > options_.max_frame_bytes) {
+    return refuse(absl::StatusCode::kResourceExhausted, "frame",
+                  absl::StrCat(frame_bytes, " bytes exceed the limit of ",
+                               options_.max_frame_bytes));
+  }
+  std::shared_ptr<Spacecraft> sc = Find(proto.spacecraft_id());
+  if (sc == nullptr) return refuse_status(NotConfigured(proto.spacecraft_id()));
+  absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
+
+  absl::MutexLock lock(&sc->ingest_mu);
+  auto refuse_counted = [&](absl::StatusCode code, std::string field, std::string reason) {
+    ++sc->frames_rejected;
+    return refuse(code, std::move(field), std::move(reason));
+  };
+  if (sc->ingest_setup == nullptr) {
+    std::string reason;
+    {
+      absl::MutexLock state(&sc->state_mu);
+      reason = sc->apply.quarantine_reason;
+    }
+    return refuse_counted(absl::StatusCode::kFailedPrecondition, "spacecraft_id",
+                          absl::StrCat("'", sc->id, "' is quarantined: ", reason));
+  }
+  if (proto.sequence() < 1) {
+    return refuse_counted(absl::StatusCode::kInvalidArgument, "sequence",
+                          absl::StrCat("must be >= 1, got ", proto.sequence()));
+  }
+  if (!frame.ok()) {
+    ++sc->frames_rejected;
+    return refuse_status(frame.status());
+  }
+  for (int i = 0; i < proto.gyros_size(); ++i) {
+    const int id = proto.gyros(i).gyro_id();
+    if (!sc->ingest_setup->configured[id - 1]) {  // 1..4 checked by FrameFromProto
+      return refuse_counted(absl::StatusCode::kInvalidArgument,
+                            absl::StrCat("gyros[", i, "].gyro_id"),
+                            absl::StrCat("gyro ", id, " is not configured for spacecraft '",
+                                         sc->id, "'"));
+    }
+  }
+  const absl::Time time = frame->time;
+  if (time < options_.earliest_frame_time || time >= options_.latest_frame_time) {
+    return refuse_counted(absl::StatusCode::kOutOfRange, "time",
+                          absl::StrCat(FormatUtc(time), " is outside the accepted window [",
+                                       FormatUtc(options_.earliest_frame_time), ", ",
+                                       FormatUtc(options_.latest_frame_time), ")"));
+  }
+
+  // Identity and time against what is stored or queued.
+  const std::string payload = StoredPayload(proto, station);
+  auto highest = sc->highest_accepted.find(station);
+  const bool known_identity =
+      highest != sc->highest_accepted.end() && proto.sequence() <= highest->second;
+  const bool known_time = time <= sc->last_accepted_time;
+  if (known_identity || known_time) {
+    absl::StatusOr<std::optional<storage::ArchivedFrame>> stored =
+        FindStoredFrame(*sc, station, proto.sequence(), time, known_identity);
+    if (!stored.ok()) {
+      return absl::UnavailableError(
+          absl::StrCat("storage: cannot read the archive: ", stored.status().message()));
+    }
+    if (stored->has_value()) {
+      const storage::ArchivedFrame& original = **stored;
+      const bool same = known_identity ? original.payload == payload
+                                       : Measurement(original.payload) == Measurement(payload);
+      if (!same) {
+        ++sc->frames_conflicting;
+        const std::string what = absl::StrCat(
+            "frame (station '", station, "', sequence ", proto.sequence(), ", time ",
+            FormatUtc(time), ") conflicts with the stored frame (station '", original.station_id,
+            "', sequence ", original.sequence, ", time ", FormatUtc(original.measurement_time),
+            "): same ", known_identity ? "station and sequence" : "measurement time",
+            ", different content; the stored frame is kept");
+        Log("WARN", absl::StrCat(sc->id, ": ", what));
+        {
+          absl::MutexLock state(&sc->state_mu);
+          sc->service_alerts.push_back({"INGEST_CONFLICT", "WARNING",
+                                        absl::StrCat("station ", station), time,
+                                        static_cast<double>(proto.sequence()),
+                                        static_cast<double>(original.sequence), "sequence", what});
+        }
+        Schedule(sc);
+        return refuse(absl::StatusCode::kAlreadyExists,
+                      known_identity ? "sequence" : "time", what);
+      }
+      // An exact duplicate: stored once, acknowledged as a duplicate once the original is.
+      ++sc->frames_duplicate;
+      ack->set_accepted(true);
+      ack->set_duplicate(true);
+      if (sc->pending.count(original.measurement_time) == 0) return false;
+      CommitEntry entry;
+      entry.sc = sc;
+      entry.barrier = true;
+      entry.done = std::move(on_durable);
+      absl::MutexLock commit(&commit_mu_);
+      if (ingest_closed_) return absl::UnavailableError("the server is shutting down");
+      commit_queue_.push_back(std::move(entry));
+      return true;
+    }
+    if (known_identity) {
+      return refuse_counted(
+          absl::StatusCode::kOutOfRange, "sequence",
+          absl::StrCat(proto.sequence(), " of station '", station,
+                       "' is not after its highest accepted sequence ", highest->second,
+                       " and was never stored: frames older than the last accepted one are "
+                       "refused (no reorder window)"));
+    }
+    return refuse_counted(
+        absl::StatusCode::kOutOfRange, "time",
+        absl::StrCat(FormatUtc(time), " is not after the last accepted frame of '", sc->id,
+                     "' (", FormatUtc(sc->last_accepted_time),
+                     "): frames older than the last accepted one are refused (no reorder "
+                     "window)"));
+  }
+  if (sc->last_accepted_time != absl::InfinitePast() &&
+      time - sc->last_accepted_time > options_.max_frame_gap) {
+    // The filter integrates across a gap at the configured rate: an absurd gap (a wrong time
+    // tag) would occupy a worker for hours.
+    return refuse_counted(
+        absl::StatusCode::kOutOfRange, "time",
+        absl::StrCat(FormatUtc(time), " is more than ",
+                     absl::FormatDuration(options_.max_frame_gap),
+                     " after the previous accepted frame (", FormatUtc(sc->last_accepted_time),
+                     ")"));
+  }
+
+  // New: queue it for the archive.
+  CommitEntry entry;
+  entry.sc = sc;
+  entry.station = station;
+  entry.sequence = proto.sequence();
+  entry.time = time;
+  entry.payload = payload;
+  entry.frame = std::move(*frame);
+  entry.done = std::move(on_durable);
+  // The verdict goes into the ack before the entry is queued: the committer may commit and send
+  // this ack before push_back returns here.
+  ack->set_accepted(true);
+  {
+    absl::MutexLock commit(&commit_mu_);
+    if (ingest_closed_) return absl::UnavailableError("the server is shutting down");
+    if (!storage_fault_.empty()) {
+      return absl::UnavailableError(absl::StrCat("storage: cannot commit (", storage_fault_, ")"));
+    }
+    if (commit_queue_bytes_ + static_cast<int64_t>(payload.size()) >
+        options_.max_commit_backlog_bytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "ingest backlog: ", commit_queue_bytes_, " bytes wait for the archive (limit ",
+          options_.max_commit_backlog_bytes,
+          "); resume from highest_durable_sequence + 1 shortly"));
+    }
+    commit_queue_bytes_ += static_cast<int64_t>(payload.size());
+    commit_queue_.push_back(std::move(entry));
+  }
+  sc->pending[time] = PendingFrame{station, proto.sequence(), payload};
+  sc->pending_ids[{station, proto.sequence()}] = time;
+  sc->highest_accepted[station] = proto.sequence();
+  sc->last_accepted_time = time;
+  return true;
+}
+
+void EstimationCore::FillDurable(esg::v1::TelemetryAck* ack) {
+  std::shared_ptr<Spacecraft> sc = Find(ack->spacecraft_id());
+  if (sc == nullptr) return;
+  absl::MutexLock lock(&sc->state_mu);
+  auto it = sc->highest_durable.find(ack->station_id());
+  ack->set_highest_durable_sequence(it == sc->highest_durable.end() ? 0 : it->second);
+}
+
+}  // namespace esg::server

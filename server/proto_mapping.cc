@@ -1,0 +1,192 @@
+// Mapping of records and estimator values to esg.v1 messages (see proto_mapping.h).
+#include "server/proto_mapping.h"
+
+#include "absl/strings/str_cat.h"
+#include "estimator/rotation.h"
+#include "estimator/units.h"
+#include "proto/convert.h"
+
+namespace esg::server {
+
+using estimator::Event;
+
+const char* SeverityName(esg::v1::AlertSeverity s) {
+  switch (s) {
+    case esg::v1::ALERT_SEVERITY_INFO:
+      return "INFO";
+    case esg::v1::ALERT_SEVERITY_WARNING:
+      return "WARNING";
+    case esg::v1::ALERT_SEVERITY_DISTRESS:
+      return "DISTRESS";
+    case esg::v1::ALERT_SEVERITY_CRITICAL:
+      return "CRITICAL";
+    default:
+      return "UNSPECIFIED";
+  }
+}
+
+namespace {
+
+esg::v1::AlertSeverity SeverityFromName(const std::string& name) {
+  if (name == "INFO") return esg::v1::ALERT_SEVERITY_INFO;
+  if (name == "WARNING") return esg::v1::ALERT_SEVERITY_WARNING;
+  if (name == "DISTRESS") return esg::v1::ALERT_SEVERITY_DISTRESS;
+  if (name == "CRITICAL") return esg::v1::ALERT_SEVERITY_CRITICAL;
+  return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
+}
+
+esg::v1::AlertReason ReasonFromName(const std::string& name) {
+  esg::v1::AlertReason reason = esg::v1::ALERT_REASON_UNSPECIFIED;
+  esg::v1::AlertReason_Parse("ALERT_REASON_" + name, &reason);
+  return reason;
+}
+
+}  // namespace
+
+esg::v1::SessionState StateToProto(estimator::SessionState s) {
+  switch (s) {
+    case estimator::SessionState::kNoData:
+      return esg::v1::SESSION_STATE_NO_DATA;
+    case estimator::SessionState::kCalibrating:
+      return esg::v1::SESSION_STATE_CALIBRATING;
+    case estimator::SessionState::kConverged:
+      return esg::v1::SESSION_STATE_CONVERGED;
+    case estimator::SessionState::kAutonomous:
+      return esg::v1::SESSION_STATE_AUTONOMOUS;
+    case estimator::SessionState::kFaulted:
+      return esg::v1::SESSION_STATE_FAULTED;
+  }
+  return esg::v1::SESSION_STATE_UNSPECIFIED;
+}
+
+static void QuaternionToProto(const Eigen::Quaterniond& q_in_b,
+                       google::protobuf::RepeatedField<double>* out) {
+  const estimator::ScalarFirst q = estimator::ToScalarFirst(estimator::Canonical(q_in_b));
+  out->Clear();
+  for (double v : q) out->Add(v);
+}
+
+void FillSample(absl::Time time, const estimator::AttitudeEstimate& attitude,
+                const std::vector<std::pair<int, Eigen::Vector3d>>& h_in,
+                esg::v1::AttitudeSample* out) {
+  *out->mutable_time() = proto_convert::TimeToProto(time);
+  QuaternionToProto(attitude.q_in_b, out->mutable_q_in_b());
+  for (int i = 0; i < 3; ++i) out->add_sigma_arcsec(estimator::RadToArcsec(attitude.sigma_b(i)));
+  for (const auto& [id, h] : h_in) {
+    esg::v1::GyroAxis* axis = out->add_spin_axes();
+    axis->set_gyro_id(id);
+    for (int i = 0; i < 3; ++i) axis->add_h_in(h(i));
+  }
+}
+
+// "field: reason" -> Rejection (proto/convert.h error contract).
+esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
+  esg::v1::Rejection r;
+  const absl::string_view m = status.message();
+  const size_t colon = m.find(": ");
+  if (colon == absl::string_view::npos) {
+    r.set_field("frame");
+    r.set_reason(std::string(m));
+  } else {
+    r.set_field(std::string(m.substr(0, colon)));
+    r.set_reason(std::string(m.substr(colon + 2)));
+  }
+  return r;
+}
+
+
+
+
+esg::v1::AlertSeverity SeverityOf(Event::Kind kind) {
+  switch (kind) {
+    case Event::Kind::kStarTrackerInnovation:
+      return esg::v1::ALERT_SEVERITY_WARNING;
+    case Event::Kind::kStarTrackerFault:
+      return esg::v1::ALERT_SEVERITY_DISTRESS;
+    case Event::Kind::kWorkingPairFault:
+      return esg::v1::ALERT_SEVERITY_CRITICAL;
+    case Event::Kind::kReservePairFault:
+      return esg::v1::ALERT_SEVERITY_DISTRESS;
+    case Event::Kind::kGyroDataRejected:
+      return esg::v1::ALERT_SEVERITY_WARNING;
+    case Event::Kind::kStarTrackerInvalid:
+      return esg::v1::ALERT_SEVERITY_INFO;
+    case Event::Kind::kFilterReset:
+      return esg::v1::ALERT_SEVERITY_DISTRESS;
+  }
+  return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
+}
+
+esg::v1::AlertReason ReasonOf(Event::Kind kind) {
+  switch (kind) {
+    case Event::Kind::kStarTrackerInnovation:
+      return esg::v1::ALERT_REASON_STAR_TRACKER_INNOVATION;
+    case Event::Kind::kStarTrackerFault:
+      return esg::v1::ALERT_REASON_STAR_TRACKER_FAULT;
+    case Event::Kind::kWorkingPairFault:
+      return esg::v1::ALERT_REASON_WORKING_PAIR_FAULT;
+    case Event::Kind::kReservePairFault:
+      return esg::v1::ALERT_REASON_RESERVE_PAIR_FAULT;
+    case Event::Kind::kGyroDataRejected:
+      return esg::v1::ALERT_REASON_GYRO_DATA_REJECTED;
+    case Event::Kind::kStarTrackerInvalid:
+      return esg::v1::ALERT_REASON_STAR_TRACKER_INVALID;
+    case Event::Kind::kFilterReset:
+      return esg::v1::ALERT_REASON_FILTER_RESET;
+  }
+  return esg::v1::ALERT_REASON_UNSPECIFIED;
+}
+
+esg::v1::Alert AlertToProto(const storage::AlertRecord& r) {
+  esg::v1::Alert a;
+  a.set_spacecraft_id(r.spacecraft_id);
+  a.set_sequence(r.sequence);
+  a.set_severity(SeverityFromName(r.severity));
+  a.set_reason(ReasonFromName(r.reason));
+  a.set_subsystem(r.subsystem);
+  a.set_value(r.value);
+  a.set_threshold(r.threshold);
+  a.set_unit(r.unit);
+  a.set_repeat_count(r.repeat_count);
+  *a.mutable_measurement_time() = proto_convert::TimeToProto(r.measurement_time);
+  *a.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  *a.mutable_first_time() = proto_convert::TimeToProto(r.first_time);
+  a.set_acknowledged(r.acknowledged);
+  a.set_acknowledged_by(r.acknowledged_by);
+  if (r.acknowledged && r.acknowledged_time != absl::InfinitePast()) {
+    *a.mutable_acknowledged_time() = proto_convert::TimeToProto(r.acknowledged_time);
+  }
+  a.set_cleared(r.cleared);
+  a.set_message(r.message);
+  return a;
+}
+
+esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r) {
+  esg::v1::CoefficientSnapshot s;
+  s.set_spacecraft_id(r.spacecraft_id);
+  s.set_gyro_id(r.gyro_id);
+  *s.mutable_measurement_time() = proto_convert::TimeToProto(r.measurement_time);
+  *s.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  // The stored layout is already deg/h and arcsec (storage/records.h): copied as stored.
+  auto fill = [](const std::vector<double>& v, esg::v1::GyroDriftModel* m,
+                 google::protobuf::RepeatedField<double>* misalignment) {
+    if (v.size() != static_cast<size_t>(storage::kNumCoefficientValues)) return;
+    m->set_k0_deg_h(v[storage::kCoefficientK0]);
+    for (int i = 0; i < 3; ++i) {
+      m->add_c1_deg_h(v[storage::kCoefficientC1 + i]);
+      m->add_c2_deg_h(v[storage::kCoefficientC2 + i]);
+      m->add_mu_deg_h(v[storage::kCoefficientMu + i]);
+      m->add_nu_deg_h(v[storage::kCoefficientNu + i]);
+      misalignment->Add(v[storage::kCoefficientMisalignment + i]);
+    }
+  };
+  fill(r.values, s.mutable_model(), s.mutable_misalignment_arcsec());
+  fill(r.sigmas, s.mutable_sigma(), s.mutable_misalignment_sigma_arcsec());
+  return s;
+}
+
+std::string FormatUtc(absl::Time t) {
+  return absl::FormatTime(absl::RFC3339_full, t, absl::UTCTimeZone());
+}
+
+}  // namespace esg::server

@@ -1,0 +1,45 @@
+// Mapping between the service's stored records and estimator values on one side and the esg.v1
+// messages on the other (docs/service.md "Alerts", "GetSession"): alert severities and reasons,
+// session states, attitude samples, coefficient snapshots, ingest rejections.
+#ifndef ESG_SERVER_PROTO_MAPPING_H_
+#define ESG_SERVER_PROTO_MAPPING_H_
+
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/time/time.h"
+#include "esg/v1/estimation_service.pb.h"
+#include "estimator/session.h"
+#include "storage/records.h"
+
+namespace esg::server {
+
+// Severity and reason of the alert an estimator event raises (docs/service.md "Alerts").
+esg::v1::AlertSeverity SeverityOf(estimator::Event::Kind kind);
+esg::v1::AlertReason ReasonOf(estimator::Event::Kind kind);
+// "INFO", "WARNING", "DISTRESS", "CRITICAL" as stored; "UNSPECIFIED" otherwise.
+const char* SeverityName(esg::v1::AlertSeverity severity);
+
+esg::v1::Alert AlertToProto(const storage::AlertRecord& record);
+esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& record);
+esg::v1::SessionState StateToProto(estimator::SessionState state);
+
+// One attitude sample: q_in_b canonical (q0 >= 0), 1-sigma about body axes [arcsec], and the
+// gyros' inertial spin axes h_in.
+void FillSample(absl::Time time, const estimator::AttitudeEstimate& attitude,
+                const std::vector<std::pair<int, Eigen::Vector3d>>& h_in,
+                esg::v1::AttitudeSample* out);
+
+// An ingest refusal from a status whose message is "field: reason" (the error contract of
+// proto/convert.h); the status code travels with it.
+esg::v1::Rejection RejectionFromStatus(const absl::Status& status);
+
+// RFC 3339 UTC with the fraction of the second, for messages.
+std::string FormatUtc(absl::Time time);
+
+}  // namespace esg::server
+
+#endif  // ESG_SERVER_PROTO_MAPPING_H_
