@@ -2,8 +2,10 @@
 #include "storage/sqlite_db.h"
 
 #include <sqlite3.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -39,6 +41,28 @@ const char* SynchronousName(Synchronous s) {
       return "EXTRA";
   }
   return "FULL";
+}
+
+// Why `path` cannot be written as far as access(2) can tell: "<file>: <errno text>" for the
+// first of the database file, its -wal (and -shm unless `exclusive`) and its directory that
+// exists and is not writable (immutable, read-only file system, permissions); empty if none.
+// access(2) rather than open(2): closing any descriptor of the database file would drop this
+// process's POSIX locks on it, which SQLite relies on.
+std::string WriteBlocker(const std::string& path, bool exclusive) {
+  std::vector<std::string> files = {path, path + "-wal"};
+  if (!exclusive) files.push_back(path + "-shm");
+  for (const std::string& file : files) {
+    if (::access(file.c_str(), F_OK) == 0 && ::access(file.c_str(), W_OK) != 0) {
+      return absl::StrCat(file, ": ", std::error_code(errno, std::generic_category()).message());
+    }
+  }
+  std::string dir = std::filesystem::path(path).parent_path().string();
+  if (dir.empty()) dir = ".";
+  if (::access(dir.c_str(), W_OK) != 0) {
+    return absl::StrCat("directory ", dir, ": ",
+                        std::error_code(errno, std::generic_category()).message());
+  }
+  return std::string();
 }
 
 }  // namespace
@@ -236,6 +260,9 @@ absl::Status Transaction::Commit() {
     // A failed COMMIT may leave the transaction open (e.g. SQLITE_BUSY); end it so that the
     // contract "over either way" holds. SQLite may already have rolled back by itself.
     if (!sqlite3_get_autocommit(db_->db_)) db_->ExecLocked("ROLLBACK").IgnoreError();
+    status = absl::Status(status.code(), absl::StrCat("db: ", db_->path_,
+                                                      ": commit failed and was rolled back: ",
+                                                      status.message()));
   }
   Release();
   return status;
@@ -271,6 +298,10 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
     return absl::InvalidArgumentError(absl::StrCat(
         "busy_timeout = ", absl::FormatDuration(options.busy_timeout), ": must be positive"));
   }
+  if (!options.vfs.empty() && sqlite3_vfs_find(options.vfs.c_str()) == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("vfs = '", options.vfs, "': no SQLite VFS of that name is registered"));
+  }
   if (!options.create_if_missing) {
     std::error_code ec;
     if (!std::filesystem::exists(path, ec)) {
@@ -280,10 +311,24 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
   int flags = SQLITE_OPEN_READWRITE | SQLITE_OPEN_FULLMUTEX;
   if (options.create_if_missing) flags |= SQLITE_OPEN_CREATE;
   sqlite3* raw = nullptr;
-  const int rc = sqlite3_open_v2(path.c_str(), &raw, flags, nullptr);
+  const int rc = sqlite3_open_v2(path.c_str(), &raw, flags,
+                                 options.vfs.empty() ? nullptr : options.vfs.c_str());
   if (rc != SQLITE_OK) {
     absl::Status status = SqliteError(rc, raw, absl::StrCat("opening ", path));
     sqlite3_close_v2(raw);
+    if ((rc & 0xff) == SQLITE_CANTOPEN) {
+      const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+      std::error_code ec;
+      if (!dir.empty() && !std::filesystem::is_directory(dir, ec)) {
+        return absl::FailedPreconditionError(absl::StrCat(
+            "db: ", path, " cannot be opened: directory ", dir.string(), " does not exist"));
+      }
+      const std::string blocker = WriteBlocker(path, options.exclusive);
+      if (!blocker.empty()) {
+        return absl::FailedPreconditionError(
+            absl::StrCat("db: ", path, " cannot be written: ", blocker));
+      }
+    }
     return status;
   }
   std::unique_ptr<Database> db(new Database(raw, path, options));
@@ -292,25 +337,88 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
   sqlite3_busy_timeout(raw, static_cast<int>(
                                 std::min<int64_t>(std::max<int64_t>(timeout_ms, 1),
                                                   std::numeric_limits<int>::max())));
-
   absl::MutexLock lock(&db->mu_);
+  int failed_rc = SQLITE_OK;
+  absl::Status status = db->ConfigureAndProbeLocked(&failed_rc);
+  if (status.ok()) return db;
+  switch (status.code()) {
+    case absl::StatusCode::kUnavailable:
+      if ((failed_rc & 0xff) == SQLITE_BUSY || (failed_rc & 0xff) == SQLITE_LOCKED) {
+        return absl::UnavailableError(absl::StrCat(
+            "db: ", path, " is locked by another process", options.exclusive ? "" : " or connection",
+            " (still after busy_timeout ", absl::FormatDuration(options.busy_timeout),
+            "; another server on the same file?): ", status.message()));
+      }
+      break;
+    case absl::StatusCode::kDataLoss:
+    case absl::StatusCode::kInvalidArgument:
+      return status;
+    default:
+      break;
+  }
+  // Anything else (read-only, cannot open the -wal, I/O error, disk full) means the file cannot
+  // be used for writing: say why, in operator's terms where the file system tells.
+  const std::string blocker = WriteBlocker(path, options.exclusive);
+  return absl::FailedPreconditionError(
+      blocker.empty()
+          ? absl::StrCat("db: ", path, " cannot be written: ", status.message())
+          : absl::StrCat("db: ", path, " cannot be written: ", blocker, " (", status.message(),
+                         ")"));
+}
+
+absl::Status Database::ConfigureAndProbeLocked(int* failed_rc) {
+  // Keeps the SQLite result code of the failing step, which Open() needs to tell a lock held by
+  // another process from an I/O error (both are Unavailable).
+  auto note = [&](absl::Status status) {
+    if (!status.ok() && *failed_rc == SQLITE_OK) *failed_rc = sqlite3_extended_errcode(db_);
+    return status;
+  };
+  // Checked first: on a read-only connection PRAGMA journal_mode fails with misleading errors.
+  if (sqlite3_db_readonly(db_, "main") == 1) {
+    return absl::FailedPreconditionError("SQLite could open the file only read-only");
+  }
+  // Must precede the first access of a WAL database: in exclusive mode SQLite then never maps
+  // the -shm file (sqlite_db.h, "Exclusive locking").
+  if (options_.exclusive) {
+    absl::Status status = note(ExecLocked("PRAGMA locking_mode=EXCLUSIVE"));
+    if (!status.ok()) return status;
+  }
   // The journal mode is persistent in the file; the PRAGMA answers with the mode in force.
   {
-    absl::StatusOr<Statement*> st = db->PrepareLocked("PRAGMA journal_mode=WAL");
-    if (!st.ok()) return st.status();
+    // Preparing reads the schema, so a lock held by another process can show up here already.
+    absl::StatusOr<Statement*> st = PrepareLocked("PRAGMA journal_mode=WAL");
+    if (!st.ok()) return note(st.status());
     absl::StatusOr<bool> row = (*st)->Step();
-    if (!row.ok()) return row.status();
-    const std::string mode = *row ? absl::AsciiStrToLower((*st)->ColumnText(0)) : "";
+    note(row.status()).IgnoreError();
+    const std::string mode =
+        row.ok() && *row ? absl::AsciiStrToLower((*st)->ColumnText(0)) : "";
     (*st)->Reset();
+    if (!row.ok()) return row.status();
     if (mode != "wal") {
       return absl::FailedPreconditionError(
-          absl::StrCat("database ", path, ": journal_mode is '", mode, "', WAL required"));
+          absl::StrCat("database ", path_, ": journal_mode is '", mode, "', WAL required"));
     }
   }
   absl::Status status =
-      db->ExecLocked(absl::StrCat("PRAGMA synchronous=", SynchronousName(options.synchronous)));
+      note(ExecLocked(absl::StrCat("PRAGMA synchronous=", SynchronousName(options_.synchronous))));
   if (!status.ok()) return status;
-  return db;
+
+  // The write probe: a real commit (one -wal frame, synced as configured) that changes nothing.
+  status = note(ExecLocked("BEGIN IMMEDIATE"));
+  if (!status.ok()) return status;
+  int64_t version = 0;
+  absl::StatusOr<Statement*> read = PrepareLocked("PRAGMA user_version");
+  status = note(read.status());
+  if (status.ok()) {
+    absl::StatusOr<bool> row = (*read)->Step();
+    status = note(row.status());
+    if (status.ok() && *row) version = (*read)->ColumnInt64(0);
+    (*read)->Reset();
+  }
+  if (status.ok()) status = note(ExecLocked(absl::StrCat("PRAGMA user_version=", version)));
+  if (status.ok()) status = note(ExecLocked("COMMIT"));
+  if (!status.ok() && !sqlite3_get_autocommit(db_)) ExecLocked("ROLLBACK").IgnoreError();
+  return status;
 }
 
 absl::Status Database::Acquire() {

@@ -28,14 +28,44 @@
 // cache). An uncommitted transaction (no Commit(), a failed Commit(), or a crash before Commit()
 // returned) is rolled back completely: readers never see part of a transaction.
 //
+// Storage faults (what a caller sees; tests/storage/storage_faults_test.cc)
+// ---------------------------------------------------------------------------
+//   fault                                   | status                | afterwards
+//   ----------------------------------------+-----------------------+------------------------------
+//   disk full (write(2) ENOSPC)             | ResourceExhausted     | nothing of the transaction is
+//   failed write(2) (EIO, EPERM on an       | Unavailable           | visible; the same Database
+//     immutable -wal, ...)                  |                       | commits again once the cause
+//   failed fsync(2) of the -wal at commit   | Unavailable           | is gone (no reopen needed)
+//   file, directory or file system not      | FailedPrecondition at | "db: <path> cannot be
+//     writable, or SQLite opens it read-only|   Open()              |   written: <reason>"
+//   file locked by another process          | Unavailable at Open() | "db: <path> is locked by
+//     (exclusive mode, the default)         |   after busy_timeout  |   another process ..."
+// A failed commit is reported by Commit() or, when SQLite had to spill pages early, by the
+// Statement step that wrote them; either way the transaction is rolled back. A checkpoint (the
+// copy of -wal pages into the database file, run by SQLite after a commit once the -wal holds
+// 1000 pages) that fails is not an error of that commit: the pages stay in the -wal, which keeps
+// growing, and the next checkpoint retries. A commit whose fsync failed was fully written to the
+// -wal: this connection never shows it and overwrites it with the next commit, but if the process
+// dies before that, the next Open() may find it complete in the -wal and recover it as committed
+// (all of it, never part of it).
+//
+// Exclusive locking (DatabaseOptions::exclusive, default true) sets PRAGMA locking_mode=EXCLUSIVE
+// before the first access, so SQLite keeps the WAL index in heap memory instead of mapping the
+// "-shm" file (https://www.sqlite.org/wal.html, "Use of WAL Without Shared-Memory"). With a
+// mapped -shm, a -shm that is made immutable, truncated or cannot get its blocks kills the
+// process with SIGBUS at the next store into the mapping; without the mapping, such faults are
+// ordinary I/O errors returned as statuses. The price: the connection holds an exclusive lock on
+// the file from Open() until it is destroyed, so no other connection or process (a second
+// server, the sqlite3 shell) can even read the file meanwhile.
+//
 // Thread safety
 // -------------
 // A Database is safe to share between threads. Access is serialized by an internal absl::Mutex:
 // a Transaction holds it from Begin() until Commit()/Rollback()/destruction, so the statements
 // of one transaction never interleave with another thread's. The connection is also opened with
 // SQLITE_OPEN_FULLMUTEX. A thread must not call Begin() or Execute() on a Database while it holds
-// a Transaction on it (FailedPrecondition). Separate Database objects (other threads or
-// processes) on the same file are isolated by SQLite's own locks; a writer waits up to
+// a Transaction on it (FailedPrecondition). With exclusive = false, separate Database
+// objects (other threads or processes) on the same file are isolated by SQLite's own locks; a writer waits up to
 // busy_timeout for another connection's write lock and then gets Unavailable.
 //
 // Error codes (StatusCodeForSqliteResult): SQLITE_BUSY/LOCKED -> Unavailable (retry allowed),
@@ -75,6 +105,12 @@ struct DatabaseOptions {
   // If false, opening a path that does not exist returns NotFound. Parent directories are never
   // created: the caller creates them.
   bool create_if_missing = true;
+  // PRAGMA locking_mode=EXCLUSIVE: one connection owns the file and no -shm file is mapped (see
+  // "Exclusive locking" above). Set false only to share the file between connections.
+  bool exclusive = true;
+  // Name of a registered SQLite VFS to open the file through, e.g. the fault-injecting
+  // "esg-fault" of tests/testing/fault_vfs.h; empty: SQLite's default VFS.
+  std::string vfs;
 };
 
 // The absl::StatusCode for an SQLite (extended) result code other than SQLITE_OK/ROW/DONE.
@@ -185,12 +221,18 @@ class Transaction {
 // no Transaction on it is alive.
 class Database {
  public:
-  // Opens (creating if allowed) the database file at `path` and applies busy_timeout,
-  // journal_mode=WAL and synchronous. Errors: InvalidArgument (empty path or a non-positive
-  // busy_timeout), NotFound (missing file and !create_if_missing), DataLoss (the file is not an
-  // SQLite database or is corrupt), Unavailable (locked by another connection for longer than
-  // busy_timeout), FailedPrecondition (cannot open, e.g. missing parent directory, or WAL mode
-  // could not be enabled).
+  // Opens (creating if allowed) the database file at `path`, applies busy_timeout,
+  // locking_mode (exclusive), journal_mode=WAL and synchronous, and proves that the file can be
+  // written by committing a transaction that rewrites PRAGMA user_version with its own value
+  // (one -wal frame and, with kFull, one fsync). Errors: InvalidArgument (empty path, a
+  // non-positive busy_timeout, an unknown vfs), NotFound (missing file and !create_if_missing),
+  // DataLoss (the file is not an SQLite database or is corrupt), Unavailable ("db: <path> is
+  // locked by another process": another connection kept the lock for longer than busy_timeout),
+  // FailedPrecondition ("db: <path> cannot be opened: ..." for a missing parent directory;
+  // "db: <path> cannot be written: <reason>" when SQLite could open the file only read-only or
+  // the probe write failed: an immutable or read-only file, -wal or directory, a read-only
+  // file system, a full disk; <reason> names the file and the errno text where access(2) finds
+  // one, else SQLite's message).
   static absl::StatusOr<std::unique_ptr<Database>> Open(const std::string& path,
                                                         const DatabaseOptions& options = {});
 
@@ -216,6 +258,8 @@ class Database {
  private:
   friend class Transaction;
   Database(sqlite3* db, std::string path, const DatabaseOptions& options);
+  // Pragmas and the write probe of Open(); *failed_rc: the SQLite result code of the failure.
+  absl::Status ConfigureAndProbeLocked(int* failed_rc);
 
   absl::Status Acquire();
   void ReleaseLock();

@@ -46,13 +46,18 @@ struct BatchResult {
 };
 
 // Thread-safe: any number of threads may call any method (serialized per Storage through its
-// Database). Several Storage objects (processes) may open the same file; writers then wait on
-// each other up to busy_timeout.
+// Database). With DatabaseOptions::exclusive (the default) a Storage owns its file: no other
+// Storage, process or sqlite3 shell can open it until this one is destroyed. With exclusive =
+// false several Storage objects (processes) may open the same file; writers then wait on each
+// other up to busy_timeout.
 class Storage {
  public:
   // Opens or creates the database at `path` (the parent directory must exist) and migrates it
   // to kCurrentSchemaVersion. Errors of Database::Open and MigrateToCurrent; notably
-  // FailedPrecondition for a database written by a newer program, DataLoss for a corrupt file.
+  // FailedPrecondition "db: <path> cannot be written: <reason>" for a file that cannot be
+  // written (read-only or immutable file, -wal or directory, read-only file system, full disk)
+  // and for a database written by a newer program, Unavailable "db: <path> is locked by another
+  // process" when another Storage owns the file, DataLoss for a corrupt file.
   static absl::StatusOr<std::unique_ptr<Storage>> Open(const std::string& path,
                                                        const DatabaseOptions& options = {});
 
@@ -63,6 +68,9 @@ class Storage {
   // InvalidArgument (naming the record, e.g. "alerts[2].severity") for a record another store
   // would reject or whose spacecraft_id differs from the batch's; NotFound if an alert repeat
   // names a missing alert; Unavailable if the database stays locked beyond busy_timeout.
+  // Storage faults (sqlite_db.h table): ResourceExhausted when the disk is full, Unavailable
+  // when a write or the fsync fails; nothing of the batch is visible then, and the same Storage
+  // takes the next CommitBatch as soon as the cause is gone.
   absl::StatusOr<BatchResult> CommitBatch(const Batch& batch);
 
   Database& database() { return *db_; }

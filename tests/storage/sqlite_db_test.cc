@@ -253,9 +253,11 @@ TEST(Database, NestedUseOnOneThreadIsRefusedInsteadOfDeadlocking) {
 
 TEST(Database, WriterBlockedByAnotherConnectionGetsUnavailable) {
   TempDir dir;
-  std::unique_ptr<Database> holder = OpenWithTable(dir.File("a.db"));
+  DatabaseOptions shared;
+  shared.exclusive = false;  // the default locks out every other connection
+  std::unique_ptr<Database> holder = OpenWithTable(dir.File("a.db"), shared);
   ASSERT_NE(holder, nullptr);
-  DatabaseOptions impatient;
+  DatabaseOptions impatient = shared;
   impatient.busy_timeout = absl::Milliseconds(30);
   std::unique_ptr<Database> waiter = OpenOrDie(dir.File("a.db"), impatient);
   ASSERT_NE(waiter, nullptr);

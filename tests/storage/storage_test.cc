@@ -365,7 +365,9 @@ TEST(Storage, FourConnectionsWritingOneFileLoseNothingAndNumberAlertsUniquely) {
   std::vector<std::thread> threads;
   for (int t = 0; t < kThreads; ++t) {
     threads.emplace_back([&, t] {
-      absl::StatusOr<std::unique_ptr<Storage>> own = Storage::Open(path);
+      DatabaseOptions shared;
+      shared.exclusive = false;  // the default locks out every other connection
+      absl::StatusOr<std::unique_ptr<Storage>> own = Storage::Open(path, shared);
       if (!own.ok()) {
         failures[t] = own.status();
         return;
