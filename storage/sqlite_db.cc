@@ -345,9 +345,10 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
     case absl::StatusCode::kUnavailable:
       if ((failed_rc & 0xff) == SQLITE_BUSY || (failed_rc & 0xff) == SQLITE_LOCKED) {
         return absl::UnavailableError(absl::StrCat(
-            "db: ", path, " is locked by another process", options.exclusive ? "" : " or connection",
-            " (still after busy_timeout ", absl::FormatDuration(options.busy_timeout),
-            "; another server on the same file?): ", status.message()));
+            "db: ", path, " is locked by another process",
+            options.exclusive ? "" : " or connection", " (waited busy_timeout ",
+            absl::FormatDuration(options.busy_timeout),
+            "; is another server using this file?): ", status.message()));
       }
       break;
     case absl::StatusCode::kDataLoss:

@@ -30,33 +30,44 @@
 //
 // Storage faults (what a caller sees; tests/storage/storage_faults_test.cc)
 // ---------------------------------------------------------------------------
-//   fault                                   | status                | afterwards
-//   ----------------------------------------+-----------------------+------------------------------
-//   disk full (write(2) ENOSPC)             | ResourceExhausted     | nothing of the transaction is
-//   failed write(2) (EIO, EPERM on an       | Unavailable           | visible; the same Database
-//     immutable -wal, ...)                  |                       | commits again once the cause
-//   failed fsync(2) of the -wal at commit   | Unavailable           | is gone (no reopen needed)
-//   file, directory or file system not      | FailedPrecondition at | "db: <path> cannot be
-//     writable, or SQLite opens it read-only|   Open()              |   written: <reason>"
-//   file locked by another process          | Unavailable at Open() | "db: <path> is locked by
-//     (exclusive mode, the default)         |   after busy_timeout  |   another process ..."
-// A failed commit is reported by Commit() or, when SQLite had to spill pages early, by the
-// Statement step that wrote them; either way the transaction is rolled back. A checkpoint (the
-// copy of -wal pages into the database file, run by SQLite after a commit once the -wal holds
-// 1000 pages) that fails is not an error of that commit: the pages stay in the -wal, which keeps
-// growing, and the next checkpoint retries. A commit whose fsync failed was fully written to the
-// -wal: this connection never shows it and overwrites it with the next commit, but if the process
-// dies before that, the next Open() may find it complete in the -wal and recover it as committed
-// (all of it, never part of it).
+//   fault during a transaction               | status of Commit() (or of the Statement step
+//                                            | that wrote, if SQLite spilled pages early)
+//   -----------------------------------------+-------------------------------------------------
+//   disk full (write(2) fails with ENOSPC)   | ResourceExhausted
+//   write(2) fails (EIO; EPERM on a -wal     | Unavailable
+//     made immutable)                        |
+//   fsync of the -wal fails at commit        | Unavailable
+// Commit()'s message starts "db: <path>: commit failed and was rolled back: ". In every case
+// nothing of the transaction is visible, the file stays consistent, and the same Database takes
+// the next transaction as soon as the cause is gone: no reopen, no hang, no retry inside. A disk
+// that stays full fails every commit the same way, quickly; reads keep working.
+//
+//   fault at Open()                          | status
+//   -----------------------------------------+-------------------------------------------------
+//   file, -wal, directory or file system not | FailedPrecondition "db: <path> cannot be written:
+//     writable; SQLite opens it read-only;   |   <reason>" (<reason>: the file and errno text,
+//     disk full at the write probe           |   e.g. "Read-only file system", and SQLite's)
+//   another process or connection holds the  | Unavailable "db: <path> is locked by another
+//     file (see "Exclusive locking")         |   process ..." after busy_timeout
+//
+// A checkpoint (SQLite copying -wal pages into the database file after a commit once the -wal
+// holds 1000 pages, and when the last connection closes) that fails is not an error of any
+// commit: the pages stay in the -wal, which keeps growing, and the next checkpoint retries. The
+// database file must grow by up to the -wal's size at a checkpoint, so on a nearly full disk
+// checkpoints fail first and commits later. A commit whose fsync failed was completely written
+// to the -wal: this connection never shows it and overwrites it with its next commit, but if the
+// process dies before that, the next Open() finds it complete in the -wal and recovers it as
+// committed (all of it, never part of it).
 //
 // Exclusive locking (DatabaseOptions::exclusive, default true) sets PRAGMA locking_mode=EXCLUSIVE
 // before the first access, so SQLite keeps the WAL index in heap memory instead of mapping the
-// "-shm" file (https://www.sqlite.org/wal.html, "Use of WAL Without Shared-Memory"). With a
-// mapped -shm, a -shm that is made immutable, truncated or cannot get its blocks kills the
-// process with SIGBUS at the next store into the mapping; without the mapping, such faults are
-// ordinary I/O errors returned as statuses. The price: the connection holds an exclusive lock on
-// the file from Open() until it is destroyed, so no other connection or process (a second
-// server, the sqlite3 shell) can even read the file meanwhile.
+// "-shm" file (https://www.sqlite.org/wal.html, "Use of WAL Without Shared-Memory"). A mapped
+// -shm that is made immutable (chattr +i) or truncated kills the process with SIGBUS at the
+// next store into the mapping (for an immutable one, once the kernel has written the page back);
+// without the mapping, the same faults on the -wal or the database file are I/O errors returned
+// as statuses (an immutable database file only makes checkpoints fail). The price: the
+// connection holds an exclusive lock on the file from Open() until it is destroyed, so no other
+// connection or process (a second server, the sqlite3 shell) can even read the file meanwhile.
 //
 // Thread safety
 // -------------
@@ -64,9 +75,9 @@
 // a Transaction holds it from Begin() until Commit()/Rollback()/destruction, so the statements
 // of one transaction never interleave with another thread's. The connection is also opened with
 // SQLITE_OPEN_FULLMUTEX. A thread must not call Begin() or Execute() on a Database while it holds
-// a Transaction on it (FailedPrecondition). With exclusive = false, separate Database
-// objects (other threads or processes) on the same file are isolated by SQLite's own locks; a writer waits up to
-// busy_timeout for another connection's write lock and then gets Unavailable.
+// a Transaction on it (FailedPrecondition). With exclusive = false, separate Database objects
+// (other threads or processes) on the same file are isolated by SQLite's own locks; a writer
+// waits up to busy_timeout for another connection's write lock and then gets Unavailable.
 //
 // Error codes (StatusCodeForSqliteResult): SQLITE_BUSY/LOCKED -> Unavailable (retry allowed),
 // SQLITE_CORRUPT/NOTADB -> DataLoss, PRIMARY KEY/UNIQUE violation -> AlreadyExists, other

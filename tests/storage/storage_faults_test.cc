@@ -220,11 +220,12 @@ TEST(StorageFaults, CommitMakesAFixedNumberOfWritesAndOneSync) {
   // Deterministic, so "the Nth write" names the same write in every run.
   EXPECT_EQ(second.writes, first.writes);
   EXPECT_EQ(second.syncs, first.syncs);
-  std::printf("commit of %d frames + checkpoint: %lld writes, %lld syncs, %lld truncates, "
-              "%lld size hints, %lld shm maps\n",
-              kFramesPerCommit, static_cast<long long>(first.writes),
-              static_cast<long long>(first.syncs), static_cast<long long>(first.truncates),
-              static_cast<long long>(first.size_hints), static_cast<long long>(first.shm_maps));
+  std::printf(
+      "commit of %d frames + checkpoint: %lld writes, %lld syncs, %lld truncates, "
+      "%lld size hints, %lld shm maps\n",
+      kFramesPerCommit, static_cast<long long>(first.writes), static_cast<long long>(first.syncs),
+      static_cast<long long>(first.truncates), static_cast<long long>(first.size_hints),
+      static_cast<long long>(first.shm_maps));
 }
 
 TEST(StorageFaults, DiskFullAtEveryWriteOfACommitIsResourceExhaustedAndRecoverable) {
@@ -271,8 +272,8 @@ TEST(StorageFaults, CrashAfterAFailedWriteRecoversNoneOfTheCommit) {
 TEST(StorageFaults, CrashAfterAFailedFsyncRecoversAllOrNoneOfTheCommit) {
   // All frames were written before the fsync failed, so recovery may find the commit complete
   // in the -wal (sqlite_db.h, "Storage faults"). Both outcomes are whole; print which.
-  const int commits = CommitsAfterCrashFollowingFailedCommit(
-      FaultOp::kSync, 1, SQLITE_IOERR_FSYNC, absl::StatusCode::kUnavailable);
+  const int commits = CommitsAfterCrashFollowingFailedCommit(FaultOp::kSync, 1, SQLITE_IOERR_FSYNC,
+                                                             absl::StatusCode::kUnavailable);
   EXPECT_THAT(commits, ::testing::AnyOf(1, 2));
   std::printf("after a failed fsync and a crash, the reopened database holds %s\n",
               commits == 2 ? "the failed commit (recovered from the -wal)" : "none of it");
@@ -326,9 +327,10 @@ TEST(StorageFaults, FailedCheckpointLosesNothingAndCommitsContinue) {
       ASSERT_NE(storage, nullptr);
       ASSERT_THAT(CommitNumber(*storage, 1), IsOk());
       FaultVfs& vfs = FaultVfs::Instance();
-      vfs.Arm(op, 1, op == FaultOp::kWrite ? SQLITE_IOERR_WRITE
-                                           : (op == FaultOp::kSync ? SQLITE_IOERR_FSYNC
-                                                                   : SQLITE_IOERR_TRUNCATE));
+      vfs.Arm(op, 1,
+              op == FaultOp::kWrite
+                  ? SQLITE_IOERR_WRITE
+                  : (op == FaultOp::kSync ? SQLITE_IOERR_FSYNC : SQLITE_IOERR_TRUNCATE));
       EXPECT_THAT(storage->database().Execute("PRAGMA wal_checkpoint(TRUNCATE)"),
                   StatusIs(absl::StatusCode::kUnavailable, HasSubstr("I/O error")));
       EXPECT_EQ(vfs.Injected(op), 1);
@@ -429,7 +431,8 @@ class Immutable {
       flags = on ? (flags | FS_IMMUTABLE_FL) : (flags & ~FS_IMMUTABLE_FL);
       done = ::ioctl(fd, FS_IOC_SETFLAGS, &flags) == 0;
     }
-    if (!done) error_ = absl::StrCat("chattr ", on ? "+" : "-", "i ", path_, ": ", ErrnoText(errno));
+    if (!done)
+      error_ = absl::StrCat("chattr ", on ? "+" : "-", "i ", path_, ": ", ErrnoText(errno));
     ::close(fd);
     return done;
   }
@@ -516,8 +519,8 @@ TEST(ReadOnly, ImmutableDirectoryIsRefusedAtOpen) {
   const std::string fresh = (sub / "new.db").string();
   EXPECT_THAT(Storage::Open(fresh),
               StatusIs(absl::StatusCode::kFailedPrecondition,
-                       HasSubstr("db: " + fresh + " cannot be written: directory " +
-                                 sub.string() + ": Operation not permitted")));
+                       HasSubstr("db: " + fresh + " cannot be written: directory " + sub.string() +
+                                 ": Operation not permitted")));
 }
 
 TEST(ReadOnly, ImmutableWalLeftByACrashIsRefusedAtOpen) {
@@ -535,10 +538,9 @@ TEST(ReadOnly, ImmutableWalLeftByACrashIsRefusedAtOpen) {
   {
     Immutable immutable(path + "-wal");
     if (!immutable.ok()) GTEST_SKIP() << immutable.error();
-    EXPECT_THAT(Storage::Open(path),
-                StatusIs(absl::StatusCode::kFailedPrecondition,
-                         HasSubstr("db: " + path + " cannot be written: " + path +
-                                   "-wal: Operation not permitted")));
+    EXPECT_THAT(Storage::Open(path), StatusIs(absl::StatusCode::kFailedPrecondition,
+                                              HasSubstr("db: " + path + " cannot be written: " +
+                                                        path + "-wal: Operation not permitted")));
   }
   // Nothing was lost: the committed transaction is recovered from the -wal.
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
@@ -554,10 +556,9 @@ TEST(ReadOnly, DatabaseOnAReadOnlyMountIsRefusedAtOpen) {
   ASSERT_NO_FATAL_FAILURE(CreateDatabase(path));
   const std::string refused = tmpfs.RemountReadOnly();
   if (!refused.empty()) GTEST_SKIP() << refused;
-  EXPECT_THAT(Storage::Open(path),
-              StatusIs(absl::StatusCode::kFailedPrecondition,
-                       HasSubstr("db: " + path + " cannot be written: " + path +
-                                 ": Read-only file system")));
+  EXPECT_THAT(Storage::Open(path), StatusIs(absl::StatusCode::kFailedPrecondition,
+                                            HasSubstr("db: " + path + " cannot be written: " +
+                                                      path + ": Read-only file system")));
   const std::string fresh = tmpfs.File("new.db");
   EXPECT_THAT(Storage::Open(fresh),
               StatusIs(absl::StatusCode::kFailedPrecondition,
@@ -731,7 +732,8 @@ TEST(StorageFaults, FullTmpfsIsResourceExhaustedUntilSpaceIsFreed) {
   EXPECT_EQ(CommitsStored(**storage), k);
   EXPECT_THAT((*storage)->database().QuickCheck(), IsOk());
   // Still full: the same commit fails the same way, quickly.
-  EXPECT_THAT(CommitNumber(**storage, k), StatusIs(absl::StatusCode::kResourceExhausted, ::testing::_));
+  EXPECT_THAT(CommitNumber(**storage, k),
+              StatusIs(absl::StatusCode::kResourceExhausted, ::testing::_));
   std::filesystem::remove(ballast);
   EXPECT_THAT(CommitNumber(**storage, k), IsOk());
   EXPECT_EQ(CommitsStored(**storage), k + 1);

@@ -84,13 +84,25 @@ int Unfetch(sqlite3_file* f, sqlite3_int64 offset, void* p) {
 // One table per io_methods version, so SQLite sees exactly the capabilities of the real file
 // (for example, a version-1 file has no shared memory and cannot be used in WAL mode).
 constexpr sqlite3_io_methods MethodsOfVersion(int version) {
-  return {version,      Close,        Read,         Write,
-          Truncate,     Sync,         FileSize,     Lock,
-          Unlock,       CheckReservedLock, FileControl, SectorSize,
+  return {version,
+          Close,
+          Read,
+          Write,
+          Truncate,
+          Sync,
+          FileSize,
+          Lock,
+          Unlock,
+          CheckReservedLock,
+          FileControl,
+          SectorSize,
           DeviceCharacteristics,
-          version >= 2 ? ShmMap : nullptr,  version >= 2 ? ShmLock : nullptr,
-          version >= 2 ? ShmBarrier : nullptr, version >= 2 ? ShmUnmap : nullptr,
-          version >= 3 ? Fetch : nullptr,   version >= 3 ? Unfetch : nullptr};
+          version >= 2 ? ShmMap : nullptr,
+          version >= 2 ? ShmLock : nullptr,
+          version >= 2 ? ShmBarrier : nullptr,
+          version >= 2 ? ShmUnmap : nullptr,
+          version >= 3 ? Fetch : nullptr,
+          version >= 3 ? Unfetch : nullptr};
 }
 const sqlite3_io_methods kMethods[3] = {MethodsOfVersion(1), MethodsOfVersion(2),
                                         MethodsOfVersion(3)};
@@ -128,9 +140,7 @@ void (*DlSym(sqlite3_vfs*, void* handle, const char* symbol))(void) {
   return g_real->xDlSym(g_real, handle, symbol);
 }
 void DlClose(sqlite3_vfs*, void* handle) { g_real->xDlClose(g_real, handle); }
-int Randomness(sqlite3_vfs*, int size, char* out) {
-  return g_real->xRandomness(g_real, size, out);
-}
+int Randomness(sqlite3_vfs*, int size, char* out) { return g_real->xRandomness(g_real, size, out); }
 int Sleep(sqlite3_vfs*, int microseconds) { return g_real->xSleep(g_real, microseconds); }
 int CurrentTime(sqlite3_vfs*, double* out) { return g_real->xCurrentTime(g_real, out); }
 int GetLastError(sqlite3_vfs*, int size, char* out) {
@@ -211,9 +221,7 @@ void FaultVfs::ResetCounters() {
 
 int64_t FaultVfs::Calls(FaultOp op) const { return ops_[static_cast<int>(op)].calls.load(); }
 
-int64_t FaultVfs::Injected(FaultOp op) const {
-  return ops_[static_cast<int>(op)].injected.load();
-}
+int64_t FaultVfs::Injected(FaultOp op) const { return ops_[static_cast<int>(op)].injected.load(); }
 
 int FaultVfs::CountCall(FaultOp op) {
   OpState& s = ops_[static_cast<int>(op)];
