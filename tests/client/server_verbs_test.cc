@@ -17,6 +17,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -546,6 +547,10 @@ TEST_F(ServerVerbs, RejectedFramesAreReportedWithTheirFieldAndMakeExitOne) {
 TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   TempDir dir;
   WriteFile(dir.File("tokens"), "# test tokens\nw-token read,write\nr-token read\n");
+  // esgd refuses a token file that group or others can read or write.
+  std::filesystem::permissions(
+      dir.File("tokens"), std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
+      std::filesystem::perm_options::replace);
   Esgd server(dir, dir.File("esg.db"), FreePort(), {"--tokens", dir.File("tokens")});
   ASSERT_TRUE(server.Start()) << server.log();
   const std::string at = "--server " + server.address() + " ";

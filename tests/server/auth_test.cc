@@ -1,13 +1,23 @@
 // Authentication and transport security of esgd (server/auth.h, docs/service.md "Security"):
-// bearer tokens with read/write roles, and mutual TLS with certificates generated at test time
-// by openssl.
+// bearer tokens with read/write roles and caller names (scheme, token prefixes, file permissions,
+// refusal logs without the token), and mutual TLS with certificates generated at test time by
+// openssl.
 #include "server/auth.h"
 
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
+#include <optional>
+#include <string>
+#include <vector>
 
 #include "gmock/gmock.h"
 #include "grpcpp/security/credentials.h"
+#include "grpcpp/test/server_context_test_spouse.h"
 #include "gtest/gtest.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/status_matchers.h"
@@ -21,32 +31,211 @@ using ::esg::testing::StatusIs;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
+using ::testing::Not;
+
+// Writes a token file the way an operator must: mode 0600 (FromFile refuses anything looser).
+void WriteTokens(const std::string& path, const std::string& text) {
+  std::ofstream(path) << text;
+  std::filesystem::permissions(
+      path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
+      std::filesystem::perm_options::replace);
+}
+
+// Runs Authenticate on a server context whose client metadata holds `authorization: <header>`
+// (no such metadata when `header` is nullopt).
+absl::StatusOr<std::string> AuthenticateWith(const TokenAuthorizer& auth,
+                                             const std::optional<std::string>& header,
+                                             Role role) {
+  grpc::ServerContext context;
+  grpc::testing::ServerContextTestSpouse spouse(&context);
+  if (header.has_value()) spouse.AddClientMetadata("authorization", *header);
+  return auth.Authenticate(context, role);
+}
+
+absl::Status CheckWith(const TokenAuthorizer& auth, const std::optional<std::string>& header,
+                       Role role) {
+  grpc::ServerContext context;
+  grpc::testing::ServerContextTestSpouse spouse(&context);
+  if (header.has_value()) spouse.AddClientMetadata("authorization", *header);
+  return auth.Check(context, role);
+}
 
 TEST(TokenAuthorizer, ParsesRolesAndRejectsMalformedLines) {
   auto auth = TokenAuthorizer::Parse("# comment\nabc read\n\nxyz read,write\n", "tokens");
   ASSERT_TRUE(auth.ok()) << auth.status();
   EXPECT_EQ(auth->size(), 2);
-  EXPECT_TRUE(auth->CheckHeader("Bearer abc", true, Role::kRead).ok());
-  EXPECT_THAT(auth->CheckHeader("Bearer abc", true, Role::kWrite),
+  EXPECT_TRUE(CheckWith(*auth, "Bearer abc", Role::kRead).ok());
+  EXPECT_THAT(CheckWith(*auth, "Bearer abc", Role::kWrite),
               StatusIs(absl::StatusCode::kPermissionDenied, HasSubstr("write")));
-  EXPECT_TRUE(auth->CheckHeader("Bearer xyz", true, Role::kWrite).ok());
-  EXPECT_THAT(auth->CheckHeader("", false, Role::kRead),
+  EXPECT_TRUE(CheckWith(*auth, "Bearer xyz", Role::kWrite).ok());
+  EXPECT_THAT(CheckWith(*auth, std::nullopt, Role::kRead),
               StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("authorization")));
-  EXPECT_THAT(auth->CheckHeader("Bearer nope", true, Role::kRead),
+  EXPECT_THAT(CheckWith(*auth, "Bearer nope", Role::kRead),
               StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("unknown token")));
-  EXPECT_THAT(auth->CheckHeader("Basic abc", true, Role::kRead),
-              StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("Bearer")));
   EXPECT_THAT(TokenAuthorizer::Parse("abc admin\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: unknown role 'admin'")));
   EXPECT_THAT(TokenAuthorizer::Parse("abc\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1")));
+  EXPECT_THAT(TokenAuthorizer::Parse("a read x y\n", "f"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: expected")));
   EXPECT_THAT(TokenAuthorizer::Parse("a read\na write\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:2: token repeated")));
+  EXPECT_THAT(TokenAuthorizer::Parse("# only a comment\n", "f"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f: no tokens")));
+}
+
+TEST(TokenAuthorizer, SchemeIsCaseInsensitiveWithOneOrMoreSpaces) {
+  auto auth = TokenAuthorizer::Parse("abc read\n", "tokens");
+  ASSERT_TRUE(auth.ok()) << auth.status();
+  for (const std::string header :
+       {"Bearer abc", "bearer abc", "BEARER abc", "bEaReR abc", "Bearer   abc"}) {
+    EXPECT_TRUE(CheckWith(*auth, header, Role::kRead).ok()) << header;
+  }
+  for (const std::string header :
+       {"Basic abc", "Bearerabc", "Bearer", "Bearer ", "Bearer\tabc", "Token abc", "abc"}) {
+    EXPECT_THAT(CheckWith(*auth, header, Role::kRead),
+                StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("expected `Bearer")))
+        << header;
+  }
+}
+
+TEST(TokenAuthorizer, PrefixOrExtensionOfARealTokenIsRefused) {
+  auto auth = TokenAuthorizer::Parse("3f9c0a77ab21 read,write\n", "tokens");
+  ASSERT_TRUE(auth.ok()) << auth.status();
+  EXPECT_TRUE(CheckWith(*auth, "Bearer 3f9c0a77ab21", Role::kWrite).ok());
+  for (const std::string token : {"3f9c0a77ab2", "3f9c0a", "3", "3f9c0a77ab21x", "3F9C0A77AB21"}) {
+    EXPECT_THAT(CheckWith(*auth, "Bearer " + token, Role::kRead),
+                StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("unknown token")))
+        << token;
+  }
+}
+
+TEST(TokenAuthorizer, AuthenticateReturnsTheNameFromTheFileOrTheLineNumber) {
+  const std::string name64(64, 'n');
+  auto auth = TokenAuthorizer::Parse(
+      "t1 read ops-console\n# comment\nt2\tread,write\nt3 write " + name64 + "\n", "tokens");
+  ASSERT_TRUE(auth.ok()) << auth.status();
+  EXPECT_EQ(auth->size(), 3);
+  auto name = AuthenticateWith(*auth, "Bearer t1", Role::kRead);
+  ASSERT_TRUE(name.ok()) << name.status();
+  EXPECT_EQ(*name, "ops-console");
+  name = AuthenticateWith(*auth, "bearer t2", Role::kWrite);
+  ASSERT_TRUE(name.ok()) << name.status();
+  EXPECT_EQ(*name, "token-3");  // no name on line 3
+  name = AuthenticateWith(*auth, "Bearer t3", Role::kWrite);
+  ASSERT_TRUE(name.ok()) << name.status();
+  EXPECT_EQ(*name, name64);
+  // Failures are the same as Check's, and the missing-role message names the caller.
+  EXPECT_THAT(AuthenticateWith(*auth, "Bearer t1", Role::kWrite),
+              StatusIs(absl::StatusCode::kPermissionDenied,
+                       HasSubstr("token 'ops-console' lacks the 'write' role")));
+  EXPECT_THAT(AuthenticateWith(*auth, "Bearer t4", Role::kRead),
+              StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("unknown token")));
+  EXPECT_THAT(AuthenticateWith(*auth, std::nullopt, Role::kRead),
+              StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("missing")));
+
+  // Names: at most 64 printable ASCII characters.
+  EXPECT_THAT(TokenAuthorizer::Parse("a read\nb read " + name64 + "x\n", "f"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:2: name must be")));
+  EXPECT_THAT(TokenAuthorizer::Parse("a read bad\x01name\n", "f"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: name must be")));
+  EXPECT_THAT(TokenAuthorizer::Parse("a read caf\xc3\xa9\n", "f"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: name must be")));
+  // Two tokens of one caller (rotation) may share a name.
+  auto rotated = TokenAuthorizer::Parse("old read ingest\nnew read ingest\n", "f");
+  ASSERT_TRUE(rotated.ok()) << rotated.status();
+  EXPECT_EQ(*AuthenticateWith(*rotated, "Bearer old", Role::kRead), "ingest");
+  EXPECT_EQ(*AuthenticateWith(*rotated, "Bearer new", Role::kRead), "ingest");
+}
+
+TEST(TokenAuthorizer, FromFileRefusesAFileGroupOrOthersCanUse) {
+  namespace fs = std::filesystem;
+  TempDir dir;
+  const std::string path = dir.File("tokens");
+  std::ofstream(path) << "abc read ops\n";
+  for (fs::perms mode : {fs::perms(0644), fs::perms(0640), fs::perms(0604), fs::perms(0620),
+                         fs::perms(0602), fs::perms(0610), fs::perms(0601)}) {
+    fs::permissions(path, mode, fs::perm_options::replace);
+    char octal[8];
+    std::snprintf(octal, sizeof(octal), "%04o", static_cast<unsigned>(mode));
+    EXPECT_THAT(TokenAuthorizer::FromFile(path),
+                StatusIs(absl::StatusCode::kFailedPrecondition,
+                         HasSubstr("tokens: " + path +
+                                   " is readable or writable by group/others (mode " + octal +
+                                   "); chmod 600 it")))
+        << octal;
+  }
+  for (fs::perms mode : {fs::perms(0600), fs::perms(0400)}) {
+    fs::permissions(path, mode, fs::perm_options::replace);
+    auto auth = TokenAuthorizer::FromFile(path);
+    ASSERT_TRUE(auth.ok()) << auth.status();
+    EXPECT_EQ(*AuthenticateWith(*auth, "Bearer abc", Role::kRead), "ops");
+  }
+
+  // Not a regular file: a directory, a FIFO (refused without blocking on the open).
+  const std::string subdir = dir.File("tokens.d");
+  fs::create_directory(subdir);
+  fs::permissions(subdir, fs::perms(0700), fs::perm_options::replace);
+  EXPECT_THAT(TokenAuthorizer::FromFile(subdir),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("not a regular file")));
+  const std::string fifo = dir.File("tokens.fifo");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  EXPECT_THAT(TokenAuthorizer::FromFile(fifo),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("not a regular file")));
+  EXPECT_THAT(TokenAuthorizer::FromFile(dir.File("absent")),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("cannot be read")));
+
+  // The daemon refuses to start on such a file.
+  fs::permissions(path, fs::perms(0644), fs::perm_options::replace);
+  TempDir db_dir;
+  ServerOptions options;
+  options.listen = "127.0.0.1:0";
+  options.db_path = db_dir.File("esg.db");
+  options.tokens_file = path;
+  EXPECT_THAT(EsgServer::Start(options).status(),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("chmod 600")));
+}
+
+TEST(TokenAuthorizer, RefusalsAreLoggedWithTheReasonButNeverTheToken) {
+  auto auth = TokenAuthorizer::Parse("reader-Qx7w9Kp2Lm read alice\n", "tokens");
+  ASSERT_TRUE(auth.ok()) << auth.status();
+  struct Case {
+    std::optional<std::string> header;
+    Role role;
+    std::string reason;  // expected in the log line
+    std::string secret;  // must not appear in it, nor its first 6 characters
+  };
+  const std::vector<Case> cases = {
+      {std::nullopt, Role::kRead, "missing authorization metadata", ""},
+      {"Basic Zm9vOmJhclNlY3JldA==", Role::kRead, "malformed scheme", "Zm9vOmJhclNlY3JldA=="},
+      {"Bearer guess-Vr8sT3nB", Role::kRead, "unknown token", "guess-Vr8sT3nB"},
+      {"Bearer reader-Qx7w9Kp2L", Role::kRead, "unknown token", "reader-Qx7w9Kp2L"},
+      {"Bearer reader-Qx7w9Kp2Lm", Role::kWrite, "token 'alice' lacks the 'write' role",
+       "reader-Qx7w9Kp2Lm"},
+  };
+  for (const Case& c : cases) {
+    ::testing::internal::CaptureStderr();
+    const absl::Status status = CheckWith(*auth, c.header, c.role);
+    const std::string log = ::testing::internal::GetCapturedStderr();
+    EXPECT_FALSE(status.ok()) << c.reason;
+    EXPECT_THAT(log, HasSubstr("WARN"));
+    EXPECT_THAT(log, HasSubstr("authorization refused"));
+    EXPECT_THAT(log, HasSubstr(c.reason));
+    EXPECT_EQ(std::count(log.begin(), log.end(), '\n'), 1) << log;  // one line per refusal
+    if (!c.secret.empty()) {
+      EXPECT_THAT(log, Not(HasSubstr(c.secret.substr(0, 6)))) << log;
+      EXPECT_THAT(std::string(status.message()), Not(HasSubstr(c.secret.substr(0, 6))));
+    }
+  }
+  // A granted call logs nothing.
+  ::testing::internal::CaptureStderr();
+  EXPECT_TRUE(CheckWith(*auth, "Bearer reader-Qx7w9Kp2Lm", Role::kRead).ok());
+  EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
 }
 
 TEST(Auth, BearerTokensGuardEveryRpcByRole) {
   TempDir dir;
-  std::ofstream(dir.File("tokens")) << "reader-token read\nwriter-token read,write\n";
+  WriteTokens(dir.File("tokens"), "reader-token read\nwriter-token read,write\n");
   ServerOptions options;
   options.tokens_file = dir.File("tokens");
   LoopbackServer server(options);
@@ -96,6 +285,35 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
   esg::v1::Alert alert;
   EXPECT_EQ(stub->AcknowledgeAlert(&ctx, ack, &alert).error_code(),
             grpc::StatusCode::PERMISSION_DENIED);
+}
+
+TEST(Auth, RefusedCallIsLoggedWithThePeerAndTheCallerName) {
+  TempDir dir;
+  WriteTokens(dir.File("tokens"), "dash-Hk4vR8zQ read dashboard\n");
+  ServerOptions options;
+  options.tokens_file = dir.File("tokens");
+  LoopbackServer server(options);
+  ASSERT_NE(server.get(), nullptr);
+  auto stub = server.Stub();
+  auto configure = [&](const std::string& header) {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", header);
+    esg::v1::ConfigureResponse r;
+    return stub->ConfigureSpacecraft(
+        &ctx, ConfigureRequestFor(::esg::testing::ServerTestConfig("AUTH-LOG")), &r);
+  };
+  // The server logs before it answers, so the line is in stderr when the call returns.
+  ::testing::internal::CaptureStderr();
+  const grpc::Status unknown = configure("Bearer dash-Hk4vR8zX");
+  const grpc::Status denied = configure("bearer dash-Hk4vR8zQ");
+  const std::string log = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(unknown.error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(denied.error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_THAT(log, HasSubstr("authorization refused: peer ipv4:127.0.0.1:"));
+  EXPECT_THAT(log, HasSubstr("unknown token"));
+  EXPECT_THAT(log, HasSubstr("token 'dashboard' lacks the 'write' role"));
+  EXPECT_THAT(log, Not(HasSubstr("Hk4vR8z"))) << log;
+  EXPECT_THAT(denied.error_message(), Not(HasSubstr("Hk4vR8z")));
 }
 
 std::string ReadAll(const std::string& path) {
