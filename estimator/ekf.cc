@@ -11,6 +11,8 @@ using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
 absl::Status CheckCovariance(const MatrixXd& P) {
+  if (P.rows() != P.cols()) return absl::InternalError("covariance is not square");
+  if (P.size() == 0) return absl::OkStatus();  // no state yet (maxCoeff of nothing is undefined)
   if (!P.allFinite()) return absl::InternalError("covariance has non-finite entries");
   const double scale = P.diagonal().cwiseAbs().maxCoeff();
   if ((P - P.transpose()).cwiseAbs().maxCoeff() > 1e-9 * std::max(scale, 1e-300)) {

@@ -998,8 +998,11 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     for (int j = 0; j < n; ++j) s.P0_(i, j) = get();
   }
   if (short_read || pos != v.size()) return absl::DataLossError("checkpoint: truncated or oversized");
-  if (absl::Status st = CheckCovariance(s.P_); s.initialized_ && !st.ok()) {
-    return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+  // An uninitialised session (no valid star-tracker attitude yet) has no state to check.
+  if (s.initialized_) {
+    if (absl::Status st = CheckCovariance(s.P_); !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
   }
   return s;
 }

@@ -269,7 +269,8 @@ absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id,
   for (;;) {
     {
       absl::MutexLock lock(&sc->state_mu);
-      if (!sc->replay_from_archive && sc->ready.empty() &&
+      const bool rebuilding = !sc->apply.quarantine_reason.empty() && sc->apply.rebuilding;
+      if (!sc->replay_from_archive && sc->ready.empty() && !rebuilding &&
           sc->apply.applied_time >= sc->last_durable_time) {
         return absl::OkStatus();
       }

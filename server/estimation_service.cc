@@ -1,6 +1,7 @@
 // Reactors of the esg.v1.EstimationService (see estimation_service.h, docs/service.md).
 #include "server/estimation_service.h"
 
+#include <atomic>
 #include <deque>
 #include <map>
 #include <memory>
@@ -155,7 +156,7 @@ class TelemetryReactor
         return;
       }
       if (!front.ready) return;
-      if (front.ack.accepted()) s.reactor->core_->FillDurable(&front.ack);
+      s.reactor->core_->FillDurable(&front.ack);
       s.writing = true;
       s.reactor->StartWrite(&front.ack);
       return;
@@ -323,17 +324,27 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
 
 // Diagnose: the diagnosis runs on its own thread (it takes seconds; gRPC threads must not
 // block). Progress updates are coalesced: at most one write in flight, the newest update waiting.
-// The final update carries the result; an error finishes the call with its status.
+// The final update carries the result; an error finishes the call with its status. When the
+// call is cancelled (the client went away, its deadline passed, the server shuts down) or a
+// write fails, the diagnosis is told through its cancellation predicate, stops at its next
+// check and stores nothing; the call then finishes with CANCELLED. The permit (the caller's
+// diagnosis slot) is given back as soon as the worker is done.
 class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate> {
  public:
-  DiagnoseReactor(EstimationCore* core, esg::v1::DiagnoseRequest request, absl::Status auth) {
-    if (!auth.ok()) {
-      Finish(ToGrpcStatus(auth));
+  // `permit` holds the caller's slot, or why the call is refused (role, limit).
+  DiagnoseReactor(EstimationCore* core, esg::v1::DiagnoseRequest request,
+                  absl::StatusOr<CallLimiter::Permit> permit) {
+    if (!permit.ok()) {
+      finished_ = true;
+      Finish(ToGrpcStatus(permit.status()));
       return;
     }
-    worker_ = std::thread([this, core, request = std::move(request)] {
+    worker_ = std::thread([this, core, request = std::move(request),
+                           permit = std::move(*permit)]() mutable {
       absl::StatusOr<esg::v1::DiagnosisResult> result = core->Diagnose(
-          request, [this](double fraction, const std::string& stage) { Post(fraction, stage); });
+          request, [this](double fraction, const std::string& stage) { Post(fraction, stage); },
+          [this] { return cancelled_.load(std::memory_order_relaxed); });
+      permit.Release();
       absl::MutexLock lock(&mu_);
       worker_done_ = true;
       if (result.ok()) {
@@ -351,7 +362,17 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
   void OnWriteDone(bool ok) override {
     absl::MutexLock lock(&mu_);
     writing_ = false;
-    if (!ok) broken_ = true;  // the client went away; finish once the worker is done
+    if (!ok) {  // the client went away: stop the diagnosis; finish once the worker is done
+      broken_ = true;
+      cancelled_ = true;
+    }
+    MaybeWriteLocked();
+  }
+
+  void OnCancel() override {
+    absl::MutexLock lock(&mu_);
+    broken_ = true;
+    cancelled_ = true;
     MaybeWriteLocked();
   }
 
@@ -401,13 +422,62 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
   bool broken_ ABSL_GUARDED_BY(mu_) = false;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   absl::Status status_ ABSL_GUARDED_BY(mu_);
+  // Read by the diagnosis (its cancellation predicate) without the lock.
+  std::atomic<bool> cancelled_{false};
   std::thread worker_;
 };
+
+EstimationServiceImpl::EstimationServiceImpl(EstimationCore* core, const TokenAuthorizer* auth,
+                                             const CallLimits& limits)
+    : core_(core),
+      auth_(auth),
+      predictions_("PredictAttitude", "prediction", "predictions",
+                   limits.max_predictions_per_caller, limits.max_predictions),
+      diagnoses_("Diagnose", "diagnosis", "diagnoses", limits.max_diagnoses_per_caller,
+                 limits.max_diagnoses) {
+  for (int i = 0; i < predictions_.total(); ++i) pool_.emplace_back([this] { PredictionLoop(); });
+}
+
+EstimationServiceImpl::~EstimationServiceImpl() {
+  {
+    absl::MutexLock lock(&pool_mu_);
+    pool_stop_ = true;
+  }
+  for (std::thread& t : pool_) t.join();
+}
+
+void EstimationServiceImpl::RunPrediction(absl::AnyInvocable<void() &&> task) {
+  absl::MutexLock lock(&pool_mu_);
+  pool_tasks_.push_back(std::move(task));
+}
+
+void EstimationServiceImpl::PredictionLoop() {
+  while (true) {
+    absl::AnyInvocable<void() &&> task;
+    {
+      absl::MutexLock lock(&pool_mu_);
+      auto ready = [this]() ABSL_EXCLUSIVE_LOCKS_REQUIRED(pool_mu_) {
+        return pool_stop_ || !pool_tasks_.empty();
+      };
+      pool_mu_.Await(absl::Condition(&ready));
+      if (pool_tasks_.empty()) return;  // stopping, nothing left
+      task = std::move(pool_tasks_.front());
+      pool_tasks_.pop_front();
+    }
+    std::move(task)();
+  }
+}
 
 absl::Status EstimationServiceImpl::Authorize(grpc::CallbackServerContext* context,
                                               Role role) const {
   if (auth_ == nullptr) return absl::OkStatus();
   return auth_->Check(*context, role);
+}
+
+absl::StatusOr<std::string> EstimationServiceImpl::Caller(grpc::CallbackServerContext* context,
+                                                          Role role) const {
+  if (auth_ != nullptr) return auth_->Authenticate(*context, role);
+  return CallerFromPeer(context->peer());
 }
 
 grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>*
@@ -436,11 +506,40 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
                [&] { return core_->ListSessions(); });
 }
 
+// The prediction runs on a prediction thread, never on the callback thread: a 48 h prediction
+// at the sample limit takes long and would hold a gRPC thread. The estimator's Predict cannot be
+// interrupted; its run is bounded by CoreOptions::max_prediction_samples and the horizon, and a
+// call cancelled before its turn does not start. The permit is given back before Finish, so a
+// client that sends its next prediction on the response is not refused.
 grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     grpc::CallbackServerContext* context, const esg::v1::PredictRequest* request,
     esg::v1::PredictResponse* response) {
-  return Unary(context, Authorize(context, Role::kRead), response,
-               [&] { return core_->Predict(*request); });
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
+  if (!caller.ok()) {
+    reactor->Finish(ToGrpcStatus(caller.status()));
+    return reactor;
+  }
+  absl::StatusOr<CallLimiter::Permit> permit = predictions_.Acquire(*caller);
+  if (!permit.ok()) {
+    reactor->Finish(ToGrpcStatus(permit.status()));
+    return reactor;
+  }
+  auto inline_task = ([this, context, request, response, reactor,
+                 permit = std::move(*permit)]() mutable {
+    absl::Status status;
+    if (context->IsCancelled()) {
+      status = absl::CancelledError("PredictAttitude: cancelled before it started");
+    } else {
+      absl::StatusOr<esg::v1::PredictResponse> result = core_->Predict(*request);
+      if (result.ok()) *response = std::move(*result);
+      status = result.status();
+    }
+    permit.Release();
+    reactor->Finish(ToGrpcStatus(status));
+  });
+  inline_task();
+  return reactor;
 }
 
 grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts(
@@ -464,7 +563,10 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
 
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagnose(
     grpc::CallbackServerContext* context, const esg::v1::DiagnoseRequest* request) {
-  return new DiagnoseReactor(core_, *request, Authorize(context, Role::kRead));
+  absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
+  return new DiagnoseReactor(core_, *request,
+                             caller.ok() ? diagnoses_.Acquire(*caller)
+                                         : absl::StatusOr<CallLimiter::Permit>(caller.status()));
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(

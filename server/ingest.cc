@@ -170,21 +170,28 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   if (known_identity || known_time) {
     absl::StatusOr<std::optional<storage::ArchivedFrame>> stored =
         FindStoredFrame(*sc, station, proto.sequence(), time, known_identity);
+    // An identity the station used for a measurement another station had delivered first was
+    // acknowledged as a duplicate of that measurement, and is judged against it again.
+    bool by_identity = known_identity;
+    if (stored.ok() && !stored->has_value() && known_identity && known_time) {
+      stored = FindStoredFrame(*sc, station, proto.sequence(), time, /*by_identity=*/false);
+      by_identity = false;
+    }
     if (!stored.ok()) {
       return absl::UnavailableError(
           absl::StrCat("storage: cannot read the archive: ", stored.status().message()));
     }
     if (stored->has_value()) {
       const storage::ArchivedFrame& original = **stored;
-      const bool same = known_identity ? original.payload == payload
-                                       : Measurement(original.payload) == Measurement(payload);
+      const bool same = by_identity ? original.payload == payload
+                                    : Measurement(original.payload) == Measurement(payload);
       if (!same) {
         ++sc->frames_conflicting;
         const std::string what = absl::StrCat(
             "frame (station '", station, "', sequence ", proto.sequence(), ", time ",
             FormatUtc(time), ") conflicts with the stored frame (station '", original.station_id,
             "', sequence ", original.sequence, ", time ", FormatUtc(original.measurement_time),
-            "): same ", known_identity ? "station and sequence" : "measurement time",
+            "): same ", by_identity ? "station and sequence" : "measurement time",
             ", different content; the stored frame is kept");
         Log("WARN", absl::StrCat(sc->id, ": ", what));
         {
@@ -195,8 +202,7 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                                         static_cast<double>(original.sequence), "sequence", what});
         }
         Schedule(sc);
-        return refuse(absl::StatusCode::kAlreadyExists,
-                      known_identity ? "sequence" : "time", what);
+        return refuse(absl::StatusCode::kAlreadyExists, by_identity ? "sequence" : "time", what);
       }
       // An exact duplicate: stored once, acknowledged as a duplicate once the original is.
       ++sc->frames_duplicate;

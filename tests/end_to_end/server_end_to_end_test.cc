@@ -17,6 +17,7 @@
 #include "storage/coefficient_store.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/daemon.h"
 
 #ifndef ESGD_PATH
 #error "ESGD_PATH must name the esgd binary"
@@ -26,6 +27,7 @@ namespace esg::server {
 namespace {
 
 using ::esg::testing::ConfigureRequestFor;
+using ::esg::testing::Daemon;
 using ::esg::testing::LoopbackServer;
 using ::esg::testing::SimulateRun;
 using ::esg::testing::SimulatedRun;
@@ -130,57 +132,6 @@ TEST(EndToEnd, StreamedCalibrationEqualsAnOfflineRunExactly) {
   // Calibration did something: k0's sigma fell well below its 0.3 deg/h prior.
   EXPECT_LT(history.back().sigma().k0_deg_h(), 0.1);
 }
-
-// ---- The real daemon as a child process ----------------------------------------------------
-
-class Daemon {
- public:
-  Daemon(const std::string& db, const std::string& log) {
-    int out[2];
-    EXPECT_EQ(pipe(out), 0);
-    pid_ = fork();
-    if (pid_ == 0) {
-      dup2(out[1], STDOUT_FILENO);
-      const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      if (err >= 0) dup2(err, STDERR_FILENO);
-      close(out[0]);
-      execl(ESGD_PATH, "esgd", "--listen", "127.0.0.1:0", "--db", db.c_str(), "--workers", "2",
-            static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    close(out[1]);
-    // Read "esgd listening on port N".
-    std::string line;
-    pollfd p{out[0], POLLIN, 0};
-    while (line.find('\n') == std::string::npos && poll(&p, 1, 30000) > 0) {
-      char buffer[256];
-      const ssize_t n = read(out[0], buffer, sizeof buffer);
-      if (n <= 0) break;
-      line.append(buffer, n);
-    }
-    close(out[0]);
-    const size_t at = line.find("port ");
-    EXPECT_NE(at, std::string::npos) << "esgd did not start: " << line;
-    if (at != std::string::npos) port_ = std::stoi(line.substr(at + 5));
-  }
-  ~Daemon() { Stop(SIGTERM); }
-  void Stop(int signal) {
-    if (pid_ <= 0) return;
-    kill(pid_, signal);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    pid_ = -1;
-  }
-  std::unique_ptr<esg::v1::EstimationService::Stub> Stub() const {
-    return esg::v1::EstimationService::NewStub(grpc::CreateChannel(
-        "127.0.0.1:" + std::to_string(port_), grpc::InsecureChannelCredentials()));
-  }
-  int port() const { return port_; }
-
- private:
-  pid_t pid_ = -1;
-  int port_ = 0;
-};
 
 TEST(EndToEnd, KillNineMidStreamLosesNoAckedFrameAndAppliesNoneTwice) {
   const SimulatedRun run = SimulateRun("CRASH-1", 8.0, 33);

@@ -332,6 +332,29 @@ TEST(Session, CheckpointResumesBitForBit) {
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checkpoint")));
 }
 
+// A routine start: the first frames carry no valid star-tracker attitude, so the session is not
+// initialised when its checkpoint is taken. Restoring it must work (it once read the empty
+// covariance and crashed every later start of the service).
+TEST(Session, CheckpointBeforeInitialisationRestoresAndResumesBitForBit) {
+  const SimulationSpec spec = PaperFlight(9, 2.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  std::vector<TelemetryFrame> frames = sim->recording.frames;
+  for (size_t i = 0; i < 5; ++i) frames[i].star_tracker.reset();
+  EstimationSession straight = *EstimationSession::Create(spec.config, Model("10+11"));
+  EstimationSession first = straight;
+  for (const TelemetryFrame& f : frames) ASSERT_THAT(straight.AddFrame(f), IsOk());
+  for (size_t i = 0; i < 5; ++i) ASSERT_THAT(first.AddFrame(frames[i]), IsOk());
+  ASSERT_FALSE(first.initialized());
+  auto resumed =
+      EstimationSession::FromCheckpoint(spec.config, Model("10+11"), first.ExportCheckpoint());
+  ASSERT_THAT(resumed, IsOk());
+  EXPECT_FALSE(resumed->initialized());
+  for (size_t i = 5; i < frames.size(); ++i) ASSERT_THAT(resumed->AddFrame(frames[i]), IsOk());
+  EXPECT_TRUE(resumed->initialized());
+  EXPECT_EQ(resumed->ExportCheckpoint().values, straight.ExportCheckpoint().values);
+}
+
 TEST(Session, FrameNotAfterThePreviousIsOutOfRange) {
   const SimulationSpec spec = PaperFlight(2, 0.5);
   auto sim = Simulate(spec);

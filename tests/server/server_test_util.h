@@ -16,7 +16,9 @@
 #include "grpcpp/security/credentials.h"
 #include "gtest/gtest.h"
 #include "proto/convert.h"
+#include "server/checkpoint_codec.h"
 #include "server/server.h"
+#include "storage/storage.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/temp_dir.h"
 
@@ -119,6 +121,39 @@ inline StreamResult StreamFrames(esg::v1::EstimationService::Stub& stub,
   reader.join();
   result.status = stream->Finish();
   return result;
+}
+
+// The session values an uninterrupted offline run of `frames` under `model` ends with
+// (EstimationSession::ExportCheckpoint), to compare with what the service stored.
+inline std::vector<double> OfflineSessionValues(const estimator::SpacecraftConfig& config,
+                                                const std::string& model,
+                                                const std::vector<esg::v1::TelemetryFrame>& frames) {
+  auto spec = estimator::ParseModel(model);
+  EXPECT_TRUE(spec.ok()) << spec.status();
+  auto session = estimator::EstimationSession::Create(config, estimator::SessionOptions{*spec});
+  EXPECT_TRUE(session.ok()) << session.status();
+  for (const esg::v1::TelemetryFrame& proto : frames) {
+    auto frame = proto_convert::FrameFromProto(proto);
+    EXPECT_TRUE(frame.ok()) << frame.status();
+    EXPECT_TRUE(session->AddFrame(*frame).ok());
+  }
+  return session->ExportCheckpoint().values;
+}
+
+// The session values of the checkpoint stored for `spacecraft_id` in the database at `db`
+// (opened after the server stopped).
+inline std::vector<double> StoredSessionValues(const std::string& db,
+                                               const std::string& spacecraft_id) {
+  auto storage = storage::Storage::Open(db);
+  EXPECT_TRUE(storage.ok()) << storage.status();
+  if (!storage.ok()) return {};
+  auto record = (*storage)->sessions().GetCheckpoint(spacecraft_id);
+  EXPECT_TRUE(record.ok()) << record.status();
+  if (!record.ok()) return {};
+  auto checkpoint = server::DecodeCheckpoint(record->state_blob);
+  EXPECT_TRUE(checkpoint.ok()) << checkpoint.status();
+  if (!checkpoint.ok() || !checkpoint->session.has_value()) return {};
+  return checkpoint->session->values;
 }
 
 }  // namespace esg::testing

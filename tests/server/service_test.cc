@@ -458,8 +458,32 @@ TEST(Service, RandomlyCorruptedFramesNeverStopTheServer) {
   esg::v1::ListSessionsResponse sessions;
   ASSERT_TRUE(stub->ListSessions(&ctx2, {}, &sessions).ok());
   ASSERT_EQ(sessions.sessions_size(), 1);
-  EXPECT_EQ(sessions.sessions(0).frames_applied() + sessions.sessions(0).frames_apply_failed(),
-            sessions.sessions(0).frames_accepted());
+  // Every accepted frame applies: nothing malformed got past ingest.
+  EXPECT_EQ(sessions.sessions(0).frames_apply_failed(), 0);
+  EXPECT_EQ(sessions.sessions(0).frames_applied(), sessions.sessions(0).frames_accepted());
+  // A clean stream afterwards is applied: the frames after the last accepted one, from a
+  // station of their own (the corruption may have left any sequence on the default station).
+  const esg::v1::SessionInfo before = sessions.sessions(0);
+  // The run's first 20 frames, moved to start a minute after the last accepted one.
+  std::vector<esg::v1::TelemetryFrame> clean;
+  const int64_t shift_s =
+      before.last_frame_time().seconds() + 60 - run.frames.front().time().seconds();
+  for (int i = 0; i < 20; ++i) {
+    clean.push_back(run.frames[i]);
+    clean.back().mutable_time()->set_seconds(run.frames[i].time().seconds() + shift_s);
+    clean.back().set_sequence(i + 1);
+    clean.back().set_station_id("clean");
+  }
+  ASSERT_FALSE(clean.empty());
+  auto tail = StreamFrames(*stub, clean);
+  ASSERT_TRUE(tail.status.ok()) << tail.status.error_message();
+  for (const esg::v1::TelemetryAck& ack : tail.acks) EXPECT_TRUE(ack.accepted()) << ack.DebugString();
+  ASSERT_TRUE(server.core().WaitApplied(run.config.spacecraft_id, absl::Seconds(60)).ok());
+  grpc::ClientContext ctx3;
+  ASSERT_TRUE(stub->ListSessions(&ctx3, {}, &sessions).ok());
+  EXPECT_EQ(sessions.sessions(0).frames_applied(),
+            before.frames_applied() + static_cast<int64_t>(clean.size()));
+  EXPECT_EQ(sessions.sessions(0).frames_apply_failed(), 0);
 }
 
 // Collects the alerts of one SubscribeAlerts call until cancelled.

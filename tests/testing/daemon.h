@@ -1,0 +1,78 @@
+// The real esgd as a child process (ESGD_PATH names the binary): started on 127.0.0.1:0 over a
+// database file, its port read from its "esgd listening on port N" line, stopped with a signal
+// (SIGTERM for a graceful stop, SIGKILL for a crash).
+#ifndef ESG_TESTS_TESTING_DAEMON_H_
+#define ESG_TESTS_TESTING_DAEMON_H_
+
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <memory>
+#include <string>
+
+#include "esg/v1/estimation_service.grpc.pb.h"
+#include "grpcpp/create_channel.h"
+#include "grpcpp/security/credentials.h"
+#include "gtest/gtest.h"
+
+#ifndef ESGD_PATH
+#error "ESGD_PATH must name the esgd binary"
+#endif
+
+namespace esg::testing {
+
+class Daemon {
+ public:
+  Daemon(const std::string& db, const std::string& log) {
+    int out[2];
+    EXPECT_EQ(pipe(out), 0);
+    pid_ = fork();
+    if (pid_ == 0) {
+      dup2(out[1], STDOUT_FILENO);
+      const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
+      if (err >= 0) dup2(err, STDERR_FILENO);
+      close(out[0]);
+      execl(ESGD_PATH, "esgd", "--listen", "127.0.0.1:0", "--db", db.c_str(), "--workers", "2",
+            static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    close(out[1]);
+    // Read "esgd listening on port N".
+    std::string line;
+    pollfd p{out[0], POLLIN, 0};
+    while (line.find('\n') == std::string::npos && poll(&p, 1, 30000) > 0) {
+      char buffer[256];
+      const ssize_t n = read(out[0], buffer, sizeof buffer);
+      if (n <= 0) break;
+      line.append(buffer, n);
+    }
+    close(out[0]);
+    const size_t at = line.find("port ");
+    EXPECT_NE(at, std::string::npos) << "esgd did not start: " << line;
+    if (at != std::string::npos) port_ = std::stoi(line.substr(at + 5));
+  }
+  ~Daemon() { Stop(SIGTERM); }
+  void Stop(int signal) {
+    if (pid_ <= 0) return;
+    kill(pid_, signal);
+    int status = 0;
+    waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+  std::unique_ptr<esg::v1::EstimationService::Stub> Stub() const {
+    return esg::v1::EstimationService::NewStub(grpc::CreateChannel(
+        "127.0.0.1:" + std::to_string(port_), grpc::InsecureChannelCredentials()));
+  }
+  int port() const { return port_; }
+
+ private:
+  pid_t pid_ = -1;
+  int port_ = 0;
+};
+
+}  // namespace esg::testing
+
+#endif  // ESG_TESTS_TESTING_DAEMON_H_
