@@ -1,6 +1,12 @@
 // Server assembly (see server.h, docs/service.md).
 #include "server/server.h"
 
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <climits>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -10,6 +16,7 @@
 #include "estimator/status_macros.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/resource_quota.h"
 #include "grpcpp/security/server_credentials.h"
 #include "grpcpp/server_builder.h"
 #include "server/log.h"
@@ -46,10 +53,73 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> Credentials(const Serve
   return grpc::SslServerCredentials(ssl);
 }
 
+absl::Status CheckLimits(const ServerOptions& o) {
+  const std::pair<const char*, int64_t> at_least_one[] = {
+      {"max_predictions_per_caller", o.calls.max_predictions_per_caller},
+      {"max_predictions", o.calls.max_predictions},
+      {"max_diagnoses_per_caller", o.calls.max_diagnoses_per_caller},
+      {"max_diagnoses", o.calls.max_diagnoses},
+      {"max_streams_per_connection", o.max_streams_per_connection},
+      {"max_sync_threads", o.max_sync_threads},
+  };
+  for (const auto& [name, value] : at_least_one) {
+    if (value < 1) return absl::InvalidArgumentError(absl::StrCat(name, ": must be >= 1, got ", value));
+  }
+  // Enough for the largest frame and any query; at most what gRPC's int takes.
+  if (o.max_message_bytes < 64 * 1024 || o.max_message_bytes > INT_MAX) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "max_message_bytes: must be in [65536, ", INT_MAX, "], got ", o.max_message_bytes));
+  }
+  if (o.grpc_memory_bytes < 4 * o.max_message_bytes) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("grpc_memory_bytes: must be at least 4 x max_message_bytes (",
+                     4 * o.max_message_bytes, "), got ", o.grpc_memory_bytes));
+  }
+  if (o.handshake_timeout <= absl::ZeroDuration()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "handshake_timeout: must be > 0, got ", absl::FormatDuration(o.handshake_timeout)));
+  }
+  return absl::OkStatus();
+}
+
+std::string LimitText(rlim_t value) {
+  return value == RLIM_INFINITY ? std::string("unlimited") : absl::StrCat(value);
+}
+
+// Raises the soft RLIMIT_NOFILE to the hard limit and logs both: every connection holds a file
+// descriptor, and gRPC 1.51 stops accepting for good once accept() fails with EMFILE
+// (grpc/grpc#20418; docs/service.md "Limits").
+void RaiseFileLimit() {
+  rlimit limit{};
+  if (getrlimit(RLIMIT_NOFILE, &limit) != 0) {
+    Log("WARN", absl::StrCat("file descriptors: getrlimit failed: ", std::strerror(errno)));
+    return;
+  }
+  const rlim_t before = limit.rlim_cur;
+  if (limit.rlim_cur != limit.rlim_max) {
+    rlimit raised = limit;
+    raised.rlim_cur = limit.rlim_max;
+    if (setrlimit(RLIMIT_NOFILE, &raised) == 0) {
+      limit = raised;
+    } else {
+      Log("WARN", absl::StrCat("file descriptors: cannot raise the soft limit from ",
+                               LimitText(before), " to the hard limit ",
+                               LimitText(limit.rlim_max), ": ", std::strerror(errno)));
+    }
+  }
+  Log("INFO", absl::StrCat("file descriptors: soft limit ", LimitText(limit.rlim_cur),
+                           limit.rlim_cur != before ? absl::StrCat(" (raised from ",
+                                                                   LimitText(before), ")")
+                                                    : std::string(),
+                           ", hard limit ", LimitText(limit.rlim_max)));
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions& options) {
   std::unique_ptr<EsgServer> s(new EsgServer());
+  RETURN_IF_ERROR(CheckLimits(options));
+  RaiseFileLimit();
   ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials, Credentials(options));
   if (!options.tokens_file.empty()) {
     ASSIGN_OR_RETURN(s->auth_, TokenAuthorizer::FromFile(options.tokens_file));
@@ -65,14 +135,15 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   }
   storage::DatabaseOptions db_options;
   db_options.synchronous = options.synchronous;
+  db_options.vfs = options.db_vfs;
   ASSIGN_OR_RETURN(s->storage_, storage::Storage::Open(options.db_path, db_options));
   CoreOptions core_options = options.core;
   if (core_options.worker_threads <= 0) {
     core_options.worker_threads = std::max(2u, std::thread::hardware_concurrency());
   }
   ASSIGN_OR_RETURN(s->core_, EstimationCore::Start(s->storage_.get(), core_options));
-  s->service_ = std::make_unique<EstimationServiceImpl>(s->core_.get(),
-                                                        s->auth_ ? &*s->auth_ : nullptr);
+  s->service_ = std::make_unique<EstimationServiceImpl>(
+      s->core_.get(), s->auth_ ? &*s->auth_ : nullptr, options.calls);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -86,7 +157,16 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_PERMIT_WITHOUT_CALLS, 1);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_RECV_PING_INTERVAL_WITHOUT_DATA_MS, 30000);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
-  builder.SetMaxReceiveMessageSize(64 * 1024 * 1024);
+  // Limits (docs/service.md "Limits").
+  builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
+  builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS, options.max_streams_per_connection);
+  builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS,
+                             static_cast<int>(std::min<int64_t>(
+                                 absl::ToInt64Milliseconds(options.handshake_timeout), INT_MAX)));
+  grpc::ResourceQuota quota("esgd");
+  quota.Resize(static_cast<size_t>(options.grpc_memory_bytes));
+  quota.SetMaxThreads(options.max_sync_threads);
+  builder.SetResourceQuota(quota);
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     s->core_->Stop(absl::ZeroDuration());
@@ -105,6 +185,12 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
                            options.tls_cert_file.empty() ? ", plaintext"
                            : options.tls_client_ca_file.empty() ? ", TLS"
                                                                 : ", mutual TLS"));
+  Log("INFO", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
+                           " per caller, ", options.calls.max_predictions, " in total; diagnoses ",
+                           options.calls.max_diagnoses_per_caller, " per caller, ",
+                           options.calls.max_diagnoses, " in total; messages up to ",
+                           options.max_message_bytes, " bytes; ",
+                           options.max_streams_per_connection, " streams per connection"));
   return s;
 }
 

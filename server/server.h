@@ -1,9 +1,11 @@
 // esgd as a library: opens the database, starts the EstimationCore and the gRPC server with the
 // options of `esgd` (docs/service.md): listen address, TLS / mTLS, bearer tokens, SQLite
-// synchronous mode, health checking, reflection, keepalive. main.cc and the tests use it.
+// synchronous mode, health checking, reflection, keepalive, and the resource limits
+// (docs/service.md "Limits"). main.cc and the tests use it.
 #ifndef ESG_SERVER_SERVER_H_
 #define ESG_SERVER_SERVER_H_
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
@@ -22,6 +24,9 @@ struct ServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 picks a free one
   std::string db_path = "./var/esg.db";    // parent directories are created
   storage::Synchronous synchronous = storage::Synchronous::kFull;
+  // SQLite VFS to open the database through (empty: SQLite's default); tests inject storage
+  // faults with one (tests/testing/fault_vfs.h).
+  std::string db_vfs;
   // PEM files. With cert and key the server speaks TLS; with a client CA as well it requires and
   // verifies client certificates (mTLS).
   std::string tls_cert_file;
@@ -30,17 +35,42 @@ struct ServerOptions {
   // Bearer tokens (server/auth.h); empty: no authentication.
   std::string tokens_file;
   CoreOptions core;
+
+  // ---- Limits (docs/service.md "Limits") ----
+  // Concurrent PredictAttitude and Diagnose calls per caller and in total.
+  CallLimits calls;
+  // Largest request message [bytes]; larger ones fail with RESOURCE_EXHAUSTED in gRPC before any
+  // handler runs. 8 MiB holds a PredictRequest at the 100 000-sample limit with a planned
+  // attitude (about 50 bytes a sample, 5 MB) and 100 000 explicit epochs (about 14 bytes each,
+  // 1.4 MB). Telemetry frames have their own, much smaller bound (CoreOptions::max_frame_bytes).
+  int64_t max_message_bytes = 8 << 20;
+  // Concurrent streams (calls) per connection (HTTP/2 SETTINGS_MAX_CONCURRENT_STREAMS; RFC 9113
+  // recommends no less than 100). Further calls wait in the client for a free stream.
+  int max_streams_per_connection = 100;
+  // Memory gRPC may take for its transports (buffers, call arenas) [bytes] (grpc::ResourceQuota).
+  // Under pressure gRPC shrinks flow-control windows, then closes idle connections, then cancels
+  // calls with RESOURCE_EXHAUSTED.
+  int64_t grpc_memory_bytes = int64_t{1} << 30;
+  // Threads of the synchronous services (server reflection) at most (grpc::ResourceQuota).
+  int max_sync_threads = 8;
+  // A connection that does not complete its TLS and HTTP/2 handshake within this time is closed
+  // (each open connection holds a file descriptor).
+  absl::Duration handshake_timeout = absl::Seconds(20);
 };
 
 class EsgServer {
  public:
-  // InvalidArgument for inconsistent TLS options or a bad tokens file; NotFound for unreadable
-  // PEM files; storage errors of opening the database; Unavailable if the port cannot be bound.
+  // Raises the process's soft RLIMIT_NOFILE to its hard limit first (each connection holds a
+  // file descriptor; see docs/service.md "Limits") and logs both. InvalidArgument for
+  // inconsistent TLS options, a bad tokens file or a limit out of range (names the field);
+  // NotFound for unreadable PEM files; storage errors of opening the database; Unavailable if
+  // the port cannot be bound.
   static absl::StatusOr<std::unique_ptr<EsgServer>> Start(const ServerOptions& options);
   ~EsgServer();
 
   int port() const { return port_; }
   EstimationCore& core() { return *core_; }
+  EstimationServiceImpl& service() { return *service_; }
 
   // Graceful stop: alert streams are closed, the gRPC server stops accepting and waits for the
   // running calls up to `deadline` (then cancels them), the committer flushes, and the workers
