@@ -113,7 +113,8 @@ esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecor
 
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
     const esg::v1::DiagnoseRequest& request,
-    const std::function<void(double fraction, const std::string& stage)>& progress) {
+    const std::function<void(double fraction, const std::string& stage)>& progress,
+    const std::function<bool()>& cancelled) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
   if (sc == nullptr) return NotConfigured(request.spacecraft_id());
@@ -140,6 +141,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
   }
   estimator::discovery::DiagnoseOptions options;
   options.model = request.model().empty() ? setup->model_name : request.model();
+  options.cancelled = cancelled;
   if (absl::StatusOr<estimator::ModelSpec> m = estimator::ParseModel(options.model); !m.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("model: ", m.status().message()));
   }
@@ -149,6 +151,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
     return absl::FailedPreconditionError(absl::StrCat(
         "no archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ", FormatUtc(to), ")"));
   }
+  if (cancelled && cancelled()) return absl::CancelledError("diagnosis cancelled");
   std::vector<TelemetryFrame> frames;
   frames.reserve(archived.size());
   for (const storage::ArchivedFrame& a : archived) {
@@ -162,6 +165,8 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
   }
   ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
                    estimator::discovery::Diagnose(setup->config, frames, options, progress));
+  // A diagnosis cancelled while it ran is not stored, even when it completed meanwhile.
+  if (cancelled && cancelled()) return absl::CancelledError("diagnosis cancelled");
   storage::DiagnosisRecord record;
   record.spacecraft_id = sc->id;
   record.from_time = frames.front().time;

@@ -131,13 +131,17 @@ class EstimationCore {
   absl::StatusOr<esg::v1::PredictResponse> Predict(const esg::v1::PredictRequest& request);
   absl::StatusOr<esg::v1::HistoryResponse> History(const esg::v1::HistoryRequest& request);
 
-  // Model-discrepancy diagnosis (DESIGN §6, estimator/discovery/diagnose.h) over the archived
-  // telemetry of a spacecraft in [from, to); the result is stored (DiagnosisStore) and returned.
-  // Long-running (seconds): call it off the gRPC threads. NotFound for an unknown spacecraft,
-  // InvalidArgument for a bad span or model, FailedPrecondition when the span holds no frames.
+  // Model-discrepancy diagnosis (estimator/discovery/diagnose.h, docs/discovery.md) over the
+  // archived telemetry of a spacecraft in [from, to); the result is stored (DiagnosisStore) and
+  // returned. Long-running (seconds): call it off the gRPC threads. `cancelled` (may be empty)
+  // is polled between the stages and candidate model runs; once it returns true the diagnosis
+  // stops, nothing is stored, and the result is Cancelled "diagnosis cancelled". NotFound for an
+  // unknown spacecraft, InvalidArgument for a bad span or model, FailedPrecondition when the
+  // span holds no frames.
   absl::StatusOr<esg::v1::DiagnosisResult> Diagnose(
       const esg::v1::DiagnoseRequest& request,
-      const std::function<void(double fraction, const std::string& stage)>& progress);
+      const std::function<void(double fraction, const std::string& stage)>& progress,
+      const std::function<bool()>& cancelled = {});
   absl::StatusOr<esg::v1::ListDiagnosesResponse> ListDiagnoses(
       const esg::v1::ListDiagnosesRequest& request);
   absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);

@@ -525,7 +525,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     reactor->Finish(ToGrpcStatus(permit.status()));
     return reactor;
   }
-  auto inline_task = ([this, context, request, response, reactor,
+  RunPrediction([this, context, request, response, reactor,
                  permit = std::move(*permit)]() mutable {
     absl::Status status;
     if (context->IsCancelled()) {
@@ -538,7 +538,6 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     permit.Release();
     reactor->Finish(ToGrpcStatus(status));
   });
-  inline_task();
   return reactor;
 }
 

@@ -1,20 +1,47 @@
 // The esg.v1.EstimationService on gRPC's callback API (STYLE §3.7 example 6: route_guide's
 // callback server). Reactors stay small: each checks the caller's role (server/auth.h), hands
 // the work to EstimationCore and maps its absl::Status through ToGrpcStatus.
+//
+// Long work never runs on gRPC's callback threads: PredictAttitude runs on the service's own
+// prediction pool (one thread per allowed concurrent prediction), each Diagnose on a thread of
+// its own. Both are bounded per caller and in total (CallLimits, docs/service.md "Limits");
+// beyond a bound the call fails at once with RESOURCE_EXHAUSTED.
 #ifndef ESG_SERVER_ESTIMATION_SERVICE_H_
 #define ESG_SERVER_ESTIMATION_SERVICE_H_
 
+#include <deque>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/functional/any_invocable.h"
+#include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
 #include "esg/v1/estimation_service.grpc.pb.h"
 #include "server/auth.h"
+#include "server/call_limiter.h"
 #include "server/estimation_core.h"
 
 namespace esg::server {
 
+// Concurrent calls allowed; a caller is a token's name, or without tokens a peer address
+// (call_limiter.h). Each value must be >= 1 (EsgServer::Start checks).
+struct CallLimits {
+  int max_predictions_per_caller = 4;
+  int max_predictions = 8;  // also the number of prediction threads
+  int max_diagnoses_per_caller = 1;
+  int max_diagnoses = 2;
+};
+
 class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackService {
  public:
-  // `auth` may be null (no authentication). Neither is owned.
-  EstimationServiceImpl(EstimationCore* core, const TokenAuthorizer* auth)
-      : core_(core), auth_(auth) {}
+  // `auth` may be null (no authentication). Neither is owned. Starts the prediction threads.
+  EstimationServiceImpl(EstimationCore* core, const TokenAuthorizer* auth,
+                        const CallLimits& limits = {});
+  // Joins the prediction threads: destroy the service only after the gRPC server has shut down
+  // (every call finished), as EsgServer does.
+  ~EstimationServiceImpl() override;
 
   grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>* StreamTelemetry(
       grpc::CallbackServerContext* context) override;
@@ -44,11 +71,29 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
                                           const esg::v1::ListDiagnosesRequest* request,
                                           esg::v1::ListDiagnosesResponse* response) override;
 
+  // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
+  CallLimiter& prediction_limiter() { return predictions_; }
+  CallLimiter& diagnosis_limiter() { return diagnoses_; }
+
  private:
   absl::Status Authorize(grpc::CallbackServerContext* context, Role role) const;
+  // The caller of the call once its role is checked: the token's name with tokens, else the
+  // peer's address without the port (CallerFromPeer). Errors as Authorize.
+  absl::StatusOr<std::string> Caller(grpc::CallbackServerContext* context, Role role) const;
+  // Runs `task` on a prediction thread. Callers hold a prediction permit, so at most
+  // limits.max_predictions tasks are queued or running and each starts at once.
+  void RunPrediction(absl::AnyInvocable<void() &&> task);
+  void PredictionLoop();
 
   EstimationCore* core_;
   const TokenAuthorizer* auth_;
+  CallLimiter predictions_;
+  CallLimiter diagnoses_;
+
+  absl::Mutex pool_mu_;
+  std::deque<absl::AnyInvocable<void() &&>> pool_tasks_ ABSL_GUARDED_BY(pool_mu_);
+  bool pool_stop_ ABSL_GUARDED_BY(pool_mu_) = false;
+  std::vector<std::thread> pool_;
 };
 
 }  // namespace esg::server

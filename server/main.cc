@@ -2,6 +2,7 @@
 // waits for SIGTERM/SIGINT and shuts down gracefully (running calls get a deadline, the durable
 // backlog is applied, checkpoints are committed).
 #include <csignal>
+#include <cstdint>
 #include <cstdio>
 #include <string>
 #include <thread>
@@ -36,6 +37,30 @@ int main(int argc, char** argv) {
   app.add_option("--shutdown-deadline", shutdown_deadline_s,
                  "Seconds running calls get to finish at shutdown")
       ->capture_default_str();
+  // Limits (docs/service.md "Limits"); EsgServer::Start checks the values.
+  app.add_option("--max-predictions-per-caller", options.calls.max_predictions_per_caller,
+                 "Concurrent PredictAttitude calls of one caller (token name, else peer address)")
+      ->capture_default_str();
+  app.add_option("--max-predictions", options.calls.max_predictions,
+                 "Concurrent PredictAttitude calls in total (also the prediction threads)")
+      ->capture_default_str();
+  app.add_option("--max-diagnoses-per-caller", options.calls.max_diagnoses_per_caller,
+                 "Concurrent Diagnose calls of one caller")
+      ->capture_default_str();
+  app.add_option("--max-diagnoses", options.calls.max_diagnoses,
+                 "Concurrent Diagnose calls in total")
+      ->capture_default_str();
+  app.add_option("--max-message-bytes", options.max_message_bytes,
+                 "Largest request message in bytes (larger: RESOURCE_EXHAUSTED)")
+      ->capture_default_str();
+  app.add_option("--max-streams-per-connection", options.max_streams_per_connection,
+                 "Concurrent calls per client connection (HTTP/2 max concurrent streams)")
+      ->capture_default_str();
+  int64_t grpc_memory_mb = options.grpc_memory_bytes >> 20;
+  app.add_option("--grpc-memory-mb", grpc_memory_mb,
+                 "Memory gRPC may use for connections and calls, MiB (grpc::ResourceQuota)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
+      ->capture_default_str();
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -46,6 +71,7 @@ int main(int argc, char** argv) {
   absl::SetMutexDeadlockDetectionMode(absl::OnDeadlockCycle::kIgnore);
   options.synchronous =
       sync == "normal" ? esg::storage::Synchronous::kNormal : esg::storage::Synchronous::kFull;
+  options.grpc_memory_bytes = grpc_memory_mb << 20;
 
   // Block the stop signals in every thread (gRPC's included), then wait for them here.
   sigset_t signals;

@@ -563,6 +563,16 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   auto say = [&](double f, const std::string& stage) {
     if (progress) progress(std::clamp(f, 0.0, 1.0), stage);
   };
+  // Cancellation, latched: once options.cancelled returns true every later check agrees, so a
+  // parallel job skipped for it is never mistaken for a finished one.
+  std::atomic<bool> stopped{false};
+  auto stop = [&]() -> bool {
+    if (stopped.load()) return true;
+    if (options.cancelled && options.cancelled()) stopped.store(true);
+    return stopped.load();
+  };
+  const auto cancelled = [] { return absl::CancelledError("diagnosis cancelled"); };
+  if (stop()) return cancelled();
 
   DiagnosisReport report;
   report.first_frame_time = frames.front().time;
@@ -585,10 +595,12 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   for (const Gap& g : gaps) held_out_options.withheld.emplace_back(g.first, g.last);
 
   auto run_full_model = [&](const ModelState& m) -> absl::StatusOr<ModelRun> {
+    if (stop()) return cancelled();
     ++report.filter_runs;
     return RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction));
   };
   auto run_held_out = [&](const ModelState& m) -> absl::StatusOr<ModelRun> {
+    if (stop()) return cancelled();
     ++report.filter_runs;
     return RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction),
                     held_out_options);
@@ -598,7 +610,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   say(0.02, "user model");
   ModelState model = *user;
   std::optional<absl::StatusOr<ModelRun>> base_full, base_held;
+  if (stop()) return cancelled();
   ParallelRun(options.threads, 2, [&](int i) {
+    if (stop()) return;
     if (i == 0) {
       base_full = RunModel(model.config, model.options,
                            CorrectStarTracker(frames, rates, model.correction));
@@ -607,6 +621,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                            CorrectStarTracker(frames, rates, model.correction), held_out_options);
     }
   });
+  if (stopped.load()) return cancelled();
   report.filter_runs += gaps.empty() ? 1 : 2;
   if (!base_full->ok()) return base_full->status();
   ModelRun current_run = std::move(**base_full);
@@ -634,6 +649,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   bool held_out_current = true;  // current_held_out belongs to the current model
   bool time_localized = false;   // significant candidates, each only fitting part of the time
   for (int round = 0; round < options.max_effects; ++round) {
+    if (stop()) return cancelled();
     const std::vector<Candidate> candidates = ListCandidates(model, report.gyros, options.effects);
     if (candidates.empty()) break;
     say(0.05 + 0.8 * round / options.max_effects,
@@ -657,6 +673,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     std::atomic<int> done{0};
     std::mutex progress_mu;
     ParallelRun(options.threads, static_cast<int>(order.size()), [&](int j) {
+      if (stop()) return;
       const int i = order[j];
       fits[i] = FitCandidate(candidates[i], ctx);
       const int d = ++done;
@@ -672,6 +689,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       std::array<double, kQuarters> quarters{};
       bool homogeneous = true;
     };
+    if (stopped.load()) return cancelled();
     const std::vector<double> current_steps = StepDeviance(current_run);
     std::vector<Scored> scored;
     for (size_t i = 0; i < candidates.size(); ++i) {
@@ -787,10 +805,12 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
             "held-out comparison of close candidates");
         std::vector<std::optional<absl::StatusOr<ModelRun>>> held(close.size());
         ParallelRun(options.threads, static_cast<int>(close.size()), [&](int j) {
+          if (stop()) return;
           const ModelState& m = (**fits[close[j]]).model;
           held[j] = RunModel(m.config, m.options, CorrectStarTracker(frames, rates, m.correction),
                              held_out_options);
         });
+        if (stopped.load()) return cancelled();
         report.filter_runs += static_cast<int>(close.size());
         double best = 1e300;
         for (size_t j = 0; j < close.size(); ++j) {
@@ -823,11 +843,13 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
           "held-out scoring of the candidates (concealed mismatch)");
       std::vector<std::optional<absl::StatusOr<ModelRun>>> held(scored.size());
       ParallelRun(options.threads, static_cast<int>(scored.size()), [&](int j) {
+        if (stop()) return;
         const CandidateFit& f = **fits[scored[j].index];
         if (f.parameters == 0) return;
         held[j] = RunModel(f.model.config, f.model.options,
                            CorrectStarTracker(frames, rates, f.model.correction), held_out_options);
       });
+      if (stopped.load()) return cancelled();
       double best_drop = 0.0;
       for (size_t j = 0; j < scored.size(); ++j) {
         if (!held[j].has_value()) continue;
@@ -918,6 +940,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   }
 
   // The extended model: held-out run (the full run is current_run).
+  if (stop()) return cancelled();
   say(0.9, "held-out prediction with the findings");
   HeldOutResult final_held_out = base_held_out;
   if (held_out_current) {

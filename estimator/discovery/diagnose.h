@@ -83,6 +83,12 @@ struct DiagnoseOptions {
   double mu_nu_sigma_deg_h = 0.1;
   double misalignment_sigma_arcsec = 60.0;
   RegimeOptions regimes;
+  // Cancellation (may be empty): polled before each stage and before each candidate or
+  // held-out model run (a candidate fit with a parameter search is one unit and is not
+  // interrupted); once it returns true Diagnose returns Cancelled "diagnosis cancelled". Called
+  // from the diagnosis threads concurrently: it must be thread-safe and cheap (e.g. an atomic
+  // flag).
+  std::function<bool()> cancelled;
 };
 
 struct Parameter {
@@ -212,7 +218,8 @@ struct DiagnosisReport {
 using DiagnoseProgressFn = std::function<void(double fraction, const std::string& stage)>;
 
 // Errors: InvalidArgument for an invalid configuration, an unknown model or effect option, no
-// frames or frames out of order, a recording without star-tracker data; those of the session.
+// frames or frames out of order, a recording without star-tracker data; Cancelled when
+// options.cancelled returned true; those of the session.
 absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                                          const std::vector<TelemetryFrame>& frames,
                                          const DiagnoseOptions& options,
