@@ -99,6 +99,12 @@ void RaiseFileLimit() {
   if (limit.rlim_cur != limit.rlim_max) {
     rlimit raised = limit;
     raised.rlim_cur = limit.rlim_max;
+    if (raised.rlim_cur == RLIM_INFINITY) {
+      // An unlimited hard limit: Linux takes at most fs.nr_open descriptors.
+      std::ifstream nr_open("/proc/sys/fs/nr_open");
+      rlim_t most = 0;
+      if (nr_open >> most && most > limit.rlim_cur) raised.rlim_cur = most;
+    }
     if (setrlimit(RLIMIT_NOFILE, &raised) == 0) {
       limit = raised;
     } else {

@@ -423,7 +423,10 @@ TEST(Limits, CancelledDiagnoseCallStopsStoresNothingAndFreesTheCallersSlot) {
 
   ASSERT_TRUE(start_and_cancel()) << "the first diagnosis sent no progress";
   // The server-side run stops: the caller's only slot comes free ...
+  const absl::Time cancelled_at = absl::Now();
   ASSERT_TRUE(WaitFor([&] { return limiter.Running() == 0; }, absl::Minutes(2)));
+  RecordProperty("cancel_to_free_slot_ms",
+                 std::to_string(absl::ToInt64Milliseconds(absl::Now() - cancelled_at)));
   // ... and nothing was stored.
   EXPECT_EQ(stored(), 0);
   // A new diagnosis of the same caller starts at once despite the limit of 1 per caller.
