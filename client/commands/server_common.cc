@@ -119,6 +119,7 @@ Json SessionJson(const esg::v1::SessionInfo& s) {
            {"framesAccepted", s.frames_accepted()},
            {"framesRejected", s.frames_rejected()},
            {"framesDuplicate", s.frames_duplicate()},
+           {"framesConflicting", s.frames_conflicting()},
            {"framesApplied", s.frames_applied()},
            {"framesApplyFailed", s.frames_apply_failed()},
            {"starTrackerRejections", s.star_tracker_rejections()},
@@ -126,8 +127,18 @@ Json SessionJson(const esg::v1::SessionInfo& s) {
            {"unacknowledgedAlerts", s.unacknowledged_alerts()},
            {"latestAttitude", s.has_latest_attitude() ? AttitudeJson(s.latest_attitude()) : Json()},
            {"lastComputeTime", TimeJson(s.last_compute_time(), s.has_last_compute_time())}};
+  if (!s.quarantine_reason().empty()) {
+    doc["quarantineReason"] = s.quarantine_reason();
+    doc["rebuilding"] = s.rebuilding();
+  }
+  Json stations = Json::array();
+  for (const esg::v1::StationSequence& st : s.stations()) {
+    stations.push_back(
+        Json{{"stationId", st.station_id()}, {"highestDurableSequence", st.highest_durable_sequence()}});
+  }
+  doc["stations"] = stations;
   if (s.has_config()) {
-    // The configuration in the form of its JSON file (DESIGN §7).
+    // The configuration in the form of its JSON file (docs/cli.md).
     std::string text;
     google::protobuf::util::JsonPrintOptions print;
     print.always_print_primitive_fields = true;

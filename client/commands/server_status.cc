@@ -31,16 +31,28 @@ void PrintSession(const esg::v1::SessionInfo& s) {
   auto n = [](int64_t v) { return static_cast<long long>(v); };
   std::printf("%s  %s  model %s\n", s.spacecraft_id().c_str(), StateName(s.state()).c_str(),
               s.model().c_str());
+  if (!s.quarantine_reason().empty()) {
+    std::printf("  quarantined%s: %s\n", s.rebuilding() ? " (rebuilding from the archive)" : "",
+                s.quarantine_reason().c_str());
+  }
   std::printf("  working pair %s, reserve pair %s\n", Ids(s.working_pair()).c_str(),
               Ids(s.reserve_pair()).c_str());
   std::printf("  last frame %s (sequence %lld); durable up to %lld, applied up to %lld\n",
               FormatUtc(s.last_frame_time(), s.has_last_frame_time()).c_str(), n(s.last_sequence()),
               n(s.highest_durable_sequence()), n(s.highest_applied_sequence()));
+  if (s.stations_size() > 1 || (s.stations_size() == 1 && s.stations(0).station_id() != "default")) {
+    std::printf("  stations:");
+    for (const esg::v1::StationSequence& st : s.stations()) {
+      std::printf(" %s durable up to %lld;", st.station_id().c_str(),
+                  n(st.highest_durable_sequence()));
+    }
+    std::printf("\n");
+  }
   std::printf(
-      "  frames: accepted %lld, rejected %lld, duplicates %lld, applied %lld, apply "
-      "failed %lld\n",
+      "  frames: accepted %lld, rejected %lld, duplicates %lld, conflicting %lld, applied %lld, "
+      "apply failed %lld\n",
       n(s.frames_accepted()), n(s.frames_rejected()), n(s.frames_duplicate()),
-      n(s.frames_applied()), n(s.frames_apply_failed()));
+      n(s.frames_conflicting()), n(s.frames_applied()), n(s.frames_apply_failed()));
   std::printf("  star-tracker rejections %lld; alerts active %lld, unacknowledged %lld\n",
               n(s.star_tracker_rejections()), n(s.active_alerts()), n(s.unacknowledged_alerts()));
   if (s.has_latest_attitude()) {

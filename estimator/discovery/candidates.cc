@@ -10,6 +10,7 @@
 #include "estimator/discovery/statistics.h"
 #include "estimator/drift_model.h"
 #include "estimator/rotation.h"
+#include "estimator/spacecraft_config.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -514,7 +515,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       double best = 0.0;
       int best_k = -1;
       for (int k = 0; k < kRandomWalkGridPoints; ++k) {
-        const double q = base * std::pow(2.0, q0 > 0.0 ? k + 1 : k);
+        // Never beyond what a configuration may hold (docs/service.md "Limits").
+        const double q = std::min(base * std::pow(2.0, q0 > 0.0 ? k + 1 : k),
+                                  DegPerHourSqrtHourToSi(kConfigLimits.random_walk.max));
         ModelState m = fit.model;
         m.config.random_walk = q;
         ModelRun r;

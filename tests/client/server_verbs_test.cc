@@ -283,7 +283,7 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
   r = RunEsg(dir, at + "status");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("RDK-1"));
-  EXPECT_THAT(r.out, HasSubstr("accepted 361, rejected 0, duplicates 0, applied 361"));
+  EXPECT_THAT(r.out, HasSubstr("accepted 361, rejected 0, duplicates 0, conflicting 0, applied 361"));
 
   // history --csv: one row per snapshot, inside the recording's time span, same column count.
   r = RunEsg(dir, at + "history --spacecraft RDK-1 --csv");
