@@ -127,30 +127,37 @@ void EstimationCore::CommitterLoop() {
       continue;
     }
     if (faulted) SetStorageFault("");
+    // Per spacecraft, under both of its locks once: durable marks first, then out of the
+    // pending set, so an ingest that finds a frame archived also finds it counted durable.
+    std::map<Spacecraft*, std::vector<CommitEntry*>> by_spacecraft;
     std::vector<std::shared_ptr<Spacecraft>> touched;
     for (CommitEntry& e : batch) {
       if (e.barrier) continue;
-      // Durable marks first, then out of the pending set, under both locks: an ingest that
-      // finds the frame archived also finds it counted durable.
-      absl::MutexLock ingest(&e.sc->ingest_mu);
-      absl::MutexLock lock(&e.sc->state_mu);
-      e.sc->pending.erase(e.time);
-      e.sc->pending_ids.erase({e.station, e.sequence});
-      int64_t& durable = e.sc->highest_durable[e.station];
-      durable = std::max(durable, e.sequence);
-      e.sc->last_durable_time = std::max(e.sc->last_durable_time, e.time);
-      ++e.sc->frames_accepted;
-      if (!e.sc->replay_from_archive) {
-        e.sc->ready_bytes += static_cast<int64_t>(sizeof(ReadyFrame) + e.station.size());
-        e.sc->ready.emplace(e.time, ReadyFrame{e.station, e.sequence, std::move(e.frame)});
-        // A filter far behind ingest reads its backlog from the archive instead of memory.
-        if (e.sc->ready_bytes > options_.max_ready_bytes) {
-          e.sc->ready.clear();
-          e.sc->ready_bytes = 0;
-          e.sc->replay_from_archive = true;
+      auto [it, inserted] = by_spacecraft.try_emplace(e.sc.get());
+      if (inserted) touched.push_back(e.sc);
+      it->second.push_back(&e);
+    }
+    for (auto& [sc, entries] : by_spacecraft) {
+      absl::MutexLock ingest(&sc->ingest_mu);
+      absl::MutexLock lock(&sc->state_mu);
+      for (CommitEntry* e : entries) {
+        sc->pending.erase(e->time);
+        sc->pending_ids.erase({e->station, e->sequence});
+        int64_t& durable = sc->highest_durable[e->station];
+        durable = std::max(durable, e->sequence);
+        sc->last_durable_time = std::max(sc->last_durable_time, e->time);
+        ++sc->frames_accepted;
+        if (!sc->replay_from_archive) {
+          sc->ready_bytes += static_cast<int64_t>(sizeof(ReadyFrame) + e->station.size());
+          sc->ready.emplace(e->time, ReadyFrame{e->station, e->sequence, std::move(e->frame)});
+          // A filter far behind ingest reads its backlog from the archive instead of memory.
+          if (sc->ready_bytes > options_.max_ready_bytes) {
+            sc->ready.clear();
+            sc->ready_bytes = 0;
+            sc->replay_from_archive = true;
+          }
         }
       }
-      if (touched.empty() || touched.back() != e.sc) touched.push_back(e.sc);
     }
     for (const auto& sc : touched) Schedule(sc);
     for (CommitEntry& e : batch) {

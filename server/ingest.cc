@@ -29,14 +29,8 @@ std::string Serialize(const esg::v1::TelemetryFrame& frame) {
   return out;
 }
 
-// The frame as stored: its station made explicit, serialized deterministically.
-std::string StoredPayload(const esg::v1::TelemetryFrame& proto, const std::string& station) {
-  esg::v1::TelemetryFrame copy = proto;
-  copy.set_station_id(station);
-  return Serialize(copy);
-}
-
-// The measurement a payload carries, without the identity of the frame that carried it.
+// The measurement a payload carries, without the identity of the frame that carried it (the
+// archive keeps the identity in its own columns).
 std::string Measurement(const std::string& payload) {
   esg::v1::TelemetryFrame frame;
   if (!frame.ParseFromString(payload)) return "\xff unparsable";
@@ -162,7 +156,8 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   }
 
   // Identity and time against what is stored or queued.
-  const std::string payload = StoredPayload(proto, station);
+  // Stored as received; the archive's columns hold the identity (station made explicit).
+  const std::string payload = proto.SerializeAsString();
   auto highest = sc->highest_accepted.find(station);
   const bool known_identity =
       highest != sc->highest_accepted.end() && proto.sequence() <= highest->second;
@@ -183,8 +178,8 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
     }
     if (stored->has_value()) {
       const storage::ArchivedFrame& original = **stored;
-      const bool same = by_identity ? original.payload == payload
-                                    : Measurement(original.payload) == Measurement(payload);
+      // By identity the station and sequence are equal already: the measurement decides.
+      const bool same = Measurement(original.payload) == Measurement(payload);
       if (!same) {
         ++sc->frames_conflicting;
         const std::string what = absl::StrCat(
