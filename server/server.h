@@ -48,8 +48,9 @@ struct ServerOptions {
   // recommends no less than 100). Further calls wait in the client for a free stream.
   int max_streams_per_connection = 100;
   // Memory gRPC may take for its transports (buffers, call arenas) [bytes] (grpc::ResourceQuota).
-  // Under pressure gRPC shrinks flow-control windows, then closes idle connections, then cancels
-  // calls with RESOURCE_EXHAUSTED.
+  // Near it gRPC itself shrinks its flow-control windows and reclaims memory from connections
+  // and calls (gRPC's behaviour; not exercised by our tests). It does not bound the number of
+  // connections: gRPC 1.51 has no such option (docs/service.md "Limits").
   int64_t grpc_memory_bytes = int64_t{1} << 30;
   // Threads of the synchronous services (server reflection) at most (grpc::ResourceQuota).
   int max_sync_threads = 8;
