@@ -267,15 +267,24 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     return txn.Commit();
   }();
   if (!status.ok()) {
-    Log("ERROR", absl::StrCat(sc->id, ": apply commit failed, will retry: ", status.ToString()));
+    // Storage trouble (a full disk, an I/O error): health says so; this job is retried with a
+    // growing pause (at most 2 s), the installed session and its checkpoint stay as they were.
+    SetApplyFault(sc->id, status.ToString());
+    const absl::Duration pause =
+        std::min(absl::Milliseconds(200) * (1 << std::min(sc->apply_retries, 4)), absl::Seconds(2));
+    ++sc->apply_retries;
     {
       absl::MutexLock lock(&sc->state_mu);
       sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
                                 service_alerts.end());
       if (rebuild_done && sc->generation == generation) sc->replay_from_archive = true;
     }
-    absl::SleepFor(absl::Milliseconds(200));
+    absl::SleepFor(pause);
     return true;
+  }
+  if (sc->apply_retries > 0) {
+    sc->apply_retries = 0;
+    SetApplyFault(sc->id, "");
   }
   apply.alert_tracks = to_store.alert_tracks;
   std::vector<storage::AlertRecord> published = alerts.new_alerts();

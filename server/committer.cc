@@ -58,8 +58,42 @@ void EstimationCore::SetStorageFault(const std::string& reason) {
     Log("ERROR", absl::StrCat("storage cannot commit: ", reason,
                               "; ingest refused with UNAVAILABLE until it can"));
   }
+  NotifyStorageHealth();
+}
+
+void EstimationCore::SetApplyFault(const std::string& spacecraft_id, const std::string& reason) {
+  bool changed = false;
+  {
+    absl::MutexLock lock(&commit_mu_);
+    auto it = apply_faults_.find(spacecraft_id);
+    if (reason.empty()) {
+      changed = it != apply_faults_.end();
+      if (changed) apply_faults_.erase(it);
+    } else {
+      changed = it == apply_faults_.end();
+      apply_faults_[spacecraft_id] = reason;
+    }
+  }
+  if (!changed) return;
+  if (reason.empty()) {
+    Log("INFO", absl::StrCat(spacecraft_id, ": the filter's commits succeed again"));
+  } else {
+    Log("ERROR", absl::StrCat(spacecraft_id, ": the filter cannot commit its results: ", reason,
+                              "; it keeps its last checkpoint and retries"));
+  }
+  NotifyStorageHealth();
+}
+
+void EstimationCore::NotifyStorageHealth() {
+  std::string fault;
+  {
+    absl::MutexLock lock(&commit_mu_);
+    fault = !storage_fault_.empty()   ? storage_fault_
+            : !apply_faults_.empty() ? apply_faults_.begin()->second
+                                     : "";
+  }
   absl::MutexLock lock(&listener_mu_);
-  if (storage_listener_) storage_listener_(reason.empty(), reason);
+  if (storage_listener_) storage_listener_(fault.empty(), fault);
 }
 
 // Fails every entry of `batch` (and of the queue behind it, which was accepted against the

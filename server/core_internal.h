@@ -63,6 +63,7 @@ struct EstimationCore::Spacecraft {
 
   // Held for a whole worker job and by a reconfiguration.
   absl::Mutex job_mu;
+  int apply_retries ABSL_GUARDED_BY(job_mu) = 0;  // failed commits of the filter in a row
 
   // ---- Ingest side ----
   absl::Mutex ingest_mu ABSL_ACQUIRED_AFTER(job_mu);

@@ -295,7 +295,8 @@ void EstimationCore::SetStorageHealthListener(
 
 std::string EstimationCore::StorageFault() {
   absl::MutexLock lock(&commit_mu_);
-  return storage_fault_;
+  if (!storage_fault_.empty()) return storage_fault_;
+  return apply_faults_.empty() ? "" : apply_faults_.begin()->second;
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -121,7 +121,7 @@ class EstimationCore {
   // later commit or probe succeeds (the server maps it to the health service). Set before
   // traffic starts; called from the committer thread.
   void SetStorageHealthListener(std::function<void(bool ok, const std::string& reason)> listener);
-  // Empty while storage commits; else why it cannot.
+  // Empty while storage commits (ingest and filter); else why it cannot.
   std::string StorageFault();
 
   // ---- Configuration and queries ----
@@ -172,7 +172,11 @@ class EstimationCore {
   // Committer helpers (committer.cc).
   absl::Status CommitFrames(const std::vector<CommitEntry>& batch);
   void FailBatch(std::vector<CommitEntry>& batch, const absl::Status& error);
+  // Ingest's commits (they hold ingest while failing) and the filter's commits fail or recover;
+  // health follows both. Logged once per change.
   void SetStorageFault(const std::string& reason);
+  void SetApplyFault(const std::string& spacecraft_id, const std::string& reason);
+  void NotifyStorageHealth();
   bool ProbeStorage();
   std::shared_ptr<Spacecraft> Find(const std::string& spacecraft_id);
   void Schedule(const std::shared_ptr<Spacecraft>& sc);
@@ -196,6 +200,9 @@ class EstimationCore {
   int64_t commit_queue_bytes_ ABSL_GUARDED_BY(commit_mu_) = 0;
   // Why storage cannot commit (empty: it can). Ingest is refused while set.
   std::string storage_fault_ ABSL_GUARDED_BY(commit_mu_);
+  // Why the filter's commits of a spacecraft fail (absent: they commit); health only, ingest
+  // goes on.
+  std::map<std::string, std::string> apply_faults_ ABSL_GUARDED_BY(commit_mu_);
   absl::Mutex listener_mu_;
   std::function<void(bool, const std::string&)> storage_listener_ ABSL_GUARDED_BY(listener_mu_);
   bool commit_stop_ ABSL_GUARDED_BY(commit_mu_) = false;

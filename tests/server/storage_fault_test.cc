@@ -4,6 +4,10 @@
 // and the reason, no frame that is not stored is acknowledged, health is NOT_SERVING while
 // storage cannot commit and SERVING again after, and senders that resume lose nothing.
 #include <sqlite3.h>
+#include <sys/statvfs.h>
+
+#include <filesystem>
+#include <fstream>
 
 #include <string>
 #include <vector>
@@ -13,6 +17,7 @@
 #include "gtest/gtest.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/fault_vfs.h"
+#include "tests/testing/tmpfs.h"
 
 namespace esg::server {
 namespace {
@@ -28,6 +33,7 @@ using ::esg::testing::SimulatedRun;
 using ::esg::testing::StoredSessionValues;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
+using ::esg::testing::Tmpfs;
 using ::testing::HasSubstr;
 
 grpc::health::v1::HealthCheckResponse::ServingStatus Health(const LoopbackServer& server) {
@@ -167,6 +173,55 @@ TEST_F(StorageFault, ShutdownFinishesWhileStorageCannotCommit) {
   const absl::Time start = absl::Now();
   server.reset();
   EXPECT_LT(absl::Now() - start, absl::Seconds(20));
+}
+
+// The same on a real file system that fills up: a small tmpfs holding the database, with ballast
+// leaving about 150 KiB free (a day of frames alone needs about 500 KiB, with the coefficient
+// history several MiB).
+TEST_F(StorageFault, RealFullFileSystemFailsStreamsUntilSpaceIsFreedAndLosesNothing) {
+  TempDir dir;
+  Tmpfs tmpfs(dir, "16m");
+  if (!tmpfs.ok()) GTEST_SKIP() << tmpfs.error();
+  const std::string db = tmpfs.File("esg.db");
+  const std::string ballast = tmpfs.File("ballast");
+  const SimulatedRun run = SimulateRun("DISK-1", 24.0, 54);
+  {
+    ServerOptions options;
+    options.core.storage_probe_period = absl::Milliseconds(50);
+    LoopbackServer server(options, db);
+    auto stub = server.Stub();
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse r;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &r).ok());
+    struct statvfs fs {};
+    ASSERT_EQ(statvfs(tmpfs.File("").c_str(), &fs), 0);
+    const int64_t free_bytes = static_cast<int64_t>(fs.f_bavail) * fs.f_frsize;
+    {
+      std::ofstream out(ballast, std::ios::binary);
+      out << std::string(static_cast<size_t>(free_bytes - 150 * 1024), 'b');
+    }
+    // Stream the day, resuming after every failure until the disk is full.
+    auto failed = StreamFrames(*stub, run.frames);
+    EXPECT_EQ(failed.status.error_code(), grpc::StatusCode::UNAVAILABLE)
+        << "the disk never filled up";
+    EXPECT_THAT(failed.status.error_message(), HasSubstr("full"));
+    EXPECT_LT(failed.acks.size(), run.frames.size());
+    for (const auto& ack : failed.acks) EXPECT_TRUE(ack.accepted());
+    EXPECT_TRUE(AwaitHealth(server, grpc::health::v1::HealthCheckResponse::NOT_SERVING));
+    // Space is freed: SERVING again, and the sender resumes from its highest durable sequence.
+    std::filesystem::remove(ballast);
+    EXPECT_TRUE(AwaitHealth(server, grpc::health::v1::HealthCheckResponse::SERVING));
+    const int64_t durable = failed.acks.empty() ? 0 : failed.acks.back().highest_durable_sequence();
+    const std::vector<esg::v1::TelemetryFrame> rest(run.frames.begin() + durable,
+                                                    run.frames.end());
+    auto resumed = StreamFrames(*stub, rest);
+    ASSERT_TRUE(resumed.status.ok()) << resumed.status.error_message();
+    ASSERT_EQ(resumed.acks.size(), rest.size());
+    for (const auto& ack : resumed.acks) EXPECT_TRUE(ack.accepted());
+    ASSERT_TRUE(server.core().WaitApplied("DISK-1", absl::Seconds(120)).ok());
+  }
+  EXPECT_EQ(StoredSessionValues(db, "DISK-1"),
+            OfflineSessionValues(run.config, "10+11", run.frames));
 }
 
 }  // namespace

@@ -35,6 +35,7 @@
 #include "storage/storage.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/fault_vfs.h"
+#include "tests/testing/tmpfs.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
 
@@ -50,6 +51,7 @@ using ::esg::testing::FaultVfs;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::esg::testing::TempDir;
+using ::esg::testing::Tmpfs;
 using ::testing::HasSubstr;
 
 constexpr char kId[] = "SC-FAULT";
@@ -439,40 +441,6 @@ class Immutable {
 
   std::string path_;
   bool ok_ = false;
-  std::string error_;
-};
-
-// A tmpfs of `size` mounted on a new directory of `dir` for its lifetime (unmounted, lazily if
-// busy, at destruction); ok() is false, with the reason, where mounting is refused.
-class Tmpfs {
- public:
-  Tmpfs(const TempDir& dir, const std::string& size) : path_(dir.File("mnt")) {
-    std::filesystem::create_directory(path_);
-    const std::string data = "size=" + size + ",mode=0755";
-    if (::mount("tmpfs", path_.c_str(), "tmpfs", 0, data.c_str()) == 0) {
-      mounted_ = true;
-    } else {
-      error_ = absl::StrCat("mount -t tmpfs -o ", data, " tmpfs ", path_, ": ", ErrnoText(errno));
-    }
-  }
-  ~Tmpfs() {
-    if (mounted_ && ::umount(path_.c_str()) != 0) ::umount2(path_.c_str(), MNT_DETACH);
-  }
-  Tmpfs(const Tmpfs&) = delete;
-  Tmpfs& operator=(const Tmpfs&) = delete;
-
-  bool ok() const { return mounted_; }
-  const std::string& error() const { return error_; }
-  std::string File(const std::string& name) const { return path_ + "/" + name; }
-  // Remounts read-only; the reason if refused.
-  std::string RemountReadOnly() {
-    if (::mount(nullptr, path_.c_str(), nullptr, MS_REMOUNT | MS_RDONLY, nullptr) == 0) return "";
-    return absl::StrCat("mount -o remount,ro ", path_, ": ", ErrnoText(errno));
-  }
-
- private:
-  std::string path_;
-  bool mounted_ = false;
   std::string error_;
 };
 
