@@ -73,6 +73,11 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
   times.erase(std::unique(times.begin(), times.end()), times.end());
 
   std::optional<SampledProfile> planned;
+  if (request.planned_attitude_size() > options_.max_prediction_samples) {
+    return absl::OutOfRangeError(absl::StrCat("planned_attitude: ", request.planned_attitude_size(),
+                                              " samples exceed the limit of ",
+                                              options_.max_prediction_samples));
+  }
   if (request.planned_attitude_size() > 0) {
     std::vector<PlannedSample> samples;
     for (int i = 0; i < request.planned_attitude_size(); ++i) {

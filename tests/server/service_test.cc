@@ -258,6 +258,11 @@ TEST(Service, MalformedRequestsGetTheirCodeAndNameTheField) {
   p.set_spacecraft_id(run.config.spacecraft_id);
   p.add_planned_attitude()->add_q_in_b(1.0);
   ExpectCode(predict(p), grpc::StatusCode::INVALID_ARGUMENT, "planned_attitude[0].time");
+  // More planned samples than a prediction may have (100 000).
+  p.mutable_planned_attitude()->Reserve(100001);
+  for (int i = 0; i < 100000; ++i) *p.add_planned_attitude() = p.planned_attitude(0);
+  ExpectCode(predict(p), grpc::StatusCode::OUT_OF_RANGE, "planned_attitude: 100001 samples");
+  p.clear_planned_attitude();
   // Sessions, history, alerts.
   {
     grpc::ClientContext ctx;
