@@ -119,12 +119,21 @@ const EstimationSession::GyroState* EstimationSession::Find(int id) const {
   return nullptr;
 }
 
-int EstimationSession::ThetaOffset(const GyroState& g) const {
-  return g.offset + 2 + (options_.model.random_walk ? 2 : 0);
+int EstimationSession::IndexOf(int id) const {
+  for (int i = 0; i < gyro_count(); ++i) {
+    if (gyros_[i].id == id) return i;
+  }
+  return -1;
 }
 
-int EstimationSession::PhiOffset(const GyroState& g) const {
-  return ThetaOffset(g) + static_cast<int>(g.free.size());
+StateLayout EstimationSession::LayoutFor(const SpacecraftConfig& config, const ModelSpec& model,
+                                         const std::vector<GyroState>& gyros) {
+  StateLayout layout(model.random_walk);
+  for (const GyroState& g : gyros) {
+    const GyroConfig& gc = *config.FindGyro(g.id);
+    layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0);
+  }
+  return layout;
 }
 
 absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
@@ -144,22 +153,18 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
   }
   const Matrix3d C_in_b = st->q_in_b.normalized().toRotationMatrix();
   gyros_.clear();
-  int offset = 0;
   for (int id : order) {
     const GyroConfig& gc = *config_.FindGyro(id);
     GyroState g;
     g.id = id;
     g.C_b_k_config = gc.C_b_k;
     g.theta = ModelCoefficients(options_.model, gc);
-    g.free = FreeCoefficients(options_.model, gc);
-    g.estimate_phi = gc.misalignment_sigma > 0.0;
-    g.offset = offset;
     g.has_reading = true;
     g.h_k_last = frame.gyros[id - 1]->h_k.normalized();
     g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();  // bases below need it
-    offset += g.size(options_.model.random_walk);
     gyros_.push_back(std::move(g));
   }
+  layout_ = LayoutFor(config_, options_.model, gyros_);
   // Tangent bases from e1 = unit(h_a x h_b) of the working pair (conventions.h).
   auto C_int_in = QuasiInertialFrame(gyros_[0].h_in, gyros_[1].h_in);
   if (!C_int_in.ok()) return C_int_in.status();
@@ -170,24 +175,26 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
   }
 
   // Prior covariance of the coefficients, residual drifts and misalignments, then the spin axes.
-  const int n = offset;
+  const int n = layout_.size();
   P_ = MatrixXd::Zero(n, n);
   const double sigma_rw0 =
       options_.residual_drift_sigma >= 0.0
           ? options_.residual_drift_sigma
           : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
-  for (GyroState& g : gyros_) {
-    const GyroConfig& gc = *config_.FindGyro(g.id);
-    if (options_.model.random_walk) {
-      P_.block<2, 2>(g.rw_offset(), g.rw_offset()) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
+  for (int i = 0; i < gyro_count(); ++i) {
+    const GyroConfig& gc = *config_.FindGyro(gyros_[i].id);
+    if (layout_.has_drift()) {
+      const int d = layout_.Drift(i);
+      P_.block<2, 2>(d, d) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
     }
     const DriftVector sigma_theta = gc.model_sigma.AsVector();
-    for (size_t j = 0; j < g.free.size(); ++j) {
-      const int idx = ThetaOffset(g) + static_cast<int>(j);
-      P_(idx, idx) = sigma_theta(g.free[j]) * sigma_theta(g.free[j]);
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+      const int idx = layout_.Theta(i) + j;
+      P_(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
     }
-    if (g.estimate_phi) {
-      const int po = PhiOffset(g);
+    if (layout_.HasPhi(i)) {
+      const int po = layout_.Phi(i);
       P_.block<3, 3>(po, po) = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
     }
   }
@@ -209,42 +216,45 @@ void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {
   const Matrix3d Sigma_st = st_noise.cwiseAbs2().asDiagonal();
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
   std::vector<Matrix23> G_st(gyros_.size());
-  for (GyroState& g : gyros_) {
+  for (int i = 0; i < gyro_count(); ++i) {
+    GyroState& g = gyros_[i];
     g.h_in = (C_in_b * g.C_b_k() * g.h_k_last).normalized();
     g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
-    P_.middleRows(g.offset, 2).setZero();
-    P_.middleCols(g.offset, 2).setZero();
+    P_.middleRows(layout_.SpinAxis(i), 2).setZero();
+    P_.middleCols(layout_.SpinAxis(i), 2).setZero();
   }
   // A maps the state to the spin-axis errors through the misalignments (zero on the spin axes).
   const int n = state_size();
   MatrixXd A = MatrixXd::Zero(n, n);
   MatrixXd noise = MatrixXd::Zero(n, n);
-  for (size_t i = 0; i < gyros_.size(); ++i) {
+  for (int i = 0; i < gyro_count(); ++i) {
     GyroState& g = gyros_[i];
+    const int h = layout_.SpinAxis(i);
     const Matrix23 Tt = g.T().transpose();
     const Vector3d h_b = g.C_b_k() * g.h_k_last;
     G_st[i] = -Tt * C_in_b * Skew(h_b);
-    if (g.estimate_phi) A.block<2, 3>(g.offset, PhiOffset(g)) = -Tt * C_in_b * Skew(h_b);
+    if (layout_.HasPhi(i)) A.block<2, 3>(h, layout_.Phi(i)) = -Tt * C_in_b * Skew(h_b);
     const Matrix2d G_r = Tt * C_in_b * g.C_b_k() * TangentBasis(g.h_k_last);
-    noise.block<2, 2>(g.offset, g.offset) += sigma_r * sigma_r * G_r * G_r.transpose();
+    noise.block<2, 2>(h, h) += sigma_r * sigma_r * G_r * G_r.transpose();
   }
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    for (size_t j = 0; j < gyros_.size(); ++j) {
-      noise.block<2, 2>(gyros_[i].offset, gyros_[j].offset) +=
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j < gyro_count(); ++j) {
+      noise.block<2, 2>(layout_.SpinAxis(i), layout_.SpinAxis(j)) +=
           G_st[i] * Sigma_st * G_st[j].transpose();
     }
   }
   // dh = A x + n: P_dh,x = A P (for x not a spin axis), P_dh,dh = A P A^T + N.
   const MatrixXd AP = A * P_;
   const MatrixXd APAt = AP * A.transpose();
-  for (const GyroState& g : gyros_) {
-    P_.middleRows(g.offset, 2) = AP.middleRows(g.offset, 2);
-    P_.middleCols(g.offset, 2) = AP.middleRows(g.offset, 2).transpose();
+  for (int i = 0; i < gyro_count(); ++i) {
+    const int h = layout_.SpinAxis(i);
+    P_.middleRows(h, 2) = AP.middleRows(h, 2);
+    P_.middleCols(h, 2) = AP.middleRows(h, 2).transpose();
   }
-  for (const GyroState& a : gyros_) {
-    for (const GyroState& b : gyros_) {
-      P_.block<2, 2>(a.offset, b.offset) =
-          APAt.block<2, 2>(a.offset, b.offset) + noise.block<2, 2>(a.offset, b.offset);
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j < gyro_count(); ++j) {
+      const int hi = layout_.SpinAxis(i), hj = layout_.SpinAxis(j);
+      P_.block<2, 2>(hi, hj) = APAt.block<2, 2>(hi, hj) + noise.block<2, 2>(hi, hj);
     }
   }
   P_ = (0.5 * (P_ + P_.transpose())).eval();
@@ -253,9 +263,11 @@ void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {
 std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const Vector3d& h_k_a,
                                                              const Vector3d& h_k_b,
                                                              Matrix3d* covariance_in) const {
-  const GyroState* ga = Find(a);
-  const GyroState* gb = Find(b);
-  if (ga == nullptr || gb == nullptr) return std::nullopt;
+  const int ia = IndexOf(a);
+  const int ib = IndexOf(b);
+  if (ia < 0 || ib < 0) return std::nullopt;
+  const GyroState* ga = &gyros_[ia];
+  const GyroState* gb = &gyros_[ib];
   auto attitude = [&](const Vector3d& h_in_a, const Vector3d& h_in_b, const Matrix3d& C_a,
                       const Matrix3d& C_b, const Vector3d& hk_a,
                       const Vector3d& hk_b) -> std::optional<Quaterniond> {
@@ -281,18 +293,18 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   };
   const Matrix32 Ta = ga->T(), Tb = gb->T();
   for (int i = 0; i < 2; ++i) {
-    J.col(ga->offset + i) =
+    J.col(layout_.SpinAxis(ia) + i) =
         diff(attitude((ga->h_in + e * Ta.col(i)).normalized(), gb->h_in, C_a, C_b, h_k_a, h_k_b));
-    J.col(gb->offset + i) =
+    J.col(layout_.SpinAxis(ib) + i) =
         diff(attitude(ga->h_in, (gb->h_in + e * Tb.col(i)).normalized(), C_a, C_b, h_k_a, h_k_b));
   }
   for (int i = 0; i < 3; ++i) {
     const Matrix3d R = ExpMatrix(e * Vector3d::Unit(i));
-    if (ga->estimate_phi) {
-      J.col(PhiOffset(*ga) + i) = diff(attitude(ga->h_in, gb->h_in, R * C_a, C_b, h_k_a, h_k_b));
+    if (layout_.HasPhi(ia)) {
+      J.col(layout_.Phi(ia) + i) = diff(attitude(ga->h_in, gb->h_in, R * C_a, C_b, h_k_a, h_k_b));
     }
-    if (gb->estimate_phi) {
-      J.col(PhiOffset(*gb) + i) = diff(attitude(ga->h_in, gb->h_in, C_a, R * C_b, h_k_a, h_k_b));
+    if (layout_.HasPhi(ib)) {
+      J.col(layout_.Phi(ib) + i) = diff(attitude(ga->h_in, gb->h_in, C_a, R * C_b, h_k_a, h_k_b));
     }
   }
   const Matrix32 Ua = TangentBasis(h_k_a), Ub = TangentBasis(h_k_b);
@@ -302,10 +314,10 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   }
   // Only the columns of the two gyros are nonzero: J P J^T over those blocks.
   std::vector<int> cols;
-  for (const GyroState* g : {ga, gb}) {
-    for (int k = 0; k < 2; ++k) cols.push_back(g->offset + k);
-    if (g->estimate_phi) {
-      for (int k = 0; k < 3; ++k) cols.push_back(PhiOffset(*g) + k);
+  for (int g : {ia, ib}) {
+    for (int k = 0; k < 2; ++k) cols.push_back(layout_.SpinAxis(g) + k);
+    if (layout_.HasPhi(g)) {
+      for (int k = 0; k < 3; ++k) cols.push_back(layout_.Phi(g) + k);
     }
   }
   const int m = static_cast<int>(cols.size());
@@ -321,7 +333,7 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
 
 absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   const double span = Seconds(frame.time - last_time_);
-  const bool rw = options_.model.random_walk;
+  const bool rw = layout_.has_drift();
 
   // Readings at both ends (a gyro missing in the new frame holds its last reading).
   std::vector<Vector3d> h_k_begin(gyros_.size()), h_k_end(gyros_.size());
@@ -386,17 +398,18 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   // P <- P + E P + P E^T + E P E^T + Q costs O(n k) instead of O(n^3).
   std::vector<MatrixXd> E(gyros_.size());
   const double q_rw = config_.random_walk;
-  for (size_t i = 0; i < gyros_.size(); ++i) {
+  for (int i = 0; i < gyro_count(); ++i) {
     GyroState& g = gyros_[i];
     // Keep the tangent basis perpendicular to the moved axis (a change of order 1e-5 rad).
     g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
     const Matrix23 Tt = g.T().transpose();
     const Matrix3d minus_hx = -Skew(g.h_in);  // v x h = -h x v
-    const int k = (rw ? 2 : 0) + static_cast<int>(g.free.size());
-    E[i] = MatrixXd::Zero(2, k);
+    // Columns: the spin-axis drivers of state_layout.h, residual drift then free coefficients.
+    E[i] = MatrixXd::Zero(2, layout_.SpinAxisDriverCount(i));
     if (rw) E[i].leftCols<2>() = kJ * span;
-    for (size_t j = 0; j < g.free.size(); ++j) {
-      E[i].col((rw ? 2 : 0) + static_cast<int>(j)) = Tt * minus_hx * M[i].col(g.free[j]);
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+      E[i].col(layout_.DriftSize() + j) = Tt * minus_hx * M[i].col(free[j]);
     }
     g.h_k_last = h_k_end[i];
   }
@@ -404,21 +417,20 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   // caller's session untouched. Only the spin-axis rows and columns (and the random-walk blocks)
   // change; they are symmetrised and checked, the rest of P is untouched.
   std::vector<MatrixXd> EP(gyros_.size());
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    EP[i] = E[i] * P_.middleRows(gyros_[i].offset + 2, E[i].cols());  // 2 x n, from P before
+  for (int i = 0; i < gyro_count(); ++i) {
+    EP[i] = E[i] * P_.middleRows(layout_.SpinAxisDrivers(i), E[i].cols());  // 2 x n, from P before
   }
   std::vector<std::vector<Matrix2d>> EPEt(gyros_.size(), std::vector<Matrix2d>(gyros_.size()));
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    for (size_t j = 0; j < gyros_.size(); ++j) {
-      EPEt[i][j] = EP[i].middleCols(gyros_[j].offset + 2, E[j].cols()) * E[j].transpose();
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j < gyro_count(); ++j) {
+      EPEt[i][j] = EP[i].middleCols(layout_.SpinAxisDrivers(j), E[j].cols()) * E[j].transpose();
     }
   }
-  for (size_t i = 0; i < gyros_.size(); ++i) P_.middleRows(gyros_[i].offset, 2) += EP[i];
-  for (size_t i = 0; i < gyros_.size(); ++i) P_.middleCols(gyros_[i].offset, 2) += EP[i].transpose();
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    const GyroState& g = gyros_[i];
-    for (size_t j = 0; j <= i; ++j) {
-      const int oi = g.offset, oj = gyros_[j].offset;
+  for (int i = 0; i < gyro_count(); ++i) P_.middleRows(layout_.SpinAxis(i), 2) += EP[i];
+  for (int i = 0; i < gyro_count(); ++i) P_.middleCols(layout_.SpinAxis(i), 2) += EP[i].transpose();
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j <= i; ++j) {
+      const int oi = layout_.SpinAxis(i), oj = layout_.SpinAxis(j);
       const Matrix2d block = 0.5 * (P_.block<2, 2>(oi, oj) + P_.block<2, 2>(oj, oi).transpose()) +
                              0.5 * (EPEt[i][j] + EPEt[j][i].transpose());
       P_.block<2, 2>(oi, oj) = block;
@@ -427,20 +439,23 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     if (rw) {
       // Integrated random walk (eq. (11)) over the interval.
       const double q2 = q_rw * q_rw;
-      P_.block<2, 2>(g.rw_offset(), g.rw_offset()) += q2 * span * Matrix2d::Identity();
-      P_.block<2, 2>(g.offset, g.rw_offset()) += q2 * span * span / 2.0 * kJ;
-      P_.block<2, 2>(g.rw_offset(), g.offset) += q2 * span * span / 2.0 * kJ.transpose();
-      P_.block<2, 2>(g.offset, g.offset) += q2 * span * span * span / 3.0 * Matrix2d::Identity();
+      const int h = layout_.SpinAxis(i), d = layout_.Drift(i);
+      P_.block<2, 2>(d, d) += q2 * span * Matrix2d::Identity();
+      P_.block<2, 2>(h, d) += q2 * span * span / 2.0 * kJ;
+      P_.block<2, 2>(d, h) += q2 * span * span / 2.0 * kJ.transpose();
+      P_.block<2, 2>(h, h) += q2 * span * span * span / 3.0 * Matrix2d::Identity();
     }
   }
-  for (const GyroState& g : gyros_) {
-    const int rows = 2 + (rw ? 2 : 0);
-    if (!P_.middleRows(g.offset, rows).allFinite()) {
-      return absl::InternalError(absl::StrFormat("covariance of gyro %d is not finite after propagation", g.id));
+  // The rows that changed: spin axis, then residual drift (contiguous, state_layout.h).
+  const int rows = StateLayout::kSpinAxisSize + layout_.DriftSize();
+  for (int i = 0; i < gyro_count(); ++i) {
+    const int h = layout_.SpinAxis(i);
+    if (!P_.middleRows(h, rows).allFinite()) {
+      return absl::InternalError(absl::StrFormat("covariance of gyro %d is not finite after propagation", gyros_[i].id));
     }
     for (int k = 0; k < rows; ++k) {
-      if (P_(g.offset + k, g.offset + k) < 0.0) {
-        return absl::InternalError(absl::StrFormat("covariance of gyro %d has a negative variance", g.id));
+      if (P_(h + k, h + k) < 0.0) {
+        return absl::InternalError(absl::StrFormat("covariance of gyro %d has a negative variance", gyros_[i].id));
       }
     }
   }
@@ -530,9 +545,9 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   }
 
   // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
-  std::vector<const GyroState*> healthy;
-  for (const GyroState& g : gyros_) {
-    if (has_reading(g)) healthy.push_back(&g);
+  std::vector<int> healthy;  // gyro indices
+  for (int i = 0; i < gyro_count(); ++i) {
+    if (has_reading(gyros_[i])) healthy.push_back(i);
   }
   const int n_st = st_available ? 2 * static_cast<int>(healthy.size()) : 0;
   const int n_avt = options_.use_autonomous_measurements
@@ -548,39 +563,39 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   VectorXd noise_var(n_noise);
   noise_var.head<3>() = st_noise.cwiseAbs2();
   noise_var.tail(n_noise - 3).setConstant(sigma_r * sigma_r);
-  auto noise_col = [&](const GyroState& g) {
-    return 3 + 2 * static_cast<int>(&g - gyros_.data());
-  };
+  auto noise_col = [](int gyro_index) { return 3 + 2 * gyro_index; };
 
   // Body attitude for the star-tracker rebuild is the star tracker's own.
   const Matrix3d C_in_b_st = q_st.toRotationMatrix();
   int row = 0;
-  for (const GyroState* g : healthy) {
+  for (int i : healthy) {
     if (!st_available) break;
+    const GyroState& g = gyros_[i];
     const StarTrackerDifference d =
-        MakeStarTrackerDifference(g->h_in, g->T(), C_in_b_st, g->C_b_k(), g->h_k_last);
+        MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
     z.segment<2>(row) = d.z;
-    H.block<2, 2>(row, g->offset) = d.H_h;
-    if (g->estimate_phi) H.block<2, 3>(row, PhiOffset(*g)) = d.H_phi;
+    H.block<2, 2>(row, layout_.SpinAxis(i)) = d.H_h;
+    if (layout_.HasPhi(i)) H.block<2, 3>(row, layout_.Phi(i)) = d.H_phi;
     G.block<2, 3>(row, 0) = d.G_st;
-    G.block<2, 2>(row, noise_col(*g)) = d.G_readout;
+    G.block<2, 2>(row, noise_col(i)) = d.G_readout;
     row += 2;
   }
-  std::vector<std::pair<const GyroState*, const GyroState*>> avt_pairs;
-  for (size_t i = 0; i < healthy.size() && n_avt > 0; ++i) {
-    for (size_t j = i + 1; j < healthy.size(); ++j) {
-      const GyroState& a = *healthy[i];
-      const GyroState& b = *healthy[j];
+  std::vector<std::pair<int, int>> avt_pairs;  // gyro ids
+  for (size_t ka = 0; ka < healthy.size() && n_avt > 0; ++ka) {
+    for (size_t kb = ka + 1; kb < healthy.size(); ++kb) {
+      const int ia = healthy[ka], ib = healthy[kb];
+      const GyroState& a = gyros_[ia];
+      const GyroState& b = gyros_[ib];
       const AutonomousDifference d = MakeAutonomousDifference(
           a.h_in, a.T(), a.C_b_k(), a.h_k_last, b.h_in, b.T(), b.C_b_k(), b.h_k_last);
       z(row) = d.z;
-      H.block<1, 2>(row, a.offset) = d.H_h_a;
-      H.block<1, 2>(row, b.offset) = d.H_h_b;
-      if (a.estimate_phi) H.block<1, 3>(row, PhiOffset(a)) = d.H_phi_a;
-      if (b.estimate_phi) H.block<1, 3>(row, PhiOffset(b)) = d.H_phi_b;
-      G.block<1, 2>(row, noise_col(a)) = d.G_readout_a;
-      G.block<1, 2>(row, noise_col(b)) = d.G_readout_b;
-      avt_pairs.emplace_back(&a, &b);
+      H.block<1, 2>(row, layout_.SpinAxis(ia)) = d.H_h_a;
+      H.block<1, 2>(row, layout_.SpinAxis(ib)) = d.H_h_b;
+      if (layout_.HasPhi(ia)) H.block<1, 3>(row, layout_.Phi(ia)) = d.H_phi_a;
+      if (layout_.HasPhi(ib)) H.block<1, 3>(row, layout_.Phi(ib)) = d.H_phi_b;
+      G.block<1, 2>(row, noise_col(ia)) = d.G_readout_a;
+      G.block<1, 2>(row, noise_col(ib)) = d.G_readout_b;
+      avt_pairs.emplace_back(a.id, b.id);
       ++row;
     }
   }
@@ -602,7 +617,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
       for (int i = 0; i < n_st; ++i) keep.push_back(i);
       report.star_tracker_used = true;
     } else {
-      const GyroState* g = healthy[t.worst_index / 2];
+      const GyroState* g = &gyros_[healthy[t.worst_index / 2]];
       report.events.push_back(Event{
           Event::Kind::kStarTrackerInnovation, frame.time, "star_tracker",
           RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold), "arcsec",
@@ -625,7 +640,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     } else {
       report.events.push_back(Event{
           Event::Kind::kGyroDataRejected, frame.time,
-          absl::StrFormat("gyros %d,%d", avt_pairs[k].first->id, avt_pairs[k].second->id),
+          absl::StrFormat("gyros %d,%d", avt_pairs[k].first, avt_pairs[k].second),
           std::abs(z(i)), kd * sigma, "1",
           absl::StrFormat("eq. (14): autonomous measurement z_avt = %.3g exceeds k_d sigma_z = %.3g",
                           z(i), kd * sigma)});
@@ -671,16 +686,16 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
 
 void EstimationSession::ApplyCorrection(const VectorXd& dx) {
   // Feedback of the error estimate into the nominal state, then the error state is zero.
-  for (GyroState& g : gyros_) {
-    g.h_in = (g.h_in + g.T() * dx.segment<2>(g.offset)).normalized();
+  for (int i = 0; i < gyro_count(); ++i) {
+    GyroState& g = gyros_[i];
+    g.h_in = (g.h_in + g.T() * dx.segment<2>(layout_.SpinAxis(i))).normalized();
     g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
-    if (options_.model.random_walk) g.residual_drift += dx.segment<2>(g.rw_offset());
-    for (size_t j = 0; j < g.free.size(); ++j) {
-      g.theta(g.free[j]) += dx(ThetaOffset(g) + static_cast<int>(j));
-    }
-    if (g.estimate_phi) {
+    if (layout_.has_drift()) g.residual_drift += dx.segment<2>(layout_.Drift(i));
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) g.theta(free[j]) += dx(layout_.Theta(i) + j);
+    if (layout_.HasPhi(i)) {
       // C_b_k(true) = Exp(dphi) Exp(phi) C_b_k(config): compose the rotations.
-      g.phi_b = LogQuaternion(ExpQuaternion(dx.segment<3>(PhiOffset(g))) * ExpQuaternion(g.phi_b));
+      g.phi_b = LogQuaternion(ExpQuaternion(dx.segment<3>(layout_.Phi(i))) * ExpQuaternion(g.phi_b));
     }
   }
 }
@@ -710,9 +725,9 @@ void EstimationSession::UpdateState(const StepReport& report) {
   // Convergence: every free coefficient's relative sigma changed < 5% over the last hour (a
   // 1/sqrt(t) information law alone changes it by 1/(2 t) per hour: 2% at 24 h).
   std::vector<double> ratios;
-  for (const GyroState& g : gyros_) {
-    for (size_t j = 0; j < g.free.size(); ++j) {
-      const int idx = ThetaOffset(g) + static_cast<int>(j);
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+      const int idx = layout_.Theta(i) + j;
       ratios.push_back(std::sqrt(P_(idx, idx) / P0_(idx, idx)));
     }
   }
@@ -772,26 +787,31 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& fra
 
 std::vector<GyroEstimate> EstimationSession::Gyros() const {
   std::vector<GyroEstimate> out;
-  for (const GyroState& g : gyros_) {
+  for (int i = 0; i < gyro_count(); ++i) {
+    const GyroState& g = gyros_[i];
     GyroEstimate e;
     e.id = g.id;
     e.coefficients = DriftCoefficients::FromVector(g.theta);
     DriftVector sigma = DriftVector::Zero();
-    for (size_t j = 0; j < g.free.size(); ++j) {
-      const int idx = ThetaOffset(g) + static_cast<int>(j);
-      sigma(g.free[j]) = std::sqrt(std::max(P_(idx, idx), 0.0));
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+      const int idx = layout_.Theta(i) + j;
+      sigma(free[j]) = std::sqrt(std::max(P_(idx, idx), 0.0));
     }
     e.sigma = DriftCoefficients::FromVector(sigma);
     e.misalignment_b = g.phi_b;
-    if (g.estimate_phi) {
-      e.misalignment_sigma_b = P_.block<3, 3>(PhiOffset(g), PhiOffset(g)).diagonal().cwiseSqrt();
+    if (layout_.HasPhi(i)) {
+      const int p = layout_.Phi(i);
+      e.misalignment_sigma_b = P_.block<3, 3>(p, p).diagonal().cwiseSqrt();
     }
-    if (options_.model.random_walk) {
+    if (layout_.has_drift()) {
+      const int d = layout_.Drift(i);
       e.residual_drift = g.residual_drift;
-      e.residual_drift_sigma = P_.block<2, 2>(g.rw_offset(), g.rw_offset()).diagonal().cwiseSqrt();
+      e.residual_drift_sigma = P_.block<2, 2>(d, d).diagonal().cwiseSqrt();
     }
     e.h_in = g.h_in;
-    e.spin_axis_sigma = P_.block<2, 2>(g.offset, g.offset).diagonal().cwiseSqrt();
+    const int h = layout_.SpinAxis(i);
+    e.spin_axis_sigma = P_.block<2, 2>(h, h).diagonal().cwiseSqrt();
     e.faulty = g.faulty;
     out.push_back(e);
   }
@@ -800,11 +820,11 @@ std::vector<GyroEstimate> EstimationSession::Gyros() const {
 
 std::vector<std::pair<int, double>> EstimationSession::RelativeSigma(int id) const {
   std::vector<std::pair<int, double>> out;
-  const GyroState* g = Find(id);
-  if (g == nullptr) return out;
-  for (size_t j = 0; j < g->free.size(); ++j) {
-    const int idx = ThetaOffset(*g) + static_cast<int>(j);
-    out.emplace_back(g->free[j], std::sqrt(P_(idx, idx) / P0_(idx, idx)));
+  const int i = IndexOf(id);
+  if (i < 0) return out;
+  for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+    const int idx = layout_.Theta(i) + j;
+    out.emplace_back(layout_.FreeCoefficients(i)[j], std::sqrt(P_(idx, idx) / P0_(idx, idx)));
   }
   return out;
 }
@@ -960,7 +980,6 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   get_vec(s.convergence_mark_sigma_);
   const int n_gyros = static_cast<int>(get());
   if (n_gyros < 0 || n_gyros > kMaxGyros) return absl::DataLossError("checkpoint: bad gyro count");
-  int offset = 0;
   for (int i = 0; i < n_gyros; ++i) {
     GyroState g;
     g.id = static_cast<int>(get());
@@ -969,8 +988,6 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       return absl::DataLossError(absl::StrCat("checkpoint: gyro ", g.id, " is not in the configuration"));
     }
     g.C_b_k_config = gc->C_b_k;
-    g.free = FreeCoefficients(options.model, *gc);
-    g.estimate_phi = gc->misalignment_sigma > 0.0;
     get_vec(g.h_in);
     get_vec(g.t1);
     get_vec(g.residual_drift);
@@ -979,15 +996,14 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     g.faulty = get() != 0;
     g.has_reading = get() != 0;
     get_vec(g.h_k_last);
-    g.offset = offset;
-    offset += g.size(options.model.random_walk);
     s.gyros_.push_back(std::move(g));
   }
+  s.layout_ = LayoutFor(config, options.model, s.gyros_);
   const int n = static_cast<int>(get());
-  if (n != offset) {
+  if (n != s.layout_.size()) {
     return absl::DataLossError(absl::StrFormat(
         "checkpoint: covariance size %d does not fit the configuration and model %s (%d states)", n,
-        options.model.Name(), offset));
+        options.model.Name(), s.layout_.size()));
   }
   s.P_ = MatrixXd::Zero(n, n);
   s.P0_ = MatrixXd::Zero(n, n);

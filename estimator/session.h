@@ -3,20 +3,17 @@
 // the star tracker, calibration of the drift model (models 1, 10, 11), fault detection by eq. (12)
 // and (14), and long-gap prediction. Pure computation: frames in, reports out.
 //
-// FILTER STATE (error form, conventions.h: error = true - estimate), per running gyro g, in order
-// of the gyros (working pair first, reference gyro first):
-//   dh_g      2  spin-axis direction error in the gyro's tangent basis (t1_g, t2_g): t1 = e1 of
-//                the `int` frame (conventions.h) projected perpendicular to h_in_g, t2 = h_in_g x t1;
-//                for the reference gyro (t1, t2) = (e1, -e3), i.e. the paper's dh_int1_1 and
-//                -dh_int3_1 [rad]
-//   dw_int_g  2  residual random-walk drift, eq. (11), perpendicular to h_in_g in the same basis
-//                [rad/s] (only with model 11; the component along the spin axis moves nothing and
-//                is not a state)
-//   dtheta_g  n  errors of the free drift coefficients (k0, C1, C2, mu, nu that the model holds
-//                and whose modelSigma > 0) [rad/s]
-//   dphi_g    3  gyro-to-star-tracker misalignment, small rotation in body axes:
-//                C_b_k(true) = Exp(phi_g) C_b_k(config) [rad] (when misalignmentSigma > 0)
-// About 14 states per gyro, 42 for three running gyros with model 10+11.
+// FILTER STATE (error form, conventions.h: error = true - estimate): one block per running gyro,
+// in the order of the gyros (working pair first, reference gyro first), indexed only through
+// StateLayout (state_layout.h): spin-axis error dh_g (2), residual random-walk drift dw_int_g of
+// eq. (11) (2, with model 11), errors of the free drift coefficients dtheta_g (0-13) and the
+// misalignment dphi_g (3, when misalignmentSigma > 0). About 14 states per gyro, 42 for three
+// running gyros with model 10+11.
+//   dh_g and dw_int_g live in the gyro's tangent basis (t1_g, t2_g): t1 = e1 of the `int` frame
+//   (conventions.h) projected perpendicular to h_in_g, t2 = h_in_g x t1; for the reference gyro
+//   (t1, t2) = (e1, -e3), i.e. the paper's dh_int1_1 and -dh_int3_1 [rad]. The component of
+//   dw_int along the spin axis moves nothing and is not a state [rad/s].
+//   dphi_g: C_b_k(true) = Exp(phi_g) C_b_k(config) [rad].
 //
 // MEASUREMENTS every measurement step (60 s default), gyro readings interpolated (slerp) to the
 // integration rate (8 Hz default) between telemetry frames:
@@ -56,6 +53,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/drift_model.h"
 #include "estimator/spacecraft_config.h"
+#include "estimator/state_layout.h"
 #include "estimator/telemetry.h"
 
 namespace esg::estimator {
@@ -209,10 +207,7 @@ class EstimationSession {
     Eigen::Vector3d t1 = Eigen::Vector3d::UnitX();  // tangent basis, t2 = h_in x t1
     Eigen::Vector2d residual_drift = Eigen::Vector2d::Zero();
     DriftVector theta = DriftVector::Zero();
-    std::vector<int> free;
     Eigen::Vector3d phi_b = Eigen::Vector3d::Zero();
-    bool estimate_phi = false;
-    int offset = 0;  // first state index
     bool faulty = false;
     // Last reading (for interpolation to the integration rate).
     bool has_reading = false;
@@ -221,10 +216,6 @@ class EstimationSession {
     Eigen::Vector3d t2() const { return h_in.cross(t1); }
     Eigen::Matrix<double, 3, 2> T() const;
     Eigen::Matrix3d C_b_k() const;
-    int size(bool random_walk) const {
-      return 2 + (random_walk ? 2 : 0) + static_cast<int>(free.size()) + (estimate_phi ? 3 : 0);
-    }
-    int rw_offset() const { return offset + 2; }
   };
 
   EstimationSession() = default;
@@ -236,8 +227,13 @@ class EstimationSession {
   absl::Status Propagate(const TelemetryFrame& frame);
   absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
   void ApplyCorrection(const Eigen::VectorXd& dx);
-  int ThetaOffset(const GyroState& g) const;
-  int PhiOffset(const GyroState& g) const;
+  // The state layout of `gyros` (each configured in `config`) under `model`: the free
+  // coefficients and the misalignment states follow from the configured sigmas.
+  static StateLayout LayoutFor(const SpacecraftConfig& config, const ModelSpec& model,
+                               const std::vector<GyroState>& gyros);
+  int gyro_count() const { return static_cast<int>(gyros_.size()); }
+  // Index of gyro `id` in gyros_ (and in layout_), -1 if it is not running.
+  int IndexOf(int id) const;
   GyroState* Find(int id);
   const GyroState* Find(int id) const;
   // Attitude of a pair from predicted h_in and the given case-frame readings (nullopt if either
@@ -251,6 +247,7 @@ class EstimationSession {
   SpacecraftConfig config_;
   SessionOptions options_;
   std::vector<GyroState> gyros_;  // running gyros, working pair first
+  StateLayout layout_;            // state indices of gyros_[i], rebuilt with gyros_
   Eigen::MatrixXd P_;
   Eigen::MatrixXd P0_;
   bool initialized_ = false;
