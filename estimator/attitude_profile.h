@@ -1,8 +1,9 @@
 // Attitude profiles: the body attitude q_in_b(t) and body rate w_b_in_b(t) of a spacecraft as
 // functions of time, for the simulator and for the planned-attitude input of gap prediction
-// (DESIGN §5). Includes the calibration profile of the paper's flight test (section 3 of the
-// paper, DESIGN §5): solar orientation, rotation about one body axis with a 60 min period, the
-// orientation changed every 3 h. Conventions of conventions.h (q_in_b maps body to inertial).
+// (docs/physics.md, "Prediction"). Includes the calibration profile of the paper's flight test
+// (section 3 of the paper; docs/physics.md, "The paper's flight test"): solar orientation, rotation
+// about one body axis with a 60 min period, the orientation changed every 3 h. Conventions of
+// conventions.h (q_in_b maps body to inertial).
 //
 // Time t is in seconds since the profile's start. Every profile is defined for all real t
 // (before its start and after its nominal end it continues analytically), so latency and

@@ -1,5 +1,5 @@
-// Frames, rotations, error states and time: the conventions every file of the project follows
-// (DESIGN §2). Written once here; docs/conventions.md repeats them for readers outside the code.
+// Frames, rotations, error states and time: the conventions every file of the project follows.
+// Written once here; docs/conventions.md repeats them for readers outside the code.
 //
 // Frames (closed list of tags): `in` inertial (J2000 axes), `b` spacecraft body, `k`/`k1..k4`
 // gyro case frame (readout and suspension axes), `int` quasi-inertial frame of a working pair.
@@ -24,7 +24,7 @@
 //    inertial spin axes: e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2; rows of C_int_in are
 //    e1, e2, e3. Then h_b = cos(theta) e2 + sin(theta) e3.
 // 7. Drift. dw_k is the drift angular velocity of the spin axis in case axes [rad/s]; the axis
-//    moves as dh_in/dt = (C_in_k dw_k) x h_in (DESIGN §3).
+//    moves as dh_in/dt = (C_in_k dw_k) x h_in (docs/physics.md, "Drift model").
 // 8. Units. SI inside (s, rad, rad/s) with no suffix; non-SI names carry a suffix from the
 //    closed list _deg, _deg_h, _arcsec, _arcmin, _mv, _um, _hours, _min (units.h converts).
 // 9. Time. Instants are absl::Time in UTC, RFC 3339 with `Z` at the edges. absl::Time has no

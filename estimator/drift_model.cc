@@ -26,7 +26,7 @@ DriftCoefficients DriftCoefficients::FromVector(const DriftVector& theta) {
 
 namespace {
 
-// DESIGN §3: dw = (h h^T - I) g.
+// docs/physics.md, "One form for k0, C1, C2": dw = (h h^T - I) g.
 Vector3d ProjectGradient(const Vector3d& h, const Vector3d& g) { return h * h.dot(g) - g; }
 
 }  // namespace
@@ -83,7 +83,7 @@ DisplacementTerms DisplacementToC1C2(const Vector3d& displacement_k, double c10_
   const Vector3d lambda = displacement_k / size;
   const double C10 = c10_per_m * size;
   const double C20 = c20_per_m * size;
-  // DESIGN §3 (sign of C2 as implied by eq. (9) against eq. (10)).
+  // eq. (8)-(10) (sign of C2 as implied by eq. (9) against eq. (10), docs/decisions.md D3).
   return {(C10 + C20) * lambda, -5.0 * C20 * lambda};
 }
 

@@ -1,8 +1,8 @@
-// Deterministic ESG drift model, DESIGN §3 and the paper's eq. (1), (8)-(10).
+// Deterministic ESG drift model, the paper's eq. (1), (8)-(10) (docs/physics.md, "Drift model").
 //
 // Every term gives the drift angular velocity dw_k of the spin axis in case axes [rad/s] as a
 // function of the spin-axis direction cosines h_k. The k0, C1 and C2 terms share the projected
-// force-function-gradient form (DESIGN §3)
+// force-function-gradient form (docs/physics.md)
 //     dw_k = (h h^T - I) g(h),   g(h) = k0 h^3 + C1 + C2 h^2   (elementwise powers),
 // which equals the printed component formulas of eq. (1), (8)-(10). The unequal-stiffness terms
 // mu, nu of eq. (1) are implemented as printed. The mu part is perpendicular to h; the printed
@@ -55,7 +55,7 @@ Eigen::Vector3d DriftRate_k(const DriftCoefficients& coefficients, const Eigen::
 // d(dw_k)/d(theta), 3 x 13; DriftRate_k(c, h) == DriftRegressor(h) * c.AsVector().
 DriftRegressorMatrix DriftRegressor(const Eigen::Vector3d& h_k);
 
-// Rotor displacement -> C1, C2 (DESIGN §3, eq. (8)-(10)): with lambda the unit displacement
+// Rotor displacement -> C1, C2 (eq. (8)-(10), docs/physics.md): with lambda the unit displacement
 // direction in case axes, C1 = (C10 + C20) lambda and C2 = -5 C20 lambda, where C10 and C20
 // scale with the displacement size: C10 = c10_per_m * |Delta|, C20 = c20_per_m * |Delta|.
 struct DisplacementTerms {

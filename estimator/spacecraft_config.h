@@ -1,4 +1,4 @@
-// Spacecraft configuration value types (DESIGN §7 JSON, proto esg.v1.SpacecraftConfig).
+// Spacecraft configuration value types (JSON of docs/formats.md, proto esg.v1.SpacecraftConfig).
 // Everything here is SI: drift coefficients in rad/s, noise in rad. proto/convert.cc converts
 // from and to the deg/h and arcsec of the JSON form.
 #ifndef ESG_ESTIMATOR_SPACECRAFT_CONFIG_H_

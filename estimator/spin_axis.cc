@@ -10,7 +10,7 @@ namespace esg::estimator {
 using Eigen::Vector3d;
 
 Vector3d SpinAxisRate_in(const Vector3d& dw_in, const Vector3d& h_in) {
-  // DESIGN §3.
+  // docs/physics.md, "Drift model".
   return dw_in.cross(h_in);
 }
 

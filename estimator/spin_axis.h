@@ -1,4 +1,4 @@
-// Spin-axis motion in inertial space (DESIGN §3): dh_in/dt = (C_in_k dw_k) x h_in, and the
+// Spin-axis motion in inertial space (docs/physics.md): dh_in/dt = (C_in_k dw_k) x h_in, and the
 // interpolation of 60-s case-frame readings to the integration rate.
 #ifndef ESG_ESTIMATOR_SPIN_AXIS_H_
 #define ESG_ESTIMATOR_SPIN_AXIS_H_

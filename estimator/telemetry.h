@@ -1,5 +1,5 @@
-// Telemetry value types (DESIGN §7 recording columns): what one frame carries. Pure values;
-// CSV and protobuf conversions live in storage/ and proto/.
+// Telemetry value types (the recording columns of docs/formats.md): what one frame carries. Pure
+// values; CSV and protobuf conversions live in storage/ and proto/.
 #ifndef ESG_ESTIMATOR_TELEMETRY_H_
 #define ESG_ESTIMATOR_TELEMETRY_H_
 

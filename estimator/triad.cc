@@ -33,7 +33,7 @@ absl::StatusOr<Matrix3d> QuasiInertialFrame(const Vector3d& h_in_a, const Vector
                                             double min_sin_theta) {
   auto T = Triad(h_in_a, h_in_b, min_sin_theta, "quasi-inertial frame");
   if (!T.ok()) return T.status();
-  // DESIGN §2: e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2.
+  // conventions.h item 6: e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2.
   const Vector3d e2 = T->col(0);
   const Vector3d e1 = T->col(1);
   const Vector3d e3 = e1.cross(e2);

@@ -1,4 +1,4 @@
-// Quasi-inertial frame of a working pair and pair attitude (DESIGN §1, §2).
+// Quasi-inertial frame of a working pair and pair attitude (docs/physics.md, conventions.h).
 #ifndef ESG_ESTIMATOR_TRIAD_H_
 #define ESG_ESTIMATOR_TRIAD_H_
 
@@ -9,8 +9,8 @@
 namespace esg::estimator {
 
 // C_int_in of the pair (reference gyro a, second gyro b), rows e1, e2, e3 with
-// e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2 (DESIGN §2). InvalidArgument when the axes are
-// collinear to within min_sin_theta.
+// e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2 (conventions.h item 6). InvalidArgument when the
+// axes are collinear to within min_sin_theta.
 absl::StatusOr<Eigen::Matrix3d> QuasiInertialFrame(const Eigen::Vector3d& h_in_a,
                                                    const Eigen::Vector3d& h_in_b,
                                                    double min_sin_theta = 1e-3);

@@ -1,4 +1,4 @@
-// Named unit conversions (DESIGN §2). Every non-SI value crosses into SI here.
+// Named unit conversions (conventions.h item 8). Every non-SI value crosses into SI here.
 #ifndef ESG_ESTIMATOR_UNITS_H_
 #define ESG_ESTIMATOR_UNITS_H_
 

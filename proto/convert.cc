@@ -1,5 +1,5 @@
-// Proto <-> estimator conversions (see convert.h): configuration (DESIGN §7 JSON), drift model
-// (DESIGN §3), telemetry frames (DESIGN §7) and timestamps.
+// Proto <-> estimator conversions (see convert.h): configuration JSON and telemetry frames
+// (docs/formats.md), drift model (docs/physics.md) and timestamps.
 #include "proto/convert.h"
 
 #include <cerrno>
@@ -152,7 +152,7 @@ std::string JsonErrorMessage(const std::string& message) {
 
 // Re-indents protobuf's compact JSON: 2-space indent, one object member per line, arrays of
 // numbers on one line ("caseToBody": [1, 0, 0, 0, 1, 0, 0, 0, 1]), as a human would write the
-// DESIGN §7 file. Input is protobuf's own output, hence valid JSON.
+// configuration file (docs/formats.md). Input is protobuf's own output, hence valid JSON.
 class JsonPrettyPrinter {
  public:
   explicit JsonPrettyPrinter(absl::string_view compact) : in_(compact) {}

@@ -1,7 +1,7 @@
 // Conversions between the esg.v1 wire messages and the estimator's SI value types: the only place
 // where proto and estimator types meet (STYLE §3.1). Covers the spacecraft configuration and its
-// JSON file (DESIGN §7), telemetry frames (DESIGN §7, same content as a recording CSV row), drift
-// models (DESIGN §3) and timestamps. Unit conversions go through estimator/units.h.
+// JSON file, telemetry frames (same content as a recording CSV row; both in docs/formats.md), drift
+// models (docs/physics.md) and timestamps. Unit conversions go through estimator/units.h.
 //
 // Error contract: every validation failure is absl::InvalidArgumentError whose message starts with
 // the offending field, then ": ", then the reason, e.g.
@@ -37,7 +37,7 @@ inline constexpr double kUnitNormTolerance = 1e-3;
 inline constexpr double kRenormaliseAbove = 1e-12;
 
 // ---------------------------------------------------------------------------------------------
-// Spacecraft configuration (DESIGN §7).
+// Spacecraft configuration (docs/formats.md).
 
 // Proto (deg/h, arcsec, V, um) -> SI (rad/s, rad, V, m). Applies the defaults documented in
 // spacecraft_config.proto (suspension 200 / 200 V / 30 um, filter 8 Hz / 60 s / k_d 5 when 0;
@@ -54,10 +54,10 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
 // relative 1e-15; the matrices, ids and dimensionless values are exact.
 esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& config);
 
-// Parses the configuration JSON (proto3 JSON mapping of esg.v1.SpacecraftConfig, DESIGN §7), then
-// ConfigFromProto. InvalidArgument for an unknown field ("gyros[0].k0: unknown field"), a value of
-// the wrong JSON type ("gyros[2].model.k0DegH: invalid value "fast" for type TYPE_DOUBLE") and
-// malformed JSON ("config JSON: <protobuf's message>").
+// Parses the configuration JSON (proto3 JSON mapping of esg.v1.SpacecraftConfig, docs/formats.md),
+// then ConfigFromProto. InvalidArgument for an unknown field ("gyros[0].k0: unknown field"), a
+// value of the wrong JSON type ("gyros[2].model.k0DegH: invalid value "fast" for type TYPE_DOUBLE")
+// and malformed JSON ("config JSON: <protobuf's message>").
 absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json);
 
 // Pretty-printed JSON ending in a newline (2-space indent, arrays of numbers on one line,
@@ -74,7 +74,7 @@ absl::StatusOr<estimator::SpacecraftConfig> ReadConfigFile(const std::string& pa
 absl::Status WriteConfigFile(const std::string& path, const estimator::SpacecraftConfig& config);
 
 // ---------------------------------------------------------------------------------------------
-// Drift model (DESIGN §3): GyroDriftModel [deg/h] <-> DriftCoefficients [rad/s]. Used for the
+// Drift model (docs/physics.md): GyroDriftModel [deg/h] <-> DriftCoefficients [rad/s]. Used for the
 // configuration and for CoefficientSnapshot.model / .sigma.
 
 // `field` prefixes error messages, e.g. "gyros[0].model" -> "gyros[0].model.c2DegH: expected 3
@@ -85,7 +85,7 @@ absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::
 esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients);
 
 // ---------------------------------------------------------------------------------------------
-// Telemetry frames (DESIGN §7).
+// Telemetry frames (docs/formats.md).
 
 // Validates and converts one frame. Checks, in this order: spacecraft_id satisfies
 // estimator::ValidateIdentifier (1..64 characters from [A-Za-z0-9._:-]; whether it is configured

@@ -1,9 +1,10 @@
-// JSON form of a model-discrepancy diagnosis (estimator/discovery/diagnose.h, DESIGN §6), shared
-// by `esg diagnose --json` and the server's Diagnose RPC (stored in SQLite beside the coefficient histories): `verdict`, `findings` (most
-// important first, each with `effect`, `gyro` where it applies, `parameters`, `explanation`,
-// `evidence`), `mismatch` (where: gyro, time span, regime, size), `fit.before` and `fit.after`
-// (each with `residualRmsArcsec` and `gapDriftRateDegH`), the regimes found and every candidate
-// tried. Times are RFC 3339 UTC; units are in the key names (docs/discovery.md).
+// JSON form of a model-discrepancy diagnosis (estimator/discovery/diagnose.h, docs/discovery.md),
+// shared by `esg diagnose --json` and the server's Diagnose RPC (stored in SQLite beside the
+// coefficient histories): `verdict`, `findings` (most important first, each with `effect`, `gyro`
+// where it applies, `parameters`, `explanation`, `evidence`), `mismatch` (where: gyro, time span,
+// regime, size), `fit.before` and `fit.after` (each with `residualRmsArcsec` and
+// `gapDriftRateDegH`), the regimes found and every candidate tried. Times are RFC 3339 UTC; units
+// are in the key names (docs/discovery.md).
 #ifndef ESG_PROTO_DIAGNOSIS_JSON_H_
 #define ESG_PROTO_DIAGNOSIS_JSON_H_
 

@@ -1,4 +1,4 @@
-// Slerp-interpolated planned attitude (DESIGN §5).
+// Slerp-interpolated planned attitude of a prediction request (docs/physics.md, "Prediction").
 #include "server/planned_profile.h"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// The planned attitude of a prediction request (DESIGN §5 long-gap prediction) as an
+// The planned attitude of a prediction request (long-gap prediction, docs/physics.md) as an
 // estimator::AttitudeProfile: a time-ordered list of q_in_b samples, interpolated by slerp between
 // neighbours and held constant before the first and after the last sample.
 #ifndef ESG_SERVER_PLANNED_PROFILE_H_

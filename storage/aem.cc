@@ -1,4 +1,4 @@
-// CCSDS AEM (KVN, ADM v2) writer and reader/validator (DESIGN §7 "Attitude product").
+// CCSDS AEM (KVN, ADM v2) writer and reader/validator (docs/formats.md, "Attitude product").
 #include "storage/aem.h"
 
 #include <cmath>

@@ -1,6 +1,6 @@
 // CCSDS Attitude Ephemeris Message (AEM) in KVN, ADM version 2 (CCSDS 504.0-B-2), the attitude
-// product of DESIGN §7: a writer for predicted q_in_b, and a reader/validator of the project's own
-// that applies the standard's structural rules (no AEM reader can be installed here).
+// product of docs/formats.md: a writer for predicted q_in_b, and a reader/validator of the
+// project's own that applies the standard's structural rules (no AEM reader can be installed here).
 //
 // Written form (one segment):
 //   CCSDS_AEM_VERS = 2.0, CREATION_DATE, ORIGINATOR, META_START, OBJECT_NAME, OBJECT_ID,

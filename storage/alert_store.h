@@ -1,5 +1,5 @@
 // Alert history with acknowledge/clear state and repeat collapsing (table alerts, schema.h;
-// DESIGN §7 "Time and alerts", after Yamcs/COSMOS/Open MCT). Each spacecraft's alerts are
+// docs/formats.md "Alerts", after Yamcs/COSMOS/Open MCT). Each spacecraft's alerts are
 // numbered 1, 2, ... by the store in commit order; numbers are never reused.
 #ifndef ESG_STORAGE_ALERT_STORE_H_
 #define ESG_STORAGE_ALERT_STORE_H_

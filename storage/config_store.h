@@ -1,4 +1,4 @@
-// Versioned spacecraft configurations (DESIGN §7 JSON, stored verbatim; table
+// Versioned spacecraft configurations (JSON of docs/formats.md, stored verbatim; table
 // spacecraft_configs, schema.h). The server validates the JSON; this store only keeps it.
 #ifndef ESG_STORAGE_CONFIG_STORE_H_
 #define ESG_STORAGE_CONFIG_STORE_H_

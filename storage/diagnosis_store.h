@@ -1,5 +1,5 @@
-// Results of model-discrepancy diagnoses (table diagnoses, schema.h; DESIGN §6): the verdict
-// over a time window and the full report as JSON, kept as a history per spacecraft.
+// Results of model-discrepancy diagnoses (table diagnoses, schema.h; docs/discovery.md): the
+// verdict over a time window and the full report as JSON, kept as a history per spacecraft.
 #ifndef ESG_STORAGE_DIAGNOSIS_STORE_H_
 #define ESG_STORAGE_DIAGNOSIS_STORE_H_
 

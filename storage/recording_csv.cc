@@ -1,4 +1,4 @@
-// Recording CSV version 1 reader and writer (DESIGN §7); rules in recording_csv.h.
+// Recording CSV version 1 reader and writer (docs/formats.md); rules in recording_csv.h.
 #include "storage/recording_csv.h"
 
 #include <algorithm>
@@ -37,7 +37,7 @@ constexpr int kNumGyroColumns = 6;  // hx hy hz ux uy uz
 constexpr int kNumStColumns = 5;    // q0 q1 q2 q3 valid
 constexpr int kNumColumns = 1 + kMaxGyros * kNumGyroColumns + kNumStColumns;
 
-// Required columns in DESIGN §7 order (also the written order).
+// Required columns in the order of docs/formats.md (also the written order).
 const std::array<std::string, kNumColumns>& ColumnNames() {
   static const std::array<std::string, kNumColumns> names = [] {
     std::array<std::string, kNumColumns> n;

@@ -1,5 +1,5 @@
-// Reader and writer of the telemetry recording CSV, version 1 (DESIGN §7): `# key: value` metadata
-// lines, a header, then one row per telemetry frame.
+// Reader and writer of the telemetry recording CSV, version 1 (docs/formats.md): `# key: value`
+// metadata lines, a header, then one row per telemetry frame.
 //
 //     # format: esg-recording-csv 1
 //     # spacecraft_id: RDK-1
@@ -15,9 +15,9 @@
 //   Recording::metadata, key and value trimmed); a '#' line without ':' is a free comment.
 //   A "format" entry other than "esg-recording-csv 1" is an error. Empty lines are skipped
 //   anywhere; '#' lines after the header are errors.
-// - The header names the columns; order is free, extra columns are ignored, every DESIGN §7
-//   column is required (the error lists the missing ones). Fields are trimmed of spaces; there
-//   is no quoting.
+// - The header names the columns; order is free, extra columns are ignored, every column of
+//   docs/formats.md is required (the error lists the missing ones). Fields are trimmed of spaces;
+//   there is no quoting.
 // - An empty field means "no value". Gyro N: all three gN_h* empty = gyro absent from the frame
 //   (then its gN_u* must be empty too); all three gN_u* empty = u_k_mv absent; a partly empty
 //   group is an error. Star tracker: all five st_* empty = outage (star_tracker absent);
@@ -57,10 +57,10 @@ absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path);
 // Formats a recording: "# format: esg-recording-csv 1", then "# spacecraft_id: ..." when that
 // metadata entry exists, then the other metadata entries in key order (a stored "format" entry is
 // replaced; line breaks in keys or values become spaces, ':' in keys becomes '_'), the header in
-// DESIGN §7 order, one row per frame. Times are RFC 3339 UTC with `Z` and as many fractional
-// digits as needed to read back the same absl::Time; numbers in the shortest form that reads back
-// the same double. An invalid star-tracker reading is written with an empty quaternion and
-// st_valid 0. Values are written as given (a non-finite value would make the file unreadable).
+// the order of docs/formats.md, one row per frame. Times are RFC 3339 UTC with `Z` and as many
+// fractional digits as needed to read back the same absl::Time; numbers in the shortest form that
+// reads back the same double. An invalid star-tracker reading is written with an empty quaternion
+// and st_valid 0. Values are written as given (a non-finite value would make the file unreadable).
 std::string FormatRecordingCsv(const estimator::Recording& recording);
 
 // Writes FormatRecordingCsv to path (through "<path>.tmp" and a rename). Unavailable on I/O failure.

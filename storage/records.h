@@ -1,4 +1,4 @@
-// Plain value types stored by the SQLite stores (DESIGN §7 "Time and alerts", §8 storage/).
+// Plain value types stored by the SQLite stores (docs/formats.md "Time" and "Alerts").
 // They carry no gRPC or proto types: the server converts. Times are UTC instants (absl::Time);
 // every record kept by the service carries the measurement epoch (the telemetry's own time) and,
 // where it is a computed product, the instant the service computed it.
@@ -16,7 +16,7 @@
 
 namespace esg::storage {
 
-// One version of a spacecraft's configuration (DESIGN §7 JSON, stored verbatim).
+// One version of a spacecraft's configuration (JSON of docs/formats.md, stored verbatim).
 struct ConfigRecord {
   std::string spacecraft_id;
   std::string config_json;
@@ -40,7 +40,7 @@ struct ArchivedFrame {
 
 // Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, each stored
 // in its own column of table `coefficients` (sigma columns: "<name>_sigma_<unit>", e.g.
-// k0_sigma_deg_h). Drift terms follow estimator/drift_model.h (DESIGN §3, eq. (1), (8)-(10)):
+// k0_sigma_deg_h). Drift terms follow estimator/drift_model.h (eq. (1), (8)-(10), docs/physics.md):
 // k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of the gyro,
 // mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all in deg/h; then the misalignment, a small
 // rotation vector about body axes b in arcsec (as in SpacecraftConfig's misalignment_sigma).
@@ -82,7 +82,7 @@ struct CoefficientRecord {
   std::string model_name;      // e.g. "model10"
 };
 
-// One alert (DESIGN §7 "Time and alerts": Yamcs/COSMOS/Open MCT conventions).
+// One alert (docs/formats.md "Alerts": Yamcs/COSMOS/Open MCT conventions).
 struct AlertRecord {
   std::string spacecraft_id;
   int64_t sequence = 0;   // 1, 2, ... per spacecraft; assigned by the store, ignored on input
@@ -120,7 +120,7 @@ struct CheckpointRecord {
   std::string state_blob;     // serialized session state, format chosen by the server
 };
 
-// The result of one model-discrepancy diagnosis over [from_time, to_time) (DESIGN §6).
+// The result of one model-discrepancy diagnosis over [from_time, to_time) (docs/discovery.md).
 struct DiagnosisRecord {
   std::string spacecraft_id;
   int64_t id = 0;  // assigned by DiagnosisStore::Put, ignored on input

@@ -1,6 +1,6 @@
 // RAII wrappers over one SQLite connection: Database (open, pragmas, serialized access),
 // Transaction (the only way to run cached prepared statements) and Statement. Every call returns
-// absl::Status; nothing throws or logs. DESIGN §8 (storage/), STYLE §3.3 (status codes).
+// absl::Status; nothing throws or logs. STYLE §3.3 (status codes).
 //
 // Durability contract (what an OK Transaction::Commit() guarantees)
 // ------------------------------------------------------------------

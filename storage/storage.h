@@ -1,6 +1,6 @@
 // The service database as one object: opens the SQLite file (WAL, synchronous per options),
 // migrates it to the current schema, owns the stores, and commits the effects of a batch of
-// telemetry atomically (DESIGN §8 storage/; durability contract in sqlite_db.h).
+// telemetry atomically (durability contract in sqlite_db.h).
 //
 // CommitBatch is the server's unit of acknowledgement: "these frames + the coefficient
 // estimates, alerts, alert repeats and checkpoint they produced" go into ONE transaction, so a

@@ -45,8 +45,9 @@ struct CommonOptions {
 };
 
 void AddCommon(CLI::App* cmd, CommonOptions& o) {
-  cmd->add_option("--config", o.config_path, "spacecraft configuration JSON (DESIGN §7)")->required();
-  cmd->add_option("--recording", o.recording_path, "recording CSV (DESIGN §7)")->required();
+  cmd->add_option("--config", o.config_path, "spacecraft configuration JSON (docs/formats.md)")
+      ->required();
+  cmd->add_option("--recording", o.recording_path, "recording CSV (docs/formats.md)")->required();
   cmd->add_option("--model", o.model, "drift model: 1, 10, 11 or a '+' set such as 10+11")
       ->capture_default_str();
   cmd->add_option("--kd", o.kd, "k_d of the innovation test, eq. (14) (default: configuration, 5)");

@@ -1,9 +1,10 @@
-// `esg diagnose`: find the physics a model left out (DESIGN §6, estimator/discovery/diagnose.h).
-// Runs the discovery over a recording with the configuration as the user's model, prints the
-// verdict, the findings with their physics and the fit before and after (or one JSON document
-// with --json, proto/diagnosis_json.h), and with --out DIR writes a Markdown report with gnuplot
-// plots: residuals before and after, held-out attitude error before and after (the paper's
-// Fig. 7/8 measure), and where the mismatch sits in time and regime. Progress goes to stderr.
+// `esg diagnose`: find the physics a model left out (docs/discovery.md,
+// estimator/discovery/diagnose.h). Runs the discovery over a recording with the configuration as
+// the user's model, prints the verdict, the findings with their physics and the fit before and
+// after (or one JSON document with --json, proto/diagnosis_json.h), and with --out DIR writes a
+// Markdown report with gnuplot plots: residuals before and after, held-out attitude error before
+// and after (the paper's Fig. 7/8 measure), and where the mismatch sits in time and regime.
+// Progress goes to stderr.
 // Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
 #include "estimator/discovery/diagnose.h"
 
@@ -396,11 +397,13 @@ void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
   (void)global;  // offline verb: no server
   auto o = std::make_shared<DiagnoseCliOptions>();
   CLI::App* cmd = app.add_subcommand(
-      "diagnose", "find the physics the configured model leaves out of a recording (DESIGN §6)");
+      "diagnose",
+      "find the physics the configured model leaves out of a recording (docs/discovery.md)");
   cmd->add_option("--config", o->config_path,
-                  "spacecraft configuration JSON (DESIGN §7): the model")
+                  "spacecraft configuration JSON (docs/formats.md): the model")
       ->required();
-  cmd->add_option("--recording", o->recording_path, "recording CSV (DESIGN §7)")->required();
+  cmd->add_option("--recording", o->recording_path, "recording CSV (docs/formats.md)")
+      ->required();
   cmd->add_option("--out", o->out_dir,
                   "write report.md, plots (gnuplot) and diagnosis.json into DIR");
   cmd->add_flag("--json", o->json, "one JSON document on stdout");

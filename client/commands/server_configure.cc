@@ -1,5 +1,5 @@
 // `esg configure --config F [--model 10+11] [--replace]`: sends a spacecraft configuration (the
-// JSON file of DESIGN §7) to esgd (ConfigureSpacecraft) and prints the resulting session.
+// JSON file of docs/formats.md) to esgd (ConfigureSpacecraft) and prints the resulting session.
 // Exit codes: 0 success, 2 bad arguments or configuration file, 1 server failure (e.g.
 // FAILED_PRECONDITION when the configuration of a spacecraft with archived telemetry would change
 // without --replace).
@@ -72,7 +72,8 @@ void RegisterConfigure(CLI::App& app, GlobalOptions& global, int* exit_code) {
   auto options = std::make_shared<ConfigureOptions>();
   CLI::App* cmd = app.add_subcommand(
       kVerb, "create or reconfigure a spacecraft session on esgd (ConfigureSpacecraft)");
-  cmd->add_option("--config", options->config_path, "spacecraft configuration JSON (DESIGN §7)")
+  cmd->add_option("--config", options->config_path,
+                  "spacecraft configuration JSON (docs/formats.md)")
       ->required();
   cmd->add_option("--model", options->model, "drift model: 1, 10, 11 or a '+' set such as 10+11")
       ->capture_default_str();

@@ -1,7 +1,7 @@
 // `esg predict --spacecraft ID --from T --to T --step S [--aem FILE]`: the attitude predicted by
-// esgd from the calibrated state (PredictAttitude, DESIGN §5): per epoch q_in_b (scalar first),
-// its 1-sigma about the body axes x, y, z [arcsec] and the predicted spin axes h_in of the gyros
-// used; --aem also writes the returned CCSDS AEM (KVN, DESIGN §7) to FILE.
+// esgd from the calibrated state (PredictAttitude, docs/physics.md): per epoch q_in_b (scalar
+// first), its 1-sigma about the body axes x, y, z [arcsec] and the predicted spin axes h_in of the
+// gyros used; --aem also writes the returned CCSDS AEM (KVN, docs/formats.md) to FILE.
 // Exit codes: 0 success, 2 bad arguments, 1 server or file failure (e.g. OUT_OF_RANGE when --from
 // is not after the last applied frame or --to is beyond the prediction horizon).
 #include <cmath>

@@ -1,5 +1,5 @@
 // `esg replay --recording F [--spacecraft ID] [--rate X] [--from-sequence N]`: streams a recording
-// CSV (DESIGN §7) to esgd through StreamTelemetry, frame sequence number = 1-based row index.
+// CSV (docs/formats.md) to esgd through StreamTelemetry, frame sequence number = 1-based row index.
 //
 // Flow: at most --window frames are unacknowledged at any time; with --rate X the frames leave at
 // X times real time (frame epochs scaled), otherwise as fast as the window allows. Acks arrive in
@@ -482,7 +482,8 @@ void RegisterReplay(CLI::App& app, GlobalOptions& global, int* exit_code) {
   auto options = std::make_shared<ReplayOptions>();
   CLI::App* cmd = app.add_subcommand(
       kVerb, "stream a recording CSV to esgd (StreamTelemetry), resuming after failures");
-  cmd->add_option("--recording", options->recording_path, "recording CSV (DESIGN §7)")->required();
+  cmd->add_option("--recording", options->recording_path, "recording CSV (docs/formats.md)")
+      ->required();
   cmd->add_option("--spacecraft", options->spacecraft_id,
                   "spacecraft id (default: the recording's '# spacecraft_id:')");
   cmd->add_option("--rate", options->rate, "X times real time (0: as fast as the window allows)")

@@ -1,8 +1,8 @@
 // `esg simulate`: runs the seeded simulator (estimator/simulator.h) for a configuration, an
 // attitude profile and an optional scenario (client/scenario.h, docs/scenario.md), and writes the
-// recording CSV of DESIGN §7 (storage::WriteRecordingCsv). Optionally writes the configuration
-// used (--write-config) and the truth (--truth: time, true q_in_b, true h_in per gyro, the true
-// coefficients in the metadata) so experiments can compare estimates against it.
+// recording CSV of docs/formats.md (storage::WriteRecordingCsv). Optionally writes the
+// configuration used (--write-config) and the truth (--truth: time, true q_in_b, true h_in per
+// gyro, the true coefficients in the metadata) so experiments can compare estimates against it.
 // Exit codes: 0 success, 2 bad arguments (missing or bad files, bad values), 1 runtime failure.
 #include <unistd.h>
 
@@ -258,8 +258,10 @@ void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code) {
   (void)global;  // offline verb: no server
   auto options = std::make_shared<SimulateOptions>();
   CLI::App* sub = app.add_subcommand(
-      "simulate", "Simulate ESG and star-tracker telemetry into a recording CSV (DESIGN §7)");
-  sub->add_option("--config", options->config_path, "spacecraft configuration JSON (DESIGN §7)")
+      "simulate",
+      "Simulate ESG and star-tracker telemetry into a recording CSV (docs/formats.md)");
+  sub->add_option("--config", options->config_path,
+                  "spacecraft configuration JSON (docs/formats.md)")
       ->required();
   sub->add_option("--profile", options->profile,
                   "attitude profile: inertial, orbital, calibration, mixed (default: the "

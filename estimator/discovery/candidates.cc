@@ -199,7 +199,7 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   if (e == nullptr) return;
   const Vector3d C1 = e->coefficients.C1, C2 = e->coefficients.C2;
   const Vector3d s1 = e->sigma.C1, s2 = e->sigma.C2;
-  // DESIGN §3: C1 = (C10 + C20) lambda, C2 = -5 C20 lambda. lambda: dominant direction of the
+  // eq. (8)-(10): C1 = (C10 + C20) lambda, C2 = -5 C20 lambda. lambda: dominant direction of the
   // pair, sign with C1 . lambda > 0.
   const Eigen::Matrix3d M = C1 * C1.transpose() + C2 * C2.transpose();
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(M);
@@ -226,7 +226,7 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   AddVectorParameters("lambda", lambda, Vector3d::Zero(), 1.0, "1", fit.fitted);
   fit.notes.push_back(absl::StrFormat(
       "C1 and C2 lie %.1f deg apart as lines (C1.C2 %s 0); a displaced rotor makes them collinear "
-      "(DESIGN §3): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f "
+      "(eq. (8)-(10)): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f "
       "%.2f] "
       "(case axes), off-line residual chi2 = %.1f on 2 dof, p = %.2g",
       line_angle_deg, C1.dot(C2) < 0 ? "<" : ">=", DegH(C10), DegH(C20), lambda.x(), lambda.y(),

@@ -1,4 +1,4 @@
-// The library of candidate effects (DESIGN §6) and how each is added to a model and fitted
+// The library of candidate effects (docs/physics.md) and how each is added to a model and fitted
 // (docs/discovery.md, "How each effect enters the model"):
 //   rotor_displacement (gyro g)   free C1, C2 of g with prior c_sigma (eq. (8)-(10))
 //   fourth_harmonic (gyro g)      free k0 of g with prior k0_sigma (eq. (1))
@@ -45,7 +45,7 @@ struct Candidate {
 };
 std::string CandidateName(const Candidate& c);  // "rotor_displacement[2]"
 
-// The candidates `model` lacks among `effects` (all of DESIGN §6 when empty), for the running
+// The candidates `model` lacks among `effects` (all of the library when empty), for the running
 // gyros.
 std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
                                       const std::vector<Effect>& effects);
@@ -105,7 +105,7 @@ struct ProfiledDeviance {
 };
 ProfiledDeviance Profile(const ModelRun& run);
 
-// Physics of a fitted rotor displacement (DESIGN §3): C1 = (C10 + C20) lambda,
+// Physics of a fitted rotor displacement (eq. (8)-(10)): C1 = (C10 + C20) lambda,
 // C2 = -5 C20 lambda; lambda the dominant common direction of C1 and C2, and the displacement
 // implied by the mean suspension offset voltages through eq. (3). Appended to `fit`.
 void DescribeRotorDisplacement(const SpacecraftConfig& config,

@@ -70,7 +70,7 @@ std::string Utc(absl::Time t) {
 
 // The user's model in the form the discovery extends: every term of eq. (1), (10) is in the
 // filter, held at its configured value unless freed; terms outside the user's model are held at
-// zero (DESIGN §6: "terms absent or zero with no sigma are not in the model").
+// zero (docs/discovery.md, "The model": a term absent or zero without a sigma is not in it).
 absl::StatusOr<ModelState> UserModel(const SpacecraftConfig& config, const DiagnoseOptions& opt) {
   auto spec = ParseModel(opt.model);
   if (!spec.ok()) return spec.status();
@@ -466,7 +466,7 @@ std::string VectorText(const std::vector<Parameter>& ps, const std::string& name
   return absl::StrCat("[", absl::StrJoin(parts, ", "), "]");
 }
 
-// The physics of a finding in the units people use (DESIGN §6).
+// The physics of a finding in the units people use (docs/discovery.md, "Physics in the report").
 std::string Explain(const Finding& f, const Evidence& e) {
   const std::string stats =
       absl::StrFormat("the likelihood improves by %.1f (-2 log L) for %d parameter%s, p = %.2g",
@@ -1019,7 +1019,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     }
     u.gyro = where.gyro;
     u.explanation = absl::StrFormat(
-        "%s: a mismatch no candidate of DESIGN §6 explains remains %s%s, %s to %s (%s span): %s%s",
+        "%s: a mismatch no candidate effect explains remains %s%s, %s to %s (%s span): %s%s",
         report.findings.empty() ? "the configured model does not fit the recording"
                                 : "after adding the findings",
         where.gyro > 0 ? absl::StrCat("in gyro ", where.gyro) : std::string("in all gyros"),

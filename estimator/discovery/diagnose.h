@@ -1,9 +1,9 @@
-// Finding the physics a model left out (DESIGN §6): given the user's model (the configuration:
-// its drift model and mountings; coefficients with positive modelSigma are calibrated, the others
-// held) and a recording, locate where the recording and the model disagree (gyro, time span,
-// attitude regime), name the missing effect from the library of DESIGN §6, add it to the model,
-// refit, and show the fit improve: in-sample star-tracker residuals and long-gap (held-out)
-// prediction error before and after, the measure of the paper's Fig. 7/8.
+// Finding the physics a model left out (docs/discovery.md): given the user's model (the
+// configuration: its drift model and mountings; coefficients with positive modelSigma are
+// calibrated, the others held) and a recording, locate where the recording and the model disagree
+// (gyro, time span, attitude regime), name the missing effect from the library of docs/physics.md,
+// add it to the model, refit, and show the fit improve: in-sample star-tracker residuals and
+// long-gap (held-out) prediction error before and after, the measure of the paper's Fig. 7/8.
 //
 // Method (docs/discovery.md has the full argument):
 // - Score. Every model is run through the filter (session.h) over the whole recording; its
@@ -40,7 +40,7 @@
 
 namespace esg::estimator::discovery {
 
-// Effect identifiers of DESIGN §6.
+// Effect identifiers (docs/physics.md, "Effect library of the diagnosis").
 enum class Effect {
   kRotorDisplacement,
   kFourthHarmonic,
@@ -72,12 +72,12 @@ struct DiagnoseOptions {
   // cost. <= 0 keeps the configuration's rate.
   double integration_rate_hz = 0.2;
   int threads = 2;
-  // Effects to try (empty: all of DESIGN §6).
+  // Effects to try (empty: all of the library).
   std::vector<Effect> effects;
   // Held-out spans: at most this many, each at most max_gap_hours long.
   int max_gaps = 4;
   double max_gap_hours = 4.0;
-  // Priors given to freed coefficients (DESIGN §3 sizes) and the search grids.
+  // Priors given to freed coefficients (the paper's sizes, docs/physics.md) and the search grids.
   double c_sigma_deg_h = 0.1;
   double k0_sigma_deg_h = 0.3;
   double mu_nu_sigma_deg_h = 0.1;

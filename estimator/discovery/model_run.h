@@ -1,10 +1,10 @@
 // One run of a (candidate) model over a recording, and what the discovery measures on it
-// (DESIGN §6): the filter (session.h) with a given configuration and model, the star-tracker
-// quaternions optionally corrected for a latency and a misalignment, the star tracker optionally
-// withheld over some spans (held-out prediction). Records per measurement step the innovation
-// log-likelihood terms (StepReport::star_tracker_nis, star_tracker_log_det_s) and the per-gyro
-// star-tracker innovations, and in withheld spans the attitude and spin-axis prediction errors
-// against the withheld (corrected) star tracker. Pure computation.
+// (docs/discovery.md): the filter (session.h) with a given configuration and model, the
+// star-tracker quaternions optionally corrected for a latency and a misalignment, the star tracker
+// optionally withheld over some spans (held-out prediction). Records per measurement step the
+// innovation log-likelihood terms (StepReport::star_tracker_nis, star_tracker_log_det_s) and the
+// per-gyro star-tracker innovations, and in withheld spans the attitude and spin-axis prediction
+// errors against the withheld (corrected) star tracker. Pure computation.
 #ifndef ESG_ESTIMATOR_DISCOVERY_MODEL_RUN_H_
 #define ESG_ESTIMATOR_DISCOVERY_MODEL_RUN_H_
 

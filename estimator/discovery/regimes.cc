@@ -157,7 +157,7 @@ std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
   std::vector<RegimeSpan> spans;
   const int n = static_cast<int>(frames.size());
   if (n == 0) return spans;
-  // Rate per frame: star tracker where available, else gyros (DESIGN §6).
+  // Rate per frame: star tracker where available, else gyros (docs/discovery.md, "Locate").
   std::vector<std::optional<Vector3d>> w(n);
   for (int i = 0; i < n; ++i) {
     if (rates.star_tracker_valid[i]) {

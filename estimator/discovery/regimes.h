@@ -1,4 +1,4 @@
-// Attitude regimes found from the data (DESIGN §6: "which time span and attitude regime"): the
+// Attitude regimes found from the data (docs/discovery.md, "Locate"): the
 // body rate at every telemetry frame, measured from consecutive star-tracker quaternions or from
 // the gyro readings, and the recording cut into spans of one regime: inertial hold, orbital
 // orientation, steady rotation, slew. The discovery (diagnose.h) holds out whole spans to test
@@ -76,8 +76,8 @@ struct RegimeSpan {
   double hours() const { return absl::ToDoubleHours(end - start); }
 };
 
-// Cuts the recording into regime spans, covering every frame, in time order. The rate per frame
-// is the star tracker's where available (DESIGN §6), the gyros' otherwise; classification uses
+// Cuts the recording into regime spans, covering every frame, in time order. The rate per frame is
+// the star tracker's where available (docs/discovery.md), the gyros' otherwise; classification uses
 // medians over the window, so outliers and outages do not split spans.
 std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
                                     const BodyRates& rates, const RegimeOptions& options = {});

@@ -1,4 +1,5 @@
-// Distribution functions and small robust fits for the discovery's significance tests (DESIGN §6):
+// Distribution functions and small robust fits for the discovery's significance tests
+// (docs/discovery.md):
 // chi-square tail probabilities and quantiles for likelihood-ratio tests, the F distribution
 // for tests with an estimated dispersion, Bonferroni levels, and a robust line fit.
 #ifndef ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
