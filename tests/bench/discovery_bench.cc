@@ -1,4 +1,4 @@
-// Discovery (DESIGN §6, docs/discovery.md): speed and the confusion matrix.
+// Discovery (docs/discovery.md): speed and the confusion matrix.
 //
 // BM_Diagnose30h: one diagnosis of a 30 h recording at 60 s telemetry (rotor displacement in one
 // gyro: two selection rounds), both cores. Target under 60 s.

@@ -1,6 +1,6 @@
 // `esg diagnose` run as a real process (ESG_BINARY) on a recording written by `esg simulate`
-// through the DESIGN §7 formats: the JSON document names the effect and the gyro and shows the
-// held-out drift rate falling; --out writes the Markdown report and the gnuplot plots; progress
+// through the formats of docs/formats.md: the JSON document names the effect and the gyro and shows
+// the held-out drift rate falling; --out writes the Markdown report and the gnuplot plots; progress
 // goes to stderr; bad arguments exit 2 naming the option.
 #include <sys/wait.h>
 

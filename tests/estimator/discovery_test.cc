@@ -1,10 +1,10 @@
-// The discovery (estimator/discovery/, DESIGN §6) on simulated recordings where an effect is
-// concealed as the issue describes (tests/testing/discovery_scenarios.h): mostly orbital
+// The discovery (estimator/discovery/, docs/discovery.md) on simulated recordings where an effect
+// is concealed as the issue describes (tests/testing/discovery_scenarios.h): mostly orbital
 // orientation, outliers and an outage, the effect in one gyro only. Checks the verdict names the
 // effect and the gyro, the fitted physics against the truth, the held-out drift rate before and
 // after, `none` on a recording the model explains, `unexplained` for a fault the library does not
-// hold, two effects in one recording; and the pieces: distribution functions, regimes from the
-// body rate, the model-free latency estimate, the star-tracker correction.
+// hold, two effects in one recording; and the pieces: distribution functions, regimes from the body
+// rate, the model-free latency estimate, the star-tracker correction.
 #include <cmath>
 
 #include "absl/strings/str_format.h"
@@ -180,7 +180,7 @@ TEST(Diagnose, NothingMissingGivesNone) {
   EXPECT_TRUE(report->findings.empty());
   EXPECT_EQ(report->before.residual_rms_arcsec, report->after.residual_rms_arcsec);
   EXPECT_FALSE(report->mismatch.found);
-  // Every candidate of DESIGN §6 the model lacks was tried once (3 gyros x 3, k0 being free, + 3
+  // Every candidate of the library the model lacks was tried once (3 gyros x 3, k0 being free, + 3
   // common) and
   // none is significant.
   EXPECT_EQ(report->candidates.size(), 12u);

@@ -146,7 +146,7 @@ TEST(DriftModel, RegressorTimesCoefficientsEqualsDrift) {
 }
 
 TEST(DriftModel, OffsetVoltageToDisplacementIsEq3) {
-  // DESIGN §3: k = 200, U0 = 200 V, d0 = 30 um gives 0.03 um per mV.
+  // eq. (3): k = 200, U0 = 200 V, d0 = 30 um gives 0.03 um per mV (the paper's example).
   const double displacement = DisplacementFromOffsetVoltage(1e-3, 200.0, 200.0, 30e-6);
   EXPECT_NEAR(displacement, 0.03e-6, 1e-18);
   EXPECT_NEAR(OffsetVoltageFromDisplacement(1e-6, 200.0, 200.0, 30e-6), 1.0 / 30.0, 1e-15);

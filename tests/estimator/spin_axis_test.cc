@@ -1,5 +1,5 @@
-// Spin-axis propagation (DESIGN §3): dh_in/dt = dw_in x h_in. A constant drift about a fixed axis
-// makes h_in precess on a cone about that axis at the rate |dw_in|.
+// Spin-axis propagation (docs/physics.md): dh_in/dt = dw_in x h_in. A constant drift about a fixed
+// axis makes h_in precess on a cone about that axis at the rate |dw_in|.
 #include "estimator/spin_axis.h"
 
 #include <cmath>

@@ -1,5 +1,5 @@
-// Pair attitude and the quasi-inertial frame (DESIGN §1, §2): TRIAD recovers the attitude from
-// noiseless spin axes; every pair of three gyros agrees; collinear axes are an error.
+// Pair attitude and the quasi-inertial frame (docs/physics.md, conventions.h): TRIAD recovers the
+// attitude from noiseless spin axes; every pair of three gyros agrees; collinear axes are an error.
 #include "estimator/triad.h"
 
 #include "estimator/random.h"
@@ -89,7 +89,8 @@ TEST(PairAttitude, CollinearAxesAreAnError) {
 }
 
 TEST(QuasiInertialFrame, RowsFollowDesignDefinition) {
-  // DESIGN §2: e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2; h_b = cos(theta) e2 + sin(theta) e3.
+  // conventions.h item 6: e2 = h_a, e1 = unit(h_a x h_b), e3 = e1 x e2;
+  // h_b = cos(theta) e2 + sin(theta) e3.
   const Vector3d h_a = Vector3d(0.1, 0.2, 0.97).normalized();
   const Vector3d h_b = Vector3d(0.9, -0.3, 0.2).normalized();
   auto C_int_in = QuasiInertialFrame(h_a, h_b);

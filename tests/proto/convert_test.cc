@@ -1,6 +1,6 @@
-// Tests of proto/convert: the DESIGN §7 configuration JSON and its SI values, JSON and file round
-// trips, configuration errors naming the JSON field, telemetry frame conversion and validation,
-// timestamp helpers.
+// Tests of proto/convert: the configuration JSON (docs/formats.md) and its SI values, JSON and file
+// round trips, configuration errors naming the JSON field, telemetry frame conversion and
+// validation, timestamp helpers.
 #include "proto/convert.h"
 
 #include <cmath>
@@ -31,7 +31,7 @@ constexpr double kPi = std::numbers::pi;
 double DegHToRadS(double x) { return x * kPi / 180.0 / 3600.0; }
 double ArcsecToRadians(double x) { return x / 3600.0 * kPi / 180.0; }
 
-// The DESIGN §7 example with its "..." filled in by two more gyros (gyro 2 mounted turned 90 deg
+// A configuration in the form of docs/formats.md with three gyros (gyro 2 mounted turned 90 deg
 // about body z so that row-major order is visible, gyro 3 about body x).
 constexpr char kDesignJson[] = R"json({
   "spacecraftId": "RDK-1",

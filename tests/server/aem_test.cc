@@ -1,4 +1,4 @@
-// CCSDS AEM writer and reader/validator (storage/aem.h, DESIGN §7 "Attitude product"): the
+// CCSDS AEM writer and reader/validator (storage/aem.h, docs/formats.md "Attitude product"): the
 // writer's output passes the reader and round-trips q_in_b; the reader rejects files that break
 // the standard's rules.
 #include "storage/aem.h"

@@ -1,6 +1,6 @@
-// The Diagnose RPC (issue 5, DESIGN §6) over real gRPC: progress while it runs, the report as
-// the final update, stored in SQLite and listed by ListDiagnoses; bad requests get their code and
-// name the field.
+// The Diagnose RPC (issue 5, docs/discovery.md) over real gRPC: progress while it runs, the report
+// as the final update, stored in SQLite and listed by ListDiagnoses; bad requests get their code
+// and name the field.
 #include <chrono>
 
 #include "gmock/gmock.h"

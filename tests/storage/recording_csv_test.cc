@@ -1,6 +1,6 @@
-// Tests of storage/recording_csv (DESIGN §7 recording CSV, version 1): bit-exact write/read round
-// trip through a real file, absent gyros and star-tracker outages, free column order and extra
-// columns, and one test per malformed input asserting line, column and reason.
+// Tests of storage/recording_csv (recording CSV version 1, docs/formats.md): bit-exact write/read
+// round trip through a real file, absent gyros and star-tracker outages, free column order and
+// extra columns, and one test per malformed input asserting line, column and reason.
 #include "storage/recording_csv.h"
 
 #include <algorithm>

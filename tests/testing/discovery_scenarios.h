@@ -1,4 +1,4 @@
-// Simulated recordings for the discovery's tests and confusion-matrix benchmark (DESIGN §6,
+// Simulated recordings for the discovery's tests and confusion-matrix benchmark (docs/physics.md,
 // docs/discovery.md): the user's model is the paper's model (1) (k0 free with a 0.3 deg/h prior,
 // no C1/C2/mu/nu, mountings believed exact, random walk 0.0015 deg/h/sqrt(h)); the spacecraft is
 // mostly in orbital orientation with one inertial hold and one rotation (60 min period), joined by
