@@ -186,7 +186,7 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
 }
 
 std::string FormatUtc(absl::Time t) {
-  return absl::FormatTime(absl::RFC3339_full, t, absl::UTCTimeZone());
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ", t, absl::UTCTimeZone());
 }
 
 }  // namespace esg::server
