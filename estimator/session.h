@@ -1,4 +1,4 @@
-// EstimationSession: the per-spacecraft estimation pipeline of DESIGN §5 (the paper's section 2):
+// EstimationSession: the per-spacecraft estimation pipeline of the paper's section 2 (docs/physics.md):
 // an error-state extended Kalman filter over the running gyros, quasi-continuous correction by
 // the star tracker, calibration of the drift model (models 1, 10, 11), fault detection by eq. (12)
 // and (14), and long-gap prediction. Pure computation: frames in, reports out.
@@ -189,6 +189,8 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
+  // The values and their order (version 1, stored by the server) are listed in
+  // session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
   // DataLoss if the checkpoint does not fit this configuration and model.
   static absl::StatusOr<EstimationSession> FromCheckpoint(const SpacecraftConfig& config,
@@ -219,14 +221,31 @@ class EstimationSession {
   };
 
   EstimationSession() = default;
+
+  // session_initialization.cc
   absl::Status Initialize(const TelemetryFrame& frame);
   // Sets every running gyro's h_in from the star tracker (h_in = C_in_b C_b_k h_k) and the
   // spin-axis blocks of P to the matching prior (misalignment, shared star-tracker noise, readout);
   // the other blocks of P are kept, cross terms with the spin axes are cleared.
   void SpinAxesFromStarTracker(const Eigen::Matrix3d& C_in_b);
+
+  // session_propagation.cc
   absl::Status Propagate(const TelemetryFrame& frame);
+
+  // session_update.cc
   absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
   void ApplyCorrection(const Eigen::VectorXd& dx);
+
+  // session_attitude.cc
+  // Attitude of a pair from predicted h_in and the given case-frame readings (nullopt if either
+  // gyro has no reading), with its covariance in inertial axes when `covariance` is set.
+  std::optional<Eigen::Quaterniond> PairQuaternion(int a, int b, const Eigen::Vector3d& h_k_a,
+                                                   const Eigen::Vector3d& h_k_b,
+                                                   Eigen::Matrix3d* covariance_in) const;
+  AttitudeEstimate OutputAttitude(absl::Time time) const;
+
+  // session.cc
+  void UpdateState(const StepReport& report);
   // The state layout of `gyros` (each configured in `config`) under `model`: the free
   // coefficients and the misalignment states follow from the configured sigmas.
   static StateLayout LayoutFor(const SpacecraftConfig& config, const ModelSpec& model,
@@ -236,13 +255,6 @@ class EstimationSession {
   int IndexOf(int id) const;
   GyroState* Find(int id);
   const GyroState* Find(int id) const;
-  // Attitude of a pair from predicted h_in and the given case-frame readings (nullopt if either
-  // gyro has no reading), with its covariance in inertial axes when `covariance` is set.
-  std::optional<Eigen::Quaterniond> PairQuaternion(int a, int b, const Eigen::Vector3d& h_k_a,
-                                                   const Eigen::Vector3d& h_k_b,
-                                                   Eigen::Matrix3d* covariance_in) const;
-  AttitudeEstimate OutputAttitude(absl::Time time) const;
-  void UpdateState(const StepReport& report);
 
   SpacecraftConfig config_;
   SessionOptions options_;

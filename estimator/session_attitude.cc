@@ -1,0 +1,134 @@
+// The attitude of a gyro pair (EstimationSession::PairQuaternion, OutputAttitude): q_in_b from
+// the two predicted inertial spin axes and their measured body-frame directions (TRIAD,
+// triad.h), and its covariance in inertial axes from the spin-axis and misalignment states and
+// the readout noise. This is the L_in,c of each pair in eq. (12) and the session's output.
+#include "estimator/session.h"
+
+#include <algorithm>
+#include <optional>
+#include <vector>
+
+#include "estimator/measurements.h"
+#include "estimator/rotation.h"
+#include "estimator/session_internal.h"
+#include "estimator/triad.h"
+
+namespace esg::estimator {
+
+using Eigen::Matrix3d;
+using Eigen::MatrixXd;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+using Matrix32 = Eigen::Matrix<double, 3, 2>;
+
+using session_internal::kNoiseFloor;
+
+namespace {
+
+// Numerical-Jacobian step for the pair attitude [rad]: TRIAD is smooth, central differences
+// have truncation error ~eps^2 (1e-14 rad) and rounding ~1e-16/eps (1e-9 relative).
+constexpr double kJacobianStep = 1e-7;
+
+}  // namespace
+
+Eigen::Matrix<double, 3, 2> EstimationSession::GyroState::T() const {
+  Matrix32 T;
+  T.col(0) = t1;
+  T.col(1) = t2();
+  return T;
+}
+
+Matrix3d EstimationSession::GyroState::C_b_k() const {
+  return ExpMatrix(phi_b) * C_b_k_config;
+}
+
+std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const Vector3d& h_k_a,
+                                                             const Vector3d& h_k_b,
+                                                             Matrix3d* covariance_in) const {
+  const int ia = IndexOf(a);
+  const int ib = IndexOf(b);
+  if (ia < 0 || ib < 0) return std::nullopt;
+  const GyroState* ga = &gyros_[ia];
+  const GyroState* gb = &gyros_[ib];
+  auto attitude = [&](const Vector3d& h_in_a, const Vector3d& h_in_b, const Matrix3d& C_a,
+                      const Matrix3d& C_b, const Vector3d& hk_a,
+                      const Vector3d& hk_b) -> std::optional<Quaterniond> {
+    auto q = PairAttitude(h_in_a, h_in_b, C_a * hk_a, C_b * hk_b);
+    if (!q.ok()) return std::nullopt;
+    return *q;
+  };
+  const Matrix3d C_a = ga->C_b_k(), C_b = gb->C_b_k();
+  const auto q0 = attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, h_k_b);
+  if (!q0.has_value() || covariance_in == nullptr) return q0;
+
+  // Attitude error dtheta_in (q_true = Exp(dtheta_in) q_est) against the state errors of the two
+  // gyros and their readout noise, by one-sided differences (error ~ step, 1e-7 relative: this
+  // feeds a 1-sigma envelope; prediction evaluates it at every output sample).
+  const int n = state_size();
+  MatrixXd J = MatrixXd::Zero(3, n);
+  Eigen::Matrix<double, 3, 4> J_r = Eigen::Matrix<double, 3, 4>::Zero();
+  const double e = kJacobianStep;
+  const Quaterniond q0_conj = q0->conjugate();
+  auto diff = [&](const std::optional<Quaterniond>& qp) {
+    if (!qp) return Vector3d::Zero().eval();
+    return (LogQuaternion(*qp * q0_conj) / e).eval();
+  };
+  const Matrix32 Ta = ga->T(), Tb = gb->T();
+  for (int i = 0; i < 2; ++i) {
+    J.col(layout_.SpinAxis(ia) + i) =
+        diff(attitude((ga->h_in + e * Ta.col(i)).normalized(), gb->h_in, C_a, C_b, h_k_a, h_k_b));
+    J.col(layout_.SpinAxis(ib) + i) =
+        diff(attitude(ga->h_in, (gb->h_in + e * Tb.col(i)).normalized(), C_a, C_b, h_k_a, h_k_b));
+  }
+  for (int i = 0; i < 3; ++i) {
+    const Matrix3d R = ExpMatrix(e * Vector3d::Unit(i));
+    if (layout_.HasPhi(ia)) {
+      J.col(layout_.Phi(ia) + i) = diff(attitude(ga->h_in, gb->h_in, R * C_a, C_b, h_k_a, h_k_b));
+    }
+    if (layout_.HasPhi(ib)) {
+      J.col(layout_.Phi(ib) + i) = diff(attitude(ga->h_in, gb->h_in, C_a, R * C_b, h_k_a, h_k_b));
+    }
+  }
+  const Matrix32 Ua = TangentBasis(h_k_a), Ub = TangentBasis(h_k_b);
+  for (int i = 0; i < 2; ++i) {
+    J_r.col(i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, (h_k_a + e * Ua.col(i)).normalized(), h_k_b));
+    J_r.col(2 + i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, (h_k_b + e * Ub.col(i)).normalized()));
+  }
+  // Only the columns of the two gyros are nonzero: J P J^T over those blocks.
+  std::vector<int> cols;
+  for (int g : {ia, ib}) {
+    for (int k = 0; k < 2; ++k) cols.push_back(layout_.SpinAxis(g) + k);
+    if (layout_.HasPhi(g)) {
+      for (int k = 0; k < 3; ++k) cols.push_back(layout_.Phi(g) + k);
+    }
+  }
+  const int m = static_cast<int>(cols.size());
+  Eigen::MatrixXd Js(3, m), Ps(m, m);
+  for (int i = 0; i < m; ++i) {
+    Js.col(i) = J.col(cols[i]);
+    for (int j = 0; j < m; ++j) Ps(i, j) = P_(cols[i], cols[j]);
+  }
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  *covariance_in = Js * Ps * Js.transpose() + sigma_r * sigma_r * J_r * J_r.transpose();
+  return q0;
+}
+
+AttitudeEstimate EstimationSession::OutputAttitude(absl::Time time) const {
+  AttitudeEstimate out;
+  out.time = time;
+  out.pair = working_pair_;
+  const GyroState* a = Find(working_pair_[0]);
+  const GyroState* b = Find(working_pair_[1]);
+  if (!initialized_ || a == nullptr || b == nullptr) return out;
+  Matrix3d S_in;
+  const auto q = PairQuaternion(a->id, b->id, a->h_k_last, b->h_k_last, &S_in);
+  if (!q.has_value()) return out;
+  out.q_in_b = *q;
+  const Matrix3d C_b_in = q->toRotationMatrix().transpose();
+  const Matrix3d S_b = C_b_in * S_in * C_b_in.transpose();
+  out.sigma_b = S_b.diagonal().cwiseMax(0.0).cwiseSqrt();
+  out.valid = true;
+  return out;
+}
+
+}  // namespace esg::estimator

@@ -1,0 +1,174 @@
+// The session's checkpoint (EstimationSession::ExportCheckpoint, FromCheckpoint): everything
+// needed to resume bit for bit, as a versioned vector of doubles. The server stores these values
+// and restores them, so the order below is a storage format: version 1 must not change.
+#include "estimator/session.h"
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/ekf.h"
+
+namespace esg::estimator {
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+// Checkpoint layout, version 1, all doubles; a time is three values (1, unix seconds,
+// nanoseconds), or (-1, 0, 0) for absl::InfinitePast():
+//   initialized, use_star_tracker, last_time, last_update_time, start_time,
+//   convergence_mark_time, working_pair (2), reserve_pair (2), state, steps_without_star_tracker,
+//   consecutive_rejections, converged, m, convergence_mark_sigma (m);
+//   the number of running gyros, then per gyro: id, h_in (3), t1 (3), residual_drift (2),
+//   theta (13), phi_b (3), faulty, has_reading, h_k_last (3);
+//   n (the state size, StateLayout::size()), P (n x n, row by row), P0 (n x n, row by row).
+// The state layout itself is not stored: it follows from the configuration and the model.
+SessionCheckpoint EstimationSession::ExportCheckpoint() const {
+  SessionCheckpoint c;
+  std::vector<double>& v = c.values;
+  auto put_time = [&](absl::Time t) {
+    if (t == absl::InfinitePast()) {
+      v.push_back(-1.0);
+      v.push_back(0.0);
+      v.push_back(0.0);
+      return;
+    }
+    const int64_t ns = absl::ToUnixNanos(t);
+    v.push_back(1.0);
+    v.push_back(static_cast<double>(ns / 1000000000));
+    v.push_back(static_cast<double>(ns % 1000000000));
+  };
+  auto put_vec = [&](const auto& x) {
+    for (int i = 0; i < x.size(); ++i) v.push_back(x(i));
+  };
+  v.push_back(initialized_ ? 1 : 0);
+  v.push_back(use_star_tracker_ ? 1 : 0);
+  put_time(last_time_);
+  put_time(last_update_time_);
+  put_time(start_time_);
+  put_time(convergence_mark_time_);
+  v.push_back(working_pair_[0]);
+  v.push_back(working_pair_[1]);
+  v.push_back(reserve_pair_[0]);
+  v.push_back(reserve_pair_[1]);
+  v.push_back(static_cast<double>(state_));
+  v.push_back(steps_without_star_tracker_);
+  v.push_back(consecutive_rejections_);
+  v.push_back(converged_ ? 1 : 0);
+  v.push_back(static_cast<double>(convergence_mark_sigma_.size()));
+  put_vec(convergence_mark_sigma_);
+  v.push_back(static_cast<double>(gyros_.size()));
+  for (const GyroState& g : gyros_) {
+    v.push_back(g.id);
+    put_vec(g.h_in);
+    put_vec(g.t1);
+    put_vec(g.residual_drift);
+    put_vec(g.theta);
+    put_vec(g.phi_b);
+    v.push_back(g.faulty ? 1 : 0);
+    v.push_back(g.has_reading ? 1 : 0);
+    put_vec(g.h_k_last);
+  }
+  v.push_back(static_cast<double>(P_.rows()));
+  for (int i = 0; i < P_.rows(); ++i) {
+    for (int j = 0; j < P_.cols(); ++j) v.push_back(P_(i, j));
+  }
+  for (int i = 0; i < P0_.rows(); ++i) {
+    for (int j = 0; j < P0_.cols(); ++j) v.push_back(P0_(i, j));
+  }
+  return c;
+}
+
+absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
+    const SpacecraftConfig& config, const SessionOptions& options,
+    const SessionCheckpoint& checkpoint) {
+  if (checkpoint.version != 1) {
+    return absl::DataLossError(absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
+  }
+  auto created = Create(config, options);
+  if (!created.ok()) return created.status();
+  EstimationSession s = std::move(*created);
+  const std::vector<double>& v = checkpoint.values;
+  size_t pos = 0;
+  bool short_read = false;
+  auto get = [&]() {
+    if (pos >= v.size()) {
+      short_read = true;
+      return 0.0;
+    }
+    return v[pos++];
+  };
+  auto get_time = [&]() {
+    const double flag = get();
+    const double sec = get();
+    const double nsec = get();
+    if (flag < 0) return absl::InfinitePast();
+    return absl::FromUnixNanos(static_cast<int64_t>(sec) * 1000000000 + static_cast<int64_t>(nsec));
+  };
+  auto get_vec = [&](auto& x) {
+    for (int i = 0; i < x.size(); ++i) x(i) = get();
+  };
+  s.initialized_ = get() != 0;
+  s.use_star_tracker_ = get() != 0;
+  s.last_time_ = get_time();
+  s.last_update_time_ = get_time();
+  s.start_time_ = get_time();
+  s.convergence_mark_time_ = get_time();
+  s.working_pair_ = {static_cast<int>(get()), static_cast<int>(get())};
+  s.reserve_pair_ = {static_cast<int>(get()), static_cast<int>(get())};
+  s.state_ = static_cast<SessionState>(static_cast<int>(get()));
+  s.steps_without_star_tracker_ = static_cast<int>(get());
+  s.consecutive_rejections_ = static_cast<int>(get());
+  s.converged_ = get() != 0;
+  const int n_mark = static_cast<int>(get());
+  if (n_mark < 0 || n_mark > 1000) return absl::DataLossError("checkpoint: bad convergence record");
+  s.convergence_mark_sigma_ = VectorXd::Zero(n_mark);
+  get_vec(s.convergence_mark_sigma_);
+  const int n_gyros = static_cast<int>(get());
+  if (n_gyros < 0 || n_gyros > kMaxGyros) return absl::DataLossError("checkpoint: bad gyro count");
+  for (int i = 0; i < n_gyros; ++i) {
+    GyroState g;
+    g.id = static_cast<int>(get());
+    const GyroConfig* gc = config.FindGyro(g.id);
+    if (gc == nullptr) {
+      return absl::DataLossError(absl::StrCat("checkpoint: gyro ", g.id, " is not in the configuration"));
+    }
+    g.C_b_k_config = gc->C_b_k;
+    get_vec(g.h_in);
+    get_vec(g.t1);
+    get_vec(g.residual_drift);
+    get_vec(g.theta);
+    get_vec(g.phi_b);
+    g.faulty = get() != 0;
+    g.has_reading = get() != 0;
+    get_vec(g.h_k_last);
+    s.gyros_.push_back(std::move(g));
+  }
+  s.layout_ = LayoutFor(config, options.model, s.gyros_);
+  const int n = static_cast<int>(get());
+  if (n != s.layout_.size()) {
+    return absl::DataLossError(absl::StrFormat(
+        "checkpoint: covariance size %d does not fit the configuration and model %s (%d states)", n,
+        options.model.Name(), s.layout_.size()));
+  }
+  s.P_ = MatrixXd::Zero(n, n);
+  s.P0_ = MatrixXd::Zero(n, n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) s.P_(i, j) = get();
+  }
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) s.P0_(i, j) = get();
+  }
+  if (short_read || pos != v.size()) return absl::DataLossError("checkpoint: truncated or oversized");
+  // An uninitialised session (no valid star-tracker attitude yet) has no state to check.
+  if (s.initialized_) {
+    if (absl::Status st = CheckCovariance(s.P_); !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
+  }
+  return s;
+}
+
+}  // namespace esg::estimator

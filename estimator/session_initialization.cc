@@ -1,0 +1,154 @@
+// Filter start (EstimationSession::Initialize): the running gyros and their state layout, the
+// tangent bases from the `int` frame of the working pair, the prior covariance of the drift
+// coefficients of eq. (1)/(10), the residual drifts of eq. (11) and the misalignments; and the
+// spin axes rebuilt from the star tracker, h_in = C_in_b(star tracker) C_b_k h_k (the h_et of
+// eq. (13)), with the covariance that rebuild implies (also used by the filter reset).
+#include "estimator/session.h"
+
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include "estimator/calibration_model.h"
+#include "estimator/ekf.h"
+#include "estimator/measurements.h"
+#include "estimator/rotation.h"
+#include "estimator/session_internal.h"
+#include "estimator/triad.h"
+#include "estimator/units.h"
+
+namespace esg::estimator {
+
+using Eigen::Matrix2d;
+using Eigen::Matrix3d;
+using Eigen::MatrixXd;
+using Eigen::Vector3d;
+using Matrix23 = Eigen::Matrix<double, 2, 3>;
+
+using session_internal::kNoiseFloor;
+
+absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
+  const auto& st = frame.star_tracker;
+  if (!st.has_value() || !st->valid) return absl::OkStatus();  // wait for a star-tracker fix
+  const auto& wa = frame.gyros[working_pair_[0] - 1];
+  const auto& wb = frame.gyros[working_pair_[1] - 1];
+  if (!wa.has_value() || !wb.has_value()) return absl::OkStatus();  // wait for the working pair
+
+  // Running gyros: the configured gyros that report in this frame, working pair first.
+  std::vector<int> order = {working_pair_[0], working_pair_[1]};
+  for (const GyroConfig& gc : config_.gyros) {
+    if (gc.id != working_pair_[0] && gc.id != working_pair_[1] &&
+        frame.gyros[gc.id - 1].has_value()) {
+      order.push_back(gc.id);
+    }
+  }
+  const Matrix3d C_in_b = st->q_in_b.normalized().toRotationMatrix();
+  gyros_.clear();
+  for (int id : order) {
+    const GyroConfig& gc = *config_.FindGyro(id);
+    GyroState g;
+    g.id = id;
+    g.C_b_k_config = gc.C_b_k;
+    g.theta = ModelCoefficients(options_.model, gc);
+    g.has_reading = true;
+    g.h_k_last = frame.gyros[id - 1]->h_k.normalized();
+    g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();  // bases below need it
+    gyros_.push_back(std::move(g));
+  }
+  layout_ = LayoutFor(config_, options_.model, gyros_);
+  // Tangent bases from e1 = unit(h_a x h_b) of the working pair (conventions.h).
+  auto C_int_in = QuasiInertialFrame(gyros_[0].h_in, gyros_[1].h_in);
+  if (!C_int_in.ok()) return C_int_in.status();
+  const Vector3d e1 = C_int_in->row(0).transpose();
+  for (GyroState& g : gyros_) {
+    Vector3d t1 = e1 - e1.dot(g.h_in) * g.h_in;
+    g.t1 = t1.norm() > 0.1 ? t1.normalized() : AnyPerpendicular(g.h_in);
+  }
+
+  // Prior covariance of the coefficients, residual drifts and misalignments, then the spin axes.
+  const int n = layout_.size();
+  P_ = MatrixXd::Zero(n, n);
+  const double sigma_rw0 =
+      options_.residual_drift_sigma >= 0.0
+          ? options_.residual_drift_sigma
+          : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
+  for (int i = 0; i < gyro_count(); ++i) {
+    const GyroConfig& gc = *config_.FindGyro(gyros_[i].id);
+    if (layout_.has_drift()) {
+      const int d = layout_.Drift(i);
+      P_.block<2, 2>(d, d) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
+    }
+    const DriftVector sigma_theta = gc.model_sigma.AsVector();
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+      const int idx = layout_.Theta(i) + j;
+      P_(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
+    }
+    if (layout_.HasPhi(i)) {
+      const int po = layout_.Phi(i);
+      P_.block<3, 3>(po, po) = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
+    }
+  }
+  SpinAxesFromStarTracker(C_in_b);
+  P0_ = P_;
+  initialized_ = true;
+  start_time_ = frame.time;
+  last_update_time_ = frame.time;
+  state_ = SessionState::kCalibrating;
+  return CheckCovariance(P_);
+}
+
+void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {
+  // The spin axes rebuilt from the star tracker, h_in = C_in_b(st) C_b_k h_k, err by the
+  // misalignment, the star-tracker noise (shared by all gyros) and the readout noise:
+  // dh_g = -H_phi,g phi_g - G_st,g n_st - G_r,g r_g with the Jacobians of the star-tracker
+  // measurement (MeasurementUpdate).
+  const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
+  const Matrix3d Sigma_st = st_noise.cwiseAbs2().asDiagonal();
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  std::vector<Matrix23> G_st(gyros_.size());
+  for (int i = 0; i < gyro_count(); ++i) {
+    GyroState& g = gyros_[i];
+    g.h_in = (C_in_b * g.C_b_k() * g.h_k_last).normalized();
+    g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
+    P_.middleRows(layout_.SpinAxis(i), 2).setZero();
+    P_.middleCols(layout_.SpinAxis(i), 2).setZero();
+  }
+  // A maps the state to the spin-axis errors through the misalignments (zero on the spin axes).
+  const int n = state_size();
+  MatrixXd A = MatrixXd::Zero(n, n);
+  MatrixXd noise = MatrixXd::Zero(n, n);
+  for (int i = 0; i < gyro_count(); ++i) {
+    GyroState& g = gyros_[i];
+    const int h = layout_.SpinAxis(i);
+    const Matrix23 Tt = g.T().transpose();
+    const Vector3d h_b = g.C_b_k() * g.h_k_last;
+    G_st[i] = -Tt * C_in_b * Skew(h_b);
+    if (layout_.HasPhi(i)) A.block<2, 3>(h, layout_.Phi(i)) = -Tt * C_in_b * Skew(h_b);
+    const Matrix2d G_r = Tt * C_in_b * g.C_b_k() * TangentBasis(g.h_k_last);
+    noise.block<2, 2>(h, h) += sigma_r * sigma_r * G_r * G_r.transpose();
+  }
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j < gyro_count(); ++j) {
+      noise.block<2, 2>(layout_.SpinAxis(i), layout_.SpinAxis(j)) +=
+          G_st[i] * Sigma_st * G_st[j].transpose();
+    }
+  }
+  // dh = A x + n: P_dh,x = A P (for x not a spin axis), P_dh,dh = A P A^T + N.
+  const MatrixXd AP = A * P_;
+  const MatrixXd APAt = AP * A.transpose();
+  for (int i = 0; i < gyro_count(); ++i) {
+    const int h = layout_.SpinAxis(i);
+    P_.middleRows(h, 2) = AP.middleRows(h, 2);
+    P_.middleCols(h, 2) = AP.middleRows(h, 2).transpose();
+  }
+  for (int i = 0; i < gyro_count(); ++i) {
+    for (int j = 0; j < gyro_count(); ++j) {
+      const int hi = layout_.SpinAxis(i), hj = layout_.SpinAxis(j);
+      P_.block<2, 2>(hi, hj) = APAt.block<2, 2>(hi, hj) + noise.block<2, 2>(hi, hj);
+    }
+  }
+  P_ = (0.5 * (P_ + P_.transpose())).eval();
+}
+
+}  // namespace esg::estimator

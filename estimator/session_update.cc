@@ -1,0 +1,280 @@
+// The measurement update (EstimationSession::MeasurementUpdate, ApplyCorrection): the eq. (12)
+// mismatch test between the working pair, the reserve pair and the star tracker; the
+// measurements of eq. (13) (star-tracker differences z2..z5 per healthy gyro, z_avt per healthy
+// pair) with one noise map for R; the innovation test of eq. (14); the filter reset after
+// kResetAfterRejections rejected steps; the Joseph update (ekf.h) and the feedback of the error
+// estimate into the nominal state.
+#include "estimator/session.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_format.h"
+#include "estimator/ekf.h"
+#include "estimator/fault_detection.h"
+#include "estimator/measurements.h"
+#include "estimator/rotation.h"
+#include "estimator/session_internal.h"
+#include "estimator/units.h"
+
+namespace esg::estimator {
+
+using Eigen::Matrix3d;
+using Eigen::MatrixXd;
+using Eigen::Quaterniond;
+using Eigen::Vector3d;
+using Eigen::VectorXd;
+
+using session_internal::kNoiseFloor;
+
+namespace {
+
+// Floor of the eq. (12) allowed angle.
+constexpr double kMismatchFloor = 2.0 * kRadPerArcsec;
+
+}  // namespace
+
+absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
+  report.measurement_step = true;
+  const int n = state_size();
+  const double kd = config_.filter.innovation_kd;
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
+
+  const auto& st = frame.star_tracker;
+  const bool st_present = use_star_tracker_ && st.has_value() && st->valid;
+  bool st_available = st_present;
+  const Quaterniond q_st = st_available ? st->q_in_b.normalized() : Quaterniond::Identity();
+
+  auto has_reading = [&](const GyroState& g) {
+    return !g.faulty && frame.gyros[g.id - 1].has_value();
+  };
+
+  // eq. (12): working pair, reserve pair, star tracker.
+  {
+    Matrix3d S1, S2;
+    std::optional<Quaterniond> q1, q2;
+    const GyroState* a1 = Find(working_pair_[0]);
+    const GyroState* b1 = Find(working_pair_[1]);
+    const GyroState* a2 = Find(reserve_pair_[0]);
+    const GyroState* b2 = Find(reserve_pair_[1]);
+    const bool reserve_usable = reserve_pair_ != working_pair_ && a2 && b2 && has_reading(*a2) &&
+                                has_reading(*b2) && state_ != SessionState::kFaulted;
+    if (a1 && b1 && has_reading(*a1) && has_reading(*b1)) {
+      q1 = PairQuaternion(a1->id, b1->id, a1->h_k_last, b1->h_k_last, &S1);
+    }
+    if (reserve_usable) q2 = PairQuaternion(a2->id, b2->id, a2->h_k_last, b2->h_k_last, &S2);
+    const Matrix3d C_in_b_st = q_st.toRotationMatrix();
+    const Matrix3d S_st = C_in_b_st * Matrix3d(st_noise.cwiseAbs2().asDiagonal()) * C_in_b_st.transpose();
+    // Allowed angle of each mismatch (eq. (12)): the configured one, or k_d times the mismatch's
+    // sigma along its direction. The two pairs share the reference gyro; the sum of their
+    // covariances bounds that of their mismatch.
+    auto allowed = [&](const std::optional<Quaterniond>& a, const Quaterniond* b, const Matrix3d& S) {
+      if (!a.has_value() || b == nullptr) return 0.0;
+      if (config_.filter.fault_threshold > 0.0) return config_.filter.fault_threshold;
+      return DirectionalAllowedAngle(LogQuaternion(*a * b->conjugate()), S, kd, kMismatchFloor);
+    };
+    const std::array<double, 3> allowed_angles = {
+        allowed(q1, q2 ? &*q2 : nullptr, S1 + S2), allowed(q1, st_available ? &q_st : nullptr, S1 + S_st),
+        allowed(q2, st_available ? &q_st : nullptr, S2 + S_st)};
+    const MismatchTest mt = TestMismatch(q1 ? &*q1 : nullptr, q2 ? &*q2 : nullptr,
+                                         st_available ? &q_st : nullptr, allowed_angles);
+    auto event = [&](Event::Kind kind, std::string subsystem, int m, std::string message) {
+      Event ev{kind, frame.time, std::move(subsystem), RadToArcsec(mt.angle[m]),
+               RadToArcsec(mt.allowed[m]), "arcsec", std::move(message)};
+      report.events.push_back(std::move(ev));
+    };
+    if (mt.faulty == Subsystem::kWorkingPair) {
+      // The gyro of the working pair that is not in the reserve pair is the suspect.
+      int suspect = working_pair_[1];
+      if (working_pair_[1] == reserve_pair_[0] || working_pair_[1] == reserve_pair_[1]) {
+        suspect = working_pair_[0];
+      }
+      if (GyroState* g = Find(suspect)) g->faulty = true;
+      event(Event::Kind::kWorkingPairFault,
+            absl::StrFormat("working_pair[%d,%d]", working_pair_[0], working_pair_[1]), 0,
+            absl::StrFormat("eq. (12): working pair disagrees with reserve pair and star tracker; "
+                            "output switched to reserve pair [%d,%d], gyro %d excluded",
+                            reserve_pair_[0], reserve_pair_[1], suspect));
+      working_pair_ = reserve_pair_;
+      state_ = SessionState::kFaulted;
+    } else if (mt.faulty == Subsystem::kReservePair) {
+      int suspect = reserve_pair_[1];
+      if (reserve_pair_[1] == working_pair_[0] || reserve_pair_[1] == working_pair_[1]) {
+        suspect = reserve_pair_[0];
+      }
+      if (GyroState* g = Find(suspect)) g->faulty = true;
+      event(Event::Kind::kReservePairFault,
+            absl::StrFormat("reserve_pair[%d,%d]", reserve_pair_[0], reserve_pair_[1]), 0,
+            absl::StrFormat("eq. (12): reserve pair disagrees with working pair and star tracker; "
+                            "gyro %d excluded",
+                            suspect));
+    } else if (mt.faulty == Subsystem::kStarTracker) {
+      event(Event::Kind::kStarTrackerFault, "star_tracker", 1,
+            "eq. (12): star tracker disagrees with both gyro pairs; its measurements are rejected");
+      st_available = false;
+    }
+  }
+
+  // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
+  std::vector<int> healthy;  // gyro indices
+  for (int i = 0; i < gyro_count(); ++i) {
+    if (has_reading(gyros_[i])) healthy.push_back(i);
+  }
+  const int n_st = st_available ? 2 * static_cast<int>(healthy.size()) : 0;
+  const int n_avt = options_.use_autonomous_measurements
+                        ? static_cast<int>(healthy.size() * (healthy.size() - 1) / 2)
+                        : 0;
+  const int m = n_st + n_avt;
+  if (m == 0) return absl::OkStatus();
+  // Noise sources: star-tracker rotation (3, body axes), readout (2 per gyro, case tangent plane).
+  const int n_noise = 3 + 2 * static_cast<int>(gyros_.size());
+  MatrixXd H = MatrixXd::Zero(m, n);
+  VectorXd z = VectorXd::Zero(m);
+  MatrixXd G = MatrixXd::Zero(m, n_noise);
+  VectorXd noise_var(n_noise);
+  noise_var.head<3>() = st_noise.cwiseAbs2();
+  noise_var.tail(n_noise - 3).setConstant(sigma_r * sigma_r);
+  auto noise_col = [](int gyro_index) { return 3 + 2 * gyro_index; };
+
+  // Body attitude for the star-tracker rebuild is the star tracker's own.
+  const Matrix3d C_in_b_st = q_st.toRotationMatrix();
+  int row = 0;
+  for (int i : healthy) {
+    if (!st_available) break;
+    const GyroState& g = gyros_[i];
+    const StarTrackerDifference d =
+        MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
+    z.segment<2>(row) = d.z;
+    H.block<2, 2>(row, layout_.SpinAxis(i)) = d.H_h;
+    if (layout_.HasPhi(i)) H.block<2, 3>(row, layout_.Phi(i)) = d.H_phi;
+    G.block<2, 3>(row, 0) = d.G_st;
+    G.block<2, 2>(row, noise_col(i)) = d.G_readout;
+    row += 2;
+  }
+  std::vector<std::pair<int, int>> avt_pairs;  // gyro ids
+  for (size_t ka = 0; ka < healthy.size() && n_avt > 0; ++ka) {
+    for (size_t kb = ka + 1; kb < healthy.size(); ++kb) {
+      const int ia = healthy[ka], ib = healthy[kb];
+      const GyroState& a = gyros_[ia];
+      const GyroState& b = gyros_[ib];
+      const AutonomousDifference d = MakeAutonomousDifference(
+          a.h_in, a.T(), a.C_b_k(), a.h_k_last, b.h_in, b.T(), b.C_b_k(), b.h_k_last);
+      z(row) = d.z;
+      H.block<1, 2>(row, layout_.SpinAxis(ia)) = d.H_h_a;
+      H.block<1, 2>(row, layout_.SpinAxis(ib)) = d.H_h_b;
+      if (layout_.HasPhi(ia)) H.block<1, 3>(row, layout_.Phi(ia)) = d.H_phi_a;
+      if (layout_.HasPhi(ib)) H.block<1, 3>(row, layout_.Phi(ib)) = d.H_phi_b;
+      G.block<1, 2>(row, noise_col(ia)) = d.G_readout_a;
+      G.block<1, 2>(row, noise_col(ib)) = d.G_readout_b;
+      avt_pairs.emplace_back(a.id, b.id);
+      ++row;
+    }
+  }
+  MatrixXd R = G * noise_var.asDiagonal() * G.transpose();
+  MatrixXd S = H * P_ * H.transpose() + R;
+
+  std::vector<int> keep;
+  report.autonomous_innovation = z.tail(n_avt);
+  report.autonomous_innovation_sigma = S.diagonal().tail(n_avt).cwiseSqrt();
+  if (n_st > 0) {
+    report.star_tracker_innovation = z.head(n_st);
+    report.star_tracker_innovation_sigma = S.diagonal().head(n_st).cwiseSqrt();
+    // eq. (14) on z2..z5.
+    const InnovationTest t = TestInnovation(z.head(n_st), S.topLeftCorner(n_st, n_st), kd);
+    report.star_tracker_test_ratio = t.worst_ratio;
+    report.star_tracker_nis = t.nis;
+    report.star_tracker_log_det_s = t.log_det_s;
+    if (t.passed) {
+      for (int i = 0; i < n_st; ++i) keep.push_back(i);
+      report.star_tracker_used = true;
+    } else {
+      const GyroState* g = &gyros_[healthy[t.worst_index / 2]];
+      report.events.push_back(Event{
+          Event::Kind::kStarTrackerInnovation, frame.time, "star_tracker",
+          RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold), "arcsec",
+          absl::StrFormat("eq. (14): star-tracker difference for gyro %d exceeds k_d sigma_z "
+                          "(|z| = %.1f arcsec > %.1f); star-tracker data rejected, output autonomous",
+                          g->id, RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold))});
+    }
+  }
+  // With the star-tracker differences applied, z_avt adds nothing: the angle between the rebuilt
+  // axes h_et equals the measured theta_S, so z_avt = -(h_et_a - h_a).h_b - h_a.(h_et_b - h_b) to
+  // first order, a linear function of z_st with the same noise, and the joint S would be singular.
+  // It is tested by eq. (14) every step and applied only when the output runs autonomous.
+  const bool apply_avt = !report.star_tracker_used;
+  for (int k = 0; k < n_avt; ++k) {
+    const int i = n_st + k;
+    const double sigma = std::sqrt(S(i, i));
+    // eq. (14) on z_avt.
+    if (std::abs(z(i)) <= kd * sigma) {
+      if (apply_avt) keep.push_back(i);
+    } else {
+      report.events.push_back(Event{
+          Event::Kind::kGyroDataRejected, frame.time,
+          absl::StrFormat("gyros %d,%d", avt_pairs[k].first, avt_pairs[k].second),
+          std::abs(z(i)), kd * sigma, "1",
+          absl::StrFormat("eq. (14): autonomous measurement z_avt = %.3g exceeds k_d sigma_z = %.3g",
+                          z(i), kd * sigma)});
+    }
+  }
+  if (report.star_tracker_used) {
+    steps_without_star_tracker_ = 0;
+    consecutive_rejections_ = 0;
+  } else {
+    ++steps_without_star_tracker_;
+    if (st_present) ++consecutive_rejections_;
+  }
+  if (consecutive_rejections_ >= kResetAfterRejections) {
+    // The star tracker has been present and rejected for kResetAfterRejections steps: a star
+    // tracker that is wrong that long flags itself invalid, a filter whose model misses part of
+    // the drift does not, so the filter is taken to be wrong (docs/decisions.md).
+    SpinAxesFromStarTracker(C_in_b_st);
+    report.events.push_back(Event{
+        Event::Kind::kFilterReset, frame.time, "filter",
+        static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
+        "steps",
+        absl::StrFormat("star-tracker data rejected for %d steps in a row: spin axes "
+                        "re-initialised from the star tracker (is the drift model missing a term?)",
+                        consecutive_rejections_)});
+    consecutive_rejections_ = 0;
+    steps_without_star_tracker_ = 0;
+    return CheckCovariance(P_);
+  }
+  if (keep.empty()) return absl::OkStatus();
+  const int mk = static_cast<int>(keep.size());
+  MatrixXd Hk(mk, n), Rk(mk, mk);
+  VectorXd zk(mk);
+  for (int i = 0; i < mk; ++i) {
+    Hk.row(i) = H.row(keep[i]);
+    zk(i) = z(keep[i]);
+    for (int j = 0; j < mk; ++j) Rk(i, j) = R(keep[i], keep[j]);
+  }
+  VectorXd dx;
+  if (absl::Status s = JosephUpdate(Hk, zk, Rk, P_, dx); !s.ok()) return s;
+  ApplyCorrection(dx);
+  return absl::OkStatus();
+}
+
+void EstimationSession::ApplyCorrection(const VectorXd& dx) {
+  // Feedback of the error estimate into the nominal state, then the error state is zero.
+  for (int i = 0; i < gyro_count(); ++i) {
+    GyroState& g = gyros_[i];
+    g.h_in = (g.h_in + g.T() * dx.segment<2>(layout_.SpinAxis(i))).normalized();
+    g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
+    if (layout_.has_drift()) g.residual_drift += dx.segment<2>(layout_.Drift(i));
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) g.theta(free[j]) += dx(layout_.Theta(i) + j);
+    if (layout_.HasPhi(i)) {
+      // C_b_k(true) = Exp(dphi) Exp(phi) C_b_k(config): compose the rotations.
+      g.phi_b = LogQuaternion(ExpQuaternion(dx.segment<3>(layout_.Phi(i))) * ExpQuaternion(g.phi_b));
+    }
+  }
+}
+
+}  // namespace esg::estimator
