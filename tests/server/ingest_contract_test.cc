@@ -12,6 +12,7 @@ namespace esg::server {
 namespace {
 
 using ::esg::testing::ConfigureRequestFor;
+using ::esg::testing::Session;
 using ::esg::testing::LoopbackServer;
 using ::esg::testing::OfflineSessionValues;
 using ::esg::testing::SimulateRun;
@@ -31,15 +32,6 @@ void Configure(esg::v1::EstimationService::Stub& stub, const estimator::Spacecra
   grpc::ClientContext ctx;
   esg::v1::ConfigureResponse r;
   ASSERT_TRUE(stub.ConfigureSpacecraft(&ctx, ConfigureRequestFor(config, model), &r).ok());
-}
-
-esg::v1::SessionInfo Session(esg::v1::EstimationService::Stub& stub, const std::string& id) {
-  grpc::ClientContext ctx;
-  esg::v1::GetSessionRequest get;
-  get.set_spacecraft_id(id);
-  esg::v1::SessionInfo info;
-  EXPECT_TRUE(stub.GetSession(&ctx, get, &info).ok());
-  return info;
 }
 
 std::vector<storage::ArchivedFrame> Archived(LoopbackServer& server, const std::string& id) {

@@ -29,6 +29,7 @@
 #include "gtest/gtest.h"
 #include "server/call_limiter.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/daemon.h"
 #include "tests/testing/status_matchers.h"
 
 #ifndef ESGD_PATH
@@ -39,6 +40,7 @@ namespace esg::server {
 namespace {
 
 using ::esg::testing::ConfigureRequestFor;
+using ::esg::testing::Daemon;
 using ::esg::testing::IsOk;
 using ::esg::testing::LoopbackServer;
 using ::esg::testing::SimulateRun;
@@ -486,57 +488,6 @@ TEST(Limits, OversizedRequestsAreRefusedByGrpcAndTheServerGoesOn) {
 
 // ---- File descriptors -------------------------------------------------------------------------
 
-// esgd as a child process whose soft RLIMIT_NOFILE starts at `soft_fds` and hard at `hard_fds`
-// (0: the test's own hard limit); stderr goes to `log`.
-class LimitedDaemon {
- public:
-  LimitedDaemon(const std::string& db, const std::string& log, rlim_t soft_fds,
-                rlim_t hard_fds = 0) {
-    rlimit limit{};
-    getrlimit(RLIMIT_NOFILE, &limit);
-    limit.rlim_cur = soft_fds;
-    if (hard_fds != 0) limit.rlim_max = hard_fds;
-    int out[2];
-    EXPECT_EQ(pipe(out), 0);
-    pid_ = fork();
-    if (pid_ == 0) {  // only async-signal-safe calls until exec
-      setrlimit(RLIMIT_NOFILE, &limit);
-      dup2(out[1], STDOUT_FILENO);
-      const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      if (err >= 0) dup2(err, STDERR_FILENO);
-      close(out[0]);
-      execl(ESGD_PATH, "esgd", "--listen", "127.0.0.1:0", "--db", db.c_str(), "--workers", "2",
-            static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    close(out[1]);
-    std::string line;
-    pollfd p{out[0], POLLIN, 0};
-    while (line.find('\n') == std::string::npos && poll(&p, 1, 30000) > 0) {
-      char buffer[256];
-      const ssize_t n = read(out[0], buffer, sizeof buffer);
-      if (n <= 0) break;
-      line.append(buffer, n);
-    }
-    close(out[0]);
-    const size_t at = line.find("port ");
-    EXPECT_NE(at, std::string::npos) << "esgd did not start: " << line;
-    if (at != std::string::npos) port_ = std::stoi(line.substr(at + 5));
-  }
-  ~LimitedDaemon() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGTERM);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-  }
-  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
-  int port() const { return port_; }
-
- private:
-  pid_t pid_ = -1;
-  int port_ = 0;
-};
-
 // A channel with a connection of its own (no subchannel shared with other channels).
 std::shared_ptr<grpc::Channel> OwnConnection(const std::string& address, int index) {
   grpc::ChannelArguments args;
@@ -581,7 +532,7 @@ TEST(Limits, BurstBeyondTheInheritedFdLimitIsServedAndTheServerStillAccepts) {
   TempDir dir;
   const std::string log = dir.File("esgd.log");
   {
-    LimitedDaemon daemon(dir.File("var/esg.db"), log, kInheritedSoft);
+    Daemon daemon(dir.File("var/esg.db"), log, {kInheritedSoft, 0});
     ASSERT_GT(daemon.port(), 0);
     std::vector<std::shared_ptr<grpc::Channel>> channels;
     int answered = 0;
@@ -608,7 +559,7 @@ TEST(Limits, BurstBeyondTheInheritedFdLimitIsServedAndTheServerStillAccepts) {
 TEST(Limits, DISABLED_AtTheHardFdLimitGrpc151StopsAcceptingForGood) {
   TempDir dir;
   const std::string log = dir.File("esgd.log");
-  LimitedDaemon daemon(dir.File("var/esg.db"), log, 128, 128);
+  Daemon daemon(dir.File("var/esg.db"), log, {128, 128});
   ASSERT_GT(daemon.port(), 0);
   std::vector<std::shared_ptr<grpc::Channel>> channels;
   int answered = 0;

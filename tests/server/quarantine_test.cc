@@ -17,6 +17,7 @@ namespace esg::server {
 namespace {
 
 using ::esg::testing::ConfigureRequestFor;
+using ::esg::testing::Session;
 using ::esg::testing::LoopbackServer;
 using ::esg::testing::OfflineSessionValues;
 using ::esg::testing::SimulateRun;
@@ -33,15 +34,6 @@ const SimulatedRun& RunA() {
 const SimulatedRun& RunB() {
   static const SimulatedRun* run = new SimulatedRun(SimulateRun("QB-1", 1.5, 32));
   return *run;
-}
-
-esg::v1::SessionInfo Session(esg::v1::EstimationService::Stub& stub, const std::string& id) {
-  grpc::ClientContext ctx;
-  esg::v1::GetSessionRequest get;
-  get.set_spacecraft_id(id);
-  esg::v1::SessionInfo info;
-  EXPECT_TRUE(stub.GetSession(&ctx, get, &info).ok());
-  return info;
 }
 
 // Both spacecraft configured and their whole runs applied, then the server stopped.

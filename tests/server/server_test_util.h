@@ -123,6 +123,17 @@ inline StreamResult StreamFrames(esg::v1::EstimationService::Stub& stub,
   return result;
 }
 
+// GetSession of `id` (expected to succeed).
+inline esg::v1::SessionInfo Session(esg::v1::EstimationService::Stub& stub,
+                                    const std::string& id) {
+  grpc::ClientContext ctx;
+  esg::v1::GetSessionRequest get;
+  get.set_spacecraft_id(id);
+  esg::v1::SessionInfo info;
+  EXPECT_TRUE(stub.GetSession(&ctx, get, &info).ok());
+  return info;
+}
+
 // The session values an uninterrupted offline run of `frames` under `model` ends with
 // (EstimationSession::ExportCheckpoint), to compare with what the service stored.
 inline std::vector<double> OfflineSessionValues(const estimator::SpacecraftConfig& config,

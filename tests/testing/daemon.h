@@ -7,6 +7,7 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,13 +25,24 @@
 
 namespace esg::testing {
 
+// Limits the child runs under (0: inherited).
+struct DaemonLimits {
+  rlim_t soft_fds = 0;
+  rlim_t hard_fds = 0;
+};
+
 class Daemon {
  public:
-  Daemon(const std::string& db, const std::string& log) {
+  Daemon(const std::string& db, const std::string& log, DaemonLimits limits = {}) {
+    rlimit fds{};
+    getrlimit(RLIMIT_NOFILE, &fds);
+    if (limits.soft_fds != 0) fds.rlim_cur = limits.soft_fds;
+    if (limits.hard_fds != 0) fds.rlim_max = limits.hard_fds;
     int out[2];
     EXPECT_EQ(pipe(out), 0);
     pid_ = fork();
-    if (pid_ == 0) {
+    if (pid_ == 0) {  // only async-signal-safe calls until exec
+      setrlimit(RLIMIT_NOFILE, &fds);
       dup2(out[1], STDOUT_FILENO);
       const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       if (err >= 0) dup2(err, STDERR_FILENO);
@@ -67,6 +79,7 @@ class Daemon {
         "127.0.0.1:" + std::to_string(port_), grpc::InsecureChannelCredentials()));
   }
   int port() const { return port_; }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
 
  private:
   pid_t pid_ = -1;
