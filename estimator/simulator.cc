@@ -9,7 +9,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/random.h"
 #include "estimator/rotation.h"
-#include "estimator/spin_axis.h"
+#include "estimator/simulator_truth.h"
 #include "estimator/status_macros.h"
 
 namespace esg::estimator {
@@ -72,22 +72,14 @@ int64_t NumFrames(const SimulationSpec& spec) {
          1;
 }
 
-DriftCoefficients EffectiveCoefficients(const GyroTruth& truth, const GyroConfig& config) {
-  DriftCoefficients c = truth.drift.value_or(config.model);
-  const DisplacementTerms d =
-      DisplacementToC1C2(truth.rotor_displacement_k, truth.c10_per_m, truth.c20_per_m);
-  c.C1 += d.C1;
-  c.C2 += d.C2;
-  return c;
-}
-
 // Everything the loop needs per running gyro, computed once.
 struct GyroState {
   int id = 0;
   Matrix3d C_b_k;  // true mounting
   Matrix3d C_k_b;
-  DriftCoefficients coefficients;
-  bool has_mu_nu = false;
+  // True drift, the paper's printed formulas (estimator/simulator_truth.h), never the filter's
+  // drift model.
+  simulator_truth::PrintedDrift drift;
   Vector3d h_in;
   Vector3d dw_in_prev = Vector3d::Zero();  // last step's drift, for the midpoint predictor
   Vector3d dw_rw_in = Vector3d::Zero();    // random-walk drift, inertial axes
@@ -115,26 +107,23 @@ struct GyroState {
   }
 };
 
-// DriftRate_k in the combined form of DESIGN §3, dw = (h h^T - I) g(h) with
-// g = k0 h^3 + C1 + C2 h^2, plus the mu/nu terms only when present: the same value as
-// DriftRate_k to rounding, at a fraction of the cost (it runs 4 x 8 times per simulated second).
-Vector3d FastDriftRate_k(const DriftCoefficients& c, bool has_mu_nu, const Vector3d& h) {
-  const Vector3d h2 = h.cwiseAbs2();
-  const Vector3d g = c.k0 * h2.cwiseProduct(h) + c.C1 + c.C2.cwiseProduct(h2);
-  Vector3d dw = h * h.dot(g) - g;
-  if (has_mu_nu) dw += UnequalStiffnessTerm(h, c.mu, c.nu);
-  return dw;
-}
-
-// StepSpinAxis(h_in, dw_in, dt) by Rodrigues' formula with series coefficients for the tiny
-// angles of drift (|dw dt| ~ 1e-6 rad): no trigonometry per step. Falls back to StepSpinAxis
-// above 1e-3 rad, where the truncated series terms (theta^6 / 5040) would start to matter.
+// h_in turned by the rotation vector a = dw_in dt (dh/dt = dw x h), by Rodrigues' formula
+// h + (sin t / t) a x h + ((1 - cos t) / t^2) a x (a x h), t = |a|. For the tiny angles of drift
+// (|a| ~ 1e-6 rad) the two coefficients come from their series, without trigonometry per step;
+// above 1e-3 rad, where the truncated series terms (t^6 / 5040) would start to matter, from
+// sin and cos. Written here rather than taken from the filter's spin-axis propagation.
 Vector3d FastStepSpinAxis(const Vector3d& h_in, const Vector3d& dw_in, double dt) {
   const Vector3d a = dw_in * dt;
   const double theta2 = a.squaredNorm();
-  if (theta2 > 1e-6) return StepSpinAxis(h_in, dw_in, dt);
-  const double sin_over = 1.0 - theta2 / 6.0 * (1.0 - theta2 / 20.0);             // sin(t)/t
-  const double one_minus_cos_over = 0.5 - theta2 / 24.0 * (1.0 - theta2 / 30.0);  // (1-cos t)/t^2
+  double sin_over, one_minus_cos_over;
+  if (theta2 > 1e-6) {
+    const double theta = std::sqrt(theta2);
+    sin_over = std::sin(theta) / theta;
+    one_minus_cos_over = (1.0 - std::cos(theta)) / theta2;
+  } else {
+    sin_over = 1.0 - theta2 / 6.0 * (1.0 - theta2 / 20.0);             // sin(t)/t
+    one_minus_cos_over = 0.5 - theta2 / 24.0 * (1.0 - theta2 / 30.0);  // (1-cos t)/t^2
+  }
   const Vector3d axh = a.cross(h_in);
   return (h_in + sin_over * axh + one_minus_cos_over * a.cross(axh)).normalized();
 }
@@ -270,8 +259,9 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     GyroState g(id, spec.seed);
     g.C_b_k = ExpMatrix(truth.misalignment_b) * gc.C_b_k;
     g.C_k_b = g.C_b_k.transpose();
-    g.coefficients = EffectiveCoefficients(truth, gc);
-    g.has_mu_nu = !g.coefficients.mu.isZero(0.0) || !g.coefficients.nu.isZero(0.0);
+    g.drift =
+        simulator_truth::FromGyroTruth(truth.drift.value_or(gc.model), truth.rotor_displacement_k,
+                                       truth.c10_per_m, truth.c20_per_m);
     g.rw_intensity = truth.random_walk.value_or(config.random_walk);
     g.readout_noise = truth.readout_noise.value_or(config.readout_noise);
     g.voltage_noise = truth.voltage_noise;
@@ -283,7 +273,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     g.fault = truth.fault;
     const Vector3d h_k0 = truth.initial_h_k.value_or(DefaultInitialSpinAxis(id)).normalized();
     g.h_in = (C_in_b0 * g.C_b_k * h_k0).normalized();
-    result.true_coefficients[id - 1] = g.coefficients;
+    result.true_coefficients[id - 1] = simulator_truth::EquivalentCoefficients(g.drift);
     gyros.push_back(std::move(g));
   }
 
@@ -303,7 +293,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     for (GyroState& g : gyros) {
       const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
       const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
-      Vector3d dw_k = FastDriftRate_k(g.coefficients, g.has_mu_nu, h_k);
+      Vector3d dw_k = simulator_truth::TrueDriftRate_k(g.drift, h_k);
       if (g.fault) dw_k += g.FaultDrift_k(t_mid);
       const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
       g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
@@ -339,7 +329,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       gt.h_in = g.h_in;
       gt.h_k = (g.C_k_b * (C_b_in * g.h_in)).normalized();
       gt.C_b_k = g.C_b_k;
-      gt.dw_k = DriftRate_k(g.coefficients, gt.h_k) + g.FaultDrift_k(t_m) +
+      gt.dw_k = simulator_truth::TrueDriftRate_k(g.drift, gt.h_k) + g.FaultDrift_k(t_m) +
                 g.C_k_b * (C_b_in * g.dw_rw_in);
       // Readout noise: a small rotation perpendicular to h_k (two draws, always).
       const Vector3d e1 = AnyPerpendicular(gt.h_k);

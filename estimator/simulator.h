@@ -1,17 +1,20 @@
-// Seeded ESG / star-tracker telemetry simulator (DESIGN §1, §3, §4, §7; the paper's flight-test
-// setting, section 3: telemetry every 60 s, 8 Hz integration). It propagates each running gyro's
-// true inertial spin axis h_in with the drift model of eq. (1), (8)-(10) (DESIGN §3) plus a random
-// walk (model (11) style) and optional faults, and samples what the spacecraft telemeters: h_k with
-// readout noise, the suspension offset voltages of eq. (3) and the star-tracker quaternion.
+// Seeded ESG / star-tracker telemetry simulator (the paper's flight-test setting, section 3:
+// telemetry every 60 s, 8 Hz integration). It propagates each running gyro's true inertial spin
+// axis h_in with the drift of eq. (1), (8)-(10) plus a random walk (model (11) style) and optional
+// faults, and samples what the spacecraft telemeters: h_k with readout noise, the suspension
+// offset voltages of eq. (3) and the star-tracker quaternion.
 //
 // Truth model (all SI):
 // - Mounting: C_b_k_true = ExpMatrix(misalignment_b) * C_b_k(config), i.e. the case frame turned
 //   by the small rotation vector misalignment_b expressed in body axes.
-// - Drift: dw_k = DriftRate_k(coefficients, h_k) with coefficients = drift (default the config
-//   model) + DisplacementToC1C2(rotor_displacement_k, c10_per_m, c20_per_m) added to C1, C2;
+// - Drift: dw_k = the paper's printed component formulas (estimator/simulator_truth.h, which
+//   never calls the filter's drift model estimator/drift_model.h): eq. (1) and (10) with the
+//   coefficients `drift` (default the config model), plus eq. (8) + (9) for the rotor
+//   displacement (lambda = Delta / |Delta|, C10 = c10_per_m |Delta|, C20 = c20_per_m |Delta|);
 //   plus a fault drift step (case axes) after its time; plus the random-walk drift vector dw_rw_in
-//   (inertial axes), which starts at zero and takes an independent N(0, q dt I) step after every
-//   integration step (q = random_walk^2).
+//   (inertial axes), which starts at zero and takes an independent N(0, q h I) step after every
+//   integration step of length h (q = random_walk^2), so its increment over any interval T
+//   between telemetry frames is N(0, q T I), independent of other intervals.
 // - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a
 //   rotation by dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
 //   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
@@ -73,8 +76,8 @@ struct GyroTruth {
   std::optional<bool> running;
   // True drift coefficients [rad/s]; default the configuration's model.
   std::optional<DriftCoefficients> drift;
-  // Rotor displacement from the suspension centre [m], case axes. Adds C1, C2 through
-  // DisplacementToC1C2 (eq. (8)-(10)) and offsets the suspension voltages through eq. (3).
+  // Rotor displacement from the suspension centre [m], case axes. Adds the drift of eq. (8) + (9)
+  // and offsets the suspension voltages through eq. (3).
   Eigen::Vector3d rotor_displacement_k = Eigen::Vector3d::Zero();
   double c10_per_m = kDefaultC10PerM;  // [rad/s per m]
   double c20_per_m = kDefaultC20PerM;  // [rad/s per m]
@@ -138,7 +141,10 @@ struct SimulationResult {
   // Metadata: spacecraft_id, seed, profile, source.
   Recording recording;
   std::vector<TruthSample> truth;  // one per frame
-  // Effective true drift coefficients per gyro (model + displacement terms) [rad/s]; empty: off.
+  // Effective true drift coefficients per gyro [rad/s]; empty: off. The model coefficients with
+  // the displacement folded in as eq. (10) terms: C1 += (C10 + C20) lambda, C2 += -5 C20 lambda
+  // (simulator_truth::EquivalentCoefficients), so DriftRate_k(true_coefficients, h_k) is the
+  // simulated deterministic drift.
   std::array<std::optional<DriftCoefficients>, kMaxGyros> true_coefficients;
 };
 
