@@ -21,6 +21,18 @@ const char* SubsystemName(Subsystem s) {
   return "?";
 }
 
+Subsystem FaultySubsystem(const std::array<double, 3>& angle, const std::array<double, 3>& allowed,
+                          const std::array<bool, 3>& available) {
+  std::array<bool, 3> exceeded = {false, false, false};
+  for (int m = 0; m < 3; ++m) exceeded[m] = available[m] && angle[m] >= allowed[m];
+  // Subsystem s is faulty when both mismatches that involve it exceed: 1 -> (12, 13),
+  // 2 -> (12, 23), 3 -> (13, 23).
+  if (exceeded[kMismatch12] && exceeded[kMismatch13]) return Subsystem::kWorkingPair;
+  if (exceeded[kMismatch12] && exceeded[kMismatch23]) return Subsystem::kReservePair;
+  if (exceeded[kMismatch13] && exceeded[kMismatch23]) return Subsystem::kStarTracker;
+  return Subsystem::kNone;
+}
+
 MismatchTest TestMismatch(const Eigen::Quaterniond* q1, const Eigen::Quaterniond* q2,
                           const Eigen::Quaterniond* q3, const std::array<double, 3>& allowed) {
   // eq. (12): dL_12 = L1 o conj(L2), dL_13 = L1 o conj(L3), dL_23 = L2 o conj(L3).
@@ -28,24 +40,14 @@ MismatchTest TestMismatch(const Eigen::Quaterniond* q1, const Eigen::Quaterniond
   t.allowed = allowed;
   const Eigen::Quaterniond* q[3] = {q1, q2, q3};
   const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
-  std::array<bool, 3> exceeded = {false, false, false};
   for (int m = 0; m < 3; ++m) {
     const auto* a = q[pairs[m][0]];
     const auto* b = q[pairs[m][1]];
     if (a == nullptr || b == nullptr) continue;
     t.available[m] = true;
     t.angle[m] = RotationAngle(*a, *b);
-    exceeded[m] = t.angle[m] >= allowed[m];
   }
-  // Subsystem s is faulty when both mismatches that involve it exceed: 1 -> (12, 13),
-  // 2 -> (12, 23), 3 -> (13, 23).
-  if (exceeded[0] && exceeded[1]) {
-    t.faulty = Subsystem::kWorkingPair;
-  } else if (exceeded[0] && exceeded[2]) {
-    t.faulty = Subsystem::kReservePair;
-  } else if (exceeded[1] && exceeded[2]) {
-    t.faulty = Subsystem::kStarTracker;
-  }
+  t.faulty = FaultySubsystem(t.angle, t.allowed, t.available);
   return t;
 }
 
@@ -60,6 +62,41 @@ double DirectionalAllowedAngle(const Eigen::Vector3d& dtheta, const Eigen::Matri
   const Eigen::Vector3d u = dtheta / angle;
   const double info = u.dot(llt.solve(u));  // u^T Sigma^-1 u = 1 / sigma_u^2
   return std::max(floor, k_d / std::sqrt(info));
+}
+
+double AllowedMismatchAngle(const Eigen::Quaterniond& q_in_b_a, const Eigen::Quaterniond& q_in_b_b,
+                            const Eigen::Matrix3d& Sigma, double k_d, double configured) {
+  if (configured > 0.0) return configured;
+  return DirectionalAllowedAngle(LogQuaternion(q_in_b_a * q_in_b_b.conjugate()), Sigma, k_d,
+                                 kMinAllowedMismatch);
+}
+
+FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& working_pair,
+                          const std::array<int, 2>& reserve_pair) {
+  FaultDecision d;
+  d.faulty = FaultySubsystem(test.angle, test.allowed, test.available);
+  d.output_pair = working_pair;
+  auto contains = [](const std::array<int, 2>& pair, int id) { return pair[0] == id || pair[1] == id; };
+  switch (d.faulty) {
+    case Subsystem::kNone:
+      break;
+    case Subsystem::kWorkingPair:
+      // docs/decisions.md D10: the gyro of the working pair that is not in the reserve pair.
+      d.evidence = kMismatch12;
+      d.excluded_gyro = contains(reserve_pair, working_pair[1]) ? working_pair[0] : working_pair[1];
+      d.output_pair = reserve_pair;
+      d.output_switched = true;
+      break;
+    case Subsystem::kReservePair:
+      d.evidence = kMismatch12;
+      d.excluded_gyro = contains(working_pair, reserve_pair[1]) ? reserve_pair[0] : reserve_pair[1];
+      break;
+    case Subsystem::kStarTracker:
+      d.evidence = kMismatch13;
+      d.reject_star_tracker = true;
+      break;
+  }
+  return d;
 }
 
 InnovationTest TestInnovation(const Eigen::VectorXd& z, const Eigen::MatrixXd& S, double k_d) {

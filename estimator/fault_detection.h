@@ -2,7 +2,10 @@
 //
 // eq. (12): at each measurement step three mismatch rotations are formed between the working
 // pair (1), the reserve pair (2) and the star tracker (3): dL_12 = L1 (x) conj(L2), dL_13, dL_23.
-// A subsystem is faulty when both mismatches that involve it exceed their allowed angle.
+// A subsystem is faulty when both mismatches that involve it exceed their allowed angle. The
+// decision that follows (which gyro is excluded, which pair carries the output, whether the
+// star tracker's measurements are dropped) is DecideFault, a function of plain values; the
+// session only applies it.
 //
 // eq. (14): a measurement is rejected when |z| > k_d sigma_z with
 // sigma_z = sqrt(diag(H P H^T + R)). The star-tracker measurements z2..z5 share one quaternion's
@@ -17,11 +20,17 @@
 
 #include "Eigen/Core"
 #include "Eigen/Geometry"
+#include "estimator/units.h"
 
 namespace esg::estimator {
 
 enum class Subsystem { kNone, kWorkingPair, kReservePair, kStarTracker };
 const char* SubsystemName(Subsystem s);
+
+// Index of each mismatch of eq. (12) in MismatchTest's arrays.
+inline constexpr int kMismatch12 = 0;  // working pair against reserve pair
+inline constexpr int kMismatch13 = 1;  // working pair against star tracker
+inline constexpr int kMismatch23 = 2;  // reserve pair against star tracker
 
 struct MismatchTest {
   // Angles [rad] of dL_12, dL_13, dL_23 and their allowed values [rad].
@@ -31,8 +40,16 @@ struct MismatchTest {
   Subsystem faulty = Subsystem::kNone;
 };
 
+// eq. (12), the naming rule: mismatch m exceeds when it is available and angle[m] >= allowed[m];
+// the subsystem whose two mismatches exceed is faulty: working pair (12, 13), reserve pair
+// (12, 23), star tracker (13, 23), checked in that order (when all three exceed, the working pair
+// is named). kNone when no subsystem has two exceeded mismatches.
+Subsystem FaultySubsystem(const std::array<double, 3>& angle, const std::array<double, 3>& allowed,
+                          const std::array<bool, 3>& available);
+
 // eq. (12). Any of the quaternions may be unavailable (nullptr); then the mismatches involving it
 // are not formed and no subsystem can be named from fewer than two exceeded mismatches.
+// `faulty` is FaultySubsystem of the formed mismatches.
 MismatchTest TestMismatch(const Eigen::Quaterniond* q_in_b_pair1, const Eigen::Quaterniond* q_in_b_pair2,
                           const Eigen::Quaterniond* q_in_b_star_tracker,
                           const std::array<double, 3>& allowed);
@@ -44,6 +61,42 @@ MismatchTest TestMismatch(const Eigen::Quaterniond* q_in_b_pair1, const Eigen::Q
 // of several arcminutes pass (docs/decisions.md).
 double DirectionalAllowedAngle(const Eigen::Vector3d& dtheta, const Eigen::Matrix3d& Sigma, double k_d,
                                double floor);
+
+// Smallest allowed angle of an eq. (12) mismatch [rad] (docs/decisions.md D9).
+inline constexpr double kMinAllowedMismatch = 2.0 * kRadPerArcsec;
+
+// The allowed angle of the eq. (12) mismatch between the attitudes q_in_b_a and q_in_b_b [rad]:
+// `configured` [rad] when it is positive (filter.faultThresholdArcsec), otherwise
+// DirectionalAllowedAngle of the mismatch rotation vector Log(q_a (x) conj(q_b)) with its
+// covariance Sigma [rad^2], k_d and the floor kMinAllowedMismatch.
+double AllowedMismatchAngle(const Eigen::Quaterniond& q_in_b_a, const Eigen::Quaterniond& q_in_b_b,
+                            const Eigen::Matrix3d& Sigma, double k_d, double configured);
+
+// What the session does about an eq. (12) result.
+struct FaultDecision {
+  Subsystem faulty = Subsystem::kNone;
+  // The mismatch reported as the evidence (its angle against its allowed angle): kMismatch12 for
+  // a pair fault, kMismatch13 for the star tracker; -1 when nothing is faulty.
+  int evidence = -1;
+  // Id of the gyro excluded from then on (a pair fault), 0 when none: the gyro of the faulty
+  // pair that is not in the other pair (docs/decisions.md D10); the second gyro of the faulty
+  // pair when the pairs are equal.
+  int excluded_gyro = 0;
+  // The pair that carries the output after the decision: the reserve pair when the working pair
+  // is faulty (output_switched), the working pair otherwise.
+  std::array<int, 2> output_pair = {0, 0};
+  bool output_switched = false;
+  // The star tracker is faulty: its measurements of this step are not used.
+  bool reject_star_tracker = false;
+};
+
+// eq. (12) policy, from plain values: the mismatch angles, allowed angles and availability of
+// `test` (its `faulty` field is not read) and the gyro ids of the working and reserve pairs.
+// Working pair faulty: exclude its gyro that is not in the reserve pair and move the output to
+// the reserve pair. Reserve pair faulty: exclude its gyro that is not in the working pair.
+// Star tracker faulty: reject its measurements.
+FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& working_pair,
+                          const std::array<int, 2>& reserve_pair);
 
 struct InnovationTest {
   bool passed = true;

@@ -32,13 +32,6 @@ using Eigen::VectorXd;
 
 using session_internal::kNoiseFloor;
 
-namespace {
-
-// Floor of the eq. (12) allowed angle.
-constexpr double kMismatchFloor = 2.0 * kRadPerArcsec;
-
-}  // namespace
-
 absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
   report.measurement_step = true;
   const int n = state_size();
@@ -76,49 +69,50 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     // covariances bounds that of their mismatch.
     auto allowed = [&](const std::optional<Quaterniond>& a, const Quaterniond* b, const Matrix3d& S) {
       if (!a.has_value() || b == nullptr) return 0.0;
-      if (config_.filter.fault_threshold > 0.0) return config_.filter.fault_threshold;
-      return DirectionalAllowedAngle(LogQuaternion(*a * b->conjugate()), S, kd, kMismatchFloor);
+      return AllowedMismatchAngle(*a, *b, S, kd, config_.filter.fault_threshold);
     };
     const std::array<double, 3> allowed_angles = {
         allowed(q1, q2 ? &*q2 : nullptr, S1 + S2), allowed(q1, st_available ? &q_st : nullptr, S1 + S_st),
         allowed(q2, st_available ? &q_st : nullptr, S2 + S_st)};
     const MismatchTest mt = TestMismatch(q1 ? &*q1 : nullptr, q2 ? &*q2 : nullptr,
                                          st_available ? &q_st : nullptr, allowed_angles);
-    auto event = [&](Event::Kind kind, std::string subsystem, int m, std::string message) {
+    // The decision is fault_detection's (DecideFault); here it is applied and reported.
+    const FaultDecision decision = DecideFault(mt, working_pair_, reserve_pair_);
+    auto event = [&](Event::Kind kind, std::string subsystem, std::string message) {
+      const int m = decision.evidence;
       Event ev{kind, frame.time, std::move(subsystem), RadToArcsec(mt.angle[m]),
                RadToArcsec(mt.allowed[m]), "arcsec", std::move(message)};
       report.events.push_back(std::move(ev));
     };
-    if (mt.faulty == Subsystem::kWorkingPair) {
-      // The gyro of the working pair that is not in the reserve pair is the suspect.
-      int suspect = working_pair_[1];
-      if (working_pair_[1] == reserve_pair_[0] || working_pair_[1] == reserve_pair_[1]) {
-        suspect = working_pair_[0];
-      }
-      if (GyroState* g = Find(suspect)) g->faulty = true;
-      event(Event::Kind::kWorkingPairFault,
-            absl::StrFormat("working_pair[%d,%d]", working_pair_[0], working_pair_[1]), 0,
-            absl::StrFormat("eq. (12): working pair disagrees with reserve pair and star tracker; "
-                            "output switched to reserve pair [%d,%d], gyro %d excluded",
-                            reserve_pair_[0], reserve_pair_[1], suspect));
-      working_pair_ = reserve_pair_;
-      state_ = SessionState::kFaulted;
-    } else if (mt.faulty == Subsystem::kReservePair) {
-      int suspect = reserve_pair_[1];
-      if (reserve_pair_[1] == working_pair_[0] || reserve_pair_[1] == working_pair_[1]) {
-        suspect = reserve_pair_[0];
-      }
-      if (GyroState* g = Find(suspect)) g->faulty = true;
-      event(Event::Kind::kReservePairFault,
-            absl::StrFormat("reserve_pair[%d,%d]", reserve_pair_[0], reserve_pair_[1]), 0,
-            absl::StrFormat("eq. (12): reserve pair disagrees with working pair and star tracker; "
-                            "gyro %d excluded",
-                            suspect));
-    } else if (mt.faulty == Subsystem::kStarTracker) {
-      event(Event::Kind::kStarTrackerFault, "star_tracker", 1,
-            "eq. (12): star tracker disagrees with both gyro pairs; its measurements are rejected");
-      st_available = false;
+    if (decision.excluded_gyro != 0) {
+      if (GyroState* g = Find(decision.excluded_gyro)) g->faulty = true;
     }
+    switch (decision.faulty) {
+      case Subsystem::kNone:
+        break;
+      case Subsystem::kWorkingPair:
+        event(Event::Kind::kWorkingPairFault,
+              absl::StrFormat("working_pair[%d,%d]", working_pair_[0], working_pair_[1]),
+              absl::StrFormat("eq. (12): working pair disagrees with reserve pair and star tracker; "
+                              "output switched to reserve pair [%d,%d], gyro %d excluded",
+                              decision.output_pair[0], decision.output_pair[1],
+                              decision.excluded_gyro));
+        break;
+      case Subsystem::kReservePair:
+        event(Event::Kind::kReservePairFault,
+              absl::StrFormat("reserve_pair[%d,%d]", reserve_pair_[0], reserve_pair_[1]),
+              absl::StrFormat("eq. (12): reserve pair disagrees with working pair and star tracker; "
+                              "gyro %d excluded",
+                              decision.excluded_gyro));
+        break;
+      case Subsystem::kStarTracker:
+        event(Event::Kind::kStarTrackerFault, "star_tracker",
+              "eq. (12): star tracker disagrees with both gyro pairs; its measurements are rejected");
+        break;
+    }
+    working_pair_ = decision.output_pair;
+    if (decision.output_switched) state_ = SessionState::kFaulted;
+    if (decision.reject_star_tracker) st_available = false;
   }
 
   // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
