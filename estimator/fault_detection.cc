@@ -76,7 +76,9 @@ FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& wo
   FaultDecision d;
   d.faulty = FaultySubsystem(test.angle, test.allowed, test.available);
   d.output_pair = working_pair;
-  auto contains = [](const std::array<int, 2>& pair, int id) { return pair[0] == id || pair[1] == id; };
+  auto contains = [](const std::array<int, 2>& pair, int id) {
+    return pair[0] == id || pair[1] == id;
+  };
   switch (d.faulty) {
     case Subsystem::kNone:
       break;

@@ -1,7 +1,8 @@
-// EstimationSession: the per-spacecraft estimation pipeline of the paper's section 2 (docs/physics.md):
-// an error-state extended Kalman filter over the running gyros, quasi-continuous correction by
-// the star tracker, calibration of the drift model (models 1, 10, 11), fault detection by eq. (12)
-// and (14), and long-gap prediction. Pure computation: frames in, reports out.
+// EstimationSession: the per-spacecraft estimation pipeline of the paper's section 2
+// (docs/physics.md): an error-state extended Kalman filter over the running gyros,
+// quasi-continuous correction by the star tracker, calibration of the drift model (models 1, 10,
+// 11), fault detection by eq. (12) and (14), and long-gap prediction. Pure computation: frames
+// in, reports out. Where each part lives: session.cc's file comment.
 //
 // FILTER STATE (error form, conventions.h: error = true - estimate): one block per running gyro,
 // in the order of the gyros (working pair first, reference gyro first), indexed only through

@@ -160,11 +160,13 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   for (int i = 0; i < gyro_count(); ++i) {
     const int h = layout_.SpinAxis(i);
     if (!P_.middleRows(h, rows).allFinite()) {
-      return absl::InternalError(absl::StrFormat("covariance of gyro %d is not finite after propagation", gyros_[i].id));
+      return absl::InternalError(absl::StrFormat(
+          "covariance of gyro %d is not finite after propagation", gyros_[i].id));
     }
     for (int k = 0; k < rows; ++k) {
       if (P_(h + k, h + k) < 0.0) {
-        return absl::InternalError(absl::StrFormat("covariance of gyro %d has a negative variance", gyros_[i].id));
+        return absl::InternalError(
+            absl::StrFormat("covariance of gyro %d has a negative variance", gyros_[i].id));
       }
     }
   }

@@ -266,7 +266,8 @@ void EstimationSession::ApplyCorrection(const VectorXd& dx) {
     for (int j = 0; j < layout_.ThetaCount(i); ++j) g.theta(free[j]) += dx(layout_.Theta(i) + j);
     if (layout_.HasPhi(i)) {
       // C_b_k(true) = Exp(dphi) Exp(phi) C_b_k(config): compose the rotations.
-      g.phi_b = LogQuaternion(ExpQuaternion(dx.segment<3>(layout_.Phi(i))) * ExpQuaternion(g.phi_b));
+      const Eigen::Vector3d dphi_b = dx.segment<3>(layout_.Phi(i));
+      g.phi_b = LogQuaternion(ExpQuaternion(dphi_b) * ExpQuaternion(g.phi_b));
     }
   }
 }
