@@ -8,7 +8,7 @@ packages=(
   libsqlite3-dev sqlite3
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libfmt-dev
-  openssl gnuplot-nox
+  libssl-dev openssl gnuplot-nox
 )
 missing=()
 for p in "${packages[@]}"; do
