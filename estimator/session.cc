@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
 #include "estimator/session_internal.h"
 
@@ -25,6 +26,38 @@ namespace esg::estimator {
 using Eigen::VectorXd;
 
 using session_internal::Seconds;
+
+namespace {
+
+// Feeds the step's innovations to the consistency monitor and reports a failing test as an
+// event (consistency_monitor.h).
+void MonitorConsistency(ConsistencyMonitor& monitor, StepReport& report) {
+  using Channel = ConsistencyMonitor::Channel;
+  std::vector<ConsistencyMonitor::TestResult> results;
+  if (report.star_tracker_innovation.size() > 0) {
+    if (auto r = monitor.Add(Channel::kStarTracker, report.time, report.star_tracker_nis,
+                             static_cast<int>(report.star_tracker_innovation.size()))) {
+      results.push_back(*r);
+    }
+  }
+  if (report.autonomous_innovation.size() > 0 && report.autonomous_innovation_sigma(0) > 0.0) {
+    const double n = report.autonomous_innovation(0) / report.autonomous_innovation_sigma(0);
+    if (auto r = monitor.Add(Channel::kAutonomous, report.time, n * n, 1)) results.push_back(*r);
+  }
+  for (const ConsistencyMonitor::TestResult& r : results) {
+    if (!r.inconsistent) continue;
+    report.events.push_back(Event{
+        Event::Kind::kModelInconsistent, report.time, "model", r.nis_sum, r.threshold,
+        "chi-square",
+        absl::StrFormat("%s over the last %d measurement steps is %.1f > %.1f (chi-square, %d "
+                        "degrees of freedom, false-alarm level %.2g): the configured model does "
+                        "not explain the data; run esg diagnose to find what the model leaves out",
+                        ConsistencyChannelName(r.channel), r.steps, r.nis_sum, r.threshold, r.dof,
+                        monitor.options().false_alarm_per_test)});
+  }
+}
+
+}  // namespace
 
 const char* SessionStateName(SessionState s) {
   switch (s) {
@@ -58,6 +91,8 @@ const char* EventKindName(Event::Kind kind) {
       return "STAR_TRACKER_INVALID";
     case Event::Kind::kFilterReset:
       return "FILTER_RESET";
+    case Event::Kind::kModelInconsistent:
+      return "MODEL_INCONSISTENT";
   }
   return "?";
 }
@@ -74,6 +109,14 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
   session.options_ = options;
   session.working_pair_ = config.working_pair;
   session.reserve_pair_ = config.reserve_pair;
+  ConsistencyMonitorOptions monitor;
+  monitor.window_steps = options.consistency_window_steps;
+  monitor.test_every_steps = options.consistency_test_every_steps;
+  monitor.warmup_steps = options.consistency_window_steps;
+  monitor.false_alarm_per_test =
+      PerTestLevel(config.filter.measurement_step, std::max(options.consistency_test_every_steps, 1),
+                   ConsistencyMonitor::kChannels, 30.0 * 86400.0, 0.1);
+  session.consistency_ = ConsistencyMonitor(monitor);
   return session;
 }
 
@@ -167,6 +210,7 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& fra
   if (since_update >= config_.filter.measurement_step - 1e-3) {
     if (absl::Status s = next.MeasurementUpdate(frame, report); !s.ok()) return s;
     next.last_update_time_ = frame.time;
+    MonitorConsistency(next.consistency_, report);
   }
   next.UpdateState(report);
   report.state = next.state_;

@@ -52,6 +52,7 @@
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "estimator/calibration_model.h"
+#include "estimator/consistency_monitor.h"
 #include "estimator/drift_model.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/state_layout.h"
@@ -77,6 +78,8 @@ struct Event {
     kFilterReset,            // star-tracker data rejected for kResetAfterRejections steps in a
                              // row: the filter, not the star tracker, is taken to be wrong and the
                              // spin axes are re-initialised from the star tracker
+    kModelInconsistent,      // the running chi-square test of the innovations failed: the
+                             // configured model does not explain the data (consistency_monitor.h)
   };
   Kind kind;
   absl::Time time;         // measurement epoch
@@ -141,6 +144,10 @@ struct SessionOptions {
   double residual_drift_sigma = -1.0;
   // Process the autonomous measurements z_avt (eq. (13)); off only for experiments.
   bool use_autonomous_measurements = true;
+  // The model-consistency monitor (consistency_monitor.h); its per-test level is derived in
+  // Create from the measurement step for at most 0.1 expected false alarms per 30 days.
+  int consistency_window_steps = 60;
+  int consistency_test_every_steps = 15;
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped.
@@ -176,6 +183,9 @@ class EstimationSession {
   std::array<int, 2> working_pair() const { return working_pair_; }
   const SpacecraftConfig& config() const { return config_; }
   const SessionOptions& options() const { return options_; }
+  // The model-consistency monitor. Not in the checkpoint: a restored session starts with empty
+  // windows.
+  const ConsistencyMonitor& consistency_monitor() const { return consistency_; }
 
   AttitudeEstimate CurrentAttitude() const;
   std::vector<GyroEstimate> Gyros() const;
@@ -280,6 +290,7 @@ class EstimationSession {
   absl::Time convergence_mark_time_ = absl::InfinitePast();
   Eigen::VectorXd convergence_mark_sigma_;
   bool converged_ = false;
+  ConsistencyMonitor consistency_;
 };
 
 }  // namespace esg::estimator

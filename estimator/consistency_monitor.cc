@@ -1,0 +1,96 @@
+// The running chi-square test of consistency_monitor.h.
+#include "estimator/consistency_monitor.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "estimator/discovery/statistics.h"
+
+namespace esg::estimator {
+
+namespace {
+// Per-step cap level: a step's NIS enters at most at its 1 - 1e-3 quantile.
+constexpr double kCapLevel = 1e-3;
+}  // namespace
+
+double PerTestLevel(double measurement_step_s, int test_every_steps, int channels,
+                    double span_s, double expected_false_alarms) {
+  const double tests = span_s / (measurement_step_s * test_every_steps) * channels;
+  return expected_false_alarms / tests;
+}
+
+const char* ConsistencyChannelName(ConsistencyMonitor::Channel channel) {
+  switch (channel) {
+    case ConsistencyMonitor::Channel::kStarTracker:
+      return "star-tracker NIS";
+    case ConsistencyMonitor::Channel::kAutonomous:
+      return "z_avt NIS";
+  }
+  return "?";
+}
+
+ConsistencyMonitor::ConsistencyMonitor(const ConsistencyMonitorOptions& options)
+    : options_(options) {
+  options_.window_steps = std::max(options_.window_steps, 1);
+  options_.test_every_steps = std::clamp(options_.test_every_steps, 1, options_.window_steps);
+  options_.warmup_steps = std::max(options_.warmup_steps, 0);
+}
+
+double ConsistencyMonitor::Cap(int dof) {
+  if (dof < static_cast<int>(cap_cache_.size())) {
+    double& c = cap_cache_[dof];
+    if (c == 0.0) c = discovery::ChiSquareQuantile(1.0 - kCapLevel, dof);
+    return c;
+  }
+  return discovery::ChiSquareQuantile(1.0 - kCapLevel, dof);
+}
+
+std::optional<ConsistencyMonitor::TestResult> ConsistencyMonitor::Add(Channel channel,
+                                                                      absl::Time time, double nis,
+                                                                      int dof) {
+  if (dof <= 0 || !std::isfinite(nis)) return std::nullopt;
+  ChannelState& c = channels_[static_cast<int>(channel)];
+  ++c.steps_seen;
+  if (c.steps_seen <= options_.warmup_steps) return std::nullopt;
+  c.window.push_back(Step{std::min(std::max(nis, 0.0), Cap(dof)), dof});
+  if (static_cast<int>(c.window.size()) > options_.window_steps) c.window.pop_front();
+  const long tested = c.steps_seen - options_.warmup_steps - options_.window_steps;
+  if (tested < 0 || tested % options_.test_every_steps != 0) return std::nullopt;
+  TestResult r;
+  r.channel = channel;
+  r.time = time;
+  r.steps = static_cast<int>(c.window.size());
+  for (const Step& s : c.window) {
+    r.nis_sum += s.nis;
+    r.dof += s.dof;
+  }
+  if (c.threshold_dof != r.dof) {
+    c.threshold = discovery::ChiSquareQuantile(1.0 - options_.false_alarm_per_test, r.dof);
+    c.threshold_dof = r.dof;
+  }
+  r.threshold = c.threshold;
+  r.inconsistent = r.nis_sum > r.threshold;
+  ++tests_;
+  if (r.inconsistent) {
+    ++inconsistent_tests_;
+    if (first_inconsistent_time_ == absl::InfinitePast()) first_inconsistent_time_ = time;
+  }
+  c.last = r;
+  return r;
+}
+
+void ConsistencyMonitor::Reset() {
+  for (ChannelState& c : channels_) {
+    c.window.clear();
+    c.steps_seen = 0;
+  }
+}
+
+bool ConsistencyMonitor::inconsistent() const {
+  for (const ChannelState& c : channels_) {
+    if (c.last.has_value() && c.last->inconsistent) return true;
+  }
+  return false;
+}
+
+}  // namespace esg::estimator

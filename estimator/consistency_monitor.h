@@ -1,0 +1,123 @@
+// ConsistencyMonitor: a running chi-square test of the filter's innovations that says when the
+// configured drift model no longer explains the data (issue 9, item 4). Pure computation: the
+// session feeds one normalised innovation squared (NIS) per measurement step and channel, the
+// monitor answers with a test result every `test_every_steps` steps.
+//
+// CHANNELS
+//   kStarTracker  z_st^T S^-1 z_st of the star-tracker differences of eq. (13) (2 per healthy
+//                 gyro: 6 degrees of freedom with three gyros), from StepReport::star_tracker_nis.
+//   kAutonomous   (z_avt / sigma)^2 of the first z_avt of the step (the first pair of healthy
+//                 gyros, the working pair when both are healthy): 1 degree of freedom. Only the
+//                 first one: the z_avt of the three pairs are correlated and the report carries
+//                 their marginal sigmas only, so their squared sum is not chi-square.
+// The NIS are those of the filter as configured (the un-widened model), before the eq. (14)
+// decision: a step whose measurements eq. (14) rejects enters with its NIS (a model that misses a
+// drift term is exactly what makes innovations large and rejected).
+//
+// STATISTICS
+//   For a consistent filter the innovations are white and NIS_k ~ chi-square(d_k) independently,
+//   so the sum over the last N steps is chi-square with D = sum d_k degrees of freedom. Every
+//   `test_every_steps` steps (once the window holds N steps) the sum is tested against the upper
+//   quantile chi2inv(1 - alpha, D). Each step's NIS enters capped at chi2inv(1 - 1e-3, d_k), so
+//   that one outlier (which eq. (14) rejects and reports) cannot make a window by itself; capping
+//   only lowers the sum, so P(false alarm per test) <= alpha still holds.
+//   False-alarm rate: by linearity of expectation the expected number of failing tests in a span
+//   is (tests in the span) x alpha, whatever the overlap of the windows (overlap only makes
+//   failing tests cluster, which the service's alert collapsing turns into one alert). With the
+//   defaults (60 s steps, N = 60 steps = 1 h, a test every 15 steps, two channels) 30 days hold
+//   30 x 24 x 4 x 2 = 5760 tests; PerTestLevel gives alpha = 1 / (5760 x 10) = 1.74e-5, i.e.
+//   0.1 expected false tests per 30 spacecraft-days (a margin of 10 below the required one).
+//   The first window after start is a warm-up and is not tested (`warmup_steps`): the filter's
+//   linearisation about the a-priori model is not yet exact there.
+// A failing test is reported with the window's NIS sum (value), the quantile (threshold), the
+// window length and D; while the condition lasts a failing test recurs every test_every_steps
+// steps (15 min by default, shorter than the service's 30 min alert-collapse window, so one
+// alert repeats and clears 30 min after the last failing test).
+#ifndef ESG_ESTIMATOR_CONSISTENCY_MONITOR_H_
+#define ESG_ESTIMATOR_CONSISTENCY_MONITOR_H_
+
+#include <array>
+#include <deque>
+#include <optional>
+
+#include "absl/time/time.h"
+
+namespace esg::estimator {
+
+struct ConsistencyMonitorOptions {
+  int window_steps = 60;       // N: measurement steps per window, > 0
+  int test_every_steps = 15;   // a test every this many steps, in [1, window_steps]
+  int warmup_steps = 60;       // steps after start that are not tested, >= 0
+  // Per-test false-alarm probability alpha, in (0, 1).
+  double false_alarm_per_test = 1.74e-5;
+};
+
+// The per-test level giving `expected_false_alarms` expected failing tests over
+// `span_s` seconds of consistent data for `channels` channels, measurement steps of
+// `measurement_step_s` seconds and a test every `test_every_steps` steps.
+double PerTestLevel(double measurement_step_s, int test_every_steps, int channels,
+                    double span_s, double expected_false_alarms);
+
+class ConsistencyMonitor {
+ public:
+  enum class Channel { kStarTracker = 0, kAutonomous = 1 };
+  static constexpr int kChannels = 2;
+
+  struct TestResult {
+    Channel channel = Channel::kStarTracker;
+    absl::Time time;       // epoch of the last step of the window
+    int steps = 0;         // N
+    int dof = 0;           // D
+    double nis_sum = 0.0;  // sum of the (capped) NIS over the window [chi-square]
+    double threshold = 0.0;
+    bool inconsistent = false;
+  };
+
+  explicit ConsistencyMonitor(const ConsistencyMonitorOptions& options = {});
+
+  // Adds one measurement step's NIS with `dof` > 0 degrees of freedom (steps with dof <= 0 or a
+  // non-finite NIS are ignored). Returns the test result when this step is a test step.
+  std::optional<TestResult> Add(Channel channel, absl::Time time, double nis, int dof);
+
+  // Empties the windows (counters and the last results are kept).
+  void Reset();
+
+  const ConsistencyMonitorOptions& options() const { return options_; }
+  // Last test of the channel, if any.
+  const std::optional<TestResult>& last(Channel channel) const {
+    return channels_[static_cast<int>(channel)].last;
+  }
+  int tests() const { return tests_; }
+  int inconsistent_tests() const { return inconsistent_tests_; }
+  // Epoch of the first failing test, InfinitePast if none.
+  absl::Time first_inconsistent_time() const { return first_inconsistent_time_; }
+  // Whether the latest test of any channel failed.
+  bool inconsistent() const;
+
+ private:
+  struct Step {
+    double nis = 0.0;
+    int dof = 0;
+  };
+  struct ChannelState {
+    std::deque<Step> window;
+    long steps_seen = 0;
+    std::optional<TestResult> last;
+    int threshold_dof = -1;  // the last quantile computed, for its D
+    double threshold = 0.0;
+  };
+  double Cap(int dof);
+
+  ConsistencyMonitorOptions options_;
+  std::array<ChannelState, kChannels> channels_;
+  std::array<double, 16> cap_cache_{};  // chi2inv(1 - 1e-3, d) for d < 16, 0 = not computed
+  int tests_ = 0;
+  int inconsistent_tests_ = 0;
+  absl::Time first_inconsistent_time_ = absl::InfinitePast();
+};
+
+const char* ConsistencyChannelName(ConsistencyMonitor::Channel channel);
+
+}  // namespace esg::estimator
+
+#endif  // ESG_ESTIMATOR_CONSISTENCY_MONITOR_H_

@@ -1,0 +1,198 @@
+// The model-consistency monitor (consistency_monitor.h): its false-alarm rate on chi-square
+// streams, its power on inflated ones, and the session's MODEL_INCONSISTENT event on a wrong
+// model (model 10 without 11 on data carrying a drift random walk).
+#include "estimator/consistency_monitor.h"
+
+#include <cmath>
+#include <iostream>
+#include <random>
+
+#include "estimator/calibration_model.h"
+#include "estimator/session.h"
+#include "estimator/simulator.h"
+#include "estimator/units.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/testing/paper_setup.h"
+#include "tests/testing/status_matchers.h"
+
+namespace esg::estimator {
+namespace {
+
+using ::esg::testing::IsOk;
+using ::testing::HasSubstr;
+using Channel = ConsistencyMonitor::Channel;
+
+const absl::Time kStart = absl::FromUnixSeconds(1551398400);
+
+TEST(ConsistencyMonitor, PerTestLevelFromTheTargetRate) {
+  // 60 s steps, a test every 15 steps, two channels: 30 d hold 5760 tests.
+  EXPECT_NEAR(PerTestLevel(60.0, 15, 2, 30 * 86400.0, 0.1), 0.1 / 5760.0, 1e-12);
+}
+
+TEST(ConsistencyMonitor, TestsEveryConfiguredStepsAfterWarmupAndAFullWindow) {
+  ConsistencyMonitorOptions o;
+  o.window_steps = 10;
+  o.test_every_steps = 5;
+  o.warmup_steps = 3;
+  ConsistencyMonitor m(o);
+  std::vector<int> tested;
+  for (int k = 1; k <= 30; ++k) {
+    auto r = m.Add(Channel::kStarTracker, kStart + absl::Minutes(k), 6.0, 6);
+    if (r.has_value()) {
+      tested.push_back(k);
+      EXPECT_EQ(r->steps, 10);
+      EXPECT_EQ(r->dof, 60);
+      EXPECT_DOUBLE_EQ(r->nis_sum, 60.0);
+      EXPECT_FALSE(r->inconsistent);
+    }
+  }
+  EXPECT_EQ(tested, (std::vector<int>{13, 18, 23, 28}));
+  EXPECT_EQ(m.tests(), 4);
+  EXPECT_FALSE(m.Add(Channel::kStarTracker, kStart, std::nan(""), 6).has_value());
+}
+
+// Feeds `steps` NIS values scale * chi-square(dof) and counts failing tests.
+int FailingTests(uint64_t seed, double scale, int dof, long steps, int* tests, int* first_fail) {
+  std::mt19937_64 rng(seed);
+  std::chi_squared_distribution<double> chi2(dof);
+  ConsistencyMonitor m;  // defaults: 60-step window, a test every 15 steps, level 1.74e-5
+  int fails = 0;
+  *first_fail = -1;
+  for (long k = 1; k <= steps; ++k) {
+    auto r = m.Add(Channel::kStarTracker, kStart + absl::Minutes(k), scale * chi2(rng), dof);
+    if (r.has_value() && r->inconsistent) {
+      ++fails;
+      if (*first_fail < 0) *first_fail = static_cast<int>(k);
+    }
+  }
+  *tests = m.tests();
+  return fails;
+}
+
+TEST(ConsistencyMonitor, FalseAlarmsOnChiSquareStreamsWithinTheBinomialBound) {
+  // 2000 days of 1-minute steps at 6 dof: 192,000 tests at alpha = 1.74e-5 expect 3.3 failing
+  // tests (capping only lowers the sum). Poisson(3.3): P(>= 12) = 1.4e-4, so more than 11 means
+  // the level is wrong. Also at a 10x level (alpha = 1.74e-4, 33 expected) the count must be at
+  // least 1: the test is not vacuous (checked with a raw quantile below).
+  int tests = 0, first = 0;
+  const int fails = FailingTests(7, 1.0, 6, 2000L * 1440, &tests, &first);
+  EXPECT_GT(tests, 190000);
+  EXPECT_LE(fails, 11) << "over " << tests << " tests";
+}
+
+TEST(ConsistencyMonitor, WindowSumOfConsistentNisExceedsTheQuantileAtTheNominalRate) {
+  // Without capping effects at a loose level: alpha = 0.01 on 60-step windows of chi-square(6):
+  // 20000 non-overlapping windows expect 200 (binomial sigma 14); within 4 sigma the monitor's
+  // quantile and summation are right (capping removes < 0.1% of each step's mass).
+  ConsistencyMonitorOptions o;
+  o.window_steps = 60;
+  o.test_every_steps = 60;
+  o.warmup_steps = 0;
+  o.false_alarm_per_test = 0.01;
+  ConsistencyMonitor m(o);
+  std::mt19937_64 rng(11);
+  std::chi_squared_distribution<double> chi2(6);
+  int fails = 0;
+  for (long k = 1; k <= 60L * 20000; ++k) {
+    auto r = m.Add(Channel::kStarTracker, kStart + absl::Minutes(k), chi2(rng), 6);
+    if (r.has_value() && r->inconsistent) ++fails;
+  }
+  EXPECT_EQ(m.tests(), 20000);
+  EXPECT_NEAR(fails, 200, 4 * std::sqrt(200.0 * 0.99));
+}
+
+TEST(ConsistencyMonitor, TwiceInflatedNisFailsTheFirstTest) {
+  for (uint64_t seed = 1; seed <= 20; ++seed) {
+    int tests = 0, first = 0;
+    // Warm-up 60 steps, then the first test when the window is full (step 120).
+    const int fails = FailingTests(seed, 2.0, 6, 130, &tests, &first);
+    EXPECT_GE(fails, 1) << "seed " << seed;
+    EXPECT_EQ(first, 120) << "seed " << seed;
+  }
+}
+
+TEST(ConsistencyMonitor, OneOutlierStepDoesNotFailAWindow) {
+  ConsistencyMonitor m;
+  std::optional<ConsistencyMonitor::TestResult> last;
+  for (int k = 1; k <= 120; ++k) {
+    const double nis = k == 100 ? 1e6 : 6.0;  // a 10 arcmin star-tracker outlier
+    auto r = m.Add(Channel::kStarTracker, kStart + absl::Minutes(k), nis, 6);
+    if (r.has_value()) last = r;
+  }
+  ASSERT_TRUE(last.has_value());
+  EXPECT_FALSE(last->inconsistent) << last->nis_sum << " > " << last->threshold;
+  EXPECT_LT(last->nis_sum, 60 * 6.0 + 30.0);
+}
+
+// The paper's calibration flight (as in session_test.cc) with the drift random walk of
+// deploy/examples/rdk1.json (0.0015 deg/h/sqrt(h)) on in the simulator and the configuration.
+SimulationSpec RandomWalkFlight(uint64_t seed, double hours) {
+  SimulationSpec spec;
+  spec.config = testing::PaperConfig();
+  spec.config.random_walk = DegPerHourSqrtHourToSi(0.0015);
+  spec.duration = HoursToSeconds(hours);
+  spec.seed = seed;
+  spec.profile = *MakeNamedProfile("calibration", spec.duration, seed);
+  for (int i = 0; i < 4; ++i) {
+    DriftCoefficients d = spec.config.gyros[i].model;
+    d.k0 += DegPerHourToRadPerSec(0.1 * (i % 2 ? 1 : -1));
+    spec.gyros[i].drift = d;
+  }
+  spec.gyros[0].rotor_displacement_k = Eigen::Vector3d(1.0e-6, -1.5e-6, 0.8e-6);
+  spec.gyros[1].rotor_displacement_k = Eigen::Vector3d(-0.7e-6, 0.5e-6, 1.2e-6);
+  spec.gyros[2].rotor_displacement_k = Eigen::Vector3d(0.5e-6, 1.0e-6, -1.0e-6);
+  return spec;
+}
+
+struct RunSummary {
+  int model_inconsistent_events = 0;
+  absl::Time first = absl::InfinitePast();
+  double first_value = 0.0;
+  double first_threshold = 0.0;
+  std::string first_message;
+  int tests = 0;
+};
+
+RunSummary RunFlight(const SimulationSpec& spec, const char* model) {
+  auto sim = Simulate(spec);
+  EXPECT_THAT(sim, IsOk());
+  SessionOptions options;
+  options.model = *ParseModel(model);
+  EstimationSession session = *EstimationSession::Create(spec.config, options);
+  RunSummary s;
+  for (const TelemetryFrame& frame : sim->recording.frames) {
+    auto report = session.AddFrame(frame);
+    EXPECT_THAT(report, IsOk());
+    if (!report.ok()) break;
+    for (const Event& e : report->events) {
+      if (e.kind != Event::Kind::kModelInconsistent) continue;
+      if (s.model_inconsistent_events++ == 0) {
+        s.first = e.time;
+        s.first_value = e.value;
+        s.first_threshold = e.threshold;
+        s.first_message = e.message;
+      }
+    }
+  }
+  s.tests = session.consistency_monitor().tests();
+  return s;
+}
+
+TEST(SessionConsistency, ModelTenAloneOnRandomWalkDataIsInconsistentModelTenElevenIsNot) {
+  const SimulationSpec spec = RandomWalkFlight(3, 12.0);
+  const RunSummary wrong = RunFlight(spec, "10");
+  EXPECT_GE(wrong.model_inconsistent_events, 1);
+  EXPECT_GT(wrong.first_value, wrong.first_threshold);
+  EXPECT_THAT(wrong.first_message, HasSubstr("run esg diagnose"));
+  const RunSummary right = RunFlight(spec, "10+11");
+  EXPECT_GT(right.tests, 70);  // 10 h of tests, 4 per hour, two channels
+  EXPECT_EQ(right.model_inconsistent_events, 0);
+  std::cout << "model 10: " << wrong.model_inconsistent_events << " events, first at "
+            << absl::FormatTime(wrong.first) << " value " << wrong.first_value << " threshold "
+            << wrong.first_threshold << "; model 10+11: " << right.model_inconsistent_events
+            << " events in " << right.tests << " tests\n";
+}
+
+}  // namespace
+}  // namespace esg::estimator
