@@ -1,8 +1,12 @@
 #include "estimator/fault_detection.h"
 
+#include <algorithm>
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "Eigen/Cholesky"
+#include "absl/strings/str_format.h"
 #include "estimator/rotation.h"
 
 namespace esg::estimator {
@@ -99,6 +103,112 @@ FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& wo
       break;
   }
   return d;
+}
+
+const char* IsolationName(Isolation i) {
+  switch (i) {
+    case Isolation::kNone:
+      return "none";
+    case Isolation::kGyro:
+      return "gyro";
+    case Isolation::kStarTracker:
+      return "star_tracker";
+    case Isolation::kAmbiguous:
+      return "ambiguous";
+  }
+  return "?";
+}
+
+std::array<int, 2> PairWithout(const std::array<int, 3>& gyro_ids, int k) {
+  std::array<int, 2> p = {0, 0};
+  int j = 0;
+  for (int i = 0; i < 3; ++i) {
+    if (i != k) p[j++] = gyro_ids[i];
+  }
+  return p;
+}
+
+IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<int, 2>& working_pair) {
+  IsolationDecision d;
+  d.output_pair = working_pair;
+  int exceeded = 0;
+  for (int k = 0; k < 3; ++k) {
+    d.pair_star_exceeded[k] = test.star_available && test.pair_star_angle[k] >= test.pair_star_allowed[k];
+    d.pair_pair_exceeded[k] = test.pair_pair_angle[k] >= test.pair_pair_allowed[k];
+    exceeded += d.pair_star_exceeded[k] + d.pair_pair_exceeded[k];
+  }
+  // Fewer than two exceeded mismatches name nothing (eq. (12)).
+  if (exceeded < 2) return d;
+  std::vector<int> matches;  // gyro index, 3 = star tracker
+  for (int g = 0; g < 3; ++g) {
+    bool holds = true;
+    for (int k = 0; k < 3; ++k) {
+      if (k == g) continue;
+      holds = holds && d.pair_pair_exceeded[k];
+      if (test.star_available) holds = holds && d.pair_star_exceeded[k];
+    }
+    if (test.star_available) holds = holds && !d.pair_star_exceeded[g];
+    if (holds) matches.push_back(g);
+  }
+  if (test.star_available) {
+    bool holds = true;
+    for (int k = 0; k < 3; ++k) holds = holds && d.pair_star_exceeded[k] && !d.pair_pair_exceeded[k];
+    if (holds) matches.push_back(3);
+  }
+  for (int m : matches) d.candidates.push_back(m == 3 ? 0 : test.gyro_ids[m]);
+  if (matches.size() != 1) {
+    d.result = Isolation::kAmbiguous;
+    return d;
+  }
+  if (matches[0] == 3) {
+    d.result = Isolation::kStarTracker;
+    d.reject_star_tracker = true;
+    return d;
+  }
+  const int g = matches[0];
+  d.result = Isolation::kGyro;
+  d.faulty_index = g;
+  d.excluded_gyro = test.gyro_ids[g];
+  if (working_pair[0] == d.excluded_gyro || working_pair[1] == d.excluded_gyro) {
+    d.output_pair = PairWithout(test.gyro_ids, g);
+    d.output_switched = true;
+  }
+  return d;
+}
+
+std::string IsolationEvidence(const IsolationTest& test, const IsolationDecision& decision) {
+  std::string out;
+  auto pair_name = [&](int k) {
+    const std::array<int, 2> p = PairWithout(test.gyro_ids, k);
+    return absl::StrFormat("[%d,%d]", p[0], p[1]);
+  };
+  auto item = [&](const std::string& name, double angle, double allowed, bool exceeded) {
+    if (!out.empty()) out += "; ";
+    out += absl::StrFormat("%s %.1f/%.1f arcsec%s", name, RadToArcsec(angle), RadToArcsec(allowed),
+                           exceeded ? " EXCEEDS" : "");
+  };
+  for (int m = 0; m < 3; ++m) {
+    // pair_pair[m] compares the two pairs that hold gyro m, i.e. the pairs without the others.
+    const int k = (m + 1) % 3, l = (m + 2) % 3;
+    item(pair_name(std::min(k, l)) + "-" + pair_name(std::max(k, l)), test.pair_pair_angle[m],
+         test.pair_pair_allowed[m], decision.pair_pair_exceeded[m]);
+  }
+  if (test.star_available) {
+    for (int k = 0; k < 3; ++k) {
+      item(pair_name(k) + "-star_tracker", test.pair_star_angle[k], test.pair_star_allowed[k],
+           decision.pair_star_exceeded[k]);
+    }
+  }
+  return out;
+}
+
+Eigen::Matrix3d MismatchCovariance(const Eigen::MatrixXd& J_x, const Eigen::MatrixXd& G_x,
+                                   const Eigen::MatrixXd& J_y, const Eigen::MatrixXd& G_y,
+                                   const Eigen::MatrixXd& P, double readout_var) {
+  const Eigen::MatrixXd dJ = J_x - J_y;
+  const Eigen::MatrixXd dG = G_x - G_y;
+  const Eigen::Matrix3d S = dJ * P * dJ.transpose() + readout_var * dG * dG.transpose();
+  return 0.5 * (S + S.transpose());
 }
 
 InnovationTest TestInnovation(const Eigen::VectorXd& z, const Eigen::MatrixXd& S, double k_d) {

@@ -17,6 +17,8 @@
 #define ESG_ESTIMATOR_FAULT_DETECTION_H_
 
 #include <array>
+#include <string>
+#include <vector>
 
 #include "Eigen/Core"
 #include "Eigen/Geometry"
@@ -97,6 +99,70 @@ struct FaultDecision {
 // Star tracker faulty: reject its measurements.
 FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& working_pair,
                           const std::array<int, 2>& reserve_pair);
+
+// Fault isolation with three running gyros a, b, c (docs/decisions.md D18). The three pairs are
+// indexed by the gyro they lack: pair k holds every gyro but gyro_ids[k]. Two families of
+// mismatches are formed:
+//   pair_star[k]: pair k against the star tracker;
+//   pair_pair[m]: the two pairs that share gyro m (pair k and pair l, {k, l, m} = {0, 1, 2}).
+// Hypotheses and the mismatches each requires to exceed (X), to stay within (o), or leaves free:
+//   none          nothing exceeds;
+//   gyro g        pair_star[k] X for k != g, pair_star[g] o (the pair without g agrees with the star
+//                 tracker), pair_pair[m] X for m != g (the pairs with g disagree with the pair
+//                 without it), pair_pair[g] free (both pairs hold g);
+//   star tracker  every pair_star X, every pair_pair o.
+// Without the star tracker only the pair_pair conditions are tested and the star tracker cannot
+// be named. A hypothesis is decided when it is the only one whose conditions hold; with fewer
+// than two exceeded mismatches nothing is named (as eq. (12) names nothing from one); otherwise
+// the result is ambiguous and nothing is excluded.
+enum class Isolation { kNone, kGyro, kStarTracker, kAmbiguous };
+const char* IsolationName(Isolation i);
+
+struct IsolationTest {
+  std::array<int, 3> gyro_ids = {0, 0, 0};
+  bool star_available = false;
+  // Angles [rad] and allowed angles [rad] (AllowedMismatchAngle with the exact covariance).
+  std::array<double, 3> pair_star_angle = {0, 0, 0};
+  std::array<double, 3> pair_star_allowed = {0, 0, 0};
+  std::array<double, 3> pair_pair_angle = {0, 0, 0};
+  std::array<double, 3> pair_pair_allowed = {0, 0, 0};
+};
+
+struct IsolationDecision {
+  Isolation result = Isolation::kNone;
+  int faulty_index = -1;  // index into gyro_ids of the isolated gyro (kGyro)
+  int excluded_gyro = 0;  // its id, 0 when none
+  // Pair carrying the output: the working pair when it does not hold the excluded gyro,
+  // otherwise the pair without it (gyro ids in the order of gyro_ids).
+  std::array<int, 2> output_pair = {0, 0};
+  bool output_switched = false;
+  bool reject_star_tracker = false;
+  std::array<bool, 3> pair_star_exceeded = {false, false, false};
+  std::array<bool, 3> pair_pair_exceeded = {false, false, false};
+  // Hypotheses whose conditions hold (kAmbiguous: zero or several): gyro ids, 0 = star tracker.
+  std::vector<int> candidates;
+};
+
+// The pair without gyro_ids[k]: the other two ids in the order of gyro_ids.
+std::array<int, 2> PairWithout(const std::array<int, 3>& gyro_ids, int k);
+
+// Isolation from plain values (rule above); working_pair is the pair that carries the output.
+IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<int, 2>& working_pair);
+
+// A readable summary of the evidence: every formed mismatch with its angle and allowed angle
+// [arcsec], exceeded ones marked "EXCEEDS".
+std::string IsolationEvidence(const IsolationTest& test, const IsolationDecision& decision);
+
+// Covariance [rad^2] of the mismatch rotation vector between two attitudes whose errors are
+// linearised in the same state error dx (covariance P) and the same readout noise r (independent,
+// variance readout_var per component): dtheta_x = J_x dx + G_x r, dtheta_y = J_y dx + G_y r.
+// The mismatch Log(q_x (x) conj(q_y)) = dtheta_y - dtheta_x to first order, so
+//   Sigma = (J_x - J_y) P (J_x - J_y)^T + readout_var (G_x - G_y)(G_x - G_y)^T.
+// Two pairs that share a gyro share its state and its reading: their errors are correlated and
+// the sum of the two covariances J_x P J_x^T + J_y P J_y^T + ... is not the mismatch's.
+Eigen::Matrix3d MismatchCovariance(const Eigen::MatrixXd& J_x, const Eigen::MatrixXd& G_x,
+                                   const Eigen::MatrixXd& J_y, const Eigen::MatrixXd& G_y,
+                                   const Eigen::MatrixXd& P, double readout_var);
 
 struct InnovationTest {
   bool passed = true;

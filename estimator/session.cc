@@ -93,6 +93,8 @@ const char* EventKindName(Event::Kind kind) {
       return "FILTER_RESET";
     case Event::Kind::kModelInconsistent:
       return "MODEL_INCONSISTENT";
+    case Event::Kind::kFaultAmbiguous:
+      return "FAULT_AMBIGUOUS";
   }
   return "?";
 }

@@ -34,7 +34,8 @@
 //   CONVERGED    as CALIBRATING, coefficients settled.
 //   AUTONOMOUS   star-tracker data absent or rejected for the last 3 steps (or withheld by
 //                SetStarTrackerUse(false)): output from the gyros alone.
-//   FAULTED      the working pair was declared faulty (eq. (12)); output is on the reserve pair.
+//   FAULTED      a gyro of the working pair was isolated (eq. (12), or the three-pair isolation of
+//                fault_detection.h); output is on a pair without it.
 // Invariants: (1) P is symmetric with a non-negative diagonal after every step; (2) every
 // h_in_g is a unit vector; (3) a rejected measurement never changes the state; (4) frames are
 // applied in strictly increasing time.
@@ -80,6 +81,8 @@ struct Event {
                              // spin axes are re-initialised from the star tracker
     kModelInconsistent,      // the running chi-square test of the innovations failed: the
                              // configured model does not explain the data (consistency_monitor.h)
+    kFaultAmbiguous,         // fault isolation with three pairs (fault_detection.h): mismatches
+                             // exceeded but no single subsystem explains them; nothing excluded
   };
   Kind kind;
   absl::Time time;         // measurement epoch
@@ -245,14 +248,28 @@ class EstimationSession {
 
   // session_update.cc
   absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
+  // Fault isolation with the three pairs of the running gyros `ids` (all with a reading) and the
+  // star tracker when `st_present` (q_st, covariance S_st in inertial axes): DecideIsolation of
+  // fault_detection.h, applied (exclusion, output pair, events). Clears st_available when the star
+  // tracker is named; sets st_agrees_with_pairs when every healthy pair agrees with the star
+  // tracker. False (nothing done) when a pair attitude cannot be formed.
+  bool IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
+                             bool st_present, const Eigen::Quaterniond& q_st,
+                             const Eigen::Matrix3d& S_st, StepReport& report, bool& st_available,
+                             bool& st_agrees_with_pairs);
   void ApplyCorrection(const Eigen::VectorXd& dx);
 
   // session_attitude.cc
   // Attitude of a pair from predicted h_in and the given case-frame readings (nullopt if either
   // gyro has no reading), with its covariance in inertial axes when `covariance` is set.
+  // When `jacobian_state` / `jacobian_readout` are set, also the linearisation of the attitude
+  // error (inertial axes): 3 x state_size against the state error, 3 x 2 gyro_count against the
+  // readout noise (columns 2i, 2i+1: TangentBasis(h_k) of gyros_[i]).
   std::optional<Eigen::Quaterniond> PairQuaternion(int a, int b, const Eigen::Vector3d& h_k_a,
                                                    const Eigen::Vector3d& h_k_b,
-                                                   Eigen::Matrix3d* covariance_in) const;
+                                                   Eigen::Matrix3d* covariance_in,
+                                                   Eigen::MatrixXd* jacobian_state = nullptr,
+                                                   Eigen::MatrixXd* jacobian_readout = nullptr) const;
   AttitudeEstimate OutputAttitude(absl::Time time) const;
 
   // session.cc
@@ -283,6 +300,9 @@ class EstimationSession {
   SessionState state_ = SessionState::kNoData;
   int steps_without_star_tracker_ = 0;
   int consecutive_rejections_ = 0;
+  // eq. (12) named the star tracker faulty during the current streak of rejections: the filter
+  // reset must not re-anchor to it (docs/decisions.md D19). Not in checkpoint version 1.
+  bool star_tracker_voted_faulty_ = false;
   // Predict integrates with substeps sized to the motion of the readings instead of the
   // configured rate (exact for an inertial hold, see Predict).
   bool adaptive_integration_ = false;

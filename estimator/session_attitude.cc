@@ -44,7 +44,9 @@ Matrix3d EstimationSession::GyroState::C_b_k() const {
 
 std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const Vector3d& h_k_a,
                                                              const Vector3d& h_k_b,
-                                                             Matrix3d* covariance_in) const {
+                                                             Matrix3d* covariance_in,
+                                                             MatrixXd* jacobian_state,
+                                                             MatrixXd* jacobian_readout) const {
   const int ia = IndexOf(a);
   const int ib = IndexOf(b);
   if (ia < 0 || ib < 0) return std::nullopt;
@@ -107,6 +109,12 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   for (int i = 0; i < m; ++i) {
     Js.col(i) = J.col(cols[i]);
     for (int j = 0; j < m; ++j) Ps(i, j) = P_(cols[i], cols[j]);
+  }
+  if (jacobian_state != nullptr) *jacobian_state = J;
+  if (jacobian_readout != nullptr) {
+    *jacobian_readout = MatrixXd::Zero(3, 2 * gyro_count());
+    jacobian_readout->block<3, 2>(0, 2 * ia) = J_r.leftCols<2>();
+    jacobian_readout->block<3, 2>(0, 2 * ib) = J_r.rightCols<2>();
   }
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
   *covariance_in = Js * Ps * Js.transpose() + sigma_r * sigma_r * J_r * J_r.transpose();

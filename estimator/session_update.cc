@@ -14,6 +14,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/ekf.h"
 #include "estimator/fault_detection.h"
@@ -48,8 +49,23 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     return !g.faulty && frame.gyros[g.id - 1].has_value();
   };
 
-  // eq. (12): working pair, reserve pair, star tracker.
-  {
+  const Matrix3d C_in_b_st_12 = q_st.toRotationMatrix();
+  const Matrix3d S_st_12 =
+      C_in_b_st_12 * Matrix3d(st_noise.cwiseAbs2().asDiagonal()) * C_in_b_st_12.transpose();
+  // Whether every healthy pair formed at this step agrees with the star tracker within its
+  // eq. (12) allowed angle: the condition for a filter reset to re-anchor to it.
+  bool st_agrees_with_pairs = false;
+  std::vector<int> fresh;  // ids of the running, not excluded gyros with a reading
+  for (const GyroState& g : gyros_) {
+    if (has_reading(g)) fresh.push_back(g.id);
+  }
+  bool isolated = false;
+  if (fresh.size() == 3) {
+    isolated = IsolateWithThreePairs(frame, {fresh[0], fresh[1], fresh[2]}, st_available, q_st,
+                                     S_st_12, report, st_available, st_agrees_with_pairs);
+  }
+  // eq. (12) with what is available: working pair, reserve pair, star tracker.
+  if (!isolated) {
     Matrix3d S1, S2;
     std::optional<Quaterniond> q1, q2;
     const GyroState* a1 = Find(working_pair_[0]);
@@ -76,6 +92,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
         allowed(q2, st_available ? &q_st : nullptr, S2 + S_st)};
     const MismatchTest mt = TestMismatch(q1 ? &*q1 : nullptr, q2 ? &*q2 : nullptr,
                                          st_available ? &q_st : nullptr, allowed_angles);
+    st_agrees_with_pairs = mt.available[kMismatch13] && mt.angle[kMismatch13] < mt.allowed[kMismatch13] &&
+                           (!mt.available[kMismatch23] || mt.angle[kMismatch23] < mt.allowed[kMismatch23]);
     // The decision is fault_detection's (DecideFault); here it is applied and reported.
     const FaultDecision decision = DecideFault(mt, working_pair_, reserve_pair_);
     auto event = [&](Event::Kind kind, std::string subsystem, std::string message) {
@@ -112,7 +130,10 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     }
     working_pair_ = decision.output_pair;
     if (decision.output_switched) state_ = SessionState::kFaulted;
-    if (decision.reject_star_tracker) st_available = false;
+    if (decision.reject_star_tracker) {
+      st_available = false;
+      star_tracker_voted_faulty_ = true;
+    }
   }
 
   // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
@@ -220,14 +241,31 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   if (report.star_tracker_used) {
     steps_without_star_tracker_ = 0;
     consecutive_rejections_ = 0;
+    star_tracker_voted_faulty_ = false;
   } else {
     ++steps_without_star_tracker_;
     if (st_present) ++consecutive_rejections_;
   }
-  if (consecutive_rejections_ >= kResetAfterRejections) {
+  const bool reset_allowed = !star_tracker_voted_faulty_ && st_agrees_with_pairs;
+  if (consecutive_rejections_ == kResetAfterRejections && !reset_allowed) {
+    // docs/decisions.md D19: never re-anchor to a star tracker that eq. (12) voted faulty in this
+    // streak, nor to one the healthy pairs disagree with; the filter keeps running on the gyros.
+    report.events.push_back(Event{
+        Event::Kind::kStarTrackerFault, frame.time, "star_tracker",
+        static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
+        "steps",
+        absl::StrFormat("star-tracker data rejected for %d steps in a row; filter reset withheld: %s",
+                        consecutive_rejections_,
+                        star_tracker_voted_faulty_
+                            ? "eq. (12) voted the star tracker faulty in this streak"
+                            : "the healthy gyro pairs disagree with the star tracker (eq. (12))")});
+  }
+  if (consecutive_rejections_ >= kResetAfterRejections && reset_allowed) {
     // The star tracker has been present and rejected for kResetAfterRejections steps: a star
     // tracker that is wrong that long flags itself invalid, a filter whose model misses part of
-    // the drift does not, so the filter is taken to be wrong (docs/decisions.md).
+    // the drift does not, so the filter is taken to be wrong (docs/decisions.md); the star
+    // tracker is adopted only when eq. (12) did not vote it faulty in this streak and the healthy
+    // pairs agree with it at this step (D19).
     SpinAxesFromStarTracker(C_in_b_st);
     report.events.push_back(Event{
         Event::Kind::kFilterReset, frame.time, "filter",
@@ -253,6 +291,123 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   if (absl::Status s = JosephUpdate(Hk, zk, Rk, P_, dx); !s.ok()) return s;
   ApplyCorrection(dx);
   return absl::OkStatus();
+}
+
+bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
+                                              bool st_present, const Quaterniond& q_st,
+                                              const Matrix3d& S_st, StepReport& report,
+                                              bool& st_available, bool& st_agrees_with_pairs) {
+  const double kd = config_.filter.innovation_kd;
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  // Pair k is the pair without gyro ids[k] (fault_detection.h).
+  std::array<Quaterniond, 3> q;
+  std::array<Matrix3d, 3> S;
+  std::array<MatrixXd, 3> J, G;
+  for (int k = 0; k < 3; ++k) {
+    const std::array<int, 2> p = PairWithout(ids, k);
+    const GyroState* a = Find(p[0]);
+    const GyroState* b = Find(p[1]);
+    const auto qk = PairQuaternion(p[0], p[1], a->h_k_last, b->h_k_last, &S[k], &J[k], &G[k]);
+    if (!qk.has_value()) return false;
+    q[k] = *qk;
+  }
+  IsolationTest test;
+  test.gyro_ids = ids;
+  test.star_available = st_present;
+  const double configured = config_.filter.fault_threshold;
+  for (int k = 0; k < 3 && st_present; ++k) {
+    // A pair and the star tracker are independent: S_k + S_st.
+    test.pair_star_angle[k] = RotationAngle(q[k], q_st);
+    test.pair_star_allowed[k] = AllowedMismatchAngle(q[k], q_st, S[k] + S_st, kd, configured);
+  }
+  for (int m = 0; m < 3; ++m) {
+    // The two pairs that share gyro ids[m]: their errors share that gyro's state and reading, so
+    // the mismatch covariance is that of the difference of their linearised errors
+    // (MismatchCovariance), not S_k + S_l.
+    const int k = (m + 1) % 3, l = (m + 2) % 3;
+    const Matrix3d Sigma = MismatchCovariance(J[k], G[k], J[l], G[l], P_, sigma_r * sigma_r);
+    test.pair_pair_angle[m] = RotationAngle(q[k], q[l]);
+    test.pair_pair_allowed[m] = AllowedMismatchAngle(q[k], q[l], Sigma, kd, configured);
+  }
+  const IsolationDecision d = DecideIsolation(test, working_pair_);
+  const std::string evidence = IsolationEvidence(test, d);
+  // The exceeded mismatch with the largest angle-to-allowed ratio: the event's value/threshold.
+  double value = 0.0, threshold = 0.0, best = -1.0;
+  auto consider = [&](double angle, double allowed, bool exceeded) {
+    if (exceeded && allowed > 0.0 && angle / allowed > best) {
+      best = angle / allowed;
+      value = angle;
+      threshold = allowed;
+    }
+  };
+  for (int k = 0; k < 3; ++k) {
+    consider(test.pair_star_angle[k], test.pair_star_allowed[k], d.pair_star_exceeded[k]);
+    consider(test.pair_pair_angle[k], test.pair_pair_allowed[k], d.pair_pair_exceeded[k]);
+  }
+  switch (d.result) {
+    case Isolation::kNone:
+      break;
+    case Isolation::kGyro: {
+      if (GyroState* g = Find(d.excluded_gyro)) g->faulty = true;
+      // A configured gyro that is not running is a cold spare.
+      std::string spare;
+      for (const GyroConfig& gc : config_.gyros) {
+        if (Find(gc.id) == nullptr) spare += absl::StrFormat("%s%d", spare.empty() ? "" : ", ", gc.id);
+      }
+      const std::array<int, 2> kept = PairWithout(ids, d.faulty_index);
+      const bool in_working = d.output_switched;
+      report.events.push_back(Event{
+          in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, frame.time,
+          absl::StrFormat("gyro %d", d.excluded_gyro), RadToArcsec(value), RadToArcsec(threshold),
+          "arcsec",
+          absl::StrFormat("fault isolation with three pairs (eq. (12)): gyro %d faulty: the pairs "
+                          "holding it disagree with pair [%d,%d]%s; gyro %d excluded, output on "
+                          "pair [%d,%d]; only two gyros remain, switch on the cold spare%s to "
+                          "restore isolation. Evidence: %s",
+                          d.excluded_gyro, kept[0], kept[1],
+                          st_present ? " and the star tracker, which agree with each other" : "",
+                          d.excluded_gyro, d.output_pair[0], d.output_pair[1],
+                          spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), evidence)});
+      working_pair_ = d.output_pair;
+      reserve_pair_ = d.output_pair;  // no second pair is left
+      if (d.output_switched) state_ = SessionState::kFaulted;
+      break;
+    }
+    case Isolation::kStarTracker:
+      report.events.push_back(Event{
+          Event::Kind::kStarTrackerFault, frame.time, "star_tracker", RadToArcsec(value),
+          RadToArcsec(threshold), "arcsec",
+          absl::StrCat("fault isolation with three pairs (eq. (12)): the star tracker disagrees "
+                       "with all three gyro pairs, which agree with each other; its measurements "
+                       "are rejected. Evidence: ",
+                       evidence)});
+      st_available = false;
+      star_tracker_voted_faulty_ = true;
+      break;
+    case Isolation::kAmbiguous: {
+      std::string candidates;
+      for (int c : d.candidates) {
+        if (!candidates.empty()) candidates += ", ";
+        candidates += c == 0 ? std::string("star tracker") : absl::StrFormat("gyro %d", c);
+      }
+      report.events.push_back(Event{
+          Event::Kind::kFaultAmbiguous, frame.time, "gyros and star tracker", RadToArcsec(value),
+          RadToArcsec(threshold), "arcsec",
+          absl::StrCat("fault isolation with three pairs (eq. (12)): mismatches exceeded but the "
+                       "fault is ambiguous (",
+                       candidates.empty() ? std::string("no single subsystem explains them")
+                                          : absl::StrCat("candidates: ", candidates),
+                       "); nothing excluded. Evidence: ", evidence)});
+      break;
+    }
+  }
+  // Healthy pairs after the decision: the pair without the excluded gyro, or all three.
+  st_agrees_with_pairs = st_present && d.result != Isolation::kStarTracker;
+  for (int k = 0; k < 3 && st_agrees_with_pairs; ++k) {
+    if (d.result == Isolation::kGyro && k != d.faulty_index) continue;
+    st_agrees_with_pairs = !d.pair_star_exceeded[k];
+  }
+  return true;
 }
 
 void EstimationSession::ApplyCorrection(const VectorXd& dx) {
