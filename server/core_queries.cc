@@ -68,6 +68,30 @@ esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
       for (const estimator::GyroEstimate& g : session->Gyros()) h_in.emplace_back(g.id, g.h_in);
       FillSample(attitude.time, attitude, h_in, info.mutable_latest_attitude());
     }
+    const estimator::ConsistencyMonitor& monitor = session->consistency_monitor();
+    std::optional<estimator::ConsistencyMonitor::TestResult> shown;
+    for (auto channel : {estimator::ConsistencyMonitor::Channel::kStarTracker,
+                         estimator::ConsistencyMonitor::Channel::kAutonomous}) {
+      const auto& last = monitor.last(channel);
+      if (!last.has_value()) continue;
+      if (!shown.has_value() || (last->inconsistent && !shown->inconsistent)) shown = last;
+    }
+    if (shown.has_value()) {
+      esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
+      mc->set_consistent(!monitor.inconsistent());
+      mc->set_channel(estimator::ConsistencyChannelName(shown->channel));
+      mc->set_value(shown->nis_sum);
+      mc->set_threshold(shown->threshold);
+      mc->set_window_steps(shown->steps);
+      mc->set_degrees_of_freedom(shown->dof);
+      *mc->mutable_test_time() = proto_convert::TimeToProto(shown->time);
+      mc->set_tests(monitor.tests());
+      mc->set_failing_tests(monitor.inconsistent_tests());
+      if (monitor.first_inconsistent_time() != absl::InfinitePast()) {
+        *mc->mutable_first_inconsistent_time() =
+            proto_convert::TimeToProto(monitor.first_inconsistent_time());
+      }
+    }
   }
   absl::StatusOr<storage::AlertCounts> counts = storage::CountAlerts(storage_->database(), sc.id);
   if (counts.ok()) {

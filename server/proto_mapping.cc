@@ -113,6 +113,8 @@ esg::v1::AlertSeverity SeverityOf(Event::Kind kind) {
       return esg::v1::ALERT_SEVERITY_INFO;
     case Event::Kind::kFilterReset:
       return esg::v1::ALERT_SEVERITY_DISTRESS;
+    case Event::Kind::kModelInconsistent:
+      return esg::v1::ALERT_SEVERITY_WARNING;
   }
   return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
 }
@@ -133,6 +135,8 @@ esg::v1::AlertReason ReasonOf(Event::Kind kind) {
       return esg::v1::ALERT_REASON_STAR_TRACKER_INVALID;
     case Event::Kind::kFilterReset:
       return esg::v1::ALERT_REASON_FILTER_RESET;
+    case Event::Kind::kModelInconsistent:
+      return esg::v1::ALERT_REASON_MODEL_INCONSISTENT;
   }
   return esg::v1::ALERT_REASON_UNSPECIFIED;
 }

@@ -107,6 +107,43 @@ json ModelJson(const estimator::DriftCoefficients& c) {
               {"muDegH", Vec(c.mu, kDegH)}, {"nuDegH", Vec(c.nu, kDegH)}};
 }
 
+// The model-consistency monitor's verdict from the run's MODEL_INCONSISTENT events
+// (estimator/consistency_monitor.h).
+struct Consistency {
+  int failing_tests = 0;
+  const estimator::Event* first = nullptr;
+  const estimator::Event* worst = nullptr;  // largest value / threshold
+};
+
+Consistency ConsistencyOf(const estimator::CalibrationResult& r) {
+  Consistency c;
+  for (const estimator::Event& e : r.events) {
+    if (e.kind != estimator::Event::Kind::kModelInconsistent) continue;
+    ++c.failing_tests;
+    if (c.first == nullptr) c.first = &e;
+    if (c.worst == nullptr || e.value / e.threshold > c.worst->value / c.worst->threshold) {
+      c.worst = &e;
+    }
+  }
+  return c;
+}
+
+json ConsistencyJson(const Inputs& in, const estimator::CalibrationResult& r) {
+  const Consistency c = ConsistencyOf(r);
+  json doc{{"consistent", c.failing_tests == 0},
+           {"windowSteps", in.options.consistency_window_steps},
+           {"failingTests", c.failing_tests}};
+  if (c.first != nullptr) {
+    doc["firstTime"] = Utc(c.first->time);
+    doc["value"] = c.first->value;
+    doc["threshold"] = c.first->threshold;
+    doc["worstValue"] = c.worst->value;
+    doc["worstThreshold"] = c.worst->threshold;
+    doc["message"] = c.first->message;
+  }
+  return doc;
+}
+
 json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
   json gyros = json::array();
   for (const estimator::GyroEstimate& g : r.gyros) {
@@ -144,6 +181,7 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
               {"state", estimator::SessionStateName(r.final_state)},
               {"outputPair", json::array({r.final_attitude.pair[0], r.final_attitude.pair[1]})},
               {"innovationRmsArcsec", r.innovation_rms * kArcsec},
+              {"modelConsistency", ConsistencyJson(in, r)},
               {"gyros", gyros},
               {"rejections", counts},
               {"events", events}};
@@ -158,6 +196,17 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
   std::printf("state %s, output pair [%d,%d], star-tracker innovation RMS %.2f arcsec\n",
               estimator::SessionStateName(r.final_state), r.final_attitude.pair[0],
               r.final_attitude.pair[1], r.innovation_rms * kArcsec);
+  if (const Consistency c = ConsistencyOf(r); c.first != nullptr) {
+    std::printf(
+        "MODEL INCONSISTENT with the data: innovation chi-square over %d-step windows %.1f > %.1f "
+        "first at %s (%d failing tests, worst %.1f > %.1f); run esg diagnose to find what the "
+        "model leaves out\n",
+        in.options.consistency_window_steps, c.first->value, c.first->threshold,
+        Utc(c.first->time).c_str(), c.failing_tests, c.worst->value, c.worst->threshold);
+  } else {
+    std::printf("model consistent with the data (innovation chi-square over %d-step windows)\n",
+                in.options.consistency_window_steps);
+  }
   for (const estimator::GyroEstimate& g : r.gyros) {
     std::printf("gyro %d%s\n", g.id, g.faulty ? " (faulty, excluded)" : "");
     auto row = [&](const char* name, double v, double s, int index) {

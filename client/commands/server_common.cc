@@ -137,6 +137,21 @@ Json SessionJson(const esg::v1::SessionInfo& s) {
         Json{{"stationId", st.station_id()}, {"highestDurableSequence", st.highest_durable_sequence()}});
   }
   doc["stations"] = stations;
+  if (s.has_model_consistency()) {
+    const esg::v1::ModelConsistency& mc = s.model_consistency();
+    doc["modelConsistency"] = Json{
+        {"consistent", mc.consistent()},
+        {"channel", mc.channel()},
+        {"value", mc.value()},
+        {"threshold", mc.threshold()},
+        {"windowSteps", mc.window_steps()},
+        {"degreesOfFreedom", mc.degrees_of_freedom()},
+        {"testTime", TimeJson(mc.test_time(), mc.has_test_time())},
+        {"tests", mc.tests()},
+        {"failingTests", mc.failing_tests()},
+        {"firstInconsistentTime",
+         TimeJson(mc.first_inconsistent_time(), mc.has_first_inconsistent_time())}};
+  }
   if (s.has_config()) {
     // The configuration in the form of its JSON file (docs/cli.md).
     std::string text;

@@ -65,6 +65,21 @@ void PrintSession(const esg::v1::SessionInfo& s) {
   } else {
     std::printf("  attitude: none yet\n");
   }
+  if (s.has_model_consistency()) {
+    const esg::v1::ModelConsistency& mc = s.model_consistency();
+    if (mc.consistent()) {
+      std::printf("  model consistent with the data: %s %.1f <= %.1f over %d steps (%d tests)\n",
+                  mc.channel().c_str(), mc.value(), mc.threshold(), mc.window_steps(), mc.tests());
+    } else {
+      std::printf(
+          "  MODEL INCONSISTENT with the data: %s %.1f > %.1f over %d steps at %s (first at %s, "
+          "%d of %d tests failed); run esg diagnose to find what the model leaves out\n",
+          mc.channel().c_str(), mc.value(), mc.threshold(), mc.window_steps(),
+          FormatUtc(mc.test_time(), mc.has_test_time()).c_str(),
+          FormatUtc(mc.first_inconsistent_time(), mc.has_first_inconsistent_time()).c_str(),
+          mc.failing_tests(), mc.tests());
+    }
+  }
   std::printf("  last update %s\n",
               FormatUtc(s.last_compute_time(), s.has_last_compute_time()).c_str());
 }
