@@ -137,8 +137,10 @@ IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<in
     d.pair_pair_exceeded[k] = test.pair_pair_angle[k] >= test.pair_pair_allowed[k];
     exceeded += d.pair_star_exceeded[k] + d.pair_pair_exceeded[k];
   }
-  // Fewer than two exceeded mismatches name nothing (eq. (12)).
-  if (exceeded < 2) return d;
+  // Fewer exceeded mismatches than the smallest signature of a hypothesis (three with the star
+  // tracker: its own; two without: a gyro's) name nothing and are not reported as ambiguous:
+  // one noisy pair attitude can exceed the two mismatches it takes part in.
+  if (exceeded < (test.star_available ? 3 : 2)) return d;
   std::vector<int> matches;  // gyro index, 3 = star tracker
   for (int g = 0; g < 3; ++g) {
     bool holds = true;

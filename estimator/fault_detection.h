@@ -113,8 +113,10 @@ FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& wo
 //   star tracker  every pair_star X, every pair_pair o.
 // Without the star tracker only the pair_pair conditions are tested and the star tracker cannot
 // be named. A hypothesis is decided when it is the only one whose conditions hold; with fewer
-// than two exceeded mismatches nothing is named (as eq. (12) names nothing from one); otherwise
-// the result is ambiguous and nothing is excluded.
+// exceeded mismatches than the smallest signature (3 with the star tracker, 2 without) nothing is
+// named and nothing reported (as eq. (12) names nothing from one: a single noisy pair attitude
+// exceeds the two mismatches it takes part in); otherwise the result is ambiguous and nothing is
+// excluded.
 enum class Isolation { kNone, kGyro, kStarTracker, kAmbiguous };
 const char* IsolationName(Isolation i);
 

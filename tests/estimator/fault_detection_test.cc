@@ -221,13 +221,21 @@ TEST(DecideIsolation, StarTrackerDisagreesWithThreeAgreeingPairs) {
   EXPECT_EQ(d.candidates, std::vector<int>{0});
 }
 
-TEST(DecideIsolation, NothingOrOneExceededNamesNothing) {
+TEST(DecideIsolation, FewerExceededThanTheSmallestSignatureNameNothing) {
   EXPECT_EQ(DecideIsolation(Isolation3({10, 10, 10}, {10, 10, 10}), kWorking).result, Isolation::kNone);
-  const IsolationDecision d = DecideIsolation(Isolation3({300, 10, 10}, {10, 10, 10}), kWorking);
+  IsolationDecision d = DecideIsolation(Isolation3({300, 10, 10}, {10, 10, 10}), kWorking);
   EXPECT_EQ(d.result, Isolation::kNone);
   EXPECT_EQ(d.excluded_gyro, 0);
   EXPECT_FALSE(d.reject_star_tracker);
   EXPECT_TRUE(d.pair_star_exceeded[0]);
+  // One noisy pair ([2,3]) against the two other pairs: two exceeded, with the star tracker fewer
+  // than the star tracker's own signature of three: nothing named, not ambiguous.
+  d = DecideIsolation(Isolation3({10, 10, 10}, {10, 300, 300}), kWorking);
+  EXPECT_EQ(d.result, Isolation::kNone);
+  // Without the star tracker two is a gyro's signature: pair mismatches 1 and 2 name gyro 1.
+  d = DecideIsolation(Isolation3({0, 0, 0}, {10, 300, 300}, /*star=*/false), kWorking);
+  EXPECT_EQ(d.result, Isolation::kGyro);
+  EXPECT_EQ(d.excluded_gyro, 1);
 }
 
 TEST(DecideIsolation, AmbiguousPatternsExcludeNothing) {
@@ -238,9 +246,9 @@ TEST(DecideIsolation, AmbiguousPatternsExcludeNothing) {
   EXPECT_EQ(d.output_pair, kWorking);
   EXPECT_FALSE(d.reject_star_tracker);
   EXPECT_TRUE(d.candidates.empty());
-  // Two pairs disagree with the star tracker but the pairs agree with each other (a star-tracker
-  // error along the direction one pair cannot see, or a gyro fault the pairs do not confirm).
-  d = DecideIsolation(Isolation3({10, 300, 300}, {10, 10, 10}), kWorking);
+  // Two pairs disagree with the star tracker, and only one of the two pair mismatches that
+  // would confirm gyro 1 exceeds.
+  d = DecideIsolation(Isolation3({10, 300, 300}, {10, 10, 300}), kWorking);
   EXPECT_EQ(d.result, Isolation::kAmbiguous);
   EXPECT_EQ(d.excluded_gyro, 0);
   // Without the star tracker, all three pair mismatches exceeded fit gyro 1, 2 and 3 alike.
@@ -355,6 +363,8 @@ TEST(MismatchCovariance, MatchesMonteCarloOfTwoPairsSharingAGyro) {
   const Eigen::Matrix3d S1 = J[0] * P * J[0].transpose() + sigma_r * sigma_r * G[0] * G[0].transpose();
   const Eigen::Matrix3d S2 = J[1] * P * J[1].transpose() + sigma_r * sigma_r * G[1] * G[1].transpose();
   EXPECT_GT(((S1 + S2) - sample).norm(), 0.3 * scale) << "S1 + S2\n" << S1 + S2;
+  // Gyro 1, the reference of both pairs, largely cancels: S1 + S2 overstates the mismatch.
+  EXPECT_GT((S1 + S2).trace(), 1.3 * sample.trace());
 }
 
 }  // namespace
