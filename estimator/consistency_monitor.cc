@@ -36,6 +36,17 @@ ConsistencyMonitor::ConsistencyMonitor(const ConsistencyMonitorOptions& options)
   options_.warmup_steps = std::max(options_.warmup_steps, 0);
 }
 
+double ConsistencyMonitor::Threshold(ChannelState& c, int dof, double level) {
+  auto& cache = c.thresholds;
+  for (const auto& [d, q] : cache) {
+    if (d == dof) return q;
+  }
+  const double q = discovery::ChiSquareQuantile(1.0 - level, dof);
+  if (cache.size() >= 8) cache.erase(cache.begin());
+  cache.emplace_back(dof, q);
+  return q;
+}
+
 double ConsistencyMonitor::Cap(int dof) {
   if (dof < static_cast<int>(cap_cache_.size())) {
     double& c = cap_cache_[dof];
@@ -53,23 +64,30 @@ std::optional<ConsistencyMonitor::TestResult> ConsistencyMonitor::Add(Channel ch
   ++c.steps_seen;
   if (c.steps_seen <= options_.warmup_steps) return std::nullopt;
   c.window.push_back(Step{std::min(std::max(nis, 0.0), Cap(dof)), dof});
-  if (static_cast<int>(c.window.size()) > options_.window_steps) c.window.pop_front();
-  const long tested = c.steps_seen - options_.warmup_steps - options_.window_steps;
+  const int n = options_.window_steps;
+  if (static_cast<int>(c.window.size()) > 2 * n) c.window.pop_front();
+  const long tested = c.steps_seen - options_.warmup_steps - 2L * n;
   if (tested < 0 || tested % options_.test_every_steps != 0) return std::nullopt;
   TestResult r;
   r.channel = channel;
   r.time = time;
-  r.steps = static_cast<int>(c.window.size());
-  for (const Step& s : c.window) {
-    r.nis_sum += s.nis;
-    r.dof += s.dof;
+  r.steps = n;
+  int previous_dof = 0;
+  for (int k = 0; k < 2 * n; ++k) {
+    const Step& s = c.window[k];
+    if (k < n) {
+      r.previous_nis_sum += s.nis;
+      previous_dof += s.dof;
+    } else {
+      r.nis_sum += s.nis;
+      r.dof += s.dof;
+    }
   }
-  if (c.threshold_dof != r.dof) {
-    c.threshold = discovery::ChiSquareQuantile(1.0 - options_.false_alarm_per_test, r.dof);
-    c.threshold_dof = r.dof;
-  }
-  r.threshold = c.threshold;
-  r.inconsistent = r.nis_sum > r.threshold;
+  const double window_level = std::sqrt(options_.false_alarm_per_test);
+  r.threshold = Threshold(c, r.dof, window_level);
+  r.window_exceeded = r.nis_sum > r.threshold;
+  r.inconsistent =
+      r.window_exceeded && r.previous_nis_sum > Threshold(c, previous_dof, window_level);
   ++tests_;
   if (r.inconsistent) {
     ++inconsistent_tests_;

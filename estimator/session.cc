@@ -50,10 +50,11 @@ void MonitorConsistency(ConsistencyMonitor& monitor, StepReport& report) {
         Event::Kind::kModelInconsistent, report.time, "model", r.nis_sum, r.threshold,
         "chi-square",
         absl::StrFormat("%s over the last %d measurement steps is %.1f > %.1f (chi-square, %d "
-                        "degrees of freedom, false-alarm level %.2g): the configured model does "
-                        "not explain the data; run esg diagnose to find what the model leaves out",
+                        "degrees of freedom), and %.1f over the %d steps before: the configured "
+                        "model does not explain the data (false-alarm level %.2g); run esg "
+                        "diagnose to find what the model leaves out",
                         ConsistencyChannelName(r.channel), r.steps, r.nis_sum, r.threshold, r.dof,
-                        monitor.options().false_alarm_per_test)});
+                        r.previous_nis_sum, r.steps, monitor.options().false_alarm_per_test)});
   }
 }
 

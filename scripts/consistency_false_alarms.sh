@@ -15,6 +15,7 @@ cd "$(dirname "$0")/.."
 SEEDS=${1:-10}
 HOURS=${2:-24}
 ESG=${3:-build/client/esg}
+WINDOW=${WINDOW:-60}  # measurement steps per window (esg calibrate --consistency-window)
 CONFIG=deploy/examples/rdk1.json
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -37,8 +38,10 @@ for seed in $(seq 1 "$SEEDS"); do
     "$ESG" simulate --config "$CONFIG" --profile "$profile" --hours "$HOURS" --seed "$seed" \
       --out "$rec" >/dev/null 2>&1
     read -r f a < <("$ESG" calibrate --config "$CONFIG" --recording "$rec" --model 10+11 --json \
+                      --consistency-window "$WINDOW" \
                       2>/dev/null | summarise)
     read -r fw aw < <("$ESG" calibrate --config "$CONFIG" --recording "$rec" --model 10 --json \
+                        --consistency-window "$WINDOW" \
                         2>/dev/null | summarise)
     runs=$((runs + 1)); tests_failed=$((tests_failed + f)); alarms=$((alarms + a))
     [ "$aw" -gt 0 ] && wrong_runs_firing=$((wrong_runs_firing + 1))
@@ -47,5 +50,6 @@ for seed in $(seq 1 "$SEEDS"); do
   done
 done
 days=$(python3 -c "print(f'{$runs * $HOURS / 24:.1f}')")
+echo "window $WINDOW steps"
 echo "model 10+11 (consistent): $runs runs, $days spacecraft-days: $tests_failed failing tests, $alarms alarms"
 echo "model 10 (random walk left out): MODEL_INCONSISTENT raised in $wrong_runs_firing of $runs runs"

@@ -41,6 +41,7 @@ struct CommonOptions {
   std::string recording_path;
   std::string model = "10+11";
   std::optional<double> kd;
+  int consistency_window = 60;
   bool json = false;
 };
 
@@ -51,6 +52,10 @@ void AddCommon(CLI::App* cmd, CommonOptions& o) {
   cmd->add_option("--model", o.model, "drift model: 1, 10, 11 or a '+' set such as 10+11")
       ->capture_default_str();
   cmd->add_option("--kd", o.kd, "k_d of the innovation test, eq. (14) (default: configuration, 5)");
+  cmd->add_option("--consistency-window", o.consistency_window,
+                  "measurement steps per window of the model-consistency test (chi-square of "
+                  "the innovations)")
+      ->capture_default_str();
   cmd->add_flag("--json", o.json, "one JSON document on stdout");
 }
 
@@ -77,6 +82,13 @@ std::optional<Inputs> Load(const CommonOptions& o) {
     return std::nullopt;
   }
   in.options.model = *model;
+  if (o.consistency_window < 4) {
+    std::fprintf(stderr, "esg: --consistency-window: must be >= 4 steps, got %d\n",
+                 o.consistency_window);
+    return std::nullopt;
+  }
+  in.options.consistency_window_steps = o.consistency_window;
+  in.options.consistency_test_every_steps = o.consistency_window / 4;
   auto recording = storage::ReadRecordingCsv(o.recording_path);
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
