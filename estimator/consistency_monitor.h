@@ -38,8 +38,9 @@
 //   {calibration, orbital, mixed} x 24 h, model 10+11): 2 alarms (3 failing tests) in 120
 //   spacecraft-days, both on the calibration profile at 19:15-19:30, after its 180 deg slew
 //   (-z to +z sun axis, 10 min) at 18 h, where the star-tracker NIS runs 1.25-1.35x its degrees
-//   of freedom for about 2 h (with 10 s telemetry instead of 60 s it does not: the readings
-//   interpolated across the slew are the likely cause, a filter matter). With one window instead
+//   of freedom for about 2 h (with 10 s telemetry instead of 60 s it does not, seeds 3 and 7:
+//   the readings interpolated across the slew are the likely cause, a filter matter; not proven).
+//   With one window instead
 //   of two the same data gave 11 alarms. Model 10 alone on the same recordings (random walk
 //   left out): raised in 120 of 120 runs.
 // A failing test is reported with the window's NIS sum (value), the quantile (threshold), the
