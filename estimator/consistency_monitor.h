@@ -40,9 +40,8 @@
 //   (-z to +z sun axis, 10 min) at 18 h, where the star-tracker NIS runs 1.25-1.35x its degrees
 //   of freedom for about 2 h (with 10 s telemetry instead of 60 s it does not, seeds 3 and 7:
 //   the readings interpolated across the slew are the likely cause, a filter matter; not proven).
-//   With one window instead
-//   of two the same data gave 11 alarms. Model 10 alone on the same recordings (random walk
-//   left out): raised in 120 of 120 runs.
+//   With one window instead of two the same data gave 11 alarms. Model 10 alone on the same
+//   recordings (random walk left out): raised in 120 of 120 runs.
 // A failing test is reported with the window's NIS sum (value), the quantile (threshold), the
 // window length and D; while the condition lasts a failing test recurs every test_every_steps
 // steps (15 min by default, shorter than the service's 30 min alert-collapse window, so one
