@@ -70,9 +70,12 @@ const char* SessionStateName(SessionState s);
 struct Event {
   enum class Kind {
     kStarTrackerInnovation,  // eq. (14) rejected the star-tracker measurements
-    kStarTrackerFault,       // eq. (12) named the star tracker
-    kWorkingPairFault,       // eq. (12) named the working pair: output switched to the reserve
-    kReservePairFault,       // eq. (12) named the reserve pair
+    kStarTrackerFault,       // eq. (12) named the star tracker (also: a filter reset withheld
+                             // because of it, docs/decisions.md D19)
+    kWorkingPairFault,       // eq. (12) named the working pair, or isolated a gyro of it with
+                             // three pairs (subsystem "gyro N"): output moved to a pair without it
+    kReservePairFault,       // eq. (12) named the reserve pair, or isolated a gyro outside the
+                             // working pair with three pairs (subsystem "gyro N")
     kGyroDataRejected,       // eq. (14) rejected an autonomous measurement z_avt
     kStarTrackerInvalid,     // the star tracker flagged its own sample invalid (not raised per
                              // sample; reserved for the service's outage alerts)
