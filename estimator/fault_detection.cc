@@ -137,29 +137,34 @@ IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<in
     d.pair_pair_exceeded[k] = test.pair_pair_angle[k] >= test.pair_pair_allowed[k];
     exceeded += d.pair_star_exceeded[k] + d.pair_pair_exceeded[k];
   }
-  // Fewer exceeded mismatches than the smallest signature of a hypothesis (three with the star
-  // tracker: its own; two without: a gyro's) name nothing and are not reported as ambiguous:
-  // one noisy pair attitude can exceed the two mismatches it takes part in.
-  if (exceeded < (test.star_available ? 3 : 2)) return d;
+  if (exceeded == 0) return d;
   std::vector<int> matches;  // gyro index, 3 = star tracker
   for (int g = 0; g < 3; ++g) {
     bool holds = true;
+    int star_exceeded = 0;
     for (int k = 0; k < 3; ++k) {
       if (k == g) continue;
       holds = holds && d.pair_pair_exceeded[k];
-      if (test.star_available) holds = holds && d.pair_star_exceeded[k];
+      star_exceeded += d.pair_star_exceeded[k];
     }
-    if (test.star_available) holds = holds && !d.pair_star_exceeded[g];
+    if (test.star_available) holds = holds && !d.pair_star_exceeded[g] && star_exceeded >= 1;
     if (holds) matches.push_back(g);
   }
   if (test.star_available) {
-    bool holds = true;
-    for (int k = 0; k < 3; ++k) holds = holds && d.pair_star_exceeded[k] && !d.pair_pair_exceeded[k];
-    if (holds) matches.push_back(3);
+    int star_exceeded = 0;
+    bool pairs_agree = true;
+    for (int k = 0; k < 3; ++k) {
+      star_exceeded += d.pair_star_exceeded[k];
+      pairs_agree = pairs_agree && !d.pair_pair_exceeded[k];
+    }
+    if (pairs_agree && star_exceeded >= 2) matches.push_back(3);
   }
   for (int m : matches) d.candidates.push_back(m == 3 ? 0 : test.gyro_ids[m]);
   if (matches.size() != 1) {
-    d.result = Isolation::kAmbiguous;
+    // Fewer exceeded mismatches than a gyro's smallest signature (three with the star tracker,
+    // two without) are not reported: one noisy pair attitude exceeds the two mismatches it takes
+    // part in.
+    if (exceeded >= (test.star_available ? 3 : 2)) d.result = Isolation::kAmbiguous;
     return d;
   }
   if (matches[0] == 3) {

@@ -107,16 +107,18 @@ FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& wo
 //   pair_pair[m]: the two pairs that share gyro m (pair k and pair l, {k, l, m} = {0, 1, 2}).
 // Hypotheses and the mismatches each requires to exceed (X), to stay within (o), or leaves free:
 //   none          nothing exceeds;
-//   gyro g        pair_star[k] X for k != g, pair_star[g] o (the pair without g agrees with the star
-//                 tracker), pair_pair[m] X for m != g (the pairs with g disagree with the pair
-//                 without it), pair_pair[g] free (both pairs hold g);
-//   star tracker  every pair_star X, every pair_pair o.
+//   gyro g        pair_pair[m] X for m != g (the pairs with g disagree with the pair without it),
+//                 pair_pair[g] free (both pairs hold g); pair_star[g] o (the pair without g agrees
+//                 with the star tracker) and pair_star[k] X for at least one k != g (the star
+//                 tracker confirms: a pair with g disagrees with it);
+//   star tracker  every pair_pair o (the pairs agree) and pair_star X for at least two pairs (a
+//                 pair whose sigma is large along the error's direction may not see it, as the
+//                 30 arcsec boresight; eq. (12) names the star tracker from two).
 // Without the star tracker only the pair_pair conditions are tested and the star tracker cannot
-// be named. A hypothesis is decided when it is the only one whose conditions hold; with fewer
-// exceeded mismatches than the smallest signature (3 with the star tracker, 2 without) nothing is
-// named and nothing reported (as eq. (12) names nothing from one: a single noisy pair attitude
-// exceeds the two mismatches it takes part in); otherwise the result is ambiguous and nothing is
-// excluded.
+// be named. A hypothesis is decided when it is the only one whose conditions hold. Otherwise the
+// result is ambiguous (nothing excluded) when at least as many mismatches exceed as a gyro's
+// smallest signature (3 with the star tracker, 2 without), and none below that: a single noisy
+// pair attitude exceeds the two mismatches it takes part in.
 enum class Isolation { kNone, kGyro, kStarTracker, kAmbiguous };
 const char* IsolationName(Isolation i);
 

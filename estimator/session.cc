@@ -200,6 +200,7 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& fra
   report.time = frame.time;
   if (!initialized_) {
     if (absl::Status s = Initialize(frame); !s.ok()) return s;
+    star_tracker_accepted_ = false;  // anchored on this one sample so far (docs/decisions.md D19)
     last_time_ = frame.time;
     report.state = state_;
     report.attitude = OutputAttitude(frame.time);

@@ -306,6 +306,10 @@ class EstimationSession {
   // eq. (12) named the star tracker faulty during the current streak of rejections: the filter
   // reset must not re-anchor to it (docs/decisions.md D19). Not in checkpoint version 1.
   bool star_tracker_voted_faulty_ = false;
+  // The star tracker has been accepted for kResetAfterRejections steps in a row since the filter
+  // started (D19). Not in checkpoint version 1: a restored session counts as anchored.
+  bool star_tracker_accepted_ = true;
+  int consecutive_accepted_ = 0;
   // Predict integrates with substeps sized to the motion of the readings instead of the
   // configured rate (exact for an inertial hold, see Predict).
   bool adaptive_integration_ = false;

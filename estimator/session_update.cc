@@ -242,11 +242,18 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     steps_without_star_tracker_ = 0;
     consecutive_rejections_ = 0;
     star_tracker_voted_faulty_ = false;
+    if (++consecutive_accepted_ >= kResetAfterRejections) star_tracker_accepted_ = true;
   } else {
+    consecutive_accepted_ = 0;
     ++steps_without_star_tracker_;
     if (st_present) ++consecutive_rejections_;
   }
-  const bool reset_allowed = !star_tracker_voted_faulty_ && st_agrees_with_pairs;
+  // Until the star tracker has been accepted for kResetAfterRejections steps in a row since the
+  // filter started, the pairs' inertial axes rest on the star-tracker sample of initialisation:
+  // their disagreement with the star tracker may be that sample's fault (an outlier), and the
+  // guard does not apply (D19).
+  const bool reset_allowed =
+      !star_tracker_accepted_ || (!star_tracker_voted_faulty_ && st_agrees_with_pairs);
   if (consecutive_rejections_ == kResetAfterRejections && !reset_allowed) {
     // docs/decisions.md D19: never re-anchor to a star tracker that eq. (12) voted faulty in this
     // streak, nor to one the healthy pairs disagree with; the filter keeps running on the gyros.

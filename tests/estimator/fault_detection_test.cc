@@ -213,12 +213,29 @@ TEST(DecideIsolation, EachGyroIsNamedByItsSignature) {
 }
 
 TEST(DecideIsolation, StarTrackerDisagreesWithThreeAgreeingPairs) {
-  const IsolationDecision d = DecideIsolation(Isolation3({300, 300, 300}, {10, 10, 10}), kWorking);
+  IsolationDecision d = DecideIsolation(Isolation3({300, 300, 300}, {10, 10, 10}), kWorking);
   EXPECT_EQ(d.result, Isolation::kStarTracker);
   EXPECT_TRUE(d.reject_star_tracker);
   EXPECT_EQ(d.excluded_gyro, 0);
   EXPECT_EQ(d.output_pair, kWorking);
   EXPECT_EQ(d.candidates, std::vector<int>{0});
+  // Two pairs suffice while the pairs agree (the third may have a large sigma along the error).
+  d = DecideIsolation(Isolation3({10, 300, 300}, {10, 10, 10}), kWorking);
+  EXPECT_EQ(d.result, Isolation::kStarTracker);
+  // One pair against the star tracker names nothing.
+  EXPECT_EQ(DecideIsolation(Isolation3({300, 10, 10}, {10, 10, 10}), kWorking).result, Isolation::kNone);
+}
+
+TEST(DecideIsolation, AGyroNeedsOnePairHoldingItToDisagreeWithTheStarTracker) {
+  // Gyro 1 confirmed by pair [1,2] against the star tracker only.
+  IsolationDecision d = DecideIsolation(Isolation3({10, 10, 300}, {10, 300, 300}), kWorking);
+  EXPECT_EQ(d.result, Isolation::kGyro);
+  EXPECT_EQ(d.excluded_gyro, 1);
+  // The pair mismatches alone while every pair agrees with the star tracker: not named (one
+  // noisy pair [2,3] exceeds both mismatches it takes part in).
+  d = DecideIsolation(Isolation3({10, 10, 10}, {10, 300, 300}), kWorking);
+  EXPECT_EQ(d.result, Isolation::kNone);
+  EXPECT_EQ(d.excluded_gyro, 0);
 }
 
 TEST(DecideIsolation, FewerExceededThanTheSmallestSignatureNameNothing) {
@@ -228,8 +245,8 @@ TEST(DecideIsolation, FewerExceededThanTheSmallestSignatureNameNothing) {
   EXPECT_EQ(d.excluded_gyro, 0);
   EXPECT_FALSE(d.reject_star_tracker);
   EXPECT_TRUE(d.pair_star_exceeded[0]);
-  // One noisy pair ([2,3]) against the two other pairs: two exceeded, with the star tracker fewer
-  // than the star tracker's own signature of three: nothing named, not ambiguous.
+  // One noisy pair ([2,3]) against the two other pairs: two exceeded, fewer than a gyro's
+  // signature of three with the star tracker: nothing named, not ambiguous.
   d = DecideIsolation(Isolation3({10, 10, 10}, {10, 300, 300}), kWorking);
   EXPECT_EQ(d.result, Isolation::kNone);
   // Without the star tracker two is a gyro's signature: pair mismatches 1 and 2 name gyro 1.
