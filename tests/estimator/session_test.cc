@@ -367,7 +367,7 @@ int CountEvents(const std::vector<Event>& events, Event::Kind kind) {
 // 12 h, seeded: the faulty gyro and only it is excluded, at the first measurement step after the
 // jump; the output moves to the pair without it (gyro 1, shared by the configured pairs [1,2] and
 // [1,3]: pair [2,3]); the event carries the evidence and recommends the cold spare; afterwards the
-// output stays within 30 arcsec of the truth (measured: <= 11 arcsec) and the
+// output stays within 30 arcsec of the truth (measured: 16.0 / 11.9 / 22.8 arcsec) and the
 // star tracker is used again (rejections after the switch in < 1% of the steps).
 TEST(FaultIsolation, ReadoutJumpInEachRunningGyroExcludesThatGyro) {
   const std::array<int, 2> expected_pair[3] = {{2, 3}, {1, 3}, {1, 2}};
