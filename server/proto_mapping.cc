@@ -115,6 +115,8 @@ esg::v1::AlertSeverity SeverityOf(Event::Kind kind) {
       return esg::v1::ALERT_SEVERITY_DISTRESS;
     case Event::Kind::kModelInconsistent:
       return esg::v1::ALERT_SEVERITY_WARNING;
+    case Event::Kind::kFaultAmbiguous:
+      return esg::v1::ALERT_SEVERITY_WARNING;
   }
   return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
 }
@@ -137,6 +139,8 @@ esg::v1::AlertReason ReasonOf(Event::Kind kind) {
       return esg::v1::ALERT_REASON_FILTER_RESET;
     case Event::Kind::kModelInconsistent:
       return esg::v1::ALERT_REASON_MODEL_INCONSISTENT;
+    case Event::Kind::kFaultAmbiguous:
+      return esg::v1::ALERT_REASON_FAULT_AMBIGUOUS;
   }
   return esg::v1::ALERT_REASON_UNSPECIFIED;
 }
