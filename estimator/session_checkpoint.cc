@@ -3,6 +3,7 @@
 // and restores them, so the order below is a storage format: version 1 must not change.
 #include "estimator/session.h"
 
+#include <cmath>
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -110,27 +111,38 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   auto get_vec = [&](auto& x) {
     for (int i = 0; i < x.size(); ++i) x(i) = get();
   };
+  // An integer field: a value that is not a finite integer in int's range marks the checkpoint
+  // corrupt (a plain cast of it would be undefined behaviour).
+  bool bad_integer = false;
+  auto get_int = [&]() {
+    const double v = get();
+    if (!(std::abs(v) <= 1e9) || v != std::floor(v)) {
+      bad_integer = true;
+      return 0;
+    }
+    return static_cast<int>(v);
+  };
   s.initialized_ = get() != 0;
   s.use_star_tracker_ = get() != 0;
   s.last_time_ = get_time();
   s.last_update_time_ = get_time();
   s.start_time_ = get_time();
   s.convergence_mark_time_ = get_time();
-  s.working_pair_ = {static_cast<int>(get()), static_cast<int>(get())};
-  s.reserve_pair_ = {static_cast<int>(get()), static_cast<int>(get())};
-  s.state_ = static_cast<SessionState>(static_cast<int>(get()));
-  s.steps_without_star_tracker_ = static_cast<int>(get());
-  s.consecutive_rejections_ = static_cast<int>(get());
+  s.working_pair_ = {get_int(), get_int()};
+  s.reserve_pair_ = {get_int(), get_int()};
+  s.state_ = static_cast<SessionState>(get_int());
+  s.steps_without_star_tracker_ = get_int();
+  s.consecutive_rejections_ = get_int();
   s.converged_ = get() != 0;
-  const int n_mark = static_cast<int>(get());
+  const int n_mark = get_int();
   if (n_mark < 0 || n_mark > 1000) return absl::DataLossError("checkpoint: bad convergence record");
   s.convergence_mark_sigma_ = VectorXd::Zero(n_mark);
   get_vec(s.convergence_mark_sigma_);
-  const int n_gyros = static_cast<int>(get());
+  const int n_gyros = get_int();
   if (n_gyros < 0 || n_gyros > kMaxGyros) return absl::DataLossError("checkpoint: bad gyro count");
   for (int i = 0; i < n_gyros; ++i) {
     GyroState g;
-    g.id = static_cast<int>(get());
+    g.id = get_int();
     const GyroConfig* gc = config.FindGyro(g.id);
     if (gc == nullptr) {
       return absl::DataLossError(absl::StrCat("checkpoint: gyro ", g.id, " is not in the configuration"));
@@ -147,7 +159,7 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     s.gyros_.push_back(std::move(g));
   }
   s.layout_ = LayoutFor(config, options.model, s.gyros_);
-  const int n = static_cast<int>(get());
+  const int n = get_int();
   if (n != s.layout_.size()) {
     return absl::DataLossError(absl::StrFormat(
         "checkpoint: covariance size %d does not fit the configuration and model %s (%d states)", n,
@@ -166,6 +178,26 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   if (s.initialized_) {
     if (absl::Status st = CheckCovariance(s.P_); !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
+  }
+  // Every index the session dereferences must name a gyro it has: a corrupt checkpoint is
+  // DataLoss, never a crash.
+  if (bad_integer) return absl::DataLossError("checkpoint: an integer field is not an integer");
+  const int state_value = static_cast<int>(s.state_);
+  if (state_value < static_cast<int>(SessionState::kNoData) ||
+      state_value > static_cast<int>(SessionState::kFaulted)) {
+    return absl::DataLossError(absl::StrCat("checkpoint: unknown session state ", state_value));
+  }
+  if (s.steps_without_star_tracker_ < 0 || s.consecutive_rejections_ < 0) {
+    return absl::DataLossError("checkpoint: negative step counter");
+  }
+  if (s.initialized_) {
+    for (const auto& [name, pair] : {std::pair<const char*, std::array<int, 2>>{"working", s.working_pair_},
+                                     {"reserve", s.reserve_pair_}}) {
+      if (pair[0] == pair[1] || s.Find(pair[0]) == nullptr || s.Find(pair[1]) == nullptr) {
+        return absl::DataLossError(absl::StrCat("checkpoint: ", name, " pair [", pair[0], ",",
+                                                pair[1], "] does not name two of its gyros"));
+      }
     }
   }
   return s;

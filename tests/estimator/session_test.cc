@@ -583,6 +583,31 @@ TEST(Session, CheckpointResumesBitForBit) {
 // A routine start: the first frames carry no valid star-tracker attitude, so the session is not
 // initialised when its checkpoint is taken. Restoring it must work (it once read the empty
 // covariance and crashed every later start of the service).
+// A checkpoint whose values decode but name what the session does not have is DataLoss, never a
+// crash later (the service then rebuilds the session from its archive). Value indices per the
+// version-1 layout in session_checkpoint.cc: 14-15 working pair, 18 state.
+TEST(Session, CheckpointNamingMissingGyrosOrNonIntegersIsDataLoss) {
+  const SimulationSpec spec = PaperFlight(10, 1.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  EstimationSession session = *EstimationSession::Create(spec.config, Model("10+11"));
+  for (const TelemetryFrame& f : sim->recording.frames) ASSERT_THAT(session.AddFrame(f), IsOk());
+  ASSERT_TRUE(session.initialized());
+  const SessionCheckpoint good = session.ExportCheckpoint();
+  ASSERT_THAT(EstimationSession::FromCheckpoint(spec.config, Model("10+11"), good), IsOk());
+  auto with = [&](size_t index, double value) {
+    SessionCheckpoint c = good;
+    c.values[index] = value;
+    return EstimationSession::FromCheckpoint(spec.config, Model("10+11"), c).status();
+  };
+  EXPECT_THAT(with(14, 7), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("working pair")));
+  EXPECT_THAT(with(15, good.values[14]),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("working pair")));
+  EXPECT_THAT(with(18, std::nan("")), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("integer")));
+  EXPECT_THAT(with(18, 1e300), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("integer")));
+  EXPECT_THAT(with(18, 42), StatusIs(absl::StatusCode::kDataLoss, HasSubstr("session state")));
+}
+
 TEST(Session, CheckpointBeforeInitialisationRestoresAndResumesBitForBit) {
   const SimulationSpec spec = PaperFlight(9, 2.0);
   auto sim = Simulate(spec);
