@@ -100,7 +100,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     from_archive = sc->replay_from_archive;
     service_alerts.swap(sc->service_alerts);
     sc->ready.erase(sc->ready.begin(), sc->ready.upper_bound(apply.applied_time));
-    const bool stopped = !apply.quarantine_reason.empty() && !apply.rebuilding;
+    const bool stopped = apply.FilterStopped();
     if (!from_archive && !stopped) {
       for (auto it = sc->ready.begin();
            it != sc->ready.end() && static_cast<int>(frames.size()) < options_.max_frames_per_job;
@@ -113,8 +113,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       from_archive = false;
     }
   }
-  const bool filter_runs = setup != nullptr && session.has_value() &&
-                           (apply.quarantine_reason.empty() || apply.rebuilding);
+  const bool filter_runs = setup != nullptr && session.has_value() && !apply.FilterStopped();
   bool rebuild_done = false;
   if (filter_runs && from_archive) {
     absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
@@ -162,11 +161,15 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // A rebuilt session does not store again what is already stored.
   const absl::Time written = apply.effects_written_until;
   for (const AlertOccurrence& o : service_alerts) alerts.Add(o);
+  // The frame is behind the filter from here on, applied or skipped.
+  auto advance_cursor = [&apply](const JobFrame& f) {
+    apply.applied_time = f.time;
+    apply.applied_station = f.station;
+    apply.applied_sequence = f.sequence;
+  };
   for (JobFrame& f : frames) {
     if (!f.frame.has_value()) {
-      apply.applied_time = f.time;
-      apply.applied_station = f.station;
-      apply.applied_sequence = f.sequence;
+      advance_cursor(f);
       ++apply.frames_apply_failed;
       if (f.time > written) {
         alerts.Add({"ARCHIVED_FRAME_UNREADABLE", "WARNING", absl::StrCat("station ", f.station),
@@ -195,15 +198,11 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
                                   apply.quarantine_reason));
         break;
       }
-      apply.applied_time = f.time;
-      apply.applied_station = f.station;
-      apply.applied_sequence = f.sequence;
+      advance_cursor(f);
       ++apply.frames_apply_failed;
       continue;
     }
-    apply.applied_time = f.time;
-    apply.applied_station = f.station;
-    apply.applied_sequence = f.sequence;
+    advance_cursor(f);
     ++apply.frames_applied;
     if (report->measurement_step && frame.star_tracker.has_value() &&
         frame.star_tracker->valid && !report->star_tracker_used) {
@@ -296,7 +295,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     sc->session = std::move(session);
     sc->apply = std::move(apply);
     sc->last_compute_time = now;
-    const bool stopped = !sc->apply.quarantine_reason.empty() && !sc->apply.rebuilding;
+    const bool stopped = sc->apply.FilterStopped();
     auto end = sc->ready.upper_bound(sc->apply.applied_time);
     for (auto it = sc->ready.begin(); it != end; ++it) {
       sc->ready_bytes -= static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());

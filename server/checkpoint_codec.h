@@ -42,6 +42,9 @@ struct ServerCheckpoint {
   // Quarantined while being rebuilt from the archive (ends by itself when caught up); false
   // with a reason: the filter is stopped until a reconfiguration.
   bool rebuilding = false;
+  // Quarantined and being rebuilt; quarantined with the filter stopped until a reconfiguration.
+  bool Rebuilding() const { return !quarantine_reason.empty() && rebuilding; }
+  bool FilterStopped() const { return !quarantine_reason.empty() && !rebuilding; }
   // Decoded from the first format, which kept no apply time: the caller derives it from the
   // stored last sequence (station "default").
   bool cursor_from_sequence = false;

@@ -43,7 +43,7 @@ esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
     }
     info.set_highest_applied_sequence(sc.apply.applied_sequence);
     info.set_quarantine_reason(sc.apply.quarantine_reason);
-    info.set_rebuilding(!sc.apply.quarantine_reason.empty() && sc.apply.rebuilding);
+    info.set_rebuilding(sc.apply.Rebuilding());
     info.set_frames_accepted(sc.frames_accepted);
     info.set_frames_applied(sc.apply.frames_applied);
     info.set_frames_apply_failed(sc.apply.frames_apply_failed);

@@ -233,7 +233,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
       for (auto& [id, sc] : registry_) {
         absl::MutexLock state(&sc->state_mu);
         if (sc->session.has_value() && sc->setup != nullptr &&
-            (sc->apply.quarantine_reason.empty() || sc->apply.rebuilding) &&
+            !sc->apply.FilterStopped() &&
             (sc->replay_from_archive || !sc->ready.empty())) {
           busy = true;
         }
@@ -269,12 +269,11 @@ absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id,
   for (;;) {
     {
       absl::MutexLock lock(&sc->state_mu);
-      const bool rebuilding = !sc->apply.quarantine_reason.empty() && sc->apply.rebuilding;
-      if (!sc->replay_from_archive && sc->ready.empty() && !rebuilding &&
+      if (!sc->replay_from_archive && sc->ready.empty() && !sc->apply.Rebuilding() &&
           sc->apply.applied_time >= sc->last_durable_time) {
         return absl::OkStatus();
       }
-      if (!sc->apply.quarantine_reason.empty() && !sc->apply.rebuilding) {
+      if (sc->apply.FilterStopped()) {
         return absl::FailedPreconditionError(absl::StrCat(
             spacecraft_id, " is quarantined: ", sc->apply.quarantine_reason));
       }

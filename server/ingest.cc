@@ -4,7 +4,6 @@
 // the frame (committer.cc).
 #include <utility>
 
-#include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/status_macros.h"
@@ -37,11 +36,6 @@ std::string Measurement(const std::string& payload) {
   frame.clear_station_id();
   frame.clear_sequence();
   return Serialize(frame);
-}
-
-// Shown in messages: at most 64 characters, non-printable bytes escaped.
-std::string Shown(const std::string& id) {
-  return absl::StrCat(absl::CHexEscape(id.substr(0, 64)), id.size() > 64 ? "..." : "");
 }
 
 }  // namespace
