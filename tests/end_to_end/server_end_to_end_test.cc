@@ -19,10 +19,6 @@
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
 
-#ifndef ESGD_PATH
-#error "ESGD_PATH must name the esgd binary"
-#endif
-
 namespace esg::server {
 namespace {
 

@@ -32,10 +32,6 @@
 #include "tests/testing/daemon.h"
 #include "tests/testing/status_matchers.h"
 
-#ifndef ESGD_PATH
-#error "ESGD_PATH must name the esgd binary"
-#endif
-
 namespace esg::server {
 namespace {
 
