@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "absl/status/status.h"
@@ -88,6 +89,8 @@ struct GyroState {
   double voltage_noise = 0.0;
   Vector3d u_offset_k;  // eq. (3) inverse of the displacement [V]
   std::optional<GyroFault> fault;
+  double switch_on_time = -std::numeric_limits<double>::infinity();  // [s]
+  std::optional<GyroReading> held_reading;  // the frozen reading inside a kReadingFrozen window
   Rng readout_rng;
   Rng voltage_rng;
   Rng rw_rng;
@@ -105,7 +108,29 @@ struct GyroState {
     }
     return Vector3d::Zero();
   }
+
+  // Whether t lies in the [time, end) window of a fault of this kind.
+  bool InFaultWindow(GyroFault::Kind kind, double t) const {
+    return fault && fault->kind == kind && t >= fault->time && t < fault->end;
+  }
 };
+
+bool InAnyWindow(const std::vector<std::pair<double, double>>& windows, double t) {
+  return std::any_of(windows.begin(), windows.end(),
+                     [&](const auto& w) { return t >= w.first && t < w.second; });
+}
+
+absl::Status CheckWindows(const std::vector<std::pair<double, double>>& windows,
+                          const std::string& field) {
+  for (size_t i = 0; i < windows.size(); ++i) {
+    const auto& [a, b] = windows[i];
+    if (!std::isfinite(a) || !std::isfinite(b) || !(a < b)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s[%d]: need finite start < end, got [%g, %g] s", field, i, a, b));
+    }
+  }
+  return absl::OkStatus();
+}
 
 // h_in turned by the rotation vector a = dw_in dt (dh/dt = dw x h), by Rodrigues' formula
 // h + (sin t / t) a x h + ((1 - cos t) / t^2) a x (a x h), t = |a|. For the tiny angles of drift
@@ -147,6 +172,7 @@ bool GyroRuns(const SimulationSpec& spec, int id) {
   if (id < 1 || id > kMaxGyros) return false;
   const GyroTruth& truth = spec.gyros[id - 1];
   if (truth.running.has_value()) return *truth.running;
+  if (truth.switch_on_time.has_value()) return true;
   if (spec.config.FindGyro(id) == nullptr) return false;
   const auto& w = spec.config.working_pair;
   const auto& r = spec.config.reserve_pair;
@@ -178,6 +204,19 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
       return absl::InvalidArgumentError(
           absl::StrCat(f, ".running: gyro ", id, " is not in the configuration"));
     }
+    if (g.switch_on_time) {
+      if (!std::isfinite(*g.switch_on_time)) {
+        return absl::InvalidArgumentError(absl::StrCat(f, ".switch_on_time: must be finite"));
+      }
+      if (g.running == false) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(f, ".switch_on_time: set for a gyro with running = false"));
+      }
+      if (spec.config.FindGyro(id) == nullptr) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(f, ".switch_on_time: gyro ", id, " is not in the configuration"));
+      }
+    }
     if (g.drift && !g.drift->AsVector().allFinite()) {
       return absl::InvalidArgumentError(absl::StrCat(f, ".drift: values must be finite"));
     }
@@ -201,6 +240,13 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
         return absl::InvalidArgumentError(absl::StrCat(f, ".fault.time: must be finite"));
       }
       RETURN_IF_ERROR(FiniteVector(g.fault->value, f + ".fault.value"));
+      const bool windowed = g.fault->kind == GyroFault::Kind::kReadingFrozen ||
+                            g.fault->kind == GyroFault::Kind::kReadingsMissing;
+      if (windowed && (std::isnan(g.fault->end) || !(g.fault->end > g.fault->time))) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "%s.fault.end: must be after fault.time %g s, got %g s", f, g.fault->time,
+            g.fault->end));
+      }
     }
     if (g.initial_h_k && (!g.initial_h_k->allFinite() || g.initial_h_k->norm() < 1e-9)) {
       return absl::InvalidArgumentError(
@@ -216,12 +262,24 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
   RETURN_IF_ERROR(Probability(st.outlier_probability, "star_tracker.outlier_probability"));
   RETURN_IF_ERROR(FiniteAtLeast(st.outlier_size, 0.0, "star_tracker.outlier_size"));
   RETURN_IF_ERROR(Probability(st.invalid_probability, "star_tracker.invalid_probability"));
-  for (size_t i = 0; i < st.outages.size(); ++i) {
-    const auto& [a, b] = st.outages[i];
-    if (!std::isfinite(a) || !std::isfinite(b) || !(a < b)) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "star_tracker.outages[%d]: need finite start < end, got [%g, %g] s", i, a, b));
+  RETURN_IF_ERROR(CheckWindows(st.outages, "star_tracker.outages"));
+  RETURN_IF_ERROR(CheckWindows(st.frozen, "star_tracker.frozen"));
+  if (st.outlier_burst) {
+    if (!std::isfinite(st.outlier_burst->time)) {
+      return absl::InvalidArgumentError("star_tracker.outlier_burst.time: must be finite");
     }
+    if (st.outlier_burst->count < 1) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "star_tracker.outlier_burst.count: must be >= 1, got %d", st.outlier_burst->count));
+    }
+    RETURN_IF_ERROR(Positive(st.outlier_burst->angle, "star_tracker.outlier_burst.angle"));
+  }
+  if (st.misalignment_jump) {
+    if (!std::isfinite(st.misalignment_jump->time)) {
+      return absl::InvalidArgumentError("star_tracker.misalignment_jump.time: must be finite");
+    }
+    RETURN_IF_ERROR(
+        FiniteVector(st.misalignment_jump->rotation_b, "star_tracker.misalignment_jump.rotation_b"));
   }
   if (!std::isfinite(st.latency)) {
     return absl::InvalidArgumentError("star_tracker.latency: must be finite");
@@ -271,6 +329,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
           truth.rotor_displacement_k(axis), s.amplifier_gain, s.reference_voltage, s.gap);
     }
     g.fault = truth.fault;
+    if (truth.switch_on_time) g.switch_on_time = *truth.switch_on_time;
     const Vector3d h_k0 = truth.initial_h_k.value_or(DefaultInitialSpinAxis(id)).normalized();
     g.h_in = (C_in_b0 * g.C_b_k * h_k0).normalized();
     result.true_coefficients[id - 1] = simulator_truth::EquivalentCoefficients(g.drift);
@@ -280,6 +339,13 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
   const StarTrackerTruth& st = spec.star_tracker;
   const Vector3d st_noise = st.noise.value_or(config.star_tracker.noise);
   const Quaterniond q_st_misalignment = ExpQuaternion(st.misalignment_b);
+  const Quaterniond q_st_jump =
+      st.misalignment_jump ? ExpQuaternion(st.misalignment_jump->rotation_b) : Quaterniond::Identity();
+  int burst_left = st.outlier_burst ? st.outlier_burst->count : 0;
+  // The sample repeated inside a frozen window, with its outlier truth.
+  std::optional<StarTrackerReading> st_held;
+  bool st_held_outlier = false;
+  double st_held_outlier_angle = 0.0;
   Rng st_noise_rng(DeriveSeed(spec.seed, kStarTrackerNoiseStream));
   Rng st_outlier_rng(DeriveSeed(spec.seed, kStarTrackerOutlierStream));
   Rng st_invalid_rng(DeriveSeed(spec.seed, kStarTrackerInvalidStream));
@@ -344,8 +410,17 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       reading.h_k = h_meas.normalized();
       const Vector3d u_k = g.u_offset_k + g.voltage_noise * g.voltage_rng.Normal3();
       reading.u_k_mv = u_k / kVoltsPerMv;
-      frame.gyros[g.id - 1] = reading;
+      // Switch-on, missing and frozen readings only decide what is telemetered, after the draws.
+      if (t_m < g.switch_on_time) continue;
       truth.gyros[g.id - 1] = gt;
+      if (g.InFaultWindow(GyroFault::Kind::kReadingsMissing, t_m)) continue;
+      if (g.InFaultWindow(GyroFault::Kind::kReadingFrozen, t_m)) {
+        if (!g.held_reading) g.held_reading = reading;
+        reading = *g.held_reading;
+      } else {
+        g.held_reading.reset();
+      }
+      frame.gyros[g.id - 1] = reading;
     }
 
     // Star tracker: every stream draws the same amount per frame whatever is used.
@@ -354,15 +429,24 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     const Vector3d outlier_axis = st_outlier_rng.UnitVector();
     const double outlier_angle = st.outlier_size * st_outlier_rng.Uniform(1.0, 3.0);
     const double invalid_draw = st_invalid_rng.Uniform();
-    const bool in_outage = std::any_of(st.outages.begin(), st.outages.end(), [&](const auto& o) {
-      return t_m >= o.first && t_m < o.second;
-    });
+    const bool in_outage = InAnyWindow(st.outages, t_m);
+    const bool in_frozen = InAnyWindow(st.frozen, t_m);
+    if (!in_frozen) st_held.reset();
     if (!in_outage) {
       const Quaterniond q_true_lagged =
           st.latency == 0.0 ? truth.q_in_b : profile.Attitude(t_m - st.latency);
-      Quaterniond q_meas =
-          q_true_lagged * q_st_misalignment * ExpQuaternion(st_noise.cwiseProduct(n));
-      if (outlier_draw < st.outlier_probability) {
+      Quaterniond q_meas = q_true_lagged * q_st_misalignment;
+      if (st.misalignment_jump && t_m >= st.misalignment_jump->time) q_meas = q_meas * q_st_jump;
+      q_meas = q_meas * ExpQuaternion(st_noise.cwiseProduct(n));
+      if (burst_left > 0 && t_m >= st.outlier_burst->time) {
+        // Cross-boresight: the frame's random axis without its body-z component.
+        Vector3d axis(outlier_axis.x(), outlier_axis.y(), 0.0);
+        axis = axis.norm() > 1e-12 ? Vector3d(axis.normalized()) : Vector3d::UnitX();
+        q_meas = q_meas * ExpQuaternion(st.outlier_burst->angle * axis);
+        truth.star_tracker_outlier = true;
+        truth.star_tracker_outlier_angle = st.outlier_burst->angle;
+        --burst_left;
+      } else if (outlier_draw < st.outlier_probability) {
         q_meas = q_meas * ExpQuaternion(outlier_angle * outlier_axis);
         truth.star_tracker_outlier = true;
         truth.star_tracker_outlier_angle = outlier_angle;
@@ -370,6 +454,18 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       StarTrackerReading reading;
       reading.q_in_b = Canonical(q_meas.normalized());
       reading.valid = !(invalid_draw < st.invalid_probability);
+      if (in_frozen) {
+        if (st_held) {
+          reading = *st_held;
+          truth.star_tracker_outlier = st_held_outlier;
+          truth.star_tracker_outlier_angle = st_held_outlier_angle;
+          truth.star_tracker_frozen = true;
+        } else {
+          st_held = reading;
+          st_held_outlier = truth.star_tracker_outlier;
+          st_held_outlier_angle = truth.star_tracker_outlier_angle;
+        }
+      }
       frame.star_tracker = reading;
     }
 

@@ -22,21 +22,31 @@
 // - Gyro reading at each telemetry time: h_k_meas = Exp(jump_k) Exp(n) h_k_true, n perpendicular to
 //   h_k_true with independent N(0, readout_noise^2) components on two perpendicular axes; jump_k is
 //   the readout_jump fault (zero before its time). Voltages u_k = eq. (3) inverse of the rotor
-//   displacement per case axis plus N(0, voltage_noise^2) each, written in mV.
-// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(n)
-//   [(x) Exp(o)], n = (noise_x N, noise_y N, noise_z N) about body axes, o an outlier with
-//   probability outlier_probability: uniformly random axis, angle uniform in
-//   [outlier_size, 3 outlier_size].
+//   displacement per case axis plus N(0, voltage_noise^2) each, written in mV. A reading_frozen
+//   fault repeats the whole reading (h_k and voltages) of the first frame of its window in every
+//   frame of the window; a readings_missing fault leaves the gyro's field empty in its window; a
+//   gyro with a switch-on time has no field (and no truth sample) before it.
+// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(jump_b)
+//   (x) Exp(n) [(x) Exp(o)], n = (noise_x N, noise_y N, noise_z N) about body axes, jump_b the
+//   misalignment jump (zero before its time), o an outlier with probability
+//   outlier_probability: uniformly random axis, angle uniform in [outlier_size, 3 outlier_size].
+//   The samples of an outlier burst carry instead o = angle * a_perp, a_perp the same per-frame
+//   random axis with its boresight (body z) component removed, renormalised: a cross-boresight
+//   outlier of exactly the burst's angle.
 //   Inside an outage no star-tracker field; with probability invalid_probability valid = false.
+//   Inside a frozen window every sample repeats the first sample of the window (quaternion, valid
+//   flag and outlier truth), with the frame's own time stamp.
 // Every random source has its own stream (DeriveSeed(seed, stream)), and every stream draws the
-// same numbers per frame whether or not a sample is used, so turning on outliers, outages or
-// invalid flags never changes the gyro noise or the star-tracker noise.
+// same numbers per frame whether or not a sample is used, so turning on outliers, bursts,
+// outages, frozen windows, misalignment jumps, invalid flags, missing or frozen gyro readings or a
+// late switch-on never changes the gyro noise or the star-tracker noise of the other samples.
 #ifndef ESG_ESTIMATOR_SIMULATOR_H_
 #define ESG_ESTIMATOR_SIMULATOR_H_
 
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <utility>
 #include <vector>
@@ -63,10 +73,18 @@ struct GyroFault {
   enum class Kind {
     kReadoutJump,  // value: rotation vector [rad] in case axes added to every reading from time on
     kDriftStep,    // value: extra constant drift [rad/s] in case axes from time on
+    kReadingFrozen,    // the telemetered reading (h_k and voltages) of the first frame at or after
+                       // time is repeated in every frame of [time, end); value unused. The truth
+                       // keeps moving.
+    kReadingsMissing,  // no reading of this gyro (field absent) in the frames of [time, end);
+                       // value unused
   };
   double time = 0.0;  // [s since the simulation start]
   Kind kind = Kind::kReadoutJump;
   Eigen::Vector3d value = Eigen::Vector3d::Zero();
+  // [s since the simulation start]; exclusive end of the window of kReadingFrozen and
+  // kReadingsMissing, > time (infinity: to the end). Unused by the other kinds.
+  double end = std::numeric_limits<double>::infinity();
 };
 
 struct GyroTruth {
@@ -89,10 +107,30 @@ struct GyroTruth {
   // Readout noise 1-sigma per perpendicular axis [rad]; default config.readout_noise.
   std::optional<double> readout_noise;
   std::optional<GyroFault> fault;
+  // [s since the simulation start]; the gyro's readings appear from this time on (the cold spare
+  // switched on by the spacecraft): frames before it carry no reading and no truth sample of the
+  // gyro. Setting it makes the gyro run (`running` must not be false). The spin axis is
+  // propagated from the start all the same (initial_h_k is its value at the start), so the random
+  // streams draw the same numbers whatever the switch-on time.
+  std::optional<double> switch_on_time;
   // Spin axis in case axes at the start [1] (normalised). Default per gyro id (well separated
   // even with identical mountings): 1: (0.2, 0.3, 0.93), 2: (0.93, 0.2, 0.3), 3: (0.3, 0.93, 0.2),
   // 4: (-0.5, 0.5, 0.7), each normalised.
   std::optional<Eigen::Vector3d> initial_h_k;
+};
+
+// n consecutive star-tracker outliers (see the file comment for their axis).
+struct StarTrackerOutlierBurst {
+  double time = 0.0;   // [s since the simulation start]; the burst starts at the first sample
+                       // emitted at or after it (frames in an outage do not count)
+  int count = 0;       // samples, >= 1
+  double angle = 0.0;  // [rad], > 0; the angle of each outlier
+};
+
+// A star-tracker mounting change: an extra rotation from time on (see the file comment).
+struct StarTrackerMisalignmentJump {
+  double time = 0.0;                                     // [s since the simulation start]
+  Eigen::Vector3d rotation_b = Eigen::Vector3d::Zero();  // rotation vector, body axes [rad]
 };
 
 struct StarTrackerTruth {
@@ -107,6 +145,10 @@ struct StarTrackerTruth {
   // Star-tracker misalignment, rotation vector [rad] (see file comment).
   Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();
   double invalid_probability = 0.0;  // per sample, [0, 1]
+  std::optional<StarTrackerOutlierBurst> outlier_burst;
+  // Frozen output [start, end) in seconds since the simulation start (see the file comment).
+  std::vector<std::pair<double, double>> frozen;
+  std::optional<StarTrackerMisalignmentJump> misalignment_jump;
 };
 
 struct SimulationSpec {
@@ -133,8 +175,9 @@ struct TruthSample {
   absl::Time time;
   Eigen::Quaterniond q_in_b;                                    // true attitude at time
   std::array<std::optional<GyroTruthSample>, kMaxGyros> gyros;  // empty: gyro off
-  bool star_tracker_outlier = false;
+  bool star_tracker_outlier = false;        // the emitted sample carries an outlier
   double star_tracker_outlier_angle = 0.0;  // [rad]
+  bool star_tracker_frozen = false;         // the emitted sample repeats an earlier one
 };
 
 struct SimulationResult {
@@ -151,7 +194,7 @@ struct SimulationResult {
 // Default starting spin axis in case axes for gyro `id` (see GyroTruth::initial_h_k).
 Eigen::Vector3d DefaultInitialSpinAxis(int id);
 
-// Whether gyro `id` runs under spec (GyroTruth::running rule).
+// Whether gyro `id` runs under spec (GyroTruth::running rule; a switch-on time makes it run).
 bool GyroRuns(const SimulationSpec& spec, int id);
 
 // Checks the spec; InvalidArgument naming the field (e.g. "duration: must be > 0 s, got -1").

@@ -1,7 +1,8 @@
 // Seeded simulator (estimator/simulator.h): reproducibility, readings against the truth, eq. (3)
 // voltages, spin-axis motion against the paper's printed drift formulas integrated independently,
 // the random-walk intensity from all increments, star-tracker noise,
-// outliers, outages, latency and invalid flags, faults, validation.
+// outliers, outages, latency and invalid flags, faults (readout jump, drift step, frozen and
+// missing readings, switch-on, outlier burst, frozen star tracker, misalignment jump), validation.
 #include "estimator/simulator.h"
 
 #include <algorithm>
@@ -642,6 +643,174 @@ TEST(Simulator, FaultsActFromTheirTime) {
   }
 }
 
+// Whether t lies in [start, end). The fault tests below also check that a clean run's frames equal
+// the faulted run's outside the fault (same random streams).
+bool InWindow(double t, double start, double end) { return t >= start && t < end; }
+
+TEST(Simulator, FrozenGyroReadingRepeatsTheFirstReadingOfItsWindow) {
+  const SimulationSpec clean_spec = TestSpec(3.0);
+  SimulationSpec spec = clean_spec;
+  const double start = HoursToSeconds(1.0) + 30.0, end = HoursToSeconds(2.0);
+  GyroFault fault;
+  fault.time = start;
+  fault.kind = GyroFault::Kind::kReadingFrozen;
+  fault.end = end;
+  spec.gyros[0].fault = fault;
+  const SimulationResult r = RunSimulation(spec);
+  const SimulationResult clean = RunSimulation(clean_spec);
+  const size_t first = static_cast<size_t>(HoursToSeconds(1.0) / 60.0) + 1;  // 1 h + 60 s
+  const GyroReading held = *clean.recording.frames[first].gyros[0];
+  int frozen = 0;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const GyroReading& g1 = *r.recording.frames[m].gyros[0];
+    for (int g = 1; g < 3; ++g) {
+      EXPECT_EQ(r.recording.frames[m].gyros[g]->h_k, clean.recording.frames[m].gyros[g]->h_k);
+    }
+    if (InWindow(t, start, end)) {
+      ++frozen;
+      EXPECT_EQ(g1.h_k, held.h_k) << t;
+      EXPECT_EQ(*g1.u_k_mv, *held.u_k_mv) << t;
+    } else {
+      EXPECT_NE(g1.h_k, held.h_k) << t;
+      EXPECT_EQ(g1.h_k, clean.recording.frames[m].gyros[0]->h_k) << t;
+      EXPECT_EQ(*g1.u_k_mv, *clean.recording.frames[m].gyros[0]->u_k_mv) << t;
+    }
+    // The truth keeps moving.
+    EXPECT_EQ(r.truth[m].gyros[0]->h_k, clean.truth[m].gyros[0]->h_k);
+  }
+  EXPECT_EQ(frozen, 59);  // 1 h + 60 s ... 1 h + 59 min
+}
+
+TEST(Simulator, MissingGyroReadingsAreAbsentExactlyInTheirWindow) {
+  const SimulationSpec clean_spec = TestSpec(3.0);
+  SimulationSpec spec = clean_spec;
+  const double start = HoursToSeconds(1.0), end = HoursToSeconds(1.0) + 600.0;
+  GyroFault fault;
+  fault.time = start;
+  fault.kind = GyroFault::Kind::kReadingsMissing;
+  fault.end = end;
+  spec.gyros[1].fault = fault;
+  const SimulationResult r = RunSimulation(spec);
+  const SimulationResult clean = RunSimulation(clean_spec);
+  int missing = 0;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const auto& g2 = r.recording.frames[m].gyros[1];
+    EXPECT_EQ(g2.has_value(), !InWindow(t, start, end)) << t;
+    missing += !g2.has_value();
+    if (g2) EXPECT_EQ(g2->h_k, clean.recording.frames[m].gyros[1]->h_k) << t;
+    EXPECT_TRUE(r.truth[m].gyros[1].has_value());
+    EXPECT_EQ(r.recording.frames[m].gyros[0]->h_k, clean.recording.frames[m].gyros[0]->h_k);
+  }
+  EXPECT_EQ(missing, 10);  // 10 min: 1 h, 1 h + 1 min ... 1 h + 9 min
+}
+
+TEST(Simulator, SpareSwitchedOnHasReadingsFromItsSwitchOnTime) {
+  const SimulationSpec clean_spec = TestSpec(3.0);
+  SimulationSpec spec = clean_spec;
+  const double on = HoursToSeconds(2.0) - 30.0;
+  spec.gyros[3].switch_on_time = on;  // the cold spare, not in the pairs
+  EXPECT_TRUE(GyroRuns(spec, 4));
+  EXPECT_FALSE(GyroRuns(clean_spec, 4));
+  const SimulationResult r = RunSimulation(spec);
+  const SimulationResult clean = RunSimulation(clean_spec);
+  ASSERT_TRUE(r.true_coefficients[3].has_value());
+  int present = 0;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const auto& g4 = r.recording.frames[m].gyros[3];
+    EXPECT_EQ(g4.has_value(), t >= on) << t;
+    EXPECT_EQ(r.truth[m].gyros[3].has_value(), t >= on) << t;
+    for (int g = 0; g < 3; ++g) {
+      EXPECT_EQ(r.recording.frames[m].gyros[g]->h_k, clean.recording.frames[m].gyros[g]->h_k);
+    }
+    if (!g4) continue;
+    ++present;
+    const double error = std::acos(std::min(1.0, g4->h_k.dot(r.truth[m].gyros[3]->h_k)));
+    EXPECT_LT(error, 6.0 * spec.config.readout_noise) << t;
+  }
+  EXPECT_EQ(present, 61);  // 2 h ... 3 h
+  SimulationSpec off = spec;
+  off.gyros[3].running = false;
+  EXPECT_THAT(Simulate(off), StatusIs(absl::StatusCode::kInvalidArgument,
+                                      HasSubstr("gyros[3] (gyro 4).switch_on_time")));
+}
+
+TEST(Simulator, OutlierBurstIsExactlyCountConsecutiveCrossBoresightSamples) {
+  SimulationSpec clean_spec = TestSpec(2.0);
+  SimulationSpec spec = clean_spec;
+  const double angle = ArcminToRad(4.0);
+  spec.star_tracker.outlier_burst = StarTrackerOutlierBurst{HoursToSeconds(1.0) + 10.0, 5, angle};
+  // An outage over the 2nd and 3rd frames after the start: they do not count.
+  spec.star_tracker.outages = {{HoursToSeconds(1.0) + 100.0, HoursToSeconds(1.0) + 190.0}};
+  clean_spec.star_tracker.outages = spec.star_tracker.outages;
+  const SimulationResult r = RunSimulation(spec);
+  const SimulationResult clean = RunSimulation(clean_spec);
+  std::vector<double> flagged;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const TelemetryFrame& f = r.recording.frames[m];
+    if (!f.star_tracker) continue;
+    const Quaterniond& q_clean = clean.recording.frames[m].star_tracker->q_in_b;
+    if (!r.truth[m].star_tracker_outlier) {
+      EXPECT_THAT(f.star_tracker->q_in_b, IsNearQuaternion(q_clean, 1e-15)) << t;
+      continue;
+    }
+    flagged.push_back(t);
+    EXPECT_EQ(r.truth[m].star_tracker_outlier_angle, angle);
+    // The outlier is a body rotation of the burst's angle about an axis perpendicular to z.
+    const Vector3d o = LogQuaternion(q_clean.conjugate() * f.star_tracker->q_in_b);
+    EXPECT_NEAR(o.norm(), angle, 1e-12) << t;
+    EXPECT_NEAR(o.z(), 0.0, 1e-12) << t;
+  }
+  const double h1 = HoursToSeconds(1.0);
+  EXPECT_THAT(flagged, ::testing::ElementsAre(h1 + 60, h1 + 240, h1 + 300, h1 + 360, h1 + 420));
+}
+
+TEST(Simulator, FrozenStarTrackerRepeatsTheFirstSampleOfItsWindow) {
+  const SimulationSpec clean_spec = TestSpec(3.0);
+  SimulationSpec spec = clean_spec;
+  const double start = HoursToSeconds(1.0), end = HoursToSeconds(1.5);
+  spec.star_tracker.frozen = {{start, end}};
+  const SimulationResult r = RunSimulation(spec);
+  const SimulationResult clean = RunSimulation(clean_spec);
+  const Quaterniond held = clean.recording.frames[60].star_tracker->q_in_b;  // at 1 h
+  int frozen = 0;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const Quaterniond& q = r.recording.frames[m].star_tracker->q_in_b;
+    if (InWindow(t, start, end)) {
+      EXPECT_EQ(q.coeffs(), held.coeffs()) << t;
+      EXPECT_EQ(r.truth[m].star_tracker_frozen, t > start) << t;
+      ++frozen;
+    } else {
+      EXPECT_FALSE(r.truth[m].star_tracker_frozen);
+      EXPECT_NE(q.coeffs(), held.coeffs()) << t;
+      EXPECT_EQ(q.coeffs(), clean.recording.frames[m].star_tracker->q_in_b.coeffs()) << t;
+    }
+  }
+  EXPECT_EQ(frozen, 30);
+}
+
+TEST(Simulator, StarTrackerMisalignmentJumpIsABodyRotationFromItsTime) {
+  SimulationSpec spec = TestSpec(2.0);
+  spec.star_tracker.noise = Vector3d::Zero();
+  spec.star_tracker.misalignment_b = ArcsecToRad(1.0) * Vector3d(30, -20, 60);
+  const Vector3d jump_b = ArcminToRad(1.0) * Vector3d(2.0, 0.0, 0.0);
+  spec.star_tracker.misalignment_jump = StarTrackerMisalignmentJump{HoursToSeconds(1.0), jump_b};
+  const SimulationResult r = RunSimulation(spec);
+  const Quaterniond mis = ExpQuaternion(spec.star_tracker.misalignment_b);
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const Quaterniond expected = t >= HoursToSeconds(1.0)
+                                     ? Quaterniond(r.truth[m].q_in_b * mis * ExpQuaternion(jump_b))
+                                     : Quaterniond(r.truth[m].q_in_b * mis);
+    EXPECT_THAT(r.recording.frames[m].star_tracker->q_in_b, IsNearQuaternion(expected, 1e-14))
+        << t;
+  }
+}
+
 TEST(Simulator, ProgressIsReportedUpToOne) {
   std::vector<double> fractions;
   auto r = Simulate(TestSpec(1.0), [&](double f) { fractions.push_back(f); });
@@ -701,6 +870,36 @@ TEST(Simulator, InvalidSpecsNameTheField) {
     SimulationSpec s = spec;
     s.config.spacecraft_id = "";
     expect_invalid(s, "spacecraftId");
+  }
+  {
+    SimulationSpec s = spec;
+    s.gyros[0].fault = GyroFault{100.0, GyroFault::Kind::kReadingsMissing, Vector3d::Zero(), 50.0};
+    expect_invalid(s, "gyros[0] (gyro 1).fault.end");
+  }
+  {
+    SimulationSpec s = spec;
+    s.gyros[3].switch_on_time = std::numeric_limits<double>::infinity();
+    expect_invalid(s, "gyros[3] (gyro 4).switch_on_time");
+  }
+  {
+    SimulationSpec s = spec;
+    s.star_tracker.outlier_burst = StarTrackerOutlierBurst{0.0, 0, ArcminToRad(2.0)};
+    expect_invalid(s, "star_tracker.outlier_burst.count");
+  }
+  {
+    SimulationSpec s = spec;
+    s.star_tracker.outlier_burst = StarTrackerOutlierBurst{0.0, 5, 0.0};
+    expect_invalid(s, "star_tracker.outlier_burst.angle");
+  }
+  {
+    SimulationSpec s = spec;
+    s.star_tracker.frozen = {{0.0, 10.0}, {30.0, 30.0}};
+    expect_invalid(s, "star_tracker.frozen[1]");
+  }
+  {
+    SimulationSpec s = spec;
+    s.star_tracker.misalignment_jump = StarTrackerMisalignmentJump{std::nan(""), Vector3d::Zero()};
+    expect_invalid(s, "star_tracker.misalignment_jump.time");
   }
 }
 
