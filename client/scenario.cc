@@ -5,6 +5,8 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -31,6 +33,7 @@ constexpr double kMaxNoiseArcsec = 3600.0;
 constexpr double kMaxRandomWalkDegHSqrtH = 1.0;
 constexpr double kMaxVoltageNoiseMv = 1000.0;
 constexpr double kMaxHours = 1e5;
+constexpr int64_t kMaxBurstCount = 100000;
 
 absl::Status Invalid(const std::string& path, const std::string& reason) {
   return absl::InvalidArgumentError(absl::StrCat(path, ": ", reason));
@@ -100,13 +103,38 @@ Vector3d DegHToSi(const Vector3d& v) { return v.unaryExpr(&estimator::DegPerHour
 
 absl::StatusOr<GyroFault> ParseFault(const json& v, const std::string& path) {
   RETURN_IF_ERROR(CheckObject(v, path));
-  RETURN_IF_ERROR(CheckKeys(v, path, {"timeHours", "kind", "arcsec", "degH"}));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"timeHours", "kind", "arcsec", "degH", "endHours"}));
   GyroFault fault;
   if (!v.contains("timeHours")) return Invalid(Key(path, "timeHours"), "required");
   ASSIGN_OR_RETURN(double hours, Number(v["timeHours"], Key(path, "timeHours"), 0.0, kMaxHours));
   fault.time = estimator::HoursToSeconds(hours);
   if (!v.contains("kind")) return Invalid(Key(path, "kind"), "required");
   ASSIGN_OR_RETURN(std::string kind, String(v["kind"], Key(path, "kind")));
+  const bool windowed = kind == "reading_frozen" || kind == "readings_missing";
+  if (windowed) {
+    for (const char* unused : {"arcsec", "degH"}) {
+      if (v.contains(unused)) {
+        return Invalid(Key(path, unused), absl::StrCat("not used by kind ", kind));
+      }
+    }
+    if (!v.contains("endHours")) {
+      return Invalid(Key(path, "endHours"), absl::StrCat("required for kind ", kind));
+    }
+    ASSIGN_OR_RETURN(double end, Number(v["endHours"], Key(path, "endHours"), 0.0, kMaxHours));
+    if (!(end > hours)) {
+      return Invalid(Key(path, "endHours"),
+                     absl::StrFormat("%g must be after timeHours %g", end, hours));
+    }
+    fault.end = estimator::HoursToSeconds(end);
+    fault.kind = kind == "reading_frozen" ? GyroFault::Kind::kReadingFrozen
+                                          : GyroFault::Kind::kReadingsMissing;
+    return fault;
+  }
+  if (v.contains("endHours") && (kind == "readout_jump" || kind == "drift_step")) {
+    return Invalid(Key(path, "endHours"),
+                   absl::StrCat("not used by kind ", kind,
+                                " (only by reading_frozen and readings_missing)"));
+  }
   if (kind == "readout_jump") {
     fault.kind = GyroFault::Kind::kReadoutJump;
     if (v.contains("degH"))
@@ -124,8 +152,10 @@ absl::StatusOr<GyroFault> ParseFault(const json& v, const std::string& path) {
                      Vec3(v["degH"], Key(path, "degH"), -kMaxDriftDegH, kMaxDriftDegH));
     fault.value = DegHToSi(deg_h);
   } else {
-    return Invalid(Key(path, "kind"), absl::StrCat("unknown kind '", kind,
-                                                   "'; valid kinds are readout_jump, drift_step"));
+    return Invalid(Key(path, "kind"),
+                   absl::StrCat("unknown kind '", kind,
+                                "'; valid kinds are readout_jump, drift_step, reading_frozen, "
+                                "readings_missing"));
   }
   return fault;
 }
@@ -136,7 +166,7 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       v, path,
       {"id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm", "k0DegH", "c1DegH",
        "c2DegH", "muDegH", "nuDegH", "misalignmentArcsec", "randomWalkDegHSqrtH",
-       "readoutNoiseArcsec", "voltageNoiseMv", "initialSpinAxis", "fault"}));
+       "readoutNoiseArcsec", "voltageNoiseMv", "initialSpinAxis", "fault", "switchOnHours"}));
   ScenarioGyro g;
   if (!v.contains("id")) return Invalid(Key(path, "id"), "required");
   if (!v["id"].is_number_integer()) {
@@ -189,9 +219,75 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       ASSIGN_OR_RETURN(g.initial_h_k, NonZeroVec3(x, p));
     } else if (k == "fault") {
       ASSIGN_OR_RETURN(g.fault, ParseFault(x, p));
+    } else if (k == "switchOnHours") {
+      ASSIGN_OR_RETURN(double hours, Number(x, p, 0.0, kMaxHours));
+      g.switch_on_time = estimator::HoursToSeconds(hours);
     }
   }
   return g;
+}
+
+// [{"startHours": a, "endHours": b}, ...] -> [start, end) in seconds.
+absl::StatusOr<std::vector<std::pair<double, double>>> ParseWindows(const json& x,
+                                                                    const std::string& p) {
+  if (!x.is_array()) return Invalid(p, absl::StrCat("expected an array, got ", x.type_name()));
+  std::vector<std::pair<double, double>> windows;
+  for (size_t i = 0; i < x.size(); ++i) {
+    const std::string pi = absl::StrCat(p, "[", i, "]");
+    RETURN_IF_ERROR(CheckObject(x[i], pi));
+    RETURN_IF_ERROR(CheckKeys(x[i], pi, {"startHours", "endHours"}));
+    if (!x[i].contains("startHours")) return Invalid(Key(pi, "startHours"), "required");
+    if (!x[i].contains("endHours")) return Invalid(Key(pi, "endHours"), "required");
+    ASSIGN_OR_RETURN(double start,
+                     Number(x[i]["startHours"], Key(pi, "startHours"), 0.0, kMaxHours));
+    ASSIGN_OR_RETURN(double end, Number(x[i]["endHours"], Key(pi, "endHours"), 0.0, kMaxHours));
+    if (!(end > start)) {
+      return Invalid(Key(pi, "endHours"),
+                     absl::StrFormat("%g must be after startHours %g", end, start));
+    }
+    windows.emplace_back(estimator::HoursToSeconds(start), estimator::HoursToSeconds(end));
+  }
+  return windows;
+}
+
+absl::StatusOr<estimator::StarTrackerOutlierBurst> ParseOutlierBurst(const json& v,
+                                                                     const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"timeHours", "count", "arcmin"}));
+  for (const char* key : {"timeHours", "count", "arcmin"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  estimator::StarTrackerOutlierBurst burst;
+  ASSIGN_OR_RETURN(double hours, Number(v["timeHours"], Key(path, "timeHours"), 0.0, kMaxHours));
+  burst.time = estimator::HoursToSeconds(hours);
+  const json& count = v["count"];
+  if (!count.is_number_integer() || count.get<int64_t>() < 1 ||
+      count.get<int64_t>() > kMaxBurstCount) {
+    return Invalid(Key(path, "count"),
+                   absl::StrCat("expected an integer in 1..", kMaxBurstCount, ", got ",
+                                count.dump()));
+  }
+  burst.count = count.get<int>();
+  ASSIGN_OR_RETURN(double arcmin, Number(v["arcmin"], Key(path, "arcmin"), 0.0, 600.0));
+  if (!(arcmin > 0.0)) return Invalid(Key(path, "arcmin"), "must be > 0");
+  burst.angle = estimator::ArcminToRad(arcmin);
+  return burst;
+}
+
+absl::StatusOr<estimator::StarTrackerMisalignmentJump> ParseMisalignmentJump(
+    const json& v, const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"timeHours", "arcsec"}));
+  for (const char* key : {"timeHours", "arcsec"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  estimator::StarTrackerMisalignmentJump jump;
+  ASSIGN_OR_RETURN(double hours, Number(v["timeHours"], Key(path, "timeHours"), 0.0, kMaxHours));
+  jump.time = estimator::HoursToSeconds(hours);
+  ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(v["arcsec"], Key(path, "arcsec"),
+                                         -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+  jump.rotation_b = estimator::kRadPerArcsec * arcsec;
+  return jump;
 }
 
 absl::Status ParseStarTracker(const json& v, const std::string& path,
@@ -199,7 +295,8 @@ absl::Status ParseStarTracker(const json& v, const std::string& path,
   RETURN_IF_ERROR(CheckObject(v, path));
   RETURN_IF_ERROR(CheckKeys(v, path,
                             {"noiseArcsec", "latencyMs", "misalignmentArcsec", "outlierRate",
-                             "outlierArcmin", "outages", "invalidRate"}));
+                             "outlierArcmin", "outages", "invalidRate", "outlierBurst", "frozen",
+                             "misalignmentJump"}));
   for (auto it = v.begin(); it != v.end(); ++it) {
     const std::string& k = it.key();
     const json& x = it.value();
@@ -222,22 +319,13 @@ absl::Status ParseStarTracker(const json& v, const std::string& path,
     } else if (k == "invalidRate") {
       ASSIGN_OR_RETURN(st->invalid_probability, Number(x, p, 0.0, 1.0));
     } else if (k == "outages") {
-      if (!x.is_array()) return Invalid(p, absl::StrCat("expected an array, got ", x.type_name()));
-      for (size_t i = 0; i < x.size(); ++i) {
-        const std::string pi = absl::StrCat(p, "[", i, "]");
-        RETURN_IF_ERROR(CheckObject(x[i], pi));
-        RETURN_IF_ERROR(CheckKeys(x[i], pi, {"startHours", "endHours"}));
-        if (!x[i].contains("startHours")) return Invalid(Key(pi, "startHours"), "required");
-        if (!x[i].contains("endHours")) return Invalid(Key(pi, "endHours"), "required");
-        ASSIGN_OR_RETURN(double start,
-                         Number(x[i]["startHours"], Key(pi, "startHours"), 0.0, kMaxHours));
-        ASSIGN_OR_RETURN(double end, Number(x[i]["endHours"], Key(pi, "endHours"), 0.0, kMaxHours));
-        if (!(end > start)) {
-          return Invalid(Key(pi, "endHours"),
-                         absl::StrFormat("%g must be after startHours %g", end, start));
-        }
-        st->outages.emplace_back(estimator::HoursToSeconds(start), estimator::HoursToSeconds(end));
-      }
+      ASSIGN_OR_RETURN(st->outages, ParseWindows(x, p));
+    } else if (k == "frozen") {
+      ASSIGN_OR_RETURN(st->frozen, ParseWindows(x, p));
+    } else if (k == "outlierBurst") {
+      ASSIGN_OR_RETURN(st->outlier_burst, ParseOutlierBurst(x, p));
+    } else if (k == "misalignmentJump") {
+      ASSIGN_OR_RETURN(st->misalignment_jump, ParseMisalignmentJump(x, p));
     }
   }
   return absl::OkStatus();
@@ -404,6 +492,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.voltage_noise) g.voltage_noise = *s.voltage_noise;
     if (s.initial_h_k) g.initial_h_k = s.initial_h_k;
     if (s.fault) g.fault = s.fault;
+    if (s.switch_on_time) g.switch_on_time = s.switch_on_time;
   }
   estimator::StarTrackerTruth& st = spec->star_tracker;
   const estimator::StarTrackerTruth& from = scenario.star_tracker;
@@ -414,6 +503,9 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
   st.latency = from.latency;
   st.misalignment_b = from.misalignment_b;
   st.invalid_probability = from.invalid_probability;
+  st.outlier_burst = from.outlier_burst;
+  st.frozen = from.frozen;
+  st.misalignment_jump = from.misalignment_jump;
   return absl::OkStatus();
 }
 

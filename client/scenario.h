@@ -39,6 +39,7 @@ struct ScenarioGyro {
   std::optional<double> voltage_noise;            // [V]
   std::optional<Eigen::Vector3d> initial_h_k;     // [1]
   std::optional<estimator::GyroFault> fault;
+  std::optional<double> switch_on_time;  // [s since the simulation start]
 };
 
 struct Scenario {

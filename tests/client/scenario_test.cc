@@ -101,6 +101,47 @@ TEST(Scenario, ApplyMergesCoefficientsWithTheModelAndSetsTruth) {
   EXPECT_THAT((*inertial)->Describe(), HasSubstr("inertial"));
 }
 
+// The faults of the fault matrix (issue 9): frozen and missing gyro readings, the cold spare
+// switched on, and the star tracker's outlier burst, frozen output and misalignment jump.
+TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
+  auto s = ParseScenarioJson(R"({
+    "gyros": [{"id": 1, "fault": {"timeHours": 2, "kind": "reading_frozen", "endHours": 2.25}},
+              {"id": 2, "fault": {"timeHours": 3, "kind": "readings_missing", "endHours": 3.5}},
+              {"id": 3, "switchOnHours": 6}],
+    "starTracker": {"outlierBurst": {"timeHours": 4, "count": 5, "arcmin": 3},
+                    "frozen": [{"startHours": 5, "endHours": 5.5}],
+                    "misalignmentJump": {"timeHours": 7, "arcsec": [120, 0, -60]}}
+  })");
+  ASSERT_THAT(s, IsOk());
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  const est::GyroFault& frozen = *spec.gyros[0].fault;
+  EXPECT_EQ(frozen.kind, est::GyroFault::Kind::kReadingFrozen);
+  EXPECT_EQ(frozen.time, 2 * 3600.0);
+  EXPECT_EQ(frozen.end, 2.25 * 3600.0);
+  const est::GyroFault& missing = *spec.gyros[1].fault;
+  EXPECT_EQ(missing.kind, est::GyroFault::Kind::kReadingsMissing);
+  EXPECT_EQ(missing.time, 3 * 3600.0);
+  EXPECT_EQ(missing.end, 3.5 * 3600.0);
+  EXPECT_EQ(spec.gyros[2].switch_on_time, 6 * 3600.0);
+  const est::StarTrackerTruth& st = spec.star_tracker;
+  ASSERT_TRUE(st.outlier_burst.has_value());
+  EXPECT_EQ(st.outlier_burst->time, 4 * 3600.0);
+  EXPECT_EQ(st.outlier_burst->count, 5);
+  EXPECT_NEAR(st.outlier_burst->angle, est::ArcminToRad(3.0), 1e-18);
+  ASSERT_EQ(st.frozen.size(), 1u);
+  EXPECT_EQ(st.frozen[0], std::make_pair(5 * 3600.0, 5.5 * 3600.0));
+  ASSERT_TRUE(st.misalignment_jump.has_value());
+  EXPECT_EQ(st.misalignment_jump->time, 7 * 3600.0);
+  EXPECT_LT((st.misalignment_jump->rotation_b - est::ArcsecToRad(1.0) * Vector3d(120, 0, -60)).norm(),
+            1e-20);
+  // The spec simulates with every one of them.
+  spec.profile = *MakeScenarioProfile(*s, "", 8 * 3600.0);
+  spec.duration = 8 * 3600.0;
+  EXPECT_THAT(est::Simulate(spec), IsOk());
+}
+
 TEST(Scenario, GyroNotInConfigurationIsAnError) {
   auto s = ParseScenarioJson(R"({"gyros": [{"id": 4, "running": true}]})");
   ASSERT_THAT(s, IsOk());
@@ -131,6 +172,32 @@ TEST(Scenario, ErrorsNameTheKey) {
       {R"({"starTracker": {"outages": [{"startHours": 4, "endHours": 3}]}})",
        "starTracker.outages[0].endHours: 3 must be after startHours 4"},
       {R"({"starTracker": {"latencyMs": "300"}})", "starTracker.latencyMs: expected a number"},
+      {R"({"gyros": [{"id": 1, "fault": {"timeHours": 1, "kind": "reading_frozen"}}]})",
+       "gyros[0].fault.endHours: required for kind reading_frozen"},
+      {R"({"gyros": [{"id": 1, "fault": {"timeHours": 2, "kind": "readings_missing", "endHours": 1}}]})",
+       "gyros[0].fault.endHours: 1 must be after timeHours 2"},
+      {R"({"gyros": [{"id": 1, "fault": {"timeHours": 1, "kind": "readings_missing", "endHours": 2, "arcsec": [1, 0, 0]}}]})",
+       "gyros[0].fault.arcsec: not used by kind readings_missing"},
+      {R"({"gyros": [{"id": 1, "fault": {"timeHours": 1, "kind": "readout_jump", "endHours": 2, "arcsec": [1, 0, 0]}}]})",
+       "gyros[0].fault.endHours: not used by kind readout_jump"},
+      {R"({"gyros": [{"id": 4, "switchOnHours": -1}]})",
+       "gyros[0].switchOnHours: -1 is outside [0, 100000]"},
+      {R"({"starTracker": {"outlierBurst": {"timeHours": 1, "count": 0, "arcmin": 2}}})",
+       "starTracker.outlierBurst.count: expected an integer in 1..100000, got 0"},
+      {R"({"starTracker": {"outlierBurst": {"timeHours": 1, "count": 2.5, "arcmin": 2}}})",
+       "starTracker.outlierBurst.count: expected an integer"},
+      {R"({"starTracker": {"outlierBurst": {"timeHours": 1, "count": 5}}})",
+       "starTracker.outlierBurst.arcmin: required"},
+      {R"({"starTracker": {"outlierBurst": {"timeHours": 1, "count": 5, "arcmin": 0}}})",
+       "starTracker.outlierBurst.arcmin: must be > 0"},
+      {R"({"starTracker": {"frozen": [{"startHours": 2, "endHours": 2}]}})",
+       "starTracker.frozen[0].endHours: 2 must be after startHours 2"},
+      {R"({"starTracker": {"frozen": {"startHours": 2, "endHours": 3}}})",
+       "starTracker.frozen: expected an array"},
+      {R"({"starTracker": {"misalignmentJump": {"timeHours": 1, "arcsec": [1, 2]}}})",
+       "starTracker.misalignmentJump.arcsec: expected an array of 3 numbers, got 2 values"},
+      {R"({"starTracker": {"misalignmentJump": {"arcsec": [1, 2, 3]}}})",
+       "starTracker.misalignmentJump.timeHours: required"},
       {R"({"profile": "tumbling"})", "profile: unknown profile 'tumbling'"},
       {R"({"inclinationDeg": 200})", "inclinationDeg: 200 is outside [0, 180]"},
       {R"({"segmentHours": 0.1, "slewMin": 10})", "slewMin: 10 min is longer than segmentHours"},
