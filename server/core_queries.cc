@@ -1,6 +1,9 @@
 // The queries of the service: session summaries, coefficient history, alert acknowledgement,
 // and the model-discrepancy diagnosis over archived telemetry (see estimation_core.h).
+#include <functional>
+#include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
@@ -166,6 +169,16 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
   estimator::discovery::DiagnoseOptions options;
   options.model = request.model().empty() ? setup->model_name : request.model();
   options.cancelled = cancelled;
+  // The estimator starts no threads. A diagnosis runs on its call's worker thread and gets one
+  // more here (options.threads = 2 tasks, the calling thread one of them); with the limit on
+  // concurrent diagnoses (CallLimiter) this bounds the server's diagnosis threads.
+  options.threads = 2;
+  options.run_parallel = [](int count, const std::function<void(int)>& task) {
+    std::vector<std::thread> helpers;
+    for (int i = 1; i < count; ++i) helpers.emplace_back(task, i);
+    task(0);
+    for (std::thread& t : helpers) t.join();
+  };
   if (absl::StatusOr<estimator::ModelSpec> m = estimator::ParseModel(options.model); !m.ok()) {
     return absl::InvalidArgumentError(absl::StrCat("model: ", m.status().message()));
   }

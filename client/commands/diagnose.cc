@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <fstream>
 #include <iostream>
 #include <map>
@@ -20,6 +21,7 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -355,6 +357,13 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
   options.alpha = o.alpha;
   options.max_effects = o.max_effects;
   options.threads = o.threads;
+  // The estimator starts no threads: the CLI lends it --threads, the calling one included.
+  options.run_parallel = [](int count, const std::function<void(int)>& task) {
+    std::vector<std::thread> helpers;
+    for (int i = 1; i < count; ++i) helpers.emplace_back(task, i);
+    task(0);
+    for (std::thread& t : helpers) t.join();
+  };
   options.integration_rate_hz = o.integration_rate_hz;
   options.effects = *effects;
   StageProgress progress;

@@ -22,9 +22,10 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/model_run.h"
+#include "estimator/discovery/options.h"
 #include "estimator/discovery/regimes.h"
+#include "estimator/discovery/report.h"
 #include "estimator/session.h"
 #include "estimator/spacecraft_config.h"
 

@@ -140,4 +140,6 @@ double Lag1Autocorrelation(const std::vector<double>& x) {
   return den > 0.0 ? num / den : 0.0;
 }
 
+bool Significant(double p, double alpha, int tests) { return p < alpha / std::max(1, tests); }
+
 }  // namespace esg::estimator::discovery

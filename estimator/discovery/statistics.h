@@ -29,6 +29,9 @@ double FSurvival(double f, double d1, double d2);
 // Standard normal upper tail P(Z > z).
 double NormalSurvival(double z);
 
+// Bonferroni: p is significant at family-wise level alpha over `tests` tests (at least one).
+bool Significant(double p, double alpha, int tests);
+
 // The robust line fit lives in estimator/line_fit.h (shared with the offline gap runs).
 using ::esg::estimator::FitRobustLine;
 using ::esg::estimator::RobustLine;

@@ -1,0 +1,64 @@
+// Held-out scoring (docs/discovery.md, "Locate" and "Method"): which spans of the recording the
+// star tracker is withheld over, and how well a model run predicts the attitude and the spin axes
+// there, against the filter's own uncertainty. This is the paper's Fig. 7/8 measure: a model
+// calibrated in one regime predicts another, so an effect the filter absorbs where it calibrates
+// still shows in the held-out spans.
+#ifndef ESG_ESTIMATOR_DISCOVERY_HELD_OUT_H_
+#define ESG_ESTIMATOR_DISCOVERY_HELD_OUT_H_
+
+#include <vector>
+
+#include "estimator/discovery/model_run.h"
+#include "estimator/discovery/options.h"
+#include "estimator/discovery/regimes.h"
+#include "estimator/discovery/report.h"
+#include "estimator/telemetry.h"
+
+namespace esg::estimator::discovery {
+
+// Materiality of a held-out misfit: with many samples a small excess is already "significant";
+// a misfit counts when the errors exceed twice the filter's claimed 1-sigma (NEES per degree of
+// freedom above 4).
+inline constexpr double kMaterialNeesRatio = 4.0;
+
+// A held-out span: frames [first, last] (inclusive) of regime span `span` (-1: none).
+struct Gap {
+  int span = -1;
+  int first = 0;
+  int last = 0;
+};
+
+// Up to options.max_gaps spans of at most options.max_gap_hours, no earlier than max(3 h, 15% of
+// the recording), each with at least 10 star-tracker samples and an hour of star-tracker data
+// between two: the longest span of every regime but the dominant one, then spans of the dominant
+// one, latest first. Without such a span, the last quarter of a recording of 4 h or more. In time
+// order; empty when nothing qualifies.
+std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans,
+                            const std::vector<TelemetryFrame>& frames,
+                            const DiagnoseOptions& options);
+
+// The run options that withhold the star tracker over `gaps`.
+ModelRunOptions WithheldOver(const std::vector<Gap>& gaps);
+
+// A run's held-out prediction: per gap the attitude drift rate and the spin-axis NEES, their
+// sums, and the attitude error series of the plots.
+struct HeldOutResult {
+  std::vector<GapSummary> gaps;
+  double nees = 0.0;
+  int dof = 0;
+  double rate_rms_deg_h = 0.0;
+  std::vector<HeldOutPoint> points;
+};
+
+// `run` must have been made with WithheldOver(gaps) on `frames`; `spans` are the regimes.
+HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps,
+                               const std::vector<RegimeSpan>& spans,
+                               const std::vector<TelemetryFrame>& frames);
+
+// True when the held-out prediction errors exceed the filter's uncertainty significantly (NEES
+// chi-square test at alpha / 2) and materially (kMaterialNeesRatio); false without held-out dof.
+bool MispredictsHeldOut(const HeldOutResult& held_out, double alpha);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_HELD_OUT_H_

@@ -1,0 +1,65 @@
+// Options of a diagnosis (docs/discovery.md): the user's model, the false-finding level, the
+// effects to try, the priors of freed coefficients, the held-out spans, and how the caller runs
+// the diagnosis's independent model runs and cancels it. The estimator starts no threads:
+// concurrency is the caller's, through `run_parallel`, so a service bounds its own threads.
+#ifndef ESG_ESTIMATOR_DISCOVERY_OPTIONS_H_
+#define ESG_ESTIMATOR_DISCOVERY_OPTIONS_H_
+
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "estimator/discovery/regimes.h"
+#include "estimator/discovery/report.h"
+
+namespace esg::estimator::discovery {
+
+// The caller's executor: runs task(0) ... task(count - 1), each exactly once, on threads of the
+// caller's choosing (concurrently or not), and returns once every task has returned. The tasks
+// are independent; each writes only its own results.
+using ParallelRunner = std::function<void(int count, const std::function<void(int)>& task)>;
+
+// Progress of a diagnosis: the fraction done in [0, 1] and the stage it is in.
+using DiagnoseProgressFn = std::function<void(double fraction, const std::string& stage)>;
+
+struct DiagnoseOptions {
+  // Drift model of the user (calibration_model.h ParseModel): "10+11" lets every configured
+  // term with a positive modelSigma be calibrated and the residual random walk run.
+  std::string model = "10+11";
+  // Family-wise false-finding level of each forward-selection round (Bonferroni over its
+  // candidates).
+  double alpha = 0.01;
+  int max_effects = 3;  // forward-selection rounds
+  // Integration rate of the filter during diagnosis [Hz]. The drift changes slowly; the
+  // deviance at 0.2 Hz equals the one at 8 Hz to ~0.1 in 2e5 (docs/discovery.md), at 1/40 of the
+  // cost. <= 0 keeps the configuration's rate.
+  double integration_rate_hz = 0.2;
+  // Concurrency. Independent model runs (the user's model's full and held-out runs, a round's
+  // candidate fits, held-out comparisons) are spread over at most `threads` tasks handed to
+  // `run_parallel`; each task takes the next unstarted run until none is left. Empty
+  // `run_parallel` or threads <= 1: the runs are made one after another on the calling thread.
+  // The report does not depend on either.
+  int threads = 2;
+  ParallelRunner run_parallel;
+  // Effects to try (empty: all of the library).
+  std::vector<Effect> effects;
+  // Held-out spans: at most this many, each at most max_gap_hours long.
+  int max_gaps = 4;
+  double max_gap_hours = 4.0;
+  // Priors given to freed coefficients (the paper's sizes, docs/physics.md) and the search grids.
+  double c_sigma_deg_h = 0.1;
+  double k0_sigma_deg_h = 0.3;
+  double mu_nu_sigma_deg_h = 0.1;
+  double misalignment_sigma_arcsec = 60.0;
+  RegimeOptions regimes;
+  // Cancellation (may be empty): polled before each stage and before each candidate or
+  // held-out model run (a candidate fit with a parameter search is one unit and is not
+  // interrupted); once it returns true Diagnose returns Cancelled "diagnosis cancelled". Called
+  // from the tasks of run_parallel concurrently: it must be thread-safe and cheap (e.g. an atomic
+  // flag).
+  std::function<bool()> cancelled;
+};
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_OPTIONS_H_

@@ -1,0 +1,123 @@
+#include "estimator/discovery/report.h"
+
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+
+namespace esg::estimator::discovery {
+
+const char* EffectId(Effect e) {
+  switch (e) {
+    case Effect::kRotorDisplacement:
+      return "rotor_displacement";
+    case Effect::kFourthHarmonic:
+      return "fourth_harmonic";
+    case Effect::kUnequalStiffness:
+      return "unequal_stiffness";
+    case Effect::kGyroMisalignment:
+      return "gyro_misalignment";
+    case Effect::kStarTrackerMisalignment:
+      return "star_tracker_misalignment";
+    case Effect::kStarTrackerLatency:
+      return "star_tracker_latency";
+    case Effect::kRandomWalkDrift:
+      return "random_walk_drift";
+  }
+  return "?";
+}
+
+std::string UtcText(absl::Time t) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", t, absl::UTCTimeZone());
+}
+
+namespace {
+
+const Parameter* FindParameter(const std::vector<Parameter>& ps, const std::string& name) {
+  for (const Parameter& p : ps) {
+    if (p.name == name) return &p;
+  }
+  return nullptr;
+}
+
+std::string VectorText(const std::vector<Parameter>& ps, const std::string& name,
+                       const char* format) {
+  std::vector<std::string> parts;
+  for (int i = 0; i < 3; ++i) {
+    const Parameter* p = FindParameter(ps, absl::StrFormat("%s[%d]", name, i));
+    if (p == nullptr) return "";
+    parts.push_back(p->sigma > 0 ? absl::StrFormat("%s+-%s", absl::StrFormat(format, p->value),
+                                                   absl::StrFormat(format, p->sigma))
+                                 : absl::StrFormat(format, p->value));
+  }
+  return absl::StrCat("[", absl::StrJoin(parts, ", "), "]");
+}
+
+}  // namespace
+
+std::string ExplainFinding(const Finding& f) {
+  const Evidence& e = f.evidence;
+  const std::string stats =
+      absl::StrFormat("the likelihood improves by %.1f (-2 log L) for %d parameter%s, p = %.2g",
+                      e.delta_deviance, e.parameters, e.parameters == 1 ? "" : "s", e.lr_p_value);
+  const auto& ps = f.parameters;
+  if (f.effect == "rotor_displacement") {
+    const Parameter* angle = FindParameter(ps, "lineAngleDeg");
+    const Parameter* size = FindParameter(ps, "displacementSizeUm");
+    return absl::StrFormat(
+        "gyro %d drifts with odd harmonics of a displaced rotor (eq. (8)-(10)): C1 = %s deg/h, "
+        "C2 = %s deg/h, %.0f deg apart as lines%s; %s",
+        f.gyro, VectorText(ps, "c1DegH", "%.3f"), VectorText(ps, "c2DegH", "%.3f"),
+        angle ? angle->value : 0.0,
+        size
+            ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))",
+                              size->value)
+            : "",
+        stats);
+  }
+  if (f.effect == "fourth_harmonic") {
+    const Parameter* k0 = FindParameter(ps, "k0DegH");
+    return absl::StrFormat(
+        "gyro %d: the 4th-harmonic coefficient k0 (eq. (1)) is missing or wrong: it "
+        "calibrates to %.4f +- %.4f deg/h; %s",
+        f.gyro, k0 ? k0->value : 0.0, k0 ? k0->sigma : 0.0, stats);
+  }
+  if (f.effect == "unequal_stiffness") {
+    return absl::StrFormat(
+        "gyro %d: unequal suspension stiffness (eq. (1)): mu = %s deg/h, nu = %s deg/h; %s", f.gyro,
+        VectorText(ps, "muDegH", "%.3f"), VectorText(ps, "nuDegH", "%.3f"), stats);
+  }
+  if (f.effect == "gyro_misalignment") {
+    return absl::StrFormat(
+        "gyro %d case axes are misaligned to the body by %s arcsec (rotation vector, "
+        "body axes); %s",
+        f.gyro, VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
+  }
+  if (f.effect == "star_tracker_misalignment") {
+    return absl::StrFormat(
+        "the star tracker is misaligned to the body by %s arcsec (rotation vector, body "
+        "axes), common to all gyros; %s",
+        VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
+  }
+  if (f.effect == "star_tracker_latency") {
+    const Parameter* tau = FindParameter(ps, "latencyMs");
+    return absl::StrFormat(
+        "the star-tracker time tag is %s by %.0f +- %.0f ms (the attitude it reports is "
+        "that of %.0f ms %s); %s",
+        tau && tau->value < 0 ? "early" : "late", tau ? std::abs(tau->value) : 0.0,
+        tau ? tau->sigma : 0.0, tau ? std::abs(tau->value) : 0.0,
+        tau && tau->value < 0 ? "later" : "earlier", stats);
+  }
+  if (f.effect == "random_walk_drift") {
+    const Parameter* q = FindParameter(ps, "randomWalkDegHSqrtH");
+    const Parameter* q0 = FindParameter(ps, "configuredRandomWalkDegHSqrtH");
+    return absl::StrFormat(
+        "the drift is less stable than configured: random-walk intensity %.4f "
+        "deg/h/sqrt(h) against %.4f configured; %s",
+        q ? q->value : 0.0, q0 ? q0->value : 0.0, stats);
+  }
+  return stats;
+}
+
+}  // namespace esg::estimator::discovery

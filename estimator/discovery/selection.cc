@@ -1,0 +1,400 @@
+#include "estimator/discovery/selection.h"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_format.h"
+#include "estimator/discovery/statistics.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+namespace {
+
+constexpr int kQuarters = 4;  // time blocks of the homogeneity test
+
+// A candidate's score in the round.
+struct Scored {
+  int index;  // into the round's candidates and fits
+  double delta, penalty, score, p, threshold;
+  bool significant;
+  std::array<double, kQuarters> quarters{};  // improvement of -2 log L per quarter
+  bool homogeneous = true;
+};
+
+// The candidates decided by held-out prediction, with their held-out results.
+using Contenders = std::vector<std::pair<int, HeldOutResult>>;
+
+// Fits every candidate on top of `selected`, in parallel through the context's runner (costly
+// candidates first for load balance). A fit skipped for cancellation stays empty.
+std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
+    const std::vector<Candidate>& candidates, int round, const std::vector<int>& gyros,
+    const SelectedModel& selected, DiagnosisContext& context) {
+  const DiagnoseOptions& options = context.options();
+  FitContext ctx;
+  ctx.frames = &context.frames();
+  ctx.rates = &context.rates();
+  ctx.model = &selected.model;
+  ctx.model_run = &selected.run;
+  ctx.options = &options;
+  ctx.gyros = gyros;
+  std::vector<std::optional<absl::StatusOr<CandidateFit>>> fits(candidates.size());
+  std::vector<int> order(candidates.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  auto cost = [](const Candidate& c) {
+    return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
+  };
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return cost(candidates[a]) > cost(candidates[b]); });
+  std::atomic<int> done{0};
+  context.ForEach(static_cast<int>(order.size()), [&](int j) {
+    if (context.Stop()) return;
+    const int i = order[j];
+    fits[i] = FitCandidate(candidates[i], ctx);
+    const int d = ++done;
+    context.Say(
+        0.05 + 0.8 * (round + static_cast<double>(d) / candidates.size()) / options.max_effects,
+        absl::StrFormat("round %d: %s fitted (%d/%d)", round + 1, CandidateName(candidates[i]), d,
+                        candidates.size()));
+  });
+  return fits;
+}
+
+// Likelihood-ratio score, significance and homogeneity of each fit against the selected model.
+std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedModel& selected,
+                          double log_n, const DiagnosisContext& context) {
+  const DiagnoseOptions& options = context.options();
+  const std::vector<double> current_steps = StepDeviance(selected.run);
+  std::vector<Scored> scored;
+  for (size_t i = 0; i < fits.size(); ++i) {
+    const CandidateFit& f = fits[i];
+    const ProfiledDeviance d = Profile(f.run);
+    Scored s;
+    s.index = static_cast<int>(i);
+    s.delta = selected.fit.value - d.value;
+    s.penalty = f.searched ? f.parameters * log_n : 0.0;
+    s.score = s.delta - s.penalty;
+    const int k = std::max(1, f.parameters);
+    s.p = ChiSquareSurvival(std::max(0.0, s.delta), k);
+    s.threshold = ChiSquareQuantile(1.0 - options.alpha / fits.size(), k);
+    s.significant =
+        f.parameters > 0 && Significant(s.p, options.alpha, static_cast<int>(fits.size()));
+    // Homogeneity: the effects of the library are constant in time. With its parameters held
+    // from the start at their final values, an effect that makes the fit worse in a quarter of
+    // the recording by more than its cost there (k ln n_q, plus the chi-square quantile) while
+    // improving it elsewhere is fitting a change in time (a fault, a jump), not the physics it
+    // names.
+    const std::vector<double> cand_steps = StepDeviance(f.fixed_run ? *f.fixed_run : f.run);
+    std::array<int, kQuarters> steps_in{};
+    for (size_t j = 0; j < std::min(current_steps.size(), cand_steps.size()); ++j) {
+      const int q = std::min(
+          kQuarters - 1,
+          static_cast<int>(kQuarters * selected.run.steps[j].frame / context.frames().size()));
+      s.quarters[q] += current_steps[j] - cand_steps[j];
+      ++steps_in[q];
+    }
+    for (int q = 0; q < kQuarters; ++q) {
+      const double cost = k * std::log(std::max(2, steps_in[q])) +
+                          ChiSquareQuantile(1.0 - options.alpha / kQuarters, k);
+      if (s.quarters[q] < -cost) s.homogeneous = false;
+    }
+    scored.push_back(s);
+  }
+  return scored;
+}
+
+// The significant candidates, best score first. Deterministic effects first: the random walk is
+// the model's allowance for what no deterministic term explains, raised only when none of them
+// does. The best-scoring significant candidate must be homogeneous in time; when it is not, the
+// mismatch is a change in time (the smaller candidates that pass are its spill-over into the
+// other gyros through the shared star tracker): none is returned and `inhomogeneous_only` is set.
+std::vector<Scored> SignificantInOrder(const std::vector<Scored>& scored,
+                                const std::vector<CandidateFit>& fits, bool& inhomogeneous_only) {
+  std::vector<Scored> significant;
+  inhomogeneous_only = false;
+  for (int pass = 0; pass < 2 && significant.empty() && !inhomogeneous_only; ++pass) {
+    std::vector<Scored> pool;
+    for (const Scored& s : scored) {
+      const bool rw = fits[s.index].candidate.effect == Effect::kRandomWalkDrift;
+      if (s.significant && rw == (pass == 1)) pool.push_back(s);
+    }
+    if (pool.empty()) continue;
+    const auto top =
+        std::max_element(pool.begin(), pool.end(),
+                         [](const Scored& a, const Scored& b) { return a.score < b.score; });
+    if (!top->homogeneous) {
+      inhomogeneous_only = true;
+      break;
+    }
+    for (const Scored& s : pool) {
+      if (s.homogeneous) significant.push_back(s);
+    }
+  }
+  std::sort(significant.begin(), significant.end(),
+            [](const Scored& a, const Scored& b) { return a.score > b.score; });
+  return significant;
+}
+
+// A drift instability can be partly fitted by a deterministic term. When the random walk is
+// significant too, the best deterministic candidate is tested on top of it (the nested
+// comparison): if it adds nothing significant beyond the raised random walk, the random walk is
+// the explanation and `significant` becomes it alone. Returns the note for the finding (empty
+// when the comparison was not made).
+absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
+                                             const std::vector<CandidateFit>& fits,
+                                             std::vector<Scored>& significant,
+                                             DiagnosisContext& context) {
+  if (significant.empty() ||
+      fits[significant.front().index].candidate.effect == Effect::kRandomWalkDrift) {
+    return std::string();
+  }
+  const Scored* rw = nullptr;
+  for (const Scored& x : scored) {
+    if (fits[x.index].candidate.effect == Effect::kRandomWalkDrift && x.significant &&
+        x.homogeneous)
+      rw = &x;
+  }
+  if (rw == nullptr) return std::string();
+  const CandidateFit& det = fits[significant.front().index];
+  const CandidateFit& walk = fits[rw->index];
+  ModelState both = det.model;
+  both.config.random_walk = walk.model.config.random_walk;
+  auto run = context.CheckedRun(both, /*held_out=*/false);
+  if (!run.ok()) return run.status();
+  const double gain = Profile(walk.run).value - Profile(*run).value;
+  const int k = std::max(1, det.parameters);
+  const double p_det = ChiSquareSurvival(std::max(0.0, gain), k);
+  std::string note = absl::StrFormat(
+      "on top of a random walk raised to %.4f deg/h/sqrt(h) it still improves -2 log L by "
+      "%.1f (p = %.2g)",
+      SiToDegPerHourSqrtHour(walk.model.config.random_walk), gain, p_det);
+  if (!Significant(p_det, context.options().alpha, static_cast<int>(fits.size()))) {
+    significant.assign(1, *rw);
+    note = absl::StrFormat(
+        "%s fits part of it but adds nothing significant on top of the raised random walk "
+        "(-2 log L %.1f, p = %.2g)",
+        CandidateName(det.candidate), gain, p_det);
+  }
+  return note;
+}
+
+// Held-out runs of the fits `indices` (a fit without parameters is skipped), in parallel; a run
+// skipped is left empty.
+std::vector<std::optional<absl::StatusOr<ModelRun>>> HeldOutRuns(
+    const std::vector<int>& indices, const std::vector<CandidateFit>& fits, bool skip_empty,
+    DiagnosisContext& context) {
+  std::vector<std::optional<absl::StatusOr<ModelRun>>> held(indices.size());
+  context.ForEach(static_cast<int>(indices.size()), [&](int j) {
+    if (context.Stop()) return;
+    const CandidateFit& f = fits[indices[j]];
+    if (skip_empty && f.parameters == 0) return;
+    held[j] = context.Run(f.model, /*held_out=*/true);
+  });
+  return held;
+}
+
+// Among the significant candidates the best score wins; candidates the likelihood does not tell
+// apart (within kDecisiveDeviance of the best) are decided by held-out prediction, lowest held-out
+// NEES. Returns the index of the chosen fit; `contenders` gets the held-out results when they
+// decided.
+absl::StatusOr<int> ChooseAmongSignificant(const std::vector<Scored>& significant,
+                                           const std::vector<CandidateFit>& fits, int round,
+                                           Contenders& contenders, DiagnosisContext& context) {
+  int chosen = significant.front().index;
+  std::vector<int> close;
+  for (const Scored& s : significant) {
+    if (s.score >= significant.front().score - kDecisiveDeviance) close.push_back(s.index);
+  }
+  if (close.size() <= 1 || context.gaps().empty()) return chosen;
+  context.Say(0.05 + 0.8 * (round + 0.95) / context.options().max_effects,
+              "held-out comparison of close candidates");
+  auto held = HeldOutRuns(close, fits, /*skip_empty=*/false, context);
+  if (context.Stopped()) return DiagnosisContext::Cancelled();
+  context.CountRuns(static_cast<int>(close.size()));
+  double best = 1e300;
+  for (size_t j = 0; j < close.size(); ++j) {
+    if (!held[j]->ok()) return held[j]->status();
+    HeldOutResult r = SummariseHeldOut(**held[j], context.gaps(), context.regimes(),
+                                       context.frames());
+    if (r.nees < best) {
+      best = r.nees;
+      chosen = close[j];
+    }
+    contenders.emplace_back(close[j], std::move(r));
+  }
+  return chosen;
+}
+
+// Concealed effects: nothing significant in-sample (the residual-drift states absorb the effect
+// where it was calibrated), yet the selected model mispredicts the held-out regimes. Then the
+// candidates are scored by held-out prediction: the one whose held-out NEES falls the most, by
+// more than the chi-square(k) quantile at the round's Bonferroni level, is taken. Returns its
+// index or -1; `contenders` gets the held-out results when one is taken.
+absl::StatusOr<int> ChooseByHeldOut(const std::vector<Scored>& scored,
+                                    const std::vector<CandidateFit>& fits, int round,
+                                    SelectedModel& selected, Contenders& contenders,
+                                    DiagnosisContext& context) {
+  const DiagnoseOptions& options = context.options();
+  if (!selected.held_out_current && !context.gaps().empty()) {
+    auto held = context.CheckedRun(selected.model, /*held_out=*/true);
+    if (!held.ok()) return held.status();
+    selected.held_out =
+        SummariseHeldOut(*held, context.gaps(), context.regimes(), context.frames());
+    selected.held_out_current = true;
+  }
+  if (!MispredictsHeldOut(selected.held_out, options.alpha)) return -1;
+  context.Say(0.05 + 0.8 * (round + 0.95) / options.max_effects,
+              "held-out scoring of the candidates (concealed mismatch)");
+  std::vector<int> indices;
+  for (const Scored& s : scored) indices.push_back(s.index);
+  auto held = HeldOutRuns(indices, fits, /*skip_empty=*/true, context);
+  if (context.Stopped()) return DiagnosisContext::Cancelled();
+  int chosen = -1;
+  double best_drop = 0.0;
+  for (size_t j = 0; j < scored.size(); ++j) {
+    if (!held[j].has_value()) continue;
+    context.CountRuns(1);
+    if (!held[j]->ok()) return held[j]->status();
+    HeldOutResult r = SummariseHeldOut(**held[j], context.gaps(), context.regimes(),
+                                       context.frames());
+    const int k = std::max(1, fits[scored[j].index].parameters);
+    const double drop = selected.held_out.nees - r.nees;
+    const double needed = ChiSquareQuantile(1.0 - options.alpha / scored.size(), k);
+    if (drop > needed && drop > best_drop && scored[j].homogeneous) {
+      best_drop = drop;
+      chosen = scored[j].index;
+    }
+    contenders.emplace_back(scored[j].index, std::move(r));
+  }
+  if (chosen < 0) contenders.clear();
+  return chosen;
+}
+
+CandidateScore Row(const Scored& s, const CandidateFit& f, int round, int chosen) {
+  CandidateScore row;
+  row.effect = EffectId(f.candidate.effect);
+  row.gyro = f.candidate.gyro;
+  row.round = round;
+  row.parameters = f.parameters;
+  row.delta_deviance = s.delta;
+  row.penalty = s.penalty;
+  row.score = s.score;
+  row.p_value = s.p;
+  row.significant = s.significant;
+  row.homogeneous = s.homogeneous;
+  row.selected = s.index == chosen;
+  return row;
+}
+
+// The finding of the chosen fit, with its evidence and the notes that support it; takes its
+// held-out result into `selected` when held-out prediction was run for it.
+Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int chosen, int round,
+                    const std::string& rw_note, bool held_out_selected,
+                    const Contenders& contenders, SelectedModel& selected) {
+  const CandidateFit& f = fits[chosen];
+  Finding finding;
+  finding.effect = EffectId(f.candidate.effect);
+  finding.gyro = f.candidate.gyro;
+  finding.parameters = f.fitted;
+  finding.evidence.delta_deviance = s.delta;
+  finding.evidence.penalty = s.penalty;
+  finding.evidence.parameters = f.parameters;
+  finding.evidence.lr_p_value = s.p;
+  finding.evidence.threshold = s.threshold;
+  finding.evidence.round = round;
+  finding.evidence.notes = f.notes;
+  finding.explanation = ExplainFinding(finding);
+  if (!rw_note.empty()) finding.evidence.notes.push_back(rw_note);
+  if (held_out_selected) {
+    finding.evidence.notes.insert(
+        finding.evidence.notes.begin(),
+        "concealed: not significant in-sample (absorbed where calibrated), found by "
+        "held-out prediction across regimes");
+  }
+  for (const auto& [index, r] : contenders) {
+    if (index == chosen) {
+      finding.evidence.held_out_nees_before = selected.held_out.nees;
+      finding.evidence.held_out_nees_after = r.nees;
+      finding.evidence.held_out_dof = r.dof;
+      selected.held_out = r;
+    } else if (!held_out_selected) {
+      finding.evidence.notes.push_back(absl::StrFormat(
+          "%s fits the star tracker almost as well (score within %.0f) but predicts the held-out "
+          "spans worse: held-out NEES %.1f against %.1f",
+          CandidateName(fits[index].candidate),
+          kDecisiveDeviance, r.nees,
+          std::find_if(contenders.begin(), contenders.end(), [&](const auto& c) {
+            return c.first == chosen;
+          })->second.nees));
+    }
+  }
+  finding.evidence.notes.push_back(
+      absl::StrFormat("improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, "
+                      "%.1f (constant in time, "
+                      "as a physical effect of the library is)",
+                      s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3]));
+  return finding;
+}
+
+}  // namespace
+
+absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros, double log_n,
+                                           SelectedModel& selected, DiagnosisContext& context) {
+  const DiagnoseOptions& options = context.options();
+  RoundResult result;
+  if (context.Stop()) return DiagnosisContext::Cancelled();
+  const std::vector<Candidate> candidates =
+      ListCandidates(selected.model, gyros, options.effects);
+  if (candidates.empty()) return result;
+  context.Say(0.05 + 0.8 * round / options.max_effects,
+              absl::StrFormat("round %d: %d candidates", round + 1, candidates.size()));
+  auto fitted = FitCandidates(candidates, round, gyros, selected, context);
+  if (context.Stopped()) return DiagnosisContext::Cancelled();
+  std::vector<CandidateFit> fits;
+  for (auto& f : fitted) {
+    if (!f->ok()) return f->status();
+    context.CountRuns((*f)->runs);
+    fits.push_back(std::move(**f));
+  }
+  const std::vector<Scored> scored = Score(fits, selected, log_n, context);
+  bool inhomogeneous_only = false;
+  std::vector<Scored> significant = SignificantInOrder(scored, fits, inhomogeneous_only);
+  auto rw_note = PreferRandomWalk(scored, fits, significant, context);
+  if (!rw_note.ok()) return rw_note.status();
+  int chosen = -1;
+  Contenders contenders;
+  if (!significant.empty()) {
+    auto c = ChooseAmongSignificant(significant, fits, round, contenders, context);
+    if (!c.ok()) return c.status();
+    chosen = *c;
+  }
+  bool held_out_selected = false;
+  if (chosen < 0 && !inhomogeneous_only) {
+    auto c = ChooseByHeldOut(scored, fits, round, selected, contenders, context);
+    if (!c.ok()) return c.status();
+    chosen = *c;
+    held_out_selected = chosen >= 0;
+  }
+  for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
+  if (chosen < 0) {
+    result.time_localized = inhomogeneous_only;
+    return result;
+  }
+  CandidateFit& f = fits[chosen];
+  const Scored& s = *std::find_if(scored.begin(), scored.end(),
+                                  [&](const Scored& x) { return x.index == chosen; });
+  result.finding =
+      MakeFinding(s, fits, chosen, round, *rw_note, held_out_selected, contenders, selected);
+  selected.held_out_current = std::any_of(contenders.begin(), contenders.end(),
+                                          [&](const auto& c) { return c.first == chosen; });
+  selected.model = f.model;
+  selected.run = std::move(f.run);
+  selected.fit = Profile(selected.run);
+  return result;
+}
+
+}  // namespace esg::estimator::discovery

@@ -1,0 +1,56 @@
+// Forward selection (docs/discovery.md, "Select"): one round adds each candidate effect the model
+// lacks in turn (candidates.h), refits, and scores it by the likelihood-ratio statistic against
+// chi-square(k) at a Bonferroni level over the round's candidates, with the homogeneity test (an
+// effect of the library is constant in time). Deterministic effects come before the random walk;
+// candidates within kDecisiveDeviance are decided by held-out prediction (held_out.h); when
+// nothing is significant in-sample yet the model mispredicts the held-out spans, the candidates
+// are scored by held-out prediction (a concealed effect).
+#ifndef ESG_ESTIMATOR_DISCOVERY_SELECTION_H_
+#define ESG_ESTIMATOR_DISCOVERY_SELECTION_H_
+
+#include <optional>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "estimator/discovery/candidates.h"
+#include "estimator/discovery/context.h"
+#include "estimator/discovery/held_out.h"
+#include "estimator/discovery/model_run.h"
+#include "estimator/discovery/report.h"
+
+namespace esg::estimator::discovery {
+
+// Two candidates whose penalised scores differ by less than this (in -2 log L) are not told apart
+// by the in-sample likelihood (Kass & Raftery: below 10 is not "very strong"); held-out prediction
+// decides between them.
+inline constexpr double kDecisiveDeviance = 10.0;
+
+// The model selection has reached, and what is known of it.
+struct SelectedModel {
+  ModelState model;
+  ModelRun run;          // its full in-sample run
+  ProfiledDeviance fit;  // Profile(run)
+  // Its held-out prediction, when `held_out_current`; else that of an earlier model.
+  HeldOutResult held_out;
+  bool held_out_current = true;
+};
+
+struct RoundResult {
+  std::vector<CandidateScore> rows;  // one per candidate tried, in candidate order
+  // The effect taken (then `selected` holds the model with it), or none: selection ends.
+  std::optional<Finding> finding;
+  // Nothing taken because the best significant candidate improves only part of the recording
+  // (a change in time, not a constant effect).
+  bool time_localized = false;
+};
+
+// Round `round` (0 first) of forward selection over the running `gyros`; `log_n` is the log of
+// the number of scored steps (the BIC penalty per searched parameter). Updates `selected` (its
+// held-out prediction may be computed even when nothing is taken). Errors: Cancelled, those of
+// FitCandidate and RunModel.
+absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros, double log_n,
+                                           SelectedModel& selected, DiagnosisContext& context);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_SELECTION_H_
