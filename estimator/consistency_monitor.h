@@ -55,7 +55,9 @@
 #include <utility>
 #include <vector>
 
+#include "absl/status/status.h"
 #include "absl/time/time.h"
+#include "absl/types/span.h"
 
 namespace esg::estimator {
 
@@ -98,6 +100,21 @@ class ConsistencyMonitor {
 
   // Empties the windows (counters and the last results are kept).
   void Reset();
+
+  // The monitor's state as doubles, for the session checkpoint (version 2,
+  // session_checkpoint.cc); the options are not included (they follow from SessionOptions). A
+  // time is three values (1, unix seconds, nanoseconds), or (-1, 0, 0) for InfinitePast:
+  //   tests, inconsistent_tests, first_inconsistent_time (3);
+  //   per channel (kStarTracker, then kAutonomous): steps_seen, has_last, the last test's time
+  //   (3), steps, dof, nis_sum, previous_nis_sum, threshold, window_exceeded, inconsistent (all
+  //   0 and time (-1, 0, 0) when has_last is 0), w (the window length), then w x (nis, dof).
+  std::vector<double> ExportState() const;
+  // Replaces the state by one from ExportState of a monitor with the same options; afterwards
+  // Add returns what the exporting monitor's Add would have. DataLoss, naming the field, if the
+  // state is truncated or oversized, an integer or flag field is not one, a value is not finite
+  // or out of its range, or the window length does not follow from steps_seen and these options;
+  // the monitor is then unchanged.
+  absl::Status RestoreState(absl::Span<const double> state);
 
   const ConsistencyMonitorOptions& options() const { return options_; }
   // Last test of the channel, if any.

@@ -156,7 +156,8 @@ struct SessionOptions {
   int consistency_test_every_steps = 15;
 };
 
-// Everything needed to resume exactly (bit for bit) where a session stopped.
+// Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
+// writes version 2; FromCheckpoint reads versions 1 and 2.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
@@ -189,8 +190,8 @@ class EstimationSession {
   std::array<int, 2> working_pair() const { return working_pair_; }
   const SpacecraftConfig& config() const { return config_; }
   const SessionOptions& options() const { return options_; }
-  // The model-consistency monitor. Not in the checkpoint: a restored session starts with empty
-  // windows.
+  // The model-consistency monitor. In the checkpoint from version 2 (a session restored from
+  // version 1 starts it with empty windows).
   const ConsistencyMonitor& consistency_monitor() const { return consistency_; }
 
   AttitudeEstimate CurrentAttitude() const;
@@ -206,10 +207,16 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
-  // The values and their order (version 1, stored by the server) are listed in
-  // session_checkpoint.cc.
+  // Version 2: everything a session restored from it needs to continue bit for bit as this one
+  // would (same reports, state and covariance), at any point, including before initialisation.
+  // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // DataLoss if the checkpoint does not fit this configuration and model.
+  // Reads versions 1 and 2 (version 1 lacks the consistency monitor and the star-tracker
+  // anchoring flags: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
+  // the version is unknown, the values are truncated or oversized, a field holds a value it
+  // cannot (an integer or flag field that is not one, a non-finite real, an unknown state, a
+  // pair naming gyros the session lacks, an invalid covariance), or the checkpoint does not fit
+  // this configuration and model.
   static absl::StatusOr<EstimationSession> FromCheckpoint(const SpacecraftConfig& config,
                                                           const SessionOptions& options,
                                                           const SessionCheckpoint& checkpoint);
@@ -304,10 +311,11 @@ class EstimationSession {
   int steps_without_star_tracker_ = 0;
   int consecutive_rejections_ = 0;
   // eq. (12) named the star tracker faulty during the current streak of rejections: the filter
-  // reset must not re-anchor to it (docs/decisions.md D19). Not in checkpoint version 1.
+  // reset must not re-anchor to it (docs/decisions.md D19). In the checkpoint from version 2.
   bool star_tracker_voted_faulty_ = false;
   // The star tracker has been accepted for kResetAfterRejections steps in a row since the filter
-  // started (D19). Not in checkpoint version 1: a restored session counts as anchored.
+  // started (D19). In the checkpoint from version 2 (with consecutive_accepted_); a session
+  // restored from version 1 counts as anchored.
   bool star_tracker_accepted_ = true;
   int consecutive_accepted_ = 0;
   // Predict integrates with substeps sized to the motion of the readings instead of the

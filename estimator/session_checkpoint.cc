@@ -1,15 +1,17 @@
 // The session's checkpoint (EstimationSession::ExportCheckpoint, FromCheckpoint): everything
 // needed to resume bit for bit, as a versioned vector of doubles. The server stores these values
-// and restores them, so the order below is a storage format: version 1 must not change.
+// and restores them, so the order below is a storage format: a written version must not change.
 #include "estimator/session.h"
 
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/types/span.h"
 #include "estimator/ekf.h"
 
 namespace esg::estimator {
@@ -17,17 +19,27 @@ namespace esg::estimator {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
-// Checkpoint layout, version 1, all doubles; a time is three values (1, unix seconds,
-// nanoseconds), or (-1, 0, 0) for absl::InfinitePast():
+// Checkpoint layout, all doubles; a time is three values (1, unix seconds, nanoseconds), or
+// (-1, 0, 0) for absl::InfinitePast().
+// Version 1 (read only):
 //   initialized, use_star_tracker, last_time, last_update_time, start_time,
 //   convergence_mark_time, working_pair (2), reserve_pair (2), state, steps_without_star_tracker,
 //   consecutive_rejections, converged, m, convergence_mark_sigma (m);
 //   the number of running gyros, then per gyro: id, h_in (3), t1 (3), residual_drift (2),
 //   theta (13), phi_b (3), faulty, has_reading, h_k_last (3);
 //   n (the state size, StateLayout::size()), P (n x n, row by row), P0 (n x n, row by row).
+//   A session restored from it starts the consistency monitor with empty windows and counts the
+//   star tracker as accepted (star_tracker_voted_faulty = 0, star_tracker_accepted = 1,
+//   consecutive_accepted = 0).
+// Version 2 (written): version 1's values in the same order (so every index above is
+//   unchanged), then
+//   star_tracker_voted_faulty, star_tracker_accepted, consecutive_accepted,
+//   c (a count), the consistency monitor's state (c values, ConsistencyMonitor::ExportState).
+//   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
+  c.version = 2;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -79,14 +91,22 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   for (int i = 0; i < P0_.rows(); ++i) {
     for (int j = 0; j < P0_.cols(); ++j) v.push_back(P0_(i, j));
   }
+  // Version 2.
+  v.push_back(star_tracker_voted_faulty_ ? 1 : 0);
+  v.push_back(star_tracker_accepted_ ? 1 : 0);
+  v.push_back(consecutive_accepted_);
+  const std::vector<double> monitor = consistency_.ExportState();
+  v.push_back(static_cast<double>(monitor.size()));
+  v.insert(v.end(), monitor.begin(), monitor.end());
   return c;
 }
 
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version != 1) {
-    return absl::DataLossError(absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
+  if (checkpoint.version != 1 && checkpoint.version != 2) {
+    return absl::DataLossError(
+        absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
   auto created = Create(config, options);
   if (!created.ok()) return created.status();
@@ -101,29 +121,53 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     }
     return v[pos++];
   };
-  auto get_time = [&]() {
-    const double flag = get();
-    const double sec = get();
-    const double nsec = get();
-    if (flag < 0) return absl::InfinitePast();
-    return absl::FromUnixNanos(static_cast<int64_t>(sec) * 1000000000 + static_cast<int64_t>(nsec));
+  // The first value that is not what its field allows; it marks the checkpoint corrupt. An
+  // integer field must hold a finite integer in int's range (a plain cast of anything else
+  // would be undefined behaviour), a flag 0 or 1, a real a finite number.
+  std::string bad_value;
+  auto mark_bad = [&](double x, const char* what) {
+    if (bad_value.empty()) {
+      bad_value = absl::StrFormat("checkpoint: value %d = %g: %s", pos - 1, x, what);
+    }
   };
-  auto get_vec = [&](auto& x) {
-    for (int i = 0; i < x.size(); ++i) x(i) = get();
-  };
-  // An integer field: a value that is not a finite integer in int's range marks the checkpoint
-  // corrupt (a plain cast of it would be undefined behaviour).
-  bool bad_integer = false;
   auto get_int = [&]() {
-    const double v = get();
-    if (!(std::abs(v) <= 1e9) || v != std::floor(v)) {
-      bad_integer = true;
+    const double x = get();
+    if (!(std::abs(x) <= 1e9) || x != std::floor(x)) {
+      mark_bad(x, "an integer field is not an integer");
       return 0;
     }
-    return static_cast<int>(v);
+    return static_cast<int>(x);
   };
-  s.initialized_ = get() != 0;
-  s.use_star_tracker_ = get() != 0;
+  auto get_flag = [&]() {
+    const double x = get();
+    if (x != 0.0 && x != 1.0) mark_bad(x, "a flag field is not 0 or 1 (an integer)");
+    return x == 1.0;
+  };
+  auto get_real = [&]() {
+    const double x = get();
+    if (!std::isfinite(x)) mark_bad(x, "a real field is not finite");
+    return x;
+  };
+  auto get_time = [&]() {
+    const double flag = get();
+    if (flag != -1.0 && flag != 1.0) mark_bad(flag, "a time's flag is not -1 or 1 (an integer)");
+    const double sec = get();
+    if (!(std::abs(sec) <= 1e12) || sec != std::floor(sec)) {
+      mark_bad(sec, "a time's seconds are not an integer in range");
+    }
+    const double nsec = get();
+    if (!(std::abs(nsec) < 1e9) || nsec != std::floor(nsec)) {
+      mark_bad(nsec, "a time's nanoseconds are not an integer in (-1e9, 1e9)");
+    }
+    if (flag != 1.0 || !bad_value.empty()) return absl::InfinitePast();
+    return absl::FromUnixSeconds(static_cast<int64_t>(sec)) +
+           absl::Nanoseconds(static_cast<int64_t>(nsec));
+  };
+  auto get_vec = [&](auto& x) {
+    for (int i = 0; i < x.size(); ++i) x(i) = get_real();
+  };
+  s.initialized_ = get_flag();
+  s.use_star_tracker_ = get_flag();
   s.last_time_ = get_time();
   s.last_update_time_ = get_time();
   s.start_time_ = get_time();
@@ -133,7 +177,7 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   s.state_ = static_cast<SessionState>(get_int());
   s.steps_without_star_tracker_ = get_int();
   s.consecutive_rejections_ = get_int();
-  s.converged_ = get() != 0;
+  s.converged_ = get_flag();
   const int n_mark = get_int();
   if (n_mark < 0 || n_mark > 1000) return absl::DataLossError("checkpoint: bad convergence record");
   s.convergence_mark_sigma_ = VectorXd::Zero(n_mark);
@@ -153,8 +197,8 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     get_vec(g.residual_drift);
     get_vec(g.theta);
     get_vec(g.phi_b);
-    g.faulty = get() != 0;
-    g.has_reading = get() != 0;
+    g.faulty = get_flag();
+    g.has_reading = get_flag();
     get_vec(g.h_k_last);
     s.gyros_.push_back(std::move(g));
   }
@@ -168,27 +212,47 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   s.P_ = MatrixXd::Zero(n, n);
   s.P0_ = MatrixXd::Zero(n, n);
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) s.P_(i, j) = get();
+    for (int j = 0; j < n; ++j) s.P_(i, j) = get_real();
   }
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) s.P0_(i, j) = get();
+    for (int j = 0; j < n; ++j) s.P0_(i, j) = get_real();
   }
-  if (short_read || pos != v.size()) return absl::DataLossError("checkpoint: truncated or oversized");
+  if (checkpoint.version >= 2) {
+    s.star_tracker_voted_faulty_ = get_flag();
+    s.star_tracker_accepted_ = get_flag();
+    s.consecutive_accepted_ = get_int();
+    const int n_monitor = get_int();
+    if (short_read || n_monitor < 0 || static_cast<size_t>(n_monitor) != v.size() - pos) {
+      return absl::DataLossError("checkpoint: truncated or oversized (consistency monitor)");
+    }
+    if (absl::Status st = s.consistency_.RestoreState(absl::MakeConstSpan(v).subspan(pos));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: consistency monitor: ", st.message()));
+    }
+    pos = v.size();
+  }
+  if (short_read || pos != v.size()) {
+    return absl::DataLossError("checkpoint: truncated or oversized");
+  }
   // An uninitialised session (no valid star-tracker attitude yet) has no state to check.
   if (s.initialized_) {
     if (absl::Status st = CheckCovariance(s.P_); !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
     }
+    if (absl::Status st = CheckCovariance(s.P0_); !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: initial ", st.message()));
+    }
   }
   // Every index the session dereferences must name a gyro it has: a corrupt checkpoint is
   // DataLoss, never a crash.
-  if (bad_integer) return absl::DataLossError("checkpoint: an integer field is not an integer");
+  if (!bad_value.empty()) return absl::DataLossError(bad_value);
   const int state_value = static_cast<int>(s.state_);
   if (state_value < static_cast<int>(SessionState::kNoData) ||
       state_value > static_cast<int>(SessionState::kFaulted)) {
     return absl::DataLossError(absl::StrCat("checkpoint: unknown session state ", state_value));
   }
-  if (s.steps_without_star_tracker_ < 0 || s.consecutive_rejections_ < 0) {
+  if (s.steps_without_star_tracker_ < 0 || s.consecutive_rejections_ < 0 ||
+      s.consecutive_accepted_ < 0) {
     return absl::DataLossError("checkpoint: negative step counter");
   }
   if (s.initialized_) {

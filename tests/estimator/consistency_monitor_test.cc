@@ -5,7 +5,10 @@
 
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <random>
+#include <utility>
+#include <vector>
 
 #include "estimator/calibration_model.h"
 #include "estimator/session.h"
@@ -127,6 +130,109 @@ TEST(ConsistencyMonitor, OneOutlierStepDoesNotFailAWindow) {
   EXPECT_LT(last->nis_sum, 60 * 6.0 + 30.0);
 }
 
+// Export and restore (the session checkpoint, version 2): a monitor restored mid-window from
+// ExportState returns what the original returns, test for test, bit for bit; its export equals
+// the original's.
+TEST(ConsistencyMonitor, RestoredMidWindowContinuesIdentically) {
+  ConsistencyMonitorOptions o;
+  o.window_steps = 10;
+  o.test_every_steps = 4;
+  o.warmup_steps = 5;
+  std::mt19937_64 rng(11);
+  std::chi_squared_distribution<double> chi2(6);
+  ConsistencyMonitor original(o);
+  int k = 1;
+  auto add = [&](ConsistencyMonitor& m, int step, double nis) {
+    const absl::Time t = kStart + absl::Minutes(step);
+    auto a = m.Add(Channel::kStarTracker, t, nis, 6);
+    auto b = m.Add(Channel::kAutonomous, t, nis / 6.0, 1);
+    return std::make_pair(a, b);
+  };
+  // Inflated NIS so that some tests fail (counters and first_inconsistent_time set).
+  for (; k <= 37; ++k) add(original, k, 3.0 * chi2(rng));
+  ASSERT_GT(original.tests(), 0);
+  ASSERT_GT(original.inconsistent_tests(), 0);
+  ConsistencyMonitor restored(o);
+  ASSERT_THAT(restored.RestoreState(original.ExportState()), IsOk());
+  EXPECT_EQ(restored.ExportState(), original.ExportState());
+  EXPECT_EQ(restored.tests(), original.tests());
+  EXPECT_EQ(restored.inconsistent_tests(), original.inconsistent_tests());
+  EXPECT_EQ(restored.first_inconsistent_time(), original.first_inconsistent_time());
+  ConsistencyMonitor fresh(o);  // what a version-1 restore had: empty windows
+  int tests_compared = 0, fresh_differs = 0;
+  for (; k <= 80; ++k) {
+    const double nis = chi2(rng);
+    const auto a = add(original, k, nis);
+    const auto b = add(restored, k, nis);
+    const auto c = add(fresh, k, nis);
+    ASSERT_EQ(a.first.has_value(), b.first.has_value()) << "step " << k;
+    ASSERT_EQ(a.second.has_value(), b.second.has_value()) << "step " << k;
+    fresh_differs += a.first.has_value() != c.first.has_value();
+    if (a.first.has_value()) {
+      ++tests_compared;
+      EXPECT_EQ(a.first->nis_sum, b.first->nis_sum);
+      EXPECT_EQ(a.first->previous_nis_sum, b.first->previous_nis_sum);
+      EXPECT_EQ(a.first->threshold, b.first->threshold);
+      EXPECT_EQ(a.first->inconsistent, b.first->inconsistent);
+      EXPECT_EQ(a.second->nis_sum, b.second->nis_sum);
+    }
+  }
+  EXPECT_GT(tests_compared, 5);
+  EXPECT_GT(fresh_differs, 0);  // so the comparison could fail
+  EXPECT_EQ(restored.ExportState(), original.ExportState());
+}
+
+TEST(ConsistencyMonitor, CorruptStateIsDataLossNamingTheFieldAndLeavesTheMonitorUnchanged) {
+  ConsistencyMonitorOptions o;
+  o.window_steps = 4;
+  o.test_every_steps = 2;
+  o.warmup_steps = 2;
+  ConsistencyMonitor m(o);
+  for (int k = 1; k <= 9; ++k) m.Add(Channel::kStarTracker, kStart + absl::Minutes(k), 6.0, 6);
+  const std::vector<double> good = m.ExportState();
+  // Layout (consistency_monitor.h): 0 tests, 1 inconsistent_tests, 2-4 first_inconsistent_time,
+  // 5 star-tracker steps_seen, 6 has_last, 7-9 last time, 10 steps, 11 dof, 12 nis_sum, ...,
+  // 17 window length, 18.. (nis, dof) pairs.
+  ASSERT_EQ(good[5], 9.0);
+  ASSERT_EQ(good[17], 7.0);  // 9 steps after a warm-up of 2
+  ConsistencyMonitor target(o);
+  ASSERT_THAT(target.RestoreState(good), IsOk());
+  const std::vector<double> before = target.ExportState();
+  auto with = [&](size_t i, double value) {
+    std::vector<double> v = good;
+    v[i] = value;
+    return target.RestoreState(v);
+  };
+  using ::esg::testing::StatusIs;
+  const auto kDataLoss = absl::StatusCode::kDataLoss;
+  EXPECT_THAT(with(0, 0.5), StatusIs(kDataLoss, HasSubstr("tests = 0.5")));
+  EXPECT_THAT(with(1, 99), StatusIs(kDataLoss, HasSubstr("inconsistent_tests = 99")));
+  EXPECT_THAT(with(2, 0), StatusIs(kDataLoss, HasSubstr("first_inconsistent_time.flag")));
+  EXPECT_THAT(with(5, std::nan("")), StatusIs(kDataLoss, HasSubstr("star_tracker.steps_seen")));
+  EXPECT_THAT(with(5, 8), StatusIs(kDataLoss, HasSubstr("star_tracker.window_length = 7")));
+  EXPECT_THAT(with(6, 2), StatusIs(kDataLoss, HasSubstr("star_tracker.has_last")));
+  EXPECT_THAT(with(9, 1e300), StatusIs(kDataLoss, HasSubstr("star_tracker.last.time")));
+  EXPECT_THAT(with(12, std::numeric_limits<double>::infinity()),
+              StatusIs(kDataLoss, HasSubstr("star_tracker.last.nis_sum")));
+  EXPECT_THAT(with(18, -1), StatusIs(kDataLoss, HasSubstr("star_tracker.window.nis")));
+  EXPECT_THAT(with(18, 1000), StatusIs(kDataLoss, HasSubstr("per-step cap")));
+  EXPECT_THAT(with(19, 0), StatusIs(kDataLoss, HasSubstr("star_tracker.window.dof")));
+  std::vector<double> longer = good;
+  longer.push_back(0);
+  EXPECT_THAT(target.RestoreState(longer), StatusIs(kDataLoss, HasSubstr("expected")));
+  for (size_t n = 0; n < good.size(); ++n) {
+    EXPECT_THAT(target.RestoreState(absl::MakeConstSpan(good).first(n)),
+                StatusIs(kDataLoss, HasSubstr("truncated")))
+        << n;
+  }
+  // Other options: the window length no longer follows from steps_seen.
+  ConsistencyMonitorOptions other = o;
+  other.warmup_steps = 0;
+  ConsistencyMonitor elsewhere(other);
+  EXPECT_THAT(elsewhere.RestoreState(good), StatusIs(kDataLoss, HasSubstr("window_length")));
+  EXPECT_EQ(target.ExportState(), before);  // every refused restore left it unchanged
+}
+
 // The paper's calibration flight (as in session_test.cc) with the drift random walk of
 // deploy/examples/rdk1.json (0.0015 deg/h/sqrt(h)) on in the simulator and the configuration.
 SimulationSpec RandomWalkFlight(uint64_t seed, double hours) {
@@ -215,4 +321,3 @@ TEST(SessionConsistency, NoFailingTestOnThreeDaysOfConsistentData) {
 
 }  // namespace
 }  // namespace esg::estimator
-
