@@ -222,14 +222,15 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     s.star_tracker_accepted_ = get_flag();
     s.consecutive_accepted_ = get_int();
     const int n_monitor = get_int();
-    if (short_read || n_monitor < 0 || static_cast<size_t>(n_monitor) != v.size() - pos) {
-      return absl::DataLossError("checkpoint: truncated or oversized (consistency monitor)");
+    if (short_read || n_monitor < 0 || static_cast<size_t>(n_monitor) > v.size() - pos) {
+      return absl::DataLossError("checkpoint: truncated (consistency monitor)");
     }
-    if (absl::Status st = s.consistency_.RestoreState(absl::MakeConstSpan(v).subspan(pos));
+    if (absl::Status st =
+            s.consistency_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_monitor));
         !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: consistency monitor: ", st.message()));
     }
-    pos = v.size();
+    pos += n_monitor;
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

@@ -94,6 +94,23 @@ SessionOptions Options(const char* model = "10+11") {
   return o;
 }
 
+// The number of values of the version-1 part of a checkpoint (session_checkpoint.cc): 23 values
+// before convergence_mark_sigma (m at index 22), m, the gyro count g, 30 per gyro, n, P and P0.
+// Version 2 appends its fields after these.
+size_t Version1Length(const SessionCheckpoint& c) {
+  const size_t m = static_cast<size_t>(c.values.at(22));
+  const size_t g = static_cast<size_t>(c.values.at(23 + m));
+  const size_t n = static_cast<size_t>(c.values.at(23 + m + 1 + 30 * g));
+  return 23 + m + 1 + 30 * g + 1 + 2 * n * n;
+}
+
+// The same session's checkpoint in version 1: the version-2 fields left out.
+SessionCheckpoint AsVersion1(SessionCheckpoint c) {
+  c.values.resize(Version1Length(c));
+  c.version = 1;
+  return c;
+}
+
 // --- Bitwise comparison ---
 
 bool SameBits(double a, double b) {
@@ -403,11 +420,8 @@ TEST(SessionCheckpoint, ConsistencyMonitorMidWindowResumesBitForBit) {
   ASSERT_FALSE(after.empty());
 
   // Version 1 (the same values without its tail) restores with empty windows: it diverges.
-  SessionCheckpoint v1 = p.session.ExportCheckpoint();
-  const std::vector<double> monitor = m.ExportState();
-  v1.values.resize(v1.values.size() - monitor.size() - 4);
-  v1.version = 1;
-  auto old = EstimationSession::FromCheckpoint(s.spec.config, Options(), v1);
+  auto old = EstimationSession::FromCheckpoint(s.spec.config, Options(),
+                                               AsVersion1(p.session.ExportCheckpoint()));
   ASSERT_THAT(old, IsOk());
   EXPECT_EQ(old->consistency_monitor().tests(), 0);
   EstimationSession straight = p.session;
@@ -472,10 +486,8 @@ TEST(SessionCheckpoint, BeforeTheStarTrackerIsAnchoredResumesBitForBit) {
   ASSERT_FALSE(after.empty());
   EXPECT_GE(CountEvents(after, Event::Kind::kFilterReset), 1);
 
-  SessionCheckpoint v1 = p.session.ExportCheckpoint();
-  v1.values.resize(v1.values.size() - p.session.consistency_monitor().ExportState().size() - 4);
-  v1.version = 1;
-  auto old = EstimationSession::FromCheckpoint(s.spec.config, Options(), v1);
+  auto old = EstimationSession::FromCheckpoint(s.spec.config, Options(),
+                                               AsVersion1(p.session.ExportCheckpoint()));
   ASSERT_THAT(old, IsOk());
   int old_resets = 0;
   for (size_t i = cut; i < s.frames.size(); ++i) {
@@ -530,9 +542,8 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   const SessionCheckpoint good = p.session.ExportCheckpoint();
   ASSERT_EQ(good.version, 2);
   const int n = p.session.state_size();
-  // The covariance blocks P and P0 (n x n each) end where the version-2 tail begins.
-  const size_t tail = p.session.consistency_monitor().ExportState().size() + 4;
-  const size_t matrices_end = good.values.size() - tail;
+  // The covariance blocks P and P0 (n x n each) end where the version-2 fields begin.
+  const size_t matrices_end = Version1Length(good);
   const size_t matrices_begin = matrices_end - 2 * static_cast<size_t>(n) * n;
   const double bad_values[] = {
       std::nan(""), std::numeric_limits<double>::infinity(), 1e300, -1e300, 0.5, -1.0,
@@ -590,7 +601,7 @@ TEST(SessionCheckpoint, CorruptVersionTwoTailIsDataLossNamingTheField) {
   const Prefix p = RunPrefix(s, Options(), cut);
   const SessionCheckpoint good = p.session.ExportCheckpoint();
   const size_t monitor_size = p.session.consistency_monitor().ExportState().size();
-  const size_t tail = good.values.size() - monitor_size - 4;  // star_tracker_voted_faulty
+  const size_t tail = Version1Length(good);  // star_tracker_voted_faulty
   auto with = [&](size_t index, double value) {
     SessionCheckpoint c = good;
     c.values[index] = value;
