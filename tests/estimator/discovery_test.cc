@@ -5,7 +5,9 @@
 // after, `none` on a recording the model explains, `unexplained` for a fault the library does not
 // hold, two effects in one recording; and the pieces: distribution functions, regimes from the body
 // rate, the model-free latency estimate, the star-tracker correction.
+#include <atomic>
 #include <cmath>
+#include <thread>
 
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/candidates.h"
@@ -257,6 +259,51 @@ TEST(Diagnose, FaultOutsideTheLibraryIsUnexplainedNotForced) {
   for (const CandidateScore& c : report->candidates)
     any_inhomogeneous |= c.significant && !c.homogeneous;
   EXPECT_TRUE(any_inhomogeneous);
+}
+
+// The estimator starts no threads (options.h): the caller's runner gets at most options.threads
+// tasks at once, and the report is the same with or without it.
+TEST(Diagnose, ReportDoesNotDependOnTheCallersRunner) {
+  const SimulationSpec spec = DiscoveryScenario("rotor_displacement", 1, 12.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  auto sequential = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
+  ASSERT_THAT(sequential, IsOk());
+  DiagnoseOptions options;
+  options.threads = 3;
+  std::atomic<int> calls{0}, most_tasks{0};
+  options.run_parallel = [&](int count, const std::function<void(int)>& task) {
+    ++calls;
+    most_tasks = std::max(most_tasks.load(), count);
+    std::vector<std::thread> helpers;
+    for (int i = 1; i < count; ++i) helpers.emplace_back(task, i);
+    task(0);
+    for (std::thread& t : helpers) t.join();
+  };
+  auto parallel = Diagnose(spec.config, sim->recording.frames, options);
+  ASSERT_THAT(parallel, IsOk());
+  EXPECT_GT(calls.load(), 0);
+  EXPECT_LE(most_tasks.load(), options.threads);
+  EXPECT_EQ(parallel->verdict, sequential->verdict);
+  EXPECT_EQ(parallel->filter_runs, sequential->filter_runs);
+  EXPECT_EQ(parallel->before.deviance, sequential->before.deviance);
+  EXPECT_EQ(parallel->after.deviance, sequential->after.deviance);
+  EXPECT_EQ(parallel->after.held_out_nees, sequential->after.held_out_nees);
+  ASSERT_EQ(parallel->findings.size(), sequential->findings.size());
+  for (size_t i = 0; i < parallel->findings.size(); ++i) {
+    EXPECT_EQ(parallel->findings[i].effect, sequential->findings[i].effect);
+    EXPECT_EQ(parallel->findings[i].explanation, sequential->findings[i].explanation);
+    ASSERT_EQ(parallel->findings[i].parameters.size(), sequential->findings[i].parameters.size());
+    for (size_t k = 0; k < parallel->findings[i].parameters.size(); ++k) {
+      EXPECT_EQ(parallel->findings[i].parameters[k].value,
+                sequential->findings[i].parameters[k].value);
+    }
+  }
+  ASSERT_EQ(parallel->candidates.size(), sequential->candidates.size());
+  for (size_t i = 0; i < parallel->candidates.size(); ++i) {
+    EXPECT_EQ(parallel->candidates[i].effect, sequential->candidates[i].effect);
+    EXPECT_EQ(parallel->candidates[i].delta_deviance, sequential->candidates[i].delta_deviance);
+  }
 }
 
 }  // namespace
