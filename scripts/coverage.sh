@@ -7,7 +7,8 @@
 #   bash scripts/coverage.sh [FIRST_SEED] [COUNT]     (default 1 40)
 #   ESG_COVERAGE_HOURS=8 bash scripts/coverage.sh       (calibration length before the gap,
 #                                                      default 12 h)
-# Measured (40 seeds, 12 h): 32 s.
+# Measured, 12 h: seeds 1-40 in 32 s (smallest p 0.09); seeds 1-200 in 156 s, mean coefficient
+# NEES/dof 1.026 nominal and 1.028 faulted, every p >= 0.13.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 first=${1:-1}

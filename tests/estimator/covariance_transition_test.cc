@@ -10,6 +10,11 @@
 //              T_g = (t1, h_in x t1) at the end of the interval, error = true - estimate
 //              (conventions.h, session.h): a true theta larger by delta moves the true axis by
 //              the numerical difference, so no sign flip.
+// Measured (seed 7, 10 s interval): worst relative mismatch 1.7e-6 against the tolerance 1e-4.
+// Against mutants of session_propagation.cc built outside the tree: the coefficient columns of E
+// with the sign flipped, or J transposed in the residual-drift columns, give a relative mismatch
+// of 2; the (spin axis, residual drift) process-noise term dropped fails
+// ProcessNoiseIsOnlyTheIntegratedRandomWalk by 3.3e-19 rad^2/s against a tolerance of 1e-35.
 #include <cmath>
 #include <string>
 #include <vector>
