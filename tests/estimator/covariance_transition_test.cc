@@ -114,7 +114,6 @@ class CovarianceTransition : public ::testing::Test {
     }
     ASSERT_LT(i + 1, frames_.size());
     next_ = frames_[i + 1];
-    ASSERT_FALSE(session->noise_widening().widened());
     checkpoint_ = session->ExportCheckpoint();
     index_ = Index(checkpoint_);
     for (const GyroEstimate& g : session->Gyros()) ids_.push_back(g.id);
@@ -187,6 +186,8 @@ class CovarianceTransition : public ::testing::Test {
 };
 
 TEST_F(CovarianceTransition, ProcessNoiseIsOnlyTheIntegratedRandomWalk) {
+  // (A widened process noise, noise_widening.h, would add to the spin-axis diagonal and fail
+  // this test: the run is one the consistency monitor finds consistent.)
   // P = tiny I: P' - P = E tiny E^T + Q; with tiny = 1e-40 the first term is below 1e-36, far
   // under Q's smallest nonzero entry (q^2 span^3 / 3 ~ 2e-18 rad^2), so P' - P is Q exactly up to
   // rounding: nonzero only in the spin-axis / residual-drift blocks, zero in every (spin axis,
