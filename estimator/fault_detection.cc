@@ -137,7 +137,39 @@ IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<in
     d.pair_pair_exceeded[k] = test.pair_pair_angle[k] >= test.pair_pair_allowed[k];
     exceeded += d.pair_star_exceeded[k] + d.pair_pair_exceeded[k];
   }
+  // The gyro whose own star-tracker difference alone fails (D22), -1 if none.
+  int star_named = -1;
+  if (test.gyro_star_available) {
+    int failed = 0, passed = 0;
+    for (int k = 0; k < 3; ++k) {
+      d.gyro_star_failed[k] = test.gyro_star_nis[k] > test.gyro_star_fail;
+      failed += d.gyro_star_failed[k];
+      passed += test.gyro_star_nis[k] < test.gyro_star_pass;
+      if (d.gyro_star_failed[k]) star_named = k;
+    }
+    if (failed != 1 || passed != 2) star_named = -1;
+  }
   if (exceeded == 0) return d;
+  if (star_named >= 0 && test.star_available && !d.pair_star_exceeded[star_named]) {
+    // Fewer mismatches than a gyro's signature exceeded, but the named gyro's own star-tracker
+    // difference fails alone and the pair without it agrees with the star tracker (D22).
+    // pair_pair[m], m != the named gyro, compares the pair without it with a pair that holds it.
+    bool involves_named = false;
+    for (int m = 0; m < 3; ++m) {
+      involves_named = involves_named || (m != star_named && d.pair_pair_exceeded[m]);
+    }
+    if (involves_named && exceeded < 3) {
+      d.result = Isolation::kGyro;
+      d.decided_by_gyro_star = true;
+      d.faulty_index = star_named;
+      d.excluded_gyro = test.gyro_ids[star_named];
+      if (working_pair[0] == d.excluded_gyro || working_pair[1] == d.excluded_gyro) {
+        d.output_pair = PairWithout(test.gyro_ids, star_named);
+        d.output_switched = true;
+      }
+      return d;
+    }
+  }
   std::vector<int> matches;  // gyro index, 3 = star tracker
   for (int g = 0; g < 3; ++g) {
     bool holds = true;
@@ -160,6 +192,12 @@ IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<in
     if (pairs_agree && star_exceeded >= 2) matches.push_back(3);
   }
   for (int m : matches) d.candidates.push_back(m == 3 ? 0 : test.gyro_ids[m]);
+  const bool star_tracker_only = matches.size() == 1 && matches[0] == 3;
+  const bool signature = exceeded >= (test.star_available ? 3 : 2);
+  if (star_named >= 0 && !star_tracker_only && (signature || matches.size() == 1)) {
+    d.decided_by_gyro_star = !(matches.size() == 1 && matches[0] == star_named);
+    matches = {star_named};
+  }
   if (matches.size() != 1) {
     // Fewer exceeded mismatches than a gyro's smallest signature (three with the star tracker,
     // two without) are not reported: one noisy pair attitude exceeds the two mismatches it takes
@@ -204,6 +242,13 @@ std::string IsolationEvidence(const IsolationTest& test, const IsolationDecision
     for (int k = 0; k < 3; ++k) {
       item(pair_name(k) + "-star_tracker", test.pair_star_angle[k], test.pair_star_allowed[k],
            decision.pair_star_exceeded[k]);
+    }
+  }
+  if (test.gyro_star_available) {
+    for (int k = 0; k < 3; ++k) {
+      out += absl::StrFormat("; gyro %d star-tracker difference chi-square %.1f (fails above %.1f)%s",
+                             test.gyro_ids[k], test.gyro_star_nis[k], test.gyro_star_fail,
+                             decision.gyro_star_failed[k] ? " FAILS" : "");
     }
   }
   return out;

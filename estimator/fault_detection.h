@@ -119,6 +119,16 @@ FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& wo
 // result is ambiguous (nothing excluded) when at least as many mismatches exceed as a gyro's
 // smallest signature (3 with the star tracker, 2 without), and none below that: a single noisy
 // pair attitude exceeds the two mismatches it takes part in.
+// Per-gyro star-tracker evidence (D22): with the star tracker, each gyro's own star-tracker
+// difference of eq. (13) (2 components, normalised by its exact covariance: gyro_star_nis, chi-
+// square with 2 degrees of freedom for a healthy gyro and star tracker) names a gyro when exactly
+// one gyro's exceeds gyro_star_fail and the others' stay below gyro_star_pass. A star-tracker error
+// rotates every rebuilt axis at once and cannot fail one gyro alone while two others, on
+// non-parallel axes, pass. This evidence decides between the pair hypotheses when the pairs
+// are ambiguous or name another gyro, and names the gyro when fewer mismatches than its
+// signature exceeded but a pair holding it disagrees with the pair without it, which agrees with the star
+// tracker: a reading error of the second gyro of a pair barely moves that pair's attitude in some
+// geometries, while its own star-tracker difference moves fully.
 enum class Isolation { kNone, kGyro, kStarTracker, kAmbiguous };
 const char* IsolationName(Isolation i);
 
@@ -130,6 +140,11 @@ struct IsolationTest {
   std::array<double, 3> pair_star_allowed = {0, 0, 0};
   std::array<double, 3> pair_pair_angle = {0, 0, 0};
   std::array<double, 3> pair_pair_allowed = {0, 0, 0};
+  // Per-gyro star-tracker evidence (above); used when gyro_star_available.
+  bool gyro_star_available = false;
+  std::array<double, 3> gyro_star_nis = {0, 0, 0};
+  double gyro_star_fail = 25.0;   // k_d^2 with eq. (14)'s k_d = 5: P = 3.7e-6 per healthy gyro
+  double gyro_star_pass = 9.21;   // chi2inv(0.99, 2)
 };
 
 struct IsolationDecision {
@@ -143,6 +158,8 @@ struct IsolationDecision {
   bool reject_star_tracker = false;
   std::array<bool, 3> pair_star_exceeded = {false, false, false};
   std::array<bool, 3> pair_pair_exceeded = {false, false, false};
+  std::array<bool, 3> gyro_star_failed = {false, false, false};
+  bool decided_by_gyro_star = false;  // the per-gyro star-tracker evidence named the gyro
   // Hypotheses whose conditions hold (kAmbiguous: zero or several): gyro ids, 0 = star tracker.
   std::vector<int> candidates;
 };

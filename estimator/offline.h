@@ -34,6 +34,9 @@ struct CalibrationResult {
   // Star-tracker differences after the update of each step would need the truth; instead the
   // RMS of the accepted star-tracker innovations [rad] (z2..z5 of eq. (13)) is reported.
   double innovation_rms = 0.0;
+  // The process-noise widening at the end as an unmodelled drift [deg/h] (noise_widening.h);
+  // 0 when the filter ends as configured.
+  double widened_drift_deg_h = 0.0;
 };
 
 // Runs a session over every frame. The session after the last frame is returned through

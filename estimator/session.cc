@@ -8,7 +8,7 @@
 //   session_update.cc          eq. (12) mismatch test, eq. (13) measurements, eq. (14) test,
 //                              filter reset, Joseph update
 //   session_attitude.cc        pair attitude (TRIAD) and its covariance, the output
-//   session_checkpoint.cc      the checkpoint values (version 1)
+//   session_checkpoint.cc      the checkpoint values (versions 1 to 3)
 #include "estimator/session.h"
 
 #include <algorithm>
@@ -20,6 +20,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
 #include "estimator/session_internal.h"
+#include "estimator/units.h"
 
 namespace esg::estimator {
 
@@ -30,8 +31,11 @@ using session_internal::Seconds;
 namespace {
 
 // Feeds the step's innovations to the consistency monitor and reports a failing test as an
-// event (consistency_monitor.h).
-void MonitorConsistency(ConsistencyMonitor& monitor, StepReport& report) {
+// event (consistency_monitor.h). While the filter runs widened (noise_widening.h) the monitor
+// sees the widened filter; the model as configured is then reported inconsistent at each test
+// step on the evidence of the window that widened it (D20).
+void MonitorConsistency(ConsistencyMonitor& monitor, const NoiseWidening& widening,
+                        StepReport& report) {
   using Channel = ConsistencyMonitor::Channel;
   std::vector<ConsistencyMonitor::TestResult> results;
   if (report.star_tracker_innovation.size() > 0) {
@@ -43,6 +47,21 @@ void MonitorConsistency(ConsistencyMonitor& monitor, StepReport& report) {
   if (report.autonomous_innovation.size() > 0 && report.autonomous_innovation_sigma(0) > 0.0) {
     const double n = report.autonomous_innovation(0) / report.autonomous_innovation_sigma(0);
     if (auto r = monitor.Add(Channel::kAutonomous, report.time, n * n, 1)) results.push_back(*r);
+  }
+  const bool monitor_failed =
+      std::any_of(results.begin(), results.end(), [](const auto& r) { return r.inconsistent; });
+  if (!results.empty() && !monitor_failed && widening.trigger().has_value()) {
+    const NoiseWidening::Decision& t = *widening.trigger();
+    report.events.push_back(Event{
+        Event::Kind::kModelInconsistent, report.time, "model", t.nis_sum, t.widen_threshold,
+        "chi-square",
+        absl::StrFormat("star-tracker NIS of the filter as configured was %.1f > %.1f over %d "
+                        "steps (chi-square, %d degrees of freedom, twice in a row) and the "
+                        "filter runs widened since (as an unmodelled drift of %.3g deg/h): the "
+                        "configured model does not explain the data; run esg diagnose to find "
+                        "what the model leaves out",
+                        t.nis_sum, t.widen_threshold, t.steps, t.dof,
+                        widening.EquivalentDriftDegH())});
   }
   for (const ConsistencyMonitor::TestResult& r : results) {
     if (!r.inconsistent) continue;
@@ -56,6 +75,41 @@ void MonitorConsistency(ConsistencyMonitor& monitor, StepReport& report) {
                         ConsistencyChannelName(r.channel), r.steps, r.nis_sum, r.threshold, r.dof,
                         r.previous_nis_sum, r.steps, monitor.options().false_alarm_per_test)});
   }
+}
+
+// Feeds the step's star-tracker NIS to the process-noise widening and reports its decision
+// (noise_widening.h): a change, or a window that ends still widened (so that the service's alert
+// stays active while the filter runs widened).
+void WidenOnInconsistency(NoiseWidening& widening, StepReport& report) {
+  const auto& sigma = report.star_tracker_innovation_sigma;
+  if (sigma.size() == 0) return;
+  const auto d = widening.Add(report.star_tracker_nis, static_cast<int>(sigma.size()),
+                              sigma.squaredNorm() / static_cast<double>(sigma.size()));
+  if (!d.has_value()) return;
+  using Change = NoiseWidening::Decision::Change;
+  if (d->change == Change::kNone && !widening.widened()) return;
+  std::string what;
+  switch (d->change) {
+    case Change::kWidened:
+      what = "widened";
+      break;
+    case Change::kNarrowed:
+      what = "narrowed";
+      break;
+    case Change::kNone:
+      what = "kept widened";
+      break;
+  }
+  report.events.push_back(Event{
+      Event::Kind::kFilterWidened, report.time, "filter", d->nis_sum, d->widen_threshold,
+      "chi-square",
+      absl::StrFormat(
+          "star-tracker NIS over the last %d steps %.1f (chi-square, %d degrees of freedom: "
+          "%.1f at the widening level %.2g); process noise of the spin axes %s to that of an "
+          "unmodelled drift of %.3g deg/h: the configured model does not explain the data; run "
+          "esg diagnose to find what it leaves out",
+          d->steps, d->nis_sum, d->dof, d->widen_threshold, widening.options().alpha, what,
+          widening.EquivalentDriftDegH())});
 }
 
 }  // namespace
@@ -96,6 +150,12 @@ const char* EventKindName(Event::Kind kind) {
       return "MODEL_INCONSISTENT";
     case Event::Kind::kFaultAmbiguous:
       return "FAULT_AMBIGUOUS";
+    case Event::Kind::kFilterWidened:
+      return "FILTER_WIDENED";
+    case Event::Kind::kGyroReadingMissing:
+      return "GYRO_READING_MISSING";
+    case Event::Kind::kGyroStarted:
+      return "GYRO_STARTED";
   }
   return "?";
 }
@@ -120,6 +180,7 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
       PerTestLevel(config.filter.measurement_step, std::max(options.consistency_test_every_steps, 1),
                    ConsistencyMonitor::kChannels, 30.0 * 86400.0, 0.1);
   session.consistency_ = ConsistencyMonitor(monitor);
+  session.widening_ = NoiseWidening(config.filter.measurement_step, options.widening);
   return session;
 }
 
@@ -152,6 +213,25 @@ StateLayout EstimationSession::LayoutFor(const SpacecraftConfig& config, const M
     layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0);
   }
   return layout;
+}
+
+void EstimationSession::ReportMissingReadings(StepReport& report) const {
+  int with_reading = 0;
+  for (const GyroState& g : gyros_) with_reading += !g.faulty && g.has_reading ? 1 : 0;
+  for (const GyroState& g : gyros_) {
+    if (g.faulty || g.has_reading) continue;
+    report.events.push_back(Event{
+        Event::Kind::kGyroReadingMissing, report.time, absl::StrFormat("gyro %d", g.id),
+        static_cast<double>(with_reading), 2.0, "gyros with a reading",
+        absl::StrFormat(
+            "gyro %d has no reading in this frame: none of its measurements formed, its drift "
+            "mapped with the attitude of pair [%d,%d]; %s",
+            g.id, report.attitude.pair[0], report.attitude.pair[1],
+            report.attitude.valid
+                ? absl::StrFormat("output on pair [%d,%d]", report.attitude.pair[0],
+                                  report.attitude.pair[1])
+                : absl::StrCat("output not valid: ", report.attitude.invalid_reason))});
+  }
 }
 
 AttitudeEstimate EstimationSession::CurrentAttitude() const { return OutputAttitude(last_time_); }
@@ -214,11 +294,14 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& fra
   if (since_update >= config_.filter.measurement_step - 1e-3) {
     if (absl::Status s = next.MeasurementUpdate(frame, report); !s.ok()) return s;
     next.last_update_time_ = frame.time;
-    MonitorConsistency(next.consistency_, report);
+    MonitorConsistency(next.consistency_, next.widening_, report);
+    if (options_.adaptive_noise) WidenOnInconsistency(next.widening_, report);
   }
   next.UpdateState(report);
   report.state = next.state_;
   report.attitude = next.OutputAttitude(frame.time);
+  next.ReportMissingReadings(report);
+  next.StartSwitchedOnGyros(frame, report);
   *this = std::move(next);
   return report;
 }

@@ -55,6 +55,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/consistency_monitor.h"
 #include "estimator/drift_model.h"
+#include "estimator/noise_widening.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/state_layout.h"
 #include "estimator/telemetry.h"
@@ -86,6 +87,13 @@ struct Event {
                              // configured model does not explain the data (consistency_monitor.h)
     kFaultAmbiguous,         // fault isolation with three pairs (fault_detection.h): mismatches
                              // exceeded but no single subsystem explains them; nothing excluded
+    kFilterWidened,          // the process noise of the spin axes is widened (or narrowed, or
+                             // still widened) by noise_widening.h: the star-tracker
+                             // innovations stay larger than the configured model allows
+    kGyroReadingMissing,     // a running gyro has no reading in this frame: no measurement of it,
+                             // its drift mapped with a pair without it, output moved or not valid
+    kGyroStarted,            // a configured gyro that was not running reports (the cold spare
+                             // switched on) and joined the filter
   };
   Kind kind;
   absl::Time time;         // measurement epoch
@@ -107,6 +115,7 @@ struct AttitudeEstimate {
   Eigen::Vector3d sigma_b = Eigen::Vector3d::Zero();  // 1-sigma about body x, y, z [rad]
   std::array<int, 2> pair = {0, 0};                   // gyro ids it was computed from
   bool valid = false;
+  std::string invalid_reason;  // why not valid (empty when valid)
 };
 
 struct GyroEstimate {
@@ -154,10 +163,15 @@ struct SessionOptions {
   // Create from the measurement step for at most 0.1 expected false alarms per 30 days.
   int consistency_window_steps = 60;
   int consistency_test_every_steps = 15;
+  // Widen the spin axes' process noise when the star-tracker innovations stay inconsistent
+  // (noise_widening.h). Off in diagnosis runs, whose likelihoods must be those of the configured
+  // model.
+  bool adaptive_noise = true;
+  NoiseWideningOptions widening;
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
-// writes version 2; FromCheckpoint reads versions 1 and 2.
+// writes version 3; FromCheckpoint reads versions 1 to 3.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
@@ -193,6 +207,9 @@ class EstimationSession {
   // The model-consistency monitor. In the checkpoint from version 2 (a session restored from
   // version 1 starts it with empty windows).
   const ConsistencyMonitor& consistency_monitor() const { return consistency_; }
+  // The process-noise widening (noise_widening.h); scale() is 1 when the filter runs as
+  // configured.
+  const NoiseWidening& noise_widening() const { return widening_; }
 
   AttitudeEstimate CurrentAttitude() const;
   std::vector<GyroEstimate> Gyros() const;
@@ -211,8 +228,8 @@ class EstimationSession {
   // would (same reports, state and covariance), at any point, including before initialisation.
   // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // Reads versions 1 and 2 (version 1 lacks the consistency monitor and the star-tracker
-  // anchoring flags: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
+  // Reads versions 1 to 3 (version 1 lacks the consistency monitor and the star-tracker
+  // anchoring flags, version 2 the process-noise widening: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
   // the version is unknown, the values are truncated or oversized, a field holds a value it
   // cannot (an integer or flag field that is not one, a non-finite real, an unknown state, a
   // pair naming gyros the session lacks, an invalid covariance), or the checkpoint does not fit
@@ -235,7 +252,9 @@ class EstimationSession {
     DriftVector theta = DriftVector::Zero();
     Eigen::Vector3d phi_b = Eigen::Vector3d::Zero();
     bool faulty = false;
-    // Last reading (for interpolation to the integration rate).
+    // Whether the latest frame carried this gyro's reading; h_k_last is that reading, or when it
+    // did not, the case-frame axis the attitude of a pair with fresh readings implies
+    // (session_propagation.cc). For interpolation to the integration rate.
     bool has_reading = false;
     Eigen::Vector3d h_k_last = Eigen::Vector3d::UnitZ();
 
@@ -252,6 +271,11 @@ class EstimationSession {
   // spin-axis blocks of P to the matching prior (misalignment, shared star-tracker noise, readout);
   // the other blocks of P are kept, cross terms with the spin axes are cleared.
   void SpinAxesFromStarTracker(const Eigen::Matrix3d& C_in_b);
+  // A configured gyro that was not running and reports in this frame (a cold spare the
+  // spacecraft switched on) joins the filter at a measurement step: its spin axis rebuilt from
+  // the star tracker (when this step accepted it) or the output pair, its block appended to the
+  // state with the configured prior; a GYRO_STARTED event.
+  void StartSwitchedOnGyros(const TelemetryFrame& frame, StepReport& report);
 
   // session_propagation.cc
   absl::Status Propagate(const TelemetryFrame& frame);
@@ -266,7 +290,7 @@ class EstimationSession {
   bool IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
                              bool st_present, const Eigen::Quaterniond& q_st,
                              const Eigen::Matrix3d& S_st, StepReport& report, bool& st_available,
-                             bool& st_agrees_with_pairs);
+                             bool& st_agrees_with_pairs, int& withheld_gyro);
   void ApplyCorrection(const Eigen::VectorXd& dx);
 
   // session_attitude.cc
@@ -281,9 +305,16 @@ class EstimationSession {
                                                    Eigen::MatrixXd* jacobian_state = nullptr,
                                                    Eigen::MatrixXd* jacobian_readout = nullptr) const;
   AttitudeEstimate OutputAttitude(absl::Time time) const;
+  // The pair the output and the drift mapping use: the working pair when both its gyros have a
+  // reading in the latest frame, otherwise the first pair of running, not excluded gyros that
+  // both have one (running order: working pair first), otherwise the working pair.
+  std::array<int, 2> AttitudePair() const;
 
   // session.cc
   void UpdateState(const StepReport& report);
+  // A GYRO_READING_MISSING event per running, not excluded gyro without a reading in the latest
+  // frame (after the output of `report` is set).
+  void ReportMissingReadings(StepReport& report) const;
   // The state layout of `gyros` (each configured in `config`) under `model`: the free
   // coefficients and the misalignment states follow from the configured sigmas.
   static StateLayout LayoutFor(const SpacecraftConfig& config, const ModelSpec& model,
@@ -326,6 +357,7 @@ class EstimationSession {
   Eigen::VectorXd convergence_mark_sigma_;
   bool converged_ = false;
   ConsistencyMonitor consistency_;
+  NoiseWidening widening_;
 };
 
 }  // namespace esg::estimator

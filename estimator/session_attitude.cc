@@ -8,6 +8,7 @@
 #include <optional>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "estimator/measurements.h"
 #include "estimator/rotation.h"
 #include "estimator/session_internal.h"
@@ -121,16 +122,48 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   return q0;
 }
 
+std::array<int, 2> EstimationSession::AttitudePair() const {
+  const GyroState* a = Find(working_pair_[0]);
+  const GyroState* b = Find(working_pair_[1]);
+  if (a != nullptr && b != nullptr && a->has_reading && b->has_reading) return working_pair_;
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    for (size_t j = i + 1; j < gyros_.size(); ++j) {
+      const GyroState& gi = gyros_[i];
+      const GyroState& gj = gyros_[j];
+      if (!gi.faulty && !gj.faulty && gi.has_reading && gj.has_reading) return {gi.id, gj.id};
+    }
+  }
+  return working_pair_;
+}
+
 AttitudeEstimate EstimationSession::OutputAttitude(absl::Time time) const {
   AttitudeEstimate out;
   out.time = time;
-  out.pair = working_pair_;
-  const GyroState* a = Find(working_pair_[0]);
-  const GyroState* b = Find(working_pair_[1]);
-  if (!initialized_ || a == nullptr || b == nullptr) return out;
+  out.pair = AttitudePair();
+  const GyroState* a = Find(out.pair[0]);
+  const GyroState* b = Find(out.pair[1]);
+  if (!initialized_ || a == nullptr || b == nullptr) {
+    out.invalid_reason = "no star-tracker fix with the working pair's readings yet";
+    return out;
+  }
+  if (!a->has_reading || !b->has_reading) {
+    std::string missing;
+    for (const GyroState& g : gyros_) {
+      if (!g.faulty && !g.has_reading) {
+        missing += absl::StrFormat("%s%d", missing.empty() ? "" : ", ", g.id);
+      }
+    }
+    out.invalid_reason = absl::StrFormat(
+        "no pair of healthy gyros has a reading in this frame (missing: gyro %s)", missing);
+    return out;
+  }
   Matrix3d S_in;
   const auto q = PairQuaternion(a->id, b->id, a->h_k_last, b->h_k_last, &S_in);
-  if (!q.has_value()) return out;
+  if (!q.has_value()) {
+    out.invalid_reason = absl::StrFormat("pair [%d,%d]: spin axes too close to form an attitude",
+                                         a->id, b->id);
+    return out;
+  }
   out.q_in_b = *q;
   const Matrix3d C_b_in = q->toRotationMatrix().transpose();
   const Matrix3d S_b = C_b_in * S_in * C_b_in.transpose();

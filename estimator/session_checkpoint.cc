@@ -31,15 +31,18 @@ using Eigen::VectorXd;
 //   A session restored from it starts the consistency monitor with empty windows and counts the
 //   star tracker as accepted (star_tracker_voted_faulty = 0, star_tracker_accepted = 1,
 //   consecutive_accepted = 0).
-// Version 2 (written): version 1's values in the same order (so every index above is
+// Version 2 (read only): version 1's values in the same order (so every index above is
 //   unchanged), then
 //   star_tracker_voted_faulty, star_tracker_accepted, consecutive_accepted,
 //   c (a count), the consistency monitor's state (c values, ConsistencyMonitor::ExportState).
+//   A session restored from it runs with the process noise as configured (not widened).
+// Version 3 (written): version 2's values, then w (a count) and the process-noise widening's
+//   state (w values, NoiseWidening::ExportState).
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 2;
+  c.version = 3;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -98,13 +101,17 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   const std::vector<double> monitor = consistency_.ExportState();
   v.push_back(static_cast<double>(monitor.size()));
   v.insert(v.end(), monitor.begin(), monitor.end());
+  // Version 3.
+  const std::vector<double> widening = widening_.ExportState();
+  v.push_back(static_cast<double>(widening.size()));
+  v.insert(v.end(), widening.begin(), widening.end());
   return c;
 }
 
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version != 1 && checkpoint.version != 2) {
+  if (checkpoint.version < 1 || checkpoint.version > 3) {
     return absl::DataLossError(
         absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
@@ -231,6 +238,18 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       return absl::DataLossError(absl::StrCat("checkpoint: consistency monitor: ", st.message()));
     }
     pos += n_monitor;
+  }
+  if (checkpoint.version >= 3) {
+    const int n_widening = get_int();
+    if (short_read || n_widening < 0 || static_cast<size_t>(n_widening) > v.size() - pos) {
+      return absl::DataLossError("checkpoint: truncated (process-noise widening)");
+    }
+    if (absl::Status st =
+            s.widening_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_widening));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
+    pos += n_widening;
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

@@ -9,6 +9,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
 #include "estimator/ekf.h"
 #include "estimator/measurements.h"
@@ -96,6 +97,80 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
   last_update_time_ = frame.time;
   state_ = SessionState::kCalibrating;
   return CheckCovariance(P_);
+}
+
+void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepReport& report) {
+  if (!initialized_ || !report.measurement_step) return;
+  // The attitude the new spin axis is rebuilt with: the star tracker when this step accepted it,
+  // otherwise the output pair's.
+  const auto& st = frame.star_tracker;
+  const bool from_star_tracker = report.star_tracker_used && st.has_value() && st->valid;
+  if (!from_star_tracker && !report.attitude.valid) return;
+  const Matrix3d C_in_b = from_star_tracker ? st->q_in_b.normalized().toRotationMatrix()
+                                            : report.attitude.q_in_b.toRotationMatrix();
+  const Vector3d sigma_att_b = from_star_tracker
+                                   ? config_.star_tracker.noise.cwiseMax(kNoiseFloor)
+                                   : report.attitude.sigma_b.cwiseMax(kNoiseFloor);
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  for (const GyroConfig& gc : config_.gyros) {
+    if (Find(gc.id) != nullptr || !frame.gyros[gc.id - 1].has_value()) continue;
+    GyroState g;
+    g.id = gc.id;
+    g.C_b_k_config = gc.C_b_k;
+    g.theta = ModelCoefficients(options_.model, gc);
+    g.has_reading = true;
+    g.h_k_last = frame.gyros[gc.id - 1]->h_k.normalized();
+    g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();
+    const Vector3d e1 = gyros_[0].t1;  // the reference gyro's t1 is e1 of the int frame
+    const Vector3d t1 = e1 - e1.dot(g.h_in) * g.h_in;
+    g.t1 = t1.norm() > 0.1 ? t1.normalized() : AnyPerpendicular(g.h_in);
+    const int old_n = state_size();
+    gyros_.push_back(g);
+    layout_ = LayoutFor(config_, options_.model, gyros_);
+    const int n = layout_.size();
+    const int i = gyro_count() - 1;
+    // Appending a gyro appends its block (state_layout.h): the old indices hold.
+    MatrixXd P = MatrixXd::Zero(n, n), P0 = MatrixXd::Zero(n, n);
+    P.topLeftCorner(old_n, old_n) = P_;
+    P0.topLeftCorner(old_n, old_n) = P0_;
+    // The prior of a gyro that starts uncalibrated: the configured coefficient sigmas, the
+    // residual drift of Initialize, the misalignment sigma; its spin axis errs by the
+    // misalignment, the attitude it was rebuilt with and the readout (a diagonal bound: its
+    // correlation with the other gyros through that attitude is left out).
+    const double sigma_rw0 =
+        options_.residual_drift_sigma >= 0.0
+            ? options_.residual_drift_sigma
+            : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
+    if (layout_.has_drift()) {
+      P.block<2, 2>(layout_.Drift(i), layout_.Drift(i)) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
+    }
+    const DriftVector sigma_theta = gc.model_sigma.AsVector();
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+      const int idx = layout_.Theta(i) + j;
+      P(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
+    }
+    if (layout_.HasPhi(i)) {
+      P.block<3, 3>(layout_.Phi(i), layout_.Phi(i)) =
+          gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
+    }
+    const double var_h = gc.misalignment_sigma * gc.misalignment_sigma +
+                         sigma_att_b.squaredNorm() + sigma_r * sigma_r;
+    P.block<2, 2>(layout_.SpinAxis(i), layout_.SpinAxis(i)) = var_h * Matrix2d::Identity();
+    for (int k = old_n; k < n; ++k) P0(k, k) = P(k, k);
+    P_ = std::move(P);
+    P0_ = std::move(P0);
+    // The new gyro forms the reserve pair with the reference gyro of the output pair.
+    reserve_pair_ = {working_pair_[0], g.id};
+    report.events.push_back(Event{
+        Event::Kind::kGyroStarted, frame.time, absl::StrFormat("gyro %d", g.id),
+        static_cast<double>(gyro_count()), 3.0, "running gyros",
+        absl::StrFormat("gyro %d reports (switched on): its spin axis initialised from the %s, "
+                        "its drift model calibrated from the configured prior; %d gyros in use, "
+                        "reserve pair [%d,%d]",
+                        g.id, from_star_tracker ? "star tracker" : "output pair's attitude",
+                        gyro_count(), reserve_pair_[0], reserve_pair_[1])});
+  }
 }
 
 void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {

@@ -43,13 +43,39 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   const double span = Seconds(frame.time - last_time_);
   const bool rw = layout_.has_drift();
 
-  // Readings at both ends (a gyro missing in the new frame holds its last reading).
+  // Readings at both ends. The pair that carries case-frame drift to inertial axes has fresh
+  // readings in this frame (AttitudePair); a gyro without a reading in the frame is not held at
+  // its last reading (which the spacecraft's motion has made stale): its case-frame axis at the
+  // end is the one that pair's attitude implies, h_k = C_k_b C_b_in h_in, so that neither its
+  // drift nor anything else depends on a reading it did not send.
+  for (GyroState& g : gyros_) g.has_reading = frame.gyros[g.id - 1].has_value();
+  const std::array<int, 2> pair = AttitudePair();
+  const int ia = IndexOf(pair[0]), ib = IndexOf(pair[1]);
   std::vector<Vector3d> h_k_begin(gyros_.size()), h_k_end(gyros_.size());
+  for (size_t i = 0; i < gyros_.size(); ++i) {
+    h_k_begin[i] = gyros_[i].h_k_last;
+    if (gyros_[i].has_reading) h_k_end[i] = frame.gyros[gyros_[i].id - 1]->h_k.normalized();
+  }
+  if (!gyros_[ia].has_reading || !gyros_[ib].has_reading) {
+    // No pair has fresh readings: every gyro holds its last reading (the output is then not
+    // valid, OutputAttitude).
+    for (size_t i = 0; i < gyros_.size(); ++i) {
+      if (!gyros_[i].has_reading) h_k_end[i] = h_k_begin[i];
+    }
+  } else {
+    const auto q_end = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
+                                    gyros_[ia].C_b_k() * h_k_end[ia],
+                                    gyros_[ib].C_b_k() * h_k_end[ib]);
+    for (size_t i = 0; i < gyros_.size(); ++i) {
+      if (gyros_[i].has_reading) continue;
+      h_k_end[i] = q_end.ok() ? (gyros_[i].C_b_k().transpose() *
+                                 q_end->toRotationMatrix().transpose() * gyros_[i].h_in)
+                                    .normalized()
+                              : h_k_begin[i];
+    }
+  }
   double max_turn = 0.0;  // largest angle a reading turns over the interval [rad]
   for (size_t i = 0; i < gyros_.size(); ++i) {
-    const auto& reading = frame.gyros[gyros_[i].id - 1];
-    h_k_begin[i] = gyros_[i].h_k_last;
-    h_k_end[i] = reading.has_value() ? reading->h_k.normalized() : gyros_[i].h_k_last;
     max_turn = std::max(max_turn, std::acos(std::clamp(h_k_begin[i].dot(h_k_end[i]), -1.0, 1.0)));
   }
   // The configured integration rate (the paper's 8 Hz); prediction instead sizes substeps to
@@ -68,13 +94,6 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   }
   const int substeps = std::max(1, static_cast<int>(substeps_wanted));
   const double dt = span / substeps;
-  // Output pair for the body attitude used to carry case-frame drift to inertial axes.
-  const std::array<int, 2> pair = working_pair_;
-  int ia = -1, ib = -1;
-  for (size_t i = 0; i < gyros_.size(); ++i) {
-    if (gyros_[i].id == pair[0]) ia = static_cast<int>(i);
-    if (gyros_[i].id == pair[1]) ib = static_cast<int>(i);
-  }
   std::vector<Matrix3d> C_b_k(gyros_.size());
   std::vector<Eigen::Matrix<double, 3, kNumDriftCoefficients>> M(
       gyros_.size(), Eigen::Matrix<double, 3, kNumDriftCoefficients>::Zero());
@@ -153,6 +172,14 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
       P_.block<2, 2>(h, d) += q2 * span * span / 2.0 * kJ;
       P_.block<2, 2>(d, h) += q2 * span * span / 2.0 * kJ.transpose();
       P_.block<2, 2>(h, h) += q2 * span * span * span / 3.0 * Matrix2d::Identity();
+    }
+  }
+  if (widening_.widened()) {
+    // The adaptive process noise (noise_widening.h): white noise on the spin-axis angles adding
+    // the widening's variance per measurement step.
+    const double q_w = widening_.added_variance() / config_.filter.measurement_step;
+    for (int i = 0; i < gyro_count(); ++i) {
+      P_.block<2, 2>(layout_.SpinAxis(i), layout_.SpinAxis(i)) += q_w * span * Matrix2d::Identity();
     }
   }
   // The rows that changed: spin axis, then residual drift (contiguous, state_layout.h).

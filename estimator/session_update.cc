@@ -45,8 +45,11 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   bool st_available = st_present;
   const Quaterniond q_st = st_available ? st->q_in_b.normalized() : Quaterniond::Identity();
 
+  // A gyro the three-pair isolation suspects while the model is known inconsistent is not
+  // excluded but its measurements are withheld at this step (D21).
+  int withheld_gyro = 0;
   auto has_reading = [&](const GyroState& g) {
-    return !g.faulty && frame.gyros[g.id - 1].has_value();
+    return !g.faulty && g.id != withheld_gyro && frame.gyros[g.id - 1].has_value();
   };
 
   const Matrix3d C_in_b_st_12 = q_st.toRotationMatrix();
@@ -62,7 +65,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   bool isolated = false;
   if (fresh.size() == 3) {
     isolated = IsolateWithThreePairs(frame, {fresh[0], fresh[1], fresh[2]}, st_available, q_st,
-                                     S_st_12, report, st_available, st_agrees_with_pairs);
+                                     S_st_12, report, st_available, st_agrees_with_pairs,
+                                     withheld_gyro);
   }
   // eq. (12) with what is available: working pair, reserve pair, star tracker.
   if (!isolated) {
@@ -252,8 +256,13 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   // filter started, the pairs' inertial axes rest on the star-tracker sample of initialisation:
   // their disagreement with the star tracker may be that sample's fault (an outlier), and the
   // guard does not apply (D19).
+  // The filter is widened before it is reset (noise_widening.h, D20): while the widening can
+  // still grow, the rejections are left to it.
+  const bool widening_exhausted =
+      !options_.adaptive_noise || widening_.at_max();
   const bool reset_allowed =
-      !star_tracker_accepted_ || (!star_tracker_voted_faulty_ && st_agrees_with_pairs);
+      !star_tracker_accepted_ ||
+      (widening_exhausted && !star_tracker_voted_faulty_ && st_agrees_with_pairs);
   if (consecutive_rejections_ == kResetAfterRejections && !reset_allowed) {
     // docs/decisions.md D19: never re-anchor to a star tracker that eq. (12) voted faulty in this
     // streak, nor to one the healthy pairs disagree with; the filter keeps running on the gyros.
@@ -265,7 +274,9 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
                         consecutive_rejections_,
                         star_tracker_voted_faulty_
                             ? "eq. (12) voted the star tracker faulty in this streak"
-                            : "the healthy gyro pairs disagree with the star tracker (eq. (12))")});
+                        : !st_agrees_with_pairs
+                            ? "the healthy gyro pairs disagree with the star tracker (eq. (12))"
+                            : "the process noise is widened first (FILTER_WIDENED)")});
   }
   if (consecutive_rejections_ >= kResetAfterRejections && reset_allowed) {
     // The star tracker has been present and rejected for kResetAfterRejections steps: a star
@@ -303,7 +314,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
 bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
                                               bool st_present, const Quaterniond& q_st,
                                               const Matrix3d& S_st, StepReport& report,
-                                              bool& st_available, bool& st_agrees_with_pairs) {
+                                              bool& st_available, bool& st_agrees_with_pairs,
+                                              int& withheld_gyro) {
   const double kd = config_.filter.innovation_kd;
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
   // Pair k is the pair without gyro ids[k] (fault_detection.h).
@@ -336,6 +348,26 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     test.pair_pair_angle[m] = RotationAngle(q[k], q[l]);
     test.pair_pair_allowed[m] = AllowedMismatchAngle(q[k], q[l], Sigma, kd, configured);
   }
+  if (st_present) {
+    // Each gyro's own star-tracker difference (eq. (13)) with its exact covariance (D22).
+    test.gyro_star_available = true;
+    test.gyro_star_fail = kd * kd;
+    const Matrix3d C_in_b_st = q_st.toRotationMatrix();
+    const Vector3d st_var = config_.star_tracker.noise.cwiseMax(kNoiseFloor).cwiseAbs2();
+    for (int k = 0; k < 3; ++k) {
+      const int i = IndexOf(ids[k]);
+      const GyroState& g = gyros_[i];
+      const StarTrackerDifference sd =
+          MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
+      MatrixXd H = MatrixXd::Zero(2, state_size());
+      H.block<2, 2>(0, layout_.SpinAxis(i)) = sd.H_h;
+      if (layout_.HasPhi(i)) H.block<2, 3>(0, layout_.Phi(i)) = sd.H_phi;
+      const Eigen::Matrix2d S_g = H * P_ * H.transpose() +
+                                  sd.G_st * st_var.asDiagonal() * sd.G_st.transpose() +
+                                  sigma_r * sigma_r * sd.G_readout * sd.G_readout.transpose();
+      test.gyro_star_nis[k] = sd.z.dot(S_g.ldlt().solve(sd.z));
+    }
+  }
   const IsolationDecision d = DecideIsolation(test, working_pair_);
   const std::string evidence = IsolationEvidence(test, d);
   // The exceeded mismatch with the largest angle-to-allowed ratio: the event's value/threshold.
@@ -355,6 +387,23 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     case Isolation::kNone:
       break;
     case Isolation::kGyro: {
+      if (consistency_.inconsistent() || widening_.widened()) {
+        // D21: while the configured model is known not to explain the data (the consistency
+        // monitor's latest test failed, or the process noise is widened), mismatches are as much
+        // the model's as a gyro's: the suspect is not excluded, only withheld at this step.
+        withheld_gyro = d.excluded_gyro;
+        report.events.push_back(Event{
+            Event::Kind::kFaultAmbiguous, frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
+            RadToArcsec(value), RadToArcsec(threshold), "arcsec",
+            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d, but the "
+                            "configured model does not explain the data (%s): gyro %d is not "
+                            "excluded, its measurements are withheld at this step. Evidence: %s",
+                            d.excluded_gyro,
+                            widening_.widened() ? "the filter runs widened, FILTER_WIDENED"
+                                                : "MODEL_INCONSISTENT",
+                            d.excluded_gyro, evidence)});
+        break;
+      }
       if (GyroState* g = Find(d.excluded_gyro)) g->faulty = true;
       // A configured gyro that is not running is a cold spare.
       std::string spare;
@@ -367,12 +416,20 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
           in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, frame.time,
           absl::StrFormat("gyro %d", d.excluded_gyro), RadToArcsec(value), RadToArcsec(threshold),
           "arcsec",
-          absl::StrFormat("fault isolation with three pairs (eq. (12)): gyro %d faulty: the pairs "
-                          "holding it disagree with pair [%d,%d]%s; gyro %d excluded, output on "
+          absl::StrFormat("fault isolation with three pairs (eq. (12)): gyro %d faulty: %s; gyro "
+                          "%d excluded, output on "
                           "pair [%d,%d]; only two gyros remain, switch on the cold spare%s to "
                           "restore isolation. Evidence: %s",
-                          d.excluded_gyro, kept[0], kept[1],
-                          st_present ? " and the star tracker, which agree with each other" : "",
+                          d.excluded_gyro,
+                          d.decided_by_gyro_star
+                              ? absl::StrFormat("its own star-tracker difference fails while "
+                                                "those of gyros %d and %d pass",
+                                                kept[0], kept[1])
+                              : absl::StrFormat("the pairs holding it disagree with pair [%d,%d]%s",
+                                                kept[0], kept[1],
+                                                st_present ? " and the star tracker, which agree "
+                                                             "with each other"
+                                                           : ""),
                           d.excluded_gyro, d.output_pair[0], d.output_pair[1],
                           spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), evidence)});
       working_pair_ = d.output_pair;
@@ -381,6 +438,21 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
       break;
     }
     case Isolation::kStarTracker:
+      if (consistency_.inconsistent() || widening_.widened()) {
+        // D21: while the model is known not to fit, three pairs that agree with each other and
+        // not with the star tracker may share the model's error (a drift the model lacks in
+        // every gyro); the star tracker stays subject to eq. (14) only.
+        report.events.push_back(Event{
+            Event::Kind::kFaultAmbiguous, frame.time, "star_tracker", RadToArcsec(value),
+            RadToArcsec(threshold), "arcsec",
+            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at the star "
+                            "tracker, but the configured model does not explain the data (%s): "
+                            "its measurements are kept, subject to eq. (14). Evidence: %s",
+                            widening_.widened() ? "the filter runs widened, FILTER_WIDENED"
+                                                : "MODEL_INCONSISTENT",
+                            evidence)});
+        break;
+      }
       report.events.push_back(Event{
           Event::Kind::kStarTrackerFault, frame.time, "star_tracker", RadToArcsec(value),
           RadToArcsec(threshold), "arcsec",
@@ -392,6 +464,16 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
       star_tracker_voted_faulty_ = true;
       break;
     case Isolation::kAmbiguous: {
+      // A gyro whose own star-tracker difference fails is kept out of this step's update, so
+      // that a fault not yet isolated is not absorbed into the spin axes.
+      int failed = 0;
+      for (int k = 0; k < 3; ++k) {
+        if (d.gyro_star_failed[k]) {
+          ++failed;
+          withheld_gyro = ids[k];
+        }
+      }
+      if (failed != 1) withheld_gyro = 0;
       std::string candidates;
       for (int c : d.candidates) {
         if (!candidates.empty()) candidates += ", ";

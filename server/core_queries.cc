@@ -79,9 +79,14 @@ esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
       if (!last.has_value()) continue;
       if (!shown.has_value() || (last->inconsistent && !shown->inconsistent)) shown = last;
     }
+    const double widened_drift_deg_h = session->noise_widening().EquivalentDriftDegH();
+    if (shown.has_value() || widened_drift_deg_h > 0.0) {
+      esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
+      mc->set_consistent(!monitor.inconsistent() && widened_drift_deg_h == 0.0);
+      mc->set_widened_drift_deg_h(widened_drift_deg_h);
+    }
     if (shown.has_value()) {
       esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
-      mc->set_consistent(!monitor.inconsistent());
       mc->set_channel(estimator::ConsistencyChannelName(shown->channel));
       mc->set_value(shown->nis_sum);
       mc->set_threshold(shown->threshold);

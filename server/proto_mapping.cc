@@ -117,6 +117,12 @@ esg::v1::AlertSeverity SeverityOf(Event::Kind kind) {
       return esg::v1::ALERT_SEVERITY_WARNING;
     case Event::Kind::kFaultAmbiguous:
       return esg::v1::ALERT_SEVERITY_WARNING;
+    case Event::Kind::kFilterWidened:
+      return esg::v1::ALERT_SEVERITY_WARNING;
+    case Event::Kind::kGyroReadingMissing:
+      return esg::v1::ALERT_SEVERITY_WARNING;
+    case Event::Kind::kGyroStarted:
+      return esg::v1::ALERT_SEVERITY_INFO;
   }
   return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
 }
@@ -141,6 +147,12 @@ esg::v1::AlertReason ReasonOf(Event::Kind kind) {
       return esg::v1::ALERT_REASON_MODEL_INCONSISTENT;
     case Event::Kind::kFaultAmbiguous:
       return esg::v1::ALERT_REASON_FAULT_AMBIGUOUS;
+    case Event::Kind::kFilterWidened:
+      return esg::v1::ALERT_REASON_FILTER_WIDENED;
+    case Event::Kind::kGyroReadingMissing:
+      return esg::v1::ALERT_REASON_GYRO_READING_MISSING;
+    case Event::Kind::kGyroStarted:
+      return esg::v1::ALERT_REASON_GYRO_STARTED;
   }
   return esg::v1::ALERT_REASON_UNSPECIFIED;
 }

@@ -142,9 +142,15 @@ Consistency ConsistencyOf(const estimator::CalibrationResult& r) {
 
 json ConsistencyJson(const Inputs& in, const estimator::CalibrationResult& r) {
   const Consistency c = ConsistencyOf(r);
-  json doc{{"consistent", c.failing_tests == 0},
+  int widenings = 0;
+  for (const estimator::Event& e : r.events) {
+    widenings += e.kind == estimator::Event::Kind::kFilterWidened ? 1 : 0;
+  }
+  json doc{{"consistent", c.failing_tests == 0 && widenings == 0},
            {"windowSteps", in.options.consistency_window_steps},
-           {"failingTests", c.failing_tests}};
+           {"failingTests", c.failing_tests},
+           {"widenedWindows", widenings},
+           {"widenedDriftDegHAtEnd", r.widened_drift_deg_h}};
   if (c.first != nullptr) {
     doc["firstTime"] = Utc(c.first->time);
     doc["value"] = c.first->value;
@@ -215,7 +221,22 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
         "model leaves out\n",
         in.options.consistency_window_steps, c.first->value, c.first->threshold,
         Utc(c.first->time).c_str(), c.failing_tests, c.worst->value, c.worst->threshold);
-  } else {
+  }
+  int widenings = 0;
+  const estimator::Event* first_widening = nullptr;
+  for (const estimator::Event& e : r.events) {
+    if (e.kind != estimator::Event::Kind::kFilterWidened) continue;
+    if (first_widening == nullptr) first_widening = &e;
+    ++widenings;
+  }
+  if (first_widening != nullptr) {
+    std::printf(
+        "FILTER WIDENED: the star-tracker innovations exceeded what the configured model allows "
+        "(first at %s, %d windows widened or kept widened; at the end as an unmodelled drift of "
+        "%.3g deg/h): the model does not explain the data; run esg diagnose\n",
+        Utc(first_widening->time).c_str(), widenings, r.widened_drift_deg_h);
+  }
+  if (ConsistencyOf(r).first == nullptr && first_widening == nullptr) {
     std::printf("model consistent with the data (innovation chi-square over %d-step windows)\n",
                 in.options.consistency_window_steps);
   }

@@ -149,6 +149,7 @@ Json SessionJson(const esg::v1::SessionInfo& s) {
         {"testTime", TimeJson(mc.test_time(), mc.has_test_time())},
         {"tests", mc.tests()},
         {"failingTests", mc.failing_tests()},
+        {"widenedDriftDegH", mc.widened_drift_deg_h()},
         {"firstInconsistentTime",
          TimeJson(mc.first_inconsistent_time(), mc.has_first_inconsistent_time())}};
   }

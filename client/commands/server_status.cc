@@ -67,8 +67,19 @@ void PrintSession(const esg::v1::SessionInfo& s) {
   }
   if (s.has_model_consistency()) {
     const esg::v1::ModelConsistency& mc = s.model_consistency();
-    if (mc.consistent()) {
-      std::printf("  model consistent with the data: %s %.1f <= %.1f over %d steps (%d tests)\n",
+    const bool widened = mc.widened_drift_deg_h() > 0.0;
+    if (widened) {
+      std::printf(
+          "  FILTER WIDENED: process noise as an unmodelled drift of %.3g deg/h, because the "
+          "star-tracker innovations exceeded what the configured model allows; run esg "
+          "diagnose\n",
+          mc.widened_drift_deg_h());
+    }
+    if (mc.tests() == 0) {
+      // no consistency test yet (the first window is a warm-up)
+    } else if (mc.consistent() || (widened && mc.value() <= mc.threshold())) {
+      std::printf("  %s with the data: %s %.1f <= %.1f over %d steps (%d tests)\n",
+                  widened ? "widened filter consistent" : "model consistent",
                   mc.channel().c_str(), mc.value(), mc.threshold(), mc.window_steps(), mc.tests());
     } else {
       std::printf(

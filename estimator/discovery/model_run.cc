@@ -33,7 +33,10 @@ std::vector<TelemetryFrame> CorrectStarTracker(const std::vector<TelemetryFrame>
 absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionOptions& options,
                                   const std::vector<TelemetryFrame>& frames,
                                   const ModelRunOptions& run_options) {
-  auto created = EstimationSession::Create(config, options);
+  // The likelihoods compared here are those of the model as configured: no adaptive widening.
+  SessionOptions as_configured = options;
+  as_configured.adaptive_noise = false;
+  auto created = EstimationSession::Create(config, as_configured);
   if (!created.ok()) return created.status();
   EstimationSession session = std::move(*created);
   ModelRun run;
