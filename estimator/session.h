@@ -358,6 +358,9 @@ class EstimationSession {
   bool converged_ = false;
   ConsistencyMonitor consistency_;
   NoiseWidening widening_;
+  // Body rate over the interval of the current frame [rad/s], set by Propagate for the star-tracker
+  // latency correction of MeasurementUpdate (recomputed every frame: not in the checkpoint).
+  Eigen::Vector3d body_rate_b_ = Eigen::Vector3d::Zero();
 };
 
 }  // namespace esg::estimator

@@ -106,8 +106,13 @@ void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepRe
   const auto& st = frame.star_tracker;
   const bool from_star_tracker = report.star_tracker_used && st.has_value() && st->valid;
   if (!from_star_tracker && !report.attitude.valid) return;
-  const Matrix3d C_in_b = from_star_tracker ? st->q_in_b.normalized().toRotationMatrix()
-                                            : report.attitude.q_in_b.toRotationMatrix();
+  // The star tracker's sample corrected for its configured latency, as in MeasurementUpdate.
+  const Matrix3d C_in_b =
+      from_star_tracker
+          ? (st->q_in_b.normalized() * ExpQuaternion(body_rate_b_ * config_.star_tracker.latency))
+                .normalized()
+                .toRotationMatrix()
+          : report.attitude.q_in_b.toRotationMatrix();
   const Vector3d sigma_att_b = from_star_tracker
                                    ? config_.star_tracker.noise.cwiseMax(kNoiseFloor)
                                    : report.attitude.sigma_b.cwiseMax(kNoiseFloor);

@@ -43,7 +43,14 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   const auto& st = frame.star_tracker;
   const bool st_present = use_star_tracker_ && st.has_value() && st->valid;
   bool st_available = st_present;
-  const Quaterniond q_st = st_available ? st->q_in_b.normalized() : Quaterniond::Identity();
+  // The configured time-tag error corrected with the body rate of the last interval
+  // (spacecraft_config.h StarTrackerConfig::latency): q_in_b(t) = q_st(t) (x) Exp(w_b latency).
+  const Quaterniond q_st =
+      !st_available ? Quaterniond::Identity()
+      : config_.star_tracker.latency == 0.0
+          ? st->q_in_b.normalized()
+          : (st->q_in_b.normalized() * ExpQuaternion(body_rate_b_ * config_.star_tracker.latency))
+                .normalized();
 
   // A gyro the three-pair isolation suspects while the model is known inconsistent is not
   // excluded but its measurements are withheld at this step (D21).

@@ -134,6 +134,8 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
     RETURN_IF_ERROR(CheckLimit(config.star_tracker.noise[k], L.star_tracker_noise,
                                absl::StrFormat("starTracker.noiseArcsec[%d]", k)));
   }
+  RETURN_IF_ERROR(
+      CheckLimit(config.star_tracker.latency, L.star_tracker_latency, "starTracker.latencyS"));
   RETURN_IF_ERROR(CheckLimit(config.readout_noise, L.readout_noise, "readoutNoiseArcsec"));
   RETURN_IF_ERROR(CheckLimit(config.random_walk, L.random_walk, "randomWalkDegHSqrtH"));
   const SuspensionConfig& s = config.suspension;

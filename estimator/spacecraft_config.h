@@ -33,6 +33,10 @@ struct GyroConfig {
 struct StarTrackerConfig {
   // 1-sigma noise about the body x, y, z axes [rad].
   Eigen::Vector3d noise = Eigen::Vector3d::Zero();
+  // Time-tag error [s]: positive when the quaternion stamped t is the attitude at t - latency.
+  // The filter corrects each sample to q_in_b(t) = q_st(t) (x) Exp(w_b latency) with the body
+  // rate w_b its gyro pairs measure (as the diagnosis's star-tracker latency effect does).
+  double latency = 0.0;
 };
 
 // Rotor-displacement readout of eq. (3): Delta = k * dU * d0 / U0.
@@ -97,6 +101,7 @@ struct ConfigLimits {
   ConfigLimit drift_sigma;
   ConfigLimit misalignment_sigma;
   ConfigLimit star_tracker_noise;
+  ConfigLimit star_tracker_latency;
   ConfigLimit readout_noise;
   ConfigLimit random_walk;
   ConfigLimit amplifier_gain;
@@ -108,11 +113,11 @@ struct ConfigLimits {
   ConfigLimit fault_threshold;
 
   // Every limit above, in declaration order.
-  constexpr std::array<ConfigLimit, 13> All() const {
+  constexpr std::array<ConfigLimit, 14> All() const {
     return {drift_coefficient, drift_sigma,      misalignment_sigma, star_tracker_noise,
-            readout_noise,     random_walk,      amplifier_gain,     reference_voltage,
-            gap,               integration_rate, measurement_step,   innovation_kd,
-            fault_threshold};
+            star_tracker_latency, readout_noise, random_walk,        amplifier_gain,
+            reference_voltage, gap,              integration_rate,   measurement_step,
+            innovation_kd,     fault_threshold};
   }
 };
 
@@ -139,6 +144,10 @@ inline constexpr ConfigLimits kConfigLimits = {
                            "5, 5, 30",
                            "a star tracker is good to arcseconds; at 1 deg (120 times the "
                            "paper's worst axis) it carries no information on arcsec-level drift"},
+    .star_tracker_latency = {"starTracker.latencyS", -10.0, 10.0, "s",
+                             &config_limits_internal::Identity, "0 (the diagnosis reports it)",
+                             "star-tracker time tags err by milliseconds to a fraction of a "
+                             "second; 10 s is a clock fault, not a latency to correct"},
     .readout_noise = {"readoutNoiseArcsec", 0.0, 300.0, "arcsec", &RadToArcsec, "3",
                       "an ESG spin-axis readout is good to a few arcsec (3 in the paper); "
                       "300 arcsec is 100 times that"},

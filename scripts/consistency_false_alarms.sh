@@ -25,8 +25,10 @@ summarise() {  # calibrate --json on stdin -> "failing_tests alarms"
 import json, sys
 from datetime import datetime
 doc = json.load(sys.stdin)
+# An alarm is an alert an operator sees: MODEL_INCONSISTENT or FILTER_WIDENED (the
+# adaptive process noise, docs/physics.md), collapsed like the alerts of the service (30 min).
 times = [datetime.fromisoformat(e["time"].replace("Z", "+00:00"))
-         for e in doc["events"] if e["kind"] == "MODEL_INCONSISTENT"]
+         for e in doc["events"] if e["kind"] in ("MODEL_INCONSISTENT", "FILTER_WIDENED")]
 alarms = sum(1 for i, t in enumerate(times) if i == 0 or (t - times[i - 1]).total_seconds() >= 1800)
 print(len(times), alarms)'
 }

@@ -157,7 +157,6 @@ const std::set<std::string>& PassingToday() {
       "gyro2_readout_jump_calibration",
       "gyro1_drift_step_calibration",
       "gyro2_drift_step_calibration",
-      "gyro3_drift_step_calibration",
       "gyro1_reading_frozen_calibration",
       "gyro2_reading_frozen_calibration",
       "gyro3_reading_frozen_calibration",
