@@ -358,6 +358,10 @@ class EstimationSession {
   bool converged_ = false;
   ConsistencyMonitor consistency_;
   NoiseWidening widening_;
+  // The gyro the three-pair isolation named at the measurement step suspect_time_ with evidence
+  // below kImmediateIsolationStrength (D24): excluded if the next step names it again; 0: none.
+  int suspect_gyro_ = 0;
+  absl::Time suspect_time_ = absl::InfinitePast();
   // Body rate over the interval of the current frame [rad/s], set by Propagate for the star-tracker
   // latency correction of MeasurementUpdate (recomputed every frame: not in the checkpoint).
   Eigen::Vector3d body_rate_b_ = Eigen::Vector3d::Zero();

@@ -37,7 +37,8 @@ using Eigen::VectorXd;
 //   c (a count), the consistency monitor's state (c values, ConsistencyMonitor::ExportState).
 //   A session restored from it runs with the process noise as configured (not widened).
 // Version 3 (written): version 2's values, then w (a count) and the process-noise widening's
-//   state (w values, NoiseWidening::ExportState).
+//   state (w values, NoiseWidening::ExportState), then suspect_gyro and suspect_time (3) of the
+//   isolation's confirmation (D24).
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
@@ -105,6 +106,8 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   const std::vector<double> widening = widening_.ExportState();
   v.push_back(static_cast<double>(widening.size()));
   v.insert(v.end(), widening.begin(), widening.end());
+  v.push_back(suspect_gyro_);
+  put_time(suspect_time_);
   return c;
 }
 
@@ -250,6 +253,8 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
     }
     pos += n_widening;
+    s.suspect_gyro_ = get_int();
+    s.suspect_time_ = get_time();
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

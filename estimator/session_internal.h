@@ -11,6 +11,11 @@ namespace esg::estimator::session_internal {
 // Floors keep R positive definite when a configuration sets a noise to zero [rad].
 inline constexpr double kNoiseFloor = 0.01 * kRadPerArcsec;
 
+// Isolation evidence (largest exceeded mismatch over its allowed angle, or sqrt of a gyro's own
+// star-tracker chi-square over k_d^2) at or above which a gyro is excluded at once; below it the
+// next measurement step must name the same gyro (docs/decisions.md D24).
+inline constexpr double kImmediateIsolationStrength = 2.0;
+
 // A span in seconds, as the integrators take it.
 inline double Seconds(absl::Duration d) { return absl::ToDoubleSeconds(d); }
 

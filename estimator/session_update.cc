@@ -31,6 +31,7 @@ using Eigen::Quaterniond;
 using Eigen::Vector3d;
 using Eigen::VectorXd;
 
+using session_internal::kImmediateIsolationStrength;
 using session_internal::kNoiseFloor;
 
 absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
@@ -408,6 +409,29 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
                             d.excluded_gyro,
                             widening_.widened() ? "the filter runs widened, FILTER_WIDENED"
                                                 : "MODEL_INCONSISTENT",
+                            d.excluded_gyro, evidence)});
+        break;
+      }
+      // D24: evidence below twice the allowed angles (or a gyro's own star-tracker chi-square
+      // below 4 k_d^2) excludes only when the previous measurement step named the same gyro;
+      // until then the gyro is withheld. A readout jump of arcminutes exceeds at once.
+      const double strength =
+          d.decided_by_gyro_star
+              ? std::sqrt(test.gyro_star_nis[d.faulty_index] / test.gyro_star_fail)
+              : best;
+      const bool confirmed = suspect_gyro_ == d.excluded_gyro && suspect_time_ == last_update_time_;
+      if (strength < kImmediateIsolationStrength && !confirmed) {
+        suspect_gyro_ = d.excluded_gyro;
+        suspect_time_ = frame.time;
+        withheld_gyro = d.excluded_gyro;
+        report.events.push_back(Event{
+            Event::Kind::kFaultAmbiguous, frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
+            RadToArcsec(value), RadToArcsec(threshold), "arcsec",
+            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d with "
+                            "evidence %.2f times its threshold (below %.1f): gyro %d is withheld at "
+                            "this step and excluded if the next measurement step names it again. "
+                            "Evidence: %s",
+                            d.excluded_gyro, strength, kImmediateIsolationStrength,
                             d.excluded_gyro, evidence)});
         break;
       }

@@ -172,7 +172,6 @@ const std::set<std::string>& PassingToday() {
       "gyro2_readout_jump_orbital",
       "gyro3_readout_jump_orbital",
       "gyro1_drift_step_orbital",
-      "gyro2_drift_step_orbital",
       "gyro1_reading_frozen_orbital",
       "gyro2_reading_frozen_orbital",
       "gyro3_reading_frozen_orbital",

@@ -167,20 +167,34 @@ TEST(Session, CoefficientsWithinThreeSigmaOfTruthIn95PercentOf40Runs) {
 }
 
 TEST(Session, TransientEndsWithin8Hours) {
-  // The transient is over when every free coefficient's sigma has fallen below a quarter of its
-  // prior and its estimate is within 3 sigma of the truth. The paper reports 6-8 h; by 8 h of the
-  // calibration profile (orientation changed every 3 h) it must be over. The ratios sqrt(P/P0)
-  // themselves are reported in README (bench/experiment command there).
+  // The transient is over when every free coefficient's sigma has fallen well below its prior and
+  // its estimate is within 3 sigma of the truth. The paper reports 6-8 h; by 8 h of the
+  // calibration profile (orientation changed every 3 h) it must be over, and at 4 h it must not
+  // be (a filter whose covariance collapsed at once would pass an 8 h bound alone). Measured on
+  // these seeds (largest sqrt(P/P0) over every free coefficient): see kBound8h / kRatio4hTo8h.
+  constexpr double kBound8h = 0.12;     // measured 0.092-0.095 (seeds 11-13)
+  constexpr double kRatio4hTo8h = 1.5;  // measured 0.19-0.45 at 4 h: 2.1-4.7 times the 8 h value
   for (uint64_t seed : {11, 12, 13}) {
     const SimulationSpec spec = PaperFlight(seed, 8.0);
     auto sim = Simulate(spec);
     ASSERT_THAT(sim, IsOk());
     EstimationSession session = *EstimationSession::Create(spec.config, Model("10+11"));
-    auto result = RunCalibration(spec.config, Model("10+11"), sim->recording.frames, {}, &session);
-    ASSERT_THAT(result, IsOk());
-    for (const GyroEstimate& g : result->gyros) {
+    double worst_4h = 0.0;
+    for (const TelemetryFrame& frame : sim->recording.frames) {
+      ASSERT_THAT(session.AddFrame(frame), IsOk());
+      if (frame.time - spec.start == absl::Hours(4)) {
+        for (const GyroEstimate& g : session.Gyros()) {
+          for (const auto& [index, ratio] : session.RelativeSigma(g.id)) {
+            worst_4h = std::max(worst_4h, ratio);
+          }
+        }
+      }
+    }
+    double worst_8h = 0.0;
+    for (const GyroEstimate& g : session.Gyros()) {
       for (const auto& [index, ratio] : session.RelativeSigma(g.id)) {
-        EXPECT_LE(ratio, 0.25) << "seed " << seed << " gyro " << g.id << " " << CoefficientName(index);
+        worst_8h = std::max(worst_8h, ratio);
+        EXPECT_LE(ratio, kBound8h) << "seed " << seed << " gyro " << g.id << " " << CoefficientName(index);
       }
       const DriftVector truth = sim->true_coefficients[g.id - 1]->AsVector();
       const DriftVector est = g.coefficients.AsVector(), sigma = g.sigma.AsVector();
@@ -190,6 +204,9 @@ TEST(Session, TransientEndsWithin8Hours) {
         }
       }
     }
+    std::printf("seed %llu: largest sqrt(P/P0) %.3f at 4 h, %.3f at 8 h\n",
+                static_cast<unsigned long long>(seed), worst_4h, worst_8h);
+    EXPECT_GT(worst_4h, kRatio4hTo8h * worst_8h) << "seed " << seed;
   }
 }
 
@@ -627,6 +644,50 @@ TEST(Session, ConfiguredStarTrackerLatencyIsCorrectedWithTheMeasuredBodyRate) {
   EXPECT_LE(corrected.worst_sigma, 3.0);
   EXPECT_LT(corrected.rejected, uncorrected.rejected);
   EXPECT_LT(uncorrected.rejected, wrong_sign.rejected);
+}
+
+// The gap experiment's claim (the paper's Fig. 7/8, README "Results against the paper"): after
+// 24 h of calibration on a mixed-profile flight whose gyros have displaced rotors (as
+// deploy/examples/scenarios/paper_fig78_low_rw.json: 0.0005 deg/h/sqrt(h) random walk), model
+// (10)+(11) drifts across a 24 h gap at least 3 times slower than model (1)+(11), which lacks the
+// rotor-displacement terms; and model (1)+(11) excludes no healthy gyro (D20, D21).
+TEST(Session, GapExperimentModelTenIsAtLeastThreeTimesBetterThanModelOne) {
+  for (uint64_t seed : {1, 2}) {
+    SimulationSpec spec;
+    spec.config = testing::PaperConfig();
+    spec.config.random_walk = DegPerHourSqrtHourToSi(0.0005);
+    spec.duration = HoursToSeconds(48.0);
+    spec.seed = seed;
+    spec.profile = *MakeNamedProfile("mixed", spec.duration, seed);
+    const double um = 1e-6;
+    spec.gyros[0].rotor_displacement_k = Eigen::Vector3d(0.8, -1.0, 0.6) * um;
+    spec.gyros[1].rotor_displacement_k = Eigen::Vector3d(0.5, -1.0, 0.3) * um;
+    spec.gyros[2].rotor_displacement_k = Eigen::Vector3d(-0.9, 0.4, 0.8) * um;
+    spec.star_tracker.outlier_probability = 0.01;
+    spec.star_tracker.outlier_size = ArcminToRad(1.0);
+    auto sim = Simulate(spec);
+    ASSERT_THAT(sim, IsOk());
+    const absl::Time gap_start = spec.start + absl::Hours(24);
+    auto model_1 = RunGap(spec.config, Model("1+11"), sim->recording.frames, gap_start);
+    auto model_10 = RunGap(spec.config, Model("10+11"), sim->recording.frames, gap_start);
+    ASSERT_THAT(model_1, IsOk());
+    ASSERT_THAT(model_10, IsOk());
+    const double rate_1 = RadPerSecToDegPerHour(model_1->drift_rate);
+    const double rate_10 = RadPerSecToDegPerHour(model_10->drift_rate);
+    std::printf("seed %llu: gap drift rate model (1)+(11) %.4f deg/h, (10)+(11) %.4f deg/h\n",
+                static_cast<unsigned long long>(seed), rate_1, rate_10);
+    EXPECT_GE(rate_1, 3.0 * rate_10) << "seed " << seed;
+    std::string isolations;
+    for (const Event& e : model_1->calibration.events) {
+      if (e.kind == Event::Kind::kWorkingPairFault || e.kind == Event::Kind::kReservePairFault) {
+        absl::StrAppend(&isolations, "\n  ", absl::FormatTime(e.time), " ", e.message);
+      }
+    }
+    for (const GyroEstimate& g : model_1->calibration.gyros) {
+      EXPECT_FALSE(g.faulty) << "seed " << seed << " model (1)+(11) excluded healthy gyro " << g.id
+                             << isolations;
+    }
+  }
 }
 
 TEST(Session, CheckpointResumesBitForBit) {
