@@ -25,7 +25,7 @@ for model in 1+11 10+11; do
   eval "rate_${model//+/_}=$rate"
 done
 gnuplot <<GP
-set terminal pngcairo size 1100,760 font "DejaVu Sans,11"
+set terminal pngcairo size 1100,760 font "DejaVu Sans,11" noenhanced
 set output "docs/fig78_gap_error.png"
 set datafile separator ","
 set multiplot layout 2,1 title "Attitude error in inertial axes across a 24 h gap without the star tracker (seed $seed, $(basename "$scenario"))"
