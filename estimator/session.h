@@ -276,6 +276,9 @@ class EstimationSession {
   // the star tracker (when this step accepted it) or the output pair, its block appended to the
   // state with the configured prior; a GYRO_STARTED event.
   void StartSwitchedOnGyros(const TelemetryFrame& frame, StepReport& report);
+  // The prior of gyros_[i]'s residual drift (eq. (11)), free coefficients and misalignment,
+  // written into the diagonal blocks of P (layout_ indices).
+  void SetDriftAndMisalignmentPrior(int i, Eigen::MatrixXd& P) const;
 
   // session_propagation.cc
   absl::Status Propagate(const TelemetryFrame& frame);

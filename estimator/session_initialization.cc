@@ -69,27 +69,7 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
   // Prior covariance of the coefficients, residual drifts and misalignments, then the spin axes.
   const int n = layout_.size();
   P_ = MatrixXd::Zero(n, n);
-  const double sigma_rw0 =
-      options_.residual_drift_sigma >= 0.0
-          ? options_.residual_drift_sigma
-          : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
-  for (int i = 0; i < gyro_count(); ++i) {
-    const GyroConfig& gc = *config_.FindGyro(gyros_[i].id);
-    if (layout_.has_drift()) {
-      const int d = layout_.Drift(i);
-      P_.block<2, 2>(d, d) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
-    }
-    const DriftVector sigma_theta = gc.model_sigma.AsVector();
-    const std::vector<int>& free = layout_.FreeCoefficients(i);
-    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
-      const int idx = layout_.Theta(i) + j;
-      P_(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
-    }
-    if (layout_.HasPhi(i)) {
-      const int po = layout_.Phi(i);
-      P_.block<3, 3>(po, po) = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
-    }
-  }
+  for (int i = 0; i < gyro_count(); ++i) SetDriftAndMisalignmentPrior(i, P_);
   SpinAxesFromStarTracker(C_in_b);
   P0_ = P_;
   initialized_ = true;
@@ -97,6 +77,28 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
   last_update_time_ = frame.time;
   state_ = SessionState::kCalibrating;
   return CheckCovariance(P_);
+}
+
+void EstimationSession::SetDriftAndMisalignmentPrior(int i, MatrixXd& P) const {
+  const GyroConfig& gc = *config_.FindGyro(gyros_[i].id);
+  if (layout_.has_drift()) {
+    const double sigma_rw0 =
+        options_.residual_drift_sigma >= 0.0
+            ? options_.residual_drift_sigma
+            : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
+    const int d = layout_.Drift(i);
+    P.block<2, 2>(d, d) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
+  }
+  const DriftVector sigma_theta = gc.model_sigma.AsVector();
+  const std::vector<int>& free = layout_.FreeCoefficients(i);
+  for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+    const int idx = layout_.Theta(i) + j;
+    P(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
+  }
+  if (layout_.HasPhi(i)) {
+    const int po = layout_.Phi(i);
+    P.block<3, 3>(po, po) = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
+  }
 }
 
 void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepReport& report) {
@@ -138,27 +140,11 @@ void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepRe
     MatrixXd P = MatrixXd::Zero(n, n), P0 = MatrixXd::Zero(n, n);
     P.topLeftCorner(old_n, old_n) = P_;
     P0.topLeftCorner(old_n, old_n) = P0_;
-    // The prior of a gyro that starts uncalibrated: the configured coefficient sigmas, the
-    // residual drift of Initialize, the misalignment sigma; its spin axis errs by the
-    // misalignment, the attitude it was rebuilt with and the readout (a diagonal bound: its
-    // correlation with the other gyros through that attitude is left out).
-    const double sigma_rw0 =
-        options_.residual_drift_sigma >= 0.0
-            ? options_.residual_drift_sigma
-            : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
-    if (layout_.has_drift()) {
-      P.block<2, 2>(layout_.Drift(i), layout_.Drift(i)) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
-    }
-    const DriftVector sigma_theta = gc.model_sigma.AsVector();
-    const std::vector<int>& free = layout_.FreeCoefficients(i);
-    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
-      const int idx = layout_.Theta(i) + j;
-      P(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
-    }
-    if (layout_.HasPhi(i)) {
-      P.block<3, 3>(layout_.Phi(i), layout_.Phi(i)) =
-          gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
-    }
+    // The prior of a gyro that starts uncalibrated: that of Initialize for its coefficients,
+    // residual drift and misalignment; its spin axis errs by the misalignment, the attitude it
+    // was rebuilt with and the readout (a diagonal bound: its correlation with the other gyros
+    // through that attitude is left out).
+    SetDriftAndMisalignmentPrior(i, P);
     const double var_h = gc.misalignment_sigma * gc.misalignment_sigma +
                          sigma_att_b.squaredNorm() + sigma_r * sigma_r;
     P.block<2, 2>(layout_.SpinAxis(i), layout_.SpinAxis(i)) = var_h * Matrix2d::Identity();
