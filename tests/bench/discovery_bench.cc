@@ -11,8 +11,10 @@
 // (scripts/confusion_matrix.sh). Takes a few minutes.
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <map>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "benchmark/benchmark.h"
@@ -24,11 +26,21 @@
 namespace esg::estimator::discovery {
 namespace {
 
+// The estimator starts no threads: the bench lends it options.threads, the calling one included,
+// as esg diagnose does.
+void RunOnThreads(int count, const std::function<void(int)>& task) {
+  std::vector<std::thread> helpers;
+  for (int i = 1; i < count; ++i) helpers.emplace_back(task, i);
+  task(0);
+  for (std::thread& t : helpers) t.join();
+}
+
 void BM_Diagnose30h(benchmark::State& state) {
   const SimulationSpec spec = ::esg::testing::DiscoveryScenario("rotor_displacement", 1, 30.0);
   const SimulationResult sim = *Simulate(spec);
   DiagnoseOptions options;
   options.threads = static_cast<int>(state.range(0));
+  options.run_parallel = RunOnThreads;
   int runs = 0;
   for (auto _ : state) {
     auto report = Diagnose(spec.config, sim.recording.frames, options);
@@ -84,7 +96,9 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
       for (int seed = 1; seed <= seeds; ++seed) {
         const SimulationSpec spec = ::esg::testing::DiscoveryScenario(truth, 100 + seed, 30.0);
         const SimulationResult sim = *Simulate(spec);
-        auto report = Diagnose(spec.config, sim.recording.frames, DiagnoseOptions{});
+        DiagnoseOptions options;  // default threads, lent as esg diagnose does
+        options.run_parallel = RunOnThreads;
+        auto report = Diagnose(spec.config, sim.recording.frames, options);
         if (!report.ok()) {
           state.SkipWithError(std::string(report.status().message()).c_str());
           return;
