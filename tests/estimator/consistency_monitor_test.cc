@@ -236,20 +236,9 @@ TEST(ConsistencyMonitor, CorruptStateIsDataLossNamingTheFieldAndLeavesTheMonitor
 // The paper's calibration flight (as in session_test.cc) with the drift random walk of
 // deploy/examples/rdk1.json (0.0015 deg/h/sqrt(h)) on in the simulator and the configuration.
 SimulationSpec RandomWalkFlight(uint64_t seed, double hours) {
-  SimulationSpec spec;
-  spec.config = testing::PaperConfig();
+  SimulationSpec spec = testing::PaperFlight(seed, hours);
   spec.config.random_walk = DegPerHourSqrtHourToSi(0.0015);
-  spec.duration = HoursToSeconds(hours);
-  spec.seed = seed;
-  spec.profile = *MakeNamedProfile("calibration", spec.duration, seed);
-  for (int i = 0; i < 4; ++i) {
-    DriftCoefficients d = spec.config.gyros[i].model;
-    d.k0 += DegPerHourToRadPerSec(0.1 * (i % 2 ? 1 : -1));
-    spec.gyros[i].drift = d;
-  }
-  spec.gyros[0].rotor_displacement_k = Eigen::Vector3d(1.0e-6, -1.5e-6, 0.8e-6);
-  spec.gyros[1].rotor_displacement_k = Eigen::Vector3d(-0.7e-6, 0.5e-6, 1.2e-6);
-  spec.gyros[2].rotor_displacement_k = Eigen::Vector3d(0.5e-6, 1.0e-6, -1.0e-6);
+  spec.gyros[1].misalignment_b = Eigen::Vector3d::Zero();
   return spec;
 }
 

@@ -44,28 +44,9 @@ namespace {
 using ::esg::estimator::discovery::ChiSquareCdf;
 using ::esg::estimator::discovery::ChiSquareQuantile;
 using ::esg::testing::IsOk;
+using ::esg::testing::PaperFlight;
 
 constexpr double kGapHours = 2.0;
-
-// The paper's calibration flight as session_test.cc's PaperFlight: a-priori k0 wrong by 0.1 deg/h,
-// rotor displacements of paper size, gyro 2 misaligned by tens of arcsec.
-SimulationSpec PaperFlight(uint64_t seed, double hours) {
-  SimulationSpec spec;
-  spec.config = testing::PaperConfig();
-  spec.duration = HoursToSeconds(hours);
-  spec.seed = seed;
-  spec.profile = *MakeNamedProfile("calibration", spec.duration, seed);
-  for (int i = 0; i < 4; ++i) {
-    DriftCoefficients d = spec.config.gyros[i].model;
-    d.k0 += DegPerHourToRadPerSec(0.1 * (i % 2 ? 1 : -1));
-    spec.gyros[i].drift = d;
-  }
-  spec.gyros[0].rotor_displacement_k = Eigen::Vector3d(1.0e-6, -1.5e-6, 0.8e-6);
-  spec.gyros[1].rotor_displacement_k = Eigen::Vector3d(-0.7e-6, 0.5e-6, 1.2e-6);
-  spec.gyros[2].rotor_displacement_k = Eigen::Vector3d(0.5e-6, 1.0e-6, -1.0e-6);
-  spec.gyros[1].misalignment_b = Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-30), ArcsecToRad(15));
-  return spec;
-}
 
 struct RunNees {
   uint64_t seed = 0;

@@ -31,32 +31,12 @@ namespace esg::estimator {
 namespace {
 
 using ::esg::testing::IsOk;
+using ::esg::testing::PaperFlight;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
 using Channel = ConsistencyMonitor::Channel;
 
 constexpr int kNoStarTrackerFrames = 5;  // the first frames carry no star-tracker sample
-
-// The paper's calibration flight (as session_test.cc's PaperFlight): a-priori k0 wrong by
-// 0.1 deg/h, rotor displacements of paper size, gyro 2 misaligned by tens of arcsec.
-SimulationSpec Flight(uint64_t seed, double hours) {
-  SimulationSpec spec;
-  spec.config = testing::PaperConfig();
-  spec.duration = HoursToSeconds(hours);
-  spec.seed = seed;
-  spec.profile = *MakeNamedProfile("calibration", spec.duration, seed);
-  for (int i = 0; i < 4; ++i) {
-    DriftCoefficients d = spec.config.gyros[i].model;
-    d.k0 += DegPerHourToRadPerSec(0.1 * (i % 2 ? 1 : -1));
-    spec.gyros[i].drift = d;
-  }
-  spec.gyros[0].rotor_displacement_k = Eigen::Vector3d(1.0e-6, -1.5e-6, 0.8e-6);
-  spec.gyros[1].rotor_displacement_k = Eigen::Vector3d(-0.7e-6, 0.5e-6, 1.2e-6);
-  spec.gyros[2].rotor_displacement_k = Eigen::Vector3d(0.5e-6, 1.0e-6, -1.0e-6);
-  spec.gyros[1].misalignment_b =
-      Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-30), ArcsecToRad(15));
-  return spec;
-}
 
 // One flight through every phase, 60 s frames: no star tracker in frames 0-4 (NO_DATA), an
 // outage at 1.5-2 h (AUTONOMOUS), a burst of 14 cross-boresight outliers of 5 arcmin at 3 h (a
@@ -70,7 +50,7 @@ struct Scenario {
 
 Scenario AllPhases() {
   Scenario s;
-  s.spec = Flight(23, 8.0);
+  s.spec = PaperFlight(23, 8.0);
   s.spec.star_tracker.outages = {{HoursToSeconds(1.5), HoursToSeconds(2.0)}};
   s.spec.star_tracker.outlier_burst =
       StarTrackerOutlierBurst{HoursToSeconds(3.0), 14, ArcminToRad(5)};
@@ -438,7 +418,7 @@ TEST(SessionCheckpoint, ConsistencyMonitorMidWindowResumesBitForBit) {
 // restored session raises at the same step with the same numbers.
 TEST(SessionCheckpoint, PendingModelInconsistencyIsRaisedAtTheSameStepAfterARestore) {
   Scenario s;
-  s.spec = Flight(3, 12.0);
+  s.spec = PaperFlight(3, 12.0);
   s.spec.config.random_walk = DegPerHourSqrtHourToSi(0.0015);
   s.spec.gyros[1].misalignment_b.setZero();
   auto sim = Simulate(s.spec);
@@ -467,7 +447,7 @@ TEST(SessionCheckpoint, PendingModelInconsistencyIsRaisedAtTheSameStepAfterARest
 // reset instead: the flags of version 2 are needed.
 TEST(SessionCheckpoint, BeforeTheStarTrackerIsAnchoredResumesBitForBit) {
   Scenario s;
-  s.spec = Flight(5, 2.0);
+  s.spec = PaperFlight(5, 2.0);
   s.spec.star_tracker.outlier_burst =
       StarTrackerOutlierBurst{60.0 * (kNoStarTrackerFrames + 2), 14, ArcminToRad(10)};
   auto sim = Simulate(s.spec);

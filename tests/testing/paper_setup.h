@@ -4,6 +4,9 @@
 #ifndef ESG_TESTS_TESTING_PAPER_SETUP_H_
 #define ESG_TESTS_TESTING_PAPER_SETUP_H_
 
+#include <cstdint>
+
+#include "estimator/attitude_profile.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/spacecraft_config.h"
@@ -38,6 +41,29 @@ inline estimator::SpacecraftConfig PaperConfig(bool estimate_c = true,
   c.readout_noise = ArcsecToRad(3);
   c.random_walk = DegPerHourSqrtHourToSi(0.001);
   return c;
+}
+
+// The paper's calibration flight (section 3) simulated on PaperConfig(): the a-priori k0 of each
+// gyro wrong by 0.1 deg/h (alternating sign), rotor displacements of paper size in gyros 1-3, gyro
+// 2 misaligned by (20, -30, 15) arcsec, `hours` of the named attitude profile.
+inline estimator::SimulationSpec PaperFlight(uint64_t seed, double hours,
+                                             const char* profile = "calibration") {
+  using namespace esg::estimator;
+  SimulationSpec spec;
+  spec.config = PaperConfig();
+  spec.duration = HoursToSeconds(hours);
+  spec.seed = seed;
+  spec.profile = *MakeNamedProfile(profile, spec.duration, seed);
+  for (int i = 0; i < 4; ++i) {
+    DriftCoefficients d = spec.config.gyros[i].model;
+    d.k0 += DegPerHourToRadPerSec(0.1 * (i % 2 ? 1 : -1));
+    spec.gyros[i].drift = d;
+  }
+  spec.gyros[0].rotor_displacement_k = Eigen::Vector3d(1.0e-6, -1.5e-6, 0.8e-6);
+  spec.gyros[1].rotor_displacement_k = Eigen::Vector3d(-0.7e-6, 0.5e-6, 1.2e-6);
+  spec.gyros[2].rotor_displacement_k = Eigen::Vector3d(0.5e-6, 1.0e-6, -1.0e-6);
+  spec.gyros[1].misalignment_b = Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-30), ArcsecToRad(15));
+  return spec;
 }
 
 }  // namespace esg::testing
