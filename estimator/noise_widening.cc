@@ -62,8 +62,8 @@ std::optional<NoiseWidening::Decision> NoiseWidening::Add(double nis, int dof,
   const bool exceeded = d.nis_sum > d.widen_threshold;
   const bool persistent = exceeded && previous_exceeded_;
   previous_exceeded_ = exceeded;
+  const bool from_configured = added_variance_ == 0.0;
   if (persistent && added_variance_ < max_variance_) {
-    if (added_variance_ == 0.0) trigger_ = d;
     added_variance_ =
         std::min(added_variance_ + (ratio - 1.0) * mean_variance_window, max_variance_);
     d.change = Decision::Change::kWidened;
@@ -74,8 +74,11 @@ std::optional<NoiseWidening::Decision> NoiseWidening::Add(double nis, int dof,
     d.change = Decision::Change::kNarrowed;
   }
   d.added_variance = added_variance_;
-  if (added_variance_ == 0.0) trigger_.reset();
-  if (trigger_.has_value() && trigger_->added_variance == 0.0) trigger_->added_variance = added_variance_;
+  if (added_variance_ == 0.0) {
+    trigger_.reset();
+  } else if (from_configured) {
+    trigger_ = d;
+  }
   window_.clear();
   return d;
 }

@@ -295,6 +295,10 @@ class EstimationSession {
                              const Eigen::Matrix3d& S_st, StepReport& report, bool& st_available,
                              bool& st_agrees_with_pairs, int& withheld_gyro);
   void ApplyCorrection(const Eigen::VectorXd& dx);
+  // D21: the configured model is known not to fit the data (the consistency monitor's latest
+  // test failed, or the process noise is widened), and which of the two says so.
+  bool ModelKnownNotToFit() const;
+  const char* ModelMisfitEvidence() const;
 
   // session_attitude.cc
   // Attitude of a pair from predicted h_in and the given case-frame readings (nullopt if either

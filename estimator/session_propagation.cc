@@ -56,6 +56,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     h_k_begin[i] = gyros_[i].h_k_last;
     if (gyros_[i].has_reading) h_k_end[i] = frame.gyros[gyros_[i].id - 1]->h_k.normalized();
   }
+  body_rate_b_ = Vector3d::Zero();
   if (!gyros_[ia].has_reading || !gyros_[ib].has_reading) {
     // No pair has fresh readings: every gyro holds its last reading (the output is then not
     // valid, OutputAttitude).
@@ -73,22 +74,17 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
                                     .normalized()
                               : h_k_begin[i];
     }
-  }
-  if (config_.star_tracker.latency != 0.0 && span > 0.0 && gyros_[ia].has_reading &&
-      gyros_[ib].has_reading) {
-    // The body rate over the interval, from the attitude pair's attitudes at both ends (for the
-    // star-tracker latency correction of the measurement update): q_end = q_begin (x) Exp(w_b T).
-    const auto q_begin = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
-                                      gyros_[ia].C_b_k() * h_k_begin[ia],
-                                      gyros_[ib].C_b_k() * h_k_begin[ib]);
-    const auto q_end = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
-                                    gyros_[ia].C_b_k() * h_k_end[ia],
-                                    gyros_[ib].C_b_k() * h_k_end[ib]);
-    body_rate_b_ = q_begin.ok() && q_end.ok()
-                       ? Vector3d(LogQuaternion(q_begin->conjugate() * *q_end) / span)
-                       : Vector3d::Zero();
-  } else {
-    body_rate_b_ = Vector3d::Zero();
+    if (config_.star_tracker.latency != 0.0 && span > 0.0) {
+      // The body rate over the interval, from the attitude pair's attitudes at both ends (for
+      // the star-tracker latency correction of the measurement update):
+      // q_end = q_begin (x) Exp(w_b T).
+      const auto q_begin = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
+                                        gyros_[ia].C_b_k() * h_k_begin[ia],
+                                        gyros_[ib].C_b_k() * h_k_begin[ib]);
+      if (q_begin.ok() && q_end.ok()) {
+        body_rate_b_ = LogQuaternion(q_begin->conjugate() * *q_end) / span;
+      }
+    }
   }
   double max_turn = 0.0;  // largest angle a reading turns over the interval [rad]
   for (size_t i = 0; i < gyros_.size(); ++i) {

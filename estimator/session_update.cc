@@ -319,6 +319,14 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   return absl::OkStatus();
 }
 
+bool EstimationSession::ModelKnownNotToFit() const {
+  return consistency_.inconsistent() || widening_.widened();
+}
+
+const char* EstimationSession::ModelMisfitEvidence() const {
+  return widening_.widened() ? "the filter runs widened, FILTER_WIDENED" : "MODEL_INCONSISTENT";
+}
+
 bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
                                               bool st_present, const Quaterniond& q_st,
                                               const Matrix3d& S_st, StepReport& report,
@@ -395,7 +403,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     case Isolation::kNone:
       break;
     case Isolation::kGyro: {
-      if (consistency_.inconsistent() || widening_.widened()) {
+      if (ModelKnownNotToFit()) {
         // D21: while the configured model is known not to explain the data (the consistency
         // monitor's latest test failed, or the process noise is widened), mismatches are as much
         // the model's as a gyro's: the suspect is not excluded, only withheld at this step.
@@ -407,8 +415,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
                             "configured model does not explain the data (%s): gyro %d is not "
                             "excluded, its measurements are withheld at this step. Evidence: %s",
                             d.excluded_gyro,
-                            widening_.widened() ? "the filter runs widened, FILTER_WIDENED"
-                                                : "MODEL_INCONSISTENT",
+                            ModelMisfitEvidence(),
                             d.excluded_gyro, evidence)});
         break;
       }
@@ -469,7 +476,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
       break;
     }
     case Isolation::kStarTracker:
-      if (consistency_.inconsistent() || widening_.widened()) {
+      if (ModelKnownNotToFit()) {
         // D21: while the model is known not to fit, three pairs that agree with each other and
         // not with the star tracker may share the model's error (a drift the model lacks in
         // every gyro); the star tracker stays subject to eq. (14) only.
@@ -479,8 +486,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
             absl::StrFormat("fault isolation with three pairs (eq. (12)) points at the star "
                             "tracker, but the configured model does not explain the data (%s): "
                             "its measurements are kept, subject to eq. (14). Evidence: %s",
-                            widening_.widened() ? "the filter runs widened, FILTER_WIDENED"
-                                                : "MODEL_INCONSISTENT",
+                            ModelMisfitEvidence(),
                             evidence)});
         break;
       }
