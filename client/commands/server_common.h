@@ -1,8 +1,8 @@
 // Helpers shared by the server verbs of `esg` (configure, replay, status, predict, alerts,
 // history; docs/cli.md): connecting with the global options, the one error format
 // `esg VERB: <CODE>: <message>` (exit 1), UTC times in RFC 3339 at the edges (conventions.h §9),
-// names of the esg.v1 enums without their prefixes, and the JSON forms of the service's messages
-// (lowerCamelCase keys, units in the key as in the configuration JSON, numbers as numbers).
+// names of the esg.v1 enums without their prefixes for tables, and the JSON forms of the service's
+// messages. --format, the JSON mapping and the time format are in client/output_format.h.
 #ifndef ESG_CLIENT_COMMANDS_SERVER_COMMON_H_
 #define ESG_CLIENT_COMMANDS_SERVER_COMMON_H_
 
@@ -14,14 +14,13 @@
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
 #include "client/esg_client.h"
+#include "client/output_format.h"
 #include "esg/v1/attitude.pb.h"
 #include "esg/v1/estimation_service.pb.h"
 #include "google/protobuf/timestamp.pb.h"
 #include "nlohmann/json.hpp"
 
 namespace esg::client {
-
-using Json = nlohmann::ordered_json;
 
 // Exit codes of every verb (commands.h).
 inline constexpr int kExitOk = 0;
@@ -39,10 +38,7 @@ int ReportRpcError(const char* verb, const absl::Status& status, const GlobalOpt
 // Prints "esg VERB: <message>" on stderr and returns kExitBadArguments.
 int ReportBadArgument(const char* verb, const std::string& message);
 
-// RFC 3339 UTC with `Z` and as many fractional digits as needed ("2019-03-01T00:00:00Z").
-std::string FormatUtc(absl::Time time);
-// The same for a wire timestamp; "-" when it is absent.
-std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present = true);
+// Times are printed with FormatUtc of output_format.h (RFC 3339 UTC, `Z`, milliseconds).
 // RFC 3339 ("2019-03-01T00:00:00Z", "...+03:00", fractional seconds allowed); nullopt otherwise.
 std::optional<absl::Time> ParseUtc(const std::string& text);
 
@@ -51,7 +47,7 @@ std::string StateName(esg::v1::SessionState state);
 std::string SeverityName(esg::v1::AlertSeverity severity);
 std::string ReasonName(esg::v1::AlertReason reason);
 
-// JSON forms. Times are RFC 3339 strings (absent: null).
+// JSON forms: the proto JSON mapping (ProtoToJson of output_format.h).
 Json SessionJson(const esg::v1::SessionInfo& session);
 Json AttitudeJson(const esg::v1::AttitudeSample& sample);
 Json AlertJson(const esg::v1::Alert& alert);

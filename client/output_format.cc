@@ -1,0 +1,173 @@
+// Output formats of the CLI (see output_format.h).
+#include "client/output_format.h"
+
+#include <cstdio>
+#include <iostream>
+#include <map>
+#include <utility>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "google/protobuf/descriptor.h"
+#include "google/protobuf/util/json_util.h"
+#include "google/protobuf/util/time_util.h"
+
+namespace esg::client {
+namespace {
+
+using google::protobuf::Descriptor;
+using google::protobuf::FieldDescriptor;
+using google::protobuf::Message;
+using google::protobuf::Reflection;
+
+bool IsTimestamp(const Descriptor* d) { return d->full_name() == "google.protobuf.Timestamp"; }
+
+std::string TimestampText(const Message& m) {
+  google::protobuf::Timestamp t;
+  t.CopyFrom(m);
+  return FormatUtc(t);
+}
+
+// Rewrites the Timestamp fields of `json` (MessageToJsonString's form of `message`) with
+// FormatUtc, recursing into nested and repeated messages. Maps of messages are left alone (the
+// service's messages have none with timestamps).
+void FixTimestamps(const Message& message, Json& json) {
+  if (!json.is_object()) return;
+  const Descriptor* descriptor = message.GetDescriptor();
+  const Reflection* reflection = message.GetReflection();
+  for (int i = 0; i < descriptor->field_count(); ++i) {
+    const FieldDescriptor* field = descriptor->field(i);
+    if (field->cpp_type() != FieldDescriptor::CPPTYPE_MESSAGE || field->is_map()) continue;
+    auto it = json.find(field->json_name());
+    if (it == json.end()) continue;
+    const bool timestamp = IsTimestamp(field->message_type());
+    if (field->is_repeated()) {
+      if (!it->is_array()) continue;
+      const int n = reflection->FieldSize(message, field);
+      for (int k = 0; k < n && k < static_cast<int>(it->size()); ++k) {
+        const Message& element = reflection->GetRepeatedMessage(message, field, k);
+        if (timestamp) {
+          (*it)[k] = TimestampText(element);
+        } else {
+          FixTimestamps(element, (*it)[k]);
+        }
+      }
+    } else if (reflection->HasField(message, field)) {
+      const Message& value = reflection->GetMessage(message, field);
+      if (timestamp) {
+        *it = TimestampText(value);
+      } else {
+        FixTimestamps(value, *it);
+      }
+    }
+  }
+}
+
+std::string CsvCell(const Json& value) {
+  std::string text;
+  if (value.is_null()) return text;
+  text = value.is_string() ? value.get<std::string>() : value.dump();
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) {
+    if (c == '"') quoted += '"';
+    quoted += c;
+  }
+  return quoted + "\"";
+}
+
+void Flatten(const std::string& prefix, const Json& value,
+             std::vector<std::pair<std::string, Json>>& out) {
+  if (value.is_object()) {
+    for (const auto& [key, child] : value.items()) {
+      Flatten(prefix.empty() ? key : absl::StrCat(prefix, ".", key), child, out);
+    }
+  } else if (value.is_array()) {
+    for (size_t i = 0; i < value.size(); ++i) {
+      Flatten(absl::StrCat(prefix, "[", i, "]"), value[i], out);
+    }
+  } else {
+    out.emplace_back(prefix.empty() ? "value" : prefix, value);
+  }
+}
+
+}  // namespace
+
+void AddFormatOption(CLI::App* cmd, OutputFormat* format, const std::string& json_note) {
+  const std::map<std::string, OutputFormat> names = {
+      {"table", OutputFormat::kTable}, {"json", OutputFormat::kJson}, {"csv", OutputFormat::kCsv}};
+  std::string help =
+      "output: table (text), json (one document, the proto JSON mapping) or csv (a header, "
+      "then one row per record)";
+  if (!json_note.empty()) absl::StrAppend(&help, "; json ", json_note);
+  CLI::Option* option = cmd->add_option("--format", *format, help)
+                            ->transform(CLI::CheckedTransformer(names, CLI::ignore_case))
+                            ->default_str("table");
+  cmd->add_flag_callback(
+         "--json", [format] { *format = OutputFormat::kJson; }, "short for --format json")
+      ->excludes(option);
+}
+
+std::string FormatUtc(absl::Time time) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", time, absl::UTCTimeZone());
+}
+
+std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present) {
+  if (!present) return "-";
+  if (timestamp.seconds() < google::protobuf::util::TimeUtil::kTimestampMinSeconds ||
+      timestamp.seconds() > google::protobuf::util::TimeUtil::kTimestampMaxSeconds ||
+      timestamp.nanos() < 0 || timestamp.nanos() > 999999999) {
+    return "(invalid time)";
+  }
+  return FormatUtc(absl::FromUnixSeconds(timestamp.seconds()) +
+                    absl::Nanoseconds(timestamp.nanos()));
+}
+
+Json ProtoToJson(const google::protobuf::Message& message) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.always_print_primitive_fields = true;
+  options.preserve_proto_field_names = false;  // lowerCamelCase, the canonical mapping
+  std::string text;
+  if (!google::protobuf::util::MessageToJsonString(message, &text, options).ok()) {
+    // Only an out-of-range Timestamp or Duration fails; keep the rest readable.
+    return Json{{"error", "message not representable in JSON"}};
+  }
+  Json json = Json::parse(text, nullptr, /*allow_exceptions=*/false);
+  FixTimestamps(message, json);
+  return json;
+}
+
+void PrintJson(const Json& doc) { std::cout << doc.dump(2) << "\n" << std::flush; }
+
+void PrintJsonLine(const Json& doc) { std::cout << doc.dump() << "\n" << std::flush; }
+
+std::string CsvTable(const std::vector<Json>& records, const std::vector<std::string>& columns) {
+  std::vector<std::string> header;
+  std::map<std::string, size_t> column;
+  for (const std::string& c : columns) {
+    if (column.emplace(c, header.size()).second) header.push_back(c);
+  }
+  std::vector<std::vector<std::pair<std::string, Json>>> flat(records.size());
+  for (size_t r = 0; r < records.size(); ++r) {
+    Flatten("", records[r], flat[r]);
+    for (const auto& [key, value] : flat[r]) {
+      if (column.emplace(key, header.size()).second) header.push_back(key);
+    }
+  }
+  std::vector<std::string> header_cells;
+  for (const std::string& h : header) header_cells.push_back(CsvCell(Json(h)));
+  std::string out = absl::StrCat(absl::StrJoin(header_cells, ","), "\n");
+  for (const auto& row : flat) {
+    std::vector<std::string> cells(header.size());
+    for (const auto& [key, value] : row) cells[column.at(key)] = CsvCell(value);
+    absl::StrAppend(&out, absl::StrJoin(cells, ","), "\n");
+  }
+  return out;
+}
+
+void PrintCsv(const std::vector<Json>& records, const std::vector<std::string>& columns) {
+  std::cout << CsvTable(records, columns) << std::flush;
+}
+
+}  // namespace esg::client
