@@ -1,11 +1,18 @@
 // The queries of the service: session summaries, coefficient history, alert acknowledgement,
 // and the model-discrepancy diagnosis over archived telemetry (see estimation_core.h).
+#include <algorithm>
+#include <cstdint>
 #include <functional>
+#include <optional>
+#include <string>
 #include <thread>
 #include <utility>
 #include <vector>
 
+#include "absl/strings/escaping.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "absl/time/clock.h"
 #include "estimator/discovery/diagnose.h"
 #include "estimator/status_macros.h"
@@ -13,6 +20,7 @@
 #include "proto/diagnosis_json.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "storage/schema.h"
 #include "storage/service_queries.h"
 
 namespace esg::server {
@@ -116,14 +124,107 @@ absl::StatusOr<esg::v1::SessionInfo> EstimationCore::GetSession(const std::strin
   return Summarize(*sc);
 }
 
-absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions() {
-  std::vector<std::shared_ptr<Spacecraft>> all;
+namespace {
+
+// ---- Page tokens (AIP-158; docs/service.md "Paging") ----
+// A token is the URL-safe base64 of "esg1;<list>;<request fingerprint>;<position>": opaque to
+// clients, bound to the list and to the request's filters (a token of another request is
+// refused), and carrying the position after which the next page starts (keyset paging: a page
+// costs the same wherever it is, and records appended meanwhile are neither skipped nor
+// repeated).
+
+// FNV-1a, 64 bit: stable across processes and builds (absl::Hash is not).
+uint64_t Fingerprint(absl::string_view text) {
+  uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
+std::string EncodePageToken(absl::string_view list, absl::string_view filters,
+                            absl::string_view position) {
+  return absl::WebSafeBase64Escape(absl::StrCat("esg1;", list, ";",
+                                                absl::Hex(Fingerprint(filters)), ";", position));
+}
+
+// The position of a token of `list` for a request with `filters`; InvalidArgument naming
+// page_token otherwise.
+absl::StatusOr<std::string> DecodePageToken(absl::string_view token, absl::string_view list,
+                                            absl::string_view filters) {
+  std::string raw;
+  if (!absl::WebSafeBase64Unescape(token, &raw)) {
+    return absl::InvalidArgumentError("page_token: not a page token of this service");
+  }
+  const std::vector<std::string> parts = absl::StrSplit(raw, absl::MaxSplits(';', 3));
+  if (parts.size() != 4 || parts[0] != "esg1" || parts[1] != list) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("page_token: not a page token of ", list, " (take next_page_token of the "
+                     "previous response)"));
+  }
+  if (parts[2] != absl::StrCat(absl::Hex(Fingerprint(filters)))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "page_token: belongs to a ", list, " request with other filters (spacecraft, gyro or "
+        "time span); paging must repeat the first request"));
+  }
+  return parts[3];
+}
+
+// AIP-158 page size: 0 -> `default_size`, above `max_size` -> `max_size`, negative refused.
+absl::StatusOr<int64_t> PageSize(int32_t page_size, int64_t default_size, int64_t max_size) {
+  if (page_size < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("page_size: must be >= 0 (0: ", default_size, "), got ", page_size));
+  }
+  if (page_size == 0) return default_size;
+  return std::min<int64_t>(page_size, max_size);
+}
+
+// Integers of a token position "a:b:c"; InvalidArgument naming page_token when malformed.
+absl::StatusOr<std::vector<int64_t>> PositionIntegers(absl::string_view position, size_t count) {
+  const std::vector<absl::string_view> parts = absl::StrSplit(position, ':');
+  std::vector<int64_t> out(parts.size());
+  bool ok = parts.size() == count;
+  for (size_t i = 0; ok && i < parts.size(); ++i) ok = absl::SimpleAtoi(parts[i], &out[i]);
+  if (!ok) return absl::InvalidArgumentError("page_token: damaged (its position does not parse)");
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
+    const esg::v1::ListSessionsRequest& request) {
+  ASSIGN_OR_RETURN(const int64_t size,
+                   PageSize(request.page_size(), kDefaultSessionsPageSize, kMaxSessionsPageSize));
+  std::string after;
+  if (!request.page_token().empty()) {
+    ASSIGN_OR_RETURN(std::string position,
+                     DecodePageToken(request.page_token(), "ListSessions", ""));
+    if (!absl::WebSafeBase64Unescape(position, &after)) {
+      return absl::InvalidArgumentError("page_token: damaged (its position does not parse)");
+    }
+  }
+  std::vector<std::shared_ptr<Spacecraft>> page;
+  bool more = false;
   {
     absl::MutexLock lock(&registry_mu_);
-    for (auto& [id, sc] : registry_) all.push_back(sc);
+    // Ordered by spacecraft id; the page starts after the token's id.
+    auto it = request.page_token().empty() ? registry_.begin() : registry_.upper_bound(after);
+    for (; it != registry_.end(); ++it) {
+      if (static_cast<int64_t>(page.size()) == size) {
+        more = true;
+        break;
+      }
+      page.push_back(it->second);
+    }
   }
   esg::v1::ListSessionsResponse response;
-  for (auto& sc : all) *response.add_sessions() = Summarize(*sc);
+  for (auto& sc : page) *response.add_sessions() = Summarize(*sc);
+  if (more) {
+    response.set_next_page_token(
+        EncodePageToken("ListSessions", "", absl::WebSafeBase64Escape(page.back()->id)));
+  }
   return response;
 }
 
@@ -226,16 +327,49 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
     const esg::v1::ListDiagnosesRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  ASSIGN_OR_RETURN(const int64_t size, PageSize(request.page_size(), kDefaultDiagnosesPageSize,
+                                                kMaxDiagnosesPageSize));
+  int64_t after_id = 0;
+  if (!request.page_token().empty()) {
+    ASSIGN_OR_RETURN(std::string position, DecodePageToken(request.page_token(), "ListDiagnoses",
+                                                           request.spacecraft_id()));
+    ASSIGN_OR_RETURN(std::vector<int64_t> v, PositionIntegers(position, 1));
+    after_id = v[0];
+  }
   ASSIGN_OR_RETURN(std::vector<storage::DiagnosisRecord> records,
-                   storage_->diagnoses().List(request.spacecraft_id()));
+                   storage_->diagnoses().ListSummaries(request.spacecraft_id(), after_id, size + 1));
   esg::v1::ListDiagnosesResponse response;
-  for (const storage::DiagnosisRecord& r : records) *response.add_diagnoses() = DiagnosisResultFromRecord(r);
+  const bool more = static_cast<int64_t>(records.size()) > size;
+  if (more) records.resize(size);
+  for (const storage::DiagnosisRecord& r : records) {
+    *response.add_diagnoses() = DiagnosisResultFromRecord(r);
+  }
+  if (more) {
+    response.set_next_page_token(EncodePageToken("ListDiagnoses", request.spacecraft_id(),
+                                                 absl::StrCat(records.back().id)));
+  }
   return response;
+}
+
+absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::GetDiagnosis(
+    const esg::v1::GetDiagnosisRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  absl::StatusOr<storage::DiagnosisRecord> record = storage_->diagnoses().Get(request.id());
+  if (absl::IsNotFound(record.status()) ||
+      (record.ok() && record->spacecraft_id != request.spacecraft_id())) {
+    return absl::NotFoundError(absl::StrCat("id: diagnosis ", request.id(), " of spacecraft '",
+                                            request.spacecraft_id(), "' does not exist"));
+  }
+  if (!record.ok()) return record.status();
+  return DiagnosisResultFromRecord(*record);
 }
 
 absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
     const esg::v1::HistoryRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  ASSIGN_OR_RETURN(const int64_t size,
+                   PageSize(request.page_size(), kDefaultHistoryPageSize, kMaxHistoryPageSize));
   if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
   if (request.gyro_id() < 0 || request.gyro_id() > estimator::kMaxGyros) {
     return absl::InvalidArgumentError(
@@ -254,11 +388,68 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
     }
     to += absl::Nanoseconds(1);  // inclusive
   }
-  ASSIGN_OR_RETURN(std::vector<storage::CoefficientRecord> records,
-                   storage_->coefficients().History(request.spacecraft_id(), request.gyro_id(),
-                                                    from, to));
+  // The filters a token is bound to (the request without its paging fields).
+  const std::string filters =
+      absl::StrCat(request.spacecraft_id(), "|", request.gyro_id(), "|",
+                   storage::TimeToUnixNanos(from), "|", storage::TimeToUnixNanos(to));
+  std::optional<storage::CoefficientCursor> after;
+  if (!request.page_token().empty()) {
+    ASSIGN_OR_RETURN(std::string position,
+                     DecodePageToken(request.page_token(), "GetCoefficientHistory", filters));
+    ASSIGN_OR_RETURN(std::vector<int64_t> v, PositionIntegers(position, 3));
+    after = storage::CoefficientCursor{v[0], v[1], v[2]};
+  }
+  ASSIGN_OR_RETURN(storage::CoefficientPage page,
+                   storage_->coefficients().HistoryPage(request.spacecraft_id(),
+                                                        request.gyro_id(), from, to, after, size));
   esg::v1::HistoryResponse response;
-  for (const storage::CoefficientRecord& r : records) *response.add_snapshots() = SnapshotToProto(r);
+  for (const storage::CoefficientRecord& r : page.records) {
+    *response.add_snapshots() = SnapshotToProto(r);
+  }
+  if (page.next.has_value()) {
+    response.set_next_page_token(EncodePageToken(
+        "GetCoefficientHistory", filters,
+        absl::StrCat(page.next->measurement_time_unix_ns, ":", page.next->gyro_id, ":",
+                     page.next->row_id)));
+  }
+  return response;
+}
+
+absl::StatusOr<esg::v1::ExportTelemetryResponse> EstimationCore::ExportTelemetryChunk(
+    const esg::v1::ExportTelemetryRequest& request, absl::Time* after, bool* done) {
+  *done = true;
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  absl::Time from = absl::InfinitePast();
+  absl::Time to = absl::InfiniteFuture();
+  if (request.has_from()) {
+    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
+  }
+  if (request.has_to()) {
+    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
+    if (to < from) {
+      return absl::InvalidArgumentError(absl::StrCat("to: ", FormatUtc(to), " is before from ",
+                                                     FormatUtc(from)));
+    }
+  }
+  // Frame times are unique per spacecraft, so "after the last time sent" resumes exactly.
+  const absl::Time start = std::max(*after, from - absl::Nanoseconds(1));
+  ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> frames,
+                   storage_->archive().ReadAfter(request.spacecraft_id(), start,
+                                                 kExportChunkSize));
+  esg::v1::ExportTelemetryResponse response;
+  for (const storage::ArchivedFrame& f : frames) {
+    if (f.measurement_time >= to) return response;  // done
+    esg::v1::TelemetryFrame* frame = response.add_frames();
+    if (!frame->ParseFromString(f.payload)) {
+      return absl::DataLossError(absl::StrCat("archived frame ", f.sequence, " of '",
+                                              request.spacecraft_id(), "' does not parse"));
+    }
+    frame->set_station_id(f.station_id);  // as stored ("default" for a frame that named none)
+    frame->set_sequence(f.sequence);
+    *after = f.measurement_time;
+  }
+  *done = static_cast<int64_t>(frames.size()) < kExportChunkSize;
   return response;
 }
 

@@ -127,9 +127,29 @@ class EstimationCore {
   // ---- Configuration and queries ----
   absl::StatusOr<esg::v1::ConfigureResponse> Configure(const esg::v1::ConfigureRequest& request);
   absl::StatusOr<esg::v1::SessionInfo> GetSession(const std::string& spacecraft_id);
-  absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions();
+  // Paged lists (docs/service.md "Paging"): page_size 0 is the default, above the maximum the
+  // maximum, negative InvalidArgument; a page_token that is not the next_page_token of the same
+  // request is InvalidArgument naming page_token.
+  static constexpr int64_t kDefaultSessionsPageSize = 100;
+  static constexpr int64_t kMaxSessionsPageSize = 500;
+  static constexpr int64_t kDefaultHistoryPageSize = 5000;
+  static constexpr int64_t kMaxHistoryPageSize = 5000;
+  static constexpr int64_t kDefaultDiagnosesPageSize = 50;
+  static constexpr int64_t kMaxDiagnosesPageSize = 100;
+  // Records per message of the export streams.
+  static constexpr int64_t kExportChunkSize = 1000;
+  absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions(
+      const esg::v1::ListSessionsRequest& request);
+  // Samples at or before the last applied frame from the archived readings, later ones planned
+  // or held (prediction.cc; docs/service.md "PredictAttitude"). FailedPrecondition naming the
+  // state when the session's output is not available.
   absl::StatusOr<esg::v1::PredictResponse> Predict(const esg::v1::PredictRequest& request);
   absl::StatusOr<esg::v1::HistoryResponse> History(const esg::v1::HistoryRequest& request);
+  // The next chunk (at most kExportChunkSize frames) of an export: frames in the request's span
+  // measured after `*after` (InfinitePast to start), which advances to the last frame returned;
+  // `*done` is set when no frame follows.
+  absl::StatusOr<esg::v1::ExportTelemetryResponse> ExportTelemetryChunk(
+      const esg::v1::ExportTelemetryRequest& request, absl::Time* after, bool* done);
 
   // Model-discrepancy diagnosis (estimator/discovery/diagnose.h, docs/discovery.md) over the
   // archived telemetry of a spacecraft in [from, to); the result is stored (DiagnosisStore) and
@@ -144,6 +164,8 @@ class EstimationCore {
       const std::function<bool()>& cancelled = {});
   absl::StatusOr<esg::v1::ListDiagnosesResponse> ListDiagnoses(
       const esg::v1::ListDiagnosesRequest& request);
+  // NotFound for an id that is not a diagnosis of the spacecraft.
+  absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(const esg::v1::GetDiagnosisRequest& request);
   absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);
   // NotFound unless empty or configured.
   absl::Status CheckSpacecraft(const std::string& spacecraft_id);

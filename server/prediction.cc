@@ -1,13 +1,17 @@
-// PredictAttitude: attitude across a gap from a copy of the session (see estimation_core.h and
-// docs/service.md "PredictAttitude").
+// PredictAttitude (see estimation_core.h and docs/service.md "PredictAttitude"): samples at or
+// before the last applied frame from the archived gyro readings (ATTITUDE_SOURCE_RECORDED),
+// later ones from a copy of the session with the planned attitude (PLANNED) or an inertial hold
+// of the last estimate (INERTIAL_HOLD). The response and the AEM say which.
 #include <algorithm>
 #include <cmath>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "absl/time/clock.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
+#include "estimator/units.h"
 #include "proto/convert.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
@@ -16,7 +20,181 @@
 
 namespace esg::server {
 
+using estimator::AttitudeEstimate;
 using estimator::EstimationSession;
+
+namespace {
+
+// Frames looked back from the first recorded epoch for a star-tracker fix.
+constexpr int64_t kFixLookbackFrames = 4096;
+
+// One predicted epoch, whatever its source.
+struct Predicted {
+  absl::Time time;
+  AttitudeEstimate attitude;
+  std::vector<std::pair<int, Eigen::Vector3d>> h_in;
+};
+
+// The configuration of a recorded-readings run: the configured one with the session's
+// calibrated drift model as the prior (coefficients, their 1-sigma, the misalignment folded
+// into C_b_k with its largest 1-sigma), so a fresh session started from a star-tracker fix
+// propagates with what the session has learned. Correlations between coefficients are not
+// carried (the prior is diagonal).
+estimator::SpacecraftConfig CalibratedConfig(const estimator::SpacecraftConfig& config,
+                                             const EstimationSession& session,
+                                             double* residual_drift_sigma) {
+  estimator::SpacecraftConfig out = config;
+  *residual_drift_sigma = 0.0;
+  for (const estimator::GyroEstimate& g : session.Gyros()) {
+    for (estimator::GyroConfig& c : out.gyros) {
+      if (c.id != g.id) continue;
+      c.model = g.coefficients;
+      c.model_sigma = g.sigma;
+      // C_b_k(true) = Exp(phi_b) C_b_k(config) (session.h).
+      c.C_b_k = estimator::ExpMatrix(g.misalignment_b) * c.C_b_k;
+      c.misalignment_sigma = c.misalignment_sigma > 0.0 ? g.misalignment_sigma_b.maxCoeff() : 0.0;
+      *residual_drift_sigma = std::max(*residual_drift_sigma, g.residual_drift_sigma.maxCoeff());
+    }
+  }
+  return out;
+}
+
+Eigen::Vector3d SigmaArcsec(const AttitudeEstimate& a) {
+  return a.sigma_b.unaryExpr([](double s) { return estimator::RadToArcsec(s); });
+}
+
+// The recorded part: `times` (sorted, all at or before the last applied frame) from a fresh
+// session started at the latest star-tracker fix at or before times.front() with the calibrated
+// model, run over the archived frames with the star tracker withheld. Between two frames the
+// attitude is slerp-interpolated and the 1-sigma is the larger of the two (componentwise).
+absl::StatusOr<std::vector<Predicted>> PredictRecorded(
+    storage::Storage& storage, const std::string& id, const estimator::SpacecraftConfig& config_in,
+    const estimator::ModelSpec& model, const EstimationSession& session, const std::vector<absl::Time>& times,
+    absl::Duration max_horizon, absl::Time* fix_time) {
+  const absl::Time first = times.front();
+  ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> back,
+                   storage.archive().ReadAtOrBefore(id, first, kFixLookbackFrames));
+  std::optional<estimator::TelemetryFrame> fix;
+  for (const storage::ArchivedFrame& a : back) {
+    esg::v1::TelemetryFrame proto;
+    if (!proto.ParseFromString(a.payload)) {
+      return absl::DataLossError(
+          absl::StrCat("archived frame ", a.sequence, " of '", id, "' does not parse"));
+    }
+    if (!proto.has_star_tracker() || !proto.star_tracker().valid() || proto.gyros_size() < 2) {
+      continue;
+    }
+    ASSIGN_OR_RETURN(estimator::TelemetryFrame frame, proto_convert::FrameFromProto(proto));
+    fix = std::move(frame);
+    break;
+  }
+  if (!fix.has_value()) {
+    return absl::OutOfRangeError(absl::StrCat(
+        "from: ", FormatUtc(first), " has no archived star-tracker fix of '", id,
+        "' at or before it (within ", kFixLookbackFrames, " frames)"));
+  }
+  *fix_time = fix->time;
+  if (times.back() - fix->time > max_horizon) {
+    return absl::OutOfRangeError(absl::StrCat(
+        "to: ", FormatUtc(times.back()), " is more than ", absl::FormatDuration(max_horizon),
+        " after the star-tracker fix at ", FormatUtc(fix->time), " the recorded readings start from"));
+  }
+  double residual_drift_sigma = 0.0;
+  const estimator::SpacecraftConfig config =
+      CalibratedConfig(config_in, session, &residual_drift_sigma);
+  estimator::SessionOptions options{model};
+  options.residual_drift_sigma = residual_drift_sigma;
+  options.adaptive_noise = false;
+  ASSIGN_OR_RETURN(EstimationSession replay, EstimationSession::Create(config, options));
+  ASSIGN_OR_RETURN(estimator::StepReport start, replay.AddFrame(*fix));
+  if (!replay.initialized() || !start.attitude.valid) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "from: the star-tracker fix at ", FormatUtc(fix->time),
+        " does not initialise an attitude (", start.attitude.invalid_reason, ")"));
+  }
+  replay.SetStarTrackerUse(false);
+
+  // The frames after the fix up to the first one at or after the last requested time.
+  ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
+                   storage.archive().ReadTimeRange(id, fix->time + absl::Nanoseconds(1),
+                                                   times.back() + absl::Nanoseconds(1)));
+  if (archived.empty() || archived.back().measurement_time < times.back()) {
+    ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> next,
+                     storage.archive().ReadAfter(id, times.back(), 1));
+    for (storage::ArchivedFrame& f : next) archived.push_back(std::move(f));
+  }
+  const absl::Duration max_gap =
+      absl::Seconds(2.0 * config_in.filter.measurement_step);
+  std::vector<Predicted> out;
+  out.reserve(times.size());
+  size_t k = 0;
+  Predicted previous{fix->time, start.attitude, {}};
+  auto emit_exact = [&](const Predicted& at) {
+    while (k < times.size() && times[k] == at.time) {
+      Predicted p = at;
+      for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
+      out.push_back(std::move(p));
+      ++k;
+    }
+  };
+  emit_exact(previous);
+  for (const storage::ArchivedFrame& a : archived) {
+    if (k == times.size()) break;
+    esg::v1::TelemetryFrame proto;
+    if (!proto.ParseFromString(a.payload)) {
+      return absl::DataLossError(
+          absl::StrCat("archived frame ", a.sequence, " of '", id, "' does not parse"));
+    }
+    ASSIGN_OR_RETURN(estimator::TelemetryFrame frame, proto_convert::FrameFromProto(proto));
+    absl::StatusOr<estimator::StepReport> report = replay.AddFrame(frame);
+    if (!report.ok()) {
+      return absl::InternalError(absl::StrCat("recorded readings: frame at ", FormatUtc(frame.time),
+                                              ": ", report.status().message()));
+    }
+    const Predicted current{frame.time, report->attitude, {}};
+    while (k < times.size() && times[k] < current.time) {
+      const absl::Time t = times[k];
+      if (current.time - previous.time > max_gap) {
+        return absl::OutOfRangeError(absl::StrCat(
+            "times: ", FormatUtc(t), " falls in a gap of the archived telemetry (frames at ",
+            FormatUtc(previous.time), " and ", FormatUtc(current.time), ")"));
+      }
+      if (!previous.attitude.valid || !current.attitude.valid) {
+        return absl::FailedPreconditionError(absl::StrCat(
+            "times: the recorded attitude at ", FormatUtc(t), " is not available (",
+            previous.attitude.valid ? current.attitude.invalid_reason
+                                    : previous.attitude.invalid_reason,
+            ")"));
+      }
+      const double s = absl::ToDoubleSeconds(t - previous.time) /
+                       absl::ToDoubleSeconds(current.time - previous.time);
+      Predicted p;
+      p.time = t;
+      p.attitude = current.attitude;
+      p.attitude.time = t;
+      p.attitude.q_in_b =
+          previous.attitude.q_in_b.slerp(s, current.attitude.q_in_b).normalized();
+      p.attitude.sigma_b = previous.attitude.sigma_b.cwiseMax(current.attitude.sigma_b);
+      for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
+      out.push_back(std::move(p));
+      ++k;
+    }
+    if (k < times.size() && times[k] == current.time && !current.attitude.valid) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("times: the recorded attitude at ", FormatUtc(current.time),
+                       " is not available (", current.attitude.invalid_reason, ")"));
+    }
+    emit_exact(current);
+    previous = current;
+  }
+  if (k != times.size()) {
+    return absl::OutOfRangeError(absl::StrCat("times: ", FormatUtc(times[k]),
+                                              " is after the last archived frame of '", id, "'"));
+  }
+  return out;
+}
+
+}  // namespace
 
 absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
     const esg::v1::PredictRequest& request) {
@@ -98,23 +276,34 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
 
   // Copy the session under the lock; predict on the copy.
   std::optional<EstimationSession> session;
-  std::string model_name;
+  std::shared_ptr<const Setup> setup;
+  std::string quarantine_reason;
   {
     absl::MutexLock lock(&sc->state_mu);
     session = sc->session;
-    if (sc->setup != nullptr) model_name = sc->setup->model_name;
+    setup = sc->setup;
+    quarantine_reason = sc->apply.quarantine_reason;
+  }
+  // A session whose output is not available refuses, naming its state (docs/service.md).
+  if (!quarantine_reason.empty() || setup == nullptr) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "spacecraft_id: '", sc->id, "' is QUARANTINED (", quarantine_reason,
+        "): its attitude output is not available"));
   }
   if (!session.has_value() || !session->initialized()) {
     return absl::FailedPreconditionError(absl::StrCat(
-        "spacecraft '", sc->id, "' has no attitude yet (no frame with a valid star-tracker "
-                                "quaternion and a readable pair has been applied)"));
+        "spacecraft_id: '", sc->id, "' is NO_DATA: it has no attitude yet (no frame with a "
+        "valid star-tracker quaternion and a readable pair has been applied)"));
+  }
+  const AttitudeEstimate current = session->CurrentAttitude();
+  if (session->state() == estimator::SessionState::kFaulted || !current.valid) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "spacecraft_id: '", sc->id, "' is ", estimator::SessionStateName(session->state()),
+        ": its attitude output is not available",
+        current.valid ? " (a gyro of the working pair was isolated; acknowledge and reconfigure)"
+                      : absl::StrCat(" (", current.invalid_reason, ")")));
   }
   const absl::Time last = session->last_frame_time();
-  if (times.front() <= last) {
-    return absl::OutOfRangeError(absl::StrCat(
-        request.has_from() ? "from" : "times", ": ", FormatUtc(times.front()),
-        " is not after the last applied frame ", FormatUtc(last)));
-  }
   if (times.back() - last > options_.max_prediction_horizon) {
     return absl::OutOfRangeError(absl::StrCat(
         request.has_to() ? "to" : "times", ": ", FormatUtc(times.back()),
@@ -122,24 +311,94 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
         absl::FormatDuration(options_.max_prediction_horizon), " after the last applied frame ",
         FormatUtc(last)));
   }
-  ASSIGN_OR_RETURN(std::vector<estimator::PredictedSample> predicted,
-                   session->Predict(times, planned.has_value() ? &*planned : nullptr,
-                                    planned.has_value() ? planned->start() : absl::UnixEpoch()));
+  const auto split = std::upper_bound(times.begin(), times.end(), last);
+  const std::vector<absl::Time> recorded_times(times.begin(), split);
+  const std::vector<absl::Time> future_times(split, times.end());
+
+  std::vector<Predicted> predicted;
+  absl::Time fix_time = absl::InfinitePast();
+  if (!recorded_times.empty()) {
+    ASSIGN_OR_RETURN(predicted,
+                     PredictRecorded(*storage_, sc->id, setup->config, setup->model, *session,
+                                     recorded_times,
+                                     options_.max_prediction_horizon, &fix_time));
+  }
+  if (!future_times.empty()) {
+    ASSIGN_OR_RETURN(std::vector<estimator::PredictedSample> ahead,
+                     session->Predict(future_times, planned.has_value() ? &*planned : nullptr,
+                                      planned.has_value() ? planned->start() : absl::UnixEpoch()));
+    for (estimator::PredictedSample& p : ahead) {
+      predicted.push_back({p.time, std::move(p.attitude), std::move(p.h_in)});
+    }
+  }
+
+  // What the prediction assumes, in the response and in the AEM.
+  const esg::v1::AttitudeSource source =
+      future_times.empty()       ? esg::v1::ATTITUDE_SOURCE_RECORDED
+      : planned.has_value()      ? esg::v1::ATTITUDE_SOURCE_PLANNED
+                                 : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
+  std::string recorded_text;
+  if (!recorded_times.empty()) {
+    recorded_text = absl::StrCat(
+        "ATTITUDE_SOURCE_RECORDED until ", FormatUtc(last),
+        ": archived gyro readings propagated with the calibrated drift model (", setup->model_name,
+        ") from the star-tracker fix at ", FormatUtc(fix_time),
+        "; the star tracker is not used after it");
+  }
+  std::string future_text;
+  if (!future_times.empty()) {
+    future_text =
+        planned.has_value()
+            ? absl::StrCat("ATTITUDE_SOURCE_PLANNED after ", FormatUtc(last),
+                           ": the planned attitude given (", request.planned_attitude_size(),
+                           " samples from ", FormatUtc(planned->start()),
+                           ", slerp between them, held beyond its ends); the envelope is the "
+                           "propagated 1-sigma of the gyros' spin axes")
+            : absl::StrCat("ATTITUDE_SOURCE_INERTIAL_HOLD after ", FormatUtc(last),
+                           ": no planned attitude given, the attitude of the last estimate held "
+                           "inertially fixed; wrong by the body's motion if it moves");
+  }
   esg::v1::PredictResponse response;
-  std::vector<storage::AemSample> aem_samples;
-  for (const estimator::PredictedSample& p : predicted) {
+  response.set_attitude_source(source);
+  response.set_recorded_samples(static_cast<int32_t>(recorded_times.size()));
+  *response.mutable_last_applied_time() = proto_convert::TimeToProto(last);
+  std::vector<std::string> assumption;
+  if (!recorded_text.empty()) assumption.push_back(recorded_text);
+  if (!future_text.empty()) assumption.push_back(future_text);
+  response.set_assumption(absl::StrJoin(assumption, "; "));
+
+  std::vector<storage::AemBlock> blocks;
+  for (size_t i = 0; i < predicted.size(); ++i) {
+    const Predicted& p = predicted[i];
     FillSample(p.time, p.attitude, p.h_in, response.add_samples());
-    if (request.aem()) aem_samples.push_back({p.time, p.attitude.q_in_b.normalized()});
+    if (!request.aem()) continue;
+    const bool recorded = i < recorded_times.size();
+    if (blocks.empty() || (i == recorded_times.size() && i > 0)) {
+      storage::AemBlock block;
+      block.comments.push_back(recorded ? recorded_text : future_text);
+      block.comments.push_back(
+          "1-sigma about body x, y, z [arcsec] of every epoch: the SIGMA_ARCSEC comments at the "
+          "start of the data section");
+      block.interpolation_method = "LINEAR";
+      block.interpolation_degree = 1;
+      blocks.push_back(std::move(block));
+    }
+    blocks.back().samples.push_back(
+        {p.time, p.attitude.q_in_b.normalized(), SigmaArcsec(p.attitude)});
   }
   if (request.aem()) {
+    const absl::Time now = absl::Now();
     storage::AemHeader header;
     header.object_name = sc->id;
     header.object_id = sc->id;
     header.originator = "ESG-ESGD";
-    header.creation_date = absl::Now();
-    header.comments.push_back(absl::StrCat("Predicted attitude q_in_b, calibration model ",
-                                           model_name, ", from the state at ", FormatUtc(last)));
-    ASSIGN_OR_RETURN(std::string text, storage::WriteAem(header, aem_samples));
+    header.creation_date = now;
+    header.message_id = absl::StrCat(
+        sc->id, "-PRED-", absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
+    header.comments.push_back(absl::StrCat("Predicted attitude q_in_b of ", sc->id,
+                                           ", calibration model ", setup->model_name,
+                                           ", state of the last applied frame ", FormatUtc(last)));
+    ASSIGN_OR_RETURN(std::string text, storage::WriteAemBlocks(header, blocks));
     response.set_aem_text(std::move(text));
   }
   return response;

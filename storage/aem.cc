@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <map>
 #include <set>
 #include <vector>
 
@@ -126,47 +127,95 @@ std::string FormatCcsdsTime(absl::Time time) {
 
 absl::StatusOr<std::string> WriteAem(const AemHeader& header,
                                      const std::vector<AemSample>& samples) {
+  if (samples.empty()) return absl::InvalidArgumentError("samples: an AEM needs at least one");
+  AemBlock block;
+  block.samples = samples;
+  absl::StatusOr<std::string> out = WriteAemBlocks(header, {std::move(block)});
+  if (out.ok()) return out;
+  // One block: name the samples as the caller knows them.
+  std::string message(out.status().message());
+  if (absl::StartsWith(message, "blocks[0].")) message = message.substr(10);
+  return absl::Status(out.status().code(), message);
+}
+
+absl::StatusOr<std::string> WriteAemBlocks(const AemHeader& header,
+                                           const std::vector<AemBlock>& blocks) {
   if (header.object_name.empty()) return absl::InvalidArgumentError("OBJECT_NAME: empty");
   if (header.object_id.empty()) return absl::InvalidArgumentError("OBJECT_ID: empty");
   if (header.originator.empty()) return absl::InvalidArgumentError("ORIGINATOR: empty");
-  if (samples.empty()) return absl::InvalidArgumentError("samples: an AEM needs at least one");
-  for (size_t i = 0; i < samples.size(); ++i) {
-    const double n = samples[i].q_in_b.norm();
-    if (!std::isfinite(n) || std::abs(n - 1.0) > kUnitTolerance) {
+  if (blocks.empty()) return absl::InvalidArgumentError("blocks: an AEM needs at least one");
+  for (size_t b = 0; b < blocks.size(); ++b) {
+    const std::vector<AemSample>& samples = blocks[b].samples;
+    if (samples.empty()) {
       return absl::InvalidArgumentError(
-          absl::StrCat("samples[", i, "].q_in_b: norm ", n, " is not 1"));
+          absl::StrCat("blocks[", b, "].samples: a segment needs at least one"));
     }
-    if (i > 0 && samples[i].epoch <= samples[i - 1].epoch) {
-      return absl::InvalidArgumentError(absl::StrCat("samples[", i, "].epoch: ",
-                                                     FormatCcsdsTime(samples[i].epoch),
-                                                     " is not after the previous epoch"));
+    if (b > 0 && samples.front().epoch <= blocks[b - 1].samples.back().epoch) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "blocks[", b, "].samples[0].epoch: ", FormatCcsdsTime(samples.front().epoch),
+          " is not after the previous block's last epoch"));
+    }
+    for (size_t i = 0; i < samples.size(); ++i) {
+      const double n = samples[i].q_in_b.norm();
+      if (!std::isfinite(n) || std::abs(n - 1.0) > kUnitTolerance) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("blocks[", b, "].samples[", i, "].q_in_b: norm ", n, " is not 1"));
+      }
+      if (i > 0 && samples[i].epoch <= samples[i - 1].epoch) {
+        return absl::InvalidArgumentError(absl::StrCat("blocks[", b, "].samples[", i, "].epoch: ",
+                                                       FormatCcsdsTime(samples[i].epoch),
+                                                       " is not after the previous epoch"));
+      }
+      if (samples[i].sigma_arcsec.has_value() && !samples[i].sigma_arcsec->allFinite()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("blocks[", b, "].samples[", i, "].sigma_arcsec: not finite"));
+      }
     }
   }
   std::string out;
   absl::StrAppend(&out, "CCSDS_AEM_VERS = 2.0\n");
   absl::StrAppend(&out, "CREATION_DATE = ", FormatCcsdsTime(header.creation_date), "\n");
-  absl::StrAppend(&out, "ORIGINATOR = ", header.originator, "\n\n");
-  absl::StrAppend(&out, "META_START\n");
-  for (const std::string& comment : header.comments) {
-    absl::StrAppend(&out, "COMMENT ", comment, "\n");
+  absl::StrAppend(&out, "ORIGINATOR = ", header.originator, "\n");
+  if (!header.message_id.empty()) absl::StrAppend(&out, "MESSAGE_ID = ", header.message_id, "\n");
+  for (const AemBlock& block : blocks) {
+    const std::vector<AemSample>& samples = block.samples;
+    absl::StrAppend(&out, "\nMETA_START\n");
+    for (const std::string& comment : header.comments) {
+      absl::StrAppend(&out, "COMMENT ", comment, "\n");
+    }
+    for (const std::string& comment : block.comments) {
+      absl::StrAppend(&out, "COMMENT ", comment, "\n");
+    }
+    absl::StrAppend(&out, "OBJECT_NAME = ", header.object_name, "\n");
+    absl::StrAppend(&out, "OBJECT_ID = ", header.object_id, "\n");
+    absl::StrAppend(&out, "REF_FRAME_A = EME2000\n");
+    absl::StrAppend(&out, "REF_FRAME_B = SC_BODY_1\n");
+    absl::StrAppend(&out, "TIME_SYSTEM = UTC\n");
+    absl::StrAppend(&out, "START_TIME = ", FormatCcsdsTime(samples.front().epoch), "\n");
+    absl::StrAppend(&out, "STOP_TIME = ", FormatCcsdsTime(samples.back().epoch), "\n");
+    absl::StrAppend(&out, "ATTITUDE_TYPE = QUATERNION\n");
+    if (!block.interpolation_method.empty()) {
+      absl::StrAppend(&out, "INTERPOLATION_METHOD = ", block.interpolation_method, "\n");
+      if (block.interpolation_degree > 0) {
+        absl::StrAppend(&out, "INTERPOLATION_DEGREE = ", block.interpolation_degree, "\n");
+      }
+    }
+    absl::StrAppend(&out, "META_STOP\n\n");
+    absl::StrAppend(&out, "DATA_START\n");
+    for (const AemSample& s : samples) {
+      if (!s.sigma_arcsec.has_value()) continue;
+      absl::StrAppend(&out, "COMMENT SIGMA_ARCSEC ", FormatCcsdsTime(s.epoch),
+                      absl::StrFormat(" %.3f %.3f %.3f\n", (*s.sigma_arcsec)(0),
+                                      (*s.sigma_arcsec)(1), (*s.sigma_arcsec)(2)));
+    }
+    for (const AemSample& s : samples) {
+      Eigen::Quaterniond q = s.q_in_b.normalized();
+      if (q.w() < 0) q.coeffs() = -q.coeffs();  // sign canonical at the output edge (QC >= 0)
+      absl::StrAppend(&out, FormatCcsdsTime(s.epoch),
+                      absl::StrFormat(" %.15f %.15f %.15f %.15f\n", q.x(), q.y(), q.z(), q.w()));
+    }
+    absl::StrAppend(&out, "DATA_STOP\n");
   }
-  absl::StrAppend(&out, "OBJECT_NAME = ", header.object_name, "\n");
-  absl::StrAppend(&out, "OBJECT_ID = ", header.object_id, "\n");
-  absl::StrAppend(&out, "REF_FRAME_A = EME2000\n");
-  absl::StrAppend(&out, "REF_FRAME_B = SC_BODY_1\n");
-  absl::StrAppend(&out, "TIME_SYSTEM = UTC\n");
-  absl::StrAppend(&out, "START_TIME = ", FormatCcsdsTime(samples.front().epoch), "\n");
-  absl::StrAppend(&out, "STOP_TIME = ", FormatCcsdsTime(samples.back().epoch), "\n");
-  absl::StrAppend(&out, "ATTITUDE_TYPE = QUATERNION\n");
-  absl::StrAppend(&out, "META_STOP\n\n");
-  absl::StrAppend(&out, "DATA_START\n");
-  for (const AemSample& s : samples) {
-    Eigen::Quaterniond q = s.q_in_b.normalized();
-    if (q.w() < 0) q.coeffs() = -q.coeffs();  // sign canonical at the output edge (QC >= 0)
-    absl::StrAppend(&out, FormatCcsdsTime(s.epoch),
-                    absl::StrFormat(" %.15f %.15f %.15f %.15f\n", q.x(), q.y(), q.z(), q.w()));
-  }
-  absl::StrAppend(&out, "DATA_STOP\n");
   return out;
 }
 
@@ -176,6 +225,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
   Where where = Where::kHeader;
   AemSegment segment;
   std::set<std::string> seen;  // keywords of the current section
+  std::map<absl::Time, Eigen::Vector3d> sigmas;  // SIGMA_ARCSEC comments of the data section
   int line_number = 0;
   int meta_start_line = 0;
   bool first_keyword = true;
@@ -246,11 +296,37 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
       if (where == Where::kData && !segment.samples.empty()) {
         return LineError(line_number, "COMMENT", "not allowed between data lines");
       }
+      const absl::string_view text = absl::StripAsciiWhitespace(line.substr(7));
+      if (where == Where::kMeta) segment.comments.emplace_back(text);
+      if (where == Where::kData && absl::StartsWith(text, "SIGMA_ARCSEC")) {
+        const std::vector<absl::string_view> f =
+            absl::StrSplit(text, absl::ByAnyChar(" \t"), absl::SkipEmpty());
+        if (f.size() != 5) {
+          return LineError(line_number, "SIGMA_ARCSEC",
+                           absl::StrCat("expected an epoch and 3 values, got ", f.size() - 1,
+                                        " fields"));
+        }
+        auto epoch = ParseCcsdsTime(f[1]);
+        if (!epoch.ok()) return LineError(line_number, "SIGMA_ARCSEC", epoch.status().message());
+        Eigen::Vector3d sigma;
+        for (int i = 0; i < 3; ++i) {
+          if (!absl::SimpleAtod(f[i + 2], &sigma[i]) || !std::isfinite(sigma[i])) {
+            return LineError(line_number, "SIGMA_ARCSEC",
+                             absl::StrCat("'", f[i + 2], "' is not a number"));
+          }
+        }
+        sigmas[*epoch] = sigma;
+      }
       continue;
     }
     if (where == Where::kData) {
       if (line == "DATA_STOP") {
         if (segment.samples.empty()) return LineError(line_number, "DATA_STOP", "no data lines");
+        for (AemSample& s : segment.samples) {
+          auto it = sigmas.find(s.epoch);
+          if (it != sigmas.end()) s.sigma_arcsec = it->second;
+        }
+        sigmas.clear();
         file.segments.push_back(std::move(segment));
         segment = AemSegment();
         where = Where::kHeader;  // another segment may follow (META_START)

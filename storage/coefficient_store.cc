@@ -2,6 +2,7 @@
 #include "storage/coefficient_store.h"
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -47,6 +48,46 @@ const std::string& HistorySql(bool one_gyro) {
       "AND measurement_time_unix_ns < ?3 AND gyro_id = ?4 "
       "ORDER BY measurement_time_unix_ns, gyro_id, id"));
   return one_gyro ? *one : *all;
+}
+
+// A page: the history order continued strictly after a cursor (row values, SQLite >= 3.15), the
+// row id appended as the last column.
+const std::string& HistoryPageSql(bool one_gyro) {
+  static const std::string* const all = new std::string(absl::StrCat(
+      "SELECT ", AllColumns(),
+      ", id FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
+      "AND measurement_time_unix_ns < ?3 "
+      "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) "
+      "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
+  static const std::string* const one = new std::string(absl::StrCat(
+      "SELECT ", AllColumns(),
+      ", id FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
+      "AND measurement_time_unix_ns < ?3 "
+      "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) AND gyro_id = ?8 "
+      "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
+  return one_gyro ? *one : *all;
+}
+
+// The record of the current row (columns in the order of AllColumns()).
+CoefficientRecord ReadRecord(const Statement& st) {
+  CoefficientRecord r;
+  r.spacecraft_id = st.ColumnText(0);
+  r.gyro_id = static_cast<int>(st.ColumnInt64(1));
+  r.measurement_time = UnixNanosToTime(st.ColumnInt64(2));
+  r.compute_time = UnixNanosToTime(st.ColumnInt64(3));
+  r.model_name = st.ColumnText(4);
+  r.values.resize(kNumCoefficientValues);
+  bool any_sigma = false;
+  std::vector<double> sigmas(kNumCoefficientValues);
+  for (int i = 0; i < kNumCoefficientValues; ++i) {
+    const int value_column = kNumLeadingColumns + i;
+    const int sigma_column = value_column + kNumCoefficientValues;
+    r.values[i] = st.ColumnDoubleOrNaN(value_column);
+    sigmas[i] = st.ColumnDoubleOrNaN(sigma_column);
+    any_sigma = any_sigma || !st.ColumnIsNull(sigma_column);
+  }
+  if (any_sigma) r.sigmas = std::move(sigmas);
+  return r;
 }
 
 absl::Status Validate(const CoefficientRecord& r) {
@@ -148,26 +189,49 @@ absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
   while (true) {
     ASSIGN_OR_RETURN(bool row, st->Step());
     if (!row) break;
-    CoefficientRecord r;
-    r.spacecraft_id = st->ColumnText(0);
-    r.gyro_id = static_cast<int>(st->ColumnInt64(1));
-    r.measurement_time = UnixNanosToTime(st->ColumnInt64(2));
-    r.compute_time = UnixNanosToTime(st->ColumnInt64(3));
-    r.model_name = st->ColumnText(4);
-    r.values.resize(kNumCoefficientValues);
-    bool any_sigma = false;
-    std::vector<double> sigmas(kNumCoefficientValues);
-    for (int i = 0; i < kNumCoefficientValues; ++i) {
-      const int value_column = kNumLeadingColumns + i;
-      const int sigma_column = value_column + kNumCoefficientValues;
-      r.values[i] = st->ColumnDoubleOrNaN(value_column);
-      sigmas[i] = st->ColumnDoubleOrNaN(sigma_column);
-      any_sigma = any_sigma || !st->ColumnIsNull(sigma_column);
-    }
-    if (any_sigma) r.sigmas = std::move(sigmas);
-    out.push_back(std::move(r));
+    out.push_back(ReadRecord(*st));
   }
   return out;
+}
+
+absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
+    absl::string_view spacecraft_id, int gyro_id, absl::Time from, absl::Time to,
+    const std::optional<CoefficientCursor>& after, int64_t limit) {
+  if (gyro_id < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("gyro_id = ", gyro_id, ": must be >= 1, or 0 for all gyros"));
+  }
+  if (limit <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("limit = ", limit, ": must be positive"));
+  }
+  // Before every row: no stored time, gyro id or row id is below these.
+  const CoefficientCursor start = after.value_or(
+      CoefficientCursor{std::numeric_limits<int64_t>::min(), 0, 0});
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(HistoryPageSql(gyro_id != 0)));
+  st->BindText(1, spacecraft_id)
+      .BindInt64(2, TimeToUnixNanos(from))
+      .BindInt64(3, TimeToUnixNanos(to))
+      .BindInt64(4, start.measurement_time_unix_ns)
+      .BindInt64(5, start.gyro_id)
+      .BindInt64(6, start.row_id)
+      .BindInt64(7, limit + 1);
+  if (gyro_id != 0) st->BindInt64(8, gyro_id);
+  CoefficientPage page;
+  CoefficientCursor last;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    if (static_cast<int64_t>(page.records.size()) == limit) {
+      page.next = last;  // a row beyond the page exists
+      break;
+    }
+    page.records.push_back(ReadRecord(*st));
+    last.measurement_time_unix_ns = st->ColumnInt64(2);
+    last.gyro_id = st->ColumnInt64(1);
+    last.row_id = st->ColumnInt64(kNumLeadingColumns + 2 * kNumCoefficientValues);
+  }
+  return page;
 }
 
 }  // namespace esg::storage

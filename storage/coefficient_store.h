@@ -5,6 +5,8 @@
 #ifndef ESG_STORAGE_COEFFICIENT_STORE_H_
 #define ESG_STORAGE_COEFFICIENT_STORE_H_
 
+#include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "Eigen/Core"
@@ -28,6 +30,20 @@ absl::Status FromCoefficientValues(absl::Span<const double> values,
                                    estimator::DriftCoefficients* drift,
                                    Eigen::Vector3d* misalignment_b);
 
+// Position of a record in the history order (measurement_time, gyro_id, insertion): a page of a
+// paged read continues strictly after it.
+struct CoefficientCursor {
+  int64_t measurement_time_unix_ns = 0;
+  int64_t gyro_id = 0;
+  int64_t row_id = 0;  // insertion order
+};
+
+struct CoefficientPage {
+  std::vector<CoefficientRecord> records;
+  // Cursor of the last record when more records follow in the range; nullopt on the last page.
+  std::optional<CoefficientCursor> next;
+};
+
 // Thread-safe (through Database). Methods without a Transaction argument run in their own
 // transaction; the overloads taking one join the caller's.
 class CoefficientStore {
@@ -46,6 +62,15 @@ class CoefficientStore {
   absl::StatusOr<std::vector<CoefficientRecord>> History(absl::string_view spacecraft_id,
                                                          int gyro_id, absl::Time from,
                                                          absl::Time to);
+
+  // One page of History(spacecraft_id, gyro_id, from, to): up to `limit` (> 0, else
+  // InvalidArgument naming limit) records strictly after `after` (nullopt: from the first), in
+  // the same order. Reads limit + 1 rows to know whether more follow; the cost of a page does
+  // not grow with its position (the index coefficients_by_time).
+  absl::StatusOr<CoefficientPage> HistoryPage(absl::string_view spacecraft_id, int gyro_id,
+                                              absl::Time from, absl::Time to,
+                                              const std::optional<CoefficientCursor>& after,
+                                              int64_t limit);
 
  private:
   Database* db_;  // not owned

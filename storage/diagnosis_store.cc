@@ -16,6 +16,10 @@ namespace {
 constexpr char kSelectById[] = "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE id = ?1";
 constexpr char kSelectBySpacecraft[] =
     "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE spacecraft_id = ?1 ORDER BY id";
+// The same columns with an empty report (summaries; the index diagnoses_by_spacecraft).
+constexpr char kSelectSummaries[] =
+    "SELECT id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, "
+    "verdict, '' FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
 #undef ESG_DIAGNOSIS_COLUMNS
 
 DiagnosisRecord ReadRow(const Statement& st) {
@@ -67,6 +71,23 @@ absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::List(
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectBySpacecraft));
   st->BindText(1, spacecraft_id);
+  std::vector<DiagnosisRecord> out;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    out.push_back(ReadRow(*st));
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::ListSummaries(
+    absl::string_view spacecraft_id, int64_t after_id, int64_t limit) {
+  if (limit <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("limit = ", limit, ": must be positive"));
+  }
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectSummaries));
+  st->BindText(1, spacecraft_id).BindInt64(2, after_id).BindInt64(3, limit);
   std::vector<DiagnosisRecord> out;
   while (true) {
     ASSIGN_OR_RETURN(bool row, st->Step());

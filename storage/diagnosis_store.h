@@ -29,6 +29,12 @@ class DiagnosisStore {
   // All diagnoses of the spacecraft, in id (insertion) order.
   absl::StatusOr<std::vector<DiagnosisRecord>> List(absl::string_view spacecraft_id);
 
+  // Up to `limit` (> 0, else InvalidArgument naming limit) diagnoses of the spacecraft with
+  // id > after_id, in id order, as summaries: report_json is left empty (not read). A page of
+  // a paged list: the caller passes the last id it returned.
+  absl::StatusOr<std::vector<DiagnosisRecord>> ListSummaries(absl::string_view spacecraft_id,
+                                                             int64_t after_id, int64_t limit);
+
   // One diagnosis; NotFound if missing.
   absl::StatusOr<DiagnosisRecord> Get(int64_t id);
 

@@ -175,6 +175,21 @@ absl::StatusOr<std::vector<ArchivedFrame>> TelemetryArchive::ReadAfter(
   return ReadFrames(st);
 }
 
+absl::StatusOr<std::vector<ArchivedFrame>> TelemetryArchive::ReadAtOrBefore(
+    absl::string_view spacecraft_id, absl::Time at_or_before, int64_t limit) {
+  if (limit <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("limit = ", limit, ": must be positive"));
+  }
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare(absl::StrCat(kColumns,
+                                            "WHERE spacecraft_id = ?1 "
+                                            "AND measurement_time_unix_ns <= ?2 "
+                                            "ORDER BY measurement_time_unix_ns DESC LIMIT ?3")));
+  st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(at_or_before)).BindInt64(3, limit);
+  return ReadFrames(st);
+}
+
 absl::StatusOr<std::vector<ArchivedFrame>> TelemetryArchive::ReadTimeRange(
     absl::string_view spacecraft_id, absl::Time from, absl::Time to) {
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));

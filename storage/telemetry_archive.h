@@ -73,6 +73,12 @@ class TelemetryArchive {
   absl::StatusOr<std::vector<ArchivedFrame>> ReadAfter(absl::string_view spacecraft_id,
                                                        absl::Time after, int64_t limit);
 
+  // Up to `limit` (> 0) frames measured at or before `at_or_before`, DESCENDING by measurement
+  // time (the latest first): where a look back for the last star-tracker fix starts.
+  absl::StatusOr<std::vector<ArchivedFrame>> ReadAtOrBefore(absl::string_view spacecraft_id,
+                                                            absl::Time at_or_before,
+                                                            int64_t limit);
+
   // All frames with from <= measurement_time < to, in measurement-time order (InfinitePast /
   // InfiniteFuture are open bounds). The whole range is loaded into memory.
   absl::StatusOr<std::vector<ArchivedFrame>> ReadTimeRange(absl::string_view spacecraft_id,
