@@ -3,7 +3,19 @@
 
 #include <algorithm>
 
+#include "server/alert_catalog.h"
+#include "server/proto_mapping.h"
+
 namespace esg::server {
+namespace {
+
+// The clearing rule of a stored reason name; kQuiet for a name the catalog does not know.
+ClearRule RuleOf(const std::string& reason) {
+  const AlertKind* kind = FindAlertKind(reason);
+  return kind != nullptr ? kind->clear_rule : ClearRule::kQuiet;
+}
+
+}  // namespace
 
 AlertCollapser::AlertCollapser(std::string spacecraft_id, std::vector<AlertTrack> tracks,
                                absl::Duration window, absl::Time compute_time)
@@ -12,31 +24,47 @@ AlertCollapser::AlertCollapser(std::string spacecraft_id, std::vector<AlertTrack
       compute_time_(compute_time),
       tracks_(std::move(tracks)) {}
 
-std::vector<AlertTrack>::iterator AlertCollapser::EndTrack(std::vector<AlertTrack>::iterator it) {
+std::vector<AlertTrack>::iterator AlertCollapser::EndTrack(std::vector<AlertTrack>::iterator it,
+                                                           absl::Time time) {
   // The condition is over: a stored alert is cleared, one created in this job is stored cleared.
   auto p = pending_.find({it->reason, it->subsystem});
   if (p != pending_.end()) {
     new_alerts_[p->second].cleared = true;
+    new_alerts_[p->second].cleared_time = time;
     pending_.erase(p);
   } else if (it->sequence > 0) {
-    clears_.push_back(it->sequence);
+    clears_.push_back({it->sequence, time});
   }
   return tracks_.erase(it);
 }
 
 void AlertCollapser::Advance(absl::Time time) {
   for (auto it = tracks_.begin(); it != tracks_.end();) {
-    it = time - it->last_time > window_ ? EndTrack(it) : it + 1;
+    const bool over = RuleOf(it->reason) == ClearRule::kQuiet && time - it->last_time > window_;
+    it = over ? EndTrack(it, it->last_time + window_) : it + 1;
   }
 }
 
-void AlertCollapser::End(const std::string& reason, const std::string& subsystem) {
+void AlertCollapser::End(const std::string& reason, const std::string& subsystem,
+                         absl::Time time) {
+  const std::string form = SubsystemForm(subsystem);
   for (auto it = tracks_.begin(); it != tracks_.end();) {
-    it = it->reason == reason && it->subsystem == subsystem ? EndTrack(it) : it + 1;
+    const bool match =
+        it->reason == reason && (it->subsystem == form || it->subsystem == subsystem);
+    it = match ? EndTrack(it, time) : it + 1;
   }
 }
 
-void AlertCollapser::Add(const AlertOccurrence& o) {
+void AlertCollapser::StarTrackerAccepted(absl::Time time) {
+  for (auto it = tracks_.begin(); it != tracks_.end();) {
+    it = RuleOf(it->reason) == ClearRule::kStarTrackerAccepted ? EndTrack(it, time) : it + 1;
+  }
+}
+
+void AlertCollapser::Add(const AlertOccurrence& occurrence) {
+  AlertOccurrence o = occurrence;
+  o.subsystem = SubsystemForm(occurrence.subsystem);
+  if (const AlertKind* kind = FindAlertKind(o.reason)) o.severity = SeverityName(kind->severity);
   auto it = std::find_if(tracks_.begin(), tracks_.end(), [&](const AlertTrack& t) {
     return t.reason == o.reason && t.subsystem == o.subsystem;
   });

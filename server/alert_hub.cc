@@ -1,10 +1,38 @@
 // Alert fan-out (see alert_hub.h).
 #include "server/alert_hub.h"
 
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
+#include "server/log.h"
+#include "server/proto_mapping.h"
+
 namespace esg::server {
+
+void LogAlert(const storage::AlertRecord& r) {
+  std::string state;
+  if (r.acknowledged) {
+    absl::StrAppend(&state, ", acknowledged by ", r.acknowledged_by, " at ",
+                    FormatUtc(r.acknowledged_time));
+  }
+  if (r.cleared) {
+    absl::StrAppend(&state, ", cleared",
+                    r.cleared_time != absl::InfinitePast()
+                        ? absl::StrCat(" at ", FormatUtc(r.cleared_time))
+                        : std::string());
+  }
+  // The log level follows the severity while the alert is active; a cleared one is news only.
+  const char* level = r.cleared                                             ? "INFO"
+                      : r.severity == "CRITICAL" || r.severity == "DISTRESS" ? "ERROR"
+                      : r.severity == "WARNING"                             ? "WARN"
+                                                                            : "INFO";
+  Log(level, absl::StrCat("alert ", r.spacecraft_id, " #", r.sequence, " ", r.severity, " ",
+                          r.reason, " ", r.subsystem, ", x", r.repeat_count, ", ",
+                          FormatUtc(r.first_time), "..", FormatUtc(r.measurement_time), state,
+                          ": ", r.message));
+}
 
 int64_t AlertHub::Subscribe(std::string spacecraft_id, Listener listener, Closer close) {
   absl::MutexLock lock(&mu_);
@@ -19,6 +47,7 @@ void AlertHub::Unsubscribe(int64_t id) {
 }
 
 void AlertHub::Publish(const storage::AlertRecord& record) {
+  LogAlert(record);
   absl::MutexLock lock(&mu_);
   for (auto& [id, s] : subscribers_) {
     if (s.spacecraft_id.empty() || s.spacecraft_id == record.spacecraft_id) s.listener(record);

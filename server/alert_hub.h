@@ -1,6 +1,7 @@
 // Live fan-out of alert changes (new alert, repeat, acknowledgement, clear) to SubscribeAlerts
 // streams (docs/service.md "Alerts"). Publishers call Publish after the change is committed;
-// a subscriber's callback runs under the hub's lock and must only queue the record.
+// a subscriber's callback runs under the hub's lock and must only queue the record. Every
+// published change is also logged (LogAlert), so the log holds each alert's life.
 #ifndef ESG_SERVER_ALERT_HUB_H_
 #define ESG_SERVER_ALERT_HUB_H_
 
@@ -15,6 +16,11 @@
 
 namespace esg::server {
 
+// One log line (server/log.h) for an alert state: spacecraft, sequence, severity, reason,
+// subsystem, repeats, first..latest occurrence, acknowledgement and clearing, message. Level
+// ERROR for an active DISTRESS or CRITICAL alert, WARN for an active WARNING, else INFO.
+void LogAlert(const storage::AlertRecord& record);
+
 class AlertHub {
  public:
   using Listener = std::function<void(const storage::AlertRecord&)>;
@@ -25,6 +31,7 @@ class AlertHub {
   int64_t Subscribe(std::string spacecraft_id, Listener listener, Closer close);
   // After it returns, the listener is never called again.
   void Unsubscribe(int64_t id);
+  // Logs the record (LogAlert) and hands it to the matching subscribers.
   void Publish(const storage::AlertRecord& record);
   // Calls every subscriber's closer (they finish their streams).
   void CloseAll();

@@ -160,6 +160,8 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   AlertCollapser alerts(sc->id, apply.alert_tracks, options_.alert_collapse_window, now);
   // A rebuilt session does not store again what is already stored.
   const absl::Time written = apply.effects_written_until;
+  // Session state changes, logged once the job's effects are committed.
+  std::vector<std::string> state_changes;
   for (const AlertOccurrence& o : service_alerts) alerts.Add(o);
   // The frame is behind the filter from here on, applied or skipped.
   auto advance_cursor = [&apply](const JobFrame& f) {
@@ -179,6 +181,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       continue;
     }
     const TelemetryFrame& frame = *f.frame;
+    const estimator::SessionState state_before = session->state();
     absl::StatusOr<estimator::StepReport> report = session->AddFrame(frame);
     if (!report.ok()) {
       const absl::StatusCode code = report.status().code();
@@ -204,6 +207,12 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     }
     advance_cursor(f);
     ++apply.frames_applied;
+    if (session->state() != state_before && f.time > written) {
+      state_changes.push_back(absl::StrCat(
+          "spacecraft ", sc->id, ": session state ", estimator::SessionStateName(state_before),
+          " -> ", estimator::SessionStateName(session->state()), " at ", FormatUtc(f.time),
+          " (station ", f.station, ", sequence ", f.sequence, ")"));
+    }
     if (report->measurement_step && frame.star_tracker.has_value() &&
         frame.star_tracker->valid && !report->star_tracker_used) {
       ++apply.star_tracker_rejections;
@@ -222,6 +231,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       }
     }
     alerts.Advance(frame.time);
+    if (report->measurement_step && report->star_tracker_used) {
+      alerts.StarTrackerAccepted(frame.time);
+    }
     for (const Event& event : report->events) {
       if (event.time <= written) continue;
       alerts.Add({estimator::EventKindName(event.kind), SeverityName(SeverityOf(event.kind)),
@@ -233,7 +245,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     Log("INFO", absl::StrCat("spacecraft ", sc->id, " rebuilt from the archive; quarantine over"));
     apply.quarantine_reason.clear();
     apply.rebuilding = false;
-    alerts.End(kQuarantineReason, "session");
+    alerts.End(kQuarantineReason, "session", apply.applied_time);
   }
 
   // Commit the effects and the checkpoint in one transaction.
@@ -251,7 +263,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     for (const auto& [seq, rep] : alerts.repeats()) {
       RETURN_IF_ERROR(storage_->alerts().UpdateRepeat(txn, rep));
     }
-    for (int64_t seq : alerts.clears()) RETURN_IF_ERROR(storage::ClearAlert(txn, sc->id, seq));
+    for (const AlertCollapser::Clear& c : alerts.clears()) {
+      RETURN_IF_ERROR(storage_->alerts().Clear(txn, sc->id, c.sequence, c.time));
+    }
     to_store.alert_tracks = alerts.Tracks(new_sequences);
     storage::CheckpointRecord cp;
     cp.spacecraft_id = sc->id;
@@ -307,7 +321,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // Publish the committed changes.
   absl::MutexLock publish(&sc->publish_mu);
   for (const storage::AlertRecord& a : published) hub_.Publish(a);
-  std::set<int64_t> changed(alerts.clears().begin(), alerts.clears().end());
+  for (const std::string& line : state_changes) Log("INFO", line);
+  std::set<int64_t> changed;
+  for (const AlertCollapser::Clear& c : alerts.clears()) changed.insert(c.sequence);
   for (const auto& [seq, rep] : alerts.repeats()) changed.insert(seq);
   for (int64_t seq : changed) {
     absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);

@@ -9,9 +9,12 @@
 #include <tuple>
 #include <utility>
 
+#include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
 #include "proto/convert.h"
 #include "server/grpc_status.h"
+#include "server/log.h"
+#include "server/proto_mapping.h"
 
 namespace esg::server {
 namespace {
@@ -174,8 +177,9 @@ class TelemetryReactor
 
 // ---- SubscribeAlerts ------------------------------------------------------------------------
 // Subscribes to the live feed first, then replays the store, then releases the live alerts that
-// arrived meanwhile; every alert state (sequence, repeat_count, acknowledged, cleared) is sent at
-// most once and never after a newer state of the same alert.
+// arrived meanwhile, then (replay_marker) queues the end-of-replay marker; every alert state
+// (sequence, repeat_count, acknowledged, cleared) is sent at most once and never after a newer
+// state of the same alert. Live alerts published after the marker was queued follow it.
 constexpr size_t kMaxQueuedAlerts = 100000;
 
 class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
@@ -238,6 +242,11 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
     for (const storage::AlertRecord& r : shared_->buffered) Offer(*shared_, r);
     shared_->buffered.clear();
     shared_->replaying = false;
+    if (request.replay_marker() && !shared_->finished) {
+      esg::v1::Alert marker;
+      marker.set_replay_complete(true);
+      shared_->queue.push_back(std::move(marker));
+    }
     TryWrite(*shared_);
   }
 
@@ -550,7 +559,25 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
     grpc::CallbackServerContext* context, const esg::v1::AcknowledgeRequest* request,
     esg::v1::Alert* response) {
   return Unary(context, Authorize(context, Role::kWrite), response,
-               [&] { return core_->Acknowledge(*request); });
+               [&]() -> absl::StatusOr<esg::v1::Alert> {
+                 absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(*request);
+                 if (!alert.ok()) return alert.status();
+                 // The store keeps the first acknowledgement; another operator's is refused so
+                 // that it is never silently dropped (the same operator again is idempotent).
+                 if (alert->acknowledged_by() != request->operator_name()) {
+                   absl::Status refused = absl::FailedPreconditionError(absl::StrCat(
+                       "operator_name: alert ", alert->sequence(), " of spacecraft '",
+                       alert->spacecraft_id(), "' was already acknowledged by '",
+                       alert->acknowledged_by(), "' at ",
+                       FormatUtc(proto_convert::TimeFromProto(alert->acknowledged_time())
+                                     .value_or(absl::InfinitePast())),
+                       "; the first acknowledgement stands"));
+                   Log("WARN", absl::StrCat("acknowledgement by '", request->operator_name(),
+                                            "' refused: ", refused.message()));
+                   return refused;
+                 }
+                 return alert;
+               });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(

@@ -5,6 +5,7 @@
 #include "estimator/rotation.h"
 #include "estimator/units.h"
 #include "proto/convert.h"
+#include "server/alert_catalog.h"
 
 namespace esg::server {
 
@@ -97,65 +98,10 @@ esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
 
 
 
-esg::v1::AlertSeverity SeverityOf(Event::Kind kind) {
-  switch (kind) {
-    case Event::Kind::kStarTrackerInnovation:
-      return esg::v1::ALERT_SEVERITY_WARNING;
-    case Event::Kind::kStarTrackerFault:
-      return esg::v1::ALERT_SEVERITY_DISTRESS;
-    case Event::Kind::kWorkingPairFault:
-      return esg::v1::ALERT_SEVERITY_CRITICAL;
-    case Event::Kind::kReservePairFault:
-      return esg::v1::ALERT_SEVERITY_DISTRESS;
-    case Event::Kind::kGyroDataRejected:
-      return esg::v1::ALERT_SEVERITY_WARNING;
-    case Event::Kind::kStarTrackerInvalid:
-      return esg::v1::ALERT_SEVERITY_INFO;
-    case Event::Kind::kFilterReset:
-      return esg::v1::ALERT_SEVERITY_DISTRESS;
-    case Event::Kind::kModelInconsistent:
-      return esg::v1::ALERT_SEVERITY_WARNING;
-    case Event::Kind::kFaultAmbiguous:
-      return esg::v1::ALERT_SEVERITY_WARNING;
-    case Event::Kind::kFilterWidened:
-      return esg::v1::ALERT_SEVERITY_WARNING;
-    case Event::Kind::kGyroReadingMissing:
-      return esg::v1::ALERT_SEVERITY_WARNING;
-    case Event::Kind::kGyroStarted:
-      return esg::v1::ALERT_SEVERITY_INFO;
-  }
-  return esg::v1::ALERT_SEVERITY_UNSPECIFIED;
-}
+// The alert catalog is the single source (alert_catalog.h).
+esg::v1::AlertSeverity SeverityOf(Event::Kind kind) { return AlertKindOf(kind).severity; }
 
-esg::v1::AlertReason ReasonOf(Event::Kind kind) {
-  switch (kind) {
-    case Event::Kind::kStarTrackerInnovation:
-      return esg::v1::ALERT_REASON_STAR_TRACKER_INNOVATION;
-    case Event::Kind::kStarTrackerFault:
-      return esg::v1::ALERT_REASON_STAR_TRACKER_FAULT;
-    case Event::Kind::kWorkingPairFault:
-      return esg::v1::ALERT_REASON_WORKING_PAIR_FAULT;
-    case Event::Kind::kReservePairFault:
-      return esg::v1::ALERT_REASON_RESERVE_PAIR_FAULT;
-    case Event::Kind::kGyroDataRejected:
-      return esg::v1::ALERT_REASON_GYRO_DATA_REJECTED;
-    case Event::Kind::kStarTrackerInvalid:
-      return esg::v1::ALERT_REASON_STAR_TRACKER_INVALID;
-    case Event::Kind::kFilterReset:
-      return esg::v1::ALERT_REASON_FILTER_RESET;
-    case Event::Kind::kModelInconsistent:
-      return esg::v1::ALERT_REASON_MODEL_INCONSISTENT;
-    case Event::Kind::kFaultAmbiguous:
-      return esg::v1::ALERT_REASON_FAULT_AMBIGUOUS;
-    case Event::Kind::kFilterWidened:
-      return esg::v1::ALERT_REASON_FILTER_WIDENED;
-    case Event::Kind::kGyroReadingMissing:
-      return esg::v1::ALERT_REASON_GYRO_READING_MISSING;
-    case Event::Kind::kGyroStarted:
-      return esg::v1::ALERT_REASON_GYRO_STARTED;
-  }
-  return esg::v1::ALERT_REASON_UNSPECIFIED;
-}
+esg::v1::AlertReason ReasonOf(Event::Kind kind) { return AlertKindOf(kind).reason; }
 
 esg::v1::Alert AlertToProto(const storage::AlertRecord& r) {
   esg::v1::Alert a;
@@ -177,6 +123,9 @@ esg::v1::Alert AlertToProto(const storage::AlertRecord& r) {
     *a.mutable_acknowledged_time() = proto_convert::TimeToProto(r.acknowledged_time);
   }
   a.set_cleared(r.cleared);
+  if (r.cleared && r.cleared_time != absl::InfinitePast()) {
+    *a.mutable_cleared_time() = proto_convert::TimeToProto(r.cleared_time);
+  }
   a.set_message(r.message);
   return a;
 }

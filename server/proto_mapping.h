@@ -17,7 +17,7 @@
 
 namespace esg::server {
 
-// Severity and reason of the alert an estimator event raises (docs/service.md "Alerts").
+// Severity and reason of the alert an estimator event raises (server/alert_catalog.h).
 esg::v1::AlertSeverity SeverityOf(estimator::Event::Kind kind);
 esg::v1::AlertReason ReasonOf(estimator::Event::Kind kind);
 // "INFO", "WARNING", "DISTRESS", "CRITICAL" as stored; "UNSPECIFIED" otherwise.

@@ -1,7 +1,10 @@
 // Server assembly (see server.h, docs/service.md).
 #include "server/server.h"
 
+#include <netdb.h>
 #include <sys/resource.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -120,6 +123,43 @@ void RaiseFileLimit() {
                            ", hard limit ", LimitText(limit.rlim_max)));
 }
 
+// Why gRPC could not bind `listen` ("host:port", "[v6]:port"), found by binding a socket the way
+// gRPC does (SO_REUSEADDR, no SO_REUSEPORT): "address already in use (is another esgd serving
+// it?)" or the errno text; a generic text when the address does not resolve or binds now.
+std::string BindFailure(const std::string& listen) {
+  const size_t colon = listen.rfind(':');
+  if (colon == std::string::npos) return "not a host:port address";
+  std::string host = listen.substr(0, colon);
+  const std::string port = listen.substr(colon + 1);
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') {
+    host = host.substr(1, host.size() - 2);
+  }
+  addrinfo hints{};
+  hints.ai_socktype = SOCK_STREAM;
+  hints.ai_flags = AI_PASSIVE;
+  addrinfo* found = nullptr;
+  if (getaddrinfo(host.empty() ? nullptr : host.c_str(), port.c_str(), &hints, &found) != 0) {
+    return "the address does not resolve";
+  }
+  std::string reason = "gRPC could not bind it";
+  for (addrinfo* a = found; a != nullptr; a = a->ai_next) {
+    const int fd = socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
+    if (fd < 0) continue;
+    const int one = 1;
+    setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    const int bound = bind(fd, a->ai_addr, a->ai_addrlen);
+    const int error = errno;
+    close(fd);
+    if (bound != 0) {
+      reason = error == EADDRINUSE ? "address already in use (is another esgd serving it?)"
+                                   : std::strerror(error);
+      break;
+    }
+  }
+  freeaddrinfo(found);
+  return reason;
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions& options) {
@@ -156,6 +196,9 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   grpc::ServerBuilder builder;
   builder.AddListeningPort(options.listen, credentials, &s->port_);
   builder.RegisterService(s->service_.get());
+  // Exclusive ownership of the address: gRPC sets SO_REUSEPORT on Linux by default, which lets a
+  // second esgd bind the same address and the kernel spread connections between the two.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   // Keep idle alert streams open for hours: ping every 60 s, accept client pings without data as
   // often as every 30 s, allow pings with no call in flight; no max_connection_idle.
   builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, 60000);
@@ -176,7 +219,8 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     s->core_->Stop(absl::ZeroDuration());
-    return absl::UnavailableError(absl::StrCat("listen: cannot serve on ", options.listen));
+    return absl::UnavailableError(
+        absl::StrCat("listen: cannot serve on ", options.listen, ": ", BindFailure(options.listen)));
   }
   if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
     health->SetServingStatus("esg.v1.EstimationService", true);

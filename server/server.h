@@ -64,8 +64,10 @@ class EsgServer {
   // Raises the process's soft RLIMIT_NOFILE to its hard limit first (each connection holds a
   // file descriptor; see docs/service.md "Limits") and logs both. InvalidArgument for
   // inconsistent TLS options, a bad tokens file or a limit out of range (names the field);
-  // NotFound for unreadable PEM files; storage errors of opening the database; Unavailable if
-  // the port cannot be bound.
+  // NotFound for unreadable PEM files; storage errors of opening the database (Unavailable "db:
+  // <path> is locked by another process (pid N ...)" when another esgd owns the file:
+  // storage/sqlite_db.h "Owner lock"); Unavailable "listen: cannot serve on <address>: <why>"
+  // if the address cannot be bound, also when another process serves it (SO_REUSEPORT is off).
   static absl::StatusOr<std::unique_ptr<EsgServer>> Start(const ServerOptions& options);
   ~EsgServer();
 

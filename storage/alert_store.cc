@@ -14,7 +14,8 @@ namespace {
 #define ESG_ALERT_COLUMNS                                                                    \
   "spacecraft_id, sequence, severity, reason, subsystem, value, threshold, unit, "          \
   "repeat_count, first_time_unix_ns, measurement_time_unix_ns, compute_time_unix_ns, "      \
-  "message, acknowledged, acknowledged_by, acknowledged_time_unix_ns, cleared"
+  "message, acknowledged, acknowledged_by, acknowledged_time_unix_ns, cleared, "             \
+  "cleared_time_unix_ns"
 
 constexpr char kSelectOne[] = "SELECT " ESG_ALERT_COLUMNS
                               " FROM alerts WHERE spacecraft_id = ?1 AND sequence = ?2";
@@ -27,7 +28,7 @@ constexpr char kSinceAll[] = "SELECT " ESG_ALERT_COLUMNS
                              "ORDER BY measurement_time_unix_ns, spacecraft_id, sequence LIMIT ?2";
 constexpr char kInsert[] = "INSERT INTO alerts (" ESG_ALERT_COLUMNS
                            ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, "
-                           "?14, ?15, ?16, ?17)";
+                           "?14, ?15, ?16, ?17, ?18)";
 #undef ESG_ALERT_COLUMNS
 
 AlertRecord ReadRow(const Statement& st) {
@@ -50,6 +51,8 @@ AlertRecord ReadRow(const Statement& st) {
   r.acknowledged_time =
       st.ColumnIsNull(15) ? absl::InfinitePast() : UnixNanosToTime(st.ColumnInt64(15));
   r.cleared = st.ColumnInt64(16) != 0;
+  r.cleared_time =
+      st.ColumnIsNull(17) ? absl::InfinitePast() : UnixNanosToTime(st.ColumnInt64(17));
   return r;
 }
 
@@ -103,6 +106,9 @@ absl::Status Validate(const AlertRecord& r) {
   if (r.acknowledged) {
     RETURN_IF_ERROR(ValidateStorableTime(r.acknowledged_time, "alert.acknowledged_time"));
   }
+  if (r.cleared && r.cleared_time != absl::InfinitePast()) {
+    RETURN_IF_ERROR(ValidateStorableTime(r.cleared_time, "alert.cleared_time"));
+  }
   return absl::OkStatus();
 }
 
@@ -151,6 +157,11 @@ absl::StatusOr<int64_t> AlertStore::Append(Transaction& txn, const AlertRecord& 
   } else {
     st->BindNull(15).BindNull(16);
   }
+  if (record.cleared && record.cleared_time != absl::InfinitePast()) {
+    st->BindInt64(18, TimeToUnixNanos(record.cleared_time));
+  } else {
+    st->BindNull(18);
+  }
   RETURN_IF_ERROR(st->Run());
   return sequence;
 }
@@ -198,16 +209,32 @@ absl::StatusOr<AlertRecord> AlertStore::Acknowledge(absl::string_view spacecraft
   return record;
 }
 
-absl::StatusOr<AlertRecord> AlertStore::Clear(absl::string_view spacecraft_id, int64_t sequence) {
+absl::StatusOr<AlertRecord> AlertStore::Clear(absl::string_view spacecraft_id, int64_t sequence,
+                                              absl::Time cleared_time) {
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("UPDATE alerts SET cleared = 1 "
-                               "WHERE spacecraft_id = ?1 AND sequence = ?2"));
-  st->BindText(1, spacecraft_id).BindInt64(2, sequence);
-  RETURN_IF_ERROR(RunKeyedUpdate(txn, st, spacecraft_id, sequence));
+  RETURN_IF_ERROR(Clear(txn, spacecraft_id, sequence, cleared_time));
   ASSIGN_OR_RETURN(AlertRecord record, GetIn(txn, spacecraft_id, sequence));
   RETURN_IF_ERROR(txn.Commit());
   return record;
+}
+
+absl::Status AlertStore::Clear(Transaction& txn, absl::string_view spacecraft_id,
+                               int64_t sequence, absl::Time cleared_time) {
+  if (cleared_time != absl::InfinitePast()) {
+    RETURN_IF_ERROR(ValidateStorableTime(cleared_time, "cleared_time"));
+  }
+  // A second clear keeps the first time.
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("UPDATE alerts SET cleared = 1, cleared_time_unix_ns = "
+                               "CASE WHEN cleared = 1 THEN cleared_time_unix_ns ELSE ?3 END "
+                               "WHERE spacecraft_id = ?1 AND sequence = ?2"));
+  st->BindText(1, spacecraft_id).BindInt64(2, sequence);
+  if (cleared_time != absl::InfinitePast()) {
+    st->BindInt64(3, TimeToUnixNanos(cleared_time));
+  } else {
+    st->BindNull(3);
+  }
+  return RunKeyedUpdate(txn, st, spacecraft_id, sequence);
 }
 
 absl::Status AlertStore::UpdateRepeat(absl::string_view spacecraft_id, int64_t sequence,

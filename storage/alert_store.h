@@ -39,14 +39,21 @@ class AlertStore {
   absl::StatusOr<AlertRecord> Get(absl::string_view spacecraft_id, int64_t sequence);
 
   // Marks the alert acknowledged by `operator_name` at `time` and returns the updated record.
-  // Acknowledging an acknowledged alert changes nothing (the first acknowledgement stands).
+  // Acknowledging an acknowledged alert changes nothing (the first acknowledgement stands; the
+  // caller compares acknowledged_by to tell, and the service refuses another operator's:
+  // AcknowledgeAlert).
   // NotFound if missing; InvalidArgument for an empty operator_name or unstorable time.
   absl::StatusOr<AlertRecord> Acknowledge(absl::string_view spacecraft_id, int64_t sequence,
                                           absl::string_view operator_name, absl::Time time);
 
-  // Marks the alert cleared (the condition is over) and returns the updated record.
-  // NotFound if missing.
-  absl::StatusOr<AlertRecord> Clear(absl::string_view spacecraft_id, int64_t sequence);
+  // Marks the alert cleared (the condition is over) at the measurement epoch `cleared_time`
+  // (InfinitePast: not known, stored as NULL) and returns the updated record. Clearing a cleared
+  // alert keeps its first cleared_time. NotFound if missing; InvalidArgument for an unstorable
+  // time.
+  absl::StatusOr<AlertRecord> Clear(absl::string_view spacecraft_id, int64_t sequence,
+                                    absl::Time cleared_time = absl::InfinitePast());
+  absl::Status Clear(Transaction& txn, absl::string_view spacecraft_id, int64_t sequence,
+                     absl::Time cleared_time);
 
   // Collapses a repeat into an existing alert: sets its repeat_count (the new total, >= 1) and
   // its measurement_time to last_time (the latest occurrence). NotFound if missing;

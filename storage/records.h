@@ -101,6 +101,9 @@ struct AlertRecord {
   std::string acknowledged_by;
   absl::Time acknowledged_time = absl::InfinitePast();  // InfinitePast while not acknowledged
   bool cleared = false;
+  // Measurement epoch at which the service found the condition over (server/alert_catalog.h
+  // ClearRule); InfinitePast while not cleared, or when cleared before it was stored.
+  absl::Time cleared_time = absl::InfinitePast();
 };
 
 // A repeat of an existing alert, collapsed into it (AlertStore::UpdateRepeat).

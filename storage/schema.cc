@@ -148,8 +148,14 @@ CREATE TABLE service_state (
 );
 )sql";
 
+// Version 4: alerts carry the measurement time at which the service cleared them (NULL while
+// not cleared, and for alerts cleared before this version).
+constexpr absl::string_view kSchemaV4 = R"sql(
+ALTER TABLE alerts ADD COLUMN cleared_time_unix_ns INTEGER;
+)sql";
+
 // kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3};
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

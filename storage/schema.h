@@ -6,7 +6,9 @@
 //   1  spacecraft_configs, telemetry_frames, coefficients, alerts (without `unit`), checkpoints.
 //   2  alerts.unit; index alerts_by_time; diagnoses.
 //   3  telemetry_frames keyed by (spacecraft, station, sequence), unique measurement time per
-//      spacecraft; frames stored before belong to station "default".  <- kCurrentSchemaVersion
+//      spacecraft; frames stored before belong to station "default".
+//   4  alerts.cleared_time_unix_ns (NULL: not cleared, or cleared before version 4).
+//                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
 // intact. A migration's DDL is frozen once released: change the schema only by appending a
@@ -32,7 +34,7 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 3;
+inline constexpr int kCurrentSchemaVersion = 4;
 
 // PRAGMA user_version of the open database.
 absl::StatusOr<int> SchemaVersion(Database& db);

@@ -1,7 +1,9 @@
 // SQLite connection, transaction and statement wrappers; contract in sqlite_db.h.
 #include "storage/sqlite_db.h"
 
+#include <fcntl.h>
 #include <sqlite3.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -63,6 +65,63 @@ std::string WriteBlocker(const std::string& path, bool exclusive) {
                         std::error_code(errno, std::generic_category()).message());
   }
   return std::string();
+}
+
+std::string ErrnoText(int error) {
+  return std::error_code(error, std::generic_category()).message();
+}
+
+// The owner lock of sqlite_db.h ("Owner lock"): the descriptor of "<path>.lock" (symbolic links
+// of the path resolved, so two names of one file share the lock) with flock(LOCK_EX) held and
+// this process's id written into it. Unavailable naming the holder's pid if another descriptor
+// holds the lock; FailedPrecondition if the lock file cannot be created.
+absl::StatusOr<int> TakeOwnerLock(const std::string& path) {
+  std::error_code ec;
+  std::filesystem::path resolved = std::filesystem::weakly_canonical(path, ec);
+  if (ec) resolved = path;
+  const std::string lock_path = resolved.string() + ".lock";
+  const int fd = ::open(lock_path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    const int error = errno;
+    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+    if (error == ENOENT && !dir.empty() && !std::filesystem::is_directory(dir, ec)) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "db: ", path, " cannot be opened: directory ", dir.string(), " does not exist"));
+    }
+    const std::string blocker = WriteBlocker(path, /*exclusive=*/true);
+    return absl::FailedPreconditionError(absl::StrCat(
+        "db: ", path, " cannot be written: ",
+        blocker.empty() ? absl::StrCat(lock_path, ": ", ErrnoText(error)) : blocker));
+  }
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int error = errno;
+    std::string holder = "unknown";
+    char buffer[32] = {};
+    const ssize_t n = ::pread(fd, buffer, sizeof buffer - 1, 0);
+    ::close(fd);
+    if (n > 0) {
+      const std::string text = std::string(absl::StripAsciiWhitespace(
+          absl::string_view(buffer, static_cast<size_t>(n))));
+      if (!text.empty() && text.find_first_not_of("0123456789") == std::string::npos) {
+        holder = text;
+      }
+    }
+    if (error != EWOULDBLOCK) {
+      return absl::UnavailableError(absl::StrCat("db: ", path, ": cannot lock ", lock_path, ": ",
+                                                 ErrnoText(error)));
+    }
+    return absl::UnavailableError(absl::StrCat("db: ", path,
+                                               " is locked by another process (pid ", holder,
+                                               " holds ", lock_path,
+                                               "; is another server using this file?)"));
+  }
+  // The pid only serves the message of a refused Open(); the lock works without it, so a disk
+  // that refuses these bytes (full) is left to the write probe to report.
+  const std::string pid = absl::StrCat(::getpid(), "\n");
+  if (::ftruncate(fd, 0) == 0) {
+    [[maybe_unused]] const ssize_t written = ::pwrite(fd, pid.data(), pid.size(), 0);
+  }
+  return fd;
 }
 
 }  // namespace
@@ -289,6 +348,7 @@ Database::~Database() {
     cache_.clear();  // finalizes every statement before the connection closes
   }
   sqlite3_close_v2(db_);
+  if (owner_lock_fd_ >= 0) ::close(owner_lock_fd_);  // releases the owner lock
 }
 
 absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path,
@@ -308,6 +368,12 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
       return absl::NotFoundError(absl::StrCat("database file ", path, " does not exist"));
     }
   }
+  int owner_lock_fd = -1;
+  if (options.exclusive) {
+    absl::StatusOr<int> fd = TakeOwnerLock(path);
+    if (!fd.ok()) return fd.status();
+    owner_lock_fd = *fd;
+  }
   int flags = SQLITE_OPEN_READWRITE | SQLITE_OPEN_FULLMUTEX;
   if (options.create_if_missing) flags |= SQLITE_OPEN_CREATE;
   sqlite3* raw = nullptr;
@@ -316,6 +382,7 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
   if (rc != SQLITE_OK) {
     absl::Status status = SqliteError(rc, raw, absl::StrCat("opening ", path));
     sqlite3_close_v2(raw);
+    if (owner_lock_fd >= 0) ::close(owner_lock_fd);
     if ((rc & 0xff) == SQLITE_CANTOPEN) {
       const std::filesystem::path dir = std::filesystem::path(path).parent_path();
       std::error_code ec;
@@ -332,6 +399,7 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
     return status;
   }
   std::unique_ptr<Database> db(new Database(raw, path, options));
+  db->owner_lock_fd_ = owner_lock_fd;  // released by the destructor, also on the errors below
   sqlite3_extended_result_codes(raw, 1);
   const int64_t timeout_ms = absl::ToInt64Milliseconds(options.busy_timeout);
   sqlite3_busy_timeout(raw, static_cast<int>(

@@ -48,7 +48,9 @@
 //     writable; SQLite opens it read-only;   |   <reason>" (<reason>: the file and errno text,
 //     disk full at the write probe           |   e.g. "Read-only file system", and SQLite's)
 //   another process or connection holds the  | Unavailable "db: <path> is locked by another
-//     file (see "Exclusive locking")         |   process ..." after busy_timeout
+//     file (see "Exclusive locking")         |   process ..." at once for an exclusive Open()
+//                                            |   while an exclusive Database holds the owner
+//                                            |   lock ("Owner lock"), else after busy_timeout
 //
 // A checkpoint (SQLite copying -wal pages into the database file after a commit once the -wal
 // holds 1000 pages, and when the last connection closes) that fails is not an error of any
@@ -68,6 +70,16 @@
 // as statuses (an immutable database file only makes checkpoints fail). The price: the
 // connection holds an exclusive lock on the file from Open() until it is destroyed, so no other
 // connection or process (a second server, the sqlite3 shell) can even read the file meanwhile.
+//
+// Owner lock. An exclusive Database also holds an exclusive advisory lock (flock(2)) on the file
+// "<path>.lock" beside the database (symbolic links resolved) from Open() until it is destroyed,
+// and writes its process id into it. A second exclusive Open() of the same file, from this or
+// another process, is refused at once with Unavailable "db: <path> is locked by another process
+// (pid <pid> holds <path>.lock; is another server using this file?)" instead of waiting
+// busy_timeout for SQLite's lock. The lock file is left in place (its content names the last
+// owner); the lock, not the file, is what counts, and the kernel drops it when the owner exits
+// however it exits. A file other than the database is locked because closing any descriptor of
+// the database file would drop this process's POSIX locks on it, which SQLite relies on.
 //
 // Thread safety
 // -------------
@@ -232,7 +244,9 @@ class Transaction {
 // no Transaction on it is alive.
 class Database {
  public:
-  // Opens (creating if allowed) the database file at `path`, applies busy_timeout,
+  // Opens (creating if allowed) the database file at `path`, takes the owner lock if
+  // options.exclusive (see "Owner lock" above; refused at once with Unavailable naming the
+  // holder's pid), applies busy_timeout,
   // locking_mode (exclusive), journal_mode=WAL and synchronous, and proves that the file can be
   // written by committing a transaction that rewrites PRAGMA user_version with its own value
   // (one -wal frame and, with kFull, one fsync). Errors: InvalidArgument (empty path, a
@@ -287,6 +301,9 @@ class Database {
   absl::Mutex mu_;
   std::atomic<std::thread::id> owner_{};  // thread holding mu_ through a Transaction
   absl::flat_hash_map<std::string, std::unique_ptr<Statement>> cache_;  // by SQL text
+  // Descriptor of "<path>.lock" holding the owner lock (exclusive mode), else -1; closed after
+  // the connection.
+  int owner_lock_fd_ = -1;
 };
 
 }  // namespace esg::storage

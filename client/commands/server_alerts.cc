@@ -2,11 +2,10 @@
 // raised by the fault and innovation tests (eq. (12), (14)) and by rejected telemetry
 // (SubscribeAlerts), and their acknowledgement (AcknowledgeAlert).
 //
-// Listing: subscribes with `since` (default: every stored alert) and prints the latest state of
-// each alert. The service does not mark where the replay of stored alerts ends (the stream
-// carries alerts only, proto AlertSubscription), so without --follow the listing ends when no
-// alert has arrived for --replay-wait seconds (the server queues the whole replay at once, so the
-// gap inside it is far shorter). --follow keeps printing alert states as they arrive (one line,
+// Listing: subscribes with `since` (default: every stored alert) and the end-of-replay marker
+// (AlertSubscription.replay_marker) and prints the latest state of each alert once the marker
+// arrives: the stored alerts are then complete, whatever their number and the network's speed.
+// --follow prints the stored alerts, then keeps printing alert states as they arrive (one line,
 // or one JSON object per line with --json) until Ctrl-C.
 // --ack SEQ acknowledges alert SEQ of --spacecraft as --operator (default $USER) and prints it.
 // Exit codes: 0 success (also when stopped by Ctrl-C), 2 bad arguments, 1 server failure.
@@ -43,7 +42,6 @@ struct AlertsOptions {
   bool follow = false;
   std::optional<int64_t> ack;
   std::string operator_name;
-  double replay_wait_s = 1.0;
   bool json = false;
 };
 
@@ -99,6 +97,7 @@ struct Inbox {
   std::mutex mu;
   std::condition_variable cv;
   std::deque<esg::v1::Alert> alerts;
+  bool replayed = false;  // the end-of-replay marker arrived
   bool done = false;
 };
 
@@ -111,11 +110,8 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
     if (!t) return ReportBadArgument(kVerb, "--since '" + o.since + "': not an RFC 3339 time");
     since = *t;
   }
-  if (!(o.replay_wait_s > 0.0)) {
-    return ReportBadArgument(kVerb,
-                             absl::StrCat("--replay-wait ", o.replay_wait_s, ": must be > 0"));
-  }
   *request.mutable_since() = proto_convert::TimeToProto(since);
+  request.set_replay_marker(true);
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
 
@@ -125,7 +121,11 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
     esg::v1::Alert alert;
     while (stream->Read(&alert)) {
       std::lock_guard<std::mutex> lock(inbox.mu);
-      inbox.alerts.push_back(alert);
+      if (alert.replay_complete()) {
+        inbox.replayed = true;  // not an alert: the stored ones are complete
+      } else {
+        inbox.alerts.push_back(alert);
+      }
       inbox.cv.notify_one();
     }
     std::lock_guard<std::mutex> lock(inbox.mu);
@@ -140,20 +140,21 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
   }
   // Latest state of each alert, in (spacecraft, sequence) order, for the listing.
   std::map<std::pair<std::string, int64_t>, esg::v1::Alert> latest;
-  const auto idle = std::chrono::duration<double>(o.replay_wait_s);
-  auto last_activity = std::chrono::steady_clock::now();
   bool cancelled = false;
   for (;;) {
     std::deque<esg::v1::Alert> batch;
     bool done = false;
+    bool replayed = false;
     {
       std::unique_lock<std::mutex> lock(inbox.mu);
+      // Woken by an alert, the marker or the end of the stream; the timeout only lets --follow
+      // notice Ctrl-C.
       inbox.cv.wait_for(lock, std::chrono::milliseconds(100),
-                        [&] { return inbox.done || !inbox.alerts.empty(); });
+                        [&] { return inbox.done || inbox.replayed || !inbox.alerts.empty(); });
       batch.swap(inbox.alerts);
       done = inbox.done;
+      replayed = inbox.replayed;
     }
-    if (!batch.empty()) last_activity = std::chrono::steady_clock::now();
     for (esg::v1::Alert& a : batch) {
       if (o.follow) {
         if (o.json) {
@@ -167,8 +168,8 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
       }
     }
     if (done) break;
-    const bool stop =
-        o.follow ? g_interrupted != 0 : std::chrono::steady_clock::now() - last_activity > idle;
+    // Every alert read before the marker is in this batch or an earlier one.
+    const bool stop = o.follow ? g_interrupted != 0 : replayed;
     if (stop && !cancelled) {
       cancelled = true;
       stream->Cancel();  // the reader's Read returns false, then done
@@ -213,9 +214,6 @@ void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--ack", options->ack, "acknowledge alert SEQ (needs --spacecraft)")
       ->excludes(follow);
   cmd->add_option("--operator", options->operator_name, "operator name for --ack (default: $USER)");
-  cmd->add_option("--replay-wait", options->replay_wait_s,
-                  "without --follow: stop after this many seconds without a new alert")
-      ->capture_default_str();
   cmd->add_flag("--json", options->json,
                 "one JSON document on stdout (with --follow: one JSON object per line)");
   cmd->callback([options, &global, exit_code] {
