@@ -49,6 +49,7 @@ absl::StatusOr<CalibrationResult> RunCalibration(const SpacecraftConfig& config,
   for (const GyroEstimate& g : result.gyros) result.relative_sigma[g.id] = session->RelativeSigma(g.id);
   result.final_state = session->state();
   result.widened_drift_deg_h = session->noise_widening().EquivalentDriftDegH();
+  result.star_tracker_latency = session->StarTrackerLatency();
   result.innovation_rms = innovation_count > 0 ? std::sqrt(innovation_sum / innovation_count) : 0.0;
   if (session_out != nullptr) *session_out = std::move(*session);
   return result;

@@ -37,6 +37,8 @@ struct CalibrationResult {
   // The process-noise widening at the end as an unmodelled drift [deg/h] (noise_widening.h);
   // 0 when the filter ends as configured.
   double widened_drift_deg_h = 0.0;
+  // The star-tracker latency at the end: configured, or estimated (latencySigmaS > 0).
+  LatencyEstimate star_tracker_latency;
 };
 
 // Runs a session over every frame. The session after the last frame is returned through

@@ -8,7 +8,7 @@
 //   session_update.cc          eq. (12) mismatch test, eq. (13) measurements, eq. (14) test,
 //                              filter reset, Joseph update
 //   session_attitude.cc        pair attitude (TRIAD) and its covariance, the output
-//   session_checkpoint.cc      the checkpoint values (versions 1 to 3)
+//   session_checkpoint.cc      the checkpoint values (versions 1 to 4)
 #include "estimator/session.h"
 
 #include <algorithm>
@@ -172,6 +172,7 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
   session.options_ = options;
   session.working_pair_ = config.working_pair;
   session.reserve_pair_ = config.reserve_pair;
+  session.latency_s_ = config.star_tracker.latency;
   ConsistencyMonitorOptions monitor;
   monitor.window_steps = options.consistency_window_steps;
   monitor.test_every_steps = options.consistency_test_every_steps;
@@ -207,7 +208,7 @@ int EstimationSession::IndexOf(int id) const {
 
 StateLayout EstimationSession::LayoutFor(const SpacecraftConfig& config, const ModelSpec& model,
                                          const std::vector<GyroState>& gyros) {
-  StateLayout layout(model.random_walk);
+  StateLayout layout(model.random_walk, config.star_tracker.latency_sigma > 0.0);
   for (const GyroState& g : gyros) {
     const GyroConfig& gc = *config.FindGyro(g.id);
     layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0);
@@ -235,6 +236,14 @@ void EstimationSession::ReportMissingReadings(StepReport& report) const {
 }
 
 AttitudeEstimate EstimationSession::CurrentAttitude() const { return OutputAttitude(last_time_); }
+
+LatencyEstimate EstimationSession::StarTrackerLatency() const {
+  LatencyEstimate e;
+  e.latency_s = latency_s_;
+  e.estimated = layout_.has_latency() && initialized_;
+  e.sigma_s = e.estimated ? std::sqrt(P_(layout_.Latency(), layout_.Latency())) : 0.0;
+  return e;
+}
 
 void EstimationSession::UpdateState(const StepReport& report) {
   if (!report.measurement_step) return;

@@ -9,7 +9,9 @@
 // StateLayout (state_layout.h): spin-axis error dh_g (2), residual random-walk drift dw_int_g of
 // eq. (11) (2, with model 11), errors of the free drift coefficients dtheta_g (0-13) and the
 // misalignment dphi_g (3, when misalignmentSigma > 0). About 14 states per gyro, 42 for three
-// running gyros with model 10+11.
+// running gyros with model 10+11. Before the gyro blocks, when the configuration gives the star
+// tracker's latency a prior (latencySigmaS > 0), its error dtau [s]: the corrected star-tracker
+// attitude q_st (x) Exp(w_b tau_est) then errs by the body rotation -w_b dtau.
 //   dh_g and dw_int_g live in the gyro's tangent basis (t1_g, t2_g): t1 = e1 of the `int` frame
 //   (conventions.h) projected perpendicular to h_in_g, t2 = h_in_g x t1; for the reference gyro
 //   (t1, t2) = (e1, -e3), i.e. the paper's dh_int1_1 and -dh_int3_1 [rad]. The component of
@@ -171,10 +173,19 @@ struct SessionOptions {
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
-// writes version 3; FromCheckpoint reads versions 1 to 3.
+// writes version 4; FromCheckpoint reads versions 1 to 4.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
+};
+
+// The star tracker's latency the filter corrects each sample with (spacecraft_config.h
+// StarTrackerConfig::latency): the configured value, or the filter's estimate when the
+// configuration gives it a prior (latency_sigma > 0).
+struct LatencyEstimate {
+  double latency_s = 0.0;  // [s]
+  double sigma_s = 0.0;    // 1-sigma [s]; 0 when held at the configured value
+  bool estimated = false;
 };
 
 struct PredictedSample {
@@ -213,6 +224,7 @@ class EstimationSession {
 
   AttitudeEstimate CurrentAttitude() const;
   std::vector<GyroEstimate> Gyros() const;
+  LatencyEstimate StarTrackerLatency() const;
   // sqrt(P/P0) of each free coefficient of gyro `id` (index into theta -> ratio).
   std::vector<std::pair<int, double>> RelativeSigma(int id) const;
 
@@ -224,12 +236,13 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
-  // Version 2: everything a session restored from it needs to continue bit for bit as this one
+  // Version 4: everything a session restored from it needs to continue bit for bit as this one
   // would (same reports, state and covariance), at any point, including before initialisation.
   // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // Reads versions 1 to 3 (version 1 lacks the consistency monitor and the star-tracker
-  // anchoring flags, version 2 the process-noise widening: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
+  // Reads versions 1 to 4 (version 1 lacks the consistency monitor and the star-tracker
+  // anchoring flags, version 2 the process-noise widening, version 3 the estimated latency:
+  // session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
   // the version is unknown, the values are truncated or oversized, a field holds a value it
   // cannot (an integer or flag field that is not one, a non-finite real, an unknown state, a
   // pair naming gyros the session lacks, an invalid covariance), or the checkpoint does not fit
@@ -295,6 +308,17 @@ class EstimationSession {
                              const Eigen::Matrix3d& S_st, StepReport& report, bool& st_available,
                              bool& st_agrees_with_pairs, int& withheld_gyro);
   void ApplyCorrection(const Eigen::VectorXd& dx);
+  // The star tracker's sample q_st corrected for the latency latency_s_ with the body rate of
+  // the current interval: q_in_b(t) = q_st(t) (x) Exp(w_b latency).
+  Eigen::Quaterniond LatencyCorrected(const Eigen::Quaterniond& q_st) const;
+  // Covariance in inertial axes of the corrected star-tracker attitude (C_in_b_st its rotation
+  // matrix): the configured noise about the body axes, plus, while the latency is a state, its
+  // variance times the body rate's direction.
+  Eigen::Matrix3d StarTrackerCovarianceIn(const Eigen::Matrix3d& C_in_b_st) const;
+  // The star tracker's noise variance about each body axis [rad^2]: the configured noise plus
+  // that of the latency correction's rate, |rate extrapolation| (|latency| + its sigma) as a
+  // 1-sigma about every axis.
+  Eigen::Vector3d StarTrackerVarianceB() const;
   // D21: the configured model is known not to fit the data (the consistency monitor's latest
   // test failed, or the process noise is widened), and which of the two says so.
   bool ModelKnownNotToFit() const;
@@ -372,6 +396,17 @@ class EstimationSession {
   // Body rate over the interval of the current frame [rad/s], set by Propagate for the star-tracker
   // latency correction of MeasurementUpdate (recomputed every frame: not in the checkpoint).
   Eigen::Vector3d body_rate_b_ = Eigen::Vector3d::Zero();
+  // The part of body_rate_b_ extrapolated from the previous interval's mean rate [rad/s]; its
+  // size times the latency is taken as the 1-sigma error of the correction (transient).
+  Eigen::Vector3d rate_extrapolation_b_ = Eigen::Vector3d::Zero();
+  // The mean body rate of the last interval [rad/s] and its length [s] (0: none measured), the
+  // extrapolation's second point. In the checkpoint from version 4.
+  Eigen::Vector3d previous_mean_rate_b_ = Eigen::Vector3d::Zero();
+  double previous_interval_s_ = 0.0;
+  // The star-tracker latency the samples are corrected with [s]: the configured one, or its
+  // estimate when layout_.has_latency() (fed back by ApplyCorrection). In the checkpoint from
+  // version 4.
+  double latency_s_ = 0.0;
 };
 
 }  // namespace esg::estimator

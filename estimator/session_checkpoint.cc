@@ -39,11 +39,15 @@ using Eigen::VectorXd;
 // Version 3 (written): version 2's values, then w (a count) and the process-noise widening's
 //   state (w values, NoiseWidening::ExportState), then suspect_gyro and suspect_time (3) of the
 //   isolation's confirmation (D24).
+// Version 4 (written): version 3's values, then latency_s (the star-tracker latency the samples
+//   are corrected with: the configured one, or the filter's estimate), previous_mean_rate_b (3)
+//   and previous_interval_s of the body-rate extrapolation. A session restored from an earlier
+//   version corrects with the configured latency and starts the extrapolation afresh.
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 3;
+  c.version = 4;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -108,13 +112,17 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   v.insert(v.end(), widening.begin(), widening.end());
   v.push_back(suspect_gyro_);
   put_time(suspect_time_);
+  // Version 4.
+  v.push_back(latency_s_);
+  put_vec(previous_mean_rate_b_);
+  v.push_back(previous_interval_s_);
   return c;
 }
 
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version < 1 || checkpoint.version > 3) {
+  if (checkpoint.version < 1 || checkpoint.version > 4) {
     return absl::DataLossError(
         absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
@@ -255,6 +263,12 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     pos += n_widening;
     s.suspect_gyro_ = get_int();
     s.suspect_time_ = get_time();
+  }
+  if (checkpoint.version >= 4) {
+    s.latency_s_ = get_real();
+    get_vec(s.previous_mean_rate_b_);
+    s.previous_interval_s_ = get_real();
+    if (s.previous_interval_s_ < 0.0) mark_bad(s.previous_interval_s_, "an interval is negative");
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

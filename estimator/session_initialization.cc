@@ -70,6 +70,10 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
   const int n = layout_.size();
   P_ = MatrixXd::Zero(n, n);
   for (int i = 0; i < gyro_count(); ++i) SetDriftAndMisalignmentPrior(i, P_);
+  if (layout_.has_latency()) {
+    const double sigma_tau = config_.star_tracker.latency_sigma;
+    P_(layout_.Latency(), layout_.Latency()) = sigma_tau * sigma_tau;
+  }
   SpinAxesFromStarTracker(C_in_b);
   P0_ = P_;
   initialized_ = true;
@@ -108,13 +112,9 @@ void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepRe
   const auto& st = frame.star_tracker;
   const bool from_star_tracker = report.star_tracker_used && st.has_value() && st->valid;
   if (!from_star_tracker && !report.attitude.valid) return;
-  // The star tracker's sample corrected for its configured latency, as in MeasurementUpdate.
-  const Matrix3d C_in_b =
-      from_star_tracker
-          ? (st->q_in_b.normalized() * ExpQuaternion(body_rate_b_ * config_.star_tracker.latency))
-                .normalized()
-                .toRotationMatrix()
-          : report.attitude.q_in_b.toRotationMatrix();
+  // The star tracker's sample corrected for its latency, as in MeasurementUpdate.
+  const Matrix3d C_in_b = from_star_tracker ? LatencyCorrected(st->q_in_b).toRotationMatrix()
+                                            : report.attitude.q_in_b.toRotationMatrix();
   const Vector3d sigma_att_b = from_star_tracker
                                    ? config_.star_tracker.noise.cwiseMax(kNoiseFloor)
                                    : report.attitude.sigma_b.cwiseMax(kNoiseFloor);
@@ -166,11 +166,10 @@ void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepRe
 
 void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {
   // The spin axes rebuilt from the star tracker, h_in = C_in_b(st) C_b_k h_k, err by the
-  // misalignment, the star-tracker noise (shared by all gyros) and the readout noise:
-  // dh_g = -H_phi,g phi_g - G_st,g n_st - G_r,g r_g with the Jacobians of the star-tracker
-  // measurement (MeasurementUpdate).
-  const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
-  const Matrix3d Sigma_st = st_noise.cwiseAbs2().asDiagonal();
+  // misalignment, the star-tracker noise (shared by all gyros), its latency's error (when a state)
+  // and the readout noise: dh_g = -H_phi,g phi_g - G_st,g (n_st - w_b dtau) - G_r,g r_g with the
+  // Jacobians of the star-tracker measurement (MeasurementUpdate).
+  const Matrix3d Sigma_st = StarTrackerVarianceB().asDiagonal();
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
   std::vector<Matrix23> G_st(gyros_.size());
   for (int i = 0; i < gyro_count(); ++i) {
@@ -191,6 +190,8 @@ void EstimationSession::SpinAxesFromStarTracker(const Matrix3d& C_in_b) {
     const Vector3d h_b = g.C_b_k() * g.h_k_last;
     G_st[i] = -Tt * C_in_b * Skew(h_b);
     if (layout_.HasPhi(i)) A.block<2, 3>(h, layout_.Phi(i)) = -Tt * C_in_b * Skew(h_b);
+    // The latency-corrected star tracker errs by the body rotation -w_b dtau (session.h).
+    if (layout_.has_latency()) A.block<2, 1>(h, layout_.Latency()) = G_st[i] * body_rate_b_;
     const Matrix2d G_r = Tt * C_in_b * g.C_b_k() * TangentBasis(g.h_k_last);
     noise.block<2, 2>(h, h) += sigma_r * sigma_r * G_r * G_r.transpose();
   }

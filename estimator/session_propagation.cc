@@ -57,6 +57,9 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     if (gyros_[i].has_reading) h_k_end[i] = frame.gyros[gyros_[i].id - 1]->h_k.normalized();
   }
   body_rate_b_ = Vector3d::Zero();
+  rate_extrapolation_b_ = Vector3d::Zero();
+  const double previous_interval_s = previous_interval_s_;
+  previous_interval_s_ = 0.0;  // set again below when this interval's mean rate is measured
   if (!gyros_[ia].has_reading || !gyros_[ib].has_reading) {
     // No pair has fresh readings: every gyro holds its last reading (the output is then not
     // valid, OutputAttitude).
@@ -74,15 +77,24 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
                                     .normalized()
                               : h_k_begin[i];
     }
-    if (config_.star_tracker.latency != 0.0 && span > 0.0) {
-      // The body rate over the interval, from the attitude pair's attitudes at both ends (for
-      // the star-tracker latency correction of the measurement update):
-      // q_end = q_begin (x) Exp(w_b T).
+    if ((latency_s_ != 0.0 || layout_.has_latency()) && span > 0.0) {
+      // The body rate at the end of the interval, for the star-tracker latency correction of
+      // the measurement update. The interval's mean rate comes from the attitude pair's
+      // attitudes at both ends, q_end = q_begin (x) Exp(w_mean T); taken at the interval's
+      // midpoint and extrapolated to its end along the line through the previous interval's
+      // mean (second order for a smoothly changing rate, such as a slew's).
       const auto q_begin = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
                                         gyros_[ia].C_b_k() * h_k_begin[ia],
                                         gyros_[ib].C_b_k() * h_k_begin[ib]);
       if (q_begin.ok() && q_end.ok()) {
-        body_rate_b_ = LogQuaternion(q_begin->conjugate() * *q_end) / span;
+        const Vector3d mean_rate_b = LogQuaternion(q_begin->conjugate() * *q_end) / span;
+        if (previous_interval_s > 0.0) {
+          rate_extrapolation_b_ =
+              (mean_rate_b - previous_mean_rate_b_) * span / (span + previous_interval_s);
+        }
+        body_rate_b_ = mean_rate_b + rate_extrapolation_b_;
+        previous_mean_rate_b_ = mean_rate_b;
+        previous_interval_s_ = span;
       }
     }
   }

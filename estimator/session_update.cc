@@ -39,19 +39,13 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   const int n = state_size();
   const double kd = config_.filter.innovation_kd;
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
-  const Vector3d st_noise = config_.star_tracker.noise.cwiseMax(kNoiseFloor);
 
   const auto& st = frame.star_tracker;
   const bool st_present = use_star_tracker_ && st.has_value() && st->valid;
   bool st_available = st_present;
-  // The configured time-tag error corrected with the body rate of the last interval
-  // (spacecraft_config.h StarTrackerConfig::latency): q_in_b(t) = q_st(t) (x) Exp(w_b latency).
+  // The time-tag error corrected with the body rate of the last interval.
   const Quaterniond q_st =
-      !st_available ? Quaterniond::Identity()
-      : config_.star_tracker.latency == 0.0
-          ? st->q_in_b.normalized()
-          : (st->q_in_b.normalized() * ExpQuaternion(body_rate_b_ * config_.star_tracker.latency))
-                .normalized();
+      st_available ? LatencyCorrected(st->q_in_b) : Quaterniond::Identity();
 
   // A gyro the three-pair isolation suspects while the model is known inconsistent is not
   // excluded but its measurements are withheld at this step (D21).
@@ -60,9 +54,10 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     return !g.faulty && g.id != withheld_gyro && frame.gyros[g.id - 1].has_value();
   };
 
-  const Matrix3d C_in_b_st_12 = q_st.toRotationMatrix();
-  const Matrix3d S_st_12 =
-      C_in_b_st_12 * Matrix3d(st_noise.cwiseAbs2().asDiagonal()) * C_in_b_st_12.transpose();
+  // The corrected star-tracker attitude and its covariance in inertial axes (eq. (12) and the
+  // star-tracker rebuild of eq. (13)).
+  const Matrix3d C_in_b_st = q_st.toRotationMatrix();
+  const Matrix3d S_st = StarTrackerCovarianceIn(C_in_b_st);
   // Whether every healthy pair formed at this step agrees with the star tracker within its
   // eq. (12) allowed angle: the condition for a filter reset to re-anchor to it.
   bool st_agrees_with_pairs = false;
@@ -73,7 +68,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   bool isolated = false;
   if (fresh.size() == 3) {
     isolated = IsolateWithThreePairs(frame, {fresh[0], fresh[1], fresh[2]}, st_available, q_st,
-                                     S_st_12, report, st_available, st_agrees_with_pairs,
+                                     S_st, report, st_available, st_agrees_with_pairs,
                                      withheld_gyro);
   }
   // eq. (12) with what is available: working pair, reserve pair, star tracker.
@@ -90,8 +85,6 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
       q1 = PairQuaternion(a1->id, b1->id, a1->h_k_last, b1->h_k_last, &S1);
     }
     if (reserve_usable) q2 = PairQuaternion(a2->id, b2->id, a2->h_k_last, b2->h_k_last, &S2);
-    const Matrix3d C_in_b_st = q_st.toRotationMatrix();
-    const Matrix3d S_st = C_in_b_st * Matrix3d(st_noise.cwiseAbs2().asDiagonal()) * C_in_b_st.transpose();
     // Allowed angle of each mismatch (eq. (12)): the configured one, or k_d times the mismatch's
     // sigma along its direction. The two pairs share the reference gyro; the sum of their
     // covariances bounds that of their mismatch.
@@ -165,12 +158,11 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   VectorXd z = VectorXd::Zero(m);
   MatrixXd G = MatrixXd::Zero(m, n_noise);
   VectorXd noise_var(n_noise);
-  noise_var.head<3>() = st_noise.cwiseAbs2();
+  noise_var.head<3>() = StarTrackerVarianceB();
   noise_var.tail(n_noise - 3).setConstant(sigma_r * sigma_r);
   auto noise_col = [](int gyro_index) { return 3 + 2 * gyro_index; };
 
-  // Body attitude for the star-tracker rebuild is the star tracker's own.
-  const Matrix3d C_in_b_st = q_st.toRotationMatrix();
+  // Body attitude for the star-tracker rebuild is the star tracker's own (C_in_b_st above).
   int row = 0;
   for (int i : healthy) {
     if (!st_available) break;
@@ -180,6 +172,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     z.segment<2>(row) = d.z;
     H.block<2, 2>(row, layout_.SpinAxis(i)) = d.H_h;
     if (layout_.HasPhi(i)) H.block<2, 3>(row, layout_.Phi(i)) = d.H_phi;
+    // The corrected star tracker errs by the body rotation -w_b dtau (session.h).
+    if (layout_.has_latency()) H.block<2, 1>(row, layout_.Latency()) = -d.G_st * body_rate_b_;
     G.block<2, 3>(row, 0) = d.G_st;
     G.block<2, 2>(row, noise_col(i)) = d.G_readout;
     row += 2;
@@ -369,7 +363,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     test.gyro_star_available = true;
     test.gyro_star_fail = kd * kd;
     const Matrix3d C_in_b_st = q_st.toRotationMatrix();
-    const Vector3d st_var = config_.star_tracker.noise.cwiseMax(kNoiseFloor).cwiseAbs2();
+    const Vector3d st_var = StarTrackerVarianceB();
     for (int k = 0; k < 3; ++k) {
       const int i = IndexOf(ids[k]);
       const GyroState& g = gyros_[i];
@@ -378,6 +372,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
       MatrixXd H = MatrixXd::Zero(2, state_size());
       H.block<2, 2>(0, layout_.SpinAxis(i)) = sd.H_h;
       if (layout_.HasPhi(i)) H.block<2, 3>(0, layout_.Phi(i)) = sd.H_phi;
+      if (layout_.has_latency()) H.block<2, 1>(0, layout_.Latency()) = -sd.G_st * body_rate_b_;
       const Eigen::Matrix2d S_g = H * P_ * H.transpose() +
                                   sd.G_st * st_var.asDiagonal() * sd.G_st.transpose() +
                                   sigma_r * sigma_r * sd.G_readout * sd.G_readout.transpose();
@@ -551,6 +546,35 @@ void EstimationSession::ApplyCorrection(const VectorXd& dx) {
       g.phi_b = LogQuaternion(ExpQuaternion(dphi_b) * ExpQuaternion(g.phi_b));
     }
   }
+  if (layout_.has_latency()) latency_s_ += dx(layout_.Latency());
+}
+
+Quaterniond EstimationSession::LatencyCorrected(const Quaterniond& q_st) const {
+  // A positive latency: the sample stamped t is the attitude at t - latency, and
+  // q(t) = q(t - latency) (x) Exp(w_b latency) for a body rate w_b steady over it.
+  if (latency_s_ == 0.0) return q_st.normalized();
+  return (q_st.normalized() * ExpQuaternion(body_rate_b_ * latency_s_)).normalized();
+}
+
+Vector3d EstimationSession::StarTrackerVarianceB() const {
+  Vector3d var = config_.star_tracker.noise.cwiseMax(kNoiseFloor).cwiseAbs2();
+  if (latency_s_ != 0.0 || layout_.has_latency()) {
+    const double tau_bound =
+        std::abs(latency_s_) +
+        (layout_.has_latency() ? std::sqrt(P_(layout_.Latency(), layout_.Latency())) : 0.0);
+    const double sigma = rate_extrapolation_b_.norm() * tau_bound;
+    var.array() += sigma * sigma;
+  }
+  return var;
+}
+
+Matrix3d EstimationSession::StarTrackerCovarianceIn(const Matrix3d& C_in_b_st) const {
+  Matrix3d S = C_in_b_st * Matrix3d(StarTrackerVarianceB().asDiagonal()) * C_in_b_st.transpose();
+  if (layout_.has_latency()) {
+    const Vector3d w_in = C_in_b_st * body_rate_b_;
+    S += P_(layout_.Latency(), layout_.Latency()) * w_in * w_in.transpose();
+  }
+  return S;
 }
 
 }  // namespace esg::estimator

@@ -136,6 +136,8 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
   }
   RETURN_IF_ERROR(
       CheckLimit(config.star_tracker.latency, L.star_tracker_latency, "starTracker.latencyS"));
+  RETURN_IF_ERROR(CheckLimit(config.star_tracker.latency_sigma, L.star_tracker_latency_sigma,
+                             "starTracker.latencySigmaS"));
   RETURN_IF_ERROR(CheckLimit(config.readout_noise, L.readout_noise, "readoutNoiseArcsec"));
   RETURN_IF_ERROR(CheckLimit(config.random_walk, L.random_walk, "randomWalkDegHSqrtH"));
   const SuspensionConfig& s = config.suspension;

@@ -37,6 +37,9 @@ struct StarTrackerConfig {
   // The filter corrects each sample to q_in_b(t) = q_st(t) (x) Exp(w_b latency) with the body
   // rate w_b its gyro pairs measure (as the diagnosis's star-tracker latency effect does).
   double latency = 0.0;
+  // Prior 1-sigma of the latency [s]; > 0: the latency is a filter state, estimated online from
+  // the star-tracker differences with `latency` as its prior mean; 0: held at `latency`.
+  double latency_sigma = 0.0;
 };
 
 // Rotor-displacement readout of eq. (3): Delta = k * dU * d0 / U0.
@@ -102,6 +105,7 @@ struct ConfigLimits {
   ConfigLimit misalignment_sigma;
   ConfigLimit star_tracker_noise;
   ConfigLimit star_tracker_latency;
+  ConfigLimit star_tracker_latency_sigma;
   ConfigLimit readout_noise;
   ConfigLimit random_walk;
   ConfigLimit amplifier_gain;
@@ -113,11 +117,13 @@ struct ConfigLimits {
   ConfigLimit fault_threshold;
 
   // Every limit above, in declaration order.
-  constexpr std::array<ConfigLimit, 14> All() const {
-    return {drift_coefficient, drift_sigma,      misalignment_sigma, star_tracker_noise,
-            star_tracker_latency, readout_noise, random_walk,        amplifier_gain,
-            reference_voltage, gap,              integration_rate,   measurement_step,
-            innovation_kd,     fault_threshold};
+  constexpr std::array<ConfigLimit, 15> All() const {
+    return {drift_coefficient,    drift_sigma,    misalignment_sigma,
+            star_tracker_noise,   star_tracker_latency,
+            star_tracker_latency_sigma,
+            readout_noise,        random_walk,    amplifier_gain,
+            reference_voltage,    gap,            integration_rate,
+            measurement_step,     innovation_kd,  fault_threshold};
   }
 };
 
@@ -148,6 +154,11 @@ inline constexpr ConfigLimits kConfigLimits = {
                              &config_limits_internal::Identity, "0 (the diagnosis reports it)",
                              "star-tracker time tags err by milliseconds to a fraction of a "
                              "second; 10 s is a clock fault, not a latency to correct"},
+    .star_tracker_latency_sigma = {"starTracker.latencySigmaS", 0.0, 10.0, "s",
+                                   &config_limits_internal::Identity,
+                                   "0 (held), 0.5 to estimate an unknown latency",
+                                   "the latency state is linear only while the attitude turns "
+                                   "by small angles over it; 10 s is a clock fault"},
     .readout_noise = {"readoutNoiseArcsec", 0.0, 300.0, "arcsec", &RadToArcsec, "3",
                       "an ESG spin-axis readout is good to a few arcsec (3 in the paper); "
                       "300 arcsec is 100 times that"},

@@ -27,6 +27,11 @@ int StateLayout::Drift(int i) const {
   return blocks_[i].begin + kSpinAxisSize;
 }
 
+int StateLayout::Latency() const {
+  assert(latency_);
+  return 0;
+}
+
 int StateLayout::Phi(int i) const {
   assert(blocks_[i].estimate_phi);
   return Theta(i) + ThetaCount(i);

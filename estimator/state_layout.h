@@ -1,7 +1,12 @@
 // StateLayout: the one owner of the estimation filter's error-state indices, in the manner of
 // KF-GINS's state ids, but built at run time because the running gyros and the model's free
-// terms vary. Each running gyro owns one contiguous block, in the order of the session's gyros
-// (working pair first); within a block, in this order:
+// terms vary. The states shared by all gyros come first:
+//
+//   Latency()    1  error of the star tracker's latency (when estimated) [s]
+//
+// then each running gyro owns one contiguous block, in the order of the session's gyros
+// (working pair first; a gyro switched on later appends its block, so earlier indices hold);
+// within a block, in this order:
 //
 //   SpinAxis(i)  2  dh_g: spin-axis direction error in the gyro's tangent basis (t1, t2) [rad]
 //   Drift(i)     2  dw_int_g: residual random-walk drift of eq. (11), same basis [rad/s]
@@ -27,10 +32,12 @@ class StateLayout {
   static constexpr int kDriftSize = 2;
   static constexpr int kPhiSize = 3;
 
-  // A layout without gyros (size() == 0). `random_walk`: the model holds eq. (11), so every gyro
-  // block carries the residual-drift states.
+  // A layout without gyros (size() == 0, or 1 with the latency). `random_walk`: the model holds
+  // eq. (11), so every gyro block carries the residual-drift states. `latency`: the star
+  // tracker's latency is a state.
   StateLayout() = default;
-  explicit StateLayout(bool random_walk) : random_walk_(random_walk) {}
+  explicit StateLayout(bool random_walk, bool latency = false)
+      : random_walk_(random_walk), latency_(latency), size_(latency ? 1 : 0) {}
 
   // Appends the block of the next running gyro and returns its gyro index. `free_coefficients`
   // are drift_model.h theta indices (calibration_model.h FreeCoefficients), one state each.
@@ -42,6 +49,10 @@ class StateLayout {
   // Whether the residual-drift states of eq. (11) exist; DriftSize() is their count per gyro.
   bool has_drift() const { return random_walk_; }
   int DriftSize() const { return random_walk_ ? kDriftSize : 0; }
+  // Whether the star tracker's latency is a state; Latency() is its index.
+  bool has_latency() const { return latency_; }
+  // Precondition: has_latency().
+  int Latency() const;
 
   // First index and size of gyro i's block (0 <= i < gyro_count()).
   int GyroBegin(int i) const { return blocks_[i].begin; }
@@ -70,6 +81,7 @@ class StateLayout {
     bool estimate_phi = false;
   };
   bool random_walk_ = false;
+  bool latency_ = false;
   std::vector<Block> blocks_;
   int size_ = 0;
 };

@@ -320,6 +320,7 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
                    OptionalVector3(proto.star_tracker().noise_arcsec(), "starTracker.noiseArcsec"));
   config.star_tracker.noise = noise_arcsec.unaryExpr(&ArcsecToRad);
   config.star_tracker.latency = proto.star_tracker().latency_s();
+  config.star_tracker.latency_sigma = proto.star_tracker().latency_sigma_s();
   config.readout_noise = ArcsecToRad(proto.readout_noise_arcsec());
   config.random_walk = estimator::DegPerHourSqrtHourToSi(proto.random_walk_deg_h_sqrt_h());
 
@@ -367,6 +368,7 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
   SetVector3(config.star_tracker.noise.unaryExpr(&TidyArcsec),
              proto.mutable_star_tracker()->mutable_noise_arcsec());
   proto.mutable_star_tracker()->set_latency_s(config.star_tracker.latency);
+  proto.mutable_star_tracker()->set_latency_sigma_s(config.star_tracker.latency_sigma);
   proto.set_readout_noise_arcsec(TidyArcsec(config.readout_noise));
   proto.set_random_walk_deg_h_sqrt_h(Tidy(estimator::SiToDegPerHourSqrtHour(config.random_walk)));
   esg::v1::SuspensionConfig* s = proto.mutable_suspension();

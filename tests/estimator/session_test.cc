@@ -574,11 +574,12 @@ TEST(FaultIsolation, ShortModelWidensTheFilterInsteadOfResettingOrExcluding) {
 }
 
 // A star tracker stamped 0.3 s late on the calibration profile (slews up to ~0.3 deg/s). With the
-// latency in the configuration the filter corrects every sample with the body rate its pairs
-// measured over the last interval; the correction is only as good as that rate (the 60 s
-// readings give the interval's mean rate, not the rate at the sample), so the claims are modest
-// and measured: fewer star-tracker rejections than without the correction and far fewer than with
-// the sign wrong, and every coefficient and misalignment within 3 sigma of the truth.
+// latency in the configuration the filter corrects every sample with the body rate at the sample,
+// extrapolated from the mean rates of the last two intervals (60 s readings), and trusts a
+// correction made while the rate changes less (docs/physics.md "Star-tracker latency"). Measured:
+// 0 rejections against 62 without the correction and 55 with the sign wrong; asserted: fewer
+// than a fifth of the uncorrected rejections, fewer than with the sign wrong, and every
+// coefficient and misalignment within 3 sigma of the truth.
 TEST(Session, ConfiguredStarTrackerLatencyIsCorrectedWithTheMeasuredBodyRate) {
   SimulationSpec spec = PaperFlight(3, 24.0, "calibration");
   spec.star_tracker.latency = 0.3;
@@ -623,8 +624,8 @@ TEST(Session, ConfiguredStarTrackerLatencyIsCorrectedWithTheMeasuredBodyRate) {
               corrected.rejected, corrected.worst_sigma, uncorrected.rejected,
               uncorrected.worst_sigma, wrong_sign.rejected, wrong_sign.worst_sigma);
   EXPECT_LE(corrected.worst_sigma, 3.0);
-  EXPECT_LT(corrected.rejected, uncorrected.rejected);
-  EXPECT_LT(uncorrected.rejected, wrong_sign.rejected);
+  EXPECT_LT(5 * corrected.rejected, uncorrected.rejected);
+  EXPECT_LT(corrected.rejected, wrong_sign.rejected);
 }
 
 // The gap experiment's claim (the paper's Fig. 7/8, README "Results against the paper"): after

@@ -60,13 +60,30 @@ TEST(StateLayout, WithoutRandomWalkTheCoefficientsFollowTheSpinAxis) {
   EXPECT_EQ(layout.size(), 13);
 }
 
+TEST(StateLayout, TheLatencyComesFirstAndAGyroSwitchedOnLaterKeepsEarlierIndices) {
+  StateLayout layout(/*random_walk=*/false, /*latency=*/true);
+  EXPECT_EQ(layout.size(), 1);
+  ASSERT_TRUE(layout.has_latency());
+  EXPECT_EQ(layout.Latency(), 0);
+  layout.AddGyro({kThetaK0}, /*estimate_phi=*/true);
+  EXPECT_EQ(layout.SpinAxis(0), 1);
+  EXPECT_EQ(layout.Theta(0), 3);
+  EXPECT_EQ(layout.Phi(0), 4);
+  layout.AddGyro({}, /*estimate_phi=*/false);
+  EXPECT_EQ(layout.SpinAxis(1), 7);
+  EXPECT_EQ(layout.size(), 9);
+  EXPECT_FALSE(StateLayout(/*random_walk=*/true).has_latency());
+}
+
 TEST(StateLayout, PartsCoverEveryStateOnceAndDriversFollowTheSpinAxis) {
-  for (bool random_walk : {false, true}) {
-    StateLayout layout(random_walk);
+  for (int variant = 0; variant < 4; ++variant) {
+    const bool random_walk = variant % 2 == 1, latency = variant >= 2;
+    StateLayout layout(random_walk, latency);
     layout.AddGyro({0, 1, 2, 3, 4, 5, 6}, true);
     layout.AddGyro({}, false);
     layout.AddGyro({0}, true);
     std::vector<int> owner(layout.size(), 0);
+    if (layout.has_latency()) ++owner.at(layout.Latency());
     for (int i = 0; i < layout.gyro_count(); ++i) {
       auto mark = [&](int begin, int count) {
         for (int k = begin; k < begin + count; ++k) ++owner.at(k);
