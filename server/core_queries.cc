@@ -87,6 +87,13 @@ esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
       if (!last.has_value()) continue;
       if (!shown.has_value() || (last->inconsistent && !shown->inconsistent)) shown = last;
     }
+    if (session->initialized()) {
+      const estimator::LatencyEstimate latency = session->StarTrackerLatency();
+      esg::v1::StarTrackerLatency* l = info.mutable_star_tracker_latency();
+      l->set_latency_s(latency.latency_s);
+      l->set_sigma_s(latency.sigma_s);
+      l->set_estimated(latency.estimated);
+    }
     const double widened_drift_deg_h = session->noise_widening().EquivalentDriftDegH();
     if (shown.has_value() || widened_drift_deg_h > 0.0) {
       esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
