@@ -146,10 +146,17 @@ absl::StatusOr<esg::v1::SessionInfo> EsgClient::GetSession(const std::string& sp
 
 absl::StatusOr<esg::v1::ListSessionsResponse> EsgClient::ListSessions(const CallOptions& call) {
   esg::v1::ListSessionsRequest request;
-  return Unary<esg::v1::ListSessionsResponse>(
-      NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ListSessionsResponse* r) {
-        return stub_->ListSessions(c, request, r);
-      });
+  esg::v1::ListSessionsResponse all;
+  do {
+    absl::StatusOr<esg::v1::ListSessionsResponse> page = Unary<esg::v1::ListSessionsResponse>(
+        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ListSessionsResponse* r) {
+          return stub_->ListSessions(c, request, r);
+        });
+    if (!page.ok()) return page.status();
+    for (esg::v1::SessionInfo& s : *page->mutable_sessions()) *all.add_sessions() = std::move(s);
+    request.set_page_token(page->next_page_token());
+  } while (!request.page_token().empty());
+  return all;
 }
 
 absl::StatusOr<esg::v1::PredictResponse> EsgClient::PredictAttitude(
@@ -170,10 +177,25 @@ absl::StatusOr<esg::v1::Alert> EsgClient::AcknowledgeAlert(
 
 absl::StatusOr<esg::v1::HistoryResponse> EsgClient::GetCoefficientHistory(
     const esg::v1::HistoryRequest& request, const CallOptions& call) {
-  return Unary<esg::v1::HistoryResponse>(NewContext(true, call),
-                                         [&](grpc::ClientContext* c, esg::v1::HistoryResponse* r) {
-                                           return stub_->GetCoefficientHistory(c, request, r);
-                                         });
+  auto one_page = [&](const esg::v1::HistoryRequest& page_request) {
+    return Unary<esg::v1::HistoryResponse>(
+        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::HistoryResponse* r) {
+          return stub_->GetCoefficientHistory(c, page_request, r);
+        });
+  };
+  if (!request.page_token().empty()) return one_page(request);
+  esg::v1::HistoryRequest page_request = request;
+  esg::v1::HistoryResponse all;
+  do {
+    absl::StatusOr<esg::v1::HistoryResponse> page = one_page(page_request);
+    if (!page.ok()) return page.status();
+    all.mutable_snapshots()->Reserve(all.snapshots_size() + page->snapshots_size());
+    for (esg::v1::CoefficientSnapshot& s : *page->mutable_snapshots()) {
+      *all.add_snapshots() = std::move(s);
+    }
+    page_request.set_page_token(page->next_page_token());
+  } while (!page_request.page_token().empty());
+  return all;
 }
 
 std::unique_ptr<TelemetryStream> EsgClient::StreamTelemetry() {

@@ -107,11 +107,15 @@ class EsgClient {
   // NotFound when the spacecraft is not configured.
   absl::StatusOr<esg::v1::SessionInfo> GetSession(const std::string& spacecraft_id,
                                                   const CallOptions& call = {});
+  // Every session: follows next_page_token until the last page (each page its own call).
   absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions(const CallOptions& call = {});
   absl::StatusOr<esg::v1::PredictResponse> PredictAttitude(const esg::v1::PredictRequest& request,
                                                            const CallOptions& call = {});
   absl::StatusOr<esg::v1::Alert> AcknowledgeAlert(const esg::v1::AcknowledgeRequest& request,
                                                   const CallOptions& call = {});
+  // With request.page_token empty: the whole history, following next_page_token page by page
+  // (each page its own call, each well under gRPC's default 4 MB message limit), merged in
+  // order; the result's next_page_token is empty. With a page_token: that one page.
   absl::StatusOr<esg::v1::HistoryResponse> GetCoefficientHistory(
       const esg::v1::HistoryRequest& request, const CallOptions& call = {});
 

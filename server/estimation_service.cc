@@ -3,8 +3,10 @@
 
 #include <atomic>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <thread>
 #include <tuple>
 #include <utility>
@@ -331,6 +333,55 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
 
 }  // namespace
 
+// Export streams: `next` produces the next chunk (nullopt: the export is complete) on the callback
+// thread, since a chunk is one bounded SQLite read (EstimationCore::kExportChunkSize records),
+// like a unary list call. One write in flight: the next chunk is read only once the client took
+// the previous one (gRPC flow control), so a slow client holds no more than one chunk. An error
+// finishes the call with its status after the chunks already sent; a client that goes away
+// ends it with CANCELLED.
+namespace {
+template <typename Response>
+class ExportReactor : public grpc::ServerWriteReactor<Response> {
+ public:
+  using Next = std::function<absl::StatusOr<std::optional<Response>>()>;
+  ExportReactor(const absl::Status& auth, Next next) : next_(std::move(next)) {
+    if (!auth.ok()) {
+      this->Finish(ToGrpcStatus(auth));
+      return;
+    }
+    WriteNext();
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (!ok) {
+      this->Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
+      return;
+    }
+    WriteNext();
+  }
+
+  void OnDone() override { delete this; }
+
+ private:
+  void WriteNext() {
+    absl::StatusOr<std::optional<Response>> chunk = next_();
+    if (!chunk.ok()) {
+      this->Finish(ToGrpcStatus(chunk.status()));
+      return;
+    }
+    if (!chunk->has_value()) {
+      this->Finish(ToGrpcStatus(absl::OkStatus()));
+      return;
+    }
+    current_ = std::move(**chunk);
+    this->StartWrite(&current_);
+  }
+
+  Next next_;
+  Response current_;  // the chunk being written
+};
+}  // namespace
+
 // Diagnose: the diagnosis runs on its own thread (it takes seconds; gRPC threads must not
 // block). Progress updates are coalesced: at most one write in flight, the newest update waiting.
 // The final update carries the result; an error finishes the call with its status. When the
@@ -509,10 +560,10 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::GetSession(
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
-    grpc::CallbackServerContext* context, const esg::v1::ListSessionsRequest* /*request*/,
+    grpc::CallbackServerContext* context, const esg::v1::ListSessionsRequest* request,
     esg::v1::ListSessionsResponse* response) {
   return Unary(context, Authorize(context, Role::kRead), response,
-               [&] { return core_->ListSessions(); });
+               [&] { return core_->ListSessions(*request); });
 }
 
 // The prediction runs on a prediction thread, never on the callback thread: a 48 h prediction
@@ -587,6 +638,53 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
                [&] { return core_->History(*request); });
 }
 
+grpc::ServerWriteReactor<esg::v1::ExportCoefficientHistoryResponse>*
+EstimationServiceImpl::ExportCoefficientHistory(
+    grpc::CallbackServerContext* context,
+    const esg::v1::ExportCoefficientHistoryRequest* request) {
+  // The pages of GetCoefficientHistory at the export chunk size, followed by their tokens.
+  esg::v1::HistoryRequest pages;
+  pages.set_spacecraft_id(request->spacecraft_id());
+  pages.set_gyro_id(request->gyro_id());
+  if (request->has_from()) *pages.mutable_from() = request->from();
+  if (request->has_to()) *pages.mutable_to() = request->to();
+  pages.set_page_size(static_cast<int32_t>(EstimationCore::kExportChunkSize));
+  EstimationCore* core = core_;
+  bool last_page = false;
+  return new ExportReactor<esg::v1::ExportCoefficientHistoryResponse>(
+      Authorize(context, Role::kRead),
+      [core, pages, last_page]() mutable
+      -> absl::StatusOr<std::optional<esg::v1::ExportCoefficientHistoryResponse>> {
+        if (last_page) return std::nullopt;
+        absl::StatusOr<esg::v1::HistoryResponse> page = core->History(pages);
+        if (!page.ok()) return page.status();
+        last_page = page->next_page_token().empty();
+        pages.set_page_token(page->next_page_token());
+        if (page->snapshots_size() == 0) return std::nullopt;
+        esg::v1::ExportCoefficientHistoryResponse chunk;
+        chunk.mutable_snapshots()->Swap(page->mutable_snapshots());
+        return chunk;
+      });
+}
+
+grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* EstimationServiceImpl::ExportTelemetry(
+    grpc::CallbackServerContext* context, const esg::v1::ExportTelemetryRequest* request) {
+  EstimationCore* core = core_;
+  absl::Time after = absl::InfinitePast();
+  bool done = false;
+  return new ExportReactor<esg::v1::ExportTelemetryResponse>(
+      Authorize(context, Role::kRead),
+      [core, request = *request, after, done]() mutable
+      -> absl::StatusOr<std::optional<esg::v1::ExportTelemetryResponse>> {
+        if (done) return std::nullopt;
+        absl::StatusOr<esg::v1::ExportTelemetryResponse> chunk =
+            core->ExportTelemetryChunk(request, &after, &done);
+        if (!chunk.ok()) return chunk.status();
+        if (chunk->frames_size() == 0) return std::nullopt;
+        return *std::move(chunk);
+      });
+}
+
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagnose(
     grpc::CallbackServerContext* context, const esg::v1::DiagnoseRequest* request) {
   absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
@@ -600,6 +698,13 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(
     esg::v1::ListDiagnosesResponse* response) {
   return Unary(context, Authorize(context, Role::kRead), response,
                [&] { return core_->ListDiagnoses(*request); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::GetDiagnosis(
+    grpc::CallbackServerContext* context, const esg::v1::GetDiagnosisRequest* request,
+    esg::v1::DiagnosisResult* response) {
+  return Unary(context, Authorize(context, Role::kRead), response,
+               [&] { return core_->GetDiagnosis(*request); });
 }
 
 }  // namespace esg::server

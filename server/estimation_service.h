@@ -70,6 +70,14 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerUnaryReactor* ListDiagnoses(grpc::CallbackServerContext* context,
                                           const esg::v1::ListDiagnosesRequest* request,
                                           esg::v1::ListDiagnosesResponse* response) override;
+  grpc::ServerUnaryReactor* GetDiagnosis(grpc::CallbackServerContext* context,
+                                         const esg::v1::GetDiagnosisRequest* request,
+                                         esg::v1::DiagnosisResult* response) override;
+  grpc::ServerWriteReactor<esg::v1::ExportCoefficientHistoryResponse>* ExportCoefficientHistory(
+      grpc::CallbackServerContext* context,
+      const esg::v1::ExportCoefficientHistoryRequest* request) override;
+  grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* ExportTelemetry(
+      grpc::CallbackServerContext* context, const esg::v1::ExportTelemetryRequest* request) override;
 
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }

@@ -1,9 +1,12 @@
-// `esg history --spacecraft ID [--gyro N] [--from T] [--to T] [--csv]`: the stored coefficient
-// history of a spacecraft (GetCoefficientHistory): per measurement epoch and gyro the estimated
+// `esg history --spacecraft ID [--gyro N] [--from T] [--to T] [--format table|json|csv]`: the
+// stored coefficient history of a spacecraft (GetCoefficientHistory, every page followed: a
+// history of any length is read in pages under gRPC's default message limit, docs/service.md
+// "Paging"): per measurement epoch and gyro the estimated
 // drift model of eq. (1), (10) in the case frame k [deg/h] with its 1-sigma, and the estimated
 // gyro-to-star-tracker misalignment about the body axes [arcsec] with its 1-sigma.
-// Output: a table (k0, C1, C2, mu, nu values and the misalignment), or with --csv one row per
-// snapshot with every value and sigma (columns in kCsvHeader), or with --json one document.
+// Output: a table (k0, C1, C2, mu, nu values and the misalignment), or with --format csv (short
+// form --csv) one row per snapshot with every value and sigma (columns in CsvHeader), or with
+// --format json (--json) the HistoryResponse in the proto JSON mapping.
 // Exit codes: 0 success, 2 bad arguments, 1 server failure.
 #include <cmath>
 #include <cstdio>
@@ -17,6 +20,7 @@
 #include "absl/strings/str_format.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
+#include "client/output_format.h"
 #include "proto/convert.h"
 
 namespace esg::client {
@@ -29,8 +33,8 @@ struct HistoryOptions {
   int gyro_id = 0;
   std::string from;
   std::string to;
-  bool csv = false;
-  bool json = false;
+  bool csv = false;  // short form of --format csv
+  OutputFormat format = OutputFormat::kTable;
 };
 
 // Column groups of GyroDriftModel: name stem per component, in the proto's component order
@@ -106,28 +110,6 @@ std::string CsvRow(const esg::v1::CoefficientSnapshot& s) {
   return absl::StrCat(row, ",", FormatUtc(s.compute_time(), s.has_compute_time()));
 }
 
-Json ModelJson(const esg::v1::GyroDriftModel& m) {
-  Json out = Json::object();
-  for (size_t t = 0; t < Terms().size(); ++t) {
-    const std::vector<double> v = TermValues(m, t);
-    out[Terms()[t].json_name] = t == 0 ? Json(v[0]) : Json(v);
-  }
-  return out;
-}
-
-Json SnapshotJson(const esg::v1::CoefficientSnapshot& s) {
-  auto three = [](const google::protobuf::RepeatedField<double>& v) {
-    return Json::array({At(v, 0), At(v, 1), At(v, 2)});
-  };
-  return Json{{"measurementTime", FormatUtc(s.measurement_time(), s.has_measurement_time())},
-              {"computeTime", FormatUtc(s.compute_time(), s.has_compute_time())},
-              {"gyro", s.gyro_id()},
-              {"model", ModelJson(s.model())},
-              {"modelSigma", ModelJson(s.sigma())},
-              {"misalignmentArcsec", three(s.misalignment_arcsec())},
-              {"misalignmentSigmaArcsec", three(s.misalignment_sigma_arcsec())}};
-}
-
 void PrintTable(const esg::v1::HistoryResponse& history) {
   std::printf("%-22s %4s %18s  %-26s  %-26s  %-26s  %-26s  %s\n", "time_utc", "gyro", "k0 +- sigma",
               "C1 x,y,z", "C2 x,y,z", "mu 12,23,31", "nu 23,31,12", "misalignment x,y,z [arcsec]");
@@ -149,7 +131,10 @@ void PrintTable(const esg::v1::HistoryResponse& history) {
 }
 
 int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
-  if (o.csv && o.json) return ReportBadArgument(kVerb, "--csv and --json: give at most one");
+  if (o.csv && o.format == OutputFormat::kJson) {
+    return ReportBadArgument(kVerb, "--csv and --json: give at most one");
+  }
+  const OutputFormat format = o.csv ? OutputFormat::kCsv : o.format;
   if (o.gyro_id < 0 || o.gyro_id > 4) {
     return ReportBadArgument(kVerb, absl::StrCat("--gyro ", o.gyro_id, ": must be 1..4 (0: all)"));
   }
@@ -171,17 +156,13 @@ int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
   absl::StatusOr<esg::v1::HistoryResponse> history = client->GetCoefficientHistory(request);
   if (!history.ok()) return ReportRpcError(kVerb, history.status(), global);
 
-  if (o.csv) {
+  if (format == OutputFormat::kCsv) {
     std::printf("%s\n", CsvHeader().c_str());
     for (const esg::v1::CoefficientSnapshot& s : history->snapshots()) {
       std::printf("%s\n", CsvRow(s).c_str());
     }
-  } else if (o.json) {
-    Json snapshots = Json::array();
-    for (const esg::v1::CoefficientSnapshot& s : history->snapshots()) {
-      snapshots.push_back(SnapshotJson(s));
-    }
-    std::cout << Json{{"spacecraftId", o.spacecraft_id}, {"snapshots", snapshots}}.dump(2) << "\n";
+  } else if (format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(*history));
   } else {
     PrintTable(*history);
   }
@@ -198,8 +179,9 @@ void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--gyro", options->gyro_id, "gyro id 1..4 (default 0: all)");
   cmd->add_option("--from", options->from, "first measurement time, RFC 3339 UTC");
   cmd->add_option("--to", options->to, "last measurement time, RFC 3339 UTC");
-  cmd->add_flag("--csv", options->csv, "CSV on stdout, one row per snapshot with every 1-sigma");
-  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  AddFormatOption(cmd, &options->format);
+  cmd->add_flag("--csv", options->csv,
+                "short form of --format csv: one row per snapshot with every 1-sigma");
   cmd->callback([options, &global, exit_code] { *exit_code = RunHistory(*options, global); });
 }
 

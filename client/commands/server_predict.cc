@@ -1,20 +1,39 @@
-// `esg predict --spacecraft ID --from T --to T --step S [--aem FILE]`: the attitude predicted by
-// esgd from the calibrated state (PredictAttitude, docs/physics.md): per epoch q_in_b (scalar
-// first), its 1-sigma about the body axes x, y, z [arcsec] and the predicted spin axes h_in of the
-// gyros used; --aem also writes the returned CCSDS AEM (KVN, docs/formats.md) to FILE.
-// Exit codes: 0 success, 2 bad arguments, 1 server or file failure (e.g. OUT_OF_RANGE when --from
-// is not after the last applied frame or --to is beyond the prediction horizon).
+// `esg predict --spacecraft ID --from T --to T --step S [--planned FILE] [--aem FILE]
+// [--format table|json|csv]`: the attitude esgd predicts (PredictAttitude, docs/service.md
+// "PredictAttitude"): per epoch q_in_b (scalar first), its 1-sigma about the body axes x, y, z
+// [arcsec], where it comes from (RECORDED: the archived gyro readings, up to the last applied
+// frame; after it PLANNED: the --planned attitude, or INERTIAL_HOLD: the last estimate held
+// inertially fixed) and the predicted spin axes h_in of the gyros used. The table and stderr
+// state the assumption; --aem also writes the returned CCSDS AEM (KVN, docs/formats.md) to FILE.
+//
+// --planned FILE: a CCSDS AEM (KVN, version 1.0 or 2.0, quaternions; every segment's data lines,
+// the file's first keyword CCSDS_AEM_VERS) or a CSV with the header `time,q0,q1,q2,q3`: RFC 3339
+// UTC time and q_in_b scalar first (body to inertial, Hamilton), one line per sample in
+// increasing time.
+// Exit codes: 0 success, 2 bad arguments or an unreadable --planned file, 1 server or file
+// failure (e.g. FAILED_PRECONDITION when the session's output is not available, OUT_OF_RANGE
+// when --to is beyond the prediction horizon).
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
+#include <vector>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
+#include "client/output_format.h"
+#include "estimator/rotation.h"
 #include "proto/convert.h"
+#include "storage/aem.h"
 
 namespace esg::client {
 namespace {
@@ -26,9 +45,85 @@ struct PredictOptions {
   std::string from;
   std::string to;
   double step_s = 0.0;
+  std::string planned_path;
   std::string aem_path;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
+
+// The planned attitude of `path` (AEM or CSV, see the file comment) as request samples;
+// InvalidArgument "--planned PATH: line N: ..." otherwise.
+absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat("--planned ", path, ": cannot read"));
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string text = buffer.str();
+  std::vector<esg::v1::AttitudeSample> out;
+  auto add = [&out](absl::Time t, const Eigen::Quaterniond& q_in_b) {
+    esg::v1::AttitudeSample s;
+    *s.mutable_time() = proto_convert::TimeToProto(t);
+    for (double v : estimator::ToScalarFirst(q_in_b)) s.add_q_in_b(v);
+    out.push_back(std::move(s));
+  };
+  const absl::string_view start = absl::StripLeadingAsciiWhitespace(text);
+  if (absl::StartsWith(start, "CCSDS_AEM_VERS")) {
+    absl::StatusOr<storage::AemFile> aem = storage::ParseAem(text);
+    if (!aem.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--planned ", path, ": ", aem.status().message()));
+    }
+    for (const storage::AemSegment& segment : aem->segments) {
+      for (const storage::AemSample& s : segment.samples) add(s.epoch, s.q_in_b);
+    }
+    return out;
+  }
+  int line_number = 0;
+  bool header = true;
+  for (absl::string_view raw : absl::StrSplit(text, '\n')) {
+    ++line_number;
+    const absl::string_view line = absl::StripAsciiWhitespace(raw);
+    if (line.empty()) continue;
+    const std::vector<std::string> f = absl::StrSplit(line, ',');
+    auto error = [&](const std::string& what) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--planned ", path, ": line ", line_number, ": ", what));
+    };
+    if (f.size() != 5) {
+      return error(absl::StrCat("expected 5 columns time,q0,q1,q2,q3 (CSV) or an AEM starting "
+                                "with CCSDS_AEM_VERS, got ", f.size()));
+    }
+    if (header) {
+      header = false;
+      std::vector<std::string> names;
+      for (const std::string& name : f) {
+        names.push_back(absl::AsciiStrToLower(absl::StripAsciiWhitespace(name)));
+      }
+      if (names != std::vector<std::string>{"time", "q0", "q1", "q2", "q3"}) {
+        return error("the header must be time,q0,q1,q2,q3 (q_in_b scalar first)");
+      }
+      continue;
+    }
+    const std::optional<absl::Time> t = ParseUtc(std::string(absl::StripAsciiWhitespace(f[0])));
+    if (!t) return error(absl::StrCat("time '", f[0], "': not an RFC 3339 time"));
+    estimator::ScalarFirst q;
+    for (int i = 0; i < 4; ++i) {
+      if (!absl::SimpleAtod(absl::StripAsciiWhitespace(f[i + 1]), &q[i]) || !std::isfinite(q[i])) {
+        return error(absl::StrCat("q", i, " '", f[i + 1], "': not a number"));
+      }
+    }
+    add(*t, estimator::QuaternionFromScalarFirst(q));
+  }
+  if (out.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("--planned ", path, ": no samples"));
+  }
+  return out;
+}
+
+std::string SourceName(esg::v1::AttitudeSource source) {
+  std::string name = esg::v1::AttitudeSource_Name(source);
+  const std::string prefix = "ATTITUDE_SOURCE_";
+  return absl::StartsWith(name, prefix) ? name.substr(prefix.size()) : name;
+}
 
 int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   const std::optional<absl::Time> from = ParseUtc(o.from);
@@ -42,10 +137,15 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   if (!(o.step_s > 0.0) || !std::isfinite(o.step_s)) {
     return ReportBadArgument(kVerb, "--step " + std::to_string(o.step_s) + ": must be > 0 seconds");
   }
+  esg::v1::PredictRequest request;
+  if (!o.planned_path.empty()) {
+    absl::StatusOr<std::vector<esg::v1::AttitudeSample>> planned = ReadPlanned(o.planned_path);
+    if (!planned.ok()) return ReportBadArgument(kVerb, std::string(planned.status().message()));
+    for (esg::v1::AttitudeSample& s : *planned) *request.add_planned_attitude() = std::move(s);
+  }
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
 
-  esg::v1::PredictRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   *request.mutable_from() = proto_convert::TimeToProto(*from);
   *request.mutable_to() = proto_convert::TimeToProto(*to);
@@ -63,23 +163,48 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
       return kExitFailure;
     }
   }
-  if (o.json) {
-    Json samples = Json::array();
-    for (const esg::v1::AttitudeSample& s : response->samples()) samples.push_back(AttitudeJson(s));
-    Json doc{{"spacecraftId", o.spacecraft_id}, {"stepS", o.step_s}, {"samples", samples}};
+  // The source of each sample: the first recorded_samples are RECORDED.
+  auto source_of = [&](int i) {
+    return i < response->recorded_samples() ? esg::v1::ATTITUDE_SOURCE_RECORDED
+                                            : response->attitude_source();
+  };
+  if (o.format == OutputFormat::kJson) {
+    esg::v1::PredictResponse shown = *response;
+    shown.clear_aem_text();  // the file holds it
+    Json doc = ProtoToJson(shown);
     if (!o.aem_path.empty()) doc["aemFile"] = o.aem_path;
-    std::cout << doc.dump(2) << "\n";
+    PrintJson(doc);
     return kExitOk;
   }
-  std::printf("%-24s %12s %12s %12s %12s %9s %9s %9s  %s\n", "time_utc", "q0", "q1", "q2", "q3",
-              "sig_x\"", "sig_y\"", "sig_z\"", "spin axes h_in");
-  for (const esg::v1::AttitudeSample& s : response->samples()) {
+  if (o.format == OutputFormat::kCsv) {
+    std::vector<Json> rows;
+    for (int i = 0; i < response->samples_size(); ++i) {
+      const esg::v1::AttitudeSample& s = response->samples(i);
+      Json row;
+      row["time"] = FormatUtc(s.time(), s.has_time());
+      for (int k = 0; k < 4; ++k) row[absl::StrCat("q", k)] = k < s.q_in_b_size() ? s.q_in_b(k) : 0.0;
+      const char* axes[] = {"sigmaXArcsec", "sigmaYArcsec", "sigmaZArcsec"};
+      for (int k = 0; k < 3; ++k) {
+        row[axes[k]] = k < s.sigma_arcsec_size() ? s.sigma_arcsec(k) : 0.0;
+      }
+      row["attitudeSource"] = esg::v1::AttitudeSource_Name(source_of(i));
+      rows.push_back(std::move(row));
+    }
+    PrintCsv(rows, {"time", "q0", "q1", "q2", "q3", "sigmaXArcsec", "sigmaYArcsec",
+                    "sigmaZArcsec", "attitudeSource"});
+    std::fprintf(stderr, "esg %s: %s\n", kVerb, response->assumption().c_str());
+    return kExitOk;
+  }
+  std::printf("%-24s %12s %12s %12s %12s %9s %9s %9s  %-13s %s\n", "time_utc", "q0", "q1", "q2",
+              "q3", "sig_x\"", "sig_y\"", "sig_z\"", "source", "spin axes h_in");
+  for (int n = 0; n < response->samples_size(); ++n) {
+    const esg::v1::AttitudeSample& s = response->samples(n);
     std::printf("%-24s", FormatUtc(s.time(), s.has_time()).c_str());
     for (int i = 0; i < 4; ++i) std::printf(" %+12.9f", i < s.q_in_b_size() ? s.q_in_b(i) : 0.0);
     for (int i = 0; i < 3; ++i) {
       std::printf(" %9.2f", i < s.sigma_arcsec_size() ? s.sigma_arcsec(i) : 0.0);
     }
-    std::printf(" ");
+    std::printf("  %-13s", SourceName(source_of(n)).c_str());
     for (const esg::v1::GyroAxis& axis : s.spin_axes()) {
       std::printf(" g%d[", axis.gyro_id());
       for (int i = 0; i < axis.h_in_size(); ++i) std::printf("%s%+.6f", i ? " " : "", axis.h_in(i));
@@ -89,7 +214,7 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   }
   std::printf("%d samples", response->samples_size());
   if (!o.aem_path.empty()) std::printf("; AEM written to %s", o.aem_path.c_str());
-  std::printf("\n");
+  std::printf("\nassumption: %s\n", response->assumption().c_str());
   return kExitOk;
 }
 
@@ -98,16 +223,20 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
 void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code) {
   auto options = std::make_shared<PredictOptions>();
   CLI::App* cmd = app.add_subcommand(
-      kVerb, "predicted attitude with its 1-sigma envelope over an interval (PredictAttitude)");
+      kVerb,
+      "attitude with its 1-sigma over an interval (PredictAttitude): recorded gyro readings up to "
+      "the last applied frame, then the --planned attitude or, without one, an inertial hold of "
+      "the last estimate");
   cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id")->required();
-  cmd->add_option("--from", options->from,
-                  "first epoch, RFC 3339 UTC (after the last applied frame)")
-      ->required();
+  cmd->add_option("--from", options->from, "first epoch, RFC 3339 UTC")->required();
   cmd->add_option("--to", options->to, "last epoch, RFC 3339 UTC")->required();
   cmd->add_option("--step", options->step_s, "step between epochs [s]")->required();
+  cmd->add_option("--planned", options->planned_path,
+                  "planned attitude after the last applied frame: a CCSDS AEM (KVN) or a CSV "
+                  "with the header time,q0,q1,q2,q3 (RFC 3339 UTC, q_in_b scalar first)");
   cmd->add_option("--aem", options->aem_path,
                   "also write the prediction as a CCSDS AEM (KVN) file");
-  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  AddFormatOption(cmd, &options->format);
   cmd->callback([options, &global, exit_code] { *exit_code = RunPredict(*options, global); });
 }
 
