@@ -57,6 +57,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/consistency_monitor.h"
 #include "estimator/drift_model.h"
+#include "estimator/measurements.h"
 #include "estimator/noise_widening.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/state_layout.h"
@@ -308,6 +309,14 @@ class EstimationSession {
                              const Eigen::Matrix3d& S_st, StepReport& report, bool& st_available,
                              bool& st_agrees_with_pairs, int& withheld_gyro);
   void ApplyCorrection(const Eigen::VectorXd& dx);
+  // Gyro gyros_[i]'s star-tracker difference (eq. (13)) against the corrected star tracker
+  // C_in_b_st, and its two rows of H over the whole state (spin axis, misalignment, latency):
+  // the one place both the update and the three-pair isolation (D22) form it.
+  struct StarTrackerRows {
+    StarTrackerDifference d;
+    Eigen::MatrixXd H;  // 2 x state_size()
+  };
+  StarTrackerRows GyroStarTrackerRows(int i, const Eigen::Matrix3d& C_in_b_st) const;
   // The star tracker's sample q_st corrected for the latency latency_s_ with the body rate of
   // the current interval: q_in_b(t) = q_st(t) (x) Exp(w_b latency).
   Eigen::Quaterniond LatencyCorrected(const Eigen::Quaterniond& q_st) const;

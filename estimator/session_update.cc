@@ -166,14 +166,10 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   int row = 0;
   for (int i : healthy) {
     if (!st_available) break;
-    const GyroState& g = gyros_[i];
-    const StarTrackerDifference d =
-        MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
+    const StarTrackerRows rows = GyroStarTrackerRows(i, C_in_b_st);
+    const StarTrackerDifference& d = rows.d;
     z.segment<2>(row) = d.z;
-    H.block<2, 2>(row, layout_.SpinAxis(i)) = d.H_h;
-    if (layout_.HasPhi(i)) H.block<2, 3>(row, layout_.Phi(i)) = d.H_phi;
-    // The corrected star tracker errs by the body rotation -w_b dtau (session.h).
-    if (layout_.has_latency()) H.block<2, 1>(row, layout_.Latency()) = -d.G_st * body_rate_b_;
+    H.middleRows<2>(row) = rows.H;
     G.block<2, 3>(row, 0) = d.G_st;
     G.block<2, 2>(row, noise_col(i)) = d.G_readout;
     row += 2;
@@ -365,14 +361,9 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     const Matrix3d C_in_b_st = q_st.toRotationMatrix();
     const Vector3d st_var = StarTrackerVarianceB();
     for (int k = 0; k < 3; ++k) {
-      const int i = IndexOf(ids[k]);
-      const GyroState& g = gyros_[i];
-      const StarTrackerDifference sd =
-          MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
-      MatrixXd H = MatrixXd::Zero(2, state_size());
-      H.block<2, 2>(0, layout_.SpinAxis(i)) = sd.H_h;
-      if (layout_.HasPhi(i)) H.block<2, 3>(0, layout_.Phi(i)) = sd.H_phi;
-      if (layout_.has_latency()) H.block<2, 1>(0, layout_.Latency()) = -sd.G_st * body_rate_b_;
+      const StarTrackerRows rows = GyroStarTrackerRows(IndexOf(ids[k]), C_in_b_st);
+      const StarTrackerDifference& sd = rows.d;
+      const MatrixXd& H = rows.H;
       const Eigen::Matrix2d S_g = H * P_ * H.transpose() +
                                   sd.G_st * st_var.asDiagonal() * sd.G_st.transpose() +
                                   sigma_r * sigma_r * sd.G_readout * sd.G_readout.transpose();
@@ -547,6 +538,19 @@ void EstimationSession::ApplyCorrection(const VectorXd& dx) {
     }
   }
   if (layout_.has_latency()) latency_s_ += dx(layout_.Latency());
+}
+
+EstimationSession::StarTrackerRows EstimationSession::GyroStarTrackerRows(
+    int i, const Matrix3d& C_in_b_st) const {
+  const GyroState& g = gyros_[i];
+  StarTrackerRows r;
+  r.d = MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
+  r.H = MatrixXd::Zero(2, state_size());
+  r.H.block<2, 2>(0, layout_.SpinAxis(i)) = r.d.H_h;
+  if (layout_.HasPhi(i)) r.H.block<2, 3>(0, layout_.Phi(i)) = r.d.H_phi;
+  // The corrected star tracker errs by the body rotation -w_b dtau (session.h).
+  if (layout_.has_latency()) r.H.block<2, 1>(0, layout_.Latency()) = -r.d.G_st * body_rate_b_;
+  return r;
 }
 
 Quaterniond EstimationSession::LatencyCorrected(const Quaterniond& q_st) const {
