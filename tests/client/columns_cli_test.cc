@@ -6,7 +6,7 @@
 // same verdict, and replays to a real esgd on loopback with every frame acknowledged and applied;
 // the identity mapping (deploy/examples/columns_esg_recording.json) reads the project's CSV bit for
 // bit; a wrong mapping or a CSV that does not fit it exits 2 naming the mapping field or the
-// column and line.
+// column and line; the worked examples of docs/formats.md load and agree.
 #include <cmath>
 #include <string>
 #include <vector>
@@ -266,6 +266,54 @@ TEST_F(ColumnsCli, WrongMappingOrCsvExitsTwoNamingFieldColumnAndLine) {
   for (const char* verb : {"calibrate", "diagnose", "replay"}) {
     r = RunEsg(dir, std::string(verb) + " --help");
     EXPECT_THAT(r.out, HasSubstr("--columns")) << verb;
+  }
+}
+
+// The text of the code block after "<!-- example: NAME -->" in a Markdown file.
+std::string DocExample(const std::string& markdown, const std::string& name) {
+  const size_t anchor = markdown.find("<!-- example: " + name + " -->");
+  if (anchor == std::string::npos) return "";
+  const size_t start = markdown.find('\n', markdown.find("```", anchor)) + 1;
+  return markdown.substr(start, markdown.find("\n```", start) + 1 - start);
+}
+
+// The worked examples of docs/formats.md: the project's CSV and a user export with its mapping
+// (the same as deploy/examples/columns_user_export.json) give the same frames.
+TEST(ColumnsDocs, DocsWorkedExamplesLoadEqual) {
+  const std::string doc = ReadFile(std::string(ESG_SOURCE_DIR) + "/docs/formats.md");
+  const std::string own_csv = DocExample(doc, "recording.csv");
+  const std::string user_csv = DocExample(doc, "user-export.csv");
+  const std::string mapping_json = DocExample(doc, "columns_user_export.json");
+  ASSERT_FALSE(own_csv.empty() || user_csv.empty() || mapping_json.empty());
+  EXPECT_EQ(Json::parse(mapping_json), Json::parse(ReadFile(Example("columns_user_export.json"))));
+  absl::StatusOr<estimator::Recording> own = storage::ParseRecordingCsv(own_csv);
+  ASSERT_THAT(own.status(), IsOk());
+  absl::StatusOr<storage::ColumnMapping> mapping = storage::ParseColumnMapping(mapping_json);
+  ASSERT_THAT(mapping.status(), IsOk());
+  absl::StatusOr<estimator::Recording> user = storage::ParseMappedRecordingCsv(user_csv, *mapping);
+  ASSERT_THAT(user.status(), IsOk());
+  EXPECT_EQ(own->metadata.at("spacecraft_id"), user->metadata.at("spacecraft_id"));
+  ASSERT_EQ(own->frames.size(), 4u);
+  ASSERT_EQ(user->frames.size(), 4u);
+  for (size_t i = 0; i < 4; ++i) {
+    const estimator::TelemetryFrame& a = own->frames[i];
+    const estimator::TelemetryFrame& b = user->frames[i];
+    EXPECT_EQ(a.time, b.time) << i;
+    for (int g = 0; g < 4; ++g) {
+      ASSERT_EQ(a.gyros[g].has_value(), b.gyros[g].has_value()) << i << " gyro " << g + 1;
+      if (!a.gyros[g].has_value()) continue;
+      EXPECT_LT((a.gyros[g]->h_k - b.gyros[g]->h_k).norm(), 1e-6) << i << " gyro " << g + 1;
+      ASSERT_EQ(a.gyros[g]->u_k_mv.has_value(), b.gyros[g]->u_k_mv.has_value()) << i;
+      if (a.gyros[g]->u_k_mv.has_value()) {
+        EXPECT_LT((*a.gyros[g]->u_k_mv - *b.gyros[g]->u_k_mv).norm(), 1e-9) << i;
+      }
+    }
+    ASSERT_EQ(a.star_tracker.has_value(), b.star_tracker.has_value()) << i;
+    if (!a.star_tracker.has_value()) continue;
+    ASSERT_EQ(a.star_tracker->valid, b.star_tracker->valid) << i;
+    if (a.star_tracker->valid) {
+      EXPECT_LT(a.star_tracker->q_in_b.angularDistance(b.star_tracker->q_in_b), 1e-9) << i;
+    }
   }
 }
 
