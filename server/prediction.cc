@@ -27,6 +27,8 @@ namespace {
 
 // Frames looked back from the first recorded epoch for a star-tracker fix.
 constexpr int64_t kFixLookbackFrames = 4096;
+// Archived frames read per query of a recorded-readings run.
+constexpr int64_t kReadChunkFrames = 4096;
 
 // One predicted epoch, whatever its source.
 struct Predicted {
@@ -114,15 +116,6 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
   }
   replay.SetStarTrackerUse(false);
 
-  // The frames after the fix up to the first one at or after the last requested time.
-  ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
-                   storage.archive().ReadTimeRange(id, fix->time + absl::Nanoseconds(1),
-                                                   times.back() + absl::Nanoseconds(1)));
-  if (archived.empty() || archived.back().measurement_time < times.back()) {
-    ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> next,
-                     storage.archive().ReadAfter(id, times.back(), 1));
-    for (storage::ArchivedFrame& f : next) archived.push_back(std::move(f));
-  }
   const absl::Duration max_gap =
       absl::Seconds(2.0 * config_in.filter.measurement_step);
   std::vector<Predicted> out;
@@ -138,8 +131,19 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
     }
   };
   emit_exact(previous);
-  for (const storage::ArchivedFrame& a : archived) {
-    if (k == times.size()) break;
+  // The frames after the fix, read in chunks (memory bounded whatever the telemetry rate), up to
+  // the first one at or after the last requested time.
+  absl::Time cursor = fix->time;
+  std::vector<storage::ArchivedFrame> archived;
+  size_t next = 0;
+  while (k < times.size()) {
+    if (next == archived.size()) {
+      ASSIGN_OR_RETURN(archived, storage.archive().ReadAfter(id, cursor, kReadChunkFrames));
+      next = 0;
+      if (archived.empty()) break;
+      cursor = archived.back().measurement_time;
+    }
+    const storage::ArchivedFrame& a = archived[next++];
     esg::v1::TelemetryFrame proto;
     if (!proto.ParseFromString(a.payload)) {
       return absl::DataLossError(

@@ -134,6 +134,13 @@ TEST(Prediction, ArchivedIntervalUsesTheRecordedReadingsOfARotatingSpacecraft) {
   EXPECT_LT(worst_error_arcsec, 60.0);
   EXPECT_GT(worst_hold_error_arcsec, 3600.0 * 90.0);
   EXPECT_LE(outside_3_sigma, 1) << "worst error " << worst_error_arcsec << " arcsec";
+
+  // Before the first archived frame there is no star-tracker fix to start from.
+  esg::v1::PredictResponse before;
+  const grpc::Status refused = Predict(
+      server, Interval("PRED-REC", run.start - absl::Hours(1), run.start, 600.0), &before);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::OUT_OF_RANGE);
+  EXPECT_THAT(refused.error_message(), ::testing::StartsWith("from: "));
 }
 
 TEST(Prediction, PlannedAttitudeAfterTheArchiveIsUsedAndStatedInTheAem) {
