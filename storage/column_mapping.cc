@@ -755,6 +755,11 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
                        "column name appears twice in the header");
         }
       }
+      if (fields.size() == 1 && cols.size() > 1) {
+        problems.Add(line_no, "",
+                     absl::StrFormat("the header is one field: is the delimiter '%s' right?",
+                                     std::string(1, mapping.delimiter)));
+      }
       for (Col& c : cols) {
         const auto it = index_of.find(c.name);
         if (it == index_of.end()) {
@@ -764,11 +769,6 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
         } else {
           c.index = it->second;
         }
-      }
-      if (fields.size() == 1 && cols.size() > 1) {
-        problems.Add(line_no, "",
-                     absl::StrFormat("the header is one field: is the delimiter '%s' right?",
-                                     std::string(1, mapping.delimiter)));
       }
       if (!problems.empty()) return problems.ToStatus();  // rows cannot be interpreted
       continue;
