@@ -95,15 +95,24 @@ void Flatten(const std::string& prefix, const Json& value,
 }  // namespace
 
 void AddFormatOption(CLI::App* cmd, OutputFormat* format, const std::string& json_note) {
-  const std::map<std::string, OutputFormat> names = {
-      {"table", OutputFormat::kTable}, {"json", OutputFormat::kJson}, {"csv", OutputFormat::kCsv}};
   std::string help =
       "output: table (text), json (one document, the proto JSON mapping) or csv (a header, "
       "then one row per record)";
   if (!json_note.empty()) absl::StrAppend(&help, "; json ", json_note);
-  CLI::Option* option = cmd->add_option("--format", *format, help)
-                            ->transform(CLI::CheckedTransformer(names, CLI::ignore_case))
-                            ->default_str("table");
+  CLI::Option* option =
+      cmd->add_option_function<std::string>(
+             "--format",
+             [format](const std::string& name) {
+               *format = name == "json"  ? OutputFormat::kJson
+                         : name == "csv" ? OutputFormat::kCsv
+                                         : OutputFormat::kTable;
+             },
+             help)
+          ->check([](const std::string& name) -> std::string {
+            if (name == "table" || name == "json" || name == "csv") return "";
+            return "must be table, json or csv (got " + name + ")";
+          })
+          ->type_name("table|json|csv");
   cmd->add_flag_callback(
          "--json", [format] { *format = OutputFormat::kJson; }, "short for --format json")
       ->excludes(option);
@@ -164,6 +173,39 @@ std::string CsvTable(const std::vector<Json>& records, const std::vector<std::st
     absl::StrAppend(&out, absl::StrJoin(cells, ","), "\n");
   }
   return out;
+}
+
+std::vector<std::string> ProtoCsvColumns(const Descriptor& descriptor) {
+  std::vector<std::string> columns;
+  for (int i = 0; i < descriptor.field_count(); ++i) {
+    const FieldDescriptor* field = descriptor.field(i);
+    if (field->is_repeated()) continue;
+    if (field->cpp_type() == FieldDescriptor::CPPTYPE_MESSAGE &&
+        !IsTimestamp(field->message_type())) {
+      continue;
+    }
+    columns.push_back(field->json_name());
+  }
+  return columns;
+}
+
+std::string CsvLine(const std::vector<std::string>& columns) {
+  std::vector<std::string> cells;
+  for (const std::string& c : columns) cells.push_back(CsvCell(Json(c)));
+  return absl::StrJoin(cells, ",");
+}
+
+std::string CsvRow(const Json& record, const std::vector<std::string>& columns) {
+  std::vector<std::pair<std::string, Json>> flat;
+  Flatten("", record, flat);
+  std::map<std::string, const Json*> by_key;
+  for (const auto& [key, value] : flat) by_key.emplace(key, &value);
+  std::vector<std::string> cells;
+  for (const std::string& c : columns) {
+    auto it = by_key.find(c);
+    cells.push_back(it == by_key.end() ? std::string() : CsvCell(*it->second));
+  }
+  return absl::StrJoin(cells, ",");
 }
 
 void PrintCsv(const std::vector<Json>& records, const std::vector<std::string>& columns) {

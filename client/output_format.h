@@ -21,6 +21,7 @@
 
 #include "CLI/CLI.hpp"
 #include "absl/time/time.h"
+#include "google/protobuf/descriptor.h"
 #include "google/protobuf/message.h"
 #include "google/protobuf/timestamp.pb.h"
 #include "nlohmann/json.hpp"
@@ -59,6 +60,14 @@ void PrintJsonLine(const Json& doc);
 // and booleans as in JSON. A record that is not an object is one column named "value".
 // `columns` come first, in their order, so that the header is there even without records.
 std::string CsvTable(const std::vector<Json>& records, const std::vector<std::string>& columns = {});
+// The leading CSV columns of a message type: the json_name of each singular scalar, enum, string
+// and Timestamp field, in field order (repeated and other message fields are flattened from the
+// records). For a header that is there without records, and for rows printed one at a time.
+std::vector<std::string> ProtoCsvColumns(const google::protobuf::Descriptor& descriptor);
+// One CSV line (without the newline) of `columns` joined, and of the cells of `record` (flattened
+// as in CsvTable) under those columns; keys of the record outside `columns` are left out.
+std::string CsvLine(const std::vector<std::string>& columns);
+std::string CsvRow(const Json& record, const std::vector<std::string>& columns);
 // Prints CsvTable(records, columns) on stdout.
 void PrintCsv(const std::vector<Json>& records, const std::vector<std::string>& columns = {});
 

@@ -9,11 +9,13 @@
 #include <iostream>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_format.h"
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
+#include "client/output_format.h"
 #include "client/progress.h"
 #include "estimator/calibration_model.h"
 #include "estimator/offline.h"
@@ -42,7 +44,7 @@ struct CommonOptions {
   std::string model = "10+11";
   std::optional<double> kd;
   int consistency_window = 60;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
 
 void AddCommon(CLI::App* cmd, CommonOptions& o) {
@@ -56,7 +58,7 @@ void AddCommon(CLI::App* cmd, CommonOptions& o) {
                   "measurement steps per window of the model-consistency test (chi-square of "
                   "the innovations)")
       ->capture_default_str();
-  cmd->add_flag("--json", o.json, "one JSON document on stdout");
+  AddFormatOption(cmd, &o.format);
 }
 
 // Loads and checks the inputs; prints the problem and returns nullopt on bad input.
@@ -103,9 +105,7 @@ std::optional<Inputs> Load(const CommonOptions& o) {
   return in;
 }
 
-std::string Utc(absl::Time t) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
-}
+std::string Utc(absl::Time t) { return FormatUtc(t); }
 
 json Vec(const Eigen::Vector3d& v, double scale) {
   return json::array({v.x() * scale, v.y() * scale, v.z() * scale});
@@ -287,8 +287,19 @@ int RunCalibrate(const CommonOptions& o) {
     std::fprintf(stderr, "esg calibrate: %s\n", std::string(result.status().message()).c_str());
     return result.status().code() == absl::StatusCode::kInternal ? 1 : 2;
   }
-  if (o.json) {
-    std::cout << CalibrationJson(*in, *result).dump(2) << "\n";
+  if (o.format == OutputFormat::kJson) {
+    PrintJson(CalibrationJson(*in, *result));
+  } else if (o.format == OutputFormat::kCsv) {
+    // One row per gyro, with the run's identity; the events are in the JSON form.
+    const Json doc = CalibrationJson(*in, *result);
+    std::vector<Json> rows;
+    for (const Json& gyro : doc["gyros"]) {
+      Json row{{"spacecraftId", doc["spacecraftId"]}, {"model", doc["model"]},
+               {"state", doc["state"]}};
+      for (const auto& [key, value] : gyro.items()) row[key] = value;
+      rows.push_back(row);
+    }
+    PrintCsv(rows, {"spacecraftId", "model", "state", "id"});
   } else {
     PrintCalibration(*in, *result);
   }
@@ -345,7 +356,17 @@ int RunGap(const GapOptions& o) {
     }
   }
   const double rate_deg_h = RadPerSecToDegPerHour(result->drift_rate);
-  if (o.common.json) {
+  if (o.common.format == OutputFormat::kCsv) {
+    std::vector<Json> rows;
+    for (const auto& s : result->samples) {
+      rows.push_back(Json{{"time", Utc(s.time)},
+                          {"hours", s.hours_since_gap},
+                          {"errorArcmin", Vec(s.error_in, RadToArcmin(1.0))},
+                          {"angleArcmin", RadToArcmin(s.angle)},
+                          {"sigmaArcmin", Vec(s.sigma_b, RadToArcmin(1.0))}});
+    }
+    PrintCsv(rows, {"time", "hours"});
+  } else if (o.common.format == OutputFormat::kJson) {
     json series = json::array();
     for (const auto& s : result->samples) {
       series.push_back(json{{"time", Utc(s.time)},
@@ -362,7 +383,7 @@ int RunGap(const GapOptions& o) {
              {"finalErrorArcmin", RadToArcmin(result->final_error)},
              {"calibration", CalibrationJson(*in, result->calibration)},
              {"series", series}};
-    std::cout << doc.dump(2) << "\n";
+    PrintJson(doc);
   } else {
     std::printf("%s: model %s calibrated up to %s, then %.2f h without the star tracker\n",
                 in->config.spacecraft_id.c_str(), in->options.model.Name().c_str(),

@@ -1,6 +1,6 @@
 // The `esg` CLI verbs. Each Register* adds one CLI11 subcommand to the app; its callback runs the
 // command and stores the process exit code in *exit_code (0 success, 1 runtime failure, 2 bad
-// arguments). Human-readable output by default, one JSON document on stdout with --json.
+// arguments). Output: --format table|json|csv (client/output_format.h), table by default.
 #ifndef ESG_CLIENT_COMMANDS_COMMANDS_H_
 #define ESG_CLIENT_COMMANDS_COMMANDS_H_
 
@@ -11,7 +11,7 @@
 namespace esg::client {
 
 struct GlobalOptions {
-  std::string server = "127.0.0.1:50051";  // --server, before or after the verb
+  std::string server = "127.0.0.1:50051";  // --server or $ESG_SERVER, before or after the verb
   // Server verbs only (client/esg_client.h): TLS PEM files and the bearer token (--token or
   // $ESG_TOKEN).
   std::string tls_ca;
@@ -23,6 +23,8 @@ struct GlobalOptions {
 void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterCalibrate(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterGap(CLI::App& app, GlobalOptions& global, int* exit_code);
+// `esg diagnose`: of a recording offline, or of a server's archive (Diagnose RPC) with
+// --spacecraft.
 void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code);
 
 // Server verbs (client/commands/server_*.cc, docs/cli.md).
@@ -32,6 +34,8 @@ void RegisterStatus(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code);
+// `esg diagnoses list|show` (ListDiagnoses).
+void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code);
 
 }  // namespace esg::client
 

@@ -30,6 +30,9 @@
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
+#include "client/commands/server_common.h"
+#include "client/commands/server_diagnoses.h"
+#include "client/output_format.h"
 #include "proto/diagnosis_json.h"
 #include "estimator/units.h"
 #include "proto/convert.h"
@@ -44,7 +47,7 @@ struct DiagnoseCliOptions {
   std::string config_path;
   std::string recording_path;
   std::string out_dir;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
   std::string model = "10+11";
   double alpha = 0.01;
   int max_effects = 3;
@@ -53,9 +56,7 @@ struct DiagnoseCliOptions {
   std::string effects;
 };
 
-std::string Utc(absl::Time t) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", t, absl::UTCTimeZone());
-}
+std::string Utc(absl::Time t) { return FormatUtc(t); }
 
 std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
   std::vector<disc::Effect> out;
@@ -392,33 +393,79 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
       std::fprintf(stderr, "esg diagnose: gnuplot failed; see %s/gnuplot.log\n", o.out_dir.c_str());
     std::fprintf(stderr, "diagnose: report written to %s/report.md\n", o.out_dir.c_str());
   }
-  if (o.json) {
+  if (o.format == OutputFormat::kJson) {
     std::cout << proto_convert::DiagnosisToJson(*report) << "\n";
+  } else if (o.format == OutputFormat::kCsv) {
+    // One row per finding (one without an effect when there is none).
+    const Json doc = proto_convert::DiagnosisJsonValue(*report);
+    std::vector<Json> rows;
+    for (const Json& f : doc["findings"]) {
+      rows.push_back(Json{{"verdict", doc["verdict"]},
+                          {"effect", f["effect"]},
+                          {"gyro", f.contains("gyro") ? f["gyro"] : Json()},
+                          {"explanation", f["explanation"]}});
+    }
+    if (rows.empty()) rows.push_back(Json{{"verdict", doc["verdict"]}});
+    PrintCsv(rows, {"verdict", "effect", "gyro", "explanation"});
   } else {
     PrintHuman(*report);
   }
   return 0;
 }
 
+// Offline over --config and --recording, or on the server's archive with --spacecraft.
+int RunDiagnoseVerb(const DiagnoseCliOptions& o, const ServerDiagnoseOptions& server,
+                    bool model_given, const GlobalOptions& global) {
+  if (!server.spacecraft_id.empty()) {
+    if (!o.config_path.empty() || !o.recording_path.empty() || !o.out_dir.empty()) {
+      return ReportBadArgument("diagnose",
+                               "--spacecraft: diagnoses the server's archive; --config, "
+                               "--recording and --out are for a recording offline");
+    }
+    ServerDiagnoseOptions request = server;
+    if (model_given) request.model = o.model;  // else the session's model
+    request.format = o.format;
+    return RunServerDiagnose(request, global);
+  }
+  if (!server.from.empty() || !server.to.empty()) {
+    return ReportBadArgument("diagnose", "--from/--to: need --spacecraft (the server's archive)");
+  }
+  if (o.config_path.empty() || o.recording_path.empty()) {
+    return ReportBadArgument("diagnose",
+                             "--config and --recording: required offline (or --spacecraft ID "
+                             "to diagnose the archive of the --server)");
+  }
+  return RunDiagnose(o);
+}
+
 }  // namespace
 
 void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
-  (void)global;  // offline verb: no server
   auto o = std::make_shared<DiagnoseCliOptions>();
+  auto server = std::make_shared<ServerDiagnoseOptions>();
   CLI::App* cmd = app.add_subcommand(
       "diagnose",
-      "find the physics the configured model leaves out of a recording (docs/discovery.md)");
+      "find the physics the configured model leaves out of a recording (docs/discovery.md), "
+      "offline or on esgd's archive (--spacecraft; Diagnose)");
   cmd->add_option("--config", o->config_path,
-                  "spacecraft configuration JSON (docs/formats.md): the model")
-      ->required();
-  cmd->add_option("--recording", o->recording_path, "recording CSV (docs/formats.md)")
-      ->required();
+                  "offline: spacecraft configuration JSON (docs/formats.md), the model");
+  cmd->add_option("--recording", o->recording_path, "offline: recording CSV (docs/formats.md)");
+  cmd->add_option("--spacecraft", server->spacecraft_id,
+                  "diagnose this spacecraft's telemetry archived on the --server instead "
+                  "(Diagnose RPC; progress on stderr)");
+  cmd->add_option("--from", server->from,
+                  "with --spacecraft: first measurement time, RFC 3339 (default: the first frame)");
+  cmd->add_option("--to", server->to,
+                  "with --spacecraft: end of the span, RFC 3339, exclusive (default: after the "
+                  "last frame)");
   cmd->add_option("--out", o->out_dir,
                   "write report.md, plots (gnuplot) and diagnosis.json into DIR");
-  cmd->add_flag("--json", o->json, "one JSON document on stdout");
-  cmd->add_option("--model", o->model,
-                  "drift model terms of the configuration: 1, 10, 11 or a '+' set")
-      ->capture_default_str();
+  AddFormatOption(cmd, &o->format);
+  CLI::Option* model =
+      cmd->add_option("--model", o->model,
+                      "drift model terms of the configuration: 1, 10, 11 or a '+' set (with "
+                      "--spacecraft default: the session's model)")
+          ->capture_default_str();
   cmd->add_option("--alpha", o->alpha, "false-finding level per selection round")
       ->capture_default_str()
       ->check(CLI::Range(1e-9, 0.5));
@@ -432,7 +479,9 @@ void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
                   "filter integration rate during diagnosis, Hz (<= 0: the configuration's)")
       ->capture_default_str();
   cmd->add_option("--effects", o->effects, "comma-separated effect ids to try (default: all)");
-  cmd->callback([o, exit_code] { *exit_code = RunDiagnose(*o); });
+  cmd->callback([o, server, model, &global, exit_code] {
+    *exit_code = RunDiagnoseVerb(*o, *server, model->count() > 0, global);
+  });
 }
 
 }  // namespace esg::client

@@ -6,7 +6,8 @@
 // (AlertSubscription.replay_marker) and prints the latest state of each alert once the marker
 // arrives: the stored alerts are then complete, whatever their number and the network's speed.
 // --follow prints the stored alerts, then keeps printing alert states as they arrive (one line,
-// or one JSON object per line with --json) until Ctrl-C.
+// or with --format json one JSON object per line, with --format csv a header then one row per
+// alert state) until Ctrl-C.
 // --ack SEQ acknowledges alert SEQ of --spacecraft as --operator (default $USER) and prints it.
 // Exit codes: 0 success (also when stopped by Ctrl-C), 2 bad arguments, 1 server failure.
 #include <atomic>
@@ -24,6 +25,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -42,7 +44,7 @@ struct AlertsOptions {
   bool follow = false;
   std::optional<int64_t> ack;
   std::string operator_name;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
 
 volatile std::sig_atomic_t g_interrupted = 0;
@@ -83,8 +85,10 @@ int RunAcknowledge(const AlertsOptions& o, const GlobalOptions& global) {
   request.set_operator_name(name);
   absl::StatusOr<esg::v1::Alert> alert = client->AcknowledgeAlert(request);
   if (!alert.ok()) return ReportRpcError(kVerb, alert.status(), global);
-  if (o.json) {
-    std::cout << AlertJson(*alert).dump(2) << "\n";
+  if (o.format == OutputFormat::kJson) {
+    PrintJson(AlertJson(*alert));
+  } else if (o.format == OutputFormat::kCsv) {
+    PrintCsv({AlertJson(*alert)}, ProtoCsvColumns(*esg::v1::Alert::descriptor()));
   } else {
     std::printf("acknowledged: %s\n", AlertLine(*alert).c_str());
   }
@@ -138,6 +142,11 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
     g_interrupted = 0;
     previous_handler = std::signal(SIGINT, OnInterrupt);
   }
+  const std::vector<std::string> csv_columns = ProtoCsvColumns(*esg::v1::Alert::descriptor());
+  if (o.follow && o.format == OutputFormat::kCsv) {
+    std::printf("%s\n", CsvLine(csv_columns).c_str());
+    std::fflush(stdout);
+  }
   // Latest state of each alert, in (spacecraft, sequence) order, for the listing.
   std::map<std::pair<std::string, int64_t>, esg::v1::Alert> latest;
   bool cancelled = false;
@@ -157,8 +166,10 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
     }
     for (esg::v1::Alert& a : batch) {
       if (o.follow) {
-        if (o.json) {
+        if (o.format == OutputFormat::kJson) {
           std::printf("%s\n", AlertJson(a).dump().c_str());
+        } else if (o.format == OutputFormat::kCsv) {
+          std::printf("%s\n", CsvRow(AlertJson(a), csv_columns).c_str());
         } else {
           std::printf("%s\n", AlertLine(a).c_str());
         }
@@ -183,10 +194,16 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
   }
   if (o.follow) return kExitOk;
 
-  if (o.json) {
+  if (o.format == OutputFormat::kJson) {
     Json alerts = Json::array();
     for (const auto& [key, a] : latest) alerts.push_back(AlertJson(a));
-    std::cout << Json{{"alerts", alerts}}.dump(2) << "\n";
+    PrintJson(Json{{"alerts", alerts}});
+    return kExitOk;
+  }
+  if (o.format == OutputFormat::kCsv) {
+    std::vector<Json> records;
+    for (const auto& [key, a] : latest) records.push_back(AlertJson(a));
+    PrintCsv(records, csv_columns);
     return kExitOk;
   }
   int active = 0, unacknowledged = 0;
@@ -214,8 +231,7 @@ void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--ack", options->ack, "acknowledge alert SEQ (needs --spacecraft)")
       ->excludes(follow);
   cmd->add_option("--operator", options->operator_name, "operator name for --ack (default: $USER)");
-  cmd->add_flag("--json", options->json,
-                "one JSON document on stdout (with --follow: one JSON object per line)");
+  AddFormatOption(cmd, &options->format, "with --follow: one JSON object per line");
   cmd->callback([options, &global, exit_code] {
     *exit_code =
         options->ack.has_value() ? RunAcknowledge(*options, global) : RunList(*options, global);

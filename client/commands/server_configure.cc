@@ -22,7 +22,7 @@ struct ConfigureOptions {
   std::string config_path;
   std::string model = "10+11";
   bool replace = false;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
 
 std::string Pair(const google::protobuf::RepeatedField<int32_t>& ids) {
@@ -52,9 +52,12 @@ int RunConfigure(const ConfigureOptions& o, const GlobalOptions& global) {
   if (!response.ok()) return ReportRpcError(kVerb, response.status(), global);
 
   const esg::v1::SessionInfo& s = response->session();
-  if (o.json) {
-    std::cout << Json{{"created", response->created()}, {"session", SessionJson(s)}}.dump(2)
-              << "\n";
+  if (o.format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(*response));
+  } else if (o.format == OutputFormat::kCsv) {
+    Json record = ProtoToJson(*response);
+    record["session"].erase("config");  // the file just sent
+    PrintCsv({record}, {"created"});
   } else {
     std::printf(
         "%s: %s, model %s, state %s, working pair %s, reserve pair %s, %lld frames "
@@ -80,7 +83,7 @@ void RegisterConfigure(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_flag("--replace", options->replace,
                 "allow changing the configuration of a spacecraft with archived telemetry (the "
                 "archive is applied again under the new one)");
-  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  AddFormatOption(cmd, &options->format);
   cmd->callback([options, &global, exit_code] { *exit_code = RunConfigure(*options, global); });
 }
 

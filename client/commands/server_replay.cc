@@ -58,7 +58,7 @@ struct ReplayOptions {
   bool allow_rejects = false;
   bool wait = false;
   double wait_timeout_s = 600.0;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
 
 struct RejectedFrame {
@@ -403,7 +403,7 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
     tally.highest_durable = std::max(tally.highest_durable, s->highest_durable_sequence());
   }
 
-  if (o.json) {
+  if (o.format != OutputFormat::kTable) {
     Json rejections = Json::array();
     for (const RejectedFrame& r : tally.rejections) {
       rejections.push_back(
@@ -429,7 +429,13 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
       doc["highestAppliedSequence"] = applied->highest_applied_sequence();
       doc["session"] = SessionJson(*applied);
     }
-    std::cout << doc.dump(2) << "\n";
+    if (o.format == OutputFormat::kJson) {
+      PrintJson(doc);
+    } else {  // one row: the tally (rejections and the session are in the JSON form)
+      doc.erase("rejections");
+      doc.erase("session");
+      PrintCsv({doc});
+    }
   } else {
     std::printf(
         "%s: %lld frames (sequences %lld..%lld) in %.1f s: sent %lld, acked %lld "
@@ -500,7 +506,7 @@ void RegisterReplay(CLI::App& app, GlobalOptions& global, int* exit_code) {
                 "afterwards, wait until the server has applied every durable frame");
   cmd->add_option("--wait-timeout", options->wait_timeout_s, "longest --wait [s]")
       ->capture_default_str();
-  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  AddFormatOption(cmd, &options->format);
   cmd->callback([options, &global, exit_code] { *exit_code = RunReplay(*options, global); });
 }
 

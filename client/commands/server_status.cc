@@ -7,6 +7,7 @@
 #include <iostream>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
@@ -18,8 +19,16 @@ constexpr char kVerb[] = "status";
 
 struct StatusOptions {
   std::string spacecraft_id;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
+
+// CSV record of a session: its JSON form without the configuration (a file of its own,
+// docs/formats.md).
+Json SessionRecord(const esg::v1::SessionInfo& s) {
+  Json record = SessionJson(s);
+  record.erase("config");
+  return record;
+}
 
 std::string Ids(const google::protobuf::RepeatedField<int32_t>& ids) {
   std::string out = "[";
@@ -91,6 +100,15 @@ void PrintSession(const esg::v1::SessionInfo& s) {
           mc.failing_tests(), mc.tests());
     }
   }
+  if (s.has_star_tracker_latency() && (s.star_tracker_latency().estimated() ||
+                                       s.star_tracker_latency().latency_s() != 0.0)) {
+    const esg::v1::StarTrackerLatency& l = s.star_tracker_latency();
+    if (l.estimated()) {
+      std::printf("  star-tracker latency %+.4f +- %.4f s (estimated)\n", l.latency_s(), l.sigma_s());
+    } else {
+      std::printf("  star-tracker latency %+.4f s (configured, held)\n", l.latency_s());
+    }
+  }
   std::printf("  last update %s\n",
               FormatUtc(s.last_compute_time(), s.has_last_compute_time()).c_str());
 }
@@ -101,8 +119,10 @@ int RunStatus(const StatusOptions& o, const GlobalOptions& global) {
   if (!o.spacecraft_id.empty()) {
     absl::StatusOr<esg::v1::SessionInfo> session = client->GetSession(o.spacecraft_id);
     if (!session.ok()) return ReportRpcError(kVerb, session.status(), global);
-    if (o.json) {
-      std::cout << SessionJson(*session).dump(2) << "\n";
+    if (o.format == OutputFormat::kJson) {
+      PrintJson(SessionJson(*session));
+    } else if (o.format == OutputFormat::kCsv) {
+      PrintCsv({SessionRecord(*session)}, {"spacecraftId", "state"});
     } else {
       PrintSession(*session);
     }
@@ -110,10 +130,12 @@ int RunStatus(const StatusOptions& o, const GlobalOptions& global) {
   }
   absl::StatusOr<esg::v1::ListSessionsResponse> list = client->ListSessions();
   if (!list.ok()) return ReportRpcError(kVerb, list.status(), global);
-  if (o.json) {
-    Json sessions = Json::array();
-    for (const esg::v1::SessionInfo& s : list->sessions()) sessions.push_back(SessionJson(s));
-    std::cout << Json{{"sessions", sessions}}.dump(2) << "\n";
+  if (o.format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(*list));
+  } else if (o.format == OutputFormat::kCsv) {
+    std::vector<Json> records;
+    for (const esg::v1::SessionInfo& s : list->sessions()) records.push_back(SessionRecord(s));
+    PrintCsv(records, {"spacecraftId", "state"});
   } else if (list->sessions().empty()) {
     std::printf("no spacecraft configured on %s\n", global.server.c_str());
   } else {
@@ -129,7 +151,7 @@ void RegisterStatus(CLI::App& app, GlobalOptions& global, int* exit_code) {
   CLI::App* cmd = app.add_subcommand(
       kVerb, "state of one spacecraft's session, or of all (GetSession, ListSessions)");
   cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id (default: all)");
-  cmd->add_flag("--json", options->json, "one JSON document on stdout");
+  AddFormatOption(cmd, &options->format);
   cmd->callback([options, &global, exit_code] { *exit_code = RunStatus(*options, global); });
 }
 

@@ -19,6 +19,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
+#include "client/output_format.h"
 #include "client/scenario.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
@@ -44,7 +45,7 @@ struct SimulateOptions {
   double telemetry_step = 60.0;
   double integration_rate_hz = 8.0;
   std::string truth_path;
-  bool json = false;
+  OutputFormat format = OutputFormat::kTable;
 };
 
 // Progress on stderr: a percentage updated in place on a terminal, otherwise a line every 10%.
@@ -234,8 +235,8 @@ int RunSimulate(const SimulateOptions& o) {
   for (int id = 1; id <= kMaxGyros; ++id) {
     if (result->true_coefficients[id - 1]) running.push_back(id);
   }
-  if (o.json) {
-    nlohmann::json j;
+  if (o.format != OutputFormat::kTable) {
+    Json j;
     j["out"] = o.out_path;
     j["frames"] = result->recording.frames.size();
     j["hours"] = o.hours;
@@ -243,7 +244,11 @@ int RunSimulate(const SimulateOptions& o) {
     j["profile"] = spec.profile->Describe();
     j["runningGyros"] = running;
     if (!o.truth_path.empty()) j["truth"] = o.truth_path;
-    std::cout << j.dump(2) << "\n";
+    if (o.format == OutputFormat::kJson) {
+      PrintJson(j);
+    } else {
+      PrintCsv({j});
+    }
   } else {
     std::cout << absl::StrFormat("wrote %d frames (%g h, gyros %s running, seed %d) to %s\n",
                                  result->recording.frames.size(), o.hours,
@@ -279,7 +284,7 @@ void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code) {
       ->capture_default_str();
   sub->add_option("--truth", options->truth_path,
                   "also write the truth CSV (true q_in_b, h_in per gyro, true coefficients)");
-  sub->add_flag("--json", options->json, "print the summary as one JSON document");
+  AddFormatOption(sub, &options->format);
   sub->callback([options, exit_code]() { *exit_code = RunSimulate(*options); });
 }
 

@@ -1,0 +1,323 @@
+// `esg diagnose --spacecraft ID` (Diagnose) and `esg diagnoses list|show` (ListDiagnoses,
+// GetDiagnosis); see server_diagnoses.h.
+#include "client/commands/server_diagnoses.h"
+
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/time/clock.h"
+#include "client/commands/server_common.h"
+#include "esg/v1/estimation_service.grpc.pb.h"
+#include "grpcpp/create_channel.h"
+#include "grpcpp/security/credentials.h"
+#include "grpcpp/support/channel_arguments.h"
+#include "proto/convert.h"
+
+namespace esg::client {
+namespace {
+
+using esg::v1::DiagnosisResult;
+
+// The diagnosis calls of esg.v1.EstimationService, on a channel built from the global options as
+// EsgClient builds its own (client/esg_client.h: plaintext or TLS, bearer token per call).
+class DiagnosisRpc {
+ public:
+  // nullptr after printing "esg VERB: <message>" (bad --tls-* or --server).
+  static std::unique_ptr<DiagnosisRpc> Create(const char* verb, const GlobalOptions& global) {
+    // EsgClient::Create checks the options and the PEM files with field-named messages.
+    if (Connect(verb, global) == nullptr) return nullptr;
+    std::shared_ptr<grpc::ChannelCredentials> credentials;
+    if (global.tls_ca.empty() && global.tls_cert.empty()) {
+      credentials = grpc::InsecureChannelCredentials();
+    } else {
+      grpc::SslCredentialsOptions ssl;
+      ssl.pem_root_certs = ReadText(global.tls_ca);
+      ssl.pem_cert_chain = ReadText(global.tls_cert);
+      ssl.pem_private_key = ReadText(global.tls_key);
+      credentials = grpc::SslCredentials(ssl);
+    }
+    grpc::ChannelArguments args;
+    args.SetMaxReceiveMessageSize(64 * 1024 * 1024);
+    auto rpc = std::unique_ptr<DiagnosisRpc>(new DiagnosisRpc(global));
+    rpc->stub_ = esg::v1::EstimationService::NewStub(
+        grpc::CreateCustomChannel(global.server, credentials, args));
+    return rpc;
+  }
+
+  std::unique_ptr<grpc::ClientContext> Context(bool unary) const {
+    auto context = std::make_unique<grpc::ClientContext>();
+    if (!global_.token.empty()) {
+      context->AddMetadata("authorization", absl::StrCat("Bearer ", global_.token));
+    }
+    if (unary) context->set_deadline(absl::ToChronoTime(absl::Now() + absl::Seconds(60)));
+    return context;
+  }
+
+  esg::v1::EstimationService::Stub& stub() { return *stub_; }
+
+ private:
+  explicit DiagnosisRpc(const GlobalOptions& global) : global_(global) {}
+  static std::string ReadText(const std::string& path) {
+    if (path.empty()) return "";
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream text;
+    text << in.rdbuf();
+    return text.str();
+  }
+
+  const GlobalOptions& global_;
+  std::unique_ptr<esg::v1::EstimationService::Stub> stub_;
+};
+
+absl::Status FromGrpc(const grpc::Status& status) { return FromGrpcStatus(status); }
+
+// The JSON form: the proto mapping, the report parsed under "report" (null when absent).
+Json ResultJson(const DiagnosisResult& result) {
+  Json doc = ProtoToJson(result);
+  doc.erase("reportJson");
+  doc["report"] = result.report_json().empty()
+                      ? Json()
+                      : Json::parse(result.report_json(), nullptr, /*allow_exceptions=*/false);
+  return doc;
+}
+
+std::vector<std::string> SummaryColumns() {
+  std::vector<std::string> columns;
+  for (const std::string& c : ProtoCsvColumns(*DiagnosisResult::descriptor())) {
+    if (c != "reportJson") columns.push_back(c);
+  }
+  return columns;
+}
+
+std::string SummaryLine(const DiagnosisResult& d) {
+  return absl::StrFormat("#%d %s %-20s %s .. %s, %d frames, computed %s", d.id(),
+                         d.spacecraft_id(), d.verdict(),
+                         FormatUtc(d.first_frame_time(), d.has_first_frame_time()),
+                         FormatUtc(d.last_frame_time(), d.has_last_frame_time()), d.frames(),
+                         FormatUtc(d.compute_time(), d.has_compute_time()));
+}
+
+// The human form of a result with its report: the summary line, the findings and the fit.
+void PrintResult(const DiagnosisResult& d) {
+  std::printf("diagnosis %s\n", SummaryLine(d).c_str());
+  const Json report = Json::parse(d.report_json(), nullptr, /*allow_exceptions=*/false);
+  if (!report.is_object()) return;
+  std::printf("verdict: %s\n", d.verdict().c_str());
+  int n = 0;
+  for (const Json& f : report.value("findings", Json::array())) {
+    std::string gyro = f.contains("gyro") ? absl::StrCat(" (gyro ", f["gyro"].dump(), ")") : "";
+    std::printf("%d. %s%s: %s\n", ++n, f.value("effect", "").c_str(), gyro.c_str(),
+                f.value("explanation", "").c_str());
+  }
+  if (report.contains("fit")) {
+    for (const char* when : {"before", "after"}) {
+      const Json& fit = report["fit"][when];
+      if (!fit.is_object()) continue;
+      std::printf("fit %-7s residual RMS %.2f arcsec, held-out drift rate %.4f deg/h (%s)\n",
+                  (std::string(when) + ":").c_str(), fit.value("residualRmsArcsec", NAN),
+                  fit.value("gapDriftRateDegH", NAN), fit.value("model", "").c_str());
+    }
+  }
+}
+
+// CSV of results with reports: one row per finding (a row without effect when none).
+void PrintResultCsv(const DiagnosisResult& d) {
+  Json base = ProtoToJson(d);
+  base.erase("reportJson");
+  const Json report = Json::parse(d.report_json(), nullptr, /*allow_exceptions=*/false);
+  std::vector<Json> rows;
+  if (report.is_object()) {
+    for (const Json& f : report.value("findings", Json::array())) {
+      Json row = base;
+      row["effect"] = f.value("effect", "");
+      row["gyro"] = f.contains("gyro") ? f["gyro"] : Json();
+      row["explanation"] = f.value("explanation", "");
+      rows.push_back(row);
+    }
+  }
+  if (rows.empty()) rows.push_back(base);
+  std::vector<std::string> columns = SummaryColumns();
+  for (const char* c : {"effect", "gyro", "explanation"}) columns.push_back(c);
+  PrintCsv(rows, columns);
+}
+
+void PrintOne(const DiagnosisResult& d, OutputFormat format) {
+  switch (format) {
+    case OutputFormat::kJson:
+      PrintJson(ResultJson(d));
+      break;
+    case OutputFormat::kCsv:
+      PrintResultCsv(d);
+      break;
+    case OutputFormat::kTable:
+      PrintResult(d);
+      break;
+  }
+}
+
+// Progress of the Diagnose stream on stderr: a line per stage (in place on a terminal).
+class StageLines {
+ public:
+  StageLines() : tty_(::isatty(STDERR_FILENO) == 1) {}
+  void operator()(double fraction, const std::string& stage) {
+    if (stage.empty() || stage == last_) return;
+    last_ = stage;
+    if (tty_) {
+      std::fprintf(stderr, "\r\033[Kdiagnose: %3.0f%% %s", 100.0 * fraction, stage.c_str());
+      if (fraction >= 1.0) std::fprintf(stderr, "\n");
+    } else {
+      std::fprintf(stderr, "diagnose: %3.0f%% %s\n", 100.0 * fraction, stage.c_str());
+    }
+    std::fflush(stderr);
+  }
+  void End() {
+    if (tty_ && !last_.empty()) std::fprintf(stderr, "\n");
+  }
+
+ private:
+  bool tty_;
+  std::string last_;
+};
+
+struct ListOptions {
+  std::string spacecraft_id;
+  int64_t id = 0;
+  int page_size = 0;
+  OutputFormat format = OutputFormat::kTable;
+};
+
+int RunList(const ListOptions& o, const GlobalOptions& global) {
+  constexpr char kVerb[] = "diagnoses list";
+  if (o.page_size < 0) {
+    return ReportBadArgument(kVerb, absl::StrCat("--page-size ", o.page_size, ": must be >= 0"));
+  }
+  std::unique_ptr<DiagnosisRpc> rpc = DiagnosisRpc::Create(kVerb, global);
+  if (rpc == nullptr) return kExitBadArguments;
+  // Every page, in the server's order (oldest first).
+  esg::v1::ListDiagnosesResponse all;
+  esg::v1::ListDiagnosesRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  request.set_page_size(o.page_size);
+  for (;;) {
+    esg::v1::ListDiagnosesResponse page;
+    const grpc::Status status = rpc->stub().ListDiagnoses(rpc->Context(true).get(), request, &page);
+    if (!status.ok()) return ReportRpcError(kVerb, FromGrpc(status), global);
+    for (DiagnosisResult& d : *page.mutable_diagnoses()) *all.add_diagnoses() = std::move(d);
+    if (page.next_page_token().empty()) break;
+    if (page.next_page_token() == request.page_token()) {
+      std::fprintf(stderr, "esg %s: the server returned the same page token twice\n", kVerb);
+      return kExitFailure;
+    }
+    request.set_page_token(page.next_page_token());
+  }
+  if (o.format == OutputFormat::kJson) {
+    Json doc = ProtoToJson(all);
+    doc.erase("nextPageToken");
+    for (Json& d : doc["diagnoses"]) d.erase("reportJson");  // summaries: always empty
+    PrintJson(doc);
+  } else if (o.format == OutputFormat::kCsv) {
+    std::vector<Json> rows;
+    for (const DiagnosisResult& d : all.diagnoses()) {
+      Json row = ProtoToJson(d);
+      row.erase("reportJson");
+      rows.push_back(row);
+    }
+    PrintCsv(rows, SummaryColumns());
+  } else {
+    for (const DiagnosisResult& d : all.diagnoses()) std::printf("%s\n", SummaryLine(d).c_str());
+    std::printf("%d diagnoses of %s (esg diagnoses show --spacecraft %s --id N for a report)\n",
+                all.diagnoses_size(), o.spacecraft_id.c_str(), o.spacecraft_id.c_str());
+  }
+  return kExitOk;
+}
+
+int RunShow(const ListOptions& o, const GlobalOptions& global) {
+  constexpr char kVerb[] = "diagnoses show";
+  if (o.id < 1) return ReportBadArgument(kVerb, absl::StrCat("--id ", o.id, ": must be >= 1"));
+  std::unique_ptr<DiagnosisRpc> rpc = DiagnosisRpc::Create(kVerb, global);
+  if (rpc == nullptr) return kExitBadArguments;
+  esg::v1::GetDiagnosisRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  request.set_id(o.id);
+  DiagnosisResult result;
+  const grpc::Status status = rpc->stub().GetDiagnosis(rpc->Context(true).get(), request, &result);
+  if (!status.ok()) return ReportRpcError(kVerb, FromGrpc(status), global);
+  PrintOne(result, o.format);
+  return kExitOk;
+}
+
+}  // namespace
+
+int RunServerDiagnose(const ServerDiagnoseOptions& o, const GlobalOptions& global) {
+  constexpr char kVerb[] = "diagnose";
+  esg::v1::DiagnoseRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  request.set_model(o.model);
+  if (!o.from.empty()) {
+    const std::optional<absl::Time> from = ParseUtc(o.from);
+    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
+    *request.mutable_from() = proto_convert::TimeToProto(*from);
+  }
+  if (!o.to.empty()) {
+    const std::optional<absl::Time> to = ParseUtc(o.to);
+    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
+    *request.mutable_to() = proto_convert::TimeToProto(*to);
+  }
+  std::unique_ptr<DiagnosisRpc> rpc = DiagnosisRpc::Create(kVerb, global);
+  if (rpc == nullptr) return kExitBadArguments;
+  std::unique_ptr<grpc::ClientContext> context = rpc->Context(false);
+  std::unique_ptr<grpc::ClientReader<esg::v1::DiagnoseUpdate>> reader =
+      rpc->stub().Diagnose(context.get(), request);
+  StageLines progress;
+  std::optional<DiagnosisResult> result;
+  esg::v1::DiagnoseUpdate update;
+  while (reader->Read(&update)) {
+    progress(update.progress(), update.stage());
+    if (update.has_result()) result = update.result();
+  }
+  progress.End();
+  const grpc::Status status = reader->Finish();
+  if (!status.ok()) return ReportRpcError(kVerb, FromGrpc(status), global);
+  if (!result) {
+    std::fprintf(stderr, "esg %s: the stream ended without a result\n", kVerb);
+    return kExitFailure;
+  }
+  PrintOne(*result, o.format);
+  return kExitOk;
+}
+
+void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  CLI::App* cmd = app.add_subcommand(
+      "diagnoses", "stored diagnoses of a spacecraft on esgd (ListDiagnoses, GetDiagnosis)");
+  cmd->require_subcommand(1);
+  cmd->fallthrough();
+
+  auto list = std::make_shared<ListOptions>();
+  CLI::App* list_cmd = cmd->add_subcommand(
+      "list", "every stored diagnosis of a spacecraft, oldest first (all pages)");
+  list_cmd->add_option("--spacecraft", list->spacecraft_id, "spacecraft id")->required();
+  list_cmd->add_option("--page-size", list->page_size,
+                       "diagnoses per request (0: the server's default); pages are followed");
+  AddFormatOption(list_cmd, &list->format);
+  list_cmd->callback([list, &global, exit_code] { *exit_code = RunList(*list, global); });
+
+  auto show = std::make_shared<ListOptions>();
+  CLI::App* show_cmd =
+      cmd->add_subcommand("show", "one stored diagnosis with its full report (GetDiagnosis)");
+  show_cmd->add_option("--spacecraft", show->spacecraft_id, "spacecraft id")->required();
+  show_cmd->add_option("--id", show->id, "diagnosis id (esg diagnoses list)")->required();
+  AddFormatOption(show_cmd, &show->format);
+  show_cmd->callback([show, &global, exit_code] { *exit_code = RunShow(*show, global); });
+}
+
+}  // namespace esg::client

@@ -1,0 +1,94 @@
+# Bash completion for `esg` (docs/cli.md). Installed by CMake as
+# share/bash-completion/completions/esg; to try it from a checkout: source deploy/completion/esg.bash
+# Completes the verbs, the options of the verb on the line (and the global options), the values
+# of --format and --model, and file names after the options that take a file.
+
+_esg() {
+  local cur prev words cword
+  if declare -F _init_completion >/dev/null; then
+    _init_completion || return
+  else
+    cur="${COMP_WORDS[COMP_CWORD]}"
+    prev="${COMP_WORDS[COMP_CWORD-1]}"
+    words=("${COMP_WORDS[@]}")
+    cword=$COMP_CWORD
+  fi
+
+  local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history"
+  local global="--server --token --tls-ca --tls-cert --tls-key --help --version"
+  local format="--format --json"
+
+  # The verb (and the sub-verb of diagnoses) on the line so far; global options may come first.
+  local verb="" sub="" i
+  for ((i = 1; i < cword; i++)); do
+    case "${words[i]}" in
+      --server | --token | --tls-ca | --tls-cert | --tls-key) ((i++)) ;;
+      -*) ;;
+      *)
+        if [[ -z "$verb" ]]; then
+          verb="${words[i]}"
+        elif [[ "$verb" == diagnoses && -z "$sub" ]]; then
+          sub="${words[i]}"
+        fi
+        ;;
+    esac
+  done
+
+  case "$prev" in
+    --format)
+      COMPREPLY=($(compgen -W "table json csv" -- "$cur"))
+      return
+      ;;
+    --model)
+      COMPREPLY=($(compgen -W "1 10 11 1+11 10+11 1+10+11" -- "$cur"))
+      return
+      ;;
+    --profile)
+      COMPREPLY=($(compgen -W "inertial orbital calibration mixed" -- "$cur"))
+      return
+      ;;
+    --config | --recording | --columns | --scenario | --write-config | --truth | --series-csv | \
+      --aem | --planned | --tls-ca | --tls-cert | --tls-key)
+      COMPREPLY=($(compgen -f -- "$cur"))
+      return
+      ;;
+    --out)
+      COMPREPLY=($(compgen -f -- "$cur"))
+      return
+      ;;
+    --server | --token | --spacecraft | --from | --to | --since | --step | --hours | --seed | \
+      --start | --gap-start | --id | --ack | --operator | --gyro | --rate | --window | --kd | \
+      --page-size | --effects | --alpha | --threads)
+      return  # a value the shell cannot guess
+      ;;
+  esac
+
+  local opts=""
+  case "$verb" in
+    "") COMPREPLY=($(compgen -W "$verbs $global" -- "$cur")); return ;;
+    simulate) opts="--config --profile --scenario --hours --seed --out --write-config --start
+                    --telemetry-step --integration-rate --truth $format" ;;
+    calibrate) opts="--config --recording --columns --model --kd --consistency-window $format" ;;
+    gap) opts="--config --recording --columns --model --kd --consistency-window --gap-start
+               --series-csv $format" ;;
+    diagnose) opts="--config --recording --columns --spacecraft --from --to --out --model --alpha
+                    --max-effects --threads --integration-rate --effects $format" ;;
+    diagnoses)
+      case "$sub" in
+        "") COMPREPLY=($(compgen -W "list show" -- "$cur")); return ;;
+        list) opts="--spacecraft --page-size $format" ;;
+        show) opts="--spacecraft --id $format" ;;
+      esac
+      ;;
+    configure) opts="--config --model --replace $format" ;;
+    replay) opts="--recording --columns --spacecraft --rate --from-sequence --window --max-retries
+                  --allow-rejects --wait --wait-timeout $format" ;;
+    status) opts="--spacecraft $format" ;;
+    predict) opts="--spacecraft --from --to --step --aem --planned $format" ;;
+    alerts) opts="--spacecraft --since --follow --ack --operator $format" ;;
+    history) opts="--spacecraft --gyro --from --to $format --csv" ;;
+  esac
+  COMPREPLY=($(compgen -W "$opts $global" -- "$cur"))
+}
+
+complete -F _esg esg
