@@ -74,12 +74,14 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
   int pages = 0;
   bool appended = false;
   size_t largest_page_bytes = 0;
+  size_t total_bytes = 0;
   do {
     esg::v1::HistoryResponse page;
     const grpc::Status status = HistoryPage(*stub, request, &page);
     ASSERT_TRUE(status.ok()) << status.error_message() << " at page " << pages;
     ++pages;
     largest_page_bytes = std::max(largest_page_bytes, page.ByteSizeLong());
+    total_bytes += page.ByteSizeLong();
     EXPECT_LE(page.snapshots_size(), 5000);
     for (const esg::v1::CoefficientSnapshot& s : page.snapshots()) {
       ASSERT_EQ(s.model().k0_deg_h(), static_cast<double>(expected_k0)) << "page " << pages;
@@ -105,6 +107,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
   EXPECT_EQ(pages, 26);               // 129601 records, 5000 per page
   EXPECT_LT(largest_page_bytes, 4u << 20);
   RecordProperty("largest_page_bytes", std::to_string(largest_page_bytes));
+  RecordProperty("total_bytes", std::to_string(total_bytes));
 
   // page_size: larger than the maximum is the maximum; small sizes are honoured.
   esg::v1::HistoryRequest sized;
@@ -158,6 +161,35 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
   ASSERT_TRUE(status.ok()) << status.error_message();
   EXPECT_EQ(exported, total + 1);
   EXPECT_EQ(chunks, 130);
+}
+
+TEST(Paging, AHistoryTokenStaysValidAcrossARestart) {
+  TempDir dir;
+  const std::string db = dir.File("esg.db");
+  std::string token;
+  {
+    LoopbackServer server({}, db);
+    auto stub = server.Stub();
+    Configure(*stub, "PAGE-RESTART");
+    AppendHistory(server.core().storage(), "PAGE-RESTART", 1);
+    esg::v1::HistoryRequest request;
+    request.set_spacecraft_id("PAGE-RESTART");
+    request.set_page_size(1000);
+    esg::v1::HistoryResponse page;
+    ASSERT_TRUE(HistoryPage(*stub, request, &page).ok());
+    ASSERT_EQ(page.snapshots_size(), 1000);
+    token = page.next_page_token();
+  }
+  LoopbackServer server({}, db);
+  esg::v1::HistoryRequest request;
+  request.set_spacecraft_id("PAGE-RESTART");
+  request.set_page_size(1000);
+  request.set_page_token(token);
+  esg::v1::HistoryResponse page;
+  const grpc::Status status = HistoryPage(*server.Stub(), request, &page);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  ASSERT_EQ(page.snapshots_size(), 1000);
+  EXPECT_EQ(page.snapshots(0).model().k0_deg_h(), 1000.0);  // the record after the first page
 }
 
 TEST(Paging, DiagnosesAreListedAsSummariesAndReadOneByOne) {
