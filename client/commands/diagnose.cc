@@ -4,7 +4,8 @@
 // after (or one JSON document with --json, proto/diagnosis_json.h), and with --out DIR writes a
 // Markdown report with gnuplot plots: residuals before and after, held-out attitude error before
 // and after (the paper's Fig. 7/8 measure), and where the mismatch sits in time and regime.
-// Progress goes to stderr.
+// Progress goes to stderr. With --spacecraft instead of --config and --recording, the diagnosis
+// runs on the server's archive (Diagnose RPC, client/commands/server_diagnoses.h).
 // Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
 #include "estimator/discovery/diagnose.h"
 

@@ -131,7 +131,9 @@ int RunStatus(const StatusOptions& o, const GlobalOptions& global) {
   absl::StatusOr<esg::v1::ListSessionsResponse> list = client->ListSessions();
   if (!list.ok()) return ReportRpcError(kVerb, list.status(), global);
   if (o.format == OutputFormat::kJson) {
-    PrintJson(ProtoToJson(*list));
+    Json doc = ProtoToJson(*list);
+    doc.erase("nextPageToken");  // every page is in the list
+    PrintJson(doc);
   } else if (o.format == OutputFormat::kCsv) {
     std::vector<Json> records;
     for (const esg::v1::SessionInfo& s : list->sessions()) records.push_back(SessionRecord(s));
