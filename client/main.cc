@@ -22,7 +22,8 @@ namespace {
 // "esg 0.1.0 (commit 2f75f1b)", or without the commit when the build was configured outside git.
 std::string VersionText() {
   const std::string commit = ESG_GIT_COMMIT;
-  return absl::StrCat("esg ", ESG_VERSION, commit.empty() ? "" : absl::StrCat(" (commit ", commit, ")"));
+  return absl::StrCat("esg ", ESG_VERSION,
+                      commit.empty() ? "" : absl::StrCat(" (commit ", commit, ")"));
 }
 
 // The global options of `app` as a help section, for the footer of every verb's --help.

@@ -99,20 +99,19 @@ void AddFormatOption(CLI::App* cmd, OutputFormat* format, const std::string& jso
       "output: table (text), json (one document, the proto JSON mapping) or csv (a header, "
       "then one row per record)";
   if (!json_note.empty()) absl::StrAppend(&help, "; json ", json_note);
-  CLI::Option* option =
-      cmd->add_option_function<std::string>(
-             "--format",
-             [format](const std::string& name) {
-               *format = name == "json"  ? OutputFormat::kJson
-                         : name == "csv" ? OutputFormat::kCsv
-                                         : OutputFormat::kTable;
-             },
-             help)
-          ->check([](const std::string& name) -> std::string {
-            if (name == "table" || name == "json" || name == "csv") return "";
-            return "must be table, json or csv (got " + name + ")";
-          })
-          ->type_name("table|json|csv");
+  CLI::Option* option = cmd->add_option_function<std::string>(
+                               "--format",
+                               [format](const std::string& name) {
+                                 *format = name == "json"  ? OutputFormat::kJson
+                                           : name == "csv" ? OutputFormat::kCsv
+                                                           : OutputFormat::kTable;
+                               },
+                               help)
+                            ->check([](const std::string& name) -> std::string {
+                              if (name == "table" || name == "json" || name == "csv") return "";
+                              return "must be table, json or csv (got " + name + ")";
+                            })
+                            ->type_name("table|json|csv");
   cmd->add_flag_callback(
          "--json", [format] { *format = OutputFormat::kJson; }, "short for --format json")
       ->excludes(option);
@@ -130,7 +129,7 @@ std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present
     return "(invalid time)";
   }
   return FormatUtc(absl::FromUnixSeconds(timestamp.seconds()) +
-                    absl::Nanoseconds(timestamp.nanos()));
+                   absl::Nanoseconds(timestamp.nanos()));
 }
 
 Json ProtoToJson(const google::protobuf::Message& message) {

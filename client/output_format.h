@@ -59,7 +59,8 @@ void PrintJsonLine(const Json& doc);
 // cell, a string is written as is (quoted when it holds a comma, quote or line break), numbers
 // and booleans as in JSON. A record that is not an object is one column named "value".
 // `columns` come first, in their order, so that the header is there even without records.
-std::string CsvTable(const std::vector<Json>& records, const std::vector<std::string>& columns = {});
+std::string CsvTable(const std::vector<Json>& records,
+                     const std::vector<std::string>& columns = {});
 // The leading CSV columns of a message type: the json_name of each singular scalar, enum, string
 // and Timestamp field, in field order (repeated and other message fields are flattened from the
 // records). For a header that is there without records, and for rows printed one at a time.

@@ -100,9 +100,8 @@ std::vector<std::string> SummaryColumns() {
 }
 
 std::string SummaryLine(const DiagnosisResult& d) {
-  return absl::StrFormat("#%d %s %-20s %s .. %s, %d frames, computed %s", d.id(),
-                         d.spacecraft_id(), d.verdict(),
-                         FormatUtc(d.first_frame_time(), d.has_first_frame_time()),
+  return absl::StrFormat("#%d %s %-20s %s .. %s, %d frames, computed %s", d.id(), d.spacecraft_id(),
+                         d.verdict(), FormatUtc(d.first_frame_time(), d.has_first_frame_time()),
                          FormatUtc(d.last_frame_time(), d.has_last_frame_time()), d.frames(),
                          FormatUtc(d.compute_time(), d.has_compute_time()));
 }

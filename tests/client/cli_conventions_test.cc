@@ -217,8 +217,8 @@ TEST(CliConventions, VersionPrintsTheProjectVersion) {
 TEST(CliConventions, EveryVerbsHelpListsTheGlobalOptions) {
   TempDir dir;
   for (const char* verb :
-       {"simulate", "calibrate", "gap", "diagnose", "diagnoses", "diagnoses list",
-        "diagnoses show", "configure", "replay", "status", "predict", "alerts", "history"}) {
+       {"simulate", "calibrate", "gap", "diagnose", "diagnoses", "diagnoses list", "diagnoses show",
+        "configure", "replay", "status", "predict", "alerts", "history"}) {
     const RunResult r = RunEsg(dir, std::string(verb) + " --help");
     EXPECT_EQ(r.exit_code, 0) << verb << ": " << r.err;
     for (const char* option : {"--server ADDR", "--token TOKEN", "--tls-ca FILE", "--tls-cert FILE",
@@ -234,8 +234,8 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
   const std::string script = std::string(ESG_SOURCE_DIR) + "/deploy/completion/esg.bash";
   const std::regex option_line(R"(^  (--[a-z][a-z-]*))");
   for (const std::string verb :
-       {"simulate", "calibrate", "gap", "diagnose", "diagnoses list", "diagnoses show",
-        "configure", "replay", "status", "predict", "alerts", "history"}) {
+       {"simulate", "calibrate", "gap", "diagnose", "diagnoses list", "diagnoses show", "configure",
+        "replay", "status", "predict", "alerts", "history"}) {
     const RunResult help = RunEsg(dir, verb + " --help");
     ASSERT_EQ(help.exit_code, 0) << verb;
     std::set<std::string> options;
@@ -245,11 +245,12 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
     }
     ASSERT_GT(options.size(), 5u) << verb << ": " << help.out;
     const std::vector<std::string> words = absl::StrSplit(verb, ' ');
-    const std::string bash = absl::StrCat(
-        "source '", script, "'; COMP_WORDS=(esg ", verb, " --); COMP_CWORD=", words.size() + 1,
-        "; _esg; printf '%s\\n' \"${COMPREPLY[@]}\"");
+    const std::string bash = absl::StrCat("source '", script, "'; COMP_WORDS=(esg ", verb,
+                                          " --); COMP_CWORD=", words.size() + 1,
+                                          "; _esg; printf '%s\\n' \"${COMPREPLY[@]}\"");
     testing::WriteFile(dir.File("complete.sh"), bash);
-    const RunResult completed = ::esg::testing::RunBinary(dir, "/bin/bash", dir.File("complete.sh"));
+    const RunResult completed =
+        ::esg::testing::RunBinary(dir, "/bin/bash", dir.File("complete.sh"));
     ASSERT_EQ(completed.exit_code, 0) << completed.err;
     const std::vector<std::string> offered = absl::StrSplit(completed.out, '\n', absl::SkipEmpty());
     for (const std::string& option : options) {
@@ -325,9 +326,9 @@ TEST_F(CliAgainstServer, EveryServerVerbPrintsJsonAndCsvWithMillisecondTimes) {
   const std::string env = Env();
   const std::string rdk = " --spacecraft RDK-1";
   // configure
-  nlohmann::json doc = ExpectJson(
-      RunEsg(dir, "configure --format json --config " + Quote(Rdk1()), env), "configure",
-      esg::v1::ConfigureResponse::descriptor());
+  nlohmann::json doc =
+      ExpectJson(RunEsg(dir, "configure --format json --config " + Quote(Rdk1()), env), "configure",
+                 esg::v1::ConfigureResponse::descriptor());
   EXPECT_EQ(doc["session"]["spacecraftId"], "RDK-1");
   ExpectCsv(RunEsg(dir, "configure --format csv --config " + Quote(Rdk1()), env), "configure",
             "created", 1);
@@ -345,9 +346,8 @@ TEST_F(CliAgainstServer, EveryServerVerbPrintsJsonAndCsvWithMillisecondTimes) {
   // alerts
   doc = ExpectJson(RunEsg(dir, "alerts --format json" + rdk, env), "alerts",
                    esg::v1::Alert::descriptor(), {"alerts"});
-  const std::vector<std::string> header =
-      ExpectCsv(RunEsg(dir, "alerts --format csv" + rdk, env), "alerts",
-                "spacecraftId", doc["alerts"].size());
+  const std::vector<std::string> header = ExpectCsv(RunEsg(dir, "alerts --format csv" + rdk, env),
+                                                    "alerts", "spacecraftId", doc["alerts"].size());
   EXPECT_THAT(header, ::testing::Contains("measurementTime"));
   // replay (not a proto message): the tally; again, every frame a duplicate
   doc = ExpectJson(RunEsg(dir, "replay --format json --recording " + Quote(recording_), env),
@@ -381,9 +381,9 @@ TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {
   EXPECT_GT(ExpectTimesInFormat(r.out, "diagnose (table)"), 0);
 
   // list: both, oldest first, over pages of one.
-  nlohmann::json list = ExpectJson(
-      RunEsg(dir, "diagnoses list --spacecraft RDK-1 --page-size 1 --format json", env),
-      "diagnoses list", esg::v1::ListDiagnosesResponse::descriptor());
+  nlohmann::json list =
+      ExpectJson(RunEsg(dir, "diagnoses list --spacecraft RDK-1 --page-size 1 --format json", env),
+                 "diagnoses list", esg::v1::ListDiagnosesResponse::descriptor());
   ASSERT_EQ(list["diagnoses"].size(), 2u) << list.dump();
   EXPECT_EQ(list["diagnoses"][0]["id"], id);
   EXPECT_EQ(list["diagnoses"][0]["verdict"], result["verdict"]);
@@ -412,8 +412,8 @@ TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {
 TEST(CliConventions, OfflineVerbsPrintJsonAndCsvWithMillisecondTimes) {
   TempDir dir;
   const std::string rec = Quote(dir.File("rec.csv"));
-  RunResult r = RunEsg(dir, "simulate --format json --config " + Quote(Rdk1()) +
-                                " --hours 4 --seed 2 --out " + rec);
+  RunResult r = RunEsg(
+      dir, "simulate --format json --config " + Quote(Rdk1()) + " --hours 4 --seed 2 --out " + rec);
   nlohmann::json doc = ExpectJson(r, "simulate", nullptr);
   EXPECT_EQ(doc["frames"], 241);
   ExpectCsv(RunEsg(dir, "simulate --format csv --config " + Quote(Rdk1()) +
@@ -426,8 +426,8 @@ TEST(CliConventions, OfflineVerbsPrintJsonAndCsvWithMillisecondTimes) {
   ExpectJson(RunEsg(dir, "gap --format json --gap-start 3" + inputs), "gap", nullptr);
   EXPECT_GT(ExpectTimesInFormat(RunEsg(dir, "gap --gap-start 3" + inputs).out, "gap (table)"), 0);
   ExpectCsv(RunEsg(dir, "gap --format csv --gap-start 3" + inputs), "gap", "time", 10);
-  doc = ExpectJson(RunEsg(dir, "diagnose --json --effects random_walk_drift" + inputs),
-                   "diagnose", nullptr);
+  doc = ExpectJson(RunEsg(dir, "diagnose --json --effects random_walk_drift" + inputs), "diagnose",
+                   nullptr);
   ExpectCsv(RunEsg(dir, "diagnose --format csv --effects random_walk_drift" + inputs), "diagnose",
             "verdict", 1);
 }
