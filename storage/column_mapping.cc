@@ -14,6 +14,7 @@
 #include <utility>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
@@ -50,8 +51,9 @@ absl::Status CheckObject(const json& j, const std::string& path,
   if (!j.is_object()) return FieldError(path.empty() ? "mapping" : path, "must be a JSON object");
   for (auto it = j.begin(); it != j.end(); ++it) {
     if (std::find(known.begin(), known.end(), it.key()) == known.end()) {
-      return FieldError(Join(path, it.key()),
-                        absl::StrCat("unknown field (known here: ", absl::StrJoin(known, ", "), ")"));
+      return FieldError(
+          Join(path, it.key()),
+          absl::StrCat("unknown field (known here: ", absl::StrJoin(known, ", "), ")"));
     }
   }
   return absl::OkStatus();
@@ -73,7 +75,8 @@ absl::StatusOr<std::string> GetColumnName(const json& j, const std::string& path
 absl::StatusOr<std::vector<std::string>> GetColumns(const json& j, const std::string& path,
                                                     size_t count, const std::string& what) {
   if (!j.is_array() || j.size() != count) {
-    return FieldError(path, absl::StrFormat("must be an array of %d column names (%s)", count, what));
+    return FieldError(path,
+                      absl::StrFormat("must be an array of %d column names (%s)", count, what));
   }
   std::vector<std::string> columns;
   for (size_t i = 0; i < count; ++i) {
@@ -106,8 +109,8 @@ absl::StatusOr<T> GetUnit(const json& j, const std::string& path,
     if (unit_name == *name) return value;
     known.push_back(unit_name);
   }
-  return FieldError(path, absl::StrFormat("'%s' is not a known unit (%s)", *name,
-                                          absl::StrJoin(known, ", ")));
+  return FieldError(
+      path, absl::StrFormat("'%s' is not a known unit (%s)", *name, absl::StrJoin(known, ", ")));
 }
 
 const std::vector<std::pair<std::string, absl::Duration>>& TimeUnits() {
@@ -116,11 +119,11 @@ const std::vector<std::pair<std::string, absl::Duration>>& TimeUnits() {
   return *units;
 }
 const std::vector<std::pair<std::string, double>>& AngleUnits() {
-  static const auto* units = new std::vector<std::pair<std::string, double>>{
-      {"rad", 1.0},
-      {"deg", kPi / 180.0},
-      {"arcmin", kPi / (180.0 * 60.0)},
-      {"arcsec", kPi / (180.0 * 3600.0)}};
+  static const auto* units =
+      new std::vector<std::pair<std::string, double>>{{"rad", 1.0},
+                                                      {"deg", kPi / 180.0},
+                                                      {"arcmin", kPi / (180.0 * 60.0)},
+                                                      {"arcsec", kPi / (180.0 * 3600.0)}};
   return *units;
 }
 const std::vector<std::pair<std::string, double>>& VoltageUnits() {
@@ -133,12 +136,12 @@ absl::Status ParseTime(const json& j, TimeMapping* time) {
   const std::string path = "time";
   if (absl::Status s = CheckObject(j, path,
                                    {"format", "column", "unit", "epoch", "weekColumn",
-                                    "secondsColumn", "gpsMinusUtcS"});
+                                    "secondsColumn", "gpsMinusUtcS", "pattern"});
       !s.ok()) {
     return s;
   }
   if (!j.contains("format")) {
-    return FieldError("time.format", "required: rfc3339, since_epoch or gps_week_seconds");
+    return FieldError("time.format", "required: rfc3339, since_epoch, gps_week_seconds or pattern");
   }
   absl::StatusOr<std::string> format = GetString(j["format"], "time.format");
   if (!format.ok()) return format.status();
@@ -153,9 +156,12 @@ absl::Status ParseTime(const json& j, TimeMapping* time) {
   } else if (*format == "gps_week_seconds") {
     time->format = TimeFormat::kGpsWeekSeconds;
     allowed = {"format", "weekColumn", "secondsColumn", "unit", "gpsMinusUtcS"};
+  } else if (*format == "pattern") {
+    time->format = TimeFormat::kPattern;
+    allowed = {"format", "column", "pattern"};
   } else {
-    return FieldError("time.format", absl::StrFormat("'%s' is not rfc3339, since_epoch or "
-                                                     "gps_week_seconds",
+    return FieldError("time.format", absl::StrFormat("'%s' is not rfc3339, since_epoch, "
+                                                     "gps_week_seconds or pattern",
                                                      *format));
   }
   for (auto it = j.begin(); it != j.end(); ++it) {
@@ -183,11 +189,30 @@ absl::Status ParseTime(const json& j, TimeMapping* time) {
     if (!epoch.ok()) return epoch.status();
     std::string error;
     if (!absl::ParseTime(absl::RFC3339_full, *epoch, &time->epoch, &error)) {
-      return FieldError("time.epoch",
-                        absl::StrFormat("'%s' is not an RFC 3339 time such as "
-                                        "1970-01-01T00:00:00Z (%s)",
-                                        *epoch, error));
+      return FieldError("time.epoch", absl::StrFormat("'%s' is not an RFC 3339 time such as "
+                                                      "1970-01-01T00:00:00Z (%s)",
+                                                      *epoch, error));
     }
+  }
+  if (time->format == TimeFormat::kPattern) {
+    absl::StatusOr<std::string> pattern = GetString(j["pattern"], "time.pattern");
+    if (!pattern.ok()) return pattern.status();
+    // The pattern must determine the instant: a known time must read back to itself.
+    const absl::Time probe =
+        absl::FromCivil(absl::CivilSecond(2019, 3, 1, 12, 34, 56), absl::UTCTimeZone());
+    const std::string text = absl::FormatTime(*pattern, probe, absl::UTCTimeZone());
+    absl::Time back;
+    std::string error;
+    if (pattern->empty() || !absl::ParseTime(*pattern, text, absl::UTCTimeZone(), &back, &error) ||
+        back != probe) {
+      return FieldError("time.pattern",
+                        absl::StrFormat("'%s' does not determine a date and time to the second "
+                                        "(2019-03-01T12:34:56Z written with it is '%s'%s)",
+                                        *pattern, text,
+                                        error.empty() ? ", which reads back otherwise"
+                                                      : absl::StrCat(": ", error)));
+    }
+    time->pattern = *pattern;
   }
   if (time->format == TimeFormat::kGpsWeekSeconds) {
     absl::StatusOr<std::string> week = GetColumnName(j["weekColumn"], "time.weekColumn");
@@ -212,10 +237,10 @@ absl::Status ParseGyro(const json& j, const std::string& path, GyroMapping* gyro
   if (absl::Status s = CheckObject(j, path, {"id", "spinAxis", "voltages"}); !s.ok()) return s;
   if (!j.contains("id")) return FieldError(Join(path, "id"), "required");
   const json& id = j["id"];
-  if (!id.is_number_integer() || id.get<int64_t>() < 1 || id.get<int64_t>() > estimator::kMaxGyros) {
-    return FieldError(Join(path, "id"),
-                      absl::StrFormat("must be a gyro id 1..%d, got %s", estimator::kMaxGyros,
-                                      id.dump()));
+  if (!id.is_number_integer() || id.get<int64_t>() < 1 ||
+      id.get<int64_t>() > estimator::kMaxGyros) {
+    return FieldError(Join(path, "id"), absl::StrFormat("must be a gyro id 1..%d, got %s",
+                                                        estimator::kMaxGyros, id.dump()));
   }
   gyro->id = id.get<int>();
 
@@ -293,9 +318,9 @@ absl::Status ParseStarTracker(const json& j, StarTrackerMapping* st) {
   } else if (*scalar == "last") {
     st->scalar_first = false;
   } else {
-    return FieldError("starTracker.scalar",
-                      absl::StrFormat("'%s' is not first or last (where the scalar part is)",
-                                      *scalar));
+    return FieldError(
+        "starTracker.scalar",
+        absl::StrFormat("'%s' is not first or last (where the scalar part is)", *scalar));
   }
   absl::StatusOr<std::string> rotation = GetString(j["rotation"], "starTracker.rotation");
   if (!rotation.ok()) return rotation.status();
@@ -365,6 +390,7 @@ std::vector<std::pair<std::string, std::string>> MappedColumns(const ColumnMappi
   switch (m.time.format) {
     case TimeFormat::kRfc3339:
     case TimeFormat::kSinceEpoch:
+    case TimeFormat::kPattern:
       out.emplace_back(m.time.column, "time.column");
       break;
     case TimeFormat::kGpsWeekSeconds:
@@ -411,9 +437,8 @@ class ProblemList {
   size_t size() const { return problems_.size(); }
   bool empty() const { return problems_.empty(); }
   absl::Status ToStatus() const {
-    std::string message =
-        absl::StrFormat("recording CSV through a column mapping: %d problem%s", problems_.size(),
-                        problems_.size() == 1 ? "" : "s");
+    std::string message = absl::StrFormat("recording CSV through a column mapping: %d problem%s",
+                                          problems_.size(), problems_.size() == 1 ? "" : "s");
     const size_t shown = std::min<size_t>(problems_.size(), kMaxReportedProblems);
     for (size_t i = 0; i < shown; ++i) {
       const Problem& p = problems_[i];
@@ -452,17 +477,49 @@ std::string Quote(absl::string_view s) {
   return absl::StrCat("'", s, "'");
 }
 
-void SplitFields(absl::string_view line, char delimiter, std::vector<absl::string_view>* fields) {
+bool IsBlank(char c, char delimiter) { return c != delimiter && (c == ' ' || c == '\t'); }
+
+// Splits at `delimiter` into trimmed fields. A field may be enclosed in double quotes (RFC 4180):
+// the delimiter is then literal and "" stands for one quote. Returns an empty string, or what is
+// wrong (a quote left open, text after a closing quote).
+std::string SplitFields(absl::string_view line, char delimiter, std::vector<std::string>* fields) {
   fields->clear();
-  size_t start = 0;
+  size_t i = 0;
   while (true) {
-    const size_t at = line.find(delimiter, start);
-    if (at == absl::string_view::npos) {
-      fields->push_back(absl::StripAsciiWhitespace(line.substr(start)));
-      return;
+    while (i < line.size() && IsBlank(line[i], delimiter)) ++i;
+    std::string field;
+    if (i < line.size() && line[i] == '"') {
+      const size_t open = i++;
+      bool closed = false;
+      while (i < line.size()) {
+        if (line[i] == '"') {
+          if (i + 1 < line.size() && line[i + 1] == '"') {
+            field += '"';
+            i += 2;
+            continue;
+          }
+          ++i;
+          closed = true;
+          break;
+        }
+        field += line[i++];
+      }
+      if (!closed)
+        return absl::StrFormat("field %d: the quote at character %d is not closed",
+                               fields->size() + 1, open + 1);
+      while (i < line.size() && IsBlank(line[i], delimiter)) ++i;
+      if (i < line.size() && line[i] != delimiter) {
+        return absl::StrFormat("field %d: text after its closing quote", fields->size() + 1);
+      }
+    } else {
+      size_t at = line.find(delimiter, i);
+      if (at == absl::string_view::npos) at = line.size();
+      field = std::string(absl::StripAsciiWhitespace(line.substr(i, at - i)));
+      i = at;
     }
-    fields->push_back(absl::StripAsciiWhitespace(line.substr(start, at - start)));
-    start = at + 1;
+    fields->push_back(std::move(field));
+    if (i >= line.size()) return "";
+    ++i;  // the delimiter
   }
 }
 
@@ -550,7 +607,7 @@ bool ParseMetadata(absl::string_view line, std::string* key, std::string* value)
 }
 
 // Values of a group: nullopt on a problem (reported); an empty vector when all are empty.
-std::optional<std::vector<double>> ParseGroup(const std::vector<absl::string_view>& fields,
+std::optional<std::vector<double>> ParseGroup(const std::vector<std::string>& fields,
                                               const std::vector<const Col*>& cols,
                                               const std::string& group_field, int line,
                                               ProblemList* problems) {
@@ -581,9 +638,9 @@ bool CheckUnit(Vector* v, const std::string& where, const std::string& what, int
                ProblemList* problems) {
   const double norm = v->norm();
   if (!(std::abs(norm - 1.0) <= kUnitNormTolerance)) {
-    problems->Add(line, where,
-                  absl::StrFormat("%s has norm %.6g, not 1 (tolerance %g)", what, norm,
-                                  kUnitNormTolerance));
+    problems->Add(
+        line, where,
+        absl::StrFormat("%s has norm %.6g, not 1 (tolerance %g)", what, norm, kUnitNormTolerance));
     return false;
   }
   if (std::abs(norm - 1.0) > kRenormaliseAbove) *v /= norm;
@@ -599,9 +656,8 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
   } catch (const json::exception& e) {
     return FieldError("mapping", absl::StrCat("not valid JSON: ", e.what()));
   }
-  if (absl::Status s = CheckObject(doc, "",
-                                   {"format", "spacecraftId", "delimiter", "time", "gyros",
-                                    "starTracker"});
+  if (absl::Status s = CheckObject(
+          doc, "", {"format", "spacecraftId", "delimiter", "time", "gyros", "starTracker"});
       !s.ok()) {
     return s;
   }
@@ -617,7 +673,8 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
   if (doc.contains("spacecraftId")) {
     absl::StatusOr<std::string> id = GetString(doc["spacecraftId"], "spacecraftId");
     if (!id.ok()) return id.status();
-    if (id->empty() || id->size() > 64) return FieldError("spacecraftId", "must be 1..64 characters");
+    if (id->empty() || id->size() > 64)
+      return FieldError("spacecraftId", "must be 1..64 characters");
     mapping.spacecraft_id = *id;
   }
   if (doc.contains("delimiter")) {
@@ -638,7 +695,8 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
   if (!doc.contains("gyros")) return FieldError("gyros", "required");
   const json& gyros = doc["gyros"];
   if (!gyros.is_array() || gyros.empty() || gyros.size() > estimator::kMaxGyros) {
-    return FieldError("gyros", absl::StrFormat("must be an array of 1..%d gyros", estimator::kMaxGyros));
+    return FieldError("gyros",
+                      absl::StrFormat("must be an array of 1..%d gyros", estimator::kMaxGyros));
   }
   std::set<int> ids;
   for (size_t g = 0; g < gyros.size(); ++g) {
@@ -658,8 +716,8 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
   std::map<std::string, std::string> field_of;
   for (const auto& [column, field] : MappedColumns(mapping)) {
     if (auto [it, inserted] = field_of.emplace(column, field); !inserted) {
-      return FieldError(field, absl::StrFormat("column '%s' is already mapped by %s", column,
-                                               it->second));
+      return FieldError(field,
+                        absl::StrFormat("column '%s' is already mapped by %s", column, it->second));
     }
   }
   return mapping;
@@ -686,7 +744,8 @@ absl::StatusOr<ColumnMapping> ReadColumnMapping(const std::string& path) {
 
 absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view std_text,
                                                              const ColumnMapping& mapping) {
-  const absl::string_view text(std_text.data(), std_text.size());
+  absl::string_view text(std_text.data(), std_text.size());
+  if (absl::StartsWith(text, "\xEF\xBB\xBF")) text.remove_prefix(3);  // a UTF-8 byte order mark
   estimator::Recording recording;
   ProblemList problems;
 
@@ -719,7 +778,7 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
   int header_line = 0;
   std::optional<absl::Time> previous_time;
   int previous_time_line = 0;
-  std::vector<absl::string_view> fields;
+  std::vector<std::string> fields;
 
   int line_no = 0;
   size_t pos = 0;
@@ -746,7 +805,10 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
       }
       have_header = true;
       header_line = line_no;
-      SplitFields(line, mapping.delimiter, &fields);
+      if (const std::string error = SplitFields(line, mapping.delimiter, &fields); !error.empty()) {
+        problems.Add(line_no, "", absl::StrCat("header: ", error));
+        return problems.ToStatus();
+      }
       num_header_fields = fields.size();
       std::map<absl::string_view, int> index_of;
       for (size_t i = 0; i < fields.size(); ++i) {
@@ -778,7 +840,10 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
       problems.Add(line_no, "", "comment or metadata line after the header");
       continue;
     }
-    SplitFields(line, mapping.delimiter, &fields);
+    if (const std::string error = SplitFields(line, mapping.delimiter, &fields); !error.empty()) {
+      problems.Add(line_no, "", error);
+      continue;
+    }
     if (fields.size() != num_header_fields) {
       problems.Add(line_no, "",
                    absl::StrFormat("expected %d fields as in the header (line %d), got %d",
@@ -801,10 +866,20 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
       if (absl::ParseTime(absl::RFC3339_full, t0_text, &t, &error)) {
         time = t;
       } else {
+        problems.Add(
+            line_no, t0.Where(),
+            absl::StrCat(Quote(t0_text), " is not an RFC 3339 time such as 2019-03-01T00:00:00Z (",
+                         error, ")"));
+      }
+    } else if (tm.format == TimeFormat::kPattern) {
+      absl::Time t;
+      std::string error;
+      if (absl::ParseTime(tm.pattern, t0_text, absl::UTCTimeZone(), &t, &error)) {
+        time = t;
+      } else {
         problems.Add(line_no, t0.Where(),
-                     absl::StrCat(Quote(t0_text),
-                                  " is not an RFC 3339 time such as 2019-03-01T00:00:00Z (", error,
-                                  ")"));
+                     absl::StrFormat("%s does not match time.pattern '%s' (%s)", Quote(t0_text),
+                                     tm.pattern, error));
       }
     } else if (tm.format == TimeFormat::kSinceEpoch) {
       if (const std::optional<absl::Duration> d = ParseCount(t0_text, tm.unit); d.has_value()) {
@@ -819,8 +894,7 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
       const Col& t1 = *time_cols[1];
       const absl::string_view sow_text = fields[t1.index];
       int64_t week = -1;
-      const auto [end, ec] =
-          std::from_chars(t0_text.data(), t0_text.data() + t0_text.size(), week);
+      const auto [end, ec] = std::from_chars(t0_text.data(), t0_text.data() + t0_text.size(), week);
       const std::optional<absl::Duration> sow = ParseCount(sow_text, tm.unit);
       if (ec != std::errc() || end != t0_text.data() + t0_text.size() || week < 0 ||
           week > 100000) {
@@ -833,20 +907,20 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
         problems.Add(line_no, t1.Where(),
                      absl::StrCat(Quote(sow_text), " is not a time of week in [0, 604800) s"));
       } else {
-        static const absl::Time kGpsEpoch = absl::FromCivil(
-            absl::CivilSecond(1980, 1, 6, 0, 0, 0), absl::UTCTimeZone());
+        static const absl::Time kGpsEpoch =
+            absl::FromCivil(absl::CivilSecond(1980, 1, 6, 0, 0, 0), absl::UTCTimeZone());
         time = kGpsEpoch + absl::Seconds(week * kSecondsPerWeek) + *sow -
                absl::Seconds(tm.gps_minus_utc_s);
       }
     }
     if (time.has_value()) {
       if (previous_time.has_value() && *time <= *previous_time) {
-        problems.Add(line_no, t0.Where(),
-                     absl::StrFormat("%s is not after %s of line %d (times must increase)",
-                                     absl::FormatTime(kTimeFormat, *time, absl::UTCTimeZone()),
-                                     absl::FormatTime(kTimeFormat, *previous_time,
-                                                      absl::UTCTimeZone()),
-                                     previous_time_line));
+        problems.Add(
+            line_no, t0.Where(),
+            absl::StrFormat("%s is not after %s of line %d (times must increase)",
+                            absl::FormatTime(kTimeFormat, *time, absl::UTCTimeZone()),
+                            absl::FormatTime(kTimeFormat, *previous_time, absl::UTCTimeZone()),
+                            previous_time_line));
       }
       previous_time = time;
       previous_time_line = line_no;
@@ -866,9 +940,9 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
       if (!spin.has_value() || !voltages.has_value()) continue;
       if (spin->empty()) {
         if (!voltages->empty()) {
-          problems.Add(line_no, GroupWhere(voltage_cols[g], voltage_field),
-                       absl::StrFormat("voltages given while gyro %d has no spin-axis reading",
-                                       gm.id));
+          problems.Add(
+              line_no, GroupWhere(voltage_cols[g], voltage_field),
+              absl::StrFormat("voltages given while gyro %d has no spin-axis reading", gm.id));
         }
         continue;  // gyro off
       }
@@ -888,8 +962,8 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
       estimator::GyroReading reading;
       reading.h_k = h_k;
       if (!voltages->empty()) {
-        reading.u_k_mv = Eigen::Vector3d((*voltages)[0], (*voltages)[1], (*voltages)[2]) *
-                         gm.voltage_unit_mv;
+        reading.u_k_mv =
+            Eigen::Vector3d((*voltages)[0], (*voltages)[1], (*voltages)[2]) * gm.voltage_unit_mv;
       }
       frame.gyros[gm.id - 1] = reading;
     }
@@ -943,8 +1017,8 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
                         "the quaternion after conversion to q_in_b", line_no, &problems)) {
             estimator::StarTrackerReading reading;
             reading.valid = true;
-            reading.q_in_b = estimator::QuaternionFromScalarFirst(
-                {q_in_b[0], q_in_b[1], q_in_b[2], q_in_b[3]});
+            reading.q_in_b =
+                estimator::QuaternionFromScalarFirst({q_in_b[0], q_in_b[1], q_in_b[2], q_in_b[3]});
             frame.star_tracker = reading;
           }
         }
@@ -973,12 +1047,11 @@ absl::StatusOr<estimator::Recording> ReadRecording(const std::string& path,
   std::ostringstream content;
   content << in.rdbuf();
   if (in.bad()) return absl::UnavailableError(absl::StrCat("recording ", path, ": read failed"));
-  absl::StatusOr<estimator::Recording> recording =
-      ParseMappedRecordingCsv(content.str(), *mapping);
+  absl::StatusOr<estimator::Recording> recording = ParseMappedRecordingCsv(content.str(), *mapping);
   if (!recording.ok()) {
-    return absl::Status(recording.status().code(),
-                        absl::StrCat(path, " (column mapping ", columns_path,
-                                     "): ", recording.status().message()));
+    return absl::Status(
+        recording.status().code(),
+        absl::StrCat(path, " (column mapping ", columns_path, "): ", recording.status().message()));
   }
   return recording;
 }

@@ -5,9 +5,11 @@
 //
 //     {"format": "esg-column-mapping 1",
 //      "spacecraftId": "RDK-1",
-//      "time": {"column": "t", "format": "since_epoch", "epoch": "2019-03-01T00:00:00Z", "unit": "s"},
+//      "time": {"column": "t", "format": "since_epoch", "epoch": "1970-01-01T00:00:00Z",
+//               "unit": "s"},
 //      "gyros": [{"id": 1,
-//                 "spinAxis": {"form": "azimuth_elevation", "columns": ["az1", "el1"], "unit": "deg"},
+//                 "spinAxis": {"form": "azimuth_elevation", "columns": ["az1", "el1"],
+//                              "unit": "deg"},
 //                 "voltages": {"columns": ["u1x", "u1y", "u1z"], "unit": "V"}}, ...],
 //      "starTracker": {"columns": ["qx", "qy", "qz", "qw"], "scalar": "last", "rotation": "q_b_in",
 //                      "valid": {"column": "st_ok", "validValues": ["1"], "invalidValues": ["0"]}}}
@@ -17,14 +19,16 @@
 // "time.unit: 'h' is not a known unit (s, ms, us)". A column may be mapped once.
 //
 // CSV rules (ParseMappedRecordingCsv), as for the recording CSV where not stated otherwise:
-// '#' lines before the header are metadata or comments, then a header naming the columns (order
-// free, extra columns ignored), then one row per frame, fields split at the mapping's delimiter
-// and trimmed, no quoting. Every column the mapping names must be in the header (the error names
-// the mapping field and the column). Groups (a gyro's spin axis, its voltages, the quaternion) are
-// all empty or all numbers; times strictly increase. Converted values are checked as in the
-// recording CSV: spin axes and a valid quaternion, after conversion, have unit norm within
-// kUnitNormTolerance (1e-3) and are renormalised beyond 1e-12. Every problem is reported as
-// "line <n>, column <csv column> (<mapping field>): <reason>", the file refused as a whole.
+// a UTF-8 byte order mark is skipped; '#' lines before the header are metadata or comments, then
+// a header naming the columns (order free, extra columns ignored), then one row per frame, fields
+// split at the mapping's delimiter and trimmed. A field may be enclosed in double quotes (RFC
+// 4180: the delimiter is literal inside, "" is one quote; no line break inside). Times are read
+// in the mapping's TimeFormat. Every column the mapping names must be in the header (the error
+// names the mapping field and the column). Groups (a gyro's spin axis, its voltages, the
+// quaternion) are all empty or all numbers; times strictly increase. Converted values are checked
+// as in the recording CSV: spin axes and a valid quaternion, after conversion, have unit norm
+// within kUnitNormTolerance (1e-3) and are renormalised beyond 1e-12. Every problem is reported
+// as "line <n>, column <csv column> (<mapping field>): <reason>", the file refused as a whole.
 #ifndef ESG_STORAGE_COLUMN_MAPPING_H_
 #define ESG_STORAGE_COLUMN_MAPPING_H_
 
@@ -48,11 +52,13 @@ enum class TimeFormat {
   kRfc3339,         // one column, e.g. 2019-03-01T00:00:00Z or with a numeric offset
   kSinceEpoch,      // one column, a decimal count of `unit` since `epoch` (no leap seconds)
   kGpsWeekSeconds,  // two columns: full GPS week number and seconds of week (GPS time scale)
+  kPattern,         // one column read with an absl::ParseTime pattern, UTC unless it has %z
 };
 
 struct TimeMapping {
   TimeFormat format = TimeFormat::kRfc3339;
-  std::string column;          // kRfc3339, kSinceEpoch
+  std::string column;          // kRfc3339, kSinceEpoch, kPattern
+  std::string pattern;         // kPattern, e.g. "%Y-%m-%d %H:%M:%E*S"
   std::string week_column;     // kGpsWeekSeconds
   std::string seconds_column;  // kGpsWeekSeconds
   // Length of one unit of the count (kSinceEpoch) or of the seconds of week (kGpsWeekSeconds).

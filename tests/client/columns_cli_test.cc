@@ -56,8 +56,8 @@ std::string Num(double x) { return absl::StrFormat("%.17g", x); }
 // The recording in the layout of deploy/examples/columns_user_export.json, columns in another
 // order than the mapping's and one the mapping does not name.
 std::string UserExport(const estimator::Recording& recording) {
-  std::vector<std::string> header = {"UNIX_TIME", "STR_STATUS", "STR_QX", "STR_QY", "STR_QZ",
-                                     "STR_QW",    "BUS_V"};
+  std::vector<std::string> header = {"UNIX_TIME", "STR_STATUS", "STR_QX", "STR_QY",
+                                     "STR_QZ",    "STR_QW",     "BUS_V"};
   for (int g = 1; g <= 4; ++g) {
     for (const char* s : {"AZ", "EL", "UX", "UY", "UZ"}) {
       header.push_back(absl::StrCat("ESG", g, "_", s));
@@ -124,10 +124,10 @@ class ColumnsCli : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     dir_ = new TempDir;
-    const RunResult r = RunEsg(
-        *dir_, "simulate --config " + Quote(Example("rdk1.json")) + " --scenario " +
-                   Quote(Example("scenarios/star_tracker_defects.json")) +
-                   " --hours 6 --seed 11 --out " + Quote(dir_->File("rec.csv")));
+    const RunResult r =
+        RunEsg(*dir_, "simulate --config " + Quote(Example("rdk1.json")) + " --scenario " +
+                          Quote(Example("scenarios/star_tracker_defects.json")) +
+                          " --hours 6 --seed 11 --out " + Quote(dir_->File("rec.csv")));
     ASSERT_EQ(r.exit_code, 0) << r.err;
     absl::StatusOr<estimator::Recording> recording =
         storage::ReadRecordingCsv(dir_->File("rec.csv"));
@@ -261,7 +261,8 @@ TEST_F(ColumnsCli, WrongMappingOrCsvExitsTwoNamingFieldColumnAndLine) {
   r = RunEsg(dir, "--server 127.0.0.1:1 replay --recording " + Quote(dir.File("bad_row.csv")) +
                       " --columns " + Quote(Example("columns_user_export.json")));
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_THAT(r.err, HasSubstr(absl::StrCat("line ", bad_line, ", column STR_QX,STR_QY,STR_QZ,STR_QW")));
+  EXPECT_THAT(r.err,
+              HasSubstr(absl::StrCat("line ", bad_line, ", column STR_QX,STR_QY,STR_QZ,STR_QW")));
   // Each verb documents the option.
   for (const char* verb : {"calibrate", "diagnose", "replay"}) {
     r = RunEsg(dir, std::string(verb) + " --help");

@@ -26,9 +26,11 @@ using ::esg::testing::TempDir;
 
 // What marks a reference to a document the user does not have.
 const std::vector<std::string>& InternalMarkers() {
-  static const auto* markers =
-      new std::vector<std::string>{"DESIGN", "\xC2\xA7" /* § */, "STYLE.md", "STYLE ",
-                                   "/work/shared", "/work/notes", "briefs/"};
+  static const auto* markers = new std::vector<std::string>{
+      "DESIGN",       "\xC2\xA7" /* the section sign */,
+      "STYLE.md",     "STYLE ",
+      "/work/shared", "/work/notes",
+      "briefs/"};
   return *markers;
 }
 
@@ -127,9 +129,9 @@ TEST(InternalReferences, DocsProtosAndExamplesCiteNone) {
 TEST(InternalReferences, ReportsAndJsonOfTheOfflineVerbsCiteNone) {
   TempDir dir;
   const std::string config = std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json";
-  RunResult r = RunBinary(dir, ESG_BINARY,
-                          "simulate --config '" + config + "' --hours 3 --seed 5 --out '" +
-                              dir.File("rec.csv") + "'");
+  RunResult r = RunBinary(
+      dir, ESG_BINARY,
+      "simulate --config '" + config + "' --hours 3 --seed 5 --out '" + dir.File("rec.csv") + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   std::vector<std::string> found;
   for (const std::string& f : InternalReferences("rec.csv", ReadFile(dir.File("rec.csv")))) {
@@ -139,9 +141,9 @@ TEST(InternalReferences, ReportsAndJsonOfTheOfflineVerbsCiteNone) {
                 "calibrate --config '" + config + "' --recording '" + dir.File("rec.csv") + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const std::string& f : InternalReferences("calibrate", r.out + r.err)) found.push_back(f);
-  r = RunBinary(dir, ESG_BINARY,
-                "calibrate --config '" + config + "' --recording '" + dir.File("rec.csv") +
-                    "' --json");
+  r = RunBinary(
+      dir, ESG_BINARY,
+      "calibrate --config '" + config + "' --recording '" + dir.File("rec.csv") + "' --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   for (const std::string& f : InternalReferences("calibrate --json", r.out)) found.push_back(f);
   r = RunBinary(dir, ESG_BINARY,

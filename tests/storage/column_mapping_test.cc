@@ -67,12 +67,14 @@ std::string UnixSeconds(absl::Time t) {
 
 // The recording as a user's export (kUserMapping): columns in another order, an extra column.
 std::string UserExport(const estimator::Recording& recording) {
-  std::vector<std::string> header = {"STR_STATUS", "STR_QX", "STR_QY", "STR_QZ", "STR_QW",
-                                     "UNIX_TIME", "TEMPERATURE_C"};
+  std::vector<std::string> header = {"STR_STATUS", "STR_QX",    "STR_QY",       "STR_QZ",
+                                     "STR_QW",     "UNIX_TIME", "TEMPERATURE_C"};
   for (int g = 1; g <= 3; ++g) {
-    for (const char* s : {"AZ", "EL", "UX", "UY", "UZ"}) header.push_back(absl::StrCat("ESG", g, "_", s));
+    for (const char* s : {"AZ", "EL", "UX", "UY", "UZ"})
+      header.push_back(absl::StrCat("ESG", g, "_", s));
   }
-  for (const char* s : {"H1", "H2", "H3", "UX", "UY", "UZ"}) header.push_back(absl::StrCat("ESG4_", s));
+  for (const char* s : {"H1", "H2", "H3", "UX", "UY", "UZ"})
+    header.push_back(absl::StrCat("ESG4_", s));
   std::string out = "# exported from the ground segment\n" + absl::StrJoin(header, ";") + "\n";
   for (const estimator::TelemetryFrame& frame : recording.frames) {
     std::vector<std::string> f;
@@ -220,8 +222,8 @@ TEST(ColumnMapping, SmallMappingReadsQuaternionAndSpinAxisAsGiven) {
 }
 
 TEST(ColumnMapping, InverseScalarLastIsTheConjugate) {
-  absl::StatusOr<ColumnMapping> m =
-      Mapping(R"("scalar": "first", "rotation": "q_in_b")", R"("scalar": "last", "rotation": "q_b_in")");
+  absl::StatusOr<ColumnMapping> m = Mapping(R"("scalar": "first", "rotation": "q_in_b")",
+                                            R"("scalar": "last", "rotation": "q_b_in")");
   ASSERT_THAT(m.status(), IsOk());
   // Columns in file order qw,qx,qy,qz now hold x, y, z, w of q_b_in.
   const std::string csv =
@@ -243,15 +245,18 @@ TEST(ColumnMapping, TimeFormatsConvertExactly) {
   absl::StatusOr<estimator::Recording> r = ParseMappedRecordingCsv(
       "t,h1,h2,h3,qw,qx,qy,qz\n0,0,0,1,,,,\n60000.000125,0,0,1,,,,\n1.2e5,0,0,1,,,,\n", *m);
   ASSERT_THAT(r.status(), IsOk());
-  const absl::Time start = absl::FromCivil(absl::CivilSecond(2019, 3, 1, 0, 0, 0), absl::UTCTimeZone());
+  const absl::Time start =
+      absl::FromCivil(absl::CivilSecond(2019, 3, 1, 0, 0, 0), absl::UTCTimeZone());
   EXPECT_EQ(r->frames[0].time, start);
   EXPECT_EQ(r->frames[1].time, start + absl::Seconds(60) + absl::Nanoseconds(125));
   EXPECT_EQ(r->frames[2].time, start + absl::Seconds(120));
   EXPECT_FALSE(r->frames[0].star_tracker.has_value());  // all empty: outage
 
-  // GPS week 2042 began 2019-02-24; day 5 at 00:00:00 GPS is 2019-02-28T23:59:42Z (GPS - UTC = 18 s).
-  m = Mapping(R"({"column": "t", "format": "rfc3339"})",
-              R"({"format": "gps_week_seconds", "weekColumn": "wk", "secondsColumn": "sow", "gpsMinusUtcS": 18})");
+  // GPS week 2042 began 2019-02-24; day 5 at 00:00:00 GPS is 2019-02-28T23:59:42Z (GPS - UTC = 18
+  // s).
+  m = Mapping(
+      R"({"column": "t", "format": "rfc3339"})",
+      R"({"format": "gps_week_seconds", "weekColumn": "wk", "secondsColumn": "sow", "gpsMinusUtcS": 18})");
   ASSERT_THAT(m.status(), IsOk());
   r = ParseMappedRecordingCsv("wk,sow,h1,h2,h3,qw,qx,qy,qz\n2042,432000,0,0,1,,,,\n", *m);
   ASSERT_THAT(r.status(), IsOk());
@@ -264,36 +269,43 @@ TEST(ColumnMapping, WrongMappingsNameTheField) {
     std::string from, to, message;
   };
   const std::vector<Case> cases = {
-      {R"("format": "rfc3339")", R"("format": "since_epoch", "epoch": "2019-03-01T00:00:00Z", "unit": "h")",
+      {R"("format": "rfc3339")",
+       R"("format": "since_epoch", "epoch": "2019-03-01T00:00:00Z", "unit": "h")",
        "time.unit: 'h' is not a known unit (s, ms, us)"},
       {R"("format": "rfc3339")", R"("format": "since_epoch", "unit": "s")", "time.epoch: required"},
       {R"("format": "rfc3339")", R"("format": "unix")", "time.format: 'unix' is not rfc3339"},
-      {R"("format": "rfc3339")", R"("format": "gps_week_seconds")", "time.column: not used with format gps_week_seconds"},
+      {R"("format": "rfc3339")", R"("format": "gps_week_seconds")",
+       "time.column: not used with format gps_week_seconds"},
       {R"("columns": ["h1", "h2", "h3"]})",
        R"("columns": ["h1", "h2", "h3"]}, "voltages": {"columns": ["a", "b", "c"], "unit": "kV"})",
        "gyros[0].voltages.unit: 'kV' is not a known unit (V, mV, uV)"},
-      {R"("columns": ["h1", "h2", "h3"]})", R"("form": "azimuth_elevation", "columns": ["az", "el"], "unit": "grad"})",
+      {R"("columns": ["h1", "h2", "h3"]})",
+       R"("form": "azimuth_elevation", "columns": ["az", "el"], "unit": "grad"})",
        "gyros[0].spinAxis.unit: 'grad' is not a known unit (rad, deg, arcmin, arcsec)"},
       {R"("columns": ["h1", "h2", "h3"]})", R"("columns": ["h1", "h2", "h3"], "unit": "deg"})",
        "gyros[0].spinAxis.unit: direction cosines have no unit"},
       {R"("columns": ["h1", "h2", "h3"]})", R"("columns": ["h1", "h2"]})",
        "gyros[0].spinAxis.columns: must be an array of 3 column names"},
       {R"("id": 2)", R"("id": 5)", "gyros[0].id: must be a gyro id 1..4, got 5"},
-      {R"("scalar": "first")", R"("scalar": "front")", "starTracker.scalar: 'front' is not first or last"},
-      {R"("scalar": "first")", R"("scalarPosition": "first")", "starTracker.scalarPosition: unknown field"},
+      {R"("scalar": "first")", R"("scalar": "front")",
+       "starTracker.scalar: 'front' is not first or last"},
+      {R"("scalar": "first")", R"("scalarPosition": "first")",
+       "starTracker.scalarPosition: unknown field"},
       {R"("rotation": "q_in_b")", R"("rotation": "body_to_inertial")",
        "starTracker.rotation: 'body_to_inertial' is not q_in_b"},
       {R"("rotation": "q_in_b")", R"("scalar": "first")", "starTracker.rotation: required"},
       {R"(["qw", "qx", "qy", "qz"])", R"(["qw", "qx", "qy", "h1"])",
        "starTracker.columns[3]: column 'h1' is already mapped by gyros[0].spinAxis.columns[0]"},
-      {R"("rotation": "q_in_b")", R"("rotation": "q_in_b", "valid": {"column": "v", "validValues": ["1"], "invalidValues": ["1"]})",
+      {R"("rotation": "q_in_b")",
+       R"("rotation": "q_in_b", "valid": {"column": "v", "validValues": ["1"], "invalidValues": ["1"]})",
        "starTracker.valid.invalidValues: '1' is also in validValues"},
       {R"("time")", R"("times")", "times: unknown field"},
   };
   for (const Case& c : cases) {
     EXPECT_THAT(Mapping(c.from, c.to).status(), StatusIs(kInvalid, HasSubstr(c.message))) << c.to;
   }
-  EXPECT_THAT(ParseColumnMapping("{\"time\": ").status(), StatusIs(kInvalid, HasSubstr("mapping: not valid JSON")));
+  EXPECT_THAT(ParseColumnMapping("{\"time\": ").status(),
+              StatusIs(kInvalid, HasSubstr("mapping: not valid JSON")));
   EXPECT_THAT(ParseColumnMapping(R"({"format": "esg-column-mapping 2"})").status(),
               StatusIs(kInvalid, HasSubstr("format: 'esg-column-mapping 2' is not supported")));
 }
@@ -316,39 +328,90 @@ TEST(ColumnMapping, WrongRowsNameLineColumnAndField) {
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:00:00Z,0,0.5,0.5,1,0,0,0\n",
        "line 2, column h1,h2,h3 (gyros[0].spinAxis): the spin axis has norm 0.707107"},
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:00:00Z,0,,1,1,0,0,0\n",
-       "line 2, column h2 (gyros[0].spinAxis): empty while the rest of gyros[0].spinAxis has values"},
+       "line 2, column h2 (gyros[0].spinAxis): empty while the rest of gyros[0].spinAxis has "
+       "values"},
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01 00:00,0,0,1,1,0,0,0\n",
        "line 2, column t (time.column): '2019-03-01 00:00' is not an RFC 3339 time"},
-      {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:01:00Z,0,0,1,1,0,0,0\n2019-03-01T00:00:00Z,0,0,1,1,0,0,0\n",
-       "line 3, column t (time.column): 2019-03-01T00:00:00Z is not after 2019-03-01T00:01:00Z of line 2"},
+      {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:01:00Z,0,0,1,1,0,0,0\n2019-03-01T00:00:00Z,0,0,1,1,0,"
+       "0,0\n",
+       "line 3, column t (time.column): 2019-03-01T00:00:00Z is not after 2019-03-01T00:01:00Z of "
+       "line 2"},
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:00:00Z,0,0,one,1,0,0,0\n",
        "line 2, column h3 (gyros[0].spinAxis.columns[2]): 'one' is not a finite number"},
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:00:00Z,0,0,1,1,0,0\n",
        "line 2: expected 8 fields as in the header (line 1), got 7"},
   };
   for (const Case& c : cases) {
-    EXPECT_THAT(ParseMappedRecordingCsv(c.csv, *m).status(), StatusIs(kInvalid, HasSubstr(c.message)))
+    EXPECT_THAT(ParseMappedRecordingCsv(c.csv, *m).status(),
+                StatusIs(kInvalid, HasSubstr(c.message)))
         << c.csv;
   }
   // A validity flag outside both lists.
-  m = Mapping(R"("rotation": "q_in_b")",
-              R"("rotation": "q_in_b", "valid": {"column": "ok", "validValues": ["Y"], "invalidValues": ["N"]})");
+  m = Mapping(
+      R"("rotation": "q_in_b")",
+      R"("rotation": "q_in_b", "valid": {"column": "ok", "validValues": ["Y"], "invalidValues": ["N"]})");
   ASSERT_THAT(m.status(), IsOk());
-  EXPECT_THAT(ParseMappedRecordingCsv("t,h1,h2,h3,qw,qx,qy,qz,ok\n2019-03-01T00:00:00Z,0,0,1,1,0,0,0,1\n", *m)
+  EXPECT_THAT(ParseMappedRecordingCsv(
+                  "t,h1,h2,h3,qw,qx,qy,qz,ok\n2019-03-01T00:00:00Z,0,0,1,1,0,0,0,1\n", *m)
                   .status(),
               StatusIs(kInvalid, HasSubstr("line 2, column ok (starTracker.valid.column): '1' is "
                                            "neither valid (Y) nor invalid (N)")));
-  absl::StatusOr<estimator::Recording> r = ParseMappedRecordingCsv(
-      "t,h1,h2,h3,qw,qx,qy,qz,ok\n2019-03-01T00:00:00Z,0,0,1,,,,,N\n", *m);
+  absl::StatusOr<estimator::Recording> r =
+      ParseMappedRecordingCsv("t,h1,h2,h3,qw,qx,qy,qz,ok\n2019-03-01T00:00:00Z,0,0,1,,,,,N\n", *m);
   ASSERT_THAT(r.status(), IsOk());
   ASSERT_TRUE(r->frames[0].star_tracker.has_value());
   EXPECT_FALSE(r->frames[0].star_tracker->valid);
 }
 
+// Exports from spreadsheets: a UTF-8 byte order mark, quoted names and numbers (RFC 4180, with
+// the delimiter and "" inside quotes), and times written "2019-03-01 00:01:00.5" read with a
+// pattern.
+TEST(ColumnMapping, ByteOrderMarkQuotesAndPatternTimes) {
+  absl::StatusOr<ColumnMapping> m =
+      Mapping(R"({"column": "t", "format": "rfc3339"})",
+              R"({"column": "t", "format": "pattern", "pattern": "%Y-%m-%d %H:%M:%E*S"})");
+  ASSERT_THAT(m.status(), IsOk());
+  const std::string csv =
+      "\xEF\xBB\xBF\"t\",\"h1\",h2,h3,qw,qx,qy,qz,\"note, free\"\n"
+      "2019-03-01 00:01:00.5,\"0.6\", \"0.8\" ,0,1,0,0,0,\"said \"\"ok\"\", then left\"\n";
+  absl::StatusOr<estimator::Recording> r = ParseMappedRecordingCsv(csv, *m);
+  ASSERT_THAT(r.status(), IsOk());
+  ASSERT_EQ(r->frames.size(), 1u);
+  EXPECT_EQ(r->frames[0].time,
+            absl::FromCivil(absl::CivilSecond(2019, 3, 1, 0, 1, 0), absl::UTCTimeZone()) +
+                absl::Milliseconds(500));
+  EXPECT_EQ(r->frames[0].gyros[1]->h_k, Eigen::Vector3d(0.6, 0.8, 0));
+
+  EXPECT_THAT(
+      ParseMappedRecordingCsv("t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:01:00Z,0,0,1,1,0,0,0\n", *m)
+          .status(),
+      StatusIs(kInvalid, HasSubstr("line 2, column t (time.column): '2019-03-01T00:01:00Z' "
+                                   "does not match time.pattern '%Y-%m-%d %H:%M:%E*S'")));
+  EXPECT_THAT(
+      ParseMappedRecordingCsv("t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01 00:01:00,\"0,0,1,1,0,0,0\n", *m)
+          .status(),
+      StatusIs(kInvalid, HasSubstr("line 2: field 2: the quote at character 21 is not closed")));
+  EXPECT_THAT(ParseMappedRecordingCsv(
+                  "t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01 00:01:00,\"0\"x,0,1,1,0,0,0\n", *m)
+                  .status(),
+              StatusIs(kInvalid, HasSubstr("line 2: field 2: text after its closing quote")));
+  // A pattern that loses the date (or anything down to the second) is refused.
+  EXPECT_THAT(Mapping(R"({"column": "t", "format": "rfc3339"})",
+                      R"({"column": "t", "format": "pattern", "pattern": "%H:%M:%S"})")
+                  .status(),
+              StatusIs(kInvalid, HasSubstr("time.pattern: '%H:%M:%S' does not determine a date and "
+                                           "time to the second")));
+  EXPECT_THAT(Mapping(R"({"column": "t", "format": "rfc3339"})",
+                      R"({"column": "t", "format": "pattern", "pattern": "%Y-%m-%d %H:%M"})")
+                  .status(),
+              StatusIs(kInvalid, HasSubstr("time.pattern: '%Y-%m-%d %H:%M' does not determine")));
+}
+
 TEST(ColumnMapping, FilesThatCannotBeOpenedAreNamed) {
   testing::TempDir dir;
-  EXPECT_THAT(ReadRecording(dir.File("rec.csv"), dir.File("none.json")).status(),
-              StatusIs(absl::StatusCode::kNotFound, HasSubstr("column mapping " + dir.File("none.json"))));
+  EXPECT_THAT(
+      ReadRecording(dir.File("rec.csv"), dir.File("none.json")).status(),
+      StatusIs(absl::StatusCode::kNotFound, HasSubstr("column mapping " + dir.File("none.json"))));
   testing::WriteFile(dir.File("columns.json"), R"({"time": {"format": "rfc3339"}})");
   EXPECT_THAT(ReadRecording(dir.File("rec.csv"), dir.File("columns.json")).status(),
               StatusIs(kInvalid, AllOf(HasSubstr(dir.File("columns.json")),
