@@ -37,6 +37,7 @@
 #include "proto/diagnosis_json.h"
 #include "estimator/units.h"
 #include "proto/convert.h"
+#include "storage/column_mapping.h"
 #include "storage/recording_csv.h"
 
 namespace esg::client {
@@ -47,6 +48,7 @@ namespace disc = estimator::discovery;
 struct DiagnoseCliOptions {
   std::string config_path;
   std::string recording_path;
+  std::string columns_path;
   std::string out_dir;
   OutputFormat format = OutputFormat::kTable;
   std::string model = "10+11";
@@ -348,7 +350,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
                  std::string(config.status().message()).c_str());
     return 2;
   }
-  auto recording = storage::ReadRecordingCsv(o.recording_path);
+  auto recording = storage::ReadRecording(o.recording_path, o.columns_path);
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
                  std::string(recording.status().message()).c_str());
@@ -418,10 +420,11 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
 int RunDiagnoseVerb(const DiagnoseCliOptions& o, const ServerDiagnoseOptions& server,
                     bool model_given, const GlobalOptions& global) {
   if (!server.spacecraft_id.empty()) {
-    if (!o.config_path.empty() || !o.recording_path.empty() || !o.out_dir.empty()) {
+    if (!o.config_path.empty() || !o.recording_path.empty() || !o.columns_path.empty() ||
+        !o.out_dir.empty()) {
       return ReportBadArgument("diagnose",
                                "--spacecraft: diagnoses the server's archive; --config, "
-                               "--recording and --out are for a recording offline");
+                               "--recording, --columns and --out are for a recording offline");
     }
     ServerDiagnoseOptions request = server;
     if (model_given) request.model = o.model;  // else the session's model
@@ -459,6 +462,9 @@ void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--to", server->to,
                   "with --spacecraft: end of the span, RFC 3339, exclusive (default: after the "
                   "last frame)");
+  cmd->add_option("--columns", o->columns_path,
+                  "column mapping JSON: read --recording as a CSV export with other column "
+                  "names, units, quaternion order or time format (docs/formats.md)");
   cmd->add_option("--out", o->out_dir,
                   "write report.md, plots (gnuplot) and diagnosis.json into DIR");
   AddFormatOption(cmd, &o->format);

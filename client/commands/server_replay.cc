@@ -39,6 +39,7 @@
 #include "client/commands/server_common.h"
 #include "client/progress.h"
 #include "proto/convert.h"
+#include "storage/column_mapping.h"
 #include "storage/recording_csv.h"
 
 namespace esg::client {
@@ -50,6 +51,7 @@ constexpr int kRejectionsKept = 20;
 
 struct ReplayOptions {
   std::string recording_path;
+  std::string columns_path;
   std::string spacecraft_id;
   double rate = 0.0;
   int64_t from_sequence = 1;
@@ -295,7 +297,8 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
     return ReportBadArgument(kVerb,
                              absl::StrCat("--max-retries ", o.max_retries, ": must be >= 0"));
   }
-  absl::StatusOr<estimator::Recording> recording = storage::ReadRecordingCsv(o.recording_path);
+  absl::StatusOr<estimator::Recording> recording =
+      storage::ReadRecording(o.recording_path, o.columns_path);
   if (!recording.ok()) {
     return ReportBadArgument(
         kVerb, absl::StrCat("--recording ", o.recording_path, ": ", recording.status().message()));
@@ -490,6 +493,9 @@ void RegisterReplay(CLI::App& app, GlobalOptions& global, int* exit_code) {
       kVerb, "stream a recording CSV to esgd (StreamTelemetry), resuming after failures");
   cmd->add_option("--recording", options->recording_path, "recording CSV (docs/formats.md)")
       ->required();
+  cmd->add_option("--columns", options->columns_path,
+                  "column mapping JSON: read --recording as a CSV export with other column "
+                  "names, units, quaternion order or time format (docs/formats.md)");
   cmd->add_option("--spacecraft", options->spacecraft_id,
                   "spacecraft id (default: the recording's '# spacecraft_id:')");
   cmd->add_option("--rate", options->rate, "X times real time (0: as fast as the window allows)")
