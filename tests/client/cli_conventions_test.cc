@@ -6,11 +6,16 @@
 // CSV with a header and rows of the header's width; every time printed, in every format, is RFC
 // 3339 UTC with Z and milliseconds; `esg diagnoses list|show` find what `esg diagnose
 // --spacecraft` stored. Also the output helpers themselves (client/output_format.h).
+#include <signal.h>
+#include <unistd.h>
+
+#include <cstdlib>
 #include <regex>
 #include <set>
 #include <string>
 #include <vector>
 
+#include "absl/cleanup/cleanup.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
@@ -407,6 +412,46 @@ TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {
   r = RunEsg(dir, "diagnose --spacecraft RDK-1 --recording x.csv", env);
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--spacecraft: "));
+}
+
+// $ESG_TOKEN is the token without --token, the flag wins over it, and the verbs on their own
+// channel (diagnose, diagnoses) send it too: esgd with a token file, started through the shell.
+TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
+  TempDir dir;
+  testing::WriteFile(dir.File("tokens"), "w-token read,write\nr-token read\n");
+  ASSERT_EQ(std::system(("chmod 600 " + Quote(dir.File("tokens"))).c_str()), 0);
+  const std::string start = absl::StrCat(
+      Quote(ESGD_BINARY), " --listen 127.0.0.1:0 --workers 2 --db ", Quote(dir.File("esg.db")),
+      " --tokens ", Quote(dir.File("tokens")), " > ", Quote(dir.File("esgd.out")), " 2> ",
+      Quote(dir.File("esgd.log")), " & echo $! > ", Quote(dir.File("esgd.pid")));
+  ASSERT_EQ(std::system(start.c_str()), 0);
+  const pid_t pid = std::stoi(testing::ReadFile(dir.File("esgd.pid")));
+  absl::Cleanup stop = [pid] {
+    kill(pid, SIGTERM);
+    for (int i = 0; i < 250 && kill(pid, 0) == 0; ++i) usleep(20000);
+  };
+  std::string out;
+  for (int i = 0; i < 300 && out.find('\n') == std::string::npos; ++i) {
+    usleep(20000);
+    out = testing::ReadFile(dir.File("esgd.out"));
+  }
+  const size_t at = out.find("port ");
+  ASSERT_NE(at, std::string::npos) << out << testing::ReadFile(dir.File("esgd.log"));
+  const std::string server = "--server 127.0.0.1:" + std::to_string(std::stoi(out.substr(at + 5)));
+
+  RunResult r = RunEsg(dir, server + " status --token nope", "ESG_TOKEN=r-token");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("UNAUTHENTICATED")) << "the flag is used, not the variable";
+  r = RunEsg(dir, server + " configure --config " + Quote(Rdk1()), "ESG_TOKEN=w-token");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1", "env -u ESG_TOKEN");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg diagnoses list: UNAUTHENTICATED"));
+  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1", "ESG_TOKEN=r-token");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("0 diagnoses of RDK-1"));
+  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1 --token r-token", "ESG_TOKEN=nope");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
 }
 
 TEST(CliConventions, OfflineVerbsPrintJsonAndCsvWithMillisecondTimes) {
