@@ -25,6 +25,8 @@
 #include "server/alert_collapse.h"
 #include "server/proto_mapping.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/daemon.h"
+#include "tests/testing/run_process.h"
 
 namespace esg::server {
 namespace {
@@ -235,6 +237,51 @@ TEST(AlertLifecycle, ClearedTimeIsStoredAndReturned) {
     EXPECT_EQ(*proto_convert::TimeFromProto(a.cleared_time()), occurred + absl::Minutes(10));
   }
   EXPECT_TRUE(seen);
+}
+
+TEST(AlertLifecycle, AlertsAcknowledgementsAndSessionStateChangesAreLogged) {
+  esg::testing::TempDir dir;
+  const std::string log = dir.File("esgd.log");
+  esg::testing::Daemon daemon(dir.File("esg.db"), log);
+  ASSERT_GT(daemon.port(), 0);
+  auto stub = daemon.Stub();
+  const SimulatedRun run = SimulateRun("LIFE-4", 0.2);
+  Configure(*stub, run);
+  ASSERT_EQ(StreamFrames(*stub, run.frames).acks.size(), run.frames.size());
+  esg::v1::Alert alert;
+  {
+    Subscription watcher(*stub, "LIFE-4", /*replay=*/false, /*marker=*/true);
+    ASSERT_TRUE(watcher.Next().replay_complete());
+    SendConflict(*stub, Conflicting(run, 4, "gs-a"));
+    for (int i = 0; i < 100 && alert.reason() != esg::v1::ALERT_REASON_INGEST_CONFLICT; ++i) {
+      alert = watcher.Next();
+    }
+    ASSERT_EQ(alert.reason(), esg::v1::ALERT_REASON_INGEST_CONFLICT);
+  }
+  grpc::ClientContext ctx;
+  esg::v1::AcknowledgeRequest request;
+  request.set_spacecraft_id("LIFE-4");
+  request.set_sequence(alert.sequence());
+  request.set_operator_name("alice");
+  esg::v1::Alert acked;
+  ASSERT_TRUE(stub->AcknowledgeAlert(&ctx, request, &acked).ok());
+  grpc::ClientContext ctx2;
+  request.set_operator_name("bob");
+  EXPECT_FALSE(stub->AcknowledgeAlert(&ctx2, request, &acked).ok());
+  // The acknowledgement is published (and logged) before AcknowledgeAlert returns.
+  stub.reset();
+  daemon.Stop(SIGTERM);
+
+  const std::string text = esg::testing::ReadFile(log);
+  // Frame 1 initialises the filter: the state change is logged with the frame's identity.
+  EXPECT_THAT(text, HasSubstr("INFO esgd: spacecraft LIFE-4: session state NO_DATA -> "
+                              "CALIBRATING at "));
+  EXPECT_THAT(text, HasSubstr("(station default, sequence 1)"));
+  const std::string prefix = absl::StrCat("alert LIFE-4 #", alert.sequence(),
+                                          " WARNING INGEST_CONFLICT station:gs-a, x1, ");
+  EXPECT_THAT(text, HasSubstr("WARN esgd: " + prefix));  // raised, active
+  EXPECT_THAT(text, HasSubstr(", acknowledged by alice at "));
+  EXPECT_THAT(text, HasSubstr("WARN esgd: acknowledgement by 'bob' refused: operator_name: "));
 }
 
 // ---- The collapser's clearing rules (a pure function of the occurrences) ---------------------
