@@ -264,7 +264,7 @@ TEST_F(ColumnsCli, WrongMappingOrCsvExitsTwoNamingFieldColumnAndLine) {
   EXPECT_THAT(r.err,
               HasSubstr(absl::StrCat("line ", bad_line, ", column STR_QX,STR_QY,STR_QZ,STR_QW")));
   // Each verb documents the option.
-  for (const char* verb : {"calibrate", "diagnose", "replay"}) {
+  for (const char* verb : {"calibrate", "gap", "diagnose", "replay"}) {
     r = RunEsg(dir, std::string(verb) + " --help");
     EXPECT_THAT(r.out, HasSubstr("--columns")) << verb;
   }
