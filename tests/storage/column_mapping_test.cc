@@ -6,6 +6,7 @@
 // row is refused with an error naming the mapping field, or the CSV line and column.
 #include "storage/column_mapping.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -148,6 +149,7 @@ TEST(ColumnMapping, UserExportLoadsEqualToTheProjectCsvOfTheSameRecording) {
   EXPECT_EQ(user->metadata.at("spacecraft_id"), "USER-1");
   ASSERT_EQ(user->frames.size(), own->frames.size());
   constexpr double kTol = 1e-12;
+  double max_h = 0.0, max_u = 0.0, max_q = 0.0;  // largest differences, recorded below
   int quaternions = 0, voltages = 0;
   for (size_t i = 0; i < own->frames.size(); ++i) {
     const estimator::TelemetryFrame& a = own->frames[i];
@@ -158,9 +160,12 @@ TEST(ColumnMapping, UserExportLoadsEqualToTheProjectCsvOfTheSameRecording) {
       ASSERT_EQ(a.gyros[g].has_value(), b.gyros[g].has_value()) << at << " gyro " << g + 1;
       if (!a.gyros[g].has_value()) continue;
       ExpectNear(a.gyros[g]->h_k, b.gyros[g]->h_k, kTol, at + " h_k");
+      max_h = std::max(max_h, (a.gyros[g]->h_k - b.gyros[g]->h_k).lpNorm<Eigen::Infinity>());
       ASSERT_EQ(a.gyros[g]->u_k_mv.has_value(), b.gyros[g]->u_k_mv.has_value()) << at;
       if (a.gyros[g]->u_k_mv.has_value()) {
         ExpectNear(*a.gyros[g]->u_k_mv, *b.gyros[g]->u_k_mv, kTol, at + " u_k_mv");
+        max_u = std::max(max_u,
+                         (*a.gyros[g]->u_k_mv - *b.gyros[g]->u_k_mv).lpNorm<Eigen::Infinity>());
         ++voltages;
       }
     }
@@ -170,9 +175,15 @@ TEST(ColumnMapping, UserExportLoadsEqualToTheProjectCsvOfTheSameRecording) {
     if (!a.star_tracker->valid) continue;
     const estimator::ScalarFirst qa = estimator::ToScalarFirst(a.star_tracker->q_in_b);
     const estimator::ScalarFirst qb = estimator::ToScalarFirst(b.star_tracker->q_in_b);
-    for (int k = 0; k < 4; ++k) EXPECT_NEAR(qa[k], qb[k], kTol) << at << " q_in_b[" << k << "]";
+    for (int k = 0; k < 4; ++k) {
+      EXPECT_NEAR(qa[k], qb[k], kTol) << at << " q_in_b[" << k << "]";
+      max_q = std::max(max_q, std::abs(qa[k] - qb[k]));
+    }
     ++quaternions;
   }
+  RecordProperty("max_abs_diff_h", absl::StrFormat("%.3g", max_h));
+  RecordProperty("max_abs_diff_u_mv", absl::StrFormat("%.3g", max_u));
+  RecordProperty("max_abs_diff_q", absl::StrFormat("%.3g", max_q));
   EXPECT_GT(quaternions, 40);
   EXPECT_GT(voltages, 100);
   EXPECT_FALSE(user->frames[5].star_tracker->valid);
