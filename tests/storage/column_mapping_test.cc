@@ -164,8 +164,8 @@ TEST(ColumnMapping, UserExportLoadsEqualToTheProjectCsvOfTheSameRecording) {
       ASSERT_EQ(a.gyros[g]->u_k_mv.has_value(), b.gyros[g]->u_k_mv.has_value()) << at;
       if (a.gyros[g]->u_k_mv.has_value()) {
         ExpectNear(*a.gyros[g]->u_k_mv, *b.gyros[g]->u_k_mv, kTol, at + " u_k_mv");
-        max_u = std::max(max_u,
-                         (*a.gyros[g]->u_k_mv - *b.gyros[g]->u_k_mv).lpNorm<Eigen::Infinity>());
+        max_u =
+            std::max(max_u, (*a.gyros[g]->u_k_mv - *b.gyros[g]->u_k_mv).lpNorm<Eigen::Infinity>());
         ++voltages;
       }
     }
