@@ -310,7 +310,10 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
     auto it = recording->metadata.find("spacecraft_id");
     if (it == recording->metadata.end() || it->second.empty()) {
       return ReportBadArgument(
-          kVerb, "--spacecraft: required, the recording has no '# spacecraft_id:' line");
+          kVerb, o.columns_path.empty()
+                     ? "--spacecraft: required, the recording has no '# spacecraft_id:' line"
+                     : "--spacecraft: required, neither the recording ('# spacecraft_id:') nor "
+                       "the --columns mapping (spacecraftId) names the spacecraft");
     }
     id = it->second;
   }

@@ -264,6 +264,15 @@ TEST_F(ColumnsCli, WrongMappingOrCsvExitsTwoNamingFieldColumnAndLine) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err,
               HasSubstr(absl::StrCat("line ", bad_line, ", column STR_QX,STR_QY,STR_QZ,STR_QW")));
+  // Without spacecraftId in the mapping (an export has no metadata lines) replay needs
+  // --spacecraft, and says where the id could have come from.
+  const size_t id_at = mapping.find("  \"spacecraftId\": \"RDK-1\",\n");
+  ASSERT_NE(id_at, std::string::npos);
+  WriteFile(dir.File("no_id.json"), std::string(mapping).erase(id_at, 27));
+  r = RunEsg(dir, "--server 127.0.0.1:1 replay --recording " + User() + " --columns " +
+                      Quote(dir.File("no_id.json")));
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.err, HasSubstr("--columns mapping (spacecraftId)"));
   // Each verb documents the option.
   for (const char* verb : {"calibrate", "gap", "diagnose", "replay"}) {
     r = RunEsg(dir, std::string(verb) + " --help");
