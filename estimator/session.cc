@@ -182,6 +182,7 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
                    ConsistencyMonitor::kChannels, 30.0 * 86400.0, 0.1);
   session.consistency_ = ConsistencyMonitor(monitor);
   session.widening_ = NoiseWidening(config.filter.measurement_step, options.widening);
+  session.change_detector_ = GyroChangeDetector(options.drift_change);
   return session;
 }
 

@@ -57,6 +57,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/consistency_monitor.h"
 #include "estimator/drift_model.h"
+#include "estimator/gyro_change_detector.h"
 #include "estimator/measurements.h"
 #include "estimator/noise_widening.h"
 #include "estimator/spacecraft_config.h"
@@ -171,6 +172,11 @@ struct SessionOptions {
   // model.
   bool adaptive_noise = true;
   NoiseWideningOptions widening;
+  // Exclude a gyro whose own star-tracker differences fail over a window while the other two
+  // pass (gyro_change_detector.h, D33). Off in diagnosis runs, which look for such changes as
+  // physics.
+  bool detect_drift_change = true;
+  GyroChangeDetectorOptions drift_change;
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
@@ -402,6 +408,8 @@ class EstimationSession {
   // below kImmediateIsolationStrength (D24): excluded if the next step names it again; 0: none.
   int suspect_gyro_ = 0;
   absl::Time suspect_time_ = absl::InfinitePast();
+  // The per-gyro accumulated star-tracker test (D33). In the checkpoint from version 4.
+  GyroChangeDetector change_detector_;
   // Body rate over the interval of the current frame [rad/s], set by Propagate for the star-tracker
   // latency correction of MeasurementUpdate (recomputed every frame: not in the checkpoint).
   Eigen::Vector3d body_rate_b_ = Eigen::Vector3d::Zero();

@@ -41,8 +41,10 @@ using Eigen::VectorXd;
 //   isolation's confirmation (D24).
 // Version 4 (written): version 3's values, then latency_s (the star-tracker latency the samples
 //   are corrected with: the configured one, or the filter's estimate), previous_mean_rate_b (3)
-//   and previous_interval_s of the body-rate extrapolation. A session restored from an earlier
-//   version corrects with the configured latency and starts the extrapolation afresh.
+//   and previous_interval_s of the body-rate extrapolation, then d (a count) and the per-gyro
+//   accumulated star-tracker test's state (d values, GyroChangeDetector::ExportState). A session
+//   restored from an earlier version corrects with the configured latency and starts the
+//   extrapolation and the accumulated test afresh.
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
@@ -116,6 +118,9 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   v.push_back(latency_s_);
   put_vec(previous_mean_rate_b_);
   v.push_back(previous_interval_s_);
+  const std::vector<double> detector = change_detector_.ExportState();
+  v.push_back(static_cast<double>(detector.size()));
+  v.insert(v.end(), detector.begin(), detector.end());
   return c;
 }
 
@@ -269,6 +274,16 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     get_vec(s.previous_mean_rate_b_);
     s.previous_interval_s_ = get_real();
     if (s.previous_interval_s_ < 0.0) mark_bad(s.previous_interval_s_, "an interval is negative");
+    const int n_detector = get_int();
+    if (short_read || n_detector < 0 || static_cast<size_t>(n_detector) > v.size() - pos) {
+      return absl::DataLossError("checkpoint: truncated (gyro change detector)");
+    }
+    if (absl::Status st =
+            s.change_detector_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_detector));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
+    pos += n_detector;
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

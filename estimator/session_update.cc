@@ -283,6 +283,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     // tracker is adopted only when eq. (12) did not vote it faulty in this streak and the healthy
     // pairs agree with it at this step (D19).
     SpinAxesFromStarTracker(C_in_b_st);
+    change_detector_.Clear();
     report.events.push_back(Event{
         Event::Kind::kFilterReset, frame.time, "filter",
         static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
@@ -372,6 +373,62 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
   }
   const IsolationDecision d = DecideIsolation(test, working_pair_);
   const std::string evidence = IsolationEvidence(test, d);
+  // Excludes gyro ids[k]: the output moves to a pair without it (the working pair when it does not
+  // hold it), the cold spare is recommended; `named_by` says what named it, `value`/`threshold`
+  // in `unit` are the event's evidence.
+  auto exclude = [&](int k, double value, double threshold, const char* unit,
+                     const std::string& named_by, const std::string& details) {
+    const int gyro = ids[k];
+    if (GyroState* g = Find(gyro)) g->faulty = true;
+    change_detector_.Clear();
+    // A configured gyro that is not running is a cold spare.
+    std::string spare;
+    for (const GyroConfig& gc : config_.gyros) {
+      if (Find(gc.id) == nullptr) spare += absl::StrFormat("%s%d", spare.empty() ? "" : ", ", gc.id);
+    }
+    const bool in_working = working_pair_[0] == gyro || working_pair_[1] == gyro;
+    const std::array<int, 2> output = in_working ? PairWithout(ids, k) : working_pair_;
+    report.events.push_back(Event{
+        in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, frame.time,
+        absl::StrFormat("gyro %d", gyro), value, threshold, unit,
+        absl::StrFormat("%s: gyro %d faulty: %s; gyro %d excluded, output on pair [%d,%d]; only two "
+                        "gyros remain, switch on the cold spare%s to restore isolation. "
+                        "Evidence: %s",
+                        named_by, gyro, details, gyro, output[0], output[1],
+                        spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), evidence)});
+    working_pair_ = output;
+    reserve_pair_ = output;  // no second pair is left
+    if (in_working) state_ = SessionState::kFaulted;
+  };
+  // The per-gyro accumulated test (D33): a gyro whose own star-tracker differences fail over the
+  // window while the other two pass is excluded, whatever the single step's mismatches say;
+  // only once the consistency monitor has tested the model and while nothing says it does not
+  // fit (D21): a drift term the model lacks can be larger in one gyro and fail its differences
+  // alone, and is announced by the monitor's and the widening's own alerts.
+  if (st_present && options_.detect_drift_change) {
+    const bool star_tracker_suspected =
+        star_tracker_voted_faulty_ || d.result == Isolation::kStarTracker ||
+        std::find(d.candidates.begin(), d.candidates.end(), 0) != d.candidates.end();
+    const auto change = change_detector_.Add(ids, test.gyro_star_nis, star_tracker_suspected);
+    if (change.has_value() && consistency_.tests() > 0 && !ModelKnownNotToFit()) {
+      const int k = static_cast<int>(std::find(ids.begin(), ids.end(), change->gyro_id) - ids.begin());
+      std::string others;
+      for (int j = 0; j < 3; ++j) {
+        if (j == k) continue;
+        absl::StrAppend(&others, others.empty() ? "" : ", ",
+                        absl::StrFormat("gyro %d %.1f", ids[j], change->sums[j]));
+      }
+      exclude(k, change->sums[k], change->fail_threshold, "chi-square",
+              "accumulated star-tracker test (eq. (13) differences of each gyro, D33)",
+              absl::StrFormat("its own star-tracker differences over the last %d steps sum to "
+                              "chi-square %.1f > %.1f (2 dof a step) while the other gyros' pass "
+                              "(%s < %.1f): its drift changed",
+                              change->steps, change->sums[k], change->fail_threshold, others,
+                              change->pass_threshold));
+      st_agrees_with_pairs = st_present && !d.pair_star_exceeded[k];
+      return true;
+    }
+  }
   // The exceeded mismatch with the largest angle-to-allowed ratio: the event's value/threshold.
   double value = 0.0, threshold = 0.0, best = -1.0;
   auto consider = [&](double angle, double allowed, bool exceeded) {
@@ -428,37 +485,17 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
                             d.excluded_gyro, evidence)});
         break;
       }
-      if (GyroState* g = Find(d.excluded_gyro)) g->faulty = true;
-      // A configured gyro that is not running is a cold spare.
-      std::string spare;
-      for (const GyroConfig& gc : config_.gyros) {
-        if (Find(gc.id) == nullptr) spare += absl::StrFormat("%s%d", spare.empty() ? "" : ", ", gc.id);
-      }
       const std::array<int, 2> kept = PairWithout(ids, d.faulty_index);
-      const bool in_working = d.output_switched;
-      report.events.push_back(Event{
-          in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, frame.time,
-          absl::StrFormat("gyro %d", d.excluded_gyro), RadToArcsec(value), RadToArcsec(threshold),
-          "arcsec",
-          absl::StrFormat("fault isolation with three pairs (eq. (12)): gyro %d faulty: %s; gyro "
-                          "%d excluded, output on "
-                          "pair [%d,%d]; only two gyros remain, switch on the cold spare%s to "
-                          "restore isolation. Evidence: %s",
-                          d.excluded_gyro,
-                          d.decided_by_gyro_star
-                              ? absl::StrFormat("its own star-tracker difference fails while "
-                                                "those of gyros %d and %d pass",
-                                                kept[0], kept[1])
-                              : absl::StrFormat("the pairs holding it disagree with pair [%d,%d]%s",
-                                                kept[0], kept[1],
-                                                st_present ? " and the star tracker, which agree "
-                                                             "with each other"
-                                                           : ""),
-                          d.excluded_gyro, d.output_pair[0], d.output_pair[1],
-                          spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), evidence)});
-      working_pair_ = d.output_pair;
-      reserve_pair_ = d.output_pair;  // no second pair is left
-      if (d.output_switched) state_ = SessionState::kFaulted;
+      exclude(d.faulty_index, RadToArcsec(value), RadToArcsec(threshold), "arcsec",
+              "fault isolation with three pairs (eq. (12))",
+              d.decided_by_gyro_star
+                  ? absl::StrFormat("its own star-tracker difference fails while those of gyros "
+                                    "%d and %d pass",
+                                    kept[0], kept[1])
+                  : absl::StrFormat("the pairs holding it disagree with pair [%d,%d]%s", kept[0],
+                                    kept[1],
+                                    st_present ? " and the star tracker, which agree with each other"
+                                               : ""));
       break;
     }
     case Isolation::kStarTracker:

@@ -22,6 +22,7 @@
 #include "estimator/units.h"
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
+#include "storage/column_mapping.h"
 #include "storage/recording_csv.h"
 
 namespace esg::client {
@@ -41,6 +42,7 @@ struct Inputs {
 struct CommonOptions {
   std::string config_path;
   std::string recording_path;
+  std::string columns_path;
   std::string model = "10+11";
   std::optional<double> kd;
   int consistency_window = 60;
@@ -51,6 +53,9 @@ void AddCommon(CLI::App* cmd, CommonOptions& o) {
   cmd->add_option("--config", o.config_path, "spacecraft configuration JSON (docs/formats.md)")
       ->required();
   cmd->add_option("--recording", o.recording_path, "recording CSV (docs/formats.md)")->required();
+  cmd->add_option("--columns", o.columns_path,
+                  "column mapping JSON: read --recording as a CSV export with other column "
+                  "names, units, quaternion order or time format (docs/formats.md)");
   cmd->add_option("--model", o.model, "drift model: 1, 10, 11 or a '+' set such as 10+11")
       ->capture_default_str();
   cmd->add_option("--kd", o.kd, "k_d of the innovation test, eq. (14) (default: configuration, 5)");
@@ -91,7 +96,7 @@ std::optional<Inputs> Load(const CommonOptions& o) {
   }
   in.options.consistency_window_steps = o.consistency_window;
   in.options.consistency_test_every_steps = o.consistency_window / 4;
-  auto recording = storage::ReadRecordingCsv(o.recording_path);
+  auto recording = storage::ReadRecording(o.recording_path, o.columns_path);
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
                  std::string(recording.status().message()).c_str());
@@ -200,6 +205,9 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
               {"outputPair", json::array({r.final_attitude.pair[0], r.final_attitude.pair[1]})},
               {"innovationRmsArcsec", r.innovation_rms * kArcsec},
               {"modelConsistency", ConsistencyJson(in, r)},
+              {"starTrackerLatency", json{{"latencyS", r.star_tracker_latency.latency_s},
+                                          {"sigmaS", r.star_tracker_latency.sigma_s},
+                                          {"estimated", r.star_tracker_latency.estimated}}},
               {"gyros", gyros},
               {"rejections", counts},
               {"events", events}};
@@ -239,6 +247,13 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
   if (ConsistencyOf(r).first == nullptr && first_widening == nullptr) {
     std::printf("model consistent with the data (innovation chi-square over %d-step windows)\n",
                 in.options.consistency_window_steps);
+  }
+  if (r.star_tracker_latency.estimated) {
+    std::printf("star-tracker latency %+.4f +- %.4f s (estimated; prior %+.4f +- %.4f s)\n",
+                r.star_tracker_latency.latency_s, r.star_tracker_latency.sigma_s,
+                in.config.star_tracker.latency, in.config.star_tracker.latency_sigma);
+  } else if (r.star_tracker_latency.latency_s != 0.0) {
+    std::printf("star-tracker latency %+.4f s (configured, held)\n", r.star_tracker_latency.latency_s);
   }
   for (const estimator::GyroEstimate& g : r.gyros) {
     std::printf("gyro %d%s\n", g.id, g.faulty ? " (faulty, excluded)" : "");

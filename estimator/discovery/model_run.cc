@@ -33,9 +33,11 @@ std::vector<TelemetryFrame> CorrectStarTracker(const std::vector<TelemetryFrame>
 absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionOptions& options,
                                   const std::vector<TelemetryFrame>& frames,
                                   const ModelRunOptions& run_options) {
-  // The likelihoods compared here are those of the model as configured: no adaptive widening.
+  // The likelihoods compared here are those of the model as configured: no adaptive widening, and
+  // no gyro excluded for a drift that changes (the diagnosis names that as physics).
   SessionOptions as_configured = options;
   as_configured.adaptive_noise = false;
+  as_configured.detect_drift_change = false;
   auto created = EstimationSession::Create(config, as_configured);
   if (!created.ok()) return created.status();
   EstimationSession session = std::move(*created);
