@@ -346,9 +346,11 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
     for (double sigma : s["sigmaArcsec"]) EXPECT_GT(sigma, 0.0);
     EXPECT_GE(s["spinAxes"].size(), 2u);
   }
-  // A prediction inside the applied data is the server's OUT_OF_RANGE, exit 1.
+  // A prediction before the archived data is the server's OUT_OF_RANGE, exit 1 (inside it, the
+  // recorded readings are used: tests/server/prediction_test.cc).
   r = RunEsg(dir, at + "predict --spacecraft RDK-1 --from " +
-                      FormatUtcForTest(recording_->frames.front().time) + " --to " + to +
+                      FormatUtcForTest(recording_->frames.front().time - absl::Hours(1)) +
+                      " --to " + to +
                       " --step 600");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("esg predict: OUT_OF_RANGE: from: "));

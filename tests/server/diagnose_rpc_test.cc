@@ -71,7 +71,14 @@ TEST(DiagnoseRpc, StreamsProgressThenTheStoredReport) {
   ASSERT_EQ(listed.diagnoses_size(), 1);
   EXPECT_EQ(listed.diagnoses(0).id(), result.id());
   EXPECT_EQ(listed.diagnoses(0).verdict(), result.verdict());
-  EXPECT_EQ(listed.diagnoses(0).report_json(), result.report_json());
+  // The list carries summaries; GetDiagnosis returns the stored report in full.
+  grpc::ClientContext get_context;
+  esg::v1::GetDiagnosisRequest get;
+  get.set_spacecraft_id("DIAG-1");
+  get.set_id(result.id());
+  esg::v1::DiagnosisResult stored;
+  ASSERT_TRUE(stub->GetDiagnosis(&get_context, get, &stored).ok());
+  EXPECT_EQ(stored.report_json(), result.report_json());
 }
 
 TEST(DiagnoseRpc, BadRequestsGetTheirCodeAndNameTheField) {
