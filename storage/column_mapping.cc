@@ -20,6 +20,7 @@
 #include "absl/strings/str_join.h"
 #include "estimator/rotation.h"
 #include "nlohmann/json.hpp"
+#include "storage/csv_problems.h"
 #include "storage/recording_csv.h"
 
 namespace esg::storage {
@@ -423,40 +424,6 @@ std::vector<std::pair<std::string, std::string>> MappedColumns(const ColumnMappi
 // ---------------------------------------------------------------------------------------------
 // CSV rows.
 
-struct Problem {
-  int line;
-  std::string where;  // "column X (field)", empty for the whole line
-  std::string reason;
-};
-
-class ProblemList {
- public:
-  void Add(int line, std::string where, std::string reason) {
-    problems_.push_back({line, std::move(where), std::move(reason)});
-  }
-  size_t size() const { return problems_.size(); }
-  bool empty() const { return problems_.empty(); }
-  absl::Status ToStatus() const {
-    std::string message = absl::StrFormat("recording CSV through a column mapping: %d problem%s",
-                                          problems_.size(), problems_.size() == 1 ? "" : "s");
-    const size_t shown = std::min<size_t>(problems_.size(), kMaxReportedProblems);
-    for (size_t i = 0; i < shown; ++i) {
-      const Problem& p = problems_[i];
-      if (p.where.empty()) {
-        absl::StrAppendFormat(&message, "\n  line %d: %s", p.line, p.reason);
-      } else {
-        absl::StrAppendFormat(&message, "\n  line %d, %s: %s", p.line, p.where, p.reason);
-      }
-    }
-    if (shown < problems_.size()) {
-      absl::StrAppendFormat(&message, "\n  ... and %d more", problems_.size() - shown);
-    }
-    return absl::InvalidArgumentError(message);
-  }
-
- private:
-  std::vector<Problem> problems_;
-};
 
 // A mapped column resolved against the header.
 struct Col {
@@ -524,7 +491,7 @@ std::string SplitFields(absl::string_view line, char delimiter, std::vector<std:
 }
 
 std::optional<double> ParseNumber(absl::string_view text, const Col& col, int line,
-                                  ProblemList* problems) {
+                                  CsvProblems* problems) {
   absl::string_view digits = text;
   if (!digits.empty() && digits.front() == '+') digits.remove_prefix(1);
   double value = 0.0;
@@ -610,7 +577,7 @@ bool ParseMetadata(absl::string_view line, std::string* key, std::string* value)
 std::optional<std::vector<double>> ParseGroup(const std::vector<std::string>& fields,
                                               const std::vector<const Col*>& cols,
                                               const std::string& group_field, int line,
-                                              ProblemList* problems) {
+                                              CsvProblems* problems) {
   std::vector<const Col*> empty;
   for (const Col* c : cols) {
     if (fields[c->index].empty()) empty.push_back(c);
@@ -635,7 +602,7 @@ std::optional<std::vector<double>> ParseGroup(const std::vector<std::string>& fi
 // |norm - 1| check after conversion and renormalisation beyond kRenormaliseAbove.
 template <typename Vector>
 bool CheckUnit(Vector* v, const std::string& where, const std::string& what, int line,
-               ProblemList* problems) {
+               CsvProblems* problems) {
   const double norm = v->norm();
   if (!(std::abs(norm - 1.0) <= kUnitNormTolerance)) {
     problems->Add(
@@ -747,7 +714,7 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
   absl::string_view text(std_text.data(), std_text.size());
   if (absl::StartsWith(text, "\xEF\xBB\xBF")) text.remove_prefix(3);  // a UTF-8 byte order mark
   estimator::Recording recording;
-  ProblemList problems;
+  CsvProblems problems("recording CSV through a column mapping", "");
 
   std::vector<Col> cols;
   for (const auto& [name, field] : MappedColumns(mapping)) cols.push_back({name, field, -1});

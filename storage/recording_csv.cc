@@ -21,6 +21,7 @@
 #include "absl/time/time.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
+#include "storage/csv_problems.h"
 
 namespace esg::storage {
 
@@ -57,41 +58,6 @@ constexpr int kTimeColumn = 0;
 constexpr int GyroColumn(int gyro_index, int k) { return 1 + gyro_index * kNumGyroColumns + k; }
 constexpr int StColumn(int k) { return 1 + kMaxGyros * kNumGyroColumns + k; }
 
-struct Problem {
-  int line;
-  std::string column;  // empty when the problem concerns the whole line
-  std::string reason;
-};
-
-class ProblemList {
- public:
-  void Add(int line, std::string column, std::string reason) {
-    problems_.push_back({line, std::move(column), std::move(reason)});
-  }
-  bool empty() const { return problems_.empty(); }
-  size_t size() const { return problems_.size(); }
-
-  absl::Status ToStatus() const {
-    std::string message = absl::StrFormat("recording CSV: %d problem%s", problems_.size(),
-                                          problems_.size() == 1 ? "" : "s");
-    const size_t shown = std::min<size_t>(problems_.size(), kMaxReportedProblems);
-    for (size_t i = 0; i < shown; ++i) {
-      const Problem& p = problems_[i];
-      if (p.column.empty()) {
-        absl::StrAppendFormat(&message, "\n  line %d: %s", p.line, p.reason);
-      } else {
-        absl::StrAppendFormat(&message, "\n  line %d, column %s: %s", p.line, p.column, p.reason);
-      }
-    }
-    if (shown < problems_.size()) {
-      absl::StrAppendFormat(&message, "\n  ... and %d more", problems_.size() - shown);
-    }
-    return absl::InvalidArgumentError(message);
-  }
-
- private:
-  std::vector<Problem> problems_;
-};
 
 absl::string_view Trim(absl::string_view s) { return absl::StripAsciiWhitespace(s); }
 
@@ -118,7 +84,7 @@ std::string Quote(absl::string_view s) {
 
 // Parses a complete, finite number; on failure adds a problem and returns nullopt.
 std::optional<double> ParseNumber(absl::string_view text, int line, const std::string& column,
-                                  ProblemList* problems) {
+                                  CsvProblems* problems) {
   absl::string_view digits = text;
   if (!digits.empty() && digits.front() == '+') digits.remove_prefix(1);
   double value = 0.0;
@@ -143,7 +109,7 @@ std::optional<double> ParseNumber(absl::string_view text, int line, const std::s
 template <int N>
 std::optional<std::optional<Eigen::Matrix<double, N, 1>>> ParseGroup(
     const std::vector<absl::string_view>& fields, const std::array<int, N>& columns,
-    const std::array<int, N>& field_index, int line, ProblemList* problems) {
+    const std::array<int, N>& field_index, int line, CsvProblems* problems) {
   const std::array<std::string, kNumColumns>& names = ColumnNames();
   int empty_count = 0;
   for (int k = 0; k < N; ++k) empty_count += fields[field_index[k]].empty() ? 1 : 0;
@@ -176,7 +142,7 @@ std::optional<std::optional<Eigen::Matrix<double, N, 1>>> ParseGroup(
 // Checks |norm - 1| and renormalises beyond kRenormaliseAbove. False (reported) when off.
 template <int N>
 bool CheckUnit(Eigen::Matrix<double, N, 1>* v, const std::string& group, int line,
-               ProblemList* problems) {
+               CsvProblems* problems) {
   const double norm = v->norm();
   if (!(std::abs(norm - 1.0) <= kUnitNormTolerance)) {
     problems->Add(line, group,
@@ -218,7 +184,7 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
   // Abseil 20220623 in Debian has its own absl::string_view (not std::string_view).
   const absl::string_view text(std_text.data(), std_text.size());
   estimator::Recording recording;
-  ProblemList problems;
+  CsvProblems problems("recording CSV", "column ");
   const std::array<std::string, kNumColumns>& names = ColumnNames();
 
   std::map<std::string, int> metadata_line;  // key -> line, to report repeated keys

@@ -1,0 +1,65 @@
+// CsvProblems: the problems found while reading a CSV recording, collected row by row and
+// reported together in one InvalidArgument (at most kMaxReportedProblems listed, then a count),
+// so that a user fixes a file in one pass. Used by the project's own CSV reader
+// (recording_csv.cc) and by the column-mapping reader (column_mapping.cc).
+#ifndef ESG_STORAGE_CSV_PROBLEMS_H_
+#define ESG_STORAGE_CSV_PROBLEMS_H_
+
+#include <algorithm>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_format.h"
+#include "storage/recording_csv.h"
+
+namespace esg::storage {
+
+class CsvProblems {
+ public:
+  // `reader` opens the message ("recording CSV"); `where_prefix` goes before a non-empty place
+  // ("column " when the place is a column name, "" when it is already phrased).
+  CsvProblems(std::string reader, std::string where_prefix)
+      : reader_(std::move(reader)), where_prefix_(std::move(where_prefix)) {}
+
+  // A problem on `line`; `where` is empty when it concerns the whole line.
+  void Add(int line, std::string where, std::string reason) {
+    problems_.push_back({line, std::move(where), std::move(reason)});
+  }
+  bool empty() const { return problems_.empty(); }
+  size_t size() const { return problems_.size(); }
+
+  absl::Status ToStatus() const {
+    std::string message = absl::StrFormat("%s: %d problem%s", reader_, problems_.size(),
+                                          problems_.size() == 1 ? "" : "s");
+    const size_t shown = std::min<size_t>(problems_.size(), kMaxReportedProblems);
+    for (size_t i = 0; i < shown; ++i) {
+      const Problem& p = problems_[i];
+      if (p.where.empty()) {
+        absl::StrAppendFormat(&message, "\n  line %d: %s", p.line, p.reason);
+      } else {
+        absl::StrAppendFormat(&message, "\n  line %d, %s%s: %s", p.line, where_prefix_, p.where,
+                              p.reason);
+      }
+    }
+    if (shown < problems_.size()) {
+      absl::StrAppendFormat(&message, "\n  ... and %d more", problems_.size() - shown);
+    }
+    return absl::InvalidArgumentError(message);
+  }
+
+ private:
+  struct Problem {
+    int line;
+    std::string where;
+    std::string reason;
+  };
+  std::string reader_;
+  std::string where_prefix_;
+  std::vector<Problem> problems_;
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_CSV_PROBLEMS_H_
