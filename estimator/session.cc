@@ -156,6 +156,8 @@ const char* EventKindName(Event::Kind kind) {
       return "GYRO_READING_MISSING";
     case Event::Kind::kGyroStarted:
       return "GYRO_STARTED";
+    case Event::Kind::kStarTrackerRealigned:
+      return "STAR_TRACKER_REALIGNED";
   }
   return "?";
 }
@@ -183,6 +185,7 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
   session.consistency_ = ConsistencyMonitor(monitor);
   session.widening_ = NoiseWidening(config.filter.measurement_step, options.widening);
   session.change_detector_ = GyroChangeDetector(options.drift_change);
+  session.mount_monitor_ = StarTrackerMountMonitor(options.star_tracker_mount);
   return session;
 }
 
@@ -244,6 +247,10 @@ LatencyEstimate EstimationSession::StarTrackerLatency() const {
   e.estimated = layout_.has_latency() && initialized_;
   e.sigma_s = e.estimated ? std::sqrt(P_(layout_.Latency(), layout_.Latency())) : 0.0;
   return e;
+}
+
+StarTrackerMount EstimationSession::StarTrackerMountShift() const {
+  return StarTrackerMount{st_mount_b_, st_mount_var_b_.cwiseMax(0.0).cwiseSqrt(), st_realignments_};
 }
 
 void EstimationSession::UpdateState(const StepReport& report) {

@@ -61,6 +61,7 @@
 #include "estimator/measurements.h"
 #include "estimator/noise_widening.h"
 #include "estimator/spacecraft_config.h"
+#include "estimator/star_tracker_mount.h"
 #include "estimator/state_layout.h"
 #include "estimator/telemetry.h"
 
@@ -98,6 +99,10 @@ struct Event {
                              // its drift mapped with a pair without it, output moved or not valid
     kGyroStarted,            // a configured gyro that was not running reports (the cold spare
                              // switched on) and joined the filter
+    kStarTrackerRealigned,   // the pairs voted the star tracker faulty for a window of steps
+                             // with a constant rotation between them (a mount shift,
+                             // star_tracker_mount.h, D34): the star tracker is corrected by it
+                             // and used again
   };
   Kind kind;
   absl::Time time;         // measurement epoch
@@ -177,10 +182,15 @@ struct SessionOptions {
   // physics.
   bool detect_drift_change = true;
   GyroChangeDetectorOptions drift_change;
+  // Re-reference the star tracker to the gyros when the pairs vote it faulty with a constant
+  // rotation between them (star_tracker_mount.h, D34). Off in diagnosis runs, which name a
+  // star-tracker misalignment as physics.
+  bool realign_star_tracker = true;
+  StarTrackerMountOptions star_tracker_mount;
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
-// writes version 4; FromCheckpoint reads versions 1 to 4.
+// writes version 5; FromCheckpoint reads versions 1 to 5.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
@@ -193,6 +203,14 @@ struct LatencyEstimate {
   double latency_s = 0.0;  // [s]
   double sigma_s = 0.0;    // 1-sigma [s]; 0 when held at the configured value
   bool estimated = false;
+};
+
+// The rotation the star tracker's output is corrected by after a mount shift (D34): its sample
+// q_st is used as q_st (x) Exp(-shift_b). Zero until the filter re-referenced the star tracker.
+struct StarTrackerMount {
+  Eigen::Vector3d shift_b = Eigen::Vector3d::Zero();  // [rad], body axes
+  Eigen::Vector3d sigma_b = Eigen::Vector3d::Zero();  // 1-sigma about body x, y, z [rad]
+  int realignments = 0;
 };
 
 struct PredictedSample {
@@ -232,6 +250,7 @@ class EstimationSession {
   AttitudeEstimate CurrentAttitude() const;
   std::vector<GyroEstimate> Gyros() const;
   LatencyEstimate StarTrackerLatency() const;
+  StarTrackerMount StarTrackerMountShift() const;
   // sqrt(P/P0) of each free coefficient of gyro `id` (index into theta -> ratio).
   std::vector<std::pair<int, double>> RelativeSigma(int id) const;
 
@@ -243,13 +262,13 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
-  // Version 4: everything a session restored from it needs to continue bit for bit as this one
+  // Version 5: everything a session restored from it needs to continue bit for bit as this one
   // would (same reports, state and covariance), at any point, including before initialisation.
   // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // Reads versions 1 to 4 (version 1 lacks the consistency monitor and the star-tracker
-  // anchoring flags, version 2 the process-noise widening, version 3 the estimated latency:
-  // session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
+  // Reads versions 1 to 5 (version 1 lacks the consistency monitor and the star-tracker
+  // anchoring flags, version 2 the process-noise widening, version 3 the estimated latency,
+  // version 4 the star-tracker mount: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
   // the version is unknown, the values are truncated or oversized, a field holds a value it
   // cannot (an integer or flag field that is not one, a non-finite real, an unknown state, a
   // pair naming gyros the session lacks, an invalid covariance), or the checkpoint does not fit
@@ -323,9 +342,16 @@ class EstimationSession {
     Eigen::MatrixXd H;  // 2 x state_size()
   };
   StarTrackerRows GyroStarTrackerRows(int i, const Eigen::Matrix3d& C_in_b_st) const;
-  // The star tracker's sample q_st corrected for the latency latency_s_ with the body rate of
-  // the current interval: q_in_b(t) = q_st(t) (x) Exp(w_b latency).
-  Eigen::Quaterniond LatencyCorrected(const Eigen::Quaterniond& q_st) const;
+  // The star tracker's sample q_st corrected for a mount shift (D34) and for the latency
+  // latency_s_ with the body rate of the current interval:
+  // q_in_b(t) = q_st(t) (x) Exp(-shift_b) (x) Exp(w_b latency).
+  Eigen::Quaterniond StarTrackerCorrected(const Eigen::Quaterniond& q_st) const;
+  // A step where the pairs voted the star tracker faulty (`voted`) or not: feeds the mount-shift
+  // test (star_tracker_mount.h) with the rotation from the output pair to the corrected star
+  // tracker q_st; when it calls the shift constant, corrects the star tracker by it and reports
+  // STAR_TRACKER_REALIGNED. True when the star tracker was re-referenced at this step.
+  bool CheckStarTrackerMount(const TelemetryFrame& frame, bool voted, const Eigen::Quaterniond& q_st,
+                             StepReport& report);
   // Covariance in inertial axes of the corrected star-tracker attitude (C_in_b_st its rotation
   // matrix): the configured noise about the body axes, plus, while the latency is a state, its
   // variance times the body rate's direction.
@@ -410,6 +436,13 @@ class EstimationSession {
   absl::Time suspect_time_ = absl::InfinitePast();
   // The per-gyro accumulated star-tracker test (D33). In the checkpoint from version 4.
   GyroChangeDetector change_detector_;
+  // The star-tracker mount-shift test and the correction it found (D34): st_mount_b_ the
+  // rotation [rad, body axes], st_mount_var_b_ its variance about each body axis [rad^2], added
+  // to the star tracker's noise. In the checkpoint from version 5.
+  StarTrackerMountMonitor mount_monitor_;
+  Eigen::Vector3d st_mount_b_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d st_mount_var_b_ = Eigen::Vector3d::Zero();
+  int st_realignments_ = 0;
   // Body rate over the interval of the current frame [rad/s], set by Propagate for the star-tracker
   // latency correction of MeasurementUpdate (recomputed every frame: not in the checkpoint).
   Eigen::Vector3d body_rate_b_ = Eigen::Vector3d::Zero();

@@ -45,11 +45,15 @@ using Eigen::VectorXd;
 //   accumulated star-tracker test's state (d values, GyroChangeDetector::ExportState). A session
 //   restored from an earlier version corrects with the configured latency and starts the
 //   extrapolation and the accumulated test afresh.
+// Version 5 (written): version 4's values, then the star-tracker mount correction (D34): shift_b
+//   (3), its variance about the body axes (3) and the number of corrections, then s (a count) and
+//   the mount-shift test's window (s values, StarTrackerMountMonitor::ExportState). A session
+//   restored from an earlier version has no mount correction.
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 4;
+  c.version = 5;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -121,13 +125,20 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   const std::vector<double> detector = change_detector_.ExportState();
   v.push_back(static_cast<double>(detector.size()));
   v.insert(v.end(), detector.begin(), detector.end());
+  // Version 5.
+  put_vec(st_mount_b_);
+  put_vec(st_mount_var_b_);
+  v.push_back(st_realignments_);
+  const std::vector<double> mount = mount_monitor_.ExportState();
+  v.push_back(static_cast<double>(mount.size()));
+  v.insert(v.end(), mount.begin(), mount.end());
   return c;
 }
 
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version < 1 || checkpoint.version > 4) {
+  if (checkpoint.version < 1 || checkpoint.version > 5) {
     return absl::DataLossError(
         absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
@@ -284,6 +295,25 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
     }
     pos += n_detector;
+  }
+  if (checkpoint.version >= 5) {
+    get_vec(s.st_mount_b_);
+    get_vec(s.st_mount_var_b_);
+    if (!(s.st_mount_var_b_.minCoeff() >= 0.0)) {
+      mark_bad(s.st_mount_var_b_.minCoeff(), "a variance is negative");
+    }
+    s.st_realignments_ = get_int();
+    if (s.st_realignments_ < 0) mark_bad(s.st_realignments_, "a count is negative");
+    const int n_mount = get_int();
+    if (short_read || n_mount < 0 || static_cast<size_t>(n_mount) > v.size() - pos) {
+      return absl::DataLossError("checkpoint: truncated (star-tracker mount)");
+    }
+    if (absl::Status st =
+            s.mount_monitor_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_mount));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
+    pos += n_mount;
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

@@ -113,7 +113,7 @@ void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepRe
   const bool from_star_tracker = report.star_tracker_used && st.has_value() && st->valid;
   if (!from_star_tracker && !report.attitude.valid) return;
   // The star tracker's sample corrected for its latency, as in MeasurementUpdate.
-  const Matrix3d C_in_b = from_star_tracker ? LatencyCorrected(st->q_in_b).toRotationMatrix()
+  const Matrix3d C_in_b = from_star_tracker ? StarTrackerCorrected(st->q_in_b).toRotationMatrix()
                                             : report.attitude.q_in_b.toRotationMatrix();
   const Vector3d sigma_att_b = from_star_tracker
                                    ? config_.star_tracker.noise.cwiseMax(kNoiseFloor)

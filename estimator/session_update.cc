@@ -43,9 +43,10 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   const auto& st = frame.star_tracker;
   const bool st_present = use_star_tracker_ && st.has_value() && st->valid;
   bool st_available = st_present;
-  // The time-tag error corrected with the body rate of the last interval.
+  // The mount shift (D34) and the time-tag error corrected, the latter with the body rate of the
+  // last interval.
   const Quaterniond q_st =
-      st_available ? LatencyCorrected(st->q_in_b) : Quaterniond::Identity();
+      st_available ? StarTrackerCorrected(st->q_in_b) : Quaterniond::Identity();
 
   // A gyro the three-pair isolation suspects while the model is known inconsistent is not
   // excluded but its measurements are withheld at this step (D21).
@@ -140,6 +141,10 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
       star_tracker_voted_faulty_ = true;
     }
   }
+
+  // A star tracker the pairs voted faulty with a constant rotation against them is re-referenced
+  // to the gyros and used again from the next step (D34).
+  CheckStarTrackerMount(frame, st_present && !st_available, q_st, report);
 
   // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
   std::vector<int> healthy;  // gyro indices
@@ -575,47 +580,6 @@ void EstimationSession::ApplyCorrection(const VectorXd& dx) {
     }
   }
   if (layout_.has_latency()) latency_s_ += dx(layout_.Latency());
-}
-
-EstimationSession::StarTrackerRows EstimationSession::GyroStarTrackerRows(
-    int i, const Matrix3d& C_in_b_st) const {
-  const GyroState& g = gyros_[i];
-  StarTrackerRows r;
-  r.d = MakeStarTrackerDifference(g.h_in, g.T(), C_in_b_st, g.C_b_k(), g.h_k_last);
-  r.H = MatrixXd::Zero(2, state_size());
-  r.H.block<2, 2>(0, layout_.SpinAxis(i)) = r.d.H_h;
-  if (layout_.HasPhi(i)) r.H.block<2, 3>(0, layout_.Phi(i)) = r.d.H_phi;
-  // The corrected star tracker errs by the body rotation -w_b dtau (session.h).
-  if (layout_.has_latency()) r.H.block<2, 1>(0, layout_.Latency()) = -r.d.G_st * body_rate_b_;
-  return r;
-}
-
-Quaterniond EstimationSession::LatencyCorrected(const Quaterniond& q_st) const {
-  // A positive latency: the sample stamped t is the attitude at t - latency, and
-  // q(t) = q(t - latency) (x) Exp(w_b latency) for a body rate w_b steady over it.
-  if (latency_s_ == 0.0) return q_st.normalized();
-  return (q_st.normalized() * ExpQuaternion(body_rate_b_ * latency_s_)).normalized();
-}
-
-Vector3d EstimationSession::StarTrackerVarianceB() const {
-  Vector3d var = config_.star_tracker.noise.cwiseMax(kNoiseFloor).cwiseAbs2();
-  if (latency_s_ != 0.0 || layout_.has_latency()) {
-    const double tau_bound =
-        std::abs(latency_s_) +
-        (layout_.has_latency() ? std::sqrt(P_(layout_.Latency(), layout_.Latency())) : 0.0);
-    const double sigma = rate_extrapolation_b_.norm() * tau_bound;
-    var.array() += sigma * sigma;
-  }
-  return var;
-}
-
-Matrix3d EstimationSession::StarTrackerCovarianceIn(const Matrix3d& C_in_b_st) const {
-  Matrix3d S = C_in_b_st * Matrix3d(StarTrackerVarianceB().asDiagonal()) * C_in_b_st.transpose();
-  if (layout_.has_latency()) {
-    const Vector3d w_in = C_in_b_st * body_rate_b_;
-    S += P_(layout_.Latency(), layout_.Latency()) * w_in * w_in.transpose();
-  }
-  return S;
 }
 
 }  // namespace esg::estimator

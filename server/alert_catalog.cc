@@ -20,7 +20,7 @@ constexpr esg::v1::AlertSeverity kWarning = esg::v1::ALERT_SEVERITY_WARNING;
 constexpr esg::v1::AlertSeverity kDistress = esg::v1::ALERT_SEVERITY_DISTRESS;
 constexpr esg::v1::AlertSeverity kCritical = esg::v1::ALERT_SEVERITY_CRITICAL;
 
-const std::array<AlertKind, 15> kCatalog = {{
+const std::array<AlertKind, 16> kCatalog = {{
     {esg::v1::ALERT_REASON_STAR_TRACKER_INNOVATION, "STAR_TRACKER_INNOVATION", kWarning,
      Event::Kind::kStarTrackerInnovation, "star_tracker", ClearRule::kQuiet,
      "eq. (14) rejected a star-tracker measurement (its innovation exceeded k_d sigma_z); the "
@@ -110,6 +110,13 @@ const std::array<AlertKind, 15> kCatalog = {{
      "a configured gyro that was not running reports (the cold spare switched on) and joined the "
      "filter",
      "None if the spare was commanded on; otherwise find out why it started"},
+    {esg::v1::ALERT_REASON_STAR_TRACKER_REALIGNED, "STAR_TRACKER_REALIGNED", kWarning,
+     Event::Kind::kStarTrackerRealigned, "star_tracker", ClearRule::kQuiet,
+     "the gyro pairs voted the star tracker faulty for 10 steps in a row with a constant rotation "
+     "between them (a mount shift): the star tracker is corrected by that rotation and used "
+     "again, with the gyros as the reference",
+     "Check the star tracker's mounting and thermal state; if the shift is real, update the "
+     "mounting in the configuration (the correction is lost with a reconfiguration)"},
 }};
 
 }  // namespace

@@ -34,10 +34,12 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
                                   const std::vector<TelemetryFrame>& frames,
                                   const ModelRunOptions& run_options) {
   // The likelihoods compared here are those of the model as configured: no adaptive widening, and
-  // no gyro excluded for a drift that changes (the diagnosis names that as physics).
+  // no gyro excluded for a drift that changes and no star tracker re-referenced after a mount
+  // shift (the diagnosis names both as physics).
   SessionOptions as_configured = options;
   as_configured.adaptive_noise = false;
   as_configured.detect_drift_change = false;
+  as_configured.realign_star_tracker = false;
   auto created = EstimationSession::Create(config, as_configured);
   if (!created.ok()) return created.status();
   EstimationSession session = std::move(*created);

@@ -1,4 +1,4 @@
-// The session checkpoint (session_checkpoint.cc, version 4): a session restored from
+// The session checkpoint (session_checkpoint.cc, version 5): a session restored from
 // ExportCheckpoint at any point continues bit for bit as the uninterrupted one (every field of
 // every StepReport, the consistency monitor, the final state and covariance), in each phase that
 // carries state beyond the filter's x and P: before initialisation, in a star-tracker outage
@@ -232,7 +232,7 @@ Prefix RunPrefix(const Scenario& s, const SessionOptions& options, size_t cut) {
 std::vector<StepReport> ExpectResumesBitForBit(const Scenario& s, const SessionOptions& options,
                                                size_t cut, const EstimationSession& at_cut) {
   const SessionCheckpoint checkpoint = at_cut.ExportCheckpoint();
-  EXPECT_EQ(checkpoint.version, 4);
+  EXPECT_EQ(checkpoint.version, 5);
   auto restored = EstimationSession::FromCheckpoint(s.spec.config, options, checkpoint);
   EXPECT_THAT(restored, IsOk());
   if (!restored.ok()) return {};
@@ -318,6 +318,38 @@ TEST(SessionCheckpoint, MidOutageResumesBitForBit) {
   const auto after = ExpectResumesBitForBit(s, Options(), cut, p.session);
   ASSERT_FALSE(after.empty());
   EXPECT_EQ(after.front().state, SessionState::kAutonomous);
+}
+
+// A star-tracker mount shift of 2 arcmin at 4 h (D34): checkpoints taken with the mount-shift
+// test's window part full, and after the star tracker was re-referenced, resume bit for bit; the
+// first continuation re-references it at the same step as the straight run.
+TEST(SessionCheckpoint, MidMountShiftWindowAndAfterTheRealignmentResumeBitForBit) {
+  Scenario s;
+  s.spec = PaperFlight(23, 5.5);
+  s.spec.star_tracker.misalignment_jump = StarTrackerMisalignmentJump{
+      HoursToSeconds(4.0) - 30.0, ArcminToRad(2.0) * Eigen::Vector3d(0.6, 0.8, 0.0)};
+  auto sim = Simulate(s.spec);
+  ASSERT_THAT(sim, IsOk());
+  s.frames = sim->recording.frames;
+  const Prefix straight = RunPrefix(s, Options(), s.frames.size());
+  size_t realigned = 0;
+  for (size_t i = 0; i < straight.reports.size() && realigned == 0; ++i) {
+    for (const Event& e : straight.reports[i].events) {
+      if (e.kind == Event::Kind::kStarTrackerRealigned) realigned = i;
+    }
+  }
+  ASSERT_GT(realigned, FrameAt(s, 4.0));
+  EXPECT_EQ(straight.session.StarTrackerMountShift().realignments, 1);
+  const size_t mid_window = realigned - 4;
+  const Prefix p1 = RunPrefix(s, Options(), mid_window);
+  ASSERT_EQ(p1.session.StarTrackerMountShift().realignments, 0);
+  const auto after1 = ExpectResumesBitForBit(s, Options(), mid_window, p1.session);
+  ASSERT_GT(after1.size(), 4u);
+  EXPECT_EQ(CountEvents({after1[4]}, Event::Kind::kStarTrackerRealigned), 1);
+  const size_t after_realignment = realigned + 3;
+  const Prefix p2 = RunPrefix(s, Options(), after_realignment);
+  ASSERT_EQ(p2.session.StarTrackerMountShift().realignments, 1);
+  ExpectResumesBitForBit(s, Options(), after_realignment, p2.session);
 }
 
 // The checkpoint is taken after the 5th of a streak of star-tracker rejections (the burst of 14
@@ -520,7 +552,7 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   ASSERT_EQ(p.session.state(), SessionState::kFaulted);
   ASSERT_GT(p.session.consistency_monitor().tests(), 0);
   const SessionCheckpoint good = p.session.ExportCheckpoint();
-  ASSERT_EQ(good.version, 4);
+  ASSERT_EQ(good.version, 5);
   const int n = p.session.state_size();
   // The covariance blocks P and P0 (n x n each) end where the version-2 fields begin.
   const size_t matrices_end = Version1Length(good);
