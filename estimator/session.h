@@ -209,7 +209,7 @@ struct LatencyEstimate {
 // q_st is used as q_st (x) Exp(-shift_b). Zero until the filter re-referenced the star tracker.
 struct StarTrackerMount {
   Eigen::Vector3d shift_b = Eigen::Vector3d::Zero();  // [rad], body axes
-  Eigen::Vector3d sigma_b = Eigen::Vector3d::Zero();  // 1-sigma about body x, y, z [rad]
+  Eigen::Vector3d sigma_b = Eigen::Vector3d::Zero();  // its 1-sigma about body x, y, z [rad]
   int realignments = 0;
 };
 
@@ -437,11 +437,13 @@ class EstimationSession {
   // The per-gyro accumulated star-tracker test (D33). In the checkpoint from version 4.
   GyroChangeDetector change_detector_;
   // The star-tracker mount-shift test and the correction it found (D34): st_mount_b_ the
-  // rotation [rad, body axes], st_mount_var_b_ its variance about each body axis [rad^2], added
-  // to the star tracker's noise. In the checkpoint from version 5.
+  // rotation [rad, body axes], st_mount_var_b_ its variance about each body axis [rad^2] (summed
+  // over the corrections), st_mount_noise_var_b_ the part of it counted as star-tracker noise
+  // (when some gyro's misalignment is not a state). In the checkpoint from version 5.
   StarTrackerMountMonitor mount_monitor_;
   Eigen::Vector3d st_mount_b_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d st_mount_var_b_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d st_mount_noise_var_b_ = Eigen::Vector3d::Zero();
   int st_realignments_ = 0;
   // Body rate over the interval of the current frame [rad/s], set by Propagate for the star-tracker
   // latency correction of MeasurementUpdate (recomputed every frame: not in the checkpoint).

@@ -46,7 +46,8 @@ using Eigen::VectorXd;
 //   restored from an earlier version corrects with the configured latency and starts the
 //   extrapolation and the accumulated test afresh.
 // Version 5 (written): version 4's values, then the star-tracker mount correction (D34): shift_b
-//   (3), its variance about the body axes (3) and the number of corrections, then s (a count) and
+//   (3), its variance about the body axes (3), the part of that counted as star-tracker noise
+//   (3) and the number of corrections, then s (a count) and
 //   the mount-shift test's window (s values, StarTrackerMountMonitor::ExportState). A session
 //   restored from an earlier version has no mount correction.
 //   A field added to the session later goes after these, with a new version.
@@ -128,6 +129,7 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   // Version 5.
   put_vec(st_mount_b_);
   put_vec(st_mount_var_b_);
+  put_vec(st_mount_noise_var_b_);
   v.push_back(st_realignments_);
   const std::vector<double> mount = mount_monitor_.ExportState();
   v.push_back(static_cast<double>(mount.size()));
@@ -299,8 +301,9 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   if (checkpoint.version >= 5) {
     get_vec(s.st_mount_b_);
     get_vec(s.st_mount_var_b_);
-    if (!(s.st_mount_var_b_.minCoeff() >= 0.0)) {
-      mark_bad(s.st_mount_var_b_.minCoeff(), "a variance is negative");
+    get_vec(s.st_mount_noise_var_b_);
+    for (const Eigen::Vector3d& var : {s.st_mount_var_b_, s.st_mount_noise_var_b_}) {
+      if (!(var.minCoeff() >= 0.0)) mark_bad(var.minCoeff(), "a variance is negative");
     }
     s.st_realignments_ = get_int();
     if (s.st_realignments_ < 0) mark_bad(s.st_realignments_, "a count is negative");

@@ -4,8 +4,6 @@
 // transition of the spin-axis errors with the integrated random walk of eq. (11) as process
 // noise. Prediction across a gap runs the same propagation on the readings a planned attitude
 // implies.
-#include "estimator/session.h"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -16,6 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/attitude_profile.h"
 #include "estimator/rotation.h"
+#include "estimator/session.h"
 #include "estimator/session_internal.h"
 #include "estimator/spin_axis.h"
 #include "estimator/triad.h"
@@ -67,9 +66,9 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
       if (!gyros_[i].has_reading) h_k_end[i] = h_k_begin[i];
     }
   } else {
-    const auto q_end = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
-                                    gyros_[ia].C_b_k() * h_k_end[ia],
-                                    gyros_[ib].C_b_k() * h_k_end[ib]);
+    const auto q_end =
+        PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in, gyros_[ia].C_b_k() * h_k_end[ia],
+                     gyros_[ib].C_b_k() * h_k_end[ib]);
     for (size_t i = 0; i < gyros_.size(); ++i) {
       if (gyros_[i].has_reading) continue;
       h_k_end[i] = q_end.ok() ? (gyros_[i].C_b_k().transpose() *
@@ -77,15 +76,16 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
                                     .normalized()
                               : h_k_begin[i];
     }
-    if ((latency_s_ != 0.0 || layout_.has_latency()) && span > 0.0) {
+    if (span > 0.0) {
       // The body rate at the end of the interval, for the star-tracker latency correction of
-      // the measurement update. The interval's mean rate comes from the attitude pair's
-      // attitudes at both ends, q_end = q_begin (x) Exp(w_mean T); taken at the interval's
-      // midpoint and extrapolated to its end along the line through the previous interval's
-      // mean (second order for a smoothly changing rate, such as a slew's).
-      const auto q_begin = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in,
-                                        gyros_[ia].C_b_k() * h_k_begin[ia],
-                                        gyros_[ib].C_b_k() * h_k_begin[ib]);
+      // the measurement update and the mount-shift test's latency alternative (D34). The interval's
+      // mean rate comes from the attitude pair's attitudes at both ends, q_end = q_begin (x)
+      // Exp(w_mean T); taken at the interval's midpoint and extrapolated to its end along the line
+      // through the previous interval's mean (second order for a smoothly changing rate, such as a
+      // slew's).
+      const auto q_begin =
+          PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in, gyros_[ia].C_b_k() * h_k_begin[ia],
+                       gyros_[ib].C_b_k() * h_k_begin[ib]);
       if (q_begin.ok() && q_end.ok()) {
         const Vector3d mean_rate_b = LogQuaternion(q_begin->conjugate() * *q_end) / span;
         if (previous_interval_s > 0.0) {
@@ -106,9 +106,9 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   // the motion of the readings (one per 0.1 deg): the drift depends on time only through them.
   // Counted in double: the span is the caller's (a library user may send a frame years after the
   // previous one, or at absl::InfiniteFuture), so the count is checked before it becomes an int.
-  const double substeps_wanted =
-      adaptive_integration_ ? std::ceil(max_turn / (0.1 * kRadPerDeg))
-                            : std::ceil(span * config_.filter.integration_rate_hz - 1e-9);
+  const double substeps_wanted = adaptive_integration_
+                                     ? std::ceil(max_turn / (0.1 * kRadPerDeg))
+                                     : std::ceil(span * config_.filter.integration_rate_hz - 1e-9);
   if (!(substeps_wanted <= static_cast<double>(std::numeric_limits<int>::max()))) {
     return absl::OutOfRangeError(absl::StrFormat(
         "frame time %s: propagating %g s at filter.integrationRateHz %g needs %g steps, more "
@@ -128,8 +128,8 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     // Midpoint of the substep: second order in dt for the slowly varying drift.
     const double s = (step + 0.5) / substeps;
     for (size_t i = 0; i < gyros_.size(); ++i) h_k[i] = SlerpUnit(h_k_begin[i], h_k_end[i], s);
-    auto q = PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in, C_b_k[ia] * h_k[ia],
-                          C_b_k[ib] * h_k[ib]);
+    auto q =
+        PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in, C_b_k[ia] * h_k[ia], C_b_k[ib] * h_k[ib]);
     if (q.ok()) C_in_b = q->toRotationMatrix();
     for (size_t i = 0; i < gyros_.size(); ++i) {
       GyroState& g = gyros_[i];
@@ -211,8 +211,8 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   for (int i = 0; i < gyro_count(); ++i) {
     const int h = layout_.SpinAxis(i);
     if (!P_.middleRows(h, rows).allFinite()) {
-      return absl::InternalError(absl::StrFormat(
-          "covariance of gyro %d is not finite after propagation", gyros_[i].id));
+      return absl::InternalError(
+          absl::StrFormat("covariance of gyro %d is not finite after propagation", gyros_[i].id));
     }
     for (int k = 0; k < rows; ++k) {
       if (P_(h + k, h + k) < 0.0) {
@@ -228,7 +228,8 @@ absl::StatusOr<std::vector<PredictedSample>> EstimationSession::Predict(
     const std::vector<absl::Time>& times, const AttitudeProfile* planned,
     absl::Time planned_start) const {
   if (!initialized_) {
-    return absl::FailedPreconditionError("prediction needs an initialised session (no star-tracker fix yet)");
+    return absl::FailedPreconditionError(
+        "prediction needs an initialised session (no star-tracker fix yet)");
   }
   EstimationSession s = *this;
   s.use_star_tracker_ = false;
@@ -242,9 +243,8 @@ absl::StatusOr<std::vector<PredictedSample>> EstimationSession::Predict(
                                                 " is not after the last frame ",
                                                 absl::FormatTime(s.last_time_)));
     }
-    const Quaterniond q_in_b = planned != nullptr
-                                   ? planned->Attitude(Seconds(t - planned_start))
-                                   : q_hold;
+    const Quaterniond q_in_b =
+        planned != nullptr ? planned->Attitude(Seconds(t - planned_start)) : q_hold;
     const Matrix3d C_b_in = q_in_b.toRotationMatrix().transpose();
     // The readings the plan implies: h_k = C_k_b C_b_in h_in (gyros' current predicted axes).
     TelemetryFrame frame;

@@ -49,7 +49,8 @@ Quaterniond EstimationSession::StarTrackerCorrected(const Quaterniond& q_st) con
 Vector3d EstimationSession::StarTrackerVarianceB() const {
   // A mount correction (D34) errs by the pairs' attitude error when it was found: counted as
   // noise of every later sample.
-  Vector3d var = config_.star_tracker.noise.cwiseMax(kNoiseFloor).cwiseAbs2() + st_mount_var_b_;
+  Vector3d var =
+      config_.star_tracker.noise.cwiseMax(kNoiseFloor).cwiseAbs2() + st_mount_noise_var_b_;
   if (latency_s_ != 0.0 || layout_.has_latency()) {
     const double tau_bound =
         std::abs(latency_s_) +
@@ -112,6 +113,13 @@ bool EstimationSession::CheckStarTrackerMount(const TelemetryFrame& frame, bool 
       m_arcsec.x(), m_arcsec.y(), m_arcsec.z(), m_arcsec.norm(), sigma_arcsec.x(), sigma_arcsec.y(),
       sigma_arcsec.z(), decision->steps, decision->scatter, decision->threshold,
       3 * (decision->steps - 1));
+  // The body rates the latency test compared [deg/min].
+  const double to_deg_min = RadToDeg(1.0) * 60.0;
+  const std::string rates = absl::StrFormat(
+      "body rate over the window %.2f deg/min, at a step of the last hour that applied the star "
+      "tracker %.2f deg/min, change %.2f deg/min",
+      to_deg_min * decision->mean_rate_b.norm(), to_deg_min * decision->rate_before_b.norm(),
+      to_deg_min * (decision->mean_rate_b - decision->rate_before_b).norm());
   if (decision->latency_alternative) {
     // A rotation along a steady body rate is what a time-tag error makes: the mount is not
     // corrected for what may be a latency.
@@ -120,13 +128,16 @@ bool EstimationSession::CheckStarTrackerMount(const TelemetryFrame& frame, bool 
         decision->perpendicular_threshold, "chi-square",
         absl::StrFormat(
             "the gyro pairs voted the star tracker faulty; its output differs from pair [%d,%d] by "
-            "%s, along the body rate (the part across it chi-square %.1f < %.1f, 2 dof): a mount "
-            "shift or a star-tracker time-tag error of %.3f s explain it alike, so the star "
+            "%s, along the body rate or within what a change of the rate since the star tracker "
+            "was "
+            "last applied makes (the "
+            "part across it chi-square %.1f < %.1f, 2 dof; %s): a mount shift or a star-tracker "
+            "time-tag error of %.3f s explain it alike, so the star "
             "tracker is not re-referenced and stays rejected while the pairs disagree with it. "
             "If the star tracker's time tag is late, configure starTracker.latencyS (or "
             "latencySigmaS to estimate it); `esg diagnose` names either",
             p[0], p[1], rotation, decision->perpendicular_chi2, decision->perpendicular_threshold,
-            decision->latency_alternative_s)});
+            rates, decision->latency_alternative_s)});
     return false;
   }
   // The samples from now on are corrected by the shift on top of any earlier correction:
@@ -145,8 +156,9 @@ bool EstimationSession::CheckStarTrackerMount(const TelemetryFrame& frame, bool 
       }
     }
   } else {
-    st_mount_var_b_ += decision->covariance_b.diagonal();
+    st_mount_noise_var_b_ += decision->covariance_b.diagonal();
   }
+  st_mount_var_b_ += decision->covariance_b.diagonal();
   ++st_realignments_;
   // The rejections of the streak are explained: the reset guard (D19) starts afresh.
   star_tracker_voted_faulty_ = false;
@@ -156,11 +168,12 @@ bool EstimationSession::CheckStarTrackerMount(const TelemetryFrame& frame, bool 
       decision->threshold, "chi-square",
       absl::StrFormat(
           "the gyro pairs voted the star tracker faulty; its output differs from pair [%d,%d] by "
-          "%s: a mount shift of the star tracker. Its samples are corrected by this rotation and "
+          "%s (%s): a mount shift of the star tracker. Its samples are corrected by this rotation "
+          "and "
           "used again from the next step (correction number %d; the gyros, not the star "
           "tracker's old mounting, are now the reference%s). Check the star tracker's mounting "
           "and thermal state",
-          p[0], p[1], rotation, st_realignments_,
+          p[0], p[1], rotation, rates, st_realignments_,
           every_misalignment_estimated ? ", and the gyro misalignments are re-estimated against it"
                                        : "")});
   return true;

@@ -246,6 +246,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     }
   }
   if (report.star_tracker_used) {
+    mount_monitor_.NoteApplied(body_rate_b_);
     steps_without_star_tracker_ = 0;
     consecutive_rejections_ = 0;
     star_tracker_voted_faulty_ = false;

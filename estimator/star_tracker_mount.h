@@ -23,10 +23,17 @@
 // leaves the window and the test is repeated at the next voted step.
 //
 // A time-tag error tau of the star tracker also rotates its output by a constant while the body
-// turns at a steady rate w_b: by -w_b tau (a rotation about the rate axis). When the shift lies
-// along the window's mean rate within its covariance, the decision says a latency explains it as
-// well, and the session does not re-reference (the latency is a configuration matter,
-// starTracker.latencyS, or a filter state with starTracker.latencySigmaS).
+// turns at a steady rate w_b: by -w_b tau (a rotation about the rate axis). Where the filter ran
+// on such a star tracker before, its misalignment states absorbed part of the rotation of the
+// rates it ran at, and a change of rate leaves a rotation of up to |w_b - w_before| tau. The
+// decision says a latency explains the shift as well (and the session does not re-reference: the
+// latency is a configuration matter, starTracker.latencyS, or a filter state with
+// starTracker.latencySigmaS) when the shift lies along the window's mean rate within its
+// covariance, or when the rate of the window differs from the rate at one of the last
+// kAppliedSteps steps that applied the star tracker (w_before, the one most different) by enough
+// for a latency within kMaxLatencyS to make it. A mount shift within an hour of a change of rate
+// is therefore not corrected until the star tracker has been applied for an hour at a steady
+// rate.
 //
 // The pair's attitude error enters each R_i as if independent between steps: it is not (it
 // changes slowly), which makes the scatter test more permissive by at most that error's share;
@@ -59,15 +66,18 @@ class StarTrackerMountMonitor {
     double scatter = 0.0;                                    // T
     double threshold = 0.0;                                  // chi2inv(1 - alpha, 3 (W - 1))
     int steps = 0;                                           // W
-    // The window's mean body rate [rad/s] and whether a star-tracker time-tag error explains m
-    // as well as a mount shift does: m lies along the rate (its part perpendicular to the rate
-    // below the 1 - alpha quantile of chi-square(2)) and |m| / |w_b| is a latency within
-    // kMaxLatencyS. Then tau = m.w_b / |w_b|^2 [s] (the sample stamped t is the attitude at
+    // The window's mean body rate w [rad/s], w_before (rule above), and whether a star-tracker
+    // time-tag
+    // error explains m as well as a mount shift does (rule above): m lies along w (its part
+    // perpendicular to w below the 1 - alpha quantile of chi-square(2), perpendicular_chi2)
+    // with |m| / |w| within kMaxLatencyS, or |m| <= |w - w_before| kMaxLatencyS. Then
+    // tau = -m.u / |u|^2 [s] (u = w or w - w_before; the sample stamped t is the attitude at
     // t - tau) is the alternative.
     Eigen::Vector3d mean_rate_b = Eigen::Vector3d::Zero();
+    Eigen::Vector3d rate_before_b = Eigen::Vector3d::Zero();
     bool latency_alternative = false;
     double latency_alternative_s = 0.0;
-    double perpendicular_chi2 = 0.0;       // of m's part perpendicular to the rate
+    double perpendicular_chi2 = 0.0;       // of m's part perpendicular to u
     double perpendicular_threshold = 0.0;  // chi2inv(1 - alpha, 2)
   };
   // The largest time-tag error the configuration admits (spacecraft_config.h,
@@ -82,12 +92,17 @@ class StarTrackerMountMonitor {
   // A measurement step where the pairs did not vote the star tracker faulty (or it was absent):
   // the window starts again.
   void Clear() { steps_.clear(); }
+  // The body rate [rad/s] of a step whose star-tracker measurements the filter applied; the last
+  // kAppliedSteps are kept (about the last hour the star tracker was in use).
+  void NoteApplied(const Eigen::Vector3d& w_b);
+  static constexpr int kAppliedSteps = 60;
 
   int window_size() const { return static_cast<int>(steps_.size()); }
   const StarTrackerMountOptions& options() const { return options_; }
 
-  // The window, for the session checkpoint: the step count, then per step d_b (3), R_b (9, row
-  // by row) and w_b (3).
+  // The window, for the session checkpoint: the count of applied rates kept (up to
+  // kAppliedSteps), those rates (3 each, oldest first), the step count, then
+  // per step d_b (3), R_b (9, row by row) and w_b (3).
   std::vector<double> ExportState() const;
   // DataLoss naming the field if the state does not fit these options (the object is then
   // unchanged).
@@ -102,6 +117,7 @@ class StarTrackerMountMonitor {
   StarTrackerMountOptions options_;
   double threshold_ = 0.0;
   double perpendicular_threshold_ = 0.0;
+  std::deque<Eigen::Vector3d> applied_rates_b_;
   std::deque<Step> steps_;
 };
 

@@ -115,8 +115,8 @@ const std::array<AlertKind, 16> kCatalog = {{
      "the gyro pairs voted the star tracker faulty for 10 steps in a row with a constant rotation "
      "between them (a mount shift): the star tracker is corrected by that rotation and used "
      "again, with the gyros as the reference",
-     "Check the star tracker's mounting and thermal state; if the shift is real, update the "
-     "mounting in the configuration (the correction is lost with a reconfiguration)"},
+     "Check the star tracker's mounting and thermal state; the correction stands until the star "
+     "tracker's output or the configuration changes again"},
 }};
 
 }  // namespace

@@ -98,13 +98,16 @@ TEST(StarTrackerMount, ABurstOrABrokenRunDecidesNothing) {
 
 // While the body turns steadily, a time-tag error tau rotates the star tracker's output by
 // -w_b tau, a constant: the decision names the latency as the alternative (with tau) when the
-// shift lies along the rate, and not when it lies across it.
+// shift lies along the rate, or when the rate changed since the star tracker was last applied,
+// and not when it lies across a rate that has not changed.
 TEST(StarTrackerMount, AShiftAlongASteadyBodyRateHasTheLatencyAsItsAlternative) {
   const Matrix3d R = StepCovariance();
   const Vector3d w_b = DegToRad(6.0) / 60.0 * Vector3d(0.0, 0.6, 0.8);  // the calibration profile's
   Rng rng(23);
+  // The filter applied the star tracker at this steady rate for an hour before the shift.
   auto decide = [&](const Vector3d& shift_b) {
     StarTrackerMountMonitor m;
+    for (int s = 0; s < 60; ++s) m.NoteApplied(w_b);
     std::optional<StarTrackerMountMonitor::Decision> d;
     for (int s = 0; s < m.options().window_steps; ++s)
       d = m.AddVoted(shift_b + Draw(rng, R), R, w_b);
@@ -121,6 +124,19 @@ TEST(StarTrackerMount, AShiftAlongASteadyBodyRateHasTheLatencyAsItsAlternative) 
   ASSERT_TRUE(mount.has_value());
   EXPECT_FALSE(mount->latency_alternative);
   EXPECT_GT(mount->perpendicular_chi2, mount->perpendicular_threshold);
+  // The filter ran on the late star tracker at a rate w_before, whose -w_before tau its
+  // misalignment states absorbed; the rate changes and -(w - w_before) tau remains, not along w.
+  const Vector3d w_before_b = DegToRad(6.0) / 60.0 * Vector3d(0.8, 0.0, -0.6);
+  StarTrackerMountMonitor changed;
+  changed.NoteApplied(w_before_b);
+  std::optional<StarTrackerMountMonitor::Decision> c;
+  for (int s = 0; s < 10; ++s) {
+    c = changed.AddVoted(-0.3 * (w_b - w_before_b) + Draw(rng, R), R, w_b);
+  }
+  ASSERT_TRUE(c.has_value());
+  EXPECT_TRUE(c->latency_alternative);
+  EXPECT_NEAR(c->latency_alternative_s, 0.3, 0.05);
+  EXPECT_EQ(c->rate_before_b, w_before_b);
   // At rest no latency rotates the output.
   StarTrackerMountMonitor rest;
   std::optional<StarTrackerMountMonitor::Decision> d;
@@ -166,22 +182,25 @@ TEST(StarTrackerMount, StateRoundTripDecidesAlikeAndCorruptionIsDataLoss) {
   StarTrackerMountMonitor c;
   for (int s = 0; s < 3; ++s) ASSERT_FALSE(c.AddVoted(d[s], R).has_value());
   const std::vector<double> good = c.ExportState();
+  // The layout: the applied rates kept (0: none here), the step count (1), then per step d_b
+  // (2-4 for the first), R_b (5-13) and w_b.
+  ASSERT_EQ(good[0], 0.0);
+  auto with = [&](size_t i, double x) {
+    std::vector<double> v = good;
+    v[i] = x;
+    return v;
+  };
   const std::vector<std::vector<double>> bad = {
       {},
-      {10.0},  // a full window is never stored
-      {-1.0},
-      {1.5},
+      {0.0, 10.0},  // a full window is never stored
+      {0.0, -1.0},
+      {0.0, 1.5},
+      {61.0, 0.0},                                        // more applied rates than are kept
+      {1.0, 0.0},                                         // an applied rate missing
+      {1.0, std::nan(""), 0.0, 0.0, 0.0},                 // an applied rate not finite
       std::vector<double>(good.begin(), good.end() - 1),  // truncated
-      [&] {
-        auto v = good;
-        v[1] = std::nan("");
-        return v;
-      }(),  // a shift not finite
-      [&] {
-        auto v = good;
-        v[4] = -1.0;
-        return v;
-      }(),  // a covariance not positive
+      with(2, std::nan("")),                              // a shift not finite
+      with(5, -1.0),                                      // a covariance not positive
   };
   for (const auto& v : bad) {
     StarTrackerMountMonitor e = c;
