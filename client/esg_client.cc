@@ -198,6 +198,44 @@ absl::StatusOr<esg::v1::HistoryResponse> EsgClient::GetCoefficientHistory(
   return all;
 }
 
+absl::StatusOr<esg::v1::ListDiagnosesResponse> EsgClient::ListDiagnoses(
+    const esg::v1::ListDiagnosesRequest& request, const CallOptions& call) {
+  auto one_page = [&](const esg::v1::ListDiagnosesRequest& page_request) {
+    return Unary<esg::v1::ListDiagnosesResponse>(
+        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ListDiagnosesResponse* r) {
+          return stub_->ListDiagnoses(c, page_request, r);
+        });
+  };
+  if (!request.page_token().empty()) return one_page(request);
+  esg::v1::ListDiagnosesRequest page_request = request;
+  esg::v1::ListDiagnosesResponse all;
+  for (;;) {
+    absl::StatusOr<esg::v1::ListDiagnosesResponse> page = one_page(page_request);
+    if (!page.ok()) return page.status();
+    for (esg::v1::DiagnosisResult& d : *page->mutable_diagnoses()) {
+      *all.add_diagnoses() = std::move(d);
+    }
+    if (page->next_page_token().empty()) break;
+    if (page->next_page_token() == page_request.page_token()) {
+      return absl::InternalError("the server returned the same page token twice");
+    }
+    page_request.set_page_token(page->next_page_token());
+  }
+  return all;
+}
+
+absl::StatusOr<esg::v1::DiagnosisResult> EsgClient::GetDiagnosis(const std::string& spacecraft_id,
+                                                                 int64_t id,
+                                                                 const CallOptions& call) {
+  esg::v1::GetDiagnosisRequest request;
+  request.set_spacecraft_id(spacecraft_id);
+  request.set_id(id);
+  return Unary<esg::v1::DiagnosisResult>(NewContext(true, call),
+                                         [&](grpc::ClientContext* c, esg::v1::DiagnosisResult* r) {
+                                           return stub_->GetDiagnosis(c, request, r);
+                                         });
+}
+
 std::unique_ptr<TelemetryStream> EsgClient::StreamTelemetry() {
   std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
   auto stream = stub_->StreamTelemetry(context.get());
@@ -208,6 +246,30 @@ std::unique_ptr<AlertStream> EsgClient::SubscribeAlerts(const esg::v1::AlertSubs
   std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
   auto reader = stub_->SubscribeAlerts(context.get(), request);
   return std::make_unique<AlertStream>(std::move(context), std::move(reader));
+}
+
+std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> EsgClient::Diagnose(
+    const esg::v1::DiagnoseRequest& request) {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  auto reader = stub_->Diagnose(context.get(), request);
+  return std::make_unique<ReaderStream<esg::v1::DiagnoseUpdate>>(std::move(context),
+                                                                 std::move(reader));
+}
+
+std::unique_ptr<ReaderStream<esg::v1::ExportCoefficientHistoryResponse>>
+EsgClient::ExportCoefficientHistory(const esg::v1::ExportCoefficientHistoryRequest& request) {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  auto reader = stub_->ExportCoefficientHistory(context.get(), request);
+  return std::make_unique<ReaderStream<esg::v1::ExportCoefficientHistoryResponse>>(
+      std::move(context), std::move(reader));
+}
+
+std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> EsgClient::ExportTelemetry(
+    const esg::v1::ExportTelemetryRequest& request) {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  auto reader = stub_->ExportTelemetry(context.get(), request);
+  return std::make_unique<ReaderStream<esg::v1::ExportTelemetryResponse>>(std::move(context),
+                                                                          std::move(reader));
 }
 
 }  // namespace esg::client

@@ -12,8 +12,10 @@
 #ifndef ESG_CLIENT_ESG_CLIENT_H_
 #define ESG_CLIENT_ESG_CLIENT_H_
 
+#include <cstdint>
 #include <memory>
 #include <string>
+#include <utility>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -93,6 +95,26 @@ class AlertStream {
   std::unique_ptr<grpc::ClientReader<esg::v1::Alert>> reader_;
 };
 
+// A server-streaming call read message by message (Diagnose, ExportCoefficientHistory,
+// ExportTelemetry): the same contract as AlertStream.
+template <typename Message>
+class ReaderStream {
+ public:
+  ReaderStream(std::unique_ptr<grpc::ClientContext> context,
+               std::unique_ptr<grpc::ClientReader<Message>> reader)
+      : context_(std::move(context)), reader_(std::move(reader)) {}
+  // Next message; false at the end of the stream (server finished, error, or Cancel).
+  bool Read(Message* message) { return reader_->Read(message); }
+  // After Read returned false: the final status of the call.
+  absl::Status Finish() { return FromGrpcStatus(reader_->Finish()); }
+  // Thread safe; unblocks a pending Read.
+  void Cancel() { context_->TryCancel(); }
+
+ private:
+  std::unique_ptr<grpc::ClientContext> context_;
+  std::unique_ptr<grpc::ClientReader<Message>> reader_;
+};
+
 class EsgClient {
  public:
   // Builds the channel (connection is lazy: an unreachable server shows up as Unavailable at the
@@ -119,10 +141,27 @@ class EsgClient {
   absl::StatusOr<esg::v1::HistoryResponse> GetCoefficientHistory(
       const esg::v1::HistoryRequest& request, const CallOptions& call = {});
 
+  // With request.page_token empty: every stored diagnosis of the spacecraft (summaries), following
+  // next_page_token page by page; the result's next_page_token is empty. With a page_token: that
+  // one page. Internal if the server hands back the token it was given (a loop).
+  absl::StatusOr<esg::v1::ListDiagnosesResponse> ListDiagnoses(
+      const esg::v1::ListDiagnosesRequest& request, const CallOptions& call = {});
+  // One stored diagnosis with its full report; NotFound for an unknown id.
+  absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(const std::string& spacecraft_id,
+                                                        int64_t id, const CallOptions& call = {});
+
   // Opens a telemetry stream (no deadline). Errors show up in TelemetryStream::Finish.
   std::unique_ptr<TelemetryStream> StreamTelemetry();
   // Opens an alert subscription (no deadline). Errors show up in AlertStream::Finish.
   std::unique_ptr<AlertStream> SubscribeAlerts(const esg::v1::AlertSubscription& request);
+  // Server streams without a deadline (a diagnosis runs for minutes, an export is as long as
+  // the archive); errors show up in ReaderStream::Finish.
+  std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> Diagnose(
+      const esg::v1::DiagnoseRequest& request);
+  std::unique_ptr<ReaderStream<esg::v1::ExportCoefficientHistoryResponse>> ExportCoefficientHistory(
+      const esg::v1::ExportCoefficientHistoryRequest& request);
+  std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> ExportTelemetry(
+      const esg::v1::ExportTelemetryRequest& request);
 
  private:
   EsgClient(ClientOptions options, std::shared_ptr<grpc::Channel> channel);

@@ -29,7 +29,7 @@ using estimator::TelemetryFrame;
 
 namespace {
 
-constexpr const char* kQuarantineReason = "SESSION_QUARANTINED";
+constexpr const char* kQuarantineReason = kQuarantineAlertReason;
 
 // A frame of the job: its identity, and the decoded frame (absent when undecodable).
 struct JobFrame {
@@ -83,6 +83,7 @@ void EstimationCore::WorkerLoop() {
 }
 
 bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
+  if (options_.before_apply_job) options_.before_apply_job(sc->id);
   absl::MutexLock job(&sc->job_mu);
   std::optional<EstimationSession> session;
   ServerCheckpoint apply;
@@ -145,9 +146,8 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       if (frame.ok()) {
         f.frame = std::move(*frame);
       } else {
-        Log("ERROR", absl::StrCat(sc->id, ": archived frame (station ", a.station_id,
-                                  ", sequence ", a.sequence,
-                                  ") cannot be decoded: ", frame.status().ToString()));
+        Log("ERROR", absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
+                                  a.sequence, ") cannot be decoded: ", frame.status().ToString()));
       }
       frames.push_back(std::move(f));
     }
@@ -190,15 +190,15 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       if (code == absl::StatusCode::kInternal || code == absl::StatusCode::kDataLoss) {
         // The filter itself failed: stop before this frame (the checkpoint stays at the last
         // good one) and quarantine; the others and the server go on.
-        apply.quarantine_reason = absl::StrCat(
-            "the filter failed at the frame of ", FormatUtc(f.time), " (station ", f.station,
-            ", sequence ", f.sequence, "): ", report.status().message(),
-            "; the filter is stopped until ConfigureSpacecraft with replace=true");
+        apply.quarantine_reason =
+            absl::StrCat("the filter failed at the frame of ", FormatUtc(f.time), " (station ",
+                         f.station, ", sequence ", f.sequence, "): ", report.status().message(),
+                         "; the filter is stopped until ConfigureSpacecraft with replace=true");
         apply.rebuilding = false;
         alerts.Add({kQuarantineReason, "DISTRESS", "session", f.time, 0.0, 0.0, "",
                     apply.quarantine_reason});
-        Log("ERROR", absl::StrCat("spacecraft ", sc->id, " quarantined: ",
-                                  apply.quarantine_reason));
+        Log("ERROR",
+            absl::StrCat("spacecraft ", sc->id, " quarantined: ", apply.quarantine_reason));
         break;
       }
       advance_cursor(f);
@@ -213,8 +213,8 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
           " -> ", estimator::SessionStateName(session->state()), " at ", FormatUtc(f.time),
           " (station ", f.station, ", sequence ", f.sequence, ")"));
     }
-    if (report->measurement_step && frame.star_tracker.has_value() &&
-        frame.star_tracker->valid && !report->star_tracker_used) {
+    if (report->measurement_step && frame.star_tracker.has_value() && frame.star_tracker->valid &&
+        !report->star_tracker_used) {
       ++apply.star_tracker_rejections;
     }
     if (report->measurement_step && frame.time > written) {
@@ -315,8 +315,8 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       sc->ready_bytes -= static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());
     }
     sc->ready.erase(sc->ready.begin(), end);
-    more = !stopped && (sc->replay_from_archive || !sc->ready.empty() ||
-                        !sc->service_alerts.empty());
+    more =
+        !stopped && (sc->replay_from_archive || !sc->ready.empty() || !sc->service_alerts.empty());
   }
   // Publish the committed changes.
   absl::MutexLock publish(&sc->publish_mu);

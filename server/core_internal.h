@@ -30,6 +30,8 @@
 namespace esg::server {
 
 inline constexpr const char* kDefaultModel = "10+11";
+// The stored reason of the alert a quarantine raises (cleared when the quarantine ends).
+inline constexpr const char* kQuarantineAlertReason = "SESSION_QUARANTINED";
 
 // NotFound "spacecraft_id: 'X' is not configured" (X escaped and shortened).
 absl::Status NotConfigured(const std::string& spacecraft_id);

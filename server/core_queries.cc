@@ -152,8 +152,8 @@ uint64_t Fingerprint(absl::string_view text) {
 
 std::string EncodePageToken(absl::string_view list, absl::string_view filters,
                             absl::string_view position) {
-  return absl::WebSafeBase64Escape(absl::StrCat("esg1;", list, ";",
-                                                absl::Hex(Fingerprint(filters)), ";", position));
+  return absl::WebSafeBase64Escape(
+      absl::StrCat("esg1;", list, ";", absl::Hex(Fingerprint(filters)), ";", position));
 }
 
 // The position of a token of `list` for a request with `filters`; InvalidArgument naming
@@ -166,14 +166,15 @@ absl::StatusOr<std::string> DecodePageToken(absl::string_view token, absl::strin
   }
   const std::vector<std::string> parts = absl::StrSplit(raw, absl::MaxSplits(';', 3));
   if (parts.size() != 4 || parts[0] != "esg1" || parts[1] != list) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("page_token: not a page token of ", list, " (take next_page_token of the "
-                     "previous response)"));
+    return absl::InvalidArgumentError(absl::StrCat("page_token: not a page token of ", list,
+                                                   " (take next_page_token of the "
+                                                   "previous response)"));
   }
   if (parts[2] != absl::StrCat(absl::Hex(Fingerprint(filters)))) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "page_token: belongs to a ", list, " request with other filters (spacecraft, gyro or "
-        "time span); paging must repeat the first request"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("page_token: belongs to a ", list,
+                     " request with other filters (spacecraft, gyro or "
+                     "time span); paging must repeat the first request"));
   }
   return parts[3];
 }
@@ -243,6 +244,7 @@ esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecor
   out.set_spacecraft_id(r.spacecraft_id);
   out.set_verdict(r.verdict);
   out.set_report_json(r.report_json);
+  out.set_frames(r.frames);
   *out.mutable_first_frame_time() = proto_convert::TimeToProto(r.from_time);
   *out.mutable_last_frame_time() = proto_convert::TimeToProto(r.to_time);
   *out.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
@@ -276,8 +278,8 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
     setup = sc->setup;
   }
   if (setup == nullptr) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "spacecraft_id: '", sc->id, "' has no usable configuration (quarantined)"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("spacecraft_id: '", sc->id, "' has no usable configuration (quarantined)"));
   }
   estimator::discovery::DiagnoseOptions options;
   options.model = request.model().empty() ? setup->model_name : request.model();
@@ -307,8 +309,8 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
   for (const storage::ArchivedFrame& a : archived) {
     esg::v1::TelemetryFrame proto;
     if (!proto.ParseFromString(a.payload)) {
-      return absl::DataLossError(absl::StrCat("archived frame ", a.sequence, " of '", sc->id,
-                                              "' does not parse"));
+      return absl::DataLossError(
+          absl::StrCat("archived frame ", a.sequence, " of '", sc->id, "' does not parse"));
     }
     ASSIGN_OR_RETURN(TelemetryFrame frame, proto_convert::FrameFromProto(proto));
     frames.push_back(std::move(frame));
@@ -324,18 +326,17 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
   record.compute_time = absl::Now();
   record.verdict = report.verdict;
   record.report_json = proto_convert::DiagnosisToJson(report);
+  record.frames = static_cast<int64_t>(frames.size());
   ASSIGN_OR_RETURN(record.id, storage_->diagnoses().Put(record));
-  esg::v1::DiagnosisResult result = DiagnosisResultFromRecord(record);
-  result.set_frames(static_cast<int64_t>(frames.size()));
-  return result;
+  return DiagnosisResultFromRecord(record);
 }
 
 absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
     const esg::v1::ListDiagnosesRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
-  ASSIGN_OR_RETURN(const int64_t size, PageSize(request.page_size(), kDefaultDiagnosesPageSize,
-                                                kMaxDiagnosesPageSize));
+  ASSIGN_OR_RETURN(const int64_t size,
+                   PageSize(request.page_size(), kDefaultDiagnosesPageSize, kMaxDiagnosesPageSize));
   int64_t after_id = 0;
   if (!request.page_token().empty()) {
     ASSIGN_OR_RETURN(std::string position, DecodePageToken(request.page_token(), "ListDiagnoses",
@@ -343,8 +344,9 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
     ASSIGN_OR_RETURN(std::vector<int64_t> v, PositionIntegers(position, 1));
     after_id = v[0];
   }
-  ASSIGN_OR_RETURN(std::vector<storage::DiagnosisRecord> records,
-                   storage_->diagnoses().ListSummaries(request.spacecraft_id(), after_id, size + 1));
+  ASSIGN_OR_RETURN(
+      std::vector<storage::DiagnosisRecord> records,
+      storage_->diagnoses().ListSummaries(request.spacecraft_id(), after_id, size + 1));
   esg::v1::ListDiagnosesResponse response;
   const bool more = static_cast<int64_t>(records.size()) > size;
   if (more) records.resize(size);
@@ -352,8 +354,8 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
     *response.add_diagnoses() = DiagnosisResultFromRecord(r);
   }
   if (more) {
-    response.set_next_page_token(EncodePageToken("ListDiagnoses", request.spacecraft_id(),
-                                                 absl::StrCat(records.back().id)));
+    response.set_next_page_token(
+        EncodePageToken("ListDiagnoses", request.spacecraft_id(), absl::StrCat(records.back().id)));
   }
   return response;
 }
@@ -390,8 +392,8 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
   if (request.has_to()) {
     ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
     if (to < from) {
-      return absl::InvalidArgumentError(absl::StrCat("to: ", FormatUtc(to), " is before from ",
-                                                     FormatUtc(from)));
+      return absl::InvalidArgumentError(
+          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
     }
     to += absl::Nanoseconds(1);  // inclusive
   }
@@ -407,17 +409,17 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
     after = storage::CoefficientCursor{v[0], v[1], v[2]};
   }
   ASSIGN_OR_RETURN(storage::CoefficientPage page,
-                   storage_->coefficients().HistoryPage(request.spacecraft_id(),
-                                                        request.gyro_id(), from, to, after, size));
+                   storage_->coefficients().HistoryPage(request.spacecraft_id(), request.gyro_id(),
+                                                        from, to, after, size));
   esg::v1::HistoryResponse response;
   for (const storage::CoefficientRecord& r : page.records) {
     *response.add_snapshots() = SnapshotToProto(r);
   }
   if (page.next.has_value()) {
-    response.set_next_page_token(EncodePageToken(
-        "GetCoefficientHistory", filters,
-        absl::StrCat(page.next->measurement_time_unix_ns, ":", page.next->gyro_id, ":",
-                     page.next->row_id)));
+    response.set_next_page_token(
+        EncodePageToken("GetCoefficientHistory", filters,
+                        absl::StrCat(page.next->measurement_time_unix_ns, ":", page.next->gyro_id,
+                                     ":", page.next->row_id)));
   }
   return response;
 }
@@ -435,15 +437,14 @@ absl::StatusOr<esg::v1::ExportTelemetryResponse> EstimationCore::ExportTelemetry
   if (request.has_to()) {
     ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
     if (to < from) {
-      return absl::InvalidArgumentError(absl::StrCat("to: ", FormatUtc(to), " is before from ",
-                                                     FormatUtc(from)));
+      return absl::InvalidArgumentError(
+          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
     }
   }
   // Frame times are unique per spacecraft, so "after the last time sent" resumes exactly.
   const absl::Time start = std::max(*after, from - absl::Nanoseconds(1));
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> frames,
-                   storage_->archive().ReadAfter(request.spacecraft_id(), start,
-                                                 kExportChunkSize));
+                   storage_->archive().ReadAfter(request.spacecraft_id(), start, kExportChunkSize));
   esg::v1::ExportTelemetryResponse response;
   for (const storage::ArchivedFrame& f : frames) {
     if (f.measurement_time >= to) return response;  // done

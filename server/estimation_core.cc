@@ -10,6 +10,7 @@
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
 #include "proto/convert.h"
+#include "server/alert_collapse.h"
 #include "server/core_internal.h"
 #include "server/log.h"
 #include "storage/service_queries.h"
@@ -26,8 +27,8 @@ absl::Status NotConfigured(const std::string& id) {
 EstimationCore::EstimationCore(storage::Storage* storage, const CoreOptions& options)
     : storage_(storage), options_(options) {}
 
-absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(
-    storage::Storage* storage, const CoreOptions& options) {
+absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::Storage* storage,
+                                                                      const CoreOptions& options) {
   std::unique_ptr<EstimationCore> core(new EstimationCore(storage, options));
   RETURN_IF_ERROR(core->Load());
   core->committer_ = std::thread([c = core.get()] { c->CommitterLoop(); });
@@ -57,8 +58,7 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
                    storage_->archive().Latest(record.spacecraft_id));
   ASSIGN_OR_RETURN(int64_t count,
                    storage::CountArchivedFrames(storage_->database(), record.spacecraft_id));
-  const absl::Time last_time =
-      latest.has_value() ? latest->measurement_time : absl::InfinitePast();
+  const absl::Time last_time = latest.has_value() ? latest->measurement_time : absl::InfinitePast();
 
   // The configuration.
   std::shared_ptr<Setup> setup;
@@ -74,8 +74,8 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
       if (g.id >= 1 && g.id <= estimator::kMaxGyros) setup->configured[g.id - 1] = true;
     }
   } else {
-    config_problem = absl::StrCat("the stored configuration cannot be used (",
-                                  config.status().message(), ")");
+    config_problem =
+        absl::StrCat("the stored configuration cannot be used (", config.status().message(), ")");
   }
 
   // The checkpoint: decoded, restored, and consistent with the archive; else rebuilt.
@@ -90,8 +90,8 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
     return stored.status();
   } else if (absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(stored->state_blob);
              !decoded.ok()) {
-    checkpoint_problem = absl::StrCat("its checkpoint cannot be decoded (",
-                                      decoded.status().message(), ")");
+    checkpoint_problem =
+        absl::StrCat("its checkpoint cannot be decoded (", decoded.status().message(), ")");
   } else {
     checkpoint = std::move(*decoded);
     if (checkpoint.cursor_from_sequence && stored->last_sequence > 0) {
@@ -109,18 +109,18 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
       }
     }
     if (checkpoint_problem.empty() && checkpoint.applied_time > last_time) {
-      checkpoint_problem = absl::StrCat(
-          "its checkpoint is ahead of the archive (applied up to ",
-          FormatUtc(checkpoint.applied_time), ", archive up to ",
-          last_time == absl::InfinitePast() ? "nothing" : FormatUtc(last_time), ")");
+      checkpoint_problem =
+          absl::StrCat("its checkpoint is ahead of the archive (applied up to ",
+                       FormatUtc(checkpoint.applied_time), ", archive up to ",
+                       last_time == absl::InfinitePast() ? "nothing" : FormatUtc(last_time), ")");
     }
   }
   if (checkpoint.model.empty()) checkpoint.model = kDefaultModel;
   if (setup != nullptr) {
     absl::StatusOr<estimator::ModelSpec> model = estimator::ParseModel(checkpoint.model);
     if (!model.ok()) {
-      checkpoint_problem = absl::StrCat("its checkpoint names an unknown model (",
-                                        model.status().message(), ")");
+      checkpoint_problem =
+          absl::StrCat("its checkpoint names an unknown model (", model.status().message(), ")");
       model = estimator::ParseModel(kDefaultModel);
       checkpoint.model = kDefaultModel;
     }
@@ -133,8 +133,8 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
       if (restored.ok()) {
         session = std::move(*restored);
       } else {
-        checkpoint_problem = absl::StrCat("its checkpoint cannot be restored (",
-                                          restored.status().message(), ")");
+        checkpoint_problem =
+            absl::StrCat("its checkpoint cannot be restored (", restored.status().message(), ")");
       }
     }
     if (!session.has_value()) {
@@ -187,7 +187,7 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
     if (session.has_value()) sc->session = std::move(*session);
     if (!reason.empty()) {
       sc->service_alerts.push_back(
-          {"SESSION_QUARANTINED", "DISTRESS", "session",
+          {kQuarantineAlertReason, "DISTRESS", "session",
            last_time == absl::InfinitePast() ? absl::UnixEpoch() : last_time, 0.0, 0.0, "",
            reason});
     }
@@ -232,8 +232,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
       absl::MutexLock lock(&registry_mu_);
       for (auto& [id, sc] : registry_) {
         absl::MutexLock state(&sc->state_mu);
-        if (sc->session.has_value() && sc->setup != nullptr &&
-            !sc->apply.FilterStopped() &&
+        if (sc->session.has_value() && sc->setup != nullptr && !sc->apply.FilterStopped() &&
             (sc->replay_from_archive || !sc->ready.empty())) {
           busy = true;
         }
@@ -261,8 +260,7 @@ absl::Status EstimationCore::CheckSpacecraft(const std::string& spacecraft_id) {
   return NotConfigured(spacecraft_id);
 }
 
-absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id,
-                                         absl::Duration timeout) {
+absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id, absl::Duration timeout) {
   std::shared_ptr<Spacecraft> sc = Find(spacecraft_id);
   if (sc == nullptr) return NotConfigured(spacecraft_id);
   const absl::Time deadline = absl::Now() + timeout;
@@ -274,8 +272,8 @@ absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id,
         return absl::OkStatus();
       }
       if (sc->apply.FilterStopped()) {
-        return absl::FailedPreconditionError(absl::StrCat(
-            spacecraft_id, " is quarantined: ", sc->apply.quarantine_reason));
+        return absl::FailedPreconditionError(
+            absl::StrCat(spacecraft_id, " is quarantined: ", sc->apply.quarantine_reason));
       }
     }
     if (absl::Now() > deadline) {
@@ -329,14 +327,25 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   record.spacecraft_id = config.spacecraft_id;
   record.config_json = setup->config_json;
   record.updated_time = cp.compute_time;
-  std::vector<int64_t> alerts_to_clear;  // a quarantine that the reconfiguration ends
+  // A quarantine that the reconfiguration ends: its alert is cleared as the apply worker clears
+  // one (AlertCollapser::End: cleared_time stored, then published and logged once committed).
+  std::optional<AlertCollapser> quarantine_end;
+  std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
   auto store = [&]() -> absl::Status {
     cp.state_blob = EncodeCheckpoint(checkpoint);
     ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
     RETURN_IF_ERROR(storage_->configs().Put(txn, record).status());
     RETURN_IF_ERROR(storage_->sessions().PutCheckpoint(txn, cp));
-    for (int64_t seq : alerts_to_clear) {
-      RETURN_IF_ERROR(storage::ClearAlert(txn, config.spacecraft_id, seq));
+    ended_sequences.clear();
+    if (quarantine_end.has_value()) {
+      for (const storage::AlertRecord& a : quarantine_end->new_alerts()) {
+        ASSIGN_OR_RETURN(int64_t seq, storage_->alerts().Append(txn, a));
+        ended_sequences.push_back(seq);
+      }
+      for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
+        RETURN_IF_ERROR(storage_->alerts().Clear(txn, config.spacecraft_id, c.sequence, c.time));
+        ended_sequences.push_back(c.sequence);
+      }
     }
     return txn.Commit();
   };
@@ -369,36 +378,69 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   }
   {
     absl::MutexLock job(&sc->job_mu);
-    absl::MutexLock ingest(&sc->ingest_mu);
-    absl::MutexLock state(&sc->state_mu);
-    const bool quarantined = !sc->apply.quarantine_reason.empty();
-    const bool same = sc->setup != nullptr && sc->setup->config_json == setup->config_json &&
-                      sc->setup->model_name == setup->model_name;
-    if (!same || (quarantined && request.replace())) {
-      if (!sc->highest_accepted.empty() && !request.replace()) {
-        return absl::FailedPreconditionError(absl::StrCat(
-            "config: spacecraft '", sc->id, "' already has telemetry (up to ",
-            FormatUtc(sc->last_accepted_time),
-            "); set replace=true to recreate its session and reapply the archive"));
-      }
-      // The new session replays the whole archive; the earlier history and alerts are kept,
-      // and the replay stores its own (a different model gives a different history).
-      for (const AlertTrack& t : sc->apply.alert_tracks) {
-        if (t.reason == "SESSION_QUARANTINED" && t.sequence > 0) {
-          alerts_to_clear.push_back(t.sequence);
+    {
+      absl::MutexLock ingest(&sc->ingest_mu);
+      absl::MutexLock state(&sc->state_mu);
+      const bool quarantined = !sc->apply.quarantine_reason.empty();
+      const bool same = sc->setup != nullptr && sc->setup->config_json == setup->config_json &&
+                        sc->setup->model_name == setup->model_name;
+      if (!same || (quarantined && request.replace())) {
+        if (!sc->highest_accepted.empty() && !request.replace()) {
+          return absl::FailedPreconditionError(
+              absl::StrCat("config: spacecraft '", sc->id, "' already has telemetry (up to ",
+                           FormatUtc(sc->last_accepted_time),
+                           "); set replace=true to recreate its session and reapply the archive"));
         }
+        // The new session replays the whole archive; the earlier history and alerts are kept,
+        // and the replay stores its own (a different model gives a different history).
+        if (quarantined) {
+          // The quarantine ends at the reconfiguration: in telemetry time, at the latest archived
+          // frame (every frame up to it was under the quarantine), or at the alert's own latest
+          // occurrence when that is later (nothing archived). A quarantine raised at load whose
+          // alert no job has stored yet is stored raised and cleared.
+          absl::Time end = sc->last_durable_time;
+          std::vector<AlertOccurrence> raised;
+          for (const AlertOccurrence& o : sc->service_alerts) {
+            if (o.reason == kQuarantineAlertReason) raised.push_back(o);
+          }
+          for (const AlertOccurrence& o : raised) end = std::max(end, o.time);
+          for (const AlertTrack& t : sc->apply.alert_tracks) {
+            if (t.reason == kQuarantineAlertReason) end = std::max(end, t.last_time);
+          }
+          if (end == absl::InfinitePast()) end = absl::UnixEpoch();
+          quarantine_end.emplace(sc->id, sc->apply.alert_tracks, options_.alert_collapse_window,
+                                 cp.compute_time);
+          for (const AlertOccurrence& o : raised) quarantine_end->Add(o);
+          quarantine_end->End(kQuarantineAlertReason, "session", end);
+        }
+        RETURN_IF_ERROR(store());
+        std::erase_if(sc->service_alerts,
+                      [](const AlertOccurrence& o) { return o.reason == kQuarantineAlertReason; });
+        sc->ingest_setup = setup;
+        sc->setup = setup;
+        sc->session = std::move(fresh);
+        sc->apply = checkpoint;
+        ++sc->generation;
+        sc->ready.clear();
+        sc->ready_bytes = 0;
+        sc->replay_from_archive = true;
+        Log("INFO",
+            absl::StrCat("reconfigured spacecraft ", sc->id, ", model ", setup->model_name,
+                         "; reapplying the archive", quarantined ? "; quarantine over" : ""));
       }
-      RETURN_IF_ERROR(store());
-      sc->ingest_setup = setup;
-      sc->setup = setup;
-      sc->session = std::move(fresh);
-      sc->apply = checkpoint;
-      ++sc->generation;
-      sc->ready.clear();
-      sc->ready_bytes = 0;
-      sc->replay_from_archive = true;
-      Log("INFO", absl::StrCat("reconfigured spacecraft ", sc->id, ", model ",
-                               setup->model_name, "; reapplying the archive"));
+    }
+    // Publish (and log) the cleared quarantine alerts once committed, in the worker's order:
+    // under publish_mu, with the job lock held (not the state locks) so no job of the new session
+    // publishes first.
+    absl::MutexLock publish(&sc->publish_mu);
+    for (int64_t seq : ended_sequences) {
+      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
+      if (r.ok()) {
+        hub_.Publish(*r);
+      } else {
+        Log("ERROR", absl::StrCat(sc->id, ": the cleared quarantine alert #", seq,
+                                  " cannot be read back: ", r.status().ToString()));
+      }
     }
   }
   Schedule(sc);

@@ -49,8 +49,8 @@
 #include "estimator/session.h"
 #include "estimator/spacecraft_config.h"
 #include "server/alert_hub.h"
-#include "server/proto_mapping.h"
 #include "server/checkpoint_codec.h"
+#include "server/proto_mapping.h"
 #include "storage/storage.h"
 
 namespace esg::server {
@@ -81,13 +81,17 @@ struct CoreOptions {
   int64_t max_ready_bytes = 16 << 20;
   // Accepted measurement times: [earliest_frame_time, latest_frame_time).
   absl::Time earliest_frame_time = absl::UnixEpoch();
-  absl::Time latest_frame_time = absl::FromCivil(absl::CivilSecond(2200, 1, 1, 0, 0, 0),
-                                                 absl::UTCTimeZone());
+  absl::Time latest_frame_time =
+      absl::FromCivil(absl::CivilSecond(2200, 1, 1, 0, 0, 0), absl::UTCTimeZone());
   // Consecutive filter failures (Internal or DataLoss from the estimator) that quarantine a
   // spacecraft.
   int quarantine_after_failures = 1;
   // Period of the probe write while storage cannot commit.
   absl::Duration storage_probe_period = absl::Seconds(1);
+  // Tests only: called on a filter worker at the start of each job of a spacecraft, before it
+  // takes frames; it may block, holding that spacecraft's filter behind ingest (frames stay
+  // durable but not applied). It must return before the server stops. Empty: nothing.
+  std::function<void(const std::string& spacecraft_id)> before_apply_job;
 };
 
 class EstimationCore {
@@ -165,7 +169,8 @@ class EstimationCore {
   absl::StatusOr<esg::v1::ListDiagnosesResponse> ListDiagnoses(
       const esg::v1::ListDiagnosesRequest& request);
   // NotFound for an id that is not a diagnosis of the spacecraft.
-  absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(const esg::v1::GetDiagnosisRequest& request);
+  absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(
+      const esg::v1::GetDiagnosisRequest& request);
   absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);
   // NotFound unless empty or configured.
   absl::Status CheckSpacecraft(const std::string& spacecraft_id);

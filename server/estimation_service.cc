@@ -21,11 +21,21 @@
 namespace esg::server {
 namespace {
 
+// The reactor of a unary call: counted until gRPC is done with the call (its response sent).
+class UnaryReactor : public grpc::ServerUnaryReactor {
+ public:
+  explicit UnaryReactor(CallCounter* calls) : token_(calls) {}
+  void OnDone() override { delete this; }
+
+ private:
+  CallCounter::Token token_;
+};
+
 // Unary rpcs: run `work` (returning absl::StatusOr<Response>) and finish.
 template <typename Response, typename Work>
-grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* context, absl::Status auth,
-                                Response* response, Work work) {
-  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+grpc::ServerUnaryReactor* Unary(CallCounter* calls, absl::Status auth, Response* response,
+                                Work work) {
+  grpc::ServerUnaryReactor* reactor = new UnaryReactor(calls);
   if (!auth.ok()) {
     reactor->Finish(ToGrpcStatus(auth));
     return reactor;
@@ -45,8 +55,8 @@ constexpr size_t kMaxInFlight = 4096;
 class TelemetryReactor
     : public grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck> {
  public:
-  TelemetryReactor(EstimationCore* core, const absl::Status& auth)
-      : core_(core), shared_(std::make_shared<Shared>()) {
+  TelemetryReactor(CallCounter* calls, EstimationCore* core, const absl::Status& auth)
+      : token_(calls), core_(core), shared_(std::make_shared<Shared>()) {
     shared_->reactor = this;
     if (!auth.ok()) {
       shared_->finished = true;
@@ -136,8 +146,8 @@ class TelemetryReactor
  private:
   struct Slot {
     esg::v1::TelemetryAck ack;
-    bool ready = false;     // guarded by Shared::mu
-    absl::Status failure;   // guarded by Shared::mu; not OK: fail the stream here, no ack
+    bool ready = false;    // guarded by Shared::mu
+    absl::Status failure;  // guarded by Shared::mu; not OK: fail the stream here, no ack
   };
   // State shared with the committer's callbacks, which may outlive the reactor.
   struct Shared {
@@ -172,6 +182,7 @@ class TelemetryReactor
     }
   }
 
+  CallCounter::Token token_;
   EstimationCore* core_;
   std::shared_ptr<Shared> shared_;
   esg::v1::TelemetryFrame frame_;
@@ -186,8 +197,9 @@ constexpr size_t kMaxQueuedAlerts = 100000;
 
 class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
  public:
-  AlertReactor(EstimationCore* core, const esg::v1::AlertSubscription& request, absl::Status auth)
-      : core_(core), shared_(std::make_shared<Shared>()) {
+  AlertReactor(CallCounter* calls, EstimationCore* core, const esg::v1::AlertSubscription& request,
+               absl::Status auth)
+      : token_(calls), core_(core), shared_(std::make_shared<Shared>()) {
     shared_->reactor = this;
     if (auth.ok()) auth = core->CheckSpacecraft(request.spacecraft_id());
     absl::Time since = absl::InfiniteFuture();
@@ -196,7 +208,8 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
       if (t.ok()) {
         since = *t;
       } else {
-        auth = absl::InvalidArgumentError(std::string("since: ") + std::string(t.status().message()));
+        auth =
+            absl::InvalidArgumentError(std::string("since: ") + std::string(t.status().message()));
       }
     }
     if (!auth.ok()) {
@@ -326,6 +339,7 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
     s.reactor->StartWrite(&s.queue.front());
   }
 
+  CallCounter::Token token_;
   EstimationCore* core_;
   std::shared_ptr<Shared> shared_;
   int64_t subscription_ = 0;
@@ -344,7 +358,8 @@ template <typename Response>
 class ExportReactor : public grpc::ServerWriteReactor<Response> {
  public:
   using Next = std::function<absl::StatusOr<std::optional<Response>>()>;
-  ExportReactor(const absl::Status& auth, Next next) : next_(std::move(next)) {
+  ExportReactor(CallCounter* calls, const absl::Status& auth, Next next)
+      : token_(calls), next_(std::move(next)) {
     if (!auth.ok()) {
       this->Finish(ToGrpcStatus(auth));
       return;
@@ -363,6 +378,7 @@ class ExportReactor : public grpc::ServerWriteReactor<Response> {
   void OnDone() override { delete this; }
 
  private:
+  CallCounter::Token token_;
   void WriteNext() {
     absl::StatusOr<std::optional<Response>> chunk = next_();
     if (!chunk.ok()) {
@@ -392,31 +408,32 @@ class ExportReactor : public grpc::ServerWriteReactor<Response> {
 class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate> {
  public:
   // `permit` holds the caller's slot, or why the call is refused (role, limit).
-  DiagnoseReactor(EstimationCore* core, esg::v1::DiagnoseRequest request,
-                  absl::StatusOr<CallLimiter::Permit> permit) {
+  DiagnoseReactor(CallCounter* calls, EstimationCore* core, esg::v1::DiagnoseRequest request,
+                  absl::StatusOr<CallLimiter::Permit> permit)
+      : token_(calls) {
     if (!permit.ok()) {
       finished_ = true;
       Finish(ToGrpcStatus(permit.status()));
       return;
     }
-    worker_ = std::thread([this, core, request = std::move(request),
-                           permit = std::move(*permit)]() mutable {
-      absl::StatusOr<esg::v1::DiagnosisResult> result = core->Diagnose(
-          request, [this](double fraction, const std::string& stage) { Post(fraction, stage); },
-          [this] { return cancelled_.load(std::memory_order_relaxed); });
-      permit.Release();
-      absl::MutexLock lock(&mu_);
-      worker_done_ = true;
-      if (result.ok()) {
-        final_.set_progress(1.0);
-        final_.set_stage("done");
-        *final_.mutable_result() = std::move(*result);
-        have_final_ = true;
-      } else {
-        status_ = result.status();
-      }
-      MaybeWriteLocked();
-    });
+    worker_ = std::thread(
+        [this, core, request = std::move(request), permit = std::move(*permit)]() mutable {
+          absl::StatusOr<esg::v1::DiagnosisResult> result = core->Diagnose(
+              request, [this](double fraction, const std::string& stage) { Post(fraction, stage); },
+              [this] { return cancelled_.load(std::memory_order_relaxed); });
+          permit.Release();
+          absl::MutexLock lock(&mu_);
+          worker_done_ = true;
+          if (result.ok()) {
+            final_.set_progress(1.0);
+            final_.set_stage("done");
+            *final_.mutable_result() = std::move(*result);
+            have_final_ = true;
+          } else {
+            status_ = result.status();
+          }
+          MaybeWriteLocked();
+        });
   }
 
   void OnWriteDone(bool ok) override {
@@ -442,6 +459,7 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
   }
 
  private:
+  CallCounter::Token token_;
   void Post(double fraction, const std::string& stage) {
     absl::MutexLock lock(&mu_);
     pending_.set_progress(fraction);
@@ -486,6 +504,28 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
   std::atomic<bool> cancelled_{false};
   std::thread worker_;
 };
+
+void CallCounter::Enter() {
+  absl::MutexLock lock(&mu_);
+  ++running_;
+}
+
+void CallCounter::Leave() {
+  absl::MutexLock lock(&mu_);
+  --running_;
+}
+
+int64_t CallCounter::running() {
+  absl::MutexLock lock(&mu_);
+  return running_;
+}
+
+bool CallCounter::WaitIdle(absl::Time deadline) {
+  absl::MutexLock lock(&mu_);
+  return mu_.AwaitWithDeadline(absl::Condition(
+                                   +[](int64_t* running) { return *running == 0; }, &running_),
+                               deadline);
+}
 
 EstimationServiceImpl::EstimationServiceImpl(EstimationCore* core, const TokenAuthorizer* auth,
                                              const CallLimits& limits)
@@ -542,27 +582,27 @@ absl::StatusOr<std::string> EstimationServiceImpl::Caller(grpc::CallbackServerCo
 
 grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>*
 EstimationServiceImpl::StreamTelemetry(grpc::CallbackServerContext* context) {
-  return new TelemetryReactor(core_, Authorize(context, Role::kWrite));
+  return new TelemetryReactor(&calls_, core_, Authorize(context, Role::kWrite));
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ConfigureSpacecraft(
     grpc::CallbackServerContext* context, const esg::v1::ConfigureRequest* request,
     esg::v1::ConfigureResponse* response) {
-  return Unary(context, Authorize(context, Role::kWrite), response,
+  return Unary(&calls_, Authorize(context, Role::kWrite), response,
                [&] { return core_->Configure(*request); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetSession(
     grpc::CallbackServerContext* context, const esg::v1::GetSessionRequest* request,
     esg::v1::SessionInfo* response) {
-  return Unary(context, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead), response,
                [&] { return core_->GetSession(request->spacecraft_id()); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
     grpc::CallbackServerContext* context, const esg::v1::ListSessionsRequest* request,
     esg::v1::ListSessionsResponse* response) {
-  return Unary(context, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead), response,
                [&] { return core_->ListSessions(*request); });
 }
 
@@ -574,7 +614,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
 grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     grpc::CallbackServerContext* context, const esg::v1::PredictRequest* request,
     esg::v1::PredictResponse* response) {
-  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  grpc::ServerUnaryReactor* reactor = new UnaryReactor(&calls_);
   absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
   if (!caller.ok()) {
     reactor->Finish(ToGrpcStatus(caller.status()));
@@ -585,8 +625,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     reactor->Finish(ToGrpcStatus(permit.status()));
     return reactor;
   }
-  RunPrediction([this, context, request, response, reactor,
-                 permit = std::move(*permit)]() mutable {
+  RunPrediction([this, context, request, response, reactor, permit = std::move(*permit)]() mutable {
     absl::Status status;
     if (context->IsCancelled()) {
       status = absl::CancelledError("PredictAttitude: cancelled before it started");
@@ -603,45 +642,44 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
 
 grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts(
     grpc::CallbackServerContext* context, const esg::v1::AlertSubscription* request) {
-  return new AlertReactor(core_, *request, Authorize(context, Role::kRead));
+  return new AlertReactor(&calls_, core_, *request, Authorize(context, Role::kRead));
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
     grpc::CallbackServerContext* context, const esg::v1::AcknowledgeRequest* request,
     esg::v1::Alert* response) {
-  return Unary(context, Authorize(context, Role::kWrite), response,
-               [&]() -> absl::StatusOr<esg::v1::Alert> {
-                 absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(*request);
-                 if (!alert.ok()) return alert.status();
-                 // The store keeps the first acknowledgement; another operator's is refused so
-                 // that it is never silently dropped (the same operator again is idempotent).
-                 if (alert->acknowledged_by() != request->operator_name()) {
-                   absl::Status refused = absl::FailedPreconditionError(absl::StrCat(
-                       "operator_name: alert ", alert->sequence(), " of spacecraft '",
-                       alert->spacecraft_id(), "' was already acknowledged by '",
-                       alert->acknowledged_by(), "' at ",
-                       FormatUtc(proto_convert::TimeFromProto(alert->acknowledged_time())
-                                     .value_or(absl::InfinitePast())),
-                       "; the first acknowledgement stands"));
-                   Log("WARN", absl::StrCat("acknowledgement by '", request->operator_name(),
-                                            "' refused: ", refused.message()));
-                   return refused;
-                 }
-                 return alert;
-               });
+  return Unary(
+      &calls_, Authorize(context, Role::kWrite), response, [&]() -> absl::StatusOr<esg::v1::Alert> {
+        absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(*request);
+        if (!alert.ok()) return alert.status();
+        // The store keeps the first acknowledgement; another operator's is refused so
+        // that it is never silently dropped (the same operator again is idempotent).
+        if (alert->acknowledged_by() != request->operator_name()) {
+          absl::Status refused = absl::FailedPreconditionError(
+              absl::StrCat("operator_name: alert ", alert->sequence(), " of spacecraft '",
+                           alert->spacecraft_id(), "' was already acknowledged by '",
+                           alert->acknowledged_by(), "' at ",
+                           FormatUtc(proto_convert::TimeFromProto(alert->acknowledged_time())
+                                         .value_or(absl::InfinitePast())),
+                           "; the first acknowledgement stands"));
+          Log("WARN", absl::StrCat("acknowledgement by '", request->operator_name(),
+                                   "' refused: ", refused.message()));
+          return refused;
+        }
+        return alert;
+      });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
     grpc::CallbackServerContext* context, const esg::v1::HistoryRequest* request,
     esg::v1::HistoryResponse* response) {
-  return Unary(context, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead), response,
                [&] { return core_->History(*request); });
 }
 
 grpc::ServerWriteReactor<esg::v1::ExportCoefficientHistoryResponse>*
 EstimationServiceImpl::ExportCoefficientHistory(
-    grpc::CallbackServerContext* context,
-    const esg::v1::ExportCoefficientHistoryRequest* request) {
+    grpc::CallbackServerContext* context, const esg::v1::ExportCoefficientHistoryRequest* request) {
   // The pages of GetCoefficientHistory at the export chunk size, followed by their tokens.
   esg::v1::HistoryRequest pages;
   pages.set_spacecraft_id(request->spacecraft_id());
@@ -652,7 +690,7 @@ EstimationServiceImpl::ExportCoefficientHistory(
   EstimationCore* core = core_;
   bool last_page = false;
   return new ExportReactor<esg::v1::ExportCoefficientHistoryResponse>(
-      Authorize(context, Role::kRead),
+      &calls_, Authorize(context, Role::kRead),
       [core, pages, last_page]() mutable
       -> absl::StatusOr<std::optional<esg::v1::ExportCoefficientHistoryResponse>> {
         if (last_page) return std::nullopt;
@@ -673,9 +711,9 @@ grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* EstimationServiceImp
   absl::Time after = absl::InfinitePast();
   bool done = false;
   return new ExportReactor<esg::v1::ExportTelemetryResponse>(
-      Authorize(context, Role::kRead),
-      [core, request = *request, after, done]() mutable
-      -> absl::StatusOr<std::optional<esg::v1::ExportTelemetryResponse>> {
+      &calls_, Authorize(context, Role::kRead),
+      [core, request = *request, after,
+       done]() mutable -> absl::StatusOr<std::optional<esg::v1::ExportTelemetryResponse>> {
         if (done) return std::nullopt;
         absl::StatusOr<esg::v1::ExportTelemetryResponse> chunk =
             core->ExportTelemetryChunk(request, &after, &done);
@@ -688,7 +726,7 @@ grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* EstimationServiceImp
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagnose(
     grpc::CallbackServerContext* context, const esg::v1::DiagnoseRequest* request) {
   absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
-  return new DiagnoseReactor(core_, *request,
+  return new DiagnoseReactor(&calls_, core_, *request,
                              caller.ok() ? diagnoses_.Acquire(*caller)
                                          : absl::StatusOr<CallLimiter::Permit>(caller.status()));
 }
@@ -696,14 +734,14 @@ grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagno
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(
     grpc::CallbackServerContext* context, const esg::v1::ListDiagnosesRequest* request,
     esg::v1::ListDiagnosesResponse* response) {
-  return Unary(context, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead), response,
                [&] { return core_->ListDiagnoses(*request); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetDiagnosis(
     grpc::CallbackServerContext* context, const esg::v1::GetDiagnosisRequest* request,
     esg::v1::DiagnosisResult* response) {
-  return Unary(context, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead), response,
                [&] { return core_->GetDiagnosis(*request); });
 }
 

@@ -9,6 +9,7 @@
 #ifndef ESG_SERVER_ESTIMATION_SERVICE_H_
 #define ESG_SERVER_ESTIMATION_SERVICE_H_
 
+#include <cstdint>
 #include <deque>
 #include <string>
 #include <thread>
@@ -18,6 +19,7 @@
 #include "absl/functional/any_invocable.h"
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
+#include "absl/time/time.h"
 #include "esg/v1/estimation_service.grpc.pb.h"
 #include "server/auth.h"
 #include "server/call_limiter.h"
@@ -32,6 +34,33 @@ struct CallLimits {
   int max_predictions = 8;  // also the number of prediction threads
   int max_diagnoses_per_caller = 1;
   int max_diagnoses = 2;
+};
+
+// The calls of the service that have not finished (their reactor's OnDone not yet run), so
+// that a shutdown knows when only idle connections and gRPC's own streams (health watches,
+// reflection) are left (EsgServer::Shutdown). Thread-safe.
+class CallCounter {
+ public:
+  // Held by each call's reactor for its whole life.
+  class Token {
+   public:
+    explicit Token(CallCounter* counter) : counter_(counter) { counter_->Enter(); }
+    ~Token() { counter_->Leave(); }
+    Token(const Token&) = delete;
+    Token& operator=(const Token&) = delete;
+
+   private:
+    CallCounter* counter_;
+  };
+  int64_t running();
+  // Blocks until no call runs (true) or until `deadline` (false).
+  bool WaitIdle(absl::Time deadline);
+
+ private:
+  void Enter();
+  void Leave();
+  absl::Mutex mu_;
+  int64_t running_ ABSL_GUARDED_BY(mu_) = 0;
 };
 
 class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackService {
@@ -77,11 +106,14 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
       grpc::CallbackServerContext* context,
       const esg::v1::ExportCoefficientHistoryRequest* request) override;
   grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* ExportTelemetry(
-      grpc::CallbackServerContext* context, const esg::v1::ExportTelemetryRequest* request) override;
+      grpc::CallbackServerContext* context,
+      const esg::v1::ExportTelemetryRequest* request) override;
 
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }
   CallLimiter& diagnosis_limiter() { return diagnoses_; }
+  // The calls of this service not finished yet.
+  CallCounter& calls() { return calls_; }
 
  private:
   absl::Status Authorize(grpc::CallbackServerContext* context, Role role) const;
@@ -95,6 +127,7 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
 
   EstimationCore* core_;
   const TokenAuthorizer* auth_;
+  CallCounter calls_;
   CallLimiter predictions_;
   CallLimiter diagnoses_;
 

@@ -1,7 +1,8 @@
 // PredictAttitude (see estimation_core.h and docs/service.md "PredictAttitude"): samples at or
-// before the last applied frame from the archived gyro readings (ATTITUDE_SOURCE_RECORDED),
-// later ones from a copy of the session with the planned attitude (PLANNED) or an inertial hold
-// of the last estimate (INERTIAL_HOLD). The response and the AEM say which.
+// before the last archived frame from the archived gyro readings (ATTITUDE_SOURCE_RECORDED),
+// whether the filter has applied those frames yet or not; later ones from a copy of the session
+// with the planned attitude (PLANNED) or an inertial hold of its last estimate (INERTIAL_HOLD).
+// The response and the AEM say which.
 #include <algorithm>
 #include <cmath>
 #include <utility>
@@ -71,8 +72,8 @@ Eigen::Vector3d SigmaArcsec(const AttitudeEstimate& a) {
 // attitude is slerp-interpolated and the 1-sigma is the larger of the two (componentwise).
 absl::StatusOr<std::vector<Predicted>> PredictRecorded(
     storage::Storage& storage, const std::string& id, const estimator::SpacecraftConfig& config_in,
-    const estimator::ModelSpec& model, const EstimationSession& session, const std::vector<absl::Time>& times,
-    absl::Duration max_horizon, absl::Time* fix_time) {
+    const estimator::ModelSpec& model, const EstimationSession& session,
+    const std::vector<absl::Time>& times, absl::Duration max_horizon, absl::Time* fix_time) {
   const absl::Time first = times.front();
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> back,
                    storage.archive().ReadAtOrBefore(id, first, kFixLookbackFrames));
@@ -91,15 +92,16 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
     break;
   }
   if (!fix.has_value()) {
-    return absl::OutOfRangeError(absl::StrCat(
-        "from: ", FormatUtc(first), " has no archived star-tracker fix of '", id,
-        "' at or before it (within ", kFixLookbackFrames, " frames)"));
+    return absl::OutOfRangeError(
+        absl::StrCat("from: ", FormatUtc(first), " has no archived star-tracker fix of '", id,
+                     "' at or before it (within ", kFixLookbackFrames, " frames)"));
   }
   *fix_time = fix->time;
   if (times.back() - fix->time > max_horizon) {
-    return absl::OutOfRangeError(absl::StrCat(
-        "to: ", FormatUtc(times.back()), " is more than ", absl::FormatDuration(max_horizon),
-        " after the star-tracker fix at ", FormatUtc(fix->time), " the recorded readings start from"));
+    return absl::OutOfRangeError(
+        absl::StrCat("to: ", FormatUtc(times.back()), " is more than ",
+                     absl::FormatDuration(max_horizon), " after the star-tracker fix at ",
+                     FormatUtc(fix->time), " the recorded readings start from"));
   }
   double residual_drift_sigma = 0.0;
   const estimator::SpacecraftConfig config =
@@ -110,14 +112,13 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
   ASSIGN_OR_RETURN(EstimationSession replay, EstimationSession::Create(config, options));
   ASSIGN_OR_RETURN(estimator::StepReport start, replay.AddFrame(*fix));
   if (!replay.initialized() || !start.attitude.valid) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "from: the star-tracker fix at ", FormatUtc(fix->time),
-        " does not initialise an attitude (", start.attitude.invalid_reason, ")"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("from: the star-tracker fix at ", FormatUtc(fix->time),
+                     " does not initialise an attitude (", start.attitude.invalid_reason, ")"));
   }
   replay.SetStarTrackerUse(false);
 
-  const absl::Duration max_gap =
-      absl::Seconds(2.0 * config_in.filter.measurement_step);
+  const absl::Duration max_gap = absl::Seconds(2.0 * config_in.filter.measurement_step);
   std::vector<Predicted> out;
   out.reserve(times.size());
   size_t k = 0;
@@ -164,11 +165,11 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
             FormatUtc(previous.time), " and ", FormatUtc(current.time), ")"));
       }
       if (!previous.attitude.valid || !current.attitude.valid) {
-        return absl::FailedPreconditionError(absl::StrCat(
-            "times: the recorded attitude at ", FormatUtc(t), " is not available (",
-            previous.attitude.valid ? current.attitude.invalid_reason
-                                    : previous.attitude.invalid_reason,
-            ")"));
+        return absl::FailedPreconditionError(
+            absl::StrCat("times: the recorded attitude at ", FormatUtc(t), " is not available (",
+                         previous.attitude.valid ? current.attitude.invalid_reason
+                                                 : previous.attitude.invalid_reason,
+                         ")"));
       }
       const double s = absl::ToDoubleSeconds(t - previous.time) /
                        absl::ToDoubleSeconds(current.time - previous.time);
@@ -176,8 +177,7 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
       p.time = t;
       p.attitude = current.attitude;
       p.attitude.time = t;
-      p.attitude.q_in_b =
-          previous.attitude.q_in_b.slerp(s, current.attitude.q_in_b).normalized();
+      p.attitude.q_in_b = previous.attitude.q_in_b.slerp(s, current.attitude.q_in_b).normalized();
       p.attitude.sigma_b = previous.attitude.sigma_b.cwiseMax(current.attitude.sigma_b);
       for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
       out.push_back(std::move(p));
@@ -218,8 +218,8 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
           absl::StrCat("step_s: must be > 0 when from/to are given, got ", request.step_s()));
     }
     if (to < from) {
-      return absl::InvalidArgumentError(absl::StrCat("to: ", FormatUtc(to),
-                                                     " is before from ", FormatUtc(from)));
+      return absl::InvalidArgumentError(
+          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
     }
     const double count = std::floor(absl::ToDoubleSeconds(to - from) / request.step_s()) + 1;
     if (count > options_.max_prediction_samples) {
@@ -237,19 +237,19 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
       return absl::InvalidArgumentError(absl::StrCat("times[", i, "]: ", t.status().message()));
     }
     if (i > 0 && *t <= explicit_previous) {
-      return absl::InvalidArgumentError(absl::StrCat("times[", i, "]: ", FormatUtc(*t),
-                                                     " is not after times[", i - 1, "]"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("times[", i, "]: ", FormatUtc(*t), " is not after times[", i - 1, "]"));
     }
     explicit_previous = *t;
     times.push_back(*t);
   }
   if (times.empty()) {
-    return absl::InvalidArgumentError("times: no epoch requested (give from, to and step_s, or times)");
+    return absl::InvalidArgumentError(
+        "times: no epoch requested (give from, to and step_s, or times)");
   }
   if (static_cast<int>(times.size()) > options_.max_prediction_samples) {
-    return absl::OutOfRangeError(absl::StrCat("times: ", times.size(),
-                                              " samples exceed the limit of ",
-                                              options_.max_prediction_samples));
+    return absl::OutOfRangeError(absl::StrCat(
+        "times: ", times.size(), " samples exceed the limit of ", options_.max_prediction_samples));
   }
   std::sort(times.begin(), times.end());
   times.erase(std::unique(times.begin(), times.end()), times.end());
@@ -278,26 +278,30 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
     ASSIGN_OR_RETURN(planned, SampledProfile::Create(std::move(samples)));
   }
 
-  // Copy the session under the lock; predict on the copy.
+  // Copy the session under the lock; predict on the copy. The archive holds every frame up to
+  // last_durable_time (it is raised after the commit), applied by the filter or not.
   std::optional<EstimationSession> session;
   std::shared_ptr<const Setup> setup;
   std::string quarantine_reason;
+  absl::Time archived_until = absl::InfinitePast();
   {
     absl::MutexLock lock(&sc->state_mu);
     session = sc->session;
     setup = sc->setup;
     quarantine_reason = sc->apply.quarantine_reason;
+    archived_until = sc->last_durable_time;
   }
   // A session whose output is not available refuses, naming its state (docs/service.md).
   if (!quarantine_reason.empty() || setup == nullptr) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "spacecraft_id: '", sc->id, "' is QUARANTINED (", quarantine_reason,
-        "): its attitude output is not available"));
+    return absl::FailedPreconditionError(absl::StrCat("spacecraft_id: '", sc->id,
+                                                      "' is QUARANTINED (", quarantine_reason,
+                                                      "): its attitude output is not available"));
   }
   if (!session.has_value() || !session->initialized()) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "spacecraft_id: '", sc->id, "' is NO_DATA: it has no attitude yet (no frame with a "
-        "valid star-tracker quaternion and a readable pair has been applied)"));
+    return absl::FailedPreconditionError(
+        absl::StrCat("spacecraft_id: '", sc->id,
+                     "' is NO_DATA: it has no attitude yet (no frame with a "
+                     "valid star-tracker quaternion and a readable pair has been applied)"));
   }
   const AttitudeEstimate current = session->CurrentAttitude();
   if (session->state() == estimator::SessionState::kFaulted || !current.valid) {
@@ -309,13 +313,17 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
   }
   const absl::Time last = session->last_frame_time();
   if (times.back() - last > options_.max_prediction_horizon) {
-    return absl::OutOfRangeError(absl::StrCat(
-        request.has_to() ? "to" : "times", ": ", FormatUtc(times.back()),
-        " is beyond the prediction horizon of ",
-        absl::FormatDuration(options_.max_prediction_horizon), " after the last applied frame ",
-        FormatUtc(last)));
+    return absl::OutOfRangeError(absl::StrCat(request.has_to() ? "to" : "times", ": ",
+                                              FormatUtc(times.back()),
+                                              " is beyond the prediction horizon of ",
+                                              absl::FormatDuration(options_.max_prediction_horizon),
+                                              " after the last applied frame ", FormatUtc(last)));
   }
-  const auto split = std::upper_bound(times.begin(), times.end(), last);
+  // Epochs up to the last archived frame use the recorded readings, including frames the filter
+  // has not applied yet (it runs behind ingest); later ones the plan or the hold, propagated
+  // from the filter's last estimate at `last`.
+  const absl::Time recorded_until = std::max(last, archived_until);
+  const auto split = std::upper_bound(times.begin(), times.end(), recorded_until);
   const std::vector<absl::Time> recorded_times(times.begin(), split);
   const std::vector<absl::Time> future_times(split, times.end());
 
@@ -324,8 +332,7 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
   if (!recorded_times.empty()) {
     ASSIGN_OR_RETURN(predicted,
                      PredictRecorded(*storage_, sc->id, setup->config, setup->model, *session,
-                                     recorded_times,
-                                     options_.max_prediction_horizon, &fix_time));
+                                     recorded_times, options_.max_prediction_horizon, &fix_time));
   }
   if (!future_times.empty()) {
     ASSIGN_OR_RETURN(std::vector<estimator::PredictedSample> ahead,
@@ -337,35 +344,47 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
   }
 
   // What the prediction assumes, in the response and in the AEM.
-  const esg::v1::AttitudeSource source =
-      future_times.empty()       ? esg::v1::ATTITUDE_SOURCE_RECORDED
-      : planned.has_value()      ? esg::v1::ATTITUDE_SOURCE_PLANNED
-                                 : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
+  const esg::v1::AttitudeSource source = future_times.empty() ? esg::v1::ATTITUDE_SOURCE_RECORDED
+                                         : planned.has_value()
+                                             ? esg::v1::ATTITUDE_SOURCE_PLANNED
+                                             : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
   std::string recorded_text;
   if (!recorded_times.empty()) {
     recorded_text = absl::StrCat(
-        "ATTITUDE_SOURCE_RECORDED until ", FormatUtc(last),
-        ": archived gyro readings propagated with the calibrated drift model (", setup->model_name,
-        ") from the star-tracker fix at ", FormatUtc(fix_time),
-        "; the star tracker is not used after it");
+        "ATTITUDE_SOURCE_RECORDED until ", FormatUtc(recorded_until),
+        " (the last archived frame): archived gyro readings propagated with the calibrated drift "
+        "model (",
+        setup->model_name, ") from the star-tracker fix at ", FormatUtc(fix_time),
+        "; the star tracker is not used after it",
+        recorded_until > last
+            ? absl::StrCat("; includes the archived frames after ", FormatUtc(last),
+                           " that the filter has not applied yet")
+            : std::string());
   }
+  // The plan or the hold starts from the filter's last estimate, which may be older than the
+  // last archived frame.
+  const std::string estimate_text =
+      recorded_until > last ? absl::StrCat(" (the filter's, at ", FormatUtc(last), ")") : "";
   std::string future_text;
   if (!future_times.empty()) {
     future_text =
         planned.has_value()
-            ? absl::StrCat("ATTITUDE_SOURCE_PLANNED after ", FormatUtc(last),
+            ? absl::StrCat("ATTITUDE_SOURCE_PLANNED after ", FormatUtc(recorded_until),
                            ": the planned attitude given (", request.planned_attitude_size(),
                            " samples from ", FormatUtc(planned->start()),
                            ", slerp between them, held beyond its ends); the envelope is the "
-                           "propagated 1-sigma of the gyros' spin axes")
-            : absl::StrCat("ATTITUDE_SOURCE_INERTIAL_HOLD after ", FormatUtc(last),
-                           ": no planned attitude given, the attitude of the last estimate held "
-                           "inertially fixed; wrong by the body's motion if it moves");
+                           "1-sigma of the gyros' spin axes propagated from the last estimate",
+                           estimate_text)
+            : absl::StrCat("ATTITUDE_SOURCE_INERTIAL_HOLD after ", FormatUtc(recorded_until),
+                           ": no planned attitude given, the attitude of the last estimate",
+                           estimate_text,
+                           " held inertially fixed; wrong by the body's motion if it moves");
   }
   esg::v1::PredictResponse response;
   response.set_attitude_source(source);
   response.set_recorded_samples(static_cast<int32_t>(recorded_times.size()));
   *response.mutable_last_applied_time() = proto_convert::TimeToProto(last);
+  *response.mutable_last_archived_time() = proto_convert::TimeToProto(recorded_until);
   std::vector<std::string> assumption;
   if (!recorded_text.empty()) assumption.push_back(recorded_text);
   if (!future_text.empty()) assumption.push_back(future_text);
@@ -397,11 +416,12 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
     header.object_id = sc->id;
     header.originator = "ESG-ESGD";
     header.creation_date = now;
-    header.message_id = absl::StrCat(
-        sc->id, "-PRED-", absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
+    header.message_id = absl::StrCat(sc->id, "-PRED-",
+                                     absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
     header.comments.push_back(absl::StrCat("Predicted attitude q_in_b of ", sc->id,
                                            ", calibration model ", setup->model_name,
-                                           ", state of the last applied frame ", FormatUtc(last)));
+                                           ", state of the last applied frame ", FormatUtc(last),
+                                           ", last archived frame ", FormatUtc(recorded_until)));
     ASSIGN_OR_RETURN(std::string text, storage::WriteAemBlocks(header, blocks));
     response.set_aem_text(std::move(text));
   }

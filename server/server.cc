@@ -16,7 +16,9 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/synchronization/notification.h"
 #include "estimator/status_macros.h"
+#include "grpc/grpc.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
 #include "grpcpp/resource_quota.h"
@@ -66,12 +68,13 @@ absl::Status CheckLimits(const ServerOptions& o) {
       {"max_sync_threads", o.max_sync_threads},
   };
   for (const auto& [name, value] : at_least_one) {
-    if (value < 1) return absl::InvalidArgumentError(absl::StrCat(name, ": must be >= 1, got ", value));
+    if (value < 1)
+      return absl::InvalidArgumentError(absl::StrCat(name, ": must be >= 1, got ", value));
   }
   // Enough for the largest frame and any query; at most what gRPC's int takes.
   if (o.max_message_bytes < 64 * 1024 || o.max_message_bytes > INT_MAX) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "max_message_bytes: must be in [65536, ", INT_MAX, "], got ", o.max_message_bytes));
+    return absl::InvalidArgumentError(absl::StrCat("max_message_bytes: must be in [65536, ",
+                                                   INT_MAX, "], got ", o.max_message_bytes));
   }
   if (o.grpc_memory_bytes < 4 * o.max_message_bytes) {
     return absl::InvalidArgumentError(
@@ -79,8 +82,8 @@ absl::Status CheckLimits(const ServerOptions& o) {
                      4 * o.max_message_bytes, "), got ", o.grpc_memory_bytes));
   }
   if (o.handshake_timeout <= absl::ZeroDuration()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "handshake_timeout: must be > 0, got ", absl::FormatDuration(o.handshake_timeout)));
+    return absl::InvalidArgumentError(absl::StrCat("handshake_timeout: must be > 0, got ",
+                                                   absl::FormatDuration(o.handshake_timeout)));
   }
   return absl::OkStatus();
 }
@@ -112,15 +115,15 @@ void RaiseFileLimit() {
       limit = raised;
     } else {
       Log("WARN", absl::StrCat("file descriptors: cannot raise the soft limit from ",
-                               LimitText(before), " to the hard limit ",
-                               LimitText(limit.rlim_max), ": ", std::strerror(errno)));
+                               LimitText(before), " to the hard limit ", LimitText(limit.rlim_max),
+                               ": ", std::strerror(errno)));
     }
   }
-  Log("INFO", absl::StrCat("file descriptors: soft limit ", LimitText(limit.rlim_cur),
-                           limit.rlim_cur != before ? absl::StrCat(" (raised from ",
-                                                                   LimitText(before), ")")
-                                                    : std::string(),
-                           ", hard limit ", LimitText(limit.rlim_max)));
+  Log("INFO",
+      absl::StrCat("file descriptors: soft limit ", LimitText(limit.rlim_cur),
+                   limit.rlim_cur != before ? absl::StrCat(" (raised from ", LimitText(before), ")")
+                                            : std::string(),
+                   ", hard limit ", LimitText(limit.rlim_max)));
 }
 
 // Why gRPC could not bind `listen` ("host:port", "[v6]:port"), found by binding a socket the way
@@ -219,8 +222,8 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     s->core_->Stop(absl::ZeroDuration());
-    return absl::UnavailableError(
-        absl::StrCat("listen: cannot serve on ", options.listen, ": ", BindFailure(options.listen)));
+    return absl::UnavailableError(absl::StrCat("listen: cannot serve on ", options.listen, ": ",
+                                               BindFailure(options.listen)));
   }
   if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
     health->SetServingStatus("esg.v1.EstimationService", true);
@@ -232,7 +235,7 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   }
   Log("INFO", absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
                            options.db_path, s->auth_ ? ", bearer tokens required" : "",
-                           options.tls_cert_file.empty() ? ", plaintext"
+                           options.tls_cert_file.empty()        ? ", plaintext"
                            : options.tls_client_ca_file.empty() ? ", TLS"
                                                                 : ", mutual TLS"));
   Log("INFO", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
@@ -251,7 +254,26 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
     health->Shutdown();
   }
   core_->alert_hub().CloseAll();
-  server_->Shutdown(absl::ToChronoTime(absl::Now() + deadline));
+  // gRPC's shutdown also waits for every client connection to close, idle ones included: a
+  // client that merely keeps its channel open would hold it for the whole deadline. Once none of
+  // the service's calls is running, the remaining connections are closed (with gRPC's own
+  // streams on them: health watches, reflection) instead; calls still running keep the deadline.
+  const absl::Time calls_deadline = absl::Now() + deadline;
+  absl::Notification shut_down;
+  std::thread closer([this, calls_deadline, &shut_down] {
+    while (!shut_down.HasBeenNotified()) {
+      if (service_->calls().WaitIdle(calls_deadline)) {
+        grpc_server_cancel_all_calls(server_->c_server());
+      }
+      // Again while Shutdown has not returned: a connection accepted meanwhile, or calls
+      // finishing later.
+      shut_down.WaitForNotificationWithTimeout(absl::Milliseconds(50));
+      if (absl::Now() >= calls_deadline) break;
+    }
+  });
+  server_->Shutdown(absl::ToChronoTime(calls_deadline));
+  shut_down.Notify();
+  closer.join();
   core_->Stop(drain);
   server_->Wait();
   Log("INFO", "stopped");

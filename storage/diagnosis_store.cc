@@ -10,16 +10,16 @@
 namespace esg::storage {
 namespace {
 
-#define ESG_DIAGNOSIS_COLUMNS                                                        \
+#define ESG_DIAGNOSIS_COLUMNS                                                     \
   "id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, " \
-  "verdict, report_json"
+  "verdict, report_json, frames"
 constexpr char kSelectById[] = "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE id = ?1";
 constexpr char kSelectBySpacecraft[] =
     "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE spacecraft_id = ?1 ORDER BY id";
 // The same columns with an empty report (summaries; the index diagnoses_by_spacecraft).
 constexpr char kSelectSummaries[] =
     "SELECT id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, "
-    "verdict, '' FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
+    "verdict, '', frames FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
 #undef ESG_DIAGNOSIS_COLUMNS
 
 DiagnosisRecord ReadRow(const Statement& st) {
@@ -31,6 +31,7 @@ DiagnosisRecord ReadRow(const Statement& st) {
   r.compute_time = UnixNanosToTime(st.ColumnInt64(4));
   r.verdict = st.ColumnText(5);
   r.report_json = st.ColumnText(6);
+  r.frames = st.ColumnInt64(7);
   return r;
 }
 
@@ -52,22 +53,27 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
   if (record.to_time < record.from_time) {
     return absl::InvalidArgumentError("diagnosis.to_time: earlier than from_time");
   }
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, "
-                               "to_time_unix_ns, compute_time_unix_ns, verdict, report_json) "
-                               "VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
+  if (record.frames < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("diagnosis.frames: must be >= 0, got ", record.frames));
+  }
+  ASSIGN_OR_RETURN(
+      Statement * st,
+      txn.Prepare("INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, "
+                  "to_time_unix_ns, compute_time_unix_ns, verdict, report_json, frames) "
+                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
   st->BindText(1, record.spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(record.from_time))
       .BindInt64(3, TimeToUnixNanos(record.to_time))
       .BindInt64(4, TimeToUnixNanos(record.compute_time))
       .BindText(5, record.verdict)
-      .BindText(6, record.report_json);
+      .BindText(6, record.report_json)
+      .BindInt64(7, record.frames);
   RETURN_IF_ERROR(st->Run());
   return txn.LastInsertRowId();
 }
 
-absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::List(
-    absl::string_view spacecraft_id) {
+absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::List(absl::string_view spacecraft_id) {
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectBySpacecraft));
   st->BindText(1, spacecraft_id);

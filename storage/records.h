@@ -35,7 +35,7 @@ struct ArchivedFrame {
   std::string station_id = kDefaultStation;
   int64_t sequence = 0;  // the frame's sequence number in its station's stream
   absl::Time measurement_time = absl::UnixEpoch();
-  std::string payload;   // serialized frame bytes, format chosen by the server
+  std::string payload;  // serialized frame bytes, format chosen by the server
 };
 
 // Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, each stored
@@ -59,22 +59,45 @@ static_assert(kCoefficientK0 == estimator::kThetaK0 && kCoefficientC1 == estimat
 
 // Column names of the values, in layout order.
 inline constexpr std::array<absl::string_view, kNumCoefficientValues> kCoefficientColumns = {
-    "k0_deg_h",   "c1x_deg_h",  "c1y_deg_h",  "c1z_deg_h",  "c2x_deg_h",
-    "c2y_deg_h",  "c2z_deg_h",  "mu12_deg_h", "mu23_deg_h", "mu31_deg_h",
-    "nu23_deg_h", "nu31_deg_h", "nu12_deg_h", "misalignment_x_arcsec",
-    "misalignment_y_arcsec",    "misalignment_z_arcsec"};
+    "k0_deg_h",
+    "c1x_deg_h",
+    "c1y_deg_h",
+    "c1z_deg_h",
+    "c2x_deg_h",
+    "c2y_deg_h",
+    "c2z_deg_h",
+    "mu12_deg_h",
+    "mu23_deg_h",
+    "mu31_deg_h",
+    "nu23_deg_h",
+    "nu31_deg_h",
+    "nu12_deg_h",
+    "misalignment_x_arcsec",
+    "misalignment_y_arcsec",
+    "misalignment_z_arcsec"};
 // Column names of the sigmas, in layout order.
 inline constexpr std::array<absl::string_view, kNumCoefficientValues> kCoefficientSigmaColumns = {
-    "k0_sigma_deg_h",   "c1x_sigma_deg_h",  "c1y_sigma_deg_h",  "c1z_sigma_deg_h",
-    "c2x_sigma_deg_h",  "c2y_sigma_deg_h",  "c2z_sigma_deg_h",  "mu12_sigma_deg_h",
-    "mu23_sigma_deg_h", "mu31_sigma_deg_h", "nu23_sigma_deg_h", "nu31_sigma_deg_h",
-    "nu12_sigma_deg_h", "misalignment_x_sigma_arcsec", "misalignment_y_sigma_arcsec",
+    "k0_sigma_deg_h",
+    "c1x_sigma_deg_h",
+    "c1y_sigma_deg_h",
+    "c1z_sigma_deg_h",
+    "c2x_sigma_deg_h",
+    "c2y_sigma_deg_h",
+    "c2z_sigma_deg_h",
+    "mu12_sigma_deg_h",
+    "mu23_sigma_deg_h",
+    "mu31_sigma_deg_h",
+    "nu23_sigma_deg_h",
+    "nu31_sigma_deg_h",
+    "nu12_sigma_deg_h",
+    "misalignment_x_sigma_arcsec",
+    "misalignment_y_sigma_arcsec",
     "misalignment_z_sigma_arcsec"};
 
 // One estimate of one gyro's model coefficients.
 struct CoefficientRecord {
   std::string spacecraft_id;
-  int gyro_id = 0;  // 1..4 as in the configuration
+  int gyro_id = 0;                                  // 1..4 as in the configuration
   absl::Time measurement_time = absl::UnixEpoch();  // epoch of the telemetry the estimate uses
   absl::Time compute_time = absl::UnixEpoch();
   std::vector<double> values;  // kNumCoefficientValues, layout above; NaN = not estimated
@@ -85,13 +108,13 @@ struct CoefficientRecord {
 // One alert (docs/formats.md "Alerts": Yamcs/COSMOS/Open MCT conventions).
 struct AlertRecord {
   std::string spacecraft_id;
-  int64_t sequence = 0;   // 1, 2, ... per spacecraft; assigned by the store, ignored on input
-  std::string severity;   // e.g. "WATCH", "WARNING", "CRITICAL" (the server's vocabulary)
-  std::string reason;     // machine-readable reason code, e.g. "INNOVATION_TEST"
-  std::string subsystem;  // e.g. "gyro2", "star_tracker", "pair(1,2)"
-  double value = 0.0;     // the triggering value, in `unit`; NaN allowed
-  double threshold = 0.0;  // the threshold it was tested against, in `unit`; NaN allowed
-  std::string unit;       // e.g. "arcsec"
+  int64_t sequence = 0;      // 1, 2, ... per spacecraft; assigned by the store, ignored on input
+  std::string severity;      // e.g. "WATCH", "WARNING", "CRITICAL" (the server's vocabulary)
+  std::string reason;        // machine-readable reason code, e.g. "INNOVATION_TEST"
+  std::string subsystem;     // e.g. "gyro2", "star_tracker", "pair(1,2)"
+  double value = 0.0;        // the triggering value, in `unit`; NaN allowed
+  double threshold = 0.0;    // the threshold it was tested against, in `unit`; NaN allowed
+  std::string unit;          // e.g. "arcsec"
   int64_t repeat_count = 1;  // occurrences collapsed into this alert, >= 1
   absl::Time first_time = absl::UnixEpoch();        // measurement epoch of the first occurrence
   absl::Time measurement_time = absl::UnixEpoch();  // measurement epoch of the latest occurrence
@@ -110,8 +133,8 @@ struct AlertRecord {
 struct AlertRepeat {
   std::string spacecraft_id;
   int64_t sequence = 0;
-  int64_t repeat_count = 1;                        // the new total, >= 1
-  absl::Time last_time = absl::UnixEpoch();        // measurement epoch of the latest occurrence
+  int64_t repeat_count = 1;                  // the new total, >= 1
+  absl::Time last_time = absl::UnixEpoch();  // measurement epoch of the latest occurrence
 };
 
 // The latest checkpoint of a spacecraft's estimation session (one per spacecraft).
@@ -120,7 +143,7 @@ struct CheckpointRecord {
   int64_t last_sequence = 0;  // sequence of the last frame the state includes
   absl::Time measurement_time = absl::UnixEpoch();
   absl::Time compute_time = absl::UnixEpoch();
-  std::string state_blob;     // serialized session state, format chosen by the server
+  std::string state_blob;  // serialized session state, format chosen by the server
 };
 
 // The result of one model-discrepancy diagnosis over [from_time, to_time) (docs/discovery.md).
@@ -132,6 +155,7 @@ struct DiagnosisRecord {
   absl::Time compute_time = absl::UnixEpoch();
   std::string verdict;      // e.g. "gyro_misalignment", "unexplained"
   std::string report_json;  // full report, stored verbatim
+  int64_t frames = 0;       // frames diagnosed (>= 0)
 };
 
 }  // namespace esg::storage

@@ -154,8 +154,21 @@ constexpr absl::string_view kSchemaV4 = R"sql(
 ALTER TABLE alerts ADD COLUMN cleared_time_unix_ns INTEGER;
 )sql";
 
+// Version 5: diagnoses carry the number of frames diagnosed. Diagnoses stored before get the
+// count of the archived frames in their span [from, to] (the first and last frame diagnosed): a
+// diagnosis read every archived frame of its span, and no frame can be archived later inside a
+// span (a frame's time must be after the spacecraft's last archived one).
+constexpr absl::string_view kSchemaV5 = R"sql(
+ALTER TABLE diagnoses ADD COLUMN frames INTEGER NOT NULL DEFAULT 0;
+UPDATE diagnoses SET frames = (
+  SELECT COUNT(*) FROM telemetry_frames AS t
+  WHERE t.spacecraft_id = diagnoses.spacecraft_id
+    AND t.measurement_time_unix_ns BETWEEN diagnoses.from_time_unix_ns
+                                       AND diagnoses.to_time_unix_ns);
+)sql";
+
 // kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4};
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4, kSchemaV5};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {
@@ -207,9 +220,9 @@ absl::Status MigrateTo(Database& db, int target_version) {
     ++version;
   }
   if (version > target_version) {
-    return absl::FailedPreconditionError(absl::StrFormat(
-        "database %s has schema version %d, newer than the requested %d", db.path(), version,
-        target_version));
+    return absl::FailedPreconditionError(
+        absl::StrFormat("database %s has schema version %d, newer than the requested %d", db.path(),
+                        version, target_version));
   }
   return absl::OkStatus();
 }
@@ -235,8 +248,7 @@ absl::Status ValidateSpacecraftId(absl::string_view id, absl::string_view field)
 }
 
 absl::Status ValidateStorableTime(absl::Time t, absl::string_view field) {
-  static const absl::Time kEarliest =
-      absl::FromUnixNanos(std::numeric_limits<int64_t>::min() + 1);
+  static const absl::Time kEarliest = absl::FromUnixNanos(std::numeric_limits<int64_t>::min() + 1);
   static const absl::Time kLatest = absl::FromUnixNanos(std::numeric_limits<int64_t>::max() - 1);
   if (t < kEarliest || t > kLatest) {
     return absl::InvalidArgumentError(

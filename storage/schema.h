@@ -1,5 +1,6 @@
 // The SQLite schema of the service database and its migrations, keyed on PRAGMA user_version
-// (docs/service.md "Durability and recovery"). Column encodings shared by every store are defined here too.
+// (docs/service.md "Durability and recovery"). Column encodings shared by every store are defined
+// here too.
 //
 // Versions (user_version):
 //   0  empty file.
@@ -8,7 +9,8 @@
 //   3  telemetry_frames keyed by (spacecraft, station, sequence), unique measurement time per
 //      spacecraft; frames stored before belong to station "default".
 //   4  alerts.cleared_time_unix_ns (NULL: not cleared, or cleared before version 4).
-//                                                                    <- kCurrentSchemaVersion
+//   5  diagnoses.frames (frames diagnosed; diagnoses stored before get the count of the archived
+//      frames in their span).                                        <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
 // intact. A migration's DDL is frozen once released: change the schema only by appending a
@@ -34,7 +36,7 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 4;
+inline constexpr int kCurrentSchemaVersion = 5;
 
 // PRAGMA user_version of the open database.
 absl::StatusOr<int> SchemaVersion(Database& db);

@@ -1,10 +1,9 @@
 // Counting and clearing queries of the service (see service_queries.h).
 #include "storage/service_queries.h"
 
-#include "storage/schema.h"
-
 #include "absl/strings/str_cat.h"
 #include "estimator/status_macros.h"
+#include "storage/schema.h"
 
 namespace esg::storage {
 
@@ -37,9 +36,8 @@ absl::StatusOr<absl::Time> LatestEffectTime(Database& db, absl::string_view spac
 
 absl::Status ProbeWrite(Database& db, absl::Time now) {
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kImmediate));
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("INSERT OR REPLACE INTO service_state (key, value) "
-                               "VALUES ('storage_probe_unix_ns', ?1)"));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("INSERT OR REPLACE INTO service_state (key, value) "
+                                               "VALUES ('storage_probe_unix_ns', ?1)"));
   st->BindInt64(1, TimeToUnixNanos(now));
   RETURN_IF_ERROR(st->Run());
   return txn.Commit();
@@ -47,10 +45,9 @@ absl::Status ProbeWrite(Database& db, absl::Time now) {
 
 absl::StatusOr<AlertCounts> CountAlerts(Database& db, absl::string_view spacecraft_id) {
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("SELECT COALESCE(SUM(cleared = 0), 0), "
-                               "COALESCE(SUM(acknowledged = 0), 0) FROM alerts "
-                               "WHERE spacecraft_id = ?1"));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("SELECT COALESCE(SUM(cleared = 0), 0), "
+                                               "COALESCE(SUM(acknowledged = 0), 0) FROM alerts "
+                                               "WHERE spacecraft_id = ?1"));
   st->BindText(1, spacecraft_id);
   ASSIGN_OR_RETURN(bool row, st->Step());
   AlertCounts counts;
@@ -60,18 +57,6 @@ absl::StatusOr<AlertCounts> CountAlerts(Database& db, absl::string_view spacecra
   }
   RETURN_IF_ERROR(txn.Commit());
   return counts;
-}
-
-absl::Status ClearAlert(Transaction& txn, absl::string_view spacecraft_id, int64_t sequence) {
-  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("UPDATE alerts SET cleared = 1 "
-                                               "WHERE spacecraft_id = ?1 AND sequence = ?2"));
-  st->BindText(1, spacecraft_id).BindInt64(2, sequence);
-  RETURN_IF_ERROR(st->Run());
-  if (txn.ChangedRows() != 1) {
-    return absl::NotFoundError(
-        absl::StrCat("alert ", spacecraft_id, "/", sequence, " does not exist"));
-  }
-  return absl::OkStatus();
 }
 
 }  // namespace esg::storage

@@ -8,8 +8,8 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "absl/time/time.h"
 #include "absl/strings/string_view.h"
+#include "absl/time/time.h"
 #include "storage/sqlite_db.h"
 
 namespace esg::storage {
@@ -31,9 +31,6 @@ absl::StatusOr<absl::Time> LatestEffectTime(Database& db, absl::string_view spac
 // A small write that proves the database can commit (table service_state); the error of the
 // commit otherwise.
 absl::Status ProbeWrite(Database& db, absl::Time now);
-
-// Marks the alert cleared (the condition is over) inside `txn`. NotFound if it does not exist.
-absl::Status ClearAlert(Transaction& txn, absl::string_view spacecraft_id, int64_t sequence);
 
 }  // namespace esg::storage
 

@@ -36,6 +36,8 @@ void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg diagnoses list|show` (ListDiagnoses).
 void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code);
+// `esg export history|telemetry` (ExportCoefficientHistory, ExportTelemetry; server_export.h).
+void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code);
 
 }  // namespace esg::client
 

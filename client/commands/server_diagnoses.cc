@@ -6,10 +6,8 @@
 
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <memory>
 #include <optional>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -17,69 +15,13 @@
 #include "absl/strings/str_format.h"
 #include "absl/time/clock.h"
 #include "client/commands/server_common.h"
-#include "esg/v1/estimation_service.grpc.pb.h"
-#include "grpcpp/create_channel.h"
-#include "grpcpp/security/credentials.h"
-#include "grpcpp/support/channel_arguments.h"
+#include "client/esg_client.h"
 #include "proto/convert.h"
 
 namespace esg::client {
 namespace {
 
 using esg::v1::DiagnosisResult;
-
-// The diagnosis calls of esg.v1.EstimationService, on a channel built from the global options as
-// EsgClient builds its own (client/esg_client.h: plaintext or TLS, bearer token per call).
-class DiagnosisRpc {
- public:
-  // nullptr after printing "esg VERB: <message>" (bad --tls-* or --server).
-  static std::unique_ptr<DiagnosisRpc> Create(const char* verb, const GlobalOptions& global) {
-    // EsgClient::Create checks the options and the PEM files with field-named messages.
-    if (Connect(verb, global) == nullptr) return nullptr;
-    std::shared_ptr<grpc::ChannelCredentials> credentials;
-    if (global.tls_ca.empty() && global.tls_cert.empty()) {
-      credentials = grpc::InsecureChannelCredentials();
-    } else {
-      grpc::SslCredentialsOptions ssl;
-      ssl.pem_root_certs = ReadText(global.tls_ca);
-      ssl.pem_cert_chain = ReadText(global.tls_cert);
-      ssl.pem_private_key = ReadText(global.tls_key);
-      credentials = grpc::SslCredentials(ssl);
-    }
-    grpc::ChannelArguments args;
-    args.SetMaxReceiveMessageSize(64 * 1024 * 1024);
-    auto rpc = std::unique_ptr<DiagnosisRpc>(new DiagnosisRpc(global));
-    rpc->stub_ = esg::v1::EstimationService::NewStub(
-        grpc::CreateCustomChannel(global.server, credentials, args));
-    return rpc;
-  }
-
-  std::unique_ptr<grpc::ClientContext> Context(bool unary) const {
-    auto context = std::make_unique<grpc::ClientContext>();
-    if (!global_.token.empty()) {
-      context->AddMetadata("authorization", absl::StrCat("Bearer ", global_.token));
-    }
-    if (unary) context->set_deadline(absl::ToChronoTime(absl::Now() + absl::Seconds(60)));
-    return context;
-  }
-
-  esg::v1::EstimationService::Stub& stub() { return *stub_; }
-
- private:
-  explicit DiagnosisRpc(const GlobalOptions& global) : global_(global) {}
-  static std::string ReadText(const std::string& path) {
-    if (path.empty()) return "";
-    std::ifstream in(path, std::ios::binary);
-    std::ostringstream text;
-    text << in.rdbuf();
-    return text.str();
-  }
-
-  const GlobalOptions& global_;
-  std::unique_ptr<esg::v1::EstimationService::Stub> stub_;
-};
-
-absl::Status FromGrpc(const grpc::Status& status) { return FromGrpcStatus(status); }
 
 // The JSON form: the proto mapping, the report parsed under "report" (null when absent).
 Json ResultJson(const DiagnosisResult& result) {
@@ -200,25 +142,15 @@ int RunList(const ListOptions& o, const GlobalOptions& global) {
   if (o.page_size < 0) {
     return ReportBadArgument(kVerb, absl::StrCat("--page-size ", o.page_size, ": must be >= 0"));
   }
-  std::unique_ptr<DiagnosisRpc> rpc = DiagnosisRpc::Create(kVerb, global);
-  if (rpc == nullptr) return kExitBadArguments;
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
   // Every page, in the server's order (oldest first).
-  esg::v1::ListDiagnosesResponse all;
   esg::v1::ListDiagnosesRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_page_size(o.page_size);
-  for (;;) {
-    esg::v1::ListDiagnosesResponse page;
-    const grpc::Status status = rpc->stub().ListDiagnoses(rpc->Context(true).get(), request, &page);
-    if (!status.ok()) return ReportRpcError(kVerb, FromGrpc(status), global);
-    for (DiagnosisResult& d : *page.mutable_diagnoses()) *all.add_diagnoses() = std::move(d);
-    if (page.next_page_token().empty()) break;
-    if (page.next_page_token() == request.page_token()) {
-      std::fprintf(stderr, "esg %s: the server returned the same page token twice\n", kVerb);
-      return kExitFailure;
-    }
-    request.set_page_token(page.next_page_token());
-  }
+  absl::StatusOr<esg::v1::ListDiagnosesResponse> listed = client->ListDiagnoses(request);
+  if (!listed.ok()) return ReportRpcError(kVerb, listed.status(), global);
+  const esg::v1::ListDiagnosesResponse& all = *listed;
   if (o.format == OutputFormat::kJson) {
     Json doc = ProtoToJson(all);
     doc.erase("nextPageToken");
@@ -243,15 +175,11 @@ int RunList(const ListOptions& o, const GlobalOptions& global) {
 int RunShow(const ListOptions& o, const GlobalOptions& global) {
   constexpr char kVerb[] = "diagnoses show";
   if (o.id < 1) return ReportBadArgument(kVerb, absl::StrCat("--id ", o.id, ": must be >= 1"));
-  std::unique_ptr<DiagnosisRpc> rpc = DiagnosisRpc::Create(kVerb, global);
-  if (rpc == nullptr) return kExitBadArguments;
-  esg::v1::GetDiagnosisRequest request;
-  request.set_spacecraft_id(o.spacecraft_id);
-  request.set_id(o.id);
-  DiagnosisResult result;
-  const grpc::Status status = rpc->stub().GetDiagnosis(rpc->Context(true).get(), request, &result);
-  if (!status.ok()) return ReportRpcError(kVerb, FromGrpc(status), global);
-  PrintOne(result, o.format);
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  absl::StatusOr<DiagnosisResult> result = client->GetDiagnosis(o.spacecraft_id, o.id);
+  if (!result.ok()) return ReportRpcError(kVerb, result.status(), global);
+  PrintOne(*result, o.format);
   return kExitOk;
 }
 
@@ -272,11 +200,9 @@ int RunServerDiagnose(const ServerDiagnoseOptions& o, const GlobalOptions& globa
     if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
     *request.mutable_to() = proto_convert::TimeToProto(*to);
   }
-  std::unique_ptr<DiagnosisRpc> rpc = DiagnosisRpc::Create(kVerb, global);
-  if (rpc == nullptr) return kExitBadArguments;
-  std::unique_ptr<grpc::ClientContext> context = rpc->Context(false);
-  std::unique_ptr<grpc::ClientReader<esg::v1::DiagnoseUpdate>> reader =
-      rpc->stub().Diagnose(context.get(), request);
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> reader = client->Diagnose(request);
   StageLines progress;
   std::optional<DiagnosisResult> result;
   esg::v1::DiagnoseUpdate update;
@@ -285,8 +211,8 @@ int RunServerDiagnose(const ServerDiagnoseOptions& o, const GlobalOptions& globa
     if (update.has_result()) result = update.result();
   }
   progress.End();
-  const grpc::Status status = reader->Finish();
-  if (!status.ok()) return ReportRpcError(kVerb, FromGrpc(status), global);
+  const absl::Status status = reader->Finish();
+  if (!status.ok()) return ReportRpcError(kVerb, status, global);
   if (!result) {
     std::fprintf(stderr, "esg %s: the stream ended without a result\n", kVerb);
     return kExitFailure;

@@ -8,6 +8,8 @@
 // form --csv) one row per snapshot with every value and sigma (columns in CsvHeader), or with
 // --format json (--json) the HistoryResponse in the proto JSON mapping.
 // Exit codes: 0 success, 2 bad arguments, 1 server failure.
+// Also `esg export history` (RunExportHistory, server_export.h): the same CSV columns from the
+// ExportCoefficientHistory stream, every value with 17 significant digits.
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -20,6 +22,7 @@
 #include "absl/strings/str_format.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
+#include "client/commands/server_export.h"
 #include "client/output_format.h"
 #include "proto/convert.h"
 
@@ -93,19 +96,24 @@ std::string CsvHeader() {
   return header + ",compute_time_utc";
 }
 
-std::string CsvRow(const esg::v1::CoefficientSnapshot& s) {
+// `full`: every value with 17 significant digits (reads back the same double: the export);
+// else 10 for the coefficients and 6 for the misalignment (`esg history --csv`).
+std::string CsvRow(const esg::v1::CoefficientSnapshot& s, bool full = false) {
   std::string row =
       absl::StrCat(FormatUtc(s.measurement_time(), s.has_measurement_time()), ",", s.gyro_id());
   for (size_t t = 0; t < Terms().size(); ++t) {
     const std::vector<double> value = TermValues(s.model(), t);
     const std::vector<double> sigma = TermValues(s.sigma(), t);
     for (size_t i = 0; i < value.size(); ++i) {
-      absl::StrAppend(&row, absl::StrFormat(",%.10g,%.10g", value[i], sigma[i]));
+      absl::StrAppend(&row, full ? absl::StrFormat(",%.17g,%.17g", value[i], sigma[i])
+                                 : absl::StrFormat(",%.10g,%.10g", value[i], sigma[i]));
     }
   }
   for (int i = 0; i < 3; ++i) {
-    absl::StrAppend(&row, absl::StrFormat(",%.6g,%.6g", At(s.misalignment_arcsec(), i),
-                                          At(s.misalignment_sigma_arcsec(), i)));
+    const double m = At(s.misalignment_arcsec(), i);
+    const double m_sigma = At(s.misalignment_sigma_arcsec(), i);
+    absl::StrAppend(&row, full ? absl::StrFormat(",%.17g,%.17g", m, m_sigma)
+                               : absl::StrFormat(",%.6g,%.6g", m, m_sigma));
   }
   return absl::StrCat(row, ",", FormatUtc(s.compute_time(), s.has_compute_time()));
 }
@@ -170,6 +178,73 @@ int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
 }
 
 }  // namespace
+
+int RunExportHistory(const ExportHistoryOptions& o, const GlobalOptions& global) {
+  constexpr char kExportVerb[] = "export history";
+  if (o.format != "csv" && o.format != "json") {
+    return ReportBadArgument(kExportVerb,
+                             absl::StrCat("--format ", o.format, ": must be csv or json"));
+  }
+  if (o.gyro_id < 0 || o.gyro_id > 4) {
+    return ReportBadArgument(kExportVerb,
+                             absl::StrCat("--gyro ", o.gyro_id, ": must be 1..4 (0: all)"));
+  }
+  esg::v1::ExportCoefficientHistoryRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  request.set_gyro_id(o.gyro_id);
+  if (!o.from.empty()) {
+    const std::optional<absl::Time> from = ParseUtc(o.from);
+    if (!from) {
+      return ReportBadArgument(kExportVerb, "--from '" + o.from + "': not an RFC 3339 time");
+    }
+    *request.mutable_from() = proto_convert::TimeToProto(*from);
+  }
+  if (!o.to.empty()) {
+    const std::optional<absl::Time> to = ParseUtc(o.to);
+    if (!to) return ReportBadArgument(kExportVerb, "--to '" + o.to + "': not an RFC 3339 time");
+    *request.mutable_to() = proto_convert::TimeToProto(*to);
+  }
+  std::unique_ptr<EsgClient> client = Connect(kExportVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  std::unique_ptr<OutputFile> out = OutputFile::Open(kExportVerb, o.out);
+  if (out == nullptr) return kExitBadArguments;
+  // CSV rows are written as the chunks arrive; JSON is one document, written at the end.
+  const bool csv = o.format == "csv";
+  bool header_written = false;  // once the first chunk (or the end) arrived: nothing on a refusal
+  esg::v1::ExportCoefficientHistoryResponse all;
+  int64_t snapshots = 0;
+  std::unique_ptr<ReaderStream<esg::v1::ExportCoefficientHistoryResponse>> stream =
+      client->ExportCoefficientHistory(request);
+  esg::v1::ExportCoefficientHistoryResponse chunk;
+  while (stream->Read(&chunk)) {
+    snapshots += chunk.snapshots_size();
+    if (csv) {
+      std::string text = header_written ? "" : CsvHeader() + "\n";
+      header_written = true;
+      for (const esg::v1::CoefficientSnapshot& s : chunk.snapshots()) {
+        absl::StrAppend(&text, CsvRow(s, /*full=*/true), "\n");
+      }
+      out->Write(text);
+    } else {
+      for (esg::v1::CoefficientSnapshot& s : *chunk.mutable_snapshots()) {
+        *all.add_snapshots() = std::move(s);
+      }
+    }
+  }
+  const absl::Status status = stream->Finish();
+  if (!status.ok()) return ReportRpcError(kExportVerb, status, global);
+  if (csv && !header_written) out->Write(CsvHeader() + "\n");
+  if (!csv) out->Write(ProtoToJson(all).dump(2) + "\n");
+  if (absl::Status closed = out->Commit(); !closed.ok()) {
+    std::fprintf(stderr, "esg %s: %s\n", kExportVerb, std::string(closed.message()).c_str());
+    return kExitFailure;
+  }
+  if (!o.out.empty()) {
+    std::fprintf(stderr, "%s: %lld coefficient snapshots written to %s\n", o.spacecraft_id.c_str(),
+                 static_cast<long long>(snapshots), o.out.c_str());
+  }
+  return kExitOk;
+}
 
 void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code) {
   auto options = std::make_shared<HistoryOptions>();

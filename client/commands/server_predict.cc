@@ -1,10 +1,11 @@
 // `esg predict --spacecraft ID --from T --to T --step S [--planned FILE] [--aem FILE]
 // [--format table|json|csv]`: the attitude esgd predicts (PredictAttitude, docs/service.md
 // "PredictAttitude"): per epoch q_in_b (scalar first), its 1-sigma about the body axes x, y, z
-// [arcsec], where it comes from (RECORDED: the archived gyro readings, up to the last applied
-// frame; after it PLANNED: the --planned attitude, or INERTIAL_HOLD: the last estimate held
-// inertially fixed) and the predicted spin axes h_in of the gyros used. The table and stderr
-// state the assumption; --aem also writes the returned CCSDS AEM (KVN, docs/formats.md) to FILE.
+// [arcsec], where it comes from (RECORDED: the archived gyro readings, up to the last archived
+// frame, applied by the filter or not; after it PLANNED: the --planned attitude, or
+// INERTIAL_HOLD: the last estimate held inertially fixed) and the predicted spin axes h_in of the
+// gyros used. The table and stderr state the assumption; --aem also writes the returned CCSDS AEM
+// (KVN, docs/formats.md) to FILE.
 //
 // --planned FILE: a CCSDS AEM (KVN, version 1.0 or 2.0, quaternions; every segment's data lines,
 // the file's first keyword CCSDS_AEM_VERS) or a CSV with the header `time,q0,q1,q2,q3`: RFC 3339
@@ -89,8 +90,10 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
           absl::StrCat("--planned ", path, ": line ", line_number, ": ", what));
     };
     if (f.size() != 5) {
-      return error(absl::StrCat("expected 5 columns time,q0,q1,q2,q3 (CSV) or an AEM starting "
-                                "with CCSDS_AEM_VERS, got ", f.size()));
+      return error(
+          absl::StrCat("expected 5 columns time,q0,q1,q2,q3 (CSV) or an AEM starting "
+                       "with CCSDS_AEM_VERS, got ",
+                       f.size()));
     }
     if (header) {
       header = false;
@@ -182,7 +185,8 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
       const esg::v1::AttitudeSample& s = response->samples(i);
       Json row;
       row["time"] = FormatUtc(s.time(), s.has_time());
-      for (int k = 0; k < 4; ++k) row[absl::StrCat("q", k)] = k < s.q_in_b_size() ? s.q_in_b(k) : 0.0;
+      for (int k = 0; k < 4; ++k)
+        row[absl::StrCat("q", k)] = k < s.q_in_b_size() ? s.q_in_b(k) : 0.0;
       const char* axes[] = {"sigmaXArcsec", "sigmaYArcsec", "sigmaZArcsec"};
       for (int k = 0; k < 3; ++k) {
         row[axes[k]] = k < s.sigma_arcsec_size() ? s.sigma_arcsec(k) : 0.0;
@@ -190,8 +194,8 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
       row["attitudeSource"] = esg::v1::AttitudeSource_Name(source_of(i));
       rows.push_back(std::move(row));
     }
-    PrintCsv(rows, {"time", "q0", "q1", "q2", "q3", "sigmaXArcsec", "sigmaYArcsec",
-                    "sigmaZArcsec", "attitudeSource"});
+    PrintCsv(rows, {"time", "q0", "q1", "q2", "q3", "sigmaXArcsec", "sigmaYArcsec", "sigmaZArcsec",
+                    "attitudeSource"});
     std::fprintf(stderr, "esg %s: %s\n", kVerb, response->assumption().c_str());
     return kExitOk;
   }
@@ -225,14 +229,14 @@ void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code) {
   CLI::App* cmd = app.add_subcommand(
       kVerb,
       "attitude with its 1-sigma over an interval (PredictAttitude): recorded gyro readings up to "
-      "the last applied frame, then the --planned attitude or, without one, an inertial hold of "
+      "the last archived frame, then the --planned attitude or, without one, an inertial hold of "
       "the last estimate");
   cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id")->required();
   cmd->add_option("--from", options->from, "first epoch, RFC 3339 UTC")->required();
   cmd->add_option("--to", options->to, "last epoch, RFC 3339 UTC")->required();
   cmd->add_option("--step", options->step_s, "step between epochs [s]")->required();
   cmd->add_option("--planned", options->planned_path,
-                  "planned attitude after the last applied frame: a CCSDS AEM (KVN) or a CSV "
+                  "planned attitude after the last archived frame: a CCSDS AEM (KVN) or a CSV "
                   "with the header time,q0,q1,q2,q3 (RFC 3339 UTC, q_in_b scalar first)");
   cmd->add_option("--aem", options->aem_path,
                   "also write the prediction as a CCSDS AEM (KVN) file");

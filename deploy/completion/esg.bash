@@ -14,11 +14,13 @@ _esg() {
     cword=$COMP_CWORD
   fi
 
-  local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history"
+  local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history
+    export"
   local global="--server --token --tls-ca --tls-cert --tls-key --help --version"
   local format="--format --json"
 
-  # The verb (and the sub-verb of diagnoses) on the line so far; global options may come first.
+  # The verb (and the sub-verb of diagnoses and export) on the line so far; global options may
+  # come first.
   local verb="" sub="" i
   for ((i = 1; i < cword; i++)); do
     case "${words[i]}" in
@@ -27,7 +29,7 @@ _esg() {
       *)
         if [[ -z "$verb" ]]; then
           verb="${words[i]}"
-        elif [[ "$verb" == diagnoses && -z "$sub" ]]; then
+        elif [[ ( "$verb" == diagnoses || "$verb" == export ) && -z "$sub" ]]; then
           sub="${words[i]}"
         fi
         ;;
@@ -36,7 +38,11 @@ _esg() {
 
   case "$prev" in
     --format)
-      COMPREPLY=($(compgen -W "table json csv" -- "$cur"))
+      if [[ "$verb" == export ]]; then
+        COMPREPLY=($(compgen -W "csv json" -- "$cur"))
+      else
+        COMPREPLY=($(compgen -W "table json csv" -- "$cur"))
+      fi
       return
       ;;
     --model)
@@ -87,6 +93,13 @@ _esg() {
     predict) opts="--spacecraft --from --to --step --aem --planned $format" ;;
     alerts) opts="--spacecraft --since --follow --ack --operator $format" ;;
     history) opts="--spacecraft --gyro --from --to $format --csv" ;;
+    export)
+      case "$sub" in
+        "") COMPREPLY=($(compgen -W "history telemetry" -- "$cur")); return ;;
+        history) opts="--spacecraft --gyro --from --to --out --format" ;;
+        telemetry) opts="--spacecraft --from --to --out" ;;
+      esac
+      ;;
   esac
   COMPREPLY=($(compgen -W "$opts $global" -- "$cur"))
 }

@@ -223,7 +223,8 @@ TEST(CliConventions, EveryVerbsHelpListsTheGlobalOptions) {
   TempDir dir;
   for (const char* verb :
        {"simulate", "calibrate", "gap", "diagnose", "diagnoses", "diagnoses list", "diagnoses show",
-        "configure", "replay", "status", "predict", "alerts", "history"}) {
+        "configure", "replay", "status", "predict", "alerts", "history", "export", "export history",
+        "export telemetry"}) {
     const RunResult r = RunEsg(dir, std::string(verb) + " --help");
     EXPECT_EQ(r.exit_code, 0) << verb << ": " << r.err;
     for (const char* option : {"--server ADDR", "--token TOKEN", "--tls-ca FILE", "--tls-cert FILE",
@@ -240,7 +241,7 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
   const std::regex option_line(R"(^  (--[a-z][a-z-]*))");
   for (const std::string verb :
        {"simulate", "calibrate", "gap", "diagnose", "diagnoses list", "diagnoses show", "configure",
-        "replay", "status", "predict", "alerts", "history"}) {
+        "replay", "status", "predict", "alerts", "history", "export history", "export telemetry"}) {
     const RunResult help = RunEsg(dir, verb + " --help");
     ASSERT_EQ(help.exit_code, 0) << verb;
     std::set<std::string> options;
@@ -262,14 +263,19 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
       EXPECT_THAT(offered, ::testing::Contains(option)) << "esg " << verb;
     }
   }
-  // The verbs themselves, and the values of --format.
+  // The verbs themselves, the sub-verbs of export, and the values of --format (csv and json
+  // only for an export).
   testing::WriteFile(dir.File("verbs.sh"),
                      "source '" + script +
                          "'; COMP_WORDS=(esg d); COMP_CWORD=1; _esg; echo ${COMPREPLY[@]}; "
                          "COMP_WORDS=(esg status --format ''); COMP_CWORD=3; _esg; "
+                         "echo ${COMPREPLY[@]}; "
+                         "COMP_WORDS=(esg e); COMP_CWORD=1; _esg; echo ${COMPREPLY[@]}; "
+                         "COMP_WORDS=(esg export ''); COMP_CWORD=2; _esg; echo ${COMPREPLY[@]}; "
+                         "COMP_WORDS=(esg export history --format ''); COMP_CWORD=4; _esg; "
                          "echo ${COMPREPLY[@]}");
   const RunResult r = ::esg::testing::RunBinary(dir, "/bin/bash", dir.File("verbs.sh"));
-  EXPECT_EQ(r.out, "diagnose diagnoses\ntable json csv\n");
+  EXPECT_EQ(r.out, "diagnose diagnoses\ntable json csv\nexport\nhistory telemetry\ncsv json\n");
 }
 
 TEST(CliConventions, FormatIsValidatedAndJsonIsItsShortForm) {
@@ -414,8 +420,9 @@ TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {
   EXPECT_THAT(r.err, HasSubstr("--spacecraft: "));
 }
 
-// $ESG_TOKEN is the token without --token, the flag wins over it, and the verbs on their own
-// channel (diagnose, diagnoses) send it too: esgd with a token file, started through the shell.
+// $ESG_TOKEN is the token without --token, the flag wins over it, on every verb: the streaming
+// and listing ones (diagnose, diagnoses, export) go through the same client (EsgClient) as the
+// others. esgd with a token file, started through the shell.
 TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
   TempDir dir;
   testing::WriteFile(dir.File("tokens"), "w-token read,write\nr-token read\n");
@@ -452,6 +459,24 @@ TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
   EXPECT_THAT(r.out, HasSubstr("0 diagnoses of RDK-1"));
   r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1 --token r-token", "ESG_TOKEN=nope");
   EXPECT_EQ(r.exit_code, 0) << r.err;
+  // The streams: without a token refused, with the variable's token served (no telemetry yet,
+  // so the diagnosis is refused by the service itself and the export is empty).
+  for (const std::string& verb : std::vector<std::string>{
+           "diagnose --spacecraft RDK-1", "export history --spacecraft RDK-1",
+           "export telemetry --spacecraft RDK-1 --out " + Quote(dir.File("t.csv"))}) {
+    const std::string name = verb.substr(0, verb.find(" --"));
+    r = RunEsg(dir, server + " " + verb, "env -u ESG_TOKEN");
+    EXPECT_EQ(r.exit_code, 1) << verb;
+    EXPECT_THAT(r.err, HasSubstr("esg " + name + ": UNAUTHENTICATED")) << verb;
+    r = RunEsg(dir, server + " " + verb, "ESG_TOKEN=r-token");
+    EXPECT_THAT(r.err, ::testing::Not(HasSubstr("UNAUTHENTICATED"))) << verb;
+  }
+  r = RunEsg(dir, server + " diagnose --spacecraft RDK-1", "ESG_TOKEN=r-token");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("esg diagnose: FAILED_PRECONDITION: no archived telemetry"));
+  r = RunEsg(dir, server + " export history --spacecraft RDK-1", "ESG_TOKEN=r-token");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, ::testing::StartsWith("time_utc,gyro,k0_deg_h,"));
 }
 
 TEST(CliConventions, OfflineVerbsPrintJsonAndCsvWithMillisecondTimes) {

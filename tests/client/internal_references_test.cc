@@ -26,11 +26,11 @@ using ::esg::testing::TempDir;
 
 // What marks a reference to a document the user does not have.
 const std::vector<std::string>& InternalMarkers() {
-  static const auto* markers = new std::vector<std::string>{
-      "DESIGN",       "\xC2\xA7" /* the section sign */,
-      "STYLE.md",     "STYLE ",
-      "/work/shared", "/work/notes",
-      "briefs/"};
+  static const auto* markers =
+      new std::vector<std::string>{"DESIGN",       "\xC2\xA7" /* the section sign */,
+                                   "STYLE.md",     "STYLE ",
+                                   "/work/shared", "/work/notes",
+                                   "briefs/"};
   return *markers;
 }
 
@@ -92,6 +92,8 @@ TEST(InternalReferences, HelpOfEveryVerbAndOfEsgdCitesNone) {
   }
   EXPECT_GE(helps, 12) << "esg, its verbs and sub-verbs";
   EXPECT_TRUE(seen.count(" calibrate") && seen.count(" replay") && seen.count(" diagnose"));
+  EXPECT_TRUE(seen.count(" export") && seen.count(" export history") &&
+              seen.count(" export telemetry"));
   const RunResult esgd = RunBinary(dir, ESGD_BINARY, "--help");
   ASSERT_EQ(esgd.exit_code, 0) << esgd.err;
   for (const std::string& f : InternalReferences("esgd --help", esgd.out + esgd.err)) {

@@ -270,7 +270,14 @@ TEST(AlertLifecycle, AlertsAcknowledgementsAndSessionStateChangesAreLogged) {
   EXPECT_FALSE(stub->AcknowledgeAlert(&ctx2, request, &acked).ok());
   // The acknowledgement is published (and logged) before AcknowledgeAlert returns.
   stub.reset();
+  // A cancelled subscription followed by an acknowledgement once held the shutdown for the whole
+  // 5 s deadline; it returns promptly (measured in the test log; the bound leaves margin for a
+  // loaded machine and is no performance test).
+  const absl::Time stopping = absl::Now();
   daemon.Stop(SIGTERM);
+  const absl::Duration shutdown = absl::Now() - stopping;
+  RecordProperty("shutdown_ms", std::to_string(absl::ToInt64Milliseconds(shutdown)));
+  EXPECT_LT(shutdown, absl::Seconds(2)) << "the shutdown took " << shutdown;
 
   const std::string text = esg::testing::ReadFile(log);
   // Frame 1 initialises the filter: the state change is logged with the frame's identity.
@@ -446,8 +453,7 @@ TEST(AlertCatalog, TheDocsTableStatesTheSameRowsWithGuidance) {
     const size_t at = docs.find(absl::StrCat("\n| ", kind.name, " |"));
     ASSERT_NE(at, std::string::npos) << kind.name << " has no row in docs/service.md";
     const std::string row = docs.substr(at + 1, docs.find('\n', at + 1) - at - 1);
-    EXPECT_THAT(row, HasSubstr(absl::StrCat("| ", SeverityName(kind.severity), " |")))
-        << kind.name;
+    EXPECT_THAT(row, HasSubstr(absl::StrCat("| ", SeverityName(kind.severity), " |"))) << kind.name;
     for (const std::string& form : SubsystemAlternatives(kind.subsystem)) {
       EXPECT_THAT(row, HasSubstr(absl::StrCat("`", form, "`"))) << kind.name;
     }

@@ -18,7 +18,8 @@ struct DiagnoseCall {
   grpc::Status status;
 };
 
-DiagnoseCall CallDiagnose(esg::v1::EstimationService::Stub& stub, const esg::v1::DiagnoseRequest& request) {
+DiagnoseCall CallDiagnose(esg::v1::EstimationService::Stub& stub,
+                          const esg::v1::DiagnoseRequest& request) {
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(300));
   auto reader = stub.Diagnose(&context, request);
@@ -36,7 +37,9 @@ TEST(DiagnoseRpc, StreamsProgressThenTheStoredReport) {
   {
     grpc::ClientContext context;
     esg::v1::ConfigureResponse response;
-    ASSERT_TRUE(stub->ConfigureSpacecraft(&context, ConfigureRequestFor(run.config, "10+11"), &response).ok());
+    ASSERT_TRUE(
+        stub->ConfigureSpacecraft(&context, ConfigureRequestFor(run.config, "10+11"), &response)
+            .ok());
   }
   const StreamResult streamed = StreamFrames(*stub, run.frames);
   ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
@@ -71,6 +74,8 @@ TEST(DiagnoseRpc, StreamsProgressThenTheStoredReport) {
   ASSERT_EQ(listed.diagnoses_size(), 1);
   EXPECT_EQ(listed.diagnoses(0).id(), result.id());
   EXPECT_EQ(listed.diagnoses(0).verdict(), result.verdict());
+  // The frame count is stored with the diagnosis, not only returned by the call that made it.
+  EXPECT_EQ(listed.diagnoses(0).frames(), static_cast<int64_t>(run.frames.size()));
   // The list carries summaries; GetDiagnosis returns the stored report in full.
   grpc::ClientContext get_context;
   esg::v1::GetDiagnosisRequest get;
@@ -79,6 +84,7 @@ TEST(DiagnoseRpc, StreamsProgressThenTheStoredReport) {
   esg::v1::DiagnosisResult stored;
   ASSERT_TRUE(stub->GetDiagnosis(&get_context, get, &stored).ok());
   EXPECT_EQ(stored.report_json(), result.report_json());
+  EXPECT_EQ(stored.frames(), static_cast<int64_t>(run.frames.size()));
 }
 
 TEST(DiagnoseRpc, BadRequestsGetTheirCodeAndNameTheField) {
@@ -88,7 +94,8 @@ TEST(DiagnoseRpc, BadRequestsGetTheirCodeAndNameTheField) {
   {
     grpc::ClientContext context;
     esg::v1::ConfigureResponse response;
-    ASSERT_TRUE(stub->ConfigureSpacecraft(&context, ConfigureRequestFor(run.config), &response).ok());
+    ASSERT_TRUE(
+        stub->ConfigureSpacecraft(&context, ConfigureRequestFor(run.config), &response).ok());
   }
   ASSERT_TRUE(StreamFrames(*stub, run.frames).status.ok());
 

@@ -4,24 +4,28 @@
 // where possible, without writing its coefficient history twice, and the others and the server
 // run on. Checkpoints of the older server format and of a session that was never initialised
 // restore without quarantine.
+#include <chrono>
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/checkpoint_codec.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/daemon.h"
+#include "tests/testing/run_process.h"
 
 namespace esg::server {
 namespace {
 
 using ::esg::testing::ConfigureRequestFor;
-using ::esg::testing::Session;
 using ::esg::testing::LoopbackServer;
 using ::esg::testing::OfflineSessionValues;
-using ::esg::testing::SimulateRun;
+using ::esg::testing::Session;
 using ::esg::testing::SimulatedRun;
+using ::esg::testing::SimulateRun;
 using ::esg::testing::StoredSessionValues;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
@@ -76,8 +80,8 @@ Effects StoredEffects(const std::string& db, const std::string& id) {
   Effects e;
   auto storage = storage::Storage::Open(db);
   EXPECT_TRUE(storage.ok()) << storage.status();
-  auto history = (*storage)->coefficients().History(id, 0, absl::InfinitePast(),
-                                                    absl::InfiniteFuture());
+  auto history =
+      (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture());
   EXPECT_TRUE(history.ok());
   e.coefficients = history->size();
   auto alerts = (*storage)->alerts().Since(id, absl::InfinitePast(), 1000);
@@ -284,8 +288,9 @@ TEST(Quarantine, UnusableConfigurationRefusesItsFramesUntilReconfigured) {
   TempDir dir;
   const std::string db = dir.File("esg.db");
   Populate(db);
-  Tamper(db, "UPDATE spacecraft_configs SET config_json = '{\"gyros\": 7}' "
-             "WHERE spacecraft_id = 'QA-1'");
+  Tamper(db,
+         "UPDATE spacecraft_configs SET config_json = '{\"gyros\": 7}' "
+         "WHERE spacecraft_id = 'QA-1'");
   LoopbackServer server({}, db);
   ASSERT_NE(server.get(), nullptr);
   auto stub = server.Stub();
@@ -312,6 +317,72 @@ TEST(Quarantine, UnusableConfigurationRefusesItsFramesUntilReconfigured) {
   const esg::v1::SessionInfo fixed = Session(*stub, "QA-1");
   EXPECT_TRUE(fixed.quarantine_reason().empty());
   EXPECT_EQ(fixed.frames_applied(), static_cast<int64_t>(RunA().frames.size()));
+}
+
+// The quarantine ended by a reconfiguration clears its alert like every other clear: cleared_time
+// stored (the latest archived frame at the reconfiguration), the clear published to a subscriber
+// and logged. Against esgd as a process, for its log.
+TEST(Quarantine, ReconfigurationClearsTheQuarantineAlertWithItsTimePublishedAndLogged) {
+  TempDir dir;
+  const std::string db = dir.File("esg.db");
+  const std::string log = dir.File("esgd.log");
+  Populate(db);
+  Tamper(db,
+         "UPDATE spacecraft_configs SET config_json = '{\"gyros\": 7}' "
+         "WHERE spacecraft_id = 'QA-1'");
+  const absl::Time last_frame = *proto_convert::TimeFromProto(RunA().frames.back().time());
+  int64_t sequence = 0;
+  {
+    esg::testing::Daemon daemon(db, log);
+    ASSERT_GT(daemon.port(), 0);
+    auto stub = daemon.Stub();
+    ASSERT_EQ(Session(*stub, "QA-1").state(), esg::v1::SESSION_STATE_QUARANTINED);
+    // Stored alerts, the marker, then live changes.
+    grpc::ClientContext watch;
+    watch.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    esg::v1::AlertSubscription subscription;
+    subscription.set_spacecraft_id("QA-1");
+    *subscription.mutable_since() = proto_convert::TimeToProto(absl::UnixEpoch());
+    subscription.set_replay_marker(true);
+    auto reader = stub->SubscribeAlerts(&watch, subscription);
+    esg::v1::Alert alert;
+    while (reader->Read(&alert) && !alert.replay_complete()) {
+    }
+    ASSERT_TRUE(alert.replay_complete());
+    auto request = ConfigureRequestFor(RunA().config);
+    request.set_replace(true);
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse r;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, request, &r).ok());
+    // The quarantine alert's clear is published (raised and cleared at once if the first job had
+    // not stored it before the reconfiguration).
+    esg::v1::Alert cleared;
+    for (int i = 0; i < 1000 && !(cleared.reason() == esg::v1::ALERT_REASON_SESSION_QUARANTINED &&
+                                  cleared.cleared());
+         ++i) {
+      ASSERT_TRUE(reader->Read(&cleared)) << "the alert stream ended";
+    }
+    ASSERT_TRUE(cleared.has_cleared_time());
+    EXPECT_EQ(*proto_convert::TimeFromProto(cleared.cleared_time()), last_frame);
+    EXPECT_THAT(cleared.message(), HasSubstr("configuration cannot be used"));
+    sequence = cleared.sequence();
+    watch.TryCancel();
+    reader->Finish();
+  }
+  auto storage = storage::Storage::Open(db);
+  ASSERT_TRUE(storage.ok()) << storage.status();
+  auto stored = (*storage)->alerts().Get("QA-1", sequence);
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  EXPECT_EQ(stored->reason, "SESSION_QUARANTINED");
+  EXPECT_TRUE(stored->cleared);
+  EXPECT_EQ(stored->cleared_time, last_frame);
+  // Logged once cleared: "alert QA-1 #N DISTRESS SESSION_QUARANTINED session, x1, ..., cleared
+  // at <time>: <reason>".
+  const std::string text = esg::testing::ReadFile(log);
+  EXPECT_THAT(text, HasSubstr(absl::StrCat("INFO esgd: alert QA-1 #", sequence,
+                                           " DISTRESS SESSION_QUARANTINED session, x1, ")));
+  EXPECT_THAT(text, HasSubstr(absl::StrCat(", cleared at ", FormatUtc(last_frame),
+                                           ": the stored configuration cannot be used")));
 }
 
 }  // namespace

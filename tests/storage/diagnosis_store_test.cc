@@ -3,6 +3,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -32,6 +33,7 @@ DiagnosisRecord Diagnosis(const std::string& id, const std::string& verdict, dou
   d.compute_time = T(from_s + 90000);
   d.verdict = verdict;
   d.report_json = R"({"candidates":[{"name":")" + verdict + R"(","gain":0.8}]})";
+  d.frames = 1441 + static_cast<int64_t>(from_s / 60);
   return d;
 }
 
@@ -59,6 +61,14 @@ TEST(DiagnosisStore, PutGetAndListRoundTrip) {
   EXPECT_EQ(got->compute_time, expected.compute_time);
   EXPECT_EQ(got->verdict, "unexplained");
   EXPECT_EQ(got->report_json, expected.report_json);
+  EXPECT_EQ(got->frames, expected.frames);
+  // Summaries carry the frame count too (only the report is left out).
+  absl::StatusOr<std::vector<DiagnosisRecord>> summaries = diagnoses.ListSummaries("RDK-1", 0, 10);
+  ASSERT_THAT(summaries, IsOk());
+  ASSERT_EQ(summaries->size(), 2u);
+  EXPECT_EQ((*summaries)[0].frames, Diagnosis("RDK-1", "gyro_misalignment", 0).frames);
+  EXPECT_EQ((*summaries)[1].frames, expected.frames);
+  EXPECT_EQ((*summaries)[1].report_json, "");
 
   EXPECT_THAT(diagnoses.List("RDK-1"),
               IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, *first),
@@ -81,6 +91,10 @@ TEST(DiagnosisStore, RejectsInvalidRecords) {
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("to_time")));
   EXPECT_THAT(diagnoses.Put(Diagnosis("", "unexplained", 0)),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("spacecraft_id")));
+  DiagnosisRecord negative = Diagnosis("RDK-1", "unexplained", 0);
+  negative.frames = -1;
+  EXPECT_THAT(diagnoses.Put(negative),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("diagnosis.frames")));
   EXPECT_THAT(diagnoses.List("RDK-1"), IsOkAndHolds(IsEmpty()));
 }
 

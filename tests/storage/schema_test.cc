@@ -72,7 +72,8 @@ std::vector<std::string> Tables(Database& db) {
 // The version-1 layout written out independently of schema.cc, as an old program left it.
 std::string HandMadeV1Sql() {
   std::vector<std::string> coefficient_columns;
-  for (absl::string_view c : kCoefficientColumns) coefficient_columns.push_back(absl::StrCat(c, " REAL"));
+  for (absl::string_view c : kCoefficientColumns)
+    coefficient_columns.push_back(absl::StrCat(c, " REAL"));
   for (absl::string_view c : kCoefficientSigmaColumns) {
     coefficient_columns.push_back(absl::StrCat(c, " REAL"));
   }
@@ -133,12 +134,9 @@ TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
   absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(dir.File("a.db"));
   ASSERT_THAT(db, IsOk());
   ASSERT_THAT(MigrateToCurrent(**db), IsOk());
-  std::vector<std::string> expected = {"id",
-                                       "spacecraft_id",
-                                       "gyro_id",
-                                       "measurement_time_unix_ns",
-                                       "compute_time_unix_ns",
-                                       "model_name"};
+  std::vector<std::string> expected = {
+      "id",        "spacecraft_id", "gyro_id", "measurement_time_unix_ns", "compute_time_unix_ns",
+      "model_name"};
   for (absl::string_view c : kCoefficientColumns) expected.emplace_back(c);
   for (absl::string_view c : kCoefficientSigmaColumns) expected.emplace_back(c);
   EXPECT_THAT(Columns(**db, "coefficients"), ElementsAreArray(expected));
@@ -196,6 +194,71 @@ TEST(Schema, HandMadeVersion1FileIsMigratedWithItsData) {
   EXPECT_THAT((*storage)->diagnoses().Put(diagnosis), IsOk());
 }
 
+// A version-4 file, as the program before version 5 left it: diagnoses without a frame count.
+// Migrated, each diagnosis gets the number of archived frames of its spacecraft in its span
+// (first..last frame diagnosed, inclusive); new diagnoses store the count they are given.
+TEST(Schema, Version4DiagnosesGetTheFrameCountOfTheirSpanWhenMigrated) {
+  TempDir dir;
+  const std::string path = dir.File("v4.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 4), IsOk());
+    EXPECT_THAT(Columns(**db, "diagnoses"), ::testing::Not(::testing::Contains("frames")));
+    // SC-A: frames every 60 s at 60..6000 s (100 frames); SC-B: 10 frames over the same times.
+    std::string sql;
+    for (int k = 1; k <= 100; ++k) {
+      absl::StrAppend(&sql, "INSERT INTO telemetry_frames VALUES ('SC-A', 'default', ", k, ", ",
+                      TimeToUnixNanos(T(60.0 * k)), ", x'00');");
+    }
+    for (int k = 1; k <= 10; ++k) {
+      absl::StrAppend(&sql, "INSERT INTO telemetry_frames VALUES ('SC-B', 'gs-1', ", k, ", ",
+                      TimeToUnixNanos(T(60.0 * k)), ", x'00');");
+    }
+    // Diagnoses over SC-A's 60..6000 s (100 frames), 600..1200 s (11 frames) and SC-B's whole
+    // archive (10 frames).
+    auto diagnosis = [](const char* id, double from_s, double to_s) {
+      return absl::StrCat(
+          "INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, to_time_unix_ns, "
+          "compute_time_unix_ns, verdict, report_json) VALUES ('",
+          id, "', ", TimeToUnixNanos(T(from_s)), ", ", TimeToUnixNanos(T(to_s)), ", ",
+          TimeToUnixNanos(T(9000)), ", 'none', '{}');");
+    };
+    absl::StrAppend(&sql, diagnosis("SC-A", 60, 6000), diagnosis("SC-A", 600, 1200),
+                    diagnosis("SC-B", 60, 600));
+    ASSERT_THAT((*db)->Execute(sql), IsOk());
+    EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(4));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  absl::StatusOr<std::vector<DiagnosisRecord>> a = (*storage)->diagnoses().List("SC-A");
+  ASSERT_THAT(a, IsOk());
+  ASSERT_EQ(a->size(), 2u);
+  EXPECT_EQ((*a)[0].frames, 100);
+  EXPECT_EQ((*a)[1].frames, 11);
+  EXPECT_EQ((*a)[1].from_time, T(600));
+  absl::StatusOr<std::vector<DiagnosisRecord>> b =
+      (*storage)->diagnoses().ListSummaries("SC-B", 0, 10);
+  ASSERT_THAT(b, IsOk());
+  ASSERT_EQ(b->size(), 1u);
+  EXPECT_EQ((*b)[0].frames, 10);
+  // A new diagnosis on the migrated file keeps the count it is given.
+  DiagnosisRecord fresh;
+  fresh.spacecraft_id = "SC-A";
+  fresh.from_time = T(60);
+  fresh.to_time = T(120);
+  fresh.compute_time = T(9100);
+  fresh.verdict = "none";
+  fresh.report_json = "{}";
+  fresh.frames = 2;
+  absl::StatusOr<int64_t> id = (*storage)->diagnoses().Put(fresh);
+  ASSERT_THAT(id, IsOk());
+  absl::StatusOr<DiagnosisRecord> got = (*storage)->diagnoses().Get(*id);
+  ASSERT_THAT(got, IsOk());
+  EXPECT_EQ(got->frames, 2);
+}
+
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Database>> stepwise = Database::Open(dir.File("s.db"));
@@ -222,9 +285,10 @@ TEST(Schema, NewerDatabaseThanTheCodeIsRefused) {
   {
     absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
     ASSERT_THAT(db, IsOk());
-    ASSERT_THAT((*db)->Execute(absl::StrCat("CREATE TABLE from_the_future (x); PRAGMA user_version = ",
-                                            kCurrentSchemaVersion + 1)),
-                IsOk());
+    ASSERT_THAT(
+        (*db)->Execute(absl::StrCat("CREATE TABLE from_the_future (x); PRAGMA user_version = ",
+                                    kCurrentSchemaVersion + 1)),
+        IsOk());
     EXPECT_THAT(MigrateToCurrent(**db),
                 StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("newer")));
   }

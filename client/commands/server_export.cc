@@ -1,0 +1,208 @@
+// `esg export history|telemetry` (see server_export.h); the history export itself is in
+// server_history.cc beside `esg history`, whose CSV columns it shares.
+#include "client/commands/server_export.h"
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "client/commands/server_common.h"
+#include "client/esg_client.h"
+#include "estimator/telemetry.h"
+#include "proto/convert.h"
+#include "storage/recording_csv.h"
+
+namespace esg::client {
+
+std::unique_ptr<OutputFile> OutputFile::Open(const char* verb, const std::string& path) {
+  if (path.empty()) return std::unique_ptr<OutputFile>(new OutputFile("", stdout));
+  const std::string tmp = path + ".tmp";
+  std::FILE* file = std::fopen(tmp.c_str(), "wb");
+  if (file == nullptr) {
+    ReportBadArgument(
+        verb, absl::StrCat("--out ", path, ": cannot create ", tmp, ": ", std::strerror(errno)));
+    return nullptr;
+  }
+  return std::unique_ptr<OutputFile>(new OutputFile(path, file));
+}
+
+OutputFile::~OutputFile() {
+  if (path_.empty() || committed_) return;
+  std::fclose(file_);
+  std::remove((path_ + ".tmp").c_str());
+}
+
+void OutputFile::Write(const std::string& text) {
+  if (failed_ || text.empty()) return;
+  if (std::fwrite(text.data(), 1, text.size(), file_) != text.size()) failed_ = true;
+}
+
+absl::Status OutputFile::Commit() {
+  if (path_.empty()) {
+    committed_ = true;
+    if (std::fflush(stdout) != 0 || failed_) return absl::UnavailableError("stdout: write failed");
+    return absl::OkStatus();
+  }
+  const std::string tmp = path_ + ".tmp";
+  const bool flushed = std::fflush(file_) == 0 && !failed_;
+  const int error = errno;
+  committed_ = true;
+  if (std::fclose(file_) != 0 || !flushed) {
+    std::remove(tmp.c_str());
+    return absl::UnavailableError(
+        absl::StrCat("--out ", path_, ": write failed: ", std::strerror(error)));
+  }
+  if (std::rename(tmp.c_str(), path_.c_str()) != 0) {
+    const int rename_error = errno;
+    std::remove(tmp.c_str());
+    return absl::UnavailableError(
+        absl::StrCat("--out ", path_, ": cannot rename ", tmp, ": ", std::strerror(rename_error)));
+  }
+  return absl::OkStatus();
+}
+
+namespace {
+
+// The text after the metadata lines and the header of a formatted recording: its rows.
+std::string RowsOf(const std::string& formatted) {
+  size_t at = 0;
+  while (at < formatted.size() && formatted[at] == '#') {
+    at = formatted.find('\n', at);
+    if (at == std::string::npos) return "";
+    ++at;
+  }
+  const size_t header_end = formatted.find('\n', at);
+  return header_end == std::string::npos ? "" : formatted.substr(header_end + 1);
+}
+
+int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& global) {
+  constexpr char kVerb[] = "export telemetry";
+  esg::v1::ExportTelemetryRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  std::optional<absl::Time> from;
+  std::optional<absl::Time> to;
+  if (!o.from.empty()) {
+    from = ParseUtc(o.from);
+    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
+    *request.mutable_from() = proto_convert::TimeToProto(*from);
+  }
+  if (!o.to.empty()) {
+    to = ParseUtc(o.to);
+    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
+    *request.mutable_to() = proto_convert::TimeToProto(*to);
+  }
+  if (from && to && *to <= *from) {
+    return ReportBadArgument(kVerb, "--to '" + o.to + "': must be after --from '" + o.from + "'");
+  }
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  std::unique_ptr<OutputFile> out = OutputFile::Open(kVerb, o.out);
+  if (out == nullptr) return kExitBadArguments;
+
+  // Each chunk is formatted by the recording writer; the metadata and header are written once.
+  std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> stream =
+      client->ExportTelemetry(request);
+  esg::v1::ExportTelemetryResponse chunk;
+  int64_t frames = 0;
+  std::string first_time;
+  std::string last_time;
+  std::string problem;
+  while (problem.empty() && stream->Read(&chunk)) {
+    estimator::Recording recording;
+    recording.metadata["spacecraft_id"] = o.spacecraft_id;
+    for (const esg::v1::TelemetryFrame& proto : chunk.frames()) {
+      absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
+      if (!frame.ok()) {
+        problem = absl::StrCat("archived frame (station ", proto.station_id(), ", sequence ",
+                               proto.sequence(), ") cannot be written: ", frame.status().message());
+        break;
+      }
+      recording.frames.push_back(*std::move(frame));
+    }
+    if (!problem.empty() || recording.frames.empty()) continue;
+    if (frames == 0) first_time = FormatUtc(recording.frames.front().time);
+    last_time = FormatUtc(recording.frames.back().time);
+    const std::string text = storage::FormatRecordingCsv(recording);
+    out->Write(frames == 0 ? text : RowsOf(text));
+    frames += static_cast<int64_t>(recording.frames.size());
+  }
+  if (!problem.empty()) {
+    stream->Cancel();
+    stream->Finish().IgnoreError();  // CANCELLED: the problem above is the reason
+    std::fprintf(stderr, "esg %s: %s\n", kVerb, problem.c_str());
+    return kExitFailure;
+  }
+  const absl::Status status = stream->Finish();
+  if (!status.ok()) return ReportRpcError(kVerb, status, global);
+  if (frames == 0) {
+    std::fprintf(stderr, "esg %s: no archived frame of %s in [%s, %s): nothing written\n", kVerb,
+                 o.spacecraft_id.c_str(), o.from.empty() ? "the first" : o.from.c_str(),
+                 o.to.empty() ? "after the last" : o.to.c_str());
+    return kExitFailure;
+  }
+  if (absl::Status closed = out->Commit(); !closed.ok()) {
+    std::fprintf(stderr, "esg %s: %s\n", kVerb, std::string(closed.message()).c_str());
+    return kExitFailure;
+  }
+  std::fprintf(stderr, "%s: %lld frames (%s .. %s) written to %s\n", o.spacecraft_id.c_str(),
+               static_cast<long long>(frames), first_time.c_str(), last_time.c_str(),
+               o.out.c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  CLI::App* cmd =
+      app.add_subcommand("export",
+                         "write a spacecraft's stored history or archived telemetry to a file "
+                         "(ExportCoefficientHistory, ExportTelemetry)");
+  cmd->require_subcommand(1);
+  cmd->fallthrough();
+
+  auto history = std::make_shared<ExportHistoryOptions>();
+  CLI::App* history_cmd = cmd->add_subcommand(
+      "history", "the stored drift-coefficient history, every snapshot, as CSV or JSON");
+  history_cmd->add_option("--spacecraft", history->spacecraft_id, "spacecraft id")->required();
+  history_cmd->add_option("--gyro", history->gyro_id, "gyro id 1..4 (default 0: all)");
+  history_cmd->add_option("--from", history->from, "first measurement time, RFC 3339 UTC");
+  history_cmd->add_option("--to", history->to, "last measurement time (inclusive), RFC 3339 UTC");
+  history_cmd
+      ->add_option("--out", history->out,
+                   "file to write (written as FILE.tmp, renamed when complete); "
+                   "default: stdout")
+      ->type_name("FILE");
+  history_cmd
+      ->add_option("--format", history->format,
+                   "csv: the columns of esg history --csv with 17 significant digits; json: "
+                   "{\"snapshots\": [...]} in the proto JSON mapping")
+      ->type_name("csv|json")
+      ->capture_default_str();
+  history_cmd->callback(
+      [history, &global, exit_code] { *exit_code = RunExportHistory(*history, global); });
+
+  auto telemetry = std::make_shared<ExportTelemetryOptions>();
+  CLI::App* telemetry_cmd = cmd->add_subcommand(
+      "telemetry",
+      "the archived frames as a recording CSV (version 1) that esg calibrate --recording reads");
+  telemetry_cmd->add_option("--spacecraft", telemetry->spacecraft_id, "spacecraft id")->required();
+  telemetry_cmd->add_option("--from", telemetry->from,
+                            "first measurement time, RFC 3339 UTC (default: the first frame)");
+  telemetry_cmd->add_option("--to", telemetry->to,
+                            "end of the span, exclusive, RFC 3339 UTC (default: after the last "
+                            "frame)");
+  telemetry_cmd
+      ->add_option("--out", telemetry->out,
+                   "recording CSV to write (written as FILE.tmp, renamed when complete)")
+      ->type_name("FILE")
+      ->required();
+  telemetry_cmd->callback(
+      [telemetry, &global, exit_code] { *exit_code = RunExportTelemetry(*telemetry, global); });
+}
+
+}  // namespace esg::client
