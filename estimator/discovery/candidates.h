@@ -141,6 +141,13 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
                                const std::vector<TelemetryFrame>& frames, int gyro,
                                CandidateFit& fit);
 
+// The trend of a gyro's suspension offset voltages through eq. (3): a robust line per case axis
+// [mV/h], the displacement rate it implies [um/h] with its 1-sigma (from the line's residual
+// scatter), and a chi-square(3) test of "no trend". Evidence only (a growing displacement is not
+// yet a candidate); appended to `fit` (parameters displacementRateUmPerH[0..2], a note).
+void DescribeVoltageTrend(const SpacecraftConfig& config,
+                          const std::vector<TelemetryFrame>& frames, int gyro, CandidateFit& fit);
+
 }  // namespace esg::estimator::discovery
 
 #endif  // ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_

@@ -226,6 +226,40 @@ TEST(DiscoveryModelRun, CoefficientReleaseWidensOnlyAfterItsTime) {
   EXPECT_GT(sigma_c1(*released), 0.05);
 }
 
+// eq. (3) over time: a rotor displacement growing by 0.3 um/h along case x (10 mV/h of offset
+// voltage with k = 200, U0 = 200 V, d0 = 30 um) is read from the voltages' trend; a constant one
+// shows none.
+TEST(DiscoveryRotorDisplacement, VoltageTrendGivesTheDisplacementRate) {
+  SimulationSpec spec = DiscoveryScenario("rotor_displacement", 1, 6.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const int gyro = ::esg::testing::AffectedGyro(1);
+  std::vector<TelemetryFrame> growing = sim->recording.frames;
+  const absl::Time t0 = growing.front().time;
+  for (TelemetryFrame& f : growing) {
+    auto& r = f.gyros[gyro - 1];
+    ASSERT_TRUE(r.has_value() && r->u_k_mv.has_value());
+    (*r->u_k_mv)(0) += 10.0 * absl::ToDoubleHours(f.time - t0);
+  }
+  auto rate = [&](const std::vector<TelemetryFrame>& frames, int axis) {
+    CandidateFit fit;
+    DescribeVoltageTrend(spec.config, frames, gyro, fit);
+    for (const Parameter& p : fit.fitted) {
+      if (p.name == absl::StrFormat("displacementRateUmPerH[%d]", axis)) return p;
+    }
+    return Parameter{};
+  };
+  const Parameter x = rate(growing, 0);
+  ASSERT_GT(x.sigma, 0.0);
+  EXPECT_NEAR(x.value, 0.3, 3.0 * x.sigma);
+  EXPECT_LT(x.sigma, 0.01);
+  for (int axis = 0; axis < 3; ++axis) {
+    const Parameter c = rate(sim->recording.frames, axis);
+    ASSERT_GT(c.sigma, 0.0);
+    EXPECT_NEAR(c.value, 0.0, 3.0 * c.sigma) << "axis " << axis;
+  }
+}
+
 TEST(Diagnose, RejectsBadInput) {
   const SpacecraftConfig config = ::esg::testing::DiscoveryConfig();
   EXPECT_THAT(Diagnose(config, {}, DiagnoseOptions{}),
