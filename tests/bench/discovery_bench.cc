@@ -6,7 +6,9 @@
 // BM_DiscoveryConfusionMatrix: ESG_DISCOVERY_SEEDS (default 10) simulated recordings per true
 // effect (tests/testing/discovery_scenarios.h: mostly orbital, outliers and an outage, the
 // effect in one gyro where that applies), each diagnosed; prints the verdict table to stdout and
-// reports per effect the share of correct verdicts (verdict and gyro right) as counters. Run:
+// reports per effect the share of correct verdicts (verdict and gyro right) as counters.
+// ESG_DISCOVERY_ROWS=library or =time selects the library's rows or the time behaviours' (with
+// `none`). Run:
 //   <build>/tests/bench/esg_bench --benchmark_filter=Confusion
 // (scripts/confusion_matrix.sh). Takes a few minutes.
 #include <algorithm>
