@@ -452,6 +452,16 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   for (size_t j = kOnsetRefine - 1; j < grid_frames.size(); j += kOnsetRefine) {
     if (absl::Status s = evaluate(grid_frames[j]); !s.ok()) return s;
   }
+  if (best_frame < 0) {  // a recording too short for the coarse grid: every onset of the finer
+    for (int f : grid_frames) {
+      if (absl::Status s = evaluate(f); !s.ok()) return s;
+    }
+  }
+  if (best_frame < 1) {  // nothing to search: no step fitted
+    fit.parameters = 0;
+    fit.run = *ctx.model_run;
+    return absl::OkStatus();
+  }
   // Refinement 1: the finer grid within one coarse spacing of the best coarse onset.
   {
     const absl::Duration spacing = length / kOnsetCoarse;
