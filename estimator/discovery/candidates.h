@@ -17,7 +17,8 @@
 //   drift_step (gyro g)           a drift constant in case axes switched on at an onset T (the
 //                                 step of C1 of eq. (10)); the likelihood profiled over T on a
 //                                 grid of onsets, refined near its maximum (3 parameters, the
-//                                 onset by Bonferroni over the onsets searched)
+//                                 onset by Bonferroni over the onsets searched; fitted by
+//                                 time_behaviour.h)
 // Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
 // rotation is not when every running gyro's misalignment is already estimated.
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
@@ -102,15 +103,6 @@ struct CandidateFit {
 // Errors: InvalidArgument for a gyro that is not configured; those of RunModel.
 absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& context);
 
-// A drift step of `candidate.gyro` (docs/discovery.md, "Time behaviour"): the C1 states of the
-// gyro released at an onset (session.h CoefficientRelease, prior c_sigma_deg_h), the likelihood
-// profiled over the onset on a coarse grid refined twice near its maximum; every onset run
-// continues from a checkpoint of one run without the step, so an onset costs the part of a run
-// after it. Fills `fit` (model, run, parameters, time, notes). Errors: InvalidArgument for a gyro
-// that is not configured; those of RunModel.
-absl::Status FitDriftStep(const Candidate& candidate, const FitContext& context,
-                          CandidateFit& fit);
-
 // Model-free first estimate of a star-tracker latency: the star tracker's rotation between
 // consecutive samples against the gyros' (TRIAD on the inertially fixed spin axes) differs by
 // -tau times the change of the body rate over the step. Observable only where the rate changes
@@ -140,13 +132,6 @@ ProfiledDeviance Profile(const ModelRun& run);
 void DescribeRotorDisplacement(const SpacecraftConfig& config,
                                const std::vector<TelemetryFrame>& frames, int gyro,
                                CandidateFit& fit);
-
-// The trend of a gyro's suspension offset voltages through eq. (3): a robust line per case axis
-// [mV/h], the displacement rate it implies [um/h] with its 1-sigma (from the line's residual
-// scatter), and a chi-square(3) test of "no trend". Evidence only (a growing displacement is not
-// yet a candidate); appended to `fit` (parameters displacementRateUmPerH[0..2], a note).
-void DescribeVoltageTrend(const SpacecraftConfig& config,
-                          const std::vector<TelemetryFrame>& frames, int gyro, CandidateFit& fit);
 
 }  // namespace esg::estimator::discovery
 

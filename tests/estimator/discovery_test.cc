@@ -15,6 +15,7 @@
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
 #include "estimator/discovery/statistics.h"
+#include "estimator/discovery/time_behaviour.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
@@ -158,7 +159,7 @@ TEST(DiscoveryModelRun, StarTrackerCorrectionUndoesMisalignment) {
               rates.best[0].norm() * 0.4, 1e-12);
 }
 
-// The drift step's onset search continues runs from checkpoints (candidates.h FitDriftStep): a
+// The drift step's onset search continues runs from checkpoints (time_behaviour.h FitDriftStep): a
 // run continued from a checkpoint taken before frame k, with the first run's steps before k,
 // gives the same steps and deviance as the one run.
 TEST(DiscoveryModelRun, RunContinuedFromACheckpointEqualsOneRun) {
