@@ -366,6 +366,12 @@ void EstimationSession::ApplyCoefficientReleases(absl::Time frame_time) {
     if (!(r.time > last_time_ && r.time <= frame_time)) continue;
     const int i = IndexOf(r.gyro_id);
     if (i < 0) continue;
+    if (r.misalignment) {
+      if (!layout_.HasPhi(i)) continue;
+      const int p = layout_.Phi(i);
+      for (int k = 0; k < StateLayout::kPhiSize; ++k) P_(p + k, p + k) += r.sigma * r.sigma;
+      continue;
+    }
     const std::vector<int>& free = layout_.FreeCoefficients(i);
     for (size_t j = 0; j < free.size(); ++j) {
       if (free[j] < r.first || free[j] >= r.first + r.count) continue;

@@ -186,13 +186,18 @@ struct SessionOptions {
   // propagating to it, the variance sigma^2 is added to each free coefficient state of gyro
   // `gyro_id` with a drift_model.h theta index in [first, first + count): from then on the
   // coefficient is C(before) + Delta, Delta ~ N(0, sigma^2) independent of the past. A
-  // coefficient held at its configured value (not free) is not affected.
+  // coefficient held at its configured value (not free) is not affected. With `misalignment`
+  // set, the variance sigma^2 [rad^2] is added instead to the gyro's three misalignment states
+  // (first and count ignored; none when the gyro's misalignment is not estimated): its readings
+  // jump by an unknown constant rotation of its case at `time` (a readout jump, a fault;
+  // docs/discovery.md, "Time behaviour", D43).
   struct CoefficientRelease {
     int gyro_id = 0;
     int first = 0;
     int count = 0;
     absl::Time time = absl::InfiniteFuture();
-    double sigma = 0.0;  // [rad/s]
+    double sigma = 0.0;  // [rad/s]; [rad] with misalignment
+    bool misalignment = false;
   };
   std::vector<CoefficientRelease> coefficient_releases;
 };

@@ -97,6 +97,13 @@ struct CandidateFit {
   bool boundary = false;
   // Onset profile of a step: hours since the first frame, -2 log L (profiled).
   std::vector<std::pair<double, double>> onset_profile;
+  // A step's competing alternative that is no physics (D43): the gyro's readings jump at the
+  // onset (its misalignment states released with the misalignment prior, 3 parameters), profiled
+  // over the step's onsets within its interval. -2 log L (profiled) of the best such run, and its
+  // onset [h since the first frame]; readout_fitted false when not fitted.
+  bool readout_fitted = false;
+  double readout_value = 0.0;
+  double readout_onset_hours = 0.0;
 };
 
 // Fits one candidate (1 to 5 filter runs, sequential; candidates run in parallel).

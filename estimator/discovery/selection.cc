@@ -420,6 +420,37 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         fits[significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
     if (settled || timed.empty()) break;
   }
+  // A time behaviour must explain the recording better than a jump of the gyro's readings at the
+  // onset (D43): a step of the readings is no physics of the library, and a drift step or a walk
+  // that fits it only in part is the nearest candidate forced onto a fault. Same currency: the
+  // profiled -2 log L with the onset's BIC penalty (the readout jump has 3 parameters, as the
+  // step). When the readout jump does at least as well, nothing is taken and the
+  // mismatch is left unexplained, located in time.
+  std::string readout_note;
+  if (!significant.empty()) {
+    const Scored& top = significant.front();
+    const Candidate& c = fits[top.index].candidate;
+    const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift;
+    const CandidateFit* jump = nullptr;
+    for (const CandidateFit& f : fits) {
+      if (!timed_top || f.candidate.effect != Effect::kDriftStep || !f.readout_fitted) continue;
+      if (c.gyro > 0 && f.candidate.gyro != c.gyro) continue;  // a walk of all gyros: any gyro
+      if (jump == nullptr || f.readout_value < jump->readout_value) jump = &f;
+    }
+    if (jump != nullptr) {
+      const double jump_score = selected.fit.value - jump->readout_value - log_n;
+      if (jump_score >= top.score) {
+        readout_note = absl::StrFormat(
+            "resembles a step of gyro %d's readings at %.2f h (a readout jump, a fault outside "
+            "the library): its misalignment released at that instant scores %.1f against "
+            "%.1f for %s, which fits it only in part",
+            jump->candidate.gyro, jump->readout_onset_hours, jump_score, top.score,
+            CandidateName(c));
+        significant.clear();
+        inhomogeneous_only = true;
+      }
+    }
+  }
   int chosen = -1;
   Contenders contenders;
   if (!significant.empty()) {
@@ -437,6 +468,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
   if (chosen < 0) {
     result.time_localized = inhomogeneous_only;
+    result.time_localized_note = readout_note;
     return result;
   }
   CandidateFit& f = fits[chosen];

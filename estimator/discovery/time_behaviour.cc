@@ -60,8 +60,12 @@ constexpr int kOnsetRefine = 4;
 // A coefficient the model holds is put in the filter's layout with this prior so that it can be
 // released at the onset; before it the filter keeps it at its configured value.
 constexpr double kHeldSigmaDegH = 1e-6;
+constexpr double kHeldSigmaArcsec = 1e-6;
 // chi-square(1) 95% quantile: the onset interval is where -2 log L stays within it of its minimum.
 constexpr double kOnsetIntervalDrop = 3.841458820694124;
+// The readout-jump alternative (D43) is profiled over at most this many of the step's onsets
+// inside its interval, nearest the best first.
+constexpr size_t kReadoutOnsets = 8;
 
 // The first frame at or after `t`.
 int FrameAtOrAfter(const std::vector<TelemetryFrame>& frames, absl::Time t) {
@@ -86,6 +90,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
     if (!(sigma(i) > 0.0)) sigma(i) = DegPerHourToRadPerSec(kHeldSigmaDegH);
   }
   g->model_sigma = DriftCoefficients::FromVector(sigma);
+  // The misalignment states too, held the same way, for the competing readout jump (D43).
+  if (!(g->misalignment_sigma > 0.0)) g->misalignment_sigma = ArcsecToRad(kHeldSigmaArcsec);
   const double step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
   const std::vector<TelemetryFrame> frames =
       CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
@@ -244,6 +250,59 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
     }
   }
   const double onset_hours = profile[best_j].first;
+  // The competing readout jump (D43): the same onsets, the gyro's misalignment states released
+  // instead of its C1 (a jump of its readings that does not grow). A drift step makes a ramp it
+  // cannot follow; a readout jump fitted as a drift step leaves the transient it explains.
+  {
+    const double readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+    std::vector<int> near;
+    for (const auto& [f, v] : value) {
+      const double h = HoursSinceStart(frames, f - 1);
+      if (h >= lower && h <= upper) near.push_back(f);
+    }
+    std::sort(near.begin(), near.end(), [&](int a, int b) {
+      return std::abs(a - best_frame) < std::abs(b - best_frame);
+    });
+    if (near.size() > kReadoutOnsets) near.resize(kReadoutOnsets);
+    for (int f : near) {
+      SessionOptions options = fit.model.options;
+      SessionOptions::CoefficientRelease release;
+      release.gyro_id = candidate.gyro;
+      release.time = frames[f].time;
+      release.sigma = readout_sigma;
+      release.misalignment = true;
+      options.coefficient_releases.push_back(release);
+      ModelRunOptions ro;
+      ro.start = &checkpoints[f];
+      ro.start_frame = f;
+      auto tail = RunModel(fit.model.config, options, frames, ro);
+      ++fit.runs;
+      if (!tail.ok()) return tail.status();
+      ModelRun run;
+      for (const StepRecord& s : prefix->steps) {
+        if (s.frame < f) run.steps.push_back(s);
+      }
+      run.steps.insert(run.steps.end(), std::make_move_iterator(tail->steps.begin()),
+                       std::make_move_iterator(tail->steps.end()));
+      run.gyros = std::move(tail->gyros);
+      run.resets = tail->resets;
+      run.rejections = tail->rejections;
+      const double v = Profile(run).value;
+      if (!fit.readout_fitted || v < fit.readout_value) {
+        fit.readout_fitted = true;
+        fit.readout_value = v;
+        fit.readout_onset_hours = HoursSinceStart(frames, f - 1);
+      }
+    }
+    if (fit.readout_fitted) {
+      fit.notes.push_back(absl::StrFormat(
+          "a jump of the gyro's readings at %.2f h (its misalignment released, prior %.0f "
+          "arcsec; %d onsets in the interval) fits -2 log L %.1f %s the drift step's",
+          fit.readout_onset_hours, opt.misalignment_sigma_arcsec, near.size(),
+          std::abs(fit.readout_value - profile[best_j].second),
+          fit.readout_value <= profile[best_j].second ? "below" : "above"));
+    }
+  }
   fit.time.onset = frames[best_frame - 1].time;
   fit.time.onset_hours = onset_hours;
   fit.time.onset_lower_hours = lower;
