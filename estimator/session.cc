@@ -305,6 +305,7 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& fra
   }
   // Transactional step: work on a copy, commit only on success.
   EstimationSession next = *this;
+  next.ApplyCoefficientReleases(frame.time);
   if (absl::Status s = next.Propagate(frame); !s.ok()) return s;
   next.last_time_ = frame.time;
   const double since_update = Seconds(frame.time - next.last_update_time_);
@@ -365,6 +366,33 @@ std::vector<std::pair<int, double>> EstimationSession::RelativeSigma(int id) con
     out.emplace_back(layout_.FreeCoefficients(i)[j], std::sqrt(P_(idx, idx) / P0_(idx, idx)));
   }
   return out;
+}
+
+void EstimationSession::ApplyCoefficientReleases(absl::Time frame_time) {
+  for (const SessionOptions::CoefficientRelease& r : options_.coefficient_releases) {
+    if (!(r.time > last_time_ && r.time <= frame_time)) continue;
+    const int i = IndexOf(r.gyro_id);
+    if (i < 0) continue;
+    if (r.misalignment) {
+      if (!layout_.HasPhi(i)) continue;
+      const int p = layout_.Phi(i);
+      for (int k = 0; k < StateLayout::kPhiSize; ++k) P_(p + k, p + k) += r.sigma * r.sigma;
+      continue;
+    }
+    const std::vector<int>& free = layout_.FreeCoefficients(i);
+    for (size_t j = 0; j < free.size(); ++j) {
+      if (free[j] < r.first || free[j] >= r.first + r.count) continue;
+      const int s = layout_.Theta(i) + static_cast<int>(j);
+      P_(s, s) += r.sigma * r.sigma;
+    }
+  }
+}
+
+double EstimationSession::RandomWalkOf(int id) const {
+  for (const auto& [gyro, q] : options_.random_walk_by_gyro) {
+    if (gyro == id) return q;
+  }
+  return config_.random_walk;
 }
 
 }  // namespace esg::estimator

@@ -47,6 +47,7 @@
 #include <array>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Core"
@@ -187,6 +188,28 @@ struct SessionOptions {
   // star-tracker misalignment as physics.
   bool realign_star_tracker = true;
   StarTrackerMountOptions star_tracker_mount;
+  // Diagnosis only (docs/discovery.md, "Time behaviour"); empty for calibration and the service.
+  // Per-gyro residual random-walk intensities of eq. (11) [rad/s/sqrt(s)], replacing
+  // config.random_walk for the listed gyro ids (gyro id, intensity).
+  std::vector<std::pair<int, double>> random_walk_by_gyro;
+  // Steps of free drift coefficients at a time: at the first frame at or after `time`, before
+  // propagating to it, the variance sigma^2 is added to each free coefficient state of gyro
+  // `gyro_id` with a drift_model.h theta index in [first, first + count): from then on the
+  // coefficient is C(before) + Delta, Delta ~ N(0, sigma^2) independent of the past. A
+  // coefficient held at its configured value (not free) is not affected. With `misalignment`
+  // set, the variance sigma^2 [rad^2] is added instead to the gyro's three misalignment states
+  // (first and count ignored; none when the gyro's misalignment is not estimated): its readings
+  // jump by an unknown constant rotation of its case at `time` (a readout jump, a fault;
+  // docs/discovery.md, "Time behaviour", D43).
+  struct CoefficientRelease {
+    int gyro_id = 0;
+    int first = 0;
+    int count = 0;
+    absl::Time time = absl::InfiniteFuture();
+    double sigma = 0.0;  // [rad/s]; [rad] with misalignment
+    bool misalignment = false;
+  };
+  std::vector<CoefficientRelease> coefficient_releases;
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
@@ -384,6 +407,11 @@ class EstimationSession {
 
   // session.cc
   void UpdateState(const StepReport& report);
+  // Applies the options' coefficient releases whose time lies in (last_time_, frame_time].
+  void ApplyCoefficientReleases(absl::Time frame_time);
+  // Residual random-walk intensity of gyro `id` [rad/s/sqrt(s)] (options' per-gyro value or the
+  // configuration's).
+  double RandomWalkOf(int id) const;
   // A GYRO_READING_MISSING event per running, not excluded gyro without a reading in the latest
   // frame (after the output of `report` is set).
   void ReportMissingReadings(StepReport& report) const;

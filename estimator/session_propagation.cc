@@ -149,7 +149,6 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   // own residual drifts and free coefficients, which follow the spin-axis pair contiguously. So
   // P <- P + E P + P E^T + E P E^T + Q costs O(n k) instead of O(n^3).
   std::vector<MatrixXd> E(gyros_.size());
-  const double q_rw = config_.random_walk;
   for (int i = 0; i < gyro_count(); ++i) {
     GyroState& g = gyros_[i];
     // Keep the tangent basis perpendicular to the moved axis (a change of order 1e-5 rad).
@@ -190,6 +189,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     }
     if (rw) {
       // Integrated random walk (eq. (11)) over the interval.
+      const double q_rw = RandomWalkOf(gyros_[i].id);  // eq. (11)
       const double q2 = q_rw * q_rw;
       const int h = layout_.SpinAxis(i), d = layout_.Drift(i);
       P_.block<2, 2>(d, d) += q2 * span * Matrix2d::Identity();

@@ -49,6 +49,22 @@ json EvidenceJson(const Evidence& e) {
   return j;
 }
 
+// How the finding behaves in time (report.h TimeBehaviour); the onset and its interval for a
+// step.
+json TimeBehaviourJson(const estimator::discovery::TimeBehaviour& t) {
+  json j{{"kind", t.kind}};
+  if (t.kind == "step") {
+    j["onset"] = Utc(t.onset);
+    j["onsetHours"] = Number(t.onset_hours);
+    j["onsetLower"] = Utc(t.onset_lower);
+    j["onsetUpper"] = Utc(t.onset_upper);
+    j["onsetLowerHours"] = Number(t.onset_lower_hours);
+    j["onsetUpperHours"] = Number(t.onset_upper_hours);
+    j["onsetsSearched"] = t.onsets_searched;
+  }
+  return j;
+}
+
 json FindingJson(const Finding& f) {
   json j{{"effect", f.effect}};
   if (f.gyro > 0) j["gyro"] = f.gyro;
@@ -57,6 +73,7 @@ json FindingJson(const Finding& f) {
   j["parameters"] = params;
   j["explanation"] = f.explanation;
   j["evidence"] = EvidenceJson(f.evidence);
+  if (f.effect != "unexplained") j["timeBehaviour"] = TimeBehaviourJson(f.time);
   return j;
 }
 
@@ -123,6 +140,8 @@ json CandidateJson(const CandidateScore& c) {
   j["significant"] = c.significant;
   j["homogeneous"] = c.homogeneous;
   j["selected"] = c.selected;
+  j["timeBehaviour"] = c.time_behaviour;
+  if (c.onset_hours >= 0) j["onsetHours"] = Number(c.onset_hours);
   return j;
 }
 

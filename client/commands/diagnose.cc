@@ -68,7 +68,7 @@ std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
       disc::Effect::kRotorDisplacement,       disc::Effect::kFourthHarmonic,
       disc::Effect::kUnequalStiffness,        disc::Effect::kGyroMisalignment,
       disc::Effect::kStarTrackerMisalignment, disc::Effect::kStarTrackerLatency,
-      disc::Effect::kRandomWalkDrift};
+      disc::Effect::kRandomWalkDrift,         disc::Effect::kDriftStep};
   for (absl::string_view part : absl::StrSplit(text, ',', absl::SkipEmpty())) {
     bool found = false;
     for (disc::Effect e : all) {
@@ -310,14 +310,17 @@ std::string WritePlots(const disc::DiagnosisReport& r, const std::filesystem::pa
   absl::StrAppend(
       &md,
       "\n![residuals](residuals.png)\n\n![held-out error](held_out.png)\n\n## Candidates tried\n\n",
-      "| round | effect | gyro | k | delta -2 log L | penalty | p | significant | selected |\n",
-      "|---|---|---|---|---|---|---|---|---|\n");
+      "| round | effect | gyro | time behaviour | k | delta -2 log L | penalty | p | significant | "
+      "selected |\n",
+      "|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& c : r.candidates) {
+    const std::string behaviour =
+        c.onset_hours >= 0 ? absl::StrFormat("step at %.2f h", c.onset_hours) : c.time_behaviour;
     absl::StrAppend(
-        &md, absl::StrFormat("| %d | %s | %s | %d | %.1f | %.1f | %.2g | %s | %s |\n", c.round + 1,
-                             c.effect, c.gyro > 0 ? absl::StrCat(c.gyro) : "", c.parameters,
-                             c.delta_deviance, c.penalty, c.p_value, c.significant ? "yes" : "",
-                             c.selected ? "**yes**" : ""));
+        &md, absl::StrFormat("| %d | %s | %s | %s | %d | %.1f | %.1f | %.2g | %s | %s |\n",
+                             c.round + 1, c.effect, c.gyro > 0 ? absl::StrCat(c.gyro) : "",
+                             behaviour, c.parameters, c.delta_deviance, c.penalty, c.p_value,
+                             c.significant ? "yes" : "", c.selected ? "**yes**" : ""));
   }
   absl::StrAppend(&md,
                   "\n## Regimes\n\n| start | end | regime | rate, deg/s |\n|---|---|---|---|\n");

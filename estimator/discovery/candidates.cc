@@ -1,13 +1,17 @@
 #include "estimator/discovery/candidates.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <iterator>
+#include <map>
 
 #include "Eigen/Eigenvalues"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
 #include "estimator/discovery/statistics.h"
+#include "estimator/discovery/time_behaviour.h"
 #include "estimator/drift_model.h"
 #include "estimator/rotation.h"
 #include "estimator/spacecraft_config.h"
@@ -172,9 +176,24 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
       !added(EffectId(Effect::kStarTrackerLatency))) {
     out.push_back({Effect::kStarTrackerLatency, 0});
   }
+  // Time behaviour: a drift switched on during the recording, per gyro; a random walk raised in
+  // every gyro or in one (once one is raised, no other is offered).
+  for (int id : gyros) {
+    if (model.config.FindGyro(id) == nullptr) continue;
+    if (Effective(effects, Effect::kDriftStep) &&
+        !added(CandidateName({Effect::kDriftStep, id}))) {
+      out.push_back({Effect::kDriftStep, id});
+    }
+  }
+  const bool walk_added = std::any_of(model.added.begin(), model.added.end(), [](const auto& a) {
+    return a.rfind(EffectId(Effect::kRandomWalkDrift), 0) == 0;
+  });
   if (Effective(effects, Effect::kRandomWalkDrift) && model.options.model.random_walk &&
-      !added(EffectId(Effect::kRandomWalkDrift))) {
+      !walk_added) {
     out.push_back({Effect::kRandomWalkDrift, 0});
+    for (int id : gyros) {
+      if (model.config.FindGyro(id) != nullptr) out.push_back({Effect::kRandomWalkDrift, id});
+    }
   }
   return out;
 }
@@ -248,6 +267,7 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   }
   const Vector3d mean_mv = sum / n;
   const Vector3d sd_mv = (sum2 / n - mean_mv.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
+  DescribeVoltageTrend(config, frames, gyro, fit);
   const SuspensionConfig& s = config.suspension;
   Vector3d displacement_um;
   for (int i = 0; i < 3; ++i) {
@@ -508,7 +528,31 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       return fit;
     }
     case Effect::kRandomWalkDrift: {
-      const double q0 = ctx.model->config.random_walk;
+      // Common (gyro 0) or of one gyro (session.h SessionOptions::random_walk_by_gyro).
+      if (candidate.gyro > 0 && FindGyroMutable(config, candidate.gyro) == nullptr) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+      }
+      auto set_intensity = [&](ModelState& m, double q) {
+        if (candidate.gyro == 0) {
+          m.config.random_walk = q;
+          return;
+        }
+        auto& by_gyro = m.options.random_walk_by_gyro;
+        for (auto& [id, value] : by_gyro) {
+          if (id == candidate.gyro) {
+            value = q;
+            return;
+          }
+        }
+        by_gyro.emplace_back(candidate.gyro, q);
+      };
+      double q0 = ctx.model->config.random_walk;
+      for (const auto& [id, value] : ctx.model->options.random_walk_by_gyro) {
+        if (id == candidate.gyro) q0 = value;
+      }
+      fit.boundary = true;
+      fit.time.kind = "random_walk";
       const double base = q0 > 0.0 ? q0 : DegPerHourSqrtHourToSi(kRandomWalkFloorDegHSqrtH);
       std::vector<double> grid, value;
       ModelRun best_run;
@@ -519,7 +563,7 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
         const double q = std::min(base * std::pow(2.0, q0 > 0.0 ? k + 1 : k),
                                   DegPerHourSqrtHourToSi(kConfigLimits.random_walk.max));
         ModelState m = fit.model;
-        m.config.random_walk = q;
+        set_intensity(m, q);
         ModelRun r;
         if (absl::Status s = run_model(m, r); !s.ok()) return s;
         const double d = Profile(r).value;
@@ -531,7 +575,7 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
           best_run = std::move(r);
         }
       }
-      fit.model.config.random_walk = grid[best_k];
+      set_intensity(fit.model, grid[best_k]);
       fit.run = std::move(best_run);
       fit.parameters = 1;
       fit.searched = true;
@@ -559,6 +603,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
           grid_text));
       return fit;
     }
+    case Effect::kDriftStep:
+      if (absl::Status s = FitDriftStep(candidate, ctx, fit); !s.ok()) return s;
+      return fit;
   }
   return absl::InternalError("unknown effect");
 }

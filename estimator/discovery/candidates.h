@@ -10,8 +10,15 @@
 //   star_tracker_latency          one delay tau: q_st corrected by the body rate over tau
 //                                 (model_run.h); tau by prediction-error least squares on the
 //                                 innovations' finite-difference sensitivity (1 parameter)
-//   random_walk_drift             the common random-walk intensity, by a log-grid search of the
-//                                 likelihood above the configured one (1 parameter)
+//   random_walk_drift             the random-walk intensity of eq. (11), common to all gyros or of
+//   (common, or gyro g)           one gyro, by a log-grid search of the likelihood above the
+//                                 configured one (1 parameter; a variance on its boundary: the
+//                                 LR against a 50:50 mixture of chi2(0) and chi2(1))
+//   drift_step (gyro g)           a drift constant in case axes switched on at an onset T (the
+//                                 step of C1 of eq. (10)); the likelihood profiled over T on a
+//                                 grid of onsets, refined near its maximum (3 parameters, the
+//                                 onset by Bonferroni over the onsets searched; fitted by
+//                                 time_behaviour.h)
 // Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
 // rotation is not when every running gyro's misalignment is already estimated.
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
@@ -19,6 +26,7 @@
 
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -77,6 +85,25 @@ struct CandidateFit {
   std::vector<Parameter> fitted;
   std::vector<std::string> notes;
   int runs = 0;  // filter runs spent
+  // Time behaviour (report.h TimeBehaviour). A step and a random walk are scored by their own
+  // likelihood ratio and exempt from the constant-effect homogeneity test (selection.h).
+  TimeBehaviour time;
+  // The likelihood-ratio statistic's null distribution: chi-square(parameters), times
+  // `lr_tests` for a maximum over that many searched onsets (Bonferroni); for a variance on its
+  // boundary (`boundary`), the 50:50 mixture of chi2(0) and chi2(parameters).
+  int lr_tests = 1;
+  // Parameters searched on top of prior-freed ones (the onset of a step): BIC penalty each.
+  int searched_parameters = 0;
+  bool boundary = false;
+  // Onset profile of a step: hours since the first frame, -2 log L (profiled).
+  std::vector<std::pair<double, double>> onset_profile;
+  // A step's competing alternative that is no physics (D43): the gyro's readings jump at the
+  // onset (its misalignment states released with the misalignment prior, 3 parameters), profiled
+  // over the step's onsets within its interval. -2 log L (profiled) of the best such run, and its
+  // onset [h since the first frame]; readout_fitted false when not fitted.
+  bool readout_fitted = false;
+  double readout_value = 0.0;
+  double readout_onset_hours = 0.0;
 };
 
 // Fits one candidate (1 to 5 filter runs, sequential; candidates run in parallel).

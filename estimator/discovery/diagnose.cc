@@ -169,12 +169,14 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   selected.held_out = base_held_out;
   const double log_n = std::log(std::max(2, selected.fit.steps));
   bool time_localized = false;  // significant candidates, each only fitting part of the time
+  std::string time_localized_note;
   for (int round = 0; round < options.max_effects; ++round) {
     auto result = SelectionRound(round, report.gyros, log_n, selected, context);
     if (!result.ok()) return result.status();
     report.candidates.insert(report.candidates.end(), result->rows.begin(), result->rows.end());
     if (!result->finding.has_value()) {
       time_localized = result->time_localized;
+      time_localized_note = result->time_localized_note;
       break;
     }
     report.findings.push_back(std::move(*result->finding));
@@ -209,6 +211,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   if (std::optional<Unexplained> u =
           FindUnexplained(mismatches.remaining, time_localized, final_held_out, selected.fit,
                           !report.findings.empty(), options.alpha)) {
+    if (!time_localized_note.empty()) u->finding.evidence.notes.push_back(time_localized_note);
     report.findings.push_back(u->finding);
     if (report.findings.size() == 1) report.mismatch = u->where;
   }

@@ -28,7 +28,8 @@
 // Files: options.h (DiagnoseOptions, the caller's runner), report.h (the report types),
 // candidates.h (the library and how each effect is fitted), model_run.h (one filter run and its
 // deviance), regimes.h (rates and regimes), held_out.h (held-out spans and scoring), selection.h
-// (one forward-selection round), location.h (where a mismatch sits; `unexplained`), context.h
+// (one forward-selection round), time_behaviour.h (a drift switched on at an onset; the voltage
+// trend), location.h (where a mismatch sits; `unexplained`), context.h
 // (what the stages share), statistics.h; this file coordinates them.
 #ifndef ESG_ESTIMATOR_DISCOVERY_DIAGNOSE_H_
 #define ESG_ESTIMATOR_DISCOVERY_DIAGNOSE_H_

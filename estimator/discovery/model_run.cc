@@ -40,7 +40,9 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
   as_configured.adaptive_noise = false;
   as_configured.detect_drift_change = false;
   as_configured.realign_star_tracker = false;
-  auto created = EstimationSession::Create(config, as_configured);
+  auto created = run_options.start != nullptr
+                     ? EstimationSession::FromCheckpoint(config, as_configured, *run_options.start)
+                     : EstimationSession::Create(config, as_configured);
   if (!created.ok()) return created.status();
   EstimationSession session = std::move(*created);
   ModelRun run;
@@ -55,7 +57,20 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
   std::map<int, Matrix3d> C_b_k_config;
   for (const GyroConfig& g : config.gyros) C_b_k_config[g.id] = g.C_b_k;
 
-  for (int i = 0; i < n; ++i) {
+  const int first_frame = run_options.start != nullptr ? std::max(0, run_options.start_frame) : 0;
+  const int end_frame =
+      run_options.stop_frame >= 0 ? std::min(n, run_options.stop_frame + 1) : n;
+  size_t next_checkpoint = 0;
+  while (next_checkpoint < run_options.checkpoint_frames.size() &&
+         run_options.checkpoint_frames[next_checkpoint] < first_frame) {
+    ++next_checkpoint;
+  }
+  for (int i = first_frame; i < end_frame; ++i) {
+    while (next_checkpoint < run_options.checkpoint_frames.size() &&
+           run_options.checkpoint_frames[next_checkpoint] == i) {
+      run.checkpoints.push_back(session.ExportCheckpoint());
+      ++next_checkpoint;
+    }
     const TelemetryFrame& frame = frames[i];
     const bool withheld = withheld_span[i] >= 0;
     session.SetStarTrackerUse(!withheld);

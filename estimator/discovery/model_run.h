@@ -76,6 +76,16 @@ struct HeldOutSample {
 struct ModelRunOptions {
   // Frame ranges [first, last] (inclusive) over which the star tracker is withheld.
   std::vector<std::pair<int, int>> withheld;
+  // Continue from `start` (a checkpoint of the same configuration and layout taken before frame
+  // `start_frame`) instead of from the first frame: the run's steps then begin at start_frame.
+  // The session continues bit for bit (session.h ExportCheckpoint), so the steps before
+  // start_frame of the run that took the checkpoint complete it.
+  const SessionCheckpoint* start = nullptr;
+  int start_frame = 0;
+  // Checkpoints taken before each of these frames (ascending) into ModelRun::checkpoints.
+  std::vector<int> checkpoint_frames;
+  // Last frame to process (-1: to the end).
+  int stop_frame = -1;
 };
 
 struct ModelRun {
@@ -84,6 +94,8 @@ struct ModelRun {
   std::vector<GyroEstimate> gyros;  // final estimates
   int resets = 0;                   // FILTER_RESET events
   int rejections = 0;               // star-tracker rejections (eq. (12), (14))
+  // Before each frame of ModelRunOptions::checkpoint_frames that was reached, in that order.
+  std::vector<SessionCheckpoint> checkpoints;
 };
 
 // Runs the session over `frames` (already corrected). Errors: those of

@@ -24,6 +24,8 @@ const char* EffectId(Effect e) {
       return "star_tracker_latency";
     case Effect::kRandomWalkDrift:
       return "random_walk_drift";
+    case Effect::kDriftStep:
+      return "drift_step";
   }
   return "?";
 }
@@ -113,9 +115,26 @@ std::string ExplainFinding(const Finding& f) {
     const Parameter* q = FindParameter(ps, "randomWalkDegHSqrtH");
     const Parameter* q0 = FindParameter(ps, "configuredRandomWalkDegHSqrtH");
     return absl::StrFormat(
-        "the drift is less stable than configured: random-walk intensity %.4f "
+        "the drift %s is less stable than configured: random-walk intensity (eq. (11)) %.4f "
         "deg/h/sqrt(h) against %.4f configured; %s",
+        f.gyro > 0 ? absl::StrFormat("of gyro %d alone", f.gyro) : "of every gyro",
         q ? q->value : 0.0, q0 ? q0->value : 0.0, stats);
+  }
+  if (f.effect == "drift_step") {
+    const Parameter* size = FindParameter(ps, "driftStepSizeDegH");
+    const TimeBehaviour& t = f.time;
+    const double half_width_h = 0.5 * (t.onset_upper_hours - t.onset_lower_hours);
+    const std::string half_width = half_width_h < 1.0
+                                       ? absl::StrFormat("%.0f min", half_width_h * 60.0)
+                                       : absl::StrFormat("%.1f h", half_width_h);
+    return absl::StrFormat(
+        "drift step of %.3f +- %.3f deg/h in gyro %d at %s +- %s (%.2f h from the start; "
+        "95%% onset interval %.2f-%.2f h, %s - %s): a drift constant in case axes, d = %s deg/h, "
+        "switched on then (a step of C1 by -d in eq. (10)); %s, best of %d onsets",
+        size ? size->value : 0.0, size ? size->sigma : 0.0, f.gyro, UtcText(t.onset), half_width,
+        t.onset_hours, t.onset_lower_hours, t.onset_upper_hours, UtcText(t.onset_lower),
+        UtcText(t.onset_upper), VectorText(ps, "driftStepDegH", "%.3f"), stats,
+        t.onsets_searched);
   }
   return stats;
 }

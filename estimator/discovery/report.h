@@ -24,6 +24,7 @@ enum class Effect {
   kStarTrackerMisalignment,
   kStarTrackerLatency,
   kRandomWalkDrift,
+  kDriftStep,
 };
 const char* EffectId(Effect e);  // "rotor_displacement", ...
 inline constexpr const char* kVerdictNone = "none";
@@ -52,12 +53,30 @@ struct Evidence {
   std::vector<std::string> notes;  // human-readable supporting facts
 };
 
+// How a finding behaves in time (docs/discovery.md, "Time behaviour"): constant over the
+// recording (the effects of eq. (1), (8)-(10), mountings, the star tracker), switched on at an
+// onset (a drift step), or a random walk whose intensity was raised.
+struct TimeBehaviour {
+  std::string kind = "constant";  // "constant", "step" or "random_walk"
+  // For "step": the onset maximising the likelihood and its interval where -2 log L stays within
+  // the chi-square(1) 95% quantile (3.84) of its minimum; the interval is clipped to the onsets
+  // searched (docs/discovery.md).
+  absl::Time onset = absl::InfinitePast();
+  absl::Time onset_lower = absl::InfinitePast();
+  absl::Time onset_upper = absl::InfinitePast();
+  double onset_hours = 0.0;  // since the first frame
+  double onset_lower_hours = 0.0;
+  double onset_upper_hours = 0.0;
+  int onsets_searched = 0;  // grid points of the onset search (the Bonferroni factor)
+};
+
 struct Finding {
   std::string effect;  // EffectId, or "unexplained"
   int gyro = 0;        // gyro id where the effect is per gyro, 0 otherwise
   std::vector<Parameter> parameters;
   std::string explanation;
   Evidence evidence;
+  TimeBehaviour time;
 };
 
 // Where the recording and a model disagree most.
@@ -123,6 +142,10 @@ struct CandidateScore {
   // of the library is constant in time).
   bool homogeneous = true;
   bool selected = false;
+  // "constant", "step" (onset searched) or "random_walk" (intensity searched); a step and a
+  // random walk are tested by their own likelihood ratio, not by the homogeneity test.
+  std::string time_behaviour = "constant";
+  double onset_hours = -1.0;  // best onset of a step, hours since the first frame
 };
 
 // Time series for the report's plots.

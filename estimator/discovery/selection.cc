@@ -46,6 +46,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
   std::vector<int> order(candidates.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
   auto cost = [](const Candidate& c) {
+    if (c.effect == Effect::kDriftStep) return 12;
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
   std::stable_sort(order.begin(), order.end(),
@@ -66,7 +67,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
 
 // Likelihood-ratio score, significance and homogeneity of each fit against the selected model.
 std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedModel& selected,
-                          double log_n, const DiagnosisContext& context) {
+                          double log_n, int family, const DiagnosisContext& context) {
   const DiagnoseOptions& options = context.options();
   const std::vector<double> current_steps = StepDeviance(selected.run);
   std::vector<Scored> scored;
@@ -76,13 +77,20 @@ std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedM
     Scored s;
     s.index = static_cast<int>(i);
     s.delta = selected.fit.value - d.value;
-    s.penalty = f.searched ? f.parameters * log_n : 0.0;
+    s.penalty = (f.searched ? f.parameters : f.searched_parameters) * log_n;
     s.score = s.delta - s.penalty;
     const int k = std::max(1, f.parameters);
-    s.p = ChiSquareSurvival(std::max(0.0, s.delta), k);
-    s.threshold = ChiSquareQuantile(1.0 - options.alpha / fits.size(), k);
-    s.significant =
-        f.parameters > 0 && Significant(s.p, options.alpha, static_cast<int>(fits.size()));
+    // The LR's null distribution (candidates.h): chi-square(k); for a variance on its boundary
+    // (a random-walk intensity) the 50:50 mixture of chi2(0) and chi2(k), P(LR > x) =
+    // P(chi2_k > x) / 2 for x > 0; for the maximum over the onsets of a step, Bonferroni over
+    // the onsets searched.
+    const double mixture = f.boundary ? 0.5 : 1.0;
+    const int tests = std::max(1, f.lr_tests);
+    s.p = s.delta > 0.0 || !f.boundary
+              ? std::min(1.0, tests * mixture * ChiSquareSurvival(std::max(0.0, s.delta), k))
+              : 1.0;
+    s.threshold = ChiSquareQuantile(1.0 - options.alpha / family / mixture / tests, k);
+    s.significant = f.parameters > 0 && Significant(s.p, options.alpha, family);
     // Homogeneity: the effects of the library are constant in time. With its parameters held
     // from the start at their final values, an effect that makes the fit worse in a quarter of
     // the recording by more than its cost there (k ln n_q, plus the chi-square quantile) while
@@ -97,7 +105,10 @@ std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedM
       s.quarters[q] += current_steps[j] - cand_steps[j];
       ++steps_in[q];
     }
-    for (int q = 0; q < kQuarters; ++q) {
+    // A step or a random walk describes a change in time itself: tested by its own likelihood
+    // ratio above, not by this test of a constant effect.
+    const bool constant = f.time.kind == "constant";
+    for (int q = 0; q < kQuarters && constant; ++q) {
       const double cost = k * std::log(std::max(2, steps_in[q])) +
                           ChiSquareQuantile(1.0 - options.alpha / kQuarters, k);
       if (s.quarters[q] < -cost) s.homogeneous = false;
@@ -127,6 +138,16 @@ std::vector<Scored> SignificantInOrder(const std::vector<Scored>& scored,
         std::max_element(pool.begin(), pool.end(),
                          [](const Scored& a, const Scored& b) { return a.score < b.score; });
     if (!top->homogeneous) {
+      // A change in time. A raised random walk (its own test) that explains at least as much
+      // describes it; otherwise it is unexplained.
+      const Scored* walk = nullptr;
+      for (const Scored& x : scored) {
+        if (fits[x.index].candidate.effect == Effect::kRandomWalkDrift && x.significant &&
+            (walk == nullptr || x.score > walk->score)) {
+          walk = &x;
+        }
+      }
+      if (pass == 0 && walk != nullptr && walk->score >= top->score) continue;
       inhomogeneous_only = true;
       break;
     }
@@ -145,17 +166,17 @@ std::vector<Scored> SignificantInOrder(const std::vector<Scored>& scored,
 // the explanation and `significant` becomes it alone. Returns the note for the finding (empty
 // when the comparison was not made).
 absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
-                                             const std::vector<CandidateFit>& fits,
+                                             const std::vector<CandidateFit>& fits, int family,
                                              std::vector<Scored>& significant,
                                              DiagnosisContext& context) {
   if (significant.empty() ||
       fits[significant.front().index].candidate.effect == Effect::kRandomWalkDrift) {
     return std::string();
   }
-  const Scored* rw = nullptr;
+  const Scored* rw = nullptr;  // the best-scoring significant random walk, common or per gyro
   for (const Scored& x : scored) {
     if (fits[x.index].candidate.effect == Effect::kRandomWalkDrift && x.significant &&
-        x.homogeneous)
+        x.homogeneous && (rw == nullptr || x.score > rw->score))
       rw = &x;
   }
   if (rw == nullptr) return std::string();
@@ -163,16 +184,19 @@ absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
   const CandidateFit& walk = fits[rw->index];
   ModelState both = det.model;
   both.config.random_walk = walk.model.config.random_walk;
+  both.options.random_walk_by_gyro = walk.model.options.random_walk_by_gyro;
   auto run = context.CheckedRun(both, /*held_out=*/false);
   if (!run.ok()) return run.status();
   const double gain = Profile(walk.run).value - Profile(*run).value;
   const int k = std::max(1, det.parameters);
   const double p_det = ChiSquareSurvival(std::max(0.0, gain), k);
   std::string note = absl::StrFormat(
-      "on top of a random walk raised to %.4f deg/h/sqrt(h) it still improves -2 log L by "
+      "on top of a random walk raised to %.4f deg/h/sqrt(h) (%s) it still improves -2 log L by "
       "%.1f (p = %.2g)",
-      SiToDegPerHourSqrtHour(walk.model.config.random_walk), gain, p_det);
-  if (!Significant(p_det, context.options().alpha, static_cast<int>(fits.size()))) {
+      SiToDegPerHourSqrtHour(walk.fitted.empty() ? walk.model.config.random_walk
+                                                 : DegPerHourSqrtHourToSi(walk.fitted[0].value)),
+      CandidateName(walk.candidate), gain, p_det);
+  if (!Significant(p_det, context.options().alpha, family)) {
     significant.assign(1, *rw);
     note = absl::StrFormat(
         "%s fits part of it but adds nothing significant on top of the raised random walk "
@@ -287,6 +311,8 @@ CandidateScore Row(const Scored& s, const CandidateFit& f, int round, int chosen
   row.significant = s.significant;
   row.homogeneous = s.homogeneous;
   row.selected = s.index == chosen;
+  row.time_behaviour = f.time.kind;
+  if (f.time.kind == "step") row.onset_hours = f.time.onset_hours;
   return row;
 }
 
@@ -300,6 +326,7 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   finding.effect = EffectId(f.candidate.effect);
   finding.gyro = f.candidate.gyro;
   finding.parameters = f.fitted;
+  finding.time = f.time;
   finding.evidence.delta_deviance = s.delta;
   finding.evidence.penalty = s.penalty;
   finding.evidence.parameters = f.parameters;
@@ -332,11 +359,15 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
           })->second.nees));
     }
   }
-  finding.evidence.notes.push_back(
-      absl::StrFormat("improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, "
-                      "%.1f (constant in time, "
-                      "as a physical effect of the library is)",
-                      s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3]));
+  const std::string behaviour =
+      f.time.kind == "step"
+          ? "a step: no change before its onset, tested by its own likelihood ratio over the onset"
+      : f.time.kind == "random_walk"
+          ? "a random walk: tested by its own likelihood ratio, not by the constant-effect test"
+          : "constant in time, as a physical effect of the library is";
+  finding.evidence.notes.push_back(absl::StrFormat(
+      "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (%s)",
+      s.quarters[0], s.quarters[1], s.quarters[2], s.quarters[3], behaviour));
   return finding;
 }
 
@@ -352,19 +383,74 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   if (candidates.empty()) return result;
   context.Say(0.05 + 0.8 * round / options.max_effects,
               absl::StrFormat("round %d: %d candidates", round + 1, candidates.size()));
-  auto fitted = FitCandidates(candidates, round, gyros, selected, context);
-  if (context.Stopped()) return DiagnosisContext::Cancelled();
-  std::vector<CandidateFit> fits;
-  for (auto& f : fitted) {
-    if (!f->ok()) return f->status();
-    context.CountRuns((*f)->runs);
-    fits.push_back(std::move(**f));
+  // Two stages. The constant effects (and the common random walk) first; the time behaviours
+  // (a drift step per gyro, a random walk per gyro: many runs each) only when those leave the
+  // round open: nothing significant, a change in time (the best is inhomogeneous), or a random
+  // walk. Every test counts the whole round's candidates in its Bonferroni level, fitted or not.
+  std::vector<Candidate> constant, timed;
+  for (const Candidate& c : candidates) {
+    const bool time_behaviour = c.effect == Effect::kDriftStep ||
+                                (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
+    (time_behaviour ? timed : constant).push_back(c);
   }
-  const std::vector<Scored> scored = Score(fits, selected, log_n, context);
+  const int family = static_cast<int>(candidates.size());
+  std::vector<CandidateFit> fits;
+  auto fit_all = [&](const std::vector<Candidate>& stage) -> absl::Status {
+    auto fitted = FitCandidates(stage, round, gyros, selected, context);
+    if (context.Stopped()) return DiagnosisContext::Cancelled();
+    for (auto& f : fitted) {
+      if (!f->ok()) return f->status();
+      context.CountRuns((*f)->runs);
+      fits.push_back(std::move(**f));
+    }
+    return absl::OkStatus();
+  };
+  std::vector<Scored> scored;
   bool inhomogeneous_only = false;
-  std::vector<Scored> significant = SignificantInOrder(scored, fits, inhomogeneous_only);
-  auto rw_note = PreferRandomWalk(scored, fits, significant, context);
-  if (!rw_note.ok()) return rw_note.status();
+  std::vector<Scored> significant;
+  absl::StatusOr<std::string> rw_note;
+  for (int stage = 0; stage < 2; ++stage) {
+    if (absl::Status s = fit_all(stage == 0 ? constant : timed); !s.ok()) return s;
+    scored = Score(fits, selected, log_n, family, context);
+    significant = SignificantInOrder(scored, fits, inhomogeneous_only);
+    rw_note = PreferRandomWalk(scored, fits, family, significant, context);
+    if (!rw_note.ok()) return rw_note.status();
+    const bool settled =
+        !significant.empty() &&
+        fits[significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
+    if (settled || timed.empty()) break;
+  }
+  // A time behaviour must explain the recording better than a jump of the gyro's readings at the
+  // onset (D43): a step of the readings is no physics of the library, and a drift step or a walk
+  // that fits it only in part is the nearest candidate forced onto a fault. Same currency: the
+  // profiled -2 log L with the onset's BIC penalty (the readout jump has 3 parameters, as the
+  // step). When the readout jump does at least as well, nothing is taken and the
+  // mismatch is left unexplained, located in time.
+  std::string readout_note;
+  if (!significant.empty()) {
+    const Scored& top = significant.front();
+    const Candidate& c = fits[top.index].candidate;
+    const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift;
+    const CandidateFit* jump = nullptr;
+    for (const CandidateFit& f : fits) {
+      if (!timed_top || f.candidate.effect != Effect::kDriftStep || !f.readout_fitted) continue;
+      if (c.gyro > 0 && f.candidate.gyro != c.gyro) continue;  // a walk of all gyros: any gyro
+      if (jump == nullptr || f.readout_value < jump->readout_value) jump = &f;
+    }
+    if (jump != nullptr) {
+      const double jump_score = selected.fit.value - jump->readout_value - log_n;
+      if (jump_score >= top.score) {
+        readout_note = absl::StrFormat(
+            "resembles a step of gyro %d's readings at %.2f h (a readout jump, a fault outside "
+            "the library): its misalignment released at that instant scores %.1f against "
+            "%.1f for %s, which fits it only in part",
+            jump->candidate.gyro, jump->readout_onset_hours, jump_score, top.score,
+            CandidateName(c));
+        significant.clear();
+        inhomogeneous_only = true;
+      }
+    }
+  }
   int chosen = -1;
   Contenders contenders;
   if (!significant.empty()) {
@@ -382,6 +468,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
   if (chosen < 0) {
     result.time_localized = inhomogeneous_only;
+    result.time_localized_note = readout_note;
     return result;
   }
   CandidateFit& f = fits[chosen];

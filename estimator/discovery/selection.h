@@ -9,6 +9,7 @@
 #define ESG_ESTIMATOR_DISCOVERY_SELECTION_H_
 
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -42,6 +43,9 @@ struct RoundResult {
   // Nothing taken because the best significant candidate improves only part of the recording
   // (a change in time, not a constant effect).
   bool time_localized = false;
+  // Why, when a time behaviour was not taken because a jump of a gyro's readings explains the
+  // mismatch at least as well (D43); else empty.
+  std::string time_localized_note;
 };
 
 // Round `round` (0 first) of forward selection over the running `gyros`; `log_n` is the log of

@@ -6,9 +6,13 @@
 // BM_DiscoveryConfusionMatrix: ESG_DISCOVERY_SEEDS (default 10) simulated recordings per true
 // effect (tests/testing/discovery_scenarios.h: mostly orbital, outliers and an outage, the
 // effect in one gyro where that applies), each diagnosed; prints the verdict table to stdout and
-// reports per effect the share of correct verdicts (verdict and gyro right) as counters. Run:
+// reports per effect the share of correct verdicts (verdict and gyro right) as counters.
+// ESG_DISCOVERY_ROWS=library or =time selects the library's rows or the time behaviours' (with
+// `none`). Run:
 //   <build>/tests/bench/esg_bench --benchmark_filter=Confusion
 // (scripts/confusion_matrix.sh). Takes a few minutes.
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
@@ -65,20 +69,48 @@ bool Correct(const std::string& truth, int gyro, const DiagnosisReport& r) {
     return false;
   };
   if (truth == "none") return r.verdict == kVerdictNone;
-  if (truth == "drift_step") return r.verdict == kVerdictUnexplained;
+  if (truth == "readout_jump") return r.verdict == kVerdictUnexplained;
   if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
+  // Exactly the one finding, in the right gyro where the effect is per gyro (the common random
+  // walk in gyro 0).
+  std::string effect = truth;
+  int want_gyro = gyro;
+  if (truth == "random_walk_one_gyro") effect = "random_walk_drift";
+  if (truth == "random_walk_15x" || truth == "random_walk_drift") {
+    effect = "random_walk_drift";
+    want_gyro = 0;
+  }
   const bool per_gyro = truth == "rotor_displacement" || truth == "fourth_harmonic" ||
-                        truth == "unequal_stiffness" || truth == "gyro_misalignment";
-  return r.verdict == truth &&
-         (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == gyro));
+                        truth == "unequal_stiffness" || truth == "gyro_misalignment" ||
+                        truth == "drift_step" || truth == "random_walk_one_gyro";
+  if (truth == "drift_step" || truth == "random_walk_one_gyro" || truth == "random_walk_15x") {
+    return r.findings.size() == 1 && r.findings.front().effect == effect &&
+           r.findings.front().gyro == want_gyro;
+  }
+  if (effect == "random_walk_drift") {  // common to every gyro, not one gyro's
+    return r.verdict == effect && r.findings.front().gyro == 0;
+  }
+  return r.verdict == effect &&
+         (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == want_gyro));
 }
 
 void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   const char* env = std::getenv("ESG_DISCOVERY_SEEDS");
   const int seeds = env != nullptr ? std::max(1, std::atoi(env)) : 10;
-  std::vector<std::string> truths = ::esg::testing::DiscoveryEffects();
-  truths.push_back("two");
-  truths.push_back("drift_step");
+  // ESG_DISCOVERY_ROWS=time: only the time-behaviour rows (and `none`); =library: only the
+  // library's rows; default both.
+  const char* rows_env = std::getenv("ESG_DISCOVERY_ROWS");
+  const std::string rows = rows_env != nullptr ? rows_env : "";
+  std::vector<std::string> truths;
+  if (rows != "time") {
+    truths = ::esg::testing::DiscoveryEffects();
+    truths.push_back("two");
+  } else {
+    truths.push_back("none");
+  }
+  if (rows != "library") {
+    for (const std::string& t : ::esg::testing::DiscoveryTimeBehaviours()) truths.push_back(t);
+  }
   const std::vector<std::string> verdicts = {"none",
                                              "rotor_displacement",
                                              "fourth_harmonic",
@@ -87,10 +119,14 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                                              "star_tracker_misalignment",
                                              "star_tracker_latency",
                                              "random_walk_drift",
+                                             "drift_step",
                                              "unexplained"};
   std::map<std::string, std::map<std::string, int>> table;
   std::map<std::string, int> correct;
   std::map<std::string, double> gap_ratio_sum;
+  std::map<std::string, int> step_onset_inside;  // drift step: the true onset in the interval
+  double seconds = 0.0;
+  int diagnoses = 0;
   for (auto _ : state) {
     for (const std::string& truth : truths) {
       for (int seed = 1; seed <= seeds; ++seed) {
@@ -98,20 +134,38 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
         const SimulationResult sim = *Simulate(spec);
         DiagnoseOptions options;  // default threads, lent as esg diagnose does
         options.run_parallel = RunOnThreads;
+        const auto start = std::chrono::steady_clock::now();
         auto report = Diagnose(spec.config, sim.recording.frames, options);
+        seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        ++diagnoses;
         if (!report.ok()) {
           state.SkipWithError(std::string(report.status().message()).c_str());
           return;
         }
         ++table[truth][report->verdict];
+        std::string detail;
+        for (const Finding& f : report->findings) {
+          detail += " " + f.effect + "[" + std::to_string(f.gyro) + "]";
+          if (f.time.kind == "step") {
+            const double truth_hours = 0.4 * 30.0;
+            const bool inside = f.time.onset_lower_hours <= truth_hours &&
+                                truth_hours <= f.time.onset_upper_hours;
+            if (truth == "drift_step" && f.effect == "drift_step") step_onset_inside[truth] += inside;
+            char text[160];
+            std::snprintf(text, sizeof text, " onset %.2f h [%.2f, %.2f]", f.time.onset_hours,
+                          f.time.onset_lower_hours, f.time.onset_upper_hours);
+            detail += text;
+          }
+        }
         const bool ok = Correct(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
         correct[truth] += ok ? 1 : 0;
         if (report->before.gap_drift_rate_deg_h > 0) {
           gap_ratio_sum[truth] +=
               report->after.gap_drift_rate_deg_h / report->before.gap_drift_rate_deg_h;
         }
-        std::fprintf(stderr, "%-26s seed %3d: %-26s%s\n", truth.c_str(), 100 + seed,
-                     report->verdict.c_str(), ok ? "" : "  (wrong)");
+        std::fprintf(stderr, "%-26s seed %3d (gyro %d): %-26s%s;%s\n", truth.c_str(), 100 + seed,
+                     ::esg::testing::AffectedGyro(100 + seed), report->verdict.c_str(),
+                     ok ? "" : "  (wrong)", detail.c_str());
       }
     }
   }
@@ -133,10 +187,17 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   }
   std::printf(
       "\n(%d seeds per row, 30 h recordings; correct = verdict right, and the gyro for per-gyro "
-      "effects; `two` = rotor displacement and star-tracker misalignment both found; `drift_step` "
-      "= "
-      "a fault outside the library, correct when unexplained)\n",
+      "effects; `two` = rotor displacement and star-tracker misalignment both found; the time "
+      "behaviours `drift_step`, `random_walk_one_gyro` (found as random_walk_drift in that gyro) "
+      "and `random_walk_15x` (random_walk_drift common to all) are correct with exactly that one "
+      "finding; `readout_jump` = a fault outside the library, correct when unexplained)\n",
       seeds);
+  if (table.count("drift_step")) {
+    std::printf("drift step: the true onset (12.0 h) inside the stated onset interval in %d of %d\n",
+                step_onset_inside["drift_step"], seeds);
+  }
+  std::printf("mean diagnosis time %.2f s over %d diagnoses\n", seconds / std::max(1, diagnoses),
+              diagnoses);
   std::fflush(stdout);
 }
 BENCHMARK(BM_DiscoveryConfusionMatrix)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();

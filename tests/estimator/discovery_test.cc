@@ -15,6 +15,7 @@
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
 #include "estimator/discovery/statistics.h"
+#include "estimator/discovery/time_behaviour.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
@@ -158,6 +159,108 @@ TEST(DiscoveryModelRun, StarTrackerCorrectionUndoesMisalignment) {
               rates.best[0].norm() * 0.4, 1e-12);
 }
 
+// The drift step's onset search continues runs from checkpoints (time_behaviour.h FitDriftStep): a
+// run continued from a checkpoint taken before frame k, with the first run's steps before k,
+// gives the same steps and deviance as the one run.
+TEST(DiscoveryModelRun, RunContinuedFromACheckpointEqualsOneRun) {
+  const SimulationSpec spec = DiscoveryScenario("none", 8, 6.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const auto& frames = sim->recording.frames;
+  SessionOptions options;
+  options.model.k0 = true;
+  options.model.random_walk = true;
+  ModelRunOptions with_checkpoint;
+  const int k = static_cast<int>(frames.size()) / 2;
+  with_checkpoint.checkpoint_frames = {k};
+  auto whole = RunModel(spec.config, options, frames, with_checkpoint);
+  ASSERT_THAT(whole, IsOk());
+  ASSERT_EQ(whole->checkpoints.size(), 1u);
+  ModelRunOptions continued;
+  continued.start = &whole->checkpoints[0];
+  continued.start_frame = k;
+  auto tail = RunModel(spec.config, options, frames, continued);
+  ASSERT_THAT(tail, IsOk());
+  ModelRun joined;
+  for (const StepRecord& s : whole->steps) {
+    if (s.frame < k) joined.steps.push_back(s);
+  }
+  joined.steps.insert(joined.steps.end(), tail->steps.begin(), tail->steps.end());
+  ASSERT_EQ(joined.steps.size(), whole->steps.size());
+  for (size_t i = 0; i < joined.steps.size(); ++i) {
+    EXPECT_EQ(joined.steps[i].frame, whole->steps[i].frame);
+    EXPECT_EQ(joined.steps[i].nis, whole->steps[i].nis) << "step " << i;
+  }
+  EXPECT_EQ(ComputeDeviance(joined).value, ComputeDeviance(*whole).value);
+}
+
+// A coefficient release (session.h CoefficientRelease) adds its variance at the first frame at or
+// after its time, and only to free coefficients of that gyro.
+TEST(DiscoveryModelRun, CoefficientReleaseWidensOnlyAfterItsTime) {
+  const SimulationSpec spec = DiscoveryScenario("none", 8, 6.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const auto& frames = sim->recording.frames;
+  SpacecraftConfig config = spec.config;
+  config.gyros[1].model_sigma.C1 = Eigen::Vector3d::Constant(DegPerHourToRadPerSec(1e-6));
+  SessionOptions options;
+  options.model.k0 = options.model.c1c2 = true;
+  options.model.random_walk = true;
+  const int k = static_cast<int>(frames.size()) / 2;
+  options.coefficient_releases.push_back(
+      {2, kThetaC1, 3, frames[k].time, DegPerHourToRadPerSec(0.1)});
+  ModelRunOptions before;
+  before.stop_frame = k - 1;
+  auto held = RunModel(config, options, frames, before);
+  ASSERT_THAT(held, IsOk());
+  ModelRunOptions after;
+  after.stop_frame = k;
+  auto released = RunModel(config, options, frames, after);
+  ASSERT_THAT(released, IsOk());
+  auto sigma_c1 = [](const ModelRun& r) {
+    for (const GyroEstimate& g : r.gyros) {
+      if (g.id == 2) return RadPerSecToDegPerHour(g.sigma.C1.norm());
+    }
+    return -1.0;
+  };
+  EXPECT_LT(sigma_c1(*held), 1e-5);
+  EXPECT_GT(sigma_c1(*released), 0.05);
+}
+
+// eq. (3) over time: a rotor displacement growing by 0.3 um/h along case x (10 mV/h of offset
+// voltage with k = 200, U0 = 200 V, d0 = 30 um) is read from the voltages' trend; a constant one
+// shows none.
+TEST(DiscoveryRotorDisplacement, VoltageTrendGivesTheDisplacementRate) {
+  SimulationSpec spec = DiscoveryScenario("rotor_displacement", 1, 6.0);
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const int gyro = ::esg::testing::AffectedGyro(1);
+  std::vector<TelemetryFrame> growing = sim->recording.frames;
+  const absl::Time t0 = growing.front().time;
+  for (TelemetryFrame& f : growing) {
+    auto& r = f.gyros[gyro - 1];
+    ASSERT_TRUE(r.has_value() && r->u_k_mv.has_value());
+    (*r->u_k_mv)(0) += 10.0 * absl::ToDoubleHours(f.time - t0);
+  }
+  auto rate = [&](const std::vector<TelemetryFrame>& frames, int axis) {
+    CandidateFit fit;
+    DescribeVoltageTrend(spec.config, frames, gyro, fit);
+    for (const Parameter& p : fit.fitted) {
+      if (p.name == absl::StrFormat("displacementRateUmPerH[%d]", axis)) return p;
+    }
+    return Parameter{};
+  };
+  const Parameter x = rate(growing, 0);
+  ASSERT_GT(x.sigma, 0.0);
+  EXPECT_NEAR(x.value, 0.3, 3.0 * x.sigma);
+  EXPECT_LT(x.sigma, 0.01);
+  for (int axis = 0; axis < 3; ++axis) {
+    const Parameter c = rate(sim->recording.frames, axis);
+    ASSERT_GT(c.sigma, 0.0);
+    EXPECT_NEAR(c.value, 0.0, 3.0 * c.sigma) << "axis " << axis;
+  }
+}
+
 TEST(Diagnose, RejectsBadInput) {
   const SpacecraftConfig config = ::esg::testing::DiscoveryConfig();
   EXPECT_THAT(Diagnose(config, {}, DiagnoseOptions{}),
@@ -183,9 +286,8 @@ TEST(Diagnose, NothingMissingGivesNone) {
   EXPECT_EQ(report->before.residual_rms_arcsec, report->after.residual_rms_arcsec);
   EXPECT_FALSE(report->mismatch.found);
   // Every candidate of the library the model lacks was tried once (3 gyros x 3, k0 being free, + 3
-  // common) and
-  // none is significant.
-  EXPECT_EQ(report->candidates.size(), 12u);
+  // common, + a drift step and a random walk per gyro) and none is significant.
+  EXPECT_EQ(report->candidates.size(), 18u);
   for (const CandidateScore& c : report->candidates)
     EXPECT_FALSE(c.significant) << c.effect << " " << c.gyro;
   EXPECT_GE(report->before.gaps.size(), 2u);  // held-out spans in the hold and the rotation
@@ -247,10 +349,20 @@ TEST(Diagnose, TwoEffectsInOneRecordingAreBothFound) {
   EXPECT_NE(report->verdict, "unexplained");
 }
 
+// A jump of one gyro's readings (60 arcsec at 40% of the recording) is neither a drift nor a
+// mounting that holds throughout: outside the library, it is reported unexplained in that gyro
+// (D43: the drift step and the per-gyro walk fit it only in part; a jump of the gyro's readings
+// at the onset, no physics, explains it at least as well).
 TEST(Diagnose, FaultOutsideTheLibraryIsUnexplainedNotForced) {
   const uint64_t seed = 2;
-  auto report = DiagnoseScenario("drift_step", seed);
+  auto report = DiagnoseScenario("readout_jump", seed);
   ASSERT_THAT(report, IsOk());
+  std::string evidence;
+  for (const Finding& f : report->findings) {
+    evidence += "\n" + f.effect + ": " + f.explanation;
+    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
+  }
+  SCOPED_TRACE(evidence);
   EXPECT_EQ(report->verdict, "unexplained");
   ASSERT_FALSE(report->findings.empty());
   EXPECT_EQ(report->findings.back().gyro, ::esg::testing::AffectedGyro(seed));
@@ -259,6 +371,79 @@ TEST(Diagnose, FaultOutsideTheLibraryIsUnexplainedNotForced) {
   for (const CandidateScore& c : report->candidates)
     any_inhomogeneous |= c.significant && !c.homogeneous;
   EXPECT_TRUE(any_inhomogeneous);
+}
+
+// Time behaviour (docs/discovery.md): a drift constant in case axes switched on at 40% of the
+// recording (9.6 h of 24 h; 0.041 deg/h, discovery_scenarios.h) is named a drift step of that
+// gyro, with its onset interval holding the true onset and the step vector within 3 of its
+// stated sigma of the truth. Seed 2 (gyro 3), fixed before the first run.
+TEST(Diagnose, DriftStepIsFoundWithItsOnsetAndSize) {
+  const uint64_t seed = 2;
+  SimulationResult sim;
+  auto report = DiagnoseScenario("drift_step", seed, &sim);
+  ASSERT_THAT(report, IsOk());
+  const int gyro = ::esg::testing::AffectedGyro(seed);
+  EXPECT_EQ(report->verdict, "drift_step");
+  ASSERT_EQ(report->findings.size(), 1u) << report->findings.back().effect;
+  const Finding& f = report->findings.front();
+  EXPECT_EQ(f.gyro, gyro);
+  EXPECT_EQ(f.time.kind, "step");
+  const double true_onset_hours = 0.4 * kHours;
+  std::string evidence = f.explanation;
+  for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
+  SCOPED_TRACE(evidence);
+  EXPECT_LE(f.time.onset_lower_hours, true_onset_hours);
+  EXPECT_GE(f.time.onset_upper_hours, true_onset_hours);
+  EXPECT_LT(f.time.onset_upper_hours - f.time.onset_lower_hours, 2.0);
+  const Eigen::Vector3d truth_deg_h(0.02, -0.03, 0.02);
+  for (int i = 0; i < 3; ++i) {
+    const Parameter* d = FindParameter(f, absl::StrFormat("driftStepDegH[%d]", i));
+    ASSERT_NE(d, nullptr);
+    ASSERT_GT(d->sigma, 0.0);
+    EXPECT_NEAR(d->value, truth_deg_h(i), 3.0 * d->sigma) << "component " << i;
+  }
+  EXPECT_THAT(f.explanation, HasSubstr(absl::StrFormat("in gyro %d at ", gyro)));
+  EXPECT_THAT(f.explanation, HasSubstr("drift step of"));
+  EXPECT_LT(report->after.residual_rms_arcsec, report->before.residual_rms_arcsec);
+}
+
+// A random walk raised in one gyro only (the library's 0.006 deg/h/sqrt(h), 4x the configured
+// one) is that gyro's intensity, not the common one; seed 3 (gyro 1), fixed before the first run.
+TEST(Diagnose, RandomWalkInOneGyroIsThatGyrosIntensity) {
+  const uint64_t seed = 3;
+  auto report = DiagnoseScenario("random_walk_one_gyro", seed);
+  ASSERT_THAT(report, IsOk());
+  EXPECT_EQ(report->verdict, "random_walk_drift");
+  ASSERT_EQ(report->findings.size(), 1u) << report->findings.back().effect;
+  const Finding& f = report->findings.front();
+  EXPECT_EQ(f.gyro, ::esg::testing::AffectedGyro(seed));
+  EXPECT_EQ(f.time.kind, "random_walk");
+  const Parameter* q = FindParameter(f, "randomWalkDegHSqrtH");
+  ASSERT_NE(q, nullptr);
+  // The search grid's resolution (factors of 2, candidates.h).
+  EXPECT_GT(q->value, 0.006 / 2.0);
+  EXPECT_LT(q->value, 0.006 * 2.0);
+}
+
+// A random walk 15 times the configured intensity in every gyro is a raised common intensity,
+// tested as an intensity (not by the homogeneity test); seed 4, fixed before the first run.
+TEST(Diagnose, RandomWalkFifteenTimesConfiguredIsFoundAsAnIntensity) {
+  const uint64_t seed = 4;
+  auto report = DiagnoseScenario("random_walk_15x", seed);
+  ASSERT_THAT(report, IsOk());
+  EXPECT_EQ(report->verdict, "random_walk_drift");
+  ASSERT_EQ(report->findings.size(), 1u) << report->findings.back().effect;
+  EXPECT_EQ(report->findings.front().gyro, 0);
+  const Parameter* q = FindParameter(report->findings.front(), "randomWalkDegHSqrtH");
+  ASSERT_NE(q, nullptr);
+  EXPECT_GT(q->value, 15 * 0.0015 / 2.0);
+  EXPECT_LT(q->value, 15 * 0.0015 * 2.0);
+  for (const CandidateScore& c : report->candidates) {
+    if (c.effect == "random_walk_drift") {
+      EXPECT_EQ(c.time_behaviour, "random_walk");
+      EXPECT_TRUE(c.homogeneous);  // exempt: tested as an intensity
+    }
+  }
 }
 
 // The estimator starts no threads (options.h): the caller's runner gets at most options.threads

@@ -67,8 +67,12 @@ inline estimator::ProfilePtr MostlyOrbitalProfile(double hours, uint64_t seed) {
 
 // The effects of the scenarios, by name: "none", "rotor_displacement", "fourth_harmonic",
 // "unequal_stiffness", "gyro_misalignment", "star_tracker_misalignment", "star_tracker_latency",
-// "random_walk_drift", "two" (rotor displacement and star-tracker misalignment), "drift_step"
-// (a fault the library does not hold: expected `unexplained`).
+// "random_walk_drift", "two" (rotor displacement and star-tracker misalignment); the time
+// behaviours: "drift_step" (a drift constant in case axes, 0.041 deg/h, switched on at 40% of the
+// recording), "random_walk_one_gyro" (the library's random walk, 0.006 deg/h/sqrt(h), in one gyro
+// only), "random_walk_15x" (every gyro's random walk 15 times the configured 0.0015); and
+// "readout_jump" (a 60 arcsec jump of one gyro's readings at 40%: a fault outside the library,
+// expected `unexplained`).
 inline std::vector<std::string> DiscoveryEffects() {
   return {"none",
           "rotor_displacement",
@@ -78,6 +82,11 @@ inline std::vector<std::string> DiscoveryEffects() {
           "star_tracker_misalignment",
           "star_tracker_latency",
           "random_walk_drift"};
+}
+
+// The time behaviours of docs/discovery.md ("Time behaviour") and a fault outside the library.
+inline std::vector<std::string> DiscoveryTimeBehaviours() {
+  return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump"};
 }
 
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
@@ -123,6 +132,17 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
   if (effect == "star_tracker_latency") s.star_tracker.latency = 0.3;
   if (effect == "random_walk_drift") {
     for (GyroTruth& t : s.gyros) t.random_walk = DegPerHourSqrtHourToSi(0.006);
+  }
+  if (effect == "random_walk_one_gyro") s.gyros[g].random_walk = DegPerHourSqrtHourToSi(0.006);
+  if (effect == "random_walk_15x") {
+    for (GyroTruth& t : s.gyros) t.random_walk = 15.0 * s.config.random_walk;
+  }
+  if (effect == "readout_jump") {
+    GyroFault f;
+    f.time = 0.4 * s.duration;
+    f.kind = GyroFault::Kind::kReadoutJump;
+    f.value = Eigen::Vector3d(ArcsecToRad(40), ArcsecToRad(-35), ArcsecToRad(25));
+    s.gyros[g].fault = f;
   }
   if (effect == "drift_step") {
     GyroFault f;

@@ -1,0 +1,397 @@
+#include "estimator/discovery/time_behaviour.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <iterator>
+#include <map>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/discovery/statistics.h"
+#include "estimator/drift_model.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+namespace {
+
+using Eigen::Vector3d;
+
+GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
+  for (GyroConfig& g : c.gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
+
+const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
+  for (const GyroEstimate& g : gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
+
+double DegH(double x) { return RadPerSecToDegPerHour(x); }
+
+double HoursSinceStart(const std::vector<TelemetryFrame>& frames, int f) {
+  return HoursSince(frames[f].time, frames.front().time);
+}
+
+void AddVectorParameters(const std::string& name, const Vector3d& value, const Vector3d& sigma,
+                         double scale, const std::string& unit, std::vector<Parameter>& out) {
+  for (int i = 0; i < 3; ++i) {
+    out.push_back(
+        Parameter{absl::StrFormat("%s[%d]", name, i), value(i) * scale, sigma(i) * scale, unit});
+  }
+}
+
+}  // namespace
+
+namespace {
+
+// The onset search of a drift step (docs/discovery.md, "Time behaviour"): coarse onsets at
+// k D / kOnsetCoarse (D the recording's length, k = 1 .. kOnsetCoarse - 1), then twice a grid
+// kOnsetRefine times finer within one spacing of the best onset so far.
+constexpr int kOnsetCoarse = 12;
+constexpr int kOnsetRefine = 4;
+// A coefficient the model holds is put in the filter's layout with this prior so that it can be
+// released at the onset; before it the filter keeps it at its configured value.
+constexpr double kHeldSigmaDegH = 1e-6;
+constexpr double kHeldSigmaArcsec = 1e-6;
+// chi-square(1) 95% quantile: the onset interval is where -2 log L stays within it of its minimum.
+constexpr double kOnsetIntervalDrop = 3.841458820694124;
+// The readout-jump alternative (D43) is profiled over at most this many of the step's onsets
+// inside its interval, nearest the best first.
+constexpr size_t kReadoutOnsets = 8;
+
+// The first frame at or after `t`.
+int FrameAtOrAfter(const std::vector<TelemetryFrame>& frames, absl::Time t) {
+  auto it = std::lower_bound(frames.begin(), frames.end(), t,
+                             [](const TelemetryFrame& f, absl::Time x) { return f.time < x; });
+  return static_cast<int>(it - frames.begin());
+}
+
+}  // namespace
+
+absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  // The step d (case axes) enters eq. (10) as C1 -> C1 - d: (h h^T - I)(-d) = d - (h.d) h, the
+  // part of d across the spin axis (the part along it moves nothing).
+  DriftVector sigma = g->model_sigma.AsVector();
+  for (int i = kThetaC1; i < kThetaC1 + 3; ++i) {
+    if (!(sigma(i) > 0.0)) sigma(i) = DegPerHourToRadPerSec(kHeldSigmaDegH);
+  }
+  g->model_sigma = DriftCoefficients::FromVector(sigma);
+  // The misalignment states too, held the same way, for the competing readout jump (D43).
+  if (!(g->misalignment_sigma > 0.0)) g->misalignment_sigma = ArcsecToRad(kHeldSigmaArcsec);
+  const double step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  const std::vector<TelemetryFrame> frames =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
+  const int n = static_cast<int>(frames.size());
+  const absl::Time t0 = frames.front().time;
+  const absl::Duration length = frames.back().time - t0;
+  fit.parameters = 3;
+  fit.searched_parameters = 1;  // the onset
+  fit.time.kind = "step";
+
+  // Prefix run without the step, with checkpoints before the onsets of the first two grids.
+  std::vector<int> grid_frames;
+  const int fine = kOnsetCoarse * kOnsetRefine;
+  for (int k = 1; k < fine; ++k) grid_frames.push_back(FrameAtOrAfter(frames, t0 + length * k / fine));
+  grid_frames.erase(std::unique(grid_frames.begin(), grid_frames.end()), grid_frames.end());
+  while (!grid_frames.empty() && grid_frames.back() >= n - 1) grid_frames.pop_back();
+  if (grid_frames.empty()) return absl::OkStatus();  // too short: parameters stay 0
+  ModelRunOptions prefix_options;
+  prefix_options.checkpoint_frames = grid_frames;
+  auto prefix = RunModel(fit.model.config, fit.model.options, frames, prefix_options);
+  ++fit.runs;
+  if (!prefix.ok()) return prefix.status();
+  std::map<int, SessionCheckpoint> checkpoints;
+  for (size_t j = 0; j < prefix->checkpoints.size(); ++j) {
+    checkpoints[grid_frames[j]] = std::move(prefix->checkpoints[j]);
+  }
+
+  // One onset: continue from the checkpoint with the C1 states released at the onset frame.
+  std::map<int, double> value;  // onset frame -> profiled -2 log L
+  int best_frame = -1;
+  double best_value = 0.0;
+  ModelRun best_run;
+  SessionOptions best_options;
+  auto evaluate = [&](int f) -> absl::Status {
+    if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
+    SessionOptions options = fit.model.options;
+    options.coefficient_releases.push_back(
+        {candidate.gyro, kThetaC1, 3, frames[f].time, step_sigma});
+    ModelRunOptions ro;
+    ro.start = &checkpoints[f];
+    ro.start_frame = f;
+    auto tail = RunModel(fit.model.config, options, frames, ro);
+    ++fit.runs;
+    if (!tail.ok()) return tail.status();
+    ModelRun run;
+    for (const StepRecord& s : prefix->steps) {
+      if (s.frame < f) run.steps.push_back(s);
+    }
+    run.steps.insert(run.steps.end(), std::make_move_iterator(tail->steps.begin()),
+                     std::make_move_iterator(tail->steps.end()));
+    run.gyros = std::move(tail->gyros);
+    run.resets = tail->resets;
+    run.rejections = tail->rejections;
+    const double v = Profile(run).value;
+    value[f] = v;
+    if (best_frame < 0 || v < best_value) {
+      best_frame = f;
+      best_value = v;
+      best_run = std::move(run);
+      best_options = options;
+    }
+    return absl::OkStatus();
+  };
+  for (size_t j = kOnsetRefine - 1; j < grid_frames.size(); j += kOnsetRefine) {
+    if (absl::Status s = evaluate(grid_frames[j]); !s.ok()) return s;
+  }
+  if (best_frame < 0) {  // a recording too short for the coarse grid: every onset of the finer
+    for (int f : grid_frames) {
+      if (absl::Status s = evaluate(f); !s.ok()) return s;
+    }
+  }
+  if (best_frame < 1) {  // nothing to search: no step fitted
+    fit.parameters = 0;
+    fit.run = *ctx.model_run;
+    return absl::OkStatus();
+  }
+  // Refinement 1: the finer grid within one coarse spacing of the best coarse onset.
+  {
+    const absl::Duration spacing = length / kOnsetCoarse;
+    for (int f : grid_frames) {
+      if (absl::AbsDuration(frames[f].time - frames[best_frame].time) <= spacing) {
+        if (absl::Status s = evaluate(f); !s.ok()) return s;
+      }
+    }
+  }
+  // Further refinements, each kOnsetRefine times finer within one spacing of the best onset so
+  // far, down to one frame, while the step is significant at the onsets searched so far (else
+  // the onset does not matter: the candidate is not taken): the profile of a real step is
+  // sharp, a few minutes wide for 0.04 deg/h against 5 arcsec star-tracker noise. The
+  // checkpoints of a level come from a short run continued from the nearest earlier one.
+  const double base_value = Profile(*ctx.model_run).value;
+  absl::Duration spacing = length / fine;
+  const absl::Duration frame_step = (frames.back().time - t0) / std::max(1, n - 1);
+  while (spacing > frame_step) {
+    const int tests = static_cast<int>(value.size());
+    const double p = tests * ChiSquareSurvival(std::max(0.0, base_value - best_value), 3.0);
+    if (!(p < opt.alpha)) break;
+    const absl::Duration finer = std::max(spacing / kOnsetRefine, frame_step);
+    std::vector<int> new_frames;
+    for (int k = -kOnsetRefine + 1; k < kOnsetRefine; ++k) {
+      const int f = FrameAtOrAfter(frames, frames[best_frame].time + finer * k);
+      if (f > 1 && f < n - 1 && !checkpoints.count(f)) new_frames.push_back(f);
+    }
+    spacing = finer;
+    std::sort(new_frames.begin(), new_frames.end());
+    new_frames.erase(std::unique(new_frames.begin(), new_frames.end()), new_frames.end());
+    if (new_frames.empty()) continue;
+    auto from = checkpoints.upper_bound(new_frames.front());
+    if (from == checkpoints.begin()) break;
+    --from;
+    ModelRunOptions ro;
+    ro.start = &from->second;
+    ro.start_frame = from->first;
+    ro.stop_frame = new_frames.back();
+    ro.checkpoint_frames = new_frames;
+    auto more = RunModel(fit.model.config, fit.model.options, frames, ro);
+    ++fit.runs;
+    if (!more.ok()) return more.status();
+    for (size_t j = 0; j < more->checkpoints.size(); ++j) {
+      checkpoints[new_frames[j]] = std::move(more->checkpoints[j]);
+    }
+    for (int f : new_frames) {
+      if (absl::Status s = evaluate(f); !s.ok()) return s;
+    }
+  }
+  fit.lr_tests = static_cast<int>(value.size());
+
+  // The onset interval: where -2 log L stays within kOnsetIntervalDrop of its minimum, linear
+  // between evaluated onsets, clipped to the onsets searched.
+  std::vector<std::pair<double, double>> profile;  // hours, value
+  // A release at frame f widens the coefficients before the propagation from frame f - 1: the
+  // modelled drift changes from frames[f - 1].time on, the onset reported.
+  for (const auto& [f, v] : value) profile.emplace_back(HoursSinceStart(frames, f - 1), v);
+  fit.onset_profile = profile;
+  size_t best_j = 0;
+  for (size_t j = 0; j < profile.size(); ++j) {
+    if (profile[j].second < profile[best_j].second) best_j = j;
+  }
+  const double level = profile[best_j].second + kOnsetIntervalDrop;
+  auto crossing = [&](size_t inside, size_t outside) {
+    const auto [x0, y0] = profile[inside];
+    const auto [x1, y1] = profile[outside];
+    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
+  };
+  double lower = profile.front().first, upper = profile.back().first;
+  for (size_t j = best_j; j > 0; --j) {
+    if (profile[j - 1].second > level) {
+      lower = crossing(j, j - 1);
+      break;
+    }
+  }
+  for (size_t j = best_j; j + 1 < profile.size(); ++j) {
+    if (profile[j + 1].second > level) {
+      upper = crossing(j, j + 1);
+      break;
+    }
+  }
+  const double onset_hours = profile[best_j].first;
+  // The competing readout jump (D43): the same onsets, the gyro's misalignment states released
+  // instead of its C1 (a jump of its readings that does not grow). A drift step makes a ramp it
+  // cannot follow; a readout jump fitted as a drift step leaves the transient it explains.
+  {
+    const double readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+    std::vector<int> near;
+    for (const auto& [f, v] : value) {
+      const double h = HoursSinceStart(frames, f - 1);
+      if (h >= lower && h <= upper) near.push_back(f);
+    }
+    std::sort(near.begin(), near.end(), [&](int a, int b) {
+      return std::abs(a - best_frame) < std::abs(b - best_frame);
+    });
+    if (near.size() > kReadoutOnsets) near.resize(kReadoutOnsets);
+    for (int f : near) {
+      SessionOptions options = fit.model.options;
+      SessionOptions::CoefficientRelease release;
+      release.gyro_id = candidate.gyro;
+      release.time = frames[f].time;
+      release.sigma = readout_sigma;
+      release.misalignment = true;
+      options.coefficient_releases.push_back(release);
+      ModelRunOptions ro;
+      ro.start = &checkpoints[f];
+      ro.start_frame = f;
+      auto tail = RunModel(fit.model.config, options, frames, ro);
+      ++fit.runs;
+      if (!tail.ok()) return tail.status();
+      ModelRun run;
+      for (const StepRecord& s : prefix->steps) {
+        if (s.frame < f) run.steps.push_back(s);
+      }
+      run.steps.insert(run.steps.end(), std::make_move_iterator(tail->steps.begin()),
+                       std::make_move_iterator(tail->steps.end()));
+      run.gyros = std::move(tail->gyros);
+      run.resets = tail->resets;
+      run.rejections = tail->rejections;
+      const double v = Profile(run).value;
+      if (!fit.readout_fitted || v < fit.readout_value) {
+        fit.readout_fitted = true;
+        fit.readout_value = v;
+        fit.readout_onset_hours = HoursSinceStart(frames, f - 1);
+      }
+    }
+    if (fit.readout_fitted) {
+      fit.notes.push_back(absl::StrFormat(
+          "a jump of the gyro's readings at %.2f h (its misalignment released, prior %.0f "
+          "arcsec; %d onsets in the interval) fits -2 log L %.1f %s the drift step's",
+          fit.readout_onset_hours, opt.misalignment_sigma_arcsec, near.size(),
+          std::abs(fit.readout_value - profile[best_j].second),
+          fit.readout_value <= profile[best_j].second ? "below" : "above"));
+    }
+  }
+  fit.time.onset = frames[best_frame - 1].time;
+  fit.time.onset_hours = onset_hours;
+  fit.time.onset_lower_hours = lower;
+  fit.time.onset_upper_hours = upper;
+  fit.time.onset_lower = t0 + absl::Hours(lower);
+  fit.time.onset_upper = t0 + absl::Hours(upper);
+  fit.time.onsets_searched = fit.lr_tests;
+
+  // The step: C1 after it (the run's final estimate) against C1 at the onset (the checkpoint's).
+  auto at_onset = EstimationSession::FromCheckpoint(fit.model.config, best_options,
+                                                    checkpoints[best_frame]);
+  if (!at_onset.ok()) return at_onset.status();
+  const std::vector<GyroEstimate> before_all = at_onset->Gyros();
+  const GyroEstimate* before = FindEstimate(before_all, candidate.gyro);
+  const GyroEstimate* after = FindEstimate(best_run.gyros, candidate.gyro);
+  if (before != nullptr && after != nullptr) {
+    const Vector3d d = -(after->coefficients.C1 - before->coefficients.C1);
+    const Vector3d d_sigma = after->sigma.C1;
+    AddVectorParameters("driftStepDegH", d, d_sigma, DegH(1.0), "deg/h", fit.fitted);
+    const double size = d.norm();
+    const double size_sigma =
+        size > 0 ? std::sqrt((d.cwiseProduct(d_sigma)).squaredNorm()) / size : d_sigma.norm();
+    fit.fitted.push_back({"driftStepSizeDegH", DegH(size), DegH(size_sigma), "deg/h"});
+  }
+  fit.fitted.push_back({"onsetHours", onset_hours, 0.5 * (upper - lower), "h"});
+  fit.fitted.push_back({"onsetLowerHours", lower, 0.0, "h"});
+  fit.fitted.push_back({"onsetUpperHours", upper, 0.0, "h"});
+  std::string profile_text;
+  for (const auto& [h, v] : profile) {
+    absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", h, v - profile[best_j].second));
+  }
+  fit.notes.push_back(absl::StrCat(
+      "likelihood over the onset (h from the start: -2 log L above the best; ", fit.lr_tests,
+      " onsets, p Bonferroni-corrected over them):", profile_text));
+  fit.model.options = best_options;
+  fit.run = std::move(best_run);
+  return absl::OkStatus();
+}
+
+void DescribeVoltageTrend(const SpacecraftConfig& config,
+                          const std::vector<TelemetryFrame>& frames, int gyro, CandidateFit& fit) {
+  // A robust line per suspension axis of the offset voltage against time; eq. (3) is linear in
+  // dU, so the slopes [mV/h] give the rate of the displacement [um/h].
+  std::array<std::vector<double>, 3> u_mv;
+  std::vector<double> hours;
+  const absl::Time t0 = frames.front().time;
+  for (const TelemetryFrame& f : frames) {
+    const auto& r = f.gyros[gyro - 1];
+    if (!r.has_value() || !r->u_k_mv.has_value() || !r->u_k_mv->allFinite()) continue;
+    hours.push_back(HoursSince(f.time, t0));
+    for (int i = 0; i < 3; ++i) u_mv[i].push_back((*r->u_k_mv)(i));
+  }
+  if (hours.size() < 10) return;
+  double mean_t = 0.0, var_t = 0.0;
+  for (double t : hours) mean_t += t;
+  mean_t /= hours.size();
+  for (double t : hours) var_t += (t - mean_t) * (t - mean_t);
+  if (!(var_t > 0.0)) return;
+  const SuspensionConfig& s = config.suspension;
+  auto um = [&](double mv) {
+    return DisplacementFromOffsetVoltage(mv * kVoltsPerMv, s.amplifier_gain, s.reference_voltage,
+                                         s.gap) /
+           kMetresPerUm;
+  };
+  Vector3d rate_um_h, rate_sigma_um_h, slope_mv_h;
+  double chi2 = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const RobustLine line = FitRobustLine(hours, u_mv[i]);
+    const double sigma_mv_h =
+        line.residual_sigma / std::sqrt(var_t * line.used / static_cast<double>(hours.size()));
+    slope_mv_h(i) = line.slope;
+    rate_um_h(i) = um(line.slope);
+    rate_sigma_um_h(i) = std::abs(um(sigma_mv_h));
+    if (sigma_mv_h > 0) chi2 += std::pow(line.slope / sigma_mv_h, 2);
+  }
+  const double p = ChiSquareSurvival(chi2, 3.0);
+  const double span_hours = hours.back() - hours.front();
+  AddVectorParameters("displacementRateUmPerH", rate_um_h, rate_sigma_um_h, 1.0, "um/h",
+                      fit.fitted);
+  fit.fitted.push_back({"displacementRateSizeUmPerH", rate_um_h.norm(), 0.0, "um/h"});
+  fit.notes.push_back(absl::StrFormat(
+      "suspension offset voltages drift by [%.2f %.2f %.2f] mV/h: by eq. (3) the displacement "
+      "changes by [%.4f %.4f %.4f] um/h (|%.4f| um/h, %.2f um over the %.1f h), trend chi2 = %.1f "
+      "on 3 dof, p = %.2g: %s",
+      slope_mv_h.x(), slope_mv_h.y(), slope_mv_h.z(), rate_um_h.x(), rate_um_h.y(), rate_um_h.z(),
+      rate_um_h.norm(), rate_um_h.norm() * span_hours, span_hours, chi2, p,
+      p < 0.01 ? "the displacement grows during the recording (the C1, C2 fitted are its mean; "
+                 "a growing displacement is not yet a candidate)"
+               : "no trend: a constant displacement, as the constant effect assumes"));
+}
+
+}  // namespace esg::estimator::discovery
