@@ -105,7 +105,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   // Prefix run without the step, with checkpoints before the onsets of the first two grids.
   std::vector<int> grid_frames;
   const int fine = kOnsetCoarse * kOnsetRefine;
-  for (int k = 1; k < fine; ++k) grid_frames.push_back(FrameAtOrAfter(frames, t0 + length * k / fine));
+  for (int k = 1; k < fine; ++k)
+    grid_frames.push_back(FrameAtOrAfter(frames, t0 + length * k / fine));
   grid_frames.erase(std::unique(grid_frames.begin(), grid_frames.end()), grid_frames.end());
   while (!grid_frames.empty() && grid_frames.back() >= n - 1) grid_frames.pop_back();
   if (grid_frames.empty()) return absl::OkStatus();  // too short: parameters stay 0
@@ -125,11 +126,9 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   double best_value = 0.0;
   ModelRun best_run;
   SessionOptions best_options;
-  auto evaluate = [&](int f) -> absl::Status {
-    if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
-    SessionOptions options = fit.model.options;
-    options.coefficient_releases.push_back(
-        {candidate.gyro, kThetaC1, 3, frames[f].time, step_sigma});
+  // The run with `options` from onset frame f: the prefix's steps before f, then a run continued
+  // from the checkpoint at f.
+  auto run_from = [&](int f, const SessionOptions& options) -> absl::StatusOr<ModelRun> {
     ModelRunOptions ro;
     ro.start = &checkpoints[f];
     ro.start_frame = f;
@@ -145,6 +144,16 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
     run.gyros = std::move(tail->gyros);
     run.resets = tail->resets;
     run.rejections = tail->rejections;
+    return run;
+  };
+  auto evaluate = [&](int f) -> absl::Status {
+    if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
+    SessionOptions options = fit.model.options;
+    options.coefficient_releases.push_back(
+        {candidate.gyro, kThetaC1, 3, frames[f].time, step_sigma});
+    auto continued = run_from(f, options);
+    if (!continued.ok()) return continued.status();
+    ModelRun run = *std::move(continued);
     const double v = Profile(run).value;
     value[f] = v;
     if (best_frame < 0 || v < best_value) {
@@ -260,9 +269,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
       const double h = HoursSinceStart(frames, f - 1);
       if (h >= lower && h <= upper) near.push_back(f);
     }
-    std::sort(near.begin(), near.end(), [&](int a, int b) {
-      return std::abs(a - best_frame) < std::abs(b - best_frame);
-    });
+    std::sort(near.begin(), near.end(),
+              [&](int a, int b) { return std::abs(a - best_frame) < std::abs(b - best_frame); });
     if (near.size() > kReadoutOnsets) near.resize(kReadoutOnsets);
     for (int f : near) {
       SessionOptions options = fit.model.options;
@@ -272,22 +280,9 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
       release.sigma = readout_sigma;
       release.misalignment = true;
       options.coefficient_releases.push_back(release);
-      ModelRunOptions ro;
-      ro.start = &checkpoints[f];
-      ro.start_frame = f;
-      auto tail = RunModel(fit.model.config, options, frames, ro);
-      ++fit.runs;
-      if (!tail.ok()) return tail.status();
-      ModelRun run;
-      for (const StepRecord& s : prefix->steps) {
-        if (s.frame < f) run.steps.push_back(s);
-      }
-      run.steps.insert(run.steps.end(), std::make_move_iterator(tail->steps.begin()),
-                       std::make_move_iterator(tail->steps.end()));
-      run.gyros = std::move(tail->gyros);
-      run.resets = tail->resets;
-      run.rejections = tail->rejections;
-      const double v = Profile(run).value;
+      auto run = run_from(f, options);
+      if (!run.ok()) return run.status();
+      const double v = Profile(*run).value;
       if (!fit.readout_fitted || v < fit.readout_value) {
         fit.readout_fitted = true;
         fit.readout_value = v;
@@ -312,8 +307,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   fit.time.onsets_searched = fit.lr_tests;
 
   // The step: C1 after it (the run's final estimate) against C1 at the onset (the checkpoint's).
-  auto at_onset = EstimationSession::FromCheckpoint(fit.model.config, best_options,
-                                                    checkpoints[best_frame]);
+  auto at_onset =
+      EstimationSession::FromCheckpoint(fit.model.config, best_options, checkpoints[best_frame]);
   if (!at_onset.ok()) return at_onset.status();
   const std::vector<GyroEstimate> before_all = at_onset->Gyros();
   const GyroEstimate* before = FindEstimate(before_all, candidate.gyro);
@@ -334,16 +329,16 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   for (const auto& [h, v] : profile) {
     absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", h, v - profile[best_j].second));
   }
-  fit.notes.push_back(absl::StrCat(
-      "likelihood over the onset (h from the start: -2 log L above the best; ", fit.lr_tests,
-      " onsets, p Bonferroni-corrected over them):", profile_text));
+  fit.notes.push_back(
+      absl::StrCat("likelihood over the onset (h from the start: -2 log L above the best; ",
+                   fit.lr_tests, " onsets, p Bonferroni-corrected over them):", profile_text));
   fit.model.options = best_options;
   fit.run = std::move(best_run);
   return absl::OkStatus();
 }
 
-void DescribeVoltageTrend(const SpacecraftConfig& config,
-                          const std::vector<TelemetryFrame>& frames, int gyro, CandidateFit& fit) {
+void DescribeVoltageTrend(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
+                          int gyro, CandidateFit& fit) {
   // A robust line per suspension axis of the offset voltage against time; eq. (3) is linear in
   // dU, so the slopes [mV/h] give the rate of the displacement [um/h].
   std::array<std::vector<double>, 3> u_mv;
