@@ -36,13 +36,16 @@ json ParameterJson(const Parameter& p) {
 json EvidenceJson(const Evidence& e) {
   json j{{"deltaDeviance", Number(e.delta_deviance)},
          {"penalty", Number(e.penalty)},
+         {"evidence", Number(e.evidence)},
          {"parameters", e.parameters},
-         {"pValue", Number(e.lr_p_value)},
+         {"pValue", Number(e.p_value)},
          {"threshold", Number(e.threshold)},
          {"round", e.round}};
   if (e.held_out_dof > 0) {
     j["heldOutNeesBefore"] = Number(e.held_out_nees_before);
     j["heldOutNeesAfter"] = Number(e.held_out_nees_after);
+    j["heldOutDevianceBefore"] = Number(e.held_out_deviance_before);
+    j["heldOutDevianceAfter"] = Number(e.held_out_deviance_after);
     j["heldOutDof"] = e.held_out_dof;
   }
   j["notes"] = e.notes;
@@ -124,6 +127,7 @@ json FitJson(const FitSummary& f, absl::Time t0) {
               {"deviance", Number(f.deviance)},
               {"dispersion", Number(f.dispersion)},
               {"heldOutNees", Number(f.held_out_nees)},
+              {"heldOutDeviance", Number(f.held_out_deviance)},
               {"heldOutDof", f.held_out_dof},
               {"gaps", gaps}};
 }

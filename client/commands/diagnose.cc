@@ -289,14 +289,15 @@ std::string WritePlots(const disc::DiagnosisReport& r, const std::filesystem::pa
   }
   absl::StrAppend(&md, "![regimes](regimes.png)\n\n## Fit before and after\n\n",
                   "| | model | residual RMS, arcsec | held-out drift rate, deg/h | dispersion | "
-                  "held-out NEES |\n",
-                  "|---|---|---|---|---|---|\n");
+                  "held-out NEES | held-out -2 log predictive density |\n",
+                  "|---|---|---|---|---|---|---|\n");
   for (const auto& [name, f] :
        {std::pair<const char*, const disc::FitSummary*>{"before", &r.before},
         {"after", &r.after}}) {
-    absl::StrAppend(&md, absl::StrFormat("| %s | %s | %.2f | %.4f | %.3f | %.1f / %d |\n", name,
-                                         f->model, f->residual_rms_arcsec, f->gap_drift_rate_deg_h,
-                                         f->dispersion, f->held_out_nees, f->held_out_dof));
+    absl::StrAppend(&md, absl::StrFormat("| %s | %s | %.2f | %.4f | %.3f | %.1f / %d | %.1f |\n",
+                                         name, f->model, f->residual_rms_arcsec,
+                                         f->gap_drift_rate_deg_h, f->dispersion, f->held_out_nees,
+                                         f->held_out_dof, f->held_out_deviance));
   }
   absl::StrAppend(
       &md, "\nHeld-out spans (star tracker withheld, model predicting):\n\n",
@@ -310,16 +311,17 @@ std::string WritePlots(const disc::DiagnosisReport& r, const std::filesystem::pa
   absl::StrAppend(
       &md,
       "\n![residuals](residuals.png)\n\n![held-out error](held_out.png)\n\n## Candidates tried\n\n",
-      "| round | effect | gyro | time behaviour | k | delta -2 log L | penalty | p | significant | "
-      "selected |\n",
-      "|---|---|---|---|---|---|---|---|---|---|\n");
+      "| round | effect | gyro | time behaviour | k | delta -2 log L | prior cost | evidence 2 ln B "
+      "| 1/B | significant | selected |\n",
+      "|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& c : r.candidates) {
     const std::string behaviour =
         c.onset_hours >= 0 ? absl::StrFormat("step at %.2f h", c.onset_hours) : c.time_behaviour;
     absl::StrAppend(
-        &md, absl::StrFormat("| %d | %s | %s | %s | %d | %.1f | %.1f | %.2g | %s | %s |\n",
+        &md, absl::StrFormat("| %d | %s | %s | %s | %d | %.1f | %.1f | %.1f | %.2g | %s | %s |\n",
                              c.round + 1, c.effect, c.gyro > 0 ? absl::StrCat(c.gyro) : "",
-                             behaviour, c.parameters, c.delta_deviance, c.penalty, c.p_value,
+                             behaviour, c.parameters, c.delta_deviance, c.penalty, c.score,
+                             c.p_value,
                              c.significant ? "yes" : "", c.selected ? "**yes**" : ""));
   }
   absl::StrAppend(&md,

@@ -450,7 +450,14 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       // Stage 2: the star tracker corrected by the common rotation, mountings as configured.
       fit.model.correction.misalignment_b = ctx.model->correction.misalignment_b + m;
       fit.parameters = 3;
-      fit.searched = true;
+      // Laplace's approximation of its evidence under the prior misalignment_sigma_arcsec per
+      // axis (candidates.h `occam`).
+      const double prior = ArcsecToRad(opt.misalignment_sigma_arcsec);
+      for (int i = 0; i < 3; ++i) {
+        if (!(m_sigma(i) > 0)) continue;
+        fit.occam += std::max(0.0, 2.0 * std::log(prior / m_sigma(i))) +
+                     m(i) * m(i) / (prior * prior);
+      }
       if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
       AddVectorParameters("misalignmentArcsec", fit.model.correction.misalignment_b, m_sigma,
                           RadToArcsec(1.0), "arcsec", fit.fitted);
@@ -463,7 +470,6 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       // absorb), so a search started at zero can stop in a false minimum.
       const LatencyEstimate first = LatencyFromRates(*ctx.frames, *ctx.rates, ctx.model->config);
       fit.parameters = 1;
-      fit.searched = true;
       if (!first.observable) {
         fit.parameters = 0;
         fit.run = *ctx.model_run;
@@ -518,6 +524,10 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       }
       fit.model.correction.latency = tau;
       fit.fitted.push_back({"latencyMs", tau * 1e3, tau_sigma * 1e3, "ms"});
+      // Laplace's approximation of its evidence under the prior latency_sigma_s
+      // (candidates.h `occam`).
+      fit.occam = std::max(0.0, 2.0 * std::log(opt.latency_sigma_s / std::max(tau_sigma, 1e-6))) +
+                  std::pow((tau - tau0) / opt.latency_sigma_s, 2);
       std::string grid_text;
       for (size_t k = 0; k < taus.size(); ++k) {
         absl::StrAppend(&grid_text,
@@ -551,7 +561,6 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       for (const auto& [id, value] : ctx.model->options.random_walk_by_gyro) {
         if (id == candidate.gyro) q0 = value;
       }
-      fit.boundary = true;
       fit.time.kind = "random_walk";
       const double base = q0 > 0.0 ? q0 : DegPerHourSqrtHourToSi(kRandomWalkFloorDegHSqrtH);
       std::vector<double> grid, value;
@@ -578,7 +587,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       set_intensity(fit.model, grid[best_k]);
       fit.run = std::move(best_run);
       fit.parameters = 1;
-      fit.searched = true;
+      // Its evidence: the intensity integrated over the grid, each point equally likely a
+      // priori (a log-uniform prior over 2 .. 32 times the configured intensity).
+      for (double d : value) fit.prior_points.emplace_back(1.0 / value.size(), d);
       // Parabola in log q through the best point and its neighbours for the reported intensity.
       double q_hat = grid[best_k];
       if (best_k > 0 && best_k + 1 < static_cast<int>(grid.size())) {

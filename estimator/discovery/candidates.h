@@ -80,21 +80,22 @@ struct CandidateFit {
   // parameters are constant from the start already.
   std::optional<ModelRun> fixed_run;
   int parameters = 0;
-  bool searched =
-      false;  // parameters fitted by search (BIC penalty) rather than freed with a prior
   std::vector<Parameter> fitted;
   std::vector<std::string> notes;
   int runs = 0;  // filter runs spent
-  // Time behaviour (report.h TimeBehaviour). A step and a random walk are scored by their own
-  // likelihood ratio and exempt from the constant-effect homogeneity test (selection.h).
+  // Time behaviour (report.h TimeBehaviour). A step and a random walk are exempt from the
+  // constant-effect homogeneity test (selection.h): they describe a change in time themselves.
   TimeBehaviour time;
-  // The likelihood-ratio statistic's null distribution: chi-square(parameters), times
-  // `lr_tests` for a maximum over that many searched onsets (Bonferroni); for a variance on its
-  // boundary (`boundary`), the 50:50 mixture of chi2(0) and chi2(parameters).
-  int lr_tests = 1;
-  // Parameters searched on top of prior-freed ones (the onset of a step): BIC penalty each.
-  int searched_parameters = 0;
-  bool boundary = false;
+  // The candidate's evidence against the current model, 2 ln B (statistics.h, docs/discovery.md
+  // "Evidence"). For parameters freed with a prior, `run`'s likelihood is their marginal
+  // likelihood already: both below stay empty. A parameter fixed by a search is integrated over
+  // a stated prior, on a grid: `prior_points` holds each point's prior weight (the weights sum
+  // to 1) and the profiled -2 log L of its run (a drift step's onsets, a random walk's
+  // intensities); or by Laplace's approximation: `occam` = ln det(P0 / P) + theta^T P0^-1 theta
+  // of the searched parameters (prior covariance P0, posterior P), subtracted from the best
+  // run's improvement (a latency, a star-tracker misalignment).
+  std::vector<std::pair<double, double>> prior_points;
+  double occam = 0.0;
   // Onset profile of a step: hours since the first frame, -2 log L (profiled).
   std::vector<std::pair<double, double>> onset_profile;
   // A step's competing alternative that is no physics (D43): the gyro's readings jump at the

@@ -108,6 +108,7 @@ FitSummary Summarise(const ModelState& model, const ModelRun& run, const Profile
   s.dispersion = fit.dispersion;
   s.gap_drift_rate_deg_h = held_out.rate_rms_deg_h;
   s.held_out_nees = held_out.nees;
+  s.held_out_deviance = held_out.deviance;
   s.held_out_dof = held_out.dof;
   s.gaps = held_out.gaps;
   return s;
@@ -167,11 +168,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
 
   // Forward selection: one effect per round while one is found.
   selected.held_out = base_held_out;
-  const double log_n = std::log(std::max(2, selected.fit.steps));
   bool time_localized = false;  // significant candidates, each only fitting part of the time
   std::string time_localized_note;
   for (int round = 0; round < options.max_effects; ++round) {
-    auto result = SelectionRound(round, report.gyros, log_n, selected, context);
+    auto result = SelectionRound(round, report.gyros, selected, context);
     if (!result.ok()) return result.status();
     report.candidates.insert(report.candidates.end(), result->rows.begin(), result->rows.end());
     if (!result->finding.has_value()) {
@@ -200,6 +200,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     Evidence& e = report.findings.front().evidence;
     e.held_out_nees_before = base_held_out.nees;
     e.held_out_nees_after = final_held_out.nees;
+    e.held_out_deviance_before = base_held_out.deviance;
+    e.held_out_deviance_after = final_held_out.deviance;
     e.held_out_dof = final_held_out.dof;
   }
 

@@ -10,14 +10,18 @@
 //   star-tracker innovations give the Gaussian log-likelihood -2 log L = sum(nis + log det S)
 //   (StepReport), capped per step at the chi-square 1e-4 quantile so that star-tracker outliers
 //   count alike for every model, and profiled over a common noise scale (a mis-stated noise level
-//   does not pose as an effect). Coefficients freed with a prior (modelSigma) make this the
-//   model's evidence, which carries its own Occam penalty; parameters fitted by search (latency,
-//   star-tracker misalignment, random-walk intensity) pay k ln n (BIC).
-// - Select. Each candidate effect the model lacks is added in turn and refitted; its
-//   likelihood-ratio statistic is tested against chi-square(k) at a Bonferroni level over the
-//   candidates of the round. Among the significant ones the best penalised score wins; when two
-//   are within kDecisiveDeviance, held-out prediction decides. Forward selection repeats on the
-//   extended model, so two effects in one recording are both found.
+//   does not pose as an effect).
+// - Evidence. Every decision compares two models by 2 ln B, B their Bayes factor: coefficients
+//   freed with a prior (modelSigma) make the filter's likelihood their marginal likelihood;
+//   parameters fixed by search (onset, random-walk intensity, latency, star-tracker
+//   misalignment) are integrated over a stated prior. Since E[B] = 1 without the effect, a
+//   threshold of 2 ln(M / alpha) over M comparisons bounds the chance of a false finding by
+//   alpha (Markov's inequality). Held-out prediction is compared in the same currency: -2 log of
+//   the predictive density of the held-out errors.
+// - Select. Each candidate effect the model lacks is added in turn and refitted; the one with
+//   the most evidence above the threshold wins; when two are within kDecisiveDeviance,
+//   held-out prediction decides. Forward selection repeats on the extended model, so two
+//   effects in one recording are both found.
 // - Locate. Regimes come from the measured body rate (regimes.h). Residuals are cut per gyro and
 //   per regime span; held-out prediction withholds the star tracker over whole regime spans, so
 //   the model calibrated in one regime predicts another (a concealed effect shows there).

@@ -152,13 +152,18 @@ HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps
       const auto [s_first, s_last] = sigma_first_last[id];
       const double var = std::max(s_last * s_last - s_first * s_first, 0.0) + fit_var;
       if (var > 0) {
+        // Two effective axes across the spin axis, each N(0, var) if the model is right: -2 log
+        // of the predictive density is growth^2 / var + 2 ln var (+ const), which a model
+        // cannot lower by claiming a larger var.
         g.nees += growth.squaredNorm() / var;
+        g.deviance += growth.squaredNorm() / var + 2.0 * std::log(var);
         g.dof += 2;
       }
       g.gyro_drift_rate_deg_h.emplace_back(id,
                                            RadPerSecToDegPerHour(growth.norm() / std::max(T, 1.0)));
     }
     out.nees += g.nees;
+    out.deviance += g.deviance;
     out.dof += g.dof;
     out.gaps.push_back(g);
   }

@@ -40,11 +40,12 @@ std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans,
 // The run options that withhold the star tracker over `gaps`.
 ModelRunOptions WithheldOver(const std::vector<Gap>& gaps);
 
-// A run's held-out prediction: per gap the attitude drift rate and the spin-axis NEES, their
-// sums, and the attitude error series of the plots.
+// A run's held-out prediction: per gap the attitude drift rate, the spin-axis NEES and its -2 log
+// predictive density (GapSummary), their sums, and the attitude error series of the plots.
 struct HeldOutResult {
   std::vector<GapSummary> gaps;
   double nees = 0.0;
+  double deviance = 0.0;  // -2 log predictive density: the currency of held-out comparisons
   int dof = 0;
   double rate_rms_deg_h = 0.0;
   std::vector<HeldOutPoint> points;

@@ -266,7 +266,7 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining, bool time_
           : "");
   u.evidence.held_out_nees_after = held_out.nees;
   u.evidence.held_out_dof = held_out.dof;
-  u.evidence.lr_p_value = residual_misfit ? where.p_value : (held_out_misfit ? held_out_p : 0.0);
+  u.evidence.p_value = residual_misfit ? where.p_value : (held_out_misfit ? held_out_p : 0.0);
   return out;
 }
 

@@ -26,8 +26,9 @@ struct DiagnoseOptions {
   // Drift model of the user (calibration_model.h ParseModel): "10+11" lets every configured
   // term with a positive modelSigma be calibrated and the residual random walk run.
   std::string model = "10+11";
-  // Family-wise false-finding level of each forward-selection round (Bonferroni over its
-  // candidates).
+  // Family-wise false-finding level of each forward-selection round: a candidate is taken when
+  // its evidence 2 ln B exceeds 2 ln(M / alpha), M the round's candidates (statistics.h
+  // EvidenceThreshold).
   double alpha = 0.01;
   int max_effects = 3;  // forward-selection rounds
   // Integration rate of the filter during diagnosis [Hz]. The drift changes slowly; the
@@ -51,6 +52,9 @@ struct DiagnoseOptions {
   double k0_sigma_deg_h = 0.3;
   double mu_nu_sigma_deg_h = 0.1;
   double misalignment_sigma_arcsec = 60.0;
+  // Prior 1-sigma of a star-tracker latency (its evidence, docs/discovery.md "Evidence"): a
+  // time stamp late or early by up to about a second.
+  double latency_sigma_s = 1.0;
   RegimeOptions regimes;
   // Cancellation (may be empty): polled before each stage and before each candidate or
   // held-out model run (a candidate fit with a parameter search is one unit and is not

@@ -60,9 +60,20 @@ std::string VectorText(const std::vector<Parameter>& ps, const std::string& name
 
 std::string ExplainFinding(const Finding& f) {
   const Evidence& e = f.evidence;
+  // docs/discovery.md "Evidence": 2 ln B, and for searched parameters the prior's cost.
   const std::string stats =
-      absl::StrFormat("the likelihood improves by %.1f (-2 log L) for %d parameter%s, p = %.2g",
-                      e.delta_deviance, e.parameters, e.parameters == 1 ? "" : "s", e.lr_p_value);
+      e.penalty != 0.0
+          ? absl::StrFormat(
+                "evidence 2 ln B = %.1f for %d parameter%s (-2 log L improves by %.1f, less %.1f "
+                "for the searched parameters' prior range; threshold %.1f, false-alarm "
+                "probability below 1/B = %.2g)",
+                e.evidence, e.parameters, e.parameters == 1 ? "" : "s", e.delta_deviance,
+                e.penalty, e.threshold, e.p_value)
+          : absl::StrFormat(
+                "evidence 2 ln B = %.1f for %d parameter%s (the marginal likelihood improves by "
+                "that much in -2 log L; threshold %.1f, false-alarm probability below 1/B = "
+                "%.2g)",
+                e.evidence, e.parameters, e.parameters == 1 ? "" : "s", e.threshold, e.p_value);
   const auto& ps = f.parameters;
   if (f.effect == "rotor_displacement") {
     const Parameter* angle = FindParameter(ps, "lineAngleDeg");

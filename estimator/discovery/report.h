@@ -38,17 +38,28 @@ struct Parameter {
 };
 
 struct Evidence {
+  // docs/discovery.md "Evidence": every decision compares models by 2 ln B (B their Bayes
+  // factor), in-sample and on the held-out spans.
   double delta_deviance = 0.0;  // -2 log L(before) - (-2 log L(with the effect)), profiled
-  double penalty = 0.0;         // k ln n for searched parameters, 0 for prior-freed ones
-  int parameters = 0;           // k
-  double lr_p_value = 1.0;      // P(chi2_k > delta_deviance)
-  double threshold = 0.0;       // chi2_k quantile at the round's Bonferroni level
-  int round = 0;                // forward-selection round (0 first)
+  // The prior's cost of parameters fixed by search (delta_deviance - evidence); 0 for
+  // parameters freed with a prior, whose likelihood is their marginal likelihood already.
+  double penalty = 0.0;
+  double evidence = 0.0;  // 2 ln B against the model without the effect
+  int parameters = 0;     // k
+  // For a finding of the library: 1 / B, the bound on its false-alarm probability. For an
+  // unexplained finding: the p-value of its goodness-of-fit test.
+  double p_value = 1.0;
+  double threshold = 0.0;  // 2 ln(M / alpha), M the round's candidates
+  int round = 0;           // forward-selection round (0 first)
   // Held-out prediction with and without the effect, when it was run: sum of the normalised
   // squared spin-axis prediction errors at the held-out span ends (chi-square with
-  // held_out_dof degrees of freedom if the model is right).
+  // held_out_dof degrees of freedom if the model is right), and their -2 log predictive density
+  // (held-out deviance; lower predicts better, and a model cannot lower it by widening its
+  // own uncertainty).
   double held_out_nees_before = -1.0;
   double held_out_nees_after = -1.0;
+  double held_out_deviance_before = 0.0;
+  double held_out_deviance_after = 0.0;
   int held_out_dof = 0;
   std::vector<std::string> notes;  // human-readable supporting facts
 };
@@ -112,6 +123,8 @@ struct GapSummary {
   double drift_rate_deg_h = 0.0;  // |slope| of the attitude error against the withheld star tracker
   double final_error_arcsec = 0.0;
   double nees = 0.0;  // sum over gyros of the normalised squared spin-axis error at the end
+  // -2 log predictive density of those errors: nees + (each gyro's) dof ln(predicted variance)
+  double deviance = 0.0;
   int dof = 0;
   std::vector<std::pair<int, double>> gyro_drift_rate_deg_h;  // gyro id, |slope| of its spin axis
 };
@@ -123,6 +136,7 @@ struct FitSummary {
   double deviance = 0.0;              // profiled -2 log L (+ const)
   double dispersion = 0.0;            // mean nis per component (1 if the noise model is right)
   double held_out_nees = 0.0;
+  double held_out_deviance = 0.0;  // -2 log predictive density over the held-out spans
   int held_out_dof = 0;
   std::vector<GapSummary> gaps;
 };
@@ -134,16 +148,16 @@ struct CandidateScore {
   int round = 0;
   int parameters = 0;
   double delta_deviance = 0.0;
-  double penalty = 0.0;
-  double score = 0.0;  // delta_deviance - penalty
-  double p_value = 1.0;
+  double penalty = 0.0;  // the prior's cost of searched parameters (Evidence)
+  double score = 0.0;    // the evidence 2 ln B = delta_deviance - penalty
+  double p_value = 1.0;  // 1 / B
   bool significant = false;
   // Improves the fit throughout the recording rather than in part of it only (a physical effect
   // of the library is constant in time).
   bool homogeneous = true;
   bool selected = false;
   // "constant", "step" (onset searched) or "random_walk" (intensity searched); a step and a
-  // random walk are tested by their own likelihood ratio, not by the homogeneity test.
+  // random walk describe a change in time and are exempt from the homogeneity test.
   std::string time_behaviour = "constant";
   double onset_hours = -1.0;  // best onset of a step, hours since the first frame
 };
@@ -183,8 +197,8 @@ inline double HoursSince(absl::Time t, absl::Time t0) { return absl::ToDoubleHou
 std::string UtcText(absl::Time t);
 
 // The physics of a finding of the library in the units people use (docs/discovery.md, "Physics in
-// the report"), from its effect, gyro, parameters and evidence (delta_deviance, parameters,
-// lr_p_value); only the statistics for an effect outside the library.
+// the report"), from its effect, gyro, parameters and evidence (evidence, parameters, p_value);
+// only the statistics for an effect outside the library.
 std::string ExplainFinding(const Finding& finding);
 
 }  // namespace esg::estimator::discovery

@@ -20,7 +20,7 @@ constexpr int kQuarters = 4;  // time blocks of the homogeneity test
 // A candidate's score in the round.
 struct Scored {
   int index;  // into the round's candidates and fits
-  double delta, penalty, score, p, threshold;
+  double delta, penalty, score, p, threshold;  // score: the evidence 2 ln B; p: 1 / B
   bool significant;
   std::array<double, kQuarters> quarters{};  // improvement of -2 log L per quarter
   bool homogeneous = true;
@@ -65,9 +65,11 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
   return fits;
 }
 
-// Likelihood-ratio score, significance and homogeneity of each fit against the selected model.
+// Evidence, significance and homogeneity of each fit against the selected model
+// (docs/discovery.md "Evidence"): 2 ln B, B the Bayes factor of the model with the effect
+// against the selected one, significant above 2 ln(family / alpha).
 std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedModel& selected,
-                          double log_n, int family, const DiagnosisContext& context) {
+                          int family, const DiagnosisContext& context) {
   const DiagnoseOptions& options = context.options();
   const std::vector<double> current_steps = StepDeviance(selected.run);
   std::vector<Scored> scored;
@@ -77,25 +79,28 @@ std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedM
     Scored s;
     s.index = static_cast<int>(i);
     s.delta = selected.fit.value - d.value;
-    s.penalty = (f.searched ? f.parameters : f.searched_parameters) * log_n;
-    s.score = s.delta - s.penalty;
+    // Parameters freed with a prior: the run's likelihood is their marginal likelihood. A
+    // searched parameter: integrated over its prior's grid, or Laplace's approximation.
+    double evidence = s.delta - f.occam;
+    if (!f.prior_points.empty()) {
+      std::vector<std::pair<double, double>> points;
+      for (const auto& [w, value] : f.prior_points)
+        points.emplace_back(w, selected.fit.value - value);
+      evidence = EvidenceOverPrior(points);
+    }
+    s.score = evidence;
+    s.penalty = s.delta - evidence;
+    s.p = EvidenceBound(evidence);
+    s.threshold = EvidenceThreshold(options.alpha, family);
+    s.significant = f.parameters > 0 && evidence > s.threshold;
     const int k = std::max(1, f.parameters);
-    // The LR's null distribution (candidates.h): chi-square(k); for a variance on its boundary
-    // (a random-walk intensity) the 50:50 mixture of chi2(0) and chi2(k), P(LR > x) =
-    // P(chi2_k > x) / 2 for x > 0; for the maximum over the onsets of a step, Bonferroni over
-    // the onsets searched.
-    const double mixture = f.boundary ? 0.5 : 1.0;
-    const int tests = std::max(1, f.lr_tests);
-    s.p = s.delta > 0.0 || !f.boundary
-              ? std::min(1.0, tests * mixture * ChiSquareSurvival(std::max(0.0, s.delta), k))
-              : 1.0;
-    s.threshold = ChiSquareQuantile(1.0 - options.alpha / family / mixture / tests, k);
-    s.significant = f.parameters > 0 && Significant(s.p, options.alpha, family);
     // Homogeneity: the effects of the library are constant in time. With its parameters held
     // from the start at their final values, an effect that makes the fit worse in a quarter of
     // the recording by more than its cost there (k ln n_q, plus the chi-square quantile) while
     // improving it elsewhere is fitting a change in time (a fault, a jump), not the physics it
-    // names.
+    // names. In the same currency: a quarter's -2 log L with the effect held against without
+    // it is 2 ln B of the two simple models there; it may worsen by the k ln n_q its fitted
+    // parameters can cost by chance, plus the evidence threshold over the quarters.
     const std::vector<double> cand_steps = StepDeviance(f.fixed_run ? *f.fixed_run : f.run);
     std::array<int, kQuarters> steps_in{};
     for (size_t j = 0; j < std::min(current_steps.size(), cand_steps.size()); ++j) {
@@ -110,7 +115,7 @@ std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedM
     const bool constant = f.time.kind == "constant";
     for (int q = 0; q < kQuarters && constant; ++q) {
       const double cost = k * std::log(std::max(2, steps_in[q])) +
-                          ChiSquareQuantile(1.0 - options.alpha / kQuarters, k);
+                          EvidenceThreshold(options.alpha, kQuarters);
       if (s.quarters[q] < -cost) s.homogeneous = false;
     }
     scored.push_back(s);
@@ -187,21 +192,22 @@ absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
   both.options.random_walk_by_gyro = walk.model.options.random_walk_by_gyro;
   auto run = context.CheckedRun(both, /*held_out=*/false);
   if (!run.ok()) return run.status();
-  const double gain = Profile(walk.run).value - Profile(*run).value;
-  const int k = std::max(1, det.parameters);
-  const double p_det = ChiSquareSurvival(std::max(0.0, gain), k);
+  // The deterministic effect's evidence on top of the walk: its likelihood gain there, less
+  // the prior's cost of its searched parameters (as in its own score).
+  const double gain = Profile(walk.run).value - Profile(*run).value - significant.front().penalty;
+  const double threshold = EvidenceThreshold(context.options().alpha, family);
   std::string note = absl::StrFormat(
-      "on top of a random walk raised to %.4f deg/h/sqrt(h) (%s) it still improves -2 log L by "
-      "%.1f (p = %.2g)",
+      "on top of a random walk raised to %.4f deg/h/sqrt(h) (%s) its evidence is still 2 ln B = "
+      "%.1f (threshold %.1f)",
       SiToDegPerHourSqrtHour(walk.fitted.empty() ? walk.model.config.random_walk
                                                  : DegPerHourSqrtHourToSi(walk.fitted[0].value)),
-      CandidateName(walk.candidate), gain, p_det);
-  if (!Significant(p_det, context.options().alpha, family)) {
+      CandidateName(walk.candidate), gain, threshold);
+  if (!(gain > threshold)) {
     significant.assign(1, *rw);
     note = absl::StrFormat(
         "%s fits part of it but adds nothing significant on top of the raised random walk "
-        "(-2 log L %.1f, p = %.2g)",
-        CandidateName(det.candidate), gain, p_det);
+        "(2 ln B = %.1f, threshold %.1f)",
+        CandidateName(det.candidate), gain, threshold);
   }
   return note;
 }
@@ -221,9 +227,9 @@ std::vector<std::optional<absl::StatusOr<ModelRun>>> HeldOutRuns(
   return held;
 }
 
-// Among the significant candidates the best score wins; candidates the likelihood does not tell
-// apart (within kDecisiveDeviance of the best) are decided by held-out prediction, lowest held-out
-// NEES. Returns the index of the chosen fit; `contenders` gets the held-out results when they
+// Among the significant candidates the best evidence wins; candidates the recording does not
+// tell apart (within kDecisiveDeviance of the best) are decided by held-out prediction: the
+// lowest held-out deviance (-2 log predictive density), the same currency out of sample. Returns the index of the chosen fit; `contenders` gets the held-out results when they
 // decided.
 absl::StatusOr<int> ChooseAmongSignificant(const std::vector<Scored>& significant,
                                            const std::vector<CandidateFit>& fits, int round,
@@ -244,8 +250,8 @@ absl::StatusOr<int> ChooseAmongSignificant(const std::vector<Scored>& significan
     if (!held[j]->ok()) return held[j]->status();
     HeldOutResult r = SummariseHeldOut(**held[j], context.gaps(), context.regimes(),
                                        context.frames());
-    if (r.nees < best) {
-      best = r.nees;
+    if (r.deviance < best) {
+      best = r.deviance;
       chosen = close[j];
     }
     contenders.emplace_back(close[j], std::move(r));
@@ -255,8 +261,10 @@ absl::StatusOr<int> ChooseAmongSignificant(const std::vector<Scored>& significan
 
 // Concealed effects: nothing significant in-sample (the residual-drift states absorb the effect
 // where it was calibrated), yet the selected model mispredicts the held-out regimes. Then the
-// candidates are scored by held-out prediction: the one whose held-out NEES falls the most, by
-// more than the chi-square(k) quantile at the round's Bonferroni level, is taken. Returns its
+// candidates are scored by held-out prediction: the one whose held-out deviance (-2 log
+// predictive density) falls the most, by more than the evidence threshold over the round's
+// candidates, is taken (the drop is 2 ln of the ratio of the two models' predictive densities
+// of data neither was fitted to: no parameter count enters). Returns its
 // index or -1; `contenders` gets the held-out results when one is taken.
 absl::StatusOr<int> ChooseByHeldOut(const std::vector<Scored>& scored,
                                     const std::vector<CandidateFit>& fits, int round,
@@ -285,9 +293,9 @@ absl::StatusOr<int> ChooseByHeldOut(const std::vector<Scored>& scored,
     if (!held[j]->ok()) return held[j]->status();
     HeldOutResult r = SummariseHeldOut(**held[j], context.gaps(), context.regimes(),
                                        context.frames());
-    const int k = std::max(1, fits[scored[j].index].parameters);
-    const double drop = selected.held_out.nees - r.nees;
-    const double needed = ChiSquareQuantile(1.0 - options.alpha / scored.size(), k);
+    const double drop = selected.held_out.deviance - r.deviance;
+    const double needed =
+        EvidenceThreshold(options.alpha, static_cast<int>(scored.size()));
     if (drop > needed && drop > best_drop && scored[j].homogeneous) {
       best_drop = drop;
       chosen = scored[j].index;
@@ -329,8 +337,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   finding.time = f.time;
   finding.evidence.delta_deviance = s.delta;
   finding.evidence.penalty = s.penalty;
+  finding.evidence.evidence = s.score;
   finding.evidence.parameters = f.parameters;
-  finding.evidence.lr_p_value = s.p;
+  finding.evidence.p_value = s.p;
   finding.evidence.threshold = s.threshold;
   finding.evidence.round = round;
   finding.evidence.notes = f.notes;
@@ -346,14 +355,20 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
     if (index == chosen) {
       finding.evidence.held_out_nees_before = selected.held_out.nees;
       finding.evidence.held_out_nees_after = r.nees;
+      finding.evidence.held_out_deviance_before = selected.held_out.deviance;
+      finding.evidence.held_out_deviance_after = r.deviance;
       finding.evidence.held_out_dof = r.dof;
       selected.held_out = r;
     } else if (!held_out_selected) {
       finding.evidence.notes.push_back(absl::StrFormat(
-          "%s fits the star tracker almost as well (score within %.0f) but predicts the held-out "
-          "spans worse: held-out NEES %.1f against %.1f",
-          CandidateName(fits[index].candidate),
-          kDecisiveDeviance, r.nees,
+          "%s fits the star tracker almost as well (2 ln B within %.0f) but predicts the "
+          "held-out spans worse: held-out -2 log predictive density %.1f higher (NEES %.1f "
+          "against %.1f)",
+          CandidateName(fits[index].candidate), kDecisiveDeviance,
+          r.deviance - std::find_if(contenders.begin(), contenders.end(), [&](const auto& c) {
+                         return c.first == chosen;
+                       })->second.deviance,
+          r.nees,
           std::find_if(contenders.begin(), contenders.end(), [&](const auto& c) {
             return c.first == chosen;
           })->second.nees));
@@ -361,9 +376,10 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   }
   const std::string behaviour =
       f.time.kind == "step"
-          ? "a step: no change before its onset, tested by its own likelihood ratio over the onset"
+          ? "a step: no change before its onset, its evidence integrated over the onset"
       : f.time.kind == "random_walk"
-          ? "a random walk: tested by its own likelihood ratio, not by the constant-effect test"
+          ? "a random walk: its evidence integrated over the intensity, not the constant-effect "
+            "test"
           : "constant in time, as a physical effect of the library is";
   finding.evidence.notes.push_back(absl::StrFormat(
       "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (%s)",
@@ -373,7 +389,7 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
 
 }  // namespace
 
-absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros, double log_n,
+absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros,
                                            SelectedModel& selected, DiagnosisContext& context) {
   const DiagnoseOptions& options = context.options();
   RoundResult result;
@@ -411,7 +427,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   absl::StatusOr<std::string> rw_note;
   for (int stage = 0; stage < 2; ++stage) {
     if (absl::Status s = fit_all(stage == 0 ? constant : timed); !s.ok()) return s;
-    scored = Score(fits, selected, log_n, family, context);
+    scored = Score(fits, selected, family, context);
     significant = SignificantInOrder(scored, fits, inhomogeneous_only);
     rw_note = PreferRandomWalk(scored, fits, family, significant, context);
     if (!rw_note.ok()) return rw_note.status();
@@ -423,27 +439,33 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   // A time behaviour must explain the recording better than a jump of the gyro's readings at the
   // onset (D43): a step of the readings is no physics of the library, and a drift step or a walk
   // that fits it only in part is the nearest candidate forced onto a fault. Same currency: the
-  // profiled -2 log L with the onset's BIC penalty (the readout jump has 3 parameters, as the
-  // step). When the readout jump does at least as well, nothing is taken and the
-  // mismatch is left unexplained, located in time.
+  // jump's evidence 2 ln B, its best onset's likelihood gain less the cost of the onset's prior
+  // (the step's own, over the same onsets; the jump has 3 parameters freed with a prior, as the
+  // step). When the readout jump does at least as well, nothing is taken and the mismatch is
+  // left unexplained, located in time.
   std::string readout_note;
   if (!significant.empty()) {
     const Scored& top = significant.front();
     const Candidate& c = fits[top.index].candidate;
     const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift;
     const CandidateFit* jump = nullptr;
-    for (const CandidateFit& f : fits) {
+    double onset_cost = 0.0;
+    for (const Scored& x : scored) {
+      const CandidateFit& f = fits[x.index];
       if (!timed_top || f.candidate.effect != Effect::kDriftStep || !f.readout_fitted) continue;
       if (c.gyro > 0 && f.candidate.gyro != c.gyro) continue;  // a walk of all gyros: any gyro
-      if (jump == nullptr || f.readout_value < jump->readout_value) jump = &f;
+      if (jump == nullptr || f.readout_value < jump->readout_value) {
+        jump = &f;
+        onset_cost = x.penalty;
+      }
     }
     if (jump != nullptr) {
-      const double jump_score = selected.fit.value - jump->readout_value - log_n;
+      const double jump_score = selected.fit.value - jump->readout_value - onset_cost;
       if (jump_score >= top.score) {
         readout_note = absl::StrFormat(
             "resembles a step of gyro %d's readings at %.2f h (a readout jump, a fault outside "
-            "the library): its misalignment released at that instant scores %.1f against "
-            "%.1f for %s, which fits it only in part",
+            "the library): its misalignment released at that instant has evidence 2 ln B = "
+            "%.1f against %.1f for %s, which fits it only in part",
             jump->candidate.gyro, jump->readout_onset_hours, jump_score, top.score,
             CandidateName(c));
         significant.clear();

@@ -1,7 +1,7 @@
 // Forward selection (docs/discovery.md, "Select"): one round adds each candidate effect the model
-// lacks in turn (candidates.h), refits, and scores it by the likelihood-ratio statistic against
-// chi-square(k) at a Bonferroni level over the round's candidates, with the homogeneity test (an
-// effect of the library is constant in time). Deterministic effects come before the random walk;
+// lacks in turn (candidates.h), refits, and scores it by its evidence 2 ln B (B the Bayes factor
+// against the current model; significant above 2 ln(M / alpha) over the round's M candidates,
+// statistics.h), with the homogeneity test (an effect of the library is constant in time). Deterministic effects come before the random walk;
 // candidates within kDecisiveDeviance are decided by held-out prediction (held_out.h); when
 // nothing is significant in-sample yet the model mispredicts the held-out spans, the candidates
 // are scored by held-out prediction (a concealed effect).
@@ -21,8 +21,8 @@
 
 namespace esg::estimator::discovery {
 
-// Two candidates whose penalised scores differ by less than this (in -2 log L) are not told apart
-// by the in-sample likelihood (Kass & Raftery: below 10 is not "very strong"); held-out prediction
+// Two candidates whose evidence 2 ln B differs by less than this are not told apart by the
+// recording in-sample (Kass & Raftery: below 10 is not "very strong"); held-out prediction
 // decides between them.
 inline constexpr double kDecisiveDeviance = 10.0;
 
@@ -48,11 +48,10 @@ struct RoundResult {
   std::string time_localized_note;
 };
 
-// Round `round` (0 first) of forward selection over the running `gyros`; `log_n` is the log of
-// the number of scored steps (the BIC penalty per searched parameter). Updates `selected` (its
+// Round `round` (0 first) of forward selection over the running `gyros`. Updates `selected` (its
 // held-out prediction may be computed even when nothing is taken). Errors: Cancelled, those of
 // FitCandidate and RunModel.
-absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros, double log_n,
+absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros,
                                            SelectedModel& selected, DiagnosisContext& context);
 
 }  // namespace esg::estimator::discovery

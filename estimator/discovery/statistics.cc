@@ -142,4 +142,23 @@ double Lag1Autocorrelation(const std::vector<double>& x) {
 
 bool Significant(double p, double alpha, int tests) { return p < alpha / std::max(1, tests); }
 
+double EvidenceThreshold(double alpha, int comparisons) {
+  return 2.0 * std::log(std::max(1, comparisons) / alpha);
+}
+
+double EvidenceBound(double evidence) { return std::min(1.0, std::exp(-0.5 * evidence)); }
+
+double EvidenceOverPrior(const std::vector<std::pair<double, double>>& weight_and_evidence) {
+  double top = -std::numeric_limits<double>::infinity();
+  for (const auto& [w, e] : weight_and_evidence) {
+    if (w > 0.0) top = std::max(top, 0.5 * e);
+  }
+  if (!std::isfinite(top)) return -std::numeric_limits<double>::infinity();
+  double sum = 0.0;
+  for (const auto& [w, e] : weight_and_evidence) {
+    if (w > 0.0) sum += w * std::exp(0.5 * e - top);
+  }
+  return 2.0 * (top + std::log(sum));
+}
+
 }  // namespace esg::estimator::discovery

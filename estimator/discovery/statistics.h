@@ -5,6 +5,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
 #define ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
 
+#include <utility>
 #include <vector>
 
 #include "estimator/line_fit.h"
@@ -31,6 +32,19 @@ double NormalSurvival(double z);
 
 // Bonferroni: p is significant at family-wise level alpha over `tests` tests (at least one).
 bool Significant(double p, double alpha, int tests);
+
+// Evidence (docs/discovery.md, "Evidence"): e = 2 ln B, B the Bayes factor of a model with an
+// effect against the model without it (B = p(data | with) / p(data | without), each parameter
+// integrated over its prior). Under the model without the effect E[B] = 1, so by Markov's
+// inequality P(B >= M / alpha) <= alpha / M: the threshold 2 ln(M / alpha) holds the chance of
+// any false finding among M comparisons below alpha, with no asymptotics and whatever k.
+double EvidenceThreshold(double alpha, int comparisons);
+// 1 / B = exp(-e / 2), at most 1: the bound on the false-alarm probability of a finding at e.
+double EvidenceBound(double evidence);
+// The evidence of a parameter integrated over a discrete prior: 2 ln sum_j w_j exp(e_j / 2),
+// from the prior weights w_j (summing to 1) and the evidence e_j of the model at each point
+// (computed without overflow); -infinity for an empty prior.
+double EvidenceOverPrior(const std::vector<std::pair<double, double>>& weight_and_evidence);
 
 // The robust line fit lives in estimator/line_fit.h (shared with the offline gap runs).
 using ::esg::estimator::FitRobustLine;

@@ -99,7 +99,6 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   const absl::Time t0 = frames.front().time;
   const absl::Duration length = frames.back().time - t0;
   fit.parameters = 3;
-  fit.searched_parameters = 1;  // the onset
   fit.time.kind = "step";
 
   // Prefix run without the step, with checkpoints before the onsets of the first two grids.
@@ -195,9 +194,9 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   absl::Duration spacing = length / fine;
   const absl::Duration frame_step = (frames.back().time - t0) / std::max(1, n - 1);
   while (spacing > frame_step) {
-    const int tests = static_cast<int>(value.size());
-    const double p = tests * ChiSquareSurvival(std::max(0.0, base_value - best_value), 3.0);
-    if (!(p < opt.alpha)) break;
+    // The evidence integrated over the onsets is at most the best onset's (an average): below
+    // the threshold of a single comparison the step cannot be taken.
+    if (!(base_value - best_value > EvidenceThreshold(opt.alpha, 1))) break;
     const absl::Duration finer = std::max(spacing / kOnsetRefine, frame_step);
     std::vector<int> new_frames;
     for (int k = -kOnsetRefine + 1; k < kOnsetRefine; ++k) {
@@ -226,7 +225,6 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
       if (absl::Status s = evaluate(f); !s.ok()) return s;
     }
   }
-  fit.lr_tests = static_cast<int>(value.size());
 
   // The onset interval: where -2 log L stays within kOnsetIntervalDrop of its minimum, linear
   // between evaluated onsets, clipped to the onsets searched.
@@ -235,6 +233,19 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   // modelled drift changes from frames[f - 1].time on, the onset reported.
   for (const auto& [f, v] : value) profile.emplace_back(HoursSinceStart(frames, f - 1), v);
   fit.onset_profile = profile;
+  // Its evidence: the onset integrated over a prior uniform across the span searched, by the
+  // trapezoid rule on the onsets evaluated (refined to one frame near the best); each onset's
+  // run is already the step's marginal likelihood (its size integrated over its prior).
+  if (profile.size() == 1) {
+    fit.prior_points.emplace_back(1.0, profile.front().second);
+  } else {
+    const double span_h = profile.back().first - profile.front().first;
+    for (size_t j = 0; j < profile.size(); ++j) {
+      const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
+      const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
+      fit.prior_points.emplace_back(0.5 * (left + right) / span_h, profile[j].second);
+    }
+  }
   size_t best_j = 0;
   for (size_t j = 0; j < profile.size(); ++j) {
     if (profile[j].second < profile[best_j].second) best_j = j;
@@ -304,7 +315,7 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   fit.time.onset_upper_hours = upper;
   fit.time.onset_lower = t0 + absl::Hours(lower);
   fit.time.onset_upper = t0 + absl::Hours(upper);
-  fit.time.onsets_searched = fit.lr_tests;
+  fit.time.onsets_searched = static_cast<int>(value.size());
 
   // The step: C1 after it (the run's final estimate) against C1 at the onset (the checkpoint's).
   auto at_onset =
@@ -331,7 +342,7 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   }
   fit.notes.push_back(
       absl::StrCat("likelihood over the onset (h from the start: -2 log L above the best; ",
-                   fit.lr_tests, " onsets, p Bonferroni-corrected over them):", profile_text));
+                   value.size(), " onsets, integrated over a uniform prior):", profile_text));
   fit.model.options = best_options;
   fit.run = std::move(best_run);
   return absl::OkStatus();

@@ -60,40 +60,6 @@ void BM_Diagnose30h(benchmark::State& state) {
 }
 BENCHMARK(BM_Diagnose30h)->Arg(1)->Arg(2)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
 
-// Correct verdict for a scenario (discovery_scenarios.h names).
-bool Correct(const std::string& truth, int gyro, const DiagnosisReport& r) {
-  auto has = [&](const std::string& effect, int g) {
-    for (const Finding& f : r.findings) {
-      if (f.effect == effect && (g == 0 || f.gyro == g)) return true;
-    }
-    return false;
-  };
-  if (truth == "none") return r.verdict == kVerdictNone;
-  if (truth == "readout_jump") return r.verdict == kVerdictUnexplained;
-  if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
-  // Exactly the one finding, in the right gyro where the effect is per gyro (the common random
-  // walk in gyro 0).
-  std::string effect = truth;
-  int want_gyro = gyro;
-  if (truth == "random_walk_one_gyro") effect = "random_walk_drift";
-  if (truth == "random_walk_15x" || truth == "random_walk_drift") {
-    effect = "random_walk_drift";
-    want_gyro = 0;
-  }
-  const bool per_gyro = truth == "rotor_displacement" || truth == "fourth_harmonic" ||
-                        truth == "unequal_stiffness" || truth == "gyro_misalignment" ||
-                        truth == "drift_step" || truth == "random_walk_one_gyro";
-  if (truth == "drift_step" || truth == "random_walk_one_gyro" || truth == "random_walk_15x") {
-    return r.findings.size() == 1 && r.findings.front().effect == effect &&
-           r.findings.front().gyro == want_gyro;
-  }
-  if (effect == "random_walk_drift") {  // common to every gyro, not one gyro's
-    return r.verdict == effect && r.findings.front().gyro == 0;
-  }
-  return r.verdict == effect &&
-         (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == want_gyro));
-}
-
 void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   const char* env = std::getenv("ESG_DISCOVERY_SEEDS");
   const int seeds = env != nullptr ? std::max(1, std::atoi(env)) : 10;
@@ -157,7 +123,7 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
             detail += text;
           }
         }
-        const bool ok = Correct(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
+        const bool ok = ::esg::testing::DiscoveryVerdictCorrect(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
         correct[truth] += ok ? 1 : 0;
         if (report->before.gap_drift_rate_deg_h > 0) {
           gap_ratio_sum[truth] +=

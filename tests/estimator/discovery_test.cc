@@ -7,6 +7,7 @@
 // rate, the model-free latency estimate, the star-tracker correction.
 #include <atomic>
 #include <cmath>
+#include <random>
 #include <thread>
 
 #include "absl/strings/str_format.h"
@@ -69,6 +70,39 @@ TEST(DiscoveryStatistics, ChiSquareQuantilesMatchTables) {
   // F(d, d) has median 1; F(1, d2) = t^2.
   EXPECT_NEAR(FSurvival(1.0, 7, 7), 0.5, 1e-9);
   EXPECT_NEAR(NormalSurvival(1.959964), 0.025, 1e-6);
+}
+
+// The evidence currency (docs/discovery.md "Evidence"): a Bayes factor's threshold 2 ln(M /
+// alpha) holds the false-alarm rate below alpha / M whatever the model (Markov's inequality,
+// E[B] = 1 without the effect). Checked on the simplest case with a closed form: the mean of n
+// unit-variance samples, effect-free, against a mean with prior N(0, 1).
+TEST(DiscoveryStatistics, EvidenceThresholdBoundsTheFalseAlarmRate) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> unit(0.0, 1.0);
+  const int n = 50, trials = 200000;
+  const double v0 = 1.0 / n, v1 = 1.0 / n + 1.0;  // variance of the mean without / with
+  const double threshold = EvidenceThreshold(0.01, 5);
+  EXPECT_NEAR(threshold, 2.0 * std::log(500.0), 1e-12);
+  int alarms = 0;
+  for (int t = 0; t < trials; ++t) {
+    const double mean = unit(rng) * std::sqrt(v0);
+    const double evidence = std::log(v0 / v1) + mean * mean * (1.0 / v0 - 1.0 / v1);  // 2 ln B
+    alarms += evidence > threshold ? 1 : 0;
+  }
+  EXPECT_LE(static_cast<double>(alarms) / trials, 0.01 / 5);
+  EXPECT_NEAR(EvidenceBound(2.0 * std::log(500.0)), 1.0 / 500.0, 1e-12);
+  EXPECT_EQ(EvidenceBound(-3.0), 1.0);
+}
+
+TEST(DiscoveryStatistics, EvidenceOverAPriorAveragesTheBayesFactors) {
+  // B = 0.5 * 3 + 0.5 * 1 = 2.
+  EXPECT_NEAR(EvidenceOverPrior({{0.5, 2.0 * std::log(3.0)}, {0.5, 0.0}}), 2.0 * std::log(2.0),
+              1e-12);
+  // No overflow at the evidence of a large effect; one point is that point.
+  EXPECT_NEAR(EvidenceOverPrior({{1.0, 9000.0}}), 9000.0, 1e-9);
+  EXPECT_NEAR(EvidenceOverPrior({{0.25, 9000.0}, {0.75, 10.0}}), 9000.0 + 2.0 * std::log(0.25),
+              1e-9);
+  EXPECT_TRUE(std::isinf(EvidenceOverPrior({})));
 }
 
 TEST(DiscoveryStatistics, RobustLineIgnoresOutliers) {

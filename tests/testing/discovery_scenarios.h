@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "estimator/attitude_profile.h"
+#include "estimator/discovery/report.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
@@ -92,8 +93,11 @@ inline std::vector<std::string> DiscoveryTimeBehaviours() {
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
 inline int AffectedGyro(uint64_t seed) { return 1 + static_cast<int>(seed % 3); }
 
+// `scale` multiplies the effect's size (the power curves of docs/discovery.md): displacement,
+// coefficient errors, misalignments, latency, random-walk intensity (of the 15x walk its excess
+// over the configured one), jump and step.
 inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, uint64_t seed,
-                                                   double hours = 30.0) {
+                                                   double hours = 30.0, double scale = 1.0) {
   using namespace esg::estimator;
   SimulationSpec s;
   s.config = DiscoveryConfig();
@@ -105,53 +109,92 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
   s.star_tracker.outages = {{5 * 3600.0, 6 * 3600.0}};
   const int g = AffectedGyro(seed) - 1;
   const double deg_h = DegPerHourToRadPerSec(1.0);
+  const double x = scale;
   // Rotor displaced 1.4 um: C1 ~ 0.09, C2 ~ 0.1 deg/h with the paper's C10, C20 per um.
-  const Eigen::Vector3d displacement = Eigen::Vector3d(0.8e-6, -1.0e-6, 0.6e-6);
+  const Eigen::Vector3d displacement = x * Eigen::Vector3d(0.8e-6, -1.0e-6, 0.6e-6);
   if (effect == "rotor_displacement" || effect == "two")
     s.gyros[g].rotor_displacement_k = displacement;
   if (effect == "fourth_harmonic") {
     // The model holds k0 at its bench value; the true one is 0.1 deg/h off.
     s.config.gyros[g].model_sigma.k0 = 0.0;
     DriftCoefficients d = s.config.gyros[g].model;
-    d.k0 += 0.1 * deg_h;
+    d.k0 += x * 0.1 * deg_h;
     s.gyros[g].drift = d;
   }
   if (effect == "unequal_stiffness") {
     DriftCoefficients d = s.config.gyros[g].model;
-    d.mu = Eigen::Vector3d(0.03, -0.05, 0.04) * deg_h;
-    d.nu = Eigen::Vector3d(0.02, 0.0, -0.03) * deg_h;
+    d.mu = x * Eigen::Vector3d(0.03, -0.05, 0.04) * deg_h;
+    d.nu = x * Eigen::Vector3d(0.02, 0.0, -0.03) * deg_h;
     s.gyros[g].drift = d;
   }
   if (effect == "gyro_misalignment") {
-    s.gyros[g].misalignment_b = Eigen::Vector3d(ArcsecToRad(30), ArcsecToRad(-20), ArcsecToRad(15));
+    s.gyros[g].misalignment_b =
+        x * Eigen::Vector3d(ArcsecToRad(30), ArcsecToRad(-20), ArcsecToRad(15));
   }
   if (effect == "star_tracker_misalignment" || effect == "two") {
     s.star_tracker.misalignment_b =
-        Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-25), ArcsecToRad(10));
+        x * Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-25), ArcsecToRad(10));
   }
-  if (effect == "star_tracker_latency") s.star_tracker.latency = 0.3;
+  if (effect == "star_tracker_latency") s.star_tracker.latency = x * 0.3;
   if (effect == "random_walk_drift") {
-    for (GyroTruth& t : s.gyros) t.random_walk = DegPerHourSqrtHourToSi(0.006);
+    for (GyroTruth& t : s.gyros) t.random_walk = x * DegPerHourSqrtHourToSi(0.006);
   }
-  if (effect == "random_walk_one_gyro") s.gyros[g].random_walk = DegPerHourSqrtHourToSi(0.006);
+  if (effect == "random_walk_one_gyro") s.gyros[g].random_walk = x * DegPerHourSqrtHourToSi(0.006);
   if (effect == "random_walk_15x") {
-    for (GyroTruth& t : s.gyros) t.random_walk = 15.0 * s.config.random_walk;
+    for (GyroTruth& t : s.gyros) t.random_walk = (1.0 + 14.0 * x) * s.config.random_walk;
   }
   if (effect == "readout_jump") {
     GyroFault f;
     f.time = 0.4 * s.duration;
     f.kind = GyroFault::Kind::kReadoutJump;
-    f.value = Eigen::Vector3d(ArcsecToRad(40), ArcsecToRad(-35), ArcsecToRad(25));
+    f.value = x * Eigen::Vector3d(ArcsecToRad(40), ArcsecToRad(-35), ArcsecToRad(25));
     s.gyros[g].fault = f;
   }
   if (effect == "drift_step") {
     GyroFault f;
     f.time = 0.4 * s.duration;
     f.kind = GyroFault::Kind::kDriftStep;
-    f.value = Eigen::Vector3d(0.02, -0.03, 0.02) * deg_h;
+    f.value = x * Eigen::Vector3d(0.02, -0.03, 0.02) * deg_h;
     s.gyros[g].fault = f;
   }
   return s;
+}
+
+// The verdict of `r` is right for scenario `truth` whose per-gyro effect is in `gyro` (the
+// confusion matrix of docs/discovery.md).
+inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
+                                    const estimator::discovery::DiagnosisReport& r) {
+  using namespace esg::estimator::discovery;
+  auto has = [&](const std::string& effect, int g) {
+    for (const Finding& f : r.findings) {
+      if (f.effect == effect && (g == 0 || f.gyro == g)) return true;
+    }
+    return false;
+  };
+  if (truth == "none") return r.verdict == kVerdictNone;
+  if (truth == "readout_jump") return r.verdict == kVerdictUnexplained;
+  if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
+  // Exactly the one finding, in the right gyro where the effect is per gyro (the common random
+  // walk in gyro 0).
+  std::string effect = truth;
+  int want_gyro = gyro;
+  if (truth == "random_walk_one_gyro") effect = "random_walk_drift";
+  if (truth == "random_walk_15x" || truth == "random_walk_drift") {
+    effect = "random_walk_drift";
+    want_gyro = 0;
+  }
+  const bool per_gyro = truth == "rotor_displacement" || truth == "fourth_harmonic" ||
+                        truth == "unequal_stiffness" || truth == "gyro_misalignment" ||
+                        truth == "drift_step" || truth == "random_walk_one_gyro";
+  if (truth == "drift_step" || truth == "random_walk_one_gyro" || truth == "random_walk_15x") {
+    return r.findings.size() == 1 && r.findings.front().effect == effect &&
+           r.findings.front().gyro == want_gyro;
+  }
+  if (effect == "random_walk_drift") {  // common to every gyro, not one gyro's
+    return r.verdict == effect && r.findings.front().gyro == 0;
+  }
+  return r.verdict == effect &&
+         (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == want_gyro));
 }
 
 }  // namespace esg::testing

@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# False-alarm rate of `esg diagnose` (docs/discovery.md, "Proof"): SEEDS (default 300)
+# effect-free 30 h recordings, seeds from FIRST_SEED (default 1001), diagnosed with the default
+# options on JOBS (default 2) threads; prints the count, the rate and its exact one-sided 95%
+# upper bound, one line per recording to stderr. About 4-5 s of CPU per recording: ~12 min for
+# 300 on two idle cores. Builds esg_bench in BUILD_DIR (default build).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BUILD_DIR="${BUILD_DIR:-build}"
+if [ ! -f "$BUILD_DIR/CMakeCache.txt" ]; then
+  cmake -S . -B "$BUILD_DIR" -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+fi
+cmake --build "$BUILD_DIR" -j2 --target esg_bench >/dev/null
+ESG_FALSE_ALARM_SEEDS="${SEEDS:-300}" ESG_FALSE_ALARM_FIRST_SEED="${FIRST_SEED:-1001}" \
+  ESG_DISCOVERY_JOBS="${JOBS:-2}" "$BUILD_DIR/tests/bench/esg_bench" \
+  --benchmark_filter=DiscoveryFalseAlarms
