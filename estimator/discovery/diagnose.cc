@@ -168,15 +168,17 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
 
   // Forward selection: one effect per round while one is found.
   selected.held_out = base_held_out;
-  bool time_localized = false;  // significant candidates, each only fitting part of the time
-  std::string time_localized_note;
+  // Why the candidates that fit were not taken (selection.h RoundResult), when they were not.
+  std::string unresolved, unresolved_note;
+  int unresolved_gyro = 0;
   for (int round = 0; round < options.max_effects; ++round) {
     auto result = SelectionRound(round, report.gyros, selected, context);
     if (!result.ok()) return result.status();
     report.candidates.insert(report.candidates.end(), result->rows.begin(), result->rows.end());
     if (!result->finding.has_value()) {
-      time_localized = result->time_localized;
-      time_localized_note = result->time_localized_note;
+      unresolved = result->unresolved;
+      unresolved_note = result->unresolved_note;
+      unresolved_gyro = result->unresolved_gyro;
       break;
     }
     report.findings.push_back(std::move(*result->finding));
@@ -211,9 +213,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       LocateMismatches(base_run, selected.run, report.regimes, frames, options.alpha);
   report.mismatch = mismatches.base;
   if (std::optional<Unexplained> u =
-          FindUnexplained(mismatches.remaining, time_localized, final_held_out, selected.fit,
-                          !report.findings.empty(), options.alpha)) {
-    if (!time_localized_note.empty()) u->finding.evidence.notes.push_back(time_localized_note);
+          FindUnexplained(mismatches.remaining, unresolved, unresolved_gyro, final_held_out,
+                          selected.fit, !report.findings.empty(), options.alpha)) {
+    if (!unresolved_note.empty()) u->finding.evidence.notes.push_back(unresolved_note);
     report.findings.push_back(u->finding);
     if (report.findings.size() == 1) report.mismatch = u->where;
   }

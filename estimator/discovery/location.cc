@@ -98,8 +98,9 @@ CellReference Reference(const std::map<std::pair<int, int>, Cell>& cells) {
   return ref;
 }
 
-// The (gyro, span) cell whose residuals exceed the reference most; `found` when its excess is
-// significant at a Bonferroni level over the cells.
+// The (gyro, span) cell whose residuals exceed the reference most; `found` when a cell's excess
+// is significant at a Bonferroni level over the cells and material (kMaterialResidualRatio):
+// then the most significant such cell.
 Mismatch Locate(const ModelRun& run, const std::vector<RegimeSpan>& spans,
                 const std::vector<TelemetryFrame>& frames, const std::vector<bool>& outlier,
                 const CellReference& ref, double alpha) {
@@ -108,6 +109,8 @@ Mismatch Locate(const ModelRun& run, const std::vector<RegimeSpan>& spans,
   if (cells.empty()) return m;
   const Cell* worst = nullptr;
   double worst_z = -1e300;
+  const Cell* material = nullptr;  // the most significant cell with a material excess
+  double material_z = -1e300;
   std::map<int, double> excess_by_gyro;
   double excess_total = 0.0;
   int tested = 0;
@@ -122,10 +125,18 @@ Mismatch Locate(const ModelRun& run, const std::vector<RegimeSpan>& spans,
       worst_z = z;
       worst = &c;
     }
+    if (z > material_z && c.sum_z2 > kMaterialResidualRatio * kMaterialResidualRatio * c.sum_s2) {
+      material_z = z;
+      material = &c;
+    }
   }
   if (worst == nullptr) return m;
+  if (material != nullptr && NormalSurvival(material_z) < alpha / std::max(1, tested)) {
+    worst = material;
+    worst_z = material_z;
+    m.found = true;
+  }
   m.p_value = NormalSurvival(worst_z);
-  m.found = m.p_value < alpha / std::max(1, tested);
   // One gyro when it carries most of the excess; otherwise the mismatch is common.
   m.gyro = (excess_total > 0 && excess_by_gyro[worst->gyro] > 0.5 * excess_total) ? worst->gyro : 0;
   m.span = worst->span;
@@ -197,7 +208,8 @@ Mismatches LocateMismatches(const ModelRun& base, const ModelRun& extended,
   return out;
 }
 
-std::optional<Unexplained> FindUnexplained(const Mismatch& remaining, bool time_localized,
+std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
+                                           const std::string& unresolved, int unresolved_gyro,
                                            const HeldOutResult& held_out,
                                            const ProfiledDeviance& fit, bool after_findings,
                                            double alpha) {
@@ -206,7 +218,7 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining, bool time_
   // The held-out statistic leans on the filter's own prediction sigma, so it must also be
   // material (MispredictsHeldOut).
   const bool held_out_misfit = MispredictsHeldOut(held_out, alpha);
-  const bool residual_misfit = remaining.found || time_localized;
+  const bool residual_misfit = remaining.found || !unresolved.empty();
   // Noise beyond the configured one everywhere (no span stands out): material when the
   // star-tracker differences are kMaterialDispersion times their predicted variance.
   const double dispersion_z = (fit.dispersion - 1.0) * std::sqrt(0.5 * std::max(1, fit.components));
@@ -243,6 +255,7 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining, bool time_
       }
     }
   }
+  if (!remaining.found && !unresolved.empty() && unresolved_gyro > 0) where.gyro = unresolved_gyro;
   u.gyro = where.gyro;
   u.explanation = absl::StrFormat(
       "%s: a mismatch no candidate effect explains remains %s%s, %s to %s (%s span): %s%s",
@@ -260,10 +273,7 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining, bool time_
           : absl::StrFormat("star-tracker differences %.2f times their predicted variance "
                             "throughout: the recording's noise exceeds the configured one",
                             fit.dispersion),
-      time_localized
-          ? "; the candidates that fit it improve only part of the recording and worsen "
-            "the rest (a change in time such as a fault, not a constant effect)"
-          : "");
+      unresolved.empty() ? "" : absl::StrCat("; ", unresolved));
   u.evidence.held_out_nees_after = held_out.nees;
   u.evidence.held_out_dof = held_out.dof;
   u.evidence.p_value = residual_misfit ? where.p_value : (held_out_misfit ? held_out_p : 0.0);

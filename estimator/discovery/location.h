@@ -20,6 +20,13 @@ namespace esg::estimator::discovery {
 // variance (1.22x their sigma) throughout.
 inline constexpr double kMaterialDispersion = 1.5;
 
+// Materiality of a span's residual excess: its star-tracker differences beyond twice their
+// predicted size (RMS), the same bound as the held-out errors' (kMaterialNeesRatio). With ~10^2
+// samples a span is "significantly" worse already at 1.4x, which the filter's own transients
+// after a regime change reach on effect-free recordings (slews); an effect that leaves a span
+// unexplained exceeds it (a 0.05 deg/h drift unmodelled for an hour is 180 arcsec).
+inline constexpr double kMaterialResidualRatio = 2.0;
+
 // RMS of the star-tracker innovations over the accepted in-sample steps of a run [arcsec].
 double ResidualRmsArcsec(const ModelRun& run);
 
@@ -40,7 +47,9 @@ Mismatches LocateMismatches(const ModelRun& base, const ModelRun& extended,
                             const std::vector<TelemetryFrame>& frames, double alpha);
 
 // What no candidate explains, after selection: a residual mismatch (`remaining.found`, or
-// `time_localized`: significant candidates that each fit only part of the recording), a held-out
+// `unresolved`: why the candidates that fit were not taken, e.g. each fits only part of the
+// recording or fails its physics check; `unresolved_gyro` the gyro they name, used when no span
+// stands out), a held-out
 // misprediction (MispredictsHeldOut), or star-tracker differences materially beyond their
 // predicted variance throughout (`fit.dispersion`). The finding `unexplained` with its gyro and
 // an explanation that names where it is; `where` is the mismatch it names (for a held-out
@@ -49,7 +58,8 @@ struct Unexplained {
   Finding finding;
   Mismatch where;
 };
-std::optional<Unexplained> FindUnexplained(const Mismatch& remaining, bool time_localized,
+std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
+                                           const std::string& unresolved, int unresolved_gyro,
                                            const HeldOutResult& held_out,
                                            const ProfiledDeviance& fit, bool after_findings,
                                            double alpha);

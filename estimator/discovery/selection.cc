@@ -7,6 +7,7 @@
 #include <string>
 #include <utility>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/units.h"
@@ -489,8 +490,12 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   }
   for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
   if (chosen < 0) {
-    result.time_localized = inhomogeneous_only;
-    result.time_localized_note = readout_note;
+    if (inhomogeneous_only) {
+      result.unresolved =
+          "the candidates that fit it improve only part of the recording and worsen the rest (a "
+          "change in time such as a fault, not a constant effect)";
+      result.unresolved_note = readout_note;
+    }
     return result;
   }
   CandidateFit& f = fits[chosen];
@@ -498,6 +503,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
                                   [&](const Scored& x) { return x.index == chosen; });
   result.finding =
       MakeFinding(s, fits, chosen, round, *rw_note, held_out_selected, contenders, selected);
+
   selected.held_out_current = std::any_of(contenders.begin(), contenders.end(),
                                           [&](const auto& c) { return c.first == chosen; });
   selected.model = f.model;

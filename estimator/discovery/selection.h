@@ -40,12 +40,13 @@ struct RoundResult {
   std::vector<CandidateScore> rows;  // one per candidate tried, in candidate order
   // The effect taken (then `selected` holds the model with it), or none: selection ends.
   std::optional<Finding> finding;
-  // Nothing taken because the best significant candidate improves only part of the recording
-  // (a change in time, not a constant effect).
-  bool time_localized = false;
-  // Why, when a time behaviour was not taken because a jump of a gyro's readings explains the
-  // mismatch at least as well (D43); else empty.
-  std::string time_localized_note;
+  // Nothing taken although a candidate fits: why (the best improves only part of the
+  // recording, a change in time; or it fails its physics check), else empty; a supporting note
+  // (a jump of a gyro's readings explains it at least as well, D43), and the gyro the best
+  // candidate names (0: common).
+  std::string unresolved;
+  std::string unresolved_note;
+  int unresolved_gyro = 0;
 };
 
 // Round `round` (0 first) of forward selection over the running `gyros`. Updates `selected` (its

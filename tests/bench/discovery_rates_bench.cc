@@ -7,6 +7,7 @@
 // from the confusion matrix's 101-110 and the tests'), each diagnosed with the default options.
 // A false alarm is any finding (verdict other than `none`). Prints every recording's verdict to
 // stderr, and the count, the rate and its exact (Clopper-Pearson) one-sided 95% upper bound.
+// ESG_FALSE_ALARM_EFFECT names another scenario to read its diagnoses the same way.
 // Run: scripts/false_alarm_rate.sh.
 //
 // BM_DiscoveryPower: per effect of the scenarios, ESG_POWER_SEEDS (default 5) recordings at each
@@ -15,7 +16,9 @@
 // matrix counts it) per effect and size as a Markdown table and a data file for the plot.
 // Run: scripts/power_curves.sh.
 //
-// Both spread the diagnoses over ESG_DISCOVERY_JOBS (default 2) threads, one diagnosis each.
+// Both spread the diagnoses over ESG_DISCOVERY_JOBS (default 2) threads, one diagnosis each;
+// ESG_DISCOVERY_INTEGRATION_RATE sets DiagnoseOptions::integration_rate_hz (<= 0: the
+// configuration's rate).
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -84,6 +87,9 @@ absl::StatusOr<DiagnosisReport> DiagnoseScenario(const std::string& effect, uint
   if (!sim.ok()) return sim.status();
   DiagnoseOptions options;
   options.threads = 1;
+  if (const char* rate = std::getenv("ESG_DISCOVERY_INTEGRATION_RATE")) {
+    options.integration_rate_hz = std::atof(rate);
+  }
   return Diagnose(spec.config, sim->recording.frames, options);
 }
 
@@ -99,12 +105,15 @@ void BM_DiscoveryFalseAlarms(benchmark::State& state) {
   const int seeds = EnvInt("ESG_FALSE_ALARM_SEEDS", 300);
   const int first = EnvInt("ESG_FALSE_ALARM_FIRST_SEED", 1001);
   const int jobs = EnvInt("ESG_DISCOVERY_JOBS", 2);
+  // Another scenario in place of the effect-free one, to read its diagnoses (not a rate then).
+  const char* effect_env = std::getenv("ESG_FALSE_ALARM_EFFECT");
+  const std::string effect = effect_env != nullptr ? effect_env : "none";
   std::atomic<int> alarms{0}, failed{0};
   std::mutex out;
   for (auto _ : state) {
     RunJobs(seeds, jobs, [&](int i) {
       const uint64_t seed = first + i;
-      auto report = DiagnoseScenario("none", seed, 1.0);
+      auto report = DiagnoseScenario(effect, seed, 1.0);
       std::lock_guard<std::mutex> lock(out);
       if (!report.ok()) {
         ++failed;
@@ -116,6 +125,10 @@ void BM_DiscoveryFalseAlarms(benchmark::State& state) {
       alarms += alarm ? 1 : 0;
       std::fprintf(stderr, "seed %4llu: %-26s%s\n", static_cast<unsigned long long>(seed),
                    report->verdict.c_str(), alarm ? Findings(*report).c_str() : "");
+      for (const Finding& f : report->findings) {
+        std::fprintf(stderr, "    %s\n", f.explanation.c_str());
+        for (const std::string& note : f.evidence.notes) std::fprintf(stderr, "      - %s\n", note.c_str());
+      }
     });
   }
   const int n = seeds - failed.load();
