@@ -64,11 +64,30 @@ json TimeBehaviourJson(const estimator::discovery::TimeBehaviour& t) {
     j["onsetLowerHours"] = Number(t.onset_lower_hours);
     j["onsetUpperHours"] = Number(t.onset_upper_hours);
     j["onsetsSearched"] = t.onsets_searched;
+    json profile = json::array();
+    for (const auto& [hours, value] : t.onset_profile)
+      profile.push_back(json::array({Number(hours), Number(value)}));
+    j["onsetProfile"] = profile;
   }
   return j;
 }
 
-json FindingJson(const Finding& f) {
+// A rotor displacement's suspension-voltage trend: the line per case axis, and with
+// `include_series` the binned displacement it was fitted to ([hours, x, y, z] in um).
+json DisplacementTrendJson(const estimator::discovery::DisplacementTrend& t, bool include_series) {
+  json j{{"interceptUm", t.intercept_um}, {"rateUmPerH", t.rate_um_h}};
+  if (include_series) {
+    json samples = json::array();
+    for (const auto& s : t.samples) {
+      samples.push_back(json::array({s.hours, Number(s.displacement_um[0]),
+                                     Number(s.displacement_um[1]), Number(s.displacement_um[2])}));
+    }
+    j["samples"] = samples;
+  }
+  return j;
+}
+
+json FindingJson(const Finding& f, bool include_series) {
   json j{{"effect", f.effect}};
   if (f.gyro > 0) j["gyro"] = f.gyro;
   json params = json::array();
@@ -77,6 +96,8 @@ json FindingJson(const Finding& f) {
   j["explanation"] = f.explanation;
   j["evidence"] = EvidenceJson(f.evidence);
   if (f.effect != "unexplained") j["timeBehaviour"] = TimeBehaviourJson(f.time);
+  if (!f.displacement_trend.samples.empty())
+    j["displacementTrend"] = DisplacementTrendJson(f.displacement_trend, include_series);
   return j;
 }
 
@@ -154,7 +175,7 @@ json CandidateJson(const CandidateScore& c) {
 json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
   const absl::Time t0 = r.first_frame_time;
   json findings = json::array();
-  for (const Finding& f : r.findings) findings.push_back(FindingJson(f));
+  for (const Finding& f : r.findings) findings.push_back(FindingJson(f, include_series));
   json regimes = json::array();
   for (const auto& s : r.regimes) {
     json j{{"regime", estimator::discovery::RegimeName(s.regime)},
@@ -181,7 +202,10 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
   if (include_series) {
     auto residuals = [](const std::vector<estimator::discovery::ResidualPoint>& v) {
       json a = json::array();
-      for (const auto& p : v) a.push_back(json::array({p.hours, p.gyro, p.residual_arcsec}));
+      for (const auto& p : v) {
+        a.push_back(json::array({p.hours, p.gyro, Number(p.residual_arcsec),
+                                 Number(p.sigma_arcsec)}));
+      }
       return a;
     };
     auto held = [](const std::vector<estimator::discovery::HeldOutPoint>& v) {

@@ -96,6 +96,8 @@ struct CandidateFit {
   // run's improvement (a latency, a star-tracker misalignment).
   std::vector<std::pair<double, double>> prior_points;
   double occam = 0.0;
+  // A rotor displacement's suspension-voltage trend (DescribeVoltageTrend), for the report.
+  DisplacementTrend displacement_trend;
   // Onset profile of a step: hours since the first frame, -2 log L (profiled).
   std::vector<std::pair<double, double>> onset_profile;
   // A step's competing alternative that is no physics (D43): the gyro's readings jump at the

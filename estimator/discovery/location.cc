@@ -191,7 +191,8 @@ std::vector<ResidualPoint> ResidualSeries(const ModelRun& run,
   for (const StepRecord& r : run.steps) {
     if (!r.nis_formed || r.withheld) continue;
     for (const GyroInnovation& g : r.innovations) {
-      out.push_back({HoursSince(frames[r.frame].time, t0), g.id, RadToArcsec(g.z.norm())});
+      out.push_back({HoursSince(frames[r.frame].time, t0), g.id, RadToArcsec(g.z.norm()),
+                     RadToArcsec(std::sqrt(0.5 * g.sigma.squaredNorm()))});
     }
   }
   return out;

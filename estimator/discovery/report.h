@@ -6,6 +6,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_REPORT_H_
 #define ESG_ESTIMATOR_DISCOVERY_REPORT_H_
 
+#include <array>
 #include <string>
 #include <utility>
 #include <vector>
@@ -79,6 +80,23 @@ struct TimeBehaviour {
   double onset_lower_hours = 0.0;
   double onset_upper_hours = 0.0;
   int onsets_searched = 0;  // grid points of the onset search (the Bonferroni factor)
+  // For "step": the likelihood over the onsets searched, (hours since the first frame,
+  // -2 log L above its minimum), in time order; the interval above is where it stays below 3.84.
+  std::vector<std::pair<double, double>> onset_profile;
+};
+
+// The rotor displacement implied through eq. (3) by a gyro's suspension offset voltages over the
+// recording, and the robust line fitted per case axis (the voltage trend of a rotor_displacement
+// finding, docs/discovery.md "Physics in the report"). Empty when the recording has no voltages.
+struct DisplacementTrend {
+  struct Sample {
+    double hours = 0.0;                       // since the first frame, the middle of the bin
+    std::array<double, 3> displacement_um{};  // mean over the bin, case axes [um]
+  };
+  std::vector<Sample> samples;  // means over at most kMaxSamples bins of equal frame count
+  std::array<double, 3> intercept_um{};  // the line at hour 0 [um]
+  std::array<double, 3> rate_um_h{};     // its slope [um/h]
+  static constexpr int kMaxSamples = 400;
 };
 
 struct Finding {
@@ -88,6 +106,7 @@ struct Finding {
   std::string explanation;
   Evidence evidence;
   TimeBehaviour time;
+  DisplacementTrend displacement_trend;  // rotor_displacement with suspension voltages
 };
 
 // Where the recording and a model disagree most.
@@ -167,6 +186,10 @@ struct ResidualPoint {
   double hours = 0.0;  // since the first frame
   int gyro = 0;
   double residual_arcsec = 0.0;  // |star-tracker difference| of that gyro
+  // The filter's predicted 1-sigma of one component of that difference: the RMS of the two
+  // components' sqrt(diag S) [arcsec]. |difference| is then Rayleigh-distributed when the model
+  // is right: 90% of it lies between 0.32 and 2.45 sigma.
+  double sigma_arcsec = 0.0;
 };
 struct HeldOutPoint {
   double hours = 0.0;

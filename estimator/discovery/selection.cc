@@ -336,6 +336,16 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   finding.gyro = f.candidate.gyro;
   finding.parameters = f.fitted;
   finding.time = f.time;
+  finding.displacement_trend = f.displacement_trend;
+  if (!f.onset_profile.empty()) {
+    const double best =
+        std::min_element(f.onset_profile.begin(), f.onset_profile.end(), [](const auto& a,
+                                                                             const auto& b) {
+          return a.second < b.second;
+        })->second;
+    for (const auto& [hours, value] : f.onset_profile)
+      finding.time.onset_profile.emplace_back(hours, value - best);
+  }
   finding.evidence.delta_deviance = s.delta;
   finding.evidence.penalty = s.penalty;
   finding.evidence.evidence = s.score;

@@ -375,14 +375,34 @@ void DescribeVoltageTrend(const SpacecraftConfig& config, const std::vector<Tele
   };
   Vector3d rate_um_h, rate_sigma_um_h, slope_mv_h;
   double chi2 = 0.0;
+  std::array<RobustLine, 3> lines;
   for (int i = 0; i < 3; ++i) {
-    const RobustLine line = FitRobustLine(hours, u_mv[i]);
+    const RobustLine& line = lines[i] = FitRobustLine(hours, u_mv[i]);
     const double sigma_mv_h =
         line.residual_sigma / std::sqrt(var_t * line.used / static_cast<double>(hours.size()));
     slope_mv_h(i) = line.slope;
     rate_um_h(i) = um(line.slope);
     rate_sigma_um_h(i) = std::abs(um(sigma_mv_h));
     if (sigma_mv_h > 0) chi2 += std::pow(line.slope / sigma_mv_h, 2);
+  }
+  // The series of the report's trend plot: the implied displacement, averaged over bins.
+  DisplacementTrend& trend = fit.displacement_trend;
+  const size_t n = hours.size();
+  const size_t bins = std::min<size_t>(n, DisplacementTrend::kMaxSamples);
+  for (size_t b = 0; b < bins; ++b) {
+    const size_t first = b * n / bins, last = (b + 1) * n / bins;
+    DisplacementTrend::Sample sample;
+    for (size_t j = first; j < last; ++j) {
+      sample.hours += hours[j];
+      for (int i = 0; i < 3; ++i) sample.displacement_um[i] += um(u_mv[i][j]);
+    }
+    sample.hours /= static_cast<double>(last - first);
+    for (double& d : sample.displacement_um) d /= static_cast<double>(last - first);
+    trend.samples.push_back(sample);
+  }
+  for (int i = 0; i < 3; ++i) {
+    trend.intercept_um[i] = um(lines[i].intercept);
+    trend.rate_um_h[i] = rate_um_h(i);
   }
   const double p = ChiSquareSurvival(chi2, 3.0);
   const double span_hours = hours.back() - hours.front();
