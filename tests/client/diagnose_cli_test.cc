@@ -1,14 +1,19 @@
 // `esg diagnose` run as a real process (ESG_BINARY) on a recording written by `esg simulate`
 // through the formats of docs/formats.md: the JSON document names the effect and the gyro and shows
-// the held-out drift rate falling; --out writes the Markdown report and the gnuplot plots; progress
+// the held-out drift rate falling; --out writes the Markdown report and the gnuplot plots (each
+// referenced from the report, time in hours from the start, the residual's predicted sigma in its
+// data), onset.png for a drift step and trend.png for a rotor displacement with voltages; progress
 // goes to stderr; bad arguments exit 2 naming the option.
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -21,6 +26,7 @@ namespace {
 
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 using ::esg::testing::ReadFile;
 using ::esg::testing::RunResult;
@@ -28,6 +34,42 @@ using ::esg::testing::WriteFile;
 
 RunResult RunEsg(const TempDir& dir, const std::string& args) {
   return ::esg::testing::RunBinary(dir, ESG_BINARY, args);
+}
+
+bool GnuplotInstalled() { return std::system("gnuplot --version > /dev/null 2>&1") == 0; }
+
+// The PNG files a Markdown report references as images, "![...](name.png)".
+std::set<std::string> ReferencedPngs(const std::string& md) {
+  std::set<std::string> out;
+  for (size_t at = md.find("]("); at != std::string::npos; at = md.find("](", at + 2)) {
+    const size_t end = md.find(')', at);
+    const std::string name = md.substr(at + 2, end - at - 2);
+    if (name.size() > 4 && name.substr(name.size() - 4) == ".png") out.insert(name);
+  }
+  return out;
+}
+
+// Every plot of the report directory: referenced from report.md with a sentence after it, drawn
+// (non-empty) when gnuplot is installed, its time axis hours from the start with the UTC start
+// in its title.
+void ExpectPlotsReferencedAndDrawn(const TempDir& dir, const std::vector<std::string>& pngs) {
+  const std::string md = ReadFile(dir.File("report/report.md"));
+  const std::set<std::string> referenced = ReferencedPngs(md);
+  for (const std::string& png : pngs) {
+    EXPECT_TRUE(referenced.count(png)) << png << " not referenced from report.md";
+    const size_t at = md.find("](" + png + ")\n\n");
+    ASSERT_NE(at, std::string::npos) << png;
+    EXPECT_GT(md.find(". ", at), at) << png << ": no sentence after the image";
+    if (GnuplotInstalled()) {
+      const std::string path = dir.File("report/" + png);
+      ASSERT_TRUE(std::filesystem::exists(path)) << png << "; " << ReadFile(dir.File("report/gnuplot.log"));
+      EXPECT_GT(std::filesystem::file_size(path), 1000u) << png;
+    }
+  }
+  const std::string gp = ReadFile(dir.File("report/plots.gp"));
+  EXPECT_THAT(gp, HasSubstr("hours from the start"));
+  EXPECT_THAT(gp, HasSubstr("(start 2019-03-01T00:00:00Z)"));
+  EXPECT_THAT(gp, Not(HasSubstr("set xlabel 'time, h'")));
 }
 
 // The user's model: paper model (1) (k0 free, no C1/C2, exact mountings).
@@ -90,13 +132,59 @@ TEST(DiagnoseCli, NamesTheMissingEffectAndWritesTheReport) {
   // The report: Markdown with the plots beside it.
   const std::string md = ReadFile(dir.File("report/report.md"));
   EXPECT_THAT(md, HasSubstr("# Diagnosis: rotor_displacement"));
-  EXPECT_THAT(md, HasSubstr("![held-out error](held_out.png)"));
-  for (const char* png : {"residuals.png", "held_out.png", "regimes.png"}) {
-    EXPECT_GT(std::filesystem::file_size(dir.File(std::string("report/") + png)), 1000u) << png;
+  // The simulator writes suspension voltages: the displacement's trend is plotted too.
+  ASSERT_TRUE(finding.contains("displacementTrend"));
+  ExpectPlotsReferencedAndDrawn(
+      dir, {"residuals.png", "held_out.png", "regimes.png", "trend.png"});
+  EXPECT_THAT(md, Not(HasSubstr("onset.png")));  // no drift step found
+  // The residual data carry the filter's predicted sigma beside each |difference|.
+  std::istringstream data(ReadFile(dir.File("report/residuals_before.dat")));
+  int rows = 0;
+  for (std::string line; std::getline(data, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream row(line);
+    double hours = -1, residual = -1, sigma = -1;
+    ASSERT_TRUE(row >> hours >> residual >> sigma) << line;
+    EXPECT_GT(sigma, 0.0) << line;
+    ++rows;
   }
+  EXPECT_GT(rows, 100);
   const nlohmann::json saved = nlohmann::json::parse(ReadFile(dir.File("report/diagnosis.json")));
   EXPECT_EQ(saved.at("verdict"), "rotor_displacement");
-  EXPECT_TRUE(saved.contains("series"));
+  ASSERT_TRUE(saved.contains("series"));
+  const auto& point = saved.at("series").at("residualsBefore").at(0);
+  ASSERT_EQ(point.size(), 4u);  // hours, gyro, |difference|, sigma
+  EXPECT_GT(point.at(3).get<double>(), 0.0);
+}
+
+// A large drift step in gyro 3 of a short recording: onset.png shows the likelihood over the
+// onset and the residual at it.
+TEST(DiagnoseCli, DriftStepReportPlotsTheOnset) {
+  TempDir dir;
+  WriteFile(dir.File("config.json"), kConfig);
+  WriteFile(dir.File("scenario.json"), R"({
+    "description": "gyro 3 drift steps at 3 h",
+    "profile": "mixed", "profileSeed": 3,
+    "gyros": [{"id": 3, "fault": {"timeHours": 3, "kind": "drift_step", "degH": [0.3, 0.3, 0.3]}}]
+  })");
+  RunResult sim = RunEsg(dir, "simulate --config '" + dir.File("config.json") + "' --scenario '" +
+                                  dir.File("scenario.json") + "' --hours 6 --seed 5 --out '" +
+                                  dir.File("rec.csv") + "'");
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  RunResult r = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
+                                dir.File("rec.csv") + "' --effects drift_step --max-effects 1 "
+                                "--json --out '" + dir.File("report") + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json doc = nlohmann::json::parse(r.out);
+  ASSERT_EQ(doc.at("verdict"), "drift_step") << r.out;
+  const auto& time = doc.at("findings").at(0).at("timeBehaviour");
+  EXPECT_NEAR(time.at("onsetHours").get<double>(), 3.0, 0.2);
+  ASSERT_FALSE(time.at("onsetProfile").empty());
+  double best = 1e300;
+  for (const auto& p : time.at("onsetProfile")) best = std::min(best, p.at(1).get<double>());
+  EXPECT_EQ(best, 0.0);  // -2 log L above the best
+  ExpectPlotsReferencedAndDrawn(dir, {"residuals.png", "held_out.png", "regimes.png", "onset.png"});
+  EXPECT_TRUE(std::filesystem::exists(dir.File("report/onset_profile.dat")));
 }
 
 TEST(DiagnoseCli, BadArgumentsExitTwoNamingTheOption) {
