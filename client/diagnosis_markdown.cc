@@ -30,9 +30,8 @@ std::string DiagnosisMarkdown(const disc::DiagnosisReport& r,
   absl::StrAppend(
       &md, absl::StrFormat("Recording: %d frames from %s; running gyros %s; %d filter runs. "
                            "Times in the plots are hours from %s.\n\n",
-                           r.frames, FormatUtc(r.first_frame_time),
-                           absl::StrJoin(r.gyros, ", "), r.filter_runs,
-                           FormatUtc(r.first_frame_time)));
+                           r.frames, FormatUtc(r.first_frame_time), absl::StrJoin(r.gyros, ", "),
+                           r.filter_runs, FormatUtc(r.first_frame_time)));
   if (!plotted) {
     absl::StrAppend(&md,
                     "(gnuplot failed or is missing: see gnuplot.log; the data files and plots.gp "
@@ -89,17 +88,16 @@ std::string DiagnosisMarkdown(const disc::DiagnosisReport& r,
     const auto& b = r.before.gaps[k];
     const double after = k < r.after.gaps.size() ? r.after.gaps[k].drift_rate_deg_h : 0.0;
     absl::StrAppend(
-        &md, absl::StrFormat("| %s - %s | %.2f - %.2f | %s | %.4f | %.4f |\n",
-                             FormatUtc(b.start), FormatUtc(b.end),
-                             disc::HoursSince(b.start, r.first_frame_time),
+        &md, absl::StrFormat("| %s - %s | %.2f - %.2f | %s | %.4f | %.4f |\n", FormatUtc(b.start),
+                             FormatUtc(b.end), disc::HoursSince(b.start, r.first_frame_time),
                              disc::HoursSince(b.end, r.first_frame_time), b.regime,
                              b.drift_rate_deg_h, after));
   }
-  absl::StrAppend(
-      &md, "\n", PlotBlock(plots, "held_out.png"), "## Candidates tried\n\n",
-      "| round | effect | gyro | time behaviour | k | delta -2 log L | prior cost | evidence 2 ln B "
-      "| 1/B | significant | selected |\n",
-      "|---|---|---|---|---|---|---|---|---|---|---|\n");
+  absl::StrAppend(&md, "\n", PlotBlock(plots, "held_out.png"), "## Candidates tried\n\n",
+                  "| round | effect | gyro | time behaviour | k | delta -2 log L | prior cost | "
+                  "evidence 2 ln B "
+                  "| 1/B | significant | selected |\n",
+                  "|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& c : r.candidates) {
     const std::string behaviour =
         c.onset_hours >= 0 ? absl::StrFormat("step at %.2f h", c.onset_hours) : c.time_behaviour;
@@ -109,14 +107,15 @@ std::string DiagnosisMarkdown(const disc::DiagnosisReport& r,
                              behaviour, c.parameters, c.delta_deviance, c.penalty, c.score,
                              c.p_value, c.significant ? "yes" : "", c.selected ? "**yes**" : ""));
   }
-  absl::StrAppend(&md, "\n## Regimes\n\n| start | end | hours from the start | regime | rate, "
-                       "deg/s |\n|---|---|---|---|---|\n");
+  absl::StrAppend(&md,
+                  "\n## Regimes\n\n| start | end | hours from the start | regime | rate, "
+                  "deg/s |\n|---|---|---|---|---|\n");
   for (const auto& s : r.regimes) {
-    absl::StrAppend(
-        &md, absl::StrFormat("| %s | %s | %.2f - %.2f | %s | %.4f |\n", FormatUtc(s.start),
-                             FormatUtc(s.end), disc::HoursSince(s.start, r.first_frame_time),
-                             disc::HoursSince(s.end, r.first_frame_time),
-                             disc::RegimeName(s.regime), estimator::RadToDeg(s.mean_rate)));
+    absl::StrAppend(&md,
+                    absl::StrFormat("| %s | %s | %.2f - %.2f | %s | %.4f |\n", FormatUtc(s.start),
+                                    FormatUtc(s.end), disc::HoursSince(s.start, r.first_frame_time),
+                                    disc::HoursSince(s.end, r.first_frame_time),
+                                    disc::RegimeName(s.regime), estimator::RadToDeg(s.mean_rate)));
   }
   return md;
 }

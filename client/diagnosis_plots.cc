@@ -27,12 +27,12 @@ namespace disc = estimator::discovery;
 constexpr double kBandLow = 0.3203;
 constexpr double kBandHigh = 2.4477;
 
-// Colours: before red, after blue, the band green; held-out spans grey, the mismatch pink.
+// Colours: before red, after blue, the band green; held-out spans grey, the mismatch red hatching.
 constexpr char kBefore[] = "#cc3333";
 constexpr char kAfter[] = "#3366cc";
 constexpr char kBand[] = "#66bb66";
-constexpr char kHeldOut[] = "#dddddd";
-constexpr char kMismatch[] = "#ffcccc";
+constexpr char kHeldOut[] = "#bbbbbb";
+constexpr char kMismatch[] = "#dd3333";
 constexpr char kInterval[] = "#ffe0a0";
 
 // A gnuplot single-quoted string.
@@ -73,7 +73,7 @@ Context MakeContext(const disc::DiagnosisReport& r) {
 std::string BeginPng(const Context& c, const std::string& png, int width, int height) {
   return absl::StrFormat(
       "reset\nset terminal pngcairo noenhanced size %d,%d font ',10'\nset encoding utf8\n"
-      "set output '%s'\nset grid\nset key top left opaque box samplen 2\n"
+      "set output '%s'\nset grid\nset key outside below center horizontal maxrows 1 samplen 2\n"
       "set xlabel 'hours from the start'\nset xrange [0:%.5f]\n",
       width, height, png, c.length_hours);
 }
@@ -84,24 +84,27 @@ constexpr char kEndPng[] = "unset multiplot\nset output\n";
 std::string Spans(const Context& c, bool held_out, bool mismatch, std::vector<std::string>& key) {
   std::string gp = "unset object\n";
   int object = 1;
-  auto rect = [&](double a, double b, const char* colour) {
+  auto rect = [&](double a, double b, const char* colour, const char* style) {
     absl::StrAppend(&gp, absl::StrFormat("set object %d rect from %.5f, graph 0 to %.5f, graph 1 "
-                                         "fc rgb '%s' fs solid 1.0 noborder behind\n",
-                                         object++, a, b, colour));
+                                         "fc rgb '%s' fs %s noborder behind\n",
+                                         object++, a, b, colour, style));
   };
-  if (held_out && !c.r->before.gaps.empty()) {
-    for (const auto& g : c.r->before.gaps) rect(c.Hours(g.start), c.Hours(g.end), kHeldOut);
-    key.push_back(absl::StrFormat(
-        "keyentry with boxes fs solid 1.0 fc rgb '%s' title 'held out (star tracker withheld)'",
-        kHeldOut));
-  }
+  // The hatching first: a pattern paints its background, so a held-out span goes over it.
   const disc::Mismatch& m = c.r->mismatch;
   if (mismatch && m.span >= 0) {
-    rect(c.Hours(m.start), c.Hours(m.end), kMismatch);
+    rect(c.Hours(m.start), c.Hours(m.end), kMismatch, "transparent pattern 4");
     key.push_back(absl::StrFormat(
-        "keyentry with boxes fs solid 1.0 fc rgb '%s' title %s", kMismatch,
-        Quote(absl::StrCat("largest mismatch of the configured model",
+        "keyentry with boxes fs transparent pattern 4 fc rgb '%s' title %s", kMismatch,
+        Quote(absl::StrCat("largest mismatch",
                            m.gyro > 0 ? absl::StrCat(" (gyro ", m.gyro, ")") : ""))));
+  }
+  if (held_out && !c.r->before.gaps.empty()) {
+    for (const auto& g : c.r->before.gaps)
+      rect(c.Hours(g.start), c.Hours(g.end), kHeldOut, "transparent solid 0.5");
+    key.push_back(
+        absl::StrFormat("keyentry with boxes fs transparent solid 0.5 fc rgb '%s' title 'held out "
+                        "(star tracker withheld)'",
+                        kHeldOut));
   }
   return gp;
 }
@@ -116,7 +119,7 @@ std::string Plot(const std::vector<std::string>& series) {
 // spans, star-tracker outages), so that the band is not drawn across the pause.
 struct ResidualData {
   std::string text;
-  std::map<int, int> points;  // gyro id -> points
+  std::map<int, int> points;                       // gyro id -> points
   std::map<int, std::pair<double, double>> range;  // gyro id -> positive min, max [arcsec]
 };
 
@@ -134,16 +137,16 @@ ResidualData MakeResidualData(const std::vector<int>& gyros,
       std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
       pause = 5.0 * steps[steps.size() / 2];
     }
-    absl::StrAppend(&d.text, "# gyro ", id, ": hours, |star-tracker difference| arcsec, "
-                             "predicted 1-sigma of a component arcsec\n");
+    absl::StrAppend(&d.text, "# gyro ", id,
+                    ": hours, |star-tracker difference| arcsec, "
+                    "predicted 1-sigma of a component arcsec\n");
     std::vector<double> values;
     double hi = 0.0, lo_band = 1e300;
     for (size_t k = 0; k < mine.size(); ++k) {
       const disc::ResidualPoint& p = *mine[k];
       if (k > 0 && p.hours - mine[k - 1]->hours > pause) d.text += "\n";
-      absl::StrAppend(&d.text,
-                      absl::StrFormat("%.5f %.3f %.3f\n", p.hours, p.residual_arcsec,
-                                      p.sigma_arcsec));
+      absl::StrAppend(
+          &d.text, absl::StrFormat("%.5f %.3f %.3f\n", p.hours, p.residual_arcsec, p.sigma_arcsec));
       if (p.residual_arcsec > 0) values.push_back(p.residual_arcsec);
       hi = std::max({hi, p.residual_arcsec, kBandHigh * p.sigma_arcsec});
       if (p.sigma_arcsec > 0) lo_band = std::min(lo_band, kBandLow * p.sigma_arcsec);
@@ -175,22 +178,24 @@ std::string ResidualYRange(const ResidualData& a, const ResidualData& b, int id)
 // The band and the points of one gyro (`index` into `file`), as plot series.
 void ResidualSeries(const std::string& file, int index, const char* colour, const std::string& what,
                     bool band, std::vector<std::string>& series) {
+  // Before: open circles, after: dots, so that where they coincide both show.
+  const bool open = colour == kBefore;
   if (band) {
     series.push_back(absl::StrFormat(
         "'%s' index %d using 1:(%g*$3):(%g*$3) with filledcurves fs transparent solid 0.35 "
-        "noborder lc rgb '%s' title '90%% expected if the model is right (%.2f-%.2f σ)'",
-        file, index, kBandLow, kBandHigh, kBand, kBandLow, kBandHigh));
+        "noborder lc rgb '%s' title '90%% band if the model is right'",
+        file, index, kBandLow, kBandHigh, kBand));
   }
-  series.push_back(absl::StrFormat(
-      "'%s' index %d using 1:2 with points pt 7 ps 0.35 lc rgb '%s' title %s", file, index,
-      colour, Quote(what)));
+  series.push_back(
+      absl::StrFormat("'%s' index %d using 1:2 with points pt %d ps %.2f lc rgb '%s' title %s",
+                      file, index, open ? 6 : 7, open ? 0.6 : 0.4, colour, Quote(what)));
 }
 
 std::string ResidualsScript(const Context& c, const ResidualData& before,
                             const ResidualData& after) {
   const disc::DiagnosisReport& r = *c.r;
   const int rows = std::max<int>(1, r.gyros.size());
-  std::string gp = BeginPng(c, "residuals.png", 1400, 120 + 260 * rows);
+  std::string gp = BeginPng(c, "residuals.png", 1400, 100 + 300 * rows);
   absl::StrAppend(
       &gp,
       absl::StrFormat("set multiplot layout %d,2 title %s\n", rows,
@@ -207,20 +212,21 @@ std::string ResidualsScript(const Context& c, const ResidualData& before,
       std::vector<std::string> series;
       const bool mismatch = is_before && (r.mismatch.gyro == 0 || r.mismatch.gyro == id);
       std::vector<std::string> key;
-      absl::StrAppend(&gp, Spans(c, true, mismatch, key));
-      absl::StrAppend(&gp, "set title ",
-                      Quote(absl::StrFormat("gyro %d %s: %s", id, is_before ? "before" : "after",
-                                            fit.model)),
-                      "\n");
+      absl::StrAppend(&gp, Spans(c, false, mismatch, key));
+      absl::StrAppend(
+          &gp, "set title ",
+          Quote(absl::StrFormat("gyro %d %s: %s", id, is_before ? "before" : "after", fit.model)),
+          "\n");
       if (d.points.at(id) > 0) {
         ResidualSeries(is_before ? "residuals_before.dat" : "residuals_after.dat",
-                       static_cast<int>(k), is_before ? kBefore : kAfter,
-                       absl::StrCat("gyro ", id, " |difference|"), true, series);
+                       static_cast<int>(k), is_before ? kBefore : kAfter, "|difference|", true,
+                       series);
         series.insert(series.end(), key.begin(), key.end());
         absl::StrAppend(&gp, "unset label 1\n");
       } else {
-        absl::StrAppend(&gp, "set label 1 'no star-tracker difference formed' at graph 0.4, "
-                             "graph 0.5\n");
+        absl::StrAppend(&gp,
+                        "set label 1 'no star-tracker difference formed' at graph 0.4, "
+                        "graph 0.5\n");
       }
       absl::StrAppend(&gp, Plot(series));
     }
@@ -235,9 +241,9 @@ std::string HeldOutData(const std::vector<disc::HeldOutPoint>& v) {
   for (const auto& p : v) {
     if (p.gap != gap && gap >= 0) text += "\n\n";
     gap = p.gap;
-    absl::StrAppend(&text, absl::StrFormat("%.5f %.4f\n", p.hours,
-                                           estimator::ArcsecToRad(p.error_arcsec) /
-                                               estimator::kRadPerArcmin));
+    absl::StrAppend(
+        &text, absl::StrFormat("%.5f %.4f\n", p.hours,
+                               estimator::ArcsecToRad(p.error_arcsec) / estimator::kRadPerArcmin));
   }
   return text;
 }
@@ -253,11 +259,11 @@ std::string HeldOutScript(const Context& c) {
                   "\nset ylabel 'attitude error, arcmin'\n");
   std::vector<std::string> series;
   if (!r.held_out_before.empty()) {
-    series.push_back(absl::StrFormat(
-        "'held_out_before.dat' using 1:2 with lines lw 2 lc rgb '%s' title "
-        "'before: %s (drift rate %.4f deg/h)'",
-        kBefore, absl::StrReplaceAll(r.before.model, {{"'", "''"}}),
-        r.before.gap_drift_rate_deg_h));
+    series.push_back(
+        absl::StrFormat("'held_out_before.dat' using 1:2 with lines lw 2 lc rgb '%s' title "
+                        "'before: %s (drift rate %.4f deg/h)'",
+                        kBefore, absl::StrReplaceAll(r.before.model, {{"'", "''"}}),
+                        r.before.gap_drift_rate_deg_h));
   }
   if (!r.held_out_after.empty()) {
     series.push_back(absl::StrFormat(
@@ -266,8 +272,9 @@ std::string HeldOutScript(const Context& c) {
         kAfter, absl::StrReplaceAll(r.after.model, {{"'", "''"}}), r.after.gap_drift_rate_deg_h));
   }
   if (series.empty()) {
-    absl::StrAppend(&gp, "set label 1 'no held-out span in this recording' at graph 0.35, graph "
-                         "0.5\nset yrange [0:1]\n");
+    absl::StrAppend(&gp,
+                    "set label 1 'no held-out span in this recording' at graph 0.35, graph "
+                    "0.5\nset yrange [0:1]\n");
   } else {
     absl::StrAppend(&gp, "set yrange [0:*]\n");
     series.insert(series.end(), key.begin(), key.end());
@@ -305,10 +312,10 @@ std::string RegimesScript(const Context& c) {
     for (const auto& s : r.regimes) present[static_cast<int>(s.regime)] = true;
     for (int k = 0; k < 4; ++k) {
       if (!present[k]) continue;
-      series.push_back(absl::StrFormat(
-          "keyentry with lines lw 4 lc rgb '%s' title %s", kRegimeColour[k],
-          Quote(absl::StrReplaceAll(disc::RegimeName(static_cast<disc::Regime>(k)),
-                                    {{"_", " "}}))));
+      series.push_back(
+          absl::StrFormat("keyentry with lines lw 4 lc rgb '%s' title %s", kRegimeColour[k],
+                          Quote(absl::StrReplaceAll(disc::RegimeName(static_cast<disc::Regime>(k)),
+                                                    {{"_", " "}}))));
     }
     series.insert(series.end(), key.begin(), key.end());
   }
@@ -318,8 +325,9 @@ std::string RegimesScript(const Context& c) {
 
 // A vertical dashed line at `hours` (with its legend entry `title`, empty: none).
 std::string VerticalLine(double hours, const std::string& title, std::vector<std::string>& key) {
-  if (!title.empty()) key.push_back(absl::StrCat("keyentry with lines dt 2 lw 2 lc rgb 'black' title ",
-                                                 Quote(title)));
+  if (!title.empty())
+    key.push_back(
+        absl::StrCat("keyentry with lines dt 2 lw 2 lc rgb 'black' title ", Quote(title)));
   return absl::StrFormat(
       "set arrow from %.5f, graph 0 to %.5f, graph 1 nohead dt 2 lw 2 lc rgb 'black' front\n",
       hours, hours);
@@ -327,34 +335,34 @@ std::string VerticalLine(double hours, const std::string& title, std::vector<std
 
 std::string IntervalObject(double a, double b, std::vector<std::string>& key,
                            const std::string& title) {
-  key.push_back(absl::StrFormat("keyentry with boxes fs solid 1.0 fc rgb '%s' title %s",
-                                kInterval, Quote(title)));
-  return absl::StrFormat("unset object\nset object 1 rect from %.5f, graph 0 to %.5f, graph 1 fc "
-                         "rgb '%s' fs solid 1.0 noborder behind\n",
-                         a, b, kInterval);
+  key.push_back(absl::StrFormat("keyentry with boxes fs solid 1.0 fc rgb '%s' title %s", kInterval,
+                                Quote(title)));
+  return absl::StrFormat(
+      "unset object\nset object 1 rect from %.5f, graph 0 to %.5f, graph 1 fc "
+      "rgb '%s' fs solid 1.0 noborder behind\n",
+      a, b, kInterval);
 }
 
 std::string OnsetScript(const Context& c, const disc::Finding& f, int gyro_index,
                         const ResidualData& before, const ResidualData& after) {
   const disc::TimeBehaviour& t = f.time;
-  std::string gp = BeginPng(c, "onset.png", 1200, 1050);
-  const std::string onset_title = absl::StrFormat(
-      "onset %.3f h (%s), 95%% interval %.3f-%.3f h", t.onset_hours, disc::UtcText(t.onset),
-      t.onset_lower_hours, t.onset_upper_hours);
+  std::string gp = BeginPng(c, "onset.png", 1200, 1200);
+  const std::string onset_title =
+      absl::StrFormat("onset %.3f h (%s), 95%% interval %.3f-%.3f h", t.onset_hours,
+                      disc::UtcText(t.onset), t.onset_lower_hours, t.onset_upper_hours);
   const std::string interval_title = "95% onset interval (within 3.84 of the best)";
-  absl::StrAppend(
-      &gp,
-      absl::StrFormat("set multiplot layout 3,1 title %s\n",
-                      Quote(absl::StrFormat("Drift step in gyro %d: when it started %s", f.gyro,
-                                            c.start))),
-      "set key top right\n");
+  absl::StrAppend(&gp,
+                  absl::StrFormat("set multiplot layout 3,1 title %s\n",
+                                  Quote(absl::StrFormat("Drift step in gyro %d: when it started %s",
+                                                        f.gyro, c.start))),
+                  "");
   double top = 0.0;
   for (const auto& [h, v] : t.onset_profile) top = std::max(top, v);
   // 1: the likelihood over every onset searched.
   {
     std::vector<std::string> key;
-    absl::StrAppend(&gp, IntervalObject(t.onset_lower_hours, t.onset_upper_hours, key,
-                                        interval_title));
+    absl::StrAppend(&gp,
+                    IntervalObject(t.onset_lower_hours, t.onset_upper_hours, key, interval_title));
     absl::StrAppend(&gp, VerticalLine(t.onset_hours, onset_title, key));
     absl::StrAppend(&gp, "set title 'Likelihood over the onset, every onset searched'\n",
                     "set ylabel '-2 log L above the best'\n",
@@ -367,20 +375,27 @@ std::string OnsetScript(const Context& c, const disc::Finding& f, int gyro_index
   }
   // 2: the same near the onset, where the interval is read off.
   const double width = std::max(t.onset_upper_hours - t.onset_lower_hours, 0.02 * c.length_hours);
-  const double z0 = std::max(0.0, t.onset_lower_hours - 2.0 * width);
-  const double z1 = std::min(c.length_hours, t.onset_upper_hours + 2.0 * width);
+  // Zoomed to the onsets around the best up to the first beyond kZoomLevel on either side.
+  constexpr double kZoomLevel = 40.0;
+  double z0 = 0.0, z1 = c.length_hours;
+  for (const auto& [h, v] : t.onset_profile) {
+    if (v > kZoomLevel && h < t.onset_hours) z0 = std::max(z0, h);
+    if (v > kZoomLevel && h > t.onset_hours) z1 = std::min(z1, h);
+  }
+  const double pad = 0.1 * (z1 - z0);
+  z0 = std::max(0.0, z0 - pad);
+  z1 = std::min(c.length_hours, z1 + pad);
   {
     double zoom_top = 0.0;
     for (const auto& [h, v] : t.onset_profile)
       if (h >= z0 && h <= z1) zoom_top = std::max(zoom_top, v);
     std::vector<std::string> key;
     absl::StrAppend(&gp, "unset arrow\n",
-                    IntervalObject(t.onset_lower_hours, t.onset_upper_hours, key,
-                                   interval_title));
+                    IntervalObject(t.onset_lower_hours, t.onset_upper_hours, key, interval_title));
     absl::StrAppend(&gp, VerticalLine(t.onset_hours, "", key));
     absl::StrAppend(
         &gp, absl::StrFormat("set xrange [%.5f:%.5f]\n", z0, z1),
-        absl::StrFormat("set yrange [0:%.4g]\n", std::clamp(1.1 * zoom_top, 10.0, 40.0)),
+        absl::StrFormat("set yrange [0:%.4g]\n", std::clamp(1.1 * zoom_top, 10.0, kZoomLevel)),
         "set title 'The same near the onset'\n",
         "set arrow from graph 0, first 3.841 to graph 1, first 3.841 nohead lc rgb '#aa6600'\n");
     key.push_back("keyentry with lines lc rgb '#aa6600' title '3.84: chi-square(1) 95%'");
@@ -395,8 +410,7 @@ std::string OnsetScript(const Context& c, const disc::Finding& f, int gyro_index
     const double w = std::max(0.1 * c.length_hours, 4.0 * width);
     std::vector<std::string> key;
     absl::StrAppend(&gp, "unset arrow\n",
-                    IntervalObject(t.onset_lower_hours, t.onset_upper_hours, key,
-                                   interval_title));
+                    IntervalObject(t.onset_lower_hours, t.onset_upper_hours, key, interval_title));
     key.clear();  // drawn, but named in the panels above
     absl::StrAppend(&gp, VerticalLine(t.onset_hours, "onset", key));
     absl::StrAppend(
@@ -409,10 +423,13 @@ std::string OnsetScript(const Context& c, const disc::Finding& f, int gyro_index
                         "step (before) and with it (after)'\n",
                         f.gyro));
     std::vector<std::string> series;
-    if (before.points.at(f.gyro) > 0)
-      ResidualSeries("residuals_before.dat", gyro_index, kBefore, "before", false, series);
     if (after.points.at(f.gyro) > 0)
-      ResidualSeries("residuals_after.dat", gyro_index, kAfter, "after", true, series);
+      ResidualSeries("residuals_after.dat", gyro_index, kAfter, "with the step (after)", true,
+                     series);
+    if (before.points.at(f.gyro) > 0) {
+      ResidualSeries("residuals_before.dat", gyro_index, kBefore, "without it (before)", false,
+                     series);
+    }
     series.insert(series.end(), key.begin(), key.end());
     absl::StrAppend(&gp, Plot(series));
   }
@@ -433,29 +450,28 @@ std::string TrendScript(const Context& c, const disc::Finding& f) {
   const disc::DisplacementTrend& t = f.displacement_trend;
   std::string gp = BeginPng(c, "trend.png", 1200, 900);
   absl::StrAppend(
-      &gp,
-      absl::StrFormat("set multiplot layout 3,1 title %s\n",
-                      Quote(absl::StrFormat("Gyro %d: rotor displacement implied by the "
-                                            "suspension offset voltages, eq. (3) %s",
-                                            f.gyro, c.start))),
-      "set key top right\n");
+      &gp, absl::StrFormat("set multiplot layout 3,1 title %s\n",
+                           Quote(absl::StrFormat("Gyro %d: rotor displacement implied by the "
+                                                 "suspension offset voltages, eq. (3) %s",
+                                                 f.gyro, c.start))));
   const char* axis[] = {"x", "y", "z"};
   const char* colour[] = {"#1b9e77", "#d95f02", "#7570b3"};
   for (int i = 0; i < 3; ++i) {
-    absl::StrAppend(&gp, absl::StrFormat("set title 'case axis %s'\nset ylabel 'displacement, µm'\n",
-                                         axis[i]));
+    absl::StrAppend(
+        &gp, absl::StrFormat("set title 'case axis %s'\nset ylabel 'displacement, µm'\n", axis[i]));
     absl::StrAppend(
         &gp,
-        Plot({absl::StrFormat("'trend.dat' using 1:%d with points pt 7 ps 0.5 lc rgb '%s' title "
-                              "'from the voltages (mean over %.2f h bins)'",
-                              i + 2, colour[i],
-                              t.samples.size() > 1 ? (t.samples.back().hours -
-                                                      t.samples.front().hours) /
-                                                         (t.samples.size() - 1)
-                                                   : 0.0),
+        Plot({absl::StrFormat(
+                  "'trend.dat' using 1:%d with points pt 7 ps 0.5 lc rgb '%s' title "
+                  "'from the voltages (mean over %.2f h bins)'",
+                  i + 2, colour[i],
+                  t.samples.size() > 1
+                      ? (t.samples.back().hours - t.samples.front().hours) / (t.samples.size() - 1)
+                      : 0.0),
               absl::StrFormat("%.6g + %.6g*x with lines lw 2 lc rgb 'black' title 'robust line: "
-                              "%+.4f µm/h'",
-                              t.intercept_um[i], t.rate_um_h[i], t.rate_um_h[i])}));
+                              "%+.2g µm/h, %+.3f µm over the recording'",
+                              t.intercept_um[i], t.rate_um_h[i], t.rate_um_h[i],
+                              t.rate_um_h[i] * c.length_hours)}));
   }
   absl::StrAppend(&gp, kEndPng);
   return gp;
@@ -482,25 +498,27 @@ absl::StatusOr<std::vector<DiagnosisPlot>> WriteDiagnosisPlots(const disc::Diagn
     return s;
   if (absl::Status s = WriteText(dir / "regimes.dat", RegimesData(c)); !s.ok()) return s;
 
-  std::string gp = absl::StrCat("# Plots of the diagnosis report (esg diagnose --out): run "
-                                "`gnuplot plots.gp` in this directory.\n",
-                                ResidualsScript(c, before, after));
+  std::string gp = absl::StrCat(
+      "# Plots of the diagnosis report (esg diagnose --out): run "
+      "`gnuplot plots.gp` in this directory.\n",
+      ResidualsScript(c, before, after));
   plots.push_back(
       {"residuals.png", "residuals before and after",
        "Each gyro's star-tracker residual with the configured model (left) and with the findings "
        "added (right), against the green band that holds 90% of it if the model is right: "
-       "points above the band are what the model leaves out (grey: held-out spans, pink: the "
-       "configured model's largest mismatch)."});
+       "points above the band are what the model leaves out (red hatching: where the configured "
+       "model disagrees most)."});
   absl::StrAppend(&gp, HeldOutScript(c));
   plots.push_back({"held_out.png", "held-out attitude error",
                    "The attitude error where the star tracker was withheld and the model "
                    "predicted alone: a model that captures the physics keeps the blue (after) "
                    "line flat and below the red (before) one."});
   absl::StrAppend(&gp, RegimesScript(c));
-  plots.push_back({"regimes.png", "attitude regimes",
-                   "The attitude regimes found from the body rate, the held-out spans (grey) and "
-                   "the configured model's largest mismatch (pink): look at which regime the "
-                   "mismatch sits in."});
+  plots.push_back(
+      {"regimes.png", "attitude regimes",
+       "The attitude regimes found from the body rate, the held-out spans (grey) and "
+       "the configured model's largest mismatch (red hatching): look at which regime the "
+       "mismatch sits in."});
 
   for (const disc::Finding& f : r.findings) {
     if (f.time.kind != "step" || f.time.onset_profile.empty()) continue;

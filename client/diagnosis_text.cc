@@ -27,15 +27,15 @@ std::string DiagnosisText(const disc::DiagnosisReport& r) {
                               m.expected_arcsec, m.p_value, m.source));
   }
   absl::StrAppend(
-      &out, absl::StrFormat("fit before: residual RMS %.2f arcsec, held-out drift rate %.4f deg/h "
-                            "(%s)\n",
-                            r.before.residual_rms_arcsec, r.before.gap_drift_rate_deg_h,
-                            r.before.model));
+      &out,
+      absl::StrFormat("fit before: residual RMS %.2f arcsec, held-out drift rate %.4f deg/h "
+                      "(%s)\n",
+                      r.before.residual_rms_arcsec, r.before.gap_drift_rate_deg_h, r.before.model));
   absl::StrAppend(
-      &out, absl::StrFormat("fit after:  residual RMS %.2f arcsec, held-out drift rate %.4f deg/h "
-                            "(%s)\n",
-                            r.after.residual_rms_arcsec, r.after.gap_drift_rate_deg_h,
-                            r.after.model));
+      &out,
+      absl::StrFormat("fit after:  residual RMS %.2f arcsec, held-out drift rate %.4f deg/h "
+                      "(%s)\n",
+                      r.after.residual_rms_arcsec, r.after.gap_drift_rate_deg_h, r.after.model));
   absl::StrAppend(&out, absl::StrFormat("%d frames, %zu regime spans, %d filter runs\n", r.frames,
                                         r.regimes.size(), r.filter_runs));
   return out;
