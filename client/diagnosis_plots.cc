@@ -80,8 +80,10 @@ std::string BeginPng(const Context& c, const std::string& png, int width, int he
 constexpr char kEndPng[] = "unset multiplot\nset output\n";
 
 // Shaded spans behind a panel: the held-out spans and the mismatch of the configured model.
-// Appends their legend entries (keyentry) to `key` when drawn.
-std::string Spans(const Context& c, bool held_out, bool mismatch, std::vector<std::string>& key) {
+// Appends their legend entries (keyentry) to `key` when drawn, the mismatch's gyro named unless
+// `name_gyro` is false (a panel of that gyro).
+std::string Spans(const Context& c, bool held_out, bool mismatch, std::vector<std::string>& key,
+                  bool name_gyro = true) {
   std::string gp = "unset object\n";
   int object = 1;
   auto rect = [&](double a, double b, const char* colour, const char* style) {
@@ -96,7 +98,7 @@ std::string Spans(const Context& c, bool held_out, bool mismatch, std::vector<st
     key.push_back(absl::StrFormat(
         "keyentry with boxes fs transparent pattern 4 fc rgb '%s' title %s", kMismatch,
         Quote(absl::StrCat("largest mismatch",
-                           m.gyro > 0 ? absl::StrCat(" (gyro ", m.gyro, ")") : ""))));
+                           m.gyro > 0 && name_gyro ? absl::StrCat(" (gyro ", m.gyro, ")") : ""))));
   }
   if (held_out && !c.r->before.gaps.empty()) {
     for (const auto& g : c.r->before.gaps)
@@ -183,7 +185,7 @@ void ResidualSeries(const std::string& file, int index, const char* colour, cons
   if (band) {
     series.push_back(absl::StrFormat(
         "'%s' index %d using 1:(%g*$3):(%g*$3) with filledcurves fs transparent solid 0.35 "
-        "noborder lc rgb '%s' title '90%% band if the model is right'",
+        "noborder lc rgb '%s' title '90%% band (model right)'",
         file, index, kBandLow, kBandHigh, kBand));
   }
   series.push_back(
@@ -212,7 +214,7 @@ std::string ResidualsScript(const Context& c, const ResidualData& before,
       std::vector<std::string> series;
       const bool mismatch = is_before && (r.mismatch.gyro == 0 || r.mismatch.gyro == id);
       std::vector<std::string> key;
-      absl::StrAppend(&gp, Spans(c, false, mismatch, key));
+      absl::StrAppend(&gp, Spans(c, false, mismatch, key, /*name_gyro=*/false));
       absl::StrAppend(
           &gp, "set title ",
           Quote(absl::StrFormat("gyro %d %s: %s", id, is_before ? "before" : "after", fit.model)),
@@ -347,9 +349,8 @@ std::string OnsetScript(const Context& c, const disc::Finding& f, int gyro_index
                         const ResidualData& before, const ResidualData& after) {
   const disc::TimeBehaviour& t = f.time;
   std::string gp = BeginPng(c, "onset.png", 1200, 1200);
-  const std::string onset_title =
-      absl::StrFormat("onset %.3f h (%s), 95%% interval %.3f-%.3f h", t.onset_hours,
-                      disc::UtcText(t.onset), t.onset_lower_hours, t.onset_upper_hours);
+  const std::string onset_title = absl::StrFormat("onset %.3f h (95%%: %.3f-%.3f h)", t.onset_hours,
+                                                  t.onset_lower_hours, t.onset_upper_hours);
   const std::string interval_title = "95% onset interval (within 3.84 of the best)";
   absl::StrAppend(&gp,
                   absl::StrFormat("set multiplot layout 3,1 title %s\n",
