@@ -112,7 +112,8 @@ std::string Spans(const Context& c, bool held_out, bool mismatch, std::vector<st
 }
 
 std::string Plot(const std::vector<std::string>& series) {
-  if (series.empty()) return "plot NaN notitle\n";
+  // Nothing to draw: an empty frame (gnuplot stops the script at a plot with no defined point).
+  if (series.empty()) return "set yrange [1:10]\nplot NaN notitle\n";
   return absl::StrCat("plot ", absl::StrJoin(series, ", \\\n     "), "\n");
 }
 
@@ -207,8 +208,8 @@ std::string ResidualsScript(const Context& c, const ResidualData& before,
       "set logscale y\nset ylabel '|difference|, arcsec'\n");
   for (size_t k = 0; k < r.gyros.size(); ++k) {
     const int id = r.gyros[k];
-    absl::StrAppend(&gp, ResidualYRange(before, after, id));
     for (bool is_before : {true, false}) {
+      absl::StrAppend(&gp, ResidualYRange(before, after, id));
       const ResidualData& d = is_before ? before : after;
       const disc::FitSummary& fit = is_before ? r.before : r.after;
       std::vector<std::string> series;
