@@ -203,8 +203,8 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
     auto residuals = [](const std::vector<estimator::discovery::ResidualPoint>& v) {
       json a = json::array();
       for (const auto& p : v) {
-        a.push_back(json::array({p.hours, p.gyro, Number(p.residual_arcsec),
-                                 Number(p.sigma_arcsec)}));
+        a.push_back(
+            json::array({p.hours, p.gyro, Number(p.residual_arcsec), Number(p.sigma_arcsec)}));
       }
       return a;
     };

@@ -12,8 +12,8 @@
 
 #include <cstdio>
 #include <filesystem>
-#include <functional>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <memory>
 #include <optional>
@@ -29,8 +29,8 @@
 #include "client/diagnosis_plots.h"
 #include "client/diagnosis_text.h"
 #include "client/output_format.h"
-#include "proto/diagnosis_json.h"
 #include "proto/convert.h"
+#include "proto/diagnosis_json.h"
 #include "storage/column_mapping.h"
 #include "storage/recording_csv.h"
 

@@ -93,7 +93,7 @@ struct DisplacementTrend {
     double hours = 0.0;                       // since the first frame, the middle of the bin
     std::array<double, 3> displacement_um{};  // mean over the bin, case axes [um]
   };
-  std::vector<Sample> samples;  // means over at most kMaxSamples bins of equal frame count
+  std::vector<Sample> samples;           // means over at most kMaxSamples bins of equal frame count
   std::array<double, 3> intercept_um{};  // the line at hour 0 [um]
   std::array<double, 3> rate_um_h{};     // its slope [um/h]
   static constexpr int kMaxSamples = 400;

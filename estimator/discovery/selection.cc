@@ -338,11 +338,8 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   finding.time = f.time;
   finding.displacement_trend = f.displacement_trend;
   if (!f.onset_profile.empty()) {
-    const double best =
-        std::min_element(f.onset_profile.begin(), f.onset_profile.end(), [](const auto& a,
-                                                                             const auto& b) {
-          return a.second < b.second;
-        })->second;
+    double best = f.onset_profile.front().second;
+    for (const auto& point : f.onset_profile) best = std::min(best, point.second);
     for (const auto& [hours, value] : f.onset_profile)
       finding.time.onset_profile.emplace_back(hours, value - best);
   }

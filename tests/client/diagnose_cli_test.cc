@@ -62,7 +62,8 @@ void ExpectPlotsReferencedAndDrawn(const TempDir& dir, const std::vector<std::st
     EXPECT_GT(md.find(". ", at), at) << png << ": no sentence after the image";
     if (GnuplotInstalled()) {
       const std::string path = dir.File("report/" + png);
-      ASSERT_TRUE(std::filesystem::exists(path)) << png << "; " << ReadFile(dir.File("report/gnuplot.log"));
+      ASSERT_TRUE(std::filesystem::exists(path))
+          << png << "; " << ReadFile(dir.File("report/gnuplot.log"));
       EXPECT_GT(std::filesystem::file_size(path), 1000u) << png;
     }
   }
@@ -134,8 +135,7 @@ TEST(DiagnoseCli, NamesTheMissingEffectAndWritesTheReport) {
   EXPECT_THAT(md, HasSubstr("# Diagnosis: rotor_displacement"));
   // The simulator writes suspension voltages: the displacement's trend is plotted too.
   ASSERT_TRUE(finding.contains("displacementTrend"));
-  ExpectPlotsReferencedAndDrawn(
-      dir, {"residuals.png", "held_out.png", "regimes.png", "trend.png"});
+  ExpectPlotsReferencedAndDrawn(dir, {"residuals.png", "held_out.png", "regimes.png", "trend.png"});
   EXPECT_THAT(md, Not(HasSubstr("onset.png")));  // no drift step found
   // The residual data carry the filter's predicted sigma beside each |difference|.
   std::istringstream data(ReadFile(dir.File("report/residuals_before.dat")));
@@ -172,8 +172,10 @@ TEST(DiagnoseCli, DriftStepReportPlotsTheOnset) {
                                   dir.File("rec.csv") + "'");
   ASSERT_EQ(sim.exit_code, 0) << sim.err;
   RunResult r = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
-                                dir.File("rec.csv") + "' --effects drift_step --max-effects 1 "
-                                "--json --out '" + dir.File("report") + "'");
+                                dir.File("rec.csv") +
+                                "' --effects drift_step --max-effects 1 "
+                                "--json --out '" +
+                                dir.File("report") + "'");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json doc = nlohmann::json::parse(r.out);
   ASSERT_EQ(doc.at("verdict"), "drift_step") << r.out;

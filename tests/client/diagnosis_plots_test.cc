@@ -48,8 +48,7 @@ TEST(DiagnosisPlots, AReportWithoutSeriesStillDrawsEveryPlotWithoutLegendEntries
   const disc::DiagnosisReport r = EmptyReport();
   auto plots = WriteDiagnosisPlots(r, dir.path());
   ASSERT_TRUE(plots.ok()) << plots.status();
-  EXPECT_THAT(Pngs(*plots), ::testing::ElementsAre("residuals.png", "held_out.png",
-                                                   "regimes.png"));
+  EXPECT_THAT(Pngs(*plots), ::testing::ElementsAre("residuals.png", "held_out.png", "regimes.png"));
   const std::string gp = ReadFile(dir.File("plots.gp"));
   EXPECT_THAT(gp, HasSubstr("(start 2019-03-01T00:00:00Z)"));
   EXPECT_THAT(gp, HasSubstr("set xlabel 'hours from the start'"));
@@ -80,8 +79,8 @@ TEST(DiagnosisPlots, ADriftStepAndADisplacementTrendGetTheirPlots) {
   step.time.onset_hours = 3.0;
   step.time.onset_lower_hours = 2.95;
   step.time.onset_upper_hours = 3.05;
-  step.time.onset_profile = {{1.0, 300.0}, {2.0, 100.0}, {2.9, 8.0}, {3.0, 0.0}, {3.1, 9.0},
-                             {4.0, 200.0}};
+  step.time.onset_profile = {{1.0, 300.0}, {2.0, 100.0}, {2.9, 8.0},
+                             {3.0, 0.0},   {3.1, 9.0},   {4.0, 200.0}};
   r.findings.push_back(step);
   disc::Finding rotor;
   rotor.effect = "rotor_displacement";
