@@ -2,6 +2,7 @@
 // DURABILITY" and docs/service.md "Storage faults"): one transaction for everything queued, acks
 // only after it committed; a failed commit fails the senders' streams with UNAVAILABLE and holds
 // ingest until a probe write succeeds.
+#include <algorithm>
 #include <map>
 #include <set>
 #include <utility>
@@ -53,10 +54,12 @@ void EstimationCore::SetStorageFault(const std::string& reason) {
   }
   if (!changed) return;
   if (reason.empty()) {
-    Log("INFO", "storage commits again: ingest resumed");
+    LogEvent("INFO", "storage_recovered", "storage commits again: ingest resumed");
   } else {
-    Log("ERROR", absl::StrCat("storage cannot commit: ", reason,
-                              "; ingest refused with UNAVAILABLE until it can"));
+    LogEvent("ERROR", "storage_error",
+             absl::StrCat("storage cannot commit: ", reason,
+                          "; ingest refused with UNAVAILABLE until it can"),
+             {{"reason", reason}});
   }
   NotifyStorageHealth();
 }
@@ -76,10 +79,14 @@ void EstimationCore::SetApplyFault(const std::string& spacecraft_id, const std::
   }
   if (!changed) return;
   if (reason.empty()) {
-    Log("INFO", absl::StrCat(spacecraft_id, ": the filter's commits succeed again"));
+    LogEvent("INFO", "storage_recovered",
+             absl::StrCat(spacecraft_id, ": the filter's commits succeed again"),
+             {{"spacecraftId", spacecraft_id}});
   } else {
-    Log("ERROR", absl::StrCat(spacecraft_id, ": the filter cannot commit its results: ", reason,
-                              "; it keeps its last checkpoint and retries"));
+    LogEvent("ERROR", "storage_error",
+             absl::StrCat(spacecraft_id, ": the filter cannot commit its results: ", reason,
+                          "; it keeps its last checkpoint and retries"),
+             {{"spacecraftId", spacecraft_id}, {"reason", reason}});
   }
   NotifyStorageHealth();
 }
@@ -150,7 +157,10 @@ void EstimationCore::CommitterLoop() {
       if (faulted) ProbeStorage();
       continue;
     }
+    const absl::Time commit_start = absl::Now();
     const absl::Status status = CommitFrames(batch);
+    metrics_.storage_commit.With({"telemetry"}).Observe(
+        absl::ToDoubleSeconds(absl::Now() - commit_start));
     if (!status.ok()) {
       const std::string reason(status.ToString());
       SetStorageFault(reason);
@@ -161,6 +171,8 @@ void EstimationCore::CommitterLoop() {
       continue;
     }
     if (faulted) SetStorageFault("");
+    metrics_.commit_batch_frames.Observe(static_cast<double>(std::count_if(
+        batch.begin(), batch.end(), [](const CommitEntry& e) { return !e.barrier; })));
     // Per spacecraft, under both of its locks once: durable marks first, then out of the
     // pending set, so an ingest that finds a frame archived also finds it counted durable.
     std::map<Spacecraft*, std::vector<CommitEntry*>> by_spacecraft;

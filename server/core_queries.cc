@@ -20,6 +20,7 @@
 #include "proto/diagnosis_json.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "server/log.h"
 #include "storage/schema.h"
 #include "storage/service_queries.h"
 
@@ -254,6 +255,40 @@ esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecor
 }  // namespace
 
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
+    const esg::v1::DiagnoseRequest& request,
+    const std::function<void(double fraction, const std::string& stage)>& progress,
+    const std::function<bool()>& cancelled) {
+  const std::string& id = request.spacecraft_id();
+  LogEvent("INFO", "diagnosis_started", absl::StrCat("diagnosis of ", id, " started"),
+           {{"spacecraftId", id}});
+  const absl::Time start = absl::Now();
+  absl::StatusOr<esg::v1::DiagnosisResult> result = RunDiagnosis(request, progress, cancelled);
+  const double seconds = absl::ToDoubleSeconds(absl::Now() - start);
+  metrics_.diagnosis_duration.Observe(seconds);
+  if (result.ok()) {
+    metrics_.diagnoses.With({"ok"}).Increment();
+    LogEvent("INFO", "diagnosis_finished",
+             absl::StrCat("diagnosis #", result->id(), " of ", id, " finished in ",
+                          absl::FormatDuration(absl::Seconds(seconds))),
+             {{"spacecraftId", id},
+              {"diagnosisId", static_cast<int64_t>(result->id())},
+              {"result", "ok"},
+              {"durationSeconds", seconds}});
+  } else {
+    const bool was_cancelled = result.status().code() == absl::StatusCode::kCancelled;
+    metrics_.diagnoses.With({was_cancelled ? "cancelled" : "error"}).Increment();
+    LogEvent(was_cancelled ? "INFO" : "WARN", "diagnosis_finished",
+             absl::StrCat("diagnosis of ", id, was_cancelled ? " cancelled" : " failed", " after ",
+                          absl::FormatDuration(absl::Seconds(seconds)), ": ",
+                          result.status().ToString()),
+             {{"spacecraftId", id},
+              {"result", was_cancelled ? "cancelled" : "error"},
+              {"durationSeconds", seconds}});
+  }
+  return result;
+}
+
+absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     const esg::v1::DiagnoseRequest& request,
     const std::function<void(double fraction, const std::string& stage)>& progress,
     const std::function<bool()>& cancelled) {

@@ -51,6 +51,7 @@
 #include "server/alert_hub.h"
 #include "server/checkpoint_codec.h"
 #include "server/proto_mapping.h"
+#include "server/service_metrics.h"
 #include "storage/storage.h"
 
 namespace esg::server {
@@ -180,6 +181,8 @@ class EstimationCore {
   absl::Status WaitApplied(const std::string& spacecraft_id, absl::Duration timeout);
 
   AlertHub& alert_hub() { return hub_; }
+  // The service's metrics (docs/service.md "Metrics"); the gRPC layer counts ingest in it.
+  ServiceMetrics& metrics() { return metrics_; }
   storage::Storage& storage() { return *storage_; }
 
  private:
@@ -209,12 +212,20 @@ class EstimationCore {
   void Schedule(const std::shared_ptr<Spacecraft>& sc);
   void CommitterLoop();
   void WorkerLoop();
+  // Diagnose without the log lines and metrics around it.
+  absl::StatusOr<esg::v1::DiagnosisResult> RunDiagnosis(
+      const esg::v1::DiagnoseRequest& request,
+      const std::function<void(double fraction, const std::string& stage)>& progress,
+      const std::function<bool()>& cancelled);
+  // Reads the gauges of the metrics from the registry and the committer (each scrape).
+  void CollectGauges();
   // Applies the next frames of one spacecraft; true when more remain.
   bool RunJob(const std::shared_ptr<Spacecraft>& sc);
   esg::v1::SessionInfo Summarize(Spacecraft& sc);
 
   storage::Storage* const storage_;
   const CoreOptions options_;
+  ServiceMetrics metrics_;
   AlertHub hub_;
 
   absl::Mutex registry_mu_;
