@@ -129,8 +129,13 @@ std::string FormatSampleValue(double value) {
     return absl::StrCat(static_cast<int64_t>(value));
   }
   // The shortest text that reads back as the same double (0.0001, not 0.00010000000000000001).
-  char buffer[32];
-  const std::to_chars_result r = std::to_chars(buffer, buffer + sizeof buffer, value);
+  // Fixed notation in the usual range (le="0.0001", not "1e-04"), scientific outside it.
+  char buffer[64];
+  const double magnitude = std::fabs(value);
+  const std::to_chars_result r =
+      magnitude >= 1e-9 && magnitude < 1e15
+          ? std::to_chars(buffer, buffer + sizeof buffer, value, std::chars_format::fixed)
+          : std::to_chars(buffer, buffer + sizeof buffer, value);
   return std::string(buffer, r.ptr);
 }
 
