@@ -270,23 +270,17 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // Commit the effects and the checkpoint in one transaction.
   ServerCheckpoint to_store = apply;
   std::vector<int64_t> new_sequences;
-  const absl::Time commit_start = absl::Now();
-  const absl::Status status = [&]() -> absl::Status {
-    ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
-    for (const storage::CoefficientRecord& r : coefficients) {
-      RETURN_IF_ERROR(storage_->coefficients().Append(txn, r));
-    }
-    for (const storage::AlertRecord& a : alerts.new_alerts()) {
-      ASSIGN_OR_RETURN(int64_t seq, storage_->alerts().Append(txn, a));
-      new_sequences.push_back(seq);
-    }
-    for (const auto& [seq, rep] : alerts.repeats()) {
-      RETURN_IF_ERROR(storage_->alerts().UpdateRepeat(txn, rep));
-    }
-    for (const AlertCollapser::Clear& c : alerts.clears()) {
-      RETURN_IF_ERROR(storage_->alerts().Clear(txn, sc->id, c.sequence, c.time));
-    }
-    to_store.alert_tracks = alerts.Tracks(new_sequences);
+  storage::FilterEffects effects;
+  effects.spacecraft_id = sc->id;
+  effects.coefficients = std::move(coefficients);
+  effects.new_alerts = alerts.new_alerts();
+  for (const auto& [seq, rep] : alerts.repeats()) effects.repeats.push_back(rep);
+  for (const AlertCollapser::Clear& c : alerts.clears()) {
+    effects.clears.push_back({c.sequence, c.time});
+  }
+  // The checkpoint carries the live alert tracks with the sequences the store assigns.
+  effects.checkpoint = [&](const std::vector<int64_t>& sequences) {
+    to_store.alert_tracks = alerts.Tracks(sequences);
     storage::CheckpointRecord cp;
     cp.spacecraft_id = sc->id;
     cp.last_sequence = apply.applied_sequence;
@@ -296,9 +290,12 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     cp.compute_time = now;
     if (session.has_value()) to_store.session = session->ExportCheckpoint();
     cp.state_blob = EncodeCheckpoint(to_store);
-    RETURN_IF_ERROR(storage_->sessions().PutCheckpoint(txn, cp));
-    return txn.Commit();
-  }();
+    return cp;
+  };
+  const absl::Time commit_start = absl::Now();
+  absl::StatusOr<std::vector<int64_t>> committed = storage_->CommitFilterEffects(effects);
+  const absl::Status status = committed.status();
+  if (committed.ok()) new_sequences = std::move(*committed);
   metrics_.storage_commit.With({"filter"}).Observe(
       absl::ToDoubleSeconds(absl::Now() - commit_start));
   if (!status.ok()) {

@@ -18,7 +18,8 @@
 namespace esg::server {
 
 absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch) {
-  std::map<Spacecraft*, std::vector<storage::ArchivedFrame>> frames;
+  std::vector<storage::ArchivedFrame> frames;
+  frames.reserve(batch.size());
   for (const CommitEntry& e : batch) {
     if (e.barrier) continue;
     storage::ArchivedFrame f;
@@ -27,22 +28,11 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
     f.sequence = e.sequence;
     f.measurement_time = e.time;
     f.payload = e.payload;
-    frames[e.sc.get()].push_back(std::move(f));
+    frames.push_back(std::move(f));
   }
-  if (frames.empty()) return absl::OkStatus();
-  ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
-  for (auto& [sc, list] : frames) {
-    ASSIGN_OR_RETURN(storage::AppendResult r, storage_->archive().AppendBatch(txn, sc->id, list));
-    if (!r.duplicate_sequences.empty()) {
-      // Ingest decided these frames were new; the archive disagrees. Storing nothing for them
-      // and acknowledging them would be a false acknowledgement.
-      return absl::InternalError(absl::StrCat(
-          sc->id, ": ", r.duplicate_sequences.size(),
-          " frames decided new are already archived (first sequence ",
-          r.duplicate_sequences.front(), ")"));
-    }
-  }
-  return txn.Commit();
+  // Ingest decided every frame new; one the archive already holds fails the whole commit
+  // (AlreadyExists) rather than be acknowledged falsely.
+  return storage_->ArchiveFrames(frames);
 }
 
 void EstimationCore::SetStorageFault(const std::string& reason) {

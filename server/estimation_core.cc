@@ -367,21 +367,18 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
   auto write = [&]() -> absl::Status {
     cp.state_blob = EncodeCheckpoint(checkpoint);
-    ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
-    RETURN_IF_ERROR(storage_->configs().Put(txn, record).status());
-    RETURN_IF_ERROR(storage_->sessions().PutCheckpoint(txn, cp));
-    ended_sequences.clear();
+    storage::ConfigurationChange change;
+    change.config = record;
+    change.checkpoint = cp;
     if (quarantine_end.has_value()) {
-      for (const storage::AlertRecord& a : quarantine_end->new_alerts()) {
-        ASSIGN_OR_RETURN(int64_t seq, storage_->alerts().Append(txn, a));
-        ended_sequences.push_back(seq);
-      }
+      change.new_alerts = quarantine_end->new_alerts();
       for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
-        RETURN_IF_ERROR(storage_->alerts().Clear(txn, config.spacecraft_id, c.sequence, c.time));
-        ended_sequences.push_back(c.sequence);
+        change.clears.push_back({c.sequence, c.time});
       }
     }
-    return txn.Commit();
+    ASSIGN_OR_RETURN(ended_sequences, storage_->CommitConfiguration(change));
+    for (const storage::AlertClear& c : change.clears) ended_sequences.push_back(c.sequence);
+    return absl::OkStatus();
   };
 
   auto store = [&]() -> absl::Status {
