@@ -214,20 +214,10 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
       return absl::InvalidArgumentError("page_token: damaged (its position does not parse)");
     }
   }
-  std::vector<std::shared_ptr<Spacecraft>> page;
+  // Ordered by spacecraft id; the page starts after the token's id.
   bool more = false;
-  {
-    absl::MutexLock lock(&registry_mu_);
-    // Ordered by spacecraft id; the page starts after the token's id.
-    auto it = request.page_token().empty() ? registry_.begin() : registry_.upper_bound(after);
-    for (; it != registry_.end(); ++it) {
-      if (static_cast<int64_t>(page.size()) == size) {
-        more = true;
-        break;
-      }
-      page.push_back(it->second);
-    }
-  }
+  const std::vector<std::shared_ptr<Spacecraft>> page =
+      registry_.Page(request.page_token().empty() ? std::string() : after, size, &more);
   esg::v1::ListSessionsResponse response;
   for (auto& sc : page) *response.add_sessions() = Summarize(*sc);
   if (more) {

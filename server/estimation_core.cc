@@ -35,10 +35,7 @@ absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::S
   core->committer_ = std::thread([c = core.get()] { c->CommitterLoop(); });
   const int n = std::max(1, options.worker_threads);
   for (int i = 0; i < n; ++i) core->workers_.emplace_back([c = core.get()] { c->WorkerLoop(); });
-  {
-    absl::MutexLock lock(&core->registry_mu_);
-    for (auto& [id, sc] : core->registry_) core->Schedule(sc);
-  }
+  for (const auto& sc : core->registry_.All()) core->Schedule(sc);
   return core;
 }
 
@@ -48,12 +45,7 @@ void EstimationCore::CollectGauges() {
        {"NO_DATA", "CALIBRATING", "CONVERGED", "AUTONOMOUS", "FAULTED", "QUARANTINED"}) {
     by_state[state] = 0;
   }
-  std::vector<std::shared_ptr<Spacecraft>> all;
-  {
-    absl::MutexLock lock(&registry_mu_);
-    for (const auto& [id, sc] : registry_) all.push_back(sc);
-  }
-  for (const auto& sc : all) {
+  for (const auto& sc : registry_.All()) {
     absl::MutexLock state(&sc->state_mu);
     if (!sc->apply.quarantine_reason.empty() || sc->setup == nullptr || !sc->session.has_value()) {
       ++by_state["QUARANTINED"];
@@ -234,8 +226,7 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
                             ? "nothing"
                             : FormatUtc(sc->apply.applied_time)),
            {{"spacecraftId", sc->id}, {"archivedFrames", count}});
-  absl::MutexLock lock(&registry_mu_);
-  registry_[sc->id] = std::move(sc);
+  registry_.Put(std::move(sc));
   return absl::OkStatus();
 }
 
@@ -263,8 +254,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
       busy = !ready_.empty();
     }
     if (!busy) {
-      absl::MutexLock lock(&registry_mu_);
-      for (auto& [id, sc] : registry_) {
+      for (const auto& sc : registry_.All()) {
         absl::MutexLock state(&sc->state_mu);
         if (sc->session.has_value() && sc->setup != nullptr && !sc->apply.FilterStopped() &&
             (sc->replay_from_archive || !sc->ready.empty())) {
@@ -284,9 +274,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
 }
 
 std::shared_ptr<EstimationCore::Spacecraft> EstimationCore::Find(const std::string& id) {
-  absl::MutexLock lock(&registry_mu_);
-  auto it = registry_.find(id);
-  return it == registry_.end() ? nullptr : it->second;
+  return registry_.Find(id);
 }
 
 absl::Status EstimationCore::CheckSpacecraft(const std::string& spacecraft_id) {
@@ -406,10 +394,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
       sc->apply = checkpoint;
       sc->replay_from_archive = false;
     }
-    {
-      absl::MutexLock lock(&registry_mu_);
-      registry_[sc->id] = sc;
-    }
+    registry_.Put(sc);
     LogEvent("INFO", "spacecraft_configured",
              absl::StrCat("configured new spacecraft ", sc->id, ", model ", setup->model_name),
              {{"spacecraftId", sc->id}, {"model", setup->model_name}, {"created", true}});
