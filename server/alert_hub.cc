@@ -28,10 +28,24 @@ void LogAlert(const storage::AlertRecord& r) {
                       : r.severity == "CRITICAL" || r.severity == "DISTRESS" ? "ERROR"
                       : r.severity == "WARNING"                             ? "WARN"
                                                                             : "INFO";
-  Log(level, absl::StrCat("alert ", r.spacecraft_id, " #", r.sequence, " ", r.severity, " ",
-                          r.reason, " ", r.subsystem, ", x", r.repeat_count, ", ",
-                          FormatUtc(r.first_time), "..", FormatUtc(r.measurement_time), state,
-                          ": ", r.message));
+  // event: alert_raised (first occurrence), alert_repeated, alert_acknowledged, alert_cleared.
+  const char* event = r.cleared             ? "alert_cleared"
+                      : r.acknowledged      ? "alert_acknowledged"
+                      : r.repeat_count > 1 ? "alert_repeated"
+                                            : "alert_raised";
+  LogEvent(level, event,
+           absl::StrCat("alert ", r.spacecraft_id, " #", r.sequence, " ", r.severity, " ",
+                        r.reason, " ", r.subsystem, ", x", r.repeat_count, ", ",
+                        FormatUtc(r.first_time), "..", FormatUtc(r.measurement_time), state, ": ",
+                        r.message),
+           {{"spacecraftId", r.spacecraft_id},
+            {"alertSequence", r.sequence},
+            {"severity", r.severity},
+            {"reason", r.reason},
+            {"subsystem", r.subsystem},
+            {"repeatCount", r.repeat_count},
+            {"firstTime", FormatUtc(r.first_time)},
+            {"measurementTime", FormatUtc(r.measurement_time)}});
 }
 
 int64_t AlertHub::Subscribe(std::string spacecraft_id, Listener listener, Closer close) {

@@ -120,7 +120,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
         storage_->archive().ReadAfter(sc->id, apply.applied_time, options_.max_frames_per_job);
     if (!archived.ok()) {
-      Log("ERROR", absl::StrCat(sc->id, ": archive read failed: ", archived.status().ToString()));
+      LogEvent("ERROR", "storage_error",
+               absl::StrCat(sc->id, ": archive read failed: ", archived.status().ToString()),
+               {{"spacecraftId", sc->id}});
       absl::MutexLock lock(&sc->state_mu);
       sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
                                 service_alerts.end());
@@ -146,8 +148,10 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       if (frame.ok()) {
         f.frame = std::move(*frame);
       } else {
-        Log("ERROR", absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
-                                  a.sequence, ") cannot be decoded: ", frame.status().ToString()));
+        LogEvent("ERROR", "frame_undecodable",
+                 absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
+                              a.sequence, ") cannot be decoded: ", frame.status().ToString()),
+                 {{"spacecraftId", sc->id}, {"station", a.station_id}, {"sequence", a.sequence}});
       }
       frames.push_back(std::move(f));
     }
@@ -161,7 +165,14 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // A rebuilt session does not store again what is already stored.
   const absl::Time written = apply.effects_written_until;
   // Session state changes, logged once the job's effects are committed.
-  std::vector<std::string> state_changes;
+  struct StateChange {
+    estimator::SessionState from;
+    estimator::SessionState to;
+    absl::Time time;
+    std::string station;
+    int64_t sequence = 0;
+  };
+  std::vector<StateChange> state_changes;
   for (const AlertOccurrence& o : service_alerts) alerts.Add(o);
   // The frame is behind the filter from here on, applied or skipped.
   auto advance_cursor = [&apply](const JobFrame& f) {
@@ -182,11 +193,19 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     }
     const TelemetryFrame& frame = *f.frame;
     const estimator::SessionState state_before = session->state();
+    const absl::Time step_start = absl::Now();
     absl::StatusOr<estimator::StepReport> report = session->AddFrame(frame);
+    metrics_.filter_step
+        .With({!report.ok()                  ? "failed"
+               : report->measurement_step ? "measurement"
+                                            : "propagation"})
+        .Observe(absl::ToDoubleSeconds(absl::Now() - step_start));
     if (!report.ok()) {
       const absl::StatusCode code = report.status().code();
-      Log("WARN", absl::StrCat(sc->id, ": frame (station ", f.station, ", sequence ", f.sequence,
-                               ") not applied: ", report.status().ToString()));
+      LogEvent("WARN", "frame_not_applied",
+               absl::StrCat(sc->id, ": frame (station ", f.station, ", sequence ", f.sequence,
+                            ") not applied: ", report.status().ToString()),
+               {{"spacecraftId", sc->id}, {"station", f.station}, {"sequence", f.sequence}});
       if (code == absl::StatusCode::kInternal || code == absl::StatusCode::kDataLoss) {
         // The filter itself failed: stop before this frame (the checkpoint stays at the last
         // good one) and quarantine; the others and the server go on.
@@ -197,8 +216,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
         apply.rebuilding = false;
         alerts.Add({kQuarantineReason, "DISTRESS", "session", f.time, 0.0, 0.0, "",
                     apply.quarantine_reason});
-        Log("ERROR",
-            absl::StrCat("spacecraft ", sc->id, " quarantined: ", apply.quarantine_reason));
+        LogEvent("ERROR", "session_quarantined",
+                 absl::StrCat("spacecraft ", sc->id, " quarantined: ", apply.quarantine_reason),
+                 {{"spacecraftId", sc->id}});
         break;
       }
       advance_cursor(f);
@@ -208,10 +228,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     advance_cursor(f);
     ++apply.frames_applied;
     if (session->state() != state_before && f.time > written) {
-      state_changes.push_back(absl::StrCat(
-          "spacecraft ", sc->id, ": session state ", estimator::SessionStateName(state_before),
-          " -> ", estimator::SessionStateName(session->state()), " at ", FormatUtc(f.time),
-          " (station ", f.station, ", sequence ", f.sequence, ")"));
+      state_changes.push_back({state_before, session->state(), f.time, f.station, f.sequence});
     }
     if (report->measurement_step && frame.star_tracker.has_value() && frame.star_tracker->valid &&
         !report->star_tracker_used) {
@@ -242,7 +259,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     }
   }
   if (rebuild_done) {
-    Log("INFO", absl::StrCat("spacecraft ", sc->id, " rebuilt from the archive; quarantine over"));
+    LogEvent("INFO", "quarantine_over",
+             absl::StrCat("spacecraft ", sc->id, " rebuilt from the archive; quarantine over"),
+             {{"spacecraftId", sc->id}});
     apply.quarantine_reason.clear();
     apply.rebuilding = false;
     alerts.End(kQuarantineReason, "session", apply.applied_time);
@@ -251,22 +270,17 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // Commit the effects and the checkpoint in one transaction.
   ServerCheckpoint to_store = apply;
   std::vector<int64_t> new_sequences;
-  const absl::Status status = [&]() -> absl::Status {
-    ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
-    for (const storage::CoefficientRecord& r : coefficients) {
-      RETURN_IF_ERROR(storage_->coefficients().Append(txn, r));
-    }
-    for (const storage::AlertRecord& a : alerts.new_alerts()) {
-      ASSIGN_OR_RETURN(int64_t seq, storage_->alerts().Append(txn, a));
-      new_sequences.push_back(seq);
-    }
-    for (const auto& [seq, rep] : alerts.repeats()) {
-      RETURN_IF_ERROR(storage_->alerts().UpdateRepeat(txn, rep));
-    }
-    for (const AlertCollapser::Clear& c : alerts.clears()) {
-      RETURN_IF_ERROR(storage_->alerts().Clear(txn, sc->id, c.sequence, c.time));
-    }
-    to_store.alert_tracks = alerts.Tracks(new_sequences);
+  storage::FilterEffects effects;
+  effects.spacecraft_id = sc->id;
+  effects.coefficients = std::move(coefficients);
+  effects.new_alerts = alerts.new_alerts();
+  for (const auto& [seq, rep] : alerts.repeats()) effects.repeats.push_back(rep);
+  for (const AlertCollapser::Clear& c : alerts.clears()) {
+    effects.clears.push_back({c.sequence, c.time});
+  }
+  // The checkpoint carries the live alert tracks with the sequences the store assigns.
+  effects.checkpoint = [&](const std::vector<int64_t>& sequences) {
+    to_store.alert_tracks = alerts.Tracks(sequences);
     storage::CheckpointRecord cp;
     cp.spacecraft_id = sc->id;
     cp.last_sequence = apply.applied_sequence;
@@ -276,9 +290,14 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     cp.compute_time = now;
     if (session.has_value()) to_store.session = session->ExportCheckpoint();
     cp.state_blob = EncodeCheckpoint(to_store);
-    RETURN_IF_ERROR(storage_->sessions().PutCheckpoint(txn, cp));
-    return txn.Commit();
-  }();
+    return cp;
+  };
+  const absl::Time commit_start = absl::Now();
+  absl::StatusOr<std::vector<int64_t>> committed = storage_->CommitFilterEffects(effects);
+  const absl::Status status = committed.status();
+  if (committed.ok()) new_sequences = std::move(*committed);
+  metrics_.storage_commit.With({"filter"}).Observe(
+      absl::ToDoubleSeconds(absl::Now() - commit_start));
   if (!status.ok()) {
     // Storage trouble (a full disk, an I/O error): health says so; this job is retried with a
     // growing pause (at most 2 s), the installed session and its checkpoint stay as they were.
@@ -320,14 +339,37 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   }
   // Publish the committed changes.
   absl::MutexLock publish(&sc->publish_mu);
-  for (const storage::AlertRecord& a : published) hub_.Publish(a);
-  for (const std::string& line : state_changes) Log("INFO", line);
+  for (const storage::AlertRecord& a : published) {
+    metrics_.alerts_raised.With({a.reason, a.severity}).Increment();
+    if (a.cleared) metrics_.alerts_cleared.With({a.reason, a.severity}).Increment();
+    hub_.Publish(a);
+  }
+  for (const StateChange& c : state_changes) {
+    const char* from = estimator::SessionStateName(c.from);
+    const char* to = estimator::SessionStateName(c.to);
+    LogEvent("INFO", "session_state",
+             absl::StrCat("spacecraft ", sc->id, ": session state ", from, " -> ", to, " at ",
+                          FormatUtc(c.time), " (station ", c.station, ", sequence ", c.sequence,
+                          ")"),
+             {{"spacecraftId", sc->id},
+              {"from", from},
+              {"to", to},
+              {"measurementTime", FormatUtc(c.time)},
+              {"station", c.station},
+              {"sequence", c.sequence}});
+  }
   std::set<int64_t> changed;
-  for (const AlertCollapser::Clear& c : alerts.clears()) changed.insert(c.sequence);
+  std::set<int64_t> cleared;
+  for (const AlertCollapser::Clear& c : alerts.clears()) {
+    changed.insert(c.sequence);
+    cleared.insert(c.sequence);
+  }
   for (const auto& [seq, rep] : alerts.repeats()) changed.insert(seq);
   for (int64_t seq : changed) {
     absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
-    if (r.ok()) hub_.Publish(*r);
+    if (!r.ok()) continue;
+    if (cleared.count(seq) != 0) metrics_.alerts_cleared.With({r->reason, r->severity}).Increment();
+    hub_.Publish(*r);
   }
   return more;
 }

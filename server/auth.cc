@@ -160,8 +160,10 @@ absl::StatusOr<std::string> TokenAuthorizer::AuthenticateHeader(
     std::optional<absl::string_view> authorization, Role role, absl::string_view peer) const {
   // One WARN line per refusal. `reason` never holds the presented header or token.
   auto refuse = [&](absl::Status status, absl::string_view reason) {
-    Log("WARN", absl::StrCat("authorization refused: peer ", peer.empty() ? "unknown" : peer,
-                             ", ", RoleName(role), " call: ", reason));
+    LogEvent("WARN", "authorization_refused",
+             absl::StrCat("authorization refused: peer ", peer.empty() ? "unknown" : peer, ", ",
+                          RoleName(role), " call: ", reason),
+             {{"peer", peer}, {"role", RoleName(role)}});
     return status;
   };
   if (!authorization.has_value()) {

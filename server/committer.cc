@@ -2,6 +2,7 @@
 // DURABILITY" and docs/service.md "Storage faults"): one transaction for everything queued, acks
 // only after it committed; a failed commit fails the senders' streams with UNAVAILABLE and holds
 // ingest until a probe write succeeds.
+#include <algorithm>
 #include <map>
 #include <set>
 #include <utility>
@@ -17,7 +18,8 @@
 namespace esg::server {
 
 absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch) {
-  std::map<Spacecraft*, std::vector<storage::ArchivedFrame>> frames;
+  std::vector<storage::ArchivedFrame> frames;
+  frames.reserve(batch.size());
   for (const CommitEntry& e : batch) {
     if (e.barrier) continue;
     storage::ArchivedFrame f;
@@ -26,22 +28,11 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
     f.sequence = e.sequence;
     f.measurement_time = e.time;
     f.payload = e.payload;
-    frames[e.sc.get()].push_back(std::move(f));
+    frames.push_back(std::move(f));
   }
-  if (frames.empty()) return absl::OkStatus();
-  ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
-  for (auto& [sc, list] : frames) {
-    ASSIGN_OR_RETURN(storage::AppendResult r, storage_->archive().AppendBatch(txn, sc->id, list));
-    if (!r.duplicate_sequences.empty()) {
-      // Ingest decided these frames were new; the archive disagrees. Storing nothing for them
-      // and acknowledging them would be a false acknowledgement.
-      return absl::InternalError(absl::StrCat(
-          sc->id, ": ", r.duplicate_sequences.size(),
-          " frames decided new are already archived (first sequence ",
-          r.duplicate_sequences.front(), ")"));
-    }
-  }
-  return txn.Commit();
+  // Ingest decided every frame new; one the archive already holds fails the whole commit
+  // (AlreadyExists) rather than be acknowledged falsely.
+  return storage_->ArchiveFrames(frames);
 }
 
 void EstimationCore::SetStorageFault(const std::string& reason) {
@@ -53,10 +44,12 @@ void EstimationCore::SetStorageFault(const std::string& reason) {
   }
   if (!changed) return;
   if (reason.empty()) {
-    Log("INFO", "storage commits again: ingest resumed");
+    LogEvent("INFO", "storage_recovered", "storage commits again: ingest resumed");
   } else {
-    Log("ERROR", absl::StrCat("storage cannot commit: ", reason,
-                              "; ingest refused with UNAVAILABLE until it can"));
+    LogEvent("ERROR", "storage_error",
+             absl::StrCat("storage cannot commit: ", reason,
+                          "; ingest refused with UNAVAILABLE until it can"),
+             {{"reason", reason}});
   }
   NotifyStorageHealth();
 }
@@ -76,10 +69,14 @@ void EstimationCore::SetApplyFault(const std::string& spacecraft_id, const std::
   }
   if (!changed) return;
   if (reason.empty()) {
-    Log("INFO", absl::StrCat(spacecraft_id, ": the filter's commits succeed again"));
+    LogEvent("INFO", "storage_recovered",
+             absl::StrCat(spacecraft_id, ": the filter's commits succeed again"),
+             {{"spacecraftId", spacecraft_id}});
   } else {
-    Log("ERROR", absl::StrCat(spacecraft_id, ": the filter cannot commit its results: ", reason,
-                              "; it keeps its last checkpoint and retries"));
+    LogEvent("ERROR", "storage_error",
+             absl::StrCat(spacecraft_id, ": the filter cannot commit its results: ", reason,
+                          "; it keeps its last checkpoint and retries"),
+             {{"spacecraftId", spacecraft_id}, {"reason", reason}});
   }
   NotifyStorageHealth();
 }
@@ -150,7 +147,10 @@ void EstimationCore::CommitterLoop() {
       if (faulted) ProbeStorage();
       continue;
     }
+    const absl::Time commit_start = absl::Now();
     const absl::Status status = CommitFrames(batch);
+    metrics_.storage_commit.With({"telemetry"}).Observe(
+        absl::ToDoubleSeconds(absl::Now() - commit_start));
     if (!status.ok()) {
       const std::string reason(status.ToString());
       SetStorageFault(reason);
@@ -161,6 +161,8 @@ void EstimationCore::CommitterLoop() {
       continue;
     }
     if (faulted) SetStorageFault("");
+    metrics_.commit_batch_frames.Observe(static_cast<double>(std::count_if(
+        batch.begin(), batch.end(), [](const CommitEntry& e) { return !e.barrier; })));
     // Per spacecraft, under both of its locks once: durable marks first, then out of the
     // pending set, so an ingest that finds a frame archived also finds it counted durable.
     std::map<Spacecraft*, std::vector<CommitEntry*>> by_spacecraft;

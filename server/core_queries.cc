@@ -20,6 +20,7 @@
 #include "proto/diagnosis_json.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "server/log.h"
 #include "storage/schema.h"
 #include "storage/service_queries.h"
 
@@ -213,20 +214,10 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
       return absl::InvalidArgumentError("page_token: damaged (its position does not parse)");
     }
   }
-  std::vector<std::shared_ptr<Spacecraft>> page;
+  // Ordered by spacecraft id; the page starts after the token's id.
   bool more = false;
-  {
-    absl::MutexLock lock(&registry_mu_);
-    // Ordered by spacecraft id; the page starts after the token's id.
-    auto it = request.page_token().empty() ? registry_.begin() : registry_.upper_bound(after);
-    for (; it != registry_.end(); ++it) {
-      if (static_cast<int64_t>(page.size()) == size) {
-        more = true;
-        break;
-      }
-      page.push_back(it->second);
-    }
-  }
+  const std::vector<std::shared_ptr<Spacecraft>> page =
+      registry_.Page(request.page_token().empty() ? std::string() : after, size, &more);
   esg::v1::ListSessionsResponse response;
   for (auto& sc : page) *response.add_sessions() = Summarize(*sc);
   if (more) {
@@ -254,6 +245,40 @@ esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecor
 }  // namespace
 
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
+    const esg::v1::DiagnoseRequest& request,
+    const std::function<void(double fraction, const std::string& stage)>& progress,
+    const std::function<bool()>& cancelled) {
+  const std::string& id = request.spacecraft_id();
+  LogEvent("INFO", "diagnosis_started", absl::StrCat("diagnosis of ", id, " started"),
+           {{"spacecraftId", id}});
+  const absl::Time start = absl::Now();
+  absl::StatusOr<esg::v1::DiagnosisResult> result = RunDiagnosis(request, progress, cancelled);
+  const double seconds = absl::ToDoubleSeconds(absl::Now() - start);
+  metrics_.diagnosis_duration.Observe(seconds);
+  if (result.ok()) {
+    metrics_.diagnoses.With({"ok"}).Increment();
+    LogEvent("INFO", "diagnosis_finished",
+             absl::StrCat("diagnosis #", result->id(), " of ", id, " finished in ",
+                          absl::FormatDuration(absl::Seconds(seconds))),
+             {{"spacecraftId", id},
+              {"diagnosisId", static_cast<int64_t>(result->id())},
+              {"result", "ok"},
+              {"durationSeconds", seconds}});
+  } else {
+    const bool was_cancelled = result.status().code() == absl::StatusCode::kCancelled;
+    metrics_.diagnoses.With({was_cancelled ? "cancelled" : "error"}).Increment();
+    LogEvent(was_cancelled ? "INFO" : "WARN", "diagnosis_finished",
+             absl::StrCat("diagnosis of ", id, was_cancelled ? " cancelled" : " failed", " after ",
+                          absl::FormatDuration(absl::Seconds(seconds)), ": ",
+                          result.status().ToString()),
+             {{"spacecraftId", id},
+              {"result", was_cancelled ? "cancelled" : "error"},
+              {"durationSeconds", seconds}});
+  }
+  return result;
+}
+
+absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     const esg::v1::DiagnoseRequest& request,
     const std::function<void(double fraction, const std::string& stage)>& progress,
     const std::function<bool()>& cancelled) {

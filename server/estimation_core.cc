@@ -31,14 +31,36 @@ absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::S
                                                                       const CoreOptions& options) {
   std::unique_ptr<EstimationCore> core(new EstimationCore(storage, options));
   RETURN_IF_ERROR(core->Load());
+  core->metrics_.registry.AddCollector([c = core.get()] { c->CollectGauges(); });
   core->committer_ = std::thread([c = core.get()] { c->CommitterLoop(); });
   const int n = std::max(1, options.worker_threads);
   for (int i = 0; i < n; ++i) core->workers_.emplace_back([c = core.get()] { c->WorkerLoop(); });
-  {
-    absl::MutexLock lock(&core->registry_mu_);
-    for (auto& [id, sc] : core->registry_) core->Schedule(sc);
-  }
+  for (const auto& sc : core->registry_.All()) core->Schedule(sc);
   return core;
+}
+
+void EstimationCore::CollectGauges() {
+  std::map<std::string, int> by_state;
+  for (const char* state :
+       {"NO_DATA", "CALIBRATING", "CONVERGED", "AUTONOMOUS", "FAULTED", "QUARANTINED"}) {
+    by_state[state] = 0;
+  }
+  for (const auto& sc : registry_.All()) {
+    absl::MutexLock state(&sc->state_mu);
+    if (!sc->apply.quarantine_reason.empty() || sc->setup == nullptr || !sc->session.has_value()) {
+      ++by_state["QUARANTINED"];
+    } else {
+      ++by_state[estimator::SessionStateName(sc->session->state())];
+    }
+  }
+  for (const auto& [state, n] : by_state) metrics_.sessions.With({state}).Set(n);
+  int64_t backlog = 0;
+  {
+    absl::MutexLock lock(&commit_mu_);
+    backlog = commit_queue_bytes_;
+  }
+  metrics_.commit_backlog_bytes.Set(static_cast<double>(backlog));
+  metrics_.storage_healthy.Set(StorageFault().empty() ? 1 : 0);
 }
 
 absl::Status EstimationCore::Load() {
@@ -170,7 +192,9 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
   }
   if (!reason.empty()) {
     checkpoint.quarantine_reason = reason;
-    Log("ERROR", absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason));
+    LogEvent("ERROR", "session_quarantined",
+             absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason),
+             {{"spacecraftId", sc->id}});
   }
   {
     absl::MutexLock lock(&sc->ingest_mu);
@@ -194,14 +218,15 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
     sc->apply = std::move(checkpoint);
     sc->replay_from_archive = true;
   }
-  Log("INFO", absl::StrCat("loaded spacecraft ", sc->id, ": model ",
-                           setup != nullptr ? setup->model_name : "-", ", ", count,
-                           " archived frames, applied up to ",
-                           sc->apply.applied_time == absl::InfinitePast()
-                               ? "nothing"
-                               : FormatUtc(sc->apply.applied_time)));
-  absl::MutexLock lock(&registry_mu_);
-  registry_[sc->id] = std::move(sc);
+  LogEvent("INFO", "spacecraft_loaded",
+           absl::StrCat("loaded spacecraft ", sc->id, ": model ",
+                        setup != nullptr ? setup->model_name : "-", ", ", count,
+                        " archived frames, applied up to ",
+                        sc->apply.applied_time == absl::InfinitePast()
+                            ? "nothing"
+                            : FormatUtc(sc->apply.applied_time)),
+           {{"spacecraftId", sc->id}, {"archivedFrames", count}});
+  registry_.Put(std::move(sc));
   return absl::OkStatus();
 }
 
@@ -229,8 +254,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
       busy = !ready_.empty();
     }
     if (!busy) {
-      absl::MutexLock lock(&registry_mu_);
-      for (auto& [id, sc] : registry_) {
+      for (const auto& sc : registry_.All()) {
         absl::MutexLock state(&sc->state_mu);
         if (sc->session.has_value() && sc->setup != nullptr && !sc->apply.FilterStopped() &&
             (sc->replay_from_archive || !sc->ready.empty())) {
@@ -250,9 +274,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
 }
 
 std::shared_ptr<EstimationCore::Spacecraft> EstimationCore::Find(const std::string& id) {
-  absl::MutexLock lock(&registry_mu_);
-  auto it = registry_.find(id);
-  return it == registry_.end() ? nullptr : it->second;
+  return registry_.Find(id);
 }
 
 absl::Status EstimationCore::CheckSpacecraft(const std::string& spacecraft_id) {
@@ -331,23 +353,28 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   // one (AlertCollapser::End: cleared_time stored, then published and logged once committed).
   std::optional<AlertCollapser> quarantine_end;
   std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
-  auto store = [&]() -> absl::Status {
+  auto write = [&]() -> absl::Status {
     cp.state_blob = EncodeCheckpoint(checkpoint);
-    ASSIGN_OR_RETURN(storage::Transaction txn, storage_->database().Begin());
-    RETURN_IF_ERROR(storage_->configs().Put(txn, record).status());
-    RETURN_IF_ERROR(storage_->sessions().PutCheckpoint(txn, cp));
-    ended_sequences.clear();
+    storage::ConfigurationChange change;
+    change.config = record;
+    change.checkpoint = cp;
     if (quarantine_end.has_value()) {
-      for (const storage::AlertRecord& a : quarantine_end->new_alerts()) {
-        ASSIGN_OR_RETURN(int64_t seq, storage_->alerts().Append(txn, a));
-        ended_sequences.push_back(seq);
-      }
+      change.new_alerts = quarantine_end->new_alerts();
       for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
-        RETURN_IF_ERROR(storage_->alerts().Clear(txn, config.spacecraft_id, c.sequence, c.time));
-        ended_sequences.push_back(c.sequence);
+        change.clears.push_back({c.sequence, c.time});
       }
     }
-    return txn.Commit();
+    ASSIGN_OR_RETURN(ended_sequences, storage_->CommitConfiguration(change));
+    for (const storage::AlertClear& c : change.clears) ended_sequences.push_back(c.sequence);
+    return absl::OkStatus();
+  };
+
+  auto store = [&]() -> absl::Status {
+    const absl::Time commit_start = absl::Now();
+    const absl::Status status = write();
+    metrics_.storage_commit.With({"configure"}).Observe(
+        absl::ToDoubleSeconds(absl::Now() - commit_start));
+    return status;
   };
 
   absl::MutexLock configure(&configure_mu_);
@@ -367,11 +394,10 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
       sc->apply = checkpoint;
       sc->replay_from_archive = false;
     }
-    {
-      absl::MutexLock lock(&registry_mu_);
-      registry_[sc->id] = sc;
-    }
-    Log("INFO", absl::StrCat("configured new spacecraft ", sc->id, ", model ", setup->model_name));
+    registry_.Put(sc);
+    LogEvent("INFO", "spacecraft_configured",
+             absl::StrCat("configured new spacecraft ", sc->id, ", model ", setup->model_name),
+             {{"spacecraftId", sc->id}, {"model", setup->model_name}, {"created", true}});
     response.set_created(true);
     *response.mutable_session() = Summarize(*sc);
     return response;
@@ -424,22 +450,30 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
         sc->ready.clear();
         sc->ready_bytes = 0;
         sc->replay_from_archive = true;
-        Log("INFO",
-            absl::StrCat("reconfigured spacecraft ", sc->id, ", model ", setup->model_name,
-                         "; reapplying the archive", quarantined ? "; quarantine over" : ""));
+        LogEvent("INFO", "spacecraft_configured",
+                 absl::StrCat("reconfigured spacecraft ", sc->id, ", model ", setup->model_name,
+                              "; reapplying the archive", quarantined ? "; quarantine over" : ""),
+                 {{"spacecraftId", sc->id}, {"model", setup->model_name}, {"created", false}});
       }
     }
     // Publish (and log) the cleared quarantine alerts once committed, in the worker's order:
     // under publish_mu, with the job lock held (not the state locks) so no job of the new session
     // publishes first.
     absl::MutexLock publish(&sc->publish_mu);
-    for (int64_t seq : ended_sequences) {
+    // ended_sequences: the alerts stored new by this transaction first, then the cleared ones.
+    const size_t raised = quarantine_end.has_value() ? quarantine_end->new_alerts().size() : 0;
+    for (size_t k = 0; k < ended_sequences.size(); ++k) {
+      const int64_t seq = ended_sequences[k];
       absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
       if (r.ok()) {
+        if (k < raised) metrics_.alerts_raised.With({r->reason, r->severity}).Increment();
+        if (r->cleared) metrics_.alerts_cleared.With({r->reason, r->severity}).Increment();
         hub_.Publish(*r);
       } else {
-        Log("ERROR", absl::StrCat(sc->id, ": the cleared quarantine alert #", seq,
-                                  " cannot be read back: ", r.status().ToString()));
+        LogEvent("ERROR", "storage_error",
+                 absl::StrCat(sc->id, ": the cleared quarantine alert #", seq,
+                              " cannot be read back: ", r.status().ToString()),
+                 {{"spacecraftId", sc->id}, {"alertSequence", seq}});
       }
     }
   }

@@ -3,8 +3,12 @@
 // commit, the workers that apply archived frames to each spacecraft's EstimationSession, alert
 // collapsing and fan-out, quarantine, and the queries. No gRPC types except the esg.v1
 // messages; errors are absl::Status. The implementation is spread over files by job:
-// estimation_core.cc (start, load, quarantine, configure, stop), ingest.cc, committer.cc,
-// apply_worker.cc, core_queries.cc, prediction.cc; core_internal.h holds the records.
+// estimation_core.cc (start, load, quarantine, configure, stop), spacecraft_registry.h (the
+// registry), ingest.cc, committer.cc (group commit), apply_worker.cc (the filter workers),
+// alert_collapse.h (alert collapsing, a pure function of the occurrences), core_queries.cc,
+// prediction.cc, proto_mapping.cc (storage records <-> esg.v1 messages), service_metrics.h
+// (the metrics); core_internal.h holds the records. Storage is written only through the three
+// transactions of storage/storage.h (ArchiveFrames, CommitFilterEffects, CommitConfiguration).
 //
 // DATA FLOW AND DURABILITY
 //   Ingest (any thread)  validate -> decide (new, duplicate, conflict, late) -> accept (the
@@ -51,6 +55,8 @@
 #include "server/alert_hub.h"
 #include "server/checkpoint_codec.h"
 #include "server/proto_mapping.h"
+#include "server/service_metrics.h"
+#include "server/spacecraft_registry.h"
 #include "storage/storage.h"
 
 namespace esg::server {
@@ -180,6 +186,8 @@ class EstimationCore {
   absl::Status WaitApplied(const std::string& spacecraft_id, absl::Duration timeout);
 
   AlertHub& alert_hub() { return hub_; }
+  // The service's metrics (docs/service.md "Metrics"); the gRPC layer counts ingest in it.
+  ServiceMetrics& metrics() { return metrics_; }
   storage::Storage& storage() { return *storage_; }
 
  private:
@@ -209,16 +217,23 @@ class EstimationCore {
   void Schedule(const std::shared_ptr<Spacecraft>& sc);
   void CommitterLoop();
   void WorkerLoop();
+  // Diagnose without the log lines and metrics around it.
+  absl::StatusOr<esg::v1::DiagnosisResult> RunDiagnosis(
+      const esg::v1::DiagnoseRequest& request,
+      const std::function<void(double fraction, const std::string& stage)>& progress,
+      const std::function<bool()>& cancelled);
+  // Reads the gauges of the metrics from the registry and the committer (each scrape).
+  void CollectGauges();
   // Applies the next frames of one spacecraft; true when more remain.
   bool RunJob(const std::shared_ptr<Spacecraft>& sc);
   esg::v1::SessionInfo Summarize(Spacecraft& sc);
 
   storage::Storage* const storage_;
   const CoreOptions options_;
+  ServiceMetrics metrics_;
   AlertHub hub_;
 
-  absl::Mutex registry_mu_;
-  std::map<std::string, std::shared_ptr<Spacecraft>> registry_ ABSL_GUARDED_BY(registry_mu_);
+  SpacecraftRegistry<Spacecraft> registry_;
   absl::Mutex configure_mu_;  // serialises Configure calls
 
   // Committer.

@@ -2,6 +2,7 @@
 #include "server/estimation_service.h"
 
 #include <atomic>
+#include <chrono>
 #include <deque>
 #include <functional>
 #include <map>
@@ -17,6 +18,7 @@
 #include "server/grpc_status.h"
 #include "server/log.h"
 #include "server/proto_mapping.h"
+#include "server/service_metrics.h"
 
 namespace esg::server {
 namespace {
@@ -55,9 +57,11 @@ constexpr size_t kMaxInFlight = 4096;
 class TelemetryReactor
     : public grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck> {
  public:
-  TelemetryReactor(CallCounter* calls, EstimationCore* core, const absl::Status& auth)
-      : token_(calls), core_(core), shared_(std::make_shared<Shared>()) {
+  TelemetryReactor(CallCounter* calls, EstimationCore* core, const absl::Status& auth,
+                   std::string peer)
+      : token_(calls), core_(core), shared_(std::make_shared<Shared>()), peer_(std::move(peer)) {
     shared_->reactor = this;
+    shared_->metrics = &core->metrics();
     if (!auth.ok()) {
       shared_->finished = true;
       Finish(ToGrpcStatus(auth));
@@ -74,8 +78,11 @@ class TelemetryReactor
       return;
     }
     auto slot = std::make_shared<Slot>();
+    slot->received = std::chrono::steady_clock::now();
+    shared_->metrics->frames_received.With({StationLabel(frame_.station_id())}).Increment();
     {
       absl::MutexLock lock(&shared_->mu);
+      ++shared_->frames_received;
       shared_->slots.push_back(slot);
     }
     std::weak_ptr<Shared> weak = shared_;
@@ -115,6 +122,7 @@ class TelemetryReactor
     if (!ok) {  // the client is gone
       if (!shared_->finished) {
         shared_->finished = true;
+        CountUnacknowledged(*shared_, absl::StatusCode::kCancelled);
         Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
       }
       return;
@@ -131,20 +139,49 @@ class TelemetryReactor
     absl::MutexLock lock(&shared_->mu);
     if (!shared_->finished) {
       shared_->finished = true;
+      CountUnacknowledged(*shared_, absl::StatusCode::kCancelled);
       Finish(ToGrpcStatus(absl::CancelledError("the client went away")));
     }
   }
 
   void OnDone() override {
+    std::string summary;
+    int64_t received = 0;
+    int64_t acknowledged = 0;
+    int64_t refused = 0;
+    int64_t unacknowledged = 0;
     {
       absl::MutexLock lock(&shared_->mu);
       shared_->reactor = nullptr;
+      received = shared_->frames_received;
+      acknowledged = shared_->frames_acknowledged;
+      refused = shared_->frames_refused;
+      unacknowledged = shared_->frames_unacknowledged;
+      for (const auto& [reason, n] : shared_->refusals) {
+        absl::StrAppend(&summary, summary.empty() ? "" : ", ", n, " ", reason);
+      }
+    }
+    // A stream that refused frames or ended before acknowledging all of them is summarised once,
+    // when it ends (each refusal itself is in the client's ack).
+    if (refused > 0 || unacknowledged > 0) {
+      LogEvent("WARN", "stream_refusals",
+               absl::StrCat("telemetry stream from ", peer_.empty() ? "unknown" : peer_, " ended: ",
+                            received, " frames received, ", acknowledged, " acknowledged, ",
+                            refused, " refused", summary.empty() ? "" : " (", summary,
+                            summary.empty() ? "" : ")", ", ", unacknowledged,
+                            " not acknowledged (stream failed)"),
+               {{"peer", peer_},
+                {"framesReceived", received},
+                {"framesAcknowledged", acknowledged},
+                {"framesRefused", refused},
+                {"framesUnacknowledged", unacknowledged}});
     }
     delete this;
   }
 
  private:
   struct Slot {
+    std::chrono::steady_clock::time_point received;
     esg::v1::TelemetryAck ack;
     bool ready = false;    // guarded by Shared::mu
     absl::Status failure;  // guarded by Shared::mu; not OK: fail the stream here, no ack
@@ -158,7 +195,44 @@ class TelemetryReactor
     bool reads_done ABSL_GUARDED_BY(mu) = false;
     bool read_paused ABSL_GUARDED_BY(mu) = false;
     bool finished ABSL_GUARDED_BY(mu) = false;
+    ServiceMetrics* metrics = nullptr;
+    // This stream's counts, for the summary logged when it ends.
+    int64_t frames_received ABSL_GUARDED_BY(mu) = 0;
+    int64_t frames_acknowledged ABSL_GUARDED_BY(mu) = 0;
+    int64_t frames_refused ABSL_GUARDED_BY(mu) = 0;
+    int64_t frames_unacknowledged ABSL_GUARDED_BY(mu) = 0;
+    std::map<std::string, int64_t> refusals ABSL_GUARDED_BY(mu);  // "REASON field" -> count
   };
+
+  // The frames read and not acknowledged when the stream ends with `code`.
+  static void CountUnacknowledged(Shared& s, absl::StatusCode code)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.slots.empty()) return;
+    s.frames_unacknowledged += static_cast<int64_t>(s.slots.size());
+    s.metrics->frames_unacknowledged.With({absl::StatusCodeToString(code)})
+        .Increment(static_cast<double>(s.slots.size()));
+  }
+
+  // Counts the ack about to be written (metrics and the stream's summary).
+  static void CountAck(Shared& s, const Slot& slot) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    const esg::v1::TelemetryAck& ack = slot.ack;
+    const std::string station = StationLabel(ack.station_id());
+    s.metrics->ack_latency.Observe(std::chrono::duration<double>(
+                                        std::chrono::steady_clock::now() - slot.received)
+                                        .count());
+    if (ack.accepted()) {
+      ++s.frames_acknowledged;
+      s.metrics->frames_acknowledged.With({station, ack.duplicate() ? "duplicate" : "new"})
+          .Increment();
+      return;
+    }
+    ++s.frames_refused;
+    const std::string reason =
+        absl::StatusCodeToString(static_cast<absl::StatusCode>(ack.rejection().code()));
+    const std::string field = FieldLabel(ack.rejection().field());
+    ++s.refusals[absl::StrCat(reason, " ", field)];
+    s.metrics->frames_refused.With({station, reason, field}).Increment();
+  }
 
   // Sends the next ack if it is ready, or finishes when everything is acknowledged.
   static void TryWrite(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
@@ -167,11 +241,13 @@ class TelemetryReactor
       Slot& front = *s.slots.front();
       if (!front.failure.ok()) {
         s.finished = true;
+        CountUnacknowledged(s, front.failure.code());
         s.reactor->Finish(ToGrpcStatus(front.failure));
         return;
       }
       if (!front.ready) return;
       s.reactor->core_->FillDurable(&front.ack);
+      CountAck(s, front);
       s.writing = true;
       s.reactor->StartWrite(&front.ack);
       return;
@@ -185,6 +261,7 @@ class TelemetryReactor
   CallCounter::Token token_;
   EstimationCore* core_;
   std::shared_ptr<Shared> shared_;
+  const std::string peer_;
   esg::v1::TelemetryFrame frame_;
 };
 
@@ -582,7 +659,7 @@ absl::StatusOr<std::string> EstimationServiceImpl::Caller(grpc::CallbackServerCo
 
 grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>*
 EstimationServiceImpl::StreamTelemetry(grpc::CallbackServerContext* context) {
-  return new TelemetryReactor(&calls_, core_, Authorize(context, Role::kWrite));
+  return new TelemetryReactor(&calls_, core_, Authorize(context, Role::kWrite), context->peer());
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ConfigureSpacecraft(
@@ -662,8 +739,12 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
                            FormatUtc(proto_convert::TimeFromProto(alert->acknowledged_time())
                                          .value_or(absl::InfinitePast())),
                            "; the first acknowledgement stands"));
-          Log("WARN", absl::StrCat("acknowledgement by '", request->operator_name(),
-                                   "' refused: ", refused.message()));
+          LogEvent("WARN", "alert_acknowledgement_refused",
+                   absl::StrCat("acknowledgement by '", request->operator_name(),
+                                "' refused: ", refused.message()),
+                   {{"spacecraftId", request->spacecraft_id()},
+                    {"alertSequence", request->sequence()},
+                    {"operator", request->operator_name()}});
           return refused;
         }
         return alert;

@@ -182,7 +182,8 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
             "', sequence ", original.sequence, ", time ", FormatUtc(original.measurement_time),
             "): same ", by_identity ? "station and sequence" : "measurement time",
             ", different content; the stored frame is kept");
-        Log("WARN", absl::StrCat(sc->id, ": ", what));
+        LogEvent("WARN", "frame_conflict", absl::StrCat(sc->id, ": ", what),
+                 {{"spacecraftId", sc->id}, {"station", station}, {"sequence", proto.sequence()}});
         {
           absl::MutexLock state(&sc->state_mu);
           sc->service_alerts.push_back({"INGEST_CONFLICT", "WARNING",

@@ -1,37 +1,50 @@
-// The server's thin logger (STYLE §3.3 rule 8): one line per message on stderr with a UTC
-// timestamp and a level. estimator/ and storage/ never log; only server/ does.
+// The server's logger (STYLE §3.3 rule 8): one line per event on stderr, as text
+// (`2019-03-01T00:00:00.000Z INFO esgd: message`) or as one JSON object a line (`--log-format
+// json`: ts, level, event, message and the event's fields, e.g. spacecraftId). docs/service.md
+// "Logs" lists the events. estimator/ and storage/ never log; only server/ does.
 #ifndef ESG_SERVER_LOG_H_
 #define ESG_SERVER_LOG_H_
 
-#include <cstdio>
+#include <cstdint>
+#include <initializer_list>
 #include <string>
-#include "absl/strings/str_format.h"
-#include "absl/strings/string_view.h"
+#include <variant>
 
-#include "absl/time/clock.h"
-#include "absl/time/time.h"
+#include "absl/strings/string_view.h"
 
 namespace esg::server {
 
-// One line per message: control characters (C0 and DEL) in `message` (an id
-// or a reason quoting client input) are written as escapes, so no client can forge a log line
-// or send escape sequences to an operator's terminal.
-inline void Log(absl::string_view level, absl::string_view message) {
-  std::string text;
-  text.reserve(message.size());
-  for (const char c : message) {
-    const unsigned char u = static_cast<unsigned char>(c);
-    if (u < 0x20 || u == 0x7f) {
-      text += absl::StrFormat("\\x%02x", u);
-    } else {
-      text += c;
-    }
-  }
-  const std::string line =
-      absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ ", absl::Now(), absl::UTCTimeZone()) +
-      std::string(level) + " esgd: " + text + "\n";
-  std::fputs(line.c_str(), stderr);
-}
+enum class LogFormat { kText, kJson };
+
+// Process-wide; set once at start (main.cc) before other threads log. Text by default.
+void SetLogFormat(LogFormat format);
+LogFormat GetLogFormat();
+
+// One field of a structured line: a string, an integer, a number or a flag.
+struct LogField {
+  LogField(absl::string_view k, absl::string_view v) : key(k), value(std::string(v)) {}
+  LogField(absl::string_view k, const std::string& v) : key(k), value(v) {}
+  LogField(absl::string_view k, const char* v) : key(k), value(std::string(v)) {}
+  LogField(absl::string_view k, int v) : key(k), value(int64_t{v}) {}
+  LogField(absl::string_view k, long v) : key(k), value(int64_t{v}) {}            // NOLINT
+  LogField(absl::string_view k, long long v) : key(k), value(int64_t{v}) {}       // NOLINT
+  LogField(absl::string_view k, double v) : key(k), value(v) {}
+  LogField(absl::string_view k, bool v) : key(k), value(v) {}
+  std::string key;
+  std::variant<std::string, int64_t, double, bool> value;
+};
+
+// Writes one line. `level`: INFO, WARN or ERROR. `event`: a stable snake_case name an operator
+// can filter on (docs/service.md "Logs"). `message`: the human text (the whole line in the text
+// format). Text: control characters (C0 and DEL) in the message are written as \xNN escapes, so
+// no client-supplied id can forge a line or send escape sequences to a terminal. JSON: every
+// string is JSON-escaped (invalid UTF-8 replaced by U+FFFD), one object per line. Thread-safe.
+void LogEvent(absl::string_view level, absl::string_view event, absl::string_view message,
+              std::initializer_list<LogField> fields = {});
+
+// The text of one line without writing it (tests).
+std::string FormatLogLine(LogFormat format, absl::string_view level, absl::string_view event,
+                          absl::string_view message, std::initializer_list<LogField> fields);
 
 }  // namespace esg::server
 

@@ -8,10 +8,25 @@
 #include <thread>
 
 #include "CLI/CLI.hpp"
+#include "grpc/support/log.h"
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
 #include "server/log.h"
 #include "server/server.h"
+
+namespace {
+
+// gRPC's own log lines (its warnings and errors) through the server's logger, so that with
+// --log-format json every line of stderr is one JSON object.
+void GrpcLog(gpr_log_func_args* args) {
+  const char* level = args->severity == GPR_LOG_SEVERITY_ERROR ? "ERROR"
+                      : args->severity == GPR_LOG_SEVERITY_INFO ? "INFO"
+                                                                : "WARN";
+  esg::server::LogEvent(level, "grpc", args->message != nullptr ? args->message : "",
+                        {{"file", args->file != nullptr ? args->file : ""}, {"line", args->line}});
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   esg::server::ServerOptions options;
@@ -28,6 +43,12 @@ int main(int argc, char** argv) {
                  "CA bundle (PEM) for client certificates: enables mutual TLS");
   app.add_option("--tokens", options.tokens_file,
                  "Bearer-token file, lines `TOKEN ROLE[,ROLE]` (roles read, write)");
+  app.add_option("--metrics-listen", options.metrics_listen,
+                 "Serve Prometheus metrics over HTTP at host:port (GET /metrics); off by default");
+  std::string log_format = "text";
+  app.add_option("--log-format", log_format, "Log lines on stderr: text or json (one object a line)")
+      ->check(CLI::IsMember({"text", "json"}))
+      ->capture_default_str();
   app.add_option("--sync", sync, "SQLite synchronous mode: full (power-loss safe acks) or normal")
       ->check(CLI::IsMember({"full", "normal"}))
       ->capture_default_str();
@@ -69,6 +90,10 @@ int main(int argc, char** argv) {
   // Deadlock detection of absl::Mutex (on in Debian's build) costs a graph update per lock; the
   // lock order is documented in estimation_core.h and exercised by the tests.
   absl::SetMutexDeadlockDetectionMode(absl::OnDeadlockCycle::kIgnore);
+  if (log_format == "json") {
+    esg::server::SetLogFormat(esg::server::LogFormat::kJson);
+    gpr_set_log_function(GrpcLog);
+  }
   options.synchronous =
       sync == "normal" ? esg::storage::Synchronous::kNormal : esg::storage::Synchronous::kFull;
   options.grpc_memory_bytes = grpc_memory_mb << 20;
@@ -83,16 +108,23 @@ int main(int argc, char** argv) {
   absl::StatusOr<std::unique_ptr<esg::server::EsgServer>> server =
       esg::server::EsgServer::Start(options);
   if (!server.ok()) {
-    esg::server::Log("ERROR", absl::StrCat("cannot start: ", server.status().ToString()));
+    esg::server::LogEvent("ERROR", "start_failed",
+                          absl::StrCat("cannot start: ", server.status().ToString()));
     return 1;
   }
-  // Tests and scripts read the bound port from this line.
-  std::printf("esgd listening on port %d\n", (*server)->port());
+  // Tests and scripts read the bound port from this line (and the metrics port from the next,
+  // written with it).
+  std::string ports = absl::StrCat("esgd listening on port ", (*server)->port(), "\n");
+  if ((*server)->metrics_port() != 0) {
+    absl::StrAppend(&ports, "esgd metrics on port ", (*server)->metrics_port(), "\n");
+  }
+  std::fputs(ports.c_str(), stdout);
   std::fflush(stdout);
 
   int signal_number = 0;
   sigwait(&signals, &signal_number);
-  esg::server::Log("INFO", absl::StrCat("signal ", signal_number, ": shutting down"));
+  esg::server::LogEvent("INFO", "stopping", absl::StrCat("signal ", signal_number, ": shutting down"),
+                        {{"signal", signal_number}});
   // Shutdown is bounded whatever storage does (a hung disk, a full one): running calls get
   // --shutdown-deadline, the filter's backlog 30 s; a watchdog ends the process 15 s after
   // both. Nothing acknowledged is lost by that: acks follow durable commits only.
@@ -100,9 +132,10 @@ int main(int argc, char** argv) {
   const absl::Duration drain = absl::Seconds(30);
   std::thread([limit = calls + drain + absl::Seconds(15)] {
     absl::SleepFor(limit);
-    esg::server::Log("ERROR", absl::StrCat("shutdown did not finish within ",
-                                           absl::FormatDuration(limit),
-                                           "; exiting without waiting for storage"));
+    esg::server::LogEvent("ERROR", "shutdown_timeout",
+                          absl::StrCat("shutdown did not finish within ",
+                                       absl::FormatDuration(limit),
+                                       "; exiting without waiting for storage"));
     std::_Exit(3);
   }).detach();
   (*server)->Shutdown(calls, drain);

@@ -136,17 +136,18 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
   s.set_gyro_id(r.gyro_id);
   *s.mutable_measurement_time() = proto_convert::TimeToProto(r.measurement_time);
   *s.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
-  // The stored layout is already deg/h and arcsec (storage/records.h): copied as stored.
+  // The record is SI (storage/records.h); the message carries deg/h and arcsec.
   auto fill = [](const std::vector<double>& v, esg::v1::GyroDriftModel* m,
                  google::protobuf::RepeatedField<double>* misalignment) {
     if (v.size() != static_cast<size_t>(storage::kNumCoefficientValues)) return;
-    m->set_k0_deg_h(v[storage::kCoefficientK0]);
+    using estimator::RadPerSecToDegPerHour;
+    m->set_k0_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientK0]));
     for (int i = 0; i < 3; ++i) {
-      m->add_c1_deg_h(v[storage::kCoefficientC1 + i]);
-      m->add_c2_deg_h(v[storage::kCoefficientC2 + i]);
-      m->add_mu_deg_h(v[storage::kCoefficientMu + i]);
-      m->add_nu_deg_h(v[storage::kCoefficientNu + i]);
-      misalignment->Add(v[storage::kCoefficientMisalignment + i]);
+      m->add_c1_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientC1 + i]));
+      m->add_c2_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientC2 + i]));
+      m->add_mu_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientMu + i]));
+      m->add_nu_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientNu + i]));
+      misalignment->Add(estimator::RadToArcsec(v[storage::kCoefficientMisalignment + i]));
     }
   };
   fill(r.values, s.mutable_model(), s.mutable_misalignment_arcsec());

@@ -98,7 +98,8 @@ std::string LimitText(rlim_t value) {
 void RaiseFileLimit() {
   rlimit limit{};
   if (getrlimit(RLIMIT_NOFILE, &limit) != 0) {
-    Log("WARN", absl::StrCat("file descriptors: getrlimit failed: ", std::strerror(errno)));
+    LogEvent("WARN", "file_limit",
+             absl::StrCat("file descriptors: getrlimit failed: ", std::strerror(errno)));
     return;
   }
   const rlim_t before = limit.rlim_cur;
@@ -114,12 +115,12 @@ void RaiseFileLimit() {
     if (setrlimit(RLIMIT_NOFILE, &raised) == 0) {
       limit = raised;
     } else {
-      Log("WARN", absl::StrCat("file descriptors: cannot raise the soft limit from ",
+      LogEvent("WARN", "file_limit", absl::StrCat("file descriptors: cannot raise the soft limit from ",
                                LimitText(before), " to the hard limit ", LimitText(limit.rlim_max),
                                ": ", std::strerror(errno)));
     }
   }
-  Log("INFO",
+  LogEvent("INFO", "file_limit",
       absl::StrCat("file descriptors: soft limit ", LimitText(limit.rlim_cur),
                    limit.rlim_cur != before ? absl::StrCat(" (raised from ", LimitText(before), ")")
                                             : std::string(),
@@ -225,6 +226,20 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
     return absl::UnavailableError(absl::StrCat("listen: cannot serve on ", options.listen, ": ",
                                                BindFailure(options.listen)));
   }
+  if (!options.metrics_listen.empty()) {
+    absl::StatusOr<std::unique_ptr<MetricsHttpServer>> metrics =
+        MetricsHttpServer::Start(options.metrics_listen, &s->core_->metrics().registry);
+    if (!metrics.ok()) {
+      s->server_->Shutdown(absl::ToChronoTime(absl::Now()));
+      s->core_->Stop(absl::ZeroDuration());
+      return metrics.status();
+    }
+    s->metrics_ = std::move(*metrics);
+    LogEvent("INFO", "metrics_serving",
+             absl::StrCat("serving Prometheus metrics on http://", options.metrics_listen.substr(
+                 0, options.metrics_listen.rfind(':')), ":", s->metrics_->port(), "/metrics"),
+             {{"metricsPort", s->metrics_->port()}});
+  }
   if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
     health->SetServingStatus("esg.v1.EstimationService", true);
     // NOT_SERVING while storage cannot commit (docs/service.md "Storage faults").
@@ -233,12 +248,14 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
       health->SetServingStatus("", ok);
     });
   }
-  Log("INFO", absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
-                           options.db_path, s->auth_ ? ", bearer tokens required" : "",
-                           options.tls_cert_file.empty()        ? ", plaintext"
-                           : options.tls_client_ca_file.empty() ? ", TLS"
-                                                                : ", mutual TLS"));
-  Log("INFO", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
+  LogEvent("INFO", "started",
+           absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
+                        options.db_path, s->auth_ ? ", bearer tokens required" : "",
+                        options.tls_cert_file.empty()        ? ", plaintext"
+                        : options.tls_client_ca_file.empty() ? ", TLS"
+                                                             : ", mutual TLS"),
+           {{"port", s->port_}, {"database", options.db_path}});
+  LogEvent("INFO", "limits", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
                            " per caller, ", options.calls.max_predictions, " in total; diagnoses ",
                            options.calls.max_diagnoses_per_caller, " per caller, ",
                            options.calls.max_diagnoses, " in total; messages up to ",
@@ -254,6 +271,7 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
     health->Shutdown();
   }
   core_->alert_hub().CloseAll();
+  if (metrics_ != nullptr) metrics_->Stop();
   // gRPC's shutdown also waits for every client connection to close, idle ones included: a
   // client that merely keeps its channel open would hold it for the whole deadline. Once none of
   // the service's calls is running, the remaining connections are closed (with gRPC's own
@@ -276,7 +294,7 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
   closer.join();
   core_->Stop(drain);
   server_->Wait();
-  Log("INFO", "stopped");
+  LogEvent("INFO", "stopped", "stopped");
 }
 
 EsgServer::~EsgServer() {

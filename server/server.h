@@ -16,6 +16,7 @@
 #include "server/auth.h"
 #include "server/estimation_core.h"
 #include "server/estimation_service.h"
+#include "server/metrics_http.h"
 #include "storage/storage.h"
 
 namespace esg::server {
@@ -34,6 +35,10 @@ struct ServerOptions {
   std::string tls_client_ca_file;
   // Bearer tokens (server/auth.h); empty: no authentication.
   std::string tokens_file;
+  // Prometheus metrics over HTTP, "host:port" (port 0 picks a free one); empty: not served
+  // (docs/service.md "Metrics"). Plain HTTP without authentication: bind it to an address only
+  // the monitoring system reaches.
+  std::string metrics_listen;
   CoreOptions core;
 
   // ---- Limits (docs/service.md "Limits") ----
@@ -67,11 +72,14 @@ class EsgServer {
   // NotFound for unreadable PEM files; storage errors of opening the database (Unavailable "db:
   // <path> is locked by another process (pid N ...)" when another esgd owns the file:
   // storage/sqlite_db.h "Owner lock"); Unavailable "listen: cannot serve on <address>: <why>"
-  // if the address cannot be bound, also when another process serves it (SO_REUSEPORT is off).
+  // if the address cannot be bound, also when another process serves it (SO_REUSEPORT is off);
+  // the errors of MetricsHttpServer::Start for `metrics_listen`.
   static absl::StatusOr<std::unique_ptr<EsgServer>> Start(const ServerOptions& options);
   ~EsgServer();
 
   int port() const { return port_; }
+  // The metrics endpoint's port; 0 without --metrics-listen.
+  int metrics_port() const { return metrics_ != nullptr ? metrics_->port() : 0; }
   EstimationCore& core() { return *core_; }
   EstimationServiceImpl& service() { return *service_; }
 
@@ -88,6 +96,8 @@ class EsgServer {
   std::optional<TokenAuthorizer> auth_;
   std::unique_ptr<EstimationServiceImpl> service_;
   std::unique_ptr<grpc::Server> server_;
+  // Declared after core_: stopped (and destroyed) before the core whose metrics it serves.
+  std::unique_ptr<MetricsHttpServer> metrics_;
   int port_ = 0;
   bool shut_down_ = false;
 };

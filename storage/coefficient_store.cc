@@ -68,6 +68,17 @@ const std::string& HistoryPageSql(bool one_gyro) {
   return one_gyro ? *one : *all;
 }
 
+// Records are SI; each column holds the unit its name carries (records.h): deg/h for the 13
+// drift terms, arcsec for the misalignment. NaN passes through.
+double ToColumnUnit(int index, double si) {
+  return index < kCoefficientMisalignment ? estimator::RadPerSecToDegPerHour(si)
+                                          : estimator::RadToArcsec(si);
+}
+double FromColumnUnit(int index, double column) {
+  return index < kCoefficientMisalignment ? estimator::DegPerHourToRadPerSec(column)
+                                          : estimator::ArcsecToRad(column);
+}
+
 // The record of the current row (columns in the order of AllColumns()).
 CoefficientRecord ReadRecord(const Statement& st) {
   CoefficientRecord r;
@@ -82,8 +93,8 @@ CoefficientRecord ReadRecord(const Statement& st) {
   for (int i = 0; i < kNumCoefficientValues; ++i) {
     const int value_column = kNumLeadingColumns + i;
     const int sigma_column = value_column + kNumCoefficientValues;
-    r.values[i] = st.ColumnDoubleOrNaN(value_column);
-    sigmas[i] = st.ColumnDoubleOrNaN(sigma_column);
+    r.values[i] = FromColumnUnit(i, st.ColumnDoubleOrNaN(value_column));
+    sigmas[i] = FromColumnUnit(i, st.ColumnDoubleOrNaN(sigma_column));
     any_sigma = any_sigma || !st.ColumnIsNull(sigma_column);
   }
   if (any_sigma) r.sigmas = std::move(sigmas);
@@ -117,15 +128,10 @@ absl::Status Validate(const CoefficientRecord& r) {
 
 std::vector<double> ToCoefficientValues(const estimator::DriftCoefficients& drift,
                                         const Eigen::Vector3d& misalignment_b) {
-  using estimator::RadPerSecToDegPerHour;
   std::vector<double> values(kNumCoefficientValues);
   const estimator::DriftVector theta = drift.AsVector();
-  for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
-    values[i] = RadPerSecToDegPerHour(theta[i]);
-  }
-  for (int i = 0; i < 3; ++i) {
-    values[kCoefficientMisalignment + i] = estimator::RadToArcsec(misalignment_b[i]);
-  }
+  for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) values[i] = theta[i];
+  for (int i = 0; i < 3; ++i) values[kCoefficientMisalignment + i] = misalignment_b[i];
   return values;
 }
 
@@ -138,13 +144,9 @@ absl::Status FromCoefficientValues(absl::Span<const double> values,
                                                    kNumCoefficientValues));
   }
   estimator::DriftVector theta;
-  for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
-    theta[i] = estimator::DegPerHourToRadPerSec(values[i]);
-  }
+  for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) theta[i] = values[i];
   *drift = estimator::DriftCoefficients::FromVector(theta);
-  for (int i = 0; i < 3; ++i) {
-    (*misalignment_b)[i] = estimator::ArcsecToRad(values[kCoefficientMisalignment + i]);
-  }
+  for (int i = 0; i < 3; ++i) (*misalignment_b)[i] = values[kCoefficientMisalignment + i];
   return absl::OkStatus();
 }
 
@@ -165,11 +167,11 @@ absl::Status CoefficientStore::Append(Transaction& txn, const CoefficientRecord&
   for (int i = 0; i < kNumCoefficientValues; ++i) {
     const int value_index = kNumLeadingColumns + 1 + i;
     const int sigma_index = value_index + kNumCoefficientValues;
-    st->BindDouble(value_index, record.values[i]);
+    st->BindDouble(value_index, ToColumnUnit(i, record.values[i]));
     if (record.sigmas.empty()) {
       st->BindNull(sigma_index);
     } else {
-      st->BindDouble(sigma_index, record.sigmas[i]);
+      st->BindDouble(sigma_index, ToColumnUnit(i, record.sigmas[i]));
     }
   }
   return st->Run();

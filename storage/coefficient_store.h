@@ -21,8 +21,8 @@
 
 namespace esg::storage {
 
-// Estimator values -> the 16-value layout of records.h: drift [rad/s] -> deg/h, misalignment
-// rotation vector about body axes [rad] -> arcsec. Also right for 1-sigma values.
+// Estimator values -> the 16-value layout of records.h (SI, no conversion): drift [rad/s], then
+// the misalignment rotation vector about body axes [rad]. Also right for 1-sigma values.
 std::vector<double> ToCoefficientValues(const estimator::DriftCoefficients& drift,
                                         const Eigen::Vector3d& misalignment_b);
 // The inverse. InvalidArgument unless values.size() == kNumCoefficientValues.

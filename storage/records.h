@@ -38,12 +38,14 @@ struct ArchivedFrame {
   std::string payload;  // serialized frame bytes, format chosen by the server
 };
 
-// Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, each stored
-// in its own column of table `coefficients` (sigma columns: "<name>_sigma_<unit>", e.g.
-// k0_sigma_deg_h). Drift terms follow estimator/drift_model.h (eq. (1), (8)-(10), docs/physics.md):
-// k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of the gyro,
-// mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all in deg/h; then the misalignment, a small
-// rotation vector about body axes b in arcsec (as in SpacecraftConfig's misalignment_sigma).
+// Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, in SI like
+// every record: drift terms following estimator/drift_model.h (eq. (1), (8)-(10),
+// docs/physics.md): k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of
+// the gyro, mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all [rad/s]; then the misalignment,
+// a small rotation vector about body axes b [rad]. Each is stored in its own column of table
+// `coefficients`, in the unit its name carries (deg/h for the drift terms, arcsec for the
+// misalignment; sigma columns "<name>_sigma_<unit>", e.g. k0_sigma_deg_h): CoefficientStore
+// converts at the columns, so a user of plain SQL reads the units operators use.
 inline constexpr int kNumCoefficientValues = 16;
 inline constexpr int kCoefficientK0 = 0;
 inline constexpr int kCoefficientC1 = 1;
@@ -100,8 +102,8 @@ struct CoefficientRecord {
   int gyro_id = 0;                                  // 1..4 as in the configuration
   absl::Time measurement_time = absl::UnixEpoch();  // epoch of the telemetry the estimate uses
   absl::Time compute_time = absl::UnixEpoch();
-  std::vector<double> values;  // kNumCoefficientValues, layout above; NaN = not estimated
-  std::vector<double> sigmas;  // 1-sigma, same layout, or empty when unknown; NaN = unknown
+  std::vector<double> values;  // kNumCoefficientValues, layout above [rad/s, rad]; NaN = not estimated
+  std::vector<double> sigmas;  // 1-sigma, same layout and units, or empty when unknown; NaN = unknown
   std::string model_name;      // e.g. "model10"
 };
 

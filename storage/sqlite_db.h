@@ -21,8 +21,8 @@
 //
 // A process crash never loses a committed transaction in any setting, because the bytes are in
 // the OS page cache once write(2) returns. The default is kFull because the server acknowledges
-// telemetry to the ground station only after CommitBatch() and the ground station then discards
-// its copy: an acknowledged frame must also survive the host losing power, which only FULL
+// telemetry to the ground station only after Storage::ArchiveFrames() and the station then
+// discards its copy: an acknowledged frame must also survive the host losing power, which only FULL
 // (or EXTRA) guarantees in WAL mode. The price is one fsync per transaction, which is why the
 // server commits frames in batches. "Survives" assumes the disk honours fsync (no lying write
 // cache). An uncommitted transaction (no Commit(), a failed Commit(), or a crash before Commit()

@@ -1,6 +1,7 @@
 // The Storage facade; contract in storage.h.
 #include "storage/storage.h"
 
+#include <map>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -10,7 +11,7 @@
 namespace esg::storage {
 namespace {
 
-// Prefixes the field path of a store's InvalidArgument with the record's place in the batch.
+// Prefixes the field path of a store's error with the record's place in the transaction.
 absl::Status InBatch(absl::Status status, absl::string_view where) {
   if (status.ok()) return status;
   return absl::Status(status.code(), absl::StrCat(where, ": ", status.message()));
@@ -20,7 +21,7 @@ absl::Status CheckSpacecraft(const std::string& record_id, const std::string& ba
                              absl::string_view where) {
   if (record_id == batch_id) return absl::OkStatus();
   return absl::InvalidArgumentError(absl::StrCat(where, ".spacecraft_id = '", record_id,
-                                                 "': differs from the batch's '", batch_id,
+                                                 "': differs from the transaction's '", batch_id,
                                                  "'"));
 }
 
@@ -42,53 +43,97 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
   return std::unique_ptr<Storage>(new Storage(std::move(db)));
 }
 
-absl::StatusOr<BatchResult> Storage::CommitBatch(const Batch& batch) {
-  RETURN_IF_ERROR(ValidateSpacecraftId(batch.spacecraft_id, "batch.spacecraft_id"));
+absl::Status Storage::ArchiveFrames(const std::vector<ArchivedFrame>& frames) {
+  // Per spacecraft, in input order; a frame's place in `frames` names it in errors.
+  std::map<std::string, std::vector<ArchivedFrame>> by_spacecraft;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    RETURN_IF_ERROR(InBatch(ValidateSpacecraftId(frames[i].spacecraft_id, "spacecraft_id"),
+                            absl::StrCat("frames[", i, "]")));
+    by_spacecraft[frames[i].spacecraft_id].push_back(frames[i]);
+  }
+  if (by_spacecraft.empty()) return absl::OkStatus();
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  for (const auto& [id, list] : by_spacecraft) {
+    ASSIGN_OR_RETURN(AppendResult appended, archive_.AppendBatch(txn, id, list));
+    if (!appended.duplicate_sequences.empty()) {
+      return absl::AlreadyExistsError(absl::StrCat(
+          id, ": ", appended.duplicate_sequences.size(),
+          " frames are already archived (first sequence ", appended.duplicate_sequences.front(),
+          "); nothing of this commit is stored"));
+    }
+  }
+  return txn.Commit();
+}
+
+absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEffects& effects) {
+  const std::string& id = effects.spacecraft_id;
+  RETURN_IF_ERROR(ValidateSpacecraftId(id, "spacecraft_id"));
+  if (!effects.checkpoint) return absl::InvalidArgumentError("checkpoint: required");
   // Cheap checks before taking the write lock.
-  for (size_t i = 0; i < batch.coefficients.size(); ++i) {
-    RETURN_IF_ERROR(CheckSpacecraft(batch.coefficients[i].spacecraft_id, batch.spacecraft_id,
+  for (size_t i = 0; i < effects.coefficients.size(); ++i) {
+    RETURN_IF_ERROR(CheckSpacecraft(effects.coefficients[i].spacecraft_id, id,
                                     absl::StrCat("coefficients[", i, "]")));
   }
-  for (size_t i = 0; i < batch.alerts.size(); ++i) {
-    RETURN_IF_ERROR(CheckSpacecraft(batch.alerts[i].spacecraft_id, batch.spacecraft_id,
-                                    absl::StrCat("alerts[", i, "]")));
+  for (size_t i = 0; i < effects.new_alerts.size(); ++i) {
+    RETURN_IF_ERROR(CheckSpacecraft(effects.new_alerts[i].spacecraft_id, id,
+                                    absl::StrCat("new_alerts[", i, "]")));
   }
-  for (size_t i = 0; i < batch.alert_repeats.size(); ++i) {
-    RETURN_IF_ERROR(CheckSpacecraft(batch.alert_repeats[i].spacecraft_id, batch.spacecraft_id,
-                                    absl::StrCat("alert_repeats[", i, "]")));
+  for (size_t i = 0; i < effects.repeats.size(); ++i) {
+    RETURN_IF_ERROR(CheckSpacecraft(effects.repeats[i].spacecraft_id, id,
+                                    absl::StrCat("repeats[", i, "]")));
   }
-  if (batch.checkpoint.has_value()) {
-    RETURN_IF_ERROR(
-        CheckSpacecraft(batch.checkpoint->spacecraft_id, batch.spacecraft_id, "checkpoint"));
-  }
-
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
-  BatchResult result;
-  {
-    ASSIGN_OR_RETURN(AppendResult appended,
-                     archive_.AppendBatch(txn, batch.spacecraft_id, batch.frames));
-    result.new_frame_sequences = std::move(appended.new_sequences);
-    result.duplicate_frame_sequences = std::move(appended.duplicate_sequences);
-  }
-  for (size_t i = 0; i < batch.coefficients.size(); ++i) {
-    RETURN_IF_ERROR(InBatch(coefficients_.Append(txn, batch.coefficients[i]),
+  for (size_t i = 0; i < effects.coefficients.size(); ++i) {
+    RETURN_IF_ERROR(InBatch(coefficients_.Append(txn, effects.coefficients[i]),
                             absl::StrCat("coefficients[", i, "]")));
   }
-  result.alert_sequences.reserve(batch.alerts.size());
-  for (size_t i = 0; i < batch.alerts.size(); ++i) {
-    absl::StatusOr<int64_t> sequence = alerts_.Append(txn, batch.alerts[i]);
-    if (!sequence.ok()) return InBatch(sequence.status(), absl::StrCat("alerts[", i, "]"));
-    result.alert_sequences.push_back(*sequence);
+  std::vector<int64_t> sequences;
+  sequences.reserve(effects.new_alerts.size());
+  for (size_t i = 0; i < effects.new_alerts.size(); ++i) {
+    absl::StatusOr<int64_t> sequence = alerts_.Append(txn, effects.new_alerts[i]);
+    if (!sequence.ok()) return InBatch(sequence.status(), absl::StrCat("new_alerts[", i, "]"));
+    sequences.push_back(*sequence);
   }
-  for (size_t i = 0; i < batch.alert_repeats.size(); ++i) {
-    RETURN_IF_ERROR(InBatch(alerts_.UpdateRepeat(txn, batch.alert_repeats[i]),
-                            absl::StrCat("alert_repeats[", i, "]")));
+  for (size_t i = 0; i < effects.repeats.size(); ++i) {
+    RETURN_IF_ERROR(
+        InBatch(alerts_.UpdateRepeat(txn, effects.repeats[i]), absl::StrCat("repeats[", i, "]")));
   }
-  if (batch.checkpoint.has_value()) {
-    RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, *batch.checkpoint));
+  for (size_t i = 0; i < effects.clears.size(); ++i) {
+    RETURN_IF_ERROR(
+        InBatch(alerts_.Clear(txn, id, effects.clears[i].sequence, effects.clears[i].time),
+                absl::StrCat("clears[", i, "]")));
+  }
+  const CheckpointRecord checkpoint = effects.checkpoint(sequences);
+  RETURN_IF_ERROR(CheckSpacecraft(checkpoint.spacecraft_id, id, "checkpoint"));
+  RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, checkpoint));
+  RETURN_IF_ERROR(txn.Commit());
+  return sequences;
+}
+
+absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
+    const ConfigurationChange& change) {
+  const std::string& id = change.config.spacecraft_id;
+  RETURN_IF_ERROR(ValidateSpacecraftId(id, "config.spacecraft_id"));
+  RETURN_IF_ERROR(CheckSpacecraft(change.checkpoint.spacecraft_id, id, "checkpoint"));
+  for (size_t i = 0; i < change.new_alerts.size(); ++i) {
+    RETURN_IF_ERROR(CheckSpacecraft(change.new_alerts[i].spacecraft_id, id,
+                                    absl::StrCat("new_alerts[", i, "]")));
+  }
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  RETURN_IF_ERROR(InBatch(configs_.Put(txn, change.config).status(), "config"));
+  RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, change.checkpoint));
+  std::vector<int64_t> sequences;
+  for (size_t i = 0; i < change.new_alerts.size(); ++i) {
+    absl::StatusOr<int64_t> sequence = alerts_.Append(txn, change.new_alerts[i]);
+    if (!sequence.ok()) return InBatch(sequence.status(), absl::StrCat("new_alerts[", i, "]"));
+    sequences.push_back(*sequence);
+  }
+  for (size_t i = 0; i < change.clears.size(); ++i) {
+    RETURN_IF_ERROR(InBatch(alerts_.Clear(txn, id, change.clears[i].sequence, change.clears[i].time),
+                            absl::StrCat("clears[", i, "]")));
   }
   RETURN_IF_ERROR(txn.Commit());
-  return result;
+  return sequences;
 }
 
 }  // namespace esg::storage

@@ -1,15 +1,20 @@
 // The service database as one object: opens the SQLite file (WAL, synchronous per options),
-// migrates it to the current schema, owns the stores, and commits the effects of a batch of
-// telemetry atomically (durability contract in sqlite_db.h).
-//
-// CommitBatch is the server's unit of acknowledgement: "these frames + the coefficient
-// estimates, alerts, alert repeats and checkpoint they produced" go into ONE transaction, so a
-// crash never leaves frames without their effects or effects without their frames. Ack a frame
-// only after CommitBatch returned OK for it.
+// migrates it to the current schema, owns the stores, and commits the three write transactions
+// the server makes (durability contract in sqlite_db.h; docs/service.md "Durability and
+// recovery"):
+//   ArchiveFrames        the group commit of accepted telemetry: the unit of acknowledgement (a
+//                        frame is acknowledged only after the call that archived it returned OK);
+//   CommitFilterEffects  one filter job of a spacecraft: its coefficient estimates, new alerts,
+//                        repeats, clears and the checkpoint that carries the apply cursor, so
+//                        a restart (checkpoint + archive after its cursor) applies no frame twice;
+//   CommitConfiguration  a configuration with the fresh checkpoint of its session (and the
+//                        clearing of a quarantine alert it ends).
+// Each is ONE IMMEDIATE transaction: on any error none of it is visible.
 #ifndef ESG_STORAGE_STORAGE_H_
 #define ESG_STORAGE_STORAGE_H_
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -17,6 +22,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "storage/alert_store.h"
 #include "storage/coefficient_store.h"
 #include "storage/config_store.h"
@@ -28,21 +34,31 @@
 
 namespace esg::storage {
 
-// Everything one ingest step of one spacecraft writes. Every record's spacecraft_id must equal
-// Batch::spacecraft_id.
-struct Batch {
-  std::string spacecraft_id;
-  std::vector<ArchivedFrame> frames;
-  std::vector<CoefficientRecord> coefficients;
-  std::vector<AlertRecord> alerts;           // new alerts; sequences are assigned
-  std::vector<AlertRepeat> alert_repeats;    // repeats collapsed into existing alerts
-  std::optional<CheckpointRecord> checkpoint;  // replaces the stored one if present
+// A stored alert found over at a measurement epoch (AlertStore::Clear).
+struct AlertClear {
+  int64_t sequence = 0;
+  absl::Time time;  // measurement epoch at which the condition ended
 };
 
-struct BatchResult {
-  std::vector<int64_t> new_frame_sequences;        // frames stored by this batch, input order
-  std::vector<int64_t> duplicate_frame_sequences;  // frames already stored (ignored)
-  std::vector<int64_t> alert_sequences;            // sequence of alerts[i], same order
+// What one filter job of one spacecraft writes (server/apply_worker.cc). Every record's
+// spacecraft_id must equal `spacecraft_id`.
+struct FilterEffects {
+  std::string spacecraft_id;
+  std::vector<CoefficientRecord> coefficients;
+  std::vector<AlertRecord> new_alerts;  // sequences are assigned, in this order
+  std::vector<AlertRepeat> repeats;     // repeats collapsed into stored alerts
+  std::vector<AlertClear> clears;       // stored alerts to clear
+  // The checkpoint, built inside the transaction from the sequences assigned to new_alerts
+  // (same order): it carries the live alert tracks with their sequences. Required.
+  std::function<CheckpointRecord(const std::vector<int64_t>& alert_sequences)> checkpoint;
+};
+
+// What a configuration writes (server/estimation_core.cc Configure).
+struct ConfigurationChange {
+  ConfigRecord config;
+  CheckpointRecord checkpoint;          // the new session's, same spacecraft
+  std::vector<AlertRecord> new_alerts;  // e.g. a quarantine alert stored raised and cleared
+  std::vector<AlertClear> clears;       // e.g. the quarantine alert the configuration ends
 };
 
 // Thread-safe: any number of threads may call any method (serialized per Storage through its
@@ -61,17 +77,27 @@ class Storage {
   static absl::StatusOr<std::unique_ptr<Storage>> Open(const std::string& path,
                                                        const DatabaseOptions& options = {});
 
-  // Writes the whole batch in one IMMEDIATE transaction and returns what was new. When it
-  // returns OK, all of it is durable (sqlite_db.h); on any error none of it is visible.
-  // Frames whose (spacecraft_id, sequence) is already stored are ignored and reported; their
-  // coefficients/alerts/checkpoint are still written (they are the caller's to decide).
-  // InvalidArgument (naming the record, e.g. "alerts[2].severity") for a record another store
-  // would reject or whose spacecraft_id differs from the batch's; NotFound if an alert repeat
-  // names a missing alert; Unavailable if the database stays locked beyond busy_timeout.
-  // Storage faults (sqlite_db.h table): ResourceExhausted when the disk is full, Unavailable
-  // when a write or the fsync fails; nothing of the batch is visible then, and the same Storage
-  // takes the next CommitBatch as soon as the cause is gone.
-  absl::StatusOr<BatchResult> CommitBatch(const Batch& batch);
+  // Archives `frames` (any spacecraft, any order) in one transaction: the server's group commit.
+  // Every frame must be new: AlreadyExists "<id>: N frames are already archived (first sequence
+  // S)" when one's identity or measurement time is stored or repeated in `frames`, and nothing
+  // is stored (the caller decided them new; acknowledging them would be false). InvalidArgument
+  // (naming "frames[i]") for a frame the archive rejects. Storage faults (sqlite_db.h table):
+  // ResourceExhausted when the disk is full, Unavailable when a write or the fsync fails;
+  // nothing is visible then, and the next call succeeds as soon as the cause is gone. OK: all
+  // of it is durable (with Synchronous::kFull, across power loss).
+  absl::Status ArchiveFrames(const std::vector<ArchivedFrame>& frames);
+
+  // Writes a filter job's effects and its checkpoint in one transaction; returns the sequences
+  // assigned to effects.new_alerts, in order. InvalidArgument naming the record
+  // ("coefficients[1]", "new_alerts[0].severity", "repeats[0].spacecraft_id") for a record a
+  // store rejects or of another spacecraft, or for a missing checkpoint function; NotFound for a
+  // repeat or clear of a missing alert; storage faults as ArchiveFrames.
+  absl::StatusOr<std::vector<int64_t>> CommitFilterEffects(const FilterEffects& effects);
+
+  // Stores a configuration, its session's checkpoint and the alert changes in one transaction;
+  // returns the sequences assigned to change.new_alerts. Errors as CommitFilterEffects
+  // ("config.", "checkpoint.", "new_alerts[i]", "clears[i]").
+  absl::StatusOr<std::vector<int64_t>> CommitConfiguration(const ConfigurationChange& change);
 
   Database& database() { return *db_; }
   ConfigStore& configs() { return configs_; }

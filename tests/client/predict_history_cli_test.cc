@@ -14,6 +14,7 @@
 #include "estimator/attitude_profile.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
+#include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
@@ -183,7 +184,8 @@ TEST(HistoryCli, ThirtyDaysArePagedThroughEveryRecordOnceInOrder) {
         r.compute_time = kStart;
         r.model_name = "10+11";
         r.values.assign(storage::kNumCoefficientValues, 0.01);
-        r.values[storage::kCoefficientK0] = step * 3 + (gyro - 1);
+        // Records are SI: k0 = the record's index in deg/h.
+        r.values[storage::kCoefficientK0] = estimator::DegPerHourToRadPerSec(step * 3 + (gyro - 1));
         r.sigmas.assign(storage::kNumCoefficientValues, 0.001);
         ASSERT_TRUE((*storage)->coefficients().Append(*txn, r).ok());
       }
@@ -199,7 +201,8 @@ TEST(HistoryCli, ThirtyDaysArePagedThroughEveryRecordOnceInOrder) {
   for (size_t i = 1; i < lines.size(); ++i) {
     const std::vector<absl::string_view> cells = absl::StrSplit(lines[i], ',');
     ASSERT_GE(cells.size(), 3u);
-    ASSERT_EQ(std::stod(std::string(cells[2])), static_cast<double>(i - 1)) << lines[i];
+    // Up to the deg/h <-> rad/s conversions of the record.
+    ASSERT_NEAR(std::stod(std::string(cells[2])), static_cast<double>(i - 1), 1e-9 * i) << lines[i];
   }
 }
 

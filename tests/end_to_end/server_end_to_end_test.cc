@@ -11,6 +11,7 @@
 #include <map>
 #include <thread>
 
+#include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/checkpoint_codec.h"
@@ -85,13 +86,18 @@ void ExpectFinalEstimatesEqualOffline(const std::vector<esg::v1::CoefficientSnap
     const std::vector<double> v = storage::ToCoefficientValues(g.coefficients, g.misalignment_b);
     const std::vector<double> sigma = storage::ToCoefficientValues(g.sigma, g.misalignment_sigma_b);
     const esg::v1::CoefficientSnapshot& s = last.at(g.id);
-    EXPECT_EQ(s.model().k0_deg_h(), v[storage::kCoefficientK0]);
-    EXPECT_EQ(s.sigma().k0_deg_h(), sigma[storage::kCoefficientK0]);
+    // Records are SI, the columns and the message deg/h and arcsec: equal up to the conversions.
+    const auto deg_h = [](double x) { return estimator::RadPerSecToDegPerHour(x); };
+    const auto arcsec = [](double x) { return estimator::RadToArcsec(x); };
+    EXPECT_DOUBLE_EQ(s.model().k0_deg_h(), deg_h(v[storage::kCoefficientK0]));
+    EXPECT_DOUBLE_EQ(s.sigma().k0_deg_h(), deg_h(sigma[storage::kCoefficientK0]));
     for (int i = 0; i < 3; ++i) {
-      EXPECT_EQ(s.model().c1_deg_h(i), v[storage::kCoefficientC1 + i]);
-      EXPECT_EQ(s.model().c2_deg_h(i), v[storage::kCoefficientC2 + i]);
-      EXPECT_EQ(s.misalignment_arcsec(i), v[storage::kCoefficientMisalignment + i]);
-      EXPECT_EQ(s.misalignment_sigma_arcsec(i), sigma[storage::kCoefficientMisalignment + i]);
+      EXPECT_DOUBLE_EQ(s.model().c1_deg_h(i), deg_h(v[storage::kCoefficientC1 + i]));
+      EXPECT_DOUBLE_EQ(s.model().c2_deg_h(i), deg_h(v[storage::kCoefficientC2 + i]));
+      EXPECT_DOUBLE_EQ(s.misalignment_arcsec(i),
+                       arcsec(v[storage::kCoefficientMisalignment + i]));
+      EXPECT_DOUBLE_EQ(s.misalignment_sigma_arcsec(i),
+                       arcsec(sigma[storage::kCoefficientMisalignment + i]));
     }
   }
 }

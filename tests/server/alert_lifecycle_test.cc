@@ -22,7 +22,6 @@
 #include "gtest/gtest.h"
 #include "proto/convert.h"
 #include "server/alert_catalog.h"
-#include "server/alert_collapse.h"
 #include "server/proto_mapping.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
@@ -289,59 +288,6 @@ TEST(AlertLifecycle, AlertsAcknowledgementsAndSessionStateChangesAreLogged) {
   EXPECT_THAT(text, HasSubstr("WARN esgd: " + prefix));  // raised, active
   EXPECT_THAT(text, HasSubstr(", acknowledged by alice at "));
   EXPECT_THAT(text, HasSubstr("WARN esgd: acknowledgement by 'bob' refused: operator_name: "));
-}
-
-// ---- The collapser's clearing rules (a pure function of the occurrences) ---------------------
-
-AlertOccurrence Occurrence(const std::string& reason, const std::string& subsystem, absl::Time t) {
-  return {reason, "INFO", subsystem, t, 1.0, 0.5, "arcsec", "test"};
-}
-
-TEST(AlertCollapse, EachReasonIsClearedByItsRule) {
-  const absl::Time t0 = absl::FromUnixSeconds(1'700'000'000);
-  const absl::Duration window = absl::Minutes(30);
-  // Stored tracks (sequences 1..4) of a quiet, a star-tracker, a never and a quarantine reason.
-  std::vector<AlertTrack> tracks = {
-      {"GYRO_DATA_REJECTED", "gyro_pair[1,2]", 1, 1, t0},
-      {"STAR_TRACKER_FAULT", "star_tracker", 2, 1, t0},
-      {"WORKING_PAIR_FAULT", "gyro_3", 3, 1, t0},
-      {"SESSION_QUARANTINED", "session", 4, 1, t0},
-  };
-  AlertCollapser c("SC", tracks, window, t0);
-  c.Advance(t0 + absl::Hours(5));  // only the quiet one ends, at its occurrence + the window
-  ASSERT_EQ(c.clears().size(), 1u);
-  EXPECT_EQ(c.clears()[0].sequence, 1);
-  EXPECT_EQ(c.clears()[0].time, t0 + window);
-  c.StarTrackerAccepted(t0 + absl::Hours(6));
-  ASSERT_EQ(c.clears().size(), 2u);
-  EXPECT_EQ(c.clears()[1].sequence, 2);
-  EXPECT_EQ(c.clears()[1].time, t0 + absl::Hours(6));
-  c.End("SESSION_QUARANTINED", "session", t0 + absl::Hours(7));
-  ASSERT_EQ(c.clears().size(), 3u);
-  EXPECT_EQ(c.clears()[2].sequence, 4);
-  // The pair fault stays live whatever happens.
-  ASSERT_EQ(c.Tracks({}).size(), 1u);
-  EXPECT_EQ(c.Tracks({})[0].reason, "WORKING_PAIR_FAULT");
-}
-
-TEST(AlertCollapse, SeverityAndSubsystemFormComeFromTheCatalog) {
-  const absl::Time t0 = absl::FromUnixSeconds(1'700'000'000);
-  AlertCollapser c("SC", {}, absl::Minutes(30), t0);
-  c.Add(Occurrence("WORKING_PAIR_FAULT", "gyro 2", t0));
-  c.Add(Occurrence("GYRO_DATA_REJECTED", "gyros 1,3", t0));
-  c.Add(Occurrence("GYRO_DATA_REJECTED", "gyro_pair[1,3]", t0 + absl::Minutes(1)));  // a repeat
-  c.Add(Occurrence("STAR_TRACKER_FAULT", "star_tracker", t0));
-  c.StarTrackerAccepted(t0 + absl::Minutes(2));  // created and cleared in one job
-  ASSERT_EQ(c.new_alerts().size(), 3u);
-  EXPECT_EQ(c.new_alerts()[0].severity, "CRITICAL");
-  EXPECT_EQ(c.new_alerts()[0].subsystem, "gyro_2");
-  EXPECT_EQ(c.new_alerts()[1].severity, "WARNING");
-  EXPECT_EQ(c.new_alerts()[1].subsystem, "gyro_pair[1,3]");
-  EXPECT_EQ(c.new_alerts()[1].repeat_count, 2);
-  EXPECT_EQ(c.new_alerts()[2].severity, "DISTRESS");
-  EXPECT_TRUE(c.new_alerts()[2].cleared);
-  EXPECT_EQ(c.new_alerts()[2].cleared_time, t0 + absl::Minutes(2));
-  EXPECT_FALSE(c.new_alerts()[0].cleared);
 }
 
 // ---- The catalog: one row per reason, and the proto and docs say the same ---------------------

@@ -9,6 +9,7 @@
 #include <tuple>
 #include <vector>
 
+#include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/coefficient_store.h"
@@ -37,7 +38,8 @@ void AppendHistory(storage::Storage& storage, const std::string& id, int days) {
       r.compute_time = kStart;
       r.model_name = "10+11";
       r.values.assign(storage::kNumCoefficientValues, 0.01);
-      r.values[storage::kCoefficientK0] = step * kGyros + (gyro - 1);
+      // Records are SI: k0 = the index in deg/h.
+      r.values[storage::kCoefficientK0] = estimator::DegPerHourToRadPerSec(step * kGyros + (gyro - 1));
       r.sigmas.assign(storage::kNumCoefficientValues, 0.001);
       ASSERT_TRUE(storage.coefficients().Append(*txn, r).ok());
     }
@@ -84,7 +86,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
     total_bytes += page.ByteSizeLong();
     EXPECT_LE(page.snapshots_size(), 5000);
     for (const esg::v1::CoefficientSnapshot& s : page.snapshots()) {
-      ASSERT_EQ(s.model().k0_deg_h(), static_cast<double>(expected_k0)) << "page " << pages;
+      ASSERT_DOUBLE_EQ(s.model().k0_deg_h(), static_cast<double>(expected_k0)) << "page " << pages;
       ASSERT_EQ(s.gyro_id(), expected_k0 % kGyros + 1);
       ++expected_k0;
     }
@@ -97,7 +99,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
       late.compute_time = kStart;
       late.model_name = "10+11";
       late.values.assign(storage::kNumCoefficientValues, 0.0);
-      late.values[storage::kCoefficientK0] = static_cast<double>(total);
+      late.values[storage::kCoefficientK0] = estimator::DegPerHourToRadPerSec(static_cast<double>(total));
       ASSERT_TRUE(server.core().storage().coefficients().Append(late).ok());
       appended = true;
     }
@@ -120,7 +122,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
   sized.set_gyro_id(2);
   ASSERT_TRUE(HistoryPage(*stub, sized, &page).ok());
   ASSERT_EQ(page.snapshots_size(), 7);
-  EXPECT_EQ(page.snapshots(6).model().k0_deg_h(), 6 * kGyros + 1);
+  EXPECT_DOUBLE_EQ(page.snapshots(6).model().k0_deg_h(), 6 * kGyros + 1);
   const std::string gyro2_token = page.next_page_token();
   ASSERT_FALSE(gyro2_token.empty());
 
@@ -153,7 +155,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
     ++chunks;
     EXPECT_LE(chunk.snapshots_size(), 1000);
     for (const esg::v1::CoefficientSnapshot& s : chunk.snapshots()) {
-      ASSERT_EQ(s.model().k0_deg_h(), static_cast<double>(exported));
+      ASSERT_DOUBLE_EQ(s.model().k0_deg_h(), static_cast<double>(exported));
       ++exported;
     }
   }
@@ -189,7 +191,7 @@ TEST(Paging, AHistoryTokenStaysValidAcrossARestart) {
   const grpc::Status status = HistoryPage(*server.Stub(), request, &page);
   ASSERT_TRUE(status.ok()) << status.error_message();
   ASSERT_EQ(page.snapshots_size(), 1000);
-  EXPECT_EQ(page.snapshots(0).model().k0_deg_h(), 1000.0);  // the record after the first page
+  EXPECT_DOUBLE_EQ(page.snapshots(0).model().k0_deg_h(), 1000.0);  // the record after the first page
 }
 
 TEST(Paging, DiagnosesAreListedAsSummariesAndReadOneByOne) {

@@ -74,12 +74,13 @@ TEST(CoefficientStore, RoundTripsValuesSigmasAndNaN) {
     if (std::isnan(written.values[i])) {
       EXPECT_TRUE(std::isnan(r.values[i])) << i;
     } else {
-      EXPECT_EQ(r.values[i], written.values[i]) << i;  // REAL is a binary64: exact
+      // SI -> the column's unit -> SI: equal up to the two conversions.
+      EXPECT_DOUBLE_EQ(r.values[i], written.values[i]) << i;
     }
     if (std::isnan(written.sigmas[i])) {
       EXPECT_TRUE(std::isnan(r.sigmas[i])) << i;
     } else {
-      EXPECT_EQ(r.sigmas[i], written.sigmas[i]) << i;
+      EXPECT_DOUBLE_EQ(r.sigmas[i], written.sigmas[i]) << i;
     }
   }
 }
@@ -90,15 +91,19 @@ TEST(CoefficientStore, EachComponentLandsInItsNamedColumn) {
   ASSERT_THAT(storage, IsOk());
   CoefficientRecord written = Record("RDK-1", 1, 0);
   ASSERT_THAT((*storage)->coefficients().Append(written), IsOk());
-  // What a user of plain SQL sees.
+  // What a user of plain SQL sees: the record's SI values in the unit each column names.
+  using estimator::RadPerSecToDegPerHour;
+  using estimator::RadToArcsec;
+  using ::testing::DoubleEq;
   EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT k0_deg_h FROM coefficients"),
-              IsOkAndHolds(written.values[kCoefficientK0]));
+              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[kCoefficientK0]))));
   EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT c2y_deg_h FROM coefficients"),
-              IsOkAndHolds(written.values[kCoefficientC2 + 1]));
-  EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT misalignment_z_arcsec FROM coefficients"),
-              IsOkAndHolds(written.values[kCoefficientMisalignment + 2]));
+              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[kCoefficientC2 + 1]))));
+  EXPECT_THAT(
+      QueryDouble((*storage)->database(), "SELECT misalignment_z_arcsec FROM coefficients"),
+      IsOkAndHolds(DoubleEq(RadToArcsec(written.values[kCoefficientMisalignment + 2]))));
   EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT nu31_sigma_deg_h FROM coefficients"),
-              IsOkAndHolds(written.sigmas[kCoefficientNu + 1]));
+              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.sigmas[kCoefficientNu + 1]))));
 }
 
 TEST(CoefficientStore, EmptySigmasReadBackEmpty) {
@@ -113,7 +118,7 @@ TEST(CoefficientStore, EmptySigmasReadBackEmpty) {
   ASSERT_THAT(read, IsOk());
   ASSERT_EQ(read->size(), 1u);
   EXPECT_THAT((*read)[0].sigmas, IsEmpty());
-  EXPECT_EQ((*read)[0].values, written.values);
+  EXPECT_THAT((*read)[0].values, ::testing::Pointwise(::testing::DoubleEq(), written.values));
 }
 
 TEST(CoefficientStore, HistoryFiltersByGyroAndHalfOpenWindowInTimeOrder) {
@@ -184,12 +189,13 @@ TEST(CoefficientValues, ConvertsEstimatorSiToTheStoredUnitsAndBack) {
                                        estimator::ArcsecToRad(30.0));
   const std::vector<double> values = ToCoefficientValues(drift, misalignment_b);
   ASSERT_EQ(values.size(), static_cast<size_t>(kNumCoefficientValues));
-  EXPECT_NEAR(values[kCoefficientK0], 0.12, 1e-12);
-  EXPECT_NEAR(values[kCoefficientC1 + 1], -0.2, 1e-12);
-  EXPECT_NEAR(values[kCoefficientC2], -0.5, 1e-12);
-  EXPECT_NEAR(values[kCoefficientMu + 1], 0.01, 1e-12);  // mu23
-  EXPECT_NEAR(values[kCoefficientNu + 2], 0.02, 1e-12);  // nu12
-  EXPECT_NEAR(values[kCoefficientMisalignment + 1], -20.0, 1e-9);
+  // SI, in the layout of records.h.
+  EXPECT_EQ(values[kCoefficientK0], drift.k0);
+  EXPECT_EQ(values[kCoefficientC1 + 1], drift.C1[1]);
+  EXPECT_EQ(values[kCoefficientC2], drift.C2[0]);
+  EXPECT_EQ(values[kCoefficientMu + 1], drift.mu[1]);  // mu23
+  EXPECT_EQ(values[kCoefficientNu + 2], drift.nu[2]);  // nu12
+  EXPECT_EQ(values[kCoefficientMisalignment + 1], misalignment_b[1]);
 
   estimator::DriftCoefficients back;
   Eigen::Vector3d misalignment_back;

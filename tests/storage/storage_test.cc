@@ -1,6 +1,7 @@
-// Tests of storage/storage.h: the atomic CommitBatch (round trip, duplicates, all-or-nothing on
-// a failure inside the batch), persistence across reopen, acknowledged batches surviving
-// kill -9 of the writing process, concurrent writers (shared object and separate
+// Tests of storage/storage.h: the server's three transactions (ArchiveFrames refusing frames
+// already archived, CommitFilterEffects and CommitConfiguration round trips, all-or-nothing on a
+// failure inside each), persistence across reopen, acknowledged frames and committed effects
+// surviving kill -9 of the writing process, concurrent writers (shared object and separate
 // connections), and a corrupted file.
 #include "storage/storage.h"
 
@@ -20,6 +21,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/schema.h"
@@ -56,25 +58,40 @@ CoefficientRecord Coefficients(const std::string& id, int gyro, double at_second
   return r;
 }
 
-// Batch number b of spacecraft `id`: frames b*4 .. b*4+3, one coefficient estimate, one
-// alert, and the checkpoint after the last frame.
-Batch MakeBatch(const std::string& id, int64_t b) {
-  Batch batch;
-  batch.spacecraft_id = id;
+// Step number b of spacecraft `id` as the server writes it: the group commit of frames
+// b*4 .. b*4+3, then the filter's effects: one coefficient estimate, one alert, and the
+// checkpoint after the last frame (its blob lists the alert sequences it was built with).
+struct Step {
+  std::vector<ArchivedFrame> frames;
+  FilterEffects effects;
+};
+
+Step MakeStep(const std::string& id, int64_t b) {
+  Step step;
   for (int64_t s = b * kFramesPerBatch; s < (b + 1) * kFramesPerBatch; ++s) {
-    batch.frames.push_back(Frame(id, s));
+    step.frames.push_back(Frame(id, s));
   }
   const int64_t last = (b + 1) * kFramesPerBatch - 1;
-  batch.coefficients.push_back(Coefficients(id, 1, 60.0 * last));
-  batch.alerts.push_back(Alert(id, 60.0 * last));
-  CheckpointRecord checkpoint;
-  checkpoint.spacecraft_id = id;
-  checkpoint.last_sequence = last;
-  checkpoint.measurement_time = T(60.0 * last);
-  checkpoint.compute_time = T(60.0 * last + 1);
-  checkpoint.state_blob = absl::StrCat("state after ", last);
-  batch.checkpoint = checkpoint;
-  return batch;
+  step.effects.spacecraft_id = id;
+  step.effects.coefficients.push_back(Coefficients(id, 1, 60.0 * last));
+  step.effects.new_alerts.push_back(Alert(id, 60.0 * last));
+  step.effects.checkpoint = [id, last](const std::vector<int64_t>& alert_sequences) {
+    CheckpointRecord checkpoint;
+    checkpoint.spacecraft_id = id;
+    checkpoint.last_sequence = last;
+    checkpoint.measurement_time = T(60.0 * last);
+    checkpoint.compute_time = T(60.0 * last + 1);
+    checkpoint.state_blob = absl::StrCat("state after ", last, ", alerts ",
+                                         absl::StrJoin(alert_sequences, ","));
+    return checkpoint;
+  };
+  return step;
+}
+
+// Both transactions of a step, in the server's order; the first error.
+absl::Status CommitStep(Storage& storage, const Step& step) {
+  if (absl::Status archived = storage.ArchiveFrames(step.frames); !archived.ok()) return archived;
+  return storage.CommitFilterEffects(step.effects).status();
 }
 
 // Everything of `id` that is visible, as counts.
@@ -108,81 +125,96 @@ Visible Count(Storage& storage, const std::string& id) {
   return v;
 }
 
-TEST(Storage, CommitBatchWritesEveryKindAndReturnsAlertSequences) {
+TEST(Storage, FilterEffectsWriteEveryKindAndReturnAlertSequences) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
   ASSERT_THAT(storage, IsOk());
-  Batch batch = MakeBatch("RDK-1", 0);
-  batch.alerts.push_back(Alert("RDK-1", 30, "PAIR_MISMATCH"));
-  absl::StatusOr<BatchResult> result = (*storage)->CommitBatch(batch);
-  ASSERT_THAT(result, IsOk());
-  EXPECT_THAT(result->new_frame_sequences, ElementsAre(0, 1, 2, 3));
-  EXPECT_THAT(result->duplicate_frame_sequences, IsEmpty());
-  EXPECT_THAT(result->alert_sequences, ElementsAre(1, 2));
+  Step step = MakeStep("RDK-1", 0);
+  step.effects.new_alerts.push_back(Alert("RDK-1", 30, "PAIR_MISMATCH"));
+  ASSERT_THAT((*storage)->ArchiveFrames(step.frames), IsOk());
+  EXPECT_THAT((*storage)->CommitFilterEffects(step.effects),
+              IsOkAndHolds(ElementsAre(1, 2)));
 
   const Visible v = Count(**storage, "RDK-1");
   EXPECT_EQ(v.frames, 4);
   EXPECT_EQ(v.coefficients, 1);
   EXPECT_EQ(v.alerts, 2);
   EXPECT_EQ(v.checkpoint_sequence, std::optional<int64_t>(3));
+  // The checkpoint was built with the sequences the store assigned.
+  absl::StatusOr<CheckpointRecord> checkpoint = (*storage)->sessions().GetCheckpoint("RDK-1");
+  ASSERT_THAT(checkpoint, IsOk());
+  EXPECT_EQ(checkpoint->state_blob, "state after 3, alerts 1,2");
   absl::StatusOr<AlertRecord> second = (*storage)->alerts().Get("RDK-1", 2);
   ASSERT_THAT(second, IsOk());
   EXPECT_EQ(second->reason, "PAIR_MISMATCH");
 
-  // The next batch collapses a repeat into alert 1 and numbering continues.
-  Batch next = MakeBatch("RDK-1", 1);
-  next.alert_repeats.push_back(AlertRepeat{"RDK-1", 1, 2, T(420)});
-  absl::StatusOr<BatchResult> next_result = (*storage)->CommitBatch(next);
-  ASSERT_THAT(next_result, IsOk());
-  EXPECT_THAT(next_result->alert_sequences, ElementsAre(3));
+  // The next job collapses a repeat into alert 1, clears alert 2, and numbering continues.
+  Step next = MakeStep("RDK-1", 1);
+  next.effects.repeats.push_back(AlertRepeat{"RDK-1", 1, 2, T(420)});
+  next.effects.clears.push_back(AlertClear{2, T(430)});
+  ASSERT_THAT((*storage)->ArchiveFrames(next.frames), IsOk());
+  EXPECT_THAT((*storage)->CommitFilterEffects(next.effects), IsOkAndHolds(ElementsAre(3)));
   absl::StatusOr<AlertRecord> first = (*storage)->alerts().Get("RDK-1", 1);
   ASSERT_THAT(first, IsOk());
   EXPECT_EQ(first->repeat_count, 2);
   EXPECT_EQ(first->measurement_time, T(420));
+  second = (*storage)->alerts().Get("RDK-1", 2);
+  ASSERT_THAT(second, IsOk());
+  EXPECT_TRUE(second->cleared);
+  EXPECT_EQ(second->cleared_time, T(430));
 }
 
-TEST(Storage, CommitBatchReportsDuplicateFramesAndStillWritesEffects) {
+TEST(Storage, ArchiveFramesRefusesFramesAlreadyArchivedAndStoresNoneOfTheCommit) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
   ASSERT_THAT(storage, IsOk());
-  ASSERT_THAT((*storage)->CommitBatch(MakeBatch("RDK-1", 0)), IsOk());
-  Batch overlapping = MakeBatch("RDK-1", 1);
-  overlapping.frames.insert(overlapping.frames.begin(), Frame("RDK-1", 2));
-  overlapping.frames.insert(overlapping.frames.begin(), Frame("RDK-1", 3));
-  absl::StatusOr<BatchResult> result = (*storage)->CommitBatch(overlapping);
-  ASSERT_THAT(result, IsOk());
-  EXPECT_THAT(result->new_frame_sequences, ElementsAre(4, 5, 6, 7));
-  EXPECT_THAT(result->duplicate_frame_sequences, ElementsAre(3, 2));
-  const Visible v = Count(**storage, "RDK-1");
-  EXPECT_EQ(v.frames, 8);
-  EXPECT_EQ(v.alerts, 2);
-  EXPECT_EQ(v.checkpoint_sequence, std::optional<int64_t>(7));
+  ASSERT_THAT(CommitStep(**storage, MakeStep("RDK-1", 0)), IsOk());
+  // Frames of two spacecraft in one commit, one of them already archived.
+  std::vector<ArchivedFrame> frames = MakeStep("RDK-1", 1).frames;
+  frames.push_back(Frame("RDK-2", 0));
+  frames.push_back(Frame("RDK-1", 2));
+  EXPECT_THAT((*storage)->ArchiveFrames(frames),
+              StatusIs(absl::StatusCode::kAlreadyExists,
+                       HasSubstr("RDK-1: 1 frames are already archived (first sequence 2)")));
+  EXPECT_EQ(Count(**storage, "RDK-1").frames, 4);
+  EXPECT_EQ(Count(**storage, "RDK-2").frames, 0);
+  frames.pop_back();
+  ASSERT_THAT((*storage)->ArchiveFrames(frames), IsOk());
+  EXPECT_EQ(Count(**storage, "RDK-1").frames, 8);
+  EXPECT_EQ(Count(**storage, "RDK-2").frames, 1);
+  // A frame the archive rejects is named by its place.
+  frames = {Frame("RDK-3", 0), Frame("RDK-3", 1)};
+  frames[1].spacecraft_id.clear();
+  EXPECT_THAT((*storage)->ArchiveFrames(frames),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("frames[1]")));
+  EXPECT_EQ(Count(**storage, "RDK-3").frames, 0);
 }
 
-TEST(Storage, FailureLateInTheBatchLeavesNothingOfIt) {
+TEST(Storage, FailureLateInTheFilterEffectsLeavesNothingOfThem) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
   ASSERT_THAT(storage, IsOk());
-  ASSERT_THAT((*storage)->CommitBatch(MakeBatch("RDK-1", 0)), IsOk());
+  ASSERT_THAT(CommitStep(**storage, MakeStep("RDK-1", 0)), IsOk());
+  ASSERT_THAT((*storage)->ArchiveFrames(MakeStep("RDK-1", 1).frames), IsOk());
   const Visible before = Count(**storage, "RDK-1");
 
-  // Frames, coefficients and alerts are inserted before the repeat of a missing alert fails.
-  Batch missing_alert = MakeBatch("RDK-1", 1);
-  missing_alert.alert_repeats.push_back(AlertRepeat{"RDK-1", 99, 2, T(500)});
-  EXPECT_THAT((*storage)->CommitBatch(missing_alert),
-              StatusIs(absl::StatusCode::kNotFound, HasSubstr("alert_repeats[0]")));
+  // Coefficients and alerts are inserted before the repeat of a missing alert fails.
+  Step missing_alert = MakeStep("RDK-1", 1);
+  missing_alert.effects.repeats.push_back(AlertRepeat{"RDK-1", 99, 2, T(500)});
+  EXPECT_THAT((*storage)->CommitFilterEffects(missing_alert.effects),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("repeats[0]")));
 
-  // A record only its store rejects, after the frames went in.
-  Batch bad_alert = MakeBatch("RDK-1", 1);
-  bad_alert.alerts.push_back(Alert("RDK-1", 500));
-  bad_alert.alerts.back().severity.clear();
-  EXPECT_THAT((*storage)->CommitBatch(bad_alert),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("alerts[1]")));
+  // A record only its store rejects.
+  Step bad_alert = MakeStep("RDK-1", 1);
+  bad_alert.effects.new_alerts.push_back(Alert("RDK-1", 500));
+  bad_alert.effects.new_alerts.back().severity.clear();
+  EXPECT_THAT((*storage)->CommitFilterEffects(bad_alert.effects),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("new_alerts[1]")));
 
   // An invalid coefficient estimate after a valid one.
-  Batch bad_coefficient = MakeBatch("RDK-1", 1);
-  bad_coefficient.coefficients.push_back(Coefficients("RDK-1", 0, 500));
-  EXPECT_THAT((*storage)->CommitBatch(bad_coefficient),
+  Step bad_coefficient = MakeStep("RDK-1", 1);
+  bad_coefficient.effects.coefficients.push_back(Coefficients("RDK-1", 0, 500));
+  EXPECT_THAT((*storage)->CommitFilterEffects(bad_coefficient.effects),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("coefficients[1]")));
 
   const Visible after = Count(**storage, "RDK-1");
@@ -190,27 +222,23 @@ TEST(Storage, FailureLateInTheBatchLeavesNothingOfIt) {
   EXPECT_EQ(after.coefficients, before.coefficients);
   EXPECT_EQ(after.alerts, before.alerts);
   EXPECT_EQ(after.checkpoint_sequence, before.checkpoint_sequence);
-  EXPECT_THAT((*storage)->archive().HighestSequence("RDK-1"),
-              IsOkAndHolds(std::optional<int64_t>(3)));
-  // The failed batches consumed no alert numbers.
-  absl::StatusOr<BatchResult> retry = (*storage)->CommitBatch(MakeBatch("RDK-1", 1));
-  ASSERT_THAT(retry, IsOk());
-  EXPECT_THAT(retry->alert_sequences, ElementsAre(2));
+  // The failed transactions consumed no alert numbers.
+  EXPECT_THAT((*storage)->CommitFilterEffects(MakeStep("RDK-1", 1).effects),
+              IsOkAndHolds(ElementsAre(2)));
 }
 
-TEST(Storage, SqliteConstraintFailureInsideTheTransactionRollsBackTheBatch) {
+TEST(Storage, SqliteConstraintFailureInsideTheTransactionRollsItBack) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
   ASSERT_THAT(storage, IsOk());
-  // Make SQLite itself refuse the checkpoint, the last write of the batch.
+  // Make SQLite itself refuse the checkpoint, the last write of the filter's transaction.
   ASSERT_THAT((*storage)->database().Execute(
                   "CREATE TRIGGER refuse_checkpoint BEFORE INSERT ON checkpoints "
                   "BEGIN SELECT RAISE(ABORT, 'checkpoint refused'); END"),
               IsOk());
-  EXPECT_THAT((*storage)->CommitBatch(MakeBatch("RDK-1", 0)),
+  EXPECT_THAT((*storage)->CommitFilterEffects(MakeStep("RDK-1", 0).effects),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint refused")));
   const Visible v = Count(**storage, "RDK-1");
-  EXPECT_EQ(v.frames, 0);
   EXPECT_EQ(v.coefficients, 0);
   EXPECT_EQ(v.alerts, 0);
   EXPECT_EQ(v.checkpoint_sequence, std::nullopt);
@@ -220,19 +248,55 @@ TEST(Storage, RejectsRecordsOfAnotherSpacecraft) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
   ASSERT_THAT(storage, IsOk());
-  Batch batch = MakeBatch("RDK-1", 0);
-  batch.alerts.push_back(Alert("RDK-2", 0));
-  EXPECT_THAT((*storage)->CommitBatch(batch),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("alerts[1].spacecraft_id")));
-  batch = MakeBatch("RDK-1", 0);
-  batch.frames[2].spacecraft_id = "RDK-2";
-  EXPECT_THAT((*storage)->CommitBatch(batch),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("frames[2].spacecraft_id")));
-  batch = MakeBatch("RDK-1", 0);
-  batch.checkpoint->spacecraft_id = "RDK-2";
-  EXPECT_THAT((*storage)->CommitBatch(batch),
+  Step step = MakeStep("RDK-1", 0);
+  step.effects.new_alerts.push_back(Alert("RDK-2", 0));
+  EXPECT_THAT((*storage)->CommitFilterEffects(step.effects),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("new_alerts[1].spacecraft_id")));
+  step = MakeStep("RDK-1", 0);
+  step.effects.checkpoint = [](const std::vector<int64_t>&) {
+    CheckpointRecord checkpoint;
+    checkpoint.spacecraft_id = "RDK-2";
+    return checkpoint;
+  };
+  EXPECT_THAT((*storage)->CommitFilterEffects(step.effects),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint.spacecraft_id")));
-  EXPECT_EQ(Count(**storage, "RDK-1").frames, 0);
+  step.effects.checkpoint = nullptr;
+  EXPECT_THAT((*storage)->CommitFilterEffects(step.effects),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint: required")));
+  EXPECT_EQ(Count(**storage, "RDK-1").alerts, 0);
+}
+
+TEST(Storage, ConfigurationIsStoredWithItsCheckpointAndAlertChanges) {
+  TempDir dir;
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+  ASSERT_THAT(storage, IsOk());
+  ASSERT_THAT((*storage)->alerts().Append(Alert("RDK-1", 60)), IsOkAndHolds(1));
+  ConfigurationChange change;
+  change.config.spacecraft_id = "RDK-1";
+  change.config.config_json = "{}";
+  change.config.updated_time = T(100);
+  change.checkpoint.spacecraft_id = "RDK-1";
+  change.checkpoint.state_blob = "fresh";
+  change.new_alerts.push_back(Alert("RDK-1", 90, "SESSION_QUARANTINED"));
+  change.clears.push_back(AlertClear{1, T(95)});
+  EXPECT_THAT((*storage)->CommitConfiguration(change), IsOkAndHolds(ElementsAre(2)));
+  EXPECT_THAT((*storage)->configs().Get("RDK-1"), IsOk());
+  absl::StatusOr<CheckpointRecord> checkpoint = (*storage)->sessions().GetCheckpoint("RDK-1");
+  ASSERT_THAT(checkpoint, IsOk());
+  EXPECT_EQ(checkpoint->state_blob, "fresh");
+  absl::StatusOr<AlertRecord> cleared = (*storage)->alerts().Get("RDK-1", 1);
+  ASSERT_THAT(cleared, IsOk());
+  EXPECT_TRUE(cleared->cleared);
+  // A clear of a missing alert fails the whole configuration.
+  change.checkpoint.state_blob = "second";
+  change.new_alerts.clear();
+  change.clears = {AlertClear{99, T(95)}};
+  EXPECT_THAT((*storage)->CommitConfiguration(change),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("clears[0]")));
+  checkpoint = (*storage)->sessions().GetCheckpoint("RDK-1");
+  ASSERT_THAT(checkpoint, IsOk());
+  EXPECT_EQ(checkpoint->state_blob, "fresh");
 }
 
 TEST(Storage, DataSurvivesCloseAndReopen) {
@@ -241,7 +305,7 @@ TEST(Storage, DataSurvivesCloseAndReopen) {
   {
     absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
     ASSERT_THAT(storage, IsOk());
-    for (int64_t b = 0; b < 3; ++b) ASSERT_THAT((*storage)->CommitBatch(MakeBatch("RDK-1", b)), IsOk());
+    for (int64_t b = 0; b < 3; ++b) ASSERT_THAT(CommitStep(**storage, MakeStep("RDK-1", b)), IsOk());
     ConfigRecord config;
     config.spacecraft_id = "RDK-1";
     config.config_json = "{}";
@@ -274,9 +338,9 @@ TEST(Storage, DataSurvivesCloseAndReopen) {
   EXPECT_EQ((*frames)[0].payload, Frame("RDK-1", 5).payload);
 }
 
-// The durability contract of sqlite_db.h: a batch whose CommitBatch returned OK (the ack) is
-// in the file after the writing process is killed with SIGKILL at an arbitrary point, and no
-// batch is ever half there.
+// The durability contract of sqlite_db.h: frames whose ArchiveFrames returned OK (the ack) and
+// effects whose CommitFilterEffects returned OK are in the file after the writing process is
+// killed with SIGKILL at an arbitrary point, and no transaction is ever half there.
 TEST(Storage, AcknowledgedBatchesSurviveKillNine) {
   TempDir dir;
   const std::string path = dir.File("esg.db");
@@ -285,12 +349,12 @@ TEST(Storage, AcknowledgedBatchesSurviveKillNine) {
   const pid_t child = fork();
   ASSERT_GE(child, 0);
   if (child == 0) {
-    // The "server": commit batches forever, acknowledging each one after CommitBatch is OK.
+    // The "server": commit steps forever, acknowledging each one after both commits are OK.
     close(acks[0]);
     absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
     if (!storage.ok()) _exit(2);
     for (int64_t b = 0;; ++b) {
-      if (!(*storage)->CommitBatch(MakeBatch("RDK-K", b)).ok()) _exit(3);
+      if (!CommitStep(**storage, MakeStep("RDK-K", b)).ok()) _exit(3);
       if (write(acks[1], &b, sizeof(b)) != static_cast<ssize_t>(sizeof(b))) _exit(4);
     }
   }
@@ -314,15 +378,16 @@ TEST(Storage, AcknowledgedBatchesSurviveKillNine) {
   ASSERT_THAT(storage, IsOk());
   EXPECT_THAT((*storage)->database().QuickCheck(), IsOk());
   const Visible v = Count(**storage, "RDK-K");
-  // Every acknowledged batch is there; one more may be (committed, killed before its ack).
+  // Every acknowledged step is there; one more may be (committed, killed before its ack).
   const int64_t batches = v.alerts;
   EXPECT_THAT(batches, AnyOf(last_acked + 1, last_acked + 2));
-  // And each visible batch is whole.
-  EXPECT_EQ(v.frames, batches * kFramesPerBatch);
+  // Each visible filter transaction is whole; the frames of one more step may be archived
+  // (killed between the two transactions: the server's restart applies them from the archive).
   EXPECT_EQ(v.coefficients, batches);
   EXPECT_EQ(v.checkpoint_sequence, std::optional<int64_t>(batches * kFramesPerBatch - 1));
+  EXPECT_THAT(v.frames, AnyOf(batches * kFramesPerBatch, (batches + 1) * kFramesPerBatch));
   EXPECT_THAT((*storage)->archive().HighestSequence("RDK-K"),
-              IsOkAndHolds(std::optional<int64_t>(batches * kFramesPerBatch - 1)));
+              IsOkAndHolds(std::optional<int64_t>(v.frames - 1)));
 }
 
 TEST(Storage, FourThreadsSharingOneStorageLoseNothing) {
@@ -337,9 +402,9 @@ TEST(Storage, FourThreadsSharingOneStorageLoseNothing) {
     threads.emplace_back([&, t] {
       const std::string id = absl::StrCat("SC-", t);
       for (int64_t b = 0; b < kBatchesPerThread; ++b) {
-        absl::StatusOr<BatchResult> r = (*storage)->CommitBatch(MakeBatch(id, b));
+        absl::Status r = CommitStep(**storage, MakeStep(id, b));
         if (!r.ok()) {
-          failures[t] = r.status();
+          failures[t] = r;
           return;
         }
       }
@@ -374,7 +439,7 @@ TEST(Storage, FourConnectionsWritingOneFileLoseNothingAndNumberAlertsUniquely) {
       }
       const std::string id = absl::StrCat("SC-", t);
       for (int64_t b = 0; b < kBatchesPerThread; ++b) {
-        absl::Status s = (*own)->CommitBatch(MakeBatch(id, b)).status();
+        absl::Status s = CommitStep(**own, MakeStep(id, b));
         // Every connection also raises alerts on one shared spacecraft: numbering contention.
         if (s.ok()) s = (*own)->alerts().Append(Alert("SC-SHARED", 60.0 * b)).status();
         if (!s.ok()) {
@@ -411,13 +476,12 @@ TEST(Storage, CorruptedPagesAreReportedAsDataLossWithoutACrash) {
   {
     absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
     ASSERT_THAT(storage, IsOk());
-    Batch batch;
-    batch.spacecraft_id = "RDK-1";
+    std::vector<ArchivedFrame> frames;
     for (int64_t s = 0; s < 200; ++s) {
-      batch.frames.push_back(Frame("RDK-1", s));
-      batch.frames.back().payload.append(1000, 'p');
+      frames.push_back(Frame("RDK-1", s));
+      frames.back().payload.append(1000, 'p');
     }
-    ASSERT_THAT((*storage)->CommitBatch(batch), IsOk());
+    ASSERT_THAT((*storage)->ArchiveFrames(frames), IsOk());
   }  // closing the last connection checkpoints the WAL into the main file
   ASSERT_FALSE(std::filesystem::exists(path + "-wal"));
   const auto size = std::filesystem::file_size(path);

@@ -1,6 +1,7 @@
 // The real esgd as a child process (ESGD_PATH names the binary): started on 127.0.0.1:0 over a
 // database file, its port read from its "esgd listening on port N" line, stopped with a signal
-// (SIGTERM for a graceful stop, SIGKILL for a crash).
+// (SIGTERM for a graceful stop, SIGKILL for a crash). With `--metrics-listen` among the extra
+// arguments, the metrics port is read from the "esgd metrics on port N" line written with it.
 #ifndef ESG_TESTS_TESTING_DAEMON_H_
 #define ESG_TESTS_TESTING_DAEMON_H_
 
@@ -13,6 +14,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "esg/v1/estimation_service.grpc.pb.h"
 #include "grpcpp/create_channel.h"
@@ -33,7 +35,18 @@ struct DaemonLimits {
 
 class Daemon {
  public:
-  Daemon(const std::string& db, const std::string& log, DaemonLimits limits = {}) {
+  Daemon(const std::string& db, const std::string& log, DaemonLimits limits = {},
+         const std::vector<std::string>& extra_args = {}) {
+    std::vector<std::string> args = {"esgd", "--listen", "127.0.0.1:0", "--db", db,
+                                     "--workers", "2"};
+    bool metrics = false;
+    for (const std::string& a : extra_args) {
+      args.push_back(a);
+      metrics = metrics || a == "--metrics-listen";
+    }
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
     rlimit fds{};
     getrlimit(RLIMIT_NOFILE, &fds);
     if (limits.soft_fds != 0) fds.rlim_cur = limits.soft_fds;
@@ -47,15 +60,20 @@ class Daemon {
       const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       if (err >= 0) dup2(err, STDERR_FILENO);
       close(out[0]);
-      execl(ESGD_PATH, "esgd", "--listen", "127.0.0.1:0", "--db", db.c_str(), "--workers", "2",
-            static_cast<char*>(nullptr));
+      execv(ESGD_PATH, argv.data());
       _exit(127);
     }
     close(out[1]);
-    // Read "esgd listening on port N".
+    // Read "esgd listening on port N" (and "esgd metrics on port M").
     std::string line;
     pollfd p{out[0], POLLIN, 0};
-    while (line.find('\n') == std::string::npos && poll(&p, 1, 30000) > 0) {
+    auto complete = [&] {
+      const size_t metrics_at = line.find("metrics on port ");
+      return line.find('\n') != std::string::npos &&
+             (!metrics ||
+              (metrics_at != std::string::npos && line.find('\n', metrics_at) != std::string::npos));
+    };
+    while (!complete() && poll(&p, 1, 30000) > 0) {
       char buffer[256];
       const ssize_t n = read(out[0], buffer, sizeof buffer);
       if (n <= 0) break;
@@ -65,6 +83,9 @@ class Daemon {
     const size_t at = line.find("port ");
     EXPECT_NE(at, std::string::npos) << "esgd did not start: " << line;
     if (at != std::string::npos) port_ = std::stoi(line.substr(at + 5));
+    if (const size_t m = line.find("metrics on port "); m != std::string::npos) {
+      metrics_port_ = std::stoi(line.substr(m + 16));
+    }
   }
   ~Daemon() { Stop(SIGTERM); }
   void Stop(int signal) {
@@ -79,11 +100,13 @@ class Daemon {
         "127.0.0.1:" + std::to_string(port_), grpc::InsecureChannelCredentials()));
   }
   int port() const { return port_; }
+  int metrics_port() const { return metrics_port_; }
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
 
  private:
   pid_t pid_ = -1;
   int port_ = 0;
+  int metrics_port_ = 0;
 };
 
 }  // namespace esg::testing

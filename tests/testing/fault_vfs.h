@@ -11,7 +11,7 @@
 //   options.vfs = FaultVfs::kName;
 //   auto storage = Storage::Open(path, options);
 //   vfs.Arm(FaultOp::kWrite, 3, SQLITE_FULL, FaultPersistence::kUntilDisarmed);
-//   ... CommitBatch() now returns ResourceExhausted ...
+//   ... ArchiveFrames() now returns ResourceExhausted ...
 //   vfs.Disarm();                                  // space is back
 //
 // Counting: every call of an operation on any file opened through the VFS (main database, -wal,
