@@ -41,7 +41,7 @@ void CheckPlanned(const esg::storage::AemFile& file) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace esg;
-  absl::StatusOr<storage::AemFile> file = storage::ParseAem(fuzz::AsText(data, size));
+  absl::StatusOr<storage::AemFile> file = storage::ParseAem(fuzz::AsAbslText(data, size));
   if (!file.ok()) {
     fuzz::CheckCleanError(file.status(), absl::StatusCode::kInvalidArgument);
     return 0;

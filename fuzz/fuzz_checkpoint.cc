@@ -91,7 +91,7 @@ esg::estimator::TelemetryFrame NextFrame(const EstimationSession& s) {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace esg;
   absl::StatusOr<server::ServerCheckpoint> decoded =
-      server::DecodeCheckpoint(fuzz::AsText(data, size));
+      server::DecodeCheckpoint(fuzz::AsAbslText(data, size));
   if (!decoded.ok()) {
     fuzz::CheckCleanError(decoded.status(), absl::StatusCode::kDataLoss);
     return 0;

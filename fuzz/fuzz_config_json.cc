@@ -9,7 +9,14 @@
 
 #include "estimator/spacecraft_config.h"
 #include "fuzz/fuzz_util.h"
+#include "google/protobuf/stubs/logging.h"
 #include "proto/convert.h"
+
+// Quiet protobuf's log lines (e.g. on invalid UTF-8 in a string field): the status says it.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  google::protobuf::SetLogHandler(nullptr);
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace esg;

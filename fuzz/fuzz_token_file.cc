@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_split.h"
 #include "fuzz/fuzz_util.h"
 #include "server/auth.h"
@@ -23,7 +24,7 @@ constexpr size_t kSecretLength = 12;
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace esg;
-  const std::string_view text = fuzz::AsText(data, size);
+  const absl::string_view text = fuzz::AsAbslText(data, size);
   absl::StatusOr<server::TokenAuthorizer> auth = server::TokenAuthorizer::Parse(text, "fuzz");
   int token_lines = 0;
   std::vector<absl::string_view> secrets;
@@ -37,10 +38,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   if (!auth.ok()) {
     fuzz::CheckCleanError(auth.status(), absl::StatusCode::kInvalidArgument);
-    const std::string_view message = auth.status().message();
-    ESG_FUZZ_CHECK(message.rfind("fuzz:", 0) == 0, message);
+    const absl::string_view message = auth.status().message();
+    ESG_FUZZ_CHECK(absl::StartsWith(message, "fuzz:"), std::string(message));
     for (absl::string_view secret : secrets) {
-      ESG_FUZZ_CHECK(message.find(secret) == std::string_view::npos,
+      ESG_FUZZ_CHECK(!absl::StrContains(message, secret),
                      "a word of the file (a possible token) is in the message");
     }
     return 0;

@@ -15,6 +15,7 @@
 #include "Eigen/Core"
 #include "Eigen/Geometry"
 #include "absl/status/status.h"
+#include "absl/strings/string_view.h"
 #include "estimator/telemetry.h"
 
 namespace esg::fuzz {
@@ -40,6 +41,11 @@ inline void CheckCleanError(const absl::Status& status, absl::StatusCode code) {
 
 inline std::string_view AsText(const uint8_t* data, size_t size) {
   return std::string_view(reinterpret_cast<const char*>(data), size);
+}
+
+// Abseil 20220623 in Debian has its own absl::string_view (not std::string_view).
+inline absl::string_view AsAbslText(const uint8_t* data, size_t size) {
+  return absl::string_view(reinterpret_cast<const char*>(data), size);
 }
 
 inline bool SameBits(double a, double b) {
