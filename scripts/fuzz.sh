@@ -115,7 +115,10 @@ case "${1:-}" in
     [ -f "$results" ] || printf 'date\ttarget\trequested\texecutions\texec/s\tcov\tft\tcorpus\tseconds\tresult\n' >"$results"
     for t in "${selected[@]}"; do
       start=$(date +%s)
-      if nice -n 10 bash -c "$(declare -f run); run $t $work -runs=$runs"; then result=clean; else result=FINDING; fi
+      # libFuzzer exits 72 when interrupted (SIGINT): the figures so far are printed and kept.
+      code=0
+      nice -n 10 bash -c "$(declare -f run); run $t $work -runs=$runs" || code=$?
+      case $code in 0) result=clean ;; 72) result=interrupted ;; *) result=FINDING ;; esac
       printf '%s\t%s\t%s\t%s\t%s\t%s\n' "$(date -u +%FT%TZ)" "$t" "$runs" "$(stats "$work/$t.log")" \
         "$(( $(date +%s) - start ))" "$result" | tee -a "$results"
     done
