@@ -4,8 +4,8 @@
 // increase inside [START_TIME, STOP_TIME], with unit finite quaternions and finite sigmas; the
 // planned profile of all samples is refused with InvalidArgument or gives unit finite attitudes;
 // the project's AEM writer writes the segments (or refuses segments that overlap) so that the
-// reader reads back the same samples (epochs to the written microsecond, quaternions normalised and up
-// to sign).
+// reader reads back the same samples (epochs to the written microsecond, quaternions normalised and
+// up to sign).
 #include <cmath>
 #include <cstddef>
 #include <cstdint>

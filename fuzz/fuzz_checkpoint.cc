@@ -66,8 +66,8 @@ void ExerciseViews(const EstimationSession& s) {
 esg::estimator::TelemetryFrame NextFrame(const EstimationSession& s) {
   esg::estimator::TelemetryFrame f;
   const absl::Time last = s.last_frame_time();
-  f.time = (last == absl::InfinitePast() ? absl::FromUnixSeconds(1551398400) : last) +
-           absl::Seconds(60);
+  f.time =
+      (last == absl::InfinitePast() ? absl::FromUnixSeconds(1551398400) : last) + absl::Seconds(60);
   const esg::estimator::AttitudeEstimate attitude = s.CurrentAttitude();
   const Eigen::Quaterniond q_in_b =
       attitude.q_in_b.coeffs().allFinite() && attitude.q_in_b.norm() > 0.5

@@ -2,10 +2,10 @@
 // export read through it. Input: the mapping JSON, optionally followed by a line "%%" and the CSV
 // text (without that line only the mapping is read).
 // Property: a mapping is refused with InvalidArgument or satisfies the mapping rules (a
-// delimiter usable between numbers, gyro ids 1..4 once each, 2 or 3 spin-axis columns, 0 or 3 voltage columns, positive
-// units); a CSV is refused with InvalidArgument or gives a recording that satisfies the recording
-// rules and that the project's recording CSV writes and reads back bit for bit (so a user's export
-// and `esg export telemetry` hold the same data).
+// delimiter usable between numbers, gyro ids 1..4 once each, 2 or 3 spin-axis columns, 0 or 3
+// voltage columns, positive units); a CSV is refused with InvalidArgument or gives a recording that
+// satisfies the recording rules and that the project's recording CSV writes and reads back bit for
+// bit (so a user's export and `esg export telemetry` hold the same data).
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -29,7 +29,8 @@ void CheckMapping(const esg::storage::ColumnMapping& m) {
   for (const esg::storage::GyroMapping& g : m.gyros) {
     ESG_FUZZ_CHECK(g.id >= 1 && g.id <= kMaxGyros, "gyro id in 1..4");
     ESG_FUZZ_CHECK(ids.insert(g.id).second, "gyro id once");
-    ESG_FUZZ_CHECK(g.spin_axis_columns.size() == (g.spin_axis_angles ? 2u : 3u), "spin-axis columns");
+    ESG_FUZZ_CHECK(g.spin_axis_columns.size() == (g.spin_axis_angles ? 2u : 3u),
+                   "spin-axis columns");
     ESG_FUZZ_CHECK(g.voltage_columns.empty() || g.voltage_columns.size() == 3, "voltage columns");
     ESG_FUZZ_CHECK(std::isfinite(g.angle_unit_rad) && g.angle_unit_rad > 0, "angle unit");
     ESG_FUZZ_CHECK(std::isfinite(g.voltage_unit_mv) && g.voltage_unit_mv > 0, "voltage unit");

@@ -10,7 +10,6 @@
 #include <string>
 
 #include "absl/strings/ascii.h"
-
 #include "fuzz/fuzz_util.h"
 #include "storage/recording_csv.h"
 
@@ -36,7 +35,8 @@ std::map<std::string, std::string> AsWritten(const std::map<std::string, std::st
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace esg;
-  absl::StatusOr<estimator::Recording> recording = storage::ParseRecordingCsv(fuzz::AsText(data, size));
+  absl::StatusOr<estimator::Recording> recording =
+      storage::ParseRecordingCsv(fuzz::AsText(data, size));
   if (!recording.ok()) {
     fuzz::CheckCleanError(recording.status(), absl::StatusCode::kInvalidArgument);
     return 0;

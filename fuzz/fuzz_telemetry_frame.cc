@@ -32,8 +32,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   estimator::Recording one;
   one.frames.push_back(*frame);
   fuzz::CheckRecordingInvariants(one);
-  const v1::TelemetryFrame again = proto_convert::FrameToProto(*frame, proto.spacecraft_id(),
-                                                               proto.sequence());
+  const v1::TelemetryFrame again =
+      proto_convert::FrameToProto(*frame, proto.spacecraft_id(), proto.sequence());
   absl::StatusOr<estimator::TelemetryFrame> back = proto_convert::FrameFromProto(again);
   ESG_FUZZ_CHECK(back.ok(), back.status().ToString());
   estimator::Recording other;

@@ -28,8 +28,8 @@ namespace esg::fuzz {
   std::abort();
 }
 
-#define ESG_FUZZ_CHECK(cond, note)                                   \
-  do {                                                               \
+#define ESG_FUZZ_CHECK(cond, note)                                         \
+  do {                                                                     \
     if (!(cond)) ::esg::fuzz::Violated(#cond, (note), __FILE__, __LINE__); \
   } while (false)
 
@@ -72,7 +72,8 @@ inline void CheckRecordingInvariants(const estimator::Recording& recording) {
   for (size_t i = 0; i < recording.frames.size(); ++i) {
     const estimator::TelemetryFrame& f = recording.frames[i];
     if (i > 0) ESG_FUZZ_CHECK(recording.frames[i - 1].time < f.time, "times strictly increase");
-    ESG_FUZZ_CHECK(f.time != absl::InfinitePast() && f.time != absl::InfiniteFuture(), "finite time");
+    ESG_FUZZ_CHECK(f.time != absl::InfinitePast() && f.time != absl::InfiniteFuture(),
+                   "finite time");
     for (const auto& g : f.gyros) {
       if (!g.has_value()) continue;
       ESG_FUZZ_CHECK(IsFinite(g->h_k) && IsUnit(g->h_k.norm()), "unit spin axis");
@@ -104,9 +105,8 @@ inline bool SameFrames(const estimator::Recording& a, const estimator::Recording
     if (x.star_tracker.has_value() != y.star_tracker.has_value()) return false;
     if (!x.star_tracker.has_value()) continue;
     if (x.star_tracker->valid != y.star_tracker->valid) return false;
-    if (x.star_tracker->valid &&
-        !SameBits(Eigen::Vector4d(x.star_tracker->q_in_b.coeffs()),
-                  Eigen::Vector4d(y.star_tracker->q_in_b.coeffs()))) {
+    if (x.star_tracker->valid && !SameBits(Eigen::Vector4d(x.star_tracker->q_in_b.coeffs()),
+                                           Eigen::Vector4d(y.star_tracker->q_in_b.coeffs()))) {
       return false;
     }
   }

@@ -40,10 +40,11 @@ std::string Num(double x) { return absl::StrFormat("%.17g", x); }
 
 // The recording as the user export of deploy/examples/columns_user_export.json.
 std::string UserExport(const estimator::Recording& recording) {
-  std::vector<std::string> header = {"STR_STATUS", "STR_QX", "STR_QY", "STR_QZ", "STR_QW",
-                                     "UNIX_TIME"};
+  std::vector<std::string> header = {"STR_STATUS", "STR_QX", "STR_QY",
+                                     "STR_QZ",     "STR_QW", "UNIX_TIME"};
   for (int g = 1; g <= 4; ++g) {
-    for (const char* s : {"AZ", "EL", "UX", "UY", "UZ"}) header.push_back(absl::StrCat("ESG", g, "_", s));
+    for (const char* s : {"AZ", "EL", "UX", "UY", "UZ"})
+      header.push_back(absl::StrCat("ESG", g, "_", s));
   }
   std::string out = "# exported from the ground segment\n" + absl::StrJoin(header, ";") + "\n";
   for (const estimator::TelemetryFrame& frame : recording.frames) {
@@ -81,17 +82,17 @@ size_t VersionLength(const std::vector<double>& v, int version) {
   const size_t n = static_cast<size_t>(v.at(23 + m + 1 + 30 * g));
   size_t pos = 23 + m + 1 + 30 * g + 1 + 2 * n * n;  // version 1
   if (version == 1) return pos;
-  pos += 3;                                          // anchoring flags
-  pos += 1 + static_cast<size_t>(v.at(pos));         // consistency monitor
+  pos += 3;                                   // anchoring flags
+  pos += 1 + static_cast<size_t>(v.at(pos));  // consistency monitor
   if (version == 2) return pos;
-  pos += 1 + static_cast<size_t>(v.at(pos));         // widening
-  pos += 1 + 3;                                      // suspect gyro and time
+  pos += 1 + static_cast<size_t>(v.at(pos));  // widening
+  pos += 1 + 3;                               // suspect gyro and time
   if (version == 3) return pos;
-  pos += 1 + 3 + 1;                                  // latency, rate, interval
-  pos += 1 + static_cast<size_t>(v.at(pos));         // change detector
+  pos += 1 + 3 + 1;                           // latency, rate, interval
+  pos += 1 + static_cast<size_t>(v.at(pos));  // change detector
   if (version == 4) return pos;
-  pos += 9 + 1;                                      // mount correction
-  pos += 1 + static_cast<size_t>(v.at(pos));         // mount monitor
+  pos += 9 + 1;                               // mount correction
+  pos += 1 + static_cast<size_t>(v.at(pos));  // mount monitor
   return pos;
 }
 

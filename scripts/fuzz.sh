@@ -90,7 +90,8 @@ case "${1:-}" in
     failed=()
     printf 'target\texecutions\texec/s\tcov\tft\tcorpus\tresult\n'
     for t in "${TARGETS[@]}"; do
-      if run "$t" "$work" -max_total_time="$seconds"; then result=clean; else result=FAILED; failed+=("$t"); fi
+      result=clean
+      run "$t" "$work" -max_total_time="$seconds" || { result=FAILED; failed+=("$t"); }
       printf '%s\t%s\t%s\n' "$t" "$(stats "$work/$t.log")" "$result"
     done
     if [ ${#failed[@]} -ne 0 ]; then
