@@ -329,6 +329,14 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     if (absl::Status st = CheckCovariance(s.P0_); !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: initial ", st.message()));
     }
+    // The prior variances: every state has one, and sqrt(P/P0) (convergence, RelativeSigma)
+    // divides by them. A zero let a restored session write a checkpoint with inf in it.
+    for (int i = 0; i < s.P0_.rows(); ++i) {
+      if (!(s.P0_(i, i) > 0.0)) {
+        return absl::DataLossError(absl::StrFormat(
+            "checkpoint: initial covariance diagonal %d is not positive (%g)", i, s.P0_(i, i)));
+      }
+    }
   }
   // Every index the session dereferences must name a gyro it has: a corrupt checkpoint is
   // DataLoss, never a crash.
