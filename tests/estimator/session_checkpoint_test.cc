@@ -625,6 +625,19 @@ TEST(SessionCheckpoint, ZeroInitialVarianceIsDataLoss) {
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("initial covariance diagonal")));
 }
 
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 4): an uninitialised session's
+// checkpoint whose working pair named gyro 0 restored (pairs were checked only once initialised),
+// and the first frame with a star-tracker fix read the frame's gyro at index -1.
+TEST(SessionCheckpoint, UninitialisedSessionWithAPairOutsideTheConfigurationIsDataLoss) {
+  auto session = EstimationSession::Create(::esg::testing::PaperConfig(), Options());
+  ASSERT_THAT(session, IsOk());
+  SessionCheckpoint c = session->ExportCheckpoint();
+  ASSERT_EQ(c.values[0], 0.0);  // not initialised
+  c.values[14] = 0.0;           // working_pair[0]
+  EXPECT_THAT(EstimationSession::FromCheckpoint(::esg::testing::PaperConfig(), Options(), c).status(),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("working pair [0,")));
+}
+
 TEST(SessionCheckpoint, CorruptVersionTwoTailIsDataLossNamingTheField) {
   const Scenario s = AllPhases();
   const size_t cut = FrameAt(s, 6.5);
