@@ -329,6 +329,14 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     if (absl::Status st = CheckCovariance(s.P0_); !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: initial ", st.message()));
     }
+    // The prior variances: every state has one, and sqrt(P/P0) (convergence, RelativeSigma)
+    // divides by them. A zero let a restored session write a checkpoint with inf in it.
+    for (int i = 0; i < s.P0_.rows(); ++i) {
+      if (!(s.P0_(i, i) > 0.0)) {
+        return absl::DataLossError(absl::StrFormat(
+            "checkpoint: initial covariance diagonal %d is not positive (%g)", i, s.P0_(i, i)));
+      }
+    }
   }
   // Every index the session dereferences must name a gyro it has: a corrupt checkpoint is
   // DataLoss, never a crash.
@@ -342,13 +350,17 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       s.consecutive_accepted_ < 0) {
     return absl::DataLossError("checkpoint: negative step counter");
   }
-  if (s.initialized_) {
-    for (const auto& [name, pair] : {std::pair<const char*, std::array<int, 2>>{"working", s.working_pair_},
-                                     {"reserve", s.reserve_pair_}}) {
-      if (pair[0] == pair[1] || s.Find(pair[0]) == nullptr || s.Find(pair[1]) == nullptr) {
-        return absl::DataLossError(absl::StrCat("checkpoint: ", name, " pair [", pair[0], ",",
-                                                pair[1], "] does not name two of its gyros"));
-      }
+  // An initialised session's pairs name two of its running gyros; an uninitialised one starts on
+  // its pairs at the first star-tracker fix, so they name two configured gyros (a pair naming
+  // gyro 0 indexed a frame's gyros at -1 there).
+  for (const auto& [name, pair] : {std::pair<const char*, std::array<int, 2>>{"working", s.working_pair_},
+                                   {"reserve", s.reserve_pair_}}) {
+    const bool named = s.initialized_
+                           ? s.Find(pair[0]) != nullptr && s.Find(pair[1]) != nullptr
+                           : config.FindGyro(pair[0]) != nullptr && config.FindGyro(pair[1]) != nullptr;
+    if (pair[0] == pair[1] || !named) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", name, " pair [", pair[0], ",",
+                                              pair[1], "] does not name two of its gyros"));
     }
   }
   return s;

@@ -48,8 +48,11 @@ absl::StatusOr<Eigen::Vector3d> OptionalVector3(const RepeatedField<double>& val
 // Unit-converted values are written with 15 significant digits, so that a configuration file
 // reads 0.12 rather than 0.11999999999999998 after deg/h -> rad/s -> deg/h (the SI value read back
 // differs by at most 5e-16 relative, far below any physical meaning).
+// A zero is written as 0: protobuf's JSON parser reads "-0" back as 0, so a written -0 would not
+// read back to itself (found by fuzz_config_json).
 double Tidy(double x) {
-  if (x == 0.0 || !std::isfinite(x)) return x;
+  if (x == 0.0) return 0.0;
+  if (!std::isfinite(x)) return x;
   char buf[32];
   std::snprintf(buf, sizeof(buf), "%.15g", x);
   return std::strtod(buf, nullptr);

@@ -84,9 +84,10 @@ absl::StatusOr<TokenAuthorizer> TokenAuthorizer::Parse(absl::string_view text,
       } else if (role == "write") {
         entry.roles |= static_cast<int>(Role::kWrite);
       } else {
-        return absl::InvalidArgumentError(absl::StrCat(source, ":", line_number,
-                                                       ": unknown role '", role,
-                                                       "' (use read, write)"));
+        // The word is not echoed: it may be a token written in the wrong column.
+        return absl::InvalidArgumentError(absl::StrCat(
+            source, ":", line_number, ": unknown role of ", role.size(),
+            " bytes in the second word (use read, write; not shown, it may be a token)"));
       }
     }
     if (parts.size() == 3) {

@@ -24,8 +24,10 @@ absl::Status LineError(int line, absl::string_view what, absl::string_view reaso
   return absl::InvalidArgumentError(absl::StrCat("line ", line, ": ", what, ": ", reason));
 }
 
+// A non-negative decimal of 1 to 9 digits (so it fits an int; longer runs are refused before
+// they could overflow).
 bool ParseDigits(absl::string_view s, int* out) {
-  if (s.empty()) return false;
+  if (s.empty() || s.size() > 9) return false;
   int v = 0;
   for (char c : s) {
     if (c < '0' || c > '9') return false;

@@ -43,15 +43,16 @@ const Parameter* FindParameter(const std::vector<Parameter>& ps, const std::stri
   return nullptr;
 }
 
-std::string VectorText(const std::vector<Parameter>& ps, const std::string& name,
-                       const char* format) {
+// `decimals` digits after the point (a count, not a format string: absl::StrFormat checks its
+// format at compile time under clang).
+std::string VectorText(const std::vector<Parameter>& ps, const std::string& name, int decimals) {
   std::vector<std::string> parts;
   for (int i = 0; i < 3; ++i) {
     const Parameter* p = FindParameter(ps, absl::StrFormat("%s[%d]", name, i));
     if (p == nullptr) return "";
-    parts.push_back(p->sigma > 0 ? absl::StrFormat("%s+-%s", absl::StrFormat(format, p->value),
-                                                   absl::StrFormat(format, p->sigma))
-                                 : absl::StrFormat(format, p->value));
+    parts.push_back(p->sigma > 0 ? absl::StrFormat("%.*f+-%.*f", decimals, p->value, decimals,
+                                                   p->sigma)
+                                 : absl::StrFormat("%.*f", decimals, p->value));
   }
   return absl::StrCat("[", absl::StrJoin(parts, ", "), "]");
 }
@@ -81,7 +82,7 @@ std::string ExplainFinding(const Finding& f) {
     return absl::StrFormat(
         "gyro %d drifts with odd harmonics of a displaced rotor (eq. (8)-(10)): C1 = %s deg/h, "
         "C2 = %s deg/h, %.0f deg apart as lines%s; %s",
-        f.gyro, VectorText(ps, "c1DegH", "%.3f"), VectorText(ps, "c2DegH", "%.3f"),
+        f.gyro, VectorText(ps, "c1DegH", 3), VectorText(ps, "c2DegH", 3),
         angle ? angle->value : 0.0,
         size
             ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))",
@@ -99,19 +100,19 @@ std::string ExplainFinding(const Finding& f) {
   if (f.effect == "unequal_stiffness") {
     return absl::StrFormat(
         "gyro %d: unequal suspension stiffness (eq. (1)): mu = %s deg/h, nu = %s deg/h; %s", f.gyro,
-        VectorText(ps, "muDegH", "%.3f"), VectorText(ps, "nuDegH", "%.3f"), stats);
+        VectorText(ps, "muDegH", 3), VectorText(ps, "nuDegH", 3), stats);
   }
   if (f.effect == "gyro_misalignment") {
     return absl::StrFormat(
         "gyro %d case axes are misaligned to the body by %s arcsec (rotation vector, "
         "body axes); %s",
-        f.gyro, VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
+        f.gyro, VectorText(ps, "misalignmentArcsec", 1), stats);
   }
   if (f.effect == "star_tracker_misalignment") {
     return absl::StrFormat(
         "the star tracker is misaligned to the body by %s arcsec (rotation vector, body "
         "axes), common to all gyros; %s",
-        VectorText(ps, "misalignmentArcsec", "%.1f"), stats);
+        VectorText(ps, "misalignmentArcsec", 1), stats);
   }
   if (f.effect == "star_tracker_latency") {
     const Parameter* tau = FindParameter(ps, "latencyMs");
@@ -144,7 +145,7 @@ std::string ExplainFinding(const Finding& f) {
         "switched on then (a step of C1 by -d in eq. (10)); %s, best of %d onsets",
         size ? size->value : 0.0, size ? size->sigma : 0.0, f.gyro, UtcText(t.onset), half_width,
         t.onset_hours, t.onset_lower_hours, t.onset_upper_hours, UtcText(t.onset_lower),
-        UtcText(t.onset_upper), VectorText(ps, "driftStepDegH", "%.3f"), stats,
+        UtcText(t.onset_upper), VectorText(ps, "driftStepDegH", 3), stats,
         t.onsets_searched);
   }
   return stats;

@@ -609,6 +609,35 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
 }
 
 // The version-2 tail: the flags and the monitor named by the message when corrupt.
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 3): a checkpoint whose initial
+// covariance P0 had a zero on its diagonal restored; the next frame put sqrt(P/P0) = inf into the
+// convergence record, so the session's own checkpoint no longer restored (the server would have
+// written a checkpoint it cannot load). The fuzzer's blob is tested in quarantine_test.cc.
+TEST(SessionCheckpoint, ZeroInitialVarianceIsDataLoss) {
+  const Scenario s = AllPhases();
+  const Prefix p = RunPrefix(s, Options(), FrameAt(s, 0.5));
+  ASSERT_TRUE(p.session.initialized());
+  SessionCheckpoint c = p.session.ExportCheckpoint();
+  const size_t n = static_cast<size_t>(p.session.state_size());
+  const size_t p0_begin = Version1Length(c) - n * n;
+  c.values[p0_begin + (n - 5) * n + (n - 5)] = 0.0;  // a diagonal entry of P0
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), c).status(),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("initial covariance diagonal")));
+}
+
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 4): an uninitialised session's
+// checkpoint whose working pair named gyro 0 restored (pairs were checked only once initialised),
+// and the first frame with a star-tracker fix read the frame's gyro at index -1.
+TEST(SessionCheckpoint, UninitialisedSessionWithAPairOutsideTheConfigurationIsDataLoss) {
+  auto session = EstimationSession::Create(::esg::testing::PaperConfig(), Options());
+  ASSERT_THAT(session, IsOk());
+  SessionCheckpoint c = session->ExportCheckpoint();
+  ASSERT_EQ(c.values[0], 0.0);  // not initialised
+  c.values[14] = 0.0;           // working_pair[0]
+  EXPECT_THAT(EstimationSession::FromCheckpoint(::esg::testing::PaperConfig(), Options(), c).status(),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("working pair [0,")));
+}
+
 TEST(SessionCheckpoint, CorruptVersionTwoTailIsDataLossNamingTheField) {
   const Scenario s = AllPhases();
   const size_t cut = FrameAt(s, 6.5);

@@ -25,6 +25,7 @@ namespace {
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 // Independent of units.h on purpose: the expected values are computed from first principles.
 constexpr double kPi = std::numbers::pi;
@@ -193,6 +194,26 @@ void ExpectConfigsEqual(const estimator::SpacecraftConfig& a, const estimator::S
   EXPECT_EQ(a.filter.measurement_step, b.filter.measurement_step);
   EXPECT_EQ(a.filter.innovation_kd, b.filter.innovation_kd);
   ExpectNear(a.filter.fault_threshold, b.filter.fault_threshold, "fault_threshold");
+}
+
+// Found by fuzz/fuzz_config_json.cc (docs/fuzzing.md, finding 5): a drift coefficient of -0.0
+// was written as -0, which protobuf's JSON parser reads as 0, so the written JSON did not read
+// back to itself. The fuzzer's input changed one value of rdk1.json to -0.0; here the same.
+TEST(ConfigJson, NegativeZeroIsWrittenAsZeroAndTheWrittenJsonIsAFixedPoint) {
+  const std::string json = R"({"spacecraftId": "RDK-1",
+    "gyros": [{"id": 1, "caseToBody": [1, 0, 0, 0, 1, 0, 0, 0, 1],
+               "model": {"k0DegH": 0.25, "c2DegH": [0.015, 0, -0.0]},
+               "modelSigma": {"k0DegH": 0.3}},
+              {"id": 2, "caseToBody": [0, 0, 1, 0, 1, 0, -1, 0, 0], "modelSigma": {"k0DegH": 0.3}}],
+    "workingPair": [1, 2], "reservePair": [1, 2], "starTracker": {"noiseArcsec": [5, 5, 30]}})";
+  absl::StatusOr<estimator::SpacecraftConfig> config = ParseConfigJson(json);
+  ASSERT_TRUE(config.ok()) << config.status();
+  const std::string written = ConfigToJson(*config);
+  EXPECT_THAT(written, Not(HasSubstr("-0,")));
+  EXPECT_THAT(written, Not(HasSubstr("-0]")));
+  absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(ConfigToJson(*back), written);
 }
 
 TEST(ConfigJson, RoundTripConfigJsonConfigIsEqual) {

@@ -160,5 +160,24 @@ TEST(Aem, CcsdsTimeFormats) {
   EXPECT_THAT(ParseCcsdsTime("yesterday"), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("CCSDS")));
 }
 
+// Found by fuzz/fuzz_aem.cc (docs/fuzzing.md, finding 2): a run of digits in the seconds (or in
+// another field read as digits, e.g. SC_BODY_<n>) overflowed an int before its length was
+// checked (undefined behaviour, reported by UBSan). The fuzzer's input, then the fields alone.
+TEST(Aem, LongDigitRunsAreRefusedWithoutOverflow) {
+  const std::string fuzzer_input =
+      "CCSDS_AEM_VERS = 2.0\nCREATION_DATE = 2019-03-01T00:00:0085304411261 -0.776050292830884 "
+      "0.041254056559672\nDATA_STOP\n";
+  EXPECT_THAT(ParseAem(fuzzer_input),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("CREATION_DATE")));
+  EXPECT_THAT(ParseCcsdsTime("2019-03-01T00:00:0085304411261"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("seconds")));
+  EXPECT_THAT(ParseCcsdsTime("99999999999-03-01T00:00:00"),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("date")));
+  const std::string body_frame =
+      absl::StrReplaceAll(ValidText(), {{"SC_BODY_1", "SC_BODY_99999999999"}});
+  EXPECT_THAT(ParseAem(body_frame),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("REF_FRAME_B")));
+}
+
 }  // namespace
 }  // namespace esg::storage

@@ -5,12 +5,17 @@
 // run on. Checkpoints of the older server format and of a session that was never initialised
 // restore without quarantine.
 #include <chrono>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "estimator/calibration_model.h"
+#include "estimator/session.h"
+#include "proto/convert.h"
 #include "server/checkpoint_codec.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
@@ -282,6 +287,30 @@ TEST(Quarantine, CheckpointOfAnUninitialisedSessionLoadsAndTheRunEqualsOffline) 
     ASSERT_TRUE(server.core().WaitApplied("QA-1", absl::Seconds(60)).ok());
   }
   EXPECT_EQ(StoredSessionValues(db, "QA-1"), OfflineSessionValues(run.config, "10+11", run.frames));
+}
+
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 3): this blob (a version-1 session
+// of deploy/examples/rdk1.json whose initial covariance has a zero diagonal entry) restored, and
+// after one frame the session's own checkpoint did not. It must be DataLoss at the restore, so
+// esgd quarantines and rebuilds the spacecraft instead of running on with it.
+TEST(Quarantine, CheckpointWithAZeroInitialVarianceIsRefusedAtTheRestore) {
+  std::ifstream in(ESG_SOURCE_DIR "/fuzz/corpus/checkpoint/regression-zero-initial-variance.bin",
+                   std::ios::binary);
+  ASSERT_TRUE(in.good());
+  const std::string blob((std::istreambuf_iterator<char>(in)), {});
+  absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(blob);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  ASSERT_TRUE(decoded->session.has_value());
+  absl::StatusOr<estimator::SpacecraftConfig> config =
+      proto_convert::ReadConfigFile(ESG_SOURCE_DIR "/deploy/examples/rdk1.json");
+  ASSERT_TRUE(config.ok()) << config.status();
+  estimator::SessionOptions options;
+  options.model = *estimator::ParseModel(decoded->model);
+  const absl::StatusOr<estimator::EstimationSession> restored =
+      estimator::EstimationSession::FromCheckpoint(*config, options, *decoded->session);
+  ASSERT_FALSE(restored.ok());
+  EXPECT_EQ(restored.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(std::string(restored.status().message()), HasSubstr("initial covariance diagonal"));
 }
 
 TEST(Quarantine, UnusableConfigurationRefusesItsFramesUntilReconfigured) {
