@@ -19,7 +19,7 @@ ESG_POWER_SEEDS="${SEEDS:-5}" ESG_POWER_SCALES="${SCALES:-0.125,0.25,0.5,1}" \
   ESG_POWER_EFFECTS="${EFFECTS:-}" ESG_DISCOVERY_JOBS="${JOBS:-2}" \
   "$BUILD_DIR/tests/bench/esg_bench" --benchmark_filter=DiscoveryPower | tee "$tmp/out.txt"
 awk '/^# data/{on=1; next} on && NF==3 {print > "'"$tmp"'/" $1 ".dat"}' "$tmp/out.txt"
-if command -v gnuplot >/dev/null && [ -n "$OUT" ]; then
+if command -v gnuplot >/dev/null && [ -n "$OUT" ] && compgen -G "$tmp/*.dat" >/dev/null; then
   plots=""
   for f in "$tmp"/*.dat; do
     name="$(basename "$f" .dat)"

@@ -150,7 +150,7 @@ void BM_DiscoveryPower(benchmark::State& state) {
   const int seeds = EnvInt("ESG_POWER_SEEDS", 5);
   const int jobs = EnvInt("ESG_DISCOVERY_JOBS", 2);
   std::vector<double> scales = {0.125, 0.25, 0.5, 1.0};
-  if (const char* v = std::getenv("ESG_POWER_SCALES")) {
+  if (const char* v = std::getenv("ESG_POWER_SCALES"); v != nullptr && *v != '\0') {
     scales.clear();
     std::stringstream in(v);
     for (std::string item; std::getline(in, item, ',');) scales.push_back(std::atof(item.c_str()));
@@ -159,7 +159,7 @@ void BM_DiscoveryPower(benchmark::State& state) {
   effects.erase(effects.begin());  // not "none"
   effects.push_back("drift_step");
   effects.push_back("random_walk_one_gyro");
-  if (const char* v = std::getenv("ESG_POWER_EFFECTS")) {
+  if (const char* v = std::getenv("ESG_POWER_EFFECTS"); v != nullptr && *v != '\0') {
     effects.clear();
     std::stringstream in(v);
     for (std::string item; std::getline(in, item, ',');) effects.push_back(item);
