@@ -26,7 +26,7 @@ if command -v gnuplot >/dev/null && [ -n "$OUT" ] && compgen -G "$tmp/*.dat" >/d
     plots="${plots:+$plots, }'$f' using 2:(100*\$3) with linespoints title '$name'"
   done
   gnuplot <<GP
-set terminal pngcairo size 900,560
+set terminal pngcairo size 900,560 noenhanced
 set output '$OUT'
 set title 'Detection power of esg diagnose against effect size (30 h recordings)'
 set xlabel 'effect size, factor of the confusion matrix size'
