@@ -12,12 +12,12 @@
 //                                 innovations' finite-difference sensitivity (1 parameter)
 //   random_walk_drift             the random-walk intensity of eq. (11), common to all gyros or of
 //   (common, or gyro g)           one gyro, by a log-grid search of the likelihood above the
-//                                 configured one (1 parameter; a variance on its boundary: the
-//                                 LR against a 50:50 mixture of chi2(0) and chi2(1))
+//                                 configured one (1 parameter; its evidence integrated over the
+//                                 grid's intensities, equally likely a priori)
 //   drift_step (gyro g)           a drift constant in case axes switched on at an onset T (the
 //                                 step of C1 of eq. (10)); the likelihood profiled over T on a
 //                                 grid of onsets, refined near its maximum (3 parameters, the
-//                                 onset by Bonferroni over the onsets searched; fitted by
+//                                 onset integrated over a uniform prior; fitted by
 //                                 time_behaviour.h)
 // Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
 // rotation is not when every running gyro's misalignment is already estimated.

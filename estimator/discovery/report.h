@@ -79,7 +79,7 @@ struct TimeBehaviour {
   double onset_hours = 0.0;  // since the first frame
   double onset_lower_hours = 0.0;
   double onset_upper_hours = 0.0;
-  int onsets_searched = 0;  // grid points of the onset search (the Bonferroni factor)
+  int onsets_searched = 0;  // onsets evaluated (the points its evidence is integrated over)
   // For "step": the likelihood over the onsets searched, (hours since the first frame,
   // -2 log L above its minimum), in time order; the interval above is where it stays below 3.84.
   std::vector<std::pair<double, double>> onset_profile;

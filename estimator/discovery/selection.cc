@@ -7,7 +7,6 @@
 #include <string>
 #include <utility>
 
-#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/units.h"
@@ -410,7 +409,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   // Two stages. The constant effects (and the common random walk) first; the time behaviours
   // (a drift step per gyro, a random walk per gyro: many runs each) only when those leave the
   // round open: nothing significant, a change in time (the best is inhomogeneous), or a random
-  // walk. Every test counts the whole round's candidates in its Bonferroni level, fitted or not.
+  // walk. Every threshold counts the whole round's candidates, fitted or not (2 ln(M / alpha)).
   std::vector<Candidate> constant, timed;
   for (const Candidate& c : candidates) {
     const bool time_behaviour = c.effect == Effect::kDriftStep ||
