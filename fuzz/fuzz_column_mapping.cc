@@ -15,8 +15,8 @@
 
 #include "absl/strings/ascii.h"
 #include "fuzz/fuzz_util.h"
+#include "fuzz/recording_round_trip.h"
 #include "storage/column_mapping.h"
-#include "storage/recording_csv.h"
 
 namespace {
 
@@ -60,10 +60,6 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     fuzz::CheckCleanError(recording.status(), absl::StatusCode::kInvalidArgument);
     return 0;
   }
-  fuzz::CheckRecordingInvariants(*recording);
-  const std::string written = storage::FormatRecordingCsv(*recording);
-  absl::StatusOr<estimator::Recording> back = storage::ParseRecordingCsv(written);
-  ESG_FUZZ_CHECK(back.ok(), back.status().ToString());
-  ESG_FUZZ_CHECK(fuzz::SameFrames(*recording, *back), written);
+  fuzz::CheckRecordingRoundTrip(*recording);
   return 0;
 }
