@@ -160,10 +160,8 @@ TEST(Observability, MetricsScrapedWithCurlCountWhatWasSentAndRefused) {
 // Simulates `hours` of the calibration profile of `id` with a 5 arcmin readout jump of gyro 2
 // (in the working pair [1,2]) at `fault_hours`.
 SimulatedRun SimulateGyroFault(const std::string& id, double hours, double fault_hours) {
-  SimulatedRun run;
-  run.config = esg::testing::ServerTestConfig(id);
   estimator::SimulationSpec spec;
-  spec.config = run.config;
+  spec.config = esg::testing::ServerTestConfig(id);
   spec.duration = estimator::HoursToSeconds(hours);
   spec.seed = 8;
   estimator::GyroFault fault;
@@ -171,16 +169,7 @@ SimulatedRun SimulateGyroFault(const std::string& id, double hours, double fault
   fault.kind = estimator::GyroFault::Kind::kReadoutJump;
   fault.value = Eigen::Vector3d(estimator::ArcminToRad(5), 0, 0);
   spec.gyros[1].fault = fault;
-  auto profile = estimator::MakeNamedProfile("calibration", spec.duration);
-  EXPECT_TRUE(profile.ok()) << profile.status();
-  spec.profile = *profile;
-  auto result = estimator::Simulate(spec);
-  EXPECT_TRUE(result.ok()) << result.status();
-  int64_t sequence = 0;
-  for (const estimator::TelemetryFrame& f : result->recording.frames) {
-    run.frames.push_back(proto_convert::FrameToProto(f, id, ++sequence));
-  }
-  return run;
+  return esg::testing::SimulateCalibrationRun(id, spec);
 }
 
 TEST(Observability, JsonLogLinesParseAndCarryTheCriticalWorkingPairFault) {

@@ -36,18 +36,11 @@ struct SimulatedRun {
   std::vector<esg::v1::TelemetryFrame> frames;  // sequences 1..n
 };
 
-// Simulates `hours` of the paper's calibration profile (60 s frames, seeded) for spacecraft `id`
-// with optional star-tracker outliers (probability per sample; 300-900 arcsec).
-inline SimulatedRun SimulateRun(const std::string& id, double hours, uint64_t seed = 7,
-                                double outlier_probability = 0.0) {
+// Simulates `spec` (its config, duration, seed and truths) over the paper's calibration profile
+// as frames of spacecraft `id`, sequences 1..n.
+inline SimulatedRun SimulateCalibrationRun(const std::string& id, estimator::SimulationSpec spec) {
   SimulatedRun run;
-  run.config = ServerTestConfig(id);
-  estimator::SimulationSpec spec;
-  spec.config = run.config;
-  spec.duration = estimator::HoursToSeconds(hours);
-  spec.seed = seed;
-  spec.star_tracker.outlier_probability = outlier_probability;
-  spec.star_tracker.outlier_size = estimator::ArcsecToRad(300);
+  run.config = spec.config;
   auto profile = estimator::MakeNamedProfile("calibration", spec.duration);
   EXPECT_TRUE(profile.ok()) << profile.status();
   spec.profile = *profile;
@@ -58,6 +51,19 @@ inline SimulatedRun SimulateRun(const std::string& id, double hours, uint64_t se
     run.frames.push_back(proto_convert::FrameToProto(f, id, ++sequence));
   }
   return run;
+}
+
+// Simulates `hours` of the paper's calibration profile (60 s frames, seeded) for spacecraft `id`
+// with optional star-tracker outliers (probability per sample; 300-900 arcsec).
+inline SimulatedRun SimulateRun(const std::string& id, double hours, uint64_t seed = 7,
+                                double outlier_probability = 0.0) {
+  estimator::SimulationSpec spec;
+  spec.config = ServerTestConfig(id);
+  spec.duration = estimator::HoursToSeconds(hours);
+  spec.seed = seed;
+  spec.star_tracker.outlier_probability = outlier_probability;
+  spec.star_tracker.outlier_size = estimator::ArcsecToRad(300);
+  return SimulateCalibrationRun(id, spec);
 }
 
 inline esg::v1::ConfigureRequest ConfigureRequestFor(const estimator::SpacecraftConfig& config,
