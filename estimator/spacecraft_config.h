@@ -12,6 +12,7 @@
 #include "Eigen/Core"
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
+#include "estimator/basis_term.h"
 #include "estimator/drift_model.h"
 #include "estimator/units.h"
 
@@ -28,6 +29,12 @@ struct GyroConfig {
   DriftCoefficients model_sigma;
   // Prior 1-sigma of the gyro-to-star-tracker misalignment per body axis [rad]; 0 = not estimated.
   double misalignment_sigma = 0.0;
+  // Drift terms beyond eq. (1), (10) (basis_term.h), e.g. found by the diagnosis's open-ended
+  // stage; a term with sigma > 0 is calibrated.
+  std::vector<BasisTerm> basis_terms;
+  // Symmetric distortion D of the spin-axis readout [1]: the reading is h_meas = (I + D) h_k
+  // normalised; the filter uses normalise((I + D)^-1 h_meas). Zero: none.
+  Eigen::Matrix3d readout_distortion = Eigen::Matrix3d::Zero();
 };
 
 struct StarTrackerConfig {

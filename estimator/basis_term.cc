@@ -1,0 +1,211 @@
+#include "estimator/basis_term.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/units.h"
+
+namespace esg::estimator {
+
+namespace {
+
+constexpr std::array<std::pair<BasisKind, std::string_view>, 7> kKindNames = {{
+    {BasisKind::kSpinAxisHarmonic, "spin_axis_harmonic"},
+    {BasisKind::kBodyRate, "body_rate"},
+    {BasisKind::kBodyRateProduct, "body_rate_product"},
+    {BasisKind::kOrbitalHarmonic, "orbital_harmonic"},
+    {BasisKind::kRamp, "ramp"},
+    {BasisKind::kRampHarmonic, "ramp_harmonic"},
+    {BasisKind::kSuspensionVoltage, "suspension_voltage"},
+}};
+
+bool InAxisRange(int i) { return i >= 1 && i <= 3; }
+
+// "x", "y", "z" for case axes 1..3.
+char AxisLetter(int m) { return "xyz"[std::clamp(m, 1, 3) - 1]; }
+
+std::string Monomial(const std::array<int, 3>& e) {
+  std::string text;
+  for (int i = 0; i < 3; ++i) {
+    if (e[i] == 0) continue;
+    absl::StrAppend(&text, text.empty() ? "" : "*", "h", i + 1);
+    if (e[i] > 1) absl::StrAppend(&text, "^", e[i]);
+  }
+  return text.empty() ? "1" : text;
+}
+
+}  // namespace
+
+std::string_view BasisKindName(BasisKind kind) {
+  for (const auto& [k, name] : kKindNames) {
+    if (k == kind) return name;
+  }
+  return "unknown";
+}
+
+absl::StatusOr<BasisKind> ParseBasisKind(std::string_view name) {
+  for (const auto& [k, n] : kKindNames) {
+    if (n == name) return k;
+  }
+  std::string known;
+  for (const auto& [k, n] : kKindNames) absl::StrAppend(&known, known.empty() ? "" : ", ", std::string(n));
+  return absl::InvalidArgumentError(
+      absl::StrFormat("unknown basis kind \"%s\" (known: %s)", name, known));
+}
+
+absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
+  auto bad = [&](std::string_view field, const std::string& why) {
+    return absl::InvalidArgumentError(absl::StrCat(std::string(prefix), ".", std::string(field), ": ", why));
+  };
+  if (!InAxisRange(t.axis)) return bad("axis", absl::StrFormat("must be 1..3, got %d", t.axis));
+  if (!std::isfinite(t.value)) return bad("value", "must be finite");
+  if (!std::isfinite(t.sigma) || t.sigma < 0.0) return bad("sigma", "must be finite and >= 0");
+  switch (t.kind) {
+    case BasisKind::kSpinAxisHarmonic: {
+      int degree = 0;
+      for (int e : t.exponents) {
+        if (e < 0) return bad("exponents", "must be >= 0");
+        degree += e;
+      }
+      if (degree > kMaxHarmonicDegree) {
+        return bad("exponents", absl::StrFormat("degree %d above %d", degree, kMaxHarmonicDegree));
+      }
+      break;
+    }
+    case BasisKind::kBodyRateProduct:
+      if (!InAxisRange(t.index[1])) {
+        return bad("index", absl::StrFormat("must be 1..3, got %d", t.index[1]));
+      }
+      [[fallthrough]];
+    case BasisKind::kBodyRate:
+    case BasisKind::kRampHarmonic:
+    case BasisKind::kSuspensionVoltage:
+      if (!InAxisRange(t.index[0])) {
+        return bad("index", absl::StrFormat("must be 1..3, got %d", t.index[0]));
+      }
+      break;
+    case BasisKind::kOrbitalHarmonic:
+      if (t.harmonic < 1 || t.harmonic > kMaxOrbitalHarmonic) {
+        return bad("harmonic",
+                   absl::StrFormat("must be 1..%d, got %d", kMaxOrbitalHarmonic, t.harmonic));
+      }
+      if (!(std::isfinite(t.period) && t.period > 0.0)) return bad("period", "must be > 0");
+      break;
+    case BasisKind::kRamp:
+      break;
+  }
+  return absl::OkStatus();
+}
+
+double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
+  switch (t.kind) {
+    case BasisKind::kSpinAxisHarmonic: {
+      double s = 1.0;
+      for (int i = 0; i < 3; ++i) s *= std::pow(in.h_k(i), t.exponents[i]);
+      return s;
+    }
+    case BasisKind::kBodyRate:
+      return in.w_k(t.index[0] - 1);
+    case BasisKind::kBodyRateProduct:
+      return in.w_k(t.index[0] - 1) * in.w_k(t.index[1] - 1);
+    case BasisKind::kOrbitalHarmonic: {
+      const double phase =
+          2.0 * kPi * t.harmonic * std::fmod(absl::ToDoubleSeconds(in.time - t.epoch), t.period) /
+          t.period;
+      return t.sine ? std::sin(phase) : std::cos(phase);
+    }
+    case BasisKind::kRamp:
+      return absl::ToDoubleSeconds(in.time - t.epoch);
+    case BasisKind::kRampHarmonic: {
+      const double h = in.h_k(t.index[0] - 1);
+      return absl::ToDoubleSeconds(in.time - t.epoch) * h * h;
+    }
+    case BasisKind::kSuspensionVoltage:
+      return in.u_k_v.has_value() ? (*in.u_k_v)(t.index[0] - 1) : 0.0;
+  }
+  return 0.0;
+}
+
+Eigen::Vector3d BasisRegressor_k(const BasisTerm& t, const BasisInputs& in) {
+  return BasisScalar(t, in) * Eigen::Vector3d::Unit(std::clamp(t.axis, 1, 3) - 1);
+}
+
+Eigen::Vector3d BasisDrift_k(const BasisTerm& t, const BasisInputs& in) {
+  return t.value * BasisRegressor_k(t, in);
+}
+
+Eigen::Vector3d BasisDriftSum_k(const std::vector<BasisTerm>& terms, const BasisInputs& in) {
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const BasisTerm& t : terms) sum += BasisDrift_k(t, in);
+  return sum;
+}
+
+std::string BasisTermLabel(const BasisTerm& t) {
+  std::string s;
+  switch (t.kind) {
+    case BasisKind::kSpinAxisHarmonic:
+      s = Monomial(t.exponents);
+      break;
+    case BasisKind::kBodyRate:
+      s = absl::StrCat("rate[", t.index[0], "]");
+      break;
+    case BasisKind::kBodyRateProduct:
+      s = absl::StrCat("rate[", t.index[0], "]*rate[", t.index[1], "]");
+      break;
+    case BasisKind::kOrbitalHarmonic:
+      s = absl::StrCat("orbit ", t.sine ? "sin " : "cos ", t.harmonic);
+      break;
+    case BasisKind::kRamp:
+      s = "ramp";
+      break;
+    case BasisKind::kRampHarmonic:
+      s = absl::StrCat("ramp*h", t.index[0], "^2");
+      break;
+    case BasisKind::kSuspensionVoltage:
+      s = absl::StrCat("voltage[", t.index[0], "]");
+      break;
+  }
+  return absl::StrCat(s, " -> ", std::string(1, AxisLetter(t.axis)));
+}
+
+std::string_view BasisScalarJsonUnit(BasisKind kind) {
+  switch (kind) {
+    case BasisKind::kBodyRate:
+      return "deg/s";
+    case BasisKind::kBodyRateProduct:
+      return "(deg/s)^2";
+    case BasisKind::kRamp:
+    case BasisKind::kRampHarmonic:
+      return "h";
+    case BasisKind::kSuspensionVoltage:
+      return "V";
+    case BasisKind::kSpinAxisHarmonic:
+    case BasisKind::kOrbitalHarmonic:
+      return "1";
+  }
+  return "1";
+}
+
+double BasisValueToJson(BasisKind kind) {
+  // value [rad/s per SI unit of s] -> [deg/h per JSON unit of s]: drift_deg_h = value_json *
+  // s_json with s_json = s_si * (JSON unit per SI unit).
+  const double drift = RadPerSecToDegPerHour(1.0);
+  switch (kind) {
+    case BasisKind::kBodyRate:
+      return drift / RadToDeg(1.0);  // s in deg/s = s_si * (180/pi)
+    case BasisKind::kBodyRateProduct:
+      return drift / (RadToDeg(1.0) * RadToDeg(1.0));
+    case BasisKind::kRamp:
+    case BasisKind::kRampHarmonic:
+      return drift * kSecondsPerHour;  // s in h = s_si / 3600
+    case BasisKind::kSuspensionVoltage:
+    case BasisKind::kSpinAxisHarmonic:
+    case BasisKind::kOrbitalHarmonic:
+      return drift;
+  }
+  return drift;
+}
+
+}  // namespace esg::estimator

@@ -1,0 +1,104 @@
+// Drift terms beyond eq. (1), (10): the documented basis of the open-ended stage of the diagnosis
+// (docs/physics.md, "Basis of drift terms"). Each term is one scalar regressor s times a case
+// axis e_m, with one coefficient:
+//
+//     dw_k = value * s(t, h_k, w_k, u_k) * e_m        [rad/s, case axes k]
+//
+// Only the part of dw_k perpendicular to h_k moves the spin axis (dh/dt = dw x h), as for the
+// terms of eq. (1). The regressors, in SI (the configuration JSON states its units in the field
+// names and converts at the boundary, proto/convert.cc):
+//
+//   kind                    s                                             unit of s
+//   spin_axis_harmonic      h1^a h2^b h3^c, a + b + c <= 4                1
+//                           (degree 0 is a case-fixed drift; eq. (1), (10) are combinations of
+//                           degrees 0-4)
+//   body_rate               w_k[i], the body rate in case axes            rad/s
+//   body_rate_product       w_k[i] w_k[j]                                 (rad/s)^2
+//   orbital_harmonic        cos or sin of n 2 pi (t - epoch) / period      1
+//   ramp                    t - epoch                                     s
+//   ramp_harmonic           (t - epoch) h_k[i]^2 (a C2-like term growing)   s
+//   suspension_voltage      dU_k[i], the suspension offset voltage        V
+//
+// A configuration holds terms per gyro (GyroConfig::basis_terms); a term with sigma > 0 is a
+// filter state (calibrated), otherwise held at its value.
+#ifndef ESG_ESTIMATOR_BASIS_TERM_H_
+#define ESG_ESTIMATOR_BASIS_TERM_H_
+
+#include <array>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+
+namespace esg::estimator {
+
+enum class BasisKind {
+  kSpinAxisHarmonic,
+  kBodyRate,
+  kBodyRateProduct,
+  kOrbitalHarmonic,
+  kRamp,
+  kRampHarmonic,
+  kSuspensionVoltage,
+};
+
+// "spin_axis_harmonic", ... (the names of the table above; the JSON's `kind`).
+std::string_view BasisKindName(BasisKind kind);
+absl::StatusOr<BasisKind> ParseBasisKind(std::string_view name);
+
+inline constexpr int kMaxHarmonicDegree = 4;
+inline constexpr int kMaxOrbitalHarmonic = 4;
+
+struct BasisTerm {
+  BasisKind kind = BasisKind::kSpinAxisHarmonic;
+  int axis = 1;  // m, the case axis of the drift direction e_m, 1..3
+  // kSpinAxisHarmonic: (a, b, c), each >= 0, sum <= kMaxHarmonicDegree.
+  std::array<int, 3> exponents = {0, 0, 0};
+  // kBodyRate, kRampHarmonic, kSuspensionVoltage: i = index[0]; kBodyRateProduct: i, j (1..3).
+  std::array<int, 2> index = {1, 1};
+  int harmonic = 1;    // kOrbitalHarmonic: n, 1..kMaxOrbitalHarmonic
+  bool sine = false;   // kOrbitalHarmonic: sin (true) or cos (false)
+  double period = 0;   // kOrbitalHarmonic: [s], > 0
+  absl::Time epoch = absl::UnixEpoch();  // kOrbitalHarmonic: phase zero; kRamp*: s = 0
+  double value = 0.0;  // coefficient [rad/s per unit of s]
+  double sigma = 0.0;  // prior 1-sigma [rad/s per unit of s]; > 0: estimated
+};
+
+// What a regressor may depend on at one instant.
+struct BasisInputs {
+  absl::Time time;
+  Eigen::Vector3d h_k = Eigen::Vector3d::UnitZ();  // spin axis, case axes [1]
+  Eigen::Vector3d w_k = Eigen::Vector3d::Zero();   // body rate in case axes [rad/s]
+  std::optional<Eigen::Vector3d> u_k_v;            // suspension offset voltages [V]
+};
+
+// InvalidArgument naming the field (prefix, e.g. "gyros[1].basisTerms[0]") when the term's
+// indices, degree, harmonic, period or numbers are out of range or not finite.
+absl::Status ValidateBasisTerm(const BasisTerm& term, std::string_view prefix);
+
+// s of the table above. A voltage term without voltages gives 0.
+double BasisScalar(const BasisTerm& term, const BasisInputs& in);
+
+// d(dw_k)/d(value) = s e_m, 3 x 1 [rad/s per unit of value]; and the term's drift value * s e_m.
+Eigen::Vector3d BasisRegressor_k(const BasisTerm& term, const BasisInputs& in);
+Eigen::Vector3d BasisDrift_k(const BasisTerm& term, const BasisInputs& in);
+
+// Sum of the terms' drifts [rad/s].
+Eigen::Vector3d BasisDriftSum_k(const std::vector<BasisTerm>& terms, const BasisInputs& in);
+
+// Short identifier, stable across runs: "h1^2*h3 -> x", "rate[2] -> z", "orbit cos 1 -> y",
+// "ramp -> x", "ramp*h2^2 -> x", "voltage[1] -> z", "rate[1]*rate[3] -> y".
+std::string BasisTermLabel(const BasisTerm& term);
+
+// Unit of s in the JSON (deg/s for rates, h for ramps) and the factor from SI to it: the
+// JSON value [deg/h per JSON unit of s] = SI value * ValueToJson(kind).
+std::string_view BasisScalarJsonUnit(BasisKind kind);
+double BasisValueToJson(BasisKind kind);
+
+}  // namespace esg::estimator
+
+#endif  // ESG_ESTIMATOR_BASIS_TERM_H_
