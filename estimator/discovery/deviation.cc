@@ -1,0 +1,210 @@
+#include "estimator/discovery/deviation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "Eigen/Geometry"
+#include "absl/strings/str_format.h"
+#include "estimator/discovery/report.h"
+#include "estimator/drift_model.h"
+#include "estimator/rotation.h"
+#include "estimator/spin_axis.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+using Eigen::Matrix2d;
+using Eigen::Matrix3d;
+using Eigen::Quaterniond;
+using Eigen::Vector2d;
+using Eigen::Vector3d;
+
+namespace {
+
+// Largest turn of the attitude within one integration substep: the drift in inertial axes turns
+// with the case, and the midpoint rule's relative error is (turn)^2 / 24 (3e-6 at 0.5 deg).
+constexpr double kMaxSubstepTurn = 0.5 * kRadPerDeg;
+constexpr int kMinSamples = 10;
+
+}  // namespace
+
+std::vector<Vector2d> Signature(const DeviationSeries& series, const DriftFunction& drift_k) {
+  std::vector<Vector2d> out(series.sample_end.size(), Vector2d::Zero());
+  Vector3d sum = Vector3d::Zero();
+  size_t step = 0;
+  for (size_t k = 0; k < series.sample_end.size(); ++k) {
+    for (; step < static_cast<size_t>(series.sample_end[k]); ++step) {
+      const TrajectoryStep& s = series.steps[step];
+      sum += (s.C_in_k * drift_k(s.inputs)).cross(s.h_in) * s.dt;
+    }
+    out[k] = Vector2d(series.u1.dot(sum), series.u2.dot(sum));
+  }
+  return out;
+}
+
+std::vector<Vector2d> ReadoutSignature(const DeviationSeries& series, const Matrix3d& E) {
+  std::vector<Vector2d> out(series.h_k.size(), Vector2d::Zero());
+  Vector3d first = Vector3d::Zero();
+  for (size_t k = 0; k < series.h_k.size(); ++k) {
+    const Vector3d& h = series.h_k[k];
+    const Vector3d dh_k = (Matrix3d::Identity() - h * h.transpose()) * E * h;
+    const Vector3d dh_in = series.C_k_in[k].transpose() * dh_k;
+    if (k == 0) first = dh_in;
+    out[k] = Vector2d(series.u1.dot(dh_in - first), series.u2.dot(dh_in - first));
+  }
+  return out;
+}
+
+DriftFunction ModelDrift(const DriftCoefficients& coefficients,
+                         const std::vector<BasisTerm>& basis_terms) {
+  return [coefficients, basis_terms](const BasisInputs& in) -> Vector3d {
+    return DriftRate_k(coefficients, in.h_k) + BasisDriftSum_k(basis_terms, in);  // eq. (1), (10)
+  };
+}
+
+absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
+    const SpacecraftConfig& config, const std::vector<GyroEstimate>& estimates,
+    const std::vector<TelemetryFrame>& frames, const BodyRates& rates, const ModelRun& run,
+    const std::vector<int>& gyros) {
+  const int n = static_cast<int>(frames.size());
+  // Samples: the star tracker the model's filter applied (in sample, accepted).
+  std::vector<bool> usable(n, false);
+  for (const StepRecord& s : run.steps) {
+    if (s.star_tracker_present && s.accepted && !s.withheld && s.frame >= 0 && s.frame < n) {
+      usable[s.frame] = true;
+    }
+  }
+  // Attitude at every frame: the star tracker where usable, else carried from the previous frame
+  // by the gyros' measured rotation over the step.
+  std::vector<Quaterniond> q_in_b(n, Quaterniond::Identity());
+  std::vector<bool> attitude_known(n, false);
+  for (int i = 0; i < n; ++i) {
+    if (usable[i]) {
+      q_in_b[i] = frames[i].star_tracker->q_in_b.normalized();
+      attitude_known[i] = true;
+    } else if (i > 0 && attitude_known[i - 1]) {
+      const bool step_valid = static_cast<size_t>(i - 1) < rates.gyro_step_valid.size() &&
+                              rates.gyro_step_valid[i - 1];
+      q_in_b[i] = step_valid ? (q_in_b[i - 1] * ExpQuaternion(rates.gyro_step[i - 1])).normalized()
+                             : q_in_b[i - 1];
+      attitude_known[i] = true;
+    }
+  }
+  const Matrix3d S_st_b = config.star_tracker.noise.cwiseAbs2().asDiagonal();
+  const double readout_var = config.readout_noise * config.readout_noise;
+  const absl::Time t0 = frames.front().time;
+
+  std::vector<DeviationSeries> out;
+  for (int id : gyros) {
+    const GyroConfig* gc = config.FindGyro(id);
+    if (gc == nullptr) {
+      return absl::InvalidArgumentError(absl::StrFormat("gyro %d is not configured", id));
+    }
+    DriftCoefficients coefficients = gc->model;
+    std::vector<BasisTerm> basis_terms = gc->basis_terms;
+    Matrix3d C_b_k = gc->C_b_k;
+    for (const GyroEstimate& e : estimates) {
+      if (e.id != id) continue;
+      coefficients = e.coefficients;
+      C_b_k = ExpMatrix(e.misalignment_b) * gc->C_b_k;  // session.h: C_b_k = Exp(phi) C_b_k
+    }
+    const DriftFunction model = ModelDrift(coefficients, basis_terms);
+    auto reading = [&](int i) -> const std::optional<GyroReading>& { return frames[i].gyros[id - 1]; };
+
+    std::vector<int> samples;
+    for (int i = 0; i < n; ++i) {
+      if (usable[i] && reading(i).has_value()) samples.push_back(i);
+    }
+    if (static_cast<int>(samples.size()) < kMinSamples) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "gyro %d: %d star-tracker samples the model applied, at least %d needed", id,
+          samples.size(), kMinSamples));
+    }
+    DeviationSeries d;
+    d.gyro = id;
+    // Substeps from the first sample to the last; the reading held where one is missing.
+    Vector3d h_last = reading(samples.front())->h_k.normalized();
+    std::optional<Vector3d> u_last_v;
+    auto voltages_v = [&](int i) -> std::optional<Vector3d> {
+      if (reading(i).has_value() && reading(i)->u_k_mv.has_value()) {
+        return *reading(i)->u_k_mv * kVoltsPerMv;
+      }
+      return std::nullopt;
+    };
+    u_last_v = voltages_v(samples.front());
+    size_t next_sample = 0;
+    for (int i = samples.front(); i <= samples.back(); ++i) {
+      const Vector3d h_i = reading(i).has_value() ? reading(i)->h_k.normalized() : h_last;
+      if (auto u = voltages_v(i)) u_last_v = u;
+      if (next_sample < samples.size() && samples[next_sample] == i) {
+        d.sample_end.push_back(static_cast<int>(d.steps.size()));
+        d.frames.push_back(i);
+        d.hours.push_back(HoursSince(frames[i].time, t0));
+        d.h_k.push_back(h_i);
+        d.C_k_in.push_back((q_in_b[i].toRotationMatrix() * C_b_k).transpose());
+        ++next_sample;
+      }
+      h_last = h_i;
+      if (i == samples.back()) break;
+      const int j = i + 1;
+      const Vector3d h_j = reading(j).has_value() ? reading(j)->h_k.normalized() : h_i;
+      const double span = absl::ToDoubleSeconds(frames[j].time - frames[i].time);
+      const Quaterniond& qa = q_in_b[i];
+      Quaterniond qb = q_in_b[j];
+      if (qa.dot(qb) < 0.0) qb.coeffs() *= -1.0;
+      const Vector3d turn_b = LogQuaternion(qa.conjugate() * qb);
+      const int substeps = std::max(1, static_cast<int>(std::ceil(turn_b.norm() / kMaxSubstepTurn)));
+      const Vector3d w_b = span > 0.0 ? Vector3d(turn_b / span) : Vector3d::Zero();
+      const std::optional<Vector3d> u_i = u_last_v, u_j = voltages_v(j);
+      for (int s = 0; s < substeps; ++s) {
+        const double f = (s + 0.5) / substeps;
+        TrajectoryStep step;
+        step.dt = span / substeps;
+        step.inputs.time = frames[i].time + absl::Seconds(f * span);
+        step.inputs.h_k = SlerpUnit(h_i, h_j, f);
+        step.inputs.w_k = C_b_k.transpose() * w_b;
+        if (u_i.has_value() && u_j.has_value()) {
+          step.inputs.u_k_v = (1.0 - f) * *u_i + f * *u_j;
+        } else {
+          step.inputs.u_k_v = u_i.has_value() ? u_i : u_j;
+        }
+        step.C_in_k = qa.slerp(f, qb).toRotationMatrix() * C_b_k;
+        step.h_in = step.C_in_k * step.inputs.h_k;
+        d.steps.push_back(step);
+      }
+    }
+    // The measured inertial spin axis at each sample, the fixed projection basis and the noise.
+    std::vector<Vector3d> h_in(samples.size());
+    Vector3d mean = Vector3d::Zero();
+    for (size_t k = 0; k < samples.size(); ++k) {
+      h_in[k] = (d.C_k_in[k].transpose() * d.h_k[k]).normalized();
+      mean += h_in[k];
+    }
+    mean.normalize();
+    d.u1 = AnyPerpendicular(mean).normalized();
+    d.u2 = mean.cross(d.u1);
+    const std::vector<Vector2d> model_signature = Signature(d, model);
+    Eigen::Matrix<double, 3, 2> U;
+    U << d.u1, d.u2;
+    d.y.resize(samples.size());
+    d.R.resize(samples.size());
+    for (size_t k = 0; k < samples.size(); ++k) {
+      const Vector3d dy = h_in[k] - h_in[0];
+      d.y[k] = Vector2d(d.u1.dot(dy), d.u2.dot(dy)) - model_signature[k];
+      // Noise of h_in: the star tracker's rotation (body axes), h_in = C_in_b (I + [dtheta x])
+      // h_b, and the readout's, perpendicular to h.
+      const Matrix3d C_in_b = q_in_b[samples[k]].toRotationMatrix();
+      const Vector3d h_b = C_b_k * d.h_k[k];
+      const Matrix3d J = C_in_b * Skew(h_b);
+      const Matrix3d cov = J * S_st_b * J.transpose() +
+                           readout_var * (Matrix3d::Identity() - h_in[k] * h_in[k].transpose());
+      d.R[k] = U.transpose() * cov * U;
+    }
+    d.duration_s = HoursToSeconds(d.hours.back() - d.hours.front());
+    out.push_back(std::move(d));
+  }
+  return out;
+}
+
+}  // namespace esg::estimator::discovery

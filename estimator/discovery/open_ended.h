@@ -1,0 +1,117 @@
+// The open-ended stage of the diagnosis (docs/discovery.md, "The open-ended stage"): for what the
+// library did not explain, a sparse regression of each gyro's deviation from the model
+// (deviation.h) on a documented basis of physically meaningful drift terms (basis_term.h,
+// docs/physics.md "Basis of drift terms"):
+//
+//   spin-axis harmonics   h1^a h2^b h3^c e_m, degree <= 4, c <= 1 (25 monomials: a basis of the
+//                         functions of a unit vector to degree 4, which holds eq. (1) and (10))
+//   body rate             w_k[i] e_m and w_k[i] w_k[j] e_m (case axes)
+//   orbital phase         cos, sin of n x orbital phase, n = 1, 2 (when the recording shows the
+//                         orbital period)
+//   time                  a ramp t e_m, and t h_m^2 e_m (a C2-like term growing)
+//   suspension voltages   dU_k[i] e_m (when telemetered)
+//   readout distortion    a symmetric distortion E of the direction-cosine readout (6 per gyro)
+//
+// Selection is forward, one regressor of one gyro per round, by the diagnosis's evidence currency:
+// 2 ln B of the regressor (its coefficient integrated over its prior, the dispersion profiled)
+// above 2 ln(M / alpha), M the regressors tested in the round. Under the null each Bayes factor
+// has expectation 1, so by Markov's inequality and the union bound a round adds a regressor the
+// data do not need with probability at most alpha (the stated false-discovery control).
+// Regressors that the recording cannot tell apart from a selected one (replacing it loses less
+// than 2 ln B = 6, "strong" evidence on Kass and Raftery's scale) are reported as alternatives.
+// Pure computation.
+#ifndef ESG_ESTIMATOR_DISCOVERY_OPEN_ENDED_H_
+#define ESG_ESTIMATOR_DISCOVERY_OPEN_ENDED_H_
+
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "estimator/basis_term.h"
+#include "estimator/discovery/deviation.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+struct OpenEndedOptions {
+  double alpha = 0.01;
+  // Prior 1-sigma of a term's drift, at the RMS of its regressor over the recording [rad/s]
+  // (the library's prior for C1, C2: 0.1 deg/h).
+  double drift_sigma = DegPerHourToRadPerSec(0.1);
+  // Prior 1-sigma of a readout distortion entry [1] (60 arcsec, the misalignment prior).
+  double readout_sigma = ArcsecToRad(60.0);
+  int max_terms = 6;
+  // Orbital period [s] (0: not known, no orbital-phase regressors) and the phase's zero.
+  double orbital_period_s = 0.0;
+  absl::Time epoch = absl::UnixEpoch();
+  // A regressor is an alternative to a selected one when replacing it loses less than this 2 ln B.
+  double ambiguity = 6.0;
+};
+
+// One regressor of the basis for one gyro.
+struct BasisColumn {
+  bool readout = false;  // a readout distortion entry instead of a drift term
+  BasisTerm term;        // drift terms: kind, axis, indices (value 1)
+  int row = 0, col = 0;  // readout: the symmetric entry E(row, col) = E(col, row), 0-based
+  std::string label;     // BasisTermLabel, or "readout E_xy"
+};
+
+// The basis for a gyro's series (regressors that vanish on the recording are left out).
+std::vector<BasisColumn> EnumerateBasis(const DeviationSeries& series,
+                                        const OpenEndedOptions& options);
+
+struct SelectedTerm {
+  int gyro = 0;
+  BasisColumn column;
+  double value = 0.0;  // posterior mean [rad/s per SI unit of s], or [1] for a readout entry
+  double sigma = 0.0;  // posterior 1-sigma
+  double prior_sigma = 0.0;
+  double evidence = 0.0;   // 2 ln B when it was added
+  double threshold = 0.0;  // 2 ln(M / alpha) of its round
+  int columns_tested = 0;  // M
+  // Regressors the recording cannot tell apart from it, with 2 ln B against it (<= 0).
+  std::vector<std::pair<std::string, double>> alternatives;
+};
+
+// A gyro's residual drift: the fixed-interval smoothed drift of its deviation, carried to case
+// axes, before and after the selected terms [rad/s].
+struct ResidualDrift {
+  int gyro = 0;
+  std::vector<double> hours;
+  std::vector<Eigen::Vector3d> before_k, after_k;
+  std::vector<double> sigma;  // 1-sigma of one component (rms of the two) [rad/s], after
+  double smoothing_intensity = 0.0;  // the walk intensity the smoother used [rad/s/sqrt(s)]
+};
+
+struct OpenEndedResult {
+  std::vector<SelectedTerm> terms;  // in the order selected
+  // The best regressor of the last round, selected or not: what the remaining deviation
+  // resembles most (gyro, label, 2 ln B, threshold).
+  int best_gyro = 0;
+  std::string best_label;
+  double best_evidence = 0.0;
+  double best_threshold = 0.0;
+  int columns_tested = 0;  // M of the first round
+  std::vector<ResidualDrift> residual_drift;
+  double deviance_before = 0.0, deviance_after = 0.0;  // summed over gyros
+};
+
+// `random_walk`: each series' intensity of eq. (11) [rad/s/sqrt(s)], `w0_sigma` the prior 1-sigma
+// of its residual drift at the start [rad/s] (same order as `series`; deviation_filter.h).
+OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
+                             const std::vector<double>& random_walk,
+                             const std::vector<double>& w0_sigma,
+                             const OpenEndedOptions& options);
+
+// What a set of selected terms of one gyro says in words: case-fixed drift along (x, y, z),
+// varying with the orbital phase, growing, proportional to the body rate, ..., with amplitudes in
+// deg/h and the alternatives that cannot be told apart.
+std::vector<std::string> DescribeTerms(const std::vector<SelectedTerm>& terms,
+                                       const OpenEndedOptions& options);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_OPEN_ENDED_H_
