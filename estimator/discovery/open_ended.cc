@@ -36,15 +36,26 @@ struct GyroData {
   double random_walk = 0.0;
   double w0_sigma = 0.0;
   VectorXd y_w;
-  std::vector<BasisColumn> columns;
+  GyroBasis basis;
   std::vector<std::vector<Vector2d>> signature;  // raw, per column
   std::vector<VectorXd> x_w;                     // whitened, per column
   VectorXd prior;                                // per column
-  std::vector<int> active;                       // selected columns
+  std::vector<int> active;                       // selected groups
   RegressionFit fit;
 };
 
-RegressionFit Fit(const GyroData& g, const std::vector<int>& cols) {
+// The columns of `groups`, in order.
+std::vector<int> ColumnsOf(const GyroData& g, const std::vector<int>& groups) {
+  std::vector<int> cols;
+  for (int k : groups) {
+    const std::vector<int>& c = g.basis.groups[k].columns;
+    cols.insert(cols.end(), c.begin(), c.end());
+  }
+  return cols;
+}
+
+RegressionFit Fit(const GyroData& g, const std::vector<int>& groups) {
+  const std::vector<int> cols = ColumnsOf(g, groups);
   std::vector<const VectorXd*> X;
   VectorXd prior(cols.size());
   for (size_t i = 0; i < cols.size(); ++i) {
@@ -52,6 +63,10 @@ RegressionFit Fit(const GyroData& g, const std::vector<int>& cols) {
     prior(i) = g.prior(cols[i]);
   }
   return FitRegression(g.y_w, X, prior);
+}
+
+bool Contains(const std::vector<int>& v, int x) {
+  return std::find(v.begin(), v.end(), x) != v.end();
 }
 
 double ScalarRms(const DeviationSeries& s, const BasisColumn& c) {
@@ -116,17 +131,32 @@ std::string Vec(const Vector3d& v, double scale, const char* fmt = "%.4f") {
 
 }  // namespace
 
-std::vector<BasisColumn> EnumerateBasis(const DeviationSeries& series,
-                                        const OpenEndedOptions& options) {
-  std::vector<BasisColumn> out;
-  auto add = [&](BasisTerm t) {
+GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options) {
+  GyroBasis out;
+  // Opens a group; columns added until the next one belong to it. Empty groups are dropped.
+  auto open_group = [&](std::string label) {
+    if (!out.groups.empty() && out.groups.back().columns.empty()) out.groups.pop_back();
+    out.groups.push_back(BasisGroup{std::move(label), {}});
+  };
+  auto add_column = [&](BasisColumn c) {
+    c.group = static_cast<int>(out.groups.size()) - 1;
+    if (!c.readout && !(ScalarRms(series, c) > kAbsentRms)) return;
+    out.groups.back().columns.push_back(static_cast<int>(out.columns.size()));
+    out.columns.push_back(std::move(c));
+  };
+  // One scalar regressor along each case axis.
+  auto add_axes = [&](BasisTerm t) {
     for (int m = 1; m <= 3; ++m) {
       t.axis = m;
       BasisColumn c;
       c.term = t;
       c.label = BasisTermLabel(t);
-      if (ScalarRms(series, c) > kAbsentRms) out.push_back(c);
+      add_column(c);
     }
+  };
+  auto scalar_label = [](BasisTerm t) {
+    const std::string label = BasisTermLabel(t);
+    return label.substr(0, label.find(" ->"));
   };
   BasisTerm t;
   t.epoch = options.epoch;
@@ -135,59 +165,69 @@ std::vector<BasisColumn> EnumerateBasis(const DeviationSeries& series,
     for (int degree = 0; degree + c <= kMaxHarmonicDegree; ++degree) {
       for (int a = degree; a >= 0; --a) {
         t.exponents = {a, degree - a, c};
-        add(t);
+        open_group(scalar_label(t));
+        add_axes(t);
       }
     }
   }
   t.kind = BasisKind::kBodyRate;
   for (int i = 1; i <= 3; ++i) {
     t.index = {i, i};
-    add(t);
+    open_group(scalar_label(t));
+    add_axes(t);
   }
   t.kind = BasisKind::kBodyRateProduct;
   for (int i = 1; i <= 3; ++i) {
     for (int j = i; j <= 3; ++j) {
       t.index = {i, j};
-      add(t);
+      open_group(scalar_label(t));
+      add_axes(t);
     }
   }
   if (options.orbital_period_s > 0.0) {
     t.kind = BasisKind::kOrbitalHarmonic;
     t.period = options.orbital_period_s;
     for (int n = 1; n <= 2; ++n) {
+      open_group(absl::StrCat("orbit ", n));
+      t.harmonic = n;
       for (bool sine : {false, true}) {
-        t.harmonic = n;
         t.sine = sine;
-        add(t);
+        add_axes(t);
       }
     }
   }
   t.kind = BasisKind::kRamp;
-  add(t);
+  open_group("ramp");
+  add_axes(t);
+  // A C2-like term growing in time (eq. (9) with C2 proportional to time): t h_m^2 e_m.
   t.kind = BasisKind::kRampHarmonic;
+  open_group("ramp*h_m^2");
   for (int m = 1; m <= 3; ++m) {
     t.index = {m, m};
     t.axis = m;
     BasisColumn c;
     c.term = t;
     c.label = BasisTermLabel(t);
-    if (ScalarRms(series, c) > kAbsentRms) out.push_back(c);
+    add_column(c);
   }
   t.kind = BasisKind::kSuspensionVoltage;
   for (int i = 1; i <= 3; ++i) {
     t.index = {i, i};
-    add(t);
+    open_group(scalar_label(t));
+    add_axes(t);
   }
   static constexpr std::array<std::pair<int, int>, 6> kEntries = {
       {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {1, 2}, {2, 0}}};
+  open_group("readout");
   for (const auto& [r, c] : kEntries) {
     BasisColumn col;
     col.readout = true;
     col.row = r;
     col.col = c;
     col.label = absl::StrCat("readout E_", std::string(1, "xyz"[r]), std::string(1, "xyz"[c]));
-    out.push_back(col);
+    add_column(col);
   }
+  if (!out.groups.empty() && out.groups.back().columns.empty()) out.groups.pop_back();
   return out;
 }
 
@@ -204,75 +244,77 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     d.w0_sigma = g < w0_sigma.size() ? w0_sigma[g] : 0.0;
     const DeviationFilter filter(series[g], d.random_walk, d.w0_sigma);
     d.y_w = filter.Whiten(series[g].y);
-    d.columns = EnumerateBasis(series[g], options);
-    d.prior.resize(d.columns.size());
-    for (size_t c = 0; c < d.columns.size(); ++c) {
-      d.signature.push_back(ColumnSignature(series[g], d.columns[c]));
+    d.basis = EnumerateBasis(series[g], options);
+    d.prior.resize(d.basis.columns.size());
+    for (size_t c = 0; c < d.basis.columns.size(); ++c) {
+      const BasisColumn& col = d.basis.columns[c];
+      d.signature.push_back(ColumnSignature(series[g], col));
       d.x_w.push_back(filter.Whiten(d.signature.back()));
-      d.prior(c) = d.columns[c].readout ? options.readout_sigma
-                                        : options.drift_sigma / ScalarRms(series[g], d.columns[c]);
+      d.prior(c) = col.readout ? options.readout_sigma
+                               : options.drift_sigma / ScalarRms(series[g], col);
     }
     d.fit = Fit(d, {});
     result.deviance_before += d.fit.deviance;
   }
   for (int round = 0; round < options.max_terms; ++round) {
-    int M = 0, best_g = -1, best_c = -1;
+    int M = 0, best_g = -1, best_k = -1;
     double best = -std::numeric_limits<double>::infinity();
     RegressionFit best_fit;
     for (size_t g = 0; g < gyros.size(); ++g) {
       GyroData& d = gyros[g];
-      for (size_t c = 0; c < d.columns.size(); ++c) {
-        if (std::find(d.active.begin(), d.active.end(), static_cast<int>(c)) != d.active.end()) {
-          continue;
-        }
+      for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+        if (Contains(d.active, k)) continue;
         ++M;
-        std::vector<int> cols = d.active;
-        cols.push_back(static_cast<int>(c));
-        RegressionFit f = Fit(d, cols);
+        std::vector<int> groups = d.active;
+        groups.push_back(k);
+        RegressionFit f = Fit(d, groups);
         const double evidence = d.fit.deviance - f.deviance;
         if (evidence > best) {
           best = evidence;
           best_g = static_cast<int>(g);
-          best_c = static_cast<int>(c);
+          best_k = k;
           best_fit = std::move(f);
         }
       }
     }
-    if (round == 0) result.columns_tested = M;
+    if (round == 0) result.groups_tested = M;
     if (best_g < 0) break;
     const double threshold = EvidenceThreshold(options.alpha, M);
     GyroData& d = gyros[best_g];
     result.best_gyro = d.series->gyro;
-    result.best_label = d.columns[best_c].label;
+    result.best_label = d.basis.groups[best_k].label;
     result.best_evidence = best;
     result.best_threshold = threshold;
     if (!(best > threshold)) break;
-    d.active.push_back(best_c);
+    d.active.push_back(best_k);
     d.fit = best_fit;
-    SelectedTerm s;
+    SelectedGroup s;
     s.gyro = d.series->gyro;
-    s.column = d.columns[best_c];
-    s.prior_sigma = d.prior(best_c);
+    s.label = d.basis.groups[best_k].label;
     s.evidence = best;
     s.threshold = threshold;
-    s.columns_tested = M;
-    result.terms.push_back(s);
+    s.groups_tested = M;
+    result.selected.push_back(s);
   }
-  // Final values, the alternatives of each selected regressor, and the residual drift.
+  // Final values, the alternatives of each selected group, and the residual drift.
   for (GyroData& d : gyros) {
+    const std::vector<int> cols = ColumnsOf(d, d.active);
     for (size_t i = 0; i < d.active.size(); ++i) {
-      for (SelectedTerm& s : result.terms) {
-        if (s.gyro != d.series->gyro || s.column.label != d.columns[d.active[i]].label) continue;
-        s.value = d.fit.mean(i);
-        s.sigma = d.fit.sigma(i);
-        for (size_t c = 0; c < d.columns.size(); ++c) {
-          if (std::find(d.active.begin(), d.active.end(), static_cast<int>(c)) != d.active.end()) {
-            continue;
+      for (SelectedGroup& s : result.selected) {
+        if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
+        for (size_t j = 0; j < cols.size(); ++j) {
+          if (d.basis.columns[cols[j]].group != d.active[i]) continue;
+          s.columns.push_back(FittedColumn{d.basis.columns[cols[j]], d.fit.mean(j), d.fit.sigma(j),
+                                           d.prior(cols[j])});
+        }
+        for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+          if (Contains(d.active, k)) continue;
+          std::vector<int> groups = d.active;
+          groups[i] = k;
+          const double against = Fit(d, groups).deviance - d.fit.deviance;
+          if (-against > -options.ambiguity) {
+            s.alternatives.emplace_back(d.basis.groups[k].label, -against);
           }
-          std::vector<int> cols = d.active;
-          cols[i] = static_cast<int>(c);
-          const double against = d.fit.deviance - Fit(d, cols).deviance;
-          if (against > -options.ambiguity) s.alternatives.emplace_back(d.columns[c].label, against);
         }
         std::sort(s.alternatives.begin(), s.alternatives.end(),
                   [](const auto& a, const auto& b) { return a.second > b.second; });
@@ -280,9 +322,9 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     }
     result.deviance_after += d.fit.deviance;
     std::vector<Vector2d> z_after = d.series->y;
-    for (size_t i = 0; i < d.active.size(); ++i) {
-      const std::vector<Vector2d>& x = d.signature[d.active[i]];
-      for (size_t k = 0; k < z_after.size(); ++k) z_after[k] -= d.fit.mean(i) * x[k];
+    for (size_t j = 0; j < cols.size(); ++j) {
+      const std::vector<Vector2d>& x = d.signature[cols[j]];
+      for (size_t k = 0; k < z_after.size(); ++k) z_after[k] -= d.fit.mean(j) * x[k];
     }
     ResidualDrift r;
     SmoothInCaseAxes(*d.series, d.w0_sigma, d.series->y, z_after, r);
@@ -291,111 +333,106 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
   return result;
 }
 
-std::vector<std::string> DescribeTerms(const std::vector<SelectedTerm>& terms,
-                                       const OpenEndedOptions& options) {
-  // Group the drift terms of a gyro by their scalar regressor (all but the axis; cos and sin of
-  // one orbital harmonic together): one group is one vector drift along a direction in case axes.
-  using Key = std::tuple<int, int, std::array<int, 3>, std::array<int, 2>, int>;
-  std::map<Key, std::vector<const SelectedTerm*>> groups;
-  std::vector<std::string> out;
-  for (const SelectedTerm& s : terms) {
-    if (s.column.readout) {
-      out.push_back(absl::StrFormat(
-          "gyro %d: readout distortion %s = %.0f +- %.0f ppm (a scale-factor or non-orthogonality "
-          "error of the direction-cosine readout: the reading is (I + E) h normalised)",
-          s.gyro, s.column.label.substr(8), s.value * 1e6, s.sigma * 1e6));
-      continue;
-    }
-    const BasisTerm& t = s.column.term;
-    groups[{s.gyro, static_cast<int>(t.kind), t.exponents, t.index, t.harmonic}].push_back(&s);
-  }
+std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& options) {
   const double deg_h = RadPerSecToDegPerHour(1.0);
-  for (const auto& [key, members] : groups) {
-    const int gyro = std::get<0>(key);
-    const BasisTerm& t0 = members.front()->column.term;
-    const double to_json = BasisValueToJson(t0.kind);
-    Vector3d v = Vector3d::Zero(), v_sigma = Vector3d::Zero(), cos_v = Vector3d::Zero(),
-             sin_v = Vector3d::Zero();
-    for (const SelectedTerm* s : members) {
-      const int m = s->column.term.axis - 1;
-      v(m) += s->value;
-      v_sigma(m) = std::hypot(v_sigma(m), s->sigma);
-      (s->column.term.sine ? sin_v : cos_v)(m) += s->value;
+  std::string text;
+  if (group.columns.empty()) return text;
+  if (group.columns.front().column.readout) {
+    Matrix3d E = Matrix3d::Zero();
+    std::vector<std::string> entries;
+    for (const FittedColumn& c : group.columns) {
+      E(c.column.row, c.column.col) = E(c.column.col, c.column.row) = c.value;
+      entries.push_back(absl::StrFormat("%s %.0f +- %.0f", c.column.label.substr(8),
+                                        c.value * 1e6, c.sigma * 1e6));
     }
-    std::string text;
+    text = absl::StrFormat(
+        "readout distortion of the direction cosines (a scale-factor or non-orthogonality "
+        "error: the reading is (I + E) h normalised), E in ppm: %s",
+        absl::StrJoin(entries, ", "));
+  } else {
+    const BasisTerm& t0 = group.columns.front().column.term;
+    const double to_json = BasisValueToJson(t0.kind);
+    Vector3d v = Vector3d::Zero(), cos_v = Vector3d::Zero(), sin_v = Vector3d::Zero();
+    for (const FittedColumn& c : group.columns) {
+      const int m = c.column.term.axis - 1;
+      v(m) += c.value;
+      (c.column.term.sine ? sin_v : cos_v)(m) += c.value;
+    }
     switch (t0.kind) {
       case BasisKind::kSpinAxisHarmonic: {
         const int degree = t0.exponents[0] + t0.exponents[1] + t0.exponents[2];
-        const Vector3d dir = v.normalized();
         text = degree == 0
                    ? absl::StrFormat("case-fixed drift along %s (case axes), %.4f deg/h",
-                                     Vec(dir, 1.0, "%.2f"), v.norm() * deg_h)
+                                     Vec(v.normalized(), 1.0, "%.2f"), v.norm() * deg_h)
                    : absl::StrFormat(
-                         "drift depending on the spin-axis direction, %s times %s deg/h (case "
-                         "axes; a harmonic of degree %d of the spin axis)",
-                         members.front()->column.label.substr(
-                             0, members.front()->column.label.find(" ->")),
-                         Vec(v, deg_h), degree);
+                         "drift that depends on the spin-axis direction in case axes as %s (a "
+                         "harmonic of degree %d), along %s, %.4f deg/h at h = 1",
+                         group.label, degree, Vec(v.normalized(), 1.0, "%.2f"), v.norm() * deg_h);
         break;
       }
       case BasisKind::kOrbitalHarmonic: {
         // d(t) = C cos(n phase) + S sin(n phase): its largest size over the orbit.
         double amplitude = 0.0;
+        Vector3d peak = Vector3d::UnitX();
         for (int i = 0; i < 360; ++i) {
           const double a = i * kPi / 180.0;
-          amplitude = std::max(amplitude, (cos_v * std::cos(a) + sin_v * std::sin(a)).norm());
+          const Vector3d d = cos_v * std::cos(a) + sin_v * std::sin(a);
+          if (d.norm() > amplitude) {
+            amplitude = d.norm();
+            peak = d.normalized();
+          }
         }
-        const Vector3d dir = (cos_v.norm() >= sin_v.norm() ? cos_v : sin_v).normalized();
         text = absl::StrFormat(
             "case-fixed drift along %s (case axes) varying with the orbital phase (period %.1f "
             "min, harmonic %d), amplitude %.4f deg/h: %s cos + %s sin deg/h",
-            Vec(dir, 1.0, "%.2f"), options.orbital_period_s / 60.0, t0.harmonic,
+            Vec(peak, 1.0, "%.2f"), options.orbital_period_s / 60.0, t0.harmonic,
             amplitude * deg_h, Vec(cos_v, deg_h), Vec(sin_v, deg_h));
         break;
       }
       case BasisKind::kRamp:
         text = absl::StrFormat(
-            "case-fixed drift growing linearly in time along %s (case axes), %.4f deg/h per hour "
-            "(zero at the recording's start)",
+            "case-fixed drift growing linearly in time along %s (case axes), %.4f deg/h per "
+            "hour (zero at the recording's start)",
             Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
         break;
       case BasisKind::kRampHarmonic:
         text = absl::StrFormat(
-            "a C2-like drift (eq. (9)) growing linearly in time, h%d^2 times %s deg/h per hour",
-            t0.index[0], Vec(v, to_json));
+            "a C2-like drift (eq. (9)) growing linearly in time: C2 changing at %s deg/h per hour",
+            Vec(-v, to_json));
         break;
       case BasisKind::kBodyRate:
         text = absl::StrFormat(
-            "drift proportional to the body rate about case axis %c, %s deg/h per deg/s",
-            "xyz"[t0.index[0] - 1], Vec(v, to_json));
+            "drift proportional to the body rate about case axis %c, along %s, %.4f deg/h per "
+            "deg/s",
+            "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
         break;
       case BasisKind::kBodyRateProduct:
         text = absl::StrFormat(
-            "drift proportional to the product of the body rates about case axes %c and %c, %s "
-            "deg/h per (deg/s)^2",
-            "xyz"[t0.index[0] - 1], "xyz"[t0.index[1] - 1], Vec(v, to_json, "%.3g"));
+            "drift proportional to the product of the body rates about case axes %c and %c, "
+            "along %s, %.3g deg/h per (deg/s)^2",
+            "xyz"[t0.index[0] - 1], "xyz"[t0.index[1] - 1], Vec(v.normalized(), 1.0, "%.2f"),
+            v.norm() * to_json);
         break;
       case BasisKind::kSuspensionVoltage:
         text = absl::StrFormat(
-            "drift proportional to the suspension offset voltage of case axis %c, %s deg/h per V",
-            "xyz"[t0.index[0] - 1], Vec(v, to_json));
+            "drift proportional to the suspension offset voltage of case axis %c, along %s, "
+            "%.4f deg/h per V",
+            "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
         break;
     }
-    std::vector<std::string> alternatives;
-    for (const SelectedTerm* s : members) {
-      for (const auto& [label, against] : s->alternatives) {
-        alternatives.push_back(absl::StrFormat("%s (2 ln B %.1f)", label, against));
-      }
-    }
-    if (!alternatives.empty()) {
-      if (alternatives.size() > 6) alternatives.resize(6);
-      absl::StrAppend(&text, "; on this recording it cannot be told apart from ",
-                      absl::StrJoin(alternatives, ", "),
-                      " (the data favour the named term by a Bayes factor below 20)");
-    }
-    out.push_back(absl::StrFormat("gyro %d: %s", gyro, text));
   }
-  return out;
+  std::vector<std::string> alternatives;
+  for (const auto& [label, against] : group.alternatives) {
+    if (alternatives.size() == 6) break;
+    alternatives.push_back(absl::StrFormat("%s (2 ln B %.1f)", label, against));
+  }
+  if (!alternatives.empty()) {
+    absl::StrAppend(&text, "; on this recording it cannot be told apart from ",
+                    absl::StrJoin(alternatives, ", "),
+                    " (2 ln B of each against the named term above -6: the data favour the "
+                    "named term by a Bayes factor below 20)");
+  }
+  return absl::StrFormat("gyro %d: %s", group.gyro, text);
 }
 
 }  // namespace esg::estimator::discovery

@@ -12,13 +12,14 @@
 //   suspension voltages   dU_k[i] e_m (when telemetered)
 //   readout distortion    a symmetric distortion E of the direction-cosine readout (6 per gyro)
 //
-// Selection is forward, one regressor of one gyro per round, by the diagnosis's evidence currency:
-// 2 ln B of the regressor (its coefficient integrated over its prior, the dispersion profiled)
-// above 2 ln(M / alpha), M the regressors tested in the round. Under the null each Bayes factor
+// Selection is forward, one group of one gyro per round (a scalar regressor along a direction in
+// case axes the data choose: BasisGroup), by the diagnosis's evidence currency: 2 ln B of the
+// group (its coefficients integrated over their prior, the dispersion profiled) above
+// 2 ln(M / alpha), M the groups tested in the round. Under the null each Bayes factor
 // has expectation 1, so by Markov's inequality and the union bound a round adds a regressor the
 // data do not need with probability at most alpha (the stated false-discovery control).
-// Regressors that the recording cannot tell apart from a selected one (replacing it loses less
-// than 2 ln B = 6, "strong" evidence on Kass and Raftery's scale) are reported as alternatives.
+// Groups that the recording cannot tell apart from a selected one (replacing it loses less than
+// 2 ln B = 6, "strong" evidence on Kass and Raftery's scale) are reported as alternatives.
 // Pure computation.
 #ifndef ESG_ESTIMATOR_DISCOVERY_OPEN_ENDED_H_
 #define ESG_ESTIMATOR_DISCOVERY_OPEN_ENDED_H_
@@ -57,22 +58,41 @@ struct BasisColumn {
   BasisTerm term;        // drift terms: kind, axis, indices (value 1)
   int row = 0, col = 0;  // readout: the symmetric entry E(row, col) = E(col, row), 0-based
   std::string label;     // BasisTermLabel, or "readout E_xy"
+  int group = 0;         // index of its group in the gyro's basis
+};
+
+// The unit of selection: one scalar regressor along every case axis (a drift of one time or
+// spin-axis behaviour along a direction the data choose), cos and sin of one orbital harmonic
+// together, the three C2-like growing terms together, the six readout entries together.
+struct BasisGroup {
+  std::string label;         // "h1^2*h3", "orbit 1", "ramp", "readout", ...
+  std::vector<int> columns;  // indices into the gyro's columns
+};
+
+struct GyroBasis {
+  std::vector<BasisColumn> columns;
+  std::vector<BasisGroup> groups;
 };
 
 // The basis for a gyro's series (regressors that vanish on the recording are left out).
-std::vector<BasisColumn> EnumerateBasis(const DeviationSeries& series,
-                                        const OpenEndedOptions& options);
+GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options);
 
-struct SelectedTerm {
-  int gyro = 0;
+struct FittedColumn {
   BasisColumn column;
   double value = 0.0;  // posterior mean [rad/s per SI unit of s], or [1] for a readout entry
   double sigma = 0.0;  // posterior 1-sigma
   double prior_sigma = 0.0;
+};
+
+// A selected group of one gyro.
+struct SelectedGroup {
+  int gyro = 0;
+  std::string label;
+  std::vector<FittedColumn> columns;
   double evidence = 0.0;   // 2 ln B when it was added
   double threshold = 0.0;  // 2 ln(M / alpha) of its round
-  int columns_tested = 0;  // M
-  // Regressors the recording cannot tell apart from it, with 2 ln B against it (<= 0).
+  int groups_tested = 0;   // M
+  // Groups the recording cannot tell apart from it, with 2 ln B against it (> -ambiguity).
   std::vector<std::pair<std::string, double>> alternatives;
 };
 
@@ -87,14 +107,14 @@ struct ResidualDrift {
 };
 
 struct OpenEndedResult {
-  std::vector<SelectedTerm> terms;  // in the order selected
-  // The best regressor of the last round, selected or not: what the remaining deviation
-  // resembles most (gyro, label, 2 ln B, threshold).
+  std::vector<SelectedGroup> selected;  // in the order selected
+  // The best group of the last round, selected or not: what the remaining deviation resembles
+  // most (gyro, label, 2 ln B, threshold).
   int best_gyro = 0;
   std::string best_label;
   double best_evidence = 0.0;
   double best_threshold = 0.0;
-  int columns_tested = 0;  // M of the first round
+  int groups_tested = 0;  // M of the first round
   std::vector<ResidualDrift> residual_drift;
   double deviance_before = 0.0, deviance_after = 0.0;  // summed over gyros
 };
@@ -106,11 +126,10 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
                              const std::vector<double>& w0_sigma,
                              const OpenEndedOptions& options);
 
-// What a set of selected terms of one gyro says in words: case-fixed drift along (x, y, z),
-// varying with the orbital phase, growing, proportional to the body rate, ..., with amplitudes in
-// deg/h and the alternatives that cannot be told apart.
-std::vector<std::string> DescribeTerms(const std::vector<SelectedTerm>& terms,
-                                       const OpenEndedOptions& options);
+// What a selected group says in words: case-fixed drift along (x, y, z), varying with the orbital
+// phase, growing, proportional to the body rate, ..., with sizes in deg/h, and the alternatives
+// that cannot be told apart.
+std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& options);
 
 }  // namespace esg::estimator::discovery
 

@@ -51,28 +51,25 @@ StageRun RunStage(const std::string& effect, uint64_t seed, double hours,
   out.result = RunOpenEnded(*series, rw, w0, out.options);
   out.gyro = ::esg::testing::AffectedGyro(seed);
   std::printf("%s seed %d gyro %d: M %d best %s gyro %d 2lnB %.1f thr %.1f\n", effect.c_str(),
-              static_cast<int>(seed), out.gyro, out.result.columns_tested,
+              static_cast<int>(seed), out.gyro, out.result.groups_tested,
               out.result.best_label.c_str(), out.result.best_gyro, out.result.best_evidence,
               out.result.best_threshold);
-  for (const SelectedTerm& t : out.result.terms) {
-    std::printf("  gyro %d %s value %.4g sigma %.3g 2lnB %.1f alt %zu\n", t.gyro,
-                t.column.label.c_str(), t.value, t.sigma, t.evidence, t.alternatives.size());
-  }
-  for (const std::string& s : DescribeTerms(out.result.terms, out.options)) {
-    std::printf("  %s\n", s.c_str());
+  for (const SelectedGroup& g : out.result.selected) {
+    std::printf("  2lnB %.1f thr %.1f: %s\n", g.evidence, g.threshold,
+                DescribeGroup(g, out.options).c_str());
   }
   return out;
 }
 
 TEST(OpenEnded, EffectFreeRecordingSelectsNothing) {
   const StageRun r = RunStage("none", 101, 24.0);
-  EXPECT_TRUE(r.result.terms.empty());
+  EXPECT_TRUE(r.result.selected.empty());
 }
 
 TEST(OpenEnded, RotorDisplacementWithoutItsTermsIsACaseFixedDrift) {
   const StageRun r = RunStage("rotor_displacement", 102, 24.0);
-  ASSERT_FALSE(r.result.terms.empty());
-  EXPECT_EQ(r.result.terms.front().gyro, r.gyro);
+  ASSERT_FALSE(r.result.selected.empty());
+  EXPECT_EQ(r.result.selected.front().gyro, r.gyro);
 }
 
 TEST(OpenEnded, DriftStep) {
