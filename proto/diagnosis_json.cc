@@ -94,6 +94,7 @@ json FindingJson(const Finding& f, bool include_series) {
   for (const Parameter& p : f.parameters) params.push_back(ParameterJson(p));
   j["parameters"] = params;
   j["explanation"] = f.explanation;
+  if (!f.description.empty()) j["description"] = f.description;
   j["evidence"] = EvidenceJson(f.evidence);
   if (f.effect != "unexplained") j["timeBehaviour"] = TimeBehaviourJson(f.time);
   if (!f.displacement_trend.samples.empty())
@@ -213,10 +214,20 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
       for (const auto& p : v) a.push_back(json::array({p.hours, p.gap, p.error_arcsec}));
       return a;
     };
+    // The open-ended stage's residual drift: [hours, gyro, before x, y, z, after x, y, z, sigma]
+    // in deg/h, case axes.
+    json drift = json::array();
+    for (const auto& p : r.residual_drift) {
+      drift.push_back(json::array({p.hours, p.gyro, Number(p.before_deg_h[0]),
+                                   Number(p.before_deg_h[1]), Number(p.before_deg_h[2]),
+                                   Number(p.after_deg_h[0]), Number(p.after_deg_h[1]),
+                                   Number(p.after_deg_h[2]), Number(p.sigma_deg_h)}));
+    }
     doc["series"] = json{{"residualsBefore", residuals(r.residuals_before)},
                          {"residualsAfter", residuals(r.residuals_after)},
                          {"heldOutBefore", held(r.held_out_before)},
-                         {"heldOutAfter", held(r.held_out_after)}};
+                         {"heldOutAfter", held(r.held_out_after)},
+                         {"residualDrift", drift}};
   }
   return doc;
 }

@@ -9,6 +9,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/calibration_model.h"
+#include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/candidates.h"
 #include "estimator/discovery/context.h"
 #include "estimator/discovery/held_out.h"
@@ -184,17 +185,48 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     report.findings.push_back(std::move(*result->finding));
   }
 
-  // The extended model: its held-out prediction (its full run is selected.run).
-  if (context.Stop()) return DiagnosisContext::Cancelled();
-  context.Say(0.9, "held-out prediction with the findings");
+  // The extended model: its held-out prediction (its full run is selected.run), and what remains
+  // (a span whose residual excess stands out, held-out prediction beyond the filter's
+  // uncertainty, or noise beyond the configured one).
   HeldOutResult final_held_out = base_held_out;
-  if (selected.held_out_current) {
-    final_held_out = selected.held_out;
-  } else if (!report.findings.empty() && !context.gaps().empty()) {
-    auto held = context.CheckedRun(selected.model, /*held_out=*/true);
-    if (!held.ok()) return held.status();
-    final_held_out = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
+  Mismatches mismatches;
+  std::optional<Unexplained> remaining;
+  auto assess = [&]() -> absl::Status {
+    if (context.Stop()) return DiagnosisContext::Cancelled();
+    context.Say(0.9, "held-out prediction with the findings");
+    final_held_out = base_held_out;
+    if (selected.held_out_current) {
+      final_held_out = selected.held_out;
+    } else if (!report.findings.empty() && !context.gaps().empty()) {
+      auto held = context.CheckedRun(selected.model, /*held_out=*/true);
+      if (!held.ok()) return held.status();
+      final_held_out = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
+    }
+    mismatches = LocateMismatches(base_run, selected.run, report.regimes, frames, options.alpha);
+    remaining = FindUnexplained(mismatches.remaining, unresolved, unresolved_gyro, final_held_out,
+                                selected.fit, !report.findings.empty(), options.alpha);
+    return absl::OkStatus();
+  };
+  if (absl::Status s = assess(); !s.ok()) return s;
+
+  // What the library left: the open-ended stage (basis_stage.h).
+  std::string resembles;
+  if (remaining.has_value() && options.open_ended) {
+    context.Say(0.92, "open-ended stage");
+    auto stage = RunBasisStage(selected, context, report.gyros,
+                               static_cast<int>(report.findings.size()));
+    if (!stage.ok()) return stage.status();
+    report.residual_drift = stage->residual_drift;
+    resembles = stage->resembles;
+    if (!stage->findings.empty()) {
+      for (Finding& f : stage->findings) report.findings.push_back(std::move(f));
+      unresolved.clear();
+      unresolved_note.clear();
+      unresolved_gyro = 0;
+      if (absl::Status s = assess(); !s.ok()) return s;
+    }
   }
+
   report.after = Summarise(selected.model, selected.run, selected.fit, final_held_out, options);
   report.residuals_after = ResidualSeries(selected.run, frames);
   report.held_out_after = final_held_out.points;
@@ -206,18 +238,12 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     e.held_out_deviance_after = final_held_out.deviance;
     e.held_out_dof = final_held_out.dof;
   }
-
-  // What remains: a span whose residual excess stands out, held-out prediction beyond the
-  // filter's uncertainty, or noise beyond the configured one, with the extended model.
-  const Mismatches mismatches =
-      LocateMismatches(base_run, selected.run, report.regimes, frames, options.alpha);
   report.mismatch = mismatches.base;
-  if (std::optional<Unexplained> u =
-          FindUnexplained(mismatches.remaining, unresolved, unresolved_gyro, final_held_out,
-                          selected.fit, !report.findings.empty(), options.alpha)) {
-    if (!unresolved_note.empty()) u->finding.evidence.notes.push_back(unresolved_note);
-    report.findings.push_back(u->finding);
-    if (report.findings.size() == 1) report.mismatch = u->where;
+  if (remaining.has_value()) {
+    if (!unresolved_note.empty()) remaining->finding.evidence.notes.push_back(unresolved_note);
+    if (!resembles.empty()) remaining->finding.evidence.notes.push_back(resembles);
+    report.findings.push_back(remaining->finding);
+    if (report.findings.size() == 1) report.mismatch = remaining->where;
   }
   report.verdict = report.findings.empty() ? kVerdictNone : report.findings.front().effect;
   report.filter_runs = context.filter_runs();

@@ -69,10 +69,16 @@ bool Contains(const std::vector<int>& v, int x) {
   return std::find(v.begin(), v.end(), x) != v.end();
 }
 
+// The scalar regressor of a drift column at a substep.
+double ColumnScalar(const BasisColumn& c, const BasisInputs& in) {
+  if (c.nuisance) return in.time < c.before ? 1.0 : 0.0;
+  return BasisScalar(c.term, in);
+}
+
 double ScalarRms(const DeviationSeries& s, const BasisColumn& c) {
   double sum = 0.0, time = 0.0;
   for (const TrajectoryStep& st : s.steps) {
-    const double v = BasisScalar(c.term, st.inputs);
+    const double v = ColumnScalar(c, st.inputs);
     sum += v * v * st.dt;
     time += st.dt;
   }
@@ -86,8 +92,10 @@ std::vector<Vector2d> ColumnSignature(const DeviationSeries& s, const BasisColum
     E(c.col, c.row) = 1.0;
     return ReadoutSignature(s, E);
   }
-  const BasisTerm term = c.term;
-  return Signature(s, [&term](const BasisInputs& in) { return BasisRegressor_k(term, in); });
+  const Vector3d e_m = Vector3d::Unit(c.term.axis - 1);
+  return Signature(s, [&c, &e_m](const BasisInputs& in) -> Vector3d {
+    return ColumnScalar(c, in) * e_m;
+  });
 }
 
 // The smoothed drift of z in case axes at each sample [rad/s], the walk intensity chosen by
@@ -227,6 +235,19 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
     col.label = absl::StrCat("readout E_", std::string(1, "xyz"[r]), std::string(1, "xyz"[c]));
     add_column(col);
   }
+  for (const auto& [gyro, time] : options.steps) {
+    if (gyro != series.gyro) continue;
+    open_group(absl::StrCat("before the drift step at ", absl::FormatTime(time)));
+    out.groups.back().nuisance = true;
+    for (int m = 1; m <= 3; ++m) {
+      BasisColumn c;
+      c.nuisance = true;
+      c.before = time;
+      c.term.axis = m;
+      c.label = absl::StrCat(out.groups.back().label, " -> ", std::string(1, "xyz"[m - 1]));
+      add_column(c);
+    }
+  }
   if (!out.groups.empty() && out.groups.back().columns.empty()) out.groups.pop_back();
   return out;
 }
@@ -253,7 +274,10 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
       d.prior(c) = col.readout ? options.readout_sigma
                                : options.drift_sigma / ScalarRms(series[g], col);
     }
-    d.fit = Fit(d, {});
+    for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+      if (d.basis.groups[k].nuisance) d.active.push_back(k);
+    }
+    d.fit = Fit(d, d.active);
     result.deviance_before += d.fit.deviance;
   }
   for (int round = 0; round < options.max_terms; ++round) {
@@ -263,7 +287,7 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     for (size_t g = 0; g < gyros.size(); ++g) {
       GyroData& d = gyros[g];
       for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
-        if (Contains(d.active, k)) continue;
+        if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
         ++M;
         std::vector<int> groups = d.active;
         groups.push_back(k);
@@ -300,6 +324,7 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
   for (GyroData& d : gyros) {
     const std::vector<int> cols = ColumnsOf(d, d.active);
     for (size_t i = 0; i < d.active.size(); ++i) {
+      if (d.basis.groups[d.active[i]].nuisance) continue;
       for (SelectedGroup& s : result.selected) {
         if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
         for (size_t j = 0; j < cols.size(); ++j) {
@@ -308,7 +333,7 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
                                            d.prior(cols[j])});
         }
         for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
-          if (Contains(d.active, k)) continue;
+          if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
           std::vector<int> groups = d.active;
           groups[i] = k;
           const double against = Fit(d, groups).deviance - d.fit.deviance;

@@ -50,6 +50,10 @@ struct OpenEndedOptions {
   absl::Time epoch = absl::UnixEpoch();
   // A regressor is an alternative to a selected one when replacing it loses less than this 2 ln B.
   double ambiguity = 6.0;
+  // Drift steps the model holds (a coefficient released at a time: gyro id, time). The model's
+  // final coefficients hold after the step; before it the deviation carries minus the step, so
+  // each adds a nuisance group to the gyro's base model: a case-fixed drift before the time.
+  std::vector<std::pair<int, absl::Time>> steps;
 };
 
 // One regressor of the basis for one gyro.
@@ -59,6 +63,9 @@ struct BasisColumn {
   int row = 0, col = 0;  // readout: the symmetric entry E(row, col) = E(col, row), 0-based
   std::string label;     // BasisTermLabel, or "readout E_xy"
   int group = 0;         // index of its group in the gyro's basis
+  // A nuisance regressor (OpenEndedOptions::steps): e_m before `before`, in every model.
+  bool nuisance = false;
+  absl::Time before = absl::InfinitePast();
 };
 
 // The unit of selection: one scalar regressor along every case axis (a drift of one time or
@@ -67,6 +74,7 @@ struct BasisColumn {
 struct BasisGroup {
   std::string label;         // "h1^2*h3", "orbit 1", "ramp", "readout", ...
   std::vector<int> columns;  // indices into the gyro's columns
+  bool nuisance = false;     // in every model, never selected
 };
 
 struct GyroBasis {

@@ -31,6 +31,10 @@ struct DiagnoseOptions {
   // EvidenceThreshold).
   double alpha = 0.01;
   int max_effects = 3;  // forward-selection rounds
+  // The open-ended stage (docs/discovery.md): when the library leaves the recording
+  // unexplained, regress each gyro's deviation on the basis of drift terms and readout
+  // distortions, add what it selects to the model and refit.
+  bool open_ended = true;
   // Integration rate of the filter during diagnosis [Hz]. The drift changes slowly; the
   // deviance at 0.2 Hz equals the one at 8 Hz to ~0.1 in 2e5 (docs/discovery.md), at 1/40 of the
   // cost. <= 0 keeps the configuration's rate.

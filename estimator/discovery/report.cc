@@ -76,6 +76,7 @@ std::string ExplainFinding(const Finding& f) {
                 "%.2g)",
                 e.evidence, e.parameters, e.parameters == 1 ? "" : "s", e.threshold, e.p_value);
   const auto& ps = f.parameters;
+  if (f.effect == kEffectBasisTerm) return absl::StrCat(f.description, "; ", stats);
   if (f.effect == "rotor_displacement") {
     const Parameter* angle = FindParameter(ps, "lineAngleDeg");
     const Parameter* size = FindParameter(ps, "displacementSizeUm");

@@ -11,7 +11,9 @@
 #include <utility>
 #include <vector>
 
+#include "Eigen/Core"
 #include "absl/time/time.h"
+#include "estimator/basis_term.h"
 #include "estimator/discovery/regimes.h"
 
 namespace esg::estimator::discovery {
@@ -30,6 +32,9 @@ enum class Effect {
 const char* EffectId(Effect e);  // "rotor_displacement", ...
 inline constexpr const char* kVerdictNone = "none";
 inline constexpr const char* kVerdictUnexplained = "unexplained";
+// A term of the open-ended stage's basis (docs/discovery.md, "The open-ended stage"): physics
+// outside the library, named by the regressor that explains it.
+inline constexpr const char* kEffectBasisTerm = "basis_term";
 
 struct Parameter {
   std::string name;  // e.g. "c1DegH[0]", "latencyMs"
@@ -100,10 +105,17 @@ struct DisplacementTrend {
 };
 
 struct Finding {
-  std::string effect;  // EffectId, or "unexplained"
+  std::string effect;  // EffectId, kEffectBasisTerm or "unexplained"
   int gyro = 0;        // gyro id where the effect is per gyro, 0 otherwise
   std::vector<Parameter> parameters;
   std::string explanation;
+  // kEffectBasisTerm: the physics in words (open_ended.h DescribeGroup), and the model terms
+  // that add it to a configuration (GyroConfig::basis_terms of `gyro`, with their fitted values
+  // and the prior sigma that frees them) or the readout distortion (GyroConfig::
+  // readout_distortion), as the refitted model holds them.
+  std::string description;
+  std::vector<BasisTerm> basis_terms;
+  Eigen::Matrix3d readout_distortion = Eigen::Matrix3d::Zero();
   Evidence evidence;
   TimeBehaviour time;
   DisplacementTrend displacement_trend;  // rotor_displacement with suspension voltages
@@ -191,6 +203,16 @@ struct ResidualPoint {
   // is right: 90% of it lies between 0.32 and 2.45 sigma.
   double sigma_arcsec = 0.0;
 };
+// A gyro's residual drift from the open-ended stage (open_ended.h ResidualDrift): the
+// fixed-interval smoothed drift the model leaves, case axes [deg/h], before and after the basis
+// terms, and its 1-sigma.
+struct ResidualDriftPoint {
+  double hours = 0.0;
+  int gyro = 0;
+  std::array<double, 3> before_deg_h{};
+  std::array<double, 3> after_deg_h{};
+  double sigma_deg_h = 0.0;
+};
 struct HeldOutPoint {
   double hours = 0.0;
   int gap = 0;
@@ -206,6 +228,7 @@ struct DiagnosisReport {
   std::vector<RegimeSpan> regimes;
   std::vector<CandidateScore> candidates;
   std::vector<ResidualPoint> residuals_before, residuals_after;
+  std::vector<ResidualDriftPoint> residual_drift;  // when the open-ended stage ran
   std::vector<HeldOutPoint> held_out_before, held_out_after;
   absl::Time first_frame_time;
   int frames = 0;

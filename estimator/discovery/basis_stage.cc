@@ -1,0 +1,197 @@
+#include "estimator/discovery/basis_stage.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/discovery/deviation.h"
+#include "estimator/discovery/statistics.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+using Eigen::Matrix3d;
+
+namespace {
+
+// The orbital period the recording shows: the median period of its orbital-orientation spans
+// (regimes.h), 0 without one.
+double OrbitalPeriod(const std::vector<RegimeSpan>& regimes) {
+  std::vector<double> periods;
+  for (const RegimeSpan& r : regimes) {
+    if (r.regime == Regime::kOrbital && r.mean_rate > 0.0) periods.push_back(2.0 * kPi / r.mean_rate);
+  }
+  if (periods.empty()) return 0.0;
+  std::nth_element(periods.begin(), periods.begin() + periods.size() / 2, periods.end());
+  return periods[periods.size() / 2];
+}
+
+// The residual random walk of eq. (11) the model holds for a gyro [rad/s/sqrt(s)], and the prior
+// of its initial value as the session sets it (session_initialization.cc).
+double RandomWalkOf(const ModelState& m, int id) {
+  if (!m.options.model.random_walk) return 0.0;
+  for (const auto& [gyro, q] : m.options.random_walk_by_gyro) {
+    if (gyro == id) return q;
+  }
+  return m.config.random_walk;
+}
+double InitialDriftSigma(const ModelState& m) {
+  if (!m.options.model.random_walk) return 0.0;
+  if (m.options.residual_drift_sigma >= 0.0) return m.options.residual_drift_sigma;
+  return DegPerHourToRadPerSec((m.options.model.k0 || m.options.model.c1c2) ? 0.01 : 0.1);
+}
+
+// A column's coefficient in the configuration JSON's units, and that unit.
+std::pair<double, std::string> JsonValue(const BasisColumn& c, double value) {
+  if (c.readout) return {value * 1e6, "ppm"};
+  const std::string unit(BasisScalarJsonUnit(c.term.kind));
+  return {value * BasisValueToJson(c.term.kind), unit == "1" ? "deg/h" : "deg/h per " + unit};
+}
+
+std::string TimeKind(const SelectedGroup& g) {
+  if (g.columns.empty() || g.columns.front().column.readout) return "constant";
+  switch (g.columns.front().column.term.kind) {
+    case BasisKind::kOrbitalHarmonic:
+      return "orbital_cycle";
+    case BasisKind::kRamp:
+    case BasisKind::kRampHarmonic:
+      return "linear";
+    default:
+      return "constant";
+  }
+}
+
+GyroConfig* MutableGyro(SpacecraftConfig& config, int id) {
+  for (GyroConfig& g : config.gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, DiagnosisContext& context,
+                                               const std::vector<int>& gyros, int round) {
+  BasisStageResult out;
+  const DiagnoseOptions& opt = context.options();
+  const ModelState& model = selected.model;
+  const std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(context.frames(), context.rates(), model.correction);
+  auto series = MeasureDeviations(model.config, selected.run.gyros, corrected, context.rates(),
+                                  selected.run, gyros);
+  if (!series.ok()) return series.status();
+  OpenEndedOptions& o = out.options;
+  o.alpha = opt.alpha;
+  o.drift_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  o.readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+  o.orbital_period_s = OrbitalPeriod(context.regimes());
+  o.epoch = context.frames().front().time;
+  for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
+    if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
+  }
+  std::vector<double> random_walk, w0;
+  for (const DeviationSeries& s : *series) {
+    random_walk.push_back(RandomWalkOf(model, s.gyro));
+    w0.push_back(InitialDriftSigma(model));
+  }
+  out.stage = RunOpenEnded(*series, random_walk, w0, o);
+  const OpenEndedResult& stage = out.stage;
+  for (const ResidualDrift& r : stage.residual_drift) {
+    for (size_t k = 0; k < r.hours.size(); ++k) {
+      ResidualDriftPoint p;
+      p.hours = r.hours[k];
+      p.gyro = r.gyro;
+      for (int i = 0; i < 3; ++i) {
+        p.before_deg_h[i] = RadPerSecToDegPerHour(r.before_k[k](i));
+        p.after_deg_h[i] = RadPerSecToDegPerHour(r.after_k[k](i));
+      }
+      p.sigma_deg_h = RadPerSecToDegPerHour(r.sigma[k]);
+      out.residual_drift.push_back(p);
+    }
+  }
+  if (!stage.best_label.empty()) {
+    out.resembles = absl::StrFormat(
+        "of the open-ended basis (docs/discovery.md), the remaining deviation resembles most "
+        "\"%s\" in gyro %d: 2 ln B = %.1f against the threshold %.1f of %d regressor groups",
+        stage.best_label, stage.best_gyro, stage.best_evidence, stage.best_threshold,
+        stage.groups_tested);
+  }
+  if (stage.selected.empty()) return out;
+
+  // The model with the selected terms, refitted by the filter.
+  ModelState extended = model;
+  for (const SelectedGroup& g : stage.selected) {
+    GyroConfig* gc = MutableGyro(extended.config, g.gyro);
+    if (gc == nullptr) continue;
+    for (const FittedColumn& c : g.columns) {
+      if (c.column.readout) {
+        gc->readout_distortion(c.column.row, c.column.col) += c.value;
+        if (c.column.row != c.column.col) gc->readout_distortion(c.column.col, c.column.row) += c.value;
+        continue;
+      }
+      BasisTerm t = c.column.term;
+      t.value = 0.0;
+      t.sigma = c.prior_sigma;
+      gc->basis_terms.push_back(t);
+    }
+    extended.added.push_back(absl::StrCat(kEffectBasisTerm, "[", g.gyro, "] ", g.label));
+  }
+  auto run = context.CheckedRun(extended, /*held_out=*/false);
+  if (!run.ok()) return run.status();
+  const ProfiledDeviance fit = Profile(*run);
+  out.refitted = true;
+  out.refit_evidence = selected.fit.value - fit.value;
+  out.refit_threshold = 0.0;
+  for (const SelectedGroup& g : stage.selected) out.refit_threshold = std::max(out.refit_threshold, g.threshold);
+  if (!(out.refit_evidence > out.refit_threshold)) {
+    absl::StrAppend(&out.resembles, absl::StrFormat(
+        "; the reduced regression selected %d group(s), but the refitted filter does not confirm "
+        "them (2 ln B = %.1f, threshold %.1f)",
+        stage.selected.size(), out.refit_evidence, out.refit_threshold));
+    return out;
+  }
+  // Findings, with the refitted filter's values of the terms.
+  for (const SelectedGroup& g : stage.selected) {
+    Finding f;
+    f.effect = kEffectBasisTerm;
+    f.gyro = g.gyro;
+    f.description = DescribeGroup(g, o);
+    f.time.kind = TimeKind(g);
+    const GyroConfig* gc = extended.config.FindGyro(g.gyro);
+    for (const FittedColumn& c : g.columns) {
+      const auto [value, unit] = JsonValue(c.column, c.value);
+      const auto [sigma, unused] = JsonValue(c.column, c.sigma);
+      f.parameters.push_back(Parameter{absl::StrCat("basis[", c.column.label, "]"), value,
+                                       std::abs(sigma), unit});
+      if (!c.column.readout) {
+        BasisTerm t = c.column.term;
+        t.value = c.value;
+        t.sigma = c.prior_sigma;
+        f.basis_terms.push_back(t);
+      } else if (gc != nullptr) {
+        f.readout_distortion = gc->readout_distortion;
+      }
+    }
+    f.evidence.delta_deviance = g.evidence;
+    f.evidence.evidence = g.evidence;
+    f.evidence.parameters = static_cast<int>(g.columns.size());
+    f.evidence.p_value = EvidenceBound(g.evidence);
+    f.evidence.threshold = g.threshold;
+    f.evidence.round = round;
+    f.evidence.notes.push_back(absl::StrFormat(
+        "found by the open-ended stage: the gyro's deviation from the model regressed on the "
+        "basis (docs/discovery.md), 2 ln B = %.1f against 2 ln(M / alpha) = %.1f with M = %d "
+        "regressor groups; refitted by the filter with every selected term: 2 ln B = %.1f",
+        g.evidence, g.threshold, g.groups_tested, out.refit_evidence));
+    f.explanation = ExplainFinding(f);
+    out.findings.push_back(std::move(f));
+  }
+  selected.model = std::move(extended);
+  selected.run = std::move(*run);
+  selected.fit = fit;
+  selected.held_out_current = false;
+  return out;
+}
+
+}  // namespace esg::estimator::discovery

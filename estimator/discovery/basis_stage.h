@@ -1,0 +1,43 @@
+// The open-ended stage inside a diagnosis (docs/discovery.md, "The open-ended stage"): for what
+// the library left unexplained, the deviation of each running gyro from the selected model
+// (deviation.h) is regressed on the basis (open_ended.h); the groups it selects are added to the
+// model as basis terms (GyroConfig::basis_terms, freed with their prior; a readout distortion
+// held at its fitted value), the model is refitted by the filter, and the terms are kept only
+// when the refitted filter's own evidence, 2 ln B from its marginal likelihood, also passes the
+// threshold. Pure computation.
+#ifndef ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
+#define ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "estimator/discovery/context.h"
+#include "estimator/discovery/open_ended.h"
+#include "estimator/discovery/report.h"
+#include "estimator/discovery/selection.h"
+
+namespace esg::estimator::discovery {
+
+struct BasisStageResult {
+  OpenEndedOptions options;
+  OpenEndedResult stage;
+  // One finding per selected group, when the refit confirmed them (then `selected` holds the
+  // model with the terms, its run and fit; its held-out prediction is stale).
+  std::vector<Finding> findings;
+  // The refitted filter's evidence for all the terms together, 2 ln B, and its threshold.
+  double refit_evidence = 0.0;
+  double refit_threshold = 0.0;
+  bool refitted = false;
+  // For an `unexplained` verdict: what the remaining deviation resembles most, in words.
+  std::string resembles;
+  std::vector<ResidualDriftPoint> residual_drift;
+};
+
+// `round`: the forward-selection round the findings are numbered with.
+absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, DiagnosisContext& context,
+                                               const std::vector<int>& gyros, int round);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
