@@ -7,6 +7,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/statistics.h"
+#include "estimator/discovery/time_behaviour.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -59,6 +60,65 @@ std::string TimeKind(const SelectedGroup& g) {
       return "linear";
     default:
       return "constant";
+  }
+}
+
+// The paper's rotor-displacement drift per um (section 1.1: C10 ~ 0.05 and C20 ~ 0.015 deg/h per
+// um of displacement), for the size of a growing displacement implied by a growing C1.
+constexpr double kC10PlusC20DegHPerUm = 0.065;
+// A drift growing along the direction of the voltages' trend agrees with it through eq. (3)
+// when the two directions are within this angle.
+constexpr double kTrendAgreementDeg = 30.0;
+
+// A case-fixed drift growing in time (a ramp) read as a growing rotor displacement (eq. (8)-(10):
+// C1 = (C10 + C20) lambda |Delta|, whose drift is (h h^T - I) C1, so a displacement growing at
+// dDelta/dt makes the case-fixed drift grow at -(C10 + C20) dDelta/dt), checked against the
+// suspension offset voltages' trend through eq. (3) when they are telemetered.
+void DescribeGrowingDisplacement(const SpacecraftConfig& config,
+                                 const std::vector<TelemetryFrame>& frames, const SelectedGroup& g,
+                                 Finding& f) {
+  Eigen::Vector3d ramp_deg_h_per_h = Eigen::Vector3d::Zero();
+  for (const FittedColumn& c : g.columns) {
+    ramp_deg_h_per_h(c.column.term.axis - 1) += c.value * BasisValueToJson(c.column.term.kind);
+  }
+  const Eigen::Vector3d implied_um_h = -ramp_deg_h_per_h / kC10PlusC20DegHPerUm;
+  CandidateFit trend;
+  DescribeVoltageTrend(config, frames, g.gyro, trend);
+  f.parameters.push_back(Parameter{"impliedDisplacementRateSizeUmPerH", implied_um_h.norm(), 0.0,
+                                   "um/h"});
+  if (trend.displacement_trend.samples.empty()) {
+    absl::StrAppend(&f.description, absl::StrFormat(
+        "; read as a rotor displacement growing (eq. (8)-(10)) it would grow at %.4f um/h along "
+        "%s with the paper's C10 + C20 = %.3f deg/h per um; no suspension voltages to check it "
+        "through eq. (3)",
+        implied_um_h.norm(), absl::StrFormat("(%.2f, %.2f, %.2f)", implied_um_h.normalized().x(),
+                                             implied_um_h.normalized().y(),
+                                             implied_um_h.normalized().z()),
+        kC10PlusC20DegHPerUm));
+    return;
+  }
+  const Eigen::Vector3d voltage_um_h(trend.displacement_trend.rate_um_h[0],
+                                     trend.displacement_trend.rate_um_h[1],
+                                     trend.displacement_trend.rate_um_h[2]);
+  const double cosine = implied_um_h.normalized().dot(voltage_um_h.normalized());
+  const double angle_deg = RadToDeg(std::acos(std::clamp(cosine, -1.0, 1.0)));
+  const bool agrees = angle_deg < kTrendAgreementDeg;
+  f.parameters.insert(f.parameters.end(), trend.fitted.begin(), trend.fitted.end());
+  f.parameters.push_back(Parameter{"trendAngleDeg", angle_deg, 0.0, "deg"});
+  for (const std::string& note : trend.notes) f.evidence.notes.push_back(note);
+  f.displacement_trend = trend.displacement_trend;
+  f.description = absl::StrFormat(
+      "gyro %d: %s: rotor displacement growing at %.4f um/h (from the drift's growth through eq. "
+      "(8)-(10) with the paper's C10 + C20 = %.3f deg/h per um; %.4f um/h from the suspension "
+      "offset voltages' trend through eq. (3)), the two directions %.0f deg apart; %s",
+      g.gyro, agrees ? "agrees with the voltages" : "does NOT agree with the voltages",
+      implied_um_h.norm(), kC10PlusC20DegHPerUm, voltage_um_h.norm(), angle_deg,
+      f.description.substr(f.description.find(": ") + 2));
+  if (!agrees) {
+    absl::StrAppend(&f.description, absl::StrFormat(
+        "; the voltages do not show this growth (directions more than %.0f deg apart), so the "
+        "growing drift is not a displacement the suspension sees",
+        kTrendAgreementDeg));
   }
 }
 
@@ -184,6 +244,10 @@ absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, Diagnosi
         "basis (docs/discovery.md), 2 ln B = %.1f against 2 ln(M / alpha) = %.1f with M = %d "
         "regressor groups; refitted by the filter with every selected term: 2 ln B = %.1f",
         g.evidence, g.threshold, g.groups_tested, out.refit_evidence));
+    if (!g.columns.empty() && !g.columns.front().column.readout &&
+        g.columns.front().column.term.kind == BasisKind::kRamp) {
+      DescribeGrowingDisplacement(model.config, context.frames(), g, f);
+    }
     f.explanation = ExplainFinding(f);
     out.findings.push_back(std::move(f));
   }
