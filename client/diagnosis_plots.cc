@@ -479,6 +479,57 @@ std::string TrendScript(const Context& c, const disc::Finding& f) {
   return gp;
 }
 
+// The open-ended stage's residual drift: one index block per gyro, columns hours, before x y z,
+// after x y z, sigma [deg/h].
+std::string ResidualDriftData(const std::vector<int>& gyros,
+                              const std::vector<disc::ResidualDriftPoint>& v) {
+  std::string text =
+      "# per gyro block: hours, residual drift before x y z, after x y z, 1-sigma (deg/h, case "
+      "axes)\n";
+  for (int id : gyros) {
+    absl::StrAppend(&text, absl::StrFormat("# gyro %d\n", id));
+    for (const auto& p : v) {
+      if (p.gyro != id) continue;
+      absl::StrAppend(&text, absl::StrFormat("%.5f %.6f %.6f %.6f %.6f %.6f %.6f %.6f\n", p.hours,
+                                             p.before_deg_h[0], p.before_deg_h[1],
+                                             p.before_deg_h[2], p.after_deg_h[0],
+                                             p.after_deg_h[1], p.after_deg_h[2], p.sigma_deg_h));
+    }
+    absl::StrAppend(&text, "\n\n");
+  }
+  return text;
+}
+
+std::string ResidualDriftScript(const Context& c, const std::vector<int>& gyros) {
+  std::string gp = BeginPng(c, "residual_drift.png", 1200, 300 * static_cast<int>(gyros.size()) + 100);
+  absl::StrAppend(&gp, absl::StrFormat(
+                           "set multiplot layout %d,1 title %s\n", static_cast<int>(gyros.size()),
+                           Quote(absl::StrCat("Residual drift the model leaves, smoothed, case "
+                                              "axes ",
+                                              c.start))));
+  const char* axis[] = {"x", "y", "z"};
+  const char* colour[] = {"#1b9e77", "#d95f02", "#7570b3"};
+  for (size_t g = 0; g < gyros.size(); ++g) {
+    absl::StrAppend(&gp, absl::StrFormat("set title 'gyro %d'\nset ylabel 'drift, deg/h'\n",
+                                         gyros[g]));
+    std::vector<std::string> series = {absl::StrFormat(
+        "'residual_drift.dat' index %d using 1:(-2*$8):(2*$8) with filledcurves fc rgb '#cccccc' "
+        "fs transparent solid 0.5 title '±2 sigma after'",
+        static_cast<int>(g))};
+    for (int i = 0; i < 3; ++i) {
+      series.push_back(absl::StrFormat(
+          "'residual_drift.dat' index %d using 1:%d with lines dt 2 lc rgb '%s' title '%s before'",
+          static_cast<int>(g), i + 2, colour[i], axis[i]));
+      series.push_back(absl::StrFormat(
+          "'residual_drift.dat' index %d using 1:%d with lines lw 2 lc rgb '%s' title '%s after'",
+          static_cast<int>(g), i + 5, colour[i], axis[i]));
+    }
+    absl::StrAppend(&gp, Plot(series));
+  }
+  absl::StrAppend(&gp, kEndPng);
+  return gp;
+}
+
 }  // namespace
 
 absl::StatusOr<std::vector<DiagnosisPlot>> WriteDiagnosisPlots(const disc::DiagnosisReport& r,
@@ -554,6 +605,19 @@ absl::StatusOr<std::vector<DiagnosisPlot>> WriteDiagnosisPlots(const disc::Diagn
                          "are its mean.",
                          f.gyro)});
     break;  // the first rotor displacement
+  }
+  if (!r.residual_drift.empty()) {
+    if (absl::Status s =
+            WriteText(dir / "residual_drift.dat", ResidualDriftData(r.gyros, r.residual_drift));
+        !s.ok())
+      return s;
+    absl::StrAppend(&gp, ResidualDriftScript(c, r.gyros));
+    plots.push_back(
+        {"residual_drift.png", "residual drift (open-ended stage)",
+         "Each gyro's drift the model leaves, smoothed over the recording (fixed-interval "
+         "smoother), per case axis, with the configured model and the library's findings "
+         "(dashed) and with the basis terms found (solid), against the grey band of twice its "
+         "1-sigma: a term that explains the physics brings the solid lines into the band."});
   }
   if (absl::Status s = WriteText(dir / "plots.gp", gp); !s.ok()) return s;
   return plots;
