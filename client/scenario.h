@@ -1,6 +1,7 @@
 // Simulation scenarios: a JSON file that changes the simulated truth away from the
 // configuration's model (true drift coefficients, rotor displacement, misalignments, faults,
-// star-tracker defects) and chooses the attitude profile. Format and example: docs/scenario.md.
+// star-tracker defects, drift behaviours beyond the paper's models) and chooses the attitude
+// profile. Format and example: docs/scenario.md.
 // Values are in the units their key names (deg/h, arcsec, um, ...), converted to SI here with
 // estimator/units.h; unknown keys and out-of-range values are InvalidArgument naming the key path,
 // e.g. "gyros[0].rotorDisplacementUm[1]: 50 is outside [-20, 20]".

@@ -84,8 +84,11 @@ std::string VecDegH(const Eigen::Vector3d& v) {
                          estimator::RadPerSecToDegPerHour(v.z()));
 }
 
-std::string Vec(const Eigen::Vector3d& v) {
-  return absl::StrCat("[", absl::StrJoin({Num(v.x()), Num(v.y()), Num(v.z())}, ", "), "]");
+// A setting converted back to its JSON unit, to 15 significant digits (30, not 29.999999999999996).
+std::string Num15(double x) { return absl::StrFormat("%.15g", x); }
+
+std::string Vec15(const Eigen::Vector3d& v) {
+  return absl::StrCat("[", absl::StrJoin({Num15(v.x()), Num15(v.y()), Num15(v.z())}, ", "), "]");
 }
 
 // Metadata lines of gyro g's effects beyond the paper's models (docs/scenario.md, "Truth file").
@@ -94,28 +97,28 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
   if (e.orbital_drift) {
     out << absl::StrFormat("# g%d_orbital_drift_amplitude_deg_h: %s\n", n,
                            VecDegH(e.orbital_drift->amplitude_k_rad_s));
-    out << absl::StrFormat("# g%d_orbital_drift_period_min: %.17g\n", n,
+    out << absl::StrFormat("# g%d_orbital_drift_period_min: %.15g\n", n,
                            *e.orbital_drift->period_s / estimator::kSecondsPerMinute);
-    out << absl::StrFormat("# g%d_orbital_drift_phase_deg: %.17g\n", n,
+    out << absl::StrFormat("# g%d_orbital_drift_phase_deg: %.15g\n", n,
                            estimator::RadToDeg(e.orbital_drift->phase_rad));
   }
   if (!e.rotor_displacement_rate_k_m_s.isZero(0.0)) {
     out << absl::StrFormat("# g%d_rotor_displacement_rate_um_h: %s\n", n,
-                           Vec(e.rotor_displacement_rate_k_m_s * estimator::kSecondsPerHour /
+                           Vec15(e.rotor_displacement_rate_k_m_s * estimator::kSecondsPerHour /
                                estimator::kMetresPerUm));
   }
   if (!e.readout_distortion_k.isZero(0.0)) {
     const Eigen::Matrix3d ppm = e.readout_distortion_k / 1e-6;
     out << absl::StrFormat(
         "# g%d_readout_distortion_ppm: [%s]\n", n,
-        absl::StrJoin({Num(ppm(0, 0)), Num(ppm(1, 1)), Num(ppm(2, 2)), Num(ppm(0, 1)),
-                       Num(ppm(1, 2)), Num(ppm(2, 0))},
+        absl::StrJoin({Num15(ppm(0, 0)), Num15(ppm(1, 1)), Num15(ppm(2, 2)), Num15(ppm(0, 1)),
+                       Num15(ppm(1, 2)), Num15(ppm(2, 0))},
                       ", "));
   }
   if (e.switching_drift) {
     out << absl::StrFormat("# g%d_switching_drift_amplitude_deg_h: %s\n", n,
                            VecDegH(e.switching_drift->amplitude_k_rad_s));
-    out << absl::StrFormat("# g%d_switching_drift_mean_dwell_h: %.17g\n", n,
+    out << absl::StrFormat("# g%d_switching_drift_mean_dwell_h: %.15g\n", n,
                            estimator::SecondsToHours(e.switching_drift->mean_dwell_s));
     out << absl::StrFormat("# g%d_switching_initial_level: %+.0f\n", n,
                            e.switching_initial_level);
@@ -126,7 +129,7 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
   if (e.hidden_driver_drift) {
     out << absl::StrFormat("# g%d_hidden_driver_amplitude_deg_h: %s\n", n,
                            VecDegH(e.hidden_driver_drift->amplitude_k_rad_s));
-    out << absl::StrFormat("# g%d_hidden_driver_correlation_h: %.17g\n", n,
+    out << absl::StrFormat("# g%d_hidden_driver_correlation_h: %.15g\n", n,
                            estimator::SecondsToHours(e.hidden_driver_drift->correlation_time_s));
   }
 }

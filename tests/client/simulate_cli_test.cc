@@ -102,8 +102,8 @@ TEST(SimulateCli, TruthFileRecordsTheDriftEffects) {
   EXPECT_THAT(truth, HasSubstr("# g1_orbital_drift_amplitude_deg_h: [0.02, 0, -0.01]\n"));
   EXPECT_THAT(truth, HasSubstr("# g1_orbital_drift_period_min: 94\n"));  // the mixed profile's
   EXPECT_THAT(truth, HasSubstr("# g1_orbital_drift_phase_deg: 30\n"));
-  EXPECT_THAT(truth, HasSubstr("# g1_rotor_displacement_rate_um_h: [0.05"));
-  EXPECT_THAT(truth, HasSubstr("# g2_readout_distortion_ppm: [200"));
+  EXPECT_THAT(truth, HasSubstr("# g1_rotor_displacement_rate_um_h: [0.05, 0, 0]\n"));
+  EXPECT_THAT(truth, HasSubstr("# g2_readout_distortion_ppm: [200, -100, 0, 50, 0, 0]\n"));
   EXPECT_THAT(truth, HasSubstr("# g2_switching_drift_mean_dwell_h: 4\n"));
   EXPECT_THAT(truth, HasSubstr("# g2_switch_times_h: ["));
   EXPECT_THAT(truth, HasSubstr("# g3_hidden_driver_correlation_h: 2\n"));

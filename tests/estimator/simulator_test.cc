@@ -1158,16 +1158,18 @@ TEST(Simulator, SwitchingDriftIsARandomTelegraphProcess) {
                                       HasSubstr("gyros[0] (gyro 1).switching_drift.mean_dwell_s")));
 }
 
-// The hidden driver x(t) at the frames, 600 s apart, over 500 h on 3 gyros (tau = 0.5 h): an
-// AR(1) sequence with rho = exp(-600 s / tau) = 0.7165 and unit variance. With N = 9003 samples:
-// the sample mean has sd sqrt((1 + rho) / (1 - rho) / N) = 0.026, the sample variance
-// sd sqrt(2 (1 + rho^2) / (1 - rho^2) / N) = 0.026, the lag-1 correlation sd
-// sqrt((1 - rho^2) / N) = 0.0074; each is checked at 5 sd. The lag-3 correlation (rho^3 = 0.368)
-// at 5 sd of sqrt(((1 + rho^2)(1 - rho^6) / (1 - rho^2) - 6 rho^6) / N) = 0.014 (Bartlett's
-// formula for an AR(1) sequence) separates the exponential correlation of the OU process from
-// other processes with the same lag-1 value. The drift is x B plus the model.
+// The hidden driver x(t) at the frames, 600 s apart, over 2000 h on 3 gyros (tau = 0.5 h): an
+// AR(1) sequence with rho = exp(-600 s / tau) = 0.7165 and unit variance. With N = 36003 samples
+// (Bartlett's large-sample formulas for an AR(1) sequence): the sample mean has sd
+// sqrt((1 + rho) / (1 - rho) / N) = 0.013, the sample variance sd
+// sqrt(2 (1 + rho^2) / (1 - rho^2) / N) = 0.013, the lag-1 correlation sd
+// sqrt((1 - rho^2) / N) = 0.0037, the lag-3 correlation (rho^3 = 0.368) sd
+// sqrt(((1 + rho^2)(1 - rho^6) / (1 - rho^2) - 6 rho^6) / N) = 0.0072; each is checked at 5 sd.
+// The lag-3 value separates the exponential correlation of the OU process from other processes
+// with the same lag-1 value; a correlation time 20% off misses the lag-1 band (checked). The
+// drift is x B plus the model.
 TEST(Simulator, HiddenDriverDriftIsAnOrnsteinUhlenbeckProcess) {
-  SimulationSpec spec = TestSpec(500.0, "inertial");
+  SimulationSpec spec = TestSpec(2000.0, "inertial");
   spec.telemetry_step = 600.0;
   spec.integration_rate_hz = 0.5;
   spec.config.random_walk = 0.0;
@@ -1200,7 +1202,7 @@ TEST(Simulator, HiddenDriverDriftIsAnOrnsteinUhlenbeckProcess) {
       }
     }
   }
-  ASSERT_EQ(n, 3 * 3001);
+  ASSERT_EQ(n, 3 * 12001);
   const double mean = sum / n;
   const double variance = sum_sq / n - mean * mean;
   const double c1 = lag1 / n1 / variance, c3 = lag3 / n3 / variance;
