@@ -222,7 +222,7 @@ struct GyroTruthSample {
   Eigen::Vector3d h_in;   // true spin axis, inertial axes
   Eigen::Vector3d h_k;    // true spin axis, case axes (noise-free)
   Eigen::Vector3d dw_k;   // true total drift [rad/s], case axes (model + displacement +
-                          // random walk + fault step)
+                          // random walk + fault step + the effects below)
   Eigen::Matrix3d C_b_k;  // true mounting
   // The parts of dw_k from the effects of GyroTruth beyond the paper's models (zero when off):
   Eigen::Vector3d rotor_displacement_k_m = Eigen::Vector3d::Zero();  // Delta(t) [m], case axes
