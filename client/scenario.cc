@@ -34,6 +34,9 @@ constexpr double kMaxRandomWalkDegHSqrtH = 1.0;
 constexpr double kMaxVoltageNoiseMv = 1000.0;
 constexpr double kMaxHours = 1e5;
 constexpr int64_t kMaxBurstCount = 100000;
+constexpr double kMaxDisplacementRateUmH = 20.0;
+constexpr double kMaxDistortionPpm = 1e5;  // 10 %
+constexpr double kMinCorrelationHours = 1e-3;
 
 absl::Status Invalid(const std::string& path, const std::string& reason) {
   return absl::InvalidArgumentError(absl::StrCat(path, ": ", reason));
@@ -160,13 +163,76 @@ absl::StatusOr<GyroFault> ParseFault(const json& v, const std::string& path) {
   return fault;
 }
 
+// {"amplitudeDegH": [x,y,z], "periodMin": P, "phaseDeg": p}; periodMin optional (default: the
+// profile's orbital period), phaseDeg optional (0).
+absl::StatusOr<estimator::OrbitalDrift> ParseOrbitalDrift(const json& v, const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"amplitudeDegH", "periodMin", "phaseDeg"}));
+  if (!v.contains("amplitudeDegH")) return Invalid(Key(path, "amplitudeDegH"), "required");
+  estimator::OrbitalDrift o;
+  ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(v["amplitudeDegH"], Key(path, "amplitudeDegH"),
+                                        -kMaxDriftDegH, kMaxDriftDegH));
+  o.amplitude_k_rad_s = DegHToSi(deg_h);
+  if (v.contains("periodMin")) {
+    ASSIGN_OR_RETURN(double min, Number(v["periodMin"], Key(path, "periodMin"), 1.0, 1e5));
+    o.period_s = min * estimator::kSecondsPerMinute;
+  }
+  if (v.contains("phaseDeg")) {
+    ASSIGN_OR_RETURN(double deg, Number(v["phaseDeg"], Key(path, "phaseDeg"), -360.0, 360.0));
+    o.phase_rad = estimator::DegToRad(deg);
+  }
+  return o;
+}
+
+// {"amplitudeDegH": [x,y,z], "<time_key>": hours} -> amplitude [rad/s] and time [s], both
+// required; the time in [kMinCorrelationHours, kMaxHours].
+absl::Status ParseAmplitudeAndTime(const json& v, const std::string& path,
+                                   const std::string& time_key, Vector3d* amplitude_rad_s,
+                                   double* time_s) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"amplitudeDegH", time_key}));
+  for (const std::string& key : {std::string("amplitudeDegH"), time_key}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(v["amplitudeDegH"], Key(path, "amplitudeDegH"),
+                                        -kMaxDriftDegH, kMaxDriftDegH));
+  *amplitude_rad_s = DegHToSi(deg_h);
+  ASSIGN_OR_RETURN(double hours,
+                   Number(v[time_key], Key(path, time_key), kMinCorrelationHours, kMaxHours));
+  *time_s = estimator::HoursToSeconds(hours);
+  return absl::OkStatus();
+}
+
+// [Dxx, Dyy, Dzz, Dxy, Dyz, Dzx] in ppm -> the symmetric D [1].
+absl::StatusOr<Eigen::Matrix3d> ParseDistortionPpm(const json& v, const std::string& path) {
+  if (!v.is_array() || v.size() != 6) {
+    return Invalid(path, absl::StrCat("expected an array of 6 numbers (Dxx, Dyy, Dzz, Dxy, Dyz, "
+                                      "Dzx) in ppm, got ",
+                                      v.is_array() ? absl::StrCat(v.size(), " values")
+                                                   : std::string(v.type_name())));
+  }
+  double ppm[6];
+  for (int i = 0; i < 6; ++i) {
+    ASSIGN_OR_RETURN(ppm[i], Number(v[i], absl::StrCat(path, "[", i, "]"), -kMaxDistortionPpm,
+                                    kMaxDistortionPpm));
+  }
+  constexpr double kPerPpm = 1e-6;
+  Eigen::Matrix3d D;
+  D << ppm[0], ppm[3], ppm[5],  //
+      ppm[3], ppm[1], ppm[4],   //
+      ppm[5], ppm[4], ppm[2];
+  return Eigen::Matrix3d(kPerPpm * D);
+}
+
 absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
   RETURN_IF_ERROR(CheckObject(v, path));
   RETURN_IF_ERROR(CheckKeys(
       v, path,
       {"id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm", "k0DegH", "c1DegH",
        "c2DegH", "muDegH", "nuDegH", "misalignmentArcsec", "randomWalkDegHSqrtH",
-       "readoutNoiseArcsec", "voltageNoiseMv", "initialSpinAxis", "fault", "switchOnHours"}));
+       "readoutNoiseArcsec", "voltageNoiseMv", "initialSpinAxis", "fault", "switchOnHours",
+       "orbitalDrift", "rotorDisplacementRateUmH", "readoutDistortionPpm", "switchingDrift",
+       "hiddenDriverDrift"}));
   ScenarioGyro g;
   if (!v.contains("id")) return Invalid(Key(path, "id"), "required");
   if (!v["id"].is_number_integer()) {
@@ -222,6 +288,25 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
     } else if (k == "switchOnHours") {
       ASSIGN_OR_RETURN(double hours, Number(x, p, 0.0, kMaxHours));
       g.switch_on_time = estimator::HoursToSeconds(hours);
+    } else if (k == "orbitalDrift") {
+      ASSIGN_OR_RETURN(g.orbital_drift, ParseOrbitalDrift(x, p));
+    } else if (k == "rotorDisplacementRateUmH") {
+      ASSIGN_OR_RETURN(Vector3d um_h,
+                       Vec3(x, p, -kMaxDisplacementRateUmH, kMaxDisplacementRateUmH));
+      g.rotor_displacement_rate_k_m_s =
+          estimator::kMetresPerUm * um_h / estimator::kSecondsPerHour;
+    } else if (k == "readoutDistortionPpm") {
+      ASSIGN_OR_RETURN(g.readout_distortion_k, ParseDistortionPpm(x, p));
+    } else if (k == "switchingDrift") {
+      estimator::SwitchingDrift d;
+      RETURN_IF_ERROR(
+          ParseAmplitudeAndTime(x, p, "meanDwellHours", &d.amplitude_k_rad_s, &d.mean_dwell_s));
+      g.switching_drift = d;
+    } else if (k == "hiddenDriverDrift") {
+      estimator::HiddenDriverDrift d;
+      RETURN_IF_ERROR(ParseAmplitudeAndTime(x, p, "correlationHours", &d.amplitude_k_rad_s,
+                                            &d.correlation_time_s));
+      g.hidden_driver_drift = d;
     }
   }
   return g;
@@ -493,6 +578,13 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.initial_h_k) g.initial_h_k = s.initial_h_k;
     if (s.fault) g.fault = s.fault;
     if (s.switch_on_time) g.switch_on_time = s.switch_on_time;
+    if (s.orbital_drift) g.orbital_drift = s.orbital_drift;
+    if (s.rotor_displacement_rate_k_m_s) {
+      g.rotor_displacement_rate_k_m_s = *s.rotor_displacement_rate_k_m_s;
+    }
+    if (s.readout_distortion_k) g.readout_distortion_k = *s.readout_distortion_k;
+    if (s.switching_drift) g.switching_drift = s.switching_drift;
+    if (s.hidden_driver_drift) g.hidden_driver_drift = s.hidden_driver_drift;
   }
   estimator::StarTrackerTruth& st = spec->star_tracker;
   const estimator::StarTrackerTruth& from = scenario.star_tracker;
@@ -506,6 +598,19 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
   st.outlier_burst = from.outlier_burst;
   st.frozen = from.frozen;
   st.misalignment_jump = from.misalignment_jump;
+  return absl::OkStatus();
+}
+
+absl::Status CheckScenarioAgainstProfile(const Scenario& scenario,
+                                         const estimator::AttitudeProfile& profile) {
+  for (size_t i = 0; i < scenario.gyros.size(); ++i) {
+    const ScenarioGyro& g = scenario.gyros[i];
+    if (g.orbital_drift && !g.orbital_drift->period_s && !profile.OrbitalPeriod()) {
+      return Invalid(absl::StrCat("gyros[", i, "].orbitalDrift.periodMin"),
+                     absl::StrCat("required: the attitude profile (", profile.Describe(),
+                                  ") has no orbital period"));
+    }
+  }
   return absl::OkStatus();
 }
 

@@ -1,6 +1,7 @@
 // Simulation scenarios: a JSON file that changes the simulated truth away from the
 // configuration's model (true drift coefficients, rotor displacement, misalignments, faults,
-// star-tracker defects) and chooses the attitude profile. Format and example: docs/scenario.md.
+// star-tracker defects, drift behaviours beyond the paper's models) and chooses the attitude
+// profile. Format and example: docs/scenario.md.
 // Values are in the units their key names (deg/h, arcsec, um, ...), converted to SI here with
 // estimator/units.h; unknown keys and out-of-range values are InvalidArgument naming the key path,
 // e.g. "gyros[0].rotorDisplacementUm[1]: 50 is outside [-20, 20]".
@@ -40,6 +41,12 @@ struct ScenarioGyro {
   std::optional<Eigen::Vector3d> initial_h_k;     // [1]
   std::optional<estimator::GyroFault> fault;
   std::optional<double> switch_on_time;  // [s since the simulation start]
+  // Effects beyond the paper's models (estimator/simulator.h), SI.
+  std::optional<estimator::OrbitalDrift> orbital_drift;
+  std::optional<Eigen::Vector3d> rotor_displacement_rate_k_m_s;  // [m/s]
+  std::optional<Eigen::Matrix3d> readout_distortion_k;           // [1], symmetric
+  std::optional<estimator::SwitchingDrift> switching_drift;
+  std::optional<estimator::HiddenDriverDrift> hidden_driver_drift;
 };
 
 struct Scenario {
@@ -66,6 +73,11 @@ absl::StatusOr<Scenario> ReadScenarioFile(const std::string& path);
 // replace the configuration model's one by one. InvalidArgument when an entry names a gyro that
 // is not in the configuration. The profile fields are not applied here (see MakeScenarioProfile).
 absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* spec);
+
+// Checks what needs the attitude profile: a gyro's orbitalDrift without periodMin needs a profile
+// with an orbital period. InvalidArgument "gyros[i].orbitalDrift.periodMin: ..." otherwise.
+absl::Status CheckScenarioAgainstProfile(const Scenario& scenario,
+                                         const estimator::AttitudeProfile& profile);
 
 // The scenario's profile: `name_override` if not empty, else scenario.profile, else
 // "calibration"; built with MakeNamedProfile over `duration` [s] with the scenario's options and

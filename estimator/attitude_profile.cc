@@ -93,6 +93,7 @@ class OrbitalProfile final : public AttitudeProfile {
     return q_in_p_ * Quaterniond(std::cos(half_u), 0.0, 0.0, std::sin(half_u)) * q_p_b0_;
   }
   Vector3d Rate(double) const override { return Vector3d(0.0, -rate_, 0.0); }
+  std::optional<double> OrbitalPeriod() const override { return options_.period; }
   std::string Describe() const override {
     return absl::StrFormat(
         "orbital(inclination %.4g deg, period %.6g min, raan %.4g deg, u0 %.4g deg)",
@@ -147,6 +148,13 @@ class SequenceProfile final : public AttitudeProfile {
   }
 
   std::string Describe() const override { return description_; }
+
+  std::optional<double> OrbitalPeriod() const override {
+    for (const ProfileSegment& s : segments_) {
+      if (std::optional<double> period = s.profile->OrbitalPeriod()) return period;
+    }
+    return std::nullopt;
+  }
 
  private:
   size_t SegmentIndex(double t) const {

@@ -40,6 +40,11 @@ class AttitudeProfile {
   // Short human-readable description, e.g. for recording metadata.
   virtual std::string Describe() const = 0;
 
+  // The period [s] of the orbit the spacecraft flies, when the profile models one (orbital, and
+  // a sequence with an orbital segment: the first such segment's); nullopt otherwise. The
+  // simulator's orbital drift cycles with it by default.
+  virtual std::optional<double> OrbitalPeriod() const { return std::nullopt; }
+
   static constexpr double kRateStep = 0.01;  // [s]
 };
 

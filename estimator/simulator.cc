@@ -29,6 +29,13 @@ constexpr uint64_t kGyroStreamBase = 100;
 constexpr uint64_t kReadoutOffset = 0;
 constexpr uint64_t kVoltageOffset = 1;
 constexpr uint64_t kRandomWalkOffset = 2;
+constexpr uint64_t kSwitchingOffset = 3;
+constexpr uint64_t kHiddenDriverOffset = 4;
+
+// Largest |D_ij| of a readout distortion (keeps I + D far from singular).
+constexpr double kMaxReadoutDistortion = 0.1;
+// Most switches a switching drift may expect over a run (duration / mean dwell).
+constexpr double kMaxExpectedSwitches = 1e7;
 
 constexpr double kMaxFrames = 1e7;
 constexpr double kMaxSteps = 1e10;
@@ -91,15 +98,65 @@ struct GyroState {
   std::optional<GyroFault> fault;
   double switch_on_time = -std::numeric_limits<double>::infinity();  // [s]
   std::optional<GyroReading> held_reading;  // the frozen reading inside a kReadingFrozen window
+
+  // Effects beyond the paper's models (GyroTruth). With a displacement rate the printed drift is
+  // rebuilt from Delta(t) (model coefficients, c10_per_m and c20_per_m kept for it).
+  bool displacement_grows = false;
+  DriftCoefficients model;
+  Vector3d displacement0_k = Vector3d::Zero();  // [m]
+  Vector3d displacement_rate_k = Vector3d::Zero();  // [m/s]
+  double c10_per_m = 0.0, c20_per_m = 0.0;
+  bool has_orbital = false;
+  Vector3d orbital_amplitude_k = Vector3d::Zero();  // [rad/s]
+  double orbital_omega = 0.0;                      // 2 pi / period [rad/s]
+  double orbital_phase = 0.0;                      // [rad]
+  bool has_distortion = false;
+  Matrix3d I_plus_D = Matrix3d::Identity();
+  bool has_switching = false;
+  Vector3d switching_amplitude_k = Vector3d::Zero();  // [rad/s]
+  double switching_initial_level = 0.0;
+  std::vector<double> switch_times;  // [s], increasing
+  bool has_hidden = false;
+  Vector3d hidden_amplitude_k = Vector3d::Zero();  // [rad/s]
+  double hidden_tau = 0.0;                         // [s]
+  double hidden_x = 0.0;                           // x(t) at the current propagation time [1]
+  bool has_extra_drift = false;  // any of orbital, switching, hidden
+
   Rng readout_rng;
   Rng voltage_rng;
   Rng rw_rng;
+  Rng switching_rng;
+  Rng hidden_rng;
 
   GyroState(int gyro_id, uint64_t seed)
       : id(gyro_id),
         readout_rng(DeriveSeed(seed, GyroStream(gyro_id, kReadoutOffset))),
         voltage_rng(DeriveSeed(seed, GyroStream(gyro_id, kVoltageOffset))),
-        rw_rng(DeriveSeed(seed, GyroStream(gyro_id, kRandomWalkOffset))) {}
+        rw_rng(DeriveSeed(seed, GyroStream(gyro_id, kRandomWalkOffset))),
+        switching_rng(DeriveSeed(seed, GyroStream(gyro_id, kSwitchingOffset))),
+        hidden_rng(DeriveSeed(seed, GyroStream(gyro_id, kHiddenDriverOffset))) {}
+
+  // Delta(t) [m], case axes.
+  Vector3d Displacement_k(double t) const { return displacement0_k + displacement_rate_k * t; }
+
+  // The printed drift of eq. (1), (10) and eq. (8) + (9) at time t: with a growing displacement,
+  // eq. (8), (9) are evaluated with Delta(t).
+  simulator_truth::PrintedDrift PrintedDriftAt(double t) const {
+    return simulator_truth::FromGyroTruth(model, Displacement_k(t), c10_per_m, c20_per_m);
+  }
+
+  Vector3d OrbitalDrift_k(double t) const {
+    return has_orbital ? Vector3d(orbital_amplitude_k * std::cos(orbital_omega * t + orbital_phase))
+                       : Vector3d::Zero();
+  }
+
+  // +1 or -1 at t (the level flips at each switch time <= t); 0 without a switching drift.
+  double SwitchingLevel(double t) const {
+    if (!has_switching) return 0.0;
+    const auto flips = std::upper_bound(switch_times.begin(), switch_times.end(), t) -
+                       switch_times.begin();
+    return flips % 2 == 0 ? switching_initial_level : -switching_initial_level;
+  }
 
   // Fault drift step in case axes at time t.
   Vector3d FaultDrift_k(double t) const {
@@ -179,6 +236,59 @@ bool GyroRuns(const SimulationSpec& spec, int id) {
   return id == w[0] || id == w[1] || id == r[0] || id == r[1];
 }
 
+// The effects of GyroTruth beyond the paper's models; f names the gyro.
+absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
+                                 const std::string& f) {
+  if (g.orbital_drift) {
+    const OrbitalDrift& o = *g.orbital_drift;
+    RETURN_IF_ERROR(FiniteVector(o.amplitude_k_rad_s, f + ".orbital_drift.amplitude_k_rad_s"));
+    if (!std::isfinite(o.phase_rad)) {
+      return absl::InvalidArgumentError(absl::StrCat(f, ".orbital_drift.phase_rad: must be finite"));
+    }
+    if (o.period_s) {
+      RETURN_IF_ERROR(Positive(*o.period_s, f + ".orbital_drift.period_s"));
+    } else if (!spec.profile->OrbitalPeriod()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          f, ".orbital_drift.period_s: required: the attitude profile (", spec.profile->Describe(),
+          ") has no orbital period"));
+    }
+  }
+  RETURN_IF_ERROR(
+      FiniteVector(g.rotor_displacement_rate_k_m_s, f + ".rotor_displacement_rate_k_m_s"));
+  // Delta(t) is linear in t: inside the gap at both ends means inside throughout.
+  const Vector3d end_k = g.rotor_displacement_k + g.rotor_displacement_rate_k_m_s * spec.duration;
+  if ((end_k.array().abs() >= spec.config.suspension.gap).any()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s.rotor_displacement_rate_k_m_s: the displacement reaches the suspension gap %g m "
+        "within the run (at its end (%g, %g, %g) m)",
+        f, spec.config.suspension.gap, end_k.x(), end_k.y(), end_k.z()));
+  }
+  const Matrix3d& D = g.readout_distortion_k;
+  if (!D.allFinite() || (D - D.transpose()).cwiseAbs().maxCoeff() != 0.0 ||
+      D.cwiseAbs().maxCoeff() >= kMaxReadoutDistortion) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s.readout_distortion_k: must be finite, symmetric and every |D_ij| < %g", f,
+        kMaxReadoutDistortion));
+  }
+  if (g.switching_drift) {
+    RETURN_IF_ERROR(FiniteVector(g.switching_drift->amplitude_k_rad_s,
+                                 f + ".switching_drift.amplitude_k_rad_s"));
+    RETURN_IF_ERROR(Positive(g.switching_drift->mean_dwell_s, f + ".switching_drift.mean_dwell_s"));
+    if (spec.duration / g.switching_drift->mean_dwell_s > kMaxExpectedSwitches) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.switching_drift.mean_dwell_s: %g s over %g s gives more than %g expected switches", f,
+          g.switching_drift->mean_dwell_s, spec.duration, kMaxExpectedSwitches));
+    }
+  }
+  if (g.hidden_driver_drift) {
+    RETURN_IF_ERROR(FiniteVector(g.hidden_driver_drift->amplitude_k_rad_s,
+                                 f + ".hidden_driver_drift.amplitude_k_rad_s"));
+    RETURN_IF_ERROR(Positive(g.hidden_driver_drift->correlation_time_s,
+                             f + ".hidden_driver_drift.correlation_time_s"));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
   RETURN_IF_ERROR(ValidateConfig(spec.config));
   if (spec.profile == nullptr) {
@@ -252,6 +362,7 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
       return absl::InvalidArgumentError(
           absl::StrCat(f, ".initial_h_k: must be a finite non-zero vector"));
     }
+    RETURN_IF_ERROR(ValidateGyroEffects(spec, g, f));
   }
   const StarTrackerTruth& st = spec.star_tracker;
   if (st.noise) {
@@ -333,6 +444,56 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     const Vector3d h_k0 = truth.initial_h_k.value_or(DefaultInitialSpinAxis(id)).normalized();
     g.h_in = (C_in_b0 * g.C_b_k * h_k0).normalized();
     result.true_coefficients[id - 1] = simulator_truth::EquivalentCoefficients(g.drift);
+
+    // Effects beyond the paper's models; each draws only from its own stream, and only when on.
+    GyroEffectsTruth& effects = result.effects[id - 1];
+    g.displacement0_k = truth.rotor_displacement_k;
+    if (!truth.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+      g.displacement_grows = true;
+      g.model = truth.drift.value_or(gc.model);
+      g.displacement_rate_k = truth.rotor_displacement_rate_k_m_s;
+      g.c10_per_m = truth.c10_per_m;
+      g.c20_per_m = truth.c20_per_m;
+      effects.rotor_displacement_rate_k_m_s = truth.rotor_displacement_rate_k_m_s;
+    }
+    if (truth.orbital_drift) {
+      OrbitalDrift o = *truth.orbital_drift;
+      if (!o.period_s) o.period_s = profile.OrbitalPeriod();
+      g.has_orbital = true;
+      g.orbital_amplitude_k = o.amplitude_k_rad_s;
+      g.orbital_omega = 2.0 * kPi / *o.period_s;
+      g.orbital_phase = o.phase_rad;
+      effects.orbital_drift = o;
+    }
+    if (!truth.readout_distortion_k.isZero(0.0)) {
+      g.has_distortion = true;
+      g.I_plus_D = Matrix3d::Identity() + truth.readout_distortion_k;
+      effects.readout_distortion_k = truth.readout_distortion_k;
+    }
+    if (truth.switching_drift) {
+      // Random telegraph process: the level at 0 is +-1 with probability 1/2, then exponential
+      // dwell times (inverse transform, 1 - U in (0, 1]), all drawn now for the whole run.
+      g.has_switching = true;
+      g.switching_amplitude_k = truth.switching_drift->amplitude_k_rad_s;
+      g.switching_initial_level = g.switching_rng.Uniform() < 0.5 ? 1.0 : -1.0;
+      const double tau = truth.switching_drift->mean_dwell_s;
+      for (double t_switch = -tau * std::log(1.0 - g.switching_rng.Uniform());
+           t_switch <= spec.duration;
+           t_switch += -tau * std::log(1.0 - g.switching_rng.Uniform())) {
+        g.switch_times.push_back(t_switch);
+      }
+      effects.switching_drift = truth.switching_drift;
+      effects.switching_initial_level = g.switching_initial_level;
+      effects.switch_times_s = g.switch_times;
+    }
+    if (truth.hidden_driver_drift) {
+      g.has_hidden = true;
+      g.hidden_amplitude_k = truth.hidden_driver_drift->amplitude_k_rad_s;
+      g.hidden_tau = truth.hidden_driver_drift->correlation_time_s;
+      g.hidden_x = g.hidden_rng.Normal();  // stationary start: x(0) ~ N(0, 1)
+      effects.hidden_driver_drift = truth.hidden_driver_drift;
+    }
+    g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden;
     gyros.push_back(std::move(g));
   }
 
@@ -359,12 +520,24 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     for (GyroState& g : gyros) {
       const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
       const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
-      Vector3d dw_k = simulator_truth::TrueDriftRate_k(g.drift, h_k);
+      Vector3d dw_k = g.displacement_grows
+                          ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_mid), h_k)
+                          : simulator_truth::TrueDriftRate_k(g.drift, h_k);
       if (g.fault) dw_k += g.FaultDrift_k(t_mid);
+      if (g.has_extra_drift) {
+        dw_k += g.OrbitalDrift_k(t_mid) + g.SwitchingLevel(t_mid) * g.switching_amplitude_k +
+                g.hidden_x * g.hidden_amplitude_k;
+      }
       const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
       g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
       g.dw_in_prev = dw_in;
       if (g.rw_intensity > 0.0) g.dw_rw_in += (g.rw_intensity * sqrt_h) * g.rw_rng.Normal3();
+      if (g.has_hidden) {
+        // Exact OU step over h: a = exp(-h / tau), innovation variance 1 - a^2 = -expm1(-2h/tau).
+        const double a = std::exp(-h / g.hidden_tau);
+        g.hidden_x = a * g.hidden_x + std::sqrt(-std::expm1(-2.0 * h / g.hidden_tau)) *
+                                          g.hidden_rng.Normal();
+      }
     }
   };
 
@@ -395,20 +568,43 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       gt.h_in = g.h_in;
       gt.h_k = (g.C_k_b * (C_b_in * g.h_in)).normalized();
       gt.C_b_k = g.C_b_k;
-      gt.dw_k = simulator_truth::TrueDriftRate_k(g.drift, gt.h_k) + g.FaultDrift_k(t_m) +
-                g.C_k_b * (C_b_in * g.dw_rw_in);
-      // Readout noise: a small rotation perpendicular to h_k (two draws, always).
-      const Vector3d e1 = AnyPerpendicular(gt.h_k);
-      const Vector3d e2 = gt.h_k.cross(e1);
+      gt.rotor_displacement_k_m = g.Displacement_k(t_m);
+      const Vector3d dw_model_k =
+          g.displacement_grows ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_m), gt.h_k)
+                               : simulator_truth::TrueDriftRate_k(g.drift, gt.h_k);
+      gt.dw_k = dw_model_k + g.FaultDrift_k(t_m) + g.C_k_b * (C_b_in * g.dw_rw_in);
+      if (g.has_extra_drift) {
+        gt.dw_orbital_k_rad_s = g.OrbitalDrift_k(t_m);
+        gt.switching_level = g.SwitchingLevel(t_m);
+        gt.dw_switching_k_rad_s = gt.switching_level * g.switching_amplitude_k;
+        gt.hidden_driver = g.has_hidden ? g.hidden_x : 0.0;
+        gt.dw_hidden_k_rad_s = gt.hidden_driver * g.hidden_amplitude_k;
+        gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s;
+      }
+      // The pick-off's distortion, then readout noise: a small rotation perpendicular to the
+      // distorted axis (two draws, always).
+      const Vector3d h_read =
+          g.has_distortion ? Vector3d((g.I_plus_D * gt.h_k).normalized()) : gt.h_k;
+      const Vector3d e1 = AnyPerpendicular(h_read);
+      const Vector3d e2 = h_read.cross(e1);
       const double n1 = g.readout_rng.Normal();
       const double n2 = g.readout_rng.Normal();
-      Vector3d h_meas = ExpMatrix(g.readout_noise * (n1 * e1 + n2 * e2)) * gt.h_k;
+      Vector3d h_meas = ExpMatrix(g.readout_noise * (n1 * e1 + n2 * e2)) * h_read;
       if (g.fault && g.fault->kind == GyroFault::Kind::kReadoutJump && t_m >= g.fault->time) {
         h_meas = ExpMatrix(g.fault->value) * h_meas;
       }
       GyroReading reading;
       reading.h_k = h_meas.normalized();
-      const Vector3d u_k = g.u_offset_k + g.voltage_noise * g.voltage_rng.Normal3();
+      Vector3d u_offset_k = g.u_offset_k;
+      if (g.displacement_grows) {
+        // eq. (3) inverse at Delta(t_m), per suspension axis.
+        const SuspensionConfig& s = config.suspension;
+        for (int axis = 0; axis < 3; ++axis) {
+          u_offset_k(axis) = OffsetVoltageFromDisplacement(
+              gt.rotor_displacement_k_m(axis), s.amplifier_gain, s.reference_voltage, s.gap);
+        }
+      }
+      const Vector3d u_k = u_offset_k + g.voltage_noise * g.voltage_rng.Normal3();
       reading.u_k_mv = u_k / kVoltsPerMv;
       // Switch-on, missing and frozen readings only decide what is telemetered, after the draws.
       if (t_m < g.switch_on_time) continue;

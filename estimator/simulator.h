@@ -15,13 +15,22 @@
 //   (inertial axes), which starts at zero and takes an independent N(0, q h I) step after every
 //   integration step of length h (q = random_walk^2), so its increment over any interval T
 //   between telemetry frames is N(0, q T I), independent of other intervals.
+// - Effects beyond the paper's models (GyroTruth, each off by default), added to dw_k in case
+//   axes: an orbital drift A cos(2 pi t / P + phase); a rotor displacement growing as
+//   Delta(t) = Delta0 + rate t, with eq. (8) + (9) evaluated at Delta(t) (lambda = Delta(t) /
+//   |Delta(t)|, C10 = c10_per_m |Delta(t)|, C20 = c20_per_m |Delta(t)|) and the voltages of
+//   eq. (3) at Delta(t); a switching drift +-A (random telegraph process, switch times drawn for
+//   the whole run at the start); a hidden-driver drift B x(t), x an Ornstein-Uhlenbeck process
+//   of unit variance. In a step the switching level and the orbital drift are taken at the step
+//   midpoint, x(t) at the step start (then x is stepped exactly over the step).
 // - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a
 //   rotation by dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
 //   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
 //   extrapolated half a step with the previous step's drift).
-// - Gyro reading at each telemetry time: h_k_meas = Exp(jump_k) Exp(n) h_k_true, n perpendicular to
-//   h_k_true with independent N(0, readout_noise^2) components on two perpendicular axes; jump_k is
-//   the readout_jump fault (zero before its time). Voltages u_k = eq. (3) inverse of the rotor
+// - Gyro reading at each telemetry time: h_k_meas = Exp(jump_k) Exp(n) h_k_read, with
+//   h_k_read = normalise((I + D) h_k_true) (D the readout distortion; h_k_read = h_k_true when D
+//   is zero), n perpendicular to h_k_read with independent N(0, readout_noise^2) components on
+//   two perpendicular axes; jump_k is the readout_jump fault (zero before its time). Voltages u_k = eq. (3) inverse of the rotor
 //   displacement per case axis plus N(0, voltage_noise^2) each, written in mV. A reading_frozen
 //   fault repeats the whole reading (h_k and voltages) of the first frame of its window in every
 //   frame of the window; a readings_missing fault leaves the gyro's field empty in its window; a
@@ -40,6 +49,8 @@
 // same numbers per frame whether or not a sample is used, so turning on outliers, bursts,
 // outages, frozen windows, misalignment jumps, invalid flags, missing or frozen gyro readings or a
 // late switch-on never changes the gyro noise or the star-tracker noise of the other samples.
+// The switching drift and the hidden driver draw from streams of their own too, so switching
+// them on changes no other random number (only the spin axes they turn).
 #ifndef ESG_ESTIMATOR_SIMULATOR_H_
 #define ESG_ESTIMATOR_SIMULATOR_H_
 
@@ -87,6 +98,36 @@ struct GyroFault {
   double end = std::numeric_limits<double>::infinity();
 };
 
+// A drift fixed in the case that cycles with the orbit, as the thermal cycle of a spacecraft in
+// and out of the Earth's shadow does: dw_k = amplitude_k_rad_s cos(2 pi t / period_s + phase_rad),
+// t in seconds since the simulation start (the cycle's epoch t0 is the start; phase_rad shifts it).
+struct OrbitalDrift {
+  Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes [rad/s]
+  // [s], > 0; default (nullopt): the attitude profile's AttitudeProfile::OrbitalPeriod(), which
+  // must then exist.
+  std::optional<double> period_s;
+  double phase_rad = 0.0;  // [rad]
+};
+
+// A drift that switches at random between +amplitude_k_rad_s and -amplitude_k_rad_s (a random
+// telegraph process, e.g. a bistable contact or a mode of the suspension electronics): the level
+// at the start is +1 or -1 with probability 1/2 each, and the dwell times between switches are
+// independent and exponential with mean mean_dwell_s, so the switches form a Poisson process of
+// rate 1 / mean_dwell_s.
+struct SwitchingDrift {
+  Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes [rad/s]
+  double mean_dwell_s = 3600.0;                                 // [s], > 0
+};
+
+// A drift driven by a quantity that is not telemetered (e.g. a temperature nobody measures):
+// dw_k = amplitude_k_rad_s x(t), x a stationary Ornstein-Uhlenbeck process of unit variance and
+// correlation time correlation_time_s: E[x(t) x(t + s)] = exp(-|s| / correlation_time_s),
+// x(0) ~ N(0, 1). Stepped exactly: x(t + h) = a x(t) + sqrt(1 - a^2) N(0, 1), a = exp(-h / tau).
+struct HiddenDriverDrift {
+  Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes [rad/s]
+  double correlation_time_s = 3600.0;                           // [s], > 0
+};
+
 struct GyroTruth {
   // Whether the gyro runs. Default (nullopt): it runs when it is configured and belongs to the
   // working or the reserve pair; so with the usual pairs {1,2}, {1,3} gyros 1-3 run and gyro 4,
@@ -117,6 +158,20 @@ struct GyroTruth {
   // even with identical mountings): 1: (0.2, 0.3, 0.93), 2: (0.93, 0.2, 0.3), 3: (0.3, 0.93, 0.2),
   // 4: (-0.5, 0.5, 0.7), each normalised.
   std::optional<Eigen::Vector3d> initial_h_k;
+
+  // Drift effects beyond the paper's models, each off by default (see the file comment). With all
+  // of them off the simulation draws and computes exactly what it did without them.
+  std::optional<OrbitalDrift> orbital_drift;
+  // Growth of the rotor displacement [m/s], case axes: Delta(t) = rotor_displacement_k +
+  // rotor_displacement_rate_k_m_s t. The drift of eq. (8) + (9) and the voltages of eq. (3)
+  // follow Delta(t). Delta(t) must stay inside the suspension gap over the run.
+  Eigen::Vector3d rotor_displacement_rate_k_m_s = Eigen::Vector3d::Zero();
+  // Symmetric distortion D of the spin-axis readout [1] (scale-factor errors on the diagonal,
+  // non-orthogonality of the direction-cosine pick-off off it): the reading, before readout
+  // noise, is normalise((I + D) h_k). |D_ij| < 0.1.
+  Eigen::Matrix3d readout_distortion_k = Eigen::Matrix3d::Zero();
+  std::optional<SwitchingDrift> switching_drift;
+  std::optional<HiddenDriverDrift> hidden_driver_drift;
 };
 
 // n consecutive star-tracker outliers (see the file comment for their axis).
@@ -167,8 +222,28 @@ struct GyroTruthSample {
   Eigen::Vector3d h_in;   // true spin axis, inertial axes
   Eigen::Vector3d h_k;    // true spin axis, case axes (noise-free)
   Eigen::Vector3d dw_k;   // true total drift [rad/s], case axes (model + displacement +
-                          // random walk + fault step)
+                          // random walk + fault step + the effects below)
   Eigen::Matrix3d C_b_k;  // true mounting
+  // The parts of dw_k from the effects of GyroTruth beyond the paper's models (zero when off):
+  Eigen::Vector3d rotor_displacement_k_m = Eigen::Vector3d::Zero();  // Delta(t) [m], case axes
+  Eigen::Vector3d dw_orbital_k_rad_s = Eigen::Vector3d::Zero();      // orbital drift [rad/s]
+  double switching_level = 0.0;  // +1 or -1 with a switching drift, else 0 [1]
+  Eigen::Vector3d dw_switching_k_rad_s = Eigen::Vector3d::Zero();  // level * amplitude [rad/s]
+  double hidden_driver = 0.0;  // x(t) of the hidden-driver drift, else 0 [1]
+  Eigen::Vector3d dw_hidden_k_rad_s = Eigen::Vector3d::Zero();  // x(t) * amplitude [rad/s]
+};
+
+// One gyro's effects beyond the paper's models as simulated: the settings in effect (the orbital
+// period resolved from the profile) and the drawn history of the switching drift.
+struct GyroEffectsTruth {
+  std::optional<OrbitalDrift> orbital_drift;  // period_s always set
+  Eigen::Vector3d rotor_displacement_rate_k_m_s = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d readout_distortion_k = Eigen::Matrix3d::Zero();
+  std::optional<SwitchingDrift> switching_drift;
+  double switching_initial_level = 0.0;  // +1 or -1 at t = 0 (0 without a switching drift)
+  // [s since the simulation start], increasing, all <= duration: the level flips sign at each.
+  std::vector<double> switch_times_s;
+  std::optional<HiddenDriverDrift> hidden_driver_drift;
 };
 
 struct TruthSample {
@@ -188,7 +263,10 @@ struct SimulationResult {
   // the displacement folded in as eq. (10) terms: C1 += (C10 + C20) lambda, C2 += -5 C20 lambda
   // (simulator_truth::EquivalentCoefficients), so DriftRate_k(true_coefficients, h_k) is the
   // simulated deterministic drift.
+  // With a rotor displacement rate, the coefficients of the displacement at the start.
   std::array<std::optional<DriftCoefficients>, kMaxGyros> true_coefficients;
+  // Per gyro (index id - 1; default-constructed when the gyro is off).
+  std::array<GyroEffectsTruth, kMaxGyros> effects;
 };
 
 // Default starting spin axis in case axes for gyro `id` (see GyroTruth::initial_h_k).

@@ -12,6 +12,7 @@
 #include <iostream>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -83,9 +84,63 @@ std::string VecDegH(const Eigen::Vector3d& v) {
                          estimator::RadPerSecToDegPerHour(v.z()));
 }
 
+// A setting converted back to its JSON unit, to 15 significant digits (30, not 29.999999999999996).
+std::string Num15(double x) { return absl::StrFormat("%.15g", x); }
+
+std::string Vec15(const Eigen::Vector3d& v) {
+  return absl::StrCat("[", absl::StrJoin({Num15(v.x()), Num15(v.y()), Num15(v.z())}, ", "), "]");
+}
+
+// Metadata lines of gyro g's effects beyond the paper's models (docs/scenario.md, "Truth file").
+void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsTruth& e) {
+  const int n = g + 1;
+  if (e.orbital_drift) {
+    out << absl::StrFormat("# g%d_orbital_drift_amplitude_deg_h: %s\n", n,
+                           VecDegH(e.orbital_drift->amplitude_k_rad_s));
+    out << absl::StrFormat("# g%d_orbital_drift_period_min: %.15g\n", n,
+                           *e.orbital_drift->period_s / estimator::kSecondsPerMinute);
+    out << absl::StrFormat("# g%d_orbital_drift_phase_deg: %.15g\n", n,
+                           estimator::RadToDeg(e.orbital_drift->phase_rad));
+  }
+  if (!e.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+    out << absl::StrFormat("# g%d_rotor_displacement_rate_um_h: %s\n", n,
+                           Vec15(e.rotor_displacement_rate_k_m_s * estimator::kSecondsPerHour /
+                               estimator::kMetresPerUm));
+  }
+  if (!e.readout_distortion_k.isZero(0.0)) {
+    const Eigen::Matrix3d ppm = e.readout_distortion_k / 1e-6;
+    out << absl::StrFormat(
+        "# g%d_readout_distortion_ppm: [%s]\n", n,
+        absl::StrJoin({Num15(ppm(0, 0)), Num15(ppm(1, 1)), Num15(ppm(2, 2)), Num15(ppm(0, 1)),
+                       Num15(ppm(1, 2)), Num15(ppm(2, 0))},
+                      ", "));
+  }
+  if (e.switching_drift) {
+    out << absl::StrFormat("# g%d_switching_drift_amplitude_deg_h: %s\n", n,
+                           VecDegH(e.switching_drift->amplitude_k_rad_s));
+    out << absl::StrFormat("# g%d_switching_drift_mean_dwell_h: %.15g\n", n,
+                           estimator::SecondsToHours(e.switching_drift->mean_dwell_s));
+    out << absl::StrFormat("# g%d_switching_initial_level: %+.0f\n", n,
+                           e.switching_initial_level);
+    std::vector<std::string> times;
+    for (double t : e.switch_times_s) times.push_back(Num(estimator::SecondsToHours(t)));
+    out << absl::StrFormat("# g%d_switch_times_h: [%s]\n", n, absl::StrJoin(times, ", "));
+  }
+  if (e.hidden_driver_drift) {
+    out << absl::StrFormat("# g%d_hidden_driver_amplitude_deg_h: %s\n", n,
+                           VecDegH(e.hidden_driver_drift->amplitude_k_rad_s));
+    out << absl::StrFormat("# g%d_hidden_driver_correlation_h: %.15g\n", n,
+                           estimator::SecondsToHours(e.hidden_driver_drift->correlation_time_s));
+  }
+}
+
 // Truth CSV: metadata lines (the recording's, plus the true coefficients [deg/h] and true
-// mountings per running gyro), then time_utc, q0..q3 (true q_in_b, scalar first), per gyro
-// gN_hin_x..z (true inertial spin axis; empty when off), st_outlier (0/1) and st_outlier_arcsec.
+// mountings per running gyro, plus the settings of any effect beyond the paper's models), then
+// time_utc, q0..q3 (true q_in_b, scalar first), per gyro gN_hin_x..z (true inertial spin axis;
+// empty when off), st_outlier (0/1) and st_outlier_arcsec, then one group of columns per gyro and
+// effect that is on (none when every effect is off, so such files keep their old layout):
+// gN_displacement_x..z_um, gN_orbital_dw_x..z_deg_h, gN_switching_level,
+// gN_hidden_driver and gN_hidden_dw_x..z_deg_h.
 absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationResult& result) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) return absl::UnavailableError(absl::StrCat(path, ": cannot open for writing"));
@@ -110,12 +165,32 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
                          Num(C(1, 2)), Num(C(2, 0)), Num(C(2, 1)), Num(C(2, 2))},
                         ", "));
     }
+    WriteEffectMetadata(out, g, result.effects[g]);
   }
   out << "time_utc,q0,q1,q2,q3";
   for (int g = 1; g <= kMaxGyros; ++g) {
     out << absl::StrFormat(",g%d_hin_x,g%d_hin_y,g%d_hin_z", g, g, g);
   }
-  out << ",st_outlier,st_outlier_arcsec\n";
+  out << ",st_outlier,st_outlier_arcsec";
+  for (int g = 0; g < kMaxGyros; ++g) {
+    const estimator::GyroEffectsTruth& e = result.effects[g];
+    const int n = g + 1;
+    if (!e.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+      out << absl::StrFormat(",g%d_displacement_x_um,g%d_displacement_y_um,g%d_displacement_z_um",
+                             n, n, n);
+    }
+    if (e.orbital_drift) {
+      out << absl::StrFormat(
+          ",g%d_orbital_dw_x_deg_h,g%d_orbital_dw_y_deg_h,g%d_orbital_dw_z_deg_h", n, n, n);
+    }
+    if (e.switching_drift) out << absl::StrFormat(",g%d_switching_level", n);
+    if (e.hidden_driver_drift) {
+      out << absl::StrFormat(
+          ",g%d_hidden_driver,g%d_hidden_dw_x_deg_h,g%d_hidden_dw_y_deg_h,g%d_hidden_dw_z_deg_h",
+          n, n, n, n);
+    }
+  }
+  out << "\n";
   for (const estimator::TruthSample& t : result.truth) {
     const estimator::ScalarFirst q = estimator::ToScalarFirst(estimator::Canonical(t.q_in_b));
     out << absl::FormatTime("%Y-%m-%d%ET%H:%M:%E*SZ", t.time, absl::UTCTimeZone()) << ","
@@ -129,7 +204,34 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
       }
     }
     out << "," << (t.star_tracker_outlier ? 1 : 0) << ","
-        << Num(estimator::RadToArcsec(t.star_tracker_outlier_angle)) << "\n";
+        << Num(estimator::RadToArcsec(t.star_tracker_outlier_angle));
+    // Effect columns; empty while the gyro has no truth sample (off or before its switch-on).
+    auto deg_h = [](const Eigen::Vector3d& v) {
+      return absl::StrCat(Num(estimator::RadPerSecToDegPerHour(v.x())), ",",
+                          Num(estimator::RadPerSecToDegPerHour(v.y())), ",",
+                          Num(estimator::RadPerSecToDegPerHour(v.z())));
+    };
+    for (int g = 0; g < kMaxGyros; ++g) {
+      const estimator::GyroEffectsTruth& e = result.effects[g];
+      const std::optional<estimator::GyroTruthSample>& s = t.gyros[g];
+      if (!e.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+        if (s) {
+          const Eigen::Vector3d um = s->rotor_displacement_k_m / estimator::kMetresPerUm;
+          out << "," << Num(um.x()) << "," << Num(um.y()) << "," << Num(um.z());
+        } else {
+          out << ",,,";
+        }
+      }
+      if (e.orbital_drift) out << "," << (s ? deg_h(s->dw_orbital_k_rad_s) : std::string(",,"));
+      if (e.switching_drift) {
+        out << "," << (s ? absl::StrFormat("%+.0f", s->switching_level) : std::string());
+      }
+      if (e.hidden_driver_drift) {
+        out << "," << (s ? absl::StrCat(Num(s->hidden_driver), ",", deg_h(s->dw_hidden_k_rad_s))
+                         : std::string(",,,"));
+      }
+    }
+    out << "\n";
   }
   out.flush();
   if (!out) return absl::UnavailableError(absl::StrCat(path, ": write failed"));
@@ -203,6 +305,9 @@ int RunSimulate(const SimulateOptions& o) {
   if (!profile.ok())
     return Fail(o.profile.empty() ? "scenario profile" : "--profile", profile.status());
   spec.profile = *profile;
+  if (absl::Status s = CheckScenarioAgainstProfile(scenario, *spec.profile); !s.ok()) {
+    return Fail("--scenario", s);
+  }
 
   Progress progress;
   absl::StatusOr<estimator::SimulationResult> result =

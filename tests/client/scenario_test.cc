@@ -142,6 +142,77 @@ TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
   EXPECT_THAT(est::Simulate(spec), IsOk());
 }
 
+// The drift effects beyond the paper's models: each key parsed into SI, applied to the truth, and
+// the orbital drift's period taken from the profile when absent (and required without an orbit).
+TEST(Scenario, ParsesAndAppliesTheDriftEffects) {
+  auto s = ParseScenarioJson(R"({
+    "profile": "orbital", "orbitPeriodMin": 92,
+    "gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0.02, 0, -0.01], "phaseDeg": 30},
+               "rotorDisplacementUm": [0.5, 0, 0], "rotorDisplacementRateUmH": [0.05, -0.1, 0]},
+              {"id": 2, "orbitalDrift": {"amplitudeDegH": [0, 0.01, 0], "periodMin": 100},
+               "switchingDrift": {"amplitudeDegH": [0, 0.03, 0], "meanDwellHours": 4},
+               "readoutDistortionPpm": [200, -100, 0, 50, 10, -30]},
+              {"id": 3, "hiddenDriverDrift": {"amplitudeDegH": [0.01, 0.02, 0],
+                                              "correlationHours": 2}}]
+  })");
+  ASSERT_THAT(s, IsOk());
+  ASSERT_EQ(s->gyros.size(), 3u);
+  const ScenarioGyro& g1 = s->gyros[0];
+  ASSERT_TRUE(g1.orbital_drift.has_value());
+  EXPECT_LT((g1.orbital_drift->amplitude_k_rad_s -
+             est::DegPerHourToRadPerSec(1.0) * Vector3d(0.02, 0, -0.01))
+                .norm(),
+            1e-20);
+  EXPECT_FALSE(g1.orbital_drift->period_s.has_value());
+  EXPECT_NEAR(g1.orbital_drift->phase_rad, est::DegToRad(30.0), 1e-15);
+  EXPECT_LT((*g1.rotor_displacement_rate_k_m_s - 1e-6 / 3600.0 * Vector3d(0.05, -0.1, 0)).norm(),
+            1e-24);
+  const ScenarioGyro& g2 = s->gyros[1];
+  EXPECT_EQ(g2.orbital_drift->period_s, 6000.0);
+  EXPECT_EQ(g2.orbital_drift->phase_rad, 0.0);
+  ASSERT_TRUE(g2.switching_drift.has_value());
+  EXPECT_EQ(g2.switching_drift->mean_dwell_s, 4 * 3600.0);
+  EXPECT_NEAR(g2.switching_drift->amplitude_k_rad_s.y(), est::DegPerHourToRadPerSec(0.03), 1e-20);
+  ASSERT_TRUE(g2.readout_distortion_k.has_value());
+  Eigen::Matrix3d D;
+  D << 200, 50, -30,  //
+      50, -100, 10,   //
+      -30, 10, 0;
+  EXPECT_LT((*g2.readout_distortion_k - 1e-6 * D).norm(), 1e-18);
+  EXPECT_EQ(*g2.readout_distortion_k, g2.readout_distortion_k->transpose());
+  const ScenarioGyro& g3 = s->gyros[2];
+  ASSERT_TRUE(g3.hidden_driver_drift.has_value());
+  EXPECT_EQ(g3.hidden_driver_drift->correlation_time_s, 2 * 3600.0);
+  EXPECT_NEAR(g3.hidden_driver_drift->amplitude_k_rad_s.y(), est::DegPerHourToRadPerSec(0.02),
+              1e-20);
+
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  EXPECT_EQ(spec.gyros[0].rotor_displacement_rate_k_m_s, *g1.rotor_displacement_rate_k_m_s);
+  EXPECT_EQ(spec.gyros[0].orbital_drift->phase_rad, g1.orbital_drift->phase_rad);
+  EXPECT_EQ(spec.gyros[1].readout_distortion_k, *g2.readout_distortion_k);
+  EXPECT_EQ(spec.gyros[1].switching_drift->mean_dwell_s, 4 * 3600.0);
+  EXPECT_EQ(spec.gyros[2].hidden_driver_drift->correlation_time_s, 2 * 3600.0);
+  EXPECT_FALSE(spec.gyros[2].orbital_drift.has_value());
+  // The orbital profile supplies gyro 1's period (92 min); the spec simulates.
+  auto profile = MakeScenarioProfile(*s, "", 3600.0);
+  ASSERT_THAT(profile, IsOk());
+  EXPECT_THAT(CheckScenarioAgainstProfile(*s, **profile), IsOk());
+  spec.profile = *profile;
+  spec.duration = 3600.0;
+  auto result = est::Simulate(spec);
+  ASSERT_THAT(result, IsOk());
+  EXPECT_EQ(result->effects[0].orbital_drift->period_s, 92 * 60.0);
+  EXPECT_EQ(result->effects[1].orbital_drift->period_s, 6000.0);
+  // The calibration profile has no orbit: gyro 1's orbitalDrift then needs periodMin.
+  auto calibration = MakeScenarioProfile(*s, "calibration", 3600.0);
+  ASSERT_THAT(calibration, IsOk());
+  EXPECT_THAT(CheckScenarioAgainstProfile(*s, **calibration),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[0].orbitalDrift.periodMin: required")));
+}
+
 TEST(Scenario, GyroNotInConfigurationIsAnError) {
   auto s = ParseScenarioJson(R"({"gyros": [{"id": 4, "running": true}]})");
   ASSERT_THAT(s, IsOk());
@@ -198,6 +269,34 @@ TEST(Scenario, ErrorsNameTheKey) {
        "starTracker.misalignmentJump.arcsec: expected an array of 3 numbers, got 2 values"},
       {R"({"starTracker": {"misalignmentJump": {"arcsec": [1, 2, 3]}}})",
        "starTracker.misalignmentJump.timeHours: required"},
+      {R"({"gyros": [{"id": 1, "orbitalDrift": {"periodMin": 90}}]})",
+       "gyros[0].orbitalDrift.amplitudeDegH: required"},
+      {R"({"gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0, 0, 0.01], "periodMin": 0}}]})",
+       "gyros[0].orbitalDrift.periodMin: 0 is outside [1, 100000]"},
+      {R"({"gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0, 0, 0.01], "phase": 3}}]})",
+       "gyros[0].orbitalDrift.phase: unknown key"},
+      {R"({"gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0, 500, 0]}}]})",
+       "gyros[0].orbitalDrift.amplitudeDegH[1]: 500 is outside [-100, 100]"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementRateUmH": [0, 0, 30]}]})",
+       "gyros[0].rotorDisplacementRateUmH[2]: 30 is outside [-20, 20]"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementRateUmH": 0.1}]})",
+       "gyros[0].rotorDisplacementRateUmH: expected an array of 3 numbers"},
+      {R"({"gyros": [{"id": 1, "readoutDistortionPpm": [1, 2, 3]}]})",
+       "gyros[0].readoutDistortionPpm: expected an array of 6 numbers"},
+      {R"({"gyros": [{"id": 1, "readoutDistortionPpm": [1, 2, 3, 4, 5, 2e5]}]})",
+       "gyros[0].readoutDistortionPpm[5]: 200000 is outside [-100000, 100000]"},
+      {R"({"gyros": [{"id": 1, "switchingDrift": {"amplitudeDegH": [0, 0, 0.01]}}]})",
+       "gyros[0].switchingDrift.meanDwellHours: required"},
+      {R"({"gyros": [{"id": 1, "switchingDrift": {"amplitudeDegH": [0, 0, 0.01], "meanDwellHours": 0}}]})",
+       "gyros[0].switchingDrift.meanDwellHours: 0 is outside [0.001, 100000]"},
+      {R"({"gyros": [{"id": 1, "switchingDrift": {"amplitudeDegH": [0, 0, 0.01], "meanDwellHours": 1, "tau": 1}}]})",
+       "gyros[0].switchingDrift.tau: unknown key"},
+      {R"({"gyros": [{"id": 1, "hiddenDriverDrift": {"correlationHours": 2}}]})",
+       "gyros[0].hiddenDriverDrift.amplitudeDegH: required"},
+      {R"({"gyros": [{"id": 1, "hiddenDriverDrift": {"amplitudeDegH": [0, 0, 0.01], "correlationHours": -2}}]})",
+       "gyros[0].hiddenDriverDrift.correlationHours: -2 is outside [0.001, 100000]"},
+      {R"({"gyros": [{"id": 1, "hiddenDriverDrift": [0, 0, 0.01]}]})",
+       "gyros[0].hiddenDriverDrift: expected an object"},
       {R"({"profile": "tumbling"})", "profile: unknown profile 'tumbling'"},
       {R"({"inclinationDeg": 200})", "inclinationDeg: 200 is outside [0, 180]"},
       {R"({"segmentHours": 0.1, "slewMin": 10})", "slewMin: 10 min is longer than segmentHours"},

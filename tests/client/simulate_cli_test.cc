@@ -86,6 +86,47 @@ TEST(SimulateCli, WritesConfigAndTruthWhenAsked) {
   EXPECT_THAT(truth, HasSubstr("\n2020-06-01T12:00:30Z,"));
 }
 
+// The drift effects beyond the paper's models are recorded in the truth file: their settings
+// (with the orbital period taken from the profile) and switch times as metadata, their time
+// histories as columns after st_outlier_arcsec; an orbital drift without a period on a profile
+// without an orbit is refused naming the JSON key.
+TEST(SimulateCli, TruthFileRecordsTheDriftEffects) {
+  TempDir dir;
+  const std::string scenario = std::string(ESG_SOURCE_DIR) +
+                               "/deploy/examples/scenarios/drift_behaviours.json";
+  RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" + scenario +
+                                "' --hours 6 --seed 5 --out '" + dir.File("rec.csv") +
+                                "' --truth '" + dir.File("truth.csv") + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string truth = ReadFile(dir.File("truth.csv"));
+  EXPECT_THAT(truth, HasSubstr("# g1_orbital_drift_amplitude_deg_h: [0.02, 0, -0.01]\n"));
+  EXPECT_THAT(truth, HasSubstr("# g1_orbital_drift_period_min: 94\n"));  // the mixed profile's
+  EXPECT_THAT(truth, HasSubstr("# g1_orbital_drift_phase_deg: 30\n"));
+  EXPECT_THAT(truth, HasSubstr("# g1_rotor_displacement_rate_um_h: [0.05, 0, 0]\n"));
+  EXPECT_THAT(truth, HasSubstr("# g2_readout_distortion_ppm: [200, -100, 0, 50, 0, 0]\n"));
+  EXPECT_THAT(truth, HasSubstr("# g2_switching_drift_mean_dwell_h: 4\n"));
+  EXPECT_THAT(truth, HasSubstr("# g2_switch_times_h: ["));
+  EXPECT_THAT(truth, HasSubstr("# g3_hidden_driver_correlation_h: 2\n"));
+  EXPECT_THAT(truth,
+              HasSubstr("st_outlier,st_outlier_arcsec,g1_displacement_x_um,g1_displacement_y_um,"
+                        "g1_displacement_z_um,g1_orbital_dw_x_deg_h,g1_orbital_dw_y_deg_h,"
+                        "g1_orbital_dw_z_deg_h,g2_switching_level,g3_hidden_driver,"
+                        "g3_hidden_dw_x_deg_h,g3_hidden_dw_y_deg_h,g3_hidden_dw_z_deg_h\n"));
+  // At the start: displacement 0.5 um, orbital drift A cos(30 deg), level +-1.
+  EXPECT_THAT(truth, ::testing::ContainsRegex(
+                         "\n2019-03-01T00:00:00Z,[^\n]*,0,0,0\\.5,0,0,0\\.0173[0-9]*,0,"
+                         "-0\\.00866[0-9]*,[+-]1,[^,\n]+,[^,\n]+,[^,\n]+,-?0\n"));
+
+  WriteFile(dir.File("no_period.json"),
+            R"({"profile": "calibration",
+                "gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0, 0, 0.01]}}]})");
+  RunResult bad = RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" +
+                                  dir.File("no_period.json") + "' --hours 1 --seed 1 --out '" +
+                                  dir.File("x.csv") + "'");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err, HasSubstr("gyros[0].orbitalDrift.periodMin: required"));
+}
+
 TEST(SimulateCli, DocumentedScenarioExamplesRun) {
   const std::filesystem::path scenarios =
       std::filesystem::path(ESG_SOURCE_DIR) / "deploy/examples/scenarios";

@@ -2,7 +2,9 @@
 // voltages, spin-axis motion against the paper's printed drift formulas integrated independently,
 // the random-walk intensity from all increments, star-tracker noise,
 // outliers, outages, latency and invalid flags, faults (readout jump, drift step, frozen and
-// missing readings, switch-on, outlier burst, frozen star tracker, misalignment jump), validation.
+// missing readings, switch-on, outlier burst, frozen star tracker, misalignment jump), the drift
+// effects beyond the paper's models (orbital drift, growing rotor displacement, readout
+// distortion, switching drift, hidden-driver drift), validation.
 #include "estimator/simulator.h"
 
 #include <algorithm>
@@ -809,6 +811,418 @@ TEST(Simulator, StarTrackerMisalignmentJumpIsABodyRotationFromItsTime) {
     EXPECT_THAT(r.recording.frames[m].star_tracker->q_in_b, IsNearQuaternion(expected, 1e-14))
         << t;
   }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Effects beyond the paper's models (GyroTruth::orbital_drift, rotor_displacement_rate_k_m_s,
+// readout_distortion_k, switching_drift, hidden_driver_drift).
+
+// Classical RK4 with step `step` [s] of dh_in/dt = (C_in_k(t) dw_k(t, h_k)) x h_in,
+// h_k = C_in_k(t)^T h_in, C_in_k = C_in_b(t) C_b_k, for a drift that may depend on time; returns
+// h_in at every telemetry time m * telemetry_step.
+std::vector<Vector3d> IntegrateTimeVaryingDrift(
+    const AttitudeProfile& profile, const std::function<Vector3d(double, const Vector3d&)>& dw_k,
+    const Matrix3d& C_b_k, const Vector3d& h_in0, double telemetry_step, int num_frames,
+    double step) {
+  auto rate = [&](double t, const Vector3d& h_in) {
+    const Matrix3d C_in_k = profile.Attitude(t).toRotationMatrix() * C_b_k;
+    const Vector3d h_k = C_in_k.transpose() * h_in.normalized();
+    return Vector3d((C_in_k * dw_k(t, h_k)).cross(h_in));
+  };
+  const int steps_per_frame = static_cast<int>(std::lround(telemetry_step / step));
+  std::vector<Vector3d> out = {h_in0};
+  Vector3d h = h_in0;
+  for (int m = 1; m < num_frames; ++m) {
+    for (int i = 0; i < steps_per_frame; ++i) {
+      const double t = (m - 1) * telemetry_step + i * step;
+      const Vector3d k1 = rate(t, h);
+      const Vector3d k2 = rate(t + 0.5 * step, h + 0.5 * step * k1);
+      const Vector3d k3 = rate(t + 0.5 * step, h + 0.5 * step * k2);
+      const Vector3d k4 = rate(t + step, h + step * k3);
+      h = (h + step / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)).normalized();
+    }
+    out.push_back(h);
+  }
+  return out;
+}
+
+// The integration tolerance of TrueSpinAxesFollowThePrintedDriftFormulasIntegratedIndependently
+// (see there): midpoint-rule discretisation for drifts up to max_drift under the profile's body
+// rate, plus one unit roundoff per renormalised step of the simulator and of the reference. A
+// drift that varies in time at angular frequency omega adds omega to the rate that turns it.
+double IntegrationTolerance(const SimulationSpec& spec, double max_drift, double reference_step,
+                            double omega = 0.0) {
+  const double h = 1.0 / spec.integration_rate_hz;
+  double discretisation = 0.0;
+  for (double t = 5.0; t < spec.duration; t += 10.0) {
+    const double W = spec.profile->Rate(t).norm() + omega;
+    discretisation += 10.0 * h * h * max_drift * (W + max_drift) * (W + max_drift) / 24.0;
+  }
+  return discretisation + (spec.duration / h + spec.duration / reference_step) *
+                              std::numeric_limits<double>::epsilon();
+}
+
+// The model drift of gyro g (the reported equivalent coefficients, no random walk) plus the
+// effects' parts reported in the truth sample.
+Vector3d ModelDrift_k(const SimulationResult& r, const TruthSample& t, int g) {
+  return DriftRate_k(*r.true_coefficients[g], t.gyros[g]->h_k);
+}
+
+// Turning the effects on with zero amplitude (and the streams they draw from with them) changes
+// nothing in the recording, bit for bit; with real amplitudes the voltages and the star tracker
+// are still bit for bit those of the clean run (the switching drift and the hidden driver draw
+// from streams of their own).
+TEST(Simulator, DriftEffectsDrawFromTheirOwnStreams) {
+  const SimulationSpec clean_spec = TestSpec(3.0);
+  const SimulationResult clean = RunSimulation(clean_spec);
+  SimulationSpec zero = clean_spec;
+  for (int g = 0; g < 3; ++g) {
+    zero.gyros[g].orbital_drift = OrbitalDrift{Vector3d::Zero(), 5400.0, 0.3};
+    zero.gyros[g].switching_drift = SwitchingDrift{Vector3d::Zero(), 600.0};
+    zero.gyros[g].hidden_driver_drift = HiddenDriverDrift{Vector3d::Zero(), 1800.0};
+  }
+  const SimulationResult r_zero = RunSimulation(zero);
+  EXPECT_TRUE(SameRecording(clean.recording, r_zero.recording));
+  EXPECT_FALSE(r_zero.effects[0].switch_times_s.empty());  // the streams did draw
+
+  SimulationSpec on = clean_spec;
+  const double a = DegPerHourToRadPerSec(0.5);
+  on.gyros[0].switching_drift = SwitchingDrift{Vector3d(a, 0, 0), 600.0};
+  on.gyros[1].hidden_driver_drift = HiddenDriverDrift{Vector3d(0, a, a), 1800.0};
+  on.gyros[2].orbital_drift = OrbitalDrift{Vector3d(0, 0, a), 5400.0, 0.0};
+  const SimulationResult r_on = RunSimulation(on);
+  for (size_t m = 0; m < r_on.truth.size(); ++m) {
+    const TelemetryFrame& f = r_on.recording.frames[m];
+    const TelemetryFrame& c = clean.recording.frames[m];
+    for (int g = 0; g < 3; ++g) EXPECT_EQ(*f.gyros[g]->u_k_mv, *c.gyros[g]->u_k_mv) << m;
+    EXPECT_EQ(f.star_tracker->q_in_b.coeffs(), c.star_tracker->q_in_b.coeffs()) << m;
+  }
+  // ... while the spin axes do move differently.
+  for (int g = 0; g < 3; ++g) {
+    EXPECT_GT(r_on.truth.back().gyros[g]->h_in.cross(clean.truth.back().gyros[g]->h_in).norm(),
+              1e-5)
+        << "gyro " << g + 1;
+  }
+}
+
+// The orbital drift sample equals A cos(2 pi t / P + phase) at every frame (computed here from the
+// spec), its period defaults to the orbital profile's, the total truth drift is the model's plus
+// it, and the simulator's spin axis follows RK4 of that drift to the integration tolerance, while
+// the same integration without the orbital term misses by far more.
+TEST(Simulator, OrbitalDriftCyclesWithTheOrbit) {
+  SimulationSpec spec = TestSpec(6.0, "orbital");
+  spec.config.random_walk = 0.0;
+  const Vector3d A = DegPerHourToRadPerSec(1.0) * Vector3d(2.0, -1.0, 0.5);
+  const double phase = DegToRad(40.0);
+  spec.gyros[0].orbital_drift = OrbitalDrift{A, std::nullopt, phase};  // the profile's period
+  const double P2 = 3000.0;
+  spec.gyros[1].orbital_drift = OrbitalDrift{A, P2, 0.0};
+  const SimulationResult r = RunSimulation(spec);
+  const double P = OrbitalOptions{}.period;
+  ASSERT_TRUE(r.effects[0].orbital_drift.has_value());
+  EXPECT_EQ(r.effects[0].orbital_drift->period_s, P);
+  EXPECT_EQ(r.effects[1].orbital_drift->period_s, P2);
+  EXPECT_FALSE(r.effects[2].orbital_drift.has_value());
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const TruthSample& tr = r.truth[m];
+    const Vector3d expected1 = A * std::cos(2.0 * kPi * (t - 0.0) / P + phase);
+    const Vector3d expected2 = A * std::cos(2.0 * kPi * t / P2);
+    EXPECT_LT((tr.gyros[0]->dw_orbital_k_rad_s - expected1).norm(), 1e-12 * A.norm()) << t;
+    EXPECT_LT((tr.gyros[1]->dw_orbital_k_rad_s - expected2).norm(), 1e-12 * A.norm()) << t;
+    EXPECT_EQ(tr.gyros[2]->dw_orbital_k_rad_s, Vector3d::Zero());
+    for (int g = 0; g < 2; ++g) {
+      const Vector3d total = ModelDrift_k(r, tr, g) + (g == 0 ? expected1 : expected2);
+      EXPECT_LT((tr.gyros[g]->dw_k - total).norm(), 1e-12 * total.norm()) << t;
+    }
+  }
+  // The spin axis of gyro 1 against RK4 of the model drift (printed formulas, test's own) plus
+  // A cos(2 pi t / P + phase).
+  const double reference_step = 0.25;
+  const double max_drift = DegPerHourToRadPerSec(4.0);
+  const double tol = IntegrationTolerance(spec, max_drift, reference_step, 2.0 * kPi / P);
+  PaperDrift p;
+  const DriftCoefficients& c = spec.config.FindGyro(1)->model;
+  p.k0 = c.k0;
+  p.C11 = c.C1(0), p.C12 = c.C1(1), p.C13 = c.C1(2);
+  p.C21 = c.C2(0), p.C22 = c.C2(1), p.C23 = c.C2(2);
+  auto integrate = [&](double amplitude_scale) {
+    return IntegrateTimeVaryingDrift(
+        *spec.profile,
+        [&](double t, const Vector3d& h_k) {
+          return Vector3d(PaperDrift_k(p, h_k) +
+                          amplitude_scale * A * std::cos(2.0 * kPi * t / P + phase));
+        },
+        r.truth[0].gyros[0]->C_b_k, r.truth[0].gyros[0]->h_in, spec.telemetry_step,
+        r.truth.size(), reference_step);
+  };
+  EXPECT_LT(MaxAngle(integrate(1.0), r.truth, 0), tol);
+  EXPECT_GT(MaxAngle(integrate(0.0), r.truth, 0), 1000.0 * tol);
+
+  // Without a period, a profile with no orbit is refused, naming the field.
+  SimulationSpec calibration = TestSpec(1.0, "calibration");
+  calibration.gyros[0].orbital_drift = OrbitalDrift{A, std::nullopt, 0.0};
+  EXPECT_THAT(Simulate(calibration),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[0] (gyro 1).orbital_drift.period_s: required")));
+  // The mixed profile has an orbit.
+  SimulationSpec mixed = TestSpec(1.0, "mixed");
+  mixed.gyros[0].orbital_drift = OrbitalDrift{A, std::nullopt, 0.0};
+  auto mixed_result = Simulate(mixed);
+  ASSERT_THAT(mixed_result, IsOk());
+  EXPECT_EQ(mixed_result->effects[0].orbital_drift->period_s, P);
+}
+
+// Delta(t) = Delta0 + rate t: the voltages follow eq. (3) of Delta(t) within the voltage noise
+// (chi-square over all frames and axes), u(t) - u(0) is eq. (3) of rate t within 6 sigma sqrt(2)
+// per axis; the drift is eq. (8) + (9) at Delta(t) (the test's printed formulas), and the spin
+// axis follows RK4 of that time-varying drift.
+TEST(Simulator, RotorDisplacementGrowsLinearlyInDriftAndVoltages) {
+  SimulationSpec spec = TestSpec(6.0);
+  spec.config.random_walk = 0.0;
+  const Vector3d delta0 = kMetresPerUm * Vector3d(0.5, -1.0, 0.3);
+  const Vector3d rate = kMetresPerUm / kSecondsPerHour * Vector3d(0.5, 0.25, -0.4);  // [m/s]
+  spec.gyros[1].rotor_displacement_k = delta0;
+  spec.gyros[1].rotor_displacement_rate_k_m_s = rate;
+  // Large C10, C20 so that the displacement's drift dominates the spin-axis motion.
+  spec.gyros[1].c10_per_m = DegPerHourToRadPerSec(0.3) / kMetresPerUm;
+  spec.gyros[1].c20_per_m = DegPerHourToRadPerSec(0.1) / kMetresPerUm;
+  const SimulationResult r = RunSimulation(spec);
+  const SuspensionConfig& s = spec.config.suspension;
+  const double sigma_v = spec.gyros[1].voltage_noise;
+  auto eq3 = [&](const Vector3d& d) {  // eq. (3) inverse per axis [V]
+    Vector3d u;
+    for (int axis = 0; axis < 3; ++axis) {
+      u(axis) = OffsetVoltageFromDisplacement(d(axis), s.amplifier_gain, s.reference_voltage, s.gap);
+    }
+    return u;
+  };
+  // The rate moves the voltages by far more than their noise over the run.
+  EXPECT_GT((eq3(rate * spec.duration) / sigma_v).cwiseAbs().minCoeff(), 30.0);
+  double chi2 = 0.0, chi2_constant = 0.0;
+  int n = 0;
+  const Vector3d u0 = *r.recording.frames[0].gyros[1]->u_k_mv * kVoltsPerMv;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const Vector3d delta = delta0 + rate * t;
+    EXPECT_LT((r.truth[m].gyros[1]->rotor_displacement_k_m - delta).norm(), 1e-18);
+    const Vector3d u = *r.recording.frames[m].gyros[1]->u_k_mv * kVoltsPerMv;
+    chi2 += ((u - eq3(delta)) / sigma_v).squaredNorm();
+    chi2_constant += ((u - eq3(delta0)) / sigma_v).squaredNorm();
+    n += 3;
+    EXPECT_LT((u - u0 - eq3(rate * t)).cwiseAbs().maxCoeff(), 6.0 * std::sqrt(2.0) * sigma_v) << t;
+    // eq. (8) + (9) at Delta(t), lambda and sizes computed here.
+    PaperDrift p;
+    const DriftCoefficients& c = spec.config.FindGyro(2)->model;
+    p.k0 = c.k0;
+    p.C11 = c.C1(0), p.C12 = c.C1(1), p.C13 = c.C1(2);
+    p.C21 = c.C2(0), p.C22 = c.C2(1), p.C23 = c.C2(2);
+    const Vector3d lambda = delta.normalized();
+    p.l1 = lambda(0), p.l2 = lambda(1), p.l3 = lambda(2);
+    p.C10 = spec.gyros[1].c10_per_m * delta.norm();
+    p.C20 = spec.gyros[1].c20_per_m * delta.norm();
+    const Vector3d expected = PaperDrift_k(p, r.truth[m].gyros[1]->h_k);
+    EXPECT_LT((r.truth[m].gyros[1]->dw_k - expected).norm(), 1e-12 * expected.norm()) << t;
+  }
+  // Sum of n squared standard normals: chi-square(n), +-5 sd.
+  EXPECT_NEAR(chi2, n, 5.0 * std::sqrt(2.0 * n));
+  EXPECT_GT(chi2_constant, n + 100.0 * std::sqrt(2.0 * n));  // a constant displacement fails
+  // The reported coefficients are those of Delta0.
+  const DriftCoefficients& c = *r.true_coefficients[1];
+  const Vector3d dC1 = c.C1 - spec.config.FindGyro(2)->model.C1;
+  EXPECT_NEAR(dC1.normalized().dot(delta0.normalized()), 1.0, 1e-12);
+
+  // The spin axis against RK4 of the printed drift at Delta(t).
+  const double reference_step = 0.25;
+  const double max_drift = DegPerHourToRadPerSec(4.0);
+  const double tol = IntegrationTolerance(spec, max_drift, reference_step);
+  auto integrate = [&](const Vector3d& rate_used) {
+    return IntegrateTimeVaryingDrift(
+        *spec.profile,
+        [&](double t, const Vector3d& h_k) {
+          PaperDrift p;
+          const DriftCoefficients& c = spec.config.FindGyro(2)->model;
+          p.k0 = c.k0;
+          p.C11 = c.C1(0), p.C12 = c.C1(1), p.C13 = c.C1(2);
+          p.C21 = c.C2(0), p.C22 = c.C2(1), p.C23 = c.C2(2);
+          const Vector3d delta = delta0 + rate_used * t;
+          const Vector3d lambda = delta.normalized();
+          p.l1 = lambda(0), p.l2 = lambda(1), p.l3 = lambda(2);
+          p.C10 = spec.gyros[1].c10_per_m * delta.norm();
+          p.C20 = spec.gyros[1].c20_per_m * delta.norm();
+          return PaperDrift_k(p, h_k);
+        },
+        r.truth[0].gyros[1]->C_b_k, r.truth[0].gyros[1]->h_in, spec.telemetry_step,
+        r.truth.size(), reference_step);
+  };
+  for (const TruthSample& t : r.truth) EXPECT_LT(t.gyros[1]->dw_k.norm(), max_drift);
+  EXPECT_LT(MaxAngle(integrate(rate), r.truth, 1), tol);
+  EXPECT_GT(MaxAngle(integrate(Vector3d::Zero()), r.truth, 1), 1000.0 * tol);
+
+  // A rate that takes the rotor to the gap within the run is refused.
+  SimulationSpec far = spec;
+  far.gyros[1].rotor_displacement_rate_k_m_s = Vector3d(10.0 * kMetresPerUm / kSecondsPerHour, 0, 0);
+  EXPECT_THAT(Simulate(far), StatusIs(absl::StatusCode::kInvalidArgument,
+                                      HasSubstr("gyros[1] (gyro 2).rotor_displacement_rate_k_m_s")));
+}
+
+// With zero readout noise the reading is normalise((I + D) h_true) exactly (to rounding).
+TEST(Simulator, ReadoutDistortionIsApplied) {
+  SimulationSpec spec = TestSpec(2.0);
+  for (int g = 0; g < 3; ++g) spec.gyros[g].readout_noise = 0.0;
+  Matrix3d D;
+  D << 300e-6, 50e-6, -20e-6,  //
+      50e-6, -150e-6, 80e-6,   //
+      -20e-6, 80e-6, 100e-6;
+  spec.gyros[0].readout_distortion_k = D;
+  const SimulationResult r = RunSimulation(spec);
+  EXPECT_EQ(r.effects[0].readout_distortion_k, D);
+  double max_effect = 0.0;
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const Vector3d& h_true = r.truth[m].gyros[0]->h_k;
+    const Vector3d expected = ((Matrix3d::Identity() + D) * h_true).normalized();
+    EXPECT_LT((r.recording.frames[m].gyros[0]->h_k - expected).norm(), 1e-15) << m;
+    max_effect = std::max(max_effect, (expected - h_true).norm());
+    // Gyro 2 has none: its reading is the true axis.
+    EXPECT_LT((r.recording.frames[m].gyros[1]->h_k - r.truth[m].gyros[1]->h_k).norm(), 1e-15);
+  }
+  EXPECT_GT(max_effect, 1e-5);  // the distortion is really there (1e-15 is far below it)
+  SimulationSpec bad = spec;
+  bad.gyros[0].readout_distortion_k(0, 1) = 0.0;  // not symmetric
+  EXPECT_THAT(Simulate(bad), StatusIs(absl::StatusCode::kInvalidArgument,
+                                      HasSubstr("gyros[0] (gyro 1).readout_distortion_k")));
+}
+
+// Random telegraph process over 200 h with mean dwell tau = 1 h on 3 gyros: the level is only +-1,
+// flips exactly at the reported switch times, the drift is the model's plus level * A; the number
+// of switches per gyro is Poisson(200): within 5 sd (5 sqrt(200) = 71) of 200, and the total over
+// the 3 gyros within 5 sqrt(600) = 122 of 600; the mean dwell (all gaps) within 5 sd
+// (sd tau / sqrt(n)) of tau. The same seed reproduces the switches, another does not.
+TEST(Simulator, SwitchingDriftIsARandomTelegraphProcess) {
+  SimulationSpec spec = TestSpec(200.0, "inertial");
+  spec.telemetry_step = 600.0;
+  spec.integration_rate_hz = 0.5;
+  spec.config.random_walk = 0.0;
+  const double tau = HoursToSeconds(1.0);
+  const Vector3d A = DegPerHourToRadPerSec(0.05) * Vector3d(1.0, -2.0, 0.5);
+  for (int g = 0; g < 3; ++g) spec.gyros[g].switching_drift = SwitchingDrift{A, tau};
+  const SimulationResult r = RunSimulation(spec);
+  const double expected = spec.duration / tau;
+  int total = 0;
+  double gap_sum = 0.0;
+  int gaps = 0;
+  for (int g = 0; g < 3; ++g) {
+    SCOPED_TRACE(::testing::Message() << "gyro " << g + 1);
+    const GyroEffectsTruth& e = r.effects[g];
+    const std::vector<double>& times = e.switch_times_s;
+    const int n = static_cast<int>(times.size());
+    EXPECT_NEAR(n, expected, 5.0 * std::sqrt(expected));
+    total += n;
+    EXPECT_TRUE(e.switching_initial_level == 1.0 || e.switching_initial_level == -1.0);
+    EXPECT_TRUE(std::is_sorted(times.begin(), times.end()));
+    EXPECT_GT(times.front(), 0.0);
+    EXPECT_LE(times.back(), spec.duration);
+    for (int i = 1; i < n; ++i) {
+      gap_sum += times[i] - times[i - 1];
+      ++gaps;
+    }
+    int level_changes = 0;
+    for (size_t m = 0; m < r.truth.size(); ++m) {
+      const double t = spec.telemetry_step * m;
+      const GyroTruthSample& s = *r.truth[m].gyros[g];
+      ASSERT_TRUE(s.switching_level == 1.0 || s.switching_level == -1.0);
+      const auto flips = std::count_if(times.begin(), times.end(), [&](double x) { return x <= t; });
+      EXPECT_EQ(s.switching_level, flips % 2 == 0 ? e.switching_initial_level
+                                                  : -e.switching_initial_level);
+      EXPECT_EQ(s.dw_switching_k_rad_s, s.switching_level * A);
+      const Vector3d total_drift = ModelDrift_k(r, r.truth[m], g) + s.switching_level * A;
+      EXPECT_LT((s.dw_k - total_drift).norm(), 1e-12 * total_drift.norm());
+      if (m > 0 && s.switching_level != r.truth[m - 1].gyros[g]->switching_level) ++level_changes;
+    }
+    EXPECT_GT(level_changes, 10);  // seen at the frames too
+  }
+  EXPECT_NEAR(total, 3.0 * expected, 5.0 * std::sqrt(3.0 * expected));
+  EXPECT_NEAR(gap_sum / gaps, tau, 5.0 * tau / std::sqrt(static_cast<double>(gaps)));
+  // Reproducible from the seed; another seed switches elsewhere.
+  SimulationSpec short_spec = spec;
+  short_spec.duration = HoursToSeconds(20.0);
+  const SimulationResult a = RunSimulation(short_spec);
+  const SimulationResult b = RunSimulation(short_spec);
+  EXPECT_EQ(a.effects[0].switch_times_s, b.effects[0].switch_times_s);
+  short_spec.seed = 43;
+  const SimulationResult c = RunSimulation(short_spec);
+  EXPECT_NE(a.effects[0].switch_times_s, c.effects[0].switch_times_s);
+  SimulationSpec bad = short_spec;
+  bad.gyros[0].switching_drift->mean_dwell_s = 0.0;
+  EXPECT_THAT(Simulate(bad), StatusIs(absl::StatusCode::kInvalidArgument,
+                                      HasSubstr("gyros[0] (gyro 1).switching_drift.mean_dwell_s")));
+}
+
+// The hidden driver x(t) at the frames, 600 s apart, over 2000 h on 3 gyros (tau = 0.5 h): an
+// AR(1) sequence with rho = exp(-600 s / tau) = 0.7165 and unit variance. With N = 36003 samples
+// (Bartlett's large-sample formulas for an AR(1) sequence): the sample mean has sd
+// sqrt((1 + rho) / (1 - rho) / N) = 0.013, the sample variance sd
+// sqrt(2 (1 + rho^2) / (1 - rho^2) / N) = 0.013, the lag-1 correlation sd
+// sqrt((1 - rho^2) / N) = 0.0037, the lag-3 correlation (rho^3 = 0.368) sd
+// sqrt(((1 + rho^2)(1 - rho^6) / (1 - rho^2) - 6 rho^6) / N) = 0.0072; each is checked at 5 sd.
+// The lag-3 value separates the exponential correlation of the OU process from other processes
+// with the same lag-1 value; a correlation time 20% off misses the lag-1 band (checked). The
+// drift is x B plus the model.
+TEST(Simulator, HiddenDriverDriftIsAnOrnsteinUhlenbeckProcess) {
+  SimulationSpec spec = TestSpec(2000.0, "inertial");
+  spec.telemetry_step = 600.0;
+  spec.integration_rate_hz = 0.5;
+  spec.config.random_walk = 0.0;
+  const double tau = HoursToSeconds(0.5);
+  const Vector3d B = DegPerHourToRadPerSec(0.02) * Vector3d(0.5, 1.0, -1.0);
+  for (int g = 0; g < 3; ++g) spec.gyros[g].hidden_driver_drift = HiddenDriverDrift{B, tau};
+  const SimulationResult r = RunSimulation(spec);
+  const double rho = std::exp(-spec.telemetry_step / tau);
+  double sum = 0.0, sum_sq = 0.0, lag1 = 0.0, lag3 = 0.0;
+  int n = 0, n1 = 0, n3 = 0;
+  for (int g = 0; g < 3; ++g) {
+    for (size_t m = 0; m < r.truth.size(); ++m) {
+      const GyroTruthSample& s = *r.truth[m].gyros[g];
+      const double x = s.hidden_driver;
+      EXPECT_EQ(s.dw_hidden_k_rad_s, x * B);
+      if (m % 97 == 0) {
+        const Vector3d total = ModelDrift_k(r, r.truth[m], g) + x * B;
+        EXPECT_LT((s.dw_k - total).norm(), 1e-12 * total.norm());
+      }
+      sum += x;
+      sum_sq += x * x;
+      ++n;
+      if (m >= 1) {
+        lag1 += x * r.truth[m - 1].gyros[g]->hidden_driver;
+        ++n1;
+      }
+      if (m >= 3) {
+        lag3 += x * r.truth[m - 3].gyros[g]->hidden_driver;
+        ++n3;
+      }
+    }
+  }
+  ASSERT_EQ(n, 3 * 12001);
+  const double mean = sum / n;
+  const double variance = sum_sq / n - mean * mean;
+  const double c1 = lag1 / n1 / variance, c3 = lag3 / n3 / variance;
+  EXPECT_NEAR(mean, 0.0, 5.0 * std::sqrt((1.0 + rho) / (1.0 - rho) / n));
+  EXPECT_NEAR(variance, 1.0, 5.0 * std::sqrt(2.0 * (1.0 + rho * rho) / (1.0 - rho * rho) / n));
+  EXPECT_NEAR(c1, rho, 5.0 * std::sqrt((1.0 - rho * rho) / n));
+  const double rho3 = rho * rho * rho;
+  EXPECT_NEAR(c3, rho3,
+              5.0 * std::sqrt(((1.0 + rho * rho) * (1.0 - rho3 * rho3) / (1.0 - rho * rho) -
+                               6.0 * rho3 * rho3) /
+                              n));
+  // A correlation time off by 20% falls outside the lag-1 band.
+  EXPECT_GT(std::abs(c1 - std::exp(-spec.telemetry_step / (1.2 * tau))),
+            5.0 * std::sqrt((1.0 - rho * rho) / n));
+  SimulationSpec bad = spec;
+  bad.duration = 3600.0;
+  bad.gyros[2].hidden_driver_drift->correlation_time_s = -1.0;
+  EXPECT_THAT(Simulate(bad),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2] (gyro 3).hidden_driver_drift.correlation_time_s")));
 }
 
 TEST(Simulator, ProgressIsReportedUpToOne) {
