@@ -1,8 +1,10 @@
 // The open-ended stage (estimator/discovery/open_ended.h, docs/discovery.md "The open-ended
 // stage") on simulated recordings.
 #include <cstdio>
+#include <cstdlib>
 
 #include "estimator/discovery/deviation.h"
+#include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/open_ended.h"
 #include "estimator/discovery/regimes.h"
@@ -76,5 +78,29 @@ TEST(OpenEnded, DriftStep) {
   const StageRun r = RunStage("drift_step", 103, 24.0);
 }
 
+}  // namespace
+}  // namespace esg::estimator::discovery
+
+namespace esg::estimator::discovery {
+namespace {
+TEST(OpenEndedExperiment, Classes) {
+  const char* only = std::getenv("ESG_EXP_CLASSES");
+  if (only == nullptr) GTEST_SKIP();
+  for (const std::string& effect : ::esg::testing::DiscoveryBasisClasses()) {
+    if (std::string(only) != "all" && std::string(only).find(effect) == std::string::npos) continue;
+    const uint64_t seed = std::getenv("ESG_EXP_SEED") ? std::atoi(std::getenv("ESG_EXP_SEED")) : 101;
+    const SimulationSpec spec = ::esg::testing::DiscoveryScenario(effect, seed, 30.0);
+    auto sim = Simulate(spec);
+    ASSERT_TRUE(sim.ok());
+    auto report = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
+    ASSERT_TRUE(report.ok()) << report.status();
+    std::printf("== %s seed %d gyro %d: verdict %s\n", effect.c_str(), (int)seed,
+                ::esg::testing::AffectedGyro(seed), report->verdict.c_str());
+    for (const Finding& f : report->findings) {
+      std::printf("  [%s gyro %d] %s\n", f.effect.c_str(), f.gyro, f.explanation.c_str());
+      for (const std::string& n : f.evidence.notes) std::printf("     note: %s\n", n.c_str());
+    }
+  }
+}
 }  // namespace
 }  // namespace esg::estimator::discovery

@@ -90,6 +90,18 @@ inline std::vector<std::string> DiscoveryTimeBehaviours() {
   return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump"};
 }
 
+// Physics outside the library (docs/discovery.md, "The open-ended stage"): what the basis
+// explains, "orbital_drift" (a case-fixed drift cycling with the orbit, amplitude 0.05 deg/h),
+// "growing_displacement" (a rotor displacement growing from 0 to 1.4 um over the recording),
+// "readout_scale" (a symmetric distortion of one gyro's direction-cosine readout, up to 300 ppm);
+// and what it cannot, which must stay `unexplained`: "switching_drift" (+-0.05 deg/h switching at
+// random, mean dwell 4 h), "hidden_driver" (0.05 deg/h times a quantity not in the telemetry, an
+// Ornstein-Uhlenbeck process of 3 h correlation time).
+inline std::vector<std::string> DiscoveryBasisClasses() {
+  return {"orbital_drift", "growing_displacement", "readout_scale", "switching_drift",
+          "hidden_driver"};
+}
+
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
 inline int AffectedGyro(uint64_t seed) { return 1 + static_cast<int>(seed % 3); }
 
@@ -149,6 +161,35 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     f.kind = GyroFault::Kind::kReadoutJump;
     f.value = x * Eigen::Vector3d(ArcsecToRad(40), ArcsecToRad(-35), ArcsecToRad(25));
     s.gyros[g].fault = f;
+  }
+  if (effect == "orbital_drift") {
+    OrbitalDrift o;
+    o.amplitude_k_rad_s = x * Eigen::Vector3d(0.03, -0.03, 0.025) * deg_h;
+    o.phase_rad = 0.3 * static_cast<double>(seed);
+    s.gyros[g].orbital_drift = o;
+  }
+  if (effect == "growing_displacement") {
+    // 0 at the start, the rotor_displacement scenario's 1.4 um at the end.
+    s.gyros[g].rotor_displacement_rate_k_m_s = displacement / s.duration;
+  }
+  if (effect == "readout_scale") {
+    Eigen::Matrix3d D;
+    D << 300, 80, -60,  //
+        80, -200, 120,  //
+        -60, 120, 150;
+    s.gyros[g].readout_distortion_k = x * 1e-6 * D;
+  }
+  if (effect == "switching_drift") {
+    SwitchingDrift d;
+    d.amplitude_k_rad_s = x * Eigen::Vector3d(0.03, 0.03, -0.025) * deg_h;
+    d.mean_dwell_s = 4.0 * 3600.0;
+    s.gyros[g].switching_drift = d;
+  }
+  if (effect == "hidden_driver") {
+    HiddenDriverDrift d;
+    d.amplitude_k_rad_s = x * Eigen::Vector3d(-0.03, 0.03, 0.025) * deg_h;
+    d.correlation_time_s = 3.0 * 3600.0;
+    s.gyros[g].hidden_driver_drift = d;
   }
   if (effect == "drift_step") {
     GyroFault f;
