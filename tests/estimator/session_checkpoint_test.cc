@@ -1,4 +1,4 @@
-// The session checkpoint (session_checkpoint.cc, version 5): a session restored from
+// The session checkpoint (session_checkpoint.cc, version 6): a session restored from
 // ExportCheckpoint at any point continues bit for bit as the uninterrupted one (every field of
 // every StepReport, the consistency monitor, the final state and covariance), in each phase that
 // carries state beyond the filter's x and P: before initialisation, in a star-tracker outage
@@ -232,7 +232,7 @@ Prefix RunPrefix(const Scenario& s, const SessionOptions& options, size_t cut) {
 std::vector<StepReport> ExpectResumesBitForBit(const Scenario& s, const SessionOptions& options,
                                                size_t cut, const EstimationSession& at_cut) {
   const SessionCheckpoint checkpoint = at_cut.ExportCheckpoint();
-  EXPECT_EQ(checkpoint.version, 5);
+  EXPECT_EQ(checkpoint.version, 6);
   auto restored = EstimationSession::FromCheckpoint(s.spec.config, options, checkpoint);
   EXPECT_THAT(restored, IsOk());
   if (!restored.ok()) return {};
@@ -554,7 +554,7 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   ASSERT_EQ(p.session.state(), SessionState::kFaulted);
   ASSERT_GT(p.session.consistency_monitor().tests(), 0);
   const SessionCheckpoint good = p.session.ExportCheckpoint();
-  ASSERT_EQ(good.version, 5);
+  ASSERT_EQ(good.version, 6);
   const int n = p.session.state_size();
   // The covariance blocks P and P0 (n x n each) end where the version-2 fields begin.
   const size_t matrices_end = Version1Length(good);
