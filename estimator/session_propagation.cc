@@ -157,16 +157,22 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
       Vector3d dw_in = CB * g.theta;
       if (rw) dw_in += g.T() * g.residual_drift;
       if (!g.basis.empty()) {
-        // The basis terms beyond eq. (1)/(10), held and free at their current values.
+        // The basis terms beyond eq. (1)/(10), held and free at their current values. Only their
+        // part perpendicular to h_k moves the spin axis (basis_term.h); it is taken here, with
+        // the projection I - h_k h_k^T that eq. (1)/(10)'s projected-gradient form carries
+        // (drift_model.h), so that the integrator (a finite rotation per substep, which the
+        // along-h part would tilt at second order in dt) treats a term as the eq. (1)/(10) term
+        // it equals: -(I - h h^T) C1 is the C1 term of eq. (10).
         BasisInputs in;
         in.time = substep_time;
         in.h_k = h_k[i];
         in.w_k = C_b_k[i].transpose() * interval_rate_b;
         in.u_k_v = g.u_k_v;
-        dw_in += C_in_k * BasisDriftSum_k(g.basis, in);
+        const Matrix3d C_in_k_perp = C_in_k * (Matrix3d::Identity() - h_k[i] * h_k[i].transpose());
+        dw_in += C_in_k_perp * BasisDriftSum_k(g.basis, in);
         const std::vector<int>& free_basis = layout_.FreeBasisTerms(i);
         for (int j = 0; j < layout_.BasisCount(i); ++j) {
-          M_basis[i].col(j) += C_in_k * BasisRegressor_k(g.basis[free_basis[j]], in) * dt;
+          M_basis[i].col(j) += C_in_k_perp * BasisRegressor_k(g.basis[free_basis[j]], in) * dt;
         }
       }
       g.h_in = StepSpinAxis(g.h_in, dw_in, dt);

@@ -1,9 +1,10 @@
 // `esg calibrate` and `esg gap`: the estimator run offline over a recording (estimator/offline.h).
 // calibrate prints per gyro the final coefficients and their 1-sigma in the configuration's JSON
 // keys, the configured basis terms (drift terms beyond eq. (1)/(10)) with their values and 1-sigma
-// in deg/h per JSON unit of their regressor, the misalignments in arcsec, the rejections by kind and the events; gap calibrates up to
-// a time, runs autonomously to the end and reports the attitude error against the withheld star
-// tracker and its growth rate (the paper's Fig. 7/8 measure).
+// in deg/h per JSON unit of their regressor, the misalignments in arcsec, the rejections by kind
+// and the events; gap calibrates up to a time, runs autonomously to the end and reports the
+// attitude error against the withheld star tracker and its growth rate (the paper's Fig. 7/8
+// measure).
 // Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
 #include <cstdio>
 #include <fstream>
