@@ -76,6 +76,14 @@ std::vector<int> FreeCoefficients(const ModelSpec& spec, const GyroConfig& gyro)
   return free;
 }
 
+std::vector<int> FreeBasisTerms(const GyroConfig& gyro) {
+  std::vector<int> free;
+  for (size_t k = 0; k < gyro.basis_terms.size(); ++k) {
+    if (gyro.basis_terms[k].sigma > 0.0) free.push_back(static_cast<int>(k));
+  }
+  return free;
+}
+
 const char* CoefficientName(int i) {
   static const char* kNames[kNumDriftCoefficients] = {
       "k0DegH",    "c1DegH[0]", "c1DegH[1]", "c1DegH[2]", "c2DegH[0]", "c2DegH[1]", "c2DegH[2]",

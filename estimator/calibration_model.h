@@ -6,7 +6,9 @@
 // A coefficient of a term in the model is free (estimated) when its configured modelSigma is
 // positive, otherwise held at the configured value. Terms outside the model are zero, except
 // with model "11" alone, where the configured (bench) model is applied as it is and nothing is
-// estimated but the random walk.
+// estimated but the random walk. The configured basis terms (GyroConfig::basis_terms, drift terms
+// beyond eq. (1)/(10)) are outside the model string: each adds its drift under every model, and
+// one with sigma > 0 is estimated.
 #ifndef ESG_ESTIMATOR_CALIBRATION_MODEL_H_
 #define ESG_ESTIMATOR_CALIBRATION_MODEL_H_
 
@@ -41,6 +43,10 @@ DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro);
 
 // Indices into theta of the free coefficients of a gyro (term in the model and sigma > 0).
 std::vector<int> FreeCoefficients(const ModelSpec& spec, const GyroConfig& gyro);
+
+// Indices into gyro.basis_terms of its free basis terms (sigma > 0). Basis terms are outside the
+// model string: held terms always add their drift, free ones are always estimated.
+std::vector<int> FreeBasisTerms(const GyroConfig& gyro);
 
 // Names of theta entries as in the JSON ("k0DegH", "c1DegH[0]", ...), for reports.
 const char* CoefficientName(int theta_index);

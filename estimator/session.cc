@@ -8,14 +8,16 @@
 //   session_update.cc          eq. (12) mismatch test, eq. (13) measurements, eq. (14) test,
 //                              filter reset, Joseph update
 //   session_attitude.cc        pair attitude (TRIAD) and its covariance, the output
-//   session_checkpoint.cc      the checkpoint values (versions 1 to 4)
+//   session_checkpoint.cc      the checkpoint values (versions 1 to 6)
 #include "estimator/session.h"
 
 #include <algorithm>
+#include <optional>
 #include <cmath>
 #include <utility>
 #include <vector>
 
+#include "Eigen/LU"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
@@ -215,7 +217,7 @@ StateLayout EstimationSession::LayoutFor(const SpacecraftConfig& config, const M
   StateLayout layout(model.random_walk, config.star_tracker.latency_sigma > 0.0);
   for (const GyroState& g : gyros) {
     const GyroConfig& gc = *config.FindGyro(g.id);
-    layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0);
+    layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0, FreeBasisTerms(gc));
   }
   return layout;
 }
@@ -255,11 +257,12 @@ StarTrackerMount EstimationSession::StarTrackerMountShift() const {
 
 void EstimationSession::UpdateState(const StepReport& report) {
   if (!report.measurement_step) return;
-  // Convergence: every free coefficient's relative sigma changed < 5% over the last hour (a
-  // 1/sqrt(t) information law alone changes it by 1/(2 t) per hour: 2% at 24 h).
+  // Convergence: every free coefficient's (and free basis term's) relative sigma changed < 5%
+  // over the last hour (a 1/sqrt(t) information law alone changes it by 1/(2 t) per hour: 2% at
+  // 24 h).
   std::vector<double> ratios;
   for (int i = 0; i < gyro_count(); ++i) {
-    for (int j = 0; j < layout_.ThetaCount(i); ++j) {
+    for (int j = 0; j < layout_.ThetaCount(i) + layout_.BasisCount(i); ++j) {
       const int idx = layout_.Theta(i) + j;
       ratios.push_back(std::sqrt(P_(idx, idx) / P0_(idx, idx)));
     }
@@ -285,7 +288,22 @@ void EstimationSession::UpdateState(const StepReport& report) {
   }
 }
 
-absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& frame) {
+TelemetryFrame EstimationSession::CorrectedForReadout(const TelemetryFrame& frame) const {
+  TelemetryFrame out = frame;
+  for (const GyroConfig& gc : config_.gyros) {
+    std::optional<GyroReading>& r = out.gyros[gc.id - 1];
+    if (!r.has_value() || gc.readout_distortion.isZero(0.0)) continue;
+    // h_meas = normalise((I + D) h_k): the inverse up to the norm (|D_ij| <= 0.01, so I + D is
+    // well conditioned).
+    const Eigen::Matrix3d I_plus_D = Eigen::Matrix3d::Identity() + gc.readout_distortion;
+    r->h_k = I_plus_D.partialPivLu().solve(r->h_k).normalized();
+  }
+  return out;
+}
+
+absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw_frame) {
+  // Readings enter here, and only here, corrected for the readout distortion.
+  const TelemetryFrame frame = CorrectedForReadout(raw_frame);
   if (initialized_ || last_time_ != absl::InfinitePast()) {
     if (frame.time <= last_time_) {
       return absl::OutOfRangeError(absl::StrCat("frame time ", absl::FormatTime(frame.time),
@@ -338,6 +356,13 @@ std::vector<GyroEstimate> EstimationSession::Gyros() const {
       sigma(free[j]) = std::sqrt(std::max(P_(idx, idx), 0.0));
     }
     e.sigma = DriftCoefficients::FromVector(sigma);
+    e.basis_terms = g.basis;
+    e.basis_sigma.assign(g.basis.size(), 0.0);
+    const std::vector<int>& free_basis = layout_.FreeBasisTerms(i);
+    for (int j = 0; j < layout_.BasisCount(i); ++j) {
+      const int idx = layout_.Basis(i) + j;
+      e.basis_sigma[free_basis[j]] = std::sqrt(std::max(P_(idx, idx), 0.0));
+    }
     e.misalignment_b = g.phi_b;
     if (layout_.HasPhi(i)) {
       const int p = layout_.Phi(i);

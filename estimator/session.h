@@ -7,9 +7,9 @@
 // FILTER STATE (error form, conventions.h: error = true - estimate): one block per running gyro,
 // in the order of the gyros (working pair first, reference gyro first), indexed only through
 // StateLayout (state_layout.h): spin-axis error dh_g (2), residual random-walk drift dw_int_g of
-// eq. (11) (2, with model 11), errors of the free drift coefficients dtheta_g (0-13) and the
-// misalignment dphi_g (3, when misalignmentSigma > 0). About 14 states per gyro, 42 for three
-// running gyros with model 10+11. Before the gyro blocks, when the configuration gives the star
+// eq. (11) (2, with model 11), errors of the free drift coefficients dtheta_g (0-13), of the free
+// basis terms (basis_term.h, 0-16) and the misalignment dphi_g (3, when misalignmentSigma > 0).
+// About 14 states per gyro, 42 for three running gyros with model 10+11. Before the gyro blocks, when the configuration gives the star
 // tracker's latency a prior (latencySigmaS > 0), its error dtau [s]: the corrected star-tracker
 // attitude q_st (x) Exp(w_b tau_est) then errs by the body rotation -w_b dtau.
 //   dh_g and dw_int_g live in the gyro's tangent basis (t1_g, t2_g): t1 = e1 of the `int` frame
@@ -55,6 +55,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/consistency_monitor.h"
 #include "estimator/drift_model.h"
@@ -132,6 +133,10 @@ struct GyroEstimate {
   int id = 0;
   DriftCoefficients coefficients;        // full current model values [rad/s]
   DriftCoefficients sigma;               // 1-sigma, 0 where held [rad/s]
+  // The configured basis terms (GyroConfig::basis_terms, same order) with their current values
+  // [rad/s per unit of s], and each one's 1-sigma (0 where held), same unit.
+  std::vector<BasisTerm> basis_terms;
+  std::vector<double> basis_sigma;
   Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();        // [rad]
   Eigen::Vector3d misalignment_sigma_b = Eigen::Vector3d::Zero();  // [rad]
   Eigen::Vector2d residual_drift = Eigen::Vector2d::Zero();        // dw_int [rad/s]
@@ -213,7 +218,7 @@ struct SessionOptions {
 };
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
-// writes version 5; FromCheckpoint reads versions 1 to 5.
+// writes version 6; FromCheckpoint reads versions 1 to 6.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
@@ -248,7 +253,8 @@ class EstimationSession {
   static absl::StatusOr<EstimationSession> Create(const SpacecraftConfig& config,
                                                   const SessionOptions& options);
 
-  // Applies one frame (strictly after the previous one: OutOfRange otherwise). Propagates from
+  // Applies one frame (strictly after the previous one: OutOfRange otherwise), its readings
+  // first corrected for the configured readout distortions (CorrectedForReadout). Propagates from
   // the previous frame at the integration rate and, at a measurement step, runs eq. (12), the
   // innovation test eq. (14) and the Joseph update. Rejections are events in the report, not
   // errors. Internal if the numerics fail (the session is then unchanged).
@@ -285,13 +291,14 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
-  // Version 5: everything a session restored from it needs to continue bit for bit as this one
+  // Version 6: everything a session restored from it needs to continue bit for bit as this one
   // would (same reports, state and covariance), at any point, including before initialisation.
   // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // Reads versions 1 to 5 (version 1 lacks the consistency monitor and the star-tracker
+  // Reads versions 1 to 6 (version 1 lacks the consistency monitor and the star-tracker
   // anchoring flags, version 2 the process-noise widening, version 3 the estimated latency,
-  // version 4 the star-tracker mount: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
+  // version 4 the star-tracker mount, version 5 the basis terms' values and the suspension
+  // voltages: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
   // the version is unknown, the values are truncated or oversized, a field holds a value it
   // cannot (an integer or flag field that is not one, a non-finite real, an unknown state, a
   // pair naming gyros the session lacks, an invalid covariance), or the checkpoint does not fit
@@ -319,6 +326,13 @@ class EstimationSession {
     // (session_propagation.cc). For interpolation to the integration rate.
     bool has_reading = false;
     Eigen::Vector3d h_k_last = Eigen::Vector3d::UnitZ();
+    // The gyro's basis terms (GyroConfig::basis_terms) at their current values: the configured
+    // ones, the free ones fed back by ApplyCorrection. In the checkpoint from version 6.
+    std::vector<BasisTerm> basis;
+    // The latest suspension offset voltages the frames carried [V] (u_k_mv in mV), held while
+    // frames lack them; none received yet: empty (a voltage term then gives 0). In the
+    // checkpoint from version 6.
+    std::optional<Eigen::Vector3d> u_k_v;
 
     Eigen::Vector3d t2() const { return h_in.cross(t1); }
     Eigen::Matrix<double, 3, 2> T() const;
@@ -407,6 +421,10 @@ class EstimationSession {
 
   // session.cc
   void UpdateState(const StepReport& report);
+  // The frame as the session uses it: each gyro's reading corrected for its configured readout
+  // distortion D, h_k = normalise((I + D)^-1 h_meas) (GyroConfig::readout_distortion); readings
+  // of gyros without one are unchanged. The one place readings enter (AddFrame).
+  TelemetryFrame CorrectedForReadout(const TelemetryFrame& frame) const;
   // Applies the options' coefficient releases whose time lies in (last_time_, frame_time].
   void ApplyCoefficientReleases(absl::Time frame_time);
   // Residual random-walk intensity of gyro `id` [rad/s/sqrt(s)] (options' per-gyro value or the

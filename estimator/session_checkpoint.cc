@@ -50,11 +50,16 @@ using Eigen::VectorXd;
 //   (3) and the number of corrections, then s (a count) and
 //   the mount-shift test's window (s values, StarTrackerMountMonitor::ExportState). A session
 //   restored from an earlier version has no mount correction.
+// Version 6 (written): version 5's values, then per running gyro (in the order above): b (its
+//   number of basis terms, that of its GyroConfig::basis_terms), the terms' current values (b,
+//   [rad/s per unit of s]), then has_u and u_k_v (3, zeros when has_u is 0), the held suspension
+//   voltages [V]. A session restored from an earlier version starts the terms at their configured
+//   values, without voltages.
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 5;
+  c.version = 6;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -134,13 +139,20 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   const std::vector<double> mount = mount_monitor_.ExportState();
   v.push_back(static_cast<double>(mount.size()));
   v.insert(v.end(), mount.begin(), mount.end());
+  // Version 6.
+  for (const GyroState& g : gyros_) {
+    v.push_back(static_cast<double>(g.basis.size()));
+    for (const BasisTerm& t : g.basis) v.push_back(t.value);
+    v.push_back(g.u_k_v.has_value() ? 1 : 0);
+    put_vec(g.u_k_v.value_or(Eigen::Vector3d::Zero()));
+  }
   return c;
 }
 
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version < 1 || checkpoint.version > 5) {
+  if (checkpoint.version < 1 || checkpoint.version > 6) {
     return absl::DataLossError(
         absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
@@ -228,6 +240,7 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       return absl::DataLossError(absl::StrCat("checkpoint: gyro ", g.id, " is not in the configuration"));
     }
     g.C_b_k_config = gc->C_b_k;
+    g.basis = gc->basis_terms;  // values from version 6 on
     get_vec(g.h_in);
     get_vec(g.t1);
     get_vec(g.residual_drift);
@@ -317,6 +330,21 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
     }
     pos += n_mount;
+  }
+  if (checkpoint.version >= 6) {
+    for (GyroState& g : s.gyros_) {
+      const int b = get_int();
+      if (short_read || b != static_cast<int>(g.basis.size())) {
+        return absl::DataLossError(absl::StrFormat(
+            "checkpoint: gyro %d has %d basis terms, the configuration %d", g.id, b,
+            g.basis.size()));
+      }
+      for (BasisTerm& t : g.basis) t.value = get_real();
+      const bool has_u = get_flag();
+      Eigen::Vector3d u_k_v;
+      get_vec(u_k_v);
+      if (has_u) g.u_k_v = u_k_v;
+    }
   }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");

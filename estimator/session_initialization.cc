@@ -1,8 +1,9 @@
 // Filter start (EstimationSession::Initialize): the running gyros and their state layout, the
 // tangent bases from the `int` frame of the working pair, the prior covariance of the drift
-// coefficients of eq. (1)/(10), the residual drifts of eq. (11) and the misalignments; and the
-// spin axes rebuilt from the star tracker, h_in = C_in_b(star tracker) C_b_k h_k (the h_et of
-// eq. (13)), with the covariance that rebuild implies (also used by the filter reset).
+// coefficients of eq. (1)/(10) and of the free basis terms (basis_term.h), the residual drifts of
+// eq. (11) and the misalignments; and the spin axes rebuilt from the star tracker,
+// h_in = C_in_b(star tracker) C_b_k h_k (the h_et of eq. (13)), with the covariance that rebuild
+// implies (also used by the filter reset).
 #include "estimator/session.h"
 
 #include <algorithm>
@@ -51,8 +52,10 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
     g.id = id;
     g.C_b_k_config = gc.C_b_k;
     g.theta = ModelCoefficients(options_.model, gc);
+    g.basis = gc.basis_terms;
     g.has_reading = true;
     g.h_k_last = frame.gyros[id - 1]->h_k.normalized();
+    if (const auto& u_mv = frame.gyros[id - 1]->u_k_mv) g.u_k_v = *u_mv * kVoltsPerMv;
     g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();  // bases below need it
     gyros_.push_back(std::move(g));
   }
@@ -99,6 +102,12 @@ void EstimationSession::SetDriftAndMisalignmentPrior(int i, MatrixXd& P) const {
     const int idx = layout_.Theta(i) + j;
     P(idx, idx) = sigma_theta(free[j]) * sigma_theta(free[j]);
   }
+  const std::vector<int>& free_basis = layout_.FreeBasisTerms(i);
+  for (int j = 0; j < layout_.BasisCount(i); ++j) {
+    const int idx = layout_.Basis(i) + j;
+    const double sigma = gc.basis_terms[free_basis[j]].sigma;
+    P(idx, idx) = sigma * sigma;
+  }
   if (layout_.HasPhi(i)) {
     const int po = layout_.Phi(i);
     P.block<3, 3>(po, po) = gc.misalignment_sigma * gc.misalignment_sigma * Matrix3d::Identity();
@@ -125,8 +134,10 @@ void EstimationSession::StartSwitchedOnGyros(const TelemetryFrame& frame, StepRe
     g.id = gc.id;
     g.C_b_k_config = gc.C_b_k;
     g.theta = ModelCoefficients(options_.model, gc);
+    g.basis = gc.basis_terms;
     g.has_reading = true;
     g.h_k_last = frame.gyros[gc.id - 1]->h_k.normalized();
+    if (const auto& u_mv = frame.gyros[gc.id - 1]->u_k_mv) g.u_k_v = *u_mv * kVoltsPerMv;
     g.h_in = (C_in_b * g.C_b_k_config * g.h_k_last).normalized();
     const Vector3d e1 = gyros_[0].t1;  // the reference gyro's t1 is e1 of the int frame
     const Vector3d t1 = e1 - e1.dot(g.h_in) * g.h_in;

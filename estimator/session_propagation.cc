@@ -1,9 +1,9 @@
 // Propagation (EstimationSession::Propagate, Predict): the nominal spin axes integrated at the
-// integration rate with the drift of eq. (1)/(10) (drift_model.h) and the residual drift of
-// eq. (11), dh_in/dt = (C_in_k dw_k) x h_in (docs/physics.md, spin_axis.h), and the covariance
-// transition of the spin-axis errors with the integrated random walk of eq. (11) as process
-// noise. Prediction across a gap runs the same propagation on the readings a planned attitude
-// implies.
+// integration rate with the drift of eq. (1)/(10) (drift_model.h), the configured basis terms
+// beyond them (basis_term.h) and the residual drift of eq. (11), dh_in/dt = (C_in_k dw_k) x h_in
+// (docs/physics.md, spin_axis.h), and the covariance transition of the spin-axis errors with the
+// integrated random walk of eq. (11) as process noise. Prediction across a gap runs the same
+// propagation on the readings a planned attitude implies.
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/attitude_profile.h"
+#include "estimator/basis_term.h"
 #include "estimator/rotation.h"
 #include "estimator/session.h"
 #include "estimator/session_internal.h"
@@ -47,7 +48,13 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   // its last reading (which the spacecraft's motion has made stale): its case-frame axis at the
   // end is the one that pair's attitude implies, h_k = C_k_b C_b_in h_in, so that neither its
   // drift nor anything else depends on a reading it did not send.
-  for (GyroState& g : gyros_) g.has_reading = frame.gyros[g.id - 1].has_value();
+  for (GyroState& g : gyros_) {
+    g.has_reading = frame.gyros[g.id - 1].has_value();
+    // Suspension voltages for the basis terms: the frame's, else the last received (held).
+    if (g.has_reading && frame.gyros[g.id - 1]->u_k_mv.has_value()) {
+      g.u_k_v = *frame.gyros[g.id - 1]->u_k_mv * kVoltsPerMv;
+    }
+  }
   const std::array<int, 2> pair = AttitudePair();
   const int ia = IndexOf(pair[0]), ib = IndexOf(pair[1]);
   std::vector<Vector3d> h_k_begin(gyros_.size()), h_k_end(gyros_.size());
@@ -57,6 +64,11 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   }
   body_rate_b_ = Vector3d::Zero();
   rate_extrapolation_b_ = Vector3d::Zero();
+  // The body rate the basis terms see over the whole interval (their w_k = C_k_b w_b): the
+  // attitude pair's mean rate over the interval, not the extrapolated end rate body_rate_b_ (the
+  // drift is integrated across the interval, and the mean is what its two ends measure); zero
+  // when no pair has fresh readings at both ends.
+  Vector3d interval_rate_b = Vector3d::Zero();
   const double previous_interval_s = previous_interval_s_;
   previous_interval_s_ = 0.0;  // set again below when this interval's mean rate is measured
   if (!gyros_[ia].has_reading || !gyros_[ib].has_reading) {
@@ -88,6 +100,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
                        gyros_[ib].C_b_k() * h_k_begin[ib]);
       if (q_begin.ok() && q_end.ok()) {
         const Vector3d mean_rate_b = LogQuaternion(q_begin->conjugate() * *q_end) / span;
+        interval_rate_b = mean_rate_b;
         if (previous_interval_s > 0.0) {
           rate_extrapolation_b_ =
               (mean_rate_b - previous_mean_rate_b_) * span / (span + previous_interval_s);
@@ -122,11 +135,15 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   std::vector<Eigen::Matrix<double, 3, kNumDriftCoefficients>> M(
       gyros_.size(), Eigen::Matrix<double, 3, kNumDriftCoefficients>::Zero());
   for (size_t i = 0; i < gyros_.size(); ++i) C_b_k[i] = gyros_[i].C_b_k();
+  // The free basis terms' columns, carried to inertial axes like M: sum of C_in_k s e_m dt.
+  std::vector<MatrixXd> M_basis(gyros_.size());
+  for (int i = 0; i < gyro_count(); ++i) M_basis[i] = MatrixXd::Zero(3, layout_.BasisCount(i));
   std::vector<Vector3d> h_k(gyros_.size());
   Matrix3d C_in_b = Matrix3d::Identity();
   for (int step = 0; step < substeps; ++step) {
     // Midpoint of the substep: second order in dt for the slowly varying drift.
     const double s = (step + 0.5) / substeps;
+    const absl::Time substep_time = last_time_ + absl::Seconds(s * span);
     for (size_t i = 0; i < gyros_.size(); ++i) h_k[i] = SlerpUnit(h_k_begin[i], h_k_end[i], s);
     auto q =
         PairAttitude(gyros_[ia].h_in, gyros_[ib].h_in, C_b_k[ia] * h_k[ia], C_b_k[ib] * h_k[ib]);
@@ -139,12 +156,32 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
       // eq. (1)/(10) carried to inertial axes: dh_in/dt = (C_in_k dw_k) x h_in.
       Vector3d dw_in = CB * g.theta;
       if (rw) dw_in += g.T() * g.residual_drift;
+      if (!g.basis.empty()) {
+        // The basis terms beyond eq. (1)/(10), held and free at their current values. Only their
+        // part perpendicular to h_k moves the spin axis (basis_term.h); it is taken here, with
+        // the projection I - h_k h_k^T that eq. (1)/(10)'s projected-gradient form carries
+        // (drift_model.h), so that the integrator (a finite rotation per substep, which the
+        // along-h part would tilt at second order in dt) treats a term as the eq. (1)/(10) term
+        // it equals: -(I - h h^T) C1 is the C1 term of eq. (10).
+        BasisInputs in;
+        in.time = substep_time;
+        in.h_k = h_k[i];
+        in.w_k = C_b_k[i].transpose() * interval_rate_b;
+        in.u_k_v = g.u_k_v;
+        const Matrix3d C_in_k_perp = C_in_k * (Matrix3d::Identity() - h_k[i] * h_k[i].transpose());
+        dw_in += C_in_k_perp * BasisDriftSum_k(g.basis, in);
+        const std::vector<int>& free_basis = layout_.FreeBasisTerms(i);
+        for (int j = 0; j < layout_.BasisCount(i); ++j) {
+          M_basis[i].col(j) += C_in_k_perp * BasisRegressor_k(g.basis[free_basis[j]], in) * dt;
+        }
+      }
       g.h_in = StepSpinAxis(g.h_in, dw_in, dt);
       M[i] += CB * dt;
     }
   }
   // Transition over the interval: only the spin-axis errors move,
-  // d(dh)/dt = T^T [(C_in_k B dtheta) x h] + J dw_int  (tangent basis held over the interval).
+  // d(dh)/dt = T^T [(C_in_k (B dtheta + sum_j s_j e_m(j) dvalue_j)) x h] + J dw_int (tangent
+  // basis held over the interval; the sum over the free basis terms).
   // Phi = I + E, where E is nonzero only in the spin-axis rows of each gyro, in the columns of its
   // own residual drifts and free coefficients, which follow the spin-axis pair contiguously. So
   // P <- P + E P + P E^T + E P E^T + Q costs O(n k) instead of O(n^3).
@@ -155,12 +192,16 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     g.t1 = (g.t1 - g.t1.dot(g.h_in) * g.h_in).normalized();
     const Matrix23 Tt = g.T().transpose();
     const Matrix3d minus_hx = -Skew(g.h_in);  // v x h = -h x v
-    // Columns: the spin-axis drivers of state_layout.h, residual drift then free coefficients.
+    // Columns: the spin-axis drivers of state_layout.h, residual drift, free coefficients, then
+    // free basis terms.
     E[i] = MatrixXd::Zero(2, layout_.SpinAxisDriverCount(i));
     if (rw) E[i].leftCols<2>() = kJ * span;
     const std::vector<int>& free = layout_.FreeCoefficients(i);
     for (int j = 0; j < layout_.ThetaCount(i); ++j) {
       E[i].col(layout_.DriftSize() + j) = Tt * minus_hx * M[i].col(free[j]);
+    }
+    for (int j = 0; j < layout_.BasisCount(i); ++j) {
+      E[i].col(layout_.DriftSize() + layout_.ThetaCount(i) + j) = Tt * minus_hx * M_basis[i].col(j);
     }
     g.h_k_last = h_k_end[i];
   }

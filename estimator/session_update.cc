@@ -574,6 +574,10 @@ void EstimationSession::ApplyCorrection(const VectorXd& dx) {
     if (layout_.has_drift()) g.residual_drift += dx.segment<2>(layout_.Drift(i));
     const std::vector<int>& free = layout_.FreeCoefficients(i);
     for (int j = 0; j < layout_.ThetaCount(i); ++j) g.theta(free[j]) += dx(layout_.Theta(i) + j);
+    const std::vector<int>& free_basis = layout_.FreeBasisTerms(i);
+    for (int j = 0; j < layout_.BasisCount(i); ++j) {
+      g.basis[free_basis[j]].value += dx(layout_.Basis(i) + j);
+    }
     if (layout_.HasPhi(i)) {
       // C_b_k(true) = Exp(dphi) Exp(phi) C_b_k(config): compose the rotations.
       const Eigen::Vector3d dphi_b = dx.segment<3>(layout_.Phi(i));

@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <set>
+#include <string>
+#include <vector>
 
 #include "Eigen/LU"
 #include "absl/strings/ascii.h"
@@ -49,6 +51,41 @@ absl::Status LimitError(double value_si, const ConfigLimit& limit, absl::string_
   return absl::InvalidArgumentError(absl::StrFormat("%s: %g is outside [%g, %g] %s (%s)", field,
                                                     limit.from_si(value_si), limit.min, limit.max,
                                                     limit.unit, limit.reason));
+}
+
+absl::Status ValidateBasisTerms(const std::vector<BasisTerm>& terms, size_t gyro) {
+  const ConfigLimits& L = kConfigLimits;
+  if (terms.size() > static_cast<size_t>(kMaxBasisTermsPerGyro)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("gyros[%d].basisTerms: %d terms, at most %d per gyro", gyro, terms.size(),
+                        kMaxBasisTermsPerGyro));
+  }
+  for (size_t k = 0; k < terms.size(); ++k) {
+    const BasisTerm& t = terms[k];
+    const std::string prefix = absl::StrFormat("gyros[%d].basisTerms[%d]", gyro, k);
+    RETURN_IF_ERROR(ValidateBasisTerm(t, prefix));
+    // The limits are in the JSON unit of the term's kind (ConfigLimits::basis_value).
+    const double to_json = BasisValueToJson(t.kind);
+    RETURN_IF_ERROR(CheckLimit(t.value * to_json, L.basis_value, absl::StrCat(prefix, ".valueDegH")));
+    RETURN_IF_ERROR(CheckLimit(t.sigma * to_json, L.basis_sigma, absl::StrCat(prefix, ".sigmaDegH")));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateReadoutDistortion(const Eigen::Matrix3d& D, size_t gyro) {
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      const std::string field = absl::StrFormat("gyros[%d].readoutDistortion[%d]", gyro, 3 * r + c);
+      RETURN_IF_ERROR(CheckLimit(D(r, c), kConfigLimits.readout_distortion, field));
+      if (!(std::abs(D(r, c) - D(c, r)) <= kReadoutDistortionSymmetryTolerance)) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "%s: %g differs from its transpose entry [%d] = %g by more than %g (D must be "
+            "symmetric)",
+            field, D(r, c), 3 * c + r, D(c, r), kReadoutDistortionSymmetryTolerance));
+      }
+    }
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace
@@ -127,6 +164,8 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
     }
     RETURN_IF_ERROR(CheckLimit(g.misalignment_sigma, L.misalignment_sigma,
                                absl::StrFormat("gyros[%d].misalignmentSigmaArcsec", i)));
+    RETURN_IF_ERROR(ValidateBasisTerms(g.basis_terms, i));
+    RETURN_IF_ERROR(ValidateReadoutDistortion(g.readout_distortion, i));
   }
   if (auto s = CheckPair(config, config.working_pair, "workingPair"); !s.ok()) return s;
   if (auto s = CheckPair(config, config.reserve_pair, "reservePair"); !s.ok()) return s;

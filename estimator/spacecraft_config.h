@@ -122,17 +122,30 @@ struct ConfigLimits {
   ConfigLimit measurement_step;
   ConfigLimit innovation_kd;
   ConfigLimit fault_threshold;
+  // The basis terms' value and sigma are checked in the JSON unit (deg/h per JSON unit of s,
+  // basis_term.h BasisValueToJson), which depends on the term's kind: their from_si is the
+  // identity and ValidateConfig converts before the check.
+  ConfigLimit basis_value;
+  ConfigLimit basis_sigma;
+  ConfigLimit readout_distortion;
 
   // Every limit above, in declaration order.
-  constexpr std::array<ConfigLimit, 15> All() const {
+  constexpr std::array<ConfigLimit, 18> All() const {
     return {drift_coefficient,    drift_sigma,    misalignment_sigma,
             star_tracker_noise,   star_tracker_latency,
             star_tracker_latency_sigma,
             readout_noise,        random_walk,    amplifier_gain,
             reference_voltage,    gap,            integration_rate,
-            measurement_step,     innovation_kd,  fault_threshold};
+            measurement_step,     innovation_kd,  fault_threshold,
+            basis_value,          basis_sigma,    readout_distortion};
   }
 };
+
+// At most this many basis terms per gyro: each free one is a filter state of its gyro's block
+// (the largest diagnosis adds a handful), and 16 keep a three-gyro state below about 100.
+inline constexpr int kMaxBasisTermsPerGyro = 16;
+// readoutDistortion must be symmetric to this absolute tolerance [1].
+inline constexpr double kReadoutDistortionSymmetryTolerance = 1e-12;
 
 namespace config_limits_internal {
 constexpr double Identity(double x) { return x; }
@@ -200,6 +213,21 @@ inline constexpr ConfigLimits kConfigLimits = {
                         "0 (derived from the noise), 180 deg in diagnosis",
                         "a mismatch angle between two attitudes is at most 180 deg; 0 derives "
                         "the threshold from the noise"},
+    .basis_value = {"gyros[].basisTerms[].valueDegH", -10.0, 10.0,
+                    "deg/h per JSON unit of s", &config_limits_internal::Identity,
+                    "a few hundredths to tenths (the diagnosis's findings)",
+                    "at one JSON unit of its regressor (a unit spin-axis harmonic, 1 deg/s of "
+                    "body rate, 1 h of ramp, 1 V) a term drifts no more than the eq. (1) "
+                    "coefficients may: 10 deg/h is 30-50 times the paper's largest"},
+    .basis_sigma = {"gyros[].basisTerms[].sigmaDegH", 0.0, 10.0, "deg/h per JSON unit of s",
+                    &config_limits_internal::Identity, "0 (held), 0.1 to calibrate",
+                    "the prior of a term is that of an eq. (1) coefficient (0.1 deg/h in the "
+                    "paper); 10 deg/h is 100 times that"},
+    .readout_distortion = {"gyros[].readoutDistortion[]", -0.01, 0.01, "1",
+                           &config_limits_internal::Identity, "0 (none)",
+                           "a 1% distortion of the readout bends a spin-axis reading by up to "
+                           "0.6 deg, 700 times the paper's 3 arcsec noise; beyond that the "
+                           "readout is broken, not distorted"},
 };
 static_assert(sizeof(ConfigLimits) == std::tuple_size_v<decltype(kConfigLimits.All())> *
                                           sizeof(ConfigLimit),
@@ -215,7 +243,10 @@ absl::Status ValidateIdentifier(absl::string_view value, absl::string_view field
 absl::Status CheckLimit(double value_si, const ConfigLimit& limit, absl::string_view field);
 
 // Checks the spacecraft id (ValidateIdentifier), gyro ids and pairs, caseToBody (a proper
-// rotation: orthonormal to 1e-6, det +1) and every numeric field against kConfigLimits. The
+// rotation: orthonormal to 1e-6, det +1), every numeric field against kConfigLimits, each gyro's
+// basis terms (at most kMaxBasisTermsPerGyro, ValidateBasisTerm, then value and sigma in their JSON
+// unit: "gyros[0].basisTerms[1].axis: must be 1..3, got 4") and its readoutDistortion (symmetric
+// to kReadoutDistortionSymmetryTolerance, each entry within its limit). The
 // message of an InvalidArgument names the JSON field, e.g. "gyros[1].caseToBody: not a proper
 // rotation matrix ..." or "filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (...)".
 absl::Status ValidateConfig(const SpacecraftConfig& config);

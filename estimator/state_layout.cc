@@ -7,10 +7,12 @@
 
 namespace esg::estimator {
 
-int StateLayout::AddGyro(std::vector<int> free_coefficients, bool estimate_phi) {
+int StateLayout::AddGyro(std::vector<int> free_coefficients, bool estimate_phi,
+                         std::vector<int> free_basis_terms) {
   Block b;
   b.begin = size_;
   b.free = std::move(free_coefficients);
+  b.free_basis = std::move(free_basis_terms);
   b.estimate_phi = estimate_phi;
   blocks_.push_back(std::move(b));
   const int i = gyro_count() - 1;
@@ -19,7 +21,7 @@ int StateLayout::AddGyro(std::vector<int> free_coefficients, bool estimate_phi) 
 }
 
 int StateLayout::GyroSize(int i) const {
-  return kSpinAxisSize + DriftSize() + ThetaCount(i) + (HasPhi(i) ? kPhiSize : 0);
+  return kSpinAxisSize + DriftSize() + ThetaCount(i) + BasisCount(i) + (HasPhi(i) ? kPhiSize : 0);
 }
 
 int StateLayout::Drift(int i) const {
@@ -34,7 +36,7 @@ int StateLayout::Latency() const {
 
 int StateLayout::Phi(int i) const {
   assert(blocks_[i].estimate_phi);
-  return Theta(i) + ThetaCount(i);
+  return Basis(i) + BasisCount(i);
 }
 
 }  // namespace esg::estimator

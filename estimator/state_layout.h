@@ -11,14 +11,19 @@
 //   SpinAxis(i)  2  dh_g: spin-axis direction error in the gyro's tangent basis (t1, t2) [rad]
 //   Drift(i)     2  dw_int_g: residual random-walk drift of eq. (11), same basis [rad/s]
 //                   (only with model 11)
-//   Theta(i)     n  errors of the free drift coefficients of eq. (1)/(10) (k0, C1, C2, mu, nu
-//                   whose modelSigma > 0), in the order of FreeCoefficients(i) [rad/s]
+//   Theta(i)     n  the free coefficients of the gyro's drift, in two runs:
+//                     n1 = ThetaCount(i): errors of the free drift coefficients of eq. (1)/(10)
+//                     (k0, C1, C2, mu, nu whose modelSigma > 0), in the order of
+//                     FreeCoefficients(i) [rad/s];
+//     Basis(i)        n2 = BasisCount(i): errors of the free basis terms (basis_term.h, those of
+//                     GyroConfig::basis_terms with sigma > 0), in the order of FreeBasisTerms(i)
+//                     [rad/s per unit of the term's s]; Basis(i) = Theta(i) + ThetaCount(i)
 //   Phi(i)       3  gyro-to-star-tracker misalignment, small rotation in body axes [rad]
 //                   (when misalignmentSigma > 0)
 //
-// Invariant used by the propagation: the residual drift and the free coefficients, the states that
-// move the spin axis (d(dh)/dt depends on them), follow SpinAxis(i) contiguously:
-// [SpinAxisDrivers(i), SpinAxisDrivers(i) + SpinAxisDriverCount(i)).
+// Invariant used by the propagation: the residual drift, the free coefficients and the free basis
+// terms, the states that move the spin axis (d(dh)/dt depends on them), follow SpinAxis(i)
+// contiguously: [SpinAxisDrivers(i), SpinAxisDrivers(i) + SpinAxisDriverCount(i)).
 #ifndef ESG_ESTIMATOR_STATE_LAYOUT_H_
 #define ESG_ESTIMATOR_STATE_LAYOUT_H_
 
@@ -40,8 +45,11 @@ class StateLayout {
       : random_walk_(random_walk), latency_(latency), size_(latency ? 1 : 0) {}
 
   // Appends the block of the next running gyro and returns its gyro index. `free_coefficients`
-  // are drift_model.h theta indices (calibration_model.h FreeCoefficients), one state each.
-  int AddGyro(std::vector<int> free_coefficients, bool estimate_phi);
+  // are drift_model.h theta indices (calibration_model.h FreeCoefficients), one state each;
+  // `free_basis_terms` indices into the gyro's GyroConfig::basis_terms (FreeBasisTerms of
+  // calibration_model.h), one state each.
+  int AddGyro(std::vector<int> free_coefficients, bool estimate_phi,
+              std::vector<int> free_basis_terms = {});
 
   // Total number of states.
   int size() const { return size_; }
@@ -66,18 +74,25 @@ class StateLayout {
   int ThetaCount(int i) const { return static_cast<int>(blocks_[i].free.size()); }
   // drift_model.h theta index of state Theta(i) + j, for j < ThetaCount(i).
   const std::vector<int>& FreeCoefficients(int i) const { return blocks_[i].free; }
+  // First state of gyro i's free basis terms, and their count.
+  int Basis(int i) const { return Theta(i) + ThetaCount(i); }
+  int BasisCount(int i) const { return static_cast<int>(blocks_[i].free_basis.size()); }
+  // Index into GyroConfig::basis_terms of state Basis(i) + j, for j < BasisCount(i).
+  const std::vector<int>& FreeBasisTerms(int i) const { return blocks_[i].free_basis; }
   bool HasPhi(int i) const { return blocks_[i].estimate_phi; }
   // Precondition: HasPhi(i).
   int Phi(int i) const;
 
-  // The states that drive the spin axis in propagation: residual drift, then free coefficients.
+  // The states that drive the spin axis in propagation: residual drift, then free coefficients,
+  // then free basis terms.
   int SpinAxisDrivers(int i) const { return blocks_[i].begin + kSpinAxisSize; }
-  int SpinAxisDriverCount(int i) const { return DriftSize() + ThetaCount(i); }
+  int SpinAxisDriverCount(int i) const { return DriftSize() + ThetaCount(i) + BasisCount(i); }
 
  private:
   struct Block {
     int begin = 0;
     std::vector<int> free;
+    std::vector<int> free_basis;
     bool estimate_phi = false;
   };
   bool random_walk_ = false;

@@ -251,6 +251,60 @@ class JsonPrettyPrinter {
   std::string out_;
 };
 
+// A basis term of the JSON (units of its field names, spacecraft_config.proto) in SI
+// (estimator/basis_term.h); the ranges are ValidateConfig's, after the whole configuration is read.
+absl::StatusOr<estimator::BasisTerm> BasisTermFromProto(const esg::v1::BasisTerm& proto,
+                                                        const std::string& prefix) {
+  estimator::BasisTerm t;
+  if (proto.kind().empty()) return FieldError(absl::StrCat(prefix, ".kind"), "required");
+  absl::StatusOr<estimator::BasisKind> kind = estimator::ParseBasisKind(proto.kind());
+  if (!kind.ok()) return FieldError(absl::StrCat(prefix, ".kind"), kind.status().message());
+  t.kind = *kind;
+  t.axis = proto.axis();
+  if (!proto.exponents().empty()) {
+    if (proto.exponents_size() != 3) {
+      return FieldError(absl::StrCat(prefix, ".exponents"),
+                        absl::StrFormat("expected 3 values or none, got %d", proto.exponents_size()));
+    }
+    for (int i = 0; i < 3; ++i) t.exponents[i] = proto.exponents(i);
+  }
+  if (proto.index_size() > 2) {
+    return FieldError(absl::StrCat(prefix, ".index"),
+                      absl::StrFormat("expected 1 or 2 values, got %d", proto.index_size()));
+  }
+  for (int i = 0; i < proto.index_size(); ++i) t.index[i] = proto.index(i);
+  t.harmonic = proto.harmonic() != 0 ? proto.harmonic() : 1;
+  t.sine = proto.sine();
+  t.period = proto.period_s();
+  if (proto.has_epoch()) {
+    absl::StatusOr<absl::Time> epoch = TimeFromProto(proto.epoch());
+    if (!epoch.ok()) return FieldError(absl::StrCat(prefix, ".epoch"), epoch.status().message());
+    t.epoch = *epoch;
+  }
+  const double to_json = estimator::BasisValueToJson(t.kind);
+  t.value = proto.value_deg_h() / to_json;
+  t.sigma = proto.sigma_deg_h() / to_json;
+  return t;
+}
+
+esg::v1::BasisTerm BasisTermToProto(const estimator::BasisTerm& t) {
+  esg::v1::BasisTerm proto;
+  proto.set_kind(std::string(estimator::BasisKindName(t.kind)));
+  proto.set_axis(t.axis);
+  for (int e : t.exponents) proto.add_exponents(e);
+  // Only the indices the kind reads (one, two for a product), so the JSON shows no unused one.
+  proto.add_index(t.index[0]);
+  if (t.kind == estimator::BasisKind::kBodyRateProduct) proto.add_index(t.index[1]);
+  proto.set_harmonic(t.harmonic);
+  proto.set_sine(t.sine);
+  proto.set_period_s(t.period);
+  *proto.mutable_epoch() = TimeToProto(t.epoch);
+  const double to_json = estimator::BasisValueToJson(t.kind);
+  proto.set_value_deg_h(Tidy(t.value * to_json));
+  proto.set_sigma_deg_h(Tidy(t.sigma * to_json));
+  return proto;
+}
+
 // Timestamp limits: 0001-01-01T00:00:00Z and 9999-12-31T23:59:59.999999999Z.
 constexpr int64_t kMinTimestampSeconds = -62135596800;
 constexpr int64_t kMaxTimestampSeconds = 253402300799;
@@ -315,6 +369,23 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
     ASSIGN_OR_RETURN(gyro.model_sigma,
                      DriftModelFromProto(g.model_sigma(), absl::StrCat(prefix, ".modelSigma")));
     gyro.misalignment_sigma = ArcsecToRad(g.misalignment_sigma_arcsec());
+    for (int k = 0; k < g.basis_terms_size(); ++k) {
+      ASSIGN_OR_RETURN(estimator::BasisTerm term,
+                       BasisTermFromProto(g.basis_terms(k),
+                                          absl::StrFormat("%s.basisTerms[%d]", prefix, k)));
+      gyro.basis_terms.push_back(std::move(term));
+    }
+    if (!g.readout_distortion().empty()) {
+      const std::string field = absl::StrCat(prefix, ".readoutDistortion");
+      if (g.readout_distortion_size() != 9) {
+        return FieldError(field, absl::StrFormat("expected 9 values (D row-major) or none, got %d",
+                                                 g.readout_distortion_size()));
+      }
+      RETURN_IF_ERROR(AllFinite(g.readout_distortion(), field));
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) gyro.readout_distortion(r, c) = g.readout_distortion(3 * r + c);
+      }
+    }
     config.gyros.push_back(std::move(gyro));
   }
   ASSIGN_OR_RETURN(config.working_pair, Pair(proto.working_pair(), "workingPair"));
@@ -365,6 +436,12 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
     *g->mutable_model() = DriftModelToProto(gyro.model);
     *g->mutable_model_sigma() = DriftModelToProto(gyro.model_sigma);
     g->set_misalignment_sigma_arcsec(TidyArcsec(gyro.misalignment_sigma));
+    for (const estimator::BasisTerm& t : gyro.basis_terms) *g->add_basis_terms() = BasisTermToProto(t);
+    if (!gyro.readout_distortion.isZero(0.0)) {
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) g->add_readout_distortion(gyro.readout_distortion(r, c));
+      }
+    }
   }
   for (int id : config.working_pair) proto.add_working_pair(id);
   for (int id : config.reserve_pair) proto.add_reserve_pair(id);

@@ -1,8 +1,10 @@
 // `esg calibrate` and `esg gap`: the estimator run offline over a recording (estimator/offline.h).
 // calibrate prints per gyro the final coefficients and their 1-sigma in the configuration's JSON
-// keys, the misalignments in arcsec, the rejections by kind and the events; gap calibrates up to
-// a time, runs autonomously to the end and reports the attitude error against the withheld star
-// tracker and its growth rate (the paper's Fig. 7/8 measure).
+// keys, the configured basis terms (drift terms beyond eq. (1)/(10)) with their values and 1-sigma
+// in deg/h per JSON unit of their regressor, the misalignments in arcsec, the rejections by kind
+// and the events; gap calibrates up to a time, runs autonomously to the end and reports the
+// attitude error against the withheld star tracker and its growth rate (the paper's Fig. 7/8
+// measure).
 // Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
 #include <cstdio>
 #include <fstream>
@@ -12,11 +14,13 @@
 #include <vector>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
 #include "client/output_format.h"
 #include "client/progress.h"
+#include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/offline.h"
 #include "estimator/units.h"
@@ -124,6 +128,25 @@ json ModelJson(const estimator::DriftCoefficients& c) {
               {"muDegH", Vec(c.mu, kDegH)}, {"nuDegH", Vec(c.nu, kDegH)}};
 }
 
+// The gyro's basis terms as the configuration JSON writes them (deg/h per JSON unit of s), with
+// their labels and 1-sigma (0: held).
+json BasisTermsJson(const estimator::GyroEstimate& g) {
+  json terms = json::array();
+  for (size_t k = 0; k < g.basis_terms.size(); ++k) {
+    const estimator::BasisTerm& t = g.basis_terms[k];
+    const double to_json = estimator::BasisValueToJson(t.kind);
+    const double sigma = k < g.basis_sigma.size() ? g.basis_sigma[k] : 0.0;
+    terms.push_back(json{{"label", estimator::BasisTermLabel(t)},
+                         {"kind", std::string(estimator::BasisKindName(t.kind))},
+                         {"axis", t.axis},
+                         {"valueDegH", t.value * to_json},
+                         {"sigmaDegH", sigma * to_json},
+                         {"unitOfS", std::string(estimator::BasisScalarJsonUnit(t.kind))},
+                         {"estimated", sigma > 0.0}});
+  }
+  return terms;
+}
+
 // The model-consistency monitor's verdict from the run's MODEL_INCONSISTENT events
 // (estimator/consistency_monitor.h).
 struct Consistency {
@@ -180,6 +203,7 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
                          {"misalignmentArcsec", Vec(g.misalignment_b, kArcsec)},
                          {"misalignmentSigmaArcsec", Vec(g.misalignment_sigma_b, kArcsec)},
                          {"relativeSigma", rel},
+                         {"basisTerms", BasisTermsJson(g)},
                          {"residualDriftDegH", json::array({g.residual_drift.x() * kDegH,
                                                             g.residual_drift.y() * kDegH})},
                          {"faulty", g.faulty}});
@@ -272,6 +296,20 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
     const auto sigma = g.sigma.AsVector();
     for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
       row(estimator::CoefficientName(i), theta(i), sigma(i), i);
+    }
+    for (size_t k = 0; k < g.basis_terms.size(); ++k) {
+      const estimator::BasisTerm& t = g.basis_terms[k];
+      const double to_json = estimator::BasisValueToJson(t.kind);
+      const double sigma = k < g.basis_sigma.size() ? g.basis_sigma[k] : 0.0;
+      const std::string unit =
+          absl::StrCat("deg/h per ", std::string(estimator::BasisScalarJsonUnit(t.kind)));
+      if (sigma > 0.0) {
+        std::printf("  basis %-18s %+9.5f +- %.5f %s\n", estimator::BasisTermLabel(t).c_str(),
+                    t.value * to_json, sigma * to_json, unit.c_str());
+      } else {
+        std::printf("  basis %-18s %+9.5f %s (held)\n", estimator::BasisTermLabel(t).c_str(),
+                    t.value * to_json, unit.c_str());
+      }
     }
     std::printf("  misalignment [%+.1f %+.1f %+.1f] +- [%.1f %.1f %.1f] arcsec (body axes)\n",
                 g.misalignment_b.x() * kArcsec, g.misalignment_b.y() * kArcsec,

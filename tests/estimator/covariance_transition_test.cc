@@ -1,11 +1,11 @@
 // The covariance transition of the propagation (estimator/session_propagation.cc: Phi = I + E over
-// a frame interval, the spin-axis errors driven by the residual drift of eq. (11) and the free
-// drift coefficients of eq. (1)/(10)) checked against central differences of the nominal
+// a frame interval, the spin-axis errors driven by the residual drift of eq. (11), the free
+// drift coefficients of eq. (1)/(10) and the free basis terms of basis_term.h) checked against central differences of the nominal
 // propagation, through the public API only: the checkpoint (layout at the top of
 // estimator/session_checkpoint.cc) is edited and restored, one frame that is not a measurement
 // step is applied, and
 //   analytic:  P = tiny I except P(j, j) = eps  =>  P'(:, j) = Phi(:, j) eps + Q(:, j)
-//   numerical: theta_j (or residual_drift_j) +- delta in the checkpoint  =>
+//   numerical: theta_j (or residual_drift_j, or a basis term's value) +- delta in the checkpoint =>
 //              Phi(spin axis of gyro g, j) = T_g^T (h_in_g(+delta) - h_in_g(-delta)) / (2 delta),
 //              T_g = (t1, h_in x t1) at the end of the interval, error = true - estimate
 //              (conventions.h, session.h): a true theta larger by delta moves the true axis by
@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/drift_model.h"
 #include "estimator/session.h"
@@ -73,7 +74,7 @@ StateLayout LayoutOf(const SpacecraftConfig& config, const ModelSpec& model,
   StateLayout layout(model.random_walk);
   for (int id : ids) {
     const GyroConfig& gc = *config.FindGyro(id);
-    layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0);
+    layout.AddGyro(FreeCoefficients(model, gc), gc.misalignment_sigma > 0.0, FreeBasisTerms(gc));
   }
   return layout;
 }
@@ -85,6 +86,17 @@ class CovarianceTransition : public ::testing::Test {
     // the 60 s measurement step: five of every six frames only propagate.
     SimulationSpec spec;
     spec.config = testing::PaperConfig();
+    // Free basis terms (basis_term.h) in gyros 1 and 3: h1 -> z, and a case-fixed drift -> x.
+    BasisTerm h1;
+    h1.kind = BasisKind::kSpinAxisHarmonic;
+    h1.axis = 3;
+    h1.exponents = {1, 0, 0};
+    h1.sigma = DegPerHourToRadPerSec(0.1);
+    BasisTerm fixed = h1;
+    fixed.axis = 1;
+    fixed.exponents = {0, 0, 0};
+    spec.config.gyros[0].basis_terms = {h1};
+    spec.config.gyros[2].basis_terms = {fixed};
     spec.duration = HoursToSeconds(2.0);
     spec.telemetry_step = 10.0;
     spec.seed = 7;
@@ -152,6 +164,18 @@ class CovarianceTransition : public ::testing::Test {
                                static_cast<int64_t>(checkpoint_.values[4]));
   }
 
+  // Index into a checkpoint's values of the value of basis term `term` of the session's gyro
+  // `gyro`: the version-6 tail (session_checkpoint.cc) holds per gyro b, b values, has_u, u (3).
+  int BasisValueIndex(const SessionCheckpoint& c, int gyro, int term) const {
+    int tail = 0;
+    for (int id : ids_) tail += 5 + static_cast<int>(config_.FindGyro(id)->basis_terms.size());
+    int pos = static_cast<int>(c.values.size()) - tail;
+    for (int g = 0; g < gyro; ++g) {
+      pos += 5 + static_cast<int>(config_.FindGyro(ids_[g])->basis_terms.size());
+    }
+    return pos + 1 + term;
+  }
+
   // The process noise Q(r, j) the propagation adds over the interval (session_propagation.cc):
   // the integrated random walk of eq. (11) in each gyro's spin-axis / residual-drift block, and
   // nothing in any column of a free coefficient.
@@ -213,9 +237,10 @@ TEST_F(CovarianceTransition, ColumnsMatchCentralDifferencesOfThePropagation) {
   ASSERT_EQ(span, 10.0);
   struct Case {
     int gyro;       // index into the session's gyros
-    bool drift;     // residual drift (else free coefficient)
+    bool drift;     // residual drift (else free coefficient or basis term)
     int component;  // residual drift component, or drift_model.h theta index
     std::string name;
+    int basis = -1;  // >= 0: index into the gyro's basis terms (then drift, component unused)
   };
   std::vector<Case> cases;
   for (int g : {0, 2}) {  // the reference gyro and gyro 3 (outside the working pair)
@@ -224,6 +249,7 @@ TEST_F(CovarianceTransition, ColumnsMatchCentralDifferencesOfThePropagation) {
     cases.push_back({g, false, kThetaC2 + 2, "C2z"});
     cases.push_back({g, true, 0, "dw_int_1"});
     cases.push_back({g, true, 1, "dw_int_2"});
+    cases.push_back({g, false, 0, g == 0 ? "h1->z" : "1->x", /*basis=*/0});
   }
   const SessionCheckpoint nominal_after = Step(checkpoint_);
   double worst_relative = 0.0;
@@ -231,7 +257,14 @@ TEST_F(CovarianceTransition, ColumnsMatchCentralDifferencesOfThePropagation) {
     SCOPED_TRACE(absl::StrCat("gyro ", ids_[k.gyro], " ", k.name));
     int state = -1;
     int value = index_.gyro[k.gyro];
-    if (k.drift) {
+    if (k.basis >= 0) {
+      const std::vector<int>& free = layout_.FreeBasisTerms(k.gyro);
+      for (size_t f = 0; f < free.size(); ++f) {
+        if (free[f] == k.basis) state = layout_.Basis(k.gyro) + static_cast<int>(f);
+      }
+      value = BasisValueIndex(checkpoint_, k.gyro, k.basis);
+      ASSERT_EQ(checkpoint_.values[value - 1 - k.basis], 1.0);  // b: one term each
+    } else if (k.drift) {
       state = layout_.Drift(k.gyro) + k.component;
       value += kResidualDrift + k.component;
     } else {

@@ -1,4 +1,4 @@
-// The session checkpoint (session_checkpoint.cc, version 5): a session restored from
+// The session checkpoint (session_checkpoint.cc, version 6): a session restored from
 // ExportCheckpoint at any point continues bit for bit as the uninterrupted one (every field of
 // every StepReport, the consistency monitor, the final state and covariance), in each phase that
 // carries state beyond the filter's x and P: before initialisation, in a star-tracker outage
@@ -17,6 +17,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/consistency_monitor.h"
 #include "estimator/session.h"
@@ -232,7 +233,7 @@ Prefix RunPrefix(const Scenario& s, const SessionOptions& options, size_t cut) {
 std::vector<StepReport> ExpectResumesBitForBit(const Scenario& s, const SessionOptions& options,
                                                size_t cut, const EstimationSession& at_cut) {
   const SessionCheckpoint checkpoint = at_cut.ExportCheckpoint();
-  EXPECT_EQ(checkpoint.version, 5);
+  EXPECT_EQ(checkpoint.version, 6);
   auto restored = EstimationSession::FromCheckpoint(s.spec.config, options, checkpoint);
   EXPECT_THAT(restored, IsOk());
   if (!restored.ok()) return {};
@@ -305,6 +306,47 @@ TEST(SessionCheckpoint, BeforeInitialisationResumesBitForBit) {
                 CountEvents(after, Event::Kind::kStarTrackerFault),
             10);
   EXPECT_EQ(after.back().state, SessionState::kFaulted);
+}
+
+// A free basis term (a case-fixed drift along case y of gyro 1, calibrated) and a held
+// suspension-voltage term of gyro 2 whose voltages the frames carry only until the cut (then
+// held): the checkpoint (version 6) carries the terms' current values and the held voltages, and
+// the restored session continues bit for bit.
+TEST(SessionCheckpoint, AFreeBasisTermAndHeldVoltagesResumeBitForBit) {
+  Scenario s;
+  s.spec = PaperFlight(29, 3.0);
+  BasisTerm fixed;
+  fixed.kind = BasisKind::kSpinAxisHarmonic;
+  fixed.axis = 2;
+  fixed.sigma = DegPerHourToRadPerSec(0.1);
+  BasisTerm voltage;
+  voltage.kind = BasisKind::kSuspensionVoltage;
+  voltage.axis = 3;
+  voltage.index = {1, 1};
+  voltage.value = DegPerHourToRadPerSec(0.05);
+  s.spec.config.gyros[0].basis_terms = {fixed};
+  s.spec.config.gyros[1].basis_terms = {voltage};
+  auto sim = Simulate(s.spec);
+  ASSERT_THAT(sim, IsOk());
+  s.frames = sim->recording.frames;
+  const size_t cut = FrameAt(s, 1.5);
+  for (size_t i = cut - 5; i < s.frames.size(); ++i) {
+    if (s.frames[i].gyros[1].has_value()) s.frames[i].gyros[1]->u_k_mv.reset();
+  }
+  const Prefix p = RunPrefix(s, Options(), cut);
+  ASSERT_TRUE(p.session.initialized());
+  const std::vector<GyroEstimate> g = p.session.Gyros();
+  ASSERT_EQ(g[0].basis_terms.size(), 1u);
+  ASSERT_GT(g[0].basis_sigma[0], 0.0);
+  ASSERT_LT(g[0].basis_sigma[0], fixed.sigma);
+  ASSERT_NE(g[0].basis_terms[0].value, 0.0);  // moved by the updates
+  const auto after = ExpectResumesBitForBit(s, Options(), cut, p.session);
+  EXPECT_EQ(after.size(), s.frames.size() - cut);
+  // The checkpoint does not fit a configuration without the free term.
+  SpacecraftConfig other = s.spec.config;
+  other.gyros[0].basis_terms.clear();
+  EXPECT_THAT(EstimationSession::FromCheckpoint(other, Options(), p.session.ExportCheckpoint()),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("checkpoint")));
 }
 
 TEST(SessionCheckpoint, MidOutageResumesBitForBit) {
@@ -554,7 +596,7 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   ASSERT_EQ(p.session.state(), SessionState::kFaulted);
   ASSERT_GT(p.session.consistency_monitor().tests(), 0);
   const SessionCheckpoint good = p.session.ExportCheckpoint();
-  ASSERT_EQ(good.version, 5);
+  ASSERT_EQ(good.version, 6);
   const int n = p.session.state_size();
   // The covariance blocks P and P0 (n x n each) end where the version-2 fields begin.
   const size_t matrices_end = Version1Length(good);

@@ -114,6 +114,71 @@ TEST(Identifier, ValidateConfigAppliesItToSpacecraftId) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Basis terms and readout distortion.
+
+TEST(BasisTermsConfig, ErrorsNameTheGyroTheTermAndTheField) {
+  SpacecraftConfig c = testing::PaperConfig();
+  BasisTerm good;
+  good.kind = BasisKind::kBodyRate;
+  good.axis = 2;
+  good.index = {3, 1};
+  good.value = 0.01 / BasisValueToJson(BasisKind::kBodyRate);  // 0.01 deg/h per deg/s
+  good.sigma = 1e-7;
+  BasisTerm bad_axis = good;
+  bad_axis.axis = 4;
+  c.gyros[0].basis_terms = {good, bad_axis};
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[0].basisTerms[1].axis: must be 1..3")));
+  BasisTerm bad_index = good;
+  bad_index.index = {0, 1};
+  c.gyros[0].basis_terms = {good};
+  c.gyros[2].basis_terms = {bad_index};
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[2].basisTerms[0].index: ")));
+  // |value| in deg/h per JSON unit of s: a body-rate term of 11 deg/h per deg/s is refused, one
+  // of 9 accepted.
+  BasisTerm big = good;
+  big.value = 11.0 / BasisValueToJson(BasisKind::kBodyRate);
+  c.gyros[2].basis_terms = {big};
+  EXPECT_THAT(ValidateConfig(c),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       StartsWith("gyros[2].basisTerms[0].valueDegH: 11 is outside [-10, 10] "
+                                  "deg/h per JSON unit of s")));
+  big.value = 9.0 / BasisValueToJson(BasisKind::kBodyRate);
+  c.gyros[2].basis_terms = {big};
+  EXPECT_THAT(ValidateConfig(c), IsOk());
+  BasisTerm wide = good;
+  wide.sigma = DegPerHourToRadPerSec(20.0);
+  wide.kind = BasisKind::kSpinAxisHarmonic;
+  c.gyros[2].basis_terms = {wide};
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[2].basisTerms[0].sigmaDegH: 20 is "
+                                                     "outside [0, 10]")));
+  c.gyros[2].basis_terms.assign(kMaxBasisTermsPerGyro + 1, good);
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[2].basisTerms: 17 terms, at most 16")));
+  c.gyros[2].basis_terms.assign(kMaxBasisTermsPerGyro, good);
+  EXPECT_THAT(ValidateConfig(c), IsOk());
+}
+
+TEST(BasisTermsConfig, ReadoutDistortionMustBeSymmetricAndSmall) {
+  SpacecraftConfig c = testing::PaperConfig();
+  Eigen::Matrix3d D;
+  D << 0.01, 1e-3, 0, 1e-3, -0.01, 0, 0, 0, 0;
+  c.gyros[1].readout_distortion = D;
+  EXPECT_THAT(ValidateConfig(c), IsOk());
+  c.gyros[1].readout_distortion(0, 1) += 1e-11;
+  EXPECT_THAT(ValidateConfig(c),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       StartsWith("gyros[1].readoutDistortion[1]: ")));
+  c.gyros[1].readout_distortion = D;
+  c.gyros[1].readout_distortion(2, 2) = 0.011;
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[1].readoutDistortion[8]: 0.011 is "
+                                                     "outside [-0.01, 0.01]")));
+}
+
+// ---------------------------------------------------------------------------------------------
 // Numeric limits.
 
 TEST(ConfigLimits, TableIsCompleteAndThePaperConfigurationIsWellInside) {

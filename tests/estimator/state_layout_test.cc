@@ -46,6 +46,30 @@ TEST(StateLayout, BlocksFollowEachOtherInTheDocumentedOrder) {
   EXPECT_EQ(layout.FreeCoefficients(0), (std::vector<int>{kThetaK0, kThetaC1, kThetaC1 + 1}));
 }
 
+// Free basis terms follow the free eq. (1) coefficients inside the gyro's block, before the
+// misalignment, and count among the spin-axis drivers.
+TEST(StateLayout, FreeBasisTermsFollowTheFreeCoefficientsAndDriveTheSpinAxis) {
+  StateLayout layout(/*random_walk=*/true);
+  layout.AddGyro({kThetaK0, kThetaC1}, /*estimate_phi=*/true, /*free_basis_terms=*/{0, 2, 3});
+  layout.AddGyro({kThetaK0}, /*estimate_phi=*/false, /*free_basis_terms=*/{1});
+  // Gyro 0: dh 0-1, dw_int 2-3, theta 4-5, basis 6-8, phi 9-11.
+  EXPECT_EQ(layout.Theta(0), 4);
+  EXPECT_EQ(layout.ThetaCount(0), 2);
+  EXPECT_EQ(layout.Basis(0), 6);
+  EXPECT_EQ(layout.BasisCount(0), 3);
+  EXPECT_EQ(layout.FreeBasisTerms(0), (std::vector<int>{0, 2, 3}));
+  EXPECT_EQ(layout.Phi(0), 9);
+  EXPECT_EQ(layout.GyroSize(0), 12);
+  EXPECT_EQ(layout.SpinAxisDrivers(0), 2);
+  EXPECT_EQ(layout.SpinAxisDriverCount(0), 2 + 2 + 3);
+  // Gyro 1: dh 12-13, dw_int 14-15, theta 16, basis 17, no phi.
+  EXPECT_EQ(layout.Basis(1), 17);
+  EXPECT_EQ(layout.BasisCount(1), 1);
+  EXPECT_EQ(layout.GyroSize(1), 6);
+  EXPECT_EQ(layout.size(), 18);
+  EXPECT_EQ(layout.SpinAxisDrivers(1) + layout.SpinAxisDriverCount(1), 18);
+}
+
 TEST(StateLayout, WithoutRandomWalkTheCoefficientsFollowTheSpinAxis) {
   StateLayout layout(/*random_walk=*/false);
   layout.AddGyro({kThetaK0, kThetaMu}, /*estimate_phi=*/true);

@@ -152,6 +152,44 @@ estimator::SpacecraftConfig RichConfig() {
     g.misalignment_sigma = 1e-4 * id;
     c.gyros.push_back(g);
   }
+  // Basis terms of every kind on gyro 1 (held and free), a readout distortion on gyro 2.
+  using estimator::BasisKind;
+  using estimator::BasisTerm;
+  auto term = [&](BasisKind kind, int axis) {
+    BasisTerm t;
+    t.kind = kind;
+    t.axis = axis;
+    t.value = 1e-7 * normal(rng);
+    return t;
+  };
+  BasisTerm harmonic = term(BasisKind::kSpinAxisHarmonic, 3);
+  harmonic.exponents = {1, 0, 2};
+  harmonic.sigma = 4.1e-7;
+  BasisTerm rate = term(BasisKind::kBodyRate, 1);
+  rate.index = {2, 1};
+  rate.value = 3e-4 * normal(rng);  // per rad/s
+  BasisTerm product = term(BasisKind::kBodyRateProduct, 2);
+  product.index = {2, 3};
+  product.value = 1e-3 * normal(rng);
+  BasisTerm orbit = term(BasisKind::kOrbitalHarmonic, 2);
+  orbit.harmonic = 3;
+  orbit.sine = true;
+  orbit.period = 5561.25;
+  orbit.epoch = absl::FromUnixSeconds(1551398400) + absl::Nanoseconds(123456789);
+  orbit.sigma = 2.2e-7;
+  BasisTerm ramp = term(BasisKind::kRamp, 1);
+  ramp.value = 1e-12 * normal(rng);  // per s
+  ramp.epoch = absl::FromUnixSeconds(1551398400);
+  BasisTerm ramp_h = term(BasisKind::kRampHarmonic, 3);
+  ramp_h.index = {3, 1};
+  ramp_h.value = 1e-12 * normal(rng);
+  BasisTerm voltage = term(BasisKind::kSuspensionVoltage, 2);
+  voltage.index = {1, 1};
+  voltage.sigma = 1e-7;
+  c.gyros[0].basis_terms = {harmonic, rate, product, orbit, ramp, ramp_h, voltage};
+  Eigen::Matrix3d D;
+  D << 1e-3, -2e-4, 3e-5, -2e-4, -5e-4, 7e-4, 3e-5, 7e-4, 2.5e-3;
+  c.gyros[1].readout_distortion = D;
   c.working_pair = {4, 1};
   c.reserve_pair = {2, 4};
   c.star_tracker.noise = Eigen::Vector3d(2.1e-5, 2.2e-5, 1.3e-4);
@@ -179,6 +217,24 @@ void ExpectConfigsEqual(const estimator::SpacecraftConfig& a, const estimator::S
                  at + " sigma");
     }
     ExpectNear(a.gyros[i].misalignment_sigma, b.gyros[i].misalignment_sigma, at);
+    EXPECT_EQ(a.gyros[i].readout_distortion, b.gyros[i].readout_distortion) << at;  // exact
+    ASSERT_EQ(a.gyros[i].basis_terms.size(), b.gyros[i].basis_terms.size()) << at;
+    for (size_t k = 0; k < a.gyros[i].basis_terms.size(); ++k) {
+      const estimator::BasisTerm& x = a.gyros[i].basis_terms[k];
+      const estimator::BasisTerm& y = b.gyros[i].basis_terms[k];
+      const std::string term = at + " basis term " + std::to_string(k);
+      EXPECT_EQ(x.kind, y.kind) << term;
+      EXPECT_EQ(x.axis, y.axis) << term;
+      EXPECT_EQ(x.exponents, y.exponents) << term;
+      EXPECT_EQ(x.index[0], y.index[0]) << term;
+      if (x.kind == estimator::BasisKind::kBodyRateProduct) EXPECT_EQ(x.index[1], y.index[1]) << term;
+      EXPECT_EQ(x.harmonic, y.harmonic) << term;
+      EXPECT_EQ(x.sine, y.sine) << term;
+      EXPECT_EQ(x.period, y.period) << term;
+      EXPECT_EQ(x.epoch, y.epoch) << term;
+      ExpectNear(x.value, y.value, term + " value");
+      ExpectNear(x.sigma, y.sigma, term + " sigma");
+    }
   }
   EXPECT_EQ(a.working_pair, b.working_pair);
   EXPECT_EQ(a.reserve_pair, b.reserve_pair);
@@ -228,6 +284,62 @@ TEST(ConfigJson, RoundTripConfigJsonConfigIsEqual) {
   ExpectConfigsEqual(original, *parsed);
   // A second trip through JSON is textually stable.
   EXPECT_EQ(ConfigToJson(*parsed), json);
+}
+
+// The JSON form of basis terms (deg/h per JSON unit of s, kind by name, epoch in RFC 3339) and of
+// the readout distortion: read to SI, written back to the same JSON.
+TEST(ConfigJson, BasisTermsAndReadoutDistortionRoundTripInJsonUnits) {
+  const std::string json = DesignJsonWith(
+      "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1], \"c2DegH\": [0.1,0.1,0.1]}},\n"
+      "    {\"id\": 2,",
+      "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1], \"c2DegH\": [0.1,0.1,0.1]},\n"
+      "     \"basisTerms\": [\n"
+      "       {\"kind\": \"spin_axis_harmonic\", \"axis\": 2, \"exponents\": [0, 0, 0],"
+      " \"valueDegH\": 0.02, \"sigmaDegH\": 0.1},\n"
+      "       {\"kind\": \"body_rate\", \"axis\": 3, \"index\": [1], \"valueDegH\": 0.002},\n"
+      "       {\"kind\": \"ramp\", \"axis\": 1, \"epoch\": \"2019-03-01T06:00:00Z\","
+      " \"valueDegH\": 0.001},\n"
+      "       {\"kind\": \"orbital_harmonic\", \"axis\": 1, \"harmonic\": 2, \"sine\": true,"
+      " \"periodS\": 5400, \"valueDegH\": -0.01}],\n"
+      "     \"readoutDistortion\": [0.001, 0.0002, 0, 0.0002, -0.001, 0, 0, 0, 0]},\n"
+      "    {\"id\": 2,");
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(json);
+  ASSERT_THAT(c, IsOk());
+  const estimator::GyroConfig& g = c->gyros[0];
+  ASSERT_EQ(g.basis_terms.size(), 4u);
+  const estimator::BasisTerm& fixed = g.basis_terms[0];
+  EXPECT_EQ(fixed.kind, estimator::BasisKind::kSpinAxisHarmonic);
+  EXPECT_EQ(fixed.axis, 2);
+  EXPECT_NEAR(fixed.value, DegHToRadS(0.02), 1e-20);
+  EXPECT_NEAR(fixed.sigma, DegHToRadS(0.1), 1e-20);
+  // 0.002 deg/h per deg/s = 0.002 / 3600 * 180 / pi rad/s per deg/s, and deg/s = rad/s * 180 / pi.
+  const estimator::BasisTerm& rate = g.basis_terms[1];
+  EXPECT_EQ(rate.kind, estimator::BasisKind::kBodyRate);
+  EXPECT_EQ(rate.index[0], 1);
+  EXPECT_NEAR(rate.value, DegHToRadS(0.002) * 180.0 / kPi, 1e-18);
+  EXPECT_EQ(rate.sigma, 0.0);
+  // 0.001 deg/h per hour of ramp, s in seconds: / 3600.
+  const estimator::BasisTerm& ramp = g.basis_terms[2];
+  EXPECT_NEAR(ramp.value, DegHToRadS(0.001) / 3600.0, 1e-22);
+  EXPECT_EQ(ramp.epoch, absl::FromUnixSeconds(1551398400 + 6 * 3600));
+  const estimator::BasisTerm& orbit = g.basis_terms[3];
+  EXPECT_EQ(orbit.harmonic, 2);
+  EXPECT_TRUE(orbit.sine);
+  EXPECT_EQ(orbit.period, 5400.0);
+  EXPECT_EQ(g.readout_distortion(0, 1), 0.0002);
+  EXPECT_EQ(g.readout_distortion(1, 1), -0.001);
+  EXPECT_TRUE(c->gyros[1].basis_terms.empty());
+  EXPECT_TRUE(c->gyros[1].readout_distortion.isZero(0.0));
+  const std::string written = ConfigToJson(*c);
+  EXPECT_THAT(written, HasSubstr("\"kind\": \"body_rate\""));
+  EXPECT_THAT(written, HasSubstr("\"valueDegH\": 0.002,"));
+  EXPECT_THAT(written, HasSubstr("\"index\": [1]"));
+  EXPECT_THAT(written, HasSubstr("\"epoch\": \"2019-03-01T06:00:00Z\""));
+  EXPECT_THAT(written, HasSubstr("\"readoutDistortion\": [0.001, 0.0002, 0, 0.0002, -0.001, 0, 0, 0, 0]"));
+  absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
+  ASSERT_THAT(back, IsOk()) << written;
+  ExpectConfigsEqual(*c, *back);
+  EXPECT_EQ(ConfigToJson(*back), written);
 }
 
 TEST(ConfigJson, WrittenConfigIsCompleteEvenForZeros) {
@@ -324,6 +436,30 @@ INSTANTIATE_TEST_SUITE_P(
                       "\"modelSigma\": {\"k0DegH\": -0.3,  \"c1DegH\": [0.1,0.1,0.1]",
                       "gyros[0].modelSigma.k0DegH: -0.3 is outside [0, 10] deg/h"},
         BadConfigCase{"NegativeNoise", "[5, 5, 30]", "[5, -5, 30]", "starTracker.noiseArcsec"},
+        BadConfigCase{"BasisTermUnknownKind", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"basisTerms\": [{\"kind\": \"ramp\", "
+                      "\"axis\": 1}, {\"kind\": \"wobble\", \"axis\": 1}],",
+                      "gyros[2].basisTerms[1].kind: unknown basis kind \"wobble\""},
+        BadConfigCase{"BasisTermAxisOutOfRange", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"basisTerms\": [{\"kind\": \"ramp\", "
+                      "\"axis\": 1}, {\"kind\": \"ramp\", \"axis\": 4}],",
+                      "gyros[2].basisTerms[1].axis: must be 1..3, got 4"},
+        BadConfigCase{"BasisTermValueBeyondLimit", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"basisTerms\": [{\"kind\": "
+                      "\"spin_axis_harmonic\", \"axis\": 1, \"valueDegH\": 12}],",
+                      "gyros[2].basisTerms[0].valueDegH: 12 is outside [-10, 10] deg/h per JSON "
+                      "unit of s"},
+        BadConfigCase{"ReadoutDistortionWrongLength", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"readoutDistortion\": [0, 0, 0],",
+                      "gyros[2].readoutDistortion: expected 9 values (D row-major) or none, got 3"},
+        BadConfigCase{"ReadoutDistortionNotSymmetric", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"readoutDistortion\": "
+                      "[0, 0.001, 0, 0, 0, 0, 0, 0, 0],",
+                      "gyros[2].readoutDistortion[1]: 0.001 differs from its transpose entry [3]"},
+        BadConfigCase{"ReadoutDistortionTooLarge", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"readoutDistortion\": "
+                      "[0.02, 0, 0, 0, 0, 0, 0, 0, 0],",
+                      "gyros[2].readoutDistortion[0]: 0.02 is outside [-0.01, 0.01]"},
         BadConfigCase{"EmptySpacecraftId", "\"RDK-1\"", "\"\"", "spacecraftId: must not be empty"},
         BadConfigCase{"SpacecraftIdWithNewline", "\"RDK-1\"", "\"RDK-1\\n\"",
                       "spacecraftId: character '\\n' at index 5"},
