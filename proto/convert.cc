@@ -489,6 +489,17 @@ std::string ConfigToJson(const estimator::SpacecraftConfig& config) {
   return JsonPrettyPrinter(json).Print();
 }
 
+std::string BasisTermToJson(const estimator::BasisTerm& term) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.add_whitespace = false;
+  options.always_print_primitive_fields = true;
+  std::string json;
+  if (!google::protobuf::util::MessageToJsonString(BasisTermToProto(term), &json, options).ok()) {
+    return std::string();
+  }
+  return json;
+}
+
 absl::StatusOr<estimator::SpacecraftConfig> ReadConfigFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {

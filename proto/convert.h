@@ -70,6 +70,10 @@ std::string ConfigToJson(const estimator::SpacecraftConfig& config);
 // file cannot be opened, InvalidArgument "<path>: <field>: <reason>" when its content is bad.
 // WriteConfigFile: InvalidArgument when ValidateConfig fails (nothing is written), Unavailable on
 // an I/O failure. Writes "<path>.tmp" then renames it over <path>.
+// One basis term as the configuration JSON holds it (an element of `gyros[].basisTerms`, units in
+// the field names), compact; the diagnosis reports the terms it found in this form.
+std::string BasisTermToJson(const estimator::BasisTerm& term);
+
 absl::StatusOr<estimator::SpacecraftConfig> ReadConfigFile(const std::string& path);
 absl::Status WriteConfigFile(const std::string& path, const estimator::SpacecraftConfig& config);
 

@@ -4,6 +4,7 @@
 
 #include "absl/time/time.h"
 #include "estimator/units.h"
+#include "proto/convert.h"
 
 namespace esg::proto_convert {
 
@@ -95,6 +96,22 @@ json FindingJson(const Finding& f, bool include_series) {
   j["parameters"] = params;
   j["explanation"] = f.explanation;
   if (!f.description.empty()) j["description"] = f.description;
+  if (f.effect == estimator::discovery::kEffectBasisTerm) {
+    // The model terms as the configuration holds them (gyros[].basisTerms of this gyro), and a
+    // readout distortion (gyros[].readoutDistortion, row-major).
+    json terms = json::array();
+    for (const estimator::BasisTerm& t : f.basis_terms) {
+      terms.push_back(json::parse(BasisTermToJson(t), nullptr, /*allow_exceptions=*/false));
+    }
+    j["modelTerms"] = terms;
+    if (!f.readout_distortion.isZero(0.0)) {
+      json d = json::array();
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) d.push_back(f.readout_distortion(r, c));
+      }
+      j["readoutDistortion"] = d;
+    }
+  }
   j["evidence"] = EvidenceJson(f.evidence);
   if (f.effect != "unexplained") j["timeBehaviour"] = TimeBehaviourJson(f.time);
   if (!f.displacement_trend.samples.empty())

@@ -131,7 +131,22 @@ GyroConfig* MutableGyro(SpacecraftConfig& config, int id) {
 
 }  // namespace
 
-absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, DiagnosisContext& context,
+ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage) {
+  ModelState out = model;
+  for (const auto& [gyro, term] : stage.added_terms) {
+    if (GyroConfig* gc = MutableGyro(out.config, gyro)) gc->basis_terms.push_back(term);
+  }
+  for (const auto& [gyro, E] : stage.added_distortions) {
+    if (GyroConfig* gc = MutableGyro(out.config, gyro)) gc->readout_distortion += E;
+  }
+  for (const SelectedGroup& g : stage.stage.selected) {
+    out.added.push_back(absl::StrCat(kEffectBasisTerm, "[", g.gyro, "] ", g.label));
+  }
+  return out;
+}
+
+absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
+                                               DiagnosisContext& context,
                                                const std::vector<int>& gyros, int round) {
   BasisStageResult out;
   const DiagnoseOptions& opt = context.options();
@@ -180,23 +195,28 @@ absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, Diagnosi
   if (stage.selected.empty()) return out;
 
   // The model with the selected terms, refitted by the filter.
-  ModelState extended = model;
-  for (const SelectedGroup& g : stage.selected) {
-    GyroConfig* gc = MutableGyro(extended.config, g.gyro);
+  std::vector<int> first_term(stage.selected.size(), 0);  // index in the gyro's basis_terms
+  for (size_t i = 0; i < stage.selected.size(); ++i) {
+    const SelectedGroup& g = stage.selected[i];
+    const GyroConfig* gc = model.config.FindGyro(g.gyro);
     if (gc == nullptr) continue;
+    int before = static_cast<int>(gc->basis_terms.size());
+    for (const auto& [gyro, term] : out.added_terms) before += gyro == g.gyro ? 1 : 0;
+    first_term[i] = before;
+    Matrix3d E = Matrix3d::Zero();
     for (const FittedColumn& c : g.columns) {
       if (c.column.readout) {
-        gc->readout_distortion(c.column.row, c.column.col) += c.value;
-        if (c.column.row != c.column.col) gc->readout_distortion(c.column.col, c.column.row) += c.value;
+        E(c.column.row, c.column.col) = E(c.column.col, c.column.row) = c.value;
         continue;
       }
       BasisTerm t = c.column.term;
       t.value = 0.0;
       t.sigma = c.prior_sigma;
-      gc->basis_terms.push_back(t);
+      out.added_terms.emplace_back(g.gyro, t);
     }
-    extended.added.push_back(absl::StrCat(kEffectBasisTerm, "[", g.gyro, "] ", g.label));
+    if (!E.isZero(0.0)) out.added_distortions.emplace_back(g.gyro, E);
   }
+  const ModelState extended = WithBasisTerms(model, out);
   auto run = context.CheckedRun(extended, /*held_out=*/false);
   if (!run.ok()) return run.status();
   const ProfiledDeviance fit = Profile(*run);
@@ -211,8 +231,24 @@ absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, Diagnosi
         stage.selected.size(), out.refit_evidence, out.refit_threshold));
     return out;
   }
-  // Findings, with the refitted filter's values of the terms.
-  for (const SelectedGroup& g : stage.selected) {
+  // Findings, with the refitted filter's values of the terms (GyroEstimate::basis_terms, in the
+  // configuration's order).
+  for (size_t i = 0; i < stage.selected.size(); ++i) {
+    SelectedGroup g = stage.selected[i];
+    const GyroEstimate* estimate = nullptr;
+    for (const GyroEstimate& e : run->gyros) {
+      if (e.id == g.gyro) estimate = &e;
+    }
+    int term = first_term[i];
+    for (FittedColumn& c : g.columns) {
+      if (c.column.readout) continue;
+      if (estimate != nullptr && term < static_cast<int>(estimate->basis_terms.size()) &&
+          term < static_cast<int>(estimate->basis_sigma.size())) {
+        c.value = estimate->basis_terms[term].value;
+        c.sigma = estimate->basis_sigma[term];
+      }
+      ++term;
+    }
     Finding f;
     f.effect = kEffectBasisTerm;
     f.gyro = g.gyro;
@@ -251,10 +287,12 @@ absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, Diagnosi
     f.explanation = ExplainFinding(f);
     out.findings.push_back(std::move(f));
   }
-  selected.model = std::move(extended);
-  selected.run = std::move(*run);
-  selected.fit = fit;
-  selected.held_out_current = false;
+  SelectedModel next;
+  next.model = extended;
+  next.run = std::move(*run);
+  next.fit = fit;
+  next.held_out_current = false;
+  out.extended = std::move(next);
   return out;
 }
 

@@ -8,7 +8,9 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
 #define ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
 
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -22,9 +24,14 @@ namespace esg::estimator::discovery {
 struct BasisStageResult {
   OpenEndedOptions options;
   OpenEndedResult stage;
-  // One finding per selected group, when the refit confirmed them (then `selected` holds the
-  // model with the terms, its run and fit; its held-out prediction is stale).
+  // One finding per selected group, when the refit confirmed them; then `extended` is the model
+  // with the terms, its run and fit (its held-out prediction not run), for the caller to take.
   std::vector<Finding> findings;
+  std::optional<SelectedModel> extended;
+  // The terms added (gyro id, term) and readout distortions (gyro id, E), to add them to another
+  // model (selection.h: the basis against a time behaviour).
+  std::vector<std::pair<int, BasisTerm>> added_terms;
+  std::vector<std::pair<int, Eigen::Matrix3d>> added_distortions;
   // The refitted filter's evidence for all the terms together, 2 ln B, and its threshold.
   double refit_evidence = 0.0;
   double refit_threshold = 0.0;
@@ -35,8 +42,12 @@ struct BasisStageResult {
 };
 
 // `round`: the forward-selection round the findings are numbered with.
-absl::StatusOr<BasisStageResult> RunBasisStage(SelectedModel& selected, DiagnosisContext& context,
+absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
+                                               DiagnosisContext& context,
                                                const std::vector<int>& gyros, int round);
+
+// `model` with the stage's terms added (as RunBasisStage added them to the selected model).
+ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage);
 
 }  // namespace esg::estimator::discovery
 

@@ -183,6 +183,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       break;
     }
     report.findings.push_back(std::move(*result->finding));
+    for (Finding& f : result->more_findings) report.findings.push_back(std::move(f));
   }
 
   // The extended model: its held-out prediction (its full run is selected.run), and what remains
@@ -218,8 +219,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     if (!stage.ok()) return stage.status();
     report.residual_drift = stage->residual_drift;
     resembles = stage->resembles;
-    if (!stage->findings.empty()) {
+    if (!stage->findings.empty() && stage->extended.has_value()) {
       for (Finding& f : stage->findings) report.findings.push_back(std::move(f));
+      selected = std::move(*stage->extended);
       unresolved.clear();
       unresolved_note.clear();
       unresolved_gyro = 0;

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "absl/strings/str_format.h"
+#include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/units.h"
 
@@ -480,6 +481,54 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       }
     }
   }
+  // Physics outside the library before a time behaviour (docs/discovery.md, "The open-ended
+  // stage"): a random walk or a drift step absorbs a deterministic drift the library lacks (one
+  // cycling with the orbit, one growing). When one tops the round, the open-ended stage runs on
+  // the current model, and its terms are taken instead when they add significant evidence on
+  // top of the time behaviour (the nested comparison of PreferRandomWalk, same currency); the
+  // time behaviour is tested again in the next round.
+  std::string basis_note;
+  if (!significant.empty() && options.open_ended) {
+    const CandidateFit& top = fits[significant.front().index];
+    if (top.candidate.effect == Effect::kRandomWalkDrift ||
+        top.candidate.effect == Effect::kDriftStep) {
+      auto basis = RunBasisStage(selected, context, gyros, round);
+      if (!basis.ok()) return basis.status();
+      if (basis->extended.has_value() && !basis->findings.empty()) {
+        auto both = context.CheckedRun(WithBasisTerms(top.model, *basis), /*held_out=*/false);
+        if (!both.ok()) return both.status();
+        const double gain = Profile(top.run).value - Profile(*both).value;
+        const std::string versus = absl::StrFormat(
+            "on top of %s (2 ln B = %.1f) the open-ended basis's terms add 2 ln B = %.1f "
+            "(threshold %.1f)",
+            CandidateName(top.candidate), significant.front().score, gain,
+            basis->refit_threshold);
+        if (gain > basis->refit_threshold) {
+          for (const Scored& x : scored) result.rows.push_back(Row(x, fits[x.index], round, -1));
+          for (Finding& f : basis->findings) {
+            f.evidence.notes.push_back(absl::StrCat(
+                versus, ": a deterministic drift, taken before the time behaviour, which the next "
+                        "round tests again"));
+          }
+          CandidateScore row;
+          row.effect = kEffectBasisTerm;
+          row.gyro = basis->findings.front().gyro;
+          row.round = round;
+          row.parameters = static_cast<int>(basis->added_terms.size());
+          row.delta_deviance = row.score = basis->refit_evidence;
+          row.p_value = EvidenceBound(basis->refit_evidence);
+          row.significant = row.selected = true;
+          row.time_behaviour = basis->findings.front().time.kind;
+          result.rows.push_back(row);
+          result.finding = basis->findings.front();
+          result.more_findings.assign(basis->findings.begin() + 1, basis->findings.end());
+          selected = std::move(*basis->extended);
+          return result;
+        }
+        basis_note = absl::StrCat(versus, ": the time behaviour is kept");
+      }
+    }
+  }
   int chosen = -1;
   Contenders contenders;
   if (!significant.empty()) {
@@ -509,6 +558,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
                                   [&](const Scored& x) { return x.index == chosen; });
   result.finding =
       MakeFinding(s, fits, chosen, round, *rw_note, held_out_selected, contenders, selected);
+  if (!basis_note.empty()) result.finding->evidence.notes.push_back(basis_note);
 
   selected.held_out_current = std::any_of(contenders.begin(), contenders.end(),
                                           [&](const auto& c) { return c.first == chosen; });

@@ -40,6 +40,9 @@ struct RoundResult {
   std::vector<CandidateScore> rows;  // one per candidate tried, in candidate order
   // The effect taken (then `selected` holds the model with it), or none: selection ends.
   std::optional<Finding> finding;
+  // Further findings taken with it: the open-ended stage's groups after the first, when the
+  // basis was taken before a time behaviour.
+  std::vector<Finding> more_findings;
   // Nothing taken although a candidate fits: why (the best improves only part of the
   // recording, a change in time; or it fails its physics check), else empty; a supporting note
   // (a jump of a gyro's readings explains it at least as well, D43), and the gyro the best

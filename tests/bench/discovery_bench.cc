@@ -67,15 +67,21 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   // library's rows; default both.
   const char* rows_env = std::getenv("ESG_DISCOVERY_ROWS");
   const std::string rows = rows_env != nullptr ? rows_env : "";
+  // =basis: `none` and the classes of the open-ended stage (docs/discovery.md).
   std::vector<std::string> truths;
-  if (rows != "time") {
-    truths = ::esg::testing::DiscoveryEffects();
-    truths.push_back("two");
-  } else {
+  if (rows == "basis") {
     truths.push_back("none");
-  }
-  if (rows != "library") {
-    for (const std::string& t : ::esg::testing::DiscoveryTimeBehaviours()) truths.push_back(t);
+    for (const std::string& t : ::esg::testing::DiscoveryBasisClasses()) truths.push_back(t);
+  } else {
+    if (rows != "time") {
+      truths = ::esg::testing::DiscoveryEffects();
+      truths.push_back("two");
+    } else {
+      truths.push_back("none");
+    }
+    if (rows != "library") {
+      for (const std::string& t : ::esg::testing::DiscoveryTimeBehaviours()) truths.push_back(t);
+    }
   }
   const std::vector<std::string> verdicts = {"none",
                                              "rotor_displacement",
@@ -86,6 +92,7 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                                              "star_tracker_latency",
                                              "random_walk_drift",
                                              "drift_step",
+                                             "basis_term",
                                              "unexplained"};
   std::map<std::string, std::map<std::string, int>> table;
   std::map<std::string, int> correct;

@@ -213,6 +213,27 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
     return false;
   };
   if (truth == "none") return r.verdict == kVerdictNone;
+  // The open-ended stage's classes: a basis term of the right gyro with the right behaviour
+  // first; the classes the basis cannot explain stay `unexplained`, located to the gyro.
+  auto basis = [&](const std::string& kind, const std::string& parameter) {
+    if (r.findings.empty()) return false;
+    const Finding& f = r.findings.front();
+    if (f.effect != kEffectBasisTerm || f.gyro != gyro) return false;
+    if (!kind.empty() && f.time.kind != kind) return false;
+    if (parameter.empty()) return true;
+    for (const Parameter& p : f.parameters) {
+      if (p.name.find(parameter) != std::string::npos) return true;
+    }
+    return false;
+  };
+  if (truth == "orbital_drift") return basis("orbital_cycle", "");
+  if (truth == "growing_displacement") return basis("linear", "");
+  if (truth == "readout_scale") return basis("", "readout");
+  if (truth == "switching_drift" || truth == "hidden_driver") {
+    return r.verdict == kVerdictUnexplained && !r.findings.empty() &&
+           r.findings.back().effect == kVerdictUnexplained &&
+           r.mismatch.found && (r.mismatch.gyro == gyro || r.mismatch.gyro == 0);
+  }
   if (truth == "readout_jump") return r.verdict == kVerdictUnexplained;
   if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
   // Exactly the one finding, in the right gyro where the effect is per gyro (the common random
