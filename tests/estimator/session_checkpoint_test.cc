@@ -640,9 +640,9 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), longer),
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("oversized")));
   SessionCheckpoint future = good;
-  future.version = 6;
+  future.version = 7;
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), future),
-              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("version 6")));
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("version 7")));
   RecordProperty("restored", restored);
   RecordProperty("refused", refused);
   std::printf("%zu values: %d corrupt restored (%d ran on), %d refused\n", good.values.size(),
