@@ -208,4 +208,21 @@ double BasisValueToJson(BasisKind kind) {
   return drift;
 }
 
+double BasisReferenceSize(BasisKind kind) {
+  switch (kind) {
+    case BasisKind::kBodyRate:
+      return 0.01;
+    case BasisKind::kBodyRateProduct:
+      return 1e-4;
+    case BasisKind::kSuspensionVoltage:
+      return 1e-3;
+    case BasisKind::kRamp:
+    case BasisKind::kRampHarmonic:
+    case BasisKind::kSpinAxisHarmonic:
+    case BasisKind::kOrbitalHarmonic:
+      return 1.0;
+  }
+  return 1.0;
+}
+
 }  // namespace esg::estimator

@@ -99,6 +99,11 @@ std::string BasisTermLabel(const BasisTerm& term);
 std::string_view BasisScalarJsonUnit(BasisKind kind);
 double BasisValueToJson(BasisKind kind);
 
+// The smallest size of s at which a term still matters, in the JSON unit of s (1 for the
+// harmonics, 0.01 deg/s of body rate, 1e-4 (deg/s)^2, 1 h of ramp, 0.001 V): the configuration's
+// limits bound value * this size (spacecraft_config.h kConfigLimits.basis_value).
+double BasisReferenceSize(BasisKind kind);
+
 }  // namespace esg::estimator
 
 #endif  // ESG_ESTIMATOR_BASIS_TERM_H_

@@ -64,8 +64,9 @@ absl::Status ValidateBasisTerms(const std::vector<BasisTerm>& terms, size_t gyro
     const BasisTerm& t = terms[k];
     const std::string prefix = absl::StrFormat("gyros[%d].basisTerms[%d]", gyro, k);
     RETURN_IF_ERROR(ValidateBasisTerm(t, prefix));
-    // The limits are in the JSON unit of the term's kind (ConfigLimits::basis_value).
-    const double to_json = BasisValueToJson(t.kind);
+    // The limits bound the drift at the kind's reference regressor size (ConfigLimits::
+    // basis_value, BasisReferenceSize), in deg/h.
+    const double to_json = BasisValueToJson(t.kind) * BasisReferenceSize(t.kind);
     RETURN_IF_ERROR(CheckLimit(t.value * to_json, L.basis_value, absl::StrCat(prefix, ".valueDegH")));
     RETURN_IF_ERROR(CheckLimit(t.sigma * to_json, L.basis_sigma, absl::StrCat(prefix, ".sigmaDegH")));
   }

@@ -214,15 +214,18 @@ inline constexpr ConfigLimits kConfigLimits = {
                         "a mismatch angle between two attitudes is at most 180 deg; 0 derives "
                         "the threshold from the noise"},
     .basis_value = {"gyros[].basisTerms[].valueDegH", -10.0, 10.0,
-                    "deg/h per JSON unit of s", &config_limits_internal::Identity,
-                    "a few hundredths to tenths (the diagnosis's findings)",
-                    "at one JSON unit of its regressor (a unit spin-axis harmonic, 1 deg/s of "
-                    "body rate, 1 h of ramp, 1 V) a term drifts no more than the eq. (1) "
-                    "coefficients may: 10 deg/h is 30-50 times the paper's largest"},
-    .basis_sigma = {"gyros[].basisTerms[].sigmaDegH", 0.0, 10.0, "deg/h per JSON unit of s",
-                    &config_limits_internal::Identity, "0 (held), 0.1 to calibrate",
+                    "deg/h at the kind's reference size of s", &config_limits_internal::Identity,
+                    "a few hundredths to tenths of deg/h (the diagnosis's findings)",
+                    "the value times the smallest regressor at which a term still matters (a "
+                    "unit spin-axis or orbital harmonic, 0.01 deg/s of body rate, (0.01 deg/s)^2 "
+                    "of its square, 1 h of ramp, 1 mV of offset voltage) is a drift no larger "
+                    "than the eq. (1) coefficients may be: 10 deg/h is 30-50 times the paper's "
+                    "largest"},
+    .basis_sigma = {"gyros[].basisTerms[].sigmaDegH", 0.0, 10.0,
+                    "deg/h at the kind's reference size of s", &config_limits_internal::Identity,
+                    "0 (held), 0.1 deg/h at the regressor's RMS to calibrate",
                     "the prior of a term is that of an eq. (1) coefficient (0.1 deg/h in the "
-                    "paper); 10 deg/h is 100 times that"},
+                    "paper); 10 deg/h at the reference size of its regressor is 100 times that"},
     .readout_distortion = {"gyros[].readoutDistortion[]", -0.01, 0.01, "1",
                            &config_limits_internal::Identity, "0 (none)",
                            "a 1% distortion of the readout bends a spin-axis reading by up to "

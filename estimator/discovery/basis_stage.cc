@@ -122,6 +122,50 @@ void DescribeGrowingDisplacement(const SpacecraftConfig& config,
   }
 }
 
+// A drift proportional to a suspension offset voltage is a rotor-displacement drift: by eq. (3)
+// the voltage measures the displacement along its axis, and eq. (8)-(10) make the drift follow
+// it. When the voltages trend (a chi-square(3) test of their robust lines at alpha), the
+// displacement and its drift grow in time: the finding's time behaviour is linear.
+void DescribeVoltageDrivenDrift(const SpacecraftConfig& config,
+                                const std::vector<TelemetryFrame>& frames, double alpha,
+                                Finding& f) {
+  CandidateFit trend;
+  DescribeVoltageTrend(config, frames, f.gyro, trend);
+  if (trend.displacement_trend.samples.empty()) return;
+  Eigen::Vector3d rate = Eigen::Vector3d::Zero(), sigma = Eigen::Vector3d::Zero();
+  for (const Parameter& p : trend.fitted) {
+    for (int i = 0; i < 3; ++i) {
+      if (p.name == absl::StrCat("displacementRateUmPerH[", i, "]")) {
+        rate(i) = p.value;
+        sigma(i) = p.sigma;
+      }
+    }
+  }
+  double chi2 = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    if (sigma(i) > 0.0) chi2 += std::pow(rate(i) / sigma(i), 2);
+  }
+  const double p_value = ChiSquareSurvival(chi2, 3.0);
+  f.parameters.insert(f.parameters.end(), trend.fitted.begin(), trend.fitted.end());
+  for (const std::string& note : trend.notes) f.evidence.notes.push_back(note);
+  f.displacement_trend = trend.displacement_trend;
+  const std::string what = f.description.substr(f.description.find(": ") + 2);
+  if (p_value < alpha) {
+    f.time.kind = "linear";
+    f.description = absl::StrFormat(
+        "gyro %d: rotor displacement growing at %.4f um/h along (%.2f, %.2f, %.2f) (case axes; "
+        "the suspension offset voltages' trend through eq. (3), p = %.2g), with a drift that "
+        "follows it (eq. (8)-(10)): %s",
+        f.gyro, rate.norm(), rate.normalized().x(), rate.normalized().y(), rate.normalized().z(),
+        p_value, what);
+  } else {
+    f.description = absl::StrFormat(
+        "gyro %d: a rotor-displacement drift (eq. (8)-(10)) read through the suspension offset "
+        "voltages (eq. (3)), which do not trend (p = %.2g): %s",
+        f.gyro, p_value, what);
+  }
+}
+
 GyroConfig* MutableGyro(SpacecraftConfig& config, int id) {
   for (GyroConfig& g : config.gyros) {
     if (g.id == id) return &g;
@@ -164,6 +208,10 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   o.epoch = context.frames().front().time;
   for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
     if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
+  }
+  for (const GyroConfig& g : model.config.gyros) {
+    o.column_budget.emplace_back(
+        g.id, std::max(0, kMaxBasisTermsPerGyro - static_cast<int>(g.basis_terms.size())));
   }
   std::vector<double> random_walk, w0;
   for (const DeviationSeries& s : *series) {
@@ -283,6 +331,10 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     if (!g.columns.empty() && !g.columns.front().column.readout &&
         g.columns.front().column.term.kind == BasisKind::kRamp) {
       DescribeGrowingDisplacement(model.config, context.frames(), g, f);
+    }
+    if (!g.columns.empty() && !g.columns.front().column.readout &&
+        g.columns.front().column.term.kind == BasisKind::kSuspensionVoltage) {
+      DescribeVoltageDrivenDrift(model.config, context.frames(), opt.alpha, f);
     }
     f.explanation = ExplainFinding(f);
     out.findings.push_back(std::move(f));

@@ -172,6 +172,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   // Why the candidates that fit were not taken (selection.h RoundResult), when they were not.
   std::string unresolved, unresolved_note;
   int unresolved_gyro = 0;
+  double readout_jump_evidence = -1.0;
   for (int round = 0; round < options.max_effects; ++round) {
     auto result = SelectionRound(round, report.gyros, selected, context);
     if (!result.ok()) return result.status();
@@ -180,10 +181,12 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       unresolved = result->unresolved;
       unresolved_note = result->unresolved_note;
       unresolved_gyro = result->unresolved_gyro;
+      readout_jump_evidence = result->readout_jump_evidence;
       break;
     }
     report.findings.push_back(std::move(*result->finding));
     for (Finding& f : result->more_findings) report.findings.push_back(std::move(f));
+    if (!result->residual_drift.empty()) report.residual_drift = result->residual_drift;
   }
 
   // The extended model: its held-out prediction (its full run is selected.run), and what remains
@@ -217,8 +220,19 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     auto stage = RunBasisStage(selected, context, report.gyros,
                                static_cast<int>(report.findings.size()));
     if (!stage.ok()) return stage.status();
-    report.residual_drift = stage->residual_drift;
+    if (!stage->findings.empty() || report.residual_drift.empty()) {
+      report.residual_drift = stage->residual_drift;
+    }
     resembles = stage->resembles;
+    // A jump of a gyro's readings that explained the last round as well as its time behaviour
+    // (D43) must be beaten by the basis too: a ramp fitted to a jump is no physics.
+    if (!stage->findings.empty() && readout_jump_evidence > stage->refit_evidence) {
+      absl::StrAppend(&resembles, absl::StrFormat(
+          "; the basis's terms (2 ln B = %.1f) explain it less well than a jump of the gyro's "
+          "readings (2 ln B = %.1f)",
+          stage->refit_evidence, readout_jump_evidence));
+      stage->findings.clear();
+    }
     if (!stage->findings.empty() && stage->extended.has_value()) {
       for (Finding& f : stage->findings) report.findings.push_back(std::move(f));
       selected = std::move(*stage->extended);

@@ -286,8 +286,20 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     RegressionFit best_fit;
     for (size_t g = 0; g < gyros.size(); ++g) {
       GyroData& d = gyros[g];
+      int budget = std::numeric_limits<int>::max();
+      for (const auto& [gyro, n] : options.column_budget) {
+        if (gyro == d.series->gyro) budget = n;
+      }
+      for (int k : d.active) {
+        for (int c : d.basis.groups[k].columns) {
+          budget -= d.basis.columns[c].readout || d.basis.columns[c].nuisance ? 0 : 1;
+        }
+      }
       for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
         if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
+        int drift_columns = 0;
+        for (int c : d.basis.groups[k].columns) drift_columns += d.basis.columns[c].readout ? 0 : 1;
+        if (drift_columns > budget) continue;
         ++M;
         std::vector<int> groups = d.active;
         groups.push_back(k);

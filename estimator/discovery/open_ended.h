@@ -54,6 +54,9 @@ struct OpenEndedOptions {
   // final coefficients hold after the step; before it the deviation carries minus the step, so
   // each adds a nuisance group to the gyro's base model: a case-fixed drift before the time.
   std::vector<std::pair<int, absl::Time>> steps;
+  // Drift columns each gyro's model may still take (gyro id, count; the configuration holds at
+  // most kMaxBasisTermsPerGyro terms a gyro); a gyro not listed: no bound.
+  std::vector<std::pair<int, int>> column_budget;
 };
 
 // One regressor of the basis for one gyro.

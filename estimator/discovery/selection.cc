@@ -478,6 +478,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
             CandidateName(c));
         significant.clear();
         inhomogeneous_only = true;
+        result.readout_jump_evidence = jump_score;
       }
     }
   }
@@ -522,6 +523,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
           result.rows.push_back(row);
           result.finding = basis->findings.front();
           result.more_findings.assign(basis->findings.begin() + 1, basis->findings.end());
+          result.residual_drift = basis->residual_drift;
           selected = std::move(*basis->extended);
           return result;
         }

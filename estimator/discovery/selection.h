@@ -43,6 +43,8 @@ struct RoundResult {
   // Further findings taken with it: the open-ended stage's groups after the first, when the
   // basis was taken before a time behaviour.
   std::vector<Finding> more_findings;
+  // The open-ended stage's residual drift when its terms were taken (basis_stage.h).
+  std::vector<ResidualDriftPoint> residual_drift;
   // Nothing taken although a candidate fits: why (the best improves only part of the
   // recording, a change in time; or it fails its physics check), else empty; a supporting note
   // (a jump of a gyro's readings explains it at least as well, D43), and the gyro the best
@@ -50,6 +52,9 @@ struct RoundResult {
   std::string unresolved;
   std::string unresolved_note;
   int unresolved_gyro = 0;
+  // When a jump of a gyro's readings explained the round at least as well as its time behaviour
+  // (D43): the jump's evidence 2 ln B, which anything else must beat (the open-ended stage too).
+  double readout_jump_evidence = -1.0;
 };
 
 // Round `round` (0 first) of forward selection over the running `gyros`. Updates `selected` (its
