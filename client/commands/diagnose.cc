@@ -8,6 +8,7 @@
 // failure.
 #include "estimator/discovery/diagnose.h"
 
+#include <algorithm>
 #include <unistd.h>
 
 #include <cstdio>
@@ -103,8 +104,10 @@ bool WriteFile(const std::filesystem::path& path, const std::string& text) {
   return static_cast<bool>(out);
 }
 
-// The report directory: plots (data, script, PNGs), report.md and diagnosis.json.
-int WriteReport(const disc::DiagnosisReport& report, const std::string& out_dir) {
+// The report directory: plots (data, script, PNGs), report.md and diagnosis.json; with basis
+// terms found, model.json: the configuration with them (for esg calibrate --config).
+int WriteReport(const disc::DiagnosisReport& report, const estimator::SpacecraftConfig& config,
+                const std::string& out_dir) {
   std::error_code ec;
   std::filesystem::create_directories(out_dir, ec);
   if (ec) {
@@ -122,6 +125,15 @@ int WriteReport(const disc::DiagnosisReport& report, const std::string& out_dir)
   if (!WriteFile(dir / "report.md", DiagnosisMarkdown(report, *plots, plotted)) ||
       !WriteFile(dir / "diagnosis.json", proto_convert::DiagnosisToJson(report, true))) {
     std::fprintf(stderr, "esg diagnose: --out %s: cannot write the report\n", out_dir.c_str());
+    return 1;
+  }
+  const bool basis_found =
+      std::any_of(report.findings.begin(), report.findings.end(),
+                  [](const disc::Finding& f) { return f.effect == disc::kEffectBasisTerm; });
+  if (basis_found &&
+      !WriteFile(dir / "model.json",
+                 proto_convert::ConfigToJson(disc::WithBasisFindings(config, report)) + "\n")) {
+    std::fprintf(stderr, "esg diagnose: --out %s: cannot write model.json\n", out_dir.c_str());
     return 1;
   }
   if (!plotted)
@@ -175,7 +187,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
     return report.status().code() == absl::StatusCode::kInvalidArgument ? 2 : 1;
   }
   if (!o.out_dir.empty()) {
-    if (const int code = WriteReport(*report, o.out_dir); code != 0) return code;
+    if (const int code = WriteReport(*report, *config, o.out_dir); code != 0) return code;
   }
   if (o.format == OutputFormat::kJson) {
     std::cout << proto_convert::DiagnosisToJson(*report) << "\n";

@@ -59,6 +59,19 @@ std::string VectorText(const std::vector<Parameter>& ps, const std::string& name
 
 }  // namespace
 
+SpacecraftConfig WithBasisFindings(const SpacecraftConfig& config, const DiagnosisReport& report) {
+  SpacecraftConfig out = config;
+  for (const Finding& f : report.findings) {
+    if (f.effect != kEffectBasisTerm) continue;
+    for (GyroConfig& g : out.gyros) {
+      if (g.id != f.gyro) continue;
+      g.basis_terms.insert(g.basis_terms.end(), f.basis_terms.begin(), f.basis_terms.end());
+      if (!f.readout_distortion.isZero(0.0)) g.readout_distortion = f.readout_distortion;
+    }
+  }
+  return out;
+}
+
 std::string ExplainFinding(const Finding& f) {
   const Evidence& e = f.evidence;
   // docs/discovery.md "Evidence": 2 ln B, and for searched parameters the prior's cost.

@@ -15,6 +15,7 @@
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
 #include "estimator/discovery/regimes.h"
+#include "estimator/spacecraft_config.h"
 
 namespace esg::estimator::discovery {
 
@@ -235,6 +236,11 @@ struct DiagnosisReport {
   int filter_runs = 0;
   std::vector<int> gyros;  // running gyros
 };
+
+// `config` with the model terms of the report's `basis_term` findings added (each gyro's
+// basis_terms, freed with the prior the diagnosis used, at the fitted values; its readout
+// distortion): the configuration `esg calibrate` can run with what the diagnosis found.
+SpacecraftConfig WithBasisFindings(const SpacecraftConfig& config, const DiagnosisReport& report);
 
 // Hours from t0 to t (the report's time axis: hours since the first frame).
 inline double HoursSince(absl::Time t, absl::Time t0) { return absl::ToDoubleHours(t - t0); }

@@ -142,6 +142,11 @@ TEST(OpenEndedDiagnosis, OrbitalDriftIsNamedWithItsAmplitudeAndDirection) {
   EXPECT_THAT(f.explanation, HasSubstr("varying with the orbital phase"));
   EXPECT_FALSE(f.basis_terms.empty());
   EXPECT_FALSE(r->residual_drift.empty());
+  // The configuration with the terms found is valid and frees them for esg calibrate.
+  const SpacecraftConfig with = WithBasisFindings(spec.config, *r);
+  EXPECT_TRUE(ValidateConfig(with).ok()) << ValidateConfig(with);
+  EXPECT_EQ(with.FindGyro(gyro)->basis_terms.size(), f.basis_terms.size());
+  for (const BasisTerm& t : with.FindGyro(gyro)->basis_terms) EXPECT_GT(t.sigma, 0.0);
 }
 
 // A rotor displacement growing from 0 to 1.4 um: named as a growing displacement with its rate
