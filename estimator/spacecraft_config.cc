@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <set>
+#include <tuple>
 #include <string>
 #include <vector>
 
@@ -65,10 +66,24 @@ absl::Status ValidateBasisTerms(const std::vector<BasisTerm>& terms, size_t gyro
     const std::string prefix = absl::StrFormat("gyros[%d].basisTerms[%d]", gyro, k);
     RETURN_IF_ERROR(ValidateBasisTerm(t, prefix));
     // The limits bound the drift at the kind's reference regressor size (ConfigLimits::
-    // basis_value, BasisReferenceSize), in deg/h.
-    const double to_json = BasisValueToJson(t.kind) * BasisReferenceSize(t.kind);
-    RETURN_IF_ERROR(CheckLimit(t.value * to_json, L.basis_value, absl::StrCat(prefix, ".valueDegH")));
-    RETURN_IF_ERROR(CheckLimit(t.sigma * to_json, L.basis_sigma, absl::StrCat(prefix, ".sigmaDegH")));
+    // basis_value, BasisReferenceSize), in deg/h; the message gives the field's own value too.
+    const double to_json = BasisValueToJson(t.kind);
+    const double size = BasisReferenceSize(t.kind);
+    const std::string unit = BasisScalarJsonUnit(t.kind) == "1"
+                                 ? std::string("deg/h")
+                                 : absl::StrCat("deg/h per ", std::string(BasisScalarJsonUnit(t.kind)));
+    for (const auto& [value, limit, field] :
+         {std::tuple<double, const ConfigLimit&, const char*>{t.value, L.basis_value, "valueDegH"},
+          {t.sigma, L.basis_sigma, "sigmaDegH"}}) {
+      if (WithinLimit(value * to_json * size, limit)) continue;
+      const std::string at = BasisScalarJsonUnit(t.kind) == "1"
+                                 ? std::string("a unit regressor")
+                                 : absl::StrFormat("%g %s of its regressor", size,
+                                                   std::string(BasisScalarJsonUnit(t.kind)));
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.%s: %g %s is %g deg/h at %s, outside [%g, %g] (%s)", prefix, field,
+          value * to_json, unit, value * to_json * size, at, limit.min, limit.max, limit.reason));
+    }
   }
   return absl::OkStatus();
 }

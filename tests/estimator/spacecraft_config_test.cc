@@ -135,16 +135,17 @@ TEST(BasisTermsConfig, ErrorsNameTheGyroTheTermAndTheField) {
   c.gyros[2].basis_terms = {bad_index};
   EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
                                           StartsWith("gyros[2].basisTerms[0].index: ")));
-  // |value| in deg/h per JSON unit of s: a body-rate term of 11 deg/h per deg/s is refused, one
-  // of 9 accepted.
+  // The limit bounds the drift at the kind's reference size of its regressor (0.01 deg/s of body
+  // rate): a body-rate term of 1100 deg/h per deg/s (11 deg/h at 0.01 deg/s) is refused, one of
+  // 900 accepted.
   BasisTerm big = good;
-  big.value = 11.0 / BasisValueToJson(BasisKind::kBodyRate);
+  big.value = 1100.0 / BasisValueToJson(BasisKind::kBodyRate);
   c.gyros[2].basis_terms = {big};
   EXPECT_THAT(ValidateConfig(c),
               StatusIs(absl::StatusCode::kInvalidArgument,
-                       StartsWith("gyros[2].basisTerms[0].valueDegH: 11 is outside [-10, 10] "
-                                  "deg/h per JSON unit of s")));
-  big.value = 9.0 / BasisValueToJson(BasisKind::kBodyRate);
+                       StartsWith("gyros[2].basisTerms[0].valueDegH: 1100 deg/h per deg/s is 11 "
+                                  "deg/h at 0.01 deg/s of its regressor, outside [-10, 10]")));
+  big.value = 900.0 / BasisValueToJson(BasisKind::kBodyRate);
   c.gyros[2].basis_terms = {big};
   EXPECT_THAT(ValidateConfig(c), IsOk());
   BasisTerm wide = good;
@@ -152,7 +153,8 @@ TEST(BasisTermsConfig, ErrorsNameTheGyroTheTermAndTheField) {
   wide.kind = BasisKind::kSpinAxisHarmonic;
   c.gyros[2].basis_terms = {wide};
   EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
-                                          StartsWith("gyros[2].basisTerms[0].sigmaDegH: 20 is "
+                                          StartsWith("gyros[2].basisTerms[0].sigmaDegH: 20 deg/h "
+                                                     "is 20 deg/h at a unit regressor, "
                                                      "outside [0, 10]")));
   c.gyros[2].basis_terms.assign(kMaxBasisTermsPerGyro + 1, good);
   EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,

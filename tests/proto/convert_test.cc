@@ -447,8 +447,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfigCase{"BasisTermValueBeyondLimit", "\"model\":      {\"k0DegH\": 0.25},",
                       "\"model\": {\"k0DegH\": 0.25}, \"basisTerms\": [{\"kind\": "
                       "\"spin_axis_harmonic\", \"axis\": 1, \"valueDegH\": 12}],",
-                      "gyros[2].basisTerms[0].valueDegH: 12 is outside [-10, 10] deg/h per JSON "
-                      "unit of s"},
+                      "gyros[2].basisTerms[0].valueDegH: 12 deg/h is 12 deg/h at a unit "
+                      "regressor, outside [-10, 10]"},
         BadConfigCase{"ReadoutDistortionWrongLength", "\"model\":      {\"k0DegH\": 0.25},",
                       "\"model\": {\"k0DegH\": 0.25}, \"readoutDistortion\": [0, 0, 0],",
                       "gyros[2].readoutDistortion: expected 9 values (D row-major) or none, got 3"},
