@@ -233,6 +233,22 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
           stage->refit_evidence, readout_jump_evidence));
       stage->findings.clear();
     }
+    // The terms must predict the held-out spans at least as well as the model without them.
+    if (!stage->findings.empty() && stage->extended.has_value() && !context.gaps().empty()) {
+      auto held = context.CheckedRun(stage->extended->model, /*held_out=*/true);
+      if (!held.ok()) return held.status();
+      HeldOutResult with = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
+      if (with.deviance > final_held_out.deviance) {
+        absl::StrAppend(&resembles, absl::StrFormat(
+            "; the basis's terms fit in-sample (2 ln B = %.1f) but predict the held-out spans "
+            "worse (-2 log predictive density %.1f against %.1f without them)",
+            stage->refit_evidence, with.deviance, final_held_out.deviance));
+        stage->findings.clear();
+      } else {
+        stage->extended->held_out = std::move(with);
+        stage->extended->held_out_current = true;
+      }
+    }
     if (!stage->findings.empty() && stage->extended.has_value()) {
       for (Finding& f : stage->findings) report.findings.push_back(std::move(f));
       selected = std::move(*stage->extended);

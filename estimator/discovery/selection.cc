@@ -504,12 +504,33 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
             "(threshold %.1f)",
             CandidateName(top.candidate), significant.front().score, gain,
             basis->refit_threshold);
-        if (gain > basis->refit_threshold) {
+        // A deterministic term must also predict: on the held-out spans its -2 log predictive
+        // density must not be worse than the time behaviour's (terms fitted to a random process,
+        // a drift switching at random, predict the withheld spans wrongly and confidently).
+        bool predicts = true;
+        std::string held_note;
+        if (gain > basis->refit_threshold && !context.gaps().empty()) {
+          auto held_basis = context.CheckedRun(basis->extended->model, /*held_out=*/true);
+          if (!held_basis.ok()) return held_basis.status();
+          auto held_top = context.CheckedRun(top.model, /*held_out=*/true);
+          if (!held_top.ok()) return held_top.status();
+          const HeldOutResult hb = SummariseHeldOut(*held_basis, context.gaps(), context.regimes(),
+                                                    context.frames());
+          const HeldOutResult ht = SummariseHeldOut(*held_top, context.gaps(), context.regimes(),
+                                                    context.frames());
+          predicts = hb.deviance <= ht.deviance;
+          held_note = absl::StrFormat(
+              "; held-out -2 log predictive density %.1f with the basis's terms against %.1f "
+              "with %s",
+              hb.deviance, ht.deviance, CandidateName(top.candidate));
+        }
+        if (gain > basis->refit_threshold && predicts) {
           for (const Scored& x : scored) result.rows.push_back(Row(x, fits[x.index], round, -1));
           for (Finding& f : basis->findings) {
             f.evidence.notes.push_back(absl::StrCat(
-                versus, ": a deterministic drift, taken before the time behaviour, which the next "
-                        "round tests again"));
+                versus, held_note,
+                ": a deterministic drift, taken before the time behaviour, which the next round "
+                "tests again"));
           }
           CandidateScore row;
           row.effect = kEffectBasisTerm;
@@ -527,7 +548,10 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
           selected = std::move(*basis->extended);
           return result;
         }
-        basis_note = absl::StrCat(versus, ": the time behaviour is kept");
+        basis_note = absl::StrCat(versus, held_note,
+                                  predicts ? ": the time behaviour is kept"
+                                           : ": the basis's terms do not predict the held-out "
+                                             "spans as well, the time behaviour is kept");
       }
     }
   }
