@@ -105,16 +105,31 @@ const Parameter* FindParameter(const Finding& f, const std::string& name) {
   return nullptr;
 }
 
+// A diagnosis of a discovery scenario (tests/testing/discovery_scenarios.h) at kHours.
+struct ScenarioDiagnosis {
+  SimulationSpec spec;
+  DiagnosisReport report;
+};
+absl::StatusOr<ScenarioDiagnosis> DiagnoseScenario(const std::string& effect, uint64_t seed) {
+  ScenarioDiagnosis out;
+  out.spec = ::esg::testing::DiscoveryScenario(effect, seed, kHours);
+  auto sim = Simulate(out.spec);
+  if (!sim.ok()) return sim.status();
+  auto report = Diagnose(out.spec.config, sim->recording.frames, DiagnoseOptions{});
+  if (!report.ok()) return report.status();
+  out.report = std::move(*report);
+  return out;
+}
+
 // A case-fixed drift cycling with the orbit (0.049 deg/h along (0.61, -0.61, 0.51)), which the
 // library's random walk of that gyro absorbs in part: named as the orbital harmonic of the right
 // gyro, with its amplitude and direction.
 TEST(OpenEndedDiagnosis, OrbitalDriftIsNamedWithItsAmplitudeAndDirection) {
   const uint64_t seed = 101;
-  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("orbital_drift", seed, kHours);
-  auto sim = Simulate(spec);
-  ASSERT_TRUE(sim.ok()) << sim.status();
-  auto r = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
-  ASSERT_TRUE(r.ok()) << r.status();
+  auto d = DiagnoseScenario("orbital_drift", seed);
+  ASSERT_TRUE(d.ok()) << d.status();
+  const SimulationSpec& spec = d->spec;
+  const DiagnosisReport* r = &d->report;
   const int gyro = ::esg::testing::AffectedGyro(seed);
   ASSERT_EQ(r->verdict, kEffectBasisTerm);
   const Finding& f = r->findings.front();
@@ -153,12 +168,10 @@ TEST(OpenEndedDiagnosis, OrbitalDriftIsNamedWithItsAmplitudeAndDirection) {
 // and direction (through the suspension voltages' trend, eq. (3)), the drift following it.
 TEST(OpenEndedDiagnosis, GrowingRotorDisplacementIsNamedWithItsRate) {
   const uint64_t seed = 101;
-  const SimulationSpec spec =
-      ::esg::testing::DiscoveryScenario("growing_displacement", seed, kHours);
-  auto sim = Simulate(spec);
-  ASSERT_TRUE(sim.ok()) << sim.status();
-  auto r = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
-  ASSERT_TRUE(r.ok()) << r.status();
+  auto d = DiagnoseScenario("growing_displacement", seed);
+  ASSERT_TRUE(d.ok()) << d.status();
+  const SimulationSpec& spec = d->spec;
+  const DiagnosisReport* r = &d->report;
   const int gyro = ::esg::testing::AffectedGyro(seed);
   ASSERT_EQ(r->verdict, kEffectBasisTerm);
   const Finding& f = r->findings.front();
