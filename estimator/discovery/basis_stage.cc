@@ -166,22 +166,15 @@ void DescribeVoltageDrivenDrift(const SpacecraftConfig& config,
   }
 }
 
-GyroConfig* MutableGyro(SpacecraftConfig& config, int id) {
-  for (GyroConfig& g : config.gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
-}
-
 }  // namespace
 
 ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage) {
   ModelState out = model;
   for (const auto& [gyro, term] : stage.added_terms) {
-    if (GyroConfig* gc = MutableGyro(out.config, gyro)) gc->basis_terms.push_back(term);
+    if (GyroConfig* gc = FindGyroMutable(out.config, gyro)) gc->basis_terms.push_back(term);
   }
   for (const auto& [gyro, E] : stage.added_distortions) {
-    if (GyroConfig* gc = MutableGyro(out.config, gyro)) gc->readout_distortion += E;
+    if (GyroConfig* gc = FindGyroMutable(out.config, gyro)) gc->readout_distortion += E;
   }
   for (const SelectedGroup& g : stage.stage.selected) {
     out.added.push_back(absl::StrCat(kEffectBasisTerm, "[", g.gyro, "] ", g.label));
@@ -283,10 +276,7 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   // configuration's order).
   for (size_t i = 0; i < stage.selected.size(); ++i) {
     SelectedGroup g = stage.selected[i];
-    const GyroEstimate* estimate = nullptr;
-    for (const GyroEstimate& e : run->gyros) {
-      if (e.id == g.gyro) estimate = &e;
-    }
+    const GyroEstimate* estimate = FindEstimate(run->gyros, g.gyro);
     int term = first_term[i];
     for (FittedColumn& c : g.columns) {
       if (c.column.readout) continue;

@@ -28,25 +28,11 @@ constexpr int kRandomWalkGridPoints = 5;  // factors 2, 4, ... 32 above the conf
 // residual-drift instability [deg/h/sqrt(h)].
 constexpr double kRandomWalkFloorDegHSqrtH = 0.0005;
 
-GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
-  for (GyroConfig& g : c.gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
-}
-
 bool AllFree(const DriftVector& sigma, int first, int count) {
   for (int i = first; i < first + count; ++i) {
     if (!(sigma(i) > 0.0)) return false;
   }
   return true;
-}
-
-const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
-  for (const GyroEstimate& g : gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
 }
 
 double DegH(double x) { return RadPerSecToDegPerHour(x); }
@@ -64,6 +50,20 @@ bool Effective(const std::vector<Effect>& effects, Effect e) {
 }
 
 }  // namespace
+
+GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
+  for (GyroConfig& g : c.gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
+
+const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
+  for (const GyroEstimate& g : gyros) {
+    if (g.id == id) return &g;
+  }
+  return nullptr;
+}
 
 LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
                                  const SpacecraftConfig& config) {

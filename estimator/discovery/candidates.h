@@ -126,6 +126,11 @@ struct LatencyEstimate {
 LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
                                  const SpacecraftConfig& config);
 
+// Gyro `id` of a configuration to change, and a run's final estimate of gyro `id`; nullptr when
+// absent.
+GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id);
+const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id);
+
 // Profiled deviance of a run (ComputeDeviance, then the common noise scale phi = nis / m
 // profiled out: N ln(phi) + sum log det S + N), and phi.
 struct ProfiledDeviance {

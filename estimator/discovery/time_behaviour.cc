@@ -20,20 +20,6 @@ namespace {
 
 using Eigen::Vector3d;
 
-GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
-  for (GyroConfig& g : c.gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
-}
-
-const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
-  for (const GyroEstimate& g : gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
-}
-
 double DegH(double x) { return RadPerSecToDegPerHour(x); }
 
 double HoursSinceStart(const std::vector<TelemetryFrame>& frames, int f) {
