@@ -148,7 +148,10 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
   };
   auto add_column = [&](BasisColumn c) {
     c.group = static_cast<int>(out.groups.size()) - 1;
-    if (!c.readout && !(ScalarRms(series, c) > kAbsentRms)) return;
+    if (!c.readout) {
+      c.rms = ScalarRms(series, c);
+      if (!(c.rms > kAbsentRms)) return;
+    }
     out.groups.back().columns.push_back(static_cast<int>(out.columns.size()));
     out.columns.push_back(std::move(c));
   };
@@ -272,7 +275,7 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
       d.signature.push_back(ColumnSignature(series[g], col));
       d.x_w.push_back(filter.Whiten(d.signature.back()));
       d.prior(c) = col.readout ? options.readout_sigma
-                               : options.drift_sigma / ScalarRms(series[g], col);
+                               : options.drift_sigma / col.rms;
     }
     for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
       if (d.basis.groups[k].nuisance) d.active.push_back(k);

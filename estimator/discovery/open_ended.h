@@ -66,6 +66,9 @@ struct BasisColumn {
   int row = 0, col = 0;  // readout: the symmetric entry E(row, col) = E(col, row), 0-based
   std::string label;     // BasisTermLabel, or "readout E_xy"
   int group = 0;         // index of its group in the gyro's basis
+  // A drift column's regressor s, RMS over the recording's substeps (time-weighted) [SI unit of
+  // s]; its prior is OpenEndedOptions::drift_sigma / rms. 0 for a readout entry.
+  double rms = 0.0;
   // A nuisance regressor (OpenEndedOptions::steps): e_m before `before`, in every model.
   bool nuisance = false;
   absl::Time before = absl::InfinitePast();
