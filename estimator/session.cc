@@ -293,12 +293,17 @@ TelemetryFrame EstimationSession::CorrectedForReadout(const TelemetryFrame& fram
   for (const GyroConfig& gc : config_.gyros) {
     std::optional<GyroReading>& r = out.gyros[gc.id - 1];
     if (!r.has_value() || gc.readout_distortion.isZero(0.0)) continue;
-    // h_meas = normalise((I + D) h_k): the inverse up to the norm (|D_ij| <= 0.01, so I + D is
-    // well conditioned).
-    const Eigen::Matrix3d I_plus_D = Eigen::Matrix3d::Identity() + gc.readout_distortion;
-    r->h_k = I_plus_D.partialPivLu().solve(r->h_k).normalized();
+    r->h_k = CorrectReadout(gc, r->h_k);
   }
   return out;
+}
+
+Eigen::Vector3d CorrectReadout(const GyroConfig& gc, const Eigen::Vector3d& h_meas) {
+  if (gc.readout_distortion.isZero(0.0)) return h_meas.normalized();
+  // h_meas = normalise((I + D) h_k): the inverse up to the norm (|D_ij| <= 0.01, so I + D is
+  // well conditioned).
+  const Eigen::Matrix3d I_plus_D = Eigen::Matrix3d::Identity() + gc.readout_distortion;
+  return I_plus_D.partialPivLu().solve(h_meas).normalized();
 }
 
 absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw_frame) {
@@ -413,11 +418,22 @@ void EstimationSession::ApplyCoefficientReleases(absl::Time frame_time) {
   }
 }
 
-double EstimationSession::RandomWalkOf(int id) const {
-  for (const auto& [gyro, q] : options_.random_walk_by_gyro) {
-    if (gyro == id) return q;
+double ResidualRandomWalk(const SpacecraftConfig& config, const SessionOptions& options,
+                          int gyro_id) {
+  for (const auto& [gyro, q] : options.random_walk_by_gyro) {
+    if (gyro == gyro_id) return q;
   }
-  return config_.random_walk;
+  return config.random_walk;
+}
+
+double InitialResidualDriftSigma(const SessionOptions& options) {
+  if (options.residual_drift_sigma >= 0.0) return options.residual_drift_sigma;
+  // 0.1 deg/h with model (11) alone, 0.01 deg/h on top of a calibrated model.
+  return DegPerHourToRadPerSec((options.model.k0 || options.model.c1c2) ? 0.01 : 0.1);
+}
+
+double EstimationSession::RandomWalkOf(int id) const {
+  return ResidualRandomWalk(config_, options_, id);
 }
 
 }  // namespace esg::estimator

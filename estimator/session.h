@@ -217,6 +217,19 @@ struct SessionOptions {
   std::vector<CoefficientRelease> coefficient_releases;
 };
 
+// The residual random-walk intensity of eq. (11) a session with `options` gives gyro `gyro_id`
+// [rad/s/sqrt(s)]: SessionOptions::random_walk_by_gyro where listed, else config.random_walk.
+double ResidualRandomWalk(const SpacecraftConfig& config, const SessionOptions& options,
+                          int gyro_id);
+
+// A reading h_meas of gyro `gc` corrected for its readout distortion D (GyroConfig::
+// readout_distortion; h_meas = normalise((I + D) h_k)): normalise((I + D)^-1 h_meas).
+Eigen::Vector3d CorrectReadout(const GyroConfig& gc, const Eigen::Vector3d& h_meas);
+
+// The initial 1-sigma of each gyro's residual drift dw_int a session with `options` sets [rad/s]:
+// SessionOptions::residual_drift_sigma, or derived from the model.
+double InitialResidualDriftSigma(const SessionOptions& options);
+
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
 // writes version 6; FromCheckpoint reads versions 1 to 6.
 struct SessionCheckpoint {

@@ -89,10 +89,7 @@ absl::Status EstimationSession::Initialize(const TelemetryFrame& frame) {
 void EstimationSession::SetDriftAndMisalignmentPrior(int i, MatrixXd& P) const {
   const GyroConfig& gc = *config_.FindGyro(gyros_[i].id);
   if (layout_.has_drift()) {
-    const double sigma_rw0 =
-        options_.residual_drift_sigma >= 0.0
-            ? options_.residual_drift_sigma
-            : DegPerHourToRadPerSec((options_.model.k0 || options_.model.c1c2) ? 0.01 : 0.1);
+    const double sigma_rw0 = InitialResidualDriftSigma(options_);
     const int d = layout_.Drift(i);
     P.block<2, 2>(d, d) = sigma_rw0 * sigma_rw0 * Matrix2d::Identity();
   }

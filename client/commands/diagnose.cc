@@ -61,7 +61,8 @@ std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
       disc::Effect::kRotorDisplacement,       disc::Effect::kFourthHarmonic,
       disc::Effect::kUnequalStiffness,        disc::Effect::kGyroMisalignment,
       disc::Effect::kStarTrackerMisalignment, disc::Effect::kStarTrackerLatency,
-      disc::Effect::kRandomWalkDrift,         disc::Effect::kDriftStep};
+      disc::Effect::kRandomWalkDrift,         disc::Effect::kDriftStep,
+      disc::Effect::kReadoutDistortion};
   for (absl::string_view part : absl::StrSplit(text, ',', absl::SkipEmpty())) {
     bool found = false;
     for (disc::Effect e : all) {
@@ -149,7 +150,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
         stderr,
         "esg: --effects '%s': unknown effect (use rotor_displacement, fourth_harmonic, "
         "unequal_stiffness, gyro_misalignment, star_tracker_misalignment, star_tracker_latency, "
-        "random_walk_drift, drift_step)\n",
+        "random_walk_drift, drift_step, readout_distortion)\n",
         o.effects.c_str());
     return 2;
   }

@@ -1,6 +1,7 @@
 #include "estimator/discovery/basis_stage.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
@@ -28,24 +29,8 @@ double OrbitalPeriod(const std::vector<RegimeSpan>& regimes) {
   return periods[periods.size() / 2];
 }
 
-// The residual random walk of eq. (11) the model holds for a gyro [rad/s/sqrt(s)], and the prior
-// of its initial value as the session sets it (session_initialization.cc).
-double RandomWalkOf(const ModelState& m, int id) {
-  if (!m.options.model.random_walk) return 0.0;
-  for (const auto& [gyro, q] : m.options.random_walk_by_gyro) {
-    if (gyro == id) return q;
-  }
-  return m.config.random_walk;
-}
-double InitialDriftSigma(const ModelState& m) {
-  if (!m.options.model.random_walk) return 0.0;
-  if (m.options.residual_drift_sigma >= 0.0) return m.options.residual_drift_sigma;
-  return DegPerHourToRadPerSec((m.options.model.k0 || m.options.model.c1c2) ? 0.01 : 0.1);
-}
-
-// A column's coefficient in the configuration JSON's units, and that unit.
+// A drift column's coefficient in the configuration JSON's units, and that unit.
 std::pair<double, std::string> JsonValue(const BasisColumn& c, double value) {
-  if (c.readout) return {value * 1e6, "ppm"};
   const std::string unit(BasisScalarJsonUnit(c.term.kind));
   return {value * BasisValueToJson(c.term.kind), unit == "1" ? "deg/h" : "deg/h per " + unit};
 }
@@ -168,6 +153,19 @@ void DescribeVoltageDrivenDrift(const SpacecraftConfig& config,
 
 }  // namespace
 
+std::vector<Parameter> ReadoutParameters(const SelectedGroup& group) {
+  const Matrix3d E = ReadoutDistortion(group);
+  const Matrix3d sigma = ReadoutDistortionSigma(group);
+  std::vector<Parameter> out;
+  static constexpr std::array<std::pair<int, int>, 6> kEntries = {
+      {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {1, 2}, {2, 0}}};
+  for (const auto& [r, c] : kEntries) {
+    out.push_back(Parameter{absl::StrFormat("basis[readout E_%c%c]", "xyz"[r], "xyz"[c]),
+                            E(r, c) * 1e6, sigma(r, c) * 1e6, "ppm"});
+  }
+  return out;
+}
+
 ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage) {
   ModelState out = model;
   for (const auto& [gyro, term] : stage.added_terms) {
@@ -208,8 +206,8 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   }
   std::vector<double> random_walk, w0;
   for (const DeviationSeries& s : *series) {
-    random_walk.push_back(RandomWalkOf(model, s.gyro));
-    w0.push_back(InitialDriftSigma(model));
+    random_walk.push_back(ModelRandomWalk(model, s.gyro));
+    w0.push_back(ModelInitialDriftSigma(model));
   }
   out.stage = RunOpenEnded(*series, random_walk, w0, o);
   const OpenEndedResult& stage = out.stage;
@@ -244,12 +242,9 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     int before = static_cast<int>(gc->basis_terms.size());
     for (const auto& [gyro, term] : out.added_terms) before += gyro == g.gyro ? 1 : 0;
     first_term[i] = before;
-    Matrix3d E = Matrix3d::Zero();
+    const Matrix3d E = ReadoutDistortion(g);
     for (const FittedColumn& c : g.columns) {
-      if (c.column.readout) {
-        E(c.column.row, c.column.col) = E(c.column.col, c.column.row) = c.value;
-        continue;
-      }
+      if (c.column.readout) continue;
       BasisTerm t = c.column.term;
       t.value = 0.0;
       t.sigma = c.prior_sigma;
@@ -293,19 +288,20 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     f.description = DescribeGroup(g, o);
     f.time.kind = TimeKind(g);
     const GyroConfig* gc = extended.config.FindGyro(g.gyro);
+    if (!g.columns.empty() && g.columns.front().column.readout) {
+      f.parameters = ReadoutParameters(g);
+      if (gc != nullptr) f.readout_distortion = gc->readout_distortion;
+    }
     for (const FittedColumn& c : g.columns) {
+      if (c.column.readout) continue;
       const auto [value, unit] = JsonValue(c.column, c.value);
       const auto [sigma, unused] = JsonValue(c.column, c.sigma);
       f.parameters.push_back(Parameter{absl::StrCat("basis[", c.column.label, "]"), value,
                                        std::abs(sigma), unit});
-      if (!c.column.readout) {
-        BasisTerm t = c.column.term;
-        t.value = c.value;
-        t.sigma = c.prior_sigma;
-        f.basis_terms.push_back(t);
-      } else if (gc != nullptr) {
-        f.readout_distortion = gc->readout_distortion;
-      }
+      BasisTerm t = c.column.term;
+      t.value = c.value;
+      t.sigma = c.prior_sigma;
+      f.basis_terms.push_back(t);
     }
     f.evidence.delta_deviance = g.evidence;
     f.evidence.evidence = g.evidence;

@@ -46,6 +46,10 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
                                                DiagnosisContext& context,
                                                const std::vector<int>& gyros, int round);
 
+// A readout group's distortion as the report's parameters: the six entries of the traceless E
+// (basis[readout E_xx] .. basis[readout E_zx]) with their 1-sigma, in ppm.
+std::vector<Parameter> ReadoutParameters(const SelectedGroup& group);
+
 // `model` with the stage's terms added (as RunBasisStage added them to the selected model).
 ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage);
 

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
+#include "estimator/discovery/readout_candidate.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/drift_model.h"
@@ -160,6 +161,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     if (Effective(effects, Effect::kGyroMisalignment) && !(g->misalignment_sigma > 0.0)) {
       out.push_back({Effect::kGyroMisalignment, id});
     }
+    if (Effective(effects, Effect::kReadoutDistortion) &&
+        !added(CandidateName({Effect::kReadoutDistortion, id}))) {
+      out.push_back({Effect::kReadoutDistortion, id});
+    }
   }
   // A rotation common to every gyro is already in the model when every running gyro's
   // misalignment is estimated.
@@ -196,6 +201,14 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     }
   }
   return out;
+}
+
+double ModelRandomWalk(const ModelState& m, int id) {
+  return m.options.model.random_walk ? ResidualRandomWalk(m.config, m.options, id) : 0.0;
+}
+
+double ModelInitialDriftSigma(const ModelState& m) {
+  return m.options.model.random_walk ? InitialResidualDriftSigma(m.options) : 0.0;
 }
 
 ProfiledDeviance Profile(const ModelRun& run) {
@@ -616,6 +629,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
     }
     case Effect::kDriftStep:
       if (absl::Status s = FitDriftStep(candidate, ctx, fit); !s.ok()) return s;
+      return fit;
+    case Effect::kReadoutDistortion:
+      if (absl::Status s = FitReadoutCandidate(candidate, ctx, fit); !s.ok()) return s;
       return fit;
   }
   return absl::InternalError("unknown effect");

@@ -19,6 +19,10 @@
 //                                 grid of onsets, refined near its maximum (3 parameters, the
 //                                 onset integrated over a uniform prior; fitted by
 //                                 time_behaviour.h)
+//   readout_distortion (gyro g)   not of the library: the open-ended basis's readout group, a
+//                                 symmetric traceless distortion of g's readout (5 parameters,
+//                                 regressed on the deviation, held; Laplace's Occam term;
+//                                 readout_candidate.h), reported as a basis term
 // Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
 // rotation is not when every running gyro's misalignment is already estimated.
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
@@ -98,6 +102,10 @@ struct CandidateFit {
   double occam = 0.0;
   // A rotor displacement's suspension-voltage trend (DescribeVoltageTrend), for the report.
   DisplacementTrend displacement_trend;
+  // A readout distortion (readout_candidate.h): the gyro's distortion in the model with it, and
+  // the finding's description (open_ended.h DescribeGroup).
+  Eigen::Matrix3d readout_distortion = Eigen::Matrix3d::Zero();
+  std::string description;
   // Onset profile of a step: hours since the first frame, -2 log L (profiled).
   std::vector<std::pair<double, double>> onset_profile;
   // A step's competing alternative that is no physics (D43): the gyro's readings jump at the
@@ -130,6 +138,12 @@ LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, cons
 // absent.
 GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id);
 const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id);
+
+// The residual random walk of eq. (11) `m` holds for gyro `id` [rad/s/sqrt(s)] and the prior
+// 1-sigma of each gyro's residual drift at the start [rad/s], as its session sets them (session.h
+// ResidualRandomWalk, InitialResidualDriftSigma); 0 when the model has no random walk.
+double ModelRandomWalk(const ModelState& m, int id);
+double ModelInitialDriftSigma(const ModelState& m);
 
 // Profiled deviance of a run (ComputeDeviance, then the common noise scale phi = nis / m
 // profiled out: N ln(phi) + sum log det S + N), and phi.

@@ -9,6 +9,7 @@
 #include "estimator/discovery/report.h"
 #include "estimator/drift_model.h"
 #include "estimator/rotation.h"
+#include "estimator/session.h"
 #include "estimator/spin_axis.h"
 #include "estimator/units.h"
 
@@ -111,6 +112,8 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
     }
     const DriftFunction model = ModelDrift(coefficients, basis_terms);
     auto reading = [&](int i) -> const std::optional<GyroReading>& { return frames[i].gyros[id - 1]; };
+    // A reading as the model's filter uses it: corrected for the configured readout distortion.
+    auto h_of = [&](int i) { return CorrectReadout(*gc, reading(i)->h_k); };
 
     std::vector<int> samples;
     for (int i = 0; i < n; ++i) {
@@ -124,7 +127,7 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
     DeviationSeries d;
     d.gyro = id;
     // Substeps from the first sample to the last; the reading held where one is missing.
-    Vector3d h_last = reading(samples.front())->h_k.normalized();
+    Vector3d h_last = h_of(samples.front());
     std::optional<Vector3d> u_last_v;
     auto voltages_v = [&](int i) -> std::optional<Vector3d> {
       if (reading(i).has_value() && reading(i)->u_k_mv.has_value()) {
@@ -135,7 +138,7 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
     u_last_v = voltages_v(samples.front());
     size_t next_sample = 0;
     for (int i = samples.front(); i <= samples.back(); ++i) {
-      const Vector3d h_i = reading(i).has_value() ? reading(i)->h_k.normalized() : h_last;
+      const Vector3d h_i = reading(i).has_value() ? h_of(i) : h_last;
       if (auto u = voltages_v(i)) u_last_v = u;
       if (next_sample < samples.size() && samples[next_sample] == i) {
         d.sample_end.push_back(static_cast<int>(d.steps.size()));
@@ -148,7 +151,7 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
       h_last = h_i;
       if (i == samples.back()) break;
       const int j = i + 1;
-      const Vector3d h_j = reading(j).has_value() ? reading(j)->h_k.normalized() : h_i;
+      const Vector3d h_j = reading(j).has_value() ? h_of(j) : h_i;
       const double span = absl::ToDoubleSeconds(frames[j].time - frames[i].time);
       const Quaterniond& qa = q_in_b[i];
       Quaterniond qb = q_in_b[j];

@@ -174,8 +174,9 @@ RegressionFit FitRegression(const VectorXd& y, const std::vector<const VectorXd*
   // Posterior: mean D (B + phi I)^-1 D b, covariance phi D (B + phi I)^-1 D.
   const MatrixXd inner = (B + fit.dispersion * MatrixXd::Identity(k, k)).inverse();
   fit.mean = prior_sigma.asDiagonal() * inner * c;
-  const MatrixXd cov = fit.dispersion * prior_sigma.asDiagonal() * inner * prior_sigma.asDiagonal();
-  fit.sigma = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+  fit.covariance =
+      fit.dispersion * prior_sigma.asDiagonal() * inner * prior_sigma.asDiagonal();
+  fit.sigma = fit.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   return fit;
 }
 

@@ -59,6 +59,7 @@ struct RegressionFit {
   double dispersion = 1.0;  // phi
   Eigen::VectorXd mean;     // posterior mean of beta (at phi)
   Eigen::VectorXd sigma;    // posterior 1-sigma
+  Eigen::MatrixXd covariance;  // posterior covariance (at phi)
 };
 // X: one whitened signature per column (y.size() rows each); may be empty.
 RegressionFit FitRegression(const Eigen::VectorXd& y, const std::vector<const Eigen::VectorXd*>& X,

@@ -86,12 +86,7 @@ double ScalarRms(const DeviationSeries& s, const BasisColumn& c) {
 }
 
 std::vector<Vector2d> ColumnSignature(const DeviationSeries& s, const BasisColumn& c) {
-  if (c.readout) {
-    Matrix3d E = Matrix3d::Zero();
-    E(c.row, c.col) = 1.0;
-    E(c.col, c.row) = 1.0;
-    return ReadoutSignature(s, E);
-  }
+  if (c.readout) return ReadoutSignature(s, ReadoutPattern(c.readout_index));
   const Vector3d e_m = Vector3d::Unit(c.term.axis - 1);
   return Signature(s, [&c, &e_m](const BasisInputs& in) -> Vector3d {
     return ColumnScalar(c, in) * e_m;
@@ -128,6 +123,46 @@ void SmoothInCaseAxes(const DeviationSeries& s, double w0_sigma,
     out.before_k.push_back(s.C_k_in[k] * W_before);
     out.after_k.push_back(s.C_k_in[k] * W_after);
     out.sigma.push_back(std::sqrt(0.5 * sd_after[k].squaredNorm()));
+  }
+}
+
+// Whitens the series and the columns of its basis (EnumerateBasis), with their priors, and fits
+// the base model (the nuisance groups).
+void PrepareGyro(const DeviationSeries& series, double random_walk, double w0_sigma,
+                 const OpenEndedOptions& options, GyroData& d) {
+  d.series = &series;
+  d.random_walk = random_walk;
+  d.w0_sigma = w0_sigma;
+  const DeviationFilter filter(series, d.random_walk, d.w0_sigma);
+  d.y_w = filter.Whiten(series.y);
+  d.basis = EnumerateBasis(series, options);
+  d.prior.resize(d.basis.columns.size());
+  for (size_t c = 0; c < d.basis.columns.size(); ++c) {
+    const BasisColumn& col = d.basis.columns[c];
+    d.signature.push_back(ColumnSignature(series, col));
+    d.x_w.push_back(filter.Whiten(d.signature.back()));
+    d.prior(c) = col.readout ? options.readout_sigma : options.drift_sigma / col.rms;
+  }
+  for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+    if (d.basis.groups[k].nuisance) d.active.push_back(k);
+  }
+  d.fit = Fit(d, d.active);
+}
+
+// The group's columns with their posterior from `fit` (a fit over `cols`, in order) and their
+// covariance block.
+void FillGroup(const GyroData& d, const std::vector<int>& cols, const RegressionFit& fit,
+               int group, SelectedGroup& s) {
+  std::vector<int> at;
+  for (size_t j = 0; j < cols.size(); ++j) {
+    if (d.basis.columns[cols[j]].group != group) continue;
+    s.columns.push_back(
+        FittedColumn{d.basis.columns[cols[j]], fit.mean(j), fit.sigma(j), d.prior(cols[j])});
+    at.push_back(static_cast<int>(j));
+  }
+  s.covariance.resize(static_cast<int>(at.size()), static_cast<int>(at.size()));
+  for (size_t a = 0; a < at.size(); ++a) {
+    for (size_t b = 0; b < at.size(); ++b) s.covariance(a, b) = fit.covariance(at[a], at[b]);
   }
 }
 
@@ -227,15 +262,12 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
     open_group(scalar_label(t));
     add_axes(t);
   }
-  static constexpr std::array<std::pair<int, int>, 6> kEntries = {
-      {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {1, 2}, {2, 0}}};
   open_group("readout");
-  for (const auto& [r, c] : kEntries) {
+  for (int i = 0; i < kReadoutPatterns; ++i) {
     BasisColumn col;
     col.readout = true;
-    col.row = r;
-    col.col = c;
-    col.label = absl::StrCat("readout E_", std::string(1, "xyz"[r]), std::string(1, "xyz"[c]));
+    col.readout_index = i;
+    col.label = ReadoutPatternLabel(i);
     add_column(col);
   }
   for (const auto& [gyro, time] : options.steps) {
@@ -262,26 +294,9 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
   OpenEndedResult result;
   std::vector<GyroData> gyros(series.size());
   for (size_t g = 0; g < series.size(); ++g) {
-    GyroData& d = gyros[g];
-    d.series = &series[g];
-    d.random_walk = g < random_walk.size() ? random_walk[g] : 0.0;
-    d.w0_sigma = g < w0_sigma.size() ? w0_sigma[g] : 0.0;
-    const DeviationFilter filter(series[g], d.random_walk, d.w0_sigma);
-    d.y_w = filter.Whiten(series[g].y);
-    d.basis = EnumerateBasis(series[g], options);
-    d.prior.resize(d.basis.columns.size());
-    for (size_t c = 0; c < d.basis.columns.size(); ++c) {
-      const BasisColumn& col = d.basis.columns[c];
-      d.signature.push_back(ColumnSignature(series[g], col));
-      d.x_w.push_back(filter.Whiten(d.signature.back()));
-      d.prior(c) = col.readout ? options.readout_sigma
-                               : options.drift_sigma / col.rms;
-    }
-    for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
-      if (d.basis.groups[k].nuisance) d.active.push_back(k);
-    }
-    d.fit = Fit(d, d.active);
-    result.deviance_before += d.fit.deviance;
+    PrepareGyro(series[g], g < random_walk.size() ? random_walk[g] : 0.0,
+                g < w0_sigma.size() ? w0_sigma[g] : 0.0, options, gyros[g]);
+    result.deviance_before += gyros[g].fit.deviance;
   }
   for (int round = 0; round < options.max_terms; ++round) {
     int M = 0, best_g = -1, best_k = -1;
@@ -342,11 +357,7 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
       if (d.basis.groups[d.active[i]].nuisance) continue;
       for (SelectedGroup& s : result.selected) {
         if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
-        for (size_t j = 0; j < cols.size(); ++j) {
-          if (d.basis.columns[cols[j]].group != d.active[i]) continue;
-          s.columns.push_back(FittedColumn{d.basis.columns[cols[j]], d.fit.mean(j), d.fit.sigma(j),
-                                           d.prior(cols[j])});
-        }
+        FillGroup(d, cols, d.fit, d.active[i], s);
         for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
           if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
           std::vector<int> groups = d.active;
@@ -373,21 +384,109 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
   return result;
 }
 
+Matrix3d ReadoutPattern(int index) {
+  Matrix3d B = Matrix3d::Zero();
+  switch (index) {
+    case 0:
+      B.diagonal() << 1.0, -1.0, 0.0;
+      return B / std::sqrt(2.0);
+    case 1:
+      B.diagonal() << 1.0, 1.0, -2.0;
+      return B / std::sqrt(6.0);
+    default: {
+      const int r = index - 2, c = (index - 1) % 3;  // xy, yz, zx
+      B(r, c) = B(c, r) = 1.0 / std::sqrt(2.0);
+      return B;
+    }
+  }
+}
+
+const char* ReadoutPatternLabel(int index) {
+  static constexpr std::array<const char*, kReadoutPatterns> kLabels = {
+      "readout xx-yy", "readout xx+yy-2zz", "readout xy", "readout yz", "readout zx"};
+  return kLabels[std::clamp(index, 0, kReadoutPatterns - 1)];
+}
+
+Matrix3d ReadoutDistortion(const SelectedGroup& group) {
+  Matrix3d E = Matrix3d::Zero();
+  for (const FittedColumn& c : group.columns) {
+    if (c.column.readout) E += c.value * ReadoutPattern(c.column.readout_index);
+  }
+  return E;
+}
+
+Matrix3d ReadoutDistortionSigma(const SelectedGroup& group) {
+  Matrix3d sigma = Matrix3d::Zero();
+  const int n = static_cast<int>(group.columns.size());
+  if (group.covariance.rows() != n) return sigma;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      VectorXd b = VectorXd::Zero(n);  // E(r, c) = b^T a
+      for (int i = 0; i < n; ++i) {
+        if (group.columns[i].column.readout)
+          b(i) = ReadoutPattern(group.columns[i].column.readout_index)(r, c);
+      }
+      sigma(r, c) = std::sqrt(std::max(0.0, b.dot(group.covariance * b)));
+    }
+  }
+  return sigma;
+}
+
+ReadoutFit FitReadoutDistortion(const DeviationSeries& series, double random_walk,
+                                double w0_sigma, const OpenEndedOptions& options) {
+  ReadoutFit out;
+  GyroData d;
+  PrepareGyro(series, random_walk, w0_sigma, options, d);
+  int readout = -1;
+  for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+    if (d.basis.groups[k].label == "readout") readout = k;
+  }
+  out.group.gyro = series.gyro;
+  out.group.label = "readout";
+  out.group.groups_tested = 1;
+  if (readout < 0) return out;
+  std::vector<int> groups = d.active;
+  groups.push_back(readout);
+  const std::vector<int> cols = ColumnsOf(d, groups);
+  const RegressionFit fit = Fit(d, groups);
+  out.group.evidence = d.fit.deviance - fit.deviance;
+  FillGroup(d, cols, fit, readout, out.group);
+  return out;
+}
+
+double ReadoutOccam(const SelectedGroup& group) {
+  const int n = static_cast<int>(group.columns.size());
+  if (n == 0 || group.covariance.rows() != n) return 0.0;
+  VectorXd a(n), p0(n);
+  for (int i = 0; i < n; ++i) {
+    a(i) = group.columns[i].value;
+    p0(i) = group.columns[i].prior_sigma * group.columns[i].prior_sigma;
+  }
+  const Eigen::LDLT<Eigen::MatrixXd> P(group.covariance);
+  double log_det_p = 0.0;
+  for (int i = 0; i < n; ++i) log_det_p += std::log(std::max(P.vectorD()(i), 1e-300));
+  return p0.array().log().sum() - log_det_p + a.cwiseQuotient(p0).dot(a);
+}
+
 std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& options) {
   const double deg_h = RadPerSecToDegPerHour(1.0);
   std::string text;
   if (group.columns.empty()) return text;
   if (group.columns.front().column.readout) {
-    Matrix3d E = Matrix3d::Zero();
+    const Matrix3d E = ReadoutDistortion(group);
+    const Matrix3d sigma = ReadoutDistortionSigma(group);
     std::vector<std::string> entries;
-    for (const FittedColumn& c : group.columns) {
-      E(c.column.row, c.column.col) = E(c.column.col, c.column.row) = c.value;
-      entries.push_back(absl::StrFormat("%s %.0f +- %.0f", c.column.label.substr(8),
-                                        c.value * 1e6, c.sigma * 1e6));
+    static constexpr std::array<std::pair<int, int>, 6> kEntries = {
+        {{0, 0}, {1, 1}, {2, 2}, {0, 1}, {1, 2}, {2, 0}}};
+    for (const auto& [r, c] : kEntries) {
+      entries.push_back(absl::StrFormat("E_%c%c %.0f +- %.0f", "xyz"[r], "xyz"[c], E(r, c) * 1e6,
+                                        sigma(r, c) * 1e6));
     }
     text = absl::StrFormat(
-        "readout distortion of the direction cosines (a scale-factor or non-orthogonality "
-        "error: the reading is (I + E) h normalised), E in ppm: %s",
+        "readout distortion of the direction cosines (scale-factor errors of the channels on the "
+        "diagonal, non-orthogonality off it: the reading is (I + E) h normalised; a scale factor "
+        "common to the three channels does not change it and is not observable, so E is "
+        "traceless), E in ppm: %s",
         absl::StrJoin(entries, ", "));
   } else {
     const BasisTerm& t0 = group.columns.front().column.term;

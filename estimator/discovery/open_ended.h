@@ -10,7 +10,9 @@
 //                         orbital period)
 //   time                  a ramp t e_m, and t h_m^2 e_m (a C2-like term growing)
 //   suspension voltages   dU_k[i] e_m (when telemetered)
-//   readout distortion    a symmetric distortion E of the direction-cosine readout (6 per gyro)
+//   readout distortion    a symmetric traceless distortion E of the direction-cosine readout (5
+//                         per gyro: a common scale factor of the three channels leaves a
+//                         normalised reading unchanged and is not observable)
 //
 // Selection is forward, one group of one gyro per round (a scalar regressor along a direction in
 // case axes the data choose: BasisGroup), by the diagnosis's evidence currency: 2 ln B of the
@@ -42,7 +44,8 @@ struct OpenEndedOptions {
   // Prior 1-sigma of a term's drift, at the RMS of its regressor over the recording [rad/s]
   // (the library's prior for C1, C2: 0.1 deg/h).
   double drift_sigma = DegPerHourToRadPerSec(0.1);
-  // Prior 1-sigma of a readout distortion entry [1] (60 arcsec, the misalignment prior).
+  // Prior 1-sigma of each coefficient of a readout distortion on its unit pattern (Frobenius norm
+  // 1; ReadoutPattern) [1] (60 arcsec, the misalignment prior).
   double readout_sigma = ArcsecToRad(60.0);
   int max_terms = 6;
   // Orbital period [s] (0: not known, no orbital-phase regressors) and the phase's zero.
@@ -63,8 +66,9 @@ struct OpenEndedOptions {
 struct BasisColumn {
   bool readout = false;  // a readout distortion entry instead of a drift term
   BasisTerm term;        // drift terms: kind, axis, indices (value 1)
-  int row = 0, col = 0;  // readout: the symmetric entry E(row, col) = E(col, row), 0-based
-  std::string label;     // BasisTermLabel, or "readout E_xy"
+  // readout: the distortion per unit of the coefficient, ReadoutPattern(readout_index)
+  int readout_index = 0;
+  std::string label;     // BasisTermLabel, or "readout xy", ...; ReadoutPattern
   int group = 0;         // index of its group in the gyro's basis
   // A drift column's regressor s, RMS over the recording's substeps (time-weighted) [SI unit of
   // s]; its prior is OpenEndedOptions::drift_sigma / rms. 0 for a readout entry.
@@ -74,9 +78,16 @@ struct BasisColumn {
   absl::Time before = absl::InfinitePast();
 };
 
+// The readout distortion's unit patterns, an orthonormal basis (Frobenius inner product) of the
+// symmetric traceless 3x3 matrices: 0 diag(1, -1, 0) / sqrt 2 ("readout xx-yy"), 1 diag(1, 1, -2)
+// / sqrt 6 ("readout xx+yy-2zz"), 2..4 the off-diagonal pairs xy, yz, zx / sqrt 2.
+inline constexpr int kReadoutPatterns = 5;
+Eigen::Matrix3d ReadoutPattern(int index);
+const char* ReadoutPatternLabel(int index);
+
 // The unit of selection: one scalar regressor along every case axis (a drift of one time or
 // spin-axis behaviour along a direction the data choose), cos and sin of one orbital harmonic
-// together, the three C2-like growing terms together, the six readout entries together.
+// together, the three C2-like growing terms together, the five readout patterns together.
 struct BasisGroup {
   std::string label;         // "h1^2*h3", "orbit 1", "ramp", "readout", ...
   std::vector<int> columns;  // indices into the gyro's columns
@@ -103,6 +114,8 @@ struct SelectedGroup {
   int gyro = 0;
   std::string label;
   std::vector<FittedColumn> columns;
+  // Posterior covariance of the columns' coefficients, in the columns' order.
+  Eigen::MatrixXd covariance;
   double evidence = 0.0;   // 2 ln B when it was added
   double threshold = 0.0;  // 2 ln(M / alpha) of its round
   int groups_tested = 0;   // M
@@ -139,6 +152,25 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
                              const std::vector<double>& random_walk,
                              const std::vector<double>& w0_sigma,
                              const OpenEndedOptions& options);
+
+// A readout group's distortion E (sum of its coefficients times their patterns) and the 1-sigma of
+// each entry of E from the group's covariance.
+Eigen::Matrix3d ReadoutDistortion(const SelectedGroup& group);
+Eigen::Matrix3d ReadoutDistortionSigma(const SelectedGroup& group);
+
+// The readout group alone for one gyro's series (a candidate of each selection round, beside the
+// library's effects: selection.h): on top of the series' nuisance groups, its coefficients'
+// posterior (SelectedGroup, gyro, label "readout", evidence 2 ln B against the nuisance groups
+// alone, threshold 0, groups_tested 1).
+struct ReadoutFit {
+  SelectedGroup group;
+};
+ReadoutFit FitReadoutDistortion(const DeviationSeries& series, double random_walk,
+                                double w0_sigma, const OpenEndedOptions& options);
+
+// Laplace's Occam term of a group's coefficients, ln det(P0 / P) + a^T P0^-1 a (prior covariance
+// P0 from the columns' prior_sigma, posterior P its covariance, a the columns' values).
+double ReadoutOccam(const SelectedGroup& group);
 
 // What a selected group says in words: case-fixed drift along (x, y, z), varying with the orbital
 // phase, growing, proportional to the body rate, ..., with sizes in deg/h, and the alternatives

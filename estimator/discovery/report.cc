@@ -26,6 +26,8 @@ const char* EffectId(Effect e) {
       return "random_walk_drift";
     case Effect::kDriftStep:
       return "drift_step";
+    case Effect::kReadoutDistortion:
+      return "readout_distortion";
   }
   return "?";
 }

@@ -29,8 +29,11 @@ enum class Effect {
   kStarTrackerLatency,
   kRandomWalkDrift,
   kDriftStep,
+  // Not of the library: the open-ended basis's readout group, a candidate of every round
+  // (readout_candidate.h); its finding is a kEffectBasisTerm.
+  kReadoutDistortion,
 };
-const char* EffectId(Effect e);  // "rotor_displacement", ...
+const char* EffectId(Effect e);  // "rotor_displacement", ..., "readout_distortion"
 inline constexpr const char* kVerdictNone = "none";
 inline constexpr const char* kVerdictUnexplained = "unexplained";
 // A term of the open-ended stage's basis (docs/discovery.md, "The open-ended stage"): physics

@@ -48,6 +48,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
   auto cost = [](const Candidate& c) {
     if (c.effect == Effect::kDriftStep) return 12;
+    if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
   std::stable_sort(order.begin(), order.end(),
@@ -333,6 +334,11 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   const CandidateFit& f = fits[chosen];
   Finding finding;
   finding.effect = EffectId(f.candidate.effect);
+  if (f.candidate.effect == Effect::kReadoutDistortion) {  // the basis's readout group
+    finding.effect = kEffectBasisTerm;
+    finding.description = f.description;
+    finding.readout_distortion = f.readout_distortion;
+  }
   finding.gyro = f.candidate.gyro;
   finding.parameters = f.fitted;
   finding.time = f.time;
@@ -402,8 +408,11 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   const DiagnoseOptions& options = context.options();
   RoundResult result;
   if (context.Stop()) return DiagnosisContext::Cancelled();
-  const std::vector<Candidate> candidates =
-      ListCandidates(selected.model, gyros, options.effects);
+  std::vector<Candidate> candidates = ListCandidates(selected.model, gyros, options.effects);
+  if (!options.open_ended) {  // the basis's readout group (readout_candidate.h) belongs to it
+    std::erase_if(candidates,
+                  [](const Candidate& c) { return c.effect == Effect::kReadoutDistortion; });
+  }
   if (candidates.empty()) return result;
   context.Say(0.05 + 0.8 * round / options.max_effects,
               absl::StrFormat("round %d: %d candidates", round + 1, candidates.size()));

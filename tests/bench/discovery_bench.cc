@@ -8,7 +8,8 @@
 // effect in one gyro where that applies), each diagnosed; prints the verdict table to stdout and
 // reports per effect the share of correct verdicts (verdict and gyro right) as counters.
 // ESG_DISCOVERY_ROWS=library or =time selects the library's rows or the time behaviours' (with
-// `none`). Run:
+// `none`), =basis the open-ended stage's classes; ESG_DISCOVERY_TRUTHS=a,b exactly these rows;
+// ESG_DISCOVERY_NOTES=1 adds each finding's notes to its line. Run:
 //   <build>/tests/bench/esg_bench --benchmark_filter=Confusion
 // (scripts/confusion_matrix.sh). Takes a few minutes.
 #include <algorithm>
@@ -21,6 +22,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_split.h"
 #include "benchmark/benchmark.h"
 #include "estimator/discovery/diagnose.h"
 #include "estimator/simulator.h"
@@ -69,7 +71,13 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   const std::string rows = rows_env != nullptr ? rows_env : "";
   // =basis: `none` and the classes of the open-ended stage (docs/discovery.md).
   std::vector<std::string> truths;
-  if (rows == "basis") {
+  // ESG_DISCOVERY_TRUTHS=a,b: exactly these rows (any scenario of discovery_scenarios.h).
+  const char* truths_env = std::getenv("ESG_DISCOVERY_TRUTHS");
+  if (truths_env != nullptr && *truths_env != '\0') {
+    for (absl::string_view t : absl::StrSplit(truths_env, ',', absl::SkipEmpty())) {
+      truths.emplace_back(t);
+    }
+  } else if (rows == "basis") {
     truths.push_back("none");
     for (const std::string& t : ::esg::testing::DiscoveryBasisClasses()) truths.push_back(t);
   } else {
@@ -98,6 +106,8 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   std::map<std::string, int> correct;
   std::map<std::string, double> gap_ratio_sum;
   std::map<std::string, int> step_onset_inside;  // drift step: the true onset in the interval
+  const char* notes_env = std::getenv("ESG_DISCOVERY_NOTES");
+  const bool notes = notes_env != nullptr && std::string(notes_env) == "1";
   double seconds = 0.0;
   int diagnoses = 0;
   for (auto _ : state) {
@@ -119,6 +129,10 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
         std::string detail;
         for (const Finding& f : report->findings) {
           detail += " " + f.effect + "[" + std::to_string(f.gyro) + "]";
+          if (notes) {
+            if (!f.description.empty()) detail += " {" + f.description + "}";
+            for (const std::string& n : f.evidence.notes) detail += " <" + n + ">";
+          }
           if (f.time.kind == "step") {
             const double truth_hours = 0.4 * 30.0;
             const bool inside = f.time.onset_lower_hours <= truth_hours &&
