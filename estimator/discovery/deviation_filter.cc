@@ -18,11 +18,6 @@ using Eigen::VectorXd;
 
 namespace {
 
-Matrix4d Transition(double dt) {
-  Matrix4d F = Matrix4d::Identity();
-  F.topRightCorner<2, 2>() = dt * Matrix2d::Identity();
-  return F;
-}
 
 // Integrated random walk over dt (eq. (11)): w gains variance q^2 dt, p its integral.
 Matrix4d ProcessNoise(double q, double dt) {
@@ -35,10 +30,44 @@ Matrix4d ProcessNoise(double q, double dt) {
   return Q;
 }
 
+// A Gauss-Markov drift over dt (DeviationFilter's StationaryDrift): w(t) = a w(0) + noise,
+// a = exp(-dt / tau), driving white noise of intensity c^2 = 2 sigma^2 / tau; p gains its integral.
+Matrix4d StationaryNoise(const StationaryDrift& g, double dt) {
+  if (!(g.sigma > 0.0) || !(g.correlation_s > 0.0)) return Matrix4d::Zero();
+  const double tau = g.correlation_s;
+  const double a = std::exp(-dt / tau);
+  const double c2 = 2.0 * g.sigma * g.sigma / tau;
+  const double qww = g.sigma * g.sigma * (1.0 - a * a);
+  const double qpw = 0.5 * c2 * tau * tau * (1.0 - a) * (1.0 - a);
+  const double qpp = c2 * tau * tau * (dt - 2.0 * tau * (1.0 - a) + 0.5 * tau * (1.0 - a * a));
+  Matrix4d Q = Matrix4d::Zero();
+  Q.topLeftCorner<2, 2>() = qpp * Matrix2d::Identity();
+  Q.topRightCorner<2, 2>() = qpw * Matrix2d::Identity();
+  Q.bottomLeftCorner<2, 2>() = qpw * Matrix2d::Identity();
+  Q.bottomRightCorner<2, 2>() = qww * Matrix2d::Identity();
+  return Q;
+}
+
 }  // namespace
 
+Matrix4d DeviationFilter::Transition(double dt) const {
+  Matrix4d F = Matrix4d::Identity();
+  if (correlation_s_ > 0.0) {  // w decays; p gains tau (1 - a) w
+    const double a = std::exp(-dt / correlation_s_);
+    F.topRightCorner<2, 2>() = correlation_s_ * (1.0 - a) * Matrix2d::Identity();
+    F.bottomRightCorner<2, 2>() = a * Matrix2d::Identity();
+  } else {
+    F.topRightCorner<2, 2>() = dt * Matrix2d::Identity();
+  }
+  return F;
+}
+
 DeviationFilter::DeviationFilter(const DeviationSeries& series, double random_walk,
-                                 double w0_sigma, double p0_sigma) {
+                                 double w0_sigma, double p0_sigma, StationaryDrift stationary) {
+  if (stationary.sigma > 0.0 && stationary.correlation_s > 0.0) {
+    correlation_s_ = stationary.correlation_s;
+    w0_sigma = std::sqrt(w0_sigma * w0_sigma + stationary.sigma * stationary.sigma);
+  }
   const size_t n = series.y.size();
   dt_.resize(n);
   K_.resize(n);
@@ -54,7 +83,8 @@ DeviationFilter::DeviationFilter(const DeviationSeries& series, double random_wa
     dt_[k] = k == 0 ? 0.0 : 3600.0 * (series.hours[k] - series.hours[k - 1]);
     if (k > 0) {
       const Matrix4d F = Transition(dt_[k]);
-      P = F * P * F.transpose() + ProcessNoise(random_walk, dt_[k]);
+      P = F * P * F.transpose() + ProcessNoise(random_walk, dt_[k]) +
+          StationaryNoise(stationary, dt_[k]);
     }
     P_pred_[k] = P;
     const Matrix2d S = P.topLeftCorner<2, 2>() + series.R[k];

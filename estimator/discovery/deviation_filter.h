@@ -24,13 +24,25 @@
 
 namespace esg::estimator::discovery {
 
+// A drift that returns to its mean (first-order Gauss-Markov, Ornstein-Uhlenbeck): stationary
+// 1-sigma per axis [rad/s] and correlation time [s]. With it the drift state w obeys
+// dw/dt = -w / tau + white noise (a random telegraph signal switching with rate 1 / T has the
+// same autocorrelation, exp(-2 |s| / T)); the random walk's noise is added to the same state, so
+// the walk too returns to its mean over tau (negligible for the configured intensities against
+// the stationary sigmas this models).
+struct StationaryDrift {
+  double sigma = 0.0;
+  double correlation_s = 0.0;
+};
+
 class DeviationFilter {
  public:
   // `random_walk`: the intensity of eq. (11) [rad/s/sqrt(s)]; `w0_sigma`: the prior 1-sigma of
   // the residual drift at the start [rad/s] (the session's: 0.01 deg/h on top of a calibrated
-  // model with eq. (11), none without it); `p0_sigma` [rad].
+  // model with eq. (11), none without it); `p0_sigma` [rad]; `stationary`: a Gauss-Markov drift
+  // on top (none when its sigma is 0).
   DeviationFilter(const DeviationSeries& series, double random_walk, double w0_sigma,
-                  double p0_sigma = 1e-2);
+                  double p0_sigma = 1e-2, StationaryDrift stationary = {});
 
   // Innovations of the filter on the series z, each normalised by the Cholesky factor of its
   // covariance: 2 per sample, independent N(0, phi) when z follows the model.
@@ -46,6 +58,8 @@ class DeviationFilter {
  private:
   using Matrix4d = Eigen::Matrix4d;
   using Vector4d = Eigen::Vector4d;
+  Matrix4d Transition(double dt) const;
+  double correlation_s_ = 0.0;               // StationaryDrift::correlation_s; 0: none
   std::vector<double> dt_;                   // from the previous sample [s]
   std::vector<Eigen::Matrix<double, 4, 2>> K_;  // gains
   std::vector<Eigen::Matrix2d> L_inv_;       // inverse Cholesky factor of the innovation cov

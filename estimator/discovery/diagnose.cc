@@ -172,6 +172,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   // Why the candidates that fit were not taken (selection.h RoundResult), when they were not.
   std::string unresolved, unresolved_note;
   int unresolved_gyro = 0;
+  Mismatch unresolved_where;
+  double stationary_evidence = -1.0;
   double readout_jump_evidence = -1.0;
   for (int round = 0; round < options.max_effects; ++round) {
     auto result = SelectionRound(round, report.gyros, selected, context);
@@ -181,6 +183,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       unresolved = result->unresolved;
       unresolved_note = result->unresolved_note;
       unresolved_gyro = result->unresolved_gyro;
+      unresolved_where = result->unresolved_where;
+      stationary_evidence = result->stationary_evidence;
       readout_jump_evidence = result->readout_jump_evidence;
       break;
     }
@@ -207,7 +211,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       final_held_out = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
     }
     mismatches = LocateMismatches(base_run, selected.run, report.regimes, frames, options.alpha);
-    remaining = FindUnexplained(mismatches.remaining, unresolved, unresolved_gyro, final_held_out,
+    remaining = FindUnexplained(mismatches.remaining, unresolved, unresolved_gyro,
+                                unresolved_where, final_held_out,
                                 selected.fit, !report.findings.empty(), options.alpha);
     return absl::OkStatus();
   };
@@ -233,6 +238,25 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
           stage->refit_evidence, readout_jump_evidence));
       stage->findings.clear();
     }
+    // A gyro whose drift returns to its mean (wander.h): the basis's terms for it must describe
+    // its deviation better than that stationary drift does, in the same reduced regression's
+    // currency (2 ln B against the configured walk).
+    if (!stage->findings.empty() && unresolved_where.found && stationary_evidence > 0.0) {
+      double basis_evidence = 0.0;
+      bool in_gyro = false;
+      for (const SelectedGroup& g : stage->stage.selected) {
+        if (g.gyro != unresolved_where.gyro) continue;
+        basis_evidence += g.evidence;
+        in_gyro = true;
+      }
+      if (in_gyro && stationary_evidence > basis_evidence) {
+        absl::StrAppend(&resembles, absl::StrFormat(
+            "; the basis's terms for gyro %d (2 ln B = %.1f in the reduced regression) describe "
+            "its deviation less well than a drift that returns to its mean (2 ln B = %.1f)",
+            unresolved_where.gyro, basis_evidence, stationary_evidence));
+        stage->findings.clear();
+      }
+    }
     // The terms must predict the held-out spans at least as well as the model without them.
     if (!stage->findings.empty() && stage->extended.has_value() && !context.gaps().empty()) {
       auto held = context.CheckedRun(stage->extended->model, /*held_out=*/true);
@@ -255,6 +279,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       unresolved.clear();
       unresolved_note.clear();
       unresolved_gyro = 0;
+      unresolved_where = Mismatch{};
+      stationary_evidence = -1.0;
       if (absl::Status s = assess(); !s.ok()) return s;
     }
   }

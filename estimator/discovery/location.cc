@@ -211,6 +211,7 @@ Mismatches LocateMismatches(const ModelRun& base, const ModelRun& extended,
 
 std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
                                            const std::string& unresolved, int unresolved_gyro,
+                                           const Mismatch& unresolved_where,
                                            const HeldOutResult& held_out,
                                            const ProfiledDeviance& fit, bool after_findings,
                                            double alpha) {
@@ -257,23 +258,28 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
     }
   }
   if (!remaining.found && !unresolved.empty() && unresolved_gyro > 0) where.gyro = unresolved_gyro;
+  if (!remaining.found && !unresolved.empty() && unresolved_where.found) where = unresolved_where;
   u.gyro = where.gyro;
+  // What the mismatch is: the residual excess of its span; else the reason the candidates were
+  // not taken (it says what it is); else the held-out prediction or the noise.
+  const std::string what =
+      remaining.found
+          ? absl::StrFormat("residual RMS %.1f arcsec against %.1f expected (p = %.2g)",
+                            where.size_arcsec, where.expected_arcsec, where.p_value)
+      : !unresolved.empty() ? std::string("the candidates that fit it were not taken")
+      : held_out_misfit
+          ? absl::StrFormat("held-out prediction error NEES %.1f on %d dof (p = %.2g)",
+                            held_out.nees, held_out.dof, held_out_p)
+          : absl::StrFormat("star-tracker differences %.2f times their predicted variance "
+                            "throughout: the recording's noise exceeds the configured one",
+                            fit.dispersion);
   u.explanation = absl::StrFormat(
       "%s: a mismatch no candidate effect explains remains %s%s, %s to %s (%s span): %s%s",
       after_findings ? "after adding the findings"
                      : "the configured model does not fit the recording",
       where.gyro > 0 ? absl::StrCat("in gyro ", where.gyro) : std::string("in all gyros"),
       where.source.empty() ? "" : absl::StrCat(" (", where.source, ")"), UtcText(where.start),
-      UtcText(where.end), where.regime,
-      residual_misfit
-          ? absl::StrFormat("residual RMS %.1f arcsec against %.1f expected (p = %.2g)",
-                            where.size_arcsec, where.expected_arcsec, where.p_value)
-      : held_out_misfit
-          ? absl::StrFormat("held-out prediction error NEES %.1f on %d dof (p = %.2g)",
-                            held_out.nees, held_out.dof, held_out_p)
-          : absl::StrFormat("star-tracker differences %.2f times their predicted variance "
-                            "throughout: the recording's noise exceeds the configured one",
-                            fit.dispersion),
+      UtcText(where.end), where.regime, what,
       unresolved.empty() ? "" : absl::StrCat("; ", unresolved));
   u.evidence.held_out_nees_after = held_out.nees;
   u.evidence.held_out_dof = held_out.dof;

@@ -49,7 +49,7 @@ Mismatches LocateMismatches(const ModelRun& base, const ModelRun& extended,
 // What no candidate explains, after selection: a residual mismatch (`remaining.found`, or
 // `unresolved`: why the candidates that fit were not taken, e.g. each fits only part of the
 // recording or fails its physics check; `unresolved_gyro` the gyro they name, used when no span
-// stands out), a held-out
+// stands out; `unresolved_where`, when found, the place the reason names, used then), a held-out
 // misprediction (MispredictsHeldOut), or star-tracker differences materially beyond their
 // predicted variance throughout (`fit.dispersion`). The finding `unexplained` with its gyro and
 // an explanation that names where it is; `where` is the mismatch it names (for a held-out
@@ -60,6 +60,7 @@ struct Unexplained {
 };
 std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
                                            const std::string& unresolved, int unresolved_gyro,
+                                           const Mismatch& unresolved_where,
                                            const HeldOutResult& held_out,
                                            const ProfiledDeviance& fit, bool after_findings,
                                            double alpha);

@@ -9,6 +9,7 @@
 
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
+#include "estimator/discovery/wander.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/units.h"
 
@@ -564,6 +565,38 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       }
     }
   }
+  // A time behaviour of one gyro (the basis did not replace it) changes its drift once (a step)
+  // or without bound (a walk); a drift that returns to its mean, switching at random between levels or driven by a quantity
+  // the telemetry does not carry, is neither (wander.h). When a stationary drift describes the
+  // gyro's deviation decisively better than both, nothing is taken: the mismatch is left
+  // unexplained, located to the gyro, and described.
+  std::string wander_note;
+  int wander_gyro = 0;
+  double wander_p = 1.0, wander_evidence = -1.0;
+  if (!significant.empty()) {
+    const Candidate& c = fits[significant.front().index].candidate;
+    if (c.gyro > 0 && (c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift)) {
+      auto e = CompareDriftBehavioursOf(selected, context, c.gyro);
+      if (!e.ok()) return e.status();
+      const double other = std::max(e->step, e->walk);
+      if (e->stationary > other + kDecisiveDeviance &&
+          e->stationary > EvidenceThreshold(options.alpha, 1)) {
+        wander_note = absl::StrFormat(
+            "the drift of gyro %d returns to its mean: a stationary random drift (correlation "
+            "time about %.1f h, 1-sigma about %.2f deg/h per axis) describes its deviation with "
+            "2 ln B = %.1f, decisively better than one step (%.1f, best onset %.2f h) or a "
+            "raised random walk (%.1f), as a drift switching at random between levels or one "
+            "driven by a quantity the telemetry does not carry would; %s is not taken",
+            c.gyro, e->correlation_hours, e->sigma_deg_h, e->stationary, e->step,
+            e->step_onset_hours, e->walk, CandidateName(c));
+        wander_gyro = c.gyro;
+        wander_p = EvidenceBound(e->stationary - other);
+        wander_evidence = e->stationary;
+        significant.clear();
+        inhomogeneous_only = true;
+      }
+    }
+  }
   int chosen = -1;
   Contenders contenders;
   if (!significant.empty()) {
@@ -580,7 +613,20 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   }
   for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
   if (chosen < 0) {
-    if (inhomogeneous_only) {
+    if (!wander_note.empty()) {
+      result.unresolved = wander_note;
+      result.unresolved_gyro = wander_gyro;
+      result.unresolved_note = readout_note;
+      Mismatch& where = result.unresolved_where;
+      where.found = true;
+      where.gyro = wander_gyro;
+      where.start = context.frames().front().time;
+      where.end = context.frames().back().time;
+      where.regime = "whole recording";
+      where.source = "the gyro's drift over the recording";
+      where.p_value = wander_p;
+      result.stationary_evidence = wander_evidence;
+    } else if (inhomogeneous_only) {
       result.unresolved =
           "the candidates that fit it improve only part of the recording and worsen the rest (a "
           "change in time such as a fault, not a constant effect)";

@@ -52,6 +52,12 @@ struct RoundResult {
   std::string unresolved;
   std::string unresolved_note;
   int unresolved_gyro = 0;
+  // Where, when no span of the residuals stands out but the reason names one gyro's drift over
+  // the whole recording (a drift that returns to its mean, wander.h); else not found.
+  Mismatch unresolved_where;
+  // With unresolved_where: the evidence 2 ln B of the drift that returns to its mean (wander.h),
+  // which the open-ended stage's terms for that gyro must beat; else -1.
+  double stationary_evidence = -1.0;
   // When a jump of a gyro's readings explained the round at least as well as its time behaviour
   // (D43): the jump's evidence 2 ln B, which anything else must beat (the open-ended stage too).
   double readout_jump_evidence = -1.0;

@@ -112,9 +112,10 @@ struct ScenarioDiagnosis {
   SimulationSpec spec;
   DiagnosisReport report;
 };
-absl::StatusOr<ScenarioDiagnosis> DiagnoseScenario(const std::string& effect, uint64_t seed) {
+absl::StatusOr<ScenarioDiagnosis> DiagnoseScenario(const std::string& effect, uint64_t seed,
+                                                   double hours = kHours) {
   ScenarioDiagnosis out;
-  out.spec = ::esg::testing::DiscoveryScenario(effect, seed, kHours);
+  out.spec = ::esg::testing::DiscoveryScenario(effect, seed, hours);
   auto sim = Simulate(out.spec);
   if (!sim.ok()) return sim.status();
   auto report = Diagnose(out.spec.config, sim->recording.frames, DiagnoseOptions{});
@@ -227,6 +228,43 @@ TEST(OpenEndedDiagnosis, ReadoutDistortionIsTheOneFindingWithItsTracelessPart) {
   const SpacecraftConfig with = WithBasisFindings(d->spec.config, r);
   EXPECT_TRUE(ValidateConfig(with).ok()) << ValidateConfig(with);
   EXPECT_TRUE(with.FindGyro(gyro)->readout_distortion.isApprox(f.readout_distortion));
+}
+
+// Drifts the basis cannot explain, which must stay `unexplained` and located: one switching at
+// random between two levels (mean dwell 4 h), one driven by a quantity the telemetry does not
+// carry (a Gauss-Markov process of 3 h correlation time). Neither is one step nor a random walk:
+// a drift that returns to its mean describes each gyro's deviation decisively better (wander.h),
+// so the library's time behaviour is not taken, and the basis's deterministic terms do not
+// describe it as well either. On the confusion matrix's 30 h recordings (docs/discovery.md); at
+// 24 h, seed 101 of the switching drift, a constant misalignment of the gyro is taken first
+// (docs/discovery.md, "Limits").
+void ExpectUnexplainedWanderingDrift(const std::string& effect, uint64_t seed) {
+  auto d = DiagnoseScenario(effect, seed, 30.0);
+  ASSERT_TRUE(d.ok()) << d.status();
+  const DiagnosisReport& r = d->report;
+  const int gyro = ::esg::testing::AffectedGyro(seed);
+  std::string findings;
+  for (const Finding& f : r.findings) {
+    absl::StrAppend(&findings, "\n", f.effect, "[", f.gyro, "]: ", f.explanation);
+    for (const std::string& n : f.evidence.notes) absl::StrAppend(&findings, "\n  ", n);
+  }
+  ASSERT_EQ(r.verdict, kVerdictUnexplained) << findings;
+  ASSERT_EQ(r.findings.size(), 1u);
+  const Finding& u = r.findings.front();
+  EXPECT_EQ(u.gyro, gyro);
+  EXPECT_TRUE(r.mismatch.found);
+  EXPECT_EQ(r.mismatch.gyro, gyro);
+  EXPECT_THAT(u.explanation, HasSubstr(absl::StrCat("the drift of gyro ", gyro,
+                                                    " returns to its mean")));
+  EXPECT_TRUE(::esg::testing::DiscoveryVerdictCorrect(effect, gyro, r));
+}
+
+TEST(OpenEndedDiagnosis, DriftSwitchingAtRandomStaysUnexplainedInItsGyro) {
+  ExpectUnexplainedWanderingDrift("switching_drift", 101);
+}
+
+TEST(OpenEndedDiagnosis, DriftOfAnUntelemeteredDriverStaysUnexplainedInItsGyro) {
+  ExpectUnexplainedWanderingDrift("hidden_driver", 102);
 }
 
 }  // namespace

@@ -1,0 +1,56 @@
+// Does a drift that changes during the recording change once, wander without bound, or return to
+// its mean? (docs/discovery.md, "Time behaviour"). The library describes a changing drift by a
+// step at an onset or by a raised random walk; a drift switching at random between levels, or
+// one driven by a quantity the telemetry does not carry (a temperature nobody measures), is
+// neither, and forcing either onto it names physics that is not there. On one gyro's deviation
+// from the current model (deviation.h), in the reduced filter (deviation_filter.h), three
+// descriptions are compared by their evidence 2 ln B against the configured random walk alone,
+// each parameter integrated over a stated prior (uniform over a grid):
+//
+//   step        a case-fixed drift switched on at an onset: 3 coefficients, prior 0.1 deg/h each
+//               (the library's drift step), the onset uniform over the samples between 5% and
+//               95% of the series (at most 120 onsets);
+//   walk        the random walk of eq. (11) raised 2, 4, 8, 16, 32 times (the library's grid);
+//   stationary  a first-order Gauss-Markov drift on top of the configured walk, correlation time
+//               0.5, 1, 2, 4, 8 h x stationary 1-sigma 0.01, 0.02, 0.04, 0.08, 0.16 deg/h per axis.
+//
+// Steps the model already holds for the gyro enter every description as nuisance regressors (a
+// case-fixed drift before each). Pure computation.
+#ifndef ESG_ESTIMATOR_DISCOVERY_WANDER_H_
+#define ESG_ESTIMATOR_DISCOVERY_WANDER_H_
+
+#include <utility>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "estimator/discovery/context.h"
+#include "estimator/discovery/deviation.h"
+#include "estimator/discovery/selection.h"
+
+namespace esg::estimator::discovery {
+
+struct DriftBehaviourEvidence {
+  int gyro = 0;
+  double step = 0.0, walk = 0.0, stationary = 0.0;  // 2 ln B of each against the configured walk
+  double step_onset_hours = 0.0;   // the best onset [h since the series' first sample]
+  double walk_factor = 0.0;        // the best grid point: times the configured intensity
+  double correlation_hours = 0.0;  // the best stationary grid point
+  double sigma_deg_h = 0.0;
+};
+
+// `random_walk` [rad/s/sqrt(s)] and `w0_sigma` [rad/s] as the model's session holds them;
+// `step_sigma` the prior 1-sigma of a step's coefficients [rad/s]; `steps` the times of the
+// drift steps the model holds for the series' gyro.
+DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, double random_walk,
+                                              double w0_sigma, double step_sigma,
+                                              const std::vector<absl::Time>& steps);
+
+// The comparison on gyro `gyro`'s deviation from the selected model.
+absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedModel& selected,
+                                                                const DiagnosisContext& context,
+                                                                int gyro);
+
+}  // namespace esg::estimator::discovery
+
+#endif  // ESG_ESTIMATOR_DISCOVERY_WANDER_H_
