@@ -1,7 +1,7 @@
 // The ingest contract (docs/service.md "Ingest contract"): each frame is validated and then
 // decided as new, an exact duplicate, a conflict, late within the reorder window (new, applied
-// by a re-run) or too late, before anything is queued for the archive. An acknowledgement that says "accepted" is sent only after the commit that stores
-// the frame (committer.cc).
+// by a re-run) or too late, before anything is queued for the archive. An acknowledgement that
+// says "accepted" is sent only after the commit that stores the frame (committer.cc).
 #include <algorithm>
 #include <utility>
 

@@ -51,11 +51,11 @@ absl::StatusOr<EstimationCore::Rerun> EstimationCore::StartRerun(
       }
     }
     if (!restored_session.has_value()) {
-      LogEvent("WARN", "window_checkpoint_unusable",
-               absl::StrCat(spacecraft_id, ": the window checkpoint of ",
-                            FormatUtc(kept->applied_time),
-                            " cannot be restored; the re-run starts from the configuration"),
-               {{"spacecraftId", spacecraft_id}});
+      LogEvent(
+          "WARN", "window_checkpoint_unusable",
+          absl::StrCat(spacecraft_id, ": the window checkpoint of ", FormatUtc(kept->applied_time),
+                       " cannot be restored; the re-run starts from the configuration"),
+          {{"spacecraftId", spacecraft_id}});
     }
   }
   if (!restored_session.has_value()) {

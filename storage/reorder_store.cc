@@ -50,9 +50,8 @@ absl::StatusOr<std::vector<absl::Time>> ReorderStore::LateFrames(absl::string_vi
 absl::Status ReorderStore::RemoveLateFrames(Transaction& txn, absl::string_view spacecraft_id,
                                             const std::vector<absl::Time>& times) {
   if (times.empty()) return absl::OkStatus();
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("DELETE FROM late_frames WHERE spacecraft_id = ?1 "
-                               "AND measurement_time_unix_ns = ?2"));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("DELETE FROM late_frames WHERE spacecraft_id = ?1 "
+                                               "AND measurement_time_unix_ns = ?2"));
   for (absl::Time t : times) {
     st->Reset();
     st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(t));
@@ -62,8 +61,7 @@ absl::Status ReorderStore::RemoveLateFrames(Transaction& txn, absl::string_view 
 }
 
 absl::Status ReorderStore::DropLateFrames(Transaction& txn, absl::string_view spacecraft_id) {
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("DELETE FROM late_frames WHERE spacecraft_id = ?1"));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("DELETE FROM late_frames WHERE spacecraft_id = ?1"));
   st->BindText(1, spacecraft_id);
   return st->Run();
 }
@@ -151,10 +149,9 @@ absl::StatusOr<int64_t> ReorderStore::Revise(Transaction& txn, absl::string_view
       .BindInt64(3, TimeToUnixNanos(revised_time));
   RETURN_IF_ERROR(coefficients->Run());
   const int64_t revised = txn.ChangedRows();
-  ASSIGN_OR_RETURN(Statement * alerts,
-                   txn.Prepare("UPDATE alerts SET revised_time_unix_ns = ?3 "
-                               "WHERE spacecraft_id = ?1 AND sequence = ?2 "
-                               "AND revised_time_unix_ns IS NULL"));
+  ASSIGN_OR_RETURN(Statement * alerts, txn.Prepare("UPDATE alerts SET revised_time_unix_ns = ?3 "
+                                                   "WHERE spacecraft_id = ?1 AND sequence = ?2 "
+                                                   "AND revised_time_unix_ns IS NULL"));
   for (int64_t sequence : alert_sequences) {
     alerts->Reset();
     alerts->BindText(1, spacecraft_id)
@@ -162,11 +159,10 @@ absl::StatusOr<int64_t> ReorderStore::Revise(Transaction& txn, absl::string_view
         .BindInt64(3, TimeToUnixNanos(revised_time));
     RETURN_IF_ERROR(alerts->Run());
   }
-  ASSIGN_OR_RETURN(Statement * restore,
-                   txn.Prepare("UPDATE alerts SET repeat_count = ?3, "
-                               "measurement_time_unix_ns = ?4, cleared = 0, "
-                               "cleared_time_unix_ns = NULL "
-                               "WHERE spacecraft_id = ?1 AND sequence = ?2"));
+  ASSIGN_OR_RETURN(Statement * restore, txn.Prepare("UPDATE alerts SET repeat_count = ?3, "
+                                                    "measurement_time_unix_ns = ?4, cleared = 0, "
+                                                    "cleared_time_unix_ns = NULL "
+                                                    "WHERE spacecraft_id = ?1 AND sequence = ?2"));
   for (const AlertRestore& r : restores) {
     RETURN_IF_ERROR(ValidateStorableTime(r.last_time, "restores.last_time"));
     restore->Reset();

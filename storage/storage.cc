@@ -91,8 +91,9 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
   if (effects.revision.has_value()) {
     const FilterEffects::Revision& r = *effects.revision;
-    RETURN_IF_ERROR(InBatch(reorder_.Revise(txn, id, r.after, r.revised_time, r.alerts, r.restores).status(),
-                            "revision"));
+    RETURN_IF_ERROR(InBatch(
+        reorder_.Revise(txn, id, r.after, r.revised_time, r.alerts, r.restores).status(),
+        "revision"));
     RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(
         txn, id, r.after == absl::InfinitePast() ? r.after : r.after + absl::Nanoseconds(1)));
   }

@@ -24,8 +24,8 @@ using ::esg::testing::Daemon;
 using ::esg::testing::OfflineCoefficientHistory;
 using ::esg::testing::OfflineSessionValues;
 using ::esg::testing::OfflineSnapshot;
-using ::esg::testing::SimulateRun;
 using ::esg::testing::SimulatedRun;
+using ::esg::testing::SimulateRun;
 using ::esg::testing::StoredSessionValues;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
@@ -118,10 +118,10 @@ TEST(ReorderRestart, LateFramesAcknowledgedBeforeAKillNineAreReRunFromAKeptCheck
   auto pending = (*storage)->reorder().LateFrames(id);
   ASSERT_TRUE(pending.ok());
   EXPECT_TRUE(pending->empty());
-  auto current = (*storage)->coefficients().History(id, 0, absl::InfinitePast(),
-                                                   absl::InfiniteFuture());
-  auto all = (*storage)->coefficients().History(id, 0, absl::InfinitePast(),
-                                               absl::InfiniteFuture(), /*include_revised=*/true);
+  auto current =
+      (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture());
+  auto all = (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture(),
+                                                /*include_revised=*/true);
   ASSERT_TRUE(current.ok() && all.ok());
   const std::vector<OfflineSnapshot> offline =
       OfflineCoefficientHistory(run.config, "10+11", merged);

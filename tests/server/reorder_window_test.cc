@@ -5,9 +5,12 @@
 // revised, ending equal to an offline run over the merged recording in time order), a frame
 // beyond the window is refused naming it, window checkpoints stay bounded, and a restarted
 // server re-runs from the checkpoints it kept.
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <vector>
 
 #include "estimator/units.h"
@@ -25,8 +28,8 @@ using ::esg::testing::OfflineCoefficientHistory;
 using ::esg::testing::OfflineSessionValues;
 using ::esg::testing::OfflineSnapshot;
 using ::esg::testing::Session;
-using ::esg::testing::SimulateRun;
 using ::esg::testing::SimulatedRun;
+using ::esg::testing::SimulateRun;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
@@ -205,7 +208,8 @@ TEST(ReorderWindow, LateFramesWithinTheWindowReviseTheHistoryAndEndAsTheOfflineR
   late_time = *proto_convert::TimeFromProto(late.front().time());
   absl::Time start_time = *proto_convert::TimeFromProto(run.frames.front().time());
   EXPECT_LT(first_revised, late_time);
-  EXPECT_GT(first_revised, start_time + absl::Hours(1)) << "the re-run started from the configuration";
+  EXPECT_GT(first_revised, start_time + absl::Hours(1))
+      << "the re-run started from the configuration";
   EXPECT_GE(first_revised, late_time - absl::Hours(1) - absl::Minutes(1));
   // The same over gRPC: current snapshots by default, the revised ones on request.
   grpc::ClientContext ctx;
@@ -313,11 +317,82 @@ TEST(ReorderWindow, RestartedServerReRunsFromTheWindowCheckpointsItKept) {
   EXPECT_EQ(StoredValues(server, id), OfflineSessionValues(run.config, "10+11", merged));
   absl::Time first_revised = absl::InfiniteFuture();
   for (const auto& r : History(server, id, true)) {
-    if (r.revised_time != absl::InfinitePast()) first_revised = std::min(first_revised, r.measurement_time);
+    if (r.revised_time != absl::InfinitePast())
+      first_revised = std::min(first_revised, r.measurement_time);
   }
   const absl::Time start_time = *proto_convert::TimeFromProto(run.frames.front().time());
   EXPECT_NE(first_revised, absl::InfiniteFuture());
-  EXPECT_GT(first_revised, start_time + absl::Hours(1)) << "the re-run started from the configuration";
+  EXPECT_GT(first_revised, start_time + absl::Hours(1))
+      << "the re-run started from the configuration";
+}
+
+}  // namespace
+}  // namespace esg::server
+
+namespace esg::server {
+namespace {
+
+// The replay of SubscribeAlerts up to its end marker.
+std::vector<esg::v1::Alert> Replay(esg::v1::EstimationService::Stub& stub, const std::string& id,
+                                   bool include_revised) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+  esg::v1::AlertSubscription request;
+  request.set_spacecraft_id(id);
+  *request.mutable_since() = proto_convert::TimeToProto(absl::UnixEpoch());
+  request.set_replay_marker(true);
+  request.set_include_revised(include_revised);
+  auto reader = stub.SubscribeAlerts(&ctx, request);
+  std::vector<esg::v1::Alert> out;
+  esg::v1::Alert a;
+  while (reader->Read(&a) && !a.replay_complete()) out.push_back(a);
+  ctx.TryCancel();
+  return out;
+}
+
+TEST(ReorderWindow, CurrentAlertsAfterAReRunAreThoseOfTheFramesSentInTimeOrder) {
+  // Star-tracker outliers raise alerts all along; the late frames fall among them.
+  const SimulatedRun run = SimulateRun("REO-2", 4.0, 5, /*outlier_probability=*/0.08);
+  const std::string id = run.config.spacecraft_id;
+  std::vector<esg::v1::TelemetryFrame> first = Pass(run, 0, 150, "GS-1", 1);
+  for (const auto& f : Pass(run, 160, 200, "GS-1", 151)) first.push_back(f);
+  LoopbackServer reordered;
+  auto stub = reordered.Stub();
+  Configure(*stub, run);
+  ExpectAllStored(StreamFrames(*stub, first), first.size());
+  ASSERT_TRUE(reordered.core().WaitApplied(id, absl::Seconds(60)).ok());
+  ExpectAllStored(StreamFrames(*stub, Pass(run, 150, 160, "GS-2", 1)), 10);
+  ASSERT_TRUE(reordered.core().WaitApplied(id, absl::Seconds(60)).ok());
+  // The reference: the same frames, in time order, to a server of its own.
+  LoopbackServer in_order;
+  auto reference_stub = in_order.Stub();
+  Configure(*reference_stub, run);
+  ExpectAllStored(StreamFrames(*reference_stub, Pass(run, 0, 200, "GS-1", 1)), 200);
+  ASSERT_TRUE(in_order.core().WaitApplied(id, absl::Seconds(60)).ok());
+
+  const std::vector<esg::v1::Alert> current = Replay(*stub, id, false);
+  const std::vector<esg::v1::Alert> reference = Replay(*reference_stub, id, false);
+  ASSERT_FALSE(reference.empty()) << "the outliers raised no alert: the test shows nothing";
+  auto key = [](const esg::v1::Alert& a) {
+    return std::make_tuple(a.reason(), a.subsystem(), a.first_time().seconds(),
+                           a.measurement_time().seconds(), a.repeat_count(), a.cleared(),
+                           a.cleared_time().seconds());
+  };
+  std::vector<decltype(key(reference[0]))> got, want;
+  for (const auto& a : current) {
+    EXPECT_FALSE(a.has_revised_time());
+    got.push_back(key(a));
+  }
+  for (const auto& a : reference) want.push_back(key(a));
+  std::sort(got.begin(), got.end());
+  std::sort(want.begin(), want.end());
+  EXPECT_EQ(got, want);
+  // The superseded alerts are kept and replayed on request, marked.
+  const std::vector<esg::v1::Alert> all = Replay(*stub, id, true);
+  int revised = 0;
+  for (const auto& a : all) revised += a.has_revised_time() ? 1 : 0;
+  EXPECT_EQ(all.size(), current.size() + revised);
+  EXPECT_GT(revised, 0);
 }
 
 }  // namespace

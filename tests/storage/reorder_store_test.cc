@@ -58,9 +58,9 @@ TEST(ReorderStore, LateFramesAreRecordedWithTheirArchiveCommitAndForgottenByTheF
   auto storage = OpenIn(dir);
   ASSERT_NE(storage, nullptr);
   ASSERT_THAT(storage->ArchiveFrames({Frame("RDK-1", 3)}), IsOk());
-  ASSERT_THAT(storage->ArchiveFrames({Frame("RDK-1", 1), Frame("RDK-1", 2)},
-                                     {{"RDK-1", {T(60), T(120)}}}),
-              IsOk());
+  ASSERT_THAT(
+      storage->ArchiveFrames({Frame("RDK-1", 1), Frame("RDK-1", 2)}, {{"RDK-1", {T(60), T(120)}}}),
+      IsOk());
   EXPECT_THAT(storage->reorder().LateFrames("RDK-1"),
               testing::IsOkAndHolds(ElementsAre(T(60), T(120))));
   // A failed archive commit records nothing late either.
@@ -70,8 +70,7 @@ TEST(ReorderStore, LateFramesAreRecordedWithTheirArchiveCommitAndForgottenByTheF
   FilterEffects e = Effects("RDK-1");
   e.late_frames_done = {T(60)};
   ASSERT_THAT(storage->CommitFilterEffects(e).status(), IsOk());
-  EXPECT_THAT(storage->reorder().LateFrames("RDK-1"),
-              testing::IsOkAndHolds(ElementsAre(T(120))));
+  EXPECT_THAT(storage->reorder().LateFrames("RDK-1"), testing::IsOkAndHolds(ElementsAre(T(120))));
 }
 
 TEST(ReorderStore, CheckpointBeforeATimeAndPruningKeepTheOldestOneTheWindowNeeds) {
@@ -126,8 +125,8 @@ TEST(ReorderStore, RevisionMarksLaterEstimatesAndAlertsKeepsThemAndDropsLaterChe
   rerun.revision = FilterEffects::Revision{T(120), T(1000), {2}, {{1, 2, T(110)}}};
   rerun.coefficients.push_back(Estimate("RDK-1", 180));
   ASSERT_THAT(storage->CommitFilterEffects(rerun).status(), IsOk());
-  auto current = storage->coefficients().History("RDK-1", 0, absl::InfinitePast(),
-                                                 absl::InfiniteFuture());
+  auto current =
+      storage->coefficients().History("RDK-1", 0, absl::InfinitePast(), absl::InfiniteFuture());
   ASSERT_TRUE(current.ok());
   ASSERT_EQ(current->size(), 3u);
   EXPECT_EQ((*current)[2].measurement_time, T(180));
@@ -163,8 +162,7 @@ TEST(ReorderStore, ANewSessionDropsTheWindowCheckpointsAndLateFrames) {
   esg::testing::TempDir dir;
   auto storage = OpenIn(dir);
   ASSERT_NE(storage, nullptr);
-  ASSERT_THAT(storage->ArchiveFrames({Frame("RDK-1", 2), Frame("RDK-1", 1)},
-                                     {{"RDK-1", {T(60)}}}),
+  ASSERT_THAT(storage->ArchiveFrames({Frame("RDK-1", 2), Frame("RDK-1", 1)}, {{"RDK-1", {T(60)}}}),
               IsOk());
   FilterEffects e = Effects("RDK-1");
   e.window_checkpoint = WindowCheckpoint{T(100), T(0), "cp"};
