@@ -92,6 +92,10 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   bool from_archive = false;
   std::vector<AlertOccurrence> service_alerts;
   std::vector<JobFrame> frames;
+  // Late frames this job accounts for; a re-run starts before the first when it is behind the
+  // cursor (the others are ahead of it and applied in time order like any frame).
+  std::vector<absl::Time> late_done;
+  std::optional<absl::Time> rerun_from;
   {
     absl::MutexLock lock(&sc->state_mu);
     session = sc->session;
@@ -100,6 +104,12 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     generation = sc->generation;
     from_archive = sc->replay_from_archive;
     service_alerts.swap(sc->service_alerts);
+    if (setup != nullptr && session.has_value() && !apply.FilterStopped()) {
+      late_done.assign(sc->late_frames.begin(), sc->late_frames.end());
+      if (!late_done.empty() && late_done.front() <= apply.applied_time) {
+        rerun_from = late_done.front();
+      }
+    }
     sc->ready.erase(sc->ready.begin(), sc->ready.upper_bound(apply.applied_time));
     const bool stopped = apply.FilterStopped();
     if (!from_archive && !stopped) {
@@ -115,6 +125,24 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     }
   }
   const bool filter_runs = setup != nullptr && session.has_value() && !apply.FilterStopped();
+  std::optional<Rerun> rerun;
+  if (filter_runs && rerun_from.has_value()) {
+    absl::StatusOr<Rerun> started = StartRerun(sc->id, *setup, *rerun_from, &session, &apply);
+    if (!started.ok()) {
+      LogEvent("ERROR", "storage_error",
+               absl::StrCat(sc->id, ": cannot start the re-run over late frames: ",
+                            started.status().ToString()),
+               {{"spacecraftId", sc->id}});
+      absl::MutexLock lock(&sc->state_mu);
+      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
+                                service_alerts.end());
+      absl::SleepFor(absl::Milliseconds(200));
+      return true;
+    }
+    rerun = std::move(*started);
+    frames.clear();
+    from_archive = true;
+  }
   bool rebuild_done = false;
   if (filter_runs && from_archive) {
     absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
@@ -156,7 +184,10 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       frames.push_back(std::move(f));
     }
   }
-  if (frames.empty() && service_alerts.empty() && !rebuild_done) return false;
+  if (frames.empty() && service_alerts.empty() && !rebuild_done && !rerun.has_value() &&
+      late_done.empty()) {
+    return false;
+  }
 
   // Apply (no lock held: readers keep using the installed session meanwhile).
   const absl::Time now = absl::Now();
@@ -180,7 +211,25 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     apply.applied_station = f.station;
     apply.applied_sequence = f.sequence;
   };
+  // Window checkpoints (D61): the state at the job's start is kept when its first frame opens a
+  // new checkpoint period; a job stops before a later frame that would open one, so the next
+  // job starts there.
+  std::optional<storage::WindowCheckpoint> window_checkpoint;
+  const absl::Duration period = options_.window_checkpoint_period;
+  auto period_of = [period](absl::Time t) {
+    absl::Duration rest;
+    return absl::IDivDuration(t - absl::UnixEpoch(), period, &rest);
+  };
+  size_t processed = 0;
   for (JobFrame& f : frames) {
+    if (period > absl::ZeroDuration() && options_.reorder_window > absl::ZeroDuration() &&
+        apply.applied_time != absl::InfinitePast() && session.has_value() &&
+        period_of(f.time) != period_of(apply.applied_time)) {
+      if (processed > 0) break;
+      window_checkpoint = storage::WindowCheckpoint{apply.applied_time, now,
+                                                    EncodeWindowCheckpoint(apply, *session)};
+    }
+    ++processed;
     if (!f.frame.has_value()) {
       advance_cursor(f);
       ++apply.frames_apply_failed;
@@ -273,6 +322,17 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   storage::FilterEffects effects;
   effects.spacecraft_id = sc->id;
   effects.coefficients = std::move(coefficients);
+  if (rerun.has_value()) {
+    effects.revision = storage::FilterEffects::Revision{rerun->after, now, rerun->revised_alerts,
+                                                        rerun->restores};
+  }
+  effects.late_frames_done = late_done;
+  if (window_checkpoint.has_value()) {
+    effects.window_checkpoint = std::move(window_checkpoint);
+    // A late frame is accepted up to the window before the last accepted frame, which is at or
+    // after this cursor: the latest checkpoint before (cursor - window) is the oldest needed.
+    effects.prune_before = apply.applied_time - options_.reorder_window;
+  }
   effects.new_alerts = alerts.new_alerts();
   for (const auto& [seq, rep] : alerts.repeats()) effects.repeats.push_back(rep);
   for (const AlertCollapser::Clear& c : alerts.clears()) {
@@ -328,17 +388,38 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     sc->session = std::move(session);
     sc->apply = std::move(apply);
     sc->last_compute_time = now;
+    for (absl::Time t : late_done) sc->late_frames.erase(t);
+    if (rerun.has_value()) {
+      // The re-run goes on from the archive until it has caught up.
+      sc->ready.clear();
+      sc->ready_bytes = 0;
+      sc->replay_from_archive = true;
+    }
     const bool stopped = sc->apply.FilterStopped();
     auto end = sc->ready.upper_bound(sc->apply.applied_time);
     for (auto it = sc->ready.begin(); it != end; ++it) {
       sc->ready_bytes -= static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());
     }
     sc->ready.erase(sc->ready.begin(), end);
-    more =
-        !stopped && (sc->replay_from_archive || !sc->ready.empty() || !sc->service_alerts.empty());
+    more = !stopped && (sc->replay_from_archive || !sc->ready.empty() ||
+                        !sc->service_alerts.empty() || !sc->late_frames.empty());
   }
   // Publish the committed changes.
   absl::MutexLock publish(&sc->publish_mu);
+  if (rerun.has_value()) {
+    metrics_.revisions.Increment();
+    LogEvent("INFO", "revision",
+             absl::StrCat("spacecraft ", sc->id, ": late frame of ", FormatUtc(*rerun_from),
+                          " re-runs the filter from ",
+                          rerun->after == absl::InfinitePast() ? std::string("the configuration")
+                                                                : FormatUtc(rerun->after),
+                          "; ", rerun->revised_alerts.size(), " alerts revised"),
+             {{"spacecraftId", sc->id}, {"lateFrameTime", FormatUtc(*rerun_from)}});
+    for (int64_t seq : rerun->revised_alerts) {
+      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
+      if (r.ok()) hub_.Publish(*r);
+    }
+  }
   for (const storage::AlertRecord& a : published) {
     metrics_.alerts_raised.With({a.reason, a.severity}).Increment();
     if (a.cleared) metrics_.alerts_cleared.With({a.reason, a.severity}).Increment();

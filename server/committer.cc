@@ -20,8 +20,10 @@ namespace esg::server {
 absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch) {
   std::vector<storage::ArchivedFrame> frames;
   frames.reserve(batch.size());
+  std::map<std::string, std::vector<absl::Time>> late;
   for (const CommitEntry& e : batch) {
     if (e.barrier) continue;
+    if (e.late) late[e.sc->id].push_back(e.time);
     storage::ArchivedFrame f;
     f.spacecraft_id = e.sc->id;
     f.station_id = e.station;
@@ -31,8 +33,9 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
     frames.push_back(std::move(f));
   }
   // Ingest decided every frame new; one the archive already holds fails the whole commit
-  // (AlreadyExists) rather than be acknowledged falsely.
-  return storage_->ArchiveFrames(frames);
+  // (AlreadyExists) rather than be acknowledged falsely. Late frames are recorded in the same
+  // transaction: a restart still re-runs the filter over them.
+  return storage_->ArchiveFrames(frames, late);
 }
 
 void EstimationCore::SetStorageFault(const std::string& reason) {
@@ -183,6 +186,7 @@ void EstimationCore::CommitterLoop() {
         durable = std::max(durable, e->sequence);
         sc->last_durable_time = std::max(sc->last_durable_time, e->time);
         ++sc->frames_accepted;
+        if (e->late) sc->late_frames.insert(e->time);
         if (!sc->replay_from_archive) {
           sc->ready_bytes += static_cast<int64_t>(sizeof(ReadyFrame) + e->station.size());
           sc->ready.emplace(e->time, ReadyFrame{e->station, e->sequence, std::move(e->frame)});

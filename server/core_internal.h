@@ -11,6 +11,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -35,6 +36,10 @@ inline constexpr const char* kQuarantineAlertReason = "SESSION_QUARANTINED";
 
 // NotFound "spacecraft_id: 'X' is not configured" (X escaped and shortened).
 absl::Status NotConfigured(const std::string& spacecraft_id);
+
+// A window checkpoint's blob: the server checkpoint `apply` with `session`'s state (reorder.cc).
+std::string EncodeWindowCheckpoint(const ServerCheckpoint& apply,
+                                   const estimator::EstimationSession& session);
 
 struct EstimationCore::Setup {
   estimator::SpacecraftConfig config;
@@ -93,6 +98,10 @@ struct EstimationCore::Spacecraft {
   int64_t generation ABSL_GUARDED_BY(state_mu) = 0;
   bool replay_from_archive ABSL_GUARDED_BY(state_mu) = true;
   absl::Time last_compute_time ABSL_GUARDED_BY(state_mu) = absl::InfinitePast();
+  // Durable late frames (measurement times) not yet accounted for by a worker job: one at or
+  // before the apply cursor makes the next job re-run the filter from a window checkpoint
+  // (apply_worker.cc); mirrored by the late_frames table.
+  std::set<absl::Time> late_frames ABSL_GUARDED_BY(state_mu);
   // Alerts raised outside the filter (ingest conflicts, quarantine at load), stored by the next
   // worker job.
   std::vector<AlertOccurrence> service_alerts ABSL_GUARDED_BY(state_mu);
@@ -111,6 +120,7 @@ struct EstimationCore::CommitEntry {
   std::string station;
   int64_t sequence = 0;
   absl::Time time;
+  bool late = false;  // measured before a frame accepted earlier: recorded as a late frame
   std::string payload;
   estimator::TelemetryFrame frame;
   std::function<void(absl::Status)> done;

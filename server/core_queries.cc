@@ -425,7 +425,8 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
   // The filters a token is bound to (the request without its paging fields).
   const std::string filters =
       absl::StrCat(request.spacecraft_id(), "|", request.gyro_id(), "|",
-                   storage::TimeToUnixNanos(from), "|", storage::TimeToUnixNanos(to));
+                   storage::TimeToUnixNanos(from), "|", storage::TimeToUnixNanos(to),
+                   request.include_revised() ? "|revised" : "");
   std::optional<storage::CoefficientCursor> after;
   if (!request.page_token().empty()) {
     ASSIGN_OR_RETURN(std::string position,
@@ -435,7 +436,8 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
   }
   ASSIGN_OR_RETURN(storage::CoefficientPage page,
                    storage_->coefficients().HistoryPage(request.spacecraft_id(), request.gyro_id(),
-                                                        from, to, after, size));
+                                                        from, to, after, size,
+                                                        request.include_revised()));
   esg::v1::HistoryResponse response;
   for (const storage::CoefficientRecord& r : page.records) {
     *response.add_snapshots() = SnapshotToProto(r);

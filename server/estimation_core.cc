@@ -80,6 +80,8 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
                    storage_->archive().Latest(record.spacecraft_id));
   ASSIGN_OR_RETURN(int64_t count,
                    storage::CountArchivedFrames(storage_->database(), record.spacecraft_id));
+  ASSIGN_OR_RETURN(std::vector<absl::Time> late_frames,
+                   storage_->reorder().LateFrames(record.spacecraft_id));
   const absl::Time last_time = latest.has_value() ? latest->measurement_time : absl::InfinitePast();
 
   // The configuration.
@@ -217,6 +219,7 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record)
     }
     sc->apply = std::move(checkpoint);
     sc->replay_from_archive = true;
+    sc->late_frames.insert(late_frames.begin(), late_frames.end());
   }
   LogEvent("INFO", "spacecraft_loaded",
            absl::StrCat("loaded spacecraft ", sc->id, ": model ",
@@ -257,7 +260,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
       for (const auto& sc : registry_.All()) {
         absl::MutexLock state(&sc->state_mu);
         if (sc->session.has_value() && sc->setup != nullptr && !sc->apply.FilterStopped() &&
-            (sc->replay_from_archive || !sc->ready.empty())) {
+            (sc->replay_from_archive || !sc->ready.empty() || !sc->late_frames.empty())) {
           busy = true;
         }
       }
@@ -290,7 +293,7 @@ absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id, absl:
     {
       absl::MutexLock lock(&sc->state_mu);
       if (!sc->replay_from_archive && sc->ready.empty() && !sc->apply.Rebuilding() &&
-          sc->apply.applied_time >= sc->last_durable_time) {
+          sc->late_frames.empty() && sc->apply.applied_time >= sc->last_durable_time) {
         return absl::OkStatus();
       }
       if (sc->apply.FilterStopped()) {
@@ -352,12 +355,14 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   // A quarantine that the reconfiguration ends: its alert is cleared as the apply worker clears
   // one (AlertCollapser::End: cleared_time stored, then published and logged once committed).
   std::optional<AlertCollapser> quarantine_end;
+  bool new_session = false;  // replaces a session: its window checkpoints and late frames go
   std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
   auto write = [&]() -> absl::Status {
     cp.state_blob = EncodeCheckpoint(checkpoint);
     storage::ConfigurationChange change;
     change.config = record;
     change.checkpoint = cp;
+    change.new_session = new_session;
     if (quarantine_end.has_value()) {
       change.new_alerts = quarantine_end->new_alerts();
       for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
@@ -439,7 +444,9 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
           for (const AlertOccurrence& o : raised) quarantine_end->Add(o);
           quarantine_end->End(kQuarantineAlertReason, "session", end);
         }
+        new_session = true;
         RETURN_IF_ERROR(store());
+        sc->late_frames.clear();
         std::erase_if(sc->service_alerts,
                       [](const AlertOccurrence& o) { return o.reason == kQuarantineAlertReason; });
         sc->ingest_setup = setup;

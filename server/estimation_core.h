@@ -28,6 +28,14 @@
 //                        install the copy. The checkpoint thus always matches the effects
 //                        stored, so a restart (load checkpoint, replay archive after its
 //                        cursor) applies no frame twice and loses none.
+//   Late frames          a frame accepted within the reorder window but measured before an
+//                        accepted one is archived together with a late-frame record (same
+//                        transaction). A job that finds a late frame at or before its cursor
+//                        re-runs: it restores the latest window checkpoint before the frame,
+//                        marks the estimates and alerts after it revised, and replays the
+//                        archive from there in time order, committing all of it, the removal
+//                        of the late-frame records and the new checkpoint in ONE transaction.
+//                        A restart reads the records back, so a late frame is never lost.
 // LOCK ORDER: Spacecraft::job_mu -> ingest_mu -> state_mu -> (storage's database lock);
 // the stream's own lock may be held while taking state_mu.
 #ifndef ESG_SERVER_ESTIMATION_CORE_H_
@@ -71,6 +79,12 @@ struct CoreOptions {
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
   // one alert (repeat_count); an alert without a new occurrence for this long is cleared.
   absl::Duration alert_collapse_window = absl::Minutes(30);
+  // Late frames (measured before the spacecraft's last accepted frame) at most this much before
+  // it are accepted and applied in time order by a re-run from a window checkpoint; older ones
+  // are refused (docs/service.md "Several ground stations", docs/decisions.md D60).
+  absl::Duration reorder_window = absl::Hours(2);
+  // Measurement-time period of the window checkpoints re-runs start from (D61).
+  absl::Duration window_checkpoint_period = absl::Hours(1);
   // Largest accepted time step between consecutive frames of a spacecraft (rejected beyond:
   // the filter integrates across a gap at the configured rate).
   absl::Duration max_frame_gap = absl::Hours(24 * 7);
@@ -226,6 +240,18 @@ class EstimationCore {
   void CollectGauges();
   // Applies the next frames of one spacecraft; true when more remain.
   bool RunJob(const std::shared_ptr<Spacecraft>& sc);
+  // A re-run over late frames (reorder.cc): where it starts and what it revises.
+  struct Rerun {
+    absl::Time after = absl::InfinitePast();  // the restored cursor (InfinitePast: fresh)
+    std::vector<storage::AlertRestore> restores;
+    std::vector<int64_t> revised_alerts;
+  };
+  // Replaces *session and *apply by the latest window checkpoint before `late_time` (or a fresh
+  // session of `setup` when there is none or it cannot be restored). Errors: storage reads.
+  absl::StatusOr<Rerun> StartRerun(const std::string& spacecraft_id, const Setup& setup,
+                                   absl::Time late_time,
+                                   std::optional<estimator::EstimationSession>* session,
+                                   ServerCheckpoint* apply);
   esg::v1::SessionInfo Summarize(Spacecraft& sc);
 
   storage::Storage* const storage_;

@@ -320,7 +320,8 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
     std::vector<storage::AlertRecord> replay;
     if (since != absl::InfiniteFuture()) {
       absl::StatusOr<std::vector<storage::AlertRecord>> stored =
-          core->storage().alerts().Since(request.spacecraft_id(), since, kMaxQueuedAlerts);
+          core->storage().alerts().Since(request.spacecraft_id(), since, kMaxQueuedAlerts,
+                                         request.include_revised());
       if (!stored.ok()) {
         absl::MutexLock lock(&shared_->mu);
         shared_->finished = true;
@@ -374,7 +375,8 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
   }
 
  private:
-  using Version = std::tuple<int64_t, bool, bool>;  // repeat_count, acknowledged, cleared
+  // repeat_count, acknowledged, cleared, revised (a re-run over a late frame superseded it)
+  using Version = std::tuple<int64_t, bool, bool, bool>;
   struct Shared {
     absl::Mutex mu;
     AlertReactor* reactor ABSL_GUARDED_BY(mu) = nullptr;
@@ -388,16 +390,20 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
 
   // Queues `r` unless the same or a newer state of that alert was already queued.
   static void Offer(Shared& s, const storage::AlertRecord& r) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
-    const Version v{r.repeat_count, r.acknowledged, r.cleared};
+    const Version v{r.repeat_count, r.acknowledged, r.cleared,
+                    r.revised_time != absl::InfinitePast()};
     auto [it, inserted] = s.sent.try_emplace({r.spacecraft_id, r.sequence}, v);
     if (!inserted) {
       const Version& old = it->second;
-      if (std::get<0>(v) <= std::get<0>(old) && std::get<1>(v) <= std::get<1>(old) &&
-          std::get<2>(v) <= std::get<2>(old)) {
+      // A revision is news even where a re-run set the repeat count back.
+      const bool revision = std::get<3>(v) && !std::get<3>(old);
+      if (!revision && std::get<0>(v) <= std::get<0>(old) && std::get<1>(v) <= std::get<1>(old) &&
+          std::get<2>(v) <= std::get<2>(old) && std::get<3>(v) <= std::get<3>(old)) {
         return;  // not newer
       }
       it->second = Version{std::max(std::get<0>(v), std::get<0>(old)),
-                           std::get<1>(v) || std::get<1>(old), std::get<2>(v) || std::get<2>(old)};
+                           std::get<1>(v) || std::get<1>(old), std::get<2>(v) || std::get<2>(old),
+                           std::get<3>(v) || std::get<3>(old)};
     }
     if (s.queue.size() >= kMaxQueuedAlerts) {
       if (!s.finished && s.reactor != nullptr) {
@@ -767,6 +773,7 @@ EstimationServiceImpl::ExportCoefficientHistory(
   pages.set_gyro_id(request->gyro_id());
   if (request->has_from()) *pages.mutable_from() = request->from();
   if (request->has_to()) *pages.mutable_to() = request->to();
+  pages.set_include_revised(request->include_revised());
   pages.set_page_size(static_cast<int32_t>(EstimationCore::kExportChunkSize));
   EstimationCore* core = core_;
   bool last_page = false;

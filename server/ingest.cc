@@ -1,7 +1,8 @@
 // The ingest contract (docs/service.md "Ingest contract"): each frame is validated and then
-// decided as new, an exact duplicate, a conflict or late, before anything is queued for the
-// archive. An acknowledgement that says "accepted" is sent only after the commit that stores
-// the frame (committer.cc).
+// decided as new, an exact duplicate, a conflict, late within the reorder window (new, applied
+// by a re-run) or too late, before anything is queued for the archive. An acknowledgement that
+// says "accepted" is sent only after the commit that stores the frame (committer.cc).
+#include <algorithm>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -208,23 +209,21 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
       commit_queue_.push_back(std::move(entry));
       return true;
     }
-    if (known_identity) {
+    // Never stored: a late frame (docs/service.md "Several ground stations"). A station's
+    // sequence identifies its frames and the time orders them: a sequence below the station's
+    // highest one that it never used is a frame the station sends late (a pass relayed after a
+    // later one, a gap filled); only its time decides whether the window still takes it.
+    if (known_time && sc->last_accepted_time - time > options_.reorder_window) {
       return refuse_counted(
-          absl::StatusCode::kOutOfRange, "sequence",
-          absl::StrCat(proto.sequence(), " of station '", station,
-                       "' is not after its highest accepted sequence ", highest->second,
-                       " and was never stored: frames older than the last accepted one are "
-                       "refused (no reorder window)"));
+          absl::StatusCode::kOutOfRange, "time",
+          absl::StrCat(FormatUtc(time), " is more than the reorder window (",
+                       absl::FormatDuration(options_.reorder_window),
+                       ", esgd --reorder-window) before the last accepted frame of '", sc->id,
+                       "' (", FormatUtc(sc->last_accepted_time),
+                       "): too late to be applied in time order"));
     }
-    return refuse_counted(
-        absl::StatusCode::kOutOfRange, "time",
-        absl::StrCat(FormatUtc(time), " is not after the last accepted frame of '", sc->id,
-                     "' (", FormatUtc(sc->last_accepted_time),
-                     "): frames older than the last accepted one are refused (no reorder "
-                     "window)"));
-  }
-  if (sc->last_accepted_time != absl::InfinitePast() &&
-      time - sc->last_accepted_time > options_.max_frame_gap) {
+  } else if (sc->last_accepted_time != absl::InfinitePast() &&
+             time - sc->last_accepted_time > options_.max_frame_gap) {
     // The filter integrates across a gap at the configured rate: an absurd gap (a wrong time
     // tag) would occupy a worker for hours.
     return refuse_counted(
@@ -235,7 +234,7 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                      ")"));
   }
 
-  // New: queue it for the archive.
+  // New (or late within the window): queue it for the archive.
   CommitEntry entry;
   entry.sc = sc;
   entry.station = station;
@@ -243,6 +242,7 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   entry.time = time;
   entry.payload = payload;
   entry.frame = std::move(*frame);
+  entry.late = known_time;
   entry.done = std::move(on_durable);
   // The verdict goes into the ack before the entry is queued: the committer may commit and send
   // this ack before push_back returns here.
@@ -265,8 +265,9 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   }
   sc->pending[time] = PendingFrame{station, proto.sequence(), payload};
   sc->pending_ids[{station, proto.sequence()}] = time;
-  sc->highest_accepted[station] = proto.sequence();
-  sc->last_accepted_time = time;
+  int64_t& highest_of_station = sc->highest_accepted[station];
+  highest_of_station = std::max(highest_of_station, proto.sequence());
+  sc->last_accepted_time = std::max(sc->last_accepted_time, time);
   return true;
 }
 

@@ -11,6 +11,7 @@
 #include "grpc/support/log.h"
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
+#include "absl/time/time.h"
 #include "server/log.h"
 #include "server/server.h"
 
@@ -55,6 +56,11 @@ int main(int argc, char** argv) {
   app.add_option("--workers", options.core.worker_threads,
                  "Filter worker threads (0: one per core, at least 2)")
       ->capture_default_str();
+  std::string reorder_window = "2h";
+  app.add_option("--reorder-window", reorder_window,
+                 "How late a frame may arrive (before the last accepted one) and still be applied "
+                 "in time order by a re-run, e.g. 2h, 90m, 0 (refuse late frames)")
+      ->capture_default_str();
   app.add_option("--shutdown-deadline", shutdown_deadline_s,
                  "Seconds running calls get to finish at shutdown")
       ->capture_default_str();
@@ -93,6 +99,12 @@ int main(int argc, char** argv) {
   if (log_format == "json") {
     esg::server::SetLogFormat(esg::server::LogFormat::kJson);
     gpr_set_log_function(GrpcLog);
+  }
+  if (!absl::ParseDuration(reorder_window, &options.core.reorder_window) ||
+      options.core.reorder_window < absl::ZeroDuration()) {
+    std::fprintf(stderr, "--reorder-window: '%s' is not a duration >= 0 (e.g. 2h, 90m, 0)\n",
+                 reorder_window.c_str());
+    return 2;
   }
   options.synchronous =
       sync == "normal" ? esg::storage::Synchronous::kNormal : esg::storage::Synchronous::kFull;

@@ -123,6 +123,9 @@ esg::v1::Alert AlertToProto(const storage::AlertRecord& r) {
     *a.mutable_acknowledged_time() = proto_convert::TimeToProto(r.acknowledged_time);
   }
   a.set_cleared(r.cleared);
+  if (r.revised_time != absl::InfinitePast()) {
+    *a.mutable_revised_time() = proto_convert::TimeToProto(r.revised_time);
+  }
   if (r.cleared && r.cleared_time != absl::InfinitePast()) {
     *a.mutable_cleared_time() = proto_convert::TimeToProto(r.cleared_time);
   }
@@ -136,6 +139,9 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
   s.set_gyro_id(r.gyro_id);
   *s.mutable_measurement_time() = proto_convert::TimeToProto(r.measurement_time);
   *s.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  if (r.revised_time != absl::InfinitePast()) {
+    *s.mutable_revised_time() = proto_convert::TimeToProto(r.revised_time);
+  }
   // The record is SI (storage/records.h); the message carries deg/h and arcsec.
   auto fill = [](const std::vector<double>& v, esg::v1::GyroDriftModel* m,
                  google::protobuf::RepeatedField<double>* misalignment) {

@@ -86,9 +86,10 @@ ServiceMetrics::ServiceMetrics()
                                          {"reason", "severity"})),
       revisions(registry
                     .AddCounter("esg_revisions_total",
-                                "Revisions of applied estimates caused by late frames. esgd "
-                                "refuses frames older than the last accepted one, so this stays "
-                                "0 until late frames are applied.")
+                                "Re-runs of the filter over late frames (accepted within the "
+                                "reorder window, measured before an applied frame): each one "
+                                "revises the coefficient history and alerts after the window "
+                                "checkpoint it starts from.")
                     .Get()),
       diagnoses(registry.AddCounter(
           "esg_diagnoses_total",

@@ -16,19 +16,24 @@ namespace {
   "repeat_count, first_time_unix_ns, measurement_time_unix_ns, compute_time_unix_ns, "      \
   "message, acknowledged, acknowledged_by, acknowledged_time_unix_ns, cleared, "             \
   "cleared_time_unix_ns"
+#define ESG_ALERT_READ_COLUMNS ESG_ALERT_COLUMNS ", revised_time_unix_ns"
 
-constexpr char kSelectOne[] = "SELECT " ESG_ALERT_COLUMNS
+constexpr char kSelectOne[] = "SELECT " ESG_ALERT_READ_COLUMNS
                               " FROM alerts WHERE spacecraft_id = ?1 AND sequence = ?2";
-constexpr char kSinceOne[] = "SELECT " ESG_ALERT_COLUMNS
+// Current alerts only, unless ?9 is 1 (revised ones too).
+constexpr char kSinceOne[] = "SELECT " ESG_ALERT_READ_COLUMNS
                              " FROM alerts WHERE spacecraft_id = ?1 AND "
                              "measurement_time_unix_ns >= ?2 "
+                             "AND (?9 OR revised_time_unix_ns IS NULL) "
                              "ORDER BY measurement_time_unix_ns, sequence LIMIT ?3";
-constexpr char kSinceAll[] = "SELECT " ESG_ALERT_COLUMNS
+constexpr char kSinceAll[] = "SELECT " ESG_ALERT_READ_COLUMNS
                              " FROM alerts WHERE measurement_time_unix_ns >= ?1 "
+                             "AND (?9 OR revised_time_unix_ns IS NULL) "
                              "ORDER BY measurement_time_unix_ns, spacecraft_id, sequence LIMIT ?2";
 constexpr char kInsert[] = "INSERT INTO alerts (" ESG_ALERT_COLUMNS
                            ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, "
                            "?14, ?15, ?16, ?17, ?18)";
+#undef ESG_ALERT_READ_COLUMNS
 #undef ESG_ALERT_COLUMNS
 
 AlertRecord ReadRow(const Statement& st) {
@@ -53,6 +58,8 @@ AlertRecord ReadRow(const Statement& st) {
   r.cleared = st.ColumnInt64(16) != 0;
   r.cleared_time =
       st.ColumnIsNull(17) ? absl::InfinitePast() : UnixNanosToTime(st.ColumnInt64(17));
+  r.revised_time =
+      st.ColumnIsNull(18) ? absl::InfinitePast() : UnixNanosToTime(st.ColumnInt64(18));
   return r;
 }
 
@@ -167,7 +174,8 @@ absl::StatusOr<int64_t> AlertStore::Append(Transaction& txn, const AlertRecord& 
 }
 
 absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spacecraft_id,
-                                                           absl::Time since, int64_t limit) {
+                                                           absl::Time since, int64_t limit,
+                                                           bool include_revised) {
   if (limit <= 0) {
     return absl::InvalidArgumentError(absl::StrCat("limit = ", limit, ": must be positive"));
   }
@@ -175,10 +183,12 @@ absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spa
   if (spacecraft_id.empty()) {
     ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSinceAll));
     st->BindInt64(1, TimeToUnixNanos(since)).BindInt64(2, limit);
+    st->BindInt64(9, include_revised ? 1 : 0);
     return ReadAll(st);
   }
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSinceOne));
   st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(since)).BindInt64(3, limit);
+  st->BindInt64(9, include_revised ? 1 : 0);
   return ReadAll(st);
 }
 

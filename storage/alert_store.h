@@ -31,9 +31,10 @@ class AlertStore {
 
   // Alerts with measurement_time >= since, ordered by (measurement_time, sequence) for one
   // spacecraft, or by (measurement_time, spacecraft_id, sequence) over all spacecraft when
-  // spacecraft_id is empty. At most `limit` (> 0, else InvalidArgument).
+  // spacecraft_id is empty. At most `limit` (> 0, else InvalidArgument). Current alerts only,
+  // unless include_revised (then also those a re-run over a late frame superseded).
   absl::StatusOr<std::vector<AlertRecord>> Since(absl::string_view spacecraft_id, absl::Time since,
-                                                 int64_t limit);
+                                                 int64_t limit, bool include_revised = false);
 
   // One alert; NotFound if missing.
   absl::StatusOr<AlertRecord> Get(absl::string_view spacecraft_id, int64_t sequence);

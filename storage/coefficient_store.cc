@@ -37,36 +37,44 @@ const std::string& InsertSql() {
   return *sql;
 }
 
+// Current rows only, unless ?9 is 1 (revised ones too).
 const std::string& HistorySql(bool one_gyro) {
   static const std::string* const all = new std::string(absl::StrCat(
       "SELECT ", AllColumns(),
-      " FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
-      "AND measurement_time_unix_ns < ?3 ORDER BY measurement_time_unix_ns, gyro_id, id"));
+      ", revised_time_unix_ns FROM coefficients WHERE spacecraft_id = ?1 "
+      "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
+      "AND (?9 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
   static const std::string* const one = new std::string(absl::StrCat(
       "SELECT ", AllColumns(),
-      " FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
-      "AND measurement_time_unix_ns < ?3 AND gyro_id = ?4 "
-      "ORDER BY measurement_time_unix_ns, gyro_id, id"));
+      ", revised_time_unix_ns FROM coefficients WHERE spacecraft_id = ?1 "
+      "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 AND gyro_id = ?4 "
+      "AND (?9 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
   return one_gyro ? *one : *all;
 }
 
 // A page: the history order continued strictly after a cursor (row values, SQLite >= 3.15), the
-// row id appended as the last column.
+// revision time and row id appended as the last columns.
 const std::string& HistoryPageSql(bool one_gyro) {
   static const std::string* const all = new std::string(absl::StrCat(
       "SELECT ", AllColumns(),
-      ", id FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
-      "AND measurement_time_unix_ns < ?3 "
+      ", revised_time_unix_ns, id FROM coefficients WHERE spacecraft_id = ?1 "
+      "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) "
+      "AND (?9 OR revised_time_unix_ns IS NULL) "
       "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
   static const std::string* const one = new std::string(absl::StrCat(
       "SELECT ", AllColumns(),
-      ", id FROM coefficients WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
-      "AND measurement_time_unix_ns < ?3 "
+      ", revised_time_unix_ns, id FROM coefficients WHERE spacecraft_id = ?1 "
+      "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) AND gyro_id = ?8 "
+      "AND (?9 OR revised_time_unix_ns IS NULL) "
       "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
   return one_gyro ? *one : *all;
 }
+
+// Column of revised_time_unix_ns in the history queries, and of the row id in a page's.
+constexpr int kRevisedColumn = kNumLeadingColumns + 2 * kNumCoefficientValues;
+constexpr int kRowIdColumn = kRevisedColumn + 1;
 
 // Records are SI; each column holds the unit its name carries (records.h): deg/h for the 13
 // drift terms, arcsec for the misalignment. NaN passes through.
@@ -98,6 +106,9 @@ CoefficientRecord ReadRecord(const Statement& st) {
     any_sigma = any_sigma || !st.ColumnIsNull(sigma_column);
   }
   if (any_sigma) r.sigmas = std::move(sigmas);
+  if (!st.ColumnIsNull(kRevisedColumn)) {
+    r.revised_time = UnixNanosToTime(st.ColumnInt64(kRevisedColumn));
+  }
   return r;
 }
 
@@ -178,7 +189,8 @@ absl::Status CoefficientStore::Append(Transaction& txn, const CoefficientRecord&
 }
 
 absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
-    absl::string_view spacecraft_id, int gyro_id, absl::Time from, absl::Time to) {
+    absl::string_view spacecraft_id, int gyro_id, absl::Time from, absl::Time to,
+    bool include_revised) {
   if (gyro_id < 0) {
     return absl::InvalidArgumentError(
         absl::StrCat("gyro_id = ", gyro_id, ": must be >= 1, or 0 for all gyros"));
@@ -187,6 +199,7 @@ absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(HistorySql(gyro_id != 0)));
   st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(from)).BindInt64(3, TimeToUnixNanos(to));
   if (gyro_id != 0) st->BindInt64(4, gyro_id);
+  st->BindInt64(9, include_revised ? 1 : 0);
   std::vector<CoefficientRecord> out;
   while (true) {
     ASSIGN_OR_RETURN(bool row, st->Step());
@@ -198,7 +211,7 @@ absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
 
 absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
     absl::string_view spacecraft_id, int gyro_id, absl::Time from, absl::Time to,
-    const std::optional<CoefficientCursor>& after, int64_t limit) {
+    const std::optional<CoefficientCursor>& after, int64_t limit, bool include_revised) {
   if (gyro_id < 0) {
     return absl::InvalidArgumentError(
         absl::StrCat("gyro_id = ", gyro_id, ": must be >= 1, or 0 for all gyros"));
@@ -219,6 +232,7 @@ absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
       .BindInt64(6, start.row_id)
       .BindInt64(7, limit + 1);
   if (gyro_id != 0) st->BindInt64(8, gyro_id);
+  st->BindInt64(9, include_revised ? 1 : 0);
   CoefficientPage page;
   CoefficientCursor last;
   while (true) {
@@ -231,7 +245,7 @@ absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
     page.records.push_back(ReadRecord(*st));
     last.measurement_time_unix_ns = st->ColumnInt64(2);
     last.gyro_id = st->ColumnInt64(1);
-    last.row_id = st->ColumnInt64(kNumLeadingColumns + 2 * kNumCoefficientValues);
+    last.row_id = st->ColumnInt64(kRowIdColumn);
   }
   return page;
 }

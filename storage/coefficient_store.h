@@ -58,10 +58,13 @@ class CoefficientStore {
   absl::Status Append(Transaction& txn, const CoefficientRecord& record);
 
   // Estimates of the spacecraft with from <= measurement_time < to, for one gyro or for all
-  // (gyro_id == 0), ordered by (measurement_time, gyro_id, insertion).
+  // (gyro_id == 0), ordered by (measurement_time, gyro_id, insertion). Current estimates only,
+  // unless include_revised (then also those a re-run over a late frame superseded, with their
+  // revised_time).
   absl::StatusOr<std::vector<CoefficientRecord>> History(absl::string_view spacecraft_id,
                                                          int gyro_id, absl::Time from,
-                                                         absl::Time to);
+                                                         absl::Time to,
+                                                         bool include_revised = false);
 
   // One page of History(spacecraft_id, gyro_id, from, to): up to `limit` (> 0, else
   // InvalidArgument naming limit) records strictly after `after` (nullopt: from the first), in
@@ -70,7 +73,7 @@ class CoefficientStore {
   absl::StatusOr<CoefficientPage> HistoryPage(absl::string_view spacecraft_id, int gyro_id,
                                               absl::Time from, absl::Time to,
                                               const std::optional<CoefficientCursor>& after,
-                                              int64_t limit);
+                                              int64_t limit, bool include_revised = false);
 
  private:
   Database* db_;  // not owned

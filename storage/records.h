@@ -105,6 +105,9 @@ struct CoefficientRecord {
   std::vector<double> values;  // kNumCoefficientValues, layout above [rad/s, rad]; NaN = not estimated
   std::vector<double> sigmas;  // 1-sigma, same layout and units, or empty when unknown; NaN = unknown
   std::string model_name;      // e.g. "model10"
+  // Wall-clock time a re-run over a late frame superseded this estimate (docs/service.md
+  // "Several ground stations"); InfinitePast: current. Ignored on input (stored current).
+  absl::Time revised_time = absl::InfinitePast();
 };
 
 // One alert (docs/formats.md "Alerts": Yamcs/COSMOS/Open MCT conventions).
@@ -129,6 +132,9 @@ struct AlertRecord {
   // Measurement epoch at which the service found the condition over (server/alert_catalog.h
   // ClearRule); InfinitePast while not cleared, or when cleared before it was stored.
   absl::Time cleared_time = absl::InfinitePast();
+  // Wall-clock time a re-run over a late frame superseded this alert (docs/service.md "Several
+  // ground stations"); InfinitePast: current. Ignored on input (stored current).
+  absl::Time revised_time = absl::InfinitePast();
 };
 
 // A repeat of an existing alert, collapsed into it (AlertStore::UpdateRepeat).

@@ -167,8 +167,30 @@ UPDATE diagnoses SET frames = (
                                        AND diagnoses.to_time_unix_ns);
 )sql";
 
+// Version 6: the reorder window. A row superseded by a re-run over a late frame keeps its values
+// and gets the wall-clock time of the re-run (kept for audit, never deleted); late frames wait in
+// late_frames until a re-run applies them (written in the transaction that archives them, so a
+// restart still re-runs); window_checkpoints holds the session checkpoints re-runs start from.
+constexpr absl::string_view kSchemaV6 = R"sql(
+ALTER TABLE coefficients ADD COLUMN revised_time_unix_ns INTEGER;
+ALTER TABLE alerts ADD COLUMN revised_time_unix_ns INTEGER;
+CREATE TABLE late_frames (
+  spacecraft_id            TEXT    NOT NULL,
+  measurement_time_unix_ns INTEGER NOT NULL,
+  PRIMARY KEY (spacecraft_id, measurement_time_unix_ns)
+) WITHOUT ROWID;
+CREATE TABLE window_checkpoints (
+  spacecraft_id            TEXT    NOT NULL,
+  applied_time_unix_ns     INTEGER NOT NULL,
+  compute_time_unix_ns     INTEGER NOT NULL,
+  state_blob               BLOB    NOT NULL,
+  PRIMARY KEY (spacecraft_id, applied_time_unix_ns)
+);
+)sql";
+
 // kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4, kSchemaV5};
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3,
+                                             kSchemaV4, kSchemaV5, kSchemaV6};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -10,7 +10,12 @@
 //      spacecraft; frames stored before belong to station "default".
 //   4  alerts.cleared_time_unix_ns (NULL: not cleared, or cleared before version 4).
 //   5  diagnoses.frames (frames diagnosed; diagnoses stored before get the count of the archived
-//      frames in their span).                                        <- kCurrentSchemaVersion
+//      frames in their span).
+//   6  the reorder window (docs/service.md "Several ground stations"): coefficients and alerts
+//      carry revised_time_unix_ns (NULL: current; else the wall-clock time a re-run over a
+//      late frame superseded the row); late_frames (late frames archived but not yet applied by
+//      a re-run); window_checkpoints (periodic session checkpoints the re-runs start from).
+//                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
 // intact. A migration's DDL is frozen once released: change the schema only by appending a
@@ -36,7 +41,7 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 5;
+inline constexpr int kCurrentSchemaVersion = 6;
 
 // PRAGMA user_version of the open database.
 absl::StatusOr<int> SchemaVersion(Database& db);

@@ -47,7 +47,8 @@ absl::StatusOr<AlertCounts> CountAlerts(Database& db, absl::string_view spacecra
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare("SELECT COALESCE(SUM(cleared = 0), 0), "
                                                "COALESCE(SUM(acknowledged = 0), 0) FROM alerts "
-                                               "WHERE spacecraft_id = ?1"));
+                                               "WHERE spacecraft_id = ?1 "
+                                               "AND revised_time_unix_ns IS NULL"));
   st->BindText(1, spacecraft_id);
   ASSIGN_OR_RETURN(bool row, st->Step());
   AlertCounts counts;

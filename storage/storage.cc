@@ -34,7 +34,8 @@ Storage::Storage(std::unique_ptr<Database> db)
       coefficients_(db_.get()),
       alerts_(db_.get()),
       sessions_(db_.get()),
-      diagnoses_(db_.get()) {}
+      diagnoses_(db_.get()),
+      reorder_(db_.get()) {}
 
 absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
                                                        const DatabaseOptions& options) {
@@ -43,7 +44,9 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
   return std::unique_ptr<Storage>(new Storage(std::move(db)));
 }
 
-absl::Status Storage::ArchiveFrames(const std::vector<ArchivedFrame>& frames) {
+absl::Status Storage::ArchiveFrames(
+    const std::vector<ArchivedFrame>& frames,
+    const std::map<std::string, std::vector<absl::Time>>& late_frames) {
   // Per spacecraft, in input order; a frame's place in `frames` names it in errors.
   std::map<std::string, std::vector<ArchivedFrame>> by_spacecraft;
   for (size_t i = 0; i < frames.size(); ++i) {
@@ -61,6 +64,9 @@ absl::Status Storage::ArchiveFrames(const std::vector<ArchivedFrame>& frames) {
           " frames are already archived (first sequence ", appended.duplicate_sequences.front(),
           "); nothing of this commit is stored"));
     }
+  }
+  for (const auto& [id, times] : late_frames) {
+    RETURN_IF_ERROR(reorder_.AddLateFrames(txn, id, times));
   }
   return txn.Commit();
 }
@@ -83,6 +89,14 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
                                     absl::StrCat("repeats[", i, "]")));
   }
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  if (effects.revision.has_value()) {
+    const FilterEffects::Revision& r = *effects.revision;
+    RETURN_IF_ERROR(InBatch(
+        reorder_.Revise(txn, id, r.after, r.revised_time, r.alerts, r.restores).status(),
+        "revision"));
+    RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(
+        txn, id, r.after == absl::InfinitePast() ? r.after : r.after + absl::Nanoseconds(1)));
+  }
   for (size_t i = 0; i < effects.coefficients.size(); ++i) {
     RETURN_IF_ERROR(InBatch(coefficients_.Append(txn, effects.coefficients[i]),
                             absl::StrCat("coefficients[", i, "]")));
@@ -103,9 +117,17 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
         InBatch(alerts_.Clear(txn, id, effects.clears[i].sequence, effects.clears[i].time),
                 absl::StrCat("clears[", i, "]")));
   }
+  RETURN_IF_ERROR(reorder_.RemoveLateFrames(txn, id, effects.late_frames_done));
   const CheckpointRecord checkpoint = effects.checkpoint(sequences);
   RETURN_IF_ERROR(CheckSpacecraft(checkpoint.spacecraft_id, id, "checkpoint"));
   RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, checkpoint));
+  if (effects.window_checkpoint.has_value()) {
+    RETURN_IF_ERROR(InBatch(reorder_.PutCheckpoint(txn, id, *effects.window_checkpoint),
+                            "window_checkpoint"));
+  }
+  if (effects.prune_before != absl::InfinitePast()) {
+    RETURN_IF_ERROR(reorder_.Prune(txn, id, effects.prune_before));
+  }
   RETURN_IF_ERROR(txn.Commit());
   return sequences;
 }
@@ -122,6 +144,10 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
   RETURN_IF_ERROR(InBatch(configs_.Put(txn, change.config).status(), "config"));
   RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, change.checkpoint));
+  if (change.new_session) {
+    RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(txn, id, absl::InfinitePast()));
+    RETURN_IF_ERROR(reorder_.DropLateFrames(txn, id));
+  }
   std::vector<int64_t> sequences;
   for (size_t i = 0; i < change.new_alerts.size(); ++i) {
     absl::StatusOr<int64_t> sequence = alerts_.Append(txn, change.new_alerts[i]);

@@ -7,6 +7,8 @@
 //   CommitFilterEffects  one filter job of a spacecraft: its coefficient estimates, new alerts,
 //                        repeats, clears and the checkpoint that carries the apply cursor, so
 //                        a restart (checkpoint + archive after its cursor) applies no frame twice;
+//                        with a re-run over late frames, also the revision of what it supersedes
+//                        and the reorder window's bookkeeping (reorder_store.h);
 //   CommitConfiguration  a configuration with the fresh checkpoint of its session (and the
 //                        clearing of a quarantine alert it ends).
 // Each is ONE IMMEDIATE transaction: on any error none of it is visible.
@@ -15,6 +17,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -28,6 +31,7 @@
 #include "storage/config_store.h"
 #include "storage/diagnosis_store.h"
 #include "storage/records.h"
+#include "storage/reorder_store.h"
 #include "storage/session_store.h"
 #include "storage/sqlite_db.h"
 #include "storage/telemetry_archive.h"
@@ -48,6 +52,23 @@ struct FilterEffects {
   std::vector<AlertRecord> new_alerts;  // sequences are assigned, in this order
   std::vector<AlertRepeat> repeats;     // repeats collapsed into stored alerts
   std::vector<AlertClear> clears;       // stored alerts to clear
+  // A re-run from a window checkpoint (docs/service.md "Several ground stations"): before the
+  // records above are written, the current estimates measured after `after` and the alerts
+  // `alerts` are marked revised at `revised_time`, the alerts of `restores` set back to their
+  // checkpointed state, and the window checkpoints after `after` dropped.
+  struct Revision {
+    absl::Time after = absl::InfinitePast();  // InfinitePast: from a fresh session
+    absl::Time revised_time;
+    std::vector<int64_t> alerts;
+    std::vector<AlertRestore> restores;
+  };
+  std::optional<Revision> revision;
+  // Late frames (measurement times) this job accounted for: forgotten by the transaction.
+  std::vector<absl::Time> late_frames_done;
+  // A window checkpoint to keep, and then the ones older than the latest before
+  // `prune_before` to drop (InfinitePast: no pruning).
+  std::optional<WindowCheckpoint> window_checkpoint;
+  absl::Time prune_before = absl::InfinitePast();
   // The checkpoint, built inside the transaction from the sequences assigned to new_alerts
   // (same order): it carries the live alert tracks with their sequences. Required.
   std::function<CheckpointRecord(const std::vector<int64_t>& alert_sequences)> checkpoint;
@@ -59,6 +80,9 @@ struct ConfigurationChange {
   CheckpointRecord checkpoint;          // the new session's, same spacecraft
   std::vector<AlertRecord> new_alerts;  // e.g. a quarantine alert stored raised and cleared
   std::vector<AlertClear> clears;       // e.g. the quarantine alert the configuration ends
+  // The new session replaces the old: its window checkpoints and late frames are dropped (the
+  // new session applies the whole archive in time order).
+  bool new_session = false;
 };
 
 // Thread-safe: any number of threads may call any method (serialized per Storage through its
@@ -84,8 +108,12 @@ class Storage {
   // (naming "frames[i]") for a frame the archive rejects. Storage faults (sqlite_db.h table):
   // ResourceExhausted when the disk is full, Unavailable when a write or the fsync fails;
   // nothing is visible then, and the next call succeeds as soon as the cause is gone. OK: all
-  // of it is durable (with Synchronous::kFull, across power loss).
-  absl::Status ArchiveFrames(const std::vector<ArchivedFrame>& frames);
+  // of it is durable (with Synchronous::kFull, across power loss). `late_frames` (spacecraft ->
+  // measurement times of frames of this batch measured before one already accepted) are
+  // recorded as late (ReorderStore) in the same transaction.
+  absl::Status ArchiveFrames(
+      const std::vector<ArchivedFrame>& frames,
+      const std::map<std::string, std::vector<absl::Time>>& late_frames = {});
 
   // Writes a filter job's effects and its checkpoint in one transaction; returns the sequences
   // assigned to effects.new_alerts, in order. InvalidArgument naming the record
@@ -106,6 +134,7 @@ class Storage {
   AlertStore& alerts() { return alerts_; }
   SessionStore& sessions() { return sessions_; }
   DiagnosisStore& diagnoses() { return diagnoses_; }
+  ReorderStore& reorder() { return reorder_; }
 
  private:
   explicit Storage(std::unique_ptr<Database> db);
@@ -117,6 +146,7 @@ class Storage {
   AlertStore alerts_;
   SessionStore sessions_;
   DiagnosisStore diagnoses_;
+  ReorderStore reorder_;
 };
 
 }  // namespace esg::storage

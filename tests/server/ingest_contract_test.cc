@@ -41,39 +41,46 @@ std::vector<storage::ArchivedFrame> Archived(LoopbackServer& server, const std::
   return frames.ok() ? *frames : std::vector<storage::ArchivedFrame>{};
 }
 
-TEST(IngestContract, LateFrameNeverSentIsRefusedOutOfRangeAndNotAckedAsDuplicate) {
+TEST(IngestContract, LateFrameNeverSentIsAcceptedWithinTheReorderWindowAndStoredOnce) {
   LoopbackServer server;
   auto stub = server.Stub();
   const SimulatedRun& run = Run2h();
   Configure(*stub, run.config);
-  // Frames 1-5 and 10, then 7 (never sent before).
+  // Frames 1-5 and 10, then 7 (never sent before; 3 min late, within the 2 h window): the
+  // station's sequence 7 is below its highest (10) but was never used, so it is a new frame.
   std::vector<esg::v1::TelemetryFrame> frames(run.frames.begin(), run.frames.begin() + 5);
   frames.push_back(run.frames[9]);
   frames.push_back(run.frames[6]);
   auto result = StreamFrames(*stub, frames);
   ASSERT_TRUE(result.status.ok()) << result.status.error_message();
   ASSERT_EQ(result.acks.size(), 7u);
-  for (int i = 0; i < 6; ++i) EXPECT_TRUE(result.acks[i].accepted()) << i;
+  for (int i = 0; i < 7; ++i) EXPECT_TRUE(result.acks[i].accepted()) << i;
   const esg::v1::TelemetryAck& late = result.acks[6];
-  EXPECT_FALSE(late.accepted());
   EXPECT_FALSE(late.duplicate());
-  EXPECT_EQ(late.rejection().code(), grpc::StatusCode::OUT_OF_RANGE);
-  EXPECT_EQ(late.rejection().field(), "sequence");
-  EXPECT_THAT(late.rejection().reason(), HasSubstr("never stored"));
   EXPECT_EQ(late.highest_durable_sequence(), 10);
-  // Exactly the six acknowledged frames are archived.
   const std::vector<storage::ArchivedFrame> archived = Archived(server, run.config.spacecraft_id);
-  ASSERT_EQ(archived.size(), 6u);
-  for (const storage::ArchivedFrame& a : archived) EXPECT_NE(a.sequence, 7);
-  // A late frame under a new identity (another station) is refused by its time.
+  ASSERT_EQ(archived.size(), 7u);
+  // The same measurement relayed late by another station: a duplicate, stored once.
   esg::v1::TelemetryFrame other = run.frames[6];
   other.set_station_id("GS-2");
   other.set_sequence(1);
   auto second = StreamFrames(*stub, {other});
   ASSERT_EQ(second.acks.size(), 1u);
-  EXPECT_EQ(second.acks[0].rejection().code(), grpc::StatusCode::OUT_OF_RANGE);
-  EXPECT_EQ(second.acks[0].rejection().field(), "time");
-  EXPECT_THAT(second.acks[0].rejection().reason(), HasSubstr("last accepted frame"));
+  EXPECT_TRUE(second.acks[0].accepted());
+  EXPECT_TRUE(second.acks[0].duplicate());
+  EXPECT_EQ(Archived(server, run.config.spacecraft_id).size(), 7u);
+  // Applied in time order: the filter ends where an offline run over frames 1-5, 7 and 10 does.
+  ASSERT_TRUE(server.core().WaitApplied(run.config.spacecraft_id, absl::Seconds(30)).ok());
+  std::vector<esg::v1::TelemetryFrame> in_order(run.frames.begin(), run.frames.begin() + 5);
+  in_order.push_back(run.frames[6]);
+  in_order.push_back(run.frames[9]);
+  auto record = server.core().storage().sessions().GetCheckpoint(run.config.spacecraft_id);
+  ASSERT_TRUE(record.ok());
+  auto checkpoint = DecodeCheckpoint(record->state_blob);
+  ASSERT_TRUE(checkpoint.ok() && checkpoint->session.has_value());
+  const std::vector<double> offline = OfflineSessionValues(run.config, "10+11", in_order);
+  EXPECT_EQ(checkpoint->frames_applied, 7);
+  EXPECT_EQ(checkpoint->session->values, offline);
 }
 
 TEST(IngestContract, ExactDuplicateIsAcknowledgedAsDuplicateAndStoredOnce) {

@@ -4,7 +4,9 @@
 #ifndef ESG_TESTS_SERVER_SERVER_TEST_UTIL_H_
 #define ESG_TESTS_SERVER_SERVER_TEST_UTIL_H_
 
+#include <algorithm>
 #include <memory>
+#include <utility>
 #include <string>
 #include <thread>
 #include <vector>
@@ -18,6 +20,7 @@
 #include "proto/convert.h"
 #include "server/checkpoint_codec.h"
 #include "server/server.h"
+#include "storage/coefficient_store.h"
 #include "storage/storage.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/temp_dir.h"
@@ -155,6 +158,46 @@ inline std::vector<double> OfflineSessionValues(const estimator::SpacecraftConfi
     EXPECT_TRUE(session->AddFrame(*frame).ok());
   }
   return session->ExportCheckpoint().values;
+}
+
+// One coefficient estimate of an offline run: after a measurement step, per gyro.
+struct OfflineSnapshot {
+  absl::Time time;
+  int gyro_id = 0;
+  std::vector<double> values;  // storage::ToCoefficientValues layout, SI
+};
+
+// The coefficient history an uninterrupted offline run of `frames` (in the order given) under
+// `model` produces: what the service stores at each measurement step.
+inline std::vector<OfflineSnapshot> OfflineCoefficientHistory(
+    const estimator::SpacecraftConfig& config, const std::string& model,
+    const std::vector<esg::v1::TelemetryFrame>& frames) {
+  auto spec = estimator::ParseModel(model);
+  EXPECT_TRUE(spec.ok()) << spec.status();
+  auto session = estimator::EstimationSession::Create(config, estimator::SessionOptions{*spec});
+  EXPECT_TRUE(session.ok()) << session.status();
+  std::vector<OfflineSnapshot> out;
+  for (const esg::v1::TelemetryFrame& proto : frames) {
+    auto frame = proto_convert::FrameFromProto(proto);
+    EXPECT_TRUE(frame.ok()) << frame.status();
+    auto report = session->AddFrame(*frame);
+    EXPECT_TRUE(report.ok()) << report.status();
+    if (!report.ok() || !report->measurement_step) continue;
+    for (const estimator::GyroEstimate& g : session->Gyros()) {
+      out.push_back({frame->time, g.id, storage::ToCoefficientValues(g.coefficients,
+                                                                     g.misalignment_b)});
+    }
+  }
+  return out;
+}
+
+// The frames sorted by measurement time (the merged recording of several stations).
+inline std::vector<esg::v1::TelemetryFrame> InTimeOrder(std::vector<esg::v1::TelemetryFrame> f) {
+  std::stable_sort(f.begin(), f.end(), [](const auto& a, const auto& b) {
+    return std::make_pair(a.time().seconds(), a.time().nanos()) <
+           std::make_pair(b.time().seconds(), b.time().nanos());
+  });
+  return f;
 }
 
 // The session values of the checkpoint stored for `spacecraft_id` in the database at `db`

@@ -139,6 +139,7 @@ TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
       "model_name"};
   for (absl::string_view c : kCoefficientColumns) expected.emplace_back(c);
   for (absl::string_view c : kCoefficientSigmaColumns) expected.emplace_back(c);
+  expected.emplace_back("revised_time_unix_ns");  // version 6: the reorder window's revisions
   EXPECT_THAT(Columns(**db, "coefficients"), ElementsAreArray(expected));
   // Spot-check the documented names (records.h) so a reordering cannot pass silently.
   EXPECT_EQ(kCoefficientColumns[kCoefficientK0], "k0_deg_h");
