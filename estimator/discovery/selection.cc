@@ -4,6 +4,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -499,6 +500,16 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   // top of the time behaviour (the nested comparison of PreferRandomWalk, same currency); the
   // time behaviour is tested again in the next round.
   std::string basis_note;
+  // The comparison of a per-gyro time behaviour with a drift that returns to its mean (wander.h),
+  // computed once when needed.
+  std::optional<DriftBehaviourEvidence> behaviour;
+  auto behaviour_of = [&](int gyro) -> absl::Status {
+    if (behaviour.has_value()) return absl::OkStatus();
+    auto e = CompareDriftBehavioursOf(selected, context, gyro);
+    if (!e.ok()) return e.status();
+    behaviour = *e;
+    return absl::OkStatus();
+  };
   if (!significant.empty() && options.open_ended) {
     const CandidateFit& top = fits[significant.front().index];
     if (top.candidate.effect == Effect::kRandomWalkDrift ||
@@ -534,7 +545,30 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
               "with %s",
               hb.deviance, ht.deviance, CandidateName(top.candidate));
         }
-        if (gain > basis->refit_threshold && predicts) {
+        // Deterministic terms for a gyro whose drift returns to its mean must describe its
+        // deviation better than that stationary drift, in the reduced regression's currency.
+        bool describes = true;
+        if (gain > basis->refit_threshold && predicts && top.candidate.gyro > 0) {
+          double basis_evidence = 0.0;
+          bool in_gyro = false;
+          for (const SelectedGroup& g : basis->stage.selected) {
+            if (g.gyro != top.candidate.gyro) continue;
+            basis_evidence += g.evidence;
+            in_gyro = true;
+          }
+          if (in_gyro) {
+            if (absl::Status st = behaviour_of(top.candidate.gyro); !st.ok()) return st;
+            if (behaviour->stationary > basis_evidence) {
+              describes = false;
+              absl::StrAppend(&held_note, absl::StrFormat(
+                  "; the basis's terms for gyro %d (2 ln B = %.1f in the reduced regression) "
+                  "describe its deviation less well than a drift that returns to its mean "
+                  "(2 ln B = %.1f)",
+                  top.candidate.gyro, basis_evidence, behaviour->stationary));
+            }
+          }
+        }
+        if (gain > basis->refit_threshold && predicts && describes) {
           for (const Scored& x : scored) result.rows.push_back(Row(x, fits[x.index], round, -1));
           for (Finding& f : basis->findings) {
             f.evidence.notes.push_back(absl::StrCat(
@@ -559,9 +593,9 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
           return result;
         }
         basis_note = absl::StrCat(versus, held_note,
-                                  predicts ? ": the time behaviour is kept"
-                                           : ": the basis's terms do not predict the held-out "
-                                             "spans as well, the time behaviour is kept");
+                                  !predicts ? ": the basis's terms do not predict the "
+                                              "held-out spans as well, the time behaviour is kept"
+                                            : ": the time behaviour is kept");
       }
     }
   }
@@ -576,8 +610,8 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   if (!significant.empty()) {
     const Candidate& c = fits[significant.front().index].candidate;
     if (c.gyro > 0 && (c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift)) {
-      auto e = CompareDriftBehavioursOf(selected, context, c.gyro);
-      if (!e.ok()) return e.status();
+      if (absl::Status st = behaviour_of(c.gyro); !st.ok()) return st;
+      const DriftBehaviourEvidence* e = &*behaviour;
       const double other = std::max(e->step, e->walk);
       if (e->stationary > other + kDecisiveDeviance &&
           e->stationary > EvidenceThreshold(options.alpha, 1)) {
