@@ -15,6 +15,22 @@ int64_t NanosOrMin(absl::Time t) {
   return t == absl::InfinitePast() ? std::numeric_limits<int64_t>::min() : TimeToUnixNanos(t);
 }
 
+// The instants (column 0, Unix ns) `sql` selects for the spacecraft bound to ?1, in one read
+// transaction.
+absl::StatusOr<std::vector<absl::Time>> Times(Database* db, const char* sql,
+                                              absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Transaction txn, db->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(sql));
+  st->BindText(1, spacecraft_id);
+  std::vector<absl::Time> out;
+  for (;;) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    out.push_back(UnixNanosToTime(st->ColumnInt64(0)));
+  }
+  return out;
+}
+
 }  // namespace
 
 absl::Status ReorderStore::AddLateFrames(Transaction& txn, absl::string_view spacecraft_id,
@@ -33,18 +49,10 @@ absl::Status ReorderStore::AddLateFrames(Transaction& txn, absl::string_view spa
 }
 
 absl::StatusOr<std::vector<absl::Time>> ReorderStore::LateFrames(absl::string_view spacecraft_id) {
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("SELECT measurement_time_unix_ns FROM late_frames "
-                               "WHERE spacecraft_id = ?1 ORDER BY measurement_time_unix_ns"));
-  st->BindText(1, spacecraft_id);
-  std::vector<absl::Time> out;
-  for (;;) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(UnixNanosToTime(st->ColumnInt64(0)));
-  }
-  return out;
+  return Times(db_,
+               "SELECT measurement_time_unix_ns FROM late_frames WHERE spacecraft_id = ?1 "
+               "ORDER BY measurement_time_unix_ns",
+               spacecraft_id);
 }
 
 absl::Status ReorderStore::RemoveLateFrames(Transaction& txn, absl::string_view spacecraft_id,
@@ -101,18 +109,10 @@ absl::StatusOr<std::optional<WindowCheckpoint>> ReorderStore::CheckpointBefore(
 
 absl::StatusOr<std::vector<absl::Time>> ReorderStore::CheckpointTimes(
     absl::string_view spacecraft_id) {
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("SELECT applied_time_unix_ns FROM window_checkpoints "
-                               "WHERE spacecraft_id = ?1 ORDER BY applied_time_unix_ns"));
-  st->BindText(1, spacecraft_id);
-  std::vector<absl::Time> out;
-  for (;;) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(UnixNanosToTime(st->ColumnInt64(0)));
-  }
-  return out;
+  return Times(db_,
+               "SELECT applied_time_unix_ns FROM window_checkpoints WHERE spacecraft_id = ?1 "
+               "ORDER BY applied_time_unix_ns",
+               spacecraft_id);
 }
 
 absl::Status ReorderStore::DropCheckpointsFrom(Transaction& txn, absl::string_view spacecraft_id,
