@@ -124,20 +124,26 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       from_archive = false;
     }
   }
+  // A read of the store failed before anything was applied: logged, the service alerts this
+  // job took handed back, and the job retried after a pause.
+  auto RetryAfterReadError = [&](const std::string& message) {
+    LogEvent("ERROR", "storage_error", message, {{"spacecraftId", sc->id}});
+    {
+      absl::MutexLock lock(&sc->state_mu);
+      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
+                                service_alerts.end());
+    }
+    absl::SleepFor(absl::Milliseconds(200));
+    return true;
+  };
   const bool filter_runs = setup != nullptr && session.has_value() && !apply.FilterStopped();
   std::optional<Rerun> rerun;
   if (filter_runs && rerun_from.has_value()) {
     absl::StatusOr<Rerun> started = StartRerun(sc->id, *setup, *rerun_from, &session, &apply);
     if (!started.ok()) {
-      LogEvent("ERROR", "storage_error",
-               absl::StrCat(sc->id, ": cannot start the re-run over late frames: ",
-                            started.status().ToString()),
-               {{"spacecraftId", sc->id}});
-      absl::MutexLock lock(&sc->state_mu);
-      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
-                                service_alerts.end());
-      absl::SleepFor(absl::Milliseconds(200));
-      return true;
+      return RetryAfterReadError(
+          absl::StrCat(sc->id, ": cannot start the re-run over late frames: ",
+                       started.status().ToString()));
     }
     rerun = std::move(*started);
     frames.clear();
@@ -148,14 +154,8 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
         storage_->archive().ReadAfter(sc->id, apply.applied_time, options_.max_frames_per_job);
     if (!archived.ok()) {
-      LogEvent("ERROR", "storage_error",
-               absl::StrCat(sc->id, ": archive read failed: ", archived.status().ToString()),
-               {{"spacecraftId", sc->id}});
-      absl::MutexLock lock(&sc->state_mu);
-      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
-                                service_alerts.end());
-      absl::SleepFor(absl::Milliseconds(200));
-      return true;
+      return RetryAfterReadError(
+          absl::StrCat(sc->id, ": archive read failed: ", archived.status().ToString()));
     }
     if (archived->empty()) {
       absl::MutexLock lock(&sc->state_mu);
