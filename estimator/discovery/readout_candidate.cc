@@ -39,16 +39,18 @@ absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& c
     if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
   }
   // Gauss-Newton: the deviation is linear in E about the model it is measured from; a few
-  // iterations, each regressing the deviation of the model with the E so far, until the step is
-  // within the estimate's 1-sigma.
+  // iterations, each regressing the deviation of the model with the E so far, while the step is
+  // significant (below).
   const ModelRun* from_run = ctx.model_run;
   const ModelState* from = &model;
+  // E changes the gyro's readings, not the star-tracker correction: one corrected copy serves
+  // every regression and run.
+  const std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, model.correction);
   Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
   ReadoutFit readout;
   double first_evidence = 0.0;
   for (int iteration = 0; iteration < kReadoutIterations; ++iteration) {
-    const std::vector<TelemetryFrame> corrected =
-        CorrectStarTracker(*ctx.frames, *ctx.rates, from->correction);
     auto series = MeasureDeviations(from->config, from_run->gyros, corrected, *ctx.rates,
                                     *from_run, {candidate.gyro});
     if (!series.ok()) return series.status();
@@ -59,8 +61,7 @@ absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& c
     const Eigen::Matrix3d step = ReadoutDistortion(readout.group);
     E += step;
     gc->readout_distortion += step;
-    auto run = RunModel(fit.model.config, fit.model.options,
-                        CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction));
+    auto run = RunModel(fit.model.config, fit.model.options, corrected);
     ++fit.runs;
     if (!run.ok()) return run.status();
     fit.run = std::move(*run);
