@@ -166,6 +166,17 @@ std::vector<Parameter> ReadoutParameters(const SelectedGroup& group) {
   return out;
 }
 
+OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOptions& opt) {
+  OpenEndedOptions o;
+  o.alpha = opt.alpha;
+  o.drift_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  o.readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+  for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
+    if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
+  }
+  return o;
+}
+
 ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage) {
   ModelState out = model;
   for (const auto& [gyro, term] : stage.added_terms) {
@@ -191,15 +202,10 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   auto series = MeasureDeviations(model.config, selected.run.gyros, corrected, context.rates(),
                                   selected.run, gyros);
   if (!series.ok()) return series.status();
+  out.options = ModelOpenEndedOptions(model, opt);
   OpenEndedOptions& o = out.options;
-  o.alpha = opt.alpha;
-  o.drift_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
-  o.readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
   o.orbital_period_s = OrbitalPeriod(context.regimes());
   o.epoch = context.frames().front().time;
-  for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
-    if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
-  }
   for (const GyroConfig& g : model.config.gyros) {
     o.column_budget.emplace_back(
         g.id, std::max(0, kMaxBasisTermsPerGyro - static_cast<int>(g.basis_terms.size())));

@@ -46,6 +46,10 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
                                                DiagnosisContext& context,
                                                const std::vector<int>& gyros, int round);
 
+// The open-ended options the diagnosis's options and `model` give: alpha, the drift and readout
+// priors, and the drift steps the model holds (nuisance groups).
+OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOptions& opt);
+
 // A readout group's distortion as the report's parameters: the six entries of the traceless E
 // (basis[readout E_xx] .. basis[readout E_zx]) with their 1-sigma, in ppm.
 std::vector<Parameter> ReadoutParameters(const SelectedGroup& group);

@@ -10,7 +10,6 @@
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/open_ended.h"
 #include "estimator/discovery/statistics.h"
-#include "estimator/units.h"
 
 namespace esg::estimator::discovery {
 
@@ -32,12 +31,7 @@ absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& c
         absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
   }
   const ModelState& model = *ctx.model;
-  OpenEndedOptions o;
-  o.alpha = opt.alpha;
-  o.readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
-  for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
-    if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
-  }
+  const OpenEndedOptions o = ModelOpenEndedOptions(model, opt);
   // Gauss-Newton: the deviation is linear in E about the model it is measured from; a few
   // iterations, each regressing the deviation of the model with the E so far, while the step is
   // significant (below).
