@@ -9,12 +9,26 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev
   libcli11-dev nlohmann-json3-dev libfmt-dev libcpp-httplib-dev
   libssl-dev openssl gnuplot-nox
+  chromium fonts-liberation
 )
+# The console's npm packages (console/package-lock.json, from the npm registry; Node 20 is on the
+# machine): installed again only when the lock file changed since the last install.
+install_console() {
+  if ! command -v npm >/dev/null 2>&1; then
+    echo "install-deps: npm (Node 20) not found: the console (console/) cannot be installed" >&2
+    exit 1
+  fi
+  local stamp=console/node_modules/.package-lock.json
+  if [ ! -f "$stamp" ] || [ console/package-lock.json -nt "$stamp" ]; then
+    (cd console && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+}
 missing=()
 for p in "${packages[@]}"; do
   dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p")
 done
 if [ ${#missing[@]} -eq 0 ]; then
+  install_console
   exit 0
 fi
 SUDO=""
@@ -22,3 +36,4 @@ if [ "$(id -u)" -ne 0 ] && command -v sudo >/dev/null 2>&1; then SUDO=sudo; fi
 echo "installing: ${missing[*]}" >&2
 $SUDO apt-get update -qq
 DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+install_console
