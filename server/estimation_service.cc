@@ -731,13 +731,20 @@ grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts
 grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
     grpc::CallbackServerContext* context, const esg::v1::AcknowledgeRequest* request,
     esg::v1::Alert* response) {
+  // With a tokens file an empty operator_name means the caller's own token name, so a console
+  // that signs each operator in with their token acknowledges under that operator's name.
+  absl::StatusOr<std::string> token_name =
+      auth_ != nullptr ? auth_->Authenticate(*context, Role::kWrite) : std::string();
+  esg::v1::AcknowledgeRequest named = *request;
+  if (token_name.ok() && named.operator_name().empty()) named.set_operator_name(*token_name);
   return Unary(
-      &calls_, Authorize(context, Role::kWrite), response, [&]() -> absl::StatusOr<esg::v1::Alert> {
-        absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(*request);
+      &calls_, token_name.status(), response,
+      [this, named = std::move(named)]() -> absl::StatusOr<esg::v1::Alert> {
+        absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(named);
         if (!alert.ok()) return alert.status();
         // The store keeps the first acknowledgement; another operator's is refused so
         // that it is never silently dropped (the same operator again is idempotent).
-        if (alert->acknowledged_by() != request->operator_name()) {
+        if (alert->acknowledged_by() != named.operator_name()) {
           absl::Status refused = absl::FailedPreconditionError(
               absl::StrCat("operator_name: alert ", alert->sequence(), " of spacecraft '",
                            alert->spacecraft_id(), "' was already acknowledged by '",
@@ -746,11 +753,11 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
                                          .value_or(absl::InfinitePast())),
                            "; the first acknowledgement stands"));
           LogEvent("WARN", "alert_acknowledgement_refused",
-                   absl::StrCat("acknowledgement by '", request->operator_name(),
+                   absl::StrCat("acknowledgement by '", named.operator_name(),
                                 "' refused: ", refused.message()),
-                   {{"spacecraftId", request->spacecraft_id()},
-                    {"alertSequence", request->sequence()},
-                    {"operator", request->operator_name()}});
+                   {{"spacecraftId", named.spacecraft_id()},
+                    {"alertSequence", named.sequence()},
+                    {"operator", named.operator_name()}});
           return refused;
         }
         return alert;

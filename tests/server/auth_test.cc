@@ -304,6 +304,59 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
             grpc::StatusCode::PERMISSION_DENIED);
 }
 
+// A console signs each operator in with their own token and acknowledges without a name: the
+// alert is acknowledged under the token's name. Another operator's token (or a different name
+// given explicitly) is refused by the first-acknowledgement rule.
+TEST(Auth, AcknowledgementWithoutANameTakesTheCallersTokenName) {
+  TempDir dir;
+  WriteTokens(dir.File("tokens"),
+              "alice-Tk3vR8zQ read,write alice\nbob-Wq9xL2mP read,write bob\n"
+              "view-Jd5nC1kS read viewer\n");
+  ServerOptions options;
+  options.tokens_file = dir.File("tokens");
+  LoopbackServer server(options);
+  auto stub = server.Stub();
+  {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", "Bearer alice-Tk3vR8zQ");
+    esg::v1::ConfigureResponse r;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(
+                        &ctx, ConfigureRequestFor(::esg::testing::ServerTestConfig("AUTH-ACK")), &r)
+                    .ok());
+  }
+  storage::AlertRecord record;
+  record.spacecraft_id = "AUTH-ACK";
+  record.severity = "WARNING";
+  record.reason = "INNOVATION_TEST";
+  record.subsystem = "star_tracker";
+  record.message = "a stored alert to acknowledge";
+  absl::StatusOr<int64_t> sequence = server.core().storage().alerts().Append(record);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+
+  auto acknowledge = [&](const std::string& token, const std::string& name, esg::v1::Alert* out) {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", "Bearer " + token);
+    esg::v1::AcknowledgeRequest request;
+    request.set_spacecraft_id("AUTH-ACK");
+    request.set_sequence(*sequence);
+    request.set_operator_name(name);
+    return stub->AcknowledgeAlert(&ctx, request, out);
+  };
+  esg::v1::Alert alert;
+  EXPECT_EQ(acknowledge("view-Jd5nC1kS", "", &alert).error_code(),
+            grpc::StatusCode::PERMISSION_DENIED);
+  ASSERT_TRUE(acknowledge("alice-Tk3vR8zQ", "", &alert).ok());
+  EXPECT_EQ(alert.acknowledged_by(), "alice");
+  // Alice again (by token or by her name): unchanged; Bob's token: refused naming alice.
+  EXPECT_TRUE(acknowledge("alice-Tk3vR8zQ", "alice", &alert).ok());
+  const grpc::Status by_bob = acknowledge("bob-Wq9xL2mP", "", &alert);
+  EXPECT_EQ(by_bob.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_THAT(by_bob.error_message(), HasSubstr("already acknowledged by 'alice'"));
+  auto stored = server.core().storage().alerts().Get("AUTH-ACK", *sequence);
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  EXPECT_EQ(stored->acknowledged_by, "alice");
+}
+
 TEST(Auth, RefusedCallIsLoggedWithThePeerAndTheCallerName) {
   TempDir dir;
   WriteTokens(dir.File("tokens"), "dash-Hk4vR8zQ read dashboard\n");
