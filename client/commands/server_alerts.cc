@@ -1,4 +1,5 @@
-// `esg alerts [--spacecraft ID] [--since T] [--follow] [--ack SEQ] [--operator NAME]`: the alerts
+// `esg alerts [--spacecraft ID] [--since T] [--include-revised] [--follow] [--ack SEQ]
+// [--operator NAME]`: the alerts
 // raised by the fault and innovation tests (eq. (12), (14)) and by rejected telemetry
 // (SubscribeAlerts), and their acknowledgement (AcknowledgeAlert).
 //
@@ -8,7 +9,10 @@
 // --follow prints the stored alerts, then keeps printing alert states as they arrive (one line,
 // or with --format json one JSON object per line, with --format csv a header then one row per
 // alert state) until Ctrl-C.
-// --ack SEQ acknowledges alert SEQ of --spacecraft as --operator (default $USER) and prints it.
+// --include-revised also lists the alerts a re-run over a late frame superseded ("revised at").
+// --ack SEQ acknowledges alert SEQ of --spacecraft as --operator and prints it; without
+// --operator the name is the token's (the service takes it from --token / $ESG_TOKEN), or $USER
+// when no token is given.
 // Exit codes: 0 success (also when stopped by Ctrl-C), 2 bad arguments, 1 server failure.
 #include <atomic>
 #include <chrono>
@@ -41,6 +45,7 @@ constexpr char kVerb[] = "alerts";
 struct AlertsOptions {
   std::string spacecraft_id;
   std::string since;
+  bool include_revised = false;
   bool follow = false;
   std::optional<int64_t> ack;
   std::string operator_name;
@@ -64,6 +69,9 @@ std::string AlertLine(const esg::v1::Alert& a) {
     absl::StrAppend(&line, ", cleared");
     if (a.has_cleared_time()) absl::StrAppend(&line, " at ", FormatUtc(a.cleared_time()));
   }
+  if (a.has_revised_time()) {
+    absl::StrAppend(&line, ", revised at ", FormatUtc(a.revised_time()));
+  }
   if (!a.message().empty()) absl::StrAppend(&line, ": ", a.message());
   return line;
 }
@@ -71,12 +79,17 @@ std::string AlertLine(const esg::v1::Alert& a) {
 int RunAcknowledge(const AlertsOptions& o, const GlobalOptions& global) {
   if (o.spacecraft_id.empty()) return ReportBadArgument(kVerb, "--ack: needs --spacecraft");
   if (*o.ack < 1) return ReportBadArgument(kVerb, absl::StrCat("--ack ", *o.ack, ": must be >= 1"));
+  // With a token the service takes the operator's name from it (an empty name), so the
+  // acknowledgement is in the name of whoever holds the token; --operator still wins.
   std::string name = o.operator_name;
-  if (name.empty()) {
+  if (name.empty() && global.token.empty()) {
     const char* user = std::getenv("USER");
     if (user != nullptr) name = user;
+    if (name.empty()) {
+      return ReportBadArgument(kVerb,
+                               "--operator: required when $USER is not set (or give --token)");
+    }
   }
-  if (name.empty()) return ReportBadArgument(kVerb, "--operator: required when $USER is not set");
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   esg::v1::AcknowledgeRequest request;
@@ -116,6 +129,7 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
   }
   *request.mutable_since() = proto_convert::TimeToProto(since);
   request.set_replay_marker(true);
+  request.set_include_revised(o.include_revised);
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
 
@@ -226,11 +240,14 @@ void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--since", options->since,
                   "stored alerts whose latest occurrence is at or after this RFC 3339 time "
                   "(default: all stored)");
+  cmd->add_flag("--include-revised", options->include_revised,
+                "also the stored alerts a re-run over a late frame superseded (revised_time set)");
   CLI::Option* follow = cmd->add_flag("--follow", options->follow,
                                       "keep printing alerts as they change, until Ctrl-C");
   cmd->add_option("--ack", options->ack, "acknowledge alert SEQ (needs --spacecraft)")
       ->excludes(follow);
-  cmd->add_option("--operator", options->operator_name, "operator name for --ack (default: $USER)");
+  cmd->add_option("--operator", options->operator_name,
+                  "operator name for --ack (default: the token's name with --token, else $USER)");
   AddFormatOption(cmd, &options->format, "with --follow: one JSON object per line");
   cmd->callback([options, &global, exit_code] {
     *exit_code =

@@ -183,6 +183,9 @@ void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code) {
                    "{\"snapshots\": [...]} in the proto JSON mapping")
       ->type_name("csv|json")
       ->capture_default_str();
+  history_cmd->add_flag("--include-revised", history->include_revised,
+                        "also the snapshots a re-run over a late frame superseded (CSV: a last "
+                        "column revised_time_utc)");
   history_cmd->callback(
       [history, &global, exit_code] { *exit_code = RunExportHistory(*history, global); });
 

@@ -1,6 +1,6 @@
 // `esg export` (docs/cli.md): the service's export streams written to a file.
 //   esg export history --spacecraft ID [--gyro N] [--from T] [--to T] [--out FILE]
-//                      [--format csv|json]
+//                      [--format csv|json] [--include-revised]
 //       the stored coefficient history (ExportCoefficientHistory): CSV with the columns of
 //       `esg history --csv`, every value with 17 significant digits (it reads back the same
 //       double), or JSON {"snapshots": [...]} in the proto JSON mapping; stdout without --out.
@@ -33,6 +33,7 @@ struct ExportHistoryOptions {
   std::string to;    // RFC 3339, inclusive; empty: unbounded
   std::string out;   // empty: stdout
   std::string format = "csv";
+  bool include_revised = false;  // also superseded snapshots; CSV gains revised_time_utc
 };
 
 struct ExportTelemetryOptions {

@@ -1,4 +1,5 @@
-// `esg history --spacecraft ID [--gyro N] [--from T] [--to T] [--format table|json|csv]`: the
+// `esg history --spacecraft ID [--gyro N] [--from T] [--to T] [--include-revised]
+// [--format table|json|csv]`: the
 // stored coefficient history of a spacecraft (GetCoefficientHistory, every page followed: a
 // history of any length is read in pages under gRPC's default message limit, docs/service.md
 // "Paging"): per measurement epoch and gyro the estimated
@@ -6,7 +7,9 @@
 // gyro-to-star-tracker misalignment about the body axes [arcsec] with its 1-sigma.
 // Output: a table (k0, C1, C2, mu, nu values and the misalignment), or with --format csv (short
 // form --csv) one row per snapshot with every value and sigma (columns in CsvHeader), or with
-// --format json (--json) the HistoryResponse in the proto JSON mapping.
+// --format json (--json) the HistoryResponse in the proto JSON mapping. --include-revised also
+// returns the snapshots a re-run over a late frame superseded (docs/service.md "Several ground
+// stations"): the table marks them "revised", the CSV gains a last column revised_time_utc.
 // Exit codes: 0 success, 2 bad arguments, 1 server failure.
 // Also `esg export history` (RunExportHistory, server_export.h): the same CSV columns from the
 // ExportCoefficientHistory stream, every value with 17 significant digits.
@@ -36,6 +39,7 @@ struct HistoryOptions {
   int gyro_id = 0;
   std::string from;
   std::string to;
+  bool include_revised = false;
   bool csv = false;  // short form of --format csv
   OutputFormat format = OutputFormat::kTable;
 };
@@ -81,6 +85,13 @@ std::vector<double> TermValues(const esg::v1::GyroDriftModel& m, size_t t) {
 
 double At(const google::protobuf::RepeatedField<double>& v, int i) {
   return i < v.size() ? v[i] : 0.0;
+}
+
+// The last CSV column with --include-revised: when a re-run superseded the snapshot (empty:
+// current).
+constexpr char kRevisedColumn[] = ",revised_time_utc";
+std::string RevisedCell(const esg::v1::CoefficientSnapshot& s) {
+  return absl::StrCat(",", s.has_revised_time() ? FormatUtc(s.revised_time()) : "");
 }
 
 std::string CsvHeader() {
@@ -132,6 +143,7 @@ void PrintTable(const esg::v1::HistoryResponse& history) {
     absl::StrAppend(
         &line, absl::StrFormat("  %+7.1f %+7.1f %+7.1f", At(s.misalignment_arcsec(), 0),
                                At(s.misalignment_arcsec(), 1), At(s.misalignment_arcsec(), 2)));
+    if (s.has_revised_time()) absl::StrAppend(&line, "  revised at ", FormatUtc(s.revised_time()));
     std::printf("%s\n", line.c_str());
   }
   std::printf("%d snapshots (coefficients in deg/h, case frame k; --csv adds every 1-sigma)\n",
@@ -149,6 +161,7 @@ int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
   esg::v1::HistoryRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_gyro_id(o.gyro_id);
+  request.set_include_revised(o.include_revised);
   if (!o.from.empty()) {
     const std::optional<absl::Time> from = ParseUtc(o.from);
     if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
@@ -165,9 +178,9 @@ int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
   if (!history.ok()) return ReportRpcError(kVerb, history.status(), global);
 
   if (format == OutputFormat::kCsv) {
-    std::printf("%s\n", CsvHeader().c_str());
+    std::printf("%s%s\n", CsvHeader().c_str(), o.include_revised ? kRevisedColumn : "");
     for (const esg::v1::CoefficientSnapshot& s : history->snapshots()) {
-      std::printf("%s\n", CsvRow(s).c_str());
+      std::printf("%s%s\n", CsvRow(s).c_str(), o.include_revised ? RevisedCell(s).c_str() : "");
     }
   } else if (format == OutputFormat::kJson) {
     PrintJson(ProtoToJson(*history));
@@ -192,6 +205,7 @@ int RunExportHistory(const ExportHistoryOptions& o, const GlobalOptions& global)
   esg::v1::ExportCoefficientHistoryRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_gyro_id(o.gyro_id);
+  request.set_include_revised(o.include_revised);
   if (!o.from.empty()) {
     const std::optional<absl::Time> from = ParseUtc(o.from);
     if (!from) {
@@ -219,10 +233,12 @@ int RunExportHistory(const ExportHistoryOptions& o, const GlobalOptions& global)
   while (stream->Read(&chunk)) {
     snapshots += chunk.snapshots_size();
     if (csv) {
-      std::string text = header_written ? "" : CsvHeader() + "\n";
+      const std::string revised_column = o.include_revised ? kRevisedColumn : "";
+      std::string text = header_written ? "" : CsvHeader() + revised_column + "\n";
       header_written = true;
       for (const esg::v1::CoefficientSnapshot& s : chunk.snapshots()) {
-        absl::StrAppend(&text, CsvRow(s, /*full=*/true), "\n");
+        absl::StrAppend(&text, CsvRow(s, /*full=*/true), o.include_revised ? RevisedCell(s) : "",
+                        "\n");
       }
       out->Write(text);
     } else {
@@ -233,7 +249,9 @@ int RunExportHistory(const ExportHistoryOptions& o, const GlobalOptions& global)
   }
   const absl::Status status = stream->Finish();
   if (!status.ok()) return ReportRpcError(kExportVerb, status, global);
-  if (csv && !header_written) out->Write(CsvHeader() + "\n");
+  if (csv && !header_written) {
+    out->Write(CsvHeader() + (o.include_revised ? kRevisedColumn : "") + "\n");
+  }
   if (!csv) out->Write(ProtoToJson(all).dump(2) + "\n");
   if (absl::Status closed = out->Commit(); !closed.ok()) {
     std::fprintf(stderr, "esg %s: %s\n", kExportVerb, std::string(closed.message()).c_str());
@@ -254,6 +272,8 @@ void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--gyro", options->gyro_id, "gyro id 1..4 (default 0: all)");
   cmd->add_option("--from", options->from, "first measurement time, RFC 3339 UTC");
   cmd->add_option("--to", options->to, "last measurement time, RFC 3339 UTC");
+  cmd->add_flag("--include-revised", options->include_revised,
+                "also the snapshots a re-run over a late frame superseded (marked revised)");
   AddFormatOption(cmd, &options->format);
   cmd->add_flag("--csv", options->csv,
                 "short form of --format csv: one row per snapshot with every 1-sigma");

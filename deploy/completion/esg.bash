@@ -91,12 +91,12 @@ _esg() {
                   --allow-rejects --wait --wait-timeout $format" ;;
     status) opts="--spacecraft $format" ;;
     predict) opts="--spacecraft --from --to --step --aem --planned $format" ;;
-    alerts) opts="--spacecraft --since --follow --ack --operator $format" ;;
-    history) opts="--spacecraft --gyro --from --to $format --csv" ;;
+    alerts) opts="--spacecraft --since --include-revised --follow --ack --operator $format" ;;
+    history) opts="--spacecraft --gyro --from --to --include-revised $format --csv" ;;
     export)
       case "$sub" in
         "") COMPREPLY=($(compgen -W "history telemetry" -- "$cur")); return ;;
-        history) opts="--spacecraft --gyro --from --to --out --format" ;;
+        history) opts="--spacecraft --gyro --from --to --out --format --include-revised" ;;
         telemetry) opts="--spacecraft --from --to --out" ;;
       esac
       ;;

@@ -288,7 +288,8 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
   r = RunEsg(dir, at + "status");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("RDK-1"));
-  EXPECT_THAT(r.out, HasSubstr("accepted 361, rejected 0, duplicates 0, conflicting 0, applied 361"));
+  EXPECT_THAT(r.out,
+              HasSubstr("accepted 361, rejected 0, duplicates 0, conflicting 0, applied 361"));
 
   // history --csv: one row per snapshot, inside the recording's time span, same column count.
   r = RunEsg(dir, at + "history --spacecraft RDK-1 --csv");
@@ -350,8 +351,7 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
   // recorded readings are used: tests/server/prediction_test.cc).
   r = RunEsg(dir, at + "predict --spacecraft RDK-1 --from " +
                       FormatUtcForTest(recording_->frames.front().time - absl::Hours(1)) +
-                      " --to " + to +
-                      " --step 600");
+                      " --to " + to + " --step 600");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("esg predict: OUT_OF_RANGE: from: "));
 
@@ -553,7 +553,7 @@ TEST_F(ServerVerbs, RejectedFramesAreReportedWithTheirFieldAndMakeExitOne) {
 
 TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   TempDir dir;
-  WriteFile(dir.File("tokens"), "# test tokens\nw-token read,write\nr-token read\n");
+  WriteFile(dir.File("tokens"), "# test tokens\nw-token read,write wendy\nr-token read\n");
   // esgd refuses a token file that group or others can read or write.
   std::filesystem::permissions(
       dir.File("tokens"), std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
@@ -573,6 +573,24 @@ TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   r = RunEsg(dir, at + "status", "ESG_TOKEN=r-token");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("RDK-1  NO_DATA"));
+
+  // --ack without --operator acknowledges in the token's name (the service takes it from the
+  // token file), not $USER's; a read token cannot acknowledge.
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait",
+             "ESG_TOKEN=w-token");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunEsg(dir, at + "alerts --spacecraft RDK-1 --json", "ESG_TOKEN=r-token");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json alerts = r.json()["alerts"];
+  ASSERT_FALSE(alerts.empty()) << "the star-tracker defects raise alerts";
+  const std::string ack =
+      "alerts --spacecraft RDK-1 --ack " + std::to_string(I64(alerts[0]["sequence"]));
+  r = RunEsg(dir, at + ack, "ESG_TOKEN=r-token USER=someone");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("PERMISSION_DENIED"));
+  r = RunEsg(dir, at + ack, "ESG_TOKEN=w-token USER=someone");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("acknowledged by wendy"));
 }
 
 // A CA, or a certificate signed by `ca` for 127.0.0.1, made with openssl.

@@ -3,18 +3,21 @@
 // after applying a pass, and again right after acknowledging late frames of another station,
 // still re-runs the filter over them from a kept checkpoint (not from the configuration) and
 // ends with the coefficient history of an offline run over the merged recording in time order
-// (drift coefficients to 1e-12 deg/h) and the same filter state bit for bit.
+// (drift coefficients to 1e-12 deg/h) and the same filter state bit for bit. `esg history`
+// shows the current snapshots, and with --include-revised also the superseded ones, marked.
 #include <cmath>
 #include <csignal>
 #include <iostream>
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_split.h"
 #include "estimator/units.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
+#include "tests/testing/run_process.h"
 
 namespace esg::server {
 namespace {
@@ -24,6 +27,8 @@ using ::esg::testing::Daemon;
 using ::esg::testing::OfflineCoefficientHistory;
 using ::esg::testing::OfflineSessionValues;
 using ::esg::testing::OfflineSnapshot;
+using ::esg::testing::RunBinary;
+using ::esg::testing::RunResult;
 using ::esg::testing::SimulatedRun;
 using ::esg::testing::SimulateRun;
 using ::esg::testing::StoredSessionValues;
@@ -105,9 +110,13 @@ TEST(ReorderRestart, LateFramesAcknowledgedBeforeAKillNineAreReRunFromAKeptCheck
     std::cout << "late frames still to re-run after the second kill -9: " << pending->size()
               << " of " << late.size() << "\n";
   }
+  RunResult cli_current, cli_all;
   {
     Daemon daemon(db, log);
     ASSERT_TRUE(WaitFramesApplied(daemon, id, 200));
+    const std::string args = "--server " + daemon.address() + " history --spacecraft " + id;
+    cli_current = RunBinary(dir, ESG_BINARY, args + " --csv");
+    cli_all = RunBinary(dir, ESG_BINARY, args + " --csv --include-revised");
     daemon.Stop(SIGTERM);
   }
 
@@ -148,6 +157,24 @@ TEST(ReorderRestart, LateFramesAcknowledgedBeforeAKillNineAreReRunFromAKeptCheck
   const absl::Time late_time = *proto_convert::TimeFromProto(late.front().time());
   EXPECT_GT(first_revised, start + absl::Hours(1));
   EXPECT_LT(first_revised, late_time);
+
+  // The CLI: a row per current snapshot; with --include-revised a row per stored snapshot and a
+  // last column revised_time_utc, filled exactly on the superseded ones.
+  ASSERT_EQ(cli_current.exit_code, 0) << cli_current.err;
+  ASSERT_EQ(cli_all.exit_code, 0) << cli_all.err;
+  const std::vector<std::string> current_rows =
+      absl::StrSplit(cli_current.out, '\n', absl::SkipEmpty());
+  const std::vector<std::string> all_rows = absl::StrSplit(cli_all.out, '\n', absl::SkipEmpty());
+  ASSERT_EQ(current_rows.size(), current->size() + 1);
+  ASSERT_EQ(all_rows.size(), all->size() + 1);
+  EXPECT_EQ(all_rows[0], current_rows[0] + ",revised_time_utc");
+  size_t revised_rows = 0, revised_stored = 0;
+  for (size_t k = 1; k < all_rows.size(); ++k) {
+    if (all_rows[k].back() != ',') ++revised_rows;
+  }
+  for (const auto& r : *all) revised_stored += r.revised_time != absl::InfinitePast();
+  EXPECT_GT(revised_stored, 0u);
+  EXPECT_EQ(revised_rows, revised_stored);
 }
 
 }  // namespace
