@@ -686,12 +686,11 @@ TEST(Frame, HugeSpacecraftIdIsRefusedFirstWithAShortPrintableMessage) {
   }
 }
 
-// Every example configuration shipped in deploy/examples passes the limits (located from this
-// file: tests/proto/ -> repository root).
+// Every example configuration shipped in deploy/examples passes the limits (the repository
+// root from CMake, so the test runs from any directory).
 TEST(ConfigFile, DeployExamplesAreValid) {
   const std::filesystem::path examples =
-      std::filesystem::path(__FILE__).parent_path().parent_path().parent_path() / "deploy" /
-      "examples";
+      std::filesystem::path(ESG_SOURCE_DIR) / "deploy" / "examples";
   ASSERT_TRUE(std::filesystem::is_directory(examples)) << examples;
   int read = 0;
   for (const auto& entry : std::filesystem::directory_iterator(examples)) {

@@ -293,8 +293,7 @@ TEST(AlertLifecycle, AlertsAcknowledgementsAndSessionStateChangesAreLogged) {
 // ---- The catalog: one row per reason, and the proto and docs say the same ---------------------
 
 std::string SourceFile(const std::string& relative) {
-  const std::filesystem::path root =
-      std::filesystem::path(__FILE__).parent_path().parent_path().parent_path();
+  const std::filesystem::path root = ESG_SOURCE_DIR;  // the repository, from CMake
   std::ifstream in(root / relative);
   EXPECT_TRUE(in.good()) << (root / relative);
   std::stringstream s;
