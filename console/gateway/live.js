@@ -61,7 +61,10 @@ class LiveSocket {
 
   fail(closeCode, error) {
     this.send({ type: 'error', id: null, error });
-    this.ws.close(closeCode, error.message.slice(0, 120));
+    // A close reason is at most 123 bytes of UTF-8.
+    let reason = error.message.slice(0, 120);
+    while (Buffer.byteLength(reason) > 123) reason = reason.slice(0, -1);
+    this.ws.close(closeCode, reason);
   }
 
   onMessage(data, isBinary) {
@@ -177,6 +180,14 @@ class LiveSocket {
   }
 }
 
+function sameOrigin(origin, host) {
+  try {
+    return new URL(origin).host === host;
+  } catch {
+    return false;
+  }
+}
+
 // Attaches /api/live to an HTTP(S) server; returns {close()} that closes every socket (1001,
 // going away) and cancels their calls.
 function attachLive(server, esgd, log) {
@@ -186,6 +197,13 @@ function attachLive(server, esgd, log) {
     const pathname = new URL(req.url, 'http://localhost').pathname;
     if (pathname !== '/api/live') {
       socket.end('HTTP/1.1 404 Not Found\r\nConnection: close\r\nContent-Length: 0\r\n\r\n');
+      return;
+    }
+    // Browsers send the page's origin with every WebSocket; one from another site's page is
+    // refused, so that site cannot read live alerts of an esgd without tokens through the
+    // operator's browser. Clients that are not browsers send no Origin.
+    if (req.headers.origin && !sameOrigin(req.headers.origin, req.headers.host)) {
+      socket.end('HTTP/1.1 403 Forbidden\r\nConnection: close\r\nContent-Length: 0\r\n\r\n');
       return;
     }
     wss.handleUpgrade(req, socket, head, (ws) => {

@@ -247,6 +247,12 @@ test('errors: unknown spacecraft 404 with esgd\'s message; bad parameters 400 na
   assert.equal(far.status, 400);
   assert.equal(far.json.error.code, 'OUT_OF_RANGE');
 
+  // A body that does not say it is JSON (what another site's form could post): 415, nothing done.
+  const form = await api('/api/spacecraft/RDK-1/alerts/1/acknowledge', { method: 'POST',
+    headers: { ...asAlice, 'Content-Type': 'text/plain' }, body: { operator_name: 'mallory' } });
+  assert.equal(form.status, 415);
+  assert.match(form.json.error.message, /^Content-Type:/);
+
   const endpoint = await api('/api/nothing-here', { headers: asBob });
   assert.equal(endpoint.status, 404);
   const method = await api('/api/sessions', { method: 'DELETE', headers: asBob });
@@ -413,6 +419,11 @@ test('WebSocket: an unknown token is refused and the socket closed', async () =>
   assert.equal(error.type, 'error');
   assert.equal(error.error.code, 'UNAUTHENTICATED');
   assert.equal((await inbox.whenClosed()).code, 4401);
+
+  // A page of another site (its Origin) cannot open the socket at all.
+  await assert.rejects(openSocket(gateway.url, { origin: 'http://evil.example' }), /403/);
+  const own = await openSocket(gateway.url, { origin: gateway.url.replace(/\/$/, '') });
+  own.ws.close();
 
   const second = await openSocket(gateway.url);
   second.ws.send(JSON.stringify({ type: 'subscribe', id: 'a', stream: 'alerts' }));

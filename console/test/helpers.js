@@ -94,8 +94,8 @@ function request(url, options = {}) {
     if (body !== undefined && typeof body !== 'string') body = JSON.stringify(body);
     const req = lib.request(target, {
       method: options.method || 'GET',
-      headers: { ...(options.headers || {}),
-        ...(body !== undefined ? { 'Content-Type': 'application/json' } : {}) },
+      headers: { ...(body !== undefined ? { 'Content-Type': 'application/json' } : {}),
+        ...(options.headers || {}) },
       ca: options.ca,
       servername: options.servername,
     }, (res) => {
