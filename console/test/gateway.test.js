@@ -369,6 +369,10 @@ test('WebSocket: auth, stored alerts, replay_complete, a live alert, unsubscribe
     assert.match(duplicate.error.message, /^id:/);
 
     ws.send(JSON.stringify({ type: 'unsubscribe', id: 'a' }));
+    // The gateway handles a socket's messages in order: once an unsubscribe of an unknown id is
+    // answered, 'a' is cancelled.
+    ws.send(JSON.stringify({ type: 'unsubscribe', id: 'a' }));
+    assert.equal((await inbox.take((m) => m.id === 'a')).error.code, 'NOT_FOUND');
     await raiseConflict();
     const toB = await inbox.take((m) => m.id === 'b');
     assert.equal(toB.alert.repeat_count, stored[0].repeat_count + 2);
@@ -376,16 +380,13 @@ test('WebSocket: auth, stored alerts, replay_complete, a live alert, unsubscribe
     await new Promise((r) => setTimeout(r, 300));
     assert.deepEqual(inbox.messages.filter((m) => m.id === 'a'), []);
 
-    const estimates = await (async () => {
-      ws.send(JSON.stringify({ type: 'subscribe', id: 'e', stream: 'estimates', spacecraft_id: 'RDK-1',
-        since: '2019-03-01T01:50:00Z' }));
-      const messages = [];
-      for (;;) {
-        const m = await inbox.take((x) => x.id === 'e');
-        messages.push(m);
-        if (m.type !== 'estimate') return messages;
-      }
-    })();
+    // Estimates: every message of the subscription up to the first that is not an estimate.
+    ws.send(JSON.stringify({ type: 'subscribe', id: 'e', stream: 'estimates', spacecraft_id: 'RDK-1',
+      since: '2019-03-01T01:50:00Z' }));
+    const estimates = [];
+    do {
+      estimates.push(await inbox.take((m) => m.id === 'e'));
+    } while (estimates.at(-1).type === 'estimate');
     const last = estimates.at(-1);
     if (last.type === 'error') {
       assert.equal(last.error.code, 'UNIMPLEMENTED');
