@@ -38,10 +38,11 @@ function invalid(message) {
 }
 
 class LiveSocket {
-  constructor(ws, esgd, log) {
+  constructor(ws, esgd, log, peer) {
     this.ws = ws;
     this.esgd = esgd;
     this.log = log;
+    this.peer = peer;
     this.authorization = null;
     this.state = 'OPEN';
     this.subscriptions = new Map();
@@ -104,10 +105,12 @@ class LiveSocket {
       if (this.state !== 'CHECKING') return;
       this.authorization = authorization;
       this.state = 'READY';
+      this.log(`live: ${this.peer} signed in`);
       this.send({ type: 'ready' });
     }, (err) => {
       if (this.state !== 'CHECKING') return;
       const error = errorObject(err);
+      this.log(`live: ${this.peer} refused: ${error.code}`);
       this.fail(error.code === 'UNAUTHENTICATED' ? CLOSE_UNAUTHENTICATED : 1011, error);
     });
   }
@@ -174,6 +177,8 @@ class LiveSocket {
 
   onClose() {
     clearTimeout(this.authTimer);
+    if (this.state === 'CLOSED') return;
+    if (this.state === 'READY') this.log(`live: ${this.peer} closed (${this.subscriptions.size} subscriptions cancelled)`);
     this.state = 'CLOSED';
     for (const subscription of this.subscriptions.values()) subscription.call.cancel();
     this.subscriptions.clear();
@@ -207,7 +212,7 @@ function attachLive(server, esgd, log) {
       return;
     }
     wss.handleUpgrade(req, socket, head, (ws) => {
-      const live = new LiveSocket(ws, esgd, log);
+      const live = new LiveSocket(ws, esgd, log, `${req.socket.remoteAddress}:${req.socket.remotePort}`);
       sockets.add(live);
       ws.on('close', () => sockets.delete(live));
     });
