@@ -1,0 +1,210 @@
+// The gateway's side of esgd: loads proto/esg/v1 with @grpc/proto-loader, opens one channel
+// (plain or TLS), and offers the calls the routes need with the operator's token forwarded as the
+// gRPC `authorization` metadata. Every call is registered with a Calls set so shutdown and a
+// closed browser connection can cancel it. Results come back already converted to the console's
+// JSON (convert.js).
+'use strict';
+
+const path = require('node:path');
+const grpc = require('@grpc/grpc-js');
+const protoLoader = require('@grpc/proto-loader');
+const { Converter } = require('./convert');
+
+const PROTO_DIR = path.resolve(__dirname, '..', '..', 'proto');
+const SERVICE = 'esg.v1.EstimationService';
+
+// Unary calls and stream replays get this long before they fail with DEADLINE_EXCEEDED (a 48 h
+// prediction of 100 000 samples takes about 2 s on a loaded server; paging a month of
+// coefficient history about as long).
+const CALL_DEADLINE_MS = 120_000;
+
+// esgd's largest responses (a prediction at its 100 000-sample limit) are about 17 MB; esg
+// itself accepts 64 MiB.
+const MAX_RECEIVE_BYTES = 64 * 1024 * 1024;
+
+function loadDefinition() {
+  return protoLoader.loadSync('esg/v1/estimation_service.proto', {
+    includeDirs: [PROTO_DIR],
+    keepCase: true,
+    longs: Number,
+    enums: String,
+    defaults: true,
+    arrays: true,
+  });
+}
+
+// The set of running gRPC calls, so they can be cancelled together (shutdown) or by owner
+// (an HTTP request whose browser went away, a WebSocket that closed).
+class Calls {
+  constructor() {
+    this.running = new Set();
+  }
+
+  add(call) {
+    this.running.add(call);
+    const forget = () => this.running.delete(call);
+    call.on('status', forget);
+    call.on('error', forget);
+    return call;
+  }
+
+  cancelAll() {
+    for (const call of this.running) call.cancel();
+    this.running.clear();
+  }
+}
+
+// gRPC errors without a message (UNIMPLEMENTED from an esgd that predates a call) get one that
+// names the call, so the browser never shows "12 UNIMPLEMENTED: ".
+function explained(method, err) {
+  if (!err.details) {
+    err.details = err.code === grpc.status.UNIMPLEMENTED
+      ? `${method}: not implemented by this esgd (an older version)`
+      : `${method}: failed without a message (gRPC code ${err.code})`;
+  }
+  return err;
+}
+
+class Esgd {
+  // options: {address, ca (PEM buffer) | null, serverName | null}
+  constructor(options) {
+    this.definition = loadDefinition();
+    this.convert = new Converter(this.definition);
+    const Client = grpc.makeGenericClientConstructor(this.definition[SERVICE], SERVICE);
+    const channelOptions = {
+      'grpc.max_receive_message_length': MAX_RECEIVE_BYTES,
+      // esgd accepts client pings no closer than 30 s; 60 s keeps a long alert stream's
+      // connection alive across NATs and finds a dead esgd within 80 s.
+      'grpc.keepalive_time_ms': 60_000,
+      'grpc.keepalive_timeout_ms': 20_000,
+    };
+    let credentials;
+    if (options.ca) {
+      credentials = grpc.credentials.createSsl(options.ca);
+      if (options.serverName) {
+        channelOptions['grpc.ssl_target_name_override'] = options.serverName;
+        channelOptions['grpc.default_authority'] = options.serverName;
+      }
+    } else {
+      credentials = grpc.credentials.createInsecure();
+    }
+    this.client = new Client(options.address, credentials, channelOptions);
+    this.calls = new Calls();
+  }
+
+  close() {
+    this.calls.cancelAll();
+    this.client.close();
+  }
+
+  static metadata(authorization) {
+    const md = new grpc.Metadata();
+    // Forwarded unchanged: esgd parses the scheme itself ("Bearer TOKEN", case-insensitive).
+    if (authorization) md.set('authorization', authorization);
+    return md;
+  }
+
+  // Full name of a method's response message (the key of its definition entry).
+  responseType(method) {
+    // proto-loader gives the method its own copy of the descriptor, named without its package.
+    const short = this.definition[SERVICE][method].responseType.type.name;
+    const matches = Object.keys(this.definition).filter((name) =>
+      (name === short || name.endsWith(`.${short}`)) && this.definition[name].type.field);
+    if (matches.length !== 1) throw new Error(`proto: cannot tell the type of ${method}'s response`);
+    return matches[0];
+  }
+
+  // One unary call; resolves with the response converted to JSON, rejects with the gRPC error
+  // (err.code, err.details). `owner` (optional) is a Calls set of the HTTP request.
+  unary(method, request, authorization, owner) {
+    return new Promise((resolve, reject) => {
+      const deadline = Date.now() + CALL_DEADLINE_MS;
+      const call = this.client[method](request, Esgd.metadata(authorization), { deadline },
+        (err, response) => {
+          if (err) reject(explained(method, err));
+          else resolve(this.convert.toJson(this.responseType(method), response));
+        });
+      this.calls.add(call);
+      if (owner) owner.add(call);
+    });
+  }
+
+  // Every page of a paged call: `field` is the repeated field of the response collected across
+  // pages. `limit` (optional): stop and reject with {code: 'LIMIT'} once more records than that
+  // arrived.
+  async pageAll(method, request, field, authorization, owner, limit = Infinity) {
+    const records = [];
+    let pageToken = '';
+    do {
+      const page = await this.unary(method, { ...request, page_token: pageToken }, authorization,
+        owner);
+      records.push(...page[field]);
+      if (records.length > limit) {
+        const err = new Error(`more than ${limit} records`);
+        err.code = 'LIMIT';
+        throw err;
+      }
+      pageToken = page.next_page_token;
+    } while (pageToken);
+    return records;
+  }
+
+  // A server-streaming subscription (SubscribeAlerts, SubscribeEstimates). Calls onMessage(json)
+  // for each message converted to JSON and onEnd(err | null) once when the call ends; returns the
+  // call (cancel() it to end; onEnd then gets an error with code CANCELLED).
+  subscribe(method, request, authorization, { onMessage, onEnd, deadline }) {
+    const options = deadline ? { deadline } : {};
+    const call = this.client[method](request, Esgd.metadata(authorization), options);
+    const type = this.responseType(method);
+    let ended = false;
+    const end = (err) => {
+      if (ended) return;
+      ended = true;
+      onEnd(err);
+    };
+    call.on('data', (message) => onMessage(this.convert.toJson(type, message)));
+    call.on('error', (err) => end(explained(method, err)));
+    call.on('status', (status) => {
+      if (status.code === grpc.status.OK) end(null);
+    });
+    this.calls.add(call);
+    return call;
+  }
+
+  // The stored part of a subscription: every message up to the replay marker, then the call is
+  // cancelled. Used by the REST alert lists and the fleet view.
+  replay(method, request, authorization, owner) {
+    return new Promise((resolve, reject) => {
+      const messages = [];
+      let done = false;
+      const call = this.subscribe(method, { ...request, replay_marker: true }, authorization, {
+        deadline: Date.now() + CALL_DEADLINE_MS,
+        onMessage: (message) => {
+          if (done) return;
+          if (message.replay_complete) {
+            done = true;
+            call.cancel();
+            resolve(messages);
+          } else {
+            messages.push(message);
+          }
+        },
+        onEnd: (err) => {
+          if (done) return;
+          done = true;
+          if (err) {
+            reject(err);
+          } else {
+            const e = new Error('the stream ended before its replay marker');
+            e.code = grpc.status.UNAVAILABLE;
+            e.details = e.message;
+            reject(e);
+          }
+        },
+      });
+      if (owner) owner.add(call);
+    });
+  }
+}
+
+module.exports = { Esgd, Calls, grpc };

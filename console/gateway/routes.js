@@ -1,0 +1,214 @@
+// The REST endpoints under /api/ (docs/console-gateway.md "REST API"). Each handler turns the
+// HTTP request into esgd calls with the operator's token, pages through every paged call, and
+// returns the JSON body; errors are thrown and answered by api.js with the one error mapping.
+'use strict';
+
+const { badRequest, ApiError } = require('./errors');
+const { timeParam, boolParam, intParam, intValue, numberParam, jsonBody } = require('./params');
+const { ConvertError } = require('./convert');
+const { grpc } = require('./esgd');
+
+// esgd's largest pages, so a long history costs as few round trips as possible.
+const HISTORY_PAGE = 5000;
+const ESTIMATE_PAGE = 5000;
+const SESSION_PAGE = 500;
+const DIAGNOSIS_PAGE = 100;
+
+// The most per-step estimates one request returns (a fortnight at 60 s steps); the browser asks
+// for narrower spans beyond.
+const MAX_ESTIMATES = 20000;
+
+const EPOCH = { seconds: 0, nanos: 0 };
+const HOUR_S = 3600;
+const DAY_S = 86400;
+const SEVERITIES = ['INFO', 'WARNING', 'DISTRESS', 'CRITICAL'];
+
+// Alerts of a replay, the latest state of each (spacecraft, sequence) at the place the alert
+// first appeared: a live change that arrives during the replay repeats an alert.
+function latestStates(alerts) {
+  const byKey = new Map();
+  for (const alert of alerts) byKey.set(`${alert.spacecraft_id}\u0000${alert.sequence}`, alert);
+  return [...byKey.values()];
+}
+
+function isUnimplemented(err) {
+  return err && err.code === grpc.status.UNIMPLEMENTED;
+}
+
+function makeRoutes(esgd) {
+  const call = (ctx, method, request) => esgd.unary(method, request, ctx.authorization, ctx.owner);
+  const pages = (ctx, method, request, field, limit) =>
+    esgd.pageAll(method, request, field, ctx.authorization, ctx.owner, limit);
+
+  async function alertList(ctx, spacecraftId) {
+    const since = timeParam(ctx.query, 'since') || EPOCH;
+    const alerts = await esgd.replay('SubscribeAlerts', { spacecraft_id: spacecraftId, since },
+      ctx.authorization, ctx.owner);
+    return { alerts: latestStates(alerts) };
+  }
+
+  // Newest per-step estimate's last star-tracker time over the day before the session's last
+  // frame; null when there is none. The last hour is asked first: it holds the newest record
+  // whenever the filter ran in it, and is 24 times less to page through than the day.
+  // Throws UNIMPLEMENTED through for the caller to remember.
+  async function lastStarTrackerTime(ctx, session) {
+    if (!session.last_frame_time) return null;
+    const toMs = Date.parse(session.last_frame_time);
+    const at = (ms) => ({ seconds: Math.floor(ms / 1000), nanos: (((ms % 1000) + 1000) % 1000) * 1e6 });
+    for (const spanS of [HOUR_S, DAY_S]) {
+      const request = {
+        spacecraft_id: session.spacecraft_id,
+        from: at(toMs - spanS * 1000),
+        // +1 ms: the ISO time dropped any sub-millisecond part of the last frame's time.
+        to: at(toMs + 1),
+        page_size: ESTIMATE_PAGE,
+      };
+      const estimates = await pages(ctx, 'GetEstimateHistory', request, 'estimates');
+      if (estimates.length > 0) return estimates[estimates.length - 1].last_star_tracker_time || null;
+    }
+    return null;
+  }
+
+  return [
+    ['GET', '/api/auth', async (ctx) => {
+      // Without a token: does esgd want one? With one: is it a token esgd knows (401 if not)?
+      let authRequired = false;
+      try {
+        await call({ ...ctx, authorization: undefined }, 'ListSessions', { page_size: 1 });
+      } catch (err) {
+        if (err.code !== grpc.status.UNAUTHENTICATED) throw err;
+        authRequired = true;
+      }
+      if (!ctx.authorization) return { auth_required: authRequired };
+      await call(ctx, 'ListSessions', { page_size: 1 });
+      // The write role cannot be checked without a write call; the page learns it from the
+      // first acknowledgement (403).
+      return { auth_required: authRequired, ok: true, can_write: null };
+    }],
+
+    ['GET', '/api/sessions', async (ctx) => ({
+      sessions: await pages(ctx, 'ListSessions', { page_size: SESSION_PAGE }, 'sessions'),
+    })],
+
+    ['GET', '/api/fleet', async (ctx) => {
+      const [sessions, alerts] = await Promise.all([
+        pages(ctx, 'ListSessions', { page_size: SESSION_PAGE }, 'sessions'),
+        esgd.replay('SubscribeAlerts', { spacecraft_id: '', since: EPOCH }, ctx.authorization,
+          ctx.owner),
+      ]);
+      const open = new Map(sessions.map((s) => [s.spacecraft_id,
+        Object.fromEntries(SEVERITIES.map((name) => [name, 0]))]));
+      for (const alert of latestStates(alerts)) {
+        const counts = open.get(alert.spacecraft_id);
+        const severity = alert.severity.replace(/^ALERT_SEVERITY_/, '');
+        if (counts && !alert.cleared && !alert.revised_time && severity in counts) counts[severity]++;
+      }
+      let estimatesAvailable = true;
+      const times = await Promise.all(sessions.map(async (session) => {
+        if (!estimatesAvailable) return null;
+        try {
+          return await lastStarTrackerTime(ctx, session);
+        } catch (err) {
+          if (!isUnimplemented(err)) throw err;
+          estimatesAvailable = false;
+          return null;
+        }
+      }));
+      return {
+        fleet: sessions.map((session, i) => ({
+          session,
+          open_alerts: open.get(session.spacecraft_id),
+          last_star_tracker_time: times[i],
+        })),
+      };
+    }],
+
+    ['GET', '/api/spacecraft/:id/history', async (ctx) => {
+      const request = {
+        spacecraft_id: ctx.params.id,
+        gyro_id: intParam(ctx.query, 'gyro', 0, 4, 0),
+        from: timeParam(ctx.query, 'from'),
+        to: timeParam(ctx.query, 'to'),
+        include_revised: boolParam(ctx.query, 'include_revised', false),
+        page_size: HISTORY_PAGE,
+      };
+      return { snapshots: await pages(ctx, 'GetCoefficientHistory', request, 'snapshots') };
+    }],
+
+    ['GET', '/api/spacecraft/:id/estimates', async (ctx) => {
+      const request = {
+        spacecraft_id: ctx.params.id,
+        from: timeParam(ctx.query, 'from'),
+        to: timeParam(ctx.query, 'to'),
+        page_size: ESTIMATE_PAGE,
+      };
+      try {
+        return { estimates: await pages(ctx, 'GetEstimateHistory', request, 'estimates', MAX_ESTIMATES) };
+      } catch (err) {
+        if (err.code !== 'LIMIT') throw err;
+        throw badRequest(`from, to: the span holds more than ${MAX_ESTIMATES} estimates; ask for a narrower span`);
+      }
+    }],
+
+    ['GET', '/api/spacecraft/:id/predict', async (ctx) => call(ctx, 'PredictAttitude', {
+      spacecraft_id: ctx.params.id,
+      from: timeParam(ctx.query, 'from'),
+      to: timeParam(ctx.query, 'to'),
+      step_s: numberParam(ctx.query, 'step_s'),
+      aem: boolParam(ctx.query, 'aem', false),
+    })],
+
+    ['POST', '/api/spacecraft/:id/predict', async (ctx) => {
+      const body = await jsonBody(ctx.req);
+      let request;
+      try {
+        request = esgd.convert.fromJson('esg.v1.PredictRequest', body);
+      } catch (err) {
+        if (err instanceof ConvertError) throw badRequest(`body.${err.message}`);
+        throw err;
+      }
+      if (request.spacecraft_id && request.spacecraft_id !== ctx.params.id) {
+        throw badRequest(`body.spacecraft_id: '${request.spacecraft_id}' differs from the path's '${ctx.params.id}'`);
+      }
+      request.spacecraft_id = ctx.params.id;
+      return call(ctx, 'PredictAttitude', request);
+    }],
+
+    ['GET', '/api/spacecraft/:id/alerts', async (ctx) => alertList(ctx, ctx.params.id)],
+    ['GET', '/api/alerts', async (ctx) => alertList(ctx, '')],
+
+    ['POST', '/api/spacecraft/:id/alerts/:sequence/acknowledge', async (ctx) => {
+      const sequence = intValue('sequence', ctx.params.sequence, 1, Number.MAX_SAFE_INTEGER);
+      const body = await jsonBody(ctx.req);
+      for (const key of Object.keys(body)) {
+        if (key !== 'operator_name') {
+          throw badRequest(`body.${key}: no such field (the body is {"operator_name": "..."}; spacecraft and sequence come from the path)`);
+        }
+      }
+      const operatorName = body.operator_name === undefined ? '' : body.operator_name;
+      if (typeof operatorName !== 'string') throw badRequest('body.operator_name: expected a string');
+      return call(ctx, 'AcknowledgeAlert', {
+        spacecraft_id: ctx.params.id, sequence, operator_name: operatorName,
+      });
+    }],
+
+    ['GET', '/api/spacecraft/:id/diagnoses', async (ctx) => ({
+      diagnoses: await pages(ctx, 'ListDiagnoses',
+        { spacecraft_id: ctx.params.id, page_size: DIAGNOSIS_PAGE }, 'diagnoses'),
+    })],
+
+    ['GET', '/api/spacecraft/:id/diagnoses/:diag_id', async (ctx) => {
+      const id = intValue('diag_id', ctx.params.diag_id, 1, Number.MAX_SAFE_INTEGER);
+      const { report_json: reportJson, ...result } = await call(ctx, 'GetDiagnosis',
+        { spacecraft_id: ctx.params.id, id });
+      try {
+        result.report = JSON.parse(reportJson);
+      } catch (err) {
+        throw new ApiError(502, 'DATA_LOSS', `diagnosis ${id}: esgd's report_json is not JSON (${err.message})`);
+      }
+      return result;
+    }],
+  ];
+}
+
+module.exports = { makeRoutes, latestStates };
