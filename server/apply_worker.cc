@@ -446,6 +446,11 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     cleared.insert(c.sequence);
   }
   for (const auto& [seq, rep] : alerts.repeats()) changed.insert(seq);
+  // Alerts a re-run set back to their state at its checkpoint: their state now (set back, or
+  // repeated or cleared again by the re-run) is news to subscribers even where it is lower.
+  if (rerun.has_value()) {
+    for (const storage::AlertRestore& r : rerun->restores) changed.insert(r.sequence);
+  }
   for (int64_t seq : changed) {
     absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
     if (!r.ok()) continue;

@@ -304,7 +304,7 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
           if (s->replaying) {
             s->buffered.push_back(r);
           } else {
-            Offer(*s, r);
+            Offer(*s, r, /*live=*/true);
             TryWrite(*s);
           }
         },
@@ -331,8 +331,8 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
       replay = std::move(*stored);
     }
     absl::MutexLock lock(&shared_->mu);
-    for (const storage::AlertRecord& r : replay) Offer(*shared_, r);
-    for (const storage::AlertRecord& r : shared_->buffered) Offer(*shared_, r);
+    for (const storage::AlertRecord& r : replay) Offer(*shared_, r, /*live=*/false);
+    for (const storage::AlertRecord& r : shared_->buffered) Offer(*shared_, r, /*live=*/false);
     shared_->buffered.clear();
     shared_->replaying = false;
     if (request.replay_marker() && !shared_->finished) {
@@ -388,12 +388,25 @@ class AlertReactor : public grpc::ServerWriteReactor<esg::v1::Alert> {
     bool finished ABSL_GUARDED_BY(mu) = false;
   };
 
-  // Queues `r` unless the same or a newer state of that alert was already queued.
-  static void Offer(Shared& s, const storage::AlertRecord& r) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+  // Queues `r` unless that state of the alert was already queued. While the replay is merged
+  // with the changes buffered during it, their order is unknown, so only a newer state is queued
+  // (a count that grew, an acknowledgement, a clear, a revision). Live changes come in commit
+  // order (AlertHub), so any state other than the last one sent is queued: a re-run over a late
+  // frame may set a repeat count back or undo a clear (docs/service.md "Several ground
+  // stations"), and the subscriber must end with the stored state.
+  static void Offer(Shared& s, const storage::AlertRecord& r, bool live)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
     const Version v{r.repeat_count, r.acknowledged, r.cleared,
                     r.revised_time != absl::InfinitePast()};
     auto [it, inserted] = s.sent.try_emplace({r.spacecraft_id, r.sequence}, v);
-    if (!inserted) {
+    if (!inserted && live) {
+      if (v == it->second) return;  // the replay already sent this state
+      // An acknowledgement is never undone: an unacknowledged state after an acknowledged one
+      // was read before the acknowledgement committed (a new alert acknowledged between its
+      // commit and its publication); the stored alert is acknowledged.
+      if (std::get<1>(it->second) && !std::get<1>(v)) return;
+      it->second = v;
+    } else if (!inserted) {
       const Version& old = it->second;
       // A revision is news even where a re-run set the repeat count back.
       const bool revision = std::get<3>(v) && !std::get<3>(old);

@@ -8,6 +8,7 @@
 #include <memory>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/ascii.h"
@@ -190,6 +191,57 @@ TEST(AlertLifecycle, AnotherOperatorsAcknowledgementIsRefusedNamingTheFirst) {
   const esg::v1::Alert streamed = watcher.Next();
   EXPECT_TRUE(streamed.acknowledged());
   EXPECT_EQ(streamed.acknowledged_by(), "alice");
+}
+
+// A re-run over a late frame may set an alert's repeat count back or undo its clear (docs/
+// service.md "Several ground stations"); the service publishes each committed state in commit
+// order, and a subscriber must receive every one, lower or not, so that it ends with the stored
+// state. A state it already has is not sent again, and an acknowledgement is never undone.
+TEST(AlertLifecycle, LiveStatesThatSetAnAlertBackReachTheSubscriber) {
+  LoopbackServer server;
+  auto stub = server.Stub();
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse r;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(
+                        &ctx, ConfigureRequestFor(::esg::testing::ServerTestConfig("LIFE-4")), &r)
+                    .ok());
+  }
+  storage::AlertRecord record;
+  record.spacecraft_id = "LIFE-4";
+  record.severity = "WARNING";
+  record.reason = "STAR_TRACKER_INNOVATION";
+  record.subsystem = "star_tracker";
+  record.repeat_count = 5;
+  absl::StatusOr<int64_t> sequence = server.core().storage().alerts().Append(record);
+  ASSERT_TRUE(sequence.ok()) << sequence.status();
+  record.sequence = *sequence;
+
+  Subscription watcher(*stub, "LIFE-4", /*replay=*/true, /*marker=*/true);
+  EXPECT_EQ(watcher.Next().repeat_count(), 5);  // the replay
+  ASSERT_TRUE(watcher.Next().replay_complete());
+  auto publish = [&](int64_t count, bool cleared, bool acknowledged) {
+    storage::AlertRecord r = record;
+    r.repeat_count = count;
+    r.cleared = cleared;
+    r.acknowledged = acknowledged;
+    server.core().alert_hub().Publish(r);
+  };
+  publish(5, false, false);  // the state the replay sent: not again
+  publish(7, true, false);   // repeated, then cleared
+  publish(3, false, false);  // set back by a re-run: lower, not cleared
+  publish(4, false, true);   // repeated by the re-run, acknowledged meanwhile
+  publish(4, false, false);  // a read from before the acknowledgement: stale
+  publish(6, true, true);
+  std::vector<std::tuple<int64_t, bool, bool>> received;
+  for (int i = 0; i < 4; ++i) {
+    const esg::v1::Alert a = watcher.Next();
+    received.emplace_back(a.repeat_count(), a.cleared(), a.acknowledged());
+  }
+  EXPECT_THAT(received, ::testing::ElementsAre(std::make_tuple(7, true, false),
+                                               std::make_tuple(3, false, false),
+                                               std::make_tuple(4, false, true),
+                                               std::make_tuple(6, true, true)));
 }
 
 TEST(AlertLifecycle, ClearedTimeIsStoredAndReturned) {
