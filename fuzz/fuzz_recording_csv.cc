@@ -17,7 +17,8 @@
 namespace {
 
 // Metadata as FormatRecordingCsv documents writing them: the format always stated, line breaks
-// inside keys and values written as spaces, ':' in keys as '_', trimmed.
+// inside keys and values written as spaces, ':' in keys as '_', trimmed; of keys that clean to
+// the same key, the first in key order kept.
 std::map<std::string, std::string> AsWritten(const std::map<std::string, std::string>& metadata) {
   auto clean = [](std::string s, bool is_key) {
     for (char& c : s) {
@@ -27,7 +28,8 @@ std::map<std::string, std::string> AsWritten(const std::map<std::string, std::st
     return std::string(absl::StripAsciiWhitespace(s));
   };
   std::map<std::string, std::string> out;
-  for (const auto& [key, value] : metadata) out[clean(key, true)] = clean(value, false);
+  for (const auto& [key, value] : metadata) out.emplace(clean(key, true), clean(value, false));
+  out.erase("");
   out["format"] = esg::storage::kRecordingCsvFormat;
   return out;
 }

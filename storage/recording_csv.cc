@@ -391,14 +391,21 @@ std::string FormatRecordingCsv(const estimator::Recording& recording) {
   std::string out;
   out.reserve(256 + recording.frames.size() * 400);
   absl::StrAppend(&out, "# format: ", kRecordingCsvFormat, "\n");
-  if (const auto it = recording.metadata.find("spacecraft_id"); it != recording.metadata.end()) {
-    absl::StrAppend(&out, "# spacecraft_id: ", CleanMetadata(it->second, false), "\n");
-  }
+  // Cleaned first, then written in the cleaned keys' order: cleaning can reorder keys ("a\rb"
+  // sorts before "a b!" but cleans to "a b", after it) or make two equal, and the reader reads
+  // the lines back into a map by cleaned key, so the text must be that map's (a fixed point).
+  std::map<std::string, std::string> metadata;
   for (const auto& [key, value] : recording.metadata) {
-    if (key == "format" || key == "spacecraft_id") continue;
-    const std::string clean_key = CleanMetadata(key, true);
-    if (clean_key.empty()) continue;
-    absl::StrAppend(&out, "# ", clean_key, ": ", CleanMetadata(value, false), "\n");
+    std::string clean_key = CleanMetadata(key, true);
+    if (clean_key.empty() || clean_key == "format") continue;
+    metadata.emplace(std::move(clean_key), CleanMetadata(value, false));
+  }
+  if (const auto it = metadata.find("spacecraft_id"); it != metadata.end()) {
+    absl::StrAppend(&out, "# spacecraft_id: ", it->second, "\n");
+  }
+  for (const auto& [key, value] : metadata) {
+    if (key == "spacecraft_id") continue;
+    absl::StrAppend(&out, "# ", key, ": ", value, "\n");
   }
   absl::StrAppend(&out, absl::StrJoin(names, ","), "\n");
 

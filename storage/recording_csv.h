@@ -54,9 +54,11 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view text);
 // InvalidArgument "<path>: ..." with the problems of ParseRecordingCsv.
 absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path);
 
-// Formats a recording: "# format: esg-recording-csv 1", then "# spacecraft_id: ..." when that
-// metadata entry exists, then the other metadata entries in key order (a stored "format" entry is
-// replaced; line breaks in keys or values become spaces, ':' in keys becomes '_'), the header in
+// Formats a recording: "# format: esg-recording-csv 1", then the metadata as the reader reads
+// them back: each key and value cleaned (line breaks become spaces, ':' in keys becomes '_',
+// trimmed), entries whose key is then empty or "format" dropped, of keys that clean to the same
+// key the first in key order kept; "# spacecraft_id: ..." first when present, then the others in
+// the order of their cleaned keys. Then the header in
 // the order of docs/formats.md, one row per frame. Times are RFC 3339 UTC with `Z` and as many
 // fractional digits as needed to read back the same absl::Time; numbers in the shortest form that
 // reads back the same double. An invalid star-tracker reading is written with an empty quaternion
