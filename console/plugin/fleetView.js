@@ -1,0 +1,84 @@
+// Fleet overview: one row per spacecraft from GET /api/fleet (ListSessions, the alert replay and
+// the newest per-step estimate). Refreshed when esgd pushes an alert or an estimate, not polled.
+import { apiFetch } from './api.js';
+import { duration, el, shortName, STYLE } from './dom.js';
+import { live } from './live.js';
+
+const SEVERITIES = ['CRITICAL', 'DISTRESS', 'WARNING', 'INFO'];
+const REFRESH_MIN_MS = 1000;
+
+function row(entry) {
+  const s = entry.session;
+  const alerts = SEVERITIES.map((sev) => el('td', { class: `num sev-${sev}`, 'data-severity': sev },
+    String(entry.open_alerts ? entry.open_alerts[sev] : 0)));
+  return el('tr', { 'data-spacecraft': s.spacecraft_id },
+    el('td', {}, s.spacecraft_id),
+    el('td', {}, shortName(s.state, 'SESSION_STATE_')),
+    el('td', {}, s.working_pair && s.working_pair.length ? `[${s.working_pair.join(',')}]` : '-'),
+    el('td', {}, s.last_frame_time || '-'),
+    ...alerts,
+    el('td', {}, entry.last_star_tracker_time
+      ? `${duration(entry.last_star_tracker_time, s.last_frame_time)} (at ${entry.last_star_tracker_time})`
+      : 'not available'));
+}
+
+function render(container, fleet) {
+  container.replaceChildren(
+    el('style', {}, STYLE),
+    el('h2', {}, 'Fleet overview'),
+    el('table', { class: 'esg-fleet' },
+      el('thead', {}, el('tr', {},
+        el('th', {}, 'Spacecraft'), el('th', {}, 'Session state'), el('th', {}, 'Output pair'),
+        el('th', {}, 'Last frame (UTC)'),
+        ...SEVERITIES.map((sev) => el('th', { class: `sev-${sev}` }, `Open ${sev}`)),
+        el('th', {}, 'Since last star-tracker correction (at last frame)'))),
+      el('tbody', {}, fleet.map(row))),
+    el('p', { class: 'muted' },
+      'Open alerts: not cleared by esgd. The star-tracker column needs per-step estimates ',
+      '(GetEstimateHistory); "not available" when esgd does not keep them.'));
+}
+
+export function fleetViewProvider() {
+  return {
+    key: 'esg.fleet.view',
+    name: 'Fleet overview',
+    cssClass: 'icon-object',
+    canView: (domainObject) => domainObject.type === 'esg.fleet',
+    view() {
+      let container = null;
+      let unsubscribes = [];
+      let timer = null;
+      let last = 0;
+      async function refresh() {
+        last = Date.now();
+        try {
+          const body = await apiFetch('/api/fleet');
+          if (container) render(container, body.fleet);
+        } catch (err) {
+          if (container) container.replaceChildren(el('p', { class: 'notice' }, `Fleet: ${err.message}`));
+        }
+      }
+      // At most one refresh a second however fast alerts and estimates arrive.
+      function schedule() {
+        if (timer) return;
+        timer = setTimeout(() => { timer = null; refresh(); }, Math.max(0, last + REFRESH_MIN_MS - Date.now()));
+      }
+      return {
+        show(element) {
+          container = el('div', { class: 'esg-view' }, 'Loading the fleet...');
+          element.append(container);
+          refresh();
+          unsubscribes = [
+            live.subscribe('alerts', '', null, schedule),
+            live.subscribe('estimates', '', null, schedule, () => {})
+          ];
+        },
+        destroy() {
+          unsubscribes.forEach((u) => u());
+          clearTimeout(timer);
+          container = null;
+        }
+      };
+    }
+  };
+}

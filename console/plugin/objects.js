@@ -1,0 +1,258 @@
+// The console's object tree (Open MCT object provider, namespace "esg"):
+//   ESG spacecraft (root)
+//     Fleet overview                              esg.fleet view
+//     <spacecraft> (folder)
+//       Drift coefficients gyro N (folder)        table of all coefficients + one plot per
+//                                                 estimated coefficient (value, +/-1-sigma)
+//       Attitude 1-sigma (per-step estimates)     overlay plot + table
+//       Star-tracker innovations gyro N           overlay plot per gyro + one table
+//       Predicted attitude                        overlay plot + table (PredictAttitude over the
+//                                                 time conductor's bounds)
+//       Diagnoses (folder)                        one esg.diagnosis report view each
+// Objects are computed from the sessions on every get(); nothing is persisted.
+import { apiFetch } from './api.js';
+import { NAMESPACE, id, parseKey } from './keys.js';
+import { estimatesAvailable, session, sessions } from './sessions.js';
+import {
+  AXES, BANDS, COEFFICIENTS, ESTIMATE_EXTRA, PREDICT_EXTRA, attitudeTableValues,
+  coefficientTableValues, innovationTableValues, singleSeriesValues
+} from './series.js';
+
+export const TELEMETRY_TYPE = 'esg.telemetry';
+
+// Band colours: the value bright, its 1-sigma band the same hue, dimmer, so the band reads as
+// belonging to the curve.
+const BAND_COLOURS = { value: '#4fb3ff', hi: '#9a6a2f', lo: '#9a6a2f' };
+const AXIS_COLOURS = { x: '#ff6b6b', y: '#7bd389', z: '#4fb3ff' };
+const AXIS_DIM = { x: '#8a3a3a', y: '#3f7047', z: '#2a5f88' };
+
+function folder(identifier, name, composition, location) {
+  return { identifier, name, type: 'folder', composition, location };
+}
+
+function telemetryObject(identifier, name, values, esg, location) {
+  return { identifier, name, type: TELEMETRY_TYPE, telemetry: { values }, esg, location };
+}
+
+// An overlay plot with the series' colours fixed, lines joined, no point markers.
+function overlay(identifier, name, series, location) {
+  return {
+    identifier,
+    name,
+    type: 'telemetry.plot.overlay',
+    location,
+    composition: series.map((s) => s.identifier),
+    configuration: {
+      series: series.map((s) => ({
+        identifier: s.identifier, color: s.color, interpolate: 'linear', markers: false
+      }))
+    }
+  };
+}
+
+function table(identifier, name, child, location) {
+  return {
+    identifier,
+    name,
+    type: 'table',
+    location,
+    composition: [child],
+    configuration: { columnWidths: {}, hiddenColumns: {} }
+  };
+}
+
+function unavailable(identifier, name, location) {
+  return { identifier, name, type: 'esg.unavailable', location };
+}
+
+function keyString(identifier) {
+  return `${identifier.namespace}:${identifier.key}`;
+}
+
+// Coefficients estimated in the session's configuration (prior 1-sigma > 0): the others are
+// held at their configured value and their plot would be a flat line.
+function estimatedCoefficients(gyroConfig) {
+  const sigma = gyroConfig.model_sigma;
+  if (!sigma) return [];
+  return COEFFICIENTS.filter((c) => {
+    try {
+      return c.get(sigma) > 0;
+    } catch (err) {
+      return false;
+    }
+  });
+}
+
+function gyroIds(info) {
+  return ((info.config && info.config.gyros) || []).map((g) => g.id);
+}
+
+function gyroConfig(info, gyro) {
+  return info.config.gyros.find((g) => g.id === gyro);
+}
+
+const builders = {
+  async root(identifier) {
+    const list = await sessions();
+    return folder(identifier, 'ESG spacecraft',
+      [id('fleet'), ...list.map((s) => id('sc', s.spacecraft_id))], 'ROOT');
+  },
+
+  async fleet(identifier) {
+    return { identifier, name: 'Fleet overview', type: 'esg.fleet', location: keyString(id('root')) };
+  },
+
+  async sc(identifier, [sc]) {
+    const info = await session(sc);
+    const gyros = gyroIds(info);
+    return folder(identifier, sc, [
+      ...gyros.map((g) => id('coefs', sc, g)),
+      id('attplot', sc),
+      id('atttable', sc),
+      ...gyros.map((g) => id('innovplot', sc, g)),
+      id('innovtable', sc),
+      id('predplot', sc),
+      id('predtable', sc),
+      id('diags', sc)
+    ], keyString(id('root')));
+  },
+
+  async coefs(identifier, [sc, gyro]) {
+    const info = await session(sc);
+    const g = Number(gyro);
+    const plots = estimatedCoefficients(gyroConfig(info, g)).map((c) => id('coefplot', sc, g, c.key));
+    return folder(identifier, `Drift coefficients gyro ${g}`,
+      [id('coeftable', sc, g), ...plots], keyString(id('sc', sc)));
+  },
+
+  async coeftable(identifier, [sc, gyro]) {
+    return table(identifier, `Gyro ${gyro} coefficients table (deg/h, case frame)`,
+      id('coef', sc, gyro), keyString(id('coefs', sc, gyro)));
+  },
+
+  async coef(identifier, [sc, gyro]) {
+    return telemetryObject(identifier, `Gyro ${gyro} drift coefficients`, coefficientTableValues(),
+      { source: 'coef', spacecraft: sc, gyro: Number(gyro) }, keyString(id('coefs', sc, gyro)));
+  },
+
+  async coefplot(identifier, [sc, gyro, coef]) {
+    const c = COEFFICIENTS.find((x) => x.key === coef);
+    const series = Object.keys(BANDS).map((band) => ({
+      identifier: id('coefband', sc, gyro, coef, band), color: BAND_COLOURS[band]
+    }));
+    return overlay(identifier, `Gyro ${gyro} ${c.label} with 1-sigma band (deg/h)`, series,
+      keyString(id('coefs', sc, gyro)));
+  },
+
+  async coefband(identifier, [sc, gyro, coef, band]) {
+    const c = COEFFICIENTS.find((x) => x.key === coef);
+    const key = `${coef}${BANDS[band].suffix}`;
+    return telemetryObject(identifier, `gyro ${gyro} ${c.label}${BANDS[band].label}`,
+      singleSeriesValues(key, `${c.label}${BANDS[band].label}`, 'deg/h'),
+      { source: 'coef', spacecraft: sc, gyro: Number(gyro) }, keyString(id('coefplot', sc, gyro, coef)));
+  },
+
+  async attplot(identifier, [sc]) {
+    const name = 'Attitude 1-sigma envelope, body axes (arcsec)';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    const series = [];
+    for (const axis of AXES) {
+      series.push({ identifier: id('estser', sc, `s${axis}_hi`, `+1-sigma body ${axis}`), color: AXIS_COLOURS[axis] });
+      series.push({ identifier: id('estser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
+    }
+    return overlay(identifier, name, series, keyString(id('sc', sc)));
+  },
+
+  async atttable(identifier, [sc]) {
+    const name = 'Attitude and 1-sigma table (per-step estimates)';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    return table(identifier, name, id('est', sc), keyString(id('sc', sc)));
+  },
+
+  async est(identifier, [sc]) {
+    return telemetryObject(identifier, `${sc} per-step estimates`, attitudeTableValues(ESTIMATE_EXTRA),
+      { source: 'est', spacecraft: sc }, keyString(id('atttable', sc)));
+  },
+
+  async estser(identifier, [sc, key, label]) {
+    return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
+      { source: 'est', spacecraft: sc }, keyString(id('sc', sc)));
+  },
+
+  async innovplot(identifier, [sc, gyro]) {
+    const name = `Star-tracker innovations gyro ${gyro}, gyro basis (arcsec)`;
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    const colours = { 1: ['#4fb3ff', '#2a5f88'], 2: ['#ffb84f', '#8a6a2a'] };
+    const series = [];
+    for (const i of [1, 2]) {
+      const k = `g${gyro}_z${i}`;
+      series.push({ identifier: id('estser', sc, k, `z${i}`), color: colours[i][0] });
+      series.push({ identifier: id('estser', sc, `${k}_hi`, `z${i} +1-sigma`), color: colours[i][1] });
+      series.push({ identifier: id('estser', sc, `${k}_lo`, `z${i} -1-sigma`), color: colours[i][1] });
+    }
+    return overlay(identifier, name, series, keyString(id('sc', sc)));
+  },
+
+  async innovtable(identifier, [sc]) {
+    const name = 'Star-tracker innovations table (arcsec)';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    return table(identifier, name, id('innov', sc), keyString(id('sc', sc)));
+  },
+
+  async innov(identifier, [sc]) {
+    const info = await session(sc);
+    return telemetryObject(identifier, `${sc} star-tracker innovations`,
+      innovationTableValues(gyroIds(info)), { source: 'est', spacecraft: sc },
+      keyString(id('innovtable', sc)));
+  },
+
+  async predplot(identifier, [sc]) {
+    const series = [];
+    for (const axis of AXES) {
+      series.push({ identifier: id('predser', sc, `s${axis}_hi`, `+1-sigma body ${axis}`), color: AXIS_COLOURS[axis] });
+      series.push({ identifier: id('predser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
+    }
+    return overlay(identifier, 'Predicted attitude 1-sigma envelope over the time bounds (arcsec)',
+      series, keyString(id('sc', sc)));
+  },
+
+  async predtable(identifier, [sc]) {
+    return table(identifier, 'Predicted attitude table', id('pred', sc), keyString(id('sc', sc)));
+  },
+
+  async pred(identifier, [sc]) {
+    return telemetryObject(identifier, `${sc} predicted attitude`, attitudeTableValues(PREDICT_EXTRA),
+      { source: 'pred', spacecraft: sc }, keyString(id('predtable', sc)));
+  },
+
+  async predser(identifier, [sc, key, label]) {
+    return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
+      { source: 'pred', spacecraft: sc }, keyString(id('predplot', sc)));
+  },
+
+  async diags(identifier, [sc]) {
+    const body = await apiFetch(`/api/spacecraft/${encodeURIComponent(sc)}/diagnoses`);
+    // Newest first: the one an engineer just ran is at the top.
+    const ids = body.diagnoses.map((d) => d.id).reverse();
+    return folder(identifier, 'Diagnoses', ids.map((n) => id('diag', sc, n)), keyString(id('sc', sc)));
+  },
+
+  async diag(identifier, [sc, n]) {
+    return { identifier, name: `Diagnosis ${n}`, type: 'esg.diagnosis', esg: { spacecraft: sc, id: Number(n) },
+      location: keyString(id('diags', sc)) };
+  }
+};
+
+async function estimatesAvailableFor(sc) {
+  const info = await session(sc);
+  return estimatesAvailable(sc, info.last_frame_time);
+}
+
+export const objectProvider = {
+  async get(identifier) {
+    const { kind, parts } = parseKey(identifier.key);
+    const build = builders[kind];
+    if (!build) throw new Error(`esg: unknown object ${identifier.key}`);
+    return build({ namespace: NAMESPACE, key: identifier.key }, parts);
+  }
+};
