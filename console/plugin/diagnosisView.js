@@ -15,14 +15,19 @@ function parameterTable(parameters) {
 
 function finding(f) {
   const e = f.evidence || {};
+  const p = e.pValue === undefined ? '-' : e.pValue.toExponential(2);
+  // An "unexplained" finding is a failed goodness-of-fit test, not a selected effect: its pValue
+  // is that test's, and it has no evidence against a smaller model.
+  const evidence = f.effect === 'unexplained'
+    ? `goodness-of-fit test p = ${p}`
+    : `evidence 2 ln B = ${fixed(e.evidence, 1)} (threshold ${fixed(e.threshold, 1)}), false-alarm bound ${p}, round ${e.round ?? '-'}`;
+  const tb = f.timeBehaviour;
   return el('div', { class: 'esg-finding' },
     el('h3', {}, `${f.effect}${f.gyro ? ` (gyro ${f.gyro})` : ''}`),
     el('p', {}, f.explanation || f.description || ''),
-    parameterTable(f.parameters),
-    el('p', { class: 'muted' },
-      `evidence 2 ln B = ${fixed(e.evidence, 1)} (threshold ${fixed(e.threshold, 1)}), `,
-      `false-alarm bound ${e.pValue === undefined ? '-' : e.pValue.toExponential(2)}, round ${e.round ?? '-'}`,
-      f.timeBehaviour ? `; time behaviour ${f.timeBehaviour.kind}${f.timeBehaviour.onsetHours !== undefined ? ` from ${fixed(f.timeBehaviour.onsetHours, 2)} h` : ''}` : ''));
+    (f.parameters || []).length ? parameterTable(f.parameters) : null,
+    el('p', { class: 'muted' }, evidence,
+      tb ? `; time behaviour ${tb.kind}${tb.onsetHours !== undefined ? ` from ${fixed(tb.onsetHours, 2)} h` : ''}` : ''));
 }
 
 function fitTable(fit) {
@@ -61,8 +66,8 @@ function render(container, d) {
       `${r.filterRuns ?? '-'} filter runs`),
     el('p', {}, 'Verdict: ', el('span', { class: 'verdict esg-verdict' }, d.verdict)),
     el('h3', {}, `Findings (${findings.length})`),
-    findings.length ? findings.map(finding) : el('p', { class: 'esg-no-findings' },
-      'No finding: the configured model explains the data.'),
+    ...(findings.length ? findings.map(finding) : [el('p', { class: 'esg-no-findings' },
+      'No finding: the configured model explains the data.')]),
     el('h3', {}, 'Mismatch'), mismatch(r.mismatch),
     el('h3', {}, 'Fit before and after'), fitTable(r.fit),
     el('h3', {}, 'Attitude error at the end of each star-tracker gap'), gapChart(r.fit));

@@ -18,7 +18,7 @@ function row(entry) {
     el('td', {}, s.last_frame_time || '-'),
     ...alerts,
     el('td', {}, entry.last_star_tracker_time
-      ? `${duration(entry.last_star_tracker_time, s.last_frame_time)} (at ${entry.last_star_tracker_time})`
+      ? `${duration(entry.last_star_tracker_time, s.last_frame_time)} before the last frame`
       : 'not available'));
 }
 
@@ -27,15 +27,18 @@ function render(container, fleet) {
     el('style', {}, STYLE),
     el('h2', {}, 'Fleet overview'),
     el('table', { class: 'esg-fleet' },
-      el('thead', {}, el('tr', {},
-        el('th', {}, 'Spacecraft'), el('th', {}, 'Session state'), el('th', {}, 'Output pair'),
-        el('th', {}, 'Last frame (UTC)'),
-        ...SEVERITIES.map((sev) => el('th', { class: `sev-${sev}` }, `Open ${sev}`)),
-        el('th', {}, 'Since last star-tracker correction (at last frame)'))),
+      el('thead', {},
+        el('tr', {},
+          el('th', { rowspan: 2 }, 'Spacecraft'), el('th', { rowspan: 2 }, 'Session state'),
+          el('th', { rowspan: 2 }, 'Output pair'), el('th', { rowspan: 2 }, 'Last frame (UTC)'),
+          el('th', { colspan: 4 }, 'Open alerts'),
+          el('th', { rowspan: 2 }, 'Last star-tracker correction')),
+        el('tr', {}, ...SEVERITIES.map((sev) => el('th', { class: `sev-${sev}` }, sev)))),
       el('tbody', {}, fleet.map(row))),
     el('p', { class: 'muted' },
-      'Open alerts: not cleared by esgd. The star-tracker column needs per-step estimates ',
-      '(GetEstimateHistory); "not available" when esgd does not keep them.'));
+      'Open alerts: not yet cleared by esgd (acknowledged or not). Last star-tracker correction: ',
+      'measurement time between the newest step that applied the star tracker and the last frame; ',
+      'it needs per-step estimates (GetEstimateHistory) and reads "not available" without them.'));
 }
 
 export function fleetViewProvider() {

@@ -15,6 +15,14 @@ function svg(tag, attrs, text) {
   return node;
 }
 
+// The smallest 1, 2, 2.5 or 5 times a power of ten at or above v, so the four gridlines fall on
+// round numbers.
+function niceTop(v) {
+  const p = 10 ** Math.floor(Math.log10(v / 4));
+  for (const m of [1, 2, 2.5, 5, 10]) if (4 * m * p >= v) return 4 * m * p;
+  return v;
+}
+
 export function gapChart(fit) {
   const before = (fit && fit.before && fit.before.gaps) || [];
   const after = (fit && fit.after && fit.after.gaps) || [];
@@ -25,7 +33,7 @@ export function gapChart(fit) {
     return root;
   }
   const values = [...before, ...after].map((g) => g.finalErrorArcsec || 0);
-  const top = Math.max(...values, 1) * 1.1;
+  const top = niceTop(Math.max(...values, 1));
   const plotW = W - PAD.left - PAD.right;
   const plotH = H - PAD.top - PAD.bottom;
   const y = (v) => PAD.top + plotH * (1 - v / top);
@@ -33,7 +41,7 @@ export function gapChart(fit) {
   for (let i = 0; i <= 4; i++) {
     const v = (top * i) / 4;
     root.append(svg('line', { x1: PAD.left, x2: W - PAD.right, y1: y(v), y2: y(v), stroke: '#444' }));
-    root.append(svg('text', { x: PAD.left - 6, y: y(v) + 4, fill: '#aaa', 'font-size': 11, 'text-anchor': 'end' }, v.toFixed(0)));
+    root.append(svg('text', { x: PAD.left - 6, y: y(v) + 4, fill: '#aaa', 'font-size': 11, 'text-anchor': 'end' }, String(Number(v.toPrecision(3)))));
   }
   root.append(svg('text', { x: 12, y: PAD.top + plotH / 2, fill: '#aaa', 'font-size': 11,
     transform: `rotate(-90 12 ${PAD.top + plotH / 2})`, 'text-anchor': 'middle' }, 'error at gap end [arcsec]'));

@@ -50,14 +50,18 @@ function overlay(identifier, name, series, location) {
   };
 }
 
-function table(identifier, name, child, location) {
+// A telemetry table of one object. The name column (always the same object) and the unit
+// columns (the unit is in each column's title) are hidden to leave room for the numbers.
+function table(identifier, name, child, values, location) {
+  const hiddenColumns = { name: true };
+  for (const v of values) if (v.unit) hiddenColumns[`${v.key}-unit`] = true;
   return {
     identifier,
     name,
     type: 'table',
     location,
     composition: [child],
-    configuration: { columnWidths: {}, hiddenColumns: {} }
+    configuration: { columnWidths: { utc: 200 }, hiddenColumns }
   };
 }
 
@@ -127,7 +131,7 @@ const builders = {
 
   async coeftable(identifier, [sc, gyro]) {
     return table(identifier, `Gyro ${gyro} coefficients table (deg/h, case frame)`,
-      id('coef', sc, gyro), keyString(id('coefs', sc, gyro)));
+      id('coef', sc, gyro), coefficientTableValues(), keyString(id('coefs', sc, gyro)));
   },
 
   async coef(identifier, [sc, gyro]) {
@@ -166,7 +170,7 @@ const builders = {
   async atttable(identifier, [sc]) {
     const name = 'Attitude and 1-sigma table (per-step estimates)';
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
-    return table(identifier, name, id('est', sc), keyString(id('sc', sc)));
+    return table(identifier, name, id('est', sc), attitudeTableValues(ESTIMATE_EXTRA), keyString(id('sc', sc)));
   },
 
   async est(identifier, [sc]) {
@@ -196,7 +200,8 @@ const builders = {
   async innovtable(identifier, [sc]) {
     const name = 'Star-tracker innovations table (arcsec)';
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
-    return table(identifier, name, id('innov', sc), keyString(id('sc', sc)));
+    const info = await session(sc);
+    return table(identifier, name, id('innov', sc), innovationTableValues(gyroIds(info)), keyString(id('sc', sc)));
   },
 
   async innov(identifier, [sc]) {
@@ -217,7 +222,8 @@ const builders = {
   },
 
   async predtable(identifier, [sc]) {
-    return table(identifier, 'Predicted attitude table', id('pred', sc), keyString(id('sc', sc)));
+    return table(identifier, 'Predicted attitude table', id('pred', sc), attitudeTableValues(PREDICT_EXTRA),
+      keyString(id('sc', sc)));
   },
 
   async pred(identifier, [sc]) {
@@ -231,17 +237,31 @@ const builders = {
   },
 
   async diags(identifier, [sc]) {
-    const body = await apiFetch(`/api/spacecraft/${encodeURIComponent(sc)}/diagnoses`);
+    const body = await loadDiagnosisSummaries(sc);
     // Newest first: the one an engineer just ran is at the top.
     const ids = body.diagnoses.map((d) => d.id).reverse();
     return folder(identifier, 'Diagnoses', ids.map((n) => id('diag', sc, n)), keyString(id('sc', sc)));
   },
 
   async diag(identifier, [sc, n]) {
-    return { identifier, name: `Diagnosis ${n}`, type: 'esg.diagnosis', esg: { spacecraft: sc, id: Number(n) },
+    if (!diagnosisSummaries.has(`${sc}\u0000${n}`)) await loadDiagnosisSummaries(sc);
+    const summary = diagnosisSummaries.get(`${sc}\u0000${n}`);
+    const name = summary
+      ? `Diagnosis ${n}: ${summary.verdict} (${(summary.compute_time || '').slice(0, 16).replace('T', ' ')})`
+      : `Diagnosis ${n}`;
+    return { identifier, name, type: 'esg.diagnosis', esg: { spacecraft: sc, id: Number(n) },
       location: keyString(id('diags', sc)) };
   }
 };
+
+// Summaries of the diagnoses seen in a list, so each one's name can carry its verdict.
+const diagnosisSummaries = new Map();
+
+async function loadDiagnosisSummaries(sc) {
+  const body = await apiFetch(`/api/spacecraft/${encodeURIComponent(sc)}/diagnoses`);
+  for (const d of body.diagnoses) diagnosisSummaries.set(`${sc}\u0000${d.id}`, d);
+  return body;
+}
 
 async function estimatesAvailableFor(sc) {
   const info = await session(sc);

@@ -29,6 +29,11 @@ function range(key, name, units, priority = 1) {
   return { key, source: key, name, ...units, hints: { range: priority } };
 }
 
+// Table columns carry the unit in their title (the unit columns are hidden).
+function column(key, name, units, priority) {
+  return range(key, units.unit ? `${name} [${units.unit}]` : name, units, priority);
+}
+
 // One snapshot -> one datum: value, 1-sigma, value+sigma, value-sigma of every coefficient.
 export function snapshotDatum(snapshot) {
   const datum = { utc: Date.parse(snapshot.measurement_time) };
@@ -46,8 +51,8 @@ export function snapshotDatum(snapshot) {
 export function coefficientTableValues() {
   const values = [TIME];
   COEFFICIENTS.forEach((c, i) => {
-    values.push(range(c.key, c.label, DEG_H, 2 * i + 1));
-    values.push(range(`${c.key}_sigma`, `${c.label} 1-sigma`, DEG_H, 2 * i + 2));
+    values.push(column(c.key, c.label, DEG_H, 2 * i + 1));
+    values.push(column(`${c.key}_sigma`, `${c.label} 1-sigma`, DEG_H, 2 * i + 2));
   });
   return values;
 }
@@ -104,7 +109,7 @@ export function predictDatum(sample, source) {
 
 export function attitudeTableValues(extra = []) {
   const values = [TIME];
-  AXES.forEach((axis, i) => values.push(range(`s${axis}`, `1-sigma body ${axis}`, ARCSEC, i + 1)));
+  AXES.forEach((axis, i) => values.push(column(`s${axis}`, `1-sigma body ${axis}`, ARCSEC, i + 1)));
   for (let i = 0; i < 4; i++) {
     values.push(range(`q${i}`, `q${i}`, { formatString: '%.9f' }, 10 + i));
   }
@@ -127,8 +132,8 @@ export function innovationTableValues(gyros) {
   let priority = 1;
   for (const g of gyros) {
     for (const i of [1, 2]) {
-      values.push(range(`g${g}_z${i}`, `gyro ${g} z${i}`, ARCSEC, priority++));
-      values.push(range(`g${g}_z${i}_sigma`, `gyro ${g} z${i} 1-sigma`, ARCSEC, priority++));
+      values.push(column(`g${g}_z${i}`, `gyro ${g} z${i}`, ARCSEC, priority++));
+      values.push(column(`g${g}_z${i}_sigma`, `gyro ${g} z${i} 1-sigma`, ARCSEC, priority++));
     }
   }
   return values;
