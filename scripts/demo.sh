@@ -2,9 +2,20 @@
 # The main job on the embedded default: esgd on a SQLite file, spacecraft RDK-1 simulated with the
 # paper's calibration profile and replayed through the client; prints the calibrated coefficients,
 # a prediction across a 6 h gap (also a CCSDS AEM file), the alerts raised, and the offline
-# model (1) versus model (10) long-gap comparison.
+# model (1) versus model (10) long-gap comparison; then serves the console (Open MCT, through the
+# console gateway, docs/console-gateway.md) on http://127.0.0.1:8080/ until Ctrl-C.
+#   bash scripts/demo.sh [--no-serve]    --no-serve (or ESG_DEMO_NO_SERVE=1): exit after the steps
+#   ESG_DEMO_PORT (esgd, default 50051), ESG_CONSOLE_PORT (console, default 8080)
 set -euo pipefail
 cd "$(dirname "$0")/.."
+serve=1
+[ "${ESG_DEMO_NO_SERVE:-0}" = 1 ] && serve=0
+for arg in "$@"; do
+  case "$arg" in
+    --no-serve) serve=0 ;;
+    *) echo "demo.sh: unknown option '$arg' (usage: bash scripts/demo.sh [--no-serve])" >&2; exit 2 ;;
+  esac
+done
 build=${ESG_BUILD_DIR:-}
 if [ -z "$build" ]; then
   bash scripts/build.sh
@@ -28,7 +39,14 @@ step "simulate RDK-1: 30 h of the paper's calibration profile (rotors displaced,
 step "start esgd on $addr with $work/esg.db"
 "$esgd" --listen "$addr" --db "$work/esg.db" >"$work/esgd.log" 2>&1 &
 esgd_pid=$!
-trap 'kill "$esgd_pid" 2>/dev/null || true; wait "$esgd_pid" 2>/dev/null || true' EXIT
+console_pid=
+cleanup() {
+  for pid in $console_pid $esgd_pid; do
+    kill "$pid" 2>/dev/null || true
+    wait "$pid" 2>/dev/null || true
+  done
+}
+trap cleanup EXIT
 for _ in $(seq 1 100); do
   "$esg" --server "$addr" status >/dev/null 2>&1 && break
   sleep 0.1
@@ -63,3 +81,37 @@ for model in 1+11 10+11; do
   "$esg" gap --config deploy/examples/rdk1.json --recording "$work/mixed.csv" --model "$model" \
     --gap-start 24 2>/dev/null | head -3
 done
+
+if [ "$serve" = 0 ]; then
+  exit 0
+fi
+
+console_port=${ESG_CONSOLE_PORT:-8080}
+step "console: Open MCT through the console gateway on 127.0.0.1:$console_port (log in $work/console.log)"
+# scripts/console.sh installs the console's npm packages first if they are missing.
+bash scripts/console.sh --esgd "$addr" --listen "127.0.0.1:$console_port" >"$work/console.log" 2>&1 &
+console_pid=$!
+for _ in $(seq 1 1200); do
+  grep -q '^console: listening on' "$work/console.log" && break
+  if ! kill -0 "$console_pid" 2>/dev/null; then
+    echo "demo.sh: the console gateway did not start:" >&2
+    tail -5 "$work/console.log" >&2
+    exit 1
+  fi
+  sleep 0.1
+done
+grep -q '^console: listening on' "$work/console.log" || { echo "demo.sh: the console gateway did not start in 120 s" >&2; exit 1; }
+echo "console: http://127.0.0.1:$console_port/ (Ctrl-C to stop)"
+# Ctrl-C reaches esgd and the gateway too (same process group); both shut down gracefully and
+# the EXIT trap waits for them. The gateway exits 0 only when told to stop by a signal, so a 0
+# here is a stop even where this shell itself does not see the signal (started with SIGINT
+# ignored, as background jobs of scripts are).
+trap 'echo; echo "demo: stopped"; exit 0' INT TERM
+console_status=0
+wait "$console_pid" || console_status=$?
+if [ "$console_status" = 0 ]; then
+  echo "demo: stopped"
+  exit 0
+fi
+echo "demo.sh: the console gateway ended with status $console_status (see $work/console.log)" >&2
+exit 1

@@ -6,6 +6,7 @@
 const { Calls } = require('./esgd');
 const { ApiError, toHttp } = require('./errors');
 const { makeRoutes } = require('./routes');
+const { sendJson } = require('./respond');
 
 // '/api/spacecraft/:id/history' -> a RegExp with one group per ':name' segment.
 function compile(pattern) {
@@ -16,17 +17,6 @@ function compile(pattern) {
     return '([^/]+)';
   }).join('/');
   return { regex: new RegExp(`^${source}$`), names };
-}
-
-function sendJson(res, httpStatus, body) {
-  const text = JSON.stringify(body);
-  res.writeHead(httpStatus, {
-    'Content-Type': 'application/json; charset=utf-8',
-    'Content-Length': Buffer.byteLength(text),
-    'Cache-Control': 'no-store',
-    'X-Content-Type-Options': 'nosniff',
-  });
-  res.end(text);
 }
 
 function makeApi(esgd, log) {
@@ -81,4 +71,4 @@ function makeApi(esgd, log) {
   };
 }
 
-module.exports = { makeApi, sendJson };
+module.exports = { makeApi };

@@ -121,6 +121,13 @@ class Converter {
   }
 
   fieldFromJson(field, scope, value, where) {
+    if (field.type === 'TYPE_ENUM') {
+      const values = this.definition[resolveType(this.definition, scope, field.typeName)].type.value;
+      if (!values.some((v) => v.name === value || v.number === value)) {
+        throw new ConvertError(`${where}: expected one of ${values.map((v) => v.name).join(', ')}, got ${JSON.stringify(value)}`);
+      }
+      return value;
+    }
     if (field.type !== 'TYPE_MESSAGE') return scalarFromJson(field.type, value, where);
     const sub = resolveType(this.definition, scope, field.typeName);
     if (sub === TIMESTAMP) {
@@ -164,12 +171,6 @@ function scalarFromJson(type, value, where) {
   }
   if (type === 'TYPE_STRING') {
     if (typeof value !== 'string') throw new ConvertError(`${where}: expected a string, got ${JSON.stringify(value)}`);
-    return value;
-  }
-  if (type === 'TYPE_ENUM') {
-    if (typeof value !== 'string' && !Number.isInteger(value)) {
-      throw new ConvertError(`${where}: expected an enum name, got ${JSON.stringify(value)}`);
-    }
     return value;
   }
   throw new ConvertError(`${where}: fields of type ${type} are not supported`);

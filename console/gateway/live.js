@@ -38,10 +38,11 @@ function invalid(message) {
 }
 
 class LiveSocket {
-  constructor(ws, esgd, log) {
+  constructor(ws, esgd, log, peer) {
     this.ws = ws;
     this.esgd = esgd;
     this.log = log;
+    this.peer = peer;
     this.authorization = null;
     this.state = 'OPEN';
     this.subscriptions = new Map();
@@ -61,7 +62,10 @@ class LiveSocket {
 
   fail(closeCode, error) {
     this.send({ type: 'error', id: null, error });
-    this.ws.close(closeCode, error.message.slice(0, 120));
+    // A close reason is at most 123 bytes of UTF-8.
+    let reason = error.message.slice(0, 120);
+    while (Buffer.byteLength(reason) > 123) reason = reason.slice(0, -1);
+    this.ws.close(closeCode, reason);
   }
 
   onMessage(data, isBinary) {
@@ -101,10 +105,12 @@ class LiveSocket {
       if (this.state !== 'CHECKING') return;
       this.authorization = authorization;
       this.state = 'READY';
+      this.log(`live: ${this.peer} signed in`);
       this.send({ type: 'ready' });
     }, (err) => {
       if (this.state !== 'CHECKING') return;
       const error = errorObject(err);
+      this.log(`live: ${this.peer} refused: ${error.code}`);
       this.fail(error.code === 'UNAUTHENTICATED' ? CLOSE_UNAUTHENTICATED : 1011, error);
     });
   }
@@ -171,9 +177,19 @@ class LiveSocket {
 
   onClose() {
     clearTimeout(this.authTimer);
+    if (this.state === 'CLOSED') return;
+    if (this.state === 'READY') this.log(`live: ${this.peer} closed (${this.subscriptions.size} subscriptions cancelled)`);
     this.state = 'CLOSED';
     for (const subscription of this.subscriptions.values()) subscription.call.cancel();
     this.subscriptions.clear();
+  }
+}
+
+function sameOrigin(origin, host) {
+  try {
+    return new URL(origin).host === host;
+  } catch {
+    return false;
   }
 }
 
@@ -188,8 +204,15 @@ function attachLive(server, esgd, log) {
       socket.end('HTTP/1.1 404 Not Found\r\nConnection: close\r\nContent-Length: 0\r\n\r\n');
       return;
     }
+    // Browsers send the page's origin with every WebSocket; one from another site's page is
+    // refused, so that site cannot read live alerts of an esgd without tokens through the
+    // operator's browser. Clients that are not browsers send no Origin.
+    if (req.headers.origin && !sameOrigin(req.headers.origin, req.headers.host)) {
+      socket.end('HTTP/1.1 403 Forbidden\r\nConnection: close\r\nContent-Length: 0\r\n\r\n');
+      return;
+    }
     wss.handleUpgrade(req, socket, head, (ws) => {
-      const live = new LiveSocket(ws, esgd, log);
+      const live = new LiveSocket(ws, esgd, log, `${req.socket.remoteAddress}:${req.socket.remotePort}`);
       sockets.add(live);
       ws.on('close', () => sockets.delete(live));
     });

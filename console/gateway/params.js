@@ -54,7 +54,10 @@ function numberParam(query, name) {
 }
 
 // The request body parsed as a JSON object; 400 naming `body` when it is missing or not JSON,
-// 413 beyond MAX_BODY_BYTES.
+// 413 beyond MAX_BODY_BYTES, 415 when a body does not say it is JSON. A browser sends
+// Content-Type application/json to another site only after a CORS preflight, which the gateway
+// never grants: so another web site cannot make an operator's browser post here (acknowledge
+// alerts of an esgd without tokens) with a form or a no-cors fetch.
 function jsonBody(req) {
   return new Promise((resolve, reject) => {
     const chunks = [];
@@ -76,6 +79,10 @@ function jsonBody(req) {
       const text = Buffer.concat(chunks).toString('utf8');
       if (text.trim() === '') {
         reject(badRequest('body: missing (expected a JSON object)'));
+        return;
+      }
+      if (!/^application\/json\s*(;|$)/i.test(req.headers['content-type'] || '')) {
+        reject(new ApiError(415, 'INVALID_ARGUMENT', 'Content-Type: expected application/json'));
         return;
       }
       let value;

@@ -5,7 +5,8 @@
 
 const http = require('node:http');
 const https = require('node:https');
-const { makeApi, sendJson } = require('./api');
+const { makeApi } = require('./api');
+const { sendJson } = require('./respond');
 const { serveStatic } = require('./static');
 const { attachLive } = require('./live');
 

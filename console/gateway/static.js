@@ -5,7 +5,7 @@
 
 const fs = require('node:fs');
 const path = require('node:path');
-const { sendJson } = require('./api');
+const { sendJson } = require('./respond');
 
 const CONSOLE_DIR = path.resolve(__dirname, '..');
 
