@@ -16,9 +16,17 @@ function short(name, prefix) {
 function formatValue(value, unit) {
   if (typeof value !== 'number') return '';
   const text = Math.abs(value) >= 0.01 || value === 0 ? value.toFixed(3) : value.toExponential(3);
-  return unit ? `${text} ${unit}` : text;
+  return unit && unit !== '1' ? `${text} ${unit}` : text; // "1": dimensionless
 }
 
+// Minutes are enough to tell occurrences apart in a list; the full time is in the inspector.
+function minute(iso) {
+  return iso ? `${iso.slice(0, 16).replace('T', ' ')}Z` : '-';
+}
+
+// Open MCT's list shows a small "namespace" line over the fault's name, the trip value, the live
+// value and the trigger time. The name stays short (reason, sequence, repeats) so the row fits;
+// the line above carries where, how severe, since when and the state.
 export function alertToFault(alert) {
   const severity = short(alert.severity, 'ALERT_SEVERITY_');
   const reason = short(alert.reason, 'ALERT_REASON_');
@@ -27,18 +35,19 @@ export function alertToFault(alert) {
   const result = OPEN_MCT_SEVERITY[severity] || 'WATCH';
   return {
     id: `${alert.spacecraft_id}/${alert.sequence}`,
-    name: `${severity} ${reason} #${alert.sequence} x${alert.repeat_count} (${state})`,
-    namespace: `${alert.spacecraft_id} / ${alert.subsystem}`,
+    name: `${reason} #${alert.sequence}${alert.repeat_count > 1 ? ` x${alert.repeat_count}` : ''}`,
+    namespace: `${alert.spacecraft_id} / ${alert.subsystem} | ${severity} | first ${minute(alert.first_time)} | ${state}`,
     severity: result,
     acknowledged: Boolean(alert.acknowledged),
     shelved: false,
     seqNum: alert.sequence,
-    // Shown as "Last Trigger Time": the latest occurrence (telemetry epoch), then the first.
-    triggerTime: `${alert.measurement_time} (first ${alert.first_time})`,
+    // Shown as "Last Trigger Time": the latest occurrence (telemetry epoch), ISO so that Open
+    // MCT's newest-first sort (a string comparison) orders it right.
+    triggerTime: alert.measurement_time,
     shortDescription: alert.message,
     // "Trip value" is the value of the latest repeat, "live value" the threshold it exceeded.
     triggerValueInfo: { value: formatValue(alert.value, alert.unit), rangeCondition: 'HIGH', monitoringResult: result },
-    currentValueInfo: { value: `threshold ${formatValue(alert.threshold, alert.unit)}`, rangeCondition: 'HIGH', monitoringResult: 'IN_LIMITS' },
+    currentValueInfo: { value: `limit ${formatValue(alert.threshold, alert.unit)}`, rangeCondition: 'HIGH', monitoringResult: 'IN_LIMITS' },
     esgAlert: alert
   };
 }

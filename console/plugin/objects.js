@@ -34,8 +34,9 @@ function telemetryObject(identifier, name, values, esg, location) {
   return { identifier, name, type: TELEMETRY_TYPE, telemetry: { values }, esg, location };
 }
 
-// An overlay plot with the series' colours fixed, lines joined, no point markers.
-function overlay(identifier, name, series, location) {
+// An overlay plot with the series' colours fixed, lines joined, no point markers, and the
+// quantity with its unit as the y-axis label.
+function overlay(identifier, name, series, location, yLabel) {
   return {
     identifier,
     name,
@@ -43,6 +44,7 @@ function overlay(identifier, name, series, location) {
     location,
     composition: series.map((s) => s.identifier),
     configuration: {
+      yAxis: { label: yLabel },
       series: series.map((s) => ({
         identifier: s.identifier, color: s.color, interpolate: 'linear', markers: false
       }))
@@ -145,7 +147,7 @@ const builders = {
       identifier: id('coefband', sc, gyro, coef, band), color: BAND_COLOURS[band]
     }));
     return overlay(identifier, `Gyro ${gyro} ${c.label} with 1-sigma band (deg/h)`, series,
-      keyString(id('coefs', sc, gyro)));
+      keyString(id('coefs', sc, gyro)), `${c.label} [deg/h], case frame`);
   },
 
   async coefband(identifier, [sc, gyro, coef, band]) {
@@ -164,7 +166,7 @@ const builders = {
       series.push({ identifier: id('estser', sc, `s${axis}_hi`, `+1-sigma body ${axis}`), color: AXIS_COLOURS[axis] });
       series.push({ identifier: id('estser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
     }
-    return overlay(identifier, name, series, keyString(id('sc', sc)));
+    return overlay(identifier, name, series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
   },
 
   async atttable(identifier, [sc]) {
@@ -194,7 +196,7 @@ const builders = {
       series.push({ identifier: id('estser', sc, `${k}_hi`, `z${i} +1-sigma`), color: colours[i][1] });
       series.push({ identifier: id('estser', sc, `${k}_lo`, `z${i} -1-sigma`), color: colours[i][1] });
     }
-    return overlay(identifier, name, series, keyString(id('sc', sc)));
+    return overlay(identifier, name, series, keyString(id('sc', sc)), `gyro ${gyro} innovation [arcsec]`);
   },
 
   async innovtable(identifier, [sc]) {
@@ -218,7 +220,7 @@ const builders = {
       series.push({ identifier: id('predser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
     }
     return overlay(identifier, 'Predicted attitude 1-sigma envelope over the time bounds (arcsec)',
-      series, keyString(id('sc', sc)));
+      series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
   },
 
   async predtable(identifier, [sc]) {

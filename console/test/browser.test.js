@@ -56,11 +56,16 @@ async function open(browsePath, query = '') {
   await page.evaluate((hash) => { window.location.hash = hash; }, `#/browse/${browsePath}${query}`);
 }
 
-async function shot(name) {
+// height: a taller window for a long view (the diagnosis report scrolls inside Open MCT's pane,
+// so a full-page capture would not show more).
+async function shot(name, height = 900) {
   if (!SCREENSHOTS) return;
   fs.mkdirSync(SHOT_DIR, { recursive: true });
+  if (height !== 900) await page.setViewport({ width: 1500, height });
+  await page.mouse.move(1, 880); // no hover toolbar or tooltip over the plot
   await sleep(1500); // plots draw on the next animation frames
   await page.screenshot({ path: path.join(SHOT_DIR, `${name}.png`) });
+  if (height !== 900) await page.setViewport({ width: 1500, height: 900 });
 }
 
 // The rows of the Open MCT telemetry table on screen, as {column title: cell text}.
@@ -207,14 +212,14 @@ test('a gyro fault alert of the faulty flight is acknowledged from the fault vie
   const fault = before.find((a) => a.reason === 'ALERT_REASON_FAULT_AMBIGUOUS' && /^gyro_\d$/.test(a.subsystem));
   assert.ok(fault, `no gyro fault alert among ${before.map((a) => a.reason).join(', ')}`);
   assert.equal(fault.acknowledged, false);
-  const label = `FAULT_AMBIGUOUS #${fault.sequence} `;
+  const repeats = Number(fault.repeatCount);
+  const label = `FAULT_AMBIGUOUS #${fault.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
   await open('faults.taxonomy:faultManagement.view');
   const item = await page.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
-    .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.includes(text)),
+    .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
   { timeout: 20_000 }, label);
   const namespace = await item.evaluate((li) => li.querySelector('.c-fault-mgmt__list-path').textContent.trim());
-  assert.equal(namespace, `${FAULTY} / ${fault.subsystem}`);
-  await shot('faults');
+  assert.equal(namespace, `${FAULTY} / ${fault.subsystem} | WARNING | first ${fault.firstTime.slice(0, 16).replace('T', ' ')}Z | active, not acknowledged`.replace('active', fault.cleared ? 'cleared' : 'active'));
   const actions = await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'));
   await actions.click();
   const menuItem = await page.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
@@ -233,8 +238,34 @@ test('a gyro fault alert of the faulty flight is acknowledged from the fault vie
   assert.equal(after.acknowledgedBy, OPERATOR);
   // ... and the change came back to the page over the WebSocket.
   await page.waitForFunction((text, who) => [...document.querySelectorAll('.c-fault-mgmt__list.is-acknowledged')]
-    .some((li) => li.textContent.includes(text) && li.textContent.includes(`acknowledged by ${who}`)),
+    .some((li) => li.querySelector('.c-fault-mgmt__list-faultname').textContent.trim() === text &&
+      li.querySelector('.c-fault-mgmt__list-path').textContent.endsWith(`acknowledged by ${who}`)),
   { timeout: 20_000 }, label, OPERATOR);
+});
+
+test('alerts raised while the fault view is open appear in it without a reload (WebSocket push)', async () => {
+  // A third spacecraft whose star tracker has outliers and an outage
+  // (deploy/examples/scenarios/star_tracker_defects.json, 5 h): esgd declares it faulty.
+  const config = path.join(tmp, 'rdks.json');
+  const recording = path.join(tmp, 'star_tracker.csv');
+  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', '"spacecraftId": "RDK-S"'));
+  await esg(['simulate', '--config', config, '--profile', 'orbital', '--scenario',
+    path.join(SCENARIOS, 'star_tracker_defects.json'), '--hours', '5', '--seed', '1', '--out', recording]);
+  await open('faults.taxonomy:faultManagement.view');
+  await page.waitForSelector('.c-fault-mgmt__list');
+  const marker = await page.evaluate(() => { window.esgNoReload = true; return document.querySelectorAll('.c-fault-mgmt__list').length; });
+  assert.ok(marker > 0);
+  assert.equal(await page.$$eval('.c-fault-mgmt__list-path', (ps) => ps.filter((p) => p.textContent.includes('RDK-S')).length), 0);
+  await cli('configure', '--config', config, '--model', '10+11');
+  await cli('replay', '--recording', recording, '--wait');
+  const raised = (await cliJson('alerts', '--spacecraft', 'RDK-S')).alerts
+    .filter((a) => a.reason === 'ALERT_REASON_STAR_TRACKER_FAULT');
+  assert.ok(raised.length > 0, 'the star-tracker defects raise STAR_TRACKER_FAULT');
+  await page.waitForFunction((n) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+    .filter((li) => li.textContent.includes('RDK-S / star_tracker | DISTRESS') && li.textContent.includes('STAR_TRACKER_FAULT #')).length === n,
+  { timeout: 20_000 }, raised.length);
+  assert.equal(await page.evaluate(() => window.esgNoReload), true, 'the page was not reloaded');
+  await shot('faults');
 });
 
 test('the diagnosis report opens with the verdict and findings esg stored', async () => {
@@ -248,7 +279,7 @@ test('the diagnosis report opens with the verdict and findings esg stored', asyn
   assert.ok(headings.length > 0, 'the faulty flight has findings');
   const gaps = report.fit.before.gaps.length;
   assert.equal(await page.$$eval('.esg-gap-chart rect title', (t) => t.length), 2 * gaps);
-  await shot('diagnosis');
+  await shot('diagnosis', 1350);
 });
 
 test('per-step estimate views: real sigma values when esgd has them, "not available" when not', async () => {
