@@ -74,8 +74,9 @@ export function makeFaultProvider(openmct) {
       const alert = fault.esgAlert;
       // With tokens esgd takes the name of the operator's own token (empty operator_name);
       // without tokens the operator types a name, remembered for this browser tab.
-      const name = getToken() ? '' : await operatorName(openmct);
+      let name = '';
       try {
+        if (!getToken()) name = await operatorName();
         const updated = await apiFetch(
           `/api/spacecraft/${encodeURIComponent(alert.spacecraft_id)}/alerts/${alert.sequence}/acknowledge`,
           { method: 'POST', body: { operator_name: name } });

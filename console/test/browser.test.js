@@ -38,6 +38,8 @@ let gateway;
 let browser;
 let page;
 let diagnosisId;
+let faulty;
+let faultyConfig;
 
 const cli = (...args) => esg(['--server', esgd.address, '--token', token, ...args]);
 const cliJson = async (...args) => JSON.parse(await cli(...args, '--json'));
@@ -94,8 +96,8 @@ before(async () => {
   const tokens = path.join(tmp, 'tokens');
   fs.writeFileSync(tokens, `${token} read,write ${OPERATOR}\n`, { mode: 0o600 });
   const flight = path.join(tmp, 'flight.csv');
-  const faulty = path.join(tmp, 'faulty.csv');
-  const faultyConfig = path.join(tmp, 'rdkf.json');
+  faulty = path.join(tmp, 'faulty.csv');
+  faultyConfig = path.join(tmp, 'rdkf.json');
   fs.writeFileSync(faultyConfig, fs.readFileSync(CONFIG, 'utf8')
     .replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${FAULTY}"`));
   await timed(`simulate ${DEMO_HOURS} h demo flight and ${FAULT_HOURS} h faulty flight`, async () => {
@@ -357,5 +359,52 @@ test('predicted attitude across a gap after the last frame: table from PredictAt
     await open('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', bounds);
     await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
     await shot('prediction_envelope');
+  }
+});
+
+test('without tokens: no sign-in, and acknowledging asks the operator name esgd then records', async () => {
+  // A second esgd without a tokens file, the faulty flight replayed into it, its own gateway, and
+  // a new browser tab (its own sessionStorage).
+  const open2 = await startEsgd(['--db', path.join(tmp, 'open.db'), '--sync', 'normal']);
+  let gateway2;
+  let tab;
+  try {
+    const cli2 = (...args) => esg(['--server', open2.address, ...args]);
+    await cli2('configure', '--config', faultyConfig, '--model', '10+11');
+    await cli2('replay', '--recording', faulty, '--wait');
+    gateway2 = await startGateway(['--esgd', open2.address]);
+    tab = await browser.newPage();
+    await tab.setViewport({ width: 1500, height: 900 });
+    await tab.goto(`${gateway2.url}#/browse/faults.taxonomy:faultManagement.view`, { waitUntil: 'domcontentloaded' });
+    await tab.waitForSelector('.c-fault-mgmt__list', { timeout: 20_000 });
+    assert.equal(await tab.$eval('#esg-signin', (f) => f.hidden), true);
+    const alerts = JSON.parse(await cli2('alerts', '--spacecraft', FAULTY, '--json')).alerts;
+    const target = alerts.find((a) => !a.acknowledged);
+    const repeats = Number(target.repeatCount);
+    const label = `${target.reason.replace('ALERT_REASON_', '')} #${target.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
+    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text), {}, label);
+    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
+    await (await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
+      .find((li) => li.textContent.trim() === 'Acknowledge'))).click();
+    await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
+    await tab.click('.c-overlay button[aria-label="Save"]');
+    // The second form: the operator's name.
+    await tab.waitForSelector('#esg-operator-name', { timeout: 10_000 });
+    await tab.type('#esg-operator-name', 'night.shift');
+    await tab.click('#esg-operator-ok');
+    let acked;
+    for (let i = 0; i < 100; i++) {
+      acked = JSON.parse(await cli2('alerts', '--spacecraft', FAULTY, '--json')).alerts
+        .find((a) => a.sequence === target.sequence);
+      if (acked.acknowledged) break;
+      await sleep(100);
+    }
+    assert.equal(acked.acknowledged, true);
+    assert.equal(acked.acknowledgedBy, 'night.shift');
+  } finally {
+    if (tab) await tab.close();
+    if (gateway2) await stop(gateway2.child);
+    await stop(open2.child);
   }
 });
