@@ -139,10 +139,12 @@ export function innovationTableValues(gyros) {
   return values;
 }
 
-// The metadata of a single plotted series: time and one value.
-export function singleSeriesValues(key, name, unit) {
+// The metadata of a single plotted series: time and one value. Every such series has the same
+// key ("value", read from the datum's field `field`): an overlay plot labels its y axis only
+// when all its series share the key.
+export function singleSeriesValues(field, name, unit) {
   const units = unit === 'deg/h' ? DEG_H : ARCSEC;
-  return [TIME, range(key, name, units)];
+  return [TIME, { ...range('value', name, units), source: field }];
 }
 
 export { AXES, TIME };
