@@ -65,9 +65,12 @@ export function makeFaultProvider(openmct) {
     subscribe(domainObject, callback) {
       // The view loads its list on the first global status; afterwards each pushed alert (new,
       // repeated, acknowledged, cleared) reloads it from esgd's stored state.
+      // The end-of-replay marker (also after a reconnect of the WebSocket) reloads it too, so
+      // changes made while the socket was down are not missed.
       callback({ type: GLOBAL });
       return live.subscribe('alerts', '', null, () => callback({ type: GLOBAL }),
-        (error) => openmct.notifications.error(`Alerts feed ended: ${error.code} ${error.message}`));
+        (error) => openmct.notifications.error(`Alerts feed ended: ${error.code} ${error.message}`),
+        () => callback({ type: GLOBAL }));
     },
 
     async acknowledgeFault(fault) {

@@ -72,7 +72,8 @@ export function fleetViewProvider() {
           element.append(container);
           refresh();
           unsubscribes = [
-            live.subscribe('alerts', '', null, schedule),
+            // The end-of-replay marker comes again after a reconnect: refresh then too.
+            live.subscribe('alerts', '', null, schedule, undefined, schedule),
             live.subscribe('estimates', '', null, schedule, () => {})
           ];
         },

@@ -319,6 +319,33 @@ test('per-step estimate views: real sigma values when esgd has them, "not availa
       });
     }
     assert.ok(compared >= 30, `compared ${compared} sigma values`);
+    // Star-tracker innovations per gyro, with their 1-sigma, in the gyro's basis.
+    await open('esg:root/esg:sc~RDK-1/esg:innovtable~RDK-1');
+    const innovationRows = await waitForTableRows(10);
+    let innovations = 0;
+    for (const row of innovationRows) {
+      const record = byTime.get(cellTime(row['Time (UTC)']));
+      if (!record) continue;
+      for (const g of record.star_tracker_innovations) {
+        for (const i of [0, 1]) {
+          assert.equal(Number(row[`gyro ${g.gyro_id} z${i + 1} [arcsec]`]).toFixed(3),
+            g.innovation_arcsec[i].toFixed(3), `gyro ${g.gyro_id} z${i + 1} at ${row['Time (UTC)']}`);
+          assert.equal(Number(row[`gyro ${g.gyro_id} z${i + 1} 1-sigma [arcsec]`]).toFixed(3),
+            g.sigma_arcsec[i].toFixed(3), `gyro ${g.gyro_id} z${i + 1} 1-sigma at ${row['Time (UTC)']}`);
+          innovations += 2;
+        }
+      }
+    }
+    assert.ok(innovations > 0, 'innovations compared');
+    // The fleet's last star-tracker correction: from the newest estimate's last_star_tracker_time.
+    const newest = estimates[estimates.length - 1];
+    const minutes = Math.round((Date.parse(status.sessions ? status.sessions[0].lastFrameTime : status.lastFrameTime) -
+      Date.parse(newest.last_star_tracker_time)) / 60000);
+    await open('esg:root/esg:fleet');
+    await page.waitForSelector('tr[data-spacecraft="RDK-1"]');
+    const cells = await page.$$eval('tr[data-spacecraft="RDK-1"] td', (tds) => tds.map((td) => td.textContent));
+    assert.equal(cells[cells.length - 1],
+      `${Math.floor(minutes / 60)} h ${String(minutes % 60).padStart(2, '0')} min before the last frame`);
     if (SCREENSHOTS) {
       await open('esg:root/esg:sc~RDK-1/esg:attplot~RDK-1');
       await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
