@@ -132,7 +132,7 @@ const builders = {
   },
 
   async coeftable(identifier, [sc, gyro]) {
-    return table(identifier, `Gyro ${gyro} coefficients table (deg/h, case frame)`,
+    return table(identifier, `Gyro ${gyro} coefficients table`,
       id('coef', sc, gyro), coefficientTableValues(), keyString(id('coefs', sc, gyro)));
   },
 
@@ -146,7 +146,7 @@ const builders = {
     const series = Object.keys(BANDS).map((band) => ({
       identifier: id('coefband', sc, gyro, coef, band), color: BAND_COLOURS[band]
     }));
-    return overlay(identifier, `Gyro ${gyro} ${c.label} with 1-sigma band (deg/h)`, series,
+    return overlay(identifier, `${c.label} gyro ${gyro} with 1-sigma band`, series,
       keyString(id('coefs', sc, gyro)), `${c.label} [deg/h], case frame`);
   },
 
@@ -159,7 +159,7 @@ const builders = {
   },
 
   async attplot(identifier, [sc]) {
-    const name = 'Attitude 1-sigma envelope, body axes (arcsec)';
+    const name = 'Attitude 1-sigma envelope';
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
     const series = [];
     for (const axis of AXES) {
@@ -170,7 +170,7 @@ const builders = {
   },
 
   async atttable(identifier, [sc]) {
-    const name = 'Attitude and 1-sigma table (per-step estimates)';
+    const name = 'Attitude 1-sigma table';
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
     return table(identifier, name, id('est', sc), attitudeTableValues(ESTIMATE_EXTRA), keyString(id('sc', sc)));
   },
@@ -186,7 +186,7 @@ const builders = {
   },
 
   async innovplot(identifier, [sc, gyro]) {
-    const name = `Star-tracker innovations gyro ${gyro}, gyro basis (arcsec)`;
+    const name = `Innovations gyro ${gyro}`;
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
     const colours = { 1: ['#4fb3ff', '#2a5f88'], 2: ['#ffb84f', '#8a6a2a'] };
     const series = [];
@@ -196,11 +196,11 @@ const builders = {
       series.push({ identifier: id('estser', sc, `${k}_hi`, `z${i} +1-sigma`), color: colours[i][1] });
       series.push({ identifier: id('estser', sc, `${k}_lo`, `z${i} -1-sigma`), color: colours[i][1] });
     }
-    return overlay(identifier, name, series, keyString(id('sc', sc)), `gyro ${gyro} innovation [arcsec]`);
+    return overlay(identifier, name, series, keyString(id('sc', sc)), `gyro ${gyro} star-tracker innovation, gyro basis [arcsec]`);
   },
 
   async innovtable(identifier, [sc]) {
-    const name = 'Star-tracker innovations table (arcsec)';
+    const name = 'Innovations table';
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
     const info = await session(sc);
     return table(identifier, name, id('innov', sc), innovationTableValues(gyroIds(info)), keyString(id('sc', sc)));
@@ -219,7 +219,7 @@ const builders = {
       series.push({ identifier: id('predser', sc, `s${axis}_hi`, `+1-sigma body ${axis}`), color: AXIS_COLOURS[axis] });
       series.push({ identifier: id('predser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
     }
-    return overlay(identifier, 'Predicted attitude 1-sigma envelope over the time bounds (arcsec)',
+    return overlay(identifier, 'Predicted attitude envelope',
       series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
   },
 
