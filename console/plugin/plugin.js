@@ -5,7 +5,7 @@ import { makeFaultProvider } from './faults.js';
 import { fleetViewProvider } from './fleetView.js';
 import { NAMESPACE } from './keys.js';
 import { objectProvider, TELEMETRY_TYPE } from './objects.js';
-import { telemetryProvider } from './telemetry.js';
+import { setNotifier, telemetryProvider } from './telemetry.js';
 import { unavailableViewProvider } from './unavailableView.js';
 
 export default function EsgConsolePlugin() {
@@ -25,6 +25,7 @@ export default function EsgConsolePlugin() {
 
     openmct.objects.addProvider(NAMESPACE, objectProvider);
     openmct.objects.addRoot({ namespace: NAMESPACE, key: 'root' });
+    setNotifier(openmct);
     openmct.telemetry.addProvider(telemetryProvider);
 
     openmct.install(openmct.plugins.FaultManagement());

@@ -110,6 +110,20 @@ function coefficientFollower({ spacecraft, gyro }, callback) {
   return subscribeEstimates(spacecraft, () => fetchNew());
 }
 
+// Open MCT answers a failed request with "see console for details"; the operator needs esgd's or
+// the gateway's own words (e.g. "the span holds more than 20000 estimates; ask for a narrower
+// span"), so they are shown once per distinct message.
+let notify = () => {};
+const shown = new Set();
+export function setNotifier(openmct) {
+  notify = (message) => {
+    if (shown.has(message)) return;
+    shown.add(message);
+    setTimeout(() => shown.delete(message), 10_000);
+    openmct.notifications.error(message);
+  };
+}
+
 export const telemetryProvider = {
   supportsRequest(domainObject) {
     return domainObject.type === TELEMETRY_TYPE;
@@ -117,8 +131,13 @@ export const telemetryProvider = {
   supportsSubscribe(domainObject) {
     return domainObject.type === TELEMETRY_TYPE && domainObject.esg.source !== 'pred';
   },
-  request(domainObject, options) {
-    return requesters[domainObject.esg.source](domainObject.esg, options);
+  async request(domainObject, options) {
+    try {
+      return await requesters[domainObject.esg.source](domainObject.esg, options);
+    } catch (err) {
+      notify(`${domainObject.name}: ${err.message}`);
+      throw err;
+    }
   },
   subscribe(domainObject, callback) {
     const esg = domainObject.esg;
