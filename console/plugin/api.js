@@ -57,14 +57,12 @@ export function isoTime(ms) {
 }
 
 // Concurrent requests for the same URL share one fetch: an overlay plot asks for the value,
-// +1-sigma and -1-sigma series of one coefficient at once, all cut from the same snapshots.
+// +1-sigma and -1-sigma series of one coefficient at once, all cut from the same snapshots. Only
+// requests in flight are shared; a later one fetches again (new data may have been stored).
 const inflight = new Map();
 export function sharedFetch(path) {
   if (!inflight.has(path)) {
-    const promise = apiFetch(path).finally(() => {
-      setTimeout(() => inflight.delete(path), 2000);
-    });
-    inflight.set(path, promise);
+    inflight.set(path, apiFetch(path).finally(() => inflight.delete(path)));
   }
   return inflight.get(path);
 }
