@@ -119,6 +119,7 @@ const builders = {
       id('innovtable', sc),
       id('predplot', sc),
       id('predtable', sc),
+      id('plan', sc),
       id('diags', sc)
     ], keyString(id('root')));
   },
@@ -236,6 +237,11 @@ const builders = {
   async predser(identifier, [sc, key, label]) {
     return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
       { source: 'pred', spacecraft: sc }, keyString(id('predplot', sc)));
+  },
+
+  async plan(identifier, [sc]) {
+    return { identifier, name: 'Planned attitude for predictions', type: 'esg.plan', esg: { spacecraft: sc },
+      location: keyString(id('sc', sc)) };
   },
 
   async diags(identifier, [sc]) {

@@ -5,6 +5,7 @@ import { makeFaultProvider } from './faults.js';
 import { fleetViewProvider } from './fleetView.js';
 import { NAMESPACE } from './keys.js';
 import { objectProvider, TELEMETRY_TYPE } from './objects.js';
+import { planViewProvider } from './planView.js';
 import { setNotifier, telemetryProvider } from './telemetry.js';
 import { unavailableViewProvider } from './unavailableView.js';
 
@@ -18,6 +19,9 @@ export default function EsgConsolePlugin() {
     });
     openmct.types.addType('esg.diagnosis', {
       name: 'ESG diagnosis', description: 'Model-discrepancy diagnosis report', cssClass: 'icon-notebook', creatable: false
+    });
+    openmct.types.addType('esg.plan', {
+      name: 'ESG planned attitude', description: 'Planned attitude used by predictions', cssClass: 'icon-timeline', creatable: false
     });
     openmct.types.addType('esg.unavailable', {
       name: 'ESG view not available', description: 'Data esgd does not serve', cssClass: 'icon-alert-rect', creatable: false
@@ -34,5 +38,6 @@ export default function EsgConsolePlugin() {
     openmct.objectViews.addProvider(fleetViewProvider());
     openmct.objectViews.addProvider(diagnosisViewProvider());
     openmct.objectViews.addProvider(unavailableViewProvider());
+    openmct.objectViews.addProvider(planViewProvider());
   };
 }

@@ -5,6 +5,7 @@
 import { apiFetch, isoTime, query, sharedFetch } from './api.js';
 import { live } from './live.js';
 import { TELEMETRY_TYPE } from './objects.js';
+import { planSamples } from './plan.js';
 import { estimateDatum, predictDatum, snapshotDatum } from './series.js';
 
 // Predictions are sampled so that a request over any span returns about this many points.
@@ -31,12 +32,19 @@ const requesters = {
   },
 
   // PredictAttitude over the conductor's bounds: recorded samples up to the last archived frame,
-  // then an inertial hold of the last estimate (no planned attitude given).
+  // then the spacecraft's planned attitude (plan.js) or, without one, an inertial hold of the
+  // last estimate.
   async pred({ spacecraft }, { start, end }) {
     const step = Math.max(MIN_PREDICT_STEP_S, Math.ceil((end - start) / 1000 / PREDICT_SAMPLES));
-    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/predict${query({
-      from: isoTime(start), to: isoTime(end), step_s: step
-    })}`);
+    const plan = planSamples(spacecraft);
+    const body = plan
+      ? await apiFetch(`${spacecraftPath(spacecraft)}/predict`, {
+        method: 'POST',
+        body: { from: isoTime(start), to: isoTime(end), step_s: step, planned_attitude: plan }
+      })
+      : await sharedFetch(`${spacecraftPath(spacecraft)}/predict${query({
+        from: isoTime(start), to: isoTime(end), step_s: step
+      })}`);
     const recorded = body.recorded_samples || 0;
     const later = (body.attitude_source || '').replace(/^ATTITUDE_SOURCE_/, '');
     return body.samples.map((s, i) => predictDatum(s, i < recorded ? 'RECORDED' : later));

@@ -435,3 +435,58 @@ test('without tokens: no sign-in, and acknowledging asks the operator name esgd 
     await stop(open2.child);
   }
 });
+
+// q * (rotation by `deg` about body z), Hamilton, scalar first.
+function rotateAboutBodyZ(q, deg) {
+  const h = (deg * Math.PI) / 360;
+  const [w, x, y, z] = q;
+  const [c, s] = [Math.cos(h), Math.sin(h)];
+  const r = [w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s];
+  return r[0] < 0 ? r.map((v) => -v) : r;
+}
+
+test('a planned attitude pasted in the console is what the prediction after the last frame uses', async () => {
+  const status = await cliJson('status', '--spacecraft', 'RDK-1');
+  const session = status.sessions ? status.sessions[0] : status;
+  const last = Date.parse(session.lastFrameTime);
+  const q = session.latestAttitude.qInB;
+  const plan = ['time,q0,q1,q2,q3',
+    `${new Date(last + 3600e3).toISOString()},${q.join(',')}`,
+    `${new Date(last + 6 * 3600e3).toISOString()},${rotateAboutBodyZ(q, 10).join(',')}`].join('\n');
+  const planFile = path.join(tmp, 'plan.csv');
+  fs.writeFileSync(planFile, `${plan}\n`);
+  await open('esg:root/esg:sc~RDK-1/esg:plan~RDK-1');
+  await page.waitForSelector('.esg-plan-text');
+  await page.$eval('.esg-plan-text', (area, text) => { area.value = text; }, plan);
+  await page.click('.esg-plan-use');
+  await page.waitForFunction(() => /2 samples/.test(document.querySelector('.esg-plan-status').textContent));
+  const start = last - 6 * 3600e3;
+  const end = last + 6 * 3600e3;
+  await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1',
+    `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
+  await page.waitForFunction(() => [...document.querySelectorAll('.c-telemetry-table__body tr.noselect')]
+    .some((tr) => tr.textContent.includes('PLANNED')), { timeout: 20_000 });
+  const rows = await tableRows();
+  const step = Math.ceil((end - start) / 1000 / 400);
+  const predicted = (await cliJson('predict', '--spacecraft', 'RDK-1', '--planned', planFile,
+    '--from', new Date(start).toISOString(), '--to', new Date(end).toISOString(), '--step', String(step))).samples;
+  const byTime = new Map(predicted.map((s) => [Date.parse(s.time), s]));
+  let planned = 0;
+  for (const row of rows) {
+    const sample = byTime.get(cellTime(row['Time (UTC)']));
+    assert.ok(sample, `no esg sample at ${row['Time (UTC)']}`);
+    ['q0', 'q1', 'q2', 'q3'].forEach((k, i) => assert.equal(Number(row[k]).toFixed(9), sample.qInB[i].toFixed(9), `${k} at ${row['Time (UTC)']}`));
+    ['x', 'y', 'z'].forEach((axis, i) => assert.equal(Number(row[`1-sigma body ${axis} [arcsec]`]).toFixed(3),
+      sample.sigmaArcsec[i].toFixed(3), `sigma ${axis} at ${row['Time (UTC)']}`));
+    if (row['Attitude source'] === 'PLANNED') planned++;
+  }
+  assert.ok(planned > 10, `${planned} planned rows`);
+  // Clearing the plan brings the inertial hold back.
+  await open('esg:root/esg:sc~RDK-1/esg:plan~RDK-1');
+  await page.waitForSelector('.esg-plan-clear');
+  await page.click('.esg-plan-clear');
+  await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1',
+    `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
+  await page.waitForFunction(() => document.querySelector('.c-telemetry-table__body tr.noselect')?.textContent.includes('INERTIAL_HOLD'),
+    { timeout: 20_000 });
+});
