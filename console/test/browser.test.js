@@ -351,8 +351,56 @@ test('per-step estimate views: real sigma values when esgd has them, "not availa
       await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
       await shot('attitude_envelope');
     }
+    await liveEstimatesAndCoefficients(last, Number((status.sessions ? status.sessions[0] : status).lastSequence));
   }
 });
+
+// Real time with per-step estimates: the next hour of the same flight is replayed in two halves
+// while a table is open. The estimate table gets rows pushed by SubscribeEstimates; the
+// coefficient table gets the snapshots fetched on each pushed estimate. No reload in between.
+async function liveEstimatesAndCoefficients(last, lastSequence) {
+  const more = path.join(tmp, 'flight_next_hour.csv');
+  await esg(['simulate', '--config', CONFIG, '--profile', 'calibration', '--scenario',
+    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', String(DEMO_HOURS + 1), '--seed', '1',
+    '--out', more]);
+  const bounds = `?tc.mode=fixed&tc.startBound=${last - 3600e3}&tc.endBound=${last + 2 * 3600e3}&tc.timeSystem=utc`;
+  const newestRowTime = () => page.evaluate(() => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td ? Date.parse(td.textContent.trim().replace(' ', 'T')) : 0;
+  });
+  const replayHalf = (first, count) => {
+    const rows = fs.readFileSync(more, 'utf8').split('\n');
+    const header = rows.filter((l) => l.startsWith('#'));
+    const columns = rows.find((l) => l.startsWith('time_utc'));
+    const data = rows.slice(rows.indexOf(columns) + 1).filter((l) => l);
+    const file = path.join(tmp, `next_${first}.csv`);
+    fs.writeFileSync(file, [...header, columns, ...data.slice(0, first - 1 + count), ''].join('\n'));
+    return cli('replay', '--recording', file, '--from-sequence', String(first), '--wait');
+  };
+  await open('esg:root/esg:sc~RDK-1/esg:atttable~RDK-1', bounds);
+  await waitForTableRows(10);
+  assert.equal(await newestRowTime(), last);
+  await page.evaluate(() => { window.esgLive = 1; });
+  await replayHalf(lastSequence + 1, 30);
+  await page.waitForFunction((t) => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td && Date.parse(td.textContent.trim().replace(' ', 'T')) > t;
+  }, { timeout: 20_000 }, last);
+  assert.equal(await page.evaluate(() => window.esgLive), 1, 'no reload');
+  const afterFirst = (await cliJson('status', '--spacecraft', 'RDK-1'));
+  const mid = Date.parse((afterFirst.sessions ? afterFirst.sessions[0] : afterFirst).lastFrameTime);
+  await open('esg:root/esg:sc~RDK-1/esg:coefs~RDK-1~1/esg:coeftable~RDK-1~1', bounds);
+  await waitForTableRows(10);
+  assert.equal(await newestRowTime(), mid);
+  await page.evaluate(() => { window.esgLive = 2; });
+  await replayHalf(lastSequence + 31, 30);
+  const end = Date.parse((await cliJson('history', '--spacecraft', 'RDK-1', '--gyro', '1')).snapshots.at(-1).measurementTime);
+  await page.waitForFunction((t) => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td && Date.parse(td.textContent.trim().replace(' ', 'T')) === t;
+  }, { timeout: 20_000 }, end);
+  assert.equal(await page.evaluate(() => window.esgLive), 2, 'no reload');
+}
 
 test('predicted attitude across a gap after the last frame: table from PredictAttitude', async () => {
   const status = (await cliJson('status', '--spacecraft', 'RDK-1'));
