@@ -1,14 +1,14 @@
 // The console's object tree (Open MCT object provider, namespace "esg"):
 //   ESG spacecraft (root)
-//     Fleet overview                              esg.fleet view
+//     Fleet overview                         esg.fleet view
 //     <spacecraft> (folder)
-//       Drift coefficients gyro N (folder)        table of all coefficients + one plot per
-//                                                 estimated coefficient (value, +/-1-sigma)
-//       Attitude 1-sigma (per-step estimates)     overlay plot + table
-//       Star-tracker innovations gyro N           overlay plot per gyro + one table
-//       Predicted attitude                        overlay plot + table (PredictAttitude over the
-//                                                 time conductor's bounds)
-//       Diagnoses (folder)                        one esg.diagnosis report view each
+//       Drift coefficients gyro N (folder)   table of all coefficients + one plot per estimated
+//                                            coefficient (value, +/-1-sigma)
+//       Attitude 1-sigma envelope / table    per-step estimates (or esg.unavailable)
+//       Innovations gyro N / table           per-step estimates (or esg.unavailable)
+//       Predicted attitude envelope / table  PredictAttitude over the time conductor's bounds
+//       Planned attitude for predictions     esg.plan editor
+//       Diagnoses (folder)                   one esg.diagnosis report view each
 // Objects are computed from the sessions on every get(); nothing is persisted.
 import { apiFetch } from './api.js';
 import { NAMESPACE, id, parseKey } from './keys.js';
