@@ -22,7 +22,9 @@ export class ApiError extends Error {
   }
 }
 
-export async function apiFetch(path, { method = 'GET', body, token = getToken() } = {}) {
+// A token esgd stops accepting (revoked, rotated) sends the operator back to the sign-in form:
+// the page is reloaded without it. The sign-in itself checks tokens with signOutOn401 = false.
+export async function apiFetch(path, { method = 'GET', body, token = getToken(), signOutOn401 = true } = {}) {
   const headers = {};
   if (token) headers.Authorization = `Bearer ${token}`;
   if (body !== undefined) headers['Content-Type'] = 'application/json';
@@ -37,6 +39,10 @@ export async function apiFetch(path, { method = 'GET', body, token = getToken() 
     json = text ? JSON.parse(text) : null;
   } catch (err) {
     throw new ApiError(response.status, 'BAD_JSON', `${path}: ${err.message}`);
+  }
+  if (response.status === 401 && token && signOutOn401) {
+    setToken('');
+    location.reload();
   }
   if (!response.ok) {
     const error = (json && json.error) || {};

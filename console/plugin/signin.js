@@ -5,7 +5,7 @@ import { apiFetch, getToken, setToken } from './api.js';
 
 async function tokenWorks(token) {
   try {
-    const body = await apiFetch('/api/auth', { token });
+    const body = await apiFetch('/api/auth', { token, signOutOn401: false });
     return body.ok === true;
   } catch (err) {
     if (err.status === 401 || err.status === 403) return false;
