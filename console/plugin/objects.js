@@ -164,8 +164,8 @@ const builders = {
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
     const series = [];
     for (const axis of AXES) {
-      series.push({ identifier: id('estser', sc, `s${axis}_hi`, `+1-sigma body ${axis}`), color: AXIS_COLOURS[axis] });
-      series.push({ identifier: id('estser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
+      series.push({ identifier: id('estser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
+      series.push({ identifier: id('estser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
     }
     return overlay(identifier, name, series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
   },
@@ -181,7 +181,8 @@ const builders = {
       { source: 'est', spacecraft: sc }, keyString(id('atttable', sc)));
   },
 
-  async estser(identifier, [sc, key, label]) {
+  async estser(identifier, [sc, key]) {
+    const label = seriesLabel(key);
     return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
       { source: 'est', spacecraft: sc }, keyString(id('sc', sc)));
   },
@@ -193,9 +194,9 @@ const builders = {
     const series = [];
     for (const i of [1, 2]) {
       const k = `g${gyro}_z${i}`;
-      series.push({ identifier: id('estser', sc, k, `z${i}`), color: colours[i][0] });
-      series.push({ identifier: id('estser', sc, `${k}_hi`, `z${i} +1-sigma`), color: colours[i][1] });
-      series.push({ identifier: id('estser', sc, `${k}_lo`, `z${i} -1-sigma`), color: colours[i][1] });
+      series.push({ identifier: id('estser', sc, k), color: colours[i][0] });
+      series.push({ identifier: id('estser', sc, `${k}_hi`), color: colours[i][1] });
+      series.push({ identifier: id('estser', sc, `${k}_lo`), color: colours[i][1] });
     }
     return overlay(identifier, name, series, keyString(id('sc', sc)), `gyro ${gyro} star-tracker innovation, gyro basis [arcsec]`);
   },
@@ -217,8 +218,8 @@ const builders = {
   async predplot(identifier, [sc]) {
     const series = [];
     for (const axis of AXES) {
-      series.push({ identifier: id('predser', sc, `s${axis}_hi`, `+1-sigma body ${axis}`), color: AXIS_COLOURS[axis] });
-      series.push({ identifier: id('predser', sc, `s${axis}_lo`, `-1-sigma body ${axis}`), color: AXIS_DIM[axis] });
+      series.push({ identifier: id('predser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
+      series.push({ identifier: id('predser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
     }
     return overlay(identifier, 'Predicted attitude envelope',
       series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
@@ -234,7 +235,8 @@ const builders = {
       { source: 'pred', spacecraft: sc }, keyString(id('predtable', sc)));
   },
 
-  async predser(identifier, [sc, key, label]) {
+  async predser(identifier, [sc, key]) {
+    const label = seriesLabel(key);
     return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
       { source: 'pred', spacecraft: sc }, keyString(id('predplot', sc)));
   },
@@ -261,6 +263,18 @@ const builders = {
       location: keyString(id('diags', sc)) };
   }
 };
+
+// The name of a plotted series from its datum field (series.js): s<axis>_hi / _lo for the attitude
+// envelope, g<gyro>_z<i>[_hi|_lo] for an innovation and its band.
+function seriesLabel(field) {
+  const band = field.endsWith('_hi') ? ' +1-sigma' : field.endsWith('_lo') ? ' -1-sigma' : '';
+  const base = field.replace(/_(hi|lo)$/, '');
+  const attitude = /^s([xyz])$/.exec(base);
+  if (attitude) return `${band.trim()} body ${attitude[1]}`;
+  const innovation = /^g(\d)_z(\d)$/.exec(base);
+  if (innovation) return `gyro ${innovation[1]} z${innovation[2]}${band}`;
+  return field;
+}
 
 // Summaries of the diagnoses seen in a list, so each one's name can carry its verdict.
 const diagnosisSummaries = new Map();
