@@ -190,11 +190,13 @@ const builders = {
   async innovplot(identifier, [sc, gyro]) {
     const name = `Innovations gyro ${gyro}`;
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
-    const colours = { 1: ['#4fb3ff', '#2a5f88'], 2: ['#ffb84f', '#8a6a2a'] };
+    // The components first, their 1-sigma lines after (drawn on top, lighter), so the band stays
+    // visible over a dense cloud of innovations.
+    const colours = { 1: ['#2f7fd0', '#a8d8ff'], 2: ['#d0801e', '#ffd9a0'] };
     const series = [];
+    for (const i of [1, 2]) series.push({ identifier: id('estser', sc, `g${gyro}_z${i}`), color: colours[i][0] });
     for (const i of [1, 2]) {
       const k = `g${gyro}_z${i}`;
-      series.push({ identifier: id('estser', sc, k), color: colours[i][0] });
       series.push({ identifier: id('estser', sc, `${k}_hi`), color: colours[i][1] });
       series.push({ identifier: id('estser', sc, `${k}_lo`), color: colours[i][1] });
     }

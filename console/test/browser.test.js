@@ -350,6 +350,11 @@ test('per-step estimate views: real sigma values when esgd has them, "not availa
       await open('esg:root/esg:sc~RDK-1/esg:attplot~RDK-1');
       await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
       await shot('attitude_envelope');
+      // The last 3 h: over the whole flight the innovations are a solid cloud.
+      await open('esg:root/esg:sc~RDK-1/esg:innovplot~RDK-1~1',
+        `?tc.mode=fixed&tc.startBound=${last - 3 * 3600e3}&tc.endBound=${last}&tc.timeSystem=utc`);
+      await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+      await shot('innovations_gyro1');
     }
     await liveEstimatesAndCoefficients(last, Number((status.sessions ? status.sessions[0] : status).lastSequence));
   }
