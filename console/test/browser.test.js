@@ -33,6 +33,7 @@ const OPERATOR = 'ana.lopez';
 
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'esg-console-browser-'));
 const token = `ops-${crypto.randomBytes(16).toString('hex')}`;
+const viewerToken = `view-${crypto.randomBytes(16).toString('hex')}`;
 let esgd;
 let gateway;
 let browser;
@@ -94,7 +95,7 @@ const cellTime = (text) => Date.parse(text.replace(' ', 'T'));
 
 before(async () => {
   const tokens = path.join(tmp, 'tokens');
-  fs.writeFileSync(tokens, `${token} read,write ${OPERATOR}\n`, { mode: 0o600 });
+  fs.writeFileSync(tokens, `${token} read,write ${OPERATOR}\n${viewerToken} read viewer\n`, { mode: 0o600 });
   const flight = path.join(tmp, 'flight.csv');
   faulty = path.join(tmp, 'faulty.csv');
   faultyConfig = path.join(tmp, 'rdkf.json');
@@ -243,6 +244,34 @@ test('a gyro fault alert of the faulty flight is acknowledged from the fault vie
     .some((li) => li.querySelector('.c-fault-mgmt__list-faultname').textContent.trim() === text &&
       li.querySelector('.c-fault-mgmt__list-path').textContent.endsWith(`acknowledged by ${who}`)),
   { timeout: 20_000 }, label, OPERATOR);
+});
+
+test('a read-only token cannot acknowledge: the page says so and esgd keeps the alert unacknowledged', async () => {
+  const alerts = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts;
+  const target = alerts.find((a) => !a.acknowledged);
+  const repeats = Number(target.repeatCount);
+  const label = `${target.reason.replace('ALERT_REASON_', '')} #${target.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
+  const tab = await browser.newPage(); // a tab of its own: its own sessionStorage, its own sign-in
+  try {
+    await tab.setViewport({ width: 1500, height: 900 });
+    await tab.goto(`${gateway.url}#/browse/faults.taxonomy:faultManagement.view`, { waitUntil: 'domcontentloaded' });
+    await tab.waitForSelector('#esg-signin:not([hidden])', { timeout: 20_000 });
+    await tab.type('#esg-token', viewerToken);
+    await tab.click('#esg-signin-submit');
+    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
+    { timeout: 20_000 }, label);
+    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
+    await (await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
+      .find((li) => li.textContent.trim() === 'Acknowledge'))).click();
+    await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
+    await tab.click('.c-overlay button[aria-label="Save"]');
+    await tab.waitForFunction(() => /does not have the write role/.test(document.body.textContent), { timeout: 20_000 });
+  } finally {
+    await tab.close();
+  }
+  const after = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts.find((a) => a.sequence === target.sequence);
+  assert.equal(after.acknowledged, false);
 });
 
 test('alerts raised while the fault view is open appear in it without a reload (WebSocket push)', async () => {
