@@ -1,0 +1,302 @@
+// The console's object tree (Open MCT object provider, namespace "esg"):
+//   ESG spacecraft (root)
+//     Fleet overview                         esg.fleet view
+//     <spacecraft> (folder)
+//       Drift coefficients gyro N (folder)   table of all coefficients + one plot per estimated
+//                                            coefficient (value, +/-1-sigma)
+//       Attitude 1-sigma envelope / table    per-step estimates (or esg.unavailable)
+//       Innovations gyro N / table           per-step estimates (or esg.unavailable)
+//       Predicted attitude envelope / table  PredictAttitude over the time conductor's bounds
+//       Planned attitude for predictions     esg.plan editor
+//       Diagnoses (folder)                   one esg.diagnosis report view each
+// Objects are computed from the sessions on every get(); nothing is persisted.
+import { apiFetch } from './api.js';
+import { NAMESPACE, id, parseKey } from './keys.js';
+import { estimatesAvailable, session, sessions } from './sessions.js';
+import {
+  AXES, BANDS, COEFFICIENTS, ESTIMATE_EXTRA, PREDICT_EXTRA, attitudeTableValues,
+  coefficientTableValues, innovationTableValues, singleSeriesValues
+} from './series.js';
+
+export const TELEMETRY_TYPE = 'esg.telemetry';
+
+// Band colours: the value bright, its 1-sigma band the same hue, dimmer, so the band reads as
+// belonging to the curve.
+const BAND_COLOURS = { value: '#4fb3ff', hi: '#9a6a2f', lo: '#9a6a2f' };
+const AXIS_COLOURS = { x: '#ff6b6b', y: '#7bd389', z: '#4fb3ff' };
+const AXIS_DIM = { x: '#8a3a3a', y: '#3f7047', z: '#2a5f88' };
+
+function folder(identifier, name, composition, location) {
+  return { identifier, name, type: 'folder', composition, location };
+}
+
+function telemetryObject(identifier, name, values, esg, location) {
+  return { identifier, name, type: TELEMETRY_TYPE, telemetry: { values }, esg, location };
+}
+
+// An overlay plot with the series' colours fixed, lines joined, no point markers, and the
+// quantity with its unit as the y-axis label.
+function overlay(identifier, name, series, location, yLabel) {
+  return {
+    identifier,
+    name,
+    type: 'telemetry.plot.overlay',
+    location,
+    composition: series.map((s) => s.identifier),
+    configuration: {
+      yAxis: { label: yLabel },
+      series: series.map((s) => ({
+        identifier: s.identifier, color: s.color, interpolate: 'linear', markers: false
+      }))
+    }
+  };
+}
+
+// A telemetry table of one object. The name column (always the same object) and the unit
+// columns (the unit is in each column's title) are hidden to leave room for the numbers.
+function table(identifier, name, child, values, location) {
+  const hiddenColumns = { name: true };
+  for (const v of values) if (v.unit) hiddenColumns[`${v.key}-unit`] = true;
+  return {
+    identifier,
+    name,
+    type: 'table',
+    location,
+    composition: [child],
+    configuration: { columnWidths: { utc: 200 }, hiddenColumns }
+  };
+}
+
+function unavailable(identifier, name, location) {
+  return { identifier, name, type: 'esg.unavailable', location };
+}
+
+function keyString(identifier) {
+  return `${identifier.namespace}:${identifier.key}`;
+}
+
+// Coefficients estimated in the session's configuration (prior 1-sigma > 0): the others are
+// held at their configured value and their plot would be a flat line.
+function estimatedCoefficients(gyroConfig) {
+  const sigma = gyroConfig.model_sigma;
+  if (!sigma) return [];
+  return COEFFICIENTS.filter((c) => {
+    try {
+      return c.get(sigma) > 0;
+    } catch (err) {
+      return false;
+    }
+  });
+}
+
+function gyroIds(info) {
+  return ((info.config && info.config.gyros) || []).map((g) => g.id);
+}
+
+function gyroConfig(info, gyro) {
+  return info.config.gyros.find((g) => g.id === gyro);
+}
+
+const builders = {
+  async root(identifier) {
+    const list = await sessions();
+    return folder(identifier, 'ESG spacecraft',
+      [id('fleet'), ...list.map((s) => id('sc', s.spacecraft_id))], 'ROOT');
+  },
+
+  async fleet(identifier) {
+    return { identifier, name: 'Fleet overview', type: 'esg.fleet', location: keyString(id('root')) };
+  },
+
+  async sc(identifier, [sc]) {
+    const info = await session(sc);
+    const gyros = gyroIds(info);
+    return folder(identifier, sc, [
+      ...gyros.map((g) => id('coefs', sc, g)),
+      id('attplot', sc),
+      id('atttable', sc),
+      ...gyros.map((g) => id('innovplot', sc, g)),
+      id('innovtable', sc),
+      id('predplot', sc),
+      id('predtable', sc),
+      id('plan', sc),
+      id('diags', sc)
+    ], keyString(id('root')));
+  },
+
+  async coefs(identifier, [sc, gyro]) {
+    const info = await session(sc);
+    const g = Number(gyro);
+    const plots = estimatedCoefficients(gyroConfig(info, g)).map((c) => id('coefplot', sc, g, c.key));
+    return folder(identifier, `Drift coefficients gyro ${g}`,
+      [id('coeftable', sc, g), ...plots], keyString(id('sc', sc)));
+  },
+
+  async coeftable(identifier, [sc, gyro]) {
+    return table(identifier, `Gyro ${gyro} coefficients table`,
+      id('coef', sc, gyro), coefficientTableValues(), keyString(id('coefs', sc, gyro)));
+  },
+
+  async coef(identifier, [sc, gyro]) {
+    return telemetryObject(identifier, `Gyro ${gyro} drift coefficients`, coefficientTableValues(),
+      { source: 'coef', spacecraft: sc, gyro: Number(gyro) }, keyString(id('coefs', sc, gyro)));
+  },
+
+  async coefplot(identifier, [sc, gyro, coef]) {
+    const c = COEFFICIENTS.find((x) => x.key === coef);
+    const series = Object.keys(BANDS).map((band) => ({
+      identifier: id('coefband', sc, gyro, coef, band), color: BAND_COLOURS[band]
+    }));
+    return overlay(identifier, `${c.label} gyro ${gyro} with 1-sigma band`, series,
+      keyString(id('coefs', sc, gyro)), `${c.label} [deg/h], case frame`);
+  },
+
+  async coefband(identifier, [sc, gyro, coef, band]) {
+    const c = COEFFICIENTS.find((x) => x.key === coef);
+    const key = `${coef}${BANDS[band].suffix}`;
+    return telemetryObject(identifier, `gyro ${gyro} ${c.label}${BANDS[band].label}`,
+      singleSeriesValues(key, `${c.label}${BANDS[band].label}`, 'deg/h'),
+      { source: 'coef', spacecraft: sc, gyro: Number(gyro) }, keyString(id('coefplot', sc, gyro, coef)));
+  },
+
+  async attplot(identifier, [sc]) {
+    const name = 'Attitude 1-sigma envelope';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    const series = [];
+    for (const axis of AXES) {
+      series.push({ identifier: id('estser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
+      series.push({ identifier: id('estser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
+    }
+    return overlay(identifier, name, series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
+  },
+
+  async atttable(identifier, [sc]) {
+    const name = 'Attitude 1-sigma table';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    return table(identifier, name, id('est', sc), attitudeTableValues(ESTIMATE_EXTRA), keyString(id('sc', sc)));
+  },
+
+  async est(identifier, [sc]) {
+    return telemetryObject(identifier, `${sc} per-step estimates`, attitudeTableValues(ESTIMATE_EXTRA),
+      { source: 'est', spacecraft: sc }, keyString(id('atttable', sc)));
+  },
+
+  async estser(identifier, [sc, key]) {
+    const label = seriesLabel(key);
+    return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
+      { source: 'est', spacecraft: sc }, keyString(id('sc', sc)));
+  },
+
+  async innovplot(identifier, [sc, gyro]) {
+    const name = `Innovations gyro ${gyro}`;
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    // The components first, their 1-sigma lines after (drawn on top, lighter), so the band stays
+    // visible over a dense cloud of innovations.
+    const colours = { 1: ['#2f7fd0', '#a8d8ff'], 2: ['#d0801e', '#ffd9a0'] };
+    const series = [];
+    for (const i of [1, 2]) series.push({ identifier: id('estser', sc, `g${gyro}_z${i}`), color: colours[i][0] });
+    for (const i of [1, 2]) {
+      const k = `g${gyro}_z${i}`;
+      series.push({ identifier: id('estser', sc, `${k}_hi`), color: colours[i][1] });
+      series.push({ identifier: id('estser', sc, `${k}_lo`), color: colours[i][1] });
+    }
+    return overlay(identifier, name, series, keyString(id('sc', sc)), `gyro ${gyro} star-tracker innovation, gyro basis [arcsec]`);
+  },
+
+  async innovtable(identifier, [sc]) {
+    const name = 'Innovations table';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    const info = await session(sc);
+    return table(identifier, name, id('innov', sc), innovationTableValues(gyroIds(info)), keyString(id('sc', sc)));
+  },
+
+  async innov(identifier, [sc]) {
+    const info = await session(sc);
+    return telemetryObject(identifier, `${sc} star-tracker innovations`,
+      innovationTableValues(gyroIds(info)), { source: 'est', spacecraft: sc },
+      keyString(id('innovtable', sc)));
+  },
+
+  async predplot(identifier, [sc]) {
+    const series = [];
+    for (const axis of AXES) {
+      series.push({ identifier: id('predser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
+      series.push({ identifier: id('predser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
+    }
+    return overlay(identifier, 'Predicted attitude envelope',
+      series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
+  },
+
+  async predtable(identifier, [sc]) {
+    return table(identifier, 'Predicted attitude table', id('pred', sc), attitudeTableValues(PREDICT_EXTRA),
+      keyString(id('sc', sc)));
+  },
+
+  async pred(identifier, [sc]) {
+    return telemetryObject(identifier, `${sc} predicted attitude`, attitudeTableValues(PREDICT_EXTRA),
+      { source: 'pred', spacecraft: sc }, keyString(id('predtable', sc)));
+  },
+
+  async predser(identifier, [sc, key]) {
+    const label = seriesLabel(key);
+    return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
+      { source: 'pred', spacecraft: sc }, keyString(id('predplot', sc)));
+  },
+
+  async plan(identifier, [sc]) {
+    return { identifier, name: 'Planned attitude for predictions', type: 'esg.plan', esg: { spacecraft: sc },
+      location: keyString(id('sc', sc)) };
+  },
+
+  async diags(identifier, [sc]) {
+    const body = await loadDiagnosisSummaries(sc);
+    // Newest first: the one an engineer just ran is at the top.
+    const ids = body.diagnoses.map((d) => d.id).reverse();
+    return folder(identifier, 'Diagnoses', ids.map((n) => id('diag', sc, n)), keyString(id('sc', sc)));
+  },
+
+  async diag(identifier, [sc, n]) {
+    if (!diagnosisSummaries.has(`${sc}\u0000${n}`)) await loadDiagnosisSummaries(sc);
+    const summary = diagnosisSummaries.get(`${sc}\u0000${n}`);
+    const name = summary
+      ? `Diagnosis ${n}: ${summary.verdict} (${(summary.compute_time || '').slice(0, 16).replace('T', ' ')})`
+      : `Diagnosis ${n}`;
+    return { identifier, name, type: 'esg.diagnosis', esg: { spacecraft: sc, id: Number(n) },
+      location: keyString(id('diags', sc)) };
+  }
+};
+
+// The name of a plotted series from its datum field (series.js): s<axis>_hi / _lo for the attitude
+// envelope, g<gyro>_z<i>[_hi|_lo] for an innovation and its band.
+function seriesLabel(field) {
+  const band = field.endsWith('_hi') ? ' +1-sigma' : field.endsWith('_lo') ? ' -1-sigma' : '';
+  const base = field.replace(/_(hi|lo)$/, '');
+  const attitude = /^s([xyz])$/.exec(base);
+  if (attitude) return `${band.trim()} body ${attitude[1]}`;
+  const innovation = /^g(\d)_z(\d)$/.exec(base);
+  if (innovation) return `gyro ${innovation[1]} z${innovation[2]}${band}`;
+  return field;
+}
+
+// Summaries of the diagnoses seen in a list, so each one's name can carry its verdict.
+const diagnosisSummaries = new Map();
+
+async function loadDiagnosisSummaries(sc) {
+  const body = await apiFetch(`/api/spacecraft/${encodeURIComponent(sc)}/diagnoses`);
+  for (const d of body.diagnoses) diagnosisSummaries.set(`${sc}\u0000${d.id}`, d);
+  return body;
+}
+
+async function estimatesAvailableFor(sc) {
+  const info = await session(sc);
+  return estimatesAvailable(sc, info.last_frame_time);
+}
+
+export const objectProvider = {
+  async get(identifier) {
+    const { kind, parts } = parseKey(identifier.key);
+    const build = builders[kind];
+    if (!build) throw new Error(`esg: unknown object ${identifier.key}`);
+    return build({ namespace: NAMESPACE, key: identifier.key }, parts);
+  }
+};

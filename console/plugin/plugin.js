@@ -1,0 +1,43 @@
+// The ESG console plugin: object types, the object tree, telemetry, alerts as faults, and the
+// console's own views. Installed by public/index.html after the operator has signed in.
+import { diagnosisViewProvider } from './diagnosisView.js';
+import { makeFaultProvider } from './faults.js';
+import { fleetViewProvider } from './fleetView.js';
+import { NAMESPACE } from './keys.js';
+import { objectProvider, TELEMETRY_TYPE } from './objects.js';
+import { planViewProvider } from './planView.js';
+import { setNotifier, telemetryProvider } from './telemetry.js';
+import { unavailableViewProvider } from './unavailableView.js';
+
+export default function EsgConsolePlugin() {
+  return function install(openmct) {
+    openmct.types.addType(TELEMETRY_TYPE, {
+      name: 'ESG telemetry', description: 'Values computed by esgd', cssClass: 'icon-telemetry', creatable: false
+    });
+    openmct.types.addType('esg.fleet', {
+      name: 'ESG fleet overview', description: 'Every spacecraft session', cssClass: 'icon-dataset', creatable: false
+    });
+    openmct.types.addType('esg.diagnosis', {
+      name: 'ESG diagnosis', description: 'Model-discrepancy diagnosis report', cssClass: 'icon-notebook', creatable: false
+    });
+    openmct.types.addType('esg.plan', {
+      name: 'ESG planned attitude', description: 'Planned attitude used by predictions', cssClass: 'icon-timeline', creatable: false
+    });
+    openmct.types.addType('esg.unavailable', {
+      name: 'ESG view not available', description: 'Data esgd does not serve', cssClass: 'icon-alert-rect', creatable: false
+    });
+
+    openmct.objects.addProvider(NAMESPACE, objectProvider);
+    openmct.objects.addRoot({ namespace: NAMESPACE, key: 'root' });
+    setNotifier(openmct);
+    openmct.telemetry.addProvider(telemetryProvider);
+
+    openmct.install(openmct.plugins.FaultManagement());
+    openmct.faults.addProvider(makeFaultProvider(openmct));
+
+    openmct.objectViews.addProvider(fleetViewProvider());
+    openmct.objectViews.addProvider(diagnosisViewProvider());
+    openmct.objectViews.addProvider(unavailableViewProvider());
+    openmct.objectViews.addProvider(planViewProvider());
+  };
+}

@@ -1,0 +1,150 @@
+// What each telemetry point of the console is made of: the fields cut from esgd's messages
+// (CoefficientSnapshot, EstimateRecord, PredictResponse samples), with their units, and the
+// Open MCT metadata (domain: UTC time; ranges: the plotted values) of the objects built on them.
+
+const TIME = { key: 'utc', source: 'utc', name: 'Time (UTC)', format: 'utc', hints: { domain: 1 } };
+
+// The drift model of one gyro, eq. (1), (8), (9), (10): GyroDriftModel fields, case frame k, deg/h.
+export const COEFFICIENTS = [
+  ['k0', 'k0', (m) => m.k0_deg_h],
+  ['c11', 'C11', (m) => m.c1_deg_h[0]],
+  ['c12', 'C12', (m) => m.c1_deg_h[1]],
+  ['c13', 'C13', (m) => m.c1_deg_h[2]],
+  ['c21', 'C21', (m) => m.c2_deg_h[0]],
+  ['c22', 'C22', (m) => m.c2_deg_h[1]],
+  ['c23', 'C23', (m) => m.c2_deg_h[2]],
+  ['mu12', 'mu12', (m) => m.mu_deg_h[0]],
+  ['mu23', 'mu23', (m) => m.mu_deg_h[1]],
+  ['mu31', 'mu31', (m) => m.mu_deg_h[2]],
+  ['nu23', 'nu23', (m) => m.nu_deg_h[0]],
+  ['nu31', 'nu31', (m) => m.nu_deg_h[1]],
+  ['nu12', 'nu12', (m) => m.nu_deg_h[2]]
+].map(([key, label, get]) => ({ key, label, get }));
+
+const AXES = ['x', 'y', 'z'];
+const DEG_H = { unit: 'deg/h', formatString: '%.5f' };
+const ARCSEC = { unit: 'arcsec', formatString: '%.3f' };
+
+function range(key, name, units, priority = 1) {
+  return { key, source: key, name, ...units, hints: { range: priority } };
+}
+
+// Table columns carry the unit in their title (the unit columns are hidden).
+function column(key, name, units, priority) {
+  return range(key, units.unit ? `${name} [${units.unit}]` : name, units, priority);
+}
+
+// One snapshot -> one datum: value, 1-sigma, value+sigma, value-sigma of every coefficient.
+export function snapshotDatum(snapshot) {
+  const datum = { utc: Date.parse(snapshot.measurement_time) };
+  for (const c of COEFFICIENTS) {
+    const value = c.get(snapshot.model);
+    const sigma = c.get(snapshot.sigma);
+    datum[c.key] = value;
+    datum[`${c.key}_sigma`] = sigma;
+    datum[`${c.key}_hi`] = value + sigma;
+    datum[`${c.key}_lo`] = value - sigma;
+  }
+  return datum;
+}
+
+export function coefficientTableValues() {
+  const values = [TIME];
+  COEFFICIENTS.forEach((c, i) => {
+    values.push(column(c.key, c.label, DEG_H, 2 * i + 1));
+    values.push(column(`${c.key}_sigma`, `${c.label} 1-sigma`, DEG_H, 2 * i + 2));
+  });
+  return values;
+}
+
+export const BANDS = {
+  value: { suffix: '', label: '' },
+  hi: { suffix: '_hi', label: ' +1-sigma' },
+  lo: { suffix: '_lo', label: ' -1-sigma' }
+};
+
+// Per-step estimate -> datum: the attitude 1-sigma about the body axes and its +/- envelope, the
+// quaternion, and each gyro's star-tracker innovation components with their 1-sigma.
+export function estimateDatum(record) {
+  const datum = {
+    utc: Date.parse(record.measurement_time),
+    state: (record.state || '').replace(/^SESSION_STATE_/, ''),
+    pair: (record.output_pair || []).join(','),
+    star_tracker_used: record.star_tracker_used ? 'yes' : 'no',
+    test_ratio: record.star_tracker_test_ratio
+  };
+  addAttitude(datum, record.attitude);
+  for (const innovation of record.star_tracker_innovations || []) {
+    for (let i = 0; i < 2; i++) {
+      const prefix = `g${innovation.gyro_id}_z${i + 1}`;
+      const z = innovation.innovation_arcsec[i];
+      const s = innovation.sigma_arcsec[i];
+      datum[prefix] = z;
+      datum[`${prefix}_sigma`] = s;
+      datum[`${prefix}_hi`] = s;
+      datum[`${prefix}_lo`] = -s;
+    }
+  }
+  return datum;
+}
+
+// The attitude's 1-sigma envelope is drawn about zero (+sigma, -sigma per body axis): the
+// estimate itself is the centre, its error is within the envelope with 68 % probability.
+function addAttitude(datum, attitude) {
+  if (!attitude) return;
+  AXES.forEach((axis, i) => {
+    const s = attitude.sigma_arcsec[i];
+    datum[`s${axis}`] = s;
+    datum[`s${axis}_hi`] = s;
+    datum[`s${axis}_lo`] = -s;
+  });
+  (attitude.q_in_b || []).forEach((q, i) => { datum[`q${i}`] = q; });
+}
+
+export function predictDatum(sample, source) {
+  const datum = { utc: Date.parse(sample.time), source };
+  addAttitude(datum, sample);
+  return datum;
+}
+
+export function attitudeTableValues(extra = []) {
+  const values = [TIME];
+  AXES.forEach((axis, i) => values.push(column(`s${axis}`, `1-sigma body ${axis}`, ARCSEC, i + 1)));
+  for (let i = 0; i < 4; i++) {
+    values.push(range(`q${i}`, `q${i}`, { formatString: '%.9f' }, 10 + i));
+  }
+  return values.concat(extra);
+}
+
+export const ESTIMATE_EXTRA = [
+  { key: 'state', source: 'state', name: 'Session state', format: 'string' },
+  { key: 'pair', source: 'pair', name: 'Output pair', format: 'string' },
+  { key: 'star_tracker_used', source: 'star_tracker_used', name: 'Star tracker used', format: 'string' },
+  range('test_ratio', 'Largest normalised innovation', { formatString: '%.3f' }, 20)
+];
+
+export const PREDICT_EXTRA = [
+  { key: 'source', source: 'source', name: 'Attitude source', format: 'string' }
+];
+
+export function innovationTableValues(gyros) {
+  const values = [TIME];
+  let priority = 1;
+  for (const g of gyros) {
+    for (const i of [1, 2]) {
+      values.push(column(`g${g}_z${i}`, `gyro ${g} z${i}`, ARCSEC, priority++));
+      values.push(column(`g${g}_z${i}_sigma`, `gyro ${g} z${i} 1-sigma`, ARCSEC, priority++));
+    }
+  }
+  return values;
+}
+
+// The metadata of a single plotted series: time and one value. Every such series has the same
+// key ("value", read from the datum's field `field`): an overlay plot labels its y axis only
+// when all its series share the key.
+export function singleSeriesValues(field, name, unit) {
+  const units = unit === 'deg/h' ? DEG_H : ARCSEC;
+  return [TIME, { ...range('value', name, units), source: field }];
+}
+
+export { AXES, TIME };

@@ -1,0 +1,155 @@
+// Telemetry provider of the esg.telemetry objects. History comes from the gateway's REST
+// endpoints over the time conductor's bounds; real time from esgd's SubscribeEstimates pushed over
+// the WebSocket. Coefficient snapshots have no subscription RPC: each new per-step estimate of a
+// spacecraft is the trigger to fetch the snapshots stored since the last one we have.
+import { apiFetch, isoTime, query, sharedFetch } from './api.js';
+import { live } from './live.js';
+import { TELEMETRY_TYPE } from './objects.js';
+import { planSamples } from './plan.js';
+import { estimateDatum, predictDatum, snapshotDatum } from './series.js';
+
+// Predictions are sampled so that a request over any span returns about this many points.
+const PREDICT_SAMPLES = 400;
+const MIN_PREDICT_STEP_S = 10;
+
+function spacecraftPath(sc) {
+  return `/api/spacecraft/${encodeURIComponent(sc)}`;
+}
+
+const requesters = {
+  async coef({ spacecraft, gyro }, { start, end }) {
+    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
+      gyro, from: isoTime(start), to: isoTime(end)
+    })}`);
+    return body.snapshots.map(snapshotDatum);
+  },
+
+  async est({ spacecraft }, { start, end }) {
+    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/estimates${query({
+      from: isoTime(start), to: isoTime(end)
+    })}`);
+    return body.estimates.map(estimateDatum);
+  },
+
+  // PredictAttitude over the conductor's bounds: recorded samples up to the last archived frame,
+  // then the spacecraft's planned attitude (plan.js) or, without one, an inertial hold of the
+  // last estimate.
+  async pred({ spacecraft }, { start, end }) {
+    const step = Math.max(MIN_PREDICT_STEP_S, Math.ceil((end - start) / 1000 / PREDICT_SAMPLES));
+    const plan = planSamples(spacecraft);
+    const body = plan
+      ? await apiFetch(`${spacecraftPath(spacecraft)}/predict`, {
+        method: 'POST',
+        body: { from: isoTime(start), to: isoTime(end), step_s: step, planned_attitude: plan }
+      })
+      : await sharedFetch(`${spacecraftPath(spacecraft)}/predict${query({
+        from: isoTime(start), to: isoTime(end), step_s: step
+      })}`);
+    const recorded = body.recorded_samples || 0;
+    const later = (body.attitude_source || '').replace(/^ATTITUDE_SOURCE_/, '');
+    return body.samples.map((s, i) => predictDatum(s, i < recorded ? 'RECORDED' : later));
+  }
+};
+
+// One estimate subscription per spacecraft, shared by every object that listens to it.
+const estimateFeeds = new Map(); // spacecraft -> {listeners:Set, unsubscribe}
+
+function subscribeEstimates(spacecraft, listener) {
+  let feed = estimateFeeds.get(spacecraft);
+  if (!feed) {
+    feed = { listeners: new Set(), unsubscribe: null };
+    feed.unsubscribe = live.subscribe('estimates', spacecraft, null,
+      (record) => feed.listeners.forEach((l) => l(record)),
+      (error) => {
+        // UNIMPLEMENTED (no per-step estimates in this esgd) or the stream ended: no live updates.
+        console.warn(`esg: estimates of ${spacecraft}: ${error.code} ${error.message}`);
+        estimateFeeds.delete(spacecraft);
+      });
+    estimateFeeds.set(spacecraft, feed);
+  }
+  feed.listeners.add(listener);
+  return () => {
+    feed.listeners.delete(listener);
+    if (feed.listeners.size === 0) {
+      feed.unsubscribe();
+      estimateFeeds.delete(spacecraft);
+    }
+  };
+}
+
+// New coefficient snapshots of one gyro after `lastTime`, fetched when an estimate arrives; one
+// fetch at a time per gyro, so a burst of estimates costs one request. `lastTime` starts at the
+// session's last frame: the historical request covers what came before.
+function coefficientFollower({ spacecraft, gyro }, callback) {
+  let lastTime = null;
+  let busy = false;
+  let again = false;
+  const started = apiFetch('/api/sessions').then((body) => {
+    const info = body.sessions.find((s) => s.spacecraft_id === spacecraft);
+    lastTime = info && info.last_frame_time ? Date.parse(info.last_frame_time) : 0;
+  });
+  async function fetchNew() {
+    if (busy) {
+      again = true;
+      return;
+    }
+    busy = true;
+    try {
+      await started;
+      const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
+        gyro, from: isoTime(lastTime + 1)
+      })}`);
+      for (const s of body.snapshots) {
+        const datum = snapshotDatum(s);
+        if (datum.utc <= lastTime) continue;
+        lastTime = datum.utc;
+        callback(datum);
+      }
+    } catch (err) {
+      console.warn(`esg: coefficient update of ${spacecraft} gyro ${gyro}: ${err.message}`);
+    } finally {
+      busy = false;
+      if (again) {
+        again = false;
+        fetchNew();
+      }
+    }
+  }
+  return subscribeEstimates(spacecraft, () => fetchNew());
+}
+
+// Open MCT answers a failed request with "see console for details"; the operator needs esgd's or
+// the gateway's own words (e.g. "the span holds more than 20000 estimates; ask for a narrower
+// span"), so they are shown once per distinct message.
+let notify = () => {};
+const shown = new Set();
+export function setNotifier(openmct) {
+  notify = (message) => {
+    if (shown.has(message)) return;
+    shown.add(message);
+    setTimeout(() => shown.delete(message), 10_000);
+    openmct.notifications.error(message);
+  };
+}
+
+export const telemetryProvider = {
+  supportsRequest(domainObject) {
+    return domainObject.type === TELEMETRY_TYPE;
+  },
+  supportsSubscribe(domainObject) {
+    return domainObject.type === TELEMETRY_TYPE && domainObject.esg.source !== 'pred';
+  },
+  async request(domainObject, options) {
+    try {
+      return await requesters[domainObject.esg.source](domainObject.esg, options);
+    } catch (err) {
+      notify(`${domainObject.name}: ${err.message}`);
+      throw err;
+    }
+  },
+  subscribe(domainObject, callback) {
+    const esg = domainObject.esg;
+    if (esg.source === 'coef') return coefficientFollower(esg, callback);
+    return subscribeEstimates(esg.spacecraft, (record) => callback(estimateDatum(record)));
+  }
+};

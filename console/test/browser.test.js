@@ -1,0 +1,574 @@
+// The Open MCT console in a real browser (Debian chromium through puppeteer-core) against a real
+// esgd and the real gateway, no mocks: esgd with a tokens file on a temp SQLite file; RDK-1 fed
+// with the demo's simulated flight (scripts/demo.sh: the paper's calibration profile, 30 h,
+// seed 1) and RDK-F with a faulty recording (deploy/examples/scenarios/gyro_faults.json, 10 h:
+// a gyro 1 readout jump and a gyro 3 drift step), both replayed with `esg replay`; RDK-F
+// diagnosed with `esg diagnose`. What the page shows, read from its DOM, is compared with what
+// the esg CLI prints from the same server.
+//   node --test console/test/browser.test.js
+// Environment: ESGD, ESG (default build/), CHROMIUM (default /usr/bin/chromium),
+// ESG_CONSOLE_SCREENSHOTS=1 to write docs/console/*.png (off in CI: they are tracked files).
+'use strict';
+
+const { test, before, after } = require('node:test');
+const assert = require('node:assert/strict');
+const crypto = require('node:crypto');
+const fs = require('node:fs');
+const os = require('node:os');
+const path = require('node:path');
+const puppeteer = require('puppeteer-core');
+const { REPO, startEsgd, startGateway, stop, esg, request } = require('./helpers');
+
+const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
+const SCREENSHOTS = process.env.ESG_CONSOLE_SCREENSHOTS === '1';
+const SHOT_DIR = path.join(REPO, 'docs', 'console');
+const CONFIG = path.join(REPO, 'deploy', 'examples', 'rdk1.json');
+const SCENARIOS = path.join(REPO, 'deploy', 'examples', 'scenarios');
+// The demo flight in full: simulating and replaying 30 h takes about 2 s (measured), so CI runs
+// the same flight as scripts/demo.sh.
+const DEMO_HOURS = 30;
+const FAULT_HOURS = 10;
+const FAULTY = 'RDK-F';
+const OPERATOR = 'ana.lopez';
+
+const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'esg-console-browser-'));
+const token = `ops-${crypto.randomBytes(16).toString('hex')}`;
+const viewerToken = `view-${crypto.randomBytes(16).toString('hex')}`;
+let esgd;
+let gateway;
+let browser;
+let page;
+let diagnosisId;
+let faulty;
+let faultyConfig;
+
+const cli = (...args) => esg(['--server', esgd.address, '--token', token, ...args]);
+const cliJson = async (...args) => JSON.parse(await cli(...args, '--json'));
+const api = (p) => request(new URL(p, gateway.url), { headers: { Authorization: `Bearer ${token}` } });
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+async function timed(label, fn) {
+  const t0 = Date.now();
+  const result = await fn();
+  process.stdout.write(`# ${label}: ${((Date.now() - t0) / 1000).toFixed(1)} s\n`);
+  return result;
+}
+
+// Open an object of the console by its Open MCT path (the part after #/browse/).
+async function open(browsePath, query = '') {
+  await page.evaluate((hash) => { window.location.hash = hash; }, `#/browse/${browsePath}${query}`);
+}
+
+// height: a taller window for a long view (the diagnosis report scrolls inside Open MCT's pane,
+// so a full-page capture would not show more).
+async function shot(name, height = 900) {
+  if (!SCREENSHOTS) return;
+  fs.mkdirSync(SHOT_DIR, { recursive: true });
+  if (height !== 900) await page.setViewport({ width: 1500, height });
+  await page.mouse.move(1, 880); // no hover toolbar or tooltip over the plot
+  await sleep(1500); // plots draw on the next animation frames
+  await page.screenshot({ path: path.join(SHOT_DIR, `${name}.png`) });
+  if (height !== 900) await page.setViewport({ width: 1500, height: 900 });
+}
+
+// The rows of the Open MCT telemetry table on screen, as {column title: cell text}.
+async function tableRows() {
+  return page.evaluate(() => {
+    const titles = [...document.querySelectorAll('.c-telemetry-table__headers__labels th')]
+      .map((th) => th.textContent.trim());
+    return [...document.querySelectorAll('.c-telemetry-table__body tr.noselect')].map((tr) => {
+      const cells = [...tr.querySelectorAll('td')].map((td) => td.textContent.trim());
+      return Object.fromEntries(titles.map((t, i) => [t, cells[i]]));
+    });
+  });
+}
+
+async function waitForTableRows(min = 1) {
+  await page.waitForFunction((n) =>
+    document.querySelectorAll('.c-telemetry-table__body tr.noselect').length >= n,
+  { timeout: 20_000 }, min);
+  return tableRows();
+}
+
+// Open MCT's utc format: "2019-03-02 06:00:00.000Z".
+const cellTime = (text) => Date.parse(text.replace(' ', 'T'));
+
+before(async () => {
+  const tokens = path.join(tmp, 'tokens');
+  fs.writeFileSync(tokens, `${token} read,write ${OPERATOR}\n${viewerToken} read viewer\n`, { mode: 0o600 });
+  const flight = path.join(tmp, 'flight.csv');
+  faulty = path.join(tmp, 'faulty.csv');
+  faultyConfig = path.join(tmp, 'rdkf.json');
+  fs.writeFileSync(faultyConfig, fs.readFileSync(CONFIG, 'utf8')
+    .replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${FAULTY}"`));
+  await timed(`simulate ${DEMO_HOURS} h demo flight and ${FAULT_HOURS} h faulty flight`, async () => {
+    await esg(['simulate', '--config', CONFIG, '--profile', 'calibration', '--scenario',
+      path.join(SCENARIOS, 'paper_calibration.json'), '--hours', String(DEMO_HOURS), '--seed', '1',
+      '--out', flight]);
+    await esg(['simulate', '--config', faultyConfig, '--profile', 'calibration', '--scenario',
+      path.join(SCENARIOS, 'gyro_faults.json'), '--hours', String(FAULT_HOURS), '--seed', '1',
+      '--out', faulty]);
+  });
+  esgd = await startEsgd(['--db', path.join(tmp, 'esg.db'), '--tokens', tokens, '--sync', 'normal']);
+  await timed('configure and replay both (esg replay --wait)', async () => {
+    await cli('configure', '--config', CONFIG, '--model', '10+11');
+    await cli('configure', '--config', faultyConfig, '--model', '10+11');
+    await cli('replay', '--recording', flight, '--wait');
+    await cli('replay', '--recording', faulty, '--wait');
+  });
+  const diagnosis = await timed(`esg diagnose --spacecraft ${FAULTY}`,
+    () => cliJson('diagnose', '--spacecraft', FAULTY));
+  diagnosisId = Number(diagnosis.id);
+  gateway = await startGateway(['--esgd', esgd.address]);
+  browser = await puppeteer.launch({
+    executablePath: CHROMIUM,
+    headless: true,
+    args: process.getuid && process.getuid() === 0 ? ['--no-sandbox'] : [],
+  });
+  page = await browser.newPage();
+  await page.setViewport({ width: 1500, height: 900 });
+  page.on('pageerror', (err) => process.stdout.write(`# page error: ${err.message}\n`));
+});
+
+after(async () => {
+  if (browser) await browser.close();
+  if (gateway) await stop(gateway.child);
+  if (esgd) await stop(esgd.child);
+  fs.rmSync(tmp, { recursive: true, force: true });
+});
+
+test('sign-in: esgd wants a token, a wrong one is refused, the operator token opens the console', async () => {
+  await page.goto(gateway.url, { waitUntil: 'domcontentloaded' });
+  await page.waitForSelector('#esg-signin:not([hidden])', { timeout: 20_000 });
+  await page.type('#esg-token', 'not-a-token');
+  await page.click('#esg-signin-submit');
+  await page.waitForFunction(() => /refused/.test(document.getElementById('esg-signin-message').textContent));
+  await page.$eval('#esg-token', (input) => { input.value = ''; });
+  await page.type('#esg-token', token);
+  await page.click('#esg-signin-submit');
+  await page.waitForSelector('.l-shell', { timeout: 20_000 });
+  assert.equal(await page.$eval('#esg-signin', (f) => f.hidden), true);
+  assert.equal(await page.evaluate(() => sessionStorage.getItem('esg.token')), token);
+});
+
+test('fleet overview lists every spacecraft with the state and open alerts esg reports', async () => {
+  await open('esg:root/esg:fleet');
+  await page.waitForFunction(() => document.querySelectorAll('tr[data-spacecraft]').length >= 2,
+    { timeout: 20_000 });
+  const rows = await page.$$eval('tr[data-spacecraft]', (trs) => trs.map((tr) => ({
+    id: tr.dataset.spacecraft,
+    cells: [...tr.querySelectorAll('td')].map((td) => td.textContent.trim()),
+    open: Object.fromEntries([...tr.querySelectorAll('td[data-severity]')]
+      .map((td) => [td.dataset.severity, Number(td.textContent)])),
+  })));
+  const status = await cliJson('status');
+  assert.deepEqual(rows.map((r) => r.id).sort(), status.sessions.map((s) => s.spacecraftId).sort());
+  const alerts = (await cliJson('alerts')).alerts;
+  for (const session of status.sessions) {
+    const row = rows.find((r) => r.id === session.spacecraftId);
+    assert.equal(row.cells[1], session.state.replace('SESSION_STATE_', ''));
+    assert.equal(row.cells[2], `[${session.workingPair.join(',')}]`);
+    assert.equal(row.cells[3], session.lastFrameTime);
+    for (const severity of ['INFO', 'WARNING', 'DISTRESS', 'CRITICAL']) {
+      const open = alerts.filter((a) => a.spacecraftId === session.spacecraftId && !a.cleared &&
+        a.severity === `ALERT_SEVERITY_${severity}`).length;
+      assert.equal(row.open[severity], open, `${session.spacecraftId} open ${severity}`);
+    }
+  }
+  assert.ok(rows.find((r) => r.id === FAULTY).open.WARNING > 0, 'the faulty flight has open warnings');
+  await shot('fleet');
+});
+
+test('coefficient table shows the values and 1-sigma of esg history, to the digits shown', async () => {
+  await open('esg:root/esg:sc~RDK-1/esg:coefs~RDK-1~1/esg:coeftable~RDK-1~1');
+  const rows = await waitForTableRows(10);
+  const history = (await cliJson('history', '--spacecraft', 'RDK-1', '--gyro', '1')).snapshots;
+  const byTime = new Map(history.map((s) => [Date.parse(s.measurementTime), s]));
+  // The table lists newest first: its top row is the newest snapshot esg has.
+  assert.equal(cellTime(rows[0]['Time (UTC)']), Date.parse(history[history.length - 1].measurementTime));
+  const columns = [
+    ['k0', (m) => m.k0DegH], ['C11', (m) => m.c1DegH[0]], ['C12', (m) => m.c1DegH[1]],
+    ['C13', (m) => m.c1DegH[2]], ['C21', (m) => m.c2DegH[0]], ['C22', (m) => m.c2DegH[1]],
+    ['C23', (m) => m.c2DegH[2]],
+  ];
+  let compared = 0;
+  for (const row of rows) {
+    const snapshot = byTime.get(cellTime(row['Time (UTC)']));
+    assert.ok(snapshot, `no esg snapshot at ${row['Time (UTC)']}`);
+    for (const [name, get] of columns) {
+      // Shown with 5 decimals (1e-5 deg/h); equal to esg's value to that precision.
+      assert.equal(Number(row[`${name} [deg/h]`]).toFixed(5), get(snapshot.model).toFixed(5), `${name} at ${row['Time (UTC)']}`);
+      assert.equal(Number(row[`${name} 1-sigma [deg/h]`]).toFixed(5), get(snapshot.sigma).toFixed(5), `${name} 1-sigma at ${row['Time (UTC)']}`);
+      compared += 2;
+    }
+  }
+  assert.ok(compared >= 140, `compared ${compared} values`);
+  if (SCREENSHOTS) {
+    await open('esg:root/esg:sc~RDK-1/esg:coefs~RDK-1~1/esg:coefplot~RDK-1~1~k0');
+    await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+    await shot('coefficient_k0_band');
+  }
+});
+
+test('a gyro fault alert of the faulty flight is acknowledged from the fault view, esg shows who', async () => {
+  const before = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts;
+  const fault = before.find((a) => a.reason === 'ALERT_REASON_FAULT_AMBIGUOUS' && /^gyro_\d$/.test(a.subsystem));
+  assert.ok(fault, `no gyro fault alert among ${before.map((a) => a.reason).join(', ')}`);
+  assert.equal(fault.acknowledged, false);
+  const repeats = Number(fault.repeatCount);
+  const label = `FAULT_AMBIGUOUS #${fault.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
+  await open('faults.taxonomy:faultManagement.view');
+  const item = await page.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+    .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
+  { timeout: 20_000 }, label);
+  const namespace = await item.evaluate((li) => li.querySelector('.c-fault-mgmt__list-path').textContent.trim());
+  assert.equal(namespace, `${FAULTY} / ${fault.subsystem} | WARNING | first ${fault.firstTime.slice(0, 16).replace('T', ' ')}Z | active, not acknowledged`.replace('active', fault.cleared ? 'cleared' : 'active'));
+  const actions = await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'));
+  await actions.click();
+  const menuItem = await page.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
+    .find((li) => li.textContent.trim() === 'Acknowledge'));
+  await menuItem.click();
+  await page.waitForSelector('.c-overlay button[aria-label="Save"]');
+  await page.click('.c-overlay button[aria-label="Save"]');
+  // esgd stored it under the token's own name (the page sent an empty operator_name) ...
+  let after;
+  for (let i = 0; i < 100; i++) {
+    after = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts.find((a) => a.sequence === fault.sequence);
+    if (after.acknowledged) break;
+    await sleep(100);
+  }
+  assert.equal(after.acknowledged, true);
+  assert.equal(after.acknowledgedBy, OPERATOR);
+  // ... and the change came back to the page over the WebSocket.
+  await page.waitForFunction((text, who) => [...document.querySelectorAll('.c-fault-mgmt__list.is-acknowledged')]
+    .some((li) => li.querySelector('.c-fault-mgmt__list-faultname').textContent.trim() === text &&
+      li.querySelector('.c-fault-mgmt__list-path').textContent.endsWith(`acknowledged by ${who}`)),
+  { timeout: 20_000 }, label, OPERATOR);
+});
+
+test('a read-only token cannot acknowledge: the page says so and esgd keeps the alert unacknowledged', async () => {
+  const alerts = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts;
+  const target = alerts.find((a) => !a.acknowledged);
+  const repeats = Number(target.repeatCount);
+  const label = `${target.reason.replace('ALERT_REASON_', '')} #${target.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
+  const tab = await browser.newPage(); // a tab of its own: its own sessionStorage, its own sign-in
+  try {
+    await tab.setViewport({ width: 1500, height: 900 });
+    await tab.goto(`${gateway.url}#/browse/faults.taxonomy:faultManagement.view`, { waitUntil: 'domcontentloaded' });
+    await tab.waitForSelector('#esg-signin:not([hidden])', { timeout: 20_000 });
+    await tab.type('#esg-token', viewerToken);
+    await tab.click('#esg-signin-submit');
+    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
+    { timeout: 20_000 }, label);
+    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
+    await (await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
+      .find((li) => li.textContent.trim() === 'Acknowledge'))).click();
+    await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
+    await tab.click('.c-overlay button[aria-label="Save"]');
+    await tab.waitForFunction(() => /does not have the write role/.test(document.body.textContent), { timeout: 20_000 });
+  } finally {
+    await tab.close();
+  }
+  const after = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts.find((a) => a.sequence === target.sequence);
+  assert.equal(after.acknowledged, false);
+});
+
+test('alerts raised while the fault view is open appear in it without a reload (WebSocket push)', async () => {
+  // A third spacecraft whose star tracker has outliers and an outage
+  // (deploy/examples/scenarios/star_tracker_defects.json, 5 h): esgd declares it faulty.
+  const config = path.join(tmp, 'rdks.json');
+  const recording = path.join(tmp, 'star_tracker.csv');
+  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', '"spacecraftId": "RDK-S"'));
+  await esg(['simulate', '--config', config, '--profile', 'orbital', '--scenario',
+    path.join(SCENARIOS, 'star_tracker_defects.json'), '--hours', '5', '--seed', '1', '--out', recording]);
+  await open('faults.taxonomy:faultManagement.view');
+  await page.waitForSelector('.c-fault-mgmt__list');
+  const marker = await page.evaluate(() => { window.esgNoReload = true; return document.querySelectorAll('.c-fault-mgmt__list').length; });
+  assert.ok(marker > 0);
+  assert.equal(await page.$$eval('.c-fault-mgmt__list-path', (ps) => ps.filter((p) => p.textContent.includes('RDK-S')).length), 0);
+  await cli('configure', '--config', config, '--model', '10+11');
+  await cli('replay', '--recording', recording, '--wait');
+  const raised = (await cliJson('alerts', '--spacecraft', 'RDK-S')).alerts
+    .filter((a) => a.reason === 'ALERT_REASON_STAR_TRACKER_FAULT');
+  assert.ok(raised.length > 0, 'the star-tracker defects raise STAR_TRACKER_FAULT');
+  await page.waitForFunction((n) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+    .filter((li) => li.textContent.includes('RDK-S / star_tracker | DISTRESS') && li.textContent.includes('STAR_TRACKER_FAULT #')).length === n,
+  { timeout: 20_000 }, raised.length);
+  assert.equal(await page.evaluate(() => window.esgNoReload), true, 'the page was not reloaded');
+  await shot('faults');
+});
+
+test('the diagnosis report opens with the verdict and findings esg stored', async () => {
+  const stored = await cliJson('diagnoses', 'show', '--spacecraft', FAULTY, '--id', String(diagnosisId));
+  const report = stored.report || JSON.parse(stored.reportJson);
+  await open(`esg:root/esg:sc~${FAULTY}/esg:diags~${FAULTY}/esg:diag~${FAULTY}~${diagnosisId}`);
+  await page.waitForSelector('.esg-verdict', { timeout: 20_000 });
+  assert.equal(await page.$eval('.esg-verdict', (e) => e.textContent), stored.verdict);
+  const headings = await page.$$eval('.esg-finding h3', (hs) => hs.map((h) => h.textContent));
+  assert.deepEqual(headings, report.findings.map((f) => `${f.effect}${f.gyro ? ` (gyro ${f.gyro})` : ''}`));
+  assert.ok(headings.length > 0, 'the faulty flight has findings');
+  const gaps = report.fit.before.gaps.length;
+  assert.equal(await page.$$eval('.esg-gap-chart rect title', (t) => t.length), 2 * gaps);
+  await shot('diagnosis', 1350);
+});
+
+test('per-step estimate views: real sigma values when esgd has them, "not available" when not', async () => {
+  const status = (await cliJson('status', '--spacecraft', 'RDK-1'));
+  const last = Date.parse((status.sessions ? status.sessions[0] : status).lastFrameTime);
+  const from = new Date(last - 3600e3).toISOString();
+  const to = new Date(last).toISOString();
+  const probe = await api(`/api/spacecraft/RDK-1/estimates?from=${from}&to=${to}`);
+  process.stdout.write(`# GET /api/spacecraft/RDK-1/estimates: ${probe.status}\n`);
+  await open('esg:root/esg:sc~RDK-1/esg:atttable~RDK-1');
+  if (probe.status === 501) {
+    await page.waitForSelector('.esg-unavailable', { timeout: 20_000 });
+    assert.match(await page.$eval('.esg-unavailable', (e) => e.textContent), /not available/);
+    await open('esg:root/esg:sc~RDK-1/esg:innovtable~RDK-1');
+    await page.waitForFunction(() => /not available/.test(document.querySelector('.esg-unavailable')?.textContent || ''));
+    await open('esg:root/esg:fleet');
+    await page.waitForSelector('tr[data-spacecraft="RDK-1"]');
+    const cells = await page.$$eval('tr[data-spacecraft="RDK-1"] td', (tds) => tds.map((td) => td.textContent));
+    assert.equal(cells[cells.length - 1], 'not available');
+  } else {
+    assert.equal(probe.status, 200, probe.text);
+    const estimates = probe.json.estimates;
+    assert.ok(estimates.length > 0);
+    const byTime = new Map(estimates.filter((e) => e.attitude).map((e) => [Date.parse(e.measurement_time), e]));
+    const rows = await waitForTableRows(10);
+    let compared = 0;
+    for (const row of rows) {
+      const t = cellTime(row['Time (UTC)']);
+      const record = byTime.get(t);
+      if (!record) continue; // older than the probe's hour
+      ['x', 'y', 'z'].forEach((axis, i) => {
+        assert.equal(Number(row[`1-sigma body ${axis} [arcsec]`]).toFixed(3),
+          record.attitude.sigma_arcsec[i].toFixed(3), `sigma ${axis} at ${row['Time (UTC)']}`);
+        compared++;
+      });
+    }
+    assert.ok(compared >= 30, `compared ${compared} sigma values`);
+    // Star-tracker innovations per gyro, with their 1-sigma, in the gyro's basis.
+    await open('esg:root/esg:sc~RDK-1/esg:innovtable~RDK-1');
+    const innovationRows = await waitForTableRows(10);
+    let innovations = 0;
+    for (const row of innovationRows) {
+      const record = byTime.get(cellTime(row['Time (UTC)']));
+      if (!record) continue;
+      for (const g of record.star_tracker_innovations) {
+        for (const i of [0, 1]) {
+          assert.equal(Number(row[`gyro ${g.gyro_id} z${i + 1} [arcsec]`]).toFixed(3),
+            g.innovation_arcsec[i].toFixed(3), `gyro ${g.gyro_id} z${i + 1} at ${row['Time (UTC)']}`);
+          assert.equal(Number(row[`gyro ${g.gyro_id} z${i + 1} 1-sigma [arcsec]`]).toFixed(3),
+            g.sigma_arcsec[i].toFixed(3), `gyro ${g.gyro_id} z${i + 1} 1-sigma at ${row['Time (UTC)']}`);
+          innovations += 2;
+        }
+      }
+    }
+    assert.ok(innovations > 0, 'innovations compared');
+    // The fleet's last star-tracker correction: from the newest estimate's last_star_tracker_time.
+    const newest = estimates[estimates.length - 1];
+    const minutes = Math.round((Date.parse(status.sessions ? status.sessions[0].lastFrameTime : status.lastFrameTime) -
+      Date.parse(newest.last_star_tracker_time)) / 60000);
+    await open('esg:root/esg:fleet');
+    await page.waitForSelector('tr[data-spacecraft="RDK-1"]');
+    const cells = await page.$$eval('tr[data-spacecraft="RDK-1"] td', (tds) => tds.map((td) => td.textContent));
+    assert.equal(cells[cells.length - 1],
+      `${Math.floor(minutes / 60)} h ${String(minutes % 60).padStart(2, '0')} min before the last frame`);
+    if (SCREENSHOTS) {
+      await open('esg:root/esg:sc~RDK-1/esg:attplot~RDK-1');
+      await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+      await shot('attitude_envelope');
+      // The last 3 h: over the whole flight the innovations are a solid cloud.
+      await open('esg:root/esg:sc~RDK-1/esg:innovplot~RDK-1~1',
+        `?tc.mode=fixed&tc.startBound=${last - 3 * 3600e3}&tc.endBound=${last}&tc.timeSystem=utc`);
+      await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+      await shot('innovations_gyro1');
+    }
+    await liveEstimatesAndCoefficients(last, Number((status.sessions ? status.sessions[0] : status).lastSequence));
+  }
+});
+
+// Real time with per-step estimates: the next hour of the same flight is replayed in two halves
+// while a table is open. The estimate table gets rows pushed by SubscribeEstimates; the
+// coefficient table gets the snapshots fetched on each pushed estimate. No reload in between.
+async function liveEstimatesAndCoefficients(last, lastSequence) {
+  const more = path.join(tmp, 'flight_next_hour.csv');
+  await esg(['simulate', '--config', CONFIG, '--profile', 'calibration', '--scenario',
+    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', String(DEMO_HOURS + 1), '--seed', '1',
+    '--out', more]);
+  const bounds = `?tc.mode=fixed&tc.startBound=${last - 3600e3}&tc.endBound=${last + 2 * 3600e3}&tc.timeSystem=utc`;
+  const newestRowTime = () => page.evaluate(() => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td ? Date.parse(td.textContent.trim().replace(' ', 'T')) : 0;
+  });
+  const replayHalf = (first, count) => {
+    const rows = fs.readFileSync(more, 'utf8').split('\n');
+    const header = rows.filter((l) => l.startsWith('#'));
+    const columns = rows.find((l) => l.startsWith('time_utc'));
+    const data = rows.slice(rows.indexOf(columns) + 1).filter((l) => l);
+    const file = path.join(tmp, `next_${first}.csv`);
+    fs.writeFileSync(file, [...header, columns, ...data.slice(0, first - 1 + count), ''].join('\n'));
+    return cli('replay', '--recording', file, '--from-sequence', String(first), '--wait');
+  };
+  await open('esg:root/esg:sc~RDK-1/esg:atttable~RDK-1', bounds);
+  await waitForTableRows(10);
+  assert.equal(await newestRowTime(), last);
+  await page.evaluate(() => { window.esgLive = 1; });
+  await replayHalf(lastSequence + 1, 30);
+  await page.waitForFunction((t) => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td && Date.parse(td.textContent.trim().replace(' ', 'T')) > t;
+  }, { timeout: 20_000 }, last);
+  assert.equal(await page.evaluate(() => window.esgLive), 1, 'no reload');
+  const afterFirst = (await cliJson('status', '--spacecraft', 'RDK-1'));
+  const mid = Date.parse((afterFirst.sessions ? afterFirst.sessions[0] : afterFirst).lastFrameTime);
+  await open('esg:root/esg:sc~RDK-1/esg:coefs~RDK-1~1/esg:coeftable~RDK-1~1', bounds);
+  await waitForTableRows(10);
+  assert.equal(await newestRowTime(), mid);
+  await page.evaluate(() => { window.esgLive = 2; });
+  await replayHalf(lastSequence + 31, 30);
+  const end = Date.parse((await cliJson('history', '--spacecraft', 'RDK-1', '--gyro', '1')).snapshots.at(-1).measurementTime);
+  await page.waitForFunction((t) => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td && Date.parse(td.textContent.trim().replace(' ', 'T')) === t;
+  }, { timeout: 20_000 }, end);
+  assert.equal(await page.evaluate(() => window.esgLive), 2, 'no reload');
+}
+
+test('predicted attitude across a gap after the last frame: table from PredictAttitude', async () => {
+  const status = (await cliJson('status', '--spacecraft', 'RDK-1'));
+  const last = Date.parse((status.sessions ? status.sessions[0] : status).lastFrameTime);
+  const start = last - 6 * 3600e3;
+  const end = last + 6 * 3600e3;
+  const bounds = `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`;
+  await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1', bounds);
+  const rows = await waitForTableRows(5);
+  // The newest rows are after the last frame: an inertial hold of the last estimate, its
+  // envelope growing with the time since the last star-tracker fix.
+  assert.equal(rows[0]['Attitude source'], 'INERTIAL_HOLD');
+  assert.ok(cellTime(rows[0]['Time (UTC)']) > last);
+  const sigmas = rows.map((r) => Number(r['1-sigma body x [arcsec]']));
+  assert.ok(sigmas[0] > sigmas[sigmas.length - 1], 'the envelope grows across the gap');
+  // The page asks for ~400 samples over the bounds (12 h: every 108 s); esg asked the same
+  // gives the same samples.
+  const step = Math.ceil((end - start) / 1000 / 400);
+  const predicted = (await cliJson('predict', '--spacecraft', 'RDK-1', '--from', new Date(start).toISOString(),
+    '--to', new Date(end).toISOString(), '--step', String(step))).samples;
+  const byTime = new Map(predicted.map((s) => [Date.parse(s.time), s]));
+  for (const row of rows) {
+    const sample = byTime.get(cellTime(row['Time (UTC)']));
+    assert.ok(sample, `no esg sample at ${row['Time (UTC)']}`);
+    ['x', 'y', 'z'].forEach((axis, i) => assert.equal(Number(row[`1-sigma body ${axis} [arcsec]`]).toFixed(3),
+      sample.sigmaArcsec[i].toFixed(3), `sigma ${axis} at ${row['Time (UTC)']}`));
+    ['q0', 'q1', 'q2', 'q3'].forEach((q, i) => assert.equal(Number(row[q]).toFixed(9),
+      sample.qInB[i].toFixed(9), `${q} at ${row['Time (UTC)']}`));
+  }
+  if (SCREENSHOTS) {
+    await open('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', bounds);
+    await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+    await shot('prediction_envelope');
+  }
+});
+
+test('without tokens: no sign-in, and acknowledging asks the operator name esgd then records', async () => {
+  // A second esgd without a tokens file, the faulty flight replayed into it, its own gateway, and
+  // a new browser tab (its own sessionStorage).
+  const open2 = await startEsgd(['--db', path.join(tmp, 'open.db'), '--sync', 'normal']);
+  let gateway2;
+  let tab;
+  try {
+    const cli2 = (...args) => esg(['--server', open2.address, ...args]);
+    await cli2('configure', '--config', faultyConfig, '--model', '10+11');
+    await cli2('replay', '--recording', faulty, '--wait');
+    gateway2 = await startGateway(['--esgd', open2.address]);
+    tab = await browser.newPage();
+    await tab.setViewport({ width: 1500, height: 900 });
+    await tab.goto(`${gateway2.url}#/browse/faults.taxonomy:faultManagement.view`, { waitUntil: 'domcontentloaded' });
+    await tab.waitForSelector('.c-fault-mgmt__list', { timeout: 20_000 });
+    assert.equal(await tab.$eval('#esg-signin', (f) => f.hidden), true);
+    const alerts = JSON.parse(await cli2('alerts', '--spacecraft', FAULTY, '--json')).alerts;
+    const target = alerts.find((a) => !a.acknowledged);
+    const repeats = Number(target.repeatCount);
+    const label = `${target.reason.replace('ALERT_REASON_', '')} #${target.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
+    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text), {}, label);
+    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
+    await (await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
+      .find((li) => li.textContent.trim() === 'Acknowledge'))).click();
+    await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
+    await tab.click('.c-overlay button[aria-label="Save"]');
+    // The second form: the operator's name.
+    await tab.waitForSelector('#esg-operator-name', { timeout: 10_000 });
+    await tab.type('#esg-operator-name', 'night.shift');
+    await tab.click('#esg-operator-ok');
+    let acked;
+    for (let i = 0; i < 100; i++) {
+      acked = JSON.parse(await cli2('alerts', '--spacecraft', FAULTY, '--json')).alerts
+        .find((a) => a.sequence === target.sequence);
+      if (acked.acknowledged) break;
+      await sleep(100);
+    }
+    assert.equal(acked.acknowledged, true);
+    assert.equal(acked.acknowledgedBy, 'night.shift');
+  } finally {
+    if (tab) await tab.close();
+    if (gateway2) await stop(gateway2.child);
+    await stop(open2.child);
+  }
+});
+
+// q * (rotation by `deg` about body z), Hamilton, scalar first.
+function rotateAboutBodyZ(q, deg) {
+  const h = (deg * Math.PI) / 360;
+  const [w, x, y, z] = q;
+  const [c, s] = [Math.cos(h), Math.sin(h)];
+  const r = [w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s];
+  return r[0] < 0 ? r.map((v) => -v) : r;
+}
+
+test('a planned attitude pasted in the console is what the prediction after the last frame uses', async () => {
+  const status = await cliJson('status', '--spacecraft', 'RDK-1');
+  const session = status.sessions ? status.sessions[0] : status;
+  const last = Date.parse(session.lastFrameTime);
+  const q = session.latestAttitude.qInB;
+  const plan = ['time,q0,q1,q2,q3',
+    `${new Date(last + 3600e3).toISOString()},${q.join(',')}`,
+    `${new Date(last + 6 * 3600e3).toISOString()},${rotateAboutBodyZ(q, 10).join(',')}`].join('\n');
+  const planFile = path.join(tmp, 'plan.csv');
+  fs.writeFileSync(planFile, `${plan}\n`);
+  await open('esg:root/esg:sc~RDK-1/esg:plan~RDK-1');
+  await page.waitForSelector('.esg-plan-text');
+  await page.$eval('.esg-plan-text', (area, text) => { area.value = text; }, plan);
+  await page.click('.esg-plan-use');
+  await page.waitForFunction(() => /2 samples/.test(document.querySelector('.esg-plan-status').textContent));
+  const start = last - 6 * 3600e3;
+  const end = last + 6 * 3600e3;
+  await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1',
+    `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
+  await page.waitForFunction(() => [...document.querySelectorAll('.c-telemetry-table__body tr.noselect')]
+    .some((tr) => tr.textContent.includes('PLANNED')), { timeout: 20_000 });
+  const rows = await tableRows();
+  const step = Math.ceil((end - start) / 1000 / 400);
+  const predicted = (await cliJson('predict', '--spacecraft', 'RDK-1', '--planned', planFile,
+    '--from', new Date(start).toISOString(), '--to', new Date(end).toISOString(), '--step', String(step))).samples;
+  const byTime = new Map(predicted.map((s) => [Date.parse(s.time), s]));
+  let planned = 0;
+  for (const row of rows) {
+    const sample = byTime.get(cellTime(row['Time (UTC)']));
+    assert.ok(sample, `no esg sample at ${row['Time (UTC)']}`);
+    ['q0', 'q1', 'q2', 'q3'].forEach((k, i) => assert.equal(Number(row[k]).toFixed(9), sample.qInB[i].toFixed(9), `${k} at ${row['Time (UTC)']}`));
+    ['x', 'y', 'z'].forEach((axis, i) => assert.equal(Number(row[`1-sigma body ${axis} [arcsec]`]).toFixed(3),
+      sample.sigmaArcsec[i].toFixed(3), `sigma ${axis} at ${row['Time (UTC)']}`));
+    if (row['Attitude source'] === 'PLANNED') planned++;
+  }
+  assert.ok(planned > 10, `${planned} planned rows`);
+  // Clearing the plan brings the inertial hold back.
+  await open('esg:root/esg:sc~RDK-1/esg:plan~RDK-1');
+  await page.waitForSelector('.esg-plan-clear');
+  await page.click('.esg-plan-clear');
+  await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1',
+    `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
+  await page.waitForFunction(() => document.querySelector('.c-telemetry-table__body tr.noselect')?.textContent.includes('INERTIAL_HOLD'),
+    { timeout: 20_000 });
+});
