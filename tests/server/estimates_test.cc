@@ -27,6 +27,7 @@
 #include "gtest/gtest.h"
 #include "server/checkpoint_codec.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/run_process.h"
 
 namespace esg::server {
 namespace {
@@ -312,8 +313,15 @@ TEST(EstimateArchive, StoredEstimatesEqualAnOfflineSessionRunOverTheSameFrames) 
   EXPECT_LT(rejected, static_cast<long>(offline.size()) / 2);
   EXPECT_GE(offline.back().gyro_order.size(), 3u);
   int pages = 0;
-  ExpectAllEqualOffline(History(*stub, "EST-OFF", 70, &pages), offline, "EST-OFF");
+  const std::vector<esg::v1::EstimateRecord> stored = History(*stub, "EST-OFF", 70, &pages);
+  ExpectAllEqualOffline(stored, offline, "EST-OFF");
   EXPECT_EQ(pages, static_cast<int>((offline.size() + 69) / 70));
+  // A page at the maximum (5000) of such records stays under gRPC's default 4 MB receive limit.
+  size_t bytes = 0;
+  for (const auto& e : stored) bytes += e.ByteSizeLong();
+  const double per_record = static_cast<double>(bytes) / static_cast<double>(stored.size());
+  ::testing::Test::RecordProperty("bytes_per_record", std::to_string(per_record));
+  EXPECT_LT(per_record * EstimationCore::kMaxEstimatesPageSize, 4.0e6) << per_record;
 }
 
 TEST(EstimateArchive, HistoryPagesBySizeAndRefusesBadRequestsNamingTheField) {
@@ -752,6 +760,19 @@ TEST(EstimateArchive, CheckpointKeepsTheLastStarTrackerTimeAndReadsFormat2) {
   EXPECT_EQ(old->last_star_tracker_time, absl::InfinitePast());
   EXPECT_EQ(old->applied_sequence, 7);
   EXPECT_EQ(old->frames_applied, 7);
+}
+
+// esgd documents the flag in --help and refuses a value that is not a duration >= 0, naming it.
+TEST(EstimateArchive, EsgdListsTheRetentionFlagAndRefusesABadValue) {
+  TempDir dir;
+  const esg::testing::RunResult help = esg::testing::RunBinary(dir, ESGD_PATH, "--help");
+  EXPECT_EQ(help.exit_code, 0) << help.err;
+  EXPECT_THAT(help.out, HasSubstr("--estimate-retention"));
+  EXPECT_THAT(help.out, HasSubstr("720h"));
+  const esg::testing::RunResult bad = esg::testing::RunBinary(
+      dir, ESGD_PATH, "--listen 127.0.0.1:0 --estimate-retention 3x --db " + dir.File("x.db"));
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err, HasSubstr("--estimate-retention: '3x' is not a duration >= 0"));
 }
 
 }  // namespace
