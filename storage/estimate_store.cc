@@ -63,11 +63,11 @@ const std::string& InsertSql() {
 
 // ?1 spacecraft, [?2, ?3) time span, ?4 after (exclusive), ?5 limit.
 const std::string& PageSql() {
-  static const std::string* const sql = new std::string(absl::StrCat(
-      "SELECT ", kColumns,
-      " FROM estimates WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
-      "AND measurement_time_unix_ns < ?3 AND measurement_time_unix_ns > ?4 "
-      "ORDER BY measurement_time_unix_ns LIMIT ?5"));
+  static const std::string* const sql = new std::string(
+      absl::StrCat("SELECT ", kColumns,
+                   " FROM estimates WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
+                   "AND measurement_time_unix_ns < ?3 AND measurement_time_unix_ns > ?4 "
+                   "ORDER BY measurement_time_unix_ns LIMIT ?5"));
   return *sql;
 }
 
@@ -98,9 +98,9 @@ absl::Status Validate(const EstimateRecord& r) {
   for (size_t i = 0; i < r.star_tracker_innovations.size(); ++i) {
     const int id = r.star_tracker_innovations[i].gyro_id;
     if (id < 1 || id > kMaxGyroId || seen[id]) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("estimates.star_tracker_innovations[", i, "].gyro_id = ", id,
-                       ": must be 1..4 and not repeated"));
+      return absl::InvalidArgumentError(absl::StrCat("estimates.star_tracker_innovations[", i,
+                                                     "].gyro_id = ", id,
+                                                     ": must be 1..4 and not repeated"));
     }
     seen[id] = true;
   }
@@ -119,7 +119,8 @@ absl::StatusOr<EstimateRecord> ReadRecord(const Statement& st) {
     for (int i = 0; i < 3; ++i) {
       r.sigma_b[i] = estimator::ArcsecToRad(st.ColumnDoubleOrNaN(kSigmaColumn + i));
     }
-    for (int i = 0; i < 2; ++i) r.output_pair[i] = static_cast<int>(st.ColumnInt64(kPairColumn + i));
+    for (int i = 0; i < 2; ++i)
+      r.output_pair[i] = static_cast<int>(st.ColumnInt64(kPairColumn + i));
   }
   r.attitude_invalid_reason = st.ColumnText(kInvalidReasonColumn);
   r.star_tracker_used = st.ColumnInt64(kUsedColumn) != 0;
@@ -228,8 +229,8 @@ absl::Status EstimateStore::Put(Transaction& txn, const EstimateRecord& r) {
 absl::StatusOr<int64_t> EstimateStore::DeleteAfter(Transaction& txn,
                                                    absl::string_view spacecraft_id,
                                                    absl::Time after) {
-  const int64_t bound = after == absl::InfinitePast() ? std::numeric_limits<int64_t>::min()
-                                                      : TimeToUnixNanos(after);
+  const int64_t bound =
+      after == absl::InfinitePast() ? std::numeric_limits<int64_t>::min() : TimeToUnixNanos(after);
   return RunDelete(txn,
                    "DELETE FROM estimates WHERE spacecraft_id = ?1 "
                    "AND measurement_time_unix_ns > ?2",
@@ -257,8 +258,8 @@ absl::StatusOr<EstimatePage> EstimateStore::Page(absl::string_view spacecraft_id
   st->BindText(1, spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(from))
       .BindInt64(3, TimeToUnixNanos(to))
-      .BindInt64(4, after.has_value() ? TimeToUnixNanos(*after)
-                                      : std::numeric_limits<int64_t>::min())
+      .BindInt64(4,
+                 after.has_value() ? TimeToUnixNanos(*after) : std::numeric_limits<int64_t>::min())
       .BindInt64(5, limit + 1);
   EstimatePage page;
   while (true) {
@@ -281,7 +282,9 @@ absl::StatusOr<int64_t> EstimateStore::Count(absl::string_view spacecraft_id, ab
                    txn.Prepare("SELECT COUNT(*) FROM estimates WHERE spacecraft_id = ?1 "
                                "AND measurement_time_unix_ns >= ?2 "
                                "AND measurement_time_unix_ns < ?3"));
-  st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(from)).BindInt64(3, TimeToUnixNanos(to));
+  st->BindText(1, spacecraft_id)
+      .BindInt64(2, TimeToUnixNanos(from))
+      .BindInt64(3, TimeToUnixNanos(to));
   ASSIGN_OR_RETURN(bool row, st->Step());
   if (!row) return absl::InternalError("COUNT(*) returned no row");
   return st->ColumnInt64(0);

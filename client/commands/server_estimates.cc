@@ -38,15 +38,24 @@ struct EstimatesOptions {
 };
 
 std::vector<std::string> CsvHeader() {
-  std::vector<std::string> header = {"time_utc",       "state",          "attitude_valid",
-                                     "q0",             "q1",             "q2",
-                                     "q3",             "sigma_x_arcsec", "sigma_y_arcsec",
-                                     "sigma_z_arcsec", "reference_gyro", "second_gyro",
-                                     "star_tracker_used", "star_tracker_test_ratio",
+  std::vector<std::string> header = {"time_utc",
+                                     "state",
+                                     "attitude_valid",
+                                     "q0",
+                                     "q1",
+                                     "q2",
+                                     "q3",
+                                     "sigma_x_arcsec",
+                                     "sigma_y_arcsec",
+                                     "sigma_z_arcsec",
+                                     "reference_gyro",
+                                     "second_gyro",
+                                     "star_tracker_used",
+                                     "star_tracker_test_ratio",
                                      "last_star_tracker_time_utc"};
   for (int id = 1; id <= kMaxGyroId; ++id) {
-    for (const char* column : {"innovation_1_arcsec", "innovation_2_arcsec", "sigma_1_arcsec",
-                               "sigma_2_arcsec"}) {
+    for (const char* column :
+         {"innovation_1_arcsec", "innovation_2_arcsec", "sigma_1_arcsec", "sigma_2_arcsec"}) {
       header.push_back(absl::StrCat("g", id, "_", column));
     }
   }
@@ -112,8 +121,8 @@ void PrintTable(const esg::v1::EstimateHistoryResponse& history) {
       const esg::v1::AttitudeSample& a = e.attitude();
       attitude = absl::StrFormat("%+.8f %+.8f %+.8f %+.8f", At(a.q_in_b(), 0), At(a.q_in_b(), 1),
                                  At(a.q_in_b(), 2), At(a.q_in_b(), 3));
-      sigma = absl::StrFormat("%7.2f %7.2f %7.2f", At(a.sigma_arcsec(), 0),
-                              At(a.sigma_arcsec(), 1), At(a.sigma_arcsec(), 2));
+      sigma = absl::StrFormat("%7.2f %7.2f %7.2f", At(a.sigma_arcsec(), 0), At(a.sigma_arcsec(), 1),
+                              At(a.sigma_arcsec(), 2));
       pair = absl::StrJoin(e.output_pair(), ",");
     }
     std::string innovations;

@@ -118,11 +118,11 @@ TEST_F(EstimatesCli, CsvHasEveryStepOnceInOrderWithTheStoredValues) {
   const std::vector<std::string> header = absl::StrSplit(lines[0], ',');
   std::map<std::string, size_t> column;
   for (size_t c = 0; c < header.size(); ++c) column[header[c]] = c;
-  for (const char* name : {"time_utc", "state", "q0", "q2", "sigma_x_arcsec", "reference_gyro",
-                           "star_tracker_used", "star_tracker_test_ratio",
-                           "last_star_tracker_time_utc", "g1_innovation_1_arcsec",
-                           "g2_sigma_2_arcsec", "g3_innovation_1_arcsec", "attitude_invalid_reason",
-                           "compute_time_utc"}) {
+  for (const char* name :
+       {"time_utc", "state", "q0", "q2", "sigma_x_arcsec", "reference_gyro", "star_tracker_used",
+        "star_tracker_test_ratio", "last_star_tracker_time_utc", "g1_innovation_1_arcsec",
+        "g2_sigma_2_arcsec", "g3_innovation_1_arcsec", "attitude_invalid_reason",
+        "compute_time_utc"}) {
     ASSERT_EQ(column.count(name), 1u) << name << " in " << lines[0];
   }
   for (int i = 0; i < kSteps; ++i) {
@@ -130,8 +130,8 @@ TEST_F(EstimatesCli, CsvHasEveryStepOnceInOrderWithTheStoredValues) {
     const std::vector<std::string> cells = absl::StrSplit(lines[i + 1], ',');
     ASSERT_EQ(cells.size(), header.size()) << lines[i + 1];
     auto cell = [&](const char* name) { return cells[column.at(name)]; };
-    ASSERT_EQ(cell("time_utc"), absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", want.measurement_time,
-                                                 absl::UTCTimeZone()));
+    ASSERT_EQ(cell("time_utc"),
+              absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", want.measurement_time, absl::UTCTimeZone()));
     EXPECT_EQ(cell("state"), want.state);
     if (want.attitude_valid) {
       EXPECT_EQ(std::stod(cell("q2")), want.q_in_b[2]) << i;
@@ -183,7 +183,8 @@ TEST_F(EstimatesCli, SpanIsInclusiveJsonIsTheResponseAndTheTableCounts) {
 TEST_F(EstimatesCli, UnknownSpacecraftAndBadTimesAreRefused) {
   RunResult r = Esg(*dir_, *daemon_, "estimates --spacecraft NOPE-1");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_THAT(r.err, HasSubstr("esg estimates: NOT_FOUND: spacecraft_id: 'NOPE-1' is not configured"));
+  EXPECT_THAT(r.err,
+              HasSubstr("esg estimates: NOT_FOUND: spacecraft_id: 'NOPE-1' is not configured"));
   r = Esg(*dir_, *daemon_, "estimates --spacecraft CLI-EST --from yesterday");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--from 'yesterday'"));

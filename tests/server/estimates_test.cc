@@ -533,7 +533,8 @@ TEST(EstimateSubscription, AllSpacecraftReplayAndLiveAndOneSpacecraftSeesOnlyIts
   absl::SleepFor(absl::Milliseconds(100));
   std::map<std::string, std::vector<absl::Time>> by_spacecraft;
   for (const auto& r : all.Received()) {
-    if (!r.replay_complete()) by_spacecraft[r.spacecraft_id()].push_back(TimeOf(r.measurement_time()));
+    if (!r.replay_complete())
+      by_spacecraft[r.spacecraft_id()].push_back(TimeOf(r.measurement_time()));
   }
   for (const auto& r : only_b.Received()) {
     if (!r.replay_complete()) EXPECT_EQ(r.spacecraft_id(), "EST-B");
@@ -585,8 +586,7 @@ TEST(EstimateArchive, RetentionPrunesOldStepsOfEachSpacecraftAndNothingElse) {
   const std::vector<esg::v1::EstimateRecord> kept = History(*stub, "EST-RET");
   ASSERT_FALSE(kept.empty());
   EXPECT_EQ(TimeOf(kept.back().measurement_time()), newest);
-  EXPECT_GE(TimeOf(kept.front().measurement_time()),
-            newest - absl::Hours(1) - absl::Minutes(10));
+  EXPECT_GE(TimeOf(kept.front().measurement_time()), newest - absl::Hours(1) - absl::Minutes(10));
   EXPECT_LE(TimeOf(kept.front().measurement_time()), newest - absl::Hours(1));
   ASSERT_GE(kept.size(), expected_kept.size());
   const std::vector<esg::v1::EstimateRecord> tail(kept.end() - expected_kept.size(), kept.end());
