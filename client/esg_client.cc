@@ -198,6 +198,33 @@ absl::StatusOr<esg::v1::HistoryResponse> EsgClient::GetCoefficientHistory(
   return all;
 }
 
+absl::StatusOr<esg::v1::EstimateHistoryResponse> EsgClient::GetEstimateHistory(
+    const esg::v1::EstimateHistoryRequest& request, const CallOptions& call) {
+  auto one_page = [&](const esg::v1::EstimateHistoryRequest& page_request) {
+    return Unary<esg::v1::EstimateHistoryResponse>(
+        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::EstimateHistoryResponse* r) {
+          return stub_->GetEstimateHistory(c, page_request, r);
+        });
+  };
+  if (!request.page_token().empty()) return one_page(request);
+  esg::v1::EstimateHistoryRequest page_request = request;
+  esg::v1::EstimateHistoryResponse all;
+  do {
+    absl::StatusOr<esg::v1::EstimateHistoryResponse> page = one_page(page_request);
+    if (!page.ok()) return page.status();
+    if (!page->next_page_token().empty() &&
+        page->next_page_token() == page_request.page_token()) {
+      return absl::InternalError("GetEstimateHistory: the server returned the same page token");
+    }
+    all.mutable_estimates()->Reserve(all.estimates_size() + page->estimates_size());
+    for (esg::v1::EstimateRecord& e : *page->mutable_estimates()) {
+      *all.add_estimates() = std::move(e);
+    }
+    page_request.set_page_token(page->next_page_token());
+  } while (!page_request.page_token().empty());
+  return all;
+}
+
 absl::StatusOr<esg::v1::ListDiagnosesResponse> EsgClient::ListDiagnoses(
     const esg::v1::ListDiagnosesRequest& request, const CallOptions& call) {
   auto one_page = [&](const esg::v1::ListDiagnosesRequest& page_request) {

@@ -141,6 +141,11 @@ class EsgClient {
   absl::StatusOr<esg::v1::HistoryResponse> GetCoefficientHistory(
       const esg::v1::HistoryRequest& request, const CallOptions& call = {});
 
+  // Per-step estimates (GetEstimateHistory), paged like GetCoefficientHistory: with
+  // request.page_token empty the whole span, every page followed and merged in order.
+  absl::StatusOr<esg::v1::EstimateHistoryResponse> GetEstimateHistory(
+      const esg::v1::EstimateHistoryRequest& request, const CallOptions& call = {});
+
   // With request.page_token empty: every stored diagnosis of the spacecraft (summaries), following
   // next_page_token page by page; the result's next_page_token is empty. With a page_token: that
   // one page. Internal if the server hands back the token it was given (a loop).

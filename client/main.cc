@@ -85,6 +85,7 @@ int main(int argc, char** argv) {
   esg::client::RegisterPredict(app, global, &exit_code);
   esg::client::RegisterAlerts(app, global, &exit_code);
   esg::client::RegisterHistory(app, global, &exit_code);
+  esg::client::RegisterEstimates(app, global, &exit_code);
   esg::client::RegisterExport(app, global, &exit_code);
   AddFooter(&app, GlobalOptionsHelp(app));
   try {

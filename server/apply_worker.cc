@@ -12,6 +12,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
+#include "estimator/rotation.h"
 #include "estimator/status_macros.h"
 #include "proto/convert.h"
 #include "server/alert_collapse.h"
@@ -38,6 +39,53 @@ struct JobFrame {
   int64_t sequence = 0;
   std::optional<TelemetryFrame> frame;
 };
+
+// The per-step estimate of a measurement step (docs/service.md "Per-step estimates"). The
+// star-tracker innovations come two per healthy gyro (a reading in this frame, not faulty) in
+// the session's gyro order, as the discovery's model runs read them
+// (estimator/discovery/model_run.cc).
+storage::EstimateRecord EstimateFromStep(const std::string& spacecraft_id,
+                                         const TelemetryFrame& frame,
+                                         const estimator::StepReport& report,
+                                         const std::vector<estimator::GyroEstimate>& gyros,
+                                         absl::Time last_star_tracker_time, absl::Time now) {
+  storage::EstimateRecord r;
+  r.spacecraft_id = spacecraft_id;
+  r.measurement_time = frame.time;
+  r.compute_time = now;
+  r.state = estimator::SessionStateName(report.state);
+  const estimator::AttitudeEstimate& attitude = report.attitude;
+  r.attitude_valid = attitude.valid;
+  if (attitude.valid) {
+    r.q_in_b = estimator::ToScalarFirst(attitude.q_in_b);
+    for (int i = 0; i < 3; ++i) r.sigma_b[i] = attitude.sigma_b(i);
+    r.output_pair = attitude.pair;
+  } else {
+    r.attitude_invalid_reason = attitude.invalid_reason;
+  }
+  r.star_tracker_used = report.star_tracker_used;
+  const int m = static_cast<int>(report.star_tracker_innovation.size());
+  int k = 0;
+  for (const estimator::GyroEstimate& g : gyros) {
+    if (m == 0) break;
+    if (g.faulty || g.id < 1 || g.id > estimator::kMaxGyros ||
+        !frame.gyros[g.id - 1].has_value()) {
+      continue;
+    }
+    if (2 * k + 1 >= m) break;
+    storage::GyroInnovationRecord gi;
+    gi.gyro_id = g.id;
+    for (int i = 0; i < 2; ++i) {
+      gi.innovation[i] = report.star_tracker_innovation(2 * k + i);
+      gi.sigma[i] = report.star_tracker_innovation_sigma(2 * k + i);
+    }
+    r.star_tracker_innovations.push_back(gi);
+    ++k;
+  }
+  r.star_tracker_test_ratio = report.star_tracker_test_ratio;
+  r.last_star_tracker_time = last_star_tracker_time;
+  return r;
+}
 
 }  // namespace
 
@@ -192,6 +240,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // Apply (no lock held: readers keep using the installed session meanwhile).
   const absl::Time now = absl::Now();
   std::vector<storage::CoefficientRecord> coefficients;
+  std::vector<storage::EstimateRecord> estimates;
   AlertCollapser alerts(sc->id, apply.alert_tracks, options_.alert_collapse_window, now);
   // A rebuilt session does not store again what is already stored.
   const absl::Time written = apply.effects_written_until;
@@ -283,8 +332,14 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
         !report->star_tracker_used) {
       ++apply.star_tracker_rejections;
     }
+    if (report->measurement_step && report->star_tracker_used) {
+      apply.last_star_tracker_time = frame.time;
+    }
     if (report->measurement_step && frame.time > written) {
-      for (const estimator::GyroEstimate& g : session->Gyros()) {
+      const std::vector<estimator::GyroEstimate> gyros = session->Gyros();
+      estimates.push_back(EstimateFromStep(sc->id, frame, *report, gyros,
+                                           apply.last_star_tracker_time, now));
+      for (const estimator::GyroEstimate& g : gyros) {
         storage::CoefficientRecord r;
         r.spacecraft_id = sc->id;
         r.gyro_id = g.id;
@@ -322,6 +377,17 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   storage::FilterEffects effects;
   effects.spacecraft_id = sc->id;
   effects.coefficients = std::move(coefficients);
+  // Retention of the per-step estimates, amortised: once the newest has advanced by the period.
+  std::optional<absl::Time> retained_at;
+  if (options_.estimate_retention > absl::ZeroDuration() && !estimates.empty()) {
+    const absl::Time newest = estimates.back().measurement_time;
+    if (sc->estimates_retained_at == absl::InfinitePast() ||
+        newest - sc->estimates_retained_at >= options_.estimate_retention_period) {
+      effects.estimates_before = newest - options_.estimate_retention;
+      retained_at = newest;
+    }
+  }
+  effects.estimates = std::move(estimates);
   if (rerun.has_value()) {
     effects.revision = storage::FilterEffects::Revision{rerun->after, now, rerun->revised_alerts,
                                                         rerun->restores};
@@ -378,6 +444,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     sc->apply_retries = 0;
     SetApplyFault(sc->id, "");
   }
+  if (retained_at.has_value()) sc->estimates_retained_at = *retained_at;
   apply.alert_tracks = to_store.alert_tracks;
   std::vector<storage::AlertRecord> published = alerts.new_alerts();
   for (size_t k = 0; k < published.size(); ++k) published[k].sequence = new_sequences[k];
@@ -420,6 +487,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       if (r.ok()) hub_.Publish(*r);
     }
   }
+  estimate_hub_.Publish(effects.estimates);
   for (const storage::AlertRecord& a : published) {
     metrics_.alerts_raised.With({a.reason, a.severity}).Increment();
     if (a.cleared) metrics_.alerts_cleared.With({a.reason, a.severity}).Increment();

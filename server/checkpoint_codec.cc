@@ -11,7 +11,8 @@ namespace esg::server {
 namespace {
 
 constexpr absl::string_view kMagicV1 = "ESGSRV01";
-constexpr absl::string_view kMagic = "ESGSRV02";
+constexpr absl::string_view kMagicV2 = "ESGSRV02";
+constexpr absl::string_view kMagic = "ESGSRV03";
 
 class Writer {
  public:
@@ -75,6 +76,7 @@ std::string EncodeCheckpoint(const ServerCheckpoint& c) {
   w.Time(c.effects_written_until);
   w.Str(c.quarantine_reason);
   w.I64(c.rebuilding ? 1 : 0);
+  w.Time(c.last_star_tracker_time);
   w.I64(c.frames_applied);
   w.I64(c.frames_apply_failed);
   w.I64(c.star_tracker_rejections);
@@ -100,7 +102,10 @@ absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob) {
     return absl::DataLossError(absl::StrCat("server checkpoint: ", what));
   };
   const bool v1 = blob.substr(0, kMagicV1.size()) == kMagicV1;
-  if (!v1 && blob.substr(0, kMagic.size()) != kMagic) return bad("unknown format (magic)");
+  const bool v2 = blob.substr(0, kMagicV2.size()) == kMagicV2;
+  if (!v1 && !v2 && blob.substr(0, kMagic.size()) != kMagic) {
+    return bad("unknown format (magic)");
+  }
   Reader r(blob.substr(kMagic.size()));
   ServerCheckpoint c;
   int64_t n_tracks = 0;
@@ -115,6 +120,7 @@ absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob) {
       return bad("truncated apply cursor");
     }
     c.rebuilding = rebuilding != 0;
+    if (!v2 && !r.Time(&c.last_star_tracker_time)) return bad("truncated apply cursor");
   }
   if (!r.I64(&c.frames_applied) || !r.I64(&c.frames_apply_failed) ||
       !r.I64(&c.star_tracker_rejections) || !r.I64(&n_tracks) || n_tracks < 0 ||

@@ -37,6 +37,12 @@ struct ServerCheckpoint {
   // Coefficient snapshots and alerts up to this measurement time are already stored: a session
   // rebuilt from the archive does not write them again (InfinitePast: nothing stored before).
   absl::Time effects_written_until = absl::InfinitePast();
+  // Measurement time of the latest step that applied the star tracker (EstimateRecord
+  // last_star_tracker_time; InfinitePast: none yet, or restored from a checkpoint of format 2,
+  // which did not keep it). Kept here, not derived from the stored estimates, so that it
+  // survives a restart, the restore of a window checkpoint by a re-run and the retention of the
+  // estimates alike.
+  absl::Time last_star_tracker_time = absl::InfinitePast();
   // Why the session is quarantined (docs/service.md "Session states"); empty: it is not.
   std::string quarantine_reason;
   // Quarantined while being rebuilt from the archive (ends by itself when caught up); false
@@ -56,8 +62,9 @@ struct ServerCheckpoint {
   std::optional<estimator::SessionCheckpoint> session;
 };
 
-// Little-endian binary, starting with the magic "ESGSRV02" (format 2: with the apply cursor and
-// the effects watermark). Blobs of format 1 ("ESGSRV01") are still read.
+// Little-endian binary, starting with the magic "ESGSRV03" (format 3: with the apply cursor, the
+// effects watermark and the last star-tracker time). Blobs of format 1 ("ESGSRV01") and 2
+// ("ESGSRV02", no last star-tracker time) are still read.
 std::string EncodeCheckpoint(const ServerCheckpoint& checkpoint);
 // DataLoss for a blob that is not a complete checkpoint of a known format.
 absl::StatusOr<ServerCheckpoint> DecodeCheckpoint(absl::string_view blob);

@@ -71,6 +71,9 @@ struct EstimationCore::Spacecraft {
   // Held for a whole worker job and by a reconfiguration.
   absl::Mutex job_mu;
   int apply_retries ABSL_GUARDED_BY(job_mu) = 0;  // failed commits of the filter in a row
+  // Newest estimate (measurement time) when the retention of the per-step estimates last ran
+  // (InfinitePast: not since the start); CoreOptions::estimate_retention_period.
+  absl::Time estimates_retained_at ABSL_GUARDED_BY(job_mu) = absl::InfinitePast();
 
   // ---- Ingest side ----
   absl::Mutex ingest_mu ABSL_ACQUIRED_AFTER(job_mu);

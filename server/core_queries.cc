@@ -451,6 +451,53 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
   return response;
 }
 
+absl::StatusOr<esg::v1::EstimateHistoryResponse> EstimationCore::EstimateHistory(
+    const esg::v1::EstimateHistoryRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  ASSIGN_OR_RETURN(const int64_t size, PageSize(request.page_size(), kDefaultEstimatesPageSize,
+                                                kMaxEstimatesPageSize));
+  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  absl::Time from = absl::InfinitePast();
+  absl::Time to = absl::InfiniteFuture();
+  if (request.has_from()) {
+    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.from());
+    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("from: ", t.status().message()));
+    from = *t;
+  }
+  if (request.has_to()) {
+    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.to());
+    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("to: ", t.status().message()));
+    to = *t;
+    if (to < from) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
+    }
+    to += absl::Nanoseconds(1);  // inclusive
+  }
+  // The filters a token is bound to (the request without its paging fields).
+  const std::string filters = absl::StrCat(request.spacecraft_id(), "|",
+                                           storage::TimeToUnixNanos(from), "|",
+                                           storage::TimeToUnixNanos(to));
+  std::optional<absl::Time> after;
+  if (!request.page_token().empty()) {
+    ASSIGN_OR_RETURN(std::string position,
+                     DecodePageToken(request.page_token(), "GetEstimateHistory", filters));
+    ASSIGN_OR_RETURN(std::vector<int64_t> v, PositionIntegers(position, 1));
+    after = storage::UnixNanosToTime(v[0]);
+  }
+  ASSIGN_OR_RETURN(storage::EstimatePage page,
+                   storage_->estimates().Page(request.spacecraft_id(), from, to, after, size));
+  esg::v1::EstimateHistoryResponse response;
+  for (const storage::EstimateRecord& r : page.records) {
+    *response.add_estimates() = EstimateToProto(r);
+  }
+  if (page.next.has_value()) {
+    response.set_next_page_token(EncodePageToken(
+        "GetEstimateHistory", filters, absl::StrCat(storage::TimeToUnixNanos(*page.next))));
+  }
+  return response;
+}
+
 absl::StatusOr<esg::v1::ExportTelemetryResponse> EstimationCore::ExportTelemetryChunk(
     const esg::v1::ExportTelemetryRequest& request, absl::Time* after, bool* done) {
   *done = true;

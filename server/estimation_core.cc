@@ -242,6 +242,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
     stopped_ = true;
   }
   hub_.CloseAll();
+  estimate_hub_.CloseAll();
   {
     absl::MutexLock lock(&commit_mu_);
     ingest_closed_ = true;
@@ -278,6 +279,13 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
 
 std::shared_ptr<EstimationCore::Spacecraft> EstimationCore::Find(const std::string& id) {
   return registry_.Find(id);
+}
+
+std::vector<std::string> EstimationCore::SpacecraftIds() {
+  std::vector<std::string> ids;
+  for (const auto& sc : registry_.All()) ids.push_back(sc->id);
+  std::sort(ids.begin(), ids.end());
+  return ids;
 }
 
 absl::Status EstimationCore::CheckSpacecraft(const std::string& spacecraft_id) {

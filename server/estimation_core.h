@@ -23,7 +23,9 @@
 //                        until a probe write succeeds (health NOT_SERVING meanwhile).
 //   Workers (pool)       per spacecraft, one job at a time: apply durable frames in measurement-
 //                        time order to a copy of the session; commit the coefficient snapshots
-//                        (every measurement step), new alerts, repeats and clears, and the
+//                        and the per-step estimate (every measurement step; estimate_hub.h
+//                        publishes the estimates once committed), new alerts, repeats and
+//                        clears, the retention of the estimates, and the
 //                        checkpoint (session values + apply cursor) in ONE transaction; then
 //                        install the copy. The checkpoint thus always matches the effects
 //                        stored, so a restart (load checkpoint, replay archive after its
@@ -32,7 +34,8 @@
 //                        accepted one is archived together with a late-frame record (same
 //                        transaction). A job that finds a late frame at or before its cursor
 //                        re-runs: it restores the latest window checkpoint before the frame,
-//                        marks the estimates and alerts after it revised, and replays the
+//                        marks the coefficient estimates and alerts after it revised, deletes
+//                        the per-step estimates after it (written again), and replays the
 //                        archive from there in time order, committing all of it, the removal
 //                        of the late-frame records and the new checkpoint in ONE transaction.
 //                        A restart reads the records back, so a late frame is never lost.
@@ -62,6 +65,7 @@
 #include "estimator/spacecraft_config.h"
 #include "server/alert_hub.h"
 #include "server/checkpoint_codec.h"
+#include "server/estimate_hub.h"
 #include "server/proto_mapping.h"
 #include "server/service_metrics.h"
 #include "server/spacecraft_registry.h"
@@ -83,6 +87,12 @@ struct CoreOptions {
   // it are accepted and applied in time order by a re-run from a window checkpoint; older ones
   // are refused (docs/service.md "Several ground stations", docs/decisions.md D60).
   absl::Duration reorder_window = absl::Hours(2);
+  // Per-step estimates older than this before the newest estimate of their spacecraft
+  // (measurement time) are deleted (docs/service.md "Per-step estimates"); zero keeps them all.
+  absl::Duration estimate_retention = absl::Hours(24 * 30);
+  // The retention runs in a filter job once the newest estimate of the spacecraft has advanced
+  // by this much (measurement time) since it last ran, and at the first job after the start.
+  absl::Duration estimate_retention_period = absl::Hours(1);
   // Measurement-time period of the window checkpoints re-runs start from (D61).
   absl::Duration window_checkpoint_period = absl::Hours(1);
   // Largest accepted time step between consecutive frames of a spacecraft (rejected beyond:
@@ -112,6 +122,10 @@ struct CoreOptions {
   // takes frames; it may block, holding that spacecraft's filter behind ingest (frames stay
   // durable but not applied). It must return before the server stops. Empty: nothing.
   std::function<void(const std::string& spacecraft_id)> before_apply_job;
+  // Tests only: called by a SubscribeEstimates call before it reads each page of its replay
+  // (on a gRPC thread, no lock held); it may block, holding the replay while live estimates
+  // arrive. It must return before the server stops. Empty: nothing.
+  std::function<void(const std::string& spacecraft_id)> before_estimate_replay_page;
 };
 
 class EstimationCore {
@@ -158,6 +172,8 @@ class EstimationCore {
   static constexpr int64_t kMaxSessionsPageSize = 500;
   static constexpr int64_t kDefaultHistoryPageSize = 5000;
   static constexpr int64_t kMaxHistoryPageSize = 5000;
+  static constexpr int64_t kDefaultEstimatesPageSize = 2000;
+  static constexpr int64_t kMaxEstimatesPageSize = 5000;
   static constexpr int64_t kDefaultDiagnosesPageSize = 50;
   static constexpr int64_t kMaxDiagnosesPageSize = 100;
   // Records per message of the export streams.
@@ -169,6 +185,13 @@ class EstimationCore {
   // state when the session's output is not available.
   absl::StatusOr<esg::v1::PredictResponse> Predict(const esg::v1::PredictRequest& request);
   absl::StatusOr<esg::v1::HistoryResponse> History(const esg::v1::HistoryRequest& request);
+  // One page of a spacecraft's per-step estimates in measurement-time order (docs/service.md
+  // "Per-step estimates", "Paging"). InvalidArgument for an empty spacecraft_id, `to` before
+  // `from`, a negative page_size or a bad page_token; NotFound for an unknown spacecraft.
+  absl::StatusOr<esg::v1::EstimateHistoryResponse> EstimateHistory(
+      const esg::v1::EstimateHistoryRequest& request);
+  // Ids of the configured spacecraft, in order.
+  std::vector<std::string> SpacecraftIds();
   // The next chunk (at most kExportChunkSize frames) of an export: frames in the request's span
   // measured after `*after` (InfinitePast to start), which advances to the last frame returned;
   // `*done` is set when no frame follows.
@@ -200,8 +223,10 @@ class EstimationCore {
   absl::Status WaitApplied(const std::string& spacecraft_id, absl::Duration timeout);
 
   AlertHub& alert_hub() { return hub_; }
+  EstimateHub& estimate_hub() { return estimate_hub_; }
   // The service's metrics (docs/service.md "Metrics"); the gRPC layer counts ingest in it.
   ServiceMetrics& metrics() { return metrics_; }
+  const CoreOptions& options() const { return options_; }
   storage::Storage& storage() { return *storage_; }
 
  private:
@@ -258,6 +283,7 @@ class EstimationCore {
   const CoreOptions options_;
   ServiceMetrics metrics_;
   AlertHub hub_;
+  EstimateHub estimate_hub_;
 
   SpacecraftRegistry<Spacecraft> registry_;
   absl::Mutex configure_mu_;  // serialises Configure calls

@@ -108,6 +108,12 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* ExportTelemetry(
       grpc::CallbackServerContext* context,
       const esg::v1::ExportTelemetryRequest* request) override;
+  grpc::ServerUnaryReactor* GetEstimateHistory(grpc::CallbackServerContext* context,
+                                               const esg::v1::EstimateHistoryRequest* request,
+                                               esg::v1::EstimateHistoryResponse* response) override;
+  grpc::ServerWriteReactor<esg::v1::EstimateRecord>* SubscribeEstimates(
+      grpc::CallbackServerContext* context,
+      const esg::v1::EstimateSubscription* request) override;
 
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }

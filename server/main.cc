@@ -61,6 +61,11 @@ int main(int argc, char** argv) {
                  "How late a frame may arrive (before the last accepted one) and still be applied "
                  "in time order by a re-run, e.g. 2h, 90m, 0 (refuse late frames)")
       ->capture_default_str();
+  std::string estimate_retention = "720h";
+  app.add_option("--estimate-retention", estimate_retention,
+                 "How long per-step estimates are kept, in measurement time before the newest "
+                 "estimate of their spacecraft, e.g. 720h (30 days), 48h, 0 (keep everything)")
+      ->capture_default_str();
   app.add_option("--shutdown-deadline", shutdown_deadline_s,
                  "Seconds running calls get to finish at shutdown")
       ->capture_default_str();
@@ -104,6 +109,13 @@ int main(int argc, char** argv) {
       options.core.reorder_window < absl::ZeroDuration()) {
     std::fprintf(stderr, "--reorder-window: '%s' is not a duration >= 0 (e.g. 2h, 90m, 0)\n",
                  reorder_window.c_str());
+    return 2;
+  }
+  if (!absl::ParseDuration(estimate_retention, &options.core.estimate_retention) ||
+      options.core.estimate_retention < absl::ZeroDuration()) {
+    std::fprintf(stderr,
+                 "--estimate-retention: '%s' is not a duration >= 0 (e.g. 720h, 48h, 0)\n",
+                 estimate_retention.c_str());
     return 2;
   }
   options.synchronous =

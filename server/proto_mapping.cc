@@ -80,6 +80,38 @@ void FillSample(absl::Time time, const estimator::AttitudeEstimate& attitude,
   }
 }
 
+esg::v1::EstimateRecord EstimateToProto(const storage::EstimateRecord& r) {
+  esg::v1::EstimateRecord e;
+  e.set_spacecraft_id(r.spacecraft_id);
+  *e.mutable_measurement_time() = proto_convert::TimeToProto(r.measurement_time);
+  esg::v1::SessionState state = esg::v1::SESSION_STATE_UNSPECIFIED;
+  esg::v1::SessionState_Parse("SESSION_STATE_" + r.state, &state);
+  e.set_state(state);
+  if (r.attitude_valid) {
+    estimator::AttitudeEstimate attitude;
+    attitude.q_in_b = estimator::QuaternionFromScalarFirst(r.q_in_b);
+    for (int i = 0; i < 3; ++i) attitude.sigma_b(i) = r.sigma_b[i];
+    FillSample(r.measurement_time, attitude, {}, e.mutable_attitude());
+    for (int id : r.output_pair) e.add_output_pair(id);
+  }
+  e.set_attitude_invalid_reason(r.attitude_invalid_reason);
+  e.set_star_tracker_used(r.star_tracker_used);
+  for (const storage::GyroInnovationRecord& g : r.star_tracker_innovations) {
+    esg::v1::GyroInnovation* out = e.add_star_tracker_innovations();
+    out->set_gyro_id(g.gyro_id);
+    for (int i = 0; i < 2; ++i) {
+      out->add_innovation_arcsec(estimator::RadToArcsec(g.innovation[i]));
+      out->add_sigma_arcsec(estimator::RadToArcsec(g.sigma[i]));
+    }
+  }
+  e.set_star_tracker_test_ratio(r.star_tracker_test_ratio);
+  if (r.last_star_tracker_time != absl::InfinitePast()) {
+    *e.mutable_last_star_tracker_time() = proto_convert::TimeToProto(r.last_star_tracker_time);
+  }
+  *e.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  return e;
+}
+
 // "field: reason" -> Rejection (proto/convert.h error contract).
 esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
   esg::v1::Rejection r;

@@ -26,6 +26,10 @@ const char* SeverityName(esg::v1::AlertSeverity severity);
 esg::v1::Alert AlertToProto(const storage::AlertRecord& record);
 esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& record);
 esg::v1::SessionState StateToProto(estimator::SessionState state);
+// A stored per-step estimate as the message (docs/service.md "Per-step estimates"): q_in_b
+// canonical (q0 >= 0), 1-sigma and innovations in arcsec; the attitude's time is the
+// measurement time and its spin_axes are not kept (empty).
+esg::v1::EstimateRecord EstimateToProto(const storage::EstimateRecord& record);
 
 // One attitude sample: q_in_b canonical (q0 >= 0), 1-sigma about body axes [arcsec], and the
 // gyros' inertial spin axes h_in.

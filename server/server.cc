@@ -271,6 +271,7 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
     health->Shutdown();
   }
   core_->alert_hub().CloseAll();
+  core_->estimate_hub().CloseAll();
   if (metrics_ != nullptr) metrics_->Stop();
   // gRPC's shutdown also waits for every client connection to close, idle ones included: a
   // client that merely keeps its channel open would hold it for the whole deadline. Once none of

@@ -145,6 +145,39 @@ struct AlertRepeat {
   absl::Time last_time = absl::UnixEpoch();  // measurement epoch of the latest occurrence
 };
 
+// The star-tracker innovation of one gyro at one measurement step: the spin axis the star
+// tracker implies minus the filter's predicted one, in the gyro's tangent basis (z2..z5 of eq.
+// (13), before the eq. (14) decision), and its 1-sigma (square root of the innovation
+// covariance's diagonal). SI like every record [rad].
+struct GyroInnovationRecord {
+  int gyro_id = 0;  // 1..4
+  std::array<double, 2> innovation = {0.0, 0.0};
+  std::array<double, 2> sigma = {0.0, 0.0};
+};
+
+// The filter's output at one measurement step (the per-step estimate archive, docs/service.md
+// "Per-step estimates"). Identity: (spacecraft_id, measurement_time); storing a record again at
+// the same identity replaces it.
+struct EstimateRecord {
+  std::string spacecraft_id;
+  absl::Time measurement_time = absl::UnixEpoch();  // epoch of the step's telemetry frame
+  absl::Time compute_time = absl::UnixEpoch();      // when the service computed it
+  std::string state;  // session state after the step (estimator::SessionStateName)
+  // Attitude output of the step; q_in_b, sigma_b and output_pair are meaningful only when valid
+  // (not stored otherwise).
+  bool attitude_valid = false;
+  std::array<double, 4> q_in_b = {1.0, 0.0, 0.0, 0.0};  // scalar first (q0, q1, q2, q3) [1]
+  std::array<double, 3> sigma_b = {0.0, 0.0, 0.0};      // 1-sigma about body x, y, z [rad]
+  std::array<int, 2> output_pair = {0, 0};              // gyro ids, reference gyro first
+  std::string attitude_invalid_reason;                  // empty when valid
+  bool star_tracker_used = false;
+  // One per healthy gyro, in the session's gyro order; empty when none were formed.
+  std::vector<GyroInnovationRecord> star_tracker_innovations;
+  double star_tracker_test_ratio = 0.0;  // largest normalised innovation of eq. (14) [1]
+  // Latest step at or before this one that applied the star tracker; InfinitePast: none yet.
+  absl::Time last_star_tracker_time = absl::InfinitePast();
+};
+
 // The latest checkpoint of a spacecraft's estimation session (one per spacecraft).
 struct CheckpointRecord {
   std::string spacecraft_id;

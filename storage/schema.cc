@@ -188,9 +188,57 @@ CREATE TABLE window_checkpoints (
 );
 )sql";
 
+// Version 7: the per-step estimate archive (storage/estimate_store.h). One row per measurement
+// step, keyed by spacecraft and measurement time (a re-applied step replaces its row; the table
+// is clustered on the key, so a time range of one spacecraft is one contiguous read). Attitude
+// q_in_b scalar first [1] and its 1-sigma about the body axes [arcsec], NULL when the output is
+// not valid; the star-tracker innovations of each gyro by gyro id (two components and their
+// 1-sigma [arcsec], NULL when none were formed for it) with the session's gyro order in
+// innovation_gyro_order ("1,2,3"; NULL when none were formed).
+constexpr absl::string_view kSchemaV7 = R"sql(
+CREATE TABLE estimates (
+  spacecraft_id                  TEXT    NOT NULL,
+  measurement_time_unix_ns       INTEGER NOT NULL,
+  compute_time_unix_ns           INTEGER NOT NULL,
+  state                          TEXT    NOT NULL,
+  attitude_valid                 INTEGER NOT NULL,
+  q0                             REAL,
+  q1                             REAL,
+  q2                             REAL,
+  q3                             REAL,
+  sigma_x_arcsec                 REAL,
+  sigma_y_arcsec                 REAL,
+  sigma_z_arcsec                 REAL,
+  output_reference_gyro_id       INTEGER,
+  output_second_gyro_id          INTEGER,
+  attitude_invalid_reason        TEXT    NOT NULL,
+  star_tracker_used              INTEGER NOT NULL,
+  star_tracker_test_ratio        REAL,
+  last_star_tracker_time_unix_ns INTEGER,
+  innovation_gyro_order          TEXT,
+  innovation_g1_1_arcsec         REAL,
+  innovation_g1_2_arcsec         REAL,
+  innovation_sigma_g1_1_arcsec   REAL,
+  innovation_sigma_g1_2_arcsec   REAL,
+  innovation_g2_1_arcsec         REAL,
+  innovation_g2_2_arcsec         REAL,
+  innovation_sigma_g2_1_arcsec   REAL,
+  innovation_sigma_g2_2_arcsec   REAL,
+  innovation_g3_1_arcsec         REAL,
+  innovation_g3_2_arcsec         REAL,
+  innovation_sigma_g3_1_arcsec   REAL,
+  innovation_sigma_g3_2_arcsec   REAL,
+  innovation_g4_1_arcsec         REAL,
+  innovation_g4_2_arcsec         REAL,
+  innovation_sigma_g4_1_arcsec   REAL,
+  innovation_sigma_g4_2_arcsec   REAL,
+  PRIMARY KEY (spacecraft_id, measurement_time_unix_ns)
+) WITHOUT ROWID;
+)sql";
+
 // kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3,
-                                             kSchemaV4, kSchemaV5, kSchemaV6};
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4,
+                                             kSchemaV5, kSchemaV6, kSchemaV7};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -35,7 +35,8 @@ Storage::Storage(std::unique_ptr<Database> db)
       alerts_(db_.get()),
       sessions_(db_.get()),
       diagnoses_(db_.get()),
-      reorder_(db_.get()) {}
+      reorder_(db_.get()),
+      estimates_(db_.get()) {}
 
 absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
                                                        const DatabaseOptions& options) {
@@ -80,6 +81,10 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
     RETURN_IF_ERROR(CheckSpacecraft(effects.coefficients[i].spacecraft_id, id,
                                     absl::StrCat("coefficients[", i, "]")));
   }
+  for (size_t i = 0; i < effects.estimates.size(); ++i) {
+    RETURN_IF_ERROR(CheckSpacecraft(effects.estimates[i].spacecraft_id, id,
+                                    absl::StrCat("estimates[", i, "]")));
+  }
   for (size_t i = 0; i < effects.new_alerts.size(); ++i) {
     RETURN_IF_ERROR(CheckSpacecraft(effects.new_alerts[i].spacecraft_id, id,
                                     absl::StrCat("new_alerts[", i, "]")));
@@ -96,10 +101,19 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
         "revision"));
     RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(
         txn, id, r.after == absl::InfinitePast() ? r.after : r.after + absl::Nanoseconds(1)));
+    RETURN_IF_ERROR(InBatch(estimates_.DeleteAfter(txn, id, r.after).status(), "revision"));
   }
   for (size_t i = 0; i < effects.coefficients.size(); ++i) {
     RETURN_IF_ERROR(InBatch(coefficients_.Append(txn, effects.coefficients[i]),
                             absl::StrCat("coefficients[", i, "]")));
+  }
+  for (size_t i = 0; i < effects.estimates.size(); ++i) {
+    RETURN_IF_ERROR(InBatch(estimates_.Put(txn, effects.estimates[i]),
+                            absl::StrCat("estimates[", i, "]")));
+  }
+  if (effects.estimates_before != absl::InfinitePast()) {
+    RETURN_IF_ERROR(InBatch(estimates_.DeleteBefore(txn, id, effects.estimates_before).status(),
+                            "estimates_before"));
   }
   std::vector<int64_t> sequences;
   sequences.reserve(effects.new_alerts.size());
@@ -147,6 +161,7 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
   if (change.new_session) {
     RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(txn, id, absl::InfinitePast()));
     RETURN_IF_ERROR(reorder_.DropLateFrames(txn, id));
+    RETURN_IF_ERROR(estimates_.DeleteAfter(txn, id, absl::InfinitePast()).status());
   }
   std::vector<int64_t> sequences;
   for (size_t i = 0; i < change.new_alerts.size(); ++i) {

@@ -4,8 +4,9 @@
 // recovery"):
 //   ArchiveFrames        the group commit of accepted telemetry: the unit of acknowledgement (a
 //                        frame is acknowledged only after the call that archived it returned OK);
-//   CommitFilterEffects  one filter job of a spacecraft: its coefficient estimates, new alerts,
-//                        repeats, clears and the checkpoint that carries the apply cursor, so
+//   CommitFilterEffects  one filter job of a spacecraft: its coefficient estimates, per-step
+//                        estimates, new alerts, repeats, clears and the checkpoint that
+//                        carries the apply cursor, so
 //                        a restart (checkpoint + archive after its cursor) applies no frame twice;
 //                        with a re-run over late frames, also the revision of what it supersedes
 //                        and the reorder window's bookkeeping (reorder_store.h);
@@ -30,6 +31,7 @@
 #include "storage/coefficient_store.h"
 #include "storage/config_store.h"
 #include "storage/diagnosis_store.h"
+#include "storage/estimate_store.h"
 #include "storage/records.h"
 #include "storage/reorder_store.h"
 #include "storage/session_store.h"
@@ -49,13 +51,17 @@ struct AlertClear {
 struct FilterEffects {
   std::string spacecraft_id;
   std::vector<CoefficientRecord> coefficients;
+  // Per-step estimates (EstimateStore), each replacing a stored one at its measurement time.
+  std::vector<EstimateRecord> estimates;
   std::vector<AlertRecord> new_alerts;  // sequences are assigned, in this order
   std::vector<AlertRepeat> repeats;     // repeats collapsed into stored alerts
   std::vector<AlertClear> clears;       // stored alerts to clear
   // A re-run from a window checkpoint (docs/service.md "Several ground stations"): before the
-  // records above are written, the current estimates measured after `after` and the alerts
-  // `alerts` are marked revised at `revised_time`, the alerts of `restores` set back to their
-  // checkpointed state, and the window checkpoints after `after` dropped.
+  // records above are written, the current coefficient estimates measured after `after` and
+  // the alerts `alerts` are marked revised at `revised_time`, the alerts of `restores` set back
+  // to their checkpointed state, the per-step estimates measured after `after` deleted (the
+  // re-run writes them again; no audit copies), and the window checkpoints after `after`
+  // dropped.
   struct Revision {
     absl::Time after = absl::InfinitePast();  // InfinitePast: from a fresh session
     absl::Time revised_time;
@@ -69,6 +75,9 @@ struct FilterEffects {
   // `prune_before` to drop (InfinitePast: no pruning).
   std::optional<WindowCheckpoint> window_checkpoint;
   absl::Time prune_before = absl::InfinitePast();
+  // Retention of the per-step estimates: after the records above are written, those measured
+  // before this are deleted (InfinitePast: none).
+  absl::Time estimates_before = absl::InfinitePast();
   // The checkpoint, built inside the transaction from the sequences assigned to new_alerts
   // (same order): it carries the live alert tracks with their sequences. Required.
   std::function<CheckpointRecord(const std::vector<int64_t>& alert_sequences)> checkpoint;
@@ -80,8 +89,9 @@ struct ConfigurationChange {
   CheckpointRecord checkpoint;          // the new session's, same spacecraft
   std::vector<AlertRecord> new_alerts;  // e.g. a quarantine alert stored raised and cleared
   std::vector<AlertClear> clears;       // e.g. the quarantine alert the configuration ends
-  // The new session replaces the old: its window checkpoints and late frames are dropped (the
-  // new session applies the whole archive in time order).
+  // The new session replaces the old: its window checkpoints, late frames and per-step
+  // estimates are dropped (the new session applies the whole archive in time order and writes
+  // its own estimates).
   bool new_session = false;
 };
 
@@ -117,7 +127,7 @@ class Storage {
 
   // Writes a filter job's effects and its checkpoint in one transaction; returns the sequences
   // assigned to effects.new_alerts, in order. InvalidArgument naming the record
-  // ("coefficients[1]", "new_alerts[0].severity", "repeats[0].spacecraft_id") for a record a
+  // ("coefficients[1]", "estimates[0]", "new_alerts[0].severity", "repeats[0].spacecraft_id") for a record a
   // store rejects or of another spacecraft, or for a missing checkpoint function; NotFound for a
   // repeat or clear of a missing alert; storage faults as ArchiveFrames.
   absl::StatusOr<std::vector<int64_t>> CommitFilterEffects(const FilterEffects& effects);
@@ -135,6 +145,7 @@ class Storage {
   SessionStore& sessions() { return sessions_; }
   DiagnosisStore& diagnoses() { return diagnoses_; }
   ReorderStore& reorder() { return reorder_; }
+  EstimateStore& estimates() { return estimates_; }
 
  private:
   explicit Storage(std::unique_ptr<Database> db);
@@ -147,6 +158,7 @@ class Storage {
   SessionStore sessions_;
   DiagnosisStore diagnoses_;
   ReorderStore reorder_;
+  EstimateStore estimates_;
 };
 
 }  // namespace esg::storage

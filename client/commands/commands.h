@@ -34,6 +34,8 @@ void RegisterStatus(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code);
+// `esg estimates` (GetEstimateHistory).
+void RegisterEstimates(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg diagnoses list|show` (ListDiagnoses).
 void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg export history|telemetry` (ExportCoefficientHistory, ExportTelemetry; server_export.h).

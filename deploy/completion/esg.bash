@@ -15,7 +15,7 @@ _esg() {
   fi
 
   local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history
-    export"
+    estimates export"
   local global="--server --token --tls-ca --tls-cert --tls-key --help --version"
   local format="--format --json"
 
@@ -93,6 +93,7 @@ _esg() {
     predict) opts="--spacecraft --from --to --step --aem --planned $format" ;;
     alerts) opts="--spacecraft --since --include-revised --follow --ack --operator $format" ;;
     history) opts="--spacecraft --gyro --from --to --include-revised $format --csv" ;;
+    estimates) opts="--spacecraft --from --to $format --csv" ;;
     export)
       case "$sub" in
         "") COMPREPLY=($(compgen -W "history telemetry" -- "$cur")); return ;;

@@ -2,7 +2,10 @@
 // (sqlite_db.h durability table), on a real file in a temporary directory:
 // BM_StorageArchiveFrames, the group commit of N telemetry frames (300-byte payloads) that
 // acknowledgements wait for (frames/s is N x commits/s); BM_StorageFilterEffects, one filter
-// job's effects: 4 coefficient estimates + 1 alert + a 2 KiB checkpoint.
+// job's effects: 4 coefficient estimates + 1 alert + a 2 KiB checkpoint; BM_StorageFilterJob, a
+// full apply job of 32 measurement steps (3 gyros: 96 coefficient estimates, a 2 KiB checkpoint)
+// without (range(0) = 0) and with (1) its 32 per-step estimates, the cost of the estimate archive
+// per job (docs/service.md "Per-step estimates").
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -124,6 +127,82 @@ void BM_StorageFilterEffects(benchmark::State& state) {
 BENCHMARK(BM_StorageFilterEffects)
     ->ArgsProduct({{1}, {static_cast<int>(Synchronous::kNormal),
                          static_cast<int>(Synchronous::kFull)}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// One apply job of 32 measurement steps at 60 s ending at step `last`: 3 gyros' coefficient
+// estimates per step and, with `estimates`, the step's per-step estimate (valid attitude, the
+// innovations of 3 gyros).
+FilterEffects MakeBenchJob(int64_t last, bool estimates) {
+  FilterEffects effects;
+  effects.spacecraft_id = "BENCH-1";
+  for (int64_t step = last - 31; step <= last; ++step) {
+    const absl::Time t = kT0 + absl::Seconds(60 * step);
+    for (int gyro = 1; gyro <= 3; ++gyro) {
+      CoefficientRecord c;
+      c.spacecraft_id = effects.spacecraft_id;
+      c.gyro_id = gyro;
+      c.measurement_time = c.compute_time = t;
+      c.model_name = "model10+11";
+      c.values.assign(kNumCoefficientValues, 1e-7 * step);
+      c.sigmas.assign(kNumCoefficientValues, 1e-8);
+      effects.coefficients.push_back(std::move(c));
+    }
+    if (!estimates) continue;
+    EstimateRecord e;
+    e.spacecraft_id = effects.spacecraft_id;
+    e.measurement_time = e.compute_time = t;
+    e.state = "CONVERGED";
+    e.attitude_valid = true;
+    e.q_in_b = {0.5, 0.5, 0.5, 0.5};
+    e.sigma_b = {1e-5, 1e-5, 2e-5};
+    e.output_pair = {1, 2};
+    e.star_tracker_used = true;
+    for (int gyro = 1; gyro <= 3; ++gyro) {
+      e.star_tracker_innovations.push_back({gyro, {1e-5 * step, -1e-5}, {2e-5, 2e-5}});
+    }
+    e.star_tracker_test_ratio = 0.5;
+    e.last_star_tracker_time = t;
+    effects.estimates.push_back(std::move(e));
+  }
+  const absl::Time t_last = kT0 + absl::Seconds(60 * last);
+  effects.checkpoint = [last, t_last](const std::vector<int64_t>&) {
+    CheckpointRecord checkpoint;
+    checkpoint.spacecraft_id = "BENCH-1";
+    checkpoint.last_sequence = last;
+    checkpoint.measurement_time = checkpoint.compute_time = t_last;
+    checkpoint.state_blob.assign(2048, 's');
+    return checkpoint;
+  };
+  return effects;
+}
+
+// range(0): without (0) or with (1) the per-step estimates; range(1): Synchronous as int.
+void BM_StorageFilterJob(benchmark::State& state) {
+  esg::testing::TempDir dir;
+  std::unique_ptr<Storage> storage = OpenBenchStorage(state, dir.File("bench.db"));
+  if (storage == nullptr) return;
+  int64_t last = 31;
+  for (auto _ : state) {
+    state.PauseTiming();
+    const FilterEffects effects = MakeBenchJob(last, state.range(0) == 1);
+    last += 32;
+    state.ResumeTiming();
+    const absl::StatusOr<std::vector<int64_t>> result = storage->CommitFilterEffects(effects);
+    if (!result.ok()) {
+      state.SkipWithError(std::string(result.status().message()).c_str());
+      return;
+    }
+  }
+  state.SetItemsProcessed(state.iterations() * 32);
+  state.SetLabel(absl::StrCat(state.range(0) == 1 ? "with estimates, " : "without estimates, ",
+                              state.range(1) == static_cast<int>(Synchronous::kFull)
+                                  ? "synchronous=FULL"
+                                  : "synchronous=NORMAL"));
+}
+BENCHMARK(BM_StorageFilterJob)
+    ->ArgsProduct({{0, 1}, {static_cast<int>(Synchronous::kNormal),
+                            static_cast<int>(Synchronous::kFull)}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

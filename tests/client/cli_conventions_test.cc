@@ -223,8 +223,8 @@ TEST(CliConventions, EveryVerbsHelpListsTheGlobalOptions) {
   TempDir dir;
   for (const char* verb :
        {"simulate", "calibrate", "gap", "diagnose", "diagnoses", "diagnoses list", "diagnoses show",
-        "configure", "replay", "status", "predict", "alerts", "history", "export", "export history",
-        "export telemetry"}) {
+        "configure", "replay", "status", "predict", "alerts", "history", "estimates", "export",
+        "export history", "export telemetry"}) {
     const RunResult r = RunEsg(dir, std::string(verb) + " --help");
     EXPECT_EQ(r.exit_code, 0) << verb << ": " << r.err;
     for (const char* option : {"--server ADDR", "--token TOKEN", "--tls-ca FILE", "--tls-cert FILE",
@@ -241,7 +241,8 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
   const std::regex option_line(R"(^  (--[a-z][a-z-]*))");
   for (const std::string verb :
        {"simulate", "calibrate", "gap", "diagnose", "diagnoses list", "diagnoses show", "configure",
-        "replay", "status", "predict", "alerts", "history", "export history", "export telemetry"}) {
+        "replay", "status", "predict", "alerts", "history", "estimates", "export history",
+        "export telemetry"}) {
     const RunResult help = RunEsg(dir, verb + " --help");
     ASSERT_EQ(help.exit_code, 0) << verb;
     std::set<std::string> options;
@@ -275,7 +276,8 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
                          "COMP_WORDS=(esg export history --format ''); COMP_CWORD=4; _esg; "
                          "echo ${COMPREPLY[@]}");
   const RunResult r = ::esg::testing::RunBinary(dir, "/bin/bash", dir.File("verbs.sh"));
-  EXPECT_EQ(r.out, "diagnose diagnoses\ntable json csv\nexport\nhistory telemetry\ncsv json\n");
+  EXPECT_EQ(r.out,
+            "diagnose diagnoses\ntable json csv\nestimates export\nhistory telemetry\ncsv json\n");
 }
 
 TEST(CliConventions, FormatIsValidatedAndJsonIsItsShortForm) {
@@ -370,6 +372,14 @@ TEST_F(CliAgainstServer, EveryServerVerbPrintsJsonAndCsvWithMillisecondTimes) {
   ExpectJson(RunEsg(dir, "history --json" + rdk, env), "history", nullptr);
   const RunResult history = RunEsg(dir, "history" + rdk, env);
   EXPECT_GT(ExpectTimesInFormat(history.out, "history (table)"), 0);
+  // estimates: the per-step estimates of the replayed 6 h (a step a minute)
+  doc = ExpectJson(RunEsg(dir, "estimates --json" + rdk, env), "estimates",
+                   esg::v1::EstimateHistoryResponse::descriptor());
+  EXPECT_GE(doc["estimates"].size(), 350u);
+  ExpectCsv(RunEsg(dir, "estimates --format csv" + rdk, env), "estimates", "time_utc",
+            doc["estimates"].size());
+  const RunResult estimates = RunEsg(dir, "estimates" + rdk, env);
+  EXPECT_GT(ExpectTimesInFormat(estimates.out, "estimates (table)"), 350);
 }
 
 TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {

@@ -302,6 +302,34 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
   esg::v1::Alert alert;
   EXPECT_EQ(stub->AcknowledgeAlert(&ctx, ack, &alert).error_code(),
             grpc::StatusCode::PERMISSION_DENIED);
+
+  // The per-step estimates: read role, the unary call and the stream alike.
+  auto history = [&](const std::string& token) {
+    grpc::ClientContext c;
+    if (!token.empty()) c.AddMetadata("authorization", "Bearer " + token);
+    esg::v1::EstimateHistoryRequest request;
+    request.set_spacecraft_id("AUTH-1");
+    esg::v1::EstimateHistoryResponse response;
+    return stub->GetEstimateHistory(&c, request, &response);
+  };
+  EXPECT_EQ(history("").error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(history("wrong").error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_TRUE(history("reader-token").ok());
+  auto subscribe = [&](const std::string& token) {
+    grpc::ClientContext c;
+    if (!token.empty()) c.AddMetadata("authorization", "Bearer " + token);
+    esg::v1::EstimateSubscription request;
+    request.set_spacecraft_id("AUTH-1");
+    request.set_replay_marker(true);
+    auto reader = stub->SubscribeEstimates(&c, request);
+    esg::v1::EstimateRecord first;
+    const bool got = reader->Read(&first);
+    c.TryCancel();
+    const grpc::Status status = reader->Finish();
+    return got && first.replay_complete() ? grpc::Status::OK : status;
+  };
+  EXPECT_EQ(subscribe("").error_code(), grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_TRUE(subscribe("reader-token").ok());
 }
 
 // A console signs each operator in with their own token and acknowledges without a name: the

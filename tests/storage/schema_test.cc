@@ -123,7 +123,8 @@ TEST(Schema, FreshDatabaseIsMigratedToTheCurrentVersion) {
   ASSERT_THAT(MigrateToCurrent(**db), IsOk());
   EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion));
   EXPECT_THAT(Tables(**db), IsSupersetOf({"alerts", "checkpoints", "coefficients", "diagnoses",
-                                          "spacecraft_configs", "telemetry_frames"}));
+                                          "estimates", "spacecraft_configs",
+                                          "telemetry_frames"}));
   // Idempotent.
   EXPECT_THAT(MigrateToCurrent(**db), IsOk());
   EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion));
@@ -258,6 +259,59 @@ TEST(Schema, Version4DiagnosesGetTheFrameCountOfTheirSpanWhenMigrated) {
   absl::StatusOr<DiagnosisRecord> got = (*storage)->diagnoses().Get(*id);
   ASSERT_THAT(got, IsOk());
   EXPECT_EQ(got->frames, 2);
+}
+
+// A version-6 file, as the program before the per-step estimate archive left it (frames,
+// coefficients with a revised row, an alert, a checkpoint, a late frame and a window
+// checkpoint): Storage::Open migrates it to the current version, keeps every row, and the new
+// estimates table is empty and takes records.
+TEST(Schema, Version6FileOpensMigratedWithItsDataAndAnEmptyEstimateArchive) {
+  TempDir dir;
+  const std::string path = dir.File("v6.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 6), IsOk());
+    EXPECT_THAT(Tables(**db), ::testing::Not(::testing::Contains("estimates")));
+    std::string sql;
+    for (int k = 1; k <= 5; ++k) {
+      absl::StrAppend(&sql, "INSERT INTO telemetry_frames VALUES ('SC-6', 'default', ", k, ", ",
+                      TimeToUnixNanos(T(60.0 * k)), ", x'00');");
+      absl::StrAppend(&sql,
+                      "INSERT INTO coefficients (spacecraft_id, gyro_id, "
+                      "measurement_time_unix_ns, compute_time_unix_ns, model_name, k0_deg_h, "
+                      "revised_time_unix_ns) VALUES ('SC-6', 1, ",
+                      TimeToUnixNanos(T(60.0 * k)), ", ", TimeToUnixNanos(T(9000)),
+                      ", 'model10', 0.25, ", k == 5 ? "1" : "NULL", ");");
+    }
+    absl::StrAppend(&sql, "INSERT INTO checkpoints VALUES ('SC-6', 5, ",
+                    TimeToUnixNanos(T(300)), ", ", TimeToUnixNanos(T(9000)), ", x'0102');",
+                    "INSERT INTO late_frames VALUES ('SC-6', ", TimeToUnixNanos(T(90)), ");",
+                    "INSERT INTO window_checkpoints VALUES ('SC-6', ", TimeToUnixNanos(T(60)),
+                    ", ", TimeToUnixNanos(T(9000)), ", x'03');");
+    ASSERT_THAT((*db)->Execute(sql), IsOk());
+    ASSERT_THAT(SchemaVersion(**db), IsOkAndHolds(6));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  Database& db = (*storage)->database();
+  EXPECT_THAT(SchemaVersion(db), IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(QueryInt(db, "SELECT COUNT(*) FROM telemetry_frames"), IsOkAndHolds(5));
+  absl::StatusOr<std::vector<CoefficientRecord>> current = (*storage)->coefficients().History(
+      "SC-6", 0, absl::InfinitePast(), absl::InfiniteFuture());
+  ASSERT_THAT(current, IsOk());
+  EXPECT_EQ(current->size(), 4u);
+  EXPECT_THAT((*storage)->reorder().LateFrames("SC-6"),
+              IsOkAndHolds(ElementsAreArray({T(90)})));
+  EXPECT_THAT((*storage)->sessions().GetCheckpoint("SC-6"), IsOk());
+  EXPECT_THAT((*storage)->estimates().Count("SC-6"), IsOkAndHolds(0));
+  EstimateRecord r;
+  r.spacecraft_id = "SC-6";
+  r.measurement_time = T(360);
+  r.compute_time = T(9001);
+  r.state = "CALIBRATING";
+  ASSERT_THAT((*storage)->estimates().Put(r), IsOk());
+  EXPECT_THAT((*storage)->estimates().Count("SC-6"), IsOkAndHolds(1));
 }
 
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {

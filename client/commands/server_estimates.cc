@@ -1,0 +1,197 @@
+// `esg estimates --spacecraft ID [--from T] [--to T] [--format table|json|csv | --csv | --json]`:
+// the per-step estimates stored by the service (GetEstimateHistory, every page followed;
+// docs/service.md "Per-step estimates"): per measurement step the session state, the attitude
+// q_in_b (scalar first, q0 >= 0) with its 1-sigma about the body axes [arcsec], the output pair,
+// whether the star tracker was applied with the largest normalised innovation of eq. (14), and the
+// star-tracker innovations of each gyro (z2..z5 of eq. (13), in the gyro's basis) with their
+// 1-sigma [arcsec].
+// Output: a table, or with --format csv (short form --csv) one row per step with every value
+// (columns in CsvHeader; the innovations by gyro id 1..4, empty where none was formed), or with
+// --format json (--json) the EstimateHistoryResponse in the proto JSON mapping.
+// Exit codes: 0 success, 2 bad arguments, 1 server failure.
+#include <cstdio>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "client/commands/commands.h"
+#include "client/commands/server_common.h"
+#include "client/output_format.h"
+#include "proto/convert.h"
+
+namespace esg::client {
+namespace {
+
+constexpr char kVerb[] = "estimates";
+constexpr int kMaxGyroId = 4;
+
+struct EstimatesOptions {
+  std::string spacecraft_id;
+  std::string from;
+  std::string to;
+  bool csv = false;  // short form of --format csv
+  OutputFormat format = OutputFormat::kTable;
+};
+
+std::vector<std::string> CsvHeader() {
+  std::vector<std::string> header = {"time_utc",
+                                     "state",
+                                     "attitude_valid",
+                                     "q0",
+                                     "q1",
+                                     "q2",
+                                     "q3",
+                                     "sigma_x_arcsec",
+                                     "sigma_y_arcsec",
+                                     "sigma_z_arcsec",
+                                     "reference_gyro",
+                                     "second_gyro",
+                                     "star_tracker_used",
+                                     "star_tracker_test_ratio",
+                                     "last_star_tracker_time_utc"};
+  for (int id = 1; id <= kMaxGyroId; ++id) {
+    for (const char* column :
+         {"innovation_1_arcsec", "innovation_2_arcsec", "sigma_1_arcsec", "sigma_2_arcsec"}) {
+      header.push_back(absl::StrCat("g", id, "_", column));
+    }
+  }
+  header.push_back("attitude_invalid_reason");
+  header.push_back("compute_time_utc");
+  return header;
+}
+
+double At(const google::protobuf::RepeatedField<double>& v, int i) {
+  return i < v.size() ? v[i] : 0.0;
+}
+
+// The session state without its enum prefix ("CALIBRATING").
+std::string StateName(esg::v1::SessionState state) {
+  const std::string name = esg::v1::SessionState_Name(state);
+  const std::string prefix = "SESSION_STATE_";
+  return name.rfind(prefix, 0) == 0 ? name.substr(prefix.size()) : name;
+}
+
+// Every value with 17 significant digits: a row reads back the doubles the service sent.
+std::string CsvRecord(const esg::v1::EstimateRecord& e) {
+  std::vector<std::string> cells = {FormatUtc(e.measurement_time(), e.has_measurement_time()),
+                                    StateName(e.state()), e.has_attitude() ? "true" : "false"};
+  const esg::v1::AttitudeSample& a = e.attitude();
+  for (int i = 0; i < 4; ++i) {
+    cells.push_back(e.has_attitude() ? absl::StrFormat("%.17g", At(a.q_in_b(), i)) : "");
+  }
+  for (int i = 0; i < 3; ++i) {
+    cells.push_back(e.has_attitude() ? absl::StrFormat("%.17g", At(a.sigma_arcsec(), i)) : "");
+  }
+  for (int i = 0; i < 2; ++i) {
+    cells.push_back(i < e.output_pair_size() ? absl::StrCat(e.output_pair(i)) : "");
+  }
+  cells.push_back(e.star_tracker_used() ? "true" : "false");
+  cells.push_back(absl::StrFormat("%.17g", e.star_tracker_test_ratio()));
+  cells.push_back(e.has_last_star_tracker_time() ? FormatUtc(e.last_star_tracker_time()) : "");
+  for (int id = 1; id <= kMaxGyroId; ++id) {
+    const esg::v1::GyroInnovation* found = nullptr;
+    for (const esg::v1::GyroInnovation& g : e.star_tracker_innovations()) {
+      if (g.gyro_id() == id) found = &g;
+    }
+    for (int i = 0; i < 2; ++i) {
+      cells.push_back(found ? absl::StrFormat("%.17g", At(found->innovation_arcsec(), i)) : "");
+    }
+    for (int i = 0; i < 2; ++i) {
+      cells.push_back(found ? absl::StrFormat("%.17g", At(found->sigma_arcsec(), i)) : "");
+    }
+  }
+  cells.push_back(e.attitude_invalid_reason());
+  cells.push_back(FormatUtc(e.compute_time(), e.has_compute_time()));
+  return CsvLine(cells);
+}
+
+void PrintTable(const esg::v1::EstimateHistoryResponse& history) {
+  std::printf("%-24s %-12s %-44s %-26s %-5s %-3s %7s  %s\n", "time_utc", "state",
+              "q_in_b (q0, q1, q2, q3)", "1-sigma x,y,z [arcsec]", "pair", "st", "ratio",
+              "innovations [arcsec] gyro: z1 z2");
+  for (const esg::v1::EstimateRecord& e : history.estimates()) {
+    std::string attitude = "-";
+    std::string sigma = e.attitude_invalid_reason();
+    std::string pair = "-";
+    if (e.has_attitude()) {
+      const esg::v1::AttitudeSample& a = e.attitude();
+      attitude = absl::StrFormat("%+.8f %+.8f %+.8f %+.8f", At(a.q_in_b(), 0), At(a.q_in_b(), 1),
+                                 At(a.q_in_b(), 2), At(a.q_in_b(), 3));
+      sigma = absl::StrFormat("%7.2f %7.2f %7.2f", At(a.sigma_arcsec(), 0), At(a.sigma_arcsec(), 1),
+                              At(a.sigma_arcsec(), 2));
+      pair = absl::StrJoin(e.output_pair(), ",");
+    }
+    std::string innovations;
+    for (const esg::v1::GyroInnovation& g : e.star_tracker_innovations()) {
+      absl::StrAppend(&innovations, innovations.empty() ? "" : "  ",
+                      absl::StrFormat("%d: %+.2f %+.2f", g.gyro_id(), At(g.innovation_arcsec(), 0),
+                                      At(g.innovation_arcsec(), 1)));
+    }
+    std::printf("%-24s %-12s %-44s %-26s %-5s %-3s %7.3f  %s\n",
+                FormatUtc(e.measurement_time(), e.has_measurement_time()).c_str(),
+                StateName(e.state()).c_str(), attitude.c_str(), sigma.c_str(), pair.c_str(),
+                e.star_tracker_used() ? "yes" : "no", e.star_tracker_test_ratio(),
+                innovations.c_str());
+  }
+  std::printf("%d estimates (q_in_b scalar first; --csv adds the innovations' 1-sigma)\n",
+              history.estimates_size());
+}
+
+int RunEstimates(const EstimatesOptions& o, const GlobalOptions& global) {
+  if (o.csv && o.format == OutputFormat::kJson) {
+    return ReportBadArgument(kVerb, "--csv and --json: give at most one");
+  }
+  const OutputFormat format = o.csv ? OutputFormat::kCsv : o.format;
+  esg::v1::EstimateHistoryRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  if (!o.from.empty()) {
+    const std::optional<absl::Time> from = ParseUtc(o.from);
+    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
+    *request.mutable_from() = proto_convert::TimeToProto(*from);
+  }
+  if (!o.to.empty()) {
+    const std::optional<absl::Time> to = ParseUtc(o.to);
+    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
+    *request.mutable_to() = proto_convert::TimeToProto(*to);
+  }
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  absl::StatusOr<esg::v1::EstimateHistoryResponse> history = client->GetEstimateHistory(request);
+  if (!history.ok()) return ReportRpcError(kVerb, history.status(), global);
+
+  if (format == OutputFormat::kCsv) {
+    std::string text = CsvLine(CsvHeader()) + "\n";
+    for (const esg::v1::EstimateRecord& e : history->estimates()) {
+      absl::StrAppend(&text, CsvRecord(e), "\n");
+    }
+    std::fputs(text.c_str(), stdout);
+  } else if (format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(*history));
+  } else {
+    PrintTable(*history);
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void RegisterEstimates(CLI::App& app, GlobalOptions& global, int* exit_code) {
+  auto options = std::make_shared<EstimatesOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      kVerb,
+      "stored per-step estimates of a spacecraft: attitude with its 1-sigma, output pair, "
+      "star-tracker innovations per gyro (GetEstimateHistory)");
+  cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id")->required();
+  cmd->add_option("--from", options->from, "first measurement time, RFC 3339 UTC");
+  cmd->add_option("--to", options->to, "last measurement time, RFC 3339 UTC (inclusive)");
+  AddFormatOption(cmd, &options->format);
+  cmd->add_flag("--csv", options->csv,
+                "short form of --format csv: one row per step with every value and 1-sigma");
+  cmd->callback([options, &global, exit_code] { *exit_code = RunEstimates(*options, global); });
+}
+
+}  // namespace esg::client
