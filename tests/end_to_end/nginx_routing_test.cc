@@ -8,7 +8,7 @@
 // status --spacecraft X` through nginx answers from that node; a routed stream carrying another
 // spacecraft's frame gets that frame refused (INVALID_ARGUMENT, spacecraft_id) and keeps its own;
 // one stream longer than nginx's default 1 MB body limit goes through; each node owns at least
-// one spacecraft; after kill -9 of a node, nginx takes it out and its spacecraft's calls reach
+// one spacecraft; ListSessions without metadata lists one node's spacecraft; after kill -9 of a node, nginx takes it out and its spacecraft's calls reach
 // another node, which (today, without a shared database) answers NOT_FOUND, while the other
 // spacecraft are served as before.
 //
@@ -263,6 +263,32 @@ TEST(NginxRouting, EachSpacecraftLivesOnOneNodeAndAKilledNodesSpacecraftAreNotFo
     EXPECT_EQ(accepted, static_cast<int64_t>(own.frames.size()));
     EXPECT_EQ(Owner(nodes, other_id, &accepted), owner[other_id]);
     EXPECT_EQ(accepted, static_cast<int64_t>(other.frames.size()) - kHeldBack);
+  }
+
+  // A call over all spacecraft carries no metadata: nginx sends it to any node (round robin), and
+  // ListSessions through the router lists that one node's spacecraft (docs/service.md).
+  {
+    std::vector<std::set<std::string>> by_node(kNodes);
+    for (const auto& [id, n] : owner) by_node[n].insert(id);
+    std::set<int> answered_by;
+    for (int call = 0; call < 2 * kNodes; ++call) {
+      grpc::ClientContext ctx;
+      esg::v1::ListSessionsResponse response;
+      ASSERT_TRUE(router->ListSessions(&ctx, {}, &response).ok());
+      std::set<std::string> listed;
+      for (const esg::v1::SessionInfo& s : response.sessions()) listed.insert(s.spacecraft_id());
+      int node = -1;
+      for (int n = 0; n < kNodes; ++n) {
+        if (listed == by_node[n]) node = n;
+      }
+      EXPECT_GE(node, 0) << "ListSessions through nginx listed " << listed.size()
+                         << " spacecraft, not one node's";
+      answered_by.insert(node);
+    }
+    EXPECT_GE(answered_by.size(), 2u);
+    std::printf("[ measured ] %d ListSessions through nginx without metadata: each listed one "
+                "node's spacecraft, %zu different nodes answered\n",
+                2 * kNodes, answered_by.size());
   }
 
   // kill -9 of the node that owns the first spacecraft: nginx takes it out, its spacecraft's
