@@ -10,6 +10,7 @@
 #include "grpcpp/create_channel.h"
 #include "grpcpp/security/credentials.h"
 #include "grpcpp/support/channel_arguments.h"
+#include "proto/routing_metadata.h"
 
 namespace esg::client {
 namespace {
@@ -111,11 +112,14 @@ EsgClient::EsgClient(ClientOptions options, std::shared_ptr<grpc::Channel> chann
       channel_(std::move(channel)),
       stub_(esg::v1::EstimationService::NewStub(channel_)) {}
 
-std::unique_ptr<grpc::ClientContext> EsgClient::NewContext(bool unary,
-                                                           const CallOptions& call) const {
+std::unique_ptr<grpc::ClientContext> EsgClient::NewContext(
+    bool unary, const CallOptions& call, const std::string& spacecraft_id) const {
   auto context = std::make_unique<grpc::ClientContext>();
   if (!options_.token.empty()) {
     context->AddMetadata("authorization", absl::StrCat("Bearer ", options_.token));
+  }
+  if (!spacecraft_id.empty()) {
+    context->AddMetadata(proto_convert::kSpacecraftMetadataKey, spacecraft_id);
   }
   if (unary) {
     const absl::Duration timeout =
@@ -129,7 +133,8 @@ std::unique_ptr<grpc::ClientContext> EsgClient::NewContext(bool unary,
 absl::StatusOr<esg::v1::ConfigureResponse> EsgClient::ConfigureSpacecraft(
     const esg::v1::ConfigureRequest& request, const CallOptions& call) {
   return Unary<esg::v1::ConfigureResponse>(
-      NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ConfigureResponse* r) {
+      NewContext(true, call, request.config().spacecraft_id()),
+      [&](grpc::ClientContext* c, esg::v1::ConfigureResponse* r) {
         return stub_->ConfigureSpacecraft(c, request, r);
       });
 }
@@ -138,7 +143,7 @@ absl::StatusOr<esg::v1::SessionInfo> EsgClient::GetSession(const std::string& sp
                                                            const CallOptions& call) {
   esg::v1::GetSessionRequest request;
   request.set_spacecraft_id(spacecraft_id);
-  return Unary<esg::v1::SessionInfo>(NewContext(true, call),
+  return Unary<esg::v1::SessionInfo>(NewContext(true, call, spacecraft_id),
                                      [&](grpc::ClientContext* c, esg::v1::SessionInfo* r) {
                                        return stub_->GetSession(c, request, r);
                                      });
@@ -149,7 +154,8 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EsgClient::ListSessions(const Call
   esg::v1::ListSessionsResponse all;
   do {
     absl::StatusOr<esg::v1::ListSessionsResponse> page = Unary<esg::v1::ListSessionsResponse>(
-        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ListSessionsResponse* r) {
+        NewContext(true, call, /*spacecraft_id=*/""),
+        [&](grpc::ClientContext* c, esg::v1::ListSessionsResponse* r) {
           return stub_->ListSessions(c, request, r);
         });
     if (!page.ok()) return page.status();
@@ -161,7 +167,7 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EsgClient::ListSessions(const Call
 
 absl::StatusOr<esg::v1::PredictResponse> EsgClient::PredictAttitude(
     const esg::v1::PredictRequest& request, const CallOptions& call) {
-  return Unary<esg::v1::PredictResponse>(NewContext(true, call),
+  return Unary<esg::v1::PredictResponse>(NewContext(true, call, request.spacecraft_id()),
                                          [&](grpc::ClientContext* c, esg::v1::PredictResponse* r) {
                                            return stub_->PredictAttitude(c, request, r);
                                          });
@@ -169,7 +175,7 @@ absl::StatusOr<esg::v1::PredictResponse> EsgClient::PredictAttitude(
 
 absl::StatusOr<esg::v1::Alert> EsgClient::AcknowledgeAlert(
     const esg::v1::AcknowledgeRequest& request, const CallOptions& call) {
-  return Unary<esg::v1::Alert>(NewContext(true, call),
+  return Unary<esg::v1::Alert>(NewContext(true, call, request.spacecraft_id()),
                                [&](grpc::ClientContext* c, esg::v1::Alert* r) {
                                  return stub_->AcknowledgeAlert(c, request, r);
                                });
@@ -179,7 +185,8 @@ absl::StatusOr<esg::v1::HistoryResponse> EsgClient::GetCoefficientHistory(
     const esg::v1::HistoryRequest& request, const CallOptions& call) {
   auto one_page = [&](const esg::v1::HistoryRequest& page_request) {
     return Unary<esg::v1::HistoryResponse>(
-        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::HistoryResponse* r) {
+        NewContext(true, call, page_request.spacecraft_id()),
+        [&](grpc::ClientContext* c, esg::v1::HistoryResponse* r) {
           return stub_->GetCoefficientHistory(c, page_request, r);
         });
   };
@@ -229,7 +236,8 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EsgClient::ListDiagnoses(
     const esg::v1::ListDiagnosesRequest& request, const CallOptions& call) {
   auto one_page = [&](const esg::v1::ListDiagnosesRequest& page_request) {
     return Unary<esg::v1::ListDiagnosesResponse>(
-        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::ListDiagnosesResponse* r) {
+        NewContext(true, call, page_request.spacecraft_id()),
+        [&](grpc::ClientContext* c, esg::v1::ListDiagnosesResponse* r) {
           return stub_->ListDiagnoses(c, page_request, r);
         });
   };
@@ -257,27 +265,28 @@ absl::StatusOr<esg::v1::DiagnosisResult> EsgClient::GetDiagnosis(const std::stri
   esg::v1::GetDiagnosisRequest request;
   request.set_spacecraft_id(spacecraft_id);
   request.set_id(id);
-  return Unary<esg::v1::DiagnosisResult>(NewContext(true, call),
+  return Unary<esg::v1::DiagnosisResult>(NewContext(true, call, spacecraft_id),
                                          [&](grpc::ClientContext* c, esg::v1::DiagnosisResult* r) {
                                            return stub_->GetDiagnosis(c, request, r);
                                          });
 }
 
-std::unique_ptr<TelemetryStream> EsgClient::StreamTelemetry() {
-  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+std::unique_ptr<TelemetryStream> EsgClient::StreamTelemetry(const std::string& spacecraft_id) {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, spacecraft_id);
   auto stream = stub_->StreamTelemetry(context.get());
   return std::make_unique<TelemetryStream>(std::move(context), std::move(stream));
 }
 
 std::unique_ptr<AlertStream> EsgClient::SubscribeAlerts(const esg::v1::AlertSubscription& request) {
-  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  // Every spacecraft (an empty id): no routing metadata, the router picks a node.
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, request.spacecraft_id());
   auto reader = stub_->SubscribeAlerts(context.get(), request);
   return std::make_unique<AlertStream>(std::move(context), std::move(reader));
 }
 
 std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> EsgClient::Diagnose(
     const esg::v1::DiagnoseRequest& request) {
-  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, request.spacecraft_id());
   auto reader = stub_->Diagnose(context.get(), request);
   return std::make_unique<ReaderStream<esg::v1::DiagnoseUpdate>>(std::move(context),
                                                                  std::move(reader));
@@ -285,7 +294,7 @@ std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> EsgClient::Diagnose(
 
 std::unique_ptr<ReaderStream<esg::v1::ExportCoefficientHistoryResponse>>
 EsgClient::ExportCoefficientHistory(const esg::v1::ExportCoefficientHistoryRequest& request) {
-  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, request.spacecraft_id());
   auto reader = stub_->ExportCoefficientHistory(context.get(), request);
   return std::make_unique<ReaderStream<esg::v1::ExportCoefficientHistoryResponse>>(
       std::move(context), std::move(reader));
@@ -293,7 +302,7 @@ EsgClient::ExportCoefficientHistory(const esg::v1::ExportCoefficientHistoryReque
 
 std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> EsgClient::ExportTelemetry(
     const esg::v1::ExportTelemetryRequest& request) {
-  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {});
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, request.spacecraft_id());
   auto reader = stub_->ExportTelemetry(context.get(), request);
   return std::make_unique<ReaderStream<esg::v1::ExportTelemetryResponse>>(std::move(context),
                                                                           std::move(reader));

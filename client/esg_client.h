@@ -6,6 +6,12 @@
 // deadline for unary calls, and a short reconnect backoff so that a client waiting for a restarted
 // server sees it come back within a second or two.
 //
+// Routing: every call about one spacecraft carries the metadata `x-esg-spacecraft: <id>`
+// (proto/routing_metadata.h), taken from the request's spacecraft id, so that a router (nginx,
+// docs/deploy.md) sends it to the node that owns the spacecraft. Calls about every spacecraft
+// (ListSessions, SubscribeAlerts without a spacecraft) carry none. A telemetry stream is opened
+// for one spacecraft and carries its frames only (docs/service.md "Routing by spacecraft").
+//
 // Error contract: every failed call returns the gRPC status converted code for code to
 // absl::Status (the numeric values are identical, STYLE §3.3) with the server's message; a server
 // that cannot be reached gives Unavailable.
@@ -155,8 +161,9 @@ class EsgClient {
   absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(const std::string& spacecraft_id,
                                                         int64_t id, const CallOptions& call = {});
 
-  // Opens a telemetry stream (no deadline). Errors show up in TelemetryStream::Finish.
-  std::unique_ptr<TelemetryStream> StreamTelemetry();
+  // Opens a telemetry stream (no deadline) for the frames of `spacecraft_id`: routed by it, and
+  // esgd refuses a frame of another spacecraft on it. Errors show up in TelemetryStream::Finish.
+  std::unique_ptr<TelemetryStream> StreamTelemetry(const std::string& spacecraft_id);
   // Opens an alert subscription (no deadline). Errors show up in AlertStream::Finish.
   std::unique_ptr<AlertStream> SubscribeAlerts(const esg::v1::AlertSubscription& request);
   // Server streams without a deadline (a diagnosis runs for minutes, an export is as long as
@@ -170,8 +177,10 @@ class EsgClient {
 
  private:
   EsgClient(ClientOptions options, std::shared_ptr<grpc::Channel> channel);
-  // A context with the bearer token and, for unary calls, the deadline.
-  std::unique_ptr<grpc::ClientContext> NewContext(bool unary, const CallOptions& call) const;
+  // A context with the bearer token, the routing metadata of `spacecraft_id` (none when empty)
+  // and, for unary calls, the deadline.
+  std::unique_ptr<grpc::ClientContext> NewContext(bool unary, const CallOptions& call,
+                                                  const std::string& spacecraft_id) const;
 
   ClientOptions options_;
   std::shared_ptr<grpc::Channel> channel_;

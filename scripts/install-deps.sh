@@ -10,6 +10,7 @@ packages=(
   libcli11-dev nlohmann-json3-dev libfmt-dev libcpp-httplib-dev
   libssl-dev openssl gnuplot-nox
   chromium fonts-liberation
+  nginx
 )
 # The console's npm packages (console/package-lock.json, from the npm registry; Node 20 is on the
 # machine): installed again only when the lock file changed since the last install.

@@ -57,6 +57,7 @@
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "esg/v1/estimation_service.pb.h"
@@ -151,8 +152,12 @@ class EstimationCore {
   // durable frame); `on_durable` is not called. A non-OK result fails the stream without an ack
   // for this frame: Unavailable while storage cannot commit or the server stops,
   // ResourceExhausted when the commit backlog is full.
+  // `scope`: the spacecraft the stream is routed by (its x-esg-spacecraft metadata,
+  // server/spacecraft_scope.h), empty when it carries none; a frame of another spacecraft is
+  // refused like any invalid frame (INVALID_ARGUMENT, field spacecraft_id) and the stream goes on.
   absl::StatusOr<bool> Ingest(const esg::v1::TelemetryFrame& frame, esg::v1::TelemetryAck* ack,
-                              std::function<void(absl::Status)> on_durable);
+                              std::function<void(absl::Status)> on_durable,
+                              absl::string_view scope = {});
   void FillDurable(esg::v1::TelemetryAck* ack);
 
   // Storage health: called with false and the reason when a commit fails, with true when a

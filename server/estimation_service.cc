@@ -19,6 +19,7 @@
 #include "server/log.h"
 #include "server/proto_mapping.h"
 #include "server/service_metrics.h"
+#include "server/spacecraft_scope.h"
 
 namespace esg::server {
 namespace {
@@ -57,9 +58,14 @@ constexpr size_t kMaxInFlight = 4096;
 class TelemetryReactor
     : public grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck> {
  public:
+  // `scope`: the spacecraft the stream is routed by (server/spacecraft_scope.h), or empty.
   TelemetryReactor(CallCounter* calls, EstimationCore* core, const absl::Status& auth,
-                   std::string peer)
-      : token_(calls), core_(core), shared_(std::make_shared<Shared>()), peer_(std::move(peer)) {
+                   std::string peer, std::string scope)
+      : token_(calls),
+        core_(core),
+        shared_(std::make_shared<Shared>()),
+        peer_(std::move(peer)),
+        scope_(std::move(scope)) {
     shared_->reactor = this;
     shared_->metrics = &core->metrics();
     if (!auth.ok()) {
@@ -99,7 +105,8 @@ class TelemetryReactor
             slot->failure = std::move(stored);
           }
           TryWrite(*shared);
-        });
+        },
+        scope_);
     absl::MutexLock lock(&shared_->mu);
     if (!wait.ok()) {
       slot->failure = wait.status();
@@ -262,6 +269,7 @@ class TelemetryReactor
   EstimationCore* core_;
   std::shared_ptr<Shared> shared_;
   const std::string peer_;
+  const std::string scope_;
   esg::v1::TelemetryFrame frame_;
 };
 
@@ -900,6 +908,13 @@ absl::Status EstimationServiceImpl::Authorize(grpc::CallbackServerContext* conte
   return auth_->Check(*context, role);
 }
 
+absl::Status EstimationServiceImpl::Authorize(grpc::CallbackServerContext* context, Role role,
+                                              absl::string_view spacecraft_id) const {
+  // The role first: a caller without one learns nothing about the routing.
+  if (absl::Status allowed = Authorize(context, role); !allowed.ok()) return allowed;
+  return CheckCallScope(*context, spacecraft_id);
+}
+
 absl::StatusOr<std::string> EstimationServiceImpl::Caller(grpc::CallbackServerContext* context,
                                                           Role role) const {
   if (auth_ != nullptr) return auth_->Authenticate(*context, role);
@@ -908,26 +923,34 @@ absl::StatusOr<std::string> EstimationServiceImpl::Caller(grpc::CallbackServerCo
 
 grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>*
 EstimationServiceImpl::StreamTelemetry(grpc::CallbackServerContext* context) {
-  return new TelemetryReactor(&calls_, core_, Authorize(context, Role::kWrite), context->peer());
+  // The stream's scope is checked once, at its start; each frame is checked against it by the
+  // ingest contract, so a frame of another spacecraft is refused and the stream goes on.
+  absl::Status admitted = Authorize(context, Role::kWrite);
+  absl::StatusOr<std::string> scope = SpacecraftScope(context->client_metadata());
+  if (admitted.ok() && !scope.ok()) admitted = scope.status();
+  return new TelemetryReactor(&calls_, core_, admitted, context->peer(),
+                              scope.ok() ? *std::move(scope) : std::string());
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ConfigureSpacecraft(
     grpc::CallbackServerContext* context, const esg::v1::ConfigureRequest* request,
     esg::v1::ConfigureResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kWrite), response,
-               [&] { return core_->Configure(*request); });
+  return Unary(&calls_, Authorize(context, Role::kWrite, request->config().spacecraft_id()),
+               response, [&] { return core_->Configure(*request); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetSession(
     grpc::CallbackServerContext* context, const esg::v1::GetSessionRequest* request,
     esg::v1::SessionInfo* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
                [&] { return core_->GetSession(request->spacecraft_id()); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
     grpc::CallbackServerContext* context, const esg::v1::ListSessionsRequest* request,
     esg::v1::ListSessionsResponse* response) {
+  // Names no spacecraft, so it has no routing scope: with x-esg-spacecraft it lists this node's
+  // sessions like without (docs/service.md "Routing by spacecraft").
   return Unary(&calls_, Authorize(context, Role::kRead), response,
                [&] { return core_->ListSessions(*request); });
 }
@@ -942,6 +965,13 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     esg::v1::PredictResponse* response) {
   grpc::ServerUnaryReactor* reactor = new UnaryReactor(&calls_);
   absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
+  if (caller.ok()) {
+    // Before a permit is taken: a misrouted call must not hold a prediction slot.
+    if (absl::Status in_scope = CheckCallScope(*context, request->spacecraft_id());
+        !in_scope.ok()) {
+      caller = in_scope;
+    }
+  }
   if (!caller.ok()) {
     reactor->Finish(ToGrpcStatus(caller.status()));
     return reactor;
@@ -968,7 +998,8 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
 
 grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts(
     grpc::CallbackServerContext* context, const esg::v1::AlertSubscription* request) {
-  return new AlertReactor(&calls_, core_, *request, Authorize(context, Role::kRead));
+  return new AlertReactor(&calls_, core_, *request,
+                          Authorize(context, Role::kRead, request->spacecraft_id()));
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
@@ -980,8 +1011,10 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
       auth_ != nullptr ? auth_->Authenticate(*context, Role::kWrite) : std::string();
   esg::v1::AcknowledgeRequest named = *request;
   if (token_name.ok() && named.operator_name().empty()) named.set_operator_name(*token_name);
+  absl::Status admitted = token_name.status();
+  if (admitted.ok()) admitted = CheckCallScope(*context, request->spacecraft_id());
   return Unary(
-      &calls_, token_name.status(), response,
+      &calls_, admitted, response,
       [this, named = std::move(named)]() -> absl::StatusOr<esg::v1::Alert> {
         absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(named);
         if (!alert.ok()) return alert.status();
@@ -1010,7 +1043,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
     grpc::CallbackServerContext* context, const esg::v1::HistoryRequest* request,
     esg::v1::HistoryResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
                [&] { return core_->History(*request); });
 }
 
@@ -1028,7 +1061,7 @@ EstimationServiceImpl::ExportCoefficientHistory(
   EstimationCore* core = core_;
   bool last_page = false;
   return new ExportReactor<esg::v1::ExportCoefficientHistoryResponse>(
-      &calls_, Authorize(context, Role::kRead),
+      &calls_, Authorize(context, Role::kRead, request->spacecraft_id()),
       [core, pages, last_page]() mutable
       -> absl::StatusOr<std::optional<esg::v1::ExportCoefficientHistoryResponse>> {
         if (last_page) return std::nullopt;
@@ -1049,7 +1082,7 @@ grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* EstimationServiceImp
   absl::Time after = absl::InfinitePast();
   bool done = false;
   return new ExportReactor<esg::v1::ExportTelemetryResponse>(
-      &calls_, Authorize(context, Role::kRead),
+      &calls_, Authorize(context, Role::kRead, request->spacecraft_id()),
       [core, request = *request, after,
        done]() mutable -> absl::StatusOr<std::optional<esg::v1::ExportTelemetryResponse>> {
         if (done) return std::nullopt;
@@ -1076,6 +1109,13 @@ grpc::ServerWriteReactor<esg::v1::EstimateRecord>* EstimationServiceImpl::Subscr
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagnose(
     grpc::CallbackServerContext* context, const esg::v1::DiagnoseRequest* request) {
   absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
+  if (caller.ok()) {
+    // Before a permit is taken: a misrouted call must not hold the caller's diagnosis slot.
+    if (absl::Status in_scope = CheckCallScope(*context, request->spacecraft_id());
+        !in_scope.ok()) {
+      caller = in_scope;
+    }
+  }
   return new DiagnoseReactor(&calls_, core_, *request,
                              caller.ok() ? diagnoses_.Acquire(*caller)
                                          : absl::StatusOr<CallLimiter::Permit>(caller.status()));
@@ -1084,14 +1124,14 @@ grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagno
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(
     grpc::CallbackServerContext* context, const esg::v1::ListDiagnosesRequest* request,
     esg::v1::ListDiagnosesResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
                [&] { return core_->ListDiagnoses(*request); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetDiagnosis(
     grpc::CallbackServerContext* context, const esg::v1::GetDiagnosisRequest* request,
     esg::v1::DiagnosisResult* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
                [&] { return core_->GetDiagnosis(*request); });
 }
 

@@ -18,6 +18,7 @@
 #include "absl/base/thread_annotations.h"
 #include "absl/functional/any_invocable.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "esg/v1/estimation_service.grpc.pb.h"
@@ -123,6 +124,10 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
 
  private:
   absl::Status Authorize(grpc::CallbackServerContext* context, Role role) const;
+  // For a call whose request names `spacecraft_id`: the role, then the call's routing scope
+  // (server/spacecraft_scope.h: its x-esg-spacecraft metadata, when given, must name it).
+  absl::Status Authorize(grpc::CallbackServerContext* context, Role role,
+                         absl::string_view spacecraft_id) const;
   // The caller of the call once its role is checked: the token's name with tokens, else the
   // peer's address without the port (CallerFromPeer). Errors as Authorize.
   absl::StatusOr<std::string> Caller(grpc::CallbackServerContext* context, Role role) const;

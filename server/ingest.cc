@@ -14,6 +14,7 @@
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/log.h"
+#include "server/spacecraft_scope.h"
 
 namespace esg::server {
 namespace {
@@ -66,7 +67,8 @@ absl::StatusOr<std::optional<storage::ArchivedFrame>> EstimationCore::FindStored
 
 absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto,
                                             esg::v1::TelemetryAck* ack,
-                                            std::function<void(absl::Status)> on_durable) {
+                                            std::function<void(absl::Status)> on_durable,
+                                            absl::string_view scope) {
   const std::string station =
       proto.station_id().empty() ? std::string(storage::kDefaultStation) : proto.station_id();
   // Echo the identity, shortened when it is not a valid identifier (the ack must stay small).
@@ -100,6 +102,12 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   }
   if (absl::Status id = estimator::ValidateIdentifier(station, "station_id"); !id.ok()) {
     return refuse_status(id);
+  }
+  // A stream routed by one spacecraft reached that spacecraft's node: another spacecraft's frame
+  // does not belong here (docs/service.md "Routing by spacecraft"). Refused before anything is
+  // looked up, so it counts against no session.
+  if (absl::Status routed = CheckInScope(scope, proto.spacecraft_id()); !routed.ok()) {
+    return refuse_status(routed);
   }
   const int64_t frame_bytes = static_cast<int64_t>(proto.ByteSizeLong());
   if (frame_bytes > options_.max_frame_bytes) {

@@ -142,7 +142,8 @@ class Replayer {
       return sequences != nullptr ? (*sequences)[i] : first + i;
     };
     int64_t acks = 0;
-    std::unique_ptr<TelemetryStream> stream = client_->StreamTelemetry();
+    // One stream per spacecraft, routed by it (docs/service.md "Routing by spacecraft").
+    std::unique_ptr<TelemetryStream> stream = client_->StreamTelemetry(id_);
     std::mutex mu;
     std::condition_variable cv;
     int64_t in_flight = 0;

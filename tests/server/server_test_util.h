@@ -106,16 +106,19 @@ class LoopbackServer {
 };
 
 // Sends `frames` on one StreamTelemetry call while a second thread reads the acks; returns the
-// acks and the final status. `token`: bearer token metadata when non-empty.
+// acks and the final status. `token`: bearer token metadata when non-empty. `routed_by`: the
+// x-esg-spacecraft routing metadata when non-empty (docs/service.md "Routing by spacecraft").
 struct StreamResult {
   std::vector<esg::v1::TelemetryAck> acks;
   grpc::Status status;
 };
 inline StreamResult StreamFrames(esg::v1::EstimationService::Stub& stub,
                                  const std::vector<esg::v1::TelemetryFrame>& frames,
-                                 const std::string& token = "") {
+                                 const std::string& token = "",
+                                 const std::string& routed_by = "") {
   grpc::ClientContext context;
   if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
+  if (!routed_by.empty()) context.AddMetadata("x-esg-spacecraft", routed_by);
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
   auto stream = stub.StreamTelemetry(&context);
   StreamResult result;

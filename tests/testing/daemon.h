@@ -1,5 +1,5 @@
-// The real esgd as a child process (ESGD_PATH names the binary): started on 127.0.0.1:0 over a
-// database file, its port read from its "esgd listening on port N" line, stopped with a signal
+// The real esgd as a child process (ESGD_PATH names the binary): started on 127.0.0.1:0 (or the
+// `listen` address given) over a database file, its port read from its "esgd listening on port N" line, stopped with a signal
 // (SIGTERM for a graceful stop, SIGKILL for a crash). With `--metrics-listen` among the extra
 // arguments, the metrics port is read from the "esgd metrics on port N" line written with it.
 #ifndef ESG_TESTS_TESTING_DAEMON_H_
@@ -36,9 +36,10 @@ struct DaemonLimits {
 class Daemon {
  public:
   Daemon(const std::string& db, const std::string& log, DaemonLimits limits = {},
-         const std::vector<std::string>& extra_args = {}) {
-    std::vector<std::string> args = {"esgd", "--listen", "127.0.0.1:0", "--db", db,
-                                     "--workers", "2"};
+         const std::vector<std::string>& extra_args = {},
+         const std::string& listen = "127.0.0.1:0")
+      : host_(listen.substr(0, listen.rfind(':'))) {
+    std::vector<std::string> args = {"esgd", "--listen", listen, "--db", db, "--workers", "2"};
     bool metrics = false;
     for (const std::string& a : extra_args) {
       args.push_back(a);
@@ -97,13 +98,14 @@ class Daemon {
   }
   std::unique_ptr<esg::v1::EstimationService::Stub> Stub() const {
     return esg::v1::EstimationService::NewStub(grpc::CreateChannel(
-        "127.0.0.1:" + std::to_string(port_), grpc::InsecureChannelCredentials()));
+        address(), grpc::InsecureChannelCredentials()));
   }
   int port() const { return port_; }
   int metrics_port() const { return metrics_port_; }
-  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  std::string address() const { return host_ + ":" + std::to_string(port_); }
 
  private:
+  std::string host_;
   pid_t pid_ = -1;
   int port_ = 0;
   int metrics_port_ = 0;
