@@ -58,7 +58,8 @@ class EstimateStore {
                                     int64_t limit);
 
   // Number of the spacecraft's estimates with from <= measurement_time < to.
-  absl::StatusOr<int64_t> Count(absl::string_view spacecraft_id, absl::Time from = absl::InfinitePast(),
+  absl::StatusOr<int64_t> Count(absl::string_view spacecraft_id,
+                                absl::Time from = absl::InfinitePast(),
                                 absl::Time to = absl::InfiniteFuture());
 
  private:
