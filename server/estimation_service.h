@@ -9,7 +9,6 @@
 #ifndef ESG_SERVER_ESTIMATION_SERVICE_H_
 #define ESG_SERVER_ESTIMATION_SERVICE_H_
 
-#include <cstdint>
 #include <deque>
 #include <string>
 #include <thread>
@@ -20,9 +19,9 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
-#include "absl/time/time.h"
 #include "esg/v1/estimation_service.grpc.pb.h"
 #include "server/auth.h"
+#include "server/call_counter.h"
 #include "server/call_limiter.h"
 #include "server/estimation_core.h"
 
@@ -35,33 +34,6 @@ struct CallLimits {
   int max_predictions = 8;  // also the number of prediction threads
   int max_diagnoses_per_caller = 1;
   int max_diagnoses = 2;
-};
-
-// The calls of the service that have not finished (their reactor's OnDone not yet run), so
-// that a shutdown knows when only idle connections and gRPC's own streams (health watches,
-// reflection) are left (EsgServer::Shutdown). Thread-safe.
-class CallCounter {
- public:
-  // Held by each call's reactor for its whole life.
-  class Token {
-   public:
-    explicit Token(CallCounter* counter) : counter_(counter) { counter_->Enter(); }
-    ~Token() { counter_->Leave(); }
-    Token(const Token&) = delete;
-    Token& operator=(const Token&) = delete;
-
-   private:
-    CallCounter* counter_;
-  };
-  int64_t running();
-  // Blocks until no call runs (true) or until `deadline` (false).
-  bool WaitIdle(absl::Time deadline);
-
- private:
-  void Enter();
-  void Leave();
-  absl::Mutex mu_;
-  int64_t running_ ABSL_GUARDED_BY(mu_) = 0;
 };
 
 class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackService {

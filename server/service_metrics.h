@@ -1,5 +1,5 @@
 // The metrics esgd exposes on `--metrics-listen` (docs/service.md "Metrics" documents each: name,
-// type, labels, unit). One instance per EstimationCore; the ingest path (estimation_service.cc),
+// type, labels, unit). One instance per EstimationCore; the ingest path (telemetry_reactor.cc),
 // the committer, the apply workers and the diagnosis update it; the sessions, storage and
 // backlog gauges are read from the core at each scrape (EstimationCore::Start adds the collector).
 #ifndef ESG_SERVER_SERVICE_METRICS_H_

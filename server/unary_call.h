@@ -1,0 +1,43 @@
+// Unary calls of the esg.v1.EstimationService: the reactor that counts the call, and Unary, which
+// runs the call's work on the callback thread once the caller is authorized.
+#ifndef ESG_SERVER_UNARY_CALL_H_
+#define ESG_SERVER_UNARY_CALL_H_
+
+#include <utility>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "grpcpp/support/server_callback.h"
+#include "server/call_counter.h"
+#include "server/grpc_status.h"
+
+namespace esg::server {
+
+// The reactor of a unary call: counted until gRPC is done with the call (its response sent).
+class UnaryReactor : public grpc::ServerUnaryReactor {
+ public:
+  explicit UnaryReactor(CallCounter* calls) : token_(calls) {}
+  void OnDone() override { delete this; }
+
+ private:
+  CallCounter::Token token_;
+};
+
+// Unary rpcs: run `work` (returning absl::StatusOr<Response>) and finish.
+template <typename Response, typename Work>
+grpc::ServerUnaryReactor* Unary(CallCounter* calls, absl::Status auth, Response* response,
+                                Work work) {
+  grpc::ServerUnaryReactor* reactor = new UnaryReactor(calls);
+  if (!auth.ok()) {
+    reactor->Finish(ToGrpcStatus(auth));
+    return reactor;
+  }
+  absl::StatusOr<Response> result = work();
+  if (result.ok()) *response = std::move(*result);
+  reactor->Finish(ToGrpcStatus(result.status()));
+  return reactor;
+}
+
+}  // namespace esg::server
+
+#endif  // ESG_SERVER_UNARY_CALL_H_
