@@ -209,7 +209,8 @@ absl::StatusOr<esg::v1::EstimateHistoryResponse> EsgClient::GetEstimateHistory(
     const esg::v1::EstimateHistoryRequest& request, const CallOptions& call) {
   auto one_page = [&](const esg::v1::EstimateHistoryRequest& page_request) {
     return Unary<esg::v1::EstimateHistoryResponse>(
-        NewContext(true, call), [&](grpc::ClientContext* c, esg::v1::EstimateHistoryResponse* r) {
+        NewContext(true, call, page_request.spacecraft_id()),
+        [&](grpc::ClientContext* c, esg::v1::EstimateHistoryResponse* r) {
           return stub_->GetEstimateHistory(c, page_request, r);
         });
   };

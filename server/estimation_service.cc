@@ -266,13 +266,14 @@ grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* EstimationServiceImp
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetEstimateHistory(
     grpc::CallbackServerContext* context, const esg::v1::EstimateHistoryRequest* request,
     esg::v1::EstimateHistoryResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
                [&] { return core_->EstimateHistory(*request); });
 }
 
 grpc::ServerWriteReactor<esg::v1::EstimateRecord>* EstimationServiceImpl::SubscribeEstimates(
     grpc::CallbackServerContext* context, const esg::v1::EstimateSubscription* request) {
-  return NewEstimateReactor(&calls_, core_, *request, Authorize(context, Role::kRead));
+  return NewEstimateReactor(&calls_, core_, *request,
+                            Authorize(context, Role::kRead, request->spacecraft_id()));
 }
 
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagnose(
