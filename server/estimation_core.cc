@@ -363,6 +363,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   // A quarantine that the reconfiguration ends: its alert is cleared as the apply worker clears
   // one (AlertCollapser::End: cleared_time stored, then published and logged once committed).
   std::optional<AlertCollapser> quarantine_end;
+  std::vector<int64_t> revised_alerts;  // the old session's, revised by the new one
   bool new_session = false;  // replaces a session: its window checkpoints and late frames go
   std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
   auto write = [&]() -> absl::Status {
@@ -371,6 +372,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
     change.config = record;
     change.checkpoint = cp;
     change.new_session = new_session;
+    change.revised_alerts = revised_alerts;
     if (quarantine_end.has_value()) {
       change.new_alerts = quarantine_end->new_alerts();
       for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
@@ -430,8 +432,8 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
                            FormatUtc(sc->last_accepted_time),
                            "); set replace=true to recreate its session and reapply the archive"));
         }
-        // The new session replays the whole archive; the earlier history and alerts are kept,
-        // and the replay stores its own (a different model gives a different history).
+        // The new session replays the whole archive and stores its own history and alerts (a
+        // different model gives a different history); the earlier ones are kept, revised.
         if (quarantined) {
           // The quarantine ends at the reconfiguration: in telemetry time, at the latest archived
           // frame (every frame up to it was under the quarantine), or at the alert's own latest
@@ -452,6 +454,9 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
           for (const AlertOccurrence& o : raised) quarantine_end->Add(o);
           quarantine_end->End(kQuarantineAlertReason, "session", end);
         }
+        // The old session's snapshots and filter alerts are superseded by the new session's
+        // (revised, kept for audit); the job lock keeps the worker from adding any meanwhile.
+        ASSIGN_OR_RETURN(revised_alerts, FilterAlertsAfter(sc->id, absl::InfinitePast()));
         new_session = true;
         RETURN_IF_ERROR(store());
         sc->late_frames.clear();
@@ -475,6 +480,11 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
     // under publish_mu, with the job lock held (not the state locks) so no job of the new session
     // publishes first.
     absl::MutexLock publish(&sc->publish_mu);
+    // Subscribers receive the superseded alerts again with revised_time set.
+    for (int64_t seq : revised_alerts) {
+      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
+      if (r.ok()) hub_.Publish(*r);
+    }
     // ended_sequences: the alerts stored new by this transaction first, then the cleared ones.
     const size_t raised = quarantine_end.has_value() ? quarantine_end->new_alerts().size() : 0;
     for (size_t k = 0; k < ended_sequences.size(); ++k) {

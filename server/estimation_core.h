@@ -282,6 +282,10 @@ class EstimationCore {
                                    absl::Time late_time,
                                    std::optional<estimator::EstimationSession>* session,
                                    ServerCheckpoint* apply);
+  // Current alerts the filter raised (not the ingest or the service) first raised after
+  // `after`: what a re-run from `after`, or a new session, supersedes (reorder.cc).
+  absl::StatusOr<std::vector<int64_t>> FilterAlertsAfter(const std::string& spacecraft_id,
+                                                         absl::Time after);
   esg::v1::SessionInfo Summarize(Spacecraft& sc);
 
   storage::Storage* const storage_;

@@ -29,6 +29,18 @@ std::string EncodeWindowCheckpoint(const ServerCheckpoint& apply,
   return EncodeCheckpoint(c);
 }
 
+absl::StatusOr<std::vector<int64_t>> EstimationCore::FilterAlertsAfter(
+    const std::string& spacecraft_id, absl::Time after) {
+  ASSIGN_OR_RETURN(std::vector<int64_t> current,
+                   storage_->reorder().CurrentAlertsAfter(spacecraft_id, after));
+  std::vector<int64_t> out;
+  for (int64_t sequence : current) {
+    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(spacecraft_id, sequence);
+    if (r.ok() && !RaisedOutsideTheFilter(r->reason)) out.push_back(sequence);
+  }
+  return out;
+}
+
 absl::StatusOr<EstimationCore::Rerun> EstimationCore::StartRerun(
     const std::string& spacecraft_id, const Setup& setup, absl::Time late_time,
     std::optional<estimator::EstimationSession>* session, ServerCheckpoint* apply) {
@@ -84,12 +96,7 @@ absl::StatusOr<EstimationCore::Rerun> EstimationCore::StartRerun(
     if (RaisedOutsideTheFilter(t.reason)) tracks.push_back(t);
   }
   restored.alert_tracks = std::move(tracks);
-  ASSIGN_OR_RETURN(std::vector<int64_t> revised,
-                   storage_->reorder().CurrentAlertsAfter(spacecraft_id, rerun.after));
-  for (int64_t sequence : revised) {
-    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(spacecraft_id, sequence);
-    if (r.ok() && !RaisedOutsideTheFilter(r->reason)) rerun.revised_alerts.push_back(sequence);
-  }
+  ASSIGN_OR_RETURN(rerun.revised_alerts, FilterAlertsAfter(spacecraft_id, rerun.after));
   *session = std::move(restored_session);
   *apply = std::move(restored);
   return rerun;

@@ -162,6 +162,10 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
     RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(txn, id, absl::InfinitePast()));
     RETURN_IF_ERROR(reorder_.DropLateFrames(txn, id));
     RETURN_IF_ERROR(estimates_.DeleteAfter(txn, id, absl::InfinitePast()).status());
+    RETURN_IF_ERROR(reorder_
+                        .Revise(txn, id, absl::InfinitePast(), change.checkpoint.compute_time,
+                                change.revised_alerts, {})
+                        .status());
   }
   std::vector<int64_t> sequences;
   for (size_t i = 0; i < change.new_alerts.size(); ++i) {

@@ -91,8 +91,10 @@ struct ConfigurationChange {
   std::vector<AlertClear> clears;       // e.g. the quarantine alert the configuration ends
   // The new session replaces the old: its window checkpoints, late frames and per-step
   // estimates are dropped (the new session applies the whole archive in time order and writes
-  // its own estimates).
+  // its own estimates); its coefficient snapshots and the alerts `revised_alerts` are marked
+  // revised at the checkpoint's compute_time (kept for audit, superseded by the new session's).
   bool new_session = false;
+  std::vector<int64_t> revised_alerts;
 };
 
 // Thread-safe: any number of threads may call any method (serialized per Storage through its

@@ -6,6 +6,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 
 namespace esg::server {
@@ -235,12 +236,14 @@ TEST(IngestContract, ReconfigurationReappliesTheArchiveUnderTheNewModel) {
   TempDir dir;
   const std::string db = dir.File("esg.db");
   const SimulatedRun& run = Run2h();
+  absl::Time reconfigured;
   {
     LoopbackServer server({}, db);
     auto stub = server.Stub();
     Configure(*stub, run.config, "10+11");
     ASSERT_EQ(StreamFrames(*stub, run.frames).acks.size(), run.frames.size());
     ASSERT_TRUE(server.core().WaitApplied(run.config.spacecraft_id, absl::Seconds(60)).ok());
+    reconfigured = absl::Now();
     auto changed = ConfigureRequestFor(run.config, "1+11");
     changed.set_replace(true);
     grpc::ClientContext ctx;
@@ -252,6 +255,44 @@ TEST(IngestContract, ReconfigurationReappliesTheArchiveUnderTheNewModel) {
   const std::vector<double> stored = StoredSessionValues(db, run.config.spacecraft_id);
   EXPECT_EQ(stored, OfflineSessionValues(run.config, "1+11", run.frames));
   EXPECT_NE(stored, OfflineSessionValues(run.config, "10+11", run.frames));
+
+  // The current coefficient history is the new session's alone (one snapshot per step and gyro,
+  // model 1); the old session's is kept, every snapshot of it revised, and only those.
+  auto storage = storage::Storage::Open(db);
+  ASSERT_TRUE(storage.ok()) << storage.status();
+  const std::string& id = run.config.spacecraft_id;
+  auto current =
+      (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture());
+  auto all = (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture(),
+                                                /*include_revised=*/true);
+  ASSERT_TRUE(current.ok() && all.ok());
+  const size_t steps =
+      ::esg::testing::OfflineCoefficientHistory(run.config, "1+11", run.frames).size();
+  ASSERT_GT(steps, 0u);
+  EXPECT_EQ(current->size(), steps);
+  EXPECT_EQ(all->size(), 2 * steps);  // the same steps under both models
+  size_t revised = 0;
+  for (const auto& r : *all) {
+    if (r.revised_time == absl::InfinitePast()) {
+      EXPECT_EQ(r.model_name, "model1+11");
+    } else {
+      ++revised;
+      EXPECT_EQ(r.model_name, "model10+11");
+    }
+  }
+  EXPECT_EQ(revised, steps);
+  // No alert the old session's filter raised is current any more: a current one was raised by
+  // the new session, a revised one was raised before and revised by the reconfiguration.
+  auto alerts = (*storage)->alerts().Since(id, absl::InfinitePast(), 10000, true);
+  ASSERT_TRUE(alerts.ok());
+  for (const auto& a : *alerts) {
+    if (a.revised_time == absl::InfinitePast()) {
+      EXPECT_GE(a.compute_time, reconfigured) << a.sequence << " " << a.reason;
+    } else {
+      EXPECT_LT(a.compute_time, reconfigured) << a.sequence << " " << a.reason;
+      EXPECT_GE(a.revised_time, reconfigured) << a.sequence << " " << a.reason;
+    }
+  }
 }
 
 }  // namespace
