@@ -19,6 +19,7 @@
 #include "esg/v1/estimation_service.pb.h"
 #include "google/protobuf/timestamp.pb.h"
 #include "nlohmann/json.hpp"
+#include "proto/convert.h"
 
 namespace esg::client {
 
@@ -41,6 +42,25 @@ int ReportBadArgument(const char* verb, const std::string& message);
 // Times are printed with FormatUtc of output_format.h (RFC 3339 UTC, `Z`, milliseconds).
 // RFC 3339 ("2019-03-01T00:00:00Z", "...+03:00", fractional seconds allowed); nullopt otherwise.
 std::optional<absl::Time> ParseUtc(const std::string& text);
+
+// Sets request->from and request->to from the --from and --to option values (an empty value
+// leaves that bound unset). Returns kExitOk, or ReportBadArgument's code naming the option whose
+// value is not an RFC 3339 time (the request is then not to be sent).
+template <typename Request>
+int SetTimeSpan(const char* verb, const std::string& from, const std::string& to,
+                Request* request) {
+  if (!from.empty()) {
+    const std::optional<absl::Time> t = ParseUtc(from);
+    if (!t) return ReportBadArgument(verb, "--from '" + from + "': not an RFC 3339 time");
+    *request->mutable_from() = proto_convert::TimeToProto(*t);
+  }
+  if (!to.empty()) {
+    const std::optional<absl::Time> t = ParseUtc(to);
+    if (!t) return ReportBadArgument(verb, "--to '" + to + "': not an RFC 3339 time");
+    *request->mutable_to() = proto_convert::TimeToProto(*t);
+  }
+  return kExitOk;
+}
 
 // Enum names without the type prefix: "CALIBRATING", "DISTRESS", "STAR_TRACKER_FAULT".
 std::string StateName(esg::v1::SessionState state);

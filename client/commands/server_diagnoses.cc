@@ -190,16 +190,7 @@ int RunServerDiagnose(const ServerDiagnoseOptions& o, const GlobalOptions& globa
   esg::v1::DiagnoseRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_model(o.model);
-  if (!o.from.empty()) {
-    const std::optional<absl::Time> from = ParseUtc(o.from);
-    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
-    *request.mutable_from() = proto_convert::TimeToProto(*from);
-  }
-  if (!o.to.empty()) {
-    const std::optional<absl::Time> to = ParseUtc(o.to);
-    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
-    *request.mutable_to() = proto_convert::TimeToProto(*to);
-  }
+  if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> reader = client->Diagnose(request);

@@ -148,16 +148,7 @@ int RunEstimates(const EstimatesOptions& o, const GlobalOptions& global) {
   const OutputFormat format = o.csv ? OutputFormat::kCsv : o.format;
   esg::v1::EstimateHistoryRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
-  if (!o.from.empty()) {
-    const std::optional<absl::Time> from = ParseUtc(o.from);
-    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
-    *request.mutable_from() = proto_convert::TimeToProto(*from);
-  }
-  if (!o.to.empty()) {
-    const std::optional<absl::Time> to = ParseUtc(o.to);
-    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
-    *request.mutable_to() = proto_convert::TimeToProto(*to);
-  }
+  if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   absl::StatusOr<esg::v1::EstimateHistoryResponse> history = client->GetEstimateHistory(request);

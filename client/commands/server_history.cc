@@ -162,16 +162,7 @@ int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_gyro_id(o.gyro_id);
   request.set_include_revised(o.include_revised);
-  if (!o.from.empty()) {
-    const std::optional<absl::Time> from = ParseUtc(o.from);
-    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
-    *request.mutable_from() = proto_convert::TimeToProto(*from);
-  }
-  if (!o.to.empty()) {
-    const std::optional<absl::Time> to = ParseUtc(o.to);
-    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
-    *request.mutable_to() = proto_convert::TimeToProto(*to);
-  }
+  if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   absl::StatusOr<esg::v1::HistoryResponse> history = client->GetCoefficientHistory(request);
@@ -206,18 +197,7 @@ int RunExportHistory(const ExportHistoryOptions& o, const GlobalOptions& global)
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_gyro_id(o.gyro_id);
   request.set_include_revised(o.include_revised);
-  if (!o.from.empty()) {
-    const std::optional<absl::Time> from = ParseUtc(o.from);
-    if (!from) {
-      return ReportBadArgument(kExportVerb, "--from '" + o.from + "': not an RFC 3339 time");
-    }
-    *request.mutable_from() = proto_convert::TimeToProto(*from);
-  }
-  if (!o.to.empty()) {
-    const std::optional<absl::Time> to = ParseUtc(o.to);
-    if (!to) return ReportBadArgument(kExportVerb, "--to '" + o.to + "': not an RFC 3339 time");
-    *request.mutable_to() = proto_convert::TimeToProto(*to);
-  }
+  if (int code = SetTimeSpan(kExportVerb, o.from, o.to, &request); code != kExitOk) return code;
   std::unique_ptr<EsgClient> client = Connect(kExportVerb, global);
   if (client == nullptr) return kExitBadArguments;
   std::unique_ptr<OutputFile> out = OutputFile::Open(kExportVerb, o.out);
