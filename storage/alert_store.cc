@@ -24,11 +24,11 @@ constexpr char kSelectOne[] = "SELECT " ESG_ALERT_READ_COLUMNS
 constexpr char kSinceOne[] = "SELECT " ESG_ALERT_READ_COLUMNS
                              " FROM alerts WHERE spacecraft_id = ?1 AND "
                              "measurement_time_unix_ns >= ?2 "
-                             "AND (?9 OR revised_time_unix_ns IS NULL) "
+                             "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
                              "ORDER BY measurement_time_unix_ns, sequence LIMIT ?3";
 constexpr char kSinceAll[] = "SELECT " ESG_ALERT_READ_COLUMNS
                              " FROM alerts WHERE measurement_time_unix_ns >= ?1 "
-                             "AND (?9 OR revised_time_unix_ns IS NULL) "
+                             "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
                              "ORDER BY measurement_time_unix_ns, spacecraft_id, sequence LIMIT ?2";
 constexpr char kInsert[] = "INSERT INTO alerts (" ESG_ALERT_COLUMNS
                            ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, "

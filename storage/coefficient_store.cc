@@ -43,12 +43,12 @@ const std::string& HistorySql(bool one_gyro) {
       "SELECT ", AllColumns(),
       ", revised_time_unix_ns FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
-      "AND (?9 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
+      "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
   static const std::string* const one = new std::string(absl::StrCat(
       "SELECT ", AllColumns(),
       ", revised_time_unix_ns FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 AND gyro_id = ?4 "
-      "AND (?9 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
+      "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
   return one_gyro ? *one : *all;
 }
 
@@ -60,14 +60,14 @@ const std::string& HistoryPageSql(bool one_gyro) {
       ", revised_time_unix_ns, id FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) "
-      "AND (?9 OR revised_time_unix_ns IS NULL) "
+      "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
       "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
   static const std::string* const one = new std::string(absl::StrCat(
       "SELECT ", AllColumns(),
       ", revised_time_unix_ns, id FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) AND gyro_id = ?8 "
-      "AND (?9 OR revised_time_unix_ns IS NULL) "
+      "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
       "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
   return one_gyro ? *one : *all;
 }

@@ -17,7 +17,7 @@
 #include "absl/types/span.h"
 #include "estimator/drift_model.h"
 #include "storage/records.h"
-#include "storage/sqlite_db.h"
+#include "storage/database.h"
 
 namespace esg::storage {
 

@@ -61,7 +61,7 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
       Statement * st,
       txn.Prepare("INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, "
                   "to_time_unix_ns, compute_time_unix_ns, verdict, report_json, frames) "
-                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)"));
+                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7) RETURNING id"));
   st->BindText(1, record.spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(record.from_time))
       .BindInt64(3, TimeToUnixNanos(record.to_time))
@@ -69,8 +69,11 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
       .BindText(5, record.verdict)
       .BindText(6, record.report_json)
       .BindInt64(7, record.frames);
-  RETURN_IF_ERROR(st->Run());
-  return txn.LastInsertRowId();
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  if (!row) return absl::InternalError("INSERT INTO diagnoses returned no id");
+  const int64_t id = st->ColumnInt64(0);
+  st->Reset();
+  return id;
 }
 
 absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::List(absl::string_view spacecraft_id) {

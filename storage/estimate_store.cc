@@ -6,6 +6,7 @@
 #include <string>
 #include <utility>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
@@ -55,8 +56,17 @@ const std::string& InsertSql() {
   static const std::string* const sql = [] {
     std::string params;
     for (int i = 1; i <= kNumColumns; ++i) absl::StrAppend(&params, i == 1 ? "" : ", ", "?", i);
-    return new std::string(
-        absl::StrCat("INSERT OR REPLACE INTO estimates (", kColumns, ") VALUES (", params, ")"));
+    // Every column but the key (spacecraft_id, measurement_time_unix_ns) is replaced.
+    std::string updates;
+    for (absl::string_view column : absl::StrSplit(kColumns, ',', absl::SkipWhitespace())) {
+      column = absl::StripAsciiWhitespace(column);
+      if (column == "spacecraft_id" || column == "measurement_time_unix_ns") continue;
+      absl::StrAppend(&updates, updates.empty() ? "" : ", ", column, " = excluded.", column);
+    }
+    return new std::string(absl::StrCat("INSERT INTO estimates (", kColumns, ") VALUES (", params,
+                                        ") ON CONFLICT (spacecraft_id, measurement_time_unix_ns) "
+                                        "DO UPDATE SET ",
+                                        updates));
   }();
   return *sql;
 }

@@ -15,7 +15,7 @@
 #include "absl/strings/string_view.h"
 #include "absl/time/time.h"
 #include "storage/records.h"
-#include "storage/sqlite_db.h"
+#include "storage/database.h"
 
 namespace esg::storage {
 

@@ -37,8 +37,9 @@ absl::Status ReorderStore::AddLateFrames(Transaction& txn, absl::string_view spa
                                          const std::vector<absl::Time>& times) {
   if (times.empty()) return absl::OkStatus();
   ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("INSERT OR IGNORE INTO late_frames "
-                               "(spacecraft_id, measurement_time_unix_ns) VALUES (?1, ?2)"));
+                   txn.Prepare("INSERT INTO late_frames "
+                               "(spacecraft_id, measurement_time_unix_ns) VALUES (?1, ?2) "
+                               "ON CONFLICT DO NOTHING"));
   for (size_t i = 0; i < times.size(); ++i) {
     RETURN_IF_ERROR(ValidateStorableTime(times[i], absl::StrCat("late_frames[", i, "]")));
     st->Reset();
@@ -79,9 +80,12 @@ absl::Status ReorderStore::PutCheckpoint(Transaction& txn, absl::string_view spa
   RETURN_IF_ERROR(ValidateStorableTime(checkpoint.applied_time, "window_checkpoint.applied_time"));
   RETURN_IF_ERROR(ValidateStorableTime(checkpoint.compute_time, "window_checkpoint.compute_time"));
   ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("INSERT OR REPLACE INTO window_checkpoints (spacecraft_id, "
+                   txn.Prepare("INSERT INTO window_checkpoints (spacecraft_id, "
                                "applied_time_unix_ns, compute_time_unix_ns, state_blob) "
-                               "VALUES (?1, ?2, ?3, ?4)"));
+                               "VALUES (?1, ?2, ?3, ?4) "
+                               "ON CONFLICT (spacecraft_id, applied_time_unix_ns) DO UPDATE SET "
+                               "compute_time_unix_ns = excluded.compute_time_unix_ns, "
+                               "state_blob = excluded.state_blob"));
   st->BindText(1, spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(checkpoint.applied_time))
       .BindInt64(3, TimeToUnixNanos(checkpoint.compute_time))

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/status_macros.h"
+#include "storage/postgres_schema.h"
 
 namespace esg::storage {
 namespace {
@@ -266,6 +267,7 @@ absl::Status CheckKnownVersion(int version, const Database& db) {
 }  // namespace
 
 absl::StatusOr<int> SchemaVersion(Database& db) {
+  if (db.dialect() == Dialect::kPostgres) return PostgresSchemaVersion(db);
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
   return ReadUserVersion(txn);
 }
@@ -275,6 +277,7 @@ absl::Status MigrateTo(Database& db, int target_version) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "target schema version = %d: must be in [0, %d]", target_version, kCurrentSchemaVersion));
   }
+  if (db.dialect() == Dialect::kPostgres) return MigratePostgresTo(db, target_version);
   // Cheap check first so that an up-to-date database needs no write lock.
   ASSIGN_OR_RETURN(int version, SchemaVersion(db));
   RETURN_IF_ERROR(CheckKnownVersion(version, db));

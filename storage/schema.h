@@ -1,5 +1,6 @@
 // The SQLite schema of the service database and its migrations, keyed on PRAGMA user_version
-// (docs/service.md "Durability and recovery"). Column encodings shared by every store are defined
+// (docs/service.md "Durability and recovery"); a PostgreSQL database is created at the current
+// version with the same tables (postgres_schema.h), and these functions dispatch to it. Column encodings shared by every store are defined
 // here too.
 //
 // Versions (user_version):
@@ -37,7 +38,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/time/time.h"
-#include "storage/sqlite_db.h"
+#include "storage/database.h"
 
 namespace esg::storage {
 

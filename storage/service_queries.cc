@@ -25,7 +25,7 @@ absl::StatusOr<absl::Time> LatestEffectTime(Database& db, absl::string_view spac
                                "SELECT MAX(measurement_time_unix_ns) AS t FROM coefficients "
                                "WHERE spacecraft_id = ?1 UNION ALL "
                                "SELECT MAX(measurement_time_unix_ns) FROM alerts "
-                               "WHERE spacecraft_id = ?1)"));
+                               "WHERE spacecraft_id = ?1) AS latest"));
   st->BindText(1, spacecraft_id);
   ASSIGN_OR_RETURN(bool row, st->Step());
   const absl::Time t =
@@ -36,8 +36,10 @@ absl::StatusOr<absl::Time> LatestEffectTime(Database& db, absl::string_view spac
 
 absl::Status ProbeWrite(Database& db, absl::Time now) {
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kImmediate));
-  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("INSERT OR REPLACE INTO service_state (key, value) "
-                                               "VALUES ('storage_probe_unix_ns', ?1)"));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("INSERT INTO service_state (key, value) "
+                                               "VALUES ('storage_probe_unix_ns', ?1) "
+                                               "ON CONFLICT (key) DO UPDATE "
+                                               "SET value = excluded.value"));
   st->BindInt64(1, TimeToUnixNanos(now));
   RETURN_IF_ERROR(st->Run());
   return txn.Commit();
@@ -45,8 +47,8 @@ absl::Status ProbeWrite(Database& db, absl::Time now) {
 
 absl::StatusOr<AlertCounts> CountAlerts(Database& db, absl::string_view spacecraft_id) {
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kDeferred));
-  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("SELECT COALESCE(SUM(cleared = 0), 0), "
-                                               "COALESCE(SUM(acknowledged = 0), 0) FROM alerts "
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare("SELECT COALESCE(SUM(CASE WHEN cleared = 0 THEN 1 ELSE 0 END), 0), "
+                                               "COALESCE(SUM(CASE WHEN acknowledged = 0 THEN 1 ELSE 0 END), 0) FROM alerts "
                                                "WHERE spacecraft_id = ?1 "
                                                "AND revised_time_unix_ns IS NULL"));
   st->BindText(1, spacecraft_id);

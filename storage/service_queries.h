@@ -10,7 +10,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "absl/time/time.h"
-#include "storage/sqlite_db.h"
+#include "storage/database.h"
 
 namespace esg::storage {
 

@@ -21,9 +21,13 @@ absl::Status SessionStore::PutCheckpoint(Transaction& txn, const CheckpointRecor
   RETURN_IF_ERROR(ValidateStorableTime(record.compute_time, "checkpoint.compute_time"));
   ASSIGN_OR_RETURN(
       Statement * st,
-      txn.Prepare("INSERT OR REPLACE INTO checkpoints (spacecraft_id, last_sequence, "
+      txn.Prepare("INSERT INTO checkpoints (spacecraft_id, last_sequence, "
                   "measurement_time_unix_ns, compute_time_unix_ns, state_blob) "
-                  "VALUES (?1, ?2, ?3, ?4, ?5)"));
+                  "VALUES (?1, ?2, ?3, ?4, ?5) ON CONFLICT (spacecraft_id) DO UPDATE SET "
+                  "last_sequence = excluded.last_sequence, "
+                  "measurement_time_unix_ns = excluded.measurement_time_unix_ns, "
+                  "compute_time_unix_ns = excluded.compute_time_unix_ns, "
+                  "state_blob = excluded.state_blob"));
   st->BindText(1, record.spacecraft_id)
       .BindInt64(2, record.last_sequence)
       .BindInt64(3, TimeToUnixNanos(record.measurement_time))

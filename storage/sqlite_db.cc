@@ -173,37 +173,37 @@ absl::StatusCode StatusCodeForSqliteResult(int result_code) {
 // ---------------------------------------------------------------------------------------------
 // Statement
 
-Statement::Statement(sqlite3* db, sqlite3_stmt* stmt, std::string sql)
-    : db_(db), stmt_(stmt), sql_(std::move(sql)) {}
+SqliteStatement::SqliteStatement(sqlite3* db, sqlite3_stmt* stmt, std::string sql)
+    : Statement(std::move(sql)), db_(db), stmt_(stmt) {}
 
-Statement::~Statement() { sqlite3_finalize(stmt_); }
+SqliteStatement::~SqliteStatement() { sqlite3_finalize(stmt_); }
 
-void Statement::NoteBindResult(int rc, int index) {
+void SqliteStatement::NoteBindResult(int rc, int index) {
   if (rc != SQLITE_OK && bind_status_.ok()) {
-    bind_status_ = SqliteError(rc, db_, absl::StrCat("binding parameter ", index, " of ", sql_));
+    bind_status_ = SqliteError(rc, db_, absl::StrCat("binding parameter ", index, " of ", sql()));
   }
 }
 
-Statement& Statement::BindInt64(int index, int64_t value) {
+SqliteStatement& SqliteStatement::BindInt64(int index, int64_t value) {
   NoteBindResult(sqlite3_bind_int64(stmt_, index, value), index);
   return *this;
 }
 
-Statement& Statement::BindDouble(int index, double value) {
+SqliteStatement& SqliteStatement::BindDouble(int index, double value) {
   NoteBindResult(std::isnan(value) ? sqlite3_bind_null(stmt_, index)
                                    : sqlite3_bind_double(stmt_, index, value),
                  index);
   return *this;
 }
 
-Statement& Statement::BindText(int index, absl::string_view value) {
+SqliteStatement& SqliteStatement::BindText(int index, absl::string_view value) {
   NoteBindResult(sqlite3_bind_text64(stmt_, index, value.data(), value.size(), SQLITE_TRANSIENT,
                                      SQLITE_UTF8),
                  index);
   return *this;
 }
 
-Statement& Statement::BindBlob(int index, absl::string_view bytes) {
+SqliteStatement& SqliteStatement::BindBlob(int index, absl::string_view bytes) {
   // A zero-length blob needs a non-null pointer, or SQLite binds NULL.
   static const char kEmpty = 0;
   NoteBindResult(sqlite3_bind_blob64(stmt_, index, bytes.empty() ? &kEmpty : bytes.data(),
@@ -212,56 +212,44 @@ Statement& Statement::BindBlob(int index, absl::string_view bytes) {
   return *this;
 }
 
-Statement& Statement::BindNull(int index) {
+SqliteStatement& SqliteStatement::BindNull(int index) {
   NoteBindResult(sqlite3_bind_null(stmt_, index), index);
   return *this;
 }
 
-absl::StatusOr<bool> Statement::Step() {
+absl::StatusOr<bool> SqliteStatement::Step() {
   if (!bind_status_.ok()) return bind_status_;
   const int rc = sqlite3_step(stmt_);
   if (rc == SQLITE_ROW) return true;
   if (rc == SQLITE_DONE) return false;
-  return SqliteError(rc, db_, sql_);
+  return SqliteError(rc, db_, sql());
 }
 
-absl::Status Statement::Run() {
-  absl::StatusOr<bool> row = Step();
-  if (!row.ok()) return row.status();
-  if (*row) return absl::InternalError(absl::StrCat("statement returned a row: ", sql_));
-  return absl::OkStatus();
-}
-
-void Statement::Reset() {
+void SqliteStatement::Reset() {
   // sqlite3_reset repeats the error of the last step, which has already been reported by Step().
   sqlite3_reset(stmt_);
   sqlite3_clear_bindings(stmt_);
   bind_status_ = absl::OkStatus();
 }
 
-int Statement::ColumnCount() const { return sqlite3_column_count(stmt_); }
+int SqliteStatement::ColumnCount() const { return sqlite3_column_count(stmt_); }
 
-bool Statement::ColumnIsNull(int column) const {
+bool SqliteStatement::ColumnIsNull(int column) const {
   return sqlite3_column_type(stmt_, column) == SQLITE_NULL;
 }
 
-int64_t Statement::ColumnInt64(int column) const { return sqlite3_column_int64(stmt_, column); }
+int64_t SqliteStatement::ColumnInt64(int column) const { return sqlite3_column_int64(stmt_, column); }
 
-double Statement::ColumnDouble(int column) const { return sqlite3_column_double(stmt_, column); }
+double SqliteStatement::ColumnDouble(int column) const { return sqlite3_column_double(stmt_, column); }
 
-double Statement::ColumnDoubleOrNaN(int column) const {
-  return ColumnIsNull(column) ? std::numeric_limits<double>::quiet_NaN()
-                              : sqlite3_column_double(stmt_, column);
-}
-
-std::string Statement::ColumnText(int column) const {
+std::string SqliteStatement::ColumnText(int column) const {
   const unsigned char* text = sqlite3_column_text(stmt_, column);
   const int size = sqlite3_column_bytes(stmt_, column);
   if (text == nullptr) return std::string();
   return std::string(reinterpret_cast<const char*>(text), static_cast<size_t>(size));
 }
 
-std::string Statement::ColumnBlob(int column) const {
+std::string SqliteStatement::ColumnBlob(int column) const {
   const void* blob = sqlite3_column_blob(stmt_, column);
   const int size = sqlite3_column_bytes(stmt_, column);
   if (blob == nullptr) return std::string();
@@ -269,90 +257,19 @@ std::string Statement::ColumnBlob(int column) const {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Transaction
-
-Transaction::Transaction(Transaction&& other) noexcept
-    : db_(std::exchange(other.db_, nullptr)), used_(std::move(other.used_)) {}
-
-Transaction::~Transaction() {
-  // Nothing can be reported from a destructor; a failed ROLLBACK leaves SQLite to roll the
-  // transaction back when the connection closes or the next BEGIN fails loudly.
-  Rollback().IgnoreError();
-}
-
-void Transaction::ResetUsedStatements() {
-  // A statement left mid-iteration would keep its read open and block COMMIT of writes.
-  for (Statement* st : used_) st->Reset();
-  used_.clear();
-}
-
-void Transaction::Release() {
-  Database* db = std::exchange(db_, nullptr);
-  if (db != nullptr) db->ReleaseLock();
-}
-
-absl::Status Transaction::Execute(absl::string_view sql) {
-  if (db_ == nullptr) return absl::FailedPreconditionError("transaction already ended");
-  return db_->ExecLocked(sql);
-}
-
-absl::StatusOr<Statement*> Transaction::Prepare(absl::string_view sql) {
-  if (db_ == nullptr) return absl::FailedPreconditionError("transaction already ended");
-  absl::StatusOr<Statement*> st = db_->PrepareLocked(sql);
-  if (st.ok()) used_.push_back(*st);
-  return st;
-}
-
-int64_t Transaction::ChangedRows() const {
-  return db_ == nullptr ? 0 : sqlite3_changes64(db_->db_);
-}
-
-int64_t Transaction::LastInsertRowId() const {
-  return db_ == nullptr ? 0 : sqlite3_last_insert_rowid(db_->db_);
-}
-
-absl::Status Transaction::Commit() {
-  if (db_ == nullptr) return absl::FailedPreconditionError("transaction already ended");
-  ResetUsedStatements();
-  absl::Status status = db_->ExecLocked("COMMIT");
-  if (!status.ok()) {
-    // A failed COMMIT may leave the transaction open (e.g. SQLITE_BUSY); end it so that the
-    // contract "over either way" holds. SQLite may already have rolled back by itself.
-    if (!sqlite3_get_autocommit(db_->db_)) db_->ExecLocked("ROLLBACK").IgnoreError();
-    status = absl::Status(status.code(), absl::StrCat("db: ", db_->path_,
-                                                      ": commit failed and was rolled back: ",
-                                                      status.message()));
-  }
-  Release();
-  return status;
-}
-
-absl::Status Transaction::Rollback() {
-  if (db_ == nullptr) return absl::OkStatus();
-  ResetUsedStatements();
-  absl::Status status;
-  if (!sqlite3_get_autocommit(db_->db_)) status = db_->ExecLocked("ROLLBACK");
-  Release();
-  return status;
-}
-
-// ---------------------------------------------------------------------------------------------
 // Database
 
-Database::Database(sqlite3* db, std::string path, const DatabaseOptions& options)
+SqliteDatabase::SqliteDatabase(sqlite3* db, std::string path, const DatabaseOptions& options)
     : db_(db), path_(std::move(path)), options_(options) {}
 
-Database::~Database() {
-  {
-    absl::MutexLock lock(&mu_);
-    cache_.clear();  // finalizes every statement before the connection closes
-  }
+SqliteDatabase::~SqliteDatabase() {
+  WithLock([&] { cache_.clear(); });  // finalizes every statement before the connection closes
   sqlite3_close_v2(db_);
   if (owner_lock_fd_ >= 0) ::close(owner_lock_fd_);  // releases the owner lock
 }
 
-absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path,
-                                                         const DatabaseOptions& options) {
+absl::StatusOr<std::unique_ptr<SqliteDatabase>> SqliteDatabase::Open(
+    const std::string& path, const DatabaseOptions& options) {
   if (path.empty()) return absl::InvalidArgumentError("database path: empty");
   if (options.busy_timeout <= absl::ZeroDuration()) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -398,16 +315,15 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
     }
     return status;
   }
-  std::unique_ptr<Database> db(new Database(raw, path, options));
+  std::unique_ptr<SqliteDatabase> db(new SqliteDatabase(raw, path, options));
   db->owner_lock_fd_ = owner_lock_fd;  // released by the destructor, also on the errors below
   sqlite3_extended_result_codes(raw, 1);
   const int64_t timeout_ms = absl::ToInt64Milliseconds(options.busy_timeout);
   sqlite3_busy_timeout(raw, static_cast<int>(
                                 std::min<int64_t>(std::max<int64_t>(timeout_ms, 1),
                                                   std::numeric_limits<int>::max())));
-  absl::MutexLock lock(&db->mu_);
   int failed_rc = SQLITE_OK;
-  absl::Status status = db->ConfigureAndProbeLocked(&failed_rc);
+  absl::Status status = db->WithLock([&] { return db->ConfigureAndProbeLocked(&failed_rc); });
   if (status.ok()) return db;
   switch (status.code()) {
     case absl::StatusCode::kUnavailable:
@@ -435,7 +351,7 @@ absl::StatusOr<std::unique_ptr<Database>> Database::Open(const std::string& path
                          ")"));
 }
 
-absl::Status Database::ConfigureAndProbeLocked(int* failed_rc) {
+absl::Status SqliteDatabase::ConfigureAndProbeLocked(int* failed_rc) {
   // Keeps the SQLite result code of the failing step, which Open() needs to tell a lock held by
   // another process from an I/O error (both are Unavailable).
   auto note = [&](absl::Status status) {
@@ -490,42 +406,11 @@ absl::Status Database::ConfigureAndProbeLocked(int* failed_rc) {
   return status;
 }
 
-absl::Status Database::Acquire() {
-  if (owner_.load(std::memory_order_relaxed) == std::this_thread::get_id()) {
-    return absl::FailedPreconditionError(
-        "this thread already holds a transaction on this database (nested use would deadlock)");
-  }
-  mu_.Lock();
-  owner_.store(std::this_thread::get_id(), std::memory_order_relaxed);
-  return absl::OkStatus();
+absl::Status SqliteDatabase::BeginLocked(TransactionMode mode) {
+  return ExecLocked(mode == TransactionMode::kImmediate ? "BEGIN IMMEDIATE" : "BEGIN DEFERRED");
 }
 
-void Database::ReleaseLock() {
-  owner_.store(std::thread::id(), std::memory_order_relaxed);
-  mu_.Unlock();
-}
-
-absl::StatusOr<Transaction> Database::Begin(TransactionMode mode) {
-  absl::Status status = Acquire();
-  if (!status.ok()) return status;
-  status =
-      ExecLocked(mode == TransactionMode::kImmediate ? "BEGIN IMMEDIATE" : "BEGIN DEFERRED");
-  if (!status.ok()) {
-    ReleaseLock();
-    return status;
-  }
-  return Transaction(this);
-}
-
-absl::Status Database::Execute(absl::string_view sql) {
-  absl::Status status = Acquire();
-  if (!status.ok()) return status;
-  status = ExecLocked(sql);
-  ReleaseLock();
-  return status;
-}
-
-absl::Status Database::QuickCheck() {
+absl::Status SqliteDatabase::QuickCheck() {
   absl::StatusOr<Transaction> txn = Begin(TransactionMode::kDeferred);
   if (!txn.ok()) return txn.status();
   absl::StatusOr<Statement*> st = txn->Prepare("PRAGMA quick_check(1)");
@@ -539,7 +424,7 @@ absl::Status Database::QuickCheck() {
   return absl::OkStatus();
 }
 
-absl::Status Database::ExecLocked(absl::string_view sql) {
+absl::Status SqliteDatabase::ExecLocked(absl::string_view sql) {
   // sqlite3_exec needs a NUL-terminated string.
   const std::string text(sql);
   const int rc = sqlite3_exec(db_, text.c_str(), nullptr, nullptr, nullptr);
@@ -547,7 +432,13 @@ absl::Status Database::ExecLocked(absl::string_view sql) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<Statement*> Database::PrepareLocked(absl::string_view sql) {
+absl::StatusOr<Statement*> SqliteDatabase::PrepareLocked(absl::string_view sql) {
+  absl::StatusOr<SqliteStatement*> st = PrepareSqliteLocked(sql);
+  if (!st.ok()) return st.status();
+  return *st;
+}
+
+absl::StatusOr<SqliteStatement*> SqliteDatabase::PrepareSqliteLocked(absl::string_view sql) {
   auto it = cache_.find(sql);
   if (it != cache_.end()) {
     it->second->Reset();
@@ -565,10 +456,25 @@ absl::StatusOr<Statement*> Database::PrepareLocked(absl::string_view sql) {
     return absl::InvalidArgumentError(
         absl::StrCat("Prepare takes exactly one SQL statement; extra text: ", rest));
   }
-  auto st = std::unique_ptr<Statement>(new Statement(db_, raw, std::string(sql)));
-  Statement* result = st.get();
+  auto st = std::unique_ptr<SqliteStatement>(new SqliteStatement(db_, raw, std::string(sql)));
+  SqliteStatement* result = st.get();
   cache_.emplace(std::string(sql), std::move(st));
   return result;
+}
+
+int64_t SqliteDatabase::ChangedRowsLocked() const { return sqlite3_changes64(db_); }
+
+absl::Status SqliteDatabase::CommitLocked() {
+  absl::Status status = ExecLocked("COMMIT");
+  // A failed COMMIT may leave the transaction open (e.g. SQLITE_BUSY); end it so that the
+  // contract "over either way" holds. SQLite may already have rolled back by itself.
+  if (!status.ok() && !sqlite3_get_autocommit(db_)) ExecLocked("ROLLBACK").IgnoreError();
+  return status;
+}
+
+absl::Status SqliteDatabase::RollbackLocked() {
+  if (sqlite3_get_autocommit(db_)) return absl::OkStatus();
+  return ExecLocked("ROLLBACK");
 }
 
 }  // namespace esg::storage

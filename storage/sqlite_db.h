@@ -1,6 +1,5 @@
-// RAII wrappers over one SQLite connection: Database (open, pragmas, serialized access),
-// Transaction (the only way to run cached prepared statements) and Statement. Every call returns
-// absl::Status; nothing throws or logs. STYLE §3.3 (status codes).
+// The SQLite engine of database.h: SqliteDatabase (open, pragmas, the owner lock) and
+// SqliteStatement. Every call returns absl::Status; nothing throws or logs. STYLE §3.3.
 //
 // Durability contract (what an OK Transaction::Commit() guarantees)
 // ------------------------------------------------------------------
@@ -98,19 +97,16 @@
 #ifndef ESG_STORAGE_SQLITE_DB_H_
 #define ESG_STORAGE_SQLITE_DB_H_
 
-#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <string>
-#include <thread>
-#include <vector>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
-#include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
+#include "storage/database.h"
 
 struct sqlite3;
 struct sqlite3_stmt;
@@ -139,110 +135,43 @@ struct DatabaseOptions {
 // The absl::StatusCode for an SQLite (extended) result code other than SQLITE_OK/ROW/DONE.
 absl::StatusCode StatusCodeForSqliteResult(int result_code);
 
-class Database;
-class Transaction;
+class SqliteDatabase;
 
-// A prepared statement owned by the Database's cache and lent out by Transaction::Prepare().
-// Parameter indexes are 1-based (SQLite's "?1"), column indexes 0-based. Bind* never fails
-// immediately: the first bind error (index out of range, out of memory) is remembered and
-// returned by the next Step()/Run(), so binds can be chained:
-//   st->BindText(1, id).BindInt64(2, sequence);
-class Statement {
+// A prepared SQLite statement (database.h Statement).
+class SqliteStatement final : public Statement {
  public:
-  Statement(const Statement&) = delete;
-  Statement& operator=(const Statement&) = delete;
-  ~Statement();
+  ~SqliteStatement() override;
 
-  Statement& BindInt64(int index, int64_t value);
-  // A NaN binds as NULL (SQLite cannot store NaN); read it back with ColumnDoubleOrNaN().
-  Statement& BindDouble(int index, double value);
-  Statement& BindText(int index, absl::string_view value);
-  Statement& BindBlob(int index, absl::string_view bytes);
-  Statement& BindNull(int index);
-
-  // Advances the statement: true if a row is available through the Column* getters, false when
-  // the statement has finished. Errors as in the file comment.
-  absl::StatusOr<bool> Step();
-  // Runs a statement that returns no rows to completion (INSERT/UPDATE/DELETE/DDL). Returns
-  // Internal if it produces a row.
-  absl::Status Run();
-  // Rewinds the statement and clears all bindings and any remembered bind error.
-  void Reset();
-
-  // Column getters for the current row (valid after Step() returned true). A NULL reads as 0,
-  // 0.0 or "" except in ColumnDoubleOrNaN().
-  int ColumnCount() const;
-  bool ColumnIsNull(int column) const;
-  int64_t ColumnInt64(int column) const;
-  double ColumnDouble(int column) const;
-  double ColumnDoubleOrNaN(int column) const;
-  std::string ColumnText(int column) const;
-  std::string ColumnBlob(int column) const;
-
-  const std::string& sql() const { return sql_; }
+  SqliteStatement& BindInt64(int index, int64_t value) override;
+  SqliteStatement& BindDouble(int index, double value) override;
+  SqliteStatement& BindText(int index, absl::string_view value) override;
+  SqliteStatement& BindBlob(int index, absl::string_view bytes) override;
+  SqliteStatement& BindNull(int index) override;
+  absl::StatusOr<bool> Step() override;
+  void Reset() override;
+  int ColumnCount() const override;
+  bool ColumnIsNull(int column) const override;
+  int64_t ColumnInt64(int column) const override;
+  double ColumnDouble(int column) const override;
+  std::string ColumnText(int column) const override;
+  std::string ColumnBlob(int column) const override;
 
  private:
-  friend class Database;
-  Statement(sqlite3* db, sqlite3_stmt* stmt, std::string sql);
+  friend class SqliteDatabase;
+  SqliteStatement(sqlite3* db, sqlite3_stmt* stmt, std::string sql);
   void NoteBindResult(int rc, int index);
 
   sqlite3* db_;
   sqlite3_stmt* stmt_;
-  std::string sql_;
   absl::Status bind_status_;
 };
 
-// BEGIN DEFERRED takes SQLite's write lock at the first write (use for reads: WAL readers never
-// block and see a consistent snapshot); BEGIN IMMEDIATE takes it at Begin(), so lock contention
-// shows up there (waiting up to busy_timeout) and never as a failed upgrade half-way through.
-enum class TransactionMode { kDeferred, kImmediate };
-
-// An open SQL transaction holding exclusive use of its Database. Destroying it without a
-// successful Commit() rolls back everything it did. Movable, so Begin() can return it.
-class Transaction {
- public:
-  Transaction(Transaction&& other) noexcept;
-  Transaction& operator=(Transaction&&) = delete;
-  Transaction(const Transaction&) = delete;
-  Transaction& operator=(const Transaction&) = delete;
-  ~Transaction();
-
-  // Runs one or more SQL statements that return no rows (DDL, PRAGMA assignments); not cached.
-  absl::Status Execute(absl::string_view sql);
-
-  // Returns the cached prepared statement for exactly one SQL statement `sql`, reset and with
-  // bindings cleared. The statement is compiled once per Database and reused; the pointer is
-  // valid while this transaction is open. Preparing the same SQL text again in the same
-  // transaction returns the same (reset) statement. InvalidArgument if `sql` holds more than one
-  // statement; Internal for SQL errors.
-  absl::StatusOr<Statement*> Prepare(absl::string_view sql);
-
-  // Rows inserted, updated or deleted by the most recently completed statement.
-  int64_t ChangedRows() const;
-  // Rowid of the most recent successful INSERT into a rowid table.
-  int64_t LastInsertRowId() const;
-
-  // Makes the transaction durable as described in the file comment. After Commit() returns the
-  // transaction is over either way: on error it has been rolled back and nothing is visible.
-  absl::Status Commit();
-  // Undoes the transaction. Calling it after the transaction ended is a no-op returning OK.
-  absl::Status Rollback();
-
-  bool active() const { return db_ != nullptr; }
-
- private:
-  friend class Database;
-  explicit Transaction(Database* db) : db_(db) {}
-  void ResetUsedStatements();
-  void Release();
-
-  Database* db_;  // null once committed, rolled back or moved from
-  std::vector<Statement*> used_;
-};
-
-// One SQLite connection in WAL mode with the options above. Closing (destruction) requires that
-// no Transaction on it is alive.
-class Database {
+// One SQLite connection in WAL mode with the options above (database.h Database). BEGIN
+// DEFERRED takes SQLite's write lock at the first write (WAL readers never block and see a
+// consistent snapshot); BEGIN IMMEDIATE takes it at Begin(), so lock contention shows up there
+// (waiting up to busy_timeout) and never as a failed upgrade half-way through. The connection
+// is also opened with SQLITE_OPEN_FULLMUTEX.
+class SqliteDatabase final : public Database {
  public:
   // Opens (creating if allowed) the database file at `path`, takes the owner lock if
   // options.exclusive (see "Owner lock" above; refused at once with Unavailable naming the
@@ -258,49 +187,36 @@ class Database {
   // the probe write failed: an immutable or read-only file, -wal or directory, a read-only
   // file system, a full disk; <reason> names the file and the errno text where access(2) finds
   // one, else SQLite's message).
-  static absl::StatusOr<std::unique_ptr<Database>> Open(const std::string& path,
-                                                        const DatabaseOptions& options = {});
+  static absl::StatusOr<std::unique_ptr<SqliteDatabase>> Open(const std::string& path,
+                                                              const DatabaseOptions& options = {});
 
-  Database(const Database&) = delete;
-  Database& operator=(const Database&) = delete;
-  ~Database();
-
-  // Starts a transaction (see TransactionMode), waiting for other threads' transactions on this
-  // Database first. Unavailable if another connection holds the lock beyond busy_timeout;
-  // FailedPrecondition if the calling thread already holds a Transaction on this Database.
-  absl::StatusOr<Transaction> Begin(TransactionMode mode = TransactionMode::kImmediate);
-
-  // Runs SQL that returns no rows outside any explicit transaction (autocommit), e.g.
-  // "PRAGMA wal_checkpoint(TRUNCATE)". Same locking rules and errors as Begin().
-  absl::Status Execute(absl::string_view sql);
+  ~SqliteDatabase() override;
 
   // PRAGMA quick_check: OK, or DataLoss naming the first problem SQLite reports.
-  absl::Status QuickCheck();
-
-  const std::string& path() const { return path_; }
+  absl::Status QuickCheck() override;
+  const std::string& path() const override { return path_; }
+  Dialect dialect() const override { return Dialect::kSqlite; }
   const DatabaseOptions& options() const { return options_; }
 
+ protected:
+  absl::Status BeginLocked(TransactionMode mode) override;
+  absl::Status ExecLocked(absl::string_view sql) override;
+  absl::StatusOr<Statement*> PrepareLocked(absl::string_view sql) override;
+  int64_t ChangedRowsLocked() const override;
+  absl::Status CommitLocked() override;
+  absl::Status RollbackLocked() override;
+
  private:
-  friend class Transaction;
-  Database(sqlite3* db, std::string path, const DatabaseOptions& options);
+  SqliteDatabase(sqlite3* db, std::string path, const DatabaseOptions& options);
   // Pragmas and the write probe of Open(); *failed_rc: the SQLite result code of the failure.
   absl::Status ConfigureAndProbeLocked(int* failed_rc);
-
-  absl::Status Acquire();
-  void ReleaseLock();
-  absl::Status ExecLocked(absl::string_view sql);
-  absl::StatusOr<Statement*> PrepareLocked(absl::string_view sql);
+  absl::StatusOr<SqliteStatement*> PrepareSqliteLocked(absl::string_view sql);
 
   sqlite3* const db_;
   const std::string path_;
   const DatabaseOptions options_;
-  // mu_ is held by a Transaction for its whole life (Begin() .. Release()), which the static
-  // thread-safety analysis cannot follow; hence no ABSL_GUARDED_BY below. The connection
-  // (db_'s statements, cache_) is used only with mu_ held: through a Transaction, Execute(),
-  // Open() or the destructor.
-  absl::Mutex mu_;
-  std::atomic<std::thread::id> owner_{};  // thread holding mu_ through a Transaction
-  absl::flat_hash_map<std::string, std::unique_ptr<Statement>> cache_;  // by SQL text
+  // The connection (db_'s statements, cache_) is used only with the base's mutex held.
+  absl::flat_hash_map<std::string, std::unique_ptr<SqliteStatement>> cache_;  // by SQL text
   // Descriptor of "<path>.lock" holding the owner lock (exclusive mode), else -1; closed after
   // the connection.
   int owner_lock_fd_ = -1;

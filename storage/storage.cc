@@ -40,7 +40,18 @@ Storage::Storage(std::unique_ptr<Database> db)
 
 absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
                                                        const DatabaseOptions& options) {
-  ASSIGN_OR_RETURN(std::unique_ptr<Database> db, Database::Open(path, options));
+  if (IsPostgresUri(path)) return OpenPostgres(path);
+  ASSIGN_OR_RETURN(std::unique_ptr<SqliteDatabase> db, SqliteDatabase::Open(path, options));
+  return FromDatabase(std::move(db));
+}
+
+absl::StatusOr<std::unique_ptr<Storage>> Storage::OpenPostgres(const std::string& uri,
+                                                               const PostgresOptions& options) {
+  ASSIGN_OR_RETURN(std::unique_ptr<PostgresDatabase> db, PostgresDatabase::Open(uri, options));
+  return FromDatabase(std::move(db));
+}
+
+absl::StatusOr<std::unique_ptr<Storage>> Storage::FromDatabase(std::unique_ptr<Database> db) {
   RETURN_IF_ERROR(MigrateToCurrent(*db));
   return std::unique_ptr<Storage>(new Storage(std::move(db)));
 }

@@ -1,6 +1,7 @@
-// The service database as one object: opens the SQLite file (WAL, synchronous per options),
-// migrates it to the current schema, owns the stores, and commits the three write transactions
-// the server makes (durability contract in sqlite_db.h; docs/service.md "Durability and
+// The service database as one object: opens the SQLite file (WAL, synchronous per options) or
+// the PostgreSQL database (docs/service.md "Storage backends"), migrates it to the current
+// schema, owns the stores, and commits the three write transactions the server makes
+// (durability contracts in sqlite_db.h and postgres_db.h; docs/service.md "Durability and
 // recovery"):
 //   ArchiveFrames        the group commit of accepted telemetry: the unit of acknowledgement (a
 //                        frame is acknowledged only after the call that archived it returned OK);
@@ -12,7 +13,7 @@
 //                        and the reorder window's bookkeeping (reorder_store.h);
 //   CommitConfiguration  a configuration with the fresh checkpoint of its session (and the
 //                        clearing of a quarantine alert it ends).
-// Each is ONE IMMEDIATE transaction: on any error none of it is visible.
+// Each is ONE transaction (IMMEDIATE with SQLite): on any error none of it is visible.
 #ifndef ESG_STORAGE_STORAGE_H_
 #define ESG_STORAGE_STORAGE_H_
 
@@ -31,8 +32,10 @@
 #include "storage/coefficient_store.h"
 #include "storage/config_store.h"
 #include "storage/diagnosis_store.h"
+#include "storage/database.h"
 #include "storage/estimate_store.h"
 #include "storage/records.h"
+#include "storage/postgres_db.h"
 #include "storage/reorder_store.h"
 #include "storage/session_store.h"
 #include "storage/sqlite_db.h"
@@ -110,8 +113,18 @@ class Storage {
   // written (read-only or immutable file, -wal or directory, read-only file system, full disk)
   // and for a database written by a newer program, Unavailable "db: <path> is locked by another
   // process" when another Storage owns the file, DataLoss for a corrupt file.
+  // A `path` that is a PostgreSQL URI (IsPostgresUri) opens that database instead (OpenPostgres
+  // with default options; `options` are SQLite's).
   static absl::StatusOr<std::unique_ptr<Storage>> Open(const std::string& path,
                                                        const DatabaseOptions& options = {});
+
+  // Connects to the PostgreSQL database at `uri` and creates or migrates its schema (several
+  // servers starting at once is safe). Errors of PostgresDatabase::Open and MigrateToCurrent.
+  static absl::StatusOr<std::unique_ptr<Storage>> OpenPostgres(
+      const std::string& uri, const PostgresOptions& options = {});
+
+  // Migrates `db` and wraps it (for an engine opened by the caller).
+  static absl::StatusOr<std::unique_ptr<Storage>> FromDatabase(std::unique_ptr<Database> db);
 
   // Archives `frames` (any spacecraft, any order) in one transaction: the server's group commit.
   // Every frame must be new: AlreadyExists "<id>: N frames are already archived (first sequence

@@ -64,9 +64,9 @@ absl::StatusOr<AppendResult> TelemetryArchive::AppendBatch(
         ValidateSpacecraftId(frames[i].station_id, absl::StrCat("frames[", i, "].station_id")));
   }
   ASSIGN_OR_RETURN(Statement * insert,
-                   txn.Prepare("INSERT OR IGNORE INTO telemetry_frames "
+                   txn.Prepare("INSERT INTO telemetry_frames "
                                "(spacecraft_id, station_id, sequence, measurement_time_unix_ns, "
-                               "payload) VALUES (?1, ?2, ?3, ?4, ?5)"));
+                               "payload) VALUES (?1, ?2, ?3, ?4, ?5) ON CONFLICT DO NOTHING"));
   AppendResult result;
   result.new_sequences.reserve(frames.size());
   for (const ArchivedFrame& f : frames) {
@@ -77,7 +77,7 @@ absl::StatusOr<AppendResult> TelemetryArchive::AppendBatch(
         .BindInt64(4, TimeToUnixNanos(f.measurement_time))
         .BindBlob(5, f.payload);
     RETURN_IF_ERROR(insert->Run());
-    // OR IGNORE turns only a key or time conflict into "0 rows changed".
+    // DO NOTHING turns only a key or time conflict into "0 rows changed".
     (txn.ChangedRows() == 1 ? result.new_sequences : result.duplicate_sequences)
         .push_back(f.sequence);
   }

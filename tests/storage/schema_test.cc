@@ -117,7 +117,7 @@ std::string HandMadeV1Sql() {
 
 TEST(Schema, FreshDatabaseIsMigratedToTheCurrentVersion) {
   TempDir dir;
-  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(dir.File("a.db"));
+  absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(dir.File("a.db"));
   ASSERT_THAT(db, IsOk());
   EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(0));
   ASSERT_THAT(MigrateToCurrent(**db), IsOk());
@@ -132,7 +132,7 @@ TEST(Schema, FreshDatabaseIsMigratedToTheCurrentVersion) {
 
 TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
   TempDir dir;
-  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(dir.File("a.db"));
+  absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(dir.File("a.db"));
   ASSERT_THAT(db, IsOk());
   ASSERT_THAT(MigrateToCurrent(**db), IsOk());
   std::vector<std::string> expected = {
@@ -156,7 +156,7 @@ TEST(Schema, HandMadeVersion1FileIsMigratedWithItsData) {
   TempDir dir;
   const std::string path = dir.File("v1.db");
   {
-    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
     ASSERT_THAT(db, IsOk());
     ASSERT_THAT((*db)->Execute(HandMadeV1Sql()), IsOk());
     EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(1));
@@ -203,7 +203,7 @@ TEST(Schema, Version4DiagnosesGetTheFrameCountOfTheirSpanWhenMigrated) {
   TempDir dir;
   const std::string path = dir.File("v4.db");
   {
-    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
     ASSERT_THAT(db, IsOk());
     ASSERT_THAT(MigrateTo(**db, 4), IsOk());
     EXPECT_THAT(Columns(**db, "diagnoses"), ::testing::Not(::testing::Contains("frames")));
@@ -269,7 +269,7 @@ TEST(Schema, Version6FileOpensMigratedWithItsDataAndAnEmptyEstimateArchive) {
   TempDir dir;
   const std::string path = dir.File("v6.db");
   {
-    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
     ASSERT_THAT(db, IsOk());
     ASSERT_THAT(MigrateTo(**db, 6), IsOk());
     EXPECT_THAT(Tables(**db), ::testing::Not(::testing::Contains("estimates")));
@@ -316,8 +316,8 @@ TEST(Schema, Version6FileOpensMigratedWithItsDataAndAnEmptyEstimateArchive) {
 
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
   TempDir dir;
-  absl::StatusOr<std::unique_ptr<Database>> stepwise = Database::Open(dir.File("s.db"));
-  absl::StatusOr<std::unique_ptr<Database>> fresh = Database::Open(dir.File("f.db"));
+  absl::StatusOr<std::unique_ptr<Database>> stepwise = SqliteDatabase::Open(dir.File("s.db"));
+  absl::StatusOr<std::unique_ptr<Database>> fresh = SqliteDatabase::Open(dir.File("f.db"));
   ASSERT_THAT(stepwise, IsOk());
   ASSERT_THAT(fresh, IsOk());
   ASSERT_THAT(MigrateTo(**stepwise, 1), IsOk());
@@ -338,7 +338,7 @@ TEST(Schema, NewerDatabaseThanTheCodeIsRefused) {
   TempDir dir;
   const std::string path = dir.File("future.db");
   {
-    absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
     ASSERT_THAT(db, IsOk());
     ASSERT_THAT(
         (*db)->Execute(absl::StrCat("CREATE TABLE from_the_future (x); PRAGMA user_version = ",
@@ -351,7 +351,7 @@ TEST(Schema, NewerDatabaseThanTheCodeIsRefused) {
               StatusIs(absl::StatusCode::kFailedPrecondition,
                        HasSubstr(absl::StrCat("schema version ", kCurrentSchemaVersion + 1))));
   // The refused file was left alone.
-  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path);
+  absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
   ASSERT_THAT(db, IsOk());
   EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion + 1));
   EXPECT_THAT(QueryInt(**db, "SELECT COUNT(*) FROM sqlite_schema WHERE name = 'alerts'"),

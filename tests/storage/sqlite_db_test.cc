@@ -30,7 +30,7 @@ using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
 
 std::unique_ptr<Database> OpenOrDie(const std::string& path, const DatabaseOptions& options = {}) {
-  absl::StatusOr<std::unique_ptr<Database>> db = Database::Open(path, options);
+  absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path, options);
   EXPECT_THAT(db, IsOk());
   return db.ok() ? std::move(*db) : nullptr;
 }
@@ -76,17 +76,17 @@ TEST(Database, SynchronousAndBusyTimeoutAreConfigurable) {
 
 TEST(Database, OpenRejectsBadArgumentsAndMissingFiles) {
   TempDir dir;
-  EXPECT_THAT(Database::Open(""), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("path")));
+  EXPECT_THAT(SqliteDatabase::Open(""), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("path")));
   DatabaseOptions zero_timeout;
   zero_timeout.busy_timeout = absl::ZeroDuration();
-  EXPECT_THAT(Database::Open(dir.File("a.db"), zero_timeout),
+  EXPECT_THAT(SqliteDatabase::Open(dir.File("a.db"), zero_timeout),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("busy_timeout")));
   DatabaseOptions no_create;
   no_create.create_if_missing = false;
-  EXPECT_THAT(Database::Open(dir.File("missing.db"), no_create),
+  EXPECT_THAT(SqliteDatabase::Open(dir.File("missing.db"), no_create),
               StatusIs(absl::StatusCode::kNotFound, HasSubstr("missing.db")));
   // Parent directories are the caller's job.
-  EXPECT_THAT(Database::Open(dir.File("no/such/dir/a.db")),
+  EXPECT_THAT(SqliteDatabase::Open(dir.File("no/such/dir/a.db")),
               StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("no/such/dir")));
 }
 
@@ -284,7 +284,7 @@ TEST(Database, GarbageFileIsDataLossNotACrash) {
     std::ofstream out(path, std::ios::binary);
     for (int i = 0; i < 8192; ++i) out.put(static_cast<char>((i * 131 + 7) & 0xff));
   }
-  EXPECT_THAT(Database::Open(path),
+  EXPECT_THAT(SqliteDatabase::Open(path),
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("not a database")));
 }
 

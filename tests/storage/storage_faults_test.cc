@@ -393,7 +393,7 @@ TEST(StorageFaults, UnknownVfsIsInvalidArgument) {
   TempDir dir;
   DatabaseOptions options;
   options.vfs = "no-such-vfs";
-  EXPECT_THAT(Database::Open(dir.File("a.db"), options),
+  EXPECT_THAT(SqliteDatabase::Open(dir.File("a.db"), options),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("no-such-vfs")));
 }
 
@@ -465,7 +465,7 @@ TEST(ReadOnly, ImmutableDatabaseFileIsRefusedAtOpen) {
                                  "read-only)")));
   DatabaseOptions shared;
   shared.exclusive = false;
-  EXPECT_THAT(Database::Open(path, shared),
+  EXPECT_THAT(SqliteDatabase::Open(path, shared),
               StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("cannot be written")));
 }
 
@@ -562,7 +562,7 @@ TEST(Exclusive, SecondOpenOfTheSameFileIsRefusedUntilTheFirstCloses) {
                        HasSubstr("db: " + path + " is locked by another process")));
   // A connection that does not ask for exclusivity is refused as well: nobody reads meanwhile.
   impatient.exclusive = false;
-  EXPECT_THAT(Database::Open(path, impatient),
+  EXPECT_THAT(SqliteDatabase::Open(path, impatient),
               StatusIs(absl::StatusCode::kUnavailable, HasSubstr("is locked by another process")));
   first->reset();
   EXPECT_THAT(Storage::Open(path, impatient), IsOk());

@@ -1,0 +1,448 @@
+// PostgreSQL connection and statement wrappers over libpq; contract in postgres_db.h.
+#include "storage/postgres_db.h"
+
+#include <libpq-fe.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <utility>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/strip.h"
+
+namespace esg::storage {
+namespace {
+
+// PostgreSQL type OIDs (server/catalog/pg_type.dat), stable across versions.
+constexpr unsigned int kBytea = 17;
+constexpr unsigned int kInt8 = 20;
+constexpr unsigned int kText = 25;
+constexpr unsigned int kFloat8 = 701;
+
+// Rewrites SQLite's numbered parameters "?N" as "$N" outside string literals and quoted
+// identifiers; *parameters: the largest N. InvalidArgument for an unnumbered "?".
+absl::StatusOr<std::string> TranslateParameters(absl::string_view sql, int* parameters) {
+  std::string out;
+  out.reserve(sql.size());
+  *parameters = 0;
+  char quote = 0;
+  for (size_t i = 0; i < sql.size(); ++i) {
+    const char c = sql[i];
+    if (quote != 0) {
+      out.push_back(c);
+      if (c == quote) quote = 0;
+      continue;
+    }
+    if (c == '\'' || c == '"') {
+      quote = c;
+      out.push_back(c);
+      continue;
+    }
+    if (c != '?') {
+      out.push_back(c);
+      continue;
+    }
+    size_t j = i + 1;
+    while (j < sql.size() && absl::ascii_isdigit(static_cast<unsigned char>(sql[j]))) ++j;
+    int n = 0;
+    if (j == i + 1 || !absl::SimpleAtoi(sql.substr(i + 1, j - i - 1), &n) || n < 1) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("parameters must be numbered (?1, ?2, ...): ", sql));
+    }
+    *parameters = std::max(*parameters, n);
+    absl::StrAppend(&out, "$", n);
+    i = j - 1;
+  }
+  return out;
+}
+
+std::string ConnectionError(pg_conn* conn) {
+  if (conn == nullptr) return "out of memory";
+  return std::string(absl::StripTrailingAsciiWhitespace(PQerrorMessage(conn)));
+}
+
+void IgnoreNotice(void*, const char*) {}
+
+}  // namespace
+
+bool IsPostgresUri(absl::string_view db) {
+  return absl::StartsWith(db, "postgresql://") || absl::StartsWith(db, "postgres://");
+}
+
+std::string RedactPostgresUri(absl::string_view uri) {
+  std::string out(uri);
+  const size_t scheme = out.find("://");
+  if (scheme != std::string::npos) {
+    const size_t authority = scheme + 3;
+    const size_t end = out.find_first_of("/?", authority);
+    const size_t at = out.rfind('@', end == std::string::npos ? out.size() : end);
+    if (at != std::string::npos && at > authority) {
+      const size_t colon = out.find(':', authority);
+      if (colon != std::string::npos && colon < at) out.erase(colon, at - colon);
+    }
+  }
+  // password=... among the query parameters
+  size_t p = out.find("password=");
+  while (p != std::string::npos) {
+    const size_t end = out.find('&', p);
+    out.replace(p, (end == std::string::npos ? out.size() : end) - p, "password=***");
+    p = out.find("password=", p + 12);
+  }
+  return out;
+}
+
+absl::StatusCode StatusCodeForSqlState(absl::string_view sqlstate) {
+  if (sqlstate.size() != 5) return absl::StatusCode::kUnavailable;  // no server answer
+  if (sqlstate == "23505") return absl::StatusCode::kAlreadyExists;
+  if (sqlstate == "23503") return absl::StatusCode::kFailedPrecondition;  // foreign key
+  if (sqlstate == "XX001" || sqlstate == "XX002") return absl::StatusCode::kDataLoss;
+  if (sqlstate == "57014") return absl::StatusCode::kCancelled;
+  if (sqlstate == "25P02") return absl::StatusCode::kAborted;  // earlier error in transaction
+  const absl::string_view cls = sqlstate.substr(0, 2);
+  if (cls == "23" || cls == "22") return absl::StatusCode::kInvalidArgument;
+  if (cls == "08" || cls == "40" || cls == "55" || cls == "57" || cls == "58") {
+    return absl::StatusCode::kUnavailable;  // connection, rollback, lock, shutdown, system I/O
+  }
+  if (cls == "53") return absl::StatusCode::kResourceExhausted;
+  if (cls == "28") return absl::StatusCode::kPermissionDenied;
+  if (cls == "42") return absl::StatusCode::kInternal;  // SQL errors are program errors
+  return absl::StatusCode::kInternal;
+}
+
+// ---------------------------------------------------------------------------------------------
+// PostgresStatement
+
+PostgresStatement::PostgresStatement(PostgresDatabase* db, std::string sql, std::string pg_sql,
+                                     int parameters)
+    : Statement(std::move(sql)), db_(db), pg_sql_(std::move(pg_sql)), params_(parameters) {}
+
+PostgresStatement::~PostgresStatement() { PQclear(result_); }
+
+PostgresStatement::Param* PostgresStatement::At(int index) {
+  if (index < 1 || index > static_cast<int>(params_.size())) {
+    if (bind_status_.ok()) {
+      bind_status_ = absl::InternalError(absl::StrCat("binding parameter ", index, " of ", sql(),
+                                                      ": the statement has ", params_.size()));
+    }
+    return nullptr;
+  }
+  return &params_[static_cast<size_t>(index - 1)];
+}
+
+PostgresStatement& PostgresStatement::BindInt64(int index, int64_t value) {
+  if (Param* p = At(index)) *p = Param{kInt8, false, false, absl::StrCat(value)};
+  return *this;
+}
+
+PostgresStatement& PostgresStatement::BindDouble(int index, double value) {
+  Param* p = At(index);
+  if (p == nullptr) return *this;
+  if (std::isnan(value)) {
+    *p = Param{kFloat8, true, false, ""};
+  } else if (std::isinf(value)) {
+    *p = Param{kFloat8, false, false, value > 0 ? "Infinity" : "-Infinity"};
+  } else {
+    *p = Param{kFloat8, false, false, absl::StrFormat("%.17g", value)};
+  }
+  return *this;
+}
+
+PostgresStatement& PostgresStatement::BindText(int index, absl::string_view value) {
+  if (Param* p = At(index)) {
+    if (value.find('\0') != absl::string_view::npos && bind_status_.ok()) {
+      bind_status_ = absl::InvalidArgumentError(absl::StrCat(
+          "parameter ", index, " of ", sql(), ": text with a NUL byte cannot be stored"));
+    }
+    *p = Param{kText, false, false, std::string(value)};
+  }
+  return *this;
+}
+
+PostgresStatement& PostgresStatement::BindBlob(int index, absl::string_view bytes) {
+  if (Param* p = At(index)) *p = Param{kBytea, false, true, std::string(bytes)};
+  return *this;
+}
+
+PostgresStatement& PostgresStatement::BindNull(int index) {
+  if (Param* p = At(index)) *p = Param{};
+  return *this;
+}
+
+absl::StatusOr<bool> PostgresStatement::Step() {
+  if (result_ == nullptr) {
+    if (!bind_status_.ok()) return bind_status_;
+    const size_t n = params_.size();
+    std::vector<unsigned int> types(n);
+    std::vector<const char*> values(n);
+    std::vector<int> lengths(n);
+    std::vector<int> formats(n);
+    for (size_t i = 0; i < n; ++i) {
+      const Param& p = params_[i];
+      // A parameter the SQL does not use still needs a type: PostgreSQL cannot infer one.
+      types[i] = p.type == 0 && p.null ? kText : p.type;
+      values[i] = p.null ? nullptr : p.value.data();
+      lengths[i] = static_cast<int>(p.value.size());
+      formats[i] = p.binary ? 1 : 0;
+    }
+    pg_result* result = PQexecParams(db_->conn_, pg_sql_.c_str(), static_cast<int>(n),
+                                     types.data(), values.data(), lengths.data(), formats.data(),
+                                     /*resultFormat=*/0);
+    absl::Status status = db_->CheckResult(result, sql());
+    if (!status.ok()) {
+      PQclear(result);
+      return status;
+    }
+    result_ = result;
+    row_ = -1;
+  }
+  if (row_ + 1 >= PQntuples(result_)) {
+    row_ = PQntuples(result_);
+    return false;
+  }
+  ++row_;
+  return true;
+}
+
+void PostgresStatement::Reset() {
+  PQclear(result_);
+  result_ = nullptr;
+  row_ = -1;
+  for (Param& p : params_) p = Param{};
+  bind_status_ = absl::OkStatus();
+}
+
+int PostgresStatement::ColumnCount() const {
+  return result_ == nullptr ? 0 : PQnfields(result_);
+}
+
+bool PostgresStatement::ColumnIsNull(int column) const {
+  if (result_ == nullptr || row_ < 0 || row_ >= PQntuples(result_)) return true;
+  if (column < 0 || column >= PQnfields(result_)) return true;
+  return PQgetisnull(result_, row_, column) == 1;
+}
+
+int64_t PostgresStatement::ColumnInt64(int column) const {
+  if (ColumnIsNull(column)) return 0;
+  const char* text = PQgetvalue(result_, row_, column);
+  int64_t value = 0;
+  if (absl::SimpleAtoi(text, &value)) return value;
+  // SUM() of BIGINT is NUMERIC ("12" or "12.0"); booleans read as 0/1.
+  if (text[0] == 't') return 1;
+  if (text[0] == 'f') return 0;
+  return static_cast<int64_t>(std::strtod(text, nullptr));
+}
+
+double PostgresStatement::ColumnDouble(int column) const {
+  if (ColumnIsNull(column)) return 0.0;
+  // float8 output: shortest exact form, or "NaN", "Infinity", "-Infinity" (strtod reads all).
+  return std::strtod(PQgetvalue(result_, row_, column), nullptr);
+}
+
+std::string PostgresStatement::ColumnText(int column) const {
+  if (ColumnIsNull(column)) return std::string();
+  return std::string(PQgetvalue(result_, row_, column),
+                     static_cast<size_t>(PQgetlength(result_, row_, column)));
+}
+
+std::string PostgresStatement::ColumnBlob(int column) const {
+  if (ColumnIsNull(column)) return std::string();
+  size_t size = 0;
+  unsigned char* bytes = PQunescapeBytea(
+      reinterpret_cast<const unsigned char*>(PQgetvalue(result_, row_, column)), &size);
+  if (bytes == nullptr) return std::string();
+  std::string out(reinterpret_cast<const char*>(bytes), size);
+  PQfreemem(bytes);
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// PostgresDatabase
+
+PostgresDatabase::PostgresDatabase(pg_conn* conn, std::string uri, const PostgresOptions& options)
+    : conn_(conn), uri_(std::move(uri)), name_(RedactPostgresUri(uri_)), options_(options) {}
+
+PostgresDatabase::~PostgresDatabase() {
+  WithLock([&] { cache_.clear(); });
+  PQfinish(conn_);
+}
+
+absl::StatusOr<std::unique_ptr<PostgresDatabase>> PostgresDatabase::Open(
+    const std::string& uri, const PostgresOptions& options) {
+  const std::string name = RedactPostgresUri(uri);
+  if (options.connect_timeout < absl::Seconds(1) || options.lock_timeout <= absl::ZeroDuration()) {
+    return absl::InvalidArgumentError(
+        "connect_timeout must be >= 1s and lock_timeout positive");
+  }
+  char* parse_error = nullptr;
+  PQconninfoOption* parsed = PQconninfoParse(uri.c_str(), &parse_error);
+  if (parsed == nullptr) {
+    std::string reason = parse_error != nullptr
+                             ? std::string(absl::StripTrailingAsciiWhitespace(parse_error))
+                             : "out of memory";
+    PQfreemem(parse_error);
+    return absl::InvalidArgumentError(absl::StrCat("db: ", name, ": not a PostgreSQL connection "
+                                                   "URI libpq accepts: ", reason));
+  }
+  PQconninfoFree(parsed);
+  const std::string timeout =
+      absl::StrCat(std::max<int64_t>(1, absl::ToInt64Seconds(options.connect_timeout)));
+  const char* keywords[] = {"dbname", "connect_timeout", "application_name", nullptr};
+  const char* values[] = {uri.c_str(), timeout.c_str(), "esgd", nullptr};
+  // expand_dbname = 1: the URI's own settings win over the defaults above where it gives them.
+  pg_conn* conn = PQconnectdbParams(keywords, values, /*expand_dbname=*/1);
+  if (conn == nullptr || PQstatus(conn) != CONNECTION_OK) {
+    const std::string reason = ConnectionError(conn);
+    PQfinish(conn);
+    return absl::UnavailableError(absl::StrCat("db: ", name, ": cannot connect: ", reason));
+  }
+  PQsetNoticeProcessor(conn, IgnoreNotice, nullptr);
+  std::unique_ptr<PostgresDatabase> db(new PostgresDatabase(conn, uri, options));
+  absl::Status status = db->WithLock([&] { return db->ConfigureSessionLocked(); });
+  if (!status.ok()) return status;
+  absl::StatusOr<Transaction> txn = db->Begin(TransactionMode::kDeferred);
+  if (!txn.ok()) return txn.status();
+  absl::StatusOr<Statement*> fsync = txn->Prepare("SELECT current_setting('fsync')");
+  if (!fsync.ok()) return fsync.status();
+  absl::StatusOr<bool> row = (*fsync)->Step();
+  if (!row.ok()) return row.status();
+  if (!*row || (*fsync)->ColumnText(0) != "on") {
+    return absl::FailedPreconditionError(
+        absl::StrCat("db: ", name, ": the server runs with fsync=off, so a committed (and "
+                     "acknowledged) frame would not survive a crash of its host; set fsync=on"));
+  }
+  status = txn->Commit();
+  if (!status.ok()) return status;
+  return db;
+}
+
+absl::Status PostgresDatabase::ConfigureSessionLocked() {
+  return ExecLocked(absl::StrCat(
+      "SET synchronous_commit = on; SET TIME ZONE 'UTC'; SET extra_float_digits = 3; "
+      "SET client_encoding = 'UTF8'; SET lock_timeout = ",
+      std::max<int64_t>(1, absl::ToInt64Milliseconds(options_.lock_timeout))));
+}
+
+absl::Status PostgresDatabase::EnsureConnectedLocked() {
+  if (PQstatus(conn_) == CONNECTION_OK) return absl::OkStatus();
+  PQreset(conn_);
+  if (PQstatus(conn_) != CONNECTION_OK) {
+    return absl::UnavailableError(
+        absl::StrCat("db: ", name_, ": connection lost: ", ConnectionError(conn_)));
+  }
+  PQsetNoticeProcessor(conn_, IgnoreNotice, nullptr);
+  return ConfigureSessionLocked();
+}
+
+absl::Status PostgresDatabase::CheckResult(pg_result* result, absl::string_view context) {
+  const ExecStatusType status = result == nullptr ? PGRES_FATAL_ERROR : PQresultStatus(result);
+  if (status == PGRES_COMMAND_OK || status == PGRES_TUPLES_OK) {
+    int64_t rows = 0;
+    changed_rows_ = absl::SimpleAtoi(PQcmdTuples(result), &rows) ? rows : 0;
+    return absl::OkStatus();
+  }
+  const char* sqlstate = result == nullptr ? nullptr : PQresultErrorField(result, PG_DIAG_SQLSTATE);
+  std::string message = result != nullptr && PQresultErrorMessage(result)[0] != '\0'
+                            ? PQresultErrorMessage(result)
+                            : PQerrorMessage(conn_);
+  message = std::string(absl::StripTrailingAsciiWhitespace(message));
+  if (PQstatus(conn_) != CONNECTION_OK) {
+    return absl::UnavailableError(
+        absl::StrCat("postgresql: ", context, ": connection lost: ", message));
+  }
+  return absl::Status(StatusCodeForSqlState(sqlstate == nullptr ? "" : sqlstate),
+                      absl::StrCat("postgresql: ", context, ": ", message,
+                                   sqlstate == nullptr ? "" : absl::StrCat(" (SQLSTATE ", sqlstate, ")")));
+}
+
+absl::Status PostgresDatabase::BeginLocked(TransactionMode mode) {
+  absl::Status status = EnsureConnectedLocked();
+  if (!status.ok()) return status;
+  // A connection left inside a transaction (a failed ROLLBACK) is ended first.
+  if (PQtransactionStatus(conn_) != PQTRANS_IDLE) ExecLocked("ROLLBACK").IgnoreError();
+  // READ COMMITTED in both modes: every row a server writes belongs to a spacecraft it owns
+  // (docs/service.md "Storage backends"), and the keys back every insert.
+  (void)mode;
+  return ExecLocked("BEGIN");
+}
+
+absl::Status PostgresDatabase::ExecLocked(absl::string_view sql) {
+  const std::string text(sql);
+  pg_result* result = PQexec(conn_, text.c_str());
+  absl::Status status = CheckResult(result, text);
+  PQclear(result);
+  return status;
+}
+
+absl::StatusOr<Statement*> PostgresDatabase::PrepareLocked(absl::string_view sql) {
+  auto it = cache_.find(sql);
+  if (it != cache_.end()) {
+    it->second->Reset();
+    return it->second.get();
+  }
+  int parameters = 0;
+  absl::StatusOr<std::string> pg_sql = TranslateParameters(sql, &parameters);
+  if (!pg_sql.ok()) return pg_sql.status();
+  auto st = std::unique_ptr<PostgresStatement>(
+      new PostgresStatement(this, std::string(sql), *std::move(pg_sql), parameters));
+  PostgresStatement* result = st.get();
+  cache_.emplace(std::string(sql), std::move(st));
+  return result;
+}
+
+absl::Status PostgresDatabase::CommitLocked() {
+  pg_result* result = PQexec(conn_, "COMMIT");
+  absl::Status status = CheckResult(result, "COMMIT");
+  // COMMIT of a transaction an earlier error aborted "succeeds" with the tag ROLLBACK.
+  if (status.ok() && std::string(PQcmdStatus(result)) != "COMMIT") {
+    status = absl::AbortedError("the transaction was aborted by an earlier error");
+  }
+  PQclear(result);
+  if (!status.ok() && PQstatus(conn_) == CONNECTION_OK &&
+      PQtransactionStatus(conn_) != PQTRANS_IDLE) {
+    ExecLocked("ROLLBACK").IgnoreError();
+  }
+  return status;
+}
+
+absl::Status PostgresDatabase::RollbackLocked() {
+  if (PQstatus(conn_) != CONNECTION_OK) return absl::OkStatus();  // the server rolls back
+  if (PQtransactionStatus(conn_) == PQTRANS_IDLE) return absl::OkStatus();
+  return ExecLocked("ROLLBACK");
+}
+
+absl::Status PostgresDatabase::QuickCheck() {
+  absl::StatusOr<Transaction> txn = Begin(TransactionMode::kDeferred);
+  if (!txn.ok()) return txn.status();
+  absl::StatusOr<Statement*> tables = txn->Prepare(
+      "SELECT tablename FROM pg_catalog.pg_tables WHERE schemaname = current_schema() "
+      "ORDER BY tablename");
+  if (!tables.ok()) return tables.status();
+  std::vector<std::string> names;
+  while (true) {
+    absl::StatusOr<bool> row = (*tables)->Step();
+    if (!row.ok()) return row.status();
+    if (!*row) break;
+    names.push_back((*tables)->ColumnText(0));
+  }
+  for (const std::string& table : names) {
+    // Reads every row (a sequential scan touches each page, whose checksum the server checks).
+    absl::StatusOr<Statement*> count =
+        txn->Prepare(absl::StrCat("SELECT COUNT(*) FROM \"", table, "\""));
+    if (!count.ok()) return count.status();
+    absl::StatusOr<bool> row = (*count)->Step();
+    if (!row.ok()) {
+      return absl::DataLossError(absl::StrCat("database ", name_, ": table ", table,
+                                              " cannot be read: ", row.status().message()));
+    }
+  }
+  return txn->Commit();
+}
+
+}  // namespace esg::storage

@@ -1,0 +1,26 @@
+// The PostgreSQL schema of the service database (postgres_db.h) and its versions, kept in the
+// table esg_schema. A new PostgreSQL database starts directly at the current schema version of
+// schema.h (the same tables, columns and keys as SQLite's, in PostgreSQL types: BIGINT,
+// DOUBLE PRECISION, TEXT, BYTEA); a later version appends a migration to both engines.
+// Creation and migrations hold a transaction-scoped advisory lock, so several servers starting
+// against one database at once create the schema once.
+#ifndef ESG_STORAGE_POSTGRES_SCHEMA_H_
+#define ESG_STORAGE_POSTGRES_SCHEMA_H_
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "storage/database.h"
+
+namespace esg::storage {
+
+// The version in esg_schema; 0 for a database without the service's tables.
+absl::StatusOr<int> PostgresSchemaVersion(Database& db);
+
+// Creates the current schema in a database without it; FailedPrecondition for a database newer
+// than this program or one holding other tables named like the service's. `target_version`
+// must be 0 (nothing to do) or kCurrentSchemaVersion: older layouts exist only in SQLite files.
+absl::Status MigratePostgresTo(Database& db, int target_version);
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_POSTGRES_SCHEMA_H_
