@@ -36,7 +36,9 @@ int main(int argc, char** argv) {
   CLI::App app{"esgd: ESG attitude estimation service (gRPC esg.v1.EstimationService)"};
   app.add_option("--listen", options.listen, "Address to serve on, host:port")
       ->capture_default_str();
-  app.add_option("--db", options.db_path, "SQLite database file (directories are created)")
+  app.add_option("--db", options.db_path,
+                 "SQLite database file (directories are created), or a PostgreSQL connection URI "
+                 "postgresql://user@host:port/database (docs/service.md \"Storage backends\")")
       ->capture_default_str();
   app.add_option("--tls-cert", options.tls_cert_file, "Server certificate chain (PEM)");
   app.add_option("--tls-key", options.tls_key_file, "Server private key (PEM)");

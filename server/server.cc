@@ -174,7 +174,9 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   if (!options.tokens_file.empty()) {
     ASSIGN_OR_RETURN(s->auth_, TokenAuthorizer::FromFile(options.tokens_file));
   }
-  const std::filesystem::path parent = std::filesystem::path(options.db_path).parent_path();
+  const bool postgres = storage::IsPostgresUri(options.db_path);
+  const std::filesystem::path parent =
+      postgres ? std::filesystem::path() : std::filesystem::path(options.db_path).parent_path();
   if (!parent.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(parent, ec);
@@ -250,11 +252,12 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   }
   LogEvent("INFO", "started",
            absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
-                        options.db_path, s->auth_ ? ", bearer tokens required" : "",
+                        s->storage_->database().path(),
+                        s->auth_ ? ", bearer tokens required" : "",
                         options.tls_cert_file.empty()        ? ", plaintext"
                         : options.tls_client_ca_file.empty() ? ", TLS"
                                                              : ", mutual TLS"),
-           {{"port", s->port_}, {"database", options.db_path}});
+           {{"port", s->port_}, {"database", s->storage_->database().path()}});
   LogEvent("INFO", "limits", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
                            " per caller, ", options.calls.max_predictions, " in total; diagnoses ",
                            options.calls.max_diagnoses_per_caller, " per caller, ",
