@@ -1,0 +1,132 @@
+// tests/testing/postgres_server.h: the shared server starts as configured, its databases are
+// separate, and a committed row survives kill -9 of the postmaster while an uncommitted one does
+// not.
+#include "tests/testing/postgres_server.h"
+
+#include <libpq-fe.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/testing/status_matchers.h"
+
+namespace esg::testing {
+namespace {
+
+using ::testing::ElementsAre;
+using ::testing::HasSubstr;
+using ::testing::IsEmpty;
+using ::testing::StartsWith;
+
+using Connection = std::unique_ptr<PGconn, decltype(&PQfinish)>;
+
+Connection Connect(const std::string& uri) {
+  Connection conn(PQconnectdb(uri.c_str()), &PQfinish);
+  EXPECT_EQ(PQstatus(conn.get()), CONNECTION_OK) << uri << ": " << PQerrorMessage(conn.get());
+  return conn;
+}
+
+// Runs sql; returns the first column of every row, or fails the test and returns {"<error>"}.
+std::vector<std::string> Query(PGconn* conn, const std::string& sql) {
+  std::unique_ptr<PGresult, decltype(&PQclear)> result(PQexec(conn, sql.c_str()), &PQclear);
+  const ExecStatusType status = PQresultStatus(result.get());
+  if (status != PGRES_COMMAND_OK && status != PGRES_TUPLES_OK) {
+    ADD_FAILURE() << sql << ": " << PQerrorMessage(conn);
+    return {"<error>"};
+  }
+  std::vector<std::string> column;
+  for (int row = 0; row < PQntuples(result.get()); ++row) {
+    column.emplace_back(PQgetvalue(result.get(), row, 0));
+  }
+  return column;
+}
+
+PostgresServer* SharedOrFail() {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  EXPECT_NE(server, nullptr) << error;
+  return server;
+}
+
+TEST(PostgresServerTest, SharedServerListensOnLoopbackWithFsyncOn) {
+  PostgresServer* server = SharedOrFail();
+  ASSERT_NE(server, nullptr);
+  EXPECT_EQ(PostgresServer::Shared(), server);
+  EXPECT_GT(server->port(), 0);
+  EXPECT_EQ(server->Uri("db1"),
+            "postgresql://esg@127.0.0.1:" + std::to_string(server->port()) + "/db1");
+
+  Connection conn = Connect(server->Uri("postgres"));
+  ASSERT_EQ(PQstatus(conn.get()), CONNECTION_OK);
+  EXPECT_THAT(Query(conn.get(), "SHOW fsync"), ElementsAre("on"));
+  EXPECT_THAT(Query(conn.get(), "SHOW listen_addresses"), ElementsAre("127.0.0.1"));
+  EXPECT_THAT(Query(conn.get(), "SHOW unix_socket_directories"), ElementsAre(server->data_dir()));
+  EXPECT_THAT(Query(conn.get(), "SHOW server_encoding"), ElementsAre("UTF8"));
+  EXPECT_THAT(Query(conn.get(), "SELECT current_user"), ElementsAre("esg"));
+  EXPECT_THAT(Query(conn.get(), "SHOW server_version_num"), ElementsAre(StartsWith("15")));
+}
+
+TEST(PostgresServerTest, DatabasesAreSeparate) {
+  PostgresServer* server = SharedOrFail();
+  ASSERT_NE(server, nullptr);
+  absl::StatusOr<std::string> first = server->CreateDatabase();
+  absl::StatusOr<std::string> second = server->CreateDatabase();
+  ASSERT_THAT(first, IsOk());
+  ASSERT_THAT(second, IsOk());
+  EXPECT_NE(*first, *second);
+  EXPECT_THAT(*first, HasSubstr("/esg_test_"));
+
+  Connection a = Connect(*first);
+  Connection b = Connect(*second);
+  ASSERT_EQ(PQstatus(a.get()), CONNECTION_OK);
+  ASSERT_EQ(PQstatus(b.get()), CONNECTION_OK);
+  EXPECT_THAT(Query(a.get(), "SELECT current_database()"),
+              ElementsAre(first->substr(first->rfind('/') + 1)));
+  Query(a.get(), "CREATE TABLE t (v text)");
+  Query(b.get(), "CREATE TABLE t (v text)");
+  Query(a.get(), "INSERT INTO t VALUES ('written in the first')");
+  EXPECT_THAT(Query(a.get(), "SELECT v FROM t"), ElementsAre("written in the first"));
+  EXPECT_THAT(Query(b.get(), "SELECT v FROM t"), IsEmpty());
+}
+
+TEST(PostgresServerTest, KillAndRestartKeepCommittedRowsOnly) {
+  PostgresServer* server = SharedOrFail();
+  ASSERT_NE(server, nullptr);
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  const int port = server->port();
+  {
+    Connection conn = Connect(*uri);
+    ASSERT_EQ(PQstatus(conn.get()), CONNECTION_OK);
+    Query(conn.get(), "CREATE TABLE t (v text)");
+    Query(conn.get(), "INSERT INTO t VALUES ('committed')");
+    Connection open_transaction = Connect(*uri);
+    ASSERT_EQ(PQstatus(open_transaction.get()), CONNECTION_OK);
+    Query(open_transaction.get(), "BEGIN");
+    Query(open_transaction.get(), "INSERT INTO t VALUES ('not committed')");
+
+    ASSERT_THAT(server->Kill(), IsOk());
+    // The connection's backend died with the postmaster.
+    std::unique_ptr<PGresult, decltype(&PQclear)> after_kill(PQexec(conn.get(), "SELECT 1"),
+                                                             &PQclear);
+    EXPECT_NE(PQresultStatus(after_kill.get()), PGRES_TUPLES_OK);
+  }
+  EXPECT_THAT(server->Kill(),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("not running")));
+
+  ASSERT_THAT(server->Restart(), IsOk());
+  EXPECT_EQ(server->port(), port);
+  EXPECT_THAT(server->Restart(),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("is running")));
+  Connection conn = Connect(*uri);
+  ASSERT_EQ(PQstatus(conn.get()), CONNECTION_OK);
+  EXPECT_THAT(Query(conn.get(), "SELECT v FROM t ORDER BY v"), ElementsAre("committed"));
+  // The restarted server still makes databases.
+  EXPECT_THAT(server->CreateDatabase(), IsOk());
+}
+
+}  // namespace
+}  // namespace esg::testing
