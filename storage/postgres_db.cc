@@ -27,11 +27,12 @@ constexpr unsigned int kText = 25;
 constexpr unsigned int kFloat8 = 701;
 
 // Rewrites SQLite's numbered parameters "?N" as "$N" outside string literals and quoted
-// identifiers; *parameters: the largest N. InvalidArgument for an unnumbered "?".
-absl::StatusOr<std::string> TranslateParameters(absl::string_view sql, int* parameters) {
+// identifiers; (*used)[N - 1]: whether ?N occurs, up to the largest N. InvalidArgument for an
+// unnumbered "?".
+absl::StatusOr<std::string> TranslateParameters(absl::string_view sql, std::vector<bool>* used) {
   std::string out;
   out.reserve(sql.size());
-  *parameters = 0;
+  used->clear();
   char quote = 0;
   for (size_t i = 0; i < sql.size(); ++i) {
     const char c = sql[i];
@@ -56,7 +57,8 @@ absl::StatusOr<std::string> TranslateParameters(absl::string_view sql, int* para
       return absl::InvalidArgumentError(
           absl::StrCat("parameters must be numbered (?1, ?2, ...): ", sql));
     }
-    *parameters = std::max(*parameters, n);
+    if (static_cast<int>(used->size()) < n) used->resize(static_cast<size_t>(n), false);
+    (*used)[static_cast<size_t>(n - 1)] = true;
     absl::StrAppend(&out, "$", n);
     i = j - 1;
   }
@@ -120,8 +122,12 @@ absl::StatusCode StatusCodeForSqlState(absl::string_view sqlstate) {
 // PostgresStatement
 
 PostgresStatement::PostgresStatement(PostgresDatabase* db, std::string sql, std::string pg_sql,
-                                     int parameters)
-    : Statement(std::move(sql)), db_(db), pg_sql_(std::move(pg_sql)), params_(parameters) {}
+                                     std::vector<bool> used)
+    : Statement(std::move(sql)),
+      db_(db),
+      pg_sql_(std::move(pg_sql)),
+      used_(std::move(used)),
+      params_(used_.size()) {}
 
 PostgresStatement::~PostgresStatement() { PQclear(result_); }
 
@@ -186,7 +192,7 @@ absl::StatusOr<bool> PostgresStatement::Step() {
     for (size_t i = 0; i < n; ++i) {
       const Param& p = params_[i];
       // A parameter the SQL does not use still needs a type: PostgreSQL cannot infer one.
-      types[i] = p.type == 0 && p.null ? kText : p.type;
+      types[i] = p.type == 0 && !used_[i] ? kText : p.type;
       values[i] = p.null ? nullptr : p.value.data();
       lengths[i] = static_cast<int>(p.value.size());
       formats[i] = p.binary ? 1 : 0;
@@ -386,11 +392,11 @@ absl::StatusOr<Statement*> PostgresDatabase::PrepareLocked(absl::string_view sql
     it->second->Reset();
     return it->second.get();
   }
-  int parameters = 0;
-  absl::StatusOr<std::string> pg_sql = TranslateParameters(sql, &parameters);
+  std::vector<bool> used;
+  absl::StatusOr<std::string> pg_sql = TranslateParameters(sql, &used);
   if (!pg_sql.ok()) return pg_sql.status();
   auto st = std::unique_ptr<PostgresStatement>(
-      new PostgresStatement(this, std::string(sql), *std::move(pg_sql), parameters));
+      new PostgresStatement(this, std::string(sql), *std::move(pg_sql), std::move(used)));
   PostgresStatement* result = st.get();
   cache_.emplace(std::string(sql), std::move(st));
   return result;

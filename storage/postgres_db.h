@@ -91,11 +91,13 @@ class PostgresStatement final : public Statement {
     bool binary = false;
     std::string value;
   };
-  PostgresStatement(PostgresDatabase* db, std::string sql, std::string pg_sql, int parameters);
+  PostgresStatement(PostgresDatabase* db, std::string sql, std::string pg_sql,
+                    std::vector<bool> used);
   Param* At(int index);
 
   PostgresDatabase* db_;
-  const std::string pg_sql_;  // with $N parameters
+  const std::string pg_sql_;     // with $N parameters
+  const std::vector<bool> used_;  // [N - 1]: whether $N occurs in pg_sql_
   std::vector<Param> params_;
   absl::Status bind_status_;
   pg_result* result_ = nullptr;
