@@ -133,6 +133,9 @@ void EstimationCore::WorkerLoop() {
 bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   if (options_.before_apply_job) options_.before_apply_job(sc->id);
   absl::MutexLock job(&sc->job_mu);
+  // A session another server took over is that server's to apply (its record here is replaced
+  // when this server takes the lease again).
+  if (sc->lease_lost) return false;
   std::optional<EstimationSession> session;
   ServerCheckpoint apply;
   std::shared_ptr<const Setup> setup;
@@ -376,6 +379,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   std::vector<int64_t> new_sequences;
   storage::FilterEffects effects;
   effects.spacecraft_id = sc->id;
+  effects.fence = FenceOf(*sc);
   effects.coefficients = std::move(coefficients);
   // Retention of the per-step estimates, amortised: once the newest has advanced by the period.
   std::optional<absl::Time> retained_at;
@@ -424,6 +428,12 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   if (committed.ok()) new_sequences = std::move(*committed);
   metrics_.storage_commit.With({"filter"}).Observe(
       absl::ToDoubleSeconds(absl::Now() - commit_start));
+  if (storage::LeaseLostSpacecraft(status).has_value()) {
+    sc->lease_lost = true;
+    LogEvent("WARNING", "session_lost", std::string(status.message()),
+             {{"spacecraftId", sc->id}});
+    return false;
+  }
   if (!status.ok()) {
     // Storage trouble (a full disk, an I/O error): health says so; this job is retried with a
     // growing pause (at most 2 s), the installed session and its checkpoint stay as they were.

@@ -21,9 +21,11 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
   std::vector<storage::ArchivedFrame> frames;
   frames.reserve(batch.size());
   std::map<std::string, std::vector<absl::Time>> late;
+  std::map<std::string, storage::LeaseFence> fences;  // with leases
   for (const CommitEntry& e : batch) {
     if (e.barrier) continue;
     if (e.late) late[e.sc->id].push_back(e.time);
+    if (std::optional<storage::LeaseFence> fence = FenceOf(*e.sc)) fences[e.sc->id] = *fence;
     storage::ArchivedFrame f;
     f.spacecraft_id = e.sc->id;
     f.station_id = e.station;
@@ -35,7 +37,7 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
   // Ingest decided every frame new; one the archive already holds fails the whole commit
   // (AlreadyExists) rather than be acknowledged falsely. Late frames are recorded in the same
   // transaction: a restart still re-runs the filter over them.
-  return storage_->ArchiveFrames(frames, late);
+  return storage_->ArchiveFrames(frames, late, fences);
 }
 
 void EstimationCore::SetStorageFault(const std::string& reason) {
@@ -154,6 +156,18 @@ void EstimationCore::CommitterLoop() {
     const absl::Status status = CommitFrames(batch);
     metrics_.storage_commit.With({"telemetry"}).Observe(
         absl::ToDoubleSeconds(absl::Now() - commit_start));
+    if (!status.ok() && storage::LeaseLostSpacecraft(status).has_value()) {
+      // Another server took a session over (a race with the lease renewal): not a storage
+      // fault. Its record is marked lost; the batch's senders resume as after a fault.
+      const std::string lost = *storage::LeaseLostSpacecraft(status);
+      if (std::shared_ptr<Spacecraft> sc = Find(lost)) sc->lease_lost = true;
+      LogEvent("WARNING", "session_lost", std::string(status.message()),
+               {{"spacecraftId", lost}});
+      FailBatch(batch, absl::UnavailableError(absl::StrCat(
+                           status.message(), "; these frames are not stored: resume from "
+                           "highest_durable_sequence + 1")));
+      continue;
+    }
     if (!status.ok()) {
       const std::string reason(status.ToString());
       SetStorageFault(reason);

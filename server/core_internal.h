@@ -6,6 +6,7 @@
 #define ESG_SERVER_CORE_INTERNAL_H_
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -67,6 +68,12 @@ struct ReadyFrame {
 struct EstimationCore::Spacecraft {
   explicit Spacecraft(std::string spacecraft_id) : id(std::move(spacecraft_id)) {}
   const std::string id;
+
+  // Several servers on one database (CoreOptions::node_id): the epoch of this server's lease of
+  // the session (0: no leases), and whether it was found taken over (the record is then
+  // replaced when the lease is taken again).
+  std::atomic<int64_t> lease_epoch{0};
+  std::atomic<bool> lease_lost{false};
 
   // Held for a whole worker job and by a reconfiguration.
   absl::Mutex job_mu;

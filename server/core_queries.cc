@@ -127,8 +127,7 @@ esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
 
 absl::StatusOr<esg::v1::SessionInfo> EstimationCore::GetSession(const std::string& spacecraft_id) {
   if (spacecraft_id.empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  std::shared_ptr<Spacecraft> sc = Find(spacecraft_id);
-  if (sc == nullptr) return NotConfigured(spacecraft_id);
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(spacecraft_id));
   return Summarize(*sc);
 }
 
@@ -283,8 +282,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     const std::function<void(double fraction, const std::string& stage)>& progress,
     const std::function<bool()>& cancelled) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
-  if (sc == nullptr) return NotConfigured(request.spacecraft_id());
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
   absl::Time from = absl::InfinitePast();
   absl::Time to = absl::InfiniteFuture();
   if (request.has_from()) {
@@ -359,7 +357,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
 absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
     const esg::v1::ListDiagnosesRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
   ASSIGN_OR_RETURN(const int64_t size,
                    PageSize(request.page_size(), kDefaultDiagnosesPageSize, kMaxDiagnosesPageSize));
   int64_t after_id = 0;
@@ -388,7 +386,7 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::GetDiagnosis(
     const esg::v1::GetDiagnosisRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
   absl::StatusOr<storage::DiagnosisRecord> record = storage_->diagnoses().Get(request.id());
   if (absl::IsNotFound(record.status()) ||
       (record.ok() && record->spacecraft_id != request.spacecraft_id())) {
@@ -404,7 +402,7 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   ASSIGN_OR_RETURN(const int64_t size,
                    PageSize(request.page_size(), kDefaultHistoryPageSize, kMaxHistoryPageSize));
-  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
   if (request.gyro_id() < 0 || request.gyro_id() > estimator::kMaxGyros) {
     return absl::InvalidArgumentError(
         absl::StrCat("gyro_id: must be 0 (all) or 1..4, got ", request.gyro_id()));
@@ -456,7 +454,7 @@ absl::StatusOr<esg::v1::EstimateHistoryResponse> EstimationCore::EstimateHistory
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   ASSIGN_OR_RETURN(const int64_t size, PageSize(request.page_size(), kDefaultEstimatesPageSize,
                                                 kMaxEstimatesPageSize));
-  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
   absl::Time from = absl::InfinitePast();
   absl::Time to = absl::InfiniteFuture();
   if (request.has_from()) {
@@ -502,7 +500,7 @@ absl::StatusOr<esg::v1::ExportTelemetryResponse> EstimationCore::ExportTelemetry
     const esg::v1::ExportTelemetryRequest& request, absl::Time* after, bool* done) {
   *done = true;
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  if (Find(request.spacecraft_id()) == nullptr) return NotConfigured(request.spacecraft_id());
+  RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
   absl::Time from = absl::InfinitePast();
   absl::Time to = absl::InfiniteFuture();
   if (request.has_from()) {
@@ -538,8 +536,7 @@ absl::StatusOr<esg::v1::ExportTelemetryResponse> EstimationCore::ExportTelemetry
 absl::StatusOr<esg::v1::Alert> EstimationCore::Acknowledge(
     const esg::v1::AcknowledgeRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
-  if (sc == nullptr) return NotConfigured(request.spacecraft_id());
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
   if (request.sequence() < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("sequence: must be >= 1, got ", request.sequence()));

@@ -35,6 +35,7 @@ absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::S
   core->committer_ = std::thread([c = core.get()] { c->CommitterLoop(); });
   const int n = std::max(1, options.worker_threads);
   for (int i = 0; i < n; ++i) core->workers_.emplace_back([c = core.get()] { c->WorkerLoop(); });
+  if (core->shared()) core->lease_renewer_ = std::thread([c = core.get()] { c->LeaseLoop(); });
   for (const auto& sc : core->registry_.All()) core->Schedule(sc);
   return core;
 }
@@ -64,6 +65,8 @@ void EstimationCore::CollectGauges() {
 }
 
 absl::Status EstimationCore::Load() {
+  // With leases a session is loaded when a call for it arrives (Lookup), by one server.
+  if (shared()) return absl::OkStatus();
   ASSIGN_OR_RETURN(std::vector<storage::ConfigRecord> configs, storage_->configs().List());
   for (const storage::ConfigRecord& record : configs) RETURN_IF_ERROR(LoadSpacecraft(record));
   return absl::OkStatus();
@@ -71,8 +74,10 @@ absl::Status EstimationCore::Load() {
 
 // A stored configuration or checkpoint that cannot be used quarantines its spacecraft only
 // (docs/service.md "Session states"): the others and the server start as usual.
-absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record) {
+absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record,
+                                            int64_t lease_epoch) {
   auto sc = std::make_shared<Spacecraft>(record.spacecraft_id);
+  sc->lease_epoch = lease_epoch;
   using StationSequences = std::map<std::string, int64_t>;
   ASSIGN_OR_RETURN(StationSequences highest,
                    storage_->archive().HighestSequences(record.spacecraft_id));
@@ -275,6 +280,21 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
   }
   for (std::thread& t : workers_) t.join();
   workers_.clear();
+  if (lease_renewer_.joinable()) lease_renewer_.join();
+  // Nothing of this server writes any more: another server may take each session at once
+  // instead of waiting for the expiry.
+  if (shared()) {
+    for (const auto& sc : registry_.All()) {
+      if (sc->lease_lost) continue;
+      const absl::Status released = storage_->leases().Release(sc->id, *FenceOf(*sc));
+      if (!released.ok()) {
+        LogEvent("WARNING", "lease_release_failed",
+                 absl::StrCat("cannot release the session lease of ", sc->id, ": ",
+                              released.message(), " (it expires by itself)"),
+                 {{"spacecraftId", sc->id}});
+      }
+    }
+  }
 }
 
 std::shared_ptr<EstimationCore::Spacecraft> EstimationCore::Find(const std::string& id) {
@@ -289,8 +309,83 @@ std::vector<std::string> EstimationCore::SpacecraftIds() {
 }
 
 absl::Status EstimationCore::CheckSpacecraft(const std::string& spacecraft_id) {
-  if (spacecraft_id.empty() || Find(spacecraft_id) != nullptr) return absl::OkStatus();
-  return NotConfigured(spacecraft_id);
+  if (spacecraft_id.empty()) return absl::OkStatus();
+  return CheckConfigured(spacecraft_id);
+}
+
+absl::Status EstimationCore::CheckConfigured(const std::string& spacecraft_id) {
+  if (Find(spacecraft_id) != nullptr) return absl::OkStatus();
+  if (!shared()) return NotConfigured(spacecraft_id);
+  absl::StatusOr<storage::ConfigRecord> stored = storage_->configs().Get(spacecraft_id);
+  if (absl::IsNotFound(stored.status())) return NotConfigured(spacecraft_id);
+  return stored.status();
+}
+
+absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Lookup(
+    const std::string& spacecraft_id) {
+  std::shared_ptr<Spacecraft> sc = Find(spacecraft_id);
+  if (!shared()) {
+    if (sc == nullptr) return NotConfigured(spacecraft_id);
+    return sc;
+  }
+  if (sc != nullptr && !sc->lease_lost) return sc;
+  absl::MutexLock takeover(&takeover_mu_);
+  sc = Find(spacecraft_id);
+  if (sc != nullptr && !sc->lease_lost) return sc;
+  absl::StatusOr<storage::ConfigRecord> record = storage_->configs().Get(spacecraft_id);
+  if (absl::IsNotFound(record.status())) return NotConfigured(spacecraft_id);
+  if (!record.ok()) return record.status();
+  absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
+      spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
+  if (absl::IsUnavailable(lease.status())) {
+    return absl::UnavailableError(absl::StrCat(
+        lease.status().message(), "; retry after that (leases last ",
+        absl::FormatDuration(options_.lease_duration), "): docs/service.md \"Several servers\""));
+  }
+  if (!lease.ok()) return lease.status();
+  // The session as the last owner left it: its checkpoint, then the archive after it.
+  RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
+  sc = Find(spacecraft_id);
+  if (sc == nullptr) return absl::InternalError("a loaded session is not in the registry");
+  LogEvent("INFO", "session_taken",
+           absl::StrCat("took the session of ", spacecraft_id, " (lease epoch ", lease->epoch,
+                        ")"),
+           {{"spacecraftId", spacecraft_id}, {"leaseEpoch", lease->epoch}});
+  Schedule(sc);
+  return sc;
+}
+
+std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc) const {
+  if (!shared()) return std::nullopt;
+  return storage::LeaseFence{options_.node_id, sc.lease_epoch.load()};
+}
+
+void EstimationCore::LeaseLoop() {
+  const absl::Duration period = options_.lease_duration / 3;
+  for (;;) {
+    {
+      absl::MutexLock lock(&stop_mu_);
+      stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), period);
+      if (stopped_) return;
+    }
+    for (const auto& sc : registry_.All()) {
+      if (sc->lease_lost) continue;
+      const absl::Status renewed = storage_->leases().Renew(sc->id, *FenceOf(*sc), absl::Now(),
+                                                            options_.lease_duration);
+      if (absl::IsNotFound(renewed)) {
+        sc->lease_lost = true;
+        LogEvent("WARNING", "session_lost",
+                 absl::StrCat("the session of ", sc->id, " was taken over by another server: ",
+                              renewed.message()),
+                 {{"spacecraftId", sc->id}});
+      } else if (!renewed.ok()) {
+        LogEvent("ERROR", "lease_renewal_failed",
+                 absl::StrCat("cannot renew the session lease of ", sc->id, ": ",
+                              renewed.message()),
+                 {{"spacecraftId", sc->id}});
+      }
+    }
+  }
 }
 
 absl::Status EstimationCore::WaitApplied(const std::string& spacecraft_id, absl::Duration timeout) {
@@ -366,6 +461,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   std::vector<int64_t> revised_alerts;  // the old session's, revised by the new one
   bool new_session = false;  // replaces a session: its window checkpoints and late frames go
   std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
+  std::optional<storage::LeaseFence> fence;  // with leases: this server's lease of the session
   auto write = [&]() -> absl::Status {
     cp.state_blob = EncodeCheckpoint(checkpoint);
     storage::ConfigurationChange change;
@@ -373,6 +469,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
     change.checkpoint = cp;
     change.new_session = new_session;
     change.revised_alerts = revised_alerts;
+    change.fence = fence;
     if (quarantine_end.has_value()) {
       change.new_alerts = quarantine_end->new_alerts();
       for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
@@ -393,11 +490,26 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   };
 
   absl::MutexLock configure(&configure_mu_);
-  std::shared_ptr<Spacecraft> sc = Find(config.spacecraft_id);
+  std::shared_ptr<Spacecraft> sc;
+  int64_t new_lease_epoch = 0;  // a new spacecraft's lease, with leases
+  if (absl::StatusOr<std::shared_ptr<Spacecraft>> found = Lookup(config.spacecraft_id);
+      found.ok()) {
+    sc = *std::move(found);
+    fence = FenceOf(*sc);
+  } else if (!absl::IsNotFound(found.status())) {
+    return found.status();
+  } else if (shared()) {
+    ASSIGN_OR_RETURN(storage::SessionLease lease,
+                     storage_->leases().Acquire(config.spacecraft_id, options_.node_id,
+                                                absl::Now(), options_.lease_duration));
+    new_lease_epoch = lease.epoch;
+    fence = storage::LeaseFence{options_.node_id, new_lease_epoch};
+  }
   esg::v1::ConfigureResponse response;
   if (sc == nullptr) {
     RETURN_IF_ERROR(store());
     sc = std::make_shared<Spacecraft>(config.spacecraft_id);
+    sc->lease_epoch = new_lease_epoch;
     {
       absl::MutexLock lock(&sc->ingest_mu);
       sc->ingest_setup = setup;

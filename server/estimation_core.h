@@ -114,6 +114,13 @@ struct CoreOptions {
   absl::Time earliest_frame_time = absl::UnixEpoch();
   absl::Time latest_frame_time =
       absl::FromCivil(absl::CivilSecond(2200, 1, 1, 0, 0, 0), absl::UTCTimeZone());
+  // Several servers sharing one PostgreSQL database (docs/service.md "Several servers"): this
+  // server's node id, non-empty to turn on session leases. A spacecraft's session is then loaded
+  // when a call for it first arrives, after taking its lease (storage/lease_store.h); every write
+  // checks the lease; the leases are renewed every lease_duration / 3 and released at Stop().
+  // Empty: one server owns the database and loads every session at the start.
+  std::string node_id;
+  absl::Duration lease_duration = absl::Seconds(15);
   // Consecutive filter failures (Internal or DataLoss from the estimator) that quarantine a
   // spacecraft.
   int quarantine_after_failures = 1;
@@ -243,7 +250,22 @@ class EstimationCore {
   absl::Status Load();
   // Loads one configured spacecraft; a checkpoint that cannot be used quarantines it (rebuilt
   // from the archive where possible) instead of failing the start. Errors: storage reads only.
-  absl::Status LoadSpacecraft(const storage::ConfigRecord& record);
+  // `lease_epoch`: the session lease taken for it (0: no leases).
+  absl::Status LoadSpacecraft(const storage::ConfigRecord& record, int64_t lease_epoch = 0);
+  // The spacecraft's record for a call that needs its session: Find(), and with leases (node_id)
+  // a record whose lease this server holds, taking the lease and loading the session (checkpoint
+  // plus archive after it) if needed. NotFound "not configured"; Unavailable "served by node N
+  // until T; retry in S s" while another server holds the lease.
+  absl::StatusOr<std::shared_ptr<Spacecraft>> Lookup(const std::string& spacecraft_id);
+  // OK if the spacecraft is configured (in the registry, or with leases in the database): for
+  // calls that only read the database. NotFound "not configured" otherwise.
+  absl::Status CheckConfigured(const std::string& spacecraft_id);
+  bool shared() const { return !options_.node_id.empty(); }
+  // The lease fence of `sc` for a write (nullopt without leases).
+  std::optional<storage::LeaseFence> FenceOf(const Spacecraft& sc) const;
+  // Renews the held leases every lease_duration / 3; a lease found taken over marks its record
+  // lost (calls for it take the lease again, or are refused while another server holds it).
+  void LeaseLoop();
   // Ingest helpers (ingest.cc).
   absl::StatusOr<std::optional<storage::ArchivedFrame>> FindStoredFrame(
       Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
@@ -311,6 +333,8 @@ class EstimationCore {
   bool commit_stop_ ABSL_GUARDED_BY(commit_mu_) = false;
   bool ingest_closed_ ABSL_GUARDED_BY(commit_mu_) = false;
   std::thread committer_;
+  std::thread lease_renewer_;  // with leases only
+  absl::Mutex takeover_mu_;    // one lease take and session load at a time
 
   // Worker pool.
   absl::Mutex pool_mu_;

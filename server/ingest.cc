@@ -115,8 +115,9 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                   absl::StrCat(frame_bytes, " bytes exceed the limit of ",
                                options_.max_frame_bytes));
   }
-  std::shared_ptr<Spacecraft> sc = Find(proto.spacecraft_id());
-  if (sc == nullptr) return refuse_status(NotConfigured(proto.spacecraft_id()));
+  absl::StatusOr<std::shared_ptr<Spacecraft>> found = Lookup(proto.spacecraft_id());
+  if (!found.ok()) return refuse_status(found.status());
+  std::shared_ptr<Spacecraft> sc = *std::move(found);
   absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
 
   absl::MutexLock lock(&sc->ingest_mu);

@@ -68,6 +68,14 @@ int main(int argc, char** argv) {
                  "How long per-step estimates are kept, in measurement time before the newest "
                  "estimate of their spacecraft, e.g. 720h (30 days), 48h, 0 (keep everything)")
       ->capture_default_str();
+  app.add_option("--node-id", options.core.node_id,
+                 "This server's name among several sharing one PostgreSQL database (session "
+                 "leases, docs/service.md \"Several servers\"); default <hostname>:<listen port>");
+  std::string lease_duration = "15s";
+  app.add_option("--lease-duration", lease_duration,
+                 "How long a session lease lasts without renewal (PostgreSQL): how long the "
+                 "sessions of a server that died wait before another server takes them, e.g. 15s")
+      ->capture_default_str();
   app.add_option("--shutdown-deadline", shutdown_deadline_s,
                  "Seconds running calls get to finish at shutdown")
       ->capture_default_str();
@@ -118,6 +126,12 @@ int main(int argc, char** argv) {
     std::fprintf(stderr,
                  "--estimate-retention: '%s' is not a duration >= 0 (e.g. 720h, 48h, 0)\n",
                  estimate_retention.c_str());
+    return 2;
+  }
+  if (!absl::ParseDuration(lease_duration, &options.core.lease_duration) ||
+      options.core.lease_duration < absl::Seconds(1)) {
+    std::fprintf(stderr, "--lease-duration: '%s' is not a duration >= 1s (e.g. 15s, 1m)\n",
+                 lease_duration.c_str());
     return 2;
   }
   options.synchronous =

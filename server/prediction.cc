@@ -203,8 +203,7 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
 absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
     const esg::v1::PredictRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id());
-  if (sc == nullptr) return NotConfigured(request.spacecraft_id());
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
 
   // The requested epochs: the from/to grid plus the explicit times.
   std::vector<absl::Time> times;

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <climits>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -190,6 +191,18 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   db_options.vfs = options.db_vfs;
   ASSIGN_OR_RETURN(s->storage_, storage::Storage::Open(options.db_path, db_options));
   CoreOptions core_options = options.core;
+  if (!postgres && !core_options.node_id.empty()) {
+    return absl::InvalidArgumentError(
+        "--node-id: session leases need a PostgreSQL --db (an SQLite file has one server)");
+  }
+  if (postgres && core_options.node_id.empty()) {
+    // Stable across restarts of the same server, so a restart takes its own leases back at once.
+    char host[256] = {};
+    if (::gethostname(host, sizeof host - 1) != 0) std::snprintf(host, sizeof host, "esgd");
+    const size_t colon = options.listen.rfind(':');
+    core_options.node_id = absl::StrCat(
+        host, ":", colon == std::string::npos ? options.listen : options.listen.substr(colon + 1));
+  }
   if (core_options.worker_threads <= 0) {
     core_options.worker_threads = std::max(2u, std::thread::hardware_concurrency());
   }

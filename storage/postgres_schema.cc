@@ -11,7 +11,8 @@
 namespace esg::storage {
 namespace {
 
-// Schema version 7 (schema.h) in PostgreSQL types.
+// Schema version 7 (schema.h) in PostgreSQL types, and the session leases of several servers
+// sharing the database (lease_store.h).
 constexpr absl::string_view kSchemaV7 = R"sql(
 CREATE TABLE spacecraft_configs (
   spacecraft_id        TEXT    NOT NULL,
@@ -167,6 +168,12 @@ CREATE TABLE estimates (
   innovation_sigma_g4_1_arcsec   DOUBLE PRECISION,
   innovation_sigma_g4_2_arcsec   DOUBLE PRECISION,
   PRIMARY KEY (spacecraft_id, measurement_time_unix_ns)
+);
+CREATE TABLE session_leases (
+  spacecraft_id   TEXT   NOT NULL PRIMARY KEY,
+  owner           TEXT   NOT NULL,
+  epoch           BIGINT NOT NULL CHECK (epoch >= 1),
+  expires_unix_ns BIGINT NOT NULL
 );
 CREATE TABLE esg_schema (
   version BIGINT NOT NULL

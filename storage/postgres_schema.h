@@ -1,7 +1,8 @@
 // The PostgreSQL schema of the service database (postgres_db.h) and its versions, kept in the
 // table esg_schema. A new PostgreSQL database starts directly at the current schema version of
 // schema.h (the same tables, columns and keys as SQLite's, in PostgreSQL types: BIGINT,
-// DOUBLE PRECISION, TEXT, BYTEA); a later version appends a migration to both engines.
+// DOUBLE PRECISION, TEXT, BYTEA) plus session_leases (lease_store.h); a later version appends a
+// migration to both engines.
 // Creation and migrations hold a transaction-scoped advisory lock, so several servers starting
 // against one database at once create the schema once.
 #ifndef ESG_STORAGE_POSTGRES_SCHEMA_H_

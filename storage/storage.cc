@@ -36,7 +36,8 @@ Storage::Storage(std::unique_ptr<Database> db)
       sessions_(db_.get()),
       diagnoses_(db_.get()),
       reorder_(db_.get()),
-      estimates_(db_.get()) {}
+      estimates_(db_.get()),
+      leases_(db_.get()) {}
 
 absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
                                                        const DatabaseOptions& options) {
@@ -58,7 +59,8 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::FromDatabase(std::unique_ptr<D
 
 absl::Status Storage::ArchiveFrames(
     const std::vector<ArchivedFrame>& frames,
-    const std::map<std::string, std::vector<absl::Time>>& late_frames) {
+    const std::map<std::string, std::vector<absl::Time>>& late_frames,
+    const std::map<std::string, LeaseFence>& fences) {
   // Per spacecraft, in input order; a frame's place in `frames` names it in errors.
   std::map<std::string, std::vector<ArchivedFrame>> by_spacecraft;
   for (size_t i = 0; i < frames.size(); ++i) {
@@ -68,6 +70,7 @@ absl::Status Storage::ArchiveFrames(
   }
   if (by_spacecraft.empty()) return absl::OkStatus();
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  for (const auto& [id, fence] : fences) RETURN_IF_ERROR(leases_.CheckHeld(txn, id, fence));
   for (const auto& [id, list] : by_spacecraft) {
     ASSIGN_OR_RETURN(AppendResult appended, archive_.AppendBatch(txn, id, list));
     if (!appended.duplicate_sequences.empty()) {
@@ -105,6 +108,7 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
                                     absl::StrCat("repeats[", i, "]")));
   }
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  if (effects.fence.has_value()) RETURN_IF_ERROR(leases_.CheckHeld(txn, id, *effects.fence));
   if (effects.revision.has_value()) {
     const FilterEffects::Revision& r = *effects.revision;
     RETURN_IF_ERROR(InBatch(
@@ -167,6 +171,7 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
                                     absl::StrCat("new_alerts[", i, "]")));
   }
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  if (change.fence.has_value()) RETURN_IF_ERROR(leases_.CheckHeld(txn, id, *change.fence));
   RETURN_IF_ERROR(InBatch(configs_.Put(txn, change.config).status(), "config"));
   RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, change.checkpoint));
   if (change.new_session) {

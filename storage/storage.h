@@ -34,6 +34,7 @@
 #include "storage/diagnosis_store.h"
 #include "storage/database.h"
 #include "storage/estimate_store.h"
+#include "storage/lease_store.h"
 #include "storage/records.h"
 #include "storage/postgres_db.h"
 #include "storage/reorder_store.h"
@@ -84,6 +85,9 @@ struct FilterEffects {
   // The checkpoint, built inside the transaction from the sequences assigned to new_alerts
   // (same order): it carries the live alert tracks with their sequences. Required.
   std::function<CheckpointRecord(const std::vector<int64_t>& alert_sequences)> checkpoint;
+  // Several servers on one database: the writing server's lease, checked first inside the
+  // transaction (LeaseStore::CheckHeld; Unavailable and nothing written when it was lost).
+  std::optional<LeaseFence> fence;
 };
 
 // What a configuration writes (server/estimation_core.cc Configure).
@@ -98,6 +102,8 @@ struct ConfigurationChange {
   // revised at the checkpoint's compute_time (kept for audit, superseded by the new session's).
   bool new_session = false;
   std::vector<int64_t> revised_alerts;
+  // As FilterEffects::fence.
+  std::optional<LeaseFence> fence;
 };
 
 // Thread-safe: any number of threads may call any method (serialized per Storage through its
@@ -135,10 +141,13 @@ class Storage {
   // nothing is visible then, and the next call succeeds as soon as the cause is gone. OK: all
   // of it is durable (with Synchronous::kFull, across power loss). `late_frames` (spacecraft ->
   // measurement times of frames of this batch measured before one already accepted) are
-  // recorded as late (ReorderStore) in the same transaction.
+  // recorded as late (ReorderStore) in the same transaction. `fences` (spacecraft -> the
+  // writing server's lease; several servers on one database) are checked first inside the
+  // transaction: Unavailable naming the spacecraft, and nothing stored, for a lease lost.
   absl::Status ArchiveFrames(
       const std::vector<ArchivedFrame>& frames,
-      const std::map<std::string, std::vector<absl::Time>>& late_frames = {});
+      const std::map<std::string, std::vector<absl::Time>>& late_frames = {},
+      const std::map<std::string, LeaseFence>& fences = {});
 
   // Writes a filter job's effects and its checkpoint in one transaction; returns the sequences
   // assigned to effects.new_alerts, in order. InvalidArgument naming the record
@@ -161,6 +170,7 @@ class Storage {
   DiagnosisStore& diagnoses() { return diagnoses_; }
   ReorderStore& reorder() { return reorder_; }
   EstimateStore& estimates() { return estimates_; }
+  LeaseStore& leases() { return leases_; }
 
  private:
   explicit Storage(std::unique_ptr<Database> db);
@@ -174,6 +184,7 @@ class Storage {
   DiagnosisStore diagnoses_;
   ReorderStore reorder_;
   EstimateStore estimates_;
+  LeaseStore leases_;
 };
 
 }  // namespace esg::storage

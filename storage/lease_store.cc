@@ -1,0 +1,155 @@
+// Session leases; contract in lease_store.h.
+#include "storage/lease_store.h"
+
+#include "absl/strings/cord.h"
+#include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
+#include "estimator/status_macros.h"
+#include "storage/schema.h"
+
+namespace esg::storage {
+namespace {
+
+constexpr char kLeaseLostPayload[] = "type.esg/storage.LeaseLost";
+
+std::string FormatUtc(absl::Time t) {
+  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
+}
+
+absl::StatusOr<SessionLease> ReadLease(Transaction& txn, absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT owner, epoch, expires_unix_ns FROM session_leases "
+                               "WHERE spacecraft_id = ?1"));
+  st->BindText(1, spacecraft_id);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  if (!row) {
+    return absl::NotFoundError(
+        absl::StrCat("spacecraft '", spacecraft_id, "': no session lease was ever taken"));
+  }
+  SessionLease lease;
+  lease.spacecraft_id = std::string(spacecraft_id);
+  lease.owner = st->ColumnText(0);
+  lease.epoch = st->ColumnInt64(1);
+  lease.expires = UnixNanosToTime(st->ColumnInt64(2));
+  st->Reset();
+  return lease;
+}
+
+}  // namespace
+
+absl::Status LeaseStore::CheckPostgres() const {
+  if (db_->dialect() == Dialect::kPostgres) return absl::OkStatus();
+  return absl::FailedPreconditionError(
+      "session leases need a PostgreSQL database: an SQLite file has one server");
+}
+
+absl::StatusOr<SessionLease> LeaseStore::Acquire(absl::string_view spacecraft_id,
+                                                 absl::string_view owner, absl::Time now,
+                                                 absl::Duration duration) {
+  RETURN_IF_ERROR(CheckPostgres());
+  RETURN_IF_ERROR(ValidateSpacecraftId(spacecraft_id, "lease.spacecraft_id"));
+  if (owner.empty()) return absl::InvalidArgumentError("lease.owner: empty");
+  if (duration <= absl::ZeroDuration()) {
+    return absl::InvalidArgumentError("lease duration: must be positive");
+  }
+  RETURN_IF_ERROR(ValidateStorableTime(now + duration, "lease.expires"));
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  // One statement: the insert, or the update of a lease that is expired or the owner's own;
+  // the row lock of ON CONFLICT makes two servers taking the same lease at once take it in turn
+  // (the second sees the first's unexpired lease and gets no row).
+  ASSIGN_OR_RETURN(
+      Statement * take,
+      txn.Prepare("INSERT INTO session_leases (spacecraft_id, owner, epoch, expires_unix_ns) "
+                  "VALUES (?1, ?2, 1, ?3) ON CONFLICT (spacecraft_id) DO UPDATE SET "
+                  "owner = excluded.owner, epoch = session_leases.epoch + 1, "
+                  "expires_unix_ns = excluded.expires_unix_ns "
+                  "WHERE session_leases.expires_unix_ns <= ?4 OR session_leases.owner = ?2 "
+                  "RETURNING epoch"));
+  take->BindText(1, spacecraft_id)
+      .BindText(2, owner)
+      .BindInt64(3, TimeToUnixNanos(now + duration))
+      .BindInt64(4, TimeToUnixNanos(now));
+  ASSIGN_OR_RETURN(bool taken, take->Step());
+  take->Reset();
+  ASSIGN_OR_RETURN(SessionLease lease, ReadLease(txn, spacecraft_id));
+  RETURN_IF_ERROR(txn.Commit());
+  if (!taken) {
+    return absl::UnavailableError(absl::StrCat("spacecraft '", spacecraft_id,
+                                               "' is served by node ", lease.owner, " until ",
+                                               FormatUtc(lease.expires)));
+  }
+  return lease;
+}
+
+absl::Status LeaseStore::Renew(absl::string_view spacecraft_id, const LeaseFence& fence,
+                               absl::Time now, absl::Duration duration) {
+  RETURN_IF_ERROR(CheckPostgres());
+  RETURN_IF_ERROR(ValidateStorableTime(now + duration, "lease.expires"));
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("UPDATE session_leases SET expires_unix_ns = ?4 "
+                               "WHERE spacecraft_id = ?1 AND owner = ?2 AND epoch = ?3"));
+  st->BindText(1, spacecraft_id)
+      .BindText(2, fence.owner)
+      .BindInt64(3, fence.epoch)
+      .BindInt64(4, TimeToUnixNanos(now + duration));
+  RETURN_IF_ERROR(st->Run());
+  if (txn.ChangedRows() == 0) {
+    return absl::NotFoundError(absl::StrCat("spacecraft '", spacecraft_id, "': the lease of node ",
+                                            fence.owner, " (epoch ", fence.epoch,
+                                            ") was taken over"));
+  }
+  return txn.Commit();
+}
+
+absl::Status LeaseStore::Release(absl::string_view spacecraft_id, const LeaseFence& fence) {
+  RETURN_IF_ERROR(CheckPostgres());
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("UPDATE session_leases SET expires_unix_ns = ?4 "
+                               "WHERE spacecraft_id = ?1 AND owner = ?2 AND epoch = ?3"));
+  st->BindText(1, spacecraft_id)
+      .BindText(2, fence.owner)
+      .BindInt64(3, fence.epoch)
+      .BindInt64(4, TimeToUnixNanos(absl::InfinitePast()));
+  RETURN_IF_ERROR(st->Run());
+  return txn.Commit();
+}
+
+absl::StatusOr<SessionLease> LeaseStore::Get(absl::string_view spacecraft_id) {
+  RETURN_IF_ERROR(CheckPostgres());
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(SessionLease lease, ReadLease(txn, spacecraft_id));
+  RETURN_IF_ERROR(txn.Commit());
+  return lease;
+}
+
+absl::Status LeaseStore::CheckHeld(Transaction& txn, absl::string_view spacecraft_id,
+                                   const LeaseFence& fence) {
+  RETURN_IF_ERROR(CheckPostgres());
+  // FOR SHARE: a takeover's UPDATE of the row waits until this transaction ends, and this one
+  // waits for a takeover under way, then reads the committed owner.
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT owner, epoch FROM session_leases "
+                               "WHERE spacecraft_id = ?1 FOR SHARE"));
+  st->BindText(1, spacecraft_id);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  const std::string owner = row ? st->ColumnText(0) : std::string();
+  const int64_t epoch = row ? st->ColumnInt64(1) : 0;
+  st->Reset();
+  if (row && owner == fence.owner && epoch == fence.epoch) return absl::OkStatus();
+  absl::Status lost = absl::AbortedError(absl::StrCat(
+      "spacecraft '", spacecraft_id, "': this server (node ", fence.owner,
+      ") no longer holds its session",
+      row ? absl::StrCat(" (taken over by node ", owner, ", epoch ", epoch, ")") : ""));
+  lost.SetPayload(kLeaseLostPayload, absl::Cord(spacecraft_id));
+  return lost;
+}
+
+std::optional<std::string> LeaseLostSpacecraft(const absl::Status& status) {
+  const auto payload = status.GetPayload(kLeaseLostPayload);
+  if (!payload.has_value()) return std::nullopt;
+  return std::string(*payload);
+}
+
+}  // namespace esg::storage

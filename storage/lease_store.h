@@ -1,0 +1,87 @@
+// Session leases (table session_leases, PostgreSQL only: postgres_schema.h): which server owns
+// each spacecraft's estimation session when several servers share one database
+// (docs/service.md "Several servers"). A lease is a row (spacecraft, owner, epoch, expiry);
+// its owner renews it well before the expiry; a server that finds it expired takes it, which
+// increments the epoch. Every transaction that writes a spacecraft's session state (frames,
+// filter effects, configuration) checks inside itself that the writing server still holds the
+// lease with its epoch (CheckHeld, a row lock taken against a concurrent takeover), so a server
+// that lost its lease (paused, cut off) can never write after the new owner started.
+//
+// Expiry times are the servers' wall clocks (Unix nanoseconds): their clocks must agree to well
+// within the lease duration (NTP).
+#ifndef ESG_STORAGE_LEASE_STORE_H_
+#define ESG_STORAGE_LEASE_STORE_H_
+
+#include <cstdint>
+#include <optional>
+#include <string>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/time/time.h"
+#include "storage/database.h"
+
+namespace esg::storage {
+
+struct SessionLease {
+  std::string spacecraft_id;
+  std::string owner;   // the server's node id
+  int64_t epoch = 0;   // 1 at the first take, +1 at each take (renewals keep it)
+  absl::Time expires;  // wall clock
+};
+
+// A server's claim to a spacecraft's session, checked by the write transactions.
+struct LeaseFence {
+  std::string owner;
+  int64_t epoch = 0;
+};
+
+// The spacecraft of a status CheckHeld returned for a lease lost (passed up through the commit
+// that checked it); nullopt for any other status.
+std::optional<std::string> LeaseLostSpacecraft(const absl::Status& status);
+
+// Thread-safe (through Database). FailedPrecondition on an SQLite database (one server owns
+// an SQLite file: sqlite_db.h "Owner lock").
+class LeaseStore {
+ public:
+  explicit LeaseStore(Database* db) : db_(db) {}
+
+  // Takes the lease of `spacecraft_id` for `owner` until now + duration if it is free, expired
+  // at `now`, or already `owner`'s (a restarted server with the same node id takes its own lease
+  // back at once); the epoch increments. Returns the lease as stored. Unavailable
+  // "spacecraft 'X' is served by node N until T" (with the holder's lease) when another owner
+  // holds it unexpired; InvalidArgument for an empty id or owner or a non-positive duration.
+  absl::StatusOr<SessionLease> Acquire(absl::string_view spacecraft_id, absl::string_view owner,
+                                       absl::Time now, absl::Duration duration);
+
+  // Extends `owner`'s lease with `epoch` to now + duration. NotFound when the lease is no longer
+  // (owner, epoch)'s: another server took it over.
+  absl::Status Renew(absl::string_view spacecraft_id, const LeaseFence& fence, absl::Time now,
+                     absl::Duration duration);
+
+  // Ends `owner`'s lease with `epoch` at once (a clean shutdown), so another server may take the
+  // session without waiting for the expiry. OK if it was no longer held.
+  absl::Status Release(absl::string_view spacecraft_id, const LeaseFence& fence);
+
+  // The lease of `spacecraft_id`; NotFound if it was never taken.
+  absl::StatusOr<SessionLease> Get(absl::string_view spacecraft_id);
+
+  // Inside a write transaction: OK if (owner, epoch) still holds the lease, locking the row
+  // until the transaction ends (a takeover waits for it, and the transaction sees a takeover
+  // committed before); Aborted "spacecraft 'X': this server (node M) no longer holds its
+  // session (taken over by node N, epoch E)" otherwise, which LeaseLostSpacecraft recognizes
+  // (also when a commit passes it up). The expiry is not checked: a lease is taken over only
+  // by writing a new owner or epoch.
+  absl::Status CheckHeld(Transaction& txn, absl::string_view spacecraft_id,
+                         const LeaseFence& fence);
+
+ private:
+  absl::Status CheckPostgres() const;
+
+  Database* db_;  // not owned
+};
+
+}  // namespace esg::storage
+
+#endif  // ESG_STORAGE_LEASE_STORE_H_
