@@ -1,0 +1,319 @@
+// Sessions that move with the routing (docs/service.md "Several servers", docs/deploy.md): a
+// real PostgreSQL on loopback, three real esgd child processes sharing its database with session
+// leases, and a real nginx running the shipped deploy/nginx/esg.conf in front of them. 60
+// spacecraft are configured and streamed through nginx; mid-stream the node serving the first
+// spacecraft is killed with kill -9. Each spacecraft's station goes on as a ground station does:
+// it resends every frame not acknowledged yet, through nginx, which routes the killed node's
+// spacecraft to the remaining nodes; those answer UNAVAILABLE (lease held) until the dead
+// node's leases expire, then take the sessions over (checkpoint plus archive after it) and go
+// on.
+//
+// Checked, for every spacecraft: each frame is archived exactly once (the archive holds exactly
+// the recording's frames, each once), its whole coefficient history equals that of an
+// uninterrupted offline calibration of the recording to 1e-12 deg/h (no frame applied twice or
+// lost, by the node that died or the one that took over), and the final session state equals
+// the offline one exactly; the killed node's spacecraft are served by another node under a new
+// lease epoch, the others kept theirs.
+#include <signal.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/units.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "storage/storage.h"
+#include "tests/server/server_test_util.h"
+#include "tests/testing/daemon.h"
+#include "tests/testing/nginx.h"
+#include "tests/testing/postgres_server.h"
+
+namespace esg {
+namespace {
+
+using ::esg::testing::ConfigureRequestFor;
+using ::esg::testing::Daemon;
+using ::esg::testing::Nginx;
+using ::esg::testing::NginxBinary;
+using ::esg::testing::OfflineCoefficientHistory;
+using ::esg::testing::OfflineSessionValues;
+using ::esg::testing::PostgresServer;
+using ::esg::testing::SimulatedRun;
+using ::esg::testing::SimulateRun;
+using ::esg::testing::StoredSessionValues;
+using ::esg::testing::TempDir;
+
+constexpr int kNodes = 3;
+constexpr int kSpacecraft = 60;
+constexpr double kHours = 1.0;  // 61 frames at 60 s each
+// The node port on 127.0.0.21, .22 and .23 (fixed addresses: see nginx_routing_test.cc).
+constexpr int kNodePort = 29061;
+constexpr int kLeaseSeconds = 2;
+// Frames a station sends per stream before it looks at the acks again: small, so that the kill
+// lands in the middle of many streams.
+constexpr int kFramesPerStream = 4;
+
+std::string NodeHost(int node) { return absl::StrCat("127.0.0.", 21 + node); }
+std::string NodeId(int node) { return absl::StrCat("node-", node); }
+std::string SpacecraftId(int i) { return absl::StrFormat("FO-%02d", i); }
+
+double Seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// What one station saw.
+struct StationLog {
+  int64_t acknowledged = 0;  // frames acknowledged (accepted, new or duplicate)
+  int64_t duplicates = 0;    // acknowledged as already stored (resent after a lost ack)
+  int64_t unavailable = 0;   // refusals and failed streams while the session moved
+  std::string error;         // a refusal a station cannot recover from
+};
+
+// A ground station for one spacecraft: sends the frames in order through the router, a few per
+// stream, and resends every frame not acknowledged (a stream that fails, a frame refused
+// UNAVAILABLE) until each is acknowledged or `deadline` passes. `pace` pauses between streams.
+StationLog RunStation(esg::v1::EstimationService::Stub& router, const std::string& id,
+                      const std::vector<esg::v1::TelemetryFrame>& frames, size_t first,
+                      std::chrono::milliseconds pace,
+                      std::chrono::steady_clock::time_point deadline) {
+  StationLog log;
+  size_t next = first;
+  while (next < frames.size()) {
+    if (std::chrono::steady_clock::now() > deadline) {
+      log.error = absl::StrCat("frames from ", next + 1, " not acknowledged before the deadline");
+      return log;
+    }
+    const size_t end = std::min(frames.size(), next + kFramesPerStream);
+    const std::vector<esg::v1::TelemetryFrame> batch(frames.begin() + next, frames.begin() + end);
+    const auto streamed = testing::StreamFrames(router, batch, "", /*routed_by=*/id);
+    size_t acked = 0;  // acknowledged in order from `next`
+    for (const esg::v1::TelemetryAck& ack : streamed.acks) {
+      if (!ack.accepted()) {
+        if (ack.rejection().code() != static_cast<int>(grpc::StatusCode::UNAVAILABLE)) {
+          log.error = absl::StrCat("frame ", ack.sequence(), " refused: ",
+                                   ack.rejection().reason());
+          return log;
+        }
+        ++log.unavailable;
+        break;
+      }
+      if (ack.sequence() != static_cast<int64_t>(next + acked + 1)) break;
+      if (ack.duplicate()) ++log.duplicates;
+      ++acked;
+    }
+    if (!streamed.status.ok()) ++log.unavailable;
+    log.acknowledged += static_cast<int64_t>(acked);
+    next += acked;
+    if (acked < batch.size()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(200));
+    } else {
+      std::this_thread::sleep_for(pace);
+    }
+  }
+  return log;
+}
+
+grpc::Status GetSession(esg::v1::EstimationService::Stub& stub, const std::string& id,
+                        esg::v1::SessionInfo* info) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+  ctx.AddMetadata("x-esg-spacecraft", id);
+  esg::v1::GetSessionRequest request;
+  request.set_spacecraft_id(id);
+  return stub.GetSession(&ctx, request, info);
+}
+
+TEST(Failover, SessionsOfAKilledNodeFinishOnTheOthersWithEveryFrameStoredAndAppliedOnce) {
+  ASSERT_FALSE(NginxBinary().empty())
+      << "nginx not found: this test needs Debian's package nginx (scripts/install-deps.sh)";
+  std::string pg_error;
+  PostgresServer* pg = PostgresServer::Shared(&pg_error);
+  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
+  absl::StatusOr<std::string> db = pg->CreateDatabase();
+  ASSERT_TRUE(db.ok()) << db.status();
+  const auto test_start = std::chrono::steady_clock::now();
+  TempDir dir;
+
+  std::vector<std::unique_ptr<Daemon>> daemons;
+  std::vector<std::string> node_addresses;
+  for (int n = 0; n < kNodes; ++n) {
+    const std::string listen = absl::StrCat(NodeHost(n), ":", kNodePort);
+    daemons.push_back(std::make_unique<Daemon>(
+        *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
+        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration",
+                                 absl::StrCat(kLeaseSeconds, "s")},
+        listen));
+    ASSERT_EQ(daemons.back()->port(), kNodePort)
+        << "esgd did not start on " << listen << ": "
+        << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
+    node_addresses.push_back(listen);
+  }
+  Nginx nginx(dir.File("nginx"), node_addresses);
+  ASSERT_TRUE(nginx.running());
+  auto router = esg::v1::EstimationService::NewStub(
+      grpc::CreateChannel(nginx.address(), grpc::InsecureChannelCredentials()));
+  std::printf("[ measured ] start of PostgreSQL database, 3 esgd and nginx: %.2f s\n",
+              Seconds(test_start));
+
+  std::vector<SimulatedRun> runs;
+  for (int i = 0; i < kSpacecraft; ++i) runs.push_back(SimulateRun(SpacecraftId(i), kHours, 300 + i));
+  for (int i = 0; i < kSpacecraft; ++i) {
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("x-esg-spacecraft", SpacecraftId(i));
+    esg::v1::ConfigureResponse configured;
+    const grpc::Status status =
+        router->ConfigureSpacecraft(&ctx, ConfigureRequestFor(runs[i].config), &configured);
+    ASSERT_TRUE(status.ok()) << SpacecraftId(i) << ": " << status.error_message();
+  }
+
+  // The leases taken at configuration: who serves what before the kill.
+  auto storage = storage::Storage::Open(*db);
+  ASSERT_TRUE(storage.ok()) << storage.status();
+  std::map<std::string, storage::SessionLease> before;
+  for (int i = 0; i < kSpacecraft; ++i) {
+    absl::StatusOr<storage::SessionLease> lease = (*storage)->leases().Get(SpacecraftId(i));
+    ASSERT_TRUE(lease.ok()) << lease.status();
+    before[SpacecraftId(i)] = *lease;
+  }
+  const std::string killed_node = before[SpacecraftId(0)].owner;
+  int killed = -1;
+  for (int n = 0; n < kNodes; ++n) {
+    if (NodeId(n) == killed_node) killed = n;
+  }
+  ASSERT_GE(killed, 0) << killed_node;
+  int on_killed = 0;
+  for (const auto& [id, lease] : before) on_killed += lease.owner == killed_node ? 1 : 0;
+
+  // Every station streams at once; the killed node dies while they do.
+  const auto stream_start = std::chrono::steady_clock::now();
+  const auto deadline = stream_start + std::chrono::seconds(240);
+  std::vector<StationLog> logs(kSpacecraft);
+  std::vector<std::thread> stations;
+  for (int i = 0; i < kSpacecraft; ++i) {
+    stations.emplace_back([&, i] {
+      logs[i] = RunStation(*router, SpacecraftId(i), runs[i].frames, 0,
+                           std::chrono::milliseconds(50), deadline);
+    });
+  }
+  // Mid-stream: once the killed node's first spacecraft has about a third of its frames durable.
+  int64_t durable_at_kill = 0;
+  for (;;) {
+    esg::v1::SessionInfo info;
+    if (GetSession(*router, SpacecraftId(0), &info).ok() &&
+        info.highest_durable_sequence() >= static_cast<int64_t>(runs[0].frames.size()) / 3) {
+      durable_at_kill = info.highest_durable_sequence();
+      break;
+    }
+    ASSERT_LT(Seconds(stream_start), 60.0) << "the first spacecraft made no progress";
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  daemons[killed]->Stop(SIGKILL);
+  const auto kill_time = std::chrono::steady_clock::now();
+  for (std::thread& t : stations) t.join();
+  std::printf("[ measured ] kill -9 of %s (serving %d of %d spacecraft) with %lld of %zu frames "
+              "of %s durable; all stations done %.2f s after the kill\n",
+              killed_node.c_str(), on_killed, kSpacecraft,
+              static_cast<long long>(durable_at_kill), runs[0].frames.size(),
+              SpacecraftId(0).c_str(), Seconds(kill_time));
+
+  int64_t unavailable = 0;
+  int64_t duplicates = 0;
+  for (int i = 0; i < kSpacecraft; ++i) {
+    ASSERT_TRUE(logs[i].error.empty()) << SpacecraftId(i) << ": " << logs[i].error;
+    EXPECT_EQ(logs[i].acknowledged, static_cast<int64_t>(runs[i].frames.size()))
+        << SpacecraftId(i);
+    unavailable += logs[i].unavailable;
+    duplicates += logs[i].duplicates;
+  }
+  std::printf("[ measured ] stations saw %lld UNAVAILABLE refusals or failed streams and %lld "
+              "duplicate acks (frames stored before the kill whose acks were lost)\n",
+              static_cast<long long>(unavailable), static_cast<long long>(duplicates));
+
+  // Every session applied everything, wherever it is now.
+  for (int i = 0; i < kSpacecraft; ++i) {
+    const std::string id = SpacecraftId(i);
+    const int64_t n = static_cast<int64_t>(runs[i].frames.size());
+    esg::v1::SessionInfo info;
+    for (int attempt = 0;; ++attempt) {
+      const grpc::Status status = GetSession(*router, id, &info);
+      if (status.ok() && info.frames_applied() >= n) break;
+      ASSERT_LT(attempt, 600) << id << ": " << status.error_message() << ", applied "
+                              << info.frames_applied() << " of " << n;
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    EXPECT_EQ(info.frames_accepted(), n) << id;
+    EXPECT_EQ(info.highest_applied_sequence(), n) << id;
+  }
+
+  // Exactly once in the archive; the coefficient history and the session as offline.
+  for (int i = 0; i < kSpacecraft; ++i) {
+    const std::string id = SpacecraftId(i);
+    SCOPED_TRACE(id);
+    absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
+        (*storage)->archive().ReadTimeRange(id, absl::InfinitePast(), absl::InfiniteFuture());
+    ASSERT_TRUE(archived.ok()) << archived.status();
+    ASSERT_EQ(archived->size(), runs[i].frames.size());
+    std::set<int64_t> sequences;
+    for (const storage::ArchivedFrame& f : *archived) sequences.insert(f.sequence);
+    EXPECT_EQ(sequences.size(), runs[i].frames.size());
+    EXPECT_EQ(*sequences.begin(), 1);
+    EXPECT_EQ(*sequences.rbegin(), static_cast<int64_t>(runs[i].frames.size()));
+
+    const std::vector<testing::OfflineSnapshot> offline =
+        OfflineCoefficientHistory(runs[i].config, "10+11", runs[i].frames);
+    absl::StatusOr<std::vector<storage::CoefficientRecord>> stored =
+        (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture());
+    ASSERT_TRUE(stored.ok()) << stored.status();
+    ASSERT_EQ(stored->size(), offline.size());
+    double worst_deg_h = 0.0;
+    for (size_t k = 0; k < offline.size(); ++k) {
+      ASSERT_EQ((*stored)[k].measurement_time, offline[k].time) << k;
+      ASSERT_EQ((*stored)[k].gyro_id, offline[k].gyro_id) << k;
+      for (size_t v = 0; v < offline[k].values.size(); ++v) {
+        const double a = (*stored)[k].values[v];
+        const double b = offline[k].values[v];
+        if (std::isnan(a) || std::isnan(b)) {
+          EXPECT_EQ(std::isnan(a), std::isnan(b)) << k << "/" << v;
+          continue;
+        }
+        worst_deg_h = std::max(worst_deg_h, std::abs(estimator::RadPerSecToDegPerHour(a - b)));
+      }
+    }
+    EXPECT_LE(worst_deg_h, 1e-12);
+    EXPECT_EQ(StoredSessionValues(*db, id), OfflineSessionValues(runs[i].config, "10+11",
+                                                                 runs[i].frames));
+  }
+
+  // The killed node's sessions moved under a new epoch; the others stayed where they were.
+  int moved = 0;
+  for (int i = 0; i < kSpacecraft; ++i) {
+    const std::string id = SpacecraftId(i);
+    absl::StatusOr<storage::SessionLease> lease = (*storage)->leases().Get(id);
+    ASSERT_TRUE(lease.ok()) << lease.status();
+    if (before[id].owner == killed_node) {
+      EXPECT_NE(lease->owner, killed_node) << id;
+      EXPECT_GT(lease->epoch, before[id].epoch) << id;
+      ++moved;
+    } else {
+      EXPECT_EQ(lease->owner, before[id].owner) << id;
+      EXPECT_EQ(lease->epoch, before[id].epoch) << id;
+    }
+  }
+  EXPECT_EQ(moved, on_killed);
+  EXPECT_GE(moved, 1);
+  std::printf("[ measured ] %d sessions moved off %s; whole test %.2f s\n", moved,
+              killed_node.c_str(), Seconds(test_start));
+}
+
+}  // namespace
+}  // namespace esg
