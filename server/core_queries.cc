@@ -32,6 +32,7 @@ using estimator::TelemetryFrame;
 esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
   esg::v1::SessionInfo info;
   info.set_spacecraft_id(sc.id);
+  if (shared()) info.set_served_by(options_.node_id);
   {
     absl::MutexLock lock(&sc.ingest_mu);
     info.set_frames_rejected(sc.frames_rejected);
@@ -127,8 +128,14 @@ esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
 
 absl::StatusOr<esg::v1::SessionInfo> EstimationCore::GetSession(const std::string& spacecraft_id) {
   if (spacecraft_id.empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(spacecraft_id));
-  return Summarize(*sc);
+  absl::StatusOr<std::shared_ptr<Spacecraft>> sc = Lookup(spacecraft_id);
+  if (shared() && absl::IsUnavailable(sc.status())) {
+    // Another server holds the session: its state as that server last committed it.
+    ASSIGN_OR_RETURN(storage::ConfigRecord record, storage_->configs().Get(spacecraft_id));
+    return SummarizeFromDatabase(record);
+  }
+  if (!sc.ok()) return sc.status();
+  return Summarize(**sc);
 }
 
 namespace {
@@ -215,6 +222,32 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
   }
   // Ordered by spacecraft id; the page starts after the token's id.
   bool more = false;
+  if (shared()) {
+    // Every spacecraft of the shared database: this server's sessions from memory, the others'
+    // as their servers last committed them.
+    ASSIGN_OR_RETURN(std::vector<storage::ConfigRecord> configs, storage_->configs().List());
+    esg::v1::ListSessionsResponse response;
+    std::string last;
+    for (const storage::ConfigRecord& record : configs) {
+      if (!request.page_token().empty() && record.spacecraft_id <= after) continue;
+      if (response.sessions_size() >= size) {
+        more = true;
+        break;
+      }
+      std::shared_ptr<Spacecraft> sc = Find(record.spacecraft_id);
+      if (sc != nullptr && !sc->lease_lost) {
+        *response.add_sessions() = Summarize(*sc);
+      } else {
+        ASSIGN_OR_RETURN(*response.add_sessions(), SummarizeFromDatabase(record));
+      }
+      last = record.spacecraft_id;
+    }
+    if (more) {
+      response.set_next_page_token(
+          EncodePageToken("ListSessions", "", absl::WebSafeBase64Escape(last)));
+    }
+    return response;
+  }
   const std::vector<std::shared_ptr<Spacecraft>> page =
       registry_.Page(request.page_token().empty() ? std::string() : after, size, &more);
   esg::v1::ListSessionsResponse response;

@@ -76,8 +76,15 @@ absl::Status EstimationCore::Load() {
 // (docs/service.md "Session states"): the others and the server start as usual.
 absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record,
                                             int64_t lease_epoch) {
-  auto sc = std::make_shared<Spacecraft>(record.spacecraft_id);
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, RestoreSpacecraft(record, /*snapshot=*/false));
   sc->lease_epoch = lease_epoch;
+  registry_.Put(std::move(sc));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::RestoreSpacecraft(
+    const storage::ConfigRecord& record, bool snapshot) {
+  auto sc = std::make_shared<Spacecraft>(record.spacecraft_id);
   using StationSequences = std::map<std::string, int64_t>;
   ASSIGN_OR_RETURN(StationSequences highest,
                    storage_->archive().HighestSequences(record.spacecraft_id));
@@ -199,6 +206,8 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record,
   }
   if (!reason.empty()) {
     checkpoint.quarantine_reason = reason;
+  }
+  if (!reason.empty() && !snapshot) {
     LogEvent("ERROR", "session_quarantined",
              absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason),
              {{"spacecraftId", sc->id}});
@@ -226,6 +235,7 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record,
     sc->replay_from_archive = true;
     sc->late_frames.insert(late_frames.begin(), late_frames.end());
   }
+  if (snapshot) return sc;
   LogEvent("INFO", "spacecraft_loaded",
            absl::StrCat("loaded spacecraft ", sc->id, ": model ",
                         setup != nullptr ? setup->model_name : "-", ", ", count,
@@ -234,8 +244,18 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record,
                             ? "nothing"
                             : FormatUtc(sc->apply.applied_time)),
            {{"spacecraftId", sc->id}, {"archivedFrames", count}});
-  registry_.Put(std::move(sc));
-  return absl::OkStatus();
+  return sc;
+}
+
+absl::StatusOr<esg::v1::SessionInfo> EstimationCore::SummarizeFromDatabase(
+    const storage::ConfigRecord& record) {
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, RestoreSpacecraft(record, /*snapshot=*/true));
+  esg::v1::SessionInfo info = Summarize(*sc);
+  info.set_served_by("");
+  absl::StatusOr<storage::SessionLease> lease = storage_->leases().Get(record.spacecraft_id);
+  if (lease.ok() && lease->expires > absl::Now()) info.set_served_by(lease->owner);
+  if (!lease.ok() && !absl::IsNotFound(lease.status())) return lease.status();
+  return info;
 }
 
 EstimationCore::~EstimationCore() { Stop(absl::ZeroDuration()); }

@@ -252,6 +252,13 @@ class EstimationCore {
   // from the archive where possible) instead of failing the start. Errors: storage reads only.
   // `lease_epoch`: the session lease taken for it (0: no leases).
   absl::Status LoadSpacecraft(const storage::ConfigRecord& record, int64_t lease_epoch = 0);
+  // The record LoadSpacecraft registers, built from the database (configuration, checkpoint,
+  // archive marks); `snapshot`: for a summary only (nothing logged, not registered).
+  absl::StatusOr<std::shared_ptr<Spacecraft>> RestoreSpacecraft(const storage::ConfigRecord& record,
+                                                                bool snapshot);
+  // With leases: the summary of a session this server does not hold, read from the database,
+  // with served_by the holder of an unexpired lease.
+  absl::StatusOr<esg::v1::SessionInfo> SummarizeFromDatabase(const storage::ConfigRecord& record);
   // The spacecraft's record for a call that needs its session: Find(), and with leases (node_id)
   // a record whose lease this server holds, taking the lease and loading the session (checkpoint
   // plus archive after it) if needed. NotFound "not configured"; Unavailable "served by node N

@@ -34,7 +34,10 @@ std::unique_ptr<EsgClient> Connect(const char* verb, const GlobalOptions& global
 
 int ReportRpcError(const char* verb, const absl::Status& status, const GlobalOptions& global) {
   std::string message(status.message());
-  if (status.code() == absl::StatusCode::kUnavailable) {
+  // esgd's own UNAVAILABLE of a session another server holds (docs/service.md "Several
+  // servers") reached the server; anything else UNAVAILABLE did not.
+  if (status.code() == absl::StatusCode::kUnavailable &&
+      !absl::StrContains(message, "' is served by node ")) {
     message = absl::StrCat("server not reachable at ", global.server, " (", message, ")");
   }
   std::fprintf(stderr, "esg %s: %s: %s\n", verb, absl::StatusCodeToString(status.code()).c_str(),

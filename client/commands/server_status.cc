@@ -38,8 +38,9 @@ std::string Ids(const google::protobuf::RepeatedField<int32_t>& ids) {
 
 void PrintSession(const esg::v1::SessionInfo& s) {
   auto n = [](int64_t v) { return static_cast<long long>(v); };
-  std::printf("%s  %s  model %s\n", s.spacecraft_id().c_str(), StateName(s.state()).c_str(),
-              s.model().c_str());
+  std::printf("%s  %s  model %s%s\n", s.spacecraft_id().c_str(), StateName(s.state()).c_str(),
+              s.model().c_str(),
+              s.served_by().empty() ? "" : ("  served by " + s.served_by()).c_str());
   if (!s.quarantine_reason().empty()) {
     std::printf("  quarantined%s: %s\n", s.rebuilding() ? " (rebuilding from the archive)" : "",
                 s.quarantine_reason().c_str());
