@@ -12,6 +12,7 @@ packages=(
   libssl-dev openssl gnuplot-nox
   chromium fonts-liberation
   nginx
+  python3 python3-yaml
 )
 # The console's npm packages (console/package-lock.json, from the npm registry; Node 20 is on the
 # machine): installed again only when the lock file changed since the last install.
