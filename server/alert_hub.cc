@@ -60,8 +60,8 @@ void AlertHub::Unsubscribe(int64_t id) {
   subscribers_.erase(id);
 }
 
-void AlertHub::Publish(const storage::AlertRecord& record) {
-  LogAlert(record);
+void AlertHub::Publish(const storage::AlertRecord& record, bool log) {
+  if (log) LogAlert(record);
   absl::MutexLock lock(&mu_);
   for (auto& [id, s] : subscribers_) {
     if (s.spacecraft_id.empty() || s.spacecraft_id == record.spacecraft_id) s.listener(record);

@@ -31,8 +31,9 @@ class AlertHub {
   int64_t Subscribe(std::string spacecraft_id, Listener listener, Closer close);
   // After it returns, the listener is never called again.
   void Unsubscribe(int64_t id);
-  // Logs the record (LogAlert) and hands it to the matching subscribers.
-  void Publish(const storage::AlertRecord& record);
+  // Logs the record (LogAlert) unless !log (a change another server committed and logged) and
+  // hands it to the matching subscribers.
+  void Publish(const storage::AlertRecord& record, bool log = true);
   // Calls every subscriber's closer (they finish their streams).
   void CloseAll();
   // Number of subscribers.

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/escaping.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
@@ -35,7 +36,10 @@ absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::S
   core->committer_ = std::thread([c = core.get()] { c->CommitterLoop(); });
   const int n = std::max(1, options.worker_threads);
   for (int i = 0; i < n; ++i) core->workers_.emplace_back([c = core.get()] { c->WorkerLoop(); });
-  if (core->shared()) core->lease_renewer_ = std::thread([c = core.get()] { c->LeaseLoop(); });
+  if (core->shared()) {
+    core->lease_renewer_ = std::thread([c = core.get()] { c->LeaseLoop(); });
+    core->alert_relay_ = std::thread([c = core.get()] { c->AlertRelayLoop(); });
+  }
   for (const auto& sc : core->registry_.All()) core->Schedule(sc);
   return core;
 }
@@ -301,6 +305,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
   for (std::thread& t : workers_) t.join();
   workers_.clear();
   if (lease_renewer_.joinable()) lease_renewer_.join();
+  if (alert_relay_.joinable()) alert_relay_.join();
   // Nothing of this server writes any more: another server may take each session at once
   // instead of waiting for the expiry.
   if (shared()) {
@@ -378,6 +383,58 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
 std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc) const {
   if (!shared()) return std::nullopt;
   return storage::LeaseFence{options_.node_id, sc.lease_epoch.load()};
+}
+
+void EstimationCore::AlertRelayLoop() {
+  std::unique_ptr<storage::PostgresListener> listener;
+  bool reported = false;  // a failure logged, not yet recovered
+  for (;;) {
+    {
+      absl::MutexLock lock(&stop_mu_);
+      if (stopped_) return;
+    }
+    if (listener == nullptr) {
+      absl::StatusOr<std::unique_ptr<storage::PostgresListener>> opened =
+          storage_->ListenForAlertChanges();
+      if (!opened.ok()) {
+        if (!reported) {
+          LogEvent("ERROR", "alert_relay_failed",
+                   absl::StrCat("cannot follow the alerts of other servers: ",
+                                opened.status().message(), " (retrying)"));
+          reported = true;
+        }
+        absl::MutexLock lock(&stop_mu_);
+        stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), absl::Seconds(1));
+        continue;
+      }
+      listener = *std::move(opened);
+      if (reported) LogEvent("INFO", "alert_relay_recovered", "following the alerts of other servers again");
+      reported = false;
+    }
+    absl::StatusOr<std::vector<storage::PostgresListener::Notification>> notified =
+        listener->Wait(absl::Milliseconds(250));
+    if (!notified.ok()) {
+      LogEvent("WARNING", "alert_relay_interrupted",
+               absl::StrCat("alerts of other servers may have been missed: ",
+                            notified.status().message()));
+      continue;
+    }
+    if (notified->empty()) continue;
+    const int own_pid = storage_->ConnectionPid();
+    for (const storage::PostgresListener::Notification& n : *notified) {
+      // This server's own commits are published by the code that made them.
+      if (n.sender_pid == own_pid) continue;
+      const size_t space = n.payload.find(' ');
+      int64_t sequence = 0;
+      if (space == std::string::npos ||
+          !absl::SimpleAtoi(n.payload.substr(0, space), &sequence)) {
+        continue;
+      }
+      absl::StatusOr<storage::AlertRecord> record =
+          storage_->alerts().Get(n.payload.substr(space + 1), sequence);
+      if (record.ok()) hub_.Publish(*record, /*log=*/false);
+    }
+  }
 }
 
 void EstimationCore::LeaseLoop() {

@@ -273,6 +273,9 @@ class EstimationCore {
   // Renews the held leases every lease_duration / 3; a lease found taken over marks its record
   // lost (calls for it take the lease again, or are refused while another server holds it).
   void LeaseLoop();
+  // Publishes to this server's alert subscribers every alert change another server committed
+  // (PostgreSQL LISTEN/NOTIFY, storage::kAlertsChannel), reading the alert from the database.
+  void AlertRelayLoop();
   // Ingest helpers (ingest.cc).
   absl::StatusOr<std::optional<storage::ArchivedFrame>> FindStoredFrame(
       Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
@@ -341,6 +344,7 @@ class EstimationCore {
   bool ingest_closed_ ABSL_GUARDED_BY(commit_mu_) = false;
   std::thread committer_;
   std::thread lease_renewer_;  // with leases only
+  std::thread alert_relay_;    // with leases only
   absl::Mutex takeover_mu_;    // one lease take and session load at a time
 
   // Worker pool.

@@ -2,11 +2,13 @@
 #include "storage/postgres_db.h"
 
 #include <libpq-fe.h>
+#include <poll.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <utility>
 
@@ -421,6 +423,97 @@ absl::Status PostgresDatabase::RollbackLocked() {
   if (PQstatus(conn_) != CONNECTION_OK) return absl::OkStatus();  // the server rolls back
   if (PQtransactionStatus(conn_) == PQTRANS_IDLE) return absl::OkStatus();
   return ExecLocked("ROLLBACK");
+}
+
+absl::StatusOr<std::unique_ptr<PostgresListener>> PostgresDatabase::Listen(
+    const std::string& channel) const {
+  return PostgresListener::Open(uri_, channel, options_);
+}
+
+int PostgresDatabase::BackendPid() {
+  return WithLock([&] { return PQbackendPID(conn_); });
+}
+
+// ---------------------------------------------------------------------------------------------
+// PostgresListener
+
+PostgresListener::PostgresListener(pg_conn* conn, std::string uri, std::string channel,
+                                   PostgresOptions options)
+    : conn_(conn), uri_(std::move(uri)), channel_(std::move(channel)), options_(options) {}
+
+PostgresListener::~PostgresListener() { PQfinish(conn_); }
+
+absl::StatusOr<std::unique_ptr<PostgresListener>> PostgresListener::Open(
+    const std::string& uri, const std::string& channel, const PostgresOptions& options) {
+  if (channel.empty() || channel.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_") !=
+                             std::string::npos) {
+    return absl::InvalidArgumentError(absl::StrCat("channel '", channel, "': not a plain name"));
+  }
+  const std::string timeout =
+      absl::StrCat(std::max<int64_t>(1, absl::ToInt64Seconds(options.connect_timeout)));
+  const char* keywords[] = {"dbname", "connect_timeout", "application_name", nullptr};
+  const char* values[] = {uri.c_str(), timeout.c_str(), "esgd-listener", nullptr};
+  pg_conn* conn = PQconnectdbParams(keywords, values, /*expand_dbname=*/1);
+  if (conn == nullptr || PQstatus(conn) != CONNECTION_OK) {
+    const std::string reason = ConnectionError(conn);
+    PQfinish(conn);
+    return absl::UnavailableError(
+        absl::StrCat("db: ", RedactPostgresUri(uri), ": cannot connect: ", reason));
+  }
+  PQsetNoticeProcessor(conn, IgnoreNotice, nullptr);
+  std::unique_ptr<PostgresListener> listener(new PostgresListener(conn, uri, channel, options));
+  absl::Status status = listener->ListenLocked();
+  if (!status.ok()) return status;
+  return listener;
+}
+
+absl::Status PostgresListener::ListenLocked() {
+  pg_result* result = PQexec(conn_, absl::StrCat("LISTEN ", channel_).c_str());
+  const bool ok = result != nullptr && PQresultStatus(result) == PGRES_COMMAND_OK;
+  PQclear(result);
+  if (!ok) {
+    return absl::UnavailableError(absl::StrCat("db: ", RedactPostgresUri(uri_), ": LISTEN ",
+                                               channel_, ": ", ConnectionError(conn_)));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<PostgresListener::Notification>> PostgresListener::Wait(
+    absl::Duration timeout) {
+  if (PQstatus(conn_) != CONNECTION_OK) {
+    PQreset(conn_);
+    if (PQstatus(conn_) != CONNECTION_OK) {
+      return absl::UnavailableError(absl::StrCat("db: ", RedactPostgresUri(uri_),
+                                                 ": connection lost: ", ConnectionError(conn_)));
+    }
+    PQsetNoticeProcessor(conn_, IgnoreNotice, nullptr);
+    absl::Status listened = ListenLocked();
+    if (!listened.ok()) return listened;
+    // Whatever was notified while the connection was down is lost: say so once.
+    return absl::UnavailableError("reconnected: notifications in between were lost");
+  }
+  std::vector<Notification> out;
+  auto drain = [&] {
+    while (PGnotify* n = PQnotifies(conn_)) {
+      out.push_back({n->extra != nullptr ? n->extra : "", n->be_pid});
+      PQfreemem(n);
+    }
+  };
+  drain();
+  if (!out.empty()) return out;
+  pollfd p{PQsocket(conn_), POLLIN, 0};
+  const int ms = static_cast<int>(std::clamp<int64_t>(absl::ToInt64Milliseconds(timeout), 0,
+                                                      std::numeric_limits<int>::max()));
+  const int ready = ::poll(&p, 1, ms);
+  if (ready < 0 && errno != EINTR) {
+    return absl::UnavailableError(absl::StrCat("poll: ", std::strerror(errno)));
+  }
+  if (ready > 0 && PQconsumeInput(conn_) == 0) {
+    return absl::UnavailableError(absl::StrCat("db: ", RedactPostgresUri(uri_),
+                                               ": connection lost: ", ConnectionError(conn_)));
+  }
+  drain();
+  return out;
 }
 
 absl::Status PostgresDatabase::QuickCheck() {

@@ -104,6 +104,37 @@ class PostgresStatement final : public Statement {
   int row_ = -1;
 };
 
+// A connection that LISTENs on one notification channel (PostgreSQL LISTEN/NOTIFY): how a
+// server learns of changes another server committed. Not thread-safe: one thread waits on it.
+class PostgresListener {
+ public:
+  struct Notification {
+    std::string payload;
+    int sender_pid = 0;  // backend process of the connection that notified
+  };
+
+  // Connects to `uri` and LISTENs on `channel` (an SQL identifier of lowercase letters, digits
+  // and _). Errors as PostgresDatabase::Open.
+  static absl::StatusOr<std::unique_ptr<PostgresListener>> Open(const std::string& uri,
+                                                                const std::string& channel,
+                                                                const PostgresOptions& options);
+  ~PostgresListener();
+
+  // Waits up to `timeout` for notifications and returns those that arrived (maybe none).
+  // Unavailable when the connection was lost: the next call reconnects and LISTENs again, and
+  // notifications sent meanwhile are lost (the caller re-reads what it follows).
+  absl::StatusOr<std::vector<Notification>> Wait(absl::Duration timeout);
+
+ private:
+  PostgresListener(pg_conn* conn, std::string uri, std::string channel, PostgresOptions options);
+  absl::Status ListenLocked();
+
+  pg_conn* conn_;
+  const std::string uri_;
+  const std::string channel_;
+  const PostgresOptions options_;
+};
+
 class PostgresDatabase final : public Database {
  public:
   // Connects to `uri` (libpq connection URI, e.g. "postgresql://esg@db.example:5432/esg"),
@@ -121,6 +152,12 @@ class PostgresDatabase final : public Database {
   absl::Status QuickCheck() override;
   const std::string& path() const override { return name_; }
   Dialect dialect() const override { return Dialect::kPostgres; }
+
+  // A new connection to the same database LISTENing on `channel`.
+  absl::StatusOr<std::unique_ptr<PostgresListener>> Listen(const std::string& channel) const;
+  // The server process of this connection now (it changes when the connection is re-made):
+  // PostgresListener::Notification::sender_pid of what this connection's commits notify.
+  int BackendPid();
 
  protected:
   absl::Status BeginLocked(TransactionMode mode) override;

@@ -11,8 +11,9 @@
 namespace esg::storage {
 namespace {
 
-// Schema version 7 (schema.h) in PostgreSQL types, and the session leases of several servers
-// sharing the database (lease_store.h).
+// Schema version 7 (schema.h) in PostgreSQL types, the session leases of several servers
+// sharing the database (lease_store.h), and a trigger that notifies channel esg_alerts with
+// "<sequence> <spacecraft_id>" at each commit that adds or changes an alert (kAlertsChannel).
 constexpr absl::string_view kSchemaV7 = R"sql(
 CREATE TABLE spacecraft_configs (
   spacecraft_id        TEXT    NOT NULL,
@@ -175,6 +176,14 @@ CREATE TABLE session_leases (
   epoch           BIGINT NOT NULL CHECK (epoch >= 1),
   expires_unix_ns BIGINT NOT NULL
 );
+CREATE FUNCTION esg_alerts_notify() RETURNS trigger LANGUAGE plpgsql AS $$
+BEGIN
+  PERFORM pg_notify('esg_alerts', NEW.sequence || ' ' || NEW.spacecraft_id);
+  RETURN NULL;
+END;
+$$;
+CREATE TRIGGER alerts_notify AFTER INSERT OR UPDATE ON alerts
+  FOR EACH ROW EXECUTE FUNCTION esg_alerts_notify();
 CREATE TABLE esg_schema (
   version BIGINT NOT NULL
 );

@@ -14,6 +14,10 @@
 
 namespace esg::storage {
 
+// The channel a trigger on the alerts table NOTIFYs at each commit that inserts or updates an
+// alert, with the payload "<sequence> <spacecraft_id>" (PostgresListener).
+inline constexpr char kAlertsChannel[] = "esg_alerts";
+
 // The version in esg_schema; 0 for a database without the service's tables.
 absl::StatusOr<int> PostgresSchemaVersion(Database& db);
 

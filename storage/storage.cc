@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "estimator/status_macros.h"
+#include "storage/postgres_schema.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
@@ -55,6 +56,18 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::OpenPostgres(const std::string
 absl::StatusOr<std::unique_ptr<Storage>> Storage::FromDatabase(std::unique_ptr<Database> db) {
   RETURN_IF_ERROR(MigrateToCurrent(*db));
   return std::unique_ptr<Storage>(new Storage(std::move(db)));
+}
+
+absl::StatusOr<std::unique_ptr<PostgresListener>> Storage::ListenForAlertChanges() {
+  if (db_->dialect() != Dialect::kPostgres) {
+    return absl::FailedPreconditionError("alert notifications need a PostgreSQL database");
+  }
+  return static_cast<PostgresDatabase&>(*db_).Listen(kAlertsChannel);
+}
+
+int Storage::ConnectionPid() {
+  if (db_->dialect() != Dialect::kPostgres) return 0;
+  return static_cast<PostgresDatabase&>(*db_).BackendPid();
 }
 
 absl::Status Storage::ArchiveFrames(

@@ -31,6 +31,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
+#include "proto/convert.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
@@ -313,6 +314,130 @@ TEST(Failover, SessionsOfAKilledNodeFinishOnTheOthersWithEveryFrameStoredAndAppl
   EXPECT_GE(moved, 1);
   std::printf("[ measured ] %d sessions moved off %s; whole test %.2f s\n", moved,
               killed_node.c_str(), Seconds(test_start));
+}
+
+// Fleet views across servers (docs/service.md "Several servers"): two esgd sharing one
+// PostgreSQL database, no router. A spacecraft served by node A (configured and streamed there,
+// with star-tracker outliers that raise alerts) is seen from node B: ListSessions lists it
+// served by A, GetSession answers from the database without taking A's lease, the coefficient
+// history is A's, and an all-spacecraft alert subscription on B receives the alerts A raises
+// while it streams (LISTEN/NOTIFY), the same alerts A stores.
+TEST(Failover, AnyServerShowsEverySpacecraftAndRelaysAlertsRaisedOnAnother) {
+  std::string pg_error;
+  PostgresServer* pg = PostgresServer::Shared(&pg_error);
+  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
+  absl::StatusOr<std::string> db = pg->CreateDatabase();
+  ASSERT_TRUE(db.ok()) << db.status();
+  TempDir dir;
+  std::vector<std::unique_ptr<Daemon>> daemons;
+  for (int n = 0; n < 2; ++n) {
+    daemons.push_back(std::make_unique<Daemon>(
+        *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
+        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration", "30s"}));
+    ASSERT_GT(daemons.back()->port(), 0) << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
+  }
+  auto a = daemons[0]->Stub();
+  auto b = daemons[1]->Stub();
+
+  // B subscribes to every spacecraft's alerts before anything exists.
+  grpc::ClientContext watch;
+  esg::v1::AlertSubscription subscription;
+  subscription.set_replay_marker(true);
+  auto reader = b->SubscribeAlerts(&watch, subscription);
+  esg::v1::Alert marker;
+  ASSERT_TRUE(reader->Read(&marker));
+  ASSERT_TRUE(marker.replay_complete());
+  std::vector<esg::v1::Alert> relayed;
+  std::thread collect([&] {
+    esg::v1::Alert alert;
+    while (reader->Read(&alert)) relayed.push_back(alert);
+  });
+
+  const SimulatedRun run = SimulateRun("FV-1", 3.0, 41, /*outlier_probability=*/0.08);
+  const std::string id = run.config.spacecraft_id;
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse configured;
+    ASSERT_TRUE(a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured).ok());
+  }
+  const auto streamed = testing::StreamFrames(*a, run.frames);
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  ASSERT_EQ(streamed.acks.size(), run.frames.size());
+  esg::v1::SessionInfo on_a;
+  for (int attempt = 0; attempt < 600; ++attempt) {
+    on_a = testing::Session(*a, id);
+    if (on_a.frames_applied() == static_cast<int64_t>(run.frames.size())) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_EQ(on_a.frames_applied(), static_cast<int64_t>(run.frames.size()));
+  EXPECT_EQ(on_a.served_by(), NodeId(0));
+
+  // ListSessions and GetSession on B: A's session, as A committed it, A still holding it.
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ListSessionsResponse listed;
+    ASSERT_TRUE(b->ListSessions(&ctx, {}, &listed).ok());
+    ASSERT_EQ(listed.sessions_size(), 1);
+    EXPECT_EQ(listed.sessions(0).spacecraft_id(), id);
+    EXPECT_EQ(listed.sessions(0).served_by(), NodeId(0));
+    EXPECT_EQ(listed.sessions(0).frames_applied(), on_a.frames_applied());
+    EXPECT_EQ(listed.sessions(0).state(), on_a.state());
+  }
+  esg::v1::SessionInfo on_b;
+  {
+    grpc::ClientContext ctx;
+    esg::v1::GetSessionRequest get;
+    get.set_spacecraft_id(id);
+    const grpc::Status status = b->GetSession(&ctx, get, &on_b);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  EXPECT_EQ(on_b.served_by(), NodeId(0));
+  EXPECT_EQ(on_b.highest_applied_sequence(), on_a.highest_applied_sequence());
+  EXPECT_EQ(testing::Session(*a, id).served_by(), NodeId(0)) << "B took A's session";
+
+  // The coefficient history read on B is A's.
+  auto history = [&](esg::v1::EstimationService::Stub& stub) {
+    grpc::ClientContext ctx;
+    esg::v1::HistoryRequest request;
+    request.set_spacecraft_id(id);
+    request.set_page_size(100000);
+    esg::v1::HistoryResponse response;
+    EXPECT_TRUE(stub.GetCoefficientHistory(&ctx, request, &response).ok());
+    return response.SerializeAsString();
+  };
+  EXPECT_EQ(history(*b), history(*a));
+
+  // The alerts A raised reached B's subscription: every stored alert state of the spacecraft,
+  // as stored (waiting for the relay to catch up with the last one).
+  grpc::ClientContext replay_ctx;
+  esg::v1::AlertSubscription replay;
+  replay.set_spacecraft_id(id);
+  *replay.mutable_since() = proto_convert::TimeToProto(absl::UnixEpoch());
+  replay.set_replay_marker(true);
+  auto stored_reader = a->SubscribeAlerts(&replay_ctx, replay);
+  std::vector<esg::v1::Alert> stored;
+  esg::v1::Alert s;
+  while (stored_reader->Read(&s) && !s.replay_complete()) stored.push_back(s);
+  replay_ctx.TryCancel();
+  ASSERT_FALSE(stored.empty()) << "the outliers raised no alert: the test shows nothing";
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+  watch.TryCancel();
+  collect.join();
+  std::map<int64_t, esg::v1::Alert> last_relayed;
+  for (const esg::v1::Alert& r : relayed) {
+    EXPECT_EQ(r.spacecraft_id(), id);
+    last_relayed[r.sequence()] = r;
+  }
+  ASSERT_EQ(last_relayed.size(), stored.size());
+  for (const esg::v1::Alert& st : stored) {
+    ASSERT_TRUE(last_relayed.count(st.sequence())) << st.sequence();
+    const esg::v1::Alert& r = last_relayed[st.sequence()];
+    EXPECT_EQ(r.reason(), st.reason());
+    EXPECT_EQ(r.repeat_count(), st.repeat_count());
+    EXPECT_EQ(r.cleared(), st.cleared());
+  }
+  std::printf("[ measured ] %zu alerts raised on node A, %zu alert changes relayed to node B\n",
+              stored.size(), relayed.size());
 }
 
 }  // namespace
