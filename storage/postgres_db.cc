@@ -17,6 +17,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_replace.h"
 #include "absl/strings/strip.h"
 
 namespace esg::storage {
@@ -80,7 +81,11 @@ bool IsPostgresUri(absl::string_view db) {
   return absl::StartsWith(db, "postgresql://") || absl::StartsWith(db, "postgres://");
 }
 
-std::string RedactPostgresUri(absl::string_view uri) {
+namespace {
+
+// RedactPostgresUri, also collecting the password texts it removed (as written in `uri`, still
+// percent-encoded) in *removed.
+std::string RedactUri(absl::string_view uri, std::vector<std::string>* removed) {
   std::string out(uri);
   const size_t scheme = out.find("://");
   if (scheme != std::string::npos) {
@@ -89,17 +94,29 @@ std::string RedactPostgresUri(absl::string_view uri) {
     const size_t at = out.rfind('@', end == std::string::npos ? out.size() : end);
     if (at != std::string::npos && at > authority) {
       const size_t colon = out.find(':', authority);
-      if (colon != std::string::npos && colon < at) out.erase(colon, at - colon);
+      if (colon != std::string::npos && colon < at) {
+        removed->push_back(out.substr(colon + 1, at - colon - 1));
+        out.erase(colon, at - colon);
+      }
     }
   }
   // password=... among the query parameters
   size_t p = out.find("password=");
   while (p != std::string::npos) {
-    const size_t end = out.find('&', p);
-    out.replace(p, (end == std::string::npos ? out.size() : end) - p, "password=***");
+    const size_t value = p + 9;
+    const size_t end = std::min(out.find('&', p), out.size());
+    removed->push_back(out.substr(value, end - value));
+    out.replace(p, end - p, "password=***");
     p = out.find("password=", p + 12);
   }
   return out;
+}
+
+}  // namespace
+
+std::string RedactPostgresUri(absl::string_view uri) {
+  std::vector<std::string> removed;
+  return RedactUri(uri, &removed);
 }
 
 absl::StatusCode StatusCodeForSqlState(absl::string_view sqlstate) {
@@ -295,6 +312,13 @@ absl::StatusOr<std::unique_ptr<PostgresDatabase>> PostgresDatabase::Open(
                              ? std::string(absl::StripTrailingAsciiWhitespace(parse_error))
                              : "out of memory";
     PQfreemem(parse_error);
+    // libpq quotes the URI, or the token it could not decode, which may be the password.
+    std::vector<std::string> passwords;
+    RedactUri(uri, &passwords);
+    reason = absl::StrReplaceAll(reason, {{uri, name}});
+    for (const std::string& password : passwords) {
+      if (!password.empty()) reason = absl::StrReplaceAll(reason, {{password, "***"}});
+    }
     return absl::InvalidArgumentError(absl::StrCat("db: ", name, ": not a PostgreSQL connection "
                                                    "URI libpq accepts: ", reason));
   }

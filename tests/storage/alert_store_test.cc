@@ -11,19 +11,19 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
 using ::esg::storage::testing::Alert;
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
@@ -36,9 +36,12 @@ std::vector<std::pair<std::string, int64_t>> Keys(const std::vector<AlertRecord>
 
 using Key = std::pair<std::string, int64_t>;
 
-TEST(AlertStore, NumbersPerSpacecraftAndRoundTripsEveryField) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The AlertStore tests run on both engines (tests/storage/backend.h).
+class AlertStoreTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(AlertStoreTest);
+
+TEST_P(AlertStoreTest, NumbersPerSpacecraftAndRoundTripsEveryField) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   AlertStore& alerts = (*storage)->alerts();
   AlertRecord written = Alert("RDK-1", 60);
@@ -70,9 +73,8 @@ TEST(AlertStore, NumbersPerSpacecraftAndRoundTripsEveryField) {
   EXPECT_THAT(alerts.Get("RDK-1", 3), StatusIs(absl::StatusCode::kNotFound, HasSubstr("3")));
 }
 
-TEST(AlertStore, SinceOrdersByMeasurementTimeThenSequenceAndHonoursLimit) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(AlertStoreTest, SinceOrdersByMeasurementTimeThenSequenceAndHonoursLimit) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   AlertStore& alerts = (*storage)->alerts();
   // Sequences follow insertion; measurement times do not.
@@ -97,9 +99,8 @@ TEST(AlertStore, SinceOrdersByMeasurementTimeThenSequenceAndHonoursLimit) {
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("limit")));
 }
 
-TEST(AlertStore, AcknowledgeRecordsOperatorOnceAndClearSetsTheFlag) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(AlertStoreTest, AcknowledgeRecordsOperatorOnceAndClearSetsTheFlag) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   AlertStore& alerts = (*storage)->alerts();
   ASSERT_THAT(alerts.Append(Alert("RDK-1", 60)), IsOkAndHolds(1));
@@ -136,9 +137,8 @@ TEST(AlertStore, AcknowledgeRecordsOperatorOnceAndClearSetsTheFlag) {
   EXPECT_THAT(alerts.Clear("RDK-9", 1), StatusIs(absl::StatusCode::kNotFound, ::testing::_));
 }
 
-TEST(AlertStore, UpdateRepeatCollapsesRepeatsIntoTheAlert) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(AlertStoreTest, UpdateRepeatCollapsesRepeatsIntoTheAlert) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   AlertStore& alerts = (*storage)->alerts();
   ASSERT_THAT(alerts.Append(Alert("RDK-1", 60)), IsOkAndHolds(1));
@@ -153,9 +153,8 @@ TEST(AlertStore, UpdateRepeatCollapsesRepeatsIntoTheAlert) {
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("repeat_count")));
 }
 
-TEST(AlertStore, RejectsIncompleteAlerts) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(AlertStoreTest, RejectsIncompleteAlerts) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   AlertStore& alerts = (*storage)->alerts();
   AlertRecord a = Alert("RDK-1", 0);

@@ -12,19 +12,19 @@
 #include "gtest/gtest.h"
 #include "storage/schema.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::QueryDouble;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
@@ -49,9 +49,12 @@ std::vector<int> Gyros(const std::vector<CoefficientRecord>& records) {
   return out;
 }
 
-TEST(CoefficientStore, RoundTripsValuesSigmasAndNaN) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The CoefficientStore tests run on both engines (tests/storage/backend.h).
+class CoefficientStoreTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(CoefficientStoreTest);
+
+TEST_P(CoefficientStoreTest, RoundTripsValuesSigmasAndNaN) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientRecord written = Record("RDK-1", 2, 600);
   written.values[kCoefficientMu] = std::nan("");   // not estimated
@@ -85,9 +88,8 @@ TEST(CoefficientStore, RoundTripsValuesSigmasAndNaN) {
   }
 }
 
-TEST(CoefficientStore, EachComponentLandsInItsNamedColumn) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(CoefficientStoreTest, EachComponentLandsInItsNamedColumn) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientRecord written = Record("RDK-1", 1, 0);
   ASSERT_THAT((*storage)->coefficients().Append(written), IsOk());
@@ -106,9 +108,8 @@ TEST(CoefficientStore, EachComponentLandsInItsNamedColumn) {
               IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.sigmas[kCoefficientNu + 1]))));
 }
 
-TEST(CoefficientStore, EmptySigmasReadBackEmpty) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(CoefficientStoreTest, EmptySigmasReadBackEmpty) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientRecord written = Record("RDK-1", 1, 0);
   written.sigmas.clear();
@@ -121,9 +122,8 @@ TEST(CoefficientStore, EmptySigmasReadBackEmpty) {
   EXPECT_THAT((*read)[0].values, ::testing::Pointwise(::testing::DoubleEq(), written.values));
 }
 
-TEST(CoefficientStore, HistoryFiltersByGyroAndHalfOpenWindowInTimeOrder) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(CoefficientStoreTest, HistoryFiltersByGyroAndHalfOpenWindowInTimeOrder) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientStore& store = (*storage)->coefficients();
   // Inserted out of time order on purpose.
@@ -150,9 +150,8 @@ TEST(CoefficientStore, HistoryFiltersByGyroAndHalfOpenWindowInTimeOrder) {
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("gyro_id")));
 }
 
-TEST(CoefficientStore, RejectsMalformedRecords) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(CoefficientStoreTest, RejectsMalformedRecords) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientStore& store = (*storage)->coefficients();
   CoefficientRecord r = Record("RDK-1", 0, 0);

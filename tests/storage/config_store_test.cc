@@ -7,18 +7,18 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::ElementsAre;
 using ::testing::Field;
 using ::testing::HasSubstr;
@@ -32,9 +32,12 @@ ConfigRecord Config(const std::string& id, const std::string& json, double at_se
   return c;
 }
 
-TEST(ConfigStore, PutKeepsVersionsAndGetReturnsTheLatest) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The ConfigStore tests run on both engines (tests/storage/backend.h).
+class ConfigStoreTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(ConfigStoreTest);
+
+TEST_P(ConfigStoreTest, PutKeepsVersionsAndGetReturnsTheLatest) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   ConfigStore& configs = (*storage)->configs();
   EXPECT_THAT(configs.Get("RDK-1"), StatusIs(absl::StatusCode::kNotFound, HasSubstr("RDK-1")));
@@ -56,9 +59,8 @@ TEST(ConfigStore, PutKeepsVersionsAndGetReturnsTheLatest) {
   EXPECT_THAT(configs.History("nobody"), IsOkAndHolds(IsEmpty()));
 }
 
-TEST(ConfigStore, RePuttingTheLatestJsonAddsNoVersion) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(ConfigStoreTest, RePuttingTheLatestJsonAddsNoVersion) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   ConfigStore& configs = (*storage)->configs();
   ASSERT_THAT(configs.Put(Config("RDK-1", "{}", 0)), IsOkAndHolds(1));
@@ -72,9 +74,8 @@ TEST(ConfigStore, RePuttingTheLatestJsonAddsNoVersion) {
   EXPECT_THAT(configs.Put(Config("RDK-1", "{}", 101)), IsOkAndHolds(3));
 }
 
-TEST(ConfigStore, ListReturnsTheLatestOfEachSpacecraftById) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(ConfigStoreTest, ListReturnsTheLatestOfEachSpacecraftById) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   ConfigStore& configs = (*storage)->configs();
   ASSERT_THAT(configs.Put(Config("SC-B", "b1", 0)), IsOk());
@@ -90,9 +91,8 @@ TEST(ConfigStore, ListReturnsTheLatestOfEachSpacecraftById) {
   EXPECT_EQ((*all)[1].version, 2);
 }
 
-TEST(ConfigStore, RejectsEmptyIdAndUnstorableTime) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(ConfigStoreTest, RejectsEmptyIdAndUnstorableTime) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   EXPECT_THAT((*storage)->configs().Put(Config("", "{}", 0)),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("config.spacecraft_id")));

@@ -8,18 +8,18 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::ElementsAre;
 using ::testing::Field;
 using ::testing::HasSubstr;
@@ -37,9 +37,12 @@ DiagnosisRecord Diagnosis(const std::string& id, const std::string& verdict, dou
   return d;
 }
 
-TEST(DiagnosisStore, PutGetAndListRoundTrip) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The DiagnosisStore tests run on both engines (tests/storage/backend.h).
+class DiagnosisStoreTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(DiagnosisStoreTest);
+
+TEST_P(DiagnosisStoreTest, PutGetAndListRoundTrip) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   DiagnosisStore& diagnoses = (*storage)->diagnoses();
   absl::StatusOr<int64_t> first = diagnoses.Put(Diagnosis("RDK-1", "gyro_misalignment", 0));
@@ -78,9 +81,8 @@ TEST(DiagnosisStore, PutGetAndListRoundTrip) {
               StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
 }
 
-TEST(DiagnosisStore, RejectsInvalidRecords) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(DiagnosisStoreTest, RejectsInvalidRecords) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   DiagnosisStore& diagnoses = (*storage)->diagnoses();
   EXPECT_THAT(diagnoses.Put(Diagnosis("RDK-1", "", 0)),

@@ -17,13 +17,14 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::QueryDouble;
 using ::esg::storage::testing::QueryInt;
@@ -31,7 +32,6 @@ using ::esg::storage::testing::QueryText;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
 
 // A valid step of spacecraft `id` at T(at_seconds) with innovations of gyros 2, 1, 3 (in that
@@ -92,10 +92,13 @@ void ExpectSame(const EstimateRecord& got, const EstimateRecord& want) {
   }
 }
 
-class EstimateStoreTest : public ::testing::Test {
+// The EstimateStore tests run on both engines (tests/storage/backend.h).
+class EstimateStoreTest : public BackendTest {
  protected:
   void SetUp() override {
-    absl::StatusOr<std::unique_ptr<Storage>> opened = Storage::Open(dir_.File("esg.db"));
+    BackendTest::SetUp();
+    if (HasFatalFailure()) return;
+    absl::StatusOr<std::unique_ptr<Storage>> opened = Storage::Open(NewDatabase());
     ASSERT_THAT(opened, IsOk());
     storage_ = std::move(*opened);
   }
@@ -112,11 +115,11 @@ class EstimateStoreTest : public ::testing::Test {
     return out;
   }
 
-  TempDir dir_;
   std::unique_ptr<Storage> storage_;
 };
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(EstimateStoreTest);
 
-TEST_F(EstimateStoreTest, RoundTripKeepsSiValuesAndTheSessionGyroOrderWithArcsecColumns) {
+TEST_P(EstimateStoreTest, RoundTripKeepsSiValuesAndTheSessionGyroOrderWithArcsecColumns) {
   const EstimateRecord r = Estimate("SC-1", 60);
   ASSERT_THAT(store().Put(r), IsOk());
   const std::vector<EstimateRecord> all = All("SC-1");
@@ -136,7 +139,7 @@ TEST_F(EstimateStoreTest, RoundTripKeepsSiValuesAndTheSessionGyroOrderWithArcsec
               IsOkAndHolds(1));
 }
 
-TEST_F(EstimateStoreTest, AStepStoredAgainReplacesTheRowAtItsMeasurementTime) {
+TEST_P(EstimateStoreTest, AStepStoredAgainReplacesTheRowAtItsMeasurementTime) {
   ASSERT_THAT(store().Put(Estimate("SC-1", 60)), IsOk());
   ASSERT_THAT(store().Put(Estimate("SC-1", 120)), IsOk());
   EstimateRecord again = Estimate("SC-1", 60);
@@ -150,7 +153,7 @@ TEST_F(EstimateStoreTest, AStepStoredAgainReplacesTheRowAtItsMeasurementTime) {
   ExpectSame(all[1], Estimate("SC-1", 120));
 }
 
-TEST_F(EstimateStoreTest, AnInvalidOutputStoresNoAttitudeAndNoInnovationsWhenNoneFormed) {
+TEST_P(EstimateStoreTest, AnInvalidOutputStoresNoAttitudeAndNoInnovationsWhenNoneFormed) {
   EstimateRecord r = Estimate("SC-1", 60);
   r.attitude_valid = false;
   r.attitude_invalid_reason = "no readable pair";
@@ -170,7 +173,7 @@ TEST_F(EstimateStoreTest, AnInvalidOutputStoresNoAttitudeAndNoInnovationsWhenNon
   ExpectSame(all[0], r);
 }
 
-TEST_F(EstimateStoreTest, PagesFollowTheSpanWithoutGapOrRepeat) {
+TEST_P(EstimateStoreTest, PagesFollowTheSpanWithoutGapOrRepeat) {
   for (int i = 1; i <= 25; ++i) ASSERT_THAT(store().Put(Estimate("SC-1", 60 * i)), IsOk());
   ASSERT_THAT(store().Put(Estimate("SC-2", 600)), IsOk());
   // [T(120), T(1320)): steps 2..21, 20 records, in pages of 7.
@@ -200,7 +203,7 @@ TEST_F(EstimateStoreTest, PagesFollowTheSpanWithoutGapOrRepeat) {
   EXPECT_THAT(store().Count("SC-1"), IsOkAndHolds(25));
 }
 
-TEST_F(EstimateStoreTest, DeletesAfterAReRunStartAndBeforeARetentionBoundOfOneSpacecraftOnly) {
+TEST_P(EstimateStoreTest, DeletesAfterAReRunStartAndBeforeARetentionBoundOfOneSpacecraftOnly) {
   for (int i = 1; i <= 10; ++i) {
     ASSERT_THAT(store().Put(Estimate("SC-1", 60 * i)), IsOk());
     ASSERT_THAT(store().Put(Estimate("SC-2", 60 * i)), IsOk());
@@ -225,7 +228,7 @@ TEST_F(EstimateStoreTest, DeletesAfterAReRunStartAndBeforeARetentionBoundOfOneSp
   EXPECT_EQ(Times("SC-1").size(), 6u);
 }
 
-TEST_F(EstimateStoreTest, RefusesRecordsItCouldNotReadBackNamingTheField) {
+TEST_P(EstimateStoreTest, RefusesRecordsItCouldNotReadBackNamingTheField) {
   EstimateRecord no_state = Estimate("SC-1", 60);
   no_state.state.clear();
   EXPECT_THAT(store().Put(no_state),
@@ -260,7 +263,7 @@ FilterEffects Effects(const std::string& id, const std::vector<double>& seconds)
   return e;
 }
 
-TEST_F(EstimateStoreTest, AReRunDeletesTheStepsAfterItsStartThenWritesItsOwn) {
+TEST_P(EstimateStoreTest, AReRunDeletesTheStepsAfterItsStartThenWritesItsOwn) {
   ASSERT_THAT(storage_->CommitFilterEffects(Effects("SC-1", {60, 120, 180, 240, 300})), IsOk());
   // The re-run from the checkpoint of T(120) recomputes 180 and 270: 240 and 300 no longer exist.
   FilterEffects rerun = Effects("SC-1", {180, 270});
@@ -274,7 +277,7 @@ TEST_F(EstimateStoreTest, AReRunDeletesTheStepsAfterItsStartThenWritesItsOwn) {
   EXPECT_EQ(Times("SC-1"), (std::vector<absl::Time>{T(30)}));
 }
 
-TEST_F(EstimateStoreTest, RetentionPrunesInTheJobTransactionAndAStoreErrorLeavesNothing) {
+TEST_P(EstimateStoreTest, RetentionPrunesInTheJobTransactionAndAStoreErrorLeavesNothing) {
   ASSERT_THAT(storage_->CommitFilterEffects(Effects("SC-1", {60, 120, 180})), IsOk());
   FilterEffects job = Effects("SC-1", {240, 300});
   job.estimates_before = T(180);
@@ -293,7 +296,7 @@ TEST_F(EstimateStoreTest, RetentionPrunesInTheJobTransactionAndAStoreErrorLeaves
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("estimates[0]")));
 }
 
-TEST_F(EstimateStoreTest, AReplacedSessionDropsTheSpacecraftsEstimates) {
+TEST_P(EstimateStoreTest, AReplacedSessionDropsTheSpacecraftsEstimates) {
   ASSERT_THAT(storage_->CommitFilterEffects(Effects("SC-1", {60, 120})), IsOk());
   ASSERT_THAT(storage_->CommitFilterEffects(Effects("SC-2", {60})), IsOk());
   ConfigurationChange change;

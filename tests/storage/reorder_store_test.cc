@@ -11,24 +11,30 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
 using ::esg::storage::testing::Alert;
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::Frame;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::testing::ElementsAre;
 
-std::unique_ptr<Storage> OpenIn(const esg::testing::TempDir& dir) {
-  auto storage = Storage::Open(dir.File("esg.db"));
-  EXPECT_TRUE(storage.ok()) << storage.status();
-  return storage.ok() ? std::move(*storage) : nullptr;
-}
+// The ReorderStore tests run on both engines (tests/storage/backend.h).
+class ReorderStoreTest : public BackendTest {
+ protected:
+  std::unique_ptr<Storage> OpenNew() {
+    auto storage = Storage::Open(NewDatabase());
+    EXPECT_TRUE(storage.ok()) << storage.status();
+    return storage.ok() ? std::move(*storage) : nullptr;
+  }
+};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(ReorderStoreTest);
 
 CoefficientRecord Estimate(const std::string& id, double at_seconds) {
   CoefficientRecord r;
@@ -53,9 +59,8 @@ FilterEffects Effects(const std::string& id) {
   return e;
 }
 
-TEST(ReorderStore, LateFramesAreRecordedWithTheirArchiveCommitAndForgottenByTheFilterCommit) {
-  esg::testing::TempDir dir;
-  auto storage = OpenIn(dir);
+TEST_P(ReorderStoreTest, LateFramesAreRecordedWithTheirArchiveCommitAndForgottenByTheFilterCommit) {
+  auto storage = OpenNew();
   ASSERT_NE(storage, nullptr);
   ASSERT_THAT(storage->ArchiveFrames({Frame("RDK-1", 3)}), IsOk());
   ASSERT_THAT(
@@ -73,9 +78,8 @@ TEST(ReorderStore, LateFramesAreRecordedWithTheirArchiveCommitAndForgottenByTheF
   EXPECT_THAT(storage->reorder().LateFrames("RDK-1"), testing::IsOkAndHolds(ElementsAre(T(120))));
 }
 
-TEST(ReorderStore, CheckpointBeforeATimeAndPruningKeepTheOldestOneTheWindowNeeds) {
-  esg::testing::TempDir dir;
-  auto storage = OpenIn(dir);
+TEST_P(ReorderStoreTest, CheckpointBeforeATimeAndPruningKeepTheOldestOneTheWindowNeeds) {
+  auto storage = OpenNew();
   ASSERT_NE(storage, nullptr);
   for (int hour = 1; hour <= 5; ++hour) {
     FilterEffects e = Effects("RDK-1");
@@ -104,9 +108,8 @@ TEST(ReorderStore, CheckpointBeforeATimeAndPruningKeepTheOldestOneTheWindowNeeds
                                                 T(5 * 3600.0 - 60), T(6 * 3600.0 - 60))));
 }
 
-TEST(ReorderStore, RevisionMarksLaterEstimatesAndAlertsKeepsThemAndDropsLaterCheckpoints) {
-  esg::testing::TempDir dir;
-  auto storage = OpenIn(dir);
+TEST_P(ReorderStoreTest, RevisionMarksLaterEstimatesAndAlertsKeepsThemAndDropsLaterCheckpoints) {
+  auto storage = OpenNew();
   ASSERT_NE(storage, nullptr);
   FilterEffects first = Effects("RDK-1");
   for (double t : {60.0, 120.0, 180.0, 240.0}) first.coefficients.push_back(Estimate("RDK-1", t));
@@ -158,9 +161,8 @@ TEST(ReorderStore, RevisionMarksLaterEstimatesAndAlertsKeepsThemAndDropsLaterChe
   EXPECT_THAT(storage->reorder().CheckpointTimes("RDK-1"), testing::IsOkAndHolds(ElementsAre()));
 }
 
-TEST(ReorderStore, ANewSessionDropsTheWindowCheckpointsAndLateFrames) {
-  esg::testing::TempDir dir;
-  auto storage = OpenIn(dir);
+TEST_P(ReorderStoreTest, ANewSessionDropsTheWindowCheckpointsAndLateFrames) {
+  auto storage = OpenNew();
   ASSERT_NE(storage, nullptr);
   ASSERT_THAT(storage->ArchiveFrames({Frame("RDK-1", 2), Frame("RDK-1", 1)}, {{"RDK-1", {T(60)}}}),
               IsOk());

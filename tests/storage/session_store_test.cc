@@ -7,18 +7,18 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 
@@ -32,9 +32,12 @@ CheckpointRecord Checkpoint(const std::string& id, int64_t last_sequence) {
   return c;
 }
 
-TEST(SessionStore, CheckpointRoundTripsAndIsReplaced) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The SessionStore tests run on both engines (tests/storage/backend.h).
+class SessionStoreTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(SessionStoreTest);
+
+TEST_P(SessionStoreTest, CheckpointRoundTripsAndIsReplaced) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   SessionStore& sessions = (*storage)->sessions();
   EXPECT_THAT(sessions.GetCheckpoint("RDK-1"),
@@ -51,9 +54,8 @@ TEST(SessionStore, CheckpointRoundTripsAndIsReplaced) {
   EXPECT_EQ(got->state_blob, expected.state_blob);
 }
 
-TEST(SessionStore, ListsSpacecraftWithCheckpoints) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(SessionStoreTest, ListsSpacecraftWithCheckpoints) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   SessionStore& sessions = (*storage)->sessions();
   ASSERT_THAT(sessions.PutCheckpoint(Checkpoint("SC-B", 1)), IsOk());
@@ -62,9 +64,8 @@ TEST(SessionStore, ListsSpacecraftWithCheckpoints) {
   EXPECT_THAT(sessions.ListSpacecraft(), IsOkAndHolds(ElementsAre("SC-A", "SC-B")));
 }
 
-TEST(SessionStore, RejectsInvalidCheckpoints) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(SessionStoreTest, RejectsInvalidCheckpoints) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   EXPECT_THAT((*storage)->sessions().PutCheckpoint(Checkpoint("", 1)),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint.spacecraft_id")));

@@ -2,7 +2,9 @@
 // already archived, CommitFilterEffects and CommitConfiguration round trips, all-or-nothing on a
 // failure inside each), persistence across reopen, acknowledged frames and committed effects
 // surviving kill -9 of the writing process, concurrent writers (shared object and separate
-// connections), and a corrupted file.
+// connections), and a corrupted file. The TEST_P tests run on SQLite and PostgreSQL
+// (tests/storage/backend.h); kill -9 of the writer, several connections to one file and the
+// corrupted file are about SQLite's file and stay TEST (SQLite only).
 #include "storage/storage.h"
 
 #include <signal.h>
@@ -25,6 +27,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/schema.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
@@ -33,6 +36,7 @@ namespace esg::storage {
 namespace {
 
 using ::esg::storage::testing::Alert;
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::Frame;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::QueryInt;
@@ -125,9 +129,12 @@ Visible Count(Storage& storage, const std::string& id) {
   return v;
 }
 
-TEST(Storage, FilterEffectsWriteEveryKindAndReturnAlertSequences) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The Storage tests run on both engines (tests/storage/backend.h).
+class StorageTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(StorageTest);
+
+TEST_P(StorageTest, FilterEffectsWriteEveryKindAndReturnAlertSequences) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   Step step = MakeStep("RDK-1", 0);
   step.effects.new_alerts.push_back(Alert("RDK-1", 30, "PAIR_MISMATCH"));
@@ -164,9 +171,8 @@ TEST(Storage, FilterEffectsWriteEveryKindAndReturnAlertSequences) {
   EXPECT_EQ(second->cleared_time, T(430));
 }
 
-TEST(Storage, ArchiveFramesRefusesFramesAlreadyArchivedAndStoresNoneOfTheCommit) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(StorageTest, ArchiveFramesRefusesFramesAlreadyArchivedAndStoresNoneOfTheCommit) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   ASSERT_THAT(CommitStep(**storage, MakeStep("RDK-1", 0)), IsOk());
   // Frames of two spacecraft in one commit, one of them already archived.
@@ -190,9 +196,8 @@ TEST(Storage, ArchiveFramesRefusesFramesAlreadyArchivedAndStoresNoneOfTheCommit)
   EXPECT_EQ(Count(**storage, "RDK-3").frames, 0);
 }
 
-TEST(Storage, FailureLateInTheFilterEffectsLeavesNothingOfThem) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(StorageTest, FailureLateInTheFilterEffectsLeavesNothingOfThem) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   ASSERT_THAT(CommitStep(**storage, MakeStep("RDK-1", 0)), IsOk());
   ASSERT_THAT((*storage)->ArchiveFrames(MakeStep("RDK-1", 1).frames), IsOk());
@@ -227,15 +232,22 @@ TEST(Storage, FailureLateInTheFilterEffectsLeavesNothingOfThem) {
               IsOkAndHolds(ElementsAre(2)));
 }
 
-TEST(Storage, SqliteConstraintFailureInsideTheTransactionRollsItBack) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(StorageTest, EngineConstraintFailureInsideTheTransactionRollsItBack) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
-  // Make SQLite itself refuse the checkpoint, the last write of the filter's transaction.
-  ASSERT_THAT((*storage)->database().Execute(
-                  "CREATE TRIGGER refuse_checkpoint BEFORE INSERT ON checkpoints "
-                  "BEGIN SELECT RAISE(ABORT, 'checkpoint refused'); END"),
-              IsOk());
+  // Make the engine itself refuse the checkpoint, the last write of the filter's transaction,
+  // with a constraint error (SQLite's RAISE(ABORT), PostgreSQL's check_violation, SQLSTATE
+  // 23514): the trigger is the one piece of SQL written per engine.
+  const char* trigger =
+      GetParam() == testing::Backend::kSqlite
+          ? "CREATE TRIGGER refuse_checkpoint BEFORE INSERT ON checkpoints "
+            "BEGIN SELECT RAISE(ABORT, 'checkpoint refused'); END"
+          : "CREATE FUNCTION refuse_checkpoint() RETURNS trigger LANGUAGE plpgsql AS $$ "
+            "BEGIN RAISE EXCEPTION 'checkpoint refused' USING ERRCODE = 'check_violation'; "
+            "END $$; "
+            "CREATE TRIGGER refuse_checkpoint BEFORE INSERT ON checkpoints "
+            "FOR EACH ROW EXECUTE FUNCTION refuse_checkpoint()";
+  ASSERT_THAT((*storage)->database().Execute(trigger), IsOk());
   EXPECT_THAT((*storage)->CommitFilterEffects(MakeStep("RDK-1", 0).effects),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint refused")));
   const Visible v = Count(**storage, "RDK-1");
@@ -244,9 +256,8 @@ TEST(Storage, SqliteConstraintFailureInsideTheTransactionRollsItBack) {
   EXPECT_EQ(v.checkpoint_sequence, std::nullopt);
 }
 
-TEST(Storage, RejectsRecordsOfAnotherSpacecraft) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(StorageTest, RejectsRecordsOfAnotherSpacecraft) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   Step step = MakeStep("RDK-1", 0);
   step.effects.new_alerts.push_back(Alert("RDK-2", 0));
@@ -267,9 +278,8 @@ TEST(Storage, RejectsRecordsOfAnotherSpacecraft) {
   EXPECT_EQ(Count(**storage, "RDK-1").alerts, 0);
 }
 
-TEST(Storage, ConfigurationIsStoredWithItsCheckpointAndAlertChanges) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(StorageTest, ConfigurationIsStoredWithItsCheckpointAndAlertChanges) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   ASSERT_THAT((*storage)->alerts().Append(Alert("RDK-1", 60)), IsOkAndHolds(1));
   ConfigurationChange change;
@@ -299,9 +309,8 @@ TEST(Storage, ConfigurationIsStoredWithItsCheckpointAndAlertChanges) {
   EXPECT_EQ(checkpoint->state_blob, "fresh");
 }
 
-TEST(Storage, DataSurvivesCloseAndReopen) {
-  TempDir dir;
-  const std::string path = dir.File("esg.db");
+TEST_P(StorageTest, DataSurvivesCloseAndReopen) {
+  const std::string path = NewDatabase();
   {
     absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
     ASSERT_THAT(storage, IsOk());
@@ -341,6 +350,8 @@ TEST(Storage, DataSurvivesCloseAndReopen) {
 // The durability contract of sqlite_db.h: frames whose ArchiveFrames returned OK (the ack) and
 // effects whose CommitFilterEffects returned OK are in the file after the writing process is
 // killed with SIGKILL at an arbitrary point, and no transaction is ever half there.
+// SQLite only: the writer is a forked process holding the file, killed with SIGKILL (the
+// PostgreSQL server's own crash is in postgres_db_test.cc).
 TEST(Storage, AcknowledgedBatchesSurviveKillNine) {
   TempDir dir;
   const std::string path = dir.File("esg.db");
@@ -390,9 +401,8 @@ TEST(Storage, AcknowledgedBatchesSurviveKillNine) {
               IsOkAndHolds(std::optional<int64_t>(v.frames - 1)));
 }
 
-TEST(Storage, FourThreadsSharingOneStorageLoseNothing) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(StorageTest, FourThreadsSharingOneStorageLoseNothing) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   constexpr int kThreads = 4;
   constexpr int kBatchesPerThread = 15;
@@ -420,6 +430,9 @@ TEST(Storage, FourThreadsSharingOneStorageLoseNothing) {
   }
 }
 
+// SQLite only: several connections to one file (DatabaseOptions::exclusive = false). With
+// PostgreSQL each spacecraft is written by the one server that owns it (docs/service.md
+// "Storage backends"), so one spacecraft's alerts numbered from four connections is not a case.
 TEST(Storage, FourConnectionsWritingOneFileLoseNothingAndNumberAlertsUniquely) {
   TempDir dir;
   const std::string path = dir.File("esg.db");
@@ -470,6 +483,7 @@ TEST(Storage, FourConnectionsWritingOneFileLoseNothingAndNumberAlertsUniquely) {
   EXPECT_EQ(*sequences.rbegin(), kThreads * kBatchesPerThread);  // and gap-free
 }
 
+// SQLite only: garbles the pages of the database file.
 TEST(Storage, CorruptedPagesAreReportedAsDataLossWithoutACrash) {
   TempDir dir;
   const std::string path = dir.File("esg.db");

@@ -1,4 +1,5 @@
-// Small builders shared by the SQLite storage tests (tests/storage/*_test.cc).
+// Small builders shared by the storage tests (tests/storage/*_test.cc), both engines: the query
+// helpers take a Database of either kind, so their SQL must run on SQLite and PostgreSQL alike.
 #ifndef ESG_TESTS_STORAGE_STORAGE_TEST_UTIL_H_
 #define ESG_TESTS_STORAGE_STORAGE_TEST_UTIL_H_
 

@@ -11,19 +11,19 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
 #include "tests/testing/status_matchers.h"
-#include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::Frame;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
-using ::esg::testing::TempDir;
 using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
@@ -34,9 +34,12 @@ std::vector<int64_t> Sequences(const std::vector<ArchivedFrame>& frames) {
   return out;
 }
 
-TEST(TelemetryArchive, AppendedFramesReadBackExactly) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+// The TelemetryArchive tests run on both engines (tests/storage/backend.h).
+class TelemetryArchiveTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(TelemetryArchiveTest);
+
+TEST_P(TelemetryArchiveTest, AppendedFramesReadBackExactly) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   TelemetryArchive& archive = (*storage)->archive();
   const std::vector<ArchivedFrame> frames = {Frame("RDK-1", 3), Frame("RDK-1", 1),
@@ -57,9 +60,8 @@ TEST(TelemetryArchive, AppendedFramesReadBackExactly) {
   }
 }
 
-TEST(TelemetryArchive, DuplicatesAreIgnoredCountedAndNeverOverwrite) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(TelemetryArchiveTest, DuplicatesAreIgnoredCountedAndNeverOverwrite) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   TelemetryArchive& archive = (*storage)->archive();
   ASSERT_THAT(archive.AppendBatch("RDK-1", {Frame("RDK-1", 1), Frame("RDK-1", 2)}), IsOk());
@@ -82,9 +84,8 @@ TEST(TelemetryArchive, DuplicatesAreIgnoredCountedAndNeverOverwrite) {
   EXPECT_THAT(other->new_sequences, ElementsAre(2));
 }
 
-TEST(TelemetryArchive, HighestSequenceAndReadWindows) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(TelemetryArchiveTest, HighestSequenceAndReadWindows) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   TelemetryArchive& archive = (*storage)->archive();
   EXPECT_THAT(archive.HighestSequence("RDK-1"), IsOkAndHolds(std::optional<int64_t>()));
@@ -112,9 +113,8 @@ TEST(TelemetryArchive, HighestSequenceAndReadWindows) {
   EXPECT_EQ(all->size(), 10u);
 }
 
-TEST(TelemetryArchive, InvalidBatchWritesNothing) {
-  TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(dir.File("esg.db"));
+TEST_P(TelemetryArchiveTest, InvalidBatchWritesNothing) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   TelemetryArchive& archive = (*storage)->archive();
   EXPECT_THAT(archive.AppendBatch("RDK-1", {Frame("RDK-1", 1), Frame("RDK-9", 2)}),
