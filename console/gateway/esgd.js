@@ -97,10 +97,13 @@ class Esgd {
     this.client.close();
   }
 
-  static metadata(authorization) {
+  static metadata(authorization, request) {
     const md = new grpc.Metadata();
     // Forwarded unchanged: esgd parses the scheme itself ("Bearer TOKEN", case-insensitive).
     if (authorization) md.set('authorization', authorization);
+    // A call about one spacecraft names it for a router in front of several esgd (nginx hashing
+    // on x-esg-spacecraft: docs/deploy.md), as the esg CLI does; calls over all carry none.
+    if (request && request.spacecraft_id) md.set('x-esg-spacecraft', request.spacecraft_id);
     return md;
   }
 
@@ -119,7 +122,7 @@ class Esgd {
   unary(method, request, authorization, owner) {
     return new Promise((resolve, reject) => {
       const deadline = Date.now() + CALL_DEADLINE_MS;
-      const call = this.client[method](request, Esgd.metadata(authorization), { deadline },
+      const call = this.client[method](request, Esgd.metadata(authorization, request), { deadline },
         (err, response) => {
           if (err) reject(explained(method, err));
           else resolve(this.convert.toJson(this.responseType(method), response));
@@ -154,7 +157,7 @@ class Esgd {
   // call (cancel() it to end; onEnd then gets an error with code CANCELLED).
   subscribe(method, request, authorization, { onMessage, onEnd, deadline }) {
     const options = deadline ? { deadline } : {};
-    const call = this.client[method](request, Esgd.metadata(authorization), options);
+    const call = this.client[method](request, Esgd.metadata(authorization, request), options);
     const type = this.responseType(method);
     let ended = false;
     const end = (err) => {

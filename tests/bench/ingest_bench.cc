@@ -1,13 +1,20 @@
 // Service benchmarks (docs/service.md "Performance"): telemetry frames per second ingested
-// through gRPC into live sessions with durable acks (SQLite synchronous FULL and NORMAL), next to
+// through gRPC into live sessions with durable acks (SQLite synchronous FULL and NORMAL, and
+// PostgreSQL on loopback with session leases: argument 2, with the server's commits per second
+// from pg_stat_database as a counter), next to
 // a bare gRPC streaming echo of the same messages in the same process (streams of 5761 frames,
 // 4 simulated days); and the latency of a 6 h
 // prediction at 60 s steps through PredictAttitude (p50/p99 as counters).
 //   cmake --build <dir> --target esg_bench
 //   <dir>/tests/bench/esg_bench --benchmark_filter='Ingest|Echo|Predict'
+#include <libpq-fe.h>
+
 #include <algorithm>
+#include <chrono>
+#include <cstdlib>
 #include <deque>
 #include <memory>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -17,6 +24,7 @@
 #include "grpcpp/create_channel.h"
 #include "grpcpp/server_builder.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/postgres_server.h"
 
 namespace esg {
 namespace {
@@ -59,12 +67,45 @@ struct IngestStub {
   auto Stream(grpc::ClientContext* c) { return stub->StreamTelemetry(c); }
 };
 
+// Transactions committed in the database at `uri` so far (pg_stat_database.xact_commit; the
+// statistics lag by up to 0.5 s, pg_stat_force_next_flush is not available on 15).
+int64_t CommittedTransactions(const std::string& uri) {
+  PGconn* conn = PQconnectdb(uri.c_str());
+  int64_t commits = -1;
+  if (PQstatus(conn) == CONNECTION_OK) {
+    PGresult* r = PQexec(conn,
+                         "SELECT xact_commit FROM pg_stat_database WHERE datname = current_database()");
+    if (PQresultStatus(r) == PGRES_TUPLES_OK && PQntuples(r) == 1) {
+      commits = std::strtoll(PQgetvalue(r, 0, 0), nullptr, 10);
+    }
+    PQclear(r);
+  }
+  PQfinish(conn);
+  return commits;
+}
+
 void BM_IngestThroughGrpc(benchmark::State& state) {
   const SimulatedRun& run = Run4d();
   server::ServerOptions options;
   options.synchronous = state.range(0) == 1 ? storage::Synchronous::kFull
                                             : storage::Synchronous::kNormal;
-  testing::LoopbackServer server(options);
+  std::string db;
+  const bool postgres = state.range(0) == 2;
+  if (postgres) {
+    std::string error;
+    testing::PostgresServer* pg = testing::PostgresServer::Shared(&error);
+    absl::StatusOr<std::string> uri =
+        pg != nullptr ? pg->CreateDatabase() : absl::UnavailableError(error);
+    if (!uri.ok()) {
+      state.SkipWithError(std::string(uri.status().message()).c_str());
+      return;
+    }
+    db = *uri;
+    options.core.node_id = "bench";
+  }
+  testing::LoopbackServer server(options, db);
+  const int64_t commits_before = postgres ? CommittedTransactions(db) : 0;
+  const auto wall_start = std::chrono::steady_clock::now();
   auto stub = server.Stub();
   int index = 0;
   size_t frames = 0;
@@ -85,9 +126,22 @@ void BM_IngestThroughGrpc(benchmark::State& state) {
     frames += acks;
   }
   state.SetItemsProcessed(static_cast<int64_t>(frames));
-  state.SetLabel(state.range(0) == 1 ? "sync=full" : "sync=normal");
+  state.SetLabel(postgres ? "postgresql" : state.range(0) == 1 ? "sync=full" : "sync=normal");
+  if (postgres) {
+    // Ingest, filter and configuration commits together, over the whole run.
+    std::this_thread::sleep_for(std::chrono::milliseconds(600));
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count() - 0.6;
+    state.counters["pg_commits_per_s"] =
+        static_cast<double>(CommittedTransactions(db) - commits_before) / seconds;
+  }
 }
-BENCHMARK(BM_IngestThroughGrpc)->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_IngestThroughGrpc)
+    ->Arg(1)
+    ->Arg(0)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // The baseline: a callback echo service answering each frame with an ack, pipelined like ingest.
 class EchoService final : public esg::bench::EchoBench::CallbackService {
