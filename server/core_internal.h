@@ -1,7 +1,8 @@
 // The per-spacecraft records of EstimationCore, shared by the files that implement it
 // (estimation_core.cc: lifecycle, load and configuration; ingest.cc: the ingest contract;
 // committer.cc: group commit; apply_worker.cc: the filter workers; core_queries.cc and
-// prediction.cc: the queries). Not part of the server's interface.
+// prediction.cc: the queries; shared_sessions.cc: several servers on one database). Not part
+// of the server's interface.
 #ifndef ESG_SERVER_CORE_INTERNAL_H_
 #define ESG_SERVER_CORE_INTERNAL_H_
 

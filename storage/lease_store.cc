@@ -83,26 +83,22 @@ absl::StatusOr<SessionLease> LeaseStore::Acquire(absl::string_view spacecraft_id
 
 absl::Status LeaseStore::Renew(absl::string_view spacecraft_id, const LeaseFence& fence,
                                absl::Time now, absl::Duration duration) {
-  RETURN_IF_ERROR(CheckPostgres());
   RETURN_IF_ERROR(ValidateStorableTime(now + duration, "lease.expires"));
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
-  ASSIGN_OR_RETURN(Statement * st,
-                   txn.Prepare("UPDATE session_leases SET expires_unix_ns = ?4 "
-                               "WHERE spacecraft_id = ?1 AND owner = ?2 AND epoch = ?3"));
-  st->BindText(1, spacecraft_id)
-      .BindText(2, fence.owner)
-      .BindInt64(3, fence.epoch)
-      .BindInt64(4, TimeToUnixNanos(now + duration));
-  RETURN_IF_ERROR(st->Run());
-  if (txn.ChangedRows() == 0) {
+  ASSIGN_OR_RETURN(const bool held, SetExpiry(spacecraft_id, fence, now + duration));
+  if (!held) {
     return absl::NotFoundError(absl::StrCat("spacecraft '", spacecraft_id, "': the lease of node ",
                                             fence.owner, " (epoch ", fence.epoch,
                                             ") was taken over"));
   }
-  return txn.Commit();
+  return absl::OkStatus();
 }
 
 absl::Status LeaseStore::Release(absl::string_view spacecraft_id, const LeaseFence& fence) {
+  return SetExpiry(spacecraft_id, fence, absl::InfinitePast()).status();
+}
+
+absl::StatusOr<bool> LeaseStore::SetExpiry(absl::string_view spacecraft_id,
+                                           const LeaseFence& fence, absl::Time expires) {
   RETURN_IF_ERROR(CheckPostgres());
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
   ASSIGN_OR_RETURN(Statement * st,
@@ -111,9 +107,11 @@ absl::Status LeaseStore::Release(absl::string_view spacecraft_id, const LeaseFen
   st->BindText(1, spacecraft_id)
       .BindText(2, fence.owner)
       .BindInt64(3, fence.epoch)
-      .BindInt64(4, TimeToUnixNanos(absl::InfinitePast()));
+      .BindInt64(4, TimeToUnixNanos(expires));
   RETURN_IF_ERROR(st->Run());
-  return txn.Commit();
+  const bool held = txn.ChangedRows() > 0;
+  RETURN_IF_ERROR(txn.Commit());
+  return held;
 }
 
 absl::StatusOr<SessionLease> LeaseStore::Get(absl::string_view spacecraft_id) {

@@ -78,6 +78,9 @@ class LeaseStore {
 
  private:
   absl::Status CheckPostgres() const;
+  // Sets the expiry of (owner, epoch)'s lease; false when the lease is no longer theirs.
+  absl::StatusOr<bool> SetExpiry(absl::string_view spacecraft_id, const LeaseFence& fence,
+                                 absl::Time expires);
 
   Database* db_;  // not owned
 };

@@ -75,6 +75,26 @@ std::string ConnectionError(pg_conn* conn) {
 
 void IgnoreNotice(void*, const char*) {}
 
+// A new connection to `uri` (notices dropped); Unavailable "db: <uri without password>: cannot
+// connect: <reason>".
+absl::StatusOr<pg_conn*> Connect(const std::string& uri, const PostgresOptions& options,
+                                 const char* application_name) {
+  const std::string timeout =
+      absl::StrCat(std::max<int64_t>(1, absl::ToInt64Seconds(options.connect_timeout)));
+  const char* keywords[] = {"dbname", "connect_timeout", "application_name", nullptr};
+  const char* values[] = {uri.c_str(), timeout.c_str(), application_name, nullptr};
+  // expand_dbname = 1: the URI's own settings win over the defaults above where it gives them.
+  pg_conn* conn = PQconnectdbParams(keywords, values, /*expand_dbname=*/1);
+  if (conn == nullptr || PQstatus(conn) != CONNECTION_OK) {
+    const std::string reason = ConnectionError(conn);
+    PQfinish(conn);
+    return absl::UnavailableError(
+        absl::StrCat("db: ", RedactPostgresUri(uri), ": cannot connect: ", reason));
+  }
+  PQsetNoticeProcessor(conn, IgnoreNotice, nullptr);
+  return conn;
+}
+
 }  // namespace
 
 bool IsPostgresUri(absl::string_view db) {
@@ -323,19 +343,9 @@ absl::StatusOr<std::unique_ptr<PostgresDatabase>> PostgresDatabase::Open(
                                                    "URI libpq accepts: ", reason));
   }
   PQconninfoFree(parsed);
-  const std::string timeout =
-      absl::StrCat(std::max<int64_t>(1, absl::ToInt64Seconds(options.connect_timeout)));
-  const char* keywords[] = {"dbname", "connect_timeout", "application_name", nullptr};
-  const char* values[] = {uri.c_str(), timeout.c_str(), "esgd", nullptr};
-  // expand_dbname = 1: the URI's own settings win over the defaults above where it gives them.
-  pg_conn* conn = PQconnectdbParams(keywords, values, /*expand_dbname=*/1);
-  if (conn == nullptr || PQstatus(conn) != CONNECTION_OK) {
-    const std::string reason = ConnectionError(conn);
-    PQfinish(conn);
-    return absl::UnavailableError(absl::StrCat("db: ", name, ": cannot connect: ", reason));
-  }
-  PQsetNoticeProcessor(conn, IgnoreNotice, nullptr);
-  std::unique_ptr<PostgresDatabase> db(new PostgresDatabase(conn, uri, options));
+  absl::StatusOr<pg_conn*> conn = Connect(uri, options, "esgd");
+  if (!conn.ok()) return conn.status();
+  std::unique_ptr<PostgresDatabase> db(new PostgresDatabase(*conn, uri, options));
   absl::Status status = db->WithLock([&] { return db->ConfigureSessionLocked(); });
   if (!status.ok()) return status;
   absl::StatusOr<Transaction> txn = db->Begin(TransactionMode::kDeferred);
@@ -473,19 +483,9 @@ absl::StatusOr<std::unique_ptr<PostgresListener>> PostgresListener::Open(
                              std::string::npos) {
     return absl::InvalidArgumentError(absl::StrCat("channel '", channel, "': not a plain name"));
   }
-  const std::string timeout =
-      absl::StrCat(std::max<int64_t>(1, absl::ToInt64Seconds(options.connect_timeout)));
-  const char* keywords[] = {"dbname", "connect_timeout", "application_name", nullptr};
-  const char* values[] = {uri.c_str(), timeout.c_str(), "esgd-listener", nullptr};
-  pg_conn* conn = PQconnectdbParams(keywords, values, /*expand_dbname=*/1);
-  if (conn == nullptr || PQstatus(conn) != CONNECTION_OK) {
-    const std::string reason = ConnectionError(conn);
-    PQfinish(conn);
-    return absl::UnavailableError(
-        absl::StrCat("db: ", RedactPostgresUri(uri), ": cannot connect: ", reason));
-  }
-  PQsetNoticeProcessor(conn, IgnoreNotice, nullptr);
-  std::unique_ptr<PostgresListener> listener(new PostgresListener(conn, uri, channel, options));
+  absl::StatusOr<pg_conn*> conn = Connect(uri, options, "esgd-listener");
+  if (!conn.ok()) return conn.status();
+  std::unique_ptr<PostgresListener> listener(new PostgresListener(*conn, uri, channel, options));
   absl::Status status = listener->ListenLocked();
   if (!status.ok()) return status;
   return listener;

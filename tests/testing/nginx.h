@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "gtest/gtest.h"
+#include "tests/testing/free_port.h"
 #include "tests/testing/run_process.h"
 
 #ifndef ESG_SOURCE_DIR
@@ -49,22 +50,6 @@ inline std::string NginxBinary() {
   return "";
 }
 
-// A TCP port on 127.0.0.1 that was free a moment ago (the OS picked it).
-inline int FreeLoopbackPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  address.sin_port = 0;
-  socklen_t length = sizeof address;
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
-    port = ntohs(address.sin_port);
-  }
-  close(fd);
-  return port;
-}
 
 // True once something accepts TCP connections on 127.0.0.1:port.
 inline bool Accepts(int port) {

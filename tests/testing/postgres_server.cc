@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "tests/testing/free_port.h"
 
 namespace esg::testing {
 namespace {
@@ -97,24 +98,6 @@ std::string Describe(const std::vector<std::string>& argv) {
   std::string s;
   for (const std::string& a : argv) absl::StrAppend(&s, s.empty() ? "" : " ", a);
   return s;
-}
-
-// A TCP port on 127.0.0.1 that was free a moment ago (the OS picked it); 0 on failure.
-int FreeLoopbackPort() {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return 0;
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  address.sin_port = 0;
-  socklen_t length = sizeof address;
-  int port = 0;
-  if (bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0 &&
-      getsockname(fd, reinterpret_cast<sockaddr*>(&address), &length) == 0) {
-    port = ntohs(address.sin_port);
-  }
-  close(fd);
-  return port;
 }
 
 // The state letter of /proc/<pid>/stat ('Z' for a zombie) and its parent; false if it is gone.

@@ -1,0 +1,160 @@
+// Several servers sharing one PostgreSQL database (docs/service.md "Several servers"): session
+// leases (take on demand, renew, fence the writes), the fleet as other servers committed it, and
+// the relay of other servers' alert changes. Part of EstimationCore (estimation_core.h); the
+// lease rows are storage/lease_store.h.
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
+#include "estimator/status_macros.h"
+#include "server/core_internal.h"
+#include "server/estimation_core.h"
+#include "server/log.h"
+#include "storage/lease_store.h"
+#include "storage/postgres_db.h"
+
+namespace esg::server {
+
+absl::Status EstimationCore::CheckConfigured(const std::string& spacecraft_id) {
+  if (Find(spacecraft_id) != nullptr) return absl::OkStatus();
+  if (!shared()) return NotConfigured(spacecraft_id);
+  absl::StatusOr<storage::ConfigRecord> stored = storage_->configs().Get(spacecraft_id);
+  if (absl::IsNotFound(stored.status())) return NotConfigured(spacecraft_id);
+  return stored.status();
+}
+
+absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Lookup(
+    const std::string& spacecraft_id) {
+  std::shared_ptr<Spacecraft> sc = Find(spacecraft_id);
+  if (!shared()) {
+    if (sc == nullptr) return NotConfigured(spacecraft_id);
+    return sc;
+  }
+  if (sc != nullptr && !sc->lease_lost) return sc;
+  absl::MutexLock takeover(&takeover_mu_);
+  sc = Find(spacecraft_id);
+  if (sc != nullptr && !sc->lease_lost) return sc;
+  absl::StatusOr<storage::ConfigRecord> record = storage_->configs().Get(spacecraft_id);
+  if (absl::IsNotFound(record.status())) return NotConfigured(spacecraft_id);
+  if (!record.ok()) return record.status();
+  absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
+      spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
+  if (absl::IsUnavailable(lease.status())) {
+    return absl::UnavailableError(absl::StrCat(
+        lease.status().message(), "; retry after that (leases last ",
+        absl::FormatDuration(options_.lease_duration), "): docs/service.md \"Several servers\""));
+  }
+  if (!lease.ok()) return lease.status();
+  // The session as the last owner left it: its checkpoint, then the archive after it.
+  RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
+  sc = Find(spacecraft_id);
+  if (sc == nullptr) return absl::InternalError("a loaded session is not in the registry");
+  LogEvent("INFO", "session_taken",
+           absl::StrCat("took the session of ", spacecraft_id, " (lease epoch ", lease->epoch,
+                        ")"),
+           {{"spacecraftId", spacecraft_id}, {"leaseEpoch", lease->epoch}});
+  Schedule(sc);
+  return sc;
+}
+
+std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc) const {
+  if (!shared()) return std::nullopt;
+  return storage::LeaseFence{options_.node_id, sc.lease_epoch.load()};
+}
+
+void EstimationCore::AlertRelayLoop() {
+  std::unique_ptr<storage::PostgresListener> listener;
+  bool reported = false;  // a failure logged, not yet recovered
+  for (;;) {
+    {
+      absl::MutexLock lock(&stop_mu_);
+      if (stopped_) return;
+    }
+    if (listener == nullptr) {
+      absl::StatusOr<std::unique_ptr<storage::PostgresListener>> opened =
+          storage_->ListenForAlertChanges();
+      if (!opened.ok()) {
+        if (!reported) {
+          LogEvent("ERROR", "alert_relay_failed",
+                   absl::StrCat("cannot follow the alerts of other servers: ",
+                                opened.status().message(), " (retrying)"));
+          reported = true;
+        }
+        absl::MutexLock lock(&stop_mu_);
+        stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), absl::Seconds(1));
+        continue;
+      }
+      listener = *std::move(opened);
+      if (reported) LogEvent("INFO", "alert_relay_recovered", "following the alerts of other servers again");
+      reported = false;
+    }
+    absl::StatusOr<std::vector<storage::PostgresListener::Notification>> notified =
+        listener->Wait(absl::Milliseconds(250));
+    if (!notified.ok()) {
+      LogEvent("WARNING", "alert_relay_interrupted",
+               absl::StrCat("alerts of other servers may have been missed: ",
+                            notified.status().message()));
+      continue;
+    }
+    if (notified->empty()) continue;
+    const int own_pid = storage_->ConnectionPid();
+    for (const storage::PostgresListener::Notification& n : *notified) {
+      // This server's own commits are published by the code that made them.
+      if (n.sender_pid == own_pid) continue;
+      const size_t space = n.payload.find(' ');
+      int64_t sequence = 0;
+      if (space == std::string::npos ||
+          !absl::SimpleAtoi(n.payload.substr(0, space), &sequence)) {
+        continue;
+      }
+      absl::StatusOr<storage::AlertRecord> record =
+          storage_->alerts().Get(n.payload.substr(space + 1), sequence);
+      if (record.ok()) hub_.Publish(*record, /*log=*/false);
+    }
+  }
+}
+
+void EstimationCore::LeaseLoop() {
+  const absl::Duration period = options_.lease_duration / 3;
+  for (;;) {
+    {
+      absl::MutexLock lock(&stop_mu_);
+      stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), period);
+      if (stopped_) return;
+    }
+    for (const auto& sc : registry_.All()) {
+      if (sc->lease_lost) continue;
+      const absl::Status renewed = storage_->leases().Renew(sc->id, *FenceOf(*sc), absl::Now(),
+                                                            options_.lease_duration);
+      if (absl::IsNotFound(renewed)) {
+        sc->lease_lost = true;
+        LogEvent("WARNING", "session_lost",
+                 absl::StrCat("the session of ", sc->id, " was taken over by another server: ",
+                              renewed.message()),
+                 {{"spacecraftId", sc->id}});
+      } else if (!renewed.ok()) {
+        LogEvent("ERROR", "lease_renewal_failed",
+                 absl::StrCat("cannot renew the session lease of ", sc->id, ": ",
+                              renewed.message()),
+                 {{"spacecraftId", sc->id}});
+      }
+    }
+  }
+}
+
+absl::StatusOr<esg::v1::SessionInfo> EstimationCore::SummarizeFromDatabase(
+    const storage::ConfigRecord& record) {
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, RestoreSpacecraft(record, /*snapshot=*/true));
+  esg::v1::SessionInfo info = Summarize(*sc);
+  info.set_served_by("");
+  absl::StatusOr<storage::SessionLease> lease = storage_->leases().Get(record.spacecraft_id);
+  if (lease.ok() && lease->expires > absl::Now()) info.set_served_by(lease->owner);
+  if (!lease.ok() && !absl::IsNotFound(lease.status())) return lease.status();
+  return info;
+}
+
+}  // namespace esg::server
