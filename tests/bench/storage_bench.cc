@@ -1,5 +1,6 @@
 // The server's two per-frame transactions (storage/storage.h), per synchronous setting
-// (sqlite_db.h durability table), on a real file in a temporary directory:
+// (sqlite_db.h durability table), on a real file in a temporary directory, and on PostgreSQL on
+// loopback (range(1) = kPostgres: a fresh database of tests/testing/postgres_server.h):
 // BM_StorageArchiveFrames, the group commit of N telemetry frames (300-byte payloads) that
 // acknowledgements wait for (frames/s is N x commits/s); BM_StorageFilterEffects, one filter
 // job's effects: 4 coefficient estimates + 1 alert + a 2 KiB checkpoint; BM_StorageFilterJob, a
@@ -15,6 +16,7 @@
 #include "absl/time/time.h"
 #include "benchmark/benchmark.h"
 #include "storage/storage.h"
+#include "tests/testing/postgres_server.h"
 #include "tests/testing/temp_dir.h"
 
 namespace esg::storage {
@@ -68,7 +70,25 @@ FilterEffects MakeBenchEffects(int64_t last) {
   return effects;
 }
 
+// range(1) of the storage benchmarks that selects PostgreSQL on loopback (a fresh database of
+// the shared test server, synchronous_commit=on) instead of an SQLite file.
+constexpr int kPostgres = 0;
+
 std::unique_ptr<Storage> OpenBenchStorage(benchmark::State& state, const std::string& path) {
+  if (state.range(1) == kPostgres) {
+    std::string error;
+    esg::testing::PostgresServer* pg = esg::testing::PostgresServer::Shared(&error);
+    absl::StatusOr<std::string> uri =
+        pg != nullptr ? pg->CreateDatabase() : absl::UnavailableError(error);
+    absl::StatusOr<std::unique_ptr<Storage>> storage =
+        uri.ok() ? Storage::Open(*uri) : absl::StatusOr<std::unique_ptr<Storage>>(uri.status());
+    state.SetLabel("postgresql");
+    if (!storage.ok()) {
+      state.SkipWithError(std::string(storage.status().message()).c_str());
+      return nullptr;
+    }
+    return std::move(*storage);
+  }
   DatabaseOptions options;
   options.synchronous = static_cast<Synchronous>(state.range(1));
   state.SetLabel(options.synchronous == Synchronous::kFull ? "synchronous=FULL"
@@ -81,7 +101,7 @@ std::unique_ptr<Storage> OpenBenchStorage(benchmark::State& state, const std::st
   return std::move(*storage);
 }
 
-// range(0): frames per commit; range(1): Synchronous as int (1 NORMAL, 2 FULL).
+// range(0): frames per commit; range(1): Synchronous as int (1 NORMAL, 2 FULL), or kPostgres.
 void BM_StorageArchiveFrames(benchmark::State& state) {
   const int frames = static_cast<int>(state.range(0));
   esg::testing::TempDir dir;
@@ -103,11 +123,11 @@ void BM_StorageArchiveFrames(benchmark::State& state) {
 }
 BENCHMARK(BM_StorageArchiveFrames)
     ->ArgsProduct({{1, 10, 100}, {static_cast<int>(Synchronous::kNormal),
-                                  static_cast<int>(Synchronous::kFull)}})
+                                  static_cast<int>(Synchronous::kFull), kPostgres}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// range(0): unused (1); range(1): Synchronous as int.
+// range(0): unused (1); range(1): Synchronous as int, or kPostgres.
 void BM_StorageFilterEffects(benchmark::State& state) {
   esg::testing::TempDir dir;
   std::unique_ptr<Storage> storage = OpenBenchStorage(state, dir.File("bench.db"));
@@ -126,7 +146,7 @@ void BM_StorageFilterEffects(benchmark::State& state) {
 }
 BENCHMARK(BM_StorageFilterEffects)
     ->ArgsProduct({{1}, {static_cast<int>(Synchronous::kNormal),
-                         static_cast<int>(Synchronous::kFull)}})
+                         static_cast<int>(Synchronous::kFull), kPostgres}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
