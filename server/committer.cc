@@ -160,7 +160,9 @@ void EstimationCore::CommitterLoop() {
       // Another server took a session over (a race with the lease renewal): not a storage
       // fault. Its record is marked lost; the batch's senders resume as after a fault.
       const std::string lost = *storage::LeaseLostSpacecraft(status);
-      if (std::shared_ptr<Spacecraft> sc = Find(lost)) sc->lease_lost = true;
+      if (std::shared_ptr<Spacecraft> sc = Find(lost); sc != nullptr && !sc->lease_lost.exchange(true)) {
+        metrics_.lease_events.With({"lost"}).Increment();
+      }
       LogEvent("WARNING", "session_lost", std::string(status.message()),
                {{"spacecraftId", lost}});
       FailBatch(batch, absl::UnavailableError(absl::StrCat(

@@ -51,6 +51,7 @@ void EstimationCore::CollectGauges() {
     by_state[state] = 0;
   }
   for (const auto& sc : registry_.All()) {
+    if (sc->lease_lost) continue;  // another server's now
     absl::MutexLock state(&sc->state_mu);
     if (!sc->apply.quarantine_reason.empty() || sc->setup == nullptr || !sc->session.has_value()) {
       ++by_state["QUARANTINED"];
@@ -301,6 +302,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
     for (const auto& sc : registry_.All()) {
       if (sc->lease_lost) continue;
       const absl::Status released = storage_->leases().Release(sc->id, *FenceOf(*sc));
+      if (released.ok()) metrics_.lease_events.With({"released"}).Increment();
       if (!released.ok()) {
         LogEvent("WARNING", "lease_release_failed",
                  absl::StrCat("cannot release the session lease of ", sc->id, ": ",
@@ -442,6 +444,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
                      storage_->leases().Acquire(config.spacecraft_id, options_.node_id,
                                                 absl::Now(), options_.lease_duration));
     new_lease_epoch = lease.epoch;
+    metrics_.lease_events.With({"taken"}).Increment();
     fence = storage::LeaseFence{options_.node_id, new_lease_epoch};
   }
   esg::v1::ConfigureResponse response;

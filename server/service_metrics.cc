@@ -46,7 +46,7 @@ ServiceMetrics::ServiceMetrics()
                       .Get()),
       storage_commit(registry.AddHistogram(
           "esg_storage_commit_seconds",
-          "Duration of SQLite write transactions from BEGIN to the end of COMMIT (fsync included), "
+          "Duration of database write transactions from BEGIN to the end of COMMIT (fsync included), "
           "seconds, by transaction: telemetry (the group commit of accepted frames), filter (an "
           "apply job's effects and checkpoint), configure.",
           {"transaction"}, CommitBuckets())),
@@ -91,6 +91,12 @@ ServiceMetrics::ServiceMetrics()
                                 "revises the coefficient history and alerts after the window "
                                 "checkpoint it starts from.")
                     .Get()),
+      lease_events(registry.AddCounter(
+          "esg_session_lease_events_total",
+          "Session leases of this server (several servers on one PostgreSQL database), by event: "
+          "taken (a new spacecraft configured here, or a session loaded here), lost (found taken over by another server), released "
+          "(at a clean stop), refused (a call met a lease another server holds).",
+          {"event"})),
       diagnoses(registry.AddCounter(
           "esg_diagnoses_total",
           "Diagnose runs finished, by result: ok (stored), cancelled, error.", {"result"})),

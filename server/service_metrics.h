@@ -33,6 +33,8 @@ struct ServiceMetrics {
   Family<Counter>& alerts_raised;         // esg_alerts_raised_total{reason,severity}
   Family<Counter>& alerts_cleared;        // esg_alerts_cleared_total{reason,severity}
   Counter& revisions;                     // esg_revisions_total
+  // Several servers on one database.
+  Family<Counter>& lease_events;  // esg_session_lease_events_total{event}
   // Diagnosis.
   Family<Counter>& diagnoses;          // esg_diagnoses_total{result}
   Histogram& diagnosis_duration;       // esg_diagnosis_duration_seconds

@@ -44,6 +44,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
       spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
   if (absl::IsUnavailable(lease.status())) {
+    metrics_.lease_events.With({"refused"}).Increment();
     return absl::UnavailableError(absl::StrCat(
         lease.status().message(), "; retry after that (leases last ",
         absl::FormatDuration(options_.lease_duration), "): docs/service.md \"Several servers\""));
@@ -53,6 +54,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
   sc = Find(spacecraft_id);
   if (sc == nullptr) return absl::InternalError("a loaded session is not in the registry");
+  metrics_.lease_events.With({"taken"}).Increment();
   LogEvent("INFO", "session_taken",
            absl::StrCat("took the session of ", spacecraft_id, " (lease epoch ", lease->epoch,
                         ")"),
@@ -131,7 +133,7 @@ void EstimationCore::LeaseLoop() {
       const absl::Status renewed = storage_->leases().Renew(sc->id, *FenceOf(*sc), absl::Now(),
                                                             options_.lease_duration);
       if (absl::IsNotFound(renewed)) {
-        sc->lease_lost = true;
+        if (!sc->lease_lost.exchange(true)) metrics_.lease_events.With({"lost"}).Increment();
         LogEvent("WARNING", "session_lost",
                  absl::StrCat("the session of ", sc->id, " was taken over by another server: ",
                               renewed.message()),

@@ -38,6 +38,8 @@
 #include "tests/testing/daemon.h"
 #include "tests/testing/nginx.h"
 #include "tests/testing/postgres_server.h"
+#include "tests/testing/prometheus_text.h"
+#include "tests/testing/run_process.h"
 
 namespace esg {
 namespace {
@@ -152,7 +154,8 @@ TEST(Failover, SessionsOfAKilledNodeFinishOnTheOthersWithEveryFrameStoredAndAppl
     daemons.push_back(std::make_unique<Daemon>(
         *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
         std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration",
-                                 absl::StrCat(kLeaseSeconds, "s")},
+                                 absl::StrCat(kLeaseSeconds, "s"), "--metrics-listen",
+                                 absl::StrCat(NodeHost(n), ":0")},
         listen));
     ASSERT_EQ(daemons.back()->port(), kNodePort)
         << "esgd did not start on " << listen << ": "
@@ -312,6 +315,29 @@ TEST(Failover, SessionsOfAKilledNodeFinishOnTheOthersWithEveryFrameStoredAndAppl
   }
   EXPECT_EQ(moved, on_killed);
   EXPECT_GE(moved, 1);
+
+  // The surviving nodes' metrics: every spacecraft's lease taken once on them (configured there,
+  // or taken over), none lost, and every session held by one of them.
+  double taken = 0;
+  double lost = 0;
+  double held = 0;
+  for (int n = 0; n < kNodes; ++n) {
+    if (n == killed) continue;
+    const auto scraped = testing::RunBinary(
+        dir, "curl",
+        absl::StrCat("-sS --max-time 10 http://", NodeHost(n), ":", daemons[n]->metrics_port(),
+                     "/metrics"));
+    ASSERT_EQ(scraped.exit_code, 0) << scraped.err;
+    const std::string& text = scraped.out;
+    absl::StatusOr<testing::Exposition> metrics = testing::ParseExposition(text);
+    ASSERT_TRUE(metrics.ok()) << metrics.status() << "\n" << text;
+    taken += metrics->Sum("esg_session_lease_events_total", {{"event", "taken"}});
+    lost += metrics->Sum("esg_session_lease_events_total", {{"event", "lost"}});
+    held += metrics->Sum("esg_sessions");
+  }
+  EXPECT_EQ(taken, kSpacecraft);
+  EXPECT_EQ(lost, 0);
+  EXPECT_EQ(held, kSpacecraft);
   std::printf("[ measured ] %d sessions moved off %s; whole test %.2f s\n", moved,
               killed_node.c_str(), Seconds(test_start));
 }
