@@ -429,9 +429,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   metrics_.storage_commit.With({"filter"}).Observe(
       absl::ToDoubleSeconds(absl::Now() - commit_start));
   if (storage::LeaseLostSpacecraft(status).has_value()) {
-    if (!sc->lease_lost.exchange(true)) metrics_.lease_events.With({"lost"}).Increment();
-    LogEvent("WARNING", "session_lost", std::string(status.message()),
-             {{"spacecraftId", sc->id}});
+    MarkLeaseLost(*sc, status.message());
     return false;
   }
   if (!status.ok()) {

@@ -156,15 +156,10 @@ void EstimationCore::CommitterLoop() {
     const absl::Status status = CommitFrames(batch);
     metrics_.storage_commit.With({"telemetry"}).Observe(
         absl::ToDoubleSeconds(absl::Now() - commit_start));
-    if (!status.ok() && storage::LeaseLostSpacecraft(status).has_value()) {
+    if (const std::optional<std::string> lost = storage::LeaseLostSpacecraft(status)) {
       // Another server took a session over (a race with the lease renewal): not a storage
       // fault. Its record is marked lost; the batch's senders resume as after a fault.
-      const std::string lost = *storage::LeaseLostSpacecraft(status);
-      if (std::shared_ptr<Spacecraft> sc = Find(lost); sc != nullptr && !sc->lease_lost.exchange(true)) {
-        metrics_.lease_events.With({"lost"}).Increment();
-      }
-      LogEvent("WARNING", "session_lost", std::string(status.message()),
-               {{"spacecraftId", lost}});
+      if (std::shared_ptr<Spacecraft> sc = Find(*lost)) MarkLeaseLost(*sc, status.message());
       FailBatch(batch, absl::UnavailableError(absl::StrCat(
                            status.message(), "; these frames are not stored: resume from "
                            "highest_durable_sequence + 1")));

@@ -6,7 +6,6 @@
 #include <utility>
 
 #include "absl/strings/escaping.h"
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
@@ -211,11 +210,11 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Rest
   }
   if (!reason.empty()) {
     checkpoint.quarantine_reason = reason;
-  }
-  if (!reason.empty() && !snapshot) {
-    LogEvent("ERROR", "session_quarantined",
-             absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason),
-             {{"spacecraftId", sc->id}});
+    if (!snapshot) {
+      LogEvent("ERROR", "session_quarantined",
+               absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason),
+               {{"spacecraftId", sc->id}});
+    }
   }
   {
     absl::MutexLock lock(&sc->ingest_mu);
@@ -302,8 +301,9 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
     for (const auto& sc : registry_.All()) {
       if (sc->lease_lost) continue;
       const absl::Status released = storage_->leases().Release(sc->id, *FenceOf(*sc));
-      if (released.ok()) metrics_.lease_events.With({"released"}).Increment();
-      if (!released.ok()) {
+      if (released.ok()) {
+        metrics_.lease_events.With({"released"}).Increment();
+      } else {
         LogEvent("WARNING", "lease_release_failed",
                  absl::StrCat("cannot release the session lease of ", sc->id, ": ",
                               released.message(), " (it expires by itself)"),

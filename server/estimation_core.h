@@ -270,6 +270,9 @@ class EstimationCore {
   bool shared() const { return !options_.node_id.empty(); }
   // The lease fence of `sc` for a write (nullopt without leases).
   std::optional<storage::LeaseFence> FenceOf(const Spacecraft& sc) const;
+  // Marks `sc`'s lease taken over by another server (found by a renewal or a fenced commit):
+  // counted and logged (session_lost, `why`) the first time only.
+  void MarkLeaseLost(Spacecraft& sc, absl::string_view why);
   // Renews the held leases every lease_duration / 3; a lease found taken over marks its record
   // lost (calls for it take the lease again, or are refused while another server holds it).
   void LeaseLoop();

@@ -46,8 +46,8 @@ ServiceMetrics::ServiceMetrics()
                       .Get()),
       storage_commit(registry.AddHistogram(
           "esg_storage_commit_seconds",
-          "Duration of database write transactions from BEGIN to the end of COMMIT (fsync included), "
-          "seconds, by transaction: telemetry (the group commit of accepted frames), filter (an "
+          "Duration of database write transactions from BEGIN to the end of COMMIT (fsync "
+          "included), seconds, by transaction: telemetry (the group commit of accepted frames), filter (an "
           "apply job's effects and checkpoint), configure.",
           {"transaction"}, CommitBuckets())),
       commit_batch_frames(registry
@@ -94,8 +94,9 @@ ServiceMetrics::ServiceMetrics()
       lease_events(registry.AddCounter(
           "esg_session_lease_events_total",
           "Session leases of this server (several servers on one PostgreSQL database), by event: "
-          "taken (a new spacecraft configured here, or a session loaded here), lost (found taken over by another server), released "
-          "(at a clean stop), refused (a call met a lease another server holds).",
+          "taken (a new spacecraft configured here, or a session loaded here), lost (found taken "
+          "over by another server), released (at a clean stop), refused (a call met a lease "
+          "another server holds).",
           {"event"})),
       diagnoses(registry.AddCounter(
           "esg_diagnoses_total",

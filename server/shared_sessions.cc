@@ -68,6 +68,14 @@ std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc)
   return storage::LeaseFence{options_.node_id, sc.lease_epoch.load()};
 }
 
+void EstimationCore::MarkLeaseLost(Spacecraft& sc, absl::string_view why) {
+  if (sc.lease_lost.exchange(true)) return;
+  metrics_.lease_events.With({"lost"}).Increment();
+  LogEvent("WARNING", "session_lost",
+           absl::StrCat("the session of ", sc.id, " was taken over by another server: ", why),
+           {{"spacecraftId", sc.id}});
+}
+
 void EstimationCore::AlertRelayLoop() {
   std::unique_ptr<storage::PostgresListener> listener;
   bool reported = false;  // a failure logged, not yet recovered
@@ -91,7 +99,9 @@ void EstimationCore::AlertRelayLoop() {
         continue;
       }
       listener = *std::move(opened);
-      if (reported) LogEvent("INFO", "alert_relay_recovered", "following the alerts of other servers again");
+      if (reported) {
+        LogEvent("INFO", "alert_relay_recovered", "following the alerts of other servers again");
+      }
       reported = false;
     }
     absl::StatusOr<std::vector<storage::PostgresListener::Notification>> notified =
@@ -133,11 +143,7 @@ void EstimationCore::LeaseLoop() {
       const absl::Status renewed = storage_->leases().Renew(sc->id, *FenceOf(*sc), absl::Now(),
                                                             options_.lease_duration);
       if (absl::IsNotFound(renewed)) {
-        if (!sc->lease_lost.exchange(true)) metrics_.lease_events.With({"lost"}).Increment();
-        LogEvent("WARNING", "session_lost",
-                 absl::StrCat("the session of ", sc->id, " was taken over by another server: ",
-                              renewed.message()),
-                 {{"spacecraftId", sc->id}});
+        MarkLeaseLost(*sc, renewed.message());
       } else if (!renewed.ok()) {
         LogEvent("ERROR", "lease_renewal_failed",
                  absl::StrCat("cannot renew the session lease of ", sc->id, ": ",
