@@ -95,14 +95,6 @@ absl::StatusOr<pg_conn*> Connect(const std::string& uri, const PostgresOptions& 
   return conn;
 }
 
-}  // namespace
-
-bool IsPostgresUri(absl::string_view db) {
-  return absl::StartsWith(db, "postgresql://") || absl::StartsWith(db, "postgres://");
-}
-
-namespace {
-
 // RedactPostgresUri, also collecting the password texts it removed (as written in `uri`, still
 // percent-encoded) in *removed.
 std::string RedactUri(absl::string_view uri, std::vector<std::string>* removed) {
@@ -134,6 +126,10 @@ std::string RedactUri(absl::string_view uri, std::vector<std::string>* removed) 
 
 }  // namespace
 
+bool IsPostgresUri(absl::string_view db) {
+  return absl::StartsWith(db, "postgresql://") || absl::StartsWith(db, "postgres://");
+}
+
 std::string RedactPostgresUri(absl::string_view uri) {
   std::vector<std::string> removed;
   return RedactUri(uri, &removed);
@@ -153,8 +149,7 @@ absl::StatusCode StatusCodeForSqlState(absl::string_view sqlstate) {
   }
   if (cls == "53") return absl::StatusCode::kResourceExhausted;
   if (cls == "28") return absl::StatusCode::kPermissionDenied;
-  if (cls == "42") return absl::StatusCode::kInternal;  // SQL errors are program errors
-  return absl::StatusCode::kInternal;
+  return absl::StatusCode::kInternal;  // SQL errors (class 42) are program errors, and the rest
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -8,6 +8,7 @@
 // without (range(0) = 0) and with (1) its 32 per-step estimates, the cost of the estimate archive
 // per job (docs/service.md "Per-step estimates").
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -37,6 +38,19 @@ std::vector<ArchivedFrame> MakeBenchFrames(int64_t first_sequence, int frames) {
   return out;
 }
 
+// A filter job's checkpoint after step `last` at `t_last`: a 2 KiB state.
+std::function<CheckpointRecord(const std::vector<int64_t>&)> BenchCheckpoint(int64_t last,
+                                                                             absl::Time t_last) {
+  return [last, t_last](const std::vector<int64_t>&) {
+    CheckpointRecord checkpoint;
+    checkpoint.spacecraft_id = "BENCH-1";
+    checkpoint.last_sequence = last;
+    checkpoint.measurement_time = checkpoint.compute_time = t_last;
+    checkpoint.state_blob.assign(2048, 's');
+    return checkpoint;
+  };
+}
+
 FilterEffects MakeBenchEffects(int64_t last) {
   const absl::Time t_last = kT0 + absl::Seconds(60 * last);
   FilterEffects effects;
@@ -59,14 +73,7 @@ FilterEffects MakeBenchEffects(int64_t last) {
   a.subsystem = "star_tracker";
   a.first_time = a.measurement_time = a.compute_time = t_last;
   effects.new_alerts.push_back(std::move(a));
-  effects.checkpoint = [last, t_last](const std::vector<int64_t>&) {
-    CheckpointRecord checkpoint;
-    checkpoint.spacecraft_id = "BENCH-1";
-    checkpoint.last_sequence = last;
-    checkpoint.measurement_time = checkpoint.compute_time = t_last;
-    checkpoint.state_blob.assign(2048, 's');
-    return checkpoint;
-  };
+  effects.checkpoint = BenchCheckpoint(last, t_last);
   return effects;
 }
 
@@ -186,14 +193,7 @@ FilterEffects MakeBenchJob(int64_t last, bool estimates) {
     effects.estimates.push_back(std::move(e));
   }
   const absl::Time t_last = kT0 + absl::Seconds(60 * last);
-  effects.checkpoint = [last, t_last](const std::vector<int64_t>&) {
-    CheckpointRecord checkpoint;
-    checkpoint.spacecraft_id = "BENCH-1";
-    checkpoint.last_sequence = last;
-    checkpoint.measurement_time = checkpoint.compute_time = t_last;
-    checkpoint.state_blob.assign(2048, 's');
-    return checkpoint;
-  };
+  effects.checkpoint = BenchCheckpoint(last, t_last);
   return effects;
 }
 
