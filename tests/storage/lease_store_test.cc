@@ -1,0 +1,111 @@
+// Tests of storage/lease_store.h on both backends: on PostgreSQL the lease rules (take when
+// free, expired or one's own, epochs, renewal and release by the holder only) and the fence that
+// makes a write of a server that lost its lease store nothing; on SQLite every call is refused
+// (one server owns an SQLite file).
+#include "storage/lease_store.h"
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "storage/storage.h"
+#include "tests/storage/backend.h"
+#include "tests/storage/storage_test_util.h"
+#include "tests/testing/status_matchers.h"
+
+namespace esg::storage {
+namespace {
+
+using ::esg::storage::testing::BackendTest;
+using ::esg::storage::testing::Frame;
+using ::esg::storage::testing::T;
+using ::esg::testing::IsOk;
+using ::esg::testing::StatusIs;
+using ::testing::HasSubstr;
+using ::testing::Optional;
+
+class LeaseStoreTest : public BackendTest {};
+ESG_INSTANTIATE_BACKEND_TEST_SUITE(LeaseStoreTest);
+
+constexpr absl::Duration kLease = absl::Seconds(15);
+
+TEST_P(LeaseStoreTest, TakenWhenFreeExpiredOrOwnEachTakeANewEpochRenewedAndReleasedByTheHolder) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  LeaseStore& leases = (*storage)->leases();
+  if (GetParam() == testing::Backend::kSqlite) {
+    EXPECT_THAT(leases.Acquire("L-1", "a", T(0), kLease),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("PostgreSQL")));
+    return;
+  }
+  absl::StatusOr<SessionLease> a = leases.Acquire("L-1", "a", T(0), kLease);
+  ASSERT_THAT(a, IsOk());
+  EXPECT_EQ(a->owner, "a");
+  EXPECT_EQ(a->epoch, 1);
+  EXPECT_EQ(a->expires, T(15));
+  // Another server before the expiry: refused, naming the holder.
+  EXPECT_THAT(leases.Acquire("L-1", "b", T(14), kLease),
+              StatusIs(absl::StatusCode::kUnavailable, HasSubstr("served by node a")));
+  // The holder renews; a renewal does not change the epoch.
+  EXPECT_THAT(leases.Renew("L-1", {"a", 1}, T(10), kLease), IsOk());
+  EXPECT_THAT(leases.Acquire("L-1", "b", T(20), kLease),
+              StatusIs(absl::StatusCode::kUnavailable, HasSubstr("served by node a")));
+  // Expired: b takes it with the next epoch; a's renewal is then refused.
+  absl::StatusOr<SessionLease> b = leases.Acquire("L-1", "b", T(25), kLease);
+  ASSERT_THAT(b, IsOk());
+  EXPECT_EQ(b->owner, "b");
+  EXPECT_EQ(b->epoch, 2);
+  EXPECT_THAT(leases.Renew("L-1", {"a", 1}, T(26), kLease),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("taken over")));
+  // b, restarted with the same node id, takes its own lease back at once (a new epoch).
+  absl::StatusOr<SessionLease> again = leases.Acquire("L-1", "b", T(27), kLease);
+  ASSERT_THAT(again, IsOk());
+  EXPECT_EQ(again->epoch, 3);
+  // A release by a stale epoch changes nothing; b's own release frees it at once.
+  EXPECT_THAT(leases.Release("L-1", {"b", 2}), IsOk());
+  EXPECT_THAT(leases.Acquire("L-1", "a", T(28), kLease),
+              StatusIs(absl::StatusCode::kUnavailable, HasSubstr("served by node b")));
+  EXPECT_THAT(leases.Release("L-1", {"b", 3}), IsOk());
+  absl::StatusOr<SessionLease> back = leases.Acquire("L-1", "a", T(28), kLease);
+  ASSERT_THAT(back, IsOk());
+  EXPECT_EQ(back->epoch, 4);
+  // The leases of two spacecraft are independent.
+  absl::StatusOr<SessionLease> other = leases.Acquire("L-2", "b", T(28), kLease);
+  ASSERT_THAT(other, IsOk());
+  EXPECT_EQ(other->epoch, 1);
+  EXPECT_THAT(leases.Get("L-3"), StatusIs(absl::StatusCode::kNotFound, HasSubstr("no session lease was ever taken")));
+}
+
+TEST_P(LeaseStoreTest, AWriteFencedByALostLeaseStoresNothingAndNamesTheSpacecraft) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  LeaseStore& leases = (*storage)->leases();
+  if (GetParam() == testing::Backend::kSqlite) {
+    // A fenced write is refused outright: there is no lease to check it against.
+    EXPECT_THAT((*storage)->ArchiveFrames({Frame("F-1", 1)}, {}, {{"F-1", {"a", 1}}}),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("PostgreSQL")));
+    return;
+  }
+  ASSERT_THAT(leases.Acquire("F-1", "a", T(0), kLease), IsOk());
+  ASSERT_THAT((*storage)->ArchiveFrames({Frame("F-1", 1)}, {}, {{"F-1", {"a", 1}}}), IsOk());
+  ASSERT_THAT(leases.Acquire("F-1", "b", T(30), kLease), IsOk());  // a's expired: epoch 2
+
+  const absl::Status stale = (*storage)->ArchiveFrames({Frame("F-1", 2)}, {}, {{"F-1", {"a", 1}}});
+  EXPECT_THAT(stale, StatusIs(absl::StatusCode::kAborted, HasSubstr("taken over by node b")));
+  EXPECT_THAT(LeaseLostSpacecraft(stale), Optional(std::string("F-1")));
+  EXPECT_EQ(LeaseLostSpacecraft(absl::UnavailableError("disk")), std::nullopt);
+  absl::StatusOr<std::vector<ArchivedFrame>> stored =
+      (*storage)->archive().ReadTimeRange("F-1", absl::InfinitePast(), absl::InfiniteFuture());
+  ASSERT_THAT(stored, IsOk());
+  ASSERT_EQ(stored->size(), 1u);
+  EXPECT_EQ((*stored)[0].sequence, 1);
+
+  // The new holder's fence writes.
+  EXPECT_THAT((*storage)->ArchiveFrames({Frame("F-1", 2)}, {}, {{"F-1", {"b", 2}}}), IsOk());
+}
+
+}  // namespace
+}  // namespace esg::storage
