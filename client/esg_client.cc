@@ -34,6 +34,34 @@ absl::StatusOr<Response> Unary(std::unique_ptr<grpc::ClientContext> context, Cal
   return response;
 }
 
+// The whole of a paged call (GetCoefficientHistory, GetEstimateHistory, ListDiagnoses): with
+// request.page_token empty, every page from the first, each its own call (`one_page`), with the
+// records of `records` (e.g. &HistoryResponse::mutable_snapshots) moved into one response in
+// order, whose next_page_token is empty; Internal "CALL: the server returned the same page
+// token" if the server hands back the token it was given (a loop). With a page_token: that one
+// page.
+template <typename Response, typename Request, typename OnePage, typename Record>
+absl::StatusOr<Response> AllPages(
+    const char* call, const Request& request, OnePage one_page,
+    google::protobuf::RepeatedPtrField<Record>* (Response::*records)()) {
+  if (!request.page_token().empty()) return one_page(request);
+  Request page_request = request;
+  Response all;
+  do {
+    absl::StatusOr<Response> page = one_page(page_request);
+    if (!page.ok()) return page.status();
+    if (!page->next_page_token().empty() && page->next_page_token() == page_request.page_token()) {
+      return absl::InternalError(absl::StrCat(call, ": the server returned the same page token"));
+    }
+    google::protobuf::RepeatedPtrField<Record>* from = ((*page).*records)();
+    google::protobuf::RepeatedPtrField<Record>* to = (all.*records)();
+    to->Reserve(to->size() + from->size());
+    for (Record& r : *from) *to->Add() = std::move(r);
+    page_request.set_page_token(page->next_page_token());
+  } while (!page_request.page_token().empty());
+  return all;
+}
+
 }  // namespace
 
 absl::Status FromGrpcStatus(const grpc::Status& status) {
@@ -190,19 +218,8 @@ absl::StatusOr<esg::v1::HistoryResponse> EsgClient::GetCoefficientHistory(
           return stub_->GetCoefficientHistory(c, page_request, r);
         });
   };
-  if (!request.page_token().empty()) return one_page(request);
-  esg::v1::HistoryRequest page_request = request;
-  esg::v1::HistoryResponse all;
-  do {
-    absl::StatusOr<esg::v1::HistoryResponse> page = one_page(page_request);
-    if (!page.ok()) return page.status();
-    all.mutable_snapshots()->Reserve(all.snapshots_size() + page->snapshots_size());
-    for (esg::v1::CoefficientSnapshot& s : *page->mutable_snapshots()) {
-      *all.add_snapshots() = std::move(s);
-    }
-    page_request.set_page_token(page->next_page_token());
-  } while (!page_request.page_token().empty());
-  return all;
+  return AllPages<esg::v1::HistoryResponse>("GetCoefficientHistory", request, one_page,
+                                            &esg::v1::HistoryResponse::mutable_snapshots);
 }
 
 absl::StatusOr<esg::v1::EstimateHistoryResponse> EsgClient::GetEstimateHistory(
@@ -214,23 +231,9 @@ absl::StatusOr<esg::v1::EstimateHistoryResponse> EsgClient::GetEstimateHistory(
           return stub_->GetEstimateHistory(c, page_request, r);
         });
   };
-  if (!request.page_token().empty()) return one_page(request);
-  esg::v1::EstimateHistoryRequest page_request = request;
-  esg::v1::EstimateHistoryResponse all;
-  do {
-    absl::StatusOr<esg::v1::EstimateHistoryResponse> page = one_page(page_request);
-    if (!page.ok()) return page.status();
-    if (!page->next_page_token().empty() &&
-        page->next_page_token() == page_request.page_token()) {
-      return absl::InternalError("GetEstimateHistory: the server returned the same page token");
-    }
-    all.mutable_estimates()->Reserve(all.estimates_size() + page->estimates_size());
-    for (esg::v1::EstimateRecord& e : *page->mutable_estimates()) {
-      *all.add_estimates() = std::move(e);
-    }
-    page_request.set_page_token(page->next_page_token());
-  } while (!page_request.page_token().empty());
-  return all;
+  return AllPages<esg::v1::EstimateHistoryResponse>(
+      "GetEstimateHistory", request, one_page,
+      &esg::v1::EstimateHistoryResponse::mutable_estimates);
 }
 
 absl::StatusOr<esg::v1::ListDiagnosesResponse> EsgClient::ListDiagnoses(
@@ -242,22 +245,8 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EsgClient::ListDiagnoses(
           return stub_->ListDiagnoses(c, page_request, r);
         });
   };
-  if (!request.page_token().empty()) return one_page(request);
-  esg::v1::ListDiagnosesRequest page_request = request;
-  esg::v1::ListDiagnosesResponse all;
-  for (;;) {
-    absl::StatusOr<esg::v1::ListDiagnosesResponse> page = one_page(page_request);
-    if (!page.ok()) return page.status();
-    for (esg::v1::DiagnosisResult& d : *page->mutable_diagnoses()) {
-      *all.add_diagnoses() = std::move(d);
-    }
-    if (page->next_page_token().empty()) break;
-    if (page->next_page_token() == page_request.page_token()) {
-      return absl::InternalError("the server returned the same page token twice");
-    }
-    page_request.set_page_token(page->next_page_token());
-  }
-  return all;
+  return AllPages<esg::v1::ListDiagnosesResponse>(
+      "ListDiagnoses", request, one_page, &esg::v1::ListDiagnosesResponse::mutable_diagnoses);
 }
 
 absl::StatusOr<esg::v1::DiagnosisResult> EsgClient::GetDiagnosis(const std::string& spacecraft_id,

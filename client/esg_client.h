@@ -143,7 +143,8 @@ class EsgClient {
                                                   const CallOptions& call = {});
   // With request.page_token empty: the whole history, following next_page_token page by page
   // (each page its own call, each well under gRPC's default 4 MB message limit), merged in
-  // order; the result's next_page_token is empty. With a page_token: that one page.
+  // order; the result's next_page_token is empty. With a page_token: that one page. Internal if
+  // the server hands back the token it was given (a loop).
   absl::StatusOr<esg::v1::HistoryResponse> GetCoefficientHistory(
       const esg::v1::HistoryRequest& request, const CallOptions& call = {});
 

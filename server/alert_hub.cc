@@ -1,9 +1,7 @@
-// Alert fan-out (see alert_hub.h).
+// The log line of an alert state (see alert_hub.h).
 #include "server/alert_hub.h"
 
 #include <string>
-#include <utility>
-#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "server/log.h"
@@ -46,40 +44,6 @@ void LogAlert(const storage::AlertRecord& r) {
             {"repeatCount", r.repeat_count},
             {"firstTime", FormatUtc(r.first_time)},
             {"measurementTime", FormatUtc(r.measurement_time)}});
-}
-
-int64_t AlertHub::Subscribe(std::string spacecraft_id, Listener listener, Closer close) {
-  absl::MutexLock lock(&mu_);
-  const int64_t id = next_id_++;
-  subscribers_[id] = Subscriber{std::move(spacecraft_id), std::move(listener), std::move(close)};
-  return id;
-}
-
-void AlertHub::Unsubscribe(int64_t id) {
-  absl::MutexLock lock(&mu_);
-  subscribers_.erase(id);
-}
-
-void AlertHub::Publish(const storage::AlertRecord& record, bool log) {
-  if (log) LogAlert(record);
-  absl::MutexLock lock(&mu_);
-  for (auto& [id, s] : subscribers_) {
-    if (s.spacecraft_id.empty() || s.spacecraft_id == record.spacecraft_id) s.listener(record);
-  }
-}
-
-int AlertHub::size() {
-  absl::MutexLock lock(&mu_);
-  return static_cast<int>(subscribers_.size());
-}
-
-void AlertHub::CloseAll() {
-  std::vector<Closer> closers;
-  {
-    absl::MutexLock lock(&mu_);
-    for (auto& [id, s] : subscribers_) closers.push_back(s.close);
-  }
-  for (Closer& c : closers) c();
 }
 
 }  // namespace esg::server

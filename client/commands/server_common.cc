@@ -57,6 +57,14 @@ std::optional<absl::Time> ParseUtc(const std::string& text) {
   return t;
 }
 
+std::optional<OutputFormat> FormatWithCsvFlag(const char* verb, bool csv, OutputFormat format) {
+  if (csv && format == OutputFormat::kJson) {
+    ReportBadArgument(verb, "--csv and --json: give at most one");
+    return std::nullopt;
+  }
+  return csv ? OutputFormat::kCsv : format;
+}
+
 std::string StateName(esg::v1::SessionState state) {
   return StripPrefix(esg::v1::SessionState_Name(state), "SESSION_STATE_");
 }

@@ -9,8 +9,10 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
 #include "client/esg_client.h"
@@ -59,6 +61,29 @@ int SetTimeSpan(const char* verb, const std::string& from, const std::string& to
     if (!t) return ReportBadArgument(verb, "--to '" + to + "': not an RFC 3339 time");
     *request->mutable_to() = proto_convert::TimeToProto(*t);
   }
+  return kExitOk;
+}
+
+// The output format of a verb with --format and the short form --csv: csv if --csv is given. Both
+// --csv and --json: nullopt after ReportBadArgument (the verb exits 2).
+std::optional<OutputFormat> FormatWithCsvFlag(const char* verb, bool csv, OutputFormat format);
+
+// The whole stored history of a paged call that follows every page (`fetch`:
+// &EsgClient::GetCoefficientHistory or &EsgClient::GetEstimateHistory) for `request`, its span
+// set from the --from and --to values first (SetTimeSpan). Returns kExitOk with *response set,
+// or the exit code after printing why: a bad time or bad connection options (kExitBadArguments),
+// the call's error (ReportRpcError, kExitFailure).
+template <typename Request, typename Response>
+int FetchHistory(const char* verb, const GlobalOptions& global, const std::string& from,
+                 const std::string& to, Request& request,
+                 absl::StatusOr<Response> (EsgClient::*fetch)(const Request&, const CallOptions&),
+                 Response* response) {
+  if (int code = SetTimeSpan(verb, from, to, &request); code != kExitOk) return code;
+  std::unique_ptr<EsgClient> client = Connect(verb, global);
+  if (client == nullptr) return kExitBadArguments;
+  absl::StatusOr<Response> fetched = ((*client).*fetch)(request, CallOptions{});
+  if (!fetched.ok()) return ReportRpcError(verb, fetched.status(), global);
+  *response = *std::move(fetched);
   return kExitOk;
 }
 

@@ -68,13 +68,6 @@ double At(const google::protobuf::RepeatedField<double>& v, int i) {
   return i < v.size() ? v[i] : 0.0;
 }
 
-// The session state without its enum prefix ("CALIBRATING").
-std::string StateName(esg::v1::SessionState state) {
-  const std::string name = esg::v1::SessionState_Name(state);
-  const std::string prefix = "SESSION_STATE_";
-  return name.rfind(prefix, 0) == 0 ? name.substr(prefix.size()) : name;
-}
-
 // Every value with 17 significant digits: a row reads back the doubles the service sent.
 std::string CsvRecord(const esg::v1::EstimateRecord& e) {
   std::vector<std::string> cells = {FormatUtc(e.measurement_time(), e.has_measurement_time()),
@@ -142,28 +135,27 @@ void PrintTable(const esg::v1::EstimateHistoryResponse& history) {
 }
 
 int RunEstimates(const EstimatesOptions& o, const GlobalOptions& global) {
-  if (o.csv && o.format == OutputFormat::kJson) {
-    return ReportBadArgument(kVerb, "--csv and --json: give at most one");
-  }
-  const OutputFormat format = o.csv ? OutputFormat::kCsv : o.format;
+  const std::optional<OutputFormat> format = FormatWithCsvFlag(kVerb, o.csv, o.format);
+  if (!format) return kExitBadArguments;
   esg::v1::EstimateHistoryRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
-  if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
-  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
-  if (client == nullptr) return kExitBadArguments;
-  absl::StatusOr<esg::v1::EstimateHistoryResponse> history = client->GetEstimateHistory(request);
-  if (!history.ok()) return ReportRpcError(kVerb, history.status(), global);
+  esg::v1::EstimateHistoryResponse history;
+  if (int code = FetchHistory(kVerb, global, o.from, o.to, request, &EsgClient::GetEstimateHistory,
+                              &history);
+      code != kExitOk) {
+    return code;
+  }
 
-  if (format == OutputFormat::kCsv) {
+  if (*format == OutputFormat::kCsv) {
     std::string text = CsvLine(CsvHeader()) + "\n";
-    for (const esg::v1::EstimateRecord& e : history->estimates()) {
+    for (const esg::v1::EstimateRecord& e : history.estimates()) {
       absl::StrAppend(&text, CsvRecord(e), "\n");
     }
     std::fputs(text.c_str(), stdout);
-  } else if (format == OutputFormat::kJson) {
-    PrintJson(ProtoToJson(*history));
+  } else if (*format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(history));
   } else {
-    PrintTable(*history);
+    PrintTable(history);
   }
   return kExitOk;
 }

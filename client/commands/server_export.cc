@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
-#include <optional>
 #include <string>
 #include <utility>
 
@@ -14,6 +13,7 @@
 #include "client/commands/server_common.h"
 #include "client/esg_client.h"
 #include "estimator/telemetry.h"
+#include "google/protobuf/util/time_util.h"  // Timestamp comparison
 #include "proto/convert.h"
 #include "storage/recording_csv.h"
 
@@ -84,19 +84,8 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
   constexpr char kVerb[] = "export telemetry";
   esg::v1::ExportTelemetryRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
-  std::optional<absl::Time> from;
-  std::optional<absl::Time> to;
-  if (!o.from.empty()) {
-    from = ParseUtc(o.from);
-    if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
-    *request.mutable_from() = proto_convert::TimeToProto(*from);
-  }
-  if (!o.to.empty()) {
-    to = ParseUtc(o.to);
-    if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
-    *request.mutable_to() = proto_convert::TimeToProto(*to);
-  }
-  if (from && to && *to <= *from) {
+  if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
+  if (request.has_from() && request.has_to() && request.to() <= request.from()) {
     return ReportBadArgument(kVerb, "--to '" + o.to + "': must be after --from '" + o.from + "'");
   }
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);

@@ -151,10 +151,8 @@ void PrintTable(const esg::v1::HistoryResponse& history) {
 }
 
 int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
-  if (o.csv && o.format == OutputFormat::kJson) {
-    return ReportBadArgument(kVerb, "--csv and --json: give at most one");
-  }
-  const OutputFormat format = o.csv ? OutputFormat::kCsv : o.format;
+  const std::optional<OutputFormat> format = FormatWithCsvFlag(kVerb, o.csv, o.format);
+  if (!format) return kExitBadArguments;
   if (o.gyro_id < 0 || o.gyro_id > 4) {
     return ReportBadArgument(kVerb, absl::StrCat("--gyro ", o.gyro_id, ": must be 1..4 (0: all)"));
   }
@@ -162,21 +160,22 @@ int RunHistory(const HistoryOptions& o, const GlobalOptions& global) {
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_gyro_id(o.gyro_id);
   request.set_include_revised(o.include_revised);
-  if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
-  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
-  if (client == nullptr) return kExitBadArguments;
-  absl::StatusOr<esg::v1::HistoryResponse> history = client->GetCoefficientHistory(request);
-  if (!history.ok()) return ReportRpcError(kVerb, history.status(), global);
+  esg::v1::HistoryResponse history;
+  if (int code = FetchHistory(kVerb, global, o.from, o.to, request,
+                              &EsgClient::GetCoefficientHistory, &history);
+      code != kExitOk) {
+    return code;
+  }
 
-  if (format == OutputFormat::kCsv) {
+  if (*format == OutputFormat::kCsv) {
     std::printf("%s%s\n", CsvHeader().c_str(), o.include_revised ? kRevisedColumn : "");
-    for (const esg::v1::CoefficientSnapshot& s : history->snapshots()) {
+    for (const esg::v1::CoefficientSnapshot& s : history.snapshots()) {
       std::printf("%s%s\n", CsvRow(s).c_str(), o.include_revised ? RevisedCell(s).c_str() : "");
     }
-  } else if (format == OutputFormat::kJson) {
-    PrintJson(ProtoToJson(*history));
+  } else if (*format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(history));
   } else {
-    PrintTable(*history);
+    PrintTable(history);
   }
   return kExitOk;
 }

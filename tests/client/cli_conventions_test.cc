@@ -26,10 +26,9 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
-#define ESGD_PATH ESGD_BINARY
-#include "tests/testing/daemon.h"
 
 namespace esg::client {
 namespace {
@@ -53,9 +52,6 @@ const std::regex& TimeLike() {
 RunResult RunEsg(const TempDir& dir, const std::string& args, const std::string& env = "") {
   return ::esg::testing::RunBinary(dir, ESG_BINARY, args, env);
 }
-
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
-std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
 
 // Every date-time in `text` is in the CLI's one format; returns how many there are.
 int ExpectTimesInFormat(const std::string& text, const std::string& what) {
@@ -117,32 +113,6 @@ nlohmann::json ExpectJson(const RunResult& r, const std::string& what,
   }
   ExpectTimesInFormat(r.out, what + " (json)");
   return doc;
-}
-
-// Splits one CSV line (RFC 4180 quoting).
-std::vector<std::string> CsvCells(const std::string& line) {
-  std::vector<std::string> cells(1);
-  bool quoted = false;
-  for (size_t i = 0; i < line.size(); ++i) {
-    const char c = line[i];
-    if (quoted) {
-      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
-        cells.back() += '"';
-        ++i;
-      } else if (c == '"') {
-        quoted = false;
-      } else {
-        cells.back() += c;
-      }
-    } else if (c == '"') {
-      quoted = true;
-    } else if (c == ',') {
-      cells.emplace_back();
-    } else {
-      cells.back() += c;
-    }
-  }
-  return cells;
 }
 
 // `--format csv` of a verb: a header naming `first_column` and at least `min_rows` rows, each as
@@ -290,35 +260,11 @@ TEST(CliConventions, FormatIsValidatedAndJsonIsItsShortForm) {
 }
 
 // One esgd with RDK-1 configured and a 6 h recording replayed, shared by the server tests.
-class CliAgainstServer : public ::testing::Test {
+class CliAgainstServer : public ReplayedRdk1Suite<CliAgainstServer> {
  protected:
-  static void SetUpTestSuite() {
-    dir_ = new TempDir;
-    recording_ = dir_->File("rec.csv");
-    RunResult r = RunEsg(*dir_, "simulate --config " + Quote(Rdk1()) +
-                                    " --hours 6 --seed 5 --out " + Quote(recording_));
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-    daemon_ = new testing::Daemon(dir_->File("esg.db"), dir_->File("esgd.log"));
-    ASSERT_GT(daemon_->port(), 0);
-    r = RunEsg(*dir_, "configure --config " + Quote(Rdk1()), Env());
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-    r = RunEsg(*dir_, "replay --recording " + Quote(recording_) + " --wait", Env());
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-  }
-  static void TearDownTestSuite() {
-    delete daemon_;
-    delete dir_;
-  }
   // The server address through the environment only.
   static std::string Env() { return "ESG_SERVER=" + daemon_->address(); }
-
-  static TempDir* dir_;
-  static std::string recording_;
-  static testing::Daemon* daemon_;
 };
-TempDir* CliAgainstServer::dir_ = nullptr;
-std::string CliAgainstServer::recording_;
-testing::Daemon* CliAgainstServer::daemon_ = nullptr;
 
 TEST_F(CliAgainstServer, EsgServerIsTheAddressWithoutServerAndTheFlagWins) {
   TempDir dir;

@@ -17,18 +17,15 @@
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
 #include "storage/storage.h"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
-
-#define ESGD_PATH ESGD_BINARY
-#include "tests/testing/daemon.h"
 
 namespace esg::client {
 namespace {
 
 using ::esg::testing::Daemon;
-using ::esg::testing::RunBinary;
 using ::esg::testing::RunResult;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
@@ -70,36 +67,6 @@ storage::EstimateRecord Step(int i) {
   }
   r.star_tracker_test_ratio = 1e-3 * i;
   return r;
-}
-
-// The cells of one CSV line (RFC 4180: a quoted cell may hold commas and doubled quotes).
-std::vector<std::string> CsvCells(const std::string& line) {
-  std::vector<std::string> cells(1);
-  bool quoted = false;
-  for (size_t i = 0; i < line.size(); ++i) {
-    const char c = line[i];
-    if (quoted) {
-      if (c == '"' && i + 1 < line.size() && line[i + 1] == '"') {
-        cells.back() += '"';
-        ++i;
-      } else if (c == '"') {
-        quoted = false;
-      } else {
-        cells.back() += c;
-      }
-    } else if (c == '"') {
-      quoted = true;
-    } else if (c == ',') {
-      cells.emplace_back();
-    } else {
-      cells.back() += c;
-    }
-  }
-  return cells;
-}
-
-RunResult Esg(const TempDir& dir, const Daemon& daemon, const std::string& args) {
-  return RunBinary(dir, ESG_BINARY, "--server " + daemon.address() + " " + args);
 }
 
 class EstimatesCli : public ::testing::Test {

@@ -18,24 +18,18 @@
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "storage/recording_csv.h"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
-
-#define ESGD_PATH ESGD_BINARY
-#include "tests/testing/daemon.h"
 
 namespace esg::client {
 namespace {
 
-using ::esg::testing::Daemon;
 using ::esg::testing::RunBinary;
 using ::esg::testing::RunResult;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
 using Json = nlohmann::json;
-
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
-std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
 
 // Largest absolute difference between two frames' values; +inf when their shapes differ (a gyro,
 // a voltage or the star tracker present in one only, a validity flag or a time that differs).
@@ -64,38 +58,14 @@ double MaxDifference(const estimator::TelemetryFrame& a, const estimator::Teleme
   return worst;
 }
 
-class ExportCli : public ::testing::Test {
+// One esgd with RDK-1 configured and a 6 h simulated recording replayed (361 frames).
+class ExportCli : public ReplayedRdk1Suite<ExportCli> {
  protected:
-  // One esgd with RDK-1 configured and a 6 h simulated recording replayed (361 frames).
-  static void SetUpTestSuite() {
-    dir_ = new TempDir;
-    recording_ = dir_->File("rec.csv");
-    RunResult r = Run("simulate --config " + Quote(Rdk1()) + " --hours 6 --seed 5 --out " +
-                      Quote(recording_));
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-    daemon_ = new Daemon(dir_->File("esg.db"), dir_->File("esgd.log"));
-    ASSERT_GT(daemon_->port(), 0);
-    r = Esg(*dir_, "configure --config " + Quote(Rdk1()));
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-    r = Esg(*dir_, "replay --recording " + Quote(recording_) + " --wait");
-    ASSERT_EQ(r.exit_code, 0) << r.err;
-  }
-  static void TearDownTestSuite() {
-    delete daemon_;
-    delete dir_;
-  }
   static RunResult Run(const std::string& args) { return RunBinary(*dir_, ESG_BINARY, args); }
   static RunResult Esg(const TempDir& dir, const std::string& args) {
-    return RunBinary(dir, ESG_BINARY, "--server " + daemon_->address() + " " + args);
+    return client::Esg(dir, *daemon_, args);
   }
-
-  static TempDir* dir_;
-  static std::string recording_;
-  static Daemon* daemon_;
 };
-TempDir* ExportCli::dir_ = nullptr;
-std::string ExportCli::recording_;
-Daemon* ExportCli::daemon_ = nullptr;
 
 TEST_F(ExportCli, TelemetryExportIsTheReplayedRecordingAndCalibratesTheSame) {
   TempDir dir;

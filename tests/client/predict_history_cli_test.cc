@@ -21,18 +21,15 @@
 #include "proto/convert.h"
 #include "storage/aem.h"
 #include "storage/storage.h"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
-
-#define ESGD_PATH ESGD_BINARY
-#include "tests/testing/daemon.h"
 
 namespace esg::client {
 namespace {
 
 using ::esg::testing::Daemon;
-using ::esg::testing::RunBinary;
 using ::esg::testing::RunResult;
 using ::esg::testing::TempDir;
 using ::esg::testing::WriteFile;
@@ -96,10 +93,6 @@ std::map<absl::Time, Eigen::Quaterniond> IngestRotating(esg::v1::EstimationServi
     absl::SleepFor(absl::Milliseconds(100));
   }
   return truth;
-}
-
-RunResult Esg(const TempDir& dir, const Daemon& daemon, const std::string& args) {
-  return RunBinary(dir, ESG_BINARY, "--server " + daemon.address() + " " + args);
 }
 
 TEST(PredictCli, PlannedAttitudeFromACsvOrAnAemIsFollowedAndStated) {

@@ -13,7 +13,6 @@
 // Seeds: ESG_ACK_INVARIANT_SEEDS (comma-separated; default "1,2" in CI);
 // scripts/ack_invariant.sh runs many.
 #include <atomic>
-#include <cmath>
 #include <cstdlib>
 #include <iostream>
 #include <map>
@@ -30,8 +29,8 @@
 #include "google/protobuf/io/coded_stream.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
 #include "gtest/gtest.h"
-#include "estimator/units.h"
 #include "storage/storage.h"
+#include "tests/server/reorder_test_util.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
 
@@ -40,9 +39,9 @@ namespace {
 
 using ::esg::testing::ConfigureRequestFor;
 using ::esg::testing::Daemon;
+using ::esg::testing::ExpectDriftCoefficientsEqualOffline;
 using ::esg::testing::OfflineCoefficientHistory;
 using ::esg::testing::OfflineSessionValues;
-using ::esg::testing::OfflineSnapshot;
 using ::esg::testing::SimulateRun;
 using ::esg::testing::SimulatedRun;
 using ::esg::testing::StoredSessionValues;
@@ -372,19 +371,8 @@ void RunOnce(uint64_t seed) {
   storage->reset();
   EXPECT_EQ(StoredSessionValues(db, "PROP-1"),
             OfflineSessionValues(run->config, "10+11", archived_frames));
-  const std::vector<OfflineSnapshot> offline =
-      OfflineCoefficientHistory(run->config, "10+11", archived_frames);
-  ASSERT_EQ(history->size(), offline.size());
-  for (size_t k = 0; k < offline.size(); ++k) {
-    ASSERT_EQ((*history)[k].measurement_time, offline[k].time) << k;
-    ASSERT_EQ((*history)[k].gyro_id, offline[k].gyro_id) << k;
-    for (int i = 0; i < storage::kCoefficientMisalignment; ++i) {
-      if (std::isnan(offline[k].values[i])) continue;
-      EXPECT_NEAR((*history)[k].values[i], offline[k].values[i],
-                  estimator::DegPerHourToRadPerSec(1e-12))
-          << "estimate " << k << " drift coefficient " << i;
-    }
-  }
+  ASSERT_NO_FATAL_FAILURE(ExpectDriftCoefficientsEqualOffline(
+      *history, OfflineCoefficientHistory(run->config, "10+11", archived_frames)));
 }
 
 TEST(AckInvariant, RandomInterleavingsWithKillNineKeepEveryAcknowledgementTrue) {

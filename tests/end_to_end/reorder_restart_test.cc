@@ -5,16 +5,15 @@
 // ends with the coefficient history of an offline run over the merged recording in time order
 // (drift coefficients to 1e-12 deg/h) and the same filter state bit for bit. `esg history`
 // shows the current snapshots, and with --include-revised also the superseded ones, marked.
-#include <cmath>
 #include <csignal>
 #include <iostream>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_split.h"
-#include "estimator/units.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
+#include "tests/server/reorder_test_util.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
 #include "tests/testing/run_process.h"
@@ -24,28 +23,17 @@ namespace {
 
 using ::esg::testing::ConfigureRequestFor;
 using ::esg::testing::Daemon;
+using ::esg::testing::ExpectDriftCoefficientsEqualOffline;
 using ::esg::testing::OfflineCoefficientHistory;
 using ::esg::testing::OfflineSessionValues;
-using ::esg::testing::OfflineSnapshot;
 using ::esg::testing::RunBinary;
 using ::esg::testing::RunResult;
 using ::esg::testing::SimulatedRun;
 using ::esg::testing::SimulateRun;
+using ::esg::testing::StationPass;
 using ::esg::testing::StoredSessionValues;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
-
-std::vector<esg::v1::TelemetryFrame> Pass(const SimulatedRun& run, int from, int to,
-                                          const std::string& station, int64_t first_sequence) {
-  std::vector<esg::v1::TelemetryFrame> out;
-  for (int i = from; i < to; ++i) {
-    esg::v1::TelemetryFrame f = run.frames[i];
-    f.set_station_id(station);
-    f.set_sequence(first_sequence + (i - from));
-    out.push_back(f);
-  }
-  return out;
-}
 
 // Polls GetSession until `frames_applied` reaches `n` (30 s at most).
 bool WaitFramesApplied(Daemon& daemon, const std::string& id, int64_t n) {
@@ -69,9 +57,9 @@ TEST(ReorderRestart, LateFramesAcknowledgedBeforeAKillNineAreReRunFromAKeptCheck
   const std::string db = dir.File("var/esg.db");
   const std::string log = dir.File("esgd.log");
   // GS-1 relays minutes 0-199 without 150-159; GS-2 relays those afterwards.
-  std::vector<esg::v1::TelemetryFrame> first = Pass(run, 0, 150, "GS-1", 1);
-  for (const auto& f : Pass(run, 160, 200, "GS-1", 151)) first.push_back(f);
-  const std::vector<esg::v1::TelemetryFrame> late = Pass(run, 150, 160, "GS-2", 1);
+  std::vector<esg::v1::TelemetryFrame> first = StationPass(run, 0, 150, "GS-1", 1);
+  for (const auto& f : StationPass(run, 160, 200, "GS-1", 151)) first.push_back(f);
+  const std::vector<esg::v1::TelemetryFrame> late = StationPass(run, 150, 160, "GS-2", 1);
   {
     Daemon daemon(db, log);
     grpc::ClientContext ctx;
@@ -132,19 +120,8 @@ TEST(ReorderRestart, LateFramesAcknowledgedBeforeAKillNineAreReRunFromAKeptCheck
   auto all = (*storage)->coefficients().History(id, 0, absl::InfinitePast(), absl::InfiniteFuture(),
                                                 /*include_revised=*/true);
   ASSERT_TRUE(current.ok() && all.ok());
-  const std::vector<OfflineSnapshot> offline =
-      OfflineCoefficientHistory(run.config, "10+11", merged);
-  ASSERT_EQ(current->size(), offline.size());
-  for (size_t k = 0; k < offline.size(); ++k) {
-    ASSERT_EQ((*current)[k].measurement_time, offline[k].time) << k;
-    ASSERT_EQ((*current)[k].gyro_id, offline[k].gyro_id) << k;
-    for (int i = 0; i < storage::kCoefficientMisalignment; ++i) {
-      if (std::isnan(offline[k].values[i])) continue;
-      EXPECT_NEAR((*current)[k].values[i], offline[k].values[i],
-                  estimator::DegPerHourToRadPerSec(1e-12))
-          << "estimate " << k << " drift coefficient " << i;
-    }
-  }
+  ASSERT_NO_FATAL_FAILURE(ExpectDriftCoefficientsEqualOffline(
+      *current, OfflineCoefficientHistory(run.config, "10+11", merged)));
   // The re-run started from a kept checkpoint: what came before it is still current.
   absl::Time first_revised = absl::InfiniteFuture();
   for (const auto& r : *all) {

@@ -16,6 +16,7 @@
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/server/reorder_test_util.h"
 #include "tests/server/server_test_util.h"
 
 namespace esg::server {
@@ -30,6 +31,7 @@ using ::esg::testing::OfflineSnapshot;
 using ::esg::testing::Session;
 using ::esg::testing::SimulatedRun;
 using ::esg::testing::SimulateRun;
+using ::esg::testing::StationPass;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
@@ -38,19 +40,6 @@ using ::testing::HasSubstr;
 const SimulatedRun& Run4h() {
   static const SimulatedRun* run = new SimulatedRun(SimulateRun("REO-1", 4.0, 31));
   return *run;
-}
-
-// Frames [from, to) of the run, as sent by `station` numbering them first_sequence, +1, ...
-std::vector<esg::v1::TelemetryFrame> Pass(const SimulatedRun& run, int from, int to,
-                                          const std::string& station, int64_t first_sequence) {
-  std::vector<esg::v1::TelemetryFrame> out;
-  for (int i = from; i < to; ++i) {
-    esg::v1::TelemetryFrame f = run.frames[i];
-    f.set_station_id(station);
-    f.set_sequence(first_sequence + (i - from));
-    out.push_back(f);
-  }
-  return out;
 }
 
 void Configure(esg::v1::EstimationService::Stub& stub, const SimulatedRun& run) {
@@ -116,8 +105,8 @@ TEST(ReorderWindow, OverlappingPassesOfTwoStationsAreStoredOnceAndAConflictIsRef
   const std::string id = run.config.spacecraft_id;
   Configure(*stub, run);
   // GS-1 relays minutes 0-79, GS-2 minutes 60-119, at the same time: 20 measurements twice.
-  const auto a = Pass(run, 0, 80, "GS-1", 1);
-  const auto b = Pass(run, 60, 120, "GS-2", 1);
+  const auto a = StationPass(run, 0, 80, "GS-1", 1);
+  const auto b = StationPass(run, 60, 120, "GS-2", 1);
   esg::testing::StreamResult ra, rb;
   std::thread ta([&] { ra = StreamFrames(*stub, a); });
   std::thread tb([&] { rb = StreamFrames(*stub, b); });
@@ -167,8 +156,8 @@ TEST(ReorderWindow, LateFramesWithinTheWindowReviseTheHistoryAndEndAsTheOfflineR
   const std::string id = run.config.spacecraft_id;
   Configure(*stub, run);
   // GS-1 sends minutes 0-199 but misses 150-159; GS-2 relays those 40 min after the last.
-  std::vector<esg::v1::TelemetryFrame> first = Pass(run, 0, 150, "GS-1", 1);
-  for (const auto& f : Pass(run, 160, 200, "GS-1", 151)) first.push_back(f);
+  std::vector<esg::v1::TelemetryFrame> first = StationPass(run, 0, 150, "GS-1", 1);
+  for (const auto& f : StationPass(run, 160, 200, "GS-1", 151)) first.push_back(f);
   ExpectAllStored(StreamFrames(*stub, first), first.size());
   ASSERT_TRUE(server.core().WaitApplied(id, absl::Seconds(60)).ok());
   auto kept = server.core().storage().reorder().CheckpointTimes(id);
@@ -178,7 +167,7 @@ TEST(ReorderWindow, LateFramesWithinTheWindowReviseTheHistoryAndEndAsTheOfflineR
   const double revisions_before = server.core().metrics().revisions.Value();
   EXPECT_EQ(revisions_before, 0);
 
-  const auto late = Pass(run, 150, 160, "GS-2", 1);
+  const auto late = StationPass(run, 150, 160, "GS-2", 1);
   const auto result = StreamFrames(*stub, late);
   ExpectAllStored(result, late.size());
   for (const auto& ack : result.acks) EXPECT_FALSE(ack.duplicate());
@@ -236,8 +225,8 @@ TEST(ReorderWindow, FrameOlderThanTheWindowIsRefusedNamingTheWindow) {
   const SimulatedRun& run = Run4h();
   const std::string id = run.config.spacecraft_id;
   Configure(*stub, run);
-  std::vector<esg::v1::TelemetryFrame> frames = Pass(run, 0, 50, "GS-1", 1);
-  for (const auto& f : Pass(run, 51, 100, "GS-1", 52)) frames.push_back(f);
+  std::vector<esg::v1::TelemetryFrame> frames = StationPass(run, 0, 50, "GS-1", 1);
+  for (const auto& f : StationPass(run, 51, 100, "GS-1", 52)) frames.push_back(f);
   ExpectAllStored(StreamFrames(*stub, frames), frames.size());
   // Minute 50 is 49 min before the last accepted frame (minute 99); minute 80 only 19 min.
   esg::v1::TelemetryFrame too_late = run.frames[50];
@@ -271,7 +260,7 @@ TEST(ReorderWindow, WindowCheckpointsAreHourlyAndBoundedByTheWindow) {
   const SimulatedRun& run = Run4h();
   const std::string id = run.config.spacecraft_id;
   Configure(*stub, run);
-  const auto frames = Pass(run, 0, 240, "GS-1", 1);
+  const auto frames = StationPass(run, 0, 240, "GS-1", 1);
   ExpectAllStored(StreamFrames(*stub, frames), frames.size());
   ASSERT_TRUE(server.core().WaitApplied(id, absl::Seconds(60)).ok());
   auto kept = server.core().storage().reorder().CheckpointTimes(id);
@@ -296,8 +285,8 @@ TEST(ReorderWindow, RestartedServerReRunsFromTheWindowCheckpointsItKept) {
   const std::string db = dir.File("var/esg.db");
   const SimulatedRun& run = Run4h();
   const std::string id = run.config.spacecraft_id;
-  std::vector<esg::v1::TelemetryFrame> first = Pass(run, 0, 150, "GS-1", 1);
-  for (const auto& f : Pass(run, 160, 200, "GS-1", 151)) first.push_back(f);
+  std::vector<esg::v1::TelemetryFrame> first = StationPass(run, 0, 150, "GS-1", 1);
+  for (const auto& f : StationPass(run, 160, 200, "GS-1", 151)) first.push_back(f);
   {
     LoopbackServer server({}, db);
     auto stub = server.Stub();
@@ -307,7 +296,7 @@ TEST(ReorderWindow, RestartedServerReRunsFromTheWindowCheckpointsItKept) {
   }
   LoopbackServer server({}, db);
   auto stub = server.Stub();
-  const auto late = Pass(run, 150, 160, "GS-2", 1);
+  const auto late = StationPass(run, 150, 160, "GS-2", 1);
   ExpectAllStored(StreamFrames(*stub, late), late.size());
   ASSERT_TRUE(server.core().WaitApplied(id, absl::Seconds(60)).ok());
   EXPECT_GE(server.core().metrics().revisions.Value(), 1);
@@ -354,20 +343,20 @@ TEST(ReorderWindow, CurrentAlertsAfterAReRunAreThoseOfTheFramesSentInTimeOrder) 
   // Star-tracker outliers raise alerts all along; the late frames fall among them.
   const SimulatedRun run = SimulateRun("REO-2", 4.0, 5, /*outlier_probability=*/0.08);
   const std::string id = run.config.spacecraft_id;
-  std::vector<esg::v1::TelemetryFrame> first = Pass(run, 0, 150, "GS-1", 1);
-  for (const auto& f : Pass(run, 160, 200, "GS-1", 151)) first.push_back(f);
+  std::vector<esg::v1::TelemetryFrame> first = StationPass(run, 0, 150, "GS-1", 1);
+  for (const auto& f : StationPass(run, 160, 200, "GS-1", 151)) first.push_back(f);
   LoopbackServer reordered;
   auto stub = reordered.Stub();
   Configure(*stub, run);
   ExpectAllStored(StreamFrames(*stub, first), first.size());
   ASSERT_TRUE(reordered.core().WaitApplied(id, absl::Seconds(60)).ok());
-  ExpectAllStored(StreamFrames(*stub, Pass(run, 150, 160, "GS-2", 1)), 10);
+  ExpectAllStored(StreamFrames(*stub, StationPass(run, 150, 160, "GS-2", 1)), 10);
   ASSERT_TRUE(reordered.core().WaitApplied(id, absl::Seconds(60)).ok());
   // The reference: the same frames, in time order, to a server of its own.
   LoopbackServer in_order;
   auto reference_stub = in_order.Stub();
   Configure(*reference_stub, run);
-  ExpectAllStored(StreamFrames(*reference_stub, Pass(run, 0, 200, "GS-1", 1)), 200);
+  ExpectAllStored(StreamFrames(*reference_stub, StationPass(run, 0, 200, "GS-1", 1)), 200);
   ASSERT_TRUE(in_order.core().WaitApplied(id, absl::Seconds(60)).ok());
 
   const std::vector<esg::v1::Alert> current = Replay(*stub, id, false);

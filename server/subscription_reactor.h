@@ -1,0 +1,224 @@
+// The skeleton of the subscription reactors (SubscribeAlerts in alert_reactor.cc,
+// SubscribeEstimates in estimate_reactor.cc): replay from the database, then live, with no gap
+// and no duplicate.
+//
+// The reactor subscribes to the live feed (a Hub, hub.h) first and replays the store afterwards;
+// live records published meanwhile are buffered. At the end of the replay it releases the buffer
+// and, when the request asks for it (replay_marker), queues the end-of-replay marker; from then on
+// live records are queued as published. Everything committed before the subscription is in the
+// store and everything committed after it is published to the subscription, so nothing falls
+// between replay and live; what both hold is kept out by the Feed's dedupe rule (Admit). How the
+// store is read (one read, or pages read as the client keeps up) is the reactor's own part.
+//
+// A Feed is the per-stream state of one kind of record, guarded by the stream's lock:
+//   using Record, Message                      the hub's record, the streamed message (which has
+//                                              a replay_complete field: the marker)
+//   static constexpr size_t kMaxQueued         a stream with this many messages waiting, or
+//   static constexpr size_t kMaxBuffered       this many live records buffered during the
+//                                              replay, is finished with RESOURCE_EXHAUSTED and
+//   static std::string TooSlowMessage()        this message
+//   static Message ToProto(const Record&)
+//   bool Admit(const Record&, bool replaying)  the dedupe rule: whether to queue the record;
+//                                              `replaying` until the buffer has been released
+//   void ReplayComplete()                      the buffer has been released
+//
+// Lifetime: the hub's listener and closer hold the Shared state weakly, since a closer may run
+// (CloseAll calls them outside the hub's lock) after OnDone has unsubscribed and deleted the
+// reactor; `reactor` is null from then on.
+#ifndef ESG_SERVER_SUBSCRIPTION_REACTOR_H_
+#define ESG_SERVER_SUBSCRIPTION_REACTOR_H_
+
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
+#include "absl/time/time.h"
+#include "grpcpp/support/server_callback.h"
+#include "proto/convert.h"
+#include "server/call_counter.h"
+#include "server/estimation_core.h"
+#include "server/grpc_status.h"
+#include "server/hub.h"
+
+namespace esg::server {
+
+template <typename Feed>
+class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Message> {
+ public:
+  using Record = typename Feed::Record;
+  using Message = typename Feed::Message;
+
+  void OnWriteDone(bool ok) override {
+    {
+      absl::MutexLock lock(&shared_->mu);
+      shared_->writing = false;
+      if (!ok) {
+        FinishOnce(*shared_, absl::CancelledError("the client went away"));
+        return;
+      }
+      shared_->queue.pop_front();
+    }
+    Pump();
+  }
+
+  void OnCancel() override {
+    absl::MutexLock lock(&shared_->mu);
+    FinishOnce(*shared_, absl::CancelledError("the client went away"));
+  }
+
+  void OnDone() override {
+    if (subscription_ != 0) hub_->Unsubscribe(subscription_);
+    {
+      absl::MutexLock lock(&shared_->mu);
+      shared_->reactor = nullptr;
+    }
+    delete this;
+  }
+
+ protected:
+  struct Shared {
+    absl::Mutex mu;
+    SubscriptionReactor* reactor ABSL_GUARDED_BY(mu) = nullptr;
+    bool replaying ABSL_GUARDED_BY(mu) = true;
+    bool marker ABSL_GUARDED_BY(mu) = false;  // the request asked for the end-of-replay marker
+    std::vector<Record> buffered ABSL_GUARDED_BY(mu);  // live records published during the replay
+    std::deque<Message> queue ABSL_GUARDED_BY(mu);
+    bool writing ABSL_GUARDED_BY(mu) = false;
+    bool finished ABSL_GUARDED_BY(mu) = false;
+    Feed feed ABSL_GUARDED_BY(mu);
+  };
+
+  SubscriptionReactor(CallCounter* calls, EstimationCore* core, Hub<Record>* hub)
+      : token_(calls), core_(core), hub_(hub), shared_(std::make_shared<Shared>()) {
+    absl::MutexLock lock(&shared_->mu);
+    shared_->reactor = this;
+  }
+
+  // Checks `auth`, then that the request's spacecraft is empty or configured, then its `since`.
+  // On an error finishes the stream with it (InvalidArgument "since: ..." for a bad time) and
+  // returns false. Otherwise sets *since to the start of the replay (InfiniteFuture: no replay),
+  // remembers whether the marker is asked for and returns true.
+  template <typename Request>
+  bool Accept(const Request& request, absl::Status auth, absl::Time* since) {
+    if (auth.ok()) auth = core_->CheckSpacecraft(request.spacecraft_id());
+    *since = absl::InfiniteFuture();
+    if (auth.ok() && request.has_since()) {
+      absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.since());
+      if (t.ok()) {
+        *since = *t;
+      } else {
+        auth =
+            absl::InvalidArgumentError(std::string("since: ") + std::string(t.status().message()));
+      }
+    }
+    absl::MutexLock lock(&shared_->mu);
+    if (!auth.ok()) {
+      FinishOnce(*shared_, auth);
+      return false;
+    }
+    shared_->marker = request.replay_marker();
+    return true;
+  }
+
+  // Subscribes to the live feed of `spacecraft_id` (empty: every spacecraft): records are
+  // buffered while replaying and queued afterwards; the hub's CloseAll finishes the stream with
+  // UNAVAILABLE.
+  void Subscribe(const std::string& spacecraft_id) {
+    std::weak_ptr<Shared> weak = shared_;
+    subscription_ = hub_->Subscribe(
+        spacecraft_id,
+        [weak](const Record& r) {
+          std::shared_ptr<Shared> s = weak.lock();
+          if (s == nullptr) return;
+          absl::MutexLock lock(&s->mu);
+          if (s->finished) return;
+          if (s->replaying) {
+            if (s->buffered.size() >= Feed::kMaxBuffered) {
+              TooSlow(*s);
+              return;
+            }
+            s->buffered.push_back(r);
+          } else {
+            Offer(*s, r);
+            TryWrite(*s);
+          }
+        },
+        [weak]() {
+          std::shared_ptr<Shared> s = weak.lock();
+          if (s == nullptr) return;
+          absl::MutexLock lock(&s->mu);
+          FinishOnce(*s, absl::UnavailableError("the server is shutting down"));
+        });
+  }
+
+  // Runs after each completed write (and wherever the reactor calls it): writes what is queued.
+  // A reactor whose replay goes on while writes complete overrides it.
+  virtual void Pump() {
+    absl::MutexLock lock(&shared_->mu);
+    TryWrite(*shared_);
+  }
+
+  // Queues `r` if the Feed admits it; a full queue finishes the stream (TooSlow).
+  static void Offer(Shared& s, const Record& r) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (!s.feed.Admit(r, s.replaying)) return;
+    if (s.queue.size() >= Feed::kMaxQueued) {
+      TooSlow(s);
+      return;
+    }
+    s.queue.push_back(Feed::ToProto(r));
+  }
+
+  // The end of the replay: the live records buffered meanwhile (still under the replay's dedupe
+  // rule), then the marker if asked for; live records are queued as published from now on.
+  static void CompleteReplay(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    for (const Record& r : s.buffered) Offer(s, r);
+    s.buffered.clear();
+    s.replaying = false;
+    s.feed.ReplayComplete();
+    if (s.marker && !s.finished) {
+      Message marker;
+      marker.set_replay_complete(true);
+      s.queue.push_back(std::move(marker));
+    }
+    TryWrite(s);
+  }
+
+  static void TryWrite(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.finished || s.writing || s.reactor == nullptr || s.queue.empty()) return;
+    s.writing = true;
+    s.reactor->StartWrite(&s.queue.front());
+  }
+
+  // Finishes the stream with `status` unless it is finished already or the reactor is gone.
+  static void FinishOnce(Shared& s, const absl::Status& status)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.finished || s.reactor == nullptr) return;
+    s.finished = true;
+    s.reactor->Finish(ToGrpcStatus(status));
+  }
+
+  static void TooSlow(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    FinishOnce(s, absl::ResourceExhaustedError(Feed::TooSlowMessage()));
+  }
+
+  EstimationCore* core() const { return core_; }
+  Shared& shared() { return *shared_; }
+
+ private:
+  CallCounter::Token token_;
+  EstimationCore* const core_;
+  Hub<Record>* const hub_;
+  std::shared_ptr<Shared> shared_;
+  int64_t subscription_ = 0;
+};
+
+}  // namespace esg::server
+
+#endif  // ESG_SERVER_SUBSCRIPTION_REACTOR_H_
