@@ -440,10 +440,10 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   } else if (!absl::IsNotFound(found.status())) {
     return found.status();
   } else if (shared()) {
-    ASSIGN_OR_RETURN(storage::SessionLease lease,
-                     storage_->leases().Acquire(config.spacecraft_id, options_.node_id,
-                                                absl::Now(), options_.lease_duration));
-    new_lease_epoch = lease.epoch;
+    absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
+        config.spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
+    if (!lease.ok()) return LeaseRefused(lease.status());
+    new_lease_epoch = lease->epoch;
     metrics_.lease_events.With({"taken"}).Increment();
     fence = storage::LeaseFence{options_.node_id, new_lease_epoch};
   }

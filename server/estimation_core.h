@@ -262,8 +262,13 @@ class EstimationCore {
   // The spacecraft's record for a call that needs its session: Find(), and with leases (node_id)
   // a record whose lease this server holds, taking the lease and loading the session (checkpoint
   // plus archive after it) if needed. NotFound "not configured"; Unavailable "served by node N
-  // until T; retry in S s" while another server holds the lease.
+  // until T; retry after that" while another server holds the lease (LeaseRefused).
   absl::StatusOr<std::shared_ptr<Spacecraft>> Lookup(const std::string& spacecraft_id);
+  // A failed LeaseStore::Acquire's status for the call: a refusal because another server holds
+  // the lease is counted (lease event "refused") and becomes Unavailable "...; retry after that"
+  // with the time until the holder's expiry as its retry delay (grpc_status.h WithRetryDelay:
+  // trailing metadata grpc-retry-pushback-ms), at most lease_duration; any other status as is.
+  absl::Status LeaseRefused(const absl::Status& status);
   // OK if the spacecraft is configured (in the registry, or with leases in the database): for
   // calls that only read the database. NotFound "not configured" otherwise.
   absl::Status CheckConfigured(const std::string& spacecraft_id);

@@ -2,6 +2,7 @@
 // leases (take on demand, renew, fence the writes), the fleet as other servers committed it, and
 // the relay of other servers' alert changes. Part of EstimationCore (estimation_core.h); the
 // lease rows are storage/lease_store.h.
+#include <algorithm>
 #include <memory>
 #include <optional>
 #include <string>
@@ -13,6 +14,7 @@
 #include "estimator/status_macros.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "server/grpc_status.h"
 #include "server/log.h"
 #include "storage/lease_store.h"
 #include "storage/postgres_db.h"
@@ -43,13 +45,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   if (!record.ok()) return record.status();
   absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
       spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
-  if (absl::IsUnavailable(lease.status())) {
-    metrics_.lease_events.With({"refused"}).Increment();
-    return absl::UnavailableError(absl::StrCat(
-        lease.status().message(), "; retry after that (leases last ",
-        absl::FormatDuration(options_.lease_duration), "): docs/service.md \"Several servers\""));
-  }
-  if (!lease.ok()) return lease.status();
+  if (!lease.ok()) return LeaseRefused(lease.status());
   // The session as the last owner left it: its checkpoint, then the archive after it.
   RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
   sc = Find(spacecraft_id);
@@ -61,6 +57,21 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
            {{"spacecraftId", spacecraft_id}, {"leaseEpoch", lease->epoch}});
   Schedule(sc);
   return sc;
+}
+
+absl::Status EstimationCore::LeaseRefused(const absl::Status& status) {
+  const std::optional<absl::Time> held_until = storage::LeaseHeldUntil(status);
+  if (!held_until.has_value()) return status;
+  metrics_.lease_events.With({"refused"}).Increment();
+  // The holder's expiry by this server's clock (the clocks agree: docs/service.md), at most one
+  // lease duration: a holder that renews refuses the retry again with a new delay.
+  const absl::Duration delay =
+      std::clamp(*held_until - absl::Now(), absl::ZeroDuration(), options_.lease_duration);
+  return WithRetryDelay(
+      absl::UnavailableError(absl::StrCat(status.message(), "; retry after that (leases last ",
+                                          absl::FormatDuration(options_.lease_duration),
+                                          "): docs/service.md \"Several servers\"")),
+      delay);
 }
 
 std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc) const {

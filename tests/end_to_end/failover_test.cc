@@ -14,6 +14,9 @@
 // lost, by the node that died or the one that took over), and the final session state equals
 // the offline one exactly; the killed node's spacecraft are served by another node under a new
 // lease epoch, the others kept theirs.
+//
+// Also here, with two esgd on one database and no router: the fleet seen from any server, the
+// alerts relayed between them, and the retry delay a refused call carries.
 #include <signal.h>
 
 #include <atomic>
@@ -27,12 +30,14 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
-#include "proto/convert.h"
+#include "grpcpp/support/channel_arguments.h"
 #include "gtest/gtest.h"
+#include "proto/convert.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
@@ -464,6 +469,131 @@ TEST(Failover, AnyServerShowsEverySpacecraftAndRelaysAlertsRaisedOnAnother) {
   }
   std::printf("[ measured ] %zu alerts raised on node A, %zu alert changes relayed to node B\n",
               stored.size(), relayed.size());
+}
+
+// The retry delay of a refusal (docs/service.md "Several servers"): node B, asked for a session
+// node A holds, answers UNAVAILABLE with the trailing metadata grpc-retry-pushback-ms, the time
+// until A's lease expires (at most the lease duration), on a unary call (ConfigureSpacecraft),
+// on one run off the callback thread (PredictAttitude) and on a stream (Diagnose). After A is
+// killed, a client whose gRPC retry policy would give up within about 50 ms (5 attempts, 10 ms
+// apart) succeeds on B because it waits as told until the lease expired.
+TEST(Failover, ARefusedCallCarriesTheTimeUntilTheLeaseExpiresAsItsRetryPushback) {
+  std::string pg_error;
+  PostgresServer* pg = PostgresServer::Shared(&pg_error);
+  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
+  absl::StatusOr<std::string> db = pg->CreateDatabase();
+  ASSERT_TRUE(db.ok()) << db.status();
+  constexpr int kLeaseMs = 3000;
+  TempDir dir;
+  std::vector<std::unique_ptr<Daemon>> daemons;
+  for (int n = 0; n < 2; ++n) {
+    daemons.push_back(std::make_unique<Daemon>(
+        *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
+        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration",
+                                 absl::StrCat(kLeaseMs / 1000, "s")}));
+    ASSERT_GT(daemons.back()->port(), 0)
+        << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
+  }
+  auto a = daemons[0]->Stub();
+  auto b = daemons[1]->Stub();
+  const SimulatedRun run = SimulateRun("RP-1", 1.0, 51);
+  const std::string id = run.config.spacecraft_id;
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse configured;
+    const grpc::Status status =
+        a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+
+  // The pushback of a finished call, -1 when it has none.
+  auto pushback_ms = [](const grpc::ClientContext& ctx) -> int64_t {
+    const auto& trailers = ctx.GetServerTrailingMetadata();
+    EXPECT_LE(trailers.count("grpc-retry-pushback-ms"), 1u);
+    const auto found = trailers.find("grpc-retry-pushback-ms");
+    if (found == trailers.end()) return -1;
+    int64_t ms = -1;
+    EXPECT_TRUE(
+        absl::SimpleAtoi(absl::string_view(found->second.data(), found->second.size()), &ms))
+        << std::string(found->second.data(), found->second.size());
+    return ms;
+  };
+  auto expect_refused = [&](const grpc::Status& status, const grpc::ClientContext& ctx,
+                            const char* call) {
+    SCOPED_TRACE(call);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+    EXPECT_THAT(status.error_message(),
+                ::testing::HasSubstr(absl::StrCat("is served by node ", NodeId(0), " until")));
+    const int64_t ms = pushback_ms(ctx);
+    EXPECT_GT(ms, 0);
+    EXPECT_LE(ms, kLeaseMs);
+    return ms;
+  };
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse configured;
+    const grpc::Status status =
+        b->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
+    const int64_t ms = expect_refused(status, ctx, "ConfigureSpacecraft");
+    std::printf(
+        "[ measured ] ConfigureSpacecraft refused by node B: grpc-retry-pushback-ms %lld "
+        "(lease %d ms, renewed every third)\n",
+        static_cast<long long>(ms), kLeaseMs);
+  }
+  {
+    grpc::ClientContext ctx;
+    esg::v1::PredictRequest request;
+    request.set_spacecraft_id(id);
+    esg::v1::PredictResponse predicted;
+    const grpc::Status status = b->PredictAttitude(&ctx, request, &predicted);
+    expect_refused(status, ctx, "PredictAttitude");
+  }
+  {
+    grpc::ClientContext ctx;
+    esg::v1::DiagnoseRequest request;
+    request.set_spacecraft_id(id);
+    auto reader = b->Diagnose(&ctx, request);
+    esg::v1::DiagnoseUpdate update;
+    while (reader->Read(&update)) {
+    }
+    const grpc::Status status = reader->Finish();
+    expect_refused(status, ctx, "Diagnose");
+  }
+  // Other failures carry no pushback.
+  {
+    grpc::ClientContext ctx;
+    esg::v1::PredictRequest request;
+    request.set_spacecraft_id("NOT-CONFIGURED");
+    esg::v1::PredictResponse predicted;
+    EXPECT_EQ(b->PredictAttitude(&ctx, request, &predicted).error_code(),
+              grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(pushback_ms(ctx), -1);
+  }
+
+  // A dies; a client with a short retry policy reaches B, which takes the session once A's
+  // lease expired. Without the pushback its five attempts would all be refused within ~50 ms.
+  daemons[0]->Stop(SIGKILL);
+  grpc::ChannelArguments args;
+  args.SetServiceConfigJSON(R"({"methodConfig": [{
+      "name": [{"service": "esg.v1.EstimationService"}],
+      "retryPolicy": {"maxAttempts": 5, "initialBackoff": "0.01s", "maxBackoff": "0.01s",
+                      "backoffMultiplier": 1.0, "retryableStatusCodes": ["UNAVAILABLE"]}}]})");
+  auto retrying = esg::v1::EstimationService::NewStub(
+      grpc::CreateCustomChannel(daemons[1]->address(), grpc::InsecureChannelCredentials(), args));
+  const auto start = std::chrono::steady_clock::now();
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  esg::v1::ConfigureResponse configured;
+  const grpc::Status status =
+      retrying->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
+  const double waited_s = Seconds(start);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(configured.session().served_by(), NodeId(1));
+  EXPECT_LE(waited_s, kLeaseMs / 1000.0 + 5.0);
+  std::printf(
+      "[ measured ] after kill -9 of node A the retrying call succeeded on node B after "
+      "%.2f s (lease %d ms)\n",
+      waited_s, kLeaseMs);
 }
 
 }  // namespace
