@@ -109,9 +109,12 @@ TEST(StatusCodeForSqlState, MapsTheClassesDatabaseHPromises) {
 // A fresh database of the shared server, opened with PostgresDatabase::Open().
 class PostgresDatabaseTest : public ::testing::Test {
  protected:
+  // The server of the fixture's database: the one shared with other tests.
+  virtual PostgresServer* Server(std::string* error) { return PostgresServer::Shared(error); }
+
   void SetUp() override {
     std::string error;
-    server_ = PostgresServer::Shared(&error);
+    server_ = Server(&error);
     ASSERT_NE(server_, nullptr) << "the PostgreSQL test server cannot start: " << error;
     absl::StatusOr<std::string> uri = server_->CreateDatabase();
     ASSERT_THAT(uri, IsOk());
@@ -248,7 +251,13 @@ TEST_F(PostgresDatabaseTest, AStatementErrorMakesCommitFailAndNothingIsVisible) 
 // The durability and reconnection contract of postgres_db.h: after kill -9 of the server and
 // its restart, the PostgresDatabase opened before takes transactions again (its first Begin()
 // may report the lost connection) and sees what was committed.
-TEST_F(PostgresDatabaseTest, AfterTheServerIsKilledAndRestartedTheConnectionRecovers) {
+// On a server of this process's own: killing the shared one would break the tests using it.
+class PostgresDatabaseCrashTest : public PostgresDatabaseTest {
+ protected:
+  PostgresServer* Server(std::string* error) override { return PostgresServer::Own(error); }
+};
+
+TEST_F(PostgresDatabaseCrashTest, AfterTheServerIsKilledAndRestartedTheConnectionRecovers) {
   ASSERT_THAT(Insert(7, [](Statement& st) { st.BindText(5, "committed before the crash"); }),
               IsOk());
   ASSERT_THAT(server_->Kill(), IsOk());
