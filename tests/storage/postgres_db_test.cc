@@ -26,6 +26,7 @@
 #include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "storage/postgres_schema.h"
 #include "storage/schema.h"
 #include "storage/storage.h"
 #include "tests/storage/storage_test_util.h"
@@ -311,6 +312,50 @@ TEST(PostgresStorage, TwoOpensOfAFreshDatabaseAtOnceBothSucceed) {
     EXPECT_THAT(QueryInt((*opened[1])->database(), "SELECT MAX(version) FROM esg_schema"),
                 IsOkAndHolds(kCurrentSchemaVersion));
   }
+}
+
+// The estimates trigger (postgres_schema.h kEstimatesChannel): a stored estimate is notified to a
+// listener of Storage::ListenForChanges with its measurement time and spacecraft, and a database
+// created at version 7 before the trigger existed gets it when a server opens it.
+TEST(PostgresStorage, AStoredEstimateIsNotifiedAndAMissingTriggerIsAddedAtOpen) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  const std::string count_sql = "SELECT COUNT(*) FROM pg_trigger WHERE tgname = 'estimates_notify'";
+  {
+    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+    ASSERT_THAT(storage, IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(1));
+    ASSERT_THAT((*storage)->database().Execute("DROP TRIGGER estimates_notify ON estimates; "
+                                               "DROP FUNCTION esg_estimates_notify()"),
+                IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(0));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(1));
+
+  absl::StatusOr<std::unique_ptr<PostgresListener>> listener = (*storage)->ListenForChanges();
+  ASSERT_THAT(listener, IsOk());
+  EstimateRecord estimate;
+  estimate.spacecraft_id = "N-1";
+  estimate.measurement_time = absl::FromUnixSeconds(1700000000);
+  estimate.compute_time = absl::FromUnixSeconds(1700000001);
+  estimate.state = "CALIBRATING";
+  ASSERT_THAT((*storage)->estimates().Put(estimate), IsOk());
+  std::vector<PostgresListener::Notification> got;
+  for (int i = 0; i < 20 && got.empty(); ++i) {
+    absl::StatusOr<std::vector<PostgresListener::Notification>> n =
+        (*listener)->Wait(absl::Milliseconds(250));
+    ASSERT_THAT(n, IsOk());
+    got = *n;
+  }
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].channel, kEstimatesChannel);
+  EXPECT_EQ(got[0].payload, "1700000000000000000 N-1");
+  EXPECT_EQ(got[0].sender_pid, (*storage)->ConnectionPid());
 }
 
 }  // namespace
