@@ -18,9 +18,9 @@ namespace {
 class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate> {
  public:
   // `permit` holds the caller's slot, or why the call is refused (role, limit).
-  DiagnoseReactor(CallCounter* calls, EstimationCore* core, esg::v1::DiagnoseRequest request,
-                  absl::StatusOr<CallLimiter::Permit> permit)
-      : token_(calls) {
+  DiagnoseReactor(CallCounter* calls, grpc::CallbackServerContext* context, EstimationCore* core,
+                  esg::v1::DiagnoseRequest request, absl::StatusOr<CallLimiter::Permit> permit)
+      : token_(calls), context_(context) {
     if (!permit.ok()) {
       finished_ = true;
       Finish(ToGrpcStatus(permit.status()));
@@ -70,6 +70,7 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
 
  private:
   CallCounter::Token token_;
+  grpc::CallbackServerContext* context_;  // gRPC's, valid until OnDone
   void Post(double fraction, const std::string& stage) {
     absl::MutexLock lock(&mu_);
     pending_.set_progress(fraction);
@@ -96,7 +97,8 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
       return;
     }
     finished_ = true;
-    Finish(ToGrpcStatus(broken_ ? absl::CancelledError("the client went away") : status_));
+    Finish(
+        ToGrpcStatus(broken_ ? absl::CancelledError("the client went away") : status_, *context_));
   }
 
   absl::Mutex mu_;
@@ -118,9 +120,9 @@ class DiagnoseReactor : public grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>
 }  // namespace
 
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* NewDiagnoseReactor(
-    CallCounter* calls, EstimationCore* core, esg::v1::DiagnoseRequest request,
-    absl::StatusOr<CallLimiter::Permit> permit) {
-  return new DiagnoseReactor(calls, core, std::move(request), std::move(permit));
+    CallCounter* calls, grpc::CallbackServerContext* context, EstimationCore* core,
+    esg::v1::DiagnoseRequest request, absl::StatusOr<CallLimiter::Permit> permit) {
+  return new DiagnoseReactor(calls, context, core, std::move(request), std::move(permit));
 }
 
 }  // namespace esg::server

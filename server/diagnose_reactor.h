@@ -12,6 +12,7 @@
 
 #include "absl/status/statusor.h"
 #include "esg/v1/estimation_service.pb.h"
+#include "grpcpp/server_context.h"
 #include "grpcpp/support/server_callback.h"
 #include "server/call_counter.h"
 #include "server/call_limiter.h"
@@ -19,10 +20,11 @@
 
 namespace esg::server {
 
-// `permit` holds the caller's slot, or why the call is refused (role, limit).
+// `permit` holds the caller's slot, or why the call is refused (role, limit). `context` is the
+// call's (for the retry delay of a refusal, grpc_status.h).
 grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* NewDiagnoseReactor(
-    CallCounter* calls, EstimationCore* core, esg::v1::DiagnoseRequest request,
-    absl::StatusOr<CallLimiter::Permit> permit);
+    CallCounter* calls, grpc::CallbackServerContext* context, EstimationCore* core,
+    esg::v1::DiagnoseRequest request, absl::StatusOr<CallLimiter::Permit> permit);
 
 }  // namespace esg::server
 

@@ -37,7 +37,7 @@ absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::S
   for (int i = 0; i < n; ++i) core->workers_.emplace_back([c = core.get()] { c->WorkerLoop(); });
   if (core->shared()) {
     core->lease_renewer_ = std::thread([c = core.get()] { c->LeaseLoop(); });
-    core->alert_relay_ = std::thread([c = core.get()] { c->AlertRelayLoop(); });
+    core->relay_ = std::thread([c = core.get()] { c->RelayLoop(); });
   }
   for (const auto& sc : core->registry_.All()) core->Schedule(sc);
   return core;
@@ -294,7 +294,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
   for (std::thread& t : workers_) t.join();
   workers_.clear();
   if (lease_renewer_.joinable()) lease_renewer_.join();
-  if (alert_relay_.joinable()) alert_relay_.join();
+  if (relay_.joinable()) relay_.join();
   // Nothing of this server writes any more: another server may take each session at once
   // instead of waiting for the expiry.
   if (shared()) {
@@ -320,7 +320,15 @@ std::shared_ptr<EstimationCore::Spacecraft> EstimationCore::Find(const std::stri
 std::vector<std::string> EstimationCore::SpacecraftIds() {
   std::vector<std::string> ids;
   for (const auto& sc : registry_.All()) ids.push_back(sc->id);
+  if (shared()) {
+    // Also those other servers hold (a read error leaves this server's own).
+    absl::StatusOr<std::vector<storage::ConfigRecord>> configs = storage_->configs().List();
+    if (configs.ok()) {
+      for (const storage::ConfigRecord& c : *configs) ids.push_back(c.spacecraft_id);
+    }
+  }
   std::sort(ids.begin(), ids.end());
+  ids.erase(std::unique(ids.begin(), ids.end()), ids.end());
   return ids;
 }
 
@@ -440,10 +448,10 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   } else if (!absl::IsNotFound(found.status())) {
     return found.status();
   } else if (shared()) {
-    ASSIGN_OR_RETURN(storage::SessionLease lease,
-                     storage_->leases().Acquire(config.spacecraft_id, options_.node_id,
-                                                absl::Now(), options_.lease_duration));
-    new_lease_epoch = lease.epoch;
+    absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
+        config.spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
+    if (!lease.ok()) return LeaseRefused(lease.status());
+    new_lease_epoch = lease->epoch;
     metrics_.lease_events.With({"taken"}).Increment();
     fence = storage::LeaseFence{options_.node_id, new_lease_epoch};
   }

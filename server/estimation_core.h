@@ -50,6 +50,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -202,7 +203,8 @@ class EstimationCore {
   // `from`, a negative page_size or a bad page_token; NotFound for an unknown spacecraft.
   absl::StatusOr<esg::v1::EstimateHistoryResponse> EstimateHistory(
       const esg::v1::EstimateHistoryRequest& request);
-  // Ids of the configured spacecraft, in order.
+  // Ids of the configured spacecraft, in order; with leases, every spacecraft configured in the
+  // database (also those other servers hold).
   std::vector<std::string> SpacecraftIds();
   // The next chunk (at most kExportChunkSize frames) of an export: frames in the request's span
   // measured after `*after` (InfinitePast to start), which advances to the last frame returned;
@@ -262,8 +264,13 @@ class EstimationCore {
   // The spacecraft's record for a call that needs its session: Find(), and with leases (node_id)
   // a record whose lease this server holds, taking the lease and loading the session (checkpoint
   // plus archive after it) if needed. NotFound "not configured"; Unavailable "served by node N
-  // until T; retry in S s" while another server holds the lease.
+  // until T; retry after that" while another server holds the lease (LeaseRefused).
   absl::StatusOr<std::shared_ptr<Spacecraft>> Lookup(const std::string& spacecraft_id);
+  // A failed LeaseStore::Acquire's status for the call: a refusal because another server holds
+  // the lease is counted (lease event "refused") and becomes Unavailable "...; retry after that"
+  // with the time until the holder's expiry as its retry delay (grpc_status.h WithRetryDelay:
+  // trailing metadata grpc-retry-pushback-ms), at most lease_duration; any other status as is.
+  absl::Status LeaseRefused(const absl::Status& status);
   // OK if the spacecraft is configured (in the registry, or with leases in the database): for
   // calls that only read the database. NotFound "not configured" otherwise.
   absl::Status CheckConfigured(const std::string& spacecraft_id);
@@ -276,9 +283,13 @@ class EstimationCore {
   // Renews the held leases every lease_duration / 3; a lease found taken over marks its record
   // lost (calls for it take the lease again, or are refused while another server holds it).
   void LeaseLoop();
-  // Publishes to this server's alert subscribers every alert change another server committed
-  // (PostgreSQL LISTEN/NOTIFY, storage::kAlertsChannel), reading the alert from the database.
-  void AlertRelayLoop();
+  // Publishes to this server's subscribers every alert change and every estimate another server
+  // committed (PostgreSQL LISTEN/NOTIFY, storage::kAlertsChannel and kEstimatesChannel),
+  // reading them from the database; estimates only while someone subscribes to them.
+  void RelayLoop();
+  // Reads the estimates of `spacecraft_id` measured at `times` (not empty) and publishes those
+  // still stored, in measurement-time order.
+  void RelayEstimates(const std::string& spacecraft_id, const std::set<absl::Time>& times);
   // Ingest helpers (ingest.cc).
   absl::StatusOr<std::optional<storage::ArchivedFrame>> FindStoredFrame(
       Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
@@ -347,7 +358,7 @@ class EstimationCore {
   bool ingest_closed_ ABSL_GUARDED_BY(commit_mu_) = false;
   std::thread committer_;
   std::thread lease_renewer_;  // with leases only
-  std::thread alert_relay_;    // with leases only
+  std::thread relay_;          // with leases only
   absl::Mutex takeover_mu_;    // one lease take and session load at a time
 
   // Worker pool.

@@ -105,15 +105,16 @@ EstimationServiceImpl::StreamTelemetry(grpc::CallbackServerContext* context) {
 grpc::ServerUnaryReactor* EstimationServiceImpl::ConfigureSpacecraft(
     grpc::CallbackServerContext* context, const esg::v1::ConfigureRequest* request,
     esg::v1::ConfigureResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kWrite, request->config().spacecraft_id()),
-               response, [&] { return core_->Configure(*request); });
+  return Unary(&calls_, context,
+               Authorize(context, Role::kWrite, request->config().spacecraft_id()), response,
+               [&] { return core_->Configure(*request); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetSession(
     grpc::CallbackServerContext* context, const esg::v1::GetSessionRequest* request,
     esg::v1::SessionInfo* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
-               [&] { return core_->GetSession(request->spacecraft_id()); });
+  return Unary(&calls_, context, Authorize(context, Role::kRead, request->spacecraft_id()),
+               response, [&] { return core_->GetSession(request->spacecraft_id()); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
@@ -121,7 +122,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::ListSessions(
     esg::v1::ListSessionsResponse* response) {
   // Names no spacecraft, so it has no routing scope: with x-esg-spacecraft it lists this node's
   // sessions like without (docs/service.md "Routing by spacecraft").
-  return Unary(&calls_, Authorize(context, Role::kRead), response,
+  return Unary(&calls_, context, Authorize(context, Role::kRead), response,
                [&] { return core_->ListSessions(*request); });
 }
 
@@ -161,7 +162,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
       status = result.status();
     }
     permit.Release();
-    reactor->Finish(ToGrpcStatus(status));
+    reactor->Finish(ToGrpcStatus(status, *context));
   });
   return reactor;
 }
@@ -183,7 +184,7 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
   if (token_name.ok() && named.operator_name().empty()) named.set_operator_name(*token_name);
   absl::Status admitted = token_name.status();
   if (admitted.ok()) admitted = CheckCallScope(*context, request->spacecraft_id());
-  return Unary(&calls_, admitted, response,
+  return Unary(&calls_, context, admitted, response,
                [this, named = std::move(named)]() -> absl::StatusOr<esg::v1::Alert> {
                  absl::StatusOr<esg::v1::Alert> alert = core_->Acknowledge(named);
                  if (!alert.ok()) return alert.status();
@@ -212,8 +213,8 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(
     grpc::CallbackServerContext* context, const esg::v1::HistoryRequest* request,
     esg::v1::HistoryResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
-               [&] { return core_->History(*request); });
+  return Unary(&calls_, context, Authorize(context, Role::kRead, request->spacecraft_id()),
+               response, [&] { return core_->History(*request); });
 }
 
 grpc::ServerWriteReactor<esg::v1::ExportCoefficientHistoryResponse>*
@@ -266,8 +267,8 @@ grpc::ServerWriteReactor<esg::v1::ExportTelemetryResponse>* EstimationServiceImp
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetEstimateHistory(
     grpc::CallbackServerContext* context, const esg::v1::EstimateHistoryRequest* request,
     esg::v1::EstimateHistoryResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
-               [&] { return core_->EstimateHistory(*request); });
+  return Unary(&calls_, context, Authorize(context, Role::kRead, request->spacecraft_id()),
+               response, [&] { return core_->EstimateHistory(*request); });
 }
 
 grpc::ServerWriteReactor<esg::v1::EstimateRecord>* EstimationServiceImpl::SubscribeEstimates(
@@ -286,7 +287,7 @@ grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagno
       caller = in_scope;
     }
   }
-  return NewDiagnoseReactor(&calls_, core_, *request,
+  return NewDiagnoseReactor(&calls_, context, core_, *request,
                             caller.ok() ? diagnoses_.Acquire(*caller)
                                         : absl::StatusOr<CallLimiter::Permit>(caller.status()));
 }
@@ -294,15 +295,15 @@ grpc::ServerWriteReactor<esg::v1::DiagnoseUpdate>* EstimationServiceImpl::Diagno
 grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(
     grpc::CallbackServerContext* context, const esg::v1::ListDiagnosesRequest* request,
     esg::v1::ListDiagnosesResponse* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
-               [&] { return core_->ListDiagnoses(*request); });
+  return Unary(&calls_, context, Authorize(context, Role::kRead, request->spacecraft_id()),
+               response, [&] { return core_->ListDiagnoses(*request); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetDiagnosis(
     grpc::CallbackServerContext* context, const esg::v1::GetDiagnosisRequest* request,
     esg::v1::DiagnosisResult* response) {
-  return Unary(&calls_, Authorize(context, Role::kRead, request->spacecraft_id()), response,
-               [&] { return core_->GetDiagnosis(*request); });
+  return Unary(&calls_, context, Authorize(context, Role::kRead, request->spacecraft_id()),
+               response, [&] { return core_->GetDiagnosis(*request); });
 }
 
 }  // namespace esg::server

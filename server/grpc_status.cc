@@ -1,10 +1,18 @@
 // absl::Status -> grpc::Status, explicitly per code (STYLE §3.3).
 #include "server/grpc_status.h"
 
+#include <cstdint>
 #include <string>
+
+#include "absl/strings/cord.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 
 namespace esg::server {
 namespace {
+
+// The delay in milliseconds, decimal.
+constexpr char kRetryDelayPayload[] = "type.esg/server.RetryDelay";
 
 grpc::StatusCode ToGrpcCode(absl::StatusCode code) {
   switch (code) {
@@ -51,6 +59,25 @@ grpc::StatusCode ToGrpcCode(absl::StatusCode code) {
 grpc::Status ToGrpcStatus(const absl::Status& status) {
   if (status.ok()) return grpc::Status::OK;
   return grpc::Status(ToGrpcCode(status.code()), std::string(status.message()));
+}
+
+absl::Status WithRetryDelay(absl::Status status, absl::Duration delay) {
+  if (status.ok()) return status;
+  const int64_t ms = delay <= absl::ZeroDuration()
+                         ? 0
+                         : absl::ToInt64Milliseconds(absl::Ceil(delay, absl::Milliseconds(1)));
+  status.SetPayload(kRetryDelayPayload, absl::Cord(absl::StrCat(ms)));
+  return status;
+}
+
+grpc::Status ToGrpcStatus(const absl::Status& status, grpc::ServerContextBase& context) {
+  if (const auto delay = status.GetPayload(kRetryDelayPayload); delay.has_value()) {
+    int64_t ms = 0;
+    if (absl::SimpleAtoi(std::string(*delay), &ms)) {
+      context.AddTrailingMetadata(kRetryPushbackKey, absl::StrCat(ms));
+    }
+  }
+  return ToGrpcStatus(status);
 }
 
 }  // namespace esg::server

@@ -1,16 +1,31 @@
 // The one mapping from absl::Status to grpc::Status (STYLE §3.3 rule 3): the codes are numerically
 // identical in both libraries and are converted explicitly; the message is passed through. No
-// other file of the project builds a grpc::Status.
+// other file of the project builds a grpc::Status. A status may also ask for a retry delay, sent
+// as the trailing metadata grpc-retry-pushback-ms (gRPC's retry design A6), which a client's
+// retry policy waits for before its next attempt.
 #ifndef ESG_SERVER_GRPC_STATUS_H_
 #define ESG_SERVER_GRPC_STATUS_H_
 
 #include "absl/status/status.h"
+#include "absl/time/time.h"
+#include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
 
 namespace esg::server {
 
 // OK -> grpc::Status::OK; every other code -> the gRPC code of the same name with the message.
 grpc::Status ToGrpcStatus(const absl::Status& status);
+
+// The trailing metadata key a retry delay travels in: milliseconds, a non-negative integer.
+inline constexpr char kRetryPushbackKey[] = "grpc-retry-pushback-ms";
+
+// `status` (not OK) marked as worth retrying after `delay`, rounded up to whole milliseconds
+// (a negative delay counts as 0). Returned as is when OK.
+absl::Status WithRetryDelay(absl::Status status, absl::Duration delay);
+
+// ToGrpcStatus(status), after adding to `context`'s trailing metadata the retry delay that
+// WithRetryDelay put on `status`, if any. Call it right before the call's Finish.
+grpc::Status ToGrpcStatus(const absl::Status& status, grpc::ServerContextBase& context);
 
 }  // namespace esg::server
 

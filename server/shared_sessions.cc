@@ -1,9 +1,12 @@
 // Several servers sharing one PostgreSQL database (docs/service.md "Several servers"): session
 // leases (take on demand, renew, fence the writes), the fleet as other servers committed it, and
-// the relay of other servers' alert changes. Part of EstimationCore (estimation_core.h); the
-// lease rows are storage/lease_store.h.
+// the relay of other servers' alert changes and estimates. Part of EstimationCore
+// (estimation_core.h); the lease rows are storage/lease_store.h.
+#include <algorithm>
+#include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -13,9 +16,12 @@
 #include "estimator/status_macros.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "server/grpc_status.h"
 #include "server/log.h"
 #include "storage/lease_store.h"
 #include "storage/postgres_db.h"
+#include "storage/postgres_schema.h"
+#include "storage/schema.h"
 
 namespace esg::server {
 
@@ -43,13 +49,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   if (!record.ok()) return record.status();
   absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
       spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
-  if (absl::IsUnavailable(lease.status())) {
-    metrics_.lease_events.With({"refused"}).Increment();
-    return absl::UnavailableError(absl::StrCat(
-        lease.status().message(), "; retry after that (leases last ",
-        absl::FormatDuration(options_.lease_duration), "): docs/service.md \"Several servers\""));
-  }
-  if (!lease.ok()) return lease.status();
+  if (!lease.ok()) return LeaseRefused(lease.status());
   // The session as the last owner left it: its checkpoint, then the archive after it.
   RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
   sc = Find(spacecraft_id);
@@ -61,6 +61,21 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
            {{"spacecraftId", spacecraft_id}, {"leaseEpoch", lease->epoch}});
   Schedule(sc);
   return sc;
+}
+
+absl::Status EstimationCore::LeaseRefused(const absl::Status& status) {
+  const std::optional<absl::Time> held_until = storage::LeaseHeldUntil(status);
+  if (!held_until.has_value()) return status;
+  metrics_.lease_events.With({"refused"}).Increment();
+  // The holder's expiry by this server's clock (the clocks agree: docs/service.md), at most one
+  // lease duration: a holder that renews refuses the retry again with a new delay.
+  const absl::Duration delay =
+      std::clamp(*held_until - absl::Now(), absl::ZeroDuration(), options_.lease_duration);
+  return WithRetryDelay(
+      absl::UnavailableError(absl::StrCat(status.message(), "; retry after that (leases last ",
+                                          absl::FormatDuration(options_.lease_duration),
+                                          "): docs/service.md \"Several servers\"")),
+      delay);
 }
 
 std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc) const {
@@ -76,7 +91,7 @@ void EstimationCore::MarkLeaseLost(Spacecraft& sc, absl::string_view why) {
            {{"spacecraftId", sc.id}});
 }
 
-void EstimationCore::AlertRelayLoop() {
+void EstimationCore::RelayLoop() {
   std::unique_ptr<storage::PostgresListener> listener;
   bool reported = false;  // a failure logged, not yet recovered
   for (;;) {
@@ -86,11 +101,11 @@ void EstimationCore::AlertRelayLoop() {
     }
     if (listener == nullptr) {
       absl::StatusOr<std::unique_ptr<storage::PostgresListener>> opened =
-          storage_->ListenForAlertChanges();
+          storage_->ListenForChanges();
       if (!opened.ok()) {
         if (!reported) {
-          LogEvent("ERROR", "alert_relay_failed",
-                   absl::StrCat("cannot follow the alerts of other servers: ",
+          LogEvent("ERROR", "relay_failed",
+                   absl::StrCat("cannot follow the alerts and estimates of other servers: ",
                                 opened.status().message(), " (retrying)"));
           reported = true;
         }
@@ -100,34 +115,69 @@ void EstimationCore::AlertRelayLoop() {
       }
       listener = *std::move(opened);
       if (reported) {
-        LogEvent("INFO", "alert_relay_recovered", "following the alerts of other servers again");
+        LogEvent("INFO", "relay_recovered",
+                 "following the alerts and estimates of other servers again");
       }
       reported = false;
     }
     absl::StatusOr<std::vector<storage::PostgresListener::Notification>> notified =
         listener->Wait(absl::Milliseconds(250));
     if (!notified.ok()) {
-      LogEvent("WARNING", "alert_relay_interrupted",
-               absl::StrCat("alerts of other servers may have been missed: ",
+      LogEvent("WARNING", "relay_interrupted",
+               absl::StrCat("alerts and estimates of other servers may have been missed: ",
                             notified.status().message()));
       continue;
     }
     if (notified->empty()) continue;
     const int own_pid = storage_->ConnectionPid();
+    // Estimates are read only for subscribers, per spacecraft in one range read.
+    const bool estimate_subscribers = estimate_hub_.size() > 0;
+    std::map<std::string, std::set<absl::Time>> estimated;
     for (const storage::PostgresListener::Notification& n : *notified) {
       // This server's own commits are published by the code that made them.
       if (n.sender_pid == own_pid) continue;
+      // "<number> <spacecraft id>": an alert's sequence, an estimate's measurement time.
       const size_t space = n.payload.find(' ');
-      int64_t sequence = 0;
-      if (space == std::string::npos ||
-          !absl::SimpleAtoi(n.payload.substr(0, space), &sequence)) {
+      int64_t number = 0;
+      if (space == std::string::npos || !absl::SimpleAtoi(n.payload.substr(0, space), &number)) {
         continue;
       }
-      absl::StatusOr<storage::AlertRecord> record =
-          storage_->alerts().Get(n.payload.substr(space + 1), sequence);
-      if (record.ok()) hub_.Publish(*record, /*log=*/false);
+      std::string spacecraft_id = n.payload.substr(space + 1);
+      if (n.channel == storage::kAlertsChannel) {
+        absl::StatusOr<storage::AlertRecord> record = storage_->alerts().Get(spacecraft_id, number);
+        if (record.ok()) hub_.Publish(*record, /*log=*/false);
+      } else if (n.channel == storage::kEstimatesChannel && estimate_subscribers) {
+        estimated[std::move(spacecraft_id)].insert(storage::UnixNanosToTime(number));
+      }
     }
+    for (const auto& [spacecraft_id, times] : estimated) RelayEstimates(spacecraft_id, times);
   }
+}
+
+void EstimationCore::RelayEstimates(const std::string& spacecraft_id,
+                                    const std::set<absl::Time>& times) {
+  constexpr int64_t kPage = 500;
+  std::vector<storage::EstimateRecord> relayed;
+  std::optional<absl::Time> after;
+  do {
+    absl::StatusOr<storage::EstimatePage> page = storage_->estimates().Page(
+        spacecraft_id, *times.begin(), *times.rbegin() + absl::Nanoseconds(1), after, kPage);
+    if (!page.ok()) {
+      LogEvent(
+          "WARNING", "relay_interrupted",
+          absl::StrCat("estimates of ", spacecraft_id,
+                       " stored by another server were not relayed: ", page.status().message()),
+          {{"spacecraftId", spacecraft_id}});
+      break;
+    }
+    // A step recomputed again since its notification is sent as stored now (its later
+    // compute_time), and once more for its own notification; a deleted one is not sent.
+    for (storage::EstimateRecord& r : page->records) {
+      if (times.count(r.measurement_time) > 0) relayed.push_back(std::move(r));
+    }
+    after = page->next;
+  } while (after.has_value());
+  estimate_hub_.Publish(relayed);
 }
 
 void EstimationCore::LeaseLoop() {

@@ -23,10 +23,11 @@ class UnaryReactor : public grpc::ServerUnaryReactor {
   CallCounter::Token token_;
 };
 
-// Unary rpcs: run `work` (returning absl::StatusOr<Response>) and finish.
+// Unary rpcs: run `work` (returning absl::StatusOr<Response>) and finish (with the retry delay
+// the status asks for in `context`'s trailing metadata).
 template <typename Response, typename Work>
-grpc::ServerUnaryReactor* Unary(CallCounter* calls, absl::Status auth, Response* response,
-                                Work work) {
+grpc::ServerUnaryReactor* Unary(CallCounter* calls, grpc::CallbackServerContext* context,
+                                absl::Status auth, Response* response, Work work) {
   grpc::ServerUnaryReactor* reactor = new UnaryReactor(calls);
   if (!auth.ok()) {
     reactor->Finish(ToGrpcStatus(auth));
@@ -34,7 +35,7 @@ grpc::ServerUnaryReactor* Unary(CallCounter* calls, absl::Status auth, Response*
   }
   absl::StatusOr<Response> result = work();
   if (result.ok()) *response = std::move(*result);
-  reactor->Finish(ToGrpcStatus(result.status()));
+  reactor->Finish(ToGrpcStatus(result.status(), *context));
   return reactor;
 }
 

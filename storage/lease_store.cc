@@ -2,6 +2,7 @@
 #include "storage/lease_store.h"
 
 #include "absl/strings/cord.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/time.h"
 #include "estimator/status_macros.h"
@@ -11,6 +12,8 @@ namespace esg::storage {
 namespace {
 
 constexpr char kLeaseLostPayload[] = "type.esg/storage.LeaseLost";
+// The holder's expiry in Unix nanoseconds, decimal.
+constexpr char kLeaseHeldPayload[] = "type.esg/storage.LeaseHeldUntil";
 
 std::string FormatUtc(absl::Time t) {
   return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
@@ -74,9 +77,11 @@ absl::StatusOr<SessionLease> LeaseStore::Acquire(absl::string_view spacecraft_id
   ASSIGN_OR_RETURN(SessionLease lease, ReadLease(txn, spacecraft_id));
   RETURN_IF_ERROR(txn.Commit());
   if (!taken) {
-    return absl::UnavailableError(absl::StrCat("spacecraft '", spacecraft_id,
-                                               "' is served by node ", lease.owner, " until ",
-                                               FormatUtc(lease.expires)));
+    absl::Status held =
+        absl::UnavailableError(absl::StrCat("spacecraft '", spacecraft_id, "' is served by node ",
+                                            lease.owner, " until ", FormatUtc(lease.expires)));
+    held.SetPayload(kLeaseHeldPayload, absl::Cord(absl::StrCat(TimeToUnixNanos(lease.expires))));
+    return held;
   }
   return lease;
 }
@@ -148,6 +153,15 @@ std::optional<std::string> LeaseLostSpacecraft(const absl::Status& status) {
   const auto payload = status.GetPayload(kLeaseLostPayload);
   if (!payload.has_value()) return std::nullopt;
   return std::string(*payload);
+}
+
+std::optional<absl::Time> LeaseHeldUntil(const absl::Status& status) {
+  const auto payload = status.GetPayload(kLeaseHeldPayload);
+  int64_t unix_ns = 0;
+  if (!payload.has_value() || !absl::SimpleAtoi(std::string(*payload), &unix_ns)) {
+    return std::nullopt;
+  }
+  return UnixNanosToTime(unix_ns);
 }
 
 }  // namespace esg::storage

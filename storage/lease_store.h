@@ -41,6 +41,10 @@ struct LeaseFence {
 // that checked it); nullopt for any other status.
 std::optional<std::string> LeaseLostSpacecraft(const absl::Status& status);
 
+// The expiry of the other server's lease that an Acquire refused with (Unavailable "served by
+// node N until T"), also when a caller passes the status up; nullopt for any other status.
+std::optional<absl::Time> LeaseHeldUntil(const absl::Status& status);
+
 // Thread-safe (through Database). FailedPrecondition on an SQLite database (one server owns
 // an SQLite file: sqlite_db.h "Owner lock").
 class LeaseStore {
@@ -51,7 +55,8 @@ class LeaseStore {
   // at `now`, or already `owner`'s (a restarted server with the same node id takes its own lease
   // back at once); the epoch increments. Returns the lease as stored. Unavailable
   // "spacecraft 'X' is served by node N until T" (with the holder's lease) when another owner
-  // holds it unexpired; InvalidArgument for an empty id or owner or a non-positive duration.
+  // holds it unexpired (LeaseHeldUntil reads T from it); InvalidArgument for an empty id or owner
+  // or a non-positive duration.
   absl::StatusOr<SessionLease> Acquire(absl::string_view spacecraft_id, absl::string_view owner,
                                        absl::Time now, absl::Duration duration);
 

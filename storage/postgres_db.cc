@@ -455,8 +455,8 @@ absl::Status PostgresDatabase::RollbackLocked() {
 }
 
 absl::StatusOr<std::unique_ptr<PostgresListener>> PostgresDatabase::Listen(
-    const std::string& channel) const {
-  return PostgresListener::Open(uri_, channel, options_);
+    const std::vector<std::string>& channels) const {
+  return PostgresListener::Open(uri_, channels, options_);
 }
 
 int PostgresDatabase::BackendPid() {
@@ -466,33 +466,39 @@ int PostgresDatabase::BackendPid() {
 // ---------------------------------------------------------------------------------------------
 // PostgresListener
 
-PostgresListener::PostgresListener(pg_conn* conn, std::string uri, std::string channel,
-                                   PostgresOptions options)
-    : conn_(conn), uri_(std::move(uri)), channel_(std::move(channel)), options_(options) {}
+PostgresListener::PostgresListener(pg_conn* conn, std::string uri,
+                                   std::vector<std::string> channels, PostgresOptions options)
+    : conn_(conn), uri_(std::move(uri)), channels_(std::move(channels)), options_(options) {}
 
 PostgresListener::~PostgresListener() { PQfinish(conn_); }
 
 absl::StatusOr<std::unique_ptr<PostgresListener>> PostgresListener::Open(
-    const std::string& uri, const std::string& channel, const PostgresOptions& options) {
-  if (channel.empty() || channel.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_") !=
-                             std::string::npos) {
-    return absl::InvalidArgumentError(absl::StrCat("channel '", channel, "': not a plain name"));
+    const std::string& uri, const std::vector<std::string>& channels,
+    const PostgresOptions& options) {
+  if (channels.empty()) return absl::InvalidArgumentError("channels: none");
+  for (const std::string& channel : channels) {
+    if (channel.empty() ||
+        channel.find_first_not_of("abcdefghijklmnopqrstuvwxyz0123456789_") != std::string::npos) {
+      return absl::InvalidArgumentError(absl::StrCat("channel '", channel, "': not a plain name"));
+    }
   }
   absl::StatusOr<pg_conn*> conn = Connect(uri, options, "esgd-listener");
   if (!conn.ok()) return conn.status();
-  std::unique_ptr<PostgresListener> listener(new PostgresListener(*conn, uri, channel, options));
+  std::unique_ptr<PostgresListener> listener(new PostgresListener(*conn, uri, channels, options));
   absl::Status status = listener->ListenLocked();
   if (!status.ok()) return status;
   return listener;
 }
 
 absl::Status PostgresListener::ListenLocked() {
-  pg_result* result = PQexec(conn_, absl::StrCat("LISTEN ", channel_).c_str());
-  const bool ok = result != nullptr && PQresultStatus(result) == PGRES_COMMAND_OK;
-  PQclear(result);
-  if (!ok) {
-    return absl::UnavailableError(absl::StrCat("db: ", RedactPostgresUri(uri_), ": LISTEN ",
-                                               channel_, ": ", ConnectionError(conn_)));
+  for (const std::string& channel : channels_) {
+    pg_result* result = PQexec(conn_, absl::StrCat("LISTEN ", channel).c_str());
+    const bool ok = result != nullptr && PQresultStatus(result) == PGRES_COMMAND_OK;
+    PQclear(result);
+    if (!ok) {
+      return absl::UnavailableError(absl::StrCat("db: ", RedactPostgresUri(uri_), ": LISTEN ",
+                                                 channel, ": ", ConnectionError(conn_)));
+    }
   }
   return absl::OkStatus();
 }
@@ -514,7 +520,8 @@ absl::StatusOr<std::vector<PostgresListener::Notification>> PostgresListener::Wa
   std::vector<Notification> out;
   auto drain = [&] {
     while (PGnotify* n = PQnotifies(conn_)) {
-      out.push_back({n->extra != nullptr ? n->extra : "", n->be_pid});
+      out.push_back({n->relname != nullptr ? n->relname : "", n->extra != nullptr ? n->extra : "",
+                     n->be_pid});
       PQfreemem(n);
     }
   };

@@ -104,20 +104,22 @@ class PostgresStatement final : public Statement {
   int row_ = -1;
 };
 
-// A connection that LISTENs on one notification channel (PostgreSQL LISTEN/NOTIFY): how a
+// A connection that LISTENs on notification channels (PostgreSQL LISTEN/NOTIFY): how a
 // server learns of changes another server committed. Not thread-safe: one thread waits on it.
 class PostgresListener {
  public:
   struct Notification {
+    std::string channel;
     std::string payload;
     int sender_pid = 0;  // backend process of the connection that notified
   };
 
-  // Connects to `uri` and LISTENs on `channel` (an SQL identifier of lowercase letters, digits
-  // and _). Errors as PostgresDatabase::Open.
-  static absl::StatusOr<std::unique_ptr<PostgresListener>> Open(const std::string& uri,
-                                                                const std::string& channel,
-                                                                const PostgresOptions& options);
+  // Connects to `uri` and LISTENs on each of `channels` (SQL identifiers of lowercase letters,
+  // digits and _; at least one). Errors as PostgresDatabase::Open; InvalidArgument for a
+  // channel that is not such a name.
+  static absl::StatusOr<std::unique_ptr<PostgresListener>> Open(
+      const std::string& uri, const std::vector<std::string>& channels,
+      const PostgresOptions& options);
   ~PostgresListener();
 
   // Waits up to `timeout` for notifications and returns those that arrived (maybe none).
@@ -126,12 +128,13 @@ class PostgresListener {
   absl::StatusOr<std::vector<Notification>> Wait(absl::Duration timeout);
 
  private:
-  PostgresListener(pg_conn* conn, std::string uri, std::string channel, PostgresOptions options);
+  PostgresListener(pg_conn* conn, std::string uri, std::vector<std::string> channels,
+                   PostgresOptions options);
   absl::Status ListenLocked();
 
   pg_conn* conn_;
   const std::string uri_;
-  const std::string channel_;
+  const std::vector<std::string> channels_;
   const PostgresOptions options_;
 };
 
@@ -153,8 +156,9 @@ class PostgresDatabase final : public Database {
   const std::string& path() const override { return name_; }
   Dialect dialect() const override { return Dialect::kPostgres; }
 
-  // A new connection to the same database LISTENing on `channel`.
-  absl::StatusOr<std::unique_ptr<PostgresListener>> Listen(const std::string& channel) const;
+  // A new connection to the same database LISTENing on `channels`.
+  absl::StatusOr<std::unique_ptr<PostgresListener>> Listen(
+      const std::vector<std::string>& channels) const;
   // The server process of this connection now (it changes when the connection is re-made):
   // PostgresListener::Notification::sender_pid of what this connection's commits notify.
   int BackendPid();

@@ -13,7 +13,8 @@ namespace {
 
 // Schema version 7 (schema.h) in PostgreSQL types, the session leases of several servers
 // sharing the database (lease_store.h), and a trigger that notifies channel esg_alerts with
-// "<sequence> <spacecraft_id>" at each commit that adds or changes an alert (kAlertsChannel).
+// "<sequence> <spacecraft_id>" at each commit that adds or changes an alert (kAlertsChannel);
+// the estimates trigger (kEstimatesTrigger) follows it.
 constexpr absl::string_view kSchemaV7 = R"sql(
 CREATE TABLE spacecraft_configs (
   spacecraft_id        TEXT    NOT NULL,
@@ -189,6 +190,21 @@ CREATE TABLE esg_schema (
 );
 )sql";
 
+// Notifies channel esg_estimates with "<measurement_time_unix_ns> <spacecraft_id>" at each
+// commit that inserts or replaces an estimate (kEstimatesChannel). Part of the current schema;
+// added to a database created at version 7 before it existed (no version change: the tables
+// are the same).
+constexpr absl::string_view kEstimatesTrigger = R"sql(
+CREATE OR REPLACE FUNCTION esg_estimates_notify() RETURNS trigger LANGUAGE plpgsql AS $$
+BEGIN
+  PERFORM pg_notify('esg_estimates', NEW.measurement_time_unix_ns || ' ' || NEW.spacecraft_id);
+  RETURN NULL;
+END;
+$$;
+CREATE TRIGGER estimates_notify AFTER INSERT OR UPDATE ON estimates
+  FOR EACH ROW EXECUTE FUNCTION esg_estimates_notify();
+)sql";
+
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").
 constexpr int64_t kSchemaLockKey = 0x6573672d736368;
 
@@ -238,10 +254,19 @@ absl::Status MigratePostgresTo(Database& db, int target_version) {
     ASSIGN_OR_RETURN(Statement * insert, txn.Prepare("INSERT INTO esg_schema (version) VALUES (?1)"));
     insert->BindInt64(1, kCurrentSchemaVersion);
     RETURN_IF_ERROR(insert->Run());
+    RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
   } else if (version > target_version) {
     return absl::FailedPreconditionError(
         absl::StrFormat("database %s has schema version %d, newer than the requested %d",
                         db.path(), version, target_version));
+  } else if (version == kCurrentSchemaVersion) {
+    ASSIGN_OR_RETURN(Statement * trigger,
+                     txn.Prepare("SELECT COUNT(*) FROM pg_trigger WHERE tgname = "
+                                 "'estimates_notify' AND tgrelid = to_regclass('estimates')"));
+    ASSIGN_OR_RETURN(bool row, trigger->Step());
+    const bool present = row && trigger->ColumnInt64(0) > 0;
+    trigger->Reset();
+    if (!present) RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
   }
   return txn.Commit();
 }

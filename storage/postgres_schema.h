@@ -18,10 +18,15 @@ namespace esg::storage {
 // alert, with the payload "<sequence> <spacecraft_id>" (PostgresListener).
 inline constexpr char kAlertsChannel[] = "esg_alerts";
 
+// The channel a trigger on the estimates table NOTIFYs at each commit that inserts or replaces a
+// per-step estimate, with the payload "<measurement_time_unix_ns> <spacecraft_id>".
+inline constexpr char kEstimatesChannel[] = "esg_estimates";
+
 // The version in esg_schema; 0 for a database without the service's tables.
 absl::StatusOr<int> PostgresSchemaVersion(Database& db);
 
-// Creates the current schema in a database without it; FailedPrecondition for a database newer
+// Creates the current schema in a database without it (in one created at the current version
+// before the estimates trigger existed, adds that trigger); FailedPrecondition for a database newer
 // than this program or one holding other tables named like the service's. `target_version`
 // must be 0 (nothing to do) or kCurrentSchemaVersion: older layouts exist only in SQLite files.
 absl::Status MigratePostgresTo(Database& db, int target_version);

@@ -58,11 +58,11 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::FromDatabase(std::unique_ptr<D
   return std::unique_ptr<Storage>(new Storage(std::move(db)));
 }
 
-absl::StatusOr<std::unique_ptr<PostgresListener>> Storage::ListenForAlertChanges() {
+absl::StatusOr<std::unique_ptr<PostgresListener>> Storage::ListenForChanges() {
   if (db_->dialect() != Dialect::kPostgres) {
-    return absl::FailedPreconditionError("alert notifications need a PostgreSQL database");
+    return absl::FailedPreconditionError("change notifications need a PostgreSQL database");
   }
-  return static_cast<PostgresDatabase&>(*db_).Listen(kAlertsChannel);
+  return static_cast<PostgresDatabase&>(*db_).Listen({kAlertsChannel, kEstimatesChannel});
 }
 
 int Storage::ConnectionPid() {

@@ -161,9 +161,10 @@ class Storage {
   // ("config.", "checkpoint.", "new_alerts[i]", "clears[i]").
   absl::StatusOr<std::vector<int64_t>> CommitConfiguration(const ConfigurationChange& change);
 
-  // PostgreSQL: a new connection notified of every committed change of an alert, by any server
-  // sharing the database (kAlertsChannel). FailedPrecondition with SQLite (one server).
-  absl::StatusOr<std::unique_ptr<PostgresListener>> ListenForAlertChanges();
+  // PostgreSQL: a new connection notified of every committed change of an alert
+  // (kAlertsChannel) and of every estimate stored (kEstimatesChannel), by any server sharing the
+  // database. FailedPrecondition with SQLite (one server).
+  absl::StatusOr<std::unique_ptr<PostgresListener>> ListenForChanges();
   // PostgreSQL: the server process of this Storage's connection, the sender_pid of the
   // notifications its own commits cause; 0 with SQLite.
   int ConnectionPid();

@@ -8,22 +8,30 @@
 // status --spacecraft X` through nginx answers from that node; a routed stream carrying another
 // spacecraft's frame gets that frame refused (INVALID_ARGUMENT, spacecraft_id) and keeps its own;
 // one stream longer than nginx's default 1 MB body limit goes through; each node owns at least
-// one spacecraft; ListSessions without metadata lists one node's spacecraft; after kill -9 of a node, nginx takes it out and its spacecraft's calls reach
-// another node, which (today, without a shared database) answers NOT_FOUND, while the other
-// spacecraft are served as before.
+// one spacecraft; ListSessions without metadata lists one node's spacecraft; after kill -9 of a
+// node, nginx takes it out and its spacecraft's calls reach another node, which (today, without a
+// shared database) answers NOT_FOUND, while the other spacecraft are served as before.
 //
 // The nodes listen on 127.0.0.11-13 at one fixed port, because nginx places a server on its hash
 // ring by the address written in the configuration: fixed addresses make the assignment of the
 // 12 spacecraft to nodes the same in every run (measured: printed as `spread`), where ports
 // chosen by the OS would give a new assignment, now and then one that leaves a node empty.
+//
+// Also: a call nginx cannot pass to any node (nodes down, or a node that closes the connection
+// in the middle of the call) is answered by nginx as a gRPC UNAVAILABLE, not an HTML error page.
+#include <poll.h>
 #include <signal.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <map>
 #include <memory>
 #include <set>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -321,6 +329,113 @@ TEST(NginxRouting, EachSpacecraftLivesOnOneNodeAndAKilledNodesSpacecraftAreNotFo
               "served, in %.3f s\n",
               killed, not_found, kSpacecraft - not_found, Seconds(failover_start));
   std::printf("[ measured ] whole test: %.2f s\n", Seconds(test_start));
+}
+
+// A node that dies in the middle of every call: it accepts the connection, reads what nginx
+// sends (the HTTP/2 preface and the call), then closes it without answering.
+class ClosingNode {
+ public:
+  ClosingNode() {
+    fd_ = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in address{};
+    address.sin_family = AF_INET;
+    address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t length = sizeof address;
+    EXPECT_EQ(bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+    EXPECT_EQ(listen(fd_, 16), 0);
+    EXPECT_EQ(getsockname(fd_, reinterpret_cast<sockaddr*>(&address), &length), 0);
+    port_ = ntohs(address.sin_port);
+    thread_ = std::thread([this] {
+      while (!stop_) {
+        pollfd p{fd_, POLLIN, 0};
+        if (poll(&p, 1, 50) <= 0) continue;
+        const int conn = accept(fd_, nullptr, nullptr);
+        if (conn < 0) continue;
+        pollfd c{conn, POLLIN, 0};
+        char buffer[4096];
+        if (poll(&c, 1, 2000) > 0 && read(conn, buffer, sizeof buffer) > 0) ++calls_;
+        close(conn);
+      }
+    });
+  }
+  ~ClosingNode() {
+    stop_ = true;
+    thread_.join();
+    close(fd_);
+  }
+  std::string address() const { return absl::StrCat("127.0.0.1:", port_); }
+  int calls() const { return calls_; }
+
+ private:
+  int fd_ = -1;
+  int port_ = 0;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> calls_{0};
+  std::thread thread_;
+};
+
+// The shipped configuration's answer when no node answers (deploy/nginx/esg.conf, error_page):
+// gRPC UNAVAILABLE with its message, as a unary call and a telemetry stream see it, and on the
+// wire HTTP 200 with content-type application/grpc, grpc-status 14 and no HTML body; once with
+// every node down (connection refused, then nginx's "no live upstreams") and once with nodes
+// that close the connection in the middle of the call.
+TEST(NginxRouting, ACallThatReachesNoNodeGetsGrpcUnavailableNotAnHtmlErrorPage) {
+  ASSERT_FALSE(NginxBinary().empty())
+      << "nginx not found ($ESG_NGINX, /usr/sbin/nginx, /usr/bin/nginx): this test needs "
+         "Debian's package nginx (scripts/install-deps.sh installs it)";
+  constexpr char kRouterMessage[] = "esg router (nginx): no esgd node answered the call; retry";
+  TempDir dir;
+  const SimulatedRun run = SimulateRun("NA-1", 0.1, 7);
+  auto check = [&](const std::string& name, const std::vector<std::string>& nodes) {
+    SCOPED_TRACE(name);
+    Nginx nginx(dir.File(name), nodes);
+    ASSERT_TRUE(nginx.running());
+    auto router = esg::v1::EstimationService::NewStub(
+        grpc::CreateChannel(nginx.address(), grpc::InsecureChannelCredentials()));
+    // Twice: the first call finds the nodes failing, the second finds them taken out.
+    for (int attempt = 0; attempt < 2; ++attempt) {
+      esg::v1::SessionInfo info;
+      const grpc::Status status = GetSession(*router, "NA-1", /*routed=*/true, &info);
+      EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+      EXPECT_EQ(status.error_message(), kRouterMessage);
+    }
+    const auto streamed = StreamFrames(*router, run.frames, "", /*routed_by=*/"NA-1");
+    EXPECT_TRUE(streamed.acks.empty());
+    EXPECT_EQ(streamed.status.error_code(), grpc::StatusCode::UNAVAILABLE)
+        << streamed.status.error_message();
+    EXPECT_EQ(streamed.status.error_message(), kRouterMessage);
+    // On the wire: a trailers-only gRPC response, no HTML.
+    const auto raw =
+        RunBinary(dir, "curl",
+                  absl::StrCat("-sS -i --max-time 10 --http2-prior-knowledge -X POST -H "
+                               "'content-type: application/grpc' -H 'x-esg-spacecraft: NA-1' "
+                               "--data-binary '' http://",
+                               nginx.address(), "/esg.v1.EstimationService/GetSession"));
+    EXPECT_EQ(raw.exit_code, 0) << raw.err;
+    EXPECT_THAT(raw.out, HasSubstr("HTTP/2 200"));
+    EXPECT_THAT(raw.out, HasSubstr("content-type: application/grpc\r\n"));
+    EXPECT_THAT(raw.out, HasSubstr("grpc-status: 14\r\n"));
+    EXPECT_THAT(raw.out, HasSubstr(absl::StrCat("grpc-message: ", kRouterMessage, "\r\n")));
+    EXPECT_THAT(raw.out, ::testing::Not(HasSubstr("html")));
+    EXPECT_THAT(raw.out, ::testing::EndsWith("\r\n\r\n")) << "a body after the headers";
+  };
+  // Down: nothing listens on these ports.
+  std::vector<std::string> down;
+  for (int n = 0; n < kNodes; ++n) {
+    down.push_back(absl::StrCat("127.0.0.1:", testing::FreeLoopbackPort()));
+  }
+  check("down", down);
+  // Dying mid-call.
+  std::vector<std::unique_ptr<ClosingNode>> closing;
+  std::vector<std::string> closing_addresses;
+  for (int n = 0; n < kNodes; ++n) {
+    closing.push_back(std::make_unique<ClosingNode>());
+    closing_addresses.push_back(closing.back()->address());
+  }
+  check("closing", closing_addresses);
+  int reached = 0;
+  for (const auto& node : closing) reached += node->calls();
+  EXPECT_GE(reached, 1) << "no call reached a closing node: the test shows nothing";
 }
 
 }  // namespace

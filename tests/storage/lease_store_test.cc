@@ -49,10 +49,13 @@ TEST_P(LeaseStoreTest, TakenWhenFreeExpiredOrOwnEachTakeANewEpochRenewedAndRelea
   // Another server before the expiry: refused, naming the holder.
   EXPECT_THAT(leases.Acquire("L-1", "b", T(14), kLease),
               StatusIs(absl::StatusCode::kUnavailable, HasSubstr("served by node a")));
-  // The holder renews; a renewal does not change the epoch.
+  // The holder renews; a renewal does not change the epoch. The refusal carries the
+  // holder's expiry (the server turns it into a retry delay).
   EXPECT_THAT(leases.Renew("L-1", {"a", 1}, T(10), kLease), IsOk());
-  EXPECT_THAT(leases.Acquire("L-1", "b", T(20), kLease),
-              StatusIs(absl::StatusCode::kUnavailable, HasSubstr("served by node a")));
+  const absl::StatusOr<SessionLease> refused = leases.Acquire("L-1", "b", T(20), kLease);
+  EXPECT_THAT(refused, StatusIs(absl::StatusCode::kUnavailable, HasSubstr("served by node a")));
+  EXPECT_THAT(LeaseHeldUntil(refused.status()), Optional(T(25)));
+  EXPECT_EQ(LeaseHeldUntil(absl::UnavailableError("served by node a")), std::nullopt);
   // Expired: b takes it with the next epoch; a's renewal is then refused.
   absl::StatusOr<SessionLease> b = leases.Acquire("L-1", "b", T(25), kLease);
   ASSERT_THAT(b, IsOk());

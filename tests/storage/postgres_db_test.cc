@@ -26,6 +26,7 @@
 #include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "storage/postgres_schema.h"
 #include "storage/schema.h"
 #include "storage/storage.h"
 #include "tests/storage/storage_test_util.h"
@@ -109,9 +110,12 @@ TEST(StatusCodeForSqlState, MapsTheClassesDatabaseHPromises) {
 // A fresh database of the shared server, opened with PostgresDatabase::Open().
 class PostgresDatabaseTest : public ::testing::Test {
  protected:
+  // The server of the fixture's database: the one shared with other tests.
+  virtual PostgresServer* Server(std::string* error) { return PostgresServer::Shared(error); }
+
   void SetUp() override {
     std::string error;
-    server_ = PostgresServer::Shared(&error);
+    server_ = Server(&error);
     ASSERT_NE(server_, nullptr) << "the PostgreSQL test server cannot start: " << error;
     absl::StatusOr<std::string> uri = server_->CreateDatabase();
     ASSERT_THAT(uri, IsOk());
@@ -248,7 +252,13 @@ TEST_F(PostgresDatabaseTest, AStatementErrorMakesCommitFailAndNothingIsVisible) 
 // The durability and reconnection contract of postgres_db.h: after kill -9 of the server and
 // its restart, the PostgresDatabase opened before takes transactions again (its first Begin()
 // may report the lost connection) and sees what was committed.
-TEST_F(PostgresDatabaseTest, AfterTheServerIsKilledAndRestartedTheConnectionRecovers) {
+// On a server of this process's own: killing the shared one would break the tests using it.
+class PostgresDatabaseCrashTest : public PostgresDatabaseTest {
+ protected:
+  PostgresServer* Server(std::string* error) override { return PostgresServer::Own(error); }
+};
+
+TEST_F(PostgresDatabaseCrashTest, AfterTheServerIsKilledAndRestartedTheConnectionRecovers) {
   ASSERT_THAT(Insert(7, [](Statement& st) { st.BindText(5, "committed before the crash"); }),
               IsOk());
   ASSERT_THAT(server_->Kill(), IsOk());
@@ -302,6 +312,50 @@ TEST(PostgresStorage, TwoOpensOfAFreshDatabaseAtOnceBothSucceed) {
     EXPECT_THAT(QueryInt((*opened[1])->database(), "SELECT MAX(version) FROM esg_schema"),
                 IsOkAndHolds(kCurrentSchemaVersion));
   }
+}
+
+// The estimates trigger (postgres_schema.h kEstimatesChannel): a stored estimate is notified to a
+// listener of Storage::ListenForChanges with its measurement time and spacecraft, and a database
+// created at version 7 before the trigger existed gets it when a server opens it.
+TEST(PostgresStorage, AStoredEstimateIsNotifiedAndAMissingTriggerIsAddedAtOpen) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  const std::string count_sql = "SELECT COUNT(*) FROM pg_trigger WHERE tgname = 'estimates_notify'";
+  {
+    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+    ASSERT_THAT(storage, IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(1));
+    ASSERT_THAT((*storage)->database().Execute("DROP TRIGGER estimates_notify ON estimates; "
+                                               "DROP FUNCTION esg_estimates_notify()"),
+                IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(0));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(1));
+
+  absl::StatusOr<std::unique_ptr<PostgresListener>> listener = (*storage)->ListenForChanges();
+  ASSERT_THAT(listener, IsOk());
+  EstimateRecord estimate;
+  estimate.spacecraft_id = "N-1";
+  estimate.measurement_time = absl::FromUnixSeconds(1700000000);
+  estimate.compute_time = absl::FromUnixSeconds(1700000001);
+  estimate.state = "CALIBRATING";
+  ASSERT_THAT((*storage)->estimates().Put(estimate), IsOk());
+  std::vector<PostgresListener::Notification> got;
+  for (int i = 0; i < 20 && got.empty(); ++i) {
+    absl::StatusOr<std::vector<PostgresListener::Notification>> n =
+        (*listener)->Wait(absl::Milliseconds(250));
+    ASSERT_THAT(n, IsOk());
+    got = *n;
+  }
+  ASSERT_EQ(got.size(), 1u);
+  EXPECT_EQ(got[0].channel, kEstimatesChannel);
+  EXPECT_EQ(got[0].payload, "1700000000000000000 N-1");
+  EXPECT_EQ(got[0].sender_pid, (*storage)->ConnectionPid());
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -29,6 +30,16 @@ namespace esg::testing {
 namespace {
 
 constexpr int kStartAttempts = 3;
+// Names the fixture's file (Publish) under ctest.
+constexpr char kFixtureVariable[] = "ESG_TEST_POSTGRES";
+// CREATE DATABASE of a name that exists.
+constexpr char kDuplicateDatabase[] = "42P04";
+
+absl::Status NotOwned() {
+  return absl::FailedPreconditionError(
+      "the server is shared with other tests (the ctest fixture's): a test that kills or "
+      "restarts its server uses PostgresServer::Own()");
+}
 constexpr char kDefaultBinDir[] = "/usr/lib/postgresql/15/bin";
 
 std::string BinDir() {
@@ -230,7 +241,7 @@ absl::StatusOr<std::unique_ptr<PostgresServer>> PostgresServer::Start() {
   return started;
 }
 
-PostgresServer* PostgresServer::Shared(std::string* error) {
+PostgresServer* PostgresServer::Own(std::string* error) {
   static SharedState* const state = [] {
     auto* s = new SharedState;
     s->owner_pid = getpid();
@@ -248,8 +259,68 @@ PostgresServer* PostgresServer::Shared(std::string* error) {
   return state->server.get();
 }
 
+PostgresServer* PostgresServer::Shared(std::string* error) {
+  // Attached, never stopped here: the fixture's cleanup stops it after every test.
+  static PostgresServer* const fixture = []() -> PostgresServer* {
+    const char* path = std::getenv(kFixtureVariable);
+    if (path == nullptr || *path == '\0') return nullptr;
+    absl::StatusOr<std::unique_ptr<PostgresServer>> attached = Attach(path, /*take_over=*/false);
+    if (!attached.ok()) {
+      std::fprintf(stderr, "%s=%s: %s; starting a PostgreSQL server of this process instead\n",
+                   kFixtureVariable, path, attached.status().ToString().c_str());
+      return nullptr;
+    }
+    return attached->release();
+  }();
+  if (fixture != nullptr) {
+    if (error != nullptr) error->clear();
+    return fixture;
+  }
+  return Own(error);
+}
+
+absl::Status PostgresServer::Publish(const std::string& path) {
+  if (!running_ || !owned_) {
+    return absl::FailedPreconditionError("only a running server of this object can be published");
+  }
+  std::ofstream out(path, std::ios::trunc);
+  out << "port " << port_ << "\n"
+      << "dir " << dir_ << "\n";
+  out.close();
+  if (!out) return absl::InternalError(absl::StrCat("cannot write ", path));
+  owned_ = false;
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::unique_ptr<PostgresServer>> PostgresServer::Attach(const std::string& path,
+                                                                       bool take_over) {
+  if (access(path.c_str(), R_OK) != 0) {
+    return absl::NotFoundError(absl::StrCat("no PostgreSQL fixture file ", path));
+  }
+  std::istringstream in(ReadText(path));
+  std::string port_key;
+  std::string dir_key;
+  int port = 0;
+  std::string dir;
+  if (!(in >> port_key >> port >> dir_key >> dir) || port_key != "port" || dir_key != "dir" ||
+      port <= 0 || dir.rfind("/tmp/esg-pg-", 0) != 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": not a PostgreSQL fixture file (port N, dir /tmp/esg-pg-...)"));
+  }
+  std::unique_ptr<PostgresServer> server(new PostgresServer(dir, BinDir()));
+  server->port_ = port;
+  server->running_ = true;
+  server->owned_ = take_over;
+  if (PQping(server->ConnInfo("postgres").c_str()) != PQPING_OK) {
+    // Taken over, the object still stops whatever runs there and removes the dir.
+    return absl::UnavailableError(
+        absl::StrCat(path, ": the server on port ", port, " does not answer"));
+  }
+  return server;
+}
+
 PostgresServer::~PostgresServer() {
-  if (getpid() != owner_pid_) return;
+  if (getpid() != owner_pid_ || !owned_) return;
   if (running_) {
     // Immediate: the directory is deleted next, so the shutdown checkpoint (which writes every
     // test database out) would be wasted time.
@@ -301,21 +372,26 @@ absl::Status PostgresServer::StartOnPort() {
 }
 
 absl::StatusOr<std::string> PostgresServer::CreateDatabase() {
-  const std::string name = absl::StrCat("esg_test_", ++databases_, "_", getpid());
   std::unique_ptr<PGconn, decltype(&PQfinish)> conn(PQconnectdb(ConnInfo("postgres").c_str()),
                                                     &PQfinish);
   if (PQstatus(conn.get()) != CONNECTION_OK) {
     return absl::UnavailableError(
         absl::StrCat("connect to ", Uri("postgres"), ": ", PQerrorMessage(conn.get())));
   }
-  // The name is made of [a-z0-9_] only: no quoting needed.
-  std::unique_ptr<PGresult, decltype(&PQclear)> result(
-      PQexec(conn.get(), ("CREATE DATABASE " + name).c_str()), &PQclear);
-  if (PQresultStatus(result.get()) != PGRES_COMMAND_OK) {
+  for (;;) {
+    const std::string name = absl::StrCat("esg_test_", ++databases_, "_", getpid());
+    // The name is made of [a-z0-9_] only: no quoting needed.
+    std::unique_ptr<PGresult, decltype(&PQclear)> result(
+        PQexec(conn.get(), ("CREATE DATABASE " + name).c_str()), &PQclear);
+    if (PQresultStatus(result.get()) == PGRES_COMMAND_OK) return Uri(name);
+    // On the fixture's server an earlier test process may have had this pid.
+    const char* state = PQresultErrorField(result.get(), PG_DIAG_SQLSTATE);
+    if (state != nullptr && std::strcmp(state, kDuplicateDatabase) == 0 && databases_ < 1000) {
+      continue;
+    }
     return absl::InternalError(
         absl::StrCat("CREATE DATABASE ", name, ": ", PQerrorMessage(conn.get())));
   }
-  return Uri(name);
 }
 
 pid_t PostgresServer::PostmasterPid() const {
@@ -325,6 +401,7 @@ pid_t PostgresServer::PostmasterPid() const {
 }
 
 absl::Status PostgresServer::Kill() {
+  if (!owned_) return NotOwned();
   if (!running_) return absl::FailedPreconditionError("the server is not running");
   const pid_t postmaster = PostmasterPid();
   if (postmaster <= 0) {
@@ -360,6 +437,7 @@ absl::Status PostgresServer::Kill() {
 }
 
 absl::Status PostgresServer::Restart() {
+  if (!owned_) return NotOwned();
   if (running_) return absl::FailedPreconditionError("the server is running");
   return StartOnPort();
 }

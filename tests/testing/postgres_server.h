@@ -35,10 +35,31 @@ class PostgresServer {
   // server log in the message. The temp dir is removed on failure.
   static absl::StatusOr<std::unique_ptr<PostgresServer>> Start();
 
-  // The process-wide server: started on the first call (thread-safe), stopped and its dir
-  // removed at process exit (std::atexit; not in a forked child). Returns nullptr when it could
-  // not start, with the reason in *error if error is not null (the same reason on every call).
+  // The server the tests of this process share. Under ctest that is one server for every test
+  // that needs one: the fixture `postgres_fixture` (tests/CMakeLists.txt) starts it before them,
+  // stops it after them and names its file in $ESG_TEST_POSTGRES (see Publish), and Shared()
+  // attaches to it; each test still makes its own databases (CreateDatabase). Without
+  // $ESG_TEST_POSTGRES (a test binary run by hand), or when its server cannot be reached, this
+  // is Own(). The first call decides (thread-safe). Kill and Restart of the fixture's server are
+  // refused: a test that kills its server uses Own().
   static PostgresServer* Shared(std::string* error = nullptr);
+
+  // The process-wide server this process starts itself: started on the first call
+  // (thread-safe), stopped and its dir removed at process exit (std::atexit; not in a forked
+  // child). Returns nullptr when it could not start, with the reason in *error if error is not
+  // null (the same reason on every call).
+  static PostgresServer* Own(std::string* error = nullptr);
+
+  // For the ctest fixture (tests/testing/postgres_fixture.cc). Publish writes the server's port
+  // and temp dir to `path` and hands the server over: this object no longer stops it, and the
+  // server runs on after the process exits. Attach reads such a file and checks that the server
+  // accepts connections; with `take_over` the returned object owns the server again (its
+  // destructor stops it and removes its dir), otherwise it only uses it (Kill and Restart are
+  // refused). Errors: kNotFound for a missing file, kInvalidArgument for a malformed one,
+  // kUnavailable when the server does not answer.
+  absl::Status Publish(const std::string& path);
+  static absl::StatusOr<std::unique_ptr<PostgresServer>> Attach(const std::string& path,
+                                                                bool take_over);
 
   // Stops the server (pg_ctl stop -m fast) and removes the temp dir with everything in it.
   ~PostgresServer();
@@ -50,7 +71,8 @@ class PostgresServer {
   // "postgresql://esg@127.0.0.1:<port>/<database>"
   std::string Uri(const std::string& database) const;
 
-  // Creates a new empty database named esg_test_<n>_<pid> (n counts up from 1 in this process)
+  // Creates a new empty database named esg_test_<n>_<pid> (n counts up from 1 in this process;
+  // a name left by an earlier process with the same pid on a shared server is skipped)
   // through libpq on the `postgres` database, and returns Uri(name). kUnavailable when the
   // server cannot be reached, kInternal when CREATE DATABASE fails; the message carries libpq's.
   absl::StatusOr<std::string> CreateDatabase();
@@ -58,12 +80,13 @@ class PostgresServer {
   // kill -9 of the postmaster, for crash tests: returns once the postmaster and its children are
   // gone (they notice the postmaster's death and exit; any still there after 10 s get SIGKILL
   // too). What was committed is on disk; nothing was shut down cleanly. kFailedPrecondition when
-  // the server is not running.
+  // the server is not running or is not this object's (attached without take_over).
   absl::Status Kill();
 
   // Starts the server again on the same data dir and port (crash recovery runs when it was
   // killed) and waits until it accepts connections. kFailedPrecondition when it is running;
-  // kInternal (with the log tail) when the start fails, e.g. because the port was taken.
+  // kInternal (with the log tail) when the start fails, e.g. because the port was taken; also
+  // kFailedPrecondition when the server is not this object's.
   absl::Status Restart();
 
   // The data directory and the server's log file (for messages and debugging).
@@ -85,6 +108,7 @@ class PostgresServer {
   std::string bin_dir_;   // initdb, pg_ctl
   int port_ = 0;
   bool running_ = false;
+  bool owned_ = true;  // this object stops it; false once published, or attached to use only
   pid_t owner_pid_;  // the process that created the server; a forked child never stops it
   std::atomic<int> databases_{0};
 };

@@ -1,10 +1,12 @@
 // tests/testing/postgres_server.h: the shared server starts as configured, its databases are
-// separate, and a committed row survives kill -9 of the postmaster while an uncommitted one does
-// not.
+// separate, a committed row survives kill -9 of the postmaster while an uncommitted one does
+// not, and a server published for the ctest fixture serves the tests that attach to it until
+// the one that takes it over stops it.
 #include "tests/testing/postgres_server.h"
 
 #include <libpq-fe.h>
 
+#include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
@@ -93,7 +95,9 @@ TEST(PostgresServerTest, DatabasesAreSeparate) {
 }
 
 TEST(PostgresServerTest, KillAndRestartKeepCommittedRowsOnly) {
-  PostgresServer* server = SharedOrFail();
+  std::string error;
+  PostgresServer* server = PostgresServer::Own(&error);  // not the shared one: it is killed
+  EXPECT_NE(server, nullptr) << error;
   ASSERT_NE(server, nullptr);
   absl::StatusOr<std::string> uri = server->CreateDatabase();
   ASSERT_THAT(uri, IsOk());
@@ -126,6 +130,49 @@ TEST(PostgresServerTest, KillAndRestartKeepCommittedRowsOnly) {
   EXPECT_THAT(Query(conn.get(), "SELECT v FROM t ORDER BY v"), ElementsAre("committed"));
   // The restarted server still makes databases.
   EXPECT_THAT(server->CreateDatabase(), IsOk());
+}
+
+TEST(PostgresServerTest, APublishedServerServesWhoAttachesUntilTheOneThatTakesItOverStopsIt) {
+  absl::StatusOr<std::unique_ptr<PostgresServer>> started = PostgresServer::Start();
+  ASSERT_THAT(started, IsOk());
+  const std::string dir = std::filesystem::path((*started)->data_dir()).parent_path().string();
+  const std::string file = dir + ".fixture";
+  const int port = (*started)->port();
+  ASSERT_THAT((*started)->Publish(file), IsOk());
+  started->reset();  // published: the server runs on
+  EXPECT_EQ(PQping(("postgresql://esg@127.0.0.1:" + std::to_string(port) + "/postgres").c_str()),
+            PQPING_OK);
+
+  // A test process attaches: it makes databases, cannot kill the server, does not stop it.
+  for (int user = 0; user < 2; ++user) {
+    absl::StatusOr<std::unique_ptr<PostgresServer>> attached =
+        PostgresServer::Attach(file, /*take_over=*/false);
+    ASSERT_THAT(attached, IsOk());
+    EXPECT_EQ((*attached)->port(), port);
+    absl::StatusOr<std::string> uri = (*attached)->CreateDatabase();
+    ASSERT_THAT(uri, IsOk());
+    Connection conn = Connect(*uri);
+    EXPECT_THAT(Query(conn.get(), "SELECT 1"), ElementsAre("1"));
+    EXPECT_THAT((*attached)->Kill(),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("shared")));
+    EXPECT_THAT((*attached)->Restart(),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("shared")));
+  }
+
+  // The fixture's cleanup takes it over: stopped, its dir removed.
+  {
+    absl::StatusOr<std::unique_ptr<PostgresServer>> owner =
+        PostgresServer::Attach(file, /*take_over=*/true);
+    ASSERT_THAT(owner, IsOk());
+  }
+  EXPECT_NE(PQping(("postgresql://esg@127.0.0.1:" + std::to_string(port) + "/postgres").c_str()),
+            PQPING_OK);
+  EXPECT_FALSE(std::filesystem::exists(dir));
+  EXPECT_THAT(PostgresServer::Attach(file, /*take_over=*/false),
+              StatusIs(absl::StatusCode::kUnavailable, HasSubstr("does not answer")));
+  std::filesystem::remove(file);
+  EXPECT_THAT(PostgresServer::Attach(file, /*take_over=*/false),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("no PostgreSQL fixture file")));
 }
 
 }  // namespace
