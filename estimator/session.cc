@@ -387,6 +387,18 @@ std::vector<GyroEstimate> EstimationSession::Gyros() const {
   return out;
 }
 
+Eigen::MatrixXd EstimationSession::CoefficientCovariance(int id) const {
+  const int i = IndexOf(id);
+  if (i < 0) return {};
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(kNumDriftCoefficients, kNumDriftCoefficients);
+  const std::vector<int>& free = layout_.FreeCoefficients(i);
+  const int t = layout_.Theta(i);
+  for (int a = 0; a < layout_.ThetaCount(i); ++a) {
+    for (int b = 0; b < layout_.ThetaCount(i); ++b) out(free[a], free[b]) = P_(t + a, t + b);
+  }
+  return out;
+}
+
 std::vector<std::pair<int, double>> EstimationSession::RelativeSigma(int id) const {
   std::vector<std::pair<int, double>> out;
   const int i = IndexOf(id);

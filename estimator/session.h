@@ -293,6 +293,9 @@ class EstimationSession {
   std::vector<GyroEstimate> Gyros() const;
   LatencyEstimate StarTrackerLatency() const;
   StarTrackerMount StarTrackerMountShift() const;
+  // Covariance of gyro `id`'s drift coefficients in DriftVector order [rad^2/s^2] (drift_model.h),
+  // 0 in the rows and columns of coefficients held; 0 x 0 when the gyro is not running.
+  Eigen::MatrixXd CoefficientCovariance(int id) const;
   // sqrt(P/P0) of each free coefficient of gyro `id` (index into theta -> ratio).
   std::vector<std::pair<int, double>> RelativeSigma(int id) const;
 

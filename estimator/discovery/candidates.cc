@@ -5,6 +5,8 @@
 #include <cmath>
 #include <iterator>
 #include <map>
+#include <utility>
+#include <vector>
 
 #include "Eigen/Eigenvalues"
 #include "absl/strings/str_cat.h"
@@ -23,6 +25,96 @@ namespace esg::estimator::discovery {
 using Eigen::Vector3d;
 
 namespace {
+
+// The collinear fit of a rotor displacement (eq. (8)-(10)): C1 = a lambda, C2 = b lambda, the
+// unit line lambda and (a, b) by generalised least squares under the full 6 x 6 covariance of
+// (C1, C2) (coefficients held, with 0 variance, are left out); chi2 the minimum of r^T Sigma^-1 r
+// over lambda and (a, b), on dof = (free components) - 4 degrees of freedom.
+struct CollinearFit {
+  Vector3d lambda = Vector3d::UnitX();
+  double a = 0.0, b = 0.0, chi2 = 0.0;
+  int dof = 0;
+};
+
+CollinearFit FitCollinear(const Vector3d& C1, const Vector3d& C2,
+                          const Eigen::Matrix<double, 6, 6>& covariance, const Vector3d& start) {
+  Eigen::Matrix<double, 6, 1> c;
+  c << C1, C2;
+  std::vector<int> free;
+  for (int i = 0; i < 6; ++i) {
+    if (covariance(i, i) > 0.0) free.push_back(i);
+  }
+  const int m = static_cast<int>(free.size());
+  Eigen::MatrixXd sub(m, m);
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < m; ++j) sub(i, j) = covariance(free[i], free[j]);
+  }
+  Eigen::Matrix<double, 6, 6> W = Eigen::Matrix<double, 6, 6>::Zero();  // Sigma^-1 on the free
+  if (m > 0) {
+    const Eigen::MatrixXd inv = sub.ldlt().solve(Eigen::MatrixXd::Identity(m, m));
+    for (int i = 0; i < m; ++i) {
+      for (int j = 0; j < m; ++j) W(free[i], free[j]) = inv(i, j);
+    }
+  }
+  auto at = [&](const Vector3d& lambda, double& a, double& b) {
+    Eigen::Matrix<double, 6, 2> A = Eigen::Matrix<double, 6, 2>::Zero();
+    A.block<3, 1>(0, 0) = lambda;
+    A.block<3, 1>(3, 1) = lambda;
+    const Eigen::Matrix2d N = A.transpose() * W * A;
+    const Eigen::Vector2d g = A.transpose() * W * c;
+    const Eigen::Vector2d x = N.completeOrthogonalDecomposition().solve(g);
+    a = x(0);
+    b = x(1);
+    return c.dot(W * c) - x.dot(g);
+  };
+  auto unit = [](double theta, double phi) {
+    return Vector3d(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi),
+                    std::cos(theta));
+  };
+  // Start: the dominant direction and a Fibonacci lattice of the hemisphere; then a pattern search
+  // in the two angles.
+  double a = 0.0, b = 0.0;
+  double best = at(start.normalized(), a, b);
+  double theta = std::acos(std::clamp(start.normalized().z(), -1.0, 1.0));
+  double phi = std::atan2(start.y(), start.x());
+  constexpr int kLattice = 2000;
+  const double golden = M_PI * (3.0 - std::sqrt(5.0));
+  for (int k = 0; k < kLattice; ++k) {
+    const double z = 1.0 - (k + 0.5) / kLattice;  // (0, 1]: one hemisphere (a line's two signs)
+    const double t = std::acos(z), p = golden * k;
+    const double v = at(unit(t, p), a, b);
+    if (v < best) {
+      best = v;
+      theta = t;
+      phi = p;
+    }
+  }
+  for (double step = 0.02; step > 1e-7;) {
+    bool moved = false;
+    for (const auto& [dt, dp] : {std::pair{step, 0.0}, std::pair{-step, 0.0}, std::pair{0.0, step},
+                                 std::pair{0.0, -step}}) {
+      const double v = at(unit(theta + dt, phi + dp), a, b);
+      if (v < best) {
+        best = v;
+        theta += dt;
+        phi += dp;
+        moved = true;
+      }
+    }
+    if (!moved) step *= 0.5;
+  }
+  CollinearFit out;
+  out.lambda = unit(theta, phi);
+  out.chi2 = std::max(0.0, at(out.lambda, out.a, out.b));
+  if (out.lambda.dot(C1) < 0.0) {
+    out.lambda = -out.lambda;
+    out.a = -out.a;
+    out.b = -out.b;
+  }
+  out.dof = std::max(0, m - 4);
+  return out;
+}
+
 
 constexpr int kRandomWalkGridPoints = 5;  // factors 2, 4, ... 32 above the configured intensity
 // Reference intensity when the configuration has none: a tenth of the paper-era ESG's
@@ -235,23 +327,29 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   // pair, sign with C1 . lambda > 0.
   const Eigen::Matrix3d M = C1 * C1.transpose() + C2 * C2.transpose();
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(M);
-  Vector3d lambda = eig.eigenvectors().col(2);
-  if (C1.dot(lambda) < 0) lambda = -lambda;
-  const double a = C1.dot(lambda);  // C10 + C20
-  const double b = C2.dot(lambda);  // -5 C20
+  // The covariance of (C1, C2): the run's full one, or the sigmas alone when it has none.
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Zero();
+  const auto found = std::find_if(fit.run.gyros.begin(), fit.run.gyros.end(),
+                                  [&](const GyroEstimate& g) { return g.id == gyro; });
+  const size_t at = static_cast<size_t>(std::distance(fit.run.gyros.begin(), found));
+  if (at < fit.run.coefficient_covariance.size() &&
+      fit.run.coefficient_covariance[at].rows() == kNumDriftCoefficients) {
+    covariance = fit.run.coefficient_covariance[at].block<6, 6>(kThetaC1, kThetaC1);
+  } else {
+    covariance.diagonal() << s1.cwiseAbs2(), s2.cwiseAbs2();
+  }
+  // Collinearity test: chi-square of (C1, C2) off the best common line under their full
+  // covariance, with 6 - 4 = 2 degrees of freedom (lambda: 2, C10 + C20 and C20: 2).
+  const CollinearFit line = FitCollinear(C1, C2, covariance, eig.eigenvectors().col(2));
+  const Vector3d lambda = line.lambda;
+  const double a = line.a;  // C10 + C20
+  const double b = line.b;  // -5 C20
   const double C20 = -b / 5.0, C10 = a - C20;
   const double cos_line =
       (C1.norm() > 0 && C2.norm() > 0) ? std::abs(C1.dot(C2)) / (C1.norm() * C2.norm()) : 1.0;
   const double line_angle_deg = RadToDeg(std::acos(std::clamp(cos_line, -1.0, 1.0)));
-  // Collinearity test: components of C1, C2 off the common line against their sigmas,
-  // chi-square with 6 - 4 = 2 degrees of freedom (lambda: 2, C10 + C20 and C20: 2).
-  const Vector3d r1 = C1 - a * lambda, r2 = C2 - b * lambda;
-  double chi2 = 0.0;
-  for (int i = 0; i < 3; ++i) {
-    if (s1(i) > 0) chi2 += r1(i) * r1(i) / (s1(i) * s1(i));
-    if (s2(i) > 0) chi2 += r2(i) * r2(i) / (s2(i) * s2(i));
-  }
-  const double p_collinear = ChiSquareSurvival(chi2, 2.0);
+  const double chi2 = line.chi2;
+  const double p_collinear = line.dof > 0 ? ChiSquareSurvival(chi2, line.dof) : 1.0;
   fit.fitted.push_back({"lineAngleDeg", line_angle_deg, 0.0, "deg"});
   fit.fitted.push_back({"c10DegH", DegH(C10), 0.0, "deg/h"});
   fit.fitted.push_back({"c20DegH", DegH(C20), 0.0, "deg/h"});
@@ -260,9 +358,10 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
       "C1 and C2 lie %.1f deg apart as lines (C1.C2 %s 0); a displaced rotor makes them collinear "
       "(eq. (8)-(10)): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f "
       "%.2f] "
-      "(case axes), off-line residual chi2 = %.1f on 2 dof, p = %.2g",
+      "(case axes), off-line residual chi2 = %.1f on %d dof under the full covariance of C1 and "
+      "C2, p = %.2g",
       line_angle_deg, C1.dot(C2) < 0 ? "<" : ">=", DegH(C10), DegH(C20), lambda.x(), lambda.y(),
-      lambda.z(), chi2, p_collinear));
+      lambda.z(), chi2, line.dof, p_collinear));
   // eq. (3): displacement from the mean suspension offset voltages.
   Vector3d sum = Vector3d::Zero(), sum2 = Vector3d::Zero();
   int n = 0;

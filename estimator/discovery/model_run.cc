@@ -140,6 +140,9 @@ absl::StatusOr<ModelRun> RunModel(const SpacecraftConfig& config, const SessionO
     }
   }
   run.gyros = session.Gyros();
+  for (const GyroEstimate& g : run.gyros) {
+    run.coefficient_covariance.push_back(session.CoefficientCovariance(g.id));
+  }
   return run;
 }
 

@@ -92,6 +92,9 @@ struct ModelRun {
   std::vector<StepRecord> steps;  // one per measurement step
   std::vector<HeldOutSample> held_out;
   std::vector<GyroEstimate> gyros;  // final estimates
+  // Final covariance of each gyro's drift coefficients, same order as `gyros`
+  // (EstimationSession::CoefficientCovariance).
+  std::vector<Eigen::MatrixXd> coefficient_covariance;
   int resets = 0;                   // FILTER_RESET events
   int rejections = 0;               // star-tracker rejections (eq. (12), (14))
   // Before each frame of ModelRunOptions::checkpoint_frames that was reached, in that order.

@@ -403,6 +403,54 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   return finding;
 }
 
+// At most this many constant effects of a round fail their physics checks before the round goes
+// on without checking further ones.
+constexpr int kMaxFailedChecks = 3;
+
+// The physics check that decides whether a constant effect of the library for one gyro is what
+// it names (docs/discovery.md, "Physics checks that decide"): a rotor displacement, a fourth
+// harmonic, unequal stiffness (functions of the spin axis in case axes) and a misalignment (a
+// rotation of the readout) change their signature with the attitude, so they fit part of any
+// drift of that gyro that changes in time. On the gyro's deviation from the current model
+// (wander.h), a drift that returns to its mean describing it decisively better (by
+// kDecisiveDeviance), while the effect's terms add nothing significant on top of it, says the
+// constant effect is not the physics (with the open-ended stage on). An effect that fails is not
+// taken as itself: the round goes on to the time behaviours and the open-ended stage, which
+// decide what the drift is. `note` says what was compared, whether it passed or not.
+struct PhysicsCheck {
+  bool fails = false;
+  std::string note;
+};
+absl::StatusOr<PhysicsCheck> CheckConstantEffect(const CandidateFit& fit,
+                                                 const SelectedModel& selected, int family,
+                                                 const DiagnosisContext& context) {
+  PhysicsCheck out;
+  const Candidate& c = fit.candidate;
+  const DiagnoseOptions& options = context.options();
+  if (!options.open_ended || c.gyro <= 0 ||
+      !(c.effect == Effect::kRotorDisplacement || c.effect == Effect::kFourthHarmonic ||
+        c.effect == Effect::kUnequalStiffness || c.effect == Effect::kGyroMisalignment)) {
+    return out;
+  }
+  auto e = CompareConstantEffectOf(selected, context, c);
+  if (!e.ok()) return e.status();
+  const double threshold = EvidenceThreshold(options.alpha, family);
+  out.fails = e->stationary > e->effect + kDecisiveDeviance && !(e->on_top > threshold);
+  out.note = out.fails
+                 ? absl::StrFormat(
+                       "%s fits part of gyro %d's drift, but on the gyro's deviation a drift "
+                       "that returns to its mean describes it decisively better (2 ln B = %.1f "
+                       "against %.1f) and the effect's terms add 2 ln B = %.1f on top of it "
+                       "(threshold %.1f): not taken as a constant effect",
+                       CandidateName(c), c.gyro, e->stationary, e->effect, e->on_top, threshold)
+                 : absl::StrFormat(
+                       "on gyro %d's deviation its terms have 2 ln B = %.1f, and add %.1f on top "
+                       "of a drift that returns to its mean (2 ln B = %.1f alone; threshold "
+                       "%.1f): a constant effect, not a wandering drift",
+                       c.gyro, e->effect, e->on_top, e->stationary, threshold);
+  return out;
+}
+
 }  // namespace
 
 absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros,
@@ -444,16 +492,38 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   bool inhomogeneous_only = false;
   std::vector<Scored> significant;
   absl::StatusOr<std::string> rw_note;
+  // Constant effects of one gyro that fail their physics checks (CheckConstantEffect): not
+  // significant as themselves; their notes.
+  std::vector<int> failed;
+  std::vector<std::pair<int, std::string>> failed_notes;    // gyro, note
+  std::vector<std::pair<int, std::string>> constant_notes;  // fit index, the check it passed
   for (int stage = 0; stage < 2; ++stage) {
     if (absl::Status s = fit_all(stage == 0 ? constant : timed); !s.ok()) return s;
-    scored = Score(fits, selected, family, context);
-    significant = SignificantInOrder(scored, fits, inhomogeneous_only);
-    rw_note = PreferRandomWalk(scored, fits, family, significant, context);
-    if (!rw_note.ok()) return rw_note.status();
-    const bool settled =
-        !significant.empty() &&
-        fits[significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
+    bool settled = false;
+    for (;;) {
+      scored = Score(fits, selected, family, context);
+      for (int i : failed) scored[i].significant = false;
+      significant = SignificantInOrder(scored, fits, inhomogeneous_only);
+      rw_note = PreferRandomWalk(scored, fits, family, significant, context);
+      if (!rw_note.ok()) return rw_note.status();
+      settled = !significant.empty() &&
+                fits[significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
+      if (!settled || static_cast<int>(failed.size()) >= kMaxFailedChecks) break;
+      const int top = significant.front().index;
+      auto check = CheckConstantEffect(fits[top], selected, family, context);
+      if (!check.ok()) return check.status();
+      if (!check->fails) {
+        if (!check->note.empty()) constant_notes.emplace_back(top, std::move(check->note));
+        break;
+      }
+      failed.push_back(top);
+      failed_notes.emplace_back(fits[top].candidate.gyro, std::move(check->note));
+    }
     if (settled || timed.empty()) break;
+  }
+  // The rows keep what the evidence says; the notes say why a significant effect was not taken.
+  for (Scored& x : scored) {
+    if (std::find(failed.begin(), failed.end(), x.index) != failed.end()) x.significant = true;
   }
   // A time behaviour must explain the recording better than a jump of the gyro's readings at the
   // onset (D43): a step of the readings is no physics of the library, and a drift step or a walk
@@ -571,6 +641,9 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         if (gain > basis->refit_threshold && predicts && describes) {
           for (const Scored& x : scored) result.rows.push_back(Row(x, fits[x.index], round, -1));
           for (Finding& f : basis->findings) {
+            for (const auto& failed_note : failed_notes) {
+              f.evidence.notes.push_back(failed_note.second);
+            }
             f.evidence.notes.push_back(absl::StrCat(
                 versus, held_note,
                 ": a deterministic drift, taken before the time behaviour, which the next round "
@@ -640,7 +713,13 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   }
   bool held_out_selected = false;
   if (chosen < 0 && !inhomogeneous_only) {
-    auto c = ChooseByHeldOut(scored, fits, round, selected, contenders, context);
+    std::vector<Scored> candidates_left;  // an effect that failed its physics check is not one
+    for (const Scored& x : scored) {
+      if (std::find(failed.begin(), failed.end(), x.index) == failed.end()) {
+        candidates_left.push_back(x);
+      }
+    }
+    auto c = ChooseByHeldOut(candidates_left, fits, round, selected, contenders, context);
     if (!c.ok()) return c.status();
     chosen = *c;
     held_out_selected = chosen >= 0;
@@ -660,11 +739,19 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       where.source = "the gyro's drift over the recording";
       where.p_value = wander_p;
       result.stationary_evidence = wander_evidence;
+      for (const auto& [gyro, note] : failed_notes) {
+        if (gyro == wander_gyro) absl::StrAppend(&result.unresolved, "; ", note);
+      }
     } else if (inhomogeneous_only) {
       result.unresolved =
           "the candidates that fit it improve only part of the recording and worsen the rest (a "
           "change in time such as a fault, not a constant effect)";
       result.unresolved_note = readout_note;
+    } else if (!failed_notes.empty()) {
+      // Nothing else explains it: what the failed effect fitted is not what it names, and neither
+      // the library's time behaviours nor the basis describe it.
+      result.unresolved = failed_notes.front().second;
+      result.unresolved_gyro = failed_notes.front().first;
     }
     return result;
   }
@@ -674,6 +761,12 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   result.finding =
       MakeFinding(s, fits, chosen, round, *rw_note, held_out_selected, contenders, selected);
   if (!basis_note.empty()) result.finding->evidence.notes.push_back(basis_note);
+  for (const auto& failed_note : failed_notes) {
+    result.finding->evidence.notes.push_back(failed_note.second);
+  }
+  for (const auto& [index, note] : constant_notes) {
+    if (index == chosen) result.finding->evidence.notes.push_back(note);
+  }
 
   selected.held_out_current = std::any_of(contenders.begin(), contenders.end(),
                                           [&](const auto& c) { return c.first == chosen; });

@@ -5,8 +5,10 @@
 #include <cmath>
 #include <limits>
 
+#include "absl/strings/str_cat.h"
 #include "estimator/discovery/deviation_filter.h"
 #include "estimator/discovery/statistics.h"
+#include "estimator/drift_model.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -45,6 +47,69 @@ double GridEvidence(double base, const std::vector<double>& deviances) {
   return EvidenceOverPrior(points);
 }
 
+// Nuisance regressors: a case-fixed drift before each step the model holds (open_ended.h does
+// the same), with the step's prior.
+struct Nuisance {
+  std::vector<std::vector<Vector2d>> columns;
+  VectorXd prior;
+};
+Nuisance StepNuisance(const DeviationSeries& series, double step_sigma,
+                      const std::vector<absl::Time>& steps) {
+  Nuisance out;
+  for (const absl::Time& t : steps) {
+    for (int m = 0; m < 3; ++m) {
+      const Vector3d e_m = Vector3d::Unit(m);
+      out.columns.push_back(Signature(series, [&](const BasisInputs& in) -> Vector3d {
+        return in.time < t ? e_m : Vector3d::Zero();
+      }));
+    }
+  }
+  out.prior = VectorXd::Constant(static_cast<int>(out.columns.size()), step_sigma);
+  return out;
+}
+
+// The deviance of each grid point of the stationary drift (correlation time x sigma, on top of
+// the configured walk) with `columns` and their `prior`; the best point's in `best`.
+struct StationaryPoint {
+  double deviance = std::numeric_limits<double>::infinity();
+  double correlation_hours = 0.0, sigma_deg_h = 0.0;
+};
+std::vector<double> StationaryDeviances(const DeviationSeries& series, double random_walk,
+                                        double w0_sigma,
+                                        const std::vector<std::vector<Vector2d>>& columns,
+                                        const VectorXd& prior, StationaryPoint& best) {
+  std::vector<double> deviances;
+  for (double tau_h : kCorrelationHours) {
+    for (double sigma_deg_h : kStationarySigmaDegH) {
+      const StationaryDrift g{DegPerHourToRadPerSec(sigma_deg_h), 3600.0 * tau_h};
+      const DeviationFilter f(series, random_walk, w0_sigma, 1e-2, g);
+      const double d = SeriesDeviance(f, series.y, columns, prior);
+      deviances.push_back(d);
+      if (d < best.deviance) best = {d, tau_h, sigma_deg_h};
+    }
+  }
+  return deviances;
+}
+
+// The drift steps model `m` holds for gyro `gyro` (coefficient releases; not misalignments).
+std::vector<absl::Time> HeldSteps(const ModelState& m, int gyro) {
+  std::vector<absl::Time> steps;
+  for (const SessionOptions::CoefficientRelease& r : m.options.coefficient_releases) {
+    if (!r.misalignment && r.gyro_id == gyro) steps.push_back(r.time);
+  }
+  return steps;
+}
+
+absl::StatusOr<DeviationSeries> SeriesOf(const SelectedModel& selected,
+                                         const DiagnosisContext& context, int gyro) {
+  const std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(context.frames(), context.rates(), selected.model.correction);
+  auto series = MeasureDeviations(selected.model.config, selected.run.gyros, corrected,
+                                  context.rates(), selected.run, {gyro});
+  if (!series.ok()) return series.status();
+  return std::move(series->front());
+}
+
 }  // namespace
 
 DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, double random_walk,
@@ -54,17 +119,9 @@ DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, dou
   out.gyro = series.gyro;
   const int n = static_cast<int>(series.y.size());
   if (n < 10) return out;
-  // Nuisance: a case-fixed drift before each step the model holds (open_ended.h does the same).
-  std::vector<std::vector<Vector2d>> nuisance;
-  for (const absl::Time& t : steps) {
-    for (int m = 0; m < 3; ++m) {
-      const Vector3d e_m = Vector3d::Unit(m);
-      nuisance.push_back(Signature(series, [&](const BasisInputs& in) -> Vector3d {
-        return in.time < t ? e_m : Vector3d::Zero();
-      }));
-    }
-  }
-  const VectorXd nuisance_prior = VectorXd::Constant(static_cast<int>(nuisance.size()), step_sigma);
+  const Nuisance held = StepNuisance(series, step_sigma, steps);
+  const std::vector<std::vector<Vector2d>>& nuisance = held.columns;
+  const VectorXd& nuisance_prior = held.prior;
   const DeviationFilter base_filter(series, random_walk, w0_sigma);
   const double base = SeriesDeviance(base_filter, series.y, nuisance, nuisance_prior);
 
@@ -112,41 +169,108 @@ DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, dou
   out.walk = GridEvidence(base, walk_deviance);
 
   // Stationary: a Gauss-Markov drift on top of the configured walk.
-  std::vector<double> stationary_deviance;
-  double best_stationary = std::numeric_limits<double>::infinity();
-  for (double tau_h : kCorrelationHours) {
-    for (double sigma_deg_h : kStationarySigmaDegH) {
-      const StationaryDrift g{DegPerHourToRadPerSec(sigma_deg_h), 3600.0 * tau_h};
-      const DeviationFilter f(series, random_walk, w0_sigma, 1e-2, g);
-      const double d = SeriesDeviance(f, series.y, nuisance, nuisance_prior);
-      stationary_deviance.push_back(d);
-      if (d < best_stationary) {
-        best_stationary = d;
-        out.correlation_hours = tau_h;
-        out.sigma_deg_h = sigma_deg_h;
-      }
-    }
-  }
-  out.stationary = GridEvidence(base, stationary_deviance);
+  StationaryPoint best;
+  out.stationary = GridEvidence(
+      base, StationaryDeviances(series, random_walk, w0_sigma, nuisance, nuisance_prior, best));
+  out.correlation_hours = best.correlation_hours;
+  out.sigma_deg_h = best.sigma_deg_h;
+  return out;
+}
+
+ConstantEffectEvidence CompareConstantEffect(
+    const DeviationSeries& series, double random_walk, double w0_sigma, double step_sigma,
+    const std::vector<absl::Time>& steps, const std::vector<std::vector<Vector2d>>& effect_columns,
+    const std::vector<double>& effect_prior) {
+  ConstantEffectEvidence out;
+  if (series.y.size() < 10 || effect_columns.empty()) return out;
+  const Nuisance held = StepNuisance(series, step_sigma, steps);
+  std::vector<std::vector<Vector2d>> with = held.columns;
+  with.insert(with.end(), effect_columns.begin(), effect_columns.end());
+  VectorXd prior(held.prior.size() + static_cast<int>(effect_prior.size()));
+  prior << held.prior, Eigen::Map<const VectorXd>(effect_prior.data(),
+                                                  static_cast<int>(effect_prior.size()));
+  const DeviationFilter base_filter(series, random_walk, w0_sigma);
+  const double base = SeriesDeviance(base_filter, series.y, held.columns, held.prior);
+  out.effect = base - SeriesDeviance(base_filter, series.y, with, prior);
+  StationaryPoint alone, both;
+  out.stationary = GridEvidence(base, StationaryDeviances(series, random_walk, w0_sigma,
+                                                          held.columns, held.prior, alone));
+  out.on_top =
+      GridEvidence(base, StationaryDeviances(series, random_walk, w0_sigma, with, prior, both)) -
+      out.stationary;
   return out;
 }
 
 absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedModel& selected,
                                                                 const DiagnosisContext& context,
                                                                 int gyro) {
-  const ModelState& model = selected.model;
-  const std::vector<TelemetryFrame> corrected =
-      CorrectStarTracker(context.frames(), context.rates(), model.correction);
-  auto series = MeasureDeviations(model.config, selected.run.gyros, corrected, context.rates(),
-                                  selected.run, {gyro});
+  auto series = SeriesOf(selected, context, gyro);
   if (!series.ok()) return series.status();
-  std::vector<absl::Time> steps;
-  for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
-    if (!r.misalignment && r.gyro_id == gyro) steps.push_back(r.time);
-  }
-  return CompareDriftBehaviours(series->front(), ModelRandomWalk(model, gyro),
+  const ModelState& model = selected.model;
+  return CompareDriftBehaviours(*series, ModelRandomWalk(model, gyro),
                                 ModelInitialDriftSigma(model),
-                                DegPerHourToRadPerSec(context.options().c_sigma_deg_h), steps);
+                                DegPerHourToRadPerSec(context.options().c_sigma_deg_h),
+                                HeldSteps(model, gyro));
+}
+
+absl::StatusOr<ConstantEffectEvidence> CompareConstantEffectOf(const SelectedModel& selected,
+                                                               const DiagnosisContext& context,
+                                                               const Candidate& candidate) {
+  const DiagnoseOptions& opt = context.options();
+  const ModelState& model = selected.model;
+  const GyroConfig* g = model.config.FindGyro(candidate.gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  int first = kThetaC1, count = 6;
+  double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  switch (candidate.effect) {
+    case Effect::kRotorDisplacement:
+    case Effect::kGyroMisalignment:
+      break;
+    case Effect::kFourthHarmonic:
+      first = kThetaK0;
+      count = 1;
+      sigma = DegPerHourToRadPerSec(opt.k0_sigma_deg_h);
+      break;
+    case Effect::kUnequalStiffness:
+      first = kThetaMu;
+      sigma = DegPerHourToRadPerSec(opt.mu_nu_sigma_deg_h);
+      break;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat(CandidateName(candidate), " is not a constant effect of one gyro"));
+  }
+  auto series = SeriesOf(selected, context, candidate.gyro);
+  if (!series.ok()) return series.status();
+  std::vector<std::vector<Vector2d>> columns;
+  std::vector<double> prior;
+  if (candidate.effect == Effect::kGyroMisalignment) {
+    // A small rotation m of the readout: the reading moves by m x h_k.
+    for (int m = 0; m < 3; ++m) {
+      Eigen::Matrix3d skew = Eigen::Matrix3d::Zero();
+      const Vector3d e_m = Vector3d::Unit(m);
+      skew << 0.0, -e_m.z(), e_m.y(), e_m.z(), 0.0, -e_m.x(), -e_m.y(), e_m.x(), 0.0;
+      columns.push_back(ReadoutSignature(*series, skew));
+      prior.push_back(ArcsecToRad(opt.misalignment_sigma_arcsec));
+    }
+  } else {
+    // Only the coefficients the candidate frees: one the model already estimates is in the
+    // deviation's model at its calibrated value.
+    const DriftVector held = g->model_sigma.AsVector();
+    for (int i = first; i < first + count; ++i) {
+      if (held(i) > 0.0) continue;
+      columns.push_back(Signature(*series, [i](const BasisInputs& in) -> Vector3d {
+        return DriftRegressor(in.h_k).col(i);  // eq. (1), (10): d(dw_k)/d(theta_i)
+      }));
+      prior.push_back(sigma);
+    }
+  }
+  return CompareConstantEffect(*series, ModelRandomWalk(model, candidate.gyro),
+                               ModelInitialDriftSigma(model),
+                               DegPerHourToRadPerSec(opt.c_sigma_deg_h),
+                               HeldSteps(model, candidate.gyro), columns, prior);
 }
 
 }  // namespace esg::estimator::discovery

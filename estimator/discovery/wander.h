@@ -51,6 +51,32 @@ absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedMo
                                                                 const DiagnosisContext& context,
                                                                 int gyro);
 
+// A constant effect of the library for one gyro against the stationary drift on the same
+// deviation: a drift that switches at random, or follows a quantity the telemetry does not carry,
+// is partly fitted by any term of the spin-axis direction or of the readout, which change with
+// the attitude. `effect_columns`: the effect's signatures on the series (Signature,
+// ReadoutSignature), one per parameter, with their prior 1-sigma. Each 2 ln B is against the
+// configured walk, the stationary drift's integrated over its grid as in CompareDriftBehaviours;
+// `on_top` is the effect's on top of the stationary drift (the nested comparison: 2 ln B of both
+// against the stationary drift alone).
+struct ConstantEffectEvidence {
+  double effect = 0.0, stationary = 0.0, on_top = 0.0;
+};
+ConstantEffectEvidence CompareConstantEffect(
+    const DeviationSeries& series, double random_walk, double w0_sigma, double step_sigma,
+    const std::vector<absl::Time>& steps,
+    const std::vector<std::vector<Eigen::Vector2d>>& effect_columns,
+    const std::vector<double>& effect_prior);
+
+// The comparison for the library candidate `candidate` of one gyro on that gyro's deviation from
+// the selected model: a rotor displacement, a fourth harmonic, unequal stiffness (the drift
+// coefficients of eq. (1), (8)-(10) it frees, DriftRegressor) or the gyro's misalignment (three
+// small rotations of its readout), each with the options' prior. InvalidArgument for another
+// effect or a gyro that is not configured.
+absl::StatusOr<ConstantEffectEvidence> CompareConstantEffectOf(const SelectedModel& selected,
+                                                               const DiagnosisContext& context,
+                                                               const Candidate& candidate);
+
 }  // namespace esg::estimator::discovery
 
 #endif  // ESG_ESTIMATOR_DISCOVERY_WANDER_H_

@@ -9,7 +9,8 @@
 // reports per effect the share of correct verdicts (verdict and gyro right) as counters.
 // ESG_DISCOVERY_ROWS=library or =time selects the library's rows or the time behaviours' (with
 // `none`), =basis the open-ended stage's classes; ESG_DISCOVERY_TRUTHS=a,b exactly these rows;
-// ESG_DISCOVERY_NOTES=1 adds each finding's notes to its line. Run:
+// ESG_DISCOVERY_NOTES=1 adds each finding's notes to its line; ESG_DISCOVERY_FIRST_SEED=k starts
+// at seed 100 + k. Run:
 //   <build>/tests/bench/esg_bench --benchmark_filter=Confusion
 // (scripts/confusion_matrix.sh). Takes a few minutes.
 #include <algorithm>
@@ -65,6 +66,9 @@ BENCHMARK(BM_Diagnose30h)->Arg(1)->Arg(2)->Unit(benchmark::kSecond)->Iterations(
 void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   const char* env = std::getenv("ESG_DISCOVERY_SEEDS");
   const int seeds = env != nullptr ? std::max(1, std::atoi(env)) : 10;
+  // ESG_DISCOVERY_FIRST_SEED=k: seeds 100 + k, ... (default 1: 101, 102, ...).
+  const char* first_env = std::getenv("ESG_DISCOVERY_FIRST_SEED");
+  const int first_seed = first_env != nullptr ? std::max(1, std::atoi(first_env)) : 1;
   // ESG_DISCOVERY_ROWS=time: only the time-behaviour rows (and `none`); =library: only the
   // library's rows; default both.
   const char* rows_env = std::getenv("ESG_DISCOVERY_ROWS");
@@ -112,7 +116,7 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   int diagnoses = 0;
   for (auto _ : state) {
     for (const std::string& truth : truths) {
-      for (int seed = 1; seed <= seeds; ++seed) {
+      for (int seed = first_seed; seed < first_seed + seeds; ++seed) {
         const SimulationSpec spec = ::esg::testing::DiscoveryScenario(truth, 100 + seed, 30.0);
         const SimulationResult sim = *Simulate(spec);
         DiagnoseOptions options;  // default threads, lent as esg diagnose does
