@@ -73,6 +73,18 @@ constexpr int kFramesPerStream = 4;
 
 std::string NodeHost(int node) { return absl::StrCat("127.0.0.", 21 + node); }
 std::string NodeId(int node) { return absl::StrCat("node-", node); }
+
+// Starts two esgd on `db` with leases of `lease` (an esgd duration, "30s"), logs in `dir`.
+void StartTwoNodes(const std::string& db, const TempDir& dir, const std::string& lease,
+                   std::vector<std::unique_ptr<Daemon>>& daemons) {
+  for (int n = 0; n < 2; ++n) {
+    daemons.push_back(std::make_unique<Daemon>(
+        db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
+        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration", lease}));
+    ASSERT_GT(daemons.back()->port(), 0)
+        << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
+  }
+}
 std::string SpacecraftId(int i) { return absl::StrFormat("FO-%02d", i); }
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -361,12 +373,7 @@ TEST(Failover, AnyServerShowsEverySpacecraftAndRelaysAlertsRaisedOnAnother) {
   ASSERT_TRUE(db.ok()) << db.status();
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  for (int n = 0; n < 2; ++n) {
-    daemons.push_back(std::make_unique<Daemon>(
-        *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
-        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration", "30s"}));
-    ASSERT_GT(daemons.back()->port(), 0) << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
-  }
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, "30s", daemons));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
 
@@ -486,14 +493,7 @@ TEST(Failover, ARefusedCallCarriesTheTimeUntilTheLeaseExpiresAsItsRetryPushback)
   constexpr int kLeaseMs = 3000;
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  for (int n = 0; n < 2; ++n) {
-    daemons.push_back(std::make_unique<Daemon>(
-        *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
-        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration",
-                                 absl::StrCat(kLeaseMs / 1000, "s")}));
-    ASSERT_GT(daemons.back()->port(), 0)
-        << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
-  }
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, absl::StrCat(kLeaseMs / 1000, "s"), daemons));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
   const SimulatedRun run = SimulateRun("RP-1", 1.0, 51);
@@ -609,13 +609,7 @@ TEST(Failover, AnEstimateSubscriptionOnAnyServerSeesTheEstimatesAnotherServerSto
   ASSERT_TRUE(db.ok()) << db.status();
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  for (int n = 0; n < 2; ++n) {
-    daemons.push_back(std::make_unique<Daemon>(
-        *db, dir.File(absl::StrCat("node", n, ".log")), testing::DaemonLimits{},
-        std::vector<std::string>{"--node-id", NodeId(n), "--lease-duration", "30s"}));
-    ASSERT_GT(daemons.back()->port(), 0)
-        << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
-  }
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, "30s", daemons));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
 
