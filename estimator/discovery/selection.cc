@@ -673,8 +673,8 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
     }
   }
   // A time behaviour of one gyro (the basis did not replace it) changes its drift once (a step)
-  // or without bound (a walk); a drift that returns to its mean, switching at random between levels or driven by a quantity
-  // the telemetry does not carry, is neither (wander.h). When a stationary drift describes the
+  // or without bound (a walk); a drift that returns to its mean, switching at random between
+  // levels or driven by a quantity the telemetry does not carry, is neither (wander.h). When a stationary drift describes the
   // gyro's deviation decisively better than both, nothing is taken: the mismatch is left
   // unexplained, located to the gyro, and described.
   std::string wander_note;
