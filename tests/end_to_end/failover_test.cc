@@ -74,6 +74,26 @@ constexpr int kFramesPerStream = 4;
 std::string NodeHost(int node) { return absl::StrCat("127.0.0.", 21 + node); }
 std::string NodeId(int node) { return absl::StrCat("node-", node); }
 
+// Configures `run` on the node behind `stub`, streams all its frames there (each acknowledged) and
+// waits up to 60 s until that node has applied them; `applied` is its session then.
+void ConfigureStreamAndAwaitApplied(esg::v1::EstimationService::Stub& stub,
+                                    const SimulatedRun& run, esg::v1::SessionInfo& applied) {
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse configured;
+    ASSERT_TRUE(stub.ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured).ok());
+  }
+  const auto streamed = testing::StreamFrames(stub, run.frames);
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  ASSERT_EQ(streamed.acks.size(), run.frames.size());
+  for (int attempt = 0; attempt < 600; ++attempt) {
+    applied = testing::Session(stub, run.config.spacecraft_id);
+    if (applied.frames_applied() == static_cast<int64_t>(run.frames.size())) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_EQ(applied.frames_applied(), static_cast<int64_t>(run.frames.size()));
+}
+
 // Starts two esgd on `db` with leases of `lease` (an esgd duration, "30s"), logs in `dir`.
 void StartTwoNodes(const std::string& db, const TempDir& dir, const std::string& lease,
                    std::vector<std::unique_ptr<Daemon>>& daemons) {
@@ -393,21 +413,8 @@ TEST(Failover, AnyServerShowsEverySpacecraftAndRelaysAlertsRaisedOnAnother) {
 
   const SimulatedRun run = SimulateRun("FV-1", 3.0, 41, /*outlier_probability=*/0.08);
   const std::string id = run.config.spacecraft_id;
-  {
-    grpc::ClientContext ctx;
-    esg::v1::ConfigureResponse configured;
-    ASSERT_TRUE(a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured).ok());
-  }
-  const auto streamed = testing::StreamFrames(*a, run.frames);
-  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
-  ASSERT_EQ(streamed.acks.size(), run.frames.size());
   esg::v1::SessionInfo on_a;
-  for (int attempt = 0; attempt < 600; ++attempt) {
-    on_a = testing::Session(*a, id);
-    if (on_a.frames_applied() == static_cast<int64_t>(run.frames.size())) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  ASSERT_EQ(on_a.frames_applied(), static_cast<int64_t>(run.frames.size()));
+  ASSERT_NO_FATAL_FAILURE(ConfigureStreamAndAwaitApplied(*a, run, on_a));
   EXPECT_EQ(on_a.served_by(), NodeId(0));
 
   // ListSessions and GetSession on B: A's session, as A committed it, A still holding it.
@@ -628,20 +635,8 @@ TEST(Failover, AnEstimateSubscriptionOnAnyServerSeesTheEstimatesAnotherServerSto
 
   const SimulatedRun run = SimulateRun("FE-1", 3.0, 43);
   const std::string id = run.config.spacecraft_id;
-  {
-    grpc::ClientContext ctx;
-    esg::v1::ConfigureResponse configured;
-    ASSERT_TRUE(a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured).ok());
-  }
-  const auto streamed = testing::StreamFrames(*a, run.frames);
-  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
-  for (int attempt = 0; attempt < 600; ++attempt) {
-    if (testing::Session(*a, id).frames_applied() == static_cast<int64_t>(run.frames.size())) {
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
-  ASSERT_EQ(testing::Session(*a, id).frames_applied(), static_cast<int64_t>(run.frames.size()));
+  esg::v1::SessionInfo on_a;
+  ASSERT_NO_FATAL_FAILURE(ConfigureStreamAndAwaitApplied(*a, run, on_a));
 
   auto storage = storage::Storage::Open(*db);
   ASSERT_TRUE(storage.ok()) << storage.status();
