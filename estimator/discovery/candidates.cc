@@ -115,7 +115,6 @@ CollinearFit FitCollinear(const Vector3d& C1, const Vector3d& C2,
   return out;
 }
 
-
 constexpr int kRandomWalkGridPoints = 5;  // factors 2, 4, ... 32 above the configured intensity
 // Reference intensity when the configuration has none: a tenth of the paper-era ESG's
 // residual-drift instability [deg/h/sqrt(h)].
@@ -407,6 +406,20 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   }
 }
 
+std::optional<FreedCoefficients> FreedDriftCoefficients(Effect effect,
+                                                        const DiagnoseOptions& options) {
+  switch (effect) {
+    case Effect::kRotorDisplacement:
+      return FreedCoefficients{kThetaC1, 6, DegPerHourToRadPerSec(options.c_sigma_deg_h)};
+    case Effect::kFourthHarmonic:
+      return FreedCoefficients{kThetaK0, 1, DegPerHourToRadPerSec(options.k0_sigma_deg_h)};
+    case Effect::kUnequalStiffness:
+      return FreedCoefficients{kThetaMu, 6, DegPerHourToRadPerSec(options.mu_nu_sigma_deg_h)};
+    default:
+      return std::nullopt;
+  }
+}
+
 absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {
   const DiagnoseOptions& opt = *ctx.options;
   CandidateFit fit;
@@ -441,17 +454,7 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
         return absl::InvalidArgumentError(
             absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
       }
-      int first = kThetaC1, count = 6;
-      double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
-      if (candidate.effect == Effect::kFourthHarmonic) {
-        first = kThetaK0;
-        count = 1;
-        sigma = DegPerHourToRadPerSec(opt.k0_sigma_deg_h);
-      } else if (candidate.effect == Effect::kUnequalStiffness) {
-        first = kThetaMu;
-        count = 6;
-        sigma = DegPerHourToRadPerSec(opt.mu_nu_sigma_deg_h);
-      }
+      const auto [first, count, sigma] = *FreedDriftCoefficients(candidate.effect, opt);
       const DriftVector before = FindGyroMutable(config, candidate.gyro)->model_sigma.AsVector();
       set_sigma(first, count, sigma);
       fit.parameters = 0;

@@ -117,6 +117,17 @@ struct CandidateFit {
   double readout_onset_hours = 0.0;
 };
 
+// The drift coefficients a rotor displacement (C1, C2), a fourth harmonic (k0) or unequal
+// stiffness (mu, nu) frees: DriftVector indices [first, first + count) with their prior 1-sigma
+// from the options [rad/s]; nullopt for any other effect.
+struct FreedCoefficients {
+  int first = 0;
+  int count = 0;
+  double sigma = 0.0;
+};
+std::optional<FreedCoefficients> FreedDriftCoefficients(Effect effect,
+                                                        const DiagnoseOptions& options);
+
 // Fits one candidate (1 to 5 filter runs, sequential; candidates run in parallel).
 // Errors: InvalidArgument for a gyro that is not configured; those of RunModel.
 absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& context);

@@ -132,15 +132,19 @@ std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedM
 // does. The best-scoring significant candidate must be homogeneous in time; when it is not, the
 // mismatch is a change in time (the smaller candidates that pass are its spill-over into the
 // other gyros through the shared star tracker): none is returned and `inhomogeneous_only` is set.
+// The fits in `refused` (an effect that failed its physics check, CheckConstantEffect) are left
+// out, significant or not.
 std::vector<Scored> SignificantInOrder(const std::vector<Scored>& scored,
-                                const std::vector<CandidateFit>& fits, bool& inhomogeneous_only) {
+                                       const std::vector<CandidateFit>& fits,
+                                       const std::vector<int>& refused, bool& inhomogeneous_only) {
   std::vector<Scored> significant;
   inhomogeneous_only = false;
   for (int pass = 0; pass < 2 && significant.empty() && !inhomogeneous_only; ++pass) {
     std::vector<Scored> pool;
     for (const Scored& s : scored) {
       const bool rw = fits[s.index].candidate.effect == Effect::kRandomWalkDrift;
-      if (s.significant && rw == (pass == 1)) pool.push_back(s);
+      const bool out = std::find(refused.begin(), refused.end(), s.index) != refused.end();
+      if (s.significant && !out && rw == (pass == 1)) pool.push_back(s);
     }
     if (pool.empty()) continue;
     const auto top =
@@ -492,18 +496,17 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   bool inhomogeneous_only = false;
   std::vector<Scored> significant;
   absl::StatusOr<std::string> rw_note;
-  // Constant effects of one gyro that fail their physics checks (CheckConstantEffect): not
-  // significant as themselves; their notes.
+  // Constant effects of one gyro that fail their physics checks (CheckConstantEffect): left out
+  // of the selection (their rows keep what the evidence says); their notes.
   std::vector<int> failed;
   std::vector<std::pair<int, std::string>> failed_notes;    // gyro, note
   std::vector<std::pair<int, std::string>> constant_notes;  // fit index, the check it passed
   for (int stage = 0; stage < 2; ++stage) {
     if (absl::Status s = fit_all(stage == 0 ? constant : timed); !s.ok()) return s;
     bool settled = false;
+    scored = Score(fits, selected, family, context);
     for (;;) {
-      scored = Score(fits, selected, family, context);
-      for (int i : failed) scored[i].significant = false;
-      significant = SignificantInOrder(scored, fits, inhomogeneous_only);
+      significant = SignificantInOrder(scored, fits, failed, inhomogeneous_only);
       rw_note = PreferRandomWalk(scored, fits, family, significant, context);
       if (!rw_note.ok()) return rw_note.status();
       settled = !significant.empty() &&
@@ -520,10 +523,6 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       failed_notes.emplace_back(fits[top].candidate.gyro, std::move(check->note));
     }
     if (settled || timed.empty()) break;
-  }
-  // The rows keep what the evidence says; the notes say why a significant effect was not taken.
-  for (Scored& x : scored) {
-    if (std::find(failed.begin(), failed.end(), x.index) != failed.end()) x.significant = true;
   }
   // A time behaviour must explain the recording better than a jump of the gyro's readings at the
   // onset (D43): a step of the readings is no physics of the library, and a drift step or a walk

@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "estimator/discovery/deviation_filter.h"
@@ -69,7 +70,7 @@ Nuisance StepNuisance(const DeviationSeries& series, double step_sigma,
 }
 
 // The deviance of each grid point of the stationary drift (correlation time x sigma, on top of
-// the configured walk) with `columns` and their `prior`; the best point's in `best`.
+// the configured walk) with `columns` and their `prior`; the best point's in `best` when given.
 struct StationaryPoint {
   double deviance = std::numeric_limits<double>::infinity();
   double correlation_hours = 0.0, sigma_deg_h = 0.0;
@@ -77,7 +78,8 @@ struct StationaryPoint {
 std::vector<double> StationaryDeviances(const DeviationSeries& series, double random_walk,
                                         double w0_sigma,
                                         const std::vector<std::vector<Vector2d>>& columns,
-                                        const VectorXd& prior, StationaryPoint& best) {
+                                        const VectorXd& prior,
+                                        StationaryPoint* best = nullptr) {
   std::vector<double> deviances;
   for (double tau_h : kCorrelationHours) {
     for (double sigma_deg_h : kStationarySigmaDegH) {
@@ -85,7 +87,7 @@ std::vector<double> StationaryDeviances(const DeviationSeries& series, double ra
       const DeviationFilter f(series, random_walk, w0_sigma, 1e-2, g);
       const double d = SeriesDeviance(f, series.y, columns, prior);
       deviances.push_back(d);
-      if (d < best.deviance) best = {d, tau_h, sigma_deg_h};
+      if (best != nullptr && d < best->deviance) *best = {d, tau_h, sigma_deg_h};
     }
   }
   return deviances;
@@ -171,7 +173,7 @@ DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, dou
   // Stationary: a Gauss-Markov drift on top of the configured walk.
   StationaryPoint best;
   out.stationary = GridEvidence(
-      base, StationaryDeviances(series, random_walk, w0_sigma, nuisance, nuisance_prior, best));
+      base, StationaryDeviances(series, random_walk, w0_sigma, nuisance, nuisance_prior, &best));
   out.correlation_hours = best.correlation_hours;
   out.sigma_deg_h = best.sigma_deg_h;
   return out;
@@ -192,12 +194,10 @@ ConstantEffectEvidence CompareConstantEffect(
   const DeviationFilter base_filter(series, random_walk, w0_sigma);
   const double base = SeriesDeviance(base_filter, series.y, held.columns, held.prior);
   out.effect = base - SeriesDeviance(base_filter, series.y, with, prior);
-  StationaryPoint alone, both;
-  out.stationary = GridEvidence(base, StationaryDeviances(series, random_walk, w0_sigma,
-                                                          held.columns, held.prior, alone));
-  out.on_top =
-      GridEvidence(base, StationaryDeviances(series, random_walk, w0_sigma, with, prior, both)) -
-      out.stationary;
+  out.stationary = GridEvidence(
+      base, StationaryDeviances(series, random_walk, w0_sigma, held.columns, held.prior));
+  out.on_top = GridEvidence(base, StationaryDeviances(series, random_walk, w0_sigma, with, prior)) -
+               out.stationary;
   return out;
 }
 
@@ -223,24 +223,10 @@ absl::StatusOr<ConstantEffectEvidence> CompareConstantEffectOf(const SelectedMod
     return absl::InvalidArgumentError(
         absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
   }
-  int first = kThetaC1, count = 6;
-  double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
-  switch (candidate.effect) {
-    case Effect::kRotorDisplacement:
-    case Effect::kGyroMisalignment:
-      break;
-    case Effect::kFourthHarmonic:
-      first = kThetaK0;
-      count = 1;
-      sigma = DegPerHourToRadPerSec(opt.k0_sigma_deg_h);
-      break;
-    case Effect::kUnequalStiffness:
-      first = kThetaMu;
-      sigma = DegPerHourToRadPerSec(opt.mu_nu_sigma_deg_h);
-      break;
-    default:
-      return absl::InvalidArgumentError(
-          absl::StrCat(CandidateName(candidate), " is not a constant effect of one gyro"));
+  const std::optional<FreedCoefficients> freed = FreedDriftCoefficients(candidate.effect, opt);
+  if (!freed.has_value() && candidate.effect != Effect::kGyroMisalignment) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(CandidateName(candidate), " is not a constant effect of one gyro"));
   }
   auto series = SeriesOf(selected, context, candidate.gyro);
   if (!series.ok()) return series.status();
@@ -259,12 +245,12 @@ absl::StatusOr<ConstantEffectEvidence> CompareConstantEffectOf(const SelectedMod
     // Only the coefficients the candidate frees: one the model already estimates is in the
     // deviation's model at its calibrated value.
     const DriftVector held = g->model_sigma.AsVector();
-    for (int i = first; i < first + count; ++i) {
+    for (int i = freed->first; i < freed->first + freed->count; ++i) {
       if (held(i) > 0.0) continue;
       columns.push_back(Signature(*series, [i](const BasisInputs& in) -> Vector3d {
         return DriftRegressor(in.h_k).col(i);  // eq. (1), (10): d(dw_k)/d(theta_i)
       }));
-      prior.push_back(sigma);
+      prior.push_back(freed->sigma);
     }
   }
   return CompareConstantEffect(*series, ModelRandomWalk(model, candidate.gyro),
