@@ -8,6 +8,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "google/protobuf/descriptor.h"
 #include "google/protobuf/util/json_util.h"
@@ -130,6 +131,18 @@ std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present
   }
   return FormatUtc(absl::FromUnixSeconds(timestamp.seconds()) +
                    absl::Nanoseconds(timestamp.nanos()));
+}
+
+std::string BasisTermLine(const estimator::BasisTerm& term, double sigma) {
+  const double to_json = estimator::BasisValueToJson(term.kind);
+  const std::string unit =
+      absl::StrCat("deg/h per ", std::string(estimator::BasisScalarJsonUnit(term.kind)));
+  const std::string label = estimator::BasisTermLabel(term);
+  if (sigma > 0.0) {
+    return absl::StrFormat("  basis %-18s %+9.5f +- %.5f %s", label, term.value * to_json,
+                           sigma * to_json, unit);
+  }
+  return absl::StrFormat("  basis %-18s %+9.5f %s (held)", label, term.value * to_json, unit);
 }
 
 Json ProtoToJson(const google::protobuf::Message& message) {

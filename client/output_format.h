@@ -21,6 +21,7 @@
 
 #include "CLI/CLI.hpp"
 #include "absl/time/time.h"
+#include "estimator/basis_term.h"
 #include "google/protobuf/descriptor.h"
 #include "google/protobuf/message.h"
 #include "google/protobuf/timestamp.pb.h"
@@ -44,6 +45,11 @@ std::string FormatUtc(absl::Time time);
 // The same for a wire timestamp; "-" when `present` is false (the field is absent), "(invalid
 // time)" when it is out of the Timestamp range.
 std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present = true);
+
+// One basis term of a table (`esg calibrate`, `esg history`), in the units of the configuration
+// (deg/h per JSON unit of the regressor): "  basis orbit cos 1 -> y   +0.00120 +- 0.00004 deg/h
+// per 1", or "... (held)" when `sigma` (SI, like term.value) is 0.
+std::string BasisTermLine(const estimator::BasisTerm& term, double sigma);
 
 // A proto message in the proto3 JSON mapping described above, its google.protobuf.Timestamp
 // fields (at any depth) in FormatUtc's form.

@@ -251,6 +251,12 @@ class JsonPrettyPrinter {
   std::string out_;
 };
 
+// Timestamp limits: 0001-01-01T00:00:00Z and 9999-12-31T23:59:59.999999999Z.
+constexpr int64_t kMinTimestampSeconds = -62135596800;
+constexpr int64_t kMaxTimestampSeconds = 253402300799;
+
+}  // namespace
+
 // A basis term of the JSON (units of its field names, spacecraft_config.proto) in SI
 // (estimator/basis_term.h); the ranges are ValidateConfig's, after the whole configuration is read.
 absl::StatusOr<estimator::BasisTerm> BasisTermFromProto(const esg::v1::BasisTerm& proto,
@@ -304,12 +310,6 @@ esg::v1::BasisTerm BasisTermToProto(const estimator::BasisTerm& t) {
   proto.set_sigma_deg_h(Tidy(t.sigma * to_json));
   return proto;
 }
-
-// Timestamp limits: 0001-01-01T00:00:00Z and 9999-12-31T23:59:59.999999999Z.
-constexpr int64_t kMinTimestampSeconds = -62135596800;
-constexpr int64_t kMaxTimestampSeconds = 253402300799;
-
-}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // Drift model.

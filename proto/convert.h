@@ -66,13 +66,20 @@ absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view jso
 // print, which a message built by ConfigToProto cannot make it do.
 std::string ConfigToJson(const estimator::SpacecraftConfig& config);
 
+// One basis term (SI, estimator/basis_term.h) as the configuration holds it: an element of
+// `gyros[].basisTerms`, in the units of its field names (deg/h per JSON unit of the regressor).
+esg::v1::BasisTerm BasisTermToProto(const estimator::BasisTerm& term);
+// The inverse; InvalidArgument "<prefix>.<field>: <reason>" for an unknown kind, a wrong count of
+// exponents or indices or a bad epoch (the ranges are ValidateConfig's).
+absl::StatusOr<estimator::BasisTerm> BasisTermFromProto(const esg::v1::BasisTerm& proto,
+                                                        const std::string& prefix);
+// The same, as compact JSON; the diagnosis reports the terms it found in this form.
+std::string BasisTermToJson(const estimator::BasisTerm& term);
+
 // File forms of the two above (the CLI's configuration files). ReadConfigFile: NotFound when the
 // file cannot be opened, InvalidArgument "<path>: <field>: <reason>" when its content is bad.
 // WriteConfigFile: InvalidArgument when ValidateConfig fails (nothing is written), Unavailable on
 // an I/O failure. Writes "<path>.tmp" then renames it over <path>.
-// One basis term as the configuration JSON holds it (an element of `gyros[].basisTerms`, units in
-// the field names), compact; the diagnosis reports the terms it found in this form.
-std::string BasisTermToJson(const estimator::BasisTerm& term);
 
 absl::StatusOr<estimator::SpacecraftConfig> ReadConfigFile(const std::string& path);
 absl::Status WriteConfigFile(const std::string& path, const estimator::SpacecraftConfig& config);

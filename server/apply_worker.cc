@@ -351,6 +351,10 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
         r.values = storage::ToCoefficientValues(g.coefficients, g.misalignment_b);
         r.sigmas = storage::ToCoefficientValues(g.sigma, g.misalignment_sigma_b);
         r.model_name = absl::StrCat("model", setup->model_name);
+        r.basis_terms = g.basis_terms;
+        for (size_t k = 0; k < r.basis_terms.size(); ++k) {
+          r.basis_terms[k].sigma = k < g.basis_sigma.size() ? g.basis_sigma[k] : 0.0;
+        }
         coefficients.push_back(std::move(r));
       }
     }

@@ -190,6 +190,9 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
   };
   fill(r.values, s.mutable_model(), s.mutable_misalignment_arcsec());
   fill(r.sigmas, s.mutable_sigma(), s.mutable_misalignment_sigma_arcsec());
+  for (const estimator::BasisTerm& t : r.basis_terms) {
+    *s.add_basis_terms() = proto_convert::BasisTermToProto(t);
+  }
   return s;
 }
 

@@ -10,25 +10,27 @@
 #include "absl/strings/str_join.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
+#include "storage/basis_terms_column.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
 namespace {
 
-// Fixed leading columns, then the 16 value columns, then the 16 sigma columns.
+// Fixed leading columns, then the 16 value columns, the 16 sigma columns and the basis terms.
 constexpr int kNumLeadingColumns = 5;
+constexpr int kBasisColumn = kNumLeadingColumns + 2 * kNumCoefficientValues;
 
 std::string AllColumns() {
   return absl::StrCat(
       "spacecraft_id, gyro_id, measurement_time_unix_ns, compute_time_unix_ns, model_name, ",
       absl::StrJoin(kCoefficientColumns, ", "), ", ",
-      absl::StrJoin(kCoefficientSigmaColumns, ", "));
+      absl::StrJoin(kCoefficientSigmaColumns, ", "), ", basis_terms_json");
 }
 
 const std::string& InsertSql() {
   static const std::string* const sql = [] {
     std::string params;
-    for (int i = 1; i <= kNumLeadingColumns + 2 * kNumCoefficientValues; ++i) {
+    for (int i = 1; i <= kBasisColumn + 1; ++i) {
       absl::StrAppend(&params, i == 1 ? "" : ", ", "?", i);
     }
     return new std::string(
@@ -73,7 +75,7 @@ const std::string& HistoryPageSql(bool one_gyro) {
 }
 
 // Column of revised_time_unix_ns in the history queries, and of the row id in a page's.
-constexpr int kRevisedColumn = kNumLeadingColumns + 2 * kNumCoefficientValues;
+constexpr int kRevisedColumn = kBasisColumn + 1;
 constexpr int kRowIdColumn = kRevisedColumn + 1;
 
 // Records are SI; each column holds the unit its name carries (records.h): deg/h for the 13
@@ -87,8 +89,9 @@ double FromColumnUnit(int index, double column) {
                                           : estimator::ArcsecToRad(column);
 }
 
-// The record of the current row (columns in the order of AllColumns()).
-CoefficientRecord ReadRecord(const Statement& st) {
+// The record of the current row (columns in the order of AllColumns()); DataLoss when its basis
+// terms do not read.
+absl::StatusOr<CoefficientRecord> ReadRecord(const Statement& st) {
   CoefficientRecord r;
   r.spacecraft_id = st.ColumnText(0);
   r.gyro_id = static_cast<int>(st.ColumnInt64(1));
@@ -106,6 +109,9 @@ CoefficientRecord ReadRecord(const Statement& st) {
     any_sigma = any_sigma || !st.ColumnIsNull(sigma_column);
   }
   if (any_sigma) r.sigmas = std::move(sigmas);
+  if (!st.ColumnIsNull(kBasisColumn)) {
+    ASSIGN_OR_RETURN(r.basis_terms, BasisTermsFromColumn(st.ColumnText(kBasisColumn)));
+  }
   if (!st.ColumnIsNull(kRevisedColumn)) {
     r.revised_time = UnixNanosToTime(st.ColumnInt64(kRevisedColumn));
   }
@@ -130,6 +136,10 @@ absl::Status Validate(const CoefficientRecord& r) {
     return absl::InvalidArgumentError(absl::StrCat("coefficients.sigmas: ", r.sigmas.size(),
                                                    " entries, expected 0 or ",
                                                    kNumCoefficientValues));
+  }
+  for (size_t k = 0; k < r.basis_terms.size(); ++k) {
+    RETURN_IF_ERROR(estimator::ValidateBasisTerm(
+        r.basis_terms[k], absl::StrCat("coefficients.basis_terms[", k, "]")));
   }
   RETURN_IF_ERROR(ValidateStorableTime(r.measurement_time, "coefficients.measurement_time"));
   return ValidateStorableTime(r.compute_time, "coefficients.compute_time");
@@ -185,6 +195,11 @@ absl::Status CoefficientStore::Append(Transaction& txn, const CoefficientRecord&
       st->BindDouble(sigma_index, ToColumnUnit(i, record.sigmas[i]));
     }
   }
+  if (record.basis_terms.empty()) {
+    st->BindNull(kBasisColumn + 1);
+  } else {
+    st->BindText(kBasisColumn + 1, BasisTermsToColumn(record.basis_terms));
+  }
   return st->Run();
 }
 
@@ -204,7 +219,8 @@ absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
   while (true) {
     ASSIGN_OR_RETURN(bool row, st->Step());
     if (!row) break;
-    out.push_back(ReadRecord(*st));
+    ASSIGN_OR_RETURN(CoefficientRecord record, ReadRecord(*st));
+    out.push_back(std::move(record));
   }
   return out;
 }
@@ -242,7 +258,8 @@ absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
       page.next = last;  // a row beyond the page exists
       break;
     }
-    page.records.push_back(ReadRecord(*st));
+    ASSIGN_OR_RETURN(CoefficientRecord record, ReadRecord(*st));
+    page.records.push_back(std::move(record));
     last.measurement_time_unix_ns = st->ColumnInt64(2);
     last.gyro_id = st->ColumnInt64(1);
     last.row_id = st->ColumnInt64(kRowIdColumn);

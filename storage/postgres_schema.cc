@@ -2,6 +2,7 @@
 #include "storage/postgres_schema.h"
 
 #include <cstdint>
+#include <iterator>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -205,6 +206,11 @@ CREATE TRIGGER estimates_notify AFTER INSERT OR UPDATE ON estimates
   FOR EACH ROW EXECUTE FUNCTION esg_estimates_notify();
 )sql";
 
+// kUpgrades[n - 7] takes a database from version n to n + 1 (one is created at version 7 and
+// upgraded in the same transaction).
+constexpr absl::string_view kUpgrades[] = {kCoefficientBasisTermsColumn};
+static_assert(7 + std::size(kUpgrades) == kCurrentSchemaVersion);
+
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").
 constexpr int64_t kSchemaLockKey = 0x6573672d736368;
 
@@ -244,22 +250,29 @@ absl::Status MigratePostgresTo(Database& db, int target_version) {
         "database %s has schema version %d, newer than this program's %d: upgrade the program",
         db.path(), version, kCurrentSchemaVersion));
   }
-  if (version == 0 && target_version == kCurrentSchemaVersion) {
+  if (version > target_version) {
+    return absl::FailedPreconditionError(
+        absl::StrFormat("database %s has schema version %d, newer than the requested %d",
+                        db.path(), version, target_version));
+  }
+  if (target_version == 0) return txn.Commit();
+  if (version > 0 && version < 7) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "database %s has schema version %d: PostgreSQL databases start at version 7", db.path(),
+        version));
+  }
+  if (version == 0) {
     absl::Status created = txn.Execute(kSchemaV7);
     if (!created.ok()) {
       return absl::FailedPreconditionError(absl::StrCat(
           "database ", db.path(), ": cannot create the service's tables (does it hold other "
           "tables of the same names?): ", created.message()));
     }
-    ASSIGN_OR_RETURN(Statement * insert, txn.Prepare("INSERT INTO esg_schema (version) VALUES (?1)"));
-    insert->BindInt64(1, kCurrentSchemaVersion);
+    ASSIGN_OR_RETURN(Statement * insert, txn.Prepare("INSERT INTO esg_schema (version) VALUES (7)"));
     RETURN_IF_ERROR(insert->Run());
     RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
-  } else if (version > target_version) {
-    return absl::FailedPreconditionError(
-        absl::StrFormat("database %s has schema version %d, newer than the requested %d",
-                        db.path(), version, target_version));
-  } else if (version == kCurrentSchemaVersion) {
+    version = 7;
+  } else {
     ASSIGN_OR_RETURN(Statement * trigger,
                      txn.Prepare("SELECT COUNT(*) FROM pg_trigger WHERE tgname = "
                                  "'estimates_notify' AND tgrelid = to_regclass('estimates')"));
@@ -268,6 +281,12 @@ absl::Status MigratePostgresTo(Database& db, int target_version) {
     trigger->Reset();
     if (!present) RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
   }
+  for (; version < kCurrentSchemaVersion; ++version) {
+    RETURN_IF_ERROR(txn.Execute(kUpgrades[version - 7]));
+  }
+  ASSIGN_OR_RETURN(Statement * update, txn.Prepare("UPDATE esg_schema SET version = ?1"));
+  update->BindInt64(1, kCurrentSchemaVersion);
+  RETURN_IF_ERROR(update->Run());
   return txn.Commit();
 }
 

@@ -12,6 +12,7 @@
 
 #include "absl/strings/string_view.h"
 #include "absl/time/time.h"
+#include "estimator/basis_term.h"
 #include "estimator/drift_model.h"
 
 namespace esg::storage {
@@ -105,6 +106,10 @@ struct CoefficientRecord {
   std::vector<double> values;  // kNumCoefficientValues, layout above [rad/s, rad]; NaN = not estimated
   std::vector<double> sigmas;  // 1-sigma, same layout and units, or empty when unknown; NaN = unknown
   std::string model_name;      // e.g. "model10"
+  // The gyro's configured basis terms (drift terms beyond eq. (1), (10), estimator/basis_term.h),
+  // in configuration order, each with `value` the estimate and `sigma` its 1-sigma (0: held at its
+  // value), SI [rad/s per SI unit of the term's regressor]; empty when the gyro has none.
+  std::vector<estimator::BasisTerm> basis_terms;
   // Wall-clock time a re-run over a late frame superseded this estimate (docs/service.md
   // "Several ground stations"); InfinitePast: current. Ignored on input (stored current).
   absl::Time revised_time = absl::InfinitePast();

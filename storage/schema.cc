@@ -237,9 +237,13 @@ CREATE TABLE estimates (
 ) WITHOUT ROWID;
 )sql";
 
+// Version 8: the basis terms of each coefficient estimate (storage/basis_terms_column.h), a JSON
+// array; NULL for a gyro without basis terms and for the rows stored before.
+constexpr absl::string_view kSchemaV8 = kCoefficientBasisTermsColumn;
+
 // kMigrations[n] takes the schema from version n to n + 1.
 constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4,
-                                             kSchemaV5, kSchemaV6, kSchemaV7};
+                                             kSchemaV5, kSchemaV6, kSchemaV7, kSchemaV8};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -16,6 +16,8 @@
 //      carry revised_time_unix_ns (NULL: current; else the wall-clock time a re-run over a
 //      late frame superseded the row); late_frames (late frames archived but not yet applied by
 //      a re-run); window_checkpoints (periodic session checkpoints the re-runs start from).
+//   7  estimates (the per-step estimate archive, estimate_store.h).
+//   8  coefficients.basis_terms_json (basis_terms_column.h; NULL: none, or stored before 8).
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -42,7 +44,11 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 7;
+inline constexpr int kCurrentSchemaVersion = 8;
+
+// The DDL of version 8, the same in both dialects.
+inline constexpr absl::string_view kCoefficientBasisTermsColumn =
+    "ALTER TABLE coefficients ADD COLUMN basis_terms_json TEXT;";
 
 // PRAGMA user_version of the open database.
 absl::StatusOr<int> SchemaVersion(Database& db);

@@ -298,18 +298,8 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
       row(estimator::CoefficientName(i), theta(i), sigma(i), i);
     }
     for (size_t k = 0; k < g.basis_terms.size(); ++k) {
-      const estimator::BasisTerm& t = g.basis_terms[k];
-      const double to_json = estimator::BasisValueToJson(t.kind);
       const double sigma = k < g.basis_sigma.size() ? g.basis_sigma[k] : 0.0;
-      const std::string unit =
-          absl::StrCat("deg/h per ", std::string(estimator::BasisScalarJsonUnit(t.kind)));
-      if (sigma > 0.0) {
-        std::printf("  basis %-18s %+9.5f +- %.5f %s\n", estimator::BasisTermLabel(t).c_str(),
-                    t.value * to_json, sigma * to_json, unit.c_str());
-      } else {
-        std::printf("  basis %-18s %+9.5f %s (held)\n", estimator::BasisTermLabel(t).c_str(),
-                    t.value * to_json, unit.c_str());
-      }
+      std::printf("%s\n", BasisTermLine(g.basis_terms[k], sigma).c_str());
     }
     std::printf("  misalignment [%+.1f %+.1f %+.1f] +- [%.1f %.1f %.1f] arcsec (body axes)\n",
                 g.misalignment_b.x() * kArcsec, g.misalignment_b.y() * kArcsec,

@@ -4,10 +4,12 @@
 // history of any length is read in pages under gRPC's default message limit, docs/service.md
 // "Paging"): per measurement epoch and gyro the estimated
 // drift model of eq. (1), (10) in the case frame k [deg/h] with its 1-sigma, and the estimated
-// gyro-to-star-tracker misalignment about the body axes [arcsec] with its 1-sigma.
-// Output: a table (k0, C1, C2, mu, nu values and the misalignment), or with --format csv (short
+// gyro-to-star-tracker misalignment about the body axes [arcsec] with its 1-sigma, and the
+// gyro's configured basis terms (drift terms beyond eq. (1), (10)) with their 1-sigma.
+// Output: a table (k0, C1, C2, mu, nu values and the misalignment, a line per basis term), or with --format csv (short
 // form --csv) one row per snapshot with every value and sigma (columns in CsvHeader), or with
-// --format json (--json) the HistoryResponse in the proto JSON mapping. --include-revised also
+// --format json (--json) the HistoryResponse in the proto JSON mapping (basis terms in
+// `basisTerms`, as the configuration writes them; the CSV leaves them out). --include-revised also
 // returns the snapshots a re-run over a late frame superseded (docs/service.md "Several ground
 // stations"): the table marks them "revised", the CSV gains a last column revised_time_utc.
 // Exit codes: 0 success, 2 bad arguments, 1 server failure.
@@ -145,6 +147,12 @@ void PrintTable(const esg::v1::HistoryResponse& history) {
                                At(s.misalignment_arcsec(), 1), At(s.misalignment_arcsec(), 2)));
     if (s.has_revised_time()) absl::StrAppend(&line, "  revised at ", FormatUtc(s.revised_time()));
     std::printf("%s\n", line.c_str());
+    for (int k = 0; k < s.basis_terms_size(); ++k) {
+      absl::StatusOr<estimator::BasisTerm> term =
+          proto_convert::BasisTermFromProto(s.basis_terms(k), absl::StrCat("basisTerms[", k, "]"));
+      std::printf("%s\n", term.ok() ? BasisTermLine(*term, term->sigma).c_str()
+                                    : absl::StrCat("  basis ", term.status().message()).c_str());
+    }
   }
   std::printf("%d snapshots (coefficients in deg/h, case frame k; --csv adds every 1-sigma)\n",
               history.snapshots_size());

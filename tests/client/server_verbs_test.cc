@@ -492,6 +492,55 @@ void ReplayAcrossServerStop(const std::string& recording_path, int64_t rows, int
   EXPECT_GE(I64(status["framesDuplicate"]), 2 * rows);
 }
 
+// A configuration with a drift term beyond eq. (1), (10) (as `esg diagnose` adds one): `esg
+// history` shows the term's estimate and 1-sigma under its gyro's row, and the JSON carries it.
+TEST_F(ServerVerbs, HistoryShowsTheCalibratedBasisTermsOfAGyro) {
+  TempDir dir;
+  Json config = Json::parse(std::ifstream(Rdk1()));
+  config["gyros"][0]["basisTerms"] =
+      Json::array({{{"kind", "orbital_harmonic"}, {"axis", 1}, {"periodS", 5400},
+                    {"sigmaDegH", 0.05}}});
+  const std::string config_path = dir.File("rdk1-basis.json");
+  std::ofstream(config_path) << config.dump(2);
+  Esgd server(dir, dir.File("esg.db"), FreePort());
+  ASSERT_TRUE(server.Start()) << server.log();
+  const std::string at = "--server " + server.address() + " ";
+  RunResult r = RunEsg(dir, at + "configure --config " + Quote(config_path));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait");
+  ASSERT_EQ(r.exit_code, 0) << r.err << server.log();
+
+  const int gyro = config["gyros"][0]["id"].get<int>();
+  r = RunEsg(dir, at + "history --spacecraft RDK-1 --gyro " + std::to_string(gyro));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::vector<std::string> lines = absl::StrSplit(r.out, '\n', absl::SkipEmpty());
+  int basis_lines = 0;
+  for (const std::string& line : lines) {
+    if (!absl::StartsWith(line, "  basis ")) continue;
+    ++basis_lines;
+    EXPECT_THAT(line, HasSubstr("orbit cos 1 -> x"));
+    EXPECT_THAT(line, HasSubstr(" +- "));
+    EXPECT_THAT(line, HasSubstr("deg/h per 1"));
+  }
+  EXPECT_GT(basis_lines, 10);
+  // The header, a row and a basis line per snapshot, the count.
+  EXPECT_EQ(2 * basis_lines + 2, static_cast<int>(lines.size())) << r.out;
+
+  r = RunEsg(dir, at + "history --spacecraft RDK-1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json history = r.json();
+  Json last_of_gyro;
+  for (const Json& s : history["snapshots"]) {
+    EXPECT_EQ(s["basisTerms"].size(), s["gyroId"] == gyro ? 1u : 0u);
+    if (s["gyroId"] == gyro) last_of_gyro = s;
+  }
+  ASSERT_EQ(last_of_gyro["basisTerms"].size(), 1u);
+  EXPECT_EQ(last_of_gyro["basisTerms"][0]["kind"], "orbital_harmonic");
+  EXPECT_EQ(last_of_gyro["basisTerms"][0]["periodS"], 5400);
+  // Calibrated over the 6 h: its 1-sigma fell below the 0.05 deg/h prior.
+  EXPECT_LT(last_of_gyro["basisTerms"][0]["sigmaDegH"].get<double>(), 0.05 / 2);
+}
+
 TEST_F(ServerVerbs, ReplayResumesAfterKillDashNineWithoutApplyingAnythingTwice) {
   ReplayAcrossServerStop(recording_path_, Rows(), SIGKILL);
 }

@@ -11,6 +11,7 @@
 #include <map>
 #include <thread>
 
+#include "estimator/basis_term.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -99,6 +100,15 @@ void ExpectFinalEstimatesEqualOffline(const std::vector<esg::v1::CoefficientSnap
       EXPECT_DOUBLE_EQ(s.misalignment_sigma_arcsec(i),
                        arcsec(sigma[storage::kCoefficientMisalignment + i]));
     }
+    // The basis terms in the configuration's units (deg/h per unit of the regressor), written
+    // with 15 significant digits: equal to 1e-12 deg/h.
+    ASSERT_EQ(s.basis_terms_size(), static_cast<int>(g.basis_terms.size()));
+    for (int k = 0; k < s.basis_terms_size(); ++k) {
+      const double to_json = estimator::BasisValueToJson(g.basis_terms[k].kind);
+      EXPECT_EQ(s.basis_terms(k).kind(), estimator::BasisKindName(g.basis_terms[k].kind));
+      EXPECT_NEAR(s.basis_terms(k).value_deg_h(), g.basis_terms[k].value * to_json, 1e-12) << k;
+      EXPECT_NEAR(s.basis_terms(k).sigma_deg_h(), g.basis_sigma[k] * to_json, 1e-12) << k;
+    }
   }
 }
 
@@ -133,6 +143,45 @@ TEST(EndToEnd, StreamedCalibrationEqualsAnOfflineRunExactly) {
   ExpectFinalEstimatesEqualOffline(history, offline);
   // Calibration did something: k0's sigma fell well below its 0.3 deg/h prior.
   EXPECT_LT(history.back().sigma().k0_deg_h(), 0.1);
+}
+
+// A drift term beyond eq. (1), (10) configured for calibration (what `esg diagnose` adds): the
+// stored history carries its estimate and 1-sigma at every step, equal to the offline session's.
+TEST(EndToEnd, ACalibratedBasisTermIsInTheHistoryAndEqualsTheOfflineRun) {
+  SimulatedRun run = SimulateRun("E2E-B", 4.0, 23);
+  estimator::BasisTerm orbit;
+  orbit.kind = estimator::BasisKind::kOrbitalHarmonic;
+  orbit.axis = 1;
+  orbit.period = 5400.0;
+  orbit.sigma = estimator::DegPerHourToRadPerSec(0.05);
+  run.config.gyros[0].basis_terms = {orbit};
+  LoopbackServer server;
+  auto stub = server.Stub();
+  grpc::ClientContext ctx;
+  esg::v1::ConfigureResponse configured;
+  ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured).ok());
+  auto streamed = StreamFrames(*stub, run.frames);
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  ASSERT_TRUE(server.core().WaitApplied("E2E-B", absl::Seconds(120)).ok());
+
+  const OfflineRun offline = RunOffline(run);
+  const auto history = History(*stub, "E2E-B");
+  ExpectFinalEstimatesEqualOffline(history, offline);
+  int with_term = 0;
+  for (const esg::v1::CoefficientSnapshot& s : history) {
+    ASSERT_EQ(s.basis_terms_size(), s.gyro_id() == run.config.gyros[0].id ? 1 : 0);
+    if (s.basis_terms_size() == 0) continue;
+    ++with_term;
+    EXPECT_EQ(s.basis_terms(0).kind(), "orbital_harmonic");
+    EXPECT_EQ(s.basis_terms(0).period_s(), 5400.0);
+  }
+  EXPECT_EQ(with_term, offline.measurement_steps);
+  // Calibrated, not echoed: its 1-sigma fell below the 0.05 deg/h prior.
+  for (auto it = history.rbegin(); it != history.rend(); ++it) {
+    if (it->basis_terms_size() == 0) continue;
+    EXPECT_LT(it->basis_terms(0).sigma_deg_h(), 0.05 / 2);
+    break;
+  }
 }
 
 TEST(EndToEnd, KillNineMidStreamLosesNoAckedFrameAndAppliesNoneTwice) {

@@ -1,5 +1,5 @@
-// Tests of storage/coefficient_store.h: round trip of all 16 values and sigmas with NaN, the
-// per-gyro and time-window filters, the SI <-> deg/h, arcsec conversions, argument errors.
+// Tests of storage/coefficient_store.h: round trip of all 16 values and sigmas with NaN and of the
+// basis terms (storage/basis_terms_column.h), the per-gyro and time-window filters, the SI <-> deg/h, arcsec conversions, argument errors.
 #include "storage/coefficient_store.h"
 
 #include <cmath>
@@ -7,8 +7,11 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
+#include "estimator/basis_term.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
+#include "nlohmann/json.hpp"
 #include "gtest/gtest.h"
 #include "storage/schema.h"
 #include "storage/storage.h"
@@ -22,6 +25,7 @@ namespace {
 using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::QueryDouble;
+using ::esg::storage::testing::QueryInt;
 using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
@@ -122,6 +126,90 @@ TEST_P(CoefficientStoreTest, EmptySigmasReadBackEmpty) {
   EXPECT_THAT((*read)[0].values, ::testing::Pointwise(::testing::DoubleEq(), written.values));
 }
 
+// Two basis terms of different kinds: an orbital harmonic (unit of s: 1) calibrated, and a ramp
+// (unit of s: h in the configuration, s in SI) held at its value.
+std::vector<estimator::BasisTerm> TwoBasisTerms() {
+  estimator::BasisTerm orbit;
+  orbit.kind = estimator::BasisKind::kOrbitalHarmonic;
+  orbit.axis = 2;
+  orbit.harmonic = 2;
+  orbit.sine = true;
+  orbit.period = 5400.0;
+  orbit.epoch = T(123.25);
+  orbit.value = estimator::DegPerHourToRadPerSec(0.0125);
+  orbit.sigma = estimator::DegPerHourToRadPerSec(0.0004);
+  estimator::BasisTerm ramp;
+  ramp.kind = estimator::BasisKind::kRamp;
+  ramp.axis = 3;
+  ramp.epoch = T(0);
+  ramp.value = estimator::DegPerHourToRadPerSec(0.002) / 3600.0;  // 0.002 deg/h per h
+  ramp.sigma = 0.0;
+  return {orbit, ramp};
+}
+
+TEST_P(CoefficientStoreTest, BasisTermsRoundTripAndTheColumnHoldsTheConfigurationUnits) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  CoefficientRecord with_terms = Record("RDK-1", 1, 60);
+  with_terms.basis_terms = TwoBasisTerms();
+  ASSERT_THAT((*storage)->coefficients().Append(with_terms), IsOk());
+  ASSERT_THAT((*storage)->coefficients().Append(Record("RDK-1", 2, 60)), IsOk());
+
+  absl::StatusOr<CoefficientPage> page = (*storage)->coefficients().HistoryPage(
+      "RDK-1", 0, absl::InfinitePast(), absl::InfiniteFuture(), std::nullopt, 10);
+  ASSERT_THAT(page, IsOk());
+  ASSERT_EQ(page->records.size(), 2u);
+  EXPECT_THAT(page->records[1].basis_terms, IsEmpty());
+  const std::vector<estimator::BasisTerm>& read = page->records[0].basis_terms;
+  ASSERT_EQ(read.size(), 2u);
+  for (size_t k = 0; k < read.size(); ++k) {
+    const estimator::BasisTerm& w = with_terms.basis_terms[k];
+    EXPECT_EQ(read[k].kind, w.kind) << k;
+    EXPECT_EQ(read[k].axis, w.axis) << k;
+    EXPECT_EQ(read[k].exponents, w.exponents) << k;
+    EXPECT_EQ(read[k].index, w.index) << k;
+    EXPECT_EQ(read[k].harmonic, w.harmonic) << k;
+    EXPECT_EQ(read[k].sine, w.sine) << k;
+    EXPECT_EQ(read[k].period, w.period) << k;
+    EXPECT_EQ(read[k].epoch, w.epoch) << k;
+    EXPECT_DOUBLE_EQ(read[k].value, w.value) << k;
+    EXPECT_DOUBLE_EQ(read[k].sigma, w.sigma) << k;
+  }
+  // A user of plain SQL reads deg/h per unit of the regressor, as the configuration writes it.
+  absl::StatusOr<std::string> column = testing::QueryText(
+      (*storage)->database(), "SELECT basis_terms_json FROM coefficients WHERE gyro_id = 1");
+  ASSERT_THAT(column, IsOk());
+  const nlohmann::json terms = nlohmann::json::parse(*column);
+  ASSERT_EQ(terms.size(), 2u);
+  EXPECT_EQ(terms[0]["label"], "orbit sin 2 -> y");
+  EXPECT_NEAR(terms[0]["value_deg_h"].get<double>(), 0.0125, 1e-15);
+  EXPECT_NEAR(terms[0]["sigma_deg_h"].get<double>(), 0.0004, 1e-15);
+  EXPECT_EQ(terms[1]["kind"], "ramp");
+  EXPECT_NEAR(terms[1]["value_deg_h"].get<double>(), 0.002, 1e-15);  // per hour of ramp
+  EXPECT_EQ(terms[1]["sigma_deg_h"].get<double>(), 0.0);
+  EXPECT_THAT(QueryInt((*storage)->database(),
+                       "SELECT COUNT(*) FROM coefficients WHERE basis_terms_json IS NULL"),
+              IsOkAndHolds(1));
+}
+
+TEST_P(CoefficientStoreTest, AnUnreadableBasisTermsColumnIsDataLossNamingIt) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  CoefficientRecord r = Record("RDK-1", 1, 60);
+  r.basis_terms = TwoBasisTerms();
+  ASSERT_THAT((*storage)->coefficients().Append(r), IsOk());
+  for (const char* text : {"'not json'", "'[{\"kind\": \"orbital_harmonic\"}]'",
+                           "'[{\"kind\": \"warp\", \"axis\": 1}]'"}) {
+    ASSERT_THAT((*storage)->database().Execute(
+                    absl::StrCat("UPDATE coefficients SET basis_terms_json = ", text)),
+                IsOk());
+    EXPECT_THAT((*storage)->coefficients().History("RDK-1", 0, absl::InfinitePast(),
+                                                   absl::InfiniteFuture()),
+                StatusIs(absl::StatusCode::kDataLoss, HasSubstr("coefficients.basis_terms_json")))
+        << text;
+  }
+}
+
 TEST_P(CoefficientStoreTest, HistoryFiltersByGyroAndHalfOpenWindowInTimeOrder) {
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
@@ -171,6 +259,11 @@ TEST_P(CoefficientStoreTest, RejectsMalformedRecords) {
   r = Record("", 1, 0);
   EXPECT_THAT(store.Append(r),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("spacecraft_id")));
+  r = Record("RDK-1", 1, 0);
+  r.basis_terms = TwoBasisTerms();
+  r.basis_terms[1].axis = 4;
+  EXPECT_THAT(store.Append(r), StatusIs(absl::StatusCode::kInvalidArgument,
+                                        HasSubstr("coefficients.basis_terms[1]")));
   EXPECT_THAT(store.History("RDK-1", 0, absl::InfinitePast(), absl::InfiniteFuture()),
               IsOkAndHolds(IsEmpty()));
 }

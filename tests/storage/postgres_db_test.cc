@@ -314,6 +314,35 @@ TEST(PostgresStorage, TwoOpensOfAFreshDatabaseAtOnceBothSucceed) {
   }
 }
 
+// A database created at version 7 by an earlier program is upgraded when a server opens it: the
+// coefficients gain their basis terms (schema.h version 8).
+TEST(PostgresStorage, AVersion7DatabaseIsUpgradedWhenOpened) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  const std::string column_sql =
+      "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'coefficients' AND "
+      "column_name = 'basis_terms_json'";
+  {
+    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+    ASSERT_THAT(storage, IsOk());
+    ASSERT_THAT((*storage)->database().Execute(
+                    "ALTER TABLE coefficients DROP COLUMN basis_terms_json; "
+                    "UPDATE esg_schema SET version = 7"),
+                IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(0));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(1));
+  EXPECT_THAT(QueryInt((*storage)->database(), "SELECT MAX(version) FROM esg_schema"),
+              IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(QueryInt((*storage)->database(), "SELECT COUNT(*) FROM esg_schema"),
+              IsOkAndHolds(1));
+}
+
 // The estimates trigger (postgres_schema.h kEstimatesChannel): a stored estimate is notified to a
 // listener of Storage::ListenForChanges with its measurement time and spacecraft, and a database
 // created at version 7 before the trigger existed gets it when a server opens it.

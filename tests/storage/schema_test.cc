@@ -31,6 +31,7 @@ using ::esg::testing::StatusIs;
 using ::esg::testing::TempDir;
 using ::testing::ElementsAreArray;
 using ::testing::HasSubstr;
+using ::testing::IsEmpty;
 using ::testing::IsSupersetOf;
 
 std::vector<std::string> Columns(Database& db, const std::string& table) {
@@ -141,6 +142,7 @@ TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
   for (absl::string_view c : kCoefficientColumns) expected.emplace_back(c);
   for (absl::string_view c : kCoefficientSigmaColumns) expected.emplace_back(c);
   expected.emplace_back("revised_time_unix_ns");  // version 6: the reorder window's revisions
+  expected.emplace_back("basis_terms_json");      // version 8: the basis terms
   EXPECT_THAT(Columns(**db, "coefficients"), ElementsAreArray(expected));
   // Spot-check the documented names (records.h) so a reordering cannot pass silently.
   EXPECT_EQ(kCoefficientColumns[kCoefficientK0], "k0_deg_h");
@@ -312,6 +314,45 @@ TEST(Schema, Version6FileOpensMigratedWithItsDataAndAnEmptyEstimateArchive) {
   r.state = "CALIBRATING";
   ASSERT_THAT((*storage)->estimates().Put(r), IsOk());
   EXPECT_THAT((*storage)->estimates().Count("SC-6"), IsOkAndHolds(1));
+}
+
+// Version 8 adds the basis terms of each coefficient estimate: rows stored before read back with
+// none, and new rows carry theirs.
+TEST(Schema, CoefficientsOfAVersion7FileReadBackWithoutBasisTermsAfterTheMigration) {
+  TempDir dir;
+  const std::string path = dir.File("v7.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 7), IsOk());
+    ASSERT_THAT((*db)->Execute(absl::StrCat(
+                    "INSERT INTO coefficients (spacecraft_id, gyro_id, measurement_time_unix_ns, "
+                    "compute_time_unix_ns, model_name, k0_deg_h) VALUES ('SC-7', 2, ",
+                    TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(61)), ", 'model10', 0.25)")),
+                IsOk());
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  CoefficientRecord added;
+  added.spacecraft_id = "SC-7";
+  added.gyro_id = 2;
+  added.measurement_time = T(120);
+  added.compute_time = T(121);
+  added.model_name = "model10";
+  added.values.assign(kNumCoefficientValues, 0.0);
+  estimator::BasisTerm term;  // a case-fixed drift along x, calibrated
+  term.value = 1e-8;
+  term.sigma = 1e-9;
+  added.basis_terms = {term};
+  ASSERT_THAT((*storage)->coefficients().Append(added), IsOk());
+  absl::StatusOr<std::vector<CoefficientRecord>> read = (*storage)->coefficients().History(
+      "SC-7", 2, absl::InfinitePast(), absl::InfiniteFuture());
+  ASSERT_THAT(read, IsOk());
+  ASSERT_EQ(read->size(), 2u);
+  EXPECT_THAT((*read)[0].basis_terms, IsEmpty());
+  ASSERT_EQ((*read)[1].basis_terms.size(), 1u);
+  EXPECT_DOUBLE_EQ((*read)[1].basis_terms[0].value, 1e-8);
 }
 
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
