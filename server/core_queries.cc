@@ -1,6 +1,7 @@
 // The queries of the service: session summaries, coefficient history, alert acknowledgement,
 // and the model-discrepancy diagnosis over archived telemetry (see estimation_core.h).
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -337,8 +338,14 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     return absl::FailedPreconditionError(
         absl::StrCat("spacecraft_id: '", sc->id, "' has no usable configuration (quarantined)"));
   }
+  if (!(std::isfinite(request.orbital_period_s()) && request.orbital_period_s() >= 0.0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "orbital_period_s: ", request.orbital_period_s(),
+        " must be positive (or 0: the period of the recording's orbital-orientation spans)"));
+  }
   estimator::discovery::DiagnoseOptions options;
   options.model = request.model().empty() ? setup->model_name : request.model();
+  options.orbital_period_s = request.orbital_period_s();
   options.cancelled = cancelled;
   // The estimator starts no threads. A diagnosis runs on its call's worker thread and gets one
   // more here (options.threads = 2 tasks, the calling thread one of them); with the limit on

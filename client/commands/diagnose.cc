@@ -52,6 +52,7 @@ struct DiagnoseCliOptions {
   int threads = 2;
   double integration_rate_hz = 0.2;
   std::string effects;
+  double orbital_period_min = 0.0;  // 0: from the recording
 };
 
 std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
@@ -180,6 +181,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
   };
   options.integration_rate_hz = o.integration_rate_hz;
   options.effects = *effects;
+  options.orbital_period_s = 60.0 * o.orbital_period_min;
   StageProgress progress;
   auto report = disc::Diagnose(*config, recording->frames, options,
                                [&](double f, const std::string& stage) { progress(f, stage); });
@@ -222,6 +224,7 @@ int RunDiagnoseVerb(const DiagnoseCliOptions& o, const ServerDiagnoseOptions& se
     }
     ServerDiagnoseOptions request = server;
     if (model_given) request.model = o.model;  // else the session's model
+    request.orbital_period_s = 60.0 * o.orbital_period_min;
     request.format = o.format;
     return RunServerDiagnose(request, global);
   }
@@ -280,6 +283,11 @@ void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
                   "filter integration rate during diagnosis, Hz (<= 0: the configuration's)")
       ->capture_default_str();
   cmd->add_option("--effects", o->effects, "comma-separated effect ids to try (default: all)");
+  cmd->add_option("--orbital-period", o->orbital_period_min,
+                  "the spacecraft's orbital period, minutes, for the orbital-phase terms of the "
+                  "open-ended stage (default: the period of the recording's orbital-orientation "
+                  "spans; a recording without them has no such terms)")
+      ->check(CLI::Range(1.0, 1e5));
   cmd->callback([o, server, model, &global, exit_code] {
     *exit_code = RunDiagnoseVerb(*o, *server, model->count() > 0, global);
   });

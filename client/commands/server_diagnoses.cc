@@ -190,6 +190,7 @@ int RunServerDiagnose(const ServerDiagnoseOptions& o, const GlobalOptions& globa
   esg::v1::DiagnoseRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_model(o.model);
+  request.set_orbital_period_s(o.orbital_period_s);
   if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;

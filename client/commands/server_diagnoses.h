@@ -24,6 +24,7 @@ struct ServerDiagnoseOptions {
   std::string from;   // RFC 3339; empty: from the first archived frame
   std::string to;     // RFC 3339; empty: to after the last archived frame
   std::string model;  // empty: the session's model
+  double orbital_period_s = 0.0;  // 0: from the recording's orbital-orientation spans
   OutputFormat format = OutputFormat::kTable;
 };
 

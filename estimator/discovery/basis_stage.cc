@@ -204,7 +204,8 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   if (!series.ok()) return series.status();
   out.options = ModelOpenEndedOptions(model, opt);
   OpenEndedOptions& o = out.options;
-  o.orbital_period_s = OrbitalPeriod(context.regimes());
+  o.orbital_period_s =
+      opt.orbital_period_s > 0.0 ? opt.orbital_period_s : OrbitalPeriod(context.regimes());
   o.epoch = context.frames().front().time;
   for (const GyroConfig& g : model.config.gyros) {
     o.column_budget.emplace_back(

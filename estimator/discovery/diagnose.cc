@@ -39,6 +39,11 @@ absl::Status CheckInput(const SpacecraftConfig& config, const std::vector<Teleme
     return absl::InvalidArgumentError(
         absl::StrFormat("alpha: must be in (0, 1), got %g", options.alpha));
   }
+  if (!(std::isfinite(options.orbital_period_s) && options.orbital_period_s >= 0.0)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "orbital period: must be positive (or 0: from the recording), got %g s",
+        options.orbital_period_s));
+  }
   int st_frames = 0;
   for (const TelemetryFrame& f : frames)
     st_frames += f.star_tracker.has_value() && f.star_tracker->valid;

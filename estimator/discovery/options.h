@@ -48,6 +48,11 @@ struct DiagnoseOptions {
   ParallelRunner run_parallel;
   // Effects to try (empty: all of the library).
   std::vector<Effect> effects;
+  // The spacecraft's orbital period [s] when the user knows it (`esg diagnose --orbital-period`):
+  // the open-ended basis's orbital-phase harmonics use it. 0: the median period of the
+  // recording's orbital-orientation spans (regimes.h); a recording without such spans (inertial
+  // holds, the calibration profile's rotations) then has no orbital-phase regressors.
+  double orbital_period_s = 0.0;
   // Held-out spans: at most this many, each at most max_gap_hours long.
   int max_gaps = 4;
   double max_gap_hours = 4.0;

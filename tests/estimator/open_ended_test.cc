@@ -183,6 +183,49 @@ TEST(OpenEndedDiagnosis, UnequalStiffnessFittingPartOfAnOrbitalDriftGivesWayToTh
   ExpectOrbitalDriftNamed(102, 30.0, "unequal_stiffness[1] fits part of gyro 1's drift");
 }
 
+// A drift cycling with a 94 min orbit on a spacecraft flying the paper's calibration profile (a
+// 60 min rotation, no orbital orientation): the recording alone gives no orbital period, so the
+// basis has no orbital-phase terms and the cycle is not named; with the period the user knows
+// (--orbital-period), it is named as the orbital harmonic of the right gyro.
+TEST(OpenEndedDiagnosis, AnOrbitalCycleOutsideOrbitalOrientationIsNamedWithTheGivenPeriod) {
+  const uint64_t seed = 101;
+  const double period_s = 94.0 * 60.0;
+  SimulationSpec spec = ::esg::testing::DiscoveryScenario("orbital_drift", seed, kHours);
+  auto profile = MakeNamedProfile("calibration", spec.duration, seed);
+  ASSERT_TRUE(profile.ok()) << profile.status();
+  spec.profile = std::move(*profile);
+  const int gyro = ::esg::testing::AffectedGyro(seed);
+  spec.gyros[gyro - 1].orbital_drift->period_s = period_s;
+  auto sim = Simulate(spec);
+  ASSERT_TRUE(sim.ok()) << sim.status();
+  auto orbital_cycle_named = [&](const DiagnosisReport& r) {
+    for (const Finding& f : r.findings) {
+      if (f.effect == kEffectBasisTerm && f.time.kind == "orbital_cycle") return true;
+    }
+    return false;
+  };
+
+  auto without = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
+  ASSERT_TRUE(without.ok()) << without.status();
+  EXPECT_FALSE(orbital_cycle_named(*without)) << without->verdict;
+
+  DiagnoseOptions options;
+  options.orbital_period_s = period_s;
+  auto with = Diagnose(spec.config, sim->recording.frames, options);
+  ASSERT_TRUE(with.ok()) << with.status();
+  ASSERT_EQ(with->verdict, kEffectBasisTerm);
+  const Finding& f = with->findings.front();
+  EXPECT_EQ(f.gyro, gyro);
+  EXPECT_EQ(f.time.kind, "orbital_cycle");
+  EXPECT_THAT(f.explanation, HasSubstr("(period 94.0 min"));
+  ASSERT_FALSE(f.basis_terms.empty());
+  EXPECT_EQ(f.basis_terms.front().period, period_s);
+
+  options.orbital_period_s = -1.0;
+  EXPECT_EQ(Diagnose(spec.config, sim->recording.frames, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 // A rotor displacement growing from 0 to 1.4 um: named as a growing displacement with its rate
 // and direction (through the suspension voltages' trend, eq. (3)), the drift following it.
 TEST(OpenEndedDiagnosis, GrowingRotorDisplacementIsNamedWithItsRate) {

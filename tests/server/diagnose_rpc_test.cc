@@ -3,6 +3,8 @@
 // and name the field.
 #include <chrono>
 
+#include <cmath>
+
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
@@ -127,6 +129,15 @@ TEST(DiagnoseRpc, BadRequestsGetTheirCodeAndNameTheField) {
   call = CallDiagnose(*stub, bad_model);
   EXPECT_EQ(call.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_THAT(call.status.error_message(), HasSubstr("model"));
+
+  for (double period : {-5400.0, std::nan("")}) {
+    esg::v1::DiagnoseRequest bad_period;
+    bad_period.set_spacecraft_id("DIAG-2");
+    bad_period.set_orbital_period_s(period);
+    call = CallDiagnose(*stub, bad_period);
+    EXPECT_EQ(call.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << period;
+    EXPECT_THAT(call.status.error_message(), HasSubstr("orbital_period_s")) << period;
+  }
 }
 
 }  // namespace
