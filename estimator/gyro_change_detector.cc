@@ -27,9 +27,19 @@ std::optional<GyroChangeDetector::Decision> GyroChangeDetector::Add(
     steps_.clear();
     gyro_ids_ = gyro_ids;
   }
+  // A NIS that is negative or NaN comes from a covariance that is not positive definite: it is no
+  // chi-square value, and its step decides nothing (kept at 0, the step marked as undecided).
   std::array<double, 4> step;
-  for (int k = 0; k < 3; ++k) step[k] = std::isfinite(nis[k]) ? std::min(nis[k], cap_) : cap_;
-  step[3] = star_tracker_suspected ? 1.0 : 0.0;
+  bool undecided = star_tracker_suspected;
+  for (int k = 0; k < 3; ++k) {
+    if (!(nis[k] >= 0.0)) {
+      step[k] = 0.0;
+      undecided = true;
+    } else {
+      step[k] = std::min(nis[k], cap_);  // +inf enters at the cap
+    }
+  }
+  step[3] = undecided ? 1.0 : 0.0;
   steps_.push_back(step);
   while (static_cast<int>(steps_.size()) > options_.window_steps) steps_.pop_front();
   if (static_cast<int>(steps_.size()) < options_.window_steps) return std::nullopt;
@@ -98,7 +108,7 @@ absl::Status GyroChangeDetector::RestoreState(absl::Span<const double> state) {
     }
     if (s[3] != 0.0 && s[3] != 1.0) {
       return absl::DataLossError(
-          absl::StrFormat("gyro change detector: star-tracker flag %g is not 0 or 1", s[3]));
+          absl::StrFormat("gyro change detector: undecided flag %g is not 0 or 1", s[3]));
     }
     steps.push_back(s);
   }

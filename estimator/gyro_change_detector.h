@@ -18,7 +18,8 @@
 // (30 arcsec about its boresight, 5 across), so a star-tracker error can fail one gyro's
 // normalised difference while the others pass; a window with a step where the star tracker was
 // suspected (eq. (12) or the three-pair isolation named it, or named it a candidate) decides
-// nothing. The three gyros must be the same over the window; another set (an exclusion, a spare
+// nothing; nor does a window with a step whose NIS is negative or NaN (a covariance that is not
+// positive definite gives no chi-square value). The three gyros must be the same over the window; another set (an exclusion, a spare
 // switched on) starts the windows again, as Clear() does. The session acts on a decision only
 // once its consistency monitor has tested the model and while nothing says the model does not
 // fit (D21): a drift term the model lacks can be larger in one gyro than in the others.
@@ -56,8 +57,8 @@ class GyroChangeDetector {
 
   // Adds one measurement step: the own star-tracker NIS (2 dof each) of the running gyros
   // `gyro_ids`, and whether the star tracker was suspected at this step. Returns a decision when
-  // the window is full, no step of it suspected the star tracker, and exactly one gyro fails
-  // while the others pass (rule above).
+  // the window is full, no step of it suspected the star tracker or had a NIS that is negative
+  // or NaN, and exactly one gyro fails while the others pass (rule above).
   std::optional<Decision> Add(const std::array<int, 3>& gyro_ids, const std::array<double, 3>& nis,
                               bool star_tracker_suspected);
   // Starts the windows again (after an exclusion or a filter reset).
@@ -65,7 +66,8 @@ class GyroChangeDetector {
 
   const GyroChangeDetectorOptions& options() const { return options_; }
   // The windows' state, for the session checkpoint: gyro ids (3), the step count, then per step
-  // the three capped values and the star-tracker flag (0 or 1).
+  // the three capped values (in [0, cap]) and the undecided flag (0 or 1: star tracker suspected,
+  // or a NIS that was negative or NaN).
   std::vector<double> ExportState() const;
   // DataLoss naming the field if the state does not fit these options (the object is then
   // unchanged).
@@ -77,7 +79,7 @@ class GyroChangeDetector {
   double fail_threshold_ = 0.0;
   double pass_threshold_ = 0.0;
   std::array<int, 3> gyro_ids_ = {0, 0, 0};
-  std::deque<std::array<double, 4>> steps_;  // three capped NIS, star tracker suspected (0/1)
+  std::deque<std::array<double, 4>> steps_;  // three capped NIS, step undecided (0/1)
 };
 
 }  // namespace esg::estimator

@@ -2,6 +2,8 @@
 // chi-square data with known statistics, and its checkpoint state.
 #include "estimator/gyro_change_detector.h"
 
+#include <cmath>
+#include <limits>
 #include <optional>
 #include <random>
 #include <vector>
@@ -97,6 +99,28 @@ TEST(GyroChangeDetector, StateRoundTripsAndCorruptStateIsDataLoss) {
   }
   std::vector<double> truncated(state.begin(), state.end() - 1);
   EXPECT_EQ(GyroChangeDetector().RestoreState(truncated).code(), absl::StatusCode::kDataLoss);
+}
+
+// A NIS that is negative or NaN (a covariance that is not positive definite, as a corrupt but
+// accepted checkpoint can leave) is no chi-square value: its window decides nothing, the state
+// stays within what a restore accepts, and +inf (a real, huge difference) still counts at the cap.
+TEST(GyroChangeDetector, ANegativeOrNaNValueDecidesNothingAndItsStateRestores) {
+  GyroChangeDetector d;
+  EXPECT_FALSE(d.Add(kIds, {0.5, -0.0058, 100}, false).has_value());
+  for (int s = 0; s < 8; ++s) EXPECT_FALSE(d.Add(kIds, {0.5, 0.5, 100}, false).has_value());
+  EXPECT_FALSE(d.Add(kIds, {0.5, 0.5, 100}, false).has_value()) << "the window holds the value";
+  GyroChangeDetector restored;
+  EXPECT_TRUE(restored.RestoreState(d.ExportState()).ok());
+  // Once the undecided step has left the window, the same evidence names gyro 3.
+  EXPECT_TRUE(d.Add(kIds, {0.5, 0.5, 100}, false).has_value());
+
+  GyroChangeDetector e;
+  EXPECT_FALSE(e.Add(kIds, {std::nan(""), 0.5, 100}, false).has_value());
+  EXPECT_TRUE(GyroChangeDetector().RestoreState(e.ExportState()).ok());
+  for (int s = 0; s < 9; ++s) EXPECT_FALSE(e.Add(kIds, {0.5, 0.5, 100}, false).has_value());
+  const auto named = e.Add(kIds, {0.5, 0.5, std::numeric_limits<double>::infinity()}, false);
+  ASSERT_TRUE(named.has_value());
+  EXPECT_EQ(named->gyro_id, 3);
 }
 
 }  // namespace
