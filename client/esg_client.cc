@@ -34,12 +34,12 @@ absl::StatusOr<Response> Unary(std::unique_ptr<grpc::ClientContext> context, Cal
   return response;
 }
 
-// The whole of a paged call (GetCoefficientHistory, GetEstimateHistory, ListDiagnoses): with
-// request.page_token empty, every page from the first, each its own call (`one_page`), with the
-// records of `records` (e.g. &HistoryResponse::mutable_snapshots) moved into one response in
-// order, whose next_page_token is empty; Internal "CALL: the server returned the same page
-// token" if the server hands back the token it was given (a loop). With a page_token: that one
-// page.
+// The whole of a paged call (ListSessions, GetCoefficientHistory, GetEstimateHistory,
+// ListDiagnoses): with request.page_token empty, every page from the first, each its own call
+// (`one_page`), with the records of `records` (e.g. &HistoryResponse::mutable_snapshots) moved
+// into one response in order, whose next_page_token is empty; Internal "CALL: the server returned
+// the same page token" if the server hands back the token it was given (a loop). With a
+// page_token: that one page.
 template <typename Response, typename Request, typename OnePage, typename Record>
 absl::StatusOr<Response> AllPages(
     const char* call, const Request& request, OnePage one_page,
@@ -178,19 +178,16 @@ absl::StatusOr<esg::v1::SessionInfo> EsgClient::GetSession(const std::string& sp
 }
 
 absl::StatusOr<esg::v1::ListSessionsResponse> EsgClient::ListSessions(const CallOptions& call) {
-  esg::v1::ListSessionsRequest request;
-  esg::v1::ListSessionsResponse all;
-  do {
-    absl::StatusOr<esg::v1::ListSessionsResponse> page = Unary<esg::v1::ListSessionsResponse>(
+  auto one_page = [&](const esg::v1::ListSessionsRequest& page_request) {
+    return Unary<esg::v1::ListSessionsResponse>(
         NewContext(true, call, /*spacecraft_id=*/""),
         [&](grpc::ClientContext* c, esg::v1::ListSessionsResponse* r) {
-          return stub_->ListSessions(c, request, r);
+          return stub_->ListSessions(c, page_request, r);
         });
-    if (!page.ok()) return page.status();
-    for (esg::v1::SessionInfo& s : *page->mutable_sessions()) *all.add_sessions() = std::move(s);
-    request.set_page_token(page->next_page_token());
-  } while (!request.page_token().empty());
-  return all;
+  };
+  return AllPages<esg::v1::ListSessionsResponse>("ListSessions", esg::v1::ListSessionsRequest(),
+                                                 one_page,
+                                                 &esg::v1::ListSessionsResponse::mutable_sessions);
 }
 
 absl::StatusOr<esg::v1::PredictResponse> EsgClient::PredictAttitude(

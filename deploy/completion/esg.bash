@@ -78,7 +78,7 @@ _esg() {
     gap) opts="--config --recording --columns --model --kd --consistency-window --gap-start
                --series-csv $format" ;;
     diagnose) opts="--config --recording --columns --spacecraft --from --to --out --model --alpha
-                    --max-effects --threads --integration-rate --effects $format" ;;
+                    --max-effects --threads --integration-rate --effects --orbital-period $format" ;;
     diagnoses)
       case "$sub" in
         "") COMPREPLY=($(compgen -W "list show" -- "$cur")); return ;;

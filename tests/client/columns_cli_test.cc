@@ -22,6 +22,7 @@
 #include "nlohmann/json.hpp"
 #include "storage/column_mapping.h"
 #include "storage/recording_csv.h"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
@@ -42,7 +43,6 @@ using Json = nlohmann::json;
 
 constexpr double kPi = 3.14159265358979323846;
 
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
 std::string Example(const std::string& name) {
   return std::string(ESG_SOURCE_DIR) + "/deploy/examples/" + name;
 }

@@ -42,6 +42,7 @@
 #include "proto/convert.h"
 #include "storage/aem.h"
 #include "storage/recording_csv.h"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
 
@@ -67,8 +68,6 @@ void WriteFile(const std::string& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
   out << text;
 }
-
-std::string Quote(const std::string& s) { return "'" + s + "'"; }
 
 std::string FormatUtcForTest(absl::Time t) {
   return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
@@ -190,8 +189,6 @@ RunResult RunEsg(const TempDir& dir, const std::string& args, const std::string&
   r.err = ReadFile(err);
   return r;
 }
-
-std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
 
 std::vector<std::string> DataLines(const std::string& text, const std::string& prefix) {
   std::vector<std::string> out;

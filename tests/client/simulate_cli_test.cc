@@ -14,6 +14,7 @@
 #include "gtest/gtest.h"
 #include "proto/convert.h"
 #include "storage/recording_csv.h"
+#include "tests/client/cli_test_support.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
@@ -32,8 +33,6 @@ using ::esg::testing::WriteFile;
 RunResult RunEsg(const TempDir& dir, const std::string& args) {
   return ::esg::testing::RunBinary(dir, ESG_BINARY, args);
 }
-
-std::string Rdk1() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
 
 TEST(SimulateCli, SameSeedGivesSameFileBytesAndAReadableRecording) {
   TempDir dir;
