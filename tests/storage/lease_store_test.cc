@@ -142,7 +142,8 @@ TEST_P(LeaseStoreTest, RenewAllRenewsEveryHeldLeaseAndReportsTheOnesTakenOverWit
       EXPECT_EQ(lease->expires, T(42)) << id(i);
     }
   }
-  EXPECT_THAT(leases.Get("R-999"), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(leases.Get("R-999"),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("never taken")));
   // The same lost leases through Renew, one by one.
   EXPECT_THAT(leases.Renew(id(10), {"a", 1}, T(28), kLease),
               StatusIs(absl::StatusCode::kNotFound, HasSubstr("taken over")));
