@@ -88,7 +88,8 @@ struct Tally {
   int64_t durable_without_ack = 0;  // skipped on resume: durable on the server, ack lost
   int64_t ambiguous = 0;            // acks without a verdict (accepted = false, no rejection)
   int64_t ambiguous_stored = 0;     // of those, found stored when sent again (counted in accepted)
-  int64_t deferred = 0;  // acks refusing a frame while another server held the session (not in acked)
+  int64_t deferred = 0;  // acks refusing a frame while another server held the session (not
+                         // in acked: the frame is sent again)
   absl::Duration lease_wait;  // waited for those, in total
   int reconnects = 0;
   int64_t last_acked = 0;       // highest sequence acknowledged
