@@ -421,7 +421,7 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
             stderr,
             "\nesg %s: %lld frames refused because another server holds the session (%s); "
             "gave up: waiting %s more would exceed --max-lease-wait %s (waited %s); "
-            "sequence %lld of %lld is not stored (continue with --from-sequence %lld)\n",
+            "sequence %lld of %lld was not accepted (continue with --from-sequence %lld)\n",
             kVerb, static_cast<long long>(replayer.deferred_count()),
             replayer.deferred_reason().c_str(), absl::FormatDuration(delay).c_str(),
             absl::FormatDuration(max_lease_wait).c_str(),
