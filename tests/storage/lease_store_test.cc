@@ -143,7 +143,7 @@ TEST_P(LeaseStoreTest, RenewAllRenewsEveryHeldLeaseAndReportsTheOnesTakenOverWit
     }
   }
   EXPECT_THAT(leases.Get("R-999"),
-              StatusIs(absl::StatusCode::kNotFound, HasSubstr("never taken")));
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("no session lease was ever taken")));
   // The same lost leases through Renew, one by one.
   EXPECT_THAT(leases.Renew(id(10), {"a", 1}, T(28), kLease),
               StatusIs(absl::StatusCode::kNotFound, HasSubstr("taken over")));
