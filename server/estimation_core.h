@@ -263,14 +263,17 @@ class EstimationCore {
   absl::StatusOr<esg::v1::SessionInfo> SummarizeFromDatabase(const storage::ConfigRecord& record);
   // The spacecraft's record for a call that needs its session: Find(), and with leases (node_id)
   // a record whose lease this server holds, taking the lease and loading the session (checkpoint
-  // plus archive after it) if needed. NotFound "not configured"; Unavailable "served by node N
-  // until T; retry after that" while another server holds the lease (LeaseRefused).
+  // plus archive after it) if needed. NotFound "not configured"; Unavailable "spacecraft_id:
+  // 'X' is served by node N until T; retry after that" while another server holds the lease
+  // (LeaseRefused).
   absl::StatusOr<std::shared_ptr<Spacecraft>> Lookup(const std::string& spacecraft_id);
-  // A failed LeaseStore::Acquire's status for the call: a refusal because another server holds
-  // the lease is counted (lease event "refused") and becomes Unavailable "...; retry after that"
-  // with the time until the holder's expiry as its retry delay (grpc_status.h WithRetryDelay:
-  // trailing metadata grpc-retry-pushback-ms), at most lease_duration; any other status as is.
-  absl::Status LeaseRefused(const absl::Status& status);
+  // A failed LeaseStore::Acquire's status for `spacecraft_id`: a refusal because another server
+  // holds the lease is counted (lease event "refused") and becomes Unavailable "spacecraft_id:
+  // 'X' is served by node N until T; retry after that ..." (the field first, as every refusal of
+  // a frame: RejectionFromStatus) with the time until the holder's expiry as its retry delay
+  // (grpc_status.h WithRetryDelay: trailing metadata grpc-retry-pushback-ms of a call,
+  // Rejection.retry_after_ms of a frame), at most lease_duration; any other status as is.
+  absl::Status LeaseRefused(const std::string& spacecraft_id, const absl::Status& status);
   // OK if the spacecraft is configured (in the registry, or with leases in the database): for
   // calls that only read the database. NotFound "not configured" otherwise.
   absl::Status CheckConfigured(const std::string& spacecraft_id);
@@ -280,8 +283,9 @@ class EstimationCore {
   // Marks `sc`'s lease taken over by another server (found by a renewal or a fenced commit):
   // counted and logged (session_lost, `why`) the first time only.
   void MarkLeaseLost(Spacecraft& sc, absl::string_view why);
-  // Renews the held leases every lease_duration / 3; a lease found taken over marks its record
-  // lost (calls for it take the lease again, or are refused while another server holds it).
+  // Renews the held leases every lease_duration / 3, all in one transaction
+  // (LeaseStore::RenewAll); a lease found taken over marks its record lost (calls for it take
+  // the lease again, or are refused while another server holds it).
   void LeaseLoop();
   // Publishes to this server's subscribers every alert change and every estimate another server
   // committed (PostgreSQL LISTEN/NOTIFY, storage::kAlertsChannel and kEstimatesChannel),

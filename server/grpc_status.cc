@@ -70,12 +70,16 @@ absl::Status WithRetryDelay(absl::Status status, absl::Duration delay) {
   return status;
 }
 
+std::optional<int64_t> RetryDelayMs(const absl::Status& status) {
+  const auto delay = status.GetPayload(kRetryDelayPayload);
+  int64_t ms = 0;
+  if (!delay.has_value() || !absl::SimpleAtoi(std::string(*delay), &ms)) return std::nullopt;
+  return ms;
+}
+
 grpc::Status ToGrpcStatus(const absl::Status& status, grpc::ServerContextBase& context) {
-  if (const auto delay = status.GetPayload(kRetryDelayPayload); delay.has_value()) {
-    int64_t ms = 0;
-    if (absl::SimpleAtoi(std::string(*delay), &ms)) {
-      context.AddTrailingMetadata(kRetryPushbackKey, absl::StrCat(ms));
-    }
+  if (const std::optional<int64_t> ms = RetryDelayMs(status); ms.has_value()) {
+    context.AddTrailingMetadata(kRetryPushbackKey, absl::StrCat(*ms));
   }
   return ToGrpcStatus(status);
 }

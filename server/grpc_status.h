@@ -6,6 +6,9 @@
 #ifndef ESG_SERVER_GRPC_STATUS_H_
 #define ESG_SERVER_GRPC_STATUS_H_
 
+#include <cstdint>
+#include <optional>
+
 #include "absl/status/status.h"
 #include "absl/time/time.h"
 #include "grpcpp/server_context.h"
@@ -22,6 +25,10 @@ inline constexpr char kRetryPushbackKey[] = "grpc-retry-pushback-ms";
 // `status` (not OK) marked as worth retrying after `delay`, rounded up to whole milliseconds
 // (a negative delay counts as 0). Returned as is when OK.
 absl::Status WithRetryDelay(absl::Status status, absl::Duration delay);
+
+// The retry delay WithRetryDelay put on `status`, in whole milliseconds (>= 0); nullopt when it
+// has none. A refused telemetry frame carries it in its ack (Rejection.retry_after_ms).
+std::optional<int64_t> RetryDelayMs(const absl::Status& status);
 
 // ToGrpcStatus(status), after adding to `context`'s trailing metadata the retry delay that
 // WithRetryDelay put on `status`, if any. Call it right before the call's Finish.

@@ -84,8 +84,9 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
     return false;
   };
   auto refuse_status = [&](const absl::Status& status) {
-    const esg::v1::Rejection r = RejectionFromStatus(status);
-    return refuse(status.code(), r.field(), r.reason());
+    ack->set_accepted(false);
+    *ack->mutable_rejection() = RejectionFromStatus(status);
+    return false;
   };
   {
     absl::MutexLock commit(&commit_mu_);

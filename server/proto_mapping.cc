@@ -1,11 +1,16 @@
 // Mapping of records and estimator values to esg.v1 messages (see proto_mapping.h).
 #include "server/proto_mapping.h"
 
+#include <algorithm>
+#include <cstdint>
+#include <optional>
+
 #include "absl/strings/str_cat.h"
 #include "estimator/rotation.h"
 #include "estimator/units.h"
 #include "proto/convert.h"
 #include "server/alert_catalog.h"
+#include "server/grpc_status.h"
 
 namespace esg::server {
 
@@ -123,6 +128,11 @@ esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
   } else {
     r.set_field(std::string(m.substr(0, colon)));
     r.set_reason(std::string(m.substr(colon + 2)));
+  }
+  r.set_code(static_cast<int>(status.code()));
+  // At least 1 ms: 0 is "no delay given" on the wire, and the lease may expire just now.
+  if (const std::optional<int64_t> ms = RetryDelayMs(status); ms.has_value()) {
+    r.set_retry_after_ms(std::max<int64_t>(*ms, 1));
   }
   return r;
 }

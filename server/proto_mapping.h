@@ -38,7 +38,8 @@ void FillSample(absl::Time time, const estimator::AttitudeEstimate& attitude,
                 esg::v1::AttitudeSample* out);
 
 // An ingest refusal from a status whose message is "field: reason" (the error contract of
-// proto/convert.h); the status code travels with it.
+// proto/convert.h), with the status's code and, when the status carries a retry delay
+// (grpc_status.h WithRetryDelay: another server holds the lease), retry_after_ms, at least 1.
 esg::v1::Rejection RejectionFromStatus(const absl::Status& status);
 
 // RFC 3339 UTC with the fraction of the second, for messages.

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
@@ -49,7 +50,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   if (!record.ok()) return record.status();
   absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
       spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
-  if (!lease.ok()) return LeaseRefused(lease.status());
+  if (!lease.ok()) return LeaseRefused(spacecraft_id, lease.status());
   // The session as the last owner left it: its checkpoint, then the archive after it.
   RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
   sc = Find(spacecraft_id);
@@ -63,7 +64,8 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   return sc;
 }
 
-absl::Status EstimationCore::LeaseRefused(const absl::Status& status) {
+absl::Status EstimationCore::LeaseRefused(const std::string& spacecraft_id,
+                                          const absl::Status& status) {
   const std::optional<absl::Time> held_until = storage::LeaseHeldUntil(status);
   if (!held_until.has_value()) return status;
   metrics_.lease_events.With({"refused"}).Increment();
@@ -71,10 +73,17 @@ absl::Status EstimationCore::LeaseRefused(const absl::Status& status) {
   // lease duration: a holder that renews refuses the retry again with a new delay.
   const absl::Duration delay =
       std::clamp(*held_until - absl::Now(), absl::ZeroDuration(), options_.lease_duration);
+  // The field first, so that a refused frame's Rejection names it (RejectionFromStatus); the
+  // holder and its expiry from the store's message ("spacecraft 'X' is served by node N until
+  // T").
+  absl::string_view holder = status.message();
+  const std::string prefix = absl::StrCat("spacecraft '", spacecraft_id, "'");
+  if (absl::StartsWith(holder, prefix)) holder.remove_prefix(prefix.size());
   return WithRetryDelay(
-      absl::UnavailableError(absl::StrCat(status.message(), "; retry after that (leases last ",
-                                          absl::FormatDuration(options_.lease_duration),
-                                          "): docs/service.md \"Several servers\"")),
+      absl::UnavailableError(absl::StrCat(
+          "spacecraft_id: '", spacecraft_id, "'", holder, "; retry after that (leases last ",
+          absl::FormatDuration(options_.lease_duration),
+          "): docs/service.md \"Several servers\"")),
       delay);
 }
 
@@ -188,18 +197,31 @@ void EstimationCore::LeaseLoop() {
       stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), period);
       if (stopped_) return;
     }
+    // One transaction for all of this server's leases: one commit a period, however many
+    // sessions it holds.
+    std::map<std::string, std::shared_ptr<Spacecraft>> held;
+    std::map<std::string, storage::LeaseFence> fences;
     for (const auto& sc : registry_.All()) {
       if (sc->lease_lost) continue;
-      const absl::Status renewed = storage_->leases().Renew(sc->id, *FenceOf(*sc), absl::Now(),
-                                                            options_.lease_duration);
-      if (absl::IsNotFound(renewed)) {
-        MarkLeaseLost(*sc, renewed.message());
-      } else if (!renewed.ok()) {
-        LogEvent("ERROR", "lease_renewal_failed",
-                 absl::StrCat("cannot renew the session lease of ", sc->id, ": ",
-                              renewed.message()),
-                 {{"spacecraftId", sc->id}});
-      }
+      fences.emplace(sc->id, *FenceOf(*sc));
+      held.emplace(sc->id, sc);
+    }
+    if (fences.empty()) continue;
+    const absl::StatusOr<std::vector<std::string>> lost =
+        storage_->leases().RenewAll(fences, absl::Now(), options_.lease_duration);
+    if (!lost.ok()) {
+      LogEvent("ERROR", "lease_renewal_failed",
+               absl::StrCat("cannot renew the session leases of ", fences.size(),
+                            " spacecraft: ", lost.status().message(),
+                            " (retrying in ", absl::FormatDuration(period), ")"),
+               {{"leases", static_cast<int64_t>(fences.size())}});
+      continue;
+    }
+    for (const std::string& id : *lost) {
+      const storage::LeaseFence& fence = fences.at(id);
+      MarkLeaseLost(*held.at(id),
+                    absl::StrCat("spacecraft '", id, "': the lease of node ", fence.owner,
+                                 " (epoch ", fence.epoch, ") was taken over"));
     }
   }
 }

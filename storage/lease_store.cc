@@ -1,6 +1,10 @@
 // Session leases; contract in lease_store.h.
 #include "storage/lease_store.h"
 
+#include <algorithm>
+#include <set>
+#include <utility>
+
 #include "absl/strings/cord.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -96,6 +100,49 @@ absl::Status LeaseStore::Renew(absl::string_view spacecraft_id, const LeaseFence
                                             ") was taken over"));
   }
   return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<std::string>> LeaseStore::RenewAll(
+    const std::map<std::string, LeaseFence>& fences, absl::Time now, absl::Duration duration) {
+  RETURN_IF_ERROR(CheckPostgres());
+  RETURN_IF_ERROR(ValidateStorableTime(now + duration, "lease.expires"));
+  std::vector<std::string> lost;
+  if (fences.empty()) return lost;
+  // kBatch leases a statement, one SQL text: a shorter last batch repeats its last lease (the
+  // same row twice in the WHERE is updated once), so the statement cache holds one entry.
+  constexpr int kBatch = 64;
+  std::string sql = "UPDATE session_leases SET expires_unix_ns = ?1 WHERE ";
+  for (int i = 0; i < kBatch; ++i) {
+    absl::StrAppend(&sql, i == 0 ? "" : " OR ", "(spacecraft_id = ?", 2 + 3 * i,
+                    " AND owner = ?", 3 + 3 * i, " AND epoch = ?", 4 + 3 * i, ")");
+  }
+  absl::StrAppend(&sql, " RETURNING spacecraft_id");
+  std::vector<const std::pair<const std::string, LeaseFence>*> leases;
+  leases.reserve(fences.size());
+  for (const auto& lease : fences) leases.push_back(&lease);
+  std::set<std::string> renewed;
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  for (size_t first = 0; first < leases.size(); first += kBatch) {
+    ASSIGN_OR_RETURN(Statement * st, txn.Prepare(sql));
+    st->BindInt64(1, TimeToUnixNanos(now + duration));
+    for (int i = 0; i < kBatch; ++i) {
+      const auto& [spacecraft_id, fence] = *leases[std::min(first + i, leases.size() - 1)];
+      st->BindText(2 + 3 * i, spacecraft_id)
+          .BindText(3 + 3 * i, fence.owner)
+          .BindInt64(4 + 3 * i, fence.epoch);
+    }
+    for (;;) {
+      ASSIGN_OR_RETURN(const bool row, st->Step());
+      if (!row) break;
+      renewed.insert(st->ColumnText(0));
+    }
+    st->Reset();
+  }
+  RETURN_IF_ERROR(txn.Commit());
+  for (const auto& [spacecraft_id, fence] : fences) {
+    if (renewed.count(spacecraft_id) == 0) lost.push_back(spacecraft_id);
+  }
+  return lost;
 }
 
 absl::Status LeaseStore::Release(absl::string_view spacecraft_id, const LeaseFence& fence) {

@@ -13,8 +13,10 @@
 #define ESG_STORAGE_LEASE_STORE_H_
 
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -64,6 +66,17 @@ class LeaseStore {
   // (owner, epoch)'s: another server took it over.
   absl::Status Renew(absl::string_view spacecraft_id, const LeaseFence& fence, absl::Time now,
                      absl::Duration duration);
+
+  // Renews, in one transaction, every lease of `fences` (spacecraft id -> the fence this server
+  // took it with: one server's leases) that is still its fence's (owner, epoch), to now +
+  // duration, and returns the spacecraft whose lease was not (taken over by another server, or
+  // gone), in id order: the caller drops those sessions. A lease expired at `now` but not taken
+  // over is renewed, as by Renew. On an error nothing is renewed (the transaction rolls back;
+  // Unavailable for a lost connection or a lock conflict: try again). An empty `fences` renews
+  // nothing and returns no spacecraft. Same as calling Renew for each lease, with one commit
+  // instead of one per lease (and a few statements instead of one per lease).
+  absl::StatusOr<std::vector<std::string>> RenewAll(const std::map<std::string, LeaseFence>& fences,
+                                                    absl::Time now, absl::Duration duration);
 
   // Ends `owner`'s lease with `epoch` at once (a clean shutdown), so another server may take the
   // session without waiting for the expiry. OK if it was no longer held.

@@ -18,16 +18,25 @@
 // refused with `frame: the server is shutting down` (a graceful stop) is such a failure too, not
 // a rejection: it is sent again.
 //
+// Lease: a frame refused UNAVAILABLE with Rejection.retry_after_ms (another server holds the
+// spacecraft's session, docs/service.md "Several servers") is not a rejection either. The
+// stream stops writing at the first such refusal (the frames in flight are answered), waits the
+// largest delay of those refusals, sends the refused frames again in sequence order, then goes
+// on with the frames after them. The waits add up to at most --max-lease-wait; when the next
+// one would exceed it, the replay gives up (exit 1) naming the server that holds the session.
+//
 // Exit codes: 0 success, 2 bad arguments or recording, 1 server failure, or rejected frames
 // without --allow-rejects.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
 #include <iostream>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -60,6 +69,7 @@ struct ReplayOptions {
   bool allow_rejects = false;
   bool wait = false;
   double wait_timeout_s = 600.0;
+  double max_lease_wait_s = 120.0;
   OutputFormat format = OutputFormat::kTable;
 };
 
@@ -78,6 +88,9 @@ struct Tally {
   int64_t durable_without_ack = 0;  // skipped on resume: durable on the server, ack lost
   int64_t ambiguous = 0;            // acks without a verdict (accepted = false, no rejection)
   int64_t ambiguous_stored = 0;     // of those, found stored when sent again (counted in accepted)
+  int64_t deferred = 0;  // acks refusing a frame while another server held the session (not
+                         // in acked: the frame is sent again)
+  absl::Duration lease_wait;  // waited for those, in total
   int reconnects = 0;
   int64_t last_acked = 0;       // highest sequence acknowledged
   int64_t last_accepted = 0;    // highest sequence acknowledged as accepted (incl. duplicate)
@@ -116,8 +129,36 @@ class Replayer {
   Tally& tally() { return tally_; }
   int64_t frame_count() const { return static_cast<int64_t>(frames_.size()); }
 
-  // Streams frames [first, n] once. OK when every one is acknowledged.
+  // Streams frames [first, n] once. OK when every frame written is acknowledged: all of them,
+  // or, when paused(), those up to last_written().
   absl::Status StreamFrom(int64_t first) { return Stream(first, nullptr); }
+
+  // The last stream stopped writing at a refusal with a retry delay (the frames after
+  // last_written() were not sent).
+  bool paused() const { return pausing_; }
+  int64_t last_written() const { return last_written_; }
+
+  // Frames refused while another server held the session, to send again.
+  bool has_deferred() const { return !deferred_.empty(); }
+  int64_t deferred_count() const { return static_cast<int64_t>(deferred_.size()); }
+  int64_t first_deferred() const { return *deferred_.begin(); }
+  // The longest retry delay of the refusals since the last call (at least 1 ms), and the
+  // latest refusal as "field: reason".
+  absl::Duration TakeRetryDelay() {
+    const absl::Duration delay = absl::Milliseconds(std::max<int64_t>(retry_after_ms_, 1));
+    retry_after_ms_ = 0;
+    return delay;
+  }
+  const std::string& deferred_reason() const { return deferred_reason_; }
+
+  // Sends the deferred frames again, in sequence order, without pacing: each is then answered
+  // as any frame (or deferred again).
+  absl::Status ResendDeferred() {
+    const std::vector<int64_t> sequences(deferred_.begin(), deferred_.end());
+    return Stream(0, &sequences);
+  }
+
+  bool has_ambiguous() const { return !ambiguous_.empty(); }
 
   // Sends again the frames whose ack carried no verdict (accepted = false without a rejection,
   // against the TelemetryAck contract): a stored frame now comes back as a duplicate, a refused
@@ -136,6 +177,7 @@ class Replayer {
   // Streams frames [first, n], or only `sequences` (without pacing) when given.
   absl::Status Stream(int64_t first, const std::vector<int64_t>* sequences) {
     server_stopping_ = false;
+    pausing_ = false;
     const int64_t count =
         sequences != nullptr ? static_cast<int64_t>(sequences->size()) : frame_count() - first + 1;
     auto sequence_at = [&](int64_t i) {
@@ -147,6 +189,7 @@ class Replayer {
     std::mutex mu;
     std::condition_variable cv;
     int64_t in_flight = 0;
+    int64_t written = 0;
     bool stop = false;
     std::thread writer([&] {
       const auto wall_start = std::chrono::steady_clock::now();
@@ -155,19 +198,21 @@ class Replayer {
       for (int64_t i = 0; i < count; ++i) {
         const int64_t seq = sequence_at(i);
         std::unique_lock<std::mutex> lock(mu);
-        cv.wait(lock, [&] { return stop || in_flight < o_.window; });
+        cv.wait(lock, [&] { return stop || pausing_ || in_flight < o_.window; });
         if (stop) {
           complete = false;
           break;
         }
+        // Paused: the stream is closed normally, so the frames in flight are answered.
+        if (pausing_) break;
         if (o_.rate > 0.0 && sequences == nullptr) {
           const double offset_s =
               absl::ToDoubleSeconds(frames_[seq - 1].time - time_start) / o_.rate;
           const auto due =
               wall_start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
                                std::chrono::duration<double>(offset_s));
-          if (cv.wait_until(lock, due, [&] { return stop; })) {
-            complete = false;
+          if (cv.wait_until(lock, due, [&] { return stop || pausing_; })) {
+            if (stop) complete = false;
             break;
           }
         }
@@ -179,6 +224,8 @@ class Replayer {
         }
         std::lock_guard<std::mutex> relock(mu);
         ++tally_.sent;
+        ++written;
+        last_written_ = seq;
       }
       if (complete) stream->WritesDone();
     });
@@ -204,9 +251,9 @@ class Replayer {
     absl::Status status = stream->Finish();
     if (status.ok() && server_stopping_) {
       status = absl::UnavailableError("the server is shutting down");
-    } else if (status.ok() && acks < count) {
-      status = absl::UnavailableError(
-          absl::StrCat("the stream ended after ", acks, " acks for ", count, " frames"));
+    } else if (status.ok() && acks < (pausing_ ? written : count)) {
+      status = absl::UnavailableError(absl::StrCat("the stream ended after ", acks, " acks for ",
+                                                   pausing_ ? written : count, " frames"));
     }
     return status;
   }
@@ -219,6 +266,20 @@ class Replayer {
       server_stopping_ = true;
     }
     if (server_stopping_) return;
+    // Another server holds the session: not a verdict on the frame, which is sent again after
+    // the delay (and the stream stops writing).
+    if (!ack.accepted() &&
+        ack.rejection().code() == static_cast<int>(absl::StatusCode::kUnavailable) &&
+        ack.rejection().retry_after_ms() > 0) {
+      ++tally_.deferred;
+      deferred_.insert(ack.sequence());
+      retry_after_ms_ = std::max(retry_after_ms_, ack.rejection().retry_after_ms());
+      deferred_reason_ = absl::StrCat(ack.rejection().field(), ": ", ack.rejection().reason());
+      pausing_ = true;
+      if (!verifying_) tally_.last_acked = std::max(tally_.last_acked, ack.sequence());
+      return;
+    }
+    deferred_.erase(ack.sequence());
     const bool no_verdict =
         !ack.accepted() && ack.rejection().field().empty() && ack.rejection().reason().empty();
     if (verifying_) {
@@ -268,6 +329,13 @@ class Replayer {
   bool server_stopping_ = false;    // this stream got a "server is shutting down" refusal
   bool verifying_ = false;          // VerifyAmbiguous is running
   std::vector<int64_t> ambiguous_;  // sequences whose ack had no verdict, to verify
+  // Refusals with a retry delay (another server holds the session). The flags and the writer's
+  // position are shared by a stream's writer and reader under its mutex.
+  bool pausing_ = false;         // this stream got one: stop writing
+  int64_t last_written_ = 0;     // the last sequence this stream wrote
+  std::set<int64_t> deferred_;   // sequences refused so, not answered otherwise since
+  int64_t retry_after_ms_ = 0;   // the longest delay since the last TakeRetryDelay()
+  std::string deferred_reason_;  // the latest such refusal, "field: reason"
 };
 
 // Polls GetSession until every durable frame is applied to the session, or the timeout.
@@ -294,6 +362,10 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
   }
   if (o.window < 1)
     return ReportBadArgument(kVerb, absl::StrCat("--window ", o.window, ": must be >= 1"));
+  if (o.max_lease_wait_s < 0.0 || !std::isfinite(o.max_lease_wait_s)) {
+    return ReportBadArgument(
+        kVerb, absl::StrCat("--max-lease-wait ", o.max_lease_wait_s, ": must be >= 0 [s]"));
+  }
   if (o.max_retries < 0) {
     return ReportBadArgument(kVerb,
                              absl::StrCat("--max-retries ", o.max_retries, ": must be >= 0"));
@@ -333,26 +405,66 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
   const absl::Time started = absl::Now();
   Replayer replayer(o, *recording, id, client.get());
   Tally& tally = replayer.tally();
+  const absl::Duration max_lease_wait = absl::Seconds(o.max_lease_wait_s);
   int64_t next = o.from_sequence;
   int failures = 0;  // consecutive attempts without progress
   absl::Status last_error;
-  while (next <= n) {
+  for (;;) {
     const int64_t acked_before = tally.last_acked;
-    absl::Status status = replayer.StreamFrom(next);
-    if (status.ok()) break;
+    const int64_t verdicts_before = tally.acked;
+    absl::Status status;
+    if (replayer.has_deferred()) {
+      // Another server holds the session: wait as told, then send those frames again.
+      const absl::Duration delay = replayer.TakeRetryDelay();
+      if (tally.lease_wait + delay > max_lease_wait) {
+        std::fprintf(
+            stderr,
+            "\nesg %s: %lld frames refused because another server holds the session (%s); "
+            "gave up: waiting %s more would exceed --max-lease-wait %s (waited %s); "
+            "sequence %lld of %lld was not accepted (continue with --from-sequence %lld)\n",
+            kVerb, static_cast<long long>(replayer.deferred_count()),
+            replayer.deferred_reason().c_str(), absl::FormatDuration(delay).c_str(),
+            absl::FormatDuration(max_lease_wait).c_str(),
+            absl::FormatDuration(tally.lease_wait).c_str(),
+            static_cast<long long>(replayer.first_deferred()), static_cast<long long>(n),
+            static_cast<long long>(replayer.first_deferred()));
+        return kExitFailure;
+      }
+      std::fprintf(stderr,
+                   "\nesg %s: %lld frames refused because another server holds the session "
+                   "(%s); sending them again in %s\n",
+                   kVerb, static_cast<long long>(replayer.deferred_count()),
+                   replayer.deferred_reason().c_str(), absl::FormatDuration(delay).c_str());
+      absl::SleepFor(delay);
+      tally.lease_wait += delay;
+      status = replayer.ResendDeferred();
+    } else if (next <= n) {
+      status = replayer.StreamFrom(next);
+      if (status.ok()) next = replayer.paused() ? replayer.last_written() + 1 : n + 1;
+    } else if (replayer.has_ambiguous()) {
+      status = replayer.VerifyAmbiguous();
+      if (!status.ok()) return ReportRpcError(kVerb, status, global);
+    } else {
+      break;
+    }
+    if (status.ok()) continue;
     if (!Transient(status.code())) return ReportRpcError(kVerb, status, global);
-    if (tally.last_acked > acked_before) failures = 0;
+    if (tally.last_acked > acked_before || tally.acked > verdicts_before) failures = 0;
     // Reconnect: back off, then learn where the server's durable archive ends.
     for (;;) {
       ++failures;
       last_error = status;
       if (failures > o.max_retries) {
+        // Frames deferred for the lease below the last acknowledged one are not stored.
+        const int64_t resume = replayer.has_deferred()
+                                   ? std::min(tally.last_acked + 1, replayer.first_deferred())
+                                   : tally.last_acked + 1;
         std::fprintf(
             stderr,
             "esg %s: gave up after %d reconnect attempts; acknowledged up to sequence %lld "
             "of %lld (continue with --from-sequence %lld)\n",
-            kVerb, o.max_retries, static_cast<long long>(tally.last_acked),
-            static_cast<long long>(n), static_cast<long long>(tally.last_acked + 1));
+            kVerb, o.max_retries, static_cast<long long>(resume - 1),
+            static_cast<long long>(n), static_cast<long long>(resume));
         return ReportRpcError(kVerb, last_error, global);
       }
       const absl::Duration backoff =
@@ -391,8 +503,6 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
     }
   }
   if (tally.ambiguous > 0) {
-    const absl::Status verified = replayer.VerifyAmbiguous();
-    if (!verified.ok()) return ReportRpcError(kVerb, verified, global);
     std::fprintf(stderr,
                  "esg %s: warning: %lld acks carried no verdict (accepted = false without a "
                  "rejection, a server bug); sent again: %lld found stored\n",
@@ -428,6 +538,8 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
              {"durableWithoutAck", tally.durable_without_ack},
              {"acksWithoutVerdict", tally.ambiguous},
              {"acksWithoutVerdictStored", tally.ambiguous_stored},
+             {"deferred", tally.deferred},
+             {"leaseWaitS", absl::ToDoubleSeconds(tally.lease_wait)},
              {"reconnects", tally.reconnects},
              {"highestDurableSequence", tally.highest_durable},
              {"elapsedS", elapsed_s},
@@ -454,6 +566,11 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
         static_cast<long long>(tally.rejected));
     if (tally.durable_without_ack > 0) {
       std::printf(", durable without ack %lld", static_cast<long long>(tally.durable_without_ack));
+    }
+    if (tally.deferred > 0) {
+      std::printf(", deferred %lld (sent again after %.1f s waiting for the session lease)",
+                  static_cast<long long>(tally.deferred),
+                  absl::ToDoubleSeconds(tally.lease_wait));
     }
     std::printf("; %d reconnects; server durable up to %lld\n", tally.reconnects,
                 static_cast<long long>(tally.highest_durable));
@@ -515,6 +632,10 @@ void RegisterReplay(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_flag("--wait", options->wait,
                 "afterwards, wait until the server has applied every durable frame");
   cmd->add_option("--wait-timeout", options->wait_timeout_s, "longest --wait [s]")
+      ->capture_default_str();
+  cmd->add_option("--max-lease-wait", options->max_lease_wait_s,
+                  "longest total wait for frames refused because another server holds the "
+                  "spacecraft's session, before giving up [s]")
       ->capture_default_str();
   AddFormatOption(cmd, &options->format);
   cmd->callback([options, &global, exit_code] { *exit_code = RunReplay(*options, global); });

@@ -6,9 +6,13 @@
 // job's effects: 4 coefficient estimates + 1 alert + a 2 KiB checkpoint; BM_StorageFilterJob, a
 // full apply job of 32 measurement steps (3 gyros: 96 coefficient estimates, a 2 KiB checkpoint)
 // without (range(0) = 0) and with (1) its 32 per-step estimates, the cost of the estimate archive
-// per job (docs/service.md "Per-step estimates").
+// per job (docs/service.md "Per-step estimates"). BM_LeaseRenewal: one renewal round of a server
+// holding 500 session leases (docs/service.md "Several servers"), one transaction per lease
+// (range(0) = 0, LeaseStore::Renew) against one for all (1, LeaseStore::RenewAll); PostgreSQL
+// only, since leases exist only there (an SQLite file has one server).
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -223,6 +227,56 @@ void BM_StorageFilterJob(benchmark::State& state) {
 BENCHMARK(BM_StorageFilterJob)
     ->ArgsProduct({{0, 1}, {static_cast<int>(Synchronous::kNormal),
                             static_cast<int>(Synchronous::kFull)}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// range(0): 0 renews each lease in its own transaction (Renew), 1 all in one (RenewAll);
+// range(1): kPostgres (leases need PostgreSQL). Items: leases renewed.
+void BM_LeaseRenewal(benchmark::State& state) {
+  constexpr int kLeases = 500;
+  constexpr absl::Duration kLease = absl::Seconds(15);
+  esg::testing::TempDir dir;
+  std::unique_ptr<Storage> storage = OpenBenchStorage(state, dir.File("bench.db"));
+  if (storage == nullptr) return;
+  std::map<std::string, LeaseFence> fences;
+  for (int i = 0; i < kLeases; ++i) {
+    const std::string id = absl::StrCat("LEASE-", i);
+    const absl::StatusOr<SessionLease> lease =
+        storage->leases().Acquire(id, "bench-node", kT0, kLease);
+    if (!lease.ok()) {
+      state.SkipWithError(std::string(lease.status().message()).c_str());
+      return;
+    }
+    fences[id] = {"bench-node", lease->epoch};
+  }
+  const bool all_at_once = state.range(0) == 1;
+  absl::Time now = kT0;
+  for (auto _ : state) {
+    now += absl::Seconds(5);
+    if (all_at_once) {
+      const absl::StatusOr<std::vector<std::string>> lost =
+          storage->leases().RenewAll(fences, now, kLease);
+      if (!lost.ok() || !lost->empty()) {
+        state.SkipWithError(lost.ok() ? "a lease was lost"
+                                      : std::string(lost.status().message()).c_str());
+        return;
+      }
+      continue;
+    }
+    for (const auto& [id, fence] : fences) {
+      const absl::Status renewed = storage->leases().Renew(id, fence, now, kLease);
+      if (!renewed.ok()) {
+        state.SkipWithError(std::string(renewed.message()).c_str());
+        return;
+      }
+    }
+  }
+  state.SetItemsProcessed(state.iterations() * kLeases);
+  state.SetLabel(all_at_once ? "postgresql, RenewAll: one transaction"
+                             : "postgresql, Renew: a transaction per lease");
+}
+BENCHMARK(BM_LeaseRenewal)
+    ->ArgsProduct({{0, 1}, {kPostgres}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -16,9 +16,11 @@
 // lease epoch, the others kept theirs.
 //
 // Also here, with two esgd on one database and no router: the fleet seen from any server, the
-// alerts and estimates relayed between them, and the retry delay a refused call carries.
+// alerts and estimates relayed between them, the retry delay a refused call or frame carries,
+// and `esg replay` waiting for it.
 #include <signal.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -37,7 +39,9 @@
 #include "gmock/gmock.h"
 #include "grpcpp/support/channel_arguments.h"
 #include "gtest/gtest.h"
+#include "nlohmann/json.hpp"
 #include "proto/convert.h"
+#include "storage/recording_csv.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
@@ -677,6 +681,176 @@ TEST(Failover, AnEstimateSubscriptionOnAnyServerSeesTheEstimatesAnotherServerSto
   EXPECT_EQ(replayed, stored->records.size());
   std::printf("[ measured ] %zu estimates stored on node A, %zu relayed to node B\n",
               stored->records.size(), relayed.size());
+}
+
+
+// A telemetry frame refused by a server that does not hold the spacecraft's session
+// (docs/service.md "Ingest contract", "Several servers"): node B, streamed frames of a
+// spacecraft node A holds, acknowledges each with accepted = false, code 14 (UNAVAILABLE),
+// field spacecraft_id naming A, and retry_after_ms, the time until A's lease expires (above 0,
+// at most the lease duration); no other refusal carries a delay. `esg replay` to B with
+// --max-lease-wait 0 gives up at once with exit 1, naming A; B stores nothing, A keeps the
+// session and takes the frames afterwards.
+TEST(Failover, AFrameRefusedWhileAnotherServerHoldsTheSessionCarriesTheTimeUntilItsLeaseExpires) {
+  std::string pg_error;
+  PostgresServer* pg = PostgresServer::Shared(&pg_error);
+  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
+  absl::StatusOr<std::string> db = pg->CreateDatabase();
+  ASSERT_TRUE(db.ok()) << db.status();
+  constexpr int kLeaseMs = 3000;
+  TempDir dir;
+  std::vector<std::unique_ptr<Daemon>> daemons;
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, absl::StrCat(kLeaseMs / 1000, "s"), daemons));
+  auto a = daemons[0]->Stub();
+  auto b = daemons[1]->Stub();
+  const SimulatedRun run = SimulateRun("RA-1", 0.2, 52);
+  const std::string id = run.config.spacecraft_id;
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse configured;
+    const grpc::Status status =
+        a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  const std::vector<esg::v1::TelemetryFrame> first(run.frames.begin(), run.frames.begin() + 4);
+  const auto streamed = testing::StreamFrames(*b, first);
+  ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
+  ASSERT_EQ(streamed.acks.size(), first.size());
+  int64_t longest_ms = 0;
+  for (const esg::v1::TelemetryAck& ack : streamed.acks) {
+    SCOPED_TRACE(ack.sequence());
+    EXPECT_FALSE(ack.accepted());
+    EXPECT_EQ(ack.rejection().code(), 14);
+    EXPECT_EQ(ack.rejection().field(), "spacecraft_id");
+    EXPECT_THAT(ack.rejection().reason(),
+                ::testing::StartsWith(absl::StrCat("'", id, "' is served by node ", NodeId(0),
+                                                   " until ")));
+    EXPECT_GT(ack.rejection().retry_after_ms(), 0);
+    EXPECT_LE(ack.rejection().retry_after_ms(), kLeaseMs);
+    longest_ms = std::max(longest_ms, ack.rejection().retry_after_ms());
+  }
+  // Any other refusal carries no delay: a spacecraft nobody configured.
+  std::vector<esg::v1::TelemetryFrame> unknown = {run.frames[0]};
+  unknown[0].set_spacecraft_id("RA-UNKNOWN");
+  const auto refused = testing::StreamFrames(*b, unknown);
+  ASSERT_EQ(refused.acks.size(), 1u);
+  EXPECT_EQ(refused.acks[0].rejection().code(), 5);
+  EXPECT_EQ(refused.acks[0].rejection().retry_after_ms(), 0);
+
+  // esg replay with no wait allowed: exit 1, the holder named, nothing stored by B.
+  estimator::Recording recording;
+  recording.metadata["spacecraft_id"] = id;
+  for (const esg::v1::TelemetryFrame& f : run.frames) {
+    absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(f);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    recording.frames.push_back(*frame);
+  }
+  const std::string csv = dir.File("ra.csv");
+  ASSERT_TRUE(storage::WriteRecordingCsv(csv, recording).ok());
+  const auto gave_up = testing::RunBinary(
+      dir, ESG_BINARY,
+      absl::StrCat("--server ", daemons[1]->address(), " replay --recording ", csv,
+                   " --max-lease-wait 0"));
+  EXPECT_EQ(gave_up.exit_code, 1) << gave_up.err;
+  EXPECT_THAT(gave_up.err, ::testing::HasSubstr("another server holds the session"));
+  EXPECT_THAT(gave_up.err,
+              ::testing::HasSubstr(absl::StrCat("is served by node ", NodeId(0), " until")));
+  EXPECT_THAT(gave_up.err, ::testing::HasSubstr("--max-lease-wait"));
+  EXPECT_THAT(gave_up.err, ::testing::HasSubstr("continue with --from-sequence 1"));
+  const esg::v1::SessionInfo on_a = testing::Session(*a, id);
+  EXPECT_EQ(on_a.served_by(), NodeId(0));
+  EXPECT_EQ(on_a.frames_accepted(), 0);
+  // A, which holds the session, takes the frames.
+  const auto accepted = testing::StreamFrames(*a, first);
+  ASSERT_EQ(accepted.acks.size(), first.size());
+  for (const esg::v1::TelemetryAck& ack : accepted.acks) EXPECT_TRUE(ack.accepted());
+  std::printf("[ measured ] frames refused by node B: retry_after_ms up to %lld (lease %d ms)\n",
+              static_cast<long long>(longest_ms), kLeaseMs);
+}
+
+// `esg replay` honours the retry delay (docs/cli.md "replay"): node A holds a spacecraft's
+// session with a 3 s lease and has stored its first frames; A is killed (its lease is no longer
+// renewed but still runs), and the whole recording is replayed to node B. B refuses the frames
+// with the time until A's lease expires; the replay waits that long, sends them again, B takes
+// the session over and the replay completes: exit 0, no frame rejected, every frame of the
+// recording stored exactly once (the ones A stored acknowledged as duplicates).
+TEST(Failover, ReplayToAnotherServerWaitsForTheLeaseAndStoresEveryFrameOnce) {
+  std::string pg_error;
+  PostgresServer* pg = PostgresServer::Shared(&pg_error);
+  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
+  absl::StatusOr<std::string> db = pg->CreateDatabase();
+  ASSERT_TRUE(db.ok()) << db.status();
+  constexpr int kLeaseMs = 3000;
+  constexpr int kStoredByA = 10;
+  TempDir dir;
+  std::vector<std::unique_ptr<Daemon>> daemons;
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, absl::StrCat(kLeaseMs / 1000, "s"), daemons));
+  auto a = daemons[0]->Stub();
+  auto b = daemons[1]->Stub();
+  const SimulatedRun run = SimulateRun("RB-1", 1.0, 53);
+  const std::string id = run.config.spacecraft_id;
+  const int64_t n = static_cast<int64_t>(run.frames.size());
+  {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse configured;
+    const grpc::Status status =
+        a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  const std::vector<esg::v1::TelemetryFrame> first(run.frames.begin(),
+                                                   run.frames.begin() + kStoredByA);
+  const auto on_a = testing::StreamFrames(*a, first);
+  ASSERT_TRUE(on_a.status.ok()) << on_a.status.error_message();
+  for (const esg::v1::TelemetryAck& ack : on_a.acks) ASSERT_TRUE(ack.accepted());
+
+  estimator::Recording recording;
+  recording.metadata["spacecraft_id"] = id;
+  for (const esg::v1::TelemetryFrame& f : run.frames) {
+    absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(f);
+    ASSERT_TRUE(frame.ok()) << frame.status();
+    recording.frames.push_back(*frame);
+  }
+  const std::string csv = dir.File("rb.csv");
+  ASSERT_TRUE(storage::WriteRecordingCsv(csv, recording).ok());
+
+  daemons[0]->Stop(SIGKILL);
+  const auto start = std::chrono::steady_clock::now();
+  const auto replayed = testing::RunBinary(
+      dir, ESG_BINARY,
+      absl::StrCat("--server ", daemons[1]->address(), " replay --recording ", csv, " --json"));
+  const double replay_s = Seconds(start);
+  ASSERT_EQ(replayed.exit_code, 0) << replayed.err;
+  EXPECT_THAT(replayed.err, ::testing::HasSubstr("another server holds the session"));
+  const nlohmann::json tally = nlohmann::json::parse(replayed.out, nullptr, false);
+  ASSERT_FALSE(tally.is_discarded()) << replayed.out;
+  EXPECT_EQ(tally["rejected"], 0);
+  EXPECT_GT(tally["deferred"].get<int64_t>(), 0);
+  EXPECT_GT(tally["leaseWaitS"].get<double>(), 0.0);
+  EXPECT_LE(tally["leaseWaitS"].get<double>(), kLeaseMs / 1000.0 + 0.1);
+  EXPECT_EQ(tally["acked"], n);
+  EXPECT_EQ(tally["duplicates"], kStoredByA);
+  EXPECT_EQ(tally["accepted"], n - kStoredByA);
+
+  // Exactly once in the archive, and B serves the session now.
+  auto storage = storage::Storage::Open(*db);
+  ASSERT_TRUE(storage.ok()) << storage.status();
+  absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
+      (*storage)->archive().ReadTimeRange(id, absl::InfinitePast(), absl::InfiniteFuture());
+  ASSERT_TRUE(archived.ok()) << archived.status();
+  ASSERT_EQ(static_cast<int64_t>(archived->size()), n);
+  std::set<int64_t> sequences;
+  for (const storage::ArchivedFrame& f : *archived) sequences.insert(f.sequence);
+  EXPECT_EQ(static_cast<int64_t>(sequences.size()), n);
+  EXPECT_EQ(*sequences.begin(), 1);
+  EXPECT_EQ(*sequences.rbegin(), n);
+  const esg::v1::SessionInfo on_b = testing::Session(*b, id);
+  EXPECT_EQ(on_b.served_by(), NodeId(1));
+  EXPECT_EQ(on_b.frames_accepted(), n);
+  std::printf(
+      "[ measured ] replay to node B after kill -9 of node A: %lld frames deferred, %.2f s "
+      "waited for the lease, whole replay %.2f s (lease %d ms)\n",
+      static_cast<long long>(tally["deferred"].get<int64_t>()),
+      tally["leaseWaitS"].get<double>(), replay_s, kLeaseMs);
 }
 
 }  // namespace

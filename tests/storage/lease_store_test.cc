@@ -4,11 +4,13 @@
 // (one server owns an SQLite file).
 #include "storage/lease_store.h"
 
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
@@ -80,6 +82,71 @@ TEST_P(LeaseStoreTest, TakenWhenFreeExpiredOrOwnEachTakeANewEpochRenewedAndRelea
   ASSERT_THAT(other, IsOk());
   EXPECT_EQ(other->epoch, 1);
   EXPECT_THAT(leases.Get("L-3"), StatusIs(absl::StatusCode::kNotFound, HasSubstr("no session lease was ever taken")));
+}
+
+// RenewAll: one server's leases renewed in one transaction; the ones another server took over
+// (or that never existed) are reported, in id order, and left as they are. 150 leases span
+// three of its statements (64 leases each, the last one short).
+TEST_P(LeaseStoreTest, RenewAllRenewsEveryHeldLeaseAndReportsTheOnesTakenOverWithoutRenewingThem) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  LeaseStore& leases = (*storage)->leases();
+  if (GetParam() == testing::Backend::kSqlite) {
+    EXPECT_THAT(leases.RenewAll({{"R-1", {"a", 1}}}, T(0), kLease),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("PostgreSQL")));
+    EXPECT_THAT(leases.RenewAll({}, T(0), kLease),
+                StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("PostgreSQL")));
+    return;
+  }
+  constexpr int kLeases = 150;
+  auto id = [](int i) { return absl::StrFormat("R-%03d", i); };
+  std::map<std::string, LeaseFence> fences;
+  for (int i = 0; i < kLeases; ++i) {
+    ASSERT_THAT(leases.Acquire(id(i), "a", T(0), kLease), IsOk());
+    fences[id(i)] = {"a", 1};
+  }
+  absl::StatusOr<std::vector<std::string>> lost = leases.RenewAll({}, T(5), kLease);
+  ASSERT_THAT(lost, IsOk());
+  EXPECT_TRUE(lost->empty());
+
+  // All held: all renewed to now + duration, epochs unchanged.
+  lost = leases.RenewAll(fences, T(10), kLease);
+  ASSERT_THAT(lost, IsOk());
+  EXPECT_TRUE(lost->empty());
+  for (int i = 0; i < kLeases; ++i) {
+    absl::StatusOr<SessionLease> lease = leases.Get(id(i));
+    ASSERT_THAT(lease, IsOk());
+    EXPECT_EQ(lease->expires, T(25)) << id(i);
+    EXPECT_EQ(lease->epoch, 1) << id(i);
+  }
+
+  // Expired at T(25): b takes over one lease in the first statement's batch and one in the
+  // last; a lease never taken is in a's map too. The others, expired but not taken over, are
+  // renewed (as Renew does).
+  ASSERT_THAT(leases.Acquire(id(10), "b", T(26), kLease), IsOk());
+  ASSERT_THAT(leases.Acquire(id(140), "b", T(26), kLease), IsOk());
+  fences["R-999"] = {"a", 1};
+  lost = leases.RenewAll(fences, T(27), kLease);
+  ASSERT_THAT(lost, IsOk());
+  EXPECT_THAT(*lost, ::testing::ElementsAre(id(10), id(140), "R-999"));
+  for (int i = 0; i < kLeases; ++i) {
+    absl::StatusOr<SessionLease> lease = leases.Get(id(i));
+    ASSERT_THAT(lease, IsOk());
+    if (i == 10 || i == 140) {
+      // b's lease as b took it: not renewed by a.
+      EXPECT_EQ(lease->owner, "b") << id(i);
+      EXPECT_EQ(lease->epoch, 2) << id(i);
+      EXPECT_EQ(lease->expires, T(41)) << id(i);
+    } else {
+      EXPECT_EQ(lease->owner, "a") << id(i);
+      EXPECT_EQ(lease->expires, T(42)) << id(i);
+    }
+  }
+  EXPECT_THAT(leases.Get("R-999"),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("no session lease was ever taken")));
+  // The same lost leases through Renew, one by one.
+  EXPECT_THAT(leases.Renew(id(10), {"a", 1}, T(28), kLease),
+              StatusIs(absl::StatusCode::kNotFound, HasSubstr("taken over")));
 }
 
 TEST_P(LeaseStoreTest, AWriteFencedByALostLeaseStoresNothingAndNamesTheSpacecraft) {
