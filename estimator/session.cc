@@ -341,6 +341,11 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
   next.UpdateState(report);
   report.state = next.state_;
   report.attitude = next.OutputAttitude(frame.time);
+  if (!report.attitude.valid) {
+    // The attitude error estimate belongs to an output attitude (StepReport).
+    report.attitude_error_b_arcsec.reset();
+    report.attitude_error_sigma_b_arcsec.reset();
+  }
   next.ReportMissingReadings(report);
   next.StartSwitchedOnGyros(frame, report);
   *this = std::move(next);

@@ -164,6 +164,17 @@ struct StepReport {
   // Autonomous innovations z_avt of this step [1] and their sigma.
   Eigen::VectorXd autonomous_innovation;
   Eigen::VectorXd autonomous_innovation_sigma;
+  // The attitude error the propagation had accumulated, as this step's star-tracker update
+  // estimates it: the rotation the update applied to the output attitude, a small-angle vector
+  // about the body axes, q_in_b(after) = q_in_b(before) (x) Exp(attitude_error_b) [arcsec]
+  // (conventions.h: error = true - estimate, so it is the estimate of the error of q_in_b(before)).
+  // Its 1-sigma per body axis is sqrt(sigma_before^2 - sigma_after^2): under the filter's model the
+  // correction has exactly the covariance the update removed, P_before - P_after (Joseph form with
+  // the optimal gain: K S K^T), mapped to the attitude [arcsec]. Set only at a step whose
+  // star-tracker measurements were applied to the pair that gives the output; absent otherwise
+  // (no star tracker, rejected, a filter reset, an output that is not valid).
+  std::optional<Eigen::Vector3d> attitude_error_b_arcsec;
+  std::optional<Eigen::Vector3d> attitude_error_sigma_b_arcsec;
   SessionState state = SessionState::kNoData;
 };
 

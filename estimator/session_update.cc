@@ -310,9 +310,45 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     zk(i) = z(keep[i]);
     for (int j = 0; j < mk; ++j) Rk(i, j) = R(keep[i], keep[j]);
   }
+  // The output attitude before the update, for the attitude error estimate of a star-tracker
+  // update (StepReport::attitude_error_b_arcsec): its Jacobian J (dtheta_in against the state
+  // errors, with the error convention of conventions.h) and P before the update.
+  const std::array<int, 2> output_pair = AttitudePair();
+  const GyroState* out_a = Find(output_pair[0]);
+  const GyroState* out_b = Find(output_pair[1]);
+  std::optional<Quaterniond> q_in_b_before;
+  MatrixXd J_before, P_before;
+  if (report.star_tracker_used && out_a != nullptr && out_b != nullptr && out_a->has_reading &&
+      out_b->has_reading) {
+    Matrix3d S_in_before;
+    q_in_b_before = PairQuaternion(out_a->id, out_b->id, out_a->h_k_last, out_b->h_k_last,
+                                   &S_in_before, &J_before);
+    P_before = P_;
+  }
   VectorXd dx;
   if (absl::Status s = JosephUpdate(Hk, zk, Rk, P_, dx); !s.ok()) return s;
   ApplyCorrection(dx);
+  if (!q_in_b_before.has_value()) return absl::OkStatus();
+  const std::optional<Quaterniond> q_in_b_after =
+      PairQuaternion(out_a->id, out_b->id, out_a->h_k_last, out_b->h_k_last, nullptr);
+  if (!q_in_b_after.has_value()) return absl::OkStatus();
+  // q_in_b(after) = q_in_b(before) (x) Exp(dtheta_b): the correction about the body axes, which
+  // is also C_b_in Log(q_in_b(after) (x) q_in_b(before)^-1) (a rotation leaves its own axis
+  // fixed, so C_b_in before or after the update gives the same vector).
+  const Vector3d dtheta_b = LogQuaternion(q_in_b_before->conjugate() * *q_in_b_after);
+  // Its covariance: J (P_before - P_after) J^T, the attitude covariance the update removed
+  // (sigma_before^2 - sigma_after^2 per axis, with J held at the prior state so that the readout
+  // noise term of the two attitude covariances cancels exactly), rotated to the body axes.
+  const Matrix3d C_b_in = q_in_b_before->toRotationMatrix().transpose();
+  const Matrix3d removed_b =
+      C_b_in * (J_before * (P_before - P_) * J_before.transpose()) * C_b_in.transpose();
+  Vector3d error_b_arcsec, sigma_b_arcsec;
+  for (int k = 0; k < 3; ++k) {
+    error_b_arcsec(k) = RadToArcsec(dtheta_b(k));
+    sigma_b_arcsec(k) = RadToArcsec(std::sqrt(std::max(removed_b(k, k), 0.0)));
+  }
+  report.attitude_error_b_arcsec = error_b_arcsec;
+  report.attitude_error_sigma_b_arcsec = sigma_b_arcsec;
   return absl::OkStatus();
 }
 

@@ -14,6 +14,7 @@
 #include "absl/time/clock.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
+#include "estimator/units.h"
 #include "proto/convert.h"
 #include "server/alert_collapse.h"
 #include "server/core_internal.h"
@@ -84,6 +85,15 @@ storage::EstimateRecord EstimateFromStep(const std::string& spacecraft_id,
   }
   r.star_tracker_test_ratio = report.star_tracker_test_ratio;
   r.last_star_tracker_time = last_star_tracker_time;
+  if (report.attitude_error_b_arcsec.has_value() &&
+      report.attitude_error_sigma_b_arcsec.has_value()) {
+    r.has_attitude_error = true;
+    for (int k = 0; k < 3; ++k) {
+      r.attitude_error_b[k] = estimator::ArcsecToRad((*report.attitude_error_b_arcsec)(k));
+      r.attitude_error_sigma_b[k] =
+          estimator::ArcsecToRad((*report.attitude_error_sigma_b_arcsec)(k));
+    }
+  }
   return r;
 }
 

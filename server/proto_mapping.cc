@@ -114,6 +114,12 @@ esg::v1::EstimateRecord EstimateToProto(const storage::EstimateRecord& r) {
     *e.mutable_last_star_tracker_time() = proto_convert::TimeToProto(r.last_star_tracker_time);
   }
   *e.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  if (r.has_attitude_error) {
+    for (int k = 0; k < 3; ++k) {
+      e.add_attitude_error_b_arcsec(estimator::RadToArcsec(r.attitude_error_b[k]));
+      e.add_attitude_error_sigma_b_arcsec(estimator::RadToArcsec(r.attitude_error_sigma_b[k]));
+    }
+  }
   return e;
 }
 

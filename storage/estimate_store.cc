@@ -1,4 +1,5 @@
-// The per-step estimate archive; contract in estimate_store.h, columns in schema.cc (version 7).
+// The per-step estimate archive; contract in estimate_store.h, columns in schema.cc (versions 7
+// and 9).
 #include "storage/estimate_store.h"
 
 #include <cmath>
@@ -21,7 +22,8 @@ namespace {
 constexpr int kMaxGyroId = 4;
 
 // Leading columns (0-based in a SELECT, ?1.. in the INSERT), then per gyro id 1..4 the
-// innovation's two components and their two sigmas.
+// innovation's two components and their two sigmas, then the attitude error estimate about body
+// x, y, z and its 1-sigma (version 9).
 constexpr char kColumns[] =
     "spacecraft_id, measurement_time_unix_ns, compute_time_unix_ns, state, attitude_valid, "
     "q0, q1, q2, q3, sigma_x_arcsec, sigma_y_arcsec, sigma_z_arcsec, "
@@ -35,7 +37,10 @@ constexpr char kColumns[] =
     "innovation_g3_1_arcsec, innovation_g3_2_arcsec, "
     "innovation_sigma_g3_1_arcsec, innovation_sigma_g3_2_arcsec, "
     "innovation_g4_1_arcsec, innovation_g4_2_arcsec, "
-    "innovation_sigma_g4_1_arcsec, innovation_sigma_g4_2_arcsec";
+    "innovation_sigma_g4_1_arcsec, innovation_sigma_g4_2_arcsec, "
+    "attitude_error_x_arcsec, attitude_error_y_arcsec, attitude_error_z_arcsec, "
+    "attitude_error_sigma_x_arcsec, attitude_error_sigma_y_arcsec, "
+    "attitude_error_sigma_z_arcsec";
 constexpr int kSpacecraftColumn = 0;
 constexpr int kTimeColumn = 1;
 constexpr int kComputeColumn = 2;
@@ -50,7 +55,9 @@ constexpr int kRatioColumn = 16;
 constexpr int kLastStarTrackerColumn = 17;
 constexpr int kOrderColumn = 18;
 constexpr int kInnovationColumn = 19;  // gyro g's four columns start at 19 + 4 (g - 1)
-constexpr int kNumColumns = kInnovationColumn + 4 * kMaxGyroId;
+constexpr int kAttitudeErrorColumn = kInnovationColumn + 4 * kMaxGyroId;
+constexpr int kAttitudeErrorSigmaColumn = kAttitudeErrorColumn + 3;
+constexpr int kNumColumns = kAttitudeErrorSigmaColumn + 3;
 
 const std::string& InsertSql() {
   static const std::string* const sql = [] {
@@ -114,6 +121,19 @@ absl::Status Validate(const EstimateRecord& r) {
     }
     seen[id] = true;
   }
+  if (r.has_attitude_error) {
+    for (size_t k = 0; k < 3; ++k) {
+      if (!std::isfinite(r.attitude_error_b[k])) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("estimates.attitude_error_b[", k, "]: not finite"));
+      }
+      if (!std::isfinite(r.attitude_error_sigma_b[k]) || r.attitude_error_sigma_b[k] < 0.0) {
+        return absl::InvalidArgumentError(absl::StrCat("estimates.attitude_error_sigma_b[", k,
+                                                       "] = ", r.attitude_error_sigma_b[k],
+                                                       ": must be finite and >= 0"));
+      }
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -158,6 +178,16 @@ absl::StatusOr<EstimateRecord> ReadRecord(const Statement& st) {
         g.sigma[k] = estimator::ArcsecToRad(st.ColumnDoubleOrNaN(first + 2 + k));
       }
       r.star_tracker_innovations.push_back(g);
+    }
+  }
+  // The six columns are written together; a row from before version 9 has none.
+  r.has_attitude_error = !st.ColumnIsNull(kAttitudeErrorColumn);
+  if (r.has_attitude_error) {
+    for (int k = 0; k < 3; ++k) {
+      r.attitude_error_b[k] =
+          estimator::ArcsecToRad(st.ColumnDoubleOrNaN(kAttitudeErrorColumn + k));
+      r.attitude_error_sigma_b[k] =
+          estimator::ArcsecToRad(st.ColumnDoubleOrNaN(kAttitudeErrorSigmaColumn + k));
     }
   }
   return r;
@@ -219,6 +249,13 @@ absl::Status EstimateStore::Put(Transaction& txn, const EstimateRecord& r) {
     st->BindInt64(kLastStarTrackerColumn + 1, TimeToUnixNanos(r.last_star_tracker_time));
   }
   for (int c = kInnovationColumn; c < kNumColumns; ++c) st->BindNull(c + 1);
+  if (r.has_attitude_error) {
+    for (int k = 0; k < 3; ++k) {
+      st->BindDouble(kAttitudeErrorColumn + 1 + k, estimator::RadToArcsec(r.attitude_error_b[k]));
+      st->BindDouble(kAttitudeErrorSigmaColumn + 1 + k,
+                     estimator::RadToArcsec(r.attitude_error_sigma_b[k]));
+    }
+  }
   if (r.star_tracker_innovations.empty()) {
     st->BindNull(kOrderColumn + 1);
   } else {

@@ -1,8 +1,9 @@
-// The per-step estimate archive (table estimates, schema version 7; docs/service.md "Per-step
-// estimates"): one EstimateRecord (records.h) per spacecraft and measurement step, keyed by
-// (spacecraft_id, measurement_time), so a step applied again (a re-run over a late frame, a
-// session replaced by ConfigureSpacecraft) replaces its row. Records are SI; the columns carry
-// the units operators read (sigma and innovations in arcsec), converted here.
+// The per-step estimate archive (table estimates, schema version 7, the attitude error estimate
+// since version 9; docs/service.md "Per-step estimates"): one EstimateRecord (records.h) per
+// spacecraft and measurement step, keyed by (spacecraft_id, measurement_time), so a step applied
+// again (a re-run over a late frame, a session replaced by ConfigureSpacecraft) replaces its row.
+// Records are SI; the columns carry the units operators read (sigma, innovations and the
+// attitude error estimate in arcsec), converted here.
 #ifndef ESG_STORAGE_ESTIMATE_STORE_H_
 #define ESG_STORAGE_ESTIMATE_STORE_H_
 
@@ -35,8 +36,9 @@ class EstimateStore {
   // Stores `record`, replacing the one of the same spacecraft and measurement time.
   // InvalidArgument (naming the field, "estimates.<field>") for an empty spacecraft id or state,
   // an unstorable time, a valid attitude with a non-finite value or a pair outside 1..4, or an
-  // innovation of a gyro id outside 1..4 or repeated. NaN test ratios are stored as NULL and
-  // read back as NaN.
+  // innovation of a gyro id outside 1..4 or repeated, or an attitude error estimate with a
+  // non-finite value or a negative 1-sigma. NaN test ratios are stored as NULL and read back as
+  // NaN.
   absl::Status Put(const EstimateRecord& record);
   absl::Status Put(Transaction& txn, const EstimateRecord& record);
 

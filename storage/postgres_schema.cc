@@ -206,9 +206,20 @@ CREATE TRIGGER estimates_notify AFTER INSERT OR UPDATE ON estimates
   FOR EACH ROW EXECUTE FUNCTION esg_estimates_notify();
 )sql";
 
+// Version 9 (schema.h) in PostgreSQL types: the attitude error estimate of each step.
+constexpr absl::string_view kEstimateAttitudeErrorColumns = R"sql(
+ALTER TABLE estimates ADD COLUMN attitude_error_x_arcsec DOUBLE PRECISION;
+ALTER TABLE estimates ADD COLUMN attitude_error_y_arcsec DOUBLE PRECISION;
+ALTER TABLE estimates ADD COLUMN attitude_error_z_arcsec DOUBLE PRECISION;
+ALTER TABLE estimates ADD COLUMN attitude_error_sigma_x_arcsec DOUBLE PRECISION;
+ALTER TABLE estimates ADD COLUMN attitude_error_sigma_y_arcsec DOUBLE PRECISION;
+ALTER TABLE estimates ADD COLUMN attitude_error_sigma_z_arcsec DOUBLE PRECISION;
+)sql";
+
 // kUpgrades[n - 7] takes a database from version n to n + 1 (one is created at version 7 and
 // upgraded in the same transaction).
-constexpr absl::string_view kUpgrades[] = {kCoefficientBasisTermsColumn};
+constexpr absl::string_view kUpgrades[] = {kCoefficientBasisTermsColumn,
+                                           kEstimateAttitudeErrorColumns};
 static_assert(7 + std::size(kUpgrades) == kCurrentSchemaVersion);
 
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").

@@ -181,6 +181,12 @@ struct EstimateRecord {
   double star_tracker_test_ratio = 0.0;  // largest normalised innovation of eq. (14) [1]
   // Latest step at or before this one that applied the star tracker; InfinitePast: none yet.
   absl::Time last_star_tracker_time = absl::InfinitePast();
+  // The attitude error estimate of the step's star-tracker update (estimator::StepReport::
+  // attitude_error_b_arcsec): the correction about body x, y, z and its 1-sigma [rad];
+  // meaningful only when has_attitude_error (not stored otherwise).
+  bool has_attitude_error = false;
+  std::array<double, 3> attitude_error_b = {0.0, 0.0, 0.0};
+  std::array<double, 3> attitude_error_sigma_b = {0.0, 0.0, 0.0};
 };
 
 // The latest checkpoint of a spacecraft's estimation session (one per spacecraft).

@@ -241,9 +241,22 @@ CREATE TABLE estimates (
 // array; NULL for a gyro without basis terms and for the rows stored before.
 constexpr absl::string_view kSchemaV8 = kCoefficientBasisTermsColumn;
 
+// Version 9: the attitude error estimate of each step (estimate_store.h): the correction the
+// star-tracker update applied to the attitude about the body axes x, y, z and its 1-sigma
+// [arcsec]; NULL at a step without a star-tracker update and for the rows stored before.
+constexpr absl::string_view kSchemaV9 = R"sql(
+ALTER TABLE estimates ADD COLUMN attitude_error_x_arcsec REAL;
+ALTER TABLE estimates ADD COLUMN attitude_error_y_arcsec REAL;
+ALTER TABLE estimates ADD COLUMN attitude_error_z_arcsec REAL;
+ALTER TABLE estimates ADD COLUMN attitude_error_sigma_x_arcsec REAL;
+ALTER TABLE estimates ADD COLUMN attitude_error_sigma_y_arcsec REAL;
+ALTER TABLE estimates ADD COLUMN attitude_error_sigma_z_arcsec REAL;
+)sql";
+
 // kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3, kSchemaV4,
-                                             kSchemaV5, kSchemaV6, kSchemaV7, kSchemaV8};
+constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3,
+                                             kSchemaV4, kSchemaV5, kSchemaV6,
+                                             kSchemaV7, kSchemaV8, kSchemaV9};
 static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -18,6 +18,8 @@
 //      a re-run); window_checkpoints (periodic session checkpoints the re-runs start from).
 //   7  estimates (the per-step estimate archive, estimate_store.h).
 //   8  coefficients.basis_terms_json (basis_terms_column.h; NULL: none, or stored before 8).
+//   9  estimates.attitude_error_{x,y,z}_arcsec and attitude_error_sigma_{x,y,z}_arcsec (the
+//      attitude error estimate of a step's star-tracker update; NULL: none, or stored before 9).
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -44,7 +46,7 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 8;
+inline constexpr int kCurrentSchemaVersion = 9;
 
 // The DDL of version 8, the same in both dialects.
 inline constexpr absl::string_view kCoefficientBasisTermsColumn =

@@ -5,6 +5,8 @@
 //       Drift coefficients gyro N (folder)   table of all coefficients + one plot per estimated
 //                                            coefficient (value, +/-1-sigma)
 //       Attitude 1-sigma envelope / table    per-step estimates (or esg.unavailable)
+//       Attitude error body x, y, z / table  per-step estimates: the error estimate of each
+//                                            star-tracker update with its +/-1-sigma
 //       Innovations gyro N / table           per-step estimates (or esg.unavailable)
 //       Predicted attitude envelope / table  PredictAttitude over the time conductor's bounds
 //       Planned attitude for predictions     esg.plan editor
@@ -14,8 +16,8 @@ import { apiFetch } from './api.js';
 import { NAMESPACE, id, parseKey } from './keys.js';
 import { estimatesAvailable, session, sessions } from './sessions.js';
 import {
-  AXES, BANDS, COEFFICIENTS, ESTIMATE_EXTRA, PREDICT_EXTRA, attitudeTableValues,
-  coefficientTableValues, innovationTableValues, singleSeriesValues
+  AXES, BANDS, COEFFICIENTS, ESTIMATE_EXTRA, PREDICT_EXTRA, attitudeErrorTableValues,
+  attitudeTableValues, coefficientTableValues, innovationTableValues, singleSeriesValues
 } from './series.js';
 
 export const TELEMETRY_TYPE = 'esg.telemetry';
@@ -115,6 +117,8 @@ const builders = {
       ...gyros.map((g) => id('coefs', sc, g)),
       id('attplot', sc),
       id('atttable', sc),
+      ...AXES.map((axis) => id('errplot', sc, axis)),
+      id('errtable', sc),
       ...gyros.map((g) => id('innovplot', sc, g)),
       id('innovtable', sc),
       id('predplot', sc),
@@ -185,6 +189,32 @@ const builders = {
     const label = seriesLabel(key);
     return telemetryObject(identifier, label, singleSeriesValues(key, label, 'arcsec'),
       { source: 'est', spacecraft: sc }, keyString(id('sc', sc)));
+  },
+
+  // The attitude error estimate about one body axis with its 1-sigma envelope (series.js): one
+  // plot per axis, since the star tracker's noise about its boresight (body z) is several times
+  // that about x and y.
+  async errplot(identifier, [sc, axis]) {
+    const name = `Attitude error body ${axis}`;
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    const series = [
+      { identifier: id('estser', sc, `e${axis}`), color: AXIS_COLOURS[axis] },
+      { identifier: id('estser', sc, `e${axis}_hi`), color: AXIS_DIM[axis] },
+      { identifier: id('estser', sc, `e${axis}_lo`), color: AXIS_DIM[axis] }
+    ];
+    return overlay(identifier, name, series, keyString(id('sc', sc)),
+      `attitude error estimate about body ${axis} [arcsec]`);
+  },
+
+  async errtable(identifier, [sc]) {
+    const name = 'Attitude error table';
+    if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
+    return table(identifier, name, id('err', sc), attitudeErrorTableValues(), keyString(id('sc', sc)));
+  },
+
+  async err(identifier, [sc]) {
+    return telemetryObject(identifier, `${sc} attitude error estimates`, attitudeErrorTableValues(),
+      { source: 'est', spacecraft: sc }, keyString(id('errtable', sc)));
   },
 
   async innovplot(identifier, [sc, gyro]) {
@@ -267,12 +297,15 @@ const builders = {
 };
 
 // The name of a plotted series from its datum field (series.js): s<axis>_hi / _lo for the attitude
-// envelope, g<gyro>_z<i>[_hi|_lo] for an innovation and its band.
+// envelope, e<axis>[_hi|_lo] for the attitude error estimate and its band, g<gyro>_z<i>[_hi|_lo]
+// for an innovation and its band.
 function seriesLabel(field) {
   const band = field.endsWith('_hi') ? ' +1-sigma' : field.endsWith('_lo') ? ' -1-sigma' : '';
   const base = field.replace(/_(hi|lo)$/, '');
   const attitude = /^s([xyz])$/.exec(base);
   if (attitude) return `${band.trim()} body ${attitude[1]}`;
+  const error = /^e([xyz])$/.exec(base);
+  if (error) return `attitude error body ${error[1]}${band}`;
   const innovation = /^g(\d)_z(\d)$/.exec(base);
   if (innovation) return `gyro ${innovation[1]} z${innovation[2]}${band}`;
   return field;

@@ -64,7 +64,8 @@ export const BANDS = {
 };
 
 // Per-step estimate -> datum: the attitude 1-sigma about the body axes and its +/- envelope, the
-// quaternion, and each gyro's star-tracker innovation components with their 1-sigma.
+// quaternion, the attitude error estimate of the step's star-tracker update with its 1-sigma, and
+// each gyro's star-tracker innovation components with their 1-sigma.
 export function estimateDatum(record) {
   const datum = {
     utc: Date.parse(record.measurement_time),
@@ -74,6 +75,7 @@ export function estimateDatum(record) {
     test_ratio: record.star_tracker_test_ratio
   };
   addAttitude(datum, record.attitude);
+  addAttitudeError(datum, record);
   for (const innovation of record.star_tracker_innovations || []) {
     for (let i = 0; i < 2; i++) {
       const prefix = `g${innovation.gyro_id}_z${i + 1}`;
@@ -101,6 +103,24 @@ function addAttitude(datum, attitude) {
   (attitude.q_in_b || []).forEach((q, i) => { datum[`q${i}`] = q; });
 }
 
+// The attitude error estimate (EstimateRecord.attitude_error_b_arcsec): the correction the step's
+// star-tracker update applied to the attitude, about the body axes, i.e. the error the output had
+// accumulated on the gyros since the previous update; with its 1-sigma (the part of the attitude
+// 1-sigma the update removed). Drawn like an innovation: the estimate, and +sigma and -sigma about
+// zero, so a consistent filter keeps about 68 % of the points inside the envelope. Steps without a
+// star-tracker update have none (their fields are left out).
+function addAttitudeError(datum, record) {
+  const error = record.attitude_error_b_arcsec || [];
+  const sigma = record.attitude_error_sigma_b_arcsec || [];
+  if (error.length !== 3 || sigma.length !== 3) return;
+  AXES.forEach((axis, i) => {
+    datum[`e${axis}`] = error[i];
+    datum[`e${axis}_sigma`] = sigma[i];
+    datum[`e${axis}_hi`] = sigma[i];
+    datum[`e${axis}_lo`] = -sigma[i];
+  });
+}
+
 export function predictDatum(sample, source) {
   const datum = { utc: Date.parse(sample.time), source };
   addAttitude(datum, sample);
@@ -122,6 +142,16 @@ export const ESTIMATE_EXTRA = [
   { key: 'star_tracker_used', source: 'star_tracker_used', name: 'Star tracker used', format: 'string' },
   range('test_ratio', 'Largest normalised innovation', { formatString: '%.3f' }, 20)
 ];
+
+export function attitudeErrorTableValues() {
+  const values = [TIME];
+  AXES.forEach((axis, i) => {
+    values.push(column(`e${axis}`, `Attitude error body ${axis}`, ARCSEC, 2 * i + 1));
+    values.push(column(`e${axis}_sigma`, `Attitude error body ${axis} 1-sigma`, ARCSEC, 2 * i + 2));
+  });
+  values.push({ key: 'star_tracker_used', source: 'star_tracker_used', name: 'Star tracker used', format: 'string' });
+  return values;
+}
 
 export const PREDICT_EXTRA = [
   { key: 'source', source: 'source', name: 'Attitude source', format: 'string' }

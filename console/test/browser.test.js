@@ -389,6 +389,69 @@ test('per-step estimate views: real sigma values when esgd has them, "not availa
   }
 });
 
+// The attitude error estimate of each star-tracker update (per body axis, with its 1-sigma): the
+// table's values over the last 2 h of the flight against `esg estimates --format json` of the same
+// steps (3 decimals, the table's format), empty on steps without a star-tracker update; each axis
+// has its plot with the estimate and its +/-1-sigma envelope.
+test('attitude error estimate: the table shows what esg estimates stored, a plot per body axis', async () => {
+  const status = await cliJson('status', '--spacecraft', 'RDK-1');
+  const last = Date.parse((status.sessions ? status.sessions[0] : status).lastFrameTime);
+  const from = new Date(last - 2 * 3600e3).toISOString();
+  const to = new Date(last).toISOString();
+  const probe = await api(`/api/spacecraft/RDK-1/estimates?from=${from}&to=${to}`);
+  const bounds = `?tc.mode=fixed&tc.startBound=${last - 2 * 3600e3}&tc.endBound=${last}&tc.timeSystem=utc`;
+  await open('esg:root/esg:sc~RDK-1/esg:errtable~RDK-1', bounds);
+  if (probe.status === 501) {
+    await page.waitForFunction(() => /not available/.test(document.querySelector('.esg-unavailable')?.textContent || ''));
+    return;
+  }
+  assert.equal(probe.status, 200, probe.text);
+  const stored = JSON.parse(await cli('estimates', '--spacecraft', 'RDK-1', '--from', from, '--to', to,
+    '--format', 'json')).estimates;
+  const byTime = new Map(stored.map((e) => [Date.parse(e.measurementTime), e]));
+  const rows = await waitForTableRows(30);
+  let withEstimate = 0;
+  let without = 0;
+  for (const row of rows) {
+    const at = row['Time (UTC)'];
+    const record = byTime.get(cellTime(at));
+    assert.ok(record, `esg estimates has the step at ${at}`);
+    const error = record.attitudeErrorBArcsec || [];
+    const sigma = record.attitudeErrorSigmaBArcsec || [];
+    if (error.length === 0) {
+      assert.equal(row['Star tracker used'], 'no', `a step without an estimate applied no star tracker (${at})`);
+      for (const axis of ['x', 'y', 'z']) {
+        assert.doesNotMatch(row[`Attitude error body ${axis} [arcsec]`] || '', /\d/, `no estimate at ${at}`);
+      }
+      without++;
+      continue;
+    }
+    assert.equal(row['Star tracker used'], 'yes');
+    ['x', 'y', 'z'].forEach((axis, i) => {
+      assert.equal(Number(row[`Attitude error body ${axis} [arcsec]`]).toFixed(3), error[i].toFixed(3),
+        `error ${axis} at ${at}`);
+      assert.equal(Number(row[`Attitude error body ${axis} 1-sigma [arcsec]`]).toFixed(3), sigma[i].toFixed(3),
+        `error 1-sigma ${axis} at ${at}`);
+    });
+    withEstimate++;
+  }
+  process.stdout.write(`# attitude error table: ${withEstimate} rows with an estimate, ${without} without\n`);
+  assert.ok(withEstimate >= 20, `compared ${withEstimate} rows`);
+  // The plots: the estimate and its +/-1-sigma lines about zero, one plot per body axis.
+  for (const axis of ['x', 'y', 'z']) {
+    await open(`esg:root/esg:sc~RDK-1/esg:errplot~RDK-1~${axis}`, bounds);
+    await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+    await page.waitForFunction(() => document.querySelectorAll('.plot-series-name').length >= 3,
+      { timeout: 20_000 });
+    const names = await page.$$eval('.plot-series-name', (spans) => spans.map((s) => s.textContent.trim()));
+    for (const band of ['', ' +1-sigma', ' -1-sigma']) {
+      assert.ok(names.some((n) => n.startsWith(`attitude error body ${axis}${band}`) &&
+        (band || !/sigma/.test(n))), `series "attitude error body ${axis}${band}" in ${names.join(' | ')}`);
+    }
+    if (axis === 'x') await shot('attitude_error_x');
+  }
+});
+
 // Real time with per-step estimates: the next hour of the same flight is replayed in two halves
 // while a table is open. The estimate table gets rows pushed by SubscribeEstimates; the
 // coefficient table gets the snapshots fetched on each pushed estimate. No reload in between.

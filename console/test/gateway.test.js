@@ -322,7 +322,13 @@ test('estimates: 501 from an esgd without the RPC, else the stored per-step esti
     assert.match(estimates[i].state, /^SESSION_STATE_/);
     assert.ok(Array.isArray(estimates[i].output_pair) && Array.isArray(estimates[i].star_tracker_innovations));
     if (i > 0) assert.ok(estimates[i].measurement_time > estimates[i - 1].measurement_time);
+    // The attitude error estimate about body x, y, z with its 1-sigma: at every step that applied
+    // the star tracker to a valid output, at no other.
+    const withError = estimates[i].star_tracker_used && estimates[i].attitude !== undefined;
+    assert.equal(estimates[i].attitude_error_b_arcsec.length, withError ? 3 : 0, estimates[i].measurement_time);
+    assert.equal(estimates[i].attitude_error_sigma_b_arcsec.length, withError ? 3 : 0);
   }
+  assert.ok(estimates.some((e) => e.attitude_error_b_arcsec.length === 3), 'some steps carry an estimate');
   const span = await api('/api/spacecraft/RDK-1/estimates?from=2019-03-01T01:00:00Z&to=2019-03-01T01:10:00Z',
     { headers: asBob });
   assert.deepEqual(span.json.estimates, estimates.filter((e) =>

@@ -2,7 +2,8 @@
 // written into the daemon's database (4500 steps, three pages of GetEstimateHistory) come out
 // every one once, in order, with the stored values (CSV with 17 significant digits reads back the
 // double; innovations under their gyro id's columns, empty where none was formed); --from/--to are
-// inclusive; --json is the EstimateHistoryResponse; the table counts them; an unknown spacecraft
+// inclusive; --json is the EstimateHistoryResponse (the attitude error estimate only on steps
+// that have one); the table counts them; an unknown spacecraft
 // is exit 1 with the server's NOT_FOUND, a bad time exit 2 naming the option.
 #include <cmath>
 #include <map>
@@ -35,7 +36,8 @@ const absl::Time kStart = absl::FromUnixSeconds(1551398400);  // 2019-03-01T00:0
 constexpr int kSteps = 4500;
 
 // Step i: every value derived from i, so a row tells which step it is. Every third step has no
-// attitude output; the innovations of gyros 2 and 1 (in that session order) on even steps.
+// attitude output; the innovations of gyros 2 and 1 (in that session order) and the attitude
+// error estimate on even steps.
 storage::EstimateRecord Step(int i) {
   storage::EstimateRecord r;
   r.spacecraft_id = "CLI-EST";
@@ -62,6 +64,11 @@ storage::EstimateRecord Step(int i) {
       r.star_tracker_innovations.push_back(g);
     }
     r.last_star_tracker_time = r.measurement_time;
+    r.has_attitude_error = true;
+    r.attitude_error_b = {estimator::ArcsecToRad(1e-3 * i), estimator::ArcsecToRad(-0.5),
+                          estimator::ArcsecToRad(2.0)};
+    r.attitude_error_sigma_b = {estimator::ArcsecToRad(1.5), estimator::ArcsecToRad(1.75),
+                                estimator::ArcsecToRad(9.0)};
   } else {
     r.last_star_tracker_time = r.measurement_time - absl::Minutes(1);
   }
@@ -115,7 +122,8 @@ TEST_F(EstimatesCli, CsvHasEveryStepOnceInOrderWithTheStoredValues) {
        {"time_utc", "state", "q0", "q2", "sigma_x_arcsec", "reference_gyro", "star_tracker_used",
         "star_tracker_test_ratio", "last_star_tracker_time_utc", "g1_innovation_1_arcsec",
         "g2_sigma_2_arcsec", "g3_innovation_1_arcsec", "attitude_invalid_reason",
-        "compute_time_utc"}) {
+        "compute_time_utc", "attitude_error_x_arcsec", "attitude_error_z_arcsec",
+        "attitude_error_sigma_y_arcsec"}) {
     ASSERT_EQ(column.count(name), 1u) << name << " in " << lines[0];
   }
   for (int i = 0; i < kSteps; ++i) {
@@ -142,8 +150,13 @@ TEST_F(EstimatesCli, CsvHasEveryStepOnceInOrderWithTheStoredValues) {
       EXPECT_NEAR(std::stod(cell("g1_innovation_1_arcsec")), 0.01 * i + 1, 1e-12) << i;
       EXPECT_NEAR(std::stod(cell("g2_innovation_2_arcsec")), -2.0, 1e-12) << i;
       EXPECT_NEAR(std::stod(cell("g2_sigma_2_arcsec")), 5.0, 1e-12) << i;
+      EXPECT_NEAR(std::stod(cell("attitude_error_x_arcsec")), 1e-3 * i, 1e-12) << i;
+      EXPECT_NEAR(std::stod(cell("attitude_error_z_arcsec")), 2.0, 1e-12) << i;
+      EXPECT_NEAR(std::stod(cell("attitude_error_sigma_y_arcsec")), 1.75, 1e-12) << i;
     } else {
       EXPECT_EQ(cell("g1_innovation_1_arcsec"), "");
+      EXPECT_EQ(cell("attitude_error_x_arcsec"), "");
+      EXPECT_EQ(cell("attitude_error_sigma_z_arcsec"), "");
     }
     EXPECT_EQ(cell("g3_innovation_1_arcsec"), "") << "no innovation of gyro 3 was formed";
   }
@@ -168,10 +181,19 @@ TEST_F(EstimatesCli, SpanIsInclusiveJsonIsTheResponseAndTheTableCounts) {
       << "step 60 has no attitude output: " << first.dump();
   EXPECT_EQ(doc["estimates"][1]["attitude"]["qInB"].size(), 4u);
   EXPECT_EQ(first["attitudeInvalidReason"], "no readable pair, step 60");
+  // Step 60 applied the star tracker: its attitude error estimate and 1-sigma about body x, y, z;
+  // step 61 did not, and has none.
+  ASSERT_EQ(first["attitudeErrorBArcsec"].size(), 3u) << first.dump();
+  EXPECT_NEAR(first["attitudeErrorBArcsec"][0].get<double>(), 0.06, 1e-12);
+  EXPECT_NEAR(first["attitudeErrorSigmaBArcsec"][2].get<double>(), 9.0, 1e-12);
+  EXPECT_FALSE(doc["estimates"][1].contains("attitudeErrorBArcsec"))
+      << doc["estimates"][1].dump();
   r = Esg(*dir_, *daemon_, "estimates --spacecraft CLI-EST" + span);
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("61 estimates"));
   EXPECT_THAT(r.out, HasSubstr("2019-03-01T01:59:00.000Z"));
+  EXPECT_THAT(r.out, HasSubstr("att. error x,y,z [arcsec]"));
+  EXPECT_THAT(r.out, HasSubstr("  +0.06   -0.50   +2.00"));
   r = Esg(*dir_, *daemon_, "estimates --spacecraft CLI-EST --csv --json");
   EXPECT_EQ(r.exit_code, 2);
 }

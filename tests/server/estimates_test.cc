@@ -14,6 +14,7 @@
 #include <cmath>
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -94,6 +95,9 @@ struct OfflineEstimate {
   absl::Time last_star_tracker_time = absl::InfinitePast();
   std::vector<int> gyro_order;
   std::map<int, std::array<double, 4>> innovations;  // gyro id -> z1, z2, sigma1, sigma2 [rad]
+  // The attitude error estimate of the step's star-tracker update and its 1-sigma [arcsec].
+  std::optional<Eigen::Vector3d> attitude_error_b_arcsec;
+  std::optional<Eigen::Vector3d> attitude_error_sigma_b_arcsec;
 };
 
 std::vector<OfflineEstimate> OfflineEstimates(const estimator::SpacecraftConfig& config,
@@ -122,6 +126,8 @@ std::vector<OfflineEstimate> OfflineEstimates(const estimator::SpacecraftConfig&
     e.star_tracker_used = report->star_tracker_used;
     e.test_ratio = report->star_tracker_test_ratio;
     e.last_star_tracker_time = last_used;
+    e.attitude_error_b_arcsec = report->attitude_error_b_arcsec;
+    e.attitude_error_sigma_b_arcsec = report->attitude_error_sigma_b_arcsec;
     int k = 0;
     const int m = static_cast<int>(report->star_tracker_innovation.size());
     for (const estimator::GyroEstimate& g : session->Gyros()) {
@@ -189,6 +195,19 @@ void ExpectEqualsOffline(const esg::v1::EstimateRecord& got, const OfflineEstima
       EXPECT_TRUE(Near(g.innovation_arcsec(i), estimator::RadToArcsec(w[i]))) << g.gyro_id();
       EXPECT_TRUE(Near(g.sigma_arcsec(i), estimator::RadToArcsec(w[2 + i]))) << g.gyro_id();
     }
+  }
+  if (want.attitude_error_b_arcsec.has_value()) {
+    ASSERT_EQ(got.attitude_error_b_arcsec_size(), 3);
+    ASSERT_EQ(got.attitude_error_sigma_b_arcsec_size(), 3);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_TRUE(Near(got.attitude_error_b_arcsec(i), (*want.attitude_error_b_arcsec)(i))) << i;
+      EXPECT_TRUE(
+          Near(got.attitude_error_sigma_b_arcsec(i), (*want.attitude_error_sigma_b_arcsec)(i)))
+          << i;
+    }
+  } else {
+    EXPECT_EQ(got.attitude_error_b_arcsec_size(), 0);
+    EXPECT_EQ(got.attitude_error_sigma_b_arcsec_size(), 0);
   }
   EXPECT_TRUE(got.has_compute_time());
 }
@@ -312,6 +331,10 @@ TEST(EstimateArchive, StoredEstimatesEqualAnOfflineSessionRunOverTheSameFrames) 
   EXPECT_GT(rejected, 0);
   EXPECT_LT(rejected, static_cast<long>(offline.size()) / 2);
   EXPECT_GE(offline.back().gyro_order.size(), 3u);
+  // Every step that applied the star tracker carries an attitude error estimate, no other does.
+  for (const OfflineEstimate& e : offline) {
+    EXPECT_EQ(e.attitude_error_b_arcsec.has_value(), e.star_tracker_used) << FormatUtc(e.time);
+  }
   int pages = 0;
   const std::vector<esg::v1::EstimateRecord> stored = History(*stub, "EST-OFF", 70, &pages);
   ExpectAllEqualOffline(stored, offline, "EST-OFF");

@@ -59,6 +59,11 @@ EstimateRecord Estimate(const std::string& id, double at_seconds) {
   }
   r.star_tracker_test_ratio = 0.75;
   r.last_star_tracker_time = T(at_seconds);
+  r.has_attitude_error = true;
+  r.attitude_error_b = {estimator::ArcsecToRad(-0.25), estimator::ArcsecToRad(0.5),
+                        estimator::ArcsecToRad(0.01 * at_seconds)};
+  r.attitude_error_sigma_b = {estimator::ArcsecToRad(0.75), estimator::ArcsecToRad(1.25),
+                              estimator::ArcsecToRad(7.0)};
   return r;
 }
 
@@ -88,6 +93,13 @@ void ExpectSame(const EstimateRecord& got, const EstimateRecord& want) {
     for (int i = 0; i < 2; ++i) {
       EXPECT_TRUE(near(g.innovation[i], w.innovation[i])) << k << " " << i;
       EXPECT_TRUE(near(g.sigma[i], w.sigma[i])) << k << " " << i;
+    }
+  }
+  EXPECT_EQ(got.has_attitude_error, want.has_attitude_error);
+  if (want.has_attitude_error) {
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_TRUE(near(got.attitude_error_b[i], want.attitude_error_b[i])) << i;
+      EXPECT_TRUE(near(got.attitude_error_sigma_b[i], want.attitude_error_sigma_b[i])) << i;
     }
   }
 }
@@ -137,6 +149,10 @@ TEST_P(EstimateStoreTest, RoundTripKeepsSiValuesAndTheSessionGyroOrderWithArcsec
               IsOkAndHolds(std::string("2,1,3")));
   EXPECT_THAT(QueryInt(db, "SELECT COUNT(*) FROM estimates WHERE innovation_g4_1_arcsec IS NULL"),
               IsOkAndHolds(1));
+  EXPECT_THAT(QueryDouble(db, "SELECT attitude_error_z_arcsec FROM estimates"),
+              IsOkAndHolds(::testing::DoubleNear(0.6, 1e-12)));
+  EXPECT_THAT(QueryDouble(db, "SELECT attitude_error_sigma_y_arcsec FROM estimates"),
+              IsOkAndHolds(::testing::DoubleNear(1.25, 1e-12)));
 }
 
 TEST_P(EstimateStoreTest, AStepStoredAgainReplacesTheRowAtItsMeasurementTime) {
@@ -146,6 +162,7 @@ TEST_P(EstimateStoreTest, AStepStoredAgainReplacesTheRowAtItsMeasurementTime) {
   again.compute_time = T(9000);
   again.state = "CONVERGED";
   again.star_tracker_innovations.resize(1);
+  again.has_attitude_error = false;  // the replaced row's estimate does not linger
   ASSERT_THAT(store().Put(again), IsOk());
   const std::vector<EstimateRecord> all = All("SC-1");
   ASSERT_EQ(all.size(), 2u);
@@ -161,12 +178,16 @@ TEST_P(EstimateStoreTest, AnInvalidOutputStoresNoAttitudeAndNoInnovationsWhenNon
   r.star_tracker_test_ratio = 0.0;
   r.last_star_tracker_time = absl::InfinitePast();
   r.q_in_b = {std::nan(""), 0, 0, 0};  // not stored, so not checked
+  r.has_attitude_error = false;
+  r.attitude_error_b = {std::nan(""), 0, 0};  // not stored, so not checked
   ASSERT_THAT(store().Put(r), IsOk());
   Database& db = storage_->database();
   EXPECT_THAT(QueryInt(db,
                        "SELECT COUNT(*) FROM estimates WHERE q0 IS NULL AND sigma_x_arcsec IS NULL "
                        "AND output_reference_gyro_id IS NULL AND innovation_gyro_order IS NULL "
-                       "AND last_star_tracker_time_unix_ns IS NULL"),
+                       "AND last_star_tracker_time_unix_ns IS NULL "
+                       "AND attitude_error_x_arcsec IS NULL "
+                       "AND attitude_error_sigma_z_arcsec IS NULL"),
               IsOkAndHolds(1));
   const std::vector<EstimateRecord> all = All("SC-1");
   ASSERT_EQ(all.size(), 1u);
@@ -246,6 +267,16 @@ TEST_P(EstimateStoreTest, RefusesRecordsItCouldNotReadBackNamingTheField) {
   bad_q.q_in_b[2] = std::nan("");
   EXPECT_THAT(store().Put(bad_q),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("estimates.q_in_b")));
+  EstimateRecord bad_error = Estimate("SC-1", 60);
+  bad_error.attitude_error_b[1] = std::nan("");
+  EXPECT_THAT(store().Put(bad_error),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("estimates.attitude_error_b[1]")));
+  EstimateRecord bad_error_sigma = Estimate("SC-1", 60);
+  bad_error_sigma.attitude_error_sigma_b[2] = -1e-6;
+  EXPECT_THAT(store().Put(bad_error_sigma),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("estimates.attitude_error_sigma_b[2]")));
   EXPECT_THAT(store().Count("SC-1"), IsOkAndHolds(0));
 }
 

@@ -19,11 +19,13 @@
 #include <latch>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/postgres_schema.h"
@@ -38,6 +40,7 @@ namespace {
 
 using ::esg::storage::testing::IsOkAndHolds;
 using ::esg::storage::testing::QueryInt;
+using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::PostgresServer;
 using ::esg::testing::StatusIs;
@@ -314,8 +317,16 @@ TEST(PostgresStorage, TwoOpensOfAFreshDatabaseAtOnceBothSucceed) {
   }
 }
 
+// Takes a database at the current version back to before version 9 (schema.h).
+constexpr char kDropAttitudeErrorColumns[] =
+    "ALTER TABLE estimates DROP COLUMN attitude_error_x_arcsec, "
+    "DROP COLUMN attitude_error_y_arcsec, DROP COLUMN attitude_error_z_arcsec, "
+    "DROP COLUMN attitude_error_sigma_x_arcsec, DROP COLUMN attitude_error_sigma_y_arcsec, "
+    "DROP COLUMN attitude_error_sigma_z_arcsec; ";
+
 // A database created at version 7 by an earlier program is upgraded when a server opens it: the
-// coefficients gain their basis terms (schema.h version 8).
+// coefficients gain their basis terms (schema.h version 8), the estimates their attitude error
+// estimate (version 9).
 TEST(PostgresStorage, AVersion7DatabaseIsUpgradedWhenOpened) {
   std::string error;
   PostgresServer* server = PostgresServer::Shared(&error);
@@ -328,9 +339,9 @@ TEST(PostgresStorage, AVersion7DatabaseIsUpgradedWhenOpened) {
   {
     absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
     ASSERT_THAT(storage, IsOk());
-    ASSERT_THAT((*storage)->database().Execute(
-                    "ALTER TABLE coefficients DROP COLUMN basis_terms_json; "
-                    "UPDATE esg_schema SET version = 7"),
+    ASSERT_THAT((*storage)->database().Execute(absl::StrCat(
+                    "ALTER TABLE coefficients DROP COLUMN basis_terms_json; ",
+                    kDropAttitudeErrorColumns, "UPDATE esg_schema SET version = 7")),
                 IsOk());
     EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(0));
   }
@@ -341,6 +352,61 @@ TEST(PostgresStorage, AVersion7DatabaseIsUpgradedWhenOpened) {
               IsOkAndHolds(kCurrentSchemaVersion));
   EXPECT_THAT(QueryInt((*storage)->database(), "SELECT COUNT(*) FROM esg_schema"),
               IsOkAndHolds(1));
+}
+
+// A database at version 8 is upgraded when a server opens it: the estimates gain the six
+// columns of the attitude error estimate in double precision; a row stored before reads back
+// without one, a new row with its values.
+TEST(PostgresStorage, AVersion8DatabaseGainsTheAttitudeErrorColumnsWhenOpened) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  const std::string column_sql =
+      "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'estimates' AND "
+      "column_name LIKE 'attitude_error_%' AND data_type = 'double precision'";
+  {
+    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+    ASSERT_THAT(storage, IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(6));
+    ASSERT_THAT((*storage)->database().Execute(
+                    absl::StrCat(kDropAttitudeErrorColumns, "UPDATE esg_schema SET version = 8; ",
+                                 "INSERT INTO estimates (spacecraft_id, measurement_time_unix_ns, "
+                                 "compute_time_unix_ns, state, attitude_valid, "
+                                 "attitude_invalid_reason, star_tracker_used) VALUES ('PG-8', ",
+                                 TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(61)),
+                                 ", 'CALIBRATING', 0, 'no pair', 0)")),
+                IsOk());
+    EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(0));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(6));
+  EXPECT_THAT(QueryInt((*storage)->database(), "SELECT MAX(version) FROM esg_schema"),
+              IsOkAndHolds(kCurrentSchemaVersion));
+  EstimateRecord added;
+  added.spacecraft_id = "PG-8";
+  added.measurement_time = T(120);
+  added.compute_time = T(121);
+  added.state = "CONVERGED";
+  added.has_attitude_error = true;
+  added.attitude_error_b = {estimator::ArcsecToRad(0.1), estimator::ArcsecToRad(-0.2),
+                            estimator::ArcsecToRad(1.0 / 3.0)};
+  added.attitude_error_sigma_b = {estimator::ArcsecToRad(1.0), estimator::ArcsecToRad(2.0),
+                                  estimator::ArcsecToRad(9.0)};
+  ASSERT_THAT((*storage)->estimates().Put(added), IsOk());
+  absl::StatusOr<EstimatePage> page = (*storage)->estimates().Page(
+      "PG-8", absl::InfinitePast(), absl::InfiniteFuture(), std::nullopt, 10);
+  ASSERT_THAT(page, IsOk());
+  ASSERT_EQ(page->records.size(), 2u);
+  EXPECT_FALSE(page->records[0].has_attitude_error);
+  ASSERT_TRUE(page->records[1].has_attitude_error);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_DOUBLE_EQ(page->records[1].attitude_error_b[k], added.attitude_error_b[k]) << k;
+    EXPECT_DOUBLE_EQ(page->records[1].attitude_error_sigma_b[k], added.attitude_error_sigma_b[k])
+        << k;
+  }
 }
 
 // The estimates trigger (postgres_schema.h kEstimatesChannel): a stored estimate is notified to a

@@ -5,11 +5,13 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/records.h"
@@ -355,6 +357,59 @@ TEST(Schema, CoefficientsOfAVersion7FileReadBackWithoutBasisTermsAfterTheMigrati
   EXPECT_DOUBLE_EQ((*read)[1].basis_terms[0].value, 1e-8);
 }
 
+// Version 9 adds the attitude error estimate of each step: a row stored before reads back
+// without one (its six columns NULL), and new rows carry theirs, in arcsec columns named with
+// their axis.
+TEST(Schema, EstimatesOfAVersion8FileReadBackWithoutAnAttitudeErrorAfterTheMigration) {
+  TempDir dir;
+  const std::string path = dir.File("v8.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 8), IsOk());
+    EXPECT_THAT(Columns(**db, "estimates"),
+                ::testing::Not(::testing::Contains("attitude_error_x_arcsec")));
+    ASSERT_THAT((*db)->Execute(absl::StrCat(
+                    "INSERT INTO estimates (spacecraft_id, measurement_time_unix_ns, "
+                    "compute_time_unix_ns, state, attitude_valid, q0, q1, q2, q3, sigma_x_arcsec, "
+                    "sigma_y_arcsec, sigma_z_arcsec, output_reference_gyro_id, "
+                    "output_second_gyro_id, attitude_invalid_reason, star_tracker_used) "
+                    "VALUES ('SC-8', ",
+                    TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(61)),
+                    ", 'CALIBRATING', 1, 1, 0, 0, 0, 4.5, 4.5, 20, 1, 2, '', 1)")),
+                IsOk());
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  const std::vector<std::string> columns = Columns((*storage)->database(), "estimates");
+  ASSERT_GE(columns.size(), 6u);
+  EXPECT_THAT(std::vector<std::string>(columns.end() - 6, columns.end()),
+              ElementsAreArray({"attitude_error_x_arcsec", "attitude_error_y_arcsec",
+                                "attitude_error_z_arcsec", "attitude_error_sigma_x_arcsec",
+                                "attitude_error_sigma_y_arcsec", "attitude_error_sigma_z_arcsec"}));
+  EstimateRecord added;
+  added.spacecraft_id = "SC-8";
+  added.measurement_time = T(120);
+  added.compute_time = T(121);
+  added.state = "CALIBRATING";
+  added.has_attitude_error = true;
+  added.attitude_error_b = {estimator::ArcsecToRad(1.5), estimator::ArcsecToRad(-2.0),
+                            estimator::ArcsecToRad(8.0)};
+  added.attitude_error_sigma_b = {estimator::ArcsecToRad(2.0), estimator::ArcsecToRad(2.5),
+                                  estimator::ArcsecToRad(12.0)};
+  ASSERT_THAT((*storage)->estimates().Put(added), IsOk());
+  absl::StatusOr<EstimatePage> page = (*storage)->estimates().Page(
+      "SC-8", absl::InfinitePast(), absl::InfiniteFuture(), std::nullopt, 10);
+  ASSERT_THAT(page, IsOk());
+  ASSERT_EQ(page->records.size(), 2u);
+  EXPECT_TRUE(page->records[0].attitude_valid);
+  EXPECT_FALSE(page->records[0].has_attitude_error);
+  ASSERT_TRUE(page->records[1].has_attitude_error);
+  EXPECT_NEAR(estimator::RadToArcsec(page->records[1].attitude_error_b[2]), 8.0, 1e-12);
+  EXPECT_NEAR(estimator::RadToArcsec(page->records[1].attitude_error_sigma_b[0]), 2.0, 1e-12);
+}
+
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Database>> stepwise = SqliteDatabase::Open(dir.File("s.db"));
@@ -366,7 +421,8 @@ TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
   EXPECT_THAT(Columns(**stepwise, "alerts"), ::testing::Not(::testing::Contains("unit")));
   ASSERT_THAT(MigrateToCurrent(**stepwise), IsOk());
   ASSERT_THAT(MigrateToCurrent(**fresh), IsOk());
-  for (const std::string table : {"alerts", "diagnoses", "telemetry_frames", "checkpoints"}) {
+  for (const std::string table :
+       {"alerts", "diagnoses", "telemetry_frames", "checkpoints", "coefficients", "estimates"}) {
     EXPECT_THAT(Columns(**stepwise, table), ElementsAreArray(Columns(**fresh, table))) << table;
   }
   EXPECT_THAT(MigrateTo(**stepwise, kCurrentSchemaVersion + 1),
