@@ -88,7 +88,7 @@ _esg() {
       ;;
     configure) opts="--config --model --replace $format" ;;
     replay) opts="--recording --columns --spacecraft --rate --from-sequence --window --max-retries
-                  --allow-rejects --wait --wait-timeout $format" ;;
+                  --max-lease-wait --allow-rejects --wait --wait-timeout $format" ;;
     status) opts="--spacecraft $format" ;;
     predict) opts="--spacecraft --from --to --step --aem --planned $format" ;;
     alerts) opts="--spacecraft --since --include-revised --follow --ack --operator $format" ;;
