@@ -109,6 +109,28 @@ void StartTwoNodes(const std::string& db, const TempDir& dir, const std::string&
         << testing::ReadFile(dir.File(absl::StrCat("node", n, ".log")));
   }
 }
+// StartTwoNodes on a new database of the shared PostgreSQL server, with leases of `lease_ms`
+// (whole seconds); the database's URL in `db_url` when given.
+void StartTwoNodesOnANewDatabase(const TempDir& dir, int lease_ms,
+                                 std::vector<std::unique_ptr<Daemon>>& daemons,
+                                 std::string* db_url = nullptr) {
+  std::string pg_error;
+  PostgresServer* pg = PostgresServer::Shared(&pg_error);
+  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
+  absl::StatusOr<std::string> db = pg->CreateDatabase();
+  ASSERT_TRUE(db.ok()) << db.status();
+  if (db_url != nullptr) *db_url = *db;
+  StartTwoNodes(*db, dir, absl::StrCat(lease_ms / 1000, "s"), daemons);
+}
+
+// Configures `run`'s spacecraft on the server of `stub`, which so takes its session.
+void Configure(esg::v1::EstimationService::Stub& stub, const SimulatedRun& run) {
+  grpc::ClientContext ctx;
+  esg::v1::ConfigureResponse configured;
+  const grpc::Status status =
+      stub.ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+}
 std::string SpacecraftId(int i) { return absl::StrFormat("FO-%02d", i); }
 
 double Seconds(std::chrono::steady_clock::time_point since) {
@@ -496,26 +518,15 @@ TEST(Failover, AnyServerShowsEverySpacecraftAndRelaysAlertsRaisedOnAnother) {
 // killed, a client whose gRPC retry policy would give up within about 50 ms (5 attempts, 10 ms
 // apart) succeeds on B because it waits as told until the lease expired.
 TEST(Failover, ARefusedCallCarriesTheTimeUntilTheLeaseExpiresAsItsRetryPushback) {
-  std::string pg_error;
-  PostgresServer* pg = PostgresServer::Shared(&pg_error);
-  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
-  absl::StatusOr<std::string> db = pg->CreateDatabase();
-  ASSERT_TRUE(db.ok()) << db.status();
   constexpr int kLeaseMs = 3000;
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, absl::StrCat(kLeaseMs / 1000, "s"), daemons));
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodesOnANewDatabase(dir, kLeaseMs, daemons));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
   const SimulatedRun run = SimulateRun("RP-1", 1.0, 51);
   const std::string id = run.config.spacecraft_id;
-  {
-    grpc::ClientContext ctx;
-    esg::v1::ConfigureResponse configured;
-    const grpc::Status status =
-        a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
-    ASSERT_TRUE(status.ok()) << status.error_message();
-  }
+  ASSERT_NO_FATAL_FAILURE(Configure(*a, run));
 
   // The pushback of a finished call, -1 when it has none.
   auto pushback_ms = [](const grpc::ClientContext& ctx) -> int64_t {
@@ -692,26 +703,15 @@ TEST(Failover, AnEstimateSubscriptionOnAnyServerSeesTheEstimatesAnotherServerSto
 // --max-lease-wait 0 gives up at once with exit 1, naming A; B stores nothing, A keeps the
 // session and takes the frames afterwards.
 TEST(Failover, AFrameRefusedWhileAnotherServerHoldsTheSessionCarriesTheTimeUntilItsLeaseExpires) {
-  std::string pg_error;
-  PostgresServer* pg = PostgresServer::Shared(&pg_error);
-  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
-  absl::StatusOr<std::string> db = pg->CreateDatabase();
-  ASSERT_TRUE(db.ok()) << db.status();
   constexpr int kLeaseMs = 3000;
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, absl::StrCat(kLeaseMs / 1000, "s"), daemons));
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodesOnANewDatabase(dir, kLeaseMs, daemons));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
   const SimulatedRun run = SimulateRun("RA-1", 0.2, 52);
   const std::string id = run.config.spacecraft_id;
-  {
-    grpc::ClientContext ctx;
-    esg::v1::ConfigureResponse configured;
-    const grpc::Status status =
-        a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
-    ASSERT_TRUE(status.ok()) << status.error_message();
-  }
+  ASSERT_NO_FATAL_FAILURE(Configure(*a, run));
   const std::vector<esg::v1::TelemetryFrame> first(run.frames.begin(), run.frames.begin() + 4);
   const auto streamed = testing::StreamFrames(*b, first);
   ASSERT_TRUE(streamed.status.ok()) << streamed.status.error_message();
@@ -775,28 +775,18 @@ TEST(Failover, AFrameRefusedWhileAnotherServerHoldsTheSessionCarriesTheTimeUntil
 // the session over and the replay completes: exit 0, no frame rejected, every frame of the
 // recording stored exactly once (the ones A stored acknowledged as duplicates).
 TEST(Failover, ReplayToAnotherServerWaitsForTheLeaseAndStoresEveryFrameOnce) {
-  std::string pg_error;
-  PostgresServer* pg = PostgresServer::Shared(&pg_error);
-  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
-  absl::StatusOr<std::string> db = pg->CreateDatabase();
-  ASSERT_TRUE(db.ok()) << db.status();
   constexpr int kLeaseMs = 3000;
   constexpr int kStoredByA = 10;
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, absl::StrCat(kLeaseMs / 1000, "s"), daemons));
+  std::string db;
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodesOnANewDatabase(dir, kLeaseMs, daemons, &db));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
   const SimulatedRun run = SimulateRun("RB-1", 1.0, 53);
   const std::string id = run.config.spacecraft_id;
   const int64_t n = static_cast<int64_t>(run.frames.size());
-  {
-    grpc::ClientContext ctx;
-    esg::v1::ConfigureResponse configured;
-    const grpc::Status status =
-        a->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &configured);
-    ASSERT_TRUE(status.ok()) << status.error_message();
-  }
+  ASSERT_NO_FATAL_FAILURE(Configure(*a, run));
   const std::vector<esg::v1::TelemetryFrame> first(run.frames.begin(),
                                                    run.frames.begin() + kStoredByA);
   const auto on_a = testing::StreamFrames(*a, first);
@@ -832,7 +822,7 @@ TEST(Failover, ReplayToAnotherServerWaitsForTheLeaseAndStoresEveryFrameOnce) {
   EXPECT_EQ(tally["accepted"], n - kStoredByA);
 
   // Exactly once in the archive, and B serves the session now.
-  auto storage = storage::Storage::Open(*db);
+  auto storage = storage::Storage::Open(db);
   ASSERT_TRUE(storage.ok()) << storage.status();
   absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
       (*storage)->archive().ReadTimeRange(id, absl::InfinitePast(), absl::InfiniteFuture());
