@@ -19,10 +19,11 @@
 // normalised difference while the others pass; a window with a step where the star tracker was
 // suspected (eq. (12) or the three-pair isolation named it, or named it a candidate) decides
 // nothing; nor does a window with a step whose NIS is negative or NaN (a covariance that is not
-// positive definite gives no chi-square value). The three gyros must be the same over the window; another set (an exclusion, a spare
-// switched on) starts the windows again, as Clear() does. The session acts on a decision only
-// once its consistency monitor has tested the model and while nothing says the model does not
-// fit (D21): a drift term the model lacks can be larger in one gyro than in the others.
+// positive definite gives no chi-square value). The three gyros must be the same over the window;
+// another set (an exclusion, a spare switched on) starts the windows again, as Clear() does. The
+// session acts on a decision only once its consistency monitor has tested the model and while
+// nothing says the model does not fit (D21): a drift term the model lacks can be larger in one
+// gyro than in the others.
 #ifndef ESG_ESTIMATOR_GYRO_CHANGE_DETECTOR_H_
 #define ESG_ESTIMATOR_GYRO_CHANGE_DETECTOR_H_
 
