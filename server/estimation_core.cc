@@ -450,7 +450,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   } else if (shared()) {
     absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
         config.spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
-    if (!lease.ok()) return LeaseRefused(config.spacecraft_id, lease.status());
+    if (!lease.ok()) return LeaseRefused(lease.status());
     new_lease_epoch = lease->epoch;
     metrics_.lease_events.With({"taken"}).Increment();
     fence = storage::LeaseFence{options_.node_id, new_lease_epoch};

@@ -267,13 +267,13 @@ class EstimationCore {
   // 'X' is served by node N until T; retry after that" while another server holds the lease
   // (LeaseRefused).
   absl::StatusOr<std::shared_ptr<Spacecraft>> Lookup(const std::string& spacecraft_id);
-  // A failed LeaseStore::Acquire's status for `spacecraft_id`: a refusal because another server
-  // holds the lease is counted (lease event "refused") and becomes Unavailable "spacecraft_id:
-  // 'X' is served by node N until T; retry after that ..." (the field first, as every refusal of
-  // a frame: RejectionFromStatus) with the time until the holder's expiry as its retry delay
+  // A failed LeaseStore::Acquire's status: a refusal because another server holds the lease is
+  // counted (lease event "refused") and becomes Unavailable "spacecraft_id: 'X' is served by node
+  // N until T; retry after that ..." (the store's message, the field first as every refusal of a
+  // frame: RejectionFromStatus) with the time until the holder's expiry as its retry delay
   // (grpc_status.h WithRetryDelay: trailing metadata grpc-retry-pushback-ms of a call,
   // Rejection.retry_after_ms of a frame), at most lease_duration; any other status as is.
-  absl::Status LeaseRefused(const std::string& spacecraft_id, const absl::Status& status);
+  absl::Status LeaseRefused(const absl::Status& status);
   // OK if the spacecraft is configured (in the registry, or with leases in the database): for
   // calls that only read the database. NotFound "not configured" otherwise.
   absl::Status CheckConfigured(const std::string& spacecraft_id);

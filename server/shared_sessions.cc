@@ -10,7 +10,6 @@
 #include <string>
 #include <vector>
 
-#include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
@@ -50,7 +49,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   if (!record.ok()) return record.status();
   absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
       spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
-  if (!lease.ok()) return LeaseRefused(spacecraft_id, lease.status());
+  if (!lease.ok()) return LeaseRefused(lease.status());
   // The session as the last owner left it: its checkpoint, then the archive after it.
   RETURN_IF_ERROR(LoadSpacecraft(*record, lease->epoch));
   sc = Find(spacecraft_id);
@@ -64,8 +63,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Look
   return sc;
 }
 
-absl::Status EstimationCore::LeaseRefused(const std::string& spacecraft_id,
-                                          const absl::Status& status) {
+absl::Status EstimationCore::LeaseRefused(const absl::Status& status) {
   const std::optional<absl::Time> held_until = storage::LeaseHeldUntil(status);
   if (!held_until.has_value()) return status;
   metrics_.lease_events.With({"refused"}).Increment();
@@ -73,17 +71,12 @@ absl::Status EstimationCore::LeaseRefused(const std::string& spacecraft_id,
   // lease duration: a holder that renews refuses the retry again with a new delay.
   const absl::Duration delay =
       std::clamp(*held_until - absl::Now(), absl::ZeroDuration(), options_.lease_duration);
-  // The field first, so that a refused frame's Rejection names it (RejectionFromStatus); the
-  // holder and its expiry from the store's message ("spacecraft 'X' is served by node N until
-  // T").
-  absl::string_view holder = status.message();
-  const std::string prefix = absl::StrCat("spacecraft '", spacecraft_id, "'");
-  if (absl::StartsWith(holder, prefix)) holder.remove_prefix(prefix.size());
+  // The store's message names the field first ("spacecraft_id: 'X' is served by node N until
+  // T"), so a refused frame's Rejection names it (RejectionFromStatus).
   return WithRetryDelay(
-      absl::UnavailableError(absl::StrCat(
-          "spacecraft_id: '", spacecraft_id, "'", holder, "; retry after that (leases last ",
-          absl::FormatDuration(options_.lease_duration),
-          "): docs/service.md \"Several servers\"")),
+      absl::UnavailableError(absl::StrCat(status.message(), "; retry after that (leases last ",
+                                          absl::FormatDuration(options_.lease_duration),
+                                          "): docs/service.md \"Several servers\"")),
       delay);
 }
 

@@ -82,7 +82,7 @@ absl::StatusOr<SessionLease> LeaseStore::Acquire(absl::string_view spacecraft_id
   RETURN_IF_ERROR(txn.Commit());
   if (!taken) {
     absl::Status held =
-        absl::UnavailableError(absl::StrCat("spacecraft '", spacecraft_id, "' is served by node ",
+        absl::UnavailableError(absl::StrCat("spacecraft_id: '", spacecraft_id, "' is served by node ",
                                             lease.owner, " until ", FormatUtc(lease.expires)));
     held.SetPayload(kLeaseHeldPayload, absl::Cord(absl::StrCat(TimeToUnixNanos(lease.expires))));
     return held;

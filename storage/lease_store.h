@@ -56,7 +56,7 @@ class LeaseStore {
   // Takes the lease of `spacecraft_id` for `owner` until now + duration if it is free, expired
   // at `now`, or already `owner`'s (a restarted server with the same node id takes its own lease
   // back at once); the epoch increments. Returns the lease as stored. Unavailable
-  // "spacecraft 'X' is served by node N until T" (with the holder's lease) when another owner
+  // "spacecraft_id: 'X' is served by node N until T" (with the holder's lease) when another owner
   // holds it unexpired (LeaseHeldUntil reads T from it); InvalidArgument for an empty id or owner
   // or a non-positive duration.
   absl::StatusOr<SessionLease> Acquire(absl::string_view spacecraft_id, absl::string_view owner,
