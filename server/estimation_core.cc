@@ -304,7 +304,7 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
       if (released.ok()) {
         metrics_.lease_events.With({"released"}).Increment();
       } else {
-        LogEvent("WARNING", "lease_release_failed",
+        LogEvent("WARN", "lease_release_failed",
                  absl::StrCat("cannot release the session lease of ", sc->id, ": ",
                               released.message(), " (it expires by itself)"),
                  {{"spacecraftId", sc->id}});

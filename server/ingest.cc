@@ -76,17 +76,14 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                                                               : proto.spacecraft_id().substr(0, 64));
   ack->set_station_id(station.size() <= 64 ? station : station.substr(0, 64));
   ack->set_sequence(proto.sequence());
-  auto refuse = [&](absl::StatusCode code, std::string field, std::string reason) {
-    ack->set_accepted(false);
-    ack->mutable_rejection()->set_field(std::move(field));
-    ack->mutable_rejection()->set_reason(std::move(reason));
-    ack->mutable_rejection()->set_code(static_cast<int>(code));
-    return false;
-  };
+  // A refusal is a status "field: reason" (RejectionFromStatus splits it at the first ": ").
   auto refuse_status = [&](const absl::Status& status) {
     ack->set_accepted(false);
     *ack->mutable_rejection() = RejectionFromStatus(status);
     return false;
+  };
+  auto refuse = [&](absl::StatusCode code, absl::string_view field, absl::string_view reason) {
+    return refuse_status(absl::Status(code, absl::StrCat(field, ": ", reason)));
   };
   {
     absl::MutexLock commit(&commit_mu_);
@@ -122,9 +119,10 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
 
   absl::MutexLock lock(&sc->ingest_mu);
-  auto refuse_counted = [&](absl::StatusCode code, std::string field, std::string reason) {
+  auto refuse_counted = [&](absl::StatusCode code, absl::string_view field,
+                            absl::string_view reason) {
     ++sc->frames_rejected;
-    return refuse(code, std::move(field), std::move(reason));
+    return refuse(code, field, reason);
   };
   if (sc->ingest_setup == nullptr) {
     std::string reason;

@@ -143,9 +143,6 @@ esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
   return r;
 }
 
-
-
-
 // The alert catalog is the single source (alert_catalog.h).
 esg::v1::AlertSeverity SeverityOf(Event::Kind kind) { return AlertKindOf(kind).severity; }
 

@@ -88,7 +88,7 @@ std::optional<storage::LeaseFence> EstimationCore::FenceOf(const Spacecraft& sc)
 void EstimationCore::MarkLeaseLost(Spacecraft& sc, absl::string_view why) {
   if (sc.lease_lost.exchange(true)) return;
   metrics_.lease_events.With({"lost"}).Increment();
-  LogEvent("WARNING", "session_lost",
+  LogEvent("WARN", "session_lost",
            absl::StrCat("the session of ", sc.id, " was taken over by another server: ", why),
            {{"spacecraftId", sc.id}});
 }
@@ -125,7 +125,7 @@ void EstimationCore::RelayLoop() {
     absl::StatusOr<std::vector<storage::PostgresListener::Notification>> notified =
         listener->Wait(absl::Milliseconds(250));
     if (!notified.ok()) {
-      LogEvent("WARNING", "relay_interrupted",
+      LogEvent("WARN", "relay_interrupted",
                absl::StrCat("alerts and estimates of other servers may have been missed: ",
                             notified.status().message()));
       continue;
@@ -166,7 +166,7 @@ void EstimationCore::RelayEstimates(const std::string& spacecraft_id,
         spacecraft_id, *times.begin(), *times.rbegin() + absl::Nanoseconds(1), after, kPage);
     if (!page.ok()) {
       LogEvent(
-          "WARNING", "relay_interrupted",
+          "WARN", "relay_interrupted",
           absl::StrCat("estimates of ", spacecraft_id,
                        " stored by another server were not relayed: ", page.status().message()),
           {{"spacecraftId", spacecraft_id}});

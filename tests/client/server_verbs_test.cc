@@ -3,12 +3,9 @@
 // directory: the whole operator flow over a simulated 6 h recording with star-tracker defects,
 // resuming a replay across `kill -9` of the server, rejected frames, bearer tokens, and the exit
 // codes (2 for bad arguments naming the option, 1 with UNAVAILABLE when no server listens).
-#include <arpa/inet.h>
 #include <fcntl.h>
-#include <netinet/in.h>
 #include <signal.h>
 #include <spawn.h>
-#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -24,7 +21,6 @@
 #include <memory>
 #include <mutex>
 #include <set>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -43,6 +39,8 @@
 #include "storage/aem.h"
 #include "storage/recording_csv.h"
 #include "tests/client/cli_test_support.h"
+#include "tests/testing/free_port.h"
+#include "tests/testing/run_process.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
 
@@ -51,23 +49,14 @@ extern char** environ;
 namespace esg::client {
 namespace {
 
+using ::esg::testing::FreeLoopbackPort;
 using ::esg::testing::IsOk;
+using ::esg::testing::ReadFile;
 using ::esg::testing::TempDir;
+using ::esg::testing::WriteFile;
 using ::testing::HasSubstr;
 using ::testing::Not;
 using Json = nlohmann::json;
-
-std::string ReadFile(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
-void WriteFile(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-}
 
 std::string FormatUtcForTest(absl::Time t) {
   return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
@@ -76,23 +65,6 @@ std::string FormatUtcForTest(absl::Time t) {
 // A 64-bit integer of the proto JSON mapping (a string there, a number in non-proto documents).
 int64_t I64(const Json& value) {
   return value.is_string() ? std::stoll(value.get<std::string>()) : value.get<int64_t>();
-}
-
-// A port nobody listens on right now: bind port 0, read the port, close.
-int FreePort() {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  addr.sin_port = 0;
-  socklen_t len = sizeof(addr);
-  if (fd < 0 || ::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)) != 0 ||
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) != 0) {
-    if (fd >= 0) ::close(fd);
-    return -1;
-  }
-  ::close(fd);
-  return ntohs(addr.sin_port);
 }
 
 // Starts `argv` with stdout and stderr redirected to files; returns the pid (or -1).
@@ -170,24 +142,14 @@ class Esgd {
   std::string out_, err_;
 };
 
-struct RunResult {
-  int exit_code = -1;
-  std::string out;
-  std::string err;
+// What `esg` printed and its exit code; json(): stdout parsed (discarded when not JSON).
+struct RunResult : esg::testing::RunResult {
   Json json() const { return Json::parse(out, nullptr, /*allow_exceptions=*/false); }
 };
 
 // Runs `env esg <args>` through the shell, stdout and stderr captured.
 RunResult RunEsg(const TempDir& dir, const std::string& args, const std::string& env = "") {
-  const std::string out = dir.File("esg_out.txt"), err = dir.File("esg_err.txt");
-  const std::string command = env + " " + Quote(ESG_BINARY) + " " + args + " > " + Quote(out) +
-                              " 2> " + Quote(err) + " < /dev/null";
-  const int status = std::system(command.c_str());
-  RunResult r;
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.out = ReadFile(out);
-  r.err = ReadFile(err);
-  return r;
+  return {esg::testing::RunBinary(dir, ESG_BINARY, args + " < /dev/null", env)};
 }
 
 std::vector<std::string> DataLines(const std::string& text, const std::string& prefix) {
@@ -241,7 +203,7 @@ estimator::Recording* ServerVerbs::recording_ = nullptr;
 
 TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
   TempDir dir;
-  Esgd server(dir, dir.File("esg.db"), FreePort());
+  Esgd server(dir, dir.File("esg.db"), FreeLoopbackPort());
   ASSERT_TRUE(server.Start()) << server.log();
   const std::string at = "--server " + server.address() + " ";
   ASSERT_EQ(Rows(), 361);
@@ -423,7 +385,7 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
 // replay resumed and that every row was stored and applied exactly once.
 void ReplayAcrossServerStop(const std::string& recording_path, int64_t rows, int signal) {
   TempDir dir;
-  const int port = FreePort();
+  const int port = FreeLoopbackPort();
   // A short deadline for running calls, so that a graceful stop does not wait 5 s for the stream.
   const std::vector<std::string> esgd_args = {"--shutdown-deadline", "0.3"};
   auto server = std::make_unique<Esgd>(dir, dir.File("esg.db"), port, esgd_args);
@@ -499,7 +461,7 @@ TEST_F(ServerVerbs, HistoryShowsTheCalibratedBasisTermsOfAGyro) {
                     {"sigmaDegH", 0.05}}});
   const std::string config_path = dir.File("rdk1-basis.json");
   std::ofstream(config_path) << config.dump(2);
-  Esgd server(dir, dir.File("esg.db"), FreePort());
+  Esgd server(dir, dir.File("esg.db"), FreeLoopbackPort());
   ASSERT_TRUE(server.Start()) << server.log();
   const std::string at = "--server " + server.address() + " ";
   RunResult r = RunEsg(dir, at + "configure --config " + Quote(config_path));
@@ -562,7 +524,7 @@ TEST_F(ServerVerbs, RejectedFramesAreReportedWithTheirFieldAndMakeExitOne) {
     recording.frames[row - 1].gyros[3] = recording.frames[row - 1].gyros[0];
   ASSERT_THAT(storage::WriteRecordingCsv(dir.File("bad.csv"), recording), IsOk());
 
-  Esgd server(dir, dir.File("esg.db"), FreePort());
+  Esgd server(dir, dir.File("esg.db"), FreeLoopbackPort());
   ASSERT_TRUE(server.Start()) << server.log();
   const std::string at = "--server " + server.address() + " ";
   for (const char* id : {"RDK-R", "RDK-S"}) {
@@ -604,7 +566,7 @@ TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   std::filesystem::permissions(
       dir.File("tokens"), std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
       std::filesystem::perm_options::replace);
-  Esgd server(dir, dir.File("esg.db"), FreePort(), {"--tokens", dir.File("tokens")});
+  Esgd server(dir, dir.File("esg.db"), FreeLoopbackPort(), {"--tokens", dir.File("tokens")});
   ASSERT_TRUE(server.Start()) << server.log();
   const std::string at = "--server " + server.address() + " ";
   RunResult r = RunEsg(dir, at + "status", "env -u ESG_TOKEN");
@@ -662,7 +624,7 @@ TEST_F(ServerVerbs, MutualTlsWithTheGlobalTlsOptions) {
   TempDir dir;
   ASSERT_TRUE(MakeCa(dir, "ca"));
   ASSERT_TRUE(MakeCert(dir, "ca", "server") && MakeCert(dir, "ca", "client"));
-  Esgd server(dir, dir.File("esg.db"), FreePort(),
+  Esgd server(dir, dir.File("esg.db"), FreeLoopbackPort(),
               {"--tls-cert", dir.File("server.crt"), "--tls-key", dir.File("server.key"),
                "--tls-client-ca", dir.File("ca.crt")});
   ASSERT_TRUE(server.Start()) << server.log();
@@ -798,7 +760,7 @@ TEST_F(ServerVerbs, ReplayTreatsAShuttingDownRefusalAsAStreamFailure) {
 
 TEST_F(ServerVerbs, ServerDownIsUnavailableWithTheAddress) {
   TempDir dir;
-  const std::string address = "127.0.0.1:" + std::to_string(FreePort());
+  const std::string address = "127.0.0.1:" + std::to_string(FreeLoopbackPort());
   const std::vector<std::string> verbs = {"status",
                                           "status --spacecraft RDK-1",
                                           "replay --recording " + Quote(recording_path_),

@@ -1,9 +1,13 @@
 // Tests of server/metrics.h (registry and Prometheus text exposition), server/service_metrics.h
-// (label helpers) and server/log.h (text and JSON lines). Pure: no server, no SQLite.
+// (label helpers) and server/log.h (text and JSON lines), and that every log event the server
+// writes is in docs/service.md's "Logs" table. Pure: no server, no SQLite.
 #include "server/metrics.h"
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
+#include <regex>
+#include <set>
 #include <string>
 
 #include "gmock/gmock.h"
@@ -12,6 +16,7 @@
 #include "server/log.h"
 #include "server/service_metrics.h"
 #include "tests/testing/prometheus_text.h"
+#include "tests/testing/run_process.h"
 
 namespace esg::server {
 namespace {
@@ -152,6 +157,35 @@ TEST(Log, JsonLinesAreOneObjectWithEscapedIds) {
   const std::string ts = j.at("ts");
   EXPECT_EQ(ts.size(), 24u) << ts;  // 2019-03-01T00:00:00.000Z
   EXPECT_EQ(ts.back(), 'Z');
+}
+
+// Every LogEvent("LEVEL", "event", ...) with literal arguments in server/*.cc: the level is one
+// docs/service.md names (INFO, WARN, ERROR) and the event has a row in its "Logs" table.
+TEST(Log, EveryEventTheServerWritesIsDocumentedWithADocumentedLevel) {
+  namespace fs = std::filesystem;
+  const fs::path root(ESG_SOURCE_DIR);
+  const std::string doc = esg::testing::ReadFile((root / "docs/service.md").string());
+  const size_t logs = doc.find("### Logs");
+  ASSERT_NE(logs, std::string::npos);
+  const std::string table = doc.substr(logs, doc.find("\n## ", logs) - logs);
+  const std::regex call(R"re(LogEvent\(\s*"([A-Z]+)",\s*"([a-z_]+)")re");
+  std::set<std::string> events;
+  for (const fs::directory_entry& e : fs::directory_iterator(root / "server")) {
+    if (e.path().extension() != ".cc") continue;
+    const std::string source = esg::testing::ReadFile(e.path().string());
+    for (auto it = std::sregex_iterator(source.begin(), source.end(), call);
+         it != std::sregex_iterator(); ++it) {
+      const std::string level = (*it)[1], event = (*it)[2];
+      EXPECT_TRUE(level == "INFO" || level == "WARN" || level == "ERROR")
+          << e.path().filename() << ": " << event << " at level " << level;
+      EXPECT_NE(table.find("`" + event + "`"), std::string::npos)
+          << e.path().filename() << ": " << event << " is not in docs/service.md's Logs table";
+      events.insert(event);
+    }
+  }
+  // The scan sees the calls (a changed call shape would otherwise pass vacuously).
+  EXPECT_GE(events.size(), 25u);
+  EXPECT_TRUE(events.count("session_taken"));
 }
 
 }  // namespace
