@@ -406,6 +406,65 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   }
 }
 
+VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config,
+                                                  const std::vector<TelemetryFrame>& frames,
+                                                  int gyro, const Vector3d& C1_k_rad_s) {
+  VoltageAgreement out;
+  out.drift_implied_um = DegH(C1_k_rad_s.norm()) / kC1DegHPerUm;
+  out.floor_um = out.drift_implied_um / kSensitivitySpread;
+  // eq. (3) per sample, in um, in the order of the recording.
+  const SuspensionConfig& s = config.suspension;
+  std::vector<Vector3d> displacement_um;
+  for (const TelemetryFrame& f : frames) {
+    const auto& r = f.gyros[gyro - 1];
+    if (!r.has_value() || !r->u_k_mv.has_value() || !r->u_k_mv->allFinite()) continue;
+    Vector3d d;
+    for (int i = 0; i < 3; ++i) {
+      d(i) = DisplacementFromOffsetVoltage((*r->u_k_mv)(i) * kVoltsPerMv, s.amplifier_gain,
+                                           s.reference_voltage, s.gap) /
+             kMetresPerUm;
+    }
+    displacement_um.push_back(d);
+  }
+  constexpr int kBatches = 16;
+  const int n = static_cast<int>(displacement_um.size());
+  if (n < 2 * kBatches) {
+    out.note = absl::StrFormat(
+        "gyro %d's suspension offset voltages: %d samples, too few to check the displacement "
+        "against eq. (3)",
+        gyro, n);
+    return out;
+  }
+  Vector3d mean = Vector3d::Zero(), sum_means = Vector3d::Zero(), sum_means2 = Vector3d::Zero();
+  for (int b = 0; b < kBatches; ++b) {
+    const int first = n * b / kBatches, last = n * (b + 1) / kBatches;
+    Vector3d m = Vector3d::Zero();
+    for (int i = first; i < last; ++i) m += displacement_um[i];
+    m /= (last - first);
+    sum_means += m;
+    sum_means2 += m.cwiseAbs2();
+  }
+  mean = sum_means / kBatches;
+  const Vector3d var_means =
+      ((sum_means2 - kBatches * mean.cwiseAbs2()) / (kBatches - 1)).cwiseMax(0.0);
+  out.voltage_um = mean.norm();
+  out.voltage_sigma_um = std::sqrt(var_means.sum() / kBatches);
+  out.informative = kVoltageZ * out.voltage_sigma_um < out.floor_um;
+  out.agrees = !out.informative || out.voltage_um + kVoltageZ * out.voltage_sigma_um >= out.floor_um;
+  out.note = absl::StrFormat(
+      "|C1| = %.4f deg/h implies a rotor displacement of about %.2f um (the paper's section 1.1: "
+      "C ~ 0.2 deg/h at 3 um), at least %.3f um for a rotor within a factor %.0f of that "
+      "sensitivity; gyro %d's suspension offset voltages give by eq. (3) |%.3f| um (1-sigma "
+      "%.4f um from %d batch means of %d samples): %s",
+      DegH(C1_k_rad_s.norm()), out.drift_implied_um, out.floor_um, kSensitivitySpread, gyro,
+      out.voltage_um, out.voltage_sigma_um, kBatches, n,
+      !out.informative ? "too imprecise to decide"
+      : out.agrees     ? "they agree"
+                       : "the rotor is not displaced that far, so the drift is not a rotor "
+                         "displacement");
+  return out;
+}
+
 std::optional<FreedCoefficients> FreedDriftCoefficients(Effect effect,
                                                         const DiagnoseOptions& options) {
   switch (effect) {

@@ -173,6 +173,32 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
                                const std::vector<TelemetryFrame>& frames, int gyro,
                                CandidateFit& fit);
 
+// The check of a rotor displacement against the suspension voltages that decides (docs/
+// discovery.md, "Physics checks that decide"). A displaced rotor is seen in its suspension offset
+// voltages (eq. (3): Delta = k dU d0 / U0); its drift grows with the displacement, about
+// kC1DegHPerUm of |C1| per um (the paper's section 1.1: C ~ 0.2 deg/h at 3 um). A rotor's shape
+// harmonics set that sensitivity, so it is taken as known only to within kSensitivitySpread
+// either way: a fitted |C1| then implies a displacement of at least |C1| / kC1DegHPerUm /
+// kSensitivitySpread (`floor_um`). The voltages' mean displacement has a 1-sigma from batch means
+// of consecutive samples (robust to noise correlated in time). The voltages decide when they
+// could show the floor (kVoltageZ sigma below it); they disagree when even their upper bound
+// |Delta| + kVoltageZ sigma stays below it.
+inline constexpr double kC1DegHPerUm = 0.2 / 3.0;
+inline constexpr double kSensitivitySpread = 10.0;
+inline constexpr double kVoltageZ = 3.29;  // two-sided 0.1%
+struct VoltageAgreement {
+  bool informative = false;       // voltages telemetered and precise enough to decide
+  bool agrees = true;
+  double drift_implied_um = 0.0;  // |C1| / kC1DegHPerUm
+  double floor_um = 0.0;          // drift_implied_um / kSensitivitySpread
+  double voltage_um = 0.0;        // |mean displacement| by eq. (3)
+  double voltage_sigma_um = 0.0;  // its 1-sigma (norm of the per-axis batch-means sigmas)
+  std::string note;
+};
+VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config,
+                                                  const std::vector<TelemetryFrame>& frames,
+                                                  int gyro, const Eigen::Vector3d& C1_k_rad_s);
+
 }  // namespace esg::estimator::discovery
 
 #endif  // ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_

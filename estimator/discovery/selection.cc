@@ -8,6 +8,7 @@
 #include <string>
 #include <utility>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/wander.h"
@@ -436,6 +437,22 @@ absl::StatusOr<PhysicsCheck> CheckConstantEffect(const CandidateFit& fit,
         c.effect == Effect::kUnequalStiffness || c.effect == Effect::kGyroMisalignment)) {
     return out;
   }
+  // A rotor displacement must be seen in the suspension voltages where they can show it (eq. (3)).
+  std::string voltage_note;
+  if (c.effect == Effect::kRotorDisplacement) {
+    if (const GyroEstimate* g = FindEstimate(fit.run.gyros, c.gyro)) {
+      const VoltageAgreement v =
+          CheckDisplacementAgainstVoltages(fit.model.config, context.frames(), c.gyro,
+                                           g->coefficients.C1);
+      if (!v.agrees) {
+        out.fails = true;
+        out.note = absl::StrFormat("%s fits part of gyro %d's drift, but %s: not taken",
+                                   CandidateName(c), c.gyro, v.note);
+        return out;
+      }
+      voltage_note = absl::StrCat("; ", v.note);
+    }
+  }
   auto e = CompareConstantEffectOf(selected, context, c);
   if (!e.ok()) return e.status();
   const double threshold = EvidenceThreshold(options.alpha, family);
@@ -452,6 +469,7 @@ absl::StatusOr<PhysicsCheck> CheckConstantEffect(const CandidateFit& fit,
                        "of a drift that returns to its mean (2 ln B = %.1f alone; threshold "
                        "%.1f): a constant effect, not a wandering drift",
                        c.gyro, e->effect, e->on_top, e->stationary, threshold);
+  if (!out.fails) out.note += voltage_note;
   return out;
 }
 

@@ -295,6 +295,53 @@ TEST(DiscoveryRotorDisplacement, VoltageTrendGivesTheDisplacementRate) {
   }
 }
 
+// The voltage check that decides (eq. (3)): a simulated rotor displacement of 0.6 um (|C1| 0.039
+// deg/h at the simulator's 0.065 deg/h per um) is seen in its voltages; the same |C1| over voltages
+// that show no displacement is refused; without voltages, or with voltages too noisy to show the
+// floor (|C1| / 0.067 deg/h per um / 10), nothing is decided.
+TEST(DiscoveryRotorDisplacement, SuspensionVoltagesDecideWhereTheyCanShowTheDisplacement) {
+  SimulationSpec spec = DiscoveryScenario("rotor_displacement", 1, 6.0);
+  const int gyro = ::esg::testing::AffectedGyro(1);
+  spec.gyros[gyro - 1].rotor_displacement_k = Eigen::Vector3d(0.6, 0.0, 0.0) * kMetresPerUm;
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const Eigen::Vector3d C1_k_rad_s = Eigen::Vector3d(DegPerHourToRadPerSec(0.039), 0.0, 0.0);
+  const VoltageAgreement seen =
+      CheckDisplacementAgainstVoltages(spec.config, sim->recording.frames, gyro, C1_k_rad_s);
+  EXPECT_TRUE(seen.informative) << seen.note;
+  EXPECT_TRUE(seen.agrees) << seen.note;
+  EXPECT_NEAR(seen.voltage_um, 0.6, 3.0 * seen.voltage_sigma_um + 1e-9) << seen.note;
+  EXPECT_NEAR(seen.drift_implied_um, 0.039 / (0.2 / 3.0), 1e-9);
+  EXPECT_NEAR(seen.floor_um, seen.drift_implied_um / 10.0, 1e-12);
+  EXPECT_THAT(seen.note, HasSubstr("they agree"));
+
+  // The other gyros' voltages show no displacement.
+  const int other = gyro % 3 + 1;
+  const VoltageAgreement unseen =
+      CheckDisplacementAgainstVoltages(spec.config, sim->recording.frames, other, C1_k_rad_s);
+  EXPECT_TRUE(unseen.informative) << unseen.note;
+  EXPECT_FALSE(unseen.agrees) << unseen.note;
+  EXPECT_LT(unseen.voltage_um + kVoltageZ * unseen.voltage_sigma_um, unseen.floor_um);
+  EXPECT_THAT(unseen.note, HasSubstr("not a rotor displacement"));
+
+  // No voltages telemetered; voltages with 1 V of noise (the mean's sigma ~ 0.5 um).
+  std::vector<TelemetryFrame> without = sim->recording.frames, noisy = sim->recording.frames;
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> volt_mv(0.0, 1000.0);
+  for (size_t i = 0; i < without.size(); ++i) {
+    if (without[i].gyros[other - 1].has_value()) without[i].gyros[other - 1]->u_k_mv.reset();
+    if (auto& r = noisy[i].gyros[other - 1]; r.has_value() && r->u_k_mv.has_value()) {
+      *r->u_k_mv = Eigen::Vector3d(volt_mv(rng), volt_mv(rng), volt_mv(rng));
+    }
+  }
+  for (const auto* frames : {&without, &noisy}) {
+    const VoltageAgreement v =
+        CheckDisplacementAgainstVoltages(spec.config, *frames, other, C1_k_rad_s);
+    EXPECT_FALSE(v.informative) << v.note;
+    EXPECT_TRUE(v.agrees) << v.note;
+  }
+}
+
 TEST(Diagnose, RejectsBadInput) {
   const SpacecraftConfig config = ::esg::testing::DiscoveryConfig();
   EXPECT_THAT(Diagnose(config, {}, DiagnoseOptions{}),

@@ -332,6 +332,13 @@ TEST(OpenEndedDiagnosis, ConstantEffectsFittingPartOfASwitchingDriftAreNotTaken)
   ExpectUnexplainedWanderingDrift("switching_drift", 105, "not taken as a constant effect");
 }
 
+// The suspension voltages decide (eq. (3), docs/discovery.md "Physics checks that decide"): on
+// seed 108 a rotor displacement of the gyro (the verdict before the check) has |C1| implying about
+// 0.5 um while the gyro's offset voltages show none.
+TEST(OpenEndedDiagnosis, ARotorDisplacementTheSuspensionVoltagesDoNotShowIsNotTaken) {
+  ExpectUnexplainedWanderingDrift("switching_drift", 108, "the rotor is not displaced that far");
+}
+
 TEST(OpenEndedDiagnosis, DriftOfAnUntelemeteredDriverStaysUnexplainedInItsGyro) {
   ExpectUnexplainedWanderingDrift("hidden_driver", 102);
 }
