@@ -11,7 +11,8 @@
 //       Predicted attitude envelope / table  PredictAttitude over the time conductor's bounds
 //       Planned attitude for predictions     esg.plan editor
 //       Diagnoses (folder)                   one esg.diagnosis report view each
-// Objects are computed from the sessions on every get(); nothing is persisted.
+// Objects are computed from the sessions on every get(); nothing is persisted. The root's children
+// follow the sessions without a reload (tree.js).
 import { apiFetch } from './api.js';
 import { NAMESPACE, id, parseKey } from './keys.js';
 import { estimatesAvailable, session, sessions } from './sessions.js';
@@ -99,11 +100,14 @@ function gyroConfig(info, gyro) {
   return info.config.gyros.find((g) => g.id === gyro);
 }
 
+// The root folder's children: the fleet overview, then one folder per spacecraft session.
+export function rootComposition(list) {
+  return [id('fleet'), ...list.map((s) => id('sc', s.spacecraft_id))];
+}
+
 const builders = {
   async root(identifier) {
-    const list = await sessions();
-    return folder(identifier, 'ESG spacecraft',
-      [id('fleet'), ...list.map((s) => id('sc', s.spacecraft_id))], 'ROOT');
+    return folder(identifier, 'ESG spacecraft', rootComposition(await sessions()), 'ROOT');
   },
 
   async fleet(identifier) {

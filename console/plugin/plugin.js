@@ -7,6 +7,7 @@ import { NAMESPACE } from './keys.js';
 import { objectProvider, TELEMETRY_TYPE } from './objects.js';
 import { planViewProvider } from './planView.js';
 import { setNotifier, telemetryProvider } from './telemetry.js';
+import { makeSpacecraftTree } from './tree.js';
 import { unavailableViewProvider } from './unavailableView.js';
 
 export default function EsgConsolePlugin() {
@@ -29,6 +30,9 @@ export default function EsgConsolePlugin() {
 
     openmct.objects.addProvider(NAMESPACE, objectProvider);
     openmct.objects.addRoot({ namespace: NAMESPACE, key: 'root' });
+    const tree = makeSpacecraftTree();
+    openmct.composition.addProvider(tree);
+    tree.watch();
     setNotifier(openmct);
     openmct.telemetry.addProvider(telemetryProvider);
 

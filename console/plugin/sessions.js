@@ -1,5 +1,6 @@
-// The fleet's sessions and whether esgd serves per-step estimates, fetched once per page load and
-// shared by the object provider (which objects exist depends on both).
+// The fleet's sessions and whether esgd serves per-step estimates, shared by the object provider
+// (which objects exist depends on both). The sessions are fetched when the page loads and again
+// when esgd pushes data of a spacecraft the page does not know (tree.js).
 import { apiFetch, ApiError, query } from './api.js';
 
 let sessionsPromise = null;
@@ -10,6 +11,14 @@ export function sessions() {
     sessionsPromise = apiFetch('/api/sessions').then((body) => body.sessions);
   }
   return sessionsPromise;
+}
+
+// Reads the sessions again. The shared list is replaced only when the read succeeds, so a failed
+// read leaves the page as it was.
+export async function reloadSessions() {
+  const list = (await apiFetch('/api/sessions')).sessions;
+  sessionsPromise = Promise.resolve(list);
+  return list;
 }
 
 export async function session(spacecraftId) {

@@ -299,6 +299,96 @@ test('alerts raised while the fault view is open appear in it without a reload (
   await shot('faults');
 });
 
+// The tree's items on screen, top to bottom, as {name, level}: level is the indent in px.
+function treeItems(tab) {
+  return tab.$$eval('.c-tree__item-h[role=treeitem]', (items) => items
+    .sort((a, b) => parseFloat(a.style.top) - parseFloat(b.style.top))
+    .map((item) => ({
+      name: item.querySelector('.c-tree__item__name').textContent.trim(),
+      level: parseFloat(item.style.paddingLeft) || 0,
+    })));
+}
+
+// The names of the children of the tree item named `name`, in order (an empty list while it is
+// closed).
+async function treeChildren(tab, name) {
+  const items = await treeItems(tab);
+  const at = items.findIndex((i) => i.name === name);
+  assert.ok(at >= 0, `no tree item ${name} in ${items.map((i) => i.name).join(', ')}`);
+  const children = [];
+  for (const item of items.slice(at + 1)) {
+    if (item.level <= items[at].level) break;
+    if (children.length === 0 || item.level === children[0].level) children.push(item);
+  }
+  return children.map((i) => i.name);
+}
+
+// Clicks the disclosure triangle of the tree item named `name`; `open` true waits until its
+// children are listed, false until they are gone.
+async function toggleTreeItem(tab, name, open) {
+  await tab.evaluate((n, o) => {
+    const item = [...document.querySelectorAll('.c-tree__item-h[role=treeitem]')]
+      .find((h) => h.querySelector('.c-tree__item__name').textContent.trim() === n);
+    if (item.getAttribute('aria-expanded') !== String(o)) item.querySelector('.c-tree__item__view-control').click();
+  }, name, open);
+  await tab.waitForFunction((n, o) => {
+    const items = [...document.querySelectorAll('.c-tree__item-h[role=treeitem]')]
+      .sort((a, b) => parseFloat(a.style.top) - parseFloat(b.style.top));
+    const at = items.findIndex((h) => h.querySelector('.c-tree__item__name').textContent.trim() === n);
+    const next = items[at + 1];
+    const deeper = Boolean(next) && parseFloat(next.style.paddingLeft || 0) > parseFloat(items[at].style.paddingLeft || 0);
+    return at >= 0 && deeper === o;
+  }, { timeout: 20_000 }, name, open);
+}
+
+const treeHas = (name) => [...document.querySelectorAll('.c-tree__item-h[role=treeitem] .c-tree__item__name')]
+  .some((n) => n.textContent.trim() === name);
+
+test('a spacecraft configured after the page loaded appears in the tree without a reload', async () => {
+  // A new tab loads the page with the fleet esgd has now; RDK-N is configured and its first hour
+  // replayed afterwards. Its folder must come from the pushed estimates and alerts, not a reload.
+  const NEW = 'RDK-N';
+  const config = path.join(tmp, 'rdkn.json');
+  const recording = path.join(tmp, 'new_spacecraft.csv');
+  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${NEW}"`));
+  await esg(['simulate', '--config', config, '--profile', 'calibration', '--scenario',
+    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', '1', '--seed', '2', '--out', recording]);
+  const tab = await browser.newPage();
+  try {
+    await tab.setViewport({ width: 1500, height: 1400 }); // the tree draws only the items in view
+    await tab.goto(`${gateway.url}#/browse/esg:root`, { waitUntil: 'domcontentloaded' });
+    await tab.waitForSelector('#esg-signin:not([hidden])', { timeout: 20_000 });
+    await tab.type('#esg-token', token);
+    await tab.click('#esg-signin-submit');
+    await tab.waitForFunction(treeHas, { timeout: 20_000 }, 'ESG spacecraft');
+    await toggleTreeItem(tab, 'ESG spacecraft', true);
+    await tab.waitForFunction(treeHas, { timeout: 20_000 }, 'RDK-1');
+    const atLoad = await treeChildren(tab, 'ESG spacecraft');
+    assert.ok(atLoad.includes('RDK-1') && !atLoad.includes(NEW), `at load: ${atLoad.join(', ')}`);
+    await tab.evaluate(() => { window.esgNoReload = true; });
+    await cli('configure', '--config', config, '--model', '10+11');
+    const t0 = Date.now();
+    await cli('replay', '--recording', recording, '--wait');
+    const replayed = Date.now();
+    await tab.waitForFunction(treeHas, { timeout: 20_000 }, NEW);
+    process.stdout.write(`# ${NEW} in the tree ${((Date.now() - t0) / 1000).toFixed(1)} s after its configuration ` +
+      `(${((Date.now() - replayed) / 1000).toFixed(1)} s after its replay ended)\n`);
+    const now = await treeChildren(tab, 'ESG spacecraft');
+    assert.deepEqual(now.filter((n) => n !== NEW), atLoad, 'the other children stay as they were');
+    // Its folder holds what the folders read at load hold (the same gyros: the same configuration).
+    await toggleTreeItem(tab, NEW, true);
+    const children = await treeChildren(tab, NEW);
+    await toggleTreeItem(tab, NEW, false);
+    await toggleTreeItem(tab, 'RDK-1', true);
+    const reference = await treeChildren(tab, 'RDK-1');
+    assert.ok(reference.includes('Drift coefficients gyro 1') && reference.includes('Diagnoses'), reference.join(', '));
+    assert.deepEqual(children, reference);
+    assert.equal(await tab.evaluate(() => window.esgNoReload), true, 'the page was not reloaded');
+  } finally {
+    await tab.close();
+  }
+});
+
 test('the diagnosis report opens with the verdict and findings esg stored', async () => {
   const stored = await cliJson('diagnoses', 'show', '--spacecraft', FAULTY, '--id', String(diagnosisId));
   const report = stored.report || JSON.parse(stored.reportJson);
