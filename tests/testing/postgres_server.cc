@@ -156,6 +156,47 @@ bool WaitDead(const std::vector<pid_t>& pids, std::chrono::milliseconds timeout)
   }
 }
 
+// The start time of a process in clock ticks since boot (/proc/<pid>/stat field 22), which
+// tells a process from a later one that reuses its pid; empty if it is gone or a zombie.
+std::string StartTime(pid_t pid) {
+  if (Dead(pid)) return "";
+  const std::string stat = ReadText(absl::StrCat("/proc/", pid, "/stat"));
+  const size_t close_paren = stat.rfind(')');
+  if (close_paren == std::string::npos) return "";
+  std::istringstream rest(stat.substr(close_paren + 1));
+  std::string field;
+  for (int i = 3; i <= 22 && rest >> field; ++i) {  // fields 3 (state) .. 22 (starttime)
+    if (i == 22) return field;
+  }
+  return "";
+}
+
+// The owner record of a server's temp dir, `<dir>/owner`: "pid P start S", the process whose
+// exit ends the server's use (PostgresServer::ReapStale).
+constexpr char kOwnerFile[] = "/owner";
+
+bool WriteOwner(const std::string& dir, pid_t pid) {
+  std::ofstream out(dir + kOwnerFile, std::ios::trunc);
+  out << "pid " << pid << " start " << StartTime(pid) << "\n";
+  out.close();
+  return static_cast<bool>(out);
+}
+
+// Whether the owner recorded in `dir` is still running; true when there is no record (a dir
+// being made, or made before owners were recorded: left alone).
+bool OwnerAlive(const std::string& dir) {
+  if (access((dir + kOwnerFile).c_str(), F_OK) != 0) return true;
+  std::istringstream in(ReadText(dir + kOwnerFile));
+  std::string pid_key, start_key, start;
+  long pid = 0;
+  if (!(in >> pid_key >> pid >> start_key) || pid_key != "pid" || start_key != "start" ||
+      pid <= 0) {
+    return false;  // a torn or foreign record: nobody can own it
+  }
+  in >> start;
+  return !start.empty() && StartTime(static_cast<pid_t>(pid)) == start;
+}
+
 struct SharedState {
   std::unique_ptr<PostgresServer> server;
   std::string error;
@@ -187,12 +228,16 @@ absl::StatusOr<std::unique_ptr<PostgresServer>> PostgresServer::Start() {
                        "(scripts/install-deps.sh does) or set $ESG_PG_BINDIR"));
     }
   }
+  ReapStale();
   std::string pattern = "/tmp/esg-pg-XXXXXX";
   if (mkdtemp(pattern.data()) == nullptr) {
     return absl::InternalError(absl::StrCat("mkdtemp ", pattern, ": ", std::strerror(errno)));
   }
   // From here on the destructor removes the dir (running_ is false: nothing to stop yet).
   std::unique_ptr<PostgresServer> server(new PostgresServer(pattern, bin_dir));
+  if (!WriteOwner(server->dir_, getpid())) {
+    return absl::InternalError(absl::StrCat("cannot write ", server->dir_, kOwnerFile));
+  }
   if (RunAsPostgres()) {
     const passwd* user = getpwnam("postgres");
     if (user == nullptr) {
@@ -288,6 +333,11 @@ absl::Status PostgresServer::Publish(const std::string& path) {
       << "dir " << dir_ << "\n";
   out.close();
   if (!out) return absl::InternalError(absl::StrCat("cannot write ", path));
+  // The server outlives this process: its use ends with the parent's (ctest's, under the
+  // fixture), whose cleanup fixture stops it; if that never runs, ReapStale does.
+  if (!WriteOwner(dir_, getppid())) {
+    return absl::InternalError(absl::StrCat("cannot write ", dir_, kOwnerFile));
+  }
   owned_ = false;
   return absl::OkStatus();
 }
@@ -434,6 +484,22 @@ absl::Status PostgresServer::Kill() {
     }
   }
   return absl::OkStatus();
+}
+
+int PostgresServer::ReapStale() {
+  int reaped = 0;
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator("/tmp", ec)) {
+    const std::string dir = entry.path().string();
+    if (dir.rfind("/tmp/esg-pg-", 0) != 0 || !entry.is_directory(ec) || OwnerAlive(dir)) continue;
+    std::unique_ptr<PostgresServer> stale(new PostgresServer(dir, BinDir()));
+    const pid_t postmaster = stale->PostmasterPid();
+    // The destructor stops a running postmaster (pg_ctl stop, else kill -9) and removes the dir.
+    stale->running_ = postmaster > 0 && !Dead(postmaster);
+    stale.reset();
+    ++reaped;
+  }
+  return reaped;
 }
 
 absl::Status PostgresServer::Restart() {

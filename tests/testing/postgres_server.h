@@ -61,6 +61,14 @@ class PostgresServer {
   static absl::StatusOr<std::unique_ptr<PostgresServer>> Attach(const std::string& path,
                                                                 bool take_over);
 
+  // Stops the servers of earlier processes that were killed before they could stop them (a test
+  // killed by ctest's timeout, a ctest interrupted before its cleanup fixture) and removes their
+  // temp dirs. Each temp dir records its owner (`owner`: the pid and its start time, so a reused
+  // pid is not taken for it): the process that started the server, or for a published server
+  // the publisher's parent (ctest under the fixture). A dir whose owner has exited is stale; one
+  // without a record is left alone. Start() calls it first. Returns how many it reaped.
+  static int ReapStale();
+
   // Stops the server (pg_ctl stop -m fast) and removes the temp dir with everything in it.
   ~PostgresServer();
   PostgresServer(const PostgresServer&) = delete;

@@ -5,8 +5,11 @@
 #include "tests/testing/postgres_server.h"
 
 #include <libpq-fe.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <string>
 #include <vector>
@@ -176,4 +179,31 @@ TEST(PostgresServerTest, APublishedServerServesWhoAttachesUntilTheOneThatTakesIt
 }
 
 }  // namespace
+// A test killed before it stopped its server (ctest's timeout) leaves the server running; the
+// next start in any process stops it and removes its dir. A server whose owner runs is kept.
+TEST(PostgresServerTest, AServerWhoseOwnerExitedIsReapedAndALiveOnesIsKept) {
+  absl::StatusOr<std::unique_ptr<PostgresServer>> kept = PostgresServer::Start();
+  ASSERT_THAT(kept, IsOk());
+  absl::StatusOr<std::unique_ptr<PostgresServer>> abandoned = PostgresServer::Start();
+  ASSERT_THAT(abandoned, IsOk());
+  const std::string dir = std::filesystem::path((*abandoned)->data_dir()).parent_path().string();
+  const std::string uri =
+      "postgresql://esg@127.0.0.1:" + std::to_string((*abandoned)->port()) + "/postgres";
+  // Its owner becomes a process that has exited (as a killed test has), and nothing stops it.
+  const pid_t child = fork();
+  if (child == 0) _exit(0);
+  ASSERT_GT(child, 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(child, &status, 0), child);
+  std::ofstream(dir + "/owner", std::ios::trunc) << "pid " << child << " start 1\n";
+  abandoned->release();
+  ASSERT_EQ(PQping(uri.c_str()), PQPING_OK);
+
+  EXPECT_GE(PostgresServer::ReapStale(), 1);
+  EXPECT_NE(PQping(uri.c_str()), PQPING_OK);
+  EXPECT_FALSE(std::filesystem::exists(dir));
+  // Ours is untouched.
+  EXPECT_THAT((*kept)->CreateDatabase(), IsOk());
+}
+
 }  // namespace esg::testing
