@@ -3,7 +3,8 @@
 //     Fleet overview                         esg.fleet view
 //     <spacecraft> (folder)
 //       Drift coefficients gyro N (folder)   table of all coefficients + one plot per estimated
-//                                            coefficient (value, +/-1-sigma)
+//                                            coefficient (value, +/-1-sigma) + the table with
+//                                            the snapshots re-runs superseded (revisions.js)
 //       Attitude 1-sigma envelope / table    per-step estimates (or esg.unavailable)
 //       Attitude error body x, y, z / table  per-step estimates: the error estimate of each
 //                                            star-tracker update with its +/-1-sigma
@@ -57,17 +58,13 @@ function overlay(identifier, name, series, location, yLabel) {
 
 // A telemetry table of one object. The name column (always the same object) and the unit
 // columns (the unit is in each column's title) are hidden to leave room for the numbers.
-function table(identifier, name, child, values, location) {
+// fitContent: columns as wide as their content (scrolling sideways) instead of equal widths.
+function table(identifier, name, child, values, location, fitContent = false) {
   const hiddenColumns = { name: true };
   for (const v of values) if (v.unit) hiddenColumns[`${v.key}-unit`] = true;
-  return {
-    identifier,
-    name,
-    type: 'table',
-    location,
-    composition: [child],
-    configuration: { columnWidths: { utc: 200 }, hiddenColumns }
-  };
+  const configuration = { columnWidths: { utc: 200 }, hiddenColumns };
+  if (fitContent) configuration.autosize = false;
+  return { identifier, name, type: 'table', location, composition: [child], configuration };
 }
 
 function unavailable(identifier, name, location) {
@@ -137,7 +134,21 @@ const builders = {
     const g = Number(gyro);
     const plots = estimatedCoefficients(gyroConfig(info, g)).map((c) => id('coefplot', sc, g, c.key));
     return folder(identifier, `Drift coefficients gyro ${g}`,
-      [id('coeftable', sc, g), ...plots], keyString(id('sc', sc)));
+      [id('coeftable', sc, g), ...plots, id('coefrevtable', sc, g)], keyString(id('sc', sc)));
+  },
+
+  // The coefficient history with what re-runs over late frames superseded: each snapshot once
+  // current, and those a re-run replaced with the time it did, next to their replacement.
+  async coefrevtable(identifier, [sc, gyro]) {
+    // Both times in full: a superseded row and its replacement share the first.
+    return table(identifier, `Gyro ${gyro} coefficients with revised rows`,
+      id('coefrev', sc, gyro), coefficientTableValues(true), keyString(id('coefs', sc, gyro)), true);
+  },
+
+  async coefrev(identifier, [sc, gyro]) {
+    return telemetryObject(identifier, `Gyro ${gyro} drift coefficients, current and revised`,
+      coefficientTableValues(true), { source: 'coefrev', spacecraft: sc, gyro: Number(gyro) },
+      keyString(id('coefs', sc, gyro)));
   },
 
   async coeftable(identifier, [sc, gyro]) {

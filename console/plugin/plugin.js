@@ -6,6 +6,7 @@ import { fleetViewProvider } from './fleetView.js';
 import { NAMESPACE } from './keys.js';
 import { objectProvider, TELEMETRY_TYPE } from './objects.js';
 import { planViewProvider } from './planView.js';
+import { installRevisions } from './revisions.js';
 import { setNotifier, telemetryProvider } from './telemetry.js';
 import { makeSpacecraftTree } from './tree.js';
 import { unavailableViewProvider } from './unavailableView.js';
@@ -35,6 +36,7 @@ export default function EsgConsolePlugin() {
     tree.watch();
     setNotifier(openmct);
     openmct.telemetry.addProvider(telemetryProvider);
+    installRevisions(openmct);
 
     openmct.install(openmct.plugins.FaultManagement());
     openmct.faults.addProvider(makeFaultProvider(openmct));

@@ -48,8 +48,19 @@ export function snapshotDatum(snapshot) {
   return datum;
 }
 
-export function coefficientTableValues() {
-  const values = [TIME];
+// A snapshot of the history with the revised ones (include_revised): the same datum, and when a
+// re-run over a late frame superseded it, the wall-clock time it did ("" on a current snapshot).
+export function revisedSnapshotDatum(snapshot) {
+  const datum = snapshotDatum(snapshot);
+  datum.revised = snapshot.revised_time ? snapshot.revised_time.replace('T', ' ') : '';
+  return datum;
+}
+
+const REVISED = { key: 'revised', source: 'revised', name: 'Revised at (UTC)', format: 'string' };
+
+// withRevised: the table of the history with the revised snapshots, "Revised at" after the time.
+export function coefficientTableValues(withRevised = false) {
+  const values = withRevised ? [TIME, REVISED] : [TIME];
   COEFFICIENTS.forEach((c, i) => {
     values.push(column(c.key, c.label, DEG_H, 2 * i + 1));
     values.push(column(`${c.key}_sigma`, `${c.label} 1-sigma`, DEG_H, 2 * i + 2));

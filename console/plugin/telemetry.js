@@ -1,12 +1,14 @@
 // Telemetry provider of the esg.telemetry objects. History comes from the gateway's REST
 // endpoints over the time conductor's bounds; real time from esgd's SubscribeEstimates pushed over
 // the WebSocket. Coefficient snapshots have no subscription RPC: each new per-step estimate of a
-// spacecraft is the trigger to fetch the snapshots stored since the last one we have.
+// spacecraft is the trigger to fetch the snapshots stored since the last one we have. After a
+// re-run of the filter (revisions.js) the open views are read again and the followers step back
+// to where the re-run started.
 import { apiFetch, isoTime, query, sharedFetch } from './api.js';
 import { live } from './live.js';
 import { TELEMETRY_TYPE } from './objects.js';
 import { planSamples } from './plan.js';
-import { estimateDatum, predictDatum, snapshotDatum } from './series.js';
+import { estimateDatum, predictDatum, revisedSnapshotDatum, snapshotDatum } from './series.js';
 
 // Predictions are sampled so that a request over any span returns about this many points.
 const PREDICT_SAMPLES = 400;
@@ -22,6 +24,14 @@ const requesters = {
       gyro, from: isoTime(start), to: isoTime(end)
     })}`);
     return body.snapshots.map(snapshotDatum);
+  },
+
+  // The same with the snapshots re-runs superseded, marked with the time they were.
+  async coefrev({ spacecraft, gyro }, { start, end }) {
+    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
+      gyro, from: isoTime(start), to: isoTime(end), include_revised: true
+    })}`);
+    return body.snapshots.map(revisedSnapshotDatum);
   },
 
   async est({ spacecraft }, { start, end }) {
@@ -77,13 +87,21 @@ function subscribeEstimates(spacecraft, listener) {
   };
 }
 
+// The coefficient followers of each spacecraft, so a re-run can move them back.
+const followers = new Map(); // spacecraft -> Set of rewind(ms)
+
 // New coefficient snapshots of one gyro after `lastTime`, fetched when an estimate arrives; one
 // fetch at a time per gyro, so a burst of estimates costs one request. `lastTime` starts at the
-// session's last frame: the historical request covers what came before.
-function coefficientFollower({ spacecraft, gyro }, callback) {
+// session's last frame: the historical request covers what came before. A re-run moves it back
+// to the re-run's start, where the snapshots are new again. `toDatum` makes the datum of the
+// table or plot being followed (new snapshots are current ones).
+function coefficientFollower({ spacecraft, gyro }, callback, toDatum) {
   let lastTime = null;
   let busy = false;
   let again = false;
+  const rewind = (ms) => {
+    if (lastTime !== null) lastTime = Math.min(lastTime, ms - 1);
+  };
   const started = apiFetch('/api/sessions').then((body) => {
     const info = body.sessions.find((s) => s.spacecraft_id === spacecraft);
     lastTime = info && info.last_frame_time ? Date.parse(info.last_frame_time) : 0;
@@ -100,7 +118,7 @@ function coefficientFollower({ spacecraft, gyro }, callback) {
         gyro, from: isoTime(lastTime + 1)
       })}`);
       for (const s of body.snapshots) {
-        const datum = snapshotDatum(s);
+        const datum = toDatum(s);
         if (datum.utc <= lastTime) continue;
         lastTime = datum.utc;
         callback(datum);
@@ -115,7 +133,23 @@ function coefficientFollower({ spacecraft, gyro }, callback) {
       }
     }
   }
-  return subscribeEstimates(spacecraft, () => fetchNew());
+  if (!followers.has(spacecraft)) followers.set(spacecraft, new Set());
+  followers.get(spacecraft).add(rewind);
+  const unsubscribe = subscribeEstimates(spacecraft, () => fetchNew());
+  return () => {
+    const set = followers.get(spacecraft);
+    set.delete(rewind);
+    if (set.size === 0) followers.delete(spacecraft);
+    unsubscribe();
+  };
+}
+
+// A re-run of the filter of `spacecraft` from `fromMs` on (revisions.js): the coefficient
+// followers step back to it. Returns whether the page shows live views of that spacecraft
+// (which then need reading again).
+export function rewindAfterRevision(spacecraft, fromMs) {
+  for (const rewind of followers.get(spacecraft) || []) rewind(fromMs);
+  return estimateFeeds.has(spacecraft);
 }
 
 // Open MCT answers a failed request with "see console for details"; the operator needs esgd's or
@@ -149,7 +183,8 @@ export const telemetryProvider = {
   },
   subscribe(domainObject, callback) {
     const esg = domainObject.esg;
-    if (esg.source === 'coef') return coefficientFollower(esg, callback);
+    if (esg.source === 'coef') return coefficientFollower(esg, callback, snapshotDatum);
+    if (esg.source === 'coefrev') return coefficientFollower(esg, callback, revisedSnapshotDatum);
     return subscribeEstimates(esg.spacecraft, (record) => callback(estimateDatum(record)));
   }
 };

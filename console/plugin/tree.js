@@ -6,7 +6,7 @@
 // view of the root folder add them like the ones read at load. A reconnect of the WebSocket (its
 // end-of-replay marker) reads them again too, for what was configured while it was down.
 import { NAMESPACE, id } from './keys.js';
-import { live } from './live.js';
+import { onFleet } from './fleetFeed.js';
 import { rootComposition } from './objects.js';
 import { reloadSessions, sessions } from './sessions.js';
 
@@ -99,14 +99,13 @@ export function makeSpacecraftTree() {
     },
     reorder() {},
 
-    // Listens to every spacecraft's alerts and per-step estimates (live only) for the rest of the
-    // page's life.
+    // Listens to every spacecraft's alerts and per-step estimates for the rest of the page's life.
     watch() {
+      onFleet('alert', (alert) => seen(alert.spacecraft_id));
+      onFleet('estimate', (record) => seen(record.spacecraft_id));
       // The end-of-replay marker also comes at the first subscription: it closes the gap between
       // the page's first read of the sessions and the start of the feeds.
-      live.subscribe('alerts', '', null, (alert) => seen(alert.spacecraft_id), () => {}, schedule);
-      // An esgd without per-step estimates ends this one (UNIMPLEMENTED): alerts remain.
-      live.subscribe('estimates', '', null, (record) => seen(record.spacecraft_id), () => {});
+      onFleet('replayComplete', schedule);
     }
   };
 }

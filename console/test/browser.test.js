@@ -730,3 +730,128 @@ test('a planned attitude pasted in the console is what the prediction after the 
   await page.waitForFunction(() => document.querySelector('.c-telemetry-table__body tr.noselect')?.textContent.includes('INERTIAL_HOLD'),
     { timeout: 20_000 });
 });
+
+// A late frame within esgd's reorder window (docs/service.md "Several ground stations"): RDK-R's
+// first 200 minutes are sent with minutes 150-159 missing, those follow last, as a second
+// station relaying a pass late would send them (`esg replay --from-sequence` gives them the
+// sequences the station never used). esgd re-runs the filter from its window checkpoint before
+// them and marks the snapshots it supersedes revised. The open coefficient table must end with
+// esgd's current history (the late minutes in it, every value as `esg history` prints it) without
+// a reload, the page must say that a re-run happened, and the table with revised rows must list
+// the superseded snapshots with the time they were revised, as `esg history --include-revised`.
+test('a late frame re-runs the filter: the open table is read again, superseded rows are marked', async () => {
+  const SC = 'RDK-R';
+  const config = path.join(tmp, 'rdkr.json');
+  const recording = path.join(tmp, 'late.csv');
+  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${SC}"`));
+  await esg(['simulate', '--config', config, '--profile', 'calibration', '--scenario',
+    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', '4', '--seed', '3', '--out', recording]);
+  const lines = fs.readFileSync(recording, 'utf8').split('\n');
+  const header = lines.filter((l) => l.startsWith('#'));
+  const columns = lines.find((l) => l.startsWith('time_utc'));
+  const data = lines.slice(lines.indexOf(columns) + 1).filter((l) => l);
+  const rowTime = (n) => Date.parse(data[n - 1].split(',')[0]);
+  // Rows first..last, with the sequences of their row numbers.
+  const send = (first, last) => {
+    const file = path.join(tmp, `late_${first}.csv`);
+    fs.writeFileSync(file, [...header, columns, ...data.slice(0, last), ''].join('\n'));
+    return cli('replay', '--recording', file, '--from-sequence', String(first), '--wait');
+  };
+  const history = async (...extra) => (await cliJson('history', '--spacecraft', SC, '--gyro', '1', ...extra)).snapshots;
+  await cli('configure', '--config', config, '--model', '10+11');
+  await send(1, 149);
+  const bounds = `?tc.mode=fixed&tc.startBound=${rowTime(140)}&tc.endBound=${rowTime(200) + 600e3}&tc.timeSystem=utc`;
+  await open(`esg:root/esg:sc~${SC}/esg:coefs~${SC}~1/esg:coeftable~${SC}~1`, bounds);
+  await waitForTableRows(5);
+  await page.evaluate(() => { window.esgRevision = 1; });
+  // Minutes 160-200 arrive live; the table follows them.
+  await send(160, 200);
+  const newest = Date.parse((await history()).at(-1).measurementTime);
+  await page.waitForFunction((t) => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td && Date.parse(td.textContent.trim().replace(' ', 'T')) === t;
+  }, { timeout: 20_000 }, newest);
+  const inGap = (t) => t >= rowTime(150) && t <= rowTime(159);
+  assert.equal((await tableRows()).filter((r) => inGap(cellTime(r['Time (UTC)']))).length, 0);
+  // The late minutes. `--wait` may return before the re-run or while it catches up (the last
+  // applied frame steps back and forward again), and the late frames may make more than one
+  // re-run: esgd's history is final when it holds a snapshot at each late frame (one per step)
+  // and again reaches the newest.
+  await send(150, 159);
+  const lateTimes = Array.from({ length: 10 }, (_, i) => rowTime(150 + i));
+  const done = (h) => lateTimes.every((t) => h.some((s) => Date.parse(s.measurementTime) === t)) &&
+    Date.parse(h.at(-1).measurementTime) === newest;
+  let current = await history();
+  for (let i = 0; i < 200 && !done(current); i++) {
+    await sleep(100);
+    current = await history();
+  }
+  assert.ok(done(current), 'esgd stored snapshots at the late frames and re-ran up to the newest');
+  const late = current.filter((s) => inGap(Date.parse(s.measurementTime)));
+  const all = await history('--include-revised');
+  assert.ok(all.some((s) => s.revisedTime), 'the late frames revised snapshots (esg history --include-revised)');
+  await page.waitForFunction((from, to) => [...document.querySelectorAll('.c-telemetry-table__body tr.noselect')]
+    .some((tr) => {
+      const t = Date.parse(tr.querySelector('td').textContent.trim().replace(' ', 'T'));
+      return t >= from && t <= to;
+    }), { timeout: 20_000 }, rowTime(150), rowTime(159));
+  await page.waitForFunction(() => /re-ran the filter/.test(document.body.textContent), { timeout: 20_000 });
+  const notice = await page.evaluate(() => [...document.querySelectorAll('.c-message-banner__message')]
+    .map((m) => m.textContent).join(' '));
+  assert.match(notice, new RegExp(`${SC}: esgd re-ran the filter from`));
+  // Every row shown is esgd's current snapshot at that time, once (the newest again at the top).
+  await page.waitForFunction((t) => {
+    const td = document.querySelector('.c-telemetry-table__body tr.noselect td');
+    return td && Date.parse(td.textContent.trim().replace(' ', 'T')) === t;
+  }, { timeout: 20_000 }, newest);
+  const byTime = new Map(current.map((s) => [Date.parse(s.measurementTime), s]));
+  const rows = await waitForTableRows(20);
+  const times = rows.map((r) => cellTime(r['Time (UTC)']));
+  assert.equal(new Set(times).size, times.length, 'one row per measurement time');
+  assert.ok(times.filter(inGap).length > 0, 'the late frames\' snapshots are in the table');
+  for (const row of rows) {
+    const snapshot = byTime.get(cellTime(row['Time (UTC)']));
+    assert.ok(snapshot, `no current snapshot at ${row['Time (UTC)']}`);
+    assert.equal(Number(row['k0 [deg/h]']).toFixed(5), snapshot.model.k0DegH.toFixed(5), `k0 at ${row['Time (UTC)']}`);
+    assert.equal(Number(row['k0 1-sigma [deg/h]']).toFixed(5), snapshot.sigma.k0DegH.toFixed(5), `k0 1-sigma at ${row['Time (UTC)']}`);
+    assert.equal(Number(row['C11 [deg/h]']).toFixed(5), snapshot.model.c1DegH[0].toFixed(5), `C11 at ${row['Time (UTC)']}`);
+  }
+  assert.equal(await page.evaluate(() => window.esgRevision), 1, 'the page was not reloaded');
+  // The table with revised rows over the last quarter hour: each snapshot esg lists with
+  // --include-revised, the superseded ones with the time they were revised.
+  const from = rowTime(186);
+  const to = rowTime(200);
+  await open(`esg:root/esg:sc~${SC}/esg:coefs~${SC}~1/esg:coefrevtable~${SC}~1`,
+    `?tc.mode=fixed&tc.startBound=${from}&tc.endBound=${to}&tc.timeSystem=utc`);
+  // The late frames may make esgd re-run once more after its history looked final (each
+  // re-run supersedes the previous one's snapshots): the table must converge on what esg lists.
+  // Times compared as milliseconds: esg prints as many fractional digits as esgd stored.
+  const key = (t, revised) => `${t} ${revised ? Date.parse(revised) : ''}`;
+  const rowKey = (row) => key(cellTime(row['Time (UTC)']), (row['Revised at (UTC)'] || '').replace(' ', 'T'));
+  let expected = [];
+  let revisedRows = [];
+  for (let i = 0; i < 20; i++) {
+    expected = (await history('--include-revised')).filter((s) =>
+      Date.parse(s.measurementTime) >= from && Date.parse(s.measurementTime) <= to);
+    revisedRows = await waitForTableRows(expected.length);
+    const shown = new Set(revisedRows.map(rowKey));
+    if (revisedRows.length === expected.length &&
+      expected.every((s) => shown.has(key(Date.parse(s.measurementTime), s.revisedTime || '')))) break;
+    await sleep(500);
+  }
+  assert.equal(revisedRows.length, expected.length);
+  const byKey = new Map(expected.map((s) => [key(Date.parse(s.measurementTime), s.revisedTime || ''), s]));
+  let superseded = 0;
+  for (const row of revisedRows) {
+    const revised = row['Revised at (UTC)'];
+    const snapshot = byKey.get(rowKey(row));
+    assert.ok(snapshot, `no snapshot of esg history --include-revised at ${row['Time (UTC)']} revised "${revised}"`);
+    assert.equal(Number(row['k0 [deg/h]']).toFixed(5), snapshot.model.k0DegH.toFixed(5));
+    if (revised) superseded++;
+  }
+  assert.equal(superseded, expected.filter((s) => s.revisedTime).length);
+  assert.ok(superseded > 0, 'the span holds superseded snapshots');
+  await shot('coefficient_revisions');
+  process.stdout.write(`# ${SC}: ${late.length} snapshots at the late frames; ${all.length - current.length} revised in all, ` +
+    `${superseded} of them in the table with revised rows\n`);
+});
