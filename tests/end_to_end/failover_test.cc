@@ -412,14 +412,9 @@ TEST(Failover, SessionsOfAKilledNodeFinishOnTheOthersWithEveryFrameStoredAndAppl
 // history is A's, and an all-spacecraft alert subscription on B receives the alerts A raises
 // while it streams (LISTEN/NOTIFY), the same alerts A stores.
 TEST(Failover, AnyServerShowsEverySpacecraftAndRelaysAlertsRaisedOnAnother) {
-  std::string pg_error;
-  PostgresServer* pg = PostgresServer::Shared(&pg_error);
-  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
-  absl::StatusOr<std::string> db = pg->CreateDatabase();
-  ASSERT_TRUE(db.ok()) << db.status();
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, "30s", daemons));
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodesOnANewDatabase(dir, 30000, daemons));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
 
@@ -624,14 +619,10 @@ TEST(Failover, ARefusedCallCarriesTheTimeUntilTheLeaseExpiresAsItsRetryPushback)
 // the estimates table, LISTEN/NOTIFY), each as stored (same compute time and attitude); and a
 // later subscription on B with `since` replays A's stored estimates before its marker.
 TEST(Failover, AnEstimateSubscriptionOnAnyServerSeesTheEstimatesAnotherServerStores) {
-  std::string pg_error;
-  PostgresServer* pg = PostgresServer::Shared(&pg_error);
-  ASSERT_NE(pg, nullptr) << "PostgreSQL could not start: " << pg_error;
-  absl::StatusOr<std::string> db = pg->CreateDatabase();
-  ASSERT_TRUE(db.ok()) << db.status();
   TempDir dir;
   std::vector<std::unique_ptr<Daemon>> daemons;
-  ASSERT_NO_FATAL_FAILURE(StartTwoNodes(*db, dir, "30s", daemons));
+  std::string db;
+  ASSERT_NO_FATAL_FAILURE(StartTwoNodesOnANewDatabase(dir, 30000, daemons, &db));
   auto a = daemons[0]->Stub();
   auto b = daemons[1]->Stub();
 
@@ -653,7 +644,7 @@ TEST(Failover, AnEstimateSubscriptionOnAnyServerSeesTheEstimatesAnotherServerSto
   esg::v1::SessionInfo on_a;
   ASSERT_NO_FATAL_FAILURE(ConfigureStreamAndAwaitApplied(*a, run, on_a));
 
-  auto storage = storage::Storage::Open(*db);
+  auto storage = storage::Storage::Open(db);
   ASSERT_TRUE(storage.ok()) << storage.status();
   absl::StatusOr<storage::EstimatePage> stored = (*storage)->estimates().Page(
       id, absl::InfinitePast(), absl::InfiniteFuture(), std::nullopt, 100000);
