@@ -341,6 +341,18 @@ async function toggleTreeItem(tab, name, open) {
   }, { timeout: 20_000 }, name, open);
 }
 
+// The demo's configuration under another spacecraft id, and a simulated calibration flight of
+// `hours` for it (paper_calibration.json, `seed`): the two files, in the test's temp dir.
+async function simulateSpacecraft(id, hours, seed) {
+  const config = path.join(tmp, `${id}.json`);
+  const recording = path.join(tmp, `${id}.csv`);
+  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${id}"`));
+  await esg(['simulate', '--config', config, '--profile', 'calibration', '--scenario',
+    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', String(hours), '--seed', String(seed),
+    '--out', recording]);
+  return { config, recording };
+}
+
 const treeHas = (name) => [...document.querySelectorAll('.c-tree__item-h[role=treeitem] .c-tree__item__name')]
   .some((n) => n.textContent.trim() === name);
 
@@ -348,11 +360,7 @@ test('a spacecraft configured after the page loaded appears in the tree without 
   // A new tab loads the page with the fleet esgd has now; RDK-N is configured and its first hour
   // replayed afterwards. Its folder must come from the pushed estimates and alerts, not a reload.
   const NEW = 'RDK-N';
-  const config = path.join(tmp, 'rdkn.json');
-  const recording = path.join(tmp, 'new_spacecraft.csv');
-  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${NEW}"`));
-  await esg(['simulate', '--config', config, '--profile', 'calibration', '--scenario',
-    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', '1', '--seed', '2', '--out', recording]);
+  const { config, recording } = await simulateSpacecraft(NEW, 1, 2);
   const tab = await browser.newPage();
   try {
     await tab.setViewport({ width: 1500, height: 1400 }); // the tree draws only the items in view
@@ -741,11 +749,7 @@ test('a planned attitude pasted in the console is what the prediction after the 
 // the superseded snapshots with the time they were revised, as `esg history --include-revised`.
 test('a late frame re-runs the filter: the open table is read again, superseded rows are marked', async () => {
   const SC = 'RDK-R';
-  const config = path.join(tmp, 'rdkr.json');
-  const recording = path.join(tmp, 'late.csv');
-  fs.writeFileSync(config, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', `"spacecraftId": "${SC}"`));
-  await esg(['simulate', '--config', config, '--profile', 'calibration', '--scenario',
-    path.join(SCENARIOS, 'paper_calibration.json'), '--hours', '4', '--seed', '3', '--out', recording]);
+  const { config, recording } = await simulateSpacecraft(SC, 4, 3);
   const lines = fs.readFileSync(recording, 'utf8').split('\n');
   const header = lines.filter((l) => l.startsWith('#'));
   const columns = lines.find((l) => l.startsWith('time_utc'));
