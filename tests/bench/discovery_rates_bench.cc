@@ -13,7 +13,8 @@
 // BM_DiscoveryPower: per effect of the scenarios, ESG_POWER_SEEDS (default 5) recordings at each
 // size factor of ESG_POWER_SCALES (default 0.125,0.25,0.5,1; 1 = the confusion matrix's size),
 // seeds from 2001; prints the share found (the right verdict in the right gyro, as the confusion
-// matrix counts it) per effect and size as a Markdown table and a data file for the plot.
+// matrix counts it) per effect and size as a Markdown table and a data file for the plot;
+// ESG_POWER_EFFECTS a comma list of effects, ESG_DISCOVERY_NOTES=1 every finding's notes too.
 // Run: scripts/power_curves.sh.
 //
 // Both spread the diagnoses over ESG_DISCOVERY_JOBS (default 2) threads, one diagnosis each;
@@ -176,6 +177,9 @@ void BM_DiscoveryPower(benchmark::State& state) {
     }
   }
   std::map<std::pair<std::string, double>, int> found;
+  // ESG_DISCOVERY_NOTES=1: every finding's explanation and notes under its line.
+  const char* notes_env = std::getenv("ESG_DISCOVERY_NOTES");
+  const bool notes = notes_env != nullptr && std::string(notes_env) == "1";
   std::mutex out;
   for (auto _ : state) {
     RunJobs(static_cast<int>(all.size()), jobs, [&](int i) {
@@ -189,6 +193,12 @@ void BM_DiscoveryPower(benchmark::State& state) {
                    static_cast<unsigned long long>(j.seed),
                    report.ok() ? report->verdict.c_str() : "error",
                    report.ok() ? Findings(*report).c_str() : "");
+      if (notes && report.ok()) {
+        for (const Finding& f : report->findings) {
+          std::fprintf(stderr, "    %s\n", f.explanation.c_str());
+          for (const std::string& n : f.evidence.notes) std::fprintf(stderr, "      - %s\n", n.c_str());
+        }
+      }
     });
   }
   std::printf("\n| effect \\ size factor |");
