@@ -3,13 +3,18 @@
 // directory: the whole operator flow over a simulated 6 h recording with star-tracker defects,
 // resuming a replay across `kill -9` of the server, rejected frames, bearer tokens, and the exit
 // codes (2 for bad arguments naming the option, 1 with UNAVAILABLE when no server listens).
+#include <arpa/inet.h>
 #include <fcntl.h>
+#include <netinet/in.h>
+#include <poll.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -772,6 +777,92 @@ TEST_F(ServerVerbs, ServerDownIsUnavailableWithTheAddress) {
     EXPECT_EQ(r.exit_code, 1) << verb;
     EXPECT_THAT(r.err, HasSubstr(": UNAVAILABLE: server not reachable at " + address)) << verb;
   }
+}
+
+// A TCP relay on 127.0.0.1 that holds each accepted connection for `delay` before it connects to
+// `target` and pumps bytes both ways: the server's HTTP/2 SETTINGS reach the client only after
+// the delay, as from a server too busy to answer at once.
+class SlowRelay {
+ public:
+  SlowRelay(int target_port, std::chrono::milliseconds delay) : target_(target_port), delay_(delay) {
+    listener_ = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a = Loopback(0);
+    socklen_t len = sizeof a;
+    if (listener_ < 0 || ::bind(listener_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
+        ::listen(listener_, 16) != 0 ||
+        ::getsockname(listener_, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
+      ADD_FAILURE() << "relay: cannot listen on 127.0.0.1";
+      return;
+    }
+    port_ = ntohs(a.sin_port);
+    acceptor_ = std::thread([this] { Accept(); });
+  }
+  ~SlowRelay() {
+    stopping_ = true;
+    ::shutdown(listener_, SHUT_RDWR);
+    ::close(listener_);
+    if (acceptor_.joinable()) acceptor_.join();
+    for (std::thread& t : pumps_) t.join();
+  }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+
+ private:
+  static sockaddr_in Loopback(int port) {
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    a.sin_port = htons(static_cast<uint16_t>(port));
+    return a;
+  }
+  void Accept() {
+    for (;;) {
+      const int client = ::accept(listener_, nullptr, nullptr);
+      if (client < 0) return;
+      pumps_.emplace_back([this, client] { Relay(client); });
+    }
+  }
+  void Relay(int client) {
+    std::this_thread::sleep_for(delay_);
+    const int server = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a = Loopback(target_);
+    if (server >= 0 && ::connect(server, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
+      pollfd fds[2] = {{client, POLLIN, 0}, {server, POLLIN, 0}};
+      char buffer[16384];
+      while (!stopping_ && ::poll(fds, 2, 200) >= 0) {
+        bool closed = false;
+        for (int i = 0; i < 2 && !closed; ++i) {
+          if (fds[i].revents == 0) continue;
+          const ssize_t n = ::read(fds[i].fd, buffer, sizeof buffer);
+          closed = n <= 0 || ::write(fds[1 - i].fd, buffer, static_cast<size_t>(n)) != n;
+        }
+        if (closed) break;
+      }
+    }
+    if (server >= 0) ::close(server);
+    ::close(client);
+  }
+  int target_;
+  std::chrono::milliseconds delay_;
+  int listener_ = -1;
+  int port_ = 0;
+  std::atomic<bool> stopping_{false};
+  std::thread acceptor_;
+  std::vector<std::thread> pumps_;
+};
+
+// A server that takes a second to answer a new connection (busy, or far away) is waited for:
+// each connection attempt has gRPC's 20 s, not the 0.2-2 s between attempts after a refusal.
+// (With the attempt bounded by 200 ms, as before, every attempt timed out before the server's
+// SETTINGS and the call failed UNAVAILABLE.)
+TEST_F(ServerVerbs, AServerSlowToAnswerANewConnectionIsWaitedFor) {
+  TempDir dir;
+  const int port = FreeLoopbackPort();
+  Esgd server(dir, dir.File("esg.db"), port);
+  ASSERT_TRUE(server.Start()) << server.log();
+  SlowRelay relay(port, std::chrono::milliseconds(1000));
+  const RunResult r = RunEsg(dir, "--server " + relay.address() + " status --json");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(r.json().contains("sessions")) << r.out;
 }
 
 TEST_F(ServerVerbs, BadArgumentsExitTwoNamingTheOption) {
