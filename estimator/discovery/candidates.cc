@@ -597,7 +597,7 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
           m_sigma(i) = 1.0 / std::sqrt(info(i));
         }
       }
-      // Commonality: the per-gyro estimates against their mean.
+      // Commonality: the per-gyro estimates phi_g against their mean, which is -m.
       double chi2 = 0.0;
       int dof = 0;
       std::string per_gyro;
@@ -611,7 +611,7 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
         for (int i = 0; i < 3; ++i) {
           const double s = e->misalignment_sigma_b(i);
           if (s > 0) {
-            chi2 += std::pow((e->misalignment_b(i) - m(i)) / s, 2);
+            chi2 += std::pow((e->misalignment_b(i) + m(i)) / s, 2);
             ++dof;
           }
         }
