@@ -223,13 +223,7 @@ test('a gyro fault alert of the faulty flight is acknowledged from the fault vie
   { timeout: 20_000 }, label);
   const namespace = await item.evaluate((li) => li.querySelector('.c-fault-mgmt__list-path').textContent.trim());
   assert.equal(namespace, `${FAULTY} / ${fault.subsystem} | WARNING | first ${fault.firstTime.slice(0, 16).replace('T', ' ')}Z | active, not acknowledged`.replace('active', fault.cleared ? 'cleared' : 'active'));
-  const actions = await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'));
-  await actions.click();
-  const menuItem = await page.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
-    .find((li) => li.textContent.trim() === 'Acknowledge'));
-  await menuItem.click();
-  await page.waitForSelector('.c-overlay button[aria-label="Save"]');
-  await page.click('.c-overlay button[aria-label="Save"]');
+  await acknowledgeInFaultList(page, label);
   // esgd stored it under the token's own name (the page sent an empty operator_name) ...
   let after;
   for (let i = 0; i < 100; i++) {
@@ -258,14 +252,7 @@ test('a read-only token cannot acknowledge: the page says so and esgd keeps the 
     await tab.waitForSelector('#esg-signin:not([hidden])', { timeout: 20_000 });
     await tab.type('#esg-token', viewerToken);
     await tab.click('#esg-signin-submit');
-    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
-      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
-    { timeout: 20_000 }, label);
-    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
-    await (await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
-      .find((li) => li.textContent.trim() === 'Acknowledge'))).click();
-    await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
-    await tab.click('.c-overlay button[aria-label="Save"]');
+    await acknowledgeInFaultList(tab, label);
     await tab.waitForFunction(() => /does not have the write role/.test(document.body.textContent), { timeout: 20_000 });
   } finally {
     await tab.close();
@@ -351,6 +338,29 @@ async function simulateSpacecraft(id, hours, seed) {
     path.join(SCENARIOS, 'paper_calibration.json'), '--hours', String(hours), '--seed', String(seed),
     '--out', recording]);
   return { config, recording };
+}
+
+// Opens the Disposition Actions menu of the fault named `label` in tab's fault list and chooses
+// Acknowledge, then saves the comment form. The list is drawn again whenever esgd pushes an
+// alert, which can take the menu away under the click: each try finds the fault afresh, and a
+// menu that has not opened within 3 s is asked for again (5 tries).
+async function acknowledgeInFaultList(tab, label) {
+  for (let attempt = 1; ; attempt++) {
+    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
+    { timeout: 20_000 }, label);
+    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
+    const menuItem = await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
+      .find((li) => li.textContent.trim() === 'Acknowledge'), { timeout: 3_000 }).catch((e) => {
+      if (attempt >= 5) throw e;
+      return null;
+    });
+    if (menuItem === null) continue;
+    await menuItem.click();
+    break;
+  }
+  await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
+  await tab.click('.c-overlay button[aria-label="Save"]');
 }
 
 const treeHas = (name) => [...document.querySelectorAll('.c-tree__item-h[role=treeitem] .c-tree__item__name')]
@@ -657,13 +667,7 @@ test('without tokens: no sign-in, and acknowledging asks the operator name esgd 
     const target = alerts.find((a) => !a.acknowledged);
     const repeats = Number(target.repeatCount);
     const label = `${target.reason.replace('ALERT_REASON_', '')} #${target.sequence}${repeats > 1 ? ` x${repeats}` : ''}`;
-    const item = await tab.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
-      .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text), {}, label);
-    await (await item.evaluateHandle((li) => li.querySelector('button[aria-label="Disposition Actions"]'))).click();
-    await (await tab.waitForFunction(() => [...document.querySelectorAll('.c-menu li')]
-      .find((li) => li.textContent.trim() === 'Acknowledge'))).click();
-    await tab.waitForSelector('.c-overlay button[aria-label="Save"]');
-    await tab.click('.c-overlay button[aria-label="Save"]');
+    await acknowledgeInFaultList(tab, label);
     // The second form: the operator's name.
     await tab.waitForSelector('#esg-operator-name', { timeout: 10_000 });
     await tab.type('#esg-operator-name', 'night.shift');
