@@ -324,28 +324,38 @@ constexpr char kDropAttitudeErrorColumns[] =
     "DROP COLUMN attitude_error_sigma_x_arcsec, DROP COLUMN attitude_error_sigma_y_arcsec, "
     "DROP COLUMN attitude_error_sigma_z_arcsec; ";
 
+// A new database of the shared test server as an earlier program left it: opened once at the
+// current version, where `count_sql` reads `current`, then taken back by `downgrade` (SQL), after
+// which it reads 0. Its URI in *uri, the storage closed again.
+void MakeDatabaseTakenBack(const std::string& count_sql, int64_t current,
+                           const std::string& downgrade, std::string* uri) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> made = server->CreateDatabase();
+  ASSERT_THAT(made, IsOk());
+  *uri = *made;
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(current));
+  ASSERT_THAT((*storage)->database().Execute(downgrade), IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(0));
+}
+
 // A database created at version 7 by an earlier program is upgraded when a server opens it: the
 // coefficients gain their basis terms (schema.h version 8), the estimates their attitude error
 // estimate (version 9).
 TEST(PostgresStorage, AVersion7DatabaseIsUpgradedWhenOpened) {
-  std::string error;
-  PostgresServer* server = PostgresServer::Shared(&error);
-  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
-  absl::StatusOr<std::string> uri = server->CreateDatabase();
-  ASSERT_THAT(uri, IsOk());
   const std::string column_sql =
       "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'coefficients' AND "
       "column_name = 'basis_terms_json'";
-  {
-    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
-    ASSERT_THAT(storage, IsOk());
-    ASSERT_THAT((*storage)->database().Execute(absl::StrCat(
-                    "ALTER TABLE coefficients DROP COLUMN basis_terms_json; ",
-                    kDropAttitudeErrorColumns, "UPDATE esg_schema SET version = 7")),
-                IsOk());
-    EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(0));
-  }
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  std::string uri;
+  ASSERT_NO_FATAL_FAILURE(MakeDatabaseTakenBack(
+      column_sql, 1,
+      absl::StrCat("ALTER TABLE coefficients DROP COLUMN basis_terms_json; ",
+                   kDropAttitudeErrorColumns, "UPDATE esg_schema SET version = 7"),
+      &uri));
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(uri);
   ASSERT_THAT(storage, IsOk());
   EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(1));
   EXPECT_THAT(QueryInt((*storage)->database(), "SELECT MAX(version) FROM esg_schema"),
@@ -358,29 +368,20 @@ TEST(PostgresStorage, AVersion7DatabaseIsUpgradedWhenOpened) {
 // columns of the attitude error estimate in double precision; a row stored before reads back
 // without one, a new row with its values.
 TEST(PostgresStorage, AVersion8DatabaseGainsTheAttitudeErrorColumnsWhenOpened) {
-  std::string error;
-  PostgresServer* server = PostgresServer::Shared(&error);
-  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
-  absl::StatusOr<std::string> uri = server->CreateDatabase();
-  ASSERT_THAT(uri, IsOk());
   const std::string column_sql =
       "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = 'estimates' AND "
       "column_name LIKE 'attitude_error_%' AND data_type = 'double precision'";
-  {
-    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
-    ASSERT_THAT(storage, IsOk());
-    EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(6));
-    ASSERT_THAT((*storage)->database().Execute(
-                    absl::StrCat(kDropAttitudeErrorColumns, "UPDATE esg_schema SET version = 8; ",
-                                 "INSERT INTO estimates (spacecraft_id, measurement_time_unix_ns, "
-                                 "compute_time_unix_ns, state, attitude_valid, "
-                                 "attitude_invalid_reason, star_tracker_used) VALUES ('PG-8', ",
-                                 TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(61)),
-                                 ", 'CALIBRATING', 0, 'no pair', 0)")),
-                IsOk());
-    EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(0));
-  }
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  std::string uri;
+  ASSERT_NO_FATAL_FAILURE(MakeDatabaseTakenBack(
+      column_sql, 6,
+      absl::StrCat(kDropAttitudeErrorColumns, "UPDATE esg_schema SET version = 8; ",
+                   "INSERT INTO estimates (spacecraft_id, measurement_time_unix_ns, "
+                   "compute_time_unix_ns, state, attitude_valid, "
+                   "attitude_invalid_reason, star_tracker_used) VALUES ('PG-8', ",
+                   TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(61)),
+                   ", 'CALIBRATING', 0, 'no pair', 0)"),
+      &uri));
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(uri);
   ASSERT_THAT(storage, IsOk());
   EXPECT_THAT(QueryInt((*storage)->database(), column_sql), IsOkAndHolds(6));
   EXPECT_THAT(QueryInt((*storage)->database(), "SELECT MAX(version) FROM esg_schema"),
@@ -413,22 +414,12 @@ TEST(PostgresStorage, AVersion8DatabaseGainsTheAttitudeErrorColumnsWhenOpened) {
 // listener of Storage::ListenForChanges with its measurement time and spacecraft, and a database
 // created at version 7 before the trigger existed gets it when a server opens it.
 TEST(PostgresStorage, AStoredEstimateIsNotifiedAndAMissingTriggerIsAddedAtOpen) {
-  std::string error;
-  PostgresServer* server = PostgresServer::Shared(&error);
-  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
-  absl::StatusOr<std::string> uri = server->CreateDatabase();
-  ASSERT_THAT(uri, IsOk());
   const std::string count_sql = "SELECT COUNT(*) FROM pg_trigger WHERE tgname = 'estimates_notify'";
-  {
-    absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
-    ASSERT_THAT(storage, IsOk());
-    EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(1));
-    ASSERT_THAT((*storage)->database().Execute("DROP TRIGGER estimates_notify ON estimates; "
-                                               "DROP FUNCTION esg_estimates_notify()"),
-                IsOk());
-    EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(0));
-  }
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  std::string uri;
+  ASSERT_NO_FATAL_FAILURE(MakeDatabaseTakenBack(
+      count_sql, 1,
+      "DROP TRIGGER estimates_notify ON estimates; DROP FUNCTION esg_estimates_notify()", &uri));
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(uri);
   ASSERT_THAT(storage, IsOk());
   EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(1));
 
