@@ -129,6 +129,27 @@ bool AllFree(const DriftVector& sigma, int first, int count) {
 
 double DegH(double x) { return RadPerSecToDegPerHour(x); }
 
+// A gyro's suspension offset voltages [mV, case axes], the frames' finite readings in order.
+std::vector<Vector3d> OffsetVoltagesMv(const std::vector<TelemetryFrame>& frames, int gyro) {
+  std::vector<Vector3d> out;
+  for (const TelemetryFrame& f : frames) {
+    const auto& r = f.gyros[gyro - 1];
+    if (r.has_value() && r->u_k_mv.has_value() && r->u_k_mv->allFinite()) out.push_back(*r->u_k_mv);
+  }
+  return out;
+}
+
+// eq. (3) per suspension axis: the rotor displacement [um] of offset voltages [mV].
+Vector3d DisplacementUm(const SuspensionConfig& s, const Vector3d& u_mv) {
+  Vector3d d;
+  for (int i = 0; i < 3; ++i) {
+    d(i) = DisplacementFromOffsetVoltage(u_mv(i) * kVoltsPerMv, s.amplifier_gain,
+                                         s.reference_voltage, s.gap) /
+           kMetresPerUm;
+  }
+  return d;
+}
+
 void AddVectorParameters(const std::string& name, const Vector3d& value, const Vector3d& sigma,
                          double scale, const std::string& unit, std::vector<Parameter>& out) {
   for (int i = 0; i < 3; ++i) {
@@ -362,14 +383,12 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
       line_angle_deg, C1.dot(C2) < 0 ? "<" : ">=", DegH(C10), DegH(C20), lambda.x(), lambda.y(),
       lambda.z(), chi2, line.dof, p_collinear));
   // eq. (3): displacement from the mean suspension offset voltages.
+  const std::vector<Vector3d> u_mv = OffsetVoltagesMv(frames, gyro);
+  const int n = static_cast<int>(u_mv.size());
   Vector3d sum = Vector3d::Zero(), sum2 = Vector3d::Zero();
-  int n = 0;
-  for (const TelemetryFrame& f : frames) {
-    const auto& r = f.gyros[gyro - 1];
-    if (!r.has_value() || !r->u_k_mv.has_value() || !r->u_k_mv->allFinite()) continue;
-    sum += *r->u_k_mv;
-    sum2 += r->u_k_mv->cwiseAbs2();
-    ++n;
+  for (const Vector3d& u : u_mv) {
+    sum += u;
+    sum2 += u.cwiseAbs2();
   }
   if (n < 2) {
     fit.notes.push_back(
@@ -380,12 +399,7 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   const Vector3d sd_mv = (sum2 / n - mean_mv.cwiseAbs2()).cwiseMax(0.0).cwiseSqrt();
   DescribeVoltageTrend(config, frames, gyro, fit);
   const SuspensionConfig& s = config.suspension;
-  Vector3d displacement_um;
-  for (int i = 0; i < 3; ++i) {
-    displacement_um(i) = DisplacementFromOffsetVoltage(mean_mv(i) * kVoltsPerMv, s.amplifier_gain,
-                                                       s.reference_voltage, s.gap) /
-                         kMetresPerUm;
-  }
+  const Vector3d displacement_um = DisplacementUm(s, mean_mv);
   AddVectorParameters("offsetVoltageMv", mean_mv, sd_mv / std::sqrt(static_cast<double>(n)), 1.0,
                       "mV", fit.fitted);
   AddVectorParameters("displacementUm", displacement_um, Vector3d::Zero(), 1.0, "um", fit.fitted);
@@ -413,18 +427,9 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
   out.drift_implied_um = DegH(C1_k_rad_s.norm()) / kC1DegHPerUm;
   out.floor_um = out.drift_implied_um / kSensitivitySpread;
   // eq. (3) per sample, in um, in the order of the recording.
-  const SuspensionConfig& s = config.suspension;
   std::vector<Vector3d> displacement_um;
-  for (const TelemetryFrame& f : frames) {
-    const auto& r = f.gyros[gyro - 1];
-    if (!r.has_value() || !r->u_k_mv.has_value() || !r->u_k_mv->allFinite()) continue;
-    Vector3d d;
-    for (int i = 0; i < 3; ++i) {
-      d(i) = DisplacementFromOffsetVoltage((*r->u_k_mv)(i) * kVoltsPerMv, s.amplifier_gain,
-                                           s.reference_voltage, s.gap) /
-             kMetresPerUm;
-    }
-    displacement_um.push_back(d);
+  for (const Vector3d& u : OffsetVoltagesMv(frames, gyro)) {
+    displacement_um.push_back(DisplacementUm(config.suspension, u));
   }
   constexpr int kBatches = 16;
   const int n = static_cast<int>(displacement_um.size());
@@ -435,7 +440,7 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
         gyro, n);
     return out;
   }
-  Vector3d mean = Vector3d::Zero(), sum_means = Vector3d::Zero(), sum_means2 = Vector3d::Zero();
+  Vector3d sum_means = Vector3d::Zero(), sum_means2 = Vector3d::Zero();
   for (int b = 0; b < kBatches; ++b) {
     const int first = n * b / kBatches, last = n * (b + 1) / kBatches;
     Vector3d m = Vector3d::Zero();
@@ -444,7 +449,7 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
     sum_means += m;
     sum_means2 += m.cwiseAbs2();
   }
-  mean = sum_means / kBatches;
+  const Vector3d mean = sum_means / kBatches;
   const Vector3d var_means =
       ((sum_means2 - kBatches * mean.cwiseAbs2()) / (kBatches - 1)).cwiseMax(0.0);
   out.voltage_um = mean.norm();
