@@ -23,6 +23,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "tests/testing/free_port.h"
 
@@ -111,14 +112,26 @@ std::string Describe(const std::vector<std::string>& argv) {
   return s;
 }
 
-// The state letter of /proc/<pid>/stat ('Z' for a zombie) and its parent; false if it is gone.
-bool ProcessState(pid_t pid, char* state, pid_t* parent) {
+// The fields of /proc/<pid>/stat after the command name: [0] is field 3 (state), [1] field 4
+// (parent), [19] field 22 (start time); empty if the process is gone.
+std::vector<std::string> StatFields(pid_t pid) {
   const std::string stat = ReadText(absl::StrCat("/proc/", pid, "/stat"));
   const size_t close_paren = stat.rfind(')');  // the command name may hold spaces and ')'
-  if (close_paren == std::string::npos) return false;
+  std::vector<std::string> fields;
+  if (close_paren == std::string::npos) return fields;
   std::istringstream rest(stat.substr(close_paren + 1));
+  for (std::string field; rest >> field;) fields.push_back(field);
+  return fields;
+}
+
+// The state letter of /proc/<pid>/stat ('Z' for a zombie) and its parent; false if it is gone.
+bool ProcessState(pid_t pid, char* state, pid_t* parent) {
+  const std::vector<std::string> fields = StatFields(pid);
   long ppid = 0;
-  if (!(rest >> *state >> ppid)) return false;
+  if (fields.size() < 2 || fields[0].size() != 1 || !absl::SimpleAtoi(fields[1], &ppid)) {
+    return false;
+  }
+  *state = fields[0][0];
   *parent = static_cast<pid_t>(ppid);
   return true;
 }
@@ -160,15 +173,8 @@ bool WaitDead(const std::vector<pid_t>& pids, std::chrono::milliseconds timeout)
 // tells a process from a later one that reuses its pid; empty if it is gone or a zombie.
 std::string StartTime(pid_t pid) {
   if (Dead(pid)) return "";
-  const std::string stat = ReadText(absl::StrCat("/proc/", pid, "/stat"));
-  const size_t close_paren = stat.rfind(')');
-  if (close_paren == std::string::npos) return "";
-  std::istringstream rest(stat.substr(close_paren + 1));
-  std::string field;
-  for (int i = 3; i <= 22 && rest >> field; ++i) {  // fields 3 (state) .. 22 (starttime)
-    if (i == 22) return field;
-  }
-  return "";
+  const std::vector<std::string> fields = StatFields(pid);
+  return fields.size() > 19 ? fields[19] : "";
 }
 
 // The owner record of a server's temp dir, `<dir>/owner`: "pid P start S", the process whose
