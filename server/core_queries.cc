@@ -30,101 +30,37 @@ namespace esg::server {
 using estimator::EstimationSession;
 using estimator::TelemetryFrame;
 
-esg::v1::SessionInfo EstimationCore::Summarize(Spacecraft& sc) {
-  esg::v1::SessionInfo info;
-  info.set_spacecraft_id(sc.id);
-  if (shared()) info.set_served_by(options_.node_id);
+SessionSummary EstimationCore::Summarize(Spacecraft& sc) {
+  SessionSummary summary;
+  summary.spacecraft_id = sc.id;
+  if (shared()) summary.served_by = options_.node_id;
   {
     absl::MutexLock lock(&sc.ingest_mu);
-    info.set_frames_rejected(sc.frames_rejected);
-    info.set_frames_duplicate(sc.frames_duplicate);
-    info.set_frames_conflicting(sc.frames_conflicting);
-    if (sc.last_accepted_time != absl::InfinitePast()) {
-      *info.mutable_last_frame_time() = proto_convert::TimeToProto(sc.last_accepted_time);
-    }
+    summary.frames_rejected = sc.frames_rejected;
+    summary.frames_duplicate = sc.frames_duplicate;
+    summary.frames_conflicting = sc.frames_conflicting;
+    summary.last_frame_time = sc.last_accepted_time;
   }
-  std::optional<EstimationSession> session;
   {
     absl::MutexLock lock(&sc.state_mu);
-    // The single-station fields describe the default station; `stations` lists every one.
-    auto it = sc.highest_durable.find(storage::kDefaultStation);
-    info.set_highest_durable_sequence(it == sc.highest_durable.end() ? 0 : it->second);
-    info.set_last_sequence(it == sc.highest_durable.end() ? 0 : it->second);
-    for (const auto& [station, sequence] : sc.highest_durable) {
-      esg::v1::StationSequence* s = info.add_stations();
-      s->set_station_id(station);
-      s->set_highest_durable_sequence(sequence);
-    }
-    info.set_highest_applied_sequence(sc.apply.applied_sequence);
-    info.set_quarantine_reason(sc.apply.quarantine_reason);
-    info.set_rebuilding(sc.apply.Rebuilding());
-    info.set_frames_accepted(sc.frames_accepted);
-    info.set_frames_applied(sc.apply.frames_applied);
-    info.set_frames_apply_failed(sc.apply.frames_apply_failed);
-    info.set_star_tracker_rejections(sc.apply.star_tracker_rejections);
+    summary.highest_durable = sc.highest_durable;
+    summary.highest_applied_sequence = sc.apply.applied_sequence;
+    summary.quarantine_reason = sc.apply.quarantine_reason;
+    summary.rebuilding = sc.apply.Rebuilding();
+    summary.frames_accepted = sc.frames_accepted;
+    summary.frames_applied = sc.apply.frames_applied;
+    summary.frames_apply_failed = sc.apply.frames_apply_failed;
+    summary.star_tracker_rejections = sc.apply.star_tracker_rejections;
     if (sc.setup != nullptr) {
-      info.set_model(sc.setup->model_name);
-      *info.mutable_config() = sc.setup->proto;
-      for (int id : sc.setup->config.reserve_pair) info.add_reserve_pair(id);
+      summary.configured = SessionSummary::Configured{
+          sc.setup->model_name, sc.setup->proto, sc.setup->config.reserve_pair};
     }
-    if (sc.last_compute_time != absl::InfinitePast()) {
-      *info.mutable_last_compute_time() = proto_convert::TimeToProto(sc.last_compute_time);
-    }
-    session = sc.session;
-  }
-  if (!info.quarantine_reason().empty()) info.set_state(esg::v1::SESSION_STATE_QUARANTINED);
-  if (session.has_value()) {
-    if (info.quarantine_reason().empty()) info.set_state(StateToProto(session->state()));
-    for (int id : session->working_pair()) info.add_working_pair(id);
-    const estimator::AttitudeEstimate attitude = session->CurrentAttitude();
-    if (session->initialized() && attitude.valid) {
-      std::vector<std::pair<int, Eigen::Vector3d>> h_in;
-      for (const estimator::GyroEstimate& g : session->Gyros()) h_in.emplace_back(g.id, g.h_in);
-      FillSample(attitude.time, attitude, h_in, info.mutable_latest_attitude());
-    }
-    const estimator::ConsistencyMonitor& monitor = session->consistency_monitor();
-    std::optional<estimator::ConsistencyMonitor::TestResult> shown;
-    for (auto channel : {estimator::ConsistencyMonitor::Channel::kStarTracker,
-                         estimator::ConsistencyMonitor::Channel::kAutonomous}) {
-      const auto& last = monitor.last(channel);
-      if (!last.has_value()) continue;
-      if (!shown.has_value() || (last->inconsistent && !shown->inconsistent)) shown = last;
-    }
-    if (session->initialized()) {
-      const estimator::LatencyEstimate latency = session->StarTrackerLatency();
-      esg::v1::StarTrackerLatency* l = info.mutable_star_tracker_latency();
-      l->set_latency_s(latency.latency_s);
-      l->set_sigma_s(latency.sigma_s);
-      l->set_estimated(latency.estimated);
-    }
-    const double widened_drift_deg_h = session->noise_widening().EquivalentDriftDegH();
-    if (shown.has_value() || widened_drift_deg_h > 0.0) {
-      esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
-      mc->set_consistent(!monitor.inconsistent() && widened_drift_deg_h == 0.0);
-      mc->set_widened_drift_deg_h(widened_drift_deg_h);
-    }
-    if (shown.has_value()) {
-      esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
-      mc->set_channel(estimator::ConsistencyChannelName(shown->channel));
-      mc->set_value(shown->nis_sum);
-      mc->set_threshold(shown->threshold);
-      mc->set_window_steps(shown->steps);
-      mc->set_degrees_of_freedom(shown->dof);
-      *mc->mutable_test_time() = proto_convert::TimeToProto(shown->time);
-      mc->set_tests(monitor.tests());
-      mc->set_failing_tests(monitor.inconsistent_tests());
-      if (monitor.first_inconsistent_time() != absl::InfinitePast()) {
-        *mc->mutable_first_inconsistent_time() =
-            proto_convert::TimeToProto(monitor.first_inconsistent_time());
-      }
-    }
+    summary.last_compute_time = sc.last_compute_time;
+    summary.session = sc.session;
   }
   absl::StatusOr<storage::AlertCounts> counts = storage::CountAlerts(storage_->database(), sc.id);
-  if (counts.ok()) {
-    info.set_active_alerts(counts->active);
-    info.set_unacknowledged_alerts(counts->unacknowledged);
-  }
-  return info;
+  if (counts.ok()) summary.alerts = *counts;
+  return summary;
 }
 
 absl::StatusOr<esg::v1::SessionInfo> EstimationCore::GetSession(const std::string& spacecraft_id) {
@@ -136,7 +72,7 @@ absl::StatusOr<esg::v1::SessionInfo> EstimationCore::GetSession(const std::strin
     return SummarizeFromDatabase(record);
   }
   if (!sc.ok()) return sc.status();
-  return Summarize(**sc);
+  return SessionInfoToProto(Summarize(**sc));
 }
 
 namespace {
@@ -237,7 +173,7 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
       }
       std::shared_ptr<Spacecraft> sc = Find(record.spacecraft_id);
       if (sc != nullptr && !sc->lease_lost) {
-        *response.add_sessions() = Summarize(*sc);
+        *response.add_sessions() = SessionInfoToProto(Summarize(*sc));
       } else {
         ASSIGN_OR_RETURN(*response.add_sessions(), SummarizeFromDatabase(record));
       }
@@ -252,7 +188,7 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
   const std::vector<std::shared_ptr<Spacecraft>> page =
       registry_.Page(request.page_token().empty() ? std::string() : after, size, &more);
   esg::v1::ListSessionsResponse response;
-  for (auto& sc : page) *response.add_sessions() = Summarize(*sc);
+  for (auto& sc : page) *response.add_sessions() = SessionInfoToProto(Summarize(*sc));
   if (more) {
     response.set_next_page_token(
         EncodePageToken("ListSessions", "", absl::WebSafeBase64Escape(page.back()->id)));

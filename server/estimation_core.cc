@@ -476,7 +476,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
              absl::StrCat("configured new spacecraft ", sc->id, ", model ", setup->model_name),
              {{"spacecraftId", sc->id}, {"model", setup->model_name}, {"created", true}});
     response.set_created(true);
-    *response.mutable_session() = Summarize(*sc);
+    *response.mutable_session() = SessionInfoToProto(Summarize(*sc));
     return response;
   }
   {
@@ -566,7 +566,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   }
   Schedule(sc);
   response.set_created(false);
-  *response.mutable_session() = Summarize(*sc);
+  *response.mutable_session() = SessionInfoToProto(Summarize(*sc));
   return response;
 }
 

@@ -70,6 +70,7 @@
 #include "server/estimate_hub.h"
 #include "server/proto_mapping.h"
 #include "server/service_metrics.h"
+#include "server/session_summary.h"
 #include "server/spacecraft_registry.h"
 #include "storage/storage.h"
 
@@ -336,7 +337,8 @@ class EstimationCore {
   // `after`: what a re-run from `after`, or a new session, supersedes (reorder.cc).
   absl::StatusOr<std::vector<int64_t>> FilterAlertsAfter(const std::string& spacecraft_id,
                                                          absl::Time after);
-  esg::v1::SessionInfo Summarize(Spacecraft& sc);
+  // The spacecraft's summary, read under its locks (proto_mapping.h SessionInfoToProto).
+  SessionSummary Summarize(Spacecraft& sc);
 
   storage::Storage* const storage_;
   const CoreOptions options_;

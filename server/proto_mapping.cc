@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cstdint>
 #include <optional>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "estimator/rotation.h"
@@ -124,6 +126,95 @@ esg::v1::EstimateRecord EstimateToProto(const storage::EstimateRecord& r) {
 }
 
 // "field: reason" -> Rejection (proto/convert.h error contract).
+esg::v1::SessionInfo SessionInfoToProto(const SessionSummary& s) {
+  esg::v1::SessionInfo info;
+  info.set_spacecraft_id(s.spacecraft_id);
+  info.set_served_by(s.served_by);
+  info.set_frames_rejected(s.frames_rejected);
+  info.set_frames_duplicate(s.frames_duplicate);
+  info.set_frames_conflicting(s.frames_conflicting);
+  if (s.last_frame_time != absl::InfinitePast()) {
+    *info.mutable_last_frame_time() = proto_convert::TimeToProto(s.last_frame_time);
+  }
+  // The single-station fields describe the default station; `stations` lists every one.
+  auto it = s.highest_durable.find(storage::kDefaultStation);
+  info.set_highest_durable_sequence(it == s.highest_durable.end() ? 0 : it->second);
+  info.set_last_sequence(it == s.highest_durable.end() ? 0 : it->second);
+  for (const auto& [station, sequence] : s.highest_durable) {
+    esg::v1::StationSequence* out = info.add_stations();
+    out->set_station_id(station);
+    out->set_highest_durable_sequence(sequence);
+  }
+  info.set_highest_applied_sequence(s.highest_applied_sequence);
+  info.set_quarantine_reason(s.quarantine_reason);
+  info.set_rebuilding(s.rebuilding);
+  info.set_frames_accepted(s.frames_accepted);
+  info.set_frames_applied(s.frames_applied);
+  info.set_frames_apply_failed(s.frames_apply_failed);
+  info.set_star_tracker_rejections(s.star_tracker_rejections);
+  if (s.configured.has_value()) {
+    info.set_model(s.configured->model_name);
+    *info.mutable_config() = s.configured->config;
+    for (int id : s.configured->reserve_pair) info.add_reserve_pair(id);
+  }
+  if (s.last_compute_time != absl::InfinitePast()) {
+    *info.mutable_last_compute_time() = proto_convert::TimeToProto(s.last_compute_time);
+  }
+  if (!s.quarantine_reason.empty()) info.set_state(esg::v1::SESSION_STATE_QUARANTINED);
+  if (s.session.has_value()) {
+    const estimator::EstimationSession& session = *s.session;
+    if (s.quarantine_reason.empty()) info.set_state(StateToProto(session.state()));
+    for (int id : session.working_pair()) info.add_working_pair(id);
+    const estimator::AttitudeEstimate attitude = session.CurrentAttitude();
+    if (session.initialized() && attitude.valid) {
+      std::vector<std::pair<int, Eigen::Vector3d>> h_in;
+      for (const estimator::GyroEstimate& g : session.Gyros()) h_in.emplace_back(g.id, g.h_in);
+      FillSample(attitude.time, attitude, h_in, info.mutable_latest_attitude());
+    }
+    const estimator::ConsistencyMonitor& monitor = session.consistency_monitor();
+    std::optional<estimator::ConsistencyMonitor::TestResult> shown;
+    for (auto channel : {estimator::ConsistencyMonitor::Channel::kStarTracker,
+                         estimator::ConsistencyMonitor::Channel::kAutonomous}) {
+      const auto& last = monitor.last(channel);
+      if (!last.has_value()) continue;
+      if (!shown.has_value() || (last->inconsistent && !shown->inconsistent)) shown = last;
+    }
+    if (session.initialized()) {
+      const estimator::LatencyEstimate latency = session.StarTrackerLatency();
+      esg::v1::StarTrackerLatency* l = info.mutable_star_tracker_latency();
+      l->set_latency_s(latency.latency_s);
+      l->set_sigma_s(latency.sigma_s);
+      l->set_estimated(latency.estimated);
+    }
+    const double widened_drift_deg_h = session.noise_widening().EquivalentDriftDegH();
+    if (shown.has_value() || widened_drift_deg_h > 0.0) {
+      esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
+      mc->set_consistent(!monitor.inconsistent() && widened_drift_deg_h == 0.0);
+      mc->set_widened_drift_deg_h(widened_drift_deg_h);
+    }
+    if (shown.has_value()) {
+      esg::v1::ModelConsistency* mc = info.mutable_model_consistency();
+      mc->set_channel(estimator::ConsistencyChannelName(shown->channel));
+      mc->set_value(shown->nis_sum);
+      mc->set_threshold(shown->threshold);
+      mc->set_window_steps(shown->steps);
+      mc->set_degrees_of_freedom(shown->dof);
+      *mc->mutable_test_time() = proto_convert::TimeToProto(shown->time);
+      mc->set_tests(monitor.tests());
+      mc->set_failing_tests(monitor.inconsistent_tests());
+      if (monitor.first_inconsistent_time() != absl::InfinitePast()) {
+        *mc->mutable_first_inconsistent_time() =
+            proto_convert::TimeToProto(monitor.first_inconsistent_time());
+      }
+    }
+  }
+  if (s.alerts.has_value()) {
+    info.set_active_alerts(s.alerts->active);
+    info.set_unacknowledged_alerts(s.alerts->unacknowledged);
+  }
+  return info;
+}
+
 esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
   esg::v1::Rejection r;
   const absl::string_view m = status.message();

@@ -1,6 +1,6 @@
 // Mapping between the service's stored records and estimator values on one side and the esg.v1
 // messages on the other (docs/service.md "Alerts", "GetSession"): alert severities and reasons,
-// session states, attitude samples, coefficient snapshots, ingest rejections.
+// session states and summaries, attitude samples, coefficient snapshots, ingest rejections.
 #ifndef ESG_SERVER_PROTO_MAPPING_H_
 #define ESG_SERVER_PROTO_MAPPING_H_
 
@@ -13,6 +13,7 @@
 #include "absl/time/time.h"
 #include "esg/v1/estimation_service.pb.h"
 #include "estimator/session.h"
+#include "server/session_summary.h"
 #include "storage/records.h"
 
 namespace esg::server {
@@ -36,6 +37,14 @@ esg::v1::EstimateRecord EstimateToProto(const storage::EstimateRecord& record);
 void FillSample(absl::Time time, const estimator::AttitudeEstimate& attitude,
                 const std::vector<std::pair<int, Eigen::Vector3d>>& h_in,
                 esg::v1::AttitudeSample* out);
+
+// GetSession's message (docs/service.md "GetSession"): the counters and sequences as read; the
+// state QUARANTINED while a quarantine reason is set, else the session's; the latest attitude
+// (canonical q_in_b, 1-sigma [arcsec], inertial spin axes) once the session is initialised and
+// valid; the star tracker's latency estimate; the model-consistency result shown (an
+// inconsistent channel before a consistent one) and the drift the filter's noise was widened by
+// [deg/h].
+esg::v1::SessionInfo SessionInfoToProto(const SessionSummary& summary);
 
 // An ingest refusal from a status whose message is "field: reason" (the error contract of
 // proto/convert.h), with the status's code and, when the status carries a retry delay

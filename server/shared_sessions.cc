@@ -222,12 +222,12 @@ void EstimationCore::LeaseLoop() {
 absl::StatusOr<esg::v1::SessionInfo> EstimationCore::SummarizeFromDatabase(
     const storage::ConfigRecord& record) {
   ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, RestoreSpacecraft(record, /*snapshot=*/true));
-  esg::v1::SessionInfo info = Summarize(*sc);
-  info.set_served_by("");
+  SessionSummary summary = Summarize(*sc);
+  summary.served_by.clear();
   absl::StatusOr<storage::SessionLease> lease = storage_->leases().Get(record.spacecraft_id);
-  if (lease.ok() && lease->expires > absl::Now()) info.set_served_by(lease->owner);
+  if (lease.ok() && lease->expires > absl::Now()) summary.served_by = lease->owner;
   if (!lease.ok() && !absl::IsNotFound(lease.status())) return lease.status();
-  return info;
+  return SessionInfoToProto(summary);
 }
 
 }  // namespace esg::server
