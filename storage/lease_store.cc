@@ -108,35 +108,48 @@ absl::StatusOr<std::vector<std::string>> LeaseStore::RenewAll(
   RETURN_IF_ERROR(ValidateStorableTime(now + duration, "lease.expires"));
   std::vector<std::string> lost;
   if (fences.empty()) return lost;
-  // kBatch leases a statement, one SQL text: a shorter last batch repeats its last lease (the
-  // same row twice in the WHERE is updated once), so the statement cache holds one entry.
+  // kBatch leases a statement, one SQL text each: a shorter last batch repeats its last lease
+  // (the same row twice in the WHERE is locked and updated once), so the statement cache holds
+  // one entry for the lock and one for the update.
   constexpr int kBatch = 64;
-  std::string sql = "UPDATE session_leases SET expires_unix_ns = ?1 WHERE ";
+  std::string fenced;
   for (int i = 0; i < kBatch; ++i) {
-    absl::StrAppend(&sql, i == 0 ? "" : " OR ", "(spacecraft_id = ?", 2 + 3 * i,
+    absl::StrAppend(&fenced, i == 0 ? "" : " OR ", "(spacecraft_id = ?", 2 + 3 * i,
                     " AND owner = ?", 3 + 3 * i, " AND epoch = ?", 4 + 3 * i, ")");
   }
-  absl::StrAppend(&sql, " RETURNING spacecraft_id");
+  // The rows are locked first in spacecraft-id order (bytewise: the "C" collation, as
+  // std::map orders the fences), the order in which a fenced commit of several sessions
+  // (Storage::ArchiveFrames) locks them: an UPDATE alone locks in table order, which deadlocks
+  // with such a commit holding one row and asking for another (PostgreSQL then aborts one side,
+  // and for the commit that is a storage fault failing every stream in it).
+  // Both statements take the same bindings (?1, the new expiry, is unused by the lock).
+  const std::string lock_sql =
+      absl::StrCat("SELECT spacecraft_id FROM session_leases WHERE ", fenced,
+                   " ORDER BY spacecraft_id COLLATE \"C\" FOR UPDATE");
+  const std::string sql = absl::StrCat("UPDATE session_leases SET expires_unix_ns = ?1 WHERE ",
+                                       fenced, " RETURNING spacecraft_id");
   std::vector<const std::pair<const std::string, LeaseFence>*> leases;
   leases.reserve(fences.size());
   for (const auto& lease : fences) leases.push_back(&lease);
   std::set<std::string> renewed;
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
   for (size_t first = 0; first < leases.size(); first += kBatch) {
-    ASSIGN_OR_RETURN(Statement * st, txn.Prepare(sql));
-    st->BindInt64(1, TimeToUnixNanos(now + duration));
-    for (int i = 0; i < kBatch; ++i) {
-      const auto& [spacecraft_id, fence] = *leases[std::min(first + i, leases.size() - 1)];
-      st->BindText(2 + 3 * i, spacecraft_id)
-          .BindText(3 + 3 * i, fence.owner)
-          .BindInt64(4 + 3 * i, fence.epoch);
+    for (const std::string* text : {&lock_sql, &sql}) {
+      ASSIGN_OR_RETURN(Statement * st, txn.Prepare(*text));
+      st->BindInt64(1, TimeToUnixNanos(now + duration));
+      for (int i = 0; i < kBatch; ++i) {
+        const auto& [spacecraft_id, fence] = *leases[std::min(first + i, leases.size() - 1)];
+        st->BindText(2 + 3 * i, spacecraft_id)
+            .BindText(3 + 3 * i, fence.owner)
+            .BindInt64(4 + 3 * i, fence.epoch);
+      }
+      for (;;) {
+        ASSIGN_OR_RETURN(const bool row, st->Step());
+        if (!row) break;
+        if (text == &sql) renewed.insert(st->ColumnText(0));
+      }
+      st->Reset();
     }
-    for (;;) {
-      ASSIGN_OR_RETURN(const bool row, st->Step());
-      if (!row) break;
-      renewed.insert(st->ColumnText(0));
-    }
-    st->Reset();
   }
   RETURN_IF_ERROR(txn.Commit());
   for (const auto& [spacecraft_id, fence] : fences) {

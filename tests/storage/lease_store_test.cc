@@ -8,9 +8,11 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "absl/time/clock.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/storage.h"
@@ -175,6 +177,64 @@ TEST_P(LeaseStoreTest, AWriteFencedByALostLeaseStoresNothingAndNamesTheSpacecraf
 
   // The new holder's fence writes.
   EXPECT_THAT((*storage)->ArchiveFrames({Frame("F-1", 2)}, {}, {{"F-1", {"b", 2}}}), IsOk());
+}
+
+// A renewal round and a commit fenced by several of the same server's leases (the committer's
+// group commit, Storage::ArchiveFrames) lock the same lease rows. Both take them in spacecraft-id
+// order, so neither waits for a row the other will want next: no deadlock, which PostgreSQL would
+// resolve by aborting one side (for the commit a storage fault failing every stream in it). The
+// leases are made in reverse id order, so a renewal locking in table order would take D-B
+// before D-A: held here while the commit holds D-A and asks for D-B.
+TEST_P(LeaseStoreTest, ARenewalRoundAndAFencedCommitOfTheSameLeasesDoNotDeadlock) {
+  const std::string uri = NewDatabase();
+  absl::StatusOr<std::unique_ptr<Storage>> committer = Storage::Open(uri);
+  ASSERT_THAT(committer, IsOk());
+  if (GetParam() == testing::Backend::kSqlite) return;  // no leases (above)
+  absl::StatusOr<std::unique_ptr<Storage>> renewer = Storage::Open(uri);
+  ASSERT_THAT(renewer, IsOk());
+  absl::StatusOr<std::unique_ptr<Storage>> observer = Storage::Open(uri);
+  ASSERT_THAT(observer, IsOk());
+  const std::map<std::string, LeaseFence> fences = {{"D-A", {"a", 1}}, {"D-B", {"a", 1}}};
+  ASSERT_THAT((*committer)->leases().Acquire("D-B", "a", T(0), kLease), IsOk());
+  ASSERT_THAT((*committer)->leases().Acquire("D-A", "a", T(0), kLease), IsOk());
+
+  // The commit locks D-A (FOR SHARE) and keeps its transaction open.
+  Database& db = (*committer)->database();
+  absl::StatusOr<Transaction> txn = db.Begin(TransactionMode::kImmediate);
+  ASSERT_THAT(txn, IsOk());
+  ASSERT_THAT((*committer)->leases().CheckHeld(*txn, "D-A", fences.at("D-A")), IsOk());
+
+  // The renewal round starts and waits for D-A.
+  absl::StatusOr<std::vector<std::string>> lost;
+  std::thread renewal([&] { lost = (*renewer)->leases().RenewAll(fences, T(5), kLease); });
+  const int renewer_pid = (*renewer)->ConnectionPid();
+  bool waiting = false;
+  for (int i = 0; i < 500 && !waiting; ++i) {
+    absl::StatusOr<Transaction> look = (*observer)->database().Begin(TransactionMode::kDeferred);
+    ASSERT_THAT(look, IsOk());
+    absl::StatusOr<Statement*> st = look->Prepare(
+        "SELECT count(*) FROM pg_stat_activity WHERE pid = ?1 AND wait_event_type = 'Lock'");
+    ASSERT_THAT(st, IsOk());
+    (*st)->BindInt64(1, renewer_pid);
+    ASSERT_THAT((*st)->Step(), IsOk());
+    waiting = (*st)->ColumnInt64(0) == 1;
+    (*st)->Reset();
+    ASSERT_THAT(look->Commit(), IsOk());
+    if (!waiting) absl::SleepFor(absl::Milliseconds(10));
+  }
+  ASSERT_TRUE(waiting) << "the renewal never waited for the commit's lock on D-A";
+
+  // The commit goes on to D-B, which the waiting renewal must not hold, and commits.
+  EXPECT_THAT((*committer)->leases().CheckHeld(*txn, "D-B", fences.at("D-B")), IsOk());
+  EXPECT_THAT(txn->Commit(), IsOk());
+  renewal.join();
+  ASSERT_THAT(lost, IsOk());
+  EXPECT_TRUE(lost->empty());
+  for (const auto& [id, fence] : fences) {
+    absl::StatusOr<SessionLease> lease = (*committer)->leases().Get(id);
+    ASSERT_THAT(lease, IsOk());
+    EXPECT_EQ(lease->expires, T(5) + kLease) << id;
+  }
 }
 
 }  // namespace
