@@ -3,12 +3,14 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
+#include "estimator/discovery/wander.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -338,6 +340,39 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   next.fit = fit;
   next.held_out_current = false;
   out.extended = std::move(next);
+  return out;
+}
+
+absl::StatusOr<OutdoneGyros> GyrosOutdoneByAStationaryDrift(
+    const BasisStageResult& stage, const SelectedModel& selected,
+    const DiagnosisContext& context, const std::map<int, double>& measured,
+    const std::vector<int>& skip, double alpha) {
+  std::map<int, double> basis_evidence;
+  for (const SelectedGroup& g : stage.stage.selected) {
+    if (std::find(skip.begin(), skip.end(), g.gyro) == skip.end()) {
+      basis_evidence[g.gyro] += g.evidence;
+    }
+  }
+  OutdoneGyros out;
+  for (const auto& [gyro, evidence] : basis_evidence) {
+    double stationary = -1.0;
+    if (auto it = measured.find(gyro); it != measured.end()) {
+      stationary = it->second;
+    } else {
+      auto e = CompareDriftBehavioursOf(selected, context, gyro);
+      if (!e.ok()) return e.status();
+      if (e->stationary > std::max(e->step, e->walk) + kDecisiveDeviance &&
+          e->stationary > EvidenceThreshold(alpha, 1)) {
+        stationary = e->stationary;
+      }
+    }
+    if (!(stationary > evidence)) continue;
+    out.gyros.push_back(gyro);
+    absl::StrAppend(&out.note, absl::StrFormat(
+        "; the basis's terms for gyro %d (2 ln B = %.1f in the reduced regression) describe its "
+        "deviation less well than a drift that returns to its mean (2 ln B = %.1f)",
+        gyro, evidence, stationary));
+  }
   return out;
 }
 

@@ -8,6 +8,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
 #define ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
 
+#include <map>
 #include <optional>
 #include <string>
 #include <utility>
@@ -45,6 +46,22 @@ struct BasisStageResult {
 absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
                                                DiagnosisContext& context,
                                                const std::vector<int>& gyros, int round);
+
+// The gyros whose selected groups in `stage` describe their deviation less well than a drift
+// that returns to its mean (wander.h), in the reduced regression's currency (2 ln B against the
+// configured walk): the stationary drift's evidence above the sum of the gyro's groups'. A gyro
+// in `measured` takes that stationary evidence as measured before; the others are compared on
+// their deviation from `selected`, the stationary drift counting only when it passes the
+// threshold and beats one step and a raised walk decisively (kDecisiveDeviance). Gyros in `skip`
+// are not tested. `note`: "; the basis's terms for gyro g (...) describe ..." per gyro found.
+struct OutdoneGyros {
+  std::vector<int> gyros;
+  std::string note;
+};
+absl::StatusOr<OutdoneGyros> GyrosOutdoneByAStationaryDrift(
+    const BasisStageResult& stage, const SelectedModel& selected,
+    const DiagnosisContext& context, const std::map<int, double>& measured,
+    const std::vector<int>& skip, double alpha);
 
 // The open-ended options the diagnosis's options and `model` give: alpha, the drift and readout
 // priors, and the drift steps the model holds (nuisance groups).

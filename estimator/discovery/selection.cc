@@ -603,6 +603,27 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         top.candidate.effect == Effect::kDriftStep) {
       auto basis = RunBasisStage(selected, context, gyros, round);
       if (!basis.ok()) return basis.status();
+      // Terms for another gyro whose drift returns to its mean are not taken along with the
+      // time behaviour's gyro's (that gyro's own are tested below): the stage runs again
+      // without those gyros.
+      std::string outdone_note;
+      if (basis->extended.has_value() && !basis->findings.empty()) {
+        auto outdone = GyrosOutdoneByAStationaryDrift(*basis, selected, context, {},
+                                                      {top.candidate.gyro}, options.alpha);
+        if (!outdone.ok()) return outdone.status();
+        if (!outdone->gyros.empty()) {
+          outdone_note = outdone->note;
+          std::vector<int> rest;
+          for (int id : gyros) {
+            if (std::find(outdone->gyros.begin(), outdone->gyros.end(), id) ==
+                outdone->gyros.end()) {
+              rest.push_back(id);
+            }
+          }
+          basis = RunBasisStage(selected, context, rest, round);
+          if (!basis.ok()) return basis.status();
+        }
+      }
       if (basis->extended.has_value() && !basis->findings.empty()) {
         auto both = context.CheckedRun(WithBasisTerms(top.model, *basis), /*held_out=*/false);
         if (!both.ok()) return both.status();
@@ -665,6 +686,11 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
                 versus, held_note,
                 ": a deterministic drift, taken before the time behaviour, which the next round "
                 "tests again"));
+            if (!outdone_note.empty()) {
+              f.evidence.notes.push_back(absl::StrCat(
+                  "not taken with them", outdone_note,
+                  ": those gyros' terms are left out and the stage was run again without them"));
+            }
           }
           CandidateScore row;
           row.effect = kEffectBasisTerm;
