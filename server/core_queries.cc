@@ -196,23 +196,6 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
   return response;
 }
 
-namespace {
-
-esg::v1::DiagnosisResult DiagnosisResultFromRecord(const storage::DiagnosisRecord& r) {
-  esg::v1::DiagnosisResult out;
-  out.set_id(r.id);
-  out.set_spacecraft_id(r.spacecraft_id);
-  out.set_verdict(r.verdict);
-  out.set_report_json(r.report_json);
-  out.set_frames(r.frames);
-  *out.mutable_first_frame_time() = proto_convert::TimeToProto(r.from_time);
-  *out.mutable_last_frame_time() = proto_convert::TimeToProto(r.to_time);
-  *out.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
-  return out;
-}
-
-}  // namespace
-
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
     const esg::v1::DiagnoseRequest& request,
     const std::function<void(double fraction, const std::string& stage)>& progress,
@@ -327,7 +310,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   record.report_json = proto_convert::DiagnosisToJson(report);
   record.frames = static_cast<int64_t>(frames.size());
   ASSIGN_OR_RETURN(record.id, storage_->diagnoses().Put(record));
-  return DiagnosisResultFromRecord(record);
+  return DiagnosisToProto(record);
 }
 
 absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
@@ -350,7 +333,7 @@ absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
   const bool more = static_cast<int64_t>(records.size()) > size;
   if (more) records.resize(size);
   for (const storage::DiagnosisRecord& r : records) {
-    *response.add_diagnoses() = DiagnosisResultFromRecord(r);
+    *response.add_diagnoses() = DiagnosisToProto(r);
   }
   if (more) {
     response.set_next_page_token(
@@ -370,7 +353,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::GetDiagnosis(
                                             request.spacecraft_id(), "' does not exist"));
   }
   if (!record.ok()) return record.status();
-  return DiagnosisResultFromRecord(*record);
+  return DiagnosisToProto(*record);
 }
 
 absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(

@@ -125,7 +125,6 @@ esg::v1::EstimateRecord EstimateToProto(const storage::EstimateRecord& r) {
   return e;
 }
 
-// "field: reason" -> Rejection (proto/convert.h error contract).
 esg::v1::SessionInfo SessionInfoToProto(const SessionSummary& s) {
   esg::v1::SessionInfo info;
   info.set_spacecraft_id(s.spacecraft_id);
@@ -215,6 +214,20 @@ esg::v1::SessionInfo SessionInfoToProto(const SessionSummary& s) {
   return info;
 }
 
+esg::v1::DiagnosisResult DiagnosisToProto(const storage::DiagnosisRecord& r) {
+  esg::v1::DiagnosisResult out;
+  out.set_id(r.id);
+  out.set_spacecraft_id(r.spacecraft_id);
+  out.set_verdict(r.verdict);
+  out.set_report_json(r.report_json);
+  out.set_frames(r.frames);
+  *out.mutable_first_frame_time() = proto_convert::TimeToProto(r.from_time);
+  *out.mutable_last_frame_time() = proto_convert::TimeToProto(r.to_time);
+  *out.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);
+  return out;
+}
+
+// "field: reason" -> Rejection (proto/convert.h error contract).
 esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
   esg::v1::Rejection r;
   const absl::string_view m = status.message();

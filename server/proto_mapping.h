@@ -46,6 +46,9 @@ void FillSample(absl::Time time, const estimator::AttitudeEstimate& attitude,
 // [deg/h].
 esg::v1::SessionInfo SessionInfoToProto(const SessionSummary& summary);
 
+// A stored diagnosis as the message (docs/service.md "Diagnose"; DiagnosisRecord of storage/records.h): the report JSON verbatim.
+esg::v1::DiagnosisResult DiagnosisToProto(const storage::DiagnosisRecord& record);
+
 // An ingest refusal from a status whose message is "field: reason" (the error contract of
 // proto/convert.h), with the status's code and, when the status carries a retry delay
 // (grpc_status.h WithRetryDelay: another server holds the lease), retry_after_ms, at least 1.
