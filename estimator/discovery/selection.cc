@@ -678,19 +678,26 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         }
         if (gain > basis->refit_threshold && predicts && describes) {
           for (const Scored& x : scored) result.rows.push_back(Row(x, fits[x.index], round, -1));
-          for (Finding& f : basis->findings) {
-            for (const auto& failed_note : failed_notes) {
-              f.evidence.notes.push_back(failed_note.second);
-            }
-            f.evidence.notes.push_back(absl::StrCat(
-                versus, held_note,
-                ": a deterministic drift, taken before the time behaviour, which the next round "
-                "tests again"));
-            if (!outdone_note.empty()) {
-              f.evidence.notes.push_back(absl::StrCat(
-                  "not taken with them", outdone_note,
-                  ": those gyros' terms are left out and the stage was run again without them"));
-            }
+          // The round's notes once, on the first of the terms taken together; the others
+          // point to it.
+          Finding& first = basis->findings.front();
+          for (const auto& failed_note : failed_notes) {
+            first.evidence.notes.push_back(failed_note.second);
+          }
+          first.evidence.notes.push_back(absl::StrCat(
+              versus, held_note,
+              ": a deterministic drift, taken before the time behaviour, which the next round "
+              "tests again"));
+          if (!outdone_note.empty()) {
+            first.evidence.notes.push_back(absl::StrCat(
+                "terms of other gyros left out", outdone_note,
+                ": the stage ran again without those gyros"));
+          }
+          for (size_t k = 1; k < basis->findings.size(); ++k) {
+            basis->findings[k].evidence.notes.push_back(absl::StrFormat(
+                "taken together with the stage's first term (gyro %d, listed before it) against "
+                "%s; the round's notes are on that finding",
+                basis->findings.front().gyro, CandidateName(top.candidate)));
           }
           CandidateScore row;
           row.effect = kEffectBasisTerm;
