@@ -27,7 +27,6 @@
 
 namespace esg::server {
 
-using estimator::EstimationSession;
 using estimator::TelemetryFrame;
 
 SessionSummary EstimationCore::Summarize(Spacecraft& sc) {

@@ -8,6 +8,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
 #define ESG_ESTIMATOR_DISCOVERY_BASIS_STAGE_H_
 
+#include <algorithm>
 #include <map>
 #include <optional>
 #include <string>
@@ -57,6 +58,18 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
 struct OutdoneGyros {
   std::vector<int> gyros;
   std::string note;
+
+  bool Contains(int gyro) const {
+    return std::find(gyros.begin(), gyros.end(), gyro) != gyros.end();
+  }
+  // `all` without the gyros found, in its order.
+  std::vector<int> Others(const std::vector<int>& all) const {
+    std::vector<int> out;
+    for (int id : all) {
+      if (!Contains(id)) out.push_back(id);
+    }
+    return out;
+  }
 };
 absl::StatusOr<OutdoneGyros> GyrosOutdoneByAStationaryDrift(
     const BasisStageResult& stage, const SelectedModel& selected,

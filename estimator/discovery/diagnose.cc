@@ -243,31 +243,23 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     // the other gyros' deviations through the shared star tracker. When only other gyros' terms
     // lose, they are left out and the stage runs again on the rest.
     if (!stage->findings.empty()) {
-      const double known = unresolved_where.found ? stationary_evidence : -1.0;
       std::map<int, double> measured;
-      if (known > 0.0) measured[unresolved_where.gyro] = known;
+      if (unresolved_where.found && stationary_evidence > 0.0) {
+        measured[unresolved_where.gyro] = stationary_evidence;
+      }
       auto outdone = GyrosOutdoneByAStationaryDrift(*stage, selected, context, measured, {},
                                                     options.alpha);
       if (!outdone.ok()) return outdone.status();
       if (!outdone->gyros.empty()) {
         absl::StrAppend(&resembles, outdone->note);
-        std::vector<int> rest;
-        for (int id : report.gyros) {
-          if (std::find(outdone->gyros.begin(), outdone->gyros.end(), id) ==
-              outdone->gyros.end()) {
-            rest.push_back(id);
-          }
-        }
         stage->findings.clear();
         const bool unresolved_lost =
-            unresolved_where.found && std::find(outdone->gyros.begin(), outdone->gyros.end(),
-                                                unresolved_where.gyro) != outdone->gyros.end();
+            unresolved_where.found && outdone->Contains(unresolved_where.gyro);
         const bool others = !unresolved_lost && std::any_of(
-            stage->stage.selected.begin(), stage->stage.selected.end(), [&](const auto& g) {
-              return std::find(rest.begin(), rest.end(), g.gyro) != rest.end();
-            });
+            stage->stage.selected.begin(), stage->stage.selected.end(),
+            [&](const SelectedGroup& g) { return !outdone->Contains(g.gyro); });
         if (others) {
-          auto again = RunBasisStage(selected, context, rest,
+          auto again = RunBasisStage(selected, context, outdone->Others(report.gyros),
                                      static_cast<int>(report.findings.size()));
           if (!again.ok()) return again.status();
           if (!again->findings.empty()) report.residual_drift = again->residual_drift;

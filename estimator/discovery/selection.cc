@@ -613,14 +613,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         if (!outdone.ok()) return outdone.status();
         if (!outdone->gyros.empty()) {
           outdone_note = outdone->note;
-          std::vector<int> rest;
-          for (int id : gyros) {
-            if (std::find(outdone->gyros.begin(), outdone->gyros.end(), id) ==
-                outdone->gyros.end()) {
-              rest.push_back(id);
-            }
-          }
-          basis = RunBasisStage(selected, context, rest, round);
+          basis = RunBasisStage(selected, context, outdone->Others(gyros), round);
           if (!basis.ok()) return basis.status();
         }
       }
