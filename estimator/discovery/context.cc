@@ -19,7 +19,8 @@ void DiagnosisContext::MeasureRecording(const SpacecraftConfig& config) {
 void DiagnosisContext::Say(double fraction, const std::string& stage) {
   if (!progress_) return;
   std::lock_guard<std::mutex> lock(progress_mu_);
-  progress_(std::clamp(fraction, 0.0, 1.0), stage);
+  said_ = std::max(said_, std::clamp(fraction, 0.0, 1.0));
+  progress_(said_, stage);
 }
 
 bool DiagnosisContext::Stop() {

@@ -38,7 +38,8 @@ class DiagnosisContext {
   const std::vector<RegimeSpan>& regimes() const { return regimes_; }
   const std::vector<Gap>& gaps() const { return gaps_; }
 
-  // Reports progress, fraction clamped to [0, 1]. Thread-safe.
+  // Reports progress, fraction clamped to [0, 1] and never below a fraction said before (parallel
+  // fits finish in any order). Thread-safe.
   void Say(double fraction, const std::string& stage);
 
   // Cancellation, latched: polls options.cancelled; once it returned true every later call
@@ -72,6 +73,7 @@ class DiagnosisContext {
   std::vector<Gap> gaps_;
   ModelRunOptions held_out_options_;
   std::mutex progress_mu_;
+  double said_ = 0.0;  // the largest fraction said, under progress_mu_
   std::atomic<bool> stopped_{false};
   int filter_runs_ = 0;
 };

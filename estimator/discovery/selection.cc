@@ -34,10 +34,12 @@ struct Scored {
 using Contenders = std::vector<std::pair<int, HeldOutResult>>;
 
 // Fits every candidate on top of `selected`, in parallel through the context's runner (costly
-// candidates first for load balance). A fit skipped for cancellation stays empty.
+// candidates first for load balance). A fit skipped for cancellation stays empty. Progress counts
+// the round's candidates: `already` of its `family` were fitted by an earlier stage of the round,
+// so the fraction said never goes back.
 std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
-    const std::vector<Candidate>& candidates, int round, const std::vector<int>& gyros,
-    const SelectedModel& selected, DiagnosisContext& context) {
+    const std::vector<Candidate>& candidates, int round, int already, int family,
+    const std::vector<int>& gyros, const SelectedModel& selected, DiagnosisContext& context) {
   const DiagnoseOptions& options = context.options();
   FitContext ctx;
   ctx.frames = &context.frames();
@@ -61,11 +63,10 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
     if (context.Stop()) return;
     const int i = order[j];
     fits[i] = FitCandidate(candidates[i], ctx);
-    const int d = ++done;
-    context.Say(
-        0.05 + 0.8 * (round + static_cast<double>(d) / candidates.size()) / options.max_effects,
-        absl::StrFormat("round %d: %s fitted (%d/%d)", round + 1, CandidateName(candidates[i]), d,
-                        candidates.size()));
+    const int d = already + ++done;
+    context.Say(0.05 + 0.8 * (round + static_cast<double>(d) / family) / options.max_effects,
+                absl::StrFormat("round %d: %s fitted (%d/%d)", round + 1,
+                                CandidateName(candidates[i]), d, family));
   });
   return fits;
 }
@@ -501,7 +502,8 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   const int family = static_cast<int>(candidates.size());
   std::vector<CandidateFit> fits;
   auto fit_all = [&](const std::vector<Candidate>& stage) -> absl::Status {
-    auto fitted = FitCandidates(stage, round, gyros, selected, context);
+    auto fitted = FitCandidates(stage, round, static_cast<int>(fits.size()), family, gyros,
+                                selected, context);
     if (context.Stopped()) return DiagnosisContext::Cancelled();
     for (auto& f : fitted) {
       if (!f->ok()) return f->status();
