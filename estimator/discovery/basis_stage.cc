@@ -361,10 +361,7 @@ absl::StatusOr<OutdoneGyros> GyrosOutdoneByAStationaryDrift(
     } else {
       auto e = CompareDriftBehavioursOf(selected, context, gyro);
       if (!e.ok()) return e.status();
-      if (e->stationary > std::max(e->step, e->walk) + kDecisiveDeviance &&
-          e->stationary > EvidenceThreshold(alpha, 1)) {
-        stationary = e->stationary;
-      }
+      if (ReturnsToItsMean(*e, EvidenceThreshold(alpha, 1))) stationary = e->stationary;
     }
     if (!(stationary > evidence)) continue;
     out.gyros.push_back(gyro);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <optional>
+#include <set>
 #include <string>
 
 #include "absl/strings/str_cat.h"
@@ -17,6 +18,7 @@
 #include "estimator/discovery/location.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/selection.h"
+#include "estimator/discovery/wander.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -181,11 +183,14 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   Mismatch unresolved_where;
   double stationary_evidence = -1.0;
   double readout_jump_evidence = -1.0;
+  // Gyros whose open-ended terms were left out for a drift that returns to its mean.
+  std::set<int> outdone_gyros;
   for (int round = 0; round < options.max_effects; ++round) {
     auto result = SelectionRound(round, report.gyros, selected, context);
     if (!result.ok()) return result.status();
     report.candidates.insert(report.candidates.end(), result->rows.begin(), result->rows.end());
     if (!result->finding.has_value()) {
+      outdone_gyros.insert(result->outdone_gyros.begin(), result->outdone_gyros.end());
       unresolved = result->unresolved;
       unresolved_note = result->unresolved_note;
       unresolved_gyro = result->unresolved_gyro;
@@ -194,6 +199,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       readout_jump_evidence = result->readout_jump_evidence;
       break;
     }
+    outdone_gyros.insert(result->outdone_gyros.begin(), result->outdone_gyros.end());
     report.findings.push_back(std::move(*result->finding));
     for (Finding& f : result->more_findings) report.findings.push_back(std::move(f));
     if (!result->residual_drift.empty()) report.residual_drift = result->residual_drift;
@@ -251,6 +257,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                                                     options.alpha);
       if (!outdone.ok()) return outdone.status();
       if (!outdone->gyros.empty()) {
+        outdone_gyros.insert(outdone->gyros.begin(), outdone->gyros.end());
         absl::StrAppend(&resembles, outdone->note);
         stage->findings.clear();
         const bool unresolved_lost =
@@ -304,6 +311,18 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     }
   }
 
+  // Another gyro whose drift returns to its mean is its own `unexplained` finding, listed before
+  // the verdict's (which stays last, with the report's mismatch).
+  if (remaining.has_value()) outdone_gyros.erase(remaining->finding.gyro);
+  std::vector<Finding> wandering;
+  if (!outdone_gyros.empty()) {
+    auto found = OtherGyrosReturningToTheirMean(
+        selected, context, outdone_gyros, final_held_out, !report.findings.empty(),
+        static_cast<int>(report.gyros.size()), options.alpha);
+    if (!found.ok()) return found.status();
+    wandering = std::move(*found);
+  }
+
   report.after = Summarise(selected.model, selected.run, selected.fit, final_held_out, options);
   report.residuals_after = ResidualSeries(selected.run, frames);
   report.held_out_after = final_held_out.points;
@@ -316,11 +335,13 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     e.held_out_dof = final_held_out.dof;
   }
   report.mismatch = mismatches.base;
+  const bool model_findings = !report.findings.empty();
+  for (Finding& f : wandering) report.findings.push_back(std::move(f));
   if (remaining.has_value()) {
     if (!unresolved_note.empty()) remaining->finding.evidence.notes.push_back(unresolved_note);
     if (!resembles.empty()) remaining->finding.evidence.notes.push_back(resembles);
     report.findings.push_back(remaining->finding);
-    if (report.findings.size() == 1) report.mismatch = remaining->where;
+    if (!model_findings) report.mismatch = remaining->where;
   }
   report.verdict = report.findings.empty() ? kVerdictNone : report.findings.front().effect;
   report.filter_runs = context.filter_runs();

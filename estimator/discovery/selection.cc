@@ -615,6 +615,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         if (!outdone.ok()) return outdone.status();
         if (!outdone->gyros.empty()) {
           outdone_note = outdone->note;
+          result.outdone_gyros = outdone->gyros;
           basis = RunBasisStage(selected, context, outdone->Others(gyros), round);
           if (!basis.ok()) return basis.status();
         }
@@ -723,27 +724,19 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   // gyro's deviation decisively better than both, nothing is taken: the mismatch is left
   // unexplained, located to the gyro, and described.
   std::string wander_note;
-  int wander_gyro = 0;
-  double wander_p = 1.0, wander_evidence = -1.0;
+  Mismatch wander_where;
+  double wander_evidence = -1.0;
   if (!significant.empty()) {
     const Candidate& c = fits[significant.front().index].candidate;
     if (c.gyro > 0 && (c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift)) {
       if (absl::Status st = behaviour_of(c.gyro); !st.ok()) return st;
-      const DriftBehaviourEvidence* e = &*behaviour;
-      const double other = std::max(e->step, e->walk);
-      if (e->stationary > other + kDecisiveDeviance &&
-          e->stationary > EvidenceThreshold(options.alpha, 1)) {
-        wander_note = absl::StrFormat(
-            "the drift of gyro %d returns to its mean: a stationary random drift (correlation "
-            "time about %.1f h, 1-sigma about %.2f deg/h per axis) describes its deviation with "
-            "2 ln B = %.1f, decisively better than one step (%.1f, best onset %.2f h) or a "
-            "raised random walk (%.1f), as a drift switching at random between levels or one "
-            "driven by a quantity the telemetry does not carry would; %s is not taken",
-            c.gyro, e->correlation_hours, e->sigma_deg_h, e->stationary, e->step,
-            e->step_onset_hours, e->walk, CandidateName(c));
-        wander_gyro = c.gyro;
-        wander_p = EvidenceBound(e->stationary - other);
-        wander_evidence = e->stationary;
+      if (ReturnsToItsMean(*behaviour, EvidenceThreshold(options.alpha, 1))) {
+        wander_note = absl::StrCat(ReturnsToItsMeanText(*behaviour), "; ", CandidateName(c),
+                                   " is not taken");
+        wander_where = WanderLocation(
+            c.gyro, context.frames(),
+            EvidenceBound(behaviour->stationary - std::max(behaviour->step, behaviour->walk)));
+        wander_evidence = behaviour->stationary;
         significant.clear();
         inhomogeneous_only = true;
       }
@@ -773,19 +766,12 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   if (chosen < 0) {
     if (!wander_note.empty()) {
       result.unresolved = wander_note;
-      result.unresolved_gyro = wander_gyro;
+      result.unresolved_gyro = wander_where.gyro;
       result.unresolved_note = readout_note;
-      Mismatch& where = result.unresolved_where;
-      where.found = true;
-      where.gyro = wander_gyro;
-      where.start = context.frames().front().time;
-      where.end = context.frames().back().time;
-      where.regime = "whole recording";
-      where.source = "the gyro's drift over the recording";
-      where.p_value = wander_p;
+      result.unresolved_where = wander_where;
       result.stationary_evidence = wander_evidence;
       for (const auto& [gyro, note] : failed_notes) {
-        if (gyro == wander_gyro) absl::StrAppend(&result.unresolved, "; ", note);
+        if (gyro == wander_where.gyro) absl::StrAppend(&result.unresolved, "; ", note);
       }
     } else if (inhomogeneous_only) {
       result.unresolved =

@@ -61,6 +61,9 @@ struct RoundResult {
   // When a jump of a gyro's readings explained the round at least as well as its time behaviour
   // (D43): the jump's evidence 2 ln B, which anything else must beat (the open-ended stage too).
   double readout_jump_evidence = -1.0;
+  // Gyros whose open-ended terms the round left out because a drift that returns to its mean
+  // describes their deviation better (basis_stage.h GyrosOutdoneByAStationaryDrift).
+  std::vector<int> outdone_gyros;
 };
 
 // Round `round` (0 first) of forward selection over the running `gyros`. Updates `selected` (its

@@ -7,7 +7,9 @@
 #include <optional>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation_filter.h"
+#include "estimator/discovery/location.h"
 #include "estimator/discovery/statistics.h"
 #include "estimator/drift_model.h"
 #include "estimator/units.h"
@@ -211,6 +213,77 @@ absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedMo
                                 ModelInitialDriftSigma(model),
                                 DegPerHourToRadPerSec(context.options().c_sigma_deg_h),
                                 HeldSteps(model, gyro));
+}
+
+bool ReturnsToItsMean(const DriftBehaviourEvidence& e, double threshold) {
+  return e.stationary > std::max(e.step, e.walk) + kDecisiveDeviance && e.stationary > threshold;
+}
+
+std::string ReturnsToItsMeanText(const DriftBehaviourEvidence& e) {
+  return absl::StrFormat(
+      "the drift of gyro %d returns to its mean: a stationary random drift (correlation time "
+      "about %.1f h, 1-sigma about %.2f deg/h per axis) describes its deviation with 2 ln B = "
+      "%.1f, decisively better than one step (%.1f, best onset %.2f h) or a raised random walk "
+      "(%.1f), as a drift switching at random between levels or one driven by a quantity the "
+      "telemetry does not carry would",
+      e.gyro, e.correlation_hours, e.sigma_deg_h, e.stationary, e.step, e.step_onset_hours,
+      e.walk);
+}
+
+std::string WandersBeyondTheWalkText(const DriftBehaviourEvidence& e) {
+  return absl::StrFormat(
+      "the drift of gyro %d wanders beyond the configured random walk: a stationary random "
+      "drift (correlation time about %.1f h, 1-sigma about %.2f deg/h per axis; 2 ln B = %.1f) "
+      "and a random walk raised %.0f times (2 ln B = %.1f) describe its deviation about equally "
+      "well (within %.0f, the ranking's decisive margin), one step decisively less well (%.1f, "
+      "best onset %.2f h): whether it returns to its mean is not decided on this recording",
+      e.gyro, e.correlation_hours, e.sigma_deg_h, e.stationary, e.walk_factor, e.walk,
+      kDecisiveDeviance, e.step, e.step_onset_hours);
+}
+
+Mismatch WanderLocation(int gyro, const std::vector<TelemetryFrame>& frames, double p_value) {
+  Mismatch where;
+  where.found = true;
+  where.gyro = gyro;
+  where.start = frames.front().time;
+  where.end = frames.back().time;
+  where.regime = "whole recording";
+  where.source = "the gyro's drift over the recording";
+  where.p_value = p_value;
+  return where;
+}
+
+absl::StatusOr<std::vector<Finding>> OtherGyrosReturningToTheirMean(
+    const SelectedModel& selected, const DiagnosisContext& context, const std::set<int>& gyros,
+    const HeldOutResult& held_out, bool after_findings, int family, double alpha) {
+  std::vector<Finding> out;
+  const double threshold = EvidenceThreshold(alpha, family);
+  for (int gyro : gyros) {
+    auto e = CompareDriftBehavioursOf(selected, context, gyro);
+    if (!e.ok()) return e.status();
+    // Returning to its mean, decisively; else wandering beyond the configured walk (the
+    // stationary drift and the raised walk both decisively above one step), undecided between
+    // the two; else nothing is said for the gyro.
+    std::string why;
+    double p_value = 1.0;
+    if (ReturnsToItsMean(*e, threshold)) {
+      why = ReturnsToItsMeanText(*e);
+      p_value = EvidenceBound(e->stationary - std::max(e->step, e->walk));
+    } else if (std::min(e->stationary, e->walk) > e->step + kDecisiveDeviance &&
+               std::max(e->stationary, e->walk) > threshold) {
+      why = WandersBeyondTheWalkText(*e);
+      p_value = EvidenceBound(std::max(e->stationary, e->walk));
+    } else {
+      continue;
+    }
+    absl::StrAppend(&why, "; the open-ended basis's terms for it were left out for that drift, "
+                          "and no effect of the library was taken for it");
+    std::optional<Unexplained> u =
+        FindUnexplained(Mismatch{}, why, gyro, WanderLocation(gyro, context.frames(), p_value),
+                        held_out, selected.fit, after_findings, alpha);
+    if (u.has_value()) out.push_back(std::move(u->finding));
+  }
+  return out;
 }
 
 absl::StatusOr<ConstantEffectEvidence> CompareConstantEffectOf(const SelectedModel& selected,

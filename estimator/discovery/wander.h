@@ -19,6 +19,8 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_WANDER_H_
 #define ESG_ESTIMATOR_DISCOVERY_WANDER_H_
 
+#include <set>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -26,6 +28,8 @@
 #include "absl/time/time.h"
 #include "estimator/discovery/context.h"
 #include "estimator/discovery/deviation.h"
+#include "estimator/discovery/held_out.h"
+#include "estimator/discovery/report.h"
 #include "estimator/discovery/selection.h"
 
 namespace esg::estimator::discovery {
@@ -50,6 +54,37 @@ DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, dou
 absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedModel& selected,
                                                                 const DiagnosisContext& context,
                                                                 int gyro);
+
+// Whether the comparison says the drift returns to its mean: the stationary drift beats one step
+// and a raised walk decisively (by kDecisiveDeviance) and passes `threshold` (2 ln B).
+bool ReturnsToItsMean(const DriftBehaviourEvidence& e, double threshold);
+
+// "the drift of gyro g returns to its mean: a stationary random drift (correlation time about ..)
+// describes its deviation with 2 ln B = .., decisively better than one step (..) or a raised
+// random walk (..), as a drift switching at random between levels or one driven by a quantity
+// the telemetry does not carry would".
+std::string ReturnsToItsMeanText(const DriftBehaviourEvidence& e);
+
+// "the drift of gyro g wanders beyond the configured random walk: a stationary random drift (..)
+// and a random walk raised .. times (..) describe its deviation about equally well ..., one step
+// decisively less well ...": the two descriptions within kDecisiveDeviance of each other.
+std::string WandersBeyondTheWalkText(const DriftBehaviourEvidence& e);
+
+// Where such a drift is: gyro `gyro` over the whole recording, with the p-value of its test.
+Mismatch WanderLocation(int gyro, const std::vector<TelemetryFrame>& frames, double p_value);
+
+// Gyros other than the verdict's whose drift returns to its mean or wanders: those in `gyros`
+// (the open-ended stage left their terms out for a stationary drift during the diagnosis, on the
+// model of that time) tested again on their deviation from the final model `selected`, the
+// threshold 2 ln(family / alpha). A gyro whose drift returns to its mean (ReturnsToItsMean), or
+// whose stationary drift and raised walk both beat one step decisively with the better of the two
+// above the threshold (undecided between them: WandersBeyondTheWalkText), is its own
+// `unexplained` finding located to its gyro over the whole recording, as the verdict's is;
+// `held_out` is the final model's held-out prediction, `after_findings` whether the model holds
+// findings (FindUnexplained's wording). The p-value is 1/B of the statement made.
+absl::StatusOr<std::vector<Finding>> OtherGyrosReturningToTheirMean(
+    const SelectedModel& selected, const DiagnosisContext& context, const std::set<int>& gyros,
+    const HeldOutResult& held_out, bool after_findings, int family, double alpha);
 
 // A constant effect of the library for one gyro against the stationary drift on the same
 // deviation: a drift that switches at random, or follows a quantity the telemetry does not carry,
