@@ -185,18 +185,46 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   double readout_jump_evidence = -1.0;
   // Gyros whose open-ended terms were left out for a drift that returns to its mean.
   std::set<int> outdone_gyros;
+  // A drift that returns to its mean leaves its round unresolved; selection goes on with the
+  // other gyros, that gyro's walk raised to the library's best intensity standing in for it (not
+  // a finding: the verdict's `unexplained` says so). Once: a later unresolved round ends it.
+  std::vector<int> active_gyros = report.gyros;
+  std::string stand_in_note, later_unresolved;
   for (int round = 0; round < options.max_effects; ++round) {
-    auto result = SelectionRound(round, report.gyros, selected, context);
+    auto result = SelectionRound(round, active_gyros, selected, context);
     if (!result.ok()) return result.status();
     report.candidates.insert(report.candidates.end(), result->rows.begin(), result->rows.end());
     if (!result->finding.has_value()) {
       outdone_gyros.insert(result->outdone_gyros.begin(), result->outdone_gyros.end());
+      if (!stand_in_note.empty()) {
+        // After the stand-in: a second wandering gyro is tested again at the end; another
+        // reason is a note on the verdict's finding.
+        if (result->unresolved_where.found) {
+          outdone_gyros.insert(result->unresolved_where.gyro);
+        } else if (!result->unresolved.empty()) {
+          later_unresolved = absl::StrCat(
+              "with that stand-in, a later round left a further mismatch unresolved: ",
+              result->unresolved);
+        }
+        break;
+      }
       unresolved = result->unresolved;
       unresolved_note = result->unresolved_note;
       unresolved_gyro = result->unresolved_gyro;
       unresolved_where = result->unresolved_where;
       stationary_evidence = result->stationary_evidence;
       readout_jump_evidence = result->readout_jump_evidence;
+      if (result->stand_in.has_value() && active_gyros.size() > 1) {
+        stand_in_note = absl::StrFormat(
+            "selection went on with the other gyros after round %d, gyro %d's random walk "
+            "raised to %.4f deg/h/sqrt(h) (the library's best intensity for it) standing in for "
+            "this drift: not a finding, but in the fit after the findings and its held-out "
+            "prediction",
+            round + 1, unresolved_where.gyro, result->stand_in_walk_deg_h_sqrt_h);
+        selected = std::move(*result->stand_in);
+        std::erase(active_gyros, unresolved_where.gyro);
+        continue;
+      }
       break;
     }
     outdone_gyros.insert(result->outdone_gyros.begin(), result->outdone_gyros.end());
@@ -300,6 +328,11 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       }
     }
     if (!stage->findings.empty() && stage->extended.has_value()) {
+      // The model keeps the stand-in walk: its note goes with the terms that explain the drift.
+      if (!stand_in_note.empty()) {
+        stage->findings.front().evidence.notes.push_back(stand_in_note);
+        stand_in_note.clear();
+      }
       for (Finding& f : stage->findings) report.findings.push_back(std::move(f));
       selected = std::move(*stage->extended);
       unresolved.clear();
@@ -339,6 +372,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   for (Finding& f : wandering) report.findings.push_back(std::move(f));
   if (remaining.has_value()) {
     if (!unresolved_note.empty()) remaining->finding.evidence.notes.push_back(unresolved_note);
+    if (!stand_in_note.empty()) remaining->finding.evidence.notes.push_back(stand_in_note);
+    if (!later_unresolved.empty()) {
+      remaining->finding.evidence.notes.push_back(later_unresolved);
+    }
     if (!resembles.empty()) remaining->finding.evidence.notes.push_back(resembles);
     report.findings.push_back(remaining->finding);
     if (!model_findings) report.mismatch = remaining->where;

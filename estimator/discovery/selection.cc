@@ -182,6 +182,7 @@ std::vector<Scored> SignificantInOrder(const std::vector<Scored>& scored,
 // when the comparison was not made).
 absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
                                              const std::vector<CandidateFit>& fits, int family,
+                                             const std::vector<int>& failed,
                                              std::vector<Scored>& significant,
                                              DiagnosisContext& context) {
   if (significant.empty() ||
@@ -191,7 +192,8 @@ absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
   const Scored* rw = nullptr;  // the best-scoring significant random walk, common or per gyro
   for (const Scored& x : scored) {
     if (fits[x.index].candidate.effect == Effect::kRandomWalkDrift && x.significant &&
-        x.homogeneous && (rw == nullptr || x.score > rw->score))
+        x.homogeneous && std::find(failed.begin(), failed.end(), x.index) == failed.end() &&
+        (rw == nullptr || x.score > rw->score))
       rw = &x;
   }
   if (rw == nullptr) return std::string();
@@ -527,12 +529,27 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
     scored = Score(fits, selected, family, context);
     for (;;) {
       significant = SignificantInOrder(scored, fits, failed, inhomogeneous_only);
-      rw_note = PreferRandomWalk(scored, fits, family, significant, context);
+      rw_note = PreferRandomWalk(scored, fits, family, failed, significant, context);
       if (!rw_note.ok()) return rw_note.status();
       settled = !significant.empty() &&
                 fits[significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
-      if (!settled || static_cast<int>(failed.size()) >= kMaxFailedChecks) break;
+      if (significant.empty() || static_cast<int>(failed.size()) >= kMaxFailedChecks) break;
       const int top = significant.front().index;
+      if (!settled) {
+        // A walk tops: the walk of every gyro must be common (wander.h CheckCommonWalk), tested
+        // once every candidate of the round is fitted.
+        if (stage == 0 && !timed.empty()) break;
+        if (fits[top].candidate.gyro != 0 || gyros.size() < 2) break;
+        auto common = CheckCommonWalk(selected, context, gyros);
+        if (!common.ok()) return common.status();
+        if (!common->fails) {
+          constant_notes.emplace_back(top, std::move(common->note));
+          break;
+        }
+        failed.push_back(top);
+        failed_notes.emplace_back(0, std::move(common->note));
+        continue;
+      }
       auto check = CheckConstantEffect(fits[top], selected, family, context);
       if (!check.ok()) return check.status();
       if (!check->fails) {
@@ -771,7 +788,24 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       result.unresolved_where = wander_where;
       result.stationary_evidence = wander_evidence;
       for (const auto& [gyro, note] : failed_notes) {
-        if (gyro == wander_where.gyro) absl::StrAppend(&result.unresolved, "; ", note);
+        // Its own effects' notes, and a common walk's that this drift made fail.
+        if (gyro == wander_where.gyro || gyro == 0) {
+          absl::StrAppend(&result.unresolved, "; ", note);
+        }
+      }
+      for (CandidateFit& f : fits) {
+        if (f.candidate.effect != Effect::kRandomWalkDrift ||
+            f.candidate.gyro != wander_where.gyro || f.fitted.empty()) {
+          continue;
+        }
+        SelectedModel stand_in;
+        stand_in.model = f.model;
+        stand_in.run = std::move(f.run);
+        stand_in.fit = Profile(stand_in.run);
+        stand_in.held_out = selected.held_out;
+        stand_in.held_out_current = false;
+        result.stand_in = std::move(stand_in);
+        result.stand_in_walk_deg_h_sqrt_h = f.fitted.front().value;
       }
     } else if (inhomogeneous_only) {
       result.unresolved =

@@ -215,6 +215,42 @@ absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedMo
                                 HeldSteps(model, gyro));
 }
 
+absl::StatusOr<CommonWalkCheck> CheckCommonWalk(const SelectedModel& selected,
+                                                const DiagnosisContext& context,
+                                                const std::vector<int>& gyros) {
+  std::vector<std::optional<absl::StatusOr<DriftBehaviourEvidence>>> evidence(gyros.size());
+  context.ForEach(static_cast<int>(gyros.size()), [&](int i) {
+    evidence[i] = CompareDriftBehavioursOf(selected, context, gyros[i]);
+  });
+  CommonWalkCheck out;
+  std::string per_gyro;
+  int weakest = 0;
+  double weakest_walk = 0.0;
+  for (size_t i = 0; i < gyros.size(); ++i) {
+    if (!evidence[i]->ok()) return evidence[i]->status();
+    const double walk = (*evidence[i])->walk;
+    absl::StrAppend(&per_gyro, absl::StrFormat("%sgyro %d %.1f", i == 0 ? "" : ", ", gyros[i],
+                                               walk));
+    if (weakest == 0 || walk < weakest_walk) {
+      weakest = gyros[i];
+      weakest_walk = walk;
+    }
+  }
+  out.fails = !(weakest_walk > 0.0);
+  out.note = out.fails
+                 ? absl::StrFormat(
+                       "a random walk raised in every gyro is not common to them: on gyro %d's "
+                       "own deviation the configured walk is more probable than a raised one "
+                       "(2 ln B of the raised walk per gyro: %s), so random_walk_drift is not "
+                       "taken",
+                       weakest, per_gyro)
+                 : absl::StrFormat(
+                       "common to the gyros: on each gyro's own deviation a raised walk is more "
+                       "probable than the configured one (2 ln B per gyro: %s)",
+                       per_gyro);
+  return out;
+}
+
 bool ReturnsToItsMean(const DriftBehaviourEvidence& e, double threshold) {
   return e.stationary > std::max(e.step, e.walk) + kDecisiveDeviance && e.stationary > threshold;
 }

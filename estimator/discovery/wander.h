@@ -55,6 +55,20 @@ absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedMo
                                                                 const DiagnosisContext& context,
                                                                 int gyro);
 
+// The library's random walk of every gyro must be common (docs/discovery.md, "Physics checks
+// that decide"): on each gyro of `gyros`, its own deviation from `selected` must make a raised
+// walk more probable than the configured one (the walk's 2 ln B of CompareDriftBehaviours above
+// 0). A walk that one gyro's drift needs (a drift that returns to its mean, or an effect of one
+// gyro a walk absorbs) raises the common walk's likelihood through that gyro alone. `fails` when
+// a gyro's deviation does not support it; `note` gives every gyro's 2 ln B.
+struct CommonWalkCheck {
+  bool fails = false;
+  std::string note;
+};
+absl::StatusOr<CommonWalkCheck> CheckCommonWalk(const SelectedModel& selected,
+                                                const DiagnosisContext& context,
+                                                const std::vector<int>& gyros);
+
 // Whether the comparison says the drift returns to its mean: the stationary drift beats one step
 // and a raised walk decisively (by kDecisiveDeviance) and passes `threshold` (2 ln B).
 bool ReturnsToItsMean(const DriftBehaviourEvidence& e, double threshold);

@@ -73,7 +73,8 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   // library's rows; default both.
   const char* rows_env = std::getenv("ESG_DISCOVERY_ROWS");
   const std::string rows = rows_env != nullptr ? rows_env : "";
-  // =basis: `none` and the classes of the open-ended stage (docs/discovery.md).
+  // =basis: `none` and the classes of the open-ended stage (docs/discovery.md); =combined: a
+  // drift that returns to its mean beside an effect of the library.
   std::vector<std::string> truths;
   // ESG_DISCOVERY_TRUTHS=a,b: exactly these rows (any scenario of discovery_scenarios.h).
   const char* truths_env = std::getenv("ESG_DISCOVERY_TRUTHS");
@@ -84,6 +85,8 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
   } else if (rows == "basis") {
     truths.push_back("none");
     for (const std::string& t : ::esg::testing::DiscoveryBasisClasses()) truths.push_back(t);
+  } else if (rows == "combined") {  // a wandering drift beside a library effect
+    for (const std::string& t : ::esg::testing::DiscoveryCombinedClasses()) truths.push_back(t);
   } else {
     if (rows != "time") {
       truths = ::esg::testing::DiscoveryEffects();

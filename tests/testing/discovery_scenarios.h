@@ -102,6 +102,14 @@ inline std::vector<std::string> DiscoveryBasisClasses() {
           "hidden_driver"};
 }
 
+// A drift that returns to its mean beside an effect of the library (docs/discovery.md, "Time
+// behaviour"): "switching_and_st_misalignment" (the switching drift of `switching_drift` and the
+// star-tracker misalignment of `star_tracker_misalignment`), "switching_and_gyro_misalignment"
+// (that switching drift and the gyro misalignment of `gyro_misalignment` in the next gyro).
+inline std::vector<std::string> DiscoveryCombinedClasses() {
+  return {"switching_and_st_misalignment", "switching_and_gyro_misalignment"};
+}
+
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
 inline int AffectedGyro(uint64_t seed) { return 1 + static_cast<int>(seed % 3); }
 
@@ -139,11 +147,12 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.nu = x * Eigen::Vector3d(0.02, 0.0, -0.03) * deg_h;
     s.gyros[g].drift = d;
   }
-  if (effect == "gyro_misalignment") {
-    s.gyros[g].misalignment_b =
+  if (effect == "gyro_misalignment" || effect == "switching_and_gyro_misalignment") {
+    s.gyros[effect == "gyro_misalignment" ? g : (g + 1) % 3].misalignment_b =
         x * Eigen::Vector3d(ArcsecToRad(30), ArcsecToRad(-20), ArcsecToRad(15));
   }
-  if (effect == "star_tracker_misalignment" || effect == "two") {
+  if (effect == "star_tracker_misalignment" || effect == "two" ||
+      effect == "switching_and_st_misalignment") {
     s.star_tracker.misalignment_b =
         x * Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-25), ArcsecToRad(10));
   }
@@ -179,7 +188,8 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
         -60, 120, 150;
     s.gyros[g].readout_distortion_k = x * 1e-6 * D;
   }
-  if (effect == "switching_drift") {
+  if (effect == "switching_drift" || effect == "switching_and_st_misalignment" ||
+      effect == "switching_and_gyro_misalignment") {
     SwitchingDrift d;
     d.amplitude_k_rad_s = x * Eigen::Vector3d(0.03, 0.03, -0.025) * deg_h;
     d.mean_dwell_s = 4.0 * 3600.0;
@@ -235,6 +245,19 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
            r.mismatch.found && (r.mismatch.gyro == gyro || r.mismatch.gyro == 0);
   }
   if (truth == "readout_jump") return r.verdict == kVerdictUnexplained;
+  // Exactly two findings: the library's effect, then the switching drift `unexplained` in its
+  // gyro.
+  auto effect_then_wander = [&](const std::string& effect, int effect_gyro) {
+    return r.findings.size() == 2 && r.findings.front().effect == effect &&
+           r.findings.front().gyro == effect_gyro &&
+           r.findings.back().effect == kVerdictUnexplained && r.findings.back().gyro == gyro;
+  };
+  if (truth == "switching_and_st_misalignment") {
+    return effect_then_wander("star_tracker_misalignment", 0);
+  }
+  if (truth == "switching_and_gyro_misalignment") {
+    return effect_then_wander("gyro_misalignment", gyro % 3 + 1);
+  }
   if (truth == "two") return has("rotor_displacement", gyro) && has("star_tracker_misalignment", 0);
   // Exactly the one finding, in the right gyro where the effect is per gyro (the common random
   // walk in gyro 0).
