@@ -4,8 +4,9 @@
 # to stderr. SEEDS (default 10) recordings per true effect; ROWS=library (the library's effects,
 # `two`), ROWS=time (`none` and the time behaviours: drift_step, random_walk_one_gyro,
 # random_walk_15x, readout_jump), ROWS=basis (`none` and the open-ended stage's classes:
-# orbital_drift, growing_displacement, readout_scale, switching_drift, hidden_driver) or library
-# and time (default). Several minutes on two cores.
+# orbital_drift, growing_displacement, readout_scale, switching_drift, hidden_driver),
+# ROWS=combined (a switching drift beside a library effect: switching_and_gyro_misalignment,
+# switching_and_st_misalignment) or library and time (default). Several minutes on two cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR="${BUILD_DIR:-build}"

@@ -190,6 +190,11 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   // a finding: the verdict's `unexplained` says so). Once: a later unresolved round ends it.
   std::vector<int> active_gyros = report.gyros;
   std::string stand_in_note, later_unresolved;
+  struct StandIn {
+    int gyro = 0;
+    std::vector<std::pair<int, double>> walks_before;  // SessionOptions::random_walk_by_gyro
+  };
+  std::optional<StandIn> stood_in;
   for (int round = 0; round < options.max_effects; ++round) {
     auto result = SelectionRound(round, active_gyros, selected, context);
     if (!result.ok()) return result.status();
@@ -218,9 +223,10 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
         stand_in_note = absl::StrFormat(
             "selection went on with the other gyros after round %d, gyro %d's random walk "
             "raised to %.4f deg/h/sqrt(h) (the library's best intensity for it) standing in for "
-            "this drift: not a finding, but in the fit after the findings and its held-out "
-            "prediction",
+            "this drift meanwhile: not a finding, and removed again before the open-ended stage "
+            "and the fit after the findings",
             round + 1, unresolved_where.gyro, result->stand_in_walk_deg_h_sqrt_h);
+        stood_in = StandIn{unresolved_where.gyro, selected.model.options.random_walk_by_gyro};
         selected = std::move(*result->stand_in);
         std::erase(active_gyros, unresolved_where.gyro);
         continue;
@@ -231,6 +237,23 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     report.findings.push_back(std::move(*result->finding));
     for (Finding& f : result->more_findings) report.findings.push_back(std::move(f));
     if (!result->residual_drift.empty()) report.residual_drift = result->residual_drift;
+  }
+
+  // The stand-in goes: the gyro's walk as it was before it (the findings taken since keep
+  // theirs), so what follows describes that gyro's drift on the model the findings define.
+  if (stood_in.has_value()) {
+    ModelState restored = selected.model;
+    auto& walks = restored.options.random_walk_by_gyro;
+    std::erase_if(walks, [&](const auto& w) { return w.first == stood_in->gyro; });
+    for (const auto& w : stood_in->walks_before) {
+      if (w.first == stood_in->gyro) walks.push_back(w);
+    }
+    auto run = context.CheckedRun(restored, /*held_out=*/false);
+    if (!run.ok()) return run.status();
+    selected.model = std::move(restored);
+    selected.run = std::move(*run);
+    selected.fit = Profile(selected.run);
+    selected.held_out_current = false;
   }
 
   // The extended model: its held-out prediction (its full run is selected.run), and what remains
