@@ -14,6 +14,7 @@
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/candidates.h"
 #include "estimator/discovery/context.h"
+#include "estimator/discovery/forward_selection.h"
 #include "estimator/discovery/held_out.h"
 #include "estimator/discovery/location.h"
 #include "estimator/discovery/model_run.h"
@@ -177,84 +178,21 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
 
   // Forward selection: one effect per round while one is found.
   selected.held_out = base_held_out;
-  // Why the candidates that fit were not taken (selection.h RoundResult), when they were not.
-  std::string unresolved, unresolved_note;
-  int unresolved_gyro = 0;
-  Mismatch unresolved_where;
-  double stationary_evidence = -1.0;
-  double readout_jump_evidence = -1.0;
-  // Gyros whose open-ended terms were left out for a drift that returns to its mean.
-  std::set<int> outdone_gyros;
-  // A drift that returns to its mean leaves its round unresolved; selection goes on with the
-  // other gyros, that gyro's walk raised to the library's best intensity standing in for it (not
-  // a finding: the verdict's `unexplained` says so). Once: a later unresolved round ends it.
-  std::vector<int> active_gyros = report.gyros;
-  std::string stand_in_note, later_unresolved;
-  struct StandIn {
-    int gyro = 0;
-    std::vector<std::pair<int, double>> walks_before;  // SessionOptions::random_walk_by_gyro
-  };
-  std::optional<StandIn> stood_in;
-  for (int round = 0; round < options.max_effects; ++round) {
-    auto result = SelectionRound(round, active_gyros, selected, context);
-    if (!result.ok()) return result.status();
-    report.candidates.insert(report.candidates.end(), result->rows.begin(), result->rows.end());
-    if (!result->finding.has_value()) {
-      outdone_gyros.insert(result->outdone_gyros.begin(), result->outdone_gyros.end());
-      if (!stand_in_note.empty()) {
-        // After the stand-in: a second wandering gyro is tested again at the end; another
-        // reason is a note on the verdict's finding.
-        if (result->unresolved_where.found) {
-          outdone_gyros.insert(result->unresolved_where.gyro);
-        } else if (!result->unresolved.empty()) {
-          later_unresolved = absl::StrCat(
-              "with that stand-in, a later round left a further mismatch unresolved: ",
-              result->unresolved);
-        }
-        break;
-      }
-      unresolved = result->unresolved;
-      unresolved_note = result->unresolved_note;
-      unresolved_gyro = result->unresolved_gyro;
-      unresolved_where = result->unresolved_where;
-      stationary_evidence = result->stationary_evidence;
-      readout_jump_evidence = result->readout_jump_evidence;
-      if (result->stand_in.has_value() && active_gyros.size() > 1) {
-        stand_in_note = absl::StrFormat(
-            "selection went on with the other gyros after round %d, gyro %d's random walk "
-            "raised to %.4f deg/h/sqrt(h) (the library's best intensity for it) standing in for "
-            "this drift meanwhile: not a finding, and removed again before the open-ended stage "
-            "and the fit after the findings",
-            round + 1, unresolved_where.gyro, result->stand_in_walk_deg_h_sqrt_h);
-        stood_in = StandIn{unresolved_where.gyro, selected.model.options.random_walk_by_gyro};
-        selected = std::move(*result->stand_in);
-        std::erase(active_gyros, unresolved_where.gyro);
-        continue;
-      }
-      break;
-    }
-    outdone_gyros.insert(result->outdone_gyros.begin(), result->outdone_gyros.end());
-    report.findings.push_back(std::move(*result->finding));
-    for (Finding& f : result->more_findings) report.findings.push_back(std::move(f));
-    if (!result->residual_drift.empty()) report.residual_drift = result->residual_drift;
-  }
-
-  // The stand-in goes: the gyro's walk as it was before it (the findings taken since keep
-  // theirs), so what follows describes that gyro's drift on the model the findings define.
-  if (stood_in.has_value()) {
-    ModelState restored = selected.model;
-    auto& walks = restored.options.random_walk_by_gyro;
-    std::erase_if(walks, [&](const auto& w) { return w.first == stood_in->gyro; });
-    for (const auto& w : stood_in->walks_before) {
-      if (w.first == stood_in->gyro) walks.push_back(w);
-    }
-    auto run = context.CheckedRun(restored, /*held_out=*/false);
-    if (!run.ok()) return run.status();
-    selected.model = std::move(restored);
-    selected.run = std::move(*run);
-    selected.fit = Profile(selected.run);
-    selected.held_out_current = false;
-  }
+  auto chosen = SelectEffects(report.gyros, selected, context);
+  if (!chosen.ok()) return chosen.status();
+  report.candidates = std::move(chosen->rows);
+  report.findings = std::move(chosen->findings);
+  report.residual_drift = std::move(chosen->residual_drift);
+  // Why the candidates that fit were not taken, when they were not (the open-ended stage may
+  // still explain it).
+  std::string unresolved = chosen->unresolved, unresolved_note = chosen->unresolved_note;
+  int unresolved_gyro = chosen->unresolved_gyro;
+  Mismatch unresolved_where = chosen->unresolved_where;
+  double stationary_evidence = chosen->stationary_evidence;
+  const double readout_jump_evidence = chosen->readout_jump_evidence;
+  std::set<int>& outdone_gyros = chosen->outdone_gyros;
+  std::string& stand_in_note = chosen->stand_in_note;
+  const std::string& later_unresolved = chosen->later_unresolved;
 
   // The extended model: its held-out prediction (its full run is selected.run), and what remains
   // (a span whose residual excess stands out, held-out prediction beyond the filter's
