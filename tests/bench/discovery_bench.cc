@@ -138,6 +138,8 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
           detail += " " + f.effect + "[" + std::to_string(f.gyro) + "]";
           if (notes) {
             if (!f.description.empty()) detail += " {" + f.description + "}";
+            // What an `unexplained` finding says is in its explanation, not in its notes.
+            if (f.effect == kVerdictUnexplained) detail += " {" + f.explanation + "}";
             for (const std::string& n : f.evidence.notes) detail += " <" + n + ">";
           }
           if (f.time.kind == "step") {
