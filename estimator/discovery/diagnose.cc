@@ -289,7 +289,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       }
     }
     if (!stage->findings.empty() && stage->extended.has_value()) {
-      // The model keeps the stand-in walk: its note goes with the terms that explain the drift.
+      // The stand-in (removed before this stage) let selection go on past this drift: its note
+      // goes with the terms that explain the drift.
       if (!stand_in_note.empty()) {
         stage->findings.front().evidence.notes.push_back(stand_in_note);
         stand_in_note.clear();

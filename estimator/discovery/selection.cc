@@ -750,9 +750,8 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       if (ReturnsToItsMean(*behaviour, EvidenceThreshold(options.alpha, 1))) {
         wander_note = absl::StrCat(ReturnsToItsMeanText(*behaviour), "; ", CandidateName(c),
                                    " is not taken");
-        wander_where = WanderLocation(
-            c.gyro, context.frames(),
-            EvidenceBound(behaviour->stationary - std::max(behaviour->step, behaviour->walk)));
+        wander_where =
+            WanderLocation(c.gyro, context.frames(), ReturnsToItsMeanBound(*behaviour));
         wander_evidence = behaviour->stationary;
         significant.clear();
         inhomogeneous_only = true;
@@ -806,6 +805,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
         stand_in.held_out_current = false;
         result.stand_in = std::move(stand_in);
         result.stand_in_walk_deg_h_sqrt_h = f.fitted.front().value;
+        break;
       }
     } else if (inhomogeneous_only) {
       result.unresolved =

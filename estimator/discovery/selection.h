@@ -66,7 +66,7 @@ struct RoundResult {
   std::vector<int> outdone_gyros;
   // With unresolved_where (a drift that returns to its mean): the model with that gyro's random
   // walk at the library's best intensity (its random_walk_drift fit of the round), which stands
-  // in for the drift while selection goes on with the other gyros (diagnose.cc); the intensity
+  // in for the drift while selection goes on with the other gyros (forward_selection.h); the intensity
   // [deg/h/sqrt(h)]. Empty when the round did not fit that walk.
   std::optional<SelectedModel> stand_in;
   double stand_in_walk_deg_h_sqrt_h = 0.0;

@@ -255,6 +255,10 @@ bool ReturnsToItsMean(const DriftBehaviourEvidence& e, double threshold) {
   return e.stationary > std::max(e.step, e.walk) + kDecisiveDeviance && e.stationary > threshold;
 }
 
+double ReturnsToItsMeanBound(const DriftBehaviourEvidence& e) {
+  return EvidenceBound(e.stationary - std::max(e.step, e.walk));
+}
+
 std::string ReturnsToItsMeanText(const DriftBehaviourEvidence& e) {
   return absl::StrFormat(
       "the drift of gyro %d returns to its mean: a stationary random drift (correlation time "
@@ -304,7 +308,7 @@ absl::StatusOr<std::vector<Finding>> OtherGyrosReturningToTheirMean(
     double p_value = 1.0;
     if (ReturnsToItsMean(*e, threshold)) {
       why = ReturnsToItsMeanText(*e);
-      p_value = EvidenceBound(e->stationary - std::max(e->step, e->walk));
+      p_value = ReturnsToItsMeanBound(*e);
     } else if (std::min(e->stationary, e->walk) > e->step + kDecisiveDeviance &&
                std::max(e->stationary, e->walk) > threshold) {
       why = WandersBeyondTheWalkText(*e);

@@ -72,6 +72,8 @@ absl::StatusOr<CommonWalkCheck> CheckCommonWalk(const SelectedModel& selected,
 // Whether the comparison says the drift returns to its mean: the stationary drift beats one step
 // and a raised walk decisively (by kDecisiveDeviance) and passes `threshold` (2 ln B).
 bool ReturnsToItsMean(const DriftBehaviourEvidence& e, double threshold);
+// Its p-value: 1/B of the stationary drift against the better of one step and a raised walk.
+double ReturnsToItsMeanBound(const DriftBehaviourEvidence& e);
 
 // "the drift of gyro g returns to its mean: a stationary random drift (correlation time about ..)
 // describes its deviation with 2 ln B = .., decisively better than one step (..) or a raised
