@@ -106,12 +106,29 @@ class DaemonSlot {
 
 // One ground station's sender: a random script over the timeline, sent in windows of 1-8
 // frames; after a broken stream it reconnects and resends the in-order frames not acknowledged.
+// The reserved frames are left out of the script: SendLate sends one after the script.
 class Sender {
  public:
   Sender(std::string station, const std::vector<esg::v1::TelemetryFrame>& timeline,
-         uint64_t seed)
-      : station_(std::move(station)), timeline_(timeline), rng_(seed) {
+         uint64_t seed, std::set<int> reserved)
+      : station_(std::move(station)), timeline_(timeline), rng_(seed),
+        reserved_(std::move(reserved)) {
     BuildScript();
+  }
+
+  // Sends one frame late, on a stream of its own, and keeps its acknowledgement.
+  void SendLate(DaemonSlot& slot, int index) {
+    const Sent sent{Kind::kLate, index, Frame(index)};
+    auto stub = slot.Stub();
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    auto stream = stub->StreamTelemetry(&context);
+    esg::v1::TelemetryAck ack;
+    const bool acknowledged = stream->Write(sent.frame) && stream->Read(&ack);
+    stream->WritesDone();
+    const grpc::Status status = stream->Finish();
+    ASSERT_TRUE(acknowledged) << status.error_message();
+    acked_.push_back({sent, ack});
   }
 
   void Run(DaemonSlot& slot, std::atomic<int64_t>& total_acks) {
@@ -176,6 +193,7 @@ class Sender {
     std::vector<int> skipped;
     std::vector<int> sent;
     for (int i = 0; i < static_cast<int>(timeline_.size()); ++i) {
+      if (reserved_.count(i) > 0) continue;
       const int dice = static_cast<int>(rng_() % 100);
       if (dice < 8) {  // skipped now, sent late
         skipped.push_back(i);
@@ -212,6 +230,7 @@ class Sender {
   const std::string station_;
   const std::vector<esg::v1::TelemetryFrame>& timeline_;
   std::mt19937_64 rng_;
+  const std::set<int> reserved_;
   std::vector<Sent> script_;
   std::vector<Acked> acked_;
 };
@@ -239,8 +258,13 @@ void RunOnce(uint64_t seed) {
     esg::v1::ConfigureResponse r;
     ASSERT_TRUE(slot.Stub()->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run->config), &r).ok());
   }
-  Sender a("GS-1", timeline, seed * 1000 + 1);
-  Sender b("GS-2", timeline, seed * 1000 + 2);
+  // A frame neither station sends in its script, 30 frames before the end of the pass: sent
+  // late once both scripts are done, it is within the reorder window and nobody has stored its
+  // time, so it must be stored. (Whether a late frame of a script is stored depends on the race
+  // with the other station, which may have stored the same time first.)
+  const int reserved = static_cast<int>(timeline.size()) - 30;
+  Sender a("GS-1", timeline, seed * 1000 + 1, {reserved});
+  Sender b("GS-2", timeline, seed * 1000 + 2, {reserved});
   std::atomic<int64_t> total_acks{0};
   std::atomic<bool> done{false};
   std::atomic<int> kills{0};
@@ -261,6 +285,10 @@ void RunOnce(uint64_t seed) {
   tb.join();
   done = true;
   controller.join();
+  ASSERT_NO_FATAL_FAILURE(a.SendLate(slot, reserved));
+  EXPECT_TRUE(a.acked().back().ack.accepted() && !a.acked().back().ack.duplicate())
+      << "a late frame within the reorder window that no station had sent was not stored: "
+      << a.acked().back().ack.rejection().reason();
   slot.Stop();
   EXPECT_EQ(kills, 2) << "the senders finished before the daemon was killed twice";
 
