@@ -130,7 +130,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const absl::Time last = s.last_frame_time();
   if (last != absl::InfinitePast()) {
     absl::StatusOr<std::vector<estimator::PredictedSample>> predicted =
-        s.Predict({last + absl::Seconds(60), last + absl::Seconds(600)}, nullptr, last);
+        s.Predict({last + absl::Seconds(60), last + absl::Seconds(120)}, nullptr, last);
     if (!predicted.ok()) ESG_FUZZ_CHECK(!predicted.status().message().empty(), "a reason");
   }
   return 0;

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <optional>
 #include <set>
 #include <string>
@@ -11,7 +10,6 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/calibration_model.h"
-#include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/candidates.h"
 #include "estimator/discovery/context.h"
 #include "estimator/discovery/forward_selection.h"
@@ -20,6 +18,7 @@
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/selection.h"
 #include "estimator/discovery/wander.h"
+#include "estimator/discovery/what_is_left.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -180,23 +179,13 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   selected.held_out = base_held_out;
   auto chosen = SelectEffects(report.gyros, selected, context);
   if (!chosen.ok()) return chosen.status();
-  report.candidates = std::move(chosen->rows);
-  report.findings = std::move(chosen->findings);
-  report.residual_drift = std::move(chosen->residual_drift);
-  // Why the candidates that fit were not taken, when they were not (the open-ended stage may
-  // still explain it).
-  std::string unresolved = chosen->unresolved, unresolved_note = chosen->unresolved_note;
-  int unresolved_gyro = chosen->unresolved_gyro;
-  Mismatch unresolved_where = chosen->unresolved_where;
-  double stationary_evidence = chosen->stationary_evidence;
-  const double readout_jump_evidence = chosen->readout_jump_evidence;
-  std::set<int>& outdone_gyros = chosen->outdone_gyros;
-  std::string& stand_in_note = chosen->stand_in_note;
-  const std::string& later_unresolved = chosen->later_unresolved;
+  ForwardSelection& selection = *chosen;
+  report.candidates = std::move(selection.rows);
 
   // The extended model: its held-out prediction (its full run is selected.run), and what remains
   // (a span whose residual excess stands out, held-out prediction beyond the filter's
-  // uncertainty, or noise beyond the configured one).
+  // uncertainty, or noise beyond the configured one). `selection`'s unresolved reason says why
+  // the candidates that fit were not taken, when they were not.
   HeldOutResult final_held_out = base_held_out;
   Mismatches mismatches;
   std::optional<Unexplained> remaining;
@@ -206,105 +195,35 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     final_held_out = base_held_out;
     if (selected.held_out_current) {
       final_held_out = selected.held_out;
-    } else if (!report.findings.empty() && !context.gaps().empty()) {
+    } else if (!selection.findings.empty() && !context.gaps().empty()) {
       auto held = context.CheckedRun(selected.model, /*held_out=*/true);
       if (!held.ok()) return held.status();
       final_held_out = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
     }
     mismatches = LocateMismatches(base_run, selected.run, report.regimes, frames, options.alpha);
-    remaining = FindUnexplained(mismatches.remaining, unresolved, unresolved_gyro,
-                                unresolved_where, final_held_out,
-                                selected.fit, !report.findings.empty(), options.alpha);
+    remaining = FindUnexplained(mismatches.remaining, selection.unresolved,
+                                selection.unresolved_gyro, selection.unresolved_where,
+                                final_held_out, selected.fit, !selection.findings.empty(),
+                                options.alpha);
     return absl::OkStatus();
   };
   if (absl::Status s = assess(); !s.ok()) return s;
 
-  // What the library left: the open-ended stage (basis_stage.h).
+  // What the library left: the open-ended stage (what_is_left.h).
   std::string resembles;
   if (remaining.has_value() && options.open_ended) {
     context.Say(0.92, "open-ended stage");
-    auto stage = RunBasisStage(selected, context, report.gyros,
-                               static_cast<int>(report.findings.size()));
-    if (!stage.ok()) return stage.status();
-    if (!stage->findings.empty() || report.residual_drift.empty()) {
-      report.residual_drift = stage->residual_drift;
-    }
-    resembles = stage->resembles;
-    // A gyro whose drift returns to its mean (wander.h): the basis's terms for it must describe
-    // its deviation better than that stationary drift does, in the same reduced regression's
-    // currency (2 ln B against the configured walk). Every gyro the terms are for is tested,
-    // not only the one the library's last round left unresolved. When the unresolved gyro's
-    // terms lose, none are taken: its wandering drift, which no term models, spills over into
-    // the other gyros' deviations through the shared star tracker. When only other gyros' terms
-    // lose, they are left out and the stage runs again on the rest.
-    if (!stage->findings.empty()) {
-      std::map<int, double> measured;
-      if (unresolved_where.found && stationary_evidence > 0.0) {
-        measured[unresolved_where.gyro] = stationary_evidence;
-      }
-      auto outdone = GyrosOutdoneByAStationaryDrift(*stage, selected, context, measured, {},
-                                                    options.alpha);
-      if (!outdone.ok()) return outdone.status();
-      if (!outdone->gyros.empty()) {
-        outdone_gyros.insert(outdone->gyros.begin(), outdone->gyros.end());
-        absl::StrAppend(&resembles, outdone->note);
-        stage->findings.clear();
-        const bool unresolved_lost =
-            unresolved_where.found && outdone->Contains(unresolved_where.gyro);
-        const bool others = !unresolved_lost && std::any_of(
-            stage->stage.selected.begin(), stage->stage.selected.end(),
-            [&](const SelectedGroup& g) { return !outdone->Contains(g.gyro); });
-        if (others) {
-          auto again = RunBasisStage(selected, context, outdone->Others(report.gyros),
-                                     static_cast<int>(report.findings.size()));
-          if (!again.ok()) return again.status();
-          if (!again->findings.empty()) report.residual_drift = again->residual_drift;
-          stage = std::move(again);
-        }
-      }
-    }
-    // A jump of a gyro's readings that explained the last round as well as its time behaviour
-    // (D43) must be beaten by the basis too: a ramp fitted to a jump is no physics.
-    if (!stage->findings.empty() && readout_jump_evidence > stage->refit_evidence) {
-      absl::StrAppend(&resembles, absl::StrFormat(
-          "; the basis's terms (2 ln B = %.1f) explain it less well than a jump of the gyro's "
-          "readings (2 ln B = %.1f)",
-          stage->refit_evidence, readout_jump_evidence));
-      stage->findings.clear();
-    }
-    // The terms must predict the held-out spans at least as well as the model without them.
-    if (!stage->findings.empty() && stage->extended.has_value() && !context.gaps().empty()) {
-      auto held = context.CheckedRun(stage->extended->model, /*held_out=*/true);
-      if (!held.ok()) return held.status();
-      HeldOutResult with = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
-      if (with.deviance > final_held_out.deviance) {
-        absl::StrAppend(&resembles, absl::StrFormat(
-            "; the basis's terms fit in-sample (2 ln B = %.1f) but predict the held-out spans "
-            "worse (-2 log predictive density %.1f against %.1f without them)",
-            stage->refit_evidence, with.deviance, final_held_out.deviance));
-        stage->findings.clear();
-      } else {
-        stage->extended->held_out = std::move(with);
-        stage->extended->held_out_current = true;
-      }
-    }
-    if (!stage->findings.empty() && stage->extended.has_value()) {
-      // The stand-in (removed before this stage) let selection go on past this drift: its note
-      // goes with the terms that explain the drift.
-      if (!stand_in_note.empty()) {
-        stage->findings.front().evidence.notes.push_back(stand_in_note);
-        stand_in_note.clear();
-      }
-      for (Finding& f : stage->findings) report.findings.push_back(std::move(f));
-      selected = std::move(*stage->extended);
-      unresolved.clear();
-      unresolved_note.clear();
-      unresolved_gyro = 0;
-      unresolved_where = Mismatch{};
-      stationary_evidence = -1.0;
+    auto left = ExplainWhatSelectionLeft(selected, context, report.gyros, final_held_out,
+                                         selection);
+    if (!left.ok()) return left.status();
+    resembles = std::move(left->resembles);
+    if (left->taken) {
       if (absl::Status s = assess(); !s.ok()) return s;
     }
   }
+  report.findings = std::move(selection.findings);
+  report.residual_drift = std::move(selection.residual_drift);
+  std::set<int>& outdone_gyros = selection.outdone_gyros;
 
   // Another gyro whose drift returns to its mean is its own `unexplained` finding, listed before
   // the verdict's (which stays last, with the report's mismatch).
@@ -333,10 +252,9 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   const bool model_findings = !report.findings.empty();
   for (Finding& f : wandering) report.findings.push_back(std::move(f));
   if (remaining.has_value()) {
-    if (!unresolved_note.empty()) remaining->finding.evidence.notes.push_back(unresolved_note);
-    if (!stand_in_note.empty()) remaining->finding.evidence.notes.push_back(stand_in_note);
-    if (!later_unresolved.empty()) {
-      remaining->finding.evidence.notes.push_back(later_unresolved);
+    for (const std::string* note :
+         {&selection.unresolved_note, &selection.stand_in_note, &selection.later_unresolved}) {
+      if (!note->empty()) remaining->finding.evidence.notes.push_back(*note);
     }
     if (!resembles.empty()) remaining->finding.evidence.notes.push_back(resembles);
     report.findings.push_back(remaining->finding);
