@@ -11,7 +11,9 @@
 #                                              so a later run continues from its coverage; one
 #                                              line per target appended to the results file
 #                                              ($ESG_FUZZ_RESULTS, default
-#                                              build-fuzz/long/results.tsv)
+#                                              build-fuzz/long/results.tsv); ESG_FUZZ_WORK=DIR
+#                                              instead of build-fuzz/long runs a second one
+#                                              beside it (its own corpus, log and results)
 #   bash scripts/fuzz.sh targets               list the targets
 #
 # A crash leaves its input in build-fuzz/artifacts/<target>/ (reproduce, with full allocation
@@ -125,7 +127,7 @@ case "${1:-}" in
     [ ${#selected[@]} -eq 0 ] && selected=("${TARGETS[@]}")
     export ASAN_OPTIONS="$(asan_options 2)"
     build
-    work=build-fuzz/long
+    work=${ESG_FUZZ_WORK:-build-fuzz/long}
     results=${ESG_FUZZ_RESULTS:-$work/results.tsv}
     mkdir -p "$work"
     [ -f "$results" ] || printf 'date\ttarget\trequested\texecutions\texec/s\tcov\tft\tcorpus\tseconds\tresult\n' >"$results"
