@@ -29,13 +29,21 @@ let gateway;
 const cli = (...args) => esg(['--server', router.address, ...args]);
 const api = (pathAndQuery) => request(new URL(pathAndQuery, gateway.url));
 
-// The node (host:port) that served each spacecraft's calls whose URI ends with `method`.
+// The router's access log, one [spacecraft header, node (host:port), status, URI] per call whose
+// URI ends with `method`.
+function callsOf(method) {
+  return router.accessLog().split('\n')
+    .map((line) => line.split(' '))
+    .filter(([, , , uri]) => uri && uri.endsWith(`/${method}`));
+}
+
+// The node that served each spacecraft's calls whose URI ends with `method`.
 function nodesOf(method) {
   const served = new Map();
-  for (const line of router.accessLog().split('\n')) {
-    const [id, node, status, uri] = line.split(' ');
-    if (!uri || !uri.endsWith(`/${method}`) || !SPACECRAFT.includes(id)) continue;
-    assert.equal(status, '200', line);
+  for (const call of callsOf(method)) {
+    const [id, node, status] = call;
+    if (!SPACECRAFT.includes(id)) continue;
+    assert.equal(status, '200', call.join(' '));
     if (!served.has(id)) served.set(id, new Set());
     served.get(id).add(node);
   }
@@ -99,9 +107,7 @@ test('a call over all spacecraft reaches one node, which knows only its own (SQL
   const listed = sessions.json.sessions.map((s) => s.spacecraft_id).sort();
   // The node that served it (the call carries no spacecraft, so any node may; one may hold none
   // of the six) lists exactly the spacecraft configured on it.
-  const served = router.accessLog().split('\n')
-    .map((line) => line.split(' '))
-    .filter(([, , , uri]) => uri && uri.endsWith('/ListSessions'));
+  const served = callsOf('ListSessions');
   assert.equal(served.length, 1, `ListSessions calls in the access log: ${served.length}`);
   const [[, node, status]] = served;
   assert.equal(status, '200');
