@@ -364,6 +364,17 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
         return absl::DataLossError(absl::StrFormat(
             "checkpoint: initial covariance diagonal %d is not positive (%g)", i, s.P0_(i, i)));
       }
+      // The relative sigma sqrt(P/P0) itself: both finite and P0 > 0 still let the quotient
+      // overflow (a tiny P0). A session restored so reported an infinite relative sigma and
+      // wrote it into its own checkpoint's convergence record, which then did not restore. Only
+      // measurement updates, which do not raise a variance, change a coefficient's rows in a
+      // restored session (coefficient releases are discovery's, on sessions it starts afresh),
+      // so a finite quotient here stays finite.
+      if (!std::isfinite(s.P_(i, i) / s.P0_(i, i))) {
+        return absl::DataLossError(absl::StrFormat(
+            "checkpoint: covariance diagonal %d (%g) over its initial value (%g) is not finite", i,
+            s.P_(i, i), s.P0_(i, i)));
+      }
     }
   }
   // Every index the session dereferences must name a gyro it has: a corrupt checkpoint is

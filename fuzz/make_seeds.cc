@@ -2,8 +2,9 @@
 // simulated flight of deploy/examples/rdk1.json as a recording CSV, as a user's export read
 // through deploy/examples/columns_user_export.json, as telemetry frames in the protobuf wire
 // form, as an AEM, and the session's server checkpoints at several points of the flight (before
-// the first frame, before initialisation, converged) in every session version (1 to 5) and both
-// server formats. Usage: fuzz_make_seeds <out dir>. The hand-written seeds live beside them.
+// the first frame, before initialisation, converged) in every session version (1 to 6) and every
+// server format (3 as written, 2 and 1 as read). Usage: fuzz_make_seeds <out dir>. The
+// hand-written seeds live beside them.
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -93,6 +94,11 @@ size_t VersionLength(const std::vector<double>& v, int version) {
   if (version == 4) return pos;
   pos += 9 + 1;                               // mount correction
   pos += 1 + static_cast<size_t>(v.at(pos));  // mount monitor
+  if (version == 5) return pos;
+  for (size_t i = 0; i < g; ++i) {
+    pos += 1 + static_cast<size_t>(v.at(pos));  // basis terms
+    pos += 1 + 3;                               // held voltages
+  }
   return pos;
 }
 
@@ -115,6 +121,17 @@ std::string EncodeFormat1(const server::ServerCheckpoint& c) {
     i64(static_cast<int64_t>(c.session->values.size()));
     for (double v : c.session->values) out.append(reinterpret_cast<const char*>(&v), sizeof v);
   }
+  return out;
+}
+
+// Server format 2 ("ESGSRV02"): format 3 without the last star-tracker time, the 8 bytes after
+// the apply cursor (server/checkpoint_codec.cc).
+std::string EncodeFormat2(const server::ServerCheckpoint& c) {
+  std::string out = server::EncodeCheckpoint(c);
+  out.replace(0, 8, "ESGSRV02");
+  const size_t cursor_end = 8 + (8 + c.model.size()) + 8 + (8 + c.applied_station.size()) + 8 +
+                            8 + (8 + c.quarantine_reason.size()) + 8;
+  out.erase(cursor_end, 8);
   return out;
 }
 
@@ -211,7 +228,7 @@ int main(int argc, char** argv) {
       }
     }
     const estimator::SessionCheckpoint full = session->ExportCheckpoint();
-    for (int version = 1; version <= 5; ++version) {
+    for (int version = 1; version <= 6; ++version) {
       server::ServerCheckpoint c;
       c.model = "10+11";
       c.applied_time = applied > 0 ? frames[applied - 1].time : absl::InfinitePast();
@@ -230,6 +247,9 @@ int main(int argc, char** argv) {
       }
       Write(absl::StrCat(out, "/checkpoint/frames", cut, "_v", version, ".bin"),
             server::EncodeCheckpoint(c));
+      if (version == 5) {
+        Write(absl::StrCat(out, "/checkpoint/format2_frames", cut, "_v5.bin"), EncodeFormat2(c));
+      }
       if (version == 5 && cut == 4) {
         Write(out + "/checkpoint/format1_frames4_v5.bin", EncodeFormat1(c));
         c.quarantine_reason = "its checkpoint cannot be restored";

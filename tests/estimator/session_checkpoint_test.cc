@@ -667,6 +667,38 @@ TEST(SessionCheckpoint, ZeroInitialVarianceIsDataLoss) {
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("initial covariance diagonal")));
 }
 
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 7): a positive but tiny initial
+// variance (here subnormal) passed the check above, yet sqrt(P/P0) overflowed: the restored session
+// reported an infinite relative sigma and wrote it into its own checkpoint, which then did not
+// restore. The fuzzer's blobs are tested in quarantine_test.cc.
+TEST(SessionCheckpoint, InitialVarianceThatOverflowsTheRelativeSigmaIsDataLoss) {
+  const Scenario s = AllPhases();
+  const size_t cut = FrameAt(s, 0.5);
+  const Prefix p = RunPrefix(s, Options(), cut);
+  ASSERT_TRUE(p.session.initialized());
+  const SessionCheckpoint good = p.session.ExportCheckpoint();
+  const size_t n = static_cast<size_t>(p.session.state_size());
+  const size_t p0_begin = Version1Length(good) - n * n;
+  const size_t i = n - 5;
+  const size_t p_ii = p0_begin - n * n + i * n + i, p0_ii = p0_begin + i * n + i;
+  ASSERT_GT(good.values[p_ii], 1e-300);
+  SessionCheckpoint tiny = good;
+  tiny.values[p0_ii] = std::numeric_limits<double>::denorm_min();
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), tiny).status(),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("over its initial value")));
+  // The bound is overflow itself, not a guess at what is plausible: a quotient of 1e250 restores,
+  // takes the next frame, and the session's own checkpoint restores after it.
+  SessionCheckpoint large = good;
+  large.values[p0_ii] = good.values[p_ii] * 1e-250;
+  absl::StatusOr<EstimationSession> restored =
+      EstimationSession::FromCheckpoint(s.spec.config, Options(), large);
+  ASSERT_THAT(restored, IsOk());
+  ASSERT_THAT(restored->AddFrame(s.frames[cut]), IsOk());
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(),
+                                                restored->ExportCheckpoint()),
+              IsOk());
+}
+
 // Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 4): an uninitialised session's
 // checkpoint whose working pair named gyro 0 restored (pairs were checked only once initialised),
 // and the first frame with a star-tracker fix read the frame's gyro at index -1.

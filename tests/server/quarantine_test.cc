@@ -289,28 +289,45 @@ TEST(Quarantine, CheckpointOfAnUninitialisedSessionLoadsAndTheRunEqualsOffline) 
   EXPECT_EQ(StoredSessionValues(db, "QA-1"), OfflineSessionValues(run.config, "10+11", run.frames));
 }
 
+// A checkpoint blob of fuzz/corpus/checkpoint/ restored as esgd restores a spacecraft of
+// deploy/examples/rdk1.json (its session under the model it names).
+absl::Status RestoreCorpusBlob(const std::string& name) {
+  std::ifstream in(ESG_SOURCE_DIR "/fuzz/corpus/checkpoint/" + name, std::ios::binary);
+  if (!in.good()) return absl::NotFoundError(name);
+  const std::string blob((std::istreambuf_iterator<char>(in)), {});
+  absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(blob);
+  if (!decoded.ok()) return decoded.status();
+  if (!decoded->session.has_value()) return absl::InvalidArgumentError("no session in " + name);
+  absl::StatusOr<estimator::SpacecraftConfig> config =
+      proto_convert::ReadConfigFile(ESG_SOURCE_DIR "/deploy/examples/rdk1.json");
+  if (!config.ok()) return config.status();
+  estimator::SessionOptions options;
+  absl::StatusOr<estimator::ModelSpec> model = estimator::ParseModel(decoded->model);
+  if (!model.ok()) return model.status();
+  options.model = *model;
+  return estimator::EstimationSession::FromCheckpoint(*config, options, *decoded->session).status();
+}
+
 // Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 3): this blob (a version-1 session
 // of deploy/examples/rdk1.json whose initial covariance has a zero diagonal entry) restored, and
 // after one frame the session's own checkpoint did not. It must be DataLoss at the restore, so
 // esgd quarantines and rebuilds the spacecraft instead of running on with it.
 TEST(Quarantine, CheckpointWithAZeroInitialVarianceIsRefusedAtTheRestore) {
-  std::ifstream in(ESG_SOURCE_DIR "/fuzz/corpus/checkpoint/regression-zero-initial-variance.bin",
-                   std::ios::binary);
-  ASSERT_TRUE(in.good());
-  const std::string blob((std::istreambuf_iterator<char>(in)), {});
-  absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(blob);
-  ASSERT_TRUE(decoded.ok()) << decoded.status();
-  ASSERT_TRUE(decoded->session.has_value());
-  absl::StatusOr<estimator::SpacecraftConfig> config =
-      proto_convert::ReadConfigFile(ESG_SOURCE_DIR "/deploy/examples/rdk1.json");
-  ASSERT_TRUE(config.ok()) << config.status();
-  estimator::SessionOptions options;
-  options.model = *estimator::ParseModel(decoded->model);
-  const absl::StatusOr<estimator::EstimationSession> restored =
-      estimator::EstimationSession::FromCheckpoint(*config, options, *decoded->session);
-  ASSERT_FALSE(restored.ok());
-  EXPECT_EQ(restored.status().code(), absl::StatusCode::kDataLoss);
-  EXPECT_THAT(std::string(restored.status().message()), HasSubstr("initial covariance diagonal"));
+  const absl::Status restored = RestoreCorpusBlob("regression-zero-initial-variance.bin");
+  EXPECT_EQ(restored.code(), absl::StatusCode::kDataLoss) << restored;
+  EXPECT_THAT(std::string(restored.message()), HasSubstr("initial covariance diagonal"));
+}
+
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 7): in these blobs one coefficient's
+// variance over its initial variance overflows (sqrt(P/P0) = inf), so the session's own
+// checkpoint after one frame held inf and did not restore. DataLoss at the restore, as above.
+TEST(Quarantine, CheckpointWhoseRelativeSigmaOverflowsIsRefusedAtTheRestore) {
+  for (const char* name : {"regression-relative-sigma-overflow-a.bin",
+                           "regression-relative-sigma-overflow-b.bin"}) {
+    const absl::Status restored = RestoreCorpusBlob(name);
+    EXPECT_EQ(restored.code(), absl::StatusCode::kDataLoss) << name << ": " << restored;
+    EXPECT_THAT(std::string(restored.message()), HasSubstr("over its initial value")) << name;
+  }
 }
 
 TEST(Quarantine, UnusableConfigurationRefusesItsFramesUntilReconfigured) {
