@@ -263,8 +263,7 @@ void EstimationSession::UpdateState(const StepReport& report) {
   std::vector<double> ratios;
   for (int i = 0; i < gyro_count(); ++i) {
     for (int j = 0; j < layout_.ThetaCount(i) + layout_.BasisCount(i); ++j) {
-      const int idx = layout_.Theta(i) + j;
-      ratios.push_back(std::sqrt(P_(idx, idx) / P0_(idx, idx)));
+      ratios.push_back(RelativeSigmaOf(layout_.Theta(i) + j));
     }
   }
   const VectorXd r = Eigen::Map<VectorXd>(ratios.data(), static_cast<int>(ratios.size()));
@@ -409,10 +408,13 @@ std::vector<std::pair<int, double>> EstimationSession::RelativeSigma(int id) con
   const int i = IndexOf(id);
   if (i < 0) return out;
   for (int j = 0; j < layout_.ThetaCount(i); ++j) {
-    const int idx = layout_.Theta(i) + j;
-    out.emplace_back(layout_.FreeCoefficients(i)[j], std::sqrt(P_(idx, idx) / P0_(idx, idx)));
+    out.emplace_back(layout_.FreeCoefficients(i)[j], RelativeSigmaOf(layout_.Theta(i) + j));
   }
   return out;
+}
+
+double EstimationSession::RelativeSigmaOf(int idx) const {
+  return std::sqrt(P_(idx, idx)) / std::sqrt(P0_(idx, idx));
 }
 
 void EstimationSession::ApplyCoefficientReleases(absl::Time frame_time) {

@@ -448,6 +448,10 @@ class EstimationSession {
 
   // session.cc
   void UpdateState(const StepReport& report);
+  // sqrt(P/P0) of state `idx`, as sqrt(P) / sqrt(P0): with P finite and P0 a positive normal
+  // number (the configuration's prior sigmas and the checkpoint restore guarantee both) it is
+  // finite, sqrt(DBL_MAX) / sqrt(DBL_MIN) being below DBL_MAX. The quotient P / P0 overflowed.
+  double RelativeSigmaOf(int idx) const;
   // The frame as the session uses it: each gyro's reading corrected for its configured readout
   // distortion D, h_k = normalise((I + D)^-1 h_meas) (GyroConfig::readout_distortion); readings
   // of gyros without one are unchanged. The one place readings enter (AddFrame).

@@ -357,23 +357,16 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     if (absl::Status st = CheckCovariance(s.P0_); !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: initial ", st.message()));
     }
-    // The prior variances: every state has one, and sqrt(P/P0) (convergence, RelativeSigma)
-    // divides by them. A zero let a restored session write a checkpoint with inf in it.
+    // The prior variances: every state has one, from a prior sigma that is positive with a normal
+    // square (ValidateConfig). The relative sigma sqrt(P)/sqrt(P0) (convergence, RelativeSigma)
+    // divides by their roots: a zero let a restored session write a checkpoint with inf in it,
+    // and a subnormal one can make the quotient overflow. A positive normal P0 keeps it finite
+    // for every finite P (EstimationSession::RelativeSigmaOf), whatever a step does to P.
     for (int i = 0; i < s.P0_.rows(); ++i) {
-      if (!(s.P0_(i, i) > 0.0)) {
+      if (!(s.P0_(i, i) > 0.0) || !std::isnormal(s.P0_(i, i))) {
         return absl::DataLossError(absl::StrFormat(
-            "checkpoint: initial covariance diagonal %d is not positive (%g)", i, s.P0_(i, i)));
-      }
-      // The relative sigma sqrt(P/P0) itself: both finite and P0 > 0 still let the quotient
-      // overflow (a tiny P0). A session restored so reported an infinite relative sigma and
-      // wrote it into its own checkpoint's convergence record, which then did not restore. Only
-      // measurement updates, which do not raise a variance, change a coefficient's rows in a
-      // restored session (coefficient releases are discovery's, on sessions it starts afresh),
-      // so a finite quotient here stays finite.
-      if (!std::isfinite(s.P_(i, i) / s.P0_(i, i))) {
-        return absl::DataLossError(absl::StrFormat(
-            "checkpoint: covariance diagonal %d (%g) over its initial value (%g) is not finite", i,
-            s.P_(i, i), s.P0_(i, i)));
+            "checkpoint: initial covariance diagonal %d is not a positive normal number (%g)", i,
+            s.P0_(i, i)));
       }
     }
   }

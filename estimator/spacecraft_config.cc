@@ -1,6 +1,7 @@
 #include "estimator/spacecraft_config.h"
 
 #include <cmath>
+#include <limits>
 #include <set>
 #include <tuple>
 #include <string>
@@ -54,6 +55,25 @@ absl::Status LimitError(double value_si, const ConfigLimit& limit, absl::string_
                                                     limit.unit, limit.reason));
 }
 
+// A sigma that is a filter state's prior: 0 (the state is held, not estimated) or one whose
+// variance sigma * sigma [SI], the prior P0 of its state, is a normal double. A smaller positive
+// one made P0 zero or subnormal: the relative sigma sqrt(P)/sqrt(P0) could overflow and the
+// session's checkpoint would not restore (session_checkpoint.cc). The bound, about sqrt(DBL_MIN)
+// = 1.5e-154 in SI, is far below any physical sigma.
+bool IsPriorSigma(double sigma_si) {
+  return sigma_si == 0.0 || std::isnormal(sigma_si * sigma_si);
+}
+
+// `to_json` converts SI to the field's unit.
+absl::Status PriorSigmaError(double sigma_si, double to_json, absl::string_view unit,
+                             absl::string_view field) {
+  const double smallest_si = std::sqrt(std::numeric_limits<double>::min());
+  return absl::InvalidArgumentError(absl::StrFormat(
+      "%s: %g %s is a prior sigma below about %g %s, whose variance is not a normal double: use "
+      "0 to hold the state fixed, or a sigma of at least that",
+      field, sigma_si * to_json, unit, smallest_si * to_json, unit));
+}
+
 absl::Status ValidateBasisTerms(const std::vector<BasisTerm>& terms, size_t gyro) {
   const ConfigLimits& L = kConfigLimits;
   if (terms.size() > static_cast<size_t>(kMaxBasisTermsPerGyro)) {
@@ -83,6 +103,9 @@ absl::Status ValidateBasisTerms(const std::vector<BasisTerm>& terms, size_t gyro
       return absl::InvalidArgumentError(absl::StrFormat(
           "%s.%s: %g %s is %g deg/h at %s, outside [%g, %g] (%s)", prefix, field,
           value * to_json, unit, value * to_json * size, at, limit.min, limit.max, limit.reason));
+    }
+    if (!IsPriorSigma(t.sigma)) {
+      return PriorSigmaError(t.sigma, to_json, unit, prefix + ".sigmaDegH");
     }
   }
   return absl::OkStatus();
@@ -177,9 +200,17 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
         return LimitError(sigma[k], L.drift_sigma,
                           absl::StrFormat("gyros[%d].modelSigma.%s", i, kCoefficientNames[k]));
       }
+      if (!IsPriorSigma(sigma[k])) {
+        return PriorSigmaError(sigma[k], RadPerSecToDegPerHour(1.0), "deg/h",
+                               absl::StrFormat("gyros[%d].modelSigma.%s", i, kCoefficientNames[k]));
+      }
     }
     RETURN_IF_ERROR(CheckLimit(g.misalignment_sigma, L.misalignment_sigma,
                                absl::StrFormat("gyros[%d].misalignmentSigmaArcsec", i)));
+    if (!IsPriorSigma(g.misalignment_sigma)) {
+      return PriorSigmaError(g.misalignment_sigma, RadToArcsec(1.0), "arcsec",
+                             absl::StrFormat("gyros[%d].misalignmentSigmaArcsec", i));
+    }
     RETURN_IF_ERROR(ValidateBasisTerms(g.basis_terms, i));
     RETURN_IF_ERROR(ValidateReadoutDistortion(g.readout_distortion, i));
   }
@@ -193,6 +224,9 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
       CheckLimit(config.star_tracker.latency, L.star_tracker_latency, "starTracker.latencyS"));
   RETURN_IF_ERROR(CheckLimit(config.star_tracker.latency_sigma, L.star_tracker_latency_sigma,
                              "starTracker.latencySigmaS"));
+  if (!IsPriorSigma(config.star_tracker.latency_sigma)) {
+    return PriorSigmaError(config.star_tracker.latency_sigma, 1.0, "s", "starTracker.latencySigmaS");
+  }
   RETURN_IF_ERROR(CheckLimit(config.readout_noise, L.readout_noise, "readoutNoiseArcsec"));
   RETURN_IF_ERROR(CheckLimit(config.random_walk, L.random_walk, "randomWalkDegHSqrtH"));
   const SuspensionConfig& s = config.suspension;

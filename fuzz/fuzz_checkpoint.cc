@@ -15,6 +15,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/session.h"
 #include "fuzz/fuzz_util.h"
+#include "fuzz/next_frame.h"
 #include "proto/convert.h"
 #include "server/checkpoint_codec.h"
 
@@ -61,34 +62,6 @@ void ExerciseViews(const EstimationSession& s) {
   for (const auto& g : Config().gyros) (void)s.RelativeSigma(g.id);
 }
 
-// A frame 60 s after the last one: every configured gyro with its current spin axis seen from
-// the current attitude, the star tracker with the current attitude.
-esg::estimator::TelemetryFrame NextFrame(const EstimationSession& s) {
-  esg::estimator::TelemetryFrame f;
-  const absl::Time last = s.last_frame_time();
-  f.time =
-      (last == absl::InfinitePast() ? absl::FromUnixSeconds(1551398400) : last) + absl::Seconds(60);
-  const esg::estimator::AttitudeEstimate attitude = s.CurrentAttitude();
-  const Eigen::Quaterniond q_in_b =
-      attitude.q_in_b.coeffs().allFinite() && attitude.q_in_b.norm() > 0.5
-          ? attitude.q_in_b.normalized()
-          : Eigen::Quaterniond::Identity();
-  for (const esg::estimator::GyroEstimate& g : s.Gyros()) {
-    const esg::estimator::GyroConfig* gc = Config().FindGyro(g.id);
-    if (gc == nullptr || g.id < 1 || g.id > esg::estimator::kMaxGyros) continue;
-    Eigen::Vector3d h_k = gc->C_b_k.transpose() * (q_in_b.conjugate() * g.h_in);
-    if (!h_k.allFinite() || h_k.norm() < 0.5) h_k = Eigen::Vector3d::UnitZ();
-    esg::estimator::GyroReading r;
-    r.h_k = h_k.normalized();
-    f.gyros[g.id - 1] = r;
-  }
-  esg::estimator::StarTrackerReading st;
-  st.q_in_b = q_in_b;
-  st.valid = true;
-  f.star_tracker = st;
-  return f;
-}
-
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
@@ -123,7 +96,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   EstimationSession& s = *restored;
   ExerciseViews(s);
   CheckOwnCheckpoint(s, options);
-  absl::StatusOr<estimator::StepReport> step = s.AddFrame(NextFrame(s));
+  absl::StatusOr<estimator::StepReport> step = s.AddFrame(fuzz::NextFrame(s, Config()));
   if (!step.ok()) ESG_FUZZ_CHECK(!step.status().message().empty(), step.status().ToString());
   ExerciseViews(s);
   CheckOwnCheckpoint(s, options);

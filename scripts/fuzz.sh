@@ -5,7 +5,7 @@
 #   bash scripts/fuzz.sh build                 install clang-14 + libFuzzer if missing, build
 #   bash scripts/fuzz.sh smoke [SECONDS]       build, run every target SECONDS (default 25) from
 #                                              its seed corpus; fails on any crash or violation
-#   bash scripts/fuzz.sh long [RUNS] [TARGET...]  build, run each target (default all) for RUNS
+#   bash scripts/fuzz.sh long [RUNS] [TARGET...]  build those targets, run each (default all) for RUNS
 #                                              executions (default 10000000), one at a time at
 #                                              nice 10; corpus kept in build-fuzz/long/corpus/
 #                                              so a later run continues from its coverage; one
@@ -41,12 +41,15 @@ install_fuzz_deps() {
     "${missing[@]}" >/dev/null
 }
 
+# Builds the targets named (fuzz_<name>), or all of them.
 build() {
   install_fuzz_deps
   local launcher=()
   if command -v ccache >/dev/null 2>&1; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
   cmake --preset fuzz "${launcher[@]}" >/dev/null
-  cmake --build build-fuzz -j"${ESG_JOBS:-2}"
+  local targets=()
+  for t in "$@"; do targets+=(--target "fuzz_$t"); done
+  cmake --build build-fuzz -j"${ESG_JOBS:-2}" "${targets[@]}"
 }
 
 # ASan keeps the allocation stack of every heap block in its stack depot, for the life of the
@@ -126,7 +129,7 @@ case "${1:-}" in
     selected=("$@")
     [ ${#selected[@]} -eq 0 ] && selected=("${TARGETS[@]}")
     export ASAN_OPTIONS="$(asan_options 2)"
-    build
+    build "${selected[@]}"
     work=${ESG_FUZZ_WORK:-build-fuzz/long}
     results=${ESG_FUZZ_RESULTS:-$work/results.tsv}
     mkdir -p "$work"

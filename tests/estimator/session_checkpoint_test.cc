@@ -668,32 +668,44 @@ TEST(SessionCheckpoint, ZeroInitialVarianceIsDataLoss) {
 }
 
 // Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 7): a positive but tiny initial
-// variance (here subnormal) passed the check above, yet sqrt(P/P0) overflowed: the restored session
-// reported an infinite relative sigma and wrote it into its own checkpoint, which then did not
-// restore. The fuzzer's blobs are tested in quarantine_test.cc.
-TEST(SessionCheckpoint, InitialVarianceThatOverflowsTheRelativeSigmaIsDataLoss) {
+// variance passed the check above, yet sqrt(P/P0) overflowed: the restored session reported an
+// infinite relative sigma and wrote it into its own checkpoint, which then did not restore. Now
+// P0 must be a positive normal number and the relative sigma is sqrt(P) / sqrt(P0), finite for
+// every finite P. The fuzzer's blobs are tested in quarantine_test.cc.
+TEST(SessionCheckpoint, SubnormalInitialVarianceIsDataLossAndTheSmallestNormalOneKeepsItFinite) {
   const Scenario s = AllPhases();
   const size_t cut = FrameAt(s, 0.5);
   const Prefix p = RunPrefix(s, Options(), cut);
   ASSERT_TRUE(p.session.initialized());
   const SessionCheckpoint good = p.session.ExportCheckpoint();
   const size_t n = static_cast<size_t>(p.session.state_size());
-  const size_t p0_begin = Version1Length(good) - n * n;
-  const size_t i = n - 5;
-  const size_t p_ii = p0_begin - n * n + i * n + i, p0_ii = p0_begin + i * n + i;
-  ASSERT_GT(good.values[p_ii], 1e-300);
-  SessionCheckpoint tiny = good;
-  tiny.values[p0_ii] = std::numeric_limits<double>::denorm_min();
-  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), tiny).status(),
-              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("over its initial value")));
-  // The bound is overflow itself, not a guess at what is plausible: a quotient of 1e250 restores,
-  // takes the next frame, and the session's own checkpoint restores after it.
-  SessionCheckpoint large = good;
-  large.values[p0_ii] = good.values[p_ii] * 1e-250;
+  const size_t p0_begin = Version1Length(good) - n * n, p_begin = p0_begin - n * n;
+  SessionCheckpoint subnormal = good;
+  subnormal.values[p0_begin + (n - 5) * n + (n - 5)] = std::numeric_limits<double>::denorm_min();
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), subnormal).status(),
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("not a positive normal number")));
+  // Every prior variance at the smallest normal number and every variance raised by 1e300 (P
+  // stays symmetric and positive semidefinite): P/P0 overflows on every state, sqrt(P)/sqrt(P0)
+  // on none. The session restores, reports finite relative sigmas, and whatever the next frame
+  // does (a failed step is a status), its own checkpoint restores.
+  SessionCheckpoint extreme = good;
+  for (size_t i = 0; i < n; ++i) {
+    extreme.values[p0_begin + i * n + i] = std::numeric_limits<double>::min();
+    extreme.values[p_begin + i * n + i] += 1e300;
+  }
   absl::StatusOr<EstimationSession> restored =
-      EstimationSession::FromCheckpoint(s.spec.config, Options(), large);
+      EstimationSession::FromCheckpoint(s.spec.config, Options(), extreme);
   ASSERT_THAT(restored, IsOk());
-  ASSERT_THAT(restored->AddFrame(s.frames[cut]), IsOk());
+  int ratios = 0;
+  for (const GyroEstimate& g : restored->Gyros()) {
+    for (const auto& [coefficient, ratio] : restored->RelativeSigma(g.id)) {
+      EXPECT_TRUE(std::isfinite(ratio)) << "gyro " << g.id << " coefficient " << coefficient;
+      EXPECT_GT(ratio, 1e300);
+      ++ratios;
+    }
+  }
+  EXPECT_GT(ratios, 0);
+  (void)restored->AddFrame(s.frames[cut]);  // any status
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(),
                                                 restored->ExportCheckpoint()),
               IsOk());

@@ -310,6 +310,46 @@ TEST(ConfigLimits, ReportedIntegrationRateIsRefusedWithItsReason) {
                                   "propagation step must resolve")));
 }
 
+// A prior sigma is 0 (the state held) or has a normal variance: a positive one so small that its
+// square underflows made the prior P0 zero or subnormal, and the session's relative sigma and
+// checkpoint not finite (docs/fuzzing.md, finding 7).
+TEST(ConfigLimits, APriorSigmaIsZeroOrHasANormalVariance) {
+  const double tiny_si = 1e-160, small_si = 1e-150;  // square subnormal; square normal (1e-300)
+  ASSERT_FALSE(std::isnormal(tiny_si * tiny_si));
+  ASSERT_TRUE(std::isnormal(small_si * small_si));
+  struct Field {
+    const char* name;
+    void (*set)(SpacecraftConfig&, double);
+  };
+  const Field fields[] = {
+      {"gyros[1].modelSigma.c1DegH[2]: ",
+       [](SpacecraftConfig& c, double v) { c.gyros[1].model_sigma.C1(2) = v; }},
+      {"gyros[0].misalignmentSigmaArcsec: ",
+       [](SpacecraftConfig& c, double v) { c.gyros[0].misalignment_sigma = v; }},
+      {"starTracker.latencySigmaS: ",
+       [](SpacecraftConfig& c, double v) { c.star_tracker.latency_sigma = v; }},
+      {"gyros[2].basisTerms[0].sigmaDegH: ",
+       [](SpacecraftConfig& c, double v) {
+         BasisTerm t;
+         t.kind = BasisKind::kSpinAxisHarmonic;  // degree 0: a case-fixed drift along axis 1
+         t.sigma = v;
+         c.gyros[2].basis_terms = {t};
+       }},
+  };
+  for (const Field& f : fields) {
+    for (double ok : {0.0, small_si}) {
+      SpacecraftConfig c = testing::PaperConfig();
+      f.set(c, ok);
+      EXPECT_THAT(ValidateConfig(c), IsOk()) << f.name << ok;
+    }
+    SpacecraftConfig c = testing::PaperConfig();
+    f.set(c, tiny_si);
+    EXPECT_THAT(ValidateConfig(c),
+                StatusIs(absl::StatusCode::kInvalidArgument,
+                         AllOf(StartsWith(f.name), HasSubstr("use 0 to hold the state fixed"))));
+  }
+}
+
 TEST(ConfigLimits, CaseToBodyMustBeAProperRotation) {
   SpacecraftConfig c = testing::PaperConfig();
   c.gyros[1].C_b_k(0, 0) += 1e-8;  // orthonormal to 1e-6: accepted

@@ -5,6 +5,7 @@
 // run on. Checkpoints of the older server format and of a session that was never initialised
 // restore without quarantine.
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <iterator>
 #include <string>
@@ -15,6 +16,7 @@
 #include "gtest/gtest.h"
 #include "estimator/calibration_model.h"
 #include "estimator/session.h"
+#include "fuzz/next_frame.h"
 #include "proto/convert.h"
 #include "server/checkpoint_codec.h"
 #include "storage/storage.h"
@@ -289,23 +291,31 @@ TEST(Quarantine, CheckpointOfAnUninitialisedSessionLoadsAndTheRunEqualsOffline) 
   EXPECT_EQ(StoredSessionValues(db, "QA-1"), OfflineSessionValues(run.config, "10+11", run.frames));
 }
 
+// The configuration of the checkpoint fuzz target's blobs, deploy/examples/rdk1.json.
+const estimator::SpacecraftConfig& Rdk1() {
+  static const estimator::SpacecraftConfig* config = [] {
+    absl::StatusOr<estimator::SpacecraftConfig> c =
+        proto_convert::ReadConfigFile(ESG_SOURCE_DIR "/deploy/examples/rdk1.json");
+    EXPECT_TRUE(c.ok()) << c.status();
+    return new estimator::SpacecraftConfig(c.ok() ? *c : estimator::SpacecraftConfig{});
+  }();
+  return *config;
+}
+
 // A checkpoint blob of fuzz/corpus/checkpoint/ restored as esgd restores a spacecraft of
-// deploy/examples/rdk1.json (its session under the model it names).
-absl::Status RestoreCorpusBlob(const std::string& name) {
+// rdk1.json: its session under the model it names.
+absl::StatusOr<estimator::EstimationSession> RestoreCorpusBlob(const std::string& name,
+                                                               estimator::SessionOptions* options) {
   std::ifstream in(ESG_SOURCE_DIR "/fuzz/corpus/checkpoint/" + name, std::ios::binary);
   if (!in.good()) return absl::NotFoundError(name);
   const std::string blob((std::istreambuf_iterator<char>(in)), {});
   absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(blob);
   if (!decoded.ok()) return decoded.status();
   if (!decoded->session.has_value()) return absl::InvalidArgumentError("no session in " + name);
-  absl::StatusOr<estimator::SpacecraftConfig> config =
-      proto_convert::ReadConfigFile(ESG_SOURCE_DIR "/deploy/examples/rdk1.json");
-  if (!config.ok()) return config.status();
-  estimator::SessionOptions options;
   absl::StatusOr<estimator::ModelSpec> model = estimator::ParseModel(decoded->model);
   if (!model.ok()) return model.status();
-  options.model = *model;
-  return estimator::EstimationSession::FromCheckpoint(*config, options, *decoded->session).status();
+  options->model = *model;
+  return estimator::EstimationSession::FromCheckpoint(Rdk1(), *options, *decoded->session);
 }
 
 // Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 3): this blob (a version-1 session
@@ -313,21 +323,51 @@ absl::Status RestoreCorpusBlob(const std::string& name) {
 // after one frame the session's own checkpoint did not. It must be DataLoss at the restore, so
 // esgd quarantines and rebuilds the spacecraft instead of running on with it.
 TEST(Quarantine, CheckpointWithAZeroInitialVarianceIsRefusedAtTheRestore) {
-  const absl::Status restored = RestoreCorpusBlob("regression-zero-initial-variance.bin");
+  estimator::SessionOptions options;
+  const absl::Status restored =
+      RestoreCorpusBlob("regression-zero-initial-variance.bin", &options).status();
   EXPECT_EQ(restored.code(), absl::StatusCode::kDataLoss) << restored;
   EXPECT_THAT(std::string(restored.message()), HasSubstr("initial covariance diagonal"));
 }
 
-// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 7): in these blobs one coefficient's
-// variance over its initial variance overflows (sqrt(P/P0) = inf), so the session's own
-// checkpoint after one frame held inf and did not restore. DataLoss at the restore, as above.
-TEST(Quarantine, CheckpointWhoseRelativeSigmaOverflowsIsRefusedAtTheRestore) {
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 7): a coefficient's P/P0
+// overflowed, and sqrt(P/P0) = inf went into the session's own checkpoint after one frame, which
+// then did not restore. In blobs a and b the tiny P0 entry is subnormal, which no configuration
+// gives (ValidateConfig): DataLoss at the restore, so esgd quarantines and rebuilds.
+TEST(Quarantine, CheckpointWithASubnormalInitialVarianceIsRefusedAtTheRestore) {
   for (const char* name : {"regression-relative-sigma-overflow-a.bin",
                            "regression-relative-sigma-overflow-b.bin"}) {
-    const absl::Status restored = RestoreCorpusBlob(name);
+    estimator::SessionOptions options;
+    const absl::Status restored = RestoreCorpusBlob(name, &options).status();
     EXPECT_EQ(restored.code(), absl::StatusCode::kDataLoss) << name << ": " << restored;
-    EXPECT_THAT(std::string(restored.message()), HasSubstr("over its initial value")) << name;
+    EXPECT_THAT(std::string(restored.message()), HasSubstr("not a positive normal number")) << name;
   }
+}
+
+// Finding 7, blob c, found by the long run against the first fix, which refused a checkpoint with
+// P/P0 not finite on any diagonal entry: P0 is normal (1.7e-307) and every P/P0 finite at the
+// restore, and the next frame's propagation raised a spin-axis variance to 1.6e31, so P/P0
+// overflowed on that state (where no relative sigma is formed) and the first fix refused the
+// session's own checkpoint. The blob restores, every relative sigma stays finite, and after the
+// frame the fuzz target gives it (a failed step is a status) the session's own checkpoint
+// restores.
+TEST(Quarantine, CheckpointWithATinyNormalInitialVarianceStaysRestorableAfterAFrame) {
+  estimator::SessionOptions options;
+  absl::StatusOr<estimator::EstimationSession> s =
+      RestoreCorpusBlob("regression-relative-sigma-overflow-c.bin", &options);
+  ASSERT_TRUE(s.ok()) << s.status();
+  (void)s->AddFrame(fuzz::NextFrame(*s, Rdk1()));
+  int ratios = 0;
+  for (const estimator::GyroConfig& g : Rdk1().gyros) {
+    for (const auto& [coefficient, ratio] : s->RelativeSigma(g.id)) {
+      EXPECT_TRUE(std::isfinite(ratio)) << "gyro " << g.id << " coefficient " << coefficient;
+      ++ratios;
+    }
+  }
+  EXPECT_GT(ratios, 0);
+  const absl::StatusOr<estimator::EstimationSession> again =
+      estimator::EstimationSession::FromCheckpoint(Rdk1(), options, s->ExportCheckpoint());
+  EXPECT_TRUE(again.ok()) << again.status();
 }
 
 TEST(Quarantine, UnusableConfigurationRefusesItsFramesUntilReconfigured) {
