@@ -348,6 +348,12 @@ TEST(ConfigLimits, APriorSigmaIsZeroOrHasANormalVariance) {
                 StatusIs(absl::StatusCode::kInvalidArgument,
                          AllOf(StartsWith(f.name), HasSubstr("use 0 to hold the state fixed"))));
   }
+  SpacecraftConfig c = testing::PaperConfig();
+  fields[0].set(c, tiny_si);
+  EXPECT_THAT(ValidateConfig(c).message(),
+              ::testing::Eq("gyros[1].modelSigma.c1DegH[2]: 2.06265e-155 deg/h is a prior sigma "
+                            "below about 3.07679e-149 deg/h, whose variance is not a normal "
+                            "double: use 0 to hold the state fixed, or a sigma of at least that"));
 }
 
 TEST(ConfigLimits, CaseToBodyMustBeAProperRotation) {
