@@ -13,6 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/types/span.h"
 #include "estimator/ekf.h"
+#include "estimator/session_internal.h"
 
 namespace esg::estimator {
 
@@ -175,13 +176,13 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   std::string bad_value;
   auto mark_bad = [&](double x, const char* what) {
     if (bad_value.empty()) {
-      bad_value = absl::StrFormat("checkpoint: value %d = %g: %s", pos - 1, x, what);
+      bad_value = absl::StrFormat("checkpoint: value %d = %.10g: %s", pos - 1, x, what);
     }
   };
   auto get_int = [&]() {
     const double x = get();
-    if (!(std::abs(x) <= 1e9) || x != std::floor(x)) {
-      mark_bad(x, "an integer field is not an integer");
+    if (!(std::abs(x) <= session_internal::kMaxCount) || x != std::floor(x)) {
+      mark_bad(x, "an integer field is not an integer in [-1e9, 1e9]");
       return 0;
     }
     return static_cast<int>(x);

@@ -16,6 +16,15 @@ inline constexpr double kNoiseFloor = 0.01 * kRadPerArcsec;
 // next measurement step must name the same gyro (docs/decisions.md D24).
 inline constexpr double kImmediateIsolationStrength = 2.0;
 
+// A count the session keeps (steps without the star tracker, rejections and acceptances in a row,
+// star-tracker realignments) stops at this value, 1e9 (1,900 years of steps at one a minute): the
+// largest integer its checkpoint restore reads (session_checkpoint.cc). A counter restored at the
+// limit and then incremented wrote a checkpoint that did not restore (docs/fuzzing.md, finding 8).
+inline constexpr int kMaxCount = 1000000000;
+inline void Count(int& counter) {
+  if (counter < kMaxCount) ++counter;
+}
+
 // A span in seconds, as the integrators take it.
 inline double Seconds(absl::Duration d) { return absl::ToDoubleSeconds(d); }
 

@@ -22,6 +22,7 @@ using Eigen::Quaterniond;
 using Eigen::Vector3d;
 
 using session_internal::kNoiseFloor;
+using session_internal::Count;
 
 EstimationSession::StarTrackerRows EstimationSession::GyroStarTrackerRows(
     int i, const Matrix3d& C_in_b_st) const {
@@ -159,7 +160,7 @@ bool EstimationSession::CheckStarTrackerMount(const TelemetryFrame& frame, bool 
     st_mount_noise_var_b_ += decision->covariance_b.diagonal();
   }
   st_mount_var_b_ += decision->covariance_b.diagonal();
-  ++st_realignments_;
+  Count(st_realignments_);
   // The rejections of the streak are explained: the reset guard (D19) starts afresh.
   star_tracker_voted_faulty_ = false;
   consecutive_rejections_ = 0;

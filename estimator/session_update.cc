@@ -33,6 +33,7 @@ using Eigen::VectorXd;
 
 using session_internal::kImmediateIsolationStrength;
 using session_internal::kNoiseFloor;
+using session_internal::Count;
 
 absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
   report.measurement_step = true;
@@ -250,11 +251,12 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     steps_without_star_tracker_ = 0;
     consecutive_rejections_ = 0;
     star_tracker_voted_faulty_ = false;
-    if (++consecutive_accepted_ >= kResetAfterRejections) star_tracker_accepted_ = true;
+    Count(consecutive_accepted_);
+    if (consecutive_accepted_ >= kResetAfterRejections) star_tracker_accepted_ = true;
   } else {
     consecutive_accepted_ = 0;
-    ++steps_without_star_tracker_;
-    if (st_present) ++consecutive_rejections_;
+    Count(steps_without_star_tracker_);
+    if (st_present) Count(consecutive_rejections_);
   }
   // Until the star tracker has been accepted for kResetAfterRejections steps in a row since the
   // filter started, the pairs' inertial axes rest on the star-tracker sample of initialisation:

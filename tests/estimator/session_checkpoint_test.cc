@@ -711,6 +711,34 @@ TEST(SessionCheckpoint, SubnormalInitialVarianceIsDataLossAndTheSmallestNormalOn
               IsOk());
 }
 
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 8): a checkpoint whose count of
+// steps without the star tracker (value 19) was 1e9, the largest integer the restore reads,
+// restored; a frame without the star tracker made it 1e9 + 1 and the session's own checkpoint
+// did not restore. The session's counts now stop at 1e9. Input:
+// fuzz/corpus/checkpoint/regression-step-count-at-limit.bin.
+TEST(SessionCheckpoint, StepCountsRestoredAtTheirLimitStayThereAndTheCheckpointRestores) {
+  const Scenario s = AllPhases();
+  const size_t cut = FrameAt(s, 0.5);
+  const Prefix p = RunPrefix(s, Options(), cut);
+  ASSERT_TRUE(p.session.initialized());
+  SessionCheckpoint c = p.session.ExportCheckpoint();
+  c.values[1] = 0.0;   // use_star_tracker: the next frame is a step without it
+  c.values[19] = 1e9;  // steps_without_star_tracker
+  c.values[20] = 1e9;  // consecutive_rejections
+  absl::StatusOr<EstimationSession> restored =
+      EstimationSession::FromCheckpoint(s.spec.config, Options(), c);
+  ASSERT_THAT(restored, IsOk());
+  ASSERT_THAT(restored->AddFrame(s.frames[cut]), IsOk());
+  const SessionCheckpoint after = restored->ExportCheckpoint();
+  EXPECT_EQ(after.values[19], 1e9);
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), after), IsOk());
+  c.values[19] = 1e9 + 1;
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), c).status(),
+              StatusIs(absl::StatusCode::kDataLoss,
+                       HasSubstr("value 19 = 1000000001: an integer field is not an integer in "
+                                 "[-1e9, 1e9]")));
+}
+
 // Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 4): an uninitialised session's
 // checkpoint whose working pair named gyro 0 restored (pairs were checked only once initialised),
 // and the first frame with a star-tracker fix read the frame's gyro at index -1.
