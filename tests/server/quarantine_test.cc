@@ -291,12 +291,15 @@ TEST(Quarantine, CheckpointOfAnUninitialisedSessionLoadsAndTheRunEqualsOffline) 
   EXPECT_EQ(StoredSessionValues(db, "QA-1"), OfflineSessionValues(run.config, "10+11", run.frames));
 }
 
-// The configuration of the checkpoint fuzz target's blobs, deploy/examples/rdk1.json.
+// The configuration of the checkpoint fuzz target's blobs as the target sets it
+// (fuzz/fuzz_checkpoint.cc): deploy/examples/rdk1.json propagated at 1 Hz, so a frame given to a
+// restored session is propagated as the fuzzer propagated it.
 const estimator::SpacecraftConfig& Rdk1() {
   static const estimator::SpacecraftConfig* config = [] {
     absl::StatusOr<estimator::SpacecraftConfig> c =
         proto_convert::ReadConfigFile(ESG_SOURCE_DIR "/deploy/examples/rdk1.json");
     EXPECT_TRUE(c.ok()) << c.status();
+    if (c.ok()) c->filter.integration_rate_hz = 1.0;
     return new estimator::SpacecraftConfig(c.ok() ? *c : estimator::SpacecraftConfig{});
   }();
   return *config;
