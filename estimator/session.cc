@@ -160,6 +160,8 @@ const char* EventKindName(Event::Kind kind) {
       return "GYRO_STARTED";
     case Event::Kind::kStarTrackerRealigned:
       return "STAR_TRACKER_REALIGNED";
+    case Event::Kind::kDriftChanged:
+      return "DRIFT_CHANGED";
   }
   return "?";
 }
@@ -279,8 +281,13 @@ void EstimationSession::UpdateState(const StepReport& report) {
     convergence_mark_time_ = report.time;
     convergence_mark_sigma_ = r;
   }
-  if (state_ == SessionState::kFaulted) return;
-  if (steps_without_star_tracker_ >= 3) {
+  // FAULTED only when no usable pair remains; an exclusion with a pair left is sensor health
+  // (degraded()), not a state (session.h).
+  int usable = 0;
+  for (const GyroState& g : gyros_) usable += g.faulty ? 0 : 1;
+  if (usable < 2) {
+    state_ = SessionState::kFaulted;
+  } else if (steps_without_star_tracker_ >= 3) {
     state_ = SessionState::kAutonomous;
   } else {
     state_ = converged_ ? SessionState::kConverged : SessionState::kCalibrating;
@@ -333,6 +340,8 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
   const double since_update = Seconds(frame.time - next.last_update_time_);
   if (since_update >= config_.filter.measurement_step - 1e-3) {
     if (absl::Status s = next.MeasurementUpdate(frame, report); !s.ok()) return s;
+    next.TrackPosteriors(frame, next.use_star_tracker_ && frame.star_tracker.has_value() &&
+                                    frame.star_tracker->valid);
     next.last_update_time_ = frame.time;
     MonitorConsistency(next.consistency_, next.widening_, report);
     if (options_.adaptive_noise) WidenOnInconsistency(next.widening_, report);
@@ -386,6 +395,7 @@ std::vector<GyroEstimate> EstimationSession::Gyros() const {
     const int h = layout_.SpinAxis(i);
     e.spin_axis_sigma = P_.block<2, 2>(h, h).diagonal().cwiseSqrt();
     e.faulty = g.faulty;
+    e.exclusion = g.exclusion;
     out.push_back(e);
   }
   return out;

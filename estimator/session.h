@@ -27,7 +27,7 @@
 // The measurement noise covariance comes from one noise map (star-tracker noise about body axes,
 // readout noise of every gyro), so its correlations across components are exact.
 //
-// SESSION STATES
+// SESSION STATES (progress of the filter; sensor health is its own dimension, below)
 //   NO_DATA      no frame with a valid star-tracker quaternion and a readable pair yet.
 //                -> CALIBRATING by AddFrame when such a frame initialises the filter.
 //   CALIBRATING  filter running; free coefficients still converging.
@@ -36,8 +36,13 @@
 //   CONVERGED    as CALIBRATING, coefficients settled.
 //   AUTONOMOUS   star-tracker data absent or rejected for the last 3 steps (or withheld by
 //                SetStarTrackerUse(false)): output from the gyros alone.
-//   FAULTED      a gyro of the working pair was isolated (eq. (12), or the three-pair isolation of
-//                fault_detection.h); output is on a pair without it.
+//   FAULTED      no usable pair remains: fewer than two running gyros are not excluded. No
+//                attitude output.
+// SENSOR HEALTH: degraded() when a running gyro is excluded (GyroEstimate::exclusion says why
+// and when); the output then comes from a pair without it, valid, in whichever progress state
+// the filter is. A gyro is excluded only for an abrupt fault of its readings or a drift change
+// beyond filter.driftChangeLimitDegH (reading_fault_monitor.h, docs/decisions.md D94), never for
+// a drift the model lacks.
 // Invariants: (1) P is symmetric with a non-negative diagonal after every step; (2) every
 // h_in_g is a unit vector; (3) a rejected measurement never changes the state; (4) frames are
 // applied in strictly increasing time.
@@ -45,6 +50,7 @@
 #define ESG_ESTIMATOR_SESSION_H_
 
 #include <array>
+#include <map>
 #include <optional>
 #include <string>
 #include <utility>
@@ -62,6 +68,7 @@
 #include "estimator/gyro_change_detector.h"
 #include "estimator/measurements.h"
 #include "estimator/noise_widening.h"
+#include "estimator/reading_fault_monitor.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/star_tracker_mount.h"
 #include "estimator/state_layout.h"
@@ -101,6 +108,9 @@ struct Event {
                              // its drift mapped with a pair without it, output moved or not valid
     kGyroStarted,            // a configured gyro that was not running reports (the cold spare
                              // switched on) and joined the filter
+    kDriftChanged,           // the accumulated star-tracker test (D33) named a gyro whose
+                             // drift changed by less than filter.driftChangeLimitDegH: its
+                             // coefficients are re-opened (D94); nothing excluded
     kStarTrackerRealigned,   // the pairs voted the star tracker faulty for a window of steps
                              // with a constant rotation between them (a mount shift,
                              // star_tracker_mount.h, D34): the star tracker is corrected by it
@@ -129,6 +139,26 @@ struct AttitudeEstimate {
   std::string invalid_reason;  // why not valid (empty when valid)
 };
 
+// Why a gyro was excluded (D94): an abrupt fault of its readings, or a drift change beyond the
+// configured limit. kEarlier: excluded by a session restored from a checkpoint before version 7,
+// which kept no reason.
+enum class ExclusionReason { kNone, kReadingJump, kBeyondAnyDrift, kErratic, kDriftBeyondLimit, kEarlier };
+const char* ExclusionReasonName(ExclusionReason r);
+
+struct Exclusion {
+  ExclusionReason reason = ExclusionReason::kNone;
+  absl::Time time = absl::InfinitePast();  // measurement epoch of the exclusion
+  // The evidence: kReadingJump the jump [arcsec] and its likelihood ratio over a drift change;
+  // kBeyondAnyDrift and kDriftBeyondLimit the rate [deg/h] and the bound [deg/h]; kErratic the
+  // window's chi-square and its threshold.
+  double value = 0.0;
+  double threshold = 0.0;
+  // Which track showed it (reading_fault_monitor.h): 0 the star-tracker rebuild, 1 the rebuild
+  // from the pair of the two other gyros, -1 none (kDriftBeyondLimit, kEarlier).
+  int source = -1;
+  std::string Describe() const;  // one sentence for operators
+};
+
 struct GyroEstimate {
   int id = 0;
   DriftCoefficients coefficients;        // full current model values [rad/s]
@@ -143,7 +173,8 @@ struct GyroEstimate {
   Eigen::Vector2d residual_drift_sigma = Eigen::Vector2d::Zero();  // [rad/s]
   Eigen::Vector3d h_in = Eigen::Vector3d::UnitZ();                 // predicted spin axis
   Eigen::Vector2d spin_axis_sigma = Eigen::Vector2d::Zero();       // [rad]
-  bool faulty = false;
+  bool faulty = false;  // excluded
+  Exclusion exclusion;  // why, when faulty
 };
 
 struct StepReport {
@@ -242,7 +273,7 @@ Eigen::Vector3d CorrectReadout(const GyroConfig& gc, const Eigen::Vector3d& h_me
 double InitialResidualDriftSigma(const SessionOptions& options);
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
-// writes version 6; FromCheckpoint reads versions 1 to 6.
+// writes version 7; FromCheckpoint reads versions 1 to 7.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
@@ -288,6 +319,8 @@ class EstimationSession {
   void SetStarTrackerUse(bool use) { use_star_tracker_ = use; }
 
   SessionState state() const { return state_; }
+  // A running gyro is excluded: the output runs on a pair without it (SESSION STATES above).
+  bool degraded() const;
   bool initialized() const { return initialized_; }
   absl::Time last_frame_time() const { return last_time_; }
   std::array<int, 2> working_pair() const { return working_pair_; }
@@ -318,14 +351,16 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
-  // Version 6: everything a session restored from it needs to continue bit for bit as this one
+  // Version 7: everything a session restored from it needs to continue bit for bit as this one
   // would (same reports, state and covariance), at any point, including before initialisation.
   // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // Reads versions 1 to 6 (version 1 lacks the consistency monitor and the star-tracker
+  // Reads versions 1 to 7 (version 1 lacks the consistency monitor and the star-tracker
   // anchoring flags, version 2 the process-noise widening, version 3 the estimated latency,
   // version 4 the star-tracker mount, version 5 the basis terms' values and the suspension
-  // voltages: session_checkpoint.cc). DataLoss, with a message starting "checkpoint", if
+  // voltages, version 6 the exclusion reasons and the reading-fault monitor:
+  // session_checkpoint.cc; a session from versions 1-6 that was FAULTED with a usable pair left
+  // resumes in its progress state, degraded). DataLoss, with a message starting "checkpoint", if
   // the version is unknown, the values are truncated or oversized, a field holds a value it
   // cannot (an integer or flag field that is not one, a non-finite real, an unknown state, a
   // pair naming gyros the session lacks, an invalid covariance), or the checkpoint does not fit
@@ -348,6 +383,11 @@ class EstimationSession {
     DriftVector theta = DriftVector::Zero();
     Eigen::Vector3d phi_b = Eigen::Vector3d::Zero();
     bool faulty = false;
+    Exclusion exclusion;  // why faulty (D94); in the checkpoint from version 7
+    // d(spin-axis motion)/d(drivers) since the last measurement update, inertial (3 x the
+    // gyro's spin-axis drivers, state_layout.h): the propagation's E carried to inertial axes
+    // and summed over the frames. In the checkpoint from version 7.
+    Eigen::MatrixXd motion_in;
     // Whether the latest frame carried this gyro's reading; h_k_last is that reading, or when it
     // did not, the case-frame axis the attitude of a pair with fresh readings implies
     // (session_propagation.cc). For interpolation to the integration rate.
@@ -416,6 +456,44 @@ class EstimationSession {
   // STAR_TRACKER_REALIGNED. True when the star tracker was re-referenced at this step.
   bool CheckStarTrackerMount(const TelemetryFrame& frame, bool voted, const Eigen::Quaterniond& q_st,
                              StepReport& report);
+
+  // session_reading_faults.cc (D94)
+  // Feeds the reading-fault monitor with this step's tracks (the star-tracker rebuild of every
+  // gyro with a reading when q_st is present, the rebuild from the pair of the two others when
+  // three gyros read) and records each verdict in abrupt_.
+  void TrackReadings(const TelemetryFrame& frame, bool st_present, const Eigen::Quaterniond& q_st,
+                     const std::vector<int>& fresh);
+  // The current values of gyro gyros_[i]'s spin-axis drivers (residual drift, free
+  // coefficients, free basis terms: the order of state_layout.h).
+  Eigen::VectorXd DriverValues(int i) const;
+  // After the step's update: the tracks' posterior residuals.
+  void TrackPosteriors(const TelemetryFrame& frame, bool st_present);
+  // The verdict that lets gyro `id` be excluded: one within the last kAbruptMemorySteps
+  // measurement steps, or nullopt (then whatever names the gyro is a drift the model lacks).
+  struct AbruptRecord {
+    absl::Time time = absl::InfinitePast();
+    ReadingVerdict verdict = ReadingVerdict::kNone;
+    ReadingFaultMonitor::Source source = ReadingFaultMonitor::Source::kStarTracker;
+    double value = 0.0;
+    double threshold = 0.0;
+    double statistic = 0.0;
+  };
+  std::optional<AbruptRecord> RecentAbrupt(int id, absl::Time now) const;
+  // A gyro named faulty without a verdict of its readings: withheld at the first step it is
+  // named (its readings' verdict may need one more step), applied from the second step in a row
+  // on (a drift the model lacks is for the filter to absorb). True: withhold it now.
+  bool WithholdUnverified(int id, absl::Time now);
+  // The exclusion record a recent abrupt verdict gives.
+  static Exclusion ExclusionFrom(const AbruptRecord& a);
+  // The bound on gyro gyros_[i]'s drift change over one interval [rad/s]: the configured limit
+  // plus three times the model's own rate uncertainty (free coefficients, basis terms, residual
+  // drift, from P at the current reading) plus the widening's equivalent drift.
+  double DriftBound(int i) const;
+  // Re-opens gyro `id`'s free coefficients and basis terms (their initial variance added) and
+  // its residual drift (the change's square added) after a drift change below the limit.
+  void ReopenDrift(int id, double change_rad_s);
+  // Excludes gyro `id` with `why` (no event: the caller reports it).
+  void MarkExcluded(int id, const Exclusion& why);
   // Covariance in inertial axes of the corrected star-tracker attitude (C_in_b_st its rotation
   // matrix): the configured noise about the body axes, plus, while the latency is a state, its
   // variance times the body rate's direction.
@@ -536,6 +614,14 @@ class EstimationSession {
   // estimate when layout_.has_latency() (fed back by ApplyCorrection). In the checkpoint from
   // version 4.
   double latency_s_ = 0.0;
+  // The reading-fault monitor's tracks and each gyro's latest verdict (D94). In the checkpoint
+  // from version 7.
+  ReadingFaultMonitor reading_monitor_;
+  std::map<int, AbruptRecord> abrupt_;
+  // The gyro last named without a verdict and the step (WithholdUnverified). In the checkpoint
+  // from version 7.
+  int unverified_gyro_ = 0;
+  absl::Time unverified_time_ = absl::InfinitePast();
 };
 
 }  // namespace esg::estimator

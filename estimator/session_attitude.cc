@@ -146,6 +146,12 @@ AttitudeEstimate EstimationSession::OutputAttitude(absl::Time time) const {
     out.invalid_reason = "no star-tracker fix with the working pair's readings yet";
     return out;
   }
+  if (a->faulty || b->faulty) {
+    out.invalid_reason = absl::StrFormat(
+        "no usable pair: gyro %d excluded (%s)", a->faulty ? a->id : b->id,
+        (a->faulty ? a : b)->exclusion.Describe());
+    return out;
+  }
   if (!a->has_reading || !b->has_reading) {
     std::string missing;
     for (const GyroState& g : gyros_) {

@@ -56,11 +56,20 @@ using Eigen::VectorXd;
 //   [rad/s per unit of s]), then has_u and u_k_v (3, zeros when has_u is 0), the held suspension
 //   voltages [V]. A session restored from an earlier version starts the terms at their configured
 //   values, without voltages.
+// Version 7 (written): version 6's values, then per running gyro (in the order above) its
+//   exclusion (D94): reason (ExclusionReason), time (3), value, threshold, source; then r (a count) and
+//   the reading-fault monitor's state (r values, ReadingFaultMonitor::ExportState); then a (a
+//   count) and per recent verdict: gyro id, time (3), verdict (ReadingVerdict), source, value,
+//   threshold, statistic; then unverified_gyro and unverified_time (3); then per running gyro
+//   the columns m of its motion since the last update (0 or its driver count) and the 3 x m
+//   values, row by row. A session restored from an earlier version gives each excluded gyro
+//   the reason kEarlier at its last update time, starts the monitor afresh, and one that was
+//   FAULTED with a usable pair left resumes in its progress state (degraded).
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 6;
+  c.version = 7;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -147,13 +156,42 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
     v.push_back(g.u_k_v.has_value() ? 1 : 0);
     put_vec(g.u_k_v.value_or(Eigen::Vector3d::Zero()));
   }
+  // Version 7.
+  for (const GyroState& g : gyros_) {
+    v.push_back(static_cast<double>(g.exclusion.reason));
+    put_time(g.exclusion.time);
+    v.push_back(g.exclusion.value);
+    v.push_back(g.exclusion.threshold);
+    v.push_back(g.exclusion.source);
+  }
+  const std::vector<double> reading = reading_monitor_.ExportState();
+  v.push_back(static_cast<double>(reading.size()));
+  v.insert(v.end(), reading.begin(), reading.end());
+  v.push_back(static_cast<double>(abrupt_.size()));
+  for (const auto& [id, a] : abrupt_) {
+    v.push_back(id);
+    put_time(a.time);
+    v.push_back(static_cast<double>(a.verdict));
+    v.push_back(static_cast<double>(a.source));
+    v.push_back(a.value);
+    v.push_back(a.threshold);
+    v.push_back(a.statistic);
+  }
+  v.push_back(unverified_gyro_);
+  put_time(unverified_time_);
+  for (const GyroState& g : gyros_) {
+    v.push_back(static_cast<double>(g.motion_in.cols()));
+    for (int r = 0; r < g.motion_in.rows(); ++r) {
+      for (int c2 = 0; c2 < g.motion_in.cols(); ++c2) v.push_back(g.motion_in(r, c2));
+    }
+  }
   return c;
 }
 
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version < 1 || checkpoint.version > 6) {
+  if (checkpoint.version < 1 || checkpoint.version > 7) {
     return absl::DataLossError(
         absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
@@ -347,6 +385,79 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
       if (has_u) g.u_k_v = u_k_v;
     }
   }
+  if (checkpoint.version >= 7) {
+    for (GyroState& g : s.gyros_) {
+      const int reason = get_int();
+      if (reason < static_cast<int>(ExclusionReason::kNone) ||
+          reason > static_cast<int>(ExclusionReason::kEarlier)) {
+        mark_bad(reason, "an exclusion reason is unknown");
+      }
+      g.exclusion.reason = static_cast<ExclusionReason>(reason);
+      g.exclusion.time = get_time();
+      g.exclusion.value = get_real();
+      g.exclusion.threshold = get_real();
+      g.exclusion.source = get_int();
+      if (g.exclusion.source < -1 || g.exclusion.source > 1) {
+        mark_bad(g.exclusion.source, "an exclusion's track is not -1, 0 or 1");
+      }
+      if ((g.exclusion.reason != ExclusionReason::kNone) != g.faulty) {
+        mark_bad(reason, "an exclusion reason does not match the gyro's excluded flag");
+      }
+    }
+    const int n_reading = get_int();
+    if (short_read || n_reading < 0 || static_cast<size_t>(n_reading) > v.size() - pos) {
+      return absl::DataLossError("checkpoint: truncated (reading-fault monitor)");
+    }
+    if (absl::Status st =
+            s.reading_monitor_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_reading));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
+    }
+    pos += n_reading;
+    const int n_abrupt = get_int();
+    if (short_read || n_abrupt < 0 || n_abrupt > kMaxGyros) {
+      return absl::DataLossError("checkpoint: bad count of reading verdicts");
+    }
+    for (int k = 0; k < n_abrupt; ++k) {
+      const int id = get_int();
+      AbruptRecord a;
+      a.time = get_time();
+      const int verdict = get_int();
+      const int source = get_int();
+      if (verdict < static_cast<int>(ReadingVerdict::kJump) ||
+          verdict > static_cast<int>(ReadingVerdict::kErratic)) {
+        mark_bad(verdict, "a reading verdict is unknown");
+      }
+      if (source != 0 && source != 1) mark_bad(source, "a reading source is not 0 or 1");
+      a.verdict = static_cast<ReadingVerdict>(verdict);
+      a.source = static_cast<ReadingFaultMonitor::Source>(source);
+      a.value = get_real();
+      a.threshold = get_real();
+      a.statistic = get_real();
+      if (s.Find(id) == nullptr) mark_bad(id, "a reading verdict names a gyro not running");
+      s.abrupt_[id] = a;
+    }
+    s.unverified_gyro_ = get_int();
+    s.unverified_time_ = get_time();
+    for (int i = 0; i < s.gyro_count(); ++i) {
+      const int cols = get_int();
+      if (short_read || (cols != 0 && cols != s.layout_.SpinAxisDriverCount(i))) {
+        return absl::DataLossError(absl::StrFormat(
+            "checkpoint: gyro %d's motion has %d drivers, the layout %d", s.gyros_[i].id, cols,
+            s.layout_.SpinAxisDriverCount(i)));
+      }
+      s.gyros_[i].motion_in = MatrixXd::Zero(cols == 0 ? 0 : 3, cols);
+      for (int r = 0; r < s.gyros_[i].motion_in.rows(); ++r) {
+        for (int c2 = 0; c2 < cols; ++c2) s.gyros_[i].motion_in(r, c2) = get_real();
+      }
+    }
+  } else {
+    for (GyroState& g : s.gyros_) {
+      if (!g.faulty) continue;
+      g.exclusion.reason = ExclusionReason::kEarlier;
+      g.exclusion.time = s.last_update_time_;
+    }
+  }
   if (short_read || pos != v.size()) {
     return absl::DataLossError("checkpoint: truncated or oversized");
   }
@@ -378,6 +489,18 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   if (state_value < static_cast<int>(SessionState::kNoData) ||
       state_value > static_cast<int>(SessionState::kFaulted)) {
     return absl::DataLossError(absl::StrCat("checkpoint: unknown session state ", state_value));
+  }
+  if (checkpoint.version < 7 && s.state_ == SessionState::kFaulted) {
+    // Before version 7 FAULTED also meant "a gyro of the working pair was isolated and the
+    // output moved to a clean pair" (docs/decisions.md D30, D94): with a usable pair left the
+    // session resumes in its progress state, degraded.
+    int usable = 0;
+    for (const GyroState& g : s.gyros_) usable += g.faulty ? 0 : 1;
+    if (usable >= 2) {
+      s.state_ = s.steps_without_star_tracker_ >= 3 ? SessionState::kAutonomous
+                 : s.converged_                     ? SessionState::kConverged
+                                                    : SessionState::kCalibrating;
+    }
   }
   if (s.steps_without_star_tracker_ < 0 || s.consecutive_rejections_ < 0 ||
       s.consecutive_accepted_ < 0) {

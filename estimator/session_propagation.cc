@@ -203,6 +203,12 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     for (int j = 0; j < layout_.BasisCount(i); ++j) {
       E[i].col(layout_.DriftSize() + layout_.ThetaCount(i) + j) = Tt * minus_hx * M_basis[i].col(j);
     }
+    // The spin axis's motion against its drivers since the last measurement update, inertial
+    // (the reading-fault tracks, session_reading_faults.cc).
+    if (g.motion_in.rows() != 3 || g.motion_in.cols() != E[i].cols()) {
+      g.motion_in = MatrixXd::Zero(3, E[i].cols());
+    }
+    g.motion_in += g.T() * E[i];
     g.h_k_last = h_k_end[i];
   }
   // In place: AddFrame and Predict work on a copy of the session, so a failure here leaves the

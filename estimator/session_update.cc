@@ -67,6 +67,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   for (const GyroState& g : gyros_) {
     if (has_reading(g)) fresh.push_back(g.id);
   }
+  // The tracks of every gyro's readings (D94): the only evidence that lets a gyro be excluded.
+  TrackReadings(frame, st_available, q_st, fresh);
   bool isolated = false;
   if (fresh.size() == 3) {
     isolated = IsolateWithThreePairs(frame, {fresh[0], fresh[1], fresh[2]}, st_available, q_st,
@@ -82,7 +84,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     const GyroState* a2 = Find(reserve_pair_[0]);
     const GyroState* b2 = Find(reserve_pair_[1]);
     const bool reserve_usable = reserve_pair_ != working_pair_ && a2 && b2 && has_reading(*a2) &&
-                                has_reading(*b2) && state_ != SessionState::kFaulted;
+                                has_reading(*b2);
     if (a1 && b1 && has_reading(*a1) && has_reading(*b1)) {
       q1 = PairQuaternion(a1->id, b1->id, a1->h_k_last, b1->h_k_last, &S1);
     }
@@ -102,16 +104,41 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     st_agrees_with_pairs = mt.available[kMismatch13] && mt.angle[kMismatch13] < mt.allowed[kMismatch13] &&
                            (!mt.available[kMismatch23] || mt.angle[kMismatch23] < mt.allowed[kMismatch23]);
     // The decision is fault_detection's (DecideFault); here it is applied and reported.
-    const FaultDecision decision = DecideFault(mt, working_pair_, reserve_pair_);
+    FaultDecision decision = DecideFault(mt, working_pair_, reserve_pair_);
+    // D94: a pair named faulty whose gyro shows no abrupt change of its readings disagrees by a
+    // drift the model lacks: nothing is excluded, the gyro is withheld at this step.
+    std::optional<AbruptRecord> abrupt;
+    if (decision.excluded_gyro != 0) abrupt = RecentAbrupt(decision.excluded_gyro, frame.time);
+    if (decision.excluded_gyro != 0 && !abrupt.has_value()) {
+      const int m = decision.evidence;
+      report.events.push_back(Event{
+          Event::Kind::kFaultAmbiguous, frame.time,
+          absl::StrFormat("gyro %d", decision.excluded_gyro), RadToArcsec(mt.angle[m]),
+          RadToArcsec(mt.allowed[m]), "arcsec",
+          absl::StrFormat("eq. (12) names the %s pair, but the readings of gyro %d show no "
+                          "abrupt change (a jump, frozen or erratic readings, a drift change "
+                          "beyond %.3g deg/h): a drift the model lacks, not a fault; gyro %d is "
+                          "not excluded (its measurements are withheld at the first step it is "
+                          "named, applied from the second)",
+                          decision.faulty == Subsystem::kWorkingPair ? "working" : "reserve",
+                          decision.excluded_gyro,
+                          RadPerSecToDegPerHour(config_.filter.drift_change_limit),
+                          decision.excluded_gyro)});
+      if (WithholdUnverified(decision.excluded_gyro, frame.time)) {
+        withheld_gyro = decision.excluded_gyro;
+      }
+      decision.faulty = Subsystem::kNone;
+      decision.excluded_gyro = 0;
+      decision.output_pair = working_pair_;
+      decision.output_switched = false;
+    }
     auto event = [&](Event::Kind kind, std::string subsystem, std::string message) {
       const int m = decision.evidence;
       Event ev{kind, frame.time, std::move(subsystem), RadToArcsec(mt.angle[m]),
                RadToArcsec(mt.allowed[m]), "arcsec", std::move(message)};
       report.events.push_back(std::move(ev));
     };
-    if (decision.excluded_gyro != 0) {
-      if (GyroState* g = Find(decision.excluded_gyro)) g->faulty = true;
-    }
+    if (decision.excluded_gyro != 0) MarkExcluded(decision.excluded_gyro, ExclusionFrom(*abrupt));
     switch (decision.faulty) {
       case Subsystem::kNone:
         break;
@@ -119,16 +146,17 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
         event(Event::Kind::kWorkingPairFault,
               absl::StrFormat("working_pair[%d,%d]", working_pair_[0], working_pair_[1]),
               absl::StrFormat("eq. (12): working pair disagrees with reserve pair and star tracker; "
-                              "output switched to reserve pair [%d,%d], gyro %d excluded",
+                              "output switched to reserve pair [%d,%d], gyro %d excluded: %s",
                               decision.output_pair[0], decision.output_pair[1],
-                              decision.excluded_gyro));
+                              decision.excluded_gyro,
+                              ExclusionFrom(*abrupt).Describe()));
         break;
       case Subsystem::kReservePair:
         event(Event::Kind::kReservePairFault,
               absl::StrFormat("reserve_pair[%d,%d]", reserve_pair_[0], reserve_pair_[1]),
               absl::StrFormat("eq. (12): reserve pair disagrees with working pair and star tracker; "
-                              "gyro %d excluded",
-                              decision.excluded_gyro));
+                              "gyro %d excluded: %s",
+                              decision.excluded_gyro, ExclusionFrom(*abrupt).Describe()));
         break;
       case Subsystem::kStarTracker:
         event(Event::Kind::kStarTrackerFault, "star_tracker",
@@ -136,7 +164,6 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
         break;
     }
     working_pair_ = decision.output_pair;
-    if (decision.output_switched) state_ = SessionState::kFaulted;
     if (decision.reject_star_tracker) {
       st_available = false;
       star_tracker_voted_faulty_ = true;
@@ -145,7 +172,9 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
 
   // A star tracker the pairs voted faulty with a constant rotation against them is re-referenced
   // to the gyros and used again from the next step (D34).
-  CheckStarTrackerMount(frame, st_present && !st_available, q_st, report);
+  if (CheckStarTrackerMount(frame, st_present && !st_available, q_st, report)) {
+    reading_monitor_.Clear();  // the rebuilds' star tracker changed
+  }
 
   // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
   std::vector<int> healthy;  // gyro indices
@@ -292,6 +321,7 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     // pairs agree with it at this step (D19).
     SpinAxesFromStarTracker(C_in_b_st);
     change_detector_.Clear();
+    reading_monitor_.Clear();
     report.events.push_back(Event{
         Event::Kind::kFilterReset, frame.time, "filter",
         static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
@@ -421,10 +451,10 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
   // hold it), the cold spare is recommended; `named_by` says what named it, `value`/`threshold`
   // in `unit` are the event's evidence.
   auto exclude = [&](int k, double value, double threshold, const char* unit,
-                     const std::string& named_by, const std::string& details) {
+                     const std::string& named_by, const std::string& details,
+                     const Exclusion& why) {
     const int gyro = ids[k];
-    if (GyroState* g = Find(gyro)) g->faulty = true;
-    change_detector_.Clear();
+    MarkExcluded(gyro, why);
     // A configured gyro that is not running is a cold spare.
     std::string spare;
     for (const GyroConfig& gc : config_.gyros) {
@@ -435,14 +465,13 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     report.events.push_back(Event{
         in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, frame.time,
         absl::StrFormat("gyro %d", gyro), value, threshold, unit,
-        absl::StrFormat("%s: gyro %d faulty: %s; gyro %d excluded, output on pair [%d,%d]; only two "
-                        "gyros remain, switch on the cold spare%s to restore isolation. "
-                        "Evidence: %s",
-                        named_by, gyro, details, gyro, output[0], output[1],
+        absl::StrFormat("%s: gyro %d faulty: %s; %s; gyro %d excluded, output on pair [%d,%d] "
+                        "(valid, degraded); only two gyros remain, switch on the cold spare%s to "
+                        "restore isolation. Evidence: %s",
+                        named_by, gyro, details, why.Describe(), gyro, output[0], output[1],
                         spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), evidence)});
     working_pair_ = output;
     reserve_pair_ = output;  // no second pair is left
-    if (in_working) state_ = SessionState::kFaulted;
   };
   // The per-gyro accumulated test (D33): a gyro whose own star-tracker differences fail over the
   // window while the other two pass is excluded, whatever the single step's mismatches say;
@@ -462,15 +491,42 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
         absl::StrAppend(&others, others.empty() ? "" : ", ",
                         absl::StrFormat("gyro %d %.1f", ids[j], change->sums[j]));
       }
-      exclude(k, change->sums[k], change->fail_threshold, "chi-square",
-              "accumulated star-tracker test (eq. (13) differences of each gyro, D33)",
-              absl::StrFormat("its own star-tracker differences over the last %d steps sum to "
-                              "chi-square %.1f > %.1f (2 dof a step) while the other gyros' pass "
-                              "(%s < %.1f): its drift changed",
-                              change->steps, change->sums[k], change->fail_threshold, others,
-                              change->pass_threshold));
-      st_agrees_with_pairs = st_present && !d.pair_star_exceeded[k];
-      return true;
+      const std::string named = absl::StrFormat(
+          "its own star-tracker differences over the last %d steps sum to chi-square %.1f > %.1f "
+          "(2 dof a step) while the other gyros' pass (%s < %.1f)",
+          change->steps, change->sums[k], change->fail_threshold, others, change->pass_threshold);
+      // D94: by how much did the drift change? Beyond the limit the gyro is excluded; below it
+      // the change is alerted and the gyro's coefficients re-opened.
+      const auto dc = reading_monitor_.EstimateDriftChange(ids[k], ReadingFaultMonitor::Source::kStarTracker);
+      if (dc.has_value() && dc->beyond) {
+        Exclusion why;
+        why.reason = ExclusionReason::kDriftBeyondLimit;
+        why.time = dc->onset;
+        why.value = RadPerSecToDegPerHour(dc->magnitude);
+        why.threshold = RadPerSecToDegPerHour(dc->bound);
+        exclude(k, why.value, why.threshold, "deg/h",
+                "accumulated star-tracker test (eq. (13) differences of each gyro, D33)", named, why);
+        st_agrees_with_pairs = st_present && !d.pair_star_exceeded[k];
+        return true;
+      }
+      const double change_rad_s = dc.has_value() ? dc->magnitude : 0.0;
+      const double sigma_rad_s =
+          dc.has_value() ? std::sqrt(std::max(dc->cov.trace(), 0.0)) : 0.0;
+      ReopenDrift(ids[k], change_rad_s);
+      change_detector_.Clear();
+      report.events.push_back(Event{
+          Event::Kind::kDriftChanged, frame.time, absl::StrFormat("gyro %d", ids[k]),
+          RadPerSecToDegPerHour(change_rad_s),
+          RadPerSecToDegPerHour(config_.filter.drift_change_limit), "deg/h",
+          absl::StrFormat(
+              "drift of gyro %d changed by %.3f +- %.3f deg/h at %s (below the limit %.3g deg/h: "
+              "not a fault): %s; its drift coefficients are re-opened and recalibrated, nothing "
+              "excluded",
+              ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
+              absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", dc.has_value() ? dc->onset : frame.time,
+                               absl::UTCTimeZone()),
+              RadPerSecToDegPerHour(dc.has_value() ? dc->bound : config_.filter.drift_change_limit),
+              named)});
     }
   }
   // The exceeded mismatch with the largest angle-to-allowed ratio: the event's value/threshold.
@@ -486,23 +542,32 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
     consider(test.pair_star_angle[k], test.pair_star_allowed[k], d.pair_star_exceeded[k]);
     consider(test.pair_pair_angle[k], test.pair_pair_allowed[k], d.pair_pair_exceeded[k]);
   }
+  std::optional<AbruptRecord> abrupt;
   switch (d.result) {
     case Isolation::kNone:
       break;
     case Isolation::kGyro: {
-      if (ModelKnownNotToFit()) {
-        // D21: while the configured model is known not to explain the data (the consistency
-        // monitor's latest test failed, or the process noise is widened), mismatches are as much
-        // the model's as a gyro's: the suspect is not excluded, only withheld at this step.
-        withheld_gyro = d.excluded_gyro;
+      // D94: only an abrupt change of the gyro's readings (a jump, frozen or erratic readings, a
+      // drift change beyond the limit) excludes it; mismatches that grow with a drift the model
+      // lacks, however it behaves in time, withhold the gyro at this step and no more. With
+      // such a verdict the exclusion stands even while the model is known not to fit (D21
+      // guarded against the drift; the verdict tells the two apart).
+      abrupt = RecentAbrupt(d.excluded_gyro, frame.time);
+      if (!abrupt.has_value()) {
+        if (WithholdUnverified(d.excluded_gyro, frame.time)) withheld_gyro = d.excluded_gyro;
         report.events.push_back(Event{
             Event::Kind::kFaultAmbiguous, frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
             RadToArcsec(value), RadToArcsec(threshold), "arcsec",
-            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d, but the "
-                            "configured model does not explain the data (%s): gyro %d is not "
-                            "excluded, its measurements are withheld at this step. Evidence: %s",
-                            d.excluded_gyro,
-                            ModelMisfitEvidence(),
+            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d, but "
+                            "its readings show no abrupt change (a jump, frozen or erratic "
+                            "readings, a drift change beyond %.3g deg/h): a drift the model "
+                            "lacks%s, not a fault; gyro %d is not excluded (its measurements are "
+                            "withheld at the first step it is named, applied from the second). "
+                            "Evidence: %s",
+                            d.excluded_gyro, RadPerSecToDegPerHour(config_.filter.drift_change_limit),
+                            ModelKnownNotToFit()
+                                ? absl::StrCat(" (", ModelMisfitEvidence(), ")")
+                                : std::string(),
                             d.excluded_gyro, evidence)});
         break;
       }
@@ -539,7 +604,8 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
                   : absl::StrFormat("the pairs holding it disagree with pair [%d,%d]%s", kept[0],
                                     kept[1],
                                     st_present ? " and the star tracker, which agree with each other"
-                                               : ""));
+                                               : ""),
+              ExclusionFrom(*abrupt));
       break;
     }
     case Isolation::kStarTracker:

@@ -241,6 +241,8 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
   RETURN_IF_ERROR(CheckLimit(f.innovation_kd, L.innovation_kd, "filter.innovationKd"));
   RETURN_IF_ERROR(
       CheckLimit(f.fault_threshold, L.fault_threshold, "filter.faultThresholdArcsec"));
+  RETURN_IF_ERROR(
+      CheckLimit(f.drift_change_limit, L.drift_change_limit, "filter.driftChangeLimitDegH"));
   return absl::OkStatus();
 }
 

@@ -61,6 +61,9 @@ struct FilterConfig {
   double measurement_step = 60.0;    // measurement update step [s]
   double innovation_kd = 5.0;        // k_d of eq. (14)
   double fault_threshold = 0.0;      // allowed mismatch angle of eq. (12) [rad]; 0 = derived
+  // A change of a gyro's drift larger than this excludes the gyro; a smaller one is a drift
+  // change, alerted and recalibrated (reading_fault_monitor.h, D94) [rad/s].
+  double drift_change_limit = DegPerHourToRadPerSec(1.0);
 };
 
 struct SpacecraftConfig {
@@ -122,6 +125,7 @@ struct ConfigLimits {
   ConfigLimit measurement_step;
   ConfigLimit innovation_kd;
   ConfigLimit fault_threshold;
+  ConfigLimit drift_change_limit;
   // The basis terms' value and sigma are checked in the JSON unit (deg/h per JSON unit of s,
   // basis_term.h BasisValueToJson), which depends on the term's kind: their from_si is the
   // identity and ValidateConfig converts before the check.
@@ -130,13 +134,14 @@ struct ConfigLimits {
   ConfigLimit readout_distortion;
 
   // Every limit above, in declaration order.
-  constexpr std::array<ConfigLimit, 18> All() const {
+  constexpr std::array<ConfigLimit, 19> All() const {
     return {drift_coefficient,    drift_sigma,    misalignment_sigma,
             star_tracker_noise,   star_tracker_latency,
             star_tracker_latency_sigma,
             readout_noise,        random_walk,    amplifier_gain,
             reference_voltage,    gap,            integration_rate,
             measurement_step,     innovation_kd,  fault_threshold,
+            drift_change_limit,
             basis_value,          basis_sigma,    readout_distortion};
   }
 };
@@ -213,6 +218,12 @@ inline constexpr ConfigLimits kConfigLimits = {
                         "0 (derived from the noise), 180 deg in diagnosis",
                         "a mismatch angle between two attitudes is at most 180 deg; 0 derives "
                         "the threshold from the noise"},
+    .drift_change_limit = {"filter.driftChangeLimitDegH", 0.01, 100.0, "deg/h",
+                           &RadPerSecToDegPerHour, "1",
+                           "a drift change below the limit is recalibrated, above it the gyro is "
+                           "excluded: below 0.01 deg/h the random walk of eq. (11) alone crosses it "
+                           "within hours; above 100 deg/h a reading frozen while the spacecraft "
+                           "turns slowly would pass as a drift"},
     .basis_value = {"gyros[].basisTerms[].valueDegH", -10.0, 10.0,
                     "deg/h at the kind's reference size of s", &config_limits_internal::Identity,
                     "a few hundredths to tenths of deg/h (the diagnosis's findings)",

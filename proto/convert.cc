@@ -419,6 +419,9 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
   config.filter.innovation_kd =
       f.innovation_kd() != 0.0 ? f.innovation_kd() : default_filter.innovation_kd;
   config.filter.fault_threshold = ArcsecToRad(f.fault_threshold_arcsec());  // 0 = derived
+  config.filter.drift_change_limit = f.drift_change_limit_deg_h() != 0.0
+                                         ? estimator::DegPerHourToRadPerSec(f.drift_change_limit_deg_h())
+                                         : default_filter.drift_change_limit;
 
   RETURN_IF_ERROR(estimator::ValidateConfig(config));
   return config;
@@ -460,6 +463,7 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
   f->set_measurement_step_s(config.filter.measurement_step);
   f->set_innovation_kd(config.filter.innovation_kd);
   f->set_fault_threshold_arcsec(TidyArcsec(config.filter.fault_threshold));
+  f->set_drift_change_limit_deg_h(TidyDegPerHour(config.filter.drift_change_limit));
   return proto;
 }
 

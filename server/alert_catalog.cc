@@ -20,7 +20,7 @@ constexpr esg::v1::AlertSeverity kWarning = esg::v1::ALERT_SEVERITY_WARNING;
 constexpr esg::v1::AlertSeverity kDistress = esg::v1::ALERT_SEVERITY_DISTRESS;
 constexpr esg::v1::AlertSeverity kCritical = esg::v1::ALERT_SEVERITY_CRITICAL;
 
-const std::array<AlertKind, 16> kCatalog = {{
+const std::array<AlertKind, 17> kCatalog = {{
     {esg::v1::ALERT_REASON_STAR_TRACKER_INNOVATION, "STAR_TRACKER_INNOVATION", kWarning,
      Event::Kind::kStarTrackerInnovation, "star_tracker", ClearRule::kQuiet,
      "eq. (14) rejected a star-tracker measurement (its innovation exceeded k_d sigma_z); the "
@@ -35,16 +35,19 @@ const std::array<AlertKind, 16> kCatalog = {{
      "output runs on the gyros alone",
      "Check the star tracker (blinding, lost lock, frozen output, time tag). The attitude drifts "
      "with the gyros' uncertainty until the star tracker is accepted again"},
-    {esg::v1::ALERT_REASON_WORKING_PAIR_FAULT, "WORKING_PAIR_FAULT", kCritical,
+    {esg::v1::ALERT_REASON_WORKING_PAIR_FAULT, "WORKING_PAIR_FAULT", kDistress,
      Event::Kind::kWorkingPairFault, "working_pair[A,B] or gyro_N", ClearRule::kNever,
-     "eq. (12) declared the working pair faulty, or isolated gyro N of it with three pairs: the "
-     "gyro is excluded, the output moved to a pair without it and the session is FAULTED",
-     "Check the named gyro's telemetry and power; do not use the attitude output. After repair "
-     "or switching on the spare, reconfigure (ConfigureSpacecraft replace = true)"},
+     "an abrupt fault of a working gyro's readings (a jump, frozen or erratic readings, a drift "
+     "change beyond the limit) was isolated by eq. (12) or the three pairs: the gyro is "
+     "excluded and the output moved to a clean pair, valid; the session runs degraded",
+     "The attitude output stays usable (from the clean pair). Check the named gyro's telemetry "
+     "and power; switch on the cold spare to restore fault isolation, or reconfigure after "
+     "repair (ConfigureSpacecraft replace = true)"},
     {esg::v1::ALERT_REASON_RESERVE_PAIR_FAULT, "RESERVE_PAIR_FAULT", kDistress,
      Event::Kind::kReservePairFault, "reserve_pair[A,B] or gyro_N", ClearRule::kNever,
-     "eq. (12) declared the reserve pair faulty, or isolated a gyro outside the working pair "
-     "with three pairs; the output is unaffected, the redundancy is lost",
+     "an abrupt fault of the readings of a gyro outside the working pair was isolated by eq. "
+     "(12) or the three pairs: the gyro is excluded; the output is unaffected, the redundancy is "
+     "lost and the session runs degraded",
      "Check the named gyro; plan to restore redundancy (switch on the cold spare). The output "
      "may still be used"},
     {esg::v1::ALERT_REASON_GYRO_DATA_REJECTED, "GYRO_DATA_REJECTED", kWarning,
@@ -117,6 +120,13 @@ const std::array<AlertKind, 16> kCatalog = {{
      "again, with the gyros as the reference",
      "Check the star tracker's mounting and thermal state; the correction stands until the star "
      "tracker's output or the configuration changes again"},
+    {esg::v1::ALERT_REASON_DRIFT_CHANGED, "DRIFT_CHANGED", kWarning, Event::Kind::kDriftChanged,
+     "gyro_N", ClearRule::kQuiet,
+     "a gyro's drift changed by less than filter.driftChangeLimitDegH (its own star-tracker "
+     "differences grew alone): not a fault; its drift coefficients were re-opened and are being "
+     "recalibrated, nothing was excluded",
+     "None at once: the gyro keeps producing. Watch its coefficient history; if the change "
+     "repeats or grows, run `esg diagnose` over the span"},
 }};
 
 }  // namespace

@@ -49,6 +49,12 @@ void EstimationCore::CollectGauges() {
        {"NO_DATA", "CALIBRATING", "CONVERGED", "AUTONOMOUS", "FAULTED", "QUARANTINED"}) {
     by_state[state] = 0;
   }
+  std::map<std::string, int> excluded;
+  for (const char* reason : {"READING_JUMP", "READING_BEYOND_ANY_DRIFT", "READINGS_ERRATIC",
+                             "DRIFT_CHANGE_BEYOND_LIMIT", "EXCLUDED_BEFORE_UPGRADE"}) {
+    excluded[reason] = 0;
+  }
+  int degraded = 0;
   for (const auto& sc : registry_.All()) {
     if (sc->lease_lost) continue;  // another server's now
     absl::MutexLock state(&sc->state_mu);
@@ -56,9 +62,15 @@ void EstimationCore::CollectGauges() {
       ++by_state["QUARANTINED"];
     } else {
       ++by_state[estimator::SessionStateName(sc->session->state())];
+      degraded += sc->session->degraded() ? 1 : 0;
+      for (const estimator::GyroEstimate& g : sc->session->Gyros()) {
+        if (g.faulty) ++excluded[estimator::ExclusionReasonName(g.exclusion.reason)];
+      }
     }
   }
   for (const auto& [state, n] : by_state) metrics_.sessions.With({state}).Set(n);
+  metrics_.sessions_degraded.Set(degraded);
+  for (const auto& [reason, n] : excluded) metrics_.gyros_excluded.With({reason}).Set(n);
   int64_t backlog = 0;
   {
     absl::MutexLock lock(&commit_mu_);

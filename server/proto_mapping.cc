@@ -164,6 +164,19 @@ esg::v1::SessionInfo SessionInfoToProto(const SessionSummary& s) {
     const estimator::EstimationSession& session = *s.session;
     if (s.quarantine_reason.empty()) info.set_state(StateToProto(session.state()));
     for (int id : session.working_pair()) info.add_working_pair(id);
+    info.set_degraded(session.degraded());
+    for (const estimator::GyroEstimate& g : session.Gyros()) {
+      if (!g.faulty) continue;
+      esg::v1::ExcludedGyro* x = info.add_excluded_gyros();
+      x->set_gyro_id(g.id);
+      x->set_reason(estimator::ExclusionReasonName(g.exclusion.reason));
+      if (g.exclusion.time != absl::InfinitePast()) {
+        *x->mutable_time() = proto_convert::TimeToProto(g.exclusion.time);
+      }
+      x->set_value(g.exclusion.value);
+      x->set_threshold(g.exclusion.threshold);
+      x->set_message(absl::StrCat("gyro ", g.id, " excluded: ", g.exclusion.Describe()));
+    }
     const estimator::AttitudeEstimate attitude = session.CurrentAttitude();
     if (session.initialized() && attitude.valid) {
       std::vector<std::pair<int, Eigen::Vector3d>> h_in;

@@ -70,6 +70,16 @@ ServiceMetrics::ServiceMetrics()
           "Configured spacecraft by session state (NO_DATA, CALIBRATING, CONVERGED, AUTONOMOUS, "
           "FAULTED, or QUARANTINED when the filter is stopped or rebuilding).",
           {"state"})),
+      sessions_degraded(registry
+                            .AddGauge("esg_sessions_degraded",
+                                      "Sessions running degraded: a gyro excluded, the output "
+                                      "from a clean pair (docs/service.md \"Session states\").")
+                            .Get()),
+      gyros_excluded(registry.AddGauge(
+          "esg_gyros_excluded",
+          "Excluded gyros over the sessions, by reason (READING_JUMP, READING_BEYOND_ANY_DRIFT, "
+          "READINGS_ERRATIC, DRIFT_CHANGE_BEYOND_LIMIT, EXCLUDED_BEFORE_UPGRADE).",
+          {"reason"})),
       filter_step(registry.AddHistogram(
           "esg_filter_step_seconds",
           "Wall time of one filter step (EstimationSession::AddFrame) on an apply worker, seconds, "
@@ -114,6 +124,10 @@ ServiceMetrics::ServiceMetrics()
     sessions.With({state});
   }
   for (const char* t : {"telemetry", "filter", "configure"}) storage_commit.With({t});
+  for (const char* reason : {"READING_JUMP", "READING_BEYOND_ANY_DRIFT", "READINGS_ERRATIC",
+                             "DRIFT_CHANGE_BEYOND_LIMIT", "EXCLUDED_BEFORE_UPGRADE"}) {
+    gyros_excluded.With({reason});
+  }
   storage_healthy.Set(1);
 }
 

@@ -29,6 +29,8 @@ struct ServiceMetrics {
   Gauge& commit_backlog_bytes;        // esg_commit_backlog_bytes
   // Sessions and the filter.
   Family<Gauge>& sessions;                // esg_sessions{state}
+  Gauge& sessions_degraded;               // esg_sessions_degraded
+  Family<Gauge>& gyros_excluded;          // esg_gyros_excluded{reason}
   Family<Histogram>& filter_step;         // esg_filter_step_seconds{step}
   Family<Counter>& alerts_raised;         // esg_alerts_raised_total{reason,severity}
   Family<Counter>& alerts_cleared;        // esg_alerts_cleared_total{reason,severity}

@@ -6,6 +6,7 @@
 // attitude error against the withheld star tracker and its growth rate (the paper's Fig. 7/8
 // measure).
 // Exit codes: 0 success, 2 bad arguments or input files, 1 runtime failure.
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -207,6 +208,21 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
                          {"residualDriftDegH", json::array({g.residual_drift.x() * kDegH,
                                                             g.residual_drift.y() * kDegH})},
                          {"faulty", g.faulty}});
+    if (g.faulty) {
+      gyros.back()["exclusion"] =
+          json{{"reason", estimator::ExclusionReasonName(g.exclusion.reason)},
+               {"time", Utc(g.exclusion.time)},
+               {"value", g.exclusion.value},
+               {"threshold", g.exclusion.threshold},
+               {"message", g.exclusion.Describe()}};
+    }
+  }
+  json excluded = json::array();
+  bool degraded = false;
+  for (const estimator::GyroEstimate& g : r.gyros) {
+    if (!g.faulty) continue;
+    degraded = true;
+    excluded.push_back(g.id);
   }
   json counts = json::object();
   for (const auto& [kind, n] : r.event_counts) counts[estimator::EventKindName(kind)] = n;
@@ -226,7 +242,10 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
               {"measurementSteps", r.measurement_steps},
               {"starTrackerStepsUsed", r.star_tracker_steps_used},
               {"state", estimator::SessionStateName(r.final_state)},
+              {"degraded", degraded},
+              {"excludedGyros", excluded},
               {"outputPair", json::array({r.final_attitude.pair[0], r.final_attitude.pair[1]})},
+              {"outputValid", r.final_attitude.valid},
               {"innovationRmsArcsec", r.innovation_rms * kArcsec},
               {"modelConsistency", ConsistencyJson(in, r)},
               {"starTrackerLatency", json{{"latencyS", r.star_tracker_latency.latency_s},
@@ -243,9 +262,13 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
               in.config.spacecraft_id.c_str(), in.options.model.Name().c_str(), r.frames,
               absl::ToDoubleHours(frames.back().time - frames.front().time), r.measurement_steps,
               r.star_tracker_steps_used);
-  std::printf("state %s, output pair [%d,%d], star-tracker innovation RMS %.2f arcsec\n",
-              estimator::SessionStateName(r.final_state), r.final_attitude.pair[0],
-              r.final_attitude.pair[1], r.innovation_rms * kArcsec);
+  std::printf("state %s%s, output pair [%d,%d], star-tracker innovation RMS %.2f arcsec\n",
+              estimator::SessionStateName(r.final_state),
+              std::any_of(r.gyros.begin(), r.gyros.end(),
+                          [](const estimator::GyroEstimate& g) { return g.faulty; })
+                  ? " (degraded: a gyro excluded, output from a clean pair)"
+                  : "",
+              r.final_attitude.pair[0], r.final_attitude.pair[1], r.innovation_rms * kArcsec);
   if (const Consistency c = ConsistencyOf(r); c.first != nullptr) {
     std::printf(
         "MODEL INCONSISTENT with the data: innovation chi-square over %d-step windows %.1f > %.1f "
@@ -281,6 +304,7 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
   }
   for (const estimator::GyroEstimate& g : r.gyros) {
     std::printf("gyro %d%s\n", g.id, g.faulty ? " (faulty, excluded)" : "");
+    if (g.faulty) std::printf("  excluded: %s\n", g.exclusion.Describe().c_str());
     auto row = [&](const char* name, double v, double s, int index) {
       double ratio = -1;
       for (const auto& [i, q] : r.relative_sigma.at(g.id)) {

@@ -47,6 +47,13 @@ void PrintSession(const esg::v1::SessionInfo& s) {
   }
   std::printf("  working pair %s, reserve pair %s\n", Ids(s.working_pair()).c_str(),
               Ids(s.reserve_pair()).c_str());
+  if (s.degraded()) {
+    std::printf("  DEGRADED: output from a clean pair, valid; predictions served\n");
+  }
+  for (const esg::v1::ExcludedGyro& x : s.excluded_gyros()) {
+    std::printf("  gyro %d excluded (%s): %s\n", x.gyro_id(), x.reason().c_str(),
+                x.message().c_str());
+  }
   std::printf("  last frame %s (sequence %lld); durable up to %lld, applied up to %lld\n",
               FormatUtc(s.last_frame_time(), s.has_last_frame_time()).c_str(), n(s.last_sequence()),
               n(s.highest_durable_sequence()), n(s.highest_applied_sequence()));

@@ -7,13 +7,22 @@ import { live } from './live.js';
 const SEVERITIES = ['CRITICAL', 'DISTRESS', 'WARNING', 'INFO'];
 const REFRESH_MIN_MS = 1000;
 
+// Sensor health beside the state: a degraded session runs on a clean pair, its output valid.
+function health(s) {
+  if (!s.degraded) return [];
+  const excluded = (s.excluded_gyros || [])
+    .map((g) => `gyro ${g.gyro_id} excluded (${g.reason})`).join(', ');
+  return [el('div', { class: 'sev-DISTRESS', 'data-health': 'degraded', title: (s.excluded_gyros || []).map((g) => g.message).join('\n') },
+    `degraded: ${excluded || 'a gyro excluded'}; output from the clean pair`)];
+}
+
 function row(entry) {
   const s = entry.session;
   const alerts = SEVERITIES.map((sev) => el('td', { class: `num sev-${sev}`, 'data-severity': sev },
     String(entry.open_alerts ? entry.open_alerts[sev] : 0)));
   return el('tr', { 'data-spacecraft': s.spacecraft_id },
     el('td', {}, s.spacecraft_id),
-    el('td', {}, shortName(s.state, 'SESSION_STATE_')),
+    el('td', {}, shortName(s.state, 'SESSION_STATE_'), ...health(s)),
     el('td', {}, s.working_pair && s.working_pair.length ? `[${s.working_pair.join(',')}]` : '-'),
     el('td', {}, s.last_frame_time || '-'),
     ...alerts,

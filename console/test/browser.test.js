@@ -166,7 +166,18 @@ test('fleet overview lists every spacecraft with the state and open alerts esg r
   const alerts = (await cliJson('alerts')).alerts;
   for (const session of status.sessions) {
     const row = rows.find((r) => r.id === session.spacecraftId);
-    assert.equal(row.cells[1], session.state.replace('SESSION_STATE_', ''));
+    // The state, and beside it the sensor health: a degraded session names each excluded gyro
+    // with its reason (docs/service.md "Session states").
+    const state = session.state.replace('SESSION_STATE_', '');
+    if (session.degraded) {
+      assert.ok(row.cells[1].startsWith(state), row.cells[1]);
+      for (const g of session.excludedGyros) {
+        assert.ok(row.cells[1].includes(`gyro ${g.gyroId} excluded (${g.reason})`), row.cells[1]);
+      }
+      assert.ok(row.cells[1].includes('output from the clean pair'), row.cells[1]);
+    } else {
+      assert.equal(row.cells[1], state);
+    }
     assert.equal(row.cells[2], `[${session.workingPair.join(',')}]`);
     assert.equal(row.cells[3], session.lastFrameTime);
     for (const severity of ['INFO', 'WARNING', 'DISTRESS', 'CRITICAL']) {
@@ -176,6 +187,12 @@ test('fleet overview lists every spacecraft with the state and open alerts esg r
     }
   }
   assert.ok(rows.find((r) => r.id === FAULTY).open.WARNING > 0, 'the faulty flight has open warnings');
+  // Gyro 1's 2 arcmin readout jump excludes it: degraded, the output on the clean pair [2,3],
+  // not FAULTED; gyro 3's 0.05 deg/h drift step is a drift change, not an exclusion.
+  const faultySession = status.sessions.find((s) => s.spacecraftId === FAULTY);
+  assert.equal(faultySession.degraded, true, JSON.stringify(faultySession.excludedGyros));
+  assert.deepEqual(faultySession.excludedGyros.map((g) => g.gyroId), [1]);
+  assert.notEqual(faultySession.state, 'SESSION_STATE_FAULTED');
   await shot('fleet');
 });
 

@@ -424,7 +424,14 @@ Observed RunSession(const SpacecraftConfig& config, const SimulationSpec& spec,
     if (!truth) continue;
     const DriftVector est = g.coefficients.AsVector();
     const DriftVector sigma = g.sigma.AsVector();
-    const DriftVector tru = truth->AsVector();
+    DriftVector tru = truth->AsVector();
+    // A drift step is a constant drift v in case axes: its part perpendicular to the spin axis,
+    // (I - h h^T) v, is the C1 term of eq. (10) with C1 = -v, so after the step the gyro's true
+    // C1 is C1 - v (the filter recalibrates it after DRIFT_CHANGED, D94).
+    const std::optional<GyroFault>& fault = spec.gyros[g.id - 1].fault;
+    if (fault && fault->kind == GyroFault::Kind::kDriftStep) {
+      tru.segment<3>(1) -= fault->value;
+    }
     for (int i = 0; i < est.size(); ++i) {
       if (!(sigma(i) > 0.0)) continue;
       const double ratio = std::abs(est(i) - tru(i)) / sigma(i);
@@ -518,9 +525,26 @@ std::vector<std::string> Violations(const Cell& cell, const SimulationSpec& spec
     case Fault::kGyroReadingFrozen:
       expect_isolated(cell.gyro, within_two_steps);
       break;
-    case Fault::kGyroDriftStep:
-      expect_isolated(cell.gyro, fault_time + absl::Hours(1));
+    case Fault::kGyroDriftStep: {
+      // D94: a drift step below filter.driftChangeLimitDegH is a drift change: named within
+      // 1 h (DRIFT_CHANGED on the gyro), recalibrated (the coefficient check below, against the
+      // stepped truth), nothing excluded.
+      std::optional<absl::Time> named;
+      for (const Event& e : obs.events) {
+        if (e.kind == Event::Kind::kDriftChanged && e.subsystem == absl::StrCat("gyro ", cell.gyro) &&
+            e.time >= fault_time && !named) {
+          named = e.time;
+        }
+      }
+      if (!named) {
+        v.push_back(absl::StrCat("no DRIFT_CHANGED of gyro ", cell.gyro, " after the fault"));
+      } else if (*named > fault_time + absl::Hours(1)) {
+        v.push_back(absl::StrCat("DRIFT_CHANGED at +", absl::FormatDuration(*named - fault_time),
+                                 ", later than allowed +1h"));
+      }
+      expect_nothing_excluded();
       break;
+    }
     case Fault::kGyroReadingsMissing:
       expect_nothing_excluded();
       if (obs.stale_valid_steps > 0) {

@@ -311,7 +311,17 @@ TEST(Session, WorkingPairFaultSwitchesToReserveWithinOneStep) {
   ASSERT_TRUE(switched.has_value());
   // The first frame after the fault is 30 s after it: detected at that measurement step.
   EXPECT_EQ(*switched, spec.start + absl::Seconds(fault.time + 30.0));
-  EXPECT_EQ(session.state(), SessionState::kFaulted);
+  // Degraded, not FAULTED: the clean pair carries a valid output (docs/decisions.md D94).
+  EXPECT_NE(session.state(), SessionState::kFaulted);
+  EXPECT_TRUE(session.degraded());
+  for (const GyroEstimate& g : session.Gyros()) {
+    EXPECT_EQ(g.faulty, g.id == 2) << "gyro " << g.id;
+    if (g.faulty) {
+      EXPECT_TRUE(g.exclusion.reason == ExclusionReason::kReadingJump ||
+                  g.exclusion.reason == ExclusionReason::kBeyondAnyDrift)
+          << ExclusionReasonName(g.exclusion.reason);
+    }
+  }
   // Output on the reserve pair stays accurate.
   const Eigen::Quaterniond q_true = sim->truth.back().q_in_b;
   EXPECT_LT(RotationAngle(session.CurrentAttitude().q_in_b, q_true), ArcsecToRad(60));

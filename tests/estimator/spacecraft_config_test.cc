@@ -292,7 +292,9 @@ INSTANTIATE_TEST_SUITE_P(
         LimitCase{"filter.innovationKd", &L.innovation_kd, &Same,
                   [](SpacecraftConfig& c, double v) { c.filter.innovation_kd = v; }},
         LimitCase{"filter.faultThresholdArcsec", &L.fault_threshold, &ArcsecToRad,
-                  [](SpacecraftConfig& c, double v) { c.filter.fault_threshold = v; }}),
+                  [](SpacecraftConfig& c, double v) { c.filter.fault_threshold = v; }},
+        LimitCase{"filter.driftChangeLimitDegH", &L.drift_change_limit, &DegPerHourToRadPerSec,
+                  [](SpacecraftConfig& c, double v) { c.filter.drift_change_limit = v; }}),
     [](const ::testing::TestParamInfo<LimitCase>& info) {
       std::string name;
       for (const char ch : info.param.field) {

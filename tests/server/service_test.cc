@@ -617,7 +617,7 @@ TEST(Service, AlertSubscribersGetEveryAlertStateExactlyOnceAcrossReconnects) {
       const std::map<esg::v1::AlertReason, esg::v1::AlertSeverity> severity = {
           {esg::v1::ALERT_REASON_STAR_TRACKER_INNOVATION, esg::v1::ALERT_SEVERITY_WARNING},
           {esg::v1::ALERT_REASON_STAR_TRACKER_FAULT, esg::v1::ALERT_SEVERITY_DISTRESS},
-          {esg::v1::ALERT_REASON_WORKING_PAIR_FAULT, esg::v1::ALERT_SEVERITY_CRITICAL},
+          {esg::v1::ALERT_REASON_WORKING_PAIR_FAULT, esg::v1::ALERT_SEVERITY_DISTRESS},
           {esg::v1::ALERT_REASON_RESERVE_PAIR_FAULT, esg::v1::ALERT_SEVERITY_DISTRESS},
           {esg::v1::ALERT_REASON_GYRO_DATA_REJECTED, esg::v1::ALERT_SEVERITY_WARNING},
           {esg::v1::ALERT_REASON_FILTER_RESET, esg::v1::ALERT_SEVERITY_DISTRESS}};

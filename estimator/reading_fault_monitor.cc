@@ -1,0 +1,462 @@
+// Reading faults told from drifts by each gyro's track (reading_fault_monitor.h).
+#include "estimator/reading_fault_monitor.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+#include "Eigen/Cholesky"
+#include "Eigen/LU"
+#include "absl/strings/str_format.h"
+#include "estimator/discovery/statistics.h"
+
+namespace esg::estimator {
+
+using Eigen::Matrix2d;
+using Eigen::Matrix3d;
+using Eigen::MatrixXd;
+using Eigen::Vector2d;
+using Eigen::Vector3d;
+using Eigen::VectorXd;
+
+namespace {
+
+// Weighted least squares of y_j = (f_j^T (x) I_2) beta over the points, f_j the scalar
+// regressors of point j (k of them): beta (2k), its covariance and the weighted residual sum.
+struct Fit {
+  VectorXd beta;
+  MatrixXd cov;
+  double rss = std::numeric_limits<double>::infinity();
+};
+
+Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const std::vector<VectorXd>& f) {
+  const int k = static_cast<int>(f[0].size());
+  MatrixXd N = MatrixXd::Zero(2 * k, 2 * k);
+  VectorXd r = VectorXd::Zero(2 * k);
+  std::vector<MatrixXd> A(p.y.size());
+  for (size_t j = 0; j < p.y.size(); ++j) {
+    A[j] = MatrixXd::Zero(2, 2 * k);
+    for (int m = 0; m < k; ++m) A[j].block<2, 2>(0, 2 * m) = f[j](m) * Matrix2d::Identity();
+    N += A[j].transpose() * p.W[j] * A[j];
+    r += A[j].transpose() * p.W[j] * p.y[j];
+  }
+  Fit out;
+  Eigen::FullPivLU<MatrixXd> lu(N);
+  if (lu.rank() < 2 * k) return out;  // regressors not independent over these points
+  out.cov = lu.inverse();
+  out.beta = out.cov * r;
+  out.rss = 0.0;
+  for (size_t j = 0; j < p.y.size(); ++j) {
+    const Vector2d e = p.y[j] - A[j] * out.beta;
+    out.rss += e.dot(p.W[j] * e);
+  }
+  return out;
+}
+
+// Regressors of the line, optionally with a jump at point `jump_at` or a rate change at time
+// `onset` (relative to the last point), or with a quadratic term.
+std::vector<VectorXd> Regressors(const ReadingFaultMonitor::Projected& p, int jump_at, std::optional<double> onset,
+                                 bool quadratic) {
+  std::vector<VectorXd> f;
+  for (size_t j = 0; j < p.tau.size(); ++j) {
+    std::vector<double> v = {1.0, p.tau[j]};
+    if (quadratic) v.push_back(p.tau[j] * p.tau[j]);
+    if (jump_at >= 0) v.push_back(static_cast<int>(j) >= jump_at ? 1.0 : 0.0);
+    if (onset.has_value()) v.push_back(std::max(0.0, p.tau[j] - *onset));
+    f.push_back(Eigen::Map<VectorXd>(v.data(), static_cast<int>(v.size())));
+  }
+  return f;
+}
+
+// Lower bound of min over |v| <= r of (c - v)^T S^-1 (c - v): the part of |c| beyond r along
+// c's own direction, over the variance along it (any v in the ball leaves at least |c| - r
+// along c, and x^T S^-1 x >= (u^T x)^2 / (u^T S u) for a unit u): a test never stronger than
+// the exact one.
+double BeyondBallChi2(const Vector2d& c, const Matrix2d& S, double r) {
+  const double n = c.norm();
+  if (!(n > r) || n == 0.0) return 0.0;
+  const Vector2d u = c / n;
+  const double var = u.dot(S * u);
+  if (!(var > 0.0)) return std::numeric_limits<double>::infinity();
+  return (n - r) * (n - r) / var;
+}
+
+}  // namespace
+
+const char* ReadingVerdictName(ReadingVerdict v) {
+  switch (v) {
+    case ReadingVerdict::kNone:
+      return "none";
+    case ReadingVerdict::kJump:
+      return "jump";
+    case ReadingVerdict::kBeyond:
+      return "beyond";
+    case ReadingVerdict::kErratic:
+      return "erratic";
+  }
+  return "?";
+}
+
+ReadingFaultMonitor::ReadingFaultMonitor(ReadingFaultOptions options) : options_(options) {
+  const int max_points = options_.window_steps + 1;
+  erratic_threshold_.assign(max_points + 1, 0.0);
+  for (int n = 4; n <= max_points; ++n) {
+    // 2 n components, 6 parameters of the quadratic. Significant, and far beyond the noise: a
+    // scatter of options_.erratic_scale times the stated noise, its chi-square scale^2 per
+    // degree of freedom (a drift's smooth curve that none of the fitted ones follows closely, as
+    // in a slew, is significant long before that).
+    const double dof = 2.0 * n - 6.0;
+    erratic_threshold_[n] =
+        std::max(discovery::ChiSquareQuantile(1.0 - options_.erratic_alpha, dof),
+                 options_.erratic_scale * options_.erratic_scale * dof);
+  }
+}
+
+void ReadingFaultMonitor::Clear() { tracks_.clear(); }
+
+std::vector<ReadingFaultMonitor::Result> ReadingFaultMonitor::AddStep(
+    absl::Time t, const std::vector<Sample>& samples) {
+  std::map<int, Track> next;
+  for (const Sample& s : samples) {
+    const int key = Key(s.gyro_id, s.source);
+    Track track;
+    auto it = tracks_.find(key);
+    // The increment needs the posterior of the previous measurement step.
+    if (it != tracks_.end() && it->second.has_posterior && it->second.posterior_time == last_step_) {
+      track = std::move(it->second);
+    }
+    Point p;
+    p.time = t;
+    p.noise_in = s.noise_in;
+    p.drift_bound = s.drift_bound;
+    p.turn = s.turn;
+    if (track.points.empty() || !track.has_posterior || track.drivers_ref.size() != s.drivers.size() ||
+        (s.drivers.size() > 0 && (s.motion_jacobian_in.rows() != 3 ||
+                                  s.motion_jacobian_in.cols() != s.drivers.size()))) {
+      p.x_in = s.prior_residual_in;
+      track.points.clear();
+      track.drivers_ref = s.drivers;
+    } else {
+      p.x_in = track.points.back().x_in + (s.prior_residual_in - track.posterior_in);
+      if (s.drivers.size() > 0 && s.motion_jacobian_in.rows() == 3) {
+        p.x_in += s.motion_jacobian_in * (s.drivers - track.drivers_ref);
+      }
+    }
+    track.points.push_back(p);
+    while (static_cast<int>(track.points.size()) > options_.window_steps + 1) {
+      track.points.pop_front();
+    }
+    track.T = s.T;
+    track.has_posterior = false;
+    next[key] = std::move(track);
+  }
+  tracks_ = std::move(next);
+  last_step_ = t;
+
+  std::vector<Result> out;
+  for (const auto& [key, track] : tracks_) {
+    out.push_back(Judge(key / 2, static_cast<Source>(key % 2), track));
+  }
+  // The star tracker's rule: a verdict that another gyro shares at this step is nobody's.
+  int st_verdicts = 0;
+  for (const Result& r : out) {
+    if (r.source == Source::kStarTracker && r.verdict != ReadingVerdict::kNone) ++st_verdicts;
+  }
+  if (st_verdicts > 1) {
+    for (Result& r : out) {
+      if (r.source == Source::kStarTracker) r.verdict = ReadingVerdict::kNone;
+    }
+  }
+  return out;
+}
+
+void ReadingFaultMonitor::SetPosterior(int gyro_id, Source source,
+                                       const Vector3d& posterior_residual_in) {
+  auto it = tracks_.find(Key(gyro_id, source));
+  if (it == tracks_.end() || it->second.points.empty() || it->second.points.back().time != last_step_) {
+    return;
+  }
+  it->second.posterior_in = posterior_residual_in;
+  it->second.has_posterior = true;
+  it->second.posterior_time = last_step_;
+}
+
+ReadingFaultMonitor::Projected ReadingFaultMonitor::Project(const Track& track) {
+  Projected p;
+  const absl::Time last = track.points.back().time;
+  for (const Point& q : track.points) {
+    p.y.push_back(track.T.transpose() * q.x_in);
+    Matrix2d cov = track.T.transpose() * q.noise_in * track.T;
+    // A floor keeps the weight finite (0.01 arcsec): a configured noise of zero.
+    cov = 0.5 * (cov + cov.transpose()) + std::pow(0.01 * kRadPerArcsec, 2) * Matrix2d::Identity();
+    p.cov.push_back(cov);
+    p.W.push_back(cov.inverse());
+    p.tau.push_back(absl::ToDoubleSeconds(q.time - last));
+  }
+  return p;
+}
+
+ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source source,
+                                                       const Track& track) const {
+  Result r;
+  r.gyro_id = gyro_id;
+  r.source = source;
+  const int n = static_cast<int>(track.points.size());
+  if (n < 2) return r;
+  const Projected p = Project(track);
+  const double dt = p.tau[n - 1] - p.tau[n - 2];
+  if (!(dt > 0.0)) return r;
+
+  // kBeyond: the last increment against the rate of the points before it.
+  {
+    Vector2d b = Vector2d::Zero();
+    Matrix2d cov_b = Matrix2d::Zero();
+    if (n >= 3) {
+      Projected before = p;
+      before.y.pop_back();
+      before.W.pop_back();
+      before.cov.pop_back();
+      before.tau.pop_back();
+      const Fit line = WeightedFit(before, Regressors(before, -1, std::nullopt, false));
+      if (std::isfinite(line.rss)) {
+        b = line.beta.segment<2>(2);
+        cov_b = line.cov.block<2, 2>(2, 2);
+      }
+    }
+    const Vector2d c = ((p.y[n - 1] - p.y[n - 2]) - b * dt) / dt;
+    const Matrix2d S = (p.cov[n - 1] + p.cov[n - 2]) / (dt * dt) + cov_b;
+    const Point& last_point = track.points.back();
+    const double bound = last_point.drift_bound + kSlowReadingErrorRad * last_point.turn / dt;
+    const double chi2 = BeyondBallChi2(c, S, bound);
+    if (chi2 >= options_.decision_chi2) {
+      r.verdict = ReadingVerdict::kBeyond;
+      r.value = c.norm();
+      r.threshold = bound;
+      r.statistic = chi2;
+      return r;
+    }
+  }
+  if (n < 4) return r;
+  // Every drift alternative over the window: a steady change (quadratic) and a rate change at
+  // any sample time. The best of them is the smooth curve a drift gives.
+  const Fit line = WeightedFit(p, Regressors(p, -1, std::nullopt, false));
+  double smooth = WeightedFit(p, Regressors(p, -1, std::nullopt, true)).rss;
+  for (int j = 1; j <= n - 2; ++j) {
+    smooth = std::min(smooth, WeightedFit(p, Regressors(p, -1, p.tau[j], false)).rss);
+  }
+  // kJump: a jump at point jump_at (two or three points after it) against every drift
+  // alternative, with the onset also inside the interval before the jump; at least two points
+  // before it for the line.
+  for (int jump_at = n - 2; jump_at >= std::max(2, n - 3) && std::isfinite(line.rss); --jump_at) {
+    const Fit jump = WeightedFit(p, Regressors(p, jump_at, std::nullopt, false));
+    if (!std::isfinite(jump.rss)) continue;
+    double drift_rss = smooth;
+    for (int m = 1; m <= 3; ++m) {
+      const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
+      drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
+    }
+    const double over_drift = drift_rss - jump.rss;
+    const double over_line = line.rss - jump.rss;
+    if (over_drift >= options_.decision_chi2 && over_line >= options_.decision_chi2) {
+      r.verdict = ReadingVerdict::kJump;
+      r.value = jump.beta.segment<2>(4).norm();
+      r.threshold = options_.decision_chi2;
+      r.statistic = over_drift;
+      return r;
+    }
+  }
+  // kErratic: scatter about the smooth curve, far beyond the noise. A drift change within the
+  // window must not read as scatter.
+  if (std::isfinite(smooth) && smooth > erratic_threshold_[n]) {
+    r.verdict = ReadingVerdict::kErratic;
+    r.value = smooth;
+    r.threshold = erratic_threshold_[n];
+    r.statistic = smooth;
+  }
+  return r;
+}
+
+std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDriftChange(
+    int gyro_id, Source source) const {
+  auto it = tracks_.find(Key(gyro_id, source));
+  if (it == tracks_.end()) return std::nullopt;
+  const Track& track = it->second;
+  const int n = static_cast<int>(track.points.size());
+  if (n < 4) return std::nullopt;
+  const Projected p = Project(track);
+  // The window's own rate (the change began before the window) against a rate change at one
+  // of its points; the latter when it fits better by chi2inv(0.99, 2).
+  std::optional<DriftChange> best;
+  auto bound_after = [&](int j) {
+    double bound = 0.0;
+    for (int k = std::max(j, 0) + 1; k < n; ++k) {
+      const double dt = p.tau[k] - p.tau[k - 1];
+      bound = std::max(bound, track.points[k].drift_bound +
+                                  (dt > 0.0 ? kSlowReadingErrorRad * track.points[k].turn / dt : 0.0));
+    }
+    return bound;
+  };
+  auto make = [&](const Fit& f, int j) {
+    DriftChange d;
+    d.c = f.beta.segment<2>(j < 0 ? 2 : 4);
+    d.cov = f.cov.block<2, 2>(j < 0 ? 2 : 4, j < 0 ? 2 : 4);
+    d.magnitude = d.c.norm();
+    d.onset = track.points[std::max(j, 0)].time;
+    d.bound = bound_after(j);
+    d.beyond_chi2 = BeyondBallChi2(d.c, d.cov, d.bound);
+    d.beyond = d.beyond_chi2 >= options_.decision_chi2;
+    return d;
+  };
+  const Fit line = WeightedFit(p, Regressors(p, -1, std::nullopt, false));
+  if (std::isfinite(line.rss)) best = make(line, -1);
+  double best_rss = std::isfinite(line.rss) ? line.rss - 9.21 : std::numeric_limits<double>::infinity();
+  for (int j = 1; j <= n - 2; ++j) {
+    const Fit drift = WeightedFit(p, Regressors(p, -1, p.tau[j], false));
+    if (!std::isfinite(drift.rss) || drift.rss >= best_rss) continue;
+    best_rss = drift.rss;
+    best = make(drift, j);
+  }
+  return best;
+}
+
+// State: last_step (3: flag, unix seconds, nanoseconds), the track count, then per track: key,
+// has_posterior, posterior_in (3), posterior_time (3), T (6, column by column), the count of
+// drivers_ref and its values, point count,
+// then per point: time (3), x_in (3), noise_in (9, row by row), drift_bound, turn.
+namespace {
+void PutTime(std::vector<double>& v, absl::Time t) {
+  if (t == absl::InfinitePast()) {
+    v.insert(v.end(), {-1.0, 0.0, 0.0});
+    return;
+  }
+  const int64_t ns = absl::ToUnixNanos(t);
+  v.push_back(1.0);
+  v.push_back(static_cast<double>(ns / 1000000000));
+  v.push_back(static_cast<double>(ns % 1000000000));
+}
+}  // namespace
+
+std::vector<double> ReadingFaultMonitor::ExportState() const {
+  std::vector<double> v;
+  PutTime(v, last_step_);
+  v.push_back(static_cast<double>(tracks_.size()));
+  for (const auto& [key, t] : tracks_) {
+    v.push_back(key);
+    v.push_back(t.has_posterior ? 1.0 : 0.0);
+    for (int i = 0; i < 3; ++i) v.push_back(t.posterior_in(i));
+    PutTime(v, t.posterior_time);
+    for (int c = 0; c < 2; ++c) {
+      for (int i = 0; i < 3; ++i) v.push_back(t.T(i, c));
+    }
+    v.push_back(static_cast<double>(t.drivers_ref.size()));
+    for (int i = 0; i < t.drivers_ref.size(); ++i) v.push_back(t.drivers_ref(i));
+    v.push_back(static_cast<double>(t.points.size()));
+    for (const Point& p : t.points) {
+      PutTime(v, p.time);
+      for (int i = 0; i < 3; ++i) v.push_back(p.x_in(i));
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) v.push_back(p.noise_in(i, j));
+      }
+      v.push_back(p.drift_bound);
+      v.push_back(p.turn);
+    }
+  }
+  return v;
+}
+
+absl::Status ReadingFaultMonitor::RestoreState(absl::Span<const double> state) {
+  size_t pos = 0;
+  auto fail = [](const std::string& what) {
+    return absl::DataLossError(absl::StrCat("reading fault monitor: ", what));
+  };
+  auto take = [&](double& out) {
+    if (pos >= state.size()) return false;
+    out = state[pos++];
+    return true;
+  };
+  auto take_time = [&](absl::Time& t) -> absl::Status {
+    double flag, s, ns;
+    if (!take(flag) || !take(s) || !take(ns)) return fail("state truncated");
+    if (flag == -1.0 && s == 0.0 && ns == 0.0) {
+      t = absl::InfinitePast();
+      return absl::OkStatus();
+    }
+    if (flag != 1.0 || !(std::abs(s) <= 1e11) || s != std::floor(s) || !(ns >= 0.0 && ns < 1e9) ||
+        ns != std::floor(ns)) {
+      return fail(absl::StrFormat("time (%g, %g, %g) is not one", flag, s, ns));
+    }
+    t = absl::FromUnixNanos(static_cast<int64_t>(s) * 1000000000 + static_cast<int64_t>(ns));
+    return absl::OkStatus();
+  };
+  auto take_finite = [&](double& out, const char* field) -> absl::Status {
+    if (!take(out)) return fail("state truncated");
+    if (!std::isfinite(out)) return fail(absl::StrFormat("%s %g is not finite", field, out));
+    return absl::OkStatus();
+  };
+  auto take_count = [&](int& out, int max, const char* field) -> absl::Status {
+    double c;
+    if (!take(c)) return fail("state truncated");
+    if (!(c >= 0.0 && c <= max && c == std::floor(c))) {
+      return fail(absl::StrFormat("%s %g outside [0, %d]", field, c, max));
+    }
+    out = static_cast<int>(c);
+    return absl::OkStatus();
+  };
+  absl::Time last_step;
+  if (absl::Status s = take_time(last_step); !s.ok()) return s;
+  int count = 0;
+  if (absl::Status s = take_count(count, 16, "track count"); !s.ok()) return s;
+  std::map<int, Track> tracks;
+  for (int k = 0; k < count; ++k) {
+    int key = 0;
+    if (absl::Status s = take_count(key, 2 * 1000 + 1, "track key"); !s.ok()) return s;
+    Track t;
+    double flag;
+    if (!take(flag)) return fail("state truncated");
+    if (flag != 0.0 && flag != 1.0) return fail(absl::StrFormat("posterior flag %g is not 0 or 1", flag));
+    t.has_posterior = flag == 1.0;
+    for (int i = 0; i < 3; ++i) {
+      if (absl::Status s = take_finite(t.posterior_in(i), "posterior"); !s.ok()) return s;
+    }
+    if (absl::Status s = take_time(t.posterior_time); !s.ok()) return s;
+    for (int c = 0; c < 2; ++c) {
+      for (int i = 0; i < 3; ++i) {
+        if (absl::Status s = take_finite(t.T(i, c), "tangent basis"); !s.ok()) return s;
+      }
+    }
+    int drivers = 0;
+    if (absl::Status s = take_count(drivers, 64, "driver count"); !s.ok()) return s;
+    t.drivers_ref = Eigen::VectorXd::Zero(drivers);
+    for (int i = 0; i < drivers; ++i) {
+      if (absl::Status s = take_finite(t.drivers_ref(i), "driver"); !s.ok()) return s;
+    }
+    int points = 0;
+    if (absl::Status s = take_count(points, options_.window_steps + 1, "point count"); !s.ok()) {
+      return s;
+    }
+    for (int j = 0; j < points; ++j) {
+      Point p;
+      if (absl::Status s = take_time(p.time); !s.ok()) return s;
+      for (int i = 0; i < 3; ++i) {
+        if (absl::Status s = take_finite(p.x_in(i), "track"); !s.ok()) return s;
+      }
+      for (int i = 0; i < 3; ++i) {
+        for (int m = 0; m < 3; ++m) {
+          if (absl::Status s = take_finite(p.noise_in(i, m), "noise"); !s.ok()) return s;
+        }
+      }
+      if (absl::Status s = take_finite(p.drift_bound, "drift bound"); !s.ok()) return s;
+      if (absl::Status s = take_finite(p.turn, "turn"); !s.ok()) return s;
+      t.points.push_back(p);
+    }
+    tracks[key] = std::move(t);
+  }
+  if (pos != state.size()) return fail("state oversized");
+  tracks_ = std::move(tracks);
+  last_step_ = last_step;
+  return absl::OkStatus();
+}
+
+}  // namespace esg::estimator

@@ -1,0 +1,120 @@
+#!/usr/bin/env bash
+# False exclusions of healthy gyros when the model lacks an effect (issue 31, docs/decisions.md
+# D94): each seed simulates a fault-free flight whose truth carries one effect the configuration
+# does not model, in one running gyro, at 0.03-0.15 deg/h (drawn from the seed), and calibrates
+# it with `esg calibrate --model 10+11 --format json`. A run fails when any gyro is excluded
+# (gyros[].faulty) or the state is FAULTED. With 0 failures in N runs the 95% upper bound of the
+# rate is 1 - 0.05^(1/N) (300 runs: 1.0%).
+# Usage: scripts/false_exclusions.sh [N [FIRST_SEED [HOURS]]]   (defaults 300, 1, 12)
+# ESG_BUILD=DIR (default build); ESG_JOBS=J parallel runs (default 2); ESG_KEEP=DIR keeps each
+# failing run's scenario, recording and calibration JSON there.
+# The effect classes: displaced rotor, unconfigured gyro misalignment, unequal stiffness, a
+# cycling (orbital, thermal) drift, a switching drift, a drift driven by an untelemetered
+# quantity, a raised random walk, a readout scale error, a creeping rotor (a growing drift), a
+# drift step below the 1 deg/h limit, a star-tracker misalignment, a star-tracker latency.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+n=${1:-300}
+first=${2:-1}
+hours=${3:-12}
+build=${ESG_BUILD:-build}
+jobs=${ESG_JOBS:-2}
+esg="$build/client/esg"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+run_one() {
+  local seed=$1
+  local dir="$work/$seed"
+  mkdir -p "$dir"
+  python3 - "$seed" "$dir/scenario.json" <<'PY'
+import json, math, random, sys
+seed = int(sys.argv[1]); out = sys.argv[2]
+rng = random.Random(7919 * seed)
+classes = ["rotor_displacement", "gyro_misalignment", "unequal_stiffness", "orbital_drift",
+           "switching_drift", "hidden_driver", "random_walk", "readout_scale", "creeping_rotor",
+           "drift_step", "star_tracker_misalignment", "star_tracker_latency"]
+cls = classes[(seed - 1) % len(classes)]
+gyro = rng.choice([1, 2, 3])
+size = rng.uniform(0.03, 0.15)  # deg/h
+def unit():
+    while True:
+        v = [rng.gauss(0, 1) for _ in range(3)]
+        n = math.sqrt(sum(x * x for x in v))
+        if n > 1e-3: return [x / n for x in v]
+u = unit()
+g = {"id": gyro}
+sc = {"description": f"false-exclusion seed {seed}: {cls} in gyro {gyro}, {size:.3f} deg/h",
+      "profile": rng.choice(["calibration", "mixed", "orbital"]), "profileSeed": seed,
+      "gyros": [g]}
+if cls == "rotor_displacement":
+    # C ~ 0.065 deg/h per um (C10 + C20): size in deg/h -> um.
+    g["rotorDisplacementUm"] = [size / 0.065 * x for x in u]
+elif cls == "gyro_misalignment":
+    g["misalignmentArcsec"] = [rng.uniform(40, 80) * x for x in u]
+elif cls == "unequal_stiffness":
+    g["muDegH"] = [size * x for x in u]
+elif cls == "orbital_drift":
+    g["orbitalDrift"] = {"amplitudeDegH": [size * x for x in u], "phaseDeg": rng.uniform(0, 360),
+                         "periodMin": 94}
+elif cls == "switching_drift":
+    g["switchingDrift"] = {"amplitudeDegH": [size * x for x in u], "meanDwellHours": rng.uniform(1, 6)}
+elif cls == "hidden_driver":
+    g["hiddenDriverDrift"] = {"amplitudeDegH": [size * x for x in u], "correlationHours": rng.uniform(0.5, 4)}
+elif cls == "random_walk":
+    g["randomWalkDegHSqrtH"] = rng.uniform(0.005, 0.02)
+elif cls == "readout_scale":
+    g["readoutDistortionPpm"] = [rng.uniform(-300, 300) for _ in range(3)] + [0, 0, 0]
+elif cls == "creeping_rotor":
+    g["rotorDisplacementUm"] = [0.3 * x for x in u]
+    g["rotorDisplacementRateUmH"] = [size / 0.065 / 12.0 * x for x in u]
+elif cls == "drift_step":
+    g["fault"] = {"timeHours": rng.uniform(1, 10), "kind": "drift_step", "degH": [size * x for x in u]}
+elif cls == "star_tracker_misalignment":
+    sc["gyros"] = []
+    sc["starTracker"] = {"misalignmentArcsec": [rng.uniform(40, 80) * x for x in u]}
+elif cls == "star_tracker_latency":
+    sc["gyros"] = []
+    sc["starTracker"] = {"latencyMs": rng.choice([-1, 1]) * rng.uniform(50, 300)}
+json.dump(sc, open(out, "w"))
+PY
+  "$esg" simulate --config deploy/examples/rdk1.json --scenario "$dir/scenario.json" \
+    --hours "$hours" --seed "$seed" --out "$dir/rec.csv" >/dev/null 2>"$dir/sim.err" || {
+      echo "seed $seed: SIMULATE FAILED $(head -c 300 "$dir/sim.err")"; return; }
+  "$esg" calibrate --config deploy/examples/rdk1.json --recording "$dir/rec.csv" \
+    --model 10+11 --format json >"$dir/out.json" 2>"$dir/cal.err" || {
+      echo "seed $seed: CALIBRATE FAILED $(head -c 300 "$dir/cal.err")"; return; }
+  python3 - "$seed" "$dir/scenario.json" "$dir/out.json" <<'PY'
+import json, sys
+seed, sc, out = sys.argv[1], json.load(open(sys.argv[2])), json.load(open(sys.argv[3]))
+excluded = [g["id"] for g in out["gyros"] if g["faulty"]]
+drift_changed = [e for e in out["events"] if e["kind"] == "DRIFT_CHANGED"]
+ok = not excluded and out["state"] != "FAULTED"
+what = sc["description"].split(": ", 1)[1]
+line = f"seed {seed}: {'PASS' if ok else 'FAIL'} {what}; state {out['state']}"
+if excluded:
+    first = next(e for e in out["events"] if e["kind"] in ("WORKING_PAIR_FAULT", "RESERVE_PAIR_FAULT"))
+    line += f"; excluded {excluded} at {first['time']}: {first['message'][:240]}"
+if drift_changed:
+    line += f"; DRIFT_CHANGED x{len(drift_changed)}"
+print(line)
+PY
+  if [ -n "${ESG_KEEP:-}" ] && grep -q '"faulty": true' "$dir/out.json" 2>/dev/null; then
+    mkdir -p "$ESG_KEEP/$seed" && cp "$dir"/scenario.json "$dir"/rec.csv "$dir"/out.json "$ESG_KEEP/$seed/"
+  fi
+  rm -f "$dir/rec.csv"
+}
+export -f run_one
+export work esg hours
+seq "$first" $((first + n - 1)) | xargs -P "$jobs" -I{} bash -c 'run_one {}' | tee "$work/results.txt"
+fails=$(grep -c ': FAIL' "$work/results.txt" || true)
+errors=$(grep -c 'FAILED' "$work/results.txt" || true)
+python3 - "$n" "$fails" "$errors" <<'PY'
+import sys
+n, f, e = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+runs = n - e
+bound = 1 - 0.05 ** (1 / runs) if f == 0 and runs > 0 else None
+print(f"false exclusions: {f} of {runs} runs" + (f" (95% upper bound {100 * bound:.2f}%)" if bound else "")
+      + (f"; {e} runs could not run" if e else ""))
+sys.exit(1 if f or e else 0)
+PY
