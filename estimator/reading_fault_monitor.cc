@@ -24,34 +24,41 @@ using Eigen::VectorXd;
 namespace {
 
 // Weighted least squares of y_j = (f_j^T (x) I_2) beta over the points, f_j the scalar
-// regressors of point j (k of them): beta (2k), its covariance and the weighted residual sum.
+// regressors of point j (k of them, at most 3): beta (2k), its covariance and the weighted
+// residual sum. The normal equations are summed block by block (N_ml = sum f_m f_l W_j,
+// r_m = sum f_m W_j y_j) and RSS = sum y^T W y - r^T beta, so a fit costs O(n k^2) 2 x 2 products
+// and no allocation: the monitor fits about 2 W of them per gyro and step.
+using FitMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
+using FitVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
 struct Fit {
-  VectorXd beta;
-  MatrixXd cov;
+  FitVector beta;
+  FitMatrix cov;
   double rss = std::numeric_limits<double>::infinity();
 };
 
 Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const std::vector<VectorXd>& f) {
   const int k = static_cast<int>(f[0].size());
-  MatrixXd N = MatrixXd::Zero(2 * k, 2 * k);
-  VectorXd r = VectorXd::Zero(2 * k);
-  std::vector<MatrixXd> A(p.y.size());
+  FitMatrix N = FitMatrix::Zero(2 * k, 2 * k);
+  FitVector r = FitVector::Zero(2 * k);
+  double yWy = 0.0;
   for (size_t j = 0; j < p.y.size(); ++j) {
-    A[j] = MatrixXd::Zero(2, 2 * k);
-    for (int m = 0; m < k; ++m) A[j].block<2, 2>(0, 2 * m) = f[j](m) * Matrix2d::Identity();
-    N += A[j].transpose() * p.W[j] * A[j];
-    r += A[j].transpose() * p.W[j] * p.y[j];
+    const Vector2d Wy = p.W[j] * p.y[j];
+    yWy += p.y[j].dot(Wy);
+    for (int m = 0; m < k; ++m) {
+      r.segment<2>(2 * m) += f[j](m) * Wy;
+      for (int l = 0; l <= m; ++l) N.block<2, 2>(2 * m, 2 * l) += (f[j](m) * f[j](l)) * p.W[j];
+    }
+  }
+  for (int m = 0; m < k; ++m) {
+    for (int l = m + 1; l < k; ++l) N.block<2, 2>(2 * m, 2 * l) = N.block<2, 2>(2 * l, 2 * m).transpose();
   }
   Fit out;
-  Eigen::FullPivLU<MatrixXd> lu(N);
+  Eigen::FullPivLU<FitMatrix> lu(N);
   if (lu.rank() < 2 * k) return out;  // regressors not independent over these points
   out.cov = lu.inverse();
   out.beta = out.cov * r;
-  out.rss = 0.0;
-  for (size_t j = 0; j < p.y.size(); ++j) {
-    const Vector2d e = p.y[j] - A[j] * out.beta;
-    out.rss += e.dot(p.W[j] * e);
-  }
+  // Rounding can leave a tiny negative sum for a perfect fit.
+  out.rss = std::max(yWy - r.dot(out.beta), 0.0);
   return out;
 }
 
@@ -186,8 +193,11 @@ void ReadingFaultMonitor::SetPosterior(int gyro_id, Source source,
 ReadingFaultMonitor::Projected ReadingFaultMonitor::Project(const Track& track) {
   Projected p;
   const absl::Time last = track.points.back().time;
+  // Relative to the last point (every model has an intercept): the track itself grows without
+  // bound over a long flight, the residual sums should not lose digits to it.
+  const Eigen::Vector3d origin = track.points.back().x_in;
   for (const Point& q : track.points) {
-    p.y.push_back(track.T.transpose() * q.x_in);
+    p.y.push_back(track.T.transpose() * (q.x_in - origin));
     Matrix2d cov = track.T.transpose() * q.noise_in * track.T;
     // A floor keeps the weight finite (0.01 arcsec): a configured noise of zero.
     cov = 0.5 * (cov + cov.transpose()) + std::pow(0.01 * kRadPerArcsec, 2) * Matrix2d::Identity();
@@ -287,36 +297,42 @@ std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDri
   if (n < 4) return std::nullopt;
   const Projected p = Project(track);
   // The window's own rate (the change began before the window) against a rate change at one
-  // of its points; the latter when it fits better by chi2inv(0.99, 2).
+  // of its points or a quarter, a half or three quarters into an interval (an onset between two
+  // samples: at the sample before it the change's slope would come out short); the rate change
+  // when it fits better by chi2inv(0.99, 2).
   std::optional<DriftChange> best;
-  auto bound_after = [&](int j) {
-    double bound = 0.0;
-    for (int k = std::max(j, 0) + 1; k < n; ++k) {
-      const double dt = p.tau[k] - p.tau[k - 1];
-      bound = std::max(bound, track.points[k].drift_bound +
-                                  (dt > 0.0 ? kSlowReadingErrorRad * track.points[k].turn / dt : 0.0));
-    }
-    return bound;
-  };
-  auto make = [&](const Fit& f, int j) {
+  auto make = [&](const Fit& f, double onset_tau, int first_after) {
     DriftChange d;
-    d.c = f.beta.segment<2>(j < 0 ? 2 : 4);
-    d.cov = f.cov.block<2, 2>(j < 0 ? 2 : 4, j < 0 ? 2 : 4);
+    const int at = onset_tau == -std::numeric_limits<double>::infinity() ? 2 : 4;
+    d.c = f.beta.segment<2>(at);
+    d.cov = f.cov.block<2, 2>(at, at);
     d.magnitude = d.c.norm();
-    d.onset = track.points[std::max(j, 0)].time;
-    d.bound = bound_after(j);
+    d.onset = track.points.back().time + absl::Seconds(std::max(onset_tau, p.tau[0]));
+    for (int k = std::max(first_after, 1); k < n; ++k) {
+      const double dt = p.tau[k] - p.tau[k - 1];
+      d.bound = std::max(d.bound, track.points[k].drift_bound +
+                                      (dt > 0.0 ? kSlowReadingErrorRad * track.points[k].turn / dt
+                                                : 0.0));
+    }
     d.beyond_chi2 = BeyondBallChi2(d.c, d.cov, d.bound);
     d.beyond = d.beyond_chi2 >= options_.decision_chi2;
+    // Below: the bound exceeds |c| by three sigma along c (one-sided 0.13%).
+    const double var = d.magnitude > 0.0 ? (d.c / d.magnitude).dot(d.cov * (d.c / d.magnitude))
+                                         : d.cov.trace() / 2.0;
+    d.below = d.bound - d.magnitude > 3.0 * std::sqrt(std::max(var, 0.0));
     return d;
   };
   const Fit line = WeightedFit(p, Regressors(p, -1, std::nullopt, false));
-  if (std::isfinite(line.rss)) best = make(line, -1);
+  if (std::isfinite(line.rss)) best = make(line, -std::numeric_limits<double>::infinity(), 1);
   double best_rss = std::isfinite(line.rss) ? line.rss - 9.21 : std::numeric_limits<double>::infinity();
   for (int j = 1; j <= n - 2; ++j) {
-    const Fit drift = WeightedFit(p, Regressors(p, -1, p.tau[j], false));
-    if (!std::isfinite(drift.rss) || drift.rss >= best_rss) continue;
-    best_rss = drift.rss;
-    best = make(drift, j);
+    for (int q = 0; q < 4; ++q) {
+      const double onset = p.tau[j] - (p.tau[j] - p.tau[j - 1]) * q / 4.0;
+      const Fit drift = WeightedFit(p, Regressors(p, -1, onset, false));
+      if (!std::isfinite(drift.rss) || drift.rss >= best_rss) continue;
+      best_rss = drift.rss;
+      best = make(drift, onset, j);
+    }
   }
   return best;
 }
@@ -331,10 +347,11 @@ void PutTime(std::vector<double>& v, absl::Time t) {
     v.insert(v.end(), {-1.0, 0.0, 0.0});
     return;
   }
-  const int64_t ns = absl::ToUnixNanos(t);
+  // Seconds and nanoseconds apart: a time far from 1970 does not fit int64 nanoseconds.
+  const int64_t s = absl::ToUnixSeconds(t);
   v.push_back(1.0);
-  v.push_back(static_cast<double>(ns / 1000000000));
-  v.push_back(static_cast<double>(ns % 1000000000));
+  v.push_back(static_cast<double>(s));
+  v.push_back(static_cast<double>(absl::ToInt64Nanoseconds(t - absl::FromUnixSeconds(s))));
 }
 }  // namespace
 
@@ -383,11 +400,11 @@ absl::Status ReadingFaultMonitor::RestoreState(absl::Span<const double> state) {
       t = absl::InfinitePast();
       return absl::OkStatus();
     }
-    if (flag != 1.0 || !(std::abs(s) <= 1e11) || s != std::floor(s) || !(ns >= 0.0 && ns < 1e9) ||
+    if (flag != 1.0 || !(std::abs(s) <= 1e12) || s != std::floor(s) || !(ns >= 0.0 && ns < 1e9) ||
         ns != std::floor(ns)) {
       return fail(absl::StrFormat("time (%g, %g, %g) is not one", flag, s, ns));
     }
-    t = absl::FromUnixNanos(static_cast<int64_t>(s) * 1000000000 + static_cast<int64_t>(ns));
+    t = absl::FromUnixSeconds(static_cast<int64_t>(s)) + absl::Nanoseconds(static_cast<int64_t>(ns));
     return absl::OkStatus();
   };
   auto take_finite = [&](double& out, const char* field) -> absl::Status {

@@ -137,6 +137,7 @@ class ReadingFaultMonitor {
   void SetPosterior(int gyro_id, Source source, const Eigen::Vector3d& posterior_residual_in);
   // Every window restarts (spin axes re-initialised, the star tracker re-referenced).
   void Clear();
+  const ReadingFaultOptions& options() const { return options_; }
 
   struct DriftChange {
     Eigen::Vector2d c = Eigen::Vector2d::Zero();  // in the tangent basis T of the last sample [rad/s]
@@ -146,6 +147,9 @@ class ReadingFaultMonitor {
     double beyond_chi2 = 0.0;
     absl::Time onset;
     bool beyond = false;     // beyond_chi2 >= decision_chi2
+    bool below = false;      // |c| below the bound by 3 sigma along c
+    // Neither: undecided, more steps after the onset will tell (the estimate's sigma falls as
+    // the steps after it to the power 1.5).
   };
   // The best rate change of gyro `gyro_id`'s window (nullopt with fewer than 4 samples).
   std::optional<DriftChange> EstimateDriftChange(int gyro_id, Source source) const;

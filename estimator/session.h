@@ -622,6 +622,10 @@ class EstimationSession {
   // from version 7.
   int unverified_gyro_ = 0;
   absl::Time unverified_time_ = absl::InfinitePast();
+  // The gyro the accumulated test (D33) named whose drift change is being measured, and when it
+  // was named; 0: none (D94). In the checkpoint from version 7.
+  int drift_change_gyro_ = 0;
+  absl::Time drift_change_named_ = absl::InfinitePast();
 };
 
 }  // namespace esg::estimator

@@ -60,7 +60,8 @@ using Eigen::VectorXd;
 //   exclusion (D94): reason (ExclusionReason), time (3), value, threshold, source; then r (a count) and
 //   the reading-fault monitor's state (r values, ReadingFaultMonitor::ExportState); then a (a
 //   count) and per recent verdict: gyro id, time (3), verdict (ReadingVerdict), source, value,
-//   threshold, statistic; then unverified_gyro and unverified_time (3); then per running gyro
+//   threshold, statistic; then unverified_gyro and unverified_time (3), drift_change_gyro and
+//   drift_change_named (3); then per running gyro
 //   the columns m of its motion since the last update (0 or its driver count) and the 3 x m
 //   values, row by row. A session restored from an earlier version gives each excluded gyro
 //   the reason kEarlier at its last update time, starts the monitor afresh, and one that was
@@ -179,6 +180,8 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   }
   v.push_back(unverified_gyro_);
   put_time(unverified_time_);
+  v.push_back(drift_change_gyro_);
+  put_time(drift_change_named_);
   for (const GyroState& g : gyros_) {
     v.push_back(static_cast<double>(g.motion_in.cols()));
     for (int r = 0; r < g.motion_in.rows(); ++r) {
@@ -439,6 +442,11 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     }
     s.unverified_gyro_ = get_int();
     s.unverified_time_ = get_time();
+    s.drift_change_gyro_ = get_int();
+    s.drift_change_named_ = get_time();
+    if (s.drift_change_gyro_ != 0 && s.Find(s.drift_change_gyro_) == nullptr) {
+      mark_bad(s.drift_change_gyro_, "the drift change being measured names a gyro not running");
+    }
     for (int i = 0; i < s.gyro_count(); ++i) {
       const int cols = get_int();
       if (short_read || (cols != 0 && cols != s.layout_.SpinAxisDriverCount(i))) {

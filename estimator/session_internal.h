@@ -16,6 +16,13 @@ inline constexpr double kNoiseFloor = 0.01 * kRadPerArcsec;
 // next measurement step must name the same gyro (docs/decisions.md D24).
 inline constexpr double kImmediateIsolationStrength = 2.0;
 
+// Measurement steps a drift change named by the accumulated test (D33) is measured on the
+// gyro's track before it is called below the limit anyway (D94): beyond the limit it is
+// excluded as soon as it shows, below it alerted as soon as it shows, and an estimate that does
+// neither in this many steps is alerted as a drift change (a change the track cannot tell from
+// the limit is no abrupt fault). Its onset stays inside the track's window of 20 steps.
+inline constexpr int kDriftChangeDecisionSteps = 10;
+
 // A count the session keeps (steps without the star tracker, rejections and acceptances in a row,
 // star-tracker realignments) stops at this value, 1e9 (1,900 years of steps at one a minute): the
 // largest integer its checkpoint restore reads (session_checkpoint.cc). A counter restored at the

@@ -328,6 +328,7 @@ void EstimationSession::MarkExcluded(int id, const Exclusion& why) {
   g->faulty = true;
   g->exclusion = why;
   change_detector_.Clear();
+  if (drift_change_gyro_ == id) drift_change_gyro_ = 0;
 }
 
 void EstimationSession::ReopenDrift(int id, double change_rad_s) {

@@ -31,6 +31,7 @@ using Eigen::Quaterniond;
 using Eigen::Vector3d;
 using Eigen::VectorXd;
 
+using session_internal::kDriftChangeDecisionSteps;
 using session_internal::kImmediateIsolationStrength;
 using session_internal::kNoiseFloor;
 using session_internal::Count;
@@ -483,50 +484,60 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
         star_tracker_voted_faulty_ || d.result == Isolation::kStarTracker ||
         std::find(d.candidates.begin(), d.candidates.end(), 0) != d.candidates.end();
     const auto change = change_detector_.Add(ids, test.gyro_star_nis, star_tracker_suspected);
-    if (change.has_value() && consistency_.tests() > 0 && !ModelKnownNotToFit()) {
-      const int k = static_cast<int>(std::find(ids.begin(), ids.end(), change->gyro_id) - ids.begin());
-      std::string others;
-      for (int j = 0; j < 3; ++j) {
-        if (j == k) continue;
-        absl::StrAppend(&others, others.empty() ? "" : ", ",
-                        absl::StrFormat("gyro %d %.1f", ids[j], change->sums[j]));
-      }
+    if (change.has_value() && consistency_.tests() > 0 && !ModelKnownNotToFit() &&
+        drift_change_gyro_ == 0) {
+      // D94: the gyro's drift changed; by how much is measured on its track from now on, until
+      // the change is clearly beyond the limit (excluded) or below it (DRIFT_CHANGED).
+      drift_change_gyro_ = change->gyro_id;
+      drift_change_named_ = frame.time;
+    }
+    const int k = static_cast<int>(std::find(ids.begin(), ids.end(), drift_change_gyro_) - ids.begin());
+    if (drift_change_gyro_ != 0 && k < 3) {
+      const auto dc =
+          reading_monitor_.EstimateDriftChange(ids[k], ReadingFaultMonitor::Source::kStarTracker);
+      const bool waited = frame.time - drift_change_named_ >=
+                          absl::Seconds(kDriftChangeDecisionSteps * config_.filter.measurement_step);
       const std::string named = absl::StrFormat(
-          "its own star-tracker differences over the last %d steps sum to chi-square %.1f > %.1f "
-          "(2 dof a step) while the other gyros' pass (%s < %.1f)",
-          change->steps, change->sums[k], change->fail_threshold, others, change->pass_threshold);
-      // D94: by how much did the drift change? Beyond the limit the gyro is excluded; below it
-      // the change is alerted and the gyro's coefficients re-opened.
-      const auto dc = reading_monitor_.EstimateDriftChange(ids[k], ReadingFaultMonitor::Source::kStarTracker);
+          "named at %s by its own star-tracker differences summed over %d steps (the other gyros' "
+          "passing), its track measured over the last %d steps",
+          absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", drift_change_named_, absl::UTCTimeZone()),
+          change_detector_.options().window_steps, reading_monitor_.options().window_steps);
       if (dc.has_value() && dc->beyond) {
         Exclusion why;
         why.reason = ExclusionReason::kDriftBeyondLimit;
         why.time = dc->onset;
         why.value = RadPerSecToDegPerHour(dc->magnitude);
         why.threshold = RadPerSecToDegPerHour(dc->bound);
+        drift_change_gyro_ = 0;
         exclude(k, why.value, why.threshold, "deg/h",
-                "accumulated star-tracker test (eq. (13) differences of each gyro, D33)", named, why);
+                "accumulated star-tracker test (eq. (13) differences of each gyro, D33) and the "
+                "gyro's track (D94)",
+                named, why);
         st_agrees_with_pairs = st_present && !d.pair_star_exceeded[k];
         return true;
       }
-      const double change_rad_s = dc.has_value() ? dc->magnitude : 0.0;
-      const double sigma_rad_s =
-          dc.has_value() ? std::sqrt(std::max(dc->cov.trace(), 0.0)) : 0.0;
-      ReopenDrift(ids[k], change_rad_s);
-      change_detector_.Clear();
-      report.events.push_back(Event{
-          Event::Kind::kDriftChanged, frame.time, absl::StrFormat("gyro %d", ids[k]),
-          RadPerSecToDegPerHour(change_rad_s),
-          RadPerSecToDegPerHour(config_.filter.drift_change_limit), "deg/h",
-          absl::StrFormat(
-              "drift of gyro %d changed by %.3f +- %.3f deg/h at %s (below the limit %.3g deg/h: "
-              "not a fault): %s; its drift coefficients are re-opened and recalibrated, nothing "
-              "excluded",
-              ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
-              absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", dc.has_value() ? dc->onset : frame.time,
-                               absl::UTCTimeZone()),
-              RadPerSecToDegPerHour(dc.has_value() ? dc->bound : config_.filter.drift_change_limit),
-              named)});
+      if (!dc.has_value() || dc->below || waited) {
+        const double change_rad_s = dc.has_value() ? dc->magnitude : 0.0;
+        const double sigma_rad_s = dc.has_value() ? std::sqrt(std::max(dc->cov.trace(), 0.0)) : 0.0;
+        ReopenDrift(ids[k], change_rad_s);
+        change_detector_.Clear();
+        drift_change_gyro_ = 0;
+        report.events.push_back(Event{
+            Event::Kind::kDriftChanged, frame.time, absl::StrFormat("gyro %d", ids[k]),
+            RadPerSecToDegPerHour(change_rad_s),
+            RadPerSecToDegPerHour(config_.filter.drift_change_limit), "deg/h",
+            absl::StrFormat(
+                "drift of gyro %d changed by %.3f +- %.3f deg/h at %s (%s the limit %.3g deg/h "
+                "with the model's uncertainty: not a fault): %s; its drift coefficients are "
+                "re-opened and recalibrated, nothing excluded",
+                ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
+                absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", dc.has_value() ? dc->onset : frame.time,
+                                 absl::UTCTimeZone()),
+                dc.has_value() && dc->below ? "below" : "not shown beyond",
+                RadPerSecToDegPerHour(dc.has_value() ? dc->bound
+                                                     : config_.filter.drift_change_limit),
+                named)});
+      }
     }
   }
   // The exceeded mismatch with the largest angle-to-allowed ratio: the event's value/threshold.
@@ -555,6 +566,10 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
       abrupt = RecentAbrupt(d.excluded_gyro, frame.time);
       if (!abrupt.has_value()) {
         if (WithholdUnverified(d.excluded_gyro, frame.time)) withheld_gyro = d.excluded_gyro;
+        // The pairs named it at this step all the same: D24's confirmation counts it (a jump's
+        // verdict may come at the step after, when the pairs name the gyro again).
+        suspect_gyro_ = d.excluded_gyro;
+        suspect_time_ = frame.time;
         report.events.push_back(Event{
             Event::Kind::kFaultAmbiguous, frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
             RadToArcsec(value), RadToArcsec(threshold), "arcsec",

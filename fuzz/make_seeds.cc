@@ -2,7 +2,7 @@
 // simulated flight of deploy/examples/rdk1.json as a recording CSV, as a user's export read
 // through deploy/examples/columns_user_export.json, as telemetry frames in the protobuf wire
 // form, as an AEM, and the session's server checkpoints at several points of the flight (before
-// the first frame, before initialisation, converged) in every session version (1 to 6) and every
+// the first frame, before initialisation, converged) in every session version (1 to 7) and every
 // server format (3 as written, 2 and 1 as read). Usage: fuzz_make_seeds <out dir>. The
 // hand-written seeds live beside them.
 #include <cmath>
@@ -99,7 +99,8 @@ size_t VersionLength(const std::vector<double>& v, int version) {
     pos += 1 + static_cast<size_t>(v.at(pos));  // basis terms
     pos += 1 + 3;                               // held voltages
   }
-  return pos;
+  if (version == 6) return pos;
+  return v.size();  // version 7: exclusions, reading-fault monitor, motion (the rest)
 }
 
 // Server format 1 ("ESGSRV01"): model, counters, alert tracks, session (no apply cursor).
@@ -228,7 +229,7 @@ int main(int argc, char** argv) {
       }
     }
     const estimator::SessionCheckpoint full = session->ExportCheckpoint();
-    for (int version = 1; version <= 6; ++version) {
+    for (int version = 1; version <= 7; ++version) {
       server::ServerCheckpoint c;
       c.model = "10+11";
       c.applied_time = applied > 0 ? frames[applied - 1].time : absl::InfinitePast();

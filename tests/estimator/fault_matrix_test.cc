@@ -16,13 +16,15 @@
 // - every cell: at the end, every free coefficient of every gyro not excluded within 3 sigma of
 //   SimulationResult::true_coefficients (for a consistent filter each of the 21 coefficients
 //   passes with probability 0.9973, the run with 0.9973^21 = 0.945);
-// - gyro readout jump, reading frozen, drift step in gyro g: a WORKING_PAIR_FAULT or
-//   RESERVE_PAIR_FAULT naming "gyro g", no isolation before the fault, only gyro g excluded, the
-//   output pair without g at the end. Jump and frozen reading: within 2 measurement steps of the
-//   fault (the frozen reading is right at the first frame of its window and wrong by the body
-//   rate, degrees per minute on both profiles, from the second on). Drift step: within 1 h (the
-//   issue asks for real-time isolation; 1 h is this file's bound, a 0.05 deg/h step then amounts
-//   to 3 arcmin);
+// - gyro readout jump, reading frozen in gyro g: a WORKING_PAIR_FAULT or RESERVE_PAIR_FAULT
+//   naming "gyro g", no isolation before the fault, only gyro g excluded, the output pair without
+//   g at the end, within 2 measurement steps of the fault (the frozen reading is right at the
+//   first frame of its window and wrong by the body rate, degrees per minute on both profiles,
+//   from the second on);
+// - drift step in gyro g (0.05-0.2 deg/h, below the 1 deg/h limit of docs/decisions.md D94): a
+//   drift change, not a fault: a DRIFT_CHANGED naming "gyro g" within 1 h of the step, nothing
+//   excluded, and gyro g's C1 within 3 sigma of its truth after the step (the step's
+//   perpendicular part is a C1 term, C1 - step);
 // - readings missing in gyro g: no gyro excluded, and no step reports a `valid` attitude from a
 //   pair with a gyro whose reading is absent from that frame;
 // - star-tracker burst: a STAR_TRACKER_FAULT or STAR_TRACKER_INNOVATION event at every burst
@@ -161,7 +163,8 @@ const std::set<std::string>& PassingToday() {
       "none_calibration",
       "gyro1_readout_jump_calibration",
       "gyro2_readout_jump_calibration",
-      "gyro1_drift_step_calibration",
+      // gyro1_drift_step_calibration is out since D94 (seed 1: named DRIFT_CHANGED and
+      // recalibrated, nothing excluded, but gyro 1 C1z ends at 3.1 sigma and gyro 3 C2z at 3.3).
       "gyro2_drift_step_calibration",
       "gyro1_reading_frozen_calibration",
       "gyro2_reading_frozen_calibration",
