@@ -96,7 +96,7 @@ class ReadingFaultMonitor {
   // last sample [rad/s] and the reading's turn over it [rad].
   // Where the rebuild's attitude comes from: the star tracker, or the pair of the two other
   // running gyros (free of the star tracker; its noise the three gyros' readout noise, its drift
-  // bound the three gyros'). A gyro has one window per source.
+  // bound the three gyros'). A gyro has one window per source; a verdict of either counts.
   enum class Source { kStarTracker = 0, kPair = 1 };
   struct Sample {
     int gyro_id = 0;

@@ -340,8 +340,10 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
   const double since_update = Seconds(frame.time - next.last_update_time_);
   if (since_update >= config_.filter.measurement_step - 1e-3) {
     if (absl::Status s = next.MeasurementUpdate(frame, report); !s.ok()) return s;
-    next.TrackPosteriors(frame, next.use_star_tracker_ && frame.star_tracker.has_value() &&
-                                    frame.star_tracker->valid);
+    if (options_.detect_drift_change) {
+      next.TrackPosteriors(frame, next.use_star_tracker_ && frame.star_tracker.has_value() &&
+                                      frame.star_tracker->valid);
+    }
     next.last_update_time_ = frame.time;
     MonitorConsistency(next.consistency_, next.widening_, report);
     if (options_.adaptive_noise) WidenOnInconsistency(next.widening_, report);

@@ -225,9 +225,10 @@ struct SessionOptions {
   // model.
   bool adaptive_noise = true;
   NoiseWideningOptions widening;
-  // Exclude a gyro whose own star-tracker differences fail over a window while the other two
-  // pass (gyro_change_detector.h, D33). Off in diagnosis runs, which look for such changes as
-  // physics.
+  // Name a gyro whose own star-tracker differences fail over a window while the other two pass
+  // (gyro_change_detector.h, D33), and judge every gyro's readings for abrupt faults
+  // (reading_fault_monitor.h, D94): the judgement that excludes a gyro. Off in diagnosis runs,
+  // which look for such changes as physics and exclude nothing.
   bool detect_drift_change = true;
   GyroChangeDetectorOptions drift_change;
   // Re-reference the star tracker to the gyros when the pairs vote it faulty with a constant

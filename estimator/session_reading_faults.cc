@@ -187,6 +187,9 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
       samples.push_back(s);
     }
   }
+  // The rebuild from the pair of the two other gyros: free of the star tracker (its 30 arcsec
+  // boresight noise hides a jump of a minute or two in some directions; the pair's readout noise
+  // of a few arcsec does not), and the only one without it.
   if (fresh.size() == 3) {
     for (int k = 0; k < 3; ++k) {
       const int id = fresh[k];
@@ -194,34 +197,28 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
       const GyroState& g = gyros_[i];
       const GyroState& a = *Find(fresh[(k + 1) % 3]);
       const GyroState& b = *Find(fresh[(k + 2) % 3]);
-      Matrix3d S_pair;
-      MatrixXd J_state, G_readout;
-      const auto q = PairQuaternion(a.id, b.id, a.h_k_last, b.h_k_last, &S_pair, &J_state,
-                                    &G_readout);
+      const auto q = PairQuaternion(a.id, b.id, a.h_k_last, b.h_k_last, nullptr);
       if (!q.has_value()) continue;
       const Vector3d rebuilt = q->toRotationMatrix() * g.C_b_k() * g.h_k_last;
       const Eigen::Matrix<double, 3, 2> T = g.T();
-      // Its noise: the pair attitude's readout part turning the rebuilt axis, and the gyro's own
-      // readout (tangent plane of h_k in case axes, carried to inertial).
-      const Matrix3d rx = Skew(rebuilt);
-      const Matrix3d att = sigma_r * sigma_r * G_readout * G_readout.transpose();
-      const Eigen::Matrix<double, 3, 2> Tk = TangentBasis(g.h_k_last);
-      const Matrix3d C_in_k = q->toRotationMatrix() * g.C_b_k();
-      const Matrix3d own = sigma_r * sigma_r * C_in_k * Tk * Tk.transpose() * C_in_k.transpose();
+      // Its noise, bounded isotropically (a test never stronger than with the exact one): the
+      // TRIAD attitude of the pair turns by the reference gyro's readout noise about two axes and
+      // by the second gyro's over sin(theta) about the reference axis, and the gyro's own readout
+      // adds its noise: sigma^2 (2 + 1 / sin^2(theta) + 1) about each tangent axis.
+      const double sin_theta = std::max(a.h_in.cross(b.h_in).norm(), 0.1);
+      const double var = sigma_r * sigma_r * (3.0 + 1.0 / (sin_theta * sin_theta));
       ReadingFaultMonitor::Sample s;
       s.gyro_id = id;
       s.source = Source::kPair;
       s.T = T;
       s.prior_residual_in = T * T.transpose() * (rebuilt - g.h_in);
-      // The rebuild's pair moves with its own drivers too; the track of this source measures
-      // against the model as it is (the pair's share is not taken out): drivers and motion of
-      // gyro g only, the pair's corrections part of the drift bound below.
+      s.noise_in = var * T * T.transpose();
+      // The rebuild's pair moves with its own drivers too; the track measures against gyro g's
+      // model as it started, the pair's model corrections part of the bound: the reference
+      // gyro's drift by its rate, the second's about the reference axis by its rate over
+      // sin(theta).
       s.drivers = DriverValues(i);
       s.motion_jacobian_in = g.motion_in;
-      s.noise_in = T * T.transpose() * (rx * att * rx.transpose() + own) * T * T.transpose();
-      // The pair's own drifts move its attitude: the reference gyro's by its rate, the second's
-      // about the reference axis by its rate over sin(theta).
-      const double sin_theta = std::max(a.h_in.cross(b.h_in).norm(), 0.1);
       s.drift_bound = bound[i] + bound[IndexOf(a.id)] + bound[IndexOf(b.id)] / sin_theta;
       s.turn = turn;
       samples.push_back(s);
@@ -232,9 +229,6 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
   for (GyroState& g : gyros_) g.motion_in.setZero();
   for (const ReadingFaultMonitor::Result& r : results) {
     if (r.verdict == ReadingVerdict::kNone) continue;
-    // The pair's rebuild moves with the pair's own corrected drivers: it speaks only where the
-    // star tracker cannot.
-    if (r.source == Source::kPair && st_present) continue;
     AbruptRecord a;
     a.time = frame.time;
     a.verdict = r.verdict;

@@ -69,7 +69,8 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
     if (has_reading(g)) fresh.push_back(g.id);
   }
   // The tracks of every gyro's readings (D94): the only evidence that lets a gyro be excluded.
-  TrackReadings(frame, st_available, q_st, fresh);
+  // Not in diagnosis runs (detect_drift_change off), which exclude nothing.
+  if (options_.detect_drift_change) TrackReadings(frame, st_available, q_st, fresh);
   bool isolated = false;
   if (fresh.size() == 3) {
     isolated = IsolateWithThreePairs(frame, {fresh[0], fresh[1], fresh[2]}, st_available, q_st,

@@ -9,9 +9,7 @@
 // - model (10)+(11) on a gyro with an unconfigured misalignment of 80 arcsec (no misalignment
 //   states), on the calibration profile: no gyro excluded.
 #include <cstdio>
-#include <fstream>
 #include <optional>
-#include <sstream>
 #include <string>
 
 #include "absl/strings/str_cat.h"
@@ -23,7 +21,7 @@
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "proto/convert.h"
+#include "tests/testing/example_config.h"
 #include "tests/testing/status_matchers.h"
 
 namespace esg::estimator {
@@ -32,13 +30,17 @@ namespace {
 using Eigen::Vector3d;
 using ::esg::testing::IsOk;
 
-SpacecraftConfig Rdk1() {
-  std::ifstream in(std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json");
-  std::stringstream text;
-  text << in.rdbuf();
-  auto config = proto_convert::ParseConfigJson(text.str());
-  EXPECT_THAT(config, IsOk());
-  return config.ok() ? *config : SpacecraftConfig{};
+SpacecraftConfig Rdk1() { return testing::ExampleConfig("rdk1.json"); }
+
+// A fault-free flight of `hours` on the named profile.
+SimulationSpec FlightSpec(const SpacecraftConfig& config, const char* profile, double hours,
+                          uint64_t seed) {
+  SimulationSpec spec;
+  spec.config = config;
+  spec.duration = HoursToSeconds(hours);
+  spec.seed = seed;
+  spec.profile = *MakeNamedProfile(profile, spec.duration, seed);
+  return spec;
 }
 
 struct Flight {
@@ -83,11 +85,7 @@ std::string Excluded(const Flight& run) {
 // A drift step of `deg_h` in gyro 2 at 5 h, perpendicular to its spin axis, on an inertial hold
 // (the body does not turn, so no allowance for slow reading errors widens the bound).
 SimulationSpec DriftStep(const SpacecraftConfig& config, double deg_h, uint64_t seed) {
-  SimulationSpec spec;
-  spec.config = config;
-  spec.duration = HoursToSeconds(8.0);
-  spec.seed = seed;
-  spec.profile = *MakeNamedProfile("inertial", spec.duration, seed);
+  SimulationSpec spec = FlightSpec(config, "inertial", 8.0, seed);
   GyroFault fault;
   fault.time = HoursToSeconds(5.0) + 30.0;
   fault.kind = GyroFault::Kind::kDriftStep;
@@ -144,11 +142,7 @@ TEST(ExclusionJudgement, ModelOneOnDisplacedRotorsExcludesNoGyro) {
   const SpacecraftConfig config = Rdk1();
   for (uint64_t seed : {1, 2}) {
     SCOPED_TRACE(absl::StrCat("seed ", seed));
-    SimulationSpec spec;
-    spec.config = config;
-    spec.duration = HoursToSeconds(12.0);
-    spec.seed = seed;
-    spec.profile = *MakeNamedProfile("calibration", spec.duration, seed);
+    SimulationSpec spec = FlightSpec(config, "calibration", 12.0, seed);
     spec.gyros[0].rotor_displacement_k = Vector3d(1.0e-6, -1.5e-6, 0.8e-6);
     spec.gyros[1].rotor_displacement_k = Vector3d(-0.7e-6, 0.5e-6, 1.2e-6);
     spec.gyros[2].rotor_displacement_k = Vector3d(0.5e-6, 1.0e-6, -1.0e-6);
@@ -164,11 +158,7 @@ TEST(ExclusionJudgement, AnUnconfiguredMisalignmentExcludesNoGyro) {
   for (GyroConfig& g : config.gyros) g.misalignment_sigma = 0.0;
   for (uint64_t seed : {1, 2}) {
     SCOPED_TRACE(absl::StrCat("seed ", seed));
-    SimulationSpec spec;
-    spec.config = config;
-    spec.duration = HoursToSeconds(8.0);
-    spec.seed = seed;
-    spec.profile = *MakeNamedProfile("calibration", spec.duration, seed);
+    SimulationSpec spec = FlightSpec(config, "calibration", 8.0, seed);
     spec.gyros[2].misalignment_b = Vector3d(ArcsecToRad(60), ArcsecToRad(-50), ArcsecToRad(20));
     const Flight run = RunSession(config, spec, "10+11");
     EXPECT_FALSE(run.degraded) << Excluded(run);

@@ -72,6 +72,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "proto/convert.h"
+#include "tests/testing/example_config.h"
 #include "tests/testing/status_matchers.h"
 
 namespace esg::estimator {
@@ -225,14 +226,7 @@ std::vector<uint64_t> Seeds() {
   return seeds;
 }
 
-SpacecraftConfig Rdk1() {
-  std::ifstream in(std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json");
-  std::stringstream text;
-  text << in.rdbuf();
-  auto config = proto_convert::ParseConfigJson(text.str());
-  EXPECT_THAT(config, IsOk());
-  return config.ok() ? *config : SpacecraftConfig{};
-}
+SpacecraftConfig Rdk1() { return testing::ExampleConfig("rdk1.json"); }
 
 // A unit vector perpendicular to `axis`, uniformly random around it.
 Vector3d RandomPerpendicular(const Vector3d& axis, Rng& rng) {

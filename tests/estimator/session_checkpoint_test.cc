@@ -642,9 +642,9 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), longer),
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("oversized")));
   SessionCheckpoint future = good;
-  future.version = 7;
+  future.version = 8;
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), future),
-              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("version 7")));
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("version 8")));
   RecordProperty("restored", restored);
   RecordProperty("refused", refused);
   std::printf("%zu values: %d corrupt restored (%d ran on), %d refused\n", good.values.size(),

@@ -379,7 +379,7 @@ int CountEvents(const std::vector<Event>& events, Event::Kind kind) {
 
 // Each running gyro x a 5 arcmin readout jump at 5 h (30 s before a frame), calibration profile,
 // 12 h, seeded: the faulty gyro and only it is excluded, at the first measurement step after the
-// jump; the output moves to the pair without it (gyro 1, shared by the configured pairs [1,2] and
+// jump or the second (when less of the jump shows than a drift change could do in one step, D94); the output moves to the pair without it (gyro 1, shared by the configured pairs [1,2] and
 // [1,3]: pair [2,3]); the event carries the evidence and recommends the cold spare; afterwards the
 // output stays within 30 arcsec of the truth (measured: 16.0 / 11.9 / 22.8 arcsec) and the
 // star tracker is used again (rejections after the switch in < 1% of the steps).
@@ -397,7 +397,11 @@ TEST(FaultIsolation, ReadoutJumpInEachRunningGyroExcludesThatGyro) {
     ASSERT_THAT(sim, IsOk());
     const FaultRun run = RunFaulted(spec, *sim, sim->recording.frames);
     ASSERT_TRUE(run.isolated.has_value());
-    EXPECT_EQ(*run.isolated, spec.start + absl::Hours(5));
+    // At the first measurement step after the jump, or the second where the jump's visible part
+    // is within what a drift change could do in one step (gyro 1 here: 90 arcsec of its 5
+    // arcmin show in its spin axis; docs/decisions.md D94).
+    EXPECT_GE(*run.isolated, spec.start + absl::Hours(5));
+    EXPECT_LE(*run.isolated, spec.start + absl::Hours(5) + absl::Minutes(1));
     for (const GyroEstimate& g : run.gyros) EXPECT_EQ(g.faulty, g.id == faulty) << "gyro " << g.id;
     EXPECT_EQ(run.final_pair, expected_pair[faulty - 1]);
     int isolations = 0;
@@ -412,7 +416,9 @@ TEST(FaultIsolation, ReadoutJumpInEachRunningGyroExcludesThatGyro) {
     }
     EXPECT_EQ(isolations, 1);
     EXPECT_EQ(CountEvents(run.events, Event::Kind::kFilterReset), 0);
-    EXPECT_EQ(CountEvents(run.events, Event::Kind::kFaultAmbiguous), 0);
+    // At most the first step's: the gyro named before its readings' verdict, withheld.
+    EXPECT_LE(CountEvents(run.events, Event::Kind::kFaultAmbiguous),
+              *run.isolated > spec.start + absl::Hours(5) ? 1 : 0);
     RecordProperty(absl::StrCat("max_error_after_arcsec_gyro", faulty), RadToArcsec(run.max_error_after_rad));
     std::printf("gyro %d: max error after %.1f arcsec, rejected %d of %d steps\n", faulty,
                 RadToArcsec(run.max_error_after_rad), run.rejected_steps_after, run.steps_after);
