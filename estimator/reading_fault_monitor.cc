@@ -5,10 +5,12 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <utility>
 
 #include "Eigen/Cholesky"
 #include "Eigen/LU"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/statistics.h"
 
@@ -23,6 +25,25 @@ using Eigen::VectorXd;
 
 namespace {
 
+// Regressors of the line, optionally with a jump at point `jump_at` or a rate change at time
+// `onset` (relative to the last point), or with a quadratic term: k (2 or 3) per point, no
+// allocation beyond the one vector.
+struct Regressors {
+  int k = 2;
+  std::vector<std::array<double, 3>> f;
+  Regressors(const ReadingFaultMonitor::Projected& p, int jump_at, std::optional<double> onset,
+             bool quadratic) {
+    k = 2 + (quadratic || jump_at >= 0 || onset.has_value() ? 1 : 0);
+    f.resize(p.tau.size());
+    for (size_t j = 0; j < p.tau.size(); ++j) {
+      f[j] = {1.0, p.tau[j], 0.0};
+      if (quadratic) f[j][2] = p.tau[j] * p.tau[j];
+      if (jump_at >= 0) f[j][2] = static_cast<int>(j) >= jump_at ? 1.0 : 0.0;
+      if (onset.has_value()) f[j][2] = std::max(0.0, p.tau[j] - *onset);
+    }
+  }
+};
+
 // Weighted least squares of y_j = (f_j^T (x) I_2) beta over the points, f_j the scalar
 // regressors of point j (k of them, at most 3): beta (2k), its covariance and the weighted
 // residual sum. The normal equations are summed block by block (N_ml = sum f_m f_l W_j,
@@ -36,8 +57,9 @@ struct Fit {
   double rss = std::numeric_limits<double>::infinity();
 };
 
-Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const std::vector<VectorXd>& f) {
-  const int k = static_cast<int>(f[0].size());
+Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const Regressors& regs) {
+  const int k = regs.k;
+  const auto& f = regs.f;
   FitMatrix N = FitMatrix::Zero(2 * k, 2 * k);
   FitVector r = FitVector::Zero(2 * k);
   double yWy = 0.0;
@@ -45,8 +67,8 @@ Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const std::vector<Vecto
     const Vector2d Wy = p.W[j] * p.y[j];
     yWy += p.y[j].dot(Wy);
     for (int m = 0; m < k; ++m) {
-      r.segment<2>(2 * m) += f[j](m) * Wy;
-      for (int l = 0; l <= m; ++l) N.block<2, 2>(2 * m, 2 * l) += (f[j](m) * f[j](l)) * p.W[j];
+      r.segment<2>(2 * m) += f[j][m] * Wy;
+      for (int l = 0; l <= m; ++l) N.block<2, 2>(2 * m, 2 * l) += (f[j][m] * f[j][l]) * p.W[j];
     }
   }
   for (int m = 0; m < k; ++m) {
@@ -60,21 +82,6 @@ Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const std::vector<Vecto
   // Rounding can leave a tiny negative sum for a perfect fit.
   out.rss = std::max(yWy - r.dot(out.beta), 0.0);
   return out;
-}
-
-// Regressors of the line, optionally with a jump at point `jump_at` or a rate change at time
-// `onset` (relative to the last point), or with a quadratic term.
-std::vector<VectorXd> Regressors(const ReadingFaultMonitor::Projected& p, int jump_at, std::optional<double> onset,
-                                 bool quadratic) {
-  std::vector<VectorXd> f;
-  for (size_t j = 0; j < p.tau.size(); ++j) {
-    std::vector<double> v = {1.0, p.tau[j]};
-    if (quadratic) v.push_back(p.tau[j] * p.tau[j]);
-    if (jump_at >= 0) v.push_back(static_cast<int>(j) >= jump_at ? 1.0 : 0.0);
-    if (onset.has_value()) v.push_back(std::max(0.0, p.tau[j] - *onset));
-    f.push_back(Eigen::Map<VectorXd>(v.data(), static_cast<int>(v.size())));
-  }
-  return f;
 }
 
 // Lower bound of min over |v| <= r of (c - v)^T S^-1 (c - v): the part of |c| beyond r along
