@@ -287,10 +287,26 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
   // kErratic: scatter about the smooth curve, far beyond the noise. A drift change within the
   // window must not read as scatter.
   if (std::isfinite(smooth) && smooth > erratic_threshold_[n]) {
-    r.verdict = ReadingVerdict::kErratic;
-    r.value = smooth;
-    r.threshold = erratic_threshold_[n];
-    r.statistic = smooth;
+    // A slow reading error (an unconfigured misalignment or scale error, kSlowReadingErrorRad
+    // per radian of turn) moves a rebuild along the turn: smooth, but during a slew (the rate
+    // rising, holding, falling) none of the fitted curves follows it. Its size over each interval
+    // enters as a positional allowance of that point before readings are called erratic.
+    Projected q = p;
+    for (int j = 0; j < n; ++j) {
+      const double a = kSlowReadingErrorRad * track.points[j].turn;
+      q.cov[j] += a * a * Matrix2d::Identity();
+      q.W[j] = q.cov[j].inverse();
+    }
+    double allowed = WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss;
+    for (int j = 1; j <= n - 2 && allowed > erratic_threshold_[n]; ++j) {
+      allowed = std::min(allowed, WeightedFit(q, Regressors(q, -1, q.tau[j], false)).rss);
+    }
+    if (allowed > erratic_threshold_[n]) {
+      r.verdict = ReadingVerdict::kErratic;
+      r.value = allowed;
+      r.threshold = erratic_threshold_[n];
+      r.statistic = allowed;
+    }
   }
   return r;
 }
