@@ -13,7 +13,7 @@
 // for one spacecraft and carries its frames only (docs/service.md "Routing by spacecraft").
 //
 // Error contract: every failed call returns the gRPC status converted code for code to
-// absl::Status (the numeric values are identical, STYLE §3.3) with the server's message; a server
+// absl::Status (the numeric values are identical) with the server's message; a server
 // that cannot be reached gives Unavailable.
 #ifndef ESG_CLIENT_ESG_CLIENT_H_
 #define ESG_CLIENT_ESG_CLIENT_H_

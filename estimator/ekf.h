@@ -1,5 +1,5 @@
 // Generic extended-Kalman-filter algebra, no physics: covariance propagation and the Joseph-form
-// measurement update, both transactional (STYLE §3.3.5): the candidate (dx, P) is committed only
+// measurement update, both transactional: the candidate (dx, P) is committed only
 // when it is finite and P stays symmetric with a non-negative diagonal; otherwise the inputs are
 // untouched and Internal is returned with the diagnostic.
 #ifndef ESG_ESTIMATOR_EKF_H_

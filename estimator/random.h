@@ -1,4 +1,4 @@
-// Seeded, platform-independent random numbers for the simulator (STYLE §3.4: no hidden
+// Seeded, platform-independent random numbers for the simulator (no hidden
 // randomness). std::mt19937_64 is fully specified by the C++ standard, but the standard
 // distributions (std::normal_distribution, std::uniform_real_distribution) are implementation
 // defined; the draws below are written out here so that one seed gives the same numbers, bit for

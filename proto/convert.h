@@ -1,5 +1,5 @@
 // Conversions between the esg.v1 wire messages and the estimator's SI value types: the only place
-// where proto and estimator types meet (STYLE §3.1). Covers the spacecraft configuration and its
+// where proto and estimator types meet. Covers the spacecraft configuration and its
 // JSON file, telemetry frames (same content as a recording CSV row; both in docs/formats.md), drift
 // models (docs/physics.md) and timestamps. Unit conversions go through estimator/units.h.
 //

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# STYLE §3.4: estimator/ stays free of I/O, gRPC, protobuf, SQLite and JSON libraries.
+# estimator/ stays free of I/O, gRPC, protobuf, SQLite and JSON libraries.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bad=$(grep -rlE '#include[[:space:]]*[<"](fstream|iostream|cstdio|grpcpp/|grpc/|google/protobuf/|sqlite3\.h|nlohmann/)' estimator || true)

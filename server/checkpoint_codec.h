@@ -1,6 +1,6 @@
 // The server's checkpoint of one spacecraft (storage CheckpointRecord::state_blob): the
 // calibration model, the apply-side counters, the alert-collapse tracks, and the estimator's
-// SessionCheckpoint values stored bit for bit (STYLE §3.4 "Persistence as data"), so a restart
+// SessionCheckpoint values stored bit for bit (persistence as data), so a restart
 // resumes exactly where the last committed step left off (docs/service.md "Durability").
 #ifndef ESG_SERVER_CHECKPOINT_CODEC_H_
 #define ESG_SERVER_CHECKPOINT_CODEC_H_

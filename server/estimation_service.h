@@ -1,4 +1,4 @@
-// The esg.v1.EstimationService on gRPC's callback API (STYLE §3.7 example 6: route_guide's
+// The esg.v1.EstimationService on gRPC's callback API (route_guide's
 // callback server). Reactors stay small: each checks the caller's role (server/auth.h), hands
 // the work to EstimationCore and maps its absl::Status through ToGrpcStatus.
 //

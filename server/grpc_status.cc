@@ -1,4 +1,4 @@
-// absl::Status -> grpc::Status, explicitly per code (STYLE §3.3).
+// absl::Status -> grpc::Status, explicitly per code.
 #include "server/grpc_status.h"
 
 #include <cstdint>

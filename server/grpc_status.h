@@ -1,4 +1,4 @@
-// The one mapping from absl::Status to grpc::Status (STYLE §3.3 rule 3): the codes are numerically
+// The one mapping from absl::Status to grpc::Status: the codes are numerically
 // identical in both libraries and are converted explicitly; the message is passed through. No
 // other file of the project builds a grpc::Status. A status may also ask for a retry delay, sent
 // as the trailing metadata grpc-retry-pushback-ms (gRPC's retry design A6), which a client's

@@ -1,4 +1,4 @@
-// The server's logger (STYLE §3.3 rule 8): one line per event on stderr, as text
+// The server's logger: one line per event on stderr, as text
 // (`2019-03-01T00:00:00.000Z INFO esgd: message`) or as one JSON object a line (`--log-format
 // json`: ts, level, event, message and the event's fields, e.g. spacecraftId). docs/service.md
 // "Logs" lists the events. estimator/ and storage/ never log; only server/ does.

@@ -9,7 +9,7 @@
 //   * an upsert is "INSERT ... ON CONFLICT (key) DO UPDATE SET c = excluded.c" or
 //     "ON CONFLICT DO NOTHING"; a generated key is read with "RETURNING id";
 //   * a subquery in FROM has an alias; SUM() is taken over integers, never over a comparison.
-// Every call returns absl::Status; nothing throws or logs. STYLE §3.3 (status codes).
+// Every call returns absl::Status; nothing throws or logs.
 //
 // Error codes, both engines: a PRIMARY KEY/UNIQUE violation is AlreadyExists, other constraint
 // violations InvalidArgument, a lost connection, a lock or serialization conflict Unavailable

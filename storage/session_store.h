@@ -1,7 +1,7 @@
 // Per-spacecraft estimation-session checkpoints (table checkpoints, schema.h): the latest
 // serialized session state and the last telemetry sequence it includes, so a restarted server
-// resumes each session and replays archived frames after last_sequence (STYLE §3.4
-// "Persistence as data": the estimator exports the state, the server serializes it).
+// resumes each session and replays archived frames after last_sequence
+// (persistence as data: the estimator exports the state, the server serializes it).
 #ifndef ESG_STORAGE_SESSION_STORE_H_
 #define ESG_STORAGE_SESSION_STORE_H_
 

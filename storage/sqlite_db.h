@@ -1,5 +1,5 @@
 // The SQLite engine of database.h: SqliteDatabase (open, pragmas, the owner lock) and
-// SqliteStatement. Every call returns absl::Status; nothing throws or logs. STYLE §3.3.
+// SqliteStatement. Every call returns absl::Status; nothing throws or logs.
 //
 // Durability contract (what an OK Transaction::Commit() guarantees)
 // ------------------------------------------------------------------

@@ -1,4 +1,4 @@
-// Convention pinning tests (STYLE §3.5, conventions.h): the 90 deg example, quaternion ==
+// Convention pinning tests (docs/conventions.md, conventions.h): the 90 deg example, quaternion ==
 // DCM, scalar-first round trip, Eigen constructor versus coeffs() order, tag cancellation.
 #include "estimator/conventions.h"
 
