@@ -1,12 +1,16 @@
 // Dispatch of /api/ requests to the routes of routes.js: path matching, the operator's token
 // taken from the Authorization header, the JSON answer, the error mapping, and cancelling the
-// request's gRPC calls when the browser goes away before the answer.
+// request's gRPC calls when the browser goes away before the answer. Before a route runs, and so
+// before any body is read, the request's announced size is checked against the route's bound
+// (limits.js) and its token with esgd (tokencheck.js): a request nobody may make costs the
+// gateway its head only.
 'use strict';
 
 const { Calls } = require('./esgd');
 const { ApiError, toHttp } = require('./errors');
 const { makeRoutes } = require('./routes');
 const { sendJson } = require('./respond');
+const { checkAnnouncedLength } = require('./limits');
 
 // '/api/spacecraft/:id/history' -> a RegExp with one group per ':name' segment.
 function compile(pattern) {
@@ -19,9 +23,10 @@ function compile(pattern) {
   return { regex: new RegExp(`^${source}$`), names };
 }
 
-function makeApi(esgd, log) {
-  const routes = makeRoutes(esgd).map(([method, pattern, handler]) =>
-    ({ method, ...compile(pattern), handler }));
+// tokens: a TokenCheck.
+function makeApi(esgd, log, tokens) {
+  const routes = makeRoutes(esgd, tokens).map(([method, pattern, handler, options = {}]) =>
+    ({ method, ...compile(pattern), handler, bodyLimit: options.body || 0, public: !!options.public }));
 
   function match(method, pathname) {
     let pathMatched = false;
@@ -52,10 +57,10 @@ function makeApi(esgd, log) {
     let httpStatus;
     try {
       const { route, params } = match(req.method === 'HEAD' ? 'GET' : req.method, url.pathname);
-      const ctx = {
-        req, params, query: url.searchParams, owner,
-        authorization: req.headers.authorization || undefined,
-      };
+      checkAnnouncedLength(req, route.bodyLimit);
+      const authorization = req.headers.authorization || undefined;
+      if (!route.public) await tokens.check(authorization);
+      const ctx = { req, params, query: url.searchParams, owner, authorization };
       const body = await route.handler(ctx);
       httpStatus = 200;
       sendJson(res, httpStatus, body);

@@ -4,9 +4,11 @@
 'use strict';
 
 const fs = require('node:fs');
+const { parseAllowedHosts, defaultHosts } = require('./hosts');
 
 const USAGE = `usage: node console/gateway/main.js --esgd HOST:PORT [--listen HOST:PORT]
        [--tls-cert FILE --tls-key FILE] [--esgd-ca FILE] [--esgd-server-name NAME]
+       [--allowed-hosts HOST[:PORT],...]
 
   --esgd HOST:PORT          esgd's gRPC address (required)
   --listen HOST:PORT        where the console is served (default 127.0.0.1:8080; port 0: any free port)
@@ -14,13 +16,16 @@ const USAGE = `usage: node console/gateway/main.js --esgd HOST:PORT [--listen HO
   --tls-key FILE            PEM private key of --tls-cert
   --esgd-ca FILE            PEM CA bundle: talk TLS to esgd and check its certificate against it
   --esgd-server-name NAME   name to check esgd's certificate against (default: the host of --esgd)
+  --allowed-hosts LIST      the names browsers reach the console by (Host and Origin headers),
+                            comma-separated; without a port: the --listen port or none
+                            (default 127.0.0.1,localhost,[::1] and the --listen address)
   --help                    this text
 `;
 
 class UsageError extends Error {}
 
 const VALUE_FLAGS = ['--esgd', '--listen', '--tls-cert', '--tls-key', '--esgd-ca',
-  '--esgd-server-name'];
+  '--esgd-server-name', '--allowed-hosts'];
 
 // Splits "HOST:PORT" ("[::1]:8080" for IPv6) into {host, port}; throws UsageError naming `flag`.
 function parseHostPort(flag, value) {
@@ -40,7 +45,8 @@ function readPem(flag, file) {
 }
 
 // Returns {help: true} or the options: esgd {host, port, address}, listen {host, port},
-// tls {cert, key} | null (PEM buffers), esgdCa (PEM buffer) | null, esgdServerName | null.
+// tls {cert, key} | null (PEM buffers), esgdCa (PEM buffer) | null, esgdServerName | null,
+// allowedHosts [{name, port | null}].
 // Throws UsageError on anything wrong.
 function parseArgs(argv) {
   const given = {};
@@ -82,7 +88,15 @@ function parseArgs(argv) {
   if (esgdServerName && !esgdCa) {
     throw new UsageError('--esgd-server-name: only meaningful with --esgd-ca (TLS to esgd)');
   }
-  return { help: false, esgd, listen, tls, esgdCa, esgdServerName };
+  let allowedHosts = defaultHosts(listen.host);
+  if (given['--allowed-hosts']) {
+    try {
+      allowedHosts = parseAllowedHosts(given['--allowed-hosts']);
+    } catch (err) {
+      throw new UsageError(`--allowed-hosts: ${err.message}`);
+    }
+  }
+  return { help: false, esgd, listen, tls, esgdCa, esgdServerName, allowedHosts };
 }
 
 module.exports = { parseArgs, UsageError, USAGE };

@@ -70,7 +70,8 @@ class Esgd {
   constructor(options) {
     this.definition = loadDefinition();
     this.convert = new Converter(this.definition);
-    const Client = grpc.makeGenericClientConstructor(this.definition[SERVICE], SERVICE);
+    this.Client = grpc.makeGenericClientConstructor(this.definition[SERVICE], SERVICE);
+    this.address = options.address;
     const channelOptions = {
       'grpc.max_receive_message_length': MAX_RECEIVE_BYTES,
       // esgd accepts client pings no closer than 30 s; 60 s keeps a long alert stream's
@@ -88,8 +89,19 @@ class Esgd {
     } else {
       credentials = grpc.credentials.createInsecure();
     }
-    this.client = new Client(options.address, credentials, channelOptions);
+    this.credentials = credentials;
+    this.channelOptions = channelOptions;
+    this.client = new this.Client(options.address, credentials, channelOptions);
     this.calls = new Calls();
+  }
+
+  // A client on a connection of its own (grpc-js shares one connection per address between
+  // clients unless told otherwise): the live subscriptions of one operator go over one, so they
+  // never wait for streams, or flow-control window, that other operators or the REST calls hold
+  // (operators.js). close() it when done.
+  ownConnection() {
+    return new this.Client(this.address, this.credentials,
+      { ...this.channelOptions, 'grpc.use_local_subchannel_pool': 1 });
   }
 
   close() {
@@ -119,9 +131,9 @@ class Esgd {
 
   // One unary call; resolves with the response converted to JSON, rejects with the gRPC error
   // (err.code, err.details). `owner` (optional) is a Calls set of the HTTP request.
-  unary(method, request, authorization, owner) {
+  unary(method, request, authorization, owner, deadlineMs = CALL_DEADLINE_MS) {
     return new Promise((resolve, reject) => {
-      const deadline = Date.now() + CALL_DEADLINE_MS;
+      const deadline = Date.now() + deadlineMs;
       const call = this.client[method](request, Esgd.metadata(authorization, request), { deadline },
         (err, response) => {
           if (err) reject(explained(method, err));
@@ -154,10 +166,11 @@ class Esgd {
 
   // A server-streaming subscription (SubscribeAlerts, SubscribeEstimates). Calls onMessage(json)
   // for each message converted to JSON and onEnd(err | null) once when the call ends; returns the
-  // call (cancel() it to end; onEnd then gets an error with code CANCELLED).
-  subscribe(method, request, authorization, { onMessage, onEnd, deadline }) {
+  // call (cancel() it to end; onEnd then gets an error with code CANCELLED). `client`: the
+  // client to call through (ownConnection()), else the shared one.
+  subscribe(method, request, authorization, { onMessage, onEnd, deadline, client }) {
     const options = deadline ? { deadline } : {};
-    const call = this.client[method](request, Esgd.metadata(authorization, request), options);
+    const call = (client || this.client)[method](request, Esgd.metadata(authorization, request), options);
     const type = this.responseType(method);
     let ended = false;
     const end = (err) => {

@@ -5,15 +5,17 @@
 //
 // Life of a socket:
 //   OPEN      -> first message {"type":"auth","token":...}; esgd checks the token
-//                (ListSessions, page_size 1) -> READY, sends {"type":"ready"};
+//                (tokencheck.js) -> READY, sends {"type":"ready"};
 //                a refused token, another first message or 10 s of silence -> error, closed.
-//   READY     -> subscribe / unsubscribe any number of times.
+//   READY     -> subscribe / unsubscribe, at most PER_SOCKET subscriptions running at once (and
+//                the operator's cap over all their sockets, operators.js).
 //   CLOSED    -> every subscription's call cancelled.
 'use strict';
 
 const { WebSocketServer } = require('ws');
 const { isoToTimestamp } = require('./convert');
 const { errorObject } = require('./errors');
+const { Operators, PER_OPERATOR } = require('./operators');
 
 const AUTH_TIMEOUT_MS = 10_000;
 // Ping period: a browser that vanished without closing (laptop lid, network gone) is dropped
@@ -23,6 +25,9 @@ const PING_MS = 30_000;
 // then holds the alerts, up to its own limit) and resumed below the low one.
 const HIGH_WATER_BYTES = 8 * 1024 * 1024;
 const LOW_WATER_BYTES = 1024 * 1024;
+// Subscriptions one socket runs at once. The console page runs a few over all spacecraft and one
+// per spacecraft whose estimates it plots; a socket that asks for more is not the page.
+const PER_SOCKET = 32;
 
 const STREAMS = {
   alerts: { method: 'SubscribeAlerts', type: 'alert', field: 'alert' },
@@ -37,13 +42,22 @@ function invalid(message) {
   return { code: 'INVALID_ARGUMENT', message };
 }
 
+function exhausted(message) {
+  return { code: 'RESOURCE_EXHAUSTED', message };
+}
+
 class LiveSocket {
-  constructor(ws, esgd, log, peer) {
+  // shared: {esgd, log, tokens (TokenCheck), operators (Operators)}; peer: "address:port".
+  constructor(ws, shared, peerAddress, peer) {
     this.ws = ws;
-    this.esgd = esgd;
-    this.log = log;
+    this.esgd = shared.esgd;
+    this.log = shared.log;
+    this.tokens = shared.tokens;
+    this.operators = shared.operators;
+    this.peerAddress = peerAddress;
     this.peer = peer;
     this.authorization = null;
+    this.operator = null;
     this.state = 'OPEN';
     this.subscriptions = new Map();
     this.alive = true;
@@ -101,18 +115,21 @@ class LiveSocket {
     clearTimeout(this.authTimer);
     this.state = 'CHECKING';
     const authorization = message.token ? `Bearer ${message.token}` : undefined;
-    this.esgd.unary('ListSessions', { page_size: 1 }, authorization).then(() => {
-      if (this.state !== 'CHECKING') return;
-      this.authorization = authorization;
-      this.state = 'READY';
-      this.log(`live: ${this.peer} signed in`);
-      this.send({ type: 'ready' });
-    }, (err) => {
-      if (this.state !== 'CHECKING') return;
-      const error = errorObject(err);
-      this.log(`live: ${this.peer} refused: ${error.code}`);
-      this.fail(error.code === 'UNAUTHENTICATED' ? CLOSE_UNAUTHENTICATED : 1011, error);
-    });
+    this.tokens.check(authorization)
+      .then(() => this.tokens.operatorKey(message.token || '', this.peerAddress))
+      .then((operator) => {
+        if (this.state !== 'CHECKING') return;
+        this.authorization = authorization;
+        this.operator = operator;
+        this.state = 'READY';
+        this.log(`live: ${this.peer} signed in`);
+        this.send({ type: 'ready' });
+      }, (err) => {
+        if (this.state !== 'CHECKING') return;
+        const error = errorObject(err);
+        this.log(`live: ${this.peer} refused: ${error.code}`);
+        this.fail(error.code === 'UNAUTHENTICATED' ? CLOSE_UNAUTHENTICATED : 1011, error);
+      });
   }
 
   onSubscribe(message) {
@@ -133,8 +150,19 @@ class LiveSocket {
       if (!since) return reject(`since: expected an ISO-8601 UTC time or null, got ${JSON.stringify(message.since)}`);
       request.since = since;
     }
-    const subscription = { paused: false, call: null };
+    // The caps come after the request's own checks: a wrong request is told what is wrong.
+    if (this.subscriptions.size >= PER_SOCKET) {
+      this.send({ type: 'error', id, error: exhausted(`subscribe: this socket already runs ${PER_SOCKET} subscriptions (the most one socket may run); unsubscribe one first`) });
+      return;
+    }
+    const slot = this.operators.take(this.operator);
+    if (!slot) {
+      this.send({ type: 'error', id, error: exhausted(`subscribe: this operator already runs ${PER_OPERATOR} subscriptions over all their sockets (the most one operator may run); unsubscribe one, or close another console tab`) });
+      return;
+    }
+    const subscription = { paused: false, call: null, release: slot.release };
     subscription.call = this.esgd.subscribe(stream.method, request, this.authorization, {
+      client: slot.client,
       onMessage: (record) => {
         if (record.replay_complete) {
           this.send({ type: 'replay_complete', id });
@@ -147,6 +175,7 @@ class LiveSocket {
         }
       },
       onEnd: (err) => {
+        subscription.release();
         // Ended by unsubscribe or close: the browser asked for it, nothing to report.
         if (this.subscriptions.get(id) !== subscription) return;
         this.subscriptions.delete(id);
@@ -172,6 +201,7 @@ class LiveSocket {
       return;
     }
     this.subscriptions.delete(message.id);
+    subscription.release();
     subscription.call.cancel();
   }
 
@@ -180,39 +210,49 @@ class LiveSocket {
     if (this.state === 'CLOSED') return;
     if (this.state === 'READY') this.log(`live: ${this.peer} closed (${this.subscriptions.size} subscriptions cancelled)`);
     this.state = 'CLOSED';
-    for (const subscription of this.subscriptions.values()) subscription.call.cancel();
+    for (const subscription of this.subscriptions.values()) {
+      subscription.release();
+      subscription.call.cancel();
+    }
     this.subscriptions.clear();
   }
 }
 
-function sameOrigin(origin, host) {
-  try {
-    return new URL(origin).host === host;
-  } catch {
-    return false;
-  }
+// Refuses an upgrade with an HTTP answer and the API's error body.
+function refuseUpgrade(socket, httpStatus, reason, error) {
+  const body = JSON.stringify({ error });
+  socket.end(`HTTP/1.1 ${httpStatus} ${reason}\r\nConnection: close\r\n`
+    + `Content-Type: application/json; charset=utf-8\r\nContent-Length: ${Buffer.byteLength(body)}\r\n\r\n${body}`);
 }
 
+const REASONS = { 403: 'Forbidden', 421: 'Misdirected Request' };
+
 // Attaches /api/live to an HTTP(S) server; returns {close()} that closes every socket (1001,
-// going away) and cancels their calls.
-function attachLive(server, esgd, log) {
+// going away) and cancels their calls. tokens: a TokenCheck; checkRequest: the Host/Origin check
+// of hosts.js.
+function attachLive(server, esgd, log, { tokens, checkRequest }) {
   const wss = new WebSocketServer({ noServer: true, maxPayload: 64 * 1024 });
   const sockets = new Set();
+  const shared = { esgd, log, tokens, operators: new Operators(esgd) };
   server.on('upgrade', (req, socket, head) => {
     const pathname = new URL(req.url, 'http://localhost').pathname;
     if (pathname !== '/api/live') {
       socket.end('HTTP/1.1 404 Not Found\r\nConnection: close\r\nContent-Length: 0\r\n\r\n');
       return;
     }
-    // Browsers send the page's origin with every WebSocket; one from another site's page is
-    // refused, so that site cannot read live alerts of an esgd without tokens through the
-    // operator's browser. Clients that are not browsers send no Origin.
-    if (req.headers.origin && !sameOrigin(req.headers.origin, req.headers.host)) {
-      socket.end('HTTP/1.1 403 Forbidden\r\nConnection: close\r\nContent-Length: 0\r\n\r\n');
+    // Browsers send the page's origin with every WebSocket; one from another site's page, or a
+    // request under a name the console does not serve under (DNS rebinding), is refused, so that
+    // site cannot read live alerts of an esgd without tokens through the operator's browser.
+    // Clients that are not browsers send no Origin.
+    const refused = checkRequest(req);
+    if (refused) {
+      refuseUpgrade(socket, refused.httpStatus, REASONS[refused.httpStatus],
+        { code: refused.code, message: refused.message });
       return;
     }
     wss.handleUpgrade(req, socket, head, (ws) => {
-      const live = new LiveSocket(ws, esgd, log, `${req.socket.remoteAddress}:${req.socket.remotePort}`);
+      const address = req.socket.remoteAddress;
+      const live = new LiveSocket(ws, shared, address, `${address}:${req.socket.remotePort}`);
       sockets.add(live);
       ws.on('close', () => sockets.delete(live));
     });
@@ -235,6 +275,7 @@ function attachLive(server, esgd, log) {
         live.onClose();
         live.ws.close(1001, 'console gateway shutting down');
       }
+      shared.operators.close();
       wss.close();
     },
   };

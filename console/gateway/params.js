@@ -5,10 +5,7 @@
 
 const { badRequest, ApiError } = require('./errors');
 const { isoToTimestamp } = require('./convert');
-
-// Largest request body read: a PredictRequest at esgd's limits (100 000 epochs and 100 000
-// planned samples) is about 16 MB as JSON.
-const MAX_BODY_BYTES = 32 * 1024 * 1024;
+const { readBody } = require('./limits');
 
 // Optional ISO-8601 time -> Timestamp, or undefined when absent or empty.
 function timeParam(query, name) {
@@ -54,51 +51,26 @@ function numberParam(query, name) {
 }
 
 // The request body parsed as a JSON object; 400 naming `body` when it is missing or not JSON,
-// 413 beyond MAX_BODY_BYTES, 415 when a body does not say it is JSON. A browser sends
+// 413 beyond `limit` bytes (limits.js), 415 when a body does not say it is JSON. A browser sends
 // Content-Type application/json to another site only after a CORS preflight, which the gateway
 // never grants: so another web site cannot make an operator's browser post here (acknowledge
 // alerts of an esgd without tokens) with a form or a no-cors fetch.
-function jsonBody(req) {
-  return new Promise((resolve, reject) => {
-    const chunks = [];
-    let size = 0;
-    let failed = false;
-    req.on('data', (chunk) => {
-      if (failed) return;
-      size += chunk.length;
-      if (size > MAX_BODY_BYTES) {
-        failed = true;
-        reject(new ApiError(413, 'RESOURCE_EXHAUSTED', `body: larger than ${MAX_BODY_BYTES} bytes`));
-        return;
-      }
-      chunks.push(chunk);
-    });
-    req.on('error', (err) => { if (!failed) { failed = true; reject(err); } });
-    req.on('end', () => {
-      if (failed) return;
-      const text = Buffer.concat(chunks).toString('utf8');
-      if (text.trim() === '') {
-        reject(badRequest('body: missing (expected a JSON object)'));
-        return;
-      }
-      if (!/^application\/json\s*(;|$)/i.test(req.headers['content-type'] || '')) {
-        reject(new ApiError(415, 'INVALID_ARGUMENT', 'Content-Type: expected application/json'));
-        return;
-      }
-      let value;
-      try {
-        value = JSON.parse(text);
-      } catch (err) {
-        reject(badRequest(`body: not JSON (${err.message})`));
-        return;
-      }
-      if (value === null || typeof value !== 'object' || Array.isArray(value)) {
-        reject(badRequest('body: expected a JSON object'));
-        return;
-      }
-      resolve(value);
-    });
-  });
+async function jsonBody(req, limit) {
+  const text = (await readBody(req, limit)).toString('utf8');
+  if (text.trim() === '') throw badRequest('body: missing (expected a JSON object)');
+  if (!/^application\/json\s*(;|$)/i.test(req.headers['content-type'] || '')) {
+    throw new ApiError(415, 'INVALID_ARGUMENT', 'Content-Type: expected application/json');
+  }
+  let value;
+  try {
+    value = JSON.parse(text);
+  } catch (err) {
+    throw badRequest(`body: not JSON (${err.message})`);
+  }
+  if (value === null || typeof value !== 'object' || Array.isArray(value)) {
+    throw badRequest('body: expected a JSON object');
+  }
+  return value;
 }
 
 module.exports = { timeParam, boolParam, intParam, intValue, numberParam, jsonBody };

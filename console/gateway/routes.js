@@ -1,12 +1,15 @@
 // The REST endpoints under /api/ (docs/console-gateway.md "REST API"). Each handler turns the
 // HTTP request into esgd calls with the operator's token, pages through every paged call, and
 // returns the JSON body; errors are thrown and answered by api.js with the one error mapping.
+// A route is [method, pattern, handler, options]: options.body is the largest body it reads
+// (limits.js; none without), options.public that api.js does not check the token first.
 'use strict';
 
 const { badRequest, ApiError } = require('./errors');
 const { timeParam, boolParam, intParam, intValue, numberParam, jsonBody } = require('./params');
 const { ConvertError } = require('./convert');
 const { grpc } = require('./esgd');
+const { PREDICT_BODY_BYTES, ACKNOWLEDGE_BODY_BYTES } = require('./limits');
 
 // esgd's largest pages, so a long history costs as few round trips as possible.
 const HISTORY_PAGE = 5000;
@@ -35,7 +38,8 @@ function isUnimplemented(err) {
   return err && err.code === grpc.status.UNIMPLEMENTED;
 }
 
-function makeRoutes(esgd) {
+// tokens: the TokenCheck api.js checks each request's token with.
+function makeRoutes(esgd, tokens) {
   const call = (ctx, method, request) => esgd.unary(method, request, ctx.authorization, ctx.owner);
   const pages = (ctx, method, request, field, limit) =>
     esgd.pageAll(method, request, field, ctx.authorization, ctx.owner, limit);
@@ -72,19 +76,13 @@ function makeRoutes(esgd) {
   return [
     ['GET', '/api/auth', async (ctx) => {
       // Without a token: does esgd want one? With one: is it a token esgd knows (401 if not)?
-      let authRequired = false;
-      try {
-        await call({ ...ctx, authorization: undefined }, 'ListSessions', { page_size: 1 });
-      } catch (err) {
-        if (err.code !== grpc.status.UNAUTHENTICATED) throw err;
-        authRequired = true;
-      }
+      const authRequired = await tokens.tokensRequired();
       if (!ctx.authorization) return { auth_required: authRequired };
-      await call(ctx, 'ListSessions', { page_size: 1 });
+      await tokens.check(ctx.authorization);
       // The write role cannot be checked without a write call; the page learns it from the
       // first acknowledgement (403).
       return { auth_required: authRequired, ok: true, can_write: null };
-    }],
+    }, { public: true }],
 
     ['GET', '/api/sessions', async (ctx) => ({
       sessions: await pages(ctx, 'ListSessions', { page_size: SESSION_PAGE }, 'sessions'),
@@ -159,7 +157,7 @@ function makeRoutes(esgd) {
     })],
 
     ['POST', '/api/spacecraft/:id/predict', async (ctx) => {
-      const body = await jsonBody(ctx.req);
+      const body = await jsonBody(ctx.req, PREDICT_BODY_BYTES);
       let request;
       try {
         request = esgd.convert.fromJson('esg.v1.PredictRequest', body);
@@ -172,14 +170,14 @@ function makeRoutes(esgd) {
       }
       request.spacecraft_id = ctx.params.id;
       return call(ctx, 'PredictAttitude', request);
-    }],
+    }, { body: PREDICT_BODY_BYTES }],
 
     ['GET', '/api/spacecraft/:id/alerts', async (ctx) => alertList(ctx, ctx.params.id)],
     ['GET', '/api/alerts', async (ctx) => alertList(ctx, '')],
 
     ['POST', '/api/spacecraft/:id/alerts/:sequence/acknowledge', async (ctx) => {
       const sequence = intValue('sequence', ctx.params.sequence, 1, Number.MAX_SAFE_INTEGER);
-      const body = await jsonBody(ctx.req);
+      const body = await jsonBody(ctx.req, ACKNOWLEDGE_BODY_BYTES);
       for (const key of Object.keys(body)) {
         if (key !== 'operator_name') {
           throw badRequest(`body.${key}: no such field (the body is {"operator_name": "..."}; spacecraft and sequence come from the path)`);
@@ -190,7 +188,7 @@ function makeRoutes(esgd) {
       return call(ctx, 'AcknowledgeAlert', {
         spacecraft_id: ctx.params.id, sequence, operator_name: operatorName,
       });
-    }],
+    }, { body: ACKNOWLEDGE_BODY_BYTES }],
 
     ['GET', '/api/spacecraft/:id/diagnoses', async (ctx) => ({
       diagnoses: await pages(ctx, 'ListDiagnoses',

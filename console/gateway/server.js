@@ -1,6 +1,7 @@
 // The console's HTTP(S) server: /api/live upgrades to the WebSocket (live.js), /api/ goes to the
-// REST endpoints (api.js), everything else to the static files (static.js). `stop()` is the
-// graceful shutdown: no new connections, every gRPC call cancelled, every socket closed.
+// REST endpoints (api.js), everything else to the static files (static.js). Every request, the
+// upgrade included, first passes the Host/Origin check (hosts.js). `stop()` is the graceful
+// shutdown: no new connections, every gRPC call cancelled, every socket closed.
 'use strict';
 
 const http = require('node:http');
@@ -9,12 +10,22 @@ const { makeApi } = require('./api');
 const { sendJson } = require('./respond');
 const { serveStatic } = require('./static');
 const { attachLive } = require('./live');
+const { makeHostCheck } = require('./hosts');
+const { TokenCheck } = require('./tokencheck');
 
-// options: {listen: {host, port}, tls: {cert, key} | null}; esgd: an Esgd; log(line).
-// Resolves with {url, stop()} once listening.
+// options: {listen: {host, port}, tls: {cert, key} | null, allowedHosts}; esgd: an Esgd;
+// log(line). Resolves with {url, stop()} once listening.
 function startServer(options, esgd, log) {
-  const api = makeApi(esgd, log);
+  const tokens = new TokenCheck(esgd);
+  const api = makeApi(esgd, log, tokens);
+  let server;
+  const checkRequest = makeHostCheck(options.allowedHosts, () => server.address().port);
   const handler = (req, res) => {
+    const refused = checkRequest(req);
+    if (refused) {
+      sendJson(res, refused.httpStatus, { error: { code: refused.code, message: refused.message } });
+      return;
+    }
     let url;
     try {
       url = new URL(req.url, 'http://localhost');
@@ -27,14 +38,16 @@ function startServer(options, esgd, log) {
         log(`error: ${err.stack || err}`);
         res.destroy();
       });
+    } else if (req.headers['content-length'] > 0 || req.headers['transfer-encoding']) {
+      sendJson(res, 413, { error: { code: 'RESOURCE_EXHAUSTED', message: 'body: static files take no body' } });
     } else {
       serveStatic(req, res, url);
     }
   };
-  const server = options.tls
+  server = options.tls
     ? https.createServer({ cert: options.tls.cert, key: options.tls.key }, handler)
     : http.createServer(handler);
-  const live = attachLive(server, esgd, log);
+  const live = attachLive(server, esgd, log, { tokens, checkRequest });
 
   return new Promise((resolve, reject) => {
     server.once('error', reject);

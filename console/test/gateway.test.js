@@ -17,6 +17,7 @@ const WebSocket = require('ws');
 const {
   REPO, startEsgd, startGateway, runGatewayExpectingFailure, stop, esg, request, EsgJson, Inbox,
 } = require('./helpers');
+const security = require('./security');
 
 const CONFIG = path.join(REPO, 'deploy', 'examples', 'rdk1.json');
 const SCENARIO = path.join(REPO, 'deploy', 'examples', 'scenarios', 'paper_calibration.json');
@@ -81,6 +82,10 @@ test('bad flags end the gateway at once with a message naming the flag', async (
     [['--esgd', '127.0.0.1:1', '--esgd-ca', path.join(tmp, 'missing.pem')], '--esgd-ca'],
     [['--esgd', '127.0.0.1:1', '--esgd-server-name', 'x'], '--esgd-server-name'],
     [['--esgd', '127.0.0.1:1', '--colour'], '--colour'],
+    [['--esgd', '127.0.0.1:1', '--allowed-hosts', 'evil example'], '--allowed-hosts'],
+    [['--esgd', '127.0.0.1:1', '--allowed-hosts', '::1'], '--allowed-hosts'],
+    [['--esgd', '127.0.0.1:1', '--allowed-hosts', 'localhost,,console.example'], '--allowed-hosts'],
+    [['--esgd', '127.0.0.1:1', '--allowed-hosts', 'localhost:99999'], '--allowed-hosts'],
   ];
   for (const [args, flag] of cases) {
     const { code, stderr } = await runGatewayExpectingFailure(args);
@@ -500,6 +505,8 @@ test('HTTPS to the browser and TLS to esgd checked against --esgd-ca and --esgd-
     await stop(tlsEsgd.child);
   }
 });
+
+security.register({ esgd: () => esgd, gateway: () => gateway, alice, bob, tmp });
 
 test('the gateway\'s log has every request and socket, and never a token', () => {
   const log = gateway.stderr();

@@ -1,0 +1,89 @@
+// Whether esgd accepts a token, asked before the gateway does any work for a request (before it
+// reads a body, before a WebSocket signs in). The gateway has no credentials or token list of its
+// own: esgd is asked, with the cheapest call that needs the read role, GetSession with an empty
+// spacecraft id. esgd checks the token first (UNAUTHENTICATED: missing or unknown token;
+// PERMISSION_DENIED: a token without the read role) and then refuses the empty id at once
+// (INVALID_ARGUMENT "spacecraft_id: required") without a lock or a database read; so
+// INVALID_ARGUMENT means "accepted". Against an esgd without tokens every call is accepted.
+//
+// Answers are kept for a few seconds, keyed by the SHA-256 of the Authorization value (the cache
+// holds no token), so a burst of requests, or of refused ones, costs esgd one call per token.
+// The cache only decides what the gateway bothers to read: every call the gateway then makes
+// carries the token and esgd checks it again, so a token revoked meanwhile gains nothing.
+'use strict';
+
+const crypto = require('node:crypto');
+const { grpc } = require('./esgd');
+
+const TTL_MS = 5000;
+const MAX_ENTRIES = 1000;
+// GetSession("") is answered at once; a slow answer means esgd is in trouble, not a slow check.
+const CHECK_DEADLINE_MS = 10_000;
+
+const REFUSALS = new Set([grpc.status.UNAUTHENTICATED, grpc.status.PERMISSION_DENIED]);
+const ACCEPTED = new Set([grpc.status.INVALID_ARGUMENT, grpc.status.NOT_FOUND]);
+
+function digest(authorization) {
+  return crypto.createHash('sha256').update(authorization || '').digest('hex');
+}
+
+class TokenCheck {
+  constructor(esgd) {
+    this.esgd = esgd;
+    this.cache = new Map(); // digest -> {promise, expires}; in insertion order, oldest first
+  }
+
+  // Resolves when esgd accepts `authorization` (an "Authorization" header value, or undefined
+  // for none) for reading; rejects with esgd's error: code UNAUTHENTICATED or PERMISSION_DENIED
+  // for a refused token, any other code when esgd could not be asked (not kept).
+  check(authorization) {
+    const key = digest(authorization);
+    const now = Date.now();
+    const cached = this.cache.get(key);
+    if (cached && cached.expires > now) return cached.promise;
+    this.cache.delete(key);
+    const entry = { expires: Infinity, promise: null };
+    entry.promise = this.ask(authorization).then(() => {
+      entry.expires = Date.now() + TTL_MS;
+    }, (err) => {
+      if (REFUSALS.has(err.code)) entry.expires = Date.now() + TTL_MS;
+      else if (this.cache.get(key) === entry) this.cache.delete(key);
+      throw err;
+    });
+    entry.promise.catch(() => {});
+    this.cache.set(key, entry);
+    // Bounded: the oldest answers go first (a flood of made-up tokens pushes out only answers).
+    while (this.cache.size > MAX_ENTRIES) this.cache.delete(this.cache.keys().next().value);
+    return entry.promise;
+  }
+
+  async ask(authorization) {
+    try {
+      await this.esgd.unary('GetSession', { spacecraft_id: '' }, authorization, undefined, CHECK_DEADLINE_MS);
+    } catch (err) {
+      if (ACCEPTED.has(err.code)) return;
+      throw err;
+    }
+  }
+
+  // Whether esgd wants a token at all: is a call without one refused?
+  async tokensRequired() {
+    try {
+      await this.check(undefined);
+      return false;
+    } catch (err) {
+      if (err.code === grpc.status.UNAUTHENTICATED) return true;
+      throw err;
+    }
+  }
+
+  // Who an operator is, for the per-operator limits: their token (its digest) when esgd checks
+  // tokens; otherwise the browser's address, since any made-up token passes an esgd without
+  // tokens and would make a new operator each time.
+  async operatorKey(token, peerAddress) {
+    if (await this.tokensRequired()) return `token:${digest(token)}`;
+    return `peer:${peerAddress}`;
+  }
+}
+
+module.exports = { TokenCheck, digest };
