@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Starts the console gateway (docs/console-gateway.md) against any esgd:
 #   bash scripts/console.sh --esgd HOST:PORT [--listen HOST:PORT] [--tls-cert F --tls-key F]
-#                           [--esgd-ca F] [--esgd-server-name NAME]
+#                           [--esgd-ca F] [--esgd-server-name NAME] [--allowed-hosts H,...]
 # Installs the console's npm packages first when they are missing or the lock file changed
 # (the same check as scripts/install-deps.sh), then runs the gateway in the foreground.
 set -euo pipefail

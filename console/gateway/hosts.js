@@ -1,10 +1,10 @@
 // The names the console answers to (docs/console-gateway.md "Security"). A browser sends the
 // name it used in the Host header and the page's address in Origin. With DNS rebinding another
 // site's page reaches the gateway under the attacker's name (evil.example resolving to
-// 127.0.0.1): its Host is that name, so a request whose Host is not in the list is refused
-// (421) before anything else, and one whose Origin is not is refused too (403): against an esgd
-// without tokens nothing else would stop such a page from reading the console or acknowledging
-// alerts.
+// 127.0.0.1): its Host is that name, so an API request or WebSocket whose Host is not in the list
+// is refused (421) before anything else, and one whose Origin is not is refused too (403):
+// against an esgd without tokens nothing else would stop such a page from reading the console or
+// acknowledging alerts.
 'use strict';
 
 // One entry of --allowed-hosts: a DNS name, an IPv4 address or an IPv6 address in brackets,

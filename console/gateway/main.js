@@ -36,6 +36,9 @@ async function main() {
   }
   process.stdout.write(`console: listening on ${server.url}\n`);
   log(`esgd at ${options.esgd.address} (${options.esgdCa ? 'TLS' : 'plain text'})`);
+  // The names browsers may use (a name without a port: the listen port, or none); a page reached
+  // by any other name is refused with 421, and this line tells the operator why.
+  log(`allowed hosts: ${options.allowedHosts.map((h) => (h.port ? `${h.name}:${h.port}` : h.name)).join(', ')}`);
 
   let stopping = false;
   const shutdown = (signal) => {

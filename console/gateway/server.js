@@ -1,7 +1,9 @@
 // The console's HTTP(S) server: /api/live upgrades to the WebSocket (live.js), /api/ goes to the
-// REST endpoints (api.js), everything else to the static files (static.js). Every request, the
-// upgrade included, first passes the Host/Origin check (hosts.js). `stop()` is the graceful
-// shutdown: no new connections, every gRPC call cancelled, every socket closed.
+// REST endpoints (api.js), everything else to the static files (static.js). /api/ requests and
+// the upgrade first pass the Host/Origin check (hosts.js); the static files are the same public
+// page for anyone, and a health probe that names the gateway by its pod address still gets them.
+// `stop()` is the graceful shutdown: no new connections, every gRPC call cancelled, every socket
+// closed.
 'use strict';
 
 const http = require('node:http');
@@ -21,11 +23,6 @@ function startServer(options, esgd, log) {
   let server;
   const checkRequest = makeHostCheck(options.allowedHosts, () => server.address().port);
   const handler = (req, res) => {
-    const refused = checkRequest(req);
-    if (refused) {
-      sendJson(res, refused.httpStatus, { error: { code: refused.code, message: refused.message } });
-      return;
-    }
     let url;
     try {
       url = new URL(req.url, 'http://localhost');
@@ -34,6 +31,11 @@ function startServer(options, esgd, log) {
       return;
     }
     if (url.pathname === '/api' || url.pathname.startsWith('/api/')) {
+      const refused = checkRequest(req);
+      if (refused) {
+        sendJson(res, refused.httpStatus, { error: { code: refused.code, message: refused.message } });
+        return;
+      }
       api(req, res, url).catch((err) => {
         log(`error: ${err.stack || err}`);
         res.destroy();

@@ -17,7 +17,7 @@ const BIG = 30 * MIB;
 const PREDICT = '/api/spacecraft/RDK-1/predict';
 const JSON_TYPE = { 'content-type': 'application/json' };
 // The gateway's bounds (gateway/limits.js, gateway/live.js), as documented.
-const PREDICT_LIMIT = 8 * MIB;
+const PREDICT_LIMIT = 2 * MIB;
 const PER_SOCKET = 32;
 const PER_OPERATOR = 64;
 
@@ -95,7 +95,7 @@ function register(ctx) {
     assert.equal(refused.sentAtAnswer, 0);
     assert.equal(refused.json.error.code, 'RESOURCE_EXHAUSTED');
     assert.match(refused.json.error.message, /^body: /);
-    assert.match(refused.json.error.message, /8388608 bytes/);
+    assert.match(refused.json.error.message, /2097152 bytes/);
     assert.equal(refused.headers.connection, 'close');
     assert.ok(refused.ms < 1000, `refused after ${refused.ms} ms`);
 
@@ -148,7 +148,7 @@ function register(ctx) {
     const answer = await within(10_000, connection.answer, 'a chunked 30 MiB body');
     connection.socket.destroy();
     assert.equal(answer.status, 413);
-    assert.match(answer.json.error.message, /^body: larger than 8388608 bytes/);
+    assert.match(answer.json.error.message, /^body: larger than 2097152 bytes/);
     assert.ok(answer.sentAtAnswer >= PREDICT_LIMIT, `answered after ${answer.sentAtAnswer} bytes`);
     assert.ok(written < BIG, 'the gateway took the whole 30 MiB');
   });
@@ -274,7 +274,7 @@ function register(ctx) {
     }
   });
 
-  test('security: Host and Origin not in the allowed list are refused: 421 and 403, on REST, static files and the WebSocket', async () => {
+  test('security: Host and Origin not in the allowed list are refused: 421 and 403, on REST and the WebSocket', async () => {
     const gateway = ctx.gateway();
     const { port } = new URL(gateway.url);
     const get = (pathName, headers) => request(new URL(pathName, gateway.url), { headers });
@@ -284,8 +284,9 @@ function register(ctx) {
       assert.equal(refused.status, 421, host);
       assert.equal(refused.json.error.code, 'INVALID_ARGUMENT');
       assert.match(refused.json.error.message, /^Host: '[^']+' is not a name this console gateway serves under .*--allowed-hosts/);
-      assert.equal((await get('/', { Host: host })).status, 421, `/ with ${host}`);
     }
+    // The static files are the same public page under any name (a health probe names the pod).
+    assert.equal((await get('/openmct/openmct.js', { Host: 'evil.example' })).status, 200);
     const ack = await request(new URL('/api/spacecraft/RDK-1/alerts/1/acknowledge', gateway.url),
       { method: 'POST', headers: { ...asAlice(), Host: 'evil.example' }, body: { operator_name: '' } });
     assert.equal(ack.status, 421);
