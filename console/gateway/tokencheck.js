@@ -66,13 +66,16 @@ class TokenCheck {
     }
   }
 
-  // Whether esgd wants a token at all: is a call without one refused?
+  // Whether esgd wants a token at all: is a call without one refused? An esgd that throttles
+  // refused calls per address (the gateway is one address for all its browsers) answers those
+  // beyond its budget RESOURCE_EXHAUSTED instead of UNAUTHENTICATED: refused all the same. That
+  // answer is not kept by check(), which would otherwise hold it against a valid token too.
   async tokensRequired() {
     try {
       await this.check(undefined);
       return false;
     } catch (err) {
-      if (err.code === grpc.status.UNAUTHENTICATED) return true;
+      if (err.code === grpc.status.UNAUTHENTICATED || err.code === grpc.status.RESOURCE_EXHAUSTED) return true;
       throw err;
     }
   }
