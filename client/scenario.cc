@@ -15,6 +15,7 @@
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
 #include "nlohmann/json.hpp"
+#include "proto/strict_json.h"
 
 namespace esg::client {
 
@@ -524,6 +525,8 @@ absl::StatusOr<Scenario> ParseTop(const json& root) {
 absl::StatusOr<Scenario> ParseScenarioJson(std::string_view text) {
   try {
     const json root = json::parse(text.begin(), text.end());
+    // nlohmann-json keeps the last value of a repeated key: refused with its path.
+    if (absl::Status strict = proto_convert::CheckStrictJson(text); !strict.ok()) return strict;
     return ParseTop(root);
   } catch (const json::exception& e) {
     return absl::InvalidArgumentError(absl::StrCat("scenario: malformed JSON: ", e.what()));

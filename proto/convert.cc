@@ -21,6 +21,7 @@
 #include "estimator/units.h"
 #include "google/protobuf/repeated_field.h"
 #include "google/protobuf/util/json_util.h"
+#include "proto/strict_json.h"
 
 namespace esg::proto_convert {
 
@@ -468,6 +469,13 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
 }
 
 absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json) {
+  // protobuf's parser keeps one value of a repeated key and flattens nested arrays.
+  if (absl::Status strict = CheckStrictJson(json); !strict.ok()) {
+    if (absl::StartsWith(strict.message(), "not valid JSON")) {
+      return absl::InvalidArgumentError(absl::StrCat("config JSON: ", strict.message()));
+    }
+    return strict;
+  }
   esg::v1::SpacecraftConfig proto;
   google::protobuf::util::JsonParseOptions options;
   options.ignore_unknown_fields = false;

@@ -57,7 +57,10 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
 // Parses the configuration JSON (proto3 JSON mapping of esg.v1.SpacecraftConfig, docs/formats.md),
 // then ConfigFromProto. InvalidArgument for an unknown field ("gyros[0].k0: unknown field"), a
 // value of the wrong JSON type ("gyros[2].model.k0DegH: invalid value "fast" for type TYPE_DOUBLE")
-// and malformed JSON ("config JSON: <protobuf's message>").
+// and malformed JSON ("config JSON: <the parser's message>"); a key repeated in an object
+// ("gyros[1].id: duplicate key ...") or an array inside an array ("gyros[0].caseToBody: an array
+// inside an array ...") are refused before protobuf's parser, which would keep one of the values
+// or flatten the array (proto/strict_json.h).
 absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json);
 
 // Pretty-printed JSON ending in a newline (2-space indent, arrays of numbers on one line,

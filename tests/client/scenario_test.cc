@@ -311,6 +311,18 @@ TEST(Scenario, ErrorsNameTheKey) {
   }
 }
 
+// nlohmann-json alone keeps the last value of a repeated key: refused with the key's path.
+TEST(Scenario, RepeatedKeyIsRefusedWithItsPath) {
+  EXPECT_THAT(
+      ParseScenarioJson(
+          R"({"gyros": [{"id": 1}, {"id": 2, "randomWalkDegHSqrtH": 0.001, "randomWalkDegHSqrtH": 0.5}]})"),
+      StatusIs(absl::StatusCode::kInvalidArgument,
+               ::testing::StartsWith("gyros[1].randomWalkDegHSqrtH: duplicate key")));
+  EXPECT_THAT(ParseScenarioJson(R"({"profile": "inertial", "profile": "orbital"})"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("profile: duplicate key")));
+}
+
 TEST(Scenario, MissingFileIsNotFound) {
   EXPECT_THAT(ReadScenarioFile("/nonexistent/scenario.json"),
               StatusIs(absl::StatusCode::kNotFound, HasSubstr("/nonexistent/scenario.json")));
