@@ -63,6 +63,7 @@
 #include "absl/time/time.h"
 #include "esg/v1/estimation_service.pb.h"
 #include "estimator/calibration_model.h"
+#include "estimator/frame_gap.h"
 #include "estimator/session.h"
 #include "estimator/spacecraft_config.h"
 #include "server/alert_hub.h"
@@ -99,8 +100,9 @@ struct CoreOptions {
   // Measurement-time period of the window checkpoints re-runs start from (D61).
   absl::Duration window_checkpoint_period = absl::Hours(1);
   // Largest accepted time step between consecutive frames of a spacecraft (rejected beyond:
-  // the filter integrates across a gap at the configured rate).
-  absl::Duration max_frame_gap = absl::Hours(24 * 7);
+  // the filter integrates across a gap at the configured rate). The offline verbs of esg apply
+  // the same limit to a recording's rows.
+  absl::Duration max_frame_gap = estimator::kMaxFrameGap;
   // Longest prediction horizon after the last applied frame (OutOfRange beyond).
   absl::Duration max_prediction_horizon = absl::Hours(48);
   // Most samples in one prediction.

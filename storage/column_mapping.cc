@@ -20,6 +20,7 @@
 #include "absl/strings/str_join.h"
 #include "estimator/rotation.h"
 #include "nlohmann/json.hpp"
+#include "proto/strict_json.h"
 #include "storage/csv_problems.h"
 #include "storage/recording_csv.h"
 
@@ -623,6 +624,8 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
   } catch (const json::exception& e) {
     return FieldError("mapping", absl::StrCat("not valid JSON: ", e.what()));
   }
+  // nlohmann-json keeps the last value of a repeated key: refused with its path.
+  if (absl::Status strict = proto_convert::CheckStrictJson(json_text); !strict.ok()) return strict;
   if (absl::Status s = CheckObject(
           doc, "", {"format", "spacecraftId", "delimiter", "time", "gyros", "starTracker"});
       !s.ok()) {
@@ -710,7 +713,8 @@ absl::StatusOr<ColumnMapping> ReadColumnMapping(const std::string& path) {
 }
 
 absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view std_text,
-                                                             const ColumnMapping& mapping) {
+                                                             const ColumnMapping& mapping,
+                                                             const RecordingReadOptions& options) {
   absl::string_view text(std_text.data(), std_text.size());
   if (absl::StartsWith(text, "\xEF\xBB\xBF")) text.remove_prefix(3);  // a UTF-8 byte order mark
   estimator::Recording recording;
@@ -888,6 +892,9 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
                             absl::FormatTime(kTimeFormat, *time, absl::UTCTimeZone()),
                             absl::FormatTime(kTimeFormat, *previous_time, absl::UTCTimeZone()),
                             previous_time_line));
+      } else if (previous_time.has_value() && *time - *previous_time > options.max_row_gap) {
+        problems.Add(line_no, t0.Where(),
+                     RowGapProblem(*time, *previous_time, previous_time_line, options.max_row_gap));
       }
       previous_time = time;
       previous_time_line = line_no;
@@ -1002,8 +1009,9 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
 }
 
 absl::StatusOr<estimator::Recording> ReadRecording(const std::string& path,
-                                                   const std::string& columns_path) {
-  if (columns_path.empty()) return ReadRecordingCsv(path);
+                                                   const std::string& columns_path,
+                                                   const RecordingReadOptions& options) {
+  if (columns_path.empty()) return ReadRecordingCsv(path, options);
   absl::StatusOr<ColumnMapping> mapping = ReadColumnMapping(columns_path);
   if (!mapping.ok()) return mapping.status();
   std::ifstream in(path, std::ios::binary);
@@ -1014,7 +1022,7 @@ absl::StatusOr<estimator::Recording> ReadRecording(const std::string& path,
   std::ostringstream content;
   content << in.rdbuf();
   if (in.bad()) return absl::UnavailableError(absl::StrCat("recording ", path, ": read failed"));
-  absl::StatusOr<estimator::Recording> recording = ParseMappedRecordingCsv(content.str(), *mapping);
+  absl::StatusOr<estimator::Recording> recording = ParseMappedRecordingCsv(content.str(), *mapping, options);
   if (!recording.ok()) {
     return absl::Status(
         recording.status().code(),

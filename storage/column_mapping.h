@@ -42,6 +42,7 @@
 #include "absl/time/time.h"
 #include "estimator/conventions.h"
 #include "estimator/telemetry.h"
+#include "storage/recording_csv.h"
 
 namespace esg::storage {
 
@@ -109,16 +110,18 @@ absl::StatusOr<ColumnMapping> ReadColumnMapping(const std::string& path);
 
 // Parses a CSV export through `mapping` (rules above). InvalidArgument listing every problem.
 // The recording's metadata are the file's "# key: value" lines, plus "spacecraft_id" from the
-// mapping when it states one (the mapping wins).
-absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view text,
-                                                             const ColumnMapping& mapping);
+// mapping when it states one (the mapping wins). options.max_row_gap as for ParseRecordingCsv.
+absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(
+    std::string_view text, const ColumnMapping& mapping, const RecordingReadOptions& options = {});
 
 // Reads a recording for the CLI: the project's recording CSV when columns_path is empty
 // (ReadRecordingCsv), otherwise the mapping at columns_path applied to the file at path.
 // NotFound when a file cannot be opened; InvalidArgument "column mapping <path>: <field>: ..."
-// for a bad mapping and "<path>: ..." with the problems of the CSV.
+// for a bad mapping and "<path>: ..." with the problems of the CSV (options as for
+// ParseRecordingCsv: the offline verbs set max_row_gap to estimator::kMaxFrameGap).
 absl::StatusOr<estimator::Recording> ReadRecording(const std::string& path,
-                                                   const std::string& columns_path);
+                                                   const std::string& columns_path,
+                                                   const RecordingReadOptions& options = {});
 
 }  // namespace esg::storage
 

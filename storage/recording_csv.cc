@@ -180,7 +180,8 @@ std::string CleanMetadata(absl::string_view s, bool is_key) {
 
 }  // namespace
 
-absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text) {
+absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text,
+                                                       const RecordingReadOptions& options) {
   // Abseil 20220623 in Debian has its own absl::string_view (not std::string_view).
   const absl::string_view text(std_text.data(), std_text.size());
   estimator::Recording recording;
@@ -287,6 +288,9 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
                                      time_text, absl::FormatTime(kTimeFormat, *previous_time,
                                                                  absl::UTCTimeZone()),
                                      previous_time_line));
+      } else if (previous_time.has_value() && time - *previous_time > options.max_row_gap) {
+        problems.Add(line_no, names[kTimeColumn],
+                     RowGapProblem(time, *previous_time, previous_time_line, options.max_row_gap));
       }
       previous_time = time;
       previous_time_line = line_no;
@@ -369,7 +373,8 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
   return recording;
 }
 
-absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path) {
+absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path,
+                                                      const RecordingReadOptions& options) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     return absl::NotFoundError(
@@ -378,7 +383,7 @@ absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path) {
   std::ostringstream content;
   content << in.rdbuf();
   if (in.bad()) return absl::UnavailableError(absl::StrCat("recording ", path, ": read failed"));
-  absl::StatusOr<estimator::Recording> recording = ParseRecordingCsv(content.str());
+  absl::StatusOr<estimator::Recording> recording = ParseRecordingCsv(content.str(), options);
   if (!recording.ok()) {
     return absl::Status(recording.status().code(),
                         absl::StrCat(path, ": ", recording.status().message()));

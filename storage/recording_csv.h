@@ -27,7 +27,9 @@
 //   looser than any real readout; it catches swapped, missing or mis-scaled components). Accepted
 //   vectors are renormalised when their norm differs from 1 by more than 1e-12; closer ones are
 //   kept bit for bit, so a written recording reads back exactly.
-// - Times strictly increasing. Numbers must parse completely and be finite.
+// - Times strictly increasing, and with RecordingReadOptions::max_row_gap set (the offline runs:
+//   estimator/frame_gap.h) at most that much after the previous row. Numbers must parse
+//   completely and be finite.
 // - Every problem is reported, never a row dropped: a file with any problem gives
 //   InvalidArgument listing all of them (up to kMaxReportedProblems, then "... and N more"),
 //   one per line as "line <n>, column <name>: <reason>".
@@ -39,6 +41,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/time/time.h"
 #include "estimator/telemetry.h"
 
 namespace esg::storage {
@@ -47,12 +50,21 @@ inline constexpr char kRecordingCsvFormat[] = "esg-recording-csv 1";
 inline constexpr double kUnitNormTolerance = 1e-3;  // same as proto_convert::kUnitNormTolerance
 inline constexpr int kMaxReportedProblems = 50;
 
+struct RecordingReadOptions {
+  // A row more than this after the previous row is a problem of the file ("line <n>, column
+  // time_utc: <time> is more than 7 days after the previous row (line <m>, <time>) ...").
+  // Infinite: no limit (the reader as a format reader; esg replay leaves the rule to esgd).
+  absl::Duration max_row_gap = absl::InfiniteDuration();
+};
+
 // Parses CSV text. InvalidArgument with every problem found (see the rules above).
-absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view text);
+absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view text,
+                                                       const RecordingReadOptions& options = {});
 
 // Reads and parses a file. NotFound when it cannot be opened, Unavailable on a read failure,
 // InvalidArgument "<path>: ..." with the problems of ParseRecordingCsv.
-absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path);
+absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path,
+                                                      const RecordingReadOptions& options = {});
 
 // Formats a recording: "# format: esg-recording-csv 1", then the metadata as the reader reads
 // them back: each key and value cleaned (line breaks become spaces, ':' in keys becomes '_',

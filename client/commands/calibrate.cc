@@ -23,6 +23,7 @@
 #include "client/progress.h"
 #include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
+#include "estimator/frame_gap.h"
 #include "estimator/offline.h"
 #include "estimator/units.h"
 #include "nlohmann/json.hpp"
@@ -101,7 +102,11 @@ std::optional<Inputs> Load(const CommonOptions& o) {
   }
   in.options.consistency_window_steps = o.consistency_window;
   in.options.consistency_test_every_steps = o.consistency_window / 4;
-  auto recording = storage::ReadRecording(o.recording_path, o.columns_path);
+  auto recording = storage::ReadRecording(
+      o.recording_path, o.columns_path,
+      // The limit esgd applies at ingest: one absurd time tag would keep the filter busy for
+      // hours integrating across the gap (estimator/frame_gap.h).
+      storage::RecordingReadOptions{.max_row_gap = estimator::kMaxFrameGap});
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
                  std::string(recording.status().message()).c_str());

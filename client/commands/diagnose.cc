@@ -30,6 +30,7 @@
 #include "client/diagnosis_plots.h"
 #include "client/diagnosis_text.h"
 #include "client/output_format.h"
+#include "estimator/frame_gap.h"
 #include "proto/convert.h"
 #include "proto/diagnosis_json.h"
 #include "storage/column_mapping.h"
@@ -161,7 +162,11 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
                  std::string(config.status().message()).c_str());
     return 2;
   }
-  auto recording = storage::ReadRecording(o.recording_path, o.columns_path);
+  auto recording = storage::ReadRecording(
+      o.recording_path, o.columns_path,
+      // The limit esgd applies at ingest: one absurd time tag would keep the filter busy for
+      // hours integrating across the gap (estimator/frame_gap.h).
+      storage::RecordingReadOptions{.max_row_gap = estimator::kMaxFrameGap});
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
                  std::string(recording.status().message()).c_str());

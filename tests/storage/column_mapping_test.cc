@@ -33,6 +33,7 @@ using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::AllOf;
 using ::testing::HasSubstr;
+using ::testing::StartsWith;
 
 constexpr absl::StatusCode kInvalid = absl::StatusCode::kInvalidArgument;
 constexpr double kPi = 3.14159265358979323846;
@@ -304,7 +305,7 @@ TEST(ColumnMapping, WrongMappingsNameTheField) {
        "starTracker.scalarPosition: unknown field"},
       {R"("rotation": "q_in_b")", R"("rotation": "body_to_inertial")",
        "starTracker.rotation: 'body_to_inertial' is not q_in_b"},
-      {R"("rotation": "q_in_b")", R"("scalar": "first")", "starTracker.rotation: required"},
+      {R"(, "rotation": "q_in_b")", "", "starTracker.rotation: required"},
       {R"(["qw", "qx", "qy", "qz"])", R"(["qw", "qx", "qy", "h1"])",
        "starTracker.columns[3]: column 'h1' is already mapped by gyros[0].spinAxis.columns[0]"},
       {R"("rotation": "q_in_b")",
@@ -319,6 +320,15 @@ TEST(ColumnMapping, WrongMappingsNameTheField) {
               StatusIs(kInvalid, HasSubstr("mapping: not valid JSON")));
   EXPECT_THAT(ParseColumnMapping(R"({"format": "esg-column-mapping 2"})").status(),
               StatusIs(kInvalid, HasSubstr("format: 'esg-column-mapping 2' is not supported")));
+}
+
+// nlohmann-json alone keeps the last value of a repeated key (docs/formats.md, "Rules and
+// errors"): the mapping reader refuses it with the key's path.
+TEST(ColumnMapping, RepeatedKeyIsRefusedWithItsPath) {
+  EXPECT_THAT(Mapping(R"("scalar": "first")", R"("scalar": "first", "scalar": "last")").status(),
+              StatusIs(kInvalid, StartsWith("starTracker.scalar: duplicate key")));
+  EXPECT_THAT(Mapping(R"("format": "rfc3339")", R"("format": "rfc3339", "column": "t")").status(),
+              StatusIs(kInvalid, StartsWith("time.column: duplicate key")));
 }
 
 // Rows that do not fit the mapping: each names the line, the CSV column and the mapping field.

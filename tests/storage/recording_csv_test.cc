@@ -428,6 +428,36 @@ TEST(RecordingCsv, EveryProblemOfAFileIsReported) {
   EXPECT_THAT(read.status().message(), AllOf(Not(HasSubstr("line 5")), Not(HasSubstr("line 8"))));
 }
 
+// The offline verbs read with max_row_gap = 7 days, the limit of esgd's ingest (docs/formats.md,
+// "Validation"): a row exactly 7 days after the previous one is read, one a nanosecond later
+// is a problem naming both lines' times; without the option the reader takes any gap.
+TEST(RecordingCsv, RowMoreThanTheGapLimitAfterThePreviousIsAProblemWhenAsked) {
+  const std::string csv = ValidCsv(3);
+  absl::StatusOr<estimator::Recording> plain = ParseRecordingCsv(csv);
+  ASSERT_THAT(plain, IsOk());
+  const absl::Time previous = plain->frames[1].time;  // line 5
+  RecordingReadOptions options;
+  options.max_row_gap = absl::Hours(24 * 7);
+  auto at = [&](absl::Duration after) {
+    return WithField(csv, 6, "time_utc",
+                     absl::FormatTime(absl::RFC3339_full, previous + after, absl::UTCTimeZone()));
+  };
+  EXPECT_THAT(ParseRecordingCsv(at(absl::Hours(24 * 7)), options), IsOk());
+  EXPECT_THAT(
+      ParseRecordingCsv(at(absl::Hours(24 * 7) + absl::Nanoseconds(1)), options),
+      StatusIs(kInvalid, AllOf(HasSubstr("1 problem"),
+                               HasSubstr("line 6, column time_utc: " +
+                                         absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ",
+                                                          previous + absl::Hours(24 * 7) +
+                                                              absl::Nanoseconds(1),
+                                                          absl::UTCTimeZone()) +
+                                         " is more than 7 days after the previous row (line 5, " +
+                                         absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ", previous,
+                                                          absl::UTCTimeZone()) +
+                                         ")"))));
+  EXPECT_THAT(ParseRecordingCsv(at(absl::Hours(24 * 365 * 5))), IsOk());
+}
+
 TEST(RecordingCsv, ProblemListIsCappedWithACount) {
   std::string csv = ValidCsv(kMaxReportedProblems + 10);
   for (int i = 0; i < kMaxReportedProblems + 10; ++i) csv = WithField(csv, 4 + i, "st_valid", "x");
