@@ -8,12 +8,14 @@
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/civil_time.h"
+#include "erfa.h"
 
 namespace esg::storage {
 namespace {
@@ -63,6 +65,55 @@ bool IsSpacecraftBodyFrame(absl::string_view frame) {
   if (!absl::StartsWith(frame, "SC_BODY_")) return false;
   int n = 0;
   return ParseDigits(frame.substr(8), &n);
+}
+
+// A TAI calendar reading (parsed by ParseCcsdsTime as if it were UTC: `label`) as the UTC
+// instant, with the leap seconds of ERFA's table (eraTaiutc; liberfa's table ends with the leap
+// second of 2016-12-31, and ERFA calls years more than 5 after its release "dubious": they are
+// converted with the last TAI-UTC, 37 s). An instant inside an inserted leap second comes out as
+// the UTC text 23:59:60.x would (ParseCcsdsTime), i.e. x after the next midnight: absl::Time has
+// no leap seconds (docs/formats.md, "Time"). Whole seconds go through ERFA, the fraction is added
+// exactly, so microseconds survive.
+absl::StatusOr<absl::Time> TaiToUtc(absl::Time label) {
+  const absl::TimeZone utc = absl::UTCTimeZone();
+  const absl::CivilSecond tai = absl::ToCivilSecond(label, utc);
+  const absl::Duration fraction = label - absl::FromCivil(tai, utc);
+  if (tai.year() < 1960) return absl::InvalidArgumentError("TAI before 1960 has no UTC");
+  double tai1 = 0.0, tai2 = 0.0;
+  if (eraDtf2d("TAI", static_cast<int>(tai.year()), tai.month(), tai.day(), tai.hour(),
+               tai.minute(), tai.second(), &tai1, &tai2) < 0) {
+    return absl::InvalidArgumentError("not a TAI date and time");
+  }
+  double utc1 = 0.0, utc2 = 0.0;
+  if (eraTaiutc(tai1, tai2, &utc1, &utc2) < 0) {
+    return absl::InvalidArgumentError("TAI outside ERFA's TAI-UTC table");
+  }
+  int year = 0, month = 0, day = 0;
+  int hmsf[4] = {0, 0, 0, 0};
+  if (eraD2dtf("UTC", 9, utc1, utc2, &year, &month, &day, hmsf) < 0) {
+    return absl::InvalidArgumentError("TAI outside ERFA's TAI-UTC table");
+  }
+  return absl::FromCivil(absl::CivilSecond(year, month, day, hmsf[0], hmsf[1], 0), utc) +
+         absl::Seconds(hmsf[2]) + absl::Nanoseconds(hmsf[3]) + fraction;
+}
+
+// An epoch of a segment whose TIME_SYSTEM is `time_system` (UTC or TAI; the others are refused
+// before any epoch is read) as UTC.
+absl::StatusOr<absl::Time> ParseEpoch(absl::string_view text, absl::string_view time_system) {
+  absl::StatusOr<absl::Time> t = ParseCcsdsTime(text);
+  if (!t.ok() || time_system != "TAI") return t;
+  // Second 60 exists only in UTC: ParseCcsdsTime reads it as the next minute's second 0.
+  const absl::string_view s = absl::StripAsciiWhitespace(text);
+  const size_t colon = s.rfind(':');
+  if (colon != absl::string_view::npos && absl::StartsWith(s.substr(colon + 1), "60")) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("'", text, "' has second 60, which only UTC has (TIME_SYSTEM = TAI)"));
+  }
+  absl::StatusOr<absl::Time> utc = TaiToUtc(*t);
+  if (!utc.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("'", text, "': ", utc.status().message()));
+  }
+  return utc;
 }
 
 }  // namespace
@@ -257,8 +308,18 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
                        absl::StrCat("exactly one must be a spacecraft body frame (SC_BODY_n), got ",
                                     m.at("REF_FRAME_A"), " and ", m.at("REF_FRAME_B")));
     }
-    if (!TimeSystems().count(m.at("TIME_SYSTEM"))) {
-      return LineError(line, "TIME_SYSTEM", absl::StrCat("unknown value ", m.at("TIME_SYSTEM")));
+    const std::string& time_system = m.at("TIME_SYSTEM");
+    if (!TimeSystems().count(time_system)) {
+      return LineError(segment.metadata_lines.at("TIME_SYSTEM"), "TIME_SYSTEM",
+                       absl::StrCat("unknown value ", time_system));
+    }
+    if (time_system != "UTC" && time_system != "TAI") {
+      // Every instant of the project is UTC; a spacecraft clock (SCLK) or mission time (MET, MRT)
+      // needs a correlation the file does not carry, and the other scales are not converted.
+      return LineError(segment.metadata_lines.at("TIME_SYSTEM"), "TIME_SYSTEM",
+                       absl::StrCat(time_system,
+                                    " is not read: the epochs must be UTC, or TAI (converted to "
+                                    "UTC with the leap seconds); convert the file to UTC first"));
     }
     if (m.at("ATTITUDE_TYPE") != "QUATERNION") {
       return LineError(line, "ATTITUDE_TYPE",
@@ -273,9 +334,9 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
         return LineError(line, "QUATERNION_TYPE", "must be FIRST or LAST");
       }
     }
-    auto start = ParseCcsdsTime(m.at("START_TIME"));
+    auto start = ParseEpoch(m.at("START_TIME"), time_system);
     if (!start.ok()) return LineError(line, "START_TIME", start.status().message());
-    auto stop = ParseCcsdsTime(m.at("STOP_TIME"));
+    auto stop = ParseEpoch(m.at("STOP_TIME"), time_system);
     if (!stop.ok()) return LineError(line, "STOP_TIME", stop.status().message());
     if (*stop < *start) return LineError(line, "STOP_TIME", "before START_TIME");
     segment.start_time = *start;
@@ -283,7 +344,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
     for (const char* k : {"USEABLE_START_TIME", "USEABLE_STOP_TIME"}) {
       auto it = m.find(k);
       if (it == m.end()) continue;
-      auto t = ParseCcsdsTime(it->second);
+      auto t = ParseEpoch(it->second, time_system);
       if (!t.ok()) return LineError(line, k, t.status().message());
       if (*t < *start || *t > *stop) return LineError(line, k, "outside START_TIME..STOP_TIME");
     }
@@ -308,7 +369,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
                            absl::StrCat("expected an epoch and 3 values, got ", f.size() - 1,
                                         " fields"));
         }
-        auto epoch = ParseCcsdsTime(f[1]);
+        auto epoch = ParseEpoch(f[1], segment.metadata.at("TIME_SYSTEM"));
         if (!epoch.ok()) return LineError(line_number, "SIGMA_ARCSEC", epoch.status().message());
         Eigen::Vector3d sigma;
         for (int i = 0; i < 3; ++i) {
@@ -342,7 +403,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
                          absl::StrCat("expected an epoch and 4 quaternion components, got ",
                                       f.size(), " fields"));
       }
-      auto epoch = ParseCcsdsTime(f[0]);
+      auto epoch = ParseEpoch(f[0], segment.metadata.at("TIME_SYSTEM"));
       if (!epoch.ok()) return LineError(line_number, "epoch", epoch.status().message());
       double v[4];
       for (int i = 0; i < 4; ++i) {
@@ -434,6 +495,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
         return LineError(line_number, key, "not a metadata keyword");
       }
       segment.metadata[key] = value;
+      segment.metadata_lines[key] = line_number;
     } else {
       return LineError(line_number, key, "unexpected between META_STOP and DATA_START");
     }
@@ -444,6 +506,27 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
   if (where == Where::kData) return LineError(line_number, "DATA_STOP", "missing");
   if (file.segments.empty()) return LineError(line_number, "META_START", "no segment");
   return file;
+}
+
+absl::StatusOr<std::vector<AemSample>> ParseAemPlan(absl::string_view text,
+                                                    absl::string_view spacecraft_id) {
+  absl::StatusOr<AemFile> file = ParseAem(text);
+  if (!file.ok()) return file.status();
+  std::vector<AemSample> samples;
+  for (const AemSegment& segment : file->segments) {
+    const std::string& name = segment.metadata.at("OBJECT_NAME");
+    const std::string& id = segment.metadata.at("OBJECT_ID");
+    if (name != spacecraft_id && id != spacecraft_id) {
+      return LineError(segment.metadata_lines.at("OBJECT_NAME"), "OBJECT_NAME",
+                       absl::StrCat("'", absl::CHexEscape(name), "' (OBJECT_ID '",
+                                    absl::CHexEscape(id), "') is not spacecraft '",
+                                    absl::CHexEscape(spacecraft_id),
+                                    "': the plan is of another spacecraft (OBJECT_NAME or "
+                                    "OBJECT_ID must be the spacecraft id)"));
+    }
+    samples.insert(samples.end(), segment.samples.begin(), segment.samples.end());
+  }
+  return samples;
 }
 
 }  // namespace esg::storage

@@ -69,6 +69,8 @@ absl::StatusOr<std::string> WriteAemBlocks(const AemHeader& header,
 // A parsed, validated AEM.
 struct AemSegment {
   std::map<std::string, std::string> metadata;  // keyword -> value (COMMENT excluded)
+  std::map<std::string, int> metadata_lines;    // keyword -> its line (1-based)
+  // UTC (converted when TIME_SYSTEM is TAI), as are the samples' epochs.
   absl::Time start_time;
   absl::Time stop_time;
   // Quaternions as q_in_b (frame A = inertial, B = body); sigma_arcsec from the data section's
@@ -89,12 +91,21 @@ struct AemFile {
 // REF_FRAME_B, TIME_SYSTEM, START_TIME, STOP_TIME, ATTITUDE_TYPE, plus for version 1.0
 // ATTITUDE_DIR (A2B/B2A) and, for quaternions, QUATERNION_TYPE (FIRST/LAST); version 2.0 forbids
 // those two; no keyword repeated or unknown; exactly one of REF_FRAME_A/REF_FRAME_B is a
-// spacecraft-body frame (SC_BODY_<n>); START_TIME <= STOP_TIME, USEABLE_START/STOP_TIME inside
+// spacecraft-body frame (SC_BODY_<n>); TIME_SYSTEM UTC, or TAI with every epoch converted to UTC
+// (ERFA's leap seconds; second 60 refused in TAI), any other of the standard's time systems
+// (SCLK, GPS, TT, ...) refused on its line; START_TIME <= STOP_TIME, USEABLE_START/STOP_TIME inside
 // them; ATTITUDE_TYPE QUATERNION (the only type this reader decodes); data lines: an epoch and 4
 // numbers, epochs strictly increasing and inside [START_TIME, STOP_TIME], quaternion norm 1 within
 // 1e-6; a SIGMA_ARCSEC comment with an epoch and 3 finite values (else an error). Errors:
 // InvalidArgument "line <n>: <keyword or field>: <reason>".
 absl::StatusOr<AemFile> ParseAem(absl::string_view text);
+
+// A planned attitude of spacecraft `spacecraft_id` (`esg predict --planned FILE`): ParseAem, then
+// each segment must be that spacecraft's, its OBJECT_NAME or OBJECT_ID equal to spacecraft_id
+// (exactly, case included), else InvalidArgument "line <n>: OBJECT_NAME: ..." naming the line of
+// the segment's OBJECT_NAME and both values. The samples of every segment in file order (UTC).
+absl::StatusOr<std::vector<AemSample>> ParseAemPlan(absl::string_view text,
+                                                    absl::string_view spacecraft_id);
 
 // CCSDS ASCII time code A ("YYYY-MM-DDThh:mm:ss[.d...]") or B ("YYYY-DDDThh:mm:ss[.d...]"), an
 // optional trailing `Z`, UTC. InvalidArgument otherwise.

@@ -8,7 +8,8 @@
 // (KVN, docs/formats.md) to FILE.
 //
 // --planned FILE: a CCSDS AEM (KVN, version 1.0 or 2.0, quaternions; every segment's data lines,
-// the file's first keyword CCSDS_AEM_VERS) or a CSV with the header `time,q0,q1,q2,q3`: RFC 3339
+// the file's first keyword CCSDS_AEM_VERS; each segment's OBJECT_NAME or OBJECT_ID the
+// --spacecraft, TIME_SYSTEM UTC or TAI) or a CSV with the header `time,q0,q1,q2,q3`: RFC 3339
 // UTC time and q_in_b scalar first (body to inertial, Hamilton), one line per sample in
 // increasing time.
 // Exit codes: 0 success, 2 bad arguments or an unreadable --planned file, 1 server or file
@@ -51,9 +52,11 @@ struct PredictOptions {
   OutputFormat format = OutputFormat::kTable;
 };
 
-// The planned attitude of `path` (AEM or CSV, see the file comment) as request samples;
-// InvalidArgument "--planned PATH: line N: ..." otherwise.
-absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::string& path) {
+// The planned attitude of `path` (AEM or CSV, see the file comment) for `spacecraft_id` as
+// request samples; InvalidArgument "--planned PATH: line N: ..." otherwise (an AEM of another
+// spacecraft or in a time system other than UTC or TAI included: storage::ParseAemPlan).
+absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::string& path,
+                                                                 const std::string& spacecraft_id) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::NotFoundError(absl::StrCat("--planned ", path, ": cannot read"));
   std::stringstream buffer;
@@ -68,14 +71,13 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
   };
   const absl::string_view start = absl::StripLeadingAsciiWhitespace(text);
   if (absl::StartsWith(start, "CCSDS_AEM_VERS")) {
-    absl::StatusOr<storage::AemFile> aem = storage::ParseAem(text);
-    if (!aem.ok()) {
+    absl::StatusOr<std::vector<storage::AemSample>> plan =
+        storage::ParseAemPlan(text, spacecraft_id);
+    if (!plan.ok()) {
       return absl::InvalidArgumentError(
-          absl::StrCat("--planned ", path, ": ", aem.status().message()));
+          absl::StrCat("--planned ", path, ": ", plan.status().message()));
     }
-    for (const storage::AemSegment& segment : aem->segments) {
-      for (const storage::AemSample& s : segment.samples) add(s.epoch, s.q_in_b);
-    }
+    for (const storage::AemSample& s : *plan) add(s.epoch, s.q_in_b);
     return out;
   }
   int line_number = 0;
@@ -142,7 +144,8 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   }
   esg::v1::PredictRequest request;
   if (!o.planned_path.empty()) {
-    absl::StatusOr<std::vector<esg::v1::AttitudeSample>> planned = ReadPlanned(o.planned_path);
+    absl::StatusOr<std::vector<esg::v1::AttitudeSample>> planned =
+        ReadPlanned(o.planned_path, o.spacecraft_id);
     if (!planned.ok()) return ReportBadArgument(kVerb, std::string(planned.status().message()));
     for (esg::v1::AttitudeSample& s : *planned) *request.add_planned_attitude() = std::move(s);
   }

@@ -1,10 +1,12 @@
 // `esg predict --planned FILE` and `esg history` as real processes against a real esgd child
 // process on 127.0.0.1 (issue 11 items 2 and 3): a planned attitude given as a CSV of quaternions
-// or as a CCSDS AEM is what the prediction after the archive follows, and the output says so
-// (PLANNED, the assumption line); without a plan the output names the inertial hold; a broken
-// plan is a bad argument naming --planned; `esg history` reads 30 days of coefficient history
-// (30 times gRPC's default 4 MB message limit) page by page, every record once and in order.
+// or as a CCSDS AEM (in UTC or TAI) is what the prediction after the archive follows, and the
+// output says so (PLANNED, the assumption line); without a plan the output names the inertial
+// hold; a broken plan, or an AEM plan of another spacecraft or in a spacecraft clock's time, is a
+// bad argument naming --planned; `esg history` reads 30 days of coefficient history (30 times
+// gRPC's default 4 MB message limit) page by page, every record once and in order.
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -142,6 +144,21 @@ TEST(PredictCli, PlannedAttitudeFromACsvOrAnAemIsFollowedAndStated) {
   EXPECT_THAT(r.out, HasSubstr("PLANNED"));
   EXPECT_THAT(r.out, HasSubstr("assumption: ATTITUDE_SOURCE_PLANNED"));
 
+  // The same plan in TAI (TAI - UTC = 37 s in 2019) is converted to UTC on reading: the same
+  // prediction (docs/formats.md, "Reading a planned attitude").
+  std::vector<storage::AemSample> tai_samples = aem_samples;
+  for (storage::AemSample& s : tai_samples) s.epoch += absl::Seconds(37);
+  std::string tai_text = *storage::WriteAem(header, tai_samples);
+  ASSERT_NE(tai_text.find("TIME_SYSTEM = UTC"), std::string::npos);
+  tai_text.replace(tai_text.find("TIME_SYSTEM = UTC"), 17, "TIME_SYSTEM = TAI");
+  WriteFile(dir.File("plan_tai.aem"), tai_text);
+  r = Esg(dir, daemon, interval + " --planned " + dir.File("plan.aem") + " --format json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json from_utc = Json::parse(r.out);
+  r = Esg(dir, daemon, interval + " --planned " + dir.File("plan_tai.aem") + " --format json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(Json::parse(r.out)["samples"], from_utc["samples"]);
+
   // Without a plan the output names the hold.
   r = Esg(dir, daemon, interval);
   ASSERT_EQ(r.exit_code, 0) << r.err;
@@ -154,6 +171,39 @@ TEST(PredictCli, PlannedAttitudeFromACsvOrAnAemIsFollowedAndStated) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--planned"));
   EXPECT_THAT(r.err, HasSubstr("line 2"));
+}
+
+// An AEM plan of another spacecraft, or in a spacecraft clock's time, is a bad argument naming the
+// line, refused before the server is asked (docs/formats.md, "Reading a planned attitude").
+TEST(PredictCli, AemPlanOfAnotherSpacecraftOrInSpacecraftClockTimeIsRefused) {
+  TempDir dir;
+  storage::AemHeader header;
+  header.object_name = header.object_id = "SAT-9";
+  header.creation_date = kStart;
+  const std::vector<storage::AemSample> samples = {
+      {kStart, Eigen::Quaterniond::Identity(), std::nullopt},
+      {kStart + absl::Minutes(1), Eigen::Quaterniond::Identity(), std::nullopt}};
+  const std::string other = *storage::WriteAem(header, samples);
+  WriteFile(dir.File("other.aem"), other);
+  header.object_name = header.object_id = "RDK-1";
+  std::string sclk = *storage::WriteAem(header, samples);
+  sclk.replace(sclk.find("TIME_SYSTEM = UTC"), 17, "TIME_SYSTEM = SCLK");
+  WriteFile(dir.File("sclk.aem"), sclk);
+  // No server listens on port 1: the file is refused before any call.
+  const std::string predict = "--server 127.0.0.1:1 predict --spacecraft RDK-1 --from " +
+                              Utc(kStart) + " --to " + Utc(kStart + absl::Minutes(1)) +
+                              " --step 60 --planned ";
+
+  RunResult r = esg::testing::RunBinary(dir, ESG_BINARY, predict + dir.File("other.aem"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("--planned " + dir.File("other.aem") + ": line "));
+  EXPECT_THAT(r.err, HasSubstr(": OBJECT_NAME: 'SAT-9' (OBJECT_ID 'SAT-9') is not spacecraft "
+                               "'RDK-1'"));
+
+  r = esg::testing::RunBinary(dir, ESG_BINARY, predict + dir.File("sclk.aem"));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("--planned " + dir.File("sclk.aem") + ": line "));
+  EXPECT_THAT(r.err, HasSubstr(": TIME_SYSTEM: SCLK is not read"));
 }
 
 TEST(HistoryCli, ThirtyDaysArePagedThroughEveryRecordOnceInOrder) {
