@@ -5,6 +5,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/civil_time.h"
+#include "absl/time/clock.h"
+#include "estimator/status_macros.h"
 #include "estimator/units.h"
 
 namespace esg::estimator {
@@ -22,6 +25,19 @@ constexpr std::array<std::pair<BasisKind, std::string_view>, 7> kKindNames = {{
 }};
 
 bool InAxisRange(int i) { return i >= 1 && i <= 3; }
+
+// Epochs lie where frame times may (docs/service.md "Limits": [1970-01-01, 2200-01-01)): a ramp
+// from 0001-01-01 is a regressor of 1.8e7 h at the first frame.
+absl::Status CheckEpoch(absl::Time epoch, std::string_view prefix) {
+  const absl::Time earliest = absl::UnixEpoch();
+  const absl::Time latest =
+      absl::FromCivil(absl::CivilSecond(2200, 1, 1, 0, 0, 0), absl::UTCTimeZone());
+  if (epoch >= earliest && epoch < latest) return absl::OkStatus();
+  return absl::InvalidArgumentError(
+      absl::StrCat(std::string(prefix),
+                   ".epoch: ", absl::FormatTime("%E4Y-%m-%dT%H:%M:%SZ", epoch, absl::UTCTimeZone()),
+                   " is outside [1970-01-01, 2200-01-01), the window frame times may have"));
+}
 
 // "x", "y", "z" for case axes 1..3.
 char AxisLetter(int m) { return "xyz"[std::clamp(m, 1, 3) - 1]; }
@@ -50,14 +66,16 @@ absl::StatusOr<BasisKind> ParseBasisKind(std::string_view name) {
     if (n == name) return k;
   }
   std::string known;
-  for (const auto& [k, n] : kKindNames) absl::StrAppend(&known, known.empty() ? "" : ", ", std::string(n));
+  for (const auto& [k, n] : kKindNames)
+    absl::StrAppend(&known, known.empty() ? "" : ", ", std::string(n));
   return absl::InvalidArgumentError(
       absl::StrFormat("unknown basis kind \"%s\" (known: %s)", name, known));
 }
 
 absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
   auto bad = [&](std::string_view field, const std::string& why) {
-    return absl::InvalidArgumentError(absl::StrCat(std::string(prefix), ".", std::string(field), ": ", why));
+    return absl::InvalidArgumentError(
+        absl::StrCat(std::string(prefix), ".", std::string(field), ": ", why));
   };
   if (!InAxisRange(t.axis)) return bad("axis", absl::StrFormat("must be 1..3, got %d", t.axis));
   if (!std::isfinite(t.value)) return bad("value", "must be finite");
@@ -66,7 +84,11 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
     case BasisKind::kSpinAxisHarmonic: {
       int degree = 0;
       for (int e : t.exponents) {
-        if (e < 0) return bad("exponents", "must be >= 0");
+        // Each checked before the sum, which INT_MAX exponents would overflow.
+        if (e < 0 || e > kMaxHarmonicDegree) {
+          return bad("exponents",
+                     absl::StrFormat("each must be 0..%d, got %d", kMaxHarmonicDegree, e));
+        }
         degree += e;
       }
       if (degree > kMaxHarmonicDegree) {
@@ -91,11 +113,17 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
         return bad("harmonic",
                    absl::StrFormat("must be 1..%d, got %d", kMaxOrbitalHarmonic, t.harmonic));
       }
-      if (!(std::isfinite(t.period) && t.period > 0.0)) return bad("period", "must be > 0");
+      if (!(t.period >= kMinOrbitalPeriodS && t.period <= kMaxOrbitalPeriodS)) {
+        return bad("periodS", absl::StrFormat("%g s is outside [%g, %g] s (a minute to a year)",
+                                              t.period, kMinOrbitalPeriodS, kMaxOrbitalPeriodS));
+      }
+      RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
       break;
     case BasisKind::kRamp:
+      RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
       break;
   }
+  if (t.kind == BasisKind::kRampHarmonic) RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
   return absl::OkStatus();
 }
 
@@ -111,9 +139,8 @@ double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
     case BasisKind::kBodyRateProduct:
       return in.w_k(t.index[0] - 1) * in.w_k(t.index[1] - 1);
     case BasisKind::kOrbitalHarmonic: {
-      const double phase =
-          2.0 * kPi * t.harmonic * std::fmod(absl::ToDoubleSeconds(in.time - t.epoch), t.period) /
-          t.period;
+      const double phase = 2.0 * kPi * t.harmonic *
+                           std::fmod(absl::ToDoubleSeconds(in.time - t.epoch), t.period) / t.period;
       return t.sine ? std::sin(phase) : std::cos(phase);
     }
     case BasisKind::kRamp:

@@ -52,6 +52,10 @@ absl::StatusOr<BasisKind> ParseBasisKind(std::string_view name);
 
 inline constexpr int kMaxHarmonicDegree = 4;
 inline constexpr int kMaxOrbitalHarmonic = 4;
+// An orbital harmonic's period [s]: a minute (harmonic 4 of it is still 8 propagation steps at
+// the paper's 8 Hz) to a year (the sun's apparent motion, the slowest periodic cause of a drift).
+inline constexpr double kMinOrbitalPeriodS = 60.0;
+inline constexpr double kMaxOrbitalPeriodS = 366.0 * 86400.0;
 
 struct BasisTerm {
   BasisKind kind = BasisKind::kSpinAxisHarmonic;

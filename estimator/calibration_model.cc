@@ -1,5 +1,7 @@
 #include "estimator/calibration_model.h"
 
+#include "absl/strings/escaping.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
@@ -45,9 +47,15 @@ absl::StatusOr<ModelSpec> ParseModel(absl::string_view name) {
     } else if (part == "11") {
       spec.random_walk = true;
     } else {
+      // Quoted in part: a request may carry a name of any length.
+      constexpr size_t kQuote = 32;
+      const auto quoted = [](absl::string_view text) {
+        return absl::StrCat(absl::CHexEscape(text.substr(0, kQuote)),
+                            text.size() > kQuote ? "..." : "");
+      };
       return absl::InvalidArgumentError(absl::StrFormat(
-          "model: unknown term '%s' in '%s' (use 1, 10, 11 or a '+' set such as 10+11)", part,
-          name));
+          "model: unknown term '%s' in '%s' (use 1, 10, 11 or a '+' set such as 10+11)",
+          quoted(part), quoted(name)));
     }
   }
   return spec;

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
+#include <tuple>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -34,6 +35,26 @@ absl::string_view AbslView(std::string_view s) { return absl::string_view(s.data
 
 absl::Status FieldError(absl::string_view field, absl::string_view reason) {
   return absl::InvalidArgumentError(absl::StrCat(field, ": ", reason));
+}
+
+// The largest suspension offset voltage a frame may carry [mV]. eq. (3): the rotor displacement
+// is k dU d0 / U0, and a displacement beyond the gap d0 would put the rotor on an electrode, so
+// |dU| < U0 / k; with the configuration's widest bounds (U0 <= 10 kV, k >= 1) that is 10 kV.
+// A larger value is a broken producer (1e308 mV made a suspension_voltage term's covariance
+// non-finite).
+const double kMaxSuspensionOffsetMv = estimator::kConfigLimits.reference_voltage.max /
+                                      estimator::kConfigLimits.amplifier_gain.min /
+                                      estimator::kVoltsPerMv;
+
+// A prior sigma typed as a positive number must stay positive in SI: 5e-324 deg/h underflowed to 0
+// (a held state) while 1e-200 deg/h was refused as a prior too small to be a variance
+// (ValidateConfig). Both are refused, the first here, where the typed value is still known.
+absl::Status SigmaKeptPositive(double json_value, double si_value, absl::string_view field) {
+  if (json_value == 0.0 || si_value != 0.0) return absl::OkStatus();
+  return FieldError(field, absl::StrFormat("%g is a prior sigma too small to be represented in SI "
+                                           "units (it would read as 0, a held state): use 0 to "
+                                           "hold the state, or a sigma the limits allow",
+                                           json_value));
 }
 
 // A 3-vector that may be empty (zero).
@@ -291,6 +312,8 @@ absl::StatusOr<estimator::BasisTerm> BasisTermFromProto(const esg::v1::BasisTerm
   const double to_json = estimator::BasisValueToJson(t.kind);
   t.value = proto.value_deg_h() / to_json;
   t.sigma = proto.sigma_deg_h() / to_json;
+  RETURN_IF_ERROR(
+      SigmaKeptPositive(proto.sigma_deg_h(), t.sigma, absl::StrCat(prefix, ".sigmaDegH")));
   return t;
 }
 
@@ -336,6 +359,29 @@ absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::
   return c;
 }
 
+namespace {
+
+// SigmaKeptPositive for every coefficient of a modelSigma.
+absl::Status DriftSigmasKeptPositive(const esg::v1::GyroDriftModel& proto,
+                                     const estimator::DriftCoefficients& c,
+                                     absl::string_view field) {
+  RETURN_IF_ERROR(SigmaKeptPositive(proto.k0_deg_h(), c.k0, absl::StrCat(field, ".k0DegH")));
+  for (const auto& [json, si, name] :
+       {std::tuple<const RepeatedField<double>&, const Eigen::Vector3d&, const char*>{
+            proto.c1_deg_h(), c.C1, ".c1DegH"},
+        {proto.c2_deg_h(), c.C2, ".c2DegH"},
+        {proto.mu_deg_h(), c.mu, ".muDegH"},
+        {proto.nu_deg_h(), c.nu, ".nuDegH"}}) {
+    for (int i = 0; i < json.size(); ++i) {
+      RETURN_IF_ERROR(
+          SigmaKeptPositive(json[i], si[i], absl::StrFormat("%s%s[%d]", field, name, i)));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients) {
   esg::v1::GyroDriftModel proto;
   proto.set_k0_deg_h(TidyDegPerHour(coefficients.k0));
@@ -369,7 +415,11 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
     ASSIGN_OR_RETURN(gyro.model, DriftModelFromProto(g.model(), absl::StrCat(prefix, ".model")));
     ASSIGN_OR_RETURN(gyro.model_sigma,
                      DriftModelFromProto(g.model_sigma(), absl::StrCat(prefix, ".modelSigma")));
+    RETURN_IF_ERROR(DriftSigmasKeptPositive(g.model_sigma(), gyro.model_sigma,
+                                            absl::StrCat(prefix, ".modelSigma")));
     gyro.misalignment_sigma = ArcsecToRad(g.misalignment_sigma_arcsec());
+    RETURN_IF_ERROR(SigmaKeptPositive(g.misalignment_sigma_arcsec(), gyro.misalignment_sigma,
+                                      absl::StrCat(prefix, ".misalignmentSigmaArcsec")));
     for (int k = 0; k < g.basis_terms_size(); ++k) {
       ASSIGN_OR_RETURN(estimator::BasisTerm term,
                        BasisTermFromProto(g.basis_terms(k),
@@ -588,6 +638,16 @@ absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::Telemetr
                                                  g.u_k_mv_size()));
       }
       RETURN_IF_ERROR(AllFinite(g.u_k_mv(), field));
+      for (int axis = 0; axis < 3; ++axis) {
+        if (!(std::abs(g.u_k_mv(axis)) <= kMaxSuspensionOffsetMv)) {
+          return FieldError(
+              absl::StrFormat("%s[%d]", field, axis),
+              absl::StrFormat("%g mV is beyond +-%g mV: an offset voltage cannot exceed the "
+                              "largest suspension reference voltage a configuration may have "
+                              "(suspension.referenceVoltageV, docs/formats.md)",
+                              g.u_k_mv(axis), kMaxSuspensionOffsetMv));
+        }
+      }
       reading.u_k_mv = Eigen::Vector3d(g.u_k_mv(0), g.u_k_mv(1), g.u_k_mv(2));
     }
     slot = std::move(reading);

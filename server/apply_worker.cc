@@ -19,6 +19,7 @@
 #include "server/alert_collapse.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "server/grpc_status.h"
 #include "server/log.h"
 #include "storage/coefficient_store.h"
 #include "storage/service_queries.h"
@@ -39,6 +40,7 @@ struct JobFrame {
   std::string station;
   int64_t sequence = 0;
   std::optional<TelemetryFrame> frame;
+  std::string undecodable;  // why `frame` is empty: the payload's parse or FrameFromProto status
 };
 
 // The per-step estimate of a measurement step (docs/service.md "Per-step estimates"). The
@@ -237,6 +239,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       if (frame.ok()) {
         f.frame = std::move(*frame);
       } else {
+        f.undecodable = std::string(frame.status().message());
         LogEvent("ERROR", "frame_undecodable",
                  absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
                               a.sequence, ") cannot be decoded: ", frame.status().ToString()),
@@ -295,11 +298,14 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     if (!f.frame.has_value()) {
       advance_cursor(f);
       ++apply.frames_apply_failed;
-      if (f.time > written) {
-        alerts.Add({"ARCHIVED_FRAME_UNREADABLE", "WARNING", absl::StrCat("station ", f.station),
-                    f.time, static_cast<double>(f.sequence), 0.0, "sequence",
-                    "an archived frame cannot be decoded; the filter skipped it"});
-      }
+      // Raised on every run that skips it, also below `written`: the frame may have been
+      // applied when it was first run (checks the service made stricter since, an archive of an
+      // older version), so no alert of it was stored then; a repeat collapses into the stored
+      // alert's track.
+      alerts.Add({"ARCHIVED_FRAME_UNREADABLE", "WARNING", absl::StrCat("station ", f.station),
+                  f.time, static_cast<double>(f.sequence), 0.0, "sequence",
+                  absl::StrCat("an archived frame cannot be decoded (",
+                               BoundedMessage(f.undecodable), "); the filter skipped it")});
       continue;
     }
     const TelemetryFrame& frame = *f.frame;

@@ -16,6 +16,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "absl/time/clock.h"
 #include "server/log.h"
 
 namespace esg::server {
@@ -101,6 +102,11 @@ absl::StatusOr<TokenAuthorizer> TokenAuthorizer::Parse(absl::string_view text,
     } else {
       entry.name = absl::StrCat("token-", line_number);
     }
+    if (parts[0].size() < static_cast<size_t>(kMinTokenLength)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          source, ":", line_number, ": token of ", parts[0].size(), " characters, at least ",
+          kMinTokenLength, " needed (make one with `openssl rand -hex 32`)"));
+    }
     entry.digest = DigestOf(parts[0]);
     if (!seen.insert(entry.digest).second) {
       return absl::InvalidArgumentError(
@@ -159,8 +165,19 @@ absl::StatusOr<TokenAuthorizer> TokenAuthorizer::FromFile(const std::string& pat
 
 absl::StatusOr<std::string> TokenAuthorizer::AuthenticateHeader(
     std::optional<absl::string_view> authorization, Role role, absl::string_view peer) const {
-  // One WARN line per refusal. `reason` never holds the presented header or token.
+  // One WARN line per refusal within the peer's budget. `reason` never holds the presented
+  // header or token.
   auto refuse = [&](absl::Status status, absl::string_view reason) {
+    const FailedAuthThrottle::Outcome outcome = throttle_->Refused(peer, absl::Now());
+    if (!outcome.summary.empty()) {
+      LogEvent("WARN", "authorization_throttled", outcome.summary,
+               {{"peer", FailedAuthThrottle::Address(peer)}});
+    }
+    if (outcome.verdict == FailedAuthThrottle::Verdict::kThrottled) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "authorization: too many refused calls from this address (", reason,
+          "); retry in a few seconds with a valid token"));
+    }
     LogEvent("WARN", "authorization_refused",
              absl::StrCat("authorization refused: peer ", peer.empty() ? "unknown" : peer, ", ",
                           RoleName(role), " call: ", reason),

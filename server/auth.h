@@ -10,6 +10,7 @@
 #define ESG_SERVER_AUTH_H_
 
 #include <array>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "grpcpp/server_context.h"
+#include "server/auth_throttle.h"
 
 namespace esg::server {
 
@@ -28,9 +30,13 @@ class TokenAuthorizer {
  public:
   // Longest caller name a token file may give [characters].
   static constexpr int kMaxNameLength = 64;
+  // Shortest token a token file may hold [characters]: 16 random hexadecimal digits are 64 bits,
+  // beyond guessing at any rate a network allows; docs/service.md asks for 32 random bytes
+  // (`openssl rand -hex 32`). A 1-character token was accepted.
+  static constexpr int kMinTokenLength = 16;
 
   // Parses a token file: one `TOKEN ROLE[,ROLE] [NAME]` per line, words separated by spaces or
-  // tabs; roles `read`, `write`; NAME is the caller's name (1 to 64 printable ASCII characters
+  // tabs; TOKEN at least kMinTokenLength characters; roles `read`, `write`; NAME is the caller's name (1 to 64 printable ASCII characters
   // without spaces, default `token-<line number>`; two tokens may share a name, e.g. while a
   // caller's token is rotated). Blank lines and lines starting with `#` are ignored.
   // InvalidArgument "<source>:<line>: <reason>" for a malformed line, an unknown role, a bad
@@ -48,7 +54,9 @@ class TokenAuthorizer {
   // OK when the call carries `authorization: Bearer <token>` (scheme case-insensitive, then one
   // or more spaces) with a known token holding `role`. Unauthenticated when the metadata is
   // absent, malformed or names an unknown token; PermissionDenied when the token lacks the role.
-  // Every failure logs one WARN line naming the peer and the reason, never the token.
+  // Every failure logs one WARN line naming the peer and the reason, never the token, within
+  // the peer's budget of refusals (FailedAuthThrottle); beyond it the failure is
+  // ResourceExhausted "authorization: too many refused ..." and logged in a summary line.
   absl::Status Check(const grpc::ServerContextBase& context, Role role) const;
 
   int size() const { return static_cast<int>(tokens_.size()); }
@@ -69,6 +77,8 @@ class TokenAuthorizer {
                                                  Role role, absl::string_view peer) const;
 
   std::vector<Entry> tokens_;
+  // Refusals per peer address; shared by the calls (the authorizer itself is const to them).
+  std::unique_ptr<FailedAuthThrottle> throttle_ = std::make_unique<FailedAuthThrottle>();
 };
 
 }  // namespace esg::server

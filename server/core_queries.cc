@@ -13,8 +13,10 @@
 #include "absl/strings/escaping.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/clock.h"
+#include "estimator/basis_term.h"
 #include "estimator/discovery/diagnose.h"
 #include "estimator/status_macros.h"
 #include "proto/convert.h"
@@ -22,6 +24,7 @@
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/log.h"
+#include "server/operator_name.h"
 #include "storage/schema.h"
 #include "storage/service_queries.h"
 
@@ -237,29 +240,45 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
   absl::Time from = absl::InfinitePast();
   absl::Time to = absl::InfiniteFuture();
+  // Every message starts with the request's field (docs/service.md "Errors").
   if (request.has_from()) {
-    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
+    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.from());
+    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("from: ", t.status().message()));
+    from = *t;
   }
   if (request.has_to()) {
-    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
+    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.to());
+    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("to: ", t.status().message()));
+    to = *t;
     if (to <= from) {
       return absl::InvalidArgumentError(
           absl::StrCat("to: ", FormatUtc(to), " is not after from ", FormatUtc(from)));
     }
   }
   std::shared_ptr<const Setup> setup;
+  std::string quarantine_reason;
   {
     absl::MutexLock state(&sc->state_mu);
     setup = sc->setup;
+    quarantine_reason = sc->apply.quarantine_reason;
   }
   if (setup == nullptr) {
     return absl::FailedPreconditionError(
         absl::StrCat("spacecraft_id: '", sc->id, "' has no usable configuration (quarantined)"));
   }
-  if (!(std::isfinite(request.orbital_period_s()) && request.orbital_period_s() >= 0.0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "orbital_period_s: ", request.orbital_period_s(),
-        " must be positive (or 0: the period of the recording's orbital-orientation spans)"));
+  // A quarantined spacecraft's archive holds what stopped its filter; the diagnosis waits for
+  // the operator's ConfigureSpacecraft with replace=true, as the filter does.
+  if (!quarantine_reason.empty()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("spacecraft_id: '", sc->id, "' is quarantined: ", quarantine_reason));
+  }
+  const double period_s = request.orbital_period_s();
+  if (!(period_s == 0.0 ||
+        (period_s >= estimator::kMinOrbitalPeriodS && period_s <= estimator::kMaxOrbitalPeriodS))) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "orbital_period_s: %g s is outside [%g, %g] s (or 0: the period of the recording's "
+        "orbital-orientation spans)",
+        period_s, estimator::kMinOrbitalPeriodS, estimator::kMaxOrbitalPeriodS));
   }
   estimator::discovery::DiagnoseOptions options;
   options.model = request.model().empty() ? setup->model_name : request.model();
@@ -275,26 +294,44 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     task(0);
     for (std::thread& t : helpers) t.join();
   };
+  // ParseModel's messages start with "model: " already.
   if (absl::StatusOr<estimator::ModelSpec> m = estimator::ParseModel(options.model); !m.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("model: ", m.status().message()));
+    return m.status();
   }
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
                    storage_->archive().ReadTimeRange(sc->id, from, to));
   if (archived.empty()) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "no archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ", FormatUtc(to), ")"));
+    return absl::FailedPreconditionError(
+        absl::StrCat(request.has_from() || request.has_to() ? "from: " : "spacecraft_id: ",
+                     "no archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ",
+                     FormatUtc(to), ")"));
   }
   if (cancelled && cancelled()) return absl::CancelledError("diagnosis cancelled");
   std::vector<TelemetryFrame> frames;
   frames.reserve(archived.size());
   for (const storage::ArchivedFrame& a : archived) {
+    // A frame the filter skips (archived before a bound the service checks now, or damaged) is
+    // skipped here too, with the same log line (apply_worker.cc): one frame does not refuse the
+    // whole window.
     esg::v1::TelemetryFrame proto;
-    if (!proto.ParseFromString(a.payload)) {
-      return absl::DataLossError(
-          absl::StrCat("archived frame ", a.sequence, " of '", sc->id, "' does not parse"));
+    absl::StatusOr<TelemetryFrame> frame =
+        proto.ParseFromString(a.payload) ? proto_convert::FrameFromProto(proto)
+                                         : absl::DataLossError("the payload does not parse");
+    if (!frame.ok()) {
+      LogEvent("WARN", "frame_undecodable",
+               absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
+                            a.sequence, ") skipped by the diagnosis: ",
+                            frame.status().ToString()),
+               {{"spacecraftId", sc->id}, {"station", a.station_id}, {"sequence", a.sequence}});
+      continue;
     }
-    ASSIGN_OR_RETURN(TelemetryFrame frame, proto_convert::FrameFromProto(proto));
-    frames.push_back(std::move(frame));
+    frames.push_back(*std::move(frame));
+  }
+  if (frames.empty()) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        request.has_from() || request.has_to() ? "from: " : "spacecraft_id: ",
+        "no decodable archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ",
+        FormatUtc(to), ")"));
   }
   ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
                    estimator::discovery::Diagnose(setup->config, frames, options, progress));
@@ -499,9 +536,7 @@ absl::StatusOr<esg::v1::Alert> EstimationCore::Acknowledge(
     return absl::InvalidArgumentError(
         absl::StrCat("sequence: must be >= 1, got ", request.sequence()));
   }
-  if (request.operator_name().empty()) {
-    return absl::InvalidArgumentError("operator_name: must not be empty");
-  }
+  RETURN_IF_ERROR(ValidateOperatorName(request.operator_name(), "operator_name"));
   absl::MutexLock publish(&sc->publish_mu);
   absl::StatusOr<storage::AlertRecord> before = storage_->alerts().Get(sc->id, request.sequence());
   if (absl::IsNotFound(before.status())) {

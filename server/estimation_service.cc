@@ -13,6 +13,7 @@
 #include "absl/functional/any_invocable.h"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
@@ -176,13 +177,26 @@ grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts
 grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
     grpc::CallbackServerContext* context, const esg::v1::AcknowledgeRequest* request,
     esg::v1::Alert* response) {
-  // With a tokens file an empty operator_name means the caller's own token name, so a console
-  // that signs each operator in with their token acknowledges under that operator's name.
+  // With a tokens file the acknowledgement is recorded under the caller's token name
+  // (docs/service.md "Security"): an empty operator_name means it, any other name is refused,
+  // so that no token acknowledges in another operator's name.
   absl::StatusOr<std::string> token_name =
       auth_ != nullptr ? auth_->Authenticate(*context, Role::kWrite) : std::string();
   esg::v1::AcknowledgeRequest named = *request;
-  if (token_name.ok() && named.operator_name().empty()) named.set_operator_name(*token_name);
   absl::Status admitted = token_name.status();
+  if (auth_ != nullptr && token_name.ok()) {
+    if (named.operator_name().empty()) {
+      named.set_operator_name(*token_name);
+    } else if (named.operator_name() != *token_name) {
+      admitted = absl::PermissionDeniedError(absl::StrCat(
+          "operator_name: ",
+          named.operator_name().size() <= 64
+              ? absl::StrCat("'", absl::CHexEscape(named.operator_name()), "'")
+              : absl::StrCat(named.operator_name().size(), " bytes"),
+          " is not the caller's name '", *token_name,
+          "'; with tokens an acknowledgement carries the token's own name (send it empty)"));
+    }
+  }
   if (admitted.ok()) admitted = CheckCallScope(*context, request->spacecraft_id());
   return Unary(&calls_, context, admitted, response,
                [this, named = std::move(named)]() -> absl::StatusOr<esg::v1::Alert> {

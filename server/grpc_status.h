@@ -8,15 +8,27 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 
 #include "absl/status/status.h"
+#include "absl/strings/string_view.h"
 #include "absl/time/time.h"
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
 
 namespace esg::server {
 
-// OK -> grpc::Status::OK; every other code -> the gRPC code of the same name with the message.
+// The longest message a status or an ack's rejection carries [bytes]. A message echoes values
+// of the request; a 1 MB field echoed whole made gRPC answer RESOURCE_EXHAUSTED (metadata too
+// large) in place of the INVALID_ARGUMENT naming the field.
+inline constexpr size_t kMaxStatusMessageBytes = 1024;
+
+// BoundedText(message, kMaxStatusMessageBytes) (log.h): the head of a longer message, cut at a
+// character boundary, and " ... (N bytes cut)".
+std::string BoundedMessage(absl::string_view message);
+
+// OK -> grpc::Status::OK; every other code -> the gRPC code of the same name with the message,
+// bounded by BoundedMessage.
 grpc::Status ToGrpcStatus(const absl::Status& status);
 
 // The trailing metadata key a retry delay travels in: milliseconds, a non-negative integer.

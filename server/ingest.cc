@@ -19,6 +19,9 @@
 namespace esg::server {
 namespace {
 
+// The largest frame sequence: 2^53 - 1, the largest integer a JSON number holds exactly.
+constexpr int64_t kMaxFrameSequence = (int64_t{1} << 53) - 1;
+
 std::string Serialize(const esg::v1::TelemetryFrame& frame) {
   std::string out;
   {
@@ -133,9 +136,12 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
     return refuse_counted(absl::StatusCode::kFailedPrecondition, "spacecraft_id",
                           absl::StrCat("'", sc->id, "' is quarantined: ", reason));
   }
-  if (proto.sequence() < 1) {
+  // At most 2^53 - 1, so that a JSON client (the console, a script) reads every sequence exactly;
+  // INT64_MAX left no next sequence and `esg replay --wait` waiting for one.
+  if (proto.sequence() < 1 || proto.sequence() > kMaxFrameSequence) {
     return refuse_counted(absl::StatusCode::kInvalidArgument, "sequence",
-                          absl::StrCat("must be >= 1, got ", proto.sequence()));
+                          absl::StrCat("must be in [1, ", kMaxFrameSequence, "] (2^53 - 1), got ",
+                                       proto.sequence()));
   }
   if (!frame.ok()) {
     ++sc->frames_rejected;

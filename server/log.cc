@@ -31,11 +31,21 @@ std::string EscapeControl(absl::string_view message) {
 
 }  // namespace
 
+std::string BoundedText(absl::string_view text, size_t max_bytes) {
+  if (text.size() <= max_bytes) return std::string(text);
+  size_t keep = max_bytes - 64;  // room for the marker
+  // Back over UTF-8 continuation bytes (10xxxxxx) so that no character is split.
+  while (keep > 0 && (static_cast<unsigned char>(text[keep]) & 0xC0) == 0x80) --keep;
+  return absl::StrCat(text.substr(0, keep), " ... (", text.size() - keep, " bytes cut)");
+}
+
 void SetLogFormat(LogFormat format) { log_format.store(format); }
 LogFormat GetLogFormat() { return log_format.load(); }
 
 std::string FormatLogLine(LogFormat format, absl::string_view level, absl::string_view event,
-                          absl::string_view message, std::initializer_list<LogField> fields) {
+                          absl::string_view full_message,
+                          std::initializer_list<LogField> fields) {
+  const std::string message = BoundedText(full_message, kMaxLogMessageBytes);
   // One UTC formatter for every output: RFC 3339, Z, milliseconds.
   const std::string ts = absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", absl::Now(), absl::UTCTimeZone());
   if (format == LogFormat::kText) {
@@ -48,7 +58,7 @@ std::string FormatLogLine(LogFormat format, absl::string_view level, absl::strin
   for (const LogField& f : fields) {
     std::visit([&](const auto& v) { line[f.key] = v; }, f.value);
   }
-  line["message"] = std::string(message);
+  line["message"] = message;
   return line.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
 }
 

@@ -5,6 +5,7 @@
 #ifndef ESG_SERVER_LOG_H_
 #define ESG_SERVER_LOG_H_
 
+#include <cstddef>
 #include <cstdint>
 #include <initializer_list>
 #include <string>
@@ -42,7 +43,15 @@ struct LogField {
 void LogEvent(absl::string_view level, absl::string_view event, absl::string_view message,
               std::initializer_list<LogField> fields = {});
 
-// The text of one line without writing it (tests).
+// The longest message a log line carries [bytes]; a longer one (a client's value quoted whole by
+// an error) is cut by BoundedText.
+inline constexpr size_t kMaxLogMessageBytes = 4096;
+
+// `text` when it has at most `max_bytes` bytes; else its head, cut at a UTF-8 character boundary,
+// and " ... (N bytes cut)", the whole at most `max_bytes` (max_bytes >= 64).
+std::string BoundedText(absl::string_view text, size_t max_bytes);
+
+// The text of one line without writing it (tests); the message bounded by kMaxLogMessageBytes.
 std::string FormatLogLine(LogFormat format, absl::string_view level, absl::string_view event,
                           absl::string_view message, std::initializer_list<LogField> fields);
 

@@ -243,7 +243,8 @@ esg::v1::DiagnosisResult DiagnosisToProto(const storage::DiagnosisRecord& r) {
 // "field: reason" -> Rejection (proto/convert.h error contract).
 esg::v1::Rejection RejectionFromStatus(const absl::Status& status) {
   esg::v1::Rejection r;
-  const absl::string_view m = status.message();
+  const std::string bounded = BoundedMessage(status.message());
+  const absl::string_view m = bounded;
   const size_t colon = m.find(": ");
   if (colon == absl::string_view::npos) {
     r.set_field("frame");

@@ -346,6 +346,14 @@ absl::StatusOr<esg::v1::SessionInfo> WaitApplied(EsgClient& client, const std::s
     absl::StatusOr<esg::v1::SessionInfo> s = client.GetSession(id);
     if (!s.ok()) return s.status();
     if (s->highest_applied_sequence() >= s->highest_durable_sequence()) return s;
+    // A stopped filter applies nothing more until the configuration is replaced: say so now
+    // rather than at the timeout.
+    if (s->state() == esg::v1::SESSION_STATE_QUARANTINED && !s->rebuilding()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "--wait: '", id, "' is quarantined (applied up to sequence ",
+          s->highest_applied_sequence(), " of ", s->highest_durable_sequence(),
+          " durable): ", s->quarantine_reason()));
+    }
     if (absl::Now() > deadline) {
       return absl::DeadlineExceededError(absl::StrCat(
           "--wait: applied up to sequence ", s->highest_applied_sequence(), " of ",
@@ -399,8 +407,27 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
   if (client == nullptr) return kExitBadArguments;
   // Reachability and configuration first: a server that is down or does not know the spacecraft
   // is an immediate, clear failure rather than a retry loop.
+  // A station's token may hold the write role only (docs/service.md "Security"): the frames go
+  // in, the acks say what is durable, and a reconnect resumes after the last acknowledged frame
+  // (the server keeps one copy of a frame sent twice). Only --wait needs the read role.
   absl::StatusOr<esg::v1::SessionInfo> initial = client->GetSession(id);
-  if (!initial.ok()) return ReportRpcError(kVerb, initial.status(), global);
+  const bool can_read = initial.status().code() != absl::StatusCode::kPermissionDenied;
+  if (!can_read && o.wait) {
+    return ReportRpcError(
+        kVerb,
+        absl::PermissionDeniedError(absl::StrCat(
+            "--wait: polls the session, which needs a token with the read role (",
+            initial.status().message(), "); without --wait a write-only token replays")),
+        global);
+  }
+  if (!can_read) {
+    std::fprintf(stderr,
+                 "esg %s: note: the token has no read role; the replay resumes from the "
+                 "acknowledgements alone after a reconnect\n",
+                 kVerb);
+  } else if (!initial.ok()) {
+    return ReportRpcError(kVerb, initial.status(), global);
+  }
 
   const absl::Time started = absl::Now();
   Replayer replayer(o, *recording, id, client.get());
@@ -475,6 +502,12 @@ int RunReplay(const ReplayOptions& o, const GlobalOptions& global) {
                    std::string(status.message()).c_str(), absl::FormatDuration(backoff).c_str(),
                    failures, o.max_retries);
       absl::SleepFor(backoff);
+      if (!can_read) {
+        // The stream itself tells whether the server is back.
+        next = std::max(tally.last_acked + 1, o.from_sequence);
+        ++tally.reconnects;
+        break;
+      }
       CallOptions call;
       call.timeout = absl::Seconds(5);
       call.wait_for_ready = true;  // wait for a restarting server instead of failing at once

@@ -191,12 +191,15 @@ test('acknowledge: read-only token 403; empty operator_name is the token\'s name
   assert.equal(stored.acknowledgedBy, 'alice');
   assert.deepEqual(esgJson.normalize('esg.v1.Alert', stored), acked.json);
 
-  // Another operator's acknowledgement is refused by esgd: 409 with its message.
+  // Alice's token acknowledging in another operator's name is refused by esgd: 403 with its
+  // message (with tokens the name is the token's own), and the stored acknowledgement stands.
   const other = await api('/api/spacecraft/RDK-1/alerts/1/acknowledge',
     { method: 'POST', headers: asAlice, body: { operator_name: 'carol' } });
-  assert.equal(other.status, 409);
-  assert.equal(other.json.error.code, 'FAILED_PRECONDITION');
-  assert.match(other.json.error.message, /already acknowledged by 'alice'/);
+  assert.equal(other.status, 403);
+  assert.equal(other.json.error.code, 'PERMISSION_DENIED');
+  assert.match(other.json.error.message, /operator_name: 'carol' is not the caller's name 'alice'/);
+  const [after] = JSON.parse(await cli(bob, 'alerts', '--spacecraft', 'RDK-1', '--json')).alerts;
+  assert.equal(after.acknowledgedBy, 'alice');
 });
 
 test('errors: unknown spacecraft 404 with esgd\'s message; bad parameters 400 naming them', async () => {

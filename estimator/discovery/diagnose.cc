@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/discovery/candidates.h"
 #include "estimator/discovery/context.h"
@@ -42,10 +43,11 @@ absl::Status CheckInput(const SpacecraftConfig& config, const std::vector<Teleme
     return absl::InvalidArgumentError(
         absl::StrFormat("alpha: must be in (0, 1), got %g", options.alpha));
   }
-  if (!(std::isfinite(options.orbital_period_s) && options.orbital_period_s >= 0.0)) {
+  const double period_s = options.orbital_period_s;
+  if (!(period_s == 0.0 || (period_s >= kMinOrbitalPeriodS && period_s <= kMaxOrbitalPeriodS))) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "orbital period: must be positive (or 0: from the recording), got %g s",
-        options.orbital_period_s));
+        "orbital period: %g s is outside [%g, %g] s (or 0: from the recording)", period_s,
+        kMinOrbitalPeriodS, kMaxOrbitalPeriodS));
   }
   int st_frames = 0;
   for (const TelemetryFrame& f : frames)

@@ -381,7 +381,7 @@ TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {
 // others. esgd with a token file, started through the shell.
 TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
   TempDir dir;
-  testing::WriteFile(dir.File("tokens"), "w-token read,write\nr-token read\n");
+  testing::WriteFile(dir.File("tokens"), "w-token-0123456789 read,write\nr-token read\n");
   ASSERT_EQ(std::system(("chmod 600 " + Quote(dir.File("tokens"))).c_str()), 0);
   const std::string start = absl::StrCat(
       Quote(ESGD_BINARY), " --listen 127.0.0.1:0 --workers 2 --db ", Quote(dir.File("esg.db")),
@@ -402,18 +402,18 @@ TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
   ASSERT_NE(at, std::string::npos) << out << testing::ReadFile(dir.File("esgd.log"));
   const std::string server = "--server 127.0.0.1:" + std::to_string(std::stoi(out.substr(at + 5)));
 
-  RunResult r = RunEsg(dir, server + " status --token nope", "ESG_TOKEN=r-token");
+  RunResult r = RunEsg(dir, server + " status --token nope", "ESG_TOKEN=r-token-0123456789");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("UNAUTHENTICATED")) << "the flag is used, not the variable";
-  r = RunEsg(dir, server + " configure --config " + Quote(Rdk1()), "ESG_TOKEN=w-token");
+  r = RunEsg(dir, server + " configure --config " + Quote(Rdk1()), "ESG_TOKEN=w-token-0123456789");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1", "env -u ESG_TOKEN");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("esg diagnoses list: UNAUTHENTICATED"));
-  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1", "ESG_TOKEN=r-token");
+  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1", "ESG_TOKEN=r-token-0123456789");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("0 diagnoses of RDK-1"));
-  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1 --token r-token", "ESG_TOKEN=nope");
+  r = RunEsg(dir, server + " diagnoses list --spacecraft RDK-1 --token r-token-0123456789", "ESG_TOKEN=nope");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   // The streams: without a token refused, with the variable's token served (no telemetry yet,
   // so the diagnosis is refused by the service itself and the export is empty).
@@ -424,13 +424,14 @@ TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
     r = RunEsg(dir, server + " " + verb, "env -u ESG_TOKEN");
     EXPECT_EQ(r.exit_code, 1) << verb;
     EXPECT_THAT(r.err, HasSubstr("esg " + name + ": UNAUTHENTICATED")) << verb;
-    r = RunEsg(dir, server + " " + verb, "ESG_TOKEN=r-token");
+    r = RunEsg(dir, server + " " + verb, "ESG_TOKEN=r-token-0123456789");
     EXPECT_THAT(r.err, ::testing::Not(HasSubstr("UNAUTHENTICATED"))) << verb;
   }
-  r = RunEsg(dir, server + " diagnose --spacecraft RDK-1", "ESG_TOKEN=r-token");
+  r = RunEsg(dir, server + " diagnose --spacecraft RDK-1", "ESG_TOKEN=r-token-0123456789");
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_THAT(r.err, HasSubstr("esg diagnose: FAILED_PRECONDITION: no archived telemetry"));
-  r = RunEsg(dir, server + " export history --spacecraft RDK-1", "ESG_TOKEN=r-token");
+  EXPECT_THAT(r.err,
+              HasSubstr("esg diagnose: FAILED_PRECONDITION: spacecraft_id: no archived telemetry"));
+  r = RunEsg(dir, server + " export history --spacecraft RDK-1", "ESG_TOKEN=r-token-0123456789");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, ::testing::StartsWith("time_utc,gyro,k0_deg_h,"));
 }

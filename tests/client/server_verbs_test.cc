@@ -577,31 +577,31 @@ TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   RunResult r = RunEsg(dir, at + "status", "env -u ESG_TOKEN");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("esg status: UNAUTHENTICATED: "));
-  r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()), "ESG_TOKEN=r-token");
+  r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()), "ESG_TOKEN=r-token-0123456789");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("esg configure: PERMISSION_DENIED: "));
-  r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()) + " --token w-token",
+  r = RunEsg(dir, at + "configure --config " + Quote(Rdk1()) + " --token w-token-0123456789",
              "env -u ESG_TOKEN");
   EXPECT_EQ(r.exit_code, 0) << r.err;
-  r = RunEsg(dir, at + "status", "ESG_TOKEN=r-token");
+  r = RunEsg(dir, at + "status", "ESG_TOKEN=r-token-0123456789");
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("RDK-1  NO_DATA"));
 
   // --ack without --operator acknowledges in the token's name (the service takes it from the
   // token file), not $USER's; a read token cannot acknowledge.
   r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait",
-             "ESG_TOKEN=w-token");
+             "ESG_TOKEN=w-token-0123456789");
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  r = RunEsg(dir, at + "alerts --spacecraft RDK-1 --json", "ESG_TOKEN=r-token");
+  r = RunEsg(dir, at + "alerts --spacecraft RDK-1 --json", "ESG_TOKEN=r-token-0123456789");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const Json alerts = r.json()["alerts"];
   ASSERT_FALSE(alerts.empty()) << "the star-tracker defects raise alerts";
   const std::string ack =
       "alerts --spacecraft RDK-1 --ack " + std::to_string(I64(alerts[0]["sequence"]));
-  r = RunEsg(dir, at + ack, "ESG_TOKEN=r-token USER=someone");
+  r = RunEsg(dir, at + ack, "ESG_TOKEN=r-token-0123456789 USER=someone");
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.err, HasSubstr("PERMISSION_DENIED"));
-  r = RunEsg(dir, at + ack, "ESG_TOKEN=w-token USER=someone");
+  r = RunEsg(dir, at + ack, "ESG_TOKEN=w-token-0123456789 USER=someone");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_THAT(r.out, HasSubstr("acknowledged by wendy"));
 }

@@ -61,13 +61,13 @@ absl::Status CheckWith(const TokenAuthorizer& auth, const std::optional<std::str
 }
 
 TEST(TokenAuthorizer, ParsesRolesAndRejectsMalformedLines) {
-  auto auth = TokenAuthorizer::Parse("# comment\nabc read\n\nxyz read,write\n", "tokens");
+  auto auth = TokenAuthorizer::Parse("# comment\nabc-0123456789abc read\n\nxyz-0123456789xyz read,write\n", "tokens");
   ASSERT_TRUE(auth.ok()) << auth.status();
   EXPECT_EQ(auth->size(), 2);
-  EXPECT_TRUE(CheckWith(*auth, "Bearer abc", Role::kRead).ok());
-  EXPECT_THAT(CheckWith(*auth, "Bearer abc", Role::kWrite),
+  EXPECT_TRUE(CheckWith(*auth, "Bearer abc-0123456789abc", Role::kRead).ok());
+  EXPECT_THAT(CheckWith(*auth, "Bearer abc-0123456789abc", Role::kWrite),
               StatusIs(absl::StatusCode::kPermissionDenied, HasSubstr("write")));
-  EXPECT_TRUE(CheckWith(*auth, "Bearer xyz", Role::kWrite).ok());
+  EXPECT_TRUE(CheckWith(*auth, "Bearer xyz-0123456789xyz", Role::kWrite).ok());
   EXPECT_THAT(CheckWith(*auth, std::nullopt, Role::kRead),
               StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("authorization")));
   EXPECT_THAT(CheckWith(*auth, "Bearer nope", Role::kRead),
@@ -78,7 +78,7 @@ TEST(TokenAuthorizer, ParsesRolesAndRejectsMalformedLines) {
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1")));
   EXPECT_THAT(TokenAuthorizer::Parse("a read x y\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: expected")));
-  EXPECT_THAT(TokenAuthorizer::Parse("a read\na write\n", "f"),
+  EXPECT_THAT(TokenAuthorizer::Parse("aaaaaaaaaaaaaaaa read\naaaaaaaaaaaaaaaa write\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:2: token repeated")));
   EXPECT_THAT(TokenAuthorizer::Parse("# only a comment\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f: no tokens")));
@@ -87,6 +87,18 @@ TEST(TokenAuthorizer, ParsesRolesAndRejectsMalformedLines) {
 // Found by fuzz/fuzz_token_file.cc (docs/fuzzing.md, finding 1): an unknown role was quoted in
 // the message, so a token written in the role's column ("read <token>", columns swapped) reached
 // the error and the daemon's log. The fuzzer's input first, then the swapped columns.
+// A 1-character token was accepted: a token is at least 16 characters, and the message says how
+// to make one without quoting the short token.
+TEST(TokenAuthorizer, ShortTokenIsRefusedWithTheLineNamed) {
+  EXPECT_THAT(TokenAuthorizer::Parse("# ops\nx read,write ops\n", "tokens"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("tokens:2: token of 1 characters, at least 16 needed")));
+  const auto refused = TokenAuthorizer::Parse("ops-0123456789a read ops\n", "tokens");
+  EXPECT_THAT(refused, StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("15 characters")));
+  EXPECT_THAT(std::string(refused.status().message()), Not(HasSubstr("ops-0123456789a")));
+  EXPECT_TRUE(TokenAuthorizer::Parse("ops-0123456789ab read ops\n", "tokens").ok());
+}
+
 TEST(TokenAuthorizer, UnknownRoleIsNotQuotedItMayBeAToken) {
   const std::string fuzzer_input("tok-a read[T\x01\x00@`\x00\x00riad\nGoke\n#f842*\x96", 35);
   const absl::StatusOr<TokenAuthorizer> fuzzed = TokenAuthorizer::Parse(fuzzer_input, "f");
@@ -102,14 +114,16 @@ TEST(TokenAuthorizer, UnknownRoleIsNotQuotedItMayBeAToken) {
 }
 
 TEST(TokenAuthorizer, SchemeIsCaseInsensitiveWithOneOrMoreSpaces) {
-  auto auth = TokenAuthorizer::Parse("abc read\n", "tokens");
+  auto auth = TokenAuthorizer::Parse("abc-0123456789abc read\n", "tokens");
   ASSERT_TRUE(auth.ok()) << auth.status();
   for (const std::string header :
-       {"Bearer abc", "bearer abc", "BEARER abc", "bEaReR abc", "Bearer   abc"}) {
+       {"Bearer abc-0123456789abc", "bearer abc-0123456789abc", "BEARER abc-0123456789abc",
+        "bEaReR abc-0123456789abc", "Bearer   abc-0123456789abc"}) {
     EXPECT_TRUE(CheckWith(*auth, header, Role::kRead).ok()) << header;
   }
   for (const std::string header :
-       {"Basic abc", "Bearerabc", "Bearer", "Bearer ", "Bearer\tabc", "Token abc", "abc"}) {
+       {"Basic abc-0123456789abc", "Bearerabc-0123456789abc", "Bearer", "Bearer ",
+        "Bearer\tabc-0123456789abc", "Token abc-0123456789abc", "abc-0123456789abc"}) {
     EXPECT_THAT(CheckWith(*auth, header, Role::kRead),
                 StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("expected `Bearer")))
         << header;
@@ -117,10 +131,11 @@ TEST(TokenAuthorizer, SchemeIsCaseInsensitiveWithOneOrMoreSpaces) {
 }
 
 TEST(TokenAuthorizer, PrefixOrExtensionOfARealTokenIsRefused) {
-  auto auth = TokenAuthorizer::Parse("3f9c0a77ab21 read,write\n", "tokens");
+  auto auth = TokenAuthorizer::Parse("3f9c0a77ab21d4e8 read,write\n", "tokens");
   ASSERT_TRUE(auth.ok()) << auth.status();
-  EXPECT_TRUE(CheckWith(*auth, "Bearer 3f9c0a77ab21", Role::kWrite).ok());
-  for (const std::string token : {"3f9c0a77ab2", "3f9c0a", "3", "3f9c0a77ab21x", "3F9C0A77AB21"}) {
+  EXPECT_TRUE(CheckWith(*auth, "Bearer 3f9c0a77ab21d4e8", Role::kWrite).ok());
+  for (const std::string token :
+       {"3f9c0a77ab21d4e", "3f9c0a", "3", "3f9c0a77ab21d4e8x", "3F9C0A77AB21D4E8"}) {
     EXPECT_THAT(CheckWith(*auth, "Bearer " + token, Role::kRead),
                 StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("unknown token")))
         << token;
@@ -130,46 +145,49 @@ TEST(TokenAuthorizer, PrefixOrExtensionOfARealTokenIsRefused) {
 TEST(TokenAuthorizer, AuthenticateReturnsTheNameFromTheFileOrTheLineNumber) {
   const std::string name64(64, 'n');
   auto auth = TokenAuthorizer::Parse(
-      "t1 read ops-console\n# comment\nt2\tread,write\nt3 write " + name64 + "\n", "tokens");
+      "token-1-0123456789 read ops-console\n# comment\ntoken-2-0123456789\tread,write\n"
+      "token-3-0123456789 write " +
+          name64 + "\n",
+      "tokens");
   ASSERT_TRUE(auth.ok()) << auth.status();
   EXPECT_EQ(auth->size(), 3);
-  auto name = AuthenticateWith(*auth, "Bearer t1", Role::kRead);
+  auto name = AuthenticateWith(*auth, "Bearer token-1-0123456789", Role::kRead);
   ASSERT_TRUE(name.ok()) << name.status();
   EXPECT_EQ(*name, "ops-console");
-  name = AuthenticateWith(*auth, "bearer t2", Role::kWrite);
+  name = AuthenticateWith(*auth, "bearer token-2-0123456789", Role::kWrite);
   ASSERT_TRUE(name.ok()) << name.status();
   EXPECT_EQ(*name, "token-3");  // no name on line 3
-  name = AuthenticateWith(*auth, "Bearer t3", Role::kWrite);
+  name = AuthenticateWith(*auth, "Bearer token-3-0123456789", Role::kWrite);
   ASSERT_TRUE(name.ok()) << name.status();
   EXPECT_EQ(*name, name64);
   // Failures are the same as Check's, and the missing-role message names the caller.
-  EXPECT_THAT(AuthenticateWith(*auth, "Bearer t1", Role::kWrite),
+  EXPECT_THAT(AuthenticateWith(*auth, "Bearer token-1-0123456789", Role::kWrite),
               StatusIs(absl::StatusCode::kPermissionDenied,
                        HasSubstr("token 'ops-console' lacks the 'write' role")));
-  EXPECT_THAT(AuthenticateWith(*auth, "Bearer t4", Role::kRead),
+  EXPECT_THAT(AuthenticateWith(*auth, "Bearer token-4-0123456789", Role::kRead),
               StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("unknown token")));
   EXPECT_THAT(AuthenticateWith(*auth, std::nullopt, Role::kRead),
               StatusIs(absl::StatusCode::kUnauthenticated, HasSubstr("missing")));
 
   // Names: at most 64 printable ASCII characters.
-  EXPECT_THAT(TokenAuthorizer::Parse("a read\nb read " + name64 + "x\n", "f"),
+  EXPECT_THAT(TokenAuthorizer::Parse("aaaaaaaaaaaaaaaa read\nbbbbbbbbbbbbbbbb read " + name64 + "x\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:2: name must be")));
   EXPECT_THAT(TokenAuthorizer::Parse("a read bad\x01name\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: name must be")));
   EXPECT_THAT(TokenAuthorizer::Parse("a read caf\xc3\xa9\n", "f"),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("f:1: name must be")));
   // Two tokens of one caller (rotation) may share a name.
-  auto rotated = TokenAuthorizer::Parse("old read ingest\nnew read ingest\n", "f");
+  auto rotated = TokenAuthorizer::Parse("old-token-0123456 read ingest\nnew-token-0123456 read ingest\n", "f");
   ASSERT_TRUE(rotated.ok()) << rotated.status();
-  EXPECT_EQ(*AuthenticateWith(*rotated, "Bearer old", Role::kRead), "ingest");
-  EXPECT_EQ(*AuthenticateWith(*rotated, "Bearer new", Role::kRead), "ingest");
+  EXPECT_EQ(*AuthenticateWith(*rotated, "Bearer old-token-0123456", Role::kRead), "ingest");
+  EXPECT_EQ(*AuthenticateWith(*rotated, "Bearer new-token-0123456", Role::kRead), "ingest");
 }
 
 TEST(TokenAuthorizer, FromFileRefusesAFileGroupOrOthersCanUse) {
   namespace fs = std::filesystem;
   TempDir dir;
   const std::string path = dir.File("tokens");
-  std::ofstream(path) << "abc read ops\n";
+  std::ofstream(path) << "abc-0123456789abc read ops\n";
   for (fs::perms mode : {fs::perms(0644), fs::perms(0640), fs::perms(0604), fs::perms(0620),
                          fs::perms(0602), fs::perms(0610), fs::perms(0601)}) {
     fs::permissions(path, mode, fs::perm_options::replace);
@@ -186,7 +204,7 @@ TEST(TokenAuthorizer, FromFileRefusesAFileGroupOrOthersCanUse) {
     fs::permissions(path, mode, fs::perm_options::replace);
     auto auth = TokenAuthorizer::FromFile(path);
     ASSERT_TRUE(auth.ok()) << auth.status();
-    EXPECT_EQ(*AuthenticateWith(*auth, "Bearer abc", Role::kRead), "ops");
+    EXPECT_EQ(*AuthenticateWith(*auth, "Bearer abc-0123456789abc", Role::kRead), "ops");
   }
 
   // Not a regular file: a directory, a FIFO (refused without blocking on the open).
@@ -252,7 +270,7 @@ TEST(TokenAuthorizer, RefusalsAreLoggedWithTheReasonButNeverTheToken) {
 
 TEST(Auth, BearerTokensGuardEveryRpcByRole) {
   TempDir dir;
-  WriteTokens(dir.File("tokens"), "reader-token read\nwriter-token read,write\n");
+  WriteTokens(dir.File("tokens"), "reader-token-0123 read\nwriter-token-0123 read,write\n");
   ServerOptions options;
   options.tokens_file = dir.File("tokens");
   LoopbackServer server(options);
@@ -267,18 +285,18 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
   };
   EXPECT_EQ(configure("").error_code(), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(configure("wrong").error_code(), grpc::StatusCode::UNAUTHENTICATED);
-  EXPECT_EQ(configure("reader-token").error_code(), grpc::StatusCode::PERMISSION_DENIED);
-  ASSERT_TRUE(configure("writer-token").ok());
+  EXPECT_EQ(configure("reader-token-0123").error_code(), grpc::StatusCode::PERMISSION_DENIED);
+  ASSERT_TRUE(configure("writer-token-0123").ok());
 
   // Ingest with a read token: PERMISSION_DENIED; no token: UNAUTHENTICATED.
   esg::v1::TelemetryFrame frame;
   frame.set_spacecraft_id("AUTH-1");
   frame.set_sequence(1);
-  auto denied = StreamFrames(*stub, {frame}, "reader-token");
+  auto denied = StreamFrames(*stub, {frame}, "reader-token-0123");
   EXPECT_EQ(denied.status.error_code(), grpc::StatusCode::PERMISSION_DENIED);
   EXPECT_TRUE(denied.acks.empty());
   EXPECT_EQ(StreamFrames(*stub, {frame}).status.error_code(), grpc::StatusCode::UNAUTHENTICATED);
-  auto allowed = StreamFrames(*stub, {frame}, "writer-token");
+  auto allowed = StreamFrames(*stub, {frame}, "writer-token-0123");
   EXPECT_TRUE(allowed.status.ok());
   EXPECT_EQ(allowed.acks.size(), 1u);
 
@@ -292,9 +310,9 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
     return stub->GetSession(&ctx, request, &info);
   };
   EXPECT_EQ(get("").error_code(), grpc::StatusCode::UNAUTHENTICATED);
-  EXPECT_TRUE(get("reader-token").ok());
+  EXPECT_TRUE(get("reader-token-0123").ok());
   grpc::ClientContext ctx;
-  ctx.AddMetadata("authorization", "Bearer reader-token");
+  ctx.AddMetadata("authorization", "Bearer reader-token-0123");
   esg::v1::AcknowledgeRequest ack;
   ack.set_spacecraft_id("AUTH-1");
   ack.set_sequence(1);
@@ -314,7 +332,7 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
   };
   EXPECT_EQ(history("").error_code(), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(history("wrong").error_code(), grpc::StatusCode::UNAUTHENTICATED);
-  EXPECT_TRUE(history("reader-token").ok());
+  EXPECT_TRUE(history("reader-token-0123").ok());
   auto subscribe = [&](const std::string& token) {
     grpc::ClientContext c;
     if (!token.empty()) c.AddMetadata("authorization", "Bearer " + token);
@@ -330,7 +348,7 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
                                    : grpc::Status(grpc::StatusCode::INTERNAL, "no marker");
   };
   EXPECT_EQ(subscribe("").error_code(), grpc::StatusCode::UNAUTHENTICATED);
-  EXPECT_TRUE(subscribe("reader-token").ok());
+  EXPECT_TRUE(subscribe("reader-token-0123").ok());
 }
 
 // A console signs each operator in with their own token and acknowledges without a name: the
@@ -339,15 +357,15 @@ TEST(Auth, BearerTokensGuardEveryRpcByRole) {
 TEST(Auth, AcknowledgementWithoutANameTakesTheCallersTokenName) {
   TempDir dir;
   WriteTokens(dir.File("tokens"),
-              "alice-Tk3vR8zQ read,write alice\nbob-Wq9xL2mP read,write bob\n"
-              "view-Jd5nC1kS read viewer\n");
+              "alice-Tk3vR8zQ9x2b read,write alice\nbob-Wq9xL2mP7c4dz read,write bob\n"
+              "view-Jd5nC1kS3p8q read viewer\n");
   ServerOptions options;
   options.tokens_file = dir.File("tokens");
   LoopbackServer server(options);
   auto stub = server.Stub();
   {
     grpc::ClientContext ctx;
-    ctx.AddMetadata("authorization", "Bearer alice-Tk3vR8zQ");
+    ctx.AddMetadata("authorization", "Bearer alice-Tk3vR8zQ9x2b");
     esg::v1::ConfigureResponse r;
     ASSERT_TRUE(stub->ConfigureSpacecraft(
                         &ctx, ConfigureRequestFor(::esg::testing::ServerTestConfig("AUTH-ACK")), &r)
@@ -372,13 +390,13 @@ TEST(Auth, AcknowledgementWithoutANameTakesTheCallersTokenName) {
     return stub->AcknowledgeAlert(&ctx, request, out);
   };
   esg::v1::Alert alert;
-  EXPECT_EQ(acknowledge("view-Jd5nC1kS", "", &alert).error_code(),
+  EXPECT_EQ(acknowledge("view-Jd5nC1kS3p8q", "", &alert).error_code(),
             grpc::StatusCode::PERMISSION_DENIED);
-  ASSERT_TRUE(acknowledge("alice-Tk3vR8zQ", "", &alert).ok());
+  ASSERT_TRUE(acknowledge("alice-Tk3vR8zQ9x2b", "", &alert).ok());
   EXPECT_EQ(alert.acknowledged_by(), "alice");
   // Alice again (by token or by her name): unchanged; Bob's token: refused naming alice.
-  EXPECT_TRUE(acknowledge("alice-Tk3vR8zQ", "alice", &alert).ok());
-  const grpc::Status by_bob = acknowledge("bob-Wq9xL2mP", "", &alert);
+  EXPECT_TRUE(acknowledge("alice-Tk3vR8zQ9x2b", "alice", &alert).ok());
+  const grpc::Status by_bob = acknowledge("bob-Wq9xL2mP7c4dz", "", &alert);
   EXPECT_EQ(by_bob.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
   EXPECT_THAT(by_bob.error_message(), HasSubstr("already acknowledged by 'alice'"));
   auto stored = server.core().storage().alerts().Get("AUTH-ACK", *sequence);
@@ -388,7 +406,7 @@ TEST(Auth, AcknowledgementWithoutANameTakesTheCallersTokenName) {
 
 TEST(Auth, RefusedCallIsLoggedWithThePeerAndTheCallerName) {
   TempDir dir;
-  WriteTokens(dir.File("tokens"), "dash-Hk4vR8zQ read dashboard\n");
+  WriteTokens(dir.File("tokens"), "dash-Hk4vR8zQ6w1e read dashboard\n");
   ServerOptions options;
   options.tokens_file = dir.File("tokens");
   LoopbackServer server(options);
@@ -404,7 +422,7 @@ TEST(Auth, RefusedCallIsLoggedWithThePeerAndTheCallerName) {
   // The server logs before it answers, so the line is in stderr when the call returns.
   ::testing::internal::CaptureStderr();
   const grpc::Status unknown = configure("Bearer dash-Hk4vR8zX");
-  const grpc::Status denied = configure("bearer dash-Hk4vR8zQ");
+  const grpc::Status denied = configure("bearer dash-Hk4vR8zQ6w1e");
   const std::string log = ::testing::internal::GetCapturedStderr();
   EXPECT_EQ(unknown.error_code(), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(denied.error_code(), grpc::StatusCode::PERMISSION_DENIED);

@@ -262,8 +262,8 @@ TEST(Limits, CallersAreTokenNamesAndTheTotalBoundsThemAll) {
   TempDir dir;
   // Two tokens of one caller (a rotation), two other callers.
   WriteTokens(dir.File("tokens"),
-              "ops-token-a read ops\nops-token-b read ops\ndash-token read dash\n"
-              "third-token read third\n");
+              "ops-token-a-01234 read ops\nops-token-b-01234 read ops\ndash-token-012345 read dash\n"
+              "third-token-01234 read third\n");
   ServerOptions options;
   options.tokens_file = dir.File("tokens");
   LoopbackServer server(options);
@@ -295,43 +295,43 @@ TEST(Limits, CallersAreTokenNamesAndTheTotalBoundsThemAll) {
   // 'ops' runs its 4 predictions (held here): both of its tokens are refused, 'dash' is not.
   std::vector<CallLimiter::Permit> held;
   for (int i = 0; i < 4; ++i) held.push_back(std::move(*predictions.Acquire("ops")));
-  for (const char* token : {"ops-token-a", "ops-token-b"}) {
+  for (const char* token : {"ops-token-a-01234", "ops-token-b-01234"}) {
     const grpc::Status refused = predict(token);
     EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << token;
     EXPECT_EQ(refused.error_message(),
               "PredictAttitude: caller 'ops' already runs 4 predictions (limit 4 per caller); "
               "retry when one finishes");
   }
-  EXPECT_EQ(predict("dash-token").error_code(), grpc::StatusCode::NOT_FOUND);  // got through
+  EXPECT_EQ(predict("dash-token-012345").error_code(), grpc::StatusCode::NOT_FOUND);  // got through
   // The role check comes first: an unknown token is UNAUTHENTICATED, not counted.
   EXPECT_EQ(predict("who-knows").error_code(), grpc::StatusCode::UNAUTHENTICATED);
   // 'dash' takes the other 4: the total of 8 refuses 'third'.
   for (int i = 0; i < 4; ++i) held.push_back(std::move(*predictions.Acquire("dash")));
-  const grpc::Status full = predict("third-token");
+  const grpc::Status full = predict("third-token-01234");
   EXPECT_EQ(full.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_EQ(full.error_message(),
             "PredictAttitude: the server already runs 8 predictions (limit 8 in total); retry "
             "when one finishes");
   held.clear();
-  EXPECT_EQ(predict("third-token").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(predict("third-token-01234").error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(predictions.Running(), 0);
 
   // Diagnoses: 1 per caller, 2 in total.
   std::vector<CallLimiter::Permit> diagnosing;
   diagnosing.push_back(std::move(*diagnoses.Acquire("dash")));
-  const grpc::Status busy = diagnose("dash-token");
+  const grpc::Status busy = diagnose("dash-token-012345");
   EXPECT_EQ(busy.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_EQ(busy.error_message(),
             "Diagnose: caller 'dash' already runs 1 diagnosis (limit 1 per caller); retry when "
             "one finishes");
-  EXPECT_EQ(diagnose("ops-token-a").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(diagnose("ops-token-a-01234").error_code(), grpc::StatusCode::NOT_FOUND);
   diagnosing.push_back(std::move(*diagnoses.Acquire("ops")));
-  const grpc::Status all_busy = diagnose("third-token");
+  const grpc::Status all_busy = diagnose("third-token-01234");
   EXPECT_EQ(all_busy.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_THAT(all_busy.error_message(),
               HasSubstr("the server already runs 2 diagnoses (limit 2 in total)"));
   diagnosing.clear();
-  EXPECT_EQ(diagnose("third-token").error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(diagnose("third-token-01234").error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(diagnoses.Running(), 0);
 }
 

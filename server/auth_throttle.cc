@@ -1,0 +1,62 @@
+#include "server/auth_throttle.h"
+
+#include <algorithm>
+#include <vector>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace esg::server {
+
+std::string FailedAuthThrottle::Address(absl::string_view peer) {
+  // "ipv4:10.0.0.5:41234", "ipv6:[::1]:41234" (or "ipv6:%5B::1%5D:41234"): the port is after
+  // the last ':'.
+  if (absl::StartsWith(peer, "ipv4:") || absl::StartsWith(peer, "ipv6:")) {
+    const size_t colon = peer.rfind(':');
+    if (colon > 5) return std::string(peer.substr(0, colon));
+  }
+  return std::string(peer);
+}
+
+FailedAuthThrottle::Outcome FailedAuthThrottle::Refused(absl::string_view peer, absl::Time now) {
+  const std::string address = Address(peer);
+  absl::MutexLock lock(&mu_);
+  if (peers_.size() >= kMaxPeers && !peers_.contains(address)) {
+    // Forget the addresses whose budget has refilled: they hold nothing worth keeping.
+    std::vector<std::string> idle;
+    for (const auto& [key, p] : peers_) {
+      if (p.held_back == 0 &&
+          p.budget + absl::ToDoubleSeconds(now - p.updated) * kRefillPerSecond >= kBurst) {
+        idle.push_back(key);
+      }
+    }
+    for (const std::string& key : idle) peers_.erase(key);
+    // Still full (a flood from many addresses): the new address is throttled without state.
+    if (peers_.size() >= kMaxPeers) return {Verdict::kThrottled, ""};
+  }
+  auto [it, inserted] = peers_.try_emplace(address);
+  Peer& p = it->second;
+  if (inserted) p.updated = now;
+  p.budget = std::min(
+      kBurst, p.budget + std::max(0.0, absl::ToDoubleSeconds(now - p.updated)) * kRefillPerSecond);
+  p.updated = now;
+  Outcome out;
+  if (p.budget >= 1.0) {
+    p.budget -= 1.0;
+  } else {
+    out.verdict = Verdict::kThrottled;
+    ++p.held_back;
+  }
+  if (p.held_back > 0 && now - p.last_summary >= kSummaryInterval) {
+    out.summary = absl::StrFormat(
+        "%d more authorization refusals from %s were not logged one by one (throttled: %g "
+        "refusals at once, then %g per second, are; one such summary per %s at most)",
+        p.held_back, address, kBurst, kRefillPerSecond, absl::FormatDuration(kSummaryInterval));
+    p.held_back = 0;
+    p.last_summary = now;
+  }
+  return out;
+}
+
+}  // namespace esg::server
