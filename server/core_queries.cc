@@ -260,7 +260,9 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   {
     absl::MutexLock state(&sc->state_mu);
     setup = sc->setup;
-    quarantine_reason = sc->apply.quarantine_reason;
+    // A rebuild (quarantine while the session is rebuilt from the archive) does not stop a
+    // diagnosis of the archive; a stopped filter does.
+    if (sc->apply.FilterStopped()) quarantine_reason = sc->apply.quarantine_reason;
   }
   if (setup == nullptr) {
     return absl::FailedPreconditionError(
