@@ -256,27 +256,38 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
     }
   }
   if (n < 4) return r;
-  // Every drift alternative over the window: a steady change (quadratic) and a rate change at
-  // any sample time. The best of them is the smooth curve a drift gives.
   const Fit line = WeightedFit(p, Regressors(p, -1, std::nullopt, false));
-  double smooth = WeightedFit(p, Regressors(p, -1, std::nullopt, true)).rss;
-  for (int j = 1; j <= n - 2; ++j) {
-    smooth = std::min(smooth, WeightedFit(p, Regressors(p, -1, p.tau[j], false)).rss);
-  }
+  // Every drift alternative over the window: a steady change (quadratic) and a rate change at
+  // any sample time. The best of them is the smooth curve a drift gives. They cost a fit per
+  // sample and decide only when the line leaves something to explain (a jump that beats it, or
+  // scatter about it beyond the noise; each alternative contains the line, so fits at least as
+  // well): computed then, and once.
+  std::optional<double> smooth_rss;
+  const auto smooth = [&]() {
+    if (!smooth_rss.has_value()) {
+      smooth_rss = WeightedFit(p, Regressors(p, -1, std::nullopt, true)).rss;
+      for (int j = 1; j <= n - 2; ++j) {
+        const double kink = WeightedFit(p, Regressors(p, -1, p.tau[j], false)).rss;
+        smooth_rss = std::min(*smooth_rss, kink);
+      }
+    }
+    return *smooth_rss;
+  };
   // kJump: a jump at point jump_at (two or three points after it) against every drift
   // alternative, with the onset also inside the interval before the jump; at least two points
   // before it for the line.
   for (int jump_at = n - 2; jump_at >= std::max(2, n - 3) && std::isfinite(line.rss); --jump_at) {
     const Fit jump = WeightedFit(p, Regressors(p, jump_at, std::nullopt, false));
     if (!std::isfinite(jump.rss)) continue;
-    double drift_rss = smooth;
+    const double over_line = line.rss - jump.rss;
+    if (!(over_line >= options_.decision_chi2)) continue;
+    double drift_rss = smooth();
     for (int m = 1; m <= 3; ++m) {
       const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
       drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
     }
     const double over_drift = drift_rss - jump.rss;
-    const double over_line = line.rss - jump.rss;
-    if (over_drift >= options_.decision_chi2 && over_line >= options_.decision_chi2) {
+    if (over_drift >= options_.decision_chi2) {
       r.verdict = ReadingVerdict::kJump;
       r.value = jump.beta.segment<2>(4).norm();
       r.threshold = options_.decision_chi2;
@@ -286,7 +297,8 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
   }
   // kErratic: scatter about the smooth curve, far beyond the noise. A drift change within the
   // window must not read as scatter.
-  if (std::isfinite(smooth) && smooth > erratic_threshold_[n]) {
+  if (!(line.rss <= erratic_threshold_[n]) && std::isfinite(smooth()) &&
+      smooth() > erratic_threshold_[n]) {
     // A slow reading error (an unconfigured misalignment or scale error, kSlowReadingErrorRad
     // per radian of turn) moves a rebuild along the turn: smooth, but during a slew (the rate
     // rising, holding, falling) none of the fitted curves follows it. Its size over each interval

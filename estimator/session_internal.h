@@ -3,10 +3,14 @@
 #ifndef ESG_ESTIMATOR_SESSION_INTERNAL_H_
 #define ESG_ESTIMATOR_SESSION_INTERNAL_H_
 
+#include "Eigen/Core"
 #include "absl/time/time.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::session_internal {
+
+// d(dh)/dt = J dw_int in the tangent basis of a spin axis: (T w) x h = w2 t1 - w1 t2.
+inline const Eigen::Matrix2d kJ = (Eigen::Matrix2d() << 0.0, 1.0, -1.0, 0.0).finished();
 
 // Floors keep R positive definite when a configuration sets a noise to zero [rad].
 inline constexpr double kNoiseFloor = 0.01 * kRadPerArcsec;

@@ -30,14 +30,8 @@ using Eigen::Quaterniond;
 using Eigen::Vector3d;
 using Matrix23 = Eigen::Matrix<double, 2, 3>;
 
+using session_internal::kJ;
 using session_internal::Seconds;
-
-namespace {
-
-// d(dh)/dt = J dw_int in the tangent basis: (T w) x h = w2 t1 - w1 t2.
-const Matrix2d kJ = (Matrix2d() << 0.0, 1.0, -1.0, 0.0).finished();
-
-}  // namespace
 
 absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   const double span = Seconds(frame.time - last_time_);

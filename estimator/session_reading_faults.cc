@@ -25,6 +25,7 @@ using Eigen::Quaterniond;
 using Eigen::Vector3d;
 using Source = ReadingFaultMonitor::Source;
 
+using session_internal::kJ;
 using session_internal::kNoiseFloor;
 
 namespace {
@@ -33,8 +34,15 @@ namespace {
 // isolation may name the gyro a step or two after its reading jumped: D24's confirmation).
 constexpr int kAbruptMemorySteps = 3;
 
-// d(dh)/dt = J dw_int in the tangent basis (session_propagation.cc).
-const Matrix2d kJ = (Matrix2d() << 0.0, 1.0, -1.0, 0.0).finished();
+// The difference [rad, frame in, in the tangent plane of T] between a gyro's spin axis rebuilt
+// with the attitude q_in_b of the pair of the two other gyros (its reading h_k turned to inertial
+// space) and the axis h_in the model carries.
+Vector3d PairRebuildResidualIn(const Quaterniond& q_in_b, const Matrix3d& C_b_k,
+                               const Vector3d& h_k, const Vector3d& h_in,
+                               const Eigen::Matrix<double, 3, 2>& T) {
+  const Vector3d rebuilt_in = q_in_b.toRotationMatrix() * C_b_k * h_k;
+  return T * T.transpose() * (rebuilt_in - h_in);
+}
 
 }  // namespace
 
@@ -199,7 +207,6 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
       const GyroState& b = *Find(fresh[(k + 2) % 3]);
       const auto q = PairQuaternion(a.id, b.id, a.h_k_last, b.h_k_last, nullptr);
       if (!q.has_value()) continue;
-      const Vector3d rebuilt = q->toRotationMatrix() * g.C_b_k() * g.h_k_last;
       const Eigen::Matrix<double, 3, 2> T = g.T();
       // Its noise, bounded isotropically (a test never stronger than with the exact one): the
       // TRIAD attitude of the pair turns by the reference gyro's readout noise about two axes and
@@ -211,7 +218,7 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
       s.gyro_id = id;
       s.source = Source::kPair;
       s.T = T;
-      s.prior_residual_in = T * T.transpose() * (rebuilt - g.h_in);
+      s.prior_residual_in = PairRebuildResidualIn(*q, g.C_b_k(), g.h_k_last, g.h_in, T);
       s.noise_in = var * T * T.transpose();
       // The rebuild's pair moves with its own drivers too; the track measures against gyro g's
       // model as it started, the pair's model corrections part of the bound: the reference
@@ -267,9 +274,8 @@ void EstimationSession::TrackPosteriors(const TelemetryFrame& frame, bool st_pre
       const GyroState& b = *Find(fresh[(k + 2) % 3]);
       const auto q = PairQuaternion(a.id, b.id, a.h_k_last, b.h_k_last, nullptr);
       if (!q.has_value()) continue;
-      const Vector3d rebuilt = q->toRotationMatrix() * g.C_b_k() * g.h_k_last;
-      const Eigen::Matrix<double, 3, 2> T = g.T();
-      reading_monitor_.SetPosterior(g.id, Source::kPair, T * T.transpose() * (rebuilt - g.h_in));
+      reading_monitor_.SetPosterior(
+          g.id, Source::kPair, PairRebuildResidualIn(*q, g.C_b_k(), g.h_k_last, g.h_in, g.T()));
     }
   }
 }
