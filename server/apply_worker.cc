@@ -17,6 +17,7 @@
 #include "estimator/units.h"
 #include "proto/convert.h"
 #include "server/alert_collapse.h"
+#include "server/backoff.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/grpc_status.h"
@@ -187,17 +188,25 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       from_archive = false;
     }
   }
-  // A read of the store failed before anything was applied: logged, the service alerts this
-  // job took handed back, and the job retried after a pause.
+  // A read of the store failed before anything was applied: a filter fault of the spacecraft
+  // (logged once, until its commits succeed again), the service alerts this job took handed
+  // back, and the job retried after a pause that backs off (server/backoff.h).
   auto RetryAfterReadError = [&](const std::string& message) {
-    LogEvent("ERROR", "storage_error", message, {{"spacecraftId", sc->id}});
+    SetApplyFault(sc->id, message);
     {
       absl::MutexLock lock(&sc->state_mu);
       sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
                                 service_alerts.end());
     }
-    absl::SleepFor(absl::Milliseconds(200));
+    ++sc->apply_retries;
+    absl::SleepFor(BackoffDelay(sc->apply_retries, absl::Milliseconds(100), kMaxReconnectWait));
     return true;
+  };
+  // A job with nothing to commit after its reads succeeded ends a fault the reads raised.
+  auto ReadsSucceeded = [&] {
+    if (sc->apply_retries == 0) return;
+    sc->apply_retries = 0;
+    SetApplyFault(sc->id, "");
   };
   const bool filter_runs = setup != nullptr && session.has_value() && !apply.FilterStopped();
   std::optional<Rerun> rerun;
@@ -228,7 +237,10 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
         sc->replay_from_archive = false;
         rebuild_done = apply.rebuilding;
       }
-      if (!rebuild_done && service_alerts.empty()) return true;
+      if (!rebuild_done && service_alerts.empty()) {
+        ReadsSucceeded();
+        return true;
+      }
     }
     for (const storage::ArchivedFrame& a : *archived) {
       esg::v1::TelemetryFrame proto;
@@ -250,6 +262,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   }
   if (frames.empty() && service_alerts.empty() && !rebuild_done && !rerun.has_value() &&
       late_done.empty()) {
+    ReadsSucceeded();
     return false;
   }
 
@@ -456,9 +469,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     // Storage trouble (a full disk, an I/O error): health says so; this job is retried with a
     // growing pause (at most 2 s), the installed session and its checkpoint stay as they were.
     SetApplyFault(sc->id, status.ToString());
-    const absl::Duration pause =
-        std::min(absl::Milliseconds(200) * (1 << std::min(sc->apply_retries, 4)), absl::Seconds(2));
     ++sc->apply_retries;
+    const absl::Duration pause =
+        BackoffDelay(sc->apply_retries, absl::Milliseconds(100), kMaxReconnectWait);
     {
       absl::MutexLock lock(&sc->state_mu);
       sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),

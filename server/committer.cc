@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
+#include "server/backoff.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/log.h"
@@ -40,22 +41,54 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
   return storage_->ArchiveFrames(frames, late, fences);
 }
 
-void EstimationCore::SetStorageFault(const std::string& reason) {
-  bool changed = false;
+void EstimationCore::StorageCommitFailed(const std::string& reason) {
+  bool log = false;
+  int64_t failed_commits = 0;
   {
     absl::MutexLock lock(&commit_mu_);
-    changed = storage_fault_ != reason;
+    if (storage_fault_.empty()) {
+      storage_fault_since_ = absl::Now();
+      storage_failed_commits_ = 0;
+      storage_failed_probes_ = 0;
+    }
+    log = storage_fault_ != reason;
     storage_fault_ = reason;
+    storage_trial_ = false;
+    failed_commits = ++storage_failed_commits_;
   }
-  if (!changed) return;
-  if (reason.empty()) {
-    LogEvent("INFO", "storage_recovered", "storage commits again: ingest resumed");
-  } else {
+  if (log) {
     LogEvent("ERROR", "storage_error",
              absl::StrCat("storage cannot commit: ", reason,
-                          "; ingest refused with UNAVAILABLE until it can"),
-             {{"reason", reason}});
+                          "; ingest refused with UNAVAILABLE until it can",
+                          failed_commits > 1
+                              ? absl::StrCat(" (", failed_commits, " commits failed so far)")
+                              : std::string()),
+             {{"reason", reason}, {"failedCommits", failed_commits}});
   }
+  NotifyStorageHealth();
+}
+
+void EstimationCore::StorageCommitSucceeded() {
+  std::string ended;
+  int64_t failed_commits = 0;
+  int64_t failed_probes = 0;
+  absl::Duration lasted;
+  {
+    absl::MutexLock lock(&commit_mu_);
+    if (storage_fault_.empty()) return;
+    ended.swap(storage_fault_);
+    storage_trial_ = false;
+    failed_commits = storage_failed_commits_;
+    failed_probes = storage_failed_probes_;
+    lasted = absl::Trunc(absl::Now() - storage_fault_since_, absl::Milliseconds(1));
+  }
+  LogEvent("INFO", "storage_recovered",
+           absl::StrCat("storage commits again: ingest resumed (", failed_commits,
+                        " commits and ", failed_probes, " probe writes failed over ",
+                        absl::FormatDuration(lasted), ")"),
+           {{"failedCommits", failed_commits},
+            {"failedProbes", failed_probes},
+            {"durationSeconds", absl::ToDoubleSeconds(lasted)}});
   NotifyStorageHealth();
 }
 
@@ -90,9 +123,10 @@ void EstimationCore::NotifyStorageHealth() {
   std::string fault;
   {
     absl::MutexLock lock(&commit_mu_);
-    fault = !storage_fault_.empty()   ? storage_fault_
-            : !apply_faults_.empty() ? apply_faults_.begin()->second
-                                     : "";
+    // On trial (a probe succeeded) ingest takes frames: health says so.
+    fault = !storage_fault_.empty() && !storage_trial_ ? storage_fault_
+            : !apply_faults_.empty()                   ? apply_faults_.begin()->second
+                                                       : "";
   }
   absl::MutexLock lock(&listener_mu_);
   if (storage_listener_) storage_listener_(fault.empty(), fault);
@@ -126,14 +160,29 @@ void EstimationCore::FailBatch(std::vector<CommitEntry>& batch, const absl::Stat
 
 bool EstimationCore::ProbeStorage() {
   const absl::Status probe = storage::ProbeWrite(storage_->database(), absl::Now());
-  if (probe.ok()) SetStorageFault("");
-  return probe.ok();
+  {
+    absl::MutexLock lock(&commit_mu_);
+    if (storage_fault_.empty()) return true;
+    if (!probe.ok()) {
+      ++storage_failed_probes_;
+      return false;
+    }
+    // Not "ingest resumed" yet: a small probe write may fit where a commit of frames does not.
+    storage_trial_ = true;
+  }
+  NotifyStorageHealth();
+  return true;
 }
 
 void EstimationCore::CommitterLoop() {
+  // The probe writes back off exponentially up to storage_probe_period (server/backoff.h).
+  const absl::Duration probe_cap = options_.storage_probe_period;
+  Backoff probes(std::min(absl::Milliseconds(50), probe_cap), probe_cap);
+  absl::Duration wait = probe_cap;
   for (;;) {
     std::vector<CommitEntry> batch;
     bool faulted = false;
+    bool probing = false;
     {
       absl::MutexLock lock(&commit_mu_);
       commit_mu_.AwaitWithTimeout(
@@ -142,14 +191,19 @@ void EstimationCore::CommitterLoop() {
                 return !c->commit_queue_.empty() || c->commit_stop_;
               },
               this),
-          options_.storage_probe_period);
+          wait);
       faulted = !storage_fault_.empty();
+      probing = faulted && !storage_trial_;
       if (commit_queue_.empty() && commit_stop_) return;
       batch.swap(commit_queue_);
       commit_queue_bytes_ = 0;
     }
     if (batch.empty()) {
-      if (faulted) ProbeStorage();
+      wait = probe_cap;
+      if (!probing) continue;
+      // The backoff goes on through a trial that fails (reset only by a commit that succeeds),
+      // so a disk that takes a probe but not a commit is tried less and less often.
+      if (!ProbeStorage()) wait = probes.Failed();
       continue;
     }
     const absl::Time commit_start = absl::Now();
@@ -167,14 +221,18 @@ void EstimationCore::CommitterLoop() {
     }
     if (!status.ok()) {
       const std::string reason(status.ToString());
-      SetStorageFault(reason);
+      StorageCommitFailed(reason);
+      wait = std::min(absl::Milliseconds(50), probe_cap);
       FailBatch(batch, absl::UnavailableError(absl::StrCat(
                            "storage: the commit failed (", reason,
                            "); these frames are not stored: resume from "
                            "highest_durable_sequence + 1 when the service is SERVING again")));
       continue;
     }
-    if (faulted) SetStorageFault("");
+    if (faulted) {
+      StorageCommitSucceeded();
+      probes.Reset();
+    }
     metrics_.commit_batch_frames.Observe(static_cast<double>(std::count_if(
         batch.begin(), batch.end(), [](const CommitEntry& e) { return !e.barrier; })));
     // Per spacecraft, under both of its locks once: durable marks first, then out of the

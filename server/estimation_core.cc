@@ -265,6 +265,38 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Rest
 
 EstimationCore::~EstimationCore() { Stop(absl::ZeroDuration()); }
 
+void EstimationCore::CloseIngest() {
+  {
+    absl::MutexLock lock(&commit_mu_);
+    ingest_closed_ = true;
+  }
+  std::map<int64_t, std::function<void()>> streams;
+  {
+    absl::MutexLock lock(&streams_mu_);
+    streams_closed_ = true;
+    streams.swap(ingest_streams_);
+  }
+  for (auto& [id, close] : streams) close();
+}
+
+int64_t EstimationCore::AddIngestStream(std::function<void()> on_close) {
+  bool closed = false;
+  int64_t id = 0;
+  {
+    absl::MutexLock lock(&streams_mu_);
+    id = ++next_stream_id_;
+    closed = streams_closed_;
+    if (!closed) ingest_streams_.emplace(id, std::move(on_close));
+  }
+  if (closed) on_close();
+  return id;
+}
+
+void EstimationCore::RemoveIngestStream(int64_t id) {
+  absl::MutexLock lock(&streams_mu_);
+  ingest_streams_.erase(id);
+}
+
 void EstimationCore::Stop(absl::Duration drain_deadline) {
   {
     absl::MutexLock lock(&stop_mu_);
@@ -273,9 +305,9 @@ void EstimationCore::Stop(absl::Duration drain_deadline) {
   }
   hub_.CloseAll();
   estimate_hub_.CloseAll();
+  CloseIngest();
   {
     absl::MutexLock lock(&commit_mu_);
-    ingest_closed_ = true;
     commit_stop_ = true;
   }
   if (committer_.joinable()) committer_.join();

@@ -107,6 +107,12 @@ struct CoreOptions {
   absl::Duration max_prediction_horizon = absl::Hours(48);
   // Most samples in one prediction.
   int max_prediction_samples = 100000;
+  // Largest lead of a frame's measurement time over this server's clock; a frame further ahead
+  // is refused (docs/service.md "Ingest contract"): nothing is measured in the future, and a
+  // frame accepted ahead of the present would move the reorder window past the correct frames
+  // that follow it. Kept below reorder_window, a frame accepted ahead of the clock never makes
+  // a correct later frame too late.
+  absl::Duration max_clock_lead = absl::Minutes(5);
   // Largest serialized telemetry frame accepted (a frame of four gyros is about 300 bytes).
   int64_t max_frame_bytes = 8192;
   // Frames queued for the archive, in bytes, over all streams; beyond, a stream fails with
@@ -128,7 +134,8 @@ struct CoreOptions {
   // Consecutive filter failures (Internal or DataLoss from the estimator) that quarantine a
   // spacecraft.
   int quarantine_after_failures = 1;
-  // Period of the probe write while storage cannot commit.
+  // Longest wait between two probe writes while storage cannot commit; the probes back off
+  // exponentially up to it (server/backoff.h).
   absl::Duration storage_probe_period = absl::Seconds(1);
   // Tests only: called on a filter worker at the start of each job of a spacecraft, before it
   // takes frames; it may block, holding that spacecraft's filter behind ingest (frames stay
@@ -148,6 +155,22 @@ class EstimationCore {
   static absl::StatusOr<std::unique_ptr<EstimationCore>> Start(storage::Storage* storage,
                                                                const CoreOptions& options);
   ~EstimationCore();
+
+  // The first step of a shutdown (docs/service.md "Running it", Shutdown): from now on every
+  // frame is refused with Unavailable and a retry delay (the stream fails, no ack), and each open
+  // stream is told through the callback it registered (AddIngestStream), so that it stops
+  // reading, sends the acks of the frames already queued once they are committed, and finishes.
+  // Idempotent.
+  void CloseIngest();
+  // Registers an open telemetry stream: `on_close` is called once by CloseIngest (at once when
+  // ingest is closed already), from the thread that closes it. Returns the id to remove it with
+  // when the stream ends.
+  int64_t AddIngestStream(std::function<void()> on_close);
+  void RemoveIngestStream(int64_t id);
+  // Unavailable "the server is shutting down ...; resume from highest_durable_sequence + 1 ..."
+  // with a retry delay of 1 s (grpc_status.h WithRetryDelay): how a stream ends once ingest is
+  // closed.
+  static absl::Status ShuttingDown();
 
   // Stops accepting frames, commits what is queued (acks go out), lets the workers apply the
   // durable backlog until `drain_deadline`, then stops all threads. Idempotent.
@@ -305,10 +328,15 @@ class EstimationCore {
   absl::Status CommitFrames(const std::vector<CommitEntry>& batch);
   void FailBatch(std::vector<CommitEntry>& batch, const absl::Status& error);
   // Ingest's commits (they hold ingest while failing) and the filter's commits fail or recover;
-  // health follows both. Logged once per change.
-  void SetStorageFault(const std::string& reason);
+  // health follows both. Logged once per change. StorageCommitFailed: a commit of frames failed
+  // (a new fault, or the same one again: counted, logged only when the reason changes);
+  // StorageCommitSucceeded: ends a fault ("ingest resumed", with its counts).
+  void StorageCommitFailed(const std::string& reason);
+  void StorageCommitSucceeded();
   void SetApplyFault(const std::string& spacecraft_id, const std::string& reason);
   void NotifyStorageHealth();
+  // A probe write while storage cannot commit; when it succeeds, ingest takes frames again on
+  // trial (storage_trial_). True when it succeeded.
   bool ProbeStorage();
   std::shared_ptr<Spacecraft> Find(const std::string& spacecraft_id);
   void Schedule(const std::shared_ptr<Spacecraft>& sc);
@@ -355,8 +383,18 @@ class EstimationCore {
   absl::Mutex commit_mu_;
   std::vector<CommitEntry> commit_queue_ ABSL_GUARDED_BY(commit_mu_);
   int64_t commit_queue_bytes_ ABSL_GUARDED_BY(commit_mu_) = 0;
-  // Why storage cannot commit (empty: it can). Ingest is refused while set.
+  // Why storage cannot commit (empty: it can). Ingest is refused while set, unless a probe
+  // write succeeded since (storage_trial_).
   std::string storage_fault_ ABSL_GUARDED_BY(commit_mu_);
+  // A probe write succeeded while storage_fault_ is set: ingest takes frames again and health
+  // is SERVING, but storage counts as recovered ("ingest resumed") only once a commit of frames
+  // succeeds; a commit that fails ends the trial (issue 33: a probe fit on a full disk, the next
+  // commit did not).
+  bool storage_trial_ ABSL_GUARDED_BY(commit_mu_) = false;
+  // Since when storage_fault_ is set, and the commits and probes that failed since then.
+  absl::Time storage_fault_since_ ABSL_GUARDED_BY(commit_mu_);
+  int64_t storage_failed_commits_ ABSL_GUARDED_BY(commit_mu_) = 0;
+  int64_t storage_failed_probes_ ABSL_GUARDED_BY(commit_mu_) = 0;
   // Why the filter's commits of a spacecraft fail (absent: they commit); health only, ingest
   // goes on.
   std::map<std::string, std::string> apply_faults_ ABSL_GUARDED_BY(commit_mu_);
@@ -364,6 +402,11 @@ class EstimationCore {
   std::function<void(bool, const std::string&)> storage_listener_ ABSL_GUARDED_BY(listener_mu_);
   bool commit_stop_ ABSL_GUARDED_BY(commit_mu_) = false;
   bool ingest_closed_ ABSL_GUARDED_BY(commit_mu_) = false;
+  // Open telemetry streams and what closes each (CloseIngest).
+  absl::Mutex streams_mu_ ABSL_ACQUIRED_AFTER(commit_mu_);
+  std::map<int64_t, std::function<void()>> ingest_streams_ ABSL_GUARDED_BY(streams_mu_);
+  int64_t next_stream_id_ ABSL_GUARDED_BY(streams_mu_) = 0;
+  bool streams_closed_ ABSL_GUARDED_BY(streams_mu_) = false;
   std::thread committer_;
   std::thread lease_renewer_;  // with leases only
   std::thread relay_;          // with leases only

@@ -99,7 +99,7 @@ EstimationServiceImpl::StreamTelemetry(grpc::CallbackServerContext* context) {
   absl::Status admitted = Authorize(context, Role::kWrite);
   absl::StatusOr<std::string> scope = SpacecraftScope(context->client_metadata());
   if (admitted.ok() && !scope.ok()) admitted = scope.status();
-  return NewTelemetryReactor(&calls_, core_, admitted, context->peer(),
+  return NewTelemetryReactor(context, &calls_, core_, admitted, context->peer(),
                              scope.ok() ? *std::move(scope) : std::string());
 }
 

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/clock.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/status_macros.h"
 #include "google/protobuf/io/coded_stream.h"
@@ -13,6 +14,7 @@
 #include "proto/convert.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
+#include "server/grpc_status.h"
 #include "server/log.h"
 #include "server/spacecraft_scope.h"
 
@@ -43,7 +45,19 @@ std::string Measurement(const std::string& payload) {
   return Serialize(frame);
 }
 
+// How long a station should wait before it sends again to a server that is shutting down: about
+// the time a restart or the router's switch to another server takes.
+constexpr absl::Duration kShutdownRetryDelay = absl::Seconds(1);
+
 }  // namespace
+
+absl::Status EstimationCore::ShuttingDown() {
+  return WithRetryDelay(
+      absl::UnavailableError(
+          "the server is shutting down: it takes no more frames; resume from "
+          "highest_durable_sequence + 1 when it (or another server) serves again"),
+      kShutdownRetryDelay);
+}
 
 absl::StatusOr<std::optional<storage::ArchivedFrame>> EstimationCore::FindStoredFrame(
     Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
@@ -90,8 +104,8 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   };
   {
     absl::MutexLock commit(&commit_mu_);
-    if (ingest_closed_) return absl::UnavailableError("the server is shutting down");
-    if (!storage_fault_.empty()) {
+    if (ingest_closed_) return ShuttingDown();
+    if (!storage_fault_.empty() && !storage_trial_) {
       return absl::UnavailableError(absl::StrCat(
           "storage: cannot commit (", storage_fault_,
           "); no frame is acknowledged until it can: resume from highest_durable_sequence + 1"));
@@ -163,6 +177,19 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                                        FormatUtc(options_.earliest_frame_time), ", ",
                                        FormatUtc(options_.latest_frame_time), ")"));
   }
+  // Nothing is measured in the future: a frame ahead of the present would move the reorder
+  // window past the correct frames after it (issue 33). The clock cannot judge past-dated data
+  // (a recording replayed); the gap limit below does.
+  if (const absl::Time now = absl::Now(); time - now > options_.max_clock_lead) {
+    return refuse_counted(
+        absl::StatusCode::kOutOfRange, "time",
+        absl::StrCat(FormatUtc(time), " is ",
+                     absl::FormatDuration(absl::Trunc(time - now, absl::Seconds(1))),
+                     " ahead of the server's clock (", FormatUtc(now), "; at most ",
+                     absl::FormatDuration(options_.max_clock_lead),
+                     ", esgd --max-clock-lead): a frame cannot be measured in the future; "
+                     "check the time tag and the clocks"));
+  }
 
   // Identity and time against what is stored or queued.
   // Stored as received; the archive's columns hold the identity (station made explicit).
@@ -219,7 +246,7 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
       entry.barrier = true;
       entry.done = std::move(on_durable);
       absl::MutexLock commit(&commit_mu_);
-      if (ingest_closed_) return absl::UnavailableError("the server is shutting down");
+      if (ingest_closed_) return ShuttingDown();
       commit_queue_.push_back(std::move(entry));
       return true;
     }
@@ -263,8 +290,8 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   ack->set_accepted(true);
   {
     absl::MutexLock commit(&commit_mu_);
-    if (ingest_closed_) return absl::UnavailableError("the server is shutting down");
-    if (!storage_fault_.empty()) {
+    if (ingest_closed_) return ShuttingDown();
+    if (!storage_fault_.empty() && !storage_trial_) {
       return absl::UnavailableError(absl::StrCat("storage: cannot commit (", storage_fault_, ")"));
     }
     if (commit_queue_bytes_ + static_cast<int64_t>(payload.size()) >

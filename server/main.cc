@@ -63,6 +63,11 @@ int main(int argc, char** argv) {
                  "How late a frame may arrive (before the last accepted one) and still be applied "
                  "in time order by a re-run, e.g. 2h, 90m, 0 (refuse late frames)")
       ->capture_default_str();
+  std::string max_clock_lead = "5m";
+  app.add_option("--max-clock-lead", max_clock_lead,
+                 "How far ahead of this server's clock a frame's time may be (further: refused "
+                 "OUT_OF_RANGE), e.g. 5m, 30s")
+      ->capture_default_str();
   std::string estimate_retention = "720h";
   app.add_option("--estimate-retention", estimate_retention,
                  "How long per-step estimates are kept, in measurement time before the newest "
@@ -119,6 +124,12 @@ int main(int argc, char** argv) {
       options.core.reorder_window < absl::ZeroDuration()) {
     std::fprintf(stderr, "--reorder-window: '%s' is not a duration >= 0 (e.g. 2h, 90m, 0)\n",
                  reorder_window.c_str());
+    return 2;
+  }
+  if (!absl::ParseDuration(max_clock_lead, &options.core.max_clock_lead) ||
+      options.core.max_clock_lead < absl::ZeroDuration()) {
+    std::fprintf(stderr, "--max-clock-lead: '%s' is not a duration >= 0 (e.g. 5m, 30s)\n",
+                 max_clock_lead.c_str());
     return 2;
   }
   if (!absl::ParseDuration(estimate_retention, &options.core.estimate_retention) ||

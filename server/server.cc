@@ -288,6 +288,10 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
   }
   core_->alert_hub().CloseAll();
   core_->estimate_hub().CloseAll();
+  // Ingest stops first, on every open stream: each sends the acks of what it queued once
+  // committed (the committer runs until core_->Stop) and ends UNAVAILABLE with a retry delay, so
+  // a station that streams continuously does not hold the shutdown for the whole deadline.
+  core_->CloseIngest();
   if (metrics_ != nullptr) metrics_->Stop();
   // gRPC's shutdown also waits for every client connection to close, idle ones included: a
   // client that merely keeps its channel open would hold it for the whole deadline. Once none of

@@ -14,6 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
+#include "server/backoff.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/grpc_status.h"
@@ -93,9 +94,15 @@ void EstimationCore::MarkLeaseLost(Spacecraft& sc, absl::string_view why) {
            {{"spacecraftId", sc.id}});
 }
 
+// The notification connection is re-made with backoff (backoff.h): while the database is
+// unreachable the loop makes at most two connection attempts a second and logs two lines in all,
+// one when the connection is lost (or cannot be made at the start) and one with the count of
+// attempts when it is made again (docs/service.md "Reconnects and retries").
 void EstimationCore::RelayLoop() {
   std::unique_ptr<storage::PostgresListener> listener;
-  bool reported = false;  // a failure logged, not yet recovered
+  Backoff reconnect(absl::Milliseconds(50), kMaxReconnectWait);
+  bool lost = false;  // relay_interrupted or relay_failed logged, not yet relay_recovered
+  absl::Time lost_at = absl::Now();
   for (;;) {
     {
       absl::MutexLock lock(&stop_mu_);
@@ -105,29 +112,45 @@ void EstimationCore::RelayLoop() {
       absl::StatusOr<std::unique_ptr<storage::PostgresListener>> opened =
           storage_->ListenForChanges();
       if (!opened.ok()) {
-        if (!reported) {
+        if (!lost) {
+          lost_at = absl::Now();
           LogEvent("ERROR", "relay_failed",
                    absl::StrCat("cannot follow the alerts and estimates of other servers: ",
-                                opened.status().message(), " (retrying)"));
-          reported = true;
+                                opened.status().message(), " (retrying, at most ",
+                                absl::FormatDuration(kMaxReconnectWait), " apart)"));
+          lost = true;
         }
+        const absl::Duration wait = reconnect.Failed();
         absl::MutexLock lock(&stop_mu_);
-        stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), absl::Seconds(1));
+        stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), wait);
         continue;
       }
       listener = *std::move(opened);
-      if (reported) {
+      if (lost) {
         LogEvent("INFO", "relay_recovered",
-                 "following the alerts and estimates of other servers again");
+                 absl::StrCat("following the alerts and estimates of other servers again after ",
+                              reconnect.failures() + 1, " connection attempts over ",
+                              absl::FormatDuration(
+                                  absl::Trunc(absl::Now() - lost_at, absl::Milliseconds(1))),
+                              " (what they stored meanwhile was not relayed: replay with since)"),
+                 {{"attempts", reconnect.failures() + 1}});
       }
-      reported = false;
+      lost = false;
+      reconnect.Reset();
     }
     absl::StatusOr<std::vector<storage::PostgresListener::Notification>> notified =
         listener->Wait(absl::Milliseconds(250));
     if (!notified.ok()) {
+      // Re-made by the branch above, with backoff: Wait's own reconnect would be tried again at
+      // once, as fast as the refusals come (issue 33: 70,000 lines a second).
       LogEvent("WARN", "relay_interrupted",
                absl::StrCat("alerts and estimates of other servers may have been missed: ",
-                            notified.status().message()));
+                            notified.status().message(), " (reconnecting, at most ",
+                            absl::FormatDuration(kMaxReconnectWait), " apart)"));
+      listener.reset();
+      lost = true;
+      lost_at = absl::Now();
+      reconnect.Reset();
       continue;
     }
     if (notified->empty()) continue;
@@ -182,14 +205,20 @@ void EstimationCore::RelayEstimates(const std::string& spacecraft_id,
   estimate_hub_.Publish(relayed);
 }
 
+// A failed renewal is retried with backoff, at most kMaxReconnectWait apart (and never later than
+// the next period), so the leases are renewed within that time of the database's return; one
+// line when renewals start failing, one with the count of attempts when one succeeds again.
 void EstimationCore::LeaseLoop() {
   const absl::Duration period = options_.lease_duration / 3;
+  Backoff retry(absl::Milliseconds(100), std::min(period, kMaxReconnectWait));
+  absl::Duration wait = period;
   for (;;) {
     {
       absl::MutexLock lock(&stop_mu_);
-      stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), period);
+      stop_mu_.AwaitWithTimeout(absl::Condition(&stopped_), wait);
       if (stopped_) return;
     }
+    wait = period;
     // One transaction for all of this server's leases: one commit a period, however many
     // sessions it holds.
     std::map<std::string, std::shared_ptr<Spacecraft>> held;
@@ -203,12 +232,26 @@ void EstimationCore::LeaseLoop() {
     const absl::StatusOr<std::vector<std::string>> lost =
         storage_->leases().RenewAll(fences, absl::Now(), options_.lease_duration);
     if (!lost.ok()) {
-      LogEvent("ERROR", "lease_renewal_failed",
-               absl::StrCat("cannot renew the session leases of ", fences.size(),
-                            " spacecraft: ", lost.status().message(),
-                            " (retrying in ", absl::FormatDuration(period), ")"),
-               {{"leases", static_cast<int64_t>(fences.size())}});
+      if (retry.failures() == 0) {
+        LogEvent("ERROR", "lease_renewal_failed",
+                 absl::StrCat("cannot renew the session leases of ", fences.size(),
+                              " spacecraft: ", lost.status().message(), " (retrying, at most ",
+                              absl::FormatDuration(std::min(period, kMaxReconnectWait)),
+                              " apart; sessions are lost when their leases expire)"),
+                 {{"leases", static_cast<int64_t>(fences.size())}});
+      }
+      wait = retry.Failed();
       continue;
+    }
+    if (retry.failures() > 0) {
+      LogEvent("INFO", "lease_renewal_recovered",
+               absl::StrCat("renewed the session leases of ", fences.size(),
+                            " spacecraft again after ", retry.failures(),
+                            " failed attempts over ",
+                            absl::FormatDuration(absl::Trunc(absl::Now() - retry.since(),
+                                                             absl::Milliseconds(1)))),
+               {{"leases", static_cast<int64_t>(fences.size())}, {"attempts", retry.failures()}});
+      retry.Reset();
     }
     for (const std::string& id : *lost) {
       const storage::LeaseFence& fence = fences.at(id);

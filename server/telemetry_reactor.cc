@@ -28,9 +28,10 @@ class TelemetryReactor
     : public grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck> {
  public:
   // `scope`: the spacecraft the stream is routed by (server/spacecraft_scope.h), or empty.
-  TelemetryReactor(CallCounter* calls, EstimationCore* core, const absl::Status& auth,
-                   std::string peer, std::string scope)
+  TelemetryReactor(grpc::CallbackServerContext* context, CallCounter* calls, EstimationCore* core,
+                   const absl::Status& auth, std::string peer, std::string scope)
       : token_(calls),
+        context_(context),
         core_(core),
         shared_(std::make_shared<Shared>()),
         peer_(std::move(peer)),
@@ -42,7 +43,17 @@ class TelemetryReactor
       Finish(ToGrpcStatus(auth));
       return;
     }
-    StartRead(&frame_);
+    // A shutdown stops the stream between frames too, not only at its next frame.
+    std::weak_ptr<Shared> weak = shared_;
+    stream_id_ = core_->AddIngestStream([weak] {
+      std::shared_ptr<Shared> shared = weak.lock();
+      if (shared == nullptr) return;
+      absl::MutexLock lock(&shared->mu);
+      shared->closing = true;
+      TryWrite(*shared);
+    });
+    absl::MutexLock lock(&shared_->mu);
+    if (!shared_->finished) StartRead(&frame_);
   }
 
   void OnReadDone(bool ok) override {
@@ -86,6 +97,7 @@ class TelemetryReactor
     TryWrite(*shared_);
     if (shared_->finished) return;
     if (!wait.ok()) return;  // no more reads: the stream ends with this frame's failure
+    if (shared_->closing) return;  // the server shuts down: no more frames are read
     if (shared_->slots.size() < kMaxInFlight) {
       StartRead(&frame_);
     } else {
@@ -105,7 +117,8 @@ class TelemetryReactor
       return;
     }
     shared_->slots.pop_front();
-    if (shared_->read_paused && shared_->slots.size() < kMaxInFlight / 2 && !shared_->finished) {
+    if (shared_->read_paused && shared_->slots.size() < kMaxInFlight / 2 && !shared_->finished &&
+        !shared_->closing) {
       shared_->read_paused = false;
       StartRead(&frame_);
     }
@@ -122,6 +135,7 @@ class TelemetryReactor
   }
 
   void OnDone() override {
+    if (stream_id_ != 0) core_->RemoveIngestStream(stream_id_);
     std::string summary;
     int64_t received = 0;
     int64_t acknowledged = 0;
@@ -172,6 +186,9 @@ class TelemetryReactor
     bool reads_done ABSL_GUARDED_BY(mu) = false;
     bool read_paused ABSL_GUARDED_BY(mu) = false;
     bool finished ABSL_GUARDED_BY(mu) = false;
+    // The server shuts down (EstimationCore::CloseIngest): no more reads; once the acks of the
+    // frames read are out, the stream finishes with UNAVAILABLE.
+    bool closing ABSL_GUARDED_BY(mu) = false;
     ServiceMetrics* metrics = nullptr;
     // This stream's counts, for the summary logged when it ends.
     int64_t frames_received ABSL_GUARDED_BY(mu) = 0;
@@ -218,7 +235,7 @@ class TelemetryReactor
       if (!front.failure.ok()) {
         s.finished = true;
         CountUnacknowledged(s, front.failure.code());
-        s.reactor->Finish(ToGrpcStatus(front.failure));
+        s.reactor->Finish(ToGrpcStatus(front.failure, *s.reactor->context_));
         return;
       }
       if (!front.ready) return;
@@ -231,11 +248,16 @@ class TelemetryReactor
     if (s.reads_done) {
       s.finished = true;
       s.reactor->Finish(ToGrpcStatus(absl::OkStatus()));
+    } else if (s.closing) {
+      s.finished = true;
+      s.reactor->Finish(ToGrpcStatus(EstimationCore::ShuttingDown(), *s.reactor->context_));
     }
   }
 
   CallCounter::Token token_;
+  grpc::CallbackServerContext* const context_;
   EstimationCore* core_;
+  int64_t stream_id_ = 0;  // its registration with core_ (AddIngestStream); 0 before
   std::shared_ptr<Shared> shared_;
   const std::string peer_;
   const std::string scope_;
@@ -245,9 +267,9 @@ class TelemetryReactor
 }  // namespace
 
 grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>* NewTelemetryReactor(
-    CallCounter* calls, EstimationCore* core, const absl::Status& auth, std::string peer,
-    std::string scope) {
-  return new TelemetryReactor(calls, core, auth, std::move(peer), std::move(scope));
+    grpc::CallbackServerContext* context, CallCounter* calls, EstimationCore* core,
+    const absl::Status& auth, std::string peer, std::string scope) {
+  return new TelemetryReactor(context, calls, core, auth, std::move(peer), std::move(scope));
 }
 
 }  // namespace esg::server

@@ -18,10 +18,13 @@
 namespace esg::server {
 
 // `scope`: the spacecraft the stream is routed by (server/spacecraft_scope.h), or empty. `auth`
-// not OK: the stream finishes at once with it.
+// not OK: the stream finishes at once with it. When ingest closes (EstimationCore::CloseIngest,
+// the first step of a shutdown) the stream stops reading, sends the acks of the frames it has
+// queued once they are committed, and finishes with UNAVAILABLE and a retry delay (trailing
+// metadata grpc-retry-pushback-ms, on `context`).
 grpc::ServerBidiReactor<esg::v1::TelemetryFrame, esg::v1::TelemetryAck>* NewTelemetryReactor(
-    CallCounter* calls, EstimationCore* core, const absl::Status& auth, std::string peer,
-    std::string scope);
+    grpc::CallbackServerContext* context, CallCounter* calls, EstimationCore* core,
+    const absl::Status& auth, std::string peer, std::string scope);
 
 }  // namespace esg::server
 
