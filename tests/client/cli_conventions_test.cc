@@ -381,7 +381,8 @@ TEST_F(CliAgainstServer, DiagnoseOnTheServerThenDiagnosesListAndShow) {
 // others. esgd with a token file, started through the shell.
 TEST(CliConventions, TokenFlagWinsOverEsgTokenOnEveryVerb) {
   TempDir dir;
-  testing::WriteFile(dir.File("tokens"), "w-token-0123456789 read,write\nr-token read\n");
+  testing::WriteFile(dir.File("tokens"),
+                     "w-token-0123456789 read,write\nr-token-0123456789 read\n");
   ASSERT_EQ(std::system(("chmod 600 " + Quote(dir.File("tokens"))).c_str()), 0);
   const std::string start = absl::StrCat(
       Quote(ESGD_BINARY), " --listen 127.0.0.1:0 --workers 2 --db ", Quote(dir.File("esg.db")),

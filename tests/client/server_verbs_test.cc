@@ -566,7 +566,9 @@ TEST_F(ServerVerbs, RejectedFramesAreReportedWithTheirFieldAndMakeExitOne) {
 
 TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   TempDir dir;
-  WriteFile(dir.File("tokens"), "# test tokens\nw-token read,write wendy\nr-token read\n");
+  WriteFile(dir.File("tokens"),
+            "# test tokens\nw-token-0123456789 read,write wendy\nr-token-0123456789 read\n"
+            "s-token-0123456789 write station\n");
   // esgd refuses a token file that group or others can read or write.
   std::filesystem::permissions(
       dir.File("tokens"), std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
@@ -592,6 +594,16 @@ TEST_F(ServerVerbs, BearerTokenIsSentFromOptionOrEnvironment) {
   r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait",
              "ESG_TOKEN=w-token-0123456789");
   ASSERT_EQ(r.exit_code, 0) << r.err;
+  // A write-only station token replays (its GetSession is refused; the acks say what is
+  // durable); --wait needs the read role and says so at once.
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_),
+             "ESG_TOKEN=s-token-0123456789");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("the token has no read role"));
+  r = RunEsg(dir, at + "replay --recording " + Quote(recording_path_) + " --wait",
+             "ESG_TOKEN=s-token-0123456789");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.err, HasSubstr("--wait: polls the session, which needs a token with the read role"));
   r = RunEsg(dir, at + "alerts --spacecraft RDK-1 --json", "ESG_TOKEN=r-token-0123456789");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const Json alerts = r.json()["alerts"];
