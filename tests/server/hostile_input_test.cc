@@ -324,6 +324,47 @@ TEST(HostileInput, OperatorNamesAreBoundedAndPrintableAndMessagesStaySmall) {
   EXPECT_LE(status.error_message().size(), 1024u);
 }
 
+// Diagnose's refusals start with the request's field ("nanos -1 ..." and "model: model: ..."
+// did not).
+TEST(HostileInput, DiagnoseRefusalsNameTheirFieldFirst) {
+  LoopbackServer server;
+  auto stub = server.Stub();
+  Configure(*stub, RunH().config);
+  auto diagnose = [&](const esg::v1::DiagnoseRequest& request) {
+    grpc::ClientContext ctx;
+    auto reader = stub->Diagnose(&ctx, request);
+    esg::v1::DiagnoseUpdate update;
+    while (reader->Read(&update)) {
+    }
+    return reader->Finish();
+  };
+  esg::v1::DiagnoseRequest request;
+  request.set_spacecraft_id("HOST-1");
+  request.mutable_from()->set_nanos(-1);
+  grpc::Status status = diagnose(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), ::testing::StartsWith("from: "));
+  request.clear_from();
+  request.mutable_to()->set_seconds(-62135596801);  // before 0001-01-01
+  status = diagnose(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), ::testing::StartsWith("to: "));
+  request.clear_to();
+  request.set_model("12");
+  status = diagnose(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), ::testing::StartsWith("model: unknown term '12'"));
+  request.set_model("");
+  request.set_orbital_period_s(1e-300);
+  status = diagnose(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), ::testing::StartsWith("orbital_period_s: 1e-300 s"));
+  request.set_orbital_period_s(0.0);
+  status = diagnose(request);  // nothing archived yet
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_THAT(status.error_message(), ::testing::StartsWith("spacecraft_id: no archived"));
+}
+
 // The catch-all under every status and log line: a message is cut at a character boundary.
 TEST(HostileInput, LongMessagesAreCutAtACharacterBoundary) {
   std::string cyrillic;
