@@ -1,5 +1,5 @@
-// Progress on stderr for long offline runs: a percentage updated in place on a terminal,
-// otherwise one line every 10%.
+// Progress on stderr for long runs (the one printer of every verb): a percentage updated in place
+// on a terminal, otherwise one line every 10%; or a line per named stage.
 #ifndef ESG_CLIENT_PROGRESS_H_
 #define ESG_CLIENT_PROGRESS_H_
 
@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <utility>
 
 namespace esg::client {
 
@@ -34,6 +35,38 @@ class Progress {
   std::string label_;
   bool tty_;
   int last_ = -1;
+};
+
+// Progress by stage on stderr: "diagnose:  42% round 1: rotor_displacement[2] fitted (3/12)", a
+// line per stage (in place on a terminal); empty stages and repeats are not printed.
+class StageProgress {
+ public:
+  explicit StageProgress(std::string label)
+      : label_(std::move(label)), tty_(::isatty(STDERR_FILENO) == 1) {}
+  void operator()(double fraction, const std::string& stage) {
+    if (stage.empty() || stage == last_) return;
+    last_ = stage;
+    if (tty_) {
+      std::fprintf(stderr, "\r\033[K%s: %3.0f%% %s", label_.c_str(), 100.0 * fraction,
+                   stage.c_str());
+      line_open_ = fraction < 1.0;
+      if (!line_open_) std::fprintf(stderr, "\n");
+    } else {
+      std::fprintf(stderr, "%s: %3.0f%% %s\n", label_.c_str(), 100.0 * fraction, stage.c_str());
+    }
+    std::fflush(stderr);
+  }
+  // Ends the line a terminal was updating in place (a run that stopped before 100%).
+  void End() {
+    if (line_open_) std::fprintf(stderr, "\n");
+    line_open_ = false;
+  }
+
+ private:
+  std::string label_;
+  bool tty_;
+  bool line_open_ = false;
+  std::string last_;
 };
 
 }  // namespace esg::client

@@ -30,6 +30,7 @@
 #include "client/diagnosis_plots.h"
 #include "client/diagnosis_text.h"
 #include "client/output_format.h"
+#include "client/progress.h"
 #include "estimator/frame_gap.h"
 #include "proto/convert.h"
 #include "proto/diagnosis_json.h"
@@ -77,28 +78,6 @@ std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
   }
   return out;
 }
-
-// Progress: "diagnose:  42% round 1: rotor_displacement[2] fitted (3/12)", a line per stage
-// (in place on a terminal).
-class StageProgress {
- public:
-  StageProgress() : tty_(::isatty(STDERR_FILENO) == 1) {}
-  void operator()(double fraction, const std::string& stage) {
-    if (stage == last_stage_) return;
-    last_stage_ = stage;
-    if (tty_) {
-      std::fprintf(stderr, "\r\033[Kdiagnose: %3.0f%% %s", 100.0 * fraction, stage.c_str());
-      if (fraction >= 1.0) std::fprintf(stderr, "\n");
-    } else {
-      std::fprintf(stderr, "diagnose: %3.0f%% %s\n", 100.0 * fraction, stage.c_str());
-    }
-    std::fflush(stderr);
-  }
-
- private:
-  bool tty_;
-  std::string last_stage_;
-};
 
 bool WriteFile(const std::filesystem::path& path, const std::string& text) {
   std::ofstream out(path);
@@ -187,7 +166,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
   options.integration_rate_hz = o.integration_rate_hz;
   options.effects = *effects;
   options.orbital_period_s = 60.0 * o.orbital_period_min;
-  StageProgress progress;
+  StageProgress progress("diagnose");
   auto report = disc::Diagnose(*config, recording->frames, options,
                                [&](double f, const std::string& stage) { progress(f, stage); });
   if (!report.ok()) {

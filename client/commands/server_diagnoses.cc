@@ -16,6 +16,7 @@
 #include "absl/time/clock.h"
 #include "client/commands/server_common.h"
 #include "client/esg_client.h"
+#include "client/progress.h"
 #include "proto/convert.h"
 
 namespace esg::client {
@@ -106,30 +107,6 @@ void PrintOne(const DiagnosisResult& d, OutputFormat format) {
   }
 }
 
-// Progress of the Diagnose stream on stderr: a line per stage (in place on a terminal).
-class StageLines {
- public:
-  StageLines() : tty_(::isatty(STDERR_FILENO) == 1) {}
-  void operator()(double fraction, const std::string& stage) {
-    if (stage.empty() || stage == last_) return;
-    last_ = stage;
-    if (tty_) {
-      std::fprintf(stderr, "\r\033[Kdiagnose: %3.0f%% %s", 100.0 * fraction, stage.c_str());
-      if (fraction >= 1.0) std::fprintf(stderr, "\n");
-    } else {
-      std::fprintf(stderr, "diagnose: %3.0f%% %s\n", 100.0 * fraction, stage.c_str());
-    }
-    std::fflush(stderr);
-  }
-  void End() {
-    if (tty_ && !last_.empty()) std::fprintf(stderr, "\n");
-  }
-
- private:
-  bool tty_;
-  std::string last_;
-};
-
 struct ListOptions {
   std::string spacecraft_id;
   int64_t id = 0;
@@ -195,7 +172,7 @@ int RunServerDiagnose(const ServerDiagnoseOptions& o, const GlobalOptions& globa
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   std::unique_ptr<ReaderStream<esg::v1::DiagnoseUpdate>> reader = client->Diagnose(request);
-  StageLines progress;
+  StageProgress progress("diagnose");
   std::optional<DiagnosisResult> result;
   esg::v1::DiagnoseUpdate update;
   while (reader->Read(&update)) {

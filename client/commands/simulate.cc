@@ -21,6 +21,7 @@
 #include "absl/time/time.h"
 #include "client/commands/commands.h"
 #include "client/output_format.h"
+#include "client/progress.h"
 #include "client/scenario.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
@@ -47,32 +48,6 @@ struct SimulateOptions {
   double integration_rate_hz = 8.0;
   std::string truth_path;
   OutputFormat format = OutputFormat::kTable;
-};
-
-// Progress on stderr: a percentage updated in place on a terminal, otherwise a line every 10%.
-class Progress {
- public:
-  Progress() : tty_(::isatty(STDERR_FILENO) == 1) {}
-  void operator()(double fraction) {
-    const int percent = static_cast<int>(std::floor(100.0 * fraction));
-    if (tty_) {
-      if (percent == last_) return;
-      std::fprintf(stderr, "\rsimulate: %3d%%", percent);
-      if (percent >= 100) std::fprintf(stderr, "\n");
-    } else {
-      const int decile = percent / 10 * 10;
-      if (decile == last_ || decile == 0) return;
-      std::fprintf(stderr, "simulate: %d%%\n", decile);
-      last_ = decile;
-      return;
-    }
-    last_ = percent;
-    std::fflush(stderr);
-  }
-
- private:
-  bool tty_;
-  int last_ = -1;
 };
 
 std::string Num(double x) { return absl::StrFormat("%.17g", x); }
@@ -309,7 +284,7 @@ int RunSimulate(const SimulateOptions& o) {
     return Fail("--scenario", s);
   }
 
-  Progress progress;
+  Progress progress("simulate");
   absl::StatusOr<estimator::SimulationResult> result =
       estimator::Simulate(spec, [&progress](double f) { progress(f); });
   if (!result.ok()) return Fail("simulation", result.status());
