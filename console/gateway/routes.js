@@ -34,6 +34,15 @@ function latestStates(alerts) {
   return [...byKey.values()];
 }
 
+// Whether `alert` is worse than `other` (or there is no other): the higher severity, then the
+// later latest occurrence.
+function worseAlert(alert, other) {
+  if (!other) return true;
+  const rank = (a) => SEVERITIES.indexOf(a.severity.replace(/^ALERT_SEVERITY_/, ''));
+  if (rank(alert) !== rank(other)) return rank(alert) > rank(other);
+  return (alert.measurement_time || '') > (other.measurement_time || '');
+}
+
 function isUnimplemented(err) {
   return err && err.code === grpc.status.UNIMPLEMENTED;
 }
@@ -96,10 +105,13 @@ function makeRoutes(esgd, tokens) {
       ]);
       const open = new Map(sessions.map((s) => [s.spacecraft_id,
         Object.fromEntries(SEVERITIES.map((name) => [name, 0]))]));
+      const worst = new Map();
       for (const alert of latestStates(alerts)) {
         const counts = open.get(alert.spacecraft_id);
         const severity = alert.severity.replace(/^ALERT_SEVERITY_/, '');
-        if (counts && !alert.cleared && !alert.revised_time && severity in counts) counts[severity]++;
+        if (!counts || alert.cleared || alert.revised_time || !(severity in counts)) continue;
+        counts[severity]++;
+        if (worseAlert(alert, worst.get(alert.spacecraft_id))) worst.set(alert.spacecraft_id, alert);
       }
       let estimatesAvailable = true;
       const times = await Promise.all(sessions.map(async (session) => {
@@ -112,10 +124,18 @@ function makeRoutes(esgd, tokens) {
           return null;
         }
       }));
+      // The newest stored diagnosis of each spacecraft (ListDiagnoses lists oldest first).
+      const diagnoses = await Promise.all(sessions.map(async (session) => {
+        const list = await pages(ctx, 'ListDiagnoses',
+          { spacecraft_id: session.spacecraft_id, page_size: DIAGNOSIS_PAGE }, 'diagnoses');
+        return list.length ? list[list.length - 1] : null;
+      }));
       return {
         fleet: sessions.map((session, i) => ({
           session,
           open_alerts: open.get(session.spacecraft_id),
+          worst_alert: worst.get(session.spacecraft_id) || null,
+          last_diagnosis: diagnoses[i],
           last_star_tracker_time: times[i],
         })),
       };

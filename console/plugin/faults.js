@@ -46,7 +46,8 @@ export function alertToFault(alert) {
     triggerTime: alert.measurement_time,
     shortDescription: alert.message,
     // "Trip value" is the value of the latest repeat, "live value" the threshold it exceeded.
-    triggerValueInfo: { value: formatValue(alert.value, alert.unit), rangeCondition: 'HIGH', monitoringResult: result },
+    // A cleared alert's trip value is not shown as a limit violation still going on.
+    triggerValueInfo: { value: formatValue(alert.value, alert.unit), rangeCondition: 'HIGH', monitoringResult: alert.cleared ? 'IN_LIMITS' : result },
     currentValueInfo: { value: `limit ${formatValue(alert.threshold, alert.unit)}`, rangeCondition: 'HIGH', monitoringResult: 'IN_LIMITS' },
     esgAlert: alert
   };

@@ -151,48 +151,129 @@ test('sign-in: esgd wants a token, a wrong one is refused, the operator token op
   assert.equal(await page.evaluate(() => sessionStorage.getItem('esg.token')), token);
 });
 
-test('fleet overview lists every spacecraft with the state and open alerts esg reports', async () => {
+// The fleet's rows as the page shows them, top to bottom, read from their cells' data attributes
+// and texts.
+async function fleetRows(tab = page) {
+  return tab.$$eval('tr[data-spacecraft]', (trs) => trs.map((tr) => {
+    const cell = (attr) => tr.querySelector(`td[${attr}]`);
+    return {
+      id: tr.dataset.spacecraft,
+      attention: tr.dataset.attention,
+      state: cell('data-state').dataset.state,
+      stateText: cell('data-state').textContent.trim(),
+      health: cell('data-health').dataset.health,
+      healthText: cell('data-health').textContent.trim(),
+      excluded: [...tr.querySelectorAll('[data-excluded-gyro]')].map((s) => ({ gyro: Number(s.dataset.excludedGyro), reason: s.dataset.reason })),
+      sigma: cell('data-sigma').dataset.sigma,
+      sigmaText: cell('data-sigma').textContent.trim(),
+      model: cell('data-model').dataset.model,
+      widened: cell('data-model').dataset.widened,
+      modelText: cell('data-model').textContent.trim(),
+      worstAlert: cell('data-worst-alert').dataset.worstAlert,
+      worstSeverity: cell('data-worst-alert').dataset.alertSeverity || '',
+      alertText: cell('data-worst-alert').textContent.trim(),
+      counts: Object.fromEntries([...tr.querySelectorAll('[data-severity]')].map((e) => [e.dataset.severity, Number(e.dataset.count)])),
+      countColours: [...tr.querySelectorAll('[data-severity]')].map((e) => getComputedStyle(e).color),
+      verdict: cell('data-verdict').dataset.verdict,
+      verdictText: cell('data-verdict').textContent.trim(),
+      lastFrame: cell('data-last-frame').dataset.lastFrame,
+      starTracker: tr.querySelector('[data-star-tracker]').textContent.trim(),
+    };
+  }));
+}
+
+const ATTENTION = ['NOMINAL', 'INFO', 'WARNING', 'DISTRESS', 'CRITICAL'];
+
+// Each row against esg status, esg alerts and esg diagnoses of the same server; the rows in
+// the order worst first.
+async function checkFleet(rows) {
+  const status = await cliJson('status');
+  assert.deepEqual(rows.map((r) => r.id).sort(), status.sessions.map((s) => s.spacecraftId).sort());
+  const alerts = (await cliJson('alerts')).alerts.filter((a) => !a.cleared && !a.revisedTime);
+  const rank = (sev) => ['INFO', 'WARNING', 'DISTRESS', 'CRITICAL'].indexOf(sev) + 1;
+  for (const session of status.sessions) {
+    const row = rows.find((r) => r.id === session.spacecraftId);
+    const where = session.spacecraftId;
+    const state = session.state.replace('SESSION_STATE_', '');
+    assert.equal(row.state, state, where);
+    assert.ok(row.stateText.startsWith(state), row.stateText);
+    // Sensor health beside the state (docs/service.md "Session states").
+    if (state === 'QUARANTINED') {
+      assert.equal(row.health, 'quarantined', where);
+      assert.ok(row.healthText.includes(session.quarantineReason), row.healthText);
+    } else if (state === 'FAULTED') {
+      assert.equal(row.health, 'faulted', where);
+    } else if (session.degraded) {
+      assert.equal(row.health, 'degraded', where);
+      assert.deepEqual(row.excluded, session.excludedGyros.map((g) => ({ gyro: g.gyroId, reason: g.reason })), where);
+      for (const g of session.excludedGyros) {
+        assert.ok(row.healthText.includes(`gyro ${g.gyroId} excluded (${g.reason.toLowerCase().replace(/_/g, ' ')})`), row.healthText);
+      }
+    } else {
+      assert.equal(row.health, 'nominal', where);
+    }
+    // The attitude 1-sigma now, per body axis, to the 0.1 arcsec shown.
+    const sigma = session.latestAttitude ? session.latestAttitude.sigmaArcsec : null;
+    if (sigma) {
+      assert.equal(row.sigma, sigma.join(' '), where);
+      assert.equal(row.sigmaText, sigma.map((v) => v.toFixed(1)).join(' / '), where);
+    }
+    // The model-consistency monitor: inconsistent, and the widening as an unmodelled drift.
+    const m = session.modelConsistency;
+    assert.equal(row.model, !m ? 'untested' : m.consistent ? 'consistent' : 'inconsistent', where);
+    assert.equal(Number(row.widened || 0), m ? m.widenedDriftDegH || 0 : 0, where);
+    if (m && m.widenedDriftDegH > 0) {
+      assert.ok(row.modelText.includes('filter widened') && row.modelText.includes(`${m.widenedDriftDegH.toFixed(3)} deg/h`), row.modelText);
+    }
+    // Active alerts: counts of the severities present only; the worst one named.
+    const mine = alerts.filter((a) => a.spacecraftId === session.spacecraftId);
+    const counts = {};
+    for (const a of mine) counts[a.severity.replace('ALERT_SEVERITY_', '')] = (counts[a.severity.replace('ALERT_SEVERITY_', '')] || 0) + 1;
+    assert.deepEqual(row.counts, counts, `${where} active alerts`);
+    assert.ok(!Object.values(row.counts).includes(0), 'no zero count printed');
+    const worst = mine.map((a) => a.severity.replace('ALERT_SEVERITY_', '')).sort((a, b) => rank(b) - rank(a))[0] || '';
+    assert.equal(row.worstSeverity, worst, `${where} worst alert`);
+    if (worst) assert.ok(mine.some((a) => a.reason === `ALERT_REASON_${row.worstAlert}` && a.severity.endsWith(worst)), row.alertText);
+    // The last diagnosis' verdict.
+    const diagnoses = (await cliJson('diagnoses', 'list', '--spacecraft', session.spacecraftId)).diagnoses || [];
+    assert.equal(row.verdict, diagnoses.length ? diagnoses.at(-1).verdict : '', where);
+    assert.equal(row.lastFrame, session.lastFrameTime, where);
+  }
+  // Worst first: the attention level never rises down the table.
+  const levels = rows.map((r) => ATTENTION.indexOf(r.attention));
+  assert.deepEqual(levels, [...levels].sort((a, b) => b - a), `attention down the table: ${rows.map((r) => `${r.id} ${r.attention}`).join(', ')}`);
+  return status;
+}
+
+test('fleet overview: health, 1-sigma, model, worst alert and diagnosis per spacecraft, worst first', async () => {
   await open('esg:root/esg:fleet');
   await page.waitForFunction(() => document.querySelectorAll('tr[data-spacecraft]').length >= 2,
     { timeout: 20_000 });
-  const rows = await page.$$eval('tr[data-spacecraft]', (trs) => trs.map((tr) => ({
-    id: tr.dataset.spacecraft,
-    cells: [...tr.querySelectorAll('td')].map((td) => td.textContent.trim()),
-    open: Object.fromEntries([...tr.querySelectorAll('td[data-severity]')]
-      .map((td) => [td.dataset.severity, Number(td.textContent)])),
-  })));
-  const status = await cliJson('status');
-  assert.deepEqual(rows.map((r) => r.id).sort(), status.sessions.map((s) => s.spacecraftId).sort());
-  const alerts = (await cliJson('alerts')).alerts;
-  for (const session of status.sessions) {
-    const row = rows.find((r) => r.id === session.spacecraftId);
-    // The state, and beside it the sensor health: a degraded session names each excluded gyro
-    // with its reason (docs/service.md "Session states").
-    const state = session.state.replace('SESSION_STATE_', '');
-    if (session.degraded) {
-      assert.ok(row.cells[1].startsWith(state), row.cells[1]);
-      for (const g of session.excludedGyros) {
-        assert.ok(row.cells[1].includes(`gyro ${g.gyroId} excluded (${g.reason})`), row.cells[1]);
-      }
-      assert.ok(row.cells[1].includes('output from the clean pair'), row.cells[1]);
-    } else {
-      assert.equal(row.cells[1], state);
-    }
-    assert.equal(row.cells[2], `[${session.workingPair.join(',')}]`);
-    assert.equal(row.cells[3], session.lastFrameTime);
-    for (const severity of ['INFO', 'WARNING', 'DISTRESS', 'CRITICAL']) {
-      const open = alerts.filter((a) => a.spacecraftId === session.spacecraftId && !a.cleared &&
-        a.severity === `ALERT_SEVERITY_${severity}`).length;
-      assert.equal(row.open[severity], open, `${session.spacecraftId} open ${severity}`);
-    }
-  }
-  assert.ok(rows.find((r) => r.id === FAULTY).open.WARNING > 0, 'the faulty flight has open warnings');
-  // Gyro 1's 2 arcmin readout jump excludes it: degraded, the output on the clean pair [2,3],
-  // not FAULTED; gyro 3's 0.05 deg/h drift step is a drift change, not an exclusion.
+  const rows = await fleetRows();
+  const status = await checkFleet(rows);
+  // RDK-F: gyro 1's 2 arcmin readout jump excludes it: degraded, the output on the clean pair
+  // [2,3], not FAULTED; gyro 3's 0.05 deg/h drift step is a drift the model lacks: the filter
+  // widens and the model-consistency monitor reports it; the diagnosis names a verdict. It is
+  // shown above the healthy RDK-1.
   const faultySession = status.sessions.find((s) => s.spacecraftId === FAULTY);
   assert.equal(faultySession.degraded, true, JSON.stringify(faultySession.excludedGyros));
   assert.deepEqual(faultySession.excludedGyros.map((g) => g.gyroId), [1]);
   assert.notEqual(faultySession.state, 'SESSION_STATE_FAULTED');
+  const f = rows.find((r) => r.id === FAULTY);
+  assert.equal(f.health, 'degraded');
+  assert.deepEqual(f.excluded.map((g) => g.gyro), [1]);
+  assert.equal(f.model, 'inconsistent');
+  assert.ok(Number(f.widened) > 0, 'RDK-F runs widened');
+  assert.equal(f.worstSeverity, 'DISTRESS');
+  assert.equal(f.worstAlert, 'WORKING_PAIR_FAULT');
+  assert.ok(f.verdict && f.verdict !== 'none', `RDK-F verdict ${f.verdict}`);
+  assert.equal(f.attention, 'DISTRESS');
+  const healthy = rows.find((r) => r.id === 'RDK-1');
+  assert.equal(healthy.health, 'nominal');
+  assert.equal(healthy.model, 'consistent');
+  assert.equal(healthy.worstAlert, '', 'RDK-1\'s two alerts are cleared');
+  assert.deepEqual(healthy.counts, {});
+  assert.deepEqual(rows.map((r) => r.id), [FAULTY, 'RDK-1']);
   await shot('fleet');
 });
 
@@ -453,8 +534,8 @@ test('per-step estimate views: real sigma values when esgd has them, "not availa
     await page.waitForFunction(() => /not available/.test(document.querySelector('.esg-unavailable')?.textContent || ''));
     await open('esg:root/esg:fleet');
     await page.waitForSelector('tr[data-spacecraft="RDK-1"]');
-    const cells = await page.$$eval('tr[data-spacecraft="RDK-1"] td', (tds) => tds.map((td) => td.textContent));
-    assert.equal(cells[cells.length - 1], 'not available');
+    assert.equal(await page.$eval('tr[data-spacecraft="RDK-1"] [data-star-tracker]', (e) => e.textContent),
+      'last star tracker: not available');
   } else {
     assert.equal(probe.status, 200, probe.text);
     const estimates = probe.json.estimates;
@@ -497,9 +578,8 @@ test('per-step estimate views: real sigma values when esgd has them, "not availa
       Date.parse(newest.last_star_tracker_time)) / 60000);
     await open('esg:root/esg:fleet');
     await page.waitForSelector('tr[data-spacecraft="RDK-1"]');
-    const cells = await page.$$eval('tr[data-spacecraft="RDK-1"] td', (tds) => tds.map((td) => td.textContent));
-    assert.equal(cells[cells.length - 1],
-      `${Math.floor(minutes / 60)} h ${String(minutes % 60).padStart(2, '0')} min before the last frame`);
+    assert.equal(await page.$eval('tr[data-spacecraft="RDK-1"] [data-star-tracker]', (e) => e.textContent),
+      `star tracker ${Math.floor(minutes / 60)} h ${String(minutes % 60).padStart(2, '0')} min before it`);
     if (SCREENSHOTS) {
       await open('esg:root/esg:sc~RDK-1/esg:attplot~RDK-1');
       await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
