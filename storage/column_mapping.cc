@@ -21,6 +21,7 @@
 #include "estimator/rotation.h"
 #include "nlohmann/json.hpp"
 #include "proto/strict_json.h"
+#include "storage/csv_lines.h"
 #include "storage/csv_problems.h"
 #include "storage/recording_csv.h"
 
@@ -565,15 +566,6 @@ std::optional<absl::Duration> ParseCount(absl::string_view text, absl::Duration 
   return negative ? -d : d;
 }
 
-bool ParseMetadata(absl::string_view line, std::string* key, std::string* value) {
-  absl::string_view body = line.substr(1);
-  const size_t colon = body.find(':');
-  if (colon == absl::string_view::npos) return false;
-  *key = std::string(absl::StripAsciiWhitespace(body.substr(0, colon)));
-  *value = std::string(absl::StripAsciiWhitespace(body.substr(colon + 1)));
-  return !key->empty();
-}
-
 // Values of a group: nullopt on a problem (reported); an empty vector when all are empty.
 std::optional<std::vector<double>> ParseGroup(const std::vector<std::string>& fields,
                                               const std::vector<const Col*>& cols,
@@ -715,8 +707,7 @@ absl::StatusOr<ColumnMapping> ReadColumnMapping(const std::string& path) {
 absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view std_text,
                                                              const ColumnMapping& mapping,
                                                              const RecordingReadOptions& options) {
-  absl::string_view text(std_text.data(), std_text.size());
-  if (absl::StartsWith(text, "\xEF\xBB\xBF")) text.remove_prefix(3);  // a UTF-8 byte order mark
+  const absl::string_view text(std_text.data(), std_text.size());
   estimator::Recording recording;
   CsvProblems problems("recording CSV through a column mapping", "");
 
@@ -743,7 +734,7 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
     if (!mapping.star_tracker->valid_column.empty()) valid_col = take(1).front();
   }
 
-  std::map<std::string, int> metadata_line;
+  CsvMetadata metadata;  // the lines before the header
   bool have_header = false;
   size_t num_header_fields = 0;
   int header_line = 0;
@@ -751,27 +742,15 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
   int previous_time_line = 0;
   std::vector<std::string> fields;
 
+  CsvLines lines(text);  // a UTF-8 byte order mark dropped
   int line_no = 0;
-  size_t pos = 0;
-  while (pos < text.size()) {
-    size_t eol = text.find('\n', pos);
-    if (eol == absl::string_view::npos) eol = text.size();
-    absl::string_view line = text.substr(pos, eol - pos);
-    pos = eol + 1;
-    ++line_no;
-    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    if (absl::StripAsciiWhitespace(line).empty()) continue;
-
+  absl::string_view line;
+  while (lines.Next(&line_no, &line)) {
     if (!have_header) {
       if (line.front() == '#') {
-        std::string key, value;
-        if (!ParseMetadata(line, &key, &value)) continue;
-        if (auto [it, inserted] = metadata_line.emplace(key, line_no); !inserted) {
-          problems.Add(line_no, "",
-                       absl::StrFormat("metadata key '%s' repeats line %d", key, it->second));
-          continue;
+        if (auto entry = metadata.Read(line, line_no, problems); entry.has_value()) {
+          recording.metadata[entry->first] = entry->second;
         }
-        recording.metadata[key] = value;
         continue;
       }
       have_header = true;

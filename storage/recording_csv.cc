@@ -21,6 +21,7 @@
 #include "absl/time/time.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
+#include "storage/csv_lines.h"
 #include "storage/csv_problems.h"
 
 namespace esg::storage {
@@ -153,16 +154,6 @@ bool CheckUnit(Eigen::Matrix<double, N, 1>* v, const std::string& group, int lin
   return true;
 }
 
-// Parses one metadata line "# key: value"; false for a free comment (no ':').
-bool ParseMetadata(absl::string_view line, std::string* key, std::string* value) {
-  absl::string_view body = line.substr(1);
-  const size_t colon = body.find(':');
-  if (colon == absl::string_view::npos) return false;
-  *key = std::string(Trim(body.substr(0, colon)));
-  *value = std::string(Trim(body.substr(colon + 1)));
-  return !key->empty();
-}
-
 void AppendNumber(double x, std::string* out) {
   char buf[32];
   const auto [end, ec] = std::to_chars(buf, buf + sizeof(buf), x);
@@ -188,7 +179,7 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
   CsvProblems problems("recording CSV", "column ");
   const std::array<std::string, kNumColumns>& names = ColumnNames();
 
-  std::map<std::string, int> metadata_line;  // key -> line, to report repeated keys
+  CsvMetadata metadata;  // the lines before the header
   std::array<int, kNumColumns> field_index;  // column -> index in a row
   size_t num_header_fields = 0;
   bool have_header = false;
@@ -198,26 +189,15 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
   std::vector<absl::string_view> fields;
   fields.reserve(kNumColumns + 8);
 
+  CsvLines lines(text);
   int line_no = 0;
-  size_t pos = 0;
-  while (pos < text.size()) {
-    size_t eol = text.find('\n', pos);
-    if (eol == absl::string_view::npos) eol = text.size();
-    absl::string_view line = text.substr(pos, eol - pos);
-    pos = eol + 1;
-    ++line_no;
-    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
-    if (Trim(line).empty()) continue;
-
+  absl::string_view line;
+  while (lines.Next(&line_no, &line)) {
     if (!have_header) {
       if (line.front() == '#') {
-        std::string key, value;
-        if (!ParseMetadata(line, &key, &value)) continue;  // free comment
-        if (auto [it, inserted] = metadata_line.emplace(key, line_no); !inserted) {
-          problems.Add(line_no, "",
-                       absl::StrFormat("metadata key '%s' repeats line %d", key, it->second));
-          continue;
-        }
+        const auto entry = metadata.Read(line, line_no, problems);
+        if (!entry.has_value()) continue;  // a free comment, or a repeated key (reported)
+        const auto& [key, value] = *entry;
         if (key == "format" && value != kRecordingCsvFormat) {
           problems.Add(line_no, "",
                        absl::StrFormat("unsupported format '%s' (this reader reads '%s')", value,

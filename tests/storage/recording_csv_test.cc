@@ -196,6 +196,33 @@ TEST(RecordingCsv, InvalidStarTrackerMayCarryAQuaternionThatIsNotKept) {
   EXPECT_FALSE(read->frames[0].star_tracker->valid);
 }
 
+// The lines are read as the column-mapping reader reads them (storage/csv_lines.h): a UTF-8 byte
+// order mark (a spreadsheet's export) is dropped, CRLF line ends and blank lines change nothing,
+// and a problem's line number counts every line of the file.
+TEST(RecordingCsv, ByteOrderMarkCrLfAndBlankLinesAreReadAsTheMappedReaderReadsThem) {
+  const std::string csv = ValidCsv();
+  std::string dos;
+  for (char c : csv) {
+    if (c == '\n') dos += "\r\n\r\n";
+    else dos += c;
+  }
+  absl::StatusOr<estimator::Recording> plain = ParseRecordingCsv(csv);
+  absl::StatusOr<estimator::Recording> bom = ParseRecordingCsv("\xEF\xBB\xBF" + dos);
+  ASSERT_THAT(plain, IsOk());
+  ASSERT_THAT(bom, IsOk());
+  ExpectRecordingsIdentical(*plain, *bom);
+  // Line numbers count the blank lines: the 4th line of `csv` is the 7th of `dos`.
+  const std::string bad = WithField(csv, 4, "g1_hx", "x");
+  std::string bad_dos;
+  for (char c : bad) {
+    if (c == '\n') bad_dos += "\r\n\r\n";
+    else bad_dos += c;
+  }
+  const absl::StatusOr<estimator::Recording> refused = ParseRecordingCsv(bad_dos);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(std::string(refused.status().message()), HasSubstr("line 7"));
+}
+
 TEST(RecordingCsv, ExtraColumnsAreIgnored) {
   const std::string text =
       "# spacecraft_id: RDK-2\n"
