@@ -13,6 +13,8 @@ async function start() {
   openmct.install(openmct.plugins.LocalStorage());
   openmct.install(openmct.plugins.Espresso());
   openmct.install(openmct.plugins.UTCTimeSystem());
+  // The per-spacecraft summary is a display layout (objects.js).
+  openmct.install(openmct.plugins.DisplayLayout());
   const conductor = conductorOptions(list);
   openmct.install(openmct.plugins.Conductor(conductor));
   // The Conductor plugin sets the real-time option's clock offsets after the fixed bounds, which

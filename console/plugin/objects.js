@@ -28,6 +28,12 @@ export const TELEMETRY_TYPE = 'esg.telemetry';
 // belonging to the curve.
 const BAND_COLOURS = { value: '#4fb3ff', hi: '#9a6a2f', lo: '#9a6a2f' };
 const AXIS_COLOURS = { x: '#ff6b6b', y: '#7bd389', z: '#4fb3ff' };
+// The sources of predicted samples (PredictResponse.attitude_source), each marked on the plot.
+export const PREDICT_SOURCES = {
+  RECORDED: { label: 'recorded gyro readings (no star tracker)', color: '#c8c8c8' },
+  INERTIAL_HOLD: { label: 'inertial hold of the last estimate', color: '#ff7fe0' },
+  PLANNED: { label: 'planned attitude', color: '#ffd23f' }
+};
 const AXIS_DIM = { x: '#8a3a3a', y: '#3f7047', z: '#2a5f88' };
 
 function folder(identifier, name, composition, location) {
@@ -40,7 +46,8 @@ function telemetryObject(identifier, name, values, esg, location) {
 
 // An overlay plot with the series' colours fixed, lines joined, no point markers, and the
 // quantity with its unit as the y-axis label.
-function overlay(identifier, name, series, location, yLabel) {
+// logMode: Open MCT's symmetric log scale of the y axis (a 1-sigma that spans decades).
+function overlay(identifier, name, series, location, yLabel, logMode = false) {
   return {
     identifier,
     name,
@@ -48,7 +55,7 @@ function overlay(identifier, name, series, location, yLabel) {
     location,
     composition: series.map((s) => s.identifier),
     configuration: {
-      yAxis: { label: yLabel },
+      yAxis: logMode ? { label: yLabel, logMode: true } : { label: yLabel },
       series: series.map((s) => ({
         identifier: s.identifier, color: s.color, interpolate: 'linear', markers: false
       }))
@@ -93,6 +100,14 @@ function gyroIds(info) {
   return ((info.config && info.config.gyros) || []).map((g) => g.id);
 }
 
+// The gyros that run: the configured working and reserve pairs. A cold spare outside both has no
+// readings, hence no innovations.
+export function runningGyros(info) {
+  const config = info.config || {};
+  const running = new Set([...(config.working_pair || []), ...(config.reserve_pair || [])]);
+  return gyroIds(info).filter((g) => running.has(g));
+}
+
 function gyroConfig(info, gyro) {
   return info.config.gyros.find((g) => g.id === gyro);
 }
@@ -114,19 +129,60 @@ const builders = {
   async sc(identifier, [sc]) {
     const info = await session(sc);
     const gyros = gyroIds(info);
+    const running = runningGyros(info);
     return folder(identifier, sc, [
+      id('summary', sc),
+      id('health', sc),
       ...gyros.map((g) => id('coefs', sc, g)),
       id('attplot', sc),
       id('atttable', sc),
       ...AXES.map((axis) => id('errplot', sc, axis)),
       id('errtable', sc),
-      ...gyros.map((g) => id('innovplot', sc, g)),
+      ...running.map((g) => id('innovplot', sc, g)),
       id('innovtable', sc),
       id('predplot', sc),
       id('predtable', sc),
       id('plan', sc),
       id('diags', sc)
     ], keyString(id('root')));
+  },
+
+  // One screen per spacecraft: its health panel and attitude 1-sigma envelope, then k0 with its
+  // 1-sigma band and the star-tracker innovations of each running gyro (Open MCT display layout,
+  // 10 px grid; sized for the view pane of a 1600x900 screen with the tree and inspector open).
+  async summary(identifier, [sc]) {
+    const info = await session(sc);
+    const running = runningGyros(info);
+    const withEstimates = await estimatesAvailableFor(sc);
+    const k0 = running.filter((g) => estimatedCoefficients(gyroConfig(info, g)).some((c) => c.key === 'k0'));
+    const items = [];
+    const place = (child, x, y, width, height) => items.push({
+      type: 'subobject-view', identifier: child, x, y, width, height, hasFrame: true,
+      fontSize: 'default', font: 'default', id: `${identifier.key}-${items.length}`
+    });
+    const ROW = 25;
+    const FULL = 106;
+    place(id('health', sc), 0, 0, 44, ROW);
+    place(id('attplot', sc), 44, 0, FULL - 44, ROW);
+    const rowOf = (list, y, make) => {
+      const w = Math.floor(FULL / Math.max(1, list.length));
+      list.forEach((g, i) => place(make(g), i * w, y, w, ROW));
+    };
+    rowOf(k0, ROW, (g) => id('coefplot', sc, g, 'k0'));
+    if (withEstimates) rowOf(running, 2 * ROW, (g) => id('innovplot', sc, g));
+    return {
+      identifier,
+      name: `${sc} summary`,
+      type: 'layout',
+      location: keyString(id('sc', sc)),
+      composition: items.map((item) => item.identifier),
+      configuration: { items, layoutGrid: [10, 10], objectStyles: {} }
+    };
+  },
+
+  async health(identifier, [sc]) {
+    return { identifier, name: `${sc} health, alerts and last diagnosis`, type: 'esg.health', esg: { spacecraft: sc },
+      location: keyString(id('sc', sc)) };
   },
 
   async coefs(identifier, [sc, gyro]) {
@@ -167,7 +223,7 @@ const builders = {
       identifier: id('coefband', sc, gyro, coef, band), color: BAND_COLOURS[band]
     }));
     return overlay(identifier, `${c.label} gyro ${gyro} with 1-sigma band`, series,
-      keyString(id('coefs', sc, gyro)), `${c.label} [deg/h], case frame`);
+      keyString(id('coefs', sc, gyro)), c.key === 'k0' ? 'k0 [deg/h]' : `${c.label} [deg/h], gyro ${gyro} case frame`);
   },
 
   async coefband(identifier, [sc, gyro, coef, band]) {
@@ -186,7 +242,7 @@ const builders = {
       series.push({ identifier: id('estser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
       series.push({ identifier: id('estser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
     }
-    return overlay(identifier, name, series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
+    return overlay(identifier, name, series, keyString(id('sc', sc)), 'attitude 1-sigma [arcsec]');
   },
 
   async atttable(identifier, [sc]) {
@@ -245,31 +301,40 @@ const builders = {
       series.push({ identifier: id('estser', sc, `${k}_hi`), color: colours[i][1] });
       series.push({ identifier: id('estser', sc, `${k}_lo`), color: colours[i][1] });
     }
-    return overlay(identifier, name, series, keyString(id('sc', sc)), `gyro ${gyro} star-tracker innovation, gyro basis [arcsec]`);
+    return overlay(identifier, name, series, keyString(id('sc', sc)), 'innovation [arcsec]');
   },
 
   async innovtable(identifier, [sc]) {
     const name = 'Innovations table';
     if (!(await estimatesAvailableFor(sc))) return unavailable(identifier, name, keyString(id('sc', sc)));
     const info = await session(sc);
-    return table(identifier, name, id('innov', sc), innovationTableValues(gyroIds(info)), keyString(id('sc', sc)));
+    return table(identifier, name, id('innov', sc), innovationTableValues(runningGyros(info)), keyString(id('sc', sc)));
   },
 
   async innov(identifier, [sc]) {
     const info = await session(sc);
     return telemetryObject(identifier, `${sc} star-tracker innovations`,
-      innovationTableValues(gyroIds(info)), { source: 'est', spacecraft: sc },
+      innovationTableValues(runningGyros(info)), { source: 'est', spacecraft: sc },
       keyString(id('innovtable', sc)));
   },
 
+  // The predicted 1-sigma per body axis on a log scale (it spans decades across a gap), and a
+  // vertical line where each source of the samples begins (PredictResponse: the recorded readings
+  // up to the last archived frame, then the plan or the inertial hold), named in the legend: the
+  // envelope's jump at the last archived frame is where the source changes.
   async predplot(identifier, [sc]) {
-    const series = [];
-    for (const axis of AXES) {
-      series.push({ identifier: id('predser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
-      series.push({ identifier: id('predser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
+    const series = AXES.map((axis) => ({ identifier: id('predser', sc, `s${axis}`), color: AXIS_COLOURS[axis] }));
+    for (const source of Object.keys(PREDICT_SOURCES)) {
+      series.push({ identifier: id('predmark', sc, source), color: PREDICT_SOURCES[source].color });
     }
-    return overlay(identifier, 'Predicted attitude envelope',
-      series, keyString(id('sc', sc)), '1-sigma about body axes [arcsec]');
+    return overlay(identifier, 'Predicted attitude 1-sigma',
+      series, keyString(id('sc', sc)), 'predicted 1-sigma [arcsec], log scale', true);
+  },
+
+  async predmark(identifier, [sc, source]) {
+    const label = `${PREDICT_SOURCES[source].label} from here`;
+    return telemetryObject(identifier, label, singleSeriesValues('mark', label, null),
+      { source: 'predmark', spacecraft: sc, mark: source }, keyString(id('predplot', sc)));
   },
 
   async predtable(identifier, [sc]) {
@@ -318,7 +383,7 @@ function seriesLabel(field) {
   const band = field.endsWith('_hi') ? ' +1-sigma' : field.endsWith('_lo') ? ' -1-sigma' : '';
   const base = field.replace(/_(hi|lo)$/, '');
   const attitude = /^s([xyz])$/.exec(base);
-  if (attitude) return `${band.trim()} body ${attitude[1]}`;
+  if (attitude) return band ? `${band.trim()} body ${attitude[1]}` : `1-sigma about body ${attitude[1]}`;
   const error = /^e([xyz])$/.exec(base);
   if (error) return `attitude error body ${error[1]}${band}`;
   const innovation = /^g(\d)_z(\d)$/.exec(base);

@@ -3,6 +3,7 @@
 import { diagnosisViewProvider } from './diagnosisView.js';
 import { makeFaultProvider } from './faults.js';
 import { fleetViewProvider } from './fleetView.js';
+import { healthViewProvider } from './healthView.js';
 import { NAMESPACE } from './keys.js';
 import { objectProvider, TELEMETRY_TYPE } from './objects.js';
 import { planViewProvider } from './planView.js';
@@ -18,6 +19,9 @@ export default function EsgConsolePlugin() {
     });
     openmct.types.addType('esg.fleet', {
       name: 'ESG fleet overview', description: 'Every spacecraft session', cssClass: 'icon-dataset', creatable: false
+    });
+    openmct.types.addType('esg.health', {
+      name: 'ESG spacecraft health', description: 'State, sensor health, model, alerts and last diagnosis of one spacecraft', cssClass: 'icon-object', creatable: false
     });
     openmct.types.addType('esg.diagnosis', {
       name: 'ESG diagnosis', description: 'Model-discrepancy diagnosis report', cssClass: 'icon-notebook', creatable: false
@@ -42,6 +46,7 @@ export default function EsgConsolePlugin() {
     openmct.faults.addProvider(makeFaultProvider(openmct));
 
     openmct.objectViews.addProvider(fleetViewProvider());
+    openmct.objectViews.addProvider(healthViewProvider());
     openmct.objectViews.addProvider(diagnosisViewProvider());
     openmct.objectViews.addProvider(unavailableViewProvider());
     openmct.objectViews.addProvider(planViewProvider());

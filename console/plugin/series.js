@@ -183,8 +183,9 @@ export function innovationTableValues(gyros) {
 // The metadata of a single plotted series: time and one value. Every such series has the same
 // key ("value", read from the datum's field `field`): an overlay plot labels its y axis only
 // when all its series share the key.
+// unit null: no unit (a marker whose value only places it).
 export function singleSeriesValues(field, name, unit) {
-  const units = unit === 'deg/h' ? DEG_H : ARCSEC;
+  const units = unit === 'deg/h' ? DEG_H : unit === null ? { formatString: '%.1f' } : ARCSEC;
   return [TIME, { ...range('value', name, units), source: field }];
 }
 

@@ -44,22 +44,53 @@ const requesters = {
   // PredictAttitude over the conductor's bounds: recorded samples up to the last archived frame,
   // then the spacecraft's planned attitude (plan.js) or, without one, an inertial hold of the
   // last estimate.
-  async pred({ spacecraft }, { start, end }) {
-    const step = Math.max(MIN_PREDICT_STEP_S, Math.ceil((end - start) / 1000 / PREDICT_SAMPLES));
-    const plan = planSamples(spacecraft);
-    const body = plan
-      ? await apiFetch(`${spacecraftPath(spacecraft)}/predict`, {
-        method: 'POST',
-        body: { from: isoTime(start), to: isoTime(end), step_s: step, planned_attitude: plan }
-      })
-      : await sharedFetch(`${spacecraftPath(spacecraft)}/predict${query({
-        from: isoTime(start), to: isoTime(end), step_s: step
-      })}`);
+  async pred(esg, bounds) {
+    const body = await predict(esg, bounds);
     const recorded = body.recorded_samples || 0;
     const later = (body.attitude_source || '').replace(/^ATTITUDE_SOURCE_/, '');
     return body.samples.map((s, i) => predictDatum(s, i < recorded ? 'RECORDED' : later));
+  },
+
+  // Where the samples of one source begin, as a vertical line across the plotted 1-sigma (two
+  // points 1 ms apart, from the smallest to the largest 1-sigma of the samples): RECORDED at the
+  // first sample, PLANNED or INERTIAL_HOLD at the first sample after the last archived frame.
+  async predmark(esg, bounds) {
+    const body = await predict(esg, bounds);
+    const recorded = body.recorded_samples || 0;
+    const later = (body.attitude_source || '').replace(/^ATTITUDE_SOURCE_/, '');
+    const sigmas = body.samples.flatMap((s) => s.sigma_arcsec || []).filter((v) => v > 0);
+    if (sigmas.length === 0) return [];
+    let first = -1;
+    if (esg.mark === 'RECORDED' && recorded > 0) first = 0;
+    if (esg.mark === later && recorded < body.samples.length) first = recorded;
+    if (first < 0) return [];
+    const t = Date.parse(body.samples[first].time);
+    return [{ utc: t, mark: Math.min(...sigmas) }, { utc: t + 1, mark: Math.max(...sigmas) }];
   }
 };
+
+// PredictAttitude over the conductor's bounds: recorded samples up to the last archived frame,
+// then the spacecraft's planned attitude (plan.js) or, without one, an inertial hold of the last
+// estimate. The plot's series and markers share one GET (sharedFetch).
+async function predict({ spacecraft }, { start, end }) {
+  const step = Math.max(MIN_PREDICT_STEP_S, Math.ceil((end - start) / 1000 / PREDICT_SAMPLES));
+  const plan = planSamples(spacecraft);
+  if (!plan) {
+    return sharedFetch(`${spacecraftPath(spacecraft)}/predict${query({
+      from: isoTime(start), to: isoTime(end), step_s: step
+    })}`);
+  }
+  const body = { from: isoTime(start), to: isoTime(end), step_s: step, planned_attitude: plan };
+  const key = `${spacecraft}\u0000${JSON.stringify(body)}`;
+  if (!plannedInflight.has(key)) {
+    plannedInflight.set(key, apiFetch(`${spacecraftPath(spacecraft)}/predict`, { method: 'POST', body })
+      .finally(() => plannedInflight.delete(key)));
+  }
+  return plannedInflight.get(key);
+}
+
+// Requests with a plan in flight, shared like sharedFetch's GETs.
+const plannedInflight = new Map();
 
 // One estimate subscription per spacecraft, shared by every object that listens to it.
 const estimateFeeds = new Map(); // spacecraft -> {listeners:Set, unsubscribe}
@@ -171,7 +202,7 @@ export const telemetryProvider = {
     return domainObject.type === TELEMETRY_TYPE;
   },
   supportsSubscribe(domainObject) {
-    return domainObject.type === TELEMETRY_TYPE && domainObject.esg.source !== 'pred';
+    return domainObject.type === TELEMETRY_TYPE && !['pred', 'predmark'].includes(domainObject.esg.source);
   },
   async request(domainObject, options) {
     try {
