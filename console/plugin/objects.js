@@ -172,7 +172,7 @@ const builders = {
     if (withEstimates) rowOf(running, 2 * ROW, (g) => id('innovplot', sc, g));
     return {
       identifier,
-      name: `${sc} summary`,
+      name: 'Summary',
       type: 'layout',
       location: keyString(id('sc', sc)),
       composition: items.map((item) => item.identifier),
@@ -181,7 +181,7 @@ const builders = {
   },
 
   async health(identifier, [sc]) {
-    return { identifier, name: `${sc} health, alerts and last diagnosis`, type: 'esg.health', esg: { spacecraft: sc },
+    return { identifier, name: 'Health, alerts and last diagnosis', type: 'esg.health', esg: { spacecraft: sc },
       location: keyString(id('sc', sc)) };
   },
 

@@ -61,14 +61,16 @@ async function open(browsePath, query = '') {
 
 // height: a taller window for a long view (the diagnosis report scrolls inside Open MCT's pane,
 // so a full-page capture would not show more).
-async function shot(name, height = 900) {
+// width: 1600 for the views that must fit an engineer's 1600x900 screen.
+async function shot(name, height = 900, width = 1500) {
   if (!SCREENSHOTS) return;
   fs.mkdirSync(SHOT_DIR, { recursive: true });
-  if (height !== 900) await page.setViewport({ width: 1500, height });
+  const resized = height !== 900 || width !== 1500;
+  if (resized) await page.setViewport({ width, height });
   await page.mouse.move(1, 880); // no hover toolbar or tooltip over the plot
   await sleep(1500); // plots draw on the next animation frames
   await page.screenshot({ path: path.join(SHOT_DIR, `${name}.png`) });
-  if (height !== 900) await page.setViewport({ width: 1500, height: 900 });
+  if (resized) await page.setViewport({ width: 1500, height: 900 });
 }
 
 // The rows of the Open MCT telemetry table on screen, as {column title: cell text}.
@@ -274,7 +276,61 @@ test('fleet overview: health, 1-sigma, model, worst alert and diagnosis per spac
   assert.equal(healthy.worstAlert, '', 'RDK-1\'s two alerts are cleared');
   assert.deepEqual(healthy.counts, {});
   assert.deepEqual(rows.map((r) => r.id), [FAULTY, 'RDK-1']);
-  await shot('fleet');
+});
+
+test('summary layout of the faulty spacecraft: health panel, envelope, k0 bands, innovations of running gyros, on one 1600x900 screen', async () => {
+  const status = await cliJson('status', '--spacecraft', FAULTY);
+  const session = status.sessions ? status.sessions[0] : status;
+  const last = Date.parse(session.lastFrameTime);
+  // The time bounds of the page, given back at the end for the tests after this one.
+  const saved = await page.evaluate(() => window.openmct.time.getBounds());
+  await page.setViewport({ width: 1600, height: 900 });
+  try {
+    await open(`esg:root/esg:sc~${FAULTY}/esg:summary~${FAULTY}`,
+      `?tc.mode=fixed&tc.startBound=${last - FAULT_HOURS * 3600e3}&tc.endBound=${last}&tc.timeSystem=utc`);
+    await page.waitForSelector(`.esg-health[data-spacecraft="${FAULTY}"] [data-active-alerts]`, { timeout: 20_000 });
+    await page.waitForFunction(() => document.querySelectorAll('.gl-plot canvas').length >= 7, { timeout: 20_000 });
+    const panel = await page.$eval('.esg-health', (t) => ({
+      attention: t.dataset.attention,
+      health: t.querySelector('[data-health]').dataset.health,
+      excluded: [...t.querySelectorAll('[data-excluded-gyro]')].map((e) => Number(e.dataset.excludedGyro)),
+      model: t.querySelector('[data-model]').dataset.model,
+      verdict: t.querySelector('[data-verdict]').dataset.verdict,
+      alerts: [...t.querySelectorAll('[data-alert]')].map((e) => Number(e.dataset.alert)),
+    }));
+    const active = (await cliJson('alerts', '--spacecraft', FAULTY)).alerts.filter((a) => !a.cleared);
+    assert.equal(panel.attention, 'DISTRESS');
+    assert.equal(panel.health, 'degraded');
+    assert.deepEqual(panel.excluded, session.excludedGyros.map((g) => g.gyroId));
+    assert.equal(panel.model, 'inconsistent');
+    const diagnoses = (await cliJson('diagnoses', 'list', '--spacecraft', FAULTY)).diagnoses;
+    assert.equal(panel.verdict, diagnoses.at(-1).verdict);
+    // Every active alert, worst first (the DISTRESS one at the top).
+    assert.deepEqual([...panel.alerts].sort((a, b) => a - b), active.map((a) => Number(a.sequence)).sort((a, b) => a - b));
+    const distress = active.find((a) => a.severity === 'ALERT_SEVERITY_DISTRESS');
+    assert.equal(panel.alerts[0], Number(distress.sequence));
+    // The frames: the panel, the envelope, k0 of each running gyro, the innovations of each
+    // running gyro (the working and reserve pairs: gyros 1, 2, 3; spare gyro 4 has none), all
+    // inside the window.
+    const frames = await page.$$eval('.l-layout__frame', (fs) => fs.map((f) => {
+      const r = f.getBoundingClientRect();
+      return { title: (f.querySelector('.c-object-label__name') || {}).textContent, bottom: r.bottom, right: r.right };
+    }));
+    const titles = frames.map((f) => (f.title || '').trim());
+    const running = [...new Set([...session.config.workingPair, ...session.config.reservePair])].sort();
+    assert.deepEqual(running, [1, 2, 3]);
+    assert.deepEqual(titles.filter((t) => t.startsWith('Innovations')), running.map((g) => `Innovations gyro ${g}`));
+    assert.deepEqual(titles.filter((t) => t.startsWith('k0')), running.map((g) => `k0 gyro ${g} with 1-sigma band`));
+    assert.ok(titles.includes('Attitude 1-sigma envelope') && titles.includes('Health, alerts and last diagnosis'), titles.join(', '));
+    for (const f of frames) assert.ok(f.bottom <= 900 - 40 && f.right <= 1600, `${f.title} at ${f.right},${f.bottom}: off the screen`);
+    // No innovations object for the spare in the spacecraft's folder either.
+    assert.equal(await page.evaluate(async (sc) => (await window.openmct.objects.get({ namespace: 'esg', key: `sc~${sc}` }))
+      .composition.some((c) => c.key === `innovplot~${sc}~4`), FAULTY), false);
+    await shot('summary', 900, 1600);
+  } finally {
+    await page.setViewport({ width: 1500, height: 900 });
+    await page.evaluate((b) => window.openmct.time.setBounds(b), saved);
+  }
 });
 
 test('coefficient table shows the values and 1-sigma of esg history, to the digits shown', async () => {
@@ -737,12 +793,44 @@ test('predicted attitude across a gap after the last frame: table from PredictAt
     ['q0', 'q1', 'q2', 'q3'].forEach((q, i) => assert.equal(Number(row[q]).toFixed(9),
       sample.qInB[i].toFixed(9), `${q} at ${row['Time (UTC)']}`));
   }
-  if (SCREENSHOTS) {
-    await open('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', bounds);
-    await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
-    await shot('prediction_envelope');
-  }
+  // The plot marks where each source begins: the recorded readings at the first sample, the
+  // inertial hold at the first sample after the last archived frame (esg predict's
+  // recordedSamples), each named in the legend; no plan, no planned marker.
+  const answer = await cliJson('predict', '--spacecraft', 'RDK-1', '--from', new Date(start).toISOString(),
+    '--to', new Date(end).toISOString(), '--step', String(step));
+  const recorded = Number(answer.recordedSamples);
+  assert.equal(answer.attitudeSource, 'ATTITUDE_SOURCE_INERTIAL_HOLD');
+  await open('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', bounds);
+  await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+  const legend = await page.waitForFunction(() => {
+    const text = document.querySelector('.c-plot-legend')?.textContent || '';
+    return /inertial hold of the last estimate from here/.test(text) && text;
+  }, { timeout: 20_000 });
+  assert.match(await legend.jsonValue(), /recorded gyro readings \(no star tracker\) from here/);
+  const marks = await predictionMarks('RDK-1', start, end);
+  assert.deepEqual(marks.RECORDED.map((p) => p.utc), [Date.parse(predicted[0].time), Date.parse(predicted[0].time) + 1]);
+  const holdStart = Date.parse(predicted[recorded].time);
+  assert.ok(holdStart > Date.parse(answer.lastArchivedTime) && Date.parse(predicted[recorded - 1].time) <= Date.parse(answer.lastArchivedTime));
+  assert.deepEqual(marks.INERTIAL_HOLD.map((p) => p.utc), [holdStart, holdStart + 1]);
+  assert.deepEqual(marks.PLANNED, []);
+  // Each marker spans the plotted 1-sigma: from the smallest to the largest of the samples.
+  const all = predicted.flatMap((p) => p.sigmaArcsec);
+  assert.deepEqual(marks.INERTIAL_HOLD.map((p) => p.mark), [Math.min(...all), Math.max(...all)]);
+  await shot('prediction_envelope');
 });
+
+// The marker series of the prediction plot as the page's telemetry provider gives them.
+function predictionMarks(sc, start, end) {
+  return page.evaluate(async (spacecraft, s, e) => {
+    const out = {};
+    for (const source of ['RECORDED', 'INERTIAL_HOLD', 'PLANNED']) {
+      const object = await window.openmct.objects.get({ namespace: 'esg', key: `predmark~${spacecraft}~${source}` });
+      out[source] = (await window.openmct.telemetry.request(object, { start: s, end: e }))
+        .map((d) => ({ utc: d.utc, mark: d.mark }));
+    }
+    return out;
+  }, sc, start, end);
+}
 
 test('without tokens: no sign-in, and acknowledging asks the operator name esgd then records', async () => {
   // A second esgd without a tokens file, the faulty flight replayed into it, its own gateway, and
@@ -830,6 +918,10 @@ test('a planned attitude pasted in the console is what the prediction after the 
     if (row['Attitude source'] === 'PLANNED') planned++;
   }
   assert.ok(planned > 10, `${planned} planned rows`);
+  const marks = await predictionMarks('RDK-1', start, end);
+  const firstPlanned = predicted.find((p) => Date.parse(p.time) > last);
+  assert.deepEqual(marks.PLANNED.map((p) => p.utc), [Date.parse(firstPlanned.time), Date.parse(firstPlanned.time) + 1]);
+  assert.deepEqual(marks.INERTIAL_HOLD, []);
   // Clearing the plan brings the inertial hold back.
   await open('esg:root/esg:sc~RDK-1/esg:plan~RDK-1');
   await page.waitForSelector('.esg-plan-clear');
@@ -959,4 +1051,26 @@ test('a late frame re-runs the filter: the open table is read again, superseded 
   await shot('coefficient_revisions');
   process.stdout.write(`# ${SC}: ${late.length} snapshots at the late frames; ${all.length - current.length} revised in all, ` +
     `${superseded} of them in the table with revised rows\n`);
+});
+
+// The whole fleet at the end of the run (five spacecraft: the demo flight, the faulty one, the
+// star-tracker defects, the new and the late-frame ones): every row as esg reports it, worst first.
+test('fleet overview of the whole fleet: every row as esg reports, the worst first, on a 1600x900 screen', async () => {
+  await page.setViewport({ width: 1600, height: 900 });
+  try {
+    await open('esg:root/esg:fleet');
+    const n = (await cliJson('status')).sessions.length;
+    await page.waitForFunction((count) => document.querySelectorAll('tr[data-spacecraft]').length === count,
+      { timeout: 20_000 }, n);
+    const rows = await fleetRows();
+    await checkFleet(rows);
+    assert.equal(rows[rows.length - 1].attention, 'NOMINAL');
+    assert.ok(['CRITICAL', 'DISTRESS'].includes(rows[0].attention), rows[0].attention);
+    // The table fits the view: no column cut at 1600 px.
+    const overflow = await page.$eval('table.esg-fleet', (t) => t.getBoundingClientRect().right - t.closest('.esg-view').getBoundingClientRect().right);
+    assert.ok(overflow <= 0, `the fleet table overflows by ${overflow} px`);
+    await shot('fleet', 900, 1600);
+  } finally {
+    await page.setViewport({ width: 1500, height: 900 });
+  }
 });

@@ -127,6 +127,10 @@ test('/api/fleet counts open alerts by severity and gives the last star-tracker 
   assert.equal(entry.session.spacecraft_id, 'RDK-1');
   // The one open alert is the INGEST_CONFLICT raised in before(): WARNING.
   assert.deepEqual(entry.open_alerts, { INFO: 0, WARNING: 1, DISTRESS: 0, CRITICAL: 0 });
+  // ... which is the worst active alert; no diagnosis has run yet (the diagnoses test is later).
+  assert.equal(entry.worst_alert.reason, 'ALERT_REASON_INGEST_CONFLICT');
+  assert.equal(entry.worst_alert.cleared, false);
+  assert.equal(entry.last_diagnosis, null);
   const estimates = await api('/api/spacecraft/RDK-1/estimates', { headers: asBob });
   if (estimates.status === 501) {
     assert.equal(entry.last_star_tracker_time, null);
@@ -293,6 +297,9 @@ test('predict: GET equals esg predict --json; POST takes a planned attitude', as
 test('diagnoses: list and report equal esg diagnoses list/show --json', async () => {
   await cli(bob, 'diagnose', '--spacecraft', 'RDK-1', '--effects', 'none', '--json');
   const list = await api('/api/spacecraft/RDK-1/diagnoses', { headers: asBob });
+  // The fleet gives the newest one.
+  const fleet = await api('/api/fleet', { headers: asBob });
+  assert.deepEqual(fleet.json.fleet[0].last_diagnosis, list.json.diagnoses.at(-1));
   assert.equal(list.status, 200);
   const expected = JSON.parse(await cli(bob, 'diagnoses', 'list', '--spacecraft', 'RDK-1', '--json'))
     .diagnoses.map((d) => esgJson.normalize('esg.v1.DiagnosisResult', d));
