@@ -13,11 +13,14 @@ import { live } from './live.js';
 const REFRESH_MIN_MS = 1000;
 
 const HEALTH_STYLE = `
-.esg-health th { text-align: left; padding-right: 10px; }
+.esg-health { font-size: 12px; }
+.esg-health th { text-align: left; padding: 2px 8px 2px 4px; }
 .esg-health td { padding: 2px 6px; white-space: normal; }
+.esg-health .alerts div { white-space: nowrap; overflow: hidden; text-overflow: ellipsis; max-width: 330px; }
 .esg-health td.num { text-align: left; }
 .esg-health .alerts td { white-space: normal; }
 .esg-health h2 { margin: 0 0 4px; }
+.esg-view:has(.esg-health) { padding: 4px 6px; }
 `;
 
 function render(container, entry, alerts) {

@@ -160,16 +160,17 @@ const builders = {
       type: 'subobject-view', identifier: child, x, y, width, height, hasFrame: true,
       fontSize: 'default', font: 'default', id: `${identifier.key}-${items.length}`
     });
-    const ROW = 25;
+    const TOP = 29;
+    const ROW = 22;
     const FULL = 106;
-    place(id('health', sc), 0, 0, 44, ROW);
-    place(id('attplot', sc), 44, 0, FULL - 44, ROW);
+    place(id('health', sc), 0, 0, 46, TOP);
+    place(id('attplot', sc), 46, 0, FULL - 46, TOP);
     const rowOf = (list, y, make) => {
       const w = Math.floor(FULL / Math.max(1, list.length));
       list.forEach((g, i) => place(make(g), i * w, y, w, ROW));
     };
-    rowOf(k0, ROW, (g) => id('coefplot', sc, g, 'k0'));
-    if (withEstimates) rowOf(running, 2 * ROW, (g) => id('innovplot', sc, g));
+    rowOf(k0, TOP, (g) => id('coefplot', sc, g, 'k0'));
+    if (withEstimates) rowOf(running, TOP + ROW, (g) => id('innovplot', sc, g));
     return {
       identifier,
       name: 'Summary',
@@ -242,7 +243,7 @@ const builders = {
       series.push({ identifier: id('estser', sc, `s${axis}_hi`), color: AXIS_COLOURS[axis] });
       series.push({ identifier: id('estser', sc, `s${axis}_lo`), color: AXIS_DIM[axis] });
     }
-    return overlay(identifier, name, series, keyString(id('sc', sc)), 'attitude 1-sigma [arcsec]');
+    return overlay(identifier, name, series, keyString(id('sc', sc)), '1-sigma [arcsec]');
   },
 
   async atttable(identifier, [sc]) {
