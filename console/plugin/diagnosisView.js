@@ -5,11 +5,53 @@ import { apiFetch } from './api.js';
 import { el, fixed, STYLE } from './dom.js';
 import { gapChart } from './gapChart.js';
 
+const AXIS = ['x', 'y', 'z'];
+// The report's parameter names (its JSON keys, docs/discovery.md "JSON") in the words of the drift
+// model and the effect library; a vector's index is the axis of the gyro's case frame k. Each entry:
+// a name, or per index a name.
+const PARAMETER_NAMES = {
+  k0DegH: 'k0, 4th shape harmonic',
+  c1DegH: ['C11', 'C12', 'C13'].map((c) => `${c}, rotor displacement (1st harmonic)`),
+  c2DegH: ['C21', 'C22', 'C23'].map((c) => `${c}, rotor displacement (3rd harmonic)`),
+  muDegH: ['mu12', 'mu23', 'mu31'].map((c) => `${c}, unequal stiffness`),
+  nuDegH: ['nu23', 'nu31', 'nu12'].map((c) => `${c}, unequal stiffness`),
+  driftStepDegH: AXIS.map((a) => `drift step about case ${a}`),
+  driftStepSizeDegH: 'drift step size',
+  onsetHours: 'onset (flight time)',
+  onsetLowerHours: 'onset, earliest',
+  onsetUpperHours: 'onset, latest',
+  displacementUm: AXIS.map((a) => `rotor displacement along case ${a}`),
+  displacementSizeUm: 'rotor displacement size',
+  displacementRateUmPerH: AXIS.map((a) => `rotor displacement rate along case ${a}`),
+  displacementRateSizeUmPerH: 'rotor displacement rate size',
+  impliedDisplacementRateSizeUmPerH: 'rotor displacement rate size implied',
+  misalignmentArcsec: AXIS.map((a) => `misalignment about case ${a}`),
+  latencyMs: 'star-tracker latency',
+  randomWalkDegHSqrtH: 'rate random walk',
+  configuredRandomWalkDegHSqrtH: 'rate random walk configured',
+  offsetVoltageMv: 'offset voltage'
+};
+const UNIT_SUFFIX = /(DegHSqrtH|DegH|UmPerH|Um|Hours|Arcsec|Ms|Mv|Deg|S)$/;
+
+// "c1DegH[0]" -> "C11, rotor displacement (1st harmonic)"; a name not in the table in words
+// ("lineAngleDeg" -> "line angle", an index as the case axis).
+export function parameterName(key) {
+  const m = /^([A-Za-z0-9]+)(?:\[(\d+)\])?$/.exec(key || '');
+  if (!m) return key;
+  const [, base, index] = m;
+  const known = PARAMETER_NAMES[base];
+  if (Array.isArray(known) && index !== undefined && known[Number(index)]) return known[Number(index)];
+  if (typeof known === 'string') return known;
+  const words = base.replace(UNIT_SUFFIX, '').replace(/([A-Z])/g, ' $1').toLowerCase().trim();
+  return index === undefined ? words : `${words}, case ${AXIS[Number(index)] || index}`;
+}
+
 function parameterTable(parameters) {
   return el('table', {},
     el('thead', {}, el('tr', {}, el('th', {}, 'parameter'), el('th', {}, 'value'), el('th', {}, '1-sigma'), el('th', {}, 'unit'))),
     el('tbody', {}, (parameters || []).map((p) => el('tr', {},
-      el('td', {}, p.name), el('td', { class: 'num' }, fixed(p.value, 5)),
+      el('td', { 'data-parameter': p.name, title: `${p.name} in the report (esg diagnose --json)` }, parameterName(p.name)),
+      el('td', { class: 'num' }, fixed(p.value, 5)),
       el('td', { class: 'num' }, p.sigma === undefined ? '-' : fixed(p.sigma, 5)), el('td', {}, p.unit || '')))));
 }
 

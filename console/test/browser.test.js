@@ -570,6 +570,11 @@ test('the diagnosis report opens with the verdict and findings esg stored', asyn
   const headings = await page.$$eval('.esg-finding h3', (hs) => hs.map((h) => h.textContent));
   assert.deepEqual(headings, report.findings.map((f) => `${f.effect}${f.gyro ? ` (gyro ${f.gyro})` : ''}`));
   assert.ok(headings.length > 0, 'the faulty flight has findings');
+  // Parameters by their names in words, not the report's JSON keys.
+  const parameters = await page.$$eval('.esg-finding td[data-parameter]', (tds) => tds.map((td) => td.textContent));
+  assert.ok(parameters.length > 0, 'the findings have parameters');
+  for (const name of parameters) assert.doesNotMatch(name, /\[\d\]|DegH|Hours/, name);
+  assert.ok(parameters.includes('drift step about case z'), parameters.join(', '));
   const gaps = report.fit.before.gaps.length;
   assert.equal(await page.$$eval('.esg-gap-chart rect title', (t) => t.length), 2 * gaps);
   await shot('diagnosis', 1350);
