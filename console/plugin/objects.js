@@ -34,6 +34,7 @@ export const PREDICT_SOURCES = {
   INERTIAL_HOLD: { label: 'inertial hold of the last estimate', color: '#ff7fe0' },
   PLANNED: { label: 'planned attitude', color: '#ffd23f' }
 };
+const SIGMA_COLOURS = ['#4fb3ff', '#ff6b6b', '#7bd389', '#ffd23f', '#c58cff', '#ff9d4f', '#5fe0d0'];
 const AXIS_DIM = { x: '#8a3a3a', y: '#3f7047', z: '#2a5f88' };
 
 function folder(identifier, name, composition, location) {
@@ -191,7 +192,26 @@ const builders = {
     const g = Number(gyro);
     const plots = estimatedCoefficients(gyroConfig(info, g)).map((c) => id('coefplot', sc, g, c.key));
     return folder(identifier, `Drift coefficients gyro ${g}`,
-      [id('coeftable', sc, g), ...plots, id('coefrevtable', sc, g)], keyString(id('sc', sc)));
+      [id('coeftable', sc, g), ...plots, id('coefsigplot', sc, g), id('coefrevtable', sc, g)], keyString(id('sc', sc)));
+  },
+
+  // The 1-sigma of every estimated coefficient of one gyro on a log scale: the band about a value
+  // narrows to a hair at linear scale once the calibration converges; its width stays readable
+  // here over decades. In 0.001 deg/h, since Open MCT's log mode is log10(1 + |x|): linear below 1.
+  async coefsigplot(identifier, [sc, gyro]) {
+    const info = await session(sc);
+    const series = estimatedCoefficients(gyroConfig(info, Number(gyro))).map((c, i) => ({
+      identifier: id('coefsig', sc, gyro, c.key), color: SIGMA_COLOURS[i % SIGMA_COLOURS.length]
+    }));
+    return overlay(identifier, `1-sigma of the coefficients of gyro ${gyro}`, series,
+      keyString(id('coefs', sc, gyro)), '1-sigma [0.001 deg/h], log scale', true);
+  },
+
+  async coefsig(identifier, [sc, gyro, coef]) {
+    const c = COEFFICIENTS.find((x) => x.key === coef);
+    const label = `gyro ${gyro} ${c.label} 1-sigma`;
+    return telemetryObject(identifier, label, singleSeriesValues(`${coef}_sigma_mdeg`, label, '0.001 deg/h'),
+      { source: 'coef', spacecraft: sc, gyro: Number(gyro) }, keyString(id('coefsigplot', sc, gyro)));
   },
 
   // The coefficient history with what re-runs over late frames superseded: each snapshot once

@@ -42,6 +42,8 @@ export function snapshotDatum(snapshot) {
     const sigma = c.get(snapshot.sigma);
     datum[c.key] = value;
     datum[`${c.key}_sigma`] = sigma;
+    // For the log-scale plot of the 1-sigma: Open MCT's log mode is log10(1 + |x|), flat below 1.
+    datum[`${c.key}_sigma_mdeg`] = sigma * 1000;
     datum[`${c.key}_hi`] = value + sigma;
     datum[`${c.key}_lo`] = value - sigma;
   }
@@ -185,7 +187,8 @@ export function innovationTableValues(gyros) {
 // when all its series share the key.
 // unit null: no unit (a marker whose value only places it).
 export function singleSeriesValues(field, name, unit) {
-  const units = unit === 'deg/h' ? DEG_H : unit === null ? { formatString: '%.1f' } : ARCSEC;
+  const units = unit === 'deg/h' ? DEG_H : unit === null ? { formatString: '%.1f' }
+    : unit === '0.001 deg/h' ? { unit, formatString: '%.2f' } : ARCSEC;
   return [TIME, { ...range('value', name, units), source: field }];
 }
 
