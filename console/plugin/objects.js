@@ -404,7 +404,7 @@ function seriesLabel(field) {
   const band = field.endsWith('_hi') ? ' +1-sigma' : field.endsWith('_lo') ? ' -1-sigma' : '';
   const base = field.replace(/_(hi|lo)$/, '');
   const attitude = /^s([xyz])$/.exec(base);
-  if (attitude) return band ? `${band.trim()} body ${attitude[1]}` : `1-sigma about body ${attitude[1]}`;
+  if (attitude) return band ? `${band.trim()} body ${attitude[1]}` : `body ${attitude[1]}`;
   const error = /^e([xyz])$/.exec(base);
   if (error) return `attitude error body ${error[1]}${band}`;
   const innovation = /^g(\d)_z(\d)$/.exec(base);
