@@ -66,8 +66,9 @@ function overlay(identifier, name, series, location, yLabel, logMode = false) {
 
 // A telemetry table of one object. The name column (always the same object) and the unit
 // columns (the unit is in each column's title) are hidden to leave room for the numbers.
-// fitContent: columns as wide as their content (scrolling sideways) instead of equal widths.
-function table(identifier, name, child, values, location, fitContent = false) {
+// Columns as wide as their content (scrolling sideways when they do not fit), not Open MCT's
+// equal widths, which cut the time and the column titles at 1600 px.
+function table(identifier, name, child, values, location, fitContent = true) {
   const hiddenColumns = { name: true };
   for (const v of values) if (v.unit) hiddenColumns[`${v.key}-unit`] = true;
   const configuration = { columnWidths: { utc: 200 }, hiddenColumns };
