@@ -8,7 +8,7 @@
 
 #include "absl/strings/str_format.h"
 
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 
 namespace esg::estimator {
 
@@ -117,7 +117,7 @@ double ConsistencyMonitor::Threshold(ChannelState& c, int dof, double level) {
   for (const auto& [d, q] : cache) {
     if (d == dof) return q;
   }
-  const double q = discovery::ChiSquareQuantile(1.0 - level, dof);
+  const double q = ChiSquareQuantile(1.0 - level, dof);
   if (cache.size() >= 8) cache.erase(cache.begin());
   cache.emplace_back(dof, q);
   return q;
@@ -126,10 +126,10 @@ double ConsistencyMonitor::Threshold(ChannelState& c, int dof, double level) {
 double ConsistencyMonitor::Cap(int dof) {
   if (dof < static_cast<int>(cap_cache_.size())) {
     double& c = cap_cache_[dof];
-    if (c == 0.0) c = discovery::ChiSquareQuantile(1.0 - kCapLevel, dof);
+    if (c == 0.0) c = ChiSquareQuantile(1.0 - kCapLevel, dof);
     return c;
   }
-  return discovery::ChiSquareQuantile(1.0 - kCapLevel, dof);
+  return ChiSquareQuantile(1.0 - kCapLevel, dof);
 }
 
 std::optional<ConsistencyMonitor::TestResult> ConsistencyMonitor::Add(Channel channel,

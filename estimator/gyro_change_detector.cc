@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "absl/strings/str_format.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 
 namespace esg::estimator {
 
@@ -15,9 +15,9 @@ constexpr double kCapLevel = 1e-3;  // each step's NIS capped at chi2inv(1 - 1e-
 
 GyroChangeDetector::GyroChangeDetector(GyroChangeDetectorOptions options) : options_(options) {
   const double dof = 2.0 * options_.window_steps;
-  cap_ = discovery::ChiSquareQuantile(1.0 - kCapLevel, 2.0);
-  fail_threshold_ = discovery::ChiSquareQuantile(1.0 - options_.alpha_fail, dof);
-  pass_threshold_ = discovery::ChiSquareQuantile(1.0 - options_.alpha_pass, dof);
+  cap_ = ChiSquareQuantile(1.0 - kCapLevel, 2.0);
+  fail_threshold_ = ChiSquareQuantile(1.0 - options_.alpha_fail, dof);
+  pass_threshold_ = ChiSquareQuantile(1.0 - options_.alpha_pass, dof);
 }
 
 std::optional<GyroChangeDetector::Decision> GyroChangeDetector::Add(

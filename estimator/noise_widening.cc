@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "absl/strings/str_format.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/units.h"
 
 namespace esg::estimator {
@@ -45,7 +45,7 @@ std::optional<NoiseWidening::Decision> NoiseWidening::Add(double nis, int dof,
     return std::nullopt;
   }
   window_.push_back(
-      {std::min(nis, discovery::ChiSquareQuantile(1.0 - kCapLevel, dof)), dof, mean_variance});
+      {std::min(nis, ChiSquareQuantile(1.0 - kCapLevel, dof)), dof, mean_variance});
   if (static_cast<int>(window_.size()) < options_.window_steps) return std::nullopt;
   Decision d;
   d.steps = static_cast<int>(window_.size());
@@ -57,8 +57,8 @@ std::optional<NoiseWidening::Decision> NoiseWidening::Add(double nis, int dof,
   }
   const double mean_variance_window = variance_sum / d.steps;
   const double ratio = d.nis_sum / d.dof;
-  d.widen_threshold = discovery::ChiSquareQuantile(1.0 - options_.alpha, d.dof);
-  d.narrow_threshold = discovery::ChiSquareQuantile(options_.alpha_narrow, d.dof);
+  d.widen_threshold = ChiSquareQuantile(1.0 - options_.alpha, d.dof);
+  d.narrow_threshold = ChiSquareQuantile(options_.alpha_narrow, d.dof);
   const bool exceeded = d.nis_sum > d.widen_threshold;
   const bool persistent = exceeded && previous_exceeded_;
   previous_exceeded_ = exceeded;

@@ -12,7 +12,7 @@
 #include "Eigen/LU"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 
 namespace esg::estimator {
 
@@ -123,7 +123,7 @@ ReadingFaultMonitor::ReadingFaultMonitor(ReadingFaultOptions options) : options_
     // in a slew, is significant long before that).
     const double dof = 2.0 * n - 6.0;
     erratic_threshold_[n] =
-        std::max(discovery::ChiSquareQuantile(1.0 - options_.erratic_alpha, dof),
+        std::max(ChiSquareQuantile(1.0 - options_.erratic_alpha, dof),
                  options_.erratic_scale * options_.erratic_scale * dof);
   }
 }

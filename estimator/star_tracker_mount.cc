@@ -8,7 +8,7 @@
 #include "Eigen/Geometry"
 #include "Eigen/LU"
 #include "absl/strings/str_format.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 
 namespace esg::estimator {
 
@@ -18,8 +18,8 @@ using Eigen::Vector3d;
 StarTrackerMountMonitor::StarTrackerMountMonitor(StarTrackerMountOptions options)
     : options_(options) {
   threshold_ =
-      discovery::ChiSquareQuantile(1.0 - options_.alpha, 3.0 * (options_.window_steps - 1));
-  perpendicular_threshold_ = discovery::ChiSquareQuantile(1.0 - options_.alpha, 2.0);
+      ChiSquareQuantile(1.0 - options_.alpha, 3.0 * (options_.window_steps - 1));
+  perpendicular_threshold_ = ChiSquareQuantile(1.0 - options_.alpha, 2.0);
 }
 
 std::optional<StarTrackerMountMonitor::Decision> StarTrackerMountMonitor::AddVoted(

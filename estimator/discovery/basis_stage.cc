@@ -8,7 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/discovery/wander.h"
 #include "estimator/units.h"

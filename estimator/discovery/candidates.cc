@@ -13,7 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
 #include "estimator/discovery/readout_candidate.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/drift_model.h"
 #include "estimator/rotation.h"

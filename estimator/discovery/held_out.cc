@@ -6,7 +6,7 @@
 #include <map>
 #include <optional>
 
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {

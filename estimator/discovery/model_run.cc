@@ -4,7 +4,7 @@
 #include <cmath>
 #include <map>
 
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/rotation.h"
 
 namespace esg::estimator::discovery {

@@ -9,7 +9,7 @@
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/open_ended.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 
 namespace esg::estimator::discovery {
 

@@ -12,7 +12,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/wander.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {

@@ -10,7 +10,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation_filter.h"
 #include "estimator/discovery/location.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/drift_model.h"
 #include "estimator/units.h"
 

@@ -25,7 +25,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "estimator/calibration_model.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/drift_model.h"
 #include "estimator/rotation.h"
 #include "estimator/session.h"
@@ -41,8 +41,8 @@
 namespace esg::estimator {
 namespace {
 
-using ::esg::estimator::discovery::ChiSquareCdf;
-using ::esg::estimator::discovery::ChiSquareQuantile;
+using ::esg::estimator::ChiSquareCdf;
+using ::esg::estimator::ChiSquareQuantile;
 using ::esg::testing::IsOk;
 using ::esg::testing::PaperFlight;
 

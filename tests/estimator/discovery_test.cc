@@ -15,7 +15,7 @@
 #include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"

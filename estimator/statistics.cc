@@ -1,4 +1,4 @@
-#include "estimator/discovery/statistics.h"
+#include "estimator/statistics.h"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 #include <tuple>
 #include <utility>
 
-namespace esg::estimator::discovery {
+namespace esg::estimator {
 
 namespace {
 
@@ -161,4 +161,4 @@ double EvidenceOverPrior(const std::vector<std::pair<double, double>>& weight_an
   return 2.0 * (top + std::log(sum));
 }
 
-}  // namespace esg::estimator::discovery
+}  // namespace esg::estimator

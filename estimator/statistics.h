@@ -1,16 +1,17 @@
-// Distribution functions and small robust fits for the discovery's significance tests
-// (docs/discovery.md):
+// Distribution functions and small robust fits for the significance tests of the filter's
+// monitors (consistency, widening, drift change, reading faults, star-tracker mount) and of the
+// discovery (docs/discovery.md):
 // chi-square tail probabilities and quantiles for likelihood-ratio tests, the F distribution
 // for tests with an estimated dispersion, Bonferroni levels, and a robust line fit.
-#ifndef ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
-#define ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
+#ifndef ESG_ESTIMATOR_STATISTICS_H_
+#define ESG_ESTIMATOR_STATISTICS_H_
 
 #include <utility>
 #include <vector>
 
 #include "estimator/line_fit.h"
 
-namespace esg::estimator::discovery {
+namespace esg::estimator {
 
 // Regularised lower incomplete gamma P(a, x), a > 0, x >= 0 (series / continued fraction).
 double RegularizedGammaP(double a, double x);
@@ -53,6 +54,6 @@ using ::esg::estimator::RobustLine;
 // Lag-1 autocorrelation of a series (mean removed); 0 for fewer than 3 values.
 double Lag1Autocorrelation(const std::vector<double>& x);
 
-}  // namespace esg::estimator::discovery
+}  // namespace esg::estimator
 
-#endif  // ESG_ESTIMATOR_DISCOVERY_STATISTICS_H_
+#endif  // ESG_ESTIMATOR_STATISTICS_H_
