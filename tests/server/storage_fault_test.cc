@@ -6,6 +6,7 @@
 #include <sqlite3.h>
 #include <sys/statvfs.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 
@@ -15,6 +16,8 @@
 #include "gmock/gmock.h"
 #include "grpc_health/health.grpc.pb.h"
 #include "gtest/gtest.h"
+#include "storage/service_queries.h"
+#include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/fault_vfs.h"
 #include "tests/testing/tmpfs.h"
@@ -153,6 +156,84 @@ TEST_F(StorageFault, FailingFsyncIsNeverAcknowledged) {
   for (const auto& ack : resumed.acks) EXPECT_TRUE(ack.accepted());
   EXPECT_EQ(resumed.acks.back().highest_durable_sequence(),
             static_cast<int64_t>(run.frames.size()));
+}
+
+// Writes (xWrite calls) one probe write (storage::ProbeWrite, what the committer tries while
+// storage cannot commit) takes through the fault VFS: the most of a few, on a database of its own.
+int64_t ProbeWrites(const std::string& path) {
+  FaultVfs& vfs = FaultVfs::Instance();
+  storage::DatabaseOptions options;
+  options.vfs = FaultVfs::kName;
+  absl::StatusOr<std::unique_ptr<storage::Storage>> opened = storage::Storage::Open(path, options);
+  EXPECT_TRUE(opened.ok()) << opened.status();
+  if (!opened.ok()) return 0;
+  int64_t most = 0;
+  for (int i = 0; i < 3; ++i) {
+    vfs.ResetCounters();
+    EXPECT_TRUE(storage::ProbeWrite((*opened)->database(), absl::Now()).ok());
+    most = std::max(most, vfs.Calls(FaultOp::kWrite));
+  }
+  return most;
+}
+
+int Occurrences(const std::string& text, const std::string& what) {
+  int n = 0;
+  for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+  return n;
+}
+
+// Issue 33: on a full disk a probe write fitted, "storage commits again: ingest resumed" was
+// logged, and the next commit of frames failed 7 ms later. A probe that succeeds lets frames in
+// (health SERVING) but only a commit of frames that succeeds is "ingest resumed".
+TEST_F(StorageFault, IngestResumedIsLoggedOnlyAfterACommitOfFramesSucceeds) {
+  TempDir dir;
+  const int64_t probe_writes = ProbeWrites(dir.File("probe.db"));
+  ASSERT_GT(probe_writes, 0);
+  const SimulatedRun run = SimulateRun("RESUME-1", 1.0, 54);
+  FaultVfs& vfs = FaultVfs::Instance();
+  ServerOptions options;
+  options.db_vfs = FaultVfs::kName;
+  options.core.storage_probe_period = absl::Milliseconds(50);
+  LoopbackServer server(options, dir.File("esg.db"));
+  auto stub = server.Stub();
+  grpc::ClientContext ctx;
+  esg::v1::ConfigureResponse r;
+  ASSERT_TRUE(stub->ConfigureSpacecraft(&ctx, ConfigureRequestFor(run.config), &r).ok());
+  const std::vector<esg::v1::TelemetryFrame> first(run.frames.begin(), run.frames.begin() + 20);
+  ASSERT_EQ(StreamFrames(*stub, first).acks.size(), first.size());
+  ASSERT_TRUE(server.core().WaitApplied("RESUME-1", absl::Seconds(30)).ok());
+
+  ::testing::internal::CaptureStderr();
+  // The disk fills up.
+  vfs.Arm(FaultOp::kWrite, 1, SQLITE_FULL, FaultPersistence::kUntilDisarmed);
+  const std::vector<esg::v1::TelemetryFrame> second(run.frames.begin() + 20,
+                                                    run.frames.begin() + 40);
+  EXPECT_EQ(StreamFrames(*stub, second).status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_TRUE(AwaitHealth(server, grpc::health::v1::HealthCheckResponse::NOT_SERVING));
+  // Room for a probe, not for a commit of frames: the probe succeeds and frames are taken again,
+  // then their commit fails.
+  vfs.Arm(FaultOp::kWrite, probe_writes + 1, SQLITE_FULL, FaultPersistence::kUntilDisarmed);
+  EXPECT_TRUE(AwaitHealth(server, grpc::health::v1::HealthCheckResponse::SERVING));
+  const auto failed = StreamFrames(*stub, second);
+  EXPECT_EQ(failed.status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_TRUE(failed.acks.empty());
+  EXPECT_TRUE(AwaitHealth(server, grpc::health::v1::HealthCheckResponse::NOT_SERVING));
+  // Space returns: the next commit of frames succeeds, and only then is ingest resumed.
+  vfs.Disarm();
+  EXPECT_TRUE(AwaitHealth(server, grpc::health::v1::HealthCheckResponse::SERVING));
+  const std::string before_commit = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(Occurrences(before_commit, "ingest resumed"), 0) << before_commit;
+  // The same fault again is not logged again (a reason worded differently is).
+  EXPECT_GE(Occurrences(before_commit, "storage cannot commit"), 1) << before_commit;
+  EXPECT_LE(Occurrences(before_commit, "storage cannot commit"), 2) << before_commit;
+  ::testing::internal::CaptureStderr();
+  const std::vector<esg::v1::TelemetryFrame> rest(run.frames.begin() + 20, run.frames.end());
+  const auto resumed = StreamFrames(*stub, rest);
+  const std::string after_commit = ::testing::internal::GetCapturedStderr();
+  ASSERT_TRUE(resumed.status.ok()) << resumed.status.error_message();
+  ASSERT_EQ(resumed.acks.size(), rest.size());
+  EXPECT_EQ(Occurrences(after_commit, "storage commits again: ingest resumed (2 commits"), 1)
+      << after_commit;
 }
 
 TEST_F(StorageFault, ShutdownFinishesWhileStorageCannotCommit) {

@@ -1,4 +1,4 @@
-// The real esgd as a child process (ESGD_PATH names the binary): started on 127.0.0.1:0 (or the
+// The real esgd as a child process (ESGD_PATH names the binary, $ESGD_BINARY overrides it): started on 127.0.0.1:0 (or the
 // `listen` address given) over a database file, its port read from its "esgd listening on port N" line, stopped with a signal
 // (SIGTERM for a graceful stop, SIGKILL for a crash). With `--metrics-listen` among the extra
 // arguments, the metrics port is read from the "esgd metrics on port N" line written with it.
@@ -12,6 +12,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <memory>
 #include <string>
 #include <vector>
@@ -52,6 +53,9 @@ class Daemon {
     getrlimit(RLIMIT_NOFILE, &fds);
     if (limits.soft_fds != 0) fds.rlim_cur = limits.soft_fds;
     if (limits.hard_fds != 0) fds.rlim_max = limits.hard_fds;
+    // $ESGD_BINARY, when set, runs another build (a before/after comparison); else ESGD_PATH.
+    const char* other = std::getenv("ESGD_BINARY");
+    const char* binary = other != nullptr && other[0] != '\0' ? other : ESGD_PATH;
     int out[2];
     EXPECT_EQ(pipe(out), 0);
     pid_ = fork();
@@ -61,7 +65,7 @@ class Daemon {
       const int err = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
       if (err >= 0) dup2(err, STDERR_FILENO);
       close(out[0]);
-      execv(ESGD_PATH, argv.data());
+      execv(binary, argv.data());
       _exit(127);
     }
     close(out[1]);
@@ -102,6 +106,8 @@ class Daemon {
   }
   int port() const { return port_; }
   int metrics_port() const { return metrics_port_; }
+  // The child's pid while it runs (for its CPU time in /proc), -1 once stopped.
+  pid_t pid() const { return pid_; }
   std::string address() const { return host_ + ":" + std::to_string(port_); }
 
  private:
