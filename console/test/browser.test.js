@@ -437,6 +437,18 @@ test('alerts raised while the fault view is open appear in it without a reload (
     .filter((li) => li.textContent.includes('RDK-S / star_tracker | DISTRESS') && li.textContent.includes('STAR_TRACKER_FAULT #')).length === n,
   { timeout: 20_000 }, raised.length);
   assert.equal(await page.evaluate(() => window.esgNoReload), true, 'the page was not reloaded');
+  // Cleared alerts are not styled as active ones: their severity mark grey, their text dimmed.
+  const styles = await page.$$eval('.c-fault-mgmt__list.data-selectable', (lis) => lis.map((li) => ({
+    cleared: / \| cleared, /.test(li.querySelector('.c-fault-mgmt__list-path').textContent),
+    grey: getComputedStyle(li.querySelector('.c-fault-mgmt__list-severity')).filter === 'grayscale(1)',
+    dimmed: Number(getComputedStyle(li.querySelector('.c-fault-mgmt__list-content')).opacity) < 1,
+  })));
+  assert.ok(styles.some((r) => r.cleared) && styles.some((r) => !r.cleared), JSON.stringify(styles));
+  // (Open MCT dims acknowledged ones itself: an active acknowledged alert may be dimmed too.)
+  for (const r of styles) {
+    assert.equal(r.grey, r.cleared, JSON.stringify(r));
+    if (r.cleared) assert.ok(r.dimmed, JSON.stringify(r));
+  }
   await shot('faults');
 });
 
