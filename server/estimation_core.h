@@ -388,8 +388,8 @@ class EstimationCore {
   std::string storage_fault_ ABSL_GUARDED_BY(commit_mu_);
   // A probe write succeeded while storage_fault_ is set: ingest takes frames again and health
   // is SERVING, but storage counts as recovered ("ingest resumed") only once a commit of frames
-  // succeeds; a commit that fails ends the trial (issue 33: a probe fit on a full disk, the next
-  // commit did not).
+  // succeeds; a commit that fails ends the trial (docs/decisions.md D95: a probe fit on a full
+  // disk, the next commit did not).
   bool storage_trial_ ABSL_GUARDED_BY(commit_mu_) = false;
   // Since when storage_fault_ is set, and the commits and probes that failed since then.
   absl::Time storage_fault_since_ ABSL_GUARDED_BY(commit_mu_);

@@ -178,8 +178,8 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                                        FormatUtc(options_.latest_frame_time), ")"));
   }
   // Nothing is measured in the future: a frame ahead of the present would move the reorder
-  // window past the correct frames after it (issue 33). The clock cannot judge past-dated data
-  // (a recording replayed); the gap limit below does.
+  // window past the correct frames after it (docs/decisions.md D95). The clock cannot judge
+  // past-dated data (a recording replayed); only the gap limit below applies to it.
   if (const absl::Time now = absl::Now(); time - now > options_.max_clock_lead) {
     return refuse_counted(
         absl::StatusCode::kOutOfRange, "time",

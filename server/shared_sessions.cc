@@ -142,7 +142,7 @@ void EstimationCore::RelayLoop() {
         listener->Wait(absl::Milliseconds(250));
     if (!notified.ok()) {
       // Re-made by the branch above, with backoff: Wait's own reconnect would be tried again at
-      // once, as fast as the refusals come (issue 33: 70,000 lines a second).
+      // once, as fast as the refusals come (docs/decisions.md D95: 70,000 lines a second).
       LogEvent("WARN", "relay_interrupted",
                absl::StrCat("alerts and estimates of other servers may have been missed: ",
                             notified.status().message(), " (reconnecting, at most ",
