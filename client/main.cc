@@ -3,12 +3,15 @@
 // default $ESG_SERVER, else 127.0.0.1:50051). The global options are accepted before or after the
 // verb and are listed in every verb's --help.
 #include <iostream>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "CLI/CLI.hpp"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/commands/commands.h"
+#include "client/verbs.h"
 
 #ifndef ESG_VERSION
 #error "ESG_VERSION must be the project version (client/CMakeLists.txt)"
@@ -88,6 +91,11 @@ int main(int argc, char** argv) {
   esg::client::RegisterEstimates(app, global, &exit_code);
   esg::client::RegisterExport(app, global, &exit_code);
   AddFooter(&app, GlobalOptionsHelp(app));
+  if (const std::optional<int> handled = esg::client::HandleVerbHabits(
+          app, std::vector<std::string>(argv + 1, argv + argc), VersionText());
+      handled.has_value()) {
+    return *handled;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

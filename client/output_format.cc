@@ -101,7 +101,7 @@ void AddFormatOption(CLI::App* cmd, OutputFormat* format, const std::string& jso
       "then one row per record)";
   if (!json_note.empty()) absl::StrAppend(&help, "; json ", json_note);
   CLI::Option* option = cmd->add_option_function<std::string>(
-                               "--format",
+                               "-o,--format",
                                [format](const std::string& name) {
                                  *format = name == "json"  ? OutputFormat::kJson
                                            : name == "csv" ? OutputFormat::kCsv

@@ -167,7 +167,7 @@ void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code) {
                    "default: stdout")
       ->type_name("FILE");
   history_cmd
-      ->add_option("--format", history->format,
+      ->add_option("-o,--format", history->format,
                    "csv: the columns of esg history --csv with 17 significant digits; json: "
                    "{\"snapshots\": [...]} in the proto JSON mapping")
       ->type_name("csv|json")

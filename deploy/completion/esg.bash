@@ -1,5 +1,6 @@
 # Bash completion for `esg` (docs/cli.md). Installed by CMake as
-# share/bash-completion/completions/esg; to try it from a checkout: source deploy/completion/esg.bash
+# share/bash-completion/completions/esg and printed by `esg completion bash`; to try it from a
+# checkout: source deploy/completion/esg.bash
 # Completes the verbs, the options of the verb on the line (and the global options), the values
 # of --format and --model, and file names after the options that take a file.
 
@@ -15,9 +16,9 @@ _esg() {
   fi
 
   local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history
-    estimates export"
+    estimates export help version completion"
   local global="--server --token --tls-ca --tls-cert --tls-key --help --version"
-  local format="--format --json"
+  local format="-o --format --json"
 
   # The verb (and the sub-verb of diagnoses and export) on the line so far; global options may
   # come first.
@@ -37,7 +38,7 @@ _esg() {
   done
 
   case "$prev" in
-    --format)
+    --format | -o)
       if [[ "$verb" == export ]]; then
         COMPREPLY=($(compgen -W "csv json" -- "$cur"))
       else
@@ -72,6 +73,9 @@ _esg() {
   local opts=""
   case "$verb" in
     "") COMPREPLY=($(compgen -W "$verbs $global" -- "$cur")); return ;;
+    help) COMPREPLY=($(compgen -W "$verbs" -- "$cur")); return ;;
+    completion) COMPREPLY=($(compgen -W "bash" -- "$cur")); return ;;
+    version) return ;;
     simulate) opts="--config --profile --scenario --hours --seed --out --write-config --start
                     --telemetry-step --integration-rate --truth $format" ;;
     calibrate) opts="--config --recording --columns --model --kd --consistency-window $format" ;;
@@ -97,7 +101,7 @@ _esg() {
     export)
       case "$sub" in
         "") COMPREPLY=($(compgen -W "history telemetry" -- "$cur")); return ;;
-        history) opts="--spacecraft --gyro --from --to --out --format --include-revised" ;;
+        history) opts="--spacecraft --gyro --from --to --out -o --format --include-revised" ;;
         telemetry) opts="--spacecraft --from --to --out" ;;
       esac
       ;;
