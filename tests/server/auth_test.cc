@@ -30,17 +30,11 @@ using ::esg::testing::LoopbackServer;
 using ::esg::testing::StatusIs;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
+using ::esg::testing::WriteTokens;
 using ::testing::HasSubstr;
 using ::testing::Not;
 
 // Writes a token file the way an operator must: mode 0600 (FromFile refuses anything looser).
-void WriteTokens(const std::string& path, const std::string& text) {
-  std::ofstream(path) << text;
-  std::filesystem::permissions(
-      path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
-      std::filesystem::perm_options::replace);
-}
-
 // Runs Authenticate on a server context whose client metadata holds `authorization: <header>`
 // (no such metadata when `header` is nullopt).
 absl::StatusOr<std::string> AuthenticateWith(const TokenAuthorizer& auth,

@@ -37,6 +37,7 @@ using ::esg::testing::SimulatedRun;
 using ::esg::testing::SimulateRun;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
+using ::esg::testing::WriteTokens;
 using ::testing::HasSubstr;
 
 const SimulatedRun& RunH() {
@@ -379,12 +380,6 @@ TEST(HostileInput, LongMessagesAreCutAtACharacterBoundary) {
   EXPECT_EQ(BoundedMessage("short"), "short");
   EXPECT_LE(BoundedText(std::string(1 << 20, 'x'), kMaxLogMessageBytes).size(),
             kMaxLogMessageBytes);
-}
-
-void WriteTokens(const std::string& path, const std::string& text) {
-  std::ofstream(path) << text;
-  std::filesystem::permissions(path, std::filesystem::perms(0600),
-                               std::filesystem::perm_options::replace);
 }
 
 TEST(HostileInput, ATokenAcknowledgesOnlyUnderItsOwnName) {

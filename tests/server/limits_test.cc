@@ -44,6 +44,7 @@ using ::esg::testing::SimulatedRun;
 using ::esg::testing::StatusIs;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
+using ::esg::testing::WriteTokens;
 using ::testing::Eq;
 using ::testing::HasSubstr;
 
@@ -68,13 +69,6 @@ std::unique_ptr<esg::v1::EstimationService::Stub> BigStub(const std::string& add
   args.SetMaxReceiveMessageSize(64 << 20);
   return esg::v1::EstimationService::NewStub(
       grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args));
-}
-
-void WriteTokens(const std::string& path, const std::string& text) {
-  std::ofstream(path) << text;
-  std::filesystem::permissions(
-      path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
-      std::filesystem::perm_options::replace);
 }
 
 // ---- CallLimiter ------------------------------------------------------------------------------

@@ -5,6 +5,8 @@
 #define ESG_TESTS_SERVER_SERVER_TEST_UTIL_H_
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <utility>
 #include <string>
@@ -75,6 +77,15 @@ inline esg::v1::ConfigureRequest ConfigureRequestFor(const estimator::Spacecraft
   *request.mutable_config() = proto_convert::ConfigToProto(config);
   request.set_model(model);
   return request;
+}
+
+// Writes a tokens file (docs/service.md "Security") that only its owner can use, as esgd
+// requires (mode 0600).
+inline void WriteTokens(const std::string& path, const std::string& text) {
+  std::ofstream(path) << text;
+  std::filesystem::permissions(
+      path, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
+      std::filesystem::perm_options::replace);
 }
 
 // An in-process server over a database in its own TempDir.
