@@ -243,10 +243,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       }
     }
     for (const storage::ArchivedFrame& a : *archived) {
-      esg::v1::TelemetryFrame proto;
-      absl::StatusOr<TelemetryFrame> frame =
-          proto.ParseFromString(a.payload) ? proto_convert::FrameFromProto(proto)
-                                           : absl::DataLossError("the payload does not parse");
+      absl::StatusOr<TelemetryFrame> frame = DecodeArchivedFrame(a.payload);
       JobFrame f{a.measurement_time, a.station_id, a.sequence, std::nullopt};
       if (frame.ok()) {
         f.frame = std::move(*frame);
@@ -567,6 +564,12 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     hub_.Publish(*r);
   }
   return more;
+}
+
+absl::StatusOr<TelemetryFrame> DecodeArchivedFrame(const std::string& payload) {
+  esg::v1::TelemetryFrame proto;
+  if (!proto.ParseFromString(payload)) return absl::DataLossError("the payload does not parse");
+  return proto_convert::FrameFromProto(proto);
 }
 
 }  // namespace esg::server

@@ -20,6 +20,7 @@
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "esg/v1/spacecraft_config.pb.h"
@@ -31,6 +32,11 @@
 #include "server/estimation_core.h"
 
 namespace esg::server {
+
+// The frame an archived payload holds, checked as ingest checks a frame now (FrameFromProto):
+// DataLoss when the payload does not parse, the check's error when a frame archived by an older
+// version breaks a bound added since. The filter and a diagnosis both skip such a frame.
+absl::StatusOr<estimator::TelemetryFrame> DecodeArchivedFrame(const std::string& payload);
 
 inline constexpr const char* kDefaultModel = "10+11";
 // The stored reason of the alert a quarantine raises (cleared when the quarantine ends).

@@ -302,11 +302,12 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   }
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
                    storage_->archive().ReadTimeRange(sc->id, from, to));
+  // An empty window is the request's window, or the spacecraft's whole archive.
+  const char* window_field = request.has_from() || request.has_to() ? "from: " : "spacecraft_id: ";
   if (archived.empty()) {
-    return absl::FailedPreconditionError(
-        absl::StrCat(request.has_from() || request.has_to() ? "from: " : "spacecraft_id: ",
-                     "no archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ",
-                     FormatUtc(to), ")"));
+    return absl::FailedPreconditionError(absl::StrCat(window_field, "no archived telemetry of '",
+                                                      sc->id, "' in [", FormatUtc(from), ", ",
+                                                      FormatUtc(to), ")"));
   }
   if (cancelled && cancelled()) return absl::CancelledError("diagnosis cancelled");
   std::vector<TelemetryFrame> frames;
@@ -315,10 +316,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     // A frame the filter skips (archived before a bound the service checks now, or damaged) is
     // skipped here too, with the same log line (apply_worker.cc): one frame does not refuse the
     // whole window.
-    esg::v1::TelemetryFrame proto;
-    absl::StatusOr<TelemetryFrame> frame =
-        proto.ParseFromString(a.payload) ? proto_convert::FrameFromProto(proto)
-                                         : absl::DataLossError("the payload does not parse");
+    absl::StatusOr<TelemetryFrame> frame = DecodeArchivedFrame(a.payload);
     if (!frame.ok()) {
       LogEvent("WARN", "frame_undecodable",
                absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
@@ -331,8 +329,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   }
   if (frames.empty()) {
     return absl::FailedPreconditionError(absl::StrCat(
-        request.has_from() || request.has_to() ? "from: " : "spacecraft_id: ",
-        "no decodable archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ",
+        window_field, "no decodable archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ",
         FormatUtc(to), ")"));
   }
   ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
