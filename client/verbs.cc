@@ -28,9 +28,11 @@ int EditDistance(const std::string& a, const std::string& b) {
   return row[b.size()];
 }
 
+// The verbs a user is offered: not the hidden ones (no group: `esg __complete`).
 std::vector<std::string> VerbNames(const CLI::App& app) {
   std::vector<std::string> names;
   for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; })) {
+    if (sub->get_group().empty()) continue;
     names.push_back(sub->get_name());
   }
   return names;

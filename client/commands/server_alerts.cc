@@ -1,5 +1,5 @@
-// `esg alerts [--spacecraft ID] [--since T] [--include-revised] [--follow] [--ack SEQ]
-// [--operator NAME]`: the alerts
+// `esg alerts [--spacecraft ID] [--since T] [--active] [--severity MIN] [--include-revised]
+// [--follow] [--ack SEQ] [--operator NAME]`: the alerts
 // raised by the fault and innovation tests (eq. (12), (14)) and by rejected telemetry
 // (SubscribeAlerts), and their acknowledgement (AcknowledgeAlert).
 //
@@ -9,10 +9,17 @@
 // --follow prints the stored alerts, then keeps printing alert states as they arrive (one line,
 // or with --format json one JSON object per line, with --format csv a header then one row per
 // alert state) until Ctrl-C.
+// --active keeps the alerts not cleared (nor revised); --severity MIN those of severity MIN or
+// worse (INFO < WARNING < DISTRESS < CRITICAL, the order of AlertSeverity). Both filter here, in
+// the client, every format and --follow alike.
 // --include-revised also lists the alerts a re-run over a late frame superseded ("revised at").
 // --ack SEQ acknowledges alert SEQ of --spacecraft as --operator and prints it; without
 // --operator the name is the token's (the service takes it from --token / $ESG_TOKEN), or $USER
 // when no token is given.
+// The table line is a sentence: "RDK-1 #3 WARNING star tracker innovation on star_tracker:
+// 412.3 arcsec, above the threshold 150 arcsec, 2 times from T1 to T2[, acknowledged by NAME at
+// T][, cleared at T]: <message>" ("above" or "below" as the numbers are; no unit for a
+// dimensionless value).
 // Exit codes: 0 success (also when stopped by Ctrl-C), 2 bad arguments, 1 server failure.
 #include <atomic>
 #include <chrono>
@@ -46,6 +53,8 @@ struct AlertsOptions {
   std::string spacecraft_id;
   std::string since;
   bool include_revised = false;
+  bool active_only = false;
+  std::string min_severity;  // empty: every severity
   bool follow = false;
   std::optional<int64_t> ack;
   std::string operator_name;
@@ -55,12 +64,26 @@ struct AlertsOptions {
 volatile std::sig_atomic_t g_interrupted = 0;
 extern "C" void OnInterrupt(int) { g_interrupted = 1; }
 
+// "25.3 arcsec" or, for a dimensionless value (unit "1" or none), "25.3".
+std::string WithUnit(double value, const std::string& unit) {
+  return unit.empty() || unit == "1" ? absl::StrFormat("%.6g", value)
+                                     : absl::StrFormat("%.6g %s", value, unit);
+}
+
 std::string AlertLine(const esg::v1::Alert& a) {
+  const char* side = a.value() > a.threshold()   ? "above"
+                     : a.value() < a.threshold() ? "below"
+                                                 : "at";
+  const std::string first = FormatUtc(a.first_time(), a.has_first_time());
+  const std::string latest = FormatUtc(a.measurement_time(), a.has_measurement_time());
+  const std::string when =
+      a.repeat_count() <= 1
+          ? absl::StrCat("once at ", latest)
+          : absl::StrCat(a.repeat_count(), " times from ", first, " to ", latest);
   std::string line = absl::StrFormat(
-      "%s #%d %-9s %-24s %-14s %.6g > %.6g %s, x%d, %s..%s", a.spacecraft_id(), a.sequence(),
-      SeverityName(a.severity()), ReasonName(a.reason()), a.subsystem(), a.value(), a.threshold(),
-      a.unit(), a.repeat_count(), FormatUtc(a.first_time(), a.has_first_time()),
-      FormatUtc(a.measurement_time(), a.has_measurement_time()));
+      "%s #%d %s %s on %s: %s, %s the threshold %s, %s", a.spacecraft_id(), a.sequence(),
+      SeverityName(a.severity()), ReasonWords(a.reason()), a.subsystem(),
+      WithUnit(a.value(), a.unit()), side, WithUnit(a.threshold(), a.unit()), when);
   if (a.acknowledged()) {
     absl::StrAppend(&line, ", acknowledged by ", a.acknowledged_by(), " at ",
                     FormatUtc(a.acknowledged_time(), a.has_acknowledged_time()));
@@ -119,6 +142,20 @@ struct Inbox {
 };
 
 int RunList(const AlertsOptions& o, const GlobalOptions& global) {
+  esg::v1::AlertSeverity min_severity = esg::v1::ALERT_SEVERITY_UNSPECIFIED;
+  if (!o.min_severity.empty()) {
+    const std::optional<esg::v1::AlertSeverity> parsed = ParseSeverity(o.min_severity);
+    if (!parsed) {
+      return ReportBadArgument(kVerb, "--severity '" + o.min_severity +
+                                          "': expected INFO, WARNING, DISTRESS or CRITICAL");
+    }
+    min_severity = *parsed;
+  }
+  // What --active and --severity let through.
+  const auto shown = [&](const esg::v1::Alert& a) {
+    if (o.active_only && (a.cleared() || a.has_revised_time())) return false;
+    return a.severity() >= min_severity;
+  };
   esg::v1::AlertSubscription request;
   request.set_spacecraft_id(o.spacecraft_id);
   absl::Time since = absl::InfinitePast();  // clamped to 0001-01-01: every stored alert
@@ -179,6 +216,11 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
       replayed = inbox.replayed;
     }
     for (esg::v1::Alert& a : batch) {
+      if (!shown(a)) {
+        // The latest state decides: an alert cleared since it was read drops out.
+        if (!o.follow) latest.erase({a.spacecraft_id(), a.sequence()});
+        continue;
+      }
       if (o.follow) {
         if (o.format == OutputFormat::kJson) {
           std::printf("%s\n", AlertJson(a).dump().c_str());
@@ -240,6 +282,11 @@ void RegisterAlerts(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--since", options->since,
                   "stored alerts whose latest occurrence is at or after this RFC 3339 time "
                   "(default: all stored)");
+  cmd->add_flag("--active", options->active_only,
+                "only the alerts not cleared (nor revised by a re-run over a late frame)");
+  cmd->add_option("--severity", options->min_severity,
+                  "only alerts of this severity or worse: INFO, WARNING, DISTRESS or CRITICAL")
+      ->type_name("MIN");
   cmd->add_flag("--include-revised", options->include_revised,
                 "also the stored alerts a re-run over a late frame superseded (revised_time set)");
   CLI::Option* follow = cmd->add_flag("--follow", options->follow,

@@ -4,8 +4,10 @@
 #include <cstdio>
 #include <string_view>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_replace.h"
 #include "proto/convert.h"
 
 namespace esg::client {
@@ -75,6 +77,20 @@ std::string SeverityName(esg::v1::AlertSeverity severity) {
 
 std::string ReasonName(esg::v1::AlertReason reason) {
   return StripPrefix(esg::v1::AlertReason_Name(reason), "ALERT_REASON_");
+}
+
+std::string ReasonWords(esg::v1::AlertReason reason) {
+  return absl::StrReplaceAll(absl::AsciiStrToLower(ReasonName(reason)), {{"_", " "}});
+}
+
+std::optional<esg::v1::AlertSeverity> ParseSeverity(const std::string& name) {
+  const std::string upper = absl::AsciiStrToUpper(name);
+  for (esg::v1::AlertSeverity s : {esg::v1::ALERT_SEVERITY_INFO, esg::v1::ALERT_SEVERITY_WARNING,
+                                   esg::v1::ALERT_SEVERITY_DISTRESS,
+                                   esg::v1::ALERT_SEVERITY_CRITICAL}) {
+    if (upper == SeverityName(s) || upper == esg::v1::AlertSeverity_Name(s)) return s;
+  }
+  return std::nullopt;
 }
 
 Json AttitudeJson(const esg::v1::AttitudeSample& sample) { return ProtoToJson(sample); }

@@ -92,6 +92,13 @@ std::string StateName(esg::v1::SessionState state);
 std::string SeverityName(esg::v1::AlertSeverity severity);
 std::string ReasonName(esg::v1::AlertReason reason);
 
+// An alert reason in words, for tables: "star tracker innovation", "gyro data rejected".
+std::string ReasonWords(esg::v1::AlertReason reason);
+
+// The severity a user names (as the proto and docs/service.md do: INFO, WARNING, DISTRESS,
+// CRITICAL, any case, or the full ALERT_SEVERITY_... name); nullopt for anything else.
+std::optional<esg::v1::AlertSeverity> ParseSeverity(const std::string& name);
+
 // JSON forms: the proto JSON mapping (ProtoToJson of output_format.h).
 Json SessionJson(const esg::v1::SessionInfo& session);
 Json AttitudeJson(const esg::v1::AttitudeSample& sample);

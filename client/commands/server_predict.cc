@@ -1,4 +1,4 @@
-// `esg predict --spacecraft ID --from T --to T --step S [--planned FILE] [--aem FILE]
+// `esg predict --spacecraft ID [--from T] [--to T] [--step S] [--planned FILE] [--aem FILE]
 // [--format table|json|csv]`: the attitude esgd predicts (PredictAttitude, docs/service.md
 // "PredictAttitude"): per epoch q_in_b (scalar first), its 1-sigma about the body axes x, y, z
 // [arcsec], where it comes from (RECORDED: the archived gyro readings, up to the last archived
@@ -12,6 +12,8 @@
 // --spacecraft, TIME_SYSTEM UTC or TAI) or a CSV with the header `time,q0,q1,q2,q3`: RFC 3339
 // UTC time and q_in_b scalar first (body to inertial, Hamilton), one line per sample in
 // increasing time.
+// Defaults, as an operator asks "where will it point": --from now (the client's clock), --to 6 h
+// after --from, --step 60 s.
 // Exit codes: 0 success, 2 bad arguments or an unreadable --planned file, 1 server or file
 // failure (e.g. FAILED_PRECONDITION when the session's output is not available, OUT_OF_RANGE
 // when --to is beyond the prediction horizon).
@@ -29,7 +31,9 @@
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_replace.h"
 #include "absl/strings/str_split.h"
+#include "absl/time/clock.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
 #include "client/output_format.h"
@@ -41,12 +45,14 @@ namespace esg::client {
 namespace {
 
 constexpr char kVerb[] = "predict";
+constexpr absl::Duration kDefaultSpan = absl::Hours(6);
+constexpr double kDefaultStepS = 60.0;
 
 struct PredictOptions {
   std::string spacecraft_id;
   std::string from;
   std::string to;
-  double step_s = 0.0;
+  double step_s = kDefaultStepS;
   std::string planned_path;
   std::string aem_path;
   OutputFormat format = OutputFormat::kTable;
@@ -124,16 +130,18 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
   return out;
 }
 
-std::string SourceName(esg::v1::AttitudeSource source) {
+// The source in words, for the table: "recorded", "planned", "inertial hold".
+std::string SourceWords(esg::v1::AttitudeSource source) {
   std::string name = esg::v1::AttitudeSource_Name(source);
   const std::string prefix = "ATTITUDE_SOURCE_";
-  return absl::StartsWith(name, prefix) ? name.substr(prefix.size()) : name;
+  if (absl::StartsWith(name, prefix)) name = name.substr(prefix.size());
+  return absl::StrReplaceAll(absl::AsciiStrToLower(name), {{"_", " "}});
 }
 
 int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
-  const std::optional<absl::Time> from = ParseUtc(o.from);
+  const std::optional<absl::Time> from = o.from.empty() ? absl::Now() : ParseUtc(o.from);
   if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
-  const std::optional<absl::Time> to = ParseUtc(o.to);
+  const std::optional<absl::Time> to = o.to.empty() ? *from + kDefaultSpan : ParseUtc(o.to);
   if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
   if (*to < *from) {
     return ReportBadArgument(kVerb,
@@ -211,7 +219,7 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
     for (int i = 0; i < 3; ++i) {
       std::printf(" %9.2f", i < s.sigma_arcsec_size() ? s.sigma_arcsec(i) : 0.0);
     }
-    std::printf("  %-13s", SourceName(source_of(n)).c_str());
+    std::printf("  %-13s", SourceWords(source_of(n)).c_str());
     for (const esg::v1::GyroAxis& axis : s.spin_axes()) {
       std::printf(" g%d[", axis.gyro_id());
       for (int i = 0; i < axis.h_in_size(); ++i) std::printf("%s%+.6f", i ? " " : "", axis.h_in(i));
@@ -221,7 +229,16 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   }
   std::printf("%d samples", response->samples_size());
   if (!o.aem_path.empty()) std::printf("; AEM written to %s", o.aem_path.c_str());
-  std::printf("\nassumption: %s\n", response->assumption().c_str());
+  // The service names the sources by their enum values (as the AEM's COMMENTs do); the table in
+  // words.
+  std::string assumption = response->assumption();
+  for (esg::v1::AttitudeSource source :
+       {esg::v1::ATTITUDE_SOURCE_RECORDED, esg::v1::ATTITUDE_SOURCE_PLANNED,
+        esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD}) {
+    assumption = absl::StrReplaceAll(
+        assumption, {{esg::v1::AttitudeSource_Name(source), SourceWords(source)}});
+  }
+  std::printf("\nassumption: %s\n", assumption.c_str());
   return kExitOk;
 }
 
@@ -235,9 +252,9 @@ void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code) {
       "the last archived frame, then the --planned attitude or, without one, an inertial hold of "
       "the last estimate");
   cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id")->required();
-  cmd->add_option("--from", options->from, "first epoch, RFC 3339 UTC")->required();
-  cmd->add_option("--to", options->to, "last epoch, RFC 3339 UTC")->required();
-  cmd->add_option("--step", options->step_s, "step between epochs [s]")->required();
+  cmd->add_option("--from", options->from, "first epoch, RFC 3339 UTC (default: now)");
+  cmd->add_option("--to", options->to, "last epoch, RFC 3339 UTC (default: 6 h after --from)");
+  cmd->add_option("--step", options->step_s, "step between epochs [s] (default: 60)");
   cmd->add_option("--planned", options->planned_path,
                   "planned attitude after the last archived frame: a CCSDS AEM (KVN) or a CSV "
                   "with the header time,q0,q1,q2,q3 (RFC 3339 UTC, q_in_b scalar first)");

@@ -2,7 +2,9 @@
 # share/bash-completion/completions/esg and printed by `esg completion bash`; to try it from a
 # checkout: source deploy/completion/esg.bash
 # Completes the verbs, the options of the verb on the line (and the global options), the values
-# of --format and --model, and file names after the options that take a file.
+# of --format and --model, file names after the options that take a file, and after --spacecraft
+# the ids the server knows (`esg __complete spacecraft`, with the --server, --token and --tls-*
+# of the line; nothing when the server is down or refuses the token, within 1 s).
 
 _esg() {
   local cur prev words cword
@@ -23,9 +25,13 @@ _esg() {
   # The verb (and the sub-verb of diagnoses and export) on the line so far; global options may
   # come first.
   local verb="" sub="" i
+  local -a connection=()
   for ((i = 1; i < cword; i++)); do
     case "${words[i]}" in
-      --server | --token | --tls-ca | --tls-cert | --tls-key) ((i++)) ;;
+      --server | --token | --tls-ca | --tls-cert | --tls-key)
+        connection+=("${words[i]}" "${words[i+1]}")
+        ((i++))
+        ;;
       -*) ;;
       *)
         if [[ -z "$verb" ]]; then
@@ -63,7 +69,17 @@ _esg() {
       COMPREPLY=($(compgen -f -- "$cur"))
       return
       ;;
-    --server | --token | --spacecraft | --from | --to | --since | --step | --hours | --seed | \
+    --spacecraft)
+      local ids
+      ids=$(timeout 1 "${words[0]}" "${connection[@]}" __complete spacecraft 2>/dev/null)
+      COMPREPLY=($(compgen -W "$ids" -- "$cur"))
+      return
+      ;;
+    --severity)
+      COMPREPLY=($(compgen -W "INFO WARNING DISTRESS CRITICAL" -- "$cur"))
+      return
+      ;;
+    --server | --token | --from | --to | --since | --step | --hours | --seed | \
       --start | --gap-start | --id | --ack | --operator | --gyro | --rate | --window | --kd | \
       --page-size | --effects | --alpha | --threads)
       return  # a value the shell cannot guess
@@ -95,7 +111,8 @@ _esg() {
                   --max-lease-wait --allow-rejects --wait --wait-timeout $format" ;;
     status) opts="--spacecraft $format" ;;
     predict) opts="--spacecraft --from --to --step --aem --planned $format" ;;
-    alerts) opts="--spacecraft --since --include-revised --follow --ack --operator $format" ;;
+    alerts) opts="--spacecraft --since --active --severity --include-revised --follow --ack --operator
+                  $format" ;;
     history) opts="--spacecraft --gyro --from --to --include-revised $format --csv" ;;
     estimates) opts="--spacecraft --from --to $format --csv" ;;
     export)

@@ -896,8 +896,7 @@ TEST_F(ServerVerbs, BadArgumentsExitTwoNamingTheOption) {
        "--to"},
       {"predict --spacecraft RDK-1 --from 2019-03-01T07:00:00Z --to 2019-03-01T08:00:00Z --step 0",
        "--step"},
-      {"predict --spacecraft RDK-1 --from 2019-03-01T07:00:00Z --to 2019-03-01T08:00:00Z",
-       "--step"},
+      {"predict --spacecraft RDK-1 --to 2019-03-01T08:00:00Z", "--to"},  // --from: now
       {"history --spacecraft RDK-1 --gyro 7", "--gyro 7"},
       {"history --gyro 1", "--spacecraft"},
       {"alerts --since never", "--since"},
