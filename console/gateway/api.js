@@ -9,6 +9,7 @@
 const { Calls } = require('./esgd');
 const { ApiError, toHttp } = require('./errors');
 const { makeRoutes } = require('./routes');
+const { StreamedJson } = require('./large');
 const { sendJson } = require('./respond');
 const { checkAnnouncedLength } = require('./limits');
 
@@ -63,7 +64,8 @@ function makeApi(esgd, log, tokens) {
       const ctx = { req, params, query: url.searchParams, owner, authorization };
       const body = await route.handler(ctx);
       httpStatus = 200;
-      sendJson(res, httpStatus, body);
+      if (body instanceof StreamedJson) await body.send(res);
+      else sendJson(res, httpStatus, body);
     } catch (err) {
       const answer = toHttp(err);
       httpStatus = answer.httpStatus;

@@ -10,9 +10,12 @@ const { timeParam, boolParam, intParam, intValue, numberParam, jsonBody } = requ
 const { ConvertError } = require('./convert');
 const { grpc } = require('./esgd');
 const { PREDICT_BODY_BYTES, ACKNOWLEDGE_BODY_BYTES } = require('./limits');
+const { StreamedJson, LargeAnswers, MAX_HISTORY } = require('./large');
 
-// esgd's largest pages, so a long history costs as few round trips as possible.
-const HISTORY_PAGE = 5000;
+// A streamed history's pages (large.js): what one request holds at a time. Smaller than esgd's
+// largest: 1000 snapshots are about 0.8 MB of JSON, and four parallel 20-day histories cost the
+// gateway less than half the memory they did at 5000 (measured in console/test/large_answers.test.js).
+const HISTORY_STREAM_PAGE = 1000;
 const ESTIMATE_PAGE = 5000;
 const SESSION_PAGE = 500;
 const DIAGNOSIS_PAGE = 100;
@@ -47,11 +50,26 @@ function isUnimplemented(err) {
   return err && err.code === grpc.status.UNIMPLEMENTED;
 }
 
-// tokens: the TokenCheck api.js checks each request's token with.
-function makeRoutes(esgd, tokens) {
+// esgd's page tokens are short (base64 of a position); longer is not one of them.
+const MAX_PAGE_TOKEN = 1024;
+
+// tokens: the TokenCheck api.js checks each request's token with. large: the LargeAnswers
+// (large.js) whose slots the history and estimate requests take.
+function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
   const call = (ctx, method, request) => esgd.unary(method, request, ctx.authorization, ctx.owner);
   const pages = (ctx, method, request, field, limit) =>
     esgd.pageAll(method, request, field, ctx.authorization, ctx.owner, limit);
+
+  // A slot of the operator's large answers (large.js); resolves with its release().
+  async function largeSlot(ctx, what) {
+    const key = await tokens.operatorKey(ctx.authorization, ctx.req.socket.remoteAddress);
+    const release = await large.take(key, what);
+    if (ctx.req.socket.destroyed) {
+      release(); // the browser went away while the request waited
+      throw new ApiError(499, 'CANCELLED', `${what}: the client went away`);
+    }
+    return release;
+  }
 
   async function alertList(ctx, spacecraftId) {
     const since = timeParam(ctx.query, 'since') || EPOCH;
@@ -141,16 +159,48 @@ function makeRoutes(esgd, tokens) {
       };
     }],
 
+    // Streamed a page at a time (large.js): at most `limit` snapshots (default and most
+    // MAX_HISTORY), then next_page_token when more remain; page_token goes on from there.
     ['GET', '/api/spacecraft/:id/history', async (ctx) => {
+      const limit = intParam(ctx.query, 'limit', 1, MAX_HISTORY, MAX_HISTORY);
+      const pageToken = ctx.query.get('page_token') || '';
+      if (pageToken.length > MAX_PAGE_TOKEN) {
+        throw badRequest(`page_token: longer than ${MAX_PAGE_TOKEN} characters; pass the next_page_token of an answer`);
+      }
       const request = {
         spacecraft_id: ctx.params.id,
         gyro_id: intParam(ctx.query, 'gyro', 0, 4, 0),
         from: timeParam(ctx.query, 'from'),
         to: timeParam(ctx.query, 'to'),
         include_revised: boolParam(ctx.query, 'include_revised', false),
-        page_size: HISTORY_PAGE,
       };
-      return { snapshots: await pages(ctx, 'GetCoefficientHistory', request, 'snapshots') };
+      const release = await largeSlot(ctx, 'history');
+      let sent = 0;
+      let next = pageToken;
+      const page = () => call(ctx, 'GetCoefficientHistory', {
+        ...request, page_size: Math.min(HISTORY_STREAM_PAGE, limit - sent), page_token: next,
+      }).then((answer) => {
+        sent += answer.snapshots.length;
+        next = answer.next_page_token;
+        return answer.snapshots;
+      });
+      let first;
+      try {
+        // The first page before the answer starts: an error (unknown spacecraft, a bad token)
+        // is still answered with its own status.
+        first = await page();
+      } catch (err) {
+        release();
+        throw err;
+      }
+      async function* rest() {
+        yield first;
+        while (next && sent < limit) yield await page();
+      }
+      return new StreamedJson('snapshots', rest(), {
+        tail: () => (next ? { next_page_token: next } : {}),
+        done: release,
+      });
     }],
 
     ['GET', '/api/spacecraft/:id/estimates', async (ctx) => {
@@ -160,11 +210,14 @@ function makeRoutes(esgd, tokens) {
         to: timeParam(ctx.query, 'to'),
         page_size: ESTIMATE_PAGE,
       };
+      const release = await largeSlot(ctx, 'estimates');
       try {
         return { estimates: await pages(ctx, 'GetEstimateHistory', request, 'estimates', MAX_ESTIMATES) };
       } catch (err) {
         if (err.code !== 'LIMIT') throw err;
         throw badRequest(`from, to: the span holds more than ${MAX_ESTIMATES} estimates; ask for a narrower span`);
+      } finally {
+        release();
       }
     }],
 

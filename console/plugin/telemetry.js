@@ -18,20 +18,33 @@ function spacecraftPath(sc) {
   return `/api/spacecraft/${encodeURIComponent(sc)}`;
 }
 
+// Every snapshot of a history query: the gateway answers at most 50 000 per request, with a
+// next_page_token to go on from (docs/console-gateway.md "Large answers").
+async function historyAll(spacecraft, params) {
+  const snapshots = [];
+  let pageToken;
+  do {
+    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
+      ...params, page_token: pageToken
+    })}`);
+    for (const s of body.snapshots) snapshots.push(s);
+    pageToken = body.next_page_token;
+  } while (pageToken);
+  return snapshots;
+}
+
 const requesters = {
   async coef({ spacecraft, gyro }, { start, end }) {
-    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
-      gyro, from: isoTime(start), to: isoTime(end)
-    })}`);
-    return body.snapshots.map(snapshotDatum);
+    const snapshots = await historyAll(spacecraft, { gyro, from: isoTime(start), to: isoTime(end) });
+    return snapshots.map(snapshotDatum);
   },
 
   // The same with the snapshots re-runs superseded, marked with the time they were.
   async coefrev({ spacecraft, gyro }, { start, end }) {
-    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
+    const snapshots = await historyAll(spacecraft, {
       gyro, from: isoTime(start), to: isoTime(end), include_revised: true
-    })}`);
-    return body.snapshots.map(revisedSnapshotDatum);
+    });
+    return snapshots.map(revisedSnapshotDatum);
   },
 
   async est({ spacecraft }, { start, end }) {
@@ -145,10 +158,8 @@ function coefficientFollower({ spacecraft, gyro }, callback, toDatum) {
     busy = true;
     try {
       await started;
-      const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
-        gyro, from: isoTime(lastTime + 1)
-      })}`);
-      for (const s of body.snapshots) {
+      const snapshots = await historyAll(spacecraft, { gyro, from: isoTime(lastTime + 1) });
+      for (const s of snapshots) {
         const datum = toDatum(s);
         if (datum.utc <= lastTime) continue;
         lastTime = datum.utc;

@@ -1,0 +1,116 @@
+// Large answers (docs/console-gateway.md "Large answers"): coefficient histories and per-step
+// estimates. A 20-day history is some 67 MB of JSON; built whole, four at once took the gateway
+// to 1.65 GB. Here:
+//   - a history is written as it is read, one esgd page at a time (StreamedJson): the next page is
+//     asked for only once the previous one was handed to the socket and its buffer drained, so a
+//     request holds about one page (5000 snapshots, some 4 MB of JSON) whatever its span;
+//   - a request returns at most MAX_HISTORY snapshots and a next_page_token to go on from;
+//   - an operator runs at most PER_OPERATOR large answers at once; up to WAITING more wait for a
+//     slot (the console asks for several series at once), further ones are refused with 429
+//     RESOURCE_EXHAUSTED naming the bound.
+'use strict';
+
+const { once } = require('node:events');
+const { ApiError } = require('./errors');
+
+const MAX_HISTORY = 50000;
+const PER_OPERATOR = 4;
+const WAITING = 32;
+
+// An answer {"<field>": [...items], ...tail()} written page by page. `pages` is an async
+// iterator of arrays of JSON-able items; `tail()` (after the last page) gives the fields that
+// follow the array; `done()` runs once the answer is written or failed.
+class StreamedJson {
+  constructor(field, pages, { tail = () => ({}), done = () => {} } = {}) {
+    this.field = field;
+    this.pages = pages;
+    this.tail = tail;
+    this.done = done;
+  }
+
+  // Writes the answer; rejects (after the headers went out: the caller destroys the socket) if
+  // a page fails or the client goes away.
+  async send(res) {
+    try {
+      await this.write(res);
+    } finally {
+      this.done();
+    }
+  }
+
+  async write(res) {
+    res.writeHead(200, {
+      'Content-Type': 'application/json; charset=utf-8',
+      'Cache-Control': 'no-store',
+      'X-Content-Type-Options': 'nosniff',
+    });
+    let first = true;
+    const write = async (text) => {
+      if (res.destroyed) throw new Error('the client went away');
+      if (!res.write(text)) {
+        await Promise.race([once(res, 'drain'), once(res, 'close')]);
+        if (res.destroyed) throw new Error('the client went away');
+      }
+    };
+    await write(`{${JSON.stringify(this.field)}:[`);
+    for await (const page of this.pages) {
+      if (page.length === 0) continue;
+      const text = page.map((item) => JSON.stringify(item)).join(',');
+      await write(first ? text : `,${text}`);
+      first = false;
+    }
+    const extra = JSON.stringify(this.tail());
+    res.end(`]${extra === '{}' ? '' : `,${extra.slice(1, -1)}`}}`);
+  }
+}
+
+// Slots for the large answers of each operator (a token, or a browser's address without tokens).
+class LargeAnswers {
+  constructor(perOperator = PER_OPERATOR, waiting = WAITING) {
+    this.perOperator = perOperator;
+    this.waiting = waiting;
+    this.operators = new Map(); // key -> {running, queue: [resolve]}
+  }
+
+  // Resolves with release() once `key` has a slot; rejects with 429 when `key` already runs
+  // perOperator and has `waiting` more waiting. `what` names the request in the message.
+  async take(key, what) {
+    let operator = this.operators.get(key);
+    if (!operator) {
+      operator = { running: 0, queue: [] };
+      this.operators.set(key, operator);
+    }
+    if (operator.running >= this.perOperator) {
+      if (operator.queue.length >= this.waiting) {
+        throw new ApiError(429, 'RESOURCE_EXHAUSTED',
+          `${what}: this operator already has ${operator.running} large answers running and ` +
+          `${operator.queue.length} waiting (limit ${this.perOperator} running and ` +
+          `${this.waiting} waiting per operator); retry when one finishes`);
+      }
+      await new Promise((resolve) => operator.queue.push(resolve));
+    } else {
+      operator.running++;
+    }
+    let released = false;
+    return () => {
+      if (released) return;
+      released = true;
+      const next = operator.queue.shift();
+      if (next) {
+        next(); // the slot passes on
+        return;
+      }
+      operator.running--;
+      if (operator.running === 0) this.operators.delete(key);
+    };
+  }
+
+  // Large answers running now (all operators), for tests and diagnostics.
+  running() {
+    let n = 0;
+    for (const operator of this.operators.values()) n += operator.running;
+    return n;
+  }
+}
+
+module.exports = { StreamedJson, LargeAnswers, MAX_HISTORY, PER_OPERATOR, WAITING };
