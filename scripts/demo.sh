@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: esgd on a SQLite file, spacecraft RDK-1 simulated with the
-# paper's calibration profile and replayed through the client; prints the calibrated coefficients,
-# a prediction across a 6 h gap (also a CCSDS AEM file), the alerts raised, and the offline
-# model (1) versus model (10) long-gap comparison; then serves the console (Open MCT, through the
-# console gateway, docs/console-gateway.md) on http://127.0.0.1:8080/ until Ctrl-C.
+# paper's calibration profile and replayed through the client; prints one screen (at most 40
+# lines of 100 columns, scripts/demo_summary.py): the calibrated coefficients against the
+# simulated truth, the offline model (1) versus model (10) long-gap comparison, the prediction for
+# the 6 h after the last frame with its source (also a CCSDS AEM file), the alerts raised; then
+# serves the console (Open MCT, through the console gateway, docs/console-gateway.md) on
+# http://127.0.0.1:8080/ until Ctrl-C. The build's output goes to var/build.log (errors shown).
 #   bash scripts/demo.sh [--no-serve]    --no-serve (or ESG_DEMO_NO_SERVE=1): exit after the steps
-#   ESG_DEMO_PORT (esgd, default 50051), ESG_CONSOLE_PORT (console, default 8080)
+#   ESG_DEMO_PORT (esgd, default 50051; 0: any free port), ESG_CONSOLE_PORT (console, default 8080)
+#   ESG_BUILD_DIR (binaries already built there: no build), ESG_DEMO_DIR (default var/demo)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 serve=1
@@ -18,26 +21,38 @@ for arg in "$@"; do
 done
 build=${ESG_BUILD_DIR:-}
 if [ -z "$build" ]; then
-  bash scripts/build.sh
+  mkdir -p var
+  echo "demo: installing and building (a first build takes about 20 min; log in var/build.log)"
+  if ! bash scripts/build.sh >var/build.log 2>&1; then
+    echo "demo.sh: the build failed; its errors (the whole log: var/build.log):" >&2
+    grep -E 'error|Error|ERROR' var/build.log | head -20 >&2 || tail -20 var/build.log >&2
+    exit 1
+  fi
   build=build
 fi
 esg=$build/client/esg
 esgd=$build/server/esgd
-work=var/demo
+work=${ESG_DEMO_DIR:-var/demo}
 port=${ESG_DEMO_PORT:-50051}
-addr=127.0.0.1:$port
 rm -rf "$work"
 mkdir -p "$work"
 
-step() { printf '\n== %s\n' "$*"; }
+# Each step's output goes to its log in $work; a failing step shows its log's end.
+run() {
+  local log=$work/$1
+  shift
+  if ! "$@" >"$log" 2>"$log.err"; then
+    echo "demo.sh: failed: $* (in $log.err):" >&2
+    tail -20 "$log.err" >&2
+    exit 1
+  fi
+}
 
-step "simulate RDK-1: 30 h of the paper's calibration profile (rotors displaced, star-tracker outliers)"
-"$esg" simulate --config deploy/examples/rdk1.json --profile calibration \
+run flight.log "$esg" simulate --config deploy/examples/rdk1.json --profile calibration \
   --scenario deploy/examples/scenarios/paper_calibration.json --hours 30 --seed 1 \
-  --out "$work/flight.csv"
+  --out "$work/flight.csv" --truth "$work/truth.csv"
 
-step "start esgd on $addr with $work/esg.db"
-"$esgd" --listen "$addr" --db "$work/esg.db" >"$work/esgd.log" 2>&1 &
+"$esgd" --listen "127.0.0.1:$port" --db "$work/esg.db" >"$work/esgd.out" 2>"$work/esgd.log" &
 esgd_pid=$!
 console_pid=
 cleanup() {
@@ -47,47 +62,51 @@ cleanup() {
   done
 }
 trap cleanup EXIT
+# esgd prints "esgd listening on port N" once it serves (port 0: the one the OS chose).
 for _ in $(seq 1 100); do
-  "$esg" --server "$addr" status >/dev/null 2>&1 && break
+  grep -q 'listening on port' "$work/esgd.out" 2>/dev/null && break
   sleep 0.1
 done
+port=$(sed -n 's/.*listening on port \([0-9]*\).*/\1/p' "$work/esgd.out" | head -1)
+if [ -z "$port" ]; then
+  echo "demo.sh: esgd did not start:" >&2
+  tail -5 "$work/esgd.log" >&2
+  exit 1
+fi
+addr=127.0.0.1:$port
+at=(--server "$addr")
 
-step "configure and replay through the client (model 10+11)"
-"$esg" --server "$addr" configure --config deploy/examples/rdk1.json --model 10+11
-"$esg" --server "$addr" replay --recording "$work/flight.csv" --wait
-
-step "session"
-"$esg" --server "$addr" status --spacecraft RDK-1
-
-step "calibrated coefficients (latest snapshot per gyro, deg/h and arcsec)"
-"$esg" --server "$addr" history --spacecraft RDK-1 --csv >"$work/history.csv"
-head -1 "$work/history.csv"
-tail -3 "$work/history.csv"
-
-step "prediction across a 6 h gap without the star tracker (1-sigma envelope), AEM in $work/prediction.aem"
+run configure.log "$esg" "${at[@]}" configure --config deploy/examples/rdk1.json --model 10+11
+run replay.log "$esg" "${at[@]}" replay --recording "$work/flight.csv" --wait
+run status.json "$esg" "${at[@]}" status --spacecraft RDK-1 -o json
 last=$(tail -1 "$work/flight.csv" | cut -d, -f1)
-from=$(date -u -d "$last + 10 minutes" +%Y-%m-%dT%H:%M:%SZ)
+run history.json "$esg" "${at[@]}" history --spacecraft RDK-1 --from "$last" -o json
+# Hours 1 to 6 after the last frame, each hour.
+from=$(date -u -d "$last + 1 hour" +%Y-%m-%dT%H:%M:%SZ)
 to=$(date -u -d "$last + 6 hours" +%Y-%m-%dT%H:%M:%SZ)
-"$esg" --server "$addr" predict --spacecraft RDK-1 --from "$from" --to "$to" --step 1800 \
-  --aem "$work/prediction.aem"
-
-step "alerts raised"
-"$esg" --server "$addr" alerts --spacecraft RDK-1
-
-step "offline: model (1) versus model (10) across a 12 h gap in varied orientations (paper Fig. 7/8)"
-"$esg" simulate --config deploy/examples/rdk1.json --profile mixed \
-  --scenario deploy/examples/scenarios/paper_fig78.json --hours 36 --seed 1 --out "$work/mixed.csv" 2>/dev/null
-for model in 1+11 10+11; do
-  "$esg" gap --config deploy/examples/rdk1.json --recording "$work/mixed.csv" --model "$model" \
-    --gap-start 24 2>/dev/null | head -3
+run predict.json "$esg" "${at[@]}" predict --spacecraft RDK-1 --from "$from" --to "$to" \
+  --step 3600 --aem "$work/prediction.aem" -o json
+run alerts.json "$esg" "${at[@]}" alerts --spacecraft RDK-1 -o json
+# Offline, the paper's Fig. 7/8: model (1) against model (10) across a 12 h gap in varied
+# orientations.
+run mixed.log "$esg" simulate --config deploy/examples/rdk1.json --profile mixed \
+  --scenario deploy/examples/scenarios/paper_fig78.json --hours 36 --seed 1 --out "$work/mixed.csv"
+for model in 1 10; do
+  run "gap_$model.json" "$esg" gap --config deploy/examples/rdk1.json --recording "$work/mixed.csv" \
+    --model "$model+11" --gap-start 24 -o json
 done
+
+python3 scripts/demo_summary.py "$work"
+echo
+echo "Next: esg --server $addr help (docs/cli.md)"
+echo "The prediction as a CCSDS AEM file: $work/prediction.aem"
 
 if [ "$serve" = 0 ]; then
   exit 0
 fi
 
 console_port=${ESG_CONSOLE_PORT:-8080}
-step "console: Open MCT through the console gateway on 127.0.0.1:$console_port (log in $work/console.log)"
+echo "console: starting Open MCT through the console gateway (log in $work/console.log)"
 # scripts/console.sh installs the console's npm packages first if they are missing.
 bash scripts/console.sh --esgd "$addr" --listen "127.0.0.1:$console_port" >"$work/console.log" 2>&1 &
 console_pid=$!
