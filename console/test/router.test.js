@@ -116,3 +116,37 @@ test('a call over all spacecraft reaches one node, which knows only its own (SQL
   assert.ok(own.length < SPACECRAFT.length, `all six spacecraft on ${node}`);
   assert.deepEqual(listed, own, `listed by ${node}`);
 });
+
+// gRPC 1.51 in esgd has no connection cap (docs/service.md "Limits"): the shipped nginx bounds
+// the calls one client address has open at 128 (limit_conn, which with HTTP/2 counts each call
+// in progress), and answers the next one as gRPC RESOURCE_EXHAUSTED.
+test('the router bounds one address\'s open calls at 128 and refuses the next RESOURCE_EXHAUSTED', async () => {
+  const { Esgd } = require('../gateway/esgd');
+  const esgd = new Esgd({ address: router.address, ca: null, serverName: null });
+  const clients = [esgd.ownConnection(), esgd.ownConnection()];
+  const calls = [];
+  const subscribe = (client) => new Promise((resolve) => {
+    const call = esgd.subscribe('SubscribeAlerts',
+      { spacecraft_id: '', since: { seconds: 0, nanos: 0 }, replay_marker: true }, undefined, {
+        client,
+        onMessage: (message) => { if (message.replay_complete) resolve(null); },
+        onEnd: (err) => resolve(err || new Error('ended')),
+      });
+    calls.push(call);
+  });
+  try {
+    // 64 on each of two connections (nginx allows 100 calls per connection).
+    const held = await Promise.all(Array.from({ length: 128 }, (_, i) => subscribe(clients[i % 2])));
+    assert.deepEqual(held.filter((r) => r !== null).map((e) => e.message), []);
+    const third = esgd.ownConnection();
+    clients.push(third);
+    const refused = await subscribe(third);
+    assert.ok(refused, 'the 129th call was served');
+    assert.equal(refused.code, 8); // RESOURCE_EXHAUSTED
+    assert.match(refused.details, /^esg router \(nginx\): this address already has 128 calls open/);
+  } finally {
+    for (const call of calls) call.cancel();
+    for (const client of clients) client.close();
+    esgd.close();
+  }
+});
