@@ -4,9 +4,9 @@
 // orientation, 1% star-tracker outliers, a 1 h outage, the effect alone, in one gyro where it is
 // per gyro). Each test asserts the exact set of findings (the named effect, in the right gyro,
 // and nothing else; `none` and no finding on an effect-free recording) and each fitted value
-// against the simulated truth within 3 of its stated sigma. The README's confusion matrix
-// (scripts/confusion_matrix.sh: 10 seeds, 30 h) is the statistical statement; these are its
-// pins in CI.
+// against the simulated truth within 3 of its stated sigma. The confusion matrix of
+// docs/measurements.md (scripts/confusion_matrix.sh: 10 seeds, 30 h) is the statistical
+// statement; these are its pins in CI.
 //
 // Seed 1 for every effect (the per-gyro effects then sit in gyro 2), fixed before any result was
 // seen and not tuned. Length: kHours = 12 h, the shortest of 12, 18 and 24 h tried, and the only

@@ -644,9 +644,9 @@ TEST(Session, ConfiguredStarTrackerLatencyIsCorrectedWithTheMeasuredBodyRate) {
   EXPECT_LT(corrected.rejected, wrong_sign.rejected);
 }
 
-// The gap experiment's claim (the paper's Fig. 7/8, README "Results against the paper"): after
-// 24 h of calibration on a mixed-profile flight whose gyros have displaced rotors (as
-// deploy/examples/scenarios/paper_fig78_low_rw.json: 0.0005 deg/h/sqrt(h) random walk), model
+// The gap experiment's claim (the paper's Fig. 7/8, docs/measurements.md "Results against the
+// paper"): after 24 h of calibration on a mixed-profile flight whose gyros have displaced rotors
+// (as deploy/examples/scenarios/paper_fig78_low_rw.json: 0.0005 deg/h/sqrt(h) random walk), model
 // (10)+(11) drifts across a 24 h gap at least 3 times slower than model (1)+(11), which lacks the
 // rotor-displacement terms; and model (1)+(11) excludes no healthy gyro (D20, D21).
 TEST(Session, GapExperimentModelTenIsAtLeastThreeTimesBetterThanModelOne) {
