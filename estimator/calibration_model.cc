@@ -1,11 +1,15 @@
 #include "estimator/calibration_model.h"
 
+#include <array>
+#include <string>
+
 #include "absl/strings/escaping.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "estimator/model_terms.h"
 
 namespace esg::estimator {
 
@@ -93,10 +97,12 @@ std::vector<int> FreeBasisTerms(const GyroConfig& gyro) {
 }
 
 const char* CoefficientName(int i) {
-  static const char* kNames[kNumDriftCoefficients] = {
-      "k0DegH",    "c1DegH[0]", "c1DegH[1]", "c1DegH[2]", "c2DegH[0]", "c2DegH[1]", "c2DegH[2]",
-      "muDegH[0]", "muDegH[1]", "muDegH[2]", "nuDegH[0]", "nuDegH[1]", "nuDegH[2]"};
-  return (i >= 0 && i < kNumDriftCoefficients) ? kNames[i] : "?";
+  static const auto* const kNames = [] {
+    auto* names = new std::array<std::string, kNumDriftCoefficients>;
+    for (int k = 0; k < kNumDriftCoefficients; ++k) (*names)[k] = FixedTermJsonName(kFixedTerms[k]);
+    return names;
+  }();
+  return (i >= 0 && i < kNumDriftCoefficients) ? (*kNames)[i].c_str() : "?";
 }
 
 }  // namespace esg::estimator

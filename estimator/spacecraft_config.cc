@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/conventions.h"
+#include "estimator/model_terms.h"
 #include "estimator/status_macros.h"
 
 namespace esg::estimator {
@@ -167,10 +168,6 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "gyros: between 2 and %d gyros are needed, got %d", kMaxGyros, config.gyros.size()));
   }
-  // JSON names of the 13 drift coefficients, in DriftCoefficients::AsVector() order.
-  static constexpr const char* kCoefficientNames[kNumDriftCoefficients] = {
-      "k0DegH",    "c1DegH[0]", "c1DegH[1]", "c1DegH[2]", "c2DegH[0]", "c2DegH[1]", "c2DegH[2]",
-      "muDegH[0]", "muDegH[1]", "muDegH[2]", "nuDegH[0]", "nuDegH[1]", "nuDegH[2]"};
   std::set<int> ids;
   for (size_t i = 0; i < config.gyros.size(); ++i) {
     const GyroConfig& g = config.gyros[i];
@@ -191,18 +188,21 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
     const DriftVector model = g.model.AsVector(), sigma = g.model_sigma.AsVector();
     for (int k = 0; k < kNumDriftCoefficients; ++k) {  // field names built only on failure
       if (!WithinLimit(model[k], L.drift_coefficient)) {
-        return LimitError(model[k], L.drift_coefficient,
-                          absl::StrFormat("gyros[%d].model.%s", i, kCoefficientNames[k]));
+        return LimitError(
+            model[k], L.drift_coefficient,
+            absl::StrFormat("gyros[%d].model.%s", i, FixedTermJsonName(kFixedTerms[k])));
       }
     }
     for (int k = 0; k < kNumDriftCoefficients; ++k) {
       if (!WithinLimit(sigma[k], L.drift_sigma)) {
-        return LimitError(sigma[k], L.drift_sigma,
-                          absl::StrFormat("gyros[%d].modelSigma.%s", i, kCoefficientNames[k]));
+        return LimitError(
+            sigma[k], L.drift_sigma,
+            absl::StrFormat("gyros[%d].modelSigma.%s", i, FixedTermJsonName(kFixedTerms[k])));
       }
       if (!IsPriorSigma(sigma[k])) {
-        return PriorSigmaError(sigma[k], RadPerSecToDegPerHour(1.0), "deg/h",
-                               absl::StrFormat("gyros[%d].modelSigma.%s", i, kCoefficientNames[k]));
+        return PriorSigmaError(
+            sigma[k], RadPerSecToDegPerHour(1.0), "deg/h",
+            absl::StrFormat("gyros[%d].modelSigma.%s", i, FixedTermJsonName(kFixedTerms[k])));
       }
     }
     RETURN_IF_ERROR(CheckLimit(g.misalignment_sigma, L.misalignment_sigma,

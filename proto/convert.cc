@@ -2,6 +2,7 @@
 // (docs/formats.md), drift model (docs/physics.md) and timestamps.
 #include "proto/convert.h"
 
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -9,7 +10,6 @@
 #include <cstring>
 #include <fstream>
 #include <sstream>
-#include <tuple>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -20,6 +20,8 @@
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
+#include "google/protobuf/descriptor.h"
+#include "google/protobuf/message.h"
 #include "google/protobuf/repeated_field.h"
 #include "google/protobuf/util/json_util.h"
 #include "proto/strict_json.h"
@@ -338,25 +340,88 @@ esg::v1::BasisTerm BasisTermToProto(const estimator::BasisTerm& t) {
 // ---------------------------------------------------------------------------------------------
 // Drift model.
 
+namespace {
+
+// The GyroDriftModel field of a term: the one whose JSON name is the descriptor's key (looked up
+// once per entry of kFixedTerms: a history export maps every snapshot); nullptr when none is.
+const google::protobuf::FieldDescriptor* DriftModelField(
+    const estimator::FixedTermDescriptor& term) {
+  auto find = [](const estimator::FixedTermDescriptor& t) {
+    return esg::v1::GyroDriftModel::descriptor()->FindFieldByCamelcaseName(
+        std::string(t.json_key));
+  };
+  using Fields = std::array<const google::protobuf::FieldDescriptor*, estimator::kNumDriftCoefficients>;
+  static const Fields* const fields = [&find] {
+    auto* f = new Fields;
+    for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) (*f)[i] = find(estimator::kFixedTerms[i]);
+    return f;
+  }();
+  const int i = term.theta_index;
+  if (i >= 0 && i < estimator::kNumDriftCoefficients &&
+      estimator::kFixedTerms[i].json_key == term.json_key) {
+    return (*fields)[i];
+  }
+  return find(term);
+}
+
+// Number of entries of the term's JSON key (1 for a number, the vector's length otherwise).
+int EntriesOfKey(absl::string_view json_key) {
+  int n = 0;
+  for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) n += t.json_key == json_key;
+  return n;
+}
+
+// Checks the length of every vector key of a GyroDriftModel: empty (zero) or complete. The keys
+// in table order, so the first wrong one is named.
+absl::Status CheckDriftModelLengths(const esg::v1::GyroDriftModel& proto, absl::string_view field) {
+  const google::protobuf::Reflection* reflection = proto.GetReflection();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    if (term.component != 0) continue;  // once per vector key, at its first entry
+    const google::protobuf::FieldDescriptor* f = DriftModelField(term);
+    if (f == nullptr || !f->is_repeated()) continue;
+    const int size = reflection->FieldSize(proto, f);
+    const int expected = EntriesOfKey(term.json_key);
+    if (size != 0 && size != expected) {
+      return FieldError(absl::StrCat(field, ".", term.json_key),
+                        absl::StrFormat("expected %d values, got %d", expected, size));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
+                          const estimator::FixedTermDescriptor& term) {
+  const google::protobuf::FieldDescriptor* f = DriftModelField(term);
+  if (f == nullptr) return 0.0;
+  const google::protobuf::Reflection* reflection = model.GetReflection();
+  if (!f->is_repeated()) return reflection->GetDouble(model, f);
+  if (term.component >= reflection->FieldSize(model, f)) return 0.0;
+  return reflection->GetRepeatedDouble(model, f, term.component);
+}
+
+void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double deg_h,
+                           esg::v1::GyroDriftModel* model) {
+  const google::protobuf::FieldDescriptor* f = DriftModelField(term);
+  if (f == nullptr) return;
+  const google::protobuf::Reflection* reflection = model->GetReflection();
+  if (!f->is_repeated()) {
+    reflection->SetDouble(model, f, deg_h);
+    return;
+  }
+  while (reflection->FieldSize(*model, f) <= term.component) reflection->AddDouble(model, f, 0.0);
+  reflection->SetRepeatedDouble(model, f, term.component, deg_h);
+}
+
 absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
                                                                  std::string_view field_name) {
-  const absl::string_view field = AbslView(field_name);
-  using estimator::DegPerHourToRadPerSec;
-  estimator::DriftCoefficients c;
-  c.k0 = DegPerHourToRadPerSec(proto.k0_deg_h());
-  ASSIGN_OR_RETURN(const Eigen::Vector3d c1_deg_h,
-                   OptionalVector3(proto.c1_deg_h(), absl::StrCat(field, ".c1DegH")));
-  ASSIGN_OR_RETURN(const Eigen::Vector3d c2_deg_h,
-                   OptionalVector3(proto.c2_deg_h(), absl::StrCat(field, ".c2DegH")));
-  ASSIGN_OR_RETURN(const Eigen::Vector3d mu_deg_h,
-                   OptionalVector3(proto.mu_deg_h(), absl::StrCat(field, ".muDegH")));
-  ASSIGN_OR_RETURN(const Eigen::Vector3d nu_deg_h,
-                   OptionalVector3(proto.nu_deg_h(), absl::StrCat(field, ".nuDegH")));
-  c.C1 = c1_deg_h.unaryExpr(&DegPerHourToRadPerSec);
-  c.C2 = c2_deg_h.unaryExpr(&DegPerHourToRadPerSec);
-  c.mu = mu_deg_h.unaryExpr(&DegPerHourToRadPerSec);
-  c.nu = nu_deg_h.unaryExpr(&DegPerHourToRadPerSec);
-  return c;
+  RETURN_IF_ERROR(CheckDriftModelLengths(proto, AbslView(field_name)));
+  estimator::DriftVector theta;
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    theta[term.theta_index] = estimator::DegPerHourToRadPerSec(DriftModelTermDegH(proto, term));
+  }
+  return estimator::DriftCoefficients::FromVector(theta);
 }
 
 namespace {
@@ -365,17 +430,11 @@ namespace {
 absl::Status DriftSigmasKeptPositive(const esg::v1::GyroDriftModel& proto,
                                      const estimator::DriftCoefficients& c,
                                      absl::string_view field) {
-  RETURN_IF_ERROR(SigmaKeptPositive(proto.k0_deg_h(), c.k0, absl::StrCat(field, ".k0DegH")));
-  for (const auto& [json, si, name] :
-       {std::tuple<const RepeatedField<double>&, const Eigen::Vector3d&, const char*>{
-            proto.c1_deg_h(), c.C1, ".c1DegH"},
-        {proto.c2_deg_h(), c.C2, ".c2DegH"},
-        {proto.mu_deg_h(), c.mu, ".muDegH"},
-        {proto.nu_deg_h(), c.nu, ".nuDegH"}}) {
-    for (int i = 0; i < json.size(); ++i) {
-      RETURN_IF_ERROR(
-          SigmaKeptPositive(json[i], si[i], absl::StrFormat("%s%s[%d]", field, name, i)));
-    }
+  const estimator::DriftVector theta = c.AsVector();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    RETURN_IF_ERROR(SigmaKeptPositive(
+        DriftModelTermDegH(proto, term), theta[term.theta_index],
+        absl::StrCat(field, ".", estimator::FixedTermJsonName(term))));
   }
   return absl::OkStatus();
 }
@@ -384,11 +443,10 @@ absl::Status DriftSigmasKeptPositive(const esg::v1::GyroDriftModel& proto,
 
 esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients) {
   esg::v1::GyroDriftModel proto;
-  proto.set_k0_deg_h(TidyDegPerHour(coefficients.k0));
-  SetVector3(coefficients.C1.unaryExpr(&TidyDegPerHour), proto.mutable_c1_deg_h());
-  SetVector3(coefficients.C2.unaryExpr(&TidyDegPerHour), proto.mutable_c2_deg_h());
-  SetVector3(coefficients.mu.unaryExpr(&TidyDegPerHour), proto.mutable_mu_deg_h());
-  SetVector3(coefficients.nu.unaryExpr(&TidyDegPerHour), proto.mutable_nu_deg_h());
+  const estimator::DriftVector theta = coefficients.AsVector();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    SetDriftModelTermDegH(term, TidyDegPerHour(theta[term.theta_index]), &proto);
+  }
   return proto;
 }
 

@@ -22,6 +22,7 @@
 #include "esg/v1/spacecraft_config.pb.h"
 #include "esg/v1/telemetry.pb.h"
 #include "estimator/drift_model.h"
+#include "estimator/model_terms.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/telemetry.h"
 #include "google/protobuf/timestamp.pb.h"
@@ -97,6 +98,15 @@ absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::
                                                                  std::string_view field);
 // Rounded to 15 significant digits like ConfigToProto.
 esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients);
+
+// One coefficient of a GyroDriftModel as on the wire [deg/h], found by its descriptor
+// (estimator/model_terms.h: the field whose JSON name is term.json_key, entry term.component);
+// an entry the message does not hold reads 0 (an empty vector is zero).
+double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
+                          const estimator::FixedTermDescriptor& term);
+// Sets it, first filling the field's missing entries before it with 0.
+void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double deg_h,
+                           esg::v1::GyroDriftModel* model);
 
 // ---------------------------------------------------------------------------------------------
 // Telemetry frames (docs/formats.md).

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/units.h"
 #include "proto/convert.h"
@@ -309,13 +310,11 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
   auto fill = [](const std::vector<double>& v, esg::v1::GyroDriftModel* m,
                  google::protobuf::RepeatedField<double>* misalignment) {
     if (v.size() != static_cast<size_t>(storage::kNumCoefficientValues)) return;
-    using estimator::RadPerSecToDegPerHour;
-    m->set_k0_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientK0]));
+    for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+      proto_convert::SetDriftModelTermDegH(
+          term, estimator::RadPerSecToDegPerHour(v[term.theta_index]), m);
+    }
     for (int i = 0; i < 3; ++i) {
-      m->add_c1_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientC1 + i]));
-      m->add_c2_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientC2 + i]));
-      m->add_mu_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientMu + i]));
-      m->add_nu_deg_h(RadPerSecToDegPerHour(v[storage::kCoefficientNu + i]));
       misalignment->Add(estimator::RadToArcsec(v[storage::kCoefficientMisalignment + i]));
     }
   };

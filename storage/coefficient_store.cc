@@ -1,6 +1,7 @@
 // Coefficient histories; contract in coefficient_store.h.
 #include "storage/coefficient_store.h"
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -8,6 +9,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "estimator/model_terms.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
 #include "storage/basis_terms_column.h"
@@ -16,15 +18,16 @@
 namespace esg::storage {
 namespace {
 
-// Fixed leading columns, then the 16 value columns, the 16 sigma columns and the basis terms.
+// Fixed leading columns, then the value columns, the sigma columns (records.h) and the basis
+// terms.
 constexpr int kNumLeadingColumns = 5;
 constexpr int kBasisColumn = kNumLeadingColumns + 2 * kNumCoefficientValues;
 
 std::string AllColumns() {
   return absl::StrCat(
       "spacecraft_id, gyro_id, measurement_time_unix_ns, compute_time_unix_ns, model_name, ",
-      absl::StrJoin(kCoefficientColumns, ", "), ", ",
-      absl::StrJoin(kCoefficientSigmaColumns, ", "), ", basis_terms_json");
+      absl::StrJoin(CoefficientColumns(), ", "), ", ",
+      absl::StrJoin(CoefficientSigmaColumns(), ", "), ", basis_terms_json");
 }
 
 const std::string& InsertSql() {
@@ -145,7 +148,34 @@ absl::Status Validate(const CoefficientRecord& r) {
   return ValidateStorableTime(r.compute_time, "coefficients.compute_time");
 }
 
+// The column names of the values (sigma = false) or of the sigmas, in layout order.
+std::array<std::string, kNumCoefficientValues> MakeColumns(bool sigma) {
+  std::array<std::string, kNumCoefficientValues> columns;
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    columns[term.theta_index] =
+        sigma ? estimator::FixedTermSigmaColumn(term) : estimator::FixedTermValueColumn(term);
+  }
+  const char* const axes[3] = {"x", "y", "z"};
+  for (int i = 0; i < 3; ++i) {
+    columns[kCoefficientMisalignment + i] =
+        absl::StrCat("misalignment_", axes[i], sigma ? "_sigma_arcsec" : "_arcsec");
+  }
+  return columns;
+}
+
 }  // namespace
+
+const std::array<std::string, kNumCoefficientValues>& CoefficientColumns() {
+  static const auto* const columns =
+      new std::array<std::string, kNumCoefficientValues>(MakeColumns(/*sigma=*/false));
+  return *columns;
+}
+
+const std::array<std::string, kNumCoefficientValues>& CoefficientSigmaColumns() {
+  static const auto* const columns =
+      new std::array<std::string, kNumCoefficientValues>(MakeColumns(/*sigma=*/true));
+  return *columns;
+}
 
 std::vector<double> ToCoefficientValues(const estimator::DriftCoefficients& drift,
                                         const Eigen::Vector3d& misalignment_b) {

@@ -40,62 +40,30 @@ struct ArchivedFrame {
 };
 
 // Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, in SI like
-// every record: drift terms following estimator/drift_model.h (eq. (1), (8)-(10),
+// every record: the drift terms of estimator/model_terms.h in theta order (eq. (1), (8)-(10),
 // docs/physics.md): k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of
 // the gyro, mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all [rad/s]; then the misalignment,
 // a small rotation vector about body axes b [rad]. Each is stored in its own column of table
 // `coefficients`, in the unit its name carries (deg/h for the drift terms, arcsec for the
 // misalignment; sigma columns "<name>_sigma_<unit>", e.g. k0_sigma_deg_h): CoefficientStore
 // converts at the columns, so a user of plain SQL reads the units operators use.
-inline constexpr int kNumCoefficientValues = 16;
+inline constexpr int kCoefficientMisalignment = estimator::kNumDriftCoefficients;
+inline constexpr int kNumCoefficientValues = kCoefficientMisalignment + 3;
 inline constexpr int kCoefficientK0 = 0;
 inline constexpr int kCoefficientC1 = 1;
 inline constexpr int kCoefficientC2 = 4;
 inline constexpr int kCoefficientMu = 7;
 inline constexpr int kCoefficientNu = 10;
-inline constexpr int kCoefficientMisalignment = 13;
 static_assert(kCoefficientK0 == estimator::kThetaK0 && kCoefficientC1 == estimator::kThetaC1 &&
                   kCoefficientC2 == estimator::kThetaC2 && kCoefficientMu == estimator::kThetaMu &&
-                  kCoefficientNu == estimator::kThetaNu &&
-                  kCoefficientMisalignment == estimator::kNumDriftCoefficients,
+                  kCoefficientNu == estimator::kThetaNu,
               "the drift part of the coefficient layout is the estimator's theta");
 
-// Column names of the values, in layout order.
-inline constexpr std::array<absl::string_view, kNumCoefficientValues> kCoefficientColumns = {
-    "k0_deg_h",
-    "c1x_deg_h",
-    "c1y_deg_h",
-    "c1z_deg_h",
-    "c2x_deg_h",
-    "c2y_deg_h",
-    "c2z_deg_h",
-    "mu12_deg_h",
-    "mu23_deg_h",
-    "mu31_deg_h",
-    "nu23_deg_h",
-    "nu31_deg_h",
-    "nu12_deg_h",
-    "misalignment_x_arcsec",
-    "misalignment_y_arcsec",
-    "misalignment_z_arcsec"};
-// Column names of the sigmas, in layout order.
-inline constexpr std::array<absl::string_view, kNumCoefficientValues> kCoefficientSigmaColumns = {
-    "k0_sigma_deg_h",
-    "c1x_sigma_deg_h",
-    "c1y_sigma_deg_h",
-    "c1z_sigma_deg_h",
-    "c2x_sigma_deg_h",
-    "c2y_sigma_deg_h",
-    "c2z_sigma_deg_h",
-    "mu12_sigma_deg_h",
-    "mu23_sigma_deg_h",
-    "mu31_sigma_deg_h",
-    "nu23_sigma_deg_h",
-    "nu31_sigma_deg_h",
-    "nu12_sigma_deg_h",
-    "misalignment_x_sigma_arcsec",
-    "misalignment_y_sigma_arcsec",
-    "misalignment_z_sigma_arcsec"};
+// Column names of the values and of the sigmas, in layout order: the drift terms' from their
+// descriptors (estimator/model_terms.h: "k0_deg_h", "k0_sigma_deg_h", ...), then
+// "misalignment_x_arcsec", ..., "misalignment_z_sigma_arcsec". Defined in coefficient_store.cc.
+const std::array<std::string, kNumCoefficientValues>& CoefficientColumns();
+const std::array<std::string, kNumCoefficientValues>& CoefficientSigmaColumns();
 
 // One estimate of one gyro's model coefficients.
 struct CoefficientRecord {

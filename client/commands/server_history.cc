@@ -29,6 +29,7 @@
 #include "client/commands/server_common.h"
 #include "client/commands/server_export.h"
 #include "client/output_format.h"
+#include "estimator/model_terms.h"
 #include "proto/convert.h"
 
 namespace esg::client {
@@ -46,43 +47,31 @@ struct HistoryOptions {
   OutputFormat format = OutputFormat::kTable;
 };
 
-// Column groups of GyroDriftModel: name stem per component, in the proto's component order
-// (spacecraft_config.proto: C1 = (C11, C12, C13) along the case axes x, y, z; mu = (mu12, mu23,
-// mu31); nu = (nu23, nu31, nu12)).
-struct Term {
-  const char* json_name;
-  std::vector<const char*> stems;
-};
-const std::vector<Term>& Terms() {
-  static const std::vector<Term> terms = {
-      {"k0DegH", {"k0"}},
-      {"c1DegH", {"c1x", "c1y", "c1z"}},
-      {"c2DegH", {"c2x", "c2y", "c2z"}},
-      {"muDegH", {"mu12", "mu23", "mu31"}},
-      {"nuDegH", {"nu23", "nu31", "nu12"}},
-  };
-  return terms;
+// The drift terms of GyroDriftModel, one group per JSON key in theta order, each with the
+// descriptors of its components (estimator/model_terms.h).
+using TermGroup = std::vector<const estimator::FixedTermDescriptor*>;
+const std::vector<TermGroup>& TermGroups() {
+  static const std::vector<TermGroup>* const groups = [] {
+    auto* out = new std::vector<TermGroup>;
+    for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+      if (out->empty() || out->back().front()->json_key != term.json_key) out->emplace_back();
+      out->back().push_back(&term);
+    }
+    return out;
+  }();
+  return *groups;
 }
 
-// Values of term `t` of a model; missing components are 0 (an empty vector is zero).
-std::vector<double> TermValues(const esg::v1::GyroDriftModel& m, size_t t) {
-  auto three = [](const google::protobuf::RepeatedField<double>& v) {
-    std::vector<double> out(3, 0.0);
-    for (int i = 0; i < v.size() && i < 3; ++i) out[i] = v[i];
-    return out;
-  };
-  switch (t) {
-    case 0:
-      return {m.k0_deg_h()};
-    case 1:
-      return three(m.c1_deg_h());
-    case 2:
-      return three(m.c2_deg_h());
-    case 3:
-      return three(m.mu_deg_h());
-    default:
-      return three(m.nu_deg_h());
+// Table heading of a group: "k0 +- sigma" for a number, "C1 x,y,z" or "mu 12,23,31" for a
+// vector (the components named by their storage keys after the symbol).
+std::string GroupHeading(const TermGroup& group) {
+  const estimator::FixedTermDescriptor& first = *group.front();
+  if (first.component < 0) return absl::StrCat(first.symbol, " +- sigma");
+  std::string heading = absl::StrCat(first.symbol, " ");
+  for (size_t i = 0; i < group.size(); ++i) {
+    absl::StrAppend(&heading, i == 0 ? "" : ",", group[i]->storage_key.substr(first.symbol.size()));
   }
+  return heading;
 }
 
 double At(const google::protobuf::RepeatedField<double>& v, int i) {
@@ -98,9 +87,9 @@ std::string RevisedCell(const esg::v1::CoefficientSnapshot& s) {
 
 std::string CsvHeader() {
   std::string header = "time_utc,gyro";
-  for (const Term& term : Terms()) {
-    for (const char* stem : term.stems)
-      absl::StrAppend(&header, ",", stem, "_deg_h,", stem, "_sigma_deg_h");
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    absl::StrAppend(&header, ",", estimator::FixedTermValueColumn(term), ",",
+                    estimator::FixedTermSigmaColumn(term));
   }
   for (const char* axis : {"x", "y", "z"}) {
     absl::StrAppend(&header, ",misalignment_", axis, "_arcsec,misalignment_", axis,
@@ -114,13 +103,11 @@ std::string CsvHeader() {
 std::string CsvRow(const esg::v1::CoefficientSnapshot& s, bool full = false) {
   std::string row =
       absl::StrCat(FormatUtc(s.measurement_time(), s.has_measurement_time()), ",", s.gyro_id());
-  for (size_t t = 0; t < Terms().size(); ++t) {
-    const std::vector<double> value = TermValues(s.model(), t);
-    const std::vector<double> sigma = TermValues(s.sigma(), t);
-    for (size_t i = 0; i < value.size(); ++i) {
-      absl::StrAppend(&row, full ? absl::StrFormat(",%.17g,%.17g", value[i], sigma[i])
-                                 : absl::StrFormat(",%.10g,%.10g", value[i], sigma[i]));
-    }
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    const double value = proto_convert::DriftModelTermDegH(s.model(), term);
+    const double sigma = proto_convert::DriftModelTermDegH(s.sigma(), term);
+    absl::StrAppend(&row, full ? absl::StrFormat(",%.17g,%.17g", value, sigma)
+                               : absl::StrFormat(",%.10g,%.10g", value, sigma));
   }
   for (int i = 0; i < 3; ++i) {
     const double m = At(s.misalignment_arcsec(), i);
@@ -132,15 +119,33 @@ std::string CsvRow(const esg::v1::CoefficientSnapshot& s, bool full = false) {
 }
 
 void PrintTable(const esg::v1::HistoryResponse& history) {
-  std::printf("%-22s %4s %18s  %-26s  %-26s  %-26s  %-26s  %s\n", "time_utc", "gyro", "k0 +- sigma",
-              "C1 x,y,z", "C2 x,y,z", "mu 12,23,31", "nu 23,31,12", "misalignment x,y,z [arcsec]");
+  // A number takes 18 columns (value +- sigma), a vector 26 (its values).
+  std::string heading = absl::StrFormat("%-22s %4s ", "time_utc", "gyro");
+  for (size_t g = 0; g < TermGroups().size(); ++g) {
+    const TermGroup& group = TermGroups()[g];
+    absl::StrAppend(&heading, g == 0 ? "" : "  ",
+                    group.front()->component < 0
+                        ? absl::StrFormat("%18s", GroupHeading(group))
+                        : absl::StrFormat("%-26s", GroupHeading(group)));
+  }
+  std::printf("%s  %s\n", heading.c_str(), "misalignment x,y,z [arcsec]");
   for (const esg::v1::CoefficientSnapshot& s : history.snapshots()) {
-    std::string line = absl::StrFormat("%-22s %4d %+9.5f +-%7.5f",
+    std::string line = absl::StrFormat("%-22s %4d ",
                                        FormatUtc(s.measurement_time(), s.has_measurement_time()),
-                                       s.gyro_id(), s.model().k0_deg_h(), s.sigma().k0_deg_h());
-    for (size_t t = 1; t < Terms().size(); ++t) {
-      const std::vector<double> v = TermValues(s.model(), t);
-      absl::StrAppend(&line, absl::StrFormat("  %+8.5f %+8.5f %+8.5f", v[0], v[1], v[2]));
+                                       s.gyro_id());
+    for (size_t g = 0; g < TermGroups().size(); ++g) {
+      const TermGroup& group = TermGroups()[g];
+      if (group.front()->component < 0) {
+        absl::StrAppend(&line, g == 0 ? "" : "  ",
+                        absl::StrFormat("%+9.5f +-%7.5f",
+                                        proto_convert::DriftModelTermDegH(s.model(), *group.front()),
+                                        proto_convert::DriftModelTermDegH(s.sigma(), *group.front())));
+        continue;
+      }
+      absl::StrAppend(&line, g == 0 ? "" : " ");
+      for (const estimator::FixedTermDescriptor* term : group) {
+        absl::StrAppend(&line, absl::StrFormat(" %+8.5f", proto_convert::DriftModelTermDegH(s.model(), *term)));
+      }
     }
     absl::StrAppend(
         &line, absl::StrFormat("  %+7.1f %+7.1f %+7.1f", At(s.misalignment_arcsec(), 0),

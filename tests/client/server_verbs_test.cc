@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
 #include "client/esg_client.h"
@@ -276,6 +277,33 @@ TEST_F(ServerVerbs, ConfigureReplayStatusHistoryPredictAndAlerts) {
     EXPECT_TRUE(std::isfinite(std::stod(cells[2]))) << lines[i];
   }
   EXPECT_TRUE(gyros.count(1) && gyros.count(2)) << "working-pair gyros have snapshots";
+  // The whole CSV header and the table's heading as docs/cli.md shows them (the coefficients'
+  // names come from estimator/model_terms.h); a table row: time, gyro, k0 +-sigma, C1, C2, mu, nu,
+  // misalignment, with the CSV's k0 at the table's 5 decimals.
+  std::string expected_header = "time_utc,gyro";
+  for (const char* stem : {"k0", "c1x", "c1y", "c1z", "c2x", "c2y", "c2z", "mu12", "mu23", "mu31",
+                           "nu23", "nu31", "nu12"}) {
+    absl::StrAppend(&expected_header, ",", stem, "_deg_h,", stem, "_sigma_deg_h");
+  }
+  for (const char* axis : {"x", "y", "z"}) {
+    absl::StrAppend(&expected_header, ",misalignment_", axis, "_arcsec,misalignment_", axis,
+                    "_sigma_arcsec");
+  }
+  EXPECT_EQ(lines[0], expected_header + ",compute_time_utc");
+  r = RunEsg(dir, at + "history --spacecraft RDK-1");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::vector<std::string> table = absl::StrSplit(r.out, '\n', absl::SkipEmpty());
+  ASSERT_GE(table.size(), lines.size() + 1) << r.out;  // heading, rows, count line
+  EXPECT_EQ(table[0],
+            "time_utc               gyro        k0 +- sigma  C1 x,y,z                    C2 x,y,z   "
+            "                 mu 12,23,31                 nu 23,31,12                 "
+            "misalignment x,y,z [arcsec]");
+  const std::vector<std::string> row = absl::StrSplit(table[1], ' ', absl::SkipEmpty());
+  const std::vector<std::string> first_row = absl::StrSplit(lines[1], ',');
+  ASSERT_EQ(row.size(), 19u) << table[1];
+  EXPECT_EQ(row[0], first_row[0]);
+  EXPECT_EQ(row[1], first_row[1]);
+  EXPECT_NEAR(std::stod(row[2]), std::stod(first_row[2]), 5.1e-6) << table[1];
   r = RunEsg(dir, at + "history --spacecraft RDK-1 --gyro 2 --csv");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const std::vector<std::string> gyro2 = DataLines(r.out, "20");

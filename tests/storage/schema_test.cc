@@ -75,9 +75,9 @@ std::vector<std::string> Tables(Database& db) {
 // The version-1 layout written out independently of schema.cc, as an old program left it.
 std::string HandMadeV1Sql() {
   std::vector<std::string> coefficient_columns;
-  for (absl::string_view c : kCoefficientColumns)
+  for (absl::string_view c : CoefficientColumns())
     coefficient_columns.push_back(absl::StrCat(c, " REAL"));
-  for (absl::string_view c : kCoefficientSigmaColumns) {
+  for (absl::string_view c : CoefficientSigmaColumns()) {
     coefficient_columns.push_back(absl::StrCat(c, " REAL"));
   }
   return absl::StrCat(
@@ -141,19 +141,19 @@ TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
   std::vector<std::string> expected = {
       "id",        "spacecraft_id", "gyro_id", "measurement_time_unix_ns", "compute_time_unix_ns",
       "model_name"};
-  for (absl::string_view c : kCoefficientColumns) expected.emplace_back(c);
-  for (absl::string_view c : kCoefficientSigmaColumns) expected.emplace_back(c);
+  for (absl::string_view c : CoefficientColumns()) expected.emplace_back(c);
+  for (absl::string_view c : CoefficientSigmaColumns()) expected.emplace_back(c);
   expected.emplace_back("revised_time_unix_ns");  // version 6: the reorder window's revisions
   expected.emplace_back("basis_terms_json");      // version 8: the basis terms
   EXPECT_THAT(Columns(**db, "coefficients"), ElementsAreArray(expected));
   // Spot-check the documented names (records.h) so a reordering cannot pass silently.
-  EXPECT_EQ(kCoefficientColumns[kCoefficientK0], "k0_deg_h");
-  EXPECT_EQ(kCoefficientColumns[kCoefficientC1 + 2], "c1z_deg_h");
-  EXPECT_EQ(kCoefficientColumns[kCoefficientC2], "c2x_deg_h");
-  EXPECT_EQ(kCoefficientColumns[kCoefficientMu], "mu12_deg_h");
-  EXPECT_EQ(kCoefficientColumns[kCoefficientNu], "nu23_deg_h");
-  EXPECT_EQ(kCoefficientColumns[kCoefficientMisalignment + 1], "misalignment_y_arcsec");
-  EXPECT_EQ(kCoefficientSigmaColumns[kCoefficientNu + 2], "nu12_sigma_deg_h");
+  EXPECT_EQ(CoefficientColumns()[kCoefficientK0], "k0_deg_h");
+  EXPECT_EQ(CoefficientColumns()[kCoefficientC1 + 2], "c1z_deg_h");
+  EXPECT_EQ(CoefficientColumns()[kCoefficientC2], "c2x_deg_h");
+  EXPECT_EQ(CoefficientColumns()[kCoefficientMu], "mu12_deg_h");
+  EXPECT_EQ(CoefficientColumns()[kCoefficientNu], "nu23_deg_h");
+  EXPECT_EQ(CoefficientColumns()[kCoefficientMisalignment + 1], "misalignment_y_arcsec");
+  EXPECT_EQ(CoefficientSigmaColumns()[kCoefficientNu + 2], "nu12_sigma_deg_h");
 }
 
 TEST(Schema, HandMadeVersion1FileIsMigratedWithItsData) {
