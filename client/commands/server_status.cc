@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_replace.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
 
@@ -51,7 +53,9 @@ void PrintSession(const esg::v1::SessionInfo& s) {
     std::printf("  DEGRADED: output from a clean pair, valid; predictions served\n");
   }
   for (const esg::v1::ExcludedGyro& x : s.excluded_gyros()) {
-    std::printf("  gyro %d excluded (%s): %s\n", x.gyro_id(), x.reason().c_str(),
+    // The reason in words ("reading jump"), as the console's fleet view shows it.
+    std::printf("  gyro %d excluded (%s): %s\n", x.gyro_id(),
+                absl::StrReplaceAll(absl::AsciiStrToLower(x.reason()), {{"_", " "}}).c_str(),
                 x.message().c_str());
   }
   std::printf("  last frame %s (sequence %lld); durable up to %lld, applied up to %lld\n",

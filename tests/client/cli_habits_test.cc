@@ -259,6 +259,8 @@ TEST_F(CliHabitsAgainstServer, TablesNameEnumsInWordsAndJsonKeepsTheProtoNames) 
                       " --to " + Utc(start_ + absl::Hours(8)) + " --step 1800");
   EXPECT_THAT(r.out, HasSubstr("  recorded "));
   EXPECT_THAT(r.out, HasSubstr("  inertial hold "));
+  r = EsgAt("status --spacecraft RDK-1");
+  EXPECT_THAT(r.out, HasSubstr("  gyro 1 excluded (reading jump): "));
   r = EsgAt("status --spacecraft RDK-1 -o json");
   EXPECT_THAT(r.out, ::testing::ContainsRegex("\"state\": \"SESSION_STATE_[A-Z]+\""));
   r = EsgAt("alerts --spacecraft RDK-1 -o json");
