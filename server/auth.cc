@@ -165,23 +165,20 @@ absl::StatusOr<TokenAuthorizer> TokenAuthorizer::FromFile(const std::string& pat
 
 absl::StatusOr<std::string> TokenAuthorizer::AuthenticateHeader(
     std::optional<absl::string_view> authorization, Role role, absl::string_view peer) const {
-  // One WARN line per refusal within the peer's budget. `reason` never holds the presented
-  // header or token.
+  // One WARN line per refusal, throttled per address (server/auth_throttle.h). `reason` never
+  // holds the presented header or token.
   auto refuse = [&](absl::Status status, absl::string_view reason) {
-    const FailedAuthThrottle::Outcome outcome = throttle_->Refused(peer, absl::Now());
-    if (!outcome.summary.empty()) {
-      LogEvent("WARN", "authorization_throttled", outcome.summary,
-               {{"peer", FailedAuthThrottle::Address(peer)}});
-    }
-    if (outcome.verdict == FailedAuthThrottle::Verdict::kThrottled) {
+    const absl::Time now = absl::Now();
+    const FailedAuthThrottle::Verdict verdict = throttle_->Refused(peer, now);
+    throttle_->Log(peer, verdict,
+                   absl::StrCat("authorization refused: peer ", peer.empty() ? "unknown" : peer,
+                                ", ", RoleName(role), " call: ", reason),
+                   {{"peer", peer}, {"role", RoleName(role)}}, now);
+    if (verdict == FailedAuthThrottle::Verdict::kThrottled) {
       return absl::ResourceExhaustedError(absl::StrCat(
           "authorization: too many refused calls from this address (", reason,
           "); retry in a few seconds with a valid token"));
     }
-    LogEvent("WARN", "authorization_refused",
-             absl::StrCat("authorization refused: peer ", peer.empty() ? "unknown" : peer, ", ",
-                          RoleName(role), " call: ", reason),
-             {{"peer", peer}, {"role", RoleName(role)}});
     return status;
   };
   if (!authorization.has_value()) {

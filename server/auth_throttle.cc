@@ -5,7 +5,6 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_format.h"
 
 namespace esg::server {
 
@@ -19,21 +18,20 @@ std::string FailedAuthThrottle::Address(absl::string_view peer) {
   return std::string(peer);
 }
 
-FailedAuthThrottle::Outcome FailedAuthThrottle::Refused(absl::string_view peer, absl::Time now) {
+FailedAuthThrottle::Verdict FailedAuthThrottle::Refused(absl::string_view peer, absl::Time now) {
   const std::string address = Address(peer);
   absl::MutexLock lock(&mu_);
   if (peers_.size() >= kMaxPeers && !peers_.contains(address)) {
     // Forget the addresses whose budget has refilled: they hold nothing worth keeping.
     std::vector<std::string> idle;
     for (const auto& [key, p] : peers_) {
-      if (p.held_back == 0 &&
-          p.budget + absl::ToDoubleSeconds(now - p.updated) * kRefillPerSecond >= kBurst) {
+      if (p.budget + absl::ToDoubleSeconds(now - p.updated) * kRefillPerSecond >= kBurst) {
         idle.push_back(key);
       }
     }
     for (const std::string& key : idle) peers_.erase(key);
     // Still full (a flood from many addresses): the new address is throttled without state.
-    if (peers_.size() >= kMaxPeers) return {Verdict::kThrottled, ""};
+    if (peers_.size() >= kMaxPeers) return Verdict::kThrottled;
   }
   auto [it, inserted] = peers_.try_emplace(address);
   Peer& p = it->second;
@@ -41,22 +39,19 @@ FailedAuthThrottle::Outcome FailedAuthThrottle::Refused(absl::string_view peer, 
   p.budget = std::min(
       kBurst, p.budget + std::max(0.0, absl::ToDoubleSeconds(now - p.updated)) * kRefillPerSecond);
   p.updated = now;
-  Outcome out;
-  if (p.budget >= 1.0) {
-    p.budget -= 1.0;
+  if (p.budget < 1.0) return Verdict::kThrottled;
+  p.budget -= 1.0;
+  return Verdict::kWithinBudget;
+}
+
+void FailedAuthThrottle::Log(absl::string_view peer, Verdict verdict, absl::string_view message,
+                             std::initializer_list<LogField> fields, absl::Time now) {
+  const std::string key = absl::StrCat("peer ", Address(peer));
+  if (verdict == Verdict::kWithinBudget) {
+    log_.Log(key, "WARN", message, fields, now);
   } else {
-    out.verdict = Verdict::kThrottled;
-    ++p.held_back;
+    log_.CountSuppressed(key, now);
   }
-  if (p.held_back > 0 && now - p.last_summary >= kSummaryInterval) {
-    out.summary = absl::StrFormat(
-        "%d more authorization refusals from %s were not logged one by one (throttled: %g "
-        "refusals at once, then %g per second, are; one such summary per %s at most)",
-        p.held_back, address, kBurst, kRefillPerSecond, absl::FormatDuration(kSummaryInterval));
-    p.held_back = 0;
-    p.last_summary = now;
-  }
-  return out;
 }
 
 }  // namespace esg::server

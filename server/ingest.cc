@@ -16,6 +16,7 @@
 #include "server/estimation_core.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
+#include "server/log_throttle.h"
 #include "server/spacecraft_scope.h"
 
 namespace esg::server {
@@ -224,8 +225,13 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
             "', sequence ", original.sequence, ", time ", FormatUtc(original.measurement_time),
             "): same ", by_identity ? "station and sequence" : "measurement time",
             ", different content; the stored frame is kept");
-        LogEvent("WARN", "frame_conflict", absl::StrCat(sc->id, ": ", what),
-                 {{"spacecraftId", sc->id}, {"station", station}, {"sequence", proto.sequence()}});
+        // Per station of a spacecraft: a replay of conflicting frames is one line each for the
+        // first few, then a count (server/log_throttle.h).
+        static LogThrottle* const conflict_log = new LogThrottle("frame_conflict");
+        conflict_log->Log(
+            absl::StrCat("station ", station, " of spacecraft ", sc->id),
+            "WARN", absl::StrCat(sc->id, ": ", what),
+            {{"spacecraftId", sc->id}, {"station", station}, {"sequence", proto.sequence()}});
         {
           absl::MutexLock state(&sc->state_mu);
           sc->service_alerts.push_back({"INGEST_CONFLICT", "WARNING",

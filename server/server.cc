@@ -263,6 +263,7 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
       health->SetServingStatus("", ok);
     });
   }
+  s->log_flusher_ = std::make_unique<ThrottledLogFlusher>();
   LogEvent("INFO", "started",
            absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
                         s->storage_->database().path(),
@@ -315,6 +316,7 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
   closer.join();
   core_->Stop(drain);
   server_->Wait();
+  if (log_flusher_ != nullptr) log_flusher_->Stop();  // the last counts of suppressed lines
   LogEvent("INFO", "stopped", "stopped");
 }
 

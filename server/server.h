@@ -16,6 +16,7 @@
 #include "server/auth.h"
 #include "server/estimation_core.h"
 #include "server/estimation_service.h"
+#include "server/log_throttle.h"
 #include "server/metrics_http.h"
 #include "storage/storage.h"
 
@@ -98,6 +99,8 @@ class EsgServer {
   std::unique_ptr<grpc::Server> server_;
   // Declared after core_: stopped (and destroyed) before the core whose metrics it serves.
   std::unique_ptr<MetricsHttpServer> metrics_;
+  // Writes the summaries of throttled log lines (server/log_throttle.h) while the server runs.
+  std::unique_ptr<ThrottledLogFlusher> log_flusher_;
   int port_ = 0;
   bool shut_down_ = false;
 };

@@ -3,6 +3,7 @@
 
 #include "absl/strings/ascii.h"
 #include "estimator/spacecraft_config.h"
+#include "server/metrics_process.h"
 #include "storage/records.h"
 
 namespace esg::server {
@@ -129,6 +130,8 @@ ServiceMetrics::ServiceMetrics()
     gyros_excluded.With({reason});
   }
   storage_healthy.Set(1);
+  AddProcessMetrics(registry);
+  AddBuildInfo(registry);
 }
 
 std::string StationLabel(absl::string_view station_id) {

@@ -2,6 +2,7 @@
 // type, labels, unit). One instance per EstimationCore; the ingest path (telemetry_reactor.cc),
 // the committer, the apply workers and the diagnosis update it; the sessions, storage and
 // backlog gauges are read from the core at each scrape (EstimationCore::Start adds the collector).
+// The process_* metrics and esgd_build_info (server/metrics_process.h) are in the same registry.
 #ifndef ESG_SERVER_SERVICE_METRICS_H_
 #define ESG_SERVER_SERVICE_METRICS_H_
 
