@@ -8,8 +8,17 @@
 
 _esg() {
   local cur prev words cword
+  # Bash splits words at ':' (COMP_WORDBREAKS), which would cut `--server host:port` in three:
+  # keep it one word (bash-completion's -n :, or the line itself split at blanks).
   if declare -F _init_completion >/dev/null; then
-    _init_completion || return
+    _init_completion -n : || return
+  elif [[ -n "${COMP_LINE-}" ]]; then
+    local line=${COMP_LINE:0:COMP_POINT}
+    read -ra words <<<"$line"
+    [[ -z "$line" || "$line" == *[[:blank:]] ]] && words+=("")
+    cword=$((${#words[@]} - 1))
+    cur="${words[cword]}"
+    prev="${words[cword-1]}"
   else
     cur="${COMP_WORDS[COMP_CWORD]}"
     prev="${COMP_WORDS[COMP_CWORD-1]}"

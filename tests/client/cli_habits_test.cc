@@ -311,6 +311,16 @@ TEST(CliHabits, SpacecraftIdsAreCompletedFromTheServerOrNothingWithinASecond) {
   };
   r = complete(at + "--token r-token-0123456789 status --spacecraft R", 7);
   EXPECT_EQ(r.out, "ids: RDK-1\n") << r.err;
+  // As bash calls it: COMP_WORDS split at the address's ':' (COMP_WORDBREAKS), COMP_LINE whole.
+  const std::string line = std::string(ESG_BINARY) + " " + at + "status --spacecraft R";
+  esg::testing::WriteFile(
+      dir.File("complete.sh"),
+      "source '" + script + "'\nCOMP_LINE='" + line + "'; COMP_POINT=${#COMP_LINE}\n" +
+          "COMP_WORDS=('" + ESG_BINARY + "' --server 127.0.0.1 : " +
+          std::to_string(daemon.port()) + " status --spacecraft R); COMP_CWORD=7\n" +
+          "ESG_TOKEN=r-token-0123456789 _esg; echo \"ids: ${COMPREPLY[*]}\"\n");
+  r = RunBinary(dir, "/bin/bash", "'" + dir.File("complete.sh") + "'");
+  EXPECT_EQ(r.out, "ids: RDK-1\n") << r.err;
   start = absl::Now();
   r = complete(at + "--token nope-0123456789 status --spacecraft ''", 7);
   EXPECT_LT(absl::Now() - start, absl::Seconds(1));
