@@ -25,7 +25,11 @@ if [ -z "$build" ]; then
   echo "demo: installing and building (a first build takes about 20 min; log in var/build.log)"
   if ! bash scripts/build.sh >var/build.log 2>&1; then
     echo "demo.sh: the build failed; its errors (the whole log: var/build.log):" >&2
-    grep -E 'error|Error|ERROR' var/build.log | head -20 >&2 || tail -20 var/build.log >&2
+    if grep -qE 'error|Error|ERROR' var/build.log; then
+      grep -E 'error|Error|ERROR' var/build.log | head -20 >&2 || true
+    else
+      tail -20 var/build.log >&2
+    fi
     exit 1
   fi
   build=build
