@@ -153,12 +153,21 @@ IsolationDecision DecideIsolation(const IsolationTest& test, const std::array<in
   if (star_named >= 0 && test.star_available && !d.pair_star_exceeded[star_named]) {
     // Fewer mismatches than a gyro's signature exceeded, but the named gyro's own star-tracker
     // difference fails alone and the pair without it agrees with the star tracker (D22).
-    // pair_pair[m], m != the named gyro, compares the pair without it with a pair that holds it.
+    // pair_pair[m], m != the named gyro, compares the pair without it with a pair that holds it;
+    // pair_star[m], m != the named gyro, a pair that holds it with the star tracker. Both of
+    // those against the star tracker while the pairs agree with each other is the star
+    // tracker's two-pair pattern, but a star-tracker error cannot fail one gyro's own difference
+    // while two others on non-parallel axes pass and the pair of those two agrees with it: the
+    // gyro is named (a slow error of its readings, such as a drift it gained, that the pair
+    // mismatches, whose thresholds carry every gyro's model uncertainty, do not yet see).
     bool involves_named = false;
+    int star_holding_named = 0;
     for (int m = 0; m < 3; ++m) {
-      involves_named = involves_named || (m != star_named && d.pair_pair_exceeded[m]);
+      if (m == star_named) continue;
+      involves_named = involves_named || d.pair_pair_exceeded[m];
+      star_holding_named += d.pair_star_exceeded[m];
     }
-    if (involves_named && exceeded < 3) {
+    if ((involves_named || star_holding_named == 2) && exceeded < 3) {
       d.result = Isolation::kGyro;
       d.decided_by_gyro_star = true;
       d.faulty_index = star_named;

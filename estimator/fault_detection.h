@@ -128,7 +128,9 @@ FaultDecision DecideFault(const MismatchTest& test, const std::array<int, 2>& wo
 // are ambiguous or name another gyro, and names the gyro when fewer mismatches than its
 // signature exceeded but a pair holding it disagrees with the pair without it, which agrees with the star
 // tracker: a reading error of the second gyro of a pair barely moves that pair's attitude in some
-// geometries, while its own star-tracker difference moves fully.
+// geometries, while its own star-tracker difference moves fully. For the same reason it names the
+// gyro, not the star tracker, when the two pairs holding it (and only they) disagree with the
+// star tracker while the pairs agree with each other.
 enum class Isolation { kNone, kGyro, kStarTracker, kAmbiguous };
 const char* IsolationName(Isolation i);
 

@@ -26,6 +26,7 @@
 #include "grpcpp/security/server_credentials.h"
 #include "grpcpp/server_builder.h"
 #include "server/log.h"
+#include "server/queue_budget.h"
 
 namespace esg::server {
 namespace {
@@ -65,6 +66,13 @@ absl::Status CheckLimits(const ServerOptions& o) {
       {"max_predictions", o.calls.max_predictions},
       {"max_diagnoses_per_caller", o.calls.max_diagnoses_per_caller},
       {"max_diagnoses", o.calls.max_diagnoses},
+      {"max_subscriptions_per_caller", o.calls.max_subscriptions_per_caller},
+      {"max_subscriptions", o.calls.max_subscriptions},
+      {"max_exports_per_caller", o.calls.max_exports_per_caller},
+      {"max_exports", o.calls.max_exports},
+      {"max_queued_bytes_per_caller", o.calls.max_queued_bytes_per_caller},
+      {"max_queued_bytes", o.calls.max_queued_bytes},
+      {"max_stored_diagnoses", o.max_stored_diagnoses},
       {"max_streams_per_connection", o.max_streams_per_connection},
       {"max_sync_threads", o.max_sync_threads},
   };
@@ -190,6 +198,7 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   db_options.synchronous = options.synchronous;
   db_options.vfs = options.db_vfs;
   ASSIGN_OR_RETURN(s->storage_, storage::Storage::Open(options.db_path, db_options));
+  s->storage_->diagnoses().set_max_per_spacecraft(options.max_stored_diagnoses);
   CoreOptions core_options = options.core;
   if (!postgres && !core_options.node_id.empty()) {
     return absl::InvalidArgumentError(
@@ -275,7 +284,15 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   LogEvent("INFO", "limits", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
                            " per caller, ", options.calls.max_predictions, " in total; diagnoses ",
                            options.calls.max_diagnoses_per_caller, " per caller, ",
-                           options.calls.max_diagnoses, " in total; messages up to ",
+                           options.calls.max_diagnoses, " in total; subscriptions ",
+                           options.calls.max_subscriptions_per_caller, " per caller, ",
+                           options.calls.max_subscriptions, " in total; export streams ",
+                           options.calls.max_exports_per_caller, " per caller, ",
+                           options.calls.max_exports, " in total; unread subscription messages ",
+                           ByteText(options.calls.max_queued_bytes_per_caller), " per caller, ",
+                           ByteText(options.calls.max_queued_bytes), " in total; ",
+                           options.max_stored_diagnoses, " stored diagnoses per spacecraft; "
+                           "messages up to ",
                            options.max_message_bytes, " bytes; ",
                            options.max_streams_per_connection, " streams per connection"));
   return s;

@@ -43,8 +43,12 @@ struct ServerOptions {
   CoreOptions core;
 
   // ---- Limits (docs/service.md "Limits") ----
-  // Concurrent PredictAttitude and Diagnose calls per caller and in total.
+  // Concurrent calls (predictions, diagnoses, subscriptions, exports) per caller and in total,
+  // and the unread subscription messages held.
   CallLimits calls;
+  // Diagnoses stored per spacecraft (storage/diagnosis_store.h): beyond it the oldest are
+  // deleted. About 9 KB each: 1000 hold some 9 MB per spacecraft.
+  int64_t max_stored_diagnoses = 1000;
   // Largest request message [bytes]; larger ones fail with RESOURCE_EXHAUSTED in gRPC before any
   // handler runs. 8 MiB holds a PredictRequest at the 100 000-sample limit with a planned
   // attitude (about 50 bytes a sample, 5 MB) and 100 000 explicit epochs (about 14 bytes each,

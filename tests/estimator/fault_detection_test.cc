@@ -226,6 +226,34 @@ TEST(DecideIsolation, StarTrackerDisagreesWithThreeAgreeingPairs) {
   EXPECT_EQ(DecideIsolation(Isolation3({300, 10, 10}, {10, 10, 10}), kWorking).result, Isolation::kNone);
 }
 
+TEST(DecideIsolation, OneGyroFailingItsOwnStarTrackerDifferenceAloneIsNotAStarTrackerFault) {
+  // The pairs agree with each other; the two pairs holding gyro 1 disagree with the star tracker
+  // and the pair without it ([2,3]) agrees: the star tracker's two-pair pattern on its own.
+  IsolationTest t = Isolation3({10, 300, 300}, {10, 10, 10});
+  t.gyro_star_available = true;
+  // Gyro 1's own star-tracker difference fails and gyros 2 and 3 pass: a star-tracker error
+  // would turn the rebuilds of gyros 2 and 3 too, so gyro 1 is named, not the star tracker.
+  t.gyro_star_nis = {32.2, 1.2, 2.1};
+  IsolationDecision d = DecideIsolation(t, kWorking);
+  EXPECT_EQ(d.result, Isolation::kGyro);
+  EXPECT_EQ(d.excluded_gyro, 1);
+  EXPECT_TRUE(d.decided_by_gyro_star);
+  EXPECT_FALSE(d.reject_star_tracker);
+  EXPECT_EQ(d.output_pair, (std::array<int, 2>{2, 3}));
+  // Two gyros failing their own differences (an error the third gyro's axis lies along): the
+  // star tracker.
+  t.gyro_star_nis = {32.2, 40.0, 2.1};
+  EXPECT_EQ(DecideIsolation(t, kWorking).result, Isolation::kStarTracker);
+  // A gyro between pass and fail does not clear the star tracker either.
+  t.gyro_star_nis = {32.2, 12.0, 2.1};
+  EXPECT_EQ(DecideIsolation(t, kWorking).result, Isolation::kStarTracker);
+  // The named gyro's pair-without disagreeing with the star tracker leaves the star tracker.
+  t = Isolation3({300, 300, 300}, {10, 10, 10});
+  t.gyro_star_available = true;
+  t.gyro_star_nis = {32.2, 1.2, 2.1};
+  EXPECT_EQ(DecideIsolation(t, kWorking).result, Isolation::kStarTracker);
+}
+
 TEST(DecideIsolation, AGyroNeedsOnePairHoldingItToDisagreeWithTheStarTracker) {
   // Gyro 1 confirmed by pair [1,2] against the star tracker only.
   IsolationDecision d = DecideIsolation(Isolation3({10, 10, 300}, {10, 300, 300}), kWorking);
