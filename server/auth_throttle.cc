@@ -3,20 +3,11 @@
 #include <algorithm>
 #include <vector>
 
-#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 
 namespace esg::server {
 
-std::string FailedAuthThrottle::Address(absl::string_view peer) {
-  // "ipv4:10.0.0.5:41234", "ipv6:[::1]:41234" (or "ipv6:%5B::1%5D:41234"): the port is after
-  // the last ':'.
-  if (absl::StartsWith(peer, "ipv4:") || absl::StartsWith(peer, "ipv6:")) {
-    const size_t colon = peer.rfind(':');
-    if (colon > 5) return std::string(peer.substr(0, colon));
-  }
-  return std::string(peer);
-}
+std::string FailedAuthThrottle::Address(absl::string_view peer) { return PeerAddress(peer); }
 
 FailedAuthThrottle::Verdict FailedAuthThrottle::Refused(absl::string_view peer, absl::Time now) {
   const std::string address = Address(peer);

@@ -6,6 +6,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
@@ -46,8 +47,7 @@ std::string LogThrottle::SummaryText(absl::string_view event, absl::string_view 
                          std::ceil(absl::ToDoubleSeconds(span)));
 }
 
-LogThrottle::Window& LogThrottle::WindowAt(absl::string_view key, absl::Time now,
-                                           Summary* ended) {
+LogThrottle::Window& LogThrottle::WindowAt(absl::string_view key, absl::Time now, Summary* ended) {
   auto it = windows_.find(key);
   if (it == windows_.end()) {
     if (windows_.size() >= options_.max_keys) {
@@ -119,15 +119,25 @@ int LogThrottle::Flush(absl::Time now) {
       if (w.suppressed > 0) {
         // At shutdown a window may be younger than its interval: its own age is reported.
         due.push_back({here->first, w.suppressed,
-                       now == absl::InfiniteFuture() ? std::min(absl::Now() - w.start,
-                                                                options_.interval)
-                                                     : options_.interval});
+                       now == absl::InfiniteFuture()
+                           ? std::min(absl::Now() - w.start, options_.interval)
+                           : options_.interval});
       }
       windows_.erase(here);
     }
   }
   for (const Summary& s : due) WriteSummary(s);
   return static_cast<int>(due.size());
+}
+
+std::string PeerAddress(absl::string_view peer) {
+  // "ipv4:10.0.0.5:41234", "ipv6:[::1]:41234" (or "ipv6:%5B::1%5D:41234"): the port is after
+  // the last ':'.
+  if (absl::StartsWith(peer, "ipv4:") || absl::StartsWith(peer, "ipv6:")) {
+    const size_t colon = peer.rfind(':');
+    if (colon > 5) return std::string(peer.substr(0, colon));
+  }
+  return std::string(peer);
 }
 
 int FlushThrottledLogs(absl::Time now) {

@@ -89,6 +89,10 @@ class LogThrottle {
   absl::flat_hash_map<std::string, Window> windows_ ABSL_GUARDED_BY(mu_);
 };
 
+// The address part of a gRPC peer string, the key of per-peer throttles: "ipv4:10.0.0.5",
+// "ipv6:[::1]", "unix:/path" (the port dropped, so that one client's connections share a key).
+std::string PeerAddress(absl::string_view peer);
+
 // Flush(now) on every LogThrottle of the process. Returns the summaries written.
 int FlushThrottledLogs(absl::Time now);
 

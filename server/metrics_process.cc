@@ -11,9 +11,9 @@
 #include <sstream>
 #include <vector>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/synchronization/mutex.h"
@@ -143,47 +143,44 @@ absl::StatusOr<ProcessStats> ReadProcessStats() {
 void AddProcessMetrics(MetricsRegistry& registry) {
   // The names, help texts and units of Prometheus' Go and Python clients, so that dashboards
   // written for them apply.
-  Gauge& resident = registry
-                        .AddGauge("process_resident_memory_bytes",
-                                  "Resident memory size in bytes.")
-                        .Get();
+  Gauge& resident =
+      registry.AddGauge("process_resident_memory_bytes", "Resident memory size in bytes.").Get();
   Gauge& virtual_memory =
       registry.AddGauge("process_virtual_memory_bytes", "Virtual memory size in bytes.").Get();
   Counter& cpu = registry
                      .AddCounter("process_cpu_seconds_total",
                                  "Total user and system CPU time spent in seconds.")
                      .Get();
-  Gauge& open_fds =
-      registry.AddGauge("process_open_fds", "Number of open file descriptors.").Get();
+  Gauge& open_fds = registry.AddGauge("process_open_fds", "Number of open file descriptors.").Get();
   Gauge& max_fds =
       registry.AddGauge("process_max_fds", "Maximum number of open file descriptors.").Get();
   Gauge& start = registry
                      .AddGauge("process_start_time_seconds",
                                "Start time of the process since unix epoch in seconds.")
                      .Get();
-  Gauge& threads = registry.AddGauge("process_threads", "Number of OS threads in the process.").Get();
-  Gauge& memory_limit =
-      registry
-          .AddGauge("esgd_memory_limit_bytes",
-                    "The memory limit of esgd's cgroup (cgroup v2 memory.max, v1 "
-                    "memory.limit_in_bytes), bytes; +Inf when none is set.")
-          .Get();
+  Gauge& threads =
+      registry.AddGauge("process_threads", "Number of OS threads in the process.").Get();
+  Gauge& memory_limit = registry
+                            .AddGauge("esgd_memory_limit_bytes",
+                                      "The memory limit of esgd's cgroup (cgroup v2 memory.max, v1 "
+                                      "memory.limit_in_bytes), bytes; +Inf when none is set.")
+                            .Get();
   // Scrapes may run at once: the counter is advanced by the difference under one mutex.
   auto mu = std::make_shared<absl::Mutex>();
-  registry.AddCollector([=, &resident, &virtual_memory, &cpu, &open_fds, &max_fds, &start,
-                         &threads, &memory_limit] {
-    absl::StatusOr<ProcessStats> s = ReadProcessStats();
-    if (!s.ok()) return;
-    absl::MutexLock lock(mu.get());
-    resident.Set(s->resident_memory_bytes);
-    virtual_memory.Set(s->virtual_memory_bytes);
-    cpu.Increment(s->cpu_seconds - cpu.Value());
-    open_fds.Set(s->open_fds);
-    max_fds.Set(s->max_fds);
-    start.Set(s->start_time_seconds);
-    threads.Set(s->threads);
-    memory_limit.Set(s->memory_limit_bytes);
-  });
+  registry.AddCollector(
+      [=, &resident, &virtual_memory, &cpu, &open_fds, &max_fds, &start, &threads, &memory_limit] {
+        absl::StatusOr<ProcessStats> s = ReadProcessStats();
+        if (!s.ok()) return;
+        absl::MutexLock lock(mu.get());
+        resident.Set(s->resident_memory_bytes);
+        virtual_memory.Set(s->virtual_memory_bytes);
+        cpu.Increment(s->cpu_seconds - cpu.Value());
+        open_fds.Set(s->open_fds);
+        max_fds.Set(s->max_fds);
+        start.Set(s->start_time_seconds);
+        threads.Set(s->threads);
+        memory_limit.Set(s->memory_limit_bytes);
+      });
 }
 
 std::string BuildVersion() { return ESG_VERSION; }

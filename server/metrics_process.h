@@ -19,7 +19,7 @@ namespace esg::server {
 struct ProcessStats {
   double resident_memory_bytes = 0;
   double virtual_memory_bytes = 0;
-  double cpu_seconds = 0;        // user + system
+  double cpu_seconds = 0;         // user + system
   double start_time_seconds = 0;  // Unix time
   double open_fds = 0;
   double max_fds = 0;  // the soft RLIMIT_NOFILE

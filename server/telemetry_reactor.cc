@@ -17,6 +17,7 @@
 #include "absl/synchronization/mutex.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
+#include "server/log_throttle.h"
 #include "server/service_metrics.h"
 
 namespace esg::server {
@@ -153,19 +154,22 @@ class TelemetryReactor
       }
     }
     // A stream that refused frames or ended before acknowledging all of them is summarised once,
-    // when it ends (each refusal itself is in the client's ack).
+    // when it ends (each refusal itself is in the client's ack); these lines are throttled per
+    // client address (server/log_throttle.h), so a client that reconnects in a loop writes a few
+    // lines and a count, not a line per stream.
+    static LogThrottle* const stream_log = new LogThrottle("stream_refusals");
     if (refused > 0 || unacknowledged > 0) {
-      LogEvent("WARN", "stream_refusals",
-               absl::StrCat("telemetry stream from ", peer_.empty() ? "unknown" : peer_,
-                            " ended: ", received, " frames received, ", acknowledged,
-                            " acknowledged, ", refused, " refused", summary.empty() ? "" : " (",
-                            summary, summary.empty() ? "" : ")", ", ", unacknowledged,
-                            " not acknowledged (stream failed)"),
-               {{"peer", peer_},
-                {"framesReceived", received},
-                {"framesAcknowledged", acknowledged},
-                {"framesRefused", refused},
-                {"framesUnacknowledged", unacknowledged}});
+      stream_log->Log(absl::StrCat("peer ", peer_.empty() ? "unknown" : PeerAddress(peer_)), "WARN",
+                      absl::StrCat("telemetry stream from ", peer_.empty() ? "unknown" : peer_,
+                                   " ended: ", received, " frames received, ", acknowledged,
+                                   " acknowledged, ", refused, " refused",
+                                   summary.empty() ? "" : " (", summary, summary.empty() ? "" : ")",
+                                   ", ", unacknowledged, " not acknowledged (stream failed)"),
+                      {{"peer", peer_},
+                       {"framesReceived", received},
+                       {"framesAcknowledged", acknowledged},
+                       {"framesRefused", refused},
+                       {"framesUnacknowledged", unacknowledged}});
     }
     delete this;
   }

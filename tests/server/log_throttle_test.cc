@@ -72,8 +72,8 @@ TEST(LogThrottle, SummaryIsAJsonLineWithTheCountedEvent) {
   LogThrottle throttle("frame_conflict", {.lines_per_interval = 1});
   ::testing::internal::CaptureStderr();
   for (int i = 0; i < 4; ++i) {
-    throttle.Log("station GS-2 of spacecraft RDK-1", "WARN", "conflict",
-                 {{"station", "GS-2"}}, kT0);
+    throttle.Log("station GS-2 of spacecraft RDK-1", "WARN", "conflict", {{"station", "GS-2"}},
+                 kT0);
   }
   throttle.Flush(kT0 + absl::Seconds(10));
   const std::vector<std::string> lines = Lines(::testing::internal::GetCapturedStderr());

@@ -84,10 +84,9 @@ TEST(ProcessMetrics, RegistryExposesTheProcessFamiliesAndTheBuild) {
   absl::StatusOr<esg::testing::Exposition> e = esg::testing::ParseExposition(registry.Render());
   ASSERT_TRUE(e.ok()) << e.status();
   EXPECT_EQ(e->type.at("process_cpu_seconds_total"), "counter");
-  for (const char* gauge :
-       {"process_resident_memory_bytes", "process_virtual_memory_bytes", "process_open_fds",
-        "process_max_fds", "process_start_time_seconds", "process_threads",
-        "esgd_memory_limit_bytes", "esgd_build_info"}) {
+  for (const char* gauge : {"process_resident_memory_bytes", "process_virtual_memory_bytes",
+                            "process_open_fds", "process_max_fds", "process_start_time_seconds",
+                            "process_threads", "esgd_memory_limit_bytes", "esgd_build_info"}) {
     EXPECT_EQ(e->type.at(gauge), "gauge") << gauge;
   }
   EXPECT_GT(e->Value("process_resident_memory_bytes"), 0);

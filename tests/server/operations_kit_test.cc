@@ -127,8 +127,8 @@ TEST(OperationsKit, ConflictingReplayWritesBoundedFrameConflictLinesAndCountsThe
     r = Esg(dir, at + "replay --recording " + Quote(dir.File("rec.csv")));
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const absl::Time start = absl::Now();
-    r = Esg(dir, at + "replay --allow-rejects --json --recording " +
-                     Quote(dir.File("conflict.csv")));
+    r = Esg(dir,
+            at + "replay --allow-rejects --json --recording " + Quote(dir.File("conflict.csv")));
     replay_time = absl::Now() - start;
     ASSERT_EQ(r.exit_code, 0) << r.err;
     const nlohmann::json tally = nlohmann::json::parse(r.out);
@@ -147,14 +147,20 @@ TEST(OperationsKit, ConflictingReplayWritesBoundedFrameConflictLinesAndCountsThe
   EXPECT_LE(conflict.lines, 10 * intervals);
   EXPECT_GE(conflict.summaries, 1);
   EXPECT_LE(conflict.summaries, intervals);
+  // The repeats of the INGEST_CONFLICT alert are throttled too; the whole log stays short
+  // (start, configuration, two streams, the alert, a few repeats, stop).
+  const EventCount repeats = CountEvent(lines, "alert_repeated");
+  EXPECT_LE(repeats.lines, 10 * intervals);
+  EXPECT_LE(lines.size(), 60u);
   RecordProperty("conflicting_frames", static_cast<int>(rows));
   RecordProperty("frame_conflict_lines", conflict.lines);
   RecordProperty("summary_lines", conflict.summaries);
   RecordProperty("log_lines", static_cast<int>(lines.size()));
-  std::printf("conflicting replay: %lld conflicts in %.1f s, %d frame_conflict lines, %d summaries, "
-              "%zu log lines in all\n",
-              static_cast<long long>(rows), absl::ToDoubleSeconds(replay_time), conflict.lines,
-              conflict.summaries, lines.size());
+  std::printf(
+      "conflicting replay: %lld conflicts in %.1f s, %d frame_conflict lines, %d summaries, "
+      "%zu log lines in all\n",
+      static_cast<long long>(rows), absl::ToDoubleSeconds(replay_time), conflict.lines,
+      conflict.summaries, lines.size());
   for (const nlohmann::json& j : lines) {
     if (j.value("event", "") != "log_suppressed") continue;
     EXPECT_THAT(j["message"].get<std::string>(),
@@ -239,16 +245,16 @@ TEST_F(ExportedMetrics, ProcessAndBuildMetricsDescribeTheRunningEsgd) {
   double rss_kb = 0;
   for (absl::string_view line : absl::StrSplit(status, '\n')) {
     if (absl::ConsumePrefix(&line, "VmRSS:")) {
-      ASSERT_TRUE(absl::SimpleAtod(absl::StripSuffix(absl::StripAsciiWhitespace(line), " kB"),
-                                   &rss_kb));
+      ASSERT_TRUE(
+          absl::SimpleAtod(absl::StripSuffix(absl::StripAsciiWhitespace(line), " kB"), &rss_kb));
     }
   }
   ASSERT_GT(rss_kb, 0);
   // Within 20 % of VmRSS read a moment later (the heap moves between the two reads).
   EXPECT_NEAR(e->Value("process_resident_memory_bytes"), rss_kb * 1024, rss_kb * 1024 * 0.2);
-  const int fds = static_cast<int>(
-      std::distance(std::filesystem::directory_iterator(absl::StrCat("/proc/", daemon_->pid(), "/fd")),
-                    std::filesystem::directory_iterator{}));
+  const int fds = static_cast<int>(std::distance(
+      std::filesystem::directory_iterator(absl::StrCat("/proc/", daemon_->pid(), "/fd")),
+      std::filesystem::directory_iterator{}));
   EXPECT_NEAR(e->Value("process_open_fds"), fds, 3);
   EXPECT_GE(e->Value("process_max_fds"), e->Value("process_open_fds"));
   const double start = e->Value("process_start_time_seconds");
@@ -278,8 +284,8 @@ std::set<std::string> MetricNamesIn(std::string expr) {
   expr = std::regex_replace(
       expr, std::regex(R"(\b(by|without|on|ignoring|group_left|group_right)\s*\([^)]*\))"), " ");
   static const std::set<std::string> kKeywords = {
-      "and", "or", "unless", "bool", "offset", "by", "without", "on", "ignoring", "group_left",
-      "group_right", "inf", "nan", "Inf", "NaN"};
+      "and",      "or",         "unless",      "bool", "offset", "by",  "without", "on",
+      "ignoring", "group_left", "group_right", "inf",  "nan",    "Inf", "NaN"};
   std::set<std::string> names;
   const std::regex identifier(R"([A-Za-z_:][A-Za-z0-9_:]*)");
   for (auto it = std::sregex_iterator(expr.begin(), expr.end(), identifier);
@@ -287,7 +293,8 @@ std::set<std::string> MetricNamesIn(std::string expr) {
     const size_t at = static_cast<size_t>(it->position());
     const std::string word = it->str();
     const char before = at > 0 ? expr[at - 1] : ' ';
-    if (before == '$' || std::isdigit(static_cast<unsigned char>(before)) || before == '.') continue;
+    if (before == '$' || std::isdigit(static_cast<unsigned char>(before)) || before == '.')
+      continue;
     size_t next = at + word.size();
     while (next < expr.size() && std::isspace(static_cast<unsigned char>(expr[next]))) ++next;
     if (next < expr.size() && expr[next] == '(') continue;  // a function
@@ -417,8 +424,8 @@ TEST(OperationsKit, AlertRulesPassPromtool) {
   for (size_t i = 0; i < queries.size(); ++i) {
     std::string q = std::regex_replace(queries[i], std::regex(R"(\$__rate_interval)"), "5m");
     q = std::regex_replace(q, std::regex(R"(\$instance)"), ".*");
-    absl::StrAppend(&rules, "      - record: dashboard:query", i, "\n        expr: ",
-                    nlohmann::json(q).dump(), "\n");
+    absl::StrAppend(&rules, "      - record: dashboard:query", i,
+                    "\n        expr: ", nlohmann::json(q).dump(), "\n");
   }
   esg::testing::WriteFile(dir.File("dashboard-rules.yml"), rules);
   const std::string dash_out =
