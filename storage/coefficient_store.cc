@@ -7,8 +7,8 @@
 #include <string>
 #include <utility>
 
+#include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_join.h"
 #include "estimator/model_terms.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
@@ -18,58 +18,65 @@
 namespace esg::storage {
 namespace {
 
-// Fixed leading columns, then the value columns, the sigma columns (records.h) and the basis
-// terms.
-constexpr int kNumLeadingColumns = 5;
-constexpr int kBasisColumn = kNumLeadingColumns + 2 * kNumCoefficientValues;
+// The columns of table coefficients a history reads, in this order; the values are rows of
+// coefficient_values keyed by term (schema.h version 10).
+constexpr char kColumns[] =
+    "spacecraft_id, gyro_id, measurement_time_unix_ns, compute_time_unix_ns, model_name, "
+    "basis_terms_json, revised_time_unix_ns, id";
+constexpr int kBasisColumn = 5;
+constexpr int kRevisedColumn = 6;
+constexpr int kRowIdColumn = 7;
 
-std::string AllColumns() {
-  return absl::StrCat(
-      "spacecraft_id, gyro_id, measurement_time_unix_ns, compute_time_unix_ns, model_name, ",
-      absl::StrJoin(CoefficientColumns(), ", "), ", ",
-      absl::StrJoin(CoefficientSigmaColumns(), ", "), ", basis_terms_json");
-}
+constexpr char kInsertSql[] =
+    "INSERT INTO coefficients (spacecraft_id, gyro_id, measurement_time_unix_ns, "
+    "compute_time_unix_ns, model_name, basis_terms_json) VALUES (?1, ?2, ?3, ?4, ?5, ?6) "
+    "RETURNING id";
 
-const std::string& InsertSql() {
+// All values of one coefficient row in one statement: ?1 the row id, then (term key, value,
+// sigma) per value of the layout.
+const std::string& InsertValuesSql() {
   static const std::string* const sql = [] {
-    std::string params;
-    for (int i = 1; i <= kBasisColumn + 1; ++i) {
-      absl::StrAppend(&params, i == 1 ? "" : ", ", "?", i);
+    std::string rows;
+    for (int i = 0; i < kNumCoefficientValues; ++i) {
+      absl::StrAppend(&rows, i == 0 ? "" : ", ", "(?1, ?", 2 + 3 * i, ", ?", 3 + 3 * i, ", ?",
+                      4 + 3 * i, ")");
     }
-    return new std::string(
-        absl::StrCat("INSERT INTO coefficients (", AllColumns(), ") VALUES (", params, ")"));
+    return new std::string(absl::StrCat(
+        "INSERT INTO coefficient_values (coefficient_id, term_key, value, sigma) VALUES ", rows));
   }();
   return *sql;
 }
 
+constexpr char kValuesSql[] =
+    "SELECT term_key, value, sigma FROM coefficient_values WHERE coefficient_id = ?1";
+
 // Current rows only, unless ?9 is 1 (revised ones too).
 const std::string& HistorySql(bool one_gyro) {
   static const std::string* const all = new std::string(absl::StrCat(
-      "SELECT ", AllColumns(),
-      ", revised_time_unix_ns FROM coefficients WHERE spacecraft_id = ?1 "
+      "SELECT ", kColumns,
+      " FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
   static const std::string* const one = new std::string(absl::StrCat(
-      "SELECT ", AllColumns(),
-      ", revised_time_unix_ns FROM coefficients WHERE spacecraft_id = ?1 "
+      "SELECT ", kColumns,
+      " FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 AND gyro_id = ?4 "
       "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) ORDER BY measurement_time_unix_ns, gyro_id, id"));
   return one_gyro ? *one : *all;
 }
 
-// A page: the history order continued strictly after a cursor (row values, SQLite >= 3.15), the
-// revision time and row id appended as the last columns.
+// A page: the history order continued strictly after a cursor (row values, SQLite >= 3.15).
 const std::string& HistoryPageSql(bool one_gyro) {
   static const std::string* const all = new std::string(absl::StrCat(
-      "SELECT ", AllColumns(),
-      ", revised_time_unix_ns, id FROM coefficients WHERE spacecraft_id = ?1 "
+      "SELECT ", kColumns,
+      " FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) "
       "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
       "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
   static const std::string* const one = new std::string(absl::StrCat(
-      "SELECT ", AllColumns(),
-      ", revised_time_unix_ns, id FROM coefficients WHERE spacecraft_id = ?1 "
+      "SELECT ", kColumns,
+      " FROM coefficients WHERE spacecraft_id = ?1 "
       "AND measurement_time_unix_ns >= ?2 AND measurement_time_unix_ns < ?3 "
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) AND gyro_id = ?8 "
       "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
@@ -77,11 +84,7 @@ const std::string& HistoryPageSql(bool one_gyro) {
   return one_gyro ? *one : *all;
 }
 
-// Column of revised_time_unix_ns in the history queries, and of the row id in a page's.
-constexpr int kRevisedColumn = kBasisColumn + 1;
-constexpr int kRowIdColumn = kRevisedColumn + 1;
-
-// Records are SI; each column holds the unit its name carries (records.h): deg/h for the 13
+// Records are SI; each value is stored in the unit its key carries (records.h): deg/h for the
 // drift terms, arcsec for the misalignment. NaN passes through.
 double ToColumnUnit(int index, double si) {
   return index < kCoefficientMisalignment ? estimator::RadPerSecToDegPerHour(si)
@@ -92,8 +95,19 @@ double FromColumnUnit(int index, double column) {
                                           : estimator::ArcsecToRad(column);
 }
 
-// The record of the current row (columns in the order of AllColumns()); DataLoss when its basis
-// terms do not read.
+// Layout index of a term key (CoefficientColumns()); -1 for a key this program does not know.
+int LayoutIndex(absl::string_view term_key) {
+  static const auto* const index = [] {
+    auto* m = new absl::flat_hash_map<std::string, int>;
+    for (int i = 0; i < kNumCoefficientValues; ++i) (*m)[CoefficientColumns()[i]] = i;
+    return m;
+  }();
+  const auto it = index->find(term_key);
+  return it == index->end() ? -1 : it->second;
+}
+
+// The record of the current row of a history query (columns kColumns) without its values;
+// DataLoss when its basis terms do not read.
 absl::StatusOr<CoefficientRecord> ReadRecord(const Statement& st) {
   CoefficientRecord r;
   r.spacecraft_id = st.ColumnText(0);
@@ -101,17 +115,6 @@ absl::StatusOr<CoefficientRecord> ReadRecord(const Statement& st) {
   r.measurement_time = UnixNanosToTime(st.ColumnInt64(2));
   r.compute_time = UnixNanosToTime(st.ColumnInt64(3));
   r.model_name = st.ColumnText(4);
-  r.values.resize(kNumCoefficientValues);
-  bool any_sigma = false;
-  std::vector<double> sigmas(kNumCoefficientValues);
-  for (int i = 0; i < kNumCoefficientValues; ++i) {
-    const int value_column = kNumLeadingColumns + i;
-    const int sigma_column = value_column + kNumCoefficientValues;
-    r.values[i] = FromColumnUnit(i, st.ColumnDoubleOrNaN(value_column));
-    sigmas[i] = FromColumnUnit(i, st.ColumnDoubleOrNaN(sigma_column));
-    any_sigma = any_sigma || !st.ColumnIsNull(sigma_column);
-  }
-  if (any_sigma) r.sigmas = std::move(sigmas);
   if (!st.ColumnIsNull(kBasisColumn)) {
     ASSIGN_OR_RETURN(r.basis_terms, BasisTermsFromColumn(st.ColumnText(kBasisColumn)));
   }
@@ -119,6 +122,27 @@ absl::StatusOr<CoefficientRecord> ReadRecord(const Statement& st) {
     r.revised_time = UnixNanosToTime(st.ColumnInt64(kRevisedColumn));
   }
   return r;
+}
+
+// Reads the values and sigmas of row `id` into `r`: a value without a row reads NaN, sigmas
+// that are all NULL (or have no row) read back as empty.
+absl::Status ReadValues(Transaction& txn, int64_t id, CoefficientRecord* r) {
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kValuesSql));
+  st->BindInt64(1, id);
+  r->values.assign(kNumCoefficientValues, std::numeric_limits<double>::quiet_NaN());
+  std::vector<double> sigmas(kNumCoefficientValues, std::numeric_limits<double>::quiet_NaN());
+  bool any_sigma = false;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    const int i = LayoutIndex(st->ColumnText(0));
+    if (i < 0) continue;
+    r->values[i] = FromColumnUnit(i, st->ColumnDoubleOrNaN(1));
+    sigmas[i] = FromColumnUnit(i, st->ColumnDoubleOrNaN(2));
+    any_sigma = any_sigma || !st->ColumnIsNull(2);
+  }
+  if (any_sigma) r->sigmas = std::move(sigmas);
+  return absl::OkStatus();
 }
 
 absl::Status Validate(const CoefficientRecord& r) {
@@ -209,28 +233,33 @@ absl::Status CoefficientStore::Append(const CoefficientRecord& record) {
 
 absl::Status CoefficientStore::Append(Transaction& txn, const CoefficientRecord& record) {
   RETURN_IF_ERROR(Validate(record));
-  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(InsertSql()));
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kInsertSql));
   st->BindText(1, record.spacecraft_id)
       .BindInt64(2, record.gyro_id)
       .BindInt64(3, TimeToUnixNanos(record.measurement_time))
       .BindInt64(4, TimeToUnixNanos(record.compute_time))
       .BindText(5, record.model_name);
+  if (record.basis_terms.empty()) {
+    st->BindNull(6);
+  } else {
+    st->BindText(6, BasisTermsToColumn(record.basis_terms));
+  }
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  if (!row) return absl::InternalError("INSERT INTO coefficients returned no id");
+  const int64_t id = st->ColumnInt64(0);
+  st->Reset();
+  ASSIGN_OR_RETURN(Statement * values, txn.Prepare(InsertValuesSql()));
+  values->BindInt64(1, id);
   for (int i = 0; i < kNumCoefficientValues; ++i) {
-    const int value_index = kNumLeadingColumns + 1 + i;
-    const int sigma_index = value_index + kNumCoefficientValues;
-    st->BindDouble(value_index, ToColumnUnit(i, record.values[i]));
+    values->BindText(2 + 3 * i, CoefficientColumns()[i])
+        .BindDouble(3 + 3 * i, ToColumnUnit(i, record.values[i]));
     if (record.sigmas.empty()) {
-      st->BindNull(sigma_index);
+      values->BindNull(4 + 3 * i);
     } else {
-      st->BindDouble(sigma_index, ToColumnUnit(i, record.sigmas[i]));
+      values->BindDouble(4 + 3 * i, ToColumnUnit(i, record.sigmas[i]));
     }
   }
-  if (record.basis_terms.empty()) {
-    st->BindNull(kBasisColumn + 1);
-  } else {
-    st->BindText(kBasisColumn + 1, BasisTermsToColumn(record.basis_terms));
-  }
-  return st->Run();
+  return values->Run();
 }
 
 absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
@@ -246,12 +275,15 @@ absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
   if (gyro_id != 0) st->BindInt64(4, gyro_id);
   st->BindInt64(9, include_revised ? 1 : 0);
   std::vector<CoefficientRecord> out;
+  std::vector<int64_t> ids;
   while (true) {
     ASSIGN_OR_RETURN(bool row, st->Step());
     if (!row) break;
     ASSIGN_OR_RETURN(CoefficientRecord record, ReadRecord(*st));
     out.push_back(std::move(record));
+    ids.push_back(st->ColumnInt64(kRowIdColumn));
   }
+  for (size_t k = 0; k < out.size(); ++k) RETURN_IF_ERROR(ReadValues(txn, ids[k], &out[k]));
   return out;
 }
 
@@ -281,6 +313,7 @@ absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
   st->BindInt64(9, include_revised ? 1 : 0);
   CoefficientPage page;
   CoefficientCursor last;
+  std::vector<int64_t> ids;
   while (true) {
     ASSIGN_OR_RETURN(bool row, st->Step());
     if (!row) break;
@@ -293,6 +326,11 @@ absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
     last.measurement_time_unix_ns = st->ColumnInt64(2);
     last.gyro_id = st->ColumnInt64(1);
     last.row_id = st->ColumnInt64(kRowIdColumn);
+    ids.push_back(last.row_id);
+  }
+  st->Reset();
+  for (size_t k = 0; k < page.records.size(); ++k) {
+    RETURN_IF_ERROR(ReadValues(txn, ids[k], &page.records[k]));
   }
   return page;
 }

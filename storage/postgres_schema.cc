@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <iterator>
+#include <string>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -216,11 +217,17 @@ ALTER TABLE estimates ADD COLUMN attitude_error_sigma_y_arcsec DOUBLE PRECISION;
 ALTER TABLE estimates ADD COLUMN attitude_error_sigma_z_arcsec DOUBLE PRECISION;
 )sql";
 
-// kUpgrades[n - 7] takes a database from version n to n + 1 (one is created at version 7 and
+// Upgrade(n) takes a database from version n >= 7 to n + 1 (one is created at version 7 and
 // upgraded in the same transaction).
-constexpr absl::string_view kUpgrades[] = {kCoefficientBasisTermsColumn,
-                                           kEstimateAttitudeErrorColumns};
-static_assert(7 + std::size(kUpgrades) == kCurrentSchemaVersion);
+absl::string_view Upgrade(int version) {
+  static const std::string* const keyed_values =
+      new std::string(KeyedCoefficientValuesMigration(Dialect::kPostgres));
+  static constexpr absl::string_view kFrozen[] = {kCoefficientBasisTermsColumn,
+                                                  kEstimateAttitudeErrorColumns};
+  static_assert(7 + std::size(kFrozen) + 1 == kCurrentSchemaVersion);
+  const int n = version - 7;
+  return n < static_cast<int>(std::size(kFrozen)) ? kFrozen[n] : absl::string_view(*keyed_values);
+}
 
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").
 constexpr int64_t kSchemaLockKey = 0x6573672d736368;
@@ -245,9 +252,10 @@ absl::StatusOr<int> PostgresSchemaVersion(Database& db) {
 }
 
 absl::Status MigratePostgresTo(Database& db, int target_version) {
-  if (target_version != 0 && target_version != kCurrentSchemaVersion) {
+  if (target_version != 0 && (target_version < 7 || target_version > kCurrentSchemaVersion)) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "target schema version = %d: a PostgreSQL database is created at version %d",
+        "target schema version = %d: a PostgreSQL database is created at version 7 and "
+        "upgraded to at most %d",
         target_version, kCurrentSchemaVersion));
   }
   ASSIGN_OR_RETURN(Transaction txn, db.Begin(TransactionMode::kImmediate));
@@ -292,11 +300,9 @@ absl::Status MigratePostgresTo(Database& db, int target_version) {
     trigger->Reset();
     if (!present) RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
   }
-  for (; version < kCurrentSchemaVersion; ++version) {
-    RETURN_IF_ERROR(txn.Execute(kUpgrades[version - 7]));
-  }
+  for (; version < target_version; ++version) RETURN_IF_ERROR(txn.Execute(Upgrade(version)));
   ASSIGN_OR_RETURN(Statement * update, txn.Prepare("UPDATE esg_schema SET version = ?1"));
-  update->BindInt64(1, kCurrentSchemaVersion);
+  update->BindInt64(1, target_version);
   RETURN_IF_ERROR(update->Run());
   return txn.Commit();
 }

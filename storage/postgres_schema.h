@@ -29,8 +29,9 @@ absl::StatusOr<int> PostgresSchemaVersion(Database& db);
 // Creates the current schema in a database without it, or upgrades one at version 7 or later to
 // it (in one created at version 7 before the estimates trigger existed, adds that trigger);
 // FailedPrecondition for a database newer than this program or one holding other tables named
-// like the service's. `target_version` must be 0 (nothing to do) or kCurrentSchemaVersion: older
-// layouts exist only in SQLite files.
+// like the service's. `target_version` is 0 (nothing to do) or in [7, kCurrentSchemaVersion]:
+// production code asks for the current one; an older one makes the database an earlier program
+// wrote (the migration tests).
 absl::Status MigratePostgresTo(Database& db, int target_version);
 
 }  // namespace esg::storage

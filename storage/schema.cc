@@ -253,11 +253,84 @@ ALTER TABLE estimates ADD COLUMN attitude_error_sigma_y_arcsec REAL;
 ALTER TABLE estimates ADD COLUMN attitude_error_sigma_z_arcsec REAL;
 )sql";
 
-// kMigrations[n] takes the schema from version n to n + 1.
-constexpr absl::string_view kMigrations[] = {kSchemaV1, kSchemaV2, kSchemaV3,
-                                             kSchemaV4, kSchemaV5, kSchemaV6,
-                                             kSchemaV7, kSchemaV8, kSchemaV9};
-static_assert(std::size(kMigrations) == kCurrentSchemaVersion);
+// The value columns of coefficients in versions 1-9, in layout order (frozen: version 10 moves
+// them to coefficient_values under these names); each has its sigma column
+// "<name>_sigma_<unit>" (k0_deg_h: k0_sigma_deg_h).
+constexpr absl::string_view kVersion9ValueColumns[][2] = {
+    {"k0", "deg_h"},     {"c1x", "deg_h"},  {"c1y", "deg_h"},  {"c1z", "deg_h"},
+    {"c2x", "deg_h"},    {"c2y", "deg_h"},  {"c2z", "deg_h"},  {"mu12", "deg_h"},
+    {"mu23", "deg_h"},   {"mu31", "deg_h"}, {"nu23", "deg_h"}, {"nu31", "deg_h"},
+    {"nu12", "deg_h"},   {"misalignment_x", "arcsec"},        {"misalignment_y", "arcsec"},
+    {"misalignment_z", "arcsec"}};
+
+// Version 10, SQLite: the table rebuilt without the value columns (the order of the remaining
+// columns is PostgreSQL's after its DROP COLUMNs, so both engines agree).
+constexpr absl::string_view kSqliteCoefficientsV10 = R"sql(
+CREATE TABLE coefficients_v10 (
+  id                       INTEGER PRIMARY KEY,
+  spacecraft_id            TEXT    NOT NULL,
+  gyro_id                  INTEGER NOT NULL CHECK (gyro_id >= 1),
+  measurement_time_unix_ns INTEGER NOT NULL,
+  compute_time_unix_ns     INTEGER NOT NULL,
+  model_name               TEXT    NOT NULL,
+  revised_time_unix_ns     INTEGER,
+  basis_terms_json         TEXT
+);
+INSERT INTO coefficients_v10
+  SELECT id, spacecraft_id, gyro_id, measurement_time_unix_ns, compute_time_unix_ns, model_name,
+         revised_time_unix_ns, basis_terms_json
+  FROM coefficients;
+DROP TABLE coefficients;
+ALTER TABLE coefficients_v10 RENAME TO coefficients;
+CREATE INDEX coefficients_by_time
+  ON coefficients (spacecraft_id, measurement_time_unix_ns, gyro_id);
+)sql";
+
+}  // namespace
+
+std::string KeyedCoefficientValuesMigration(Dialect dialect) {
+  const bool sqlite = dialect == Dialect::kSqlite;
+  std::string sql = absl::StrCat(
+      "CREATE TABLE coefficient_values (\n"
+      "  coefficient_id ", sqlite ? "INTEGER" : "BIGINT", " NOT NULL,\n"
+      "  term_key       TEXT NOT NULL,\n"
+      "  value          ", sqlite ? "REAL" : "DOUBLE PRECISION", ",\n"
+      "  sigma          ", sqlite ? "REAL" : "DOUBLE PRECISION", ",\n"
+      "  PRIMARY KEY (coefficient_id, term_key)\n)", sqlite ? " WITHOUT ROWID" : "", ";\n");
+  std::string drops;
+  for (const auto& [name, unit] : kVersion9ValueColumns) {
+    const std::string value = absl::StrCat(name, "_", unit);
+    const std::string sigma = absl::StrCat(name, "_sigma_", unit);
+    absl::StrAppend(&sql, "INSERT INTO coefficient_values SELECT id, '", value, "', ", value, ", ",
+                    sigma, " FROM coefficients;\n");
+    absl::StrAppend(&drops, drops.empty() ? "ALTER TABLE coefficients " : ",\n  ",
+                    "DROP COLUMN ", value, ", DROP COLUMN ", sigma);
+  }
+  if (sqlite) {
+    absl::StrAppend(&sql, kSqliteCoefficientsV10);
+  } else {
+    absl::StrAppend(&sql, drops, ";\n");
+  }
+  return sql;
+}
+
+namespace {
+
+// Version 10: coefficient values keyed by term (KeyedCoefficientValuesMigration).
+const std::string& SchemaV10() {
+  static const std::string* const sql =
+      new std::string(KeyedCoefficientValuesMigration(Dialect::kSqlite));
+  return *sql;
+}
+
+// Migration n takes the schema from version n to n + 1.
+absl::string_view Migration(int n) {
+  static constexpr absl::string_view kFrozen[] = {kSchemaV1, kSchemaV2, kSchemaV3,
+                                                  kSchemaV4, kSchemaV5, kSchemaV6,
+                                                  kSchemaV7, kSchemaV8, kSchemaV9};
+  static_assert(std::size(kFrozen) + 1 == kCurrentSchemaVersion);
+  return n < static_cast<int>(std::size(kFrozen)) ? kFrozen[n] : absl::string_view(SchemaV10());
+}
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare("PRAGMA user_version"));
@@ -304,7 +377,7 @@ absl::Status MigrateTo(Database& db, int target_version) {
     ASSIGN_OR_RETURN(version, ReadUserVersion(txn));
     RETURN_IF_ERROR(CheckKnownVersion(version, db));
     if (version >= target_version) break;
-    RETURN_IF_ERROR(txn.Execute(kMigrations[version]));
+    RETURN_IF_ERROR(txn.Execute(Migration(version)));
     RETURN_IF_ERROR(txn.Execute(absl::StrCat("PRAGMA user_version = ", version + 1)));
     RETURN_IF_ERROR(txn.Commit());
     ++version;

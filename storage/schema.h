@@ -20,6 +20,10 @@
 //   8  coefficients.basis_terms_json (basis_terms_column.h; NULL: none, or stored before 8).
 //   9  estimates.attitude_error_{x,y,z}_arcsec and attitude_error_sigma_{x,y,z}_arcsec (the
 //      attitude error estimate of a step's star-tracker update; NULL: none, or stored before 9).
+//  10  coefficient values keyed by term: coefficient_values (coefficient_id, term_key, value,
+//      sigma), one row per value of records.h's layout, term_key its column name of versions
+//      1-9 ("k0_deg_h", "misalignment_x_arcsec"); the 32 value and sigma columns of
+//      coefficients move there and are dropped.
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -32,11 +36,13 @@
 //     past). SQL users: datetime(measurement_time_unix_ns / 1e9, 'unixepoch').
 //   * a NaN double is stored as NULL (SQLite has no NaN) and read back as NaN.
 //   * booleans: INTEGER 0/1.
-//   * drift coefficients: one REAL column per component, named with its unit (records.h).
+//   * coefficient values: a row per value in coefficient_values, keyed by the value's name with
+//     its unit (records.h CoefficientColumns()), value and 1-sigma in that unit.
 #ifndef ESG_STORAGE_SCHEMA_H_
 #define ESG_STORAGE_SCHEMA_H_
 
 #include <cstdint>
+#include <string>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -46,11 +52,16 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 9;
+inline constexpr int kCurrentSchemaVersion = 10;
 
 // The DDL of version 8, the same in both dialects.
 inline constexpr absl::string_view kCoefficientBasisTermsColumn =
     "ALTER TABLE coefficients ADD COLUMN basis_terms_json TEXT;";
+
+// The migration to version 10 in the dialect's types: the 16 values and sigmas of each coefficient
+// row move to coefficient_values and their columns are dropped (SQLite rebuilds the table; the
+// names are those of versions 1-9, frozen).
+std::string KeyedCoefficientValuesMigration(Dialect dialect);
 
 // PRAGMA user_version of the open database.
 absl::StatusOr<int> SchemaVersion(Database& db);

@@ -8,12 +8,15 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "estimator/basis_term.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "nlohmann/json.hpp"
 #include "gtest/gtest.h"
+#include "storage/postgres_db.h"
 #include "storage/schema.h"
+#include "storage/sqlite_db.h"
 #include "storage/storage.h"
 #include "tests/storage/backend.h"
 #include "tests/storage/storage_test_util.h"
@@ -92,24 +95,156 @@ TEST_P(CoefficientStoreTest, RoundTripsValuesSigmasAndNaN) {
   }
 }
 
-TEST_P(CoefficientStoreTest, EachComponentLandsInItsNamedColumn) {
+TEST_P(CoefficientStoreTest, EachComponentLandsInTheRowOfItsTermKey) {
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientRecord written = Record("RDK-1", 1, 0);
   ASSERT_THAT((*storage)->coefficients().Append(written), IsOk());
-  // What a user of plain SQL sees: the record's SI values in the unit each column names.
+  // What a user of plain SQL sees: the record's SI values in the unit each term key names.
   using estimator::RadPerSecToDegPerHour;
   using estimator::RadToArcsec;
   using ::testing::DoubleEq;
-  EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT k0_deg_h FROM coefficients"),
+  Database& db = (*storage)->database();
+  auto value = [&db](const std::string& column, const std::string& key) {
+    return QueryDouble(db, absl::StrCat("SELECT ", column,
+                                        " FROM coefficient_values WHERE term_key = '", key, "'"));
+  };
+  EXPECT_THAT(value("value", "k0_deg_h"),
               IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[kCoefficientK0]))));
-  EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT c2y_deg_h FROM coefficients"),
+  EXPECT_THAT(value("value", "c2y_deg_h"),
               IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[kCoefficientC2 + 1]))));
-  EXPECT_THAT(
-      QueryDouble((*storage)->database(), "SELECT misalignment_z_arcsec FROM coefficients"),
-      IsOkAndHolds(DoubleEq(RadToArcsec(written.values[kCoefficientMisalignment + 2]))));
-  EXPECT_THAT(QueryDouble((*storage)->database(), "SELECT nu31_sigma_deg_h FROM coefficients"),
+  EXPECT_THAT(value("value", "misalignment_z_arcsec"),
+              IsOkAndHolds(DoubleEq(RadToArcsec(written.values[kCoefficientMisalignment + 2]))));
+  EXPECT_THAT(value("sigma", "nu31_deg_h"),
               IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.sigmas[kCoefficientNu + 1]))));
+  EXPECT_THAT(QueryInt(db, "SELECT COUNT(*) FROM coefficient_values"),
+              IsOkAndHolds(kNumCoefficientValues));
+}
+
+// The coefficient table of schema versions 1-9 (one column per value and per sigma, schema.h),
+// written as an earlier program did: every value in its column's unit, NULL for NaN and for
+// absent sigmas.
+std::string Version9Insert(const CoefficientRecord& r) {
+  const char* const stems[kNumCoefficientValues] = {
+      "k0",   "c1x",  "c1y",  "c1z",  "c2x",  "c2y",  "c2z",  "mu12",
+      "mu23", "mu31", "nu23", "nu31", "nu12", "misalignment_x", "misalignment_y",
+      "misalignment_z"};
+  auto cell = [](int i, double si) -> std::string {
+    if (std::isnan(si)) return "NULL";
+    const double column = i < kCoefficientMisalignment ? estimator::RadPerSecToDegPerHour(si)
+                                                       : estimator::RadToArcsec(si);
+    return absl::StrFormat("%.17g", column);
+  };
+  std::string columns, values;
+  for (int i = 0; i < kNumCoefficientValues; ++i) {
+    const std::string unit = i < kCoefficientMisalignment ? "deg_h" : "arcsec";
+    absl::StrAppend(&columns, ", ", stems[i], "_", unit, ", ", stems[i], "_sigma_", unit);
+    absl::StrAppend(&values, ", ", cell(i, r.values[i]), ", ",
+                    r.sigmas.empty() ? "NULL" : cell(i, r.sigmas[i]));
+  }
+  return absl::StrCat(
+      "INSERT INTO coefficients (spacecraft_id, gyro_id, measurement_time_unix_ns, "
+      "compute_time_unix_ns, model_name",
+      columns, ") VALUES ('", r.spacecraft_id, "', ", r.gyro_id, ", ",
+      TimeToUnixNanos(r.measurement_time), ", ", TimeToUnixNanos(r.compute_time), ", '",
+      r.model_name, "'", values, ")");
+}
+
+// Doubles equal bit for bit (NaN equal to NaN): what an export of them prints is then the same.
+void ExpectSameRecords(const std::vector<CoefficientRecord>& a,
+                       const std::vector<CoefficientRecord>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  auto same = [](const std::vector<double>& x, const std::vector<double>& y) {
+    if (x.size() != y.size()) return false;
+    for (size_t i = 0; i < x.size(); ++i) {
+      if (!(x[i] == y[i] || (std::isnan(x[i]) && std::isnan(y[i])))) return false;
+    }
+    return true;
+  };
+  for (size_t k = 0; k < a.size(); ++k) {
+    EXPECT_EQ(a[k].spacecraft_id, b[k].spacecraft_id) << k;
+    EXPECT_EQ(a[k].gyro_id, b[k].gyro_id) << k;
+    EXPECT_EQ(a[k].measurement_time, b[k].measurement_time) << k;
+    EXPECT_EQ(a[k].compute_time, b[k].compute_time) << k;
+    EXPECT_EQ(a[k].model_name, b[k].model_name) << k;
+    EXPECT_TRUE(same(a[k].values, b[k].values)) << k;
+    EXPECT_TRUE(same(a[k].sigmas, b[k].sigmas)) << k;
+    EXPECT_EQ(a[k].revised_time, b[k].revised_time) << k;
+  }
+}
+
+// A database an earlier program wrote at schema version 9 (values in 32 columns) opens on either
+// engine with its coefficients moved to coefficient_values, and reads back (History and pages,
+// as the history RPC and the export read them) exactly what the same records read back from a
+// database written at the current version.
+TEST_P(CoefficientStoreTest, AVersion9DatabaseReadsBackTheSameHistoryAfterTheMigration) {
+  std::vector<CoefficientRecord> records = {Record("OLD-9", 1, 60), Record("OLD-9", 2, 60),
+                                            Record("OLD-9", 1, 120)};
+  records[1].values[kCoefficientMu + 2] = std::nan("");  // not estimated
+  records[2].sigmas.clear();                               // no sigmas
+  records[2].values[kCoefficientK0] = -1.0 / 3.0;          // 17 digits survive the SQL text
+  const std::string old_path = NewDatabase();
+  {
+    std::unique_ptr<Database> db;
+    if (GetParam() == ::esg::storage::testing::Backend::kSqlite) {
+      absl::StatusOr<std::unique_ptr<SqliteDatabase>> opened = SqliteDatabase::Open(old_path);
+      ASSERT_THAT(opened, IsOk());
+      db = *std::move(opened);
+    } else {
+      absl::StatusOr<std::unique_ptr<PostgresDatabase>> opened = PostgresDatabase::Open(old_path);
+      ASSERT_THAT(opened, IsOk());
+      db = *std::move(opened);
+    }
+    ASSERT_THAT(MigrateTo(*db, 9), IsOk());
+    for (const CoefficientRecord& r : records) {
+      ASSERT_THAT(db->Execute(Version9Insert(r)), IsOk()) << Version9Insert(r);
+    }
+    ASSERT_THAT(db->Execute("UPDATE coefficients SET revised_time_unix_ns = 5 WHERE gyro_id = 2"),
+                IsOk());
+  }
+  records[1].revised_time = UnixNanosToTime(5);
+  absl::StatusOr<std::unique_ptr<Storage>> old_storage = Storage::Open(old_path);
+  ASSERT_THAT(old_storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*old_storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(QueryInt((*old_storage)->database(), "SELECT COUNT(*) FROM coefficient_values"),
+              IsOkAndHolds(3 * kNumCoefficientValues));
+  absl::StatusOr<std::unique_ptr<Storage>> new_storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(new_storage, IsOk());
+  for (const CoefficientRecord& r : records) {
+    ASSERT_THAT((*new_storage)->coefficients().Append(r), IsOk());
+  }
+  ASSERT_THAT((*new_storage)->database().Execute(
+                  "UPDATE coefficients SET revised_time_unix_ns = 5 WHERE gyro_id = 2"),
+              IsOk());
+  for (bool include_revised : {false, true}) {
+    absl::StatusOr<std::vector<CoefficientRecord>> migrated =
+        (*old_storage)->coefficients().History("OLD-9", 0, absl::InfinitePast(),
+                                               absl::InfiniteFuture(), include_revised);
+    absl::StatusOr<std::vector<CoefficientRecord>> written =
+        (*new_storage)->coefficients().History("OLD-9", 0, absl::InfinitePast(),
+                                               absl::InfiniteFuture(), include_revised);
+    ASSERT_THAT(migrated, IsOk());
+    ASSERT_THAT(written, IsOk());
+    ASSERT_EQ(migrated->size(), include_revised ? 3u : 2u);
+    ExpectSameRecords(*migrated, *written);
+    // And the values are the ones written (NaN where not estimated, no sigmas on the last).
+    if (!include_revised) continue;
+    EXPECT_TRUE(std::isnan((*migrated)[1].values[kCoefficientMu + 2]));
+    EXPECT_THAT((*migrated)[2].sigmas, IsEmpty());
+    EXPECT_EQ((*migrated)[1].revised_time, UnixNanosToTime(5));
+    for (int i = 0; i < kNumCoefficientValues; ++i) {
+      EXPECT_DOUBLE_EQ((*migrated)[2].values[i], records[2].values[i]) << i;
+      EXPECT_DOUBLE_EQ((*migrated)[0].sigmas[i], records[0].sigmas[i]) << i;
+    }
+  }
+  absl::StatusOr<CoefficientPage> page = (*old_storage)->coefficients().HistoryPage(
+      "OLD-9", 0, absl::InfinitePast(), absl::InfiniteFuture(), std::nullopt, 1, true);
+  ASSERT_THAT(page, IsOk());
+  ASSERT_TRUE(page->next.has_value());
+  absl::StatusOr<std::vector<CoefficientRecord>> first = (*new_storage)->coefficients().History(
+      "OLD-9", 1, T(60), T(61));
+  ASSERT_THAT(first, IsOk());
+  ExpectSameRecords(page->records, *first);
 }
 
 TEST_P(CoefficientStoreTest, EmptySigmasReadBackEmpty) {

@@ -317,16 +317,16 @@ TEST(PostgresStorage, TwoOpensOfAFreshDatabaseAtOnceBothSucceed) {
   }
 }
 
-// Takes a database at the current version back to before version 9 (schema.h).
+// Takes a database at version 9 back to before version 9 (schema.h).
 constexpr char kDropAttitudeErrorColumns[] =
     "ALTER TABLE estimates DROP COLUMN attitude_error_x_arcsec, "
     "DROP COLUMN attitude_error_y_arcsec, DROP COLUMN attitude_error_z_arcsec, "
     "DROP COLUMN attitude_error_sigma_x_arcsec, DROP COLUMN attitude_error_sigma_y_arcsec, "
     "DROP COLUMN attitude_error_sigma_z_arcsec; ";
 
-// A new database of the shared test server as an earlier program left it: opened once at the
-// current version, where `count_sql` reads `current`, then taken back by `downgrade` (SQL), after
-// which it reads 0. Its URI in *uri, the storage closed again.
+// A new database of the shared test server as an earlier program left it: created at version 9,
+// where `count_sql` reads `current`, then taken back by `downgrade` (SQL), after which it reads
+// 0. Its URI in *uri, the connection closed again.
 void MakeDatabaseTakenBack(const std::string& count_sql, int64_t current,
                            const std::string& downgrade, std::string* uri) {
   std::string error;
@@ -335,11 +335,14 @@ void MakeDatabaseTakenBack(const std::string& count_sql, int64_t current,
   absl::StatusOr<std::string> made = server->CreateDatabase();
   ASSERT_THAT(made, IsOk());
   *uri = *made;
-  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
-  ASSERT_THAT(storage, IsOk());
-  EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(current));
-  ASSERT_THAT((*storage)->database().Execute(downgrade), IsOk());
-  EXPECT_THAT(QueryInt((*storage)->database(), count_sql), IsOkAndHolds(0));
+  // Version 9, from which the downgrades go back (the keyed coefficient values of version 10
+  // are not undone by them).
+  absl::StatusOr<std::unique_ptr<PostgresDatabase>> db = PostgresDatabase::Open(*uri);
+  ASSERT_THAT(db, IsOk());
+  ASSERT_THAT(MigrateTo(**db, 9), IsOk());
+  EXPECT_THAT(QueryInt(**db, count_sql), IsOkAndHolds(current));
+  ASSERT_THAT((*db)->Execute(downgrade), IsOk());
+  EXPECT_THAT(QueryInt(**db, count_sql), IsOkAndHolds(0));
 }
 
 // A database created at version 7 by an earlier program is upgraded when a server opens it: the

@@ -31,6 +31,7 @@ using ::esg::storage::testing::T;
 using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::esg::testing::TempDir;
+using ::testing::ElementsAre;
 using ::testing::ElementsAreArray;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
@@ -133,19 +134,20 @@ TEST(Schema, FreshDatabaseIsMigratedToTheCurrentVersion) {
   EXPECT_THAT(SchemaVersion(**db), IsOkAndHolds(kCurrentSchemaVersion));
 }
 
-TEST(Schema, CoefficientColumnsAreNamedWithTheirUnitsInLayoutOrder) {
+// Version 10: the coefficient rows keep their identity, times, model, revision and basis terms;
+// each value is a row of coefficient_values keyed by its name with its unit (records.h), the
+// names of the value columns of versions 1-9.
+TEST(Schema, CoefficientValuesAreKeyedByTermNamedWithTheirUnitsInLayoutOrder) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(dir.File("a.db"));
   ASSERT_THAT(db, IsOk());
   ASSERT_THAT(MigrateToCurrent(**db), IsOk());
-  std::vector<std::string> expected = {
-      "id",        "spacecraft_id", "gyro_id", "measurement_time_unix_ns", "compute_time_unix_ns",
-      "model_name"};
-  for (absl::string_view c : CoefficientColumns()) expected.emplace_back(c);
-  for (absl::string_view c : CoefficientSigmaColumns()) expected.emplace_back(c);
-  expected.emplace_back("revised_time_unix_ns");  // version 6: the reorder window's revisions
-  expected.emplace_back("basis_terms_json");      // version 8: the basis terms
-  EXPECT_THAT(Columns(**db, "coefficients"), ElementsAreArray(expected));
+  EXPECT_THAT(Columns(**db, "coefficients"),
+              ElementsAre("id", "spacecraft_id", "gyro_id", "measurement_time_unix_ns",
+                          "compute_time_unix_ns", "model_name", "revised_time_unix_ns",
+                          "basis_terms_json"));
+  EXPECT_THAT(Columns(**db, "coefficient_values"),
+              ElementsAre("coefficient_id", "term_key", "value", "sigma"));
   // Spot-check the documented names (records.h) so a reordering cannot pass silently.
   EXPECT_EQ(CoefficientColumns()[kCoefficientK0], "k0_deg_h");
   EXPECT_EQ(CoefficientColumns()[kCoefficientC1 + 2], "c1z_deg_h");
