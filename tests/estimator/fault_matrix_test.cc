@@ -164,9 +164,9 @@ const std::set<std::string>& PassingToday() {
       "none_calibration",
       "gyro1_readout_jump_calibration",
       "gyro2_readout_jump_calibration",
-      // gyro1_drift_step_calibration is out since D94 (seed 1: named DRIFT_CHANGED and
-      // recalibrated, nothing excluded, but gyro 1 C1z ends at 3.1 sigma and gyro 3 C2z at 3.3).
-      "gyro2_drift_step_calibration",
+      // The drift-step cells are out since D94: the step is named (DRIFT_CHANGED) and nothing
+      // is excluded, but the recalibrated coefficients miss 3 sigma in 5-14 of 20 seeds
+      // (docs/measurements.md, fault matrix).
       "gyro1_reading_frozen_calibration",
       "gyro2_reading_frozen_calibration",
       "gyro3_reading_frozen_calibration",
@@ -180,9 +180,8 @@ const std::set<std::string>& PassingToday() {
       "spare_calibration",
       "none_orbital",
       "gyro1_readout_jump_orbital",
-      "gyro2_readout_jump_orbital",
+      // gyro2_readout_jump_orbital passes 17 of 20 (two jumps read as drifts, one late).
       "gyro3_readout_jump_orbital",
-      "gyro1_drift_step_orbital",
       "gyro1_reading_frozen_orbital",
       "gyro2_reading_frozen_orbital",
       "gyro3_reading_frozen_orbital",
