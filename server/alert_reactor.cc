@@ -13,6 +13,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "server/proto_mapping.h"
@@ -34,6 +36,10 @@ class AlertFeed {
   // are not counted (the queue's limit applies as they are released).
   static constexpr size_t kMaxBuffered = std::numeric_limits<size_t>::max();
   static std::string TooSlowMessage() { return "alert subscriber too slow: queue limit reached"; }
+  static std::string DroppedMessage(absl::string_view why) {
+    return absl::StrCat("alert subscriber too slow, dropped: ", why,
+                        "; subscribe again with since = the latest measurement_time received");
+  }
   static Message ToProto(const Record& r) { return AlertToProto(r); }
 
   // Whether to queue `r`: not if that state of the alert was already queued. While the replay is
@@ -80,10 +86,10 @@ class AlertFeed {
 class AlertReactor : public SubscriptionReactor<AlertFeed> {
  public:
   AlertReactor(CallCounter* calls, EstimationCore* core, const esg::v1::AlertSubscription& request,
-               absl::Status auth)
-      : SubscriptionReactor(calls, core, &core->alert_hub()) {
+               absl::StatusOr<SubscriptionHold> hold)
+      : SubscriptionReactor(calls, core, &core->alert_hub(), std::move(hold)) {
     absl::Time since;
-    if (!Accept(request, std::move(auth), &since)) return;
+    if (!Accept(request, &since)) return;
     Subscribe(request.spacecraft_id());
     std::vector<storage::AlertRecord> replay;
     if (since != absl::InfiniteFuture()) {
@@ -107,8 +113,8 @@ class AlertReactor : public SubscriptionReactor<AlertFeed> {
 
 grpc::ServerWriteReactor<esg::v1::Alert>* NewAlertReactor(CallCounter* calls, EstimationCore* core,
                                                           const esg::v1::AlertSubscription& request,
-                                                          absl::Status auth) {
-  return new AlertReactor(calls, core, request, std::move(auth));
+                                                          absl::StatusOr<SubscriptionHold> hold) {
+  return new AlertReactor(calls, core, request, std::move(hold));
 }
 
 }  // namespace esg::server

@@ -29,25 +29,28 @@ std::string CallerFromPeer(absl::string_view peer) {
 }
 
 CallLimiter::CallLimiter(std::string call, std::string singular, std::string plural,
-                         int per_caller, int total)
+                         int per_caller, int total, std::string verb)
     : call_(std::move(call)),
       singular_(std::move(singular)),
       plural_(std::move(plural)),
+      verb_(std::move(verb)),
       per_caller_(std::max(1, per_caller)),
       total_(std::max(1, total)) {}
 
-absl::StatusOr<CallLimiter::Permit> CallLimiter::Acquire(const std::string& caller) {
+absl::StatusOr<CallLimiter::Permit> CallLimiter::Acquire(const std::string& caller,
+                                                          absl::string_view call) {
+  if (call.empty()) call = call_;
   absl::MutexLock lock(&mu_);
   auto it = running_.find(caller);
   const int mine = it == running_.end() ? 0 : it->second;
   if (mine >= per_caller_) {
     return absl::ResourceExhaustedError(
-        absl::StrCat(call_, ": caller '", caller, "' already runs ", mine, " ", Noun(mine),
+        absl::StrCat(call, ": caller '", caller, "' already ", verb_, " ", mine, " ", Noun(mine),
                      " (limit ", per_caller_, " per caller); retry when one finishes"));
   }
   if (total_running_ >= total_) {
     return absl::ResourceExhaustedError(
-        absl::StrCat(call_, ": the server already runs ", total_running_, " ",
+        absl::StrCat(call, ": the server already ", verb_, " ", total_running_, " ",
                      Noun(total_running_), " (limit ", total_, " in total); retry when one finishes"));
   }
   ++running_[caller];

@@ -29,10 +29,11 @@ std::string CallerFromPeer(absl::string_view peer);
 class CallLimiter {
  public:
   // `call` names the rpc in messages ("PredictAttitude"); `singular`/`plural` the running thing
-  // ("prediction"/"predictions"). Limits below 1 are treated as 1 (the server validates its
-  // options before it builds limiters).
+  // ("prediction"/"predictions"), `verb` what a caller does with it ("runs"; "holds" for
+  // streams). Limits below 1 are treated as 1 (the server validates its options before it
+  // builds limiters).
   CallLimiter(std::string call, std::string singular, std::string plural, int per_caller,
-              int total);
+              int total, std::string verb = "runs");
   CallLimiter(const CallLimiter&) = delete;
   CallLimiter& operator=(const CallLimiter&) = delete;
 
@@ -64,8 +65,10 @@ class CallLimiter {
   //   one finishes"
   //   "PredictAttitude: the server already runs 8 predictions (limit 8 in total); retry when one
   //   finishes"
-  // The per-caller bound is checked first.
-  absl::StatusOr<Permit> Acquire(const std::string& caller);
+  // The per-caller bound is checked first. `call`, when given, names the rpc instead of the
+  // constructor's (one limiter bounding several rpcs together, as SubscribeAlerts and
+  // SubscribeEstimates).
+  absl::StatusOr<Permit> Acquire(const std::string& caller, absl::string_view call = {});
 
   // Calls running now, of `caller` and over all callers.
   int Running(const std::string& caller) const;
@@ -81,6 +84,7 @@ class CallLimiter {
   const std::string call_;
   const std::string singular_;
   const std::string plural_;
+  const std::string verb_;
   const int per_caller_;
   const int total_;
   mutable absl::Mutex mu_;

@@ -12,6 +12,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "server/proto_mapping.h"
@@ -36,6 +37,11 @@ struct EstimateFeed {
     return absl::StrCat(
         "estimate subscriber too slow: ", kMaxQueuedEstimates,
         " estimates waiting; subscribe again with since = the last measurement_time received");
+  }
+  static std::string DroppedMessage(absl::string_view why) {
+    return absl::StrCat(
+        "estimate subscriber too slow, dropped: ", why,
+        "; subscribe again with since = the last measurement_time received");
   }
   static Message ToProto(const Record& r) { return EstimateToProto(r); }
 
@@ -66,10 +72,10 @@ struct EstimateFeed {
 class EstimateReactor : public SubscriptionReactor<EstimateFeed> {
  public:
   EstimateReactor(CallCounter* calls, EstimationCore* core,
-                  const esg::v1::EstimateSubscription& request, absl::Status auth)
-      : SubscriptionReactor(calls, core, &core->estimate_hub()) {
+                  const esg::v1::EstimateSubscription& request, absl::StatusOr<SubscriptionHold> hold)
+      : SubscriptionReactor(calls, core, &core->estimate_hub(), std::move(hold)) {
     absl::Time since;
-    if (!Accept(request, std::move(auth), &since)) return;
+    if (!Accept(request, &since)) return;
     {
       absl::MutexLock lock(&shared().mu);
       EstimateFeed& feed = shared().feed;
@@ -135,8 +141,8 @@ class EstimateReactor : public SubscriptionReactor<EstimateFeed> {
 
 grpc::ServerWriteReactor<esg::v1::EstimateRecord>* NewEstimateReactor(
     CallCounter* calls, EstimationCore* core, const esg::v1::EstimateSubscription& request,
-    absl::Status auth) {
-  return new EstimateReactor(calls, core, request, std::move(auth));
+    absl::StatusOr<SubscriptionHold> hold) {
+  return new EstimateReactor(calls, core, request, std::move(hold));
 }
 
 }  // namespace esg::server

@@ -19,13 +19,15 @@
 #include "grpcpp/support/server_callback.h"
 #include "server/call_counter.h"
 #include "server/estimation_core.h"
+#include "server/queue_budget.h"
 
 namespace esg::server {
 
-// `auth` not OK: the stream finishes at once with it.
+// `hold` not OK (the role, the routing scope or the caller's subscription slot refused): the
+// stream finishes at once with its status.
 grpc::ServerWriteReactor<esg::v1::EstimateRecord>* NewEstimateReactor(
     CallCounter* calls, EstimationCore* core, const esg::v1::EstimateSubscription& request,
-    absl::Status auth);
+    absl::StatusOr<SubscriptionHold> hold);
 
 }  // namespace esg::server
 

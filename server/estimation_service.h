@@ -12,6 +12,7 @@
 #include <deque>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "absl/base/thread_annotations.h"
@@ -24,16 +25,29 @@
 #include "server/call_counter.h"
 #include "server/call_limiter.h"
 #include "server/estimation_core.h"
+#include "server/queue_budget.h"
 
 namespace esg::server {
 
-// Concurrent calls allowed; a caller is a token's name, or without tokens a peer address
-// (call_limiter.h). Each value must be >= 1 (EsgServer::Start checks).
+// Concurrent calls allowed, and bytes held for slow readers; a caller is a token's name, or
+// without tokens a peer address (call_limiter.h). Each value must be >= 1 (EsgServer::Start
+// checks).
 struct CallLimits {
   int max_predictions_per_caller = 4;
   int max_predictions = 8;  // also the number of prediction threads
   int max_diagnoses_per_caller = 1;
   int max_diagnoses = 2;
+  // SubscribeAlerts and SubscribeEstimates streams together. 64 per caller: the console gateway
+  // holds up to 64 for one operator (console/gateway/operators.js).
+  int max_subscriptions_per_caller = 64;
+  int max_subscriptions = 1024;
+  // ExportCoefficientHistory and ExportTelemetry streams together.
+  int max_exports_per_caller = 4;
+  int max_exports = 32;
+  // Unread messages queued on subscription streams [bytes] (queue_budget.h): of one caller's
+  // streams, of all streams.
+  int64_t max_queued_bytes_per_caller = int64_t{64} << 20;
+  int64_t max_queued_bytes = int64_t{256} << 20;
 };
 
 class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackService {
@@ -91,6 +105,9 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }
   CallLimiter& diagnosis_limiter() { return diagnoses_; }
+  CallLimiter& subscription_limiter() { return subscriptions_; }
+  CallLimiter& export_limiter() { return exports_; }
+  QueueBudget& queue_budget() { return queued_; }
   // The calls of this service not finished yet.
   CallCounter& calls() { return calls_; }
 
@@ -103,6 +120,15 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   // The caller of the call once its role is checked: the token's name with tokens, else the
   // peer's address without the port (CallerFromPeer). Errors as Authorize.
   absl::StatusOr<std::string> Caller(grpc::CallbackServerContext* context, Role role) const;
+  // For a stream about `spacecraft_id` (empty: all): the caller (role read), the routing scope,
+  // then a slot of `limiter` for `call`. Errors as Authorize, or the limiter's
+  // RESOURCE_EXHAUSTED.
+  absl::StatusOr<std::pair<std::string, CallLimiter::Permit>> AdmitStream(
+      grpc::CallbackServerContext* context, absl::string_view spacecraft_id,
+      CallLimiter& limiter, absl::string_view call);
+  absl::StatusOr<SubscriptionHold> HoldSubscription(grpc::CallbackServerContext* context,
+                                                    absl::string_view spacecraft_id,
+                                                    absl::string_view call);
   // Runs `task` on a prediction thread. Callers hold a prediction permit, so at most
   // limits.max_predictions tasks are queued or running and each starts at once.
   void RunPrediction(absl::AnyInvocable<void() &&> task);
@@ -113,6 +139,9 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   CallCounter calls_;
   CallLimiter predictions_;
   CallLimiter diagnoses_;
+  CallLimiter subscriptions_;
+  CallLimiter exports_;
+  QueueBudget queued_;
 
   absl::Mutex pool_mu_;
   std::deque<absl::AnyInvocable<void() &&>> pool_tasks_ ABSL_GUARDED_BY(pool_mu_);

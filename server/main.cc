@@ -13,6 +13,7 @@
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "server/log.h"
+#include "server/memory_release.h"
 #include "server/server.h"
 
 namespace {
@@ -30,6 +31,7 @@ void GrpcLog(gpr_log_func_args* args) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  esg::server::ConfigureMalloc();  // before the first large block (server/memory_release.h)
   esg::server::ServerOptions options;
   std::string sync = "full";
   double shutdown_deadline_s = 5.0;
@@ -97,6 +99,33 @@ int main(int argc, char** argv) {
   app.add_option("--max-diagnoses", options.calls.max_diagnoses,
                  "Concurrent Diagnose calls in total")
       ->capture_default_str();
+  app.add_option("--max-subscriptions-per-caller", options.calls.max_subscriptions_per_caller,
+                 "Concurrent SubscribeAlerts and SubscribeEstimates streams of one caller")
+      ->capture_default_str();
+  app.add_option("--max-subscriptions", options.calls.max_subscriptions,
+                 "Concurrent SubscribeAlerts and SubscribeEstimates streams in total")
+      ->capture_default_str();
+  app.add_option("--max-exports-per-caller", options.calls.max_exports_per_caller,
+                 "Concurrent ExportCoefficientHistory and ExportTelemetry streams of one caller")
+      ->capture_default_str();
+  app.add_option("--max-exports", options.calls.max_exports,
+                 "Concurrent ExportCoefficientHistory and ExportTelemetry streams in total")
+      ->capture_default_str();
+  int64_t queued_mb_per_caller = options.calls.max_queued_bytes_per_caller >> 20;
+  app.add_option("--max-queued-mb-per-caller", queued_mb_per_caller,
+                 "Unread subscription messages one caller's streams hold, MiB (beyond: its "
+                 "slowest stream is dropped)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
+      ->capture_default_str();
+  int64_t queued_mb = options.calls.max_queued_bytes >> 20;
+  app.add_option("--max-queued-mb", queued_mb,
+                 "Unread subscription messages all streams hold together, MiB (beyond: the "
+                 "slowest streams are dropped)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
+      ->capture_default_str();
+  app.add_option("--max-stored-diagnoses", options.max_stored_diagnoses,
+                 "Diagnoses kept per spacecraft (beyond: the oldest are deleted)")
+      ->capture_default_str();
   app.add_option("--max-message-bytes", options.max_message_bytes,
                  "Largest request message in bytes (larger: RESOURCE_EXHAUSTED)")
       ->capture_default_str();
@@ -148,6 +177,8 @@ int main(int argc, char** argv) {
   options.synchronous =
       sync == "normal" ? esg::storage::Synchronous::kNormal : esg::storage::Synchronous::kFull;
   options.grpc_memory_bytes = grpc_memory_mb << 20;
+  options.calls.max_queued_bytes_per_caller = queued_mb_per_caller << 20;
+  options.calls.max_queued_bytes = queued_mb << 20;
 
   // Block the stop signals in every thread (gRPC's included), then wait for them here.
   sigset_t signals;

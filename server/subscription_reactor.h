@@ -17,10 +17,20 @@
 //   static constexpr size_t kMaxBuffered       this many live records buffered during the
 //                                              replay, is finished with RESOURCE_EXHAUSTED and
 //   static std::string TooSlowMessage()        this message
+//   static std::string DroppedMessage(why)     the message of a stream dropped because the
+//                                              unread messages of its caller, or of all
+//                                              subscribers, reached their bound (`why`, from
+//                                              QueueBudget)
 //   static Message ToProto(const Record&)
 //   bool Admit(const Record&, bool replaying)  the dedupe rule: whether to queue the record;
 //                                              `replaying` until the buffer has been released
 //   void ReplayComplete()                      the buffer has been released
+//
+// Bounds (docs/service.md "Limits"): the stream holds its caller's subscription slot (a Permit)
+// from its start until it is finished, and charges every queued message to its caller's
+// QueueBudget account until the message is written. Finishing the stream (an error, a cancel, a
+// drop) gives back the slot, discards what is still queued and notes the freed memory
+// (memory_release.h), so a dropped or cancelled subscriber's queue is returned at once.
 //
 // Lifetime: the hub's listener and closer hold the Shared state weakly, since a closer may run
 // (CloseAll calls them outside the hub's lock) after OnDone has unsubscribed and deleted the
@@ -46,6 +56,8 @@
 #include "server/estimation_core.h"
 #include "server/grpc_status.h"
 #include "server/hub.h"
+#include "server/memory_release.h"
+#include "server/queue_budget.h"
 
 namespace esg::server {
 
@@ -63,6 +75,7 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
         FinishOnce(*shared_, absl::CancelledError("the client went away"));
         return;
       }
+      shared_->hold.queue.Refund(shared_->queue.front().bytes);
       shared_->queue.pop_front();
     }
     Pump();
@@ -89,24 +102,39 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
     bool replaying ABSL_GUARDED_BY(mu) = true;
     bool marker ABSL_GUARDED_BY(mu) = false;  // the request asked for the end-of-replay marker
     std::vector<Record> buffered ABSL_GUARDED_BY(mu);  // live records published during the replay
-    std::deque<Message> queue ABSL_GUARDED_BY(mu);
+    // Each queued message with the bytes charged for it (QueueBudget); the front one is being
+    // written while `writing`.
+    struct Queued {
+      Message message;
+      int64_t bytes = 0;
+    };
+    std::deque<Queued> queue ABSL_GUARDED_BY(mu);
+    SubscriptionHold hold ABSL_GUARDED_BY(mu);
     bool writing ABSL_GUARDED_BY(mu) = false;
     bool finished ABSL_GUARDED_BY(mu) = false;
     Feed feed ABSL_GUARDED_BY(mu);
   };
 
-  SubscriptionReactor(CallCounter* calls, EstimationCore* core, Hub<Record>* hub)
+  // `hold` not OK: the stream is refused with its status (by Accept).
+  SubscriptionReactor(CallCounter* calls, EstimationCore* core, Hub<Record>* hub,
+                      absl::StatusOr<SubscriptionHold> hold)
       : token_(calls), core_(core), hub_(hub), shared_(std::make_shared<Shared>()) {
     absl::MutexLock lock(&shared_->mu);
     shared_->reactor = this;
+    if (hold.ok()) {
+      shared_->hold = *std::move(hold);
+    } else {
+      refused_ = hold.status();
+    }
   }
 
-  // Checks `auth`, then that the request's spacecraft is empty or configured, then its `since`.
+  // Checks the hold (role, routing scope and subscription slot, checked by the service), then that the request's spacecraft is empty or configured, then its `since`.
   // On an error finishes the stream with it (InvalidArgument "since: ..." for a bad time) and
   // returns false. Otherwise sets *since to the start of the replay (InfiniteFuture: no replay),
   // remembers whether the marker is asked for and returns true.
   template <typename Request>
-  bool Accept(const Request& request, absl::Status auth, absl::Time* since) {
+  bool Accept(const Request& request, absl::Time* since) {
+    absl::Status auth = refused_;
     if (auth.ok()) auth = core_->CheckSpacecraft(request.spacecraft_id());
     *since = absl::InfiniteFuture();
     if (auth.ok() && request.has_since()) {
@@ -165,26 +193,35 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
     TryWrite(*shared_);
   }
 
-  // Queues `r` if the Feed admits it; a full queue finishes the stream (TooSlow).
+  // Queues `r` if the Feed admits it; a full queue (TooSlow), or a charge its caller's or all
+  // subscribers' QueueBudget refuses, finishes the stream with RESOURCE_EXHAUSTED.
   static void Offer(Shared& s, const Record& r) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
-    if (!s.feed.Admit(r, s.replaying)) return;
+    if (s.finished || !s.feed.Admit(r, s.replaying)) return;
     if (s.queue.size() >= Feed::kMaxQueued) {
       TooSlow(s);
       return;
     }
-    s.queue.push_back(Feed::ToProto(r));
+    typename Shared::Queued queued{Feed::ToProto(r), 0};
+    // The message object and its serialized size: about what it holds on the heap.
+    queued.bytes = static_cast<int64_t>(sizeof(Message) + queued.message.ByteSizeLong());
+    if (absl::Status charged = s.hold.queue.Charge(queued.bytes); !charged.ok()) {
+      FinishOnce(s, absl::ResourceExhaustedError(Feed::DroppedMessage(charged.message())));
+      return;
+    }
+    s.queue.push_back(std::move(queued));
   }
 
   // The end of the replay: the live records buffered meanwhile (still under the replay's dedupe
   // rule), then the marker if asked for; live records are queued as published from now on.
   static void CompleteReplay(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
-    for (const Record& r : s.buffered) Offer(s, r);
-    s.buffered.clear();
+    std::vector<Record> buffered;  // Offer may finish the stream, which clears s.buffered
+    buffered.swap(s.buffered);
+    for (const Record& r : buffered) Offer(s, r);
     s.replaying = false;
     s.feed.ReplayComplete();
     if (s.marker && !s.finished) {
-      Message marker;
-      marker.set_replay_complete(true);
+      typename Shared::Queued marker;
+      marker.message.set_replay_complete(true);
       s.queue.push_back(std::move(marker));
     }
     TryWrite(s);
@@ -193,15 +230,27 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
   static void TryWrite(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
     if (s.finished || s.writing || s.reactor == nullptr || s.queue.empty()) return;
     s.writing = true;
-    s.reactor->StartWrite(&s.queue.front());
+    s.reactor->StartWrite(&s.queue.front().message);
   }
 
-  // Finishes the stream with `status` unless it is finished already or the reactor is gone.
+  // Finishes the stream with `status` unless it is finished already or the reactor is gone;
+  // gives back the subscription slot and discards the queue (all but a message being written)
+  // and the buffer.
   static void FinishOnce(Shared& s, const absl::Status& status)
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
     if (s.finished || s.reactor == nullptr) return;
     s.finished = true;
     s.reactor->Finish(ToGrpcStatus(status));
+    s.hold.permit.Release();
+    int64_t freed = 0;
+    while (s.queue.size() > (s.writing ? 1u : 0u)) {
+      freed += s.queue.back().bytes;
+      s.hold.queue.Refund(s.queue.back().bytes);
+      s.queue.pop_back();
+    }
+    freed += static_cast<int64_t>(s.buffered.size() * sizeof(Message));
+    std::vector<Record>().swap(s.buffered);
+    NoteFreedMemory(freed);
   }
 
   static void TooSlow(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
@@ -217,6 +266,7 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
   Hub<Record>* const hub_;
   std::shared_ptr<Shared> shared_;
   int64_t subscription_ = 0;
+  absl::Status refused_;  // the hold's refusal
 };
 
 }  // namespace esg::server

@@ -3,6 +3,7 @@
 #ifndef ESG_SERVER_UNARY_CALL_H_
 #define ESG_SERVER_UNARY_CALL_H_
 
+#include <cstdint>
 #include <utility>
 
 #include "absl/status/status.h"
@@ -10,6 +11,7 @@
 #include "grpcpp/support/server_callback.h"
 #include "server/call_counter.h"
 #include "server/grpc_status.h"
+#include "server/memory_release.h"
 
 namespace esg::server {
 
@@ -17,10 +19,17 @@ namespace esg::server {
 class UnaryReactor : public grpc::ServerUnaryReactor {
  public:
   explicit UnaryReactor(CallCounter* calls) : token_(calls) {}
-  void OnDone() override { delete this; }
+  // Before Finish: the response's size, noted as freed (memory_release.h) once gRPC is done
+  // with the call, which frees the response then.
+  void FreesOnDone(int64_t bytes) { freed_on_done_ = bytes; }
+  void OnDone() override {
+    NoteFreedMemory(freed_on_done_);
+    delete this;
+  }
 
  private:
   CallCounter::Token token_;
+  int64_t freed_on_done_ = 0;
 };
 
 // Unary rpcs: run `work` (returning absl::StatusOr<Response>) and finish (with the retry delay

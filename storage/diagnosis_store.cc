@@ -73,6 +73,15 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
   if (!row) return absl::InternalError("INSERT INTO diagnoses returned no id");
   const int64_t id = st->ColumnInt64(0);
   st->Reset();
+  if (const int64_t keep = max_per_spacecraft(); keep > 0) {
+    // The ids beyond the newest `keep` (index diagnoses_by_spacecraft).
+    ASSIGN_OR_RETURN(Statement * drop,
+                     txn.Prepare("DELETE FROM diagnoses WHERE spacecraft_id = ?1 AND id <= "
+                                 "(SELECT id FROM diagnoses WHERE spacecraft_id = ?1 "
+                                 "ORDER BY id DESC LIMIT 1 OFFSET ?2)"));
+    drop->BindText(1, record.spacecraft_id).BindInt64(2, keep);
+    RETURN_IF_ERROR(drop->Run());
+  }
   return id;
 }
 

@@ -1,8 +1,15 @@
 // Results of model-discrepancy diagnoses (table diagnoses, schema.h; docs/discovery.md): the
 // verdict over a time window and the full report as JSON, kept as a history per spacecraft.
+//
+// Bounded per spacecraft (docs/service.md "Limits"): with a bound set, storing a diagnosis
+// beyond it deletes the spacecraft's oldest ones in the same transaction, so the newest
+// `max_per_spacecraft` stay. Oldest dropped rather than new ones refused: a report is read for
+// its recent verdict, and refusing would also refuse the service's own diagnoses; the ids of
+// the rest do not change, so a paged ListDiagnoses goes on after a drop.
 #ifndef ESG_STORAGE_DIAGNOSIS_STORE_H_
 #define ESG_STORAGE_DIAGNOSIS_STORE_H_
 
+#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -20,8 +27,13 @@ class DiagnosisStore {
  public:
   explicit DiagnosisStore(Database* db) : db_(db) {}
 
+  // Diagnoses kept per spacecraft at most (<= 0: no bound, the default of a bare store; esgd
+  // sets its --max-stored-diagnoses). Takes effect from the next Put.
+  void set_max_per_spacecraft(int64_t n) { max_per_spacecraft_.store(n); }
+  int64_t max_per_spacecraft() const { return max_per_spacecraft_.load(); }
+
   // Stores a diagnosis and returns its id (unique across all spacecraft, increasing;
-  // record.id is ignored). InvalidArgument for an empty spacecraft_id or verdict, an unstorable
+  // record.id is ignored); beyond the bound, deletes the spacecraft's oldest. InvalidArgument for an empty spacecraft_id or verdict, an unstorable
   // time, or to_time < from_time.
   absl::StatusOr<int64_t> Put(const DiagnosisRecord& record);
   absl::StatusOr<int64_t> Put(Transaction& txn, const DiagnosisRecord& record);
@@ -35,11 +47,12 @@ class DiagnosisStore {
   absl::StatusOr<std::vector<DiagnosisRecord>> ListSummaries(absl::string_view spacecraft_id,
                                                              int64_t after_id, int64_t limit);
 
-  // One diagnosis; NotFound if missing.
+  // One diagnosis; NotFound if missing (never stored, or dropped beyond the bound).
   absl::StatusOr<DiagnosisRecord> Get(int64_t id);
 
  private:
   Database* db_;  // not owned
+  std::atomic<int64_t> max_per_spacecraft_{0};
 };
 
 }  // namespace esg::storage

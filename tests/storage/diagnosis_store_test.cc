@@ -1,6 +1,7 @@
 // Tests of storage/diagnosis_store.h: round trip, per-spacecraft listing, NotFound, errors.
 #include "storage/diagnosis_store.h"
 
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <vector>
@@ -79,6 +80,49 @@ TEST_P(DiagnosisStoreTest, PutGetAndListRoundTrip) {
   EXPECT_THAT(diagnoses.List("nobody"), IsOkAndHolds(IsEmpty()));
   EXPECT_THAT(diagnoses.Get(*second + 100),
               StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
+}
+
+// The bound per spacecraft (docs/service.md "Limits"): beyond it the oldest diagnoses of that
+// spacecraft are deleted with the Put; the newest stay with their ids, other spacecraft keep
+// theirs, and a dropped id reads NotFound.
+TEST_P(DiagnosisStoreTest, KeepsTheNewestPerSpacecraftBeyondItsBound) {
+  const std::string path = NewDatabase();
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  EXPECT_EQ(diagnoses.max_per_spacecraft(), 0);  // a bare store: no bound
+  diagnoses.set_max_per_spacecraft(3);
+  absl::StatusOr<int64_t> other = diagnoses.Put(Diagnosis("RDK-2", "unexplained", 0));
+  ASSERT_THAT(other, IsOk());
+  std::vector<int64_t> ids;
+  for (int i = 0; i < 8; ++i) {
+    absl::StatusOr<int64_t> id =
+        diagnoses.Put(Diagnosis("RDK-1", "unexplained", 86400.0 * i));
+    ASSERT_THAT(id, IsOk());
+    ids.push_back(*id);
+    absl::StatusOr<std::vector<DiagnosisRecord>> kept = diagnoses.List("RDK-1");
+    ASSERT_THAT(kept, IsOk());
+    EXPECT_EQ(kept->size(), std::min<size_t>(i + 1, 3)) << i;
+  }
+  EXPECT_THAT(diagnoses.List("RDK-1"),
+              IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, ids[5]),
+                                       Field(&DiagnosisRecord::id, ids[6]),
+                                       Field(&DiagnosisRecord::id, ids[7]))));
+  EXPECT_THAT(diagnoses.Get(ids[0]), StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
+  EXPECT_THAT(diagnoses.Get(ids[4]), StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
+  EXPECT_THAT(diagnoses.Get(*other), IsOk());
+  // A paged list goes on after the oldest were dropped: ids after the last one seen.
+  EXPECT_THAT(diagnoses.ListSummaries("RDK-1", ids[1], 10),
+              IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, ids[5]),
+                                       Field(&DiagnosisRecord::id, ids[6]),
+                                       Field(&DiagnosisRecord::id, ids[7]))));
+  // Lowering the bound applies from the next Put.
+  diagnoses.set_max_per_spacecraft(1);
+  absl::StatusOr<int64_t> last = diagnoses.Put(Diagnosis("RDK-1", "gyro_misalignment", 1e6));
+  ASSERT_THAT(last, IsOk());
+  EXPECT_THAT(diagnoses.List("RDK-1"),
+              IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, *last))));
+  EXPECT_THAT(diagnoses.List("RDK-2"), IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, *other))));
 }
 
 TEST_P(DiagnosisStoreTest, RejectsInvalidRecords) {
