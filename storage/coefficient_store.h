@@ -1,7 +1,7 @@
-// Histories of estimated gyro model coefficients (table coefficients, one REAL column per
-// component in the layout of records.h: k0, C1, C2, mu, nu in deg/h, misalignment in arcsec;
-// docs/physics.md, eq. (1), (8)-(10)), plus the conversions between that layout and the estimator's
-// SI DriftCoefficients.
+// Histories of estimated gyro model coefficients (table coefficients, a row per estimate, and
+// coefficient_values, a row per component keyed by its name in the layout of records.h: k0, C1,
+// C2, mu, nu in deg/h, misalignment in arcsec; docs/physics.md, eq. (1), (8)-(10)), plus the
+// conversions between that layout and the estimator's SI DriftCoefficients.
 #ifndef ESG_STORAGE_COEFFICIENT_STORE_H_
 #define ESG_STORAGE_COEFFICIENT_STORE_H_
 

@@ -43,10 +43,10 @@ struct ArchivedFrame {
 // every record: the drift terms of estimator/model_terms.h in theta order (eq. (1), (8)-(10),
 // docs/physics.md): k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of
 // the gyro, mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all [rad/s]; then the misalignment,
-// a small rotation vector about body axes b [rad]. Each is stored in its own column of table
-// `coefficients`, in the unit its name carries (deg/h for the drift terms, arcsec for the
-// misalignment; sigma columns "<name>_sigma_<unit>", e.g. k0_sigma_deg_h): CoefficientStore
-// converts at the columns, so a user of plain SQL reads the units operators use.
+// a small rotation vector about body axes b [rad]. Each is stored as a row of table
+// `coefficient_values` keyed by its name with its unit (CoefficientColumns() below), value and
+// 1-sigma in that unit (deg/h for the drift terms, arcsec for the misalignment): CoefficientStore
+// converts at the rows, so a user of plain SQL reads the units operators use.
 inline constexpr int kCoefficientMisalignment = estimator::kNumDriftCoefficients;
 inline constexpr int kNumCoefficientValues = kCoefficientMisalignment + 3;
 inline constexpr int kCoefficientK0 = 0;
@@ -59,9 +59,10 @@ static_assert(kCoefficientK0 == estimator::kThetaK0 && kCoefficientC1 == estimat
                   kCoefficientNu == estimator::kThetaNu,
               "the drift part of the coefficient layout is the estimator's theta");
 
-// Column names of the values and of the sigmas, in layout order: the drift terms' from their
-// descriptors (estimator/model_terms.h: "k0_deg_h", "k0_sigma_deg_h", ...), then
-// "misalignment_x_arcsec", ..., "misalignment_z_sigma_arcsec". Defined in coefficient_store.cc.
+// Names of the values (their storage keys, coefficient_values.term_key) and of the sigmas, in
+// layout order: the drift terms' from their descriptors (estimator/model_terms.h: "k0_deg_h",
+// "k0_sigma_deg_h", ...), then "misalignment_x_arcsec", ..., "misalignment_z_sigma_arcsec".
+// Defined in coefficient_store.cc.
 const std::array<std::string, kNumCoefficientValues>& CoefficientColumns();
 const std::array<std::string, kNumCoefficientValues>& CoefficientSigmaColumns();
 
