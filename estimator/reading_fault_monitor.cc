@@ -273,6 +273,29 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
     }
     return *smooth_rss;
   };
+  // A slow reading error delta (kSlowReadingErrorRad: an unconfigured misalignment, a scale
+  // error, the filter's own misalignment error) displaces a rebuild by (R delta) x h, R the
+  // attitude: over an interval in which the reading turns by theta it moves the rebuild by at
+  // most |delta| |R_j - R_(j-1)| <= |delta| min(theta, 2), at once during a fast slew (3.5 deg/s
+  // turns a reading 3.6 rad between two measurement steps), and the displacement stays. So a
+  // drift may come with a step at any point j of the window no larger than that allowance: the
+  // best line with a step whose size is within its allowance (its part beyond the allowance
+  // along its own direction below k_d^2, BeyondBallChi2) joins the drift alternatives. A step
+  // beyond every allowance is left to the jump test.
+  const auto slew_steps = [&](const Projected& q) {
+    double best = std::numeric_limits<double>::infinity();
+    for (int j = 1; j < n; ++j) {
+      const double allowance = kSlowReadingErrorRad * std::min(track.points[j].turn, 2.0);
+      if (!(allowance > 0.0)) continue;
+      const Fit step = WeightedFit(q, Regressors(q, j, std::nullopt, false));
+      if (!std::isfinite(step.rss)) continue;
+      if (BeyondBallChi2(step.beta.segment<2>(4), step.cov.block<2, 2>(4, 4), allowance) <
+          options_.decision_chi2) {
+        best = std::min(best, step.rss);
+      }
+    }
+    return best;
+  };
   // kJump: a jump at point jump_at (two or three points after it) against every drift
   // alternative, with the onset also inside the interval before the jump; at least two points
   // before it for the line.
@@ -286,6 +309,7 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
       drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
     }
+    drift_rss = std::min(drift_rss, slew_steps(p));
     const double over_drift = drift_rss - jump.rss;
     if (over_drift >= options_.decision_chi2) {
       r.verdict = ReadingVerdict::kJump;
@@ -309,7 +333,8 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       q.cov[j] += a * a * Matrix2d::Identity();
       q.W[j] = q.cov[j].inverse();
     }
-    double allowed = WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss;
+    double allowed = std::min(WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss,
+                              slew_steps(q));
     for (int j = 1; j <= n - 2 && allowed > erratic_threshold_[n]; ++j) {
       allowed = std::min(allowed, WeightedFit(q, Regressors(q, -1, q.tau[j], false)).rss);
     }

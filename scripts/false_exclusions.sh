@@ -115,11 +115,14 @@ export -f run_one
 export work esg hours
 seq "$first" $((first + n - 1)) | xargs -P "$jobs" -I{} bash -c 'run_one {}' | tee "$work/results.txt"
 fails=$(grep -c ': FAIL' "$work/results.txt" || true)
-errors=$(grep -c 'FAILED' "$work/results.txt" || true)
-python3 - "$n" "$fails" "$errors" <<'PY'
+passes=$(grep -c ': PASS' "$work/results.txt" || true)
+python3 - "$n" "$fails" "$passes" <<'PY'
 import sys
-n, f, e = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
-runs = n - e
+# A seed is counted only from its own PASS or FAIL line; one without (it could not simulate or
+# calibrate, or printed nothing) is reported as not run.
+n, f, p = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+runs = f + p
+e = n - runs
 bound = 1 - 0.05 ** (1 / runs) if f == 0 and runs > 0 else None
 print(f"false exclusions: {f} of {runs} runs" + (f" (95% upper bound {100 * bound:.2f}%)" if bound else "")
       + (f"; {e} runs could not run" if e else ""))

@@ -36,6 +36,8 @@ struct Truth {
   std::function<Vector2d(double)> offset = [](double) { return Vector2d::Zero(); };
   double noise_scale = 1.0;
   double turn = 0.0;  // the reading's turn per step [rad]
+  // The turn over the step ending at t [rad], when it varies (a slew); else `turn`.
+  std::function<double(double)> turn_at;
 };
 
 struct Outcome {
@@ -67,7 +69,7 @@ Outcome Simulate(const Truth& run, int steps, unsigned seed) {
     s.prior_residual_in = T * prior;
     s.noise_in = N;
     s.drift_bound = kLimit;
-    s.turn = run.turn;
+    s.turn = run.turn_at ? run.turn_at(t) : run.turn;
     for (const auto& r : monitor.AddStep(t0 + absl::Seconds(t), {s})) {
       if (r.verdict != ReadingVerdict::kNone) out.verdicts.emplace_back(k, r.verdict);
     }
@@ -135,6 +137,34 @@ TEST(ReadingFaultMonitor, AReadingJumpIsAJumpByTheSecondStep) {
     ASSERT_FALSE(o.verdicts.empty()) << "seed " << seed;
     EXPECT_GE(o.verdicts[0].first, 300) << "seed " << seed;
     EXPECT_LE(o.verdicts[0].first, 301) << "seed " << seed;
+  }
+}
+
+TEST(ReadingFaultMonitor, ADisplacementDuringAFastSlewIsNoJump) {
+  // The reading turns 3.6 rad (3.5 deg/s) over the step to 300: a slow reading error of up to
+  // 2 arcmin (kSlowReadingErrorRad) moves the rebuild by up to 4 arcmin then. A displacement of
+  // 140 arcsec in that step is no verdict; the same displacement where the reading turns 0.1 rad
+  // over the step (6 deg/min) is a jump by the second step.
+  for (const double turn : {3.6, 0.1}) {
+    for (unsigned seed = 1; seed <= 10; ++seed) {
+      Truth run;
+      run.rate = [](double) { return DegH(0.1, 0.05); };
+      run.offset = [](double t) {
+        return t >= 17970.0 ? Vector2d(100.0 * kRadPerArcsec, 100.0 * kRadPerArcsec)
+                            : Vector2d::Zero();
+      };
+      run.turn_at = [turn](double t) { return std::abs(t - 18000.0) < 1.0 ? turn : 0.0; };
+      const Outcome o = Simulate(run, 320, seed);
+      if (turn > 2.0) {
+        EXPECT_TRUE(o.verdicts.empty())
+            << "seed " << seed << ": verdict " << ReadingVerdictName(o.verdicts[0].second)
+            << " at step " << o.verdicts[0].first;
+      } else {
+        ASSERT_FALSE(o.verdicts.empty()) << "seed " << seed;
+        EXPECT_GE(o.verdicts[0].first, 300) << "seed " << seed;
+        EXPECT_LE(o.verdicts[0].first, 301) << "seed " << seed;
+      }
+    }
   }
 }
 
