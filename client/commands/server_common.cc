@@ -19,14 +19,18 @@ std::string StripPrefix(const std::string& name, absl::string_view prefix) {
 
 }  // namespace
 
-std::unique_ptr<EsgClient> Connect(const char* verb, const GlobalOptions& global) {
+ClientOptions ClientOptionsFrom(const GlobalOptions& global) {
   ClientOptions options;
   options.server = global.server;
   options.tls_ca = global.tls_ca;
   options.tls_cert = global.tls_cert;
   options.tls_key = global.tls_key;
   options.token = global.token;
-  absl::StatusOr<std::unique_ptr<EsgClient>> client = EsgClient::Create(options);
+  return options;
+}
+
+std::unique_ptr<EsgClient> Connect(const char* verb, const GlobalOptions& global) {
+  absl::StatusOr<std::unique_ptr<EsgClient>> client = EsgClient::Create(ClientOptionsFrom(global));
   if (!client.ok()) {
     ReportBadArgument(verb, std::string(client.status().message()));
     return nullptr;

@@ -30,6 +30,9 @@ inline constexpr int kExitOk = 0;
 inline constexpr int kExitFailure = 1;
 inline constexpr int kExitBadArguments = 2;
 
+// The connection options the global flags give (address, TLS files, token).
+ClientOptions ClientOptionsFrom(const GlobalOptions& global);
+
 // Builds the client from the global options (--server, --tls-*, --token / $ESG_TOKEN). On bad
 // options prints "esg VERB: <message>" and returns nullptr (the verb exits 2).
 std::unique_ptr<EsgClient> Connect(const char* verb, const GlobalOptions& global);

@@ -19,12 +19,7 @@ constexpr absl::Duration kCompletionDeadline = absl::Milliseconds(500);
 
 int ListIds(const std::string& what, const GlobalOptions& global) {
   if (what != "spacecraft") return kExitOk;
-  ClientOptions options;
-  options.server = global.server;
-  options.tls_ca = global.tls_ca;
-  options.tls_cert = global.tls_cert;
-  options.tls_key = global.tls_key;
-  options.token = global.token;
+  ClientOptions options = ClientOptionsFrom(global);
   options.rpc_timeout = kCompletionDeadline;
   absl::StatusOr<std::unique_ptr<EsgClient>> client = EsgClient::Create(options);
   if (!client.ok()) return kExitOk;
