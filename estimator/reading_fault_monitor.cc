@@ -296,6 +296,7 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
     }
     return best;
   };
+  std::optional<double> slew_rss;
   // kJump: a jump at point jump_at (two or three points after it) against every drift
   // alternative, with the onset also inside the interval before the jump; at least two points
   // before it for the line.
@@ -309,7 +310,8 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
       drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
     }
-    drift_rss = std::min(drift_rss, slew_steps(p));
+    if (!slew_rss.has_value()) slew_rss = slew_steps(p);  // the same for both jump points
+    drift_rss = std::min(drift_rss, *slew_rss);
     const double over_drift = drift_rss - jump.rss;
     if (over_drift >= options_.decision_chi2) {
       r.verdict = ReadingVerdict::kJump;
