@@ -28,14 +28,37 @@ export const TELEMETRY_TYPE = 'esg.telemetry';
 // belonging to the curve.
 const BAND_COLOURS = { value: '#4fb3ff', hi: '#9a6a2f', lo: '#9a6a2f' };
 const AXIS_COLOURS = { x: '#ff6b6b', y: '#7bd389', z: '#4fb3ff' };
-// The sources of predicted samples (PredictResponse.attitude_source), each marked on the plot.
+// The sources of predicted samples (PredictResponse.attitude_source without its ATTITUDE_SOURCE_
+// prefix), each marked on the plot: `words` in the table (esg's words,
+// proto/attitude_source_words.h), `marker` in the legend at the line where the source begins. The
+// 1-sigma steps there because the estimate changes: the recorded samples are the gyros' alone
+// since a star-tracker fix; the plan and the hold start from the filter's last estimate, made
+// with the star tracker, and propagate its covariance (docs/console.md).
 export const PREDICT_SOURCES = {
-  RECORDED: { label: 'recorded gyro readings (no star tracker)', color: '#c8c8c8' },
-  INERTIAL_HOLD: { label: 'inertial hold of the last estimate', color: '#ff7fe0' },
-  PLANNED: { label: 'planned attitude', color: '#ffd23f' }
+  RECORDED: {
+    words: 'recorded',
+    marker: 'recorded gyro readings from here (star tracker withheld: the gyros alone)',
+    color: '#c8c8c8'
+  },
+  INERTIAL_HOLD: {
+    words: 'inertial hold',
+    marker: "inertial hold from here, 1-sigma from the filter's last estimate (with the star tracker)",
+    color: '#ff7fe0'
+  },
+  PLANNED: {
+    words: 'planned',
+    marker: "planned attitude from here, 1-sigma from the filter's last estimate (with the star tracker)",
+    color: '#ffd23f'
+  }
 };
 const SIGMA_COLOURS = ['#4fb3ff', '#ff6b6b', '#7bd389', '#ffd23f', '#c58cff', '#ff9d4f', '#5fe0d0'];
 const AXIS_DIM = { x: '#8a3a3a', y: '#3f7047', z: '#2a5f88' };
+
+// Open MCT's plot legend, expanded, with the series' names only.
+const EXPANDED_NAMES_ONLY = {
+  expandByDefault: true, showTimestampWhenExpanded: false, showValueWhenExpanded: false,
+  showMinimumWhenExpanded: false, showMaximumWhenExpanded: false, showUnitsWhenExpanded: false
+};
 
 function folder(identifier, name, composition, location) {
   return { identifier, name, type: 'folder', composition, location };
@@ -48,7 +71,9 @@ function telemetryObject(identifier, name, values, esg, location) {
 // An overlay plot with the series' colours fixed, lines joined, no point markers, and the
 // quantity with its unit as the y-axis label.
 // logMode: Open MCT's symmetric log scale of the y axis (a 1-sigma that spans decades).
-function overlay(identifier, name, series, location, yLabel, logMode = false) {
+// legendRows: the legend expanded, one row per series with its whole name and nothing else (for
+// names that explain what the plot shows and would be cut in the one-line legend).
+function overlay(identifier, name, series, location, yLabel, logMode = false, legendRows = false) {
   return {
     identifier,
     name,
@@ -57,6 +82,7 @@ function overlay(identifier, name, series, location, yLabel, logMode = false) {
     composition: series.map((s) => s.identifier),
     configuration: {
       yAxis: logMode ? { label: yLabel, logMode: true } : { label: yLabel },
+      ...(legendRows ? { legend: EXPANDED_NAMES_ONLY } : {}),
       series: series.map((s) => ({
         identifier: s.identifier, color: s.color, interpolate: 'linear', markers: false
       }))
@@ -343,18 +369,18 @@ const builders = {
   // The predicted 1-sigma per body axis on a log scale (it spans decades across a gap), and a
   // vertical line where each source of the samples begins (PredictResponse: the recorded readings
   // up to the last archived frame, then the plan or the inertial hold), named in the legend: the
-  // envelope's jump at the last archived frame is where the source changes.
+  // envelope's step at the last archived frame is where the source, and the estimate, change.
   async predplot(identifier, [sc]) {
     const series = AXES.map((axis) => ({ identifier: id('predser', sc, `s${axis}`), color: AXIS_COLOURS[axis] }));
     for (const source of Object.keys(PREDICT_SOURCES)) {
       series.push({ identifier: id('predmark', sc, source), color: PREDICT_SOURCES[source].color });
     }
     return overlay(identifier, 'Predicted attitude 1-sigma',
-      series, keyString(id('sc', sc)), 'predicted 1-sigma [arcsec], log scale', true);
+      series, keyString(id('sc', sc)), 'predicted 1-sigma [arcsec], log scale', true, true);
   },
 
   async predmark(identifier, [sc, source]) {
-    const label = `${PREDICT_SOURCES[source].label} from here`;
+    const label = PREDICT_SOURCES[source].marker;
     return telemetryObject(identifier, label, singleSeriesValues('mark', label, null),
       { source: 'predmark', spacecraft: sc, mark: source }, keyString(id('predplot', sc)));
   },

@@ -4,9 +4,9 @@ import { el, STYLE } from './dom.js';
 import { parsePlan, planText, setPlan } from './plan.js';
 
 function status(text) {
-  if (!text.trim()) return 'No plan: after the last frame predictions hold the last estimate inertially fixed (INERTIAL_HOLD).';
+  if (!text.trim()) return 'No plan: after the last frame predictions hold the last estimate inertially fixed (inertial hold).';
   const samples = parsePlan(text);
-  return `Predictions after the last frame use this plan (PLANNED): ${samples.length} samples from ` +
+  return `Predictions after the last frame use this plan (planned): ${samples.length} samples from ` +
     `${samples[0].time} to ${samples[samples.length - 1].time}, slerp between them, held before the first and after the last.`;
 }
 

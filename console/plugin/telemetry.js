@@ -6,7 +6,7 @@
 // to where the re-run started.
 import { apiFetch, isoTime, query, sharedFetch } from './api.js';
 import { live } from './live.js';
-import { TELEMETRY_TYPE } from './objects.js';
+import { PREDICT_SOURCES, TELEMETRY_TYPE } from './objects.js';
 import { planSamples } from './plan.js';
 import { estimateDatum, predictDatum, revisedSnapshotDatum, snapshotDatum } from './series.js';
 
@@ -56,12 +56,13 @@ const requesters = {
 
   // PredictAttitude over the conductor's bounds: recorded samples up to the last archived frame,
   // then the spacecraft's planned attitude (plan.js) or, without one, an inertial hold of the
-  // last estimate.
+  // last estimate; each sample's source in words ("recorded", "planned", "inertial hold").
   async pred(esg, bounds) {
     const body = await predict(esg, bounds);
     const recorded = body.recorded_samples || 0;
     const later = (body.attitude_source || '').replace(/^ATTITUDE_SOURCE_/, '');
-    return body.samples.map((s, i) => predictDatum(s, i < recorded ? 'RECORDED' : later));
+    const words = (source) => PREDICT_SOURCES[source]?.words ?? source.toLowerCase().replace(/_/g, ' ');
+    return body.samples.map((s, i) => predictDatum(s, words(i < recorded ? 'RECORDED' : later)));
   },
 
   // Where the samples of one source begin, as a vertical line across the plotted 1-sigma (two

@@ -791,8 +791,11 @@ test('predicted attitude across a gap after the last frame: table from PredictAt
   await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1', bounds);
   const rows = await waitForTableRows(5);
   // The newest rows are after the last frame: an inertial hold of the last estimate, its
-  // envelope growing with the time since the last star-tracker fix.
-  assert.equal(rows[0]['Attitude source'], 'INERTIAL_HOLD');
+  // envelope growing with the time since the last star-tracker fix. The sources in words, as
+  // esg's table names them; the enum names stay in the JSON (esg --format json below).
+  assert.equal(rows[0]['Attitude source'], 'inertial hold');
+  for (const row of rows) assert.ok(['recorded', 'inertial hold'].includes(row['Attitude source']), row['Attitude source']);
+  assert.doesNotMatch(await page.$eval('.c-telemetry-table__body', (b) => b.textContent), /INERTIAL_HOLD|ATTITUDE_SOURCE_|RECORDED/);
   assert.ok(cellTime(rows[0]['Time (UTC)']) > last);
   const sigmas = rows.map((r) => Number(r['1-sigma body x [arcsec]']));
   assert.ok(sigmas[0] > sigmas[sigmas.length - 1], 'the envelope grows across the gap');
@@ -819,11 +822,14 @@ test('predicted attitude across a gap after the last frame: table from PredictAt
   assert.equal(answer.attitudeSource, 'ATTITUDE_SOURCE_INERTIAL_HOLD');
   await open('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', bounds);
   await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
+  // The legend says why the envelope steps at the switch: the recorded samples are the gyros'
+  // alone, the hold starts from the filter's estimate made with the star tracker.
   const legend = await page.waitForFunction(() => {
     const text = document.querySelector('.c-plot-legend')?.textContent || '';
-    return /inertial hold of the last estimate from here/.test(text) && text;
+    return /inertial hold from here, 1-sigma from the filter's last estimate \(with the star tracker\)/.test(text) && text;
   }, { timeout: 20_000 });
-  assert.match(await legend.jsonValue(), /recorded gyro readings \(no star tracker\) from here/);
+  assert.match(await legend.jsonValue(), /recorded gyro readings from here \(star tracker withheld: the gyros alone\)/);
+  assert.doesNotMatch(await legend.jsonValue(), /INERTIAL_HOLD|ATTITUDE_SOURCE_/);
   const marks = await predictionMarks('RDK-1', start, end);
   assert.deepEqual(marks.RECORDED.map((p) => p.utc), [Date.parse(predicted[0].time), Date.parse(predicted[0].time) + 1]);
   const holdStart = Date.parse(predicted[recorded].time);
@@ -919,7 +925,7 @@ test('a planned attitude pasted in the console is what the prediction after the 
   await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1',
     `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
   await page.waitForFunction(() => [...document.querySelectorAll('.c-telemetry-table__body tr.noselect')]
-    .some((tr) => tr.textContent.includes('PLANNED')), { timeout: 20_000 });
+    .some((tr) => tr.textContent.includes('planned')), { timeout: 20_000 });
   const rows = await tableRows();
   const step = Math.ceil((end - start) / 1000 / 400);
   const predicted = (await cliJson('predict', '--spacecraft', 'RDK-1', '--planned', planFile,
@@ -932,7 +938,7 @@ test('a planned attitude pasted in the console is what the prediction after the 
     ['q0', 'q1', 'q2', 'q3'].forEach((k, i) => assert.equal(Number(row[k]).toFixed(9), sample.qInB[i].toFixed(9), `${k} at ${row['Time (UTC)']}`));
     ['x', 'y', 'z'].forEach((axis, i) => assert.equal(Number(row[`1-sigma body ${axis} [arcsec]`]).toFixed(3),
       sample.sigmaArcsec[i].toFixed(3), `sigma ${axis} at ${row['Time (UTC)']}`));
-    if (row['Attitude source'] === 'PLANNED') planned++;
+    if (row['Attitude source'] === 'planned') planned++;
   }
   assert.ok(planned > 10, `${planned} planned rows`);
   const marks = await predictionMarks('RDK-1', start, end);
@@ -945,7 +951,7 @@ test('a planned attitude pasted in the console is what the prediction after the 
   await page.click('.esg-plan-clear');
   await open('esg:root/esg:sc~RDK-1/esg:predtable~RDK-1',
     `?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
-  await page.waitForFunction(() => document.querySelector('.c-telemetry-table__body tr.noselect')?.textContent.includes('INERTIAL_HOLD'),
+  await page.waitForFunction(() => document.querySelector('.c-telemetry-table__body tr.noselect')?.textContent.includes('inertial hold'),
     { timeout: 20_000 });
 });
 
