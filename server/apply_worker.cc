@@ -1,6 +1,7 @@
 // The filter workers (see estimation_core.h "DATA FLOW AND DURABILITY"): per spacecraft, one job
 // at a time applies durable frames in measurement-time order to a copy of the session and
-// commits the effects with the checkpoint in one transaction. A filter failure quarantines the
+// commits the effects with the checkpoint in one transaction (on PostgreSQL together with the
+// other jobs that finish at the same time: CommitFilterJob). A filter failure quarantines the
 // spacecraft; a session rebuilt from the archive leaves quarantine when it has caught up.
 #include <sys/resource.h>
 #include <sys/syscall.h>
@@ -22,6 +23,7 @@
 #include "server/estimation_core.h"
 #include "server/grpc_status.h"
 #include "server/log.h"
+#include "server/memory_release.h"
 #include "storage/coefficient_store.h"
 #include "storage/service_queries.h"
 
@@ -149,6 +151,21 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // A session another server took over is that server's to apply (its record here is replaced
   // when this server takes the lease again).
   if (sc->lease_lost) return false;
+  // Applying takes one of the worker_threads slots, given back before the commit (and before any
+  // pause), so the threads waiting for the group commit do not add to the filter's CPU share.
+  class ApplySlot {
+   public:
+    explicit ApplySlot(EstimationCore* core) : core_(core) { core_->AcquireApplySlot(); }
+    ~ApplySlot() { Release(); }
+    void Release() {
+      if (core_ != nullptr) core_->ReleaseApplySlot();
+      core_ = nullptr;
+    }
+
+   private:
+    EstimationCore* core_;
+  };
+  ApplySlot slot(this);
   std::optional<EstimationSession> session;
   ServerCheckpoint apply;
   std::shared_ptr<const Setup> setup;
@@ -199,6 +216,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
                                 service_alerts.end());
     }
     ++sc->apply_retries;
+    slot.Release();
     absl::SleepFor(BackoffDelay(sc->apply_retries, absl::Milliseconds(100), kMaxReconnectWait));
     return true;
   };
@@ -452,8 +470,9 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     cp.state_blob = EncodeCheckpoint(to_store);
     return cp;
   };
+  slot.Release();
   const absl::Time commit_start = absl::Now();
-  absl::StatusOr<std::vector<int64_t>> committed = storage_->CommitFilterEffects(effects);
+  absl::StatusOr<std::vector<int64_t>> committed = CommitFilterJob(effects);
   const absl::Status status = committed.status();
   if (committed.ok()) new_sequences = std::move(*committed);
   metrics_.storage_commit.With({"filter"}).Observe(
@@ -487,6 +506,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   std::vector<storage::AlertRecord> published = alerts.new_alerts();
   for (size_t k = 0; k < published.size(); ++k) published[k].sequence = new_sequences[k];
   bool more = false;
+  int64_t freed_bytes = 0;  // of the applied frames dropped from memory
   {
     absl::MutexLock lock(&sc->state_mu);
     if (sc->generation != generation) return true;
@@ -503,12 +523,18 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     const bool stopped = sc->apply.FilterStopped();
     auto end = sc->ready.upper_bound(sc->apply.applied_time);
     for (auto it = sc->ready.begin(); it != end; ++it) {
-      sc->ready_bytes -= static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());
+      const int64_t bytes = static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());
+      sc->ready_bytes -= bytes;
+      freed_bytes += bytes;
     }
     sc->ready.erase(sc->ready.begin(), end);
     more = !stopped && (sc->replay_from_archive || !sc->ready.empty() ||
                         !sc->service_alerts.empty() || !sc->late_frames.empty());
   }
+  // A backlog applied leaves its frames' memory free in malloc's arenas, interleaved with the
+  // sessions' blocks: handed back to the system once enough is noted (memory_release.h), so a
+  // burst of telemetry does not keep the resident set at its peak.
+  NoteFreedMemory(freed_bytes);
   // Publish the committed changes.
   absl::MutexLock publish(&sc->publish_mu);
   if (rerun.has_value()) {

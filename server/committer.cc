@@ -14,6 +14,7 @@
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/log.h"
+#include "server/memory_release.h"
 #include "storage/service_queries.h"
 
 namespace esg::server {
@@ -39,6 +40,71 @@ absl::Status EstimationCore::CommitFrames(const std::vector<CommitEntry>& batch)
   // (AlreadyExists) rather than be acknowledged falsely. Late frames are recorded in the same
   // transaction: a restart still re-runs the filter over them.
   return storage_->ArchiveFrames(frames, late, fences);
+}
+
+// A filter job waiting for the group commit (CommitFilterJob).
+struct EstimationCore::FilterCommit {
+  EstimationCore* core = nullptr;
+  const storage::FilterEffects* effects = nullptr;
+  absl::StatusOr<std::vector<int64_t>> result;
+  bool done = false;
+};
+
+// The filter's group commit on PostgreSQL, as ingest's (CommitterLoop) but without a thread of
+// its own: the first waiting job's thread commits every job queued at that moment in one
+// transaction, each job in its own savepoint (Storage::CommitFilterEffectsGroup), and hands each
+// job its own result; jobs that arrive meanwhile wait and form the next group. A job's result is
+// thus what committing it alone would give: OK only once its effects are durable, its lost lease
+// or refused record its own failure, never the others'.
+absl::StatusOr<std::vector<int64_t>> EstimationCore::CommitFilterJob(
+    const storage::FilterEffects& effects) {
+  if (!group_filter_commits_) return storage_->CommitFilterEffects(effects);
+  FilterCommit mine;
+  mine.core = this;
+  mine.effects = &effects;
+  filter_commit_mu_.Lock();
+  filter_commit_queue_.push_back(&mine);
+  while (!mine.done) {
+    if (filter_committing_) {
+      filter_commit_mu_.Await(absl::Condition(
+          +[](FilterCommit* c) ABSL_EXCLUSIVE_LOCKS_REQUIRED(c->core->filter_commit_mu_) {
+            return c->done || !c->core->filter_committing_;
+          },
+          &mine));
+      continue;
+    }
+    std::vector<FilterCommit*> group;
+    group.swap(filter_commit_queue_);
+    filter_committing_ = true;
+    filter_commit_mu_.Unlock();
+    std::vector<const storage::FilterEffects*> jobs;
+    jobs.reserve(group.size());
+    for (const FilterCommit* c : group) jobs.push_back(c->effects);
+    std::vector<absl::StatusOr<std::vector<int64_t>>> results =
+        storage_->CommitFilterEffectsGroup(jobs);
+    filter_commit_mu_.Lock();
+    for (size_t j = 0; j < group.size(); ++j) {
+      group[j]->result = std::move(results[j]);
+      group[j]->done = true;
+    }
+    filter_committing_ = false;
+  }
+  filter_commit_mu_.Unlock();
+  return std::move(mine.result);
+}
+
+void EstimationCore::AcquireApplySlot() {
+  if (!group_filter_commits_) return;
+  absl::MutexLock lock(&apply_slots_mu_);
+  apply_slots_mu_.Await(absl::Condition(
+      +[](int* free) { return *free > 0; }, &apply_slots_free_));
+  --apply_slots_free_;
+}
+
+void EstimationCore::ReleaseApplySlot() {
+  if (!group_filter_commits_) return;
+  absl::MutexLock lock(&apply_slots_mu_);
+  ++apply_slots_free_;
 }
 
 void EstimationCore::StorageCommitFailed(const std::string& reason) {
@@ -269,9 +335,13 @@ void EstimationCore::CommitterLoop() {
       }
     }
     for (const auto& sc : touched) Schedule(sc);
+    int64_t payload_bytes = 0;
     for (CommitEntry& e : batch) {
+      payload_bytes += static_cast<int64_t>(sizeof(CommitEntry) + e.payload.size());
       if (e.done) e.done(absl::OkStatus());
     }
+    // The batch's payloads are freed with it (memory_release.h, as the applied frames are).
+    NoteFreedMemory(payload_bytes);
   }
 }
 

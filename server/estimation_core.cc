@@ -25,7 +25,11 @@ absl::Status NotConfigured(const std::string& id) {
 }
 
 EstimationCore::EstimationCore(storage::Storage* storage, const CoreOptions& options)
-    : storage_(storage), options_(options) {}
+    : storage_(storage),
+      options_(options),
+      group_filter_commits_(storage->database().dialect() == storage::Dialect::kPostgres &&
+                            options.filter_commit_group > std::max(1, options.worker_threads)),
+      apply_slots_free_(std::max(1, options.worker_threads)) {}
 
 absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::Storage* storage,
                                                                       const CoreOptions& options) {
@@ -33,7 +37,10 @@ absl::StatusOr<std::unique_ptr<EstimationCore>> EstimationCore::Start(storage::S
   RETURN_IF_ERROR(core->Load());
   core->metrics_.registry.AddCollector([c = core.get()] { c->CollectGauges(); });
   core->committer_ = std::thread([c = core.get()] { c->CommitterLoop(); });
-  const int n = std::max(1, options.worker_threads);
+  // With the filter's group commit, threads beyond worker_threads wait for commits
+  // (AcquireApplySlot keeps the applying ones to worker_threads).
+  const int n = core->group_filter_commits_ ? options.filter_commit_group
+                                            : std::max(1, options.worker_threads);
   for (int i = 0; i < n; ++i) core->workers_.emplace_back([c = core.get()] { c->WorkerLoop(); });
   if (core->shared()) {
     core->lease_renewer_ = std::thread([c = core.get()] { c->LeaseLoop(); });

@@ -27,7 +27,9 @@
 //                        publishes the estimates once committed), new alerts, repeats and
 //                        clears, the retention of the estimates, and the
 //                        checkpoint (session values + apply cursor) in ONE transaction; then
-//                        install the copy. The checkpoint thus always matches the effects
+//                        install the copy. On PostgreSQL the jobs that finish together share
+//                        that transaction, each in its own savepoint (CommitFilterJob): one
+//                        job's failure (a lost lease) undoes its own effects only. The checkpoint thus always matches the effects
 //                        stored, so a restart (load checkpoint, replay archive after its
 //                        cursor) applies no frame twice and loses none.
 //   Late frames          a frame accepted within the reorder window but measured before an
@@ -84,6 +86,12 @@ struct CoreOptions {
   int worker_nice = 10;
   // Frames applied per worker job (and per apply transaction) at most.
   int max_frames_per_job = 32;
+  // PostgreSQL: how many filter jobs may wait for their commit at once. The jobs waiting
+  // together are committed in ONE transaction (storage::Storage::CommitFilterEffectsGroup, each
+  // job in its own savepoint), so a node makes one commit for many spacecraft instead of one per
+  // job (docs/deploy.md "Capacity"). The worker pool then has this many threads, of which at
+  // most worker_threads apply frames at a time. SQLite: unused (each job commits alone).
+  int filter_commit_group = 64;
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
   // one alert (repeat_count); an alert without a new occurrence for this long is cleared.
   absl::Duration alert_collapse_window = absl::Minutes(30);
@@ -351,6 +359,14 @@ class EstimationCore {
   void CollectGauges();
   // Applies the next frames of one spacecraft; true when more remain.
   bool RunJob(const std::shared_ptr<Spacecraft>& sc);
+  // Commits one job's effects: alone (SQLite), or with the other jobs waiting at the same time
+  // in one transaction (PostgreSQL: group_filter_commits_); the result is the job's own
+  // (committer.cc).
+  absl::StatusOr<std::vector<int64_t>> CommitFilterJob(const storage::FilterEffects& effects);
+  // With group_filter_commits_: a job applies frames only while it holds one of worker_threads
+  // slots, so the extra threads that wait for commits do not add to the filter's CPU share.
+  void AcquireApplySlot();
+  void ReleaseApplySlot();
   // A re-run over late frames (reorder.cc): where it starts and what it revises.
   struct Rerun {
     absl::Time after = absl::InfinitePast();  // the restored cursor (InfinitePast: fresh)
@@ -411,6 +427,16 @@ class EstimationCore {
   std::thread lease_renewer_;  // with leases only
   std::thread relay_;          // with leases only
   absl::Mutex takeover_mu_;    // one lease take and session load at a time
+
+  // Filter group commit (PostgreSQL): the jobs waiting for their commit, and whether one of
+  // their threads is committing a group now (the next group is taken when it is done).
+  struct FilterCommit;
+  const bool group_filter_commits_;
+  absl::Mutex filter_commit_mu_;
+  std::vector<FilterCommit*> filter_commit_queue_ ABSL_GUARDED_BY(filter_commit_mu_);
+  bool filter_committing_ ABSL_GUARDED_BY(filter_commit_mu_) = false;
+  absl::Mutex apply_slots_mu_;
+  int apply_slots_free_ ABSL_GUARDED_BY(apply_slots_mu_) = 0;
 
   // Worker pool.
   absl::Mutex pool_mu_;

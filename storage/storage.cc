@@ -1,6 +1,7 @@
 // The Storage facade; contract in storage.h.
 #include "storage/storage.h"
 
+#include <algorithm>
 #include <map>
 #include <utility>
 
@@ -99,7 +100,7 @@ absl::Status Storage::ArchiveFrames(
   return txn.Commit();
 }
 
-absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEffects& effects) {
+absl::Status Storage::CheckFilterEffects(const FilterEffects& effects) {
   const std::string& id = effects.spacecraft_id;
   RETURN_IF_ERROR(ValidateSpacecraftId(id, "spacecraft_id"));
   if (!effects.checkpoint) return absl::InvalidArgumentError("checkpoint: required");
@@ -120,7 +121,12 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
     RETURN_IF_ERROR(CheckSpacecraft(effects.repeats[i].spacecraft_id, id,
                                     absl::StrCat("repeats[", i, "]")));
   }
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<int64_t>> Storage::WriteFilterEffects(Transaction& txn,
+                                                            const FilterEffects& effects) {
+  const std::string& id = effects.spacecraft_id;
   if (effects.fence.has_value()) RETURN_IF_ERROR(leases_.CheckHeld(txn, id, *effects.fence));
   if (effects.revision.has_value()) {
     const FilterEffects::Revision& r = *effects.revision;
@@ -170,8 +176,75 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEf
   if (effects.prune_before != absl::InfinitePast()) {
     RETURN_IF_ERROR(reorder_.Prune(txn, id, effects.prune_before));
   }
+  return sequences;
+}
+
+
+absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEffects& effects) {
+  RETURN_IF_ERROR(CheckFilterEffects(effects));
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(std::vector<int64_t> sequences, WriteFilterEffects(txn, effects));
   RETURN_IF_ERROR(txn.Commit());
   return sequences;
+}
+
+std::vector<absl::StatusOr<std::vector<int64_t>>> Storage::CommitFilterEffectsGroup(
+    const std::vector<const FilterEffects*>& jobs) {
+  std::vector<absl::StatusOr<std::vector<int64_t>>> results(jobs.size());
+  // In spacecraft-id order, as the group commit of frames and the lease renewal lock the
+  // lease rows (LeaseStore::CheckHeld), so that none of them deadlocks with another.
+  std::vector<size_t> order(jobs.size());
+  for (size_t j = 0; j < jobs.size(); ++j) order[j] = j;
+  std::stable_sort(order.begin(), order.end(), [&jobs](size_t a, size_t b) {
+    return jobs[a]->spacecraft_id < jobs[b]->spacecraft_id;
+  });
+  std::vector<size_t> valid;
+  for (size_t j : order) {
+    absl::Status checked = CheckFilterEffects(*jobs[j]);
+    if (checked.ok()) {
+      valid.push_back(j);
+    } else {
+      results[j] = std::move(checked);
+    }
+  }
+  if (valid.empty()) return results;
+  // Every job still waiting for an outcome gets `status` (a failure of the whole transaction).
+  auto fail_all = [&](const absl::Status& status) {
+    for (size_t j : valid) {
+      if (results[j].ok()) results[j] = status;
+    }
+    return results;
+  };
+  absl::StatusOr<Transaction> txn = db_->Begin(TransactionMode::kImmediate);
+  if (!txn.ok()) return fail_all(txn.status());
+  // Each job inside its own savepoint: a job that fails (its lease lost, a record refused) is
+  // undone alone and the others' writes stay in the transaction. A savepoint that cannot be
+  // rolled back (the connection is gone) fails them all.
+  std::vector<size_t> written;
+  for (size_t j : valid) {
+    if (absl::Status s = txn->Execute("SAVEPOINT filter_job"); !s.ok()) return fail_all(s);
+    absl::StatusOr<std::vector<int64_t>> sequences = WriteFilterEffects(*txn, *jobs[j]);
+    if (sequences.ok()) {
+      if (absl::Status s = txn->Execute("RELEASE SAVEPOINT filter_job"); !s.ok()) {
+        return fail_all(s);
+      }
+      results[j] = std::move(*sequences);
+      written.push_back(j);
+      continue;
+    }
+    if (absl::Status s = txn->Execute("ROLLBACK TO SAVEPOINT filter_job"); !s.ok()) {
+      return fail_all(s);
+    }
+    if (absl::Status s = txn->Execute("RELEASE SAVEPOINT filter_job"); !s.ok()) {
+      return fail_all(s);
+    }
+    results[j] = sequences.status();
+  }
+  if (written.empty()) return results;
+  if (absl::Status committed = txn->Commit(); !committed.ok()) {
+    for (size_t j : written) results[j] = committed;
+  }
+  return results;
 }
 
 absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(

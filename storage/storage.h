@@ -156,6 +156,16 @@ class Storage {
   // repeat or clear of a missing alert; storage faults as ArchiveFrames.
   absl::StatusOr<std::vector<int64_t>> CommitFilterEffects(const FilterEffects& effects);
 
+  // Several filter jobs (of different spacecraft) in ONE transaction, each inside its own
+  // savepoint: the server's group commit of the filter on PostgreSQL (docs/service.md "Durability
+  // and recovery"). results[j] is what CommitFilterEffects(*jobs[j]) would return: a job refused
+  // (its lease lost, a record a store rejects) is rolled back alone and the other jobs' effects
+  // are committed; a failure of the transaction itself (Begin, a savepoint that cannot be rolled
+  // back, the commit: a lost connection, a full disk) is every remaining job's error, and then
+  // nothing of any job is visible. An OK result is durable as with CommitFilterEffects.
+  std::vector<absl::StatusOr<std::vector<int64_t>>> CommitFilterEffectsGroup(
+      const std::vector<const FilterEffects*>& jobs);
+
   // Stores a configuration, its session's checkpoint and the alert changes in one transaction;
   // returns the sequences assigned to change.new_alerts. Errors as CommitFilterEffects
   // ("config.", "checkpoint.", "new_alerts[i]", "clears[i]").
@@ -182,6 +192,10 @@ class Storage {
 
  private:
   explicit Storage(std::unique_ptr<Database> db);
+  // The checks of CommitFilterEffects made before the transaction, and its writes inside one.
+  static absl::Status CheckFilterEffects(const FilterEffects& effects);
+  absl::StatusOr<std::vector<int64_t>> WriteFilterEffects(Transaction& txn,
+                                                          const FilterEffects& effects);
 
   std::unique_ptr<Database> db_;
   ConfigStore configs_;

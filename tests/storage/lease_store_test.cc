@@ -23,6 +23,7 @@
 namespace esg::storage {
 namespace {
 
+using ::esg::storage::testing::Alert;
 using ::esg::storage::testing::BackendTest;
 using ::esg::storage::testing::Frame;
 using ::esg::storage::testing::T;
@@ -177,6 +178,57 @@ TEST_P(LeaseStoreTest, AWriteFencedByALostLeaseStoresNothingAndNamesTheSpacecraf
 
   // The new holder's fence writes.
   EXPECT_THAT((*storage)->ArchiveFrames({Frame("F-1", 2)}, {}, {{"F-1", {"b", 2}}}), IsOk());
+}
+
+// The filter's group commit of one server (Storage::CommitFilterEffectsGroup) holding three
+// spacecraft, one of which another server has taken over meanwhile: that job is refused as lost
+// (nothing of it stored) and the other two are committed in the same transaction.
+TEST_P(LeaseStoreTest, AGroupCommitWithOneLeaseLostCommitsTheOthers) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  if (GetParam() == testing::Backend::kSqlite) return;  // no leases (above)
+  LeaseStore& leases = (*storage)->leases();
+  const std::vector<std::string> ids = {"F-A", "F-B", "F-C"};
+  std::vector<FilterEffects> jobs(ids.size());
+  for (size_t i = 0; i < ids.size(); ++i) {
+    ASSERT_THAT(leases.Acquire(ids[i], "a", T(0), kLease), IsOk());
+    ASSERT_THAT((*storage)->ArchiveFrames({Frame(ids[i], 1)}), IsOk());
+    FilterEffects& e = jobs[i];
+    e.spacecraft_id = ids[i];
+    e.fence = LeaseFence{"a", 1};
+    e.new_alerts.push_back(Alert(ids[i], 60));
+    e.checkpoint = [id = ids[i]](const std::vector<int64_t>&) {
+      CheckpointRecord cp;
+      cp.spacecraft_id = id;
+      cp.last_sequence = 1;
+      cp.measurement_time = T(60);
+      cp.compute_time = T(61);
+      cp.state_blob = "state";
+      return cp;
+    };
+  }
+  // b takes F-B over after a's lease expired.
+  ASSERT_THAT(leases.Acquire("F-B", "b", T(20), kLease), IsOk());
+  const std::vector<absl::StatusOr<std::vector<int64_t>>> results =
+      (*storage)->CommitFilterEffectsGroup({&jobs[0], &jobs[1], &jobs[2]});
+  ASSERT_EQ(results.size(), 3u);
+  EXPECT_THAT(results[0], IsOk());
+  EXPECT_THAT(results[1], StatusIs(absl::StatusCode::kAborted, HasSubstr("taken over by node b")));
+  EXPECT_EQ(LeaseLostSpacecraft(results[1].status()), std::optional<std::string>("F-B"));
+  EXPECT_THAT(results[2], IsOk());
+  for (const std::string& id : ids) {
+    absl::StatusOr<CheckpointRecord> cp = (*storage)->sessions().GetCheckpoint(id);
+    absl::StatusOr<std::vector<AlertRecord>> alerts =
+        (*storage)->alerts().Since(id, absl::InfinitePast(), 100);
+    ASSERT_THAT(alerts, IsOk());
+    if (id == "F-B") {
+      EXPECT_THAT(cp, StatusIs(absl::StatusCode::kNotFound, ::testing::_));
+      EXPECT_TRUE(alerts->empty());
+    } else {
+      EXPECT_THAT(cp, IsOk()) << id;
+      EXPECT_EQ(alerts->size(), 1u) << id;
+    }
+  }
 }
 
 // A renewal round and a commit fenced by several of the same server's leases (the committer's

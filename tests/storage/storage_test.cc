@@ -256,6 +256,62 @@ TEST_P(StorageTest, EngineConstraintFailureInsideTheTransactionRollsItBack) {
   EXPECT_EQ(v.checkpoint_sequence, std::nullopt);
 }
 
+// The filter's group commit (Storage::CommitFilterEffectsGroup): several spacecraft's jobs in
+// one transaction, one of which the engine refuses half-way (coefficients and alert written,
+// then the checkpoint refused by a trigger for that spacecraft only). Its writes are undone
+// alone; the others' are committed, and each job gets its own result in the order given.
+TEST_P(StorageTest, AGroupOfFilterJobsCommitsEachAndUndoesARefusedJobAlone) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  const char* trigger =
+      GetParam() == testing::Backend::kSqlite
+          ? "CREATE TRIGGER refuse_checkpoint BEFORE INSERT ON checkpoints "
+            "WHEN NEW.spacecraft_id = 'G-B' BEGIN SELECT RAISE(ABORT, 'checkpoint refused'); END"
+          : "CREATE FUNCTION refuse_checkpoint() RETURNS trigger LANGUAGE plpgsql AS $$ "
+            "BEGIN IF NEW.spacecraft_id = 'G-B' THEN RAISE EXCEPTION 'checkpoint refused' "
+            "USING ERRCODE = 'check_violation'; END IF; RETURN NEW; END $$; "
+            "CREATE TRIGGER refuse_checkpoint BEFORE INSERT ON checkpoints "
+            "FOR EACH ROW EXECUTE FUNCTION refuse_checkpoint()";
+  ASSERT_THAT((*storage)->database().Execute(trigger), IsOk());
+  std::vector<Step> steps = {MakeStep("G-C", 0), MakeStep("G-B", 0), MakeStep("G-A", 0)};
+  steps[2].effects.new_alerts.push_back(Alert("G-A", 30, "PAIR_MISMATCH"));
+  std::vector<const FilterEffects*> jobs;
+  for (const Step& step : steps) {
+    ASSERT_THAT((*storage)->ArchiveFrames(step.frames), IsOk());
+    jobs.push_back(&step.effects);
+  }
+  const std::vector<absl::StatusOr<std::vector<int64_t>>> results =
+      (*storage)->CommitFilterEffectsGroup(jobs);
+  ASSERT_EQ(results.size(), 3u);
+  EXPECT_THAT(results[0], IsOkAndHolds(ElementsAre(1)));
+  EXPECT_THAT(results[1],
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint refused")));
+  EXPECT_THAT(results[2], IsOkAndHolds(ElementsAre(1, 2)));
+  for (const char* id : {"G-A", "G-C"}) {
+    const Visible v = Count(**storage, id);
+    EXPECT_EQ(v.coefficients, 1) << id;
+    EXPECT_EQ(v.alerts, id == std::string("G-A") ? 2 : 1) << id;
+    EXPECT_EQ(v.checkpoint_sequence, std::optional<int64_t>(3)) << id;
+  }
+  const Visible refused = Count(**storage, "G-B");
+  EXPECT_EQ(refused.frames, 4);
+  EXPECT_EQ(refused.coefficients, 0);
+  EXPECT_EQ(refused.alerts, 0);
+  EXPECT_EQ(refused.checkpoint_sequence, std::nullopt);
+  // A job refused before the transaction (no checkpoint function) is named alone too.
+  Step next = MakeStep("G-A", 1);
+  ASSERT_THAT((*storage)->ArchiveFrames(next.frames), IsOk());
+  Step broken = MakeStep("G-C", 1);
+  broken.effects.checkpoint = nullptr;
+  const std::vector<absl::StatusOr<std::vector<int64_t>>> again =
+      (*storage)->CommitFilterEffectsGroup({&broken.effects, &next.effects});
+  ASSERT_EQ(again.size(), 2u);
+  EXPECT_THAT(again[0], StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("checkpoint")));
+  EXPECT_THAT(again[1], IsOkAndHolds(ElementsAre(3)));
+  EXPECT_EQ(Count(**storage, "G-A").checkpoint_sequence, std::optional<int64_t>(7));
+  EXPECT_EQ(Count(**storage, "G-C").checkpoint_sequence, std::optional<int64_t>(3));
+}
+
 TEST_P(StorageTest, RejectsRecordsOfAnotherSpacecraft) {
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
