@@ -2,17 +2,27 @@
 // before the last archived frame from the archived gyro readings (ATTITUDE_SOURCE_RECORDED),
 // whether the filter has applied those frames yet or not; later ones from a copy of the session
 // with the planned attitude (PLANNED) or an inertial hold of its last estimate (INERTIAL_HOLD).
-// The response and the AEM say which.
+// The response and the AEM say which, in words (proto/attitude_source_words.h).
+//
+// The 1-sigma steps down at the switch, and that is the physics, not a lost covariance: the
+// recorded samples come from a fresh session that withholds the star tracker after its fix, so
+// their 1-sigma is that of the gyros alone since the fix; the plan or the hold starts from the
+// filter's last estimate, which used the star tracker at every frame up to it, and propagates
+// that estimate's covariance (its 1-sigma at the first later sample is never below the
+// estimate's). Starting the hold from the recorded run's covariance would state an uncertainty
+// of another, worse estimate than the one held. The assumption names both 1-sigmas.
 #include <algorithm>
 #include <cmath>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/time/clock.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
+#include "proto/attitude_source_words.h"
 #include "proto/convert.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
@@ -347,37 +357,58 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
                                          : planned.has_value()
                                              ? esg::v1::ATTITUDE_SOURCE_PLANNED
                                              : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
+  // The sources in words (proto/attitude_source_words.h); the enum names stay in the proto
+  // fields.
+  const auto words = [](esg::v1::AttitudeSource s) {
+    return std::string(proto_convert::AttitudeSourceWords(s));
+  };
+  const auto sigma_text = [](const AttitudeEstimate& a) {
+    const Eigen::Vector3d s = SigmaArcsec(a);
+    return absl::StrFormat("%.2f, %.2f, %.2f arcsec about body x, y, z", s.x(), s.y(), s.z());
+  };
   std::string recorded_text;
   if (!recorded_times.empty()) {
     recorded_text = absl::StrCat(
-        "ATTITUDE_SOURCE_RECORDED until ", FormatUtc(recorded_until),
+        words(esg::v1::ATTITUDE_SOURCE_RECORDED), " until ", FormatUtc(recorded_until),
         " (the last archived frame): archived gyro readings propagated with the calibrated drift "
         "model (",
         setup->model_name, ") from the star-tracker fix at ", FormatUtc(fix_time),
-        "; the star tracker is not used after it",
+        "; the star tracker is not used after it, so the 1-sigma is that of the gyros alone since "
+        "the fix",
         recorded_until > last
             ? absl::StrCat("; includes the archived frames after ", FormatUtc(last),
                            " that the filter has not applied yet")
             : std::string());
   }
-  // The plan or the hold starts from the filter's last estimate, which may be older than the
-  // last archived frame.
-  const std::string estimate_text =
-      recorded_until > last ? absl::StrCat(" (the filter's, at ", FormatUtc(last), ")") : "";
+  // The plan or the hold starts from the filter's last estimate (which may be older than the
+  // last archived frame) and propagates its covariance: the envelope starts from that estimate's
+  // 1-sigma, not from the recorded samples' (see the head of this file).
+  std::string start_text =
+      absl::StrCat("the 1-sigma is propagated from the filter's last estimate at ", FormatUtc(last),
+                   " (", sigma_text(current), ", the star tracker used up to it)");
+  if (!recorded_times.empty()) {
+    const Predicted& last_recorded = predicted[recorded_times.size() - 1];
+    absl::StrAppend(&start_text, ", not from the recorded samples' (", sigma_text(last_recorded.attitude),
+                    " at ", FormatUtc(last_recorded.time),
+                    "): the envelope steps there because the estimate changes, from the gyros "
+                    "alone to the filter's");
+  }
   std::string future_text;
   if (!future_times.empty()) {
     future_text =
         planned.has_value()
-            ? absl::StrCat("ATTITUDE_SOURCE_PLANNED after ", FormatUtc(recorded_until),
-                           ": the planned attitude given (", request.planned_attitude_size(),
-                           " samples from ", FormatUtc(planned->start()),
-                           ", slerp between them, held beyond its ends); the envelope is the "
-                           "1-sigma of the gyros' spin axes propagated from the last estimate",
-                           estimate_text)
-            : absl::StrCat("ATTITUDE_SOURCE_INERTIAL_HOLD after ", FormatUtc(recorded_until),
-                           ": no planned attitude given, the attitude of the last estimate",
-                           estimate_text,
-                           " held inertially fixed; wrong by the body's motion if it moves");
+            ? absl::StrCat(words(esg::v1::ATTITUDE_SOURCE_PLANNED), " after ",
+                           FormatUtc(recorded_until), ": the planned attitude given (",
+                           request.planned_attitude_size(), " samples from ",
+                           FormatUtc(planned->start()),
+                           ", slerp between them, held beyond its ends); ", start_text,
+                           " along the gyro readings the plan implies")
+            : absl::StrCat(words(esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD), " after ",
+                           FormatUtc(recorded_until),
+                           ": no planned attitude given, the attitude of the filter's last "
+                           "estimate held inertially fixed; wrong by the body's motion if it "
+                           "moves; ",
+                           start_text);
   }
   esg::v1::PredictResponse response;
   response.set_attitude_source(source);

@@ -1,10 +1,10 @@
 // `esg predict --spacecraft ID [--from T] [--to T] [--step S] [--planned FILE] [--aem FILE]
 // [--format table|json|csv]`: the attitude esgd predicts (PredictAttitude, docs/service.md
 // "PredictAttitude"): per epoch q_in_b (scalar first), its 1-sigma about the body axes x, y, z
-// [arcsec], where it comes from (RECORDED: the archived gyro readings, up to the last archived
-// frame, applied by the filter or not; after it PLANNED: the --planned attitude, or
-// INERTIAL_HOLD: the last estimate held inertially fixed) and the predicted spin axes h_in of the
-// gyros used. The table and stderr state the assumption; --aem also writes the returned CCSDS AEM
+// [arcsec], where it comes from ("recorded": the archived gyro readings, up to the last archived
+// frame, applied by the filter or not; after it "planned": the --planned attitude, or "inertial
+// hold": the last estimate held inertially fixed; proto/attitude_source_words.h, the proto names
+// in --format json and csv) and the predicted spin axes h_in of the gyros used. The table and stderr state the assumption; --aem also writes the returned CCSDS AEM
 // (KVN, docs/formats.md) to FILE.
 //
 // --planned FILE: a CCSDS AEM (KVN, version 1.0 or 2.0, quaternions; every segment's data lines,
@@ -31,13 +31,13 @@
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_replace.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/clock.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
 #include "client/output_format.h"
 #include "estimator/rotation.h"
+#include "proto/attitude_source_words.h"
 #include "proto/convert.h"
 #include "storage/aem.h"
 
@@ -130,14 +130,6 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
   return out;
 }
 
-// The source in words, for the table: "recorded", "planned", "inertial hold".
-std::string SourceWords(esg::v1::AttitudeSource source) {
-  std::string name = esg::v1::AttitudeSource_Name(source);
-  const std::string prefix = "ATTITUDE_SOURCE_";
-  if (absl::StartsWith(name, prefix)) name = name.substr(prefix.size());
-  return absl::StrReplaceAll(absl::AsciiStrToLower(name), {{"_", " "}});
-}
-
 int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   const std::optional<absl::Time> from = o.from.empty() ? absl::Now() : ParseUtc(o.from);
   if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
@@ -219,7 +211,7 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
     for (int i = 0; i < 3; ++i) {
       std::printf(" %9.2f", i < s.sigma_arcsec_size() ? s.sigma_arcsec(i) : 0.0);
     }
-    std::printf("  %-13s", SourceWords(source_of(n)).c_str());
+    std::printf("  %-13s", std::string(proto_convert::AttitudeSourceWords(source_of(n))).c_str());
     for (const esg::v1::GyroAxis& axis : s.spin_axes()) {
       std::printf(" g%d[", axis.gyro_id());
       for (int i = 0; i < axis.h_in_size(); ++i) std::printf("%s%+.6f", i ? " " : "", axis.h_in(i));
@@ -229,15 +221,8 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   }
   std::printf("%d samples", response->samples_size());
   if (!o.aem_path.empty()) std::printf("; AEM written to %s", o.aem_path.c_str());
-  // The service names the sources by their enum values (as the AEM's COMMENTs do); the table in
-  // words.
-  std::string assumption = response->assumption();
-  for (esg::v1::AttitudeSource source :
-       {esg::v1::ATTITUDE_SOURCE_RECORDED, esg::v1::ATTITUDE_SOURCE_PLANNED,
-        esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD}) {
-    assumption = absl::StrReplaceAll(
-        assumption, {{esg::v1::AttitudeSource_Name(source), SourceWords(source)}});
-  }
+  // The service states the assumption with the sources in words, as the table names them.
+  const std::string& assumption = response->assumption();
   std::printf("\nassumption: %s\n", assumption.c_str());
   return kExitOk;
 }

@@ -5,6 +5,8 @@
 // hold; a broken plan, or an AEM plan of another spacecraft or in a spacecraft clock's time, is a
 // bad argument naming --planned; `esg history` reads 30 days of coefficient history (30 times
 // gRPC's default 4 MB message limit) page by page, every record once and in order.
+#include <algorithm>
+#include <cstdio>
 #include <map>
 #include <optional>
 #include <string>
@@ -172,6 +174,97 @@ TEST(PredictCli, PlannedAttitudeFromACsvOrAnAemIsFollowedAndStated) {
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--planned"));
   EXPECT_THAT(r.err, HasSubstr("line 2"));
+}
+
+// At the last archived frame the source switches from the recorded readings (a fresh session
+// from a star-tracker fix, the star tracker withheld: the gyros alone) to the inertial hold of
+// the filter's last estimate (the star tracker used at every frame up to it). The hold's 1-sigma
+// starts from that estimate's covariance, propagated: never below the estimate's 1-sigma at the
+// last frame, and not the recorded run's (another, worse estimate). The step between the two is
+// stated in the output with both 1-sigmas (docs/service.md, "PredictAttitude").
+TEST(PredictCli, TheHoldStartsFromTheFiltersCovarianceAndTheStepAtTheSwitchIsStated) {
+  TempDir dir;
+  Daemon daemon(dir.File("esg.db"), dir.File("esgd.log"));
+  auto stub = daemon.Stub();
+  Configure(*stub, "CLI-STEP");
+  IngestRotating(*stub, "CLI-STEP", 3.0, 3.0);
+  const absl::Time last = kStart + absl::Hours(3);
+
+  RunResult r = Esg(dir, daemon, "status --spacecraft CLI-STEP -o json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json status = Json::parse(r.out);
+  ASSERT_EQ(status["latestAttitude"]["time"], Utc(last));
+  const Json filter_sigma = status["latestAttitude"]["sigmaArcsec"];
+  ASSERT_EQ(filter_sigma.size(), 3u);
+
+  const std::string interval = absl::StrCat("predict --spacecraft CLI-STEP --from ",
+                                            Utc(last - absl::Minutes(30)), " --to ",
+                                            Utc(last + absl::Minutes(10)), " --step 60");
+  r = Esg(dir, daemon, interval + " -o json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json doc = Json::parse(r.out);
+  EXPECT_EQ(doc["attitudeSource"], "ATTITUDE_SOURCE_INERTIAL_HOLD");  // JSON keeps proto names
+  ASSERT_EQ(doc["recordedSamples"], 31);
+  ASSERT_EQ(doc["samples"].size(), 41u);
+  const Json& recorded_last = doc["samples"][30];
+  const Json& hold_first = doc["samples"][31];
+  ASSERT_EQ(recorded_last["time"], Utc(last));
+  for (int axis = 0; axis < 3; ++axis) {
+    const double filter = filter_sigma[axis].get<double>();
+    const double hold = hold_first["sigmaArcsec"][axis].get<double>();
+    std::printf("axis %d: recorded %.2f arcsec at the last frame, filter %.2f, hold %.2f 1 min "
+                "later\n",
+                axis, recorded_last["sigmaArcsec"][axis].get<double>(), filter, hold);
+    // Propagated from the filter's covariance, never below it (after 3 h the coefficients are
+    // still calibrating: 0.1 deg/h of drift uncertainty is 6 arcsec a minute).
+    EXPECT_GE(hold, filter) << "axis " << axis;
+  }
+  // Continuous with the estimate it starts from: 1 s after the last frame the hold's 1-sigma is
+  // the filter's, not a fresh small one and not the recorded run's.
+  r = Esg(dir, daemon,
+          absl::StrCat("predict --spacecraft CLI-STEP --from ", Utc(last + absl::Seconds(1)),
+                       " --to ", Utc(last + absl::Seconds(1)), " --step 1 -o json"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const Json one_second = Json::parse(r.out)["samples"][0]["sigmaArcsec"];
+  ASSERT_EQ(one_second.size(), 3u);
+  for (int axis = 0; axis < 3; ++axis) {
+    const double filter = filter_sigma[axis].get<double>();
+    std::printf("axis %d: hold %.3f arcsec 1 s after the last frame, filter %.3f at it\n", axis,
+                one_second[axis].get<double>(), filter);
+    EXPECT_GE(one_second[axis].get<double>(), filter) << "axis " << axis;
+    EXPECT_LT(one_second[axis].get<double>(), 1.01 * filter + 0.2) << "axis " << axis;
+  }
+  // The recorded run withholds the star tracker: its 1-sigma at the last frame is the larger
+  // one (the gyros alone for 30 min), so the envelope steps down at the switch.
+  double recorded_max = 0.0, hold_max = 0.0;
+  for (int axis = 0; axis < 3; ++axis) {
+    recorded_max = std::max(recorded_max, recorded_last["sigmaArcsec"][axis].get<double>());
+    hold_max = std::max(hold_max, hold_first["sigmaArcsec"][axis].get<double>());
+  }
+  EXPECT_GT(recorded_max, hold_max);
+
+  // The table names the sources in words and states the step with both 1-sigmas.
+  r = Esg(dir, daemon, interval);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("  recorded "));
+  EXPECT_THAT(r.out, HasSubstr("  inertial hold "));
+  EXPECT_THAT(r.out, ::testing::Not(HasSubstr("ATTITUDE_SOURCE_")));
+  EXPECT_THAT(r.out, ::testing::Not(HasSubstr("INERTIAL_HOLD")));
+  EXPECT_THAT(r.out, HasSubstr(absl::StrFormat(
+                         "the 1-sigma is propagated from the filter's last estimate at %s "
+                         "(%.2f, %.2f, %.2f arcsec about body x, y, z, the star tracker used up "
+                         "to it), not from the recorded samples' (",
+                         Utc(last), filter_sigma[0].get<double>(), filter_sigma[1].get<double>(),
+                         filter_sigma[2].get<double>())));
+  EXPECT_THAT(r.out, HasSubstr("the envelope steps there because the estimate changes"));
+
+  // The AEM's COMMENTs say the same in words.
+  r = Esg(dir, daemon, interval + " --aem " + dir.File("p.aem"));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string aem = esg::testing::ReadFile(dir.File("p.aem"));
+  EXPECT_THAT(aem, HasSubstr("COMMENT recorded until "));
+  EXPECT_THAT(aem, HasSubstr("COMMENT inertial hold after "));
+  EXPECT_THAT(aem, ::testing::Not(HasSubstr("ATTITUDE_SOURCE_")));
 }
 
 // An AEM plan of another spacecraft, or in a spacecraft clock's time, is a bad argument naming the

@@ -2,9 +2,10 @@
 // "PredictAttitude"): an interval covered by archived telemetry uses the recorded gyro readings
 // (checked against the simulated truth of a spacecraft rotating at 0.1 deg/s, which an inertial
 // hold misses by tens of degrees); after the last applied frame the planned attitude or an
-// inertial hold, stated in attitude_source, assumption and the AEM's COMMENTs; the AEM carries
-// MESSAGE_ID, INTERPOLATION_METHOD/DEGREE and every sample's 1-sigma; sessions whose output is not
-// available (no data, FAULTED) are refused with FAILED_PRECONDITION naming the state.
+// inertial hold, stated in attitude_source (the enum) and in words in assumption and the AEM's
+// COMMENTs; the AEM carries MESSAGE_ID, INTERPOLATION_METHOD/DEGREE and every sample's 1-sigma;
+// sessions whose output is not available (no data, FAULTED) are refused with FAILED_PRECONDITION
+// naming the state.
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -113,7 +114,7 @@ TEST(Prediction, ArchivedIntervalUsesTheRecordedReadingsOfARotatingSpacecraft) {
   ASSERT_EQ(response.samples_size(), 31);
   EXPECT_EQ(response.recorded_samples(), 31);
   EXPECT_EQ(response.attitude_source(), esg::v1::ATTITUDE_SOURCE_RECORDED);
-  EXPECT_THAT(response.assumption(), HasSubstr("ATTITUDE_SOURCE_RECORDED"));
+  EXPECT_THAT(response.assumption(), HasSubstr("recorded until "));
   double worst_error_arcsec = 0.0;
   double worst_hold_error_arcsec = 0.0;
   int outside_3_sigma = 0;
@@ -165,7 +166,7 @@ TEST(Prediction, PlannedAttitudeAfterTheArchiveIsUsedAndStatedInTheAem) {
   ASSERT_EQ(response.samples_size(), 12);
   EXPECT_EQ(response.recorded_samples(), 0);
   EXPECT_EQ(response.attitude_source(), esg::v1::ATTITUDE_SOURCE_PLANNED);
-  EXPECT_THAT(response.assumption(), HasSubstr("ATTITUDE_SOURCE_PLANNED"));
+  EXPECT_THAT(response.assumption(), HasSubstr("planned after "));
   EXPECT_EQ(
       SampleTime(response.samples(0)) > *proto_convert::TimeFromProto(response.last_applied_time()),
       true);
@@ -182,7 +183,7 @@ TEST(Prediction, PlannedAttitudeAfterTheArchiveIsUsedAndStatedInTheAem) {
   const storage::AemSegment& segment = aem->segments[0];
   EXPECT_EQ(segment.metadata.at("INTERPOLATION_METHOD"), "LINEAR");
   EXPECT_EQ(segment.metadata.at("INTERPOLATION_DEGREE"), "1");
-  EXPECT_THAT(::testing::PrintToString(segment.comments), HasSubstr("ATTITUDE_SOURCE_PLANNED"));
+  EXPECT_THAT(::testing::PrintToString(segment.comments), HasSubstr("planned after "));
   ASSERT_EQ(segment.samples.size(), 12u);
   for (size_t i = 0; i < segment.samples.size(); ++i) {
     ASSERT_TRUE(segment.samples[i].sigma_arcsec.has_value()) << i;
@@ -206,8 +207,11 @@ TEST(Prediction, WithoutAPlanTheHoldIsStatedAndAMixedIntervalHasTwoSegments) {
   ASSERT_EQ(response.samples_size(), 5);
   EXPECT_EQ(response.recorded_samples(), 3);  // -10, -5, 0 min
   EXPECT_EQ(response.attitude_source(), esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD);
-  EXPECT_THAT(response.assumption(), HasSubstr("ATTITUDE_SOURCE_RECORDED"));
-  EXPECT_THAT(response.assumption(), HasSubstr("ATTITUDE_SOURCE_INERTIAL_HOLD"));
+  // The assumption names the sources in words, never by their enum names.
+  EXPECT_THAT(response.assumption(), HasSubstr("recorded until "));
+  EXPECT_THAT(response.assumption(), HasSubstr("inertial hold after "));
+  EXPECT_THAT(response.assumption(), ::testing::Not(HasSubstr("ATTITUDE_SOURCE_")));
+  EXPECT_THAT(response.assumption(), ::testing::Not(HasSubstr("INERTIAL_HOLD")));
   // The held samples are one constant attitude, the latest estimate.
   const esg::v1::SessionInfo info = Session(*server.Stub(), "PRED-HOLD");
   const Eigen::Quaterniond latest = SampleQuaternion(info.latest_attitude());
@@ -225,10 +229,11 @@ TEST(Prediction, WithoutAPlanTheHoldIsStatedAndAMixedIntervalHasTwoSegments) {
   ASSERT_EQ(aem->segments.size(), 2u);
   EXPECT_EQ(aem->segments[0].samples.size(), 3u);
   EXPECT_EQ(aem->segments[1].samples.size(), 2u);
-  EXPECT_THAT(::testing::PrintToString(aem->segments[0].comments),
-              HasSubstr("ATTITUDE_SOURCE_RECORDED"));
+  EXPECT_THAT(::testing::PrintToString(aem->segments[0].comments), HasSubstr("recorded until "));
   EXPECT_THAT(::testing::PrintToString(aem->segments[1].comments),
-              HasSubstr("ATTITUDE_SOURCE_INERTIAL_HOLD"));
+              HasSubstr("inertial hold after "));
+  EXPECT_THAT(response.aem_text(), ::testing::Not(HasSubstr("ATTITUDE_SOURCE_")));
+  EXPECT_THAT(response.aem_text(), ::testing::Not(HasSubstr("INERTIAL_HOLD")));
 }
 
 // Holds every filter job of the server at its start while closed (CoreOptions::before_apply_job):
@@ -291,7 +296,7 @@ TEST(Prediction, ArchivedFramesTheFilterHasNotAppliedYetAreRecordedReadings) {
   EXPECT_EQ(*proto_convert::TimeFromProto(response.last_applied_time()), last_applied);
   EXPECT_EQ(*proto_convert::TimeFromProto(response.last_archived_time()), last_archived);
   EXPECT_THAT(response.assumption(), HasSubstr("that the filter has not applied yet"));
-  EXPECT_THAT(response.assumption(), HasSubstr(absl::StrCat("ATTITUDE_SOURCE_INERTIAL_HOLD after ",
+  EXPECT_THAT(response.assumption(), HasSubstr(absl::StrCat("inertial hold after ",
                                                             server::FormatUtc(last_archived))));
   // The recorded readings follow the rotation: within their 1-sigma envelope (3 sigma) and to
   // arcminutes after 40 min without the star tracker on a model calibrated for 2 h (measured
