@@ -14,6 +14,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_replace.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::client {
 
@@ -65,7 +66,7 @@ Context MakeContext(const disc::DiagnosisReport& r) {
   for (const auto& p : r.residuals_before) end = std::max(end, p.hours);
   for (const auto& p : r.held_out_before) end = std::max(end, p.hours);
   c.length_hours = end > 0 ? end : 1.0;
-  c.start = absl::StrCat("(start ", disc::UtcText(r.first_frame_time), ")");
+  c.start = absl::StrCat("(start ", estimator::FormatUtc(r.first_frame_time), ")");
   return c;
 }
 

@@ -118,10 +118,6 @@ void AddFormatOption(CLI::App* cmd, OutputFormat* format, const std::string& jso
       ->excludes(option);
 }
 
-std::string FormatUtc(absl::Time time) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", time, absl::UTCTimeZone());
-}
-
 std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present) {
   if (!present) return "-";
   if (timestamp.seconds() < google::protobuf::util::TimeUtil::kTimestampMinSeconds ||

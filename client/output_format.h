@@ -22,6 +22,7 @@
 #include "CLI/CLI.hpp"
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
+#include "estimator/utc_time.h"
 #include "google/protobuf/descriptor.h"
 #include "google/protobuf/message.h"
 #include "google/protobuf/timestamp.pb.h"
@@ -39,9 +40,9 @@ enum class OutputFormat { kTable, kJson, kCsv };
 // --follow: one JSON object per line").
 void AddFormatOption(CLI::App* cmd, OutputFormat* format, const std::string& json_note = "");
 
-// RFC 3339 UTC with `Z` and millisecond precision (truncated): "2019-03-01T00:00:00.000Z". The
-// one time format of the CLI's output.
-std::string FormatUtc(absl::Time time);
+// RFC 3339 UTC with `Z` and millisecond precision (truncated): "2019-03-01T00:00:00.000Z", the
+// one time format of every output (estimator/utc_time.h).
+using estimator::FormatUtc;
 // The same for a wire timestamp; "-" when `present` is false (the field is absent), "(invalid
 // time)" when it is out of the Timestamp range.
 std::string FormatUtc(const google::protobuf::Timestamp& timestamp, bool present = true);

@@ -9,6 +9,7 @@
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator {
 
@@ -35,7 +36,7 @@ absl::Status CheckEpoch(absl::Time epoch, std::string_view prefix) {
   if (epoch >= earliest && epoch < latest) return absl::OkStatus();
   return absl::InvalidArgumentError(
       absl::StrCat(std::string(prefix),
-                   ".epoch: ", absl::FormatTime("%E4Y-%m-%dT%H:%M:%SZ", epoch, absl::UTCTimeZone()),
+                   ".epoch: ", FormatUtc(epoch),
                    " is outside [1970-01-01, 2200-01-01), the window frame times may have"));
 }
 

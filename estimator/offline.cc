@@ -7,6 +7,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/line_fit.h"
 #include "estimator/rotation.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator {
 
@@ -26,8 +27,7 @@ absl::StatusOr<CalibrationResult> RunCalibration(const SpacecraftConfig& config,
     if (!report.ok()) {
       return absl::Status(report.status().code(),
                           absl::StrFormat("frame %d (%s): %s", i,
-                                          absl::FormatTime(absl::RFC3339_full, frames[i].time,
-                                                           absl::UTCTimeZone()),
+                                          FormatUtc(frames[i].time),
                                           report.status().message()));
     }
     ++result.frames;
@@ -63,9 +63,9 @@ absl::StatusOr<GapResult> RunGap(const SpacecraftConfig& config, const SessionOp
   if (split == frames.begin() || split == frames.end()) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "gap-start: %s leaves no frame before or after it (recording %s .. %s)",
-        absl::FormatTime(absl::RFC3339_full, gap_start, absl::UTCTimeZone()),
-        frames.empty() ? "empty" : absl::FormatTime(absl::RFC3339_full, frames.front().time, absl::UTCTimeZone()),
-        frames.empty() ? "empty" : absl::FormatTime(absl::RFC3339_full, frames.back().time, absl::UTCTimeZone())));
+        FormatUtc(gap_start),
+        frames.empty() ? "empty" : FormatUtc(frames.front().time),
+        frames.empty() ? "empty" : FormatUtc(frames.back().time)));
   }
   const std::vector<TelemetryFrame> calibration(frames.begin(), split);
   const double n_total = static_cast<double>(frames.size());

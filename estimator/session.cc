@@ -23,6 +23,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/session_internal.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator {
 
@@ -317,9 +318,9 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
   const TelemetryFrame frame = CorrectedForReadout(raw_frame);
   if (initialized_ || last_time_ != absl::InfinitePast()) {
     if (frame.time <= last_time_) {
-      return absl::OutOfRangeError(absl::StrCat("frame time ", absl::FormatTime(frame.time),
+      return absl::OutOfRangeError(absl::StrCat("frame time ", FormatUtc(frame.time),
                                                 " is not after the previous frame ",
-                                                absl::FormatTime(last_time_)));
+                                                FormatUtc(last_time_)));
     }
   }
   StepReport report;

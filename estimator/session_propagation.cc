@@ -20,6 +20,7 @@
 #include "estimator/spin_axis.h"
 #include "estimator/triad.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator {
 
@@ -120,7 +121,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
     return absl::OutOfRangeError(absl::StrFormat(
         "frame time %s: propagating %g s at filter.integrationRateHz %g needs %g steps, more "
         "than %d",
-        absl::FormatTime(frame.time), span, config_.filter.integration_rate_hz, substeps_wanted,
+        FormatUtc(frame.time), span, config_.filter.integration_rate_hz, substeps_wanted,
         std::numeric_limits<int>::max()));
   }
   const int substeps = std::max(1, static_cast<int>(substeps_wanted));
@@ -280,9 +281,9 @@ absl::StatusOr<std::vector<PredictedSample>> EstimationSession::Predict(
   out.reserve(times.size());
   for (absl::Time t : times) {
     if (t <= s.last_time_) {
-      return absl::OutOfRangeError(absl::StrCat("prediction time ", absl::FormatTime(t),
+      return absl::OutOfRangeError(absl::StrCat("prediction time ", FormatUtc(t),
                                                 " is not after the last frame ",
-                                                absl::FormatTime(s.last_time_)));
+                                                FormatUtc(s.last_time_)));
     }
     const Quaterniond q_in_b =
         planned != nullptr ? planned->Attitude(Seconds(t - planned_start)) : q_hold;

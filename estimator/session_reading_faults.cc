@@ -15,6 +15,7 @@
 #include "estimator/session.h"
 #include "estimator/session_internal.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator {
 
@@ -65,7 +66,7 @@ const char* ExclusionReasonName(ExclusionReason r) {
 }
 
 std::string Exclusion::Describe() const {
-  const std::string at = absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", time, absl::UTCTimeZone()) +
+  const std::string at = FormatUtc(time) +
                          (source == 0   ? " (its star-tracker rebuild)"
                           : source == 1 ? " (its rebuild from the two other gyros)"
                                         : "");

@@ -22,6 +22,7 @@
 #include "estimator/rotation.h"
 #include "estimator/session_internal.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator {
 
@@ -501,7 +502,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
       const std::string named = absl::StrFormat(
           "named at %s by its own star-tracker differences summed over %d steps (the other gyros' "
           "passing), its track measured over the last %d steps",
-          absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", drift_change_named_, absl::UTCTimeZone()),
+          FormatUtc(drift_change_named_),
           change_detector_.options().window_steps, reading_monitor_.options().window_steps);
       if (dc.has_value() && dc->beyond) {
         Exclusion why;
@@ -532,8 +533,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
                 "with the model's uncertainty: not a fault): %s; its drift coefficients are "
                 "re-opened and recalibrated, nothing excluded",
                 ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
-                absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", dc.has_value() ? dc->onset : frame.time,
-                                 absl::UTCTimeZone()),
+                FormatUtc(dc.has_value() ? dc->onset : frame.time),
                 dc.has_value() && dc->below ? "below" : "not shown beyond",
                 RadPerSecToDegPerHour(dc.has_value() ? dc->bound
                                                      : config_.filter.drift_change_limit),

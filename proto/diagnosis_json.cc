@@ -4,6 +4,7 @@
 
 #include "absl/time/time.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 #include "proto/convert.h"
 
 namespace esg::proto_convert {
@@ -18,11 +19,8 @@ using estimator::discovery::FitSummary;
 using estimator::discovery::GapSummary;
 using estimator::discovery::Mismatch;
 using estimator::discovery::Parameter;
+using estimator::FormatUtc;
 using json = nlohmann::ordered_json;
-
-std::string Utc(absl::Time t) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
-}
 
 // JSON has no infinities or NaN: they become null.
 json Number(double x) { return std::isfinite(x) ? json(x) : json(nullptr); }
@@ -58,10 +56,10 @@ json EvidenceJson(const Evidence& e) {
 json TimeBehaviourJson(const estimator::discovery::TimeBehaviour& t) {
   json j{{"kind", t.kind}};
   if (t.kind == "step") {
-    j["onset"] = Utc(t.onset);
+    j["onset"] = FormatUtc(t.onset);
     j["onsetHours"] = Number(t.onset_hours);
-    j["onsetLower"] = Utc(t.onset_lower);
-    j["onsetUpper"] = Utc(t.onset_upper);
+    j["onsetLower"] = FormatUtc(t.onset_lower);
+    j["onsetUpper"] = FormatUtc(t.onset_upper);
     j["onsetLowerHours"] = Number(t.onset_lower_hours);
     j["onsetUpperHours"] = Number(t.onset_upper_hours);
     j["onsetsSearched"] = t.onsets_searched;
@@ -123,8 +121,8 @@ json MismatchJson(const Mismatch& m, absl::Time t0) {
   json j{{"found", m.found}};
   if (m.gyro > 0) j["gyro"] = m.gyro;
   if (m.span >= 0 || m.found) {
-    j["start"] = Utc(m.start);
-    j["end"] = Utc(m.end);
+    j["start"] = FormatUtc(m.start);
+    j["end"] = FormatUtc(m.end);
     j["startHours"] = absl::ToDoubleHours(m.start - t0);
     j["endHours"] = absl::ToDoubleHours(m.end - t0);
     j["regime"] = m.regime;
@@ -146,8 +144,8 @@ json GapJson(const GapSummary& g, absl::Time t0) {
   for (const auto& [id, rate] : g.gyro_drift_rate_deg_h)
     rates.push_back(json{{"gyro", id}, {"driftRateDegH", Number(rate)}});
   return json{{"regime", g.regime},
-              {"start", Utc(g.start)},
-              {"end", Utc(g.end)},
+              {"start", FormatUtc(g.start)},
+              {"end", FormatUtc(g.end)},
               {"startHours", absl::ToDoubleHours(g.start - t0)},
               {"endHours", absl::ToDoubleHours(g.end - t0)},
               {"driftRateDegH", Number(g.drift_rate_deg_h)},
@@ -197,8 +195,8 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
   json regimes = json::array();
   for (const auto& s : r.regimes) {
     json j{{"regime", estimator::discovery::RegimeName(s.regime)},
-           {"start", Utc(s.start)},
-           {"end", Utc(s.end)},
+           {"start", FormatUtc(s.start)},
+           {"end", FormatUtc(s.end)},
            {"startHours", absl::ToDoubleHours(s.start - t0)},
            {"endHours", absl::ToDoubleHours(s.end - t0)},
            {"rateDegS", Number(estimator::RadToDeg(s.mean_rate))}};
@@ -214,7 +212,7 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
            {"regimes", regimes},
            {"candidates", candidates},
            {"gyros", r.gyros},
-           {"firstFrame", Utc(t0)},
+           {"firstFrame", FormatUtc(t0)},
            {"frames", r.frames},
            {"filterRuns", r.filter_runs}};
   if (include_series) {

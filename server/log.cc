@@ -8,6 +8,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/time/clock.h"
 #include "absl/time/time.h"
+#include "estimator/utc_time.h"
 #include "nlohmann/json.hpp"
 
 namespace esg::server {
@@ -46,8 +47,7 @@ std::string FormatLogLine(LogFormat format, absl::string_view level, absl::strin
                           absl::string_view full_message,
                           std::initializer_list<LogField> fields) {
   const std::string message = BoundedText(full_message, kMaxLogMessageBytes);
-  // One UTC formatter for every output: RFC 3339, Z, milliseconds.
-  const std::string ts = absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", absl::Now(), absl::UTCTimeZone());
+  const std::string ts = estimator::FormatUtc(absl::Now());
   if (format == LogFormat::kText) {
     return absl::StrCat(ts, " ", level, " esgd: ", EscapeControl(message), "\n");
   }

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "estimator/utc_time.h"
 
 namespace esg::server {
 
@@ -23,8 +24,8 @@ absl::StatusOr<SampledProfile> SampledProfile::Create(std::vector<PlannedSample>
     }
     if (i > 0 && samples[i].time <= samples[i - 1].time) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "planned_attitude[", i, "].time: ", absl::FormatTime(samples[i].time),
-          " is not after the previous sample ", absl::FormatTime(samples[i - 1].time)));
+          "planned_attitude[", i, "].time: ", estimator::FormatUtc(samples[i].time),
+          " is not after the previous sample ", estimator::FormatUtc(samples[i - 1].time)));
     }
     p.t_.push_back(absl::ToDoubleSeconds(samples[i].time - p.start_));
     p.q_in_b_.push_back(q.normalized());
@@ -42,7 +43,7 @@ Eigen::Quaterniond SampledProfile::Attitude(double t) const {
 
 std::string SampledProfile::Describe() const {
   return absl::StrCat("planned attitude, ", t_.size(), " samples from ",
-                      absl::FormatTime(absl::RFC3339_full, start_, absl::UTCTimeZone()));
+                      estimator::FormatUtc(start_));
 }
 
 }  // namespace esg::server

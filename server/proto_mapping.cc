@@ -326,8 +326,4 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
   return s;
 }
 
-std::string FormatUtc(absl::Time t) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ", t, absl::UTCTimeZone());
-}
-
 }  // namespace esg::server

@@ -13,6 +13,7 @@
 #include "absl/time/time.h"
 #include "esg/v1/estimation_service.pb.h"
 #include "estimator/session.h"
+#include "estimator/utc_time.h"
 #include "server/session_summary.h"
 #include "storage/records.h"
 
@@ -54,8 +55,8 @@ esg::v1::DiagnosisResult DiagnosisToProto(const storage::DiagnosisRecord& record
 // (grpc_status.h WithRetryDelay: another server holds the lease), retry_after_ms, at least 1.
 esg::v1::Rejection RejectionFromStatus(const absl::Status& status);
 
-// RFC 3339 UTC with the fraction of the second, for messages.
-std::string FormatUtc(absl::Time time);
+// The one text form of an instant (estimator/utc_time.h), for messages.
+using estimator::FormatUtc;
 
 }  // namespace esg::server
 

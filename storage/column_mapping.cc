@@ -19,6 +19,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/rotation.h"
+#include "estimator/utc_time.h"
 #include "nlohmann/json.hpp"
 #include "proto/strict_json.h"
 #include "storage/csv_lines.h"
@@ -33,7 +34,6 @@ using json = nlohmann::json;
 
 // Vectors closer to unit norm than this are kept bit for bit, as in the recording CSV.
 constexpr double kRenormaliseAbove = 1e-12;
-constexpr char kTimeFormat[] = "%Y-%m-%d%ET%H:%M:%E*SZ";
 constexpr int64_t kSecondsPerWeek = 604800;
 constexpr double kPi = 3.14159265358979323846;
 
@@ -868,8 +868,7 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
         problems.Add(
             line_no, t0.Where(),
             absl::StrFormat("%s is not after %s of line %d (times must increase)",
-                            absl::FormatTime(kTimeFormat, *time, absl::UTCTimeZone()),
-                            absl::FormatTime(kTimeFormat, *previous_time, absl::UTCTimeZone()),
+                            estimator::FormatUtc(*time), estimator::FormatUtc(*previous_time),
                             previous_time_line));
       } else if (previous_time.has_value() && *time - *previous_time > options.max_row_gap) {
         problems.Add(line_no, t0.Where(),

@@ -14,6 +14,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_format.h"
 #include "absl/time/time.h"
+#include "estimator/utc_time.h"
 #include "storage/recording_csv.h"
 
 namespace esg::storage {
@@ -21,7 +22,6 @@ namespace esg::storage {
 // The problem of a row `time` more than `limit` after the previous row (RecordingReadOptions).
 inline std::string RowGapProblem(absl::Time time, absl::Time previous_time, int previous_line,
                                  absl::Duration limit) {
-  constexpr char kFormat[] = "%Y-%m-%dT%H:%M:%E*SZ";
   absl::Duration rest;
   const int64_t days = absl::IDivDuration(limit, absl::Hours(24), &rest);
   const std::string limit_text = days < 1 || rest != absl::ZeroDuration()
@@ -31,8 +31,7 @@ inline std::string RowGapProblem(absl::Time time, absl::Time previous_time, int 
       "%s is more than %s after the previous row (line %d, %s): the filter would run across the "
       "whole gap, and esgd refuses such a frame too; split the recording there or correct the "
       "time",
-      absl::FormatTime(kFormat, time, absl::UTCTimeZone()), limit_text, previous_line,
-      absl::FormatTime(kFormat, previous_time, absl::UTCTimeZone()));
+      estimator::FormatUtc(time), limit_text, previous_line, estimator::FormatUtc(previous_time));
 }
 
 class CsvProblems {

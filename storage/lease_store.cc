@@ -10,18 +10,17 @@
 #include "absl/strings/str_cat.h"
 #include "absl/time/time.h"
 #include "estimator/status_macros.h"
+#include "estimator/utc_time.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
 namespace {
 
+using estimator::FormatUtc;
+
 constexpr char kLeaseLostPayload[] = "type.esg/storage.LeaseLost";
 // The holder's expiry in Unix nanoseconds, decimal.
 constexpr char kLeaseHeldPayload[] = "type.esg/storage.LeaseHeldUntil";
-
-std::string FormatUtc(absl::Time t) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%E3SZ", t, absl::UTCTimeZone());
-}
 
 absl::StatusOr<SessionLease> ReadLease(Transaction& txn, absl::string_view spacecraft_id) {
   ASSIGN_OR_RETURN(Statement * st,

@@ -21,6 +21,7 @@
 #include "absl/time/time.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
+#include "estimator/utc_time.h"
 #include "storage/csv_lines.h"
 #include "storage/csv_problems.h"
 
@@ -265,8 +266,7 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
       if (previous_time.has_value() && time <= *previous_time) {
         problems.Add(line_no, names[kTimeColumn],
                      absl::StrFormat("%s is not after %s of line %d (times must increase)",
-                                     time_text, absl::FormatTime(kTimeFormat, *previous_time,
-                                                                 absl::UTCTimeZone()),
+                                     time_text, estimator::FormatUtc(*previous_time),
                                      previous_time_line));
       } else if (previous_time.has_value() && time - *previous_time > options.max_row_gap) {
         problems.Add(line_no, names[kTimeColumn],

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/status_macros.h"
+#include "estimator/utc_time.h"
 #include "storage/postgres_schema.h"
 
 namespace esg::storage {
@@ -415,7 +416,7 @@ absl::Status ValidateStorableTime(absl::Time t, absl::string_view field) {
   static const absl::Time kLatest = absl::FromUnixNanos(std::numeric_limits<int64_t>::max() - 1);
   if (t < kEarliest || t > kLatest) {
     return absl::InvalidArgumentError(
-        absl::StrCat(field, " = ", absl::FormatTime(absl::RFC3339_full, t, absl::UTCTimeZone()),
+        absl::StrCat(field, " = ", estimator::FormatUtc(t),
                      ": must be a finite instant between years 1678 and 2262"));
   }
   return absl::OkStatus();

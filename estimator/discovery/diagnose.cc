@@ -21,6 +21,7 @@
 #include "estimator/discovery/wander.h"
 #include "estimator/discovery/what_is_left.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator::discovery {
 
@@ -36,7 +37,7 @@ absl::Status CheckInput(const SpacecraftConfig& config, const std::vector<Teleme
   for (size_t i = 1; i < frames.size(); ++i) {
     if (!(frames[i].time > frames[i - 1].time)) {
       return absl::InvalidArgumentError(absl::StrFormat(
-          "recording: frame %d (%s) is not after frame %d", i, UtcText(frames[i].time), i - 1));
+          "recording: frame %d (%s) is not after frame %d", i, FormatUtc(frames[i].time), i - 1));
     }
   }
   if (!(options.alpha > 0.0 && options.alpha < 1.0)) {

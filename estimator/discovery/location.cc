@@ -9,6 +9,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/statistics.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator::discovery {
 
@@ -278,8 +279,8 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
       after_findings ? "after adding the findings"
                      : "the configured model does not fit the recording",
       where.gyro > 0 ? absl::StrCat("in gyro ", where.gyro) : std::string("in all gyros"),
-      where.source.empty() ? "" : absl::StrCat(" (", where.source, ")"), UtcText(where.start),
-      UtcText(where.end), where.regime, what,
+      where.source.empty() ? "" : absl::StrCat(" (", where.source, ")"), FormatUtc(where.start),
+      FormatUtc(where.end), where.regime, what,
       unresolved.empty() ? "" : absl::StrCat("; ", unresolved));
   u.evidence.held_out_nees_after = held_out.nees;
   u.evidence.held_out_dof = held_out.dof;

@@ -12,6 +12,7 @@
 #include "absl/strings/str_join.h"
 #include "estimator/discovery/deviation_filter.h"
 #include "estimator/statistics.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator::discovery {
 
@@ -272,7 +273,7 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
   }
   for (const auto& [gyro, time] : options.steps) {
     if (gyro != series.gyro) continue;
-    open_group(absl::StrCat("before the drift step at ", absl::FormatTime(time)));
+    open_group(absl::StrCat("before the drift step at ", FormatUtc(time)));
     out.groups.back().nuisance = true;
     for (int m = 1; m <= 3; ++m) {
       BasisColumn c;

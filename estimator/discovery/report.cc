@@ -5,6 +5,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/utc_time.h"
 
 namespace esg::estimator::discovery {
 
@@ -30,10 +31,6 @@ const char* EffectId(Effect e) {
       return "readout_distortion";
   }
   return "?";
-}
-
-std::string UtcText(absl::Time t) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%SZ", t, absl::UTCTimeZone());
 }
 
 namespace {
@@ -159,9 +156,9 @@ std::string ExplainFinding(const Finding& f) {
         "drift step of %.3f +- %.3f deg/h in gyro %d at %s +- %s (%.2f h from the start; "
         "95%% onset interval %.2f-%.2f h, %s - %s): a drift constant in case axes, d = %s deg/h, "
         "switched on then (a step of C1 by -d in eq. (10)); %s, best of %d onsets",
-        size ? size->value : 0.0, size ? size->sigma : 0.0, f.gyro, UtcText(t.onset), half_width,
-        t.onset_hours, t.onset_lower_hours, t.onset_upper_hours, UtcText(t.onset_lower),
-        UtcText(t.onset_upper), VectorText(ps, "driftStepDegH", 3), stats,
+        size ? size->value : 0.0, size ? size->sigma : 0.0, f.gyro, FormatUtc(t.onset), half_width,
+        t.onset_hours, t.onset_lower_hours, t.onset_upper_hours, FormatUtc(t.onset_lower),
+        FormatUtc(t.onset_upper), VectorText(ps, "driftStepDegH", 3), stats,
         t.onsets_searched);
   }
   return stats;

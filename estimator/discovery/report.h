@@ -248,9 +248,6 @@ SpacecraftConfig WithBasisFindings(const SpacecraftConfig& config, const Diagnos
 // Hours from t0 to t (the report's time axis: hours since the first frame).
 inline double HoursSince(absl::Time t, absl::Time t0) { return absl::ToDoubleHours(t - t0); }
 
-// An instant as the report prints it, "2019-03-01T00:17:00Z".
-std::string UtcText(absl::Time t);
-
 // The physics of a finding of the library in the units people use (docs/discovery.md, "Physics in
 // the report"), from its effect, gyro, parameters and evidence (evidence, parameters, p_value);
 // only the statistics for an effect outside the library.

@@ -69,7 +69,7 @@ void ExpectPlotsReferencedAndDrawn(const TempDir& dir, const std::vector<std::st
   }
   const std::string gp = ReadFile(dir.File("report/plots.gp"));
   EXPECT_THAT(gp, HasSubstr("hours from the start"));
-  EXPECT_THAT(gp, HasSubstr("(start 2019-03-01T00:00:00Z)"));
+  EXPECT_THAT(gp, HasSubstr("(start 2019-03-01T00:00:00.000Z)"));
   EXPECT_THAT(gp, Not(HasSubstr("set xlabel 'time, h'")));
 }
 

@@ -50,7 +50,7 @@ TEST(DiagnosisPlots, AReportWithoutSeriesStillDrawsEveryPlotWithoutLegendEntries
   ASSERT_TRUE(plots.ok()) << plots.status();
   EXPECT_THAT(Pngs(*plots), ::testing::ElementsAre("residuals.png", "held_out.png", "regimes.png"));
   const std::string gp = ReadFile(dir.File("plots.gp"));
-  EXPECT_THAT(gp, HasSubstr("(start 2019-03-01T00:00:00Z)"));
+  EXPECT_THAT(gp, HasSubstr("(start 2019-03-01T00:00:00.000Z)"));
   EXPECT_THAT(gp, HasSubstr("set xlabel 'hours from the start'"));
   EXPECT_THAT(gp, Not(HasSubstr("keyentry")));  // no regime, span or mismatch to name
   EXPECT_THAT(gp, Not(HasSubstr("title 'before")));

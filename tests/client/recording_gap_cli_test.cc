@@ -10,6 +10,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
+#include "estimator/utc_time.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/client/cli_test_support.h"
@@ -66,9 +67,10 @@ JumpedRecording WriteJumpedRecording(const TempDir& dir, absl::Duration jump) {
   std::string error;
   EXPECT_TRUE(absl::ParseTime(absl::RFC3339_full, before, &previous, &error)) << error;
   const absl::Time moved = previous + jump;
-  out.previous_time = absl::FormatTime(kTimeFormat, previous, absl::UTCTimeZone());
-  out.moved_time = absl::FormatTime(kTimeFormat, moved, absl::UTCTimeZone());
-  last = out.moved_time + last.substr(last.find(','));
+  // The row is written exactly (the recording CSV's form); messages print the one UTC form.
+  out.previous_time = estimator::FormatUtc(previous);
+  out.moved_time = estimator::FormatUtc(moved);
+  last = absl::FormatTime(kTimeFormat, moved, absl::UTCTimeZone()) + last.substr(last.find(','));
   out.line = static_cast<int>(lines.size());
   WriteFile(out.path, absl::StrJoin(lines, "\n") + "\n");
   return out;

@@ -355,7 +355,8 @@ TEST(ColumnMapping, WrongRowsNameLineColumnAndField) {
        "line 2, column t (time.column): '2019-03-01 00:00' is not an RFC 3339 time"},
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:01:00Z,0,0,1,1,0,0,0\n2019-03-01T00:00:00Z,0,0,1,1,0,"
        "0,0\n",
-       "line 3, column t (time.column): 2019-03-01T00:00:00Z is not after 2019-03-01T00:01:00Z of "
+       "line 3, column t (time.column): 2019-03-01T00:00:00.000Z is not after 2019-03-01T00:01:00.000Z "
+       "of "
        "line 2"},
       {"t,h1,h2,h3,qw,qx,qy,qz\n2019-03-01T00:00:00Z,0,0,one,1,0,0,0\n",
        "line 2, column h3 (gyros[0].spinAxis.columns[2]): 'one' is not a finite number"},

@@ -18,6 +18,7 @@
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
 #include "estimator/rotation.h"
+#include "estimator/utc_time.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/status_matchers.h"
@@ -375,7 +376,7 @@ INSTANTIATE_TEST_SUITE_P(
                         return WithField(c, 5, "time_utc", "2019-03-01T00:00:00Z");
                       },
                       "line 5, column time_utc: 2019-03-01T00:00:00Z is not after "
-                      "2019-03-01T00:00:00Z of line 4"},
+                      "2019-03-01T00:00:00.000Z of line 4"},
         MalformedCase{"BadTimestamp",
                       [] { return WithField(ValidCsv(), 5, "time_utc", "2019-03-01 00:01:00"); },
                       "line 5, column time_utc: '2019-03-01 00:01:00' is not an RFC 3339 time"},
@@ -474,14 +475,10 @@ TEST(RecordingCsv, RowMoreThanTheGapLimitAfterThePreviousIsAProblemWhenAsked) {
       ParseRecordingCsv(at(absl::Hours(24 * 7) + absl::Nanoseconds(1)), options),
       StatusIs(kInvalid, AllOf(HasSubstr("1 problem"),
                                HasSubstr("line 6, column time_utc: " +
-                                         absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ",
-                                                          previous + absl::Hours(24 * 7) +
-                                                              absl::Nanoseconds(1),
-                                                          absl::UTCTimeZone()) +
+                                         estimator::FormatUtc(previous + absl::Hours(24 * 7) +
+                                                              absl::Nanoseconds(1)) +
                                          " is more than 7 days after the previous row (line 5, " +
-                                         absl::FormatTime("%Y-%m-%dT%H:%M:%E*SZ", previous,
-                                                          absl::UTCTimeZone()) +
-                                         ")"))));
+                                         estimator::FormatUtc(previous) + ")"))));
   EXPECT_THAT(ParseRecordingCsv(at(absl::Hours(24 * 365 * 5))), IsOk());
 }
 
