@@ -238,23 +238,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     const std::function<bool()>& cancelled) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
-  absl::Time from = absl::InfinitePast();
-  absl::Time to = absl::InfiniteFuture();
-  // Every message starts with the request's field (docs/service.md "Errors").
-  if (request.has_from()) {
-    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.from());
-    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("from: ", t.status().message()));
-    from = *t;
-  }
-  if (request.has_to()) {
-    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.to());
-    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("to: ", t.status().message()));
-    to = *t;
-    if (to <= from) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("to: ", FormatUtc(to), " is not after from ", FormatUtc(from)));
-    }
-  }
+  ASSIGN_OR_RETURN(const estimator::TimeInterval interval, RequestInterval(request));
   std::shared_ptr<const Setup> setup;
   std::string quarantine_reason;
   {
@@ -301,13 +285,13 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     return m.status();
   }
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
-                   storage_->archive().ReadTimeRange(sc->id, from, to));
+                   storage_->archive().ReadTimeRange(sc->id, interval.from, interval.End()));
   // An empty window is the request's window, or the spacecraft's whole archive.
   const char* window_field = request.has_from() || request.has_to() ? "from: " : "spacecraft_id: ";
   if (archived.empty()) {
     return absl::FailedPreconditionError(absl::StrCat(window_field, "no archived telemetry of '",
-                                                      sc->id, "' in [", FormatUtc(from), ", ",
-                                                      FormatUtc(to), ")"));
+                                                      sc->id, "' in [", FormatUtc(interval.from),
+                                                      ", ", FormatUtc(interval.to), "]"));
   }
   if (cancelled && cancelled()) return absl::CancelledError("diagnosis cancelled");
   std::vector<TelemetryFrame> frames;
@@ -329,8 +313,8 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   }
   if (frames.empty()) {
     return absl::FailedPreconditionError(absl::StrCat(
-        window_field, "no decodable archived telemetry of '", sc->id, "' in [", FormatUtc(from), ", ",
-        FormatUtc(to), ")"));
+        window_field, "no decodable archived telemetry of '", sc->id, "' in [",
+        FormatUtc(interval.from), ", ", FormatUtc(interval.to), "]"));
   }
   ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
                    estimator::discovery::Diagnose(setup->config, frames, options, progress));
@@ -401,19 +385,10 @@ absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(
     return absl::InvalidArgumentError(
         absl::StrCat("gyro_id: must be 0 (all) or 1..4, got ", request.gyro_id()));
   }
-  absl::Time from = absl::InfinitePast();
-  absl::Time to = absl::InfiniteFuture();
-  if (request.has_from()) {
-    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
-  }
-  if (request.has_to()) {
-    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
-    if (to < from) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
-    }
-    to += absl::Nanoseconds(1);  // inclusive
-  }
+  ASSIGN_OR_RETURN(const estimator::TimeInterval interval, RequestInterval(request));
+  // Storage queries take the half-open [from, end), end the first instant after `to`.
+  const absl::Time from = interval.from;
+  const absl::Time to = interval.End();
   // The filters a token is bound to (the request without its paging fields).
   const std::string filters =
       absl::StrCat(request.spacecraft_id(), "|", request.gyro_id(), "|",
@@ -449,23 +424,10 @@ absl::StatusOr<esg::v1::EstimateHistoryResponse> EstimationCore::EstimateHistory
   ASSIGN_OR_RETURN(const int64_t size, PageSize(request.page_size(), kDefaultEstimatesPageSize,
                                                 kMaxEstimatesPageSize));
   RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
-  absl::Time from = absl::InfinitePast();
-  absl::Time to = absl::InfiniteFuture();
-  if (request.has_from()) {
-    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.from());
-    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("from: ", t.status().message()));
-    from = *t;
-  }
-  if (request.has_to()) {
-    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(request.to());
-    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("to: ", t.status().message()));
-    to = *t;
-    if (to < from) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
-    }
-    to += absl::Nanoseconds(1);  // inclusive
-  }
+  ASSIGN_OR_RETURN(const estimator::TimeInterval interval, RequestInterval(request));
+  // Storage queries take the half-open [from, end), end the first instant after `to`.
+  const absl::Time from = interval.from;
+  const absl::Time to = interval.End();
   // The filters a token is bound to (the request without its paging fields).
   const std::string filters = absl::StrCat(request.spacecraft_id(), "|",
                                            storage::TimeToUnixNanos(from), "|",
@@ -495,25 +457,14 @@ absl::StatusOr<esg::v1::ExportTelemetryResponse> EstimationCore::ExportTelemetry
   *done = true;
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   RETURN_IF_ERROR(CheckConfigured(request.spacecraft_id()));
-  absl::Time from = absl::InfinitePast();
-  absl::Time to = absl::InfiniteFuture();
-  if (request.has_from()) {
-    ASSIGN_OR_RETURN(from, proto_convert::TimeFromProto(request.from()));
-  }
-  if (request.has_to()) {
-    ASSIGN_OR_RETURN(to, proto_convert::TimeFromProto(request.to()));
-    if (to < from) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
-    }
-  }
+  ASSIGN_OR_RETURN(const estimator::TimeInterval interval, RequestInterval(request));
   // Frame times are unique per spacecraft, so "after the last time sent" resumes exactly.
-  const absl::Time start = std::max(*after, from - absl::Nanoseconds(1));
+  const absl::Time start = std::max(*after, interval.from - absl::Nanoseconds(1));
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> frames,
                    storage_->archive().ReadAfter(request.spacecraft_id(), start, kExportChunkSize));
   esg::v1::ExportTelemetryResponse response;
   for (const storage::ArchivedFrame& f : frames) {
-    if (f.measurement_time >= to) return response;  // done
+    if (f.measurement_time > interval.to) return response;  // done
     esg::v1::TelemetryFrame* frame = response.add_frames();
     if (!frame->ParseFromString(f.payload)) {
       return absl::DataLossError(absl::StrCat("archived frame ", f.sequence, " of '",

@@ -326,4 +326,24 @@ esg::v1::CoefficientSnapshot SnapshotToProto(const storage::CoefficientRecord& r
   return s;
 }
 
+absl::StatusOr<estimator::TimeInterval> IntervalFromProto(const google::protobuf::Timestamp* from,
+                                                          const google::protobuf::Timestamp* to) {
+  estimator::TimeInterval interval;
+  if (from != nullptr) {
+    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(*from);
+    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("from: ", t.status().message()));
+    interval.from = *t;
+  }
+  if (to != nullptr) {
+    absl::StatusOr<absl::Time> t = proto_convert::TimeFromProto(*to);
+    if (!t.ok()) return absl::InvalidArgumentError(absl::StrCat("to: ", t.status().message()));
+    interval.to = *t;
+  }
+  if (interval.to < interval.from) {
+    return absl::InvalidArgumentError(absl::StrCat("to: ", FormatUtc(interval.to),
+                                                   " is before from ", FormatUtc(interval.from)));
+  }
+  return interval;
+}
+
 }  // namespace esg::server

@@ -10,9 +10,11 @@
 
 #include "Eigen/Core"
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "esg/v1/estimation_service.pb.h"
 #include "estimator/session.h"
+#include "estimator/time_interval.h"
 #include "estimator/utc_time.h"
 #include "server/session_summary.h"
 #include "storage/records.h"
@@ -57,6 +59,18 @@ esg::v1::Rejection RejectionFromStatus(const absl::Status& status);
 
 // The one text form of an instant (estimator/utc_time.h), for messages.
 using estimator::FormatUtc;
+
+// The measurement-time interval of a request's optional `from` and `to`, [from, to] with both
+// ends inclusive (estimator/time_interval.h); an absent end is open. InvalidArgument starting
+// with the field: "from: ..." or "to: ..." for a time out of the Timestamp range, "to: T is before
+// from F". Every RPC with from/to reads them here.
+absl::StatusOr<estimator::TimeInterval> IntervalFromProto(
+    const google::protobuf::Timestamp* from, const google::protobuf::Timestamp* to);
+template <typename Request>
+absl::StatusOr<estimator::TimeInterval> RequestInterval(const Request& request) {
+  return IntervalFromProto(request.has_from() ? &request.from() : nullptr,
+                           request.has_to() ? &request.to() : nullptr);
+}
 
 }  // namespace esg::server
 

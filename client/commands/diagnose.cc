@@ -241,7 +241,7 @@ void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
   cmd->add_option("--from", server->from,
                   "with --spacecraft: first measurement time, RFC 3339 (default: the first frame)");
   cmd->add_option("--to", server->to,
-                  "with --spacecraft: end of the span, RFC 3339, exclusive (default: after the "
+                  "with --spacecraft: last measurement time (inclusive), RFC 3339 (default: the "
                   "last frame)");
   cmd->add_option("--columns", o->columns_path,
                   "column mapping JSON: read --recording as a CSV export with other column "

@@ -49,19 +49,24 @@ int ReportBadArgument(const char* verb, const std::string& message);
 std::optional<absl::Time> ParseUtc(const std::string& text);
 
 // Sets request->from and request->to from the --from and --to option values (an empty value
-// leaves that bound unset). Returns kExitOk, or ReportBadArgument's code naming the option whose
-// value is not an RFC 3339 time (the request is then not to be sent).
+// leaves that bound unset): the span [--from, --to], both ends inclusive, as the service reads
+// it (docs/cli.md "Time spans"). Returns kExitOk, or ReportBadArgument's code naming the option
+// whose value is not an RFC 3339 time, or --to before --from (the request is then not to be sent).
 template <typename Request>
 int SetTimeSpan(const char* verb, const std::string& from, const std::string& to,
                 Request* request) {
+  std::optional<absl::Time> from_time;
   if (!from.empty()) {
-    const std::optional<absl::Time> t = ParseUtc(from);
-    if (!t) return ReportBadArgument(verb, "--from '" + from + "': not an RFC 3339 time");
-    *request->mutable_from() = proto_convert::TimeToProto(*t);
+    from_time = ParseUtc(from);
+    if (!from_time) return ReportBadArgument(verb, "--from '" + from + "': not an RFC 3339 time");
+    *request->mutable_from() = proto_convert::TimeToProto(*from_time);
   }
   if (!to.empty()) {
     const std::optional<absl::Time> t = ParseUtc(to);
     if (!t) return ReportBadArgument(verb, "--to '" + to + "': not an RFC 3339 time");
+    if (from_time && *t < *from_time) {
+      return ReportBadArgument(verb, "--to '" + to + "': is before --from '" + from + "'");
+    }
     *request->mutable_to() = proto_convert::TimeToProto(*t);
   }
   return kExitOk;

@@ -85,9 +85,6 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
   esg::v1::ExportTelemetryRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   if (int code = SetTimeSpan(kVerb, o.from, o.to, &request); code != kExitOk) return code;
-  if (request.has_from() && request.has_to() && request.to() <= request.from()) {
-    return ReportBadArgument(kVerb, "--to '" + o.to + "': must be after --from '" + o.from + "'");
-  }
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   std::unique_ptr<OutputFile> out = OutputFile::Open(kVerb, o.out);
@@ -129,9 +126,9 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
   const absl::Status status = stream->Finish();
   if (!status.ok()) return ReportRpcError(kVerb, status, global);
   if (frames == 0) {
-    std::fprintf(stderr, "esg %s: no archived frame of %s in [%s, %s): nothing written\n", kVerb,
+    std::fprintf(stderr, "esg %s: no archived frame of %s in [%s, %s]: nothing written\n", kVerb,
                  o.spacecraft_id.c_str(), o.from.empty() ? "the first" : o.from.c_str(),
-                 o.to.empty() ? "after the last" : o.to.c_str());
+                 o.to.empty() ? "the last" : o.to.c_str());
     return kExitFailure;
   }
   if (absl::Status closed = out->Commit(); !closed.ok()) {
@@ -186,7 +183,7 @@ void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code) {
   telemetry_cmd->add_option("--from", telemetry->from,
                             "first measurement time, RFC 3339 UTC (default: the first frame)");
   telemetry_cmd->add_option("--to", telemetry->to,
-                            "end of the span, exclusive, RFC 3339 UTC (default: after the last "
+                            "last measurement time (inclusive), RFC 3339 UTC (default: the last "
                             "frame)");
   telemetry_cmd
       ->add_option("--out", telemetry->out,

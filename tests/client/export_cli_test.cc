@@ -108,7 +108,7 @@ TEST_F(ExportCli, TelemetryExportIsTheReplayedRecordingAndCalibratesTheSame) {
 TEST_F(ExportCli, TelemetrySpanExportsItsFramesOnly) {
   TempDir dir;
   const std::string exported = dir.File("span.csv");
-  // [01:00, 02:00): frames at 01:00, 01:01, ..., 01:59.
+  // [01:00, 02:00], both ends inclusive: frames at 01:00, 01:01, ..., 02:00.
   RunResult r = Esg(dir,
                     "export telemetry --spacecraft RDK-1 --from 2019-03-01T01:00:00Z "
                     "--to 2019-03-01T02:00:00Z --out " +
@@ -116,10 +116,10 @@ TEST_F(ExportCli, TelemetrySpanExportsItsFramesOnly) {
   ASSERT_EQ(r.exit_code, 0) << r.err;
   absl::StatusOr<estimator::Recording> back = storage::ReadRecordingCsv(exported);
   ASSERT_TRUE(back.ok()) << back.status();
-  ASSERT_EQ(back->frames.size(), 60u);
+  ASSERT_EQ(back->frames.size(), 61u);
   const absl::Time start = absl::FromUnixSeconds(1551398400);  // 2019-03-01T00:00:00Z
   EXPECT_EQ(back->frames.front().time, start + absl::Hours(1));
-  EXPECT_EQ(back->frames.back().time, start + absl::Hours(2) - absl::Minutes(1));
+  EXPECT_EQ(back->frames.back().time, start + absl::Hours(2));
 
   // No frame in the span: exit 1, nothing written.
   const std::string empty = dir.File("empty.csv");
@@ -138,6 +138,47 @@ std::vector<std::vector<std::string>> CsvRows(const std::string& text) {
     rows.push_back(absl::StrSplit(line, ','));
   }
   return rows;
+}
+
+// Every verb with --from/--to reads the span one way, [--from, --to] with both ends inclusive
+// (docs/cli.md "Time spans"): the records measured exactly at --to are printed or written, none
+// after it. The replay has a frame, an estimate and a snapshot per gyro every 60 s.
+TEST_F(ExportCli, EveryVerbsSpanIncludesTheRecordsAtTo) {
+  TempDir dir;
+  const std::string span = " --from 2019-03-01T01:00:00Z --to 2019-03-01T02:00:00Z";
+  const std::string at_to = "\n2019-03-01T02:00:00.000Z,";
+  const std::string after_to = "\n2019-03-01T02:01:00.000Z,";
+  // esg estimates --csv: a row per step, 01:00 .. 02:00.
+  RunResult r = Esg(dir, "estimates --spacecraft RDK-1 --csv" + span);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(CsvRows(r.out).size(), 1u + 61u) << "header and 61 steps";
+  EXPECT_THAT(r.out, HasSubstr(at_to));
+  EXPECT_THAT(r.out, ::testing::Not(HasSubstr(after_to)));
+  // esg history --csv and esg export history: a row per gyro and step, the last at 02:00.
+  for (const std::string verb : {"history --csv", "export history"}) {
+    r = Esg(dir, verb + " --spacecraft RDK-1" + span);
+    ASSERT_EQ(r.exit_code, 0) << verb << ": " << r.err;
+    EXPECT_THAT(r.out, HasSubstr(at_to)) << verb;
+    EXPECT_THAT(r.out, ::testing::Not(HasSubstr(after_to))) << verb;
+    const std::vector<std::vector<std::string>> rows = CsvRows(r.out);
+    ASSERT_GE(rows.size(), 2u) << verb;
+    EXPECT_EQ(rows.back()[0], "2019-03-01T02:00:00.000Z") << verb;
+  }
+  // esg export telemetry (TelemetrySpanExportsItsFramesOnly reads the file back): 61 frames.
+  r = Esg(dir, "export telemetry --spacecraft RDK-1 --out " + Quote(dir.File("t.csv")) + span);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("RDK-1: 61 frames (2019-03-01T01:00:00.000Z .. "
+                               "2019-03-01T02:00:00.000Z)"));
+  // esg diagnose --spacecraft: the stored diagnosis ran on the 61 frames, the last at 02:00.
+  r = Esg(dir, "diagnose --spacecraft RDK-1" + span);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.out, HasSubstr("2019-03-01T01:00:00.000Z .. 2019-03-01T02:00:00.000Z, 61 frames"));
+  // --from = --to: the one instant.
+  r = Esg(dir, "estimates --spacecraft RDK-1 --csv --from 2019-03-01T02:00:00Z "
+               "--to 2019-03-01T02:00:00Z");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(CsvRows(r.out).size(), 2u) << r.out;
+  EXPECT_THAT(r.out, HasSubstr(at_to));
 }
 
 TEST_F(ExportCli, HistoryExportHasEveryStoredSnapshotWithItsValues) {
@@ -199,7 +240,7 @@ TEST_F(ExportCli, BadArgumentsExitTwoNamingTheOptionAndRefusalsExitOne) {
           "export telemetry --spacecraft RDK-1 --from 2019-03-01T02:00:00Z "
           "--to 2019-03-01T01:00:00Z --out x.csv");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_THAT(r.err, HasSubstr("--to '2019-03-01T01:00:00Z': must be after --from"));
+  EXPECT_THAT(r.err, HasSubstr("--to '2019-03-01T01:00:00Z': is before --from"));
   r = Esg(dir, "export telemetry --spacecraft RDK-1 --out /nonexistent-dir/x.csv");
   EXPECT_EQ(r.exit_code, 2);
   EXPECT_THAT(r.err, HasSubstr("--out /nonexistent-dir/x.csv: cannot create"));

@@ -323,13 +323,13 @@ TEST(Paging, TelemetryExportStreamsTheArchiveInTimeOrder) {
     expected.set_station_id("default");
     ASSERT_EQ(frames[i].SerializeAsString(), expected.SerializeAsString()) << "frame " << i;
   }
-  // [from, to): the 10th to the 19th frame.
+  // [from, to], both ends inclusive: the 10th to the 20th frame.
   *request.mutable_from() = run.frames[10].time();
   *request.mutable_to() = run.frames[20].time();
   const std::vector<esg::v1::TelemetryFrame> window = export_all(request, &chunks);
-  ASSERT_EQ(window.size(), 10u);
+  ASSERT_EQ(window.size(), 11u);
   EXPECT_EQ(window.front().sequence(), run.frames[10].sequence());
-  EXPECT_EQ(window.back().sequence(), run.frames[19].sequence());
+  EXPECT_EQ(window.back().sequence(), run.frames[20].sequence());
   // An unknown spacecraft is NOT_FOUND.
   grpc::ClientContext context;
   esg::v1::ExportTelemetryRequest unknown;
