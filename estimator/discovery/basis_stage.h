@@ -19,7 +19,7 @@
 #include "estimator/discovery/context.h"
 #include "estimator/discovery/open_ended.h"
 #include "estimator/discovery/report.h"
-#include "estimator/discovery/selection.h"
+#include "estimator/discovery/selected_model.h"
 
 namespace esg::estimator::discovery {
 

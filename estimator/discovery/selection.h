@@ -18,23 +18,9 @@
 #include "estimator/discovery/held_out.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/report.h"
+#include "estimator/discovery/selected_model.h"
 
 namespace esg::estimator::discovery {
-
-// Two candidates whose evidence 2 ln B differs by less than this are not told apart by the
-// recording in-sample (Kass & Raftery: below 10 is not "very strong"); held-out prediction
-// decides between them.
-inline constexpr double kDecisiveDeviance = 10.0;
-
-// The model selection has reached, and what is known of it.
-struct SelectedModel {
-  ModelState model;
-  ModelRun run;          // its full in-sample run
-  ProfiledDeviance fit;  // Profile(run)
-  // Its held-out prediction, when `held_out_current`; else that of an earlier model.
-  HeldOutResult held_out;
-  bool held_out_current = true;
-};
 
 struct RoundResult {
   std::vector<CandidateScore> rows;  // one per candidate tried, in candidate order

@@ -30,7 +30,7 @@
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/held_out.h"
 #include "estimator/discovery/report.h"
-#include "estimator/discovery/selection.h"
+#include "estimator/discovery/selected_model.h"
 
 namespace esg::estimator::discovery {
 
