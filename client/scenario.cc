@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
@@ -227,13 +228,16 @@ absl::StatusOr<Eigen::Matrix3d> ParseDistortionPpm(const json& v, const std::str
 
 absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
   RETURN_IF_ERROR(CheckObject(v, path));
-  RETURN_IF_ERROR(CheckKeys(
-      v, path,
-      {"id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm", "k0DegH", "c1DegH",
-       "c2DegH", "muDegH", "nuDegH", "misalignmentArcsec", "randomWalkDegHSqrtH",
-       "readoutNoiseArcsec", "voltageNoiseMv", "initialSpinAxis", "fault", "switchOnHours",
-       "orbitalDrift", "rotorDisplacementRateUmH", "readoutDistortionPpm", "switchingDrift",
-       "hiddenDriverDrift"}));
+  // The keys of the drift model's fixed terms (estimator/model_terms.h) and the others.
+  std::set<std::string> keys = {
+      "id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm",
+      "misalignmentArcsec", "randomWalkDegHSqrtH", "readoutNoiseArcsec", "voltageNoiseMv",
+      "initialSpinAxis", "fault", "switchOnHours", "orbitalDrift", "rotorDisplacementRateUmH",
+      "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift"};
+  for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
+    keys.insert(std::string(key.json_key));
+  }
+  RETURN_IF_ERROR(CheckKeys(v, path, keys));
   ScenarioGyro g;
   if (!v.contains("id")) return Invalid(Key(path, "id"), "required");
   if (!v["id"].is_number_integer()) {
@@ -259,16 +263,17 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       ASSIGN_OR_RETURN(double per_um, Number(x, p, -kMaxPerUmDegH, kMaxPerUmDegH));
       const double per_m = estimator::DegPerHourToRadPerSec(per_um) / estimator::kMetresPerUm;
       (k == "c10DegHPerUm" ? g.c10_per_m : g.c20_per_m) = per_m;
-    } else if (k == "k0DegH") {
-      ASSIGN_OR_RETURN(double k0, Number(x, p, -kMaxDriftDegH, kMaxDriftDegH));
-      g.k0 = estimator::DegPerHourToRadPerSec(k0);
-    } else if (k == "c1DegH" || k == "c2DegH" || k == "muDegH" || k == "nuDegH") {
-      ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(x, p, -kMaxDriftDegH, kMaxDriftDegH));
-      std::optional<Vector3d>& target = k == "c1DegH"   ? g.C1
-                                        : k == "c2DegH" ? g.C2
-                                        : k == "muDegH" ? g.mu
-                                                        : g.nu;
-      target = DegHToSi(deg_h);
+    } else if (const auto term = estimator::FindFixedTermKey(k); term.has_value()) {
+      // A fixed term of the drift model: one number, or a vector of its 3 components (deg/h).
+      const int first = term->first_theta_index;
+      if (term->components == 0) {
+        ASSIGN_OR_RETURN(double deg_h, Number(x, p, -kMaxDriftDegH, kMaxDriftDegH));
+        g.drift_coefficients[first] = estimator::DegPerHourToRadPerSec(deg_h);
+      } else {
+        ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(x, p, -kMaxDriftDegH, kMaxDriftDegH));
+        const Vector3d si = DegHToSi(deg_h);
+        for (int i = 0; i < 3; ++i) g.drift_coefficients[first + i] = si[i];
+      }
     } else if (k == "misalignmentArcsec") {
       ASSIGN_OR_RETURN(Vector3d arcsec,
                        Vec3(x, p, -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
@@ -565,14 +570,13 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.rotor_displacement_k) g.rotor_displacement_k = *s.rotor_displacement_k;
     if (s.c10_per_m) g.c10_per_m = *s.c10_per_m;
     if (s.c20_per_m) g.c20_per_m = *s.c20_per_m;
-    if (s.k0 || s.C1 || s.C2 || s.mu || s.nu) {
-      estimator::DriftCoefficients c = g.drift.value_or(config->model);
-      if (s.k0) c.k0 = *s.k0;
-      if (s.C1) c.C1 = *s.C1;
-      if (s.C2) c.C2 = *s.C2;
-      if (s.mu) c.mu = *s.mu;
-      if (s.nu) c.nu = *s.nu;
-      g.drift = c;
+    const auto& drift = s.drift_coefficients;
+    if (std::any_of(drift.begin(), drift.end(), [](const auto& x) { return x.has_value(); })) {
+      estimator::DriftVector theta = g.drift.value_or(config->model).AsVector();
+      for (int i = 0; i < estimator::kNumDriftCoefficients; ++i) {
+        if (drift[i]) theta(i) = *drift[i];
+      }
+      g.drift = estimator::DriftCoefficients::FromVector(theta);
     }
     if (s.misalignment_b) g.misalignment_b = *s.misalignment_b;
     if (s.random_walk) g.random_walk = s.random_walk;

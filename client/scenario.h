@@ -19,6 +19,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "estimator/attitude_profile.h"
+#include "estimator/drift_model.h"
 #include "estimator/simulator.h"
 
 namespace esg::client {
@@ -31,9 +32,9 @@ struct ScenarioGyro {
   std::optional<Eigen::Vector3d> rotor_displacement_k;  // [m]
   std::optional<double> c10_per_m;                      // [rad/s per m]
   std::optional<double> c20_per_m;
-  // True coefficient values replacing the configuration's model, one by one [rad/s].
-  std::optional<double> k0;
-  std::optional<Eigen::Vector3d> C1, C2, mu, nu;
+  // True coefficient values replacing the configuration's model, one by one, in theta layout
+  // (estimator/drift_model.h; keys "k0DegH", "c1DegH", ... of estimator/model_terms.h) [rad/s].
+  std::array<std::optional<double>, estimator::kNumDriftCoefficients> drift_coefficients;
   std::optional<Eigen::Vector3d> misalignment_b;  // [rad]
   std::optional<double> random_walk;              // [rad/s/sqrt(s)]
   std::optional<double> readout_noise;            // [rad]

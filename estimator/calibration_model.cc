@@ -14,24 +14,20 @@
 namespace esg::estimator {
 
 std::string ModelSpec::Name() const {
-  std::vector<std::string> parts;
-  if (c1c2) {
-    parts.push_back("10");
-  } else if (k0 || mu_nu) {
-    parts.push_back("1");
+  std::vector<std::string> parts_named;
+  if (parts & kModelPart10) {
+    parts_named.push_back("10");
+  } else if (parts & kModelPart1) {
+    parts_named.push_back("1");
   }
-  if (random_walk) parts.push_back("11");
-  return absl::StrJoin(parts, "+");
+  if (random_walk) parts_named.push_back("11");
+  return absl::StrJoin(parts_named, "+");
 }
 
 std::array<bool, kNumDriftCoefficients> ModelSpec::TermMask() const {
   std::array<bool, kNumDriftCoefficients> mask{};
-  mask[kThetaK0] = k0;
-  for (int i = 0; i < 3; ++i) {
-    mask[kThetaC1 + i] = c1c2;
-    mask[kThetaC2 + i] = c1c2;
-    mask[kThetaMu + i] = mu_nu;
-    mask[kThetaNu + i] = mu_nu;
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    mask[term.theta_index] = (term.model_parts & parts) != 0;
   }
   return mask;
 }
@@ -42,12 +38,9 @@ absl::StatusOr<ModelSpec> ParseModel(absl::string_view name) {
   for (absl::string_view part : absl::StrSplit(name, '+')) {
     part = absl::StripAsciiWhitespace(part);
     if (part == "1") {
-      spec.k0 = true;
-      spec.mu_nu = true;
+      spec.parts |= kModelPart1;
     } else if (part == "10") {
-      spec.k0 = true;
-      spec.c1c2 = true;
-      spec.mu_nu = true;
+      spec.parts |= kModelPart10;
     } else if (part == "11") {
       spec.random_walk = true;
     } else {
@@ -69,7 +62,7 @@ DriftVector ModelCoefficients(const ModelSpec& spec, const GyroConfig& gyro) {
   DriftVector theta = gyro.model.AsVector();
   // Model (11) alone: the configured (bench) model is applied as it is and the random walk takes
   // up what it leaves (the paper: model (11) stands alone when model (10) was not calibrated).
-  if (!spec.k0 && !spec.c1c2 && !spec.mu_nu) return theta;
+  if (!spec.HasFixedTerms()) return theta;
   const auto mask = spec.TermMask();
   for (int i = 0; i < kNumDriftCoefficients; ++i) {
     if (!mask[i]) theta(i) = 0.0;

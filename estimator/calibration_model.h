@@ -1,7 +1,8 @@
-// Which drift model the filter calibrates (issue: models 1, 10, 11 of the paper) and which of its
+// Which drift model the filter calibrates (models 1, 10, 11 of the paper) and which of its
 // coefficients are free. Model strings: "1" (eq. (1): k0, mu, nu), "10" (eq. (10): k0, C1, C2;
 // plus mu, nu of the full model when configured), "11" (random walk of the residual drift in
-// `int` axes only, eq. (11)), and "+"-joined sets such as "10+11" or "1+11".
+// `int` axes only, eq. (11)), and "+"-joined sets such as "10+11" or "1+11". Which fixed terms
+// "1" and "10" take is the term table's (model_terms.h model_parts).
 //
 // A coefficient of a term in the model is free (estimated) when its configured modelSigma is
 // positive, otherwise held at the configured value. Terms outside the model are zero, except
@@ -12,22 +13,26 @@
 #ifndef ESG_ESTIMATOR_CALIBRATION_MODEL_H_
 #define ESG_ESTIMATOR_CALIBRATION_MODEL_H_
 
+#include <array>
 #include <string>
-#include "absl/strings/string_view.h"
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "estimator/drift_model.h"
+#include "estimator/model_terms.h"
 #include "estimator/spacecraft_config.h"
 
 namespace esg::estimator {
 
 struct ModelSpec {
-  bool k0 = false;           // eq. (1), (10)
-  bool c1c2 = false;         // eq. (10)
-  bool mu_nu = false;        // eq. (1)
+  // The model-string parts that take fixed terms (model_terms.h kModelPart*: "1" eq. (1), "10"
+  // eq. (10)); which terms each part takes is the descriptors' model_parts.
+  unsigned parts = 0;
   bool random_walk = false;  // eq. (11)
 
+  // Some fixed term is in the model (false for model "11" alone).
+  bool HasFixedTerms() const { return parts != 0; }
   // Canonical name, e.g. "10+11".
   std::string Name() const;
   // Mask over theta (drift_model.h offsets): true where the term is in the model.

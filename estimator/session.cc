@@ -171,7 +171,7 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
                                                             const SessionOptions& options) {
   if (absl::Status s = ValidateConfig(config); !s.ok()) return s;
   const ModelSpec& m = options.model;
-  if (!m.k0 && !m.c1c2 && !m.mu_nu && !m.random_walk) {
+  if (!m.HasFixedTerms() && !m.random_walk) {
     return absl::InvalidArgumentError("model: no term selected (use 1, 10, 11 or e.g. 10+11)");
   }
   EstimationSession session;
@@ -461,7 +461,7 @@ double ResidualRandomWalk(const SpacecraftConfig& config, const SessionOptions& 
 double InitialResidualDriftSigma(const SessionOptions& options) {
   if (options.residual_drift_sigma >= 0.0) return options.residual_drift_sigma;
   // 0.1 deg/h with model (11) alone, 0.01 deg/h on top of a calibrated model.
-  return DegPerHourToRadPerSec((options.model.k0 || options.model.c1c2) ? 0.01 : 0.1);
+  return DegPerHourToRadPerSec(options.model.HasFixedTerms() ? 0.01 : 0.1);
 }
 
 double EstimationSession::RandomWalkOf(int id) const {

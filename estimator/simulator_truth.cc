@@ -22,9 +22,20 @@ Vector3d Eq1K0(const Cosines& c, double k0) {
                        c.h3 * (-(1.0 - c.h3_2) * c.h3_2 + h1_4 + h2_4));
 }
 
+// The unequal-stiffness coefficients of eq. (1) by their printed names, read through the
+// DriftCoefficients layout mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12) (drift_model.h).
+struct Stiffness {
+  double mu12, mu23, mu31, nu23, nu31, nu12;
+  explicit Stiffness(const DriftCoefficients& m)
+      : mu12(m.mu(0)), mu23(m.mu(1)), mu31(m.mu(2)), nu23(m.nu(0)), nu31(m.nu(1)), nu12(m.nu(2)) {}
+  bool IsZero() const {
+    return mu12 == 0.0 && mu23 == 0.0 && mu31 == 0.0 && nu23 == 0.0 && nu31 == 0.0 && nu12 == 0.0;
+  }
+};
+
 // eq. (1), unequal stiffness: x = h1 (mu12 h2^2 - mu31 h3^2) + h2 h3 nu23; cyclic
 // (mu12 -> mu23 -> mu31, nu23 -> nu31 -> nu12).
-Vector3d Eq1MuNu(const Cosines& c, const PrintedDrift& d) {
+Vector3d Eq1MuNu(const Cosines& c, const Stiffness& d) {
   return Vector3d(c.h1 * (d.mu12 * c.h2_2 - d.mu31 * c.h3_2) + c.h2 * c.h3 * d.nu23,
                   c.h2 * (d.mu23 * c.h3_2 - d.mu12 * c.h1_2) + c.h3 * c.h1 * d.nu31,
                   c.h3 * (d.mu31 * c.h1_2 - d.mu23 * c.h2_2) + c.h1 * c.h2 * d.nu12);
@@ -69,16 +80,7 @@ Vector3d Eq9(const Cosines& c, const Vector3d& lambda, double C20) {
 PrintedDrift FromGyroTruth(const DriftCoefficients& model, const Vector3d& rotor_displacement_k,
                            double c10_per_m, double c20_per_m) {
   PrintedDrift d;
-  d.k0 = model.k0;
-  d.C1 = model.C1;
-  d.C2 = model.C2;
-  // DriftCoefficients layout: mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12).
-  d.mu12 = model.mu(0);
-  d.mu23 = model.mu(1);
-  d.mu31 = model.mu(2);
-  d.nu23 = model.nu(0);
-  d.nu31 = model.nu(1);
-  d.nu12 = model.nu(2);
+  d.coefficients = model;
   const double size = rotor_displacement_k.norm();
   if (size > 0.0) {
     d.lambda = rotor_displacement_k / size;
@@ -90,24 +92,20 @@ PrintedDrift FromGyroTruth(const DriftCoefficients& model, const Vector3d& rotor
 
 Vector3d TrueDriftRate_k(const PrintedDrift& d, const Vector3d& h_k) {
   const Cosines c(h_k);
-  Vector3d dw_k = Eq1K0(c, d.k0) + Eq10C1(c, d.C1) + Eq10C2(c, d.C2);
+  const DriftCoefficients& m = d.coefficients;
+  Vector3d dw_k = Eq1K0(c, m.k0) + Eq10C1(c, m.C1) + Eq10C2(c, m.C2);
   // Terms with all coefficients zero add exactly zero; skip them (this runs at the integration
   // rate for every gyro).
-  if (d.mu12 != 0.0 || d.mu23 != 0.0 || d.mu31 != 0.0 || d.nu23 != 0.0 || d.nu31 != 0.0 ||
-      d.nu12 != 0.0) {
-    dw_k += Eq1MuNu(c, d);
-  }
+  const Stiffness stiffness(m);
+  if (!stiffness.IsZero()) dw_k += Eq1MuNu(c, stiffness);
   if (d.C10 != 0.0 || d.C20 != 0.0) dw_k += Eq8(c, d.lambda, d.C10) + Eq9(c, d.lambda, d.C20);
   return dw_k;
 }
 
 DriftCoefficients EquivalentCoefficients(const PrintedDrift& d) {
-  DriftCoefficients c;
-  c.k0 = d.k0;
-  c.C1 = d.C1 + (d.C10 + d.C20) * d.lambda;
-  c.C2 = d.C2 - 5.0 * d.C20 * d.lambda;
-  c.mu = Vector3d(d.mu12, d.mu23, d.mu31);
-  c.nu = Vector3d(d.nu23, d.nu31, d.nu12);
+  DriftCoefficients c = d.coefficients;
+  c.C1 = d.coefficients.C1 + (d.C10 + d.C20) * d.lambda;
+  c.C2 = d.coefficients.C2 - 5.0 * d.C20 * d.lambda;
   return c;
 }
 

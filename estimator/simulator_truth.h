@@ -8,8 +8,9 @@
 // the 13 coefficients); the truth here writes every component out as printed. A sign or index
 // slip on either side therefore shows as a disagreement between the two, which the tests check
 // (tests/estimator/simulator_test.cc, tests/estimator/drift_model_test.cc). Only the plain data
-// type DriftCoefficients is shared, with its documented layout mu = (mu12, mu23, mu31),
-// nu = (nu23, nu31, nu12); FromGyroTruth unpacks it into named scalars once.
+// type DriftCoefficients is shared; the printed formulas (simulator_truth.cc) read its components
+// by the paper's names through its documented layout (drift_model.h), the one place here that
+// names the coefficients one by one (estimator/model_terms.h lists the others).
 //
 // All rates [rad/s], components in the gyro case axes k; h_k is the unit spin axis in case axes.
 #ifndef ESG_ESTIMATOR_SIMULATOR_TRUTH_H_
@@ -22,11 +23,8 @@ namespace esg::estimator::simulator_truth {
 
 // One gyro's true drift as the paper writes it.
 struct PrintedDrift {
-  double k0 = 0.0;                               // eq. (1), (10)
-  Eigen::Vector3d C1 = Eigen::Vector3d::Zero();  // eq. (10): (C11, C12, C13)
-  Eigen::Vector3d C2 = Eigen::Vector3d::Zero();  // eq. (10): (C21, C22, C23)
-  double mu12 = 0.0, mu23 = 0.0, mu31 = 0.0;     // eq. (1)
-  double nu23 = 0.0, nu31 = 0.0, nu12 = 0.0;     // eq. (1)
+  // The coefficients of eq. (1) and (10) [rad/s].
+  DriftCoefficients coefficients;
   // Rotor displacement, eq. (8), (9): unit direction lambda (zero when there is none) and the
   // sizes C10, C20 [rad/s], which scale with the displacement length.
   Eigen::Vector3d lambda = Eigen::Vector3d::Zero();

@@ -13,6 +13,10 @@
 namespace esg::storage {
 namespace {
 
+// Frozen schema history, begin. Version 7's DDL, from which every PostgreSQL database starts
+// before its upgrades, describes what a database of that version holds, not the current terms
+// (estimator/model_terms.h); the text up to the end mark is pinned by
+// tests/estimator/model_terms_test.cc.
 // Schema version 7 (schema.h) in PostgreSQL types, the session leases of several servers
 // sharing the database (lease_store.h), and a trigger that notifies channel esg_alerts with
 // "<sequence> <spacecraft_id>" at each commit that adds or changes an alert (kAlertsChannel);
@@ -191,6 +195,7 @@ CREATE TABLE esg_schema (
   version BIGINT NOT NULL
 );
 )sql";
+// Frozen schema history, end.
 
 // Notifies channel esg_estimates with "<measurement_time_unix_ns> <spacecraft_id>" at each
 // commit that inserts or replaces an estimate (kEstimatesChannel). Part of the current schema;

@@ -39,25 +39,16 @@ struct ArchivedFrame {
   std::string payload;  // serialized frame bytes, format chosen by the server
 };
 
-// Layout of CoefficientRecord::values and ::sigmas: 16 numbers in this fixed order, in SI like
-// every record: the drift terms of estimator/model_terms.h in theta order (eq. (1), (8)-(10),
-// docs/physics.md): k0, C1 = (C11, C12, C13) and C2 = (C21, C22, C23) along case axes x, y, z of
-// the gyro, mu = (mu12, mu23, mu31), nu = (nu23, nu31, nu12), all [rad/s]; then the misalignment,
-// a small rotation vector about body axes b [rad]. Each is stored as a row of table
-// `coefficient_values` keyed by its name with its unit (CoefficientColumns() below), value and
-// 1-sigma in that unit (deg/h for the drift terms, arcsec for the misalignment): CoefficientStore
-// converts at the rows, so a user of plain SQL reads the units operators use.
+// Layout of CoefficientRecord::values and ::sigmas: kNumCoefficientValues numbers in this fixed
+// order, in SI like every record: the drift terms of estimator/model_terms.h in theta order
+// (eq. (1), (8)-(10), docs/physics.md), indexed by theta's offsets (estimator/drift_model.h
+// kTheta*), all [rad/s]; then the misalignment, a small rotation vector about body axes b [rad].
+// Each is stored as a row of table `coefficient_values` keyed by its name with its unit
+// (CoefficientColumns() below), value and 1-sigma in that unit (deg/h for the drift terms, arcsec
+// for the misalignment): CoefficientStore converts at the rows, so a user of plain SQL reads the
+// units operators use.
 inline constexpr int kCoefficientMisalignment = estimator::kNumDriftCoefficients;
 inline constexpr int kNumCoefficientValues = kCoefficientMisalignment + 3;
-inline constexpr int kCoefficientK0 = 0;
-inline constexpr int kCoefficientC1 = 1;
-inline constexpr int kCoefficientC2 = 4;
-inline constexpr int kCoefficientMu = 7;
-inline constexpr int kCoefficientNu = 10;
-static_assert(kCoefficientK0 == estimator::kThetaK0 && kCoefficientC1 == estimator::kThetaC1 &&
-                  kCoefficientC2 == estimator::kThetaC2 && kCoefficientMu == estimator::kThetaMu &&
-                  kCoefficientNu == estimator::kThetaNu,
-              "the drift part of the coefficient layout is the estimator's theta");
 
 // Names of the values (their storage keys, coefficient_values.term_key) and of the sigmas, in
 // layout order: the drift terms' from their descriptors (estimator/model_terms.h: "k0_deg_h",

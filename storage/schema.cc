@@ -14,6 +14,9 @@
 namespace esg::storage {
 namespace {
 
+// Frozen schema history, begin. The DDL of versions 1-9 and their coefficient columns describe
+// what databases of those versions hold, not the current terms (estimator/model_terms.h); the
+// text up to the end mark is pinned by tests/estimator/model_terms_test.cc.
 // Version 1: the first layout. Frozen: never edit, append a migration instead.
 constexpr absl::string_view kSchemaV1 = R"sql(
 CREATE TABLE spacecraft_configs (
@@ -263,6 +266,7 @@ constexpr absl::string_view kVersion9ValueColumns[][2] = {
     {"mu23", "deg_h"},   {"mu31", "deg_h"}, {"nu23", "deg_h"}, {"nu31", "deg_h"},
     {"nu12", "deg_h"},   {"misalignment_x", "arcsec"},        {"misalignment_y", "arcsec"},
     {"misalignment_z", "arcsec"}};
+// Frozen schema history, end.
 
 // Version 10, SQLite: the table rebuilt without the value columns (the order of the remaining
 // columns is PostgreSQL's after its DROP COLUMNs, so both engines agree).

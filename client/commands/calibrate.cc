@@ -24,6 +24,7 @@
 #include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/frame_gap.h"
+#include "estimator/model_terms.h"
 #include "estimator/offline.h"
 #include "estimator/units.h"
 #include "nlohmann/json.hpp"
@@ -129,9 +130,22 @@ json Vec(const Eigen::Vector3d& v, double scale) {
 const double kDegH = RadPerSecToDegPerHour(1.0);
 const double kArcsec = RadToArcsec(1.0);
 
+// The coefficients as the configuration JSON writes them (deg/h): per key of
+// estimator/model_terms.h a number, or an array of its components.
 json ModelJson(const estimator::DriftCoefficients& c) {
-  return json{{"k0DegH", c.k0 * kDegH}, {"c1DegH", Vec(c.C1, kDegH)}, {"c2DegH", Vec(c.C2, kDegH)},
-              {"muDegH", Vec(c.mu, kDegH)}, {"nuDegH", Vec(c.nu, kDegH)}};
+  const estimator::DriftVector theta = c.AsVector();
+  json out = json::object();
+  for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
+    const int first = key.first_theta_index;
+    json& entry = out[std::string(key.json_key)];
+    if (key.components == 0) {
+      entry = theta(first) * kDegH;
+    } else {
+      entry = json::array();
+      for (int i = first; i < first + key.components; ++i) entry.push_back(theta(i) * kDegH);
+    }
+  }
+  return out;
 }
 
 // The gyro's basis terms as the configuration JSON writes them (deg/h per JSON unit of s), with

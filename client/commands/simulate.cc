@@ -23,6 +23,7 @@
 #include "client/output_format.h"
 #include "client/progress.h"
 #include "client/scenario.h"
+#include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
@@ -126,12 +127,23 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
   for (int g = 0; g < kMaxGyros; ++g) {
     if (!result.true_coefficients[g]) continue;
     const estimator::DriftCoefficients& c = *result.true_coefficients[g];
-    out << absl::StrFormat("# g%d_true_k0_deg_h: %.15g\n", g + 1,
-                           estimator::RadPerSecToDegPerHour(c.k0));
-    out << absl::StrFormat("# g%d_true_c1_deg_h: %s\n", g + 1, VecDegH(c.C1));
-    out << absl::StrFormat("# g%d_true_c2_deg_h: %s\n", g + 1, VecDegH(c.C2));
-    out << absl::StrFormat("# g%d_true_mu_deg_h: %s\n", g + 1, VecDegH(c.mu));
-    out << absl::StrFormat("# g%d_true_nu_deg_h: %s\n", g + 1, VecDegH(c.nu));
+    // One line per key of estimator/model_terms.h: "# g1_true_c1_deg_h: [..., ..., ...]".
+    const estimator::DriftVector theta = c.AsVector();
+    for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
+      const int first = key.first_theta_index;
+      std::string value;
+      if (key.components == 0) {
+        value = absl::StrFormat("%.15g", estimator::RadPerSecToDegPerHour(theta(first)));
+      } else {
+        std::vector<std::string> parts;
+        for (int i = first; i < first + key.components; ++i) {
+          parts.push_back(absl::StrFormat("%.15g", estimator::RadPerSecToDegPerHour(theta(i))));
+        }
+        value = absl::StrCat("[", absl::StrJoin(parts, ", "), "]");
+      }
+      out << absl::StrFormat("# g%d_true_%s: %s\n", g + 1,
+                             estimator::FixedTermFieldName(key.json_key), value);
+    }
     if (!result.truth.empty() && result.truth.front().gyros[g]) {
       const Eigen::Matrix3d& C = result.truth.front().gyros[g]->C_b_k;
       out << absl::StrFormat(

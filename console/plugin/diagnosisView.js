@@ -4,17 +4,22 @@
 import { apiFetch } from './api.js';
 import { el, fixed, STYLE } from './dom.js';
 import { gapChart } from './gapChart.js';
+import { COEFFICIENTS } from './series.js';
 
 const AXIS = ['x', 'y', 'z'];
+// The fixed drift terms' report names (their configuration JSON keys, "c1DegH[0]") from the
+// console's table of them (series.js COEFFICIENTS): "C11, rotor displacement (1st harmonic)".
+const FIXED_TERM_NAMES = {};
+for (const c of COEFFICIENTS) {
+  const name = `${c.label}, ${c.meaning}`;
+  if (c.component < 0) FIXED_TERM_NAMES[c.jsonKey] = name;
+  else (FIXED_TERM_NAMES[c.jsonKey] ||= [])[c.component] = name;
+}
 // The report's parameter names (its JSON keys, docs/discovery.md "JSON") in the words of the drift
 // model and the effect library; a vector's index is the axis of the gyro's case frame k. Each entry:
 // a name, or per index a name.
 const PARAMETER_NAMES = {
-  k0DegH: 'k0, 4th shape harmonic',
-  c1DegH: ['C11', 'C12', 'C13'].map((c) => `${c}, rotor displacement (1st harmonic)`),
-  c2DegH: ['C21', 'C22', 'C23'].map((c) => `${c}, rotor displacement (3rd harmonic)`),
-  muDegH: ['mu12', 'mu23', 'mu31'].map((c) => `${c}, unequal stiffness`),
-  nuDegH: ['nu23', 'nu31', 'nu12'].map((c) => `${c}, unequal stiffness`),
+  ...FIXED_TERM_NAMES,
   driftStepDegH: AXIS.map((a) => `drift step about case ${a}`),
   driftStepSizeDegH: 'drift step size',
   onsetHours: 'onset (flight time)',

@@ -4,22 +4,31 @@
 
 const TIME = { key: 'utc', source: 'utc', name: 'Time (UTC)', format: 'utc', hints: { domain: 1 } };
 
-// The drift model of one gyro, eq. (1), (8), (9), (10): GyroDriftModel fields, case frame k, deg/h.
+// The drift model of one gyro, eq. (1), (8), (9), (10): the fixed terms of estimator/model_terms.h
+// in theta order, checked row for row against it by tests/estimator/model_terms_test.cc (a plain
+// module cannot read the C++ table). Each row: label, the GyroDriftModel JSON key and the
+// component in it (-1: the key holds a number), what the term is; case frame k, deg/h. Each entry
+// also has its telemetry key (the label in lower case) and get(model), the value from a
+// GyroDriftModel message (proto field names: "c1DegH" is read as c1_deg_h).
 export const COEFFICIENTS = [
-  ['k0', 'k0', (m) => m.k0_deg_h],
-  ['c11', 'C11', (m) => m.c1_deg_h[0]],
-  ['c12', 'C12', (m) => m.c1_deg_h[1]],
-  ['c13', 'C13', (m) => m.c1_deg_h[2]],
-  ['c21', 'C21', (m) => m.c2_deg_h[0]],
-  ['c22', 'C22', (m) => m.c2_deg_h[1]],
-  ['c23', 'C23', (m) => m.c2_deg_h[2]],
-  ['mu12', 'mu12', (m) => m.mu_deg_h[0]],
-  ['mu23', 'mu23', (m) => m.mu_deg_h[1]],
-  ['mu31', 'mu31', (m) => m.mu_deg_h[2]],
-  ['nu23', 'nu23', (m) => m.nu_deg_h[0]],
-  ['nu31', 'nu31', (m) => m.nu_deg_h[1]],
-  ['nu12', 'nu12', (m) => m.nu_deg_h[2]]
-].map(([key, label, get]) => ({ key, label, get }));
+  ['k0', 'k0DegH', -1, '4th shape harmonic'],
+  ['C11', 'c1DegH', 0, 'rotor displacement (1st harmonic)'],
+  ['C12', 'c1DegH', 1, 'rotor displacement (1st harmonic)'],
+  ['C13', 'c1DegH', 2, 'rotor displacement (1st harmonic)'],
+  ['C21', 'c2DegH', 0, 'rotor displacement (3rd harmonic)'],
+  ['C22', 'c2DegH', 1, 'rotor displacement (3rd harmonic)'],
+  ['C23', 'c2DegH', 2, 'rotor displacement (3rd harmonic)'],
+  ['mu12', 'muDegH', 0, 'unequal stiffness'],
+  ['mu23', 'muDegH', 1, 'unequal stiffness'],
+  ['mu31', 'muDegH', 2, 'unequal stiffness'],
+  ['nu23', 'nuDegH', 0, 'unequal stiffness'],
+  ['nu31', 'nuDegH', 1, 'unequal stiffness'],
+  ['nu12', 'nuDegH', 2, 'unequal stiffness']
+].map(([label, jsonKey, component, meaning]) => {
+  const field = jsonKey.replace(/[A-Z]/g, (c) => `_${c.toLowerCase()}`);
+  const get = component < 0 ? (m) => m[field] : (m) => m[field][component];
+  return { key: label.toLowerCase(), label, jsonKey, component, meaning, get };
+});
 
 const AXES = ['x', 'y', 'z'];
 const DEG_H = { unit: 'deg/h', formatString: '%.5f' };

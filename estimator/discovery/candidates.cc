@@ -16,6 +16,7 @@
 #include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/drift_model.h"
+#include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/units.h"
@@ -120,7 +121,22 @@ constexpr int kRandomWalkGridPoints = 5;  // factors 2, 4, ... 32 above the conf
 // residual-drift instability [deg/h/sqrt(h)].
 constexpr double kRandomWalkFloorDegHSqrtH = 0.0005;
 
-bool AllFree(const DriftVector& sigma, int first, int count) {
+// The theta range [first, first + count) of the fixed terms whose descriptor names the effect
+// (estimator/model_terms.h `effect`, contiguous in theta); count 0 when none does.
+std::pair<int, int> FixedTermsOf(Effect effect) {
+  const absl::string_view id = EffectId(effect);
+  int first = -1, count = 0;
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    if (term.effect != id) continue;
+    if (first < 0) first = term.theta_index;
+    ++count;
+  }
+  return {std::max(first, 0), count};
+}
+
+// Every fixed term the effect frees is already free (sigma > 0).
+bool AllFree(const DriftVector& sigma, Effect effect) {
+  const auto [first, count] = FixedTermsOf(effect);
   for (int i = first; i < first + count; ++i) {
     if (!(sigma(i) > 0.0)) return false;
   }
@@ -261,15 +277,11 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     const GyroConfig* g = model.config.FindGyro(id);
     if (g == nullptr) continue;
     const DriftVector sigma = g->model_sigma.AsVector();
-    if (Effective(effects, Effect::kRotorDisplacement) && !AllFree(sigma, kThetaC1, 6)) {
-      out.push_back({Effect::kRotorDisplacement, id});
-    }
-    if (Effective(effects, Effect::kFourthHarmonic) && !AllFree(sigma, kThetaK0, 1)) {
-      out.push_back({Effect::kFourthHarmonic, id});
-    }
-    if (Effective(effects, Effect::kUnequalStiffness) && !AllFree(sigma, kThetaMu, 6)) {
-      out.push_back({Effect::kUnequalStiffness, id});
-    }
+    // A drift effect of the library whose fixed terms are not all free yet.
+    auto lacks = [&](Effect e) { return Effective(effects, e) && !AllFree(sigma, e); };
+    if (lacks(Effect::kRotorDisplacement)) out.push_back({Effect::kRotorDisplacement, id});
+    if (lacks(Effect::kFourthHarmonic)) out.push_back({Effect::kFourthHarmonic, id});
+    if (lacks(Effect::kUnequalStiffness)) out.push_back({Effect::kUnequalStiffness, id});
     if (Effective(effects, Effect::kGyroMisalignment) && !(g->misalignment_sigma > 0.0)) {
       out.push_back({Effect::kGyroMisalignment, id});
     }
@@ -472,16 +484,23 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
 
 std::optional<FreedCoefficients> FreedDriftCoefficients(Effect effect,
                                                         const DiagnoseOptions& options) {
+  double sigma_deg_h = 0.0;
   switch (effect) {
     case Effect::kRotorDisplacement:
-      return FreedCoefficients{kThetaC1, 6, DegPerHourToRadPerSec(options.c_sigma_deg_h)};
+      sigma_deg_h = options.c_sigma_deg_h;
+      break;
     case Effect::kFourthHarmonic:
-      return FreedCoefficients{kThetaK0, 1, DegPerHourToRadPerSec(options.k0_sigma_deg_h)};
+      sigma_deg_h = options.k0_sigma_deg_h;
+      break;
     case Effect::kUnequalStiffness:
-      return FreedCoefficients{kThetaMu, 6, DegPerHourToRadPerSec(options.mu_nu_sigma_deg_h)};
+      sigma_deg_h = options.unequal_stiffness_sigma_deg_h;
+      break;
     default:
       return std::nullopt;
   }
+  const auto [first, count] = FixedTermsOf(effect);
+  if (count == 0) return std::nullopt;
+  return FreedCoefficients{first, count, DegPerHourToRadPerSec(sigma_deg_h)};
 }
 
 absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {

@@ -1,8 +1,9 @@
 // The library of candidate effects (docs/physics.md) and how each is added to a model and fitted
-// (docs/discovery.md, "How each effect enters the model"):
+// (docs/discovery.md, "How each effect enters the model"); the fixed terms an effect frees are
+// those whose descriptor names it (estimator/model_terms.h `effect`):
 //   rotor_displacement (gyro g)   free C1, C2 of g with prior c_sigma (eq. (8)-(10))
 //   fourth_harmonic (gyro g)      free k0 of g with prior k0_sigma (eq. (1))
-//   unequal_stiffness (gyro g)    free mu, nu of g with prior mu_nu_sigma (eq. (1))
+//   unequal_stiffness (gyro g)    free mu, nu of g with prior unequal_stiffness_sigma (eq. (1))
 //   gyro_misalignment (gyro g)    misalignment of g estimated with prior misalignment_sigma
 //   star_tracker_misalignment     one rotation m common to all gyros: first estimated as the
 //                                 information-weighted mean of free per-gyro misalignments, then
@@ -118,8 +119,9 @@ struct CandidateFit {
 };
 
 // The drift coefficients a rotor displacement (C1, C2), a fourth harmonic (k0) or unequal
-// stiffness (mu, nu) frees: DriftVector indices [first, first + count) with their prior 1-sigma
-// from the options [rad/s]; nullopt for any other effect.
+// stiffness (mu, nu) frees, the fixed terms whose descriptor names the effect (estimator/
+// model_terms.h, contiguous in theta): DriftVector indices [first, first + count) with their prior
+// 1-sigma from the options [rad/s]; nullopt for any other effect.
 struct FreedCoefficients {
   int first = 0;
   int count = 0;

@@ -68,7 +68,7 @@ absl::StatusOr<ModelState> UserModel(const SpacecraftConfig& config, const Diagn
   if (!spec.ok()) return spec.status();
   ModelState m;
   m.config = config;
-  const bool only_random_walk = !spec->k0 && !spec->c1c2 && !spec->mu_nu;
+  const bool only_random_walk = !spec->HasFixedTerms();
   const auto mask = spec->TermMask();
   for (GyroConfig& g : m.config.gyros) {
     DriftVector value = g.model.AsVector(), sigma = g.model_sigma.AsVector();
@@ -83,7 +83,7 @@ absl::StatusOr<ModelState> UserModel(const SpacecraftConfig& config, const Diagn
     g.model = DriftCoefficients::FromVector(value);
     g.model_sigma = DriftCoefficients::FromVector(sigma);
   }
-  m.options.model.k0 = m.options.model.c1c2 = m.options.model.mu_nu = true;
+  m.options.model.parts = kAllModelParts;
   m.options.model.random_walk = spec->random_walk;
   if (opt.integration_rate_hz > 0.0) m.config.filter.integration_rate_hz = opt.integration_rate_hz;
   // eq. (12) would exclude a gyro whose unmodelled drift makes its pair disagree with the star

@@ -56,10 +56,11 @@ struct DiagnoseOptions {
   // Held-out spans: at most this many, each at most max_gap_hours long.
   int max_gaps = 4;
   double max_gap_hours = 4.0;
-  // Priors given to freed coefficients (the paper's sizes, docs/physics.md) and the search grids.
-  double c_sigma_deg_h = 0.1;
-  double k0_sigma_deg_h = 0.3;
-  double mu_nu_sigma_deg_h = 0.1;
+  // Priors given to freed coefficients (the paper's sizes, docs/physics.md) and the search grids:
+  // per effect, to each fixed term it frees (estimator/model_terms.h `effect`).
+  double c_sigma_deg_h = 0.1;                    // rotor_displacement
+  double k0_sigma_deg_h = 0.3;                   // fourth_harmonic
+  double unequal_stiffness_sigma_deg_h = 0.1;  // unequal_stiffness
   double misalignment_sigma_arcsec = 60.0;
   // Prior 1-sigma of a star-tracker latency (its evidence, docs/discovery.md "Evidence"): a
   // time stamp late or early by up to about a second.

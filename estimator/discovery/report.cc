@@ -5,6 +5,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/model_terms.h"
 #include "estimator/utc_time.h"
 
 namespace esg::estimator::discovery {
@@ -56,6 +57,24 @@ std::string VectorText(const std::vector<Parameter>& ps, const std::string& name
   return absl::StrCat("[", absl::StrJoin(parts, ", "), "]");
 }
 
+// The fixed terms an effect frees (estimator/model_terms.h `effect`), one "<symbol> = <value>
+// <unit>" per symbol in table order, a symbol's components as one vector: for unequal stiffness
+// "mu = [...] deg/h, nu = [...] deg/h".
+std::string FreedTermsText(const std::vector<Parameter>& ps, absl::string_view effect) {
+  std::vector<std::string> parts;
+  absl::string_view last_symbol;
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    if (term.effect != effect || term.symbol == last_symbol) continue;
+    last_symbol = term.symbol;
+    const Parameter* scalar = FindParameter(ps, std::string(term.json_key));
+    const std::string value =
+        term.component >= 0 ? VectorText(ps, std::string(term.json_key), 3)
+                            : absl::StrFormat("%.3f", scalar ? scalar->value : 0.0);
+    parts.push_back(absl::StrCat(term.symbol, " = ", value, " ", term.unit));
+  }
+  return absl::StrJoin(parts, ", ");
+}
+
 }  // namespace
 
 SpacecraftConfig WithBasisFindings(const SpacecraftConfig& config, const DiagnosisReport& report) {
@@ -93,10 +112,9 @@ std::string ExplainFinding(const Finding& f) {
     const Parameter* angle = FindParameter(ps, "lineAngleDeg");
     const Parameter* size = FindParameter(ps, "displacementSizeUm");
     return absl::StrFormat(
-        "gyro %d drifts with odd harmonics of a displaced rotor (eq. (8)-(10)): C1 = %s deg/h, "
-        "C2 = %s deg/h, %.0f deg apart as lines%s; %s",
-        f.gyro, VectorText(ps, "c1DegH", 3), VectorText(ps, "c2DegH", 3),
-        angle ? angle->value : 0.0,
+        "gyro %d drifts with odd harmonics of a displaced rotor (eq. (8)-(10)): %s, %.0f deg "
+        "apart as lines%s; %s",
+        f.gyro, FreedTermsText(ps, f.effect), angle ? angle->value : 0.0,
         size
             ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))",
                               size->value)
@@ -112,8 +130,8 @@ std::string ExplainFinding(const Finding& f) {
   }
   if (f.effect == "unequal_stiffness") {
     return absl::StrFormat(
-        "gyro %d: unequal suspension stiffness (eq. (1)): mu = %s deg/h, nu = %s deg/h; %s", f.gyro,
-        VectorText(ps, "muDegH", 3), VectorText(ps, "nuDegH", 3), stats);
+        "gyro %d: unequal suspension stiffness (eq. (1)): %s; %s", f.gyro,
+        FreedTermsText(ps, f.effect), stats);
   }
   if (f.effect == "gyro_misalignment") {
     return absl::StrFormat(

@@ -322,7 +322,7 @@ TEST(HistoryCli, ThirtyDaysArePagedThroughEveryRecordOnceInOrder) {
         r.model_name = "10+11";
         r.values.assign(storage::kNumCoefficientValues, 0.01);
         // Records are SI: k0 = the record's index in deg/h.
-        r.values[storage::kCoefficientK0] = estimator::DegPerHourToRadPerSec(step * 3 + (gyro - 1));
+        r.values[estimator::kThetaK0] = estimator::DegPerHourToRadPerSec(step * 3 + (gyro - 1));
         r.sigmas.assign(storage::kNumCoefficientValues, 0.001);
         ASSERT_TRUE((*storage)->coefficients().Append(*txn, r).ok());
       }

@@ -57,7 +57,7 @@ TEST(Scenario, ParsesEveryFieldIntoSi) {
   EXPECT_EQ(g2.id, 2);
   EXPECT_LT((*g2.rotor_displacement_k - 1e-6 * Vector3d(0.5, -1.0, 0.3)).norm(), 1e-20);
   EXPECT_NEAR(*g2.c10_per_m, est::DegPerHourToRadPerSec(0.05) / 1e-6, 1e-12);
-  EXPECT_NEAR(*g2.k0, est::DegPerHourToRadPerSec(0.2), 1e-20);
+  EXPECT_NEAR(*g2.drift_coefficients[est::kThetaK0], est::DegPerHourToRadPerSec(0.2), 1e-20);
   EXPECT_LT((*g2.misalignment_b - est::ArcsecToRad(1.0) * Vector3d(10, -20, 30)).norm(), 1e-20);
   ASSERT_TRUE(g2.fault.has_value());
   EXPECT_EQ(g2.fault->kind, est::GyroFault::Kind::kDriftStep);

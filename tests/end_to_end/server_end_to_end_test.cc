@@ -90,11 +90,11 @@ void ExpectFinalEstimatesEqualOffline(const std::vector<esg::v1::CoefficientSnap
     // Records are SI, the columns and the message deg/h and arcsec: equal up to the conversions.
     const auto deg_h = [](double x) { return estimator::RadPerSecToDegPerHour(x); };
     const auto arcsec = [](double x) { return estimator::RadToArcsec(x); };
-    EXPECT_DOUBLE_EQ(s.model().k0_deg_h(), deg_h(v[storage::kCoefficientK0]));
-    EXPECT_DOUBLE_EQ(s.sigma().k0_deg_h(), deg_h(sigma[storage::kCoefficientK0]));
+    EXPECT_DOUBLE_EQ(s.model().k0_deg_h(), deg_h(v[estimator::kThetaK0]));
+    EXPECT_DOUBLE_EQ(s.sigma().k0_deg_h(), deg_h(sigma[estimator::kThetaK0]));
     for (int i = 0; i < 3; ++i) {
-      EXPECT_DOUBLE_EQ(s.model().c1_deg_h(i), deg_h(v[storage::kCoefficientC1 + i]));
-      EXPECT_DOUBLE_EQ(s.model().c2_deg_h(i), deg_h(v[storage::kCoefficientC2 + i]));
+      EXPECT_DOUBLE_EQ(s.model().c1_deg_h(i), deg_h(v[estimator::kThetaC1 + i]));
+      EXPECT_DOUBLE_EQ(s.model().c2_deg_h(i), deg_h(v[estimator::kThetaC2 + i]));
       EXPECT_DOUBLE_EQ(s.misalignment_arcsec(i),
                        arcsec(v[storage::kCoefficientMisalignment + i]));
       EXPECT_DOUBLE_EQ(s.misalignment_sigma_arcsec(i),

@@ -202,7 +202,7 @@ TEST(DiscoveryModelRun, RunContinuedFromACheckpointEqualsOneRun) {
   ASSERT_THAT(sim, IsOk());
   const auto& frames = sim->recording.frames;
   SessionOptions options;
-  options.model.k0 = true;
+  options.model.parts = kModelPart1;
   options.model.random_walk = true;
   ModelRunOptions with_checkpoint;
   const int k = static_cast<int>(frames.size()) / 2;
@@ -238,7 +238,7 @@ TEST(DiscoveryModelRun, CoefficientReleaseWidensOnlyAfterItsTime) {
   SpacecraftConfig config = spec.config;
   config.gyros[1].model_sigma.C1 = Eigen::Vector3d::Constant(DegPerHourToRadPerSec(1e-6));
   SessionOptions options;
-  options.model.k0 = options.model.c1c2 = true;
+  options.model.parts = kModelPart10;
   options.model.random_walk = true;
   const int k = static_cast<int>(frames.size()) / 2;
   options.coefficient_releases.push_back(

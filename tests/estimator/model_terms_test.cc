@@ -3,12 +3,16 @@
 // (console/plugin/series.js), which must name the same coefficients in the same order.
 #include "estimator/model_terms.h"
 
+#include <algorithm>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <set>
 #include <sstream>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/strings/ascii.h"
@@ -20,6 +24,19 @@
 
 namespace esg::estimator {
 namespace {
+
+std::string ReadSource(const std::string& path) {
+  std::ifstream in(std::string(ESG_SOURCE_DIR) + "/" + path);
+  EXPECT_TRUE(in.good()) << path;
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// Fingerprints (FNV-1a) of the frozen schema history of storage/schema.cc and
+// storage/postgres_schema.cc as released.
+constexpr uint64_t kSqliteFrozen = 0x4008a1848832b2a6ull;
+constexpr uint64_t kPostgresFrozen = 0xbbd72b994f5f6f3bull;
 
 // The coefficient of `c` a descriptor names, by its symbol and component (drift_model.h).
 double ByName(const DriftCoefficients& c, const FixedTermDescriptor& term) {
@@ -66,99 +83,176 @@ TEST(ModelTerms, NamesAreThoseOfTheFormatsAndUnique) {
   EXPECT_EQ(kFixedTerms[kThetaC1].label, "C11");
 }
 
-// "c1DegH" -> "c1_deg_h": the proto field name of a JSON key (the proto3 JSON mapping).
-std::string ProtoFieldName(absl::string_view json_key) {
-  std::string out;
-  for (char c : json_key) {
-    if (absl::ascii_isupper(static_cast<unsigned char>(c))) {
-      out += '_';
-      out += absl::ascii_tolower(static_cast<unsigned char>(c));
-    } else {
-      out += c;
-    }
-  }
-  return out;
+TEST(ModelTerms, FieldNamesAreTheProtoFieldsOfTheJsonKeys) {
+  EXPECT_EQ(FixedTermFieldName("k0DegH"), "k0_deg_h");
+  EXPECT_EQ(FixedTermFieldName("c1DegH"), "c1_deg_h");
+  EXPECT_EQ(FixedTermFieldName("muDegH"), "mu_deg_h");
 }
 
-// The console cannot include C++: its table of coefficients (COEFFICIENTS: telemetry key, label,
-// the GyroDriftModel field it reads) is checked against the descriptors, row for row.
+// Each JSON key once, in theta order, with its first theta index and number of components.
+TEST(ModelTerms, KeysGroupTheComponentsOfATerm) {
+  std::vector<std::string> keys;
+  for (const FixedTermKey& key : FixedTermKeys()) {
+    keys.push_back(absl::StrCat(key.json_key, " ", key.symbol, " ", key.first_theta_index, " ",
+                                key.components, " ", key.unit));
+  }
+  EXPECT_THAT(keys, ::testing::ElementsAre("k0DegH k0 0 0 deg/h", "c1DegH C1 1 3 deg/h",
+                                           "c2DegH C2 4 3 deg/h", "muDegH mu 7 3 deg/h",
+                                           "nuDegH nu 10 3 deg/h"));
+  int covered = 0;
+  for (const FixedTermKey& key : FixedTermKeys()) covered += std::max(1, key.components);
+  EXPECT_EQ(covered, kNumDriftCoefficients);
+  ASSERT_TRUE(FindFixedTermKey("c2DegH").has_value());
+  EXPECT_EQ(FindFixedTermKey("c2DegH")->first_theta_index, kThetaC2);
+  EXPECT_FALSE(FindFixedTermKey("c2").has_value());
+}
+
+// Model membership is the table's (calibration_model.h): "1" takes k0, mu, nu of eq. (1); "10"
+// takes every term, C1 and C2 of eq. (10) too; "11" alone none.
+TEST(ModelTerms, ModelStringsTakeTheTermsTheTableGivesThem) {
+  auto mask = [](const char* model) {
+    std::string taken;
+    const auto m = ParseModel(model)->TermMask();
+    for (int i = 0; i < kNumDriftCoefficients; ++i) taken += m[i] ? '1' : '.';
+    return taken;
+  };
+  EXPECT_EQ(mask("1"), "1......111111");
+  EXPECT_EQ(mask("10"), "1111111111111");
+  EXPECT_EQ(mask("10+11"), "1111111111111");
+  EXPECT_EQ(mask("1+11"), "1......111111");
+  EXPECT_EQ(mask("11"), ".............");
+  EXPECT_FALSE(ParseModel("11")->HasFixedTerms());
+  EXPECT_EQ(ParseModel("1+10")->Name(), "10");
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    EXPECT_NE(term.model_parts, 0u) << term.label << " is in no model";
+    EXPECT_EQ(term.model_parts & ~kAllModelParts, 0u) << term.label;
+  }
+}
+
+// The discovery frees an effect's terms as one range of theta (candidates.h FreedCoefficients).
+TEST(ModelTerms, AnEffectsTermsAreContiguousInTheta) {
+  std::map<std::string, std::vector<int>> by_effect;
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    if (!term.effect.empty()) by_effect[std::string(term.effect)].push_back(term.theta_index);
+  }
+  EXPECT_THAT(by_effect, ::testing::ElementsAre(::testing::Key("fourth_harmonic"),
+                                                ::testing::Key("rotor_displacement"),
+                                                ::testing::Key("unequal_stiffness")));
+  for (const auto& [effect, indices] : by_effect) {
+    for (size_t i = 1; i < indices.size(); ++i) {
+      EXPECT_EQ(indices[i], indices[i - 1] + 1) << effect;
+    }
+  }
+  EXPECT_THAT(by_effect["unequal_stiffness"], ::testing::SizeIs(6));
+  EXPECT_THAT(by_effect["rotor_displacement"], ::testing::SizeIs(6));
+}
+
+// The console cannot include C++: its table of coefficients (series.js COEFFICIENTS: label, JSON
+// key, component, meaning; its diagnosis view reads the same rows) is checked against the
+// descriptors, row for row.
 TEST(ModelTerms, ConsoleLabelsAreTheDescriptorsInOrder) {
-  std::ifstream in(std::string(ESG_SOURCE_DIR) + "/console/plugin/series.js");
-  ASSERT_TRUE(in.good());
-  std::stringstream text;
-  text << in.rdbuf();
-  const std::string js = text.str();
+  const std::string js = ReadSource("console/plugin/series.js");
   const size_t begin = js.find("export const COEFFICIENTS = [");
   ASSERT_NE(begin, std::string::npos);
   const size_t end = js.find("].map(", begin);
   ASSERT_NE(end, std::string::npos);
   const std::string table = js.substr(begin, end - begin);
-  // ['c11', 'C11', (m) => m.c1_deg_h[0]],
-  const std::regex row(R"(\['([^']*)', '([^']*)', \(m\) => m\.([a-z0-9_]+)(\[(\d)\])?\])");
+  // ['C11', 'c1DegH', 0, 'rotor displacement (1st harmonic)'],
+  const std::regex row(R"(\['([^']*)', '([^']*)', (-?\d+), '([^']*)'\])");
   std::vector<std::string> rows;
   for (std::sregex_iterator it(table.begin(), table.end(), row), done; it != done; ++it) {
     const std::smatch& m = *it;
-    rows.push_back(absl::StrCat(m[1].str(), " ", m[2].str(), " ", m[3].str(), " ",
-                                m[5].matched ? m[5].str() : "-1"));
+    rows.push_back(absl::StrCat(m[1].str(), "|", m[2].str(), "|", m[3].str(), "|", m[4].str()));
   }
   std::vector<std::string> expected;
   for (const FixedTermDescriptor& term : kFixedTerms) {
-    expected.push_back(absl::StrCat(absl::AsciiStrToLower(term.label), " ", term.label, " ",
-                                    ProtoFieldName(term.json_key), " ", term.component));
+    expected.push_back(
+        absl::StrCat(term.label, "|", term.json_key, "|", term.component, "|", term.meaning));
   }
   EXPECT_THAT(rows, ::testing::ElementsAreArray(expected));
 }
 
+// FNV-1a, 64 bits: a fingerprint of frozen text.
+uint64_t Fingerprint(absl::string_view text) {
+  uint64_t h = 14695981039346656037ull;
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
+constexpr std::string_view kFrozenBegin = "// Frozen schema history, begin.";
+constexpr std::string_view kFrozenEnd = "// Frozen schema history, end.";
+
+// The file's text without its frozen schema history (the DDL of old schema versions, which
+// describes what databases of those versions hold and never changes); each frozen part is
+// appended to *frozen.
+std::string WithoutFrozenHistory(const std::string& content, std::vector<std::string>* frozen) {
+  std::string out;
+  size_t at = 0;
+  while (true) {
+    const size_t begin = content.find(kFrozenBegin, at);
+    if (begin == std::string::npos) break;
+    const size_t end = content.find(kFrozenEnd, begin);
+    if (end == std::string::npos) {
+      ADD_FAILURE() << "a frozen part without its end mark";
+      break;
+    }
+    out += content.substr(at, begin - at);
+    frozen->push_back(content.substr(begin, end + kFrozenEnd.size() - begin));
+    at = end + kFrozenEnd.size();
+  }
+  out += content.substr(at);
+  return out;
+}
+
 // Where a fixed term is named: the production files (not tests, docs or fuzz corpora) that name
 // the last term of theta, nu (eq. (1)), by any of its names: JSON key, proto field, component
-// labels, theta offset, DriftCoefficients member or the model flag. A new fixed term is written
-// where nu is. Pinned, so a new place that names the terms one by one fails here instead of
-// growing unseen, and a place converted to the table must leave the list.
-TEST(ModelTerms, TheFilesThatNameAFixedTermAreTheKnownOnes) {
-  // A new term is necessarily written in these: its descriptor, its physics (regressor and
-  // coefficient struct), its wire field, the model strings that include it, the console's labels
-  // (checked against the table above).
+// labels, theta offset, DriftCoefficients member, a string of its symbol or the model flag. A new
+// fixed term is written where nu is, so these are the files a new term needs:
+//   estimator/model_terms.h           its descriptor: names, unit, frame, models, effect;
+//   estimator/drift_model.h, .cc      its physics: theta offset, coefficient, regressor column;
+//   estimator/simulator_truth.cc      the simulator's independent printed formula for it;
+//   proto/esg/v1/spacecraft_config.proto  its wire field;
+//   console/plugin/series.js          the console's row (a plain module; checked above).
+// Every other file reads the table (model_terms.h). Frozen schema history (the DDL of old
+// versions in storage/schema.cc and storage/postgres_schema.cc) names the terms of those versions
+// and is pinned unchanged here, so it never takes a new term.
+TEST(ModelTerms, ANewFixedTermIsWrittenInSixFilesOnly) {
   const std::set<std::string> per_term = {
-      "estimator/model_terms.h",       "estimator/drift_model.h",
-      "estimator/drift_model.cc",      "proto/esg/v1/spacecraft_config.proto",
-      "estimator/calibration_model.h", "estimator/calibration_model.cc",
-      "console/plugin/series.js"};
-  // Not yet reading the table (issue 34 item 1): the simulator's independent truth model, the
-  // diagnosis' candidates and report, the CLI's calibrate/simulate/scenario and the console's
-  // diagnosis labels; frozen schema history and the storage layout offsets.
-  const std::set<std::string> not_yet = {
-      "estimator/simulator_truth.h",          "estimator/simulator_truth.cc",
-      "estimator/session.cc",                 "estimator/discovery/candidates.h",
-      "estimator/discovery/candidates.cc",    "estimator/discovery/diagnose.cc",
-      "estimator/discovery/options.h",        "estimator/discovery/report.cc",
-      "client/commands/calibrate.cc",         "client/commands/simulate.cc",
-      "client/scenario.cc",                   "console/plugin/diagnosisView.js",
-      "storage/records.h",                    "storage/schema.cc",
-      "storage/postgres_schema.cc"};
-  const std::regex names(R"(nuDegH|nu_deg_h|nu23|nu31|nu12|kThetaNu|kCoefficientNu|\.nu\b|mu_nu)");
+      "estimator/model_terms.h",     "estimator/drift_model.h",
+      "estimator/drift_model.cc",    "estimator/simulator_truth.cc",
+      "proto/esg/v1/spacecraft_config.proto", "console/plugin/series.js"};
+  EXPECT_LE(per_term.size(), 6u);
+  const std::regex names(
+      R"(nuDegH|nu_deg_h|nu23|nu31|nu12|kThetaNu|kCoefficientNu|\.nu\b|mu_nu|"nu"|'nu')");
   const std::filesystem::path root(ESG_SOURCE_DIR);
   std::set<std::string> found;
+  std::map<std::string, std::vector<uint64_t>> frozen_parts;
   for (const char* dir : {"estimator", "proto", "storage", "server", "client", "console/plugin",
-                          "console/gateway"}) {
+                          "console/gateway", "fuzz"}) {
     for (const auto& entry : std::filesystem::recursive_directory_iterator(root / dir)) {
       const std::string ext = entry.path().extension().string();
       if (!entry.is_regular_file() ||
           (ext != ".h" && ext != ".cc" && ext != ".proto" && ext != ".js")) {
         continue;
       }
-      std::ifstream in(entry.path());
-      std::stringstream text;
-      text << in.rdbuf();
-      const std::string content = text.str();
-      if (std::regex_search(content, names)) {
-        found.insert(std::filesystem::relative(entry.path(), root).generic_string());
-      }
+      const std::string path = std::filesystem::relative(entry.path(), root).generic_string();
+      std::vector<std::string> frozen;
+      const std::string content = WithoutFrozenHistory(ReadSource(path), &frozen);
+      for (const std::string& part : frozen) frozen_parts[path].push_back(Fingerprint(part));
+      if (std::regex_search(content, names)) found.insert(path);
     }
   }
-  std::set<std::string> expected = per_term;
-  expected.insert(not_yet.begin(), not_yet.end());
-  EXPECT_THAT(found, ::testing::ContainerEq(expected));
-  EXPECT_EQ(per_term.size(), 7u);
+  EXPECT_THAT(found, ::testing::ContainerEq(per_term));
+  // The frozen parts, as released: version 1-9's DDL and coefficient columns (SQLite), version
+  // 7's DDL (PostgreSQL). A change here changes what an old database is taken to be.
+  EXPECT_THAT(frozen_parts,
+              ::testing::UnorderedElementsAre(
+                  ::testing::Pair("storage/schema.cc", ::testing::ElementsAre(kSqliteFrozen)),
+                  ::testing::Pair("storage/postgres_schema.cc",
+                                  ::testing::ElementsAre(kPostgresFrozen))));
 }
 
 }  // namespace

@@ -83,7 +83,7 @@ TEST(OpenEnded, EffectFreeRecordingSelectsNothing) {
   config.filter.fault_threshold = kPi;
   config.filter.integration_rate_hz = 0.2;
   SessionOptions options;
-  options.model.k0 = options.model.c1c2 = options.model.mu_nu = true;
+  options.model.parts = kAllModelParts;
   options.model.random_walk = true;
   const auto& frames = sim->recording.frames;
   auto run = RunModel(config, options, frames);

@@ -40,10 +40,10 @@ SessionOptions Model(const char* name) {
 TEST(CalibrationModel, ParsesModelStringsAndFreesSigmaPositiveTerms) {
   auto m = ParseModel("10+11");
   ASSERT_THAT(m, IsOk());
-  EXPECT_TRUE(m->k0 && m->c1c2 && m->random_walk);
+  EXPECT_TRUE((m->parts & kModelPart10) && m->random_walk);
   EXPECT_EQ(m->Name(), "10+11");
   EXPECT_EQ(ParseModel("1")->Name(), "1");
-  EXPECT_FALSE(ParseModel("1")->c1c2);
+  EXPECT_EQ(ParseModel("1")->parts, kModelPart1);
   EXPECT_THAT(ParseModel("12"), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("'12'")));
   EXPECT_THAT(ParseModel(""), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("model")));
   const SpacecraftConfig config = testing::PaperConfig();

@@ -39,7 +39,7 @@ void AppendHistory(storage::Storage& storage, const std::string& id, int days) {
       r.model_name = "10+11";
       r.values.assign(storage::kNumCoefficientValues, 0.01);
       // Records are SI: k0 = the index in deg/h.
-      r.values[storage::kCoefficientK0] = estimator::DegPerHourToRadPerSec(step * kGyros + (gyro - 1));
+      r.values[estimator::kThetaK0] = estimator::DegPerHourToRadPerSec(step * kGyros + (gyro - 1));
       r.sigmas.assign(storage::kNumCoefficientValues, 0.001);
       ASSERT_TRUE(storage.coefficients().Append(*txn, r).ok());
     }
@@ -99,7 +99,8 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
       late.compute_time = kStart;
       late.model_name = "10+11";
       late.values.assign(storage::kNumCoefficientValues, 0.0);
-      late.values[storage::kCoefficientK0] = estimator::DegPerHourToRadPerSec(static_cast<double>(total));
+      late.values[estimator::kThetaK0] =
+          estimator::DegPerHourToRadPerSec(static_cast<double>(total));
       ASSERT_TRUE(server.core().storage().coefficients().Append(late).ok());
       appended = true;
     }

@@ -64,8 +64,8 @@ TEST_P(CoefficientStoreTest, RoundTripsValuesSigmasAndNaN) {
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
   CoefficientRecord written = Record("RDK-1", 2, 600);
-  written.values[kCoefficientMu] = std::nan("");   // not estimated
-  written.sigmas[kCoefficientNu + 1] = std::nan("");  // unknown
+  written.values[estimator::kThetaMu] = std::nan("");   // not estimated
+  written.sigmas[estimator::kThetaNu + 1] = std::nan("");  // unknown
   ASSERT_THAT((*storage)->coefficients().Append(written), IsOk());
 
   absl::StatusOr<std::vector<CoefficientRecord>> read = (*storage)->coefficients().History(
@@ -110,13 +110,15 @@ TEST_P(CoefficientStoreTest, EachComponentLandsInTheRowOfItsTermKey) {
                                         " FROM coefficient_values WHERE term_key = '", key, "'"));
   };
   EXPECT_THAT(value("value", "k0_deg_h"),
-              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[kCoefficientK0]))));
+              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[estimator::kThetaK0]))));
   EXPECT_THAT(value("value", "c2y_deg_h"),
-              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.values[kCoefficientC2 + 1]))));
+              IsOkAndHolds(
+                  DoubleEq(RadPerSecToDegPerHour(written.values[estimator::kThetaC2 + 1]))));
   EXPECT_THAT(value("value", "misalignment_z_arcsec"),
               IsOkAndHolds(DoubleEq(RadToArcsec(written.values[kCoefficientMisalignment + 2]))));
   EXPECT_THAT(value("sigma", "nu31_deg_h"),
-              IsOkAndHolds(DoubleEq(RadPerSecToDegPerHour(written.sigmas[kCoefficientNu + 1]))));
+              IsOkAndHolds(
+                  DoubleEq(RadPerSecToDegPerHour(written.sigmas[estimator::kThetaNu + 1]))));
   EXPECT_THAT(QueryInt(db, "SELECT COUNT(*) FROM coefficient_values"),
               IsOkAndHolds(kNumCoefficientValues));
 }
@@ -180,9 +182,9 @@ void ExpectSameRecords(const std::vector<CoefficientRecord>& a,
 TEST_P(CoefficientStoreTest, AVersion9DatabaseReadsBackTheSameHistoryAfterTheMigration) {
   std::vector<CoefficientRecord> records = {Record("OLD-9", 1, 60), Record("OLD-9", 2, 60),
                                             Record("OLD-9", 1, 120)};
-  records[1].values[kCoefficientMu + 2] = std::nan("");  // not estimated
+  records[1].values[estimator::kThetaMu + 2] = std::nan("");  // not estimated
   records[2].sigmas.clear();                               // no sigmas
-  records[2].values[kCoefficientK0] = -1.0 / 3.0;          // 17 digits survive the SQL text
+  records[2].values[estimator::kThetaK0] = -1.0 / 3.0;          // 17 digits survive the SQL text
   const std::string old_path = NewDatabase();
   {
     std::unique_ptr<Database> db;
@@ -229,7 +231,7 @@ TEST_P(CoefficientStoreTest, AVersion9DatabaseReadsBackTheSameHistoryAfterTheMig
     ExpectSameRecords(*migrated, *written);
     // And the values are the ones written (NaN where not estimated, no sigmas on the last).
     if (!include_revised) continue;
-    EXPECT_TRUE(std::isnan((*migrated)[1].values[kCoefficientMu + 2]));
+    EXPECT_TRUE(std::isnan((*migrated)[1].values[estimator::kThetaMu + 2]));
     EXPECT_THAT((*migrated)[2].sigmas, IsEmpty());
     EXPECT_EQ((*migrated)[1].revised_time, UnixNanosToTime(5));
     for (int i = 0; i < kNumCoefficientValues; ++i) {
@@ -417,11 +419,11 @@ TEST(CoefficientValues, ConvertsEstimatorSiToTheStoredUnitsAndBack) {
   const std::vector<double> values = ToCoefficientValues(drift, misalignment_b);
   ASSERT_EQ(values.size(), static_cast<size_t>(kNumCoefficientValues));
   // SI, in the layout of records.h.
-  EXPECT_EQ(values[kCoefficientK0], drift.k0);
-  EXPECT_EQ(values[kCoefficientC1 + 1], drift.C1[1]);
-  EXPECT_EQ(values[kCoefficientC2], drift.C2[0]);
-  EXPECT_EQ(values[kCoefficientMu + 1], drift.mu[1]);  // mu23
-  EXPECT_EQ(values[kCoefficientNu + 2], drift.nu[2]);  // nu12
+  EXPECT_EQ(values[estimator::kThetaK0], drift.k0);
+  EXPECT_EQ(values[estimator::kThetaC1 + 1], drift.C1[1]);
+  EXPECT_EQ(values[estimator::kThetaC2], drift.C2[0]);
+  EXPECT_EQ(values[estimator::kThetaMu + 1], drift.mu[1]);  // mu23
+  EXPECT_EQ(values[estimator::kThetaNu + 2], drift.nu[2]);  // nu12
   EXPECT_EQ(values[kCoefficientMisalignment + 1], misalignment_b[1]);
 
   estimator::DriftCoefficients back;

@@ -75,11 +75,20 @@ std::vector<std::string> Tables(Database& db) {
 
 // The version-1 layout written out independently of schema.cc, as an old program left it.
 std::string HandMadeV1Sql() {
+  // Version 1's coefficient columns, frozen as an old program wrote them: not the current terms
+  // (estimator/model_terms.h), so a new term does not change what a version-1 database is.
+  static constexpr const char* kStems[][2] = {
+      {"k0", "deg_h"},   {"c1x", "deg_h"},  {"c1y", "deg_h"},  {"c1z", "deg_h"},
+      {"c2x", "deg_h"},  {"c2y", "deg_h"},  {"c2z", "deg_h"},  {"mu12", "deg_h"},
+      {"mu23", "deg_h"}, {"mu31", "deg_h"}, {"nu23", "deg_h"}, {"nu31", "deg_h"},
+      {"nu12", "deg_h"}, {"misalignment_x", "arcsec"}, {"misalignment_y", "arcsec"},
+      {"misalignment_z", "arcsec"}};
   std::vector<std::string> coefficient_columns;
-  for (absl::string_view c : CoefficientColumns())
-    coefficient_columns.push_back(absl::StrCat(c, " REAL"));
-  for (absl::string_view c : CoefficientSigmaColumns()) {
-    coefficient_columns.push_back(absl::StrCat(c, " REAL"));
+  for (const auto& [stem, unit] : kStems) {
+    coefficient_columns.push_back(absl::StrCat(stem, "_", unit, " REAL"));
+  }
+  for (const auto& [stem, unit] : kStems) {
+    coefficient_columns.push_back(absl::StrCat(stem, "_sigma_", unit, " REAL"));
   }
   return absl::StrCat(
       "CREATE TABLE spacecraft_configs (spacecraft_id TEXT NOT NULL, version INTEGER NOT NULL, "
@@ -149,13 +158,13 @@ TEST(Schema, CoefficientValuesAreKeyedByTermNamedWithTheirUnitsInLayoutOrder) {
   EXPECT_THAT(Columns(**db, "coefficient_values"),
               ElementsAre("coefficient_id", "term_key", "value", "sigma"));
   // Spot-check the documented names (records.h) so a reordering cannot pass silently.
-  EXPECT_EQ(CoefficientColumns()[kCoefficientK0], "k0_deg_h");
-  EXPECT_EQ(CoefficientColumns()[kCoefficientC1 + 2], "c1z_deg_h");
-  EXPECT_EQ(CoefficientColumns()[kCoefficientC2], "c2x_deg_h");
-  EXPECT_EQ(CoefficientColumns()[kCoefficientMu], "mu12_deg_h");
-  EXPECT_EQ(CoefficientColumns()[kCoefficientNu], "nu23_deg_h");
+  EXPECT_EQ(CoefficientColumns()[estimator::kThetaK0], "k0_deg_h");
+  EXPECT_EQ(CoefficientColumns()[estimator::kThetaC1 + 2], "c1z_deg_h");
+  EXPECT_EQ(CoefficientColumns()[estimator::kThetaC2], "c2x_deg_h");
+  EXPECT_EQ(CoefficientColumns()[estimator::kThetaMu], "mu12_deg_h");
+  EXPECT_EQ(CoefficientColumns()[estimator::kThetaNu], "nu23_deg_h");
   EXPECT_EQ(CoefficientColumns()[kCoefficientMisalignment + 1], "misalignment_y_arcsec");
-  EXPECT_EQ(CoefficientSigmaColumns()[kCoefficientNu + 2], "nu12_sigma_deg_h");
+  EXPECT_EQ(CoefficientSigmaColumns()[estimator::kThetaNu + 2], "nu12_sigma_deg_h");
 }
 
 TEST(Schema, HandMadeVersion1FileIsMigratedWithItsData) {
