@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "absl/strings/string_view.h"
 #include "absl/time/clock.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
@@ -383,16 +384,20 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
   // The plan or the hold starts from the filter's last estimate (which may be older than the
   // last archived frame) and propagates its covariance: the envelope starts from that estimate's
   // 1-sigma, not from the recorded samples' (see the head of this file).
-  std::string start_text =
-      absl::StrCat("the 1-sigma is propagated from the filter's last estimate at ", FormatUtc(last),
-                   " (", sigma_text(current), ", the star tracker used up to it)");
-  if (!recorded_times.empty()) {
-    const Predicted& last_recorded = predicted[recorded_times.size() - 1];
-    absl::StrAppend(&start_text, ", not from the recorded samples' (", sigma_text(last_recorded.attitude),
-                    " at ", FormatUtc(last_recorded.time),
-                    "): the envelope steps there because the estimate changes, from the gyros "
-                    "alone to the filter's");
-  }
+  // `how`: along what the propagation runs, for the plan.
+  const auto start_text = [&](absl::string_view how) {
+    std::string text = absl::StrCat("the 1-sigma is propagated", how,
+                                    " from the filter's last estimate at ", FormatUtc(last), " (",
+                                    sigma_text(current), ", the star tracker used up to it)");
+    if (!recorded_times.empty()) {
+      const Predicted& last_recorded = predicted[recorded_times.size() - 1];
+      absl::StrAppend(&text, ", not from the recorded samples' (",
+                      sigma_text(last_recorded.attitude), " at ", FormatUtc(last_recorded.time),
+                      "): the envelope steps there because the estimate changes, from the gyros "
+                      "alone to the filter's");
+    }
+    return text;
+  };
   std::string future_text;
   if (!future_times.empty()) {
     future_text =
@@ -401,14 +406,14 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
                            FormatUtc(recorded_until), ": the planned attitude given (",
                            request.planned_attitude_size(), " samples from ",
                            FormatUtc(planned->start()),
-                           ", slerp between them, held beyond its ends); ", start_text,
-                           " along the gyro readings the plan implies")
+                           ", slerp between them, held beyond its ends); ",
+                           start_text(" along the gyro readings the plan implies"))
             : absl::StrCat(words(esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD), " after ",
                            FormatUtc(recorded_until),
                            ": no planned attitude given, the attitude of the filter's last "
                            "estimate held inertially fixed; wrong by the body's motion if it "
                            "moves; ",
-                           start_text);
+                           start_text(""));
   }
   esg::v1::PredictResponse response;
   response.set_attitude_source(source);
