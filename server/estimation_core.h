@@ -89,9 +89,12 @@ struct CoreOptions {
   // PostgreSQL: how many filter jobs may wait for their commit at once. The jobs waiting
   // together are committed in ONE transaction (storage::Storage::CommitFilterEffectsGroup, each
   // job in its own savepoint), so a node makes one commit for many spacecraft instead of one per
-  // job (docs/deploy.md "Capacity"). The worker pool then has this many threads, of which at
-  // most worker_threads apply frames at a time. SQLite: unused (each job commits alone).
-  int filter_commit_group = 64;
+  // job. The worker pool then has this many threads, of which at most worker_threads apply
+  // frames at a time. 0 (the default), or not above worker_threads: each job commits alone.
+  // Off by default: on esgd's one connection the groups' transactions held it back to back and
+  // ingest's commits waited seconds for it (docs/deploy.md "Capacity", BM_FleetAtOneHertz).
+  // SQLite: unused.
+  int filter_commit_group = 0;
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
   // one alert (repeat_count); an alert without a new occurrence for this long is cleared.
   absl::Duration alert_collapse_window = absl::Minutes(30);
