@@ -28,6 +28,7 @@
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/planned_profile.h"
+#include "server/proto_mapping.h"
 #include "storage/aem.h"
 
 namespace esg::server {
@@ -221,15 +222,13 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
   if (request.has_from() || request.has_to()) {
     if (!request.has_from()) return absl::InvalidArgumentError("from: required when to is given");
     if (!request.has_to()) return absl::InvalidArgumentError("to: required when from is given");
-    ASSIGN_OR_RETURN(absl::Time from, proto_convert::TimeFromProto(request.from()));
-    ASSIGN_OR_RETURN(absl::Time to, proto_convert::TimeFromProto(request.to()));
+    // [from, to] read as every RPC reads it (proto_mapping.h RequestInterval).
+    ASSIGN_OR_RETURN(const estimator::TimeInterval span, RequestInterval(request));
+    const absl::Time from = span.from;
+    const absl::Time to = span.to;
     if (!(request.step_s() > 0) || !std::isfinite(request.step_s())) {
       return absl::InvalidArgumentError(
           absl::StrCat("step_s: must be > 0 when from/to are given, got ", request.step_s()));
-    }
-    if (to < from) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("to: ", FormatUtc(to), " is before from ", FormatUtc(from)));
     }
     const double count = std::floor(absl::ToDoubleSeconds(to - from) / request.step_s()) + 1;
     if (count > options_.max_prediction_samples) {
