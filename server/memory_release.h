@@ -31,8 +31,9 @@ inline constexpr int kTrimThresholdBytes = 1 << 20;
 
 // Notes that about `bytes` of heap were, or are about to be, freed (a response written, a queue
 // dropped). Once kTrimAfterBytes are noted, malloc_trim(0) runs on a background thread
-// kTrimDelay later (time for gRPC to destroy the call that held the response); notes meanwhile
-// join that run. Cheap and thread-safe; never blocks the caller.
+// 300 ms later (time for gRPC to destroy the call that held the response), then again 2 s and
+// 12 s later (what is freed later on a loaded machine); notes before the first trim join that
+// run. Cheap and thread-safe; never blocks the caller.
 void NoteFreedMemory(int64_t bytes);
 
 inline constexpr int64_t kTrimAfterBytes = int64_t{16} << 20;
