@@ -5,8 +5,8 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
-#include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <tuple>
 #include <utility>
@@ -19,12 +19,15 @@
 #include "absl/time/time.h"
 #include "server/proto_mapping.h"
 #include "server/subscription_reactor.h"
+#include "storage/alert_store.h"
 #include "storage/records.h"
 
 namespace esg::server {
 namespace {
 
 constexpr size_t kMaxQueuedAlerts = 100000;
+// Stored alerts read at a time by the replay: about 1.5 MB at 1.3 KB an alert.
+constexpr int64_t kAlertReplayPage = 1000;
 
 // What a SubscribeAlerts stream has sent of each alert (subscription_reactor.h "Feed").
 class AlertFeed {
@@ -32,15 +35,21 @@ class AlertFeed {
   using Record = storage::AlertRecord;
   using Message = esg::v1::Alert;
   static constexpr size_t kMaxQueued = kMaxQueuedAlerts;
-  // The replay is one read of at most kMaxQueuedAlerts alerts; the live alerts buffered during it
-  // are not counted (the queue's limit applies as they are released).
-  static constexpr size_t kMaxBuffered = std::numeric_limits<size_t>::max();
+  // The replay is read as the client keeps up, so the live alerts buffered meanwhile are bounded
+  // like the queue (and charged to the QueueBudget).
+  static constexpr size_t kMaxBuffered = kMaxQueuedAlerts;
   static std::string TooSlowMessage() { return "alert subscriber too slow: queue limit reached"; }
   static std::string DroppedMessage(absl::string_view why) {
     return absl::StrCat("alert subscriber too slow, dropped: ", why,
                         "; subscribe again with since = the latest measurement_time received");
   }
   static Message ToProto(const Record& r) { return AlertToProto(r); }
+  static int64_t RecordBytes(const Record& r) {
+    return static_cast<int64_t>(sizeof(Record) + r.spacecraft_id.capacity() +
+                                r.severity.capacity() + r.reason.capacity() +
+                                r.subsystem.capacity() + r.unit.capacity() +
+                                r.message.capacity() + r.acknowledged_by.capacity());
+  }
 
   // Whether to queue `r`: not if that state of the alert was already queued. While the replay is
   // merged with the changes buffered during it, their order is unknown, so only a newer state is
@@ -76,13 +85,26 @@ class AlertFeed {
   // The live rule above needs every alert's last state sent: nothing is forgotten.
   void ReplayComplete() {}
 
+  // The replay: the request's spacecraft ("" for all), since (InfiniteFuture: no replay),
+  // include_revised, and where the read stands (the last alert read; nullopt before the first
+  // page); `read` once the last page was read.
+  std::string spacecraft_id;
+  absl::Time since = absl::InfiniteFuture();
+  bool include_revised = false;
+  std::optional<storage::AlertPosition> after;
+  bool read = false;
+
  private:
   // repeat_count, acknowledged, cleared, revised (a re-run over a late frame superseded it)
   using Version = std::tuple<int64_t, bool, bool, bool>;
   std::map<std::pair<std::string, int64_t>, Version> sent_;
 };
 
-// The replay is one read of the alert store, merged at once with what was buffered meanwhile.
+// The replay is read kAlertReplayPage alerts at a time, each page once the previous one is
+// written, so a client that does not read holds one page at most. A page is charged to the
+// caller's QueueBudget account from the read until its alerts are queued (each then charged as
+// a message): a page that would take the caller, or all subscribers, beyond the bound finishes
+// the stream with RESOURCE_EXHAUSTED naming it, as a slow live subscriber's queue does.
 class AlertReactor : public SubscriptionReactor<AlertFeed> {
  public:
   AlertReactor(CallCounter* calls, EstimationCore* core, const esg::v1::AlertSubscription& request,
@@ -90,22 +112,75 @@ class AlertReactor : public SubscriptionReactor<AlertFeed> {
       : SubscriptionReactor(calls, core, &core->alert_hub(), std::move(hold)) {
     absl::Time since;
     if (!Accept(request, &since)) return;
+    {
+      absl::MutexLock lock(&shared().mu);
+      AlertFeed& feed = shared().feed;
+      feed.spacecraft_id = request.spacecraft_id();
+      feed.since = since;
+      feed.include_revised = request.include_revised();
+    }
     Subscribe(request.spacecraft_id());
-    std::vector<storage::AlertRecord> replay;
-    if (since != absl::InfiniteFuture()) {
-      absl::StatusOr<std::vector<storage::AlertRecord>> stored = core->storage().alerts().Since(
-          request.spacecraft_id(), since, kMaxQueuedAlerts, request.include_revised());
-      if (!stored.ok()) {
-        absl::MutexLock lock(&shared().mu);
-        FinishOnce(shared(), stored.status());
+    Pump();
+  }
+
+ private:
+  // Writes what is queued; while replaying and nothing is queued, reads the next page of the
+  // replay (outside the lock: publishers are not held up by the store) or, at its end, releases
+  // the buffered live alerts and queues the marker. Runs on the reactor's own calls (the
+  // constructor, OnWriteDone), never two at a time.
+  void Pump() override {
+    Shared& s = shared();
+    for (;;) {
+      std::string id;
+      absl::Time since;
+      bool include_revised = false;
+      std::optional<storage::AlertPosition> after;
+      {
+        absl::MutexLock lock(&s.mu);
+        if (s.finished) return;
+        if (!s.replaying || !s.queue.empty()) {
+          TryWrite(s);
+          return;
+        }
+        if (s.feed.read || s.feed.since == absl::InfiniteFuture()) {
+          CompleteReplay(s);
+          return;
+        }
+        id = s.feed.spacecraft_id;
+        since = s.feed.since;
+        include_revised = s.feed.include_revised;
+        after = s.feed.after;
+      }
+      storage::AlertStore& store = core()->storage().alerts();
+      absl::StatusOr<std::vector<storage::AlertRecord>> page =
+          after.has_value() ? store.Since(id, since, *after, kAlertReplayPage, include_revised)
+                            : store.Since(id, since, kAlertReplayPage, include_revised);
+      absl::MutexLock lock(&s.mu);
+      if (!page.ok()) {
+        FinishOnce(s, page.status());
         return;
       }
-      replay = std::move(*stored);
+      int64_t page_bytes = 0;
+      for (const storage::AlertRecord& r : *page) page_bytes += AlertFeed::RecordBytes(r);
+      if (absl::Status charged = s.hold.queue.Charge(page_bytes); !charged.ok()) {
+        FinishOnce(s, absl::ResourceExhaustedError(absl::StrCat(
+                          "alert replay stopped: the page of ", page->size(),
+                          " stored alerts read for it (", page_bytes,
+                          " bytes) would pass the bound: ", charged.message(),
+                          "; subscribe again with since = the latest measurement_time received")));
+        NoteFreedMemory(page_bytes);
+        return;
+      }
+      for (const storage::AlertRecord& r : *page) Offer(s, r);
+      s.hold.queue.Refund(page_bytes);
+      if (static_cast<int64_t>(page->size()) < kAlertReplayPage) {
+        s.feed.read = true;
+      } else {
+        const storage::AlertRecord& last = page->back();
+        s.feed.after = storage::AlertPosition{last.measurement_time, last.spacecraft_id,
+                                              last.sequence};
+      }
     }
-    Shared& s = shared();
-    absl::MutexLock lock(&s.mu);
-    for (const storage::AlertRecord& r : replay) Offer(s, r);
-    CompleteReplay(s);
   }
 };
 

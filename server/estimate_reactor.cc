@@ -44,6 +44,12 @@ struct EstimateFeed {
         "; subscribe again with since = the last measurement_time received");
   }
   static Message ToProto(const Record& r) { return EstimateToProto(r); }
+  static int64_t RecordBytes(const Record& r) {
+    return static_cast<int64_t>(
+        sizeof(Record) + r.spacecraft_id.capacity() + r.state.capacity() +
+        r.attitude_invalid_reason.capacity() +
+        r.star_tracker_innovations.capacity() * sizeof(r.star_tracker_innovations[0]));
+  }
 
   // Whether to queue `r`: not if, while replay and live overlap, the same or a later computation
   // of its step was already queued.

@@ -8,7 +8,7 @@
 // live records are queued as published. Everything committed before the subscription is in the
 // store and everything committed after it is published to the subscription, so nothing falls
 // between replay and live; what both hold is kept out by the Feed's dedupe rule (Admit). How the
-// store is read (one read, or pages read as the client keeps up) is the reactor's own part.
+// store is read (pages read as the client keeps up, for both) is the reactor's own part.
 //
 // A Feed is the per-stream state of one kind of record, guarded by the stream's lock:
 //   using Record, Message                      the hub's record, the streamed message (which has
@@ -22,15 +22,19 @@
 //                                              subscribers, reached their bound (`why`, from
 //                                              QueueBudget)
 //   static Message ToProto(const Record&)
+//   static int64_t RecordBytes(const Record&)  about what a record holds on the heap (charged
+//                                              to the QueueBudget while it is buffered or read)
 //   bool Admit(const Record&, bool replaying)  the dedupe rule: whether to queue the record;
 //                                              `replaying` until the buffer has been released
 //   void ReplayComplete()                      the buffer has been released
 //
 // Bounds (docs/service.md "Limits"): the stream holds its caller's subscription slot (a Permit)
 // from its start until it is finished, and charges every queued message to its caller's
-// QueueBudget account until the message is written. Finishing the stream (an error, a cancel, a
-// drop) gives back the slot, discards what is still queued and notes the freed memory
-// (memory_release.h), so a dropped or cancelled subscriber's queue is returned at once.
+// QueueBudget account until the message is written, and every live record buffered during the
+// replay until it is released (a replay read as the client keeps up may take long). Finishing
+// the stream (an error, a cancel, a drop) gives back the slot, discards what is still queued and
+// buffered and notes the freed memory (memory_release.h), so a dropped or cancelled
+// subscriber's queue is returned at once.
 //
 // Lifetime: the hub's listener and closer hold the Shared state weakly, since a closer may run
 // (CloseAll calls them outside the hub's lock) after OnDone has unsubscribed and deleted the
@@ -172,6 +176,12 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
               TooSlow(*s);
               return;
             }
+            if (absl::Status charged = s->hold.queue.Charge(Feed::RecordBytes(r));
+                !charged.ok()) {
+              FinishOnce(*s,
+                         absl::ResourceExhaustedError(Feed::DroppedMessage(charged.message())));
+              return;
+            }
             s->buffered.push_back(r);
           } else {
             Offer(*s, r);
@@ -216,6 +226,7 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
   static void CompleteReplay(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
     std::vector<Record> buffered;  // Offer may finish the stream, which clears s.buffered
     buffered.swap(s.buffered);
+    s.hold.queue.Refund(BufferedBytes(buffered));  // each is charged as a message instead
     for (const Record& r : buffered) Offer(s, r);
     s.replaying = false;
     s.feed.ReplayComplete();
@@ -248,9 +259,17 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
       s.hold.queue.Refund(s.queue.back().bytes);
       s.queue.pop_back();
     }
-    freed += static_cast<int64_t>(s.buffered.size() * sizeof(Message));
+    const int64_t buffered = BufferedBytes(s.buffered);
+    s.hold.queue.Refund(buffered);
+    freed += buffered;
     std::vector<Record>().swap(s.buffered);
     NoteFreedMemory(freed);
+  }
+
+  static int64_t BufferedBytes(const std::vector<Record>& records) {
+    int64_t bytes = 0;
+    for (const Record& r : records) bytes += Feed::RecordBytes(r);
+    return bytes;
   }
 
   static void TooSlow(Shared& s) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {

@@ -30,6 +30,21 @@ constexpr char kSinceAll[] = "SELECT " ESG_ALERT_READ_COLUMNS
                              " FROM alerts WHERE measurement_time_unix_ns >= ?1 "
                              "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
                              "ORDER BY measurement_time_unix_ns, spacecraft_id, sequence LIMIT ?2";
+// Since continued after a position ?4 (time), ?5 (sequence), ?6 (spacecraft): the redundant
+// "measurement_time_unix_ns >= ?4" bounds the range the index is read from.
+constexpr char kSinceOneAfter[] =
+    "SELECT " ESG_ALERT_READ_COLUMNS
+    " FROM alerts WHERE spacecraft_id = ?1 AND measurement_time_unix_ns >= ?2 "
+    "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) AND measurement_time_unix_ns >= ?4 "
+    "AND (measurement_time_unix_ns > ?4 OR sequence > ?5) "
+    "ORDER BY measurement_time_unix_ns, sequence LIMIT ?3";
+constexpr char kSinceAllAfter[] =
+    "SELECT " ESG_ALERT_READ_COLUMNS
+    " FROM alerts WHERE measurement_time_unix_ns >= ?1 "
+    "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) AND measurement_time_unix_ns >= ?4 "
+    "AND (measurement_time_unix_ns > ?4 OR spacecraft_id > ?6 "
+    "OR (spacecraft_id = ?6 AND sequence > ?5)) "
+    "ORDER BY measurement_time_unix_ns, spacecraft_id, sequence LIMIT ?2";
 constexpr char kInsert[] = "INSERT INTO alerts (" ESG_ALERT_COLUMNS
                            ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, "
                            "?14, ?15, ?16, ?17, ?18)";
@@ -188,6 +203,27 @@ absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spa
   }
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSinceOne));
   st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(since)).BindInt64(3, limit);
+  st->BindInt64(9, include_revised ? 1 : 0);
+  return ReadAll(st);
+}
+
+absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spacecraft_id,
+                                                           absl::Time since,
+                                                           const AlertPosition& after,
+                                                           int64_t limit, bool include_revised) {
+  if (limit <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("limit = ", limit, ": must be positive"));
+  }
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  const bool all = spacecraft_id.empty();
+  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(all ? kSinceAllAfter : kSinceOneAfter));
+  if (all) {
+    st->BindInt64(1, TimeToUnixNanos(since)).BindInt64(2, limit);
+    st->BindText(6, after.spacecraft_id);
+  } else {
+    st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(since)).BindInt64(3, limit);
+  }
+  st->BindInt64(4, TimeToUnixNanos(after.measurement_time)).BindInt64(5, after.sequence);
   st->BindInt64(9, include_revised ? 1 : 0);
   return ReadAll(st);
 }

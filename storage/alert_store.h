@@ -5,6 +5,7 @@
 #define ESG_STORAGE_ALERT_STORE_H_
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -15,6 +16,13 @@
 #include "storage/database.h"
 
 namespace esg::storage {
+
+// Where a paged read of AlertStore::Since stopped: the last alert it returned, in Since's order.
+struct AlertPosition {
+  absl::Time measurement_time;
+  std::string spacecraft_id;
+  int64_t sequence = 0;
+};
 
 // Thread-safe (through Database). Methods without a Transaction argument run in their own
 // transaction; the overloads taking one join the caller's.
@@ -35,6 +43,11 @@ class AlertStore {
   // unless include_revised (then also those a re-run over a late frame superseded).
   absl::StatusOr<std::vector<AlertRecord>> Since(absl::string_view spacecraft_id, absl::Time since,
                                                  int64_t limit, bool include_revised = false);
+  // The same read continued strictly after `after` (a page of a paged read: at most `limit`
+  // alerts; the next page continues after the last alert of this one).
+  absl::StatusOr<std::vector<AlertRecord>> Since(absl::string_view spacecraft_id, absl::Time since,
+                                                 const AlertPosition& after, int64_t limit,
+                                                 bool include_revised = false);
 
   // One alert; NotFound if missing.
   absl::StatusOr<AlertRecord> Get(absl::string_view spacecraft_id, int64_t sequence);

@@ -11,9 +11,12 @@
 #include <functional>
 #include <iostream>
 #include <memory>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -24,6 +27,8 @@
 #include "gtest/gtest.h"
 #include "server/memory_release.h"
 #include "server/queue_budget.h"
+#include "storage/alert_store.h"
+#include "storage/storage.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
 #include "tests/testing/status_matchers.h"
@@ -40,6 +45,7 @@ using ::esg::testing::SimulateRun;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
 using ::esg::testing::WriteTokens;
+using ::testing::EndsWith;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
@@ -474,6 +480,144 @@ TEST(CallerBounds, NonReadingSubscribersOfSeveralCallersAreDroppedAtTheTotalBoun
   EXPECT_EQ(fast.Cancel().error_code(), grpc::StatusCode::CANCELLED);
   EXPECT_TRUE(WaitFor([&] { return server.get()->service().queue_budget().held() == 0; },
                       absl::Seconds(5)));
+}
+
+// ---- Alert replay ------------------------------------------------------------------------------
+
+// Stores `n` alerts of about 1.3 KB in `server`'s SQLite file, alternating between spacecraft
+// CB-RA and CB-RB, four to a measurement time (so that pages end between alerts of one time).
+void StoreBigAlerts(LoopbackServer& server, int64_t n) {
+  storage::Storage& store = server.core().storage();
+  absl::StatusOr<storage::Transaction> txn =
+      store.database().Begin(storage::TransactionMode::kImmediate);
+  ASSERT_THAT(txn.status(), IsOk());
+  for (int64_t i = 0; i < n; ++i) {
+    storage::AlertRecord r = BigAlert(0);
+    r.spacecraft_id = i % 2 == 0 ? "CB-RA" : "CB-RB";
+    r.first_time = r.measurement_time = r.compute_time = absl::FromUnixSeconds(1700000000 + i / 4);
+    ASSERT_THAT(store.alerts().Append(*txn, r).status(), IsOk());
+  }
+  ASSERT_THAT(txn->Commit(), IsOk());
+}
+
+// Reads a SubscribeAlerts stream since 1970 up to its marker; returns the alerts before it.
+std::vector<esg::v1::Alert> ReplayAll(const std::string& address, const std::string& spacecraft_id,
+                                      grpc::Status* status) {
+  auto stub = esg::v1::EstimationService::NewStub(OwnChannel(address, 500));
+  grpc::ClientContext context;
+  context.set_deadline(In(absl::Minutes(2)));
+  esg::v1::AlertSubscription request;
+  request.set_spacecraft_id(spacecraft_id);
+  request.mutable_since()->set_seconds(0);
+  request.set_replay_marker(true);
+  auto reader = stub->SubscribeAlerts(&context, request);
+  std::vector<esg::v1::Alert> alerts;
+  esg::v1::Alert a;
+  bool marker = false;
+  while (!marker && reader->Read(&a)) {
+    marker = a.replay_complete();
+    if (!marker) alerts.push_back(a);
+  }
+  if (marker) context.TryCancel();
+  *status = reader->Finish();
+  return alerts;
+}
+
+// SubscribeAlerts' replay is read 1000 stored alerts at a time, each page once the previous one
+// is written, and charged to the caller's unread-message bound: a client that does not read
+// holds one page (about 3 MB with its messages, here; the whole replay of 12 000 alerts of
+// 1.3 KB is about 17 MB, which the replay used to read, and queue, at once). A client that
+// reads gets every stored alert once, in order (over all spacecraft: by time, spacecraft,
+// sequence), across pages that end between alerts of one measurement time.
+TEST(CallerBounds, AlertReplayIsReadInPagesChargedToTheCallersBound) {
+  LoopbackServer server;
+  StoreBigAlerts(server, 12000);
+  if (HasFatalFailure()) return;
+  QueueBudget& budget = server.get()->service().queue_budget();
+
+  std::atomic<int64_t> peak_held{0};
+  std::atomic<bool> watching{true};
+  std::thread watch([&] {
+    while (watching.load()) {
+      peak_held.store(std::max(peak_held.load(), budget.held()));
+      absl::SleepFor(absl::Microseconds(200));
+    }
+  });
+  HeldStream idle;
+  ASSERT_TRUE(idle.Start(server.address(), 1, /*alert=*/true));
+  absl::SleepFor(absl::Seconds(1));
+  watching.store(false);
+  watch.join();
+  const int64_t idle_held = budget.held("127.0.0.1");
+  std::cout << "a non-reading replay of 12000 stored alerts (about 17 MB) holds " << idle_held
+            << " bytes of the caller's bound after 1 s, at most " << peak_held.load() << "\n";
+  EXPECT_LE(peak_held.load(), 4 << 20);
+
+  grpc::Status status;
+  const std::vector<esg::v1::Alert> all = ReplayAll(server.address(), "", &status);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED) << status.error_message();
+  ASSERT_EQ(all.size(), 12000u);
+  std::set<std::pair<std::string, int64_t>> seen;
+  for (size_t i = 0; i < all.size(); ++i) {
+    seen.insert({all[i].spacecraft_id(), all[i].sequence()});
+    if (i == 0) continue;
+    const auto key = [](const esg::v1::Alert& a) {
+      return std::make_tuple(a.measurement_time().seconds(), a.spacecraft_id(), a.sequence());
+    };
+    EXPECT_LT(key(all[i - 1]), key(all[i])) << i;
+  }
+  EXPECT_EQ(seen.size(), 12000u);
+  {  // one spacecraft's replay asks for a configured one
+    grpc::ClientContext context;
+    esg::v1::ConfigureResponse configured;
+    ASSERT_TRUE(server.Stub()
+                    ->ConfigureSpacecraft(&context,
+                                          ConfigureRequestFor(testing::ServerTestConfig("CB-RB")),
+                                          &configured)
+                    .ok());
+  }
+  const std::vector<esg::v1::Alert> one = ReplayAll(server.address(), "CB-RB", &status);
+  ASSERT_EQ(one.size(), 6000u) << status.error_message();
+  for (size_t i = 0; i < one.size(); ++i) {
+    EXPECT_EQ(one[i].spacecraft_id(), "CB-RB");
+    EXPECT_EQ(one[i].sequence(), static_cast<int64_t>(i) + 1);
+  }
+
+  // The idle stream was not dropped: it reads the rest once it reads.
+  int64_t rest = 0;
+  esg::v1::Alert a;
+  while (idle.alerts->Read(&a) && !a.replay_complete()) ++rest;
+  EXPECT_EQ(rest, 12000 - 1);
+  EXPECT_EQ(idle.Cancel().error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_TRUE(WaitFor([&] { return budget.held() == 0; }, absl::Seconds(5))) << budget.held();
+}
+
+// A replay page that would pass the caller's bound, or the bound over all subscribers, ends the
+// stream with RESOURCE_EXHAUSTED naming the bound, as a slow live subscriber's queue does.
+TEST(CallerBounds, AlertReplayBeyondTheBoundEndsNamingIt) {
+  for (const bool per_caller : {true, false}) {
+    ServerOptions options;
+    if (per_caller) {
+      options.calls.max_queued_bytes_per_caller = 1 << 20;
+    } else {
+      options.calls.max_queued_bytes = 1 << 20;
+    }
+    LoopbackServer server(options);
+    StoreBigAlerts(server, 2000);
+    if (HasFatalFailure()) return;
+    grpc::Status status;
+    EXPECT_TRUE(ReplayAll(server.address(), "", &status).empty());
+    std::cout << status.error_message() << "\n";
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+    EXPECT_THAT(status.error_message(),
+                StartsWith("alert replay stopped: the page of 1000 stored alerts read for it ("));
+    EXPECT_THAT(status.error_message(),
+                HasSubstr(per_caller ? "(limit 1 MiB per caller, --max-queued-mb-per-caller); "
+                                     : "(limit 1 MiB over all subscribers, --max-queued-mb); "));
+    EXPECT_THAT(status.error_message(),
+                EndsWith("subscribe again with since = the latest measurement_time received"));
+    EXPECT_EQ(server.get()->service().queue_budget().held(), 0);
+  }
 }
 
 // ---- Memory after large answers ---------------------------------------------------------------
