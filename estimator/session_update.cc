@@ -522,6 +522,19 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
         const double change_rad_s = dc.has_value() ? dc->magnitude : 0.0;
         const double sigma_rad_s = dc.has_value() ? std::sqrt(std::max(dc->cov.trace(), 0.0)) : 0.0;
         ReopenDrift(ids[k], change_rad_s);
+        if (dc.has_value() && frame.time > dc->onset) {
+          // Between the onset and now the filter carried the old drift: the gyro's spin axis
+          // moved against the model by the change integrated over that time, which its
+          // measurements pulled into the spin axis and the other states only in part. Its
+          // spin-axis covariance grows by that displacement's second moment, (|c|^2 + tr cov_c)
+          // dt^2 per tangent axis, so the re-opened coefficients are not fitted against a spin
+          // axis the filter wrongly holds as known.
+          const double dt_s = absl::ToDoubleSeconds(frame.time - dc->onset);
+          const double var_rad2 =
+              (change_rad_s * change_rad_s + std::max(dc->cov.trace(), 0.0)) * dt_s * dt_s;
+          const int s = layout_.SpinAxis(IndexOf(ids[k]));
+          for (int a = 0; a < StateLayout::kSpinAxisSize; ++a) P_(s + a, s + a) += var_rad2;
+        }
         change_detector_.Clear();
         drift_change_gyro_ = 0;
         report.events.push_back(Event{
