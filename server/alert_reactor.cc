@@ -82,8 +82,14 @@ class AlertFeed {
     }
     return true;
   }
-  // The live rule above needs every alert's last state sent: nothing is forgotten.
+  // The live rule above needs every alert's last state sent: nothing is forgotten while the
+  // stream runs (one map node per alert sent, about 100 bytes).
   void ReplayComplete() {}
+  int64_t Forget() {
+    const int64_t bytes = static_cast<int64_t>(sent_.size() * kSentNodeBytes);
+    std::map<std::pair<std::string, int64_t>, Version>().swap(sent_);
+    return bytes;
+  }
 
   // The replay: the request's spacecraft ("" for all), since (InfiniteFuture: no replay),
   // include_revised, and where the read stands (the last alert read; nullopt before the first
@@ -97,6 +103,9 @@ class AlertFeed {
  private:
   // repeat_count, acknowledged, cleared, revised (a re-run over a late frame superseded it)
   using Version = std::tuple<int64_t, bool, bool, bool>;
+  // A map node: the key and value, and the tree's three pointers and colour.
+  static constexpr size_t kSentNodeBytes =
+      sizeof(std::pair<std::string, int64_t>) + sizeof(Version) + 4 * sizeof(void*);
   std::map<std::pair<std::string, int64_t>, Version> sent_;
 };
 
@@ -156,6 +165,7 @@ class AlertReactor : public SubscriptionReactor<AlertFeed> {
           after.has_value() ? store.Since(id, since, *after, kAlertReplayPage, include_revised)
                             : store.Since(id, since, kAlertReplayPage, include_revised);
       absl::MutexLock lock(&s.mu);
+      if (s.finished) return;
       if (!page.ok()) {
         FinishOnce(s, page.status());
         return;

@@ -63,6 +63,15 @@ struct EstimateFeed {
     return true;
   }
   void ReplayComplete() { sent.clear(); }
+  int64_t Forget() {
+    // A map node: the key and value, and the tree's three pointers and colour.
+    constexpr size_t kNodeBytes = sizeof(Key) + sizeof(absl::Time) + 4 * sizeof(void*);
+    const int64_t bytes = static_cast<int64_t>(sent.size() * kNodeBytes +
+                                               ids.capacity() * sizeof(std::string));
+    std::map<Key, absl::Time>().swap(sent);
+    std::vector<std::string>().swap(ids);
+    return bytes;
+  }
 
   using Key = std::pair<std::string, absl::Time>;  // (spacecraft, measurement time)
   // Compute time of the latest record queued per key, until the buffer is released.

@@ -27,14 +27,17 @@
 //   bool Admit(const Record&, bool replaying)  the dedupe rule: whether to queue the record;
 //                                              `replaying` until the buffer has been released
 //   void ReplayComplete()                      the buffer has been released
+//   int64_t Forget()                           the stream is finished: drops the dedupe state
+//                                              and returns about the bytes it held
 //
 // Bounds (docs/service.md "Limits"): the stream holds its caller's subscription slot (a Permit)
 // from its start until it is finished, and charges every queued message to its caller's
 // QueueBudget account until the message is written, and every live record buffered during the
 // replay until it is released (a replay read as the client keeps up may take long). Finishing
 // the stream (an error, a cancel, a drop) gives back the slot, discards what is still queued and
-// buffered and notes the freed memory (memory_release.h), so a dropped or cancelled
-// subscriber's queue is returned at once.
+// buffered and the Feed's dedupe state, and notes the freed memory (memory_release.h), so a
+// dropped or cancelled subscriber's memory is returned at once, not when gRPC is done with the
+// call (which waits for a client that does not read to take what was written before).
 //
 // Lifetime: the hub's listener and closer hold the Shared state weakly, since a closer may run
 // (CloseAll calls them outside the hub's lock) after OnDone has unsubscribed and deleted the
@@ -263,6 +266,7 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
     s.hold.queue.Refund(buffered);
     freed += buffered;
     std::vector<Record>().swap(s.buffered);
+    freed += s.feed.Forget();
     NoteFreedMemory(freed);
   }
 
