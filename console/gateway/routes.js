@@ -16,12 +16,14 @@ const { StreamedJson, LargeAnswers, MAX_HISTORY } = require('./large');
 // largest: 1000 snapshots are about 0.8 MB of JSON, and four parallel 20-day histories cost the
 // gateway less than half the memory they did at 5000 (measured in console/test/large_answers.test.js).
 const HISTORY_STREAM_PAGE = 1000;
+// The same for an estimate list: 1000 estimates are about 1.2 MB of JSON.
+const ESTIMATE_STREAM_PAGE = 1000;
 const ESTIMATE_PAGE = 5000;
 const SESSION_PAGE = 500;
 const DIAGNOSIS_PAGE = 100;
 
-// The most per-step estimates one request returns (a fortnight at 60 s steps); the browser asks
-// for narrower spans beyond.
+// The most per-step estimates one request returns (a fortnight at 60 s steps); a next_page_token
+// goes on from there.
 const MAX_ESTIMATES = 20000;
 
 const EPOCH = { seconds: 0, nanos: 0 };
@@ -69,6 +71,44 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
       throw new ApiError(499, 'CANCELLED', `${what}: the client went away`);
     }
     return release;
+  }
+
+  // The answer {"<field>": [...], "next_page_token": "..."} of a paged esgd call, streamed a page
+  // of `streamPage` at a time (large.js) in a slot of the operator's large answers: at most
+  // `limit` items from the query's page_token on, then next_page_token when more remain.
+  async function streamedPages(ctx, what, method, request, field, maxItems, streamPage) {
+    const limit = intParam(ctx.query, 'limit', 1, maxItems, maxItems);
+    const pageToken = ctx.query.get('page_token') || '';
+    if (pageToken.length > MAX_PAGE_TOKEN) {
+      throw badRequest(`page_token: longer than ${MAX_PAGE_TOKEN} characters; pass the next_page_token of an answer`);
+    }
+    const release = await largeSlot(ctx, what);
+    let sent = 0;
+    let next = pageToken;
+    const page = () => call(ctx, method, {
+      ...request, page_size: Math.min(streamPage, limit - sent), page_token: next,
+    }).then((answer) => {
+      sent += answer[field].length;
+      next = answer.next_page_token;
+      return answer[field];
+    });
+    let first;
+    try {
+      // The first page before the answer starts: an error (unknown spacecraft, a bad token)
+      // is still answered with its own status.
+      first = await page();
+    } catch (err) {
+      release();
+      throw err;
+    }
+    async function* rest() {
+      yield first;
+      while (next && sent < limit) yield await page();
+    }
+    return new StreamedJson(field, rest(), {
+      tail: () => (next ? { next_page_token: next } : {}),
+      done: release,
+    });
   }
 
   async function alertList(ctx, spacecraftId) {
@@ -161,65 +201,23 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
 
     // Streamed a page at a time (large.js): at most `limit` snapshots (default and most
     // MAX_HISTORY), then next_page_token when more remain; page_token goes on from there.
-    ['GET', '/api/spacecraft/:id/history', async (ctx) => {
-      const limit = intParam(ctx.query, 'limit', 1, MAX_HISTORY, MAX_HISTORY);
-      const pageToken = ctx.query.get('page_token') || '';
-      if (pageToken.length > MAX_PAGE_TOKEN) {
-        throw badRequest(`page_token: longer than ${MAX_PAGE_TOKEN} characters; pass the next_page_token of an answer`);
-      }
-      const request = {
+    ['GET', '/api/spacecraft/:id/history', async (ctx) => streamedPages(ctx, 'history',
+      'GetCoefficientHistory', {
         spacecraft_id: ctx.params.id,
         gyro_id: intParam(ctx.query, 'gyro', 0, 4, 0),
         from: timeParam(ctx.query, 'from'),
         to: timeParam(ctx.query, 'to'),
         include_revised: boolParam(ctx.query, 'include_revised', false),
-      };
-      const release = await largeSlot(ctx, 'history');
-      let sent = 0;
-      let next = pageToken;
-      const page = () => call(ctx, 'GetCoefficientHistory', {
-        ...request, page_size: Math.min(HISTORY_STREAM_PAGE, limit - sent), page_token: next,
-      }).then((answer) => {
-        sent += answer.snapshots.length;
-        next = answer.next_page_token;
-        return answer.snapshots;
-      });
-      let first;
-      try {
-        // The first page before the answer starts: an error (unknown spacecraft, a bad token)
-        // is still answered with its own status.
-        first = await page();
-      } catch (err) {
-        release();
-        throw err;
-      }
-      async function* rest() {
-        yield first;
-        while (next && sent < limit) yield await page();
-      }
-      return new StreamedJson('snapshots', rest(), {
-        tail: () => (next ? { next_page_token: next } : {}),
-        done: release,
-      });
-    }],
+      }, 'snapshots', MAX_HISTORY, HISTORY_STREAM_PAGE)],
 
-    ['GET', '/api/spacecraft/:id/estimates', async (ctx) => {
-      const request = {
+    // Streamed the same way: at most `limit` estimates (default and most MAX_ESTIMATES), then
+    // next_page_token when more remain.
+    ['GET', '/api/spacecraft/:id/estimates', async (ctx) => streamedPages(ctx, 'estimates',
+      'GetEstimateHistory', {
         spacecraft_id: ctx.params.id,
         from: timeParam(ctx.query, 'from'),
         to: timeParam(ctx.query, 'to'),
-        page_size: ESTIMATE_PAGE,
-      };
-      const release = await largeSlot(ctx, 'estimates');
-      try {
-        return { estimates: await pages(ctx, 'GetEstimateHistory', request, 'estimates', MAX_ESTIMATES) };
-      } catch (err) {
-        if (err.code !== 'LIMIT') throw err;
-        throw badRequest(`from, to: the span holds more than ${MAX_ESTIMATES} estimates; ask for a narrower span`);
-      } finally {
-        release();
-      }
-    }],
+      }, 'estimates', MAX_ESTIMATES, ESTIMATE_STREAM_PAGE)],
 
     ['GET', '/api/spacecraft/:id/predict', async (ctx) => call(ctx, 'PredictAttitude', {
       spacecraft_id: ctx.params.id,

@@ -18,20 +18,23 @@ function spacecraftPath(sc) {
   return `/api/spacecraft/${encodeURIComponent(sc)}`;
 }
 
-// Every snapshot of a history query: the gateway answers at most 50 000 per request, with a
-// next_page_token to go on from (docs/console-gateway.md "Large answers").
-async function historyAll(spacecraft, params) {
-  const snapshots = [];
+// Every item of a paged list (`what`: "history" for its snapshots, "estimates"): the gateway
+// answers at most 50 000 snapshots or 20 000 estimates per request, with a next_page_token to go
+// on from (docs/console-gateway.md "Large answers").
+async function pagedAll(spacecraft, what, field, params) {
+  const items = [];
   let pageToken;
   do {
-    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/history${query({
+    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/${what}${query({
       ...params, page_token: pageToken
     })}`);
-    for (const s of body.snapshots) snapshots.push(s);
+    for (const item of body[field]) items.push(item);
     pageToken = body.next_page_token;
   } while (pageToken);
-  return snapshots;
+  return items;
 }
+
+const historyAll = (spacecraft, params) => pagedAll(spacecraft, 'history', 'snapshots', params);
 
 const requesters = {
   async coef({ spacecraft, gyro }, { start, end }) {
@@ -48,10 +51,10 @@ const requesters = {
   },
 
   async est({ spacecraft }, { start, end }) {
-    const body = await sharedFetch(`${spacecraftPath(spacecraft)}/estimates${query({
+    const estimates = await pagedAll(spacecraft, 'estimates', 'estimates', {
       from: isoTime(start), to: isoTime(end)
-    })}`);
-    return body.estimates.map(estimateDatum);
+    });
+    return estimates.map(estimateDatum);
   },
 
   // PredictAttitude over the conductor's bounds: recorded samples up to the last archived frame,
@@ -196,8 +199,8 @@ export function rewindAfterRevision(spacecraft, fromMs) {
 }
 
 // Open MCT answers a failed request with "see console for details"; the operator needs esgd's or
-// the gateway's own words (e.g. "the span holds more than 20000 estimates; ask for a narrower
-// span"), so they are shown once per distinct message.
+// the gateway's own words (e.g. "history: this operator already has 4 large answers running and
+// 32 waiting ..."), so they are shown once per distinct message.
 let notify = () => {};
 const shown = new Set();
 export function setNotifier(openmct) {
