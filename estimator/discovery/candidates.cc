@@ -121,19 +121,6 @@ constexpr int kRandomWalkGridPoints = 5;  // factors 2, 4, ... 32 above the conf
 // residual-drift instability [deg/h/sqrt(h)].
 constexpr double kRandomWalkFloorDegHSqrtH = 0.0005;
 
-// The theta range [first, first + count) of the fixed terms whose descriptor names the effect
-// (estimator/model_terms.h `effect`, contiguous in theta); count 0 when none does.
-std::pair<int, int> FixedTermsOf(Effect effect) {
-  const absl::string_view id = EffectId(effect);
-  int first = -1, count = 0;
-  for (const FixedTermDescriptor& term : kFixedTerms) {
-    if (term.effect != id) continue;
-    if (first < 0) first = term.theta_index;
-    ++count;
-  }
-  return {std::max(first, 0), count};
-}
-
 // Every fixed term the effect frees is already free (sigma > 0).
 bool AllFree(const DriftVector& sigma, Effect effect) {
   const auto [first, count] = FixedTermsOf(effect);
@@ -179,20 +166,6 @@ bool Effective(const std::vector<Effect>& effects, Effect e) {
 }
 
 }  // namespace
-
-GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
-  for (GyroConfig& g : c.gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
-}
-
-const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
-  for (const GyroEstimate& g : gyros) {
-    if (g.id == id) return &g;
-  }
-  return nullptr;
-}
 
 LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
                                  const SpacecraftConfig& config) {
@@ -262,11 +235,6 @@ LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, cons
   return out;
 }
 
-std::string CandidateName(const Candidate& c) {
-  if (c.gyro > 0) return absl::StrCat(EffectId(c.effect), "[", c.gyro, "]");
-  return EffectId(c.effect);
-}
-
 std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
                                       const std::vector<Effect>& effects) {
   std::vector<Candidate> out;
@@ -325,27 +293,6 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     }
   }
   return out;
-}
-
-double ModelRandomWalk(const ModelState& m, int id) {
-  return m.options.model.random_walk ? ResidualRandomWalk(m.config, m.options, id) : 0.0;
-}
-
-double ModelInitialDriftSigma(const ModelState& m) {
-  return m.options.model.random_walk ? InitialResidualDriftSigma(m.options) : 0.0;
-}
-
-ProfiledDeviance Profile(const ModelRun& run) {
-  const Deviance d = ComputeDeviance(run);
-  ProfiledDeviance p;
-  p.components = d.components;
-  p.steps = d.steps;
-  if (d.components == 0) return p;
-  p.dispersion = std::max(d.nis_sum / d.components, 1e-12);
-  const double log_det = d.value - d.nis_sum;
-  // -2 log L with S -> phi S, minimised over phi: N ln phi + sum log det S + N.
-  p.value = d.components * std::log(p.dispersion) + log_det + d.components;
-  return p;
 }
 
 void DescribeRotorDisplacement(const SpacecraftConfig& config,
@@ -480,27 +427,6 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
                        : "the rotor is not displaced that far, so the drift is not a rotor "
                          "displacement");
   return out;
-}
-
-std::optional<FreedCoefficients> FreedDriftCoefficients(Effect effect,
-                                                        const DiagnoseOptions& options) {
-  double sigma_deg_h = 0.0;
-  switch (effect) {
-    case Effect::kRotorDisplacement:
-      sigma_deg_h = options.c_sigma_deg_h;
-      break;
-    case Effect::kFourthHarmonic:
-      sigma_deg_h = options.k0_sigma_deg_h;
-      break;
-    case Effect::kUnequalStiffness:
-      sigma_deg_h = options.unequal_stiffness_sigma_deg_h;
-      break;
-    default:
-      return std::nullopt;
-  }
-  const auto [first, count] = FixedTermsOf(effect);
-  if (count == 0) return std::nullopt;
-  return FreedCoefficients{first, count, DegPerHourToRadPerSec(sigma_deg_h)};
 }
 
 absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {

@@ -13,7 +13,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "estimator/discovery/candidates.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/discovery/held_out.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/options.h"

@@ -7,7 +7,7 @@
 
 #include <vector>
 
-#include "estimator/discovery/candidates.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/discovery/held_out.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"

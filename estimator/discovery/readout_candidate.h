@@ -18,7 +18,7 @@
 #define ESG_ESTIMATOR_DISCOVERY_READOUT_CANDIDATE_H_
 
 #include "absl/status/status.h"
-#include "estimator/discovery/candidates.h"
+#include "estimator/discovery/candidate.h"
 
 namespace esg::estimator::discovery {
 

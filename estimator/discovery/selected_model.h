@@ -5,7 +5,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_SELECTED_MODEL_H_
 #define ESG_ESTIMATOR_DISCOVERY_SELECTED_MODEL_H_
 
-#include "estimator/discovery/candidates.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/discovery/held_out.h"
 #include "estimator/discovery/model_run.h"
 

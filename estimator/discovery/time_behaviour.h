@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
-#include "estimator/discovery/candidates.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/telemetry.h"
 
