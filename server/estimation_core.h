@@ -27,7 +27,9 @@
 //                        publishes the estimates once committed), new alerts, repeats and
 //                        clears, the retention of the estimates, and the
 //                        checkpoint (session values + apply cursor) in ONE transaction; then
-//                        install the copy. On PostgreSQL the jobs that finish together share
+//                        install the copy. On PostgreSQL these commits run on a connection of
+//                        their own (storage.h "Connections"), so ingest's commits and acks never
+//                        wait for them; the jobs that finish together share
 //                        that transaction, each in its own savepoint (CommitFilterJob): one
 //                        job's failure (a lost lease) undoes its own effects only. The checkpoint thus always matches the effects
 //                        stored, so a restart (load checkpoint, replay archive after its
@@ -91,9 +93,8 @@ struct CoreOptions {
   // job in its own savepoint), so a node makes one commit for many spacecraft instead of one per
   // job. The worker pool then has this many threads, of which at most worker_threads apply
   // frames at a time. 0 (the default), or not above worker_threads: each job commits alone.
-  // Off by default: on esgd's one connection the groups' transactions held it back to back and
-  // ingest's commits waited seconds for it (docs/deploy.md "Capacity", BM_FleetAtOneHertz).
-  // SQLite: unused.
+  // The filter commits on a connection of its own (storage.h "Connections"), so ingest's commits
+  // never wait for a group (docs/deploy.md "Capacity", BM_FleetAtOneHertz). SQLite: unused.
   int filter_commit_group = 0;
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
   // one alert (repeat_count); an alert without a new occurrence for this long is cleared.

@@ -155,12 +155,13 @@ void EstimationCore::RelayLoop() {
     }
     if (notified->empty()) continue;
     const int own_pid = storage_->ConnectionPid();
+    const int own_filter_pid = storage_->FilterConnectionPid();
     // Estimates are read only for subscribers, per spacecraft in one range read.
     const bool estimate_subscribers = estimate_hub_.size() > 0;
     std::map<std::string, std::set<absl::Time>> estimated;
     for (const storage::PostgresListener::Notification& n : *notified) {
       // This server's own commits are published by the code that made them.
-      if (n.sender_pid == own_pid) continue;
+      if (n.sender_pid == own_pid || n.sender_pid == own_filter_pid) continue;
       // "<number> <spacecraft id>": an alert's sequence, an estimate's measurement time.
       const size_t space = n.payload.find(' ');
       int64_t number = 0;

@@ -51,7 +51,10 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::Open(const std::string& path,
 absl::StatusOr<std::unique_ptr<Storage>> Storage::OpenPostgres(const std::string& uri,
                                                                const PostgresOptions& options) {
   ASSIGN_OR_RETURN(std::unique_ptr<PostgresDatabase> db, PostgresDatabase::Open(uri, options));
-  return FromDatabase(std::move(db));
+  ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage, FromDatabase(std::move(db)));
+  // The filter's connection, opened after the migration so that it sees the current schema.
+  ASSIGN_OR_RETURN(storage->filter_db_, PostgresDatabase::Open(uri, options));
+  return storage;
 }
 
 absl::StatusOr<std::unique_ptr<Storage>> Storage::FromDatabase(std::unique_ptr<Database> db) {
@@ -69,6 +72,11 @@ absl::StatusOr<std::unique_ptr<PostgresListener>> Storage::ListenForChanges() {
 int Storage::ConnectionPid() {
   if (db_->dialect() != Dialect::kPostgres) return 0;
   return static_cast<PostgresDatabase&>(*db_).BackendPid();
+}
+
+int Storage::FilterConnectionPid() {
+  if (filter_db_ == nullptr) return ConnectionPid();
+  return static_cast<PostgresDatabase&>(*filter_db_).BackendPid();
 }
 
 absl::Status Storage::ArchiveFrames(
@@ -182,7 +190,7 @@ absl::StatusOr<std::vector<int64_t>> Storage::WriteFilterEffects(Transaction& tx
 
 absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEffects& effects) {
   RETURN_IF_ERROR(CheckFilterEffects(effects));
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Transaction txn, filter_database().Begin(TransactionMode::kImmediate));
   ASSIGN_OR_RETURN(std::vector<int64_t> sequences, WriteFilterEffects(txn, effects));
   RETURN_IF_ERROR(txn.Commit());
   return sequences;
@@ -215,7 +223,7 @@ std::vector<absl::StatusOr<std::vector<int64_t>>> Storage::CommitFilterEffectsGr
     }
     return results;
   };
-  absl::StatusOr<Transaction> txn = db_->Begin(TransactionMode::kImmediate);
+  absl::StatusOr<Transaction> txn = filter_database().Begin(TransactionMode::kImmediate);
   if (!txn.ok()) return fail_all(txn.status());
   // Each job inside its own savepoint: a job that fails (its lease lost, a record refused) is
   // undone alone and the others' writes stay in the transaction. A savepoint that cannot be

@@ -14,6 +14,14 @@
 //   CommitConfiguration  a configuration with the fresh checkpoint of its session (and the
 //                        clearing of a quarantine alert it ends).
 // Each is ONE transaction (IMMEDIATE with SQLite): on any error none of it is visible.
+// Connections: SQLite, one for everything. PostgreSQL, two: the filter's commits
+// (CommitFilterEffects, CommitFilterEffectsGroup) run on a connection of their own, so that a
+// filter transaction never holds up the group commit of frames and the acknowledgements waiting
+// for it; everything else (ArchiveFrames, CommitConfiguration, the stores' reads and writes)
+// runs on the main one. Both are opened with the same options (synchronous_commit=on), so the
+// durability contract is the same on either, and a filter transaction checks its lease fence
+// inside itself as before (a server taking the lease over waits for the fence's row lock until
+// the filter's transaction ends).
 #ifndef ESG_STORAGE_STORAGE_H_
 #define ESG_STORAGE_STORAGE_H_
 
@@ -106,7 +114,7 @@ struct ConfigurationChange {
   std::optional<LeaseFence> fence;
 };
 
-// Thread-safe: any number of threads may call any method (serialized per Storage through its
+// Thread-safe: any number of threads may call any method (serialized per connection: its
 // Database). With DatabaseOptions::exclusive (the default) a Storage owns its file: no other
 // Storage, process or sqlite3 shell can open it until this one is destroyed. With exclusive =
 // false several Storage objects (processes) may open the same file; writers then wait on each
@@ -175,9 +183,13 @@ class Storage {
   // (kAlertsChannel) and of every estimate stored (kEstimatesChannel), by any server sharing the
   // database. FailedPrecondition with SQLite (one server).
   absl::StatusOr<std::unique_ptr<PostgresListener>> ListenForChanges();
-  // PostgreSQL: the server process of this Storage's connection, the sender_pid of the
-  // notifications its own commits cause; 0 with SQLite.
+  // PostgreSQL: the server process of this Storage's main connection, the sender_pid of the
+  // notifications its own commits other than the filter's cause; 0 with SQLite.
   int ConnectionPid();
+  // PostgreSQL: the server process of the filter's connection (CommitFilterEffects and
+  // CommitFilterEffectsGroup), the sender_pid of the notifications the filter's commits cause
+  // (its alerts and estimates). With SQLite the same as ConnectionPid().
+  int FilterConnectionPid();
 
   Database& database() { return *db_; }
   ConfigStore& configs() { return configs_; }
@@ -197,7 +209,12 @@ class Storage {
   absl::StatusOr<std::vector<int64_t>> WriteFilterEffects(Transaction& txn,
                                                           const FilterEffects& effects);
 
+  // The connection of the filter's commits: filter_db_ on PostgreSQL, else db_.
+  Database& filter_database() { return filter_db_ != nullptr ? *filter_db_ : *db_; }
+
   std::unique_ptr<Database> db_;
+  // PostgreSQL only (null with SQLite): the filter's own connection.
+  std::unique_ptr<Database> filter_db_;
   ConfigStore configs_;
   TelemetryArchive archive_;
   CoefficientStore coefficients_;
