@@ -39,6 +39,7 @@ constexpr int64_t kMaxBurstCount = 100000;
 constexpr double kMaxDisplacementRateUmH = 20.0;
 constexpr double kMaxDistortionPpm = 1e5;  // 10 %
 constexpr double kMinCorrelationHours = 1e-3;
+constexpr double kMaxRateGainDegHPerDegS = 100.0;  // 100 deg/h of drift at 1 deg/s
 
 absl::Status Invalid(const std::string& path, const std::string& reason) {
   return absl::InvalidArgumentError(absl::StrCat(path, ": ", reason));
@@ -205,6 +206,50 @@ absl::Status ParseAmplitudeAndTime(const json& v, const std::string& path,
   return absl::OkStatus();
 }
 
+// {"degHPerDegS": [gxx, gxy, gxz, gyx, gyy, gyz, gzx, gzy, gzz]}: the gain of a rate-dependent
+// drift row by row (row i: drift component i per body rate x, y, z, case axes), drift [deg/h]
+// per body rate [deg/s] -> [1] (1 deg/h per deg/s = 1/3600).
+absl::StatusOr<estimator::RateDrift> ParseRateDrift(const json& v, const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"degHPerDegS"}));
+  if (!v.contains("degHPerDegS")) return Invalid(Key(path, "degHPerDegS"), "required");
+  const json& g = v["degHPerDegS"];
+  const std::string p = Key(path, "degHPerDegS");
+  if (!g.is_array() || g.size() != 9) {
+    return Invalid(p, absl::StrCat("expected an array of 9 numbers (the gain row by row: drift x, "
+                                   "y, z per body rate x, y, z in case axes), got ",
+                                   g.is_array() ? absl::StrCat(g.size(), " values")
+                                                : std::string(g.type_name())));
+  }
+  estimator::RateDrift d;
+  for (int i = 0; i < 9; ++i) {
+    ASSIGN_OR_RETURN(double x, Number(g[i], absl::StrCat(p, "[", i, "]"),
+                                      -kMaxRateGainDegHPerDegS, kMaxRateGainDegHPerDegS));
+    d.gain_k(i / 3, i % 3) = x / estimator::kSecondsPerHour;
+  }
+  return d;
+}
+
+// {"amplitudeDegH": [x, y, z], "timeConstantHours": tau, "startHours": t0 (default 0)}.
+absl::StatusOr<estimator::TransientDrift> ParseTransientDrift(const json& v,
+                                                             const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"amplitudeDegH", "timeConstantHours", "startHours"}));
+  estimator::TransientDrift d;
+  json amplitude_and_time = json::object();
+  for (const char* key : {"amplitudeDegH", "timeConstantHours"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+    amplitude_and_time[key] = v[key];
+  }
+  RETURN_IF_ERROR(ParseAmplitudeAndTime(amplitude_and_time, path, "timeConstantHours",
+                                        &d.amplitude_k_rad_s, &d.time_constant_s));
+  if (v.contains("startHours")) {
+    ASSIGN_OR_RETURN(double hours, Number(v["startHours"], Key(path, "startHours"), 0.0, kMaxHours));
+    d.start_s = estimator::HoursToSeconds(hours);
+  }
+  return d;
+}
+
 // [Dxx, Dyy, Dzz, Dxy, Dyz, Dzx] in ppm -> the symmetric D [1].
 absl::StatusOr<Eigen::Matrix3d> ParseDistortionPpm(const json& v, const std::string& path) {
   if (!v.is_array() || v.size() != 6) {
@@ -233,7 +278,8 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       "id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm",
       "misalignmentArcsec", "randomWalkDegHSqrtH", "readoutNoiseArcsec", "voltageNoiseMv",
       "initialSpinAxis", "fault", "switchOnHours", "orbitalDrift", "rotorDisplacementRateUmH",
-      "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift"};
+      "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift", "rateDrift",
+      "transientDrift"};
   for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
     keys.insert(std::string(key.json_key));
   }
@@ -313,6 +359,10 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       RETURN_IF_ERROR(ParseAmplitudeAndTime(x, p, "correlationHours", &d.amplitude_k_rad_s,
                                             &d.correlation_time_s));
       g.hidden_driver_drift = d;
+    } else if (k == "rateDrift") {
+      ASSIGN_OR_RETURN(g.rate_drift, ParseRateDrift(x, p));
+    } else if (k == "transientDrift") {
+      ASSIGN_OR_RETURN(g.transient_drift, ParseTransientDrift(x, p));
     }
   }
   return g;
@@ -592,6 +642,8 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.readout_distortion_k) g.readout_distortion_k = *s.readout_distortion_k;
     if (s.switching_drift) g.switching_drift = s.switching_drift;
     if (s.hidden_driver_drift) g.hidden_driver_drift = s.hidden_driver_drift;
+    if (s.rate_drift) g.rate_drift = s.rate_drift;
+    if (s.transient_drift) g.transient_drift = s.transient_drift;
   }
   estimator::StarTrackerTruth& st = spec->star_tracker;
   const estimator::StarTrackerTruth& from = scenario.star_tracker;

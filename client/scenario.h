@@ -48,6 +48,8 @@ struct ScenarioGyro {
   std::optional<Eigen::Matrix3d> readout_distortion_k;           // [1], symmetric
   std::optional<estimator::SwitchingDrift> switching_drift;
   std::optional<estimator::HiddenDriverDrift> hidden_driver_drift;
+  std::optional<estimator::RateDrift> rate_drift;
+  std::optional<estimator::TransientDrift> transient_drift;
 };
 
 struct Scenario {

@@ -120,7 +120,13 @@ struct GyroState {
   Vector3d hidden_amplitude_k = Vector3d::Zero();  // [rad/s]
   double hidden_tau = 0.0;                         // [s]
   double hidden_x = 0.0;                           // x(t) at the current propagation time [1]
-  bool has_extra_drift = false;  // any of orbital, switching, hidden
+  bool has_rate = false;
+  Matrix3d rate_gain_k = Matrix3d::Zero();  // [1]
+  bool has_transient = false;
+  Vector3d transient_amplitude_k = Vector3d::Zero();  // [rad/s]
+  double transient_tau = 1.0;                         // [s]
+  double transient_start = 0.0;                       // [s]
+  bool has_extra_drift = false;  // any of orbital, switching, hidden, rate, transient
 
   Rng readout_rng;
   Rng voltage_rng;
@@ -156,6 +162,17 @@ struct GyroState {
     const auto flips = std::upper_bound(switch_times.begin(), switch_times.end(), t) -
                        switch_times.begin();
     return flips % 2 == 0 ? switching_initial_level : -switching_initial_level;
+  }
+
+  // The rate-dependent drift for the body rate w_b [rad/s] (body axes).
+  Vector3d RateDrift_k(const Vector3d& w_b) const {
+    return has_rate ? Vector3d(rate_gain_k * (C_k_b * w_b)) : Vector3d::Zero();
+  }
+
+  // The warm-up transient at time t.
+  Vector3d TransientDrift_k(double t) const {
+    if (!has_transient || t < transient_start) return Vector3d::Zero();
+    return transient_amplitude_k * std::exp(-(t - transient_start) / transient_tau);
   }
 
   // Fault drift step in case axes at time t.
@@ -285,6 +302,20 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
                                  f + ".hidden_driver_drift.amplitude_k_rad_s"));
     RETURN_IF_ERROR(Positive(g.hidden_driver_drift->correlation_time_s,
                              f + ".hidden_driver_drift.correlation_time_s"));
+  }
+  if (g.rate_drift && !g.rate_drift->gain_k.allFinite()) {
+    return absl::InvalidArgumentError(absl::StrCat(f, ".rate_drift.gain_k: must be finite"));
+  }
+  if (g.transient_drift) {
+    RETURN_IF_ERROR(FiniteVector(g.transient_drift->amplitude_k_rad_s,
+                                 f + ".transient_drift.amplitude_k_rad_s"));
+    RETURN_IF_ERROR(Positive(g.transient_drift->time_constant_s,
+                             f + ".transient_drift.time_constant_s"));
+    if (!(g.transient_drift->start_s >= 0.0) || !std::isfinite(g.transient_drift->start_s)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.transient_drift.start_s: must be finite and >= 0, got %g", f,
+          g.transient_drift->start_s));
+    }
   }
   return absl::OkStatus();
 }
@@ -493,7 +524,20 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       g.hidden_x = g.hidden_rng.Normal();  // stationary start: x(0) ~ N(0, 1)
       effects.hidden_driver_drift = truth.hidden_driver_drift;
     }
-    g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden;
+    if (truth.rate_drift) {
+      g.has_rate = true;
+      g.rate_gain_k = truth.rate_drift->gain_k;
+      effects.rate_drift = truth.rate_drift;
+    }
+    if (truth.transient_drift) {
+      g.has_transient = true;
+      g.transient_amplitude_k = truth.transient_drift->amplitude_k_rad_s;
+      g.transient_tau = truth.transient_drift->time_constant_s;
+      g.transient_start = truth.transient_drift->start_s;
+      effects.transient_drift = truth.transient_drift;
+    }
+    g.has_extra_drift =
+        g.has_orbital || g.has_switching || g.has_hidden || g.has_rate || g.has_transient;
     gyros.push_back(std::move(g));
   }
 
@@ -511,12 +555,15 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
   Rng st_outlier_rng(DeriveSeed(spec.seed, kStarTrackerOutlierStream));
   Rng st_invalid_rng(DeriveSeed(spec.seed, kStarTrackerInvalidStream));
 
+  const bool any_rate_drift =
+      std::any_of(gyros.begin(), gyros.end(), [](const GyroState& g) { return g.has_rate; });
   // One integration step [t0, t0 + h]: drift at the midpoint (attitude at t_mid, h_in
   // extrapolated half a step with the previous drift), then h_in turned by dw_in * h.
   auto step = [&](double t0, double h) {
     const double t_mid = t0 + 0.5 * h;
     const Matrix3d C_in_b = profile.Attitude(t_mid).toRotationMatrix();
     const double sqrt_h = std::sqrt(h);
+    const Vector3d w_b = any_rate_drift ? profile.Rate(t_mid) : Vector3d::Zero();
     for (GyroState& g : gyros) {
       const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
       const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
@@ -526,7 +573,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       if (g.fault) dw_k += g.FaultDrift_k(t_mid);
       if (g.has_extra_drift) {
         dw_k += g.OrbitalDrift_k(t_mid) + g.SwitchingLevel(t_mid) * g.switching_amplitude_k +
-                g.hidden_x * g.hidden_amplitude_k;
+                g.hidden_x * g.hidden_amplitude_k + g.RateDrift_k(w_b) + g.TransientDrift_k(t_mid);
       }
       const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
       g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
@@ -579,7 +626,10 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
         gt.dw_switching_k_rad_s = gt.switching_level * g.switching_amplitude_k;
         gt.hidden_driver = g.has_hidden ? g.hidden_x : 0.0;
         gt.dw_hidden_k_rad_s = gt.hidden_driver * g.hidden_amplitude_k;
-        gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s;
+        gt.dw_rate_k_rad_s = g.RateDrift_k(g.has_rate ? profile.Rate(t_m) : Vector3d::Zero());
+        gt.dw_transient_k_rad_s = g.TransientDrift_k(t_m);
+        gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s +
+                   gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s;
       }
       // The pick-off's distortion, then readout noise: a small rotation perpendicular to the
       // distorted axis (two draws, always).

@@ -21,8 +21,10 @@
 //   |Delta(t)|, C10 = c10_per_m |Delta(t)|, C20 = c20_per_m |Delta(t)|) and the voltages of
 //   eq. (3) at Delta(t); a switching drift +-A (random telegraph process, switch times drawn for
 //   the whole run at the start); a hidden-driver drift B x(t), x an Ornstein-Uhlenbeck process
-//   of unit variance. In a step the switching level and the orbital drift are taken at the step
-//   midpoint, x(t) at the step start (then x is stepped exactly over the step).
+//   of unit variance; a rate-dependent drift G w_k (w_k the body rate in case axes); a warm-up
+//   transient A exp(-(t - t0) / tau) from t0. In a step the switching level, the orbital drift,
+//   the body rate and the transient are taken at the step midpoint, x(t) at the step start (then
+//   x is stepped exactly over the step).
 // - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a
 //   rotation by dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
 //   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
@@ -128,6 +130,21 @@ struct HiddenDriverDrift {
   double correlation_time_s = 3600.0;                           // [s], > 0
 };
 
+// A drift proportional to the body rate (a rate-dependent drift of the suspension or the
+// pick-off): dw_k = gain_k w_k, w_k the body rate w_b_in_b in case axes. gain_k [rad/s of drift
+// per rad/s of rate, 1]; 1 deg/h per deg/s is 1/3600.
+struct RateDrift {
+  Eigen::Matrix3d gain_k = Eigen::Matrix3d::Zero();
+};
+
+// A warm-up transient: a case-fixed drift that decays from its start,
+// dw_k = amplitude_k_rad_s exp(-(t - start_s) / time_constant_s) for t >= start_s, 0 before.
+struct TransientDrift {
+  Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes [rad/s]
+  double time_constant_s = 3600.0;                              // [s], > 0
+  double start_s = 0.0;  // [s since the simulation start], >= 0
+};
+
 struct GyroTruth {
   // Whether the gyro runs. Default (nullopt): it runs when it is configured and belongs to the
   // working or the reserve pair; so with the usual pairs {1,2}, {1,3} gyros 1-3 run and gyro 4,
@@ -172,6 +189,8 @@ struct GyroTruth {
   Eigen::Matrix3d readout_distortion_k = Eigen::Matrix3d::Zero();
   std::optional<SwitchingDrift> switching_drift;
   std::optional<HiddenDriverDrift> hidden_driver_drift;
+  std::optional<RateDrift> rate_drift;
+  std::optional<TransientDrift> transient_drift;
 };
 
 // n consecutive star-tracker outliers (see the file comment for their axis).
@@ -231,6 +250,8 @@ struct GyroTruthSample {
   Eigen::Vector3d dw_switching_k_rad_s = Eigen::Vector3d::Zero();  // level * amplitude [rad/s]
   double hidden_driver = 0.0;  // x(t) of the hidden-driver drift, else 0 [1]
   Eigen::Vector3d dw_hidden_k_rad_s = Eigen::Vector3d::Zero();  // x(t) * amplitude [rad/s]
+  Eigen::Vector3d dw_rate_k_rad_s = Eigen::Vector3d::Zero();       // gain * w_k [rad/s]
+  Eigen::Vector3d dw_transient_k_rad_s = Eigen::Vector3d::Zero();  // the transient [rad/s]
 };
 
 // One gyro's effects beyond the paper's models as simulated: the settings in effect (the orbital
@@ -244,6 +265,8 @@ struct GyroEffectsTruth {
   // [s since the simulation start], increasing, all <= duration: the level flips sign at each.
   std::vector<double> switch_times_s;
   std::optional<HiddenDriverDrift> hidden_driver_drift;
+  std::optional<RateDrift> rate_drift;
+  std::optional<TransientDrift> transient_drift;
 };
 
 struct TruthSample {

@@ -4,22 +4,23 @@
 # does not model, in one running gyro, at 0.03-0.15 deg/h (drawn from the seed), and calibrates
 # it with `esg calibrate --model 10+11 --format json`. A run fails when any gyro is excluded
 # (gyros[].faulty) or the state is FAULTED. With 0 failures in N runs the 95% upper bound of the
-# rate is 1 - 0.05^(1/N) (390 runs: 0.77%).
-# The class and the gyro follow from the seed, not from a draw: seed s has class (s - 1) mod 13
-# and gyro 1 + ((s - 1) div 13) mod 3, so any 39 consecutive seeds put every class in every
-# running gyro once, and the default 390 seeds do so 10 times (the star-tracker classes have no
+# rate is 1 - 0.05^(1/N) (450 runs: 0.66%).
+# The class and the gyro follow from the seed, not from a draw: seed s has class (s - 1) mod 15
+# and gyro 1 + ((s - 1) div 15) mod 3, so any 45 consecutive seeds put every class in every
+# running gyro once, and the default 450 seeds do so 10 times (the star-tracker classes have no
 # gyro: they run 30 times each).
-# Usage: scripts/false_exclusions.sh [N [FIRST_SEED [HOURS]]]   (defaults 390, 1, 12)
+# Usage: scripts/false_exclusions.sh [N [FIRST_SEED [HOURS]]]   (defaults 450, 1, 12)
 # ESG_BUILD=DIR (default build); ESG_JOBS=J parallel runs (default 2); ESG_KEEP=DIR keeps each
 # failing run's scenario, recording and calibration JSON there.
 # The effect classes: displaced rotor, unconfigured gyro misalignment, unequal stiffness, a
 # cycling (orbital, thermal) drift, a switching drift, a drift driven by an untelemetered
 # quantity, a raised random walk, a readout scale error, a creeping rotor (a growing drift), a
 # drift step below the 1 deg/h limit, a star-tracker misalignment, a star-tracker latency, a
-# nu term of eq. (1) the configuration lacks.
+# nu term of eq. (1) the configuration lacks, a drift proportional to the body rate, a warm-up
+# transient decaying with a time constant of 1-6 h.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-n=${1:-390}
+n=${1:-450}
 first=${2:-1}
 hours=${3:-12}
 build=${ESG_BUILD:-build}
@@ -38,7 +39,8 @@ seed = int(sys.argv[1]); out = sys.argv[2]
 rng = random.Random(7919 * seed)
 classes = ["rotor_displacement", "gyro_misalignment", "unequal_stiffness", "orbital_drift",
            "switching_drift", "hidden_driver", "random_walk", "readout_scale", "creeping_rotor",
-           "drift_step", "star_tracker_misalignment", "star_tracker_latency", "nu_drift"]
+           "drift_step", "star_tracker_misalignment", "star_tracker_latency", "nu_drift",
+           "rate_drift", "warm_up_transient"]
 cls = classes[(seed - 1) % len(classes)]
 gyro = 1 + ((seed - 1) // len(classes)) % 3
 size = rng.uniform(0.03, 0.15)  # deg/h
@@ -77,6 +79,14 @@ elif cls == "creeping_rotor":
     g["rotorDisplacementRateUmH"] = [size / 0.065 / 12.0 * x for x in u]
 elif cls == "drift_step":
     g["fault"] = {"timeHours": rng.uniform(1, 10), "kind": "drift_step", "degH": [size * x for x in u]}
+elif cls == "rate_drift":
+    # A drift proportional to the body rate: size deg/h at 0.1 deg/s (the calibration profile's
+    # turn of 6 deg a minute), along u, for the rate along a second random direction.
+    v = unit()
+    g["rateDrift"] = {"degHPerDegS": [size / 0.1 * a * b for a in u for b in v]}
+elif cls == "warm_up_transient":
+    g["transientDrift"] = {"amplitudeDegH": [size * x for x in u],
+                           "timeConstantHours": rng.uniform(1, 6)}
 elif cls == "star_tracker_misalignment":
     sc["gyros"] = []
     sc["starTracker"] = {"misalignmentArcsec": [rng.uniform(40, 80) * x for x in u]}

@@ -108,6 +108,21 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
     out << absl::StrFormat("# g%d_hidden_driver_correlation_h: %.15g\n", n,
                            estimator::SecondsToHours(e.hidden_driver_drift->correlation_time_s));
   }
+  if (e.rate_drift) {
+    const Eigen::Matrix3d per_deg_s = e.rate_drift->gain_k * estimator::kSecondsPerHour;
+    std::vector<std::string> gains;  // row by row, as in the scenario
+    for (int i = 0; i < 9; ++i) gains.push_back(Num15(per_deg_s(i / 3, i % 3)));
+    out << absl::StrFormat("# g%d_rate_drift_deg_h_per_deg_s: [%s]\n", n,
+                           absl::StrJoin(gains, ", "));
+  }
+  if (e.transient_drift) {
+    out << absl::StrFormat("# g%d_transient_drift_amplitude_deg_h: %s\n", n,
+                           VecDegH(e.transient_drift->amplitude_k_rad_s));
+    out << absl::StrFormat("# g%d_transient_drift_time_constant_h: %.15g\n", n,
+                           estimator::SecondsToHours(e.transient_drift->time_constant_s));
+    out << absl::StrFormat("# g%d_transient_drift_start_h: %.15g\n", n,
+                           estimator::SecondsToHours(e.transient_drift->start_s));
+  }
 }
 
 // Truth CSV: metadata lines (the recording's, plus the true coefficients [deg/h] and true
@@ -116,7 +131,8 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
 // empty when off), st_outlier (0/1) and st_outlier_arcsec, then one group of columns per gyro and
 // effect that is on (none when every effect is off, so such files keep their old layout):
 // gN_displacement_x..z_um, gN_orbital_dw_x..z_deg_h, gN_switching_level,
-// gN_hidden_driver and gN_hidden_dw_x..z_deg_h.
+// gN_hidden_driver and gN_hidden_dw_x..z_deg_h, gN_rate_dw_x..z_deg_h,
+// gN_transient_dw_x..z_deg_h.
 absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationResult& result) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
   if (!out) return absl::UnavailableError(absl::StrCat(path, ": cannot open for writing"));
@@ -176,6 +192,14 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
           ",g%d_hidden_driver,g%d_hidden_dw_x_deg_h,g%d_hidden_dw_y_deg_h,g%d_hidden_dw_z_deg_h",
           n, n, n, n);
     }
+    if (e.rate_drift) {
+      out << absl::StrFormat(",g%d_rate_dw_x_deg_h,g%d_rate_dw_y_deg_h,g%d_rate_dw_z_deg_h", n, n,
+                             n);
+    }
+    if (e.transient_drift) {
+      out << absl::StrFormat(
+          ",g%d_transient_dw_x_deg_h,g%d_transient_dw_y_deg_h,g%d_transient_dw_z_deg_h", n, n, n);
+    }
   }
   out << "\n";
   for (const estimator::TruthSample& t : result.truth) {
@@ -216,6 +240,10 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
       if (e.hidden_driver_drift) {
         out << "," << (s ? absl::StrCat(Num(s->hidden_driver), ",", deg_h(s->dw_hidden_k_rad_s))
                          : std::string(",,,"));
+      }
+      if (e.rate_drift) out << "," << (s ? deg_h(s->dw_rate_k_rad_s) : std::string(",,"));
+      if (e.transient_drift) {
+        out << "," << (s ? deg_h(s->dw_transient_k_rad_s) : std::string(",,"));
       }
     }
     out << "\n";

@@ -2,6 +2,9 @@
 // out-of-range values named, changes applied on top of the configuration's model.
 #include "client/scenario.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "estimator/rotation.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
@@ -140,6 +143,58 @@ TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
   spec.profile = *MakeScenarioProfile(*s, "", 8 * 3600.0);
   spec.duration = 8 * 3600.0;
   EXPECT_THAT(est::Simulate(spec), IsOk());
+}
+
+// A rate-dependent drift and a warm-up transient: parsed into SI, applied, and simulated as
+// their formulas say (each truth sample's part: G C_k_b w_b for the body rate of the profile at
+// that time, A exp(-(t - t0) / tau) from t0 and zero before), both included in the total drift.
+TEST(Scenario, ParsesAndSimulatesTheRateDependentDriftAndTheWarmUpTransient) {
+  auto s = ParseScenarioJson(R"({
+    "profile": "calibration",
+    "gyros": [{"id": 1, "rateDrift": {"degHPerDegS": [0.7, 0, 0, 0, 0, -0.3, 0.1, 0.2, 0]}},
+              {"id": 2, "transientDrift": {"amplitudeDegH": [0.1, -0.05, 0],
+                                           "timeConstantHours": 0.5, "startHours": 0.25}}]
+  })");
+  ASSERT_THAT(s, IsOk());
+  ASSERT_EQ(s->gyros.size(), 2u);
+  ASSERT_TRUE(s->gyros[0].rate_drift.has_value());
+  EXPECT_NEAR(s->gyros[0].rate_drift->gain_k(0, 0), 0.7 / 3600.0, 1e-18);
+  EXPECT_NEAR(s->gyros[0].rate_drift->gain_k(1, 2), -0.3 / 3600.0, 1e-18);
+  EXPECT_NEAR(s->gyros[0].rate_drift->gain_k(2, 1), 0.2 / 3600.0, 1e-18);
+  ASSERT_TRUE(s->gyros[1].transient_drift.has_value());
+  EXPECT_EQ(s->gyros[1].transient_drift->time_constant_s, 1800.0);
+  EXPECT_EQ(s->gyros[1].transient_drift->start_s, 900.0);
+
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  auto profile = MakeScenarioProfile(*s, "", 3600.0);
+  ASSERT_THAT(profile, IsOk());
+  spec.profile = *profile;
+  spec.duration = 3600.0;
+  auto result = est::Simulate(spec);
+  ASSERT_THAT(result, IsOk());
+  ASSERT_TRUE(result->effects[0].rate_drift.has_value());
+  ASSERT_TRUE(result->effects[1].transient_drift.has_value());
+  const Eigen::Matrix3d gain = s->gyros[0].rate_drift->gain_k;
+  const Vector3d amplitude = s->gyros[1].transient_drift->amplitude_k_rad_s;
+  double largest_rate_drift = 0.0;
+  for (const est::TruthSample& t : result->truth) {
+    const double t_s = absl::ToDoubleSeconds(t.time - spec.start);
+    const est::GyroTruthSample& g1 = *t.gyros[0];
+    const Vector3d w_k = g1.C_b_k.transpose() * spec.profile->Rate(t_s);
+    EXPECT_LT((g1.dw_rate_k_rad_s - gain * w_k).norm(), 1e-15) << t_s;
+    largest_rate_drift = std::max(largest_rate_drift, g1.dw_rate_k_rad_s.norm());
+    const est::GyroTruthSample& g2 = *t.gyros[1];
+    const Vector3d expected =
+        t_s < 900.0 ? Vector3d::Zero() : Vector3d(amplitude * std::exp(-(t_s - 900.0) / 1800.0));
+    EXPECT_LT((g2.dw_transient_k_rad_s - expected).norm(), 1e-15) << t_s;
+    // Gyro 2 has no other effect beyond the model: its total drift includes the transient.
+    EXPECT_TRUE(g2.dw_rate_k_rad_s.isZero(0.0));
+    EXPECT_TRUE(t.gyros[2]->dw_transient_k_rad_s.isZero(0.0));
+  }
+  // The calibration profile turns at about 0.1 deg/s: a drift of a few hundredths of a deg/h.
+  EXPECT_GT(est::RadPerSecToDegPerHour(largest_rate_drift), 0.01);
 }
 
 // The drift effects beyond the paper's models: each key parsed into SI, applied to the truth, and
@@ -297,6 +352,17 @@ TEST(Scenario, ErrorsNameTheKey) {
        "gyros[0].hiddenDriverDrift.correlationHours: -2 is outside [0.001, 100000]"},
       {R"({"gyros": [{"id": 1, "hiddenDriverDrift": [0, 0, 0.01]}]})",
        "gyros[0].hiddenDriverDrift: expected an object"},
+      {R"({"gyros": [{"id": 1, "rateDrift": {"degHPerDegS": [1, 0, 0, 0, 1, 0]}}]})",
+       "gyros[0].rateDrift.degHPerDegS: expected an array of 9 numbers"},
+      {R"({"gyros": [{"id": 1, "rateDrift": {"degHPerDegS": [1, 0, 0, 0, 1, 0, 0, 0, 500]}}]})",
+       "gyros[0].rateDrift.degHPerDegS[8]: 500 is outside [-100, 100]"},
+      {R"({"gyros": [{"id": 1, "rateDrift": {}}]})", "gyros[0].rateDrift.degHPerDegS: required"},
+      {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1]}}]})",
+       "gyros[0].transientDrift.timeConstantHours: required"},
+      {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 3, "startHours": -1}}]})",
+       "gyros[0].transientDrift.startHours: -1 is outside [0, 100000]"},
+      {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 3, "tau": 3}}]})",
+       "gyros[0].transientDrift.tau: unknown key"},
       {R"({"profile": "tumbling"})", "profile: unknown profile 'tumbling'"},
       {R"({"inclinationDeg": 200})", "inclinationDeg: 200 is outside [0, 180]"},
       {R"({"segmentHours": 0.1, "slewMin": 10})", "slewMin: 10 min is longer than segmentHours"},
