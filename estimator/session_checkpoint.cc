@@ -66,11 +66,17 @@ using Eigen::VectorXd;
 //   values, row by row. A session restored from an earlier version gives each excluded gyro
 //   the reason kEarlier at its last update time, starts the monitor afresh, and one that was
 //   FAULTED with a usable pair left resumes in its progress state (degraded).
+// Version 8 (written): version 7's values, except that each gyro's theta is preceded by its
+//   length t (kNumDriftCoefficients: the fixed terms of estimator/model_terms.h, 13 today), so a
+//   checkpoint says how many fixed drift coefficients it holds: one written before a fixed term
+//   was added to (or removed from) the model no longer restores (DataLoss naming the counts; the
+//   server rebuilds the session from its archive) instead of reading the next field as a
+//   coefficient. Versions 1-7 hold 13.
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 7;
+  c.version = 8;
   std::vector<double>& v = c.values;
   auto put_time = [&](absl::Time t) {
     if (t == absl::InfinitePast()) {
@@ -109,6 +115,7 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
     put_vec(g.h_in);
     put_vec(g.t1);
     put_vec(g.residual_drift);
+    v.push_back(static_cast<double>(g.theta.size()));  // version 8
     put_vec(g.theta);
     put_vec(g.phi_b);
     v.push_back(g.faulty ? 1 : 0);
@@ -194,7 +201,7 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
 absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SpacecraftConfig& config, const SessionOptions& options,
     const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version < 1 || checkpoint.version > 7) {
+  if (checkpoint.version < 1 || checkpoint.version > 8) {
     return absl::DataLossError(
         absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
   }
@@ -286,6 +293,14 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     get_vec(g.h_in);
     get_vec(g.t1);
     get_vec(g.residual_drift);
+    // Versions 1-7 hold the 13 coefficients of eq. (1), (10); version 8 says how many.
+    const int theta_count = checkpoint.version >= 8 ? get_int() : 13;
+    if (bad_value.empty() && !short_read && theta_count != g.theta.size()) {
+      return absl::DataLossError(absl::StrFormat(
+          "checkpoint: gyro %d holds %d fixed drift coefficients, this build's model has %d "
+          "(a fixed term added or removed since it was written, estimator/model_terms.h)",
+          g.id, theta_count, static_cast<int>(g.theta.size())));
+    }
     get_vec(g.theta);
     get_vec(g.phi_b);
     g.faulty = get_flag();

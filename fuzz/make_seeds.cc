@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <cstddef>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -75,8 +76,24 @@ std::string UserExport(const estimator::Recording& recording) {
   return out;
 }
 
-// The length of the session checkpoint's values up to and including `version`
-// (estimator/session_checkpoint.cc): each version appends to the one before.
+// A version-8 session checkpoint's values without the count of fixed drift coefficients before
+// each gyro's theta (estimator/session_checkpoint.cc): version 7's layout, which versions 1-6
+// extend.
+std::vector<double> WithoutThetaCounts(std::vector<double> v) {
+  size_t pos = 22;
+  const size_t m = static_cast<size_t>(v.at(pos));
+  pos += 1 + m;
+  const size_t g = static_cast<size_t>(v.at(pos++));
+  for (size_t i = 0; i < g; ++i) {
+    v.erase(v.begin() + static_cast<std::ptrdiff_t>(pos + 9));  // after id, h_in, t1, drift
+    pos += 30;
+  }
+  return v;
+}
+
+// The length of version-7-layout session checkpoint values (WithoutThetaCounts) up to and
+// including `version` <= 7 (estimator/session_checkpoint.cc): each version appends to the one
+// before.
 size_t VersionLength(const std::vector<double>& v, int version) {
   const size_t m = static_cast<size_t>(v.at(22));
   const size_t g = static_cast<size_t>(v.at(23 + m));
@@ -229,7 +246,8 @@ int main(int argc, char** argv) {
       }
     }
     const estimator::SessionCheckpoint full = session->ExportCheckpoint();
-    for (int version = 1; version <= 7; ++version) {
+    const std::vector<double> version7_layout = WithoutThetaCounts(full.values);
+    for (int version = 1; version <= 8; ++version) {
       server::ServerCheckpoint c;
       c.model = "10+11";
       c.applied_time = applied > 0 ? frames[applied - 1].time : absl::InfinitePast();
@@ -238,7 +256,10 @@ int main(int argc, char** argv) {
       c.frames_applied = static_cast<int64_t>(applied);
       c.session = full;
       c.session->version = version;
-      c.session->values.resize(VersionLength(full.values, version));
+      if (version <= 7) {
+        c.session->values = version7_layout;
+        c.session->values.resize(VersionLength(version7_layout, version));
+      }
       if (!estimator::EstimationSession::FromCheckpoint(*config, options, *c.session).ok()) {
         std::fprintf(stderr, "cut %zu version %d does not restore\n", cut, version);
         return 1;

@@ -29,6 +29,7 @@
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/checkpoint_versions.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/status_matchers.h"
 
@@ -37,9 +38,10 @@ namespace {
 
 using ::esg::testing::IsOk;
 
-// Per-gyro checkpoint record (session_checkpoint.cc): id, h_in (3), t1 (3), residual_drift (2),
-// theta (13), phi_b (3), faulty, has_reading, h_k_last (3).
-constexpr int kGyroRecord = 30;
+// Per-gyro checkpoint record of version 7 (session_checkpoint.cc): id, h_in (3), t1 (3),
+// residual_drift (2), theta (13), phi_b (3), faulty, has_reading, h_k_last (3); version 8 has the
+// theta count before theta (testing::GyroRecordLength). The tests below cut the checkpoint to
+// version 6, so their offsets are version 7's.
 constexpr int kHIn = 1, kT1 = 4, kResidualDrift = 7, kTheta = 9;
 
 // Offsets into a version-3 checkpoint's values.
@@ -58,7 +60,8 @@ CheckpointIndex Index(const SessionCheckpoint& c) {
   const int m = static_cast<int>(c.values[pos]);
   pos += 1 + m;
   const int gyros = static_cast<int>(c.values[pos++]);
-  for (int i = 0; i < gyros; ++i, pos += kGyroRecord) x.gyro.push_back(pos);
+  const int record = static_cast<int>(testing::GyroRecordLength(c));
+  for (int i = 0; i < gyros; ++i, pos += record) x.gyro.push_back(pos);
   x.n_index = pos;
   x.n = static_cast<int>(c.values[pos]);
   return x;
@@ -69,6 +72,7 @@ CheckpointIndex Index(const SessionCheckpoint& c) {
 // tracks) starting afresh: the tests below read the version-6 tail from the end.
 SessionCheckpoint ToVersion6(SessionCheckpoint c, int gyros, int n, const SpacecraftConfig& config,
                              const std::vector<int>& ids) {
+  c = testing::AsVersion7(std::move(c));
   const CheckpointIndex x = Index(c);
   size_t pos = static_cast<size_t>(x.n_index) + 1 + 2 * static_cast<size_t>(n) * n;  // version 1
   auto section = [&] { pos += 1 + static_cast<size_t>(c.values[pos]); };
@@ -169,7 +173,8 @@ class CovarianceTransition : public ::testing::Test {
     EXPECT_THAT(report, IsOk());
     if (!report.ok()) return c;
     EXPECT_FALSE(report->measurement_step);
-    return s->ExportCheckpoint();
+    // In version 7's layout, whose first part (through P) the offsets of index_ describe.
+    return testing::AsVersion7(s->ExportCheckpoint());
   }
 
   // The checkpoint with P = tiny I, except P(j, j) = eps.

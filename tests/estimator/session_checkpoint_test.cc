@@ -25,6 +25,7 @@
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/checkpoint_versions.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/status_matchers.h"
 
@@ -76,17 +77,20 @@ SessionOptions Options(const char* model = "10+11") {
 }
 
 // The number of values of the version-1 part of a checkpoint (session_checkpoint.cc): 23 values
-// before convergence_mark_sigma (m at index 22), m, the gyro count g, 30 per gyro, n, P and P0.
-// Version 2 appends its fields after these.
+// before convergence_mark_sigma (m at index 22), m, the gyro count g, 30 per gyro (31 from
+// version 8 on), n, P and P0. Version 2 appends its fields after these.
 size_t Version1Length(const SessionCheckpoint& c) {
+  const size_t record = testing::GyroRecordLength(c);
   const size_t m = static_cast<size_t>(c.values.at(22));
   const size_t g = static_cast<size_t>(c.values.at(23 + m));
-  const size_t n = static_cast<size_t>(c.values.at(23 + m + 1 + 30 * g));
-  return 23 + m + 1 + 30 * g + 1 + 2 * n * n;
+  const size_t n = static_cast<size_t>(c.values.at(23 + m + 1 + record * g));
+  return 23 + m + 1 + record * g + 1 + 2 * n * n;
 }
 
-// The same session's checkpoint in version 1: the version-2 fields left out.
+// The same session's checkpoint in version 1: the theta counts of version 8 and the fields of
+// versions 2-7 left out.
 SessionCheckpoint AsVersion1(SessionCheckpoint c) {
+  c = testing::AsVersion7(std::move(c));
   c.values.resize(Version1Length(c));
   c.version = 1;
   return c;
@@ -233,7 +237,7 @@ Prefix RunPrefix(const Scenario& s, const SessionOptions& options, size_t cut) {
 std::vector<StepReport> ExpectResumesBitForBit(const Scenario& s, const SessionOptions& options,
                                                size_t cut, const EstimationSession& at_cut) {
   const SessionCheckpoint checkpoint = at_cut.ExportCheckpoint();
-  EXPECT_EQ(checkpoint.version, 7);
+  EXPECT_EQ(checkpoint.version, 8);
   auto restored = EstimationSession::FromCheckpoint(s.spec.config, options, checkpoint);
   EXPECT_THAT(restored, IsOk());
   if (!restored.ok()) return {};
@@ -598,7 +602,7 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   ASSERT_TRUE(p.session.degraded());
   ASSERT_GT(p.session.consistency_monitor().tests(), 0);
   const SessionCheckpoint good = p.session.ExportCheckpoint();
-  ASSERT_EQ(good.version, 7);
+  ASSERT_EQ(good.version, 8);
   const int n = p.session.state_size();
   // The covariance blocks P and P0 (n x n each) end where the version-2 fields begin.
   const size_t matrices_end = Version1Length(good);
@@ -642,9 +646,9 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), longer),
               StatusIs(absl::StatusCode::kDataLoss, HasSubstr("oversized")));
   SessionCheckpoint future = good;
-  future.version = 8;
+  future.version = 9;
   EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), future),
-              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("version 8")));
+              StatusIs(absl::StatusCode::kDataLoss, HasSubstr("version 9")));
   RecordProperty("restored", restored);
   RecordProperty("refused", refused);
   std::printf("%zu values: %d corrupt restored (%d ran on), %d refused\n", good.values.size(),
@@ -657,6 +661,35 @@ TEST(SessionCheckpoint, EveryCorruptedOrTruncatedValueIsRestoredOrDataLoss) {
 // covariance P0 had a zero on its diagonal restored; the next frame put sqrt(P/P0) = inf into the
 // convergence record, so the session's own checkpoint no longer restored (the server would have
 // written a checkpoint it cannot load). The fuzzer's blob is tested in quarantine_test.cc.
+// Version 8 says how many fixed drift coefficients each gyro holds (estimator/model_terms.h):
+// a checkpoint that holds another number (written before a fixed term was added or removed) is
+// DataLoss naming both counts, never read with its next field taken for a coefficient; the same
+// session's values in version 7's layout (13, not stated) still restore, to the same state.
+TEST(SessionCheckpoint, ACountOfFixedCoefficientsOtherThanTheModelsIsDataLossAndVersion7Restores) {
+  const Scenario s = AllPhases();
+  const Prefix p = RunPrefix(s, Options(), FrameAt(s, 6.5));
+  const SessionCheckpoint good = p.session.ExportCheckpoint();
+  ASSERT_EQ(good.version, 8);
+  const size_t m = static_cast<size_t>(good.values.at(22));
+  const size_t first_gyro = 23 + m + 1;
+  const size_t count_at = first_gyro + testing::kGyroValuesBeforeTheta;
+  ASSERT_EQ(good.values.at(count_at), static_cast<double>(kNumDriftCoefficients));
+  for (const double other : {12.0, 14.0}) {
+    SessionCheckpoint c = good;
+    c.values[count_at] = other;
+    EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(), c),
+                StatusIs(absl::StatusCode::kDataLoss,
+                         HasSubstr(absl::StrFormat("gyro %d holds %d fixed drift coefficients, "
+                                                   "this build's model has %d",
+                                                   static_cast<int>(good.values[first_gyro]),
+                                                   static_cast<int>(other), kNumDriftCoefficients))));
+  }
+  auto from_version7 =
+      EstimationSession::FromCheckpoint(s.spec.config, Options(), testing::AsVersion7(good));
+  ASSERT_THAT(from_version7, IsOk());
+  EXPECT_TRUE(SameBits(from_version7->ExportCheckpoint().values, good.values));
+}
+
 TEST(SessionCheckpoint, ZeroInitialVarianceIsDataLoss) {
   const Scenario s = AllPhases();
   const Prefix p = RunPrefix(s, Options(), FrameAt(s, 0.5));

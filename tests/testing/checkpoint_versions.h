@@ -1,0 +1,40 @@
+// A session checkpoint of this build in the layout of version 7 (estimator/session_checkpoint.cc):
+// version 8 added the count of fixed drift coefficients before each gyro's theta, and nothing
+// else; tests that cut a checkpoint down to an earlier version start from this layout.
+#ifndef ESG_TESTS_TESTING_CHECKPOINT_VERSIONS_H_
+#define ESG_TESTS_TESTING_CHECKPOINT_VERSIONS_H_
+
+#include <cstddef>
+
+#include "estimator/session.h"
+
+namespace esg::testing {
+
+// The values of one running gyro before its theta count: id, h_in (3), t1 (3), residual_drift (2).
+inline constexpr size_t kGyroValuesBeforeTheta = 9;
+// The per-gyro record of versions 1-7: those, theta (13), phi_b (3), faulty, has_reading,
+// h_k_last (3); version 8 has one value more (the theta count).
+inline constexpr size_t kGyroRecordVersion7 = 30;
+
+inline size_t GyroRecordLength(const estimator::SessionCheckpoint& c) {
+  return kGyroRecordVersion7 + (c.version >= 8 ? 1 : 0);
+}
+
+// `c` (version 8) with the theta counts taken out, as version 7; an earlier version unchanged.
+inline estimator::SessionCheckpoint AsVersion7(estimator::SessionCheckpoint c) {
+  if (c.version < 8) return c;
+  size_t pos = 22;  // the scalar fields before convergence_mark_sigma's length m
+  const size_t m = static_cast<size_t>(c.values.at(pos));
+  pos += 1 + m;
+  const size_t gyros = static_cast<size_t>(c.values.at(pos++));
+  for (size_t g = 0; g < gyros; ++g) {
+    c.values.erase(c.values.begin() + static_cast<std::ptrdiff_t>(pos + kGyroValuesBeforeTheta));
+    pos += kGyroRecordVersion7;
+  }
+  c.version = 7;
+  return c;
+}
+
+}  // namespace esg::testing
+
+#endif  // ESG_TESTS_TESTING_CHECKPOINT_VERSIONS_H_
