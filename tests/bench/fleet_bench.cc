@@ -6,8 +6,11 @@
 // transactions per applied frame (commits_per_applied_frame: ingest's group commits, the
 // filter's commits, lease renewals), and the acknowledgement latency of the frames sent in it
 // (ack_p50_ms, ack_p99_ms: from the write of a frame to its ack, which follows its durable
-// commit). Argument 2 is the filter's group commit (CoreOptions::filter_commit_group): 64, or 0
-// for one commit per filter job as before it. One iteration each (wall time):
+// commit). With the group commit the transaction ids count each job's savepoint too, so
+// xact_commit_per_applied_frame counts the commits themselves (pg_stat_database, read-only
+// transactions included). Argument 2 is the filter's group commit
+// (CoreOptions::filter_commit_group): 64, or 0 for one commit per filter job as before it.
+// One iteration each (wall time):
 //   <dir>/tests/bench/esg_bench --benchmark_filter=BM_FleetAtOneHertz
 #include <libpq-fe.h>
 
@@ -52,20 +55,35 @@ const std::vector<esg::v1::TelemetryFrame>& OneHertzFrames() {
   return *frames;
 }
 
-// The next transaction id of the PostgreSQL server at `uri` (write transactions get ids in
-// order; this query takes one itself), as BM_IngestThroughGrpc counts them.
-int64_t NextXid(const std::string& uri) {
+// One integer `sql` reads from the PostgreSQL database at `uri` (-1 on error).
+int64_t QueryInt(const std::string& uri, const char* sql) {
   PGconn* conn = PQconnectdb(uri.c_str());
-  int64_t xid = -1;
+  int64_t value = -1;
   if (PQstatus(conn) == CONNECTION_OK) {
-    PGresult* r = PQexec(conn, "SELECT pg_current_xact_id()::text::bigint");
+    PGresult* r = PQexec(conn, sql);
     if (PQresultStatus(r) == PGRES_TUPLES_OK && PQntuples(r) == 1) {
-      xid = std::strtoll(PQgetvalue(r, 0, 0), nullptr, 10);
+      value = std::strtoll(PQgetvalue(r, 0, 0), nullptr, 10);
     }
     PQclear(r);
   }
   PQfinish(conn);
-  return xid;
+  return value;
+}
+
+// The next transaction id of the PostgreSQL server at `uri` (write transactions get ids in
+// order; this query takes one itself), as BM_IngestThroughGrpc counts them. A savepoint that
+// writes takes an id of its own too, so with the filter's group commit this counts each job of
+// a group, not the group's one commit: see CommittedTransactions.
+int64_t NextXid(const std::string& uri) {
+  return QueryInt(uri, "SELECT pg_current_xact_id()::text::bigint");
+}
+
+// Transactions committed in the database at `uri` so far (pg_stat_database.xact_commit: every
+// commit, savepoints not counted, read-only transactions included; each connection reports its
+// counts when idle, at most once a second).
+int64_t CommittedTransactions(const std::string& uri) {
+  return QueryInt(uri,
+                  "SELECT xact_commit FROM pg_stat_database WHERE datname = current_database()");
 }
 
 std::string FleetId(int i) { return absl::StrFormat("FL-%05d", i); }
@@ -183,11 +201,13 @@ void BM_FleetAtOneHertz(benchmark::State& state) {
     std::this_thread::sleep_until(window_start);
     const int64_t applied_before = applied();
     const int64_t xid_before = NextXid(*db);
+    const int64_t committed_before = CommittedTransactions(*db);
     const Clock::time_point measured_from = Clock::now();
     std::this_thread::sleep_until(measured_from + std::chrono::seconds(kMeasuredSeconds));
     const Clock::time_point snapshot_start = Clock::now();
     const int64_t applied_after = applied();
     const int64_t xid_after = NextXid(*db);
+    const int64_t committed_after = CommittedTransactions(*db);
     const double snapshot_s = std::chrono::duration<double>(Clock::now() - snapshot_start).count();
     const double seconds = std::chrono::duration<double>(Clock::now() - measured_from).count();
     for (std::thread& t : streams) t.join();
@@ -200,6 +220,11 @@ void BM_FleetAtOneHertz(benchmark::State& state) {
     state.counters["snapshot_s"] = snapshot_s;
     state.counters["offered_fps"] = n;
     state.counters["applied_fps"] = static_cast<double>(applied_frames) / seconds;
+    // The queries of the two snapshots (NextXid, CommittedTransactions) are not counted.
+    const double committed = static_cast<double>(committed_after - committed_before - 2);
+    state.counters["xact_commit_per_s"] = committed / seconds;
+    state.counters["xact_commit_per_applied_frame"] =
+        applied_frames > 0 ? committed / static_cast<double>(applied_frames) : 0;
     state.counters["commits_per_s"] = static_cast<double>(xid_after - xid_before - 1) / seconds;
     state.counters["commits_per_applied_frame"] =
         applied_frames > 0 ? static_cast<double>(xid_after - xid_before - 1) / applied_frames : 0;
