@@ -121,8 +121,6 @@ std::optional<Inputs> Load(const CommonOptions& o) {
   return in;
 }
 
-std::string Utc(absl::Time t) { return FormatUtc(t); }
-
 json Vec(const Eigen::Vector3d& v, double scale) {
   return json::array({v.x() * scale, v.y() * scale, v.z() * scale});
 }
@@ -200,7 +198,7 @@ json ConsistencyJson(const Inputs& in, const estimator::CalibrationResult& r) {
            {"widenedWindows", widenings},
            {"widenedDriftDegHAtEnd", r.widened_drift_deg_h}};
   if (c.first != nullptr) {
-    doc["firstTime"] = Utc(c.first->time);
+    doc["firstTime"] = FormatUtc(c.first->time);
     doc["value"] = c.first->value;
     doc["threshold"] = c.first->threshold;
     doc["worstValue"] = c.worst->value;
@@ -230,7 +228,7 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
     if (g.faulty) {
       gyros.back()["exclusion"] =
           json{{"reason", estimator::ExclusionReasonName(g.exclusion.reason)},
-               {"time", Utc(g.exclusion.time)},
+               {"time", FormatUtc(g.exclusion.time)},
                {"value", g.exclusion.value},
                {"threshold", g.exclusion.threshold},
                {"message", g.exclusion.Describe()}};
@@ -247,7 +245,7 @@ json CalibrationJson(const Inputs& in, const estimator::CalibrationResult& r) {
   for (const auto& [kind, n] : r.event_counts) counts[estimator::EventKindName(kind)] = n;
   json events = json::array();
   for (const estimator::Event& e : r.events) {
-    events.push_back(json{{"time", Utc(e.time)},
+    events.push_back(json{{"time", FormatUtc(e.time)},
                           {"kind", estimator::EventKindName(e.kind)},
                           {"subsystem", e.subsystem},
                           {"value", e.value},
@@ -294,7 +292,7 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
         "first at %s (%d failing tests, worst %.1f > %.1f); run esg diagnose to find what the "
         "model leaves out\n",
         in.options.consistency_window_steps, c.first->value, c.first->threshold,
-        Utc(c.first->time).c_str(), c.failing_tests, c.worst->value, c.worst->threshold);
+        FormatUtc(c.first->time).c_str(), c.failing_tests, c.worst->value, c.worst->threshold);
   }
   int widenings = 0;
   const estimator::Event* first_widening = nullptr;
@@ -308,7 +306,7 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
         "FILTER WIDENED: the star-tracker innovations exceeded what the configured model allows "
         "(first at %s, %d windows widened or kept widened; at the end as an unmodelled drift of "
         "%.3g deg/h): the model does not explain the data; run esg diagnose\n",
-        Utc(first_widening->time).c_str(), widenings, r.widened_drift_deg_h);
+        FormatUtc(first_widening->time).c_str(), widenings, r.widened_drift_deg_h);
   }
   if (ConsistencyOf(r).first == nullptr && first_widening == nullptr) {
     std::printf("model consistent with the data (innovation chi-square over %d-step windows)\n",
@@ -356,7 +354,7 @@ void PrintCalibration(const Inputs& in, const estimator::CalibrationResult& r) {
   const size_t shown = std::min<size_t>(r.events.size(), 20);
   for (size_t i = 0; i < shown; ++i) {
     const auto& e = r.events[i];
-    std::printf("  %s %-24s %-18s %.1f > %.1f %s\n", Utc(e.time).c_str(),
+    std::printf("  %s %-24s %-18s %.1f > %.1f %s\n", FormatUtc(e.time).c_str(),
                 estimator::EventKindName(e.kind), e.subsystem.c_str(), e.value, e.threshold,
                 e.unit.c_str());
   }
@@ -431,7 +429,7 @@ int RunGap(const GapOptions& o) {
     out << "time_utc,hours_since_gap,err_x_arcmin,err_y_arcmin,err_z_arcmin,err_arcmin,"
            "sigma_x_arcmin,sigma_y_arcmin,sigma_z_arcmin\n";
     for (const auto& s : result->samples) {
-      out << absl::StrFormat("%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", Utc(s.time),
+      out << absl::StrFormat("%s,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f,%.6f\n", FormatUtc(s.time),
                              s.hours_since_gap, RadToArcmin(s.error_in.x()), RadToArcmin(s.error_in.y()),
                              RadToArcmin(s.error_in.z()), RadToArcmin(s.angle), RadToArcmin(s.sigma_b.x()),
                              RadToArcmin(s.sigma_b.y()), RadToArcmin(s.sigma_b.z()));
@@ -445,7 +443,7 @@ int RunGap(const GapOptions& o) {
   if (o.common.format == OutputFormat::kCsv) {
     std::vector<Json> rows;
     for (const auto& s : result->samples) {
-      rows.push_back(Json{{"time", Utc(s.time)},
+      rows.push_back(Json{{"time", FormatUtc(s.time)},
                           {"hours", s.hours_since_gap},
                           {"errorArcmin", Vec(s.error_in, RadToArcmin(1.0))},
                           {"angleArcmin", RadToArcmin(s.angle)},
@@ -455,14 +453,14 @@ int RunGap(const GapOptions& o) {
   } else if (o.common.format == OutputFormat::kJson) {
     json series = json::array();
     for (const auto& s : result->samples) {
-      series.push_back(json{{"time", Utc(s.time)},
+      series.push_back(json{{"time", FormatUtc(s.time)},
                             {"hours", s.hours_since_gap},
                             {"errorArcmin", Vec(s.error_in, RadToArcmin(1.0))},
                             {"angleArcmin", RadToArcmin(s.angle)}});
     }
     json doc{{"spacecraftId", in->config.spacecraft_id},
              {"model", in->options.model.Name()},
-             {"gapStart", Utc(*gap_start)},
+             {"gapStart", FormatUtc(*gap_start)},
              {"gapHours", result->gap_hours},
              {"driftRateDegH", rate_deg_h},
              {"slopeDegH", Vec(result->slope_in, RadPerSecToDegPerHour(1.0))},
@@ -473,7 +471,7 @@ int RunGap(const GapOptions& o) {
   } else {
     std::printf("%s: model %s calibrated up to %s, then %.2f h without the star tracker\n",
                 in->config.spacecraft_id.c_str(), in->options.model.Name().c_str(),
-                Utc(*gap_start).c_str(), result->gap_hours);
+                FormatUtc(*gap_start).c_str(), result->gap_hours);
     std::printf("drift-caused attitude error rate %.4f deg/h (inertial axes slope [%+.4f %+.4f %+.4f] deg/h)\n",
                 rate_deg_h, RadPerSecToDegPerHour(result->slope_in.x()),
                 RadPerSecToDegPerHour(result->slope_in.y()), RadPerSecToDegPerHour(result->slope_in.z()));
