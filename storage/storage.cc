@@ -27,6 +27,18 @@ absl::Status CheckSpacecraft(const std::string& record_id, const std::string& ba
                                                  "'"));
 }
 
+// A write transaction on `db`, the filter's connection: own_connection (PostgreSQL) when it is
+// not the main one. That connection may have sat idle through a restart of the database server:
+// its first BEGIN then finds the connection lost (having done nothing) and the next one
+// reconnects.
+absl::StatusOr<Transaction> BeginFilterTransaction(Database& db, bool own_connection) {
+  {
+    absl::StatusOr<Transaction> txn = db.Begin(TransactionMode::kImmediate);
+    if (!own_connection || !absl::IsUnavailable(txn.status())) return txn;
+  }
+  return db.Begin(TransactionMode::kImmediate);
+}
+
 }  // namespace
 
 Storage::Storage(std::unique_ptr<Database> db)
@@ -190,7 +202,8 @@ absl::StatusOr<std::vector<int64_t>> Storage::WriteFilterEffects(Transaction& tx
 
 absl::StatusOr<std::vector<int64_t>> Storage::CommitFilterEffects(const FilterEffects& effects) {
   RETURN_IF_ERROR(CheckFilterEffects(effects));
-  ASSIGN_OR_RETURN(Transaction txn, filter_database().Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Transaction txn,
+                   BeginFilterTransaction(filter_database(), filter_db_ != nullptr));
   ASSIGN_OR_RETURN(std::vector<int64_t> sequences, WriteFilterEffects(txn, effects));
   RETURN_IF_ERROR(txn.Commit());
   return sequences;
@@ -223,7 +236,8 @@ std::vector<absl::StatusOr<std::vector<int64_t>>> Storage::CommitFilterEffectsGr
     }
     return results;
   };
-  absl::StatusOr<Transaction> txn = filter_database().Begin(TransactionMode::kImmediate);
+  absl::StatusOr<Transaction> txn =
+      BeginFilterTransaction(filter_database(), filter_db_ != nullptr);
   if (!txn.ok()) return fail_all(txn.status());
   // Each job inside its own savepoint: a job that fails (its lease lost, a record refused) is
   // undone alone and the others' writes stay in the transaction. A savepoint that cannot be
