@@ -249,7 +249,9 @@ Vector3d RandomPerpendicular(const Vector3d& axis, Rng& rng) {
 // deg a minute on the calibration profile) moved it by anything between 0 and the full size:
 // 30 arcsec of a "2.17 arcmin" jump on seed 14 of gyro 3.
 Vector3d ReadingAtFault(const SimulationSpec& spec, int gyro) {
-  auto sim = Simulate(spec);
+  SimulationSpec up_to_fault = spec;  // the frames after the first one at the fault change nothing
+  up_to_fault.duration = kFaultTime + kStep;
+  auto sim = Simulate(up_to_fault);
   if (!sim.ok()) return DefaultInitialSpinAxis(gyro);  // MakeSpec's caller simulates and fails
   const absl::Time at = spec.start + absl::Seconds(kFaultTime);
   for (const TruthSample& sample : sim->truth) {
