@@ -10,7 +10,6 @@
 #include <cstdio>
 #include <fstream>
 #include <string>
-#include <cstddef>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -24,6 +23,7 @@
 #include "server/checkpoint_codec.h"
 #include "storage/aem.h"
 #include "storage/recording_csv.h"
+#include "tests/testing/checkpoint_versions.h"
 
 namespace {
 
@@ -76,24 +76,9 @@ std::string UserExport(const estimator::Recording& recording) {
   return out;
 }
 
-// A version-8 session checkpoint's values without the count of fixed drift coefficients before
-// each gyro's theta (estimator/session_checkpoint.cc): version 7's layout, which versions 1-6
-// extend.
-std::vector<double> WithoutThetaCounts(std::vector<double> v) {
-  size_t pos = 22;
-  const size_t m = static_cast<size_t>(v.at(pos));
-  pos += 1 + m;
-  const size_t g = static_cast<size_t>(v.at(pos++));
-  for (size_t i = 0; i < g; ++i) {
-    v.erase(v.begin() + static_cast<std::ptrdiff_t>(pos + 9));  // after id, h_in, t1, drift
-    pos += 30;
-  }
-  return v;
-}
-
-// The length of version-7-layout session checkpoint values (WithoutThetaCounts) up to and
-// including `version` <= 7 (estimator/session_checkpoint.cc): each version appends to the one
-// before.
+// The length of session checkpoint values in version 7's layout (tests/testing/
+// checkpoint_versions.h AsVersion7) up to and including `version` <= 7 (estimator/
+// session_checkpoint.cc): each version appends to the one before.
 size_t VersionLength(const std::vector<double>& v, int version) {
   const size_t m = static_cast<size_t>(v.at(22));
   const size_t g = static_cast<size_t>(v.at(23 + m));
@@ -246,7 +231,7 @@ int main(int argc, char** argv) {
       }
     }
     const estimator::SessionCheckpoint full = session->ExportCheckpoint();
-    const std::vector<double> version7_layout = WithoutThetaCounts(full.values);
+    const std::vector<double> version7_layout = esg::testing::AsVersion7(full).values;
     for (int version = 1; version <= 8; ++version) {
       server::ServerCheckpoint c;
       c.model = "10+11";
