@@ -188,12 +188,15 @@ absl::StatusOr<estimator::OrbitalDrift> ParseOrbitalDrift(const json& v, const s
 }
 
 // {"amplitudeDegH": [x,y,z], "<time_key>": hours} -> amplitude [rad/s] and time [s], both
-// required; the time in [kMinCorrelationHours, kMaxHours].
+// required; the time in [kMinCorrelationHours, kMaxHours]. `optional_key`, when not empty, may
+// also appear (its caller reads it).
 absl::Status ParseAmplitudeAndTime(const json& v, const std::string& path,
                                    const std::string& time_key, Vector3d* amplitude_rad_s,
-                                   double* time_s) {
+                                   double* time_s, const std::string& optional_key = "") {
   RETURN_IF_ERROR(CheckObject(v, path));
-  RETURN_IF_ERROR(CheckKeys(v, path, {"amplitudeDegH", time_key}));
+  std::set<std::string> keys = {"amplitudeDegH", time_key};
+  if (!optional_key.empty()) keys.insert(optional_key);
+  RETURN_IF_ERROR(CheckKeys(v, path, keys));
   for (const std::string& key : {std::string("amplitudeDegH"), time_key}) {
     if (!v.contains(key)) return Invalid(Key(path, key), "required");
   }
@@ -233,16 +236,9 @@ absl::StatusOr<estimator::RateDrift> ParseRateDrift(const json& v, const std::st
 // {"amplitudeDegH": [x, y, z], "timeConstantHours": tau, "startHours": t0 (default 0)}.
 absl::StatusOr<estimator::TransientDrift> ParseTransientDrift(const json& v,
                                                              const std::string& path) {
-  RETURN_IF_ERROR(CheckObject(v, path));
-  RETURN_IF_ERROR(CheckKeys(v, path, {"amplitudeDegH", "timeConstantHours", "startHours"}));
   estimator::TransientDrift d;
-  json amplitude_and_time = json::object();
-  for (const char* key : {"amplitudeDegH", "timeConstantHours"}) {
-    if (!v.contains(key)) return Invalid(Key(path, key), "required");
-    amplitude_and_time[key] = v[key];
-  }
-  RETURN_IF_ERROR(ParseAmplitudeAndTime(amplitude_and_time, path, "timeConstantHours",
-                                        &d.amplitude_k_rad_s, &d.time_constant_s));
+  RETURN_IF_ERROR(ParseAmplitudeAndTime(v, path, "timeConstantHours", &d.amplitude_k_rad_s,
+                                        &d.time_constant_s, "startHours"));
   if (v.contains("startHours")) {
     ASSIGN_OR_RETURN(double hours, Number(v["startHours"], Key(path, "startHours"), 0.0, kMaxHours));
     d.start_s = estimator::HoursToSeconds(hours);
