@@ -319,6 +319,14 @@ class EstimationSession {
   // Withholds (false) or restores star-tracker measurements, as for a long-gap experiment.
   void SetStarTrackerUse(bool use) { use_star_tracker_ = use; }
 
+  // Readmits gyro `gyro_id`, excluded by the filter, on an operator's word (docs/service.md
+  // "Readmitting a gyro"): its block leaves the state now, and it rejoins at the next measurement
+  // step where it reports, as a cold spare switched on does (its spin axis rebuilt, its drift
+  // model from the configured prior; a GYRO_STARTED event). NotFound "gyro_id: ..." for a gyro
+  // not configured; FailedPrecondition "gyro_id: ..." for one not excluded (running, or not
+  // running), or one of the output pair (no clean pair would carry the output meanwhile).
+  absl::Status ReadmitGyro(int gyro_id);
+
   SessionState state() const { return state_; }
   // A running gyro is excluded: the output runs on a pair without it (SESSION STATES above).
   bool degraded() const;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "Eigen/Eigenvalues"
@@ -330,6 +331,61 @@ void EstimationSession::MarkExcluded(int id, const Exclusion& why) {
   g->exclusion = why;
   change_detector_.Clear();
   if (drift_change_gyro_ == id) drift_change_gyro_ = 0;
+}
+
+absl::Status EstimationSession::ReadmitGyro(int gyro_id) {
+  if (config_.FindGyro(gyro_id) == nullptr) {
+    std::string configured;
+    for (const GyroConfig& gc : config_.gyros) {
+      configured += absl::StrFormat("%s%d", configured.empty() ? "" : ", ", gc.id);
+    }
+    return absl::NotFoundError(absl::StrFormat(
+        "gyro_id: gyro %d is not configured (configured: %s)", gyro_id, configured));
+  }
+  const int i = IndexOf(gyro_id);
+  if (i < 0 || !gyros_[i].faulty) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "gyro_id: gyro %d is not excluded (%s); only a gyro the filter excluded is readmitted",
+        gyro_id, i < 0 ? "it is not running" : "it is running in the filter"));
+  }
+  if (working_pair_[0] == gyro_id || working_pair_[1] == gyro_id) {
+    return absl::FailedPreconditionError(absl::StrFormat(
+        "gyro_id: gyro %d is in the output pair [%d,%d]: no clean pair is left to carry the "
+        "output until it rejoins",
+        gyro_id, working_pair_[0], working_pair_[1]));
+  }
+  // Its block leaves the state (state_layout.h: the blocks are contiguous in gyros_ order, so the
+  // others keep their order and the latency its index); StartSwitchedOnGyros appends it again at
+  // the next measurement step where it reports, with the configured prior.
+  const int begin = layout_.GyroBegin(i);
+  const int size = layout_.GyroSize(i);
+  const int n = state_size();
+  std::vector<int> keep;
+  keep.reserve(n - size);
+  for (int k = 0; k < n; ++k) {
+    if (k < begin || k >= begin + size) keep.push_back(k);
+  }
+  const int m = static_cast<int>(keep.size());
+  MatrixXd P(m, m), P0(m, m);
+  for (int r = 0; r < m; ++r) {
+    for (int c = 0; c < m; ++c) {
+      P(r, c) = P_(keep[r], keep[c]);
+      P0(r, c) = P0_(keep[r], keep[c]);
+    }
+  }
+  P_ = std::move(P);
+  P0_ = std::move(P0);
+  gyros_.erase(gyros_.begin() + i);
+  layout_ = LayoutFor(config_, options_.model, gyros_);
+  if (reserve_pair_[0] == gyro_id || reserve_pair_[1] == gyro_id) reserve_pair_ = working_pair_;
+  // What the filter held about the gyro's readings and drift ends with its block.
+  abrupt_.erase(gyro_id);
+  if (suspect_gyro_ == gyro_id) suspect_gyro_ = 0;
+  if (unverified_gyro_ == gyro_id) unverified_gyro_ = 0;
+  if (drift_change_gyro_ == gyro_id) drift_change_gyro_ = 0;
+  change_detector_.Clear();
+  reading_monitor_.Clear();
+  return absl::OkStatus();
 }
 
 void EstimationSession::ReopenDrift(int id, double change_rad_s) {
