@@ -12,9 +12,9 @@
 #include <string>
 #include <vector>
 
+#include "formats/aem.h"
 #include "fuzz/fuzz_util.h"
 #include "server/planned_profile.h"
-#include "storage/aem.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// Fuzz target: the column-mapping reader (storage/column_mapping.h), the mapping JSON and a CSV
+// Fuzz target: the column-mapping reader (formats/column_mapping.h), the mapping JSON and a CSV
 // export read through it. Input: the mapping JSON, optionally followed by a line "%%" and the CSV
 // text (without that line only the mapping is read).
 // Property: a mapping is refused with InvalidArgument or satisfies the mapping rules (a
@@ -14,9 +14,9 @@
 #include <string_view>
 
 #include "absl/strings/ascii.h"
+#include "formats/column_mapping.h"
 #include "fuzz/fuzz_util.h"
 #include "fuzz/recording_round_trip.h"
-#include "storage/column_mapping.h"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// Fuzz target: the recording CSV reader (storage/recording_csv.h).
+// Fuzz target: the recording CSV reader (formats/recording_csv.h).
 // Property: any text is either refused with InvalidArgument, or gives a recording that satisfies
 // the reader's rules (times strictly increasing, unit spin axes and valid quaternions, finite
 // values) and that FormatRecordingCsv writes so that it reads back bit for bit (write then read
@@ -10,9 +10,9 @@
 #include <string>
 
 #include "absl/strings/ascii.h"
+#include "formats/recording_csv.h"
 #include "fuzz/fuzz_util.h"
 #include "fuzz/recording_round_trip.h"
-#include "storage/recording_csv.h"
 
 namespace {
 

@@ -65,7 +65,7 @@ inline bool IsFinite(const Eigen::Vector3d& v) { return v.allFinite(); }
 // |norm - 1| within the readers' tolerance (and renormalised beyond 1e-12, so within ~1e-12).
 inline bool IsUnit(double norm) { return std::abs(norm - 1.0) <= 1e-9; }
 
-// What every accepted recording satisfies (storage/recording_csv.h, storage/column_mapping.h):
+// What every accepted recording satisfies (formats/recording_csv.h, formats/column_mapping.h):
 // times strictly increase, spin axes and valid star-tracker quaternions are finite and unit,
 // voltages finite.
 inline void CheckRecordingInvariants(const estimator::Recording& recording) {

@@ -36,7 +36,7 @@ write('recording_csv', 'recording CSV version 1 (docs/formats.md)',
        'esg-recording-csv 1', '2019-03-01T00:00:00Z', '2019-03-01T00:01:00.5Z', '+00:00', 'T', 'Z',
        '.000000001', '1e-3', '1e308', '-0', 'nan', 'inf', '0.6', '0.8', '1', '0', '-1',
        '1.0000000001', '0x1p-3'] + csv_columns)
-write('column_mapping', 'column mapping JSON (storage/column_mapping.h), then %% and the CSV',
+write('column_mapping', 'column mapping JSON (formats/column_mapping.h), then %% and the CSV',
       ['\n%%\n', '{', '}', '[', ']', ':', ',', '"', 'null', 'true', 'esg-column-mapping 1'] +
       quoted('format spacecraftId delimiter time column epoch unit pattern weekColumn '
              'secondsColumn gpsMinusUtcS gyros id spinAxis form columns voltages starTracker '
@@ -64,7 +64,7 @@ write('scenario', 'scenario JSON of the simulator (docs/scenario.md)',
              'reading_frozen readings_missing readoutNoiseArcsec readout_jump rotorDisplacementUm '
              'running starTracker startHours sunDirection switchOnHours timeHours voltageNoiseMv '
              'inertial orbital mixed segmentHours slewMin spinPeriodMin'))
-write('aem', 'CCSDS AEM in KVN (CCSDS 504.0-B-2 and -B-1), storage/aem.h',
+write('aem', 'CCSDS AEM in KVN (CCSDS 504.0-B-2 and -B-1), formats/aem.h',
       ['CCSDS_AEM_VERS = 2.0', 'CCSDS_AEM_VERS = 1.0', 'CREATION_DATE = ', 'ORIGINATOR = ',
        'MESSAGE_ID = ', 'META_START', 'META_STOP', 'DATA_START', 'DATA_STOP', 'COMMENT ',
        'COMMENT SIGMA_ARCSEC ', 'OBJECT_NAME = ', 'OBJECT_ID = ', 'CENTER_NAME = ',

@@ -19,10 +19,10 @@
 #include "estimator/rotation.h"
 #include "estimator/session.h"
 #include "estimator/simulator.h"
+#include "formats/aem.h"
+#include "formats/recording_csv.h"
 #include "proto/convert.h"
 #include "server/checkpoint_codec.h"
-#include "storage/aem.h"
-#include "storage/recording_csv.h"
 #include "tests/testing/checkpoint_versions.h"
 
 namespace {

@@ -8,8 +8,8 @@
 
 #include "absl/status/statusor.h"
 #include "estimator/telemetry.h"
+#include "formats/recording_csv.h"
 #include "fuzz/fuzz_util.h"
-#include "storage/recording_csv.h"
 
 namespace esg::fuzz {
 

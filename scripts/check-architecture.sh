@@ -2,8 +2,8 @@
 # The layers of the code (README "Layout and conventions"): estimator/ (the filter) is free of
 # I/O, gRPC, protobuf, SQLite and JSON libraries and never includes the discovery built on it; the
 # discovery (estimator/discovery/) includes nothing above the estimator, and its files include
-# each other in no loop; the file formats (esg_formats: recording CSV, column
-# mapping, AEM) include no store; and the libraries' link lines say the same: each library links
+# each other in no loop; the file formats (formats/, esg_formats: recording CSV, column mapping,
+# AEM) include no store; and the libraries' link lines say the same: each library links
 # only libraries of lower layers, esg_estimator Eigen and Abseil only, esg_discovery the estimator
 # only, esg_formats and the CLI's library neither SQLite nor libpq.
 set -euo pipefail
@@ -73,32 +73,24 @@ if ! loop=$(grep -vxF "$pending_arrows" <<<"$arrows" | tsort 2>&1 >/dev/null) ||
   echo "$loop" | awk '/input contains a loop/ { n++; next } n == 1 { print "  " $2 }' >&2
   fail=1
 fi
-# The file formats (the sources of esg_formats) include no store: no SQLite, libpq or database.
+# The file formats (formats/, the library esg_formats) include no store and nothing above them:
+# no SQLite, libpq, storage/, server/ or client/.
 formats_sources=$(awk '/^set\(ESG_FORMATS_SOURCES/ { on = 1; next } on && /\)/ { on = 0 } on { print $1 }' \
-  storage/CMakeLists.txt)
+  formats/CMakeLists.txt)
 if [ -z "$formats_sources" ]; then
-  echo "storage/CMakeLists.txt: no ESG_FORMATS_SOURCES list (the sources of esg_formats)" >&2
+  echo "formats/CMakeLists.txt: no ESG_FORMATS_SOURCES list (the sources of esg_formats)" >&2
   fail=1
 fi
-formats_files=""
 for src in $formats_sources; do
-  formats_files="$formats_files storage/$src"
-  [ -f "storage/${src%.cc}.h" ] && formats_files="$formats_files storage/${src%.cc}.h"
+  [ -f "formats/$src" ] || { echo "formats/CMakeLists.txt lists $src, not in formats/" >&2; fail=1; }
 done
-formats_files="$formats_files storage/csv_lines.h storage/csv_problems.h"
-for f in $formats_files; do
+for f in formats/*.h formats/*.cc; do
   for inc in $(sed -nE 's|^#include[[:space:]]*[<"]([^">]+)[">].*|\1|p' "$f"); do
     case "$inc" in
-      sqlite3.h | libpq-fe.h) bad_inc=1 ;;
-      storage/*)
-        bad_inc=1
-        for ok in $formats_files; do [ "$inc" = "$ok" ] && bad_inc=0; done ;;
-      *) bad_inc=0 ;;
+      sqlite3.h | libpq-fe.h | storage/* | server/* | client/*)
+        echo "$f (esg_formats) includes $inc: the file formats include no store and nothing above" >&2
+        fail=1 ;;
     esac
-    if [ "$bad_inc" -eq 1 ]; then
-      echo "$f (esg_formats) includes $inc: the file formats include no store" >&2
-      fail=1
-    fi
   done
 done
 
@@ -113,8 +105,8 @@ layer() {
     *) echo "" ;;
   esac
 }
-cmake_files="estimator/CMakeLists.txt proto/CMakeLists.txt storage/CMakeLists.txt
-  server/CMakeLists.txt client/CMakeLists.txt"
+cmake_files="estimator/CMakeLists.txt proto/CMakeLists.txt formats/CMakeLists.txt
+  storage/CMakeLists.txt server/CMakeLists.txt client/CMakeLists.txt"
 libraries=$(sed -nE 's/^add_library\((esg_[a-z_]+).*/\1/p' $cmake_files | sort -u)
 for lib in $libraries; do
   own=$(layer "$lib")
@@ -135,7 +127,7 @@ for lib in $libraries; do
   done
 done
 for lib in esg_formats esg_client_lib; do
-  for dep in $(links storage/CMakeLists.txt "$lib") $(links client/CMakeLists.txt "$lib"); do
+  for dep in $(links formats/CMakeLists.txt "$lib") $(links client/CMakeLists.txt "$lib"); do
     case "$dep" in
       SQLite::SQLite3 | PkgConfig::LIBPQ | esg_storage)
         echo "$lib links $dep: reading a file or calling the server needs no database" >&2

@@ -23,13 +23,13 @@
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
+#include "formats/aem.h"
 #include "proto/attitude_source_words.h"
 #include "proto/convert.h"
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/planned_profile.h"
 #include "server/proto_mapping.h"
-#include "storage/aem.h"
 
 namespace esg::server {
 

@@ -27,10 +27,10 @@
 #include "estimator/model_terms.h"
 #include "estimator/offline.h"
 #include "estimator/units.h"
+#include "formats/column_mapping.h"
+#include "formats/recording_csv.h"
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
-#include "storage/column_mapping.h"
-#include "storage/recording_csv.h"
 
 namespace esg::client {
 namespace {

@@ -32,10 +32,10 @@
 #include "client/output_format.h"
 #include "client/progress.h"
 #include "estimator/frame_gap.h"
+#include "formats/column_mapping.h"
+#include "formats/recording_csv.h"
 #include "proto/convert.h"
 #include "proto/diagnosis_json.h"
-#include "storage/column_mapping.h"
-#include "storage/recording_csv.h"
 
 namespace esg::client {
 namespace {

@@ -13,9 +13,9 @@
 #include "client/commands/server_common.h"
 #include "client/esg_client.h"
 #include "estimator/telemetry.h"
+#include "formats/recording_csv.h"
 #include "google/protobuf/util/time_util.h"  // Timestamp comparison
 #include "proto/convert.h"
-#include "storage/recording_csv.h"
 
 namespace esg::client {
 

@@ -37,9 +37,9 @@
 #include "client/commands/server_common.h"
 #include "client/output_format.h"
 #include "estimator/rotation.h"
+#include "formats/aem.h"
 #include "proto/attitude_source_words.h"
 #include "proto/convert.h"
-#include "storage/aem.h"
 
 namespace esg::client {
 namespace {

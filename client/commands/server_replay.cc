@@ -47,9 +47,9 @@
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
 #include "client/progress.h"
+#include "formats/column_mapping.h"
+#include "formats/recording_csv.h"
 #include "proto/convert.h"
-#include "storage/column_mapping.h"
-#include "storage/recording_csv.h"
 
 namespace esg::client {
 namespace {

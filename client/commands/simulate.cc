@@ -27,9 +27,9 @@
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
+#include "formats/recording_csv.h"
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
-#include "storage/recording_csv.h"
 
 namespace esg::client {
 namespace {

@@ -22,9 +22,9 @@
 #include "absl/strings/str_format.h"
 #include "esg/v1/estimation_service.grpc.pb.h"
 #include "estimator/calibration_model.h"
+#include "formats/recording_csv.h"
 #include "grpcpp/create_channel.h"
 #include "proto/convert.h"
-#include "storage/recording_csv.h"
 
 namespace {
 

@@ -10,13 +10,13 @@
 #include <string>
 
 #include "estimator/units.h"
+#include "formats/recording_csv.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "proto/convert.h"
-#include "storage/recording_csv.h"
 #include "tests/client/cli_test_support.h"
-#include "tests/testing/status_matchers.h"
 #include "tests/testing/run_process.h"
+#include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
 
 namespace esg::client {

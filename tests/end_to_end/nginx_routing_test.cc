@@ -36,11 +36,11 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "formats/recording_csv.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
-#include "storage/recording_csv.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/daemon.h"
 #include "tests/testing/nginx.h"

@@ -695,7 +695,7 @@ TEST(ConfigFile, DeployExamplesAreValid) {
   int read = 0;
   for (const auto& entry : std::filesystem::directory_iterator(examples)) {
     if (entry.path().extension() != ".json") continue;  // scenarios/ holds simulator files
-    // Column mappings (docs/formats.md), tested by tests/storage/column_mapping_test.cc.
+    // Column mappings (docs/formats.md), tested by tests/formats/column_mapping_test.cc.
     if (entry.path().filename().string().rfind("columns_", 0) == 0) continue;
     EXPECT_THAT(ReadConfigFile(entry.path().string()), IsOk()) << entry.path();
     ++read;

@@ -1,7 +1,7 @@
-// CCSDS AEM writer and reader/validator (storage/aem.h, docs/formats.md "Attitude product"): the
+// CCSDS AEM writer and reader/validator (formats/aem.h, docs/formats.md "Attitude product"): the
 // writer's output passes the reader and round-trips q_in_b; the reader rejects files that break
 // the standard's rules.
-#include "storage/aem.h"
+#include "formats/aem.h"
 
 #include <string>
 

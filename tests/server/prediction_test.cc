@@ -16,9 +16,9 @@
 #include "absl/cleanup/cleanup.h"
 #include "absl/synchronization/mutex.h"
 #include "estimator/rotation.h"
+#include "formats/aem.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "storage/aem.h"
 #include "tests/server/server_test_util.h"
 
 namespace esg::testing {

@@ -9,9 +9,9 @@
 #include <thread>
 
 #include "absl/synchronization/mutex.h"
+#include "formats/aem.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "storage/aem.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/status_matchers.h"
 

@@ -1,5 +1,5 @@
 // Column mapping version 1 (docs/formats.md, "Column mapping"); rules in column_mapping.h.
-#include "storage/column_mapping.h"
+#include "formats/column_mapping.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -20,11 +20,11 @@
 #include "absl/strings/str_join.h"
 #include "estimator/rotation.h"
 #include "estimator/utc_time.h"
+#include "formats/csv_lines.h"
+#include "formats/csv_problems.h"
+#include "formats/recording_csv.h"
 #include "nlohmann/json.hpp"
 #include "proto/strict_json.h"
-#include "storage/csv_lines.h"
-#include "storage/csv_problems.h"
-#include "storage/recording_csv.h"
 
 namespace esg::storage {
 

@@ -1,5 +1,5 @@
 // Recording CSV version 1 reader and writer (docs/formats.md); rules in recording_csv.h.
-#include "storage/recording_csv.h"
+#include "formats/recording_csv.h"
 
 #include <algorithm>
 #include <array>
@@ -22,8 +22,8 @@
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
 #include "estimator/utc_time.h"
-#include "storage/csv_lines.h"
-#include "storage/csv_problems.h"
+#include "formats/csv_lines.h"
+#include "formats/csv_problems.h"
 
 namespace esg::storage {
 

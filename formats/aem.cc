@@ -1,5 +1,5 @@
 // CCSDS AEM (KVN, ADM v2) writer and reader/validator (docs/formats.md, "Attitude product").
-#include "storage/aem.h"
+#include "formats/aem.h"
 
 #include <cmath>
 #include <cstdlib>

@@ -1,8 +1,10 @@
-// The AEM reader's time systems and the spacecraft check of a plan (storage/aem.h,
+// The AEM reader's time systems and the spacecraft check of a plan (formats/aem.h,
 // docs/formats.md "Attitude product: CCSDS AEM"): TAI epochs are converted to UTC with ERFA's
 // leap seconds, SCLK and the other time systems are refused naming the TIME_SYSTEM line, and a
 // plan whose OBJECT_NAME and OBJECT_ID name another spacecraft is refused naming OBJECT_NAME's
 // line. (The writer and the structural rules are tested in tests/server/aem_test.cc.)
+#include "formats/aem.h"
+
 #include <string>
 #include <vector>
 
@@ -10,7 +12,6 @@
 #include "absl/time/time.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "storage/aem.h"
 #include "tests/testing/quaternion_matchers.h"
 #include "tests/testing/status_matchers.h"
 

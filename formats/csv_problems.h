@@ -2,8 +2,8 @@
 // reported together in one InvalidArgument (at most kMaxReportedProblems listed, then a count),
 // so that a user fixes a file in one pass. Used by the project's own CSV reader
 // (recording_csv.cc) and by the column-mapping reader (column_mapping.cc).
-#ifndef ESG_STORAGE_CSV_PROBLEMS_H_
-#define ESG_STORAGE_CSV_PROBLEMS_H_
+#ifndef ESG_FORMATS_CSV_PROBLEMS_H_
+#define ESG_FORMATS_CSV_PROBLEMS_H_
 
 #include <algorithm>
 #include <cstdint>
@@ -15,7 +15,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/time/time.h"
 #include "estimator/utc_time.h"
-#include "storage/recording_csv.h"
+#include "formats/recording_csv.h"
 
 namespace esg::storage {
 
@@ -80,4 +80,4 @@ class CsvProblems {
 
 }  // namespace esg::storage
 
-#endif  // ESG_STORAGE_CSV_PROBLEMS_H_
+#endif  // ESG_FORMATS_CSV_PROBLEMS_H_

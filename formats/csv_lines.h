@@ -3,8 +3,8 @@
 // blank lines skipped, and the "# key: value" metadata lines before the header, a repeated key
 // reported. One reader of lines, so that both formats number, trim and report lines alike
 // (docs/formats.md).
-#ifndef ESG_STORAGE_CSV_LINES_H_
-#define ESG_STORAGE_CSV_LINES_H_
+#ifndef ESG_FORMATS_CSV_LINES_H_
+#define ESG_FORMATS_CSV_LINES_H_
 
 #include <map>
 #include <optional>
@@ -15,7 +15,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/string_view.h"
-#include "storage/csv_problems.h"
+#include "formats/csv_problems.h"
 
 namespace esg::storage {
 
@@ -76,4 +76,4 @@ class CsvMetadata {
 
 }  // namespace esg::storage
 
-#endif  // ESG_STORAGE_CSV_LINES_H_
+#endif  // ESG_FORMATS_CSV_LINES_H_

@@ -1,7 +1,7 @@
 // Column mapping, version 1 (docs/formats.md, "Column mapping"): a JSON file that says where each
 // quantity of a recording is in a user's own CSV telemetry export and in which unit, frame,
 // quaternion order and time format, so that the export loads as it is, into the same
-// estimator::Recording the project's recording CSV (storage/recording_csv.h) gives.
+// estimator::Recording the project's recording CSV (formats/recording_csv.h) gives.
 //
 //     {"format": "esg-column-mapping 1",
 //      "spacecraftId": "RDK-1",
@@ -29,8 +29,8 @@
 // as in the recording CSV: spin axes and a valid quaternion, after conversion, have unit norm
 // within kUnitNormTolerance (1e-3) and are renormalised beyond 1e-12. Every problem is reported
 // as "line <n>, column <csv column> (<mapping field>): <reason>", the file refused as a whole.
-#ifndef ESG_STORAGE_COLUMN_MAPPING_H_
-#define ESG_STORAGE_COLUMN_MAPPING_H_
+#ifndef ESG_FORMATS_COLUMN_MAPPING_H_
+#define ESG_FORMATS_COLUMN_MAPPING_H_
 
 #include <array>
 #include <optional>
@@ -42,7 +42,7 @@
 #include "absl/time/time.h"
 #include "estimator/conventions.h"
 #include "estimator/telemetry.h"
-#include "storage/recording_csv.h"
+#include "formats/recording_csv.h"
 
 namespace esg::storage {
 
@@ -125,4 +125,4 @@ absl::StatusOr<estimator::Recording> ReadRecording(const std::string& path,
 
 }  // namespace esg::storage
 
-#endif  // ESG_STORAGE_COLUMN_MAPPING_H_
+#endif  // ESG_FORMATS_COLUMN_MAPPING_H_

@@ -33,8 +33,8 @@
 // - Every problem is reported, never a row dropped: a file with any problem gives
 //   InvalidArgument listing all of them (up to kMaxReportedProblems, then "... and N more"),
 //   one per line as "line <n>, column <name>: <reason>".
-#ifndef ESG_STORAGE_RECORDING_CSV_H_
-#define ESG_STORAGE_RECORDING_CSV_H_
+#ifndef ESG_FORMATS_RECORDING_CSV_H_
+#define ESG_FORMATS_RECORDING_CSV_H_
 
 #include <string>
 #include <string_view>
@@ -82,4 +82,4 @@ absl::Status WriteRecordingCsv(const std::string& path, const estimator::Recordi
 
 }  // namespace esg::storage
 
-#endif  // ESG_STORAGE_RECORDING_CSV_H_
+#endif  // ESG_FORMATS_RECORDING_CSV_H_

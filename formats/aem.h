@@ -15,8 +15,8 @@
 //   turns the EME2000 axes onto the body axes, i.e. our q_in_b (whose matrix is C_in_b: body
 //   coordinates to inertial); the vector part first and the scalar QC last, sign canonical
 //   (QC >= 0). Epochs are CCSDS ASCII time code A, UTC, microsecond resolution, no `Z`.
-#ifndef ESG_STORAGE_AEM_H_
-#define ESG_STORAGE_AEM_H_
+#ifndef ESG_FORMATS_AEM_H_
+#define ESG_FORMATS_AEM_H_
 
 #include <map>
 #include <optional>
@@ -114,4 +114,4 @@ std::string FormatCcsdsTime(absl::Time time);
 
 }  // namespace esg::storage
 
-#endif  // ESG_STORAGE_AEM_H_
+#endif  // ESG_FORMATS_AEM_H_

@@ -1,7 +1,7 @@
-// Tests of storage/recording_csv (recording CSV version 1, docs/formats.md): bit-exact write/read
+// Tests of formats/recording_csv (recording CSV version 1, docs/formats.md): bit-exact write/read
 // round trip through a real file, absent gyros and star-tracker outages, free column order and
 // extra columns, and one test per malformed input asserting line, column and reason.
-#include "storage/recording_csv.h"
+#include "formats/recording_csv.h"
 
 #include <algorithm>
 #include <cmath>
@@ -197,7 +197,7 @@ TEST(RecordingCsv, InvalidStarTrackerMayCarryAQuaternionThatIsNotKept) {
   EXPECT_FALSE(read->frames[0].star_tracker->valid);
 }
 
-// The lines are read as the column-mapping reader reads them (storage/csv_lines.h): a UTF-8 byte
+// The lines are read as the column-mapping reader reads them (formats/csv_lines.h): a UTF-8 byte
 // order mark (a spreadsheet's export) is dropped, CRLF line ends and blank lines change nothing,
 // and a problem's line number counts every line of the file.
 TEST(RecordingCsv, ByteOrderMarkCrLfAndBlankLinesAreReadAsTheMappedReaderReadsThem) {

@@ -1,10 +1,10 @@
-// Tests of storage/column_mapping (column mapping version 1, docs/formats.md "Column mapping"):
+// Tests of formats/column_mapping (column mapping version 1, docs/formats.md "Column mapping"):
 // a simulated recording exported as a user would (other column names and order, ';' between
 // fields, spin axes as azimuth/elevation in degrees, voltages in volts, q_b_in scalar last, a
 // text validity flag, Unix seconds) loads through a mapping file equal to 1e-12 to the project's
 // own CSV of the same recording; the time formats convert exactly; and every wrong mapping or
 // row is refused with an error naming the mapping field, or the CSV line and column.
-#include "storage/column_mapping.h"
+#include "formats/column_mapping.h"
 
 #include <algorithm>
 #include <cmath>
@@ -18,9 +18,9 @@
 #include "absl/time/time.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
+#include "formats/recording_csv.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "storage/recording_csv.h"
 #include "tests/testing/paper_setup.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/status_matchers.h"
