@@ -4,8 +4,9 @@
 # discovery (estimator/discovery/) includes nothing above the estimator, and its files include
 # each other in no loop; the file formats (formats/, esg_formats: recording CSV, column mapping,
 # AEM) include no store; and the libraries' link lines say the same: each library links
-# only libraries of lower layers, esg_estimator Eigen and Abseil only, esg_discovery the estimator
-# only, esg_formats and the CLI's library neither SQLite nor libpq.
+# only libraries of lower layers, esg_estimator Eigen, Abseil and ERFA (the sun's direction)
+# only, esg_discovery the estimator only, esg_formats and the CLI's library neither SQLite nor
+# libpq.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fail=0
@@ -36,8 +37,8 @@ links() {
 }
 for lib in $(links estimator/CMakeLists.txt esg_estimator); do
   case "$lib" in
-    Eigen3::Eigen | absl::*) ;;
-    *) echo "esg_estimator links $lib: it may link Eigen and Abseil only" >&2; fail=1 ;;
+    Eigen3::Eigen | absl::* | PkgConfig::ERFA) ;;
+    *) echo "esg_estimator links $lib: it may link Eigen, Abseil and ERFA only" >&2; fail=1 ;;
   esac
 done
 for lib in $(links estimator/CMakeLists.txt esg_discovery); do
