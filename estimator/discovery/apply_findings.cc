@@ -1,0 +1,147 @@
+// Findings to configuration; contract in apply_findings.h.
+#include "estimator/discovery/apply_findings.h"
+
+#include <algorithm>
+#include <optional>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
+#include "estimator/discovery/candidate.h"
+#include "estimator/model_terms.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+namespace {
+
+const Parameter* Find(const Finding& f, const std::string& name) {
+  for (const Parameter& p : f.parameters) {
+    if (p.name == name) return &p;
+  }
+  return nullptr;
+}
+
+std::optional<Effect> LibraryEffect(const std::string& id) {
+  for (Effect e : {Effect::kRotorDisplacement, Effect::kFourthHarmonic, Effect::kUnequalStiffness,
+                   Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
+                   Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep}) {
+    if (id == EffectId(e)) return e;
+  }
+  return std::nullopt;
+}
+
+std::string Name(const Finding& f) {
+  return f.gyro > 0 ? absl::StrFormat("%s (gyro %d)", f.effect, f.gyro) : f.effect;
+}
+
+}  // namespace
+
+AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisReport& report,
+                             const DiagnoseOptions& options) {
+  AppliedFindings out;
+  out.config = WithBasisFindings(config, report);
+  for (const Finding& f : report.findings) {
+    const std::string name = Name(f);
+    GyroConfig* g = f.gyro > 0 ? FindGyroMutable(out.config, f.gyro) : nullptr;
+    if (f.gyro > 0 && g == nullptr) {
+      out.not_applied.push_back(absl::StrFormat("%s: gyro %d is not configured", name, f.gyro));
+      continue;
+    }
+    if (f.effect == kEffectBasisTerm) {
+      std::vector<std::string> labels;
+      for (const BasisTerm& t : f.basis_terms) labels.push_back(BasisTermLabel(t));
+      std::string line =
+          absl::StrFormat("%s: gyros[%d].basisTerms += %d term%s", name, f.gyro,
+                          f.basis_terms.size(), f.basis_terms.size() == 1 ? "" : "s");
+      if (!labels.empty()) absl::StrAppend(&line, " (", absl::StrJoin(labels, ", "), ")");
+      if (!f.readout_distortion.isZero(0.0)) absl::StrAppend(&line, ", readoutDistortion set");
+      absl::StrAppend(&line, ", at the fitted values, freed with the diagnosis's prior");
+      out.applied.push_back(line);
+      continue;
+    }
+    const std::optional<Effect> effect = LibraryEffect(f.effect);
+    if (!effect.has_value()) {
+      out.not_applied.push_back(absl::StrCat(
+          name, ": not an effect of the library; nothing in the configuration describes it"));
+      continue;
+    }
+    if (const std::optional<FreedCoefficients> freed = FreedDriftCoefficients(*effect, options);
+        freed.has_value() && g != nullptr) {
+      DriftVector value = g->model.AsVector();
+      DriftVector sigma = g->model_sigma.AsVector();
+      std::vector<std::string> set;
+      for (const FixedTermDescriptor& term : kFixedTerms) {
+        if (term.effect != f.effect) continue;
+        const Parameter* p = Find(f, FixedTermJsonName(term));
+        if (p == nullptr) continue;
+        value(term.theta_index) = DegPerHourToRadPerSec(p->value);
+        sigma(term.theta_index) = std::max(sigma(term.theta_index), freed->sigma);
+        set.push_back(std::string(term.label));
+      }
+      if (set.empty()) {
+        out.not_applied.push_back(
+            absl::StrCat(name, ": the report holds none of its coefficients"));
+        continue;
+      }
+      g->model = DriftCoefficients::FromVector(value);
+      g->model_sigma = DriftCoefficients::FromVector(sigma);
+      out.applied.push_back(absl::StrFormat(
+          "%s: gyros[%d].model %s at the fitted values, freed with modelSigma %.3g deg/h", name,
+          f.gyro, absl::StrJoin(set, ", "), RadPerSecToDegPerHour(freed->sigma)));
+      continue;
+    }
+    switch (*effect) {
+      case Effect::kGyroMisalignment: {
+        const double prior = ArcsecToRad(options.misalignment_sigma_arcsec);
+        g->misalignment_sigma = std::max(g->misalignment_sigma, prior);
+        out.applied.push_back(absl::StrFormat(
+            "%s: gyros[%d].misalignmentSigmaArcsec = %.3g (the filter estimates the misalignment)",
+            name, f.gyro, RadToArcsec(g->misalignment_sigma)));
+        break;
+      }
+      case Effect::kStarTrackerLatency: {
+        const Parameter* tau = Find(f, "latencyMs");
+        if (tau == nullptr) {
+          out.not_applied.push_back(absl::StrCat(name, ": the report holds no latencyMs"));
+          break;
+        }
+        out.config.star_tracker.latency = tau->value * 1e-3;
+        out.applied.push_back(absl::StrFormat("%s: starTracker.latencyS = %.6g (fitted)", name,
+                                              out.config.star_tracker.latency));
+        break;
+      }
+      case Effect::kRandomWalkDrift: {
+        const Parameter* q = Find(f, "randomWalkDegHSqrtH");
+        if (f.gyro > 0) {
+          out.not_applied.push_back(absl::StrCat(
+              name, ": the configuration holds one random-walk intensity for all gyros"));
+        } else if (q == nullptr) {
+          out.not_applied.push_back(absl::StrCat(name, ": the report holds no intensity"));
+        } else {
+          out.config.random_walk = DegPerHourSqrtHourToSi(q->value);
+          out.applied.push_back(
+              absl::StrFormat("%s: randomWalkDegHSqrtH = %.4g (fitted)", name, q->value));
+        }
+        break;
+      }
+      case Effect::kStarTrackerMisalignment:
+        out.not_applied.push_back(absl::StrCat(
+            name,
+            ": the configuration holds no star-tracker mounting; the service re-references "
+            "a shifted star tracker online"));
+        break;
+      case Effect::kDriftStep:
+        out.not_applied.push_back(
+            absl::StrCat(name,
+                         ": a change in time, not a constant of the configuration; the service "
+                         "re-opens a gyro's drift at a drift change online"));
+        break;
+      default:
+        out.not_applied.push_back(absl::StrCat(name, ": no configuration field describes it"));
+        break;
+    }
+  }
+  return out;
+}
+
+}  // namespace esg::estimator::discovery
