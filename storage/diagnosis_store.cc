@@ -12,14 +12,14 @@ namespace {
 
 #define ESG_DIAGNOSIS_COLUMNS                                                     \
   "id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, " \
-  "verdict, report_json, frames"
+  "verdict, report_json, frames, config_version, model_name"
 constexpr char kSelectById[] = "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE id = ?1";
 constexpr char kSelectBySpacecraft[] =
     "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE spacecraft_id = ?1 ORDER BY id";
 // The same columns with an empty report (summaries; the index diagnoses_by_spacecraft).
 constexpr char kSelectSummaries[] =
     "SELECT id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, "
-    "verdict, '', frames FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
+    "verdict, '', frames, config_version, model_name FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
 #undef ESG_DIAGNOSIS_COLUMNS
 
 DiagnosisRecord ReadRow(const Statement& st) {
@@ -32,6 +32,8 @@ DiagnosisRecord ReadRow(const Statement& st) {
   r.verdict = st.ColumnText(5);
   r.report_json = st.ColumnText(6);
   r.frames = st.ColumnInt64(7);
+  r.config_version = st.ColumnInt64(8);  // NULL (stored before version 11) reads as 0
+  r.model_name = st.ColumnText(9);
   return r;
 }
 
@@ -60,8 +62,9 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
   ASSIGN_OR_RETURN(
       Statement * st,
       txn.Prepare("INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, "
-                  "to_time_unix_ns, compute_time_unix_ns, verdict, report_json, frames) "
-                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7) RETURNING id"));
+                  "to_time_unix_ns, compute_time_unix_ns, verdict, report_json, frames, "
+                  "config_version, model_name) "
+                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9) RETURNING id"));
   st->BindText(1, record.spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(record.from_time))
       .BindInt64(3, TimeToUnixNanos(record.to_time))
@@ -69,6 +72,17 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
       .BindText(5, record.verdict)
       .BindText(6, record.report_json)
       .BindInt64(7, record.frames);
+  // 0 and empty (not recorded) are stored as NULL, as for a diagnosis stored before version 11.
+  if (record.config_version > 0) {
+    st->BindInt64(8, record.config_version);
+  } else {
+    st->BindNull(8);
+  }
+  if (!record.model_name.empty()) {
+    st->BindText(9, record.model_name);
+  } else {
+    st->BindNull(9);
+  }
   ASSIGN_OR_RETURN(bool row, st->Step());
   if (!row) return absl::InternalError("INSERT INTO diagnoses returned no id");
   const int64_t id = st->ColumnInt64(0);

@@ -227,11 +227,15 @@ ALTER TABLE estimates ADD COLUMN attitude_error_sigma_z_arcsec DOUBLE PRECISION;
 absl::string_view Upgrade(int version) {
   static const std::string* const keyed_values =
       new std::string(KeyedCoefficientValuesMigration(Dialect::kPostgres));
+  static const std::string* const readmissions =
+      new std::string(ReadmissionsMigration(Dialect::kPostgres));
   static constexpr absl::string_view kFrozen[] = {kCoefficientBasisTermsColumn,
                                                   kEstimateAttitudeErrorColumns};
-  static_assert(7 + std::size(kFrozen) + 1 == kCurrentSchemaVersion);
+  static_assert(7 + std::size(kFrozen) + 2 == kCurrentSchemaVersion);
   const int n = version - 7;
-  return n < static_cast<int>(std::size(kFrozen)) ? kFrozen[n] : absl::string_view(*keyed_values);
+  if (n < static_cast<int>(std::size(kFrozen))) return kFrozen[n];
+  return n == static_cast<int>(std::size(kFrozen)) ? absl::string_view(*keyed_values)
+                                                   : absl::string_view(*readmissions);
 }
 
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").

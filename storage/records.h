@@ -168,6 +168,22 @@ struct DiagnosisRecord {
   std::string verdict;      // e.g. "gyro_misalignment", "unexplained"
   std::string report_json;  // full report, stored verbatim
   int64_t frames = 0;       // frames diagnosed (>= 0)
+  // The configuration version (ConfigRecord::version) and the model name ("10+11") the diagnosis
+  // ran on; 0 and empty for a diagnosis stored before schema version 11 (not recorded).
+  int64_t config_version = 0;
+  std::string model_name;
+};
+
+// An operator's readmission of a gyro the filter excluded (docs/service.md "Readmitting a gyro"):
+// the gyro rejoins the filter at the first measurement step after `after_time`, the measurement
+// time of the last frame applied when it was stored; a re-run from the archive applies it there
+// again.
+struct ReadmissionRecord {
+  std::string spacecraft_id;
+  int gyro_id = 0;
+  absl::Time after_time = absl::UnixEpoch();
+  absl::Time compute_time = absl::UnixEpoch();  // wall clock when stored
+  std::string operator_name;
 };
 
 }  // namespace esg::storage

@@ -319,6 +319,21 @@ std::string KeyedCoefficientValuesMigration(Dialect dialect) {
   return sql;
 }
 
+std::string ReadmissionsMigration(Dialect dialect) {
+  const char* integer = dialect == Dialect::kSqlite ? "INTEGER" : "BIGINT";
+  return absl::StrCat(
+      "ALTER TABLE diagnoses ADD COLUMN config_version ", integer, ";\n"
+      "ALTER TABLE diagnoses ADD COLUMN model_name TEXT;\n"
+      "CREATE TABLE gyro_readmissions (\n"
+      "  spacecraft_id        TEXT NOT NULL,\n"
+      "  after_time_unix_ns   ", integer, " NOT NULL,\n"
+      "  gyro_id              ", integer, " NOT NULL CHECK (gyro_id >= 1),\n"
+      "  compute_time_unix_ns ", integer, " NOT NULL,\n"
+      "  operator_name        TEXT NOT NULL,\n"
+      "  PRIMARY KEY (spacecraft_id, after_time_unix_ns, gyro_id)\n"
+      ");\n");
+}
+
 namespace {
 
 // Version 10: coefficient values keyed by term (KeyedCoefficientValuesMigration).
@@ -333,8 +348,11 @@ absl::string_view Migration(int n) {
   static constexpr absl::string_view kFrozen[] = {kSchemaV1, kSchemaV2, kSchemaV3,
                                                   kSchemaV4, kSchemaV5, kSchemaV6,
                                                   kSchemaV7, kSchemaV8, kSchemaV9};
-  static_assert(std::size(kFrozen) + 1 == kCurrentSchemaVersion);
-  return n < static_cast<int>(std::size(kFrozen)) ? kFrozen[n] : absl::string_view(SchemaV10());
+  static const std::string* const v11 = new std::string(ReadmissionsMigration(Dialect::kSqlite));
+  static_assert(std::size(kFrozen) + 2 == kCurrentSchemaVersion);
+  if (n < static_cast<int>(std::size(kFrozen))) return kFrozen[n];
+  return n == static_cast<int>(std::size(kFrozen)) ? absl::string_view(SchemaV10())
+                                                   : absl::string_view(*v11);
 }
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -24,6 +24,9 @@
 //      sigma), one row per value of records.h's layout, term_key its column name of versions
 //      1-9 ("k0_deg_h", "misalignment_x_arcsec"); the 32 value and sigma columns of
 //      coefficients move there and are dropped.
+//  11  diagnoses.config_version and diagnoses.model_name (the configuration version and model a
+//      diagnosis ran on; NULL for those stored before); gyro_readmissions (operators'
+//      readmissions of excluded gyros, session_store.h).
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -52,7 +55,10 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 10;
+inline constexpr int kCurrentSchemaVersion = 11;
+
+// The DDL of version 11 in the dialect's types (SQLite INTEGER, PostgreSQL BIGINT).
+std::string ReadmissionsMigration(Dialect dialect);
 
 // The DDL of version 8, the same in both dialects.
 inline constexpr absl::string_view kCoefficientBasisTermsColumn =

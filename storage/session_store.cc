@@ -69,4 +69,57 @@ absl::StatusOr<std::vector<std::string>> SessionStore::ListSpacecraft() {
   return out;
 }
 
+absl::Status SessionStore::PutReadmission(const ReadmissionRecord& record) {
+  RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "readmission.spacecraft_id"));
+  if (record.gyro_id < 1 || record.gyro_id > 4) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("readmission.gyro_id: ", record.gyro_id, " is not in 1..4"));
+  }
+  if (record.operator_name.empty()) {
+    return absl::InvalidArgumentError("readmission.operator_name: empty");
+  }
+  RETURN_IF_ERROR(ValidateStorableTime(record.after_time, "readmission.after_time"));
+  RETURN_IF_ERROR(ValidateStorableTime(record.compute_time, "readmission.compute_time"));
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("INSERT INTO gyro_readmissions (spacecraft_id, after_time_unix_ns, "
+                               "gyro_id, compute_time_unix_ns, operator_name) "
+                               "VALUES (?1, ?2, ?3, ?4, ?5) ON CONFLICT DO NOTHING RETURNING 1"));
+  st->BindText(1, record.spacecraft_id)
+      .BindInt64(2, TimeToUnixNanos(record.after_time))
+      .BindInt64(3, record.gyro_id)
+      .BindInt64(4, TimeToUnixNanos(record.compute_time))
+      .BindText(5, record.operator_name);
+  ASSIGN_OR_RETURN(bool inserted, st->Step());
+  st->Reset();
+  if (!inserted) {
+    return absl::AlreadyExistsError(absl::StrCat("gyro_id: gyro ", record.gyro_id,
+                                                 " is readmitted already after this time"));
+  }
+  return txn.Commit();
+}
+
+absl::StatusOr<std::vector<ReadmissionRecord>> SessionStore::ListReadmissions(
+    absl::string_view spacecraft_id) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT gyro_id, after_time_unix_ns, compute_time_unix_ns, "
+                               "operator_name FROM gyro_readmissions WHERE spacecraft_id = ?1 "
+                               "ORDER BY after_time_unix_ns, gyro_id"));
+  st->BindText(1, spacecraft_id);
+  std::vector<ReadmissionRecord> out;
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st->Step());
+    if (!row) break;
+    ReadmissionRecord r;
+    r.spacecraft_id = std::string(spacecraft_id);
+    r.gyro_id = static_cast<int>(st->ColumnInt64(0));
+    r.after_time = UnixNanosToTime(st->ColumnInt64(1));
+    r.compute_time = UnixNanosToTime(st->ColumnInt64(2));
+    r.operator_name = st->ColumnText(3);
+    out.push_back(std::move(r));
+  }
+  return out;
+}
+
 }  // namespace esg::storage

@@ -447,5 +447,59 @@ TEST(PostgresStorage, AStoredEstimateIsNotifiedAndAMissingTriggerIsAddedAtOpen) 
   EXPECT_EQ(got[0].sender_pid, (*storage)->ConnectionPid());
 }
 
+// A database at version 10 is upgraded when a server opens it (schema.h version 11): its
+// diagnoses gain the configuration version (bigint) and model they ran on, read back as 0 and
+// empty for the rows stored before; readmissions of excluded gyros are stored and listed.
+TEST(PostgresStorage, AVersion10DatabaseGainsTheDiagnosisConfigurationAndReadmissions) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  {
+    absl::StatusOr<std::unique_ptr<PostgresDatabase>> db = PostgresDatabase::Open(*uri);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 10), IsOk());
+    ASSERT_THAT((*db)->Execute(absl::StrCat(
+                    "INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, to_time_unix_ns, "
+                    "compute_time_unix_ns, verdict, report_json, frames) VALUES ('PG-10', ",
+                    TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(600)), ", ",
+                    TimeToUnixNanos(T(900)), ", 'none', '{}', 10)")),
+                IsOk());
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), "SELECT MAX(version) FROM esg_schema"),
+              IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(QueryInt((*storage)->database(),
+                       "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = "
+                       "'diagnoses' AND column_name = 'config_version' AND data_type = 'bigint'"),
+              IsOkAndHolds(1));
+  absl::StatusOr<std::vector<DiagnosisRecord>> old = (*storage)->diagnoses().List("PG-10");
+  ASSERT_THAT(old, IsOk());
+  ASSERT_EQ(old->size(), 1u);
+  EXPECT_EQ((*old)[0].config_version, 0);
+  DiagnosisRecord fresh = (*old)[0];
+  fresh.config_version = 2;
+  fresh.model_name = "10+11";
+  absl::StatusOr<int64_t> id = (*storage)->diagnoses().Put(fresh);
+  ASSERT_THAT(id, IsOk());
+  absl::StatusOr<DiagnosisRecord> read = (*storage)->diagnoses().Get(*id);
+  ASSERT_THAT(read, IsOk());
+  EXPECT_EQ(read->config_version, 2);
+  EXPECT_EQ(read->model_name, "10+11");
+  const ReadmissionRecord readmission{"PG-10", 3, T(7200), T(9000), "alice"};
+  ASSERT_THAT((*storage)->sessions().PutReadmission(readmission), IsOk());
+  EXPECT_THAT((*storage)->sessions().PutReadmission(readmission),
+              StatusIs(absl::StatusCode::kAlreadyExists, HasSubstr("gyro_id")));
+  absl::StatusOr<std::vector<ReadmissionRecord>> listed =
+      (*storage)->sessions().ListReadmissions("PG-10");
+  ASSERT_THAT(listed, IsOk());
+  ASSERT_EQ(listed->size(), 1u);
+  EXPECT_EQ((*listed)[0].gyro_id, 3);
+  EXPECT_EQ((*listed)[0].after_time, T(7200));
+  EXPECT_EQ((*listed)[0].operator_name, "alice");
+}
+
 }  // namespace
 }  // namespace esg::storage

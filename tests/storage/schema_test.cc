@@ -421,6 +421,65 @@ TEST(Schema, EstimatesOfAVersion8FileReadBackWithoutAnAttitudeErrorAfterTheMigra
   EXPECT_NEAR(estimator::RadToArcsec(page->records[1].attitude_error_sigma_b[0]), 2.0, 1e-12);
 }
 
+// A version-10 file: its diagnoses read back without the configuration they ran on (0 and empty:
+// ApplyDiagnosis refuses them), new ones store it; readmissions of excluded gyros are stored and
+// listed by time, the same gyro after the same time once.
+TEST(Schema, Version10DiagnosesHaveNoConfigurationAndReadmissionsAreStoredAfterTheMigration) {
+  TempDir dir;
+  const std::string path = dir.File("v10.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 10), IsOk());
+    EXPECT_THAT(Columns(**db, "diagnoses"), ::testing::Not(::testing::Contains("config_version")));
+    ASSERT_THAT((*db)->Execute(absl::StrCat(
+                    "INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, to_time_unix_ns, "
+                    "compute_time_unix_ns, verdict, report_json, frames) VALUES ('SC-A', ",
+                    TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(600)), ", ",
+                    TimeToUnixNanos(T(900)), ", 'rotor_displacement', '{}', 10);")),
+                IsOk());
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  absl::StatusOr<std::vector<DiagnosisRecord>> old = (*storage)->diagnoses().List("SC-A");
+  ASSERT_THAT(old, IsOk());
+  ASSERT_EQ(old->size(), 1u);
+  EXPECT_EQ((*old)[0].config_version, 0);
+  EXPECT_EQ((*old)[0].model_name, "");
+  DiagnosisRecord fresh = (*old)[0];
+  fresh.config_version = 3;
+  fresh.model_name = "10+11";
+  ASSERT_THAT((*storage)->diagnoses().Put(fresh), IsOk());
+  absl::StatusOr<std::vector<DiagnosisRecord>> summaries =
+      (*storage)->diagnoses().ListSummaries("SC-A", 0, 10);
+  ASSERT_THAT(summaries, IsOk());
+  ASSERT_EQ(summaries->size(), 2u);
+  EXPECT_EQ((*summaries)[1].config_version, 3);
+  EXPECT_EQ((*summaries)[1].model_name, "10+11");
+
+  ReadmissionRecord later{"SC-A", 3, T(7200), T(9000), "alice"};
+  ReadmissionRecord earlier{"SC-A", 2, T(3600), T(9100), "bob"};
+  ASSERT_THAT((*storage)->sessions().PutReadmission(later), IsOk());
+  ASSERT_THAT((*storage)->sessions().PutReadmission(earlier), IsOk());
+  EXPECT_THAT((*storage)->sessions().PutReadmission(later),
+              StatusIs(absl::StatusCode::kAlreadyExists, HasSubstr("gyro_id")));
+  ReadmissionRecord bad = later;
+  bad.gyro_id = 5;
+  EXPECT_THAT((*storage)->sessions().PutReadmission(bad),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("readmission.gyro_id")));
+  absl::StatusOr<std::vector<ReadmissionRecord>> listed =
+      (*storage)->sessions().ListReadmissions("SC-A");
+  ASSERT_THAT(listed, IsOk());
+  ASSERT_EQ(listed->size(), 2u);
+  EXPECT_EQ((*listed)[0].gyro_id, 2);
+  EXPECT_EQ((*listed)[0].after_time, T(3600));
+  EXPECT_EQ((*listed)[0].operator_name, "bob");
+  EXPECT_EQ((*listed)[1].gyro_id, 3);
+  EXPECT_EQ((*listed)[1].compute_time, T(9000));
+  EXPECT_THAT((*storage)->sessions().ListReadmissions("SC-B"), IsOkAndHolds(IsEmpty()));
+}
+
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Database>> stepwise = SqliteDatabase::Open(dir.File("s.db"));
