@@ -261,6 +261,24 @@ absl::StatusOr<esg::v1::DiagnosisResult> EsgClient::GetDiagnosis(const std::stri
                                          });
 }
 
+absl::StatusOr<esg::v1::ApplyDiagnosisResponse> EsgClient::ApplyDiagnosis(
+    const esg::v1::ApplyDiagnosisRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::ApplyDiagnosisResponse>(
+      NewContext(true, call, request.spacecraft_id()),
+      [&](grpc::ClientContext* c, esg::v1::ApplyDiagnosisResponse* r) {
+        return stub_->ApplyDiagnosis(c, request, r);
+      });
+}
+
+absl::StatusOr<esg::v1::ReadmitGyroResponse> EsgClient::ReadmitGyro(
+    const esg::v1::ReadmitGyroRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::ReadmitGyroResponse>(
+      NewContext(true, call, request.spacecraft_id()),
+      [&](grpc::ClientContext* c, esg::v1::ReadmitGyroResponse* r) {
+        return stub_->ReadmitGyro(c, request, r);
+      });
+}
+
 std::unique_ptr<TelemetryStream> EsgClient::StreamTelemetry(const std::string& spacecraft_id) {
   std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, spacecraft_id);
   auto stream = stub_->StreamTelemetry(context.get());

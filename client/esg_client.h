@@ -162,6 +162,12 @@ class EsgClient {
   absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(const std::string& spacecraft_id,
                                                         int64_t id, const CallOptions& call = {});
 
+  // Operator actions (docs/service.md "Applying a diagnosis", "Readmitting a gyro").
+  absl::StatusOr<esg::v1::ApplyDiagnosisResponse> ApplyDiagnosis(
+      const esg::v1::ApplyDiagnosisRequest& request, const CallOptions& call = {});
+  absl::StatusOr<esg::v1::ReadmitGyroResponse> ReadmitGyro(
+      const esg::v1::ReadmitGyroRequest& request, const CallOptions& call = {});
+
   // Opens a telemetry stream (no deadline) for the frames of `spacecraft_id`: routed by it, and
   // esgd refuses a frame of another spacecraft on it. Errors show up in TelemetryStream::Finish.
   std::unique_ptr<TelemetryStream> StreamTelemetry(const std::string& spacecraft_id);

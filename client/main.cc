@@ -90,6 +90,8 @@ int main(int argc, char** argv) {
   esg::client::RegisterHistory(app, global, &exit_code);
   esg::client::RegisterEstimates(app, global, &exit_code);
   esg::client::RegisterExport(app, global, &exit_code);
+  esg::client::RegisterModel(app, global, &exit_code);
+  esg::client::RegisterGyro(app, global, &exit_code);
   esg::client::RegisterComplete(app, global, &exit_code);
   AddFooter(&app, GlobalOptionsHelp(app));
   if (const std::optional<int> handled = esg::client::HandleVerbHabits(

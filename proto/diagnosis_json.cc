@@ -2,7 +2,9 @@
 
 #include <cmath>
 
+#include "absl/strings/str_cat.h"
 #include "absl/time/time.h"
+#include "google/protobuf/util/json_util.h"
 #include "estimator/units.h"
 #include "estimator/utc_time.h"
 #include "proto/convert.h"
@@ -249,6 +251,77 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
 
 std::string DiagnosisToJson(const DiagnosisReport& report, bool include_series) {
   return DiagnosisJsonValue(report, include_series).dump(2);
+}
+
+absl::StatusOr<DiagnosisReport> DiagnosisFindingsFromJson(std::string_view text) {
+  const json doc = json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (doc.is_discarded() || !doc.is_object()) {
+    return absl::InvalidArgumentError("report_json: not a JSON object");
+  }
+  DiagnosisReport report;
+  if (!doc.contains("verdict") || !doc["verdict"].is_string()) {
+    return absl::InvalidArgumentError("report_json.verdict: missing");
+  }
+  report.verdict = doc["verdict"].get<std::string>();
+  if (!doc.contains("findings")) return report;
+  if (!doc["findings"].is_array()) {
+    return absl::InvalidArgumentError("report_json.findings: not an array");
+  }
+  int i = 0;
+  for (const json& jf : doc["findings"]) {
+    const std::string field = absl::StrCat("report_json.findings[", i++, "]");
+    if (!jf.is_object() || !jf.contains("effect") || !jf["effect"].is_string()) {
+      return absl::InvalidArgumentError(absl::StrCat(field, ".effect: missing"));
+    }
+    Finding f;
+    f.effect = jf["effect"].get<std::string>();
+    if (jf.contains("gyro") && jf["gyro"].is_number_integer()) f.gyro = jf["gyro"].get<int>();
+    if (jf.contains("parameters") && jf["parameters"].is_array()) {
+      for (const json& jp : jf["parameters"]) {
+        if (!jp.is_object() || !jp.contains("name") || !jp["name"].is_string() ||
+            !jp.contains("value") || !jp["value"].is_number()) {
+          continue;  // a value JSON could not hold (null) is not applied
+        }
+        Parameter p;
+        p.name = jp["name"].get<std::string>();
+        p.value = jp["value"].get<double>();
+        if (jp.contains("sigma") && jp["sigma"].is_number()) p.sigma = jp["sigma"].get<double>();
+        if (jp.contains("unit") && jp["unit"].is_string()) p.unit = jp["unit"].get<std::string>();
+        f.parameters.push_back(std::move(p));
+      }
+    }
+    if (jf.contains("modelTerms") && jf["modelTerms"].is_array()) {
+      int k = 0;
+      for (const json& jt : jf["modelTerms"]) {
+        const std::string term_field = absl::StrCat(field, ".modelTerms[", k++, "]");
+        esg::v1::BasisTerm proto;
+        if (!google::protobuf::util::JsonStringToMessage(jt.dump(), &proto).ok()) {
+          return absl::InvalidArgumentError(absl::StrCat(term_field, ": not a basis term"));
+        }
+        absl::StatusOr<estimator::BasisTerm> term = BasisTermFromProto(proto, term_field);
+        if (!term.ok()) return term.status();
+        f.basis_terms.push_back(*term);
+      }
+    }
+    if (jf.contains("readoutDistortion")) {
+      const json& d = jf["readoutDistortion"];
+      if (!d.is_array() || d.size() != 9) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(field, ".readoutDistortion: expected 9 numbers (row-major)"));
+      }
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) {
+          if (!d[3 * r + c].is_number()) {
+            return absl::InvalidArgumentError(
+                absl::StrCat(field, ".readoutDistortion: expected 9 numbers (row-major)"));
+          }
+          f.readout_distortion(r, c) = d[3 * r + c].get<double>();
+        }
+      }
+    }
+    report.findings.push_back(std::move(f));
+  }
+  return report;
 }
 
 }  // namespace esg::proto_convert

@@ -9,6 +9,9 @@
 #define ESG_PROTO_DIAGNOSIS_JSON_H_
 
 #include <string>
+#include <string_view>
+
+#include "absl/status/statusor.h"
 
 #include "estimator/discovery/diagnose.h"
 #include "nlohmann/json.hpp"
@@ -23,6 +26,13 @@ nlohmann::ordered_json DiagnosisJsonValue(const estimator::discovery::DiagnosisR
 // The document as text, indented by 2.
 std::string DiagnosisToJson(const estimator::discovery::DiagnosisReport& report,
                             bool include_series = false);
+
+// The verdict and the findings of a document written by DiagnosisToJson (each finding's effect,
+// gyro, parameters, modelTerms and readoutDistortion; the rest is not read): what a stored
+// diagnosis applies (estimator/discovery/apply_findings.h). InvalidArgument naming the field for a
+// document that is not one.
+absl::StatusOr<estimator::discovery::DiagnosisReport> DiagnosisFindingsFromJson(
+    std::string_view json);
 
 }  // namespace esg::proto_convert
 

@@ -172,6 +172,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   int64_t generation = 0;
   bool from_archive = false;
   std::vector<AlertOccurrence> service_alerts;
+  std::vector<storage::ReadmissionRecord> readmissions;
   std::vector<JobFrame> frames;
   // Late frames this job accounts for; a re-run starts before the first when it is behind the
   // cursor (the others are ahead of it and applied in time order like any frame).
@@ -185,6 +186,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     generation = sc->generation;
     from_archive = sc->replay_from_archive;
     service_alerts.swap(sc->service_alerts);
+    readmissions = sc->readmissions;
     if (setup != nullptr && session.has_value() && !apply.FilterStopped()) {
       late_done.assign(sc->late_frames.begin(), sc->late_frames.end());
       if (!late_done.empty() && late_done.front() <= apply.applied_time) {
@@ -337,6 +339,10 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       continue;
     }
     const TelemetryFrame& frame = *f.frame;
+    // The operators' readmissions stored after the previous frame and before this one
+    // (operator_actions.cc), in a re-run too; one that does not fit the session any more (the
+    // gyro not excluded at this point of a re-run) changes nothing.
+    ApplyReadmissions(sc->id, readmissions, frame.time, f.time > written, *session);
     const estimator::SessionState state_before = session->state();
     const absl::Time step_start = absl::Now();
     absl::StatusOr<estimator::StepReport> report = session->AddFrame(frame);

@@ -45,6 +45,21 @@ inline constexpr const char* kQuarantineAlertReason = "SESSION_QUARANTINED";
 // NotFound "spacecraft_id: 'X' is not configured" (X escaped and shortened).
 absl::Status NotConfigured(const std::string& spacecraft_id);
 
+// Applies to `session` each of `readmissions` (by after_time) stored after its last frame and
+// before `frame_time`: after_time in [session.last_frame_time(), frame_time)
+// (EstimationSession::ReadmitGyro); `log`: log each applied (not again in a re-run of frames
+// whose effects are stored). One the session refuses (the gyro not excluded at this point of a
+// re-run) changes nothing (operator_actions.cc).
+void ApplyReadmissions(const std::string& spacecraft_id,
+                       const std::vector<storage::ReadmissionRecord>& readmissions,
+                       absl::Time frame_time, bool log, estimator::EstimationSession& session);
+
+// What ApplyDiagnosis would set for the stored diagnosis `record` in `config`
+// (DiagnosisResult.applies, .does_not_apply); nothing for a verdict none or unexplained, or a
+// report that cannot be read (operator_actions.cc).
+void DescribeApplication(const estimator::SpacecraftConfig& config,
+                         const storage::DiagnosisRecord& record, esg::v1::DiagnosisResult* result);
+
 // A window checkpoint's blob: the server checkpoint `apply` with `session`'s state (reorder.cc).
 std::string EncodeWindowCheckpoint(const ServerCheckpoint& apply,
                                    const estimator::EstimationSession& session);
@@ -122,6 +137,10 @@ struct EstimationCore::Spacecraft {
   // Alerts raised outside the filter (ingest conflicts, quarantine at load), stored by the next
   // worker job.
   std::vector<AlertOccurrence> service_alerts ABSL_GUARDED_BY(state_mu);
+  // The operators' stored readmissions of excluded gyros, by after_time (operator_actions.cc):
+  // a job applies each before the first frame after its after_time, also in a re-run from the
+  // archive; mirrored by the gyro_readmissions table.
+  std::vector<storage::ReadmissionRecord> readmissions ABSL_GUARDED_BY(state_mu);
 
   // Orders alert publication (worker) with acknowledgements (rpc threads).
   absl::Mutex publish_mu;

@@ -281,9 +281,11 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     for (std::thread& t : helpers) t.join();
   };
   // ParseModel's messages start with "model: " already.
-  if (absl::StatusOr<estimator::ModelSpec> m = estimator::ParseModel(options.model); !m.ok()) {
-    return m.status();
-  }
+  absl::StatusOr<estimator::ModelSpec> model_spec = estimator::ParseModel(options.model);
+  if (!model_spec.ok()) return model_spec.status();
+  // The configuration version the diagnosis runs on, recorded with it (ApplyDiagnosis refuses a
+  // diagnosis of another version).
+  ASSIGN_OR_RETURN(const storage::ConfigRecord config_record, storage_->configs().Get(sc->id));
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> archived,
                    storage_->archive().ReadTimeRange(sc->id, interval.from, interval.End()));
   // An empty window is the request's window, or the spacecraft's whole archive.
@@ -328,8 +330,12 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   record.verdict = report.verdict;
   record.report_json = proto_convert::DiagnosisToJson(report);
   record.frames = static_cast<int64_t>(frames.size());
+  record.config_version = config_record.version;
+  record.model_name = model_spec->Name();
   ASSIGN_OR_RETURN(record.id, storage_->diagnoses().Put(record));
-  return DiagnosisToProto(record);
+  esg::v1::DiagnosisResult result = DiagnosisToProto(record);
+  DescribeApplication(setup->config, record, &result);
+  return result;
 }
 
 absl::StatusOr<esg::v1::ListDiagnosesResponse> EstimationCore::ListDiagnoses(
@@ -372,7 +378,14 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::GetDiagnosis(
                                             request.spacecraft_id(), "' does not exist"));
   }
   if (!record.ok()) return record.status();
-  return DiagnosisToProto(*record);
+  esg::v1::DiagnosisResult result = DiagnosisToProto(*record);
+  std::shared_ptr<const Setup> setup;
+  if (std::shared_ptr<Spacecraft> sc = Find(request.spacecraft_id()); sc != nullptr) {
+    absl::MutexLock lock(&sc->state_mu);
+    setup = sc->setup;
+  }
+  if (setup != nullptr) DescribeApplication(setup->config, *record, &result);
+  return result;
 }
 
 absl::StatusOr<esg::v1::HistoryResponse> EstimationCore::History(

@@ -117,6 +117,8 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Rest
                    storage::CountArchivedFrames(storage_->database(), record.spacecraft_id));
   ASSIGN_OR_RETURN(std::vector<absl::Time> late_frames,
                    storage_->reorder().LateFrames(record.spacecraft_id));
+  ASSIGN_OR_RETURN(std::vector<storage::ReadmissionRecord> readmissions,
+                   storage_->sessions().ListReadmissions(record.spacecraft_id));
   const absl::Time last_time = latest.has_value() ? latest->measurement_time : absl::InfinitePast();
 
   // The configuration.
@@ -257,6 +259,7 @@ absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::Rest
     sc->apply = std::move(checkpoint);
     sc->replay_from_archive = true;
     sc->late_frames.insert(late_frames.begin(), late_frames.end());
+    sc->readmissions = std::move(readmissions);
   }
   if (snapshot) return sc;
   LogEvent("INFO", "spacecraft_loaded",

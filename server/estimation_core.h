@@ -267,6 +267,18 @@ class EstimationCore {
   absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(
       const esg::v1::GetDiagnosisRequest& request);
   absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);
+
+  // ---- Operator actions (operator_actions.cc; docs/service.md "Applying a diagnosis",
+  // "Readmitting a gyro") ----
+  // The stored diagnosis's findings that map to configuration applied to the configuration it
+  // ran on, through Configure with replace = true. Refusals as the RPC's (estimation_service.proto).
+  absl::StatusOr<esg::v1::ApplyDiagnosisResponse> ApplyDiagnosis(
+      const esg::v1::ApplyDiagnosisRequest& request);
+  // Stores the readmission of an excluded gyro (request.operator_name set by the caller); the next
+  // filter job applies it before its first frame (EstimationSession::ReadmitGyro). Refusals as the
+  // RPC's (estimation_service.proto).
+  absl::StatusOr<esg::v1::ReadmitGyroResponse> ReadmitGyro(
+      const esg::v1::ReadmitGyroRequest& request);
   // NotFound unless empty or configured.
   absl::Status CheckSpacecraft(const std::string& spacecraft_id);
 

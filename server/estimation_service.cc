@@ -18,6 +18,7 @@
 #include "absl/strings/string_view.h"
 #include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
+#include "estimator/status_macros.h"
 #include "proto/convert.h"
 #include "server/alert_reactor.h"
 #include "server/diagnose_reactor.h"
@@ -254,6 +255,43 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::AcknowledgeAlert(
                  }
                  return alert;
                });
+}
+
+absl::StatusOr<std::string> EstimationServiceImpl::OperatorName(
+    grpc::CallbackServerContext* context, const std::string& requested) const {
+  if (auth_ == nullptr) return requested;
+  ASSIGN_OR_RETURN(std::string token_name, auth_->Authenticate(*context, Role::kWrite));
+  if (requested.empty()) return token_name;
+  if (requested != token_name) {
+    return absl::PermissionDeniedError(absl::StrCat(
+        "operator_name: ",
+        requested.size() <= 64 ? absl::StrCat("'", absl::CHexEscape(requested), "'")
+                               : absl::StrCat(requested.size(), " bytes"),
+        " is not the caller's name '", token_name,
+        "'; with tokens an operator action carries the token's own name (send it empty)"));
+  }
+  return requested;
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::ApplyDiagnosis(
+    grpc::CallbackServerContext* context, const esg::v1::ApplyDiagnosisRequest* request,
+    esg::v1::ApplyDiagnosisResponse* response) {
+  return Unary(&calls_, context, Authorize(context, Role::kWrite, request->spacecraft_id()),
+               response, [&] { return core_->ApplyDiagnosis(*request); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::ReadmitGyro(
+    grpc::CallbackServerContext* context, const esg::v1::ReadmitGyroRequest* request,
+    esg::v1::ReadmitGyroResponse* response) {
+  // With a tokens file the readmission is stored under the caller's token name, as an
+  // acknowledgement is (docs/service.md "Security").
+  absl::StatusOr<std::string> name = OperatorName(context, request->operator_name());
+  absl::Status admitted = name.status();
+  if (admitted.ok()) admitted = CheckCallScope(*context, request->spacecraft_id());
+  esg::v1::ReadmitGyroRequest named = *request;
+  if (name.ok()) named.set_operator_name(*name);
+  return Unary(&calls_, context, admitted, response,
+               [this, named = std::move(named)] { return core_->ReadmitGyro(named); });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(

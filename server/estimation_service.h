@@ -101,6 +101,12 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerWriteReactor<esg::v1::EstimateRecord>* SubscribeEstimates(
       grpc::CallbackServerContext* context,
       const esg::v1::EstimateSubscription* request) override;
+  grpc::ServerUnaryReactor* ApplyDiagnosis(grpc::CallbackServerContext* context,
+                                           const esg::v1::ApplyDiagnosisRequest* request,
+                                           esg::v1::ApplyDiagnosisResponse* response) override;
+  grpc::ServerUnaryReactor* ReadmitGyro(grpc::CallbackServerContext* context,
+                                        const esg::v1::ReadmitGyroRequest* request,
+                                        esg::v1::ReadmitGyroResponse* response) override;
 
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }
@@ -120,6 +126,11 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   // The caller of the call once its role is checked: the token's name with tokens, else the
   // peer's address without the port (CallerFromPeer). Errors as Authorize.
   absl::StatusOr<std::string> Caller(grpc::CallbackServerContext* context, Role role) const;
+  // The operator name an operator action is stored under (role write): with tokens the caller's
+  // token name, `requested` being empty or that name (else PERMISSION_DENIED naming
+  // operator_name); without tokens `requested` as given.
+  absl::StatusOr<std::string> OperatorName(grpc::CallbackServerContext* context,
+                                           const std::string& requested) const;
   // For a stream about `spacecraft_id` (empty: all): the caller (role read), the routing scope,
   // then a slot of `limiter` for `call`. Errors as Authorize, or the limiter's
   // RESOURCE_EXHAUSTED.

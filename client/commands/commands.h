@@ -40,6 +40,9 @@ void RegisterEstimates(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg export history|telemetry` (ExportCoefficientHistory, ExportTelemetry; server_export.h).
 void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code);
+// server_operator.cc: `esg model apply` (ApplyDiagnosis) and `esg gyro readmit` (ReadmitGyro).
+void RegisterModel(CLI::App& app, GlobalOptions& global, int* exit_code);
+void RegisterGyro(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg __complete spacecraft` (hidden): ids for the bash completion (server_complete.cc).
 void RegisterComplete(CLI::App& app, GlobalOptions& global, int* exit_code);
 

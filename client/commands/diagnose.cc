@@ -31,6 +31,7 @@
 #include "client/diagnosis_text.h"
 #include "client/output_format.h"
 #include "client/progress.h"
+#include "estimator/discovery/apply_findings.h"
 #include "estimator/frame_gap.h"
 #include "formats/column_mapping.h"
 #include "formats/recording_csv.h"
@@ -86,8 +87,9 @@ bool WriteFile(const std::filesystem::path& path, const std::string& text) {
   return static_cast<bool>(out);
 }
 
-// The report directory: plots (data, script, PNGs), report.md and diagnosis.json; with basis
-// terms found, model.json: the configuration with them (for esg calibrate --config).
+// The report directory: plots (data, script, PNGs), report.md and diagnosis.json; with findings
+// that map to configuration, model.json: the configuration with them (estimator/discovery/
+// apply_findings.h, the mapping esgd's ApplyDiagnosis applies; for esg calibrate --config).
 int WriteReport(const disc::DiagnosisReport& report, const estimator::SpacecraftConfig& config,
                 const std::string& out_dir) {
   std::error_code ec;
@@ -109,12 +111,9 @@ int WriteReport(const disc::DiagnosisReport& report, const estimator::Spacecraft
     std::fprintf(stderr, "esg diagnose: --out %s: cannot write the report\n", out_dir.c_str());
     return 1;
   }
-  const bool basis_found =
-      std::any_of(report.findings.begin(), report.findings.end(),
-                  [](const disc::Finding& f) { return f.effect == disc::kEffectBasisTerm; });
-  if (basis_found &&
-      !WriteFile(dir / "model.json",
-                 proto_convert::ConfigToJson(disc::WithBasisFindings(config, report)) + "\n")) {
+  const disc::AppliedFindings applied = disc::WithFindings(config, report);
+  if (!applied.applied.empty() &&
+      !WriteFile(dir / "model.json", proto_convert::ConfigToJson(applied.config) + "\n")) {
     std::fprintf(stderr, "esg diagnose: --out %s: cannot write model.json\n", out_dir.c_str());
     return 1;
   }

@@ -27,11 +27,11 @@ _esg() {
   fi
 
   local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history
-    estimates export help version completion"
+    estimates export model gyro help version completion"
   local global="--server --token --tls-ca --tls-cert --tls-key --help --version"
   local format="-o --format --json"
 
-  # The verb (and the sub-verb of diagnoses and export) on the line so far; global options may
+  # The verb (and the sub-verb of diagnoses, export, model and gyro) on the line so far; global options may
   # come first.
   local verb="" sub="" i
   local -a connection=()
@@ -45,7 +45,8 @@ _esg() {
       *)
         if [[ -z "$verb" ]]; then
           verb="${words[i]}"
-        elif [[ ( "$verb" == diagnoses || "$verb" == export ) && -z "$sub" ]]; then
+        elif [[ ( "$verb" == diagnoses || "$verb" == export || "$verb" == model ||
+                  "$verb" == gyro ) && -z "$sub" ]]; then
           sub="${words[i]}"
         fi
         ;;
@@ -90,7 +91,7 @@ _esg() {
       ;;
     --server | --token | --from | --to | --since | --step | --hours | --seed | \
       --start | --gap-start | --id | --ack | --operator | --gyro | --rate | --window | --kd | \
-      --page-size | --effects | --alpha | --threads)
+      --page-size | --effects | --alpha | --threads | --diagnosis)
       return  # a value the shell cannot guess
       ;;
   esac
@@ -129,6 +130,18 @@ _esg() {
         "") COMPREPLY=($(compgen -W "history telemetry" -- "$cur")); return ;;
         history) opts="--spacecraft --gyro --from --to --out -o --format --include-revised" ;;
         telemetry) opts="--spacecraft --from --to --out" ;;
+      esac
+      ;;
+    model)
+      case "$sub" in
+        "") COMPREPLY=($(compgen -W "apply" -- "$cur")); return ;;
+        apply) opts="--spacecraft --diagnosis $format" ;;
+      esac
+      ;;
+    gyro)
+      case "$sub" in
+        "") COMPREPLY=($(compgen -W "readmit" -- "$cur")); return ;;
+        readmit) opts="--spacecraft --gyro --operator $format" ;;
       esac
       ;;
   esac
