@@ -277,6 +277,19 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
       }
       return result;
     }],
+
+    // ApplyDiagnosis (write role): the diagnosis's findings that map to configuration, applied
+    // with replace=true (docs/service.md "Applying a diagnosis"). The body is {} (a JSON body: a form
+    // of another site cannot post it, params.js).
+    ['POST', '/api/spacecraft/:id/diagnoses/:diag_id/apply', async (ctx) => {
+      const diagnosisId = intValue('diag_id', ctx.params.diag_id, 1, Number.MAX_SAFE_INTEGER);
+      const body = await jsonBody(ctx.req, ACKNOWLEDGE_BODY_BYTES);
+      const extra = Object.keys(body)[0];
+      if (extra !== undefined) {
+        throw badRequest(`body.${extra}: no such field (the body is {}; spacecraft and diagnosis come from the path)`);
+      }
+      return call(ctx, 'ApplyDiagnosis', { spacecraft_id: ctx.params.id, diagnosis_id: diagnosisId });
+    }, { body: ACKNOWLEDGE_BODY_BYTES }],
   ];
 }
 

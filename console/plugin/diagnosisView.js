@@ -1,6 +1,9 @@
 // One stored diagnosis (GET /api/spacecraft/:id/diagnoses/:n, GetDiagnosis with its report):
 // verdict, findings with their parameters and evidence, the mismatch found, the fit before and
 // after, and the gap errors as a bar chart. Report fields: docs/discovery.md "JSON".
+// "Apply to the model" (POST .../diagnoses/:n/apply, ApplyDiagnosis with the write role): what the
+// diagnosis would set (its `applies` lines) and what not, confirmed in a dialog, then the result:
+// the configuration version stored and the re-run from the archive, or esgd's refusal.
 import { apiFetch } from './api.js';
 import { el, fixed, STYLE } from './dom.js';
 import { gapChart } from './gapChart.js';
@@ -102,6 +105,59 @@ function mismatch(m) {
     `p = ${m.pValue === undefined ? '-' : m.pValue.toExponential(2)}${m.gyro ? `, gyro ${m.gyro}` : ''}.`);
 }
 
+// The confirmation: what is applied and what is not, and that the archive is applied again.
+function confirmApply(d) {
+  return new Promise((resolve) => {
+    const dialog = el('dialog', { id: 'esg-apply-dialog', style: 'background:#333;color:#ddd;border:1px solid #666;padding:16px;max-width:60em' },
+      el('form', { method: 'dialog' },
+        el('p', {}, `Apply diagnosis ${d.id} to the configuration of ${d.spacecraft_id}? `,
+          'The session is recreated and every archived frame applied again under it.'),
+        el('ul', {}, (d.applies || []).map((line) => el('li', {}, line))),
+        (d.does_not_apply || []).length ? el('p', { class: 'muted' }, 'Not applied:') : null,
+        el('ul', { class: 'muted' }, (d.does_not_apply || []).map((line) => el('li', {}, line))),
+        el('p', {},
+          el('button', { id: 'esg-apply-ok', type: 'submit', value: 'ok' }, 'Apply'), ' ',
+          el('button', { id: 'esg-apply-cancel', type: 'submit', value: 'cancel' }, 'Cancel'))));
+    document.body.append(dialog);
+    dialog.addEventListener('close', () => {
+      dialog.remove();
+      resolve(dialog.returnValue === 'ok');
+    });
+    dialog.showModal();
+  });
+}
+
+function applySection(d) {
+  const applies = d.applies || [];
+  const result = el('p', { class: 'esg-apply-result' });
+  if (!applies.length) {
+    return el('div', { class: 'esg-apply' },
+      el('p', { class: 'muted' }, `Nothing of this diagnosis maps to the configuration (verdict ${d.verdict}).`));
+  }
+  const button = el('button', { class: 'esg-apply-button', type: 'button' }, 'Apply to the model');
+  button.addEventListener('click', async () => {
+    if (!(await confirmApply(d))) return;
+    button.disabled = true;
+    result.textContent = 'Applying...';
+    try {
+      const r = await apiFetch(
+        `/api/spacecraft/${encodeURIComponent(d.spacecraft_id)}/diagnoses/${d.id}/apply`,
+        { method: 'POST', body: {} });
+      result.textContent = `Applied as configuration version ${r.config_version}: ${(r.applied || []).join('; ')}. ` +
+        'The session is re-running the archive.';
+    } catch (err) {
+      button.disabled = false;
+      result.textContent = `Not applied: ${err.status === 403 ? 'your token does not have the write role' : err.message}`;
+    }
+  });
+  return el('div', { class: 'esg-apply' },
+    el('ul', {}, applies.map((line) => el('li', {}, line))),
+    (d.does_not_apply || []).length
+      ? el('p', { class: 'muted' }, `Not applied: ${d.does_not_apply.join('; ')}`) : null,
+    el('p', { class: 'muted' }, `Made on configuration version ${d.config_version} (model ${d.model}).`),
+    button, result);
+}
+
 function render(container, d) {
   const r = d.report || {};
   const findings = r.findings || [];
@@ -115,6 +171,7 @@ function render(container, d) {
     el('h3', {}, `Findings (${findings.length})`),
     ...(findings.length ? findings.map(finding) : [el('p', { class: 'esg-no-findings' },
       'No finding: the configured model explains the data.')]),
+    el('h3', {}, 'Apply to the model'), applySection(d),
     el('h3', {}, 'Mismatch'), mismatch(r.mismatch),
     el('h3', {}, 'Fit before and after'), fitTable(r.fit),
     el('h3', {}, 'Attitude error at the end of each star-tracker gap'), gapChart(r.fit));

@@ -1097,3 +1097,71 @@ test('fleet overview of the whole fleet: every row as esg reports, the worst fir
     await page.setViewport({ width: 1500, height: 900 });
   }
 });
+
+// docs/discovery.md's worked example: the model (model1.json) lacks gyro 2's rotor displacement.
+// Diagnosed on esgd, the report offers "Apply to the model"; confirmed, esgd stores the
+// configuration with the freed coefficients and re-runs the archive, as `esg status` shows.
+test('a diagnosis is applied to the model from its report after a confirmation, as esg status then shows', async () => {
+  const SC = 'DISC-1';
+  const model1 = path.join(tmp, 'model1.json');
+  fs.writeFileSync(model1, JSON.stringify({
+    spacecraftId: SC,
+    gyros: [
+      { id: 1, caseToBody: [1, 0, 0, 0, 1, 0, 0, 0, 1], model: { k0DegH: 0.25 }, modelSigma: { k0DegH: 0.3 } },
+      { id: 2, caseToBody: [0, 0, -1, 0, 1, 0, 1, 0, 0], model: { k0DegH: -0.18 }, modelSigma: { k0DegH: 0.3 } },
+      { id: 3, caseToBody: [0, -1, 0, 1, 0, 0, 0, 0, 1], model: { k0DegH: 0.31 }, modelSigma: { k0DegH: 0.3 } },
+      { id: 4, caseToBody: [0, 0, 1, 1, 0, 0, 0, 1, 0], model: { k0DegH: 0.2 }, modelSigma: { k0DegH: 0.3 } },
+    ],
+    workingPair: [1, 2], reservePair: [1, 3],
+    starTracker: { noiseArcsec: [5, 5, 30] }, readoutNoiseArcsec: 3, randomWalkDegHSqrtH: 0.0015,
+  }));
+  const displaced = path.join(tmp, 'displaced.json');
+  fs.writeFileSync(displaced, JSON.stringify({
+    profile: 'mixed', profileSeed: 3, gyros: [{ id: 2, rotorDisplacementUm: [0.8, -1.0, 0.6] }],
+    starTracker: { outlierRate: 0.01, outlierArcmin: 1, outages: [{ startHours: 5, endHours: 6 }] },
+  }));
+  const recording = path.join(tmp, 'displaced.csv');
+  await esg(['simulate', '--config', model1, '--scenario', displaced, '--hours', '12', '--seed', '3',
+    '--out', recording]);
+  await cli('configure', '--config', model1);
+  await cli('replay', '--recording', recording, '--wait');
+  const diagnosis = await timed(`esg diagnose --spacecraft ${SC}`, () => cliJson('diagnose', '--spacecraft', SC));
+  assert.equal(diagnosis.verdict, 'rotor_displacement');
+  assert.ok(diagnosis.applies && diagnosis.applies.length > 0, JSON.stringify(diagnosis.applies));
+  await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`);
+  await page.waitForSelector('.esg-apply-button', { timeout: 20_000 });
+  // What it would set, as esgd says (the same lines as esg diagnoses show).
+  const offered = await page.$$eval('.esg-apply li', (lis) => lis.map((li) => li.textContent));
+  assert.deepEqual(offered, diagnosis.applies);
+  // Cancelled: nothing changes.
+  await page.click('.esg-apply-button');
+  await page.waitForSelector('#esg-apply-dialog');
+  await page.click('#esg-apply-cancel');
+  await page.waitForFunction(() => !document.getElementById('esg-apply-dialog'));
+  const held = (await cliJson('status', '--spacecraft', SC)).config.gyros.find((g) => g.id === 2);
+  assert.ok(!((held.modelSigma || {}).c1DegH || []).some((v) => v > 0), JSON.stringify(held));
+  // Confirmed: applied, the result on the page.
+  await page.click('.esg-apply-button');
+  await page.waitForSelector('#esg-apply-dialog');
+  const dialog = await page.$eval('#esg-apply-dialog', (d) => d.textContent);
+  assert.match(dialog, /rotor_displacement \(gyro 2\)/);
+  await page.click('#esg-apply-ok');
+  await page.waitForFunction(() => /Applied as configuration version 2/.test(
+    document.querySelector('.esg-apply-result').textContent), { timeout: 20_000 });
+  await shot('diagnosis_apply', 1350);
+  const status = await cliJson('status', '--spacecraft', SC);
+  const gyro2 = status.config.gyros.find((g) => g.id === 2);
+  assert.deepEqual(gyro2.modelSigma.c1DegH, [0.1, 0.1, 0.1]);
+  assert.deepEqual(gyro2.modelSigma.c2DegH, [0.1, 0.1, 0.1]);
+  // Applied again (the report opened anew), the same diagnosis is refused: the configuration
+  // changed since.
+  await open('esg:root/esg:fleet');
+  await page.waitForSelector('table.esg-fleet', { timeout: 20_000 });
+  await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`);
+  await page.waitForSelector('.esg-apply-button:not([disabled])', { timeout: 20_000 });
+  await page.click('.esg-apply-button');
+  await page.waitForSelector('#esg-apply-dialog');
+  await page.click('#esg-apply-ok');
+  await page.waitForFunction(() => /Not applied: .*changed since/.test(
+    document.querySelector('.esg-apply-result').textContent), { timeout: 20_000 });
+});
