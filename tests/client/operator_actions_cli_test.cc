@@ -4,11 +4,13 @@
 // and through the `esg` CLI (exit code and message); a gyro excluded by a frozen reading readmitted
 // and running again, through a restart and a re-run from the archive; and the docs' worked
 // example (docs/discovery.md: gyro 2's rotor displaced, the model lacking it) diagnosed through
-// esgd, applied, and the re-run calibrating the coefficients the diagnosis freed.
+// esgd, applied, and the re-run calibrating the coefficients the diagnosis freed; and the write
+// role both need.
 #include <signal.h>
 
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <string>
@@ -440,6 +442,63 @@ TEST(ApplyDiagnosis, TheDocsRotorDisplacementIsDiagnosedAppliedAndCalibratedByTh
   ExpectCliRefused(
       Esg(dir, *daemon, absl::StrCat("model apply --spacecraft DISC-CLI --diagnosis ", id)),
       "FAILED_PRECONDITION", "spacecraft_id", "quarantined");
+}
+
+// Both are write calls: a token with the read role only is PERMISSION_DENIED, through gRPC and
+// the CLI; a readmission in another operator's name than the token's is refused naming
+// operator_name (as an acknowledgement is).
+TEST(OperatorActions, NeedTheWriteRoleAndTheTokensOwnName) {
+  TempDir dir;
+  const std::string tokens = dir.File("tokens");
+  Write(tokens, "w-token-0123456789 read,write wendy\nr-token-0123456789 read viewer\n");
+  std::filesystem::permissions(
+      tokens, std::filesystem::perms::owner_read | std::filesystem::perms::owner_write,
+      std::filesystem::perm_options::replace);
+  Daemon daemon(dir.File("esg.db"), dir.File("esgd.log"), {}, {"--tokens", tokens});
+  ASSERT_GT(daemon.port(), 0);
+  auto stub = daemon.Stub();
+  auto call = [&](const std::string& token, auto&& rpc) {
+    grpc::ClientContext context;
+    context.AddMetadata("authorization", "Bearer " + token);
+    return rpc(context);
+  };
+  esg::v1::ReadmitGyroRequest readmit;
+  readmit.set_spacecraft_id("RDK-1");
+  readmit.set_gyro_id(3);
+  esg::v1::ApplyDiagnosisRequest apply;
+  apply.set_spacecraft_id("RDK-1");
+  apply.set_diagnosis_id(1);
+  grpc::Status status = call("r-token-0123456789", [&](grpc::ClientContext& c) {
+    esg::v1::ReadmitGyroResponse r;
+    return stub->ReadmitGyro(&c, readmit, &r);
+  });
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED) << status.error_message();
+  status = call("r-token-0123456789", [&](grpc::ClientContext& c) {
+    esg::v1::ApplyDiagnosisResponse r;
+    return stub->ApplyDiagnosis(&c, apply, &r);
+  });
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED) << status.error_message();
+  readmit.set_operator_name("mallory");
+  status = call("w-token-0123456789", [&](grpc::ClientContext& c) {
+    esg::v1::ReadmitGyroResponse r;
+    return stub->ReadmitGyro(&c, readmit, &r);
+  });
+  ExpectRefused(status, grpc::StatusCode::PERMISSION_DENIED, "operator_name", "wendy");
+  // The write token's own name passes the role check: the call reaches the core (no such
+  // spacecraft here).
+  readmit.set_operator_name("");
+  status = call("w-token-0123456789", [&](grpc::ClientContext& c) {
+    esg::v1::ReadmitGyroResponse r;
+    return stub->ReadmitGyro(&c, readmit, &r);
+  });
+  ExpectRefused(status, grpc::StatusCode::NOT_FOUND, "spacecraft_id");
+  RunResult r =
+      Esg(dir, daemon, "--token r-token-0123456789 gyro readmit --spacecraft RDK-1 --gyro 3");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("PERMISSION_DENIED"));
+  r = Esg(dir, daemon, "--token r-token-0123456789 model apply --spacecraft RDK-1 --diagnosis 1");
+  EXPECT_EQ(r.exit_code, 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("PERMISSION_DENIED"));
 }
 
 }  // namespace
