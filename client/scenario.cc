@@ -246,6 +246,27 @@ absl::StatusOr<estimator::TransientDrift> ParseTransientDrift(const json& v,
   return d;
 }
 
+// {"amplitudeDegH": [x, y, z], "face": "+x" | "-x" | "+y" | "-y" | "+z" | "-z",
+// "timeConstantHours": tau}, all required.
+absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const std::string& path) {
+  estimator::SunFaceDrift d;
+  RETURN_IF_ERROR(ParseAmplitudeAndTime(v, path, "timeConstantHours", &d.amplitude_k_rad_s,
+                                        &d.time_constant_s, "face"));
+  const std::string p = Key(path, "face");
+  if (!v.contains("face")) return Invalid(p, "required (+x, -x, +y, -y, +z or -z)");
+  const json& f = v["face"];
+  const std::string face = f.is_string() ? f.get<std::string>() : f.dump();
+  if (!f.is_string() || face.size() != 2 || (face[0] != '+' && face[0] != '-') ||
+      face[1] < 'x' || face[1] > 'z') {
+    return Invalid(p, absl::StrCat("expected one of +x, -x, +y, -y, +z, -z (the body face whose "
+                                   "outward normal is that axis), got ",
+                                   f.is_string() ? absl::StrCat("'", face, "'") : face));
+  }
+  d.face_sign = face[0] == '+' ? 1 : -1;
+  d.face_axis = face[1] - 'x';
+  return d;
+}
+
 // [Dxx, Dyy, Dzz, Dxy, Dyz, Dzx] in ppm -> the symmetric D [1].
 absl::StatusOr<Eigen::Matrix3d> ParseDistortionPpm(const json& v, const std::string& path) {
   if (!v.is_array() || v.size() != 6) {
@@ -275,7 +296,7 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       "misalignmentArcsec", "randomWalkDegHSqrtH", "readoutNoiseArcsec", "voltageNoiseMv",
       "initialSpinAxis", "fault", "switchOnHours", "orbitalDrift", "rotorDisplacementRateUmH",
       "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift", "rateDrift",
-      "transientDrift"};
+      "transientDrift", "sunFaceDrift"};
   for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
     keys.insert(std::string(key.json_key));
   }
@@ -359,6 +380,8 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       ASSIGN_OR_RETURN(g.rate_drift, ParseRateDrift(x, p));
     } else if (k == "transientDrift") {
       ASSIGN_OR_RETURN(g.transient_drift, ParseTransientDrift(x, p));
+    } else if (k == "sunFaceDrift") {
+      ASSIGN_OR_RETURN(g.sun_face_drift, ParseSunFaceDrift(x, p));
     }
   }
   return g;
@@ -640,6 +663,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.hidden_driver_drift) g.hidden_driver_drift = s.hidden_driver_drift;
     if (s.rate_drift) g.rate_drift = s.rate_drift;
     if (s.transient_drift) g.transient_drift = s.transient_drift;
+    if (s.sun_face_drift) g.sun_face_drift = s.sun_face_drift;
   }
   estimator::StarTrackerTruth& st = spec->star_tracker;
   const estimator::StarTrackerTruth& from = scenario.star_tracker;

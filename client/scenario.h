@@ -50,6 +50,7 @@ struct ScenarioGyro {
   std::optional<estimator::HiddenDriverDrift> hidden_driver_drift;
   std::optional<estimator::RateDrift> rate_drift;
   std::optional<estimator::TransientDrift> transient_drift;
+  std::optional<estimator::SunFaceDrift> sun_face_drift;
 };
 
 struct Scenario {

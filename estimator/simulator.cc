@@ -12,6 +12,7 @@
 #include "estimator/rotation.h"
 #include "estimator/simulator_truth.h"
 #include "estimator/status_macros.h"
+#include "estimator/sun_direction.h"
 
 namespace esg::estimator {
 
@@ -36,6 +37,10 @@ constexpr uint64_t kHiddenDriverOffset = 4;
 constexpr double kMaxReadoutDistortion = 0.1;
 // Most switches a switching drift may expect over a run (duration / mean dwell).
 constexpr double kMaxExpectedSwitches = 1e7;
+
+// Spacing of the sun directions the simulator computes and interpolates between [s]
+// (SunFaceDrift).
+constexpr double kSunNodeSpacingS = 600.0;
 
 constexpr double kMaxFrames = 1e7;
 constexpr double kMaxSteps = 1e10;
@@ -126,7 +131,13 @@ struct GyroState {
   Vector3d transient_amplitude_k = Vector3d::Zero();  // [rad/s]
   double transient_tau = 1.0;                         // [s]
   double transient_start = 0.0;                       // [s]
-  bool has_extra_drift = false;  // any of orbital, switching, hidden, rate, transient
+  bool has_sun = false;
+  Vector3d sun_amplitude_k = Vector3d::Zero();  // [rad/s]
+  int sun_face_axis = 0;
+  double sun_face_sign = 1.0;
+  double sun_tau = 1.0;  // [s]
+  double sun_y = 0.0;    // lagged illumination y at the current propagation time [1]
+  bool has_extra_drift = false;  // any of orbital, switching, hidden, rate, transient, sun
 
   Rng readout_rng;
   Rng voltage_rng;
@@ -175,6 +186,11 @@ struct GyroState {
     return transient_amplitude_k * std::exp(-(t - transient_start) / transient_tau);
   }
 
+  // The face's illumination max(0, +-s_b[axis]) for the sun s_b in body axes.
+  double SunIllumination(const Vector3d& s_b) const {
+    return std::max(0.0, sun_face_sign * s_b(sun_face_axis));
+  }
+
   // Fault drift step in case axes at time t.
   Vector3d FaultDrift_k(double t) const {
     if (fault && fault->kind == GyroFault::Kind::kDriftStep && t >= fault->time) {
@@ -187,6 +203,34 @@ struct GyroState {
   bool InFaultWindow(GyroFault::Kind kind, double t) const {
     return fault && fault->kind == kind && t >= fault->time && t < fault->end;
   }
+};
+
+// The sun's direction in inertial axes at nodes kSunNodeSpacingS apart from the simulation start,
+// interpolated linearly between them and normalised (SunFaceDrift).
+class SunNodes {
+ public:
+  static absl::StatusOr<SunNodes> Make(absl::Time start, double duration_s) {
+    SunNodes nodes;
+    const int64_t n = static_cast<int64_t>(std::ceil(duration_s / kSunNodeSpacingS)) + 2;
+    nodes.s_in_.reserve(n);
+    for (int64_t i = 0; i < n; ++i) {
+      ASSIGN_OR_RETURN(Vector3d s_in,
+                       SunDirection_in(start + absl::Seconds(kSunNodeSpacingS * i)));
+      nodes.s_in_.push_back(s_in);
+    }
+    return nodes;
+  }
+
+  // [1], inertial axes, at t seconds since the start (0 <= t <= duration).
+  Vector3d At(double t) const {
+    const double x = std::clamp(t / kSunNodeSpacingS, 0.0, static_cast<double>(s_in_.size() - 2));
+    const size_t i = static_cast<size_t>(x);
+    const double f = x - static_cast<double>(i);
+    return ((1.0 - f) * s_in_[i] + f * s_in_[i + 1]).normalized();
+  }
+
+ private:
+  std::vector<Vector3d> s_in_;
 };
 
 bool InAnyWindow(const std::vector<std::pair<double, double>>& windows, double t) {
@@ -315,6 +359,27 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
       return absl::InvalidArgumentError(absl::StrFormat(
           "%s.transient_drift.start_s: must be finite and >= 0, got %g", f,
           g.transient_drift->start_s));
+    }
+  }
+  if (g.sun_face_drift) {
+    const SunFaceDrift& d = *g.sun_face_drift;
+    RETURN_IF_ERROR(FiniteVector(d.amplitude_k_rad_s, f + ".sun_face_drift.amplitude_k_rad_s"));
+    if (d.face_axis < 0 || d.face_axis > 2) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.sun_face_drift.face_axis: must be 0 (x), 1 (y) or 2 (z), got %d", f, d.face_axis));
+    }
+    if (d.face_sign != 1 && d.face_sign != -1) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.sun_face_drift.face_sign: must be +1 or -1, got %d", f, d.face_sign));
+    }
+    RETURN_IF_ERROR(Positive(d.time_constant_s, f + ".sun_face_drift.time_constant_s"));
+    for (const double t : {0.0, spec.duration}) {
+      const auto s_in = SunDirection_in(spec.start + absl::Seconds(t));
+      if (!s_in.ok()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            f, ".sun_face_drift: the run (start and duration) must lie where the sun is known: ",
+            s_in.status().message()));
+      }
     }
   }
   return absl::OkStatus();
@@ -451,6 +516,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
 
   // Gyro set-up.
   std::vector<GyroState> gyros;
+  std::optional<SunNodes> sun_nodes;  // made when a gyro has a SunFaceDrift
   const Matrix3d C_in_b0 = profile.Attitude(0.0).toRotationMatrix();
   for (int id = 1; id <= kMaxGyros; ++id) {
     if (!GyroRuns(spec, id)) continue;
@@ -536,8 +602,22 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       g.transient_start = truth.transient_drift->start_s;
       effects.transient_drift = truth.transient_drift;
     }
-    g.has_extra_drift =
-        g.has_orbital || g.has_switching || g.has_hidden || g.has_rate || g.has_transient;
+    if (truth.sun_face_drift) {
+      if (!sun_nodes) {
+        ASSIGN_OR_RETURN(SunNodes nodes, SunNodes::Make(spec.start, spec.duration));
+        sun_nodes = std::move(nodes);
+      }
+      g.has_sun = true;
+      g.sun_amplitude_k = truth.sun_face_drift->amplitude_k_rad_s;
+      g.sun_face_axis = truth.sun_face_drift->face_axis;
+      g.sun_face_sign = truth.sun_face_drift->face_sign;
+      g.sun_tau = truth.sun_face_drift->time_constant_s;
+      // The face in equilibrium with its illumination at the start: y(0) = u(0).
+      g.sun_y = g.SunIllumination(C_in_b0.transpose() * sun_nodes->At(0.0));
+      effects.sun_face_drift = truth.sun_face_drift;
+    }
+    g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden || g.has_rate ||
+                        g.has_transient || g.has_sun;
     gyros.push_back(std::move(g));
   }
 
@@ -564,6 +644,8 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     const Matrix3d C_in_b = profile.Attitude(t_mid).toRotationMatrix();
     const double sqrt_h = std::sqrt(h);
     const Vector3d w_b = any_rate_drift ? profile.Rate(t_mid) : Vector3d::Zero();
+    const Vector3d s_b = sun_nodes ? Vector3d(C_in_b.transpose() * sun_nodes->At(t_mid))
+                                   : Vector3d::Zero();
     for (GyroState& g : gyros) {
       const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
       const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
@@ -574,6 +656,13 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       if (g.has_extra_drift) {
         dw_k += g.OrbitalDrift_k(t_mid) + g.SwitchingLevel(t_mid) * g.switching_amplitude_k +
                 g.hidden_x * g.hidden_amplitude_k + g.RateDrift_k(w_b) + g.TransientDrift_k(t_mid);
+      }
+      if (g.has_sun) {
+        // The lag stepped exactly for the illumination u at the midpoint: y at the midpoint for
+        // the drift, y at the step end for the next step.
+        const double u = g.SunIllumination(s_b);
+        dw_k += (u + (g.sun_y - u) * std::exp(-0.5 * h / g.sun_tau)) * g.sun_amplitude_k;
+        g.sun_y = u + (g.sun_y - u) * std::exp(-h / g.sun_tau);
       }
       const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
       g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
@@ -628,8 +717,13 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
         gt.dw_hidden_k_rad_s = gt.hidden_driver * g.hidden_amplitude_k;
         gt.dw_rate_k_rad_s = g.RateDrift_k(g.has_rate ? profile.Rate(t_m) : Vector3d::Zero());
         gt.dw_transient_k_rad_s = g.TransientDrift_k(t_m);
+        if (g.has_sun) {
+          gt.sun_illumination = g.SunIllumination(C_b_in * sun_nodes->At(t_m));
+          gt.sun_lagged_illumination = g.sun_y;
+          gt.dw_sun_k_rad_s = g.sun_y * g.sun_amplitude_k;
+        }
         gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s +
-                   gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s;
+                   gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s + gt.dw_sun_k_rad_s;
       }
       // The pick-off's distortion, then readout noise: a small rotation perpendicular to the
       // distorted axis (two draws, always).

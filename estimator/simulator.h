@@ -22,9 +22,11 @@
 //   eq. (3) at Delta(t); a switching drift +-A (random telegraph process, switch times drawn for
 //   the whole run at the start); a hidden-driver drift B x(t), x an Ornstein-Uhlenbeck process
 //   of unit variance; a rate-dependent drift G w_k (w_k the body rate in case axes); a warm-up
-//   transient A exp(-(t - t0) / tau) from t0. In a step the switching level, the orbital drift,
-//   the body rate and the transient are taken at the step midpoint, x(t) at the step start (then
-//   x is stepped exactly over the step).
+//   transient A exp(-(t - t0) / tau) from t0; a sun-driven thermal drift A y(t), y the
+//   first-order lag of the sun's illumination of one body face (SunFaceDrift). In a step the
+//   switching level, the orbital drift, the body rate, the transient and the lagged illumination
+//   are taken at the step midpoint, x(t) at the step start (then x is stepped exactly over the
+//   step).
 // - Propagation: h_in stepped at integration_rate_hz as StepSpinAxis(h_in, dw_in, dt) (a
 //   rotation by dw_in dt, evaluated by its Rodrigues series for the tiny drift angles),
 //   dw_in = C_in_b(t_mid) C_b_k_true dw_k evaluated at the step midpoint (attitude at t_mid, h_in
@@ -145,6 +147,22 @@ struct TransientDrift {
   double start_s = 0.0;  // [s since the simulation start], >= 0
 };
 
+// A thermal drift driven by the sun on one face of the body (a gyro heated through the panel the
+// sun shines on): the face's illumination u(t) = max(0, face_sign s_b(t)[face_axis]), s_b the
+// unit vector to the sun (estimator/sun_direction.h) in body axes of the true attitude, drives
+// the face's temperature y through a first-order lag tau dy/dt = u - y with y(0) = u(0) (the face
+// in equilibrium at the start), and dw_k = amplitude_k_rad_s y(t). Over an integration step of
+// length h, u is taken at the step midpoint and y stepped exactly for it:
+// y(t + h) = u + (y(t) - u) exp(-h / tau). The sun's direction is computed every 600 s from the
+// simulated UTC and interpolated linearly between (normalised; the sun moves 0.007 deg in 600 s,
+// the interpolation is off by under 1e-8 rad).
+struct SunFaceDrift {
+  Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes, at y = 1 [rad/s]
+  int face_axis = 0;                // body axis of the face's outward normal: 0 x, 1 y, 2 z
+  int face_sign = 1;                // +1: the face towards +axis, -1: towards -axis
+  double time_constant_s = 3600.0;  // [s], > 0
+};
+
 struct GyroTruth {
   // Whether the gyro runs. Default (nullopt): it runs when it is configured and belongs to the
   // working or the reserve pair; so with the usual pairs {1,2}, {1,3} gyros 1-3 run and gyro 4,
@@ -191,6 +209,7 @@ struct GyroTruth {
   std::optional<HiddenDriverDrift> hidden_driver_drift;
   std::optional<RateDrift> rate_drift;
   std::optional<TransientDrift> transient_drift;
+  std::optional<SunFaceDrift> sun_face_drift;
 };
 
 // n consecutive star-tracker outliers (see the file comment for their axis).
@@ -252,6 +271,10 @@ struct GyroTruthSample {
   Eigen::Vector3d dw_hidden_k_rad_s = Eigen::Vector3d::Zero();  // x(t) * amplitude [rad/s]
   Eigen::Vector3d dw_rate_k_rad_s = Eigen::Vector3d::Zero();       // gain * w_k [rad/s]
   Eigen::Vector3d dw_transient_k_rad_s = Eigen::Vector3d::Zero();  // the transient [rad/s]
+  // The sun-driven drift: the face's illumination u(t) and its lag y(t) [1] (0 without it).
+  double sun_illumination = 0.0;
+  double sun_lagged_illumination = 0.0;
+  Eigen::Vector3d dw_sun_k_rad_s = Eigen::Vector3d::Zero();  // y * amplitude [rad/s]
 };
 
 // One gyro's effects beyond the paper's models as simulated: the settings in effect (the orbital
@@ -267,6 +290,7 @@ struct GyroEffectsTruth {
   std::optional<HiddenDriverDrift> hidden_driver_drift;
   std::optional<RateDrift> rate_drift;
   std::optional<TransientDrift> transient_drift;
+  std::optional<SunFaceDrift> sun_face_drift;
 };
 
 struct TruthSample {

@@ -123,6 +123,15 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
     out << absl::StrFormat("# g%d_transient_drift_start_h: %.15g\n", n,
                            estimator::SecondsToHours(e.transient_drift->start_s));
   }
+  if (e.sun_face_drift) {
+    out << absl::StrFormat("# g%d_sun_face_drift_amplitude_deg_h: %s\n", n,
+                           VecDegH(e.sun_face_drift->amplitude_k_rad_s));
+    out << absl::StrFormat("# g%d_sun_face_drift_face: %c%c\n", n,
+                           e.sun_face_drift->face_sign > 0 ? '+' : '-',
+                           "xyz"[e.sun_face_drift->face_axis]);
+    out << absl::StrFormat("# g%d_sun_face_drift_time_constant_h: %.15g\n", n,
+                           estimator::SecondsToHours(e.sun_face_drift->time_constant_s));
+  }
 }
 
 // Truth CSV: metadata lines (the recording's, plus the true coefficients [deg/h] and true
@@ -200,6 +209,12 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
       out << absl::StrFormat(
           ",g%d_transient_dw_x_deg_h,g%d_transient_dw_y_deg_h,g%d_transient_dw_z_deg_h", n, n, n);
     }
+    if (e.sun_face_drift) {
+      out << absl::StrFormat(
+          ",g%d_sun_illumination,g%d_sun_lagged_illumination,g%d_sun_dw_x_deg_h,"
+          "g%d_sun_dw_y_deg_h,g%d_sun_dw_z_deg_h",
+          n, n, n, n, n);
+    }
   }
   out << "\n";
   for (const estimator::TruthSample& t : result.truth) {
@@ -244,6 +259,12 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
       if (e.rate_drift) out << "," << (s ? deg_h(s->dw_rate_k_rad_s) : std::string(",,"));
       if (e.transient_drift) {
         out << "," << (s ? deg_h(s->dw_transient_k_rad_s) : std::string(",,"));
+      }
+      if (e.sun_face_drift) {
+        out << "," << (s ? absl::StrCat(Num(s->sun_illumination), ",",
+                                        Num(s->sun_lagged_illumination), ",",
+                                        deg_h(s->dw_sun_k_rad_s))
+                         : std::string(",,,,"));
       }
     }
     out << "\n";

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "estimator/rotation.h"
+#include "estimator/sun_direction.h"
 #include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -197,6 +198,92 @@ TEST(Scenario, ParsesAndSimulatesTheRateDependentDriftAndTheWarmUpTransient) {
   EXPECT_GT(est::RadPerSecToDegPerHour(largest_rate_drift), 0.01);
 }
 
+// A sun-driven thermal drift: parsed into SI and a face, and simulated as its formula says. The
+// face's illumination u = max(0, s_b[x]) is recomputed here from each truth sample's attitude and
+// the sun's direction at its time, and its lag tau dy/dt = u - y, y(0) = u(0), integrated on the
+// truth samples alone (60 s apart, exact for u linear between them). The simulator steps the lag
+// at 8 Hz, so the two differ by the lag of u's departure from a line over 60 s: under
+// |u''| (60 s)^2 / 8 = 6e-4 for the orbital profile's 1.1e-3 rad/s, and under 4e-4 where u meets
+// its kink at 0 (a slope change of at most 1.1e-3 /s, lagged over 60 s of tau = 0.5 h): 2e-3
+// allowed.
+TEST(Scenario, ParsesAndSimulatesTheSunDrivenThermalDrift) {
+  auto s = ParseScenarioJson(R"({
+    "profile": "orbital", "orbitPeriodMin": 95,
+    "gyros": [{"id": 2, "sunFaceDrift": {"amplitudeDegH": [0.09, 0, -0.03], "face": "+x",
+                                        "timeConstantHours": 0.5}}]
+  })");
+  ASSERT_THAT(s, IsOk());
+  ASSERT_EQ(s->gyros.size(), 1u);
+  ASSERT_TRUE(s->gyros[0].sun_face_drift.has_value());
+  const est::SunFaceDrift& d = *s->gyros[0].sun_face_drift;
+  EXPECT_EQ(d.face_axis, 0);
+  EXPECT_EQ(d.face_sign, 1);
+  auto minus_y = ParseScenarioJson(R"({"gyros": [{"id": 1, "sunFaceDrift":
+      {"amplitudeDegH": [0, 0, 0.1], "face": "-y", "timeConstantHours": 2}}]})");
+  ASSERT_THAT(minus_y, IsOk());
+  EXPECT_EQ(minus_y->gyros[0].sun_face_drift->face_axis, 1);
+  EXPECT_EQ(minus_y->gyros[0].sun_face_drift->face_sign, -1);
+  EXPECT_EQ(d.time_constant_s, 1800.0);
+  EXPECT_LT((d.amplitude_k_rad_s - est::DegPerHourToRadPerSec(1.0) * Vector3d(0.09, 0, -0.03))
+                .norm(),
+            1e-20);
+
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  spec.start = absl::FromCivil(absl::CivilSecond(2024, 6, 20, 0, 0, 0), absl::UTCTimeZone());
+  spec.duration = 6 * 3600.0;
+  auto profile = MakeScenarioProfile(*s, "", spec.duration);
+  ASSERT_THAT(profile, IsOk());
+  spec.profile = *profile;
+  auto result = est::Simulate(spec);
+  ASSERT_THAT(result, IsOk());
+  ASSERT_TRUE(result->effects[1].sun_face_drift.has_value());
+  EXPECT_FALSE(result->effects[0].sun_face_drift.has_value());
+
+  const double tau = 1800.0;
+  double y = 0.0, u_prev = 0.0, t_prev = 0.0;
+  double u_min = 1.0, u_max = 0.0, worst = 0.0;
+  for (size_t m = 0; m < result->truth.size(); ++m) {
+    const est::TruthSample& t = result->truth[m];
+    const double t_s = absl::ToDoubleSeconds(t.time - spec.start);
+    auto s_in = est::SunDirection_in(t.time);
+    ASSERT_THAT(s_in.status(), IsOk());
+    const Vector3d s_b = t.q_in_b.toRotationMatrix().transpose() * *s_in;
+    const double u = std::max(0.0, s_b.x());
+    if (m == 0) {
+      y = u;
+    } else {
+      // Exact for u linear over [t_prev, t_s].
+      const double h = t_s - t_prev, a = std::exp(-h / tau);
+      y = u + (y - u_prev) * a - (u - u_prev) * (tau / h) * (1.0 - a);
+    }
+    u_prev = u;
+    t_prev = t_s;
+    u_min = std::min(u_min, u);
+    u_max = std::max(u_max, u);
+    const est::GyroTruthSample& g2 = *t.gyros[1];
+    EXPECT_NEAR(g2.sun_illumination, u, 1e-7) << t_s;
+    EXPECT_NEAR(g2.sun_lagged_illumination, y, 2e-3) << t_s;
+    worst = std::max(worst, std::abs(g2.sun_lagged_illumination - y));
+    EXPECT_LT((g2.dw_sun_k_rad_s - g2.sun_lagged_illumination * d.amplitude_k_rad_s).norm(),
+              1e-20)
+        << t_s;
+    EXPECT_TRUE(t.gyros[0]->dw_sun_k_rad_s.isZero(0.0));
+    EXPECT_EQ(t.gyros[0]->sun_lagged_illumination, 0.0);
+  }
+  // The orbital profile carries the face in and out of the sun, so the lag matters.
+  EXPECT_LT(u_min, 0.05);
+  EXPECT_GT(u_max, 0.5);
+  RecordProperty("worst_lag_difference", std::to_string(worst));
+
+  // Where the sun is not known (past ERFA's ephemeris), the run is refused naming the effect.
+  spec.start = absl::FromCivil(absl::CivilSecond(2150, 1, 1, 0, 0, 0), absl::UTCTimeZone());
+  EXPECT_THAT(est::Simulate(spec),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("sun_face_drift: the run (start and duration) must lie where "
+                                 "the sun is known")));
+}
+
 // The drift effects beyond the paper's models: each key parsed into SI, applied to the truth, and
 // the orbital drift's period taken from the profile when absent (and required without an orbit).
 TEST(Scenario, ParsesAndAppliesTheDriftEffects) {
@@ -359,6 +446,18 @@ TEST(Scenario, ErrorsNameTheKey) {
       {R"({"gyros": [{"id": 1, "rateDrift": {}}]})", "gyros[0].rateDrift.degHPerDegS: required"},
       {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1]}}]})",
        "gyros[0].transientDrift.timeConstantHours: required"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1}}]})",
+       "gyros[0].sunFaceDrift.face: required (+x, -x, +y, -y, +z or -z)"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1, "face": "y"}}]})",
+       "gyros[0].sunFaceDrift.face: expected one of +x, -x, +y, -y, +z, -z (the body face whose outward normal is that axis), got 'y'"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1, "face": 2}}]})",
+       "gyros[0].sunFaceDrift.face: expected one of +x, -x, +y, -y, +z, -z (the body face whose outward normal is that axis), got 2"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "face": "+x"}}]})",
+       "gyros[0].sunFaceDrift.timeConstantHours: required"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "face": "+x", "timeConstantHours": 0}}]})",
+       "gyros[0].sunFaceDrift.timeConstantHours: 0 is outside [0.001, 100000]"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "face": "+x", "timeConstantHours": 1, "lag": 1}}]})",
+       "gyros[0].sunFaceDrift.lag: unknown key"},
       {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 3, "startHours": -1}}]})",
        "gyros[0].transientDrift.startHours: -1 is outside [0, 100000]"},
       {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 3, "tau": 3}}]})",
