@@ -194,7 +194,7 @@ TEST(CliConventions, EveryVerbsHelpListsTheGlobalOptions) {
   for (const char* verb :
        {"simulate", "calibrate", "gap", "diagnose", "diagnoses", "diagnoses list", "diagnoses show",
         "configure", "replay", "status", "predict", "alerts", "history", "estimates", "export",
-        "export history", "export telemetry"}) {
+        "export history", "export telemetry", "model", "model apply", "gyro", "gyro readmit"}) {
     const RunResult r = RunEsg(dir, std::string(verb) + " --help");
     EXPECT_EQ(r.exit_code, 0) << verb << ": " << r.err;
     for (const char* option : {"--server ADDR", "--token TOKEN", "--tls-ca FILE", "--tls-cert FILE",
@@ -212,7 +212,7 @@ TEST(CliConventions, BashCompletionOffersEveryOptionOfEveryVerb) {
   for (const std::string verb :
        {"simulate", "calibrate", "gap", "diagnose", "diagnoses list", "diagnoses show", "configure",
         "replay", "status", "predict", "alerts", "history", "estimates", "export history",
-        "export telemetry"}) {
+        "export telemetry", "model apply", "gyro readmit"}) {
     const RunResult help = RunEsg(dir, verb + " --help");
     ASSERT_EQ(help.exit_code, 0) << verb;
     std::set<std::string> options;
