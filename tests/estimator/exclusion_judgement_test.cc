@@ -7,7 +7,9 @@
 // - model (1) on the paper's displaced rotors, the calibration profile (the model lacks C1, C2
 //   in every gyro): no gyro excluded;
 // - model (10)+(11) on a gyro with an unconfigured misalignment of 80 arcsec (no misalignment
-//   states), on the calibration profile: no gyro excluded.
+//   states), on the calibration profile: no gyro excluded;
+// - a gyro excluded by a frozen reading and readmitted by the operator (ReadmitGyro) rejoins as
+//   a switched-on spare and runs to the end.
 #include <cstdio>
 #include <optional>
 #include <string>
@@ -163,6 +165,68 @@ TEST(ExclusionJudgement, AnUnconfiguredMisalignmentExcludesNoGyro) {
     const Flight run = RunSession(config, spec, "10+11");
     EXPECT_FALSE(run.degraded) << Excluded(run);
   }
+}
+
+// An excluded gyro readmitted on an operator's word (EstimationSession::ReadmitGyro): gyro 3's
+// reading frozen for 15 min at 2 h while the spacecraft turns excludes it; readmitted at 4 h, its
+// block leaves the state at once and it rejoins at the next measurement step as a switched-on
+// spare (GYRO_STARTED), running and not excluded to the end; the session restores from a
+// checkpoint taken between the two. Refused: a gyro not configured (NotFound), one running or
+// not running (FailedPrecondition), each naming gyro_id.
+TEST(ExclusionJudgement, AReadmittedGyroRejoinsAtTheNextMeasurementStepAsASwitchedOnSpare) {
+  const SpacecraftConfig config = Rdk1();
+  SimulationSpec spec = FlightSpec(config, "calibration", 6.0, 5);
+  GyroFault fault;
+  fault.time = HoursToSeconds(2.0);
+  fault.kind = GyroFault::Kind::kReadingFrozen;
+  fault.end = HoursToSeconds(2.25);
+  spec.gyros[2].fault = fault;
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  SessionOptions options;
+  options.model = *ParseModel("10+11");
+  auto session = EstimationSession::Create(config, options);
+  ASSERT_THAT(session, IsOk());
+  const absl::Time readmit_at = sim->recording.frames.front().time + absl::Hours(4);
+  std::vector<Event> after;
+  bool readmitted = false;
+  for (const TelemetryFrame& frame : sim->recording.frames) {
+    if (!readmitted && frame.time > readmit_at) {
+      const std::vector<GyroEstimate> before = session->Gyros();
+      ASSERT_EQ(before.size(), 3u);
+      ASSERT_TRUE(before[2].id == 3 && before[2].faulty) << "gyro 3 was not excluded";
+      EXPECT_TRUE(session->degraded());
+      EXPECT_EQ(session->ReadmitGyro(5).code(), absl::StatusCode::kNotFound);
+      const absl::Status running = session->ReadmitGyro(1);
+      EXPECT_EQ(running.code(), absl::StatusCode::kFailedPrecondition);
+      EXPECT_THAT(std::string(running.message()), ::testing::HasSubstr("gyro_id: gyro 1 is not excluded"));
+      const int size_before = session->state_size();
+      ASSERT_THAT(session->ReadmitGyro(3), IsOk());
+      EXPECT_LT(session->state_size(), size_before);
+      EXPECT_EQ(session->Gyros().size(), 2u);
+      EXPECT_FALSE(session->degraded());
+      EXPECT_EQ(session->ReadmitGyro(3).code(), absl::StatusCode::kFailedPrecondition);
+      // A checkpoint taken before it rejoins restores.
+      auto restored = EstimationSession::FromCheckpoint(config, options, session->ExportCheckpoint());
+      ASSERT_THAT(restored, IsOk());
+      EXPECT_EQ(restored->state_size(), session->state_size());
+      readmitted = true;
+    }
+    auto report = session->AddFrame(frame);
+    ASSERT_THAT(report, IsOk());
+    if (readmitted) after.insert(after.end(), report->events.begin(), report->events.end());
+  }
+  ASSERT_TRUE(readmitted);
+  bool started = false;
+  for (const Event& e : after) started = started || (e.kind == Event::Kind::kGyroStarted && e.subsystem == "gyro 3");
+  EXPECT_TRUE(started) << "no GYRO_STARTED of gyro 3 after the readmission";
+  const std::vector<GyroEstimate> gyros = session->Gyros();
+  ASSERT_EQ(gyros.size(), 3u);
+  for (const GyroEstimate& g : gyros) EXPECT_FALSE(g.faulty) << "gyro " << g.id << ": " << g.exclusion.Describe();
+  EXPECT_FALSE(session->degraded());
+  EXPECT_NE(session->state(), SessionState::kFaulted);
+  const Eigen::MatrixXd& P = session->covariance();
+  EXPECT_LE((P - P.transpose()).cwiseAbs().maxCoeff(), 1e-12 * P.cwiseAbs().maxCoeff());
 }
 
 }  // namespace
