@@ -399,6 +399,46 @@ std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDri
   return best;
 }
 
+std::optional<ReadingFaultMonitor::Misfit> ReadingFaultMonitor::ModelMisfit(
+    int gyro_id, Source source, const Matrix2d& rate_cov) const {
+  auto it = tracks_.find(Key(gyro_id, source));
+  if (it == tracks_.end()) return std::nullopt;
+  const Track& track = it->second;
+  const int n = static_cast<int>(track.points.size());
+  if (n < 4) return std::nullopt;
+  const Projected p = Project(track);
+  // Penalised least squares of y_j = a + b tau_j with the prior b ~ N(0, rate_cov): the normal
+  // equations of (a, b) plus rate_cov^-1 on b's block; the minimum is y^T W y - r^T beta. A rate
+  // covariance of zero (nothing free) pins b to 0.
+  Eigen::Matrix4d N = Eigen::Matrix4d::Zero();
+  Eigen::Vector4d r = Eigen::Vector4d::Zero();
+  double yWy = 0.0;
+  for (int j = 0; j < n; ++j) {
+    const Vector2d Wy = p.W[j] * p.y[j];
+    yWy += p.y[j].dot(Wy);
+    r.head<2>() += Wy;
+    r.tail<2>() += p.tau[j] * Wy;
+    N.topLeftCorner<2, 2>() += p.W[j];
+    N.topRightCorner<2, 2>() += p.tau[j] * p.W[j];
+    N.bottomRightCorner<2, 2>() += p.tau[j] * p.tau[j] * p.W[j];
+  }
+  N.bottomLeftCorner<2, 2>() = N.topRightCorner<2, 2>().transpose();
+  Misfit m;
+  m.samples = n;
+  m.dof = 2 * (n - 1);
+  const Matrix2d Q = 0.5 * (rate_cov + rate_cov.transpose());
+  const Eigen::LDLT<Matrix2d> q(Q);
+  if (q.info() == Eigen::Success && q.isPositive() && Q.determinant() > 0.0) {
+    N.bottomRightCorner<2, 2>() += Q.inverse();
+    const Eigen::LDLT<Eigen::Matrix4d> solve(N);
+    m.chi2 = std::max(yWy - r.dot(solve.solve(r)), 0.0);
+  } else {
+    const Eigen::LDLT<Matrix2d> solve(N.topLeftCorner<2, 2>());
+    m.chi2 = std::max(yWy - r.head<2>().dot(solve.solve(r.head<2>())), 0.0);
+  }
+  return m;
+}
+
 // State: last_step (3: flag, unix seconds, nanoseconds), the track count, then per track: key,
 // has_posterior, posterior_in (3), posterior_time (3), T (6, column by column), the count of
 // drivers_ref and its values, point count,

@@ -154,6 +154,25 @@ class ReadingFaultMonitor {
   // The best rate change of gyro `gyro_id`'s window (nullopt with fewer than 4 samples).
   std::optional<DriftChange> EstimateDriftChange(int gyro_id, Source source) const;
 
+  // How far gyro `gyro_id`'s window departs from the model (the model-consistency alert's
+  // location, mismatch_location.h). Under the model, the track is x_j = a + b tau_j + n_j: a free
+  // offset a, a rate error b drawn from the model's own rate uncertainty N(0, rate_cov) (2 x 2
+  // in the tangent basis of the last sample [(rad/s)^2], the session's covariance of its drivers
+  // carried to the spin axis's rate) and the white noise n_j of known covariance. The statistic
+  // is min over a, b of sum (y_j - a - b tau_j)^T W_j (...) + b^T rate_cov^-1 b, which under the
+  // model is chi-square with 2 (n - 1) degrees of freedom (the Gaussian marginal of b, a
+  // profiled): a rate beyond the model's uncertainty (a drift it lacks) and scatter beyond the
+  // configured noise (a noisier star tracker) both raise it. nullopt with fewer than 4 samples.
+  // The drift random walk within the window is left out: over the default 20 steps of 60 s at
+  // 0.0015 deg/h/sqrt(h) it moves the track by about 0.5 arcsec, against 5-30 arcsec of noise.
+  struct Misfit {
+    double chi2 = 0.0;
+    int dof = 0;
+    int samples = 0;
+  };
+  std::optional<Misfit> ModelMisfit(int gyro_id, Source source,
+                                    const Eigen::Matrix2d& rate_cov) const;
+
   // A window projected on the tangent plane: y_j = T^T x_j, weights W_j = (T^T N_j T)^-1 (cov
   // their inverse), times tau_j [s] relative to the last point.
   struct Projected {

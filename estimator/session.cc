@@ -12,8 +12,9 @@
 #include "estimator/session.h"
 
 #include <algorithm>
-#include <optional>
 #include <cmath>
+#include <functional>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -38,7 +39,7 @@ namespace {
 // sees the widened filter; the model as configured is then reported inconsistent at each test
 // step on the evidence of the window that widened it (D20).
 void MonitorConsistency(ConsistencyMonitor& monitor, const NoiseWidening& widening,
-                        StepReport& report) {
+                        const std::function<MismatchLocation()>& located, StepReport& report) {
   using Channel = ConsistencyMonitor::Channel;
   std::vector<ConsistencyMonitor::TestResult> results;
   if (report.star_tracker_innovation.size() > 0) {
@@ -55,28 +56,31 @@ void MonitorConsistency(ConsistencyMonitor& monitor, const NoiseWidening& wideni
       std::any_of(results.begin(), results.end(), [](const auto& r) { return r.inconsistent; });
   if (!results.empty() && !monitor_failed && widening.trigger().has_value()) {
     const NoiseWidening::Decision& t = *widening.trigger();
+    const MismatchLocation where = located();
     report.events.push_back(Event{
-        Event::Kind::kModelInconsistent, report.time, "model", t.nis_sum, t.widen_threshold,
-        "chi-square",
+        Event::Kind::kModelInconsistent, report.time, where.Subsystem(), t.nis_sum,
+        t.widen_threshold, "chi-square",
         absl::StrFormat("star-tracker NIS of the filter as configured was %.1f > %.1f over %d "
                         "steps (chi-square, %d degrees of freedom, twice in a row) and the "
                         "filter runs widened since (as an unmodelled drift of %.3g deg/h): the "
-                        "configured model does not explain the data; run esg diagnose to find "
-                        "what the model leaves out",
+                        "configured model does not explain the data; %s; run esg diagnose to "
+                        "find what the model leaves out",
                         t.nis_sum, t.widen_threshold, t.steps, t.dof,
-                        widening.EquivalentDriftDegH())});
+                        widening.EquivalentDriftDegH(), where.Describe())});
   }
   for (const ConsistencyMonitor::TestResult& r : results) {
     if (!r.inconsistent) continue;
+    const MismatchLocation where = located();
     report.events.push_back(Event{
-        Event::Kind::kModelInconsistent, report.time, "model", r.nis_sum, r.threshold,
+        Event::Kind::kModelInconsistent, report.time, where.Subsystem(), r.nis_sum, r.threshold,
         "chi-square",
         absl::StrFormat("%s over the last %d measurement steps is %.1f > %.1f (chi-square, %d "
                         "degrees of freedom), and %.1f over the %d steps before: the configured "
-                        "model does not explain the data (false-alarm level %.2g); run esg "
+                        "model does not explain the data (false-alarm level %.2g); %s; run esg "
                         "diagnose to find what the model leaves out",
                         ConsistencyChannelName(r.channel), r.steps, r.nis_sum, r.threshold, r.dof,
-                        r.previous_nis_sum, r.steps, monitor.options().false_alarm_per_test)});
+                        r.previous_nis_sum, r.steps, monitor.options().false_alarm_per_test,
+                        where.Describe())});
   }
 }
 
@@ -346,7 +350,8 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
                                       frame.star_tracker->valid);
     }
     next.last_update_time_ = frame.time;
-    MonitorConsistency(next.consistency_, next.widening_, report);
+    MonitorConsistency(next.consistency_, next.widening_,
+                       [&next] { return next.LocateModelMismatch(); }, report);
     if (options_.adaptive_noise) WidenOnInconsistency(next.widening_, report);
   }
   next.UpdateState(report);

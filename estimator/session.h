@@ -64,6 +64,7 @@
 #include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/consistency_monitor.h"
+#include "estimator/mismatch_location.h"
 #include "estimator/drift_model.h"
 #include "estimator/gyro_change_detector.h"
 #include "estimator/measurements.h"
@@ -498,6 +499,13 @@ class EstimationSession {
   // plus three times the model's own rate uncertainty (free coefficients, basis terms, residual
   // drift, from P at the current reading) plus the widening's equivalent drift.
   double DriftBound(int i) const;
+  // The model's own uncertainty of gyro gyros_[i]'s spin-axis rate, in its tangent basis T()
+  // [(rad/s)^2]: the covariance of its drivers (residual drift, free coefficients, free basis
+  // terms) in P carried to the rate; zero when it has none.
+  Eigen::Matrix2d ModelRateCovariance(int i) const;
+  // Where a failing consistency test's mismatch sits, from the reading-fault monitor's tracks
+  // (mismatch_location.h).
+  MismatchLocation LocateModelMismatch() const;
   // Re-opens gyro `id`'s free coefficients and basis terms (their initial variance added) and
   // its residual drift (the change's square added) after a drift change below the limit.
   void ReopenDrift(int id, double change_rad_s);

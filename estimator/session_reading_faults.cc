@@ -104,11 +104,11 @@ bool EstimationSession::degraded() const {
   return std::any_of(gyros_.begin(), gyros_.end(), [](const GyroState& g) { return g.faulty; });
 }
 
-double EstimationSession::DriftBound(int i) const {
+Eigen::Matrix2d EstimationSession::ModelRateCovariance(int i) const {
   const GyroState& g = gyros_[i];
   const int drivers = layout_.SpinAxisDriverCount(i);
-  double sigma_rate = 0.0;
-  if (drivers > 0) {
+  if (drivers <= 0) return Eigen::Matrix2d::Zero();
+  {
     // The rate error of the spin axis against its drivers (the propagation's E over a unit
     // interval): residual drift, free coefficients, free basis terms.
     Eigen::MatrixXd R = Eigen::MatrixXd::Zero(2, drivers);
@@ -146,12 +146,51 @@ double EstimationSession::DriftBound(int i) const {
     }
     const int d0 = layout_.SpinAxisDrivers(i);
     const Matrix2d cov = R * P_.block(d0, d0, drivers, drivers) * R.transpose();
-    const Eigen::SelfAdjointEigenSolver<Matrix2d> eig(0.5 * (cov + cov.transpose()));
-    sigma_rate = std::sqrt(std::max(eig.eigenvalues().maxCoeff(), 0.0));
+    return 0.5 * (cov + cov.transpose());
   }
+}
+
+double EstimationSession::DriftBound(int i) const {
+  const Eigen::SelfAdjointEigenSolver<Matrix2d> eig(ModelRateCovariance(i));
+  const double sigma_rate = std::sqrt(std::max(eig.eigenvalues().maxCoeff(), 0.0));
   const double widened =
       widening_.widened() ? DegPerHourToRadPerSec(widening_.EquivalentDriftDegH()) : 0.0;
   return config_.filter.drift_change_limit + 3.0 * sigma_rate + widened;
+}
+
+MismatchLocation EstimationSession::LocateModelMismatch() const {
+  std::vector<int> running;  // indices of the gyros not excluded
+  for (int i = 0; i < static_cast<int>(gyros_.size()); ++i) {
+    if (!gyros_[i].faulty) running.push_back(i);
+  }
+  std::vector<Matrix2d> rate_cov;
+  std::vector<double> rate_var_max;  // largest eigenvalue of each [(rad/s)^2]
+  for (int i : running) {
+    rate_cov.push_back(ModelRateCovariance(i));
+    const Eigen::SelfAdjointEigenSolver<Matrix2d> eig(rate_cov.back());
+    rate_var_max.push_back(std::max(eig.eigenvalues().maxCoeff(), 0.0));
+  }
+  std::vector<TrackMisfit> misfits;
+  for (size_t k = 0; k < running.size(); ++k) {
+    const GyroState& g = gyros_[running[k]];
+    TrackMisfit m;
+    m.gyro_id = g.id;
+    m.star_tracker = reading_monitor_.ModelMisfit(g.id, Source::kStarTracker, rate_cov[k]);
+    if (running.size() == 3) {
+      // The pair rebuild moves with the two other gyros' rate errors as well, as its drift bound
+      // does (TrackReadings): the reference gyro's, and the second's over sin(theta), taken
+      // isotropically at their largest.
+      const size_t ka = (k + 1) % 3, kb = (k + 2) % 3;
+      const double sin_theta = std::max(
+          gyros_[running[ka]].h_in.cross(gyros_[running[kb]].h_in).norm(), 0.1);
+      const Matrix2d pair_cov =
+          rate_cov[k] + (rate_var_max[ka] + rate_var_max[kb] / (sin_theta * sin_theta)) *
+                            Matrix2d::Identity();
+      m.pair = reading_monitor_.ModelMisfit(g.id, Source::kPair, pair_cov);
+    }
+    misfits.push_back(m);
+  }
+  return LocateMismatch(misfits);
 }
 
 Eigen::VectorXd EstimationSession::DriverValues(int i) const {

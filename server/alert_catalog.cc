@@ -84,7 +84,9 @@ const std::array<AlertKind, 17> kCatalog = {{
      "Check the disk and that one program version wrote the archive; resend the frame's data if "
      "the station still has it"},
     {esg::v1::ALERT_REASON_MODEL_INCONSISTENT, "MODEL_INCONSISTENT", kWarning,
-     Event::Kind::kModelInconsistent, "model", ClearRule::kQuiet,
+     Event::Kind::kModelInconsistent,
+     "model:gyro_N, model:gyros_N_M, model:star_tracker, model:all_gyros, model:common or model",
+     ClearRule::kQuiet,
      "the running chi-square test of the filter's innovations failed: the configured drift model "
      "does not explain the data",
      "Run `esg diagnose` over the span to find the missing effect; reconfigure with a fuller "
