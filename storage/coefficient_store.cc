@@ -1,6 +1,7 @@
 // Coefficient histories; contract in coefficient_store.h.
 #include "storage/coefficient_store.h"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -47,8 +48,6 @@ const std::string& InsertValuesSql() {
   return *sql;
 }
 
-constexpr char kValuesSql[] =
-    "SELECT term_key, value, sigma FROM coefficient_values WHERE coefficient_id = ?1";
 
 // Current rows only, unless ?9 is 1 (revised ones too).
 const std::string& HistorySql(bool one_gyro) {
@@ -81,6 +80,39 @@ const std::string& HistoryPageSql(bool one_gyro) {
       "AND (measurement_time_unix_ns, gyro_id, id) > (?4, ?5, ?6) AND gyro_id = ?8 "
       "AND (?9 <> 0 OR revised_time_unix_ns IS NULL) "
       "ORDER BY measurement_time_unix_ns, gyro_id, id LIMIT ?7"));
+  return one_gyro ? *one : *all;
+}
+
+// The values of a history's records in one query, joined to the records by their row id: the
+// rows of coefficient_values (coefficient_id, term_key, value, sigma) of every record of the
+// spacecraft in the window [?2, ?3), and of gyro ?4 alone when one gyro is asked. Revised records
+// are not filtered out: the records query decides which records there are, and a record revised
+// between the two queries still finds its values.
+const std::string& HistoryValuesSql(bool one_gyro) {
+  static const std::string* const all = new std::string(
+      "SELECT v.coefficient_id, v.term_key, v.value, v.sigma "
+      "FROM coefficients c JOIN coefficient_values v ON v.coefficient_id = c.id "
+      "WHERE c.spacecraft_id = ?1 "
+      "AND c.measurement_time_unix_ns >= ?2 AND c.measurement_time_unix_ns < ?3");
+  static const std::string* const one =
+      new std::string(absl::StrCat(*all, " AND c.gyro_id = ?4"));
+  return one_gyro ? *one : *all;
+}
+
+// The values of one page's records: those of the records strictly after the page's cursor
+// (?4, ?5, ?6) up to its last record (?7, ?8, ?9) inclusive in the history order, of gyro ?10
+// alone when one gyro is asked; ?2 and ?3 bound their times (the later of the window's start and
+// the cursor's time, the last record's time), so that the index coefficients_by_time covers it.
+const std::string& PageValuesSql(bool one_gyro) {
+  static const std::string* const all = new std::string(
+      "SELECT v.coefficient_id, v.term_key, v.value, v.sigma "
+      "FROM coefficients c JOIN coefficient_values v ON v.coefficient_id = c.id "
+      "WHERE c.spacecraft_id = ?1 "
+      "AND c.measurement_time_unix_ns >= ?2 AND c.measurement_time_unix_ns <= ?3 "
+      "AND (c.measurement_time_unix_ns, c.gyro_id, c.id) > (?4, ?5, ?6) "
+      "AND (c.measurement_time_unix_ns, c.gyro_id, c.id) <= (?7, ?8, ?9)");
+  static const std::string* const one =
+      new std::string(absl::StrCat(*all, " AND c.gyro_id = ?10"));
   return one_gyro ? *one : *all;
 }
 
@@ -124,24 +156,37 @@ absl::StatusOr<CoefficientRecord> ReadRecord(const Statement& st) {
   return r;
 }
 
-// Reads the values and sigmas of row `id` into `r`: a value without a row reads NaN, sigmas
-// that are all NULL (or have no row) read back as empty.
-absl::Status ReadValues(Transaction& txn, int64_t id, CoefficientRecord* r) {
-  ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kValuesSql));
-  st->BindInt64(1, id);
-  r->values.assign(kNumCoefficientValues, std::numeric_limits<double>::quiet_NaN());
-  std::vector<double> sigmas(kNumCoefficientValues, std::numeric_limits<double>::quiet_NaN());
-  bool any_sigma = false;
-  while (true) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    const int i = LayoutIndex(st->ColumnText(0));
-    if (i < 0) continue;
-    r->values[i] = FromColumnUnit(i, st->ColumnDoubleOrNaN(1));
-    sigmas[i] = FromColumnUnit(i, st->ColumnDoubleOrNaN(2));
-    any_sigma = any_sigma || !st->ColumnIsNull(2);
+// Steps a values query (HistoryValuesSql, PageValuesSql: coefficient_id, term_key, value, sigma)
+// and puts each value into the record of `records` whose row id is at the same position of
+// `ids`; rows of other records (revised ones the history leaves out) and of term keys this
+// program does not know are skipped. A value without a row reads NaN; sigmas that are all NULL
+// (or have no row) read back as empty.
+absl::Status ReadValues(Statement& st, const std::vector<int64_t>& ids,
+                        std::vector<CoefficientRecord>* records) {
+  absl::flat_hash_map<int64_t, size_t> position;
+  position.reserve(ids.size());
+  for (size_t k = 0; k < ids.size(); ++k) position[ids[k]] = k;
+  std::vector<std::vector<double>> sigmas(ids.size());
+  std::vector<bool> any_sigma(ids.size(), false);
+  for (size_t k = 0; k < ids.size(); ++k) {
+    (*records)[k].values.assign(kNumCoefficientValues, std::numeric_limits<double>::quiet_NaN());
+    sigmas[k].assign(kNumCoefficientValues, std::numeric_limits<double>::quiet_NaN());
   }
-  if (any_sigma) r->sigmas = std::move(sigmas);
+  while (true) {
+    ASSIGN_OR_RETURN(bool row, st.Step());
+    if (!row) break;
+    const auto it = position.find(st.ColumnInt64(0));
+    if (it == position.end()) continue;
+    const int i = LayoutIndex(st.ColumnText(1));
+    if (i < 0) continue;
+    const size_t k = it->second;
+    (*records)[k].values[i] = FromColumnUnit(i, st.ColumnDoubleOrNaN(2));
+    sigmas[k][i] = FromColumnUnit(i, st.ColumnDoubleOrNaN(3));
+    if (!st.ColumnIsNull(3)) any_sigma[k] = true;
+  }
+  for (size_t k = 0; k < ids.size(); ++k) {
+    if (any_sigma[k]) (*records)[k].sigmas = std::move(sigmas[k]);
+  }
   return absl::OkStatus();
 }
 
@@ -283,7 +328,16 @@ absl::StatusOr<std::vector<CoefficientRecord>> CoefficientStore::History(
     out.push_back(std::move(record));
     ids.push_back(st->ColumnInt64(kRowIdColumn));
   }
-  for (size_t k = 0; k < out.size(); ++k) RETURN_IF_ERROR(ReadValues(txn, ids[k], &out[k]));
+  st->Reset();
+  if (out.empty()) return out;
+  // The values of all of them in one more query (not one per record).
+  ASSIGN_OR_RETURN(Statement * values, txn.Prepare(HistoryValuesSql(gyro_id != 0)));
+  values->BindText(1, spacecraft_id)
+      .BindInt64(2, TimeToUnixNanos(from))
+      .BindInt64(3, TimeToUnixNanos(to));
+  if (gyro_id != 0) values->BindInt64(4, gyro_id);
+  RETURN_IF_ERROR(ReadValues(*values, ids, &out));
+  values->Reset();
   return out;
 }
 
@@ -329,9 +383,22 @@ absl::StatusOr<CoefficientPage> CoefficientStore::HistoryPage(
     ids.push_back(last.row_id);
   }
   st->Reset();
-  for (size_t k = 0; k < page.records.size(); ++k) {
-    RETURN_IF_ERROR(ReadValues(txn, ids[k], &page.records[k]));
-  }
+  if (page.records.empty()) return page;
+  // The values of the page's records in one more query (not one per record): those between the
+  // cursor and the page's last record.
+  ASSIGN_OR_RETURN(Statement * values, txn.Prepare(PageValuesSql(gyro_id != 0)));
+  values->BindText(1, spacecraft_id)
+      .BindInt64(2, std::max(TimeToUnixNanos(from), start.measurement_time_unix_ns))
+      .BindInt64(3, last.measurement_time_unix_ns)
+      .BindInt64(4, start.measurement_time_unix_ns)
+      .BindInt64(5, start.gyro_id)
+      .BindInt64(6, start.row_id)
+      .BindInt64(7, last.measurement_time_unix_ns)
+      .BindInt64(8, last.gyro_id)
+      .BindInt64(9, last.row_id);
+  if (gyro_id != 0) values->BindInt64(10, gyro_id);
+  RETURN_IF_ERROR(ReadValues(*values, ids, &page.records));
+  values->Reset();
   return page;
 }
 

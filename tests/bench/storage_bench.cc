@@ -9,11 +9,14 @@
 // per job (docs/service.md "Per-step estimates"). BM_LeaseRenewal: one renewal round of a server
 // holding 500 session leases (docs/service.md "Several servers"), one transaction per lease
 // (range(0) = 0, LeaseStore::Renew) against one for all (1, LeaseStore::RenewAll); PostgreSQL
-// only, since leases exist only there (an SQLite file has one server).
+// only, since leases exist only there (an SQLite file has one server). BM_CoefficientHistory:
+// reading a 10-day coefficient history (57 600 records) whole and in pages of 1000, as the
+// history and export RPCs read it.
 #include <cstdint>
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -277,6 +280,89 @@ void BM_LeaseRenewal(benchmark::State& state) {
 }
 BENCHMARK(BM_LeaseRenewal)
     ->ArgsProduct({{0, 1}, {kPostgres}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// A history of `steps` measurement steps at 60 s of 4 gyros (with sigmas, every fourth record
+// with a basis term column), written in transactions of 1000 records.
+absl::Status WriteBenchHistory(Storage& storage, int steps) {
+  std::vector<CoefficientRecord> batch;
+  for (int step = 0; step < steps; ++step) {
+    for (int gyro = 1; gyro <= 4; ++gyro) {
+      CoefficientRecord c;
+      c.spacecraft_id = "BENCH-1";
+      c.gyro_id = gyro;
+      c.measurement_time = c.compute_time = kT0 + absl::Seconds(60 * step);
+      c.model_name = "model10";
+      c.values.assign(kNumCoefficientValues, 1e-7 * (step + gyro));
+      c.sigmas.assign(kNumCoefficientValues, 1e-8);
+      batch.push_back(std::move(c));
+    }
+    if (batch.size() < 1000 && step + 1 < steps) continue;
+    absl::StatusOr<Transaction> txn = storage.database().Begin(TransactionMode::kImmediate);
+    if (!txn.ok()) return txn.status();
+    for (const CoefficientRecord& c : batch) {
+      const absl::Status appended = storage.coefficients().Append(*txn, c);
+      if (!appended.ok()) return appended;
+    }
+    const absl::Status committed = txn->Commit();
+    if (!committed.ok()) return committed;
+    batch.clear();
+  }
+  return absl::OkStatus();
+}
+
+// Reading a whole coefficient history of range(0) steps (4 gyros, so 4 x range(0) records: 14 400
+// steps are 10 days at 60 s), as the history and export RPCs read it: range(2) = 0 in one
+// History call, 1 in pages of 1000 records (HistoryPage, the RPCs' page size). range(1):
+// Synchronous as int, or kPostgres. Items: records read.
+void BM_CoefficientHistory(benchmark::State& state) {
+  const int steps = static_cast<int>(state.range(0));
+  esg::testing::TempDir dir;
+  std::unique_ptr<Storage> storage = OpenBenchStorage(state, dir.File("bench.db"));
+  if (storage == nullptr) return;
+  const absl::Status written = WriteBenchHistory(*storage, steps);
+  if (!written.ok()) {
+    state.SkipWithError(std::string(written.message()).c_str());
+    return;
+  }
+  const bool paged = state.range(2) == 1;
+  size_t read = 0;
+  for (auto _ : state) {
+    read = 0;
+    if (!paged) {
+      const absl::StatusOr<std::vector<CoefficientRecord>> history =
+          storage->coefficients().History("BENCH-1", 0, absl::InfinitePast(),
+                                          absl::InfiniteFuture());
+      if (!history.ok()) {
+        state.SkipWithError(std::string(history.status().message()).c_str());
+        return;
+      }
+      read = history->size();
+      continue;
+    }
+    std::optional<CoefficientCursor> after;
+    do {
+      const absl::StatusOr<CoefficientPage> page = storage->coefficients().HistoryPage(
+          "BENCH-1", 0, absl::InfinitePast(), absl::InfiniteFuture(), after, 1000);
+      if (!page.ok()) {
+        state.SkipWithError(std::string(page.status().message()).c_str());
+        return;
+      }
+      read += page->records.size();
+      after = page->next;
+    } while (after.has_value());
+  }
+  if (read != static_cast<size_t>(4 * steps)) {
+    state.SkipWithError(absl::StrCat("read ", read, " records of ", 4 * steps).c_str());
+    return;
+  }
+  state.SetItemsProcessed(state.iterations() * read);
+  state.SetLabel(absl::StrCat(state.range(1) == kPostgres ? "postgresql" : "sqlite",
+                              paged ? ", pages of 1000" : ", one History call"));
+}
+BENCHMARK(BM_CoefficientHistory)
+    ->ArgsProduct({{14400}, {static_cast<int>(Synchronous::kNormal), kPostgres}, {0, 1}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -373,6 +374,99 @@ TEST_P(CoefficientStoreTest, HistoryFiltersByGyroAndHalfOpenWindowInTimeOrder) {
               IsOkAndHolds(IsEmpty()));
   EXPECT_THAT(store.History("RDK-1", -1, T(0), T(1)),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("gyro_id")));
+}
+
+// A history reads each record with its own values and sigmas, whole and in pages of any size
+// (one query joins the records to their rows of coefficient_values): three gyros at 25 times,
+// every value different, some without sigmas, some with NaN, some with basis terms, some
+// revised; one record whose value rows are gone reads all NaN without sigmas, and a row of a
+// term key this program does not know is skipped.
+TEST_P(CoefficientStoreTest, AHistoryReadsEachRecordWithItsOwnValuesWholeAndInPages) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  CoefficientStore& store = (*storage)->coefficients();
+  std::vector<CoefficientRecord> written;
+  for (int step = 0; step < 25; ++step) {
+    for (int gyro = 1; gyro <= 3; ++gyro) {
+      CoefficientRecord r = Record("RDK-1", gyro, 60.0 * step);
+      const int n = static_cast<int>(written.size());
+      for (int i = 0; i < kNumCoefficientValues; ++i) {
+        r.values[i] = 1e-7 * (n * kNumCoefficientValues + i + 1);
+        r.sigmas[i] = 1e-9 * (n * kNumCoefficientValues + i + 1);
+      }
+      if (n % 5 == 1) r.sigmas.clear();
+      if (n % 7 == 2) r.values[n % kNumCoefficientValues] = std::nan("");
+      if (n % 4 == 3) r.basis_terms = TwoBasisTerms();
+      ASSERT_THAT(store.Append(r), IsOk());
+      written.push_back(std::move(r));
+    }
+  }
+  Database& db = (*storage)->database();
+  // Gyro 3 at every sixth step is revised (the rows are numbered from 1 in insertion order).
+  ASSERT_THAT(db.Execute("UPDATE coefficients SET revised_time_unix_ns = 7 "
+                         "WHERE gyro_id = 3 AND (id - 3) % 18 = 0"),
+              IsOk());
+  for (size_t k = 2; k < written.size(); k += 18) written[k].revised_time = UnixNanosToTime(7);
+  // Record 40 lost its value rows; record 41 has a row of an unknown term.
+  ASSERT_THAT(db.Execute("DELETE FROM coefficient_values WHERE coefficient_id = 41"), IsOk());
+  written[40].values.assign(kNumCoefficientValues, std::nan(""));
+  written[40].sigmas.clear();
+  ASSERT_THAT(db.Execute("INSERT INTO coefficient_values (coefficient_id, term_key, value, sigma) "
+                         "VALUES (42, 'k9_deg_h', 1.0, 2.0)"),
+              IsOk());
+
+  for (bool include_revised : {false, true}) {
+    std::vector<CoefficientRecord> expected;
+    for (const CoefficientRecord& r : written) {
+      if (include_revised || r.revised_time == absl::InfinitePast()) expected.push_back(r);
+    }
+    absl::StatusOr<std::vector<CoefficientRecord>> whole =
+        store.History("RDK-1", 0, absl::InfinitePast(), absl::InfiniteFuture(), include_revised);
+    ASSERT_THAT(whole, IsOk());
+    ASSERT_EQ(whole->size(), expected.size());
+    for (size_t k = 0; k < expected.size(); ++k) {
+      const CoefficientRecord& got = (*whole)[k];
+      const CoefficientRecord& want = expected[k];
+      EXPECT_EQ(got.gyro_id, want.gyro_id) << k;
+      EXPECT_EQ(got.measurement_time, want.measurement_time) << k;
+      EXPECT_EQ(got.revised_time, want.revised_time) << k;
+      EXPECT_EQ(got.basis_terms.size(), want.basis_terms.size()) << k;
+      ASSERT_EQ(got.values.size(), want.values.size()) << k;
+      ASSERT_EQ(got.sigmas.size(), want.sigmas.size()) << k;
+      for (int i = 0; i < kNumCoefficientValues; ++i) {
+        if (std::isnan(want.values[i])) {
+          EXPECT_TRUE(std::isnan(got.values[i])) << k << " " << i;
+        } else {
+          EXPECT_DOUBLE_EQ(got.values[i], want.values[i]) << k << " " << i;
+        }
+        if (!want.sigmas.empty()) EXPECT_DOUBLE_EQ(got.sigmas[i], want.sigmas[i]) << k << " " << i;
+      }
+    }
+    // Pages of any size give the same records bit for bit, and one gyro's history its part.
+    for (int64_t limit : {1, 4, 7, 1000}) {
+      std::vector<CoefficientRecord> paged;
+      std::optional<CoefficientCursor> after;
+      do {
+        absl::StatusOr<CoefficientPage> page =
+            store.HistoryPage("RDK-1", 0, absl::InfinitePast(), absl::InfiniteFuture(), after,
+                              limit, include_revised);
+        ASSERT_THAT(page, IsOk());
+        ASSERT_LE(page->records.size(), static_cast<size_t>(limit));
+        for (CoefficientRecord& r : page->records) paged.push_back(std::move(r));
+        after = page->next;
+      } while (after.has_value());
+      SCOPED_TRACE(limit);
+      ExpectSameRecords(paged, *whole);
+    }
+    absl::StatusOr<std::vector<CoefficientRecord>> gyro2 =
+        store.History("RDK-1", 2, absl::InfinitePast(), absl::InfiniteFuture(), include_revised);
+    ASSERT_THAT(gyro2, IsOk());
+    std::vector<CoefficientRecord> gyro2_of_whole;
+    for (const CoefficientRecord& r : *whole) {
+      if (r.gyro_id == 2) gyro2_of_whole.push_back(r);
+    }
+    ExpectSameRecords(*gyro2, gyro2_of_whole);
+  }
 }
 
 TEST_P(CoefficientStoreTest, RejectsMalformedRecords) {
