@@ -33,9 +33,6 @@ using estimator::kMaxGyros;
 
 // Vectors closer to unit norm than this are kept bit for bit (see recording_csv.h).
 constexpr double kRenormaliseAbove = 1e-12;
-// Written time format: RFC 3339 in UTC with `Z` and full sub-second precision.
-constexpr char kTimeFormat[] = "%Y-%m-%d%ET%H:%M:%E*SZ";
-
 constexpr int kNumGyroColumns = 6;  // hx hy hz ux uy uz
 constexpr int kNumStColumns = 5;    // q0 q1 q2 q3 valid
 constexpr int kNumColumns = 1 + kMaxGyros * kNumGyroColumns + kNumStColumns;
@@ -395,7 +392,7 @@ std::string FormatRecordingCsv(const estimator::Recording& recording) {
   absl::StrAppend(&out, absl::StrJoin(names, ","), "\n");
 
   for (const estimator::TelemetryFrame& frame : recording.frames) {
-    out += absl::FormatTime(kTimeFormat, frame.time, absl::UTCTimeZone());
+    out += FormatRecordingTime(frame.time);
     for (int g = 0; g < kMaxGyros; ++g) {
       const std::optional<estimator::GyroReading>& reading = frame.gyros[g];
       for (int k = 0; k < 3; ++k) {
@@ -445,6 +442,10 @@ absl::Status WriteRecordingCsv(const std::string& path, const estimator::Recordi
         absl::StrCat("recording ", path, ": cannot rename: ", std::strerror(err)));
   }
   return absl::OkStatus();
+}
+
+std::string FormatRecordingTime(absl::Time time) {
+  return absl::FormatTime("%Y-%m-%d%ET%H:%M:%E*SZ", time, absl::UTCTimeZone());
 }
 
 }  // namespace esg::storage

@@ -80,6 +80,13 @@ std::string FormatRecordingCsv(const estimator::Recording& recording);
 // Writes FormatRecordingCsv to path (through "<path>.tmp" and a rename). Unavailable on I/O failure.
 absl::Status WriteRecordingCsv(const std::string& path, const estimator::Recording& recording);
 
+// The time of a recording row: RFC 3339 in UTC with `Z` and as many fractional digits as the
+// instant needs (none on a whole second, up to 9), so that it reads back the same absl::Time
+// ("2019-03-01T00:00:00Z", "2019-03-01T00:00:00.25Z"). Also the time column of the simulator's
+// truth file, whose rows are the recording's times (client/commands/simulate.cc). Not the
+// millisecond form of messages and tables (estimator/utc_time.h FormatUtc).
+std::string FormatRecordingTime(absl::Time time);
+
 }  // namespace esg::storage
 
 #endif  // ESG_FORMATS_RECORDING_CSV_H_

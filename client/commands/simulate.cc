@@ -219,7 +219,7 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
   out << "\n";
   for (const estimator::TruthSample& t : result.truth) {
     const estimator::ScalarFirst q = estimator::ToScalarFirst(estimator::Canonical(t.q_in_b));
-    out << absl::FormatTime("%Y-%m-%d%ET%H:%M:%E*SZ", t.time, absl::UTCTimeZone()) << ","
+    out << storage::FormatRecordingTime(t.time) << ","
         << absl::StrJoin({Num(q[0]), Num(q[1]), Num(q[2]), Num(q[3])}, ",");
     for (int g = 0; g < kMaxGyros; ++g) {
       if (t.gyros[g]) {

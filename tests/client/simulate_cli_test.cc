@@ -8,6 +8,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "estimator/units.h"
 #include "formats/recording_csv.h"
@@ -83,6 +84,32 @@ TEST(SimulateCli, WritesConfigAndTruthWhenAsked) {
   EXPECT_THAT(truth, HasSubstr("# g1_true_k0_deg_h: 0.25\n"));
   EXPECT_THAT(truth, HasSubstr("time_utc,q0,q1,q2,q3,g1_hin_x"));
   EXPECT_THAT(truth, HasSubstr("\n2020-06-01T12:00:30Z,"));
+}
+
+// The truth file's rows are the recording's rows: the same times in the same text, to the
+// digit the instant needs (formats/recording_csv.h FormatRecordingTime), here a 0.2505 s step
+// that the millisecond form of messages would cut to .250.
+TEST(SimulateCli, TruthRowsHaveTheRecordingsTimesExactly) {
+  TempDir dir;
+  RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() +
+                                "' --hours 0.002 --telemetry-step 0.2505 --integration-rate 4000"
+                                " --seed 1 --out '" + dir.File("rec.csv") + "' --truth '" +
+                                dir.File("truth.csv") + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  auto times = [](const std::string& text) {
+    std::vector<std::string> out;
+    std::istringstream lines(text);
+    std::string line;
+    while (std::getline(lines, line)) {
+      if (line.empty() || line[0] == '#' || line.rfind("time_utc", 0) == 0) continue;
+      out.push_back(line.substr(0, line.find(',')));
+    }
+    return out;
+  };
+  const std::vector<std::string> recording = times(ReadFile(dir.File("rec.csv")));
+  ASSERT_EQ(recording.size(), 29u);
+  EXPECT_EQ(recording[1], "2019-03-01T00:00:00.2505Z");
+  EXPECT_EQ(times(ReadFile(dir.File("truth.csv"))), recording);
 }
 
 // The drift effects beyond the paper's models are recorded in the truth file: their settings
