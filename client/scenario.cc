@@ -75,17 +75,24 @@ absl::StatusOr<double> Number(const json& v, const std::string& path, double lo,
   return x;
 }
 
-absl::StatusOr<Vector3d> Vec3(const json& v, const std::string& path, double lo, double hi) {
-  if (!v.is_array() || v.size() != 3) {
-    return Invalid(path, absl::StrCat("expected an array of 3 numbers, got ",
+// An array of exactly n numbers, each in [lo, hi].
+absl::StatusOr<std::vector<double>> Numbers(const json& v, const std::string& path, int n,
+                                            double lo, double hi) {
+  if (!v.is_array() || v.size() != static_cast<size_t>(n)) {
+    return Invalid(path, absl::StrCat("expected an array of ", n, " numbers, got ",
                                       v.is_array() ? absl::StrCat(v.size(), " values")
                                                    : std::string(v.type_name())));
   }
-  Vector3d out;
-  for (int i = 0; i < 3; ++i) {
-    ASSIGN_OR_RETURN(out(i), Number(v[i], absl::StrCat(path, "[", i, "]"), lo, hi));
+  std::vector<double> out(n);
+  for (int i = 0; i < n; ++i) {
+    ASSIGN_OR_RETURN(out[i], Number(v[i], absl::StrCat(path, "[", i, "]"), lo, hi));
   }
   return out;
+}
+
+absl::StatusOr<Vector3d> Vec3(const json& v, const std::string& path, double lo, double hi) {
+  ASSIGN_OR_RETURN(std::vector<double> xyz, Numbers(v, path, 3, lo, hi));
+  return Vector3d(xyz[0], xyz[1], xyz[2]);
 }
 
 absl::StatusOr<Vector3d> NonZeroVec3(const json& v, const std::string& path) {
@@ -327,15 +334,18 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       const double per_m = estimator::DegPerHourToRadPerSec(per_um) / estimator::kMetresPerUm;
       (k == "c10DegHPerUm" ? g.c10_per_m : g.c20_per_m) = per_m;
     } else if (const auto term = estimator::FindFixedTermKey(k); term.has_value()) {
-      // A fixed term of the drift model: one number, or a vector of its 3 components (deg/h).
+      // A fixed term of the drift model (deg/h): one number, or an array of as many numbers as
+      // the term has components (estimator/model_terms.h FixedTermKeys()).
       const int first = term->first_theta_index;
       if (term->components == 0) {
         ASSIGN_OR_RETURN(double deg_h, Number(x, p, -kMaxDriftDegH, kMaxDriftDegH));
         g.drift_coefficients[first] = estimator::DegPerHourToRadPerSec(deg_h);
       } else {
-        ASSIGN_OR_RETURN(Vector3d deg_h, Vec3(x, p, -kMaxDriftDegH, kMaxDriftDegH));
-        const Vector3d si = DegHToSi(deg_h);
-        for (int i = 0; i < 3; ++i) g.drift_coefficients[first + i] = si[i];
+        ASSIGN_OR_RETURN(std::vector<double> deg_h,
+                         Numbers(x, p, term->components, -kMaxDriftDegH, kMaxDriftDegH));
+        for (int i = 0; i < term->components; ++i) {
+          g.drift_coefficients[first + i] = estimator::DegPerHourToRadPerSec(deg_h[i]);
+        }
       }
     } else if (k == "misalignmentArcsec") {
       ASSIGN_OR_RETURN(Vector3d arcsec,

@@ -4,7 +4,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/sun_direction.h"
 #include "estimator/units.h"
@@ -362,6 +366,41 @@ TEST(Scenario, GyroNotInConfigurationIsAnError) {
   spec.config = Config();
   EXPECT_THAT(ApplyScenario(*s, &spec),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("gyros[0].id: gyro 4")));
+}
+
+// Every fixed term of the drift model is a scenario key with the shape the term table gives it
+// (estimator/model_terms.h FixedTermKeys()): one number, or an array of its component count, each
+// number landing in its own theta slot; an array one longer is refused naming that count.
+TEST(Scenario, FixedTermKeysTakeTheComponentCountOfTheTermTable) {
+  for (const est::FixedTermKey& key : est::FixedTermKeys()) {
+    SCOPED_TRACE(std::string(key.json_key));
+    const int n = key.components == 0 ? 1 : key.components;
+    std::string numbers;
+    for (int i = 0; i < n; ++i) {
+      numbers += absl::StrFormat("%s%g", i == 0 ? "" : ", ", 0.01 * (i + 1));
+    }
+    const std::string value = key.components == 0 ? numbers : absl::StrCat("[", numbers, "]");
+    absl::StatusOr<Scenario> s = ParseScenarioJson(
+        absl::StrCat(R"({"gyros": [{"id": 1, ")", key.json_key, R"(": )", value, "}]}"));
+    ASSERT_THAT(s, IsOk());
+    ASSERT_EQ(s->gyros.size(), 1u);
+    for (int t = 0; t < est::kNumDriftCoefficients; ++t) {
+      const bool in_key = t >= key.first_theta_index && t < key.first_theta_index + n;
+      ASSERT_EQ(s->gyros[0].drift_coefficients[t].has_value(), in_key) << t;
+      if (in_key) {
+        EXPECT_DOUBLE_EQ(*s->gyros[0].drift_coefficients[t],
+                         est::DegPerHourToRadPerSec(0.01 * (t - key.first_theta_index + 1)))
+            << t;
+      }
+    }
+    if (key.components == 0) continue;
+    EXPECT_THAT(
+        ParseScenarioJson(absl::StrCat(R"({"gyros": [{"id": 1, ")", key.json_key, R"(": [)",
+                                       numbers, ", 0]}]}")),
+        StatusIs(absl::StatusCode::kInvalidArgument,
+                 HasSubstr(absl::StrCat("gyros[0].", key.json_key, ": expected an array of ", n,
+                                        " numbers, got ", n + 1, " values"))));
+  }
 }
 
 TEST(Scenario, ErrorsNameTheKey) {
