@@ -8,9 +8,9 @@
 // failure.
 #include "estimator/discovery/diagnose.h"
 
-#include <algorithm>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
