@@ -26,7 +26,6 @@
 #include <condition_variable>
 #include <csignal>
 #include <cstdio>
-#include <cstdlib>
 #include <deque>
 #include <iostream>
 #include <map>
@@ -102,23 +101,16 @@ std::string AlertLine(const esg::v1::Alert& a) {
 int RunAcknowledge(const AlertsOptions& o, const GlobalOptions& global) {
   if (o.spacecraft_id.empty()) return ReportBadArgument(kVerb, "--ack: needs --spacecraft");
   if (*o.ack < 1) return ReportBadArgument(kVerb, absl::StrCat("--ack ", *o.ack, ": must be >= 1"));
-  // With a token the service takes the operator's name from it (an empty name), so the
-  // acknowledgement is in the name of whoever holds the token; --operator still wins.
-  std::string name = o.operator_name;
-  if (name.empty() && global.token.empty()) {
-    const char* user = std::getenv("USER");
-    if (user != nullptr) name = user;
-    if (name.empty()) {
-      return ReportBadArgument(kVerb,
-                               "--operator: required when $USER is not set (or give --token)");
-    }
-  }
+  // With a token the service takes the operator's name from it (an empty name); --operator
+  // still wins.
+  const std::optional<std::string> name = OperatorName(kVerb, o.operator_name, global);
+  if (!name.has_value()) return kExitBadArguments;
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   esg::v1::AcknowledgeRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_sequence(*o.ack);
-  request.set_operator_name(name);
+  request.set_operator_name(*name);
   absl::StatusOr<esg::v1::Alert> alert = client->AcknowledgeAlert(request);
   if (!alert.ok()) return ReportRpcError(kVerb, alert.status(), global);
   if (o.format == OutputFormat::kJson) {

@@ -2,6 +2,7 @@
 #include "client/commands/server_common.h"
 
 #include <cstdio>
+#include <cstdlib>
 #include <string_view>
 
 #include "absl/strings/ascii.h"
@@ -54,6 +55,15 @@ int ReportRpcError(const char* verb, const absl::Status& status, const GlobalOpt
 int ReportBadArgument(const char* verb, const std::string& message) {
   std::fprintf(stderr, "esg %s: %s\n", verb, message.c_str());
   return kExitBadArguments;
+}
+
+std::optional<std::string> OperatorName(const char* verb, const std::string& given,
+                                        const GlobalOptions& global) {
+  if (!given.empty() || !global.token.empty()) return given;
+  const char* user = std::getenv("USER");
+  if (user != nullptr && *user != '\0') return std::string(user);
+  ReportBadArgument(verb, "--operator: required when $USER is not set (or give --token)");
+  return std::nullopt;
 }
 
 std::optional<absl::Time> ParseUtc(const std::string& text) {

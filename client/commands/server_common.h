@@ -73,6 +73,12 @@ int SetTimeSpan(const char* verb, const std::string& from, const std::string& to
 }
 
 // The output format of a verb with --format and the short form --csv: csv if --csv is given. Both
+// The operator name an acknowledgement or a readmission is stored under: `given` (--operator);
+// with a token and no --operator, empty (the service takes the token's name); else $USER.
+// nullopt after ReportBadArgument when none applies (the verb exits 2).
+std::optional<std::string> OperatorName(const char* verb, const std::string& given,
+                                        const GlobalOptions& global);
+
 // --csv and --json: nullopt after ReportBadArgument (the verb exits 2).
 std::optional<OutputFormat> FormatWithCsvFlag(const char* verb, bool csv, OutputFormat format);
 

@@ -10,7 +10,6 @@
 // Exit codes: 0 success, 2 bad arguments, 1 server failure (the service's refusal on stderr:
 // "esg model apply: FAILED_PRECONDITION: diagnosis_id: ...").
 #include <cstdio>
-#include <cstdlib>
 #include <memory>
 #include <string>
 
@@ -72,22 +71,16 @@ int RunReadmit(const ReadmitOptions& o, const GlobalOptions& global) {
   if (o.gyro_id < 1 || o.gyro_id > 4) {
     return ReportBadArgument(kVerb, absl::StrCat("--gyro ", o.gyro_id, ": must be 1..4"));
   }
-  // As `esg alerts --ack`: with a token the service takes the name from it.
-  std::string name = o.operator_name;
-  if (name.empty() && global.token.empty()) {
-    const char* user = std::getenv("USER");
-    if (user != nullptr) name = user;
-    if (name.empty()) {
-      return ReportBadArgument(kVerb,
-                               "--operator: required when $USER is not set (or give --token)");
-    }
-  }
+  // With a token the service takes the operator's name from it (an empty name); --operator
+  // still wins.
+  const std::optional<std::string> name = OperatorName(kVerb, o.operator_name, global);
+  if (!name.has_value()) return kExitBadArguments;
   std::unique_ptr<EsgClient> client = Connect(kVerb, global);
   if (client == nullptr) return kExitBadArguments;
   esg::v1::ReadmitGyroRequest request;
   request.set_spacecraft_id(o.spacecraft_id);
   request.set_gyro_id(o.gyro_id);
-  request.set_operator_name(name);
+  request.set_operator_name(*name);
   absl::StatusOr<esg::v1::ReadmitGyroResponse> readmitted = client->ReadmitGyro(request);
   if (!readmitted.ok()) return ReportRpcError(kVerb, readmitted.status(), global);
   if (o.format == OutputFormat::kJson) {
