@@ -61,21 +61,10 @@ struct DiagnoseCliOptions {
 std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
   std::vector<disc::Effect> out;
   if (text.empty()) return out;
-  const disc::Effect all[] = {
-      disc::Effect::kRotorDisplacement,       disc::Effect::kFourthHarmonic,
-      disc::Effect::kUnequalStiffness,        disc::Effect::kGyroMisalignment,
-      disc::Effect::kStarTrackerMisalignment, disc::Effect::kStarTrackerLatency,
-      disc::Effect::kRandomWalkDrift,         disc::Effect::kDriftStep,
-      disc::Effect::kReadoutDistortion};
   for (absl::string_view part : absl::StrSplit(text, ',', absl::SkipEmpty())) {
-    bool found = false;
-    for (disc::Effect e : all) {
-      if (part == disc::EffectId(e)) {
-        out.push_back(e);
-        found = true;
-      }
-    }
-    if (!found) return std::nullopt;
+    const std::optional<disc::Effect> e = disc::EffectFromId(part);
+    if (!e.has_value()) return std::nullopt;
+    out.push_back(*e);
   }
   return out;
 }

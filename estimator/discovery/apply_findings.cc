@@ -14,22 +14,6 @@
 namespace esg::estimator::discovery {
 namespace {
 
-const Parameter* Find(const Finding& f, const std::string& name) {
-  for (const Parameter& p : f.parameters) {
-    if (p.name == name) return &p;
-  }
-  return nullptr;
-}
-
-std::optional<Effect> LibraryEffect(const std::string& id) {
-  for (Effect e : {Effect::kRotorDisplacement, Effect::kFourthHarmonic, Effect::kUnequalStiffness,
-                   Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
-                   Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep}) {
-    if (id == EffectId(e)) return e;
-  }
-  return std::nullopt;
-}
-
 std::string Name(const Finding& f) {
   return f.gyro > 0 ? absl::StrFormat("%s (gyro %d)", f.effect, f.gyro) : f.effect;
 }
@@ -59,8 +43,9 @@ AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisRepo
       out.applied.push_back(line);
       continue;
     }
-    const std::optional<Effect> effect = LibraryEffect(f.effect);
-    if (!effect.has_value()) {
+    // The readout group is not of the library: its findings are kEffectBasisTerm.
+    const std::optional<Effect> effect = EffectFromId(f.effect);
+    if (!effect.has_value() || *effect == Effect::kReadoutDistortion) {
       out.not_applied.push_back(absl::StrCat(
           name, ": not an effect of the library; nothing in the configuration describes it"));
       continue;
@@ -72,7 +57,7 @@ AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisRepo
       std::vector<std::string> set;
       for (const FixedTermDescriptor& term : kFixedTerms) {
         if (term.effect != f.effect) continue;
-        const Parameter* p = Find(f, FixedTermJsonName(term));
+        const Parameter* p = FindParameter(f.parameters, FixedTermJsonName(term));
         if (p == nullptr) continue;
         value(term.theta_index) = DegPerHourToRadPerSec(p->value);
         sigma(term.theta_index) = std::max(sigma(term.theta_index), freed->sigma);
@@ -100,7 +85,7 @@ AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisRepo
         break;
       }
       case Effect::kStarTrackerLatency: {
-        const Parameter* tau = Find(f, "latencyMs");
+        const Parameter* tau = FindParameter(f.parameters, "latencyMs");
         if (tau == nullptr) {
           out.not_applied.push_back(absl::StrCat(name, ": the report holds no latencyMs"));
           break;
@@ -111,7 +96,7 @@ AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisRepo
         break;
       }
       case Effect::kRandomWalkDrift: {
-        const Parameter* q = Find(f, "randomWalkDegHSqrtH");
+        const Parameter* q = FindParameter(f.parameters, "randomWalkDegHSqrtH");
         if (f.gyro > 0) {
           out.not_applied.push_back(absl::StrCat(
               name, ": the configuration holds one random-walk intensity for all gyros"));

@@ -34,14 +34,24 @@ const char* EffectId(Effect e) {
   return "?";
 }
 
-namespace {
-
-const Parameter* FindParameter(const std::vector<Parameter>& ps, const std::string& name) {
+const Parameter* FindParameter(const std::vector<Parameter>& ps, absl::string_view name) {
   for (const Parameter& p : ps) {
     if (p.name == name) return &p;
   }
   return nullptr;
 }
+
+std::optional<Effect> EffectFromId(absl::string_view id) {
+  for (Effect e : {Effect::kRotorDisplacement, Effect::kFourthHarmonic, Effect::kUnequalStiffness,
+                   Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
+                   Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
+                   Effect::kReadoutDistortion}) {
+    if (id == EffectId(e)) return e;
+  }
+  return std::nullopt;
+}
+
+namespace {
 
 // `decimals` digits after the point (a count, not a format string: absl::StrFormat checks its
 // format at compile time under clang).

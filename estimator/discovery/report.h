@@ -7,11 +7,13 @@
 #define ESG_ESTIMATOR_DISCOVERY_REPORT_H_
 
 #include <array>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "Eigen/Core"
+#include "absl/strings/string_view.h"
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
 #include "estimator/discovery/regimes.h"
@@ -34,6 +36,8 @@ enum class Effect {
   kReadoutDistortion,
 };
 const char* EffectId(Effect e);  // "rotor_displacement", ..., "readout_distortion"
+// The effect whose EffectId is `id`, or nullopt.
+std::optional<Effect> EffectFromId(absl::string_view id);
 inline constexpr const char* kVerdictNone = "none";
 inline constexpr const char* kVerdictUnexplained = "unexplained";
 // A term of the open-ended stage's basis (docs/discovery.md, "The open-ended stage"): physics
@@ -46,6 +50,8 @@ struct Parameter {
   double sigma = 0.0;  // 1-sigma, 0 if not available
   std::string unit;    // "deg/h", "arcsec", "ms", "um", "deg", "deg/h/sqrt(h)", "1"
 };
+// The parameter of `ps` named `name`, or nullptr.
+const Parameter* FindParameter(const std::vector<Parameter>& ps, absl::string_view name);
 
 struct Evidence {
   // docs/discovery.md "Evidence": every decision compares models by 2 ln B (B their Bayes
