@@ -48,7 +48,6 @@ const std::string& InsertValuesSql() {
   return *sql;
 }
 
-
 // Current rows only, unless ?9 is 1 (revised ones too).
 const std::string& HistorySql(bool one_gyro) {
   static const std::string* const all = new std::string(absl::StrCat(
