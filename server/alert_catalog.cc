@@ -20,7 +20,7 @@ constexpr esg::v1::AlertSeverity kWarning = esg::v1::ALERT_SEVERITY_WARNING;
 constexpr esg::v1::AlertSeverity kDistress = esg::v1::ALERT_SEVERITY_DISTRESS;
 constexpr esg::v1::AlertSeverity kCritical = esg::v1::ALERT_SEVERITY_CRITICAL;
 
-const std::array<AlertKind, 17> kCatalog = {{
+const std::array<AlertKind, 18> kCatalog = {{
     {esg::v1::ALERT_REASON_STAR_TRACKER_INNOVATION, "STAR_TRACKER_INNOVATION", kWarning,
      Event::Kind::kStarTrackerInnovation, "star_tracker", ClearRule::kQuiet,
      "eq. (14) rejected a star-tracker measurement (its innovation exceeded k_d sigma_z); the "
@@ -129,6 +129,13 @@ const std::array<AlertKind, 17> kCatalog = {{
      "recalibrated, nothing was excluded",
      "None at once: the gyro keeps producing. Watch its coefficient history; if the change "
      "repeats or grows, run `esg diagnose` over the span"},
+    {esg::v1::ALERT_REASON_MODEL_DIAGNOSED, "MODEL_DIAGNOSED", kWarning, std::nullopt, "model",
+     ClearRule::kQuiet,
+     "the service's own diagnosis of a MODEL_INCONSISTENT alert is stored (value: its id, "
+     "threshold: the alert's sequence); the message gives its verdict",
+     "Read the diagnosis (`esg diagnoses show --id ID`); for a verdict naming an effect apply it "
+     "with `esg model apply --diagnosis ID`; for none or unexplained there is nothing to apply: "
+     "look at the span with `esg diagnose --out DIR` and the plots (docs/discovery.md)"},
 }};
 
 }  // namespace
