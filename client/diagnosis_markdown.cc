@@ -37,6 +37,9 @@ std::string DiagnosisMarkdown(const disc::DiagnosisReport& r,
                     "(gnuplot failed or is missing: see gnuplot.log; the data files and plots.gp "
                     "are beside this report.)\n\n");
   }
+  if (!r.consistency.summary.empty()) {
+    absl::StrAppend(&md, "Partly explained: ", r.consistency.summary, ".\n\n");
+  }
   absl::StrAppend(&md, "## Findings\n\n");
   if (r.findings.empty())
     absl::StrAppend(&md, "None: the configured model explains the recording.\n\n");

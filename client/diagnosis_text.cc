@@ -10,6 +10,7 @@ namespace disc = estimator::discovery;
 
 std::string DiagnosisText(const disc::DiagnosisReport& r) {
   std::string out = absl::StrCat("verdict: ", r.verdict, "\n");
+  if (!r.consistency.summary.empty()) absl::StrAppend(&out, "  ", r.consistency.summary, "\n");
   for (size_t i = 0; i < r.findings.size(); ++i) {
     const disc::Finding& f = r.findings[i];
     absl::StrAppend(&out, i + 1, ". ", f.effect,

@@ -188,6 +188,27 @@ json CandidateJson(const CandidateScore& c) {
   return j;
 }
 
+// The consistency tests of the model with the findings (report.h ModelConsistency); the shares
+// explained are null when the user's model showed no excess.
+json ConsistencyJson(const estimator::discovery::ModelConsistency& c) {
+  json tests = json::array();
+  for (const estimator::discovery::ConsistencyTest& t : c.tests) {
+    json j{{"name", t.name},         {"statistic", Number(t.statistic)},
+           {"dof", t.dof},           {"bound", Number(t.bound)},
+           {"pValue", Number(t.p_value)}};
+    if (t.materiality > 0) j["materiality"] = Number(t.materiality);
+    j["passed"] = t.passed;
+    tests.push_back(j);
+  }
+  auto share = [](double x) { return x < 0 ? json(nullptr) : Number(x); };
+  return json{{"passed", c.passed},
+              {"level", Number(c.level)},
+              {"tests", tests},
+              {"inSampleExplained", share(c.in_sample_explained)},
+              {"heldOutExplained", share(c.held_out_explained)},
+              {"summary", c.summary}};
+}
+
 }  // namespace
 
 json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
@@ -217,6 +238,7 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
            {"firstFrame", FormatUtc(t0)},
            {"frames", r.frames},
            {"filterRuns", r.filter_runs}};
+  if (r.consistency.checked) doc["consistency"] = ConsistencyJson(r.consistency);
   if (include_series) {
     auto residuals = [](const std::vector<estimator::discovery::ResidualPoint>& v) {
       json a = json::array();

@@ -168,6 +168,9 @@ function render(container, d) {
       `${d.frames} frames from ${d.first_frame_time} to ${d.last_frame_time}; computed ${d.compute_time}; `,
       `${r.filterRuns ?? '-'} filter runs`),
     el('p', {}, 'Verdict: ', el('span', { class: 'verdict esg-verdict' }, d.verdict)),
+    // partly_explained: what the findings explain and what remains (docs/discovery.md).
+    ...(r.consistency && r.consistency.summary
+      ? [el('p', { class: 'esg-consistency' }, `Partly explained: ${r.consistency.summary}.`)] : []),
     el('h3', {}, `Findings (${findings.length})`),
     ...(findings.length ? findings.map(finding) : [el('p', { class: 'esg-no-findings' },
       'No finding: the configured model explains the data.')]),

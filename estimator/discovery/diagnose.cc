@@ -12,6 +12,7 @@
 #include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
 #include "estimator/discovery/candidates.h"
+#include "estimator/discovery/consistency.h"
 #include "estimator/discovery/context.h"
 #include "estimator/discovery/forward_selection.h"
 #include "estimator/discovery/held_out.h"
@@ -126,6 +127,38 @@ FitSummary Summarise(const ModelState& model, const ModelRun& run, const Profile
   return s;
 }
 
+// The verdict (docs/discovery.md, "A verdict no stronger than its evidence"): none without
+// findings; with findings of a model term, the consistency tests of the model with them
+// (consistency.h); when one fails and no `unexplained` finding says what remains, one is added,
+// located. Findings of a model term with an `unexplained` one (`unexplained_found` or added):
+// partly_explained, with the summary of what they explain; else the first finding's effect.
+void Conclude(bool model_findings, bool unexplained_found, const ProfiledDeviance& base_fit,
+              const SelectedModel& selected, const HeldOutResult& base_held_out,
+              const HeldOutResult& final_held_out, const Mismatch& remaining, double alpha,
+              DiagnosisReport& report) {
+  if (report.findings.empty()) {
+    report.verdict = kVerdictNone;
+    return;
+  }
+  report.verdict = report.findings.front().effect;
+  if (!model_findings) return;
+  report.consistency = CheckConsistency(selected.run, base_fit, selected.fit, base_held_out,
+                                        final_held_out, alpha);
+  if (!report.consistency.passed && !unexplained_found) {
+    report.findings.push_back(
+        RemainingAfterFindings(report.consistency, final_held_out, remaining).finding);
+    unexplained_found = true;
+  }
+  if (!unexplained_found) return;
+  report.verdict = kVerdictPartlyExplained;
+  std::vector<const Finding*> remains;
+  for (const Finding& f : report.findings) {
+    if (f.effect == kVerdictUnexplained) remains.push_back(&f);
+  }
+  report.consistency.summary =
+      PartlyExplainedSummary(report.consistency, report.before, report.after, remains);
+}
+
 }  // namespace
 
 absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
@@ -174,6 +207,7 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     base_held_out = SummariseHeldOut(**base_held, context.gaps(), report.regimes, frames);
   }
   const ModelRun base_run = selected.run;
+  const ProfiledDeviance base_fit = selected.fit;
   report.before = Summarise(selected.model, selected.run, selected.fit, base_held_out, options);
   report.residuals_before = ResidualSeries(selected.run, frames);
   report.held_out_before = base_held_out.points;
@@ -263,7 +297,8 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     report.findings.push_back(remaining->finding);
     if (!model_findings) report.mismatch = remaining->where;
   }
-  report.verdict = report.findings.empty() ? kVerdictNone : report.findings.front().effect;
+  Conclude(model_findings, remaining.has_value() || !wandering.empty(), base_fit, selected,
+           base_held_out, final_held_out, mismatches.remaining, options.alpha, report);
   report.filter_runs = context.filter_runs();
   context.Say(1.0, "done");
   return report;

@@ -210,6 +210,30 @@ Mismatches LocateMismatches(const ModelRun& base, const ModelRun& extended,
   return out;
 }
 
+Mismatch HeldOutMismatch(const HeldOutResult& held_out) {
+  Mismatch where;
+  const GapSummary* worst = nullptr;
+  for (const GapSummary& g : held_out.gaps) {
+    if (g.dof > 0 && (worst == nullptr || g.nees / g.dof > worst->nees / worst->dof)) worst = &g;
+  }
+  if (worst == nullptr) return where;
+  where.found = true;
+  where.start = worst->start;
+  where.end = worst->end;
+  where.regime = worst->regime;
+  where.span = worst->span;
+  where.source = "held-out prediction";
+  where.p_value = held_out.dof > 0 ? ChiSquareSurvival(held_out.nees, held_out.dof) : 1.0;
+  double top = 0;
+  for (const auto& [id, rate] : worst->gyro_drift_rate_deg_h) {
+    if (rate > top) {
+      top = rate;
+      where.gyro = id;
+    }
+  }
+  return where;
+}
+
 std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
                                            const std::string& unresolved, int unresolved_gyro,
                                            const Mismatch& unresolved_where,
@@ -234,29 +258,7 @@ std::optional<Unexplained> FindUnexplained(const Mismatch& remaining,
   Mismatch& where = out.where;
   where = remaining;
   if (held_out_misfit && !residual_misfit) {
-    // The held-out span that misses most.
-    const GapSummary* worst = nullptr;
-    for (const GapSummary& g : held_out.gaps) {
-      if (g.dof > 0 && (worst == nullptr || g.nees / g.dof > worst->nees / worst->dof))
-        worst = &g;
-    }
-    if (worst != nullptr) {
-      where.found = true;
-      where.start = worst->start;
-      where.end = worst->end;
-      where.regime = worst->regime;
-      where.span = worst->span;
-      where.source = "held-out prediction";
-      where.p_value = held_out_p;
-      where.gyro = 0;
-      double top = 0;
-      for (const auto& [id, rate] : worst->gyro_drift_rate_deg_h) {
-        if (rate > top) {
-          top = rate;
-          where.gyro = id;
-        }
-      }
-    }
+    if (const Mismatch held = HeldOutMismatch(held_out); held.found) where = held;
   }
   if (!remaining.found && !unresolved.empty() && unresolved_gyro > 0) where.gyro = unresolved_gyro;
   if (!remaining.found && !unresolved.empty() && unresolved_where.found) where = unresolved_where;

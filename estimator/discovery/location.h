@@ -46,6 +46,11 @@ Mismatches LocateMismatches(const ModelRun& base, const ModelRun& extended,
                             const std::vector<RegimeSpan>& spans,
                             const std::vector<TelemetryFrame>& frames, double alpha);
 
+// The held-out span whose prediction misses most (largest NEES per degree of freedom) and the
+// gyro whose spin axis drifts fastest there (0: none rated), with the p-value of the whole
+// held-out NEES; `found` false without a held-out span with degrees of freedom.
+Mismatch HeldOutMismatch(const HeldOutResult& held_out);
+
 // What no candidate explains, after selection: a residual mismatch (`remaining.found`, or
 // `unresolved`: why the candidates that fit were not taken, e.g. each fits only part of the
 // recording or fails its physics check; `unresolved_gyro` the gyro they name, used when no span

@@ -40,6 +40,9 @@ const char* EffectId(Effect e);  // "rotor_displacement", ..., "readout_distorti
 std::optional<Effect> EffectFromId(absl::string_view id);
 inline constexpr const char* kVerdictNone = "none";
 inline constexpr const char* kVerdictUnexplained = "unexplained";
+// Findings were taken but the model with them fails the diagnosis's own consistency tests
+// (ModelConsistency): they explain part of the mismatch, the rest is an `unexplained` finding.
+inline constexpr const char* kVerdictPartlyExplained = "partly_explained";
 // A term of the open-ended stage's basis (docs/discovery.md, "The open-ended stage"): physics
 // outside the library, named by the regressor that explains it.
 inline constexpr const char* kEffectBasisTerm = "basis_term";
@@ -229,8 +232,37 @@ struct HeldOutPoint {
   double error_arcsec = 0.0;  // attitude error angle against the withheld star tracker
 };
 
+// One consistency test of the model with the findings (docs/discovery.md, "A verdict no stronger
+// than its evidence"): a statistic chi-square with `dof` degrees of freedom when the model is
+// right, against its upper quantile at `level`.
+struct ConsistencyTest {
+  std::string name;  // "held-out NEES", "in-sample NIS" or "whiteness"
+  double statistic = 0.0;
+  int dof = 0;
+  double bound = 0.0;   // ChiSquareQuantile(level, dof)
+  double p_value = 1.0;  // ChiSquareSurvival(statistic, dof)
+  // > 0: the test fails only when statistic / dof also exceeds it (a material excess).
+  double materiality = 0.0;
+  bool passed = true;
+};
+
+// The model with the findings against the recording, and what the findings explain.
+struct ModelConsistency {
+  bool checked = false;  // only when findings were taken
+  bool passed = true;    // every test passed
+  double level = 0.0;    // 1 - alpha / 3: the three tests at alpha, Bonferroni
+  std::vector<ConsistencyTest> tests;
+  // Share of the mismatch the findings remove: of the in-sample NIS in excess of its chi-square
+  // expectation (sum of nis - components), and of the held-out NEES in excess of its dof; in
+  // [0, 1], -1 when the user's model showed no excess.
+  double in_sample_explained = -1.0;
+  double held_out_explained = -1.0;
+  std::string summary;  // the above in words, and what remains where
+};
+
 struct DiagnosisReport {
-  std::string verdict;            // effect id, "none" or "unexplained"
+  // Effect id of the most important finding, "none", "unexplained" or "partly_explained".
+  std::string verdict;
   std::vector<Finding> findings;  // most important first
   Mismatch mismatch;              // of the user's model
   FitSummary before;              // the user's model
@@ -244,6 +276,7 @@ struct DiagnosisReport {
   int frames = 0;
   int filter_runs = 0;
   std::vector<int> gyros;  // running gyros
+  ModelConsistency consistency;
 };
 
 // `config` with the model terms of the report's `basis_term` findings added (each gyro's

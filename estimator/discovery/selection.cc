@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
+#include "estimator/discovery/point_prediction.h"
 #include "estimator/discovery/wander.h"
 #include "estimator/statistics.h"
 #include "estimator/units.h"
@@ -276,11 +277,13 @@ absl::StatusOr<int> ChooseAmongSignificant(const std::vector<Scored>& significan
 // candidates are scored by held-out prediction: the one whose held-out deviance (-2 log
 // predictive density) falls the most, by more than the evidence threshold over the round's
 // candidates, is taken (the drop is 2 ln of the ratio of the two models' predictive densities
-// of data neither was fitted to: no parameter count enters). Returns its
+// of data neither was fitted to: no parameter count enters), unless it makes the held-out point
+// prediction worse (point_prediction.h; those go to `worsened` with their notes). Returns its
 // index or -1; `contenders` gets the held-out results when one is taken.
 absl::StatusOr<int> ChooseByHeldOut(const std::vector<Scored>& scored,
                                     const std::vector<CandidateFit>& fits, int round,
                                     SelectedModel& selected, Contenders& contenders,
+                                    std::vector<std::pair<int, std::string>>& worsened,
                                     DiagnosisContext& context) {
   const DiagnoseOptions& options = context.options();
   if (!selected.held_out_current && !context.gaps().empty()) {
@@ -308,7 +311,13 @@ absl::StatusOr<int> ChooseByHeldOut(const std::vector<Scored>& scored,
     const double drop = selected.held_out.deviance - r.deviance;
     const double needed =
         EvidenceThreshold(options.alpha, static_cast<int>(scored.size()));
-    if (drop > needed && drop > best_drop && scored[j].homogeneous) {
+    // The point-prediction guard (point_prediction.h): a drop of the predictive density bought
+    // by a wider covariance while the predicted attitude drifts away faster is not taken.
+    if (drop > needed && scored[j].homogeneous && WorsensPointPrediction(selected.held_out, r)) {
+      worsened.emplace_back(scored[j].index,
+                            PointPredictionNote(CandidateName(fits[scored[j].index].candidate),
+                                                selected.held_out, r));
+    } else if (drop > needed && drop > best_drop && scored[j].homogeneous) {
       best_drop = drop;
       chosen = scored[j].index;
     }
@@ -316,6 +325,75 @@ absl::StatusOr<int> ChooseByHeldOut(const std::vector<Scored>& scored,
   }
   if (chosen < 0) contenders.clear();
   return chosen;
+}
+
+// The round's choice through the point-prediction guard (point_prediction.h): the significant
+// candidates (ChooseAmongSignificant), else, unless the mismatch is a change in time, the
+// candidates scored by held-out prediction (ChooseByHeldOut), leaving out the fits that failed
+// their physics check. A chosen fit whose held-out gap drift is more than 5% worse than the
+// selected model's is not taken, whatever its evidence or predictive density, and the choice is
+// made again without it.
+struct Choice {
+  int chosen = -1;
+  bool held_out_selected = false;
+  Contenders contenders;
+  // The chosen fit's held-out prediction when the guard ran it (not among the contenders).
+  std::optional<HeldOutResult> guard_held_out;
+  std::vector<std::pair<int, std::string>> worsened;  // fits the guard left out, their notes
+};
+absl::StatusOr<Choice> ChooseGuarded(std::vector<Scored> significant,
+                                     const std::vector<Scored>& scored,
+                                     const std::vector<CandidateFit>& fits,
+                                     const std::vector<int>& failed, bool inhomogeneous_only,
+                                     int round, SelectedModel& selected,
+                                     DiagnosisContext& context) {
+  Choice out;
+  auto refused = [&](int index) {
+    return std::any_of(out.worsened.begin(), out.worsened.end(),
+                       [&](const auto& w) { return w.first == index; });
+  };
+  for (;;) {
+    out.chosen = -1;
+    out.held_out_selected = false;
+    out.contenders.clear();
+    std::erase_if(significant, [&](const Scored& s) { return refused(s.index); });
+    if (!significant.empty()) {
+      auto c = ChooseAmongSignificant(significant, fits, round, out.contenders, context);
+      if (!c.ok()) return c.status();
+      out.chosen = *c;
+    }
+    if (out.chosen < 0 && !inhomogeneous_only) {
+      std::vector<Scored> left;  // an effect that failed its physics check is not one
+      for (const Scored& x : scored) {
+        if (std::find(failed.begin(), failed.end(), x.index) == failed.end() &&
+            !refused(x.index)) {
+          left.push_back(x);
+        }
+      }
+      auto c = ChooseByHeldOut(left, fits, round, selected, out.contenders, out.worsened, context);
+      if (!c.ok()) return c.status();
+      out.chosen = *c;
+      out.held_out_selected = out.chosen >= 0;
+    }
+    if (out.chosen < 0) return out;
+    const CandidateFit& f = fits[out.chosen];
+    const auto ran = std::find_if(out.contenders.begin(), out.contenders.end(),
+                                  [&](const auto& c) { return c.first == out.chosen; });
+    if (ran == out.contenders.end()) {
+      auto check = CheckPointPrediction(f.model, CandidateName(f.candidate), selected, context);
+      if (!check.ok()) return check.status();
+      if (!check->worsens) {
+        if (!context.gaps().empty()) out.guard_held_out = std::move(check->held_out);
+        return out;
+      }
+      out.worsened.emplace_back(out.chosen, std::move(check->note));
+      continue;
+    }
+    if (absl::Status s = MakeHeldOutCurrent(selected, context); !s.ok()) return s;
+    if (!WorsensPointPrediction(selected.held_out, ran->second)) return out;
+    out.worsened.emplace_back(
+        out.chosen, PointPredictionNote(CandidateName(f.candidate), selected.held_out, ran->second));
+  }
 }
 
 CandidateScore Row(const Scored& s, const CandidateFit& f, int round, int chosen) {
@@ -665,6 +743,17 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
               "; held-out -2 log predictive density %.1f with the basis's terms against %.1f "
               "with %s",
               hb.deviance, ht.deviance, CandidateName(top.candidate));
+          // Nor may the terms make the held-out point prediction worse (point_prediction.h).
+          if (absl::Status st = MakeHeldOutCurrent(selected, context); !st.ok()) return st;
+          if (predicts && WorsensPointPrediction(selected.held_out, hb)) {
+            predicts = false;
+            absl::StrAppend(&held_note, "; ",
+                            PointPredictionNote("the basis's terms", selected.held_out, hb));
+          }
+          if (predicts) {
+            basis->extended->held_out = hb;
+            basis->extended->held_out_current = true;
+          }
         }
         // Deterministic terms for a gyro whose drift returns to its mean must describe its
         // deviation better than that stationary drift, in the reduced regression's currency.
@@ -758,26 +847,12 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       }
     }
   }
-  int chosen = -1;
-  Contenders contenders;
-  if (!significant.empty()) {
-    auto c = ChooseAmongSignificant(significant, fits, round, contenders, context);
-    if (!c.ok()) return c.status();
-    chosen = *c;
-  }
-  bool held_out_selected = false;
-  if (chosen < 0 && !inhomogeneous_only) {
-    std::vector<Scored> candidates_left;  // an effect that failed its physics check is not one
-    for (const Scored& x : scored) {
-      if (std::find(failed.begin(), failed.end(), x.index) == failed.end()) {
-        candidates_left.push_back(x);
-      }
-    }
-    auto c = ChooseByHeldOut(candidates_left, fits, round, selected, contenders, context);
-    if (!c.ok()) return c.status();
-    chosen = *c;
-    held_out_selected = chosen >= 0;
-  }
+  auto choice = ChooseGuarded(significant, scored, fits, failed, inhomogeneous_only, round,
+                              selected, context);
+  if (!choice.ok()) return choice.status();
+  const int chosen = choice->chosen;
+  const bool held_out_selected = choice->held_out_selected;
+  const Contenders& contenders = choice->contenders;
   for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
   if (chosen < 0) {
     if (!wander_note.empty()) {
@@ -817,6 +892,10 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       // the library's time behaviours nor the basis describe it.
       result.unresolved = failed_notes.front().second;
       result.unresolved_gyro = failed_notes.front().first;
+    } else if (!choice->worsened.empty()) {
+      // What fits it in-sample or by its predictive density predicts the attitude worse.
+      result.unresolved = choice->worsened.front().second;
+      result.unresolved_gyro = fits[choice->worsened.front().first].candidate.gyro;
     }
     return result;
   }
@@ -832,9 +911,23 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   for (const auto& [index, note] : constant_notes) {
     if (index == chosen) result.finding->evidence.notes.push_back(note);
   }
+  for (const auto& worse : choice->worsened) result.finding->evidence.notes.push_back(worse.second);
 
   selected.held_out_current = std::any_of(contenders.begin(), contenders.end(),
                                           [&](const auto& c) { return c.first == chosen; });
+  if (choice->guard_held_out.has_value()) {
+    // The guard's run of the chosen model: its held-out prediction with and without the effect.
+    Evidence& e = result.finding->evidence;
+    if (e.held_out_nees_after < 0) {
+      e.held_out_nees_before = selected.held_out.nees;
+      e.held_out_nees_after = choice->guard_held_out->nees;
+      e.held_out_deviance_before = selected.held_out.deviance;
+      e.held_out_deviance_after = choice->guard_held_out->deviance;
+      e.held_out_dof = choice->guard_held_out->dof;
+    }
+    selected.held_out = std::move(*choice->guard_held_out);
+    selected.held_out_current = true;
+  }
   selected.model = f.model;
   selected.run = std::move(f.run);
   selected.fit = Profile(selected.run);

@@ -8,6 +8,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/model_run.h"
+#include "estimator/discovery/point_prediction.h"
 
 namespace esg::estimator::discovery {
 
@@ -67,7 +68,8 @@ absl::StatusOr<WhatIsLeft> ExplainWhatSelectionLeft(SelectedModel& selected,
                                     stage->refit_evidence, selection.readout_jump_evidence));
     stage->findings.clear();
   }
-  // The terms must predict the held-out spans at least as well as the model without them.
+  // The terms must predict the held-out spans at least as well as the model without them, by the
+  // predictive density and by the point prediction (point_prediction.h).
   if (!stage->findings.empty() && stage->extended.has_value() && !context.gaps().empty()) {
     auto held = context.CheckedRun(stage->extended->model, /*held_out=*/true);
     if (!held.ok()) return held.status();
@@ -79,6 +81,9 @@ absl::StatusOr<WhatIsLeft> ExplainWhatSelectionLeft(SelectedModel& selected,
                                       "predict the held-out spans worse (-2 log predictive "
                                       "density %.1f against %.1f without them)",
                                       stage->refit_evidence, with.deviance, held_out.deviance));
+      stage->findings.clear();
+    } else if (WorsensPointPrediction(held_out, with)) {
+      absl::StrAppend(&out.resembles, "; ", PointPredictionNote("the basis's terms", held_out, with));
       stage->findings.clear();
     } else {
       stage->extended->held_out = std::move(with);

@@ -108,6 +108,7 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                                              "random_walk_drift",
                                              "drift_step",
                                              "basis_term",
+                                             "partly_explained",
                                              "unexplained"};
   std::map<std::string, std::map<std::string, int>> table;
   std::map<std::string, int> correct;

@@ -61,6 +61,11 @@ absl::StatusOr<Diagnosed> DiagnoseLibraryEffect(const std::string& effect) {
 std::string FindingsText(const DiagnosisReport& r) {
   std::string text = absl::StrCat("verdict ", r.verdict, "; findings:");
   for (const Finding& f : r.findings) absl::StrAppend(&text, " ", f.effect, "[", f.gyro, "]");
+  // Why a verdict is partly explained: the consistency tests and what remains.
+  if (!r.consistency.summary.empty()) absl::StrAppend(&text, "; ", r.consistency.summary);
+  for (const Finding& f : r.findings) {
+    if (f.effect == kVerdictUnexplained) absl::StrAppend(&text, "; ", f.explanation);
+  }
   return text;
 }
 

@@ -384,6 +384,16 @@ TEST(OpenEndedDiagnosis, AMisalignmentOfAnotherGyroIsFoundBesideADriftThatReturn
   EXPECT_TRUE(stood_in) << findings;
   EXPECT_TRUE(::esg::testing::DiscoveryVerdictCorrect("switching_and_gyro_misalignment",
                                                       wandering, r));
+  // The misalignment explains part of the mismatch, the wandering drift remains: the verdict is
+  // partly explained, with what the finding explains and where the rest is (docs/discovery.md, "A
+  // verdict no stronger than its evidence").
+  EXPECT_EQ(r.verdict, kVerdictPartlyExplained) << findings;
+  EXPECT_TRUE(r.consistency.checked);
+  EXPECT_THAT(r.consistency.summary, HasSubstr("of the in-sample excess")) << findings;
+  EXPECT_THAT(r.consistency.summary,
+              HasSubstr(absl::StrCat("what remains is unexplained, in gyro ", wandering)))
+      << r.consistency.summary;
+  EXPECT_GT(r.consistency.in_sample_explained, 0.0) << r.consistency.summary;
 }
 
 }  // namespace
