@@ -270,6 +270,15 @@ absl::StatusOr<esg::v1::ApplyDiagnosisResponse> EsgClient::ApplyDiagnosis(
       });
 }
 
+absl::StatusOr<esg::v1::CancelAutoDiagnosisResponse> EsgClient::CancelAutoDiagnosis(
+    const esg::v1::CancelAutoDiagnosisRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::CancelAutoDiagnosisResponse>(
+      NewContext(true, call, request.spacecraft_id()),
+      [&](grpc::ClientContext* c, esg::v1::CancelAutoDiagnosisResponse* r) {
+        return stub_->CancelAutoDiagnosis(c, request, r);
+      });
+}
+
 absl::StatusOr<esg::v1::ReadmitGyroResponse> EsgClient::ReadmitGyro(
     const esg::v1::ReadmitGyroRequest& request, const CallOptions& call) {
   return Unary<esg::v1::ReadmitGyroResponse>(

@@ -167,6 +167,9 @@ class EsgClient {
       const esg::v1::ApplyDiagnosisRequest& request, const CallOptions& call = {});
   absl::StatusOr<esg::v1::ReadmitGyroResponse> ReadmitGyro(
       const esg::v1::ReadmitGyroRequest& request, const CallOptions& call = {});
+  // Cancels the service's automatic diagnosis (docs/service.md "Automatic diagnosis").
+  absl::StatusOr<esg::v1::CancelAutoDiagnosisResponse> CancelAutoDiagnosis(
+      const esg::v1::CancelAutoDiagnosisRequest& request, const CallOptions& call = {});
 
   // Opens a telemetry stream (no deadline) for the frames of `spacecraft_id`: routed by it, and
   // esgd refuses a frame of another spacecraft on it. Errors show up in TelemetryStream::Finish.

@@ -563,6 +563,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     if (a.cleared) metrics_.alerts_cleared.With({a.reason, a.severity}).Increment();
     hub_.Publish(a);
   }
+  NotifyModelAlerts(published);
   for (const StateChange& c : state_changes) {
     const char* from = estimator::SessionStateName(c.from);
     const char* to = estimator::SessionStateName(c.to);

@@ -201,12 +201,12 @@ absl::StatusOr<esg::v1::ListSessionsResponse> EstimationCore::ListSessions(
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
     const esg::v1::DiagnoseRequest& request,
     const std::function<void(double fraction, const std::string& stage)>& progress,
-    const std::function<bool()>& cancelled) {
+    const std::function<bool()>& cancelled, const DiagnosisOrigin& origin) {
   const std::string& id = request.spacecraft_id();
   LogEvent("INFO", "diagnosis_started", absl::StrCat("diagnosis of ", id, " started"),
            {{"spacecraftId", id}});
   const absl::Time start = absl::Now();
-  absl::StatusOr<esg::v1::DiagnosisResult> result = RunDiagnosis(request, progress, cancelled);
+  absl::StatusOr<esg::v1::DiagnosisResult> result = RunDiagnosis(request, progress, cancelled, origin);
   const double seconds = absl::ToDoubleSeconds(absl::Now() - start);
   metrics_.diagnosis_duration.Observe(seconds);
   if (result.ok()) {
@@ -235,7 +235,7 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::Diagnose(
 absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
     const esg::v1::DiagnoseRequest& request,
     const std::function<void(double fraction, const std::string& stage)>& progress,
-    const std::function<bool()>& cancelled) {
+    const std::function<bool()>& cancelled, const DiagnosisOrigin& origin) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
   ASSIGN_OR_RETURN(const estimator::TimeInterval interval, RequestInterval(request));
@@ -332,6 +332,8 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
   record.frames = static_cast<int64_t>(frames.size());
   record.config_version = config_record.version;
   record.model_name = model_spec->Name();
+  record.requested_by = origin.requested_by;
+  record.answers_alert = origin.answers_alert;
   ASSIGN_OR_RETURN(record.id, storage_->diagnoses().Put(record));
   esg::v1::DiagnosisResult result = DiagnosisToProto(record);
   DescribeApplication(setup->config, record, &result);

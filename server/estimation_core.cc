@@ -618,6 +618,8 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
       }
     }
   }
+  // The automatic diagnosis of the old configuration is stale (auto_diagnosis.h).
+  if (new_session) NotifyConfigured(sc->id);
   Schedule(sc);
   response.set_created(false);
   *response.mutable_session() = SessionInfoToProto(Summarize(*sc));

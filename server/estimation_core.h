@@ -70,6 +70,7 @@
 #include "estimator/frame_gap.h"
 #include "estimator/session.h"
 #include "estimator/spacecraft_config.h"
+#include "server/alert_collapse.h"
 #include "server/alert_hub.h"
 #include "server/checkpoint_codec.h"
 #include "server/estimate_hub.h"
@@ -80,6 +81,13 @@
 #include "storage/storage.h"
 
 namespace esg::server {
+
+// Who asked for a diagnosis (storage::DiagnosisRecord requested_by, answers_alert): empty and 0
+// for an operator's Diagnose call.
+struct DiagnosisOrigin {
+  std::string requested_by;
+  int64_t answers_alert = 0;
+};
 
 struct CoreOptions {
   int worker_threads = 2;
@@ -257,10 +265,12 @@ class EstimationCore {
   // stops, nothing is stored, and the result is Cancelled "diagnosis cancelled". NotFound for an
   // unknown spacecraft, InvalidArgument for a bad span or model, FailedPrecondition when the
   // span holds no frames.
+  // `origin`: who asked (empty for a Diagnose call; the automatic diagnosis's, auto_diagnosis.h),
+  // stored with the result.
   absl::StatusOr<esg::v1::DiagnosisResult> Diagnose(
       const esg::v1::DiagnoseRequest& request,
       const std::function<void(double fraction, const std::string& stage)>& progress,
-      const std::function<bool()>& cancelled = {});
+      const std::function<bool()>& cancelled = {}, const DiagnosisOrigin& origin = {});
   absl::StatusOr<esg::v1::ListDiagnosesResponse> ListDiagnoses(
       const esg::v1::ListDiagnosesRequest& request);
   // NotFound for an id that is not a diagnosis of the spacecraft.
@@ -281,6 +291,22 @@ class EstimationCore {
       const esg::v1::ReadmitGyroRequest& request);
   // NotFound unless empty or configured.
   absl::Status CheckSpacecraft(const std::string& spacecraft_id);
+
+  // ---- The automatic diagnosis (server/auto_diagnosis.h; docs/service.md "Automatic
+  // diagnosis") ----
+  // Called with each new MODEL_INCONSISTENT alert once it is stored and published (a filter
+  // worker's thread, no lock of the core held), and with the id of each spacecraft whose
+  // configuration changed (after the change is stored). Either may be empty; both must return
+  // quickly. Replaces the previous observer; SetModelObserver({}, {}) before the observer goes.
+  void SetModelObserver(std::function<void(const storage::AlertRecord&)> on_model_alert,
+                        std::function<void(const std::string&)> on_configured);
+  // Raises an alert of the service itself (reason a catalog name, e.g. "MODEL_DIAGNOSED") at the
+  // measurement time of the spacecraft's last applied frame, or `occurrence.time` when later; the
+  // next filter job stores and publishes it (scheduled now). NotFound for an unknown spacecraft.
+  absl::Status RaiseServiceAlert(const std::string& spacecraft_id, AlertOccurrence occurrence);
+  // The measurement time of the spacecraft's last durable frame (InfinitePast: none); NotFound
+  // for a spacecraft not held by this server.
+  absl::StatusOr<absl::Time> LastDurableTime(const std::string& spacecraft_id);
 
   // Blocks until every durable frame of the spacecraft is applied (or `timeout`); for tests and
   // the benchmark. DeadlineExceeded on timeout.
@@ -370,7 +396,11 @@ class EstimationCore {
   absl::StatusOr<esg::v1::DiagnosisResult> RunDiagnosis(
       const esg::v1::DiagnoseRequest& request,
       const std::function<void(double fraction, const std::string& stage)>& progress,
-      const std::function<bool()>& cancelled);
+      const std::function<bool()>& cancelled, const DiagnosisOrigin& origin);
+  // Tells the model observer of the new MODEL_INCONSISTENT alerts among `published` (a filter
+  // job's, committed), and of a reconfiguration of `spacecraft_id`.
+  void NotifyModelAlerts(const std::vector<storage::AlertRecord>& published);
+  void NotifyConfigured(const std::string& spacecraft_id);
   // Reads the gauges of the metrics from the registry and the committer (each scrape).
   void CollectGauges();
   // Applies the next frames of one spacecraft; true when more remain.
@@ -462,6 +492,11 @@ class EstimationCore {
 
   absl::Mutex stop_mu_;
   bool stopped_ ABSL_GUARDED_BY(stop_mu_) = false;
+
+  // SetModelObserver's; held while one is called, so none runs after it is replaced.
+  absl::Mutex observer_mu_;
+  std::function<void(const storage::AlertRecord&)> on_model_alert_ ABSL_GUARDED_BY(observer_mu_);
+  std::function<void(const std::string&)> on_configured_ ABSL_GUARDED_BY(observer_mu_);
 };
 
 }  // namespace esg::server

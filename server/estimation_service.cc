@@ -35,7 +35,8 @@
 namespace esg::server {
 
 EstimationServiceImpl::EstimationServiceImpl(EstimationCore* core, const TokenAuthorizer* auth,
-                                             const CallLimits& limits)
+                                             const CallLimits& limits,
+                                             const AutoDiagnosisOptions& auto_diagnosis)
     : core_(core),
       auth_(auth),
       predictions_("PredictAttitude", "prediction", "predictions",
@@ -46,11 +47,13 @@ EstimationServiceImpl::EstimationServiceImpl(EstimationCore* core, const TokenAu
                      limits.max_subscriptions_per_caller, limits.max_subscriptions, "holds"),
       exports_("ExportCoefficientHistory/ExportTelemetry", "export stream", "export streams",
                limits.max_exports_per_caller, limits.max_exports, "runs"),
-      queued_(limits.max_queued_bytes_per_caller, limits.max_queued_bytes) {
+      queued_(limits.max_queued_bytes_per_caller, limits.max_queued_bytes),
+      auto_diagnosis_(std::make_unique<AutoDiagnosis>(core, &diagnoses_, auto_diagnosis)) {
   for (int i = 0; i < predictions_.total(); ++i) pool_.emplace_back([this] { PredictionLoop(); });
 }
 
 EstimationServiceImpl::~EstimationServiceImpl() {
+  auto_diagnosis_->Stop();
   {
     absl::MutexLock lock(&pool_mu_);
     pool_stop_ = true;
@@ -292,6 +295,24 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::ReadmitGyro(
   if (name.ok()) named.set_operator_name(*name);
   return Unary(&calls_, context, admitted, response,
                [this, named = std::move(named)] { return core_->ReadmitGyro(named); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::CancelAutoDiagnosis(
+    grpc::CallbackServerContext* context, const esg::v1::CancelAutoDiagnosisRequest* request,
+    esg::v1::CancelAutoDiagnosisResponse* response) {
+  return Unary(&calls_, context, Authorize(context, Role::kWrite, request->spacecraft_id()),
+               response, [&]() -> absl::StatusOr<esg::v1::CancelAutoDiagnosisResponse> {
+                 if (request->spacecraft_id().empty()) {
+                   return absl::InvalidArgumentError("spacecraft_id: required");
+                 }
+                 RETURN_IF_ERROR(core_->CheckSpacecraft(request->spacecraft_id()));
+                 esg::v1::CancelAutoDiagnosisResponse out;
+                 const std::optional<int64_t> answered =
+                     auto_diagnosis_->Cancel(request->spacecraft_id());
+                 out.set_cancelled(answered.has_value());
+                 out.set_answers_alert(answered.value_or(0));
+                 return out;
+               });
 }
 
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetCoefficientHistory(

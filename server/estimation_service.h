@@ -22,6 +22,7 @@
 #include "absl/synchronization/mutex.h"
 #include "esg/v1/estimation_service.grpc.pb.h"
 #include "server/auth.h"
+#include "server/auto_diagnosis.h"
 #include "server/call_counter.h"
 #include "server/call_limiter.h"
 #include "server/estimation_core.h"
@@ -53,8 +54,10 @@ struct CallLimits {
 class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackService {
  public:
   // `auth` may be null (no authentication). Neither is owned. Starts the prediction threads.
+  // Starts the automatic diagnosis (auto_diagnosis.h) unless auto_diagnosis.span is zero.
   EstimationServiceImpl(EstimationCore* core, const TokenAuthorizer* auth,
-                        const CallLimits& limits = {});
+                        const CallLimits& limits = {},
+                        const AutoDiagnosisOptions& auto_diagnosis = {});
   // Joins the prediction threads: destroy the service only after the gRPC server has shut down
   // (every call finished), as EsgServer does.
   ~EstimationServiceImpl() override;
@@ -107,6 +110,9 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerUnaryReactor* ReadmitGyro(grpc::CallbackServerContext* context,
                                         const esg::v1::ReadmitGyroRequest* request,
                                         esg::v1::ReadmitGyroResponse* response) override;
+  grpc::ServerUnaryReactor* CancelAutoDiagnosis(
+      grpc::CallbackServerContext* context, const esg::v1::CancelAutoDiagnosisRequest* request,
+      esg::v1::CancelAutoDiagnosisResponse* response) override;
 
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }
@@ -114,6 +120,8 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   CallLimiter& subscription_limiter() { return subscriptions_; }
   CallLimiter& export_limiter() { return exports_; }
   QueueBudget& queue_budget() { return queued_; }
+  // The service's own diagnosis of model mismatches; EsgServer stops it first at a shutdown.
+  AutoDiagnosis& auto_diagnosis() { return *auto_diagnosis_; }
   // The calls of this service not finished yet.
   CallCounter& calls() { return calls_; }
 
@@ -153,6 +161,7 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   CallLimiter subscriptions_;
   CallLimiter exports_;
   QueueBudget queued_;
+  std::unique_ptr<AutoDiagnosis> auto_diagnosis_;  // after diagnoses_, whose slots it takes
 
   absl::Mutex pool_mu_;
   std::deque<absl::AnyInvocable<void() &&>> pool_tasks_ ABSL_GUARDED_BY(pool_mu_);

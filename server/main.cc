@@ -126,6 +126,13 @@ int main(int argc, char** argv) {
   app.add_option("--max-stored-diagnoses", options.max_stored_diagnoses,
                  "Diagnoses kept per spacecraft (beyond: the oldest are deleted)")
       ->capture_default_str();
+  double auto_diagnosis_hours = absl::ToDoubleHours(options.auto_diagnosis.span);
+  app.add_option("--auto-diagnosis-hours", auto_diagnosis_hours,
+                 "Span of the service's own diagnosis of a MODEL_INCONSISTENT alert, hours of "
+                 "telemetry up to the last frame (and the least telemetry between two of one "
+                 "spacecraft under one configuration); 0: no automatic diagnosis")
+      ->check(CLI::Range(0.0, 24.0 * 366))
+      ->capture_default_str();
   app.add_option("--max-message-bytes", options.max_message_bytes,
                  "Largest request message in bytes (larger: RESOURCE_EXHAUSTED)")
       ->capture_default_str();
@@ -177,6 +184,7 @@ int main(int argc, char** argv) {
   options.synchronous =
       sync == "normal" ? esg::storage::Synchronous::kNormal : esg::storage::Synchronous::kFull;
   options.grpc_memory_bytes = grpc_memory_mb << 20;
+  options.auto_diagnosis.span = absl::Hours(auto_diagnosis_hours);
   options.calls.max_queued_bytes_per_caller = queued_mb_per_caller << 20;
   options.calls.max_queued_bytes = queued_mb << 20;
 

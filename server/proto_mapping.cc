@@ -237,6 +237,8 @@ esg::v1::DiagnosisResult DiagnosisToProto(const storage::DiagnosisRecord& r) {
   out.set_frames(r.frames);
   out.set_config_version(r.config_version);
   out.set_model(r.model_name);
+  out.set_requested_by(r.requested_by);
+  out.set_answers_alert(r.answers_alert);
   *out.mutable_first_frame_time() = proto_convert::TimeToProto(r.from_time);
   *out.mutable_last_frame_time() = proto_convert::TimeToProto(r.to_time);
   *out.mutable_compute_time() = proto_convert::TimeToProto(r.compute_time);

@@ -90,6 +90,11 @@ absl::Status CheckLimits(const ServerOptions& o) {
         absl::StrCat("grpc_memory_bytes: must be at least 4 x max_message_bytes (",
                      4 * o.max_message_bytes, "), got ", o.grpc_memory_bytes));
   }
+  if (o.auto_diagnosis.span < absl::ZeroDuration()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("auto_diagnosis_hours: must be >= 0, got ",
+                     absl::ToDoubleHours(o.auto_diagnosis.span)));
+  }
   if (o.handshake_timeout <= absl::ZeroDuration()) {
     return absl::InvalidArgumentError(absl::StrCat("handshake_timeout: must be > 0, got ",
                                                    absl::FormatDuration(o.handshake_timeout)));
@@ -217,7 +222,7 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   }
   ASSIGN_OR_RETURN(s->core_, EstimationCore::Start(s->storage_.get(), core_options));
   s->service_ = std::make_unique<EstimationServiceImpl>(
-      s->core_.get(), s->auth_ ? &*s->auth_ : nullptr, options.calls);
+      s->core_.get(), s->auth_ ? &*s->auth_ : nullptr, options.calls, options.auto_diagnosis);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -292,6 +297,9 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
                            ByteText(options.calls.max_queued_bytes_per_caller), " per caller, ",
                            ByteText(options.calls.max_queued_bytes), " in total; ",
                            options.max_stored_diagnoses, " stored diagnoses per spacecraft; "
+                           "automatic diagnosis ", options.auto_diagnosis.span > absl::ZeroDuration()
+                               ? absl::StrCat("over ", absl::FormatDuration(options.auto_diagnosis.span))
+                               : std::string("off"), "; "
                            "messages up to ",
                            options.max_message_bytes, " bytes; ",
                            options.max_streams_per_connection, " streams per connection"));
@@ -304,6 +312,8 @@ void EsgServer::Shutdown(absl::Duration deadline, absl::Duration drain) {
   if (grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService()) {
     health->Shutdown();
   }
+  // A running automatic diagnosis stops at its next check and stores nothing.
+  service_->auto_diagnosis().Stop();
   core_->alert_hub().CloseAll();
   core_->estimate_hub().CloseAll();
   // Ingest stops first, on every open stream: each sends the acks of what it queued once

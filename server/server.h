@@ -49,6 +49,9 @@ struct ServerOptions {
   // Diagnoses stored per spacecraft (storage/diagnosis_store.h): beyond it the oldest are
   // deleted. About 9 KB each: 1000 hold some 9 MB per spacecraft.
   int64_t max_stored_diagnoses = 1000;
+  // The service's own diagnosis of MODEL_INCONSISTENT alerts (server/auto_diagnosis.h): the span
+  // it diagnoses (esgd --auto-diagnosis-hours; zero: none).
+  AutoDiagnosisOptions auto_diagnosis;
   // Largest request message [bytes]; larger ones fail with RESOURCE_EXHAUSTED in gRPC before any
   // handler runs. 8 MiB holds a PredictRequest at the 100 000-sample limit with a planned
   // attitude (about 50 bytes a sample, 5 MB) and 100 000 explicit epochs (about 14 bytes each,
@@ -88,7 +91,7 @@ class EsgServer {
   EstimationCore& core() { return *core_; }
   EstimationServiceImpl& service() { return *service_; }
 
-  // Graceful stop: alert streams are closed, the gRPC server stops accepting and waits for the
+  // Graceful stop: the automatic diagnosis is cancelled, alert streams are closed, the gRPC server stops accepting and waits for the
   // running calls up to `deadline` (then cancels them), the committer flushes, and the workers
   // apply the durable backlog for up to `drain` before they stop. Idempotent.
   void Shutdown(absl::Duration deadline = absl::Seconds(5), absl::Duration drain = absl::Seconds(10));

@@ -12,14 +12,15 @@ namespace {
 
 #define ESG_DIAGNOSIS_COLUMNS                                                     \
   "id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, " \
-  "verdict, report_json, frames, config_version, model_name"
+  "verdict, report_json, frames, config_version, model_name, requested_by, answers_alert"
 constexpr char kSelectById[] = "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE id = ?1";
 constexpr char kSelectBySpacecraft[] =
     "SELECT " ESG_DIAGNOSIS_COLUMNS " FROM diagnoses WHERE spacecraft_id = ?1 ORDER BY id";
 // The same columns with an empty report (summaries; the index diagnoses_by_spacecraft).
 constexpr char kSelectSummaries[] =
     "SELECT id, spacecraft_id, from_time_unix_ns, to_time_unix_ns, compute_time_unix_ns, "
-    "verdict, '', frames, config_version, model_name FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
+    "verdict, '', frames, config_version, model_name, requested_by, answers_alert "
+    "FROM diagnoses WHERE spacecraft_id = ?1 AND id > ?2 ORDER BY id LIMIT ?3";
 #undef ESG_DIAGNOSIS_COLUMNS
 
 DiagnosisRecord ReadRow(const Statement& st) {
@@ -34,6 +35,8 @@ DiagnosisRecord ReadRow(const Statement& st) {
   r.frames = st.ColumnInt64(7);
   r.config_version = st.ColumnInt64(8);  // NULL (stored before version 11) reads as 0
   r.model_name = st.ColumnText(9);
+  r.requested_by = st.ColumnText(10);
+  r.answers_alert = st.ColumnInt64(11);
   return r;
 }
 
@@ -55,6 +58,10 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
   if (record.to_time < record.from_time) {
     return absl::InvalidArgumentError("diagnosis.to_time: earlier than from_time");
   }
+  if (record.answers_alert < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("diagnosis.answers_alert: must be >= 0, got ", record.answers_alert));
+  }
   if (record.frames < 0) {
     return absl::InvalidArgumentError(
         absl::StrCat("diagnosis.frames: must be >= 0, got ", record.frames));
@@ -63,8 +70,8 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
       Statement * st,
       txn.Prepare("INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, "
                   "to_time_unix_ns, compute_time_unix_ns, verdict, report_json, frames, "
-                  "config_version, model_name) "
-                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9) RETURNING id"));
+                  "config_version, model_name, requested_by, answers_alert) "
+                  "VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11) RETURNING id"));
   st->BindText(1, record.spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(record.from_time))
       .BindInt64(3, TimeToUnixNanos(record.to_time))
@@ -83,6 +90,7 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
   } else {
     st->BindNull(9);
   }
+  st->BindText(10, record.requested_by).BindInt64(11, record.answers_alert);
   ASSIGN_OR_RETURN(bool row, st->Step());
   if (!row) return absl::InternalError("INSERT INTO diagnoses returned no id");
   const int64_t id = st->ColumnInt64(0);

@@ -229,13 +229,16 @@ absl::string_view Upgrade(int version) {
       new std::string(KeyedCoefficientValuesMigration(Dialect::kPostgres));
   static const std::string* const readmissions =
       new std::string(ReadmissionsMigration(Dialect::kPostgres));
+  static const std::string* const origin =
+      new std::string(DiagnosisOriginMigration(Dialect::kPostgres));
   static constexpr absl::string_view kFrozen[] = {kCoefficientBasisTermsColumn,
                                                   kEstimateAttitudeErrorColumns};
-  static_assert(7 + std::size(kFrozen) + 2 == kCurrentSchemaVersion);
+  static_assert(7 + std::size(kFrozen) + 3 == kCurrentSchemaVersion);
   const int n = version - 7;
   if (n < static_cast<int>(std::size(kFrozen))) return kFrozen[n];
-  return n == static_cast<int>(std::size(kFrozen)) ? absl::string_view(*keyed_values)
-                                                   : absl::string_view(*readmissions);
+  const int built = n - static_cast<int>(std::size(kFrozen));
+  if (built == 0) return *keyed_values;
+  return built == 1 ? absl::string_view(*readmissions) : absl::string_view(*origin);
 }
 
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").

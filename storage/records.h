@@ -172,7 +172,15 @@ struct DiagnosisRecord {
   // ran on; 0 and empty for a diagnosis stored before schema version 11 (not recorded).
   int64_t config_version = 0;
   std::string model_name;
+  // Who asked for it: kRequestedByService for the service's automatic diagnosis of a
+  // MODEL_INCONSISTENT alert (docs/service.md "Automatic diagnosis"), empty for a Diagnose call
+  // (and for every diagnosis stored before schema version 12); answers_alert: the sequence of
+  // the alert an automatic diagnosis answers, 0 otherwise.
+  std::string requested_by;
+  int64_t answers_alert = 0;
 };
+
+inline constexpr const char* kRequestedByService = "service";
 
 // An operator's readmission of a gyro the filter excluded (docs/service.md "Readmitting a gyro"):
 // the gyro rejoins the filter at the first measurement step after `after_time`, the measurement

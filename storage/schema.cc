@@ -334,6 +334,13 @@ std::string ReadmissionsMigration(Dialect dialect) {
       ");\n");
 }
 
+std::string DiagnosisOriginMigration(Dialect dialect) {
+  const char* integer = dialect == Dialect::kSqlite ? "INTEGER" : "BIGINT";
+  return absl::StrCat(
+      "ALTER TABLE diagnoses ADD COLUMN requested_by TEXT NOT NULL DEFAULT '';\n"
+      "ALTER TABLE diagnoses ADD COLUMN answers_alert ", integer, " NOT NULL DEFAULT 0;\n");
+}
+
 namespace {
 
 // Version 10: coefficient values keyed by term (KeyedCoefficientValuesMigration).
@@ -349,10 +356,13 @@ absl::string_view Migration(int n) {
                                                   kSchemaV4, kSchemaV5, kSchemaV6,
                                                   kSchemaV7, kSchemaV8, kSchemaV9};
   static const std::string* const v11 = new std::string(ReadmissionsMigration(Dialect::kSqlite));
-  static_assert(std::size(kFrozen) + 2 == kCurrentSchemaVersion);
-  if (n < static_cast<int>(std::size(kFrozen))) return kFrozen[n];
-  return n == static_cast<int>(std::size(kFrozen)) ? absl::string_view(SchemaV10())
-                                                   : absl::string_view(*v11);
+  static const std::string* const v12 =
+      new std::string(DiagnosisOriginMigration(Dialect::kSqlite));
+  static_assert(std::size(kFrozen) + 3 == kCurrentSchemaVersion);
+  const int built = n - static_cast<int>(std::size(kFrozen));
+  if (built < 0) return kFrozen[n];
+  if (built == 0) return SchemaV10();
+  return built == 1 ? absl::string_view(*v11) : absl::string_view(*v12);
 }
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

@@ -27,6 +27,9 @@
 //  11  diagnoses.config_version and diagnoses.model_name (the configuration version and model a
 //      diagnosis ran on; NULL for those stored before); gyro_readmissions (operators'
 //      readmissions of excluded gyros, session_store.h).
+//  12  diagnoses.requested_by ('service' for the service's automatic diagnosis, '' for a
+//      Diagnose call; '' for those stored before) and diagnoses.answers_alert (the sequence of
+//      the MODEL_INCONSISTENT alert an automatic diagnosis answers; 0 otherwise).
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -55,10 +58,13 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 11;
+inline constexpr int kCurrentSchemaVersion = 12;
 
 // The DDL of version 11 in the dialect's types (SQLite INTEGER, PostgreSQL BIGINT).
 std::string ReadmissionsMigration(Dialect dialect);
+
+// The DDL of version 12 in the dialect's types: who asked for each diagnosis.
+std::string DiagnosisOriginMigration(Dialect dialect);
 
 // The DDL of version 8, the same in both dialects.
 inline constexpr absl::string_view kCoefficientBasisTermsColumn =

@@ -1,5 +1,5 @@
-// `esg diagnose --spacecraft ID` (Diagnose) and `esg diagnoses list|show` (ListDiagnoses,
-// GetDiagnosis); see server_diagnoses.h.
+// `esg diagnose --spacecraft ID` (Diagnose) and `esg diagnoses list|show|cancel-auto`
+// (ListDiagnoses, GetDiagnosis, CancelAutoDiagnosis); see server_diagnoses.h.
 #include "client/commands/server_diagnoses.h"
 
 #include <unistd.h>
@@ -42,11 +42,20 @@ std::vector<std::string> SummaryColumns() {
   return columns;
 }
 
+// "#ID spacecraft verdict first .. last, N frames, computed T", and ", automatic: answers alert
+// #N" for the service's own diagnosis (docs/service.md "Automatic diagnosis").
 std::string SummaryLine(const DiagnosisResult& d) {
-  return absl::StrFormat("#%d %s %-20s %s .. %s, %d frames, computed %s", d.id(), d.spacecraft_id(),
-                         d.verdict(), FormatUtc(d.first_frame_time(), d.has_first_frame_time()),
+  const std::string origin =
+      d.requested_by().empty()
+          ? std::string()
+          : absl::StrCat(", ", d.requested_by() == "service" ? "automatic" : d.requested_by(),
+                         d.answers_alert() > 0 ? absl::StrCat(": answers alert #", d.answers_alert())
+                                               : std::string());
+  return absl::StrFormat("#%d %s %-20s %s .. %s, %d frames, computed %s%s", d.id(),
+                         d.spacecraft_id(), d.verdict(),
+                         FormatUtc(d.first_frame_time(), d.has_first_frame_time()),
                          FormatUtc(d.last_frame_time(), d.has_last_frame_time()), d.frames(),
-                         FormatUtc(d.compute_time(), d.has_compute_time()));
+                         FormatUtc(d.compute_time(), d.has_compute_time()), origin);
 }
 
 // The human form of a result with its report: the summary line, the findings and the fit.
@@ -149,6 +158,28 @@ int RunList(const ListOptions& o, const GlobalOptions& global) {
   return kExitOk;
 }
 
+int RunCancelAuto(const ListOptions& o, const GlobalOptions& global) {
+  constexpr char kVerb[] = "diagnoses cancel-auto";
+  std::unique_ptr<EsgClient> client = Connect(kVerb, global);
+  if (client == nullptr) return kExitBadArguments;
+  esg::v1::CancelAutoDiagnosisRequest request;
+  request.set_spacecraft_id(o.spacecraft_id);
+  absl::StatusOr<esg::v1::CancelAutoDiagnosisResponse> r = client->CancelAutoDiagnosis(request);
+  if (!r.ok()) return ReportRpcError(kVerb, r.status(), global);
+  if (o.format == OutputFormat::kJson) {
+    PrintJson(ProtoToJson(*r));
+  } else if (o.format == OutputFormat::kCsv) {
+    PrintCsv({ProtoToJson(*r)}, ProtoCsvColumns(*r->GetDescriptor()));
+  } else if (r->cancelled()) {
+    std::printf("automatic diagnosis of %s (answering alert #%lld) cancelled; none starts again "
+                "under this configuration\n",
+                o.spacecraft_id.c_str(), static_cast<long long>(r->answers_alert()));
+  } else {
+    std::printf("no automatic diagnosis of %s waits or runs\n", o.spacecraft_id.c_str());
+  }
+  return kExitOk;
+}
+
 int RunShow(const ListOptions& o, const GlobalOptions& global) {
   constexpr char kVerb[] = "diagnoses show";
   if (o.id < 1) return ReportBadArgument(kVerb, absl::StrCat("--id ", o.id, ": must be >= 1"));
@@ -212,6 +243,16 @@ void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code) {
   show_cmd->add_option("--id", show->id, "diagnosis id (esg diagnoses list)")->required();
   AddFormatOption(show_cmd, &show->format);
   show_cmd->callback([show, &global, exit_code] { *exit_code = RunShow(*show, global); });
+
+  auto cancel = std::make_shared<ListOptions>();
+  CLI::App* cancel_cmd = cmd->add_subcommand(
+      "cancel-auto",
+      "cancel the service's own diagnosis of a spacecraft while it waits or runs "
+      "(CancelAutoDiagnosis, write role)");
+  cancel_cmd->add_option("--spacecraft", cancel->spacecraft_id, "spacecraft id")->required();
+  AddFormatOption(cancel_cmd, &cancel->format);
+  cancel_cmd->callback(
+      [cancel, &global, exit_code] { *exit_code = RunCancelAuto(*cancel, global); });
 }
 
 }  // namespace esg::client

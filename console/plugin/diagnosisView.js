@@ -1,6 +1,7 @@
 // One stored diagnosis (GET /api/spacecraft/:id/diagnoses/:n, GetDiagnosis with its report):
-// verdict, findings with their parameters and evidence, the mismatch found, the fit before and
-// after, and the gap errors as a bar chart. Report fields: docs/discovery.md "JSON".
+// verdict, whether esgd ran it itself and for which alert, findings with their parameters and
+// evidence, the mismatch found, the fit before and after, and the gap errors as a bar chart.
+// Report fields: docs/discovery.md "JSON".
 // "Apply to the model" (POST .../diagnoses/:n/apply, ApplyDiagnosis with the write role): what the
 // diagnosis would set (its `applies` lines) and what not, confirmed in a dialog, then the result:
 // the configuration version stored and the re-run from the archive, or esgd's refusal.
@@ -168,6 +169,11 @@ function render(container, d) {
       `${d.frames} frames from ${d.first_frame_time} to ${d.last_frame_time}; computed ${d.compute_time}; `,
       `${r.filterRuns ?? '-'} filter runs`),
     el('p', {}, 'Verdict: ', el('span', { class: 'verdict esg-verdict' }, d.verdict)),
+    // The service's own diagnosis of a MODEL_INCONSISTENT alert (docs/service.md "Automatic
+    // diagnosis"); its MODEL_DIAGNOSED alert carries this id.
+    ...(d.requested_by === 'service'
+      ? [el('p', { class: 'esg-automatic', 'data-answers-alert': String(d.answers_alert) },
+        `Automatic: esgd ran it for alert #${d.answers_alert} (MODEL_INCONSISTENT).`)] : []),
     // partly_explained: what the findings explain and what remains (docs/discovery.md).
     ...(r.consistency && r.consistency.summary
       ? [el('p', { class: 'esg-consistency' }, `Partly explained: ${r.consistency.summary}.`)] : []),

@@ -417,7 +417,7 @@ const builders = {
     if (!diagnosisSummaries.has(`${sc}\u0000${n}`)) await loadDiagnosisSummaries(sc);
     const summary = diagnosisSummaries.get(`${sc}\u0000${n}`);
     const name = summary
-      ? `Diagnosis ${n}: ${summary.verdict} (${(summary.compute_time || '').slice(0, 16).replace('T', ' ')})`
+      ? `Diagnosis ${n}: ${summary.verdict}${summary.requested_by === 'service' ? ', automatic' : ''} (${(summary.compute_time || '').slice(0, 16).replace('T', ' ')})`
       : `Diagnosis ${n}`;
     return { identifier, name, type: 'esg.diagnosis', esg: { spacecraft: sc, id: Number(n) },
       location: keyString(id('diags', sc)) };

@@ -1125,6 +1125,38 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
     '--out', recording]);
   await cli('configure', '--config', model1);
   await cli('replay', '--recording', recording, '--wait');
+  // esgd diagnoses the mismatch itself (docs/service.md "Automatic diagnosis"): the diagnosis is
+  // listed and shown as automatic, answering the MODEL_INCONSISTENT alert, and its MODEL_DIAGNOSED
+  // alert is in the alert list.
+  let automatic;
+  await timed(`automatic diagnosis of ${SC}`, async () => {
+    for (let i = 0; i < 600 && !automatic; i++) {
+      const listed = (await cliJson('diagnoses', 'list', '--spacecraft', SC)).diagnoses || [];
+      automatic = listed.find((d) => d.requestedBy === 'service');
+      if (!automatic) await sleep(200);
+    }
+  });
+  assert.ok(automatic, `no automatic diagnosis of ${SC}`);
+  let followUp;
+  for (let i = 0; i < 100 && !followUp; i++) {
+    followUp = (await cliJson('alerts', '--spacecraft', SC)).alerts
+      .find((a) => a.reason === 'ALERT_REASON_MODEL_DIAGNOSED');
+    if (!followUp) await sleep(200);
+  }
+  assert.ok(followUp, 'no MODEL_DIAGNOSED alert');
+  assert.equal(Number(followUp.value), Number(automatic.id));
+  assert.equal(Number(followUp.threshold), Number(automatic.answersAlert));
+  const answered = (await cliJson('alerts', '--spacecraft', SC)).alerts
+    .find((a) => Number(a.sequence) === Number(automatic.answersAlert));
+  assert.equal(answered.reason, 'ALERT_REASON_MODEL_INCONSISTENT');
+  assert.match(followUp.message, new RegExp(`answers alert #${automatic.answersAlert} \\(MODEL_INCONSISTENT ${answered.subsystem} at `));
+  await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${automatic.id}`);
+  await page.waitForSelector('.esg-automatic', { timeout: 20_000 });
+  assert.equal(await page.$eval('.esg-automatic', (p) => p.dataset.answersAlert), String(automatic.answersAlert));
+  await open('faults.taxonomy:faultManagement.view');
+  await page.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+    .some((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
+  { timeout: 20_000 }, `MODEL_DIAGNOSED #${followUp.sequence}`);
   const diagnosis = await timed(`esg diagnose --spacecraft ${SC}`, () => cliJson('diagnose', '--spacecraft', SC));
   assert.equal(diagnosis.verdict, 'rotor_displacement');
   assert.ok(diagnosis.applies && diagnosis.applies.length > 0, JSON.stringify(diagnosis.applies));

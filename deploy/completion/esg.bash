@@ -111,9 +111,10 @@ _esg() {
                     --max-effects --threads --integration-rate --effects --orbital-period $format" ;;
     diagnoses)
       case "$sub" in
-        "") COMPREPLY=($(compgen -W "list show" -- "$cur")); return ;;
+        "") COMPREPLY=($(compgen -W "list show cancel-auto" -- "$cur")); return ;;
         list) opts="--spacecraft --page-size $format" ;;
         show) opts="--spacecraft --id $format" ;;
+        cancel-auto) opts="--spacecraft $format" ;;
       esac
       ;;
     configure) opts="--config --model --replace $format" ;;

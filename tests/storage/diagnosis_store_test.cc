@@ -125,6 +125,32 @@ TEST_P(DiagnosisStoreTest, KeepsTheNewestPerSpacecraftBeyondItsBound) {
   EXPECT_THAT(diagnoses.List("RDK-2"), IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, *other))));
 }
 
+// An automatic diagnosis (docs/service.md "Automatic diagnosis") keeps who asked for it and the
+// alert it answers, in the full record and in the summaries; a requested one reads back empty/0.
+TEST_P(DiagnosisStoreTest, KeepsWhoAskedAndTheAlertAnswered) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  DiagnosisRecord automatic = Diagnosis("RDK-1", "rotor_displacement", 0);
+  automatic.requested_by = kRequestedByService;
+  automatic.answers_alert = 7;
+  absl::StatusOr<int64_t> requested = diagnoses.Put(Diagnosis("RDK-1", "none", 0));
+  absl::StatusOr<int64_t> answered = diagnoses.Put(automatic);
+  ASSERT_THAT(requested, IsOk());
+  ASSERT_THAT(answered, IsOk());
+  absl::StatusOr<DiagnosisRecord> got = diagnoses.Get(*answered);
+  ASSERT_THAT(got, IsOk());
+  EXPECT_EQ(got->requested_by, "service");
+  EXPECT_EQ(got->answers_alert, 7);
+  absl::StatusOr<std::vector<DiagnosisRecord>> summaries = diagnoses.ListSummaries("RDK-1", 0, 10);
+  ASSERT_THAT(summaries, IsOk());
+  ASSERT_EQ(summaries->size(), 2u);
+  EXPECT_EQ((*summaries)[0].requested_by, "");
+  EXPECT_EQ((*summaries)[0].answers_alert, 0);
+  EXPECT_EQ((*summaries)[1].requested_by, "service");
+  EXPECT_EQ((*summaries)[1].answers_alert, 7);
+}
+
 TEST_P(DiagnosisStoreTest, RejectsInvalidRecords) {
   absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
   ASSERT_THAT(storage, IsOk());
@@ -141,6 +167,10 @@ TEST_P(DiagnosisStoreTest, RejectsInvalidRecords) {
   negative.frames = -1;
   EXPECT_THAT(diagnoses.Put(negative),
               StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("diagnosis.frames")));
+  DiagnosisRecord no_alert = Diagnosis("RDK-1", "unexplained", 0);
+  no_alert.answers_alert = -2;
+  EXPECT_THAT(diagnoses.Put(no_alert),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("diagnosis.answers_alert")));
   EXPECT_THAT(diagnoses.List("RDK-1"), IsOkAndHolds(IsEmpty()));
 }
 

@@ -421,6 +421,35 @@ TEST(Schema, EstimatesOfAVersion8FileReadBackWithoutAnAttitudeErrorAfterTheMigra
   EXPECT_NEAR(estimator::RadToArcsec(page->records[1].attitude_error_sigma_b[0]), 2.0, 1e-12);
 }
 
+// A version-11 file: its diagnoses read back as requested ones (requested_by empty, answering no
+// alert) after the migration to version 12.
+TEST(Schema, Version11DiagnosesReadBackAsRequestedOnes) {
+  TempDir dir;
+  const std::string path = dir.File("v11.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 11), IsOk());
+    EXPECT_THAT(Columns(**db, "diagnoses"), ::testing::Not(::testing::Contains("requested_by")));
+    ASSERT_THAT((*db)->Execute(absl::StrCat(
+                    "INSERT INTO diagnoses (spacecraft_id, from_time_unix_ns, to_time_unix_ns, "
+                    "compute_time_unix_ns, verdict, report_json, frames, config_version, "
+                    "model_name) VALUES ('SC-A', ",
+                    TimeToUnixNanos(T(60)), ", ", TimeToUnixNanos(T(600)), ", ",
+                    TimeToUnixNanos(T(900)), ", 'rotor_displacement', '{}', 10, 1, '10+11');")),
+                IsOk());
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  absl::StatusOr<std::vector<DiagnosisRecord>> old = (*storage)->diagnoses().List("SC-A");
+  ASSERT_THAT(old, IsOk());
+  ASSERT_EQ(old->size(), 1u);
+  EXPECT_EQ((*old)[0].requested_by, "");
+  EXPECT_EQ((*old)[0].answers_alert, 0);
+  EXPECT_EQ((*old)[0].config_version, 1);
+}
+
 // A version-10 file: its diagnoses read back without the configuration they ran on (0 and empty:
 // ApplyDiagnosis refuses them), new ones store it; readmissions of excluded gyros are stored and
 // listed by time, the same gyro after the same time once.
