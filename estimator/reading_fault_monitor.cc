@@ -25,6 +25,16 @@ using Eigen::VectorXd;
 
 namespace {
 
+// A verdict's figures, finite: a rate change or a jump so far beyond its bound that its norm or
+// chi-square overflows (a corrupt state, not a sensor) saturates at the largest double, so the
+// verdict stands and the session's checkpoint, which refuses a non-finite real, still restores
+// (docs/fuzzing.md, finding 9). A NaN never makes a verdict (every test compares with >=).
+ReadingFaultMonitor::Result Saturated(ReadingFaultMonitor::Result r) {
+  constexpr double kMax = std::numeric_limits<double>::max();
+  for (double* x : {&r.value, &r.threshold, &r.statistic}) *x = std::clamp(*x, -kMax, kMax);
+  return r;
+}
+
 // Regressors of the line, optionally with a jump at point `jump_at` or a rate change at time
 // `onset` (relative to the last point), or with a quadratic term: k (2 or 3) per point, no
 // allocation beyond the one vector.
@@ -171,7 +181,7 @@ std::vector<ReadingFaultMonitor::Result> ReadingFaultMonitor::AddStep(
 
   std::vector<Result> out;
   for (const auto& [key, track] : tracks_) {
-    out.push_back(Judge(key / 2, static_cast<Source>(key % 2), track));
+    out.push_back(Saturated(Judge(key / 2, static_cast<Source>(key % 2), track)));
   }
   // The star tracker's rule: a verdict that another gyro shares at this step is nobody's.
   int st_verdicts = 0;

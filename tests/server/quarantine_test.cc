@@ -373,6 +373,26 @@ TEST(Quarantine, CheckpointWithATinyNormalInitialVarianceStaysRestorableAfterAFr
   EXPECT_TRUE(again.ok()) << again.status();
 }
 
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 9): a checkpoint that restores,
+// whose next frame moves a gyro's track by about 1e149 rad/s; the reading-fault monitor's
+// verdict "beyond the drift bound" is right, but its chi-square overflowed to inf, the session
+// kept it as the gyro's reading verdict, and its own checkpoint, which refuses a non-finite real,
+// did not restore. The verdict's figures now saturate at the largest double.
+TEST(Quarantine, AReadingVerdictWhoseStatisticOverflowsLeavesARestorableCheckpoint) {
+  estimator::SessionOptions options;
+  absl::StatusOr<estimator::EstimationSession> s =
+      RestoreCorpusBlob("regression-rate-change-overflow.bin", &options);
+  ASSERT_TRUE(s.ok()) << s.status();
+  (void)s->AddFrame(fuzz::NextFrame(*s, Rdk1()));
+  const estimator::SessionCheckpoint after = s->ExportCheckpoint();
+  for (size_t i = 0; i < after.values.size(); ++i) {
+    ASSERT_TRUE(std::isfinite(after.values[i])) << "value " << i;
+  }
+  const absl::StatusOr<estimator::EstimationSession> again =
+      estimator::EstimationSession::FromCheckpoint(Rdk1(), options, after);
+  EXPECT_TRUE(again.ok()) << again.status();
+}
+
 TEST(Quarantine, UnusableConfigurationRefusesItsFramesUntilReconfigured) {
   TempDir dir;
   const std::string db = dir.File("esg.db");
