@@ -43,6 +43,12 @@ struct EstimateFeed {
         "estimate subscriber too slow, dropped: ", why,
         "; subscribe again with since = the last measurement_time received");
   }
+  static std::string ReplayStoppedMessage(size_t records, int64_t bytes, absl::string_view why) {
+    return absl::StrCat("estimate replay stopped: the page of ", records,
+                        " stored estimates read for it (", bytes,
+                        " bytes) would pass the bound: ", why,
+                        "; subscribe again with since = the last measurement_time received");
+  }
   static Message ToProto(const Record& r) { return EstimateToProto(r); }
   static int64_t RecordBytes(const Record& r) {
     return static_cast<int64_t>(
@@ -83,7 +89,8 @@ struct EstimateFeed {
   absl::Time since = absl::InfiniteFuture();
 };
 
-// The replay is read a page at a time, each page once the previous one is written.
+// The replay is read a page at a time, each page once the previous one is written and charged to
+// the caller's bound while it is held (SubscriptionReactor::OfferPage).
 class EstimateReactor : public SubscriptionReactor<EstimateFeed> {
  public:
   EstimateReactor(CallCounter* calls, EstimationCore* core,
@@ -118,15 +125,7 @@ class EstimateReactor : public SubscriptionReactor<EstimateFeed> {
       absl::Time since;
       {
         absl::MutexLock lock(&s.mu);
-        if (s.finished) return;
-        if (!s.replaying || !s.queue.empty()) {
-          TryWrite(s);
-          return;
-        }
-        if (s.feed.index >= s.feed.ids.size()) {
-          CompleteReplay(s);
-          return;
-        }
+        if (!ReadyForPage(s, s.feed.index >= s.feed.ids.size())) return;
         id = s.feed.ids[s.feed.index];
         after = s.feed.after;
         since = s.feed.since;
@@ -137,11 +136,7 @@ class EstimateReactor : public SubscriptionReactor<EstimateFeed> {
       absl::StatusOr<storage::EstimatePage> page = core()->storage().estimates().Page(
           id, since, absl::InfiniteFuture(), after, kEstimateReplayPage);
       absl::MutexLock lock(&s.mu);
-      if (!page.ok()) {
-        FinishOnce(s, page.status());
-        return;
-      }
-      for (const storage::EstimateRecord& r : page->records) Offer(s, r);
+      if (!OfferPage(s, page.status(), page.ok() ? &page->records : nullptr)) return;
       if (page->next.has_value()) {
         s.feed.after = page->next;
       } else {

@@ -21,6 +21,10 @@
 //                                              unread messages of its caller, or of all
 //                                              subscribers, reached their bound (`why`, from
 //                                              QueueBudget)
+//   static std::string ReplayStoppedMessage(   the message of a stream finished because a page
+//       size_t records, int64_t bytes,         of its replay (`records` read, about `bytes` on
+//       absl::string_view why)                 the heap) would pass its caller's or all
+//                                              subscribers' bound (`why`, from QueueBudget)
 //   static Message ToProto(const Record&)
 //   static int64_t RecordBytes(const Record&)  about what a record holds on the heap (charged
 //                                              to the QueueBudget while it is buffered or read)
@@ -32,8 +36,9 @@
 //
 // Bounds (docs/service.md "Limits"): the stream holds its caller's subscription slot (a Permit)
 // from its start until it is finished, and charges every queued message to its caller's
-// QueueBudget account until the message is written, and every live record buffered during the
-// replay until it is released (a replay read as the client keeps up may take long). Finishing
+// QueueBudget account until the message is written, every live record buffered during the
+// replay until it is released (a replay read as the client keeps up may take long), and every
+// page of the replay from its read until its records are queued (OfferPage). Finishing
 // the stream (an error, a cancel, a drop) gives back the slot, discards what is still queued and
 // buffered and the Feed's dedupe state, and notes the freed memory (memory_release.h), so a
 // dropped or cancelled subscriber's memory is returned at once, not when gRPC is done with the
@@ -204,6 +209,48 @@ class SubscriptionReactor : public grpc::ServerWriteReactor<typename Feed::Messa
   virtual void Pump() {
     absl::MutexLock lock(&shared_->mu);
     TryWrite(*shared_);
+  }
+
+  // At the top of a replaying reactor's Pump, under the lock: whether to read the next page of
+  // the replay now. Otherwise it has done what there is to do: nothing (the stream is finished),
+  // written what is queued (the replay is over, or the client has not yet taken the last page),
+  // or completed the replay (`last_page_read`).
+  static bool ReadyForPage(Shared& s, bool last_page_read) ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.finished) return false;
+    if (!s.replaying || !s.queue.empty()) {
+      TryWrite(s);
+      return false;
+    }
+    if (last_page_read) {
+      CompleteReplay(s);
+      return false;
+    }
+    return true;
+  }
+
+  // A page of the replay, read outside the lock (`read` its status, `page` null when it failed):
+  // charged to the caller's
+  // QueueBudget account from the read until its records are queued, each then charged as a
+  // message, so a client that does not read holds one page at most. A failed read, or a page
+  // that would take the caller or all subscribers beyond their bound (RESOURCE_EXHAUSTED,
+  // Feed::ReplayStoppedMessage), finishes the stream. Returns whether the stream goes on.
+  static bool OfferPage(Shared& s, const absl::Status& read, const std::vector<Record>* page)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(s.mu) {
+    if (s.finished) return false;
+    if (!read.ok()) {
+      FinishOnce(s, read);
+      return false;
+    }
+    const int64_t page_bytes = BufferedBytes(*page);
+    if (absl::Status charged = s.hold.queue.Charge(page_bytes); !charged.ok()) {
+      FinishOnce(s, absl::ResourceExhaustedError(
+                        Feed::ReplayStoppedMessage(page->size(), page_bytes, charged.message())));
+      NoteFreedMemory(page_bytes);
+      return false;
+    }
+    for (const Record& r : *page) Offer(s, r);
+    s.hold.queue.Refund(page_bytes);
+    return !s.finished;
   }
 
   // Queues `r` if the Feed admits it; a full queue (TooSlow), or a charge its caller's or all

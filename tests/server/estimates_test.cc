@@ -531,6 +531,28 @@ TEST(EstimateSubscription, ReplayThenMarkerThenLiveWithoutGapOrDuplicateWhileFra
   }
 }
 
+// A page of the replay counts against its caller's bound from its read until its estimates are
+// queued, as an alert replay's page does: a caller whose bound one page passes is told so, by
+// name, instead of the server holding the page beyond the bound.
+TEST(EstimateSubscription, AReplayPageBeyondTheCallersBoundEndsTheStreamNamingIt) {
+  ServerOptions options;
+  options.calls.max_queued_bytes_per_caller = 64 << 10;
+  LoopbackServer server(options);
+  auto stub = server.Stub();
+  const SimulatedRun run = Renamed(Run13h(), "EST-PAGE");
+  Configure(*stub, run);
+  Stream(*stub, Frames(run, 0, 600));  // a full first page (500)
+  ASSERT_TRUE(server.core().WaitApplied("EST-PAGE", absl::Seconds(60)).ok());
+  Subscriber sub(*stub, Subscription("EST-PAGE", true, TimeOf(run.frames[0].time())));
+  const grpc::Status status = sub.Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+  EXPECT_THAT(status.error_message(),
+              StartsWith("estimate replay stopped: the page of 500 stored estimates read for it ("));
+  EXPECT_THAT(status.error_message(), HasSubstr("--max-queued-mb-per-caller"));
+  EXPECT_TRUE(sub.Received().empty());
+  EXPECT_EQ(server.get()->service().queue_budget().held(), 0);
+}
+
 TEST(EstimateSubscription, AllSpacecraftReplayAndLiveAndOneSpacecraftSeesOnlyItsOwn) {
   LoopbackServer server;
   auto stub = server.Stub();
