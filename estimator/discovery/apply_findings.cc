@@ -43,6 +43,16 @@ AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisRepo
       out.applied.push_back(line);
       continue;
     }
+    if (f.effect == kVerdictUnexplained) {
+      // Beside findings (partly_explained): what they leave, applied or not.
+      out.not_applied.push_back(absl::StrCat(
+          name, ": ",
+          report.verdict == kVerdictPartlyExplained
+              ? "what the other findings leave unexplained (verdict partly_explained): "
+              : "",
+          "a mismatch no effect explains; nothing in the configuration describes it"));
+      continue;
+    }
     // The readout group is not of the library: its findings are kEffectBasisTerm.
     const std::optional<Effect> effect = EffectFromId(f.effect);
     if (!effect.has_value() || *effect == Effect::kReadoutDistortion) {

@@ -11,7 +11,8 @@
 //   basis_term (gyro N): its basis terms and readout distortion (WithBasisFindings).
 // Findings that do not: star_tracker_misalignment (the configuration holds no star-tracker
 // mounting), random_walk_drift of one gyro (one intensity is configured for all), drift_step (a
-// change in time, not a constant of the configuration), and unexplained mismatches.
+// change in time, not a constant of the configuration), and unexplained mismatches. A verdict
+// partly_explained applies the findings that map, its unexplained one among those that do not.
 #ifndef ESG_ESTIMATOR_DISCOVERY_APPLY_FINDINGS_H_
 #define ESG_ESTIMATOR_DISCOVERY_APPLY_FINDINGS_H_
 

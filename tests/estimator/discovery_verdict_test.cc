@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "estimator/discovery/apply_findings.h"
 #include "estimator/discovery/consistency.h"
 #include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/held_out.h"
@@ -133,6 +134,29 @@ TEST(ModelConsistency, AHeldOutNeesAboveItsChiSquareBoundFailsAndTheSharesAreOfT
   EXPECT_EQ(rest.finding.gyro, 2);
   EXPECT_EQ(rest.where.regime, "inertial");
   EXPECT_THAT(rest.finding.explanation, HasSubstr("held-out NEES 28.0 on 6 dof"));
+}
+
+// `esg model apply` of a partly explained diagnosis applies the findings that map and lists the
+// unexplained rest as not applied, saying what it is.
+TEST(ApplyPartlyExplained, TheFindingsAreAppliedAndTheRestIsListedAsNotApplied) {
+  const SpacecraftConfig config = ::esg::testing::DiscoveryConfig();
+  DiagnosisReport report;
+  report.verdict = kVerdictPartlyExplained;
+  Finding latency;
+  latency.effect = "star_tracker_latency";
+  latency.parameters.push_back({"latencyMs", 250.0, 5.0, "ms"});
+  Finding rest;
+  rest.effect = kVerdictUnexplained;
+  rest.gyro = 2;
+  report.findings = {latency, rest};
+  const AppliedFindings applied = WithFindings(config, report);
+  ASSERT_EQ(applied.applied.size(), 1u);
+  EXPECT_THAT(applied.applied.front(), HasSubstr("starTracker.latencyS = 0.25"));
+  EXPECT_NEAR(applied.config.star_tracker.latency, 0.25, 1e-12);
+  ASSERT_EQ(applied.not_applied.size(), 1u);
+  EXPECT_THAT(applied.not_applied.front(),
+              HasSubstr("unexplained (gyro 2): what the other findings leave unexplained (verdict "
+                        "partly_explained)"));
 }
 
 // The star tracker's mount misalignment cycling with the orbit, 30 arcsec about a tilted body
