@@ -8,6 +8,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/discovery/candidate.h"
+#include "estimator/discovery/sun_terms.h"
 #include "estimator/model_terms.h"
 #include "estimator/units.h"
 
@@ -29,6 +30,14 @@ AppliedFindings WithFindings(const SpacecraftConfig& config, const DiagnosisRepo
     GyroConfig* g = f.gyro > 0 ? FindGyroMutable(out.config, f.gyro) : nullptr;
     if (f.gyro > 0 && g == nullptr) {
       out.not_applied.push_back(absl::StrFormat("%s: gyro %d is not configured", name, f.gyro));
+      continue;
+    }
+    if (f.effect == kEffectBasisTerm && f.time.kind == kTimeFollowsSun) {
+      out.not_applied.push_back(absl::StrCat(
+          name,
+          ": a drift that follows the sun through a thermal lag; the filter has no state for the "
+          "lag, so no configuration field describes it (docs/discovery.md, \"A drift that follows "
+          "the sun\")"));
       continue;
     }
     if (f.effect == kEffectBasisTerm) {

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation.h"
+#include "estimator/discovery/sun_terms.h"
 #include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/discovery/wander.h"
@@ -38,6 +39,7 @@ std::pair<double, std::string> JsonValue(const BasisColumn& c, double value) {
 }
 
 std::string TimeKind(const SelectedGroup& g) {
+  if (g.sun_face >= 0) return kTimeFollowsSun;
   if (g.columns.empty() || g.columns.front().column.readout) return "constant";
   switch (g.columns.front().column.term.kind) {
     case BasisKind::kOrbitalHarmonic:
@@ -153,6 +155,22 @@ void DescribeVoltageDrivenDrift(const SpacecraftConfig& config,
   }
 }
 
+// A selected sun group held in the model as a correction of its gyro's readings (sun_terms.h).
+ReadingShift HeldSunDrift(const SelectedGroup& g, const std::vector<DeviationSeries>& series,
+                          const std::vector<SunRegressors>& sun,
+                          const std::vector<TelemetryFrame>& corrected,
+                          const DiagnosisContext& context, const SelectedModel& selected) {
+  const SunRegressors* regressors = FindSunRegressors(sun, g.gyro);
+  const DeviationSeries* s = nullptr;
+  for (const DeviationSeries& d : series) {
+    if (d.gyro == g.gyro) s = &d;
+  }
+  if (regressors == nullptr || s == nullptr) return ReadingShift{g.gyro, nullptr};
+  const CarriedAttitude attitude = AttitudeAlongRecording(corrected, context.rates(), selected.run);
+  return SunReadingShift(g, *s, *regressors, corrected, attitude,
+                         ModelMounting_b_k(selected.model.config, selected.run.gyros, g.gyro));
+}
+
 }  // namespace
 
 std::vector<Parameter> ReadoutParameters(const SelectedGroup& group) {
@@ -187,6 +205,9 @@ ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage
   for (const auto& [gyro, E] : stage.added_distortions) {
     if (GyroConfig* gc = FindGyroMutable(out.config, gyro)) gc->readout_distortion += E;
   }
+  for (const ReadingShift& shift : stage.added_shifts) {
+    out.correction.reading_shifts.push_back(shift);
+  }
   for (const SelectedGroup& g : stage.stage.selected) {
     out.added.push_back(absl::StrCat(kEffectBasisTerm, "[", g.gyro, "] ", g.label));
   }
@@ -209,6 +230,8 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   o.orbital_period_s =
       opt.orbital_period_s > 0.0 ? opt.orbital_period_s : OrbitalPeriod(context.regimes());
   o.epoch = context.frames().front().time;
+  std::string sun_note;
+  o.sun = SunRegressorsOf(*series, model.config, selected.run.gyros, &sun_note);
   for (const GyroConfig& g : model.config.gyros) {
     o.column_budget.emplace_back(
         g.id, std::max(0, kMaxBasisTermsPerGyro - static_cast<int>(g.basis_terms.size())));
@@ -240,14 +263,21 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
         stage.best_label, stage.best_gyro, stage.best_evidence, stage.best_threshold,
         stage.groups_tested);
   }
+  if (!sun_note.empty()) absl::StrAppend(&out.resembles, "; ", sun_note);
   if (stage.selected.empty()) return out;
 
   // The model with the selected terms, refitted by the filter.
   std::vector<int> first_term(stage.selected.size(), 0);  // index in the gyro's basis_terms
+  double sun_occam = 0.0;
   for (size_t i = 0; i < stage.selected.size(); ++i) {
     const SelectedGroup& g = stage.selected[i];
     const GyroConfig* gc = model.config.FindGyro(g.gyro);
     if (gc == nullptr) continue;
+    if (g.sun_face >= 0) {  // held as a correction of the readings (sun_terms.h)
+      out.added_shifts.push_back(HeldSunDrift(g, *series, o.sun, corrected, context, selected));
+      sun_occam += ReadoutOccam(g);
+      continue;
+    }
     int before = static_cast<int>(gc->basis_terms.size());
     for (const auto& [gyro, term] : out.added_terms) before += gyro == g.gyro ? 1 : 0;
     first_term[i] = before;
@@ -266,7 +296,7 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   if (!run.ok()) return run.status();
   const ProfiledDeviance fit = Profile(*run);
   out.refitted = true;
-  out.refit_evidence = selected.fit.value - fit.value;
+  out.refit_evidence = selected.fit.value - fit.value - sun_occam;
   out.refit_threshold = 0.0;
   for (const SelectedGroup& g : stage.selected) out.refit_threshold = std::max(out.refit_threshold, g.threshold);
   if (!(out.refit_evidence > out.refit_threshold)) {
@@ -283,7 +313,7 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     const GyroEstimate* estimate = FindEstimate(run->gyros, g.gyro);
     int term = first_term[i];
     for (FittedColumn& c : g.columns) {
-      if (c.column.readout) continue;
+      if (c.column.readout || g.sun_face >= 0) continue;
       if (estimate != nullptr && term < static_cast<int>(estimate->basis_terms.size()) &&
           term < static_cast<int>(estimate->basis_sigma.size())) {
         c.value = estimate->basis_terms[term].value;
@@ -294,15 +324,26 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     Finding f;
     f.effect = kEffectBasisTerm;
     f.gyro = g.gyro;
-    f.description = DescribeGroup(g, o);
+    f.description = g.sun_face >= 0 ? absl::StrFormat("gyro %d: %s%s", g.gyro,
+                                                      DescribeSunGroup(g), DescribeAlternatives(g))
+                                    : DescribeGroup(g, o);
     f.time.kind = TimeKind(g);
     const GyroConfig* gc = extended.config.FindGyro(g.gyro);
     if (!g.columns.empty() && g.columns.front().column.readout) {
       f.parameters = ReadoutParameters(g);
       if (gc != nullptr) f.readout_distortion = gc->readout_distortion;
     }
+    if (g.sun_face >= 0) {
+      f.parameters = SunParameters(g);
+      f.evidence.notes.push_back(absl::StrFormat(
+          "the drift that follows the sun is held in the refit at the regression's values, as a "
+          "correction of gyro %d's readings (the filter has no state for the thermal lag); its "
+          "values and sigmas are the regression's, and the refit's 2 ln B is its improvement of "
+          "-2 log L less the Occam term of the held coefficients (%.1f)",
+          g.gyro, ReadoutOccam(g)));
+    }
     for (const FittedColumn& c : g.columns) {
-      if (c.column.readout) continue;
+      if (c.column.readout || g.sun_face >= 0) continue;
       const auto [value, unit] = JsonValue(c.column, c.value);
       const auto [sigma, unused] = JsonValue(c.column, c.sigma);
       f.parameters.push_back(Parameter{absl::StrCat("basis[", c.column.label, "]"), value,

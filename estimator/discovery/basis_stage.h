@@ -34,7 +34,10 @@ struct BasisStageResult {
   // model (selection.h: the basis against a time behaviour).
   std::vector<std::pair<int, BasisTerm>> added_terms;
   std::vector<std::pair<int, Eigen::Matrix3d>> added_distortions;
-  // The refitted filter's evidence for all the terms together, 2 ln B, and its threshold.
+  // The drifts that follow the sun, held as corrections of the gyros' readings (sun_terms.h).
+  std::vector<ReadingShift> added_shifts;
+  // The refitted filter's evidence for all the terms together, 2 ln B (less the Occam term of the
+  // sun groups, held at their fitted values), and its threshold.
   double refit_evidence = 0.0;
   double refit_threshold = 0.0;
   bool refitted = false;

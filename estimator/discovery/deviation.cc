@@ -64,34 +64,45 @@ DriftFunction ModelDrift(const DriftCoefficients& coefficients,
   };
 }
 
+CarriedAttitude AttitudeAlongRecording(const std::vector<TelemetryFrame>& frames,
+                                       const BodyRates& rates, const ModelRun& run) {
+  const int n = static_cast<int>(frames.size());
+  CarriedAttitude out;
+  // Samples: the star tracker the model's filter applied (in sample, accepted).
+  out.usable.assign(n, false);
+  for (const StepRecord& s : run.steps) {
+    if (s.star_tracker_present && s.accepted && !s.withheld && s.frame >= 0 && s.frame < n) {
+      out.usable[s.frame] = true;
+    }
+  }
+  // Attitude at every frame: the star tracker where usable, else carried from the previous frame
+  // by the gyros' measured rotation over the step.
+  out.q_in_b.assign(n, Quaterniond::Identity());
+  out.known.assign(n, false);
+  for (int i = 0; i < n; ++i) {
+    if (out.usable[i]) {
+      out.q_in_b[i] = frames[i].star_tracker->q_in_b.normalized();
+      out.known[i] = true;
+    } else if (i > 0 && out.known[i - 1]) {
+      const bool step_valid = static_cast<size_t>(i - 1) < rates.gyro_step_valid.size() &&
+                              rates.gyro_step_valid[i - 1];
+      out.q_in_b[i] = step_valid
+                          ? (out.q_in_b[i - 1] * ExpQuaternion(rates.gyro_step[i - 1])).normalized()
+                          : out.q_in_b[i - 1];
+      out.known[i] = true;
+    }
+  }
+  return out;
+}
+
 absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
     const SpacecraftConfig& config, const std::vector<GyroEstimate>& estimates,
     const std::vector<TelemetryFrame>& frames, const BodyRates& rates, const ModelRun& run,
     const std::vector<int>& gyros) {
   const int n = static_cast<int>(frames.size());
-  // Samples: the star tracker the model's filter applied (in sample, accepted).
-  std::vector<bool> usable(n, false);
-  for (const StepRecord& s : run.steps) {
-    if (s.star_tracker_present && s.accepted && !s.withheld && s.frame >= 0 && s.frame < n) {
-      usable[s.frame] = true;
-    }
-  }
-  // Attitude at every frame: the star tracker where usable, else carried from the previous frame
-  // by the gyros' measured rotation over the step.
-  std::vector<Quaterniond> q_in_b(n, Quaterniond::Identity());
-  std::vector<bool> attitude_known(n, false);
-  for (int i = 0; i < n; ++i) {
-    if (usable[i]) {
-      q_in_b[i] = frames[i].star_tracker->q_in_b.normalized();
-      attitude_known[i] = true;
-    } else if (i > 0 && attitude_known[i - 1]) {
-      const bool step_valid = static_cast<size_t>(i - 1) < rates.gyro_step_valid.size() &&
-                              rates.gyro_step_valid[i - 1];
-      q_in_b[i] = step_valid ? (q_in_b[i - 1] * ExpQuaternion(rates.gyro_step[i - 1])).normalized()
-                             : q_in_b[i - 1];
-      attitude_known[i] = true;
-    }
-  }
+  const CarriedAttitude attitude = AttitudeAlongRecording(frames, rates, run);
+  const std::vector<bool>& usable = attitude.usable;
+  const std::vector<Quaterniond>& q_in_b = attitude.q_in_b;
   const Matrix3d S_st_b = config.star_tracker.noise.cwiseAbs2().asDiagonal();
   const double readout_var = config.readout_noise * config.readout_noise;
   const absl::Time t0 = frames.front().time;

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "Eigen/Geometry"
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
@@ -78,6 +79,18 @@ std::vector<Eigen::Vector2d> ReadoutSignature(const DeviationSeries& series,
 // configuration's basis terms.
 DriftFunction ModelDrift(const DriftCoefficients& coefficients,
                          const std::vector<BasisTerm>& basis_terms);
+
+// The attitude at every frame of a recording as the deviation uses it: the star tracker (already
+// corrected) where `run`, the model's full run, applied it (in sample, accepted: `usable`), else
+// carried from the previous frame by the gyros' measured rotation (regimes.h
+// BodyRates::gyro_step); `known` is false before the first usable sample.
+struct CarriedAttitude {
+  std::vector<Eigen::Quaterniond> q_in_b;
+  std::vector<bool> known;
+  std::vector<bool> usable;
+};
+CarriedAttitude AttitudeAlongRecording(const std::vector<TelemetryFrame>& frames,
+                                       const BodyRates& rates, const ModelRun& run);
 
 // The deviation series of each gyro in `gyros` from the model of `config` whose final estimates
 // are `estimates` (coefficients, misalignments), on `frames` (star tracker already corrected by

@@ -27,6 +27,15 @@ std::vector<TelemetryFrame> CorrectStarTracker(const std::vector<TelemetryFrame>
     st->q_in_b =
         (st->q_in_b.normalized() * q_mis * ExpQuaternion(w_b * correction.latency)).normalized();
   }
+  for (const ReadingShift& shift : correction.reading_shifts) {
+    if (shift.dh_k == nullptr || shift.gyro < 1) continue;
+    const size_t g = static_cast<size_t>(shift.gyro - 1);
+    for (size_t i = 0; i < out.size() && i < shift.dh_k->size(); ++i) {
+      if (g >= out[i].gyros.size() || !out[i].gyros[g].has_value()) continue;
+      Vector3d& h_k = out[i].gyros[g]->h_k;
+      h_k = (h_k - (*shift.dh_k)[i]).normalized();
+    }
+  }
   return out;
 }
 

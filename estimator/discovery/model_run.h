@@ -9,6 +9,7 @@
 #define ESG_ESTIMATOR_DISCOVERY_MODEL_RUN_H_
 
 #include <array>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -26,13 +27,26 @@ namespace esg::estimator::discovery {
 // q_st(t) = q_in_b(t - latency) (x) Exp(misalignment_b); its correction is
 // q_in_b(t) = q_st(t) (x) Exp(-misalignment_b) (x) Exp(w_b_in_b(t) latency), to first order in
 // the latency (the rate w_b_in_b measured from the gyros, regimes.h).
+//
+// A drift the model holds at fitted values outside the filter's drift model (a drift that
+// follows the sun, sun_terms.h) corrects one gyro's readings instead: the spin-axis motion it
+// caused, dh_k in case axes at every frame, is taken off the reading, h_k <- normalise(h_k -
+// dh_k), as if the rotor had not drifted (held at its value, like a readout distortion).
+struct ReadingShift {
+  int gyro = 0;
+  std::shared_ptr<const std::vector<Eigen::Vector3d>> dh_k;  // per frame, case axes [1]
+};
 struct StarTrackerCorrection {
   double latency = 0.0;                                      // [s], positive: stamped late
   Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();  // [rad]
-  bool IsZero() const { return latency == 0.0 && misalignment_b.isZero(0.0); }
+  std::vector<ReadingShift> reading_shifts;
+  bool IsZero() const {
+    return latency == 0.0 && misalignment_b.isZero(0.0) && reading_shifts.empty();
+  }
 };
 
-// A copy of the frames with every star-tracker quaternion corrected.
+// A copy of the frames with every star-tracker quaternion corrected (and the gyro readings of
+// `reading_shifts`).
 std::vector<TelemetryFrame> CorrectStarTracker(const std::vector<TelemetryFrame>& frames,
                                                const BodyRates& rates,
                                                const StarTrackerCorrection& correction);

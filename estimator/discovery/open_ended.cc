@@ -70,6 +70,89 @@ bool Contains(const std::vector<int>& v, int x) {
   return std::find(v.begin(), v.end(), x) != v.end();
 }
 
+// A sun column's regressor at every substep of the gyro's series; nullptr for other columns.
+const std::vector<double>* SunValues(const OpenEndedOptions& options, int gyro,
+                                     const BasisColumn& c) {
+  if (c.sun_face < 0) return nullptr;
+  const SunRegressors* sun = FindSunRegressors(options.sun, gyro);
+  if (sun == nullptr || c.sun_face >= static_cast<int>(sun->values.size()) ||
+      c.sun_lag >= static_cast<int>(sun->values[c.sun_face].size())) {
+    return nullptr;
+  }
+  return &sun->values[c.sun_face][c.sun_lag];
+}
+
+// A candidate of a round: one group, or a face's family of sun groups (the lags of the grid),
+// fitted on top of the gyro's active groups; its evidence 2 ln B (a family's averaged over the
+// lags, sun_terms.h AverageEvidence), the group taken if it is selected (a family's best lag) and
+// that group's fit.
+struct RoundCandidate {
+  int group = -1;
+  double evidence = -std::numeric_limits<double>::infinity();
+  RegressionFit fit;
+  std::vector<double> lag_evidence;  // a family: 2 ln B at each lag
+  // A family: the drift at full illumination [rad/s, case axes] and its covariance averaged over
+  // the lags with their posterior weights.
+  Vector3d averaged_k = Vector3d::Zero();
+  Matrix3d averaged_covariance_k = Matrix3d::Zero();
+};
+
+// The sun group's drift (case axes) and covariance in `fit`, a fit whose last columns are the
+// group's `cols`.
+std::pair<Vector3d, Matrix3d> SunDriftOf(const GyroData& d, const std::vector<int>& cols,
+                                         const RegressionFit& fit) {
+  Vector3d a = Vector3d::Zero();
+  Matrix3d P = Matrix3d::Zero();
+  const int n = static_cast<int>(fit.mean.size()), first = n - static_cast<int>(cols.size());
+  for (int i = 0; i < static_cast<int>(cols.size()); ++i) {
+    const int m = d.basis.columns[cols[i]].term.axis - 1;
+    a(m) += fit.mean(first + i);
+    for (int j = 0; j < static_cast<int>(cols.size()); ++j) {
+      P(m, d.basis.columns[cols[j]].term.axis - 1) += fit.covariance(first + i, first + j);
+    }
+  }
+  return {a, P};
+}
+
+RoundCandidate FitFamily(const GyroData& d, const std::vector<int>& family) {
+  RoundCandidate out;
+  double best = -std::numeric_limits<double>::infinity();
+  std::vector<std::pair<Vector3d, Matrix3d>> drifts;
+  for (int k : family) {
+    std::vector<int> groups = d.active;
+    groups.push_back(k);
+    RegressionFit f = Fit(d, groups);
+    const double evidence = d.fit.deviance - f.deviance;
+    out.lag_evidence.push_back(evidence);
+    drifts.push_back(SunDriftOf(d, d.basis.groups[k].columns, f));
+    if (evidence > best) {
+      best = evidence;
+      out.group = k;
+      out.fit = std::move(f);
+    }
+  }
+  out.evidence = AverageEvidence(out.lag_evidence);
+  // Posterior weights of the lags (equal prior): w_l proportional to exp(e_l / 2).
+  std::vector<double> w;
+  double total = 0.0;
+  for (double e : out.lag_evidence) {
+    w.push_back(std::exp(0.5 * (e - best)));
+    total += w.back();
+  }
+  for (size_t l = 0; l < w.size(); ++l) out.averaged_k += w[l] / total * drifts[l].first;
+  for (size_t l = 0; l < w.size(); ++l) {
+    const Vector3d dev = drifts[l].first - out.averaged_k;
+    out.averaged_covariance_k += w[l] / total * (drifts[l].second + dev * dev.transpose());
+  }
+  return out;
+}
+
+// Whether a group of face `face` is active in the gyro's model.
+bool FaceActive(const GyroData& d, int face) {
+  return std::any_of(d.active.begin(), d.active.end(),
+                     [&](int k) { return d.basis.groups[k].sun_face == face; });
+}
+
 // The scalar regressor of a drift column at a substep.
 double ColumnScalar(const BasisColumn& c, const BasisInputs& in) {
   if (c.nuisance) return in.time < c.before ? 1.0 : 0.0;
@@ -140,7 +223,10 @@ void PrepareGyro(const DeviationSeries& series, double random_walk, double w0_si
   d.prior.resize(d.basis.columns.size());
   for (size_t c = 0; c < d.basis.columns.size(); ++c) {
     const BasisColumn& col = d.basis.columns[c];
-    d.signature.push_back(ColumnSignature(series, col));
+    const std::vector<double>* sun = SunValues(options, series.gyro, col);
+    d.signature.push_back(sun != nullptr ? TabulatedSignature(series, *sun,
+                                                              Vector3d::Unit(col.term.axis - 1))
+                                         : ColumnSignature(series, col));
     d.x_w.push_back(filter.Whiten(d.signature.back()));
     d.prior(c) = col.readout ? options.readout_sigma : options.drift_sigma / col.rms;
   }
@@ -185,7 +271,8 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
   auto add_column = [&](BasisColumn c) {
     c.group = static_cast<int>(out.groups.size()) - 1;
     if (!c.readout) {
-      c.rms = ScalarRms(series, c);
+      const std::vector<double>* sun = SunValues(options, series.gyro, c);
+      c.rms = sun != nullptr ? TabulatedRms(series, *sun) : ScalarRms(series, c);
       if (!(c.rms > kAbsentRms)) return;
     }
     out.groups.back().columns.push_back(static_cast<int>(out.columns.size()));
@@ -271,6 +358,24 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
     col.label = ReadoutPatternLabel(i);
     add_column(col);
   }
+  if (const SunRegressors* sun = FindSunRegressors(options.sun, series.gyro)) {
+    for (int face = 0; face < kSunFaces; ++face) {
+      for (int lag = 0; lag < static_cast<int>(sun->lag_hours.size()); ++lag) {
+        const std::string label = SunGroupLabel(face, sun->lag_hours[lag]);
+        open_group(label);
+        out.groups.back().sun_face = face;
+        out.groups.back().sun_lag = lag;
+        for (int m = 1; m <= 3; ++m) {
+          BasisColumn c;
+          c.sun_face = face;
+          c.sun_lag = lag;
+          c.term.axis = m;
+          c.label = absl::StrCat(label, " -> ", std::string(1, "xyz"[m - 1]));
+          add_column(c);
+        }
+      }
+    }
+  }
   for (const auto& [gyro, time] : options.steps) {
     if (gyro != series.gyro) continue;
     open_group(absl::StrCat("before the drift step at ", FormatUtc(time)));
@@ -303,6 +408,8 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     int M = 0, best_g = -1, best_k = -1;
     double best = -std::numeric_limits<double>::infinity();
     RegressionFit best_fit;
+    std::vector<double> best_profile;  // a sun family's 2 ln B at each lag
+    std::pair<Vector3d, Matrix3d> best_averaged;  // its lag-averaged drift and covariance
     for (size_t g = 0; g < gyros.size(); ++g) {
       GyroData& d = gyros[g];
       int budget = std::numeric_limits<int>::max();
@@ -314,8 +421,26 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
           budget -= d.basis.columns[c].readout || d.basis.columns[c].nuisance ? 0 : 1;
         }
       }
+      std::map<int, std::vector<int>> families;  // sun face -> its groups, by lag
+      for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+        const int face = d.basis.groups[k].sun_face;
+        if (face >= 0 && !FaceActive(d, face)) families[face].push_back(k);
+      }
+      for (const auto& [face, family] : families) {
+        ++M;
+        RoundCandidate c = FitFamily(d, family);
+        if (c.evidence > best) {
+          best = c.evidence;
+          best_g = static_cast<int>(g);
+          best_k = c.group;
+          best_fit = std::move(c.fit);
+          best_profile = std::move(c.lag_evidence);
+          best_averaged = {c.averaged_k, c.averaged_covariance_k};
+        }
+      }
       for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
         if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
+        if (d.basis.groups[k].sun_face >= 0) continue;  // in its family above
         int drift_columns = 0;
         for (int c : d.basis.groups[k].columns) drift_columns += d.basis.columns[c].readout ? 0 : 1;
         if (drift_columns > budget) continue;
@@ -329,6 +454,7 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
           best_g = static_cast<int>(g);
           best_k = k;
           best_fit = std::move(f);
+          best_profile.clear();
         }
       }
     }
@@ -349,6 +475,15 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     s.evidence = best;
     s.threshold = threshold;
     s.groups_tested = M;
+    s.sun_face = d.basis.groups[best_k].sun_face;
+    if (s.sun_face >= 0) {
+      if (const SunRegressors* sun = FindSunRegressors(options.sun, s.gyro)) {
+        s.lag_hours = sun->lag_hours;
+      }
+      s.lag_evidence = std::move(best_profile);
+      s.lag_averaged_k = best_averaged.first;
+      s.lag_averaged_covariance_k = best_averaged.second;
+    }
     result.selected.push_back(s);
   }
   // Final values, the alternatives of each selected group, and the residual drift.
@@ -359,14 +494,25 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
       for (SelectedGroup& s : result.selected) {
         if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
         FillGroup(d, cols, d.fit, d.active[i], s);
+        std::map<int, std::pair<std::string, double>> sun_best;  // face -> its best lag
         for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
           if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
+          const int face = d.basis.groups[k].sun_face;
+          if (face >= 0 && (face == s.sun_face || FaceActive(d, face))) continue;
           std::vector<int> groups = d.active;
           groups[i] = k;
           const double against = Fit(d, groups).deviance - d.fit.deviance;
-          if (-against > -options.ambiguity) {
+          if (face >= 0) {
+            auto it = sun_best.find(face);
+            if (it == sun_best.end() || -against > it->second.second) {
+              sun_best[face] = {d.basis.groups[k].label, -against};
+            }
+          } else if (-against > -options.ambiguity) {
             s.alternatives.emplace_back(d.basis.groups[k].label, -against);
           }
+        }
+        for (const auto& [face, alternative] : sun_best) {
+          if (alternative.second > -options.ambiguity) s.alternatives.push_back(alternative);
         }
         std::sort(s.alternatives.begin(), s.alternatives.end(),
                   [](const auto& a, const auto& b) { return a.second > b.second; });
@@ -561,18 +707,20 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
         break;
     }
   }
+  return absl::StrFormat("gyro %d: %s%s", group.gyro, text, DescribeAlternatives(group));
+}
+
+std::string DescribeAlternatives(const SelectedGroup& group) {
   std::vector<std::string> alternatives;
   for (const auto& [label, against] : group.alternatives) {
     if (alternatives.size() == 6) break;
     alternatives.push_back(absl::StrFormat("%s (2 ln B %.1f)", label, against));
   }
-  if (!alternatives.empty()) {
-    absl::StrAppend(&text, "; on this recording it cannot be told apart from ",
-                    absl::StrJoin(alternatives, ", "),
-                    " (2 ln B of each against the named term above -6: the data favour the "
-                    "named term by a Bayes factor below 20)");
-  }
-  return absl::StrFormat("gyro %d: %s", group.gyro, text);
+  if (alternatives.empty()) return "";
+  return absl::StrCat("; on this recording it cannot be told apart from ",
+                      absl::StrJoin(alternatives, ", "),
+                      " (2 ln B of each against the named term above -6: the data favour the "
+                      "named term by a Bayes factor below 20)");
 }
 
 }  // namespace esg::estimator::discovery

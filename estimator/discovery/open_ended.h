@@ -13,6 +13,8 @@
 //   readout distortion    a symmetric traceless distortion E of the direction-cosine readout (5
 //                         per gyro: a common scale factor of the three channels leaves a
 //                         normalised reading unchanged and is not observable)
+//   the sun               the lagged illumination of each body face (sun_regressors.h), its
+//                         time constant profiled over a grid: one family per face
 //
 // Selection is forward, one group of one gyro per round (a scalar regressor along a direction in
 // case axes the data choose: BasisGroup), by the diagnosis's evidence currency: 2 ln B of the
@@ -20,6 +22,11 @@
 // 2 ln(M / alpha), M the groups tested in the round. Under the null each Bayes factor
 // has expectation 1, so by Markov's inequality and the union bound a round adds a regressor the
 // data do not need with probability at most alpha (the stated false-discovery control).
+// A face's family of sun groups (one per lag of the grid) counts as one group of M: its evidence is
+// the Bayes factor averaged over the lags, equally likely a priori on the log-spaced grid (the
+// lag integrated over its prior, as the onset of a drift step is), which has expectation 1 under
+// the null like every group's, so the bound holds with the larger basis; the lag reported is the
+// best of the grid, with the interval where 2 ln B stays within 3.84 of its maximum.
 // Groups that the recording cannot tell apart from a selected one (replacing it loses less than
 // 2 ln B = 6, "strong" evidence on Kass and Raftery's scale) are reported as alternatives.
 // Pure computation.
@@ -35,6 +42,7 @@
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
 #include "estimator/discovery/deviation.h"
+#include "estimator/discovery/sun_regressors.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -60,6 +68,8 @@ struct OpenEndedOptions {
   // Drift columns each gyro's model may still take (gyro id, count; the configuration holds at
   // most kMaxBasisTermsPerGyro terms a gyro); a gyro not listed: no bound.
   std::vector<std::pair<int, int>> column_budget;
+  // The sun's regressors of each gyro (sun_regressors.h); a gyro not listed has no sun groups.
+  std::vector<SunRegressors> sun;
 };
 
 // One regressor of the basis for one gyro.
@@ -76,6 +86,10 @@ struct BasisColumn {
   // A nuisance regressor (OpenEndedOptions::steps): e_m before `before`, in every model.
   bool nuisance = false;
   absl::Time before = absl::InfinitePast();
+  // A sun column: the lagged illumination of face sun_face (sun_regressors.h) at lag index
+  // sun_lag, along case axis term.axis; -1 otherwise.
+  int sun_face = -1;
+  int sun_lag = -1;
 };
 
 // The readout distortion's unit patterns, an orthonormal basis (Frobenius inner product) of the
@@ -92,6 +106,8 @@ struct BasisGroup {
   std::string label;         // "h1^2*h3", "orbit 1", "ramp", "readout", ...
   std::vector<int> columns;  // indices into the gyro's columns
   bool nuisance = false;     // in every model, never selected
+  int sun_face = -1;         // a sun group: its face and lag index (BasisColumn)
+  int sun_lag = -1;
 };
 
 struct GyroBasis {
@@ -121,6 +137,16 @@ struct SelectedGroup {
   int groups_tested = 0;   // M
   // Groups the recording cannot tell apart from it, with 2 ln B against it (> -ambiguity).
   std::vector<std::pair<std::string, double>> alternatives;
+  // A sun group: its face, and the lag profile of the round it was selected in: each lag of the
+  // grid [h] with the family's 2 ln B at it (evidence above is their average's).
+  int sun_face = -1;
+  std::vector<double> lag_hours;
+  std::vector<double> lag_evidence;
+  // Its drift at full illumination in case axes [rad/s] and covariance averaged over the lags
+  // with their posterior weights (proportional to each lag's Bayes factor) in that round: the
+  // amplitude with the lag's uncertainty, not at one lag of the grid.
+  Eigen::Vector3d lag_averaged_k = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d lag_averaged_covariance_k = Eigen::Matrix3d::Zero();
 };
 
 // A gyro's residual drift: the fixed-interval smoothed drift of its deviation, carried to case
@@ -175,7 +201,11 @@ double ReadoutOccam(const SelectedGroup& group);
 // What a selected group says in words: case-fixed drift along (x, y, z), varying with the orbital
 // phase, growing, proportional to the body rate, ..., with sizes in deg/h, and the alternatives
 // that cannot be told apart.
+// Not for a sun group (SelectedGroup::sun_face >= 0): sun_terms.h DescribeSunGroup.
 std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& options);
+
+// "; on this recording it cannot be told apart from ..." for the group's alternatives, or "".
+std::string DescribeAlternatives(const SelectedGroup& group);
 
 }  // namespace esg::estimator::discovery
 

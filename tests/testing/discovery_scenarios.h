@@ -110,6 +110,19 @@ inline std::vector<std::string> DiscoveryCombinedClasses() {
   return {"switching_and_st_misalignment", "switching_and_gyro_misalignment"};
 }
 
+// A drift that follows the sun (docs/discovery.md, "A drift that follows the sun"):
+// "sun_face_drift", a thermal drift of one gyro of (0.06, -0.04, 0.05) deg/h at full illumination
+// of one body face through a first-order lag (simulator.h SunFaceDrift; the face and the lag by
+// the seed: SunFaceOf, SunLagHoursOf).
+inline std::vector<std::string> DiscoverySunClasses() { return {"sun_face_drift"}; }
+
+// The sun scenario's face (0..5: +x, -x, +y, -y, +z, -z) and lag [h] for a seed.
+inline int SunFaceOf(uint64_t seed) { return static_cast<int>(seed % 6); }
+inline double SunLagHoursOf(uint64_t seed) {
+  constexpr double kLags[4] = {0.5, 1.4, 3.0, 0.8};
+  return kLags[(seed / 3) % 4];
+}
+
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
 inline int AffectedGyro(uint64_t seed) { return 1 + static_cast<int>(seed % 3); }
 
@@ -201,6 +214,14 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.correlation_time_s = 3.0 * 3600.0;
     s.gyros[g].hidden_driver_drift = d;
   }
+  if (effect == "sun_face_drift") {
+    SunFaceDrift d;
+    d.amplitude_k_rad_s = x * Eigen::Vector3d(0.06, -0.04, 0.05) * deg_h;
+    d.face_axis = SunFaceOf(seed) / 2;
+    d.face_sign = SunFaceOf(seed) % 2 == 0 ? 1 : -1;
+    d.time_constant_s = SunLagHoursOf(seed) * 3600.0;
+    s.gyros[g].sun_face_drift = d;
+  }
   if (effect == "drift_step") {
     GyroFault f;
     f.time = 0.4 * s.duration;
@@ -237,6 +258,7 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
     return false;
   };
   if (truth == "orbital_drift") return basis("orbital_cycle", "");
+  if (truth == "sun_face_drift") return basis("follows_sun", "sunLagHours");
   if (truth == "growing_displacement") return basis("linear", "");
   if (truth == "readout_scale") return basis("", "readout");
   if (truth == "switching_drift" || truth == "hidden_driver") {

@@ -1,0 +1,163 @@
+#include "estimator/discovery/sun_regressors.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "absl/strings/str_format.h"
+#include "estimator/sun_direction.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+using Eigen::Matrix3d;
+using Eigen::Vector3d;
+
+namespace {
+
+constexpr double kSunTableStepS = 600.0;
+constexpr double kFirstLagHours = 0.1;
+constexpr double kLastLagHours = 10.0;
+constexpr int kLagsPerDecade = 20;
+
+}  // namespace
+
+std::string SunFaceName(int face) {
+  return std::string(face % 2 == 0 ? "+" : "-") + std::string(1, "xyz"[std::clamp(face / 2, 0, 2)]);
+}
+
+Vector3d SunFaceNormal_b(int face) {
+  return (face % 2 == 0 ? 1.0 : -1.0) * Vector3d::Unit(std::clamp(face / 2, 0, 2));
+}
+
+double FaceIllumination(const Vector3d& s_b, int face) {
+  return std::max(0.0, SunFaceNormal_b(face).dot(s_b));
+}
+
+std::vector<double> SunLagGridHours() {
+  std::vector<double> out;
+  const int n = static_cast<int>(
+      std::lround(kLagsPerDecade * std::log10(kLastLagHours / kFirstLagHours)));
+  for (int i = 0; i <= n; ++i) {
+    out.push_back(kFirstLagHours * std::pow(10.0, static_cast<double>(i) / kLagsPerDecade));
+  }
+  return out;
+}
+
+std::vector<double> LaggedIllumination(const std::vector<double>& u, const std::vector<double>& dt,
+                                       double tau_s) {
+  std::vector<double> y(u.size(), 0.0);
+  if (u.empty()) return y;
+  double start = u.front();  // y at the start of the substep
+  for (size_t i = 0; i < u.size(); ++i) {
+    const double h = i < dt.size() ? dt[i] : 0.0;
+    y[i] = u[i] + (start - u[i]) * std::exp(-0.5 * h / tau_s);  // at the midpoint
+    start = u[i] + (start - u[i]) * std::exp(-h / tau_s);
+  }
+  return y;
+}
+
+absl::StatusOr<std::vector<Vector3d>> SunAlongSeries_in(const DeviationSeries& series) {
+  std::vector<Vector3d> out;
+  if (series.steps.empty()) return out;
+  const absl::Time t0 = series.steps.front().inputs.time;
+  const absl::Time t1 = series.steps.back().inputs.time;
+  const int n = 2 + static_cast<int>(absl::ToDoubleSeconds(t1 - t0) / kSunTableStepS);
+  std::vector<Vector3d> table;
+  for (int i = 0; i < n; ++i) {
+    auto s = SunDirection_in(t0 + absl::Seconds(i * kSunTableStepS));
+    if (!s.ok()) return s.status();
+    table.push_back(*s);
+  }
+  for (const TrajectoryStep& step : series.steps) {
+    const double x = absl::ToDoubleSeconds(step.inputs.time - t0) / kSunTableStepS;
+    const int i = std::clamp(static_cast<int>(std::floor(x)), 0, n - 2);
+    const double f = std::clamp(x - i, 0.0, 1.0);
+    out.push_back(((1.0 - f) * table[i] + f * table[i + 1]).normalized());
+  }
+  return out;
+}
+
+absl::StatusOr<SunRegressors> ComputeSunRegressors(const DeviationSeries& series,
+                                                   const Matrix3d& C_b_k) {
+  auto sun_in = SunAlongSeries_in(series);
+  if (!sun_in.ok()) return sun_in.status();
+  SunRegressors out;
+  out.gyro = series.gyro;
+  out.lag_hours = SunLagGridHours();
+  std::vector<double> dt;
+  std::vector<Vector3d> s_b;
+  for (size_t i = 0; i < series.steps.size(); ++i) {
+    const TrajectoryStep& step = series.steps[i];
+    dt.push_back(step.dt);
+    // s_b = C_b_k C_k_in s_in, C_k_in = C_in_k^T.
+    s_b.push_back(C_b_k * (step.C_in_k.transpose() * (*sun_in)[i]));
+  }
+  out.values.resize(kSunFaces);
+  for (int face = 0; face < kSunFaces; ++face) {
+    std::vector<double> u;
+    for (const Vector3d& s : s_b) u.push_back(FaceIllumination(s, face));
+    for (double lag_h : out.lag_hours) {
+      out.values[face].push_back(LaggedIllumination(u, dt, HoursToSeconds(lag_h)));
+    }
+  }
+  return out;
+}
+
+const SunRegressors* FindSunRegressors(const std::vector<SunRegressors>& sun, int gyro) {
+  for (const SunRegressors& r : sun) {
+    if (r.gyro == gyro) return &r;
+  }
+  return nullptr;
+}
+
+std::string SunGroupLabel(int face, double lag_hours) {
+  return absl::StrFormat("sun %s lag %.3g h", SunFaceName(face), lag_hours);
+}
+
+std::vector<Eigen::Vector2d> TabulatedSignature(const DeviationSeries& series,
+                                                const std::vector<double>& s,
+                                                const Vector3d& e_m) {
+  std::vector<Eigen::Vector2d> out(series.sample_end.size(), Eigen::Vector2d::Zero());
+  Vector3d sum = Vector3d::Zero();
+  size_t step = 0;
+  for (size_t k = 0; k < series.sample_end.size(); ++k) {
+    for (; step < static_cast<size_t>(series.sample_end[k]) && step < s.size(); ++step) {
+      const TrajectoryStep& st = series.steps[step];
+      sum += (st.C_in_k * (s[step] * e_m)).cross(st.h_in) * st.dt;
+    }
+    out[k] = Eigen::Vector2d(series.u1.dot(sum), series.u2.dot(sum));
+  }
+  return out;
+}
+
+double TabulatedRms(const DeviationSeries& series, const std::vector<double>& s) {
+  double sum = 0.0, time = 0.0;
+  for (size_t i = 0; i < series.steps.size() && i < s.size(); ++i) {
+    sum += s[i] * s[i] * series.steps[i].dt;
+    time += series.steps[i].dt;
+  }
+  return time > 0.0 ? std::sqrt(sum / time) : 0.0;
+}
+
+std::vector<Vector3d> TabulatedMotion_in(const DeviationSeries& series,
+                                         const std::vector<double>& s, const Vector3d& a_k) {
+  std::vector<Vector3d> out;
+  Vector3d sum = Vector3d::Zero();
+  for (size_t i = 0; i < series.steps.size() && i < s.size(); ++i) {
+    const TrajectoryStep& st = series.steps[i];
+    sum += (st.C_in_k * (s[i] * a_k)).cross(st.h_in) * st.dt;
+    out.push_back(sum);
+  }
+  return out;
+}
+
+double AverageEvidence(const std::vector<double>& evidence) {
+  if (evidence.empty()) return -std::numeric_limits<double>::infinity();
+  const double top = *std::max_element(evidence.begin(), evidence.end());
+  double sum = 0.0;
+  for (double e : evidence) sum += std::exp(0.5 * (e - top));
+  return top + 2.0 * std::log(sum / static_cast<double>(evidence.size()));
+}
+
+}  // namespace esg::estimator::discovery
