@@ -431,7 +431,7 @@ std::string EstimationCore::StorageFault() {
 // Configuration.
 
 absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
-    const esg::v1::ConfigureRequest& request) {
+    const esg::v1::ConfigureRequest& request, const std::function<absl::Status()>& precondition) {
   if (!request.has_config()) return absl::InvalidArgumentError("config: required");
   ASSIGN_OR_RETURN(estimator::SpacecraftConfig config,
                    proto_convert::ConfigFromProto(request.config()));
@@ -493,6 +493,7 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   };
 
   absl::MutexLock configure(&configure_mu_);
+  if (precondition) RETURN_IF_ERROR(precondition());
   std::shared_ptr<Spacecraft> sc;
   int64_t new_lease_epoch = 0;  // a new spacecraft's lease, with leases
   if (absl::StatusOr<std::shared_ptr<Spacecraft>> found = Lookup(config.spacecraft_id);

@@ -222,7 +222,12 @@ class EstimationCore {
   std::string StorageFault();
 
   // ---- Configuration and queries ----
-  absl::StatusOr<esg::v1::ConfigureResponse> Configure(const esg::v1::ConfigureRequest& request);
+  // `precondition`, when given, runs under the lock that serialises configurations, before
+  // anything changes; its error refuses the call (ApplyDiagnosis: the configuration the diagnosis
+  // ran on is still the spacecraft's, so no configuration stored meanwhile is overwritten).
+  absl::StatusOr<esg::v1::ConfigureResponse> Configure(
+      const esg::v1::ConfigureRequest& request,
+      const std::function<absl::Status()>& precondition = nullptr);
   absl::StatusOr<esg::v1::SessionInfo> GetSession(const std::string& spacecraft_id);
   // Paged lists (docs/service.md "Paging"): page_size 0 is the default, above the maximum the
   // maximum, negative InvalidArgument; a page_token that is not the next_page_token of the same

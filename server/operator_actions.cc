@@ -28,7 +28,14 @@ bool Appliable(const std::string& verdict) {
   return verdict != disc::kVerdictNone && verdict != disc::kVerdictUnexplained;
 }
 
-absl::Status Quarantined(const std::string& id, const std::string& reason) {
+// FailedPrecondition naming the spacecraft if it cannot take an operator's action: it is
+// quarantined, or its stored configuration cannot be used (`usable` false); else OK.
+absl::Status Usable(const std::string& id, const std::string& quarantine_reason, bool usable) {
+  std::string reason = quarantine_reason;
+  if (reason.empty() && !usable) {
+    reason = "its stored configuration cannot be used";
+  }
+  if (reason.empty()) return absl::OkStatus();
   return absl::FailedPreconditionError(
       absl::StrCat("spacecraft_id: '", id, "' is quarantined (", reason,
                    "); ConfigureSpacecraft with replace=true ends the quarantine"));
@@ -83,16 +90,11 @@ absl::StatusOr<esg::v1::ApplyDiagnosisResponse> EstimationCore::ApplyDiagnosis(
   }
   if (!record.ok()) return record.status();
   std::shared_ptr<const Setup> setup;
-  std::string quarantine_reason;
   {
     absl::MutexLock lock(&sc->state_mu);
     setup = sc->setup;
-    quarantine_reason = sc->apply.quarantine_reason;
+    RETURN_IF_ERROR(Usable(sc->id, sc->apply.quarantine_reason, setup != nullptr));
   }
-  if (setup == nullptr && quarantine_reason.empty()) {
-    quarantine_reason = "its stored configuration cannot be used";
-  }
-  if (!quarantine_reason.empty()) return Quarantined(sc->id, quarantine_reason);
   if (!Appliable(record->verdict)) {
     return absl::FailedPreconditionError(absl::StrCat(
         "diagnosis_id: diagnosis ", record->id, " has the verdict '", record->verdict, "': ",
@@ -106,14 +108,25 @@ absl::StatusOr<esg::v1::ApplyDiagnosisResponse> EstimationCore::ApplyDiagnosis(
         " was stored before the service recorded the configuration a diagnosis runs on; run "
         "the diagnosis again"));
   }
-  ASSIGN_OR_RETURN(storage::ConfigRecord current, storage_->configs().Get(sc->id));
-  if (current.version != record->config_version || setup->model_name != record->model_name) {
+  // Checked before the refit and again under Configure's lock, so that a configuration stored
+  // in between is never overwritten with one derived from the version before it.
+  const auto unchanged = [&]() -> absl::Status {
+    ASSIGN_OR_RETURN(storage::ConfigRecord current, storage_->configs().Get(sc->id));
+    std::string model_name;
+    {
+      absl::MutexLock lock(&sc->state_mu);
+      if (sc->setup != nullptr) model_name = sc->setup->model_name;
+    }
+    if (current.version == record->config_version && model_name == record->model_name) {
+      return absl::OkStatus();
+    }
     return absl::FailedPreconditionError(absl::StrCat(
         "diagnosis_id: diagnosis ", record->id, " ran on configuration version ",
         record->config_version, " with model ", record->model_name,
-        "; the session now runs version ", current.version, " with model ", setup->model_name,
+        "; the session now runs version ", current.version, " with model ", model_name,
         ": the configuration changed since, run the diagnosis again"));
-  }
+  };
+  RETURN_IF_ERROR(unchanged());
   ASSIGN_OR_RETURN(disc::DiagnosisReport report,
                    proto_convert::DiagnosisFindingsFromJson(record->report_json));
   const disc::AppliedFindings applied = disc::WithFindings(setup->config, report);
@@ -126,7 +139,7 @@ absl::StatusOr<esg::v1::ApplyDiagnosisResponse> EstimationCore::ApplyDiagnosis(
   *configure.mutable_config() = proto_convert::ConfigToProto(applied.config);
   configure.set_model(setup->model_name);
   configure.set_replace(true);
-  ASSIGN_OR_RETURN(esg::v1::ConfigureResponse configured, Configure(configure));
+  ASSIGN_OR_RETURN(esg::v1::ConfigureResponse configured, Configure(configure, unchanged));
   ASSIGN_OR_RETURN(storage::ConfigRecord stored, storage_->configs().Get(sc->id));
   LogEvent(
       "INFO", "diagnosis_applied",
@@ -163,11 +176,8 @@ absl::StatusOr<esg::v1::ReadmitGyroResponse> EstimationCore::ReadmitGyro(
   record.compute_time = absl::Now();
   {
     absl::MutexLock lock(&sc->state_mu);
-    std::string reason = sc->apply.quarantine_reason;
-    if (reason.empty() && (sc->setup == nullptr || !sc->session.has_value())) {
-      reason = "its stored configuration cannot be used";
-    }
-    if (!reason.empty()) return Quarantined(sc->id, reason);
+    RETURN_IF_ERROR(Usable(sc->id, sc->apply.quarantine_reason,
+                           sc->setup != nullptr && sc->session.has_value()));
     const absl::Time after = sc->session->last_frame_time();
     for (const storage::ReadmissionRecord& r : sc->readmissions) {
       if (r.gyro_id == record.gyro_id && r.after_time >= after) {
