@@ -162,9 +162,12 @@ TEST(DiagnoseCli, NamesTheMissingEffectAndWritesTheReport) {
 // displacement, gyro 2 switches at random and has a distorted readout, gyro 3 follows a quantity
 // the telemetry does not carry. The open-ended stage's regression also selects terms for gyros 2
 // and 3; a drift that returns to its mean describes each of those better (docs/discovery.md,
-// "The open-ended stage"), so they are not taken along with gyro 1's: gyro 2 keeps only its
-// readout distortion, gyro 3 nothing; gyro 2's drift stays unexplained (the verdict's, last), and
-// gyro 3's wandering drift is its own unexplained finding, described in time.
+// "The open-ended stage"), so they are not taken: gyro 2 keeps only its readout distortion,
+// gyro 3 nothing, and each one's drift is its own unexplained finding, described in time. Gyro
+// 1's terms are refused too, by the held-out point-prediction guard (docs/discovery.md, "A
+// verdict no stronger than its evidence": with them the held-out gap drift was 36% worse), so
+// no finding makes the gap drift worse, and the model with the findings still fails its own
+// consistency tests: the verdict is partly_explained, never the readout distortion alone.
 TEST(DiagnoseCli, TheDriftBehavioursExampleTakesNoTermsForDriftsThatReturnToTheirMeanAndNamesEach) {
   TempDir dir;
   const std::string examples = std::string(ESG_SOURCE_DIR) + "/deploy/examples/";
@@ -177,7 +180,7 @@ TEST(DiagnoseCli, TheDriftBehavioursExampleTakesNoTermsForDriftsThatReturnToThei
                                 dir.File("rec.csv") + "' --json");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   const nlohmann::json doc = nlohmann::json::parse(r.out);
-  bool orbital = false, left_out = false, gyro3_wanders = false;
+  bool left_out = false, gyro2_unexplained = false, gyro3_wanders = false;
   for (const auto& f : doc.at("findings")) {
     const std::string effect = f.at("effect");
     const int gyro = f.at("gyro");
@@ -188,9 +191,7 @@ TEST(DiagnoseCli, TheDriftBehavioursExampleTakesNoTermsForDriftsThatReturnToThei
                       text.find("the drift of gyro 3 wanders beyond the configured random walk") !=
                           std::string::npos;
     }
-    if (effect == "basis_term" && gyro == 1) {
-      orbital |= f.at("timeBehaviour").at("kind") == "orbital_cycle";
-    }
+    gyro2_unexplained |= effect == "unexplained" && gyro == 2;
     if (effect == "basis_term") {
       EXPECT_NE(gyro, 3) << f.at("explanation");
       if (gyro == 2) EXPECT_TRUE(f.contains("readoutDistortion")) << f.at("explanation");
@@ -201,11 +202,15 @@ TEST(DiagnoseCli, TheDriftBehavioursExampleTakesNoTermsForDriftsThatReturnToThei
                   text.find("less well than a drift that returns to its mean") != std::string::npos;
     }
   }
-  EXPECT_TRUE(orbital) << r.out;
   EXPECT_TRUE(left_out) << r.out;
+  EXPECT_TRUE(gyro2_unexplained) << r.out;
   EXPECT_TRUE(gyro3_wanders) << r.out;
-  EXPECT_EQ(doc.at("findings").back().at("effect"), "unexplained");
-  EXPECT_EQ(doc.at("findings").back().at("gyro"), 2);
+  // What the findings take is never a worse point prediction, and the model with them is tested.
+  const double before = doc.at("fit").at("before").at("gapDriftRateDegH");
+  const double after = doc.at("fit").at("after").at("gapDriftRateDegH");
+  EXPECT_LE(after, 1.05 * before) << r.out;
+  EXPECT_EQ(doc.at("verdict"), "partly_explained") << r.out;
+  EXPECT_FALSE(doc.at("consistency").at("passed").get<bool>()) << r.out;
 }
 
 // A large drift step in gyro 3 of a short recording: onset.png shows the likelihood over the
