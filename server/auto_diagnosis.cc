@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "absl/time/clock.h"
+#include "estimator/discovery/report.h"
 #include "proto/convert.h"
 #include "server/log.h"
 #include "server/proto_mapping.h"
@@ -28,11 +29,11 @@ std::string VerdictText(const esg::v1::DiagnosisResult& result) {
   const std::string apply = absl::StrCat("apply it with `esg model apply --spacecraft ",
                                          result.spacecraft_id(), " --diagnosis ", result.id(),
                                          "` (the session then re-runs the archive)");
-  if (result.verdict() == "none") {
+  if (result.verdict() == estimator::discovery::kVerdictNone) {
     return "verdict none: no effect the model lacks was found over the span, nothing to apply; "
            "the mismatch may have been transient, or the noise settings are too tight";
   }
-  if (result.verdict() == "unexplained") {
+  if (result.verdict() == estimator::discovery::kVerdictUnexplained) {
     return "verdict unexplained: the mismatch is real but no library effect explains it, nothing "
            "to apply; look at the span with `esg diagnose --out DIR` and its plots";
   }
