@@ -146,9 +146,11 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
       const authRequired = await tokens.tokensRequired();
       if (!ctx.authorization) return { auth_required: authRequired };
       await tokens.check(ctx.authorization);
-      // The write role cannot be checked without a write call; the page learns it from the
-      // first acknowledgement (403).
-      return { auth_required: authRequired, ok: true, can_write: null };
+      // Whether the page offers its write actions (applying a diagnosis): esgd without tokens
+      // lets every caller write; with tokens it is asked (TokenCheck.canWrite). esgd checks the
+      // role of each write call all the same.
+      const canWrite = authRequired ? await tokens.canWrite(ctx.authorization) : true;
+      return { auth_required: authRequired, ok: true, can_write: canWrite };
     }, { public: true }],
 
     ['GET', '/api/sessions', async (ctx) => ({

@@ -10,6 +10,12 @@
 // holds no token), so a burst of requests, or of refused ones, costs esgd one call per token.
 // The cache only decides what the gateway bothers to read: every call the gateway then makes
 // carries the token and esgd checks it again, so a token revoked meanwhile gains nothing.
+//
+// Whether a token has the write role (canWrite, for the page to offer its write actions only to
+// those who may use them) is asked the same way with the cheapest call that needs it,
+// ApplyDiagnosis with an empty spacecraft id: esgd checks the role first (PERMISSION_DENIED
+// without it), then refuses the empty id at once (INVALID_ARGUMENT), changing nothing. It only
+// decides what the page shows: esgd checks the role of every write call itself.
 'use strict';
 
 const crypto = require('node:crypto');
@@ -31,6 +37,7 @@ class TokenCheck {
   constructor(esgd) {
     this.esgd = esgd;
     this.cache = new Map(); // digest -> {promise, expires}; in insertion order, oldest first
+    this.writeCache = new Map(); // digest -> {promise, expires}: canWrite's answers, as cache
   }
 
   // Resolves when esgd accepts `authorization` (an "Authorization" header value, or undefined
@@ -64,6 +71,37 @@ class TokenCheck {
       if (ACCEPTED.has(err.code)) return;
       throw err;
     }
+  }
+
+  // Whether esgd lets `authorization` write: true (INVALID_ARGUMENT: the role was granted, then
+  // the empty id refused), false (PERMISSION_DENIED or UNAUTHENTICATED: refused before), null
+  // when esgd could not tell (an esgd without ApplyDiagnosis, refusals beyond its per-address
+  // budget, esgd unreachable; not kept). Never rejects.
+  canWrite(authorization) {
+    const key = digest(authorization);
+    const now = Date.now();
+    const cached = this.writeCache.get(key);
+    if (cached && cached.expires > now) return cached.promise;
+    this.writeCache.delete(key);
+    const entry = { expires: Infinity, promise: null };
+    entry.promise = this.esgd.unary('ApplyDiagnosis', { spacecraft_id: '', diagnosis_id: 0 },
+      authorization, undefined, CHECK_DEADLINE_MS).then(() => true, (err) => {
+      if (err.code === grpc.status.INVALID_ARGUMENT) return true;
+      if (REFUSALS.has(err.code)) return false;
+      return null;
+    }).then((answer) => {
+      if (answer === null) {
+        if (this.writeCache.get(key) === entry) this.writeCache.delete(key);
+      } else {
+        entry.expires = Date.now() + TTL_MS;
+      }
+      return answer;
+    });
+    this.writeCache.set(key, entry);
+    while (this.writeCache.size > MAX_ENTRIES) {
+      this.writeCache.delete(this.writeCache.keys().next().value);
+    }
+    return entry.promise;
   }
 
   // Whether esgd wants a token at all: is a call without one refused? An esgd that throttles

@@ -51,6 +51,19 @@ export async function apiFetch(path, { method = 'GET', body, token = getToken(),
   return json;
 }
 
+// Whether this caller may use the page's write actions (applying a diagnosis): GET /api/auth's
+// can_write, which the gateway asks esgd (docs/console-gateway.md); esgd without tokens lets
+// everyone write. Asked once per page load (a new token reloads the page). It only decides what
+// the page offers: esgd checks the role of every write call itself.
+let writeRole = null;
+export function canWrite() {
+  if (!writeRole) {
+    writeRole = apiFetch('/api/auth').then((body) => !body.auth_required || body.can_write === true,
+      () => { writeRole = null; return false; });
+  }
+  return writeRole;
+}
+
 // Query string from an object, skipping null/undefined values.
 export function query(params) {
   const entries = Object.entries(params).filter(([, v]) => v !== undefined && v !== null);

@@ -4,8 +4,9 @@
 // Report fields: docs/discovery.md "JSON".
 // "Apply to the model" (POST .../diagnoses/:n/apply, ApplyDiagnosis with the write role): what the
 // diagnosis would set (its `applies` lines) and what not, confirmed in a dialog, then the result:
-// the configuration version stored and the re-run from the archive, or esgd's refusal.
-import { apiFetch } from './api.js';
+// the configuration version stored and the re-run from the archive, or esgd's refusal. Offered
+// only to a caller with the write role (api.js canWrite); a read-only one sees what it would set.
+import { apiFetch, canWrite } from './api.js';
 import { el, fixed, STYLE } from './dom.js';
 import { gapChart } from './gapChart.js';
 import { COEFFICIENTS } from './series.js';
@@ -128,12 +129,22 @@ function confirmApply(d) {
   });
 }
 
-function applySection(d) {
+function applySection(d, writable) {
   const applies = d.applies || [];
   const result = el('p', { class: 'esg-apply-result' });
   if (!applies.length) {
     return el('div', { class: 'esg-apply' },
       el('p', { class: 'muted' }, `Nothing of this diagnosis maps to the configuration (verdict ${d.verdict}).`));
+  }
+  const made = el('p', { class: 'muted' }, `Made on configuration version ${d.config_version} (model ${d.model}).`);
+  const notApplied = (d.does_not_apply || []).length
+    ? el('p', { class: 'muted' }, `Not applied: ${d.does_not_apply.join('; ')}`) : null;
+  if (!writable) {
+    return el('div', { class: 'esg-apply' },
+      el('ul', {}, applies.map((line) => el('li', {}, line))), notApplied, made,
+      el('p', { class: 'esg-apply-read-only' },
+        'Applying it needs the write role, which your token does not have: an operator with it ',
+        'applies it here or with ', el('code', {}, `esg model apply --spacecraft ${d.spacecraft_id} --diagnosis ${d.id}`), '.'));
   }
   const button = el('button', { class: 'esg-apply-button', type: 'button' }, 'Apply to the model');
   button.addEventListener('click', async () => {
@@ -152,14 +163,10 @@ function applySection(d) {
     }
   });
   return el('div', { class: 'esg-apply' },
-    el('ul', {}, applies.map((line) => el('li', {}, line))),
-    (d.does_not_apply || []).length
-      ? el('p', { class: 'muted' }, `Not applied: ${d.does_not_apply.join('; ')}`) : null,
-    el('p', { class: 'muted' }, `Made on configuration version ${d.config_version} (model ${d.model}).`),
-    button, result);
+    el('ul', {}, applies.map((line) => el('li', {}, line))), notApplied, made, button, result);
 }
 
-function render(container, d) {
+function render(container, d, writable) {
   const r = d.report || {};
   const findings = r.findings || [];
   container.replaceChildren(
@@ -180,7 +187,7 @@ function render(container, d) {
     el('h3', {}, `Findings (${findings.length})`),
     ...(findings.length ? findings.map(finding) : [el('p', { class: 'esg-no-findings' },
       'No finding: the configured model explains the data.')]),
-    el('h3', {}, 'Apply to the model'), applySection(d),
+    el('h3', {}, 'Apply to the model'), applySection(d, writable),
     el('h3', {}, 'Mismatch'), mismatch(r.mismatch),
     el('h3', {}, 'Fit before and after'), fitTable(r.fit),
     el('h3', {}, 'Attitude error at the end of each star-tracker gap'), gapChart(r.fit));
@@ -200,8 +207,9 @@ export function diagnosisViewProvider() {
           element.append(container);
           const { spacecraft, id } = domainObject.esg;
           try {
-            const d = await apiFetch(`/api/spacecraft/${encodeURIComponent(spacecraft)}/diagnoses/${id}`);
-            if (container) render(container, d);
+            const [d, writable] = await Promise.all([
+              apiFetch(`/api/spacecraft/${encodeURIComponent(spacecraft)}/diagnoses/${id}`), canWrite()]);
+            if (container) render(container, d, writable);
           } catch (err) {
             if (container) container.replaceChildren(el('p', { class: 'notice' }, `Diagnosis ${id}: ${err.message}`));
           }

@@ -1101,7 +1101,7 @@ test('fleet overview of the whole fleet: every row as esg reports, the worst fir
 // docs/discovery.md's worked example: the model (model1.json) lacks gyro 2's rotor displacement.
 // Diagnosed on esgd, the report offers "Apply to the model"; confirmed, esgd stores the
 // configuration with the freed coefficients and re-runs the archive, as `esg status` shows.
-test('a diagnosis is applied to the model from its report after a confirmation, as esg status then shows', async () => {
+test('a diagnosis is applied to the model from its report after a confirmation, as esg status then shows; a read-only token is not offered the button', async () => {
   const SC = 'DISC-1';
   const model1 = path.join(tmp, 'model1.json');
   fs.writeFileSync(model1, JSON.stringify({
@@ -1160,6 +1160,24 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
   const diagnosis = await timed(`esg diagnose --spacecraft ${SC}`, () => cliJson('diagnose', '--spacecraft', SC));
   assert.equal(diagnosis.verdict, 'rotor_displacement');
   assert.ok(diagnosis.applies && diagnosis.applies.length > 0, JSON.stringify(diagnosis.applies));
+  // A token without the write role sees what applying would set, not the button (esgd would
+  // refuse the call: PERMISSION_DENIED).
+  const viewer = await browser.newPage(); // a tab of its own: its own sessionStorage, its own sign-in
+  try {
+    await viewer.setViewport({ width: 1500, height: 900 });
+    await viewer.goto(`${gateway.url}#/browse/esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`,
+      { waitUntil: 'domcontentloaded' });
+    await viewer.waitForSelector('#esg-signin:not([hidden])', { timeout: 20_000 });
+    await viewer.type('#esg-token', viewerToken);
+    await viewer.click('#esg-signin-submit');
+    await viewer.waitForSelector('.esg-apply-read-only', { timeout: 20_000 });
+    assert.equal(await viewer.$('.esg-apply-button'), null, 'a read-only token is offered Apply');
+    assert.match(await viewer.$eval('.esg-apply-read-only', (p) => p.textContent),
+      new RegExp(`needs the write role.*esg model apply --spacecraft ${SC} --diagnosis ${diagnosis.id}`));
+    assert.deepEqual(await viewer.$$eval('.esg-apply li', (lis) => lis.map((li) => li.textContent)), diagnosis.applies);
+  } finally {
+    await viewer.close();
+  }
   await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`);
   await page.waitForSelector('.esg-apply-button', { timeout: 20_000 });
   // What it would set, as esgd says (the same lines as esg diagnoses show).

@@ -94,11 +94,16 @@ test('bad flags end the gateway at once with a message naming the flag', async (
   }
 });
 
-test('/api/auth says a token is needed, accepts a known one and refuses an unknown one (401)', async () => {
+test('/api/auth says a token is needed, accepts a known one and refuses an unknown one (401), and tells a read-only token from a writer', async () => {
   assert.deepEqual((await api('/api/auth')).json, { auth_required: true });
   const ok = await api('/api/auth', { headers: asBob });
   assert.equal(ok.status, 200);
-  assert.deepEqual(ok.json, { auth_required: true, ok: true, can_write: null });
+  // bob's token has the read role only, alice's also write (esgd answers the role, the gateway
+  // asks it with a call esgd refuses before changing anything).
+  assert.deepEqual(ok.json, { auth_required: true, ok: true, can_write: false });
+  const writer = await api('/api/auth', { headers: asAlice });
+  assert.equal(writer.status, 200);
+  assert.deepEqual(writer.json, { auth_required: true, ok: true, can_write: true });
   const refused = await api('/api/auth', { headers: { Authorization: 'Bearer not-a-token' } });
   assert.equal(refused.status, 401);
   assert.equal(refused.json.error.code, 'UNAUTHENTICATED');
