@@ -18,6 +18,7 @@
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/log.h"
+#include "storage/lease_store.h"
 
 namespace esg::server {
 namespace disc = estimator::discovery;
@@ -191,7 +192,18 @@ absl::StatusOr<esg::v1::ReadmitGyroResponse> EstimationCore::ReadmitGyro(
     RETURN_IF_ERROR(trial.ReadmitGyro(record.gyro_id));
     record.after_time = after;
   }
-  RETURN_IF_ERROR(storage_->sessions().PutReadmission(record));
+  // With leases, stored only while this server still holds the session (checked inside the
+  // transaction, as every write of the session is): a server that lost it stores nothing the
+  // new holder would not know of.
+  if (const absl::Status stored = storage_->CommitReadmission(record, FenceOf(*sc));
+      !stored.ok()) {
+    if (!storage::LeaseLostSpacecraft(stored).has_value()) return stored;
+    MarkLeaseLost(*sc, stored.message());
+    return absl::AbortedError(
+        absl::StrCat("spacecraft_id: ", stored.message(), "; the readmission of gyro ",
+                     record.gyro_id, " is not stored: send it again (the server holding the "
+                     "session now takes it): docs/service.md \"Several servers\""));
+  }
   esg::v1::ReadmitGyroResponse response;
   {
     absl::MutexLock lock(&sc->state_mu);

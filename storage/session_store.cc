@@ -70,6 +70,12 @@ absl::StatusOr<std::vector<std::string>> SessionStore::ListSpacecraft() {
 }
 
 absl::Status SessionStore::PutReadmission(const ReadmissionRecord& record) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  RETURN_IF_ERROR(PutReadmission(txn, record));
+  return txn.Commit();
+}
+
+absl::Status SessionStore::PutReadmission(Transaction& txn, const ReadmissionRecord& record) {
   RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "readmission.spacecraft_id"));
   if (record.gyro_id < 1 || record.gyro_id > 4) {
     return absl::InvalidArgumentError(
@@ -80,7 +86,6 @@ absl::Status SessionStore::PutReadmission(const ReadmissionRecord& record) {
   }
   RETURN_IF_ERROR(ValidateStorableTime(record.after_time, "readmission.after_time"));
   RETURN_IF_ERROR(ValidateStorableTime(record.compute_time, "readmission.compute_time"));
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
   ASSIGN_OR_RETURN(Statement * st,
                    txn.Prepare("INSERT INTO gyro_readmissions (spacecraft_id, after_time_unix_ns, "
                                "gyro_id, compute_time_unix_ns, operator_name) "
@@ -96,7 +101,7 @@ absl::Status SessionStore::PutReadmission(const ReadmissionRecord& record) {
     return absl::AlreadyExistsError(absl::StrCat("gyro_id: gyro ", record.gyro_id,
                                                  " is readmitted already after this time"));
   }
-  return txn.Commit();
+  return absl::OkStatus();
 }
 
 absl::StatusOr<std::vector<ReadmissionRecord>> SessionStore::ListReadmissions(

@@ -39,6 +39,7 @@ class SessionStore {
   // outside 1..4, an unstorable time; AlreadyExists when the same gyro's readmission after the
   // same time is stored.
   absl::Status PutReadmission(const ReadmissionRecord& record);
+  absl::Status PutReadmission(Transaction& txn, const ReadmissionRecord& record);
   // The spacecraft's readmissions by after_time, then gyro_id.
   absl::StatusOr<std::vector<ReadmissionRecord>> ListReadmissions(absl::string_view spacecraft_id);
 

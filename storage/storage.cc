@@ -305,4 +305,15 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
   return sequences;
 }
 
+absl::Status Storage::CommitReadmission(const ReadmissionRecord& record,
+                                        const std::optional<LeaseFence>& fence) {
+  RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "readmission.spacecraft_id"));
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  if (fence.has_value()) {
+    RETURN_IF_ERROR(leases_.CheckHeld(txn, record.spacecraft_id, *fence));
+  }
+  RETURN_IF_ERROR(sessions_.PutReadmission(txn, record));
+  return txn.Commit();
+}
+
 }  // namespace esg::storage

@@ -179,6 +179,14 @@ class Storage {
   // ("config.", "checkpoint.", "new_alerts[i]", "clears[i]").
   absl::StatusOr<std::vector<int64_t>> CommitConfiguration(const ConfigurationChange& change);
 
+  // Stores an operator's readmission of a gyro (SessionStore::PutReadmission) in one
+  // transaction that first checks `fence` (several servers on one database: the writing
+  // server's lease of the session; nullopt without leases): Aborted naming the spacecraft, and
+  // nothing stored, for a lease lost (LeaseStore::CheckHeld). Errors otherwise as
+  // PutReadmission, storage faults as ArchiveFrames.
+  absl::Status CommitReadmission(const ReadmissionRecord& record,
+                                 const std::optional<LeaseFence>& fence);
+
   // PostgreSQL: a new connection notified of every committed change of an alert
   // (kAlertsChannel) and of every estimate stored (kEstimatesChannel), by any server sharing the
   // database. FailedPrecondition with SQLite (one server).

@@ -1,7 +1,9 @@
 // The filter's commits on PostgreSQL run on a connection of their own (storage/storage.h
 // "Connections"): a real esgd on 127.0.0.1 over a real PostgreSQL server (tests/testing/
 // postgres_server.h), the filter's group commit on, a filter transaction held waiting for a row
-// lock another connection holds, and a frame acknowledged meanwhile.
+// lock another connection holds, and a frame acknowledged meanwhile. Also on PostgreSQL with
+// session leases: an operator's readmission of a gyro is fenced like every write of the session
+// (docs/service.md "Several servers", Fencing).
 #include <memory>
 #include <string>
 #include <vector>
@@ -12,7 +14,9 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "storage/postgres_db.h"
+#include "storage/storage.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/example_config.h"
 #include "tests/testing/postgres_server.h"
 #include "tests/testing/status_matchers.h"
 
@@ -134,6 +138,92 @@ TEST(FilterConnectionPostgres, AnAckIsSentWhileAFilterCommitWaitsForALock) {
   ASSERT_THAT(server.core().WaitApplied("FC-1", absl::Minutes(2)), IsOk());
   const esg::v1::SessionInfo info = Session(*stub, "FC-1");
   EXPECT_EQ(info.frames_applied(), static_cast<int64_t>(n));
+}
+
+// A server that lost a session's lease (another node took it over: the lease row's owner and
+// epoch changed, as a takeover after this server paused past its lease writes them) refuses an
+// operator's readmission of the session's excluded gyro with ABORTED naming spacecraft_id, the
+// node that took it over and that nothing is stored; the readmission is not in the database. The
+// server drops the session: the call sent again is refused UNAVAILABLE while the other node
+// holds the lease. (The lease renewal, every 20 s here, cannot notice the takeover first.)
+TEST(ReadmitGyroPostgres, IsRefusedAndStoresNothingOnAServerThatLostTheSessionLease) {
+  std::string error;
+  PostgresServer* pg = PostgresServer::Shared(&error);
+  ASSERT_NE(pg, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = pg->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  server::ServerOptions options;
+  options.core.node_id = "node-a";
+  options.core.lease_duration = absl::Minutes(1);
+  options.auto_diagnosis.span = absl::ZeroDuration();
+  LoopbackServer server(options, *uri);
+  ASSERT_NE(server.get(), nullptr);
+  auto stub = server.Stub();
+
+  // RDK-1, gyro 3's reading frozen for 15 min at 2 h while the spacecraft turns: excluded.
+  const std::string id = "LEASE-1";
+  estimator::SimulationSpec spec;
+  spec.config = ExampleConfig("rdk1.json");
+  spec.config.spacecraft_id = id;
+  spec.duration = estimator::HoursToSeconds(3.0);
+  spec.seed = 5;
+  estimator::GyroFault frozen;
+  frozen.time = estimator::HoursToSeconds(2.0);
+  frozen.kind = estimator::GyroFault::Kind::kReadingFrozen;
+  frozen.end = estimator::HoursToSeconds(2.25);
+  spec.gyros[2].fault = frozen;
+  const SimulatedRun run = SimulateCalibrationRun(id, spec);
+  {
+    grpc::ClientContext context;
+    esg::v1::ConfigureResponse response;
+    ASSERT_TRUE(stub->ConfigureSpacecraft(&context, ConfigureRequestFor(run.config), &response)
+                    .ok());
+  }
+  const StreamResult sent = StreamFrames(*stub, run.frames);
+  ASSERT_TRUE(sent.status.ok()) << sent.status.error_message();
+  ASSERT_THAT(server.core().WaitApplied(id, absl::Minutes(2)), IsOk());
+  const esg::v1::SessionInfo info = Session(*stub, id);
+  bool excluded = false;
+  for (const esg::v1::ExcludedGyro& e : info.excluded_gyros()) excluded |= e.gyro_id() == 3;
+  ASSERT_TRUE(excluded) << "gyro 3 was not excluded: " << info.DebugString();
+
+  // Node B takes the session over.
+  absl::StatusOr<std::unique_ptr<storage::Storage>> db = storage::Storage::Open(*uri);
+  ASSERT_THAT(db, IsOk());
+  absl::StatusOr<storage::SessionLease> held = (*db)->leases().Get(id);
+  ASSERT_THAT(held, IsOk());
+  ASSERT_EQ(held->owner, "node-a");
+  ASSERT_THAT((*db)->database().Execute(
+                  "UPDATE session_leases SET owner = 'node-b', epoch = epoch + 1 "
+                  "WHERE spacecraft_id = 'LEASE-1'"),
+              IsOk());
+
+  const auto readmit = [&]() {
+    grpc::ClientContext context;
+    esg::v1::ReadmitGyroRequest request;
+    request.set_spacecraft_id(id);
+    request.set_gyro_id(3);
+    request.set_operator_name("alice");
+    esg::v1::ReadmitGyroResponse response;
+    return stub->ReadmitGyro(&context, request, &response);
+  };
+  const grpc::Status refused = readmit();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::ABORTED) << refused.error_message();
+  EXPECT_THAT(refused.error_message(), ::testing::StartsWith("spacecraft_id: "));
+  EXPECT_THAT(refused.error_message(),
+              ::testing::HasSubstr(absl::StrCat("no longer holds its session (taken over by node "
+                                                "node-b, epoch ",
+                                                held->epoch + 1, ")")));
+  EXPECT_THAT(refused.error_message(),
+              ::testing::HasSubstr("the readmission of gyro 3 is not stored"));
+  absl::StatusOr<std::vector<storage::ReadmissionRecord>> stored =
+      (*db)->sessions().ListReadmissions(id);
+  ASSERT_THAT(stored, IsOk());
+  EXPECT_TRUE(stored->empty()) << stored->size() << " readmissions stored";
+
+  const grpc::Status again = readmit();
+  EXPECT_EQ(again.error_code(), grpc::StatusCode::UNAVAILABLE) << again.error_message();
+  EXPECT_THAT(again.error_message(), ::testing::HasSubstr("is served by node node-b"));
 }
 
 }  // namespace
