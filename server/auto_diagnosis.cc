@@ -50,15 +50,26 @@ std::string VerdictText(const esg::v1::DiagnosisResult& result) {
   return text;
 }
 
+// "over A .. B", the span the diagnosis covered; a span whose ends cannot be read (a timestamp
+// outside the range a Timestamp may hold) is stated as such rather than guessed.
+std::string SpanText(const esg::v1::DiagnosisResult& result) {
+  const absl::StatusOr<absl::Time> first = proto_convert::TimeFromProto(result.first_frame_time());
+  const absl::StatusOr<absl::Time> last = proto_convert::TimeFromProto(result.last_frame_time());
+  if (first.ok() && last.ok()) {
+    return absl::StrCat("over ", FormatUtc(*first), " .. ", FormatUtc(*last));
+  }
+  const absl::Status& bad = first.ok() ? last.status() : first.status();
+  return absl::StrCat("over a span whose ", first.ok() ? "last" : "first",
+                      " frame time cannot be read (", bad.message(), ")");
+}
+
 }  // namespace
 
 std::string FollowUpMessage(const esg::v1::DiagnosisResult& result,
                             const storage::AlertRecord& alert) {
   return absl::StrCat("automatic diagnosis #", result.id(), " of ", result.spacecraft_id(), " ",
-                      AnswersText(alert), ", over ",
-                      FormatUtc(*proto_convert::TimeFromProto(result.first_frame_time())), " .. ",
-                      FormatUtc(*proto_convert::TimeFromProto(result.last_frame_time())), " (",
-                      result.frames(), " frames, configuration version ", result.config_version(),
+                      AnswersText(alert), ", ", SpanText(result), " (", result.frames(),
+                      " frames, configuration version ", result.config_version(),
                       "): ", VerdictText(result));
 }
 
@@ -279,7 +290,9 @@ void AutoDiagnosis::Finish(const Job& job, const absl::StatusOr<esg::v1::Diagnos
   AlertOccurrence follow_up;
   follow_up.reason = "MODEL_DIAGNOSED";
   follow_up.subsystem = "model";
-  follow_up.time = *proto_convert::TimeFromProto(result->last_frame_time());
+  // The diagnosis's last frame; the answered alert's time if it cannot be read.
+  follow_up.time = proto_convert::TimeFromProto(result->last_frame_time())
+                       .value_or(job.alert.measurement_time);
   follow_up.value = static_cast<double>(result->id());
   follow_up.threshold = static_cast<double>(job.alert.sequence);
   follow_up.message = FollowUpMessage(*result, job.alert);

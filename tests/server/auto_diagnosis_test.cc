@@ -82,6 +82,28 @@ TEST(AutoDiagnosisMessage, NamesTheVerdictTheDiagnosisTheAlertAndWhatToDo) {
   EXPECT_THAT(m, Not(HasSubstr("esg model apply")));
 }
 
+// A result whose span cannot be read (a timestamp with nanos out of range, as a corrupt or
+// hand-made DiagnosisResult may carry) gives the message with that said instead of a time: the
+// span's ends are not dereferenced unchecked.
+TEST(AutoDiagnosisMessage, StatesASpanItCannotReadInsteadOfATime) {
+  const storage::AlertRecord alert =
+      Inconsistent("RDK-1", 5, absl::FromUnixSeconds(1551398400) + absl::Hours(3));
+  esg::v1::DiagnosisResult bad_first = Result("none");
+  bad_first.mutable_first_frame_time()->set_nanos(-1);
+  const std::string first = FollowUpMessage(bad_first, alert);
+  EXPECT_THAT(first, HasSubstr("automatic diagnosis #12 of RDK-1 answers alert #5"));
+  EXPECT_THAT(first, HasSubstr(", over a span whose first frame time cannot be read ("));
+  EXPECT_THAT(first, HasSubstr("721 frames, configuration version 3"));
+  EXPECT_THAT(first, HasSubstr("verdict none: "));
+  esg::v1::DiagnosisResult bad_last = Result("none");
+  bad_last.mutable_last_frame_time()->set_seconds(int64_t{1} << 62);
+  EXPECT_THAT(FollowUpMessage(bad_last, alert),
+              HasSubstr(", over a span whose last frame time cannot be read ("));
+  // Both readable: the span in UTC.
+  EXPECT_THAT(FollowUpMessage(Result("none"), alert),
+              HasSubstr(", over 2019-03-01T00:00:00.000Z .. 2019-03-01T12:00:00.000Z ("));
+}
+
 // A configured spacecraft with `hours` of archived, applied telemetry.
 struct Flight {
   explicit Flight(const std::string& id, double hours, server::ServerOptions options = {})
