@@ -2,7 +2,11 @@
 // WARNING, CRITICAL); esgd four, so DISTRESS shows red with CRITICAL and the fault's name keeps
 // esgd's own word. History: GET /api/alerts (SubscribeAlerts replay); live: the WebSocket alerts
 // stream, each change making the view fetch the list again. Acknowledge: AcknowledgeAlert.
+// A selected MODEL_DIAGNOSED alert has an inspector tab "Diagnosis" leading to the diagnosis it
+// answers with.
 import { apiFetch, getToken } from './api.js';
+import { el } from './dom.js';
+import { alertDiagnosis } from './keys.js';
 import { live } from './live.js';
 import { operatorName } from './operator.js';
 
@@ -99,6 +103,40 @@ export function makeFaultProvider(openmct) {
       fault.shelved = Boolean(shelved);
       if (shelved && shelveDuration) setTimeout(() => { fault.shelved = false; }, shelveDuration);
       return { success: true };
+    }
+  };
+}
+
+// The single fault selected in the fault-management view (Open MCT selects [the view's object,
+// {selectedFaults}]), or null.
+function selectedFault(selection) {
+  const faults = selection?.[0]?.[1]?.context?.selectedFaults;
+  return Array.isArray(faults) && faults.length === 1 ? faults[0] : null;
+}
+
+// The inspector tab "Diagnosis" of a selected MODEL_DIAGNOSED alert: which diagnosis answers the
+// alert it refers to, and a link that opens its report. Below Open MCT's own fault details in
+// priority, so those stay the tab shown first.
+export function diagnosisInspectorProvider(openmct) {
+  return {
+    key: 'esg.fault.diagnosis',
+    name: 'Diagnosis',
+    canView: (selection) => alertDiagnosis(selectedFault(selection)?.esgAlert) !== null,
+    view(selection) {
+      const alert = selectedFault(selection).esgAlert;
+      const diagnosis = alertDiagnosis(alert);
+      return {
+        show(element) {
+          element.append(el('div', { class: 'c-inspect-properties esg-fault-diagnosis' },
+            el('p', {}, `esgd diagnosed ${diagnosis.spacecraft} itself for alert #${Math.round(alert.threshold)} `,
+              '(MODEL_INCONSISTENT): ',
+              el('a', { class: 'esg-diagnosis-link', href: diagnosis.hash, 'data-diagnosis': String(diagnosis.id) },
+                `open diagnosis #${diagnosis.id}`),
+              ', its verdict, findings and what applying it would set.')));
+        },
+        priority: () => openmct.priority.DEFAULT,
+        destroy() {}
+      };
     }
   };
 }

@@ -4,6 +4,7 @@
 // when esgd pushes an alert or an estimate of the spacecraft, not polled.
 import { apiFetch } from './api.js';
 import { el, shortName, STYLE } from './dom.js';
+import { alertDiagnosis } from './keys.js';
 import {
   FLEET_STYLE, LEVEL_NAMES, SEVERITIES, alertSeverity, attention, diagnosisCell, healthCell, minute,
   modelCell, sigmaCell, words
@@ -22,6 +23,11 @@ const HEALTH_STYLE = `
 .esg-health h2 { margin: 0 0 4px; }
 .esg-view:has(.esg-health) { padding: 4px 6px; }
 `;
+
+function diagnosisLink(diagnosis) {
+  return el('a', { class: 'esg-diagnosis-link', href: diagnosis.hash, 'data-diagnosis': String(diagnosis.id) },
+    `diagnosis #${diagnosis.id}`);
+}
 
 function render(container, entry, alerts) {
   const s = entry.session;
@@ -47,7 +53,10 @@ function render(container, entry, alerts) {
           active.length === 0 ? el('span', { class: 'muted' }, 'none') : null,
           active.map((a) => el('div', { 'data-alert': a.sequence, title: a.message },
             el('span', { class: `sev-${alertSeverity(a)}` }, alertSeverity(a)),
-            ` ${words(shortName(a.reason, 'ALERT_REASON_'))} (${a.subsystem})`,
+            ` ${words(shortName(a.reason, 'ALERT_REASON_'))}`,
+            // A MODEL_DIAGNOSED alert leads to the diagnosis it answers with.
+            ...(alertDiagnosis(a) ? [': ', diagnosisLink(alertDiagnosis(a))] : []),
+            ` (${a.subsystem})`,
             el('span', { class: 'muted' }, ` since ${minute(a.first_time)}${a.acknowledged ? ', acknowledged' : ''}`))))))));
 }
 

@@ -14,3 +14,20 @@ export function parseKey(key) {
 export function id(kind, ...parts) {
   return { namespace: NAMESPACE, key: makeKey(kind, ...parts) };
 }
+
+// The page's address (location hash) of a stored diagnosis's report: its object in the tree,
+// ESG spacecraft / SC / Diagnoses / Diagnosis N.
+export function diagnosisHash(spacecraft, diagnosisId) {
+  const path = [['root'], ['sc', spacecraft], ['diags', spacecraft], ['diag', spacecraft, diagnosisId]];
+  return `#/browse/${path.map(([kind, ...parts]) => `${NAMESPACE}:${makeKey(kind, ...parts)}`).join('/')}`;
+}
+
+// The diagnosis a MODEL_DIAGNOSED alert answers with (docs/service.md "Automatic diagnosis": its
+// value is the diagnosis id, its text names it too): {spacecraft, id, hash}; null for any other
+// alert.
+export function alertDiagnosis(alert) {
+  if (!alert || alert.reason !== 'ALERT_REASON_MODEL_DIAGNOSED') return null;
+  const diagnosisId = Math.round(Number(alert.value));
+  if (!Number.isFinite(diagnosisId) || diagnosisId <= 0) return null;
+  return { spacecraft: alert.spacecraft_id, id: diagnosisId, hash: diagnosisHash(alert.spacecraft_id, diagnosisId) };
+}

@@ -1,7 +1,7 @@
 // The ESG console plugin: object types, the object tree, telemetry, alerts as faults, and the
 // console's own views. Installed by public/index.html after the operator has signed in.
 import { diagnosisViewProvider } from './diagnosisView.js';
-import { makeFaultProvider } from './faults.js';
+import { diagnosisInspectorProvider, makeFaultProvider } from './faults.js';
 import { fleetViewProvider } from './fleetView.js';
 import { healthViewProvider } from './healthView.js';
 import { NAMESPACE } from './keys.js';
@@ -44,6 +44,7 @@ export default function EsgConsolePlugin() {
 
     openmct.install(openmct.plugins.FaultManagement());
     openmct.faults.addProvider(makeFaultProvider(openmct));
+    openmct.inspectorViews.addProvider(diagnosisInspectorProvider(openmct));
 
     openmct.objectViews.addProvider(fleetViewProvider());
     openmct.objectViews.addProvider(healthViewProvider());

@@ -1101,7 +1101,7 @@ test('fleet overview of the whole fleet: every row as esg reports, the worst fir
 // docs/discovery.md's worked example: the model (model1.json) lacks gyro 2's rotor displacement.
 // Diagnosed on esgd, the report offers "Apply to the model"; confirmed, esgd stores the
 // configuration with the freed coefficients and re-runs the archive, as `esg status` shows.
-test('a diagnosis is applied to the model from its report after a confirmation, as esg status then shows; a read-only token is not offered the button', async () => {
+test('a diagnosis is applied to the model from its report after a confirmation, as esg status then shows; a read-only token is not offered the button; the MODEL_DIAGNOSED alert links to its diagnosis', async () => {
   const SC = 'DISC-1';
   const model1 = path.join(tmp, 'model1.json');
   fs.writeFileSync(model1, JSON.stringify({
@@ -1157,6 +1157,28 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
   await page.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
     .some((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
   { timeout: 20_000 }, `MODEL_DIAGNOSED #${followUp.sequence}`);
+  // The alert leads to its diagnosis: selected in the fault view, its inspector tab "Diagnosis"
+  // links to the report; the health panel's line of the active alert links there too.
+  const row = await page.waitForFunction((text) => [...document.querySelectorAll('.c-fault-mgmt__list')]
+    .find((li) => li.querySelector('.c-fault-mgmt__list-faultname')?.textContent.trim() === text),
+  { timeout: 20_000 }, `MODEL_DIAGNOSED #${followUp.sequence}`);
+  await (await row.evaluateHandle((li) => li.querySelector('.c-fault-mgmt__list-checkbox input'))).click();
+  const inspectorTab = await page.waitForFunction(() => [...document.querySelectorAll('.c-inspector__tab')]
+    .find((t) => t.title === 'Diagnosis'), { timeout: 20_000 });
+  await inspectorTab.click();
+  const faultLink = await page.waitForSelector('.esg-fault-diagnosis a.esg-diagnosis-link', { timeout: 20_000 });
+  assert.equal(await faultLink.evaluate((a) => a.dataset.diagnosis), String(automatic.id));
+  await faultLink.click();
+  await page.waitForSelector('.esg-automatic', { timeout: 20_000 });
+  assert.equal(await page.$eval('.esg-automatic', (p) => p.dataset.answersAlert), String(automatic.answersAlert));
+  assert.match(await page.evaluate(() => location.hash), new RegExp(`esg:diag~${SC}~${automatic.id}$`));
+  await open(`esg:root/esg:sc~${SC}/esg:health~${SC}`);
+  const healthLink = await page.waitForSelector(
+    `.esg-health [data-alert="${followUp.sequence}"] a.esg-diagnosis-link`, { timeout: 20_000 });
+  assert.equal(await healthLink.evaluate((a) => a.dataset.diagnosis), String(automatic.id));
+  await healthLink.click();
+  await page.waitForSelector('.esg-automatic', { timeout: 20_000 });
+  assert.match(await page.evaluate(() => location.hash), new RegExp(`esg:diag~${SC}~${automatic.id}$`));
   const diagnosis = await timed(`esg diagnose --spacecraft ${SC}`, () => cliJson('diagnose', '--spacecraft', SC));
   assert.equal(diagnosis.verdict, 'rotor_displacement');
   assert.ok(diagnosis.applies && diagnosis.applies.length > 0, JSON.stringify(diagnosis.applies));
