@@ -1101,6 +1101,14 @@ test('fleet overview of the whole fleet: every row as esg reports, the worst fir
 // docs/discovery.md's worked example: the model (model1.json) lacks gyro 2's rotor displacement.
 // Diagnosed on esgd, the report offers "Apply to the model"; confirmed, esgd stores the
 // configuration with the freed coefficients and re-runs the archive, as `esg status` shows.
+// Clicks the report's Apply button as found when clicked: the view may be drawn again between a
+// wait for the button and a click on the element that wait returned (Open MCT re-shows a view
+// when the tree reloads), which detached it.
+async function clickApply() {
+  await page.waitForSelector('.esg-apply-button:not([disabled])', { timeout: 20_000 });
+  await page.$eval('.esg-apply-button', (button) => button.click());
+}
+
 test('a diagnosis is applied to the model from its report after a confirmation, as esg status then shows; a read-only token is not offered the button; the MODEL_DIAGNOSED alert links to its diagnosis', async () => {
   const SC = 'DISC-1';
   const model1 = path.join(tmp, 'model1.json');
@@ -1206,14 +1214,14 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
   const offered = await page.$$eval('.esg-apply li', (lis) => lis.map((li) => li.textContent));
   assert.deepEqual(offered, diagnosis.applies);
   // Cancelled: nothing changes.
-  await page.click('.esg-apply-button');
+  await clickApply();
   await page.waitForSelector('#esg-apply-dialog');
   await page.click('#esg-apply-cancel');
   await page.waitForFunction(() => !document.getElementById('esg-apply-dialog'));
   const held = (await cliJson('status', '--spacecraft', SC)).config.gyros.find((g) => g.id === 2);
   assert.ok(!((held.modelSigma || {}).c1DegH || []).some((v) => v > 0), JSON.stringify(held));
   // Confirmed: applied, the result on the page.
-  await page.click('.esg-apply-button');
+  await clickApply();
   await page.waitForSelector('#esg-apply-dialog');
   const dialog = await page.$eval('#esg-apply-dialog', (d) => d.textContent);
   assert.match(dialog, /rotor_displacement \(gyro 2\)/);
@@ -1231,7 +1239,7 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
   await page.waitForSelector('table.esg-fleet', { timeout: 20_000 });
   await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`);
   await page.waitForSelector('.esg-apply-button:not([disabled])', { timeout: 20_000 });
-  await page.click('.esg-apply-button');
+  await clickApply();
   await page.waitForSelector('#esg-apply-dialog');
   await page.click('#esg-apply-ok');
   await page.waitForFunction(() => /Not applied: .*changed since/.test(
