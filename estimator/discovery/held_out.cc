@@ -5,6 +5,8 @@
 #include <cmath>
 #include <map>
 #include <optional>
+#include <utility>
+#include <vector>
 
 #include "estimator/statistics.h"
 #include "estimator/units.h"
@@ -12,6 +14,25 @@
 namespace esg::estimator::discovery {
 
 using Eigen::Vector3d;
+
+namespace {
+
+// The least-squares standard error of `line`'s slope over times `t` with white residuals:
+// residual_sigma / sqrt(S_tt), S_tt = sum (t - mean t)^2. The robust pass of FitRobustLine drops
+// outliers without saying which; S_tt over all the times is scaled by the share of points used
+// (the times are evenly spread, so each point carries S_tt / n on average).
+double SlopeStandardError(const std::vector<double>& t, const RobustLine& line) {
+  if (t.size() < 3 || line.used < 3) return 0.0;
+  double mean = 0.0;
+  for (double v : t) mean += v;
+  mean /= static_cast<double>(t.size());
+  double s_tt = 0.0;
+  for (double v : t) s_tt += (v - mean) * (v - mean);
+  s_tt *= static_cast<double>(line.used) / static_cast<double>(t.size());
+  return s_tt > 0.0 ? line.residual_sigma / std::sqrt(s_tt) : 0.0;
+}
+
+}  // namespace
 
 std::vector<Gap> ChooseGaps(const std::vector<RegimeSpan>& spans,
                             const std::vector<TelemetryFrame>& frames, const DiagnoseOptions& opt) {
@@ -98,6 +119,7 @@ HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps
   const absl::Time t0 = frames.front().time;
   double rate2 = 0.0;
   int rated = 0;
+  std::vector<std::pair<double, double>> rates_and_variances;  // r_k [deg/h], var r_k [(deg/h)^2]
   for (size_t k = 0; k < gaps.size(); ++k) {
     GapSummary g;
     g.span = gaps[k].span;
@@ -131,9 +153,20 @@ HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps
       out.gaps.push_back(g);
       continue;
     }
-    Vector3d slope;
-    for (int i = 0; i < 3; ++i) slope(i) = FitRobustLine(t, y[i]).slope;
+    Vector3d slope, slope_sigma;
+    for (int i = 0; i < 3; ++i) {
+      const RobustLine line = FitRobustLine(t, y[i]);
+      slope(i) = line.slope;
+      slope_sigma(i) = SlopeStandardError(t, line);
+    }
     g.drift_rate_deg_h = RadPerSecToDegPerHour(slope.norm());
+    // var r_k = sum_i b_ki^2 s_ki^2 / r_k^2 (first order in the slope errors); at r_k = 0 the
+    // largest axis variance.
+    const double rate_var_rad2_s2 =
+        slope.norm() > 0.0 ? slope.cwiseProduct(slope_sigma).squaredNorm() / slope.squaredNorm()
+                           : slope_sigma.cwiseAbs2().maxCoeff();
+    const double rate_sigma_deg_h = RadPerSecToDegPerHour(std::sqrt(rate_var_rad2_s2));
+    rates_and_variances.emplace_back(g.drift_rate_deg_h, rate_sigma_deg_h * rate_sigma_deg_h);
     rate2 += g.drift_rate_deg_h * g.drift_rate_deg_h;
     ++rated;
     // Spin-axis prediction error growth over the gap against the filter's own uncertainty:
@@ -168,6 +201,14 @@ HeldOutResult SummariseHeldOut(const ModelRun& run, const std::vector<Gap>& gaps
     out.gaps.push_back(g);
   }
   out.rate_rms_deg_h = rated > 0 ? std::sqrt(rate2 / rated) : 0.0;
+  // var R = sum_k (dR/dr_k)^2 var r_k, dR/dr_k = r_k / (n R); at R = 0 the mean of var r_k / n.
+  double rate_rms_var = 0.0;
+  for (const auto& [rate_deg_h, var_deg2_h2] : rates_and_variances) {
+    const double d = out.rate_rms_deg_h > 0.0 ? rate_deg_h / (rated * out.rate_rms_deg_h)
+                                              : 1.0 / rated;
+    rate_rms_var += d * d * var_deg2_h2;
+  }
+  out.rate_rms_sigma_deg_h = std::sqrt(rate_rms_var);
   return out;
 }
 

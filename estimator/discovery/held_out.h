@@ -47,7 +47,17 @@ struct HeldOutResult {
   double nees = 0.0;
   double deviance = 0.0;  // -2 log predictive density: the currency of held-out comparisons
   int dof = 0;
+  // The gap drift: R = sqrt(mean over the rated gaps of r_k^2), r_k = |b_k| the norm of the slope
+  // b_k of gap k's attitude error (three inertial axes, robust line fits) [deg/h].
   double rate_rms_deg_h = 0.0;
+  // R's 1-sigma from the line fits' own slope uncertainty [deg/h]: each axis' slope has the
+  // least-squares standard error s_ki = sigma_ki / sqrt(S_tt) (sigma_ki the fit's residual
+  // standard deviation, S_tt = sum (t - mean t)^2 over the points the fit used, residuals taken
+  // as white), carried to r_k and R to first order (the delta method):
+  // var r_k = sum_i b_ki^2 s_ki^2 / r_k^2, var R = sum_k (r_k / (n R))^2 var r_k, n the rated
+  // gaps. Residuals correlated in time (a drift that bends within the gap) make it smaller than
+  // the slope's real scatter, never larger.
+  double rate_rms_sigma_deg_h = 0.0;
   std::vector<HeldOutPoint> points;
 };
 
