@@ -124,7 +124,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   app.add_option("--max-stored-diagnoses", options.max_stored_diagnoses,
-                 "Diagnoses kept per spacecraft (beyond: the oldest are deleted)")
+                 "Diagnoses kept per spacecraft (beyond: the oldest are deleted, the "
+                 "service's own before the operators')")
       ->capture_default_str();
   double auto_diagnosis_hours = absl::ToDoubleHours(options.auto_diagnosis.span);
   app.add_option("--auto-diagnosis-hours", auto_diagnosis_hours,

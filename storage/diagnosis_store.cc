@@ -96,12 +96,19 @@ absl::StatusOr<int64_t> DiagnosisStore::Put(Transaction& txn, const DiagnosisRec
   const int64_t id = st->ColumnInt64(0);
   st->Reset();
   if (const int64_t keep = max_per_spacecraft(); keep > 0) {
-    // The ids beyond the newest `keep` (index diagnoses_by_spacecraft).
-    ASSIGN_OR_RETURN(Statement * drop,
-                     txn.Prepare("DELETE FROM diagnoses WHERE spacecraft_id = ?1 AND id <= "
-                                 "(SELECT id FROM diagnoses WHERE spacecraft_id = ?1 "
-                                 "ORDER BY id DESC LIMIT 1 OFFSET ?2)"));
-    drop->BindText(1, record.spacecraft_id).BindInt64(2, keep);
+    // Kept: the one just stored, then the operators' newest, then the service's newest, `keep`
+    // in all; the rest go (index diagnoses_by_spacecraft). So the service's own diagnoses are
+    // dropped before any an operator asked for, and never the one this call returns.
+    ASSIGN_OR_RETURN(
+        Statement * drop,
+        txn.Prepare("DELETE FROM diagnoses WHERE spacecraft_id = ?1 AND id NOT IN "
+                    "(SELECT id FROM diagnoses WHERE spacecraft_id = ?1 ORDER BY CASE WHEN "
+                    "id = ?3 THEN 0 WHEN requested_by = ?4 THEN 2 ELSE 1 END, id DESC "
+                    "LIMIT ?2)"));
+    drop->BindText(1, record.spacecraft_id)
+        .BindInt64(2, keep)
+        .BindInt64(3, id)
+        .BindText(4, kRequestedByService);
     RETURN_IF_ERROR(drop->Run());
   }
   return id;

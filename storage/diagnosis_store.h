@@ -2,10 +2,13 @@
 // verdict over a time window and the full report as JSON, kept as a history per spacecraft.
 //
 // Bounded per spacecraft (docs/service.md "Limits"): with a bound set, storing a diagnosis
-// beyond it deletes the spacecraft's oldest ones in the same transaction, so the newest
-// `max_per_spacecraft` stay. Oldest dropped rather than new ones refused: a report is read for
-// its recent verdict, and refusing would also refuse the service's own diagnoses; the ids of
-// the rest do not change, so a paged ListDiagnoses goes on after a drop.
+// beyond it deletes the spacecraft's oldest ones in the same transaction, the service's own
+// (requested_by kRequestedByService) before any an operator asked for, never the one just
+// stored: `max_per_spacecraft` stay. Oldest dropped rather than new ones refused: a report is
+// read for its recent verdict, and refusing would also refuse the service's own diagnoses; the
+// service's go first because an automatic diagnosis can be run again and an operator's report
+// was asked for; the ids of the rest do not change, so a paged ListDiagnoses goes on after a
+// drop.
 #ifndef ESG_STORAGE_DIAGNOSIS_STORE_H_
 #define ESG_STORAGE_DIAGNOSIS_STORE_H_
 
@@ -33,7 +36,8 @@ class DiagnosisStore {
   int64_t max_per_spacecraft() const { return max_per_spacecraft_.load(); }
 
   // Stores a diagnosis and returns its id (unique across all spacecraft, increasing;
-  // record.id is ignored); beyond the bound, deletes the spacecraft's oldest. InvalidArgument for an empty spacecraft_id or verdict, an unstorable
+  // record.id is ignored); beyond the bound, deletes the spacecraft's oldest automatic ones,
+  // then its oldest others (never this one). InvalidArgument for an empty spacecraft_id or verdict, an unstorable
   // time, or to_time < from_time.
   absl::StatusOr<int64_t> Put(const DiagnosisRecord& record);
   absl::StatusOr<int64_t> Put(Transaction& txn, const DiagnosisRecord& record);

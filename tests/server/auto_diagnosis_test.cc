@@ -8,6 +8,7 @@
 // tests/client/operator_actions_cli_test.cc (AutoDiagnosis.*).
 #include "server/auto_diagnosis.h"
 
+#include <chrono>
 #include <string>
 #include <vector>
 
@@ -304,6 +305,76 @@ TEST(AutoDiagnosis, ZeroHoursRunsNone) {
       Inconsistent("AUTO-4", 1, f.last_time()));
   absl::SleepFor(absl::Seconds(1));
   EXPECT_TRUE(f.Stored("AUTO-4").empty());
+}
+
+// An operator's diagnosis of the whole archive through the Diagnose rpc; its stored id.
+int64_t OperatorDiagnosis(esg::v1::EstimationService::Stub& stub, const std::string& id) {
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(300));
+  esg::v1::DiagnoseRequest request;
+  request.set_spacecraft_id(id);
+  auto reader = stub.Diagnose(&context, request);
+  esg::v1::DiagnoseUpdate update;
+  int64_t stored = 0;
+  while (reader->Read(&update)) {
+    if (update.has_result()) stored = update.result().id();
+  }
+  const grpc::Status status = reader->Finish();
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  return stored;
+}
+
+// Under the per-spacecraft bound (esgd --max-stored-diagnoses 2; docs/service.md "Limits"), the
+// service's own diagnoses are dropped before any an operator asked for: an operator's, then an
+// automatic one, then an operator's again leave the two operators' (dropping the oldest, as
+// before, would have dropped the first operator's and kept the automatic one). The one just
+// stored is never the one dropped: an automatic diagnosis stored beside two operators' stays,
+// and the older operator's goes.
+TEST(AutoDiagnosis, UnderTheStorageBoundTheServicesDiagnosesGoBeforeTheOperators) {
+  server::ServerOptions options;
+  options.max_stored_diagnoses = 2;
+  Flight f("AUTO-5", 6.0, options);
+  AutoDiagnosis& scheduler = f.server.get()->service().auto_diagnosis();
+  const auto ids = [&] {
+    std::vector<int64_t> out;
+    for (const storage::DiagnosisRecord& d : f.Stored("AUTO-5")) out.push_back(d.id);
+    return out;
+  };
+  const int64_t operator1 = OperatorDiagnosis(*f.stub, "AUTO-5");
+  ASSERT_GT(operator1, 0);
+  scheduler.OnModelAlert(Inconsistent("AUTO-5", 2, f.last_time()));
+  ASSERT_TRUE(WaitFor([&] { return f.Diagnosed("AUTO-5").size() == 1; }, absl::Minutes(3)));
+  const int64_t automatic1 = static_cast<int64_t>(f.Diagnosed("AUTO-5")[0].value);
+  EXPECT_EQ(ids(), (std::vector<int64_t>{operator1, automatic1}));
+  const int64_t operator2 = OperatorDiagnosis(*f.stub, "AUTO-5");
+  ASSERT_GT(operator2, 0);
+  EXPECT_EQ(ids(), (std::vector<int64_t>{operator1, operator2}));
+  for (const storage::DiagnosisRecord& d : f.Stored("AUTO-5")) EXPECT_EQ(d.requested_by, "");
+
+  // A new configuration version lifts the debounce; its automatic diagnosis is stored and kept.
+  {
+    grpc::ClientContext context;
+    estimator::SpacecraftConfig changed = f.run.config;
+    changed.readout_noise *= 1.5;
+    esg::v1::ConfigureRequest request = ConfigureRequestFor(changed);
+    request.set_replace(true);
+    esg::v1::ConfigureResponse configured;
+    ASSERT_TRUE(f.stub->ConfigureSpacecraft(&context, request, &configured).ok());
+  }
+  ASSERT_TRUE(f.server.core().WaitApplied("AUTO-5", absl::Minutes(2)).ok());
+  scheduler.OnModelAlert(Inconsistent("AUTO-5", 30, f.last_time()));
+  int64_t automatic2 = 0;
+  ASSERT_TRUE(WaitFor(
+      [&] {
+        for (const storage::DiagnosisRecord& d : f.Stored("AUTO-5")) {
+          if (d.requested_by == storage::kRequestedByService && d.answers_alert == 30) {
+            automatic2 = d.id;
+          }
+        }
+        return automatic2 > 0;
+      },
+      absl::Minutes(3)));
+  EXPECT_EQ(ids(), (std::vector<int64_t>{operator2, automatic2}));
 }
 
 }  // namespace

@@ -125,6 +125,47 @@ TEST_P(DiagnosisStoreTest, KeepsTheNewestPerSpacecraftBeyondItsBound) {
   EXPECT_THAT(diagnoses.List("RDK-2"), IsOkAndHolds(ElementsAre(Field(&DiagnosisRecord::id, *other))));
 }
 
+// Beyond the bound the service's own diagnoses (requested_by "service") go first, oldest first,
+// then the operators' oldest; the one just stored is never dropped, even an automatic one
+// stored beside operators' that fill the bound.
+TEST_P(DiagnosisStoreTest, DropsTheServicesDiagnosesBeforeTheOperatorsBeyondTheBound) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  diagnoses.set_max_per_spacecraft(3);
+  const auto put = [&](bool automatic, double from_s) -> int64_t {
+    DiagnosisRecord d = Diagnosis("RDK-1", "unexplained", from_s);
+    if (automatic) {
+      d.requested_by = kRequestedByService;
+      d.answers_alert = 7;
+    }
+    absl::StatusOr<int64_t> id = diagnoses.Put(d);
+    EXPECT_THAT(id, IsOk());
+    return id.ok() ? *id : 0;
+  };
+  const auto kept = [&] {
+    std::vector<int64_t> ids;
+    absl::StatusOr<std::vector<DiagnosisRecord>> list = diagnoses.List("RDK-1");
+    EXPECT_THAT(list, IsOk());
+    if (list.ok()) {
+      for (const DiagnosisRecord& d : *list) ids.push_back(d.id);
+    }
+    return ids;
+  };
+  const int64_t op1 = put(false, 0);
+  const int64_t auto1 = put(true, 1);
+  const int64_t auto2 = put(true, 2);
+  const int64_t op2 = put(false, 3);  // beyond the bound: the oldest automatic goes
+  EXPECT_EQ(kept(), (std::vector<int64_t>{op1, auto2, op2}));
+  const int64_t op3 = put(false, 4);  // the other automatic goes, not op1
+  EXPECT_EQ(kept(), (std::vector<int64_t>{op1, op2, op3}));
+  const int64_t auto3 = put(true, 5);  // kept itself; the oldest operator's goes
+  EXPECT_EQ(kept(), (std::vector<int64_t>{op2, op3, auto3}));
+  const int64_t op4 = put(false, 6);  // the automatic goes again
+  EXPECT_EQ(kept(), (std::vector<int64_t>{op2, op3, op4}));
+  EXPECT_THAT(diagnoses.Get(auto1), StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
+}
+
 // An automatic diagnosis (docs/service.md "Automatic diagnosis") keeps who asked for it and the
 // alert it answers, in the full record and in the summaries; a requested one reads back empty/0.
 TEST_P(DiagnosisStoreTest, KeepsWhoAskedAndTheAlertAnswered) {
