@@ -128,25 +128,43 @@ void AutoDiagnosis::OnConfigured(const std::string& spacecraft_id) {
 
 std::optional<int64_t> AutoDiagnosis::Cancel(const std::string& spacecraft_id) {
   absl::StatusOr<storage::ConfigRecord> config = core_->storage().configs().Get(spacecraft_id);
-  absl::MutexLock lock(&mu_);
   std::optional<int64_t> answered;
-  for (auto it = queue_.begin(); it != queue_.end();) {
-    if (it->alert.spacecraft_id != spacecraft_id) {
-      ++it;
-      continue;
+  {
+    absl::MutexLock lock(&mu_);
+    for (auto it = queue_.begin(); it != queue_.end();) {
+      if (it->alert.spacecraft_id != spacecraft_id) {
+        ++it;
+        continue;
+      }
+      answered = it->alert.sequence;
+      LogEvent("INFO", "auto_diagnosis_cancelled",
+               absl::StrCat("automatic diagnosis of ", spacecraft_id, " (", AnswersText(it->alert),
+                            ") cancelled before it started: an operator cancelled it"),
+               {{"spacecraftId", spacecraft_id}, {"alertSequence", it->alert.sequence}});
+      it = queue_.erase(it);
     }
-    answered = it->alert.sequence;
-    LogEvent("INFO", "auto_diagnosis_cancelled",
-             absl::StrCat("automatic diagnosis of ", spacecraft_id, " (", AnswersText(it->alert),
-                          ") cancelled before it started: an operator cancelled it"),
-             {{"spacecraftId", spacecraft_id}, {"alertSequence", it->alert.sequence}});
-    it = queue_.erase(it);
+    if (running_.has_value() && running_->alert.spacecraft_id == spacecraft_id) {
+      answered = running_->alert.sequence;
+      CancelLocked(*running_, "an operator cancelled it");
+    }
+    if (!answered.has_value() || !config.ok()) return answered;
+    suppressed_[spacecraft_id] = config->version;
   }
-  if (running_.has_value() && running_->alert.spacecraft_id == spacecraft_id) {
-    answered = running_->alert.sequence;
-    CancelLocked(*running_, "an operator cancelled it");
+  // Stored, so that a restart keeps it (in memory above for this run of the server either way);
+  // outside the lock, which the filter workers' alerts take.
+  storage::AutoCancelRecord marker;
+  marker.spacecraft_id = spacecraft_id;
+  marker.config_version = config->version;
+  marker.answers_alert = *answered;
+  marker.cancel_time = absl::Now();
+  if (const absl::Status stored = core_->storage().diagnoses().PutAutoCancel(marker);
+      !stored.ok()) {
+    LogEvent("WARN", "auto_diagnosis_cancel_not_stored",
+             absl::StrCat("the cancel of the automatic diagnosis of ", spacecraft_id,
+                          " under configuration version ", config->version,
+                          " holds until this server stops, not after: ", stored.ToString()),
+             {{"spacecraftId", spacecraft_id}, {"configVersion", config->version}});
   }
-  if (answered.has_value() && config.ok()) suppressed_[spacecraft_id] = config->version;
   return answered;
 }
 
@@ -179,12 +197,23 @@ std::string AutoDiagnosis::Debounced(const Job& job) {
   const std::string& id = job.alert.spacecraft_id;
   absl::StatusOr<storage::ConfigRecord> config = core_->storage().configs().Get(id);
   if (!config.ok()) return absl::StrCat("its configuration cannot be read: ", config.status().ToString());
+  bool cancelled = false;
   {
     absl::MutexLock lock(&mu_);
-    if (auto it = suppressed_.find(id); it != suppressed_.end() && it->second == config->version) {
-      return absl::StrCat("an operator cancelled the automatic diagnosis under configuration "
-                          "version ", config->version);
+    auto it = suppressed_.find(id);
+    cancelled = it != suppressed_.end() && it->second == config->version;
+  }
+  if (!cancelled) {
+    // A cancel stored before this server started.
+    absl::StatusOr<bool> stored = core_->storage().diagnoses().AutoCancelled(id, config->version);
+    if (!stored.ok()) {
+      return absl::StrCat("its cancels cannot be read: ", stored.status().ToString());
     }
+    cancelled = *stored;
+  }
+  if (cancelled) {
+    return absl::StrCat("an operator cancelled the automatic diagnosis under configuration "
+                        "version ", config->version);
   }
   int64_t after = 0;
   for (;;) {

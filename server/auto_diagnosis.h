@@ -12,8 +12,8 @@
 //             version for which an automatic diagnosis is stored whose last frame is less than
 //             `span` before the alert (so one persistent mismatch, whatever its repeats and
 //             re-raises, gives at most one run per `span` of telemetry); none under a version for
-//             which an operator cancelled one (CancelAutoDiagnosis), until the configuration
-//             changes.
+//             which an operator cancelled one (CancelAutoDiagnosis; the cancel is stored, so
+//             it holds across restarts), until the configuration changes.
 //   Span      the last `span` of measurement time up to the spacecraft's last durable frame.
 //             Every configuration change re-applies the whole archive under the new
 //             configuration, so the whole archive is the current configuration's; the span is
@@ -83,7 +83,9 @@ class AutoDiagnosis {
   void OnConfigured(const std::string& spacecraft_id);
 
   // An operator's cancel: the queued or running automatic diagnosis of the spacecraft is
-  // dropped or told to stop, and none starts again under its configuration version. Returns
+  // dropped or told to stop, and none starts again under its configuration version (stored:
+  // DiagnosisStore::PutAutoCancel; a failure to store it is logged, and it then holds until
+  // this server stops). Returns
   // the sequence of the alert it answered; nullopt when none was queued or running.
   std::optional<int64_t> Cancel(const std::string& spacecraft_id);
 

@@ -153,4 +153,36 @@ absl::StatusOr<DiagnosisRecord> DiagnosisStore::Get(int64_t id) {
   return ReadRow(*st);
 }
 
+absl::Status DiagnosisStore::PutAutoCancel(const AutoCancelRecord& record) {
+  RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "auto_cancel.spacecraft_id"));
+  if (record.config_version < 1) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "auto_cancel.config_version: must be >= 1, got ", record.config_version));
+  }
+  RETURN_IF_ERROR(ValidateStorableTime(record.cancel_time, "auto_cancel.cancel_time"));
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("INSERT INTO auto_diagnosis_cancels (spacecraft_id, "
+                               "config_version, answers_alert, cancel_time_unix_ns) "
+                               "VALUES (?1, ?2, ?3, ?4) ON CONFLICT DO NOTHING"));
+  st->BindText(1, record.spacecraft_id)
+      .BindInt64(2, record.config_version)
+      .BindInt64(3, record.answers_alert)
+      .BindInt64(4, TimeToUnixNanos(record.cancel_time));
+  RETURN_IF_ERROR(st->Run());
+  return txn.Commit();
+}
+
+absl::StatusOr<bool> DiagnosisStore::AutoCancelled(absl::string_view spacecraft_id,
+                                                   int64_t config_version) {
+  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
+  ASSIGN_OR_RETURN(Statement * st,
+                   txn.Prepare("SELECT 1 FROM auto_diagnosis_cancels WHERE spacecraft_id = ?1 "
+                               "AND config_version = ?2"));
+  st->BindText(1, spacecraft_id).BindInt64(2, config_version);
+  ASSIGN_OR_RETURN(bool row, st->Step());
+  st->Reset();
+  return row;
+}
+
 }  // namespace esg::storage

@@ -54,6 +54,14 @@ class DiagnosisStore {
   // One diagnosis; NotFound if missing (never stored, or dropped beyond the bound).
   absl::StatusOr<DiagnosisRecord> Get(int64_t id);
 
+  // Stores an operator's cancel of the automatic diagnosis (table auto_diagnosis_cancels); the
+  // same spacecraft and configuration version stored again keeps the first. InvalidArgument for
+  // an empty spacecraft_id, a config_version below 1 or an unstorable time.
+  absl::Status PutAutoCancel(const AutoCancelRecord& record);
+  // Whether an operator cancelled the automatic diagnosis of the spacecraft under
+  // config_version.
+  absl::StatusOr<bool> AutoCancelled(absl::string_view spacecraft_id, int64_t config_version);
+
  private:
   Database* db_;  // not owned
   std::atomic<int64_t> max_per_spacecraft_{0};

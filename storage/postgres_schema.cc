@@ -231,14 +231,17 @@ absl::string_view Upgrade(int version) {
       new std::string(ReadmissionsMigration(Dialect::kPostgres));
   static const std::string* const origin =
       new std::string(DiagnosisOriginMigration(Dialect::kPostgres));
+  static const std::string* const cancels =
+      new std::string(AutoDiagnosisCancelsMigration(Dialect::kPostgres));
   static constexpr absl::string_view kFrozen[] = {kCoefficientBasisTermsColumn,
                                                   kEstimateAttitudeErrorColumns};
-  static_assert(7 + std::size(kFrozen) + 3 == kCurrentSchemaVersion);
+  static_assert(7 + std::size(kFrozen) + 4 == kCurrentSchemaVersion);
   const int n = version - 7;
   if (n < static_cast<int>(std::size(kFrozen))) return kFrozen[n];
   const int built = n - static_cast<int>(std::size(kFrozen));
   if (built == 0) return *keyed_values;
-  return built == 1 ? absl::string_view(*readmissions) : absl::string_view(*origin);
+  if (built == 1) return *readmissions;
+  return built == 2 ? absl::string_view(*origin) : absl::string_view(*cancels);
 }
 
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").

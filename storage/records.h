@@ -182,6 +182,16 @@ struct DiagnosisRecord {
 
 inline constexpr const char* kRequestedByService = "service";
 
+// An operator's cancel of the service's automatic diagnosis of a spacecraft (docs/service.md
+// "Automatic diagnosis"): none runs again for it under `config_version` (ConfigRecord::version),
+// across restarts; a new configuration version starts afresh.
+struct AutoCancelRecord {
+  std::string spacecraft_id;
+  int64_t config_version = 0;  // >= 1
+  int64_t answers_alert = 0;   // the sequence of the alert the cancelled diagnosis answered
+  absl::Time cancel_time = absl::UnixEpoch();  // wall clock
+};
+
 // An operator's readmission of a gyro the filter excluded (docs/service.md "Readmitting a gyro"):
 // the gyro rejoins the filter at the first measurement step after `after_time`, the measurement
 // time of the last frame applied when it was stored; a re-run from the archive applies it there

@@ -341,6 +341,18 @@ std::string DiagnosisOriginMigration(Dialect dialect) {
       "ALTER TABLE diagnoses ADD COLUMN answers_alert ", integer, " NOT NULL DEFAULT 0;\n");
 }
 
+std::string AutoDiagnosisCancelsMigration(Dialect dialect) {
+  const char* integer = dialect == Dialect::kSqlite ? "INTEGER" : "BIGINT";
+  return absl::StrCat(
+      "CREATE TABLE auto_diagnosis_cancels (\n"
+      "  spacecraft_id       TEXT NOT NULL,\n"
+      "  config_version      ", integer, " NOT NULL CHECK (config_version >= 1),\n"
+      "  answers_alert       ", integer, " NOT NULL,\n"
+      "  cancel_time_unix_ns ", integer, " NOT NULL,\n"
+      "  PRIMARY KEY (spacecraft_id, config_version)\n"
+      ");\n");
+}
+
 namespace {
 
 // Version 10: coefficient values keyed by term (KeyedCoefficientValuesMigration).
@@ -358,11 +370,14 @@ absl::string_view Migration(int n) {
   static const std::string* const v11 = new std::string(ReadmissionsMigration(Dialect::kSqlite));
   static const std::string* const v12 =
       new std::string(DiagnosisOriginMigration(Dialect::kSqlite));
-  static_assert(std::size(kFrozen) + 3 == kCurrentSchemaVersion);
+  static const std::string* const v13 =
+      new std::string(AutoDiagnosisCancelsMigration(Dialect::kSqlite));
+  static_assert(std::size(kFrozen) + 4 == kCurrentSchemaVersion);
   const int built = n - static_cast<int>(std::size(kFrozen));
   if (built < 0) return kFrozen[n];
   if (built == 0) return SchemaV10();
-  return built == 1 ? absl::string_view(*v11) : absl::string_view(*v12);
+  if (built == 1) return *v11;
+  return built == 2 ? absl::string_view(*v12) : absl::string_view(*v13);
 }
 
 absl::StatusOr<int> ReadUserVersion(Transaction& txn) {

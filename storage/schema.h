@@ -30,6 +30,8 @@
 //  12  diagnoses.requested_by ('service' for the service's automatic diagnosis, '' for a
 //      Diagnose call; '' for those stored before) and diagnoses.answers_alert (the sequence of
 //      the MODEL_INCONSISTENT alert an automatic diagnosis answers; 0 otherwise).
+//  13  auto_diagnosis_cancels (an operator's cancel of the automatic diagnosis of a spacecraft,
+//      per configuration version: none runs again under that version; diagnosis_store.h).
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -58,13 +60,16 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 12;
+inline constexpr int kCurrentSchemaVersion = 13;
 
 // The DDL of version 11 in the dialect's types (SQLite INTEGER, PostgreSQL BIGINT).
 std::string ReadmissionsMigration(Dialect dialect);
 
 // The DDL of version 12 in the dialect's types: who asked for each diagnosis.
 std::string DiagnosisOriginMigration(Dialect dialect);
+
+// The DDL of version 13 in the dialect's types: operators' cancels of the automatic diagnosis.
+std::string AutoDiagnosisCancelsMigration(Dialect dialect);
 
 // The DDL of version 8, the same in both dialects.
 inline constexpr absl::string_view kCoefficientBasisTermsColumn =

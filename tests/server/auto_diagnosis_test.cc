@@ -307,6 +307,61 @@ TEST(AutoDiagnosis, ZeroHoursRunsNone) {
   EXPECT_TRUE(f.Stored("AUTO-4").empty());
 }
 
+// An operator's cancel is stored with the configuration version: after a restart of the server
+// on the same SQLite file, an alert under that version queues a job that the debounce drops at
+// once (with every diagnosis slot taken, a job not dropped would wait for one, and a cancel
+// would find it).
+TEST(AutoDiagnosis, AnOperatorsCancelHoldsAcrossARestart) {
+  esg::testing::TempDir dir;
+  const std::string db = dir.File("esg.db");
+  server::ServerOptions options;
+  options.auto_diagnosis.slot_retry = absl::Milliseconds(100);
+  const SimulatedRun run = SimulateRun("AUTO-6", 3.0, 11);
+  const absl::Time last = *proto_convert::TimeFromProto(run.frames.back().time());
+  const auto hold_slots = [](LoopbackServer& server) {
+    CallLimiter& limiter = server.get()->service().diagnosis_limiter();
+    std::vector<CallLimiter::Permit> held;
+    for (const char* caller : {"ops-a", "ops-b"}) {
+      absl::StatusOr<CallLimiter::Permit> p = limiter.Acquire(caller);
+      EXPECT_TRUE(p.ok()) << p.status();
+      if (p.ok()) held.push_back(std::move(*p));
+    }
+    return held;
+  };
+  esg::v1::CancelAutoDiagnosisResponse cancelled;
+  {
+    LoopbackServer server(options, db);
+    auto stub = server.Stub();
+    grpc::ClientContext context;
+    esg::v1::ConfigureResponse configured;
+    ASSERT_TRUE(
+        stub->ConfigureSpacecraft(&context, ConfigureRequestFor(run.config), &configured).ok());
+    ASSERT_TRUE(StreamFrames(*stub, run.frames).status.ok());
+    ASSERT_TRUE(server.core().WaitApplied("AUTO-6", absl::Minutes(2)).ok());
+    std::vector<CallLimiter::Permit> held = hold_slots(server);
+    server.get()->service().auto_diagnosis().OnModelAlert(Inconsistent("AUTO-6", 3, last));
+    absl::SleepFor(absl::Milliseconds(300));
+    ASSERT_TRUE(CancelAuto(*stub, "AUTO-6", &cancelled).ok());
+    ASSERT_TRUE(cancelled.cancelled());
+    absl::StatusOr<bool> marker = server.core().storage().diagnoses().AutoCancelled("AUTO-6", 1);
+    ASSERT_TRUE(marker.ok()) << marker.status();
+    EXPECT_TRUE(*marker);
+  }
+  LoopbackServer server(options, db);
+  auto stub = server.Stub();
+  std::vector<CallLimiter::Permit> held = hold_slots(server);
+  server.get()->service().auto_diagnosis().OnModelAlert(Inconsistent("AUTO-6", 9, last));
+  absl::SleepFor(absl::Seconds(1));
+  ASSERT_TRUE(CancelAuto(*stub, "AUTO-6", &cancelled).ok());
+  EXPECT_FALSE(cancelled.cancelled()) << "a job waited under the cancelled configuration version";
+  held.clear();
+  absl::SleepFor(absl::Milliseconds(300));
+  absl::StatusOr<std::vector<storage::DiagnosisRecord>> stored =
+      server.core().storage().diagnoses().List("AUTO-6");
+  ASSERT_TRUE(stored.ok()) << stored.status();
+  EXPECT_TRUE(stored->empty());
+}
+
 // An operator's diagnosis of the whole archive through the Diagnose rpc; its stored id.
 int64_t OperatorDiagnosis(esg::v1::EstimationService::Stub& stub, const std::string& id) {
   grpc::ClientContext context;

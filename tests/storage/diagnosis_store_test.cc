@@ -166,6 +166,25 @@ TEST_P(DiagnosisStoreTest, DropsTheServicesDiagnosesBeforeTheOperatorsBeyondTheB
   EXPECT_THAT(diagnoses.Get(auto1), StatusIs(absl::StatusCode::kNotFound, HasSubstr("diagnosis")));
 }
 
+// An operator's cancel of the automatic diagnosis: stored per spacecraft and configuration
+// version (the first kept), read back; bad records refused naming the field.
+TEST_P(DiagnosisStoreTest, StoresAnOperatorsCancelPerConfigurationVersion) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  ASSERT_THAT(diagnoses.PutAutoCancel({"RDK-1", 3, 12, T(60)}), IsOk());
+  ASSERT_THAT(diagnoses.PutAutoCancel({"RDK-1", 3, 15, T(90)}), IsOk());
+  EXPECT_THAT(diagnoses.AutoCancelled("RDK-1", 3), IsOkAndHolds(true));
+  EXPECT_THAT(diagnoses.AutoCancelled("RDK-1", 4), IsOkAndHolds(false));
+  EXPECT_THAT(diagnoses.AutoCancelled("RDK-2", 3), IsOkAndHolds(false));
+  EXPECT_THAT(diagnoses.PutAutoCancel({"", 3, 12, T(60)}),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("auto_cancel.spacecraft_id")));
+  EXPECT_THAT(diagnoses.PutAutoCancel({"RDK-1", 0, 12, T(60)}),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("auto_cancel.config_version")));
+  EXPECT_THAT(diagnoses.PutAutoCancel({"RDK-1", 1, 12, absl::InfiniteFuture()}),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("auto_cancel.cancel_time")));
+}
+
 // An automatic diagnosis (docs/service.md "Automatic diagnosis") keeps who asked for it and the
 // alert it answers, in the full record and in the summaries; a requested one reads back empty/0.
 TEST_P(DiagnosisStoreTest, KeepsWhoAskedAndTheAlertAnswered) {

@@ -501,5 +501,38 @@ TEST(PostgresStorage, AVersion10DatabaseGainsTheDiagnosisConfigurationAndReadmis
   EXPECT_EQ((*listed)[0].operator_name, "alice");
 }
 
+// A version-12 database gains auto_diagnosis_cancels (config_version bigint) at its open; an
+// operator's cancel is stored and read back per spacecraft and configuration version.
+TEST(PostgresStorage, AVersion12DatabaseGainsTheAutoDiagnosisCancels) {
+  std::string error;
+  PostgresServer* server = PostgresServer::Shared(&error);
+  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = server->CreateDatabase();
+  ASSERT_THAT(uri, IsOk());
+  {
+    absl::StatusOr<std::unique_ptr<PostgresDatabase>> db = PostgresDatabase::Open(*uri);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 12), IsOk());
+    EXPECT_THAT(QueryInt(**db, "SELECT COUNT(*) FROM information_schema.tables WHERE table_name = "
+                               "'auto_diagnosis_cancels'"),
+                IsOkAndHolds(0));
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(*uri);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(QueryInt((*storage)->database(), "SELECT MAX(version) FROM esg_schema"),
+              IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(QueryInt((*storage)->database(),
+                       "SELECT COUNT(*) FROM information_schema.columns WHERE table_name = "
+                       "'auto_diagnosis_cancels' AND column_name = 'config_version' AND "
+                       "data_type = 'bigint'"),
+              IsOkAndHolds(1));
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  EXPECT_THAT(diagnoses.AutoCancelled("PG-12", 1), IsOkAndHolds(false));
+  ASSERT_THAT(diagnoses.PutAutoCancel({"PG-12", 1, 4, T(100)}), IsOk());
+  ASSERT_THAT(diagnoses.PutAutoCancel({"PG-12", 1, 5, T(200)}), IsOk());
+  EXPECT_THAT(diagnoses.AutoCancelled("PG-12", 1), IsOkAndHolds(true));
+  EXPECT_THAT(diagnoses.AutoCancelled("PG-12", 2), IsOkAndHolds(false));
+}
+
 }  // namespace
 }  // namespace esg::storage

@@ -509,6 +509,32 @@ TEST(Schema, Version10DiagnosesHaveNoConfigurationAndReadmissionsAreStoredAfterT
   EXPECT_THAT((*storage)->sessions().ListReadmissions("SC-B"), IsOkAndHolds(IsEmpty()));
 }
 
+// A version-12 file gains auto_diagnosis_cancels at version 13: an operator's cancel of the
+// automatic diagnosis is stored per spacecraft and configuration version, the first kept.
+TEST(Schema, Version12FileGainsTheAutoDiagnosisCancels) {
+  TempDir dir;
+  const std::string path = dir.File("v12.db");
+  {
+    absl::StatusOr<std::unique_ptr<Database>> db = SqliteDatabase::Open(path);
+    ASSERT_THAT(db, IsOk());
+    ASSERT_THAT(MigrateTo(**db, 12), IsOk());
+    EXPECT_THAT(Columns(**db, "auto_diagnosis_cancels"), IsEmpty());
+  }
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(path);
+  ASSERT_THAT(storage, IsOk());
+  EXPECT_THAT(SchemaVersion((*storage)->database()), IsOkAndHolds(kCurrentSchemaVersion));
+  EXPECT_THAT(Columns((*storage)->database(), "auto_diagnosis_cancels"),
+              ElementsAre("spacecraft_id", "config_version", "answers_alert",
+                          "cancel_time_unix_ns"));
+  DiagnosisStore& diagnoses = (*storage)->diagnoses();
+  EXPECT_THAT(diagnoses.AutoCancelled("SC-A", 2), IsOkAndHolds(false));
+  ASSERT_THAT(diagnoses.PutAutoCancel({"SC-A", 2, 7, T(100)}), IsOk());
+  ASSERT_THAT(diagnoses.PutAutoCancel({"SC-A", 2, 9, T(200)}), IsOk());  // the first stays
+  EXPECT_THAT(diagnoses.AutoCancelled("SC-A", 2), IsOkAndHolds(true));
+  EXPECT_THAT(diagnoses.AutoCancelled("SC-A", 3), IsOkAndHolds(false));
+  EXPECT_THAT(diagnoses.AutoCancelled("SC-B", 2), IsOkAndHolds(false));
+}
+
 TEST(Schema, StepwiseMigrationReachesTheSameLayoutAsAFreshOne) {
   TempDir dir;
   absl::StatusOr<std::unique_ptr<Database>> stepwise = SqliteDatabase::Open(dir.File("s.db"));
