@@ -102,6 +102,35 @@ storage::EstimateRecord EstimateFromStep(const std::string& spacecraft_id,
   return r;
 }
 
+// A session state change of a job, logged once the job's effects are committed.
+struct StateChange {
+  estimator::SessionState from;
+  estimator::SessionState to;
+  absl::Time time;
+  std::string station;
+  int64_t sequence = 0;
+};
+
+// The coefficient history row of one gyro at a measurement step (docs/service.md).
+storage::CoefficientRecord CoefficientsOfStep(const std::string& spacecraft_id,
+                                              absl::Time measurement_time, absl::Time now,
+                                              const std::string& model_name,
+                                              const estimator::GyroEstimate& g) {
+  storage::CoefficientRecord r;
+  r.spacecraft_id = spacecraft_id;
+  r.gyro_id = g.id;
+  r.measurement_time = measurement_time;
+  r.compute_time = now;
+  r.values = storage::ToCoefficientValues(g.coefficients, g.misalignment_b);
+  r.sigmas = storage::ToCoefficientValues(g.sigma, g.misalignment_sigma_b);
+  r.model_name = absl::StrCat("model", model_name);
+  r.basis_terms = g.basis_terms;
+  for (size_t k = 0; k < r.basis_terms.size(); ++k) {
+    r.basis_terms[k].sigma = k < g.basis_sigma.size() ? g.basis_sigma[k] : 0.0;
+  }
+  return r;
+}
+
 }  // namespace
 
 void EstimationCore::Schedule(const std::shared_ptr<Spacecraft>& sc) {
@@ -145,18 +174,18 @@ void EstimationCore::WorkerLoop() {
   }
 }
 
-bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
-  if (options_.before_apply_job) options_.before_apply_job(sc->id);
-  absl::MutexLock job(&sc->job_mu);
-  // A session another server took over is that server's to apply (its record here is replaced
-  // when this server takes the lease again).
-  if (sc->lease_lost) return false;
+// One filter job, passed from each step of RunJob to the next: what it took from the
+// spacecraft, what it read from the store, what applying its frames produced, and what it
+// committed.
+struct EstimationCore::ApplyJob {
   // Applying takes one of the worker_threads slots, given back before the commit (and before any
   // pause), so the threads waiting for the group commit do not add to the filter's CPU share.
-  class ApplySlot {
+  class Slot {
    public:
-    explicit ApplySlot(EstimationCore* core) : core_(core) { core_->AcquireApplySlot(); }
-    ~ApplySlot() { Release(); }
+    explicit Slot(EstimationCore* core) : core_(core) { core_->AcquireApplySlot(); }
+    ~Slot() { Release(); }
+    Slot(const Slot&) = delete;
+    Slot& operator=(const Slot&) = delete;
     void Release() {
       if (core_ != nullptr) core_->ReleaseApplySlot();
       core_ = nullptr;
@@ -165,7 +194,11 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
    private:
     EstimationCore* core_;
   };
-  ApplySlot slot(this);
+
+  explicit ApplyJob(EstimationCore* core) : slot(core) {}
+
+  Slot slot;
+  // Taken from the spacecraft (TakeJob).
   std::optional<EstimationSession> session;
   ServerCheckpoint apply;
   std::shared_ptr<const Setup> setup;
@@ -178,87 +211,127 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   // cursor (the others are ahead of it and applied in time order like any frame).
   std::vector<absl::Time> late_done;
   std::optional<absl::Time> rerun_from;
-  {
-    absl::MutexLock lock(&sc->state_mu);
-    session = sc->session;
-    apply = sc->apply;
-    setup = sc->setup;
-    generation = sc->generation;
-    from_archive = sc->replay_from_archive;
-    service_alerts.swap(sc->service_alerts);
-    readmissions = sc->readmissions;
-    if (setup != nullptr && session.has_value() && !apply.FilterStopped()) {
-      late_done.assign(sc->late_frames.begin(), sc->late_frames.end());
-      if (!late_done.empty() && late_done.front() <= apply.applied_time) {
-        rerun_from = late_done.front();
-      }
-    }
-    sc->ready.erase(sc->ready.begin(), sc->ready.upper_bound(apply.applied_time));
-    const bool stopped = apply.FilterStopped();
-    if (!from_archive && !stopped) {
-      for (auto it = sc->ready.begin();
-           it != sc->ready.end() && static_cast<int>(frames.size()) < options_.max_frames_per_job;
-           ++it) {
-        frames.push_back({it->first, it->second.station, it->second.sequence, it->second.frame});
-      }
-    }
-    if (stopped || setup == nullptr || !session.has_value()) {
-      frames.clear();
-      from_archive = false;
+  // Read from the store (ReadJobFrames).
+  std::optional<Rerun> rerun;
+  bool rebuild_done = false;
+  // Applying the frames (ApplyJobFrames).
+  absl::Time now;
+  std::vector<storage::CoefficientRecord> coefficients;
+  std::vector<storage::EstimateRecord> estimates;
+  std::optional<AlertCollapser> alerts;
+  std::vector<StateChange> state_changes;
+  // Window checkpoints (D61): the state at the job's start is kept when its first frame opens a
+  // new checkpoint period; a job stops before a later frame that would open one, so the next
+  // job starts there.
+  std::optional<storage::WindowCheckpoint> window_checkpoint;
+  // Committed (CommitJob).
+  storage::FilterEffects effects;
+  std::vector<int64_t> new_sequences;
+  std::optional<absl::Time> retained_at;
+};
+
+bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
+  if (options_.before_apply_job) options_.before_apply_job(sc->id);
+  absl::MutexLock job_lock(&sc->job_mu);
+  // A session another server took over is that server's to apply (its record here is replaced
+  // when this server takes the lease again).
+  if (sc->lease_lost) return false;
+  ApplyJob job(this);
+  TakeJob(*sc, job);
+  if (std::optional<bool> more = ReadJobFrames(*sc, job)) return *more;
+  // Apply (no lock held: readers keep using the installed session meanwhile).
+  ApplyJobFrames(*sc, job);
+  if (std::optional<bool> more = CommitJob(*sc, job)) return *more;
+  const std::optional<bool> more = InstallJob(*sc, job);
+  // A reconfiguration replaced the session meanwhile: nothing of this job is published.
+  if (!more.has_value()) return true;
+  PublishJob(*sc, job);
+  return *more;
+}
+
+void EstimationCore::TakeJob(Spacecraft& sc, ApplyJob& job) {
+  absl::MutexLock lock(&sc.state_mu);
+  job.session = sc.session;
+  job.apply = sc.apply;
+  job.setup = sc.setup;
+  job.generation = sc.generation;
+  job.from_archive = sc.replay_from_archive;
+  job.service_alerts.swap(sc.service_alerts);
+  job.readmissions = sc.readmissions;
+  const bool stopped = job.apply.FilterStopped();
+  if (job.setup != nullptr && job.session.has_value() && !stopped) {
+    job.late_done.assign(sc.late_frames.begin(), sc.late_frames.end());
+    if (!job.late_done.empty() && job.late_done.front() <= job.apply.applied_time) {
+      job.rerun_from = job.late_done.front();
     }
   }
-  // A read of the store failed before anything was applied: a filter fault of the spacecraft
-  // (logged once, until its commits succeed again), the service alerts this job took handed
-  // back, and the job retried after a pause that backs off (server/backoff.h).
-  auto RetryAfterReadError = [&](const std::string& message) {
-    SetApplyFault(sc->id, message);
-    {
-      absl::MutexLock lock(&sc->state_mu);
-      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
-                                service_alerts.end());
+  sc.ready.erase(sc.ready.begin(), sc.ready.upper_bound(job.apply.applied_time));
+  if (!job.from_archive && !stopped) {
+    for (auto it = sc.ready.begin();
+         it != sc.ready.end() && static_cast<int>(job.frames.size()) < options_.max_frames_per_job;
+         ++it) {
+      job.frames.push_back({it->first, it->second.station, it->second.sequence, it->second.frame});
     }
-    ++sc->apply_retries;
-    slot.Release();
-    absl::SleepFor(BackoffDelay(sc->apply_retries, absl::Milliseconds(100), kMaxReconnectWait));
-    return true;
-  };
-  // A job with nothing to commit after its reads succeeded ends a fault the reads raised.
-  auto ReadsSucceeded = [&] {
-    if (sc->apply_retries == 0) return;
-    sc->apply_retries = 0;
-    SetApplyFault(sc->id, "");
-  };
-  const bool filter_runs = setup != nullptr && session.has_value() && !apply.FilterStopped();
-  std::optional<Rerun> rerun;
-  if (filter_runs && rerun_from.has_value()) {
-    absl::StatusOr<Rerun> started = StartRerun(sc->id, *setup, *rerun_from, &session, &apply);
+  }
+  if (stopped || job.setup == nullptr || !job.session.has_value()) {
+    job.frames.clear();
+    job.from_archive = false;
+  }
+}
+
+bool EstimationCore::RetryJobAfterReadError(Spacecraft& sc, ApplyJob& job,
+                                            const std::string& message) {
+  SetApplyFault(sc.id, message);
+  {
+    absl::MutexLock lock(&sc.state_mu);
+    sc.service_alerts.insert(sc.service_alerts.begin(), job.service_alerts.begin(),
+                             job.service_alerts.end());
+  }
+  ++sc.apply_retries;
+  job.slot.Release();
+  absl::SleepFor(BackoffDelay(sc.apply_retries, absl::Milliseconds(100), kMaxReconnectWait));
+  return true;
+}
+
+void EstimationCore::EndApplyFault(Spacecraft& sc) {
+  if (sc.apply_retries == 0) return;
+  sc.apply_retries = 0;
+  SetApplyFault(sc.id, "");
+}
+
+std::optional<bool> EstimationCore::ReadJobFrames(Spacecraft& sc, ApplyJob& job) {
+  const bool filter_runs =
+      job.setup != nullptr && job.session.has_value() && !job.apply.FilterStopped();
+  if (filter_runs && job.rerun_from.has_value()) {
+    absl::StatusOr<Rerun> started =
+        StartRerun(sc.id, *job.setup, *job.rerun_from, &job.session, &job.apply);
     if (!started.ok()) {
-      return RetryAfterReadError(
-          absl::StrCat(sc->id, ": cannot start the re-run over late frames: ",
+      return RetryJobAfterReadError(
+          sc, job,
+          absl::StrCat(sc.id, ": cannot start the re-run over late frames: ",
                        started.status().ToString()));
     }
-    rerun = std::move(*started);
-    frames.clear();
-    from_archive = true;
+    job.rerun = std::move(*started);
+    job.frames.clear();
+    job.from_archive = true;
   }
-  bool rebuild_done = false;
-  if (filter_runs && from_archive) {
+  if (filter_runs && job.from_archive) {
     absl::StatusOr<std::vector<storage::ArchivedFrame>> archived =
-        storage_->archive().ReadAfter(sc->id, apply.applied_time, options_.max_frames_per_job);
+        storage_->archive().ReadAfter(sc.id, job.apply.applied_time, options_.max_frames_per_job);
     if (!archived.ok()) {
-      return RetryAfterReadError(
-          absl::StrCat(sc->id, ": archive read failed: ", archived.status().ToString()));
+      return RetryJobAfterReadError(
+          sc, job, absl::StrCat(sc.id, ": archive read failed: ", archived.status().ToString()));
     }
     if (archived->empty()) {
-      absl::MutexLock lock(&sc->state_mu);
+      absl::MutexLock lock(&sc.state_mu);
       // Caught up only if nothing became durable meanwhile (the committer skips the in-memory
       // queue while this flag is set).
-      if (sc->generation == generation && sc->last_durable_time <= apply.applied_time) {
-        sc->replay_from_archive = false;
-        rebuild_done = apply.rebuilding;
+      if (sc.generation == job.generation && sc.last_durable_time <= job.apply.applied_time) {
+        sc.replay_from_archive = false;
+        job.rebuild_done = job.apply.rebuilding;
       }
-      if (!rebuild_done && service_alerts.empty()) {
-        ReadsSucceeded();
+      if (!job.rebuild_done && job.service_alerts.empty()) {
+        EndApplyFault(sc);
         return true;
       }
     }
@@ -270,59 +343,50 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
       } else {
         f.undecodable = std::string(frame.status().message());
         LogEvent("ERROR", "frame_undecodable",
-                 absl::StrCat(sc->id, ": archived frame (station ", a.station_id, ", sequence ",
+                 absl::StrCat(sc.id, ": archived frame (station ", a.station_id, ", sequence ",
                               a.sequence, ") cannot be decoded: ", frame.status().ToString()),
-                 {{"spacecraftId", sc->id}, {"station", a.station_id}, {"sequence", a.sequence}});
+                 {{"spacecraftId", sc.id}, {"station", a.station_id}, {"sequence", a.sequence}});
       }
-      frames.push_back(std::move(f));
+      job.frames.push_back(std::move(f));
     }
   }
-  if (frames.empty() && service_alerts.empty() && !rebuild_done && !rerun.has_value() &&
-      late_done.empty()) {
-    ReadsSucceeded();
+  // A job with nothing to commit after its reads succeeded ends a fault the reads raised.
+  if (job.frames.empty() && job.service_alerts.empty() && !job.rebuild_done &&
+      !job.rerun.has_value() && job.late_done.empty()) {
+    EndApplyFault(sc);
     return false;
   }
+  return std::nullopt;
+}
 
-  // Apply (no lock held: readers keep using the installed session meanwhile).
-  const absl::Time now = absl::Now();
-  std::vector<storage::CoefficientRecord> coefficients;
-  std::vector<storage::EstimateRecord> estimates;
-  AlertCollapser alerts(sc->id, apply.alert_tracks, options_.alert_collapse_window, now);
+void EstimationCore::ApplyJobFrames(Spacecraft& sc, ApplyJob& job) {
+  job.now = absl::Now();
+  ServerCheckpoint& apply = job.apply;
+  std::optional<EstimationSession>& session = job.session;
+  job.alerts.emplace(sc.id, apply.alert_tracks, options_.alert_collapse_window, job.now);
+  AlertCollapser& alerts = *job.alerts;
   // A rebuilt session does not store again what is already stored.
   const absl::Time written = apply.effects_written_until;
-  // Session state changes, logged once the job's effects are committed.
-  struct StateChange {
-    estimator::SessionState from;
-    estimator::SessionState to;
-    absl::Time time;
-    std::string station;
-    int64_t sequence = 0;
-  };
-  std::vector<StateChange> state_changes;
-  for (const AlertOccurrence& o : service_alerts) alerts.Add(o);
+  for (const AlertOccurrence& o : job.service_alerts) alerts.Add(o);
   // The frame is behind the filter from here on, applied or skipped.
   auto advance_cursor = [&apply](const JobFrame& f) {
     apply.applied_time = f.time;
     apply.applied_station = f.station;
     apply.applied_sequence = f.sequence;
   };
-  // Window checkpoints (D61): the state at the job's start is kept when its first frame opens a
-  // new checkpoint period; a job stops before a later frame that would open one, so the next
-  // job starts there.
-  std::optional<storage::WindowCheckpoint> window_checkpoint;
   const absl::Duration period = options_.window_checkpoint_period;
   auto period_of = [period](absl::Time t) {
     absl::Duration rest;
     return absl::IDivDuration(t - absl::UnixEpoch(), period, &rest);
   };
   size_t processed = 0;
-  for (JobFrame& f : frames) {
+  for (JobFrame& f : job.frames) {
     if (period > absl::ZeroDuration() && options_.reorder_window > absl::ZeroDuration() &&
         apply.applied_time != absl::InfinitePast() && session.has_value() &&
         period_of(f.time) != period_of(apply.applied_time)) {
       if (processed > 0) break;
-      window_checkpoint = storage::WindowCheckpoint{apply.applied_time, now,
-                                                    EncodeWindowCheckpoint(apply, *session)};
+      job.window_checkpoint = storage::WindowCheckpoint{apply.applied_time, job.now,
+                                                        EncodeWindowCheckpoint(apply, *session)};
     }
     ++processed;
     if (!f.frame.has_value()) {
@@ -342,7 +406,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     // The operators' readmissions stored after the previous frame and before this one
     // (operator_actions.cc), in a re-run too; one that does not fit the session any more (the
     // gyro not excluded at this point of a re-run) changes nothing.
-    ApplyReadmissions(sc->id, readmissions, frame.time, f.time > written, *session);
+    ApplyReadmissions(sc.id, job.readmissions, frame.time, f.time > written, *session);
     const estimator::SessionState state_before = session->state();
     const absl::Time step_start = absl::Now();
     absl::StatusOr<estimator::StepReport> report = session->AddFrame(frame);
@@ -352,24 +416,13 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
                                             : "propagation"})
         .Observe(absl::ToDoubleSeconds(absl::Now() - step_start));
     if (!report.ok()) {
-      const absl::StatusCode code = report.status().code();
       LogEvent("WARN", "frame_not_applied",
-               absl::StrCat(sc->id, ": frame (station ", f.station, ", sequence ", f.sequence,
+               absl::StrCat(sc.id, ": frame (station ", f.station, ", sequence ", f.sequence,
                             ") not applied: ", report.status().ToString()),
-               {{"spacecraftId", sc->id}, {"station", f.station}, {"sequence", f.sequence}});
+               {{"spacecraftId", sc.id}, {"station", f.station}, {"sequence", f.sequence}});
+      const absl::StatusCode code = report.status().code();
       if (code == absl::StatusCode::kInternal || code == absl::StatusCode::kDataLoss) {
-        // The filter itself failed: stop before this frame (the checkpoint stays at the last
-        // good one) and quarantine; the others and the server go on.
-        apply.quarantine_reason =
-            absl::StrCat("the filter failed at the frame of ", FormatUtc(f.time), " (station ",
-                         f.station, ", sequence ", f.sequence, "): ", report.status().message(),
-                         "; the filter is stopped until ConfigureSpacecraft with replace=true");
-        apply.rebuilding = false;
-        alerts.Add({kQuarantineReason, "DISTRESS", "session", f.time, 0.0, 0.0, "",
-                    apply.quarantine_reason});
-        LogEvent("ERROR", "session_quarantined",
-                 absl::StrCat("spacecraft ", sc->id, " quarantined: ", apply.quarantine_reason),
-                 {{"spacecraftId", sc->id}});
+        QuarantineJob(sc, job, f.time, f.station, f.sequence, report.status());
         break;
       }
       advance_cursor(f);
@@ -379,7 +432,7 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     advance_cursor(f);
     ++apply.frames_applied;
     if (session->state() != state_before && f.time > written) {
-      state_changes.push_back({state_before, session->state(), f.time, f.station, f.sequence});
+      job.state_changes.push_back({state_before, session->state(), f.time, f.station, f.sequence});
     }
     if (report->measurement_step && frame.star_tracker.has_value() && frame.star_tracker->valid &&
         !report->star_tracker_used) {
@@ -390,22 +443,11 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
     }
     if (report->measurement_step && frame.time > written) {
       const std::vector<estimator::GyroEstimate> gyros = session->Gyros();
-      estimates.push_back(EstimateFromStep(sc->id, frame, *report, gyros,
-                                           apply.last_star_tracker_time, now));
+      job.estimates.push_back(EstimateFromStep(sc.id, frame, *report, gyros,
+                                               apply.last_star_tracker_time, job.now));
       for (const estimator::GyroEstimate& g : gyros) {
-        storage::CoefficientRecord r;
-        r.spacecraft_id = sc->id;
-        r.gyro_id = g.id;
-        r.measurement_time = frame.time;
-        r.compute_time = now;
-        r.values = storage::ToCoefficientValues(g.coefficients, g.misalignment_b);
-        r.sigmas = storage::ToCoefficientValues(g.sigma, g.misalignment_sigma_b);
-        r.model_name = absl::StrCat("model", setup->model_name);
-        r.basis_terms = g.basis_terms;
-        for (size_t k = 0; k < r.basis_terms.size(); ++k) {
-          r.basis_terms[k].sigma = k < g.basis_sigma.size() ? g.basis_sigma[k] : 0.0;
-        }
-        coefficients.push_back(std::move(r));
+        job.coefficients.push_back(
+            CoefficientsOfStep(sc.id, frame.time, job.now, job.setup->model_name, g));
       }
     }
     alerts.Advance(frame.time);
@@ -419,43 +461,62 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
                   event.message});
     }
   }
-  if (rebuild_done) {
+  if (job.rebuild_done) {
     LogEvent("INFO", "quarantine_over",
-             absl::StrCat("spacecraft ", sc->id, " rebuilt from the archive; quarantine over"),
-             {{"spacecraftId", sc->id}});
+             absl::StrCat("spacecraft ", sc.id, " rebuilt from the archive; quarantine over"),
+             {{"spacecraftId", sc.id}});
     apply.quarantine_reason.clear();
     apply.rebuilding = false;
     alerts.End(kQuarantineReason, "session", apply.applied_time);
   }
+}
 
-  // Commit the effects and the checkpoint in one transaction.
-  ServerCheckpoint to_store = apply;
-  std::vector<int64_t> new_sequences;
-  storage::FilterEffects effects;
-  effects.spacecraft_id = sc->id;
-  effects.fence = FenceOf(*sc);
-  effects.coefficients = std::move(coefficients);
+// The filter itself failed: the job stops before this frame (the checkpoint stays at the last
+// good one) and the spacecraft is quarantined; the others and the server go on.
+void EstimationCore::QuarantineJob(Spacecraft& sc, ApplyJob& job, absl::Time time,
+                                   const std::string& station, int64_t sequence,
+                                   const absl::Status& failure) {
+  job.apply.quarantine_reason =
+      absl::StrCat("the filter failed at the frame of ", FormatUtc(time), " (station ", station,
+                   ", sequence ", sequence, "): ", failure.message(),
+                   "; the filter is stopped until ConfigureSpacecraft with replace=true");
+  job.apply.rebuilding = false;
+  job.alerts->Add({kQuarantineReason, "DISTRESS", "session", time, 0.0, 0.0, "",
+                   job.apply.quarantine_reason});
+  LogEvent("ERROR", "session_quarantined",
+           absl::StrCat("spacecraft ", sc.id, " quarantined: ", job.apply.quarantine_reason),
+           {{"spacecraftId", sc.id}});
+}
+
+std::optional<bool> EstimationCore::CommitJob(Spacecraft& sc, ApplyJob& job) {
+  // The effects and the checkpoint in one transaction.
+  ServerCheckpoint to_store = job.apply;
+  AlertCollapser& alerts = *job.alerts;
+  storage::FilterEffects& effects = job.effects;
+  effects.spacecraft_id = sc.id;
+  effects.fence = FenceOf(sc);
+  effects.coefficients = std::move(job.coefficients);
   // Retention of the per-step estimates, amortised: once the newest has advanced by the period.
-  std::optional<absl::Time> retained_at;
-  if (options_.estimate_retention > absl::ZeroDuration() && !estimates.empty()) {
-    const absl::Time newest = estimates.back().measurement_time;
-    if (sc->estimates_retained_at == absl::InfinitePast() ||
-        newest - sc->estimates_retained_at >= options_.estimate_retention_period) {
+  if (options_.estimate_retention > absl::ZeroDuration() && !job.estimates.empty()) {
+    const absl::Time newest = job.estimates.back().measurement_time;
+    if (sc.estimates_retained_at == absl::InfinitePast() ||
+        newest - sc.estimates_retained_at >= options_.estimate_retention_period) {
       effects.estimates_before = newest - options_.estimate_retention;
-      retained_at = newest;
+      job.retained_at = newest;
     }
   }
-  effects.estimates = std::move(estimates);
-  if (rerun.has_value()) {
-    effects.revision = storage::FilterEffects::Revision{rerun->after, now, rerun->revised_alerts,
-                                                        rerun->restores};
+  effects.estimates = std::move(job.estimates);
+  if (job.rerun.has_value()) {
+    effects.revision = storage::FilterEffects::Revision{job.rerun->after, job.now,
+                                                        job.rerun->revised_alerts,
+                                                        job.rerun->restores};
   }
-  effects.late_frames_done = late_done;
-  if (window_checkpoint.has_value()) {
-    effects.window_checkpoint = std::move(window_checkpoint);
+  effects.late_frames_done = job.late_done;
+  if (job.window_checkpoint.has_value()) {
+    effects.window_checkpoint = std::move(job.window_checkpoint);
     // A late frame is accepted up to the window before the last accepted frame, which is at or
     // after this cursor: the latest checkpoint before (cursor - window) is the oldest needed.
-    effects.prune_before = apply.applied_time - options_.reorder_window;
+    effects.prune_before = job.apply.applied_time - options_.reorder_window;
   }
   effects.new_alerts = alerts.new_alerts();
   for (const auto& [seq, rep] : alerts.repeats()) effects.repeats.push_back(rep);
@@ -466,112 +527,120 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   effects.checkpoint = [&](const std::vector<int64_t>& sequences) {
     to_store.alert_tracks = alerts.Tracks(sequences);
     storage::CheckpointRecord cp;
-    cp.spacecraft_id = sc->id;
-    cp.last_sequence = apply.applied_sequence;
-    cp.measurement_time = session.has_value() && session->last_frame_time() != absl::InfinitePast()
-                              ? session->last_frame_time()
-                              : absl::UnixEpoch();
-    cp.compute_time = now;
-    if (session.has_value()) to_store.session = session->ExportCheckpoint();
+    cp.spacecraft_id = sc.id;
+    cp.last_sequence = job.apply.applied_sequence;
+    cp.measurement_time =
+        job.session.has_value() && job.session->last_frame_time() != absl::InfinitePast()
+            ? job.session->last_frame_time()
+            : absl::UnixEpoch();
+    cp.compute_time = job.now;
+    if (job.session.has_value()) to_store.session = job.session->ExportCheckpoint();
     cp.state_blob = EncodeCheckpoint(to_store);
     return cp;
   };
-  slot.Release();
+  job.slot.Release();
   const absl::Time commit_start = absl::Now();
   absl::StatusOr<std::vector<int64_t>> committed = CommitFilterJob(effects);
   const absl::Status status = committed.status();
-  if (committed.ok()) new_sequences = std::move(*committed);
+  if (committed.ok()) job.new_sequences = std::move(*committed);
+  effects.checkpoint = nullptr;  // it refers to this function's to_store
   metrics_.storage_commit.With({"filter"}).Observe(
       absl::ToDoubleSeconds(absl::Now() - commit_start));
   if (storage::LeaseLostSpacecraft(status).has_value()) {
-    MarkLeaseLost(*sc, status.message());
+    MarkLeaseLost(sc, status.message());
     return false;
   }
   if (!status.ok()) {
     // Storage trouble (a full disk, an I/O error): health says so; this job is retried with a
     // growing pause (at most 2 s), the installed session and its checkpoint stay as they were.
-    SetApplyFault(sc->id, status.ToString());
-    ++sc->apply_retries;
+    SetApplyFault(sc.id, status.ToString());
+    ++sc.apply_retries;
     const absl::Duration pause =
-        BackoffDelay(sc->apply_retries, absl::Milliseconds(100), kMaxReconnectWait);
+        BackoffDelay(sc.apply_retries, absl::Milliseconds(100), kMaxReconnectWait);
     {
-      absl::MutexLock lock(&sc->state_mu);
-      sc->service_alerts.insert(sc->service_alerts.begin(), service_alerts.begin(),
-                                service_alerts.end());
-      if (rebuild_done && sc->generation == generation) sc->replay_from_archive = true;
+      absl::MutexLock lock(&sc.state_mu);
+      sc.service_alerts.insert(sc.service_alerts.begin(), job.service_alerts.begin(),
+                               job.service_alerts.end());
+      if (job.rebuild_done && sc.generation == job.generation) sc.replay_from_archive = true;
     }
     absl::SleepFor(pause);
     return true;
   }
-  if (sc->apply_retries > 0) {
-    sc->apply_retries = 0;
-    SetApplyFault(sc->id, "");
-  }
-  if (retained_at.has_value()) sc->estimates_retained_at = *retained_at;
-  apply.alert_tracks = to_store.alert_tracks;
-  std::vector<storage::AlertRecord> published = alerts.new_alerts();
-  for (size_t k = 0; k < published.size(); ++k) published[k].sequence = new_sequences[k];
+  EndApplyFault(sc);
+  if (job.retained_at.has_value()) sc.estimates_retained_at = *job.retained_at;
+  job.apply.alert_tracks = to_store.alert_tracks;
+  return std::nullopt;
+}
+
+std::optional<bool> EstimationCore::InstallJob(Spacecraft& sc, ApplyJob& job) {
   bool more = false;
   int64_t freed_bytes = 0;  // of the applied frames dropped from memory
   {
-    absl::MutexLock lock(&sc->state_mu);
-    if (sc->generation != generation) return true;
-    sc->session = std::move(session);
-    sc->apply = std::move(apply);
-    sc->last_compute_time = now;
-    for (absl::Time t : late_done) sc->late_frames.erase(t);
-    if (rerun.has_value()) {
+    absl::MutexLock lock(&sc.state_mu);
+    if (sc.generation != job.generation) return std::nullopt;
+    sc.session = std::move(job.session);
+    sc.apply = std::move(job.apply);
+    sc.last_compute_time = job.now;
+    for (absl::Time t : job.late_done) sc.late_frames.erase(t);
+    if (job.rerun.has_value()) {
       // The re-run goes on from the archive until it has caught up.
-      sc->ready.clear();
-      sc->ready_bytes = 0;
-      sc->replay_from_archive = true;
+      sc.ready.clear();
+      sc.ready_bytes = 0;
+      sc.replay_from_archive = true;
     }
-    const bool stopped = sc->apply.FilterStopped();
-    auto end = sc->ready.upper_bound(sc->apply.applied_time);
-    for (auto it = sc->ready.begin(); it != end; ++it) {
+    const bool stopped = sc.apply.FilterStopped();
+    auto end = sc.ready.upper_bound(sc.apply.applied_time);
+    for (auto it = sc.ready.begin(); it != end; ++it) {
       const int64_t bytes = static_cast<int64_t>(sizeof(ReadyFrame) + it->second.station.size());
-      sc->ready_bytes -= bytes;
+      sc.ready_bytes -= bytes;
       freed_bytes += bytes;
     }
-    sc->ready.erase(sc->ready.begin(), end);
-    more = !stopped && (sc->replay_from_archive || !sc->ready.empty() ||
-                        !sc->service_alerts.empty() || !sc->late_frames.empty());
+    sc.ready.erase(sc.ready.begin(), end);
+    more = !stopped && (sc.replay_from_archive || !sc.ready.empty() ||
+                        !sc.service_alerts.empty() || !sc.late_frames.empty());
   }
   // A backlog applied leaves its frames' memory free in malloc's arenas, interleaved with the
   // sessions' blocks: handed back to the system once enough is noted (memory_release.h), so a
   // burst of telemetry does not keep the resident set at its peak.
   NoteFreedMemory(freed_bytes);
-  // Publish the committed changes.
-  absl::MutexLock publish(&sc->publish_mu);
-  if (rerun.has_value()) {
+  return more;
+}
+
+void EstimationCore::PublishJob(Spacecraft& sc, const ApplyJob& job) {
+  const AlertCollapser& alerts = *job.alerts;
+  std::vector<storage::AlertRecord> published = alerts.new_alerts();
+  for (size_t k = 0; k < published.size(); ++k) published[k].sequence = job.new_sequences[k];
+  absl::MutexLock publish(&sc.publish_mu);
+  if (job.rerun.has_value()) {
     metrics_.revisions.Increment();
     LogEvent("INFO", "revision",
-             absl::StrCat("spacecraft ", sc->id, ": late frame of ", FormatUtc(*rerun_from),
+             absl::StrCat("spacecraft ", sc.id, ": late frame of ", FormatUtc(*job.rerun_from),
                           " re-runs the filter from ",
-                          rerun->after == absl::InfinitePast() ? std::string("the configuration")
-                                                                : FormatUtc(rerun->after),
-                          "; ", rerun->revised_alerts.size(), " alerts revised"),
-             {{"spacecraftId", sc->id}, {"lateFrameTime", FormatUtc(*rerun_from)}});
-    for (int64_t seq : rerun->revised_alerts) {
-      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
+                          job.rerun->after == absl::InfinitePast()
+                              ? std::string("the configuration")
+                              : FormatUtc(job.rerun->after),
+                          "; ", job.rerun->revised_alerts.size(), " alerts revised"),
+             {{"spacecraftId", sc.id}, {"lateFrameTime", FormatUtc(*job.rerun_from)}});
+    for (int64_t seq : job.rerun->revised_alerts) {
+      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc.id, seq);
       if (r.ok()) hub_.Publish(*r);
     }
   }
-  estimate_hub_.Publish(effects.estimates);
+  estimate_hub_.Publish(job.effects.estimates);
   for (const storage::AlertRecord& a : published) {
     metrics_.alerts_raised.With({a.reason, a.severity}).Increment();
     if (a.cleared) metrics_.alerts_cleared.With({a.reason, a.severity}).Increment();
     hub_.Publish(a);
   }
   NotifyModelAlerts(published);
-  for (const StateChange& c : state_changes) {
+  for (const StateChange& c : job.state_changes) {
     const char* from = estimator::SessionStateName(c.from);
     const char* to = estimator::SessionStateName(c.to);
     LogEvent("INFO", "session_state",
-             absl::StrCat("spacecraft ", sc->id, ": session state ", from, " -> ", to, " at ",
+             absl::StrCat("spacecraft ", sc.id, ": session state ", from, " -> ", to, " at ",
                           FormatUtc(c.time), " (station ", c.station, ", sequence ", c.sequence,
                           ")"),
-             {{"spacecraftId", sc->id},
+             {{"spacecraftId", sc.id},
               {"from", from},
               {"to", to},
               {"measurementTime", FormatUtc(c.time)},
@@ -587,16 +656,15 @@ bool EstimationCore::RunJob(const std::shared_ptr<Spacecraft>& sc) {
   for (const auto& [seq, rep] : alerts.repeats()) changed.insert(seq);
   // Alerts a re-run set back to their state at its checkpoint: their state now (set back, or
   // repeated or cleared again by the re-run) is news to subscribers even where it is lower.
-  if (rerun.has_value()) {
-    for (const storage::AlertRestore& r : rerun->restores) changed.insert(r.sequence);
+  if (job.rerun.has_value()) {
+    for (const storage::AlertRestore& r : job.rerun->restores) changed.insert(r.sequence);
   }
   for (int64_t seq : changed) {
-    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
+    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc.id, seq);
     if (!r.ok()) continue;
     if (cleared.count(seq) != 0) metrics_.alerts_cleared.With({r->reason, r->severity}).Increment();
     hub_.Publish(*r);
   }
-  return more;
 }
 
 absl::StatusOr<TelemetryFrame> DecodeArchivedFrame(const std::string& payload) {

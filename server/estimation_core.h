@@ -375,7 +375,22 @@ class EstimationCore {
   // Reads the estimates of `spacecraft_id` measured at `times` (not empty) and publishes those
   // still stored, in measurement-time order.
   void RelayEstimates(const std::string& spacecraft_id, const std::set<absl::Time>& times);
-  // Ingest helpers (ingest.cc).
+  // Ingest helpers (ingest.cc). CheckFrame: the frame's own checks against its spacecraft (not
+  // quarantined, sequence, fields, configured gyros, accepted window, the clock); a refusal
+  // "field: reason", or OK.
+  absl::Status CheckFrame(Spacecraft& sc, const esg::v1::TelemetryFrame& proto,
+                          const absl::StatusOr<estimator::TelemetryFrame>& frame)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.ingest_mu);
+  // A frame whose station and sequence, or whose time, the spacecraft accepted before, judged
+  // against the stored frame: empty for a late frame the reorder window still takes (to be
+  // queued); otherwise Ingest's result (a conflict or a frame too late refused in *ack, an exact
+  // duplicate acknowledged as one, taking `on_durable` when the original is not durable yet, or
+  // a storage error).
+  std::optional<absl::StatusOr<bool>> JudgeKnownFrame(
+      const std::shared_ptr<Spacecraft>& sc, const std::string& station, int64_t sequence,
+      absl::Time time, const std::string& payload, bool known_identity,
+      esg::v1::TelemetryAck* ack, std::function<void(absl::Status)>& on_durable)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc->ingest_mu);
   absl::StatusOr<std::optional<storage::ArchivedFrame>> FindStoredFrame(
       Spacecraft& sc, const std::string& station, int64_t sequence, absl::Time time,
       bool by_identity) ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.ingest_mu);
@@ -408,8 +423,34 @@ class EstimationCore {
   void NotifyConfigured(const std::string& spacecraft_id);
   // Reads the gauges of the metrics from the registry and the committer (each scrape).
   void CollectGauges();
-  // Applies the next frames of one spacecraft; true when more remain.
+  // Applies the next frames of one spacecraft; true when more remain (apply_worker.cc). A job
+  // is a sequence of steps, each a function of its own, passing an ApplyJob on: take the frames
+  // and the session under the spacecraft's lock, read what the store holds for them (a re-run's
+  // start, archived frames), apply them to a copy of the session, commit the effects with the
+  // checkpoint, install the session and publish. A step returning a value ends the job there
+  // with that value.
+  struct ApplyJob;
   bool RunJob(const std::shared_ptr<Spacecraft>& sc);
+  void TakeJob(Spacecraft& sc, ApplyJob& job) ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  std::optional<bool> ReadJobFrames(Spacecraft& sc, ApplyJob& job)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  void ApplyJobFrames(Spacecraft& sc, ApplyJob& job) ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  std::optional<bool> CommitJob(Spacecraft& sc, ApplyJob& job)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  // Empty when a reconfiguration replaced the session meanwhile (nothing is installed).
+  std::optional<bool> InstallJob(Spacecraft& sc, ApplyJob& job)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  void PublishJob(Spacecraft& sc, const ApplyJob& job) ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  // A read of the store failed before anything was applied: a filter fault of the spacecraft
+  // (logged once, until its commits succeed again), the service alerts the job took handed
+  // back, and the job retried after a pause that backs off (server/backoff.h). True.
+  bool RetryJobAfterReadError(Spacecraft& sc, ApplyJob& job, const std::string& message)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  // Ends the filter fault that failed reads or commits raised, if any.
+  void EndApplyFault(Spacecraft& sc) ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
+  void QuarantineJob(Spacecraft& sc, ApplyJob& job, absl::Time time, const std::string& station,
+                     int64_t sequence, const absl::Status& failure)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
   // Commits one job's effects: alone (SQLite), or with the other jobs waiting at the same time
   // in one transaction (PostgreSQL: group_filter_commits_); the result is the job's own
   // (committer.cc).

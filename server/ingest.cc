@@ -50,6 +50,14 @@ std::string Measurement(const std::string& payload) {
 // the time a restart or the router's switch to another server takes.
 constexpr absl::Duration kShutdownRetryDelay = absl::Seconds(1);
 
+// A refusal of the frame in its ack: `status` is "field: reason" (RejectionFromStatus splits it
+// at the first ": "). False: the ack can be sent at once.
+bool Refuse(esg::v1::TelemetryAck* ack, const absl::Status& status) {
+  ack->set_accepted(false);
+  *ack->mutable_rejection() = RejectionFromStatus(status);
+  return false;
+}
+
 }  // namespace
 
 absl::Status EstimationCore::ShuttingDown() {
@@ -94,15 +102,6 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
                                                               : proto.spacecraft_id().substr(0, 64));
   ack->set_station_id(station.size() <= 64 ? station : station.substr(0, 64));
   ack->set_sequence(proto.sequence());
-  // A refusal is a status "field: reason" (RejectionFromStatus splits it at the first ": ").
-  auto refuse_status = [&](const absl::Status& status) {
-    ack->set_accepted(false);
-    *ack->mutable_rejection() = RejectionFromStatus(status);
-    return false;
-  };
-  auto refuse = [&](absl::StatusCode code, absl::string_view field, absl::string_view reason) {
-    return refuse_status(absl::Status(code, absl::StrCat(field, ": ", reason)));
-  };
   {
     absl::MutexLock commit(&commit_mu_);
     if (ingest_closed_) return ShuttingDown();
@@ -114,84 +113,34 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   }
   if (absl::Status id = estimator::ValidateIdentifier(proto.spacecraft_id(), "spacecraft_id");
       !id.ok()) {
-    return refuse_status(id);
+    return Refuse(ack, id);
   }
   if (absl::Status id = estimator::ValidateIdentifier(station, "station_id"); !id.ok()) {
-    return refuse_status(id);
+    return Refuse(ack, id);
   }
   // A stream routed by one spacecraft reached that spacecraft's node: another spacecraft's frame
   // does not belong here (docs/service.md "Routing by spacecraft"). Refused before anything is
   // looked up, so it counts against no session.
   if (absl::Status routed = CheckInScope(scope, proto.spacecraft_id()); !routed.ok()) {
-    return refuse_status(routed);
+    return Refuse(ack, routed);
   }
   const int64_t frame_bytes = static_cast<int64_t>(proto.ByteSizeLong());
   if (frame_bytes > options_.max_frame_bytes) {
-    return refuse(absl::StatusCode::kResourceExhausted, "frame",
-                  absl::StrCat(frame_bytes, " bytes exceed the limit of ",
-                               options_.max_frame_bytes));
+    return Refuse(ack, absl::ResourceExhaustedError(absl::StrCat(
+                           "frame: ", frame_bytes, " bytes exceed the limit of ",
+                           options_.max_frame_bytes)));
   }
   absl::StatusOr<std::shared_ptr<Spacecraft>> found = Lookup(proto.spacecraft_id());
-  if (!found.ok()) return refuse_status(found.status());
+  if (!found.ok()) return Refuse(ack, found.status());
   std::shared_ptr<Spacecraft> sc = *std::move(found);
   absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
 
   absl::MutexLock lock(&sc->ingest_mu);
-  auto refuse_counted = [&](absl::StatusCode code, absl::string_view field,
-                            absl::string_view reason) {
+  if (absl::Status checked = CheckFrame(*sc, proto, frame); !checked.ok()) {
     ++sc->frames_rejected;
-    return refuse(code, field, reason);
-  };
-  if (sc->ingest_setup == nullptr) {
-    std::string reason;
-    {
-      absl::MutexLock state(&sc->state_mu);
-      reason = sc->apply.quarantine_reason;
-    }
-    return refuse_counted(absl::StatusCode::kFailedPrecondition, "spacecraft_id",
-                          absl::StrCat("'", sc->id, "' is quarantined: ", reason));
-  }
-  // At most 2^53 - 1, so that a JSON client (the console, a script) reads every sequence exactly;
-  // INT64_MAX left no next sequence and `esg replay --wait` waiting for one.
-  if (proto.sequence() < 1 || proto.sequence() > kMaxFrameSequence) {
-    return refuse_counted(absl::StatusCode::kInvalidArgument, "sequence",
-                          absl::StrCat("must be in [1, ", kMaxFrameSequence, "] (2^53 - 1), got ",
-                                       proto.sequence()));
-  }
-  if (!frame.ok()) {
-    ++sc->frames_rejected;
-    return refuse_status(frame.status());
-  }
-  for (int i = 0; i < proto.gyros_size(); ++i) {
-    const int id = proto.gyros(i).gyro_id();
-    if (!sc->ingest_setup->configured[id - 1]) {  // 1..4 checked by FrameFromProto
-      return refuse_counted(absl::StatusCode::kInvalidArgument,
-                            absl::StrCat("gyros[", i, "].gyro_id"),
-                            absl::StrCat("gyro ", id, " is not configured for spacecraft '",
-                                         sc->id, "'"));
-    }
+    return Refuse(ack, checked);
   }
   const absl::Time time = frame->time;
-  if (time < options_.earliest_frame_time || time >= options_.latest_frame_time) {
-    return refuse_counted(absl::StatusCode::kOutOfRange, "time",
-                          absl::StrCat(FormatUtc(time), " is outside the accepted window [",
-                                       FormatUtc(options_.earliest_frame_time), ", ",
-                                       FormatUtc(options_.latest_frame_time), ")"));
-  }
-  // Nothing is measured in the future: a frame ahead of the present would move the reorder
-  // window past the correct frames after it (docs/decisions.md D95). The clock cannot judge
-  // past-dated data (a recording replayed); only the gap limit below applies to it.
-  if (const absl::Time now = absl::Now(); time - now > options_.max_clock_lead) {
-    return refuse_counted(
-        absl::StatusCode::kOutOfRange, "time",
-        absl::StrCat(FormatUtc(time), " is ",
-                     absl::FormatDuration(absl::Trunc(time - now, absl::Seconds(1))),
-                     " ahead of the server's clock (", FormatUtc(now), "; at most ",
-                     absl::FormatDuration(options_.max_clock_lead),
-                     ", esgd --max-clock-lead): a frame cannot be measured in the future; "
-                     "check the time tag and the clocks"));
-  }
-
   // Identity and time against what is stored or queued.
   // Stored as received; the archive's columns hold the identity (station made explicit).
   const std::string payload = proto.SerializeAsString();
@@ -200,85 +149,19 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
       highest != sc->highest_accepted.end() && proto.sequence() <= highest->second;
   const bool known_time = time <= sc->last_accepted_time;
   if (known_identity || known_time) {
-    absl::StatusOr<std::optional<storage::ArchivedFrame>> stored =
-        FindStoredFrame(*sc, station, proto.sequence(), time, known_identity);
-    // An identity the station used for a measurement another station had delivered first was
-    // acknowledged as a duplicate of that measurement, and is judged against it again.
-    bool by_identity = known_identity;
-    if (stored.ok() && !stored->has_value() && known_identity && known_time) {
-      stored = FindStoredFrame(*sc, station, proto.sequence(), time, /*by_identity=*/false);
-      by_identity = false;
-    }
-    if (!stored.ok()) {
-      return absl::UnavailableError(
-          absl::StrCat("storage: cannot read the archive: ", stored.status().message()));
-    }
-    if (stored->has_value()) {
-      const storage::ArchivedFrame& original = **stored;
-      // By identity the station and sequence are equal already: the measurement decides.
-      const bool same = Measurement(original.payload) == Measurement(payload);
-      if (!same) {
-        ++sc->frames_conflicting;
-        const std::string what = absl::StrCat(
-            "frame (station '", station, "', sequence ", proto.sequence(), ", time ",
-            FormatUtc(time), ") conflicts with the stored frame (station '", original.station_id,
-            "', sequence ", original.sequence, ", time ", FormatUtc(original.measurement_time),
-            "): same ", by_identity ? "station and sequence" : "measurement time",
-            ", different content; the stored frame is kept");
-        // Per station of a spacecraft: a replay of conflicting frames is one line each for the
-        // first few, then a count (server/log_throttle.h).
-        static LogThrottle* const conflict_log = new LogThrottle("frame_conflict");
-        conflict_log->Log(
-            absl::StrCat("station ", station, " of spacecraft ", sc->id),
-            "WARN", absl::StrCat(sc->id, ": ", what),
-            {{"spacecraftId", sc->id}, {"station", station}, {"sequence", proto.sequence()}});
-        {
-          absl::MutexLock state(&sc->state_mu);
-          sc->service_alerts.push_back({"INGEST_CONFLICT", "WARNING",
-                                        absl::StrCat("station ", station), time,
-                                        static_cast<double>(proto.sequence()),
-                                        static_cast<double>(original.sequence), "sequence", what});
-        }
-        Schedule(sc);
-        return refuse(absl::StatusCode::kAlreadyExists, by_identity ? "sequence" : "time", what);
-      }
-      // An exact duplicate: stored once, acknowledged as a duplicate once the original is.
-      ++sc->frames_duplicate;
-      ack->set_accepted(true);
-      ack->set_duplicate(true);
-      if (sc->pending.count(original.measurement_time) == 0) return false;
-      CommitEntry entry;
-      entry.sc = sc;
-      entry.barrier = true;
-      entry.done = std::move(on_durable);
-      absl::MutexLock commit(&commit_mu_);
-      if (ingest_closed_) return ShuttingDown();
-      commit_queue_.push_back(std::move(entry));
-      return true;
-    }
-    // Never stored: a late frame (docs/service.md "Several ground stations"). A station's
-    // sequence identifies its frames and the time orders them: a sequence below the station's
-    // highest one that it never used is a frame the station sends late (a pass relayed after a
-    // later one, a gap filled); only its time decides whether the window still takes it.
-    if (known_time && sc->last_accepted_time - time > options_.reorder_window) {
-      return refuse_counted(
-          absl::StatusCode::kOutOfRange, "time",
-          absl::StrCat(FormatUtc(time), " is more than the reorder window (",
-                       absl::FormatDuration(options_.reorder_window),
-                       ", esgd --reorder-window) before the last accepted frame of '", sc->id,
-                       "' (", FormatUtc(sc->last_accepted_time),
-                       "): too late to be applied in time order"));
-    }
+    std::optional<absl::StatusOr<bool>> judged = JudgeKnownFrame(
+        sc, station, proto.sequence(), time, payload, known_identity, ack, on_durable);
+    if (judged.has_value()) return *std::move(judged);
   } else if (sc->last_accepted_time != absl::InfinitePast() &&
              time - sc->last_accepted_time > options_.max_frame_gap) {
     // The filter integrates across a gap at the configured rate: an absurd gap (a wrong time
     // tag) would occupy a worker for hours.
-    return refuse_counted(
-        absl::StatusCode::kOutOfRange, "time",
-        absl::StrCat(FormatUtc(time), " is more than ",
-                     absl::FormatDuration(options_.max_frame_gap),
-                     " after the previous accepted frame (", FormatUtc(sc->last_accepted_time),
-                     ")"));
+    ++sc->frames_rejected;
+    return Refuse(ack, absl::OutOfRangeError(absl::StrCat(
+                           "time: ", FormatUtc(time), " is more than ",
+                           absl::FormatDuration(options_.max_frame_gap),
+                           " after the previous accepted frame (",
+                           FormatUtc(sc->last_accepted_time), ")")));
   }
 
   // New (or late within the window): queue it for the archive.
@@ -316,6 +199,131 @@ absl::StatusOr<bool> EstimationCore::Ingest(const esg::v1::TelemetryFrame& proto
   highest_of_station = std::max(highest_of_station, proto.sequence());
   sc->last_accepted_time = std::max(sc->last_accepted_time, time);
   return true;
+}
+
+absl::Status EstimationCore::CheckFrame(Spacecraft& sc, const esg::v1::TelemetryFrame& proto,
+                                        const absl::StatusOr<estimator::TelemetryFrame>& frame) {
+  if (sc.ingest_setup == nullptr) {
+    std::string reason;
+    {
+      absl::MutexLock state(&sc.state_mu);
+      reason = sc.apply.quarantine_reason;
+    }
+    return absl::FailedPreconditionError(
+        absl::StrCat("spacecraft_id: '", sc.id, "' is quarantined: ", reason));
+  }
+  // At most 2^53 - 1, so that a JSON client (the console, a script) reads every sequence exactly;
+  // INT64_MAX left no next sequence and `esg replay --wait` waiting for one.
+  if (proto.sequence() < 1 || proto.sequence() > kMaxFrameSequence) {
+    return absl::InvalidArgumentError(absl::StrCat("sequence: must be in [1, ",
+                                                   kMaxFrameSequence, "] (2^53 - 1), got ",
+                                                   proto.sequence()));
+  }
+  if (!frame.ok()) return frame.status();
+  for (int i = 0; i < proto.gyros_size(); ++i) {
+    const int id = proto.gyros(i).gyro_id();
+    if (!sc.ingest_setup->configured[id - 1]) {  // 1..4 checked by FrameFromProto
+      return absl::InvalidArgumentError(
+          absl::StrCat("gyros[", i, "].gyro_id: gyro ", id,
+                       " is not configured for spacecraft '", sc.id, "'"));
+    }
+  }
+  const absl::Time time = frame->time;
+  if (time < options_.earliest_frame_time || time >= options_.latest_frame_time) {
+    return absl::OutOfRangeError(absl::StrCat("time: ", FormatUtc(time),
+                                              " is outside the accepted window [",
+                                              FormatUtc(options_.earliest_frame_time), ", ",
+                                              FormatUtc(options_.latest_frame_time), ")"));
+  }
+  // Nothing is measured in the future: a frame ahead of the present would move the reorder
+  // window past the correct frames after it (docs/decisions.md D95). The clock cannot judge
+  // past-dated data (a recording replayed); only the gap limit applies to it.
+  if (const absl::Time now = absl::Now(); time - now > options_.max_clock_lead) {
+    return absl::OutOfRangeError(
+        absl::StrCat("time: ", FormatUtc(time), " is ",
+                     absl::FormatDuration(absl::Trunc(time - now, absl::Seconds(1))),
+                     " ahead of the server's clock (", FormatUtc(now), "; at most ",
+                     absl::FormatDuration(options_.max_clock_lead),
+                     ", esgd --max-clock-lead): a frame cannot be measured in the future; "
+                     "check the time tag and the clocks"));
+  }
+  return absl::OkStatus();
+}
+
+std::optional<absl::StatusOr<bool>> EstimationCore::JudgeKnownFrame(
+    const std::shared_ptr<Spacecraft>& sc, const std::string& station, int64_t sequence,
+    absl::Time time, const std::string& payload, bool known_identity, esg::v1::TelemetryAck* ack,
+    std::function<void(absl::Status)>& on_durable) {
+  const bool known_time = time <= sc->last_accepted_time;
+  absl::StatusOr<std::optional<storage::ArchivedFrame>> stored =
+      FindStoredFrame(*sc, station, sequence, time, known_identity);
+  // An identity the station used for a measurement another station had delivered first was
+  // acknowledged as a duplicate of that measurement, and is judged against it again.
+  bool by_identity = known_identity;
+  if (stored.ok() && !stored->has_value() && known_identity && known_time) {
+    stored = FindStoredFrame(*sc, station, sequence, time, /*by_identity=*/false);
+    by_identity = false;
+  }
+  if (!stored.ok()) {
+    return absl::UnavailableError(
+        absl::StrCat("storage: cannot read the archive: ", stored.status().message()));
+  }
+  if (stored->has_value()) {
+    const storage::ArchivedFrame& original = **stored;
+    // By identity the station and sequence are equal already: the measurement decides.
+    if (Measurement(original.payload) != Measurement(payload)) {
+      ++sc->frames_conflicting;
+      const std::string what = absl::StrCat(
+          "frame (station '", station, "', sequence ", sequence, ", time ", FormatUtc(time),
+          ") conflicts with the stored frame (station '", original.station_id, "', sequence ",
+          original.sequence, ", time ", FormatUtc(original.measurement_time), "): same ",
+          by_identity ? "station and sequence" : "measurement time",
+          ", different content; the stored frame is kept");
+      // Per station of a spacecraft: a replay of conflicting frames is one line each for the
+      // first few, then a count (server/log_throttle.h).
+      static LogThrottle* const conflict_log = new LogThrottle("frame_conflict");
+      conflict_log->Log(absl::StrCat("station ", station, " of spacecraft ", sc->id), "WARN",
+                        absl::StrCat(sc->id, ": ", what),
+                        {{"spacecraftId", sc->id}, {"station", station}, {"sequence", sequence}});
+      {
+        absl::MutexLock state(&sc->state_mu);
+        sc->service_alerts.push_back({"INGEST_CONFLICT", "WARNING",
+                                      absl::StrCat("station ", station), time,
+                                      static_cast<double>(sequence),
+                                      static_cast<double>(original.sequence), "sequence", what});
+      }
+      Schedule(sc);
+      return Refuse(ack, absl::AlreadyExistsError(
+                             absl::StrCat(by_identity ? "sequence" : "time", ": ", what)));
+    }
+    // An exact duplicate: stored once, acknowledged as a duplicate once the original is.
+    ++sc->frames_duplicate;
+    ack->set_accepted(true);
+    ack->set_duplicate(true);
+    if (sc->pending.count(original.measurement_time) == 0) return false;
+    CommitEntry entry;
+    entry.sc = sc;
+    entry.barrier = true;
+    entry.done = std::move(on_durable);
+    absl::MutexLock commit(&commit_mu_);
+    if (ingest_closed_) return ShuttingDown();
+    commit_queue_.push_back(std::move(entry));
+    return true;
+  }
+  // Never stored: a late frame (docs/service.md "Several ground stations"). A station's
+  // sequence identifies its frames and the time orders them: a sequence below the station's
+  // highest one that it never used is a frame the station sends late (a pass relayed after a
+  // later one, a gap filled); only its time decides whether the window still takes it.
+  if (known_time && sc->last_accepted_time - time > options_.reorder_window) {
+    ++sc->frames_rejected;
+    return Refuse(ack, absl::OutOfRangeError(absl::StrCat(
+                           "time: ", FormatUtc(time), " is more than the reorder window (",
+                           absl::FormatDuration(options_.reorder_window),
+                           ", esgd --reorder-window) before the last accepted frame of '",
+                           sc->id, "' (", FormatUtc(sc->last_accepted_time),
+                           "): too late to be applied in time order")));
+  }
+  return std::nullopt;
 }
 
 void EstimationCore::FillDurable(esg::v1::TelemetryAck* ack) {

@@ -210,14 +210,10 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
   return out;
 }
 
-}  // namespace
-
-absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
-    const esg::v1::PredictRequest& request) {
-  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
-  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
-
-  // The requested epochs: the from/to grid plus the explicit times.
+// The requested epochs, sorted and without repeats: the from/to grid plus the explicit times.
+// Errors name the field; at most `max_samples`.
+absl::StatusOr<std::vector<absl::Time>> RequestedEpochs(const esg::v1::PredictRequest& request,
+                                                        int max_samples) {
   std::vector<absl::Time> times;
   if (request.has_from() || request.has_to()) {
     if (!request.has_from()) return absl::InvalidArgumentError("from: required when to is given");
@@ -231,9 +227,9 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
           absl::StrCat("step_s: must be > 0 when from/to are given, got ", request.step_s()));
     }
     const double count = std::floor(absl::ToDoubleSeconds(to - from) / request.step_s()) + 1;
-    if (count > options_.max_prediction_samples) {
-      return absl::OutOfRangeError(absl::StrCat("step_s: ", count, " samples exceed the limit of ",
-                                                options_.max_prediction_samples));
+    if (count > max_samples) {
+      return absl::OutOfRangeError(
+          absl::StrCat("step_s: ", count, " samples exceed the limit of ", max_samples));
     }
     for (int64_t i = 0; i < static_cast<int64_t>(count); ++i) {
       times.push_back(from + absl::Seconds(request.step_s() * static_cast<double>(i)));
@@ -256,36 +252,186 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
     return absl::InvalidArgumentError(
         "times: no epoch requested (give from, to and step_s, or times)");
   }
-  if (static_cast<int>(times.size()) > options_.max_prediction_samples) {
-    return absl::OutOfRangeError(absl::StrCat(
-        "times: ", times.size(), " samples exceed the limit of ", options_.max_prediction_samples));
+  if (static_cast<int>(times.size()) > max_samples) {
+    return absl::OutOfRangeError(
+        absl::StrCat("times: ", times.size(), " samples exceed the limit of ", max_samples));
   }
   std::sort(times.begin(), times.end());
   times.erase(std::unique(times.begin(), times.end()), times.end());
+  return times;
+}
 
-  std::optional<SampledProfile> planned;
-  if (request.planned_attitude_size() > options_.max_prediction_samples) {
+// The planned attitude of the request, if it gives one. Errors name the field; at most
+// `max_samples`.
+absl::StatusOr<std::optional<SampledProfile>> PlannedAttitude(
+    const esg::v1::PredictRequest& request, int max_samples) {
+  if (request.planned_attitude_size() > max_samples) {
     return absl::OutOfRangeError(absl::StrCat("planned_attitude: ", request.planned_attitude_size(),
-                                              " samples exceed the limit of ",
-                                              options_.max_prediction_samples));
+                                              " samples exceed the limit of ", max_samples));
   }
-  if (request.planned_attitude_size() > 0) {
-    std::vector<PlannedSample> samples;
-    for (int i = 0; i < request.planned_attitude_size(); ++i) {
-      const esg::v1::AttitudeSample& s = request.planned_attitude(i);
-      if (!s.has_time()) {
-        return absl::InvalidArgumentError(absl::StrCat("planned_attitude[", i, "].time: required"));
-      }
-      if (s.q_in_b_size() != 4) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            "planned_attitude[", i, "].q_in_b: expected 4 values, got ", s.q_in_b_size()));
-      }
-      ASSIGN_OR_RETURN(absl::Time t, proto_convert::TimeFromProto(s.time()));
-      samples.push_back({t, estimator::QuaternionFromScalarFirst(
-                                {s.q_in_b(0), s.q_in_b(1), s.q_in_b(2), s.q_in_b(3)})});
+  if (request.planned_attitude_size() == 0) return std::nullopt;
+  std::vector<PlannedSample> samples;
+  for (int i = 0; i < request.planned_attitude_size(); ++i) {
+    const esg::v1::AttitudeSample& s = request.planned_attitude(i);
+    if (!s.has_time()) {
+      return absl::InvalidArgumentError(absl::StrCat("planned_attitude[", i, "].time: required"));
     }
-    ASSIGN_OR_RETURN(planned, SampledProfile::Create(std::move(samples)));
+    if (s.q_in_b_size() != 4) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "planned_attitude[", i, "].q_in_b: expected 4 values, got ", s.q_in_b_size()));
+    }
+    ASSIGN_OR_RETURN(absl::Time t, proto_convert::TimeFromProto(s.time()));
+    samples.push_back({t, estimator::QuaternionFromScalarFirst(
+                              {s.q_in_b(0), s.q_in_b(1), s.q_in_b(2), s.q_in_b(3)})});
   }
+  ASSIGN_OR_RETURN(SampledProfile planned, SampledProfile::Create(std::move(samples)));
+  return std::optional<SampledProfile>(std::move(planned));
+}
+
+// What a prediction rests on, for the words of its assumption and its AEM.
+struct PredictionBasis {
+  std::string model_name;
+  absl::Time last;            // the filter's last applied frame (its estimate `current`)
+  AttitudeEstimate current;
+  absl::Time recorded_until;  // the last archived frame
+  absl::Time fix_time;        // the star-tracker fix of the recorded samples
+  size_t recorded_count = 0;  // the first samples of `predicted` that are recorded
+  const SampledProfile* planned = nullptr;
+  int planned_samples = 0;
+};
+
+std::string SigmaText(const AttitudeEstimate& a) {
+  const Eigen::Vector3d s = SigmaArcsec(a);
+  return absl::StrFormat("%.2f, %.2f, %.2f arcsec about body x, y, z", s.x(), s.y(), s.z());
+}
+
+// The sources in words (proto/attitude_source_words.h); the enum names stay in the proto fields.
+std::string Words(esg::v1::AttitudeSource s) {
+  return std::string(proto_convert::AttitudeSourceWords(s));
+}
+
+// The assumption of the recorded samples (empty without any).
+std::string RecordedAssumption(const PredictionBasis& b) {
+  if (b.recorded_count == 0) return "";
+  return absl::StrCat(
+      Words(esg::v1::ATTITUDE_SOURCE_RECORDED), " until ", FormatUtc(b.recorded_until),
+      " (the last archived frame): archived gyro readings propagated with the calibrated drift "
+      "model (",
+      b.model_name, ") from the star-tracker fix at ", FormatUtc(b.fix_time),
+      "; the star tracker is not used after it, so the 1-sigma is that of the gyros alone since "
+      "the fix",
+      b.recorded_until > b.last ? absl::StrCat("; includes the archived frames after ",
+                                               FormatUtc(b.last),
+                                               " that the filter has not applied yet")
+                                : std::string());
+}
+
+// The assumption of the later samples, the plan's or the hold's (empty without any). They start
+// from the filter's last estimate (which may be older than the last archived frame) and
+// propagate its covariance: the envelope starts from that estimate's 1-sigma, not from the
+// recorded samples' (see the head of this file).
+std::string FutureAssumption(const PredictionBasis& b, const std::vector<Predicted>& predicted) {
+  if (predicted.size() == b.recorded_count) return "";
+  // `how`: along what the propagation runs, for the plan.
+  const auto start_text = [&](absl::string_view how) {
+    std::string text = absl::StrCat("the 1-sigma is propagated", how,
+                                    " from the filter's last estimate at ", FormatUtc(b.last),
+                                    " (", SigmaText(b.current), ", the star tracker used up to it)");
+    if (b.recorded_count > 0) {
+      const Predicted& last_recorded = predicted[b.recorded_count - 1];
+      absl::StrAppend(&text, ", not from the recorded samples' (",
+                      SigmaText(last_recorded.attitude), " at ", FormatUtc(last_recorded.time),
+                      "): the envelope steps there because the estimate changes, from the gyros "
+                      "alone to the filter's");
+    }
+    return text;
+  };
+  if (b.planned != nullptr) {
+    return absl::StrCat(Words(esg::v1::ATTITUDE_SOURCE_PLANNED), " after ",
+                        FormatUtc(b.recorded_until), ": the planned attitude given (",
+                        b.planned_samples, " samples from ", FormatUtc(b.planned->start()),
+                        ", slerp between them, held beyond its ends); ",
+                        start_text(" along the gyro readings the plan implies"));
+  }
+  return absl::StrCat(Words(esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD), " after ",
+                      FormatUtc(b.recorded_until),
+                      ": no planned attitude given, the attitude of the filter's last estimate "
+                      "held inertially fixed; wrong by the body's motion if it moves; ",
+                      start_text(""));
+}
+
+// The response: the samples, what they assume, and with `aem` the AEM of them, one block per
+// source.
+absl::StatusOr<esg::v1::PredictResponse> PredictionResponse(const std::string& spacecraft_id,
+                                                            const PredictionBasis& b,
+                                                            const std::vector<Predicted>& predicted,
+                                                            bool aem) {
+  const bool any_future = predicted.size() > b.recorded_count;
+  // What the prediction assumes, in the response and in the AEM.
+  const esg::v1::AttitudeSource source = !any_future ? esg::v1::ATTITUDE_SOURCE_RECORDED
+                                         : b.planned != nullptr
+                                             ? esg::v1::ATTITUDE_SOURCE_PLANNED
+                                             : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
+  const std::string recorded_text = RecordedAssumption(b);
+  const std::string future_text = FutureAssumption(b, predicted);
+  esg::v1::PredictResponse response;
+  response.set_attitude_source(source);
+  response.set_recorded_samples(static_cast<int32_t>(b.recorded_count));
+  *response.mutable_last_applied_time() = proto_convert::TimeToProto(b.last);
+  *response.mutable_last_archived_time() = proto_convert::TimeToProto(b.recorded_until);
+  std::vector<std::string> assumption;
+  if (!recorded_text.empty()) assumption.push_back(recorded_text);
+  if (!future_text.empty()) assumption.push_back(future_text);
+  response.set_assumption(absl::StrJoin(assumption, "; "));
+
+  std::vector<storage::AemBlock> blocks;
+  for (size_t i = 0; i < predicted.size(); ++i) {
+    const Predicted& p = predicted[i];
+    FillSample(p.time, p.attitude, p.h_in, response.add_samples());
+    if (!aem) continue;
+    const bool recorded = i < b.recorded_count;
+    if (blocks.empty() || (i == b.recorded_count && i > 0)) {
+      storage::AemBlock block;
+      block.comments.push_back(recorded ? recorded_text : future_text);
+      block.comments.push_back(
+          "1-sigma about body x, y, z [arcsec] of every epoch: the SIGMA_ARCSEC comments at the "
+          "start of the data section");
+      block.interpolation_method = "LINEAR";
+      block.interpolation_degree = 1;
+      blocks.push_back(std::move(block));
+    }
+    blocks.back().samples.push_back(
+        {p.time, p.attitude.q_in_b.normalized(), SigmaArcsec(p.attitude)});
+  }
+  if (aem) {
+    const absl::Time now = absl::Now();
+    storage::AemHeader header;
+    header.object_name = spacecraft_id;
+    header.object_id = spacecraft_id;
+    header.originator = "ESG-ESGD";
+    header.creation_date = now;
+    header.message_id = absl::StrCat(spacecraft_id, "-PRED-",
+                                     absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
+    header.comments.push_back(absl::StrCat("Predicted attitude q_in_b of ", spacecraft_id,
+                                           ", calibration model ", b.model_name,
+                                           ", state of the last applied frame ", FormatUtc(b.last),
+                                           ", last archived frame ", FormatUtc(b.recorded_until)));
+    ASSIGN_OR_RETURN(std::string text, storage::WriteAemBlocks(header, blocks));
+    response.set_aem_text(std::move(text));
+  }
+  return response;
+}
+
+}  // namespace
+
+absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
+    const esg::v1::PredictRequest& request) {
+  if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
+  ASSIGN_OR_RETURN(const std::vector<absl::Time> times,
+                   RequestedEpochs(request, options_.max_prediction_samples));
+  ASSIGN_OR_RETURN(const std::optional<SampledProfile> planned,
+                   PlannedAttitude(request, options_.max_prediction_samples));
 
   // Copy the session under the lock; predict on the copy. The archive holds every frame up to
   // last_durable_time (it is raised after the commit), applied by the filter or not.
@@ -312,154 +458,52 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
                      "' is NO_DATA: it has no attitude yet (no frame with a "
                      "valid star-tracker quaternion and a readable pair has been applied)"));
   }
-  const AttitudeEstimate current = session->CurrentAttitude();
-  if (session->state() == estimator::SessionState::kFaulted || !current.valid) {
+  PredictionBasis basis;
+  basis.model_name = setup->model_name;
+  basis.current = session->CurrentAttitude();
+  if (session->state() == estimator::SessionState::kFaulted || !basis.current.valid) {
     return absl::FailedPreconditionError(absl::StrCat(
         "spacecraft_id: '", sc->id, "' is ", estimator::SessionStateName(session->state()),
         ": its attitude output is not available",
-        current.valid ? " (a gyro of the working pair was isolated; acknowledge and reconfigure)"
-                      : absl::StrCat(" (", current.invalid_reason, ")")));
+        basis.current.valid
+            ? " (a gyro of the working pair was isolated; acknowledge and reconfigure)"
+            : absl::StrCat(" (", basis.current.invalid_reason, ")")));
   }
-  const absl::Time last = session->last_frame_time();
-  if (times.back() - last > options_.max_prediction_horizon) {
-    return absl::OutOfRangeError(absl::StrCat(request.has_to() ? "to" : "times", ": ",
-                                              FormatUtc(times.back()),
-                                              " is beyond the prediction horizon of ",
-                                              absl::FormatDuration(options_.max_prediction_horizon),
-                                              " after the last applied frame ", FormatUtc(last)));
+  basis.last = session->last_frame_time();
+  if (times.back() - basis.last > options_.max_prediction_horizon) {
+    return absl::OutOfRangeError(absl::StrCat(
+        request.has_to() ? "to" : "times", ": ", FormatUtc(times.back()),
+        " is beyond the prediction horizon of ",
+        absl::FormatDuration(options_.max_prediction_horizon), " after the last applied frame ",
+        FormatUtc(basis.last)));
   }
   // Epochs up to the last archived frame use the recorded readings, including frames the filter
   // has not applied yet (it runs behind ingest); later ones the plan or the hold, propagated
   // from the filter's last estimate at `last`.
-  const absl::Time recorded_until = std::max(last, archived_until);
-  const auto split = std::upper_bound(times.begin(), times.end(), recorded_until);
+  basis.recorded_until = std::max(basis.last, archived_until);
+  const auto split = std::upper_bound(times.begin(), times.end(), basis.recorded_until);
   const std::vector<absl::Time> recorded_times(times.begin(), split);
   const std::vector<absl::Time> future_times(split, times.end());
+  basis.recorded_count = recorded_times.size();
+  basis.planned = planned.has_value() ? &*planned : nullptr;
+  basis.planned_samples = request.planned_attitude_size();
 
   std::vector<Predicted> predicted;
-  absl::Time fix_time = absl::InfinitePast();
+  basis.fix_time = absl::InfinitePast();
   if (!recorded_times.empty()) {
-    ASSIGN_OR_RETURN(predicted,
-                     PredictRecorded(*storage_, sc->id, setup->config, setup->model, *session,
-                                     recorded_times, options_.max_prediction_horizon, &fix_time));
+    ASSIGN_OR_RETURN(predicted, PredictRecorded(*storage_, sc->id, setup->config, setup->model,
+                                                *session, recorded_times,
+                                                options_.max_prediction_horizon, &basis.fix_time));
   }
   if (!future_times.empty()) {
     ASSIGN_OR_RETURN(std::vector<estimator::PredictedSample> ahead,
-                     session->Predict(future_times, planned.has_value() ? &*planned : nullptr,
+                     session->Predict(future_times, basis.planned,
                                       planned.has_value() ? planned->start() : absl::UnixEpoch()));
     for (estimator::PredictedSample& p : ahead) {
       predicted.push_back({p.time, std::move(p.attitude), std::move(p.h_in)});
     }
   }
-
-  // What the prediction assumes, in the response and in the AEM.
-  const esg::v1::AttitudeSource source = future_times.empty() ? esg::v1::ATTITUDE_SOURCE_RECORDED
-                                         : planned.has_value()
-                                             ? esg::v1::ATTITUDE_SOURCE_PLANNED
-                                             : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
-  // The sources in words (proto/attitude_source_words.h); the enum names stay in the proto
-  // fields.
-  const auto words = [](esg::v1::AttitudeSource s) {
-    return std::string(proto_convert::AttitudeSourceWords(s));
-  };
-  const auto sigma_text = [](const AttitudeEstimate& a) {
-    const Eigen::Vector3d s = SigmaArcsec(a);
-    return absl::StrFormat("%.2f, %.2f, %.2f arcsec about body x, y, z", s.x(), s.y(), s.z());
-  };
-  std::string recorded_text;
-  if (!recorded_times.empty()) {
-    recorded_text = absl::StrCat(
-        words(esg::v1::ATTITUDE_SOURCE_RECORDED), " until ", FormatUtc(recorded_until),
-        " (the last archived frame): archived gyro readings propagated with the calibrated drift "
-        "model (",
-        setup->model_name, ") from the star-tracker fix at ", FormatUtc(fix_time),
-        "; the star tracker is not used after it, so the 1-sigma is that of the gyros alone since "
-        "the fix",
-        recorded_until > last
-            ? absl::StrCat("; includes the archived frames after ", FormatUtc(last),
-                           " that the filter has not applied yet")
-            : std::string());
-  }
-  // The plan or the hold starts from the filter's last estimate (which may be older than the
-  // last archived frame) and propagates its covariance: the envelope starts from that estimate's
-  // 1-sigma, not from the recorded samples' (see the head of this file).
-  // `how`: along what the propagation runs, for the plan.
-  const auto start_text = [&](absl::string_view how) {
-    std::string text = absl::StrCat("the 1-sigma is propagated", how,
-                                    " from the filter's last estimate at ", FormatUtc(last), " (",
-                                    sigma_text(current), ", the star tracker used up to it)");
-    if (!recorded_times.empty()) {
-      const Predicted& last_recorded = predicted[recorded_times.size() - 1];
-      absl::StrAppend(&text, ", not from the recorded samples' (",
-                      sigma_text(last_recorded.attitude), " at ", FormatUtc(last_recorded.time),
-                      "): the envelope steps there because the estimate changes, from the gyros "
-                      "alone to the filter's");
-    }
-    return text;
-  };
-  std::string future_text;
-  if (!future_times.empty()) {
-    future_text =
-        planned.has_value()
-            ? absl::StrCat(words(esg::v1::ATTITUDE_SOURCE_PLANNED), " after ",
-                           FormatUtc(recorded_until), ": the planned attitude given (",
-                           request.planned_attitude_size(), " samples from ",
-                           FormatUtc(planned->start()),
-                           ", slerp between them, held beyond its ends); ",
-                           start_text(" along the gyro readings the plan implies"))
-            : absl::StrCat(words(esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD), " after ",
-                           FormatUtc(recorded_until),
-                           ": no planned attitude given, the attitude of the filter's last "
-                           "estimate held inertially fixed; wrong by the body's motion if it "
-                           "moves; ",
-                           start_text(""));
-  }
-  esg::v1::PredictResponse response;
-  response.set_attitude_source(source);
-  response.set_recorded_samples(static_cast<int32_t>(recorded_times.size()));
-  *response.mutable_last_applied_time() = proto_convert::TimeToProto(last);
-  *response.mutable_last_archived_time() = proto_convert::TimeToProto(recorded_until);
-  std::vector<std::string> assumption;
-  if (!recorded_text.empty()) assumption.push_back(recorded_text);
-  if (!future_text.empty()) assumption.push_back(future_text);
-  response.set_assumption(absl::StrJoin(assumption, "; "));
-
-  std::vector<storage::AemBlock> blocks;
-  for (size_t i = 0; i < predicted.size(); ++i) {
-    const Predicted& p = predicted[i];
-    FillSample(p.time, p.attitude, p.h_in, response.add_samples());
-    if (!request.aem()) continue;
-    const bool recorded = i < recorded_times.size();
-    if (blocks.empty() || (i == recorded_times.size() && i > 0)) {
-      storage::AemBlock block;
-      block.comments.push_back(recorded ? recorded_text : future_text);
-      block.comments.push_back(
-          "1-sigma about body x, y, z [arcsec] of every epoch: the SIGMA_ARCSEC comments at the "
-          "start of the data section");
-      block.interpolation_method = "LINEAR";
-      block.interpolation_degree = 1;
-      blocks.push_back(std::move(block));
-    }
-    blocks.back().samples.push_back(
-        {p.time, p.attitude.q_in_b.normalized(), SigmaArcsec(p.attitude)});
-  }
-  if (request.aem()) {
-    const absl::Time now = absl::Now();
-    storage::AemHeader header;
-    header.object_name = sc->id;
-    header.object_id = sc->id;
-    header.originator = "ESG-ESGD";
-    header.creation_date = now;
-    header.message_id = absl::StrCat(sc->id, "-PRED-",
-                                     absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
-    header.comments.push_back(absl::StrCat("Predicted attitude q_in_b of ", sc->id,
-                                           ", calibration model ", setup->model_name,
-                                           ", state of the last applied frame ", FormatUtc(last),
-                                           ", last archived frame ", FormatUtc(recorded_until)));
-    ASSIGN_OR_RETURN(std::string text, storage::WriteAemBlocks(header, blocks));
-    response.set_aem_text(std::move(text));
-  }
-  return response;
+  return PredictionResponse(sc->id, basis, predicted, request.aem());
 }
 
 }  // namespace esg::server
