@@ -495,187 +495,397 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
-                                          const std::function<void(double fraction)>& progress) {
-  RETURN_IF_ERROR(ValidateSimulationSpec(spec));
-  const AttitudeProfile& profile = *spec.profile;
-  const SpacecraftConfig& config = spec.config;
-  const double dt = 1.0 / spec.integration_rate_hz;
-  const int64_t num_frames = NumFrames(spec);
+namespace {
 
+// A result with the recording's metadata set and room for num_frames frames and truth samples.
+SimulationResult StartResult(const SimulationSpec& spec, int64_t num_frames) {
   SimulationResult result;
   Recording& recording = result.recording;
-  recording.metadata["spacecraft_id"] = config.spacecraft_id;
+  recording.metadata["spacecraft_id"] = spec.config.spacecraft_id;
   recording.metadata["seed"] = absl::StrCat(spec.seed);
-  recording.metadata["profile"] = profile.Describe();
+  recording.metadata["profile"] = spec.profile->Describe();
   recording.metadata["source"] = "esg simulator";
   recording.metadata["telemetry_step_s"] = absl::StrFormat("%.17g", spec.telemetry_step);
   recording.metadata["integration_rate_hz"] = absl::StrFormat("%.17g", spec.integration_rate_hz);
   recording.frames.reserve(num_frames);
   result.truth.reserve(num_frames);
+  return result;
+}
 
-  // Gyro set-up.
+// Gyro id's paper-model state: true mounting, printed drift, noise levels, offset voltages, fault,
+// switch-on time and the spin axis at the start (C_in_b0 the attitude at 0).
+GyroState MakePaperGyro(const SimulationSpec& spec, int id, const Matrix3d& C_in_b0) {
+  const SpacecraftConfig& config = spec.config;
+  const GyroTruth& truth = spec.gyros[id - 1];
+  const GyroConfig& gc = *config.FindGyro(id);
+  GyroState g(id, spec.seed);
+  g.C_b_k = ExpMatrix(truth.misalignment_b) * gc.C_b_k;
+  g.C_k_b = g.C_b_k.transpose();
+  g.drift =
+      simulator_truth::FromGyroTruth(truth.drift.value_or(gc.model), truth.rotor_displacement_k,
+                                     truth.c10_per_m, truth.c20_per_m);
+  g.rw_intensity = truth.random_walk.value_or(config.random_walk);
+  g.readout_noise = truth.readout_noise.value_or(config.readout_noise);
+  g.voltage_noise = truth.voltage_noise;
+  const SuspensionConfig& s = config.suspension;
+  for (int axis = 0; axis < 3; ++axis) {
+    g.u_offset_k(axis) = OffsetVoltageFromDisplacement(
+        truth.rotor_displacement_k(axis), s.amplifier_gain, s.reference_voltage, s.gap);
+  }
+  g.fault = truth.fault;
+  if (truth.switch_on_time) g.switch_on_time = *truth.switch_on_time;
+  const Vector3d h_k0 = truth.initial_h_k.value_or(DefaultInitialSpinAxis(id)).normalized();
+  g.h_in = (C_in_b0 * g.C_b_k * h_k0).normalized();
+  return g;
+}
+
+// Turns on g's effects beyond the paper's models as its truth asks, recording each in effects;
+// each draws only from its own stream, and only when on. Makes sun_nodes at the first sun-face
+// drift; fails only when the sun's direction cannot be computed.
+absl::Status SetUpGyroEffects(const SimulationSpec& spec, const Matrix3d& C_in_b0, GyroState& g,
+                              GyroEffectsTruth& effects, std::optional<SunNodes>& sun_nodes) {
+  const GyroTruth& truth = spec.gyros[g.id - 1];
+  const GyroConfig& gc = *spec.config.FindGyro(g.id);
+  g.displacement0_k = truth.rotor_displacement_k;
+  if (!truth.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+    g.displacement_grows = true;
+    g.model = truth.drift.value_or(gc.model);
+    g.displacement_rate_k = truth.rotor_displacement_rate_k_m_s;
+    g.c10_per_m = truth.c10_per_m;
+    g.c20_per_m = truth.c20_per_m;
+    effects.rotor_displacement_rate_k_m_s = truth.rotor_displacement_rate_k_m_s;
+  }
+  if (truth.orbital_drift) {
+    OrbitalDrift o = *truth.orbital_drift;
+    if (!o.period_s) o.period_s = spec.profile->OrbitalPeriod();
+    g.has_orbital = true;
+    g.orbital_amplitude_k = o.amplitude_k_rad_s;
+    g.orbital_omega = 2.0 * kPi / *o.period_s;
+    g.orbital_phase = o.phase_rad;
+    effects.orbital_drift = o;
+  }
+  if (!truth.readout_distortion_k.isZero(0.0)) {
+    g.has_distortion = true;
+    g.I_plus_D = Matrix3d::Identity() + truth.readout_distortion_k;
+    effects.readout_distortion_k = truth.readout_distortion_k;
+  }
+  if (truth.switching_drift) {
+    // Random telegraph process: the level at 0 is +-1 with probability 1/2, then exponential
+    // dwell times (inverse transform, 1 - U in (0, 1]), all drawn now for the whole run.
+    g.has_switching = true;
+    g.switching_amplitude_k = truth.switching_drift->amplitude_k_rad_s;
+    g.switching_initial_level = g.switching_rng.Uniform() < 0.5 ? 1.0 : -1.0;
+    const double tau = truth.switching_drift->mean_dwell_s;
+    for (double t_switch = -tau * std::log(1.0 - g.switching_rng.Uniform());
+         t_switch <= spec.duration;
+         t_switch += -tau * std::log(1.0 - g.switching_rng.Uniform())) {
+      g.switch_times.push_back(t_switch);
+    }
+    effects.switching_drift = truth.switching_drift;
+    effects.switching_initial_level = g.switching_initial_level;
+    effects.switch_times_s = g.switch_times;
+  }
+  if (truth.hidden_driver_drift) {
+    g.has_hidden = true;
+    g.hidden_amplitude_k = truth.hidden_driver_drift->amplitude_k_rad_s;
+    g.hidden_tau = truth.hidden_driver_drift->correlation_time_s;
+    g.hidden_x = g.hidden_rng.Normal();  // stationary start: x(0) ~ N(0, 1)
+    effects.hidden_driver_drift = truth.hidden_driver_drift;
+  }
+  if (truth.rate_drift) {
+    g.has_rate = true;
+    g.rate_gain_k = truth.rate_drift->gain_k;
+    effects.rate_drift = truth.rate_drift;
+  }
+  if (truth.transient_drift) {
+    g.has_transient = true;
+    g.transient_amplitude_k = truth.transient_drift->amplitude_k_rad_s;
+    g.transient_tau = truth.transient_drift->time_constant_s;
+    g.transient_start = truth.transient_drift->start_s;
+    effects.transient_drift = truth.transient_drift;
+  }
+  if (truth.sun_face_drift) {
+    if (!sun_nodes) {
+      ASSIGN_OR_RETURN(SunNodes nodes, SunNodes::Make(spec.start, spec.duration));
+      sun_nodes = std::move(nodes);
+    }
+    g.has_sun = true;
+    g.sun_amplitude_k = truth.sun_face_drift->amplitude_k_rad_s;
+    g.sun_face_axis = truth.sun_face_drift->face_axis;
+    g.sun_face_sign = truth.sun_face_drift->face_sign;
+    g.sun_tau = truth.sun_face_drift->time_constant_s;
+    // The face in equilibrium with its illumination at the start: y(0) = u(0).
+    g.sun_y = g.SunIllumination(C_in_b0.transpose() * sun_nodes->At(0.0));
+    effects.sun_face_drift = truth.sun_face_drift;
+  }
+  g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden || g.has_rate ||
+                      g.has_transient || g.has_sun;
+  return absl::OkStatus();
+}
+
+// The running gyros in id order, each set up with its effects; fills result's true coefficients
+// and effects truth, and sun_nodes when a gyro has a sun-face drift.
+absl::StatusOr<std::vector<GyroState>> SetUpGyros(const SimulationSpec& spec,
+                                                  SimulationResult& result,
+                                                  std::optional<SunNodes>& sun_nodes) {
   std::vector<GyroState> gyros;
-  std::optional<SunNodes> sun_nodes;  // made when a gyro has a SunFaceDrift
-  const Matrix3d C_in_b0 = profile.Attitude(0.0).toRotationMatrix();
+  const Matrix3d C_in_b0 = spec.profile->Attitude(0.0).toRotationMatrix();
   for (int id = 1; id <= kMaxGyros; ++id) {
     if (!GyroRuns(spec, id)) continue;
-    const GyroTruth& truth = spec.gyros[id - 1];
-    const GyroConfig& gc = *config.FindGyro(id);
-    GyroState g(id, spec.seed);
-    g.C_b_k = ExpMatrix(truth.misalignment_b) * gc.C_b_k;
-    g.C_k_b = g.C_b_k.transpose();
-    g.drift =
-        simulator_truth::FromGyroTruth(truth.drift.value_or(gc.model), truth.rotor_displacement_k,
-                                       truth.c10_per_m, truth.c20_per_m);
-    g.rw_intensity = truth.random_walk.value_or(config.random_walk);
-    g.readout_noise = truth.readout_noise.value_or(config.readout_noise);
-    g.voltage_noise = truth.voltage_noise;
-    const SuspensionConfig& s = config.suspension;
-    for (int axis = 0; axis < 3; ++axis) {
-      g.u_offset_k(axis) = OffsetVoltageFromDisplacement(
-          truth.rotor_displacement_k(axis), s.amplifier_gain, s.reference_voltage, s.gap);
-    }
-    g.fault = truth.fault;
-    if (truth.switch_on_time) g.switch_on_time = *truth.switch_on_time;
-    const Vector3d h_k0 = truth.initial_h_k.value_or(DefaultInitialSpinAxis(id)).normalized();
-    g.h_in = (C_in_b0 * g.C_b_k * h_k0).normalized();
+    GyroState g = MakePaperGyro(spec, id, C_in_b0);
     result.true_coefficients[id - 1] = simulator_truth::EquivalentCoefficients(g.drift);
-
-    // Effects beyond the paper's models; each draws only from its own stream, and only when on.
-    GyroEffectsTruth& effects = result.effects[id - 1];
-    g.displacement0_k = truth.rotor_displacement_k;
-    if (!truth.rotor_displacement_rate_k_m_s.isZero(0.0)) {
-      g.displacement_grows = true;
-      g.model = truth.drift.value_or(gc.model);
-      g.displacement_rate_k = truth.rotor_displacement_rate_k_m_s;
-      g.c10_per_m = truth.c10_per_m;
-      g.c20_per_m = truth.c20_per_m;
-      effects.rotor_displacement_rate_k_m_s = truth.rotor_displacement_rate_k_m_s;
-    }
-    if (truth.orbital_drift) {
-      OrbitalDrift o = *truth.orbital_drift;
-      if (!o.period_s) o.period_s = profile.OrbitalPeriod();
-      g.has_orbital = true;
-      g.orbital_amplitude_k = o.amplitude_k_rad_s;
-      g.orbital_omega = 2.0 * kPi / *o.period_s;
-      g.orbital_phase = o.phase_rad;
-      effects.orbital_drift = o;
-    }
-    if (!truth.readout_distortion_k.isZero(0.0)) {
-      g.has_distortion = true;
-      g.I_plus_D = Matrix3d::Identity() + truth.readout_distortion_k;
-      effects.readout_distortion_k = truth.readout_distortion_k;
-    }
-    if (truth.switching_drift) {
-      // Random telegraph process: the level at 0 is +-1 with probability 1/2, then exponential
-      // dwell times (inverse transform, 1 - U in (0, 1]), all drawn now for the whole run.
-      g.has_switching = true;
-      g.switching_amplitude_k = truth.switching_drift->amplitude_k_rad_s;
-      g.switching_initial_level = g.switching_rng.Uniform() < 0.5 ? 1.0 : -1.0;
-      const double tau = truth.switching_drift->mean_dwell_s;
-      for (double t_switch = -tau * std::log(1.0 - g.switching_rng.Uniform());
-           t_switch <= spec.duration;
-           t_switch += -tau * std::log(1.0 - g.switching_rng.Uniform())) {
-        g.switch_times.push_back(t_switch);
-      }
-      effects.switching_drift = truth.switching_drift;
-      effects.switching_initial_level = g.switching_initial_level;
-      effects.switch_times_s = g.switch_times;
-    }
-    if (truth.hidden_driver_drift) {
-      g.has_hidden = true;
-      g.hidden_amplitude_k = truth.hidden_driver_drift->amplitude_k_rad_s;
-      g.hidden_tau = truth.hidden_driver_drift->correlation_time_s;
-      g.hidden_x = g.hidden_rng.Normal();  // stationary start: x(0) ~ N(0, 1)
-      effects.hidden_driver_drift = truth.hidden_driver_drift;
-    }
-    if (truth.rate_drift) {
-      g.has_rate = true;
-      g.rate_gain_k = truth.rate_drift->gain_k;
-      effects.rate_drift = truth.rate_drift;
-    }
-    if (truth.transient_drift) {
-      g.has_transient = true;
-      g.transient_amplitude_k = truth.transient_drift->amplitude_k_rad_s;
-      g.transient_tau = truth.transient_drift->time_constant_s;
-      g.transient_start = truth.transient_drift->start_s;
-      effects.transient_drift = truth.transient_drift;
-    }
-    if (truth.sun_face_drift) {
-      if (!sun_nodes) {
-        ASSIGN_OR_RETURN(SunNodes nodes, SunNodes::Make(spec.start, spec.duration));
-        sun_nodes = std::move(nodes);
-      }
-      g.has_sun = true;
-      g.sun_amplitude_k = truth.sun_face_drift->amplitude_k_rad_s;
-      g.sun_face_axis = truth.sun_face_drift->face_axis;
-      g.sun_face_sign = truth.sun_face_drift->face_sign;
-      g.sun_tau = truth.sun_face_drift->time_constant_s;
-      // The face in equilibrium with its illumination at the start: y(0) = u(0).
-      g.sun_y = g.SunIllumination(C_in_b0.transpose() * sun_nodes->At(0.0));
-      effects.sun_face_drift = truth.sun_face_drift;
-    }
-    g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden || g.has_rate ||
-                        g.has_transient || g.has_sun;
+    RETURN_IF_ERROR(SetUpGyroEffects(spec, C_in_b0, g, result.effects[id - 1], sun_nodes));
     gyros.push_back(std::move(g));
   }
+  return gyros;
+}
 
-  const StarTrackerTruth& st = spec.star_tracker;
-  const Vector3d st_noise = st.noise.value_or(config.star_tracker.noise);
-  const Quaterniond q_st_misalignment = ExpQuaternion(st.misalignment_b);
-  const Quaterniond q_st_jump =
-      st.misalignment_jump ? ExpQuaternion(st.misalignment_jump->rotation_b) : Quaterniond::Identity();
-  int burst_left = st.outlier_burst ? st.outlier_burst->count : 0;
-  // The sample repeated inside a frozen window, with its outlier truth.
-  std::optional<StarTrackerReading> st_held;
-  bool st_held_outlier = false;
-  double st_held_outlier_angle = 0.0;
-  Rng st_noise_rng(DeriveSeed(spec.seed, kStarTrackerNoiseStream));
-  Rng st_outlier_rng(DeriveSeed(spec.seed, kStarTrackerOutlierStream));
-  Rng st_invalid_rng(DeriveSeed(spec.seed, kStarTrackerInvalidStream));
+// Truth integration: advances every gyro's spin axis and drift states over the step [t0, t0 + h].
+class TruthIntegrator {
+ public:
+  TruthIntegrator(const AttitudeProfile& profile, const std::optional<SunNodes>& sun_nodes,
+                  std::vector<GyroState>& gyros)
+      : profile_(profile),
+        sun_nodes_(sun_nodes),
+        gyros_(gyros),
+        any_rate_drift_(std::any_of(gyros.begin(), gyros.end(),
+                                    [](const GyroState& g) { return g.has_rate; })) {}
 
-  const bool any_rate_drift =
-      std::any_of(gyros.begin(), gyros.end(), [](const GyroState& g) { return g.has_rate; });
   // One integration step [t0, t0 + h]: drift at the midpoint (attitude at t_mid, h_in
   // extrapolated half a step with the previous drift), then h_in turned by dw_in * h.
-  auto step = [&](double t0, double h) {
+  void Step(double t0, double h) {
     const double t_mid = t0 + 0.5 * h;
-    const Matrix3d C_in_b = profile.Attitude(t_mid).toRotationMatrix();
+    const Matrix3d C_in_b = profile_.Attitude(t_mid).toRotationMatrix();
     const double sqrt_h = std::sqrt(h);
-    const Vector3d w_b = any_rate_drift ? profile.Rate(t_mid) : Vector3d::Zero();
-    const Vector3d s_b = sun_nodes ? Vector3d(C_in_b.transpose() * sun_nodes->At(t_mid))
-                                   : Vector3d::Zero();
-    for (GyroState& g : gyros) {
-      const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
-      const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
-      Vector3d dw_k = g.displacement_grows
-                          ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_mid), h_k)
-                          : simulator_truth::TrueDriftRate_k(g.drift, h_k);
-      if (g.fault) dw_k += g.FaultDrift_k(t_mid);
-      if (g.has_extra_drift) {
-        dw_k += g.OrbitalDrift_k(t_mid) + g.SwitchingLevel(t_mid) * g.switching_amplitude_k +
-                g.hidden_x * g.hidden_amplitude_k + g.RateDrift_k(w_b) + g.TransientDrift_k(t_mid);
-      }
-      if (g.has_sun) {
-        // The lag stepped exactly for the illumination u at the midpoint: y at the midpoint for
-        // the drift, y at the step end for the next step.
-        const double u = g.SunIllumination(s_b);
-        dw_k += (u + (g.sun_y - u) * std::exp(-0.5 * h / g.sun_tau)) * g.sun_amplitude_k;
-        g.sun_y = u + (g.sun_y - u) * std::exp(-h / g.sun_tau);
-      }
-      const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
-      g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
-      g.dw_in_prev = dw_in;
-      if (g.rw_intensity > 0.0) g.dw_rw_in += (g.rw_intensity * sqrt_h) * g.rw_rng.Normal3();
-      if (g.has_hidden) {
-        // Exact OU step over h: a = exp(-h / tau), innovation variance 1 - a^2 = -expm1(-2h/tau).
-        const double a = std::exp(-h / g.hidden_tau);
-        g.hidden_x = a * g.hidden_x + std::sqrt(-std::expm1(-2.0 * h / g.hidden_tau)) *
-                                          g.hidden_rng.Normal();
-      }
+    const Vector3d w_b = any_rate_drift_ ? profile_.Rate(t_mid) : Vector3d::Zero();
+    const Vector3d s_b = sun_nodes_ ? Vector3d(C_in_b.transpose() * sun_nodes_->At(t_mid))
+                                    : Vector3d::Zero();
+    for (GyroState& g : gyros_) StepGyro(g, t_mid, h, sqrt_h, C_in_b, w_b, s_b);
+  }
+
+ private:
+  // Gyro g over the step of length h with midpoint t_mid (attitude C_in_b, body rate w_b, sun
+  // s_b in body axes there).
+  static void StepGyro(GyroState& g, double t_mid, double h, double sqrt_h, const Matrix3d& C_in_b,
+                       const Vector3d& w_b, const Vector3d& s_b) {
+    const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
+    const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
+    Vector3d dw_k = g.displacement_grows
+                        ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_mid), h_k)
+                        : simulator_truth::TrueDriftRate_k(g.drift, h_k);
+    if (g.fault) dw_k += g.FaultDrift_k(t_mid);
+    if (g.has_extra_drift) {
+      dw_k += g.OrbitalDrift_k(t_mid) + g.SwitchingLevel(t_mid) * g.switching_amplitude_k +
+              g.hidden_x * g.hidden_amplitude_k + g.RateDrift_k(w_b) + g.TransientDrift_k(t_mid);
     }
-  };
+    if (g.has_sun) {
+      // The lag stepped exactly for the illumination u at the midpoint: y at the midpoint for
+      // the drift, y at the step end for the next step.
+      const double u = g.SunIllumination(s_b);
+      dw_k += (u + (g.sun_y - u) * std::exp(-0.5 * h / g.sun_tau)) * g.sun_amplitude_k;
+      g.sun_y = u + (g.sun_y - u) * std::exp(-h / g.sun_tau);
+    }
+    const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
+    g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
+    g.dw_in_prev = dw_in;
+    if (g.rw_intensity > 0.0) g.dw_rw_in += (g.rw_intensity * sqrt_h) * g.rw_rng.Normal3();
+    if (g.has_hidden) {
+      // Exact OU step over h: a = exp(-h / tau), innovation variance 1 - a^2 = -expm1(-2h/tau).
+      const double a = std::exp(-h / g.hidden_tau);
+      g.hidden_x = a * g.hidden_x + std::sqrt(-std::expm1(-2.0 * h / g.hidden_tau)) *
+                                        g.hidden_rng.Normal();
+    }
+  }
+
+  const AttitudeProfile& profile_;
+  const std::optional<SunNodes>& sun_nodes_;
+  std::vector<GyroState>& gyros_;
+  const bool any_rate_drift_;
+};
+
+// Gyro g's truth at t_m (C_b_in the true attitude's transpose there): spin axis, mounting,
+// displacement and every drift term.
+GyroTruthSample GyroTruthAt(const GyroState& g, double t_m, const Matrix3d& C_b_in,
+                            const AttitudeProfile& profile,
+                            const std::optional<SunNodes>& sun_nodes) {
+  GyroTruthSample gt;
+  gt.h_in = g.h_in;
+  gt.h_k = (g.C_k_b * (C_b_in * g.h_in)).normalized();
+  gt.C_b_k = g.C_b_k;
+  gt.rotor_displacement_k_m = g.Displacement_k(t_m);
+  const Vector3d dw_model_k =
+      g.displacement_grows ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_m), gt.h_k)
+                           : simulator_truth::TrueDriftRate_k(g.drift, gt.h_k);
+  gt.dw_k = dw_model_k + g.FaultDrift_k(t_m) + g.C_k_b * (C_b_in * g.dw_rw_in);
+  if (g.has_extra_drift) {
+    gt.dw_orbital_k_rad_s = g.OrbitalDrift_k(t_m);
+    gt.switching_level = g.SwitchingLevel(t_m);
+    gt.dw_switching_k_rad_s = gt.switching_level * g.switching_amplitude_k;
+    gt.hidden_driver = g.has_hidden ? g.hidden_x : 0.0;
+    gt.dw_hidden_k_rad_s = gt.hidden_driver * g.hidden_amplitude_k;
+    gt.dw_rate_k_rad_s = g.RateDrift_k(g.has_rate ? profile.Rate(t_m) : Vector3d::Zero());
+    gt.dw_transient_k_rad_s = g.TransientDrift_k(t_m);
+    if (g.has_sun) {
+      gt.sun_illumination = g.SunIllumination(C_b_in * sun_nodes->At(t_m));
+      gt.sun_lagged_illumination = g.sun_y;
+      gt.dw_sun_k_rad_s = g.sun_y * g.sun_amplitude_k;
+    }
+    gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s +
+               gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s + gt.dw_sun_k_rad_s;
+  }
+  return gt;
+}
+
+// What gyro g reads at t_m for its truth gt: distortion, readout noise (two draws, always), a
+// readout jump, then the offset voltages with their noise (three draws, always).
+GyroReading ReadGyro(GyroState& g, const GyroTruthSample& gt, double t_m,
+                     const SuspensionConfig& s) {
+  // The pick-off's distortion, then readout noise: a small rotation perpendicular to the
+  // distorted axis (two draws, always).
+  const Vector3d h_read = g.has_distortion ? Vector3d((g.I_plus_D * gt.h_k).normalized()) : gt.h_k;
+  const Vector3d e1 = AnyPerpendicular(h_read);
+  const Vector3d e2 = h_read.cross(e1);
+  const double n1 = g.readout_rng.Normal();
+  const double n2 = g.readout_rng.Normal();
+  Vector3d h_meas = ExpMatrix(g.readout_noise * (n1 * e1 + n2 * e2)) * h_read;
+  if (g.fault && g.fault->kind == GyroFault::Kind::kReadoutJump && t_m >= g.fault->time) {
+    h_meas = ExpMatrix(g.fault->value) * h_meas;
+  }
+  GyroReading reading;
+  reading.h_k = h_meas.normalized();
+  Vector3d u_offset_k = g.u_offset_k;
+  if (g.displacement_grows) {
+    // eq. (3) inverse at Delta(t_m), per suspension axis.
+    for (int axis = 0; axis < 3; ++axis) {
+      u_offset_k(axis) = OffsetVoltageFromDisplacement(
+          gt.rotor_displacement_k_m(axis), s.amplifier_gain, s.reference_voltage, s.gap);
+    }
+  }
+  const Vector3d u_k = u_offset_k + g.voltage_noise * g.voltage_rng.Normal3();
+  reading.u_k_mv = u_k / kVoltsPerMv;
+  return reading;
+}
+
+// Every gyro's truth and reading at t_m into truth and frame. Switch-on, missing and frozen
+// readings only decide what is telemetered, after the draws.
+void SampleGyros(std::vector<GyroState>& gyros, double t_m, const SimulationSpec& spec,
+                 const std::optional<SunNodes>& sun_nodes, TelemetryFrame& frame,
+                 TruthSample& truth) {
+  const Matrix3d C_b_in = truth.q_in_b.toRotationMatrix().transpose();
+  for (GyroState& g : gyros) {
+    const GyroTruthSample gt = GyroTruthAt(g, t_m, C_b_in, *spec.profile, sun_nodes);
+    GyroReading reading = ReadGyro(g, gt, t_m, spec.config.suspension);
+    if (t_m < g.switch_on_time) continue;
+    truth.gyros[g.id - 1] = gt;
+    if (g.InFaultWindow(GyroFault::Kind::kReadingsMissing, t_m)) continue;
+    if (g.InFaultWindow(GyroFault::Kind::kReadingFrozen, t_m)) {
+      if (!g.held_reading) g.held_reading = reading;
+      reading = *g.held_reading;
+    } else {
+      g.held_reading.reset();
+    }
+    frame.gyros[g.id - 1] = reading;
+  }
+}
+
+// The star tracker across the run: noise, misalignment and its jump, latency, outliers (random
+// and a burst), invalid flags, outages and frozen windows. Every stream draws the same amount per
+// frame whatever is used.
+class StarTrackerSampler {
+ public:
+  explicit StarTrackerSampler(const SimulationSpec& spec)
+      : st_(spec.star_tracker),
+        profile_(*spec.profile),
+        noise_(st_.noise.value_or(spec.config.star_tracker.noise)),
+        q_misalignment_(ExpQuaternion(st_.misalignment_b)),
+        q_jump_(st_.misalignment_jump ? ExpQuaternion(st_.misalignment_jump->rotation_b)
+                                      : Quaterniond::Identity()),
+        burst_left_(st_.outlier_burst ? st_.outlier_burst->count : 0),
+        noise_rng_(DeriveSeed(spec.seed, kStarTrackerNoiseStream)),
+        outlier_rng_(DeriveSeed(spec.seed, kStarTrackerOutlierStream)),
+        invalid_rng_(DeriveSeed(spec.seed, kStarTrackerInvalidStream)) {}
+
+  // The reading at t_m into frame (none in an outage), its outlier and frozen truth into truth.
+  void Sample(double t_m, TelemetryFrame& frame, TruthSample& truth) {
+    const Vector3d n = noise_rng_.Normal3();
+    const double outlier_draw = outlier_rng_.Uniform();
+    const Vector3d outlier_axis = outlier_rng_.UnitVector();
+    const double outlier_angle = st_.outlier_size * outlier_rng_.Uniform(1.0, 3.0);
+    const double invalid_draw = invalid_rng_.Uniform();
+    const bool in_outage = InAnyWindow(st_.outages, t_m);
+    const bool in_frozen = InAnyWindow(st_.frozen, t_m);
+    if (!in_frozen) held_.reset();
+    if (in_outage) return;
+    const Quaterniond q_true_lagged =
+        st_.latency == 0.0 ? truth.q_in_b : profile_.Attitude(t_m - st_.latency);
+    Quaterniond q_meas = q_true_lagged * q_misalignment_;
+    if (st_.misalignment_jump && t_m >= st_.misalignment_jump->time) q_meas = q_meas * q_jump_;
+    q_meas = q_meas * ExpQuaternion(noise_.cwiseProduct(n));
+    if (burst_left_ > 0 && t_m >= st_.outlier_burst->time) {
+      // Cross-boresight: the frame's random axis without its body-z component.
+      Vector3d axis(outlier_axis.x(), outlier_axis.y(), 0.0);
+      axis = axis.norm() > 1e-12 ? Vector3d(axis.normalized()) : Vector3d::UnitX();
+      q_meas = q_meas * ExpQuaternion(st_.outlier_burst->angle * axis);
+      truth.star_tracker_outlier = true;
+      truth.star_tracker_outlier_angle = st_.outlier_burst->angle;
+      --burst_left_;
+    } else if (outlier_draw < st_.outlier_probability) {
+      q_meas = q_meas * ExpQuaternion(outlier_angle * outlier_axis);
+      truth.star_tracker_outlier = true;
+      truth.star_tracker_outlier_angle = outlier_angle;
+    }
+    StarTrackerReading reading;
+    reading.q_in_b = Canonical(q_meas.normalized());
+    reading.valid = !(invalid_draw < st_.invalid_probability);
+    if (in_frozen) HoldOrRepeat(reading, truth);
+    frame.star_tracker = reading;
+  }
+
+ private:
+  // Inside a frozen window: the first reading is held with its outlier truth, later ones repeat
+  // it (and are marked frozen in truth).
+  void HoldOrRepeat(StarTrackerReading& reading, TruthSample& truth) {
+    if (held_) {
+      reading = *held_;
+      truth.star_tracker_outlier = held_outlier_;
+      truth.star_tracker_outlier_angle = held_outlier_angle_;
+      truth.star_tracker_frozen = true;
+    } else {
+      held_ = reading;
+      held_outlier_ = truth.star_tracker_outlier;
+      held_outlier_angle_ = truth.star_tracker_outlier_angle;
+    }
+  }
+
+  const StarTrackerTruth& st_;
+  const AttitudeProfile& profile_;
+  const Vector3d noise_;
+  const Quaterniond q_misalignment_;
+  const Quaterniond q_jump_;
+  int burst_left_;
+  // The sample repeated inside a frozen window, with its outlier truth.
+  std::optional<StarTrackerReading> held_;
+  bool held_outlier_ = false;
+  double held_outlier_angle_ = 0.0;
+  Rng noise_rng_;
+  Rng outlier_rng_;
+  Rng invalid_rng_;
+};
+
+}  // namespace
+
+absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
+                                          const std::function<void(double fraction)>& progress) {
+  RETURN_IF_ERROR(ValidateSimulationSpec(spec));
+  const AttitudeProfile& profile = *spec.profile;
+  const double dt = 1.0 / spec.integration_rate_hz;
+  const int64_t num_frames = NumFrames(spec);
+
+  SimulationResult result = StartResult(spec, num_frames);
+  std::optional<SunNodes> sun_nodes;  // made when a gyro has a SunFaceDrift
+  ASSIGN_OR_RETURN(std::vector<GyroState> gyros, SetUpGyros(spec, result, sun_nodes));
+  StarTrackerSampler star_tracker(spec);
+  TruthIntegrator integrator(profile, sun_nodes, gyros);
 
   const int64_t progress_every = std::max<int64_t>(1, num_frames / 100);
   double t = 0.0;
@@ -687,7 +897,7 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
       double next_grid = static_cast<double>(grid_steps + 1) * dt;
       if (std::abs(next_grid - t_m) <= 1e-9 * dt) next_grid = t_m;
       const double t_next = std::min(next_grid, t_m);
-      step(t, t_next - t);
+      integrator.Step(t, t_next - t);
       t = t_next;
       if (t_next == next_grid) ++grid_steps;
     }
@@ -697,119 +907,10 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
     frame.time = spec.start + absl::Seconds(t_m);
     truth.time = frame.time;
     truth.q_in_b = profile.Attitude(t_m);
-    const Matrix3d C_b_in = truth.q_in_b.toRotationMatrix().transpose();
+    SampleGyros(gyros, t_m, spec, sun_nodes, frame, truth);
+    star_tracker.Sample(t_m, frame, truth);
 
-    for (GyroState& g : gyros) {
-      GyroTruthSample gt;
-      gt.h_in = g.h_in;
-      gt.h_k = (g.C_k_b * (C_b_in * g.h_in)).normalized();
-      gt.C_b_k = g.C_b_k;
-      gt.rotor_displacement_k_m = g.Displacement_k(t_m);
-      const Vector3d dw_model_k =
-          g.displacement_grows ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_m), gt.h_k)
-                               : simulator_truth::TrueDriftRate_k(g.drift, gt.h_k);
-      gt.dw_k = dw_model_k + g.FaultDrift_k(t_m) + g.C_k_b * (C_b_in * g.dw_rw_in);
-      if (g.has_extra_drift) {
-        gt.dw_orbital_k_rad_s = g.OrbitalDrift_k(t_m);
-        gt.switching_level = g.SwitchingLevel(t_m);
-        gt.dw_switching_k_rad_s = gt.switching_level * g.switching_amplitude_k;
-        gt.hidden_driver = g.has_hidden ? g.hidden_x : 0.0;
-        gt.dw_hidden_k_rad_s = gt.hidden_driver * g.hidden_amplitude_k;
-        gt.dw_rate_k_rad_s = g.RateDrift_k(g.has_rate ? profile.Rate(t_m) : Vector3d::Zero());
-        gt.dw_transient_k_rad_s = g.TransientDrift_k(t_m);
-        if (g.has_sun) {
-          gt.sun_illumination = g.SunIllumination(C_b_in * sun_nodes->At(t_m));
-          gt.sun_lagged_illumination = g.sun_y;
-          gt.dw_sun_k_rad_s = g.sun_y * g.sun_amplitude_k;
-        }
-        gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s +
-                   gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s + gt.dw_sun_k_rad_s;
-      }
-      // The pick-off's distortion, then readout noise: a small rotation perpendicular to the
-      // distorted axis (two draws, always).
-      const Vector3d h_read =
-          g.has_distortion ? Vector3d((g.I_plus_D * gt.h_k).normalized()) : gt.h_k;
-      const Vector3d e1 = AnyPerpendicular(h_read);
-      const Vector3d e2 = h_read.cross(e1);
-      const double n1 = g.readout_rng.Normal();
-      const double n2 = g.readout_rng.Normal();
-      Vector3d h_meas = ExpMatrix(g.readout_noise * (n1 * e1 + n2 * e2)) * h_read;
-      if (g.fault && g.fault->kind == GyroFault::Kind::kReadoutJump && t_m >= g.fault->time) {
-        h_meas = ExpMatrix(g.fault->value) * h_meas;
-      }
-      GyroReading reading;
-      reading.h_k = h_meas.normalized();
-      Vector3d u_offset_k = g.u_offset_k;
-      if (g.displacement_grows) {
-        // eq. (3) inverse at Delta(t_m), per suspension axis.
-        const SuspensionConfig& s = config.suspension;
-        for (int axis = 0; axis < 3; ++axis) {
-          u_offset_k(axis) = OffsetVoltageFromDisplacement(
-              gt.rotor_displacement_k_m(axis), s.amplifier_gain, s.reference_voltage, s.gap);
-        }
-      }
-      const Vector3d u_k = u_offset_k + g.voltage_noise * g.voltage_rng.Normal3();
-      reading.u_k_mv = u_k / kVoltsPerMv;
-      // Switch-on, missing and frozen readings only decide what is telemetered, after the draws.
-      if (t_m < g.switch_on_time) continue;
-      truth.gyros[g.id - 1] = gt;
-      if (g.InFaultWindow(GyroFault::Kind::kReadingsMissing, t_m)) continue;
-      if (g.InFaultWindow(GyroFault::Kind::kReadingFrozen, t_m)) {
-        if (!g.held_reading) g.held_reading = reading;
-        reading = *g.held_reading;
-      } else {
-        g.held_reading.reset();
-      }
-      frame.gyros[g.id - 1] = reading;
-    }
-
-    // Star tracker: every stream draws the same amount per frame whatever is used.
-    const Vector3d n = st_noise_rng.Normal3();
-    const double outlier_draw = st_outlier_rng.Uniform();
-    const Vector3d outlier_axis = st_outlier_rng.UnitVector();
-    const double outlier_angle = st.outlier_size * st_outlier_rng.Uniform(1.0, 3.0);
-    const double invalid_draw = st_invalid_rng.Uniform();
-    const bool in_outage = InAnyWindow(st.outages, t_m);
-    const bool in_frozen = InAnyWindow(st.frozen, t_m);
-    if (!in_frozen) st_held.reset();
-    if (!in_outage) {
-      const Quaterniond q_true_lagged =
-          st.latency == 0.0 ? truth.q_in_b : profile.Attitude(t_m - st.latency);
-      Quaterniond q_meas = q_true_lagged * q_st_misalignment;
-      if (st.misalignment_jump && t_m >= st.misalignment_jump->time) q_meas = q_meas * q_st_jump;
-      q_meas = q_meas * ExpQuaternion(st_noise.cwiseProduct(n));
-      if (burst_left > 0 && t_m >= st.outlier_burst->time) {
-        // Cross-boresight: the frame's random axis without its body-z component.
-        Vector3d axis(outlier_axis.x(), outlier_axis.y(), 0.0);
-        axis = axis.norm() > 1e-12 ? Vector3d(axis.normalized()) : Vector3d::UnitX();
-        q_meas = q_meas * ExpQuaternion(st.outlier_burst->angle * axis);
-        truth.star_tracker_outlier = true;
-        truth.star_tracker_outlier_angle = st.outlier_burst->angle;
-        --burst_left;
-      } else if (outlier_draw < st.outlier_probability) {
-        q_meas = q_meas * ExpQuaternion(outlier_angle * outlier_axis);
-        truth.star_tracker_outlier = true;
-        truth.star_tracker_outlier_angle = outlier_angle;
-      }
-      StarTrackerReading reading;
-      reading.q_in_b = Canonical(q_meas.normalized());
-      reading.valid = !(invalid_draw < st.invalid_probability);
-      if (in_frozen) {
-        if (st_held) {
-          reading = *st_held;
-          truth.star_tracker_outlier = st_held_outlier;
-          truth.star_tracker_outlier_angle = st_held_outlier_angle;
-          truth.star_tracker_frozen = true;
-        } else {
-          st_held = reading;
-          st_held_outlier = truth.star_tracker_outlier;
-          st_held_outlier_angle = truth.star_tracker_outlier_angle;
-        }
-      }
-      frame.star_tracker = reading;
-    }
-
-    recording.frames.push_back(std::move(frame));
+    result.recording.frames.push_back(std::move(frame));
     result.truth.push_back(std::move(truth));
     if (progress && m % progress_every == 0) {
       progress(static_cast<double>(m) / static_cast<double>(num_frames));
