@@ -430,8 +430,25 @@ std::string EstimationCore::StorageFault() {
 // ---------------------------------------------------------------------------------------------
 // Configuration.
 
-absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
-    const esg::v1::ConfigureRequest& request, const std::function<absl::Status()>& precondition) {
+// A configuration call's new setup, fresh session and what it stores, with what the store and the
+// publication after it need.
+struct EstimationCore::Configuration {
+  std::shared_ptr<Setup> setup;
+  std::optional<EstimationSession> fresh;
+  ServerCheckpoint checkpoint;
+  storage::CheckpointRecord cp;
+  storage::ConfigRecord record;
+  // A quarantine that the reconfiguration ends: its alert is cleared as the apply worker clears
+  // one (AlertCollapser::End: cleared_time stored, then published and logged once committed).
+  std::optional<AlertCollapser> quarantine_end;
+  std::vector<int64_t> revised_alerts;  // the old session's, revised by the new one
+  bool new_session = false;  // replaces a session: its window checkpoints and late frames go
+  std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
+  std::optional<storage::LeaseFence> fence;  // with leases: this server's lease of the session
+};
+
+absl::StatusOr<EstimationCore::Configuration> EstimationCore::PrepareConfiguration(
+    const esg::v1::ConfigureRequest& request) {
   if (!request.has_config()) return absl::InvalidArgumentError("config: required");
   ASSIGN_OR_RETURN(estimator::SpacecraftConfig config,
                    proto_convert::ConfigFromProto(request.config()));
@@ -440,6 +457,8 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   const estimator::SessionOptions session_options{model};
   ASSIGN_OR_RETURN(EstimationSession fresh, EstimationSession::Create(config, session_options));
 
+  Configuration c;
+  c.fresh = std::move(fresh);
   auto setup = std::make_shared<Setup>();
   setup->config = config;
   setup->proto = proto_convert::ConfigToProto(config);
@@ -447,181 +466,198 @@ absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
   setup->model_name = model.Name();
   setup->config_json = proto_convert::ConfigToJson(config);
   for (const auto& g : config.gyros) setup->configured[g.id - 1] = true;
+  c.setup = setup;
 
-  ServerCheckpoint checkpoint;
-  checkpoint.model = setup->model_name;
-  storage::CheckpointRecord cp;
-  cp.spacecraft_id = config.spacecraft_id;
-  cp.last_sequence = 0;
-  cp.compute_time = absl::Now();
-  storage::ConfigRecord record;
-  record.spacecraft_id = config.spacecraft_id;
-  record.config_json = setup->config_json;
-  record.updated_time = cp.compute_time;
-  // A quarantine that the reconfiguration ends: its alert is cleared as the apply worker clears
-  // one (AlertCollapser::End: cleared_time stored, then published and logged once committed).
-  std::optional<AlertCollapser> quarantine_end;
-  std::vector<int64_t> revised_alerts;  // the old session's, revised by the new one
-  bool new_session = false;  // replaces a session: its window checkpoints and late frames go
-  std::vector<int64_t> ended_sequences;  // stored by this transaction, to publish after it
-  std::optional<storage::LeaseFence> fence;  // with leases: this server's lease of the session
-  auto write = [&]() -> absl::Status {
-    cp.state_blob = EncodeCheckpoint(checkpoint);
+  c.checkpoint.model = setup->model_name;
+  c.cp.spacecraft_id = config.spacecraft_id;
+  c.cp.last_sequence = 0;
+  c.cp.compute_time = absl::Now();
+  c.record.spacecraft_id = config.spacecraft_id;
+  c.record.config_json = setup->config_json;
+  c.record.updated_time = c.cp.compute_time;
+  return c;
+}
+
+absl::Status EstimationCore::StoreConfiguration(Configuration& c) {
+  const absl::Time commit_start = absl::Now();
+  const absl::Status status = [&]() -> absl::Status {
+    c.cp.state_blob = EncodeCheckpoint(c.checkpoint);
     storage::ConfigurationChange change;
-    change.config = record;
-    change.checkpoint = cp;
-    change.new_session = new_session;
-    change.revised_alerts = revised_alerts;
-    change.fence = fence;
-    if (quarantine_end.has_value()) {
-      change.new_alerts = quarantine_end->new_alerts();
-      for (const AlertCollapser::Clear& c : quarantine_end->clears()) {
-        change.clears.push_back({c.sequence, c.time});
+    change.config = c.record;
+    change.checkpoint = c.cp;
+    change.new_session = c.new_session;
+    change.revised_alerts = c.revised_alerts;
+    change.fence = c.fence;
+    if (c.quarantine_end.has_value()) {
+      change.new_alerts = c.quarantine_end->new_alerts();
+      for (const AlertCollapser::Clear& clear : c.quarantine_end->clears()) {
+        change.clears.push_back({clear.sequence, clear.time});
       }
     }
-    ASSIGN_OR_RETURN(ended_sequences, storage_->CommitConfiguration(change));
-    for (const storage::AlertClear& c : change.clears) ended_sequences.push_back(c.sequence);
+    ASSIGN_OR_RETURN(c.ended_sequences, storage_->CommitConfiguration(change));
+    for (const storage::AlertClear& clear : change.clears) {
+      c.ended_sequences.push_back(clear.sequence);
+    }
     return absl::OkStatus();
-  };
+  }();
+  metrics_.storage_commit.With({"configure"}).Observe(
+      absl::ToDoubleSeconds(absl::Now() - commit_start));
+  return status;
+}
 
-  auto store = [&]() -> absl::Status {
-    const absl::Time commit_start = absl::Now();
-    const absl::Status status = write();
-    metrics_.storage_commit.With({"configure"}).Observe(
-        absl::ToDoubleSeconds(absl::Now() - commit_start));
-    return status;
-  };
-
-  absl::MutexLock configure(&configure_mu_);
-  if (precondition) RETURN_IF_ERROR(precondition());
-  std::shared_ptr<Spacecraft> sc;
-  int64_t new_lease_epoch = 0;  // a new spacecraft's lease, with leases
-  if (absl::StatusOr<std::shared_ptr<Spacecraft>> found = Lookup(config.spacecraft_id);
-      found.ok()) {
-    sc = *std::move(found);
-    fence = FenceOf(*sc);
+absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::FindForConfigure(
+    const std::string& spacecraft_id, Configuration& c, int64_t* new_lease_epoch) {
+  if (absl::StatusOr<std::shared_ptr<Spacecraft>> found = Lookup(spacecraft_id); found.ok()) {
+    std::shared_ptr<Spacecraft> sc = *std::move(found);
+    c.fence = FenceOf(*sc);
+    return sc;
   } else if (!absl::IsNotFound(found.status())) {
     return found.status();
   } else if (shared()) {
     absl::StatusOr<storage::SessionLease> lease = storage_->leases().Acquire(
-        config.spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
+        spacecraft_id, options_.node_id, absl::Now(), options_.lease_duration);
     if (!lease.ok()) return LeaseRefused(lease.status());
-    new_lease_epoch = lease->epoch;
+    *new_lease_epoch = lease->epoch;
     metrics_.lease_events.With({"taken"}).Increment();
-    fence = storage::LeaseFence{options_.node_id, new_lease_epoch};
+    c.fence = storage::LeaseFence{options_.node_id, *new_lease_epoch};
   }
-  esg::v1::ConfigureResponse response;
-  if (sc == nullptr) {
-    RETURN_IF_ERROR(store());
-    sc = std::make_shared<Spacecraft>(config.spacecraft_id);
-    sc->lease_epoch = new_lease_epoch;
-    {
-      absl::MutexLock lock(&sc->ingest_mu);
-      sc->ingest_setup = setup;
-    }
-    {
-      absl::MutexLock lock(&sc->state_mu);
-      sc->setup = setup;
-      sc->session = std::move(fresh);
-      sc->apply = checkpoint;
-      sc->replay_from_archive = false;
-    }
-    registry_.Put(sc);
-    LogEvent("INFO", "spacecraft_configured",
-             absl::StrCat("configured new spacecraft ", sc->id, ", model ", setup->model_name),
-             {{"spacecraftId", sc->id}, {"model", setup->model_name}, {"created", true}});
-    response.set_created(true);
-    *response.mutable_session() = SessionInfoToProto(Summarize(*sc));
-    return response;
+  return std::shared_ptr<Spacecraft>();
+}
+
+absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::ConfigureNewSpacecraft(
+    Configuration& c, int64_t lease_epoch) {
+  RETURN_IF_ERROR(StoreConfiguration(c));
+  auto sc = std::make_shared<Spacecraft>(c.record.spacecraft_id);
+  sc->lease_epoch = lease_epoch;
+  {
+    absl::MutexLock lock(&sc->ingest_mu);
+    sc->ingest_setup = c.setup;
   }
   {
-    absl::MutexLock job(&sc->job_mu);
-    {
-      absl::MutexLock ingest(&sc->ingest_mu);
-      absl::MutexLock state(&sc->state_mu);
-      const bool quarantined = !sc->apply.quarantine_reason.empty();
-      const bool same = sc->setup != nullptr && sc->setup->config_json == setup->config_json &&
-                        sc->setup->model_name == setup->model_name;
-      if (!same || (quarantined && request.replace())) {
-        if (!sc->highest_accepted.empty() && !request.replace()) {
-          return absl::FailedPreconditionError(
-              absl::StrCat("config: spacecraft '", sc->id, "' already has telemetry (up to ",
-                           FormatUtc(sc->last_accepted_time),
-                           "); set replace=true to recreate its session and reapply the archive"));
-        }
-        // The new session replays the whole archive and stores its own history and alerts (a
-        // different model gives a different history); the earlier ones are kept, revised.
-        if (quarantined) {
-          // The quarantine ends at the reconfiguration: in telemetry time, at the latest archived
-          // frame (every frame up to it was under the quarantine), or at the alert's own latest
-          // occurrence when that is later (nothing archived). A quarantine raised at load whose
-          // alert no job has stored yet is stored raised and cleared.
-          absl::Time end = sc->last_durable_time;
-          std::vector<AlertOccurrence> raised;
-          for (const AlertOccurrence& o : sc->service_alerts) {
-            if (o.reason == kQuarantineAlertReason) raised.push_back(o);
-          }
-          for (const AlertOccurrence& o : raised) end = std::max(end, o.time);
-          for (const AlertTrack& t : sc->apply.alert_tracks) {
-            if (t.reason == kQuarantineAlertReason) end = std::max(end, t.last_time);
-          }
-          if (end == absl::InfinitePast()) end = absl::UnixEpoch();
-          quarantine_end.emplace(sc->id, sc->apply.alert_tracks, options_.alert_collapse_window,
-                                 cp.compute_time);
-          for (const AlertOccurrence& o : raised) quarantine_end->Add(o);
-          quarantine_end->End(kQuarantineAlertReason, "session", end);
-        }
-        // The old session's snapshots and filter alerts are superseded by the new session's
-        // (revised, kept for audit); the job lock keeps the worker from adding any meanwhile.
-        ASSIGN_OR_RETURN(revised_alerts, FilterAlertsAfter(sc->id, absl::InfinitePast()));
-        new_session = true;
-        RETURN_IF_ERROR(store());
-        sc->late_frames.clear();
-        std::erase_if(sc->service_alerts,
-                      [](const AlertOccurrence& o) { return o.reason == kQuarantineAlertReason; });
-        sc->ingest_setup = setup;
-        sc->setup = setup;
-        sc->session = std::move(fresh);
-        sc->apply = checkpoint;
-        ++sc->generation;
-        sc->ready.clear();
-        sc->ready_bytes = 0;
-        sc->replay_from_archive = true;
-        LogEvent("INFO", "spacecraft_configured",
-                 absl::StrCat("reconfigured spacecraft ", sc->id, ", model ", setup->model_name,
-                              "; reapplying the archive", quarantined ? "; quarantine over" : ""),
-                 {{"spacecraftId", sc->id}, {"model", setup->model_name}, {"created", false}});
-      }
-    }
-    // Publish (and log) the cleared quarantine alerts once committed, in the worker's order:
-    // under publish_mu, with the job lock held (not the state locks) so no job of the new session
-    // publishes first.
-    absl::MutexLock publish(&sc->publish_mu);
-    // Subscribers receive the superseded alerts again with revised_time set.
-    for (int64_t seq : revised_alerts) {
-      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
-      if (r.ok()) hub_.Publish(*r);
-    }
-    // ended_sequences: the alerts stored new by this transaction first, then the cleared ones.
-    const size_t raised = quarantine_end.has_value() ? quarantine_end->new_alerts().size() : 0;
-    for (size_t k = 0; k < ended_sequences.size(); ++k) {
-      const int64_t seq = ended_sequences[k];
-      absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc->id, seq);
-      if (r.ok()) {
-        if (k < raised) metrics_.alerts_raised.With({r->reason, r->severity}).Increment();
-        if (r->cleared) metrics_.alerts_cleared.With({r->reason, r->severity}).Increment();
-        hub_.Publish(*r);
-      } else {
-        LogEvent("ERROR", "storage_error",
-                 absl::StrCat(sc->id, ": the cleared quarantine alert #", seq,
-                              " cannot be read back: ", r.status().ToString()),
-                 {{"spacecraftId", sc->id}, {"alertSequence", seq}});
-      }
+    absl::MutexLock lock(&sc->state_mu);
+    sc->setup = c.setup;
+    sc->session = std::move(*c.fresh);
+    sc->apply = c.checkpoint;
+    sc->replay_from_archive = false;
+  }
+  registry_.Put(sc);
+  LogEvent("INFO", "spacecraft_configured",
+           absl::StrCat("configured new spacecraft ", sc->id, ", model ", c.setup->model_name),
+           {{"spacecraftId", sc->id}, {"model", c.setup->model_name}, {"created", true}});
+  esg::v1::ConfigureResponse response;
+  response.set_created(true);
+  *response.mutable_session() = SessionInfoToProto(Summarize(*sc));
+  return response;
+}
+
+void EstimationCore::EndQuarantineAtReconfiguration(Spacecraft& sc, Configuration& c) {
+  // The quarantine ends at the reconfiguration: in telemetry time, at the latest archived
+  // frame (every frame up to it was under the quarantine), or at the alert's own latest
+  // occurrence when that is later (nothing archived). A quarantine raised at load whose
+  // alert no job has stored yet is stored raised and cleared.
+  absl::Time end = sc.last_durable_time;
+  std::vector<AlertOccurrence> raised;
+  for (const AlertOccurrence& o : sc.service_alerts) {
+    if (o.reason == kQuarantineAlertReason) raised.push_back(o);
+  }
+  for (const AlertOccurrence& o : raised) end = std::max(end, o.time);
+  for (const AlertTrack& t : sc.apply.alert_tracks) {
+    if (t.reason == kQuarantineAlertReason) end = std::max(end, t.last_time);
+  }
+  if (end == absl::InfinitePast()) end = absl::UnixEpoch();
+  c.quarantine_end.emplace(sc.id, sc.apply.alert_tracks, options_.alert_collapse_window,
+                           c.cp.compute_time);
+  for (const AlertOccurrence& o : raised) c.quarantine_end->Add(o);
+  c.quarantine_end->End(kQuarantineAlertReason, "session", end);
+}
+
+absl::Status EstimationCore::ReplaceSessionIfChanged(Spacecraft& sc, Configuration& c,
+                                                     bool replace) {
+  absl::MutexLock ingest(&sc.ingest_mu);
+  absl::MutexLock state(&sc.state_mu);
+  const Setup& setup = *c.setup;
+  const bool quarantined = !sc.apply.quarantine_reason.empty();
+  const bool same = sc.setup != nullptr && sc.setup->config_json == setup.config_json &&
+                    sc.setup->model_name == setup.model_name;
+  if (same && !(quarantined && replace)) return absl::OkStatus();
+  if (!sc.highest_accepted.empty() && !replace) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("config: spacecraft '", sc.id, "' already has telemetry (up to ",
+                     FormatUtc(sc.last_accepted_time),
+                     "); set replace=true to recreate its session and reapply the archive"));
+  }
+  // The new session replays the whole archive and stores its own history and alerts (a
+  // different model gives a different history); the earlier ones are kept, revised.
+  if (quarantined) EndQuarantineAtReconfiguration(sc, c);
+  // The old session's snapshots and filter alerts are superseded by the new session's
+  // (revised, kept for audit); the job lock keeps the worker from adding any meanwhile.
+  ASSIGN_OR_RETURN(c.revised_alerts, FilterAlertsAfter(sc.id, absl::InfinitePast()));
+  c.new_session = true;
+  RETURN_IF_ERROR(StoreConfiguration(c));
+  sc.late_frames.clear();
+  std::erase_if(sc.service_alerts,
+                [](const AlertOccurrence& o) { return o.reason == kQuarantineAlertReason; });
+  sc.ingest_setup = c.setup;
+  sc.setup = c.setup;
+  sc.session = std::move(*c.fresh);
+  sc.apply = c.checkpoint;
+  ++sc.generation;
+  sc.ready.clear();
+  sc.ready_bytes = 0;
+  sc.replay_from_archive = true;
+  LogEvent("INFO", "spacecraft_configured",
+           absl::StrCat("reconfigured spacecraft ", sc.id, ", model ", setup.model_name,
+                        "; reapplying the archive", quarantined ? "; quarantine over" : ""),
+           {{"spacecraftId", sc.id}, {"model", setup.model_name}, {"created", false}});
+  return absl::OkStatus();
+}
+
+void EstimationCore::PublishReconfiguration(Spacecraft& sc, const Configuration& c) {
+  // Publish (and log) the cleared quarantine alerts once committed, in the worker's order:
+  // under publish_mu, with the job lock held (not the state locks) so no job of the new session
+  // publishes first.
+  absl::MutexLock publish(&sc.publish_mu);
+  // Subscribers receive the superseded alerts again with revised_time set.
+  for (int64_t seq : c.revised_alerts) {
+    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc.id, seq);
+    if (r.ok()) hub_.Publish(*r);
+  }
+  // ended_sequences: the alerts stored new by this transaction first, then the cleared ones.
+  const size_t raised = c.quarantine_end.has_value() ? c.quarantine_end->new_alerts().size() : 0;
+  for (size_t k = 0; k < c.ended_sequences.size(); ++k) {
+    const int64_t seq = c.ended_sequences[k];
+    absl::StatusOr<storage::AlertRecord> r = storage_->alerts().Get(sc.id, seq);
+    if (r.ok()) {
+      if (k < raised) metrics_.alerts_raised.With({r->reason, r->severity}).Increment();
+      if (r->cleared) metrics_.alerts_cleared.With({r->reason, r->severity}).Increment();
+      hub_.Publish(*r);
+    } else {
+      LogEvent("ERROR", "storage_error",
+               absl::StrCat(sc.id, ": the cleared quarantine alert #", seq,
+                            " cannot be read back: ", r.status().ToString()),
+               {{"spacecraftId", sc.id}, {"alertSequence", seq}});
     }
   }
+}
+
+absl::StatusOr<esg::v1::ConfigureResponse> EstimationCore::Configure(
+    const esg::v1::ConfigureRequest& request, const std::function<absl::Status()>& precondition) {
+  ASSIGN_OR_RETURN(Configuration c, PrepareConfiguration(request));
+  absl::MutexLock configure(&configure_mu_);
+  if (precondition) RETURN_IF_ERROR(precondition());
+  int64_t new_lease_epoch = 0;  // a new spacecraft's lease, with leases
+  ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc,
+                   FindForConfigure(c.record.spacecraft_id, c, &new_lease_epoch));
+  if (sc == nullptr) return ConfigureNewSpacecraft(c, new_lease_epoch);
+  {
+    absl::MutexLock job(&sc->job_mu);
+    RETURN_IF_ERROR(ReplaceSessionIfChanged(*sc, c, request.replace()));
+    PublishReconfiguration(*sc, c);
+  }
   // The automatic diagnosis of the old configuration is stale (auto_diagnosis.h).
-  if (new_session) NotifyConfigured(sc->id);
+  if (c.new_session) NotifyConfigured(sc->id);
   Schedule(sc);
+  esg::v1::ConfigureResponse response;
   response.set_created(false);
   *response.mutable_session() = SessionInfoToProto(Summarize(*sc));
   return response;

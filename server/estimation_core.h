@@ -339,6 +339,38 @@ class EstimationCore {
   // archive marks); `snapshot`: for a summary only (nothing logged, not registered).
   absl::StatusOr<std::shared_ptr<Spacecraft>> RestoreSpacecraft(const storage::ConfigRecord& record,
                                                                 bool snapshot);
+  // Configure's steps (estimation_core.cc), in order, each with what it decides.
+  struct Configuration;
+  // The request checked (InvalidArgument "config: required", the configuration's and the model's
+  // own errors) and turned into the new setup, a fresh session and the records to store.
+  static absl::StatusOr<Configuration> PrepareConfiguration(
+      const esg::v1::ConfigureRequest& request);
+  // Commits the configuration change `c` describes (timed as the "configure" commit); the
+  // sequences it stored or cleared go to c.ended_sequences.
+  absl::Status StoreConfiguration(Configuration& c) ABSL_EXCLUSIVE_LOCKS_REQUIRED(configure_mu_);
+  // The configured spacecraft's record (its fence in c.fence), or null for a new one (with
+  // leases, its lease taken: *new_lease_epoch and c.fence); Lookup's and the lease's errors.
+  absl::StatusOr<std::shared_ptr<Spacecraft>> FindForConfigure(const std::string& spacecraft_id,
+                                                               Configuration& c,
+                                                               int64_t* new_lease_epoch)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(configure_mu_);
+  // Stores and registers a new spacecraft with the fresh session; the "created" response.
+  absl::StatusOr<esg::v1::ConfigureResponse> ConfigureNewSpacecraft(Configuration& c,
+                                                                    int64_t lease_epoch)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(configure_mu_);
+  // Replaces sc's session when the configuration or model changed, or when a quarantined one is
+  // replaced: FailedPrecondition if it has telemetry and `replace` is false; else stores the
+  // change and installs the fresh session (the archive to be reapplied). Takes ingest_mu and
+  // state_mu. OK without change when the same configuration and model are given again.
+  absl::Status ReplaceSessionIfChanged(Spacecraft& sc, Configuration& c, bool replace)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(configure_mu_, sc.job_mu);
+  // The quarantine alert cleared at the reconfiguration, into c.quarantine_end.
+  void EndQuarantineAtReconfiguration(Spacecraft& sc, Configuration& c)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.ingest_mu, sc.state_mu);
+  // Publishes the revised alerts, then those the reconfiguration stored or cleared (counted),
+  // under publish_mu so no job of the new session publishes first.
+  void PublishReconfiguration(Spacecraft& sc, const Configuration& c)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(sc.job_mu);
   // With leases: the summary of a session this server does not hold, read from the database,
   // with served_by the holder of an unexpired lease.
   absl::StatusOr<esg::v1::SessionInfo> SummarizeFromDatabase(const storage::ConfigRecord& record);
