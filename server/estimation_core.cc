@@ -105,171 +105,213 @@ absl::Status EstimationCore::LoadSpacecraft(const storage::ConfigRecord& record,
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::RestoreSpacecraft(
-    const storage::ConfigRecord& record, bool snapshot) {
-  auto sc = std::make_shared<Spacecraft>(record.spacecraft_id);
-  using StationSequences = std::map<std::string, int64_t>;
-  ASSIGN_OR_RETURN(StationSequences highest,
-                   storage_->archive().HighestSequences(record.spacecraft_id));
-  ASSIGN_OR_RETURN(std::optional<storage::ArchivedFrame> latest,
-                   storage_->archive().Latest(record.spacecraft_id));
-  ASSIGN_OR_RETURN(int64_t count,
-                   storage::CountArchivedFrames(storage_->database(), record.spacecraft_id));
-  ASSIGN_OR_RETURN(std::vector<absl::Time> late_frames,
-                   storage_->reorder().LateFrames(record.spacecraft_id));
-  ASSIGN_OR_RETURN(std::vector<storage::ReadmissionRecord> readmissions,
-                   storage_->sessions().ListReadmissions(record.spacecraft_id));
-  const absl::Time last_time = latest.has_value() ? latest->measurement_time : absl::InfinitePast();
-
-  // The configuration.
-  std::shared_ptr<Setup> setup;
-  std::string config_problem;
-  if (absl::StatusOr<estimator::SpacecraftConfig> config =
-          proto_convert::ParseConfigJson(record.config_json);
-      config.ok()) {
-    setup = std::make_shared<Setup>();
-    setup->config = *config;
-    setup->proto = proto_convert::ConfigToProto(*config);
-    setup->config_json = record.config_json;
-    for (const auto& g : config->gyros) {
-      if (g.id >= 1 && g.id <= estimator::kMaxGyros) setup->configured[g.id - 1] = true;
-    }
-  } else {
-    config_problem =
-        absl::StrCat("the stored configuration cannot be used (", config.status().message(), ")");
-  }
-
-  // The checkpoint: decoded, restored, and consistent with the archive; else rebuilt.
+// What RestoreSpacecraft reads and decides before installing it: the archive's marks, the stored
+// configuration's setup, the checkpoint and the session, and why they cannot be used.
+struct EstimationCore::Restoration {
+  std::map<std::string, int64_t> highest;  // per station
+  absl::Time last_time = absl::InfinitePast();  // the latest archived frame's
+  int64_t count = 0;  // archived frames
+  std::vector<absl::Time> late_frames;
+  std::vector<storage::ReadmissionRecord> readmissions;
+  std::shared_ptr<Setup> setup;  // null: the stored configuration cannot be used
   ServerCheckpoint checkpoint;
-  std::string checkpoint_problem;
   std::optional<EstimationSession> session;
+  std::string config_problem;
+  std::string checkpoint_problem;
+};
+
+absl::Status EstimationCore::ReadArchiveMarks(const std::string& spacecraft_id, Restoration& r) {
+  using StationSequences = std::map<std::string, int64_t>;
+  ASSIGN_OR_RETURN(StationSequences highest, storage_->archive().HighestSequences(spacecraft_id));
+  ASSIGN_OR_RETURN(std::optional<storage::ArchivedFrame> latest,
+                   storage_->archive().Latest(spacecraft_id));
+  ASSIGN_OR_RETURN(int64_t count,
+                   storage::CountArchivedFrames(storage_->database(), spacecraft_id));
+  ASSIGN_OR_RETURN(std::vector<absl::Time> late_frames,
+                   storage_->reorder().LateFrames(spacecraft_id));
+  ASSIGN_OR_RETURN(std::vector<storage::ReadmissionRecord> readmissions,
+                   storage_->sessions().ListReadmissions(spacecraft_id));
+  r.highest = std::move(highest);
+  r.last_time = latest.has_value() ? latest->measurement_time : absl::InfinitePast();
+  r.count = count;
+  r.late_frames = std::move(late_frames);
+  r.readmissions = std::move(readmissions);
+  return absl::OkStatus();
+}
+
+void EstimationCore::SetupFromStoredConfig(const storage::ConfigRecord& record, Restoration& r) {
+  absl::StatusOr<estimator::SpacecraftConfig> config =
+      proto_convert::ParseConfigJson(record.config_json);
+  if (!config.ok()) {
+    r.config_problem =
+        absl::StrCat("the stored configuration cannot be used (", config.status().message(), ")");
+    return;
+  }
+  r.setup = std::make_shared<Setup>();
+  r.setup->config = *config;
+  r.setup->proto = proto_convert::ConfigToProto(*config);
+  r.setup->config_json = record.config_json;
+  for (const auto& g : config->gyros) {
+    if (g.id >= 1 && g.id <= estimator::kMaxGyros) r.setup->configured[g.id - 1] = true;
+  }
+}
+
+absl::Status EstimationCore::ReadStoredCheckpoint(const std::string& spacecraft_id,
+                                                  Restoration& r) {
   absl::StatusOr<storage::CheckpointRecord> stored =
-      storage_->sessions().GetCheckpoint(record.spacecraft_id);
+      storage_->sessions().GetCheckpoint(spacecraft_id);
   if (absl::IsNotFound(stored.status())) {
-    if (count > 0) checkpoint_problem = "its checkpoint is missing";
-  } else if (!stored.ok()) {
-    return stored.status();
-  } else if (absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(stored->state_blob);
-             !decoded.ok()) {
-    checkpoint_problem =
+    if (r.count > 0) r.checkpoint_problem = "its checkpoint is missing";
+    return absl::OkStatus();
+  }
+  if (!stored.ok()) return stored.status();
+  absl::StatusOr<ServerCheckpoint> decoded = DecodeCheckpoint(stored->state_blob);
+  if (!decoded.ok()) {
+    r.checkpoint_problem =
         absl::StrCat("its checkpoint cannot be decoded (", decoded.status().message(), ")");
-  } else {
-    checkpoint = std::move(*decoded);
-    if (checkpoint.cursor_from_sequence && stored->last_sequence > 0) {
-      // Format 1 kept the last applied sequence of the single station.
-      ASSIGN_OR_RETURN(std::optional<storage::ArchivedFrame> at,
-                       storage_->archive().Find(record.spacecraft_id, storage::kDefaultStation,
-                                                stored->last_sequence));
-      if (at.has_value()) {
-        checkpoint.applied_time = at->measurement_time;
-        checkpoint.applied_station = at->station_id;
-        checkpoint.applied_sequence = at->sequence;
-      } else {
-        checkpoint_problem = absl::StrCat("its checkpoint is ahead of the archive (sequence ",
+    return absl::OkStatus();
+  }
+  ServerCheckpoint& checkpoint = r.checkpoint;
+  checkpoint = std::move(*decoded);
+  if (checkpoint.cursor_from_sequence && stored->last_sequence > 0) {
+    // Format 1 kept the last applied sequence of the single station.
+    ASSIGN_OR_RETURN(std::optional<storage::ArchivedFrame> at,
+                     storage_->archive().Find(spacecraft_id, storage::kDefaultStation,
+                                              stored->last_sequence));
+    if (at.has_value()) {
+      checkpoint.applied_time = at->measurement_time;
+      checkpoint.applied_station = at->station_id;
+      checkpoint.applied_sequence = at->sequence;
+    } else {
+      r.checkpoint_problem = absl::StrCat("its checkpoint is ahead of the archive (sequence ",
                                           stored->last_sequence, " is not archived)");
-      }
-    }
-    if (checkpoint_problem.empty() && checkpoint.applied_time > last_time) {
-      checkpoint_problem =
-          absl::StrCat("its checkpoint is ahead of the archive (applied up to ",
-                       FormatUtc(checkpoint.applied_time), ", archive up to ",
-                       last_time == absl::InfinitePast() ? "nothing" : FormatUtc(last_time), ")");
     }
   }
+  if (r.checkpoint_problem.empty() && checkpoint.applied_time > r.last_time) {
+    r.checkpoint_problem =
+        absl::StrCat("its checkpoint is ahead of the archive (applied up to ",
+                     FormatUtc(checkpoint.applied_time), ", archive up to ",
+                     r.last_time == absl::InfinitePast() ? "nothing" : FormatUtc(r.last_time),
+                     ")");
+  }
+  return absl::OkStatus();
+}
+
+void EstimationCore::RestoreSession(Restoration& r) {
+  ServerCheckpoint& checkpoint = r.checkpoint;
   if (checkpoint.model.empty()) checkpoint.model = kDefaultModel;
-  if (setup != nullptr) {
+  if (r.setup != nullptr) {
     absl::StatusOr<estimator::ModelSpec> model = estimator::ParseModel(checkpoint.model);
     if (!model.ok()) {
-      checkpoint_problem =
+      r.checkpoint_problem =
           absl::StrCat("its checkpoint names an unknown model (", model.status().message(), ")");
       model = estimator::ParseModel(kDefaultModel);
       checkpoint.model = kDefaultModel;
     }
-    setup->model = *model;
-    setup->model_name = setup->model.Name();
-    const estimator::SessionOptions session_options{setup->model};
-    if (checkpoint_problem.empty() && checkpoint.session.has_value()) {
+    r.setup->model = *model;
+    r.setup->model_name = r.setup->model.Name();
+    const estimator::SessionOptions session_options{r.setup->model};
+    if (r.checkpoint_problem.empty() && checkpoint.session.has_value()) {
       absl::StatusOr<EstimationSession> restored =
-          EstimationSession::FromCheckpoint(setup->config, session_options, *checkpoint.session);
+          EstimationSession::FromCheckpoint(r.setup->config, session_options, *checkpoint.session);
       if (restored.ok()) {
-        session = std::move(*restored);
+        r.session = std::move(*restored);
       } else {
-        checkpoint_problem =
+        r.checkpoint_problem =
             absl::StrCat("its checkpoint cannot be restored (", restored.status().message(), ")");
       }
     }
-    if (!session.has_value()) {
+    if (!r.session.has_value()) {
       absl::StatusOr<EstimationSession> fresh =
-          EstimationSession::Create(setup->config, session_options);
+          EstimationSession::Create(r.setup->config, session_options);
       if (fresh.ok()) {
-        session = std::move(*fresh);
+        r.session = std::move(*fresh);
       } else {
-        config_problem = absl::StrCat("the stored configuration cannot be used (",
-                                      fresh.status().message(), ")");
-        setup = nullptr;
+        r.config_problem = absl::StrCat("the stored configuration cannot be used (",
+                                        fresh.status().message(), ")");
+        r.setup = nullptr;
       }
     }
   }
   checkpoint.session.reset();
+}
 
+absl::StatusOr<std::string> EstimationCore::QuarantineReason(const std::string& spacecraft_id,
+                                                             Restoration& r) {
   std::string reason;
-  if (!config_problem.empty()) {
-    reason = absl::StrCat(config_problem,
+  if (!r.config_problem.empty()) {
+    reason = absl::StrCat(r.config_problem,
                           "; frames are refused until ConfigureSpacecraft with replace=true");
-    checkpoint.rebuilding = false;
-  } else if (!checkpoint_problem.empty()) {
+    r.checkpoint.rebuilding = false;
+  } else if (!r.checkpoint_problem.empty()) {
     // Rebuild from the archive: a fresh session replays every frame; what is already stored
     // (coefficient history, alerts) is not written again.
-    const std::string model = checkpoint.model;
+    const std::string model = r.checkpoint.model;
     ServerCheckpoint fresh;
     fresh.model = model;
     ASSIGN_OR_RETURN(fresh.effects_written_until,
-                     storage::LatestEffectTime(storage_->database(), record.spacecraft_id));
-    checkpoint = std::move(fresh);
-    reason = absl::StrCat(checkpoint_problem, "; rebuilding the session from the archive");
-    checkpoint.rebuilding = true;
+                     storage::LatestEffectTime(storage_->database(), spacecraft_id));
+    r.checkpoint = std::move(fresh);
+    reason = absl::StrCat(r.checkpoint_problem, "; rebuilding the session from the archive");
+    r.checkpoint.rebuilding = true;
   }
-  if (!reason.empty()) {
-    checkpoint.quarantine_reason = reason;
-    if (!snapshot) {
-      LogEvent("ERROR", "session_quarantined",
-               absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason),
-               {{"spacecraftId", sc->id}});
-    }
+  if (!reason.empty()) r.checkpoint.quarantine_reason = reason;
+  return reason;
+}
+
+void EstimationCore::InstallRestoration(Spacecraft& sc, Restoration& r, const std::string& reason) {
+  {
+    absl::MutexLock lock(&sc.ingest_mu);
+    sc.ingest_setup = r.setup;
+    sc.highest_accepted = r.highest;
+    sc.last_accepted_time = r.last_time;
   }
   {
-    absl::MutexLock lock(&sc->ingest_mu);
-    sc->ingest_setup = setup;
-    sc->highest_accepted = highest;
-    sc->last_accepted_time = last_time;
-  }
-  {
-    absl::MutexLock lock(&sc->state_mu);
-    sc->setup = setup;
-    sc->highest_durable = highest;
-    sc->last_durable_time = last_time;
-    sc->frames_accepted = count;
-    if (session.has_value()) sc->session = std::move(*session);
+    absl::MutexLock lock(&sc.state_mu);
+    sc.setup = r.setup;
+    sc.highest_durable = r.highest;
+    sc.last_durable_time = r.last_time;
+    sc.frames_accepted = r.count;
+    if (r.session.has_value()) sc.session = std::move(*r.session);
     if (!reason.empty()) {
-      sc->service_alerts.push_back(
+      sc.service_alerts.push_back(
           {kQuarantineAlertReason, "DISTRESS", "session",
-           last_time == absl::InfinitePast() ? absl::UnixEpoch() : last_time, 0.0, 0.0, "",
+           r.last_time == absl::InfinitePast() ? absl::UnixEpoch() : r.last_time, 0.0, 0.0, "",
            reason});
     }
-    sc->apply = std::move(checkpoint);
-    sc->replay_from_archive = true;
-    sc->late_frames.insert(late_frames.begin(), late_frames.end());
-    sc->readmissions = std::move(readmissions);
+    sc.apply = std::move(r.checkpoint);
+    sc.replay_from_archive = true;
+    sc.late_frames.insert(r.late_frames.begin(), r.late_frames.end());
+    sc.readmissions = std::move(r.readmissions);
   }
+}
+
+absl::StatusOr<std::shared_ptr<EstimationCore::Spacecraft>> EstimationCore::RestoreSpacecraft(
+    const storage::ConfigRecord& record, bool snapshot) {
+  auto sc = std::make_shared<Spacecraft>(record.spacecraft_id);
+  Restoration r;
+  RETURN_IF_ERROR(ReadArchiveMarks(record.spacecraft_id, r));
+  // The configuration.
+  SetupFromStoredConfig(record, r);
+  // The checkpoint: decoded, restored, and consistent with the archive; else rebuilt.
+  RETURN_IF_ERROR(ReadStoredCheckpoint(record.spacecraft_id, r));
+  RestoreSession(r);
+  ASSIGN_OR_RETURN(const std::string reason, QuarantineReason(record.spacecraft_id, r));
+  if (!reason.empty() && !snapshot) {
+    LogEvent("ERROR", "session_quarantined",
+             absl::StrCat("spacecraft ", sc->id, " quarantined: ", reason),
+             {{"spacecraftId", sc->id}});
+  }
+  InstallRestoration(*sc, r, reason);
   if (snapshot) return sc;
+  const std::string model_name = r.setup != nullptr ? r.setup->model_name : "-";
   LogEvent("INFO", "spacecraft_loaded",
-           absl::StrCat("loaded spacecraft ", sc->id, ": model ",
-                        setup != nullptr ? setup->model_name : "-", ", ", count,
+           absl::StrCat("loaded spacecraft ", sc->id, ": model ", model_name, ", ", r.count,
                         " archived frames, applied up to ",
                         sc->apply.applied_time == absl::InfinitePast()
                             ? "nothing"
                             : FormatUtc(sc->apply.applied_time)),
-           {{"spacecraftId", sc->id}, {"archivedFrames", count}});
+           {{"spacecraftId", sc->id}, {"archivedFrames", r.count}});
   return sc;
 }
 

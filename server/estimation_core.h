@@ -339,6 +339,27 @@ class EstimationCore {
   // archive marks); `snapshot`: for a summary only (nothing logged, not registered).
   absl::StatusOr<std::shared_ptr<Spacecraft>> RestoreSpacecraft(const storage::ConfigRecord& record,
                                                                 bool snapshot);
+  // RestoreSpacecraft's steps (estimation_core.cc), in order, each with what it decides.
+  struct Restoration;
+  // The archive's marks of the spacecraft (highest sequences, latest frame time, frame count,
+  // late frames, readmissions) into r. Errors: storage reads.
+  absl::Status ReadArchiveMarks(const std::string& spacecraft_id, Restoration& r);
+  // The stored configuration's setup into r.setup, or why it cannot be used (r.config_problem).
+  static void SetupFromStoredConfig(const storage::ConfigRecord& record, Restoration& r);
+  // The stored checkpoint, decoded and checked against the archive, into r.checkpoint, or why it
+  // cannot be used (r.checkpoint_problem: missing, undecodable, ahead of the archive). Errors:
+  // storage reads.
+  absl::Status ReadStoredCheckpoint(const std::string& spacecraft_id, Restoration& r);
+  // The checkpoint's model and session restored (else a fresh session; else the configuration
+  // cannot be used: r.setup null), with why into r's problems; the checkpoint's session dropped.
+  static void RestoreSession(Restoration& r);
+  // The quarantine reason ("" for none): a configuration that cannot be used refuses frames, a
+  // checkpoint that cannot be used is rebuilt from the archive (r.checkpoint reset to a
+  // rebuilding one). Errors: storage reads.
+  absl::StatusOr<std::string> QuarantineReason(const std::string& spacecraft_id, Restoration& r);
+  // Installs r in sc under ingest_mu, then state_mu (with the quarantine alert when `reason` is
+  // not empty).
+  static void InstallRestoration(Spacecraft& sc, Restoration& r, const std::string& reason);
   // Configure's steps (estimation_core.cc), in order, each with what it decides.
   struct Configuration;
   // The request checked (InvalidArgument "config: required", the configuration's and the model's
