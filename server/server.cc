@@ -178,19 +178,11 @@ std::string BindFailure(const std::string& listen) {
   return reason;
 }
 
-}  // namespace
-
-absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions& options) {
-  std::unique_ptr<EsgServer> s(new EsgServer());
-  RETURN_IF_ERROR(CheckLimits(options));
-  RaiseFileLimit();
-  ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials, Credentials(options));
-  if (!options.tokens_file.empty()) {
-    ASSIGN_OR_RETURN(s->auth_, TokenAuthorizer::FromFile(options.tokens_file));
-  }
-  const bool postgres = storage::IsPostgresUri(options.db_path);
+// Creates the directory of an SQLite database file (none for PostgreSQL); FailedPrecondition
+// "db: cannot create directory ..." when that fails.
+absl::Status CreateDatabaseDirectory(const std::string& db_path, bool postgres) {
   const std::filesystem::path parent =
-      postgres ? std::filesystem::path() : std::filesystem::path(options.db_path).parent_path();
+      postgres ? std::filesystem::path() : std::filesystem::path(db_path).parent_path();
   if (!parent.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(parent, ec);
@@ -199,11 +191,12 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
           absl::StrCat("db: cannot create directory ", parent.string(), ": ", ec.message()));
     }
   }
-  storage::DatabaseOptions db_options;
-  db_options.synchronous = options.synchronous;
-  db_options.vfs = options.db_vfs;
-  ASSIGN_OR_RETURN(s->storage_, storage::Storage::Open(options.db_path, db_options));
-  s->storage_->diagnoses().set_max_per_spacecraft(options.max_stored_diagnoses);
+  return absl::OkStatus();
+}
+
+// The core's options: a node id only with PostgreSQL (InvalidArgument for an SQLite file), there
+// <hostname>:<listen port> by default; worker threads one per core (at least 2) when 0.
+absl::StatusOr<CoreOptions> CoreOptionsFor(const ServerOptions& options, bool postgres) {
   CoreOptions core_options = options.core;
   if (!postgres && !core_options.node_id.empty()) {
     return absl::InvalidArgumentError(
@@ -220,15 +213,13 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   if (core_options.worker_threads <= 0) {
     core_options.worker_threads = std::max(2u, std::thread::hardware_concurrency());
   }
-  ASSIGN_OR_RETURN(s->core_, EstimationCore::Start(s->storage_.get(), core_options));
-  s->service_ = std::make_unique<EstimationServiceImpl>(
-      s->core_.get(), s->auth_ ? &*s->auth_ : nullptr, options.calls, options.auto_diagnosis);
+  return core_options;
+}
 
-  grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.listen, credentials, &s->port_);
-  builder.RegisterService(s->service_.get());
+// The gRPC server's channel arguments (exclusive address, keepalive) and limits, with `quota`
+// sized and set as its resource quota.
+void ConfigureBuilder(const ServerOptions& options, grpc::ResourceQuota& quota,
+                      grpc::ServerBuilder& builder) {
   // Exclusive ownership of the address: gRPC sets SO_REUSEPORT on Linux by default, which lets a
   // second esgd bind the same address and the kernel spread connections between the two.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
@@ -245,10 +236,82 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS,
                              static_cast<int>(std::min<int64_t>(
                                  absl::ToInt64Milliseconds(options.handshake_timeout), INT_MAX)));
-  grpc::ResourceQuota quota("esgd");
   quota.Resize(static_cast<size_t>(options.grpc_memory_bytes));
   quota.SetMaxThreads(options.max_sync_threads);
   builder.SetResourceQuota(quota);
+}
+
+// The health service reports the estimation service SERVING, and NOT_SERVING while storage
+// cannot commit (docs/service.md "Storage faults").
+void ServeHealth(grpc::Server& server, EstimationCore& core) {
+  if (grpc::HealthCheckServiceInterface* health = server.GetHealthCheckService()) {
+    health->SetServingStatus("esg.v1.EstimationService", true);
+    core.SetStorageHealthListener([health](bool ok, const std::string&) {
+      health->SetServingStatus("esg.v1.EstimationService", ok);
+      health->SetServingStatus("", ok);
+    });
+  }
+}
+
+// Logs the server's start ("started": port, database, authentication, transport) and its limits
+// ("limits").
+void LogStarted(const ServerOptions& options, int port, const std::string& database, bool tokens) {
+  LogEvent("INFO", "started",
+           absl::StrCat("serving esg.v1.EstimationService on port ", port, ", database ",
+                        database,
+                        tokens ? ", bearer tokens required" : "",
+                        options.tls_cert_file.empty()        ? ", plaintext"
+                        : options.tls_client_ca_file.empty() ? ", TLS"
+                                                             : ", mutual TLS"),
+           {{"port", port}, {"database", database}});
+  LogEvent("INFO", "limits", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
+                           " per caller, ", options.calls.max_predictions, " in total; diagnoses ",
+                           options.calls.max_diagnoses_per_caller, " per caller, ",
+                           options.calls.max_diagnoses, " in total; subscriptions ",
+                           options.calls.max_subscriptions_per_caller, " per caller, ",
+                           options.calls.max_subscriptions, " in total; export streams ",
+                           options.calls.max_exports_per_caller, " per caller, ",
+                           options.calls.max_exports, " in total; unread subscription messages ",
+                           ByteText(options.calls.max_queued_bytes_per_caller), " per caller, ",
+                           ByteText(options.calls.max_queued_bytes), " in total; ",
+                           options.max_stored_diagnoses, " stored diagnoses per spacecraft; "
+                           "automatic diagnosis ", options.auto_diagnosis.span > absl::ZeroDuration()
+                               ? absl::StrCat("over ", absl::FormatDuration(options.auto_diagnosis.span))
+                               : std::string("off"), "; "
+                           "messages up to ",
+                           options.max_message_bytes, " bytes; ",
+                           options.max_streams_per_connection, " streams per connection"));
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions& options) {
+  std::unique_ptr<EsgServer> s(new EsgServer());
+  RETURN_IF_ERROR(CheckLimits(options));
+  RaiseFileLimit();
+  ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials, Credentials(options));
+  if (!options.tokens_file.empty()) {
+    ASSIGN_OR_RETURN(s->auth_, TokenAuthorizer::FromFile(options.tokens_file));
+  }
+  const bool postgres = storage::IsPostgresUri(options.db_path);
+  RETURN_IF_ERROR(CreateDatabaseDirectory(options.db_path, postgres));
+  storage::DatabaseOptions db_options;
+  db_options.synchronous = options.synchronous;
+  db_options.vfs = options.db_vfs;
+  ASSIGN_OR_RETURN(s->storage_, storage::Storage::Open(options.db_path, db_options));
+  s->storage_->diagnoses().set_max_per_spacecraft(options.max_stored_diagnoses);
+  ASSIGN_OR_RETURN(const CoreOptions core_options, CoreOptionsFor(options, postgres));
+  ASSIGN_OR_RETURN(s->core_, EstimationCore::Start(s->storage_.get(), core_options));
+  s->service_ = std::make_unique<EstimationServiceImpl>(
+      s->core_.get(), s->auth_ ? &*s->auth_ : nullptr, options.calls, options.auto_diagnosis);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen, credentials, &s->port_);
+  builder.RegisterService(s->service_.get());
+  grpc::ResourceQuota quota("esgd");
+  ConfigureBuilder(options, quota, builder);
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     s->core_->Stop(absl::ZeroDuration());
@@ -269,40 +332,9 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
                  0, options.metrics_listen.rfind(':')), ":", s->metrics_->port(), "/metrics"),
              {{"metricsPort", s->metrics_->port()}});
   }
-  if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
-    health->SetServingStatus("esg.v1.EstimationService", true);
-    // NOT_SERVING while storage cannot commit (docs/service.md "Storage faults").
-    s->core_->SetStorageHealthListener([health](bool ok, const std::string&) {
-      health->SetServingStatus("esg.v1.EstimationService", ok);
-      health->SetServingStatus("", ok);
-    });
-  }
+  ServeHealth(*s->server_, *s->core_);
   s->log_flusher_ = std::make_unique<ThrottledLogFlusher>();
-  LogEvent("INFO", "started",
-           absl::StrCat("serving esg.v1.EstimationService on port ", s->port_, ", database ",
-                        s->storage_->database().path(),
-                        s->auth_ ? ", bearer tokens required" : "",
-                        options.tls_cert_file.empty()        ? ", plaintext"
-                        : options.tls_client_ca_file.empty() ? ", TLS"
-                                                             : ", mutual TLS"),
-           {{"port", s->port_}, {"database", s->storage_->database().path()}});
-  LogEvent("INFO", "limits", absl::StrCat("limits: predictions ", options.calls.max_predictions_per_caller,
-                           " per caller, ", options.calls.max_predictions, " in total; diagnoses ",
-                           options.calls.max_diagnoses_per_caller, " per caller, ",
-                           options.calls.max_diagnoses, " in total; subscriptions ",
-                           options.calls.max_subscriptions_per_caller, " per caller, ",
-                           options.calls.max_subscriptions, " in total; export streams ",
-                           options.calls.max_exports_per_caller, " per caller, ",
-                           options.calls.max_exports, " in total; unread subscription messages ",
-                           ByteText(options.calls.max_queued_bytes_per_caller), " per caller, ",
-                           ByteText(options.calls.max_queued_bytes), " in total; ",
-                           options.max_stored_diagnoses, " stored diagnoses per spacecraft; "
-                           "automatic diagnosis ", options.auto_diagnosis.span > absl::ZeroDuration()
-                               ? absl::StrCat("over ", absl::FormatDuration(options.auto_diagnosis.span))
-                               : std::string("off"), "; "
-                           "messages up to ",
-                           options.max_message_bytes, " bytes; ",
-                           options.max_streams_per_connection, " streams per connection"));
+  LogStarted(options, s->port_, s->storage_->database().path(), s->auth_.has_value());
   return s;
 }
 
