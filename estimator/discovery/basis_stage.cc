@@ -20,18 +20,6 @@ using Eigen::Matrix3d;
 
 namespace {
 
-// The orbital period the recording shows: the median period of its orbital-orientation spans
-// (regimes.h), 0 without one.
-double OrbitalPeriod(const std::vector<RegimeSpan>& regimes) {
-  std::vector<double> periods;
-  for (const RegimeSpan& r : regimes) {
-    if (r.regime == Regime::kOrbital && r.mean_rate > 0.0) periods.push_back(2.0 * kPi / r.mean_rate);
-  }
-  if (periods.empty()) return 0.0;
-  std::nth_element(periods.begin(), periods.begin() + periods.size() / 2, periods.end());
-  return periods[periods.size() / 2];
-}
-
 // A drift column's coefficient in the configuration JSON's units, and that unit.
 std::pair<double, std::string> JsonValue(const BasisColumn& c, double value) {
   const std::string unit(BasisScalarJsonUnit(c.term.kind));
@@ -186,6 +174,16 @@ std::vector<Parameter> ReadoutParameters(const SelectedGroup& group) {
   return out;
 }
 
+double RecordingOrbitalPeriod(const std::vector<RegimeSpan>& regimes) {
+  std::vector<double> periods;
+  for (const RegimeSpan& r : regimes) {
+    if (r.regime == Regime::kOrbital && r.mean_rate > 0.0) periods.push_back(2.0 * kPi / r.mean_rate);
+  }
+  if (periods.empty()) return 0.0;
+  std::nth_element(periods.begin(), periods.begin() + periods.size() / 2, periods.end());
+  return periods[periods.size() / 2];
+}
+
 OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOptions& opt) {
   OpenEndedOptions o;
   o.alpha = opt.alpha;
@@ -228,10 +226,17 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   out.options = ModelOpenEndedOptions(model, opt);
   OpenEndedOptions& o = out.options;
   o.orbital_period_s =
-      opt.orbital_period_s > 0.0 ? opt.orbital_period_s : OrbitalPeriod(context.regimes());
+      opt.orbital_period_s > 0.0 ? opt.orbital_period_s : RecordingOrbitalPeriod(context.regimes());
   o.epoch = context.frames().front().time;
   std::string sun_note;
   o.sun = SunRegressorsOf(*series, model.config, selected.run.gyros, &sun_note);
+  // A face a selection round took already (sun_terms.h FitSunCandidate) is held in the model: its
+  // regressors are left out.
+  for (SunRegressors& r : o.sun) {
+    for (int face : HeldSunFaces(model, r.gyro)) {
+      if (face < static_cast<int>(r.values.size())) r.values[face].clear();
+    }
+  }
   for (const GyroConfig& g : model.config.gyros) {
     o.column_budget.emplace_back(
         g.id, std::max(0, kMaxBasisTermsPerGyro - static_cast<int>(g.basis_terms.size())));

@@ -83,6 +83,10 @@ absl::StatusOr<OutdoneGyros> GyrosOutdoneByAStationaryDrift(
 // priors, and the drift steps the model holds (nuisance groups).
 OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOptions& opt);
 
+// The orbital period the recording shows [s]: the median period of its orbital-orientation spans
+// (regimes.h), 0 without one.
+double RecordingOrbitalPeriod(const std::vector<RegimeSpan>& regimes);
+
 // A readout group's distortion as the report's parameters: the six entries of the traceless E
 // (basis[readout E_xx] .. basis[readout E_zx]) with their 1-sigma, in ppm.
 std::vector<Parameter> ReadoutParameters(const SelectedGroup& group);

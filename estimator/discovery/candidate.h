@@ -1,6 +1,7 @@
 // A candidate effect and its fit: the types every effect's fit takes and fills, and the helpers
 // those fits share (the library's dispatch is candidates.h FitCandidate; the drift step's fit is
-// time_behaviour.h, the readout distortion's readout_candidate.h). Below both, so that no fit
+// time_behaviour.h, the readout distortion's readout_candidate.h, the sun's sun_terms.h). Below
+// both, so that no fit
 // includes the library that calls it.
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATE_H_
 #define ESG_ESTIMATOR_DISCOVERY_CANDIDATE_H_
@@ -46,6 +47,8 @@ struct FitContext {
   const ModelRun* model_run = nullptr;
   const DiagnoseOptions* options = nullptr;
   std::vector<int> gyros;
+  // The recording's attitude regimes (regimes.h), for the orbital period; may be null.
+  const std::vector<RegimeSpan>* regimes = nullptr;
 };
 
 struct CandidateFit {
@@ -80,6 +83,12 @@ struct CandidateFit {
   // the finding's description (open_ended.h DescribeGroup).
   Eigen::Matrix3d readout_distortion = Eigen::Matrix3d::Zero();
   std::string description;
+  // The sun candidate (sun_terms.h FitSunCandidate): its terms at the best lag against a drift
+  // that returns to its mean on the gyro's deviation (wander.h CompareConstantEffect, on the
+  // series it regressed): 2 ln B of the terms, of the stationary drift, and of the terms on top
+  // of it, for the round's physics check (selection.cc).
+  bool wander_compared = false;
+  double wander_effect = 0.0, wander_stationary = 0.0, wander_on_top = 0.0;
   // Onset profile of a step: hours since the first frame, -2 log L (profiled).
   std::vector<std::pair<double, double>> onset_profile;
   // A step's competing alternative that is no physics (D43): the gyro's readings jump at the

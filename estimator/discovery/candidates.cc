@@ -13,6 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
 #include "estimator/discovery/readout_candidate.h"
+#include "estimator/discovery/sun_terms.h"
 #include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
 #include "estimator/drift_model.h"
@@ -257,6 +258,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
         !added(CandidateName({Effect::kReadoutDistortion, id}))) {
       out.push_back({Effect::kReadoutDistortion, id});
     }
+    if (Effective(effects, Effect::kSunDrift) &&
+        static_cast<int>(HeldSunFaces(model, id).size()) < kSunFaces) {
+      out.push_back({Effect::kSunDrift, id});
+    }
   }
   // A rotation common to every gyro is already in the model when every running gyro's
   // misalignment is estimated.
@@ -427,6 +432,11 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
                        : "the rotor is not displaced that far, so the drift is not a rotor "
                          "displacement");
   return out;
+}
+
+int CandidateComparisons(const Candidate& candidate, const ModelState& model) {
+  if (candidate.effect != Effect::kSunDrift) return 1;
+  return std::max(1, kSunFaces - static_cast<int>(HeldSunFaces(model, candidate.gyro).size()));
 }
 
 absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {
@@ -743,6 +753,9 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
       return fit;
     case Effect::kReadoutDistortion:
       if (absl::Status s = FitReadoutCandidate(candidate, ctx, fit); !s.ok()) return s;
+      return fit;
+    case Effect::kSunDrift:
+      if (absl::Status s = FitSunCandidate(candidate, ctx, fit); !s.ok()) return s;
       return fit;
   }
   return absl::InternalError("unknown effect");

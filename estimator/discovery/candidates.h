@@ -24,6 +24,11 @@
 //                                 symmetric traceless distortion of g's readout (5 parameters,
 //                                 regressed on the deviation, held; Laplace's Occam term;
 //                                 readout_candidate.h), reported as a basis term
+//   sun_drift (gyro g)            not of the library: the open-ended basis's sun families, a drift
+//                                 following a body face's illumination through a thermal lag
+//                                 (3 parameters, the face and the lag searched; regressed on the
+//                                 deviation, held; Laplace's Occam term and the lag's cost;
+//                                 sun_terms.h FitSunCandidate), reported as a basis term
 // Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
 // rotation is not when every running gyro's misalignment is already estimated.
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_
@@ -49,6 +54,11 @@ namespace esg::estimator::discovery {
 // gyros.
 std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
                                       const std::vector<Effect>& effects);
+
+// The comparisons a candidate makes in a round's family M of the threshold 2 ln(M / alpha): a
+// sun candidate one per face it may try (the faces `model` does not hold for its gyro; each
+// face's lags are one comparison, their Bayes factors averaged: D101), any other candidate 1.
+int CandidateComparisons(const Candidate& candidate, const ModelState& model);
 
 // Fits one candidate (1 to 5 filter runs, sequential; candidates run in parallel).
 // Errors: InvalidArgument for a gyro that is not configured; those of RunModel.

@@ -360,6 +360,8 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
   }
   if (const SunRegressors* sun = FindSunRegressors(options.sun, series.gyro)) {
     for (int face = 0; face < kSunFaces; ++face) {
+      // A face held in the model already (sun_terms.h HeldSunFaces) has no regressors.
+      if (face >= static_cast<int>(sun->values.size()) || sun->values[face].empty()) continue;
       for (int lag = 0; lag < static_cast<int>(sun->lag_hours.size()); ++lag) {
         const std::string label = SunGroupLabel(face, sun->lag_hours[lag]);
         open_group(label);
@@ -598,6 +600,73 @@ ReadoutFit FitReadoutDistortion(const DeviationSeries& series, double random_wal
   const RegressionFit fit = Fit(d, groups);
   out.group.evidence = d.fit.deviance - fit.deviance;
   FillGroup(d, cols, fit, readout, out.group);
+  return out;
+}
+
+SunFamilyFit FitSunFamilies(const DeviationSeries& series, double random_walk, double w0_sigma,
+                            const OpenEndedOptions& options, const std::vector<int>& held_faces) {
+  SunFamilyFit out;
+  out.group.gyro = series.gyro;
+  const SunRegressors* sun = FindSunRegressors(options.sun, series.gyro);
+  if (sun == nullptr) return out;
+  GyroData d;
+  PrepareGyro(series, random_walk, w0_sigma, options, d);
+  std::map<int, std::vector<int>> families;  // sun face -> its groups, by lag
+  for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+    const int face = d.basis.groups[k].sun_face;
+    if (face >= 0 && !Contains(held_faces, face)) families[face].push_back(k);
+  }
+  RoundCandidate best;
+  int best_face = -1;
+  for (const auto& [face, family] : families) {
+    RoundCandidate c = FitFamily(d, family);
+    if (best_face < 0 || c.evidence > best.evidence) {
+      best = std::move(c);
+      best_face = face;
+    }
+  }
+  if (best_face < 0) return out;
+  SelectedGroup& s = out.group;
+  s.label = d.basis.groups[best.group].label;
+  s.evidence = best.evidence;
+  s.groups_tested = static_cast<int>(families.size());
+  s.sun_face = best_face;
+  s.lag_hours = sun->lag_hours;
+  s.lag_evidence = best.lag_evidence;
+  s.lag_averaged_k = best.averaged_k;
+  s.lag_averaged_covariance_k = best.averaged_covariance_k;
+  out.best_lag_evidence = d.fit.deviance - best.fit.deviance;
+  std::vector<int> groups = d.active;
+  groups.push_back(best.group);
+  FillGroup(d, ColumnsOf(d, groups), best.fit, best.group, s);
+  // The alternatives, as the stage names them: any other group of the basis, and each other face
+  // at its best lag, that replaces the face's group at a loss below options.ambiguity.
+  std::map<int, std::pair<std::string, double>> sun_best;  // face -> its best lag
+  for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+    if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
+    const int face = d.basis.groups[k].sun_face;
+    if (face == best_face) continue;
+    std::vector<int> other = d.active;
+    other.push_back(k);
+    const double against = Fit(d, other).deviance - best.fit.deviance;
+    if (face < 0 && out.best_lag_evidence - against > out.best_other_evidence) {
+      out.best_other_evidence = out.best_lag_evidence - against;  // d.fit.deviance - its fit's
+      out.best_other_label = d.basis.groups[k].label;
+    }
+    if (face >= 0) {
+      auto it = sun_best.find(face);
+      if (it == sun_best.end() || -against > it->second.second) {
+        sun_best[face] = {d.basis.groups[k].label, -against};
+      }
+    } else if (-against > -options.ambiguity) {
+      s.alternatives.emplace_back(d.basis.groups[k].label, -against);
+    }
+  }
+  for (const auto& [face, alternative] : sun_best) {
+    if (alternative.second > -options.ambiguity) s.alternatives.push_back(alternative);
+  }
+  std::sort(s.alternatives.begin(), s.alternatives.end(),
+            [](const auto& a, const auto& b) { return a.second > b.second; });
   return out;
 }
 

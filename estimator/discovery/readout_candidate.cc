@@ -1,14 +1,19 @@
 #include "estimator/discovery/readout_candidate.h"
 
+#include <algorithm>
 #include <utility>
 #include <vector>
 
 #include "Eigen/Cholesky"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/time/time.h"
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/open_ended.h"
+#include "estimator/discovery/sun_terms.h"
+#include "estimator/discovery/wander.h"
+#include "estimator/units.h"
 #include "estimator/statistics.h"
 
 namespace esg::estimator::discovery {
@@ -85,6 +90,106 @@ absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& c
       "(%d filter run%s), the filter's -2 log L is the candidate's, less Laplace's Occam term "
       "%.1f of the five coefficients",
       first_evidence, fit.runs, fit.runs == 1 ? "" : "s", fit.occam));
+  return absl::OkStatus();
+}
+
+absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
+                             CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  if (FindGyroMutable(fit.model.config, candidate.gyro) == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  const ModelState& model = *ctx.model;
+  const std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, model.correction);
+  auto series = MeasureDeviations(model.config, ctx.model_run->gyros, corrected, *ctx.rates,
+                                  *ctx.model_run, {candidate.gyro});
+  if (!series.ok()) return series.status();
+  OpenEndedOptions o = ModelOpenEndedOptions(model, opt);
+  o.orbital_period_s = opt.orbital_period_s > 0.0 ? opt.orbital_period_s
+                       : ctx.regimes != nullptr   ? RecordingOrbitalPeriod(*ctx.regimes)
+                                                  : 0.0;
+  o.epoch = ctx.frames->front().time;
+  std::string sun_note;
+  o.sun = SunRegressorsOf(*series, model.config, ctx.model_run->gyros, &sun_note);
+  const SunRegressors* regressors = FindSunRegressors(o.sun, candidate.gyro);
+  if (regressors == nullptr) {
+    if (!sun_note.empty()) fit.notes.push_back(sun_note);
+    return absl::OkStatus();
+  }
+  const SunFamilyFit sun =
+      FitSunFamilies(series->front(), ModelRandomWalk(model, candidate.gyro),
+                     ModelInitialDriftSigma(model), o, HeldSunFaces(model, candidate.gyro));
+  const SelectedGroup& g = sun.group;
+  if (g.sun_face < 0 || g.columns.empty()) return absl::OkStatus();
+  // The sun enters a round as the open-ended basis's choice for the gyro: when another group of
+  // the basis (a ramp, an orbital harmonic, a case-fixed drift, ...) describes the deviation with
+  // more evidence, the stage would select that group first, and the sun is not the description.
+  if (sun.best_other_evidence > g.evidence) {
+    fit.notes.push_back(absl::StrFormat(
+        "the sun's best face (%s, 2 ln B = %.1f averaged over the lags) is not the open-ended "
+        "basis's first choice on gyro %d's deviation: \"%s\" has 2 ln B = %.1f",
+        SunFaceName(g.sun_face), g.evidence, candidate.gyro, sun.best_other_label,
+        sun.best_other_evidence));
+    return absl::OkStatus();
+  }
+  // A drift that returns to its mean (switching at random, driven by a quantity the telemetry
+  // does not carry) is partly fitted by any regressor that changes in time: the face's terms at
+  // the best lag against the stationary drift on the same deviation, for the round's physics
+  // check (selection.cc CheckConstantEffect), as the library's constant effects of one gyro.
+  {
+    std::vector<std::vector<Eigen::Vector2d>> columns;
+    std::vector<double> prior;
+    const std::vector<double>& values =
+        regressors->values[g.sun_face][g.columns.front().column.sun_lag];
+    for (const FittedColumn& c : g.columns) {
+      columns.push_back(TabulatedSignature(series->front(), values,
+                                           Eigen::Vector3d::Unit(c.column.term.axis - 1)));
+      prior.push_back(c.prior_sigma);
+    }
+    std::vector<absl::Time> steps;
+    for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
+      if (!r.misalignment && r.gyro_id == candidate.gyro) steps.push_back(r.time);
+    }
+    const ConstantEffectEvidence e = CompareConstantEffect(
+        series->front(), ModelRandomWalk(model, candidate.gyro), ModelInitialDriftSigma(model),
+        DegPerHourToRadPerSec(opt.c_sigma_deg_h), steps, columns, prior);
+    fit.wander_compared = true;
+    fit.wander_effect = e.effect;
+    fit.wander_stationary = e.stationary;
+    fit.wander_on_top = e.on_top;
+  }
+  // Held at the best lag's values as a correction of the gyro's readings, refitted.
+  const CarriedAttitude attitude = AttitudeAlongRecording(corrected, *ctx.rates, *ctx.model_run);
+  fit.model.correction.reading_shifts.push_back(SunReadingShift(
+      g, series->front(), *regressors, corrected, attitude,
+      ModelMounting_b_k(model.config, ctx.model_run->gyros, candidate.gyro)));
+  fit.model.added.push_back(HeldSunGroupName(candidate.gyro, g.label));
+  auto run = RunModel(fit.model.config, fit.model.options,
+                      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction));
+  ++fit.runs;
+  if (!run.ok()) return run.status();
+  fit.run = std::move(*run);
+  const double lag_cost = std::max(0.0, sun.best_lag_evidence - g.evidence);
+  const double coefficients_occam = ReadoutOccam(g);
+  fit.parameters = static_cast<int>(g.columns.size());
+  fit.occam = coefficients_occam + lag_cost;
+  fit.fitted = SunParameters(g);
+  fit.time.kind = kTimeFollowsSun;
+  fit.description =
+      absl::StrFormat("gyro %d: %s%s", candidate.gyro, DescribeSunGroup(g),
+                      DescribeAlternatives(g));
+  fit.notes.push_back(absl::StrFormat(
+      "the gyro's deviation from the model regressed on the sun's families (docs/discovery.md, "
+      "\"A drift that follows the sun\"): face %s has the most evidence of the %d faces tried, "
+      "2 ln B = %.1f averaged over the lags (%.1f at its best lag, %s); held at that lag's values "
+      "as a correction of gyro %d's readings (the filter has no state for the thermal lag), the "
+      "filter's -2 log L is the candidate's, less Laplace's Occam term %.1f of the three "
+      "coefficients and the lag's cost %.1f (2 ln B at the best lag less its average over the "
+      "lags); values and sigmas are the regression's",
+      SunFaceName(g.sun_face), g.groups_tested, g.evidence, sun.best_lag_evidence, g.label,
+      candidate.gyro, coefficients_occam, lag_cost));
   return absl::OkStatus();
 }
 

@@ -1,5 +1,6 @@
-// The open-ended basis's readout group as a candidate of each selection round (docs/discovery.md,
-// "The open-ended stage"): a symmetric distortion E of a gyro's direction-cosine readout (scale
+// The open-ended basis's groups as candidates of each selection round: the readout group
+// (docs/discovery.md, "The open-ended stage") and, below, the sun's families (FitSunCandidate).
+// The readout group: a symmetric distortion E of a gyro's direction-cosine readout (scale
 // factors of the channels, their non-orthogonality; the reading is (I + E) h normalised) is an
 // error of the readings, not a drift, so no effect of the library describes it, and left to the
 // end it is forced onto the nearest ones (unequal stiffness, a misalignment, a raised random
@@ -28,6 +29,32 @@ namespace esg::estimator::discovery {
 // RunModel.
 absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& ctx,
                                  CandidateFit& fit);
+
+// The sun as a candidate of every selection round (docs/discovery.md, "A drift that follows the
+// sun"; D104), candidate {Effect::kSunDrift, gyro}, beside the library's effects as the readout
+// group is:
+//
+//   1. the gyro's deviation from the current model (deviation.h) regressed on the sun's families
+//      of the faces the model does not hold (open_ended.h FitSunFamilies): each face's Bayes
+//      factor averaged over the 41 lags (D101), the face with the most evidence taken, only
+//      when no other group of the basis has more evidence there (the stage's first choice);
+//   2. its drift at the best lag held in the model as a correction of the gyro's readings
+//      (sun_terms.h SunReadingShift), the model refitted by the filter;
+//   3. its evidence 2 ln B = the refit's improvement of -2 log L less `occam`: Laplace's Occam
+//      term of the three coefficients (open_ended.h ReadoutOccam) plus the lag's cost, 2 ln B at
+//      the best lag less 2 ln B averaged over the lags in the regression (the refit holds the
+//      best lag; the lag integrated over its prior costs what the regression's profile says);
+//   4. for the round's physics check (selection.cc: not taken when a drift that returns to its
+//      mean describes the deviation better, the stage's rule for its terms), the face's terms at
+//      the best lag against that stationary drift on the same deviation (wander.h
+//      CompareConstantEffect): CandidateFit::wander_*.
+//
+// The round counts the candidate once per face it may try (candidates.h CandidateComparisons).
+// Found, it is reported as a basis term (kEffectBasisTerm, time behaviour kTimeFollowsSun) with
+// sun_terms.h SunParameters and DescribeSunGroup. A recording outside the ephemeris's years gives
+// no fit (parameters 0, a note). Errors: InvalidArgument for a gyro that is not configured; those
+// of MeasureDeviations and RunModel.
+absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit);
 
 }  // namespace esg::estimator::discovery
 

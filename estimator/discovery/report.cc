@@ -30,6 +30,8 @@ const char* EffectId(Effect e) {
       return "drift_step";
     case Effect::kReadoutDistortion:
       return "readout_distortion";
+    case Effect::kSunDrift:
+      return "sun_drift";
   }
   return "?";
 }
@@ -45,7 +47,7 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
   for (Effect e : {Effect::kRotorDisplacement, Effect::kFourthHarmonic, Effect::kUnequalStiffness,
                    Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
-                   Effect::kReadoutDistortion}) {
+                   Effect::kReadoutDistortion, Effect::kSunDrift}) {
     if (id == EffectId(e)) return e;
   }
   return std::nullopt;

@@ -34,8 +34,12 @@ enum class Effect {
   // Not of the library: the open-ended basis's readout group, a candidate of every round
   // (readout_candidate.h); its finding is a kEffectBasisTerm.
   kReadoutDistortion,
+  // Not of the library: the open-ended basis's sun families (a drift that follows a body face's
+  // illumination through a thermal lag), a candidate of every round (sun_terms.h
+  // FitSunCandidate); its finding is a kEffectBasisTerm.
+  kSunDrift,
 };
-const char* EffectId(Effect e);  // "rotor_displacement", ..., "readout_distortion"
+const char* EffectId(Effect e);  // "rotor_displacement", ..., "readout_distortion", "sun_drift"
 // The effect whose EffectId is `id`, or nullopt.
 std::optional<Effect> EffectFromId(absl::string_view id);
 inline constexpr const char* kVerdictNone = "none";

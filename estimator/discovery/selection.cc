@@ -12,6 +12,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/point_prediction.h"
+#include "estimator/discovery/sun_terms.h"
 #include "estimator/discovery/wander.h"
 #include "estimator/statistics.h"
 #include "estimator/units.h"
@@ -49,12 +50,14 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
   ctx.model_run = &selected.run;
   ctx.options = &options;
   ctx.gyros = gyros;
+  ctx.regimes = &context.regimes();
   std::vector<std::optional<absl::StatusOr<CandidateFit>>> fits(candidates.size());
   std::vector<int> order(candidates.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
   auto cost = [](const Candidate& c) {
     if (c.effect == Effect::kDriftStep) return 12;
     if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
+    if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
   std::stable_sort(order.begin(), order.end(),
@@ -118,8 +121,9 @@ std::vector<Scored> Score(const std::vector<CandidateFit>& fits, const SelectedM
       ++steps_in[q];
     }
     // A step or a random walk describes a change in time itself: tested by its own likelihood
-    // ratio above, not by this test of a constant effect.
-    const bool constant = f.time.kind == "constant";
+    // ratio above, not by this test of a constant effect. A drift that follows the sun has
+    // constant coefficients of a known function of time: held from the start, it is tested.
+    const bool constant = f.time.kind == "constant" || f.time.kind == kTimeFollowsSun;
     for (int q = 0; q < kQuarters && constant; ++q) {
       const double cost = k * std::log(std::max(2, steps_in[q])) +
                           EvidenceThreshold(options.alpha, kQuarters);
@@ -427,6 +431,10 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
     finding.description = f.description;
     finding.readout_distortion = f.readout_distortion;
   }
+  if (f.candidate.effect == Effect::kSunDrift) {  // the basis's sun families
+    finding.effect = kEffectBasisTerm;
+    finding.description = f.description;
+  }
   finding.gyro = f.candidate.gyro;
   finding.parameters = f.fitted;
   finding.time = f.time;
@@ -482,6 +490,8 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
       : f.time.kind == "random_walk"
           ? "a random walk: its evidence integrated over the intensity, not the constant-effect "
             "test"
+      : f.time.kind == kTimeFollowsSun
+          ? "a drift that follows the sun: its coefficients constant in time, held from the start"
           : "constant in time, as a physical effect of the library is";
   finding.evidence.notes.push_back(absl::StrFormat(
       "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (%s)",
@@ -513,6 +523,31 @@ absl::StatusOr<PhysicsCheck> CheckConstantEffect(const CandidateFit& fit,
   PhysicsCheck out;
   const Candidate& c = fit.candidate;
   const DiagnoseOptions& options = context.options();
+  if (c.effect == Effect::kSunDrift && fit.wander_compared) {
+    // The sun's terms at the best lag, compared on the deviation the candidate regressed, by the
+    // open-ended stage's rule for its terms (GyrosOutdoneByAStationaryDrift): a group of the
+    // basis whose gyro's deviation a drift that returns to its mean describes better is not
+    // taken. (The library's rule for its constant effects, decisively better and nothing on top,
+    // let the sun's terms of a switching drift through: what a stationary drift leaves of a
+    // switching one is not white, and a lagged illumination fits part of it.)
+    const double threshold = EvidenceThreshold(options.alpha, family);
+    out.fails = fit.wander_stationary > fit.wander_effect;
+    out.note =
+        out.fails
+            ? absl::StrFormat(
+                  "%s fits part of gyro %d's drift, but on the gyro's deviation a drift that "
+                  "returns to its mean describes it better (2 ln B = %.1f against %.1f; the "
+                  "sun's terms add 2 ln B = %.1f on top of it, threshold %.1f): not taken as a "
+                  "drift that follows the sun",
+                  CandidateName(c), c.gyro, fit.wander_stationary, fit.wander_effect,
+                  fit.wander_on_top, threshold)
+            : absl::StrFormat(
+                  "on gyro %d's deviation the sun's terms have 2 ln B = %.1f, more than a drift "
+                  "that returns to its mean (2 ln B = %.1f; the terms add %.1f on top of it, "
+                  "threshold %.1f): a drift that follows the sun, not a wandering drift",
+                  c.gyro, fit.wander_effect, fit.wander_stationary, fit.wander_on_top, threshold);
+    return out;
+  }
   if (!options.open_ended || c.gyro <= 0 ||
       !(c.effect == Effect::kRotorDisplacement || c.effect == Effect::kFourthHarmonic ||
         c.effect == Effect::kUnequalStiffness || c.effect == Effect::kGyroMisalignment)) {
@@ -562,9 +597,10 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   RoundResult result;
   if (context.Stop()) return DiagnosisContext::Cancelled();
   std::vector<Candidate> candidates = ListCandidates(selected.model, gyros, options.effects);
-  if (!options.open_ended) {  // the basis's readout group (readout_candidate.h) belongs to it
-    std::erase_if(candidates,
-                  [](const Candidate& c) { return c.effect == Effect::kReadoutDistortion; });
+  if (!options.open_ended) {  // the basis's readout group and sun families belong to it
+    std::erase_if(candidates, [](const Candidate& c) {
+      return c.effect == Effect::kReadoutDistortion || c.effect == Effect::kSunDrift;
+    });
   }
   if (candidates.empty()) return result;
   context.Say(0.05 + 0.8 * round / options.max_effects,
@@ -579,11 +615,13 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
                                 (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
     (time_behaviour ? timed : constant).push_back(c);
   }
-  const int family = static_cast<int>(candidates.size());
+  // M counts each comparison once: a sun candidate one per face it may try (D101).
+  int family = 0;
+  for (const Candidate& c : candidates) family += CandidateComparisons(c, selected.model);
   std::vector<CandidateFit> fits;
   auto fit_all = [&](const std::vector<Candidate>& stage) -> absl::Status {
-    auto fitted = FitCandidates(stage, round, static_cast<int>(fits.size()), family, gyros,
-                                selected, context);
+    auto fitted = FitCandidates(stage, round, static_cast<int>(fits.size()),
+                                static_cast<int>(candidates.size()), gyros, selected, context);
     if (context.Stopped()) return DiagnosisContext::Cancelled();
     for (auto& f : fitted) {
       if (!f->ok()) return f->status();

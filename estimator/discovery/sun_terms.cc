@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/match.h"
@@ -190,6 +191,24 @@ ReadingShift SunReadingShift(const SelectedGroup& group, const DeviationSeries& 
     if (j >= attitude.known.size() || !attitude.known[j]) continue;
     const Matrix3d C_in_k = attitude.q_in_b[j].toRotationMatrix() * C_b_k;
     (*dh_k)[j] = C_in_k.transpose() * dh_in;
+  }
+  return out;
+}
+
+std::string HeldSunGroupName(int gyro, const std::string& label) {
+  return absl::StrCat(kEffectBasisTerm, "[", gyro, "] ", label);
+}
+
+std::vector<int> HeldSunFaces(const ModelState& model, int gyro) {
+  std::vector<int> out;
+  for (int face = 0; face < kSunFaces; ++face) {
+    const std::string prefix = HeldSunGroupName(gyro, absl::StrCat("sun ", SunFaceName(face), " "));
+    for (const std::string& added : model.added) {
+      if (absl::StartsWith(added, prefix)) {
+        out.push_back(face);
+        break;
+      }
+    }
   }
   return out;
 }

@@ -3,7 +3,9 @@
 // selected face's lag and its interval, the finding's words and parameters, and the drift held in
 // the model as a correction of the gyro's readings (model_run.h ReadingShift: the filter has no
 // state for the lag, so the term is held at its fitted value, as a readout distortion is, and
-// scored by the refit's likelihood less its Occam term). Pure computation.
+// scored by the refit's likelihood less its Occam term), and the names of the held groups. The
+// sun as a candidate of every selection round: readout_candidate.h FitSunCandidate. Pure
+// computation.
 #ifndef ESG_ESTIMATOR_DISCOVERY_SUN_TERMS_H_
 #define ESG_ESTIMATOR_DISCOVERY_SUN_TERMS_H_
 
@@ -12,6 +14,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/open_ended.h"
@@ -69,6 +72,13 @@ ReadingShift SunReadingShift(const SelectedGroup& group, const DeviationSeries& 
 // The gyro's mounting as MeasureDeviations uses it: Exp(misalignment) C_b_k of `config`.
 Eigen::Matrix3d ModelMounting_b_k(const SpacecraftConfig& config,
                                   const std::vector<GyroEstimate>& estimates, int gyro);
+
+// The name a model gives a held sun group of `gyro` (ModelState::added): "basis_term[2] sun -y
+// lag 1.26 h", as the open-ended stage's and the round candidate's; and the faces of `gyro` a
+// model holds, read back from those names.
+std::string HeldSunGroupName(int gyro, const std::string& label);
+std::vector<int> HeldSunFaces(const ModelState& model, int gyro);
+
 
 }  // namespace esg::estimator::discovery
 

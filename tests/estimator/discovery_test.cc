@@ -367,9 +367,9 @@ TEST(Diagnose, NothingMissingGivesNone) {
   EXPECT_EQ(report->before.residual_rms_arcsec, report->after.residual_rms_arcsec);
   EXPECT_FALSE(report->mismatch.found);
   // Every candidate of the library the model lacks was tried once (3 gyros x 3, k0 being free, + 3
-  // common, + a drift step and a random walk per gyro), and the basis's readout group per gyro,
-  // and none is significant.
-  EXPECT_EQ(report->candidates.size(), 21u);
+  // common, + a drift step and a random walk per gyro), and the basis's readout group and sun
+  // families per gyro (readout_candidate.h), and none is significant.
+  EXPECT_EQ(report->candidates.size(), 24u);
   for (const CandidateScore& c : report->candidates)
     EXPECT_FALSE(c.significant) << c.effect << " " << c.gyro;
   EXPECT_GE(report->before.gaps.size(), 2u);  // held-out spans in the hold and the rotation
