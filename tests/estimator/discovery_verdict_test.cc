@@ -64,8 +64,9 @@ HeldOutResult HeldOutWithSigma(double rate_deg_h, double sigma_deg_h) {
 TEST(PointPredictionGuard, AWorseningWithinTheGapDriftsSamplingUncertaintyIsNotRefused) {
   EXPECT_FALSE(WorsensPointPrediction(HeldOutWithSigma(0.0039, 0.0003),
                                       HeldOutWithSigma(0.0042, 0.0003)));
-  EXPECT_NEAR(GapDriftWorseningZ(HeldOutWithSigma(0.0039, 0.0003), HeldOutWithSigma(0.0042, 0.0003)),
-              (0.0042 - 1.05 * 0.0039) / std::hypot(0.0003, 1.05 * 0.0003), 1e-12);
+  EXPECT_NEAR(
+      GapDriftWorseningZ(HeldOutWithSigma(0.0039, 0.0003), HeldOutWithSigma(0.0042, 0.0003)),
+      (0.0042 - 1.05 * 0.0039) / std::hypot(0.0003, 1.05 * 0.0003), 1e-12);
   EXPECT_TRUE(WorsensPointPrediction(HeldOutWithSigma(0.0094, 0.002),
                                      HeldOutWithSigma(0.027, 0.004)));
   // The same 7.7% with ten times smaller sigmas is shown (z = 2.4).
