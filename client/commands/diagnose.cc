@@ -22,6 +22,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "client/commands/commands.h"
 #include "client/commands/server_common.h"
@@ -67,6 +68,15 @@ std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
     out.push_back(*e);
   }
   return out;
+}
+
+// Every effect id the diagnosis tries (report.h Effect, kSunDrift last), comma-separated.
+std::string KnownEffectIds() {
+  std::vector<std::string> ids;
+  for (int e = 0; e <= static_cast<int>(disc::Effect::kSunDrift); ++e) {
+    ids.push_back(disc::EffectId(static_cast<disc::Effect>(e)));
+  }
+  return absl::StrJoin(ids, ", ");
 }
 
 bool WriteFile(const std::filesystem::path& path, const std::string& text) {
@@ -115,12 +125,8 @@ int WriteReport(const disc::DiagnosisReport& report, const estimator::Spacecraft
 int RunDiagnose(const DiagnoseCliOptions& o) {
   const auto effects = ParseEffects(o.effects);
   if (!effects) {
-    std::fprintf(
-        stderr,
-        "esg: --effects '%s': unknown effect (use rotor_displacement, fourth_harmonic, "
-        "unequal_stiffness, gyro_misalignment, star_tracker_misalignment, star_tracker_latency, "
-        "random_walk_drift, drift_step, readout_distortion)\n",
-        o.effects.c_str());
+    std::fprintf(stderr, "esg: --effects '%s': unknown effect (use %s)\n", o.effects.c_str(),
+                 KnownEffectIds().c_str());
     return 2;
   }
   auto config = proto_convert::ReadConfigFile(o.config_path);
