@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <ctime>
 #include <filesystem>
 #include <string>
 
@@ -58,11 +59,24 @@ TEST(ProcessMetrics, ReadsTheCgroupMemoryLimitOfV1AndV2) {
 }
 
 TEST(ProcessMetrics, ThisProcessHasMemoryCpuFilesAndAStartTime) {
+  // /proc counts CPU time in clock ticks (10 ms): a test binary run alone had used less than one
+  // when it got here, and read 0. Spend 50 ms of CPU first, by the process's own clock.
+  const auto process_cpu_seconds = [] {
+    timespec t{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+    return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+  };
+  volatile double sink = 0.0;
+  while (process_cpu_seconds() < 0.05) {
+    for (int i = 0; i < 100000; ++i) sink = sink + 1e-9 * i;
+  }
   absl::StatusOr<ProcessStats> s = ReadProcessStats();
   ASSERT_TRUE(s.ok()) << s.status();
   EXPECT_GT(s->resident_memory_bytes, 1 << 20);
   EXPECT_GE(s->virtual_memory_bytes, s->resident_memory_bytes);
-  EXPECT_GT(s->cpu_seconds, 0);
+  // At least the 50 ms less two ticks, at most what the process's clock says now plus two.
+  EXPECT_GE(s->cpu_seconds, 0.03);
+  EXPECT_LE(s->cpu_seconds, process_cpu_seconds() + 0.02);
   EXPECT_GE(s->open_fds, 3);  // stdin, stdout, stderr
   EXPECT_GE(s->max_fds, s->open_fds);
   EXPECT_GE(s->threads, 1);
