@@ -78,18 +78,12 @@ Eigen::Vector3d SigmaArcsec(const AttitudeEstimate& a) {
   return a.sigma_b.unaryExpr([](double s) { return estimator::RadToArcsec(s); });
 }
 
-// The recorded part: `times` (sorted, all at or before the last applied frame) from a fresh
-// session started at the latest star-tracker fix at or before times.front() with the calibrated
-// model, run over the archived frames with the star tracker withheld. Between two frames the
-// attitude is slerp-interpolated and the 1-sigma is the larger of the two (componentwise).
-absl::StatusOr<std::vector<Predicted>> PredictRecorded(
-    storage::Storage& storage, const std::string& id, const estimator::SpacecraftConfig& config_in,
-    const estimator::ModelSpec& model, const EstimationSession& session,
-    const std::vector<absl::Time>& times, absl::Duration max_horizon, absl::Time* fix_time) {
-  const absl::Time first = times.front();
+// The latest archived frame of `id` at or before `first` with a valid star-tracker quaternion
+// and at least two gyro readings (within kFixLookbackFrames), where the recorded readings start.
+absl::StatusOr<estimator::TelemetryFrame> LatestFix(storage::Storage& storage,
+                                                    const std::string& id, absl::Time first) {
   ASSIGN_OR_RETURN(std::vector<storage::ArchivedFrame> back,
                    storage.archive().ReadAtOrBefore(id, first, kFixLookbackFrames));
-  std::optional<estimator::TelemetryFrame> fix;
   for (const storage::ArchivedFrame& a : back) {
     esg::v1::TelemetryFrame proto;
     if (!proto.ParseFromString(a.payload)) {
@@ -99,22 +93,20 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
     if (!proto.has_star_tracker() || !proto.star_tracker().valid() || proto.gyros_size() < 2) {
       continue;
     }
-    ASSIGN_OR_RETURN(estimator::TelemetryFrame frame, proto_convert::FrameFromProto(proto));
-    fix = std::move(frame);
-    break;
+    return proto_convert::FrameFromProto(proto);
   }
-  if (!fix.has_value()) {
-    return absl::OutOfRangeError(
-        absl::StrCat("from: ", FormatUtc(first), " has no archived star-tracker fix of '", id,
-                     "' at or before it (within ", kFixLookbackFrames, " frames)"));
-  }
-  *fix_time = fix->time;
-  if (times.back() - fix->time > max_horizon) {
-    return absl::OutOfRangeError(
-        absl::StrCat("to: ", FormatUtc(times.back()), " is more than ",
-                     absl::FormatDuration(max_horizon), " after the star-tracker fix at ",
-                     FormatUtc(fix->time), " the recorded readings start from"));
-  }
+  return absl::OutOfRangeError(
+      absl::StrCat("from: ", FormatUtc(first), " has no archived star-tracker fix of '", id,
+                   "' at or before it (within ", kFixLookbackFrames, " frames)"));
+}
+
+// A fresh session with the calibrated drift model (CalibratedConfig) started from the fix, the
+// star tracker withheld after it; `start` is its step at the fix.
+absl::StatusOr<EstimationSession> StartFromFix(const estimator::SpacecraftConfig& config_in,
+                                               const estimator::ModelSpec& model,
+                                               const EstimationSession& session,
+                                               const estimator::TelemetryFrame& fix,
+                                               estimator::StepReport* start) {
   double residual_drift_sigma = 0.0;
   const estimator::SpacecraftConfig config =
       CalibratedConfig(config_in, session, &residual_drift_sigma);
@@ -122,31 +114,82 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
   options.residual_drift_sigma = residual_drift_sigma;
   options.adaptive_noise = false;
   ASSIGN_OR_RETURN(EstimationSession replay, EstimationSession::Create(config, options));
-  ASSIGN_OR_RETURN(estimator::StepReport start, replay.AddFrame(*fix));
-  if (!replay.initialized() || !start.attitude.valid) {
+  ASSIGN_OR_RETURN(*start, replay.AddFrame(fix));
+  if (!replay.initialized() || !start->attitude.valid) {
     return absl::FailedPreconditionError(
-        absl::StrCat("from: the star-tracker fix at ", FormatUtc(fix->time),
-                     " does not initialise an attitude (", start.attitude.invalid_reason, ")"));
+        absl::StrCat("from: the star-tracker fix at ", FormatUtc(fix.time),
+                     " does not initialise an attitude (", start->attitude.invalid_reason, ")"));
   }
   replay.SetStarTrackerUse(false);
+  return replay;
+}
+
+// The attitude at `t` between two recorded steps: slerp of the quaternions, the larger 1-sigma
+// of the two per axis. Refused across a gap longer than `max_gap` or from an invalid attitude.
+absl::StatusOr<Predicted> Interpolated(const Predicted& previous, const Predicted& current,
+                                       absl::Time t, absl::Duration max_gap) {
+  if (current.time - previous.time > max_gap) {
+    return absl::OutOfRangeError(absl::StrCat(
+        "times: ", FormatUtc(t), " falls in a gap of the archived telemetry (frames at ",
+        FormatUtc(previous.time), " and ", FormatUtc(current.time), ")"));
+  }
+  if (!previous.attitude.valid || !current.attitude.valid) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("times: the recorded attitude at ", FormatUtc(t), " is not available (",
+                     previous.attitude.valid ? current.attitude.invalid_reason
+                                             : previous.attitude.invalid_reason,
+                     ")"));
+  }
+  const double s = absl::ToDoubleSeconds(t - previous.time) /
+                   absl::ToDoubleSeconds(current.time - previous.time);
+  Predicted p;
+  p.time = t;
+  p.attitude = current.attitude;
+  p.attitude.time = t;
+  p.attitude.q_in_b = previous.attitude.q_in_b.slerp(s, current.attitude.q_in_b).normalized();
+  p.attitude.sigma_b = previous.attitude.sigma_b.cwiseMax(current.attitude.sigma_b);
+  return p;
+}
+
+// The recorded part: `times` (sorted, all at or before the last applied frame) from a fresh
+// session started at the latest star-tracker fix at or before times.front() with the calibrated
+// model, run over the archived frames with the star tracker withheld. Between two frames the
+// attitude is slerp-interpolated and the 1-sigma is the larger of the two (componentwise).
+absl::StatusOr<std::vector<Predicted>> PredictRecorded(
+    storage::Storage& storage, const std::string& id, const estimator::SpacecraftConfig& config_in,
+    const estimator::ModelSpec& model, const EstimationSession& session,
+    const std::vector<absl::Time>& times, absl::Duration max_horizon, absl::Time* fix_time) {
+  ASSIGN_OR_RETURN(const estimator::TelemetryFrame fix, LatestFix(storage, id, times.front()));
+  *fix_time = fix.time;
+  if (times.back() - fix.time > max_horizon) {
+    return absl::OutOfRangeError(
+        absl::StrCat("to: ", FormatUtc(times.back()), " is more than ",
+                     absl::FormatDuration(max_horizon), " after the star-tracker fix at ",
+                     FormatUtc(fix.time), " the recorded readings start from"));
+  }
+  estimator::StepReport start;
+  ASSIGN_OR_RETURN(EstimationSession replay,
+                   StartFromFix(config_in, model, session, fix, &start));
 
   const absl::Duration max_gap = absl::Seconds(2.0 * config_in.filter.measurement_step);
   std::vector<Predicted> out;
   out.reserve(times.size());
   size_t k = 0;
-  Predicted previous{fix->time, start.attitude, {}};
+  Predicted previous{fix.time, start.attitude, {}};
+  const auto with_spin_axes = [&](Predicted p) {
+    for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
+    return p;
+  };
   auto emit_exact = [&](const Predicted& at) {
     while (k < times.size() && times[k] == at.time) {
-      Predicted p = at;
-      for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
-      out.push_back(std::move(p));
+      out.push_back(with_spin_axes(at));
       ++k;
     }
   };
   emit_exact(previous);
   // The frames after the fix, read in chunks (memory bounded whatever the telemetry rate), up to
   // the first one at or after the last requested time.
-  absl::Time cursor = fix->time;
+  absl::Time cursor = fix.time;
   std::vector<storage::ArchivedFrame> archived;
   size_t next = 0;
   while (k < times.size()) {
@@ -170,29 +213,8 @@ absl::StatusOr<std::vector<Predicted>> PredictRecorded(
     }
     const Predicted current{frame.time, report->attitude, {}};
     while (k < times.size() && times[k] < current.time) {
-      const absl::Time t = times[k];
-      if (current.time - previous.time > max_gap) {
-        return absl::OutOfRangeError(absl::StrCat(
-            "times: ", FormatUtc(t), " falls in a gap of the archived telemetry (frames at ",
-            FormatUtc(previous.time), " and ", FormatUtc(current.time), ")"));
-      }
-      if (!previous.attitude.valid || !current.attitude.valid) {
-        return absl::FailedPreconditionError(
-            absl::StrCat("times: the recorded attitude at ", FormatUtc(t), " is not available (",
-                         previous.attitude.valid ? current.attitude.invalid_reason
-                                                 : previous.attitude.invalid_reason,
-                         ")"));
-      }
-      const double s = absl::ToDoubleSeconds(t - previous.time) /
-                       absl::ToDoubleSeconds(current.time - previous.time);
-      Predicted p;
-      p.time = t;
-      p.attitude = current.attitude;
-      p.attitude.time = t;
-      p.attitude.q_in_b = previous.attitude.q_in_b.slerp(s, current.attitude.q_in_b).normalized();
-      p.attitude.sigma_b = previous.attitude.sigma_b.cwiseMax(current.attitude.sigma_b);
-      for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
-      out.push_back(std::move(p));
+      ASSIGN_OR_RETURN(Predicted p, Interpolated(previous, current, times[k], max_gap));
+      out.push_back(with_spin_axes(std::move(p)));
       ++k;
     }
     if (k < times.size() && times[k] == current.time && !current.attitude.valid) {
