@@ -177,7 +177,9 @@ std::vector<Parameter> ReadoutParameters(const SelectedGroup& group) {
 double RecordingOrbitalPeriod(const std::vector<RegimeSpan>& regimes) {
   std::vector<double> periods;
   for (const RegimeSpan& r : regimes) {
-    if (r.regime == Regime::kOrbital && r.mean_rate > 0.0) periods.push_back(2.0 * kPi / r.mean_rate);
+    if (r.regime == Regime::kOrbital && r.mean_rate > 0.0) {
+      periods.push_back(2.0 * kPi / r.mean_rate);
+    }
   }
   if (periods.empty()) return 0.0;
   std::nth_element(periods.begin(), periods.begin() + periods.size() / 2, periods.end());
@@ -230,8 +232,8 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   o.epoch = context.frames().front().time;
   std::string sun_note;
   o.sun = SunRegressorsOf(*series, model.config, selected.run.gyros, &sun_note);
-  // A face a selection round took already (sun_terms.h FitSunCandidate) is held in the model: its
-  // regressors are left out.
+  // A face a selection round took already (readout_candidate.h FitSunCandidate) is held in the
+  // model: its regressors are left out.
   for (SunRegressors& r : o.sun) {
     for (int face : HeldSunFaces(model, r.gyro)) {
       if (face < static_cast<int>(r.values.size())) r.values[face].clear();

@@ -83,8 +83,8 @@ struct CandidateFit {
   // the finding's description (open_ended.h DescribeGroup).
   Eigen::Matrix3d readout_distortion = Eigen::Matrix3d::Zero();
   std::string description;
-  // The sun candidate (sun_terms.h FitSunCandidate): its terms at the best lag against a drift
-  // that returns to its mean on the gyro's deviation (wander.h CompareConstantEffect, on the
+  // The sun candidate (readout_candidate.h FitSunCandidate): its terms at the best lag against a
+  // drift that returns to its mean on the gyro's deviation (wander.h CompareConstantEffect, on the
   // series it regressed): 2 ln B of the terms, of the stationary drift, and of the terms on top
   // of it, for the round's physics check (selection.cc).
   bool wander_compared = false;

@@ -28,7 +28,7 @@
 //                                 following a body face's illumination through a thermal lag
 //                                 (3 parameters, the face and the lag searched; regressed on the
 //                                 deviation, held; Laplace's Occam term and the lag's cost;
-//                                 sun_terms.h FitSunCandidate), reported as a basis term
+//                                 readout_candidate.h FitSunCandidate), reported as a basis term
 // Only what the model lacks is a candidate: a term already free is not, and a common star-tracker
 // rotation is not when every running gyro's misalignment is already estimated.
 #ifndef ESG_ESTIMATOR_DISCOVERY_CANDIDATES_H_

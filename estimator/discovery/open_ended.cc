@@ -259,6 +259,39 @@ std::string Vec(const Vector3d& v, double scale, const char* fmt = "%.4f") {
                       ")");
 }
 
+
+// The alternatives to a selected group, as the stage names them: each other group of the basis
+// that replaces it at a loss below `ambiguity`, a sun face counted once, at its best lag.
+class Alternatives {
+ public:
+  explicit Alternatives(double ambiguity) : ambiguity_(ambiguity) {}
+  // `group` in place of the selected one: `against` is its deviance less the selection's.
+  void Add(const BasisGroup& group, double against) {
+    if (group.sun_face >= 0) {
+      auto it = sun_best_.find(group.sun_face);
+      if (it == sun_best_.end() || -against > it->second.second) {
+        sun_best_[group.sun_face] = {group.label, -against};
+      }
+    } else if (-against > -ambiguity_) {
+      others_.emplace_back(group.label, -against);
+    }
+  }
+  // Appends them to `out` and sorts it by evidence, largest first.
+  void AppendTo(std::vector<std::pair<std::string, double>>& out) const {
+    out.insert(out.end(), others_.begin(), others_.end());
+    for (const auto& [face, alternative] : sun_best_) {
+      if (alternative.second > -ambiguity_) out.push_back(alternative);
+    }
+    std::sort(out.begin(), out.end(),
+              [](const auto& a, const auto& b) { return a.second > b.second; });
+  }
+
+ private:
+  double ambiguity_;
+  std::vector<std::pair<std::string, double>> others_;
+  std::map<int, std::pair<std::string, double>> sun_best_;  // face -> its best lag
+};
+
 }  // namespace
 
 GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options) {
@@ -496,28 +529,16 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
       for (SelectedGroup& s : result.selected) {
         if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
         FillGroup(d, cols, d.fit, d.active[i], s);
-        std::map<int, std::pair<std::string, double>> sun_best;  // face -> its best lag
+        Alternatives alternatives(options.ambiguity);
         for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
           if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
           const int face = d.basis.groups[k].sun_face;
           if (face >= 0 && (face == s.sun_face || FaceActive(d, face))) continue;
           std::vector<int> groups = d.active;
           groups[i] = k;
-          const double against = Fit(d, groups).deviance - d.fit.deviance;
-          if (face >= 0) {
-            auto it = sun_best.find(face);
-            if (it == sun_best.end() || -against > it->second.second) {
-              sun_best[face] = {d.basis.groups[k].label, -against};
-            }
-          } else if (-against > -options.ambiguity) {
-            s.alternatives.emplace_back(d.basis.groups[k].label, -against);
-          }
+          alternatives.Add(d.basis.groups[k], Fit(d, groups).deviance - d.fit.deviance);
         }
-        for (const auto& [face, alternative] : sun_best) {
-          if (alternative.second > -options.ambiguity) s.alternatives.push_back(alternative);
-        }
-        std::sort(s.alternatives.begin(), s.alternatives.end(),
-                  [](const auto& a, const auto& b) { return a.second > b.second; });
+        alternatives.AppendTo(s.alternatives);
       }
     }
     result.deviance_after += d.fit.deviance;
@@ -641,7 +662,7 @@ SunFamilyFit FitSunFamilies(const DeviationSeries& series, double random_walk, d
   FillGroup(d, ColumnsOf(d, groups), best.fit, best.group, s);
   // The alternatives, as the stage names them: any other group of the basis, and each other face
   // at its best lag, that replaces the face's group at a loss below options.ambiguity.
-  std::map<int, std::pair<std::string, double>> sun_best;  // face -> its best lag
+  Alternatives alternatives(options.ambiguity);
   for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
     if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
     const int face = d.basis.groups[k].sun_face;
@@ -653,20 +674,9 @@ SunFamilyFit FitSunFamilies(const DeviationSeries& series, double random_walk, d
       out.best_other_evidence = out.best_lag_evidence - against;  // d.fit.deviance - its fit's
       out.best_other_label = d.basis.groups[k].label;
     }
-    if (face >= 0) {
-      auto it = sun_best.find(face);
-      if (it == sun_best.end() || -against > it->second.second) {
-        sun_best[face] = {d.basis.groups[k].label, -against};
-      }
-    } else if (-against > -options.ambiguity) {
-      s.alternatives.emplace_back(d.basis.groups[k].label, -against);
-    }
+    alternatives.Add(d.basis.groups[k], against);
   }
-  for (const auto& [face, alternative] : sun_best) {
-    if (alternative.second > -options.ambiguity) s.alternatives.push_back(alternative);
-  }
-  std::sort(s.alternatives.begin(), s.alternatives.end(),
-            [](const auto& a, const auto& b) { return a.second > b.second; });
+  alternatives.AppendTo(s.alternatives);
   return out;
 }
 

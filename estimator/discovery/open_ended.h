@@ -196,16 +196,16 @@ ReadoutFit FitReadoutDistortion(const DeviationSeries& series, double random_wal
                                 double w0_sigma, const OpenEndedOptions& options);
 
 // The sun's families alone for one gyro's series (a candidate of each selection round, beside the
-// library's effects: sun_terms.h FitSunCandidate). Each face with regressors in options.sun and
-// not in `held_faces` is fitted on top of the series' nuisance groups as the stage fits a family
-// (its Bayes factor averaged over the lags, equally likely a priori); the face with the largest
-// averaged 2 ln B is returned as a SelectedGroup at its best lag (gyro, label, columns and
+// library's effects: readout_candidate.h FitSunCandidate). Each face with regressors in options.sun
+// and not in `held_faces` is fitted on top of the series' nuisance groups as the stage fits a
+// family (its Bayes factor averaged over the lags, equally likely a priori); the face with the
+// largest averaged 2 ln B is returned as a SelectedGroup at its best lag (gyro, label, columns and
 // covariance at that lag, evidence the averaged 2 ln B, threshold 0, groups_tested the faces
-// fitted, the lag profile, the lag-averaged drift and covariance, and the alternatives: the
-// other groups of the basis and the other faces at their best lag that replace it at a loss
-// below options.ambiguity). `best_lag_evidence` is 2 ln B at the best lag alone (at least the
-// average), `best_other_*` the best group of the rest of the basis. group.sun_face is -1 when no
-// face was fitted.
+// fitted, the lag profile, the lag-averaged drift and covariance, and the alternatives: the other
+// groups of the basis and the other faces at their best lag that replace it at a loss below
+// options.ambiguity). `best_lag_evidence` is 2 ln B at the best lag alone (at least the average),
+// `best_other_*` the best group of the rest of the basis. group.sun_face is -1 when no face was
+// fitted.
 struct SunFamilyFit {
   SelectedGroup group;
   double best_lag_evidence = 0.0;

@@ -35,7 +35,7 @@ enum class Effect {
   // (readout_candidate.h); its finding is a kEffectBasisTerm.
   kReadoutDistortion,
   // Not of the library: the open-ended basis's sun families (a drift that follows a body face's
-  // illumination through a thermal lag), a candidate of every round (sun_terms.h
+  // illumination through a thermal lag), a candidate of every round (readout_candidate.h
   // FitSunCandidate); its finding is a kEffectBasisTerm.
   kSunDrift,
 };
