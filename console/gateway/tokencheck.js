@@ -33,35 +33,66 @@ function digest(authorization) {
   return crypto.createHash('sha256').update(authorization || '').digest('hex');
 }
 
+// Answers per token digest, each kept TTL_MS, at most MAX_ENTRIES in insertion order (a flood
+// of made-up tokens pushes out only answers, oldest first). An answer `keep` rejects (esgd could
+// not tell) is dropped as soon as it is known, so the next request asks again.
+class AnswerCache {
+  constructor() {
+    this.entries = new Map(); // digest -> {promise, expires}
+  }
+
+  // The kept answer for `key`, or `ask()`'s; `keep({value})` or `keep({error})` says whether it
+  // is kept. The promise settles as ask()'s does.
+  get(key, ask, keep) {
+    const cached = this.entries.get(key);
+    if (cached && cached.expires > Date.now()) return cached.promise;
+    this.entries.delete(key);
+    const entry = { expires: Infinity, promise: null };
+    const settle = (outcome) => {
+      if (keep(outcome)) entry.expires = Date.now() + TTL_MS;
+      else if (this.entries.get(key) === entry) this.entries.delete(key);
+    };
+    entry.promise = ask().then((value) => {
+      settle({ value });
+      return value;
+    }, (error) => {
+      settle({ error });
+      throw error;
+    });
+    entry.promise.catch(() => {});
+    this.entries.set(key, entry);
+    while (this.entries.size > MAX_ENTRIES) this.entries.delete(this.entries.keys().next().value);
+    return entry.promise;
+  }
+}
+
 class TokenCheck {
   constructor(esgd) {
     this.esgd = esgd;
-    this.cache = new Map(); // digest -> {promise, expires}; in insertion order, oldest first
-    this.writeCache = new Map(); // digest -> {promise, expires}: canWrite's answers, as cache
+    this.reads = new AnswerCache(); // check's answers
+    this.writes = new AnswerCache(); // canWrite's answers
   }
 
   // Resolves when esgd accepts `authorization` (an "Authorization" header value, or undefined
   // for none) for reading; rejects with esgd's error: code UNAUTHENTICATED or PERMISSION_DENIED
   // for a refused token, any other code when esgd could not be asked (not kept).
   check(authorization) {
-    const key = digest(authorization);
-    const now = Date.now();
-    const cached = this.cache.get(key);
-    if (cached && cached.expires > now) return cached.promise;
-    this.cache.delete(key);
-    const entry = { expires: Infinity, promise: null };
-    entry.promise = this.ask(authorization).then(() => {
-      entry.expires = Date.now() + TTL_MS;
-    }, (err) => {
-      if (REFUSALS.has(err.code)) entry.expires = Date.now() + TTL_MS;
-      else if (this.cache.get(key) === entry) this.cache.delete(key);
-      throw err;
+    return this.reads.get(digest(authorization), () => this.ask(authorization),
+      ({ error }) => !error || REFUSALS.has(error.code));
+  }
+
+  // Whether esgd lets `authorization` write: true (INVALID_ARGUMENT: the role was granted, then
+  // the empty id refused), false (PERMISSION_DENIED or UNAUTHENTICATED: refused before), null
+  // when esgd could not tell (an esgd without ApplyDiagnosis, refusals beyond its per-address
+  // budget, esgd unreachable; not kept). Never rejects.
+  canWrite(authorization) {
+    const ask = () => this.esgd.unary('ApplyDiagnosis', { spacecraft_id: '', diagnosis_id: 0 },
+      authorization, undefined, CHECK_DEADLINE_MS).then(() => true, (err) => {
+      if (err.code === grpc.status.INVALID_ARGUMENT) return true;
+      if (REFUSALS.has(err.code)) return false;
+      return null;
     });
-    entry.promise.catch(() => {});
-    this.cache.set(key, entry);
-    // Bounded: the oldest answers go first (a flood of made-up tokens pushes out only answers).
-    while (this.cache.size > MAX_ENTRIES) this.cache.delete(this.cache.keys().next().value);
-    return entry.promise;
+    return this.writes.get(digest(authorization), ask, ({ value }) => value !== null);
   }
 
   async ask(authorization) {
@@ -71,37 +102,6 @@ class TokenCheck {
       if (ACCEPTED.has(err.code)) return;
       throw err;
     }
-  }
-
-  // Whether esgd lets `authorization` write: true (INVALID_ARGUMENT: the role was granted, then
-  // the empty id refused), false (PERMISSION_DENIED or UNAUTHENTICATED: refused before), null
-  // when esgd could not tell (an esgd without ApplyDiagnosis, refusals beyond its per-address
-  // budget, esgd unreachable; not kept). Never rejects.
-  canWrite(authorization) {
-    const key = digest(authorization);
-    const now = Date.now();
-    const cached = this.writeCache.get(key);
-    if (cached && cached.expires > now) return cached.promise;
-    this.writeCache.delete(key);
-    const entry = { expires: Infinity, promise: null };
-    entry.promise = this.esgd.unary('ApplyDiagnosis', { spacecraft_id: '', diagnosis_id: 0 },
-      authorization, undefined, CHECK_DEADLINE_MS).then(() => true, (err) => {
-      if (err.code === grpc.status.INVALID_ARGUMENT) return true;
-      if (REFUSALS.has(err.code)) return false;
-      return null;
-    }).then((answer) => {
-      if (answer === null) {
-        if (this.writeCache.get(key) === entry) this.writeCache.delete(key);
-      } else {
-        entry.expires = Date.now() + TTL_MS;
-      }
-      return answer;
-    });
-    this.writeCache.set(key, entry);
-    while (this.writeCache.size > MAX_ENTRIES) {
-      this.writeCache.delete(this.writeCache.keys().next().value);
-    }
-    return entry.promise;
   }
 
   // Whether esgd wants a token at all: is a call without one refused? An esgd that throttles
