@@ -243,6 +243,7 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
       CheckLimit(f.fault_threshold, L.fault_threshold, "filter.faultThresholdArcsec"));
   RETURN_IF_ERROR(
       CheckLimit(f.drift_change_limit, L.drift_change_limit, "filter.driftChangeLimitDegH"));
+  RETURN_IF_ERROR(ValidateChannelConfigs(config.channels));
   return absl::OkStatus();
 }
 

@@ -13,6 +13,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
 #include "estimator/basis_term.h"
+#include "estimator/channels.h"
 #include "estimator/drift_model.h"
 #include "estimator/units.h"
 
@@ -77,6 +78,9 @@ struct SpacecraftConfig {
   double random_walk = 0.0;
   SuspensionConfig suspension;
   FilterConfig filter;
+  // Auxiliary housekeeping channels a frame may carry (channels.h); none: a frame carrying any
+  // channel is refused.
+  std::vector<ChannelConfig> channels;
 
   // Gyro by id, or nullptr.
   const GyroConfig* FindGyro(int id) const;
@@ -260,7 +264,8 @@ absl::Status CheckLimit(double value_si, const ConfigLimit& limit, absl::string_
 // rotation: orthonormal to 1e-6, det +1), every numeric field against kConfigLimits, each gyro's
 // basis terms (at most kMaxBasisTermsPerGyro, ValidateBasisTerm, then value and sigma in their JSON
 // unit: "gyros[0].basisTerms[1].axis: must be 1..3, got 4") and its readoutDistortion (symmetric
-// to kReadoutDistortionSymmetryTolerance, each entry within its limit). The
+// to kReadoutDistortionSymmetryTolerance, each entry within its limit) and the channel
+// declarations (channels.h ValidateChannelConfigs: "channels[2].validMin: ..."). The
 // message of an InvalidArgument names the JSON field, e.g. "gyros[1].caseToBody: not a proper
 // rotation matrix ..." or "filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (...)".
 absl::Status ValidateConfig(const SpacecraftConfig& config);

@@ -3,6 +3,7 @@
 #ifndef ESG_ESTIMATOR_TELEMETRY_H_
 #define ESG_ESTIMATOR_TELEMETRY_H_
 
+#include <algorithm>
 #include <array>
 #include <map>
 #include <optional>
@@ -11,6 +12,7 @@
 
 #include "Eigen/Core"
 #include "Eigen/Geometry"
+#include "absl/strings/string_view.h"
 #include "absl/time/time.h"
 #include "estimator/conventions.h"
 
@@ -29,12 +31,54 @@ struct StarTrackerReading {
   bool valid = false;
 };
 
+// One auxiliary housekeeping channel's value in a frame, in the unit its declaration states
+// (spacecraft_config.h ChannelConfig; docs/formats.md "Channels").
+struct ChannelValue {
+  std::string name;
+  double value = 0.0;
+  bool operator==(const ChannelValue&) const = default;
+};
+
+// The named housekeeping channels of one frame (temperatures, heater states, ...): name -> value,
+// kept sorted by name with each name once. A frame without channels holds one empty vector (no
+// allocation), so the gyro-only hot path does not grow. What a name and a value may be is
+// estimator/channels.h's (ValidateFrameChannels); this container only keeps the order.
+class Channels {
+ public:
+  bool empty() const { return values_.empty(); }
+  int size() const { return static_cast<int>(values_.size()); }
+  // Sets the value of `name`, replacing an earlier one.
+  void Set(absl::string_view name, double value) {
+    auto it = std::lower_bound(values_.begin(), values_.end(), name, ByName);
+    if (it != values_.end() && it->name == name) {
+      it->value = value;
+    } else {
+      values_.insert(it, ChannelValue{std::string(name), value});
+    }
+  }
+  // The value of `name`, or nullptr when the frame does not carry it.
+  const double* Find(absl::string_view name) const {
+    auto it = std::lower_bound(values_.begin(), values_.end(), name, ByName);
+    return it != values_.end() && it->name == name ? &it->value : nullptr;
+  }
+  std::vector<ChannelValue>::const_iterator begin() const { return values_.begin(); }
+  std::vector<ChannelValue>::const_iterator end() const { return values_.end(); }
+  bool operator==(const Channels&) const = default;
+
+ private:
+  static bool ByName(const ChannelValue& v, absl::string_view name) { return v.name < name; }
+  std::vector<ChannelValue> values_;
+};
+
 struct TelemetryFrame {
   absl::Time time;  // Measurement epoch, UTC.
   // Index gyro id - 1; empty when the gyro is off or its reading is missing.
   std::array<std::optional<GyroReading>, kMaxGyros> gyros;
   // Empty during a star-tracker outage.
   std::optional<StarTrackerReading> star_tracker;
+  // Auxiliary housekeeping channels carried by this frame; a channel absent here keeps its last
+  // value up to its declared age (estimator/channels.h ChannelHold).
+  Channels channels;
 };
 
 struct Recording {

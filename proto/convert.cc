@@ -16,6 +16,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_format.h"
+#include "estimator/channels.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
@@ -532,6 +533,22 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
                                          ? estimator::DegPerHourToRadPerSec(f.drift_change_limit_deg_h())
                                          : default_filter.drift_change_limit;
 
+  for (int i = 0; i < proto.channels_size(); ++i) {
+    const esg::v1::ChannelConfig& c = proto.channels(i);
+    estimator::ChannelConfig channel;
+    channel.name = c.name();
+    channel.unit = c.unit();
+    channel.valid_min = c.valid_min();
+    channel.valid_max = c.valid_max();
+    // Checked here, before absl::Seconds, which has no NaN; the range is ValidateConfig's.
+    if (!std::isfinite(c.max_age_s())) {
+      return FieldError(absl::StrCat("channels[", i, "].maxAgeS"),
+                        absl::StrFormat("%g is not finite", c.max_age_s()));
+    }
+    channel.max_age = absl::Seconds(c.max_age_s());
+    config.channels.push_back(std::move(channel));
+  }
+
   RETURN_IF_ERROR(estimator::ValidateConfig(config));
   return config;
 }
@@ -573,6 +590,14 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
   f->set_innovation_kd(config.filter.innovation_kd);
   f->set_fault_threshold_arcsec(TidyArcsec(config.filter.fault_threshold));
   f->set_drift_change_limit_deg_h(TidyDegPerHour(config.filter.drift_change_limit));
+  for (const estimator::ChannelConfig& channel : config.channels) {
+    esg::v1::ChannelConfig* c = proto.add_channels();
+    c->set_name(channel.name);
+    c->set_unit(channel.unit);
+    c->set_valid_min(channel.valid_min);
+    c->set_valid_max(channel.valid_max);
+    c->set_max_age_s(absl::ToDoubleSeconds(channel.max_age));
+  }
   return proto;
 }
 
@@ -605,6 +630,14 @@ std::string ConfigToJson(const estimator::SpacecraftConfig& config) {
   // Printing a valid message cannot fail; an empty string signals the impossible case.
   if (!google::protobuf::util::MessageToJsonString(ConfigToProto(config), &json, options).ok()) {
     return std::string();
+  }
+  // A configuration without channels prints as it did before the field existed: the service
+  // compares the stored text to tell a changed configuration from the same one sent again
+  // (storage/config_store.cc, server/estimation_core.cc), so an empty "channels" must not make an
+  // unchanged configuration new. The field is the message's last, printed last.
+  constexpr absl::string_view kNoChannels = ",\"channels\":[]}";
+  if (config.channels.empty() && absl::EndsWith(json, kNoChannels)) {
+    json.replace(json.size() - kNoChannels.size(), kNoChannels.size(), "}");
   }
   return JsonPrettyPrinter(json).Print();
 }
@@ -728,6 +761,14 @@ absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::Telemetr
     }
     frame.star_tracker = reading;
   }
+  // Whether each channel is declared, and within its range, is the caller's (it knows the
+  // configuration: estimator::CheckDeclaredChannels).
+  if (proto.channels_size() > estimator::kMaxChannels) {
+    return FieldError("channels", absl::StrFormat("%d channels, at most %d in a frame",
+                                                  proto.channels_size(), estimator::kMaxChannels));
+  }
+  for (const auto& [name, value] : proto.channels()) frame.channels.Set(name, value);
+  RETURN_IF_ERROR(estimator::ValidateFrameChannels(frame.channels));
   return frame;
 }
 
@@ -751,6 +792,9 @@ esg::v1::TelemetryFrame FrameToProto(const estimator::TelemetryFrame& frame,
     if (frame.star_tracker->valid) {
       for (double v : estimator::ToScalarFirst(frame.star_tracker->q_in_b)) st->add_q_in_b(v);
     }
+  }
+  for (const estimator::ChannelValue& c : frame.channels) {
+    (*proto.mutable_channels())[c.name] = c.value;
   }
   return proto;
 }

@@ -44,7 +44,9 @@ inline constexpr double kRenormaliseAbove = 1e-12;
 // spacecraft_config.proto (suspension 200 / 200 V / 30 um, filter 8 Hz / 60 s / k_d 5 when 0;
 // empty 3-vectors are zero), checks vector lengths (case_to_body 9, drift and noise vectors 0 or 3,
 // pairs 2), then runs estimator::ValidateConfig (identifier rule for spacecraftId, the ranges of
-// estimator::kConfigLimits). InvalidArgument names the JSON field, e.g.
+// estimator::kConfigLimits, the channel declarations of estimator/channels.h; a maxAgeS that is
+// not finite is refused here, "channels[0].maxAgeS: nan is not finite"). InvalidArgument names
+// the JSON field, e.g.
 // "gyros[0].caseToBody: expected 9 values, got 8", "workingPair: gyro 4 is not among the
 // configured gyros" or "filter.integrationRateHz: 3e+07 is outside [0.1, 100] Hz (...)".
 absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::SpacecraftConfig& proto);
@@ -117,7 +119,11 @@ void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double de
 // repeated; h_k exactly 3 finite values with unit norm (kUnitNormTolerance); u_k_mv empty or 3
 // finite values; star_tracker absent = outage; star_tracker.valid: q_in_b exactly 4 finite values,
 // unit norm; not valid: q_in_b empty or 4 finite values, not carried (the reading is kept with
-// valid = false and an identity quaternion). Accepted vectors are renormalised as described at
+// valid = false and an identity quaternion); channels: at most estimator::kMaxChannels ("channels:
+// 65 channels, at most 64 in a frame"), each name a channel name and each value finite
+// (estimator::ValidateFrameChannels: `channels["T_gyro2"]: nan is not finite`), whether each is
+// declared and in range being the caller's (estimator::CheckDeclaredChannels). Accepted vectors
+// are renormalised as described at
 // kRenormaliseAbove. Errors: InvalidArgument "<field>: <reason>", field in proto names, e.g.
 // "spacecraft_id: character '\n' at index 5 of ...", "gyros[1].h_k: norm 1.2 is not 1
 // (tolerance 0.001)", "star_tracker.q_in_b[2]: nan is not finite", "gyros[2].gyro_id: gyro 3
@@ -125,7 +131,8 @@ void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double de
 absl::StatusOr<estimator::TelemetryFrame> FrameFromProto(const esg::v1::TelemetryFrame& proto);
 
 // The reverse: gyros in id order, u_k_mv only when present, star_tracker only when present
-// (q_in_b empty when not valid). Quaternions are written as stored (no sign canonicalisation).
+// (q_in_b empty when not valid), the channels the frame carries. Quaternions are written as
+// stored (no sign canonicalisation).
 esg::v1::TelemetryFrame FrameToProto(const estimator::TelemetryFrame& frame,
                                      std::string spacecraft_id, int64_t sequence);
 

@@ -228,6 +228,13 @@ absl::Status EstimationCore::CheckFrame(Spacecraft& sc, const esg::v1::Telemetry
                        " is not configured for spacecraft '", sc.id, "'"));
     }
   }
+  // Each channel declared by the configuration and within its valid range (docs/formats.md
+  // "Channels"); FrameFromProto checked the names, the count and that the values are finite.
+  if (absl::Status channels = estimator::CheckDeclaredChannels(
+          frame->channels, sc.ingest_setup->config.channels);
+      !channels.ok()) {
+    return channels;
+  }
   const absl::Time time = frame->time;
   if (time < options_.earliest_frame_time || time >= options_.latest_frame_time) {
     return absl::OutOfRangeError(absl::StrCat("time: ", FormatUtc(time),

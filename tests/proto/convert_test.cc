@@ -12,6 +12,7 @@
 #include <random>
 #include <string>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
 #include "absl/time/time.h"
 #include "gmock/gmock.h"
@@ -755,6 +756,123 @@ TEST(DriftModel, ProtoRoundTripConvertsDegPerHour) {
   EXPECT_THAT(DriftModelFromProto(bad, "sigma"),
               StatusIs(absl::StatusCode::kInvalidArgument,
                        HasSubstr("sigma.nuDegH: expected 3 values, got 4")));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Auxiliary housekeeping channels (docs/formats.md "Channels").
+
+TEST(Frame, ChannelsRoundTripExactly) {
+  estimator::TelemetryFrame original = SampleFrame();
+  original.channels.Set("T_gyro2", 301.125);
+  original.channels.Set("heater_1", 1.0);
+  original.channels.Set("bus.V", -1.0 / 3.0);
+  const esg::v1::TelemetryFrame proto = FrameToProto(original, "RDK-1", 5);
+  ASSERT_EQ(proto.channels_size(), 3);
+  EXPECT_EQ(proto.channels().at("T_gyro2"), 301.125);
+  absl::StatusOr<estimator::TelemetryFrame> back = FrameFromProto(proto);
+  ASSERT_THAT(back, IsOk());
+  ExpectFramesEqual(original, *back);
+  EXPECT_EQ(back->channels, original.channels);
+  // Through the wire bytes as well, and a frame without channels has none.
+  esg::v1::TelemetryFrame parsed;
+  ASSERT_TRUE(parsed.ParseFromString(proto.SerializeAsString()));
+  back = FrameFromProto(parsed);
+  ASSERT_THAT(back, IsOk());
+  EXPECT_EQ(back->channels, original.channels);
+  back = FrameFromProto(FrameToProto(SampleFrame(), "RDK-1", 6));
+  ASSERT_THAT(back, IsOk());
+  EXPECT_TRUE(back->channels.empty());
+}
+
+TEST(Frame, BadChannelsAreRefusedNamingTheChannel) {
+  esg::v1::TelemetryFrame proto = FrameToProto(SampleFrame(), "RDK-1", 7);
+  (*proto.mutable_channels())["T_gyro2"] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(FrameFromProto(proto),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[\"T_gyro2\"]: nan is not finite")));
+  proto.clear_channels();
+  (*proto.mutable_channels())["T gyro"] = 1.0;
+  EXPECT_THAT(FrameFromProto(proto),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[\"T gyro\"]: character ' ' at index 1")));
+  proto.clear_channels();
+  for (int i = 0; i <= estimator::kMaxChannels; ++i) {
+    (*proto.mutable_channels())[absl::StrCat("c", i)] = 0.0;
+  }
+  EXPECT_THAT(FrameFromProto(proto),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels: 65 channels, at most 64 in a frame")));
+}
+
+TEST(Frame, AFrameWithEveryChannelFitsTheFrameSizeLimit) {
+  // docs/service.md "Ingest contract": a serialized frame of more than 8192 bytes is refused.
+  estimator::TelemetryFrame frame = SampleFrame();
+  frame.gyros[1] = frame.gyros[0];
+  for (int i = 0; i < estimator::kMaxChannels; ++i) {
+    std::string name = absl::StrCat("channel_", i);
+    name.resize(estimator::kMaxChannelNameLength, 'x');
+    frame.channels.Set(name, -1.0 / 3.0);
+  }
+  const esg::v1::TelemetryFrame proto =
+      FrameToProto(frame, std::string(64, 'R'), (int64_t{1} << 53) - 1);
+  EXPECT_LE(proto.ByteSizeLong(), 8192u);
+  EXPECT_THAT(FrameFromProto(proto), IsOk());
+}
+
+TEST(ConfigJson, ChannelDeclarationsRoundTrip) {
+  const std::string json = DesignJsonWith(
+      "\"randomWalkDegHSqrtH\": 0.002",
+      "\"randomWalkDegHSqrtH\": 0.002,\n"
+      "  \"channels\": [{\"name\": \"T_gyro2\", \"unit\": \"K\", \"validMin\": 250,"
+      " \"validMax\": 350, \"maxAgeS\": 600},\n"
+      "               {\"name\": \"heater_1\", \"unit\": \"1\", \"validMin\": 0, \"validMax\": 1}]");
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(json);
+  ASSERT_THAT(c, IsOk());
+  ASSERT_EQ(c->channels.size(), 2u);
+  EXPECT_EQ(c->channels[0].name, "T_gyro2");
+  EXPECT_EQ(c->channels[0].unit, "K");
+  EXPECT_EQ(c->channels[0].valid_min, 250.0);
+  EXPECT_EQ(c->channels[0].valid_max, 350.0);
+  EXPECT_EQ(c->channels[0].max_age, absl::Minutes(10));
+  EXPECT_EQ(c->channels[1].max_age, absl::ZeroDuration());
+  const std::string written = ConfigToJson(*c);
+  EXPECT_THAT(written, HasSubstr("\"maxAgeS\": 600"));
+  absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
+  ASSERT_THAT(back, IsOk()) << written;
+  EXPECT_EQ(back->channels, c->channels);
+  EXPECT_EQ(ConfigToJson(*back), written);
+}
+
+TEST(ConfigJson, AConfigurationWithoutChannelsPrintsAsBefore) {
+  // The service tells a changed configuration from the same one by its stored text.
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(kDesignJson);
+  ASSERT_THAT(c, IsOk());
+  const std::string json = ConfigToJson(*c);
+  EXPECT_THAT(json, Not(HasSubstr("channels")));
+  EXPECT_THAT(json, HasSubstr("\"driftChangeLimitDegH\": 1\n  }\n}"));
+}
+
+TEST(ConfigJson, BadChannelDeclarationsNameTheField) {
+  auto with = [](absl::string_view channel) {
+    return ParseConfigJson(DesignJsonWith(
+        "\"randomWalkDegHSqrtH\": 0.002",
+        absl::StrCat("\"randomWalkDegHSqrtH\": 0.002, \"channels\": [", channel, "]")));
+  };
+  EXPECT_THAT(with(R"({"name": "T", "unit": "K", "validMin": 5, "validMax": 1})"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[0].validMin: ")));
+  EXPECT_THAT(with(R"({"name": "T", "validMax": 1})"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[0].unit: ")));
+  EXPECT_THAT(with(R"({"name": "T", "unit": "K", "maxAgeS": -1})"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[0].maxAgeS: ")));
+  EXPECT_THAT(with(R"({"name": "T", "unit": "K", "maxAgeS": "NaN"})"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[0].maxAgeS: nan is not finite")));
+  EXPECT_THAT(with(R"({"name": "", "unit": "K"})"),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       ::testing::StartsWith("channels[0].name: ")));
 }
 
 }  // namespace
