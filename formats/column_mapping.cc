@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/channels.h"
 #include "estimator/rotation.h"
 #include "estimator/utc_time.h"
 #include "formats/csv_lines.h"
@@ -387,6 +388,35 @@ absl::Status ParseStarTracker(const json& j, StarTrackerMapping* st) {
   return absl::OkStatus();
 }
 
+// "channels": [{"name": "T_gyro2", "column": "TEMP_G2"}, ...]: the file's column holding each
+// channel, its values already in the channel's declared unit (docs/formats.md "Channels").
+absl::Status ParseChannels(const json& j, std::vector<ChannelMapping>* channels) {
+  if (!j.is_array() || j.size() > static_cast<size_t>(estimator::kMaxChannels)) {
+    return FieldError("channels", absl::StrFormat("must be an array of at most %d channels",
+                                                  estimator::kMaxChannels));
+  }
+  std::set<std::string> names;
+  for (size_t i = 0; i < j.size(); ++i) {
+    const std::string path = absl::StrCat("channels[", i, "]");
+    if (absl::Status s = CheckObject(j[i], path, {"name", "column"}); !s.ok()) return s;
+    if (!j[i].contains("name")) return FieldError(path + ".name", "required");
+    if (!j[i].contains("column")) return FieldError(path + ".column", "required");
+    ChannelMapping channel;
+    absl::StatusOr<std::string> name = GetString(j[i]["name"], path + ".name");
+    if (!name.ok()) return name.status();
+    if (absl::Status s = estimator::ValidateChannelName(*name, path + ".name"); !s.ok()) return s;
+    if (!names.insert(*name).second) {
+      return FieldError(path + ".name", absl::StrFormat("channel '%s' is mapped twice", *name));
+    }
+    absl::StatusOr<std::string> column = GetColumnName(j[i]["column"], path + ".column");
+    if (!column.ok()) return column.status();
+    channel.name = *name;
+    channel.column = *column;
+    channels->push_back(std::move(channel));
+  }
+  return absl::OkStatus();
+}
+
 // Every column of the mapping with the field that names it, in mapping order.
 std::vector<std::pair<std::string, std::string>> MappedColumns(const ColumnMapping& m) {
   std::vector<std::pair<std::string, std::string>> out;
@@ -419,6 +449,9 @@ std::vector<std::pair<std::string, std::string>> MappedColumns(const ColumnMappi
     if (!m.star_tracker->valid_column.empty()) {
       out.emplace_back(m.star_tracker->valid_column, "starTracker.valid.column");
     }
+  }
+  for (size_t i = 0; i < m.channels.size(); ++i) {
+    out.emplace_back(m.channels[i].column, absl::StrFormat("channels[%d].column", i));
   }
   return out;
 }
@@ -619,7 +652,8 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
   // nlohmann-json keeps the last value of a repeated key: refused with its path.
   if (absl::Status strict = proto_convert::CheckStrictJson(json_text); !strict.ok()) return strict;
   if (absl::Status s = CheckObject(
-          doc, "", {"format", "spacecraftId", "delimiter", "time", "gyros", "starTracker"});
+          doc, "",
+          {"format", "spacecraftId", "delimiter", "time", "gyros", "starTracker", "channels"});
       !s.ok()) {
     return s;
   }
@@ -674,6 +708,9 @@ absl::StatusOr<ColumnMapping> ParseColumnMapping(std::string_view json_text) {
     StarTrackerMapping st;
     if (absl::Status s = ParseStarTracker(doc["starTracker"], &st); !s.ok()) return s;
     mapping.star_tracker = std::move(st);
+  }
+  if (doc.contains("channels")) {
+    if (absl::Status s = ParseChannels(doc["channels"], &mapping.channels); !s.ok()) return s;
   }
   std::map<std::string, std::string> field_of;
   for (const auto& [column, field] : MappedColumns(mapping)) {
@@ -733,6 +770,7 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
     q_cols = take(4);
     if (!mapping.star_tracker->valid_column.empty()) valid_col = take(1).front();
   }
+  const std::vector<const Col*> channel_cols = take(mapping.channels.size());
 
   CsvMetadata metadata;  // the lines before the header
   bool have_header = false;
@@ -975,6 +1013,13 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
           }
         }
       }
+    }
+
+    // Channels: an empty cell is a channel this frame does not carry.
+    for (size_t i = 0; i < channel_cols.size(); ++i) {
+      const std::optional<std::vector<double>> v =
+          ParseGroup(fields, {channel_cols[i]}, channel_cols[i]->field, line_no, &problems);
+      if (v.has_value() && !v->empty()) frame.channels.Set(mapping.channels[i].name, v->front());
     }
 
     if (problems.size() == problems_before) recording.frames.push_back(std::move(frame));

@@ -12,7 +12,8 @@
 //                              "unit": "deg"},
 //                 "voltages": {"columns": ["u1x", "u1y", "u1z"], "unit": "V"}}, ...],
 //      "starTracker": {"columns": ["qx", "qy", "qz", "qw"], "scalar": "last", "rotation": "q_b_in",
-//                      "valid": {"column": "st_ok", "validValues": ["1"], "invalidValues": ["0"]}}}
+//                      "valid": {"column": "st_ok", "validValues": ["1"], "invalidValues": ["0"]}},
+//      "channels": [{"name": "T_gyro2", "column": "TEMP_G2"}]}
 //
 // Mapping rules (ParseColumnMapping): every field is checked, unknown fields are errors, and an
 // error is InvalidArgument whose message starts with the field, e.g.
@@ -93,12 +94,20 @@ struct StarTrackerMapping {
   std::vector<std::string> invalid_values;
 };
 
+// One auxiliary housekeeping channel (estimator/channels.h): the file's column holding it, its
+// values in the channel's declared unit; an empty cell is a frame without the channel.
+struct ChannelMapping {
+  std::string name;    // the channel's name, as the configuration declares it
+  std::string column;  // the CSV column
+};
+
 struct ColumnMapping {
   std::string spacecraft_id;  // empty: none (recording metadata "spacecraft_id" when given)
   char delimiter = ',';
   TimeMapping time;
   std::vector<GyroMapping> gyros;
   std::optional<StarTrackerMapping> star_tracker;  // absent: no star-tracker columns
+  std::vector<ChannelMapping> channels;             // at most estimator::kMaxChannels
 };
 
 // Parses a mapping JSON document. InvalidArgument "<field>: <reason>" on the first problem.

@@ -10,15 +10,19 @@
 #include <fstream>
 #include <map>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <system_error>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/time/time.h"
+#include "estimator/channels.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
 #include "estimator/utc_time.h"
@@ -179,6 +183,7 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
 
   CsvMetadata metadata;  // the lines before the header
   std::array<int, kNumColumns> field_index;  // column -> index in a row
+  std::vector<std::pair<std::string, int>> channel_columns;  // channel name, index in a row
   size_t num_header_fields = 0;
   bool have_header = false;
   int header_line = 0;
@@ -228,6 +233,17 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
         problems.Add(line_no, "",
                      absl::StrCat("header lacks required column", missing.size() == 1 ? "" : "s",
                                   " ", absl::StrJoin(missing, ", ")));
+      }
+      // Channel columns `ch:NAME` (docs/formats.md "Channels"), in header order.
+      for (size_t i = 0; i < fields.size(); ++i) {
+        if (!absl::StartsWith(fields[i], kChannelColumnPrefix)) continue;
+        const absl::string_view name = fields[i].substr(kChannelColumnPrefix.size());
+        const absl::Status valid = estimator::ValidateChannelName(name, "name");
+        if (!valid.ok()) {
+          problems.Add(line_no, std::string(fields[i]), std::string(valid.message()));
+        } else {
+          channel_columns.push_back({std::string(name), static_cast<int>(i)});
+        }
       }
       if (!problems.empty()) return problems.ToStatus();  // rows cannot be interpreted
       continue;
@@ -340,6 +356,21 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
       problems.Add(line_no, valid_name, absl::StrCat(Quote(valid_text), " is not 0 or 1"));
     }
 
+    // Channels: an empty cell is a channel this frame does not carry.
+    for (const auto& [name, index] : channel_columns) {
+      const absl::string_view text = fields[index];
+      if (text.empty()) continue;
+      const std::string column = absl::StrCat(kChannelColumnPrefix, name);
+      if (const std::optional<double> v = ParseNumber(text, line_no, column, &problems)) {
+        frame.channels.Set(name, *v);
+      }
+    }
+    if (frame.channels.size() > estimator::kMaxChannels) {
+      problems.Add(line_no, "",
+                   absl::StrFormat("%d channels, at most %d in a frame", frame.channels.size(),
+                                   estimator::kMaxChannels));
+    }
+
     if (problems.size() == problems_before) recording.frames.push_back(std::move(frame));
   }
 
@@ -389,7 +420,16 @@ std::string FormatRecordingCsv(const estimator::Recording& recording) {
     if (key == "spacecraft_id") continue;
     absl::StrAppend(&out, "# ", key, ": ", value, "\n");
   }
-  absl::StrAppend(&out, absl::StrJoin(names, ","), "\n");
+  // Every channel any frame carries, one `ch:NAME` column each after st_valid, in name order.
+  std::set<std::string> channel_names;
+  for (const estimator::TelemetryFrame& frame : recording.frames) {
+    for (const estimator::ChannelValue& c : frame.channels) channel_names.insert(c.name);
+  }
+  absl::StrAppend(&out, absl::StrJoin(names, ","));
+  for (const std::string& name : channel_names) {
+    absl::StrAppend(&out, ",", kChannelColumnPrefix, name);
+  }
+  out += '\n';
 
   for (const estimator::TelemetryFrame& frame : recording.frames) {
     out += FormatRecordingTime(frame.time);
@@ -416,6 +456,10 @@ std::string FormatRecordingCsv(const estimator::Recording& recording) {
         AppendNumber(v, &out);
       }
       out += ",1";
+    }
+    for (const std::string& name : channel_names) {
+      out += ',';
+      if (const double* v = frame.channels.Find(name)) AppendNumber(*v, &out);
     }
     out += '\n';
   }

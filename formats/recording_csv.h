@@ -8,7 +8,9 @@
 //
 // Columns: gN_h* spin-axis direction cosines of gyro N in its case frame [1]; gN_u* suspension
 // offset voltages along its case axes [mV]; st_q0..st_q3 star-tracker q_in_b, scalar first;
-// st_valid 1 or 0. Times are RFC 3339 (written with `Z`, UTC).
+// st_valid 1 or 0. Times are RFC 3339 (written with `Z`, UTC). Optional channel columns
+// `ch:NAME`: the auxiliary housekeeping channel NAME (estimator/channels.h), a number in its
+// declared unit, an empty cell where the frame does not carry it.
 //
 // Reading rules (the contract the writer follows too):
 // - Lines starting with '#' before the header are metadata "# key: value" (kept in
@@ -27,6 +29,11 @@
 //   looser than any real readout; it catches swapped, missing or mis-scaled components). Accepted
 //   vectors are renormalised when their norm differs from 1 by more than 1e-12; closer ones are
 //   kept bit for bit, so a written recording reads back exactly.
+// - A header column `ch:NAME` is a channel column: NAME must be a channel name
+//   (estimator::ValidateChannelName), or the header is refused. A non-empty cell is a finite
+//   number; at most estimator::kMaxChannels non-empty channel cells in a row. Whether a channel
+//   is declared, and its range, is checked where the configuration is known (the offline verbs,
+//   esgd at ingest).
 // - Times strictly increasing, and with RecordingReadOptions::max_row_gap set (the offline runs:
 //   estimator/frame_gap.h) at most that much after the previous row. Numbers must parse
 //   completely and be finite.
@@ -41,6 +48,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "absl/time/time.h"
 #include "estimator/telemetry.h"
 
@@ -49,6 +57,8 @@ namespace esg::storage {
 inline constexpr char kRecordingCsvFormat[] = "esg-recording-csv 1";
 inline constexpr double kUnitNormTolerance = 1e-3;  // same as proto_convert::kUnitNormTolerance
 inline constexpr int kMaxReportedProblems = 50;
+// A header column with this prefix carries the channel named by the rest (docs/formats.md).
+inline constexpr absl::string_view kChannelColumnPrefix = "ch:";
 
 struct RecordingReadOptions {
   // A row more than this after the previous row is a problem of the file ("line <n>, column
@@ -71,7 +81,9 @@ absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path,
 // trimmed), entries whose key is then empty or "format" dropped, of keys that clean to the same
 // key the first in key order kept; "# spacecraft_id: ..." first when present, then the others in
 // the order of their cleaned keys. Then the header in
-// the order of docs/formats.md, one row per frame. Times are RFC 3339 UTC with `Z` and as many
+// the order of docs/formats.md, then a `ch:NAME` column for every channel any frame carries (in
+// name order; none without channels, so such a recording is written as before), one row per
+// frame. Times are RFC 3339 UTC with `Z` and as many
 // fractional digits as needed to read back the same absl::Time; numbers in the shortest form that
 // reads back the same double. An invalid star-tracker reading is written with an empty quaternion
 // and st_valid 0. Values are written as given (a non-finite value would make the file unreadable).

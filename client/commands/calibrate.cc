@@ -23,6 +23,7 @@
 #include "client/progress.h"
 #include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
+#include "estimator/channels.h"
 #include "estimator/frame_gap.h"
 #include "estimator/model_terms.h"
 #include "estimator/offline.h"
@@ -115,6 +116,14 @@ std::optional<Inputs> Load(const CommonOptions& o) {
   }
   if (recording->frames.empty()) {
     std::fprintf(stderr, "esg: --recording %s: no frames\n", o.recording_path.c_str());
+    return std::nullopt;
+  }
+  // Every channel declared by --config and within its range, as esgd checks at ingest.
+  if (absl::Status channels =
+          estimator::CheckRecordingChannels(recording->frames, in.config.channels);
+      !channels.ok()) {
+    std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
+                 std::string(channels.message()).c_str());
     return std::nullopt;
   }
   in.recording = std::move(*recording);

@@ -33,6 +33,7 @@
 #include "client/output_format.h"
 #include "client/progress.h"
 #include "estimator/discovery/apply_findings.h"
+#include "estimator/channels.h"
 #include "estimator/frame_gap.h"
 #include "formats/column_mapping.h"
 #include "formats/recording_csv.h"
@@ -143,6 +144,14 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
   if (!recording.ok()) {
     std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
                  std::string(recording.status().message()).c_str());
+    return 2;
+  }
+  // Every channel declared by --config and within its range, as esgd checks at ingest.
+  if (absl::Status channels =
+          estimator::CheckRecordingChannels(recording->frames, config->channels);
+      !channels.ok()) {
+    std::fprintf(stderr, "esg: --recording %s: %s\n", o.recording_path.c_str(),
+                 std::string(channels.message()).c_str());
     return 2;
   }
   disc::DiagnoseOptions options;

@@ -68,18 +68,6 @@ absl::Status OutputFile::Commit() {
 
 namespace {
 
-// The text after the metadata lines and the header of a formatted recording: its rows.
-std::string RowsOf(const std::string& formatted) {
-  size_t at = 0;
-  while (at < formatted.size() && formatted[at] == '#') {
-    at = formatted.find('\n', at);
-    if (at == std::string::npos) return "";
-    ++at;
-  }
-  const size_t header_end = formatted.find('\n', at);
-  return header_end == std::string::npos ? "" : formatted.substr(header_end + 1);
-}
-
 int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& global) {
   constexpr char kVerb[] = "export telemetry";
   esg::v1::ExportTelemetryRequest request;
@@ -90,17 +78,16 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
   std::unique_ptr<OutputFile> out = OutputFile::Open(kVerb, o.out);
   if (out == nullptr) return kExitBadArguments;
 
-  // Each chunk is formatted by the recording writer; the metadata and header are written once.
+  // The frames are held until the stream ends and formatted once: the header must name every
+  // channel column (`ch:NAME`) any frame of the span carries, which the first chunk cannot tell
+  // (docs/formats.md "Channels"; under 1 kB of memory per frame with its row).
   std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> stream =
       client->ExportTelemetry(request);
   esg::v1::ExportTelemetryResponse chunk;
-  int64_t frames = 0;
-  std::string first_time;
-  std::string last_time;
+  estimator::Recording recording;
+  recording.metadata["spacecraft_id"] = o.spacecraft_id;
   std::string problem;
   while (problem.empty() && stream->Read(&chunk)) {
-    estimator::Recording recording;
-    recording.metadata["spacecraft_id"] = o.spacecraft_id;
     for (const esg::v1::TelemetryFrame& proto : chunk.frames()) {
       absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
       if (!frame.ok()) {
@@ -110,13 +97,8 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
       }
       recording.frames.push_back(*std::move(frame));
     }
-    if (!problem.empty() || recording.frames.empty()) continue;
-    if (frames == 0) first_time = FormatUtc(recording.frames.front().time);
-    last_time = FormatUtc(recording.frames.back().time);
-    const std::string text = storage::FormatRecordingCsv(recording);
-    out->Write(frames == 0 ? text : RowsOf(text));
-    frames += static_cast<int64_t>(recording.frames.size());
   }
+  const int64_t frames = static_cast<int64_t>(recording.frames.size());
   if (!problem.empty()) {
     stream->Cancel();
     stream->Finish().IgnoreError();  // CANCELLED: the problem above is the reason
@@ -131,6 +113,9 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
                  o.to.empty() ? "the last" : o.to.c_str());
     return kExitFailure;
   }
+  out->Write(storage::FormatRecordingCsv(recording));
+  const std::string first_time = FormatUtc(recording.frames.front().time);
+  const std::string last_time = FormatUtc(recording.frames.back().time);
   if (absl::Status closed = out->Commit(); !closed.ok()) {
     std::fprintf(stderr, "esg %s: %s\n", kVerb, std::string(closed.message()).c_str());
     return kExitFailure;

@@ -440,5 +440,58 @@ TEST(ColumnMapping, FilesThatCannotBeOpenedAreNamed) {
                                        HasSubstr("time.column: required"))));
 }
 
+// Channels (docs/formats.md "Channels"): a mapped column per channel, an empty cell a frame
+// without it.
+TEST(ColumnMapping, ChannelColumnsAreReadEmptyCellsMissing) {
+  absl::StatusOr<ColumnMapping> m = Mapping(
+      R"("rotation": "q_in_b"})",
+      R"("rotation": "q_in_b"}, "channels": [{"name": "T_gyro2", "column": "TEMP G2"},
+                                             {"name": "heater_1", "column": "HTR1"}])");
+  ASSERT_THAT(m.status(), IsOk());
+  ASSERT_EQ(m->channels.size(), 2u);
+  const std::string csv =
+      "t,h1,h2,h3,qw,qx,qy,qz,TEMP G2,HTR1\n"
+      "2019-03-01T00:00:00Z,0.6,0.8,0,1,0,0,0,301.5,1\n"
+      "2019-03-01T00:01:00Z,0.6,0.8,0,1,0,0,0,,0\n";
+  absl::StatusOr<estimator::Recording> r = ParseMappedRecordingCsv(csv, *m);
+  ASSERT_THAT(r.status(), IsOk());
+  ASSERT_EQ(r->frames.size(), 2u);
+  ASSERT_EQ(r->frames[0].channels.size(), 2);
+  EXPECT_EQ(*r->frames[0].channels.Find("T_gyro2"), 301.5);
+  EXPECT_EQ(*r->frames[0].channels.Find("heater_1"), 1.0);
+  EXPECT_EQ(r->frames[1].channels.Find("T_gyro2"), nullptr);
+  EXPECT_EQ(*r->frames[1].channels.Find("heater_1"), 0.0);
+
+  const std::string bad =
+      "t,h1,h2,h3,qw,qx,qy,qz,TEMP G2,HTR1\n"
+      "2019-03-01T00:00:00Z,0.6,0.8,0,1,0,0,0,inf,1\n";
+  EXPECT_THAT(ParseMappedRecordingCsv(bad, *m),
+              StatusIs(kInvalid, HasSubstr("line 2, column TEMP G2 (channels[0].column): 'inf' is "
+                                           "not a finite number")));
+  EXPECT_THAT(ParseMappedRecordingCsv(kSmallCsv, *m),
+              StatusIs(kInvalid, HasSubstr("the header has no column 'TEMP G2' (named by the "
+                                           "mapping's channels[0].column)")));
+}
+
+TEST(ColumnMapping, WrongChannelMappingsNameTheField) {
+  auto with = [](const std::string& channels) {
+    return Mapping(R"("rotation": "q_in_b"})",
+                   absl::StrCat(R"("rotation": "q_in_b"}, "channels": )", channels));
+  };
+  EXPECT_THAT(with(R"([{"name": "T g", "column": "a"}])").status(),
+              StatusIs(kInvalid, HasSubstr("channels[0].name: character ' ' at index 1")));
+  EXPECT_THAT(with(R"([{"name": "T", "column": "a"}, {"name": "T", "column": "b"}])").status(),
+              StatusIs(kInvalid, HasSubstr("channels[1].name: channel 'T' is mapped twice")));
+  EXPECT_THAT(with(R"([{"name": "T"}])").status(),
+              StatusIs(kInvalid, HasSubstr("channels[0].column: required")));
+  EXPECT_THAT(with(R"([{"name": "T", "column": "h1"}])").status(),
+              StatusIs(kInvalid, HasSubstr("channels[0].column: column 'h1' is already mapped by "
+                                           "gyros[0].spinAxis.columns[0]")));
+  EXPECT_THAT(with(R"([{"name": "T", "column": "a", "unit": "K"}])").status(),
+              StatusIs(kInvalid, HasSubstr("channels[0].unit: unknown field")));
+  EXPECT_THAT(with(R"({"name": "T"})").status(),
+              StatusIs(kInvalid, HasSubstr("channels: must be an array")));
+}
+
 }  // namespace
 }  // namespace esg::storage

@@ -17,6 +17,7 @@
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/time.h"
+#include "estimator/channels.h"
 #include "estimator/rotation.h"
 #include "estimator/utc_time.h"
 #include "gmock/gmock.h"
@@ -489,6 +490,65 @@ TEST(RecordingCsv, ProblemListIsCappedWithACount) {
   EXPECT_THAT(read, StatusIs(kInvalid, AllOf(HasSubstr("60 problems"), HasSubstr("line 53, column"),
                                             Not(HasSubstr("line 54, column")),
                                             HasSubstr("... and 10 more"))));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Channel columns `ch:NAME` (docs/formats.md "Channels").
+
+TEST(RecordingCsv, ChannelsRoundTripAsChColumnsWithEmptyCellsWhereMissing) {
+  estimator::Recording r = RandomRecording(4, 38);
+  r.metadata.erase("source");  // line 3 is the header
+  r.frames[0].channels.Set("T_gyro2", 301.25);
+  r.frames[0].channels.Set("heater_1", 1.0);
+  r.frames[1].channels.Set("heater_1", 0.0);  // T_gyro2 has its own, slower cadence
+  r.frames[3].channels.Set("T_gyro2", -1.0 / 3.0);
+  const std::string csv = FormatRecordingCsv(r);
+  const std::vector<std::string> lines = absl::StrSplit(csv, '\n');
+  EXPECT_THAT(lines[2], ::testing::EndsWith(",st_valid,ch:T_gyro2,ch:heater_1"));
+  EXPECT_THAT(lines[3], ::testing::EndsWith(",301.25,1"));
+  EXPECT_THAT(lines[4], ::testing::EndsWith(",,0"));
+  EXPECT_THAT(lines[5], ::testing::EndsWith(",,"));
+  absl::StatusOr<estimator::Recording> read = ParseRecordingCsv(csv);
+  ASSERT_THAT(read, IsOk());
+  ExpectRecordingsIdentical(r, *read);
+  for (size_t i = 0; i < r.frames.size(); ++i) {
+    EXPECT_EQ(read->frames[i].channels, r.frames[i].channels) << "frame " << i;
+  }
+  EXPECT_EQ(FormatRecordingCsv(*read), csv);
+}
+
+TEST(RecordingCsv, ARecordingWithoutChannelsIsWrittenAsBefore) {
+  const std::string csv = ValidCsv(2);
+  EXPECT_THAT(csv, Not(HasSubstr("ch:")));
+  absl::StatusOr<estimator::Recording> read = ParseRecordingCsv(csv);
+  ASSERT_THAT(read, IsOk());
+  for (const estimator::TelemetryFrame& f : read->frames) EXPECT_TRUE(f.channels.empty());
+}
+
+TEST(RecordingCsv, BadChannelColumnsAndValuesAreProblemsNamingTheColumn) {
+  estimator::Recording r = RandomRecording(2, 39);
+  r.metadata.erase("source");  // line 3 is the header
+  r.frames[0].channels.Set("T_gyro2", 300.0);
+  const std::string csv = FormatRecordingCsv(r);
+  EXPECT_THAT(ParseRecordingCsv(WithField(csv, 4, "ch:T_gyro2", "warm")),
+              StatusIs(kInvalid, HasSubstr("line 4, column ch:T_gyro2: 'warm' is not a number")));
+  EXPECT_THAT(ParseRecordingCsv(WithField(csv, 5, "ch:T_gyro2", "nan")),
+              StatusIs(kInvalid, HasSubstr("line 5, column ch:T_gyro2: 'nan' is not finite")));
+  EXPECT_THAT(ParseRecordingCsv(WithField(csv, 3, "ch:T_gyro2", "ch:2hot")),
+              StatusIs(kInvalid, HasSubstr("line 3, column ch:2hot: name: character '2' at index "
+                                           "0 is not allowed")));
+  EXPECT_THAT(ParseRecordingCsv(WithField(csv, 3, "ch:T_gyro2", "ch:")),
+              StatusIs(kInvalid, HasSubstr("line 3, column ch:: name: empty name")));
+}
+
+TEST(RecordingCsv, MoreChannelsInARowThanAFrameCarriesIsAProblem) {
+  estimator::Recording r = RandomRecording(1, 40);
+  r.metadata.erase("source");  // line 3 is the header
+  for (int i = 0; i <= estimator::kMaxChannels; ++i) {
+    r.frames[0].channels.Set(absl::StrCat("c", i), i);
+  }
+  EXPECT_THAT(ParseRecordingCsv(FormatRecordingCsv(r)),
+              StatusIs(kInvalid, HasSubstr("line 4: 65 channels, at most 64 in a frame")));
 }
 
 }  // namespace
