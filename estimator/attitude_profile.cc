@@ -131,7 +131,7 @@ class SequenceProfile final : public AttitudeProfile {
     const Quaterniond q_prev = segments_[i - 1].profile->Attitude(t - starts_[i - 1]);
     const double tau = local / slew_duration_;
     const double s = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau));  // quintic
-    const Vector3d v = LogQuaternion(q_prev.conjugate() * q_next);
+    const Vector3d v = SlewRotation(i, local, q_prev.conjugate() * q_next);
     return (q_prev * ExpQuaternion(s * v)).normalized();
   }
 
@@ -157,6 +157,36 @@ class SequenceProfile final : public AttitudeProfile {
   }
 
  private:
+  // The relative rotation r = conj(q_prev) (x) q_next of the slew into segment i at local time
+  // `local`, as a rotation vector on one branch for the whole slew. Both segments keep moving, so
+  // r can pass through a rotation by pi; the shorter way (Log) would then flip its axis and the
+  // attitude would jump. Instead r's sign is followed continuously from the slew's start, where
+  // the shorter way is taken (the quaternions of r a few seconds apart are never near
+  // orthogonal: each segment turns at most a few deg/s), and the angle 2 atan2(|r_xyz|, r_w)
+  // runs over [0, 2 pi): a rotation through pi goes on the long way, continuously. While r stays
+  // below pi this is exactly Log(r).
+  Vector3d SlewRotation(size_t i, double local, const Quaterniond& r_now) const {
+    const auto relative = [&](double u) {
+      const double t = starts_[i] + u;
+      const Quaterniond q_prev = segments_[i - 1].profile->Attitude(t - starts_[i - 1]);
+      return Quaterniond(q_prev.conjugate() * segments_[i].profile->Attitude(u)).normalized();
+    };
+    Quaterniond branch = Canonical(relative(0.0));
+    for (double u = kSlewUnwrapStep; u < local; u += kSlewUnwrapStep) {
+      const Quaterniond r = relative(u);
+      branch = r.dot(branch) < 0.0 ? Quaterniond(-r.w(), -r.x(), -r.y(), -r.z()) : r;
+    }
+    Quaterniond r = r_now;
+    if (r.dot(branch) < 0.0) r = Quaterniond(-r.w(), -r.x(), -r.y(), -r.z());
+    if (r.w() >= 0.0) return LogQuaternion(r);  // below pi: the shorter way, as Log gives it
+    r.normalize();
+    const Vector3d xyz(r.x(), r.y(), r.z());
+    const double n = xyz.norm();
+    return 2.0 * std::atan2(n, r.w()) * xyz / n;  // (pi, 2 pi): n > 0 there
+  }
+
+  static constexpr double kSlewUnwrapStep = 5.0;  // [s]
+
   size_t SegmentIndex(double t) const {
     const auto it = std::upper_bound(starts_.begin(), starts_.end(), t);
     return it == starts_.begin() ? 0 : static_cast<size_t>(it - starts_.begin()) - 1;

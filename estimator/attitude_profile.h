@@ -92,9 +92,10 @@ struct ProfileSegment {
 //   tau = (t - T_i) / slew_duration,  s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 (quintic),
 // where q_prev and q_next are the two segments' attitudes at t. Between two inertial holds this is
 // the classic eigen-axis slew with a quintic time law (zero rate and acceleration at both ends);
-// in general attitude and rate are continuous at both ends of the slew. The relative rotation
-// must stay below pi during the slew (it does for the built-in profiles; a rotation through pi
-// flips the eigen axis). slew_duration = 0 switches instantly. Rates come from finite differences
+// in general attitude and rate are continuous at both ends of the slew. Log takes the shorter way
+// at the slew's start and follows the same branch continuously after it: a relative rotation
+// that passes through pi while both segments move goes on the long way instead of flipping the
+// eigen axis (attitude and rate stay continuous). slew_duration = 0 switches instantly. Rates come from finite differences
 // during slews and from the segment otherwise.
 // InvalidArgument for an empty list, a null profile, a non-positive duration, a negative slew or a
 // slew longer than a segment.

@@ -139,6 +139,46 @@ TEST(AttitudeProfile, SlewsAreContinuousInAttitudeAndRate) {
   }
 }
 
+// A slew whose relative rotation passes through pi while the incoming segment turns: the
+// shorter way would flip the eigen axis there (the attitude jumping by about pi at mid-slew);
+// the slew keeps its branch and goes on the long way, continuously.
+TEST(AttitudeProfile, ASlewThroughPiStaysContinuous) {
+  const Vector3d z = Vector3d::UnitZ();
+  // Segment B starts at pi - 0.25 rad about z and turns at 0.01 rad/s about z: the relative
+  // rotation from the hold passes pi 25 s into the 50 s slew (tau = 1/2).
+  auto spin = ConstantSpin(ExpQuaternion((kPi - 0.25) * z), z, 0.01);
+  ASSERT_THAT(spin, IsOk());
+  auto p = Sequence({{InertialHold(Quaterniond::Identity()), 100.0}, {*spin, 200.0}}, 50.0);
+  ASSERT_THAT(p, IsOk());
+  double max_step = 0.0;
+  for (double t = 95.0; t < 160.0; t += 0.1) {
+    max_step = std::max(max_step, RotationAngle((*p)->Attitude(t), (*p)->Attitude(t + 0.1)));
+  }
+  // The long way turns about 3.6 rad in 50 s: peak rate 30/16 * 3.6 / 50 = 0.135 rad/s.
+  EXPECT_LT(max_step, 0.1 * 0.15);
+  EXPECT_THAT((*p)->Attitude(150.0), IsNearQuaternion((*spin)->Attitude(50.0), 1e-12));
+  ExpectRatesMatchFiniteDifferences(**p, 300.0, 1e-6);
+}
+
+// The seeded calibration and mixed profiles draw the spin phases, so a slew between two spinning
+// segments can pass through pi (seed 5024 of the calibration profile did, at 18 h): the attitude
+// stays continuous, at the rates of spins and slews, over every slew of a day.
+TEST(AttitudeProfile, SeededProfilesHaveNoAttitudeJumps) {
+  for (const char* name : {"calibration", "mixed"}) {
+    for (uint64_t seed : {uint64_t{5024}, uint64_t{3029}, uint64_t{1}, uint64_t{2}, uint64_t{3},
+                          uint64_t{4}, uint64_t{5}, uint64_t{6}, uint64_t{7}, uint64_t{8}}) {
+      auto p = MakeNamedProfile(name, HoursToSeconds(24.0), seed);
+      ASSERT_THAT(p, IsOk());
+      double max_step = 0.0;
+      for (double t = 0.0; t < HoursToSeconds(24.0); t += 1.0) {
+        max_step = std::max(max_step, RotationAngle((*p)->Attitude(t), (*p)->Attitude(t + 1.0)));
+      }
+      // A slew of at most 2 pi in 600 s peaks at 30/16 * 2 pi / 600 = 0.02 rad/s, plus spins.
+      EXPECT_LT(max_step, 0.03) << name << " seed " << seed;
+    }
+  }
+}
+
 TEST(AttitudeProfile, SequenceBetweenHoldsIsEigenAxisSlew) {
   const Quaterniond qa = Quaterniond::Identity();
   const Vector3d axis = Vector3d(1, -1, 2).normalized();
