@@ -16,6 +16,7 @@
 #include "Eigen/Geometry"
 #include "absl/status/status.h"
 #include "absl/strings/string_view.h"
+#include "estimator/channels.h"
 #include "estimator/telemetry.h"
 
 namespace esg::fuzz {
@@ -83,10 +84,21 @@ inline void CheckRecordingInvariants(const estimator::Recording& recording) {
       const Eigen::Vector4d q = f.star_tracker->q_in_b.coeffs();
       ESG_FUZZ_CHECK(q.allFinite() && IsUnit(q.norm()), "unit star-tracker quaternion");
     }
+    // Channels (estimator/channels.h): at most kMaxChannels, valid names once each in name
+    // order, finite values.
+    ESG_FUZZ_CHECK(f.channels.size() <= estimator::kMaxChannels, "at most 64 channels");
+    const estimator::ChannelValue* previous = nullptr;
+    for (const estimator::ChannelValue& c : f.channels) {
+      ESG_FUZZ_CHECK(estimator::ValidateChannelName(c.name, "name").ok(), c.name);
+      ESG_FUZZ_CHECK(std::isfinite(c.value), "finite channel value");
+      ESG_FUZZ_CHECK(previous == nullptr || previous->name < c.name, "channels in name order");
+      previous = &c;
+    }
   }
 }
 
-// Bit for bit: times, gyro readings, star-tracker readings (the quaternion only when valid).
+// Bit for bit: times, gyro readings, channels, star-tracker readings (the quaternion only when
+// valid).
 inline bool SameFrames(const estimator::Recording& a, const estimator::Recording& b) {
   if (a.frames.size() != b.frames.size()) return false;
   for (size_t i = 0; i < a.frames.size(); ++i) {
@@ -101,6 +113,12 @@ inline bool SameFrames(const estimator::Recording& a, const estimator::Recording
       if (x.gyros[k]->u_k_mv.has_value() && !SameBits(*x.gyros[k]->u_k_mv, *y.gyros[k]->u_k_mv)) {
         return false;
       }
+    }
+    if (x.channels.size() != y.channels.size()) return false;
+    auto cy = y.channels.begin();
+    for (const estimator::ChannelValue& cx : x.channels) {
+      if (cx.name != cy->name || !SameBits(cx.value, cy->value)) return false;
+      ++cy;
     }
     if (x.star_tracker.has_value() != y.star_tracker.has_value()) return false;
     if (!x.star_tracker.has_value()) continue;

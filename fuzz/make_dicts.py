@@ -35,14 +35,14 @@ write('recording_csv', 'recording CSV version 1 (docs/formats.md)',
       ['# format: esg-recording-csv 1', '# spacecraft_id: ', '# ', ':', ',', '\n', '\r\n',
        'esg-recording-csv 1', '2019-03-01T00:00:00Z', '2019-03-01T00:01:00.5Z', '+00:00', 'T', 'Z',
        '.000000001', '1e-3', '1e308', '-0', 'nan', 'inf', '0.6', '0.8', '1', '0', '-1',
-       '1.0000000001', '0x1p-3'] + csv_columns)
+       '1.0000000001', '0x1p-3', 'ch:', 'ch:T_gyro2', 'ch:heater_1'] + csv_columns)
 write('column_mapping', 'column mapping JSON (formats/column_mapping.h), then %% and the CSV',
       ['\n%%\n', '{', '}', '[', ']', ':', ',', '"', 'null', 'true', 'esg-column-mapping 1'] +
       quoted('format spacecraftId delimiter time column epoch unit pattern weekColumn '
              'secondsColumn gpsMinusUtcS gyros id spinAxis form columns voltages starTracker '
              'scalar rotation valid validValues invalidValues rfc3339 since_epoch '
              'gps_week_seconds azimuth_elevation direction_cosines first last q_b_in q_in_b s ms '
-             'us deg rad arcsec arcmin V mV uV') +
+             'us deg rad arcsec arcmin V mV uV channels name') +
       ['%Y-%m-%d %H:%M:%E*S', '%z', '1970-01-01T00:00:00Z', ';', '\t', '|', '""', '# ',
        '1551398400.5', '2045', '302400'])
 write('config_json', 'configuration JSON (proto3 JSON mapping of esg.v1.SpacecraftConfig)',

@@ -3,7 +3,8 @@
 // through deploy/examples/columns_user_export.json, as telemetry frames in the protobuf wire
 // form, as an AEM, and the session's server checkpoints at several points of the flight (before
 // the first frame, before initialisation, converged) in every session version (1 to 7) and every
-// server format (3 as written, 2 and 1 as read). Usage: fuzz_make_seeds <out dir>. The
+// server format (3 as written, 2 and 1 as read). Some frames carry housekeeping channels, and a
+// configuration declares them. Usage: fuzz_make_seeds <out dir>. The
 // hand-written seeds live beside them.
 #include <cmath>
 #include <cstdint>
@@ -167,6 +168,12 @@ int main(int argc, char** argv) {
   frames[5].star_tracker->valid = false;                       // an invalid reading
   frames[6].gyros[3].reset();                                  // a gyro's reading missing
   frames[7].gyros[1]->u_k_mv.reset();                          // voltages not telemetered
+  // Housekeeping channels (docs/formats.md "Channels"): a temperature every third frame, a
+  // heater state in most, none in frame 8.
+  for (int i = 0; i < 8; ++i) {
+    if (i % 3 == 0) frames[i].channels.Set("T_gyro2", 290.0 + 0.25 * i);
+    if (i != 4) frames[i].channels.Set("heater_1", i % 2);
+  }
 
   // Recording CSV and the user's export, a few frames each.
   estimator::Recording small;
@@ -180,6 +187,15 @@ int main(int argc, char** argv) {
   const std::string user_json((std::istreambuf_iterator<char>(user_mapping)), {});
   Write(out + "/column_mapping/esg_recording.txt", esg_json + "\n%%\n" + csv);
   Write(out + "/column_mapping/user_export.txt", user_json + "\n%%\n" + UserExport(small));
+  // The project's mapping with the channel columns mapped as well.
+  std::string channels_json = esg_json;
+  if (const size_t end = channels_json.rfind('}'); end != std::string::npos) {
+    channels_json.insert(end,
+                         ",\n  \"channels\": [\n"
+                         "    {\"name\": \"T_gyro2\", \"column\": \"ch:T_gyro2\"},\n"
+                         "    {\"name\": \"heater_1\", \"column\": \"ch:heater_1\"}]\n");
+  }
+  Write(out + "/column_mapping/esg_recording_channels.txt", channels_json + "\n%%\n" + csv);
 
   // Telemetry frames in the protobuf wire form.
   for (int i = 0; i < 9; ++i) {
@@ -189,6 +205,19 @@ int main(int argc, char** argv) {
 
   // The configuration as ConfigToJson writes it.
   Write(out + "/config_json/rdk1_written.json", proto_convert::ConfigToJson(*config));
+  estimator::SpacecraftConfig with_channels = *config;
+  estimator::ChannelConfig temperature;
+  temperature.name = "T_gyro2";
+  temperature.unit = "K";
+  temperature.valid_min = 250.0;
+  temperature.valid_max = 350.0;
+  temperature.max_age = absl::Minutes(10);
+  estimator::ChannelConfig heater;
+  heater.name = "heater_1";
+  heater.unit = "1";
+  heater.valid_max = 1.0;
+  with_channels.channels = {temperature, heater};
+  Write(out + "/config_json/rdk1_channels.json", proto_convert::ConfigToJson(with_channels));
 
   // An AEM of the true attitude: two segments, sigmas in the first.
   storage::AemHeader header;
