@@ -11,7 +11,11 @@
 # gyro: they run 30 times each).
 # Usage: scripts/false_exclusions.sh [N [FIRST_SEED [HOURS]]]   (defaults 450, 1, 12)
 # ESG_BUILD=DIR (default build); ESG_JOBS=J parallel runs (default 2); ESG_KEEP=DIR keeps each
-# failing run's scenario, recording and calibration JSON there.
+# failing run's scenario, recording and calibration JSON there. Harder variants:
+# ESG_CLASS=NAME runs one class only (names below, e.g. rate_drift); ESG_CONFIG=FILE calibrates
+# with another configuration (e.g. one without misalignment states); ESG_TWO=1 adds a second
+# effect of another class (no drift step) in another running gyro, drawn from the seed. A day
+# (HOURS 24) crosses every slew of the calibration profile, the -z to +z one at 18 h included.
 # The effect classes: displaced rotor, unconfigured gyro misalignment, unequal stiffness, a
 # cycling (orbital, thermal) drift, a switching drift, a drift driven by an untelemetered
 # quantity, a raised random walk, a readout scale error, a creeping rotor (a growing drift), a
@@ -25,6 +29,7 @@ first=${2:-1}
 hours=${3:-12}
 build=${ESG_BUILD:-build}
 jobs=${ESG_JOBS:-2}
+config=${ESG_CONFIG:-deploy/examples/rdk1.json}
 esg="$build/client/esg"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
@@ -34,14 +39,15 @@ run_one() {
   local dir="$work/$seed"
   mkdir -p "$dir"
   python3 - "$seed" "$dir/scenario.json" <<'PY'
-import json, math, random, sys
+import json, math, os, random, sys
 seed = int(sys.argv[1]); out = sys.argv[2]
 rng = random.Random(7919 * seed)
 classes = ["rotor_displacement", "gyro_misalignment", "unequal_stiffness", "orbital_drift",
            "switching_drift", "hidden_driver", "random_walk", "readout_scale", "creeping_rotor",
            "drift_step", "star_tracker_misalignment", "star_tracker_latency", "nu_drift",
            "rate_drift", "warm_up_transient"]
-cls = classes[(seed - 1) % len(classes)]
+cls = os.environ.get("ESG_CLASS") or classes[(seed - 1) % len(classes)]
+if cls not in classes: sys.exit(f"ESG_CLASS: unknown class {cls!r}")
 gyro = 1 + ((seed - 1) // len(classes)) % 3
 size = rng.uniform(0.03, 0.15)  # deg/h
 def unit():
@@ -54,51 +60,62 @@ g = {"id": gyro}
 sc = {"description": f"false-exclusion seed {seed}: {cls} in gyro {gyro}, {size:.3f} deg/h",
       "profile": rng.choice(["calibration", "mixed", "orbital"]), "profileSeed": seed,
       "gyros": [g]}
-if cls == "rotor_displacement":
-    # C ~ 0.065 deg/h per um (C10 + C20): size in deg/h -> um.
-    g["rotorDisplacementUm"] = [size / 0.065 * x for x in u]
-elif cls == "nu_drift":
-    g["nuDegH"] = [size * x for x in u]
-elif cls == "gyro_misalignment":
-    g["misalignmentArcsec"] = [rng.uniform(40, 80) * x for x in u]
-elif cls == "unequal_stiffness":
-    g["muDegH"] = [size * x for x in u]
-elif cls == "orbital_drift":
-    g["orbitalDrift"] = {"amplitudeDegH": [size * x for x in u], "phaseDeg": rng.uniform(0, 360),
-                         "periodMin": 94}
-elif cls == "switching_drift":
-    g["switchingDrift"] = {"amplitudeDegH": [size * x for x in u], "meanDwellHours": rng.uniform(1, 6)}
-elif cls == "hidden_driver":
-    g["hiddenDriverDrift"] = {"amplitudeDegH": [size * x for x in u], "correlationHours": rng.uniform(0.5, 4)}
-elif cls == "random_walk":
-    g["randomWalkDegHSqrtH"] = rng.uniform(0.005, 0.02)
-elif cls == "readout_scale":
-    g["readoutDistortionPpm"] = [rng.uniform(-300, 300) for _ in range(3)] + [0, 0, 0]
-elif cls == "creeping_rotor":
-    g["rotorDisplacementUm"] = [0.3 * x for x in u]
-    g["rotorDisplacementRateUmH"] = [size / 0.065 / 12.0 * x for x in u]
-elif cls == "drift_step":
-    g["fault"] = {"timeHours": rng.uniform(1, 10), "kind": "drift_step", "degH": [size * x for x in u]}
-elif cls == "rate_drift":
-    # A drift proportional to the body rate: size deg/h at 0.1 deg/s (the calibration profile's
-    # turn of 6 deg a minute), along u, for the rate along a second random direction.
-    v = unit()
-    g["rateDrift"] = {"degHPerDegS": [size / 0.1 * a * b for a in u for b in v]}
-elif cls == "warm_up_transient":
-    g["transientDrift"] = {"amplitudeDegH": [size * x for x in u],
-                           "timeConstantHours": rng.uniform(1, 6)}
-elif cls == "star_tracker_misalignment":
-    sc["gyros"] = []
-    sc["starTracker"] = {"misalignmentArcsec": [rng.uniform(40, 80) * x for x in u]}
-elif cls == "star_tracker_latency":
-    sc["gyros"] = []
-    sc["starTracker"] = {"latencyMs": rng.choice([-1, 1]) * rng.uniform(50, 300)}
+def add_effect(cls, g, size, u):
+    if cls == "rotor_displacement":
+        # C ~ 0.065 deg/h per um (C10 + C20): size in deg/h -> um.
+        g["rotorDisplacementUm"] = [size / 0.065 * x for x in u]
+    elif cls == "nu_drift":
+        g["nuDegH"] = [size * x for x in u]
+    elif cls == "gyro_misalignment":
+        g["misalignmentArcsec"] = [rng.uniform(40, 80) * x for x in u]
+    elif cls == "unequal_stiffness":
+        g["muDegH"] = [size * x for x in u]
+    elif cls == "orbital_drift":
+        g["orbitalDrift"] = {"amplitudeDegH": [size * x for x in u], "phaseDeg": rng.uniform(0, 360),
+                             "periodMin": 94}
+    elif cls == "switching_drift":
+        g["switchingDrift"] = {"amplitudeDegH": [size * x for x in u], "meanDwellHours": rng.uniform(1, 6)}
+    elif cls == "hidden_driver":
+        g["hiddenDriverDrift"] = {"amplitudeDegH": [size * x for x in u], "correlationHours": rng.uniform(0.5, 4)}
+    elif cls == "random_walk":
+        g["randomWalkDegHSqrtH"] = rng.uniform(0.005, 0.02)
+    elif cls == "readout_scale":
+        g["readoutDistortionPpm"] = [rng.uniform(-300, 300) for _ in range(3)] + [0, 0, 0]
+    elif cls == "creeping_rotor":
+        g["rotorDisplacementUm"] = [0.3 * x for x in u]
+        g["rotorDisplacementRateUmH"] = [size / 0.065 / 12.0 * x for x in u]
+    elif cls == "drift_step":
+        g["fault"] = {"timeHours": rng.uniform(1, 10), "kind": "drift_step", "degH": [size * x for x in u]}
+    elif cls == "rate_drift":
+        # A drift proportional to the body rate: size deg/h at 0.1 deg/s (the calibration profile's
+        # turn of 6 deg a minute), along u, for the rate along a second random direction.
+        v = unit()
+        g["rateDrift"] = {"degHPerDegS": [size / 0.1 * a * b for a in u for b in v]}
+    elif cls == "warm_up_transient":
+        g["transientDrift"] = {"amplitudeDegH": [size * x for x in u],
+                               "timeConstantHours": rng.uniform(1, 6)}
+    elif cls == "star_tracker_misalignment":
+        sc["gyros"] = []
+        sc["starTracker"] = {"misalignmentArcsec": [rng.uniform(40, 80) * x for x in u]}
+    elif cls == "star_tracker_latency":
+        sc["gyros"] = []
+        sc["starTracker"] = {"latencyMs": rng.choice([-1, 1]) * rng.uniform(50, 300)}
+
+add_effect(cls, g, size, u)
+if os.environ.get("ESG_TWO") and cls not in ("star_tracker_misalignment", "star_tracker_latency"):
+    cls2 = rng.choice([c for c in classes if c not in (cls, "drift_step", "star_tracker_misalignment",
+                                                       "star_tracker_latency")])
+    g2 = {"id": rng.choice([x for x in (1, 2, 3) if x != gyro])}
+    size2 = rng.uniform(0.03, 0.15)
+    sc["gyros"].append(g2)
+    sc["description"] += f" + {cls2} in gyro {g2['id']}, {size2:.3f} deg/h"
+    add_effect(cls2, g2, size2, unit())
 json.dump(sc, open(out, "w"))
 PY
-  "$esg" simulate --config deploy/examples/rdk1.json --scenario "$dir/scenario.json" \
+  "$esg" simulate --config "$config" --scenario "$dir/scenario.json" \
     --hours "$hours" --seed "$seed" --out "$dir/rec.csv" >/dev/null 2>"$dir/sim.err" || {
       echo "seed $seed: SIMULATE FAILED $(head -c 300 "$dir/sim.err")"; return; }
-  "$esg" calibrate --config deploy/examples/rdk1.json --recording "$dir/rec.csv" \
+  "$esg" calibrate --config "$config" --recording "$dir/rec.csv" \
     --model 10+11 --format json >"$dir/out.json" 2>"$dir/cal.err" || {
       echo "seed $seed: CALIBRATE FAILED $(head -c 300 "$dir/cal.err")"; return; }
   python3 - "$seed" "$dir/scenario.json" "$dir/out.json" <<'PY'
@@ -122,7 +139,7 @@ PY
   rm -f "$dir/rec.csv"
 }
 export -f run_one
-export work esg hours
+export work esg hours config ESG_CLASS ESG_TWO
 seq "$first" $((first + n - 1)) | xargs -P "$jobs" -I{} bash -c 'run_one {}' | tee "$work/results.txt"
 fails=$(grep -c ': FAIL' "$work/results.txt" || true)
 passes=$(grep -c ': PASS' "$work/results.txt" || true)
