@@ -325,4 +325,12 @@ std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> EsgClient::Expor
                                                                           std::move(reader));
 }
 
+std::unique_ptr<ReaderStream<esg::v1::PredictChunk>> EsgClient::PredictAttitudeStream(
+    const esg::v1::PredictRequest& request) {
+  std::unique_ptr<grpc::ClientContext> context = NewContext(false, {}, request.spacecraft_id());
+  auto reader = stub_->PredictAttitudeStream(context.get(), request);
+  return std::make_unique<ReaderStream<esg::v1::PredictChunk>>(std::move(context),
+                                                               std::move(reader));
+}
+
 }  // namespace esg::client

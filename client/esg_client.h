@@ -102,7 +102,7 @@ class AlertStream {
 };
 
 // A server-streaming call read message by message (Diagnose, ExportCoefficientHistory,
-// ExportTelemetry): the same contract as AlertStream.
+// ExportTelemetry, PredictAttitudeStream): the same contract as AlertStream.
 template <typename Message>
 class ReaderStream {
  public:
@@ -137,8 +137,12 @@ class EsgClient {
                                                   const CallOptions& call = {});
   // Every session: follows next_page_token until the last page (each page its own call).
   absl::StatusOr<esg::v1::ListSessionsResponse> ListSessions(const CallOptions& call = {});
+  // The whole prediction in one message (kept for compatibility; esg predict streams).
   absl::StatusOr<esg::v1::PredictResponse> PredictAttitude(const esg::v1::PredictRequest& request,
                                                            const CallOptions& call = {});
+  // The prediction in chunks as the server computes them (PredictAttitudeStream).
+  std::unique_ptr<ReaderStream<esg::v1::PredictChunk>> PredictAttitudeStream(
+      const esg::v1::PredictRequest& request);
   absl::StatusOr<esg::v1::Alert> AcknowledgeAlert(const esg::v1::AcknowledgeRequest& request,
                                                   const CallOptions& call = {});
   // With request.page_token empty: the whole history, following next_page_token page by page

@@ -3,12 +3,17 @@
 # docs/service.md "Limits"): starts this build's esgd on a free port over a temp database, feeds
 # it 1 h of the demo flight with the esg CLI, then prints VmRSS (/proc/PID/status) before, at
 # its highest while the predictions run (sampled every 50 ms), right after, and every 10 s for a
-# minute. ESGD / ESG name other binaries (a before/after comparison); extra arguments go to esgd.
+# minute. ESGD / ESG name other binaries (a before/after comparison); ESG_PREDICT the esg that
+# runs the eight predictions (default ESG): this build's esg streams them (PredictAttitudeStream),
+# an esg built before issue 40's stream asks for each whole (PredictAttitude), so the two compare
+# the rpcs against the same esgd. Extra arguments go to esgd.
 #   scripts/memory_after_predictions.sh [ESGD_ARGS...]
+#   ESG_PREDICT=/path/to/older/esg scripts/memory_after_predictions.sh
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 ESGD=${ESGD:-$ROOT/build/server/esgd}
 ESG=${ESG:-$ROOT/build/client/esg}
+ESG_PREDICT=${ESG_PREDICT:-$ESG}
 TMP=$(mktemp -d)
 trap 'kill $PID 2>/dev/null || true; wait 2>/dev/null || true; rm -rf "$TMP"' EXIT
 
@@ -33,8 +38,8 @@ BEFORE=$(rss)
 PEAK=$BEFORE
 CLIENTS=()
 for i in $(seq 8); do
-  esg predict --spacecraft RDK-1 --from "$FROM" --to "$TO" --step 1.728 --aem "$TMP/p$i.aem" \
-    --json >/dev/null &
+  "$ESG_PREDICT" --server "127.0.0.1:$PORT" predict --spacecraft RDK-1 --from "$FROM" --to "$TO" \
+    --step 1.728 --aem "$TMP/p$i.aem" --json >/dev/null &
   CLIENTS+=($!)
 done
 running() { for c in "${CLIENTS[@]}"; do kill -0 "$c" 2>/dev/null && return 0; done; return 1; }
@@ -43,6 +48,7 @@ while running; do
   sleep 0.05
 done
 for c in "${CLIENTS[@]}"; do wait "$c"; done
+echo "predictions by $ESG_PREDICT ($("$ESG_PREDICT" predict --help | sed -n 's/.*(\(PredictAttitude[A-Za-z]*\)).*/\1/p' | head -1))"
 echo "AEM file of one prediction: $(stat -c %s "$TMP/p1.aem") bytes"
 echo "esgd VmRSS: before $((BEFORE / 1024)) MiB, peak $((PEAK / 1024)) MiB, right after $(($(rss) / 1024)) MiB"
 for t in 10 20 30 40 50 60; do

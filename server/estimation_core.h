@@ -82,6 +82,8 @@
 
 namespace esg::server {
 
+class PredictionStream;
+
 // Who asked for a diagnosis (storage::DiagnosisRecord requested_by, answers_alert): empty and 0
 // for an operator's Diagnose call.
 struct DiagnosisOrigin {
@@ -248,6 +250,11 @@ class EstimationCore {
   // or held (prediction.cc; docs/service.md "PredictAttitude"). FailedPrecondition naming the
   // state when the session's output is not available.
   absl::StatusOr<esg::v1::PredictResponse> Predict(const esg::v1::PredictRequest& request);
+  // The same prediction one chunk at a time (prediction_stream.h; PredictAttitudeStream): the
+  // request is checked and the session copied now, every error above that does not depend on
+  // the samples returned here; the samples are computed by PredictionStream::Next.
+  absl::StatusOr<std::unique_ptr<PredictionStream>> StartPrediction(
+      const esg::v1::PredictRequest& request);
   absl::StatusOr<esg::v1::HistoryResponse> History(const esg::v1::HistoryRequest& request);
   // One page of a spacecraft's per-step estimates in measurement-time order (docs/service.md
   // "Per-step estimates", "Paging"). InvalidArgument for an empty spacecraft_id, `to` before

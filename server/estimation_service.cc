@@ -5,6 +5,8 @@
 #include "server/estimation_service.h"
 
 #include <cstdint>
+#include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <thread>
@@ -27,6 +29,7 @@
 #include "server/grpc_status.h"
 #include "server/log.h"
 #include "server/memory_release.h"
+#include "server/prediction_stream.h"
 #include "server/proto_mapping.h"
 #include "server/spacecraft_scope.h"
 #include "server/telemetry_reactor.h"
@@ -202,6 +205,123 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::PredictAttitude(
     reactor->Finish(ToGrpcStatus(status, *context));
   });
   return reactor;
+}
+
+namespace {
+
+// PredictAttitudeStream's reactor: each chunk is computed on a prediction thread (never on a
+// callback thread), and only once the client has taken the previous one (one write in flight:
+// gRPC flow control), so a call holds one chunk at a time however large the prediction. The
+// caller's prediction slot is held from the first chunk to the last and given back before
+// Finish. A client that goes away ends the call with CANCELLED at the next chunk.
+class PredictStreamReactor : public grpc::ServerWriteReactor<esg::v1::PredictChunk> {
+ public:
+  using Run = std::function<void(absl::AnyInvocable<void() &&>)>;
+  PredictStreamReactor(CallCounter* calls, EstimationCore* core, Run run,
+                       grpc::CallbackServerContext* context, const esg::v1::PredictRequest* request,
+                       CallLimiter::Permit permit)
+      : token_(calls),
+        core_(core),
+        run_(std::move(run)),
+        context_(context),
+        request_(request),
+        permit_(std::move(permit)) {
+    ComputeNext();
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (!ok) {
+      FinishWith(absl::CancelledError("PredictAttitudeStream: the client went away"));
+      return;
+    }
+    ComputeNext();
+  }
+
+  void OnDone() override {
+    NoteFreedMemory(written_bytes_);
+    delete this;
+  }
+
+ private:
+  void ComputeNext() {
+    run_([this] {
+      if (context_->IsCancelled()) {
+        FinishWith(absl::CancelledError("PredictAttitudeStream: cancelled"));
+        return;
+      }
+      if (prediction_ == nullptr) {
+        absl::StatusOr<std::unique_ptr<PredictionStream>> started =
+            core_->StartPrediction(*request_);
+        if (!started.ok()) {
+          FinishWith(started.status());
+          return;
+        }
+        prediction_ = std::move(*started);
+      }
+      absl::StatusOr<std::optional<esg::v1::PredictChunk>> chunk =
+          prediction_->Next(kPredictChunkSamples);
+      if (!chunk.ok() || !chunk->has_value()) {
+        prediction_.reset();
+        FinishWith(chunk.ok() ? absl::OkStatus() : chunk.status());
+        return;
+      }
+      current_ = std::move(**chunk);
+      written_bytes_ += static_cast<int64_t>(current_.ByteSizeLong());
+      StartWrite(&current_);
+    });
+  }
+
+  // The slot first: a client that starts its next prediction on the status is not refused.
+  void FinishWith(const absl::Status& status) {
+    prediction_.reset();
+    permit_.Release();
+    Finish(ToGrpcStatus(status, *context_));
+  }
+
+  CallCounter::Token token_;
+  EstimationCore* const core_;
+  const Run run_;
+  grpc::CallbackServerContext* const context_;
+  const esg::v1::PredictRequest* const request_;
+  CallLimiter::Permit permit_;
+  std::unique_ptr<PredictionStream> prediction_;
+  esg::v1::PredictChunk current_;  // the chunk being written
+  int64_t written_bytes_ = 0;
+};
+
+// A call refused before it starts.
+class RefusedPredictStream : public grpc::ServerWriteReactor<esg::v1::PredictChunk> {
+ public:
+  RefusedPredictStream(CallCounter* calls, const absl::Status& status) : token_(calls) {
+    Finish(ToGrpcStatus(status));
+  }
+  void OnDone() override { delete this; }
+
+ private:
+  CallCounter::Token token_;
+};
+
+}  // namespace
+
+grpc::ServerWriteReactor<esg::v1::PredictChunk>* EstimationServiceImpl::PredictAttitudeStream(
+    grpc::CallbackServerContext* context, const esg::v1::PredictRequest* request) {
+  absl::StatusOr<std::string> caller = Caller(context, Role::kRead);
+  if (caller.ok()) {
+    // Before a permit is taken: a misrouted call must not hold a prediction slot.
+    if (absl::Status in_scope = CheckCallScope(*context, request->spacecraft_id());
+        !in_scope.ok()) {
+      caller = in_scope;
+    }
+  }
+  if (!caller.ok()) return new RefusedPredictStream(&calls_, caller.status());
+  // The same bounds as PredictAttitude: one limiter counts both rpcs.
+  absl::StatusOr<CallLimiter::Permit> permit =
+      predictions_.Acquire(*caller, "PredictAttitudeStream");
+  if (!permit.ok()) return new RefusedPredictStream(&calls_, permit.status());
+  return new PredictStreamReactor(
+      &calls_, core_,
+      [this](absl::AnyInvocable<void() &&> task) { RunPrediction(std::move(task)); }, context,
+      request, std::move(*permit));
 }
 
 grpc::ServerWriteReactor<esg::v1::Alert>* EstimationServiceImpl::SubscribeAlerts(

@@ -2,9 +2,10 @@
 // callback server). Reactors stay small: each checks the caller's role (server/auth.h), hands
 // the work to EstimationCore and maps its absl::Status through ToGrpcStatus.
 //
-// Long work never runs on gRPC's callback threads: PredictAttitude runs on the service's own
-// prediction pool (one thread per allowed concurrent prediction), each Diagnose on a thread of
-// its own. Both are bounded per caller and in total (CallLimits, docs/service.md "Limits");
+// Long work never runs on gRPC's callback threads: PredictAttitude, and each chunk of
+// PredictAttitudeStream, run on the service's own prediction pool (one thread per allowed
+// concurrent prediction; the two rpcs share one bound), each Diagnose on a thread of its own.
+// Both are bounded per caller and in total (CallLimits, docs/service.md "Limits");
 // beyond a bound the call fails at once with RESOURCE_EXHAUSTED.
 #ifndef ESG_SERVER_ESTIMATION_SERVICE_H_
 #define ESG_SERVER_ESTIMATION_SERVICE_H_
@@ -76,6 +77,8 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerUnaryReactor* PredictAttitude(grpc::CallbackServerContext* context,
                                             const esg::v1::PredictRequest* request,
                                             esg::v1::PredictResponse* response) override;
+  grpc::ServerWriteReactor<esg::v1::PredictChunk>* PredictAttitudeStream(
+      grpc::CallbackServerContext* context, const esg::v1::PredictRequest* request) override;
   grpc::ServerWriteReactor<esg::v1::Alert>* SubscribeAlerts(
       grpc::CallbackServerContext* context, const esg::v1::AlertSubscription* request) override;
   grpc::ServerUnaryReactor* AcknowledgeAlert(grpc::CallbackServerContext* context,

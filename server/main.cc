@@ -100,10 +100,12 @@ void AddServingFlags(CLI::App& app, esg::server::ServerOptions& options, Flags& 
 void AddLimitFlags(CLI::App& app, esg::server::ServerOptions& options, Flags& flags) {
   // Limits (docs/service.md "Limits"); EsgServer::Start checks the values.
   app.add_option("--max-predictions-per-caller", options.calls.max_predictions_per_caller,
-                 "Concurrent PredictAttitude calls of one caller (token name, else peer address)")
+                 "Concurrent predictions (PredictAttitude, PredictAttitudeStream) of one "
+                 "caller (token name, else peer address)")
       ->capture_default_str();
   app.add_option("--max-predictions", options.calls.max_predictions,
-                 "Concurrent PredictAttitude calls in total (also the prediction threads)")
+                 "Concurrent predictions (PredictAttitude, PredictAttitudeStream) in total "
+                 "(also the prediction threads)")
       ->capture_default_str();
   app.add_option("--max-diagnoses-per-caller", options.calls.max_diagnoses_per_caller,
                  "Concurrent Diagnose calls of one caller")

@@ -1,18 +1,22 @@
-// PredictAttitude (see estimation_core.h and docs/service.md "PredictAttitude"): samples at or
-// before the last archived frame from the archived gyro readings (ATTITUDE_SOURCE_RECORDED),
-// whether the filter has applied those frames yet or not; later ones from a copy of the session
-// with the planned attitude (PLANNED) or an inertial hold of its last estimate (INERTIAL_HOLD).
+// PredictAttitude and PredictAttitudeStream (see estimation_core.h, prediction_stream.h and
+// docs/service.md "PredictAttitude"): samples at or before the last archived frame from the
+// archived gyro readings (ATTITUDE_SOURCE_RECORDED), whether the filter has applied those frames
+// yet or not; later ones with the planned attitude (PLANNED) or an inertial hold (INERTIAL_HOLD).
 // The response and the AEM say which, in words (proto/attitude_source_words.h).
 //
-// The 1-sigma steps down at the switch, and that is the physics, not a lost covariance: the
-// recorded samples come from a fresh session that withholds the star tracker after its fix, so
-// their 1-sigma is that of the gyros alone since the fix; the plan or the hold starts from the
-// filter's last estimate, which used the star tracker at every frame up to it, and propagates
-// that estimate's covariance (its 1-sigma at the first later sample is never below the
-// estimate's). Starting the hold from the recorded run's covariance would state an uncertainty
-// of another, worse estimate than the one held. The assumption names both 1-sigmas.
+// The 1-sigma is continuous at the switch by construction (docs/physics.md "The prediction's
+// envelope"): the recorded samples come from a fresh session started at a star-tracker fix that
+// withholds the star tracker after it (the gyros alone since the fix); when a prediction has
+// recorded samples, that session is run to the last archived frame and the plan or the hold is
+// propagated from it, its attitude and covariance carried across, so the first later sample's
+// 1-sigma is the recorded run's grown by the propagation, never below it. Only a prediction
+// without recorded samples starts from the filter's last estimate (the star tracker used up to
+// it). The samples are computed one chunk at a time (Prediction::Next).
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <memory>
+#include <optional>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -29,6 +33,7 @@
 #include "server/core_internal.h"
 #include "server/estimation_core.h"
 #include "server/planned_profile.h"
+#include "server/prediction_stream.h"
 #include "server/proto_mapping.h"
 
 namespace esg::server {
@@ -151,87 +156,6 @@ absl::StatusOr<Predicted> Interpolated(const Predicted& previous, const Predicte
   return p;
 }
 
-// The recorded part: `times` (sorted, all at or before the last applied frame) from a fresh
-// session started at the latest star-tracker fix at or before times.front() with the calibrated
-// model, run over the archived frames with the star tracker withheld. Between two frames the
-// attitude is slerp-interpolated and the 1-sigma is the larger of the two (componentwise).
-absl::StatusOr<std::vector<Predicted>> PredictRecorded(
-    storage::Storage& storage, const std::string& id, const estimator::SpacecraftConfig& config_in,
-    const estimator::ModelSpec& model, const EstimationSession& session,
-    const std::vector<absl::Time>& times, absl::Duration max_horizon, absl::Time* fix_time) {
-  ASSIGN_OR_RETURN(const estimator::TelemetryFrame fix, LatestFix(storage, id, times.front()));
-  *fix_time = fix.time;
-  if (times.back() - fix.time > max_horizon) {
-    return absl::OutOfRangeError(
-        absl::StrCat("to: ", FormatUtc(times.back()), " is more than ",
-                     absl::FormatDuration(max_horizon), " after the star-tracker fix at ",
-                     FormatUtc(fix.time), " the recorded readings start from"));
-  }
-  estimator::StepReport start;
-  ASSIGN_OR_RETURN(EstimationSession replay,
-                   StartFromFix(config_in, model, session, fix, &start));
-
-  const absl::Duration max_gap = absl::Seconds(2.0 * config_in.filter.measurement_step);
-  std::vector<Predicted> out;
-  out.reserve(times.size());
-  size_t k = 0;
-  Predicted previous{fix.time, start.attitude, {}};
-  const auto with_spin_axes = [&](Predicted p) {
-    for (const estimator::GyroEstimate& g : replay.Gyros()) p.h_in.emplace_back(g.id, g.h_in);
-    return p;
-  };
-  auto emit_exact = [&](const Predicted& at) {
-    while (k < times.size() && times[k] == at.time) {
-      out.push_back(with_spin_axes(at));
-      ++k;
-    }
-  };
-  emit_exact(previous);
-  // The frames after the fix, read in chunks (memory bounded whatever the telemetry rate), up to
-  // the first one at or after the last requested time.
-  absl::Time cursor = fix.time;
-  std::vector<storage::ArchivedFrame> archived;
-  size_t next = 0;
-  while (k < times.size()) {
-    if (next == archived.size()) {
-      ASSIGN_OR_RETURN(archived, storage.archive().ReadAfter(id, cursor, kReadChunkFrames));
-      next = 0;
-      if (archived.empty()) break;
-      cursor = archived.back().measurement_time;
-    }
-    const storage::ArchivedFrame& a = archived[next++];
-    esg::v1::TelemetryFrame proto;
-    if (!proto.ParseFromString(a.payload)) {
-      return absl::DataLossError(
-          absl::StrCat("archived frame ", a.sequence, " of '", id, "' does not parse"));
-    }
-    ASSIGN_OR_RETURN(estimator::TelemetryFrame frame, proto_convert::FrameFromProto(proto));
-    absl::StatusOr<estimator::StepReport> report = replay.AddFrame(frame);
-    if (!report.ok()) {
-      return absl::InternalError(absl::StrCat("recorded readings: frame at ", FormatUtc(frame.time),
-                                              ": ", report.status().message()));
-    }
-    const Predicted current{frame.time, report->attitude, {}};
-    while (k < times.size() && times[k] < current.time) {
-      ASSIGN_OR_RETURN(Predicted p, Interpolated(previous, current, times[k], max_gap));
-      out.push_back(with_spin_axes(std::move(p)));
-      ++k;
-    }
-    if (k < times.size() && times[k] == current.time && !current.attitude.valid) {
-      return absl::FailedPreconditionError(
-          absl::StrCat("times: the recorded attitude at ", FormatUtc(current.time),
-                       " is not available (", current.attitude.invalid_reason, ")"));
-    }
-    emit_exact(current);
-    previous = current;
-  }
-  if (k != times.size()) {
-    return absl::OutOfRangeError(absl::StrCat("times: ", FormatUtc(times[k]),
-                                              " is after the last archived frame of '", id, "'"));
-  }
-  return out;
-}
-
 // The requested epochs, sorted and without repeats: the from/to grid plus the explicit times.
 // Errors name the field; at most `max_samples`.
 absl::StatusOr<std::vector<absl::Time>> RequestedEpochs(const esg::v1::PredictRequest& request,
@@ -317,7 +241,7 @@ struct PredictionBasis {
   AttitudeEstimate current;
   absl::Time recorded_until;  // the last archived frame
   absl::Time fix_time;        // the star-tracker fix of the recorded samples
-  size_t recorded_count = 0;  // the first samples of `predicted` that are recorded
+  size_t recorded_count = 0;  // the first samples that are recorded
   const SampledProfile* planned = nullptr;
   int planned_samples = 0;
 };
@@ -348,111 +272,301 @@ std::string RecordedAssumption(const PredictionBasis& b) {
                                 : std::string());
 }
 
-// The assumption of the later samples, the plan's or the hold's (empty without any). They start
-// from the filter's last estimate (which may be older than the last archived frame) and
-// propagate its covariance: the envelope starts from that estimate's 1-sigma, not from the
-// recorded samples' (see the head of this file).
-std::string FutureAssumption(const PredictionBasis& b, const std::vector<Predicted>& predicted) {
-  if (predicted.size() == b.recorded_count) return "";
-  // `how`: along what the propagation runs, for the plan.
-  const auto start_text = [&](absl::string_view how) {
-    std::string text = absl::StrCat("the 1-sigma is propagated", how,
-                                    " from the filter's last estimate at ", FormatUtc(b.last),
-                                    " (", SigmaText(b.current), ", the star tracker used up to it)");
-    if (b.recorded_count > 0) {
-      const Predicted& last_recorded = predicted[b.recorded_count - 1];
-      absl::StrAppend(&text, ", not from the recorded samples' (",
-                      SigmaText(last_recorded.attitude), " at ", FormatUtc(last_recorded.time),
-                      "): the envelope steps there because the estimate changes, from the gyros "
-                      "alone to the filter's");
-    }
-    return text;
-  };
+// The assumption of the later samples, the plan's or the hold's. `start` is the attitude they
+// are propagated from: with recorded samples the recorded run's at the last archived frame
+// (carried across the switch), else the filter's last estimate.
+std::string FutureAssumption(const PredictionBasis& b, const AttitudeEstimate& start) {
+  std::string from;
+  if (b.recorded_count > 0) {
+    from = absl::StrCat(
+        "the 1-sigma continues from the recorded readings' at the switch (", SigmaText(start),
+        " at ", FormatUtc(b.recorded_until),
+        "): their covariance is carried across and grows with the drift model's uncertainty, "
+        "the star tracker not used");
+  } else {
+    from = absl::StrCat("the 1-sigma is propagated from the filter's last estimate at ",
+                        FormatUtc(b.last), " (", SigmaText(start),
+                        ", the star tracker used up to it) and grows with the drift model's "
+                        "uncertainty");
+  }
+  const std::string switch_time = FormatUtc(b.recorded_count > 0 ? b.recorded_until : b.last);
   if (b.planned != nullptr) {
-    return absl::StrCat(Words(esg::v1::ATTITUDE_SOURCE_PLANNED), " after ",
-                        FormatUtc(b.recorded_until), ": the planned attitude given (",
-                        b.planned_samples, " samples from ", FormatUtc(b.planned->start()),
-                        ", slerp between them, held beyond its ends); ",
-                        start_text(" along the gyro readings the plan implies"));
+    return absl::StrCat(Words(esg::v1::ATTITUDE_SOURCE_PLANNED), " after ", switch_time,
+                        ": the planned attitude given (", b.planned_samples, " samples from ",
+                        FormatUtc(b.planned->start()),
+                        ", slerp between them, held beyond its ends), propagated along the gyro "
+                        "readings the plan implies; ",
+                        from);
   }
-  return absl::StrCat(Words(esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD), " after ",
-                      FormatUtc(b.recorded_until),
-                      ": no planned attitude given, the attitude of the filter's last estimate "
-                      "held inertially fixed; wrong by the body's motion if it moves; ",
-                      start_text(""));
+  return absl::StrCat(Words(esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD), " after ", switch_time,
+                      ": no planned attitude given, the attitude at ", switch_time,
+                      b.recorded_count > 0 ? " (the recorded readings')" : " (the filter's)",
+                      " held inertially fixed; wrong by the body's motion if it moves; ", from);
 }
 
-// The response: the samples, what they assume, and with `aem` the AEM of them, one block per
-// source.
-absl::StatusOr<esg::v1::PredictResponse> PredictionResponse(const std::string& spacecraft_id,
-                                                            const PredictionBasis& b,
-                                                            const std::vector<Predicted>& predicted,
-                                                            bool aem) {
-  const bool any_future = predicted.size() > b.recorded_count;
-  // What the prediction assumes, in the response and in the AEM.
-  const esg::v1::AttitudeSource source = !any_future ? esg::v1::ATTITUDE_SOURCE_RECORDED
-                                         : b.planned != nullptr
-                                             ? esg::v1::ATTITUDE_SOURCE_PLANNED
-                                             : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD;
-  const std::string recorded_text = RecordedAssumption(b);
-  const std::string future_text = FutureAssumption(b, predicted);
-  esg::v1::PredictResponse response;
-  response.set_attitude_source(source);
-  response.set_recorded_samples(static_cast<int32_t>(b.recorded_count));
-  *response.mutable_last_applied_time() = proto_convert::TimeToProto(b.last);
-  *response.mutable_last_archived_time() = proto_convert::TimeToProto(b.recorded_until);
-  std::vector<std::string> assumption;
-  if (!recorded_text.empty()) assumption.push_back(recorded_text);
-  if (!future_text.empty()) assumption.push_back(future_text);
-  response.set_assumption(absl::StrJoin(assumption, "; "));
+// One prediction, computed chunk by chunk. The recorded part advances a fresh session over the
+// archived frames (read kReadChunkFrames at a time) only as far as the chunk asked for needs; at
+// the switch that session, run to the last archived frame, gives the plan or the hold its
+// start. The later samples come from one EstimationSession::Predict call (the session propagates
+// a list of epochs in one call); what is kept of them is the estimator's values, the messages
+// and the AEM are built per chunk.
+class Prediction final : public PredictionStream {
+ public:
+  Prediction(storage::Storage* storage, std::string id, estimator::SpacecraftConfig config,
+             estimator::ModelSpec model, EstimationSession session, PredictionBasis basis,
+             std::vector<absl::Time> times, std::optional<SampledProfile> planned, bool aem)
+      : storage_(storage),
+        id_(std::move(id)),
+        config_(std::move(config)),
+        model_(std::move(model)),
+        session_(std::move(session)),
+        basis_(std::move(basis)),
+        times_(std::move(times)),
+        planned_(std::move(planned)),
+        aem_(aem),
+        max_gap_(absl::Seconds(2.0 * config_.filter.measurement_step)) {
+    basis_.planned = planned_.has_value() ? &*planned_ : nullptr;
+  }
 
-  std::vector<storage::AemBlock> blocks;
-  for (size_t i = 0; i < predicted.size(); ++i) {
-    const Predicted& p = predicted[i];
-    FillSample(p.time, p.attitude, p.h_in, response.add_samples());
-    if (!aem) continue;
-    const bool recorded = i < b.recorded_count;
-    if (blocks.empty() || (i == b.recorded_count && i > 0)) {
-      storage::AemBlock block;
-      block.comments.push_back(recorded ? recorded_text : future_text);
-      block.comments.push_back(
-          "1-sigma about body x, y, z [arcsec] of every epoch: the SIGMA_ARCSEC comments at the "
-          "start of the data section");
-      block.interpolation_method = "LINEAR";
-      block.interpolation_degree = 1;
-      blocks.push_back(std::move(block));
+  // The recorded run from its star-tracker fix (the latest at or before the first recorded
+  // epoch), within `max_horizon` of the last recorded epoch. Errors name the field.
+  absl::Status StartRecorded(absl::Duration max_horizon) {
+    if (basis_.recorded_count == 0) return absl::OkStatus();
+    ASSIGN_OR_RETURN(const estimator::TelemetryFrame fix,
+                     LatestFix(*storage_, id_, times_.front()));
+    basis_.fix_time = fix.time;
+    const absl::Time last_recorded = times_[basis_.recorded_count - 1];
+    if (last_recorded - fix.time > max_horizon) {
+      return absl::OutOfRangeError(
+          absl::StrCat("to: ", FormatUtc(last_recorded), " is more than ",
+                       absl::FormatDuration(max_horizon), " after the star-tracker fix at ",
+                       FormatUtc(fix.time), " the recorded readings start from"));
     }
-    blocks.back().samples.push_back(
-        {p.time, p.attitude.q_in_b.normalized(), SigmaArcsec(p.attitude)});
+    estimator::StepReport start;
+    ASSIGN_OR_RETURN(EstimationSession replay,
+                     StartFromFix(config_, model_, *session_, fix, &start));
+    replay_ = std::move(replay);
+    current_ = Predicted{fix.time, start.attitude, {}};
+    previous_ = current_;
+    cursor_ = fix.time;
+    return absl::OkStatus();
   }
-  if (aem) {
-    const absl::Time now = absl::Now();
-    storage::AemHeader header;
-    header.object_name = spacecraft_id;
-    header.object_id = spacecraft_id;
-    header.originator = "ESG-ESGD";
-    header.creation_date = now;
-    header.message_id = absl::StrCat(spacecraft_id, "-PRED-",
-                                     absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
-    header.comments.push_back(absl::StrCat("Predicted attitude q_in_b of ", spacecraft_id,
-                                           ", calibration model ", b.model_name,
-                                           ", state of the last applied frame ", FormatUtc(b.last),
-                                           ", last archived frame ", FormatUtc(b.recorded_until)));
-    ASSIGN_OR_RETURN(std::string text, storage::WriteAemBlocks(header, blocks));
-    response.set_aem_text(std::move(text));
+
+  absl::StatusOr<std::optional<esg::v1::PredictChunk>> Next(int max_samples) override {
+    if (k_ == times_.size()) return std::nullopt;
+    const size_t limit = static_cast<size_t>(std::max(1, max_samples));
+    esg::v1::PredictChunk chunk;
+    if (chunks_ == 0) {
+      chunk.set_total_samples(static_cast<int32_t>(times_.size()));
+      chunk.set_recorded_samples(static_cast<int32_t>(basis_.recorded_count));
+      *chunk.mutable_last_applied_time() = proto_convert::TimeToProto(basis_.last);
+      *chunk.mutable_last_archived_time() = proto_convert::TimeToProto(basis_.recorded_until);
+    }
+    std::vector<Predicted> out;
+    const bool recorded = k_ < basis_.recorded_count;
+    if (recorded) {
+      if (k_ == 0) chunk.set_assumption(RecordedAssumption(basis_));
+      RETURN_IF_ERROR(NextRecorded(limit, &out));
+      chunk.set_attitude_source(esg::v1::ATTITUDE_SOURCE_RECORDED);
+    } else {
+      if (!future_started_) {
+        RETURN_IF_ERROR(StartFuture());
+        chunk.set_assumption(future_text_);
+      }
+      while (k_ < times_.size() && out.size() < limit) {
+        estimator::PredictedSample& p = ahead_[k_ - basis_.recorded_count];
+        out.push_back({p.time, std::move(p.attitude), std::move(p.h_in)});
+        ++k_;
+      }
+      if (k_ == times_.size()) ahead_ = {};
+      chunk.set_attitude_source(basis_.planned != nullptr ? esg::v1::ATTITUDE_SOURCE_PLANNED
+                                                          : esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD);
+    }
+    for (const Predicted& p : out) FillSample(p.time, p.attitude, p.h_in, chunk.add_samples());
+    if (aem_) {
+      ASSIGN_OR_RETURN(std::string text,
+                       AemPiece(recorded ? RecordedAssumption(basis_) : future_text_, out));
+      chunk.set_aem_text(std::move(text));
+    }
+    ++chunks_;
+    return chunk;
   }
-  return response;
-}
+
+ private:
+  Predicted WithSpinAxes(Predicted p) const {
+    for (const estimator::GyroEstimate& g : replay_->Gyros()) p.h_in.emplace_back(g.id, g.h_in);
+    return p;
+  }
+
+  // Applies the next archived frame after the current one, up to the last archived frame when
+  // the prediction started (frames archived since are not part of it). False at the end.
+  absl::StatusOr<bool> ReadFrame() {
+    if (next_ == archived_.size()) {
+      if (archive_end_) return false;
+      ASSIGN_OR_RETURN(archived_, storage_->archive().ReadAfter(id_, cursor_, kReadChunkFrames));
+      next_ = 0;
+      if (archived_.empty()) {
+        archive_end_ = true;
+        return false;
+      }
+      cursor_ = archived_.back().measurement_time;
+    }
+    const storage::ArchivedFrame& a = archived_[next_];
+    if (a.measurement_time > basis_.recorded_until) {
+      archive_end_ = true;
+      archived_ = {};
+      next_ = 0;
+      return false;
+    }
+    ++next_;
+    esg::v1::TelemetryFrame proto;
+    if (!proto.ParseFromString(a.payload)) {
+      return absl::DataLossError(
+          absl::StrCat("archived frame ", a.sequence, " of '", id_, "' does not parse"));
+    }
+    ASSIGN_OR_RETURN(estimator::TelemetryFrame frame, proto_convert::FrameFromProto(proto));
+    absl::StatusOr<estimator::StepReport> report = replay_->AddFrame(frame);
+    if (!report.ok()) {
+      return absl::InternalError(absl::StrCat("recorded readings: frame at ", FormatUtc(frame.time),
+                                              ": ", report.status().message()));
+    }
+    previous_ = std::move(current_);
+    current_ = Predicted{frame.time, report->attitude, {}};
+    return true;
+  }
+
+  // Recorded samples until `limit` are in `out` or the recorded epochs end. Between two frames
+  // the attitude is slerp-interpolated and the 1-sigma is the larger of the two (componentwise:
+  // Interpolated).
+  absl::Status NextRecorded(size_t limit, std::vector<Predicted>* out) {
+    while (k_ < basis_.recorded_count && out->size() < limit) {
+      const absl::Time t = times_[k_];
+      if (t <= current_.time) {
+        if (t == current_.time) {
+          if (!current_.attitude.valid) {
+            return absl::FailedPreconditionError(
+                absl::StrCat("times: the recorded attitude at ", FormatUtc(t),
+                             " is not available (", current_.attitude.invalid_reason, ")"));
+          }
+          out->push_back(WithSpinAxes(current_));
+        } else {
+          ASSIGN_OR_RETURN(Predicted p, Interpolated(previous_, current_, t, max_gap_));
+          out->push_back(WithSpinAxes(std::move(p)));
+        }
+        ++k_;
+        continue;
+      }
+      ASSIGN_OR_RETURN(const bool read, ReadFrame());
+      if (!read) {
+        return absl::OutOfRangeError(absl::StrCat(
+            "times: ", FormatUtc(t), " is after the last archived frame of '", id_, "'"));
+      }
+    }
+    return absl::OkStatus();
+  }
+
+  // The later samples: from the recorded run at the last archived frame (its attitude and
+  // covariance carried across the switch) when there are recorded samples, else from the
+  // filter's last estimate.
+  absl::Status StartFuture() {
+    future_started_ = true;
+    const std::vector<absl::Time> future(times_.begin() + basis_.recorded_count, times_.end());
+    const absl::Time planned_start = planned_.has_value() ? planned_->start() : absl::UnixEpoch();
+    const EstimationSession* from = &*session_;
+    if (replay_.has_value()) {
+      while (current_.time < basis_.recorded_until) {
+        ASSIGN_OR_RETURN(const bool read, ReadFrame());
+        if (!read) break;
+      }
+      archived_ = {};
+      if (!current_.attitude.valid) {
+        return absl::FailedPreconditionError(
+            absl::StrCat("times: the recorded attitude at ", FormatUtc(current_.time),
+                         ", where the later samples start, is not available (",
+                         current_.attitude.invalid_reason, ")"));
+      }
+      from = &*replay_;
+    }
+    const AttitudeEstimate start = from->CurrentAttitude();
+    ASSIGN_OR_RETURN(ahead_, from->Predict(future, basis_.planned, planned_start));
+    future_text_ = FutureAssumption(basis_, start);
+    replay_.reset();
+    session_.reset();
+    return absl::OkStatus();
+  }
+
+  // This chunk's part of the AEM: the header before the first chunk's segment, then one segment
+  // of the chunk's samples with its source's assumption.
+  absl::StatusOr<std::string> AemPiece(const std::string& assumption,
+                                       const std::vector<Predicted>& samples) {
+    if (chunks_ == 0) {
+      const absl::Time now = absl::Now();
+      header_.object_name = id_;
+      header_.object_id = id_;
+      header_.originator = "ESG-ESGD";
+      header_.creation_date = now;
+      header_.message_id = absl::StrCat(
+          id_, "-PRED-", absl::FormatTime("%Y%m%dT%H%M%E6S", now, absl::UTCTimeZone()));
+      header_.comments.push_back(absl::StrCat(
+          "Predicted attitude q_in_b of ", id_, ", calibration model ", basis_.model_name,
+          ", state of the last applied frame ", FormatUtc(basis_.last), ", last archived frame ",
+          FormatUtc(basis_.recorded_until)));
+    }
+    storage::AemBlock block;
+    block.comments.push_back(assumption);
+    block.comments.push_back(
+        "1-sigma about body x, y, z [arcsec] of every epoch: the SIGMA_ARCSEC comments at the "
+        "start of the data section");
+    block.interpolation_method = "LINEAR";
+    block.interpolation_degree = 1;
+    for (const Predicted& p : samples) {
+      block.samples.push_back({p.time, p.attitude.q_in_b.normalized(), SigmaArcsec(p.attitude)});
+    }
+    ASSIGN_OR_RETURN(std::string text, storage::WriteAemBlocks(header_, {std::move(block)}));
+    if (chunks_ == 0) return text;
+    // Later chunks: the segment only (from the blank line before META_START), so that the
+    // pieces concatenated are one AEM with one segment per chunk.
+    const size_t segment = text.find("\nMETA_START\n");
+    if (segment == std::string::npos) return absl::InternalError("AEM segment without META_START");
+    return text.substr(segment);
+  }
+
+  storage::Storage* const storage_;
+  const std::string id_;
+  const estimator::SpacecraftConfig config_;
+  const estimator::ModelSpec model_;
+  std::optional<EstimationSession> session_;  // the filter's, until the later samples start
+  PredictionBasis basis_;
+  const std::vector<absl::Time> times_;  // every epoch, sorted, without repeats
+  const std::optional<SampledProfile> planned_;
+  const bool aem_;
+  const absl::Duration max_gap_;
+  size_t k_ = 0;  // the next epoch to return
+  int chunks_ = 0;
+  // The recorded run: its session, its last two applied frames, the archive read ahead.
+  std::optional<EstimationSession> replay_;
+  Predicted previous_;
+  Predicted current_;
+  std::vector<storage::ArchivedFrame> archived_;
+  size_t next_ = 0;
+  absl::Time cursor_;
+  bool archive_end_ = false;
+  // The later samples.
+  bool future_started_ = false;
+  std::vector<estimator::PredictedSample> ahead_;
+  std::string future_text_;
+  storage::AemHeader header_;
+};
 
 }  // namespace
 
-absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
+absl::StatusOr<std::unique_ptr<PredictionStream>> EstimationCore::StartPrediction(
     const esg::v1::PredictRequest& request) {
   if (request.spacecraft_id().empty()) return absl::InvalidArgumentError("spacecraft_id: required");
   ASSIGN_OR_RETURN(std::shared_ptr<Spacecraft> sc, Lookup(request.spacecraft_id()));
-  ASSIGN_OR_RETURN(const std::vector<absl::Time> times,
+  ASSIGN_OR_RETURN(std::vector<absl::Time> times,
                    RequestedEpochs(request, options_.max_prediction_samples));
-  ASSIGN_OR_RETURN(const std::optional<SampledProfile> planned,
+  ASSIGN_OR_RETURN(std::optional<SampledProfile> planned,
                    PlannedAttitude(request, options_.max_prediction_samples));
 
   // Copy the session under the lock; predict on the copy. The archive holds every frame up to
@@ -500,32 +614,47 @@ absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
         FormatUtc(basis.last)));
   }
   // Epochs up to the last archived frame use the recorded readings, including frames the filter
-  // has not applied yet (it runs behind ingest); later ones the plan or the hold, propagated
-  // from the filter's last estimate at `last`.
+  // has not applied yet (it runs behind ingest); later ones the plan or the hold.
   basis.recorded_until = std::max(basis.last, archived_until);
-  const auto split = std::upper_bound(times.begin(), times.end(), basis.recorded_until);
-  const std::vector<absl::Time> recorded_times(times.begin(), split);
-  const std::vector<absl::Time> future_times(split, times.end());
-  basis.recorded_count = recorded_times.size();
-  basis.planned = planned.has_value() ? &*planned : nullptr;
+  basis.recorded_count = static_cast<size_t>(
+      std::upper_bound(times.begin(), times.end(), basis.recorded_until) - times.begin());
   basis.planned_samples = request.planned_attitude_size();
-
-  std::vector<Predicted> predicted;
   basis.fix_time = absl::InfinitePast();
-  if (!recorded_times.empty()) {
-    ASSIGN_OR_RETURN(predicted, PredictRecorded(*storage_, sc->id, setup->config, setup->model,
-                                                *session, recorded_times,
-                                                options_.max_prediction_horizon, &basis.fix_time));
-  }
-  if (!future_times.empty()) {
-    ASSIGN_OR_RETURN(std::vector<estimator::PredictedSample> ahead,
-                     session->Predict(future_times, basis.planned,
-                                      planned.has_value() ? planned->start() : absl::UnixEpoch()));
-    for (estimator::PredictedSample& p : ahead) {
-      predicted.push_back({p.time, std::move(p.attitude), std::move(p.h_in)});
+  auto prediction = std::make_unique<Prediction>(
+      storage_, sc->id, setup->config, setup->model, std::move(*session), std::move(basis),
+      std::move(times), std::move(planned), request.aem());
+  RETURN_IF_ERROR(prediction->StartRecorded(options_.max_prediction_horizon));
+  return std::unique_ptr<PredictionStream>(std::move(prediction));
+}
+
+absl::StatusOr<esg::v1::PredictResponse> EstimationCore::Predict(
+    const esg::v1::PredictRequest& request) {
+  ASSIGN_OR_RETURN(std::unique_ptr<PredictionStream> prediction, StartPrediction(request));
+  esg::v1::PredictResponse response;
+  response.set_attitude_source(esg::v1::ATTITUDE_SOURCE_RECORDED);
+  std::vector<std::string> assumption;
+  bool first = true;
+  while (true) {
+    // One chunk per source: the AEM has one segment per source.
+    ASSIGN_OR_RETURN(std::optional<esg::v1::PredictChunk> chunk,
+                     prediction->Next(std::numeric_limits<int>::max()));
+    if (!chunk.has_value()) break;
+    if (first) {
+      response.set_recorded_samples(chunk->recorded_samples());
+      *response.mutable_last_applied_time() = chunk->last_applied_time();
+      *response.mutable_last_archived_time() = chunk->last_archived_time();
+      response.mutable_samples()->Reserve(chunk->total_samples());
+      first = false;
+    }
+    response.set_attitude_source(chunk->attitude_source());
+    if (!chunk->assumption().empty()) assumption.push_back(chunk->assumption());
+    response.mutable_aem_text()->append(chunk->aem_text());
+    for (esg::v1::AttitudeSample& s : *chunk->mutable_samples()) {
+      *response.add_samples() = std::move(s);
     }
   }
-  return PredictionResponse(sc->id, basis, predicted, request.aem());
+  response.set_assumption(absl::StrJoin(assumption, "; "));
+  return response;
 }
 
 }  // namespace esg::server

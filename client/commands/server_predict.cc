@@ -1,11 +1,13 @@
 // `esg predict --spacecraft ID [--from T] [--to T] [--step S] [--planned FILE] [--aem FILE]
-// [--format table|json|csv]`: the attitude esgd predicts (PredictAttitude, docs/service.md
-// "PredictAttitude"): per epoch q_in_b (scalar first), its 1-sigma about the body axes x, y, z
-// [arcsec], where it comes from ("recorded": the archived gyro readings, up to the last archived
-// frame, applied by the filter or not; after it "planned": the --planned attitude, or "inertial
-// hold": the last estimate held inertially fixed; proto/attitude_source_words.h, the proto names
-// in --format json and csv) and the predicted spin axes h_in of the gyros used. The table and stderr state the assumption; --aem also writes the returned CCSDS AEM
-// (KVN, docs/formats.md) to FILE.
+// [--format table|json|csv]`: the attitude esgd predicts (PredictAttitudeStream, docs/service.md
+// "PredictAttitude", "PredictAttitudeStream"; the table and the AEM are written as the chunks
+// come): per epoch q_in_b (scalar first), its 1-sigma about the body axes x, y, z [arcsec],
+// where it comes from ("recorded": the archived gyro readings, up to the last archived frame,
+// applied by the filter or not; after it "planned": the --planned attitude, or "inertial hold":
+// the attitude held inertially fixed; proto/attitude_source_words.h, the proto names in
+// --format json and csv) and the predicted spin axes h_in of the gyros used. The table marks the
+// switch of source with a line; the table and stderr state the assumption; --aem also writes
+// the returned CCSDS AEM (KVN, docs/formats.md) to FILE.
 //
 // --planned FILE: a CCSDS AEM (KVN, version 1.0 or 2.0, quaternions; every segment's data lines,
 // the file's first keyword CCSDS_AEM_VERS; each segment's OBJECT_NAME or OBJECT_ID the
@@ -31,6 +33,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/clock.h"
 #include "client/commands/commands.h"
@@ -157,35 +160,100 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
   *request.mutable_to() = proto_convert::TimeToProto(*to);
   request.set_step_s(o.step_s);
   request.set_aem(!o.aem_path.empty());
-  absl::StatusOr<esg::v1::PredictResponse> response = client->PredictAttitude(request);
-  if (!response.ok()) return ReportRpcError(kVerb, response.status(), global);
 
+  // PredictAttitudeStream: the table is printed and the AEM written chunk by chunk, as the
+  // server computes them; --format json and csv gather the chunks into the PredictResponse the
+  // unary PredictAttitude returns (docs/cli.md).
+  std::ofstream aem;
   if (!o.aem_path.empty()) {
-    std::ofstream out(o.aem_path, std::ios::binary | std::ios::trunc);
-    out << response->aem_text();
-    out.close();
-    if (!out) {
+    aem.open(o.aem_path, std::ios::binary | std::ios::trunc);
+    if (!aem) {
       std::fprintf(stderr, "esg %s: --aem %s: cannot write\n", kVerb, o.aem_path.c_str());
       return kExitFailure;
     }
   }
-  // The source of each sample: the first recorded_samples are RECORDED.
-  auto source_of = [&](int i) {
-    return i < response->recorded_samples() ? esg::v1::ATTITUDE_SOURCE_RECORDED
-                                            : response->attitude_source();
-  };
+  const bool table = o.format == OutputFormat::kTable;
+  esg::v1::PredictResponse response;  // json and csv: the chunks gathered
+  response.set_attitude_source(esg::v1::ATTITUDE_SOURCE_RECORDED);
+  std::vector<std::string> assumption;
+  std::vector<esg::v1::AttitudeSource> sources;  // json and csv: each sample's
+  esg::v1::AttitudeSource previous = esg::v1::ATTITUDE_SOURCE_UNSPECIFIED;
+  std::string last_archived;
+  int count = 0;
+  auto stream = client->PredictAttitudeStream(request);
+  esg::v1::PredictChunk chunk;
+  while (stream->Read(&chunk)) {
+    if (count == 0 && chunk.has_last_archived_time()) {
+      last_archived = FormatUtc(chunk.last_archived_time(), true);
+      response.set_recorded_samples(chunk.recorded_samples());
+      *response.mutable_last_applied_time() = chunk.last_applied_time();
+      *response.mutable_last_archived_time() = chunk.last_archived_time();
+    }
+    if (!chunk.assumption().empty()) assumption.push_back(chunk.assumption());
+    if (aem.is_open()) aem << chunk.aem_text();
+    response.set_attitude_source(chunk.attitude_source());
+    if (!table) {
+      for (esg::v1::AttitudeSample& s : *chunk.mutable_samples()) {
+        *response.add_samples() = std::move(s);
+        sources.push_back(chunk.attitude_source());
+      }
+      count += chunk.samples_size();
+      continue;
+    }
+    if (count == 0) {
+      std::printf("%-24s %12s %12s %12s %12s %9s %9s %9s  %-13s %s\n", "time_utc", "q0", "q1", "q2",
+                  "q3", "sig_x\"", "sig_y\"", "sig_z\"", "source", "spin axes h_in");
+    }
+    if (previous != esg::v1::ATTITUDE_SOURCE_UNSPECIFIED && chunk.attitude_source() != previous) {
+      // The switch of source at the last archived frame: the 1-sigma carries on from the row
+      // above (docs/physics.md "The prediction's envelope").
+      std::printf(
+          "---- %s, the last archived frame: %s above, %s below; the 1-sigma carries on "
+          "----\n",
+          last_archived.c_str(), std::string(proto_convert::AttitudeSourceWords(previous)).c_str(),
+          std::string(proto_convert::AttitudeSourceWords(chunk.attitude_source())).c_str());
+    }
+    previous = chunk.attitude_source();
+    const std::string words(proto_convert::AttitudeSourceWords(chunk.attitude_source()));
+    for (const esg::v1::AttitudeSample& s : chunk.samples()) {
+      std::printf("%-24s", FormatUtc(s.time(), s.has_time()).c_str());
+      for (int i = 0; i < 4; ++i) std::printf(" %+12.9f", i < s.q_in_b_size() ? s.q_in_b(i) : 0.0);
+      for (int i = 0; i < 3; ++i) {
+        std::printf(" %9.2f", i < s.sigma_arcsec_size() ? s.sigma_arcsec(i) : 0.0);
+      }
+      std::printf("  %-13s", words.c_str());
+      for (const esg::v1::GyroAxis& axis : s.spin_axes()) {
+        std::printf(" g%d[", axis.gyro_id());
+        for (int i = 0; i < axis.h_in_size(); ++i) {
+          std::printf("%s%+.6f", i ? " " : "", axis.h_in(i));
+        }
+        std::printf("]");
+      }
+      std::printf("\n");
+    }
+    count += chunk.samples_size();
+  }
+  const absl::Status finished = stream->Finish();
+  if (aem.is_open()) aem.close();
+  if (!finished.ok()) {
+    if (!o.aem_path.empty()) std::remove(o.aem_path.c_str());  // no partial AEM left behind
+    return ReportRpcError(kVerb, finished, global);
+  }
+  if (!o.aem_path.empty() && !aem) {
+    std::fprintf(stderr, "esg %s: --aem %s: cannot write\n", kVerb, o.aem_path.c_str());
+    return kExitFailure;
+  }
+  response.set_assumption(absl::StrJoin(assumption, "; "));
   if (o.format == OutputFormat::kJson) {
-    esg::v1::PredictResponse shown = *response;
-    shown.clear_aem_text();  // the file holds it
-    Json doc = ProtoToJson(shown);
+    Json doc = ProtoToJson(response);
     if (!o.aem_path.empty()) doc["aemFile"] = o.aem_path;
     PrintJson(doc);
     return kExitOk;
   }
   if (o.format == OutputFormat::kCsv) {
     std::vector<Json> rows;
-    for (int i = 0; i < response->samples_size(); ++i) {
-      const esg::v1::AttitudeSample& s = response->samples(i);
+    for (int i = 0; i < response.samples_size(); ++i) {
+      const esg::v1::AttitudeSample& s = response.samples(i);
       Json row;
       row["time"] = FormatUtc(s.time(), s.has_time());
       for (int k = 0; k < 4; ++k)
@@ -194,36 +262,18 @@ int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
       for (int k = 0; k < 3; ++k) {
         row[axes[k]] = k < s.sigma_arcsec_size() ? s.sigma_arcsec(k) : 0.0;
       }
-      row["attitudeSource"] = esg::v1::AttitudeSource_Name(source_of(i));
+      row["attitudeSource"] = esg::v1::AttitudeSource_Name(sources[i]);
       rows.push_back(std::move(row));
     }
     PrintCsv(rows, {"time", "q0", "q1", "q2", "q3", "sigmaXArcsec", "sigmaYArcsec", "sigmaZArcsec",
                     "attitudeSource"});
-    std::fprintf(stderr, "esg %s: %s\n", kVerb, response->assumption().c_str());
+    std::fprintf(stderr, "esg %s: %s\n", kVerb, response.assumption().c_str());
     return kExitOk;
   }
-  std::printf("%-24s %12s %12s %12s %12s %9s %9s %9s  %-13s %s\n", "time_utc", "q0", "q1", "q2",
-              "q3", "sig_x\"", "sig_y\"", "sig_z\"", "source", "spin axes h_in");
-  for (int n = 0; n < response->samples_size(); ++n) {
-    const esg::v1::AttitudeSample& s = response->samples(n);
-    std::printf("%-24s", FormatUtc(s.time(), s.has_time()).c_str());
-    for (int i = 0; i < 4; ++i) std::printf(" %+12.9f", i < s.q_in_b_size() ? s.q_in_b(i) : 0.0);
-    for (int i = 0; i < 3; ++i) {
-      std::printf(" %9.2f", i < s.sigma_arcsec_size() ? s.sigma_arcsec(i) : 0.0);
-    }
-    std::printf("  %-13s", std::string(proto_convert::AttitudeSourceWords(source_of(n))).c_str());
-    for (const esg::v1::GyroAxis& axis : s.spin_axes()) {
-      std::printf(" g%d[", axis.gyro_id());
-      for (int i = 0; i < axis.h_in_size(); ++i) std::printf("%s%+.6f", i ? " " : "", axis.h_in(i));
-      std::printf("]");
-    }
-    std::printf("\n");
-  }
-  std::printf("%d samples", response->samples_size());
+  std::printf("%d samples", count);
   if (!o.aem_path.empty()) std::printf("; AEM written to %s", o.aem_path.c_str());
   // The service states the assumption with the sources in words, as the table names them.
-  const std::string& assumption = response->assumption();
-  std::printf("\nassumption: %s\n", assumption.c_str());
+  std::printf("\nassumption: %s\n", response.assumption().c_str());
   return kExitOk;
 }
 
@@ -233,9 +283,9 @@ void RegisterPredict(CLI::App& app, GlobalOptions& global, int* exit_code) {
   auto options = std::make_shared<PredictOptions>();
   CLI::App* cmd = app.add_subcommand(
       kVerb,
-      "attitude with its 1-sigma over an interval (PredictAttitude): recorded gyro readings up to "
-      "the last archived frame, then the --planned attitude or, without one, an inertial hold of "
-      "the last estimate");
+      "attitude with its 1-sigma over an interval (PredictAttitudeStream): recorded gyro readings "
+      "up to the last archived frame, then the --planned attitude or, without one, an inertial "
+      "hold");
   cmd->add_option("--spacecraft", options->spacecraft_id, "spacecraft id")->required();
   cmd->add_option("--from", options->from, "first epoch, RFC 3339 UTC (default: now)");
   cmd->add_option("--to", options->to, "last epoch, RFC 3339 UTC (default: 6 h after --from)");

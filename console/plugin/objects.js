@@ -31,9 +31,9 @@ const AXIS_COLOURS = { x: '#ff6b6b', y: '#7bd389', z: '#4fb3ff' };
 // The sources of predicted samples (PredictResponse.attitude_source without its ATTITUDE_SOURCE_
 // prefix), each marked on the plot: `words` in the table (esg's words,
 // proto/attitude_source_words.h), `marker` in the legend at the line where the source begins. The
-// 1-sigma steps there because the estimate changes: the recorded samples are the gyros' alone
-// since a star-tracker fix; the plan and the hold start from the filter's last estimate, made
-// with the star tracker, and propagate its covariance (docs/console.md).
+// 1-sigma is continuous there: the recorded samples are the gyros' alone since a star-tracker
+// fix, and the plan or the hold continues that run with its covariance carried across
+// (docs/console.md, docs/physics.md "The prediction's envelope").
 export const PREDICT_SOURCES = {
   RECORDED: {
     words: 'recorded',
@@ -42,12 +42,12 @@ export const PREDICT_SOURCES = {
   },
   INERTIAL_HOLD: {
     words: 'inertial hold',
-    marker: "inertial hold from here, 1-sigma from the filter's last estimate (with the star tracker)",
+    marker: 'inertial hold from here, the 1-sigma carried on from the recorded readings',
     color: '#ff7fe0'
   },
   PLANNED: {
     words: 'planned',
-    marker: "planned attitude from here, 1-sigma from the filter's last estimate (with the star tracker)",
+    marker: 'planned attitude from here, the 1-sigma carried on from the recorded readings',
     color: '#ffd23f'
   }
 };
@@ -369,7 +369,7 @@ const builders = {
   // The predicted 1-sigma per body axis on a log scale (it spans decades across a gap), and a
   // vertical line where each source of the samples begins (PredictResponse: the recorded readings
   // up to the last archived frame, then the plan or the inertial hold), named in the legend: the
-  // envelope's step at the last archived frame is where the source, and the estimate, change.
+  // envelope goes on through the last archived frame, where the source changes.
   async predplot(identifier, [sc]) {
     const series = AXES.map((axis) => ({ identifier: id('predser', sc, `s${axis}`), color: AXIS_COLOURS[axis] }));
     for (const source of Object.keys(PREDICT_SOURCES)) {

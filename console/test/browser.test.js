@@ -822,12 +822,14 @@ test('predicted attitude across a gap after the last frame: table from PredictAt
   assert.equal(answer.attitudeSource, 'ATTITUDE_SOURCE_INERTIAL_HOLD');
   await open('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', bounds);
   await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
-  // The legend says why the envelope steps at the switch: the recorded samples are the gyros'
-  // alone, the hold starts from the filter's estimate made with the star tracker.
+  // The legend names the switch: the recorded samples are the gyros' alone, the hold continues
+  // that run with its 1-sigma carried across, so the envelope does not drop there.
   const legend = await page.waitForFunction(() => {
     const text = document.querySelector('.c-plot-legend')?.textContent || '';
-    return /inertial hold from here, 1-sigma from the filter's last estimate \(with the star tracker\)/.test(text) && text;
+    return /inertial hold from here, the 1-sigma carried on from the recorded readings/.test(text) && text;
   }, { timeout: 20_000 });
+  ['x', 'y', 'z'].forEach((axis, i) => assert.ok(predicted[recorded].sigmaArcsec[i] >= predicted[recorded - 1].sigmaArcsec[i],
+    `1-sigma ${axis} drops at the switch: ${predicted[recorded - 1].sigmaArcsec[i]} -> ${predicted[recorded].sigmaArcsec[i]}`));
   assert.match(await legend.jsonValue(), /recorded gyro readings from here \(star tracker withheld: the gyros alone\)/);
   assert.doesNotMatch(await legend.jsonValue(), /INERTIAL_HOLD|ATTITUDE_SOURCE_/);
   const marks = await predictionMarks('RDK-1', start, end);

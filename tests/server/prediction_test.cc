@@ -8,6 +8,7 @@
 // naming the state.
 #include <algorithm>
 #include <cmath>
+#include <iostream>
 #include <map>
 #include <memory>
 #include <string>
@@ -19,6 +20,8 @@
 #include "formats/aem.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "server/call_limiter.h"
+#include "server/prediction_stream.h"
 #include "tests/server/server_test_util.h"
 
 namespace esg::testing {
@@ -212,11 +215,16 @@ TEST(Prediction, WithoutAPlanTheHoldIsStatedAndAMixedIntervalHasTwoSegments) {
   EXPECT_THAT(response.assumption(), HasSubstr("inertial hold after "));
   EXPECT_THAT(response.assumption(), ::testing::Not(HasSubstr("ATTITUDE_SOURCE_")));
   EXPECT_THAT(response.assumption(), ::testing::Not(HasSubstr("INERTIAL_HOLD")));
-  // The held samples are one constant attitude, the latest estimate.
-  const esg::v1::SessionInfo info = Session(*server.Stub(), "PRED-HOLD");
-  const Eigen::Quaterniond latest = SampleQuaternion(info.latest_attitude());
+  // The held samples are one constant attitude, the recorded readings' at the last archived
+  // frame (the third sample): carried across the switch with its covariance, so the 1-sigma
+  // after the switch is not below the one at it.
+  ASSERT_EQ(SampleTime(response.samples(2)), last);
+  const Eigen::Quaterniond at_switch = SampleQuaternion(response.samples(2));
   for (int i = 3; i < 5; ++i) {
-    EXPECT_LT(AngleArcsec(SampleQuaternion(response.samples(i)), latest), 1e-6);
+    EXPECT_LT(AngleArcsec(SampleQuaternion(response.samples(i)), at_switch), 1e-6);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GE(response.samples(i).sigma_arcsec(k), response.samples(2).sigma_arcsec(k)) << i;
+    }
   }
   // The recorded samples follow the rotation (truth), the hold does not (5 min = 30 deg).
   for (int i = 0; i < 3; ++i) {
@@ -234,6 +242,181 @@ TEST(Prediction, WithoutAPlanTheHoldIsStatedAndAMixedIntervalHasTwoSegments) {
               HasSubstr("inertial hold after "));
   EXPECT_THAT(response.aem_text(), ::testing::Not(HasSubstr("ATTITUDE_SOURCE_")));
   EXPECT_THAT(response.aem_text(), ::testing::Not(HasSubstr("INERTIAL_HOLD")));
+}
+
+double SigmaNorm(const esg::v1::AttitudeSample& s) {
+  return std::sqrt(s.sigma_arcsec(0) * s.sigma_arcsec(0) + s.sigma_arcsec(1) * s.sigma_arcsec(1) +
+                   s.sigma_arcsec(2) * s.sigma_arcsec(2));
+}
+
+// Issue 39: the envelope of a prediction spanning the last archived frame is continuous there.
+// The recorded samples are the gyros alone since a star-tracker fix (about 50 arcsec after an
+// hour); before the fix the hold or the plan started from the filter's estimate, made with the
+// star tracker (about 4 arcsec), and the envelope dropped by an order of magnitude at the
+// switch. Now the recorded run's covariance is carried across: just after the switch the
+// 1-sigma is not below the one just before it, and it grows with the drift model's uncertainty
+// over the following 6 h (docs/physics.md "The prediction's envelope").
+TEST(Prediction, TheEnvelopeIsContinuousAtTheSwitchAndGrowsAfterIt) {
+  const TruthRun run = SimulateWithTruth("PRED-CONT", 3.0, 11);
+  LoopbackServer server;
+  Ingest(server, run, run.frames.size());
+  const absl::Time last = run.start + absl::Hours(3);
+  const esg::v1::SessionInfo info = Session(*server.Stub(), "PRED-CONT");
+  const double filter_sigma = SigmaNorm(info.latest_attitude());
+  esg::v1::PredictRequest hold =
+      Interval("PRED-CONT", last - absl::Hours(1), last + absl::Hours(6), 60.0);
+  esg::v1::PredictRequest planned = hold;
+  // A plan that turns the body (0.01 deg/s about z for the 6 h): the gyros' readings move.
+  for (int m = 0; m <= 360; m += 5) {
+    esg::v1::AttitudeSample* s = planned.add_planned_attitude();
+    const absl::Time t = last + absl::Minutes(m);
+    *s->mutable_time() = proto_convert::TimeToProto(t);
+    const Eigen::Quaterniond q =
+        run.truth.at(last) * Eigen::Quaterniond(Eigen::AngleAxisd(
+                                 estimator::DegToRad(0.01 * 60.0 * m), Eigen::Vector3d::UnitZ()));
+    for (double v : estimator::ToScalarFirst(q)) s->add_q_in_b(v);
+  }
+  for (const esg::v1::PredictRequest& request : {hold, planned}) {
+    SCOPED_TRACE(request.planned_attitude_size() > 0 ? "planned" : "hold");
+    esg::v1::PredictResponse response;
+    const grpc::Status status = Predict(server, request, &response);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    ASSERT_EQ(response.samples_size(), 421);
+    ASSERT_EQ(response.recorded_samples(), 61);
+    const esg::v1::AttitudeSample& before = response.samples(60);
+    const esg::v1::AttitudeSample& after = response.samples(61);
+    ASSERT_EQ(SampleTime(before), last);
+    ASSERT_EQ(SampleTime(after), last + absl::Minutes(1));
+    std::cout << "1-sigma [arcsec]: filter " << filter_sigma << ", at the switch "
+              << SigmaNorm(before) << ", 1 min after " << SigmaNorm(after) << ", 6 h after "
+              << SigmaNorm(response.samples(420)) << "\n";
+    // The recorded run is the gyros alone for an hour: well above the filter's 1-sigma, which
+    // the later samples started from before (the drop this test pins).
+    EXPECT_GT(SigmaNorm(before), 3.0 * filter_sigma);
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GE(after.sigma_arcsec(k), before.sigma_arcsec(k)) << "axis " << k;
+    }
+    // Growing afterwards: each hour's 1-sigma above the previous hour's.
+    for (int hour = 1; hour <= 6; ++hour) {
+      EXPECT_GT(SigmaNorm(response.samples(60 + 60 * hour)), SigmaNorm(response.samples(60 * hour)))
+          << "hour " << hour;
+    }
+    // The switch is stated: where, and the 1-sigma carried across.
+    EXPECT_EQ(*proto_convert::TimeFromProto(response.last_archived_time()), last);
+    EXPECT_THAT(response.assumption(),
+                HasSubstr(absl::StrCat(
+                    request.planned_attitude_size() > 0 ? "planned after " : "inertial hold after ",
+                    server::FormatUtc(last))));
+    EXPECT_THAT(response.assumption(), HasSubstr("continues from the recorded readings'"));
+  }
+}
+
+// Issue 40: PredictAttitudeStream sends the same samples as PredictAttitude in chunks of at
+// most kPredictChunkSamples, a chunk never spanning the switch of source; the first chunk
+// carries the counts and times, the first chunk of each source its assumption, and the chunks'
+// AEM pieces concatenated are one AEM with a segment per chunk.
+TEST(PredictionStream, ChunksCarryTheUnaryPredictionAndNeverSpanTheSwitch) {
+  const TruthRun run = SimulateWithTruth("PRED-STREAM", 3.0, 12);
+  LoopbackServer server;
+  Ingest(server, run, run.frames.size());
+  const absl::Time last = run.start + absl::Hours(3);
+  // 2 h 30 min recorded and 1 h held every 3 s: 3001 + 1200 samples.
+  const esg::v1::PredictRequest request =
+      Interval("PRED-STREAM", last - absl::Minutes(150), last + absl::Hours(1), 3.0, true);
+  esg::v1::PredictResponse whole;
+  {
+    const grpc::Status status = Predict(server, request, &whole);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+  }
+  ASSERT_EQ(whole.samples_size(), 4201);
+  ASSERT_EQ(whole.recorded_samples(), 3001);
+
+  auto stub = server.Stub();
+  grpc::ClientContext context;
+  auto reader = stub->PredictAttitudeStream(&context, request);
+  std::vector<esg::v1::PredictChunk> chunks;
+  esg::v1::PredictChunk chunk;
+  while (reader->Read(&chunk)) chunks.push_back(chunk);
+  const grpc::Status status = reader->Finish();
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  // 3001 recorded: 2000 + 1001; 1200 held: one chunk.
+  ASSERT_EQ(chunks.size(), 3u);
+  EXPECT_EQ(chunks[0].samples_size(), server::kPredictChunkSamples);
+  EXPECT_EQ(chunks[1].samples_size(), 1001);
+  EXPECT_EQ(chunks[2].samples_size(), 1200);
+  EXPECT_EQ(chunks[0].attitude_source(), esg::v1::ATTITUDE_SOURCE_RECORDED);
+  EXPECT_EQ(chunks[1].attitude_source(), esg::v1::ATTITUDE_SOURCE_RECORDED);
+  EXPECT_EQ(chunks[2].attitude_source(), esg::v1::ATTITUDE_SOURCE_INERTIAL_HOLD);
+  EXPECT_EQ(chunks[0].total_samples(), 4201);
+  EXPECT_EQ(chunks[0].recorded_samples(), 3001);
+  EXPECT_EQ(*proto_convert::TimeFromProto(chunks[0].last_archived_time()), last);
+  EXPECT_EQ(chunks[1].total_samples(), 0);
+  EXPECT_THAT(chunks[0].assumption(), HasSubstr("recorded until "));
+  EXPECT_EQ(chunks[1].assumption(), "");
+  EXPECT_THAT(chunks[2].assumption(), HasSubstr("inertial hold after "));
+  EXPECT_EQ(absl::StrCat(chunks[0].assumption(), "; ", chunks[2].assumption()), whole.assumption());
+  int n = 0;
+  std::string aem_text;
+  for (const esg::v1::PredictChunk& c : chunks) {
+    aem_text += c.aem_text();
+    for (const esg::v1::AttitudeSample& s : c.samples()) {
+      ASSERT_LT(n, whole.samples_size());
+      EXPECT_EQ(s.SerializeAsString(), whole.samples(n).SerializeAsString()) << "sample " << n;
+      ++n;
+    }
+  }
+  EXPECT_EQ(n, whole.samples_size());
+  absl::StatusOr<storage::AemFile> aem = storage::ParseAem(aem_text);
+  ASSERT_TRUE(aem.ok()) << aem.status();
+  ASSERT_EQ(aem->segments.size(), 3u);
+  EXPECT_EQ(aem->segments[0].samples.size(), 2000u);
+  EXPECT_EQ(aem->segments[2].samples.size(), 1200u);
+  EXPECT_THAT(::testing::PrintToString(aem->segments[2].comments),
+              HasSubstr("inertial hold after "));
+}
+
+// The stream is bounded as PredictAttitude is (one limiter for both) and refuses bad input
+// naming the field.
+TEST(PredictionStream, HonoursTheCallerBoundsAndNamesBadFields) {
+  const TruthRun run = SimulateWithTruth("PRED-SBOUND", 1.0, 13);
+  LoopbackServer server;
+  Ingest(server, run, run.frames.size());
+  const absl::Time last = run.start + absl::Hours(1);
+  auto stub = server.Stub();
+  const auto stream_status = [&](const esg::v1::PredictRequest& request, int* chunks) {
+    grpc::ClientContext context;
+    auto reader = stub->PredictAttitudeStream(&context, request);
+    esg::v1::PredictChunk chunk;
+    *chunks = 0;
+    while (reader->Read(&chunk)) ++*chunks;
+    return reader->Finish();
+  };
+  int chunks = 0;
+  esg::v1::PredictRequest bad = Interval("PRED-SBOUND", last, last + absl::Hours(1), 0.0);
+  grpc::Status status = stream_status(bad, &chunks);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), ::testing::StartsWith("step_s: "));
+  EXPECT_EQ(chunks, 0);
+
+  server::CallLimiter& limiter = server.get()->service().prediction_limiter();
+  std::vector<server::CallLimiter::Permit> held;
+  for (int i = 0; i < limiter.per_caller(); ++i) {
+    absl::StatusOr<server::CallLimiter::Permit> permit = limiter.Acquire("127.0.0.1");
+    ASSERT_TRUE(permit.ok()) << permit.status();
+    held.push_back(std::move(*permit));
+  }
+  const esg::v1::PredictRequest good =
+      Interval("PRED-SBOUND", last - absl::Minutes(10), last + absl::Minutes(10), 60.0);
+  status = stream_status(good, &chunks);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_EQ(status.error_message(),
+            "PredictAttitudeStream: caller '127.0.0.1' already runs 4 predictions (limit 4 per "
+            "caller); retry when one finishes");
+  held.pop_back();
+  status = stream_status(good, &chunks);
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(chunks, 2);                        // recorded, then the hold
+  EXPECT_EQ(limiter.Running("127.0.0.1"), 3);  // its slot given back
 }
 
 // Holds every filter job of the server at its start while closed (CoreOptions::before_apply_job):
