@@ -8,6 +8,7 @@
 //   in every gyro): no gyro excluded;
 // - model (10)+(11) on a gyro with an unconfigured misalignment of 80 arcsec (no misalignment
 //   states), on the calibration profile: no gyro excluded;
+// - a drift proportional to the body rate through a slew of 180 deg: no gyro excluded;
 // - a gyro excluded by a frozen reading and readmitted by the operator (ReadmitGyro) rejoins as
 //   a switched-on spare and runs to the end.
 #include <cstdio>
@@ -198,6 +199,26 @@ TEST(ExclusionJudgement, ACyclingDriftTheModelLacksInOneGyroIsNoDriftChange) {
           << e.subsystem << " at " << e.time << ": " << e.message;
     }
   }
+}
+
+// A drift proportional to the body rate, which the model lacks (scripts/false_exclusions.sh's
+// rate_drift class, seed 5024: 0.076 deg/h at 0.1 deg/s in gyro 2, 19 h of the seeded calibration
+// profile): the slew at 18 h turns the body from -z to +z at the Sun, through 180 deg, where the
+// simulated attitude had jumped and the drift with the rate (gyro 2 was excluded at 18:03); a
+// slew turns it at up to 1 deg/s, a drift of a few tenths of a deg/h the model lacks for ten
+// minutes: nothing excluded.
+TEST(ExclusionJudgement, ARateDependentDriftThroughAHalfTurnSlewExcludesNoGyro) {
+  const SpacecraftConfig config = Rdk1();
+  SimulationSpec spec = FlightSpec(config, "calibration", 19.0, 5024);
+  RateDrift drift;
+  const double gain[9] = {-0.40112157851880037, -0.525216642908976,  0.09906942242487568,
+                          -0.2040746590254603,  -0.26720927782528303, 0.05040257040237541,
+                          -0.07267671481154743, -0.09516072486532892, 0.017949770208585146};
+  for (int i = 0; i < 9; ++i) drift.gain_k(i / 3, i % 3) = gain[i] / kSecondsPerHour;
+  spec.gyros[1].rate_drift = drift;
+  const Flight run = RunSession(config, spec, "10+11");
+  EXPECT_FALSE(run.degraded) << Excluded(run);
+  EXPECT_NE(run.state, SessionState::kFaulted);
 }
 
 // An excluded gyro readmitted on an operator's word (EstimationSession::ReadmitGyro): gyro 3's
