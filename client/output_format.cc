@@ -31,11 +31,16 @@ std::string TimestampText(const Message& m) {
 }
 
 // Rewrites the Timestamp fields of `json` (MessageToJsonString's form of `message`) with
-// FormatUtc, recursing into nested and repeated messages. Maps of messages are left alone (the
-// service's messages have none with timestamps).
-void FixTimestamps(const Message& message, Json& json) {
+// FormatUtc, and leaves out a GyroDriftModel's keyed coefficients when it has none (its JSON as
+// before the field existed, docs/formats.md), recursing into nested and repeated messages. Maps
+// of messages are left alone (the service's messages have none with timestamps).
+void TidyJson(const Message& message, Json& json) {
   if (!json.is_object()) return;
   const Descriptor* descriptor = message.GetDescriptor();
+  if (descriptor->full_name() == "esg.v1.GyroDriftModel") {
+    auto keyed = json.find("coefficients");
+    if (keyed != json.end() && keyed->is_array() && keyed->empty()) json.erase(keyed);
+  }
   const Reflection* reflection = message.GetReflection();
   for (int i = 0; i < descriptor->field_count(); ++i) {
     const FieldDescriptor* field = descriptor->field(i);
@@ -51,7 +56,7 @@ void FixTimestamps(const Message& message, Json& json) {
         if (timestamp) {
           (*it)[k] = TimestampText(element);
         } else {
-          FixTimestamps(element, (*it)[k]);
+          TidyJson(element, (*it)[k]);
         }
       }
     } else if (reflection->HasField(message, field)) {
@@ -59,7 +64,7 @@ void FixTimestamps(const Message& message, Json& json) {
       if (timestamp) {
         *it = TimestampText(value);
       } else {
-        FixTimestamps(value, *it);
+        TidyJson(value, *it);
       }
     }
   }
@@ -151,7 +156,7 @@ Json ProtoToJson(const google::protobuf::Message& message) {
     return Json{{"error", "message not representable in JSON"}};
   }
   Json json = Json::parse(text, nullptr, /*allow_exceptions=*/false);
-  FixTimestamps(message, json);
+  TidyJson(message, json);
   return json;
 }
 

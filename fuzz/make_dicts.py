@@ -52,7 +52,8 @@ write('config_json', 'configuration JSON (proto3 JSON mapping of esg.v1.Spacecra
              'innovationKd integrationRateHz k0DegH latencyS latencySigmaS measurementStepS '
              'misalignmentSigmaArcsec model modelSigma muDegH noiseArcsec nuDegH '
              'randomWalkDegHSqrtH readoutNoiseArcsec referenceVoltageV reservePair spacecraftId '
-             'starTracker suspension workingPair k0_deg_h case_to_body working_pair'))
+             'starTracker suspension workingPair k0_deg_h case_to_body working_pair coefficients '
+             'term valueDegH'))
 write('scenario', 'scenario JSON of the simulator (docs/scenario.md)',
       ['{', '}', '[', ']', ':', ',', 'null', 'true', 'false', '1e308', '-0', '0.5', '20', '-20'] +
       quoted('argLatitudeDeg c10DegHPerUm c1DegH c20DegHPerUm c2DegH calibration count degH '

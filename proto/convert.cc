@@ -14,8 +14,10 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/ascii.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_replace.h"
 #include "estimator/channels.h"
 #include "estimator/conventions.h"
 #include "estimator/rotation.h"
@@ -372,9 +374,30 @@ int EntriesOfKey(absl::string_view json_key) {
   return n;
 }
 
+// Whether the message gives the term by its field (a number other than 0, a vector not empty).
+bool GivenByField(const esg::v1::GyroDriftModel& proto,
+                  const estimator::FixedTermDescriptor& term) {
+  const google::protobuf::FieldDescriptor* f = DriftModelField(term);
+  if (f == nullptr) return false;
+  const google::protobuf::Reflection* reflection = proto.GetReflection();
+  return f->is_repeated() ? reflection->FieldSize(proto, f) != 0
+                          : reflection->GetDouble(proto, f) != 0.0;
+}
+
+// The keyed entry of the term (GyroDriftModel.coefficients), or nullptr.
+const esg::v1::DriftCoefficient* KeyedEntry(const esg::v1::GyroDriftModel& proto,
+                                            const estimator::FixedTermDescriptor& term) {
+  for (const esg::v1::DriftCoefficient& c : proto.coefficients()) {
+    if (absl::string_view(c.term()) == term.storage_key) return &c;
+  }
+  return nullptr;
+}
+
 // Checks the length of every vector key of a GyroDriftModel: empty (zero) or complete. The keys
-// in table order, so the first wrong one is named.
-absl::Status CheckDriftModelLengths(const esg::v1::GyroDriftModel& proto, absl::string_view field) {
+// in table order, so the first wrong one is named. Then the keyed coefficients, in their order:
+// each names a term of the table (estimator/model_terms.h storage_key), at most once, and one
+// not also given by its field.
+absl::Status CheckDriftModel(const esg::v1::GyroDriftModel& proto, absl::string_view field) {
   const google::protobuf::Reflection* reflection = proto.GetReflection();
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
     if (term.component != 0) continue;  // once per vector key, at its first entry
@@ -387,6 +410,31 @@ absl::Status CheckDriftModelLengths(const esg::v1::GyroDriftModel& proto, absl::
                         absl::StrFormat("expected %d values, got %d", expected, size));
     }
   }
+  std::array<bool, estimator::kNumDriftCoefficients> keyed{};
+  for (int i = 0; i < proto.coefficients_size(); ++i) {
+    const std::string& key = proto.coefficients(i).term();
+    const estimator::FixedTermDescriptor* term = nullptr;
+    for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) {
+      if (absl::string_view(key) == t.storage_key) term = &t;
+    }
+    const std::string at = absl::StrCat(field, ".coefficients[", i, "].term");
+    if (term == nullptr) {
+      std::string known;
+      for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) {
+        absl::StrAppend(&known, known.empty() ? "" : ", ", t.storage_key);
+      }
+      return FieldError(at, absl::StrFormat("unknown term \"%s\" (terms: %s)",
+                                            absl::CHexEscape(key), known));
+    }
+    if (keyed[term->theta_index]) {
+      return FieldError(at, absl::StrFormat("term \"%s\" is given twice", key));
+    }
+    keyed[term->theta_index] = true;
+    if (GivenByField(proto, *term)) {
+      return FieldError(at, absl::StrFormat("term \"%s\" is also given by %s.%s; give it once",
+                                            key, field, term->json_key));
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -394,6 +442,7 @@ absl::Status CheckDriftModelLengths(const esg::v1::GyroDriftModel& proto, absl::
 
 double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
                           const estimator::FixedTermDescriptor& term) {
+  if (const esg::v1::DriftCoefficient* keyed = KeyedEntry(model, term)) return keyed->value_deg_h();
   const google::protobuf::FieldDescriptor* f = DriftModelField(term);
   if (f == nullptr) return 0.0;
   const google::protobuf::Reflection* reflection = model.GetReflection();
@@ -405,7 +454,19 @@ double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
 void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double deg_h,
                            esg::v1::GyroDriftModel* model) {
   const google::protobuf::FieldDescriptor* f = DriftModelField(term);
-  if (f == nullptr) return;
+  if (f == nullptr) {
+    // A term without a field of its own is written keyed.
+    for (esg::v1::DriftCoefficient& c : *model->mutable_coefficients()) {
+      if (absl::string_view(c.term()) == term.storage_key) {
+        c.set_value_deg_h(deg_h);
+        return;
+      }
+    }
+    esg::v1::DriftCoefficient* c = model->add_coefficients();
+    c->set_term(std::string(term.storage_key));
+    c->set_value_deg_h(deg_h);
+    return;
+  }
   const google::protobuf::Reflection* reflection = model->GetReflection();
   if (!f->is_repeated()) {
     reflection->SetDouble(model, f, deg_h);
@@ -417,7 +478,7 @@ void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double de
 
 absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
                                                                  std::string_view field_name) {
-  RETURN_IF_ERROR(CheckDriftModelLengths(proto, AbslView(field_name)));
+  RETURN_IF_ERROR(CheckDriftModel(proto, AbslView(field_name)));
   estimator::DriftVector theta;
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
     theta[term.theta_index] = estimator::DegPerHourToRadPerSec(DriftModelTermDegH(proto, term));
@@ -631,6 +692,11 @@ std::string ConfigToJson(const estimator::SpacecraftConfig& config) {
   if (!google::protobuf::util::MessageToJsonString(ConfigToProto(config), &json, options).ok()) {
     return std::string();
   }
+  // A drift model without keyed coefficients prints as it did before the field existed: the
+  // service compares the stored text to tell a changed configuration from the same one sent again
+  // (storage/config_store.cc, server/estimation_core.cc). The field is GyroDriftModel's last,
+  // printed last.
+  json = absl::StrReplaceAll(json, {{",\"coefficients\":[]}", "}"}});
   // A configuration without channels prints as it did before the field existed: the service
   // compares the stored text to tell a changed configuration from the same one sent again
   // (storage/config_store.cc, server/estimation_core.cc), so an empty "channels" must not make an

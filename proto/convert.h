@@ -95,18 +95,23 @@ absl::Status WriteConfigFile(const std::string& path, const estimator::Spacecraf
 // configuration and for CoefficientSnapshot.model / .sigma.
 
 // `field` prefixes error messages, e.g. "gyros[0].model" -> "gyros[0].model.c2DegH: expected 3
-// values, got 4". Empty vectors are zero. Values are not range-checked here.
+// values, got 4". Empty vectors are zero. A coefficient may be given keyed instead
+// (GyroDriftModel.coefficients: "gyros[0].model.coefficients[2].term: unknown term ..." for a key
+// not in estimator/model_terms.h, one given twice, or one also given by its field). Values are
+// not range-checked here.
 absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
                                                                  std::string_view field);
 // Rounded to 15 significant digits like ConfigToProto.
 esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients);
 
 // One coefficient of a GyroDriftModel as on the wire [deg/h], found by its descriptor
-// (estimator/model_terms.h: the field whose JSON name is term.json_key, entry term.component);
+// (estimator/model_terms.h): its keyed entry (coefficients[].term == term.storage_key) if the
+// message has one, otherwise the field whose JSON name is term.json_key, entry term.component;
 // an entry the message does not hold reads 0 (an empty vector is zero).
 double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
                           const estimator::FixedTermDescriptor& term);
-// Sets it, first filling the field's missing entries before it with 0.
+// Sets it in its field, first filling the field's missing entries before it with 0; a term
+// without a field of its own (one added to the table after the fields) in its keyed entry.
 void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double deg_h,
                            esg::v1::GyroDriftModel* model);
 

@@ -7,27 +7,34 @@ const TIME = { key: 'utc', source: 'utc', name: 'Time (UTC)', format: 'utc', hin
 // The drift model of one gyro, eq. (1), (8), (9), (10): the fixed terms of estimator/model_terms.h
 // in theta order, checked row for row against it by tests/estimator/model_terms_test.cc (a plain
 // module cannot read the C++ table). Each row: label, the GyroDriftModel JSON key and the
-// component in it (-1: the key holds a number), what the term is; case frame k, deg/h. Each entry
-// also has its telemetry key (the label in lower case) and get(model), the value from a
-// GyroDriftModel message (proto field names: "c1DegH" is read as c1_deg_h).
+// component in it (-1: the key holds a number), the term's key, what the term is; case frame k,
+// deg/h. Each entry also has its telemetry key (the label in lower case) and get(model), the value
+// from a GyroDriftModel message (proto field names: "c1DegH" is read as c1_deg_h): its keyed entry
+// in `coefficients` (docs/formats.md) if the message has one, otherwise its field; 0 when the
+// message has neither (a term added after the fields has none).
 export const COEFFICIENTS = [
-  ['k0', 'k0DegH', -1, '4th shape harmonic'],
-  ['C11', 'c1DegH', 0, 'rotor displacement (1st harmonic)'],
-  ['C12', 'c1DegH', 1, 'rotor displacement (1st harmonic)'],
-  ['C13', 'c1DegH', 2, 'rotor displacement (1st harmonic)'],
-  ['C21', 'c2DegH', 0, 'rotor displacement (3rd harmonic)'],
-  ['C22', 'c2DegH', 1, 'rotor displacement (3rd harmonic)'],
-  ['C23', 'c2DegH', 2, 'rotor displacement (3rd harmonic)'],
-  ['mu12', 'muDegH', 0, 'unequal stiffness'],
-  ['mu23', 'muDegH', 1, 'unequal stiffness'],
-  ['mu31', 'muDegH', 2, 'unequal stiffness'],
-  ['nu23', 'nuDegH', 0, 'unequal stiffness'],
-  ['nu31', 'nuDegH', 1, 'unequal stiffness'],
-  ['nu12', 'nuDegH', 2, 'unequal stiffness']
-].map(([label, jsonKey, component, meaning]) => {
+  ['k0', 'k0DegH', -1, 'k0', '4th shape harmonic'],
+  ['C11', 'c1DegH', 0, 'c1x', 'rotor displacement (1st harmonic)'],
+  ['C12', 'c1DegH', 1, 'c1y', 'rotor displacement (1st harmonic)'],
+  ['C13', 'c1DegH', 2, 'c1z', 'rotor displacement (1st harmonic)'],
+  ['C21', 'c2DegH', 0, 'c2x', 'rotor displacement (3rd harmonic)'],
+  ['C22', 'c2DegH', 1, 'c2y', 'rotor displacement (3rd harmonic)'],
+  ['C23', 'c2DegH', 2, 'c2z', 'rotor displacement (3rd harmonic)'],
+  ['mu12', 'muDegH', 0, 'mu12', 'unequal stiffness'],
+  ['mu23', 'muDegH', 1, 'mu23', 'unequal stiffness'],
+  ['mu31', 'muDegH', 2, 'mu31', 'unequal stiffness'],
+  ['nu23', 'nuDegH', 0, 'nu23', 'unequal stiffness'],
+  ['nu31', 'nuDegH', 1, 'nu31', 'unequal stiffness'],
+  ['nu12', 'nuDegH', 2, 'nu12', 'unequal stiffness']
+].map(([label, jsonKey, component, term, meaning]) => {
   const field = jsonKey.replace(/[A-Z]/g, (c) => `_${c.toLowerCase()}`);
-  const get = component < 0 ? (m) => m[field] : (m) => m[field][component];
-  return { key: label.toLowerCase(), label, jsonKey, component, meaning, get };
+  const get = (m) => {
+    const keyed = (m.coefficients || []).find((c) => c.term === term);
+    if (keyed) return keyed.value_deg_h;
+    if (m[field] === undefined) return 0;
+    return component < 0 ? m[field] : m[field][component];
+  };
+  return { key: label.toLowerCase(), label, jsonKey, component, term, meaning, get };
 });
 
 const AXES = ['x', 'y', 'z'];

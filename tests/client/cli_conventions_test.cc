@@ -168,6 +168,24 @@ TEST(OutputFormat, ProtoJsonIsTheCanonicalMappingWithMillisecondTimes) {
   EXPECT_EQ(ProtoToJson(list)["sessions"][0]["lastFrameTime"], "2019-03-01T00:00:01.000Z");
 }
 
+// A drift model's keyed coefficients (docs/formats.md) are printed when it has some, and left out
+// when it has none, as before the field existed; its fields are printed either way.
+TEST(OutputFormat, ADriftModelsKeyedCoefficientsArePrintedOnlyWhenItHasSome) {
+  esg::v1::CoefficientSnapshot snapshot;
+  snapshot.mutable_model()->set_k0_deg_h(0.25);
+  esg::v1::DriftCoefficient* keyed = snapshot.mutable_sigma()->add_coefficients();
+  keyed->set_term("c1y");
+  keyed->set_value_deg_h(0.5);
+  const Json doc = ProtoToJson(snapshot);
+  EXPECT_EQ(doc["model"]["k0DegH"], 0.25);
+  EXPECT_EQ(doc["model"]["nuDegH"], Json::array());
+  EXPECT_FALSE(doc["model"].contains("coefficients"));
+  ASSERT_TRUE(doc["sigma"].contains("coefficients"));
+  EXPECT_EQ(doc["sigma"]["coefficients"],
+            Json::parse(R"([{"term": "c1y", "valueDegH": 0.5}])"));
+  EXPECT_EQ(doc["sigma"]["k0DegH"], 0.0);
+}
+
 TEST(OutputFormat, CsvHasAHeaderFlattensAndQuotes) {
   const std::vector<Json> records = {
       Json{{"id", 1}, {"q", Json::array({0.5, 1})}, {"note", "a, \"b\""}},

@@ -13,6 +13,7 @@
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/ascii.h"
@@ -34,9 +35,11 @@ std::string ReadSource(const std::string& path) {
 }
 
 // Fingerprints (FNV-1a) of the frozen schema history of storage/schema.cc and
-// storage/postgres_schema.cc as released.
+// storage/postgres_schema.cc as released, and of the frozen fields of GyroDriftModel
+// (proto/esg/v1/spacecraft_config.proto).
 constexpr uint64_t kSqliteFrozen = 0x4008a1848832b2a6ull;
 constexpr uint64_t kPostgresFrozen = 0xbbd72b994f5f6f3bull;
+constexpr uint64_t kProtoFrozen = 0x27a026345bb22eb6ull;
 
 // The coefficient of `c` a descriptor names, by its symbol and component (drift_model.h).
 double ByName(const DriftCoefficients& c, const FixedTermDescriptor& term) {
@@ -148,8 +151,8 @@ TEST(ModelTerms, AnEffectsTermsAreContiguousInTheta) {
 }
 
 // The console cannot include C++: its table of coefficients (series.js COEFFICIENTS: label, JSON
-// key, component, meaning; its diagnosis view reads the same rows) is checked against the
-// descriptors, row for row.
+// key, component, the term's key of the keyed form, meaning; its diagnosis view reads the same
+// rows) is checked against the descriptors, row for row.
 TEST(ModelTerms, ConsoleLabelsAreTheDescriptorsInOrder) {
   const std::string js = ReadSource("console/plugin/series.js");
   const size_t begin = js.find("export const COEFFICIENTS = [");
@@ -157,17 +160,18 @@ TEST(ModelTerms, ConsoleLabelsAreTheDescriptorsInOrder) {
   const size_t end = js.find("].map(", begin);
   ASSERT_NE(end, std::string::npos);
   const std::string table = js.substr(begin, end - begin);
-  // ['C11', 'c1DegH', 0, 'rotor displacement (1st harmonic)'],
-  const std::regex row(R"(\['([^']*)', '([^']*)', (-?\d+), '([^']*)'\])");
+  // ['C11', 'c1DegH', 0, 'c1x', 'rotor displacement (1st harmonic)'],
+  const std::regex row(R"(\['([^']*)', '([^']*)', (-?\d+), '([^']*)', '([^']*)'\])");
   std::vector<std::string> rows;
   for (std::sregex_iterator it(table.begin(), table.end(), row), done; it != done; ++it) {
     const std::smatch& m = *it;
-    rows.push_back(absl::StrCat(m[1].str(), "|", m[2].str(), "|", m[3].str(), "|", m[4].str()));
+    rows.push_back(absl::StrCat(m[1].str(), "|", m[2].str(), "|", m[3].str(), "|", m[4].str(),
+                                "|", m[5].str()));
   }
   std::vector<std::string> expected;
   for (const FixedTermDescriptor& term : kFixedTerms) {
-    expected.push_back(
-        absl::StrCat(term.label, "|", term.json_key, "|", term.component, "|", term.meaning));
+    expected.push_back(absl::StrCat(term.label, "|", term.json_key, "|", term.component, "|",
+                                    term.storage_key, "|", term.meaning));
   }
   EXPECT_THAT(rows, ::testing::ElementsAreArray(expected));
 }
@@ -182,29 +186,35 @@ uint64_t Fingerprint(absl::string_view text) {
   return h;
 }
 
-constexpr std::string_view kFrozenBegin = "// Frozen schema history, begin.";
-constexpr std::string_view kFrozenEnd = "// Frozen schema history, end.";
+// The marks around frozen text: the schema history (the DDL of old schema versions, which
+// describes what databases of those versions hold and never changes) and the proto's fields of
+// the terms as released (a term added later is keyed, GyroDriftModel.coefficients).
+constexpr std::pair<std::string_view, std::string_view> kFrozenMarks[] = {
+    {"// Frozen schema history, begin.", "// Frozen schema history, end."},
+    {"// Frozen fields, begin.", "// Frozen fields, end."}};
 
-// The file's text without its frozen schema history (the DDL of old schema versions, which
-// describes what databases of those versions hold and never changes); each frozen part is
-// appended to *frozen.
-std::string WithoutFrozenHistory(const std::string& content, std::vector<std::string>* frozen) {
-  std::string out;
-  size_t at = 0;
-  while (true) {
-    const size_t begin = content.find(kFrozenBegin, at);
-    if (begin == std::string::npos) break;
-    const size_t end = content.find(kFrozenEnd, begin);
-    if (end == std::string::npos) {
-      ADD_FAILURE() << "a frozen part without its end mark";
-      break;
+// The file's text without its frozen parts; each is appended to *frozen.
+std::string WithoutFrozenText(const std::string& content, std::vector<std::string>* frozen) {
+  std::string text = content;
+  for (const auto& [begin_mark, end_mark] : kFrozenMarks) {
+    std::string out;
+    size_t at = 0;
+    while (true) {
+      const size_t begin = text.find(begin_mark, at);
+      if (begin == std::string::npos) break;
+      const size_t end = text.find(end_mark, begin);
+      if (end == std::string::npos) {
+        ADD_FAILURE() << "a frozen part without its end mark: " << begin_mark;
+        break;
+      }
+      out += text.substr(at, begin - at);
+      frozen->push_back(text.substr(begin, end + end_mark.size() - begin));
+      at = end + end_mark.size();
     }
-    out += content.substr(at, begin - at);
-    frozen->push_back(content.substr(begin, end + kFrozenEnd.size() - begin));
-    at = end + kFrozenEnd.size();
+    out += text.substr(at);
+    text = out;
   }
-  out += content.substr(at);
-  return out;
+  return text;
 }
 
 // Where a fixed term is named: the production files (not tests, docs or fuzz corpora) that name
@@ -214,16 +224,16 @@ std::string WithoutFrozenHistory(const std::string& content, std::vector<std::st
 //   estimator/model_terms.h           its descriptor: names, unit, frame, models, effect;
 //   estimator/drift_model.h, .cc      its physics: theta offset, coefficient, regressor column;
 //   estimator/simulator_truth.cc      the simulator's independent printed formula for it;
-//   proto/esg/v1/spacecraft_config.proto  its wire field;
 //   console/plugin/series.js          the console's row (a plain module; checked above).
-// Every other file reads the table (model_terms.h). Frozen schema history (the DDL of old
-// versions in storage/schema.cc and storage/postgres_schema.cc) names the terms of those versions
-// and is pinned unchanged here, so it never takes a new term.
-TEST(ModelTerms, ANewFixedTermIsWrittenInSixFilesOnly) {
+// Every other file reads the table (model_terms.h). Frozen text names the terms as released and
+// is pinned unchanged here, so it never takes a new term: the schema history (the DDL of old
+// versions in storage/schema.cc and storage/postgres_schema.cc) and GyroDriftModel's fields of
+// the 13 coefficients (proto/esg/v1/spacecraft_config.proto; a new term is keyed on the wire,
+// GyroDriftModel.coefficients, which proto/convert.cc reads and writes from the table).
+TEST(ModelTerms, ANewFixedTermIsWrittenInFiveFilesOnly) {
   const std::set<std::string> per_term = {
-      "estimator/model_terms.h",     "estimator/drift_model.h",
-      "estimator/drift_model.cc",    "estimator/simulator_truth.cc",
-      "proto/esg/v1/spacecraft_config.proto", "console/plugin/series.js"};
+      "estimator/model_terms.h", "estimator/drift_model.h", "estimator/drift_model.cc",
+      "estimator/simulator_truth.cc", "console/plugin/series.js"};
   EXPECT_LE(per_term.size(), 6u);
   const std::regex names(
       R"(nuDegH|nu_deg_h|nu23|nu31|nu12|kThetaNu|kCoefficientNu|\.nu\b|mu_nu|"nu"|'nu')");
@@ -240,19 +250,22 @@ TEST(ModelTerms, ANewFixedTermIsWrittenInSixFilesOnly) {
       }
       const std::string path = std::filesystem::relative(entry.path(), root).generic_string();
       std::vector<std::string> frozen;
-      const std::string content = WithoutFrozenHistory(ReadSource(path), &frozen);
+      const std::string content = WithoutFrozenText(ReadSource(path), &frozen);
       for (const std::string& part : frozen) frozen_parts[path].push_back(Fingerprint(part));
       if (std::regex_search(content, names)) found.insert(path);
     }
   }
   EXPECT_THAT(found, ::testing::ContainerEq(per_term));
   // The frozen parts, as released: version 1-9's DDL and coefficient columns (SQLite), version
-  // 7's DDL (PostgreSQL). A change here changes what an old database is taken to be.
+  // 7's DDL (PostgreSQL): a change here changes what an old database is taken to be; the proto's
+  // fields of the 13 coefficients: a change here changes the wire.
   EXPECT_THAT(frozen_parts,
               ::testing::UnorderedElementsAre(
                   ::testing::Pair("storage/schema.cc", ::testing::ElementsAre(kSqliteFrozen)),
                   ::testing::Pair("storage/postgres_schema.cc",
-                                  ::testing::ElementsAre(kPostgresFrozen))));
+                                  ::testing::ElementsAre(kPostgresFrozen)),
+                  ::testing::Pair("proto/esg/v1/spacecraft_config.proto",
+                                  ::testing::ElementsAre(kProtoFrozen))));
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
 #include "absl/time/time.h"
+#include "estimator/model_terms.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/status_matchers.h"
@@ -480,6 +481,24 @@ INSTANTIATE_TEST_SUITE_P(
                       "gyros[1].model.c1DegH[2]: 11 is outside [-10, 10] deg/h"},
         BadConfigCase{"RandomWalkTooLarge", "\"randomWalkDegHSqrtH\": 0.002",
                       "\"randomWalkDegHSqrtH\": 2", "randomWalkDegHSqrtH: 2 is outside [0, 1]"},
+        BadConfigCase{"KeyedCoefficientUnknownTerm", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"coefficients\": [{\"term\": \"k0\", \"valueDegH\": 0.25}, "
+                      "{\"term\": \"c1\", \"valueDegH\": 0.1}]},",
+                      "gyros[2].model.coefficients[1].term: unknown term \"c1\" (terms: k0, c1x, "
+                      "c1y, c1z, c2x, c2y, c2z, mu12, mu23, mu31, nu23, nu31, nu12)"},
+        BadConfigCase{"KeyedCoefficientGivenTwice", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"coefficients\": [{\"term\": \"mu23\", \"valueDegH\": 0.1}, "
+                      "{\"term\": \"k0\", \"valueDegH\": 0.25}, "
+                      "{\"term\": \"mu23\", \"valueDegH\": 0.1}]},",
+                      "gyros[2].model.coefficients[2].term: term \"mu23\" is given twice"},
+        BadConfigCase{"KeyedCoefficientAlsoGivenByItsField", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"c1DegH\": [0, 0, 0], "
+                      "\"coefficients\": [{\"term\": \"c1y\", \"valueDegH\": 0.1}]},",
+                      "gyros[2].model.coefficients[0].term: term \"c1y\" is also given by "
+                      "gyros[2].model.c1DegH; give it once"},
+        BadConfigCase{"KeyedCoefficientTooLarge", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"coefficients\": [{\"term\": \"nu31\", \"valueDegH\": -11}]},",
+                      "gyros[2].model.nuDegH[1]: -11 is outside [-10, 10] deg/h"},
         BadConfigCase{"WrongJsonType", "\"k0DegH\": 0.25", "\"k0DegH\": \"fast\"",
                       "gyros[2].model.k0DegH: invalid value \"fast\""},
         BadConfigCase{"WrongJsonTypeInArray", "\"workingPair\": [1, 2]",
@@ -756,6 +775,104 @@ TEST(DriftModel, ProtoRoundTripConvertsDegPerHour) {
   EXPECT_THAT(DriftModelFromProto(bad, "sigma"),
               StatusIs(absl::StatusCode::kInvalidArgument,
                        HasSubstr("sigma.nuDegH: expected 3 values, got 4")));
+}
+
+// A GyroDriftModel whose 13 coefficients are distinct, given by its fields (as the service writes
+// it); each value has more digits than the 15 DriftModelToProto keeps, so a read that rounded would
+// show.
+esg::v1::GyroDriftModel DistinctFieldModel() {
+  esg::v1::GyroDriftModel proto;
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    SetDriftModelTermDegH(term, (term.theta_index + 1) * (term.theta_index % 2 ? -1.0 : 1.0) / 7.0,
+                          &proto);
+  }
+  return proto;
+}
+
+// The keyed form (GyroDriftModel.coefficients) reads as the fields do: every coefficient keyed, in
+// reverse order, and half of them keyed with the other half in fields, give the same coefficients
+// bit for bit.
+TEST(DriftModel, KeyedCoefficientsReadAsTheirFieldsDo) {
+  const esg::v1::GyroDriftModel fields = DistinctFieldModel();
+  ASSERT_EQ(fields.coefficients_size(), 0);
+  absl::StatusOr<estimator::DriftCoefficients> expected = DriftModelFromProto(fields, "model");
+  ASSERT_THAT(expected, IsOk());
+
+  esg::v1::GyroDriftModel keyed;
+  for (int i = estimator::kNumDriftCoefficients - 1; i >= 0; --i) {
+    esg::v1::DriftCoefficient* c = keyed.add_coefficients();
+    c->set_term(std::string(estimator::kFixedTerms[i].storage_key));
+    c->set_value_deg_h(DriftModelTermDegH(fields, estimator::kFixedTerms[i]));
+  }
+  absl::StatusOr<estimator::DriftCoefficients> all_keyed = DriftModelFromProto(keyed, "model");
+  ASSERT_THAT(all_keyed, IsOk());
+  EXPECT_EQ(all_keyed->AsVector(), expected->AsVector());
+
+  // k0, C2 and nu keyed; C1 and mu in their fields.
+  esg::v1::GyroDriftModel mixed;
+  *mixed.mutable_c1_deg_h() = fields.c1_deg_h();
+  *mixed.mutable_mu_deg_h() = fields.mu_deg_h();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    if (term.symbol != "k0" && term.symbol != "C2" && term.symbol != "nu") continue;
+    esg::v1::DriftCoefficient* c = mixed.add_coefficients();
+    c->set_term(std::string(term.storage_key));
+    c->set_value_deg_h(DriftModelTermDegH(fields, term));
+  }
+  ASSERT_EQ(mixed.coefficients_size(), 7);
+  absl::StatusOr<estimator::DriftCoefficients> half = DriftModelFromProto(mixed, "model");
+  ASSERT_THAT(half, IsOk());
+  EXPECT_EQ(half->AsVector(), expected->AsVector());
+}
+
+// In the configuration JSON: gyro 3's model keyed ("coefficients": [{"term": "k0", ...}]) reads as
+// the example's "k0DegH", and a prior sigma keyed is a sigma (the coefficient is estimated).
+TEST(ConfigJson, KeyedCoefficientsReadAsTheFieldsOfTheExample) {
+  absl::StatusOr<estimator::SpacecraftConfig> fields = ParseConfigJson(kDesignJson);
+  ASSERT_THAT(fields, IsOk());
+  absl::StatusOr<estimator::SpacecraftConfig> keyed = ParseConfigJson(DesignJsonWith(
+      "\"model\":      {\"k0DegH\": 0.25},\n"
+      "     \"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1], "
+      "\"c2DegH\": [0.1,0.1,0.1]}}\n",
+      "\"model\": {\"coefficients\": [{\"term\": \"k0\", \"valueDegH\": 0.25}]},\n"
+      "     \"modelSigma\": {\"coefficients\": [{\"term\": \"k0\", \"valueDegH\": 0.3}, "
+      "{\"term\": \"c1x\", \"valueDegH\": 0.1}, {\"term\": \"c1y\", \"valueDegH\": 0.1}, "
+      "{\"term\": \"c1z\", \"valueDegH\": 0.1}], \"c2DegH\": [0.1,0.1,0.1]}}\n"));
+  ASSERT_THAT(keyed, IsOk());
+  ASSERT_EQ(keyed->gyros.size(), 3u);
+  EXPECT_EQ(keyed->gyros[2].model.AsVector(), fields->gyros[2].model.AsVector());
+  EXPECT_EQ(keyed->gyros[2].model_sigma.AsVector(), fields->gyros[2].model_sigma.AsVector());
+  EXPECT_EQ(keyed->gyros[2].model.k0, DegHToRadS(0.25));
+  // Written back, the fields are used, as before the keyed form, and no empty keyed list.
+  EXPECT_EQ(ConfigToJson(*keyed), ConfigToJson(*fields));
+  EXPECT_THAT(ConfigToJson(*keyed), Not(HasSubstr("coefficients")));
+  EXPECT_THAT(ConfigToJson(*keyed), HasSubstr("\"nuDegH\": [0, 0, 0]"));
+}
+
+// A term added to the table after the proto's fields (here one made up, past the 13 of theta) is
+// written keyed, and read back from there; the 13 of today are written in their fields, so what
+// the service writes is unchanged.
+TEST(DriftModel, ATermWithoutAFieldOfItsOwnIsWrittenAndReadKeyed) {
+  const estimator::FixedTermDescriptor later = {
+      "k1", "k1", "k1DegH", -1, "deg/h", "k", estimator::kNumDriftCoefficients, "k1",
+      "a term added later", estimator::kModelPart10, ""};
+  esg::v1::GyroDriftModel proto = DistinctFieldModel();
+  EXPECT_EQ(DriftModelTermDegH(proto, later), 0.0);
+  SetDriftModelTermDegH(later, 0.375, &proto);
+  ASSERT_EQ(proto.coefficients_size(), 1);
+  EXPECT_EQ(proto.coefficients(0).term(), "k1");
+  EXPECT_EQ(DriftModelTermDegH(proto, later), 0.375);
+  SetDriftModelTermDegH(later, -0.5, &proto);
+  ASSERT_EQ(proto.coefficients_size(), 1);
+  EXPECT_EQ(DriftModelTermDegH(proto, later), -0.5);
+  // The 13 coefficients are where they were.
+  const esg::v1::GyroDriftModel fields = DistinctFieldModel();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    EXPECT_EQ(DriftModelTermDegH(proto, term), DriftModelTermDegH(fields, term)) << term.label;
+  }
+  EXPECT_EQ(DriftModelToProto(estimator::DriftCoefficients::FromVector(
+                                  estimator::DriftVector::Constant(1e-6)))
+                .coefficients_size(),
+            0);
 }
 
 // ---------------------------------------------------------------------------------------------
