@@ -15,6 +15,7 @@
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/discovery/wander.h"
 #include "estimator/statistics.h"
+#include "estimator/status_macros.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -589,386 +590,459 @@ absl::StatusOr<PhysicsCheck> CheckConstantEffect(const CandidateFit& fit,
   return out;
 }
 
-}  // namespace
-
-absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros,
-                                           SelectedModel& selected, DiagnosisContext& context) {
-  const DiagnoseOptions& options = context.options();
-  RoundResult result;
-  if (context.Stop()) return DiagnosisContext::Cancelled();
-  std::vector<Candidate> candidates = ListCandidates(selected.model, gyros, options.effects);
-  if (!options.open_ended) {  // the basis's readout group and sun families belong to it
-    std::erase_if(candidates, [](const Candidate& c) {
-      return c.effect == Effect::kReadoutDistortion || c.effect == Effect::kSunDrift;
-    });
-  }
-  if (candidates.empty()) return result;
-  context.Say(0.05 + 0.8 * round / options.max_effects,
-              absl::StrFormat("round %d: %d candidates", round + 1, candidates.size()));
+// The working state of one selection round, shared by its decisions below.
+struct RoundState {
+  std::vector<Candidate> candidates;
   // Two stages. The constant effects (and the common random walk) first; the time behaviours
   // (a drift step per gyro, a random walk per gyro: many runs each) only when those leave the
   // round open: nothing significant, a change in time (the best is inhomogeneous), or a random
   // walk. Every threshold counts the whole round's candidates, fitted or not (2 ln(M / alpha)).
   std::vector<Candidate> constant, timed;
-  for (const Candidate& c : candidates) {
-    const bool time_behaviour = c.effect == Effect::kDriftStep ||
-                                (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
-    (time_behaviour ? timed : constant).push_back(c);
-  }
-  // M counts each comparison once: a sun candidate one per face it may try (D101).
-  int family = 0;
-  for (const Candidate& c : candidates) family += CandidateComparisons(c, selected.model);
+  int family = 0;  // M: each comparison once, a sun candidate one per face it may try (D101)
   std::vector<CandidateFit> fits;
-  auto fit_all = [&](const std::vector<Candidate>& stage) -> absl::Status {
-    auto fitted = FitCandidates(stage, round, static_cast<int>(fits.size()),
-                                static_cast<int>(candidates.size()), gyros, selected, context);
-    if (context.Stopped()) return DiagnosisContext::Cancelled();
-    for (auto& f : fitted) {
-      if (!f->ok()) return f->status();
-      context.CountRuns((*f)->runs);
-      fits.push_back(std::move(**f));
-    }
-    return absl::OkStatus();
-  };
   std::vector<Scored> scored;
-  bool inhomogeneous_only = false;
   std::vector<Scored> significant;
-  absl::StatusOr<std::string> rw_note;
+  bool inhomogeneous_only = false;
+  std::string rw_note;  // PreferRandomWalk's note for the finding
   // Constant effects of one gyro that fail their physics checks (CheckConstantEffect): left out
   // of the selection (their rows keep what the evidence says); their notes.
   std::vector<int> failed;
   std::vector<std::pair<int, std::string>> failed_notes;    // gyro, note
   std::vector<std::pair<int, std::string>> constant_notes;  // fit index, the check it passed
-  for (int stage = 0; stage < 2; ++stage) {
-    if (absl::Status s = fit_all(stage == 0 ? constant : timed); !s.ok()) return s;
-    bool settled = false;
-    scored = Score(fits, selected, family, context);
-    for (;;) {
-      significant = SignificantInOrder(scored, fits, failed, inhomogeneous_only);
-      rw_note = PreferRandomWalk(scored, fits, family, failed, significant, context);
-      if (!rw_note.ok()) return rw_note.status();
-      settled = !significant.empty() &&
-                fits[significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
-      if (significant.empty() || static_cast<int>(failed.size()) >= kMaxFailedChecks) break;
-      const int top = significant.front().index;
-      if (!settled) {
-        // A walk tops: the walk of every gyro must be common (wander.h CheckCommonWalk), tested
-        // once every candidate of the round is fitted.
-        if (stage == 0 && !timed.empty()) break;
-        if (fits[top].candidate.gyro != 0 || gyros.size() < 2) break;
-        auto common = CheckCommonWalk(selected, context, gyros);
-        if (!common.ok()) return common.status();
-        if (!common->fails) {
-          constant_notes.emplace_back(top, std::move(common->note));
-          break;
-        }
-        failed.push_back(top);
-        failed_notes.emplace_back(0, std::move(common->note));
-        continue;
-      }
-      auto check = CheckConstantEffect(fits[top], selected, family, context);
-      if (!check.ok()) return check.status();
-      if (!check->fails) {
-        if (!check->note.empty()) constant_notes.emplace_back(top, std::move(check->note));
-        break;
-      }
-      failed.push_back(top);
-      failed_notes.emplace_back(fits[top].candidate.gyro, std::move(check->note));
-    }
-    if (settled || timed.empty()) break;
-  }
-  // A time behaviour must explain the recording better than a jump of the gyro's readings at the
-  // onset (D43): a step of the readings is no physics of the library, and a drift step or a walk
-  // that fits it only in part is the nearest candidate forced onto a fault. Same currency: the
-  // jump's evidence 2 ln B, its best onset's likelihood gain less the cost of the onset's prior
-  // (the step's own, over the same onsets; the jump has 3 parameters freed with a prior, as the
-  // step). When the readout jump does at least as well, nothing is taken and the mismatch is
-  // left unexplained, located in time.
-  std::string readout_note;
-  if (!significant.empty()) {
-    const Scored& top = significant.front();
-    const Candidate& c = fits[top.index].candidate;
-    const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift;
-    const CandidateFit* jump = nullptr;
-    double onset_cost = 0.0;
-    for (const Scored& x : scored) {
-      const CandidateFit& f = fits[x.index];
-      if (!timed_top || f.candidate.effect != Effect::kDriftStep || !f.readout_fitted) continue;
-      if (c.gyro > 0 && f.candidate.gyro != c.gyro) continue;  // a walk of all gyros: any gyro
-      if (jump == nullptr || f.readout_value < jump->readout_value) {
-        jump = &f;
-        onset_cost = x.penalty;
-      }
-    }
-    if (jump != nullptr) {
-      const double jump_score = selected.fit.value - jump->readout_value - onset_cost;
-      if (jump_score >= top.score) {
-        readout_note = absl::StrFormat(
-            "resembles a step of gyro %d's readings at %.2f h (a readout jump, a fault outside "
-            "the library): its misalignment released at that instant has evidence 2 ln B = "
-            "%.1f against %.1f for %s, which fits it only in part",
-            jump->candidate.gyro, jump->readout_onset_hours, jump_score, top.score,
-            CandidateName(c));
-        significant.clear();
-        inhomogeneous_only = true;
-        result.readout_jump_evidence = jump_score;
-      }
-    }
-  }
-  // Physics outside the library before a time behaviour (docs/discovery.md, "The open-ended
-  // stage"): a random walk or a drift step absorbs a deterministic drift the library lacks (one
-  // cycling with the orbit, one growing). When one tops the round, the open-ended stage runs on
-  // the current model, and its terms are taken instead when they add significant evidence on
-  // top of the time behaviour (the nested comparison of PreferRandomWalk, same currency); the
-  // time behaviour is tested again in the next round.
-  std::string basis_note;
+  std::string readout_note;  // a readout jump explains the round as well (D43)
+  std::string basis_note;    // the open-ended basis was compared and not taken
   // The comparison of a per-gyro time behaviour with a drift that returns to its mean (wander.h),
   // computed once when needed.
   std::optional<DriftBehaviourEvidence> behaviour;
-  auto behaviour_of = [&](int gyro) -> absl::Status {
-    if (behaviour.has_value()) return absl::OkStatus();
-    auto e = CompareDriftBehavioursOf(selected, context, gyro);
-    if (!e.ok()) return e.status();
-    behaviour = *e;
-    return absl::OkStatus();
-  };
-  if (!significant.empty() && options.open_ended) {
-    const CandidateFit& top = fits[significant.front().index];
-    if (top.candidate.effect == Effect::kRandomWalkDrift ||
-        top.candidate.effect == Effect::kDriftStep) {
-      auto basis = RunBasisStage(selected, context, gyros, round);
-      if (!basis.ok()) return basis.status();
-      // Terms for another gyro whose drift returns to its mean are not taken along with the
-      // time behaviour's gyro's (that gyro's own are tested below): the stage runs again
-      // without those gyros.
-      std::string outdone_note;
-      if (basis->extended.has_value() && !basis->findings.empty()) {
-        auto outdone = GyrosOutdoneByAStationaryDrift(*basis, selected, context, {},
-                                                      {top.candidate.gyro}, options.alpha);
-        if (!outdone.ok()) return outdone.status();
-        if (!outdone->gyros.empty()) {
-          outdone_note = outdone->note;
-          result.outdone_gyros = outdone->gyros;
-          basis = RunBasisStage(selected, context, outdone->Others(gyros), round);
-          if (!basis.ok()) return basis.status();
-        }
-      }
-      if (basis->extended.has_value() && !basis->findings.empty()) {
-        auto both = context.CheckedRun(WithBasisTerms(top.model, *basis), /*held_out=*/false);
-        if (!both.ok()) return both.status();
-        const double gain = Profile(top.run).value - Profile(*both).value;
-        const std::string versus = absl::StrFormat(
-            "on top of %s (2 ln B = %.1f) the open-ended basis's terms add 2 ln B = %.1f "
-            "(threshold %.1f)",
-            CandidateName(top.candidate), significant.front().score, gain,
-            basis->refit_threshold);
-        // A deterministic term must also predict: on the held-out spans its -2 log predictive
-        // density must not be worse than the time behaviour's (terms fitted to a random process,
-        // a drift switching at random, predict the withheld spans wrongly and confidently).
-        bool predicts = true;
-        std::string held_note;
-        if (gain > basis->refit_threshold && !context.gaps().empty()) {
-          auto held_basis = context.CheckedRun(basis->extended->model, /*held_out=*/true);
-          if (!held_basis.ok()) return held_basis.status();
-          auto held_top = context.CheckedRun(top.model, /*held_out=*/true);
-          if (!held_top.ok()) return held_top.status();
-          const HeldOutResult hb = SummariseHeldOut(*held_basis, context.gaps(), context.regimes(),
-                                                    context.frames());
-          const HeldOutResult ht = SummariseHeldOut(*held_top, context.gaps(), context.regimes(),
-                                                    context.frames());
-          predicts = hb.deviance <= ht.deviance;
-          held_note = absl::StrFormat(
-              "; held-out -2 log predictive density %.1f with the basis's terms against %.1f "
-              "with %s",
-              hb.deviance, ht.deviance, CandidateName(top.candidate));
-          // Nor may the terms make the held-out point prediction worse (point_prediction.h).
-          if (absl::Status st = MakeHeldOutCurrent(selected, context); !st.ok()) return st;
-          if (predicts && WorsensPointPrediction(selected.held_out, hb)) {
-            predicts = false;
-            absl::StrAppend(&held_note, "; ",
-                            PointPredictionNote("the basis's terms", selected.held_out, hb));
-          }
-          if (predicts) {
-            basis->extended->held_out = hb;
-            basis->extended->held_out_current = true;
-          }
-        }
-        // Deterministic terms for a gyro whose drift returns to its mean must describe its
-        // deviation better than that stationary drift, in the reduced regression's currency.
-        bool describes = true;
-        if (gain > basis->refit_threshold && predicts && top.candidate.gyro > 0) {
-          double basis_evidence = 0.0;
-          bool in_gyro = false;
-          for (const SelectedGroup& g : basis->stage.selected) {
-            if (g.gyro != top.candidate.gyro) continue;
-            basis_evidence += g.evidence;
-            in_gyro = true;
-          }
-          if (in_gyro) {
-            if (absl::Status st = behaviour_of(top.candidate.gyro); !st.ok()) return st;
-            if (behaviour->stationary > basis_evidence) {
-              describes = false;
-              absl::StrAppend(&held_note, absl::StrFormat(
-                  "; the basis's terms for gyro %d (2 ln B = %.1f in the reduced regression) "
-                  "describe its deviation less well than a drift that returns to its mean "
-                  "(2 ln B = %.1f)",
-                  top.candidate.gyro, basis_evidence, behaviour->stationary));
-            }
-          }
-        }
-        if (gain > basis->refit_threshold && predicts && describes) {
-          for (const Scored& x : scored) result.rows.push_back(Row(x, fits[x.index], round, -1));
-          // The round's notes once, on the first of the terms taken together; the others
-          // point to it.
-          Finding& first = basis->findings.front();
-          for (const auto& failed_note : failed_notes) {
-            first.evidence.notes.push_back(failed_note.second);
-          }
-          first.evidence.notes.push_back(absl::StrCat(
-              versus, held_note,
-              ": a deterministic drift, taken before the time behaviour, which the next round "
-              "tests again"));
-          if (!outdone_note.empty()) {
-            first.evidence.notes.push_back(absl::StrCat(
-                "terms of other gyros left out", outdone_note,
-                ": the stage ran again without those gyros"));
-          }
-          for (size_t k = 1; k < basis->findings.size(); ++k) {
-            basis->findings[k].evidence.notes.push_back(absl::StrFormat(
-                "taken together with the stage's first term (gyro %d, listed before it) against "
-                "%s; the round's notes are on that finding",
-                basis->findings.front().gyro, CandidateName(top.candidate)));
-          }
-          CandidateScore row;
-          row.effect = kEffectBasisTerm;
-          row.gyro = basis->findings.front().gyro;
-          row.round = round;
-          row.parameters = static_cast<int>(basis->added_terms.size());
-          row.delta_deviance = row.score = basis->refit_evidence;
-          row.p_value = EvidenceBound(basis->refit_evidence);
-          row.significant = row.selected = true;
-          row.time_behaviour = basis->findings.front().time.kind;
-          result.rows.push_back(row);
-          result.finding = basis->findings.front();
-          result.more_findings.assign(basis->findings.begin() + 1, basis->findings.end());
-          result.residual_drift = basis->residual_drift;
-          selected = std::move(*basis->extended);
-          return result;
-        }
-        basis_note = absl::StrCat(versus, held_note,
-                                  !predicts ? ": the basis's terms do not predict the "
-                                              "held-out spans as well, the time behaviour is kept"
-                                            : ": the time behaviour is kept");
-      }
-    }
-  }
-  // A time behaviour of one gyro (the basis did not replace it) changes its drift once (a step)
-  // or without bound (a walk); a drift that returns to its mean, switching at random between
-  // levels or driven by a quantity the telemetry does not carry, is neither (wander.h). When a stationary drift describes the
-  // gyro's deviation decisively better than both, nothing is taken: the mismatch is left
-  // unexplained, located to the gyro, and described.
   std::string wander_note;
   Mismatch wander_where;
   double wander_evidence = -1.0;
-  if (!significant.empty()) {
-    const Candidate& c = fits[significant.front().index].candidate;
-    if (c.gyro > 0 && (c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift)) {
-      if (absl::Status st = behaviour_of(c.gyro); !st.ok()) return st;
-      if (ReturnsToItsMean(*behaviour, EvidenceThreshold(options.alpha, 1))) {
-        wander_note = absl::StrCat(ReturnsToItsMeanText(*behaviour), "; ", CandidateName(c),
-                                   " is not taken");
-        wander_where =
-            WanderLocation(c.gyro, context.frames(), ReturnsToItsMeanBound(*behaviour));
-        wander_evidence = behaviour->stationary;
-        significant.clear();
-        inhomogeneous_only = true;
-      }
-    }
+};
+
+// The round's candidates, split into its two stages, and M.
+void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
+                         const SelectedModel& selected, const DiagnoseOptions& options) {
+  st.candidates = ListCandidates(selected.model, gyros, options.effects);
+  if (!options.open_ended) {  // the basis's readout group and sun families belong to it
+    std::erase_if(st.candidates, [](const Candidate& c) {
+      return c.effect == Effect::kReadoutDistortion || c.effect == Effect::kSunDrift;
+    });
   }
-  auto choice = ChooseGuarded(significant, scored, fits, failed, inhomogeneous_only, round,
-                              selected, context);
-  if (!choice.ok()) return choice.status();
-  const int chosen = choice->chosen;
-  const bool held_out_selected = choice->held_out_selected;
-  const Contenders& contenders = choice->contenders;
-  for (const Scored& s : scored) result.rows.push_back(Row(s, fits[s.index], round, chosen));
-  if (chosen < 0) {
-    if (!wander_note.empty()) {
-      result.unresolved = wander_note;
-      result.unresolved_gyro = wander_where.gyro;
-      result.unresolved_note = readout_note;
-      result.unresolved_where = wander_where;
-      result.stationary_evidence = wander_evidence;
-      for (const auto& [gyro, note] : failed_notes) {
-        // Its own effects' notes, and a common walk's that this drift made fail.
-        if (gyro == wander_where.gyro || gyro == 0) {
-          absl::StrAppend(&result.unresolved, "; ", note);
+  for (const Candidate& c : st.candidates) {
+    const bool time_behaviour = c.effect == Effect::kDriftStep ||
+                                (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
+    (time_behaviour ? st.timed : st.constant).push_back(c);
+  }
+  for (const Candidate& c : st.candidates) st.family += CandidateComparisons(c, selected.model);
+}
+
+// Fits a stage's candidates into st.fits.
+absl::Status FitStage(RoundState& st, const std::vector<Candidate>& stage, int round,
+                      const std::vector<int>& gyros, const SelectedModel& selected,
+                      DiagnosisContext& context) {
+  auto fitted = FitCandidates(stage, round, static_cast<int>(st.fits.size()),
+                              static_cast<int>(st.candidates.size()), gyros, selected, context);
+  if (context.Stopped()) return DiagnosisContext::Cancelled();
+  for (auto& f : fitted) {
+    if (!f->ok()) return f->status();
+    context.CountRuns((*f)->runs);
+    st.fits.push_back(std::move(**f));
+  }
+  return absl::OkStatus();
+}
+
+// The significant candidates of the round, stage by stage: the best must pass its physics check
+// (CheckConstantEffect), or, when a walk tops, the walk of every gyro must be common
+// (CheckCommonWalk); a candidate that fails is left out and the next is tried, up to
+// kMaxFailedChecks.
+absl::Status SettleSignificant(RoundState& st, int round, const std::vector<int>& gyros,
+                               const SelectedModel& selected, DiagnosisContext& context) {
+  for (int stage = 0; stage < 2; ++stage) {
+    RETURN_IF_ERROR(
+        FitStage(st, stage == 0 ? st.constant : st.timed, round, gyros, selected, context));
+    bool settled = false;
+    st.scored = Score(st.fits, selected, st.family, context);
+    for (;;) {
+      st.significant = SignificantInOrder(st.scored, st.fits, st.failed, st.inhomogeneous_only);
+      ASSIGN_OR_RETURN(st.rw_note, PreferRandomWalk(st.scored, st.fits, st.family, st.failed,
+                                                    st.significant, context));
+      settled = !st.significant.empty() &&
+                st.fits[st.significant.front().index].candidate.effect != Effect::kRandomWalkDrift;
+      if (st.significant.empty() || static_cast<int>(st.failed.size()) >= kMaxFailedChecks) break;
+      const int top = st.significant.front().index;
+      if (!settled) {
+        // A walk tops: the walk of every gyro must be common (wander.h CheckCommonWalk), tested
+        // once every candidate of the round is fitted.
+        if (stage == 0 && !st.timed.empty()) break;
+        if (st.fits[top].candidate.gyro != 0 || gyros.size() < 2) break;
+        auto common = CheckCommonWalk(selected, context, gyros);
+        if (!common.ok()) return common.status();
+        if (!common->fails) {
+          st.constant_notes.emplace_back(top, std::move(common->note));
+          break;
         }
+        st.failed.push_back(top);
+        st.failed_notes.emplace_back(0, std::move(common->note));
+        continue;
       }
-      for (CandidateFit& f : fits) {
-        if (f.candidate.effect != Effect::kRandomWalkDrift ||
-            f.candidate.gyro != wander_where.gyro || f.fitted.empty()) {
-          continue;
-        }
-        SelectedModel stand_in;
-        stand_in.model = f.model;
-        stand_in.run = std::move(f.run);
-        stand_in.fit = Profile(stand_in.run);
-        stand_in.held_out = selected.held_out;
-        stand_in.held_out_current = false;
-        result.stand_in = std::move(stand_in);
-        result.stand_in_walk_deg_h_sqrt_h = f.fitted.front().value;
+      auto check = CheckConstantEffect(st.fits[top], selected, st.family, context);
+      if (!check.ok()) return check.status();
+      if (!check->fails) {
+        if (!check->note.empty()) st.constant_notes.emplace_back(top, std::move(check->note));
         break;
       }
-    } else if (inhomogeneous_only) {
-      result.unresolved =
-          "the candidates that fit it improve only part of the recording and worsen the rest (a "
-          "change in time such as a fault, not a constant effect)";
-      result.unresolved_note = readout_note;
-    } else if (!failed_notes.empty()) {
-      // Nothing else explains it: what the failed effect fitted is not what it names, and neither
-      // the library's time behaviours nor the basis describe it.
-      result.unresolved = failed_notes.front().second;
-      result.unresolved_gyro = failed_notes.front().first;
-    } else if (!choice->worsened.empty()) {
-      // What fits it in-sample or by its predictive density predicts the attitude worse.
-      result.unresolved = choice->worsened.front().second;
-      result.unresolved_gyro = fits[choice->worsened.front().first].candidate.gyro;
+      st.failed.push_back(top);
+      st.failed_notes.emplace_back(st.fits[top].candidate.gyro, std::move(check->note));
     }
-    return result;
+    if (settled || st.timed.empty()) break;
   }
-  CandidateFit& f = fits[chosen];
-  const Scored& s = *std::find_if(scored.begin(), scored.end(),
+  return absl::OkStatus();
+}
+
+// A time behaviour must explain the recording better than a jump of the gyro's readings at the
+// onset (D43): a step of the readings is no physics of the library, and a drift step or a walk
+// that fits it only in part is the nearest candidate forced onto a fault. Same currency: the
+// jump's evidence 2 ln B, its best onset's likelihood gain less the cost of the onset's prior
+// (the step's own, over the same onsets; the jump has 3 parameters freed with a prior, as the
+// step). When the readout jump does at least as well, nothing is taken and the mismatch is
+// left unexplained, located in time.
+void PreferReadoutJump(RoundState& st, const SelectedModel& selected, RoundResult& result) {
+  if (st.significant.empty()) return;
+  const Scored& top = st.significant.front();
+  const Candidate& c = st.fits[top.index].candidate;
+  const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift;
+  const CandidateFit* jump = nullptr;
+  double onset_cost = 0.0;
+  for (const Scored& x : st.scored) {
+    const CandidateFit& f = st.fits[x.index];
+    if (!timed_top || f.candidate.effect != Effect::kDriftStep || !f.readout_fitted) continue;
+    if (c.gyro > 0 && f.candidate.gyro != c.gyro) continue;  // a walk of all gyros: any gyro
+    if (jump == nullptr || f.readout_value < jump->readout_value) {
+      jump = &f;
+      onset_cost = x.penalty;
+    }
+  }
+  if (jump == nullptr) return;
+  const double jump_score = selected.fit.value - jump->readout_value - onset_cost;
+  if (jump_score < top.score) return;
+  st.readout_note = absl::StrFormat(
+      "resembles a step of gyro %d's readings at %.2f h (a readout jump, a fault outside "
+      "the library): its misalignment released at that instant has evidence 2 ln B = "
+      "%.1f against %.1f for %s, which fits it only in part",
+      jump->candidate.gyro, jump->readout_onset_hours, jump_score, top.score, CandidateName(c));
+  st.significant.clear();
+  st.inhomogeneous_only = true;
+  result.readout_jump_evidence = jump_score;
+}
+
+// st.behaviour for `gyro`, computed once.
+absl::Status BehaviourOf(RoundState& st, const SelectedModel& selected,
+                         DiagnosisContext& context, int gyro) {
+  if (st.behaviour.has_value()) return absl::OkStatus();
+  ASSIGN_OR_RETURN(st.behaviour, CompareDriftBehavioursOf(selected, context, gyro));
+  return absl::OkStatus();
+}
+
+// The open-ended basis's terms against the time behaviour on the held-out spans: not worse by
+// -2 log predictive density, nor by the point prediction (point_prediction.h). Sets
+// basis->extended's held-out result when they predict; appends the comparison to `held_note`.
+absl::StatusOr<bool> BasisPredicts(BasisStageResult& basis, const CandidateFit& top,
+                                   SelectedModel& selected, DiagnosisContext& context,
+                                   std::string& held_note) {
+  ASSIGN_OR_RETURN(ModelRun held_basis,
+                   context.CheckedRun(basis.extended->model, /*held_out=*/true));
+  ASSIGN_OR_RETURN(ModelRun held_top, context.CheckedRun(top.model, /*held_out=*/true));
+  const HeldOutResult hb =
+      SummariseHeldOut(held_basis, context.gaps(), context.regimes(), context.frames());
+  const HeldOutResult ht =
+      SummariseHeldOut(held_top, context.gaps(), context.regimes(), context.frames());
+  bool predicts = hb.deviance <= ht.deviance;
+  held_note = absl::StrFormat(
+      "; held-out -2 log predictive density %.1f with the basis's terms against %.1f "
+      "with %s",
+      hb.deviance, ht.deviance, CandidateName(top.candidate));
+  // Nor may the terms make the held-out point prediction worse (point_prediction.h).
+  RETURN_IF_ERROR(MakeHeldOutCurrent(selected, context));
+  if (predicts && WorsensPointPrediction(selected.held_out, hb)) {
+    predicts = false;
+    absl::StrAppend(&held_note, "; ",
+                    PointPredictionNote("the basis's terms", selected.held_out, hb));
+  }
+  if (predicts) {
+    basis.extended->held_out = hb;
+    basis.extended->held_out_current = true;
+  }
+  return predicts;
+}
+
+// Takes the open-ended basis's terms as the round's findings (before the time behaviour `top`).
+void TakeBasisTerms(RoundState& st, BasisStageResult& basis, const CandidateFit& top, int round,
+                    const std::string& comparison, const std::string& outdone_note,
+                    SelectedModel& selected, RoundResult& result) {
+  for (const Scored& x : st.scored) result.rows.push_back(Row(x, st.fits[x.index], round, -1));
+  // The round's notes once, on the first of the terms taken together; the others point to it.
+  Finding& first = basis.findings.front();
+  for (const auto& failed_note : st.failed_notes) {
+    first.evidence.notes.push_back(failed_note.second);
+  }
+  first.evidence.notes.push_back(absl::StrCat(
+      comparison,
+      ": a deterministic drift, taken before the time behaviour, which the next round "
+      "tests again"));
+  if (!outdone_note.empty()) {
+    first.evidence.notes.push_back(absl::StrCat("terms of other gyros left out", outdone_note,
+                                                ": the stage ran again without those gyros"));
+  }
+  for (size_t k = 1; k < basis.findings.size(); ++k) {
+    basis.findings[k].evidence.notes.push_back(absl::StrFormat(
+        "taken together with the stage's first term (gyro %d, listed before it) against "
+        "%s; the round's notes are on that finding",
+        basis.findings.front().gyro, CandidateName(top.candidate)));
+  }
+  CandidateScore row;
+  row.effect = kEffectBasisTerm;
+  row.gyro = basis.findings.front().gyro;
+  row.round = round;
+  row.parameters = static_cast<int>(basis.added_terms.size());
+  row.delta_deviance = row.score = basis.refit_evidence;
+  row.p_value = EvidenceBound(basis.refit_evidence);
+  row.significant = row.selected = true;
+  row.time_behaviour = basis.findings.front().time.kind;
+  result.rows.push_back(row);
+  result.finding = basis.findings.front();
+  result.more_findings.assign(basis.findings.begin() + 1, basis.findings.end());
+  result.residual_drift = basis.residual_drift;
+  selected = std::move(*basis.extended);
+}
+
+// Physics outside the library before a time behaviour (docs/discovery.md, "The open-ended
+// stage"): a random walk or a drift step absorbs a deterministic drift the library lacks (one
+// cycling with the orbit, one growing). When one tops the round, the open-ended stage runs on
+// the current model, and its terms are taken instead when they add significant evidence on
+// top of the time behaviour (the nested comparison of PreferRandomWalk, same currency); the
+// time behaviour is tested again in the next round. Returns whether the terms were taken (then
+// `result` and `selected` hold them); else st.basis_note says why not, when they were compared.
+absl::StatusOr<bool> PreferBasisToTimeBehaviour(RoundState& st, int round,
+                                                const std::vector<int>& gyros,
+                                                SelectedModel& selected,
+                                                DiagnosisContext& context, RoundResult& result) {
+  const DiagnoseOptions& options = context.options();
+  if (st.significant.empty() || !options.open_ended) return false;
+  const CandidateFit& top = st.fits[st.significant.front().index];
+  if (top.candidate.effect != Effect::kRandomWalkDrift &&
+      top.candidate.effect != Effect::kDriftStep) {
+    return false;
+  }
+  ASSIGN_OR_RETURN(BasisStageResult basis, RunBasisStage(selected, context, gyros, round));
+  // Terms for another gyro whose drift returns to its mean are not taken along with the time
+  // behaviour's gyro's (that gyro's own are tested below): the stage runs again without those
+  // gyros.
+  std::string outdone_note;
+  if (basis.extended.has_value() && !basis.findings.empty()) {
+    ASSIGN_OR_RETURN(auto outdone, GyrosOutdoneByAStationaryDrift(basis, selected, context, {},
+                                                                  {top.candidate.gyro},
+                                                                  options.alpha));
+    if (!outdone.gyros.empty()) {
+      outdone_note = outdone.note;
+      result.outdone_gyros = outdone.gyros;
+      ASSIGN_OR_RETURN(basis, RunBasisStage(selected, context, outdone.Others(gyros), round));
+    }
+  }
+  if (!basis.extended.has_value() || basis.findings.empty()) return false;
+  ASSIGN_OR_RETURN(ModelRun both,
+                   context.CheckedRun(WithBasisTerms(top.model, basis), /*held_out=*/false));
+  const double gain = Profile(top.run).value - Profile(both).value;
+  const std::string versus = absl::StrFormat(
+      "on top of %s (2 ln B = %.1f) the open-ended basis's terms add 2 ln B = %.1f "
+      "(threshold %.1f)",
+      CandidateName(top.candidate), st.significant.front().score, gain, basis.refit_threshold);
+  // A deterministic term must also predict: on the held-out spans its -2 log predictive
+  // density must not be worse than the time behaviour's (terms fitted to a random process, a
+  // drift switching at random, predict the withheld spans wrongly and confidently).
+  bool predicts = true;
+  std::string held_note;
+  if (gain > basis.refit_threshold && !context.gaps().empty()) {
+    ASSIGN_OR_RETURN(predicts, BasisPredicts(basis, top, selected, context, held_note));
+  }
+  // Deterministic terms for a gyro whose drift returns to its mean must describe its deviation
+  // better than that stationary drift, in the reduced regression's currency.
+  bool describes = true;
+  if (gain > basis.refit_threshold && predicts && top.candidate.gyro > 0) {
+    double basis_evidence = 0.0;
+    bool in_gyro = false;
+    for (const SelectedGroup& g : basis.stage.selected) {
+      if (g.gyro != top.candidate.gyro) continue;
+      basis_evidence += g.evidence;
+      in_gyro = true;
+    }
+    if (in_gyro) {
+      RETURN_IF_ERROR(BehaviourOf(st, selected, context, top.candidate.gyro));
+      if (st.behaviour->stationary > basis_evidence) {
+        describes = false;
+        absl::StrAppend(&held_note, absl::StrFormat(
+            "; the basis's terms for gyro %d (2 ln B = %.1f in the reduced regression) "
+            "describe its deviation less well than a drift that returns to its mean "
+            "(2 ln B = %.1f)",
+            top.candidate.gyro, basis_evidence, st.behaviour->stationary));
+      }
+    }
+  }
+  if (gain > basis.refit_threshold && predicts && describes) {
+    TakeBasisTerms(st, basis, top, round, absl::StrCat(versus, held_note), outdone_note,
+                   selected, result);
+    return true;
+  }
+  st.basis_note = absl::StrCat(versus, held_note,
+                               !predicts ? ": the basis's terms do not predict the "
+                                           "held-out spans as well, the time behaviour is kept"
+                                         : ": the time behaviour is kept");
+  return false;
+}
+
+// A time behaviour of one gyro (the basis did not replace it) changes its drift once (a step)
+// or without bound (a walk); a drift that returns to its mean, switching at random between
+// levels or driven by a quantity the telemetry does not carry, is neither (wander.h). When a
+// stationary drift describes the gyro's deviation decisively better than both, nothing is
+// taken: the mismatch is left unexplained, located to the gyro, and described.
+absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected,
+                                   DiagnosisContext& context) {
+  if (st.significant.empty()) return absl::OkStatus();
+  const Candidate& c = st.fits[st.significant.front().index].candidate;
+  if (c.gyro <= 0 || (c.effect != Effect::kDriftStep && c.effect != Effect::kRandomWalkDrift)) {
+    return absl::OkStatus();
+  }
+  RETURN_IF_ERROR(BehaviourOf(st, selected, context, c.gyro));
+  if (!ReturnsToItsMean(*st.behaviour, EvidenceThreshold(context.options().alpha, 1))) {
+    return absl::OkStatus();
+  }
+  st.wander_note = absl::StrCat(ReturnsToItsMeanText(*st.behaviour), "; ", CandidateName(c),
+                                " is not taken");
+  st.wander_where =
+      WanderLocation(c.gyro, context.frames(), ReturnsToItsMeanBound(*st.behaviour));
+  st.wander_evidence = st.behaviour->stationary;
+  st.significant.clear();
+  st.inhomogeneous_only = true;
+  return absl::OkStatus();
+}
+
+// Nothing taken: why, in `result`.
+void DescribeUnresolved(RoundState& st, const Choice& choice, const SelectedModel& selected,
+                        RoundResult& result) {
+  if (!st.wander_note.empty()) {
+    result.unresolved = st.wander_note;
+    result.unresolved_gyro = st.wander_where.gyro;
+    result.unresolved_note = st.readout_note;
+    result.unresolved_where = st.wander_where;
+    result.stationary_evidence = st.wander_evidence;
+    for (const auto& [gyro, note] : st.failed_notes) {
+      // Its own effects' notes, and a common walk's that this drift made fail.
+      if (gyro == st.wander_where.gyro || gyro == 0) {
+        absl::StrAppend(&result.unresolved, "; ", note);
+      }
+    }
+    for (CandidateFit& f : st.fits) {
+      if (f.candidate.effect != Effect::kRandomWalkDrift ||
+          f.candidate.gyro != st.wander_where.gyro || f.fitted.empty()) {
+        continue;
+      }
+      SelectedModel stand_in;
+      stand_in.model = f.model;
+      stand_in.run = std::move(f.run);
+      stand_in.fit = Profile(stand_in.run);
+      stand_in.held_out = selected.held_out;
+      stand_in.held_out_current = false;
+      result.stand_in = std::move(stand_in);
+      result.stand_in_walk_deg_h_sqrt_h = f.fitted.front().value;
+      break;
+    }
+  } else if (st.inhomogeneous_only) {
+    result.unresolved =
+        "the candidates that fit it improve only part of the recording and worsen the rest (a "
+        "change in time such as a fault, not a constant effect)";
+    result.unresolved_note = st.readout_note;
+  } else if (!st.failed_notes.empty()) {
+    // Nothing else explains it: what the failed effect fitted is not what it names, and neither
+    // the library's time behaviours nor the basis describe it.
+    result.unresolved = st.failed_notes.front().second;
+    result.unresolved_gyro = st.failed_notes.front().first;
+  } else if (!choice.worsened.empty()) {
+    // What fits it in-sample or by its predictive density predicts the attitude worse.
+    result.unresolved = choice.worsened.front().second;
+    result.unresolved_gyro = st.fits[choice.worsened.front().first].candidate.gyro;
+  }
+}
+
+// The chosen fit becomes the round's finding, with the round's notes, and the selected model.
+void TakeChosen(RoundState& st, Choice& choice, int round, SelectedModel& selected,
+                RoundResult& result) {
+  const int chosen = choice.chosen;
+  const Contenders& contenders = choice.contenders;
+  CandidateFit& f = st.fits[chosen];
+  const Scored& s = *std::find_if(st.scored.begin(), st.scored.end(),
                                   [&](const Scored& x) { return x.index == chosen; });
-  result.finding =
-      MakeFinding(s, fits, chosen, round, *rw_note, held_out_selected, contenders, selected);
-  if (!basis_note.empty()) result.finding->evidence.notes.push_back(basis_note);
-  for (const auto& failed_note : failed_notes) {
+  result.finding = MakeFinding(s, st.fits, chosen, round, st.rw_note, choice.held_out_selected,
+                               contenders, selected);
+  if (!st.basis_note.empty()) result.finding->evidence.notes.push_back(st.basis_note);
+  for (const auto& failed_note : st.failed_notes) {
     result.finding->evidence.notes.push_back(failed_note.second);
   }
-  for (const auto& [index, note] : constant_notes) {
+  for (const auto& [index, note] : st.constant_notes) {
     if (index == chosen) result.finding->evidence.notes.push_back(note);
   }
-  for (const auto& worse : choice->worsened) result.finding->evidence.notes.push_back(worse.second);
+  for (const auto& worse : choice.worsened) result.finding->evidence.notes.push_back(worse.second);
 
   selected.held_out_current = std::any_of(contenders.begin(), contenders.end(),
                                           [&](const auto& c) { return c.first == chosen; });
-  if (choice->guard_held_out.has_value()) {
+  if (choice.guard_held_out.has_value()) {
     // The guard's run of the chosen model: its held-out prediction with and without the effect.
     Evidence& e = result.finding->evidence;
     if (e.held_out_nees_after < 0) {
       e.held_out_nees_before = selected.held_out.nees;
-      e.held_out_nees_after = choice->guard_held_out->nees;
+      e.held_out_nees_after = choice.guard_held_out->nees;
       e.held_out_deviance_before = selected.held_out.deviance;
-      e.held_out_deviance_after = choice->guard_held_out->deviance;
-      e.held_out_dof = choice->guard_held_out->dof;
+      e.held_out_deviance_after = choice.guard_held_out->deviance;
+      e.held_out_dof = choice.guard_held_out->dof;
     }
-    selected.held_out = std::move(*choice->guard_held_out);
+    selected.held_out = std::move(*choice.guard_held_out);
     selected.held_out_current = true;
   }
   selected.model = f.model;
   selected.run = std::move(f.run);
   selected.fit = Profile(selected.run);
+}
+
+}  // namespace
+
+// One round as a sequence of decisions: list and fit the candidates in two stages until the
+// significant ones settle; a readout jump (D43), the open-ended basis or a drift that returns to
+// its mean may stand in for a time behaviour; the guarded choice; then the finding, or why
+// nothing is taken.
+absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gyros,
+                                           SelectedModel& selected, DiagnosisContext& context) {
+  const DiagnoseOptions& options = context.options();
+  RoundResult result;
+  if (context.Stop()) return DiagnosisContext::Cancelled();
+  RoundState st;
+  ListRoundCandidates(st, gyros, selected, options);
+  if (st.candidates.empty()) return result;
+  context.Say(0.05 + 0.8 * round / options.max_effects,
+              absl::StrFormat("round %d: %d candidates", round + 1, st.candidates.size()));
+  RETURN_IF_ERROR(SettleSignificant(st, round, gyros, selected, context));
+  PreferReadoutJump(st, selected, result);
+  ASSIGN_OR_RETURN(const bool basis_taken,
+                   PreferBasisToTimeBehaviour(st, round, gyros, selected, context, result));
+  if (basis_taken) return result;
+  RETURN_IF_ERROR(PreferStationaryDrift(st, selected, context));
+  ASSIGN_OR_RETURN(Choice choice, ChooseGuarded(st.significant, st.scored, st.fits, st.failed,
+                                                st.inhomogeneous_only, round, selected, context));
+  for (const Scored& s : st.scored) {
+    result.rows.push_back(Row(s, st.fits[s.index], round, choice.chosen));
+  }
+  if (choice.chosen < 0) {
+    DescribeUnresolved(st, choice, selected, result);
+  } else {
+    TakeChosen(st, choice, round, selected, result);
+  }
   return result;
 }
 
