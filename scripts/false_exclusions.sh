@@ -118,7 +118,8 @@ PY
   "$esg" calibrate --config "$config" --recording "$dir/rec.csv" \
     --model 10+11 --format json >"$dir/out.json" 2>"$dir/cal.err" || {
       echo "seed $seed: CALIBRATE FAILED $(head -c 300 "$dir/cal.err")"; return; }
-  python3 - "$seed" "$dir/scenario.json" "$dir/out.json" <<'PY'
+  # One line per run, written whole under a lock: parallel runs never share a line.
+  python3 - "$seed" "$dir/scenario.json" "$dir/out.json" >"$dir/line" <<'PY'
 import json, sys
 seed, sc, out = sys.argv[1], json.load(open(sys.argv[2])), json.load(open(sys.argv[3]))
 excluded = [g["id"] for g in out["gyros"] if g["faulty"]]
@@ -133,6 +134,7 @@ if drift_changed:
     line += f"; DRIFT_CHANGED x{len(drift_changed)}"
 print(line)
 PY
+  flock "$work/lock" cat "$dir/line"
   if [ -n "${ESG_KEEP:-}" ] && grep -q '"faulty": true' "$dir/out.json" 2>/dev/null; then
     mkdir -p "$ESG_KEEP/$seed" && cp "$dir"/scenario.json "$dir"/rec.csv "$dir"/out.json "$ESG_KEEP/$seed/"
   fi
@@ -141,8 +143,8 @@ PY
 export -f run_one
 export work esg hours config ESG_CLASS ESG_TWO
 seq "$first" $((first + n - 1)) | xargs -P "$jobs" -I{} bash -c 'run_one {}' | tee "$work/results.txt"
-fails=$(grep -c ': FAIL' "$work/results.txt" || true)
-passes=$(grep -c ': PASS' "$work/results.txt" || true)
+fails=$({ grep -o ': FAIL' "$work/results.txt" || true; } | wc -l)
+passes=$({ grep -o ': PASS' "$work/results.txt" || true; } | wc -l)
 python3 - "$n" "$fails" "$passes" <<'PY'
 import sys
 # A seed is counted only from its own PASS or FAIL line; one without (it could not simulate or
