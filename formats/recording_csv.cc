@@ -399,16 +399,16 @@ absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path,
   return recording;
 }
 
-std::string FormatRecordingCsv(const estimator::Recording& recording) {
+std::string FormatRecordingCsvHead(const std::map<std::string, std::string>& recording_metadata,
+                                   const std::vector<std::string>& channel_names) {
   const std::array<std::string, kNumColumns>& names = ColumnNames();
   std::string out;
-  out.reserve(256 + recording.frames.size() * 400);
   absl::StrAppend(&out, "# format: ", kRecordingCsvFormat, "\n");
   // Cleaned first, then written in the cleaned keys' order: cleaning can reorder keys ("a\rb"
   // sorts before "a b!" but cleans to "a b", after it) or make two equal, and the reader reads
   // the lines back into a map by cleaned key, so the text must be that map's (a fixed point).
   std::map<std::string, std::string> metadata;
-  for (const auto& [key, value] : recording.metadata) {
+  for (const auto& [key, value] : recording_metadata) {
     std::string clean_key = CleanMetadata(key, true);
     if (clean_key.empty() || clean_key == "format") continue;
     metadata.emplace(std::move(clean_key), CleanMetadata(value, false));
@@ -420,18 +420,19 @@ std::string FormatRecordingCsv(const estimator::Recording& recording) {
     if (key == "spacecraft_id") continue;
     absl::StrAppend(&out, "# ", key, ": ", value, "\n");
   }
-  // Every channel any frame carries, one `ch:NAME` column each after st_valid, in name order.
-  std::set<std::string> channel_names;
-  for (const estimator::TelemetryFrame& frame : recording.frames) {
-    for (const estimator::ChannelValue& c : frame.channels) channel_names.insert(c.name);
-  }
   absl::StrAppend(&out, absl::StrJoin(names, ","));
   for (const std::string& name : channel_names) {
     absl::StrAppend(&out, ",", kChannelColumnPrefix, name);
   }
   out += '\n';
+  return out;
+}
 
-  for (const estimator::TelemetryFrame& frame : recording.frames) {
+std::string FormatRecordingCsvRows(const std::vector<estimator::TelemetryFrame>& frames,
+                                   const std::vector<std::string>& channel_names) {
+  std::string out;
+  out.reserve(frames.size() * 400);
+  for (const estimator::TelemetryFrame& frame : frames) {
     out += FormatRecordingTime(frame.time);
     for (int g = 0; g < kMaxGyros; ++g) {
       const std::optional<estimator::GyroReading>& reading = frame.gyros[g];
@@ -463,6 +464,23 @@ std::string FormatRecordingCsv(const estimator::Recording& recording) {
     }
     out += '\n';
   }
+  return out;
+}
+
+std::vector<std::string> RecordingChannelNames(
+    const std::vector<estimator::TelemetryFrame>& frames) {
+  std::set<std::string> names;
+  for (const estimator::TelemetryFrame& frame : frames) {
+    for (const estimator::ChannelValue& c : frame.channels) names.insert(c.name);
+  }
+  return std::vector<std::string>(names.begin(), names.end());
+}
+
+std::string FormatRecordingCsv(const estimator::Recording& recording) {
+  // Every channel any frame carries, one `ch:NAME` column each after st_valid, in name order.
+  const std::vector<std::string> channel_names = RecordingChannelNames(recording.frames);
+  std::string out = FormatRecordingCsvHead(recording.metadata, channel_names);
+  out += FormatRecordingCsvRows(recording.frames, channel_names);
   return out;
 }
 

@@ -89,6 +89,19 @@ absl::StatusOr<estimator::Recording> ReadRecordingCsv(const std::string& path,
 // and st_valid 0. Values are written as given (a non-finite value would make the file unreadable).
 std::string FormatRecordingCsv(const estimator::Recording& recording);
 
+// FormatRecordingCsv in parts, for a recording written as it arrives (esg export telemetry holds
+// one chunk of frames at a time): the format and metadata lines and the header with the given
+// channel columns (names in name order, as RecordingChannelNames gives them), then the rows of
+// each part's frames with the same columns (a channel a frame lacks: an empty cell). Head + the
+// rows of every part equal FormatRecordingCsv of the whole when the names are those of all frames.
+std::string FormatRecordingCsvHead(const std::map<std::string, std::string>& metadata,
+                                   const std::vector<std::string>& channel_names);
+std::string FormatRecordingCsvRows(const std::vector<estimator::TelemetryFrame>& frames,
+                                   const std::vector<std::string>& channel_names);
+// Every channel any of the frames carries, in name order.
+std::vector<std::string> RecordingChannelNames(
+    const std::vector<estimator::TelemetryFrame>& frames);
+
 // Writes FormatRecordingCsv to path (through "<path>.tmp" and a rename). Unavailable on I/O failure.
 absl::Status WriteRecordingCsv(const std::string& path, const estimator::Recording& recording);
 

@@ -3,11 +3,14 @@
 #include "client/commands/server_export.h"
 
 #include <cerrno>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <set>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "client/commands/server_common.h"
@@ -68,6 +71,9 @@ absl::Status OutputFile::Commit() {
 
 namespace {
 
+// Frames formatted at a time from the export's spill file.
+constexpr int kSpillBatch = 1000;
+
 int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& global) {
   constexpr char kVerb[] = "export telemetry";
   esg::v1::ExportTelemetryRequest request;
@@ -78,15 +84,26 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
   std::unique_ptr<OutputFile> out = OutputFile::Open(kVerb, o.out);
   if (out == nullptr) return kExitBadArguments;
 
-  // The frames are held until the stream ends and formatted once: the header must name every
-  // channel column (`ch:NAME`) any frame of the span carries, which the first chunk cannot tell
-  // (docs/formats.md "Channels"; under 1 kB of memory per frame with its row).
+  // The header must name every channel column (`ch:NAME`) any frame of the span carries, which
+  // the first chunk cannot tell (docs/formats.md "Channels"): the frames go to an anonymous spill
+  // file as they arrive (each checked, its channels noted), and are formatted from it after the
+  // stream ends, kSpillBatch at a time, so memory stays at a chunk whatever the span's length.
   std::unique_ptr<ReaderStream<esg::v1::ExportTelemetryResponse>> stream =
       client->ExportTelemetry(request);
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> spill(std::tmpfile(), &std::fclose);
+  if (spill == nullptr) {
+    stream->Cancel();
+    stream->Finish().IgnoreError();
+    std::fprintf(stderr, "esg %s: cannot create a temporary file: %s\n", kVerb,
+                 std::strerror(errno));
+    return kExitFailure;
+  }
   esg::v1::ExportTelemetryResponse chunk;
-  estimator::Recording recording;
-  recording.metadata["spacecraft_id"] = o.spacecraft_id;
+  std::set<std::string> channel_names;
+  int64_t frames = 0;
+  absl::Time first_time, last_time;
   std::string problem;
+  std::string bytes;
   while (problem.empty() && stream->Read(&chunk)) {
     for (const esg::v1::TelemetryFrame& proto : chunk.frames()) {
       absl::StatusOr<estimator::TelemetryFrame> frame = proto_convert::FrameFromProto(proto);
@@ -95,10 +112,20 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
                                proto.sequence(), ") cannot be written: ", frame.status().message());
         break;
       }
-      recording.frames.push_back(*std::move(frame));
+      for (const estimator::ChannelValue& c : frame->channels) channel_names.insert(c.name);
+      if (frames == 0) first_time = frame->time;
+      last_time = frame->time;
+      ++frames;
+      bytes.clear();
+      proto.SerializeToString(&bytes);
+      const uint32_t size = static_cast<uint32_t>(bytes.size());
+      if (std::fwrite(&size, sizeof size, 1, spill.get()) != 1 ||
+          std::fwrite(bytes.data(), 1, bytes.size(), spill.get()) != bytes.size()) {
+        problem = absl::StrCat("cannot write the temporary file: ", std::strerror(errno));
+        break;
+      }
     }
   }
-  const int64_t frames = static_cast<int64_t>(recording.frames.size());
   if (!problem.empty()) {
     stream->Cancel();
     stream->Finish().IgnoreError();  // CANCELLED: the problem above is the reason
@@ -113,15 +140,39 @@ int RunExportTelemetry(const ExportTelemetryOptions& o, const GlobalOptions& glo
                  o.to.empty() ? "the last" : o.to.c_str());
     return kExitFailure;
   }
-  out->Write(storage::FormatRecordingCsv(recording));
-  const std::string first_time = FormatUtc(recording.frames.front().time);
-  const std::string last_time = FormatUtc(recording.frames.back().time);
+  const std::vector<std::string> columns(channel_names.begin(), channel_names.end());
+  out->Write(storage::FormatRecordingCsvHead({{"spacecraft_id", o.spacecraft_id}}, columns));
+  std::rewind(spill.get());
+  std::vector<estimator::TelemetryFrame> batch;
+  esg::v1::TelemetryFrame proto;
+  for (int64_t read = 0; read < frames; ++read) {
+    uint32_t size = 0;
+    bytes.resize(0);
+    if (std::fread(&size, sizeof size, 1, spill.get()) == 1) {
+      bytes.resize(size);
+      if (std::fread(bytes.data(), 1, size, spill.get()) != size) bytes.clear();
+    }
+    absl::StatusOr<estimator::TelemetryFrame> frame =
+        proto.ParseFromString(bytes) && bytes.size() == size
+            ? proto_convert::FrameFromProto(proto)
+            : absl::DataLossError("the temporary file reads back short");
+    if (!frame.ok()) {
+      std::fprintf(stderr, "esg %s: %s\n", kVerb, std::string(frame.status().message()).c_str());
+      return kExitFailure;
+    }
+    batch.push_back(*std::move(frame));
+    if (static_cast<int>(batch.size()) == kSpillBatch || read + 1 == frames) {
+      out->Write(storage::FormatRecordingCsvRows(batch, columns));
+      batch.clear();
+    }
+  }
   if (absl::Status closed = out->Commit(); !closed.ok()) {
     std::fprintf(stderr, "esg %s: %s\n", kVerb, std::string(closed.message()).c_str());
     return kExitFailure;
   }
   std::fprintf(stderr, "%s: %lld frames (%s .. %s) written to %s\n", o.spacecraft_id.c_str(),
-               static_cast<long long>(frames), first_time.c_str(), last_time.c_str(),
+               static_cast<long long>(frames), FormatUtc(first_time).c_str(),
+               FormatUtc(last_time).c_str(),
                o.out.c_str());
   return kExitOk;
 }

@@ -75,6 +75,45 @@ std::string RecordingWithChannels(const TempDir& dir, estimator::Recording* out)
   return path;
 }
 
+// An export longer than one chunk of the stream (1000 frames) and one batch of the spill file
+// (1000): the header names a channel first carried after the first chunk, and one carried only
+// in the first, and the file is the recording as the writer writes it whole.
+TEST(ChannelsCli, AnExportLongerThanAChunkNamesEveryChannelOfTheSpan) {
+  TempDir dir;
+  const std::string config = ConfigWithChannels(dir);
+  const std::string plain = dir.File("plain.csv");
+  RunResult r = RunBinary(dir, ESG_BINARY,
+                          "simulate --config " + Quote(Rdk1()) + " --hours 20 --seed 39 --out " +
+                              Quote(plain));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  absl::StatusOr<estimator::Recording> recording = storage::ReadRecordingCsv(plain);
+  ASSERT_TRUE(recording.ok()) << recording.status();
+  ASSERT_EQ(recording->frames.size(), 1201u);
+  for (size_t i = 0; i < recording->frames.size(); ++i) {
+    if (i < 50) recording->frames[i].channels.Set("T_gyro2", 280.0 + 0.1 * static_cast<double>(i));
+    if (i >= 1100) recording->frames[i].channels.Set("heater_1", i % 2 == 0 ? 1.0 : 0.0);
+  }
+  const std::string path = dir.File("channels.csv");
+  ASSERT_TRUE(storage::WriteRecordingCsv(path, *recording).ok());
+  Daemon daemon(dir.File("esg.db"), dir.File("esg.log"));
+  ASSERT_GT(daemon.port(), 0);
+  r = Esg(dir, daemon, "configure --config " + Quote(config));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = Esg(dir, daemon, "replay --recording " + Quote(path) + " --wait");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string exported = dir.File("export.csv");
+  r = Esg(dir, daemon, "export telemetry --spacecraft RDK-1 --out " + Quote(exported));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("RDK-1: 1201 frames"));
+  const std::string text = Slurp(exported);
+  EXPECT_THAT(text, HasSubstr(",ch:T_gyro2,ch:heater_1\n"));
+  absl::StatusOr<estimator::Recording> back = storage::ReadRecordingCsv(exported);
+  ASSERT_TRUE(back.ok()) << back.status();
+  estimator::Recording expected = *recording;
+  expected.metadata = back->metadata;
+  EXPECT_EQ(text, storage::FormatRecordingCsv(expected));
+}
+
 TEST(ChannelsCli, ExportedRecordingIsTheReplayedOneAndReplaysToTheSameFrames) {
   TempDir dir;
   const std::string config = ConfigWithChannels(dir);
