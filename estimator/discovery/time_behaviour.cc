@@ -5,6 +5,7 @@
 #include <cmath>
 #include <iterator>
 #include <map>
+#include <vector>
 #include <string>
 #include <utility>
 
@@ -12,6 +13,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/statistics.h"
 #include "estimator/drift_model.h"
+#include "estimator/status_macros.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -60,8 +62,256 @@ int FrameAtOrAfter(const std::vector<TelemetryFrame>& frames, absl::Time t) {
   return static_cast<int>(it - frames.begin());
 }
 
+// The part of a drift step's search that every onset shares: the recording (its star tracker
+// corrected as the model corrects it), the run without the step with checkpoints at the onsets
+// of the grids, and each onset's profiled -2 log L with the best so far.
+struct OnsetSearch {
+  const Candidate& candidate;
+  CandidateFit& fit;
+  std::vector<TelemetryFrame> frames;
+  double step_sigma = 0.0;  // the step's prior 1-sigma [rad/s]
+  ModelRun prefix;
+  std::map<int, SessionCheckpoint> checkpoints;
+  std::map<int, double> value;  // onset frame -> profiled -2 log L
+  int best_frame = -1;
+  double best_value = 0.0;
+  ModelRun best_run;
+  SessionOptions best_options;
+
+  // The run with `options` from onset frame f: the prefix's steps before f, then a run continued
+  // from the checkpoint at f.
+  absl::StatusOr<ModelRun> RunFrom(int f, const SessionOptions& options) {
+    ModelRunOptions ro;
+    ro.start = &checkpoints[f];
+    ro.start_frame = f;
+    auto tail = RunModel(fit.model.config, options, frames, ro);
+    ++fit.runs;
+    if (!tail.ok()) return tail.status();
+    ModelRun run;
+    for (const StepRecord& s : prefix.steps) {
+      if (s.frame < f) run.steps.push_back(s);
+    }
+    run.steps.insert(run.steps.end(), std::make_move_iterator(tail->steps.begin()),
+                     std::make_move_iterator(tail->steps.end()));
+    run.gyros = std::move(tail->gyros);
+    run.resets = tail->resets;
+    run.rejections = tail->rejections;
+    return run;
+  }
+
+  // One onset: continue from the checkpoint with the C1 states released at the onset frame.
+  absl::Status Evaluate(int f) {
+    if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
+    SessionOptions options = fit.model.options;
+    options.coefficient_releases.push_back(
+        {candidate.gyro, kThetaC1, 3, frames[f].time, step_sigma});
+    ASSIGN_OR_RETURN(ModelRun run, RunFrom(f, options));
+    const double v = Profile(run).value;
+    value[f] = v;
+    if (best_frame < 0 || v < best_value) {
+      best_frame = f;
+      best_value = v;
+      best_run = std::move(run);
+      best_options = options;
+    }
+    return absl::OkStatus();
+  }
+
+  // Further refinements, each kOnsetRefine times finer within one spacing of the best onset so
+  // far, down to one frame, while the step is significant at the onsets searched so far (else
+  // the onset does not matter: the candidate is not taken): the profile of a real step is
+  // sharp, a few minutes wide for 0.04 deg/h against 5 arcsec star-tracker noise. The
+  // checkpoints of a level come from a short run continued from the nearest earlier one.
+  absl::Status Refine(absl::Duration spacing, double base_value, double alpha) {
+    const int n = static_cast<int>(frames.size());
+    const absl::Duration frame_step =
+        (frames.back().time - frames.front().time) / std::max(1, n - 1);
+    while (spacing > frame_step) {
+      // The evidence integrated over the onsets is at most the best onset's (an average): below
+      // the threshold of a single comparison the step cannot be taken.
+      if (!(base_value - best_value > EvidenceThreshold(alpha, 1))) break;
+      const absl::Duration finer = std::max(spacing / kOnsetRefine, frame_step);
+      std::vector<int> new_frames;
+      for (int k = -kOnsetRefine + 1; k < kOnsetRefine; ++k) {
+        const int f = FrameAtOrAfter(frames, frames[best_frame].time + finer * k);
+        if (f > 1 && f < n - 1 && !checkpoints.count(f)) new_frames.push_back(f);
+      }
+      spacing = finer;
+      std::sort(new_frames.begin(), new_frames.end());
+      new_frames.erase(std::unique(new_frames.begin(), new_frames.end()), new_frames.end());
+      if (new_frames.empty()) continue;
+      auto from = checkpoints.upper_bound(new_frames.front());
+      if (from == checkpoints.begin()) break;
+      --from;
+      ModelRunOptions ro;
+      ro.start = &from->second;
+      ro.start_frame = from->first;
+      ro.stop_frame = new_frames.back();
+      ro.checkpoint_frames = new_frames;
+      auto more = RunModel(fit.model.config, fit.model.options, frames, ro);
+      ++fit.runs;
+      if (!more.ok()) return more.status();
+      for (size_t j = 0; j < more->checkpoints.size(); ++j) {
+        checkpoints[new_frames[j]] = std::move(more->checkpoints[j]);
+      }
+      for (int f : new_frames) RETURN_IF_ERROR(Evaluate(f));
+    }
+    return absl::OkStatus();
+  }
+};
+
+// The likelihood over the onset, in hours from the start, and what it gives: the prior weights
+// of the evidence, the best onset and its interval.
+struct OnsetProfile {
+  std::vector<std::pair<double, double>> points;  // hours, value
+  size_t best = 0;
+  double lower = 0.0, upper = 0.0;  // [h]
+};
+
+// The onset interval: where -2 log L stays within kOnsetIntervalDrop of its minimum, linear
+// between evaluated onsets, clipped to the onsets searched. Also the evidence's prior points in
+// `fit`: the onset integrated over a prior uniform across the span searched, by the trapezoid
+// rule on the onsets evaluated (refined to one frame near the best); each onset's run is already
+// the step's marginal likelihood (its size integrated over its prior).
+OnsetProfile ProfileOnsets(const OnsetSearch& search, CandidateFit& fit) {
+  OnsetProfile p;
+  // A release at frame f widens the coefficients before the propagation from frame f - 1: the
+  // modelled drift changes from frames[f - 1].time on, the onset reported.
+  for (const auto& [f, v] : search.value) {
+    p.points.emplace_back(HoursSinceStart(search.frames, f - 1), v);
+  }
+  const std::vector<std::pair<double, double>>& profile = p.points;
+  fit.onset_profile = profile;
+  if (profile.size() == 1) {
+    fit.prior_points.emplace_back(1.0, profile.front().second);
+  } else {
+    const double span_h = profile.back().first - profile.front().first;
+    for (size_t j = 0; j < profile.size(); ++j) {
+      const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
+      const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
+      fit.prior_points.emplace_back(0.5 * (left + right) / span_h, profile[j].second);
+    }
+  }
+  for (size_t j = 0; j < profile.size(); ++j) {
+    if (profile[j].second < profile[p.best].second) p.best = j;
+  }
+  const double level = profile[p.best].second + kOnsetIntervalDrop;
+  auto crossing = [&](size_t inside, size_t outside) {
+    const auto [x0, y0] = profile[inside];
+    const auto [x1, y1] = profile[outside];
+    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
+  };
+  p.lower = profile.front().first;
+  p.upper = profile.back().first;
+  for (size_t j = p.best; j > 0; --j) {
+    if (profile[j - 1].second > level) {
+      p.lower = crossing(j, j - 1);
+      break;
+    }
+  }
+  for (size_t j = p.best; j + 1 < profile.size(); ++j) {
+    if (profile[j + 1].second > level) {
+      p.upper = crossing(j, j + 1);
+      break;
+    }
+  }
+  return p;
+}
+
+// The competing readout jump (D43): the same onsets, the gyro's misalignment states released
+// instead of its C1 (a jump of its readings that does not grow). A drift step makes a ramp it
+// cannot follow; a readout jump fitted as a drift step leaves the transient it explains.
+absl::Status FitReadoutJump(OnsetSearch& search, const OnsetProfile& p,
+                            const DiagnoseOptions& opt) {
+  CandidateFit& fit = search.fit;
+  const double readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+  std::vector<int> near;
+  for (const auto& [f, v] : search.value) {
+    const double h = HoursSinceStart(search.frames, f - 1);
+    if (h >= p.lower && h <= p.upper) near.push_back(f);
+  }
+  const int best_frame = search.best_frame;
+  std::sort(near.begin(), near.end(),
+            [&](int a, int b) { return std::abs(a - best_frame) < std::abs(b - best_frame); });
+  if (near.size() > kReadoutOnsets) near.resize(kReadoutOnsets);
+  for (int f : near) {
+    SessionOptions options = fit.model.options;
+    SessionOptions::CoefficientRelease release;
+    release.gyro_id = search.candidate.gyro;
+    release.time = search.frames[f].time;
+    release.sigma = readout_sigma;
+    release.misalignment = true;
+    options.coefficient_releases.push_back(release);
+    ASSIGN_OR_RETURN(ModelRun run, search.RunFrom(f, options));
+    const double v = Profile(run).value;
+    if (!fit.readout_fitted || v < fit.readout_value) {
+      fit.readout_fitted = true;
+      fit.readout_value = v;
+      fit.readout_onset_hours = HoursSinceStart(search.frames, f - 1);
+    }
+  }
+  if (fit.readout_fitted) {
+    const double best = p.points[p.best].second;
+    fit.notes.push_back(absl::StrFormat(
+        "a jump of the gyro's readings at %.2f h (its misalignment released, prior %.0f "
+        "arcsec; %d onsets in the interval) fits -2 log L %.1f %s the drift step's",
+        fit.readout_onset_hours, opt.misalignment_sigma_arcsec, near.size(),
+        std::abs(fit.readout_value - best), fit.readout_value <= best ? "below" : "above"));
+  }
+  return absl::OkStatus();
+}
+
+// The fit's time behaviour, the step (C1 after it, the run's final estimate, against C1 at the
+// onset, the checkpoint's), the onset with its interval and the profile's note; the best onset's
+// model and run become the fit's.
+absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
+  CandidateFit& fit = search.fit;
+  const std::vector<TelemetryFrame>& frames = search.frames;
+  const absl::Time t0 = frames.front().time;
+  const double onset_hours = p.points[p.best].first;
+  fit.time.onset = frames[search.best_frame - 1].time;
+  fit.time.onset_hours = onset_hours;
+  fit.time.onset_lower_hours = p.lower;
+  fit.time.onset_upper_hours = p.upper;
+  fit.time.onset_lower = t0 + absl::Hours(p.lower);
+  fit.time.onset_upper = t0 + absl::Hours(p.upper);
+  fit.time.onsets_searched = static_cast<int>(search.value.size());
+
+  auto at_onset = EstimationSession::FromCheckpoint(fit.model.config, search.best_options,
+                                                    search.checkpoints[search.best_frame]);
+  if (!at_onset.ok()) return at_onset.status();
+  const std::vector<GyroEstimate> before_all = at_onset->Gyros();
+  const GyroEstimate* before = FindEstimate(before_all, search.candidate.gyro);
+  const GyroEstimate* after = FindEstimate(search.best_run.gyros, search.candidate.gyro);
+  if (before != nullptr && after != nullptr) {
+    const Vector3d d = -(after->coefficients.C1 - before->coefficients.C1);
+    const Vector3d d_sigma = after->sigma.C1;
+    AddVectorParameters("driftStepDegH", d, d_sigma, DegH(1.0), "deg/h", fit.fitted);
+    const double size = d.norm();
+    const double size_sigma =
+        size > 0 ? std::sqrt((d.cwiseProduct(d_sigma)).squaredNorm()) / size : d_sigma.norm();
+    fit.fitted.push_back({"driftStepSizeDegH", DegH(size), DegH(size_sigma), "deg/h"});
+  }
+  fit.fitted.push_back({"onsetHours", onset_hours, 0.5 * (p.upper - p.lower), "h"});
+  fit.fitted.push_back({"onsetLowerHours", p.lower, 0.0, "h"});
+  fit.fitted.push_back({"onsetUpperHours", p.upper, 0.0, "h"});
+  std::string profile_text;
+  for (const auto& [h, v] : p.points) {
+    absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", h, v - p.points[p.best].second));
+  }
+  fit.notes.push_back(absl::StrCat(
+      "likelihood over the onset (h from the start: -2 log L above the best; ",
+      search.value.size(), " onsets, integrated over a uniform prior):", profile_text));
+  fit.model.options = search.best_options;
+  fit.run = std::move(search.best_run);
+  return absl::OkStatus();
+}
+
 }  // namespace
 
+// The search as a sequence: the gyro's C1 (and misalignment) made releasable, the run without the
+// step with checkpoints, the coarse grid, its refinements, the onset's profile, the competing
+// readout jump, and the step described.
 absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
   GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
@@ -78,9 +328,9 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   g->model_sigma = DriftCoefficients::FromVector(sigma);
   // The misalignment states too, held the same way, for the competing readout jump (D43).
   if (!(g->misalignment_sigma > 0.0)) g->misalignment_sigma = ArcsecToRad(kHeldSigmaArcsec);
-  const double step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
-  const std::vector<TelemetryFrame> frames =
-      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
+  OnsetSearch search{candidate, fit, CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction)};
+  search.step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  const std::vector<TelemetryFrame>& frames = search.frames;
   const int n = static_cast<int>(frames.size());
   const absl::Time t0 = frames.front().time;
   const absl::Duration length = frames.back().time - t0;
@@ -100,64 +350,18 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   auto prefix = RunModel(fit.model.config, fit.model.options, frames, prefix_options);
   ++fit.runs;
   if (!prefix.ok()) return prefix.status();
-  std::map<int, SessionCheckpoint> checkpoints;
   for (size_t j = 0; j < prefix->checkpoints.size(); ++j) {
-    checkpoints[grid_frames[j]] = std::move(prefix->checkpoints[j]);
+    search.checkpoints[grid_frames[j]] = std::move(prefix->checkpoints[j]);
   }
+  search.prefix = *std::move(prefix);
 
-  // One onset: continue from the checkpoint with the C1 states released at the onset frame.
-  std::map<int, double> value;  // onset frame -> profiled -2 log L
-  int best_frame = -1;
-  double best_value = 0.0;
-  ModelRun best_run;
-  SessionOptions best_options;
-  // The run with `options` from onset frame f: the prefix's steps before f, then a run continued
-  // from the checkpoint at f.
-  auto run_from = [&](int f, const SessionOptions& options) -> absl::StatusOr<ModelRun> {
-    ModelRunOptions ro;
-    ro.start = &checkpoints[f];
-    ro.start_frame = f;
-    auto tail = RunModel(fit.model.config, options, frames, ro);
-    ++fit.runs;
-    if (!tail.ok()) return tail.status();
-    ModelRun run;
-    for (const StepRecord& s : prefix->steps) {
-      if (s.frame < f) run.steps.push_back(s);
-    }
-    run.steps.insert(run.steps.end(), std::make_move_iterator(tail->steps.begin()),
-                     std::make_move_iterator(tail->steps.end()));
-    run.gyros = std::move(tail->gyros);
-    run.resets = tail->resets;
-    run.rejections = tail->rejections;
-    return run;
-  };
-  auto evaluate = [&](int f) -> absl::Status {
-    if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
-    SessionOptions options = fit.model.options;
-    options.coefficient_releases.push_back(
-        {candidate.gyro, kThetaC1, 3, frames[f].time, step_sigma});
-    auto continued = run_from(f, options);
-    if (!continued.ok()) return continued.status();
-    ModelRun run = *std::move(continued);
-    const double v = Profile(run).value;
-    value[f] = v;
-    if (best_frame < 0 || v < best_value) {
-      best_frame = f;
-      best_value = v;
-      best_run = std::move(run);
-      best_options = options;
-    }
-    return absl::OkStatus();
-  };
   for (size_t j = kOnsetRefine - 1; j < grid_frames.size(); j += kOnsetRefine) {
-    if (absl::Status s = evaluate(grid_frames[j]); !s.ok()) return s;
+    RETURN_IF_ERROR(search.Evaluate(grid_frames[j]));
   }
-  if (best_frame < 0) {  // a recording too short for the coarse grid: every onset of the finer
-    for (int f : grid_frames) {
-      if (absl::Status s = evaluate(f); !s.ok()) return s;
-    }
+  if (search.best_frame < 0) {  // a recording too short for the coarse grid: every onset of the finer
+    for (int f : grid_frames) RETURN_IF_ERROR(search.Evaluate(f));
   }
-  if (best_frame < 1) {  // nothing to search: no step fitted
+  if (search.best_frame < 1) {  // nothing to search: no step fitted
     fit.parameters = 0;
     fit.run = *ctx.model_run;
     return absl::OkStatus();
@@ -166,172 +370,15 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   {
     const absl::Duration spacing = length / kOnsetCoarse;
     for (int f : grid_frames) {
-      if (absl::AbsDuration(frames[f].time - frames[best_frame].time) <= spacing) {
-        if (absl::Status s = evaluate(f); !s.ok()) return s;
+      if (absl::AbsDuration(frames[f].time - frames[search.best_frame].time) <= spacing) {
+        RETURN_IF_ERROR(search.Evaluate(f));
       }
     }
   }
-  // Further refinements, each kOnsetRefine times finer within one spacing of the best onset so
-  // far, down to one frame, while the step is significant at the onsets searched so far (else
-  // the onset does not matter: the candidate is not taken): the profile of a real step is
-  // sharp, a few minutes wide for 0.04 deg/h against 5 arcsec star-tracker noise. The
-  // checkpoints of a level come from a short run continued from the nearest earlier one.
-  const double base_value = Profile(*ctx.model_run).value;
-  absl::Duration spacing = length / fine;
-  const absl::Duration frame_step = (frames.back().time - t0) / std::max(1, n - 1);
-  while (spacing > frame_step) {
-    // The evidence integrated over the onsets is at most the best onset's (an average): below
-    // the threshold of a single comparison the step cannot be taken.
-    if (!(base_value - best_value > EvidenceThreshold(opt.alpha, 1))) break;
-    const absl::Duration finer = std::max(spacing / kOnsetRefine, frame_step);
-    std::vector<int> new_frames;
-    for (int k = -kOnsetRefine + 1; k < kOnsetRefine; ++k) {
-      const int f = FrameAtOrAfter(frames, frames[best_frame].time + finer * k);
-      if (f > 1 && f < n - 1 && !checkpoints.count(f)) new_frames.push_back(f);
-    }
-    spacing = finer;
-    std::sort(new_frames.begin(), new_frames.end());
-    new_frames.erase(std::unique(new_frames.begin(), new_frames.end()), new_frames.end());
-    if (new_frames.empty()) continue;
-    auto from = checkpoints.upper_bound(new_frames.front());
-    if (from == checkpoints.begin()) break;
-    --from;
-    ModelRunOptions ro;
-    ro.start = &from->second;
-    ro.start_frame = from->first;
-    ro.stop_frame = new_frames.back();
-    ro.checkpoint_frames = new_frames;
-    auto more = RunModel(fit.model.config, fit.model.options, frames, ro);
-    ++fit.runs;
-    if (!more.ok()) return more.status();
-    for (size_t j = 0; j < more->checkpoints.size(); ++j) {
-      checkpoints[new_frames[j]] = std::move(more->checkpoints[j]);
-    }
-    for (int f : new_frames) {
-      if (absl::Status s = evaluate(f); !s.ok()) return s;
-    }
-  }
-
-  // The onset interval: where -2 log L stays within kOnsetIntervalDrop of its minimum, linear
-  // between evaluated onsets, clipped to the onsets searched.
-  std::vector<std::pair<double, double>> profile;  // hours, value
-  // A release at frame f widens the coefficients before the propagation from frame f - 1: the
-  // modelled drift changes from frames[f - 1].time on, the onset reported.
-  for (const auto& [f, v] : value) profile.emplace_back(HoursSinceStart(frames, f - 1), v);
-  fit.onset_profile = profile;
-  // Its evidence: the onset integrated over a prior uniform across the span searched, by the
-  // trapezoid rule on the onsets evaluated (refined to one frame near the best); each onset's
-  // run is already the step's marginal likelihood (its size integrated over its prior).
-  if (profile.size() == 1) {
-    fit.prior_points.emplace_back(1.0, profile.front().second);
-  } else {
-    const double span_h = profile.back().first - profile.front().first;
-    for (size_t j = 0; j < profile.size(); ++j) {
-      const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
-      const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
-      fit.prior_points.emplace_back(0.5 * (left + right) / span_h, profile[j].second);
-    }
-  }
-  size_t best_j = 0;
-  for (size_t j = 0; j < profile.size(); ++j) {
-    if (profile[j].second < profile[best_j].second) best_j = j;
-  }
-  const double level = profile[best_j].second + kOnsetIntervalDrop;
-  auto crossing = [&](size_t inside, size_t outside) {
-    const auto [x0, y0] = profile[inside];
-    const auto [x1, y1] = profile[outside];
-    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
-  };
-  double lower = profile.front().first, upper = profile.back().first;
-  for (size_t j = best_j; j > 0; --j) {
-    if (profile[j - 1].second > level) {
-      lower = crossing(j, j - 1);
-      break;
-    }
-  }
-  for (size_t j = best_j; j + 1 < profile.size(); ++j) {
-    if (profile[j + 1].second > level) {
-      upper = crossing(j, j + 1);
-      break;
-    }
-  }
-  const double onset_hours = profile[best_j].first;
-  // The competing readout jump (D43): the same onsets, the gyro's misalignment states released
-  // instead of its C1 (a jump of its readings that does not grow). A drift step makes a ramp it
-  // cannot follow; a readout jump fitted as a drift step leaves the transient it explains.
-  {
-    const double readout_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
-    std::vector<int> near;
-    for (const auto& [f, v] : value) {
-      const double h = HoursSinceStart(frames, f - 1);
-      if (h >= lower && h <= upper) near.push_back(f);
-    }
-    std::sort(near.begin(), near.end(),
-              [&](int a, int b) { return std::abs(a - best_frame) < std::abs(b - best_frame); });
-    if (near.size() > kReadoutOnsets) near.resize(kReadoutOnsets);
-    for (int f : near) {
-      SessionOptions options = fit.model.options;
-      SessionOptions::CoefficientRelease release;
-      release.gyro_id = candidate.gyro;
-      release.time = frames[f].time;
-      release.sigma = readout_sigma;
-      release.misalignment = true;
-      options.coefficient_releases.push_back(release);
-      auto run = run_from(f, options);
-      if (!run.ok()) return run.status();
-      const double v = Profile(*run).value;
-      if (!fit.readout_fitted || v < fit.readout_value) {
-        fit.readout_fitted = true;
-        fit.readout_value = v;
-        fit.readout_onset_hours = HoursSinceStart(frames, f - 1);
-      }
-    }
-    if (fit.readout_fitted) {
-      fit.notes.push_back(absl::StrFormat(
-          "a jump of the gyro's readings at %.2f h (its misalignment released, prior %.0f "
-          "arcsec; %d onsets in the interval) fits -2 log L %.1f %s the drift step's",
-          fit.readout_onset_hours, opt.misalignment_sigma_arcsec, near.size(),
-          std::abs(fit.readout_value - profile[best_j].second),
-          fit.readout_value <= profile[best_j].second ? "below" : "above"));
-    }
-  }
-  fit.time.onset = frames[best_frame - 1].time;
-  fit.time.onset_hours = onset_hours;
-  fit.time.onset_lower_hours = lower;
-  fit.time.onset_upper_hours = upper;
-  fit.time.onset_lower = t0 + absl::Hours(lower);
-  fit.time.onset_upper = t0 + absl::Hours(upper);
-  fit.time.onsets_searched = static_cast<int>(value.size());
-
-  // The step: C1 after it (the run's final estimate) against C1 at the onset (the checkpoint's).
-  auto at_onset =
-      EstimationSession::FromCheckpoint(fit.model.config, best_options, checkpoints[best_frame]);
-  if (!at_onset.ok()) return at_onset.status();
-  const std::vector<GyroEstimate> before_all = at_onset->Gyros();
-  const GyroEstimate* before = FindEstimate(before_all, candidate.gyro);
-  const GyroEstimate* after = FindEstimate(best_run.gyros, candidate.gyro);
-  if (before != nullptr && after != nullptr) {
-    const Vector3d d = -(after->coefficients.C1 - before->coefficients.C1);
-    const Vector3d d_sigma = after->sigma.C1;
-    AddVectorParameters("driftStepDegH", d, d_sigma, DegH(1.0), "deg/h", fit.fitted);
-    const double size = d.norm();
-    const double size_sigma =
-        size > 0 ? std::sqrt((d.cwiseProduct(d_sigma)).squaredNorm()) / size : d_sigma.norm();
-    fit.fitted.push_back({"driftStepSizeDegH", DegH(size), DegH(size_sigma), "deg/h"});
-  }
-  fit.fitted.push_back({"onsetHours", onset_hours, 0.5 * (upper - lower), "h"});
-  fit.fitted.push_back({"onsetLowerHours", lower, 0.0, "h"});
-  fit.fitted.push_back({"onsetUpperHours", upper, 0.0, "h"});
-  std::string profile_text;
-  for (const auto& [h, v] : profile) {
-    absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", h, v - profile[best_j].second));
-  }
-  fit.notes.push_back(
-      absl::StrCat("likelihood over the onset (h from the start: -2 log L above the best; ",
-                   value.size(), " onsets, integrated over a uniform prior):", profile_text));
-  fit.model.options = best_options;
-  fit.run = std::move(best_run);
-  return absl::OkStatus();
+  RETURN_IF_ERROR(search.Refine(length / fine, Profile(*ctx.model_run).value, opt.alpha));
+  const OnsetProfile profile = ProfileOnsets(search, fit);
+  RETURN_IF_ERROR(FitReadoutJump(search, profile, opt));
+  return DescribeStep(search, profile);
 }
 
 void DescribeVoltageTrend(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
