@@ -20,6 +20,7 @@
 #include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/spacecraft_config.h"
+#include "estimator/status_macros.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -439,326 +440,380 @@ int CandidateComparisons(const Candidate& candidate, const ModelState& model) {
   return std::max(1, kSunFaces - static_cast<int>(HeldSunFaces(model, candidate.gyro).size()));
 }
 
-absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {
+namespace {
+
+// The candidate's model run on the recording (its star tracker corrected as `m` corrects it),
+// counted in fit.runs.
+absl::Status RunCandidateModel(const FitContext& ctx, CandidateFit& fit, const ModelState& m,
+                               ModelRun& out) {
+  const std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, m.correction);
+  auto run = RunModel(m.config, m.options, corrected);
+  ++fit.runs;
+  if (!run.ok()) return run.status();
+  out = std::move(*run);
+  return absl::OkStatus();
+}
+
+// Gives the coefficients first .. first + count - 1 of `gyro` that the model holds (sigma 0) the
+// prior `sigma` [rad/s], so that the filter calibrates them.
+void ReleaseHeldCoefficients(SpacecraftConfig& config, int gyro, int first, int count,
+                             double sigma) {
+  GyroConfig* g = FindGyroMutable(config, gyro);
+  DriftVector s = g->model_sigma.AsVector();
+  for (int i = first; i < first + count; ++i) {
+    if (!(s(i) > 0.0)) s(i) = sigma;
+  }
+  g->model_sigma = DriftCoefficients::FromVector(s);
+}
+
+// The constant drift effects of the library (a rotor displacement, the fourth harmonic, unequal
+// stiffness): the gyro's coefficients of eq. (1)/(10) that the effect frees, calibrated; the
+// run with them fixed at their fitted values (fixed_run).
+absl::Status FitDriftCoefficients(const Candidate& candidate, const FitContext& ctx,
+                                  CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
+  SpacecraftConfig& config = fit.model.config;
+  const std::vector<TelemetryFrame>& frames = *ctx.frames;
+  if (FindGyroMutable(config, candidate.gyro) == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  const auto [first, count, sigma] = *FreedDriftCoefficients(candidate.effect, opt);
+  const DriftVector before = FindGyroMutable(config, candidate.gyro)->model_sigma.AsVector();
+  ReleaseHeldCoefficients(fit.model.config, candidate.gyro, first, count, sigma);
+  fit.parameters = 0;
+  for (int i = first; i < first + count; ++i) fit.parameters += before(i) > 0.0 ? 0 : 1;
+  if (absl::Status s = RunCandidateModel(ctx, fit, fit.model, fit.run); !s.ok()) return s;
+  const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro);
+  if (e != nullptr) {
+    const DriftVector v = e->coefficients.AsVector(), sg = e->sigma.AsVector();
+    for (int i = first; i < first + count; ++i) {
+      fit.fitted.push_back({CoefficientName(i), DegH(v(i)), DegH(sg(i)), "deg/h"});
+    }
+    const DriftVector configured = ctx.model->config.FindGyro(candidate.gyro)->model.AsVector();
+    if (candidate.effect == Effect::kFourthHarmonic) {
+      fit.notes.push_back(absl::StrFormat(
+          "k0 of gyro %d calibrates to %.4f +- %.4f deg/h; the model held %.4f deg/h",
+          candidate.gyro, DegH(v(kThetaK0)), DegH(sg(kThetaK0)), DegH(configured(kThetaK0))));
+    }
+  }
+  if (candidate.effect == Effect::kRotorDisplacement) {
+    DescribeRotorDisplacement(config, frames, candidate.gyro, fit);
+  }
+  if (e != nullptr) {
+    ModelState fixed = *ctx.model;
+    GyroConfig* g = FindGyroMutable(fixed.config, candidate.gyro);
+    DriftVector v = g->model.AsVector();
+    const DriftVector fitted = e->coefficients.AsVector();
+    for (int i = first; i < first + count; ++i) v(i) = fitted(i);
+    g->model = DriftCoefficients::FromVector(v);
+    ModelRun r;
+    if (absl::Status st = RunCandidateModel(ctx, fit, fixed, r); !st.ok()) return st;
+    fit.fixed_run = std::move(r);
+  }
+  return absl::OkStatus();
+}
+
+// A gyro's misalignment: its mounting states freed with the prior misalignment_sigma_arcsec;
+// the run with the fitted rotation applied to its mounting (fixed_run).
+absl::Status FitGyroMisalignment(const Candidate& candidate, const FitContext& ctx,
+                                 CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  SpacecraftConfig& config = fit.model.config;
+  GyroConfig* g = FindGyroMutable(config, candidate.gyro);
+  if (g == nullptr)
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+  fit.parameters = 3;
+  if (absl::Status s = RunCandidateModel(ctx, fit, fit.model, fit.run); !s.ok()) return s;
+  if (const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro)) {
+    AddVectorParameters("misalignmentArcsec", e->misalignment_b, e->misalignment_sigma_b,
+                        RadToArcsec(1.0), "arcsec", fit.fitted);
+    ModelState fixed = *ctx.model;
+    GyroConfig* gf = FindGyroMutable(fixed.config, candidate.gyro);
+    gf->C_b_k = ExpMatrix(e->misalignment_b) * gf->C_b_k;  // session.h: C_b_k = Exp(phi) C_b_k
+    ModelRun r;
+    if (absl::Status st = RunCandidateModel(ctx, fit, fixed, r); !st.ok()) return st;
+    fit.fixed_run = std::move(r);
+  }
+  return absl::OkStatus();
+}
+
+// The star tracker's misalignment, in two stages: every running gyro's mounting free (the
+// common part is the star tracker's, tested for commonality), then the star tracker corrected by
+// it with the mountings as configured.
+absl::Status FitStarTrackerMisalignment(const Candidate& candidate, const FitContext& ctx,
+                                        CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  // Stage 1: every running gyro's misalignment free; the common part is the star tracker's.
+  ModelState free_all = fit.model;
+  for (int id : ctx.gyros) {
+    GyroConfig* g = FindGyroMutable(free_all.config, id);
+    if (g != nullptr && !(g->misalignment_sigma > 0.0)) {
+      g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
+    }
+  }
+  ModelRun stage1;
+  if (absl::Status s = RunCandidateModel(ctx, fit, free_all, stage1); !s.ok()) return s;
+  Vector3d info = Vector3d::Zero(), weighted = Vector3d::Zero();
+  for (int id : ctx.gyros) {
+    const GyroEstimate* e = FindEstimate(stage1.gyros, id);
+    if (e == nullptr) continue;
+    for (int i = 0; i < 3; ++i) {
+      const double s = e->misalignment_sigma_b(i);
+      if (!(s > 0)) continue;
+      info(i) += 1.0 / (s * s);
+      weighted(i) += e->misalignment_b(i) / (s * s);
+    }
+  }
+  Vector3d m = Vector3d::Zero(), m_sigma = Vector3d::Zero();
+  for (int i = 0; i < 3; ++i) {
+    if (info(i) > 0) {
+      m(i) = -weighted(i) / info(i);  // phi_g = -m (see the file comment)
+      m_sigma(i) = 1.0 / std::sqrt(info(i));
+    }
+  }
+  // Commonality: the per-gyro estimates phi_g against their mean, which is -m.
+  double chi2 = 0.0;
+  int dof = 0;
+  std::string per_gyro;
+  for (int id : ctx.gyros) {
+    const GyroEstimate* e = FindEstimate(stage1.gyros, id);
+    if (e == nullptr) continue;
+    absl::StrAppend(&per_gyro, absl::StrFormat(" gyro %d [%.1f %.1f %.1f]", id,
+                                               RadToArcsec(e->misalignment_b.x()),
+                                               RadToArcsec(e->misalignment_b.y()),
+                                               RadToArcsec(e->misalignment_b.z())));
+    for (int i = 0; i < 3; ++i) {
+      const double s = e->misalignment_sigma_b(i);
+      if (s > 0) {
+        chi2 += std::pow((e->misalignment_b(i) + m(i)) / s, 2);
+        ++dof;
+      }
+    }
+  }
+  dof = std::max(1, dof - 3);
+  fit.notes.push_back(absl::StrFormat(
+      "with every gyro's mounting free the fitted misalignments are (arcsec, body axes):%s; "
+      "their spread about the common rotation: chi2 = %.1f on %d dof, p = %.2g",
+      per_gyro, chi2, dof, ChiSquareSurvival(chi2, dof)));
+  // Stage 2: the star tracker corrected by the common rotation, mountings as configured.
+  fit.model.correction.misalignment_b = ctx.model->correction.misalignment_b + m;
+  fit.parameters = 3;
+  // Laplace's approximation of its evidence under the prior misalignment_sigma_arcsec per
+  // axis (candidates.h `occam`).
+  const double prior = ArcsecToRad(opt.misalignment_sigma_arcsec);
+  for (int i = 0; i < 3; ++i) {
+    if (!(m_sigma(i) > 0)) continue;
+    fit.occam += std::max(0.0, 2.0 * std::log(prior / m_sigma(i))) +
+                 m(i) * m(i) / (prior * prior);
+  }
+  if (absl::Status s = RunCandidateModel(ctx, fit, fit.model, fit.run); !s.ok()) return s;
+  AddVectorParameters("misalignmentArcsec", fit.model.correction.misalignment_b, m_sigma,
+                      RadToArcsec(1.0), "arcsec", fit.fitted);
+  return absl::OkStatus();
+}
+
+// The star tracker's latency: a model-free estimate from the rates, then the filter's
+// likelihood searched around it.
+absl::Status FitStarTrackerLatency(const Candidate& candidate, const FitContext& ctx,
+                                   CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  // A first, model-free estimate from the rates (LatencyFromRates), then a 1-D search of the
+  // filter's likelihood around it: the filter's response to a wrong latency is far from
+  // affine (each regime change leaves a step of w tau that eq. (14) rejects and resets
+  // absorb), so a search started at zero can stop in a false minimum.
+  const LatencyEstimate first = LatencyFromRates(*ctx.frames, *ctx.rates, ctx.model->config);
+  fit.parameters = 1;
+  if (!first.observable) {
+    fit.parameters = 0;
+    fit.run = *ctx.model_run;
+    fit.notes.push_back(
+        "the body rate never changed enough to observe a star-tracker latency "
+        "(in a steady rotation a latency is a constant misalignment)");
+    return absl::OkStatus();
+  }
+  fit.notes.push_back(absl::StrFormat(
+      "star-tracker against gyro step rotations over %d rate changes: latency %.0f +- %.0f ms "
+      "(model-free)",
+      first.samples, first.latency * 1e3, first.sigma * 1e3));
+  const double tau0 = ctx.model->correction.latency;
+  const double centre = tau0 + first.latency;
+  const double step = std::clamp(2.0 * first.sigma, 0.005, 0.05);
+  std::vector<double> taus;
+  for (int k = -2; k <= 2; ++k) taus.push_back(centre + k * step);
+  std::vector<double> value(taus.size());
+  std::vector<ModelRun> runs(taus.size());
+  for (size_t k = 0; k < taus.size(); ++k) {
+    ModelState m = fit.model;
+    m.correction.latency = taus[k];
+    if (absl::Status s = RunCandidateModel(ctx, fit, m, runs[k]); !s.ok()) return s;
+    value[k] = Profile(runs[k]).value;
+  }
+  size_t best = std::min_element(value.begin(), value.end()) - value.begin();
+  double tau = taus[best], tau_sigma = first.sigma;
+  double best_value = value[best];
+  fit.run = std::move(runs[best]);
+  if (best > 0 && best + 1 < taus.size()) {
+    const double x0 = taus[best - 1], x1 = taus[best], x2 = taus[best + 1];
+    const double y0 = value[best - 1], y1 = value[best], y2 = value[best + 1];
+    const double d01 = (y1 - y0) / (x1 - x0), d12 = (y2 - y1) / (x2 - x1);
+    const double curvature = 2.0 * (d12 - d01) / (x2 - x0);  // D''
+    if (curvature > 0) {
+      // -2 log L = const + (tau - tau_hat)^2 / sigma^2; D'(x) = d01 + D'' (x - (x0 + x1) / 2).
+      tau_sigma = std::sqrt(2.0 / curvature);
+      const double x_star = std::clamp(0.5 * (x0 + x1) - d01 / curvature, x0, x2);
+      if (std::abs(x_star - x1) > 1e-3) {
+        ModelState m = fit.model;
+        m.correction.latency = x_star;
+        ModelRun r;
+        if (absl::Status s = RunCandidateModel(ctx, fit, m, r); !s.ok()) return s;
+        const double v = Profile(r).value;
+        if (v < best_value) {
+          best_value = v;
+          tau = x_star;
+          fit.run = std::move(r);
+        }
+      }
+    }
+  }
+  fit.model.correction.latency = tau;
+  fit.fitted.push_back({"latencyMs", tau * 1e3, tau_sigma * 1e3, "ms"});
+  // Laplace's approximation of its evidence under the prior latency_sigma_s
+  // (candidates.h `occam`).
+  fit.occam = std::max(0.0, 2.0 * std::log(opt.latency_sigma_s / std::max(tau_sigma, 1e-6))) +
+              std::pow((tau - tau0) / opt.latency_sigma_s, 2);
+  std::string grid_text;
+  for (size_t k = 0; k < taus.size(); ++k) {
+    absl::StrAppend(&grid_text,
+                    absl::StrFormat(" %.0f:%.1f", taus[k] * 1e3, value[k] - best_value));
+  }
+  fit.notes.push_back(
+      absl::StrCat("filter likelihood around it (ms: -2 log L above the best):", grid_text));
+  return absl::OkStatus();
+}
+
+// A raised drift random walk, common (gyro 0) or of one gyro: the intensity over a grid, its
+// evidence integrated over it.
+absl::Status FitRandomWalk(const Candidate& candidate, const FitContext& ctx,
+                           CandidateFit& fit) {
+  SpacecraftConfig& config = fit.model.config;
+  // Common (gyro 0) or of one gyro (session.h SessionOptions::random_walk_by_gyro).
+  if (candidate.gyro > 0 && FindGyroMutable(config, candidate.gyro) == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  auto set_intensity = [&](ModelState& m, double q) {
+    if (candidate.gyro == 0) {
+      m.config.random_walk = q;
+      return;
+    }
+    auto& by_gyro = m.options.random_walk_by_gyro;
+    for (auto& [id, value] : by_gyro) {
+      if (id == candidate.gyro) {
+        value = q;
+        return;
+      }
+    }
+    by_gyro.emplace_back(candidate.gyro, q);
+  };
+  double q0 = ctx.model->config.random_walk;
+  for (const auto& [id, value] : ctx.model->options.random_walk_by_gyro) {
+    if (id == candidate.gyro) q0 = value;
+  }
+  fit.time.kind = "random_walk";
+  const double base = q0 > 0.0 ? q0 : DegPerHourSqrtHourToSi(kRandomWalkFloorDegHSqrtH);
+  std::vector<double> grid, value;
+  ModelRun best_run;
+  double best = 0.0;
+  int best_k = -1;
+  for (int k = 0; k < kRandomWalkGridPoints; ++k) {
+    // Never beyond what a configuration may hold (docs/service.md "Limits").
+    const double q = std::min(base * std::pow(2.0, q0 > 0.0 ? k + 1 : k),
+                              DegPerHourSqrtHourToSi(kConfigLimits.random_walk.max));
+    ModelState m = fit.model;
+    set_intensity(m, q);
+    ModelRun r;
+    if (absl::Status s = RunCandidateModel(ctx, fit, m, r); !s.ok()) return s;
+    const double d = Profile(r).value;
+    grid.push_back(q);
+    value.push_back(d);
+    if (best_k < 0 || d < best) {
+      best = d;
+      best_k = k;
+      best_run = std::move(r);
+    }
+  }
+  set_intensity(fit.model, grid[best_k]);
+  fit.run = std::move(best_run);
+  fit.parameters = 1;
+  // Its evidence: the intensity integrated over the grid, each point equally likely a
+  // priori (a log-uniform prior over 2 .. 32 times the configured intensity).
+  for (double d : value) fit.prior_points.emplace_back(1.0 / value.size(), d);
+  // Parabola in log q through the best point and its neighbours for the reported intensity.
+  double q_hat = grid[best_k];
+  if (best_k > 0 && best_k + 1 < static_cast<int>(grid.size())) {
+    const double y0 = value[best_k - 1], y1 = value[best_k], y2 = value[best_k + 1];
+    const double curvature = y0 - 2 * y1 + y2;
+    if (curvature > 0) {
+      const double offset = 0.5 * (y0 - y2) / curvature;  // in grid steps (factor 2)
+      q_hat = grid[best_k] * std::pow(2.0, std::clamp(offset, -1.0, 1.0));
+    }
+  }
+  fit.fitted.push_back(
+      {"randomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q_hat), 0.0, "deg/h/sqrt(h)"});
+  fit.fitted.push_back(
+      {"configuredRandomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q0), 0.0, "deg/h/sqrt(h)"});
+  std::string grid_text;
+  for (size_t k = 0; k < grid.size(); ++k) {
+    absl::StrAppend(&grid_text, absl::StrFormat(" %.4g:%.1f", SiToDegPerHourSqrtHour(grid[k]),
+                                                value[k] - value[best_k]));
+  }
+  fit.notes.push_back(absl::StrCat(
+      "likelihood over the intensity grid (deg/h/sqrt(h): -2 log L above the best):",
+      grid_text));
+  return absl::OkStatus();
+}
+
+// Each effect's fit (the library's, the time behaviours', the basis's readout and sun groups).
+using EffectFit = absl::Status (*)(const Candidate&, const FitContext&, CandidateFit&);
+EffectFit FitOf(Effect effect) {
+  switch (effect) {
+    case Effect::kRotorDisplacement:
+    case Effect::kFourthHarmonic:
+    case Effect::kUnequalStiffness:
+      return &FitDriftCoefficients;
+    case Effect::kGyroMisalignment:
+      return &FitGyroMisalignment;
+    case Effect::kStarTrackerMisalignment:
+      return &FitStarTrackerMisalignment;
+    case Effect::kStarTrackerLatency:
+      return &FitStarTrackerLatency;
+    case Effect::kRandomWalkDrift:
+      return &FitRandomWalk;
+    case Effect::kDriftStep:
+      return &FitDriftStep;
+    case Effect::kReadoutDistortion:
+      return &FitReadoutCandidate;
+    case Effect::kSunDrift:
+      return &FitSunCandidate;
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitContext& ctx) {
   CandidateFit fit;
   fit.candidate = candidate;
   fit.model = *ctx.model;
   fit.model.added.push_back(CandidateName(candidate));
-  SpacecraftConfig& config = fit.model.config;
-  const std::vector<TelemetryFrame>& frames = *ctx.frames;
-  auto run_model = [&](const ModelState& m, ModelRun& out) -> absl::Status {
-    const std::vector<TelemetryFrame> corrected =
-        CorrectStarTracker(frames, *ctx.rates, m.correction);
-    auto run = RunModel(m.config, m.options, corrected);
-    ++fit.runs;
-    if (!run.ok()) return run.status();
-    out = std::move(*run);
-    return absl::OkStatus();
-  };
-  auto set_sigma = [&](int first, int count, double sigma) {
-    GyroConfig* g = FindGyroMutable(config, candidate.gyro);
-    DriftVector s = g->model_sigma.AsVector();
-    for (int i = first; i < first + count; ++i) {
-      if (!(s(i) > 0.0)) s(i) = sigma;
-    }
-    g->model_sigma = DriftCoefficients::FromVector(s);
-  };
-
-  switch (candidate.effect) {
-    case Effect::kRotorDisplacement:
-    case Effect::kFourthHarmonic:
-    case Effect::kUnequalStiffness: {
-      if (FindGyroMutable(config, candidate.gyro) == nullptr) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-      }
-      const auto [first, count, sigma] = *FreedDriftCoefficients(candidate.effect, opt);
-      const DriftVector before = FindGyroMutable(config, candidate.gyro)->model_sigma.AsVector();
-      set_sigma(first, count, sigma);
-      fit.parameters = 0;
-      for (int i = first; i < first + count; ++i) fit.parameters += before(i) > 0.0 ? 0 : 1;
-      if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
-      const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro);
-      if (e != nullptr) {
-        const DriftVector v = e->coefficients.AsVector(), sg = e->sigma.AsVector();
-        for (int i = first; i < first + count; ++i) {
-          fit.fitted.push_back({CoefficientName(i), DegH(v(i)), DegH(sg(i)), "deg/h"});
-        }
-        const DriftVector configured = ctx.model->config.FindGyro(candidate.gyro)->model.AsVector();
-        if (candidate.effect == Effect::kFourthHarmonic) {
-          fit.notes.push_back(absl::StrFormat(
-              "k0 of gyro %d calibrates to %.4f +- %.4f deg/h; the model held %.4f deg/h",
-              candidate.gyro, DegH(v(kThetaK0)), DegH(sg(kThetaK0)), DegH(configured(kThetaK0))));
-        }
-      }
-      if (candidate.effect == Effect::kRotorDisplacement) {
-        DescribeRotorDisplacement(config, frames, candidate.gyro, fit);
-      }
-      if (e != nullptr) {
-        ModelState fixed = *ctx.model;
-        GyroConfig* g = FindGyroMutable(fixed.config, candidate.gyro);
-        DriftVector v = g->model.AsVector();
-        const DriftVector fitted = e->coefficients.AsVector();
-        for (int i = first; i < first + count; ++i) v(i) = fitted(i);
-        g->model = DriftCoefficients::FromVector(v);
-        ModelRun r;
-        if (absl::Status st = run_model(fixed, r); !st.ok()) return st;
-        fit.fixed_run = std::move(r);
-      }
-      return fit;
-    }
-    case Effect::kGyroMisalignment: {
-      GyroConfig* g = FindGyroMutable(config, candidate.gyro);
-      if (g == nullptr)
-        return absl::InvalidArgumentError(
-            absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-      g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
-      fit.parameters = 3;
-      if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
-      if (const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro)) {
-        AddVectorParameters("misalignmentArcsec", e->misalignment_b, e->misalignment_sigma_b,
-                            RadToArcsec(1.0), "arcsec", fit.fitted);
-        ModelState fixed = *ctx.model;
-        GyroConfig* gf = FindGyroMutable(fixed.config, candidate.gyro);
-        gf->C_b_k = ExpMatrix(e->misalignment_b) * gf->C_b_k;  // session.h: C_b_k = Exp(phi) C_b_k
-        ModelRun r;
-        if (absl::Status st = run_model(fixed, r); !st.ok()) return st;
-        fit.fixed_run = std::move(r);
-      }
-      return fit;
-    }
-    case Effect::kStarTrackerMisalignment: {
-      // Stage 1: every running gyro's misalignment free; the common part is the star tracker's.
-      ModelState free_all = fit.model;
-      for (int id : ctx.gyros) {
-        GyroConfig* g = FindGyroMutable(free_all.config, id);
-        if (g != nullptr && !(g->misalignment_sigma > 0.0)) {
-          g->misalignment_sigma = ArcsecToRad(opt.misalignment_sigma_arcsec);
-        }
-      }
-      ModelRun stage1;
-      if (absl::Status s = run_model(free_all, stage1); !s.ok()) return s;
-      Vector3d info = Vector3d::Zero(), weighted = Vector3d::Zero();
-      for (int id : ctx.gyros) {
-        const GyroEstimate* e = FindEstimate(stage1.gyros, id);
-        if (e == nullptr) continue;
-        for (int i = 0; i < 3; ++i) {
-          const double s = e->misalignment_sigma_b(i);
-          if (!(s > 0)) continue;
-          info(i) += 1.0 / (s * s);
-          weighted(i) += e->misalignment_b(i) / (s * s);
-        }
-      }
-      Vector3d m = Vector3d::Zero(), m_sigma = Vector3d::Zero();
-      for (int i = 0; i < 3; ++i) {
-        if (info(i) > 0) {
-          m(i) = -weighted(i) / info(i);  // phi_g = -m (see the file comment)
-          m_sigma(i) = 1.0 / std::sqrt(info(i));
-        }
-      }
-      // Commonality: the per-gyro estimates phi_g against their mean, which is -m.
-      double chi2 = 0.0;
-      int dof = 0;
-      std::string per_gyro;
-      for (int id : ctx.gyros) {
-        const GyroEstimate* e = FindEstimate(stage1.gyros, id);
-        if (e == nullptr) continue;
-        absl::StrAppend(&per_gyro, absl::StrFormat(" gyro %d [%.1f %.1f %.1f]", id,
-                                                   RadToArcsec(e->misalignment_b.x()),
-                                                   RadToArcsec(e->misalignment_b.y()),
-                                                   RadToArcsec(e->misalignment_b.z())));
-        for (int i = 0; i < 3; ++i) {
-          const double s = e->misalignment_sigma_b(i);
-          if (s > 0) {
-            chi2 += std::pow((e->misalignment_b(i) + m(i)) / s, 2);
-            ++dof;
-          }
-        }
-      }
-      dof = std::max(1, dof - 3);
-      fit.notes.push_back(absl::StrFormat(
-          "with every gyro's mounting free the fitted misalignments are (arcsec, body axes):%s; "
-          "their spread about the common rotation: chi2 = %.1f on %d dof, p = %.2g",
-          per_gyro, chi2, dof, ChiSquareSurvival(chi2, dof)));
-      // Stage 2: the star tracker corrected by the common rotation, mountings as configured.
-      fit.model.correction.misalignment_b = ctx.model->correction.misalignment_b + m;
-      fit.parameters = 3;
-      // Laplace's approximation of its evidence under the prior misalignment_sigma_arcsec per
-      // axis (candidates.h `occam`).
-      const double prior = ArcsecToRad(opt.misalignment_sigma_arcsec);
-      for (int i = 0; i < 3; ++i) {
-        if (!(m_sigma(i) > 0)) continue;
-        fit.occam += std::max(0.0, 2.0 * std::log(prior / m_sigma(i))) +
-                     m(i) * m(i) / (prior * prior);
-      }
-      if (absl::Status s = run_model(fit.model, fit.run); !s.ok()) return s;
-      AddVectorParameters("misalignmentArcsec", fit.model.correction.misalignment_b, m_sigma,
-                          RadToArcsec(1.0), "arcsec", fit.fitted);
-      return fit;
-    }
-    case Effect::kStarTrackerLatency: {
-      // A first, model-free estimate from the rates (LatencyFromRates), then a 1-D search of the
-      // filter's likelihood around it: the filter's response to a wrong latency is far from
-      // affine (each regime change leaves a step of w tau that eq. (14) rejects and resets
-      // absorb), so a search started at zero can stop in a false minimum.
-      const LatencyEstimate first = LatencyFromRates(*ctx.frames, *ctx.rates, ctx.model->config);
-      fit.parameters = 1;
-      if (!first.observable) {
-        fit.parameters = 0;
-        fit.run = *ctx.model_run;
-        fit.notes.push_back(
-            "the body rate never changed enough to observe a star-tracker latency "
-            "(in a steady rotation a latency is a constant misalignment)");
-        return fit;
-      }
-      fit.notes.push_back(absl::StrFormat(
-          "star-tracker against gyro step rotations over %d rate changes: latency %.0f +- %.0f ms "
-          "(model-free)",
-          first.samples, first.latency * 1e3, first.sigma * 1e3));
-      const double tau0 = ctx.model->correction.latency;
-      const double centre = tau0 + first.latency;
-      const double step = std::clamp(2.0 * first.sigma, 0.005, 0.05);
-      std::vector<double> taus;
-      for (int k = -2; k <= 2; ++k) taus.push_back(centre + k * step);
-      std::vector<double> value(taus.size());
-      std::vector<ModelRun> runs(taus.size());
-      for (size_t k = 0; k < taus.size(); ++k) {
-        ModelState m = fit.model;
-        m.correction.latency = taus[k];
-        if (absl::Status s = run_model(m, runs[k]); !s.ok()) return s;
-        value[k] = Profile(runs[k]).value;
-      }
-      size_t best = std::min_element(value.begin(), value.end()) - value.begin();
-      double tau = taus[best], tau_sigma = first.sigma;
-      double best_value = value[best];
-      fit.run = std::move(runs[best]);
-      if (best > 0 && best + 1 < taus.size()) {
-        const double x0 = taus[best - 1], x1 = taus[best], x2 = taus[best + 1];
-        const double y0 = value[best - 1], y1 = value[best], y2 = value[best + 1];
-        const double d01 = (y1 - y0) / (x1 - x0), d12 = (y2 - y1) / (x2 - x1);
-        const double curvature = 2.0 * (d12 - d01) / (x2 - x0);  // D''
-        if (curvature > 0) {
-          // -2 log L = const + (tau - tau_hat)^2 / sigma^2; D'(x) = d01 + D'' (x - (x0 + x1) / 2).
-          tau_sigma = std::sqrt(2.0 / curvature);
-          const double x_star = std::clamp(0.5 * (x0 + x1) - d01 / curvature, x0, x2);
-          if (std::abs(x_star - x1) > 1e-3) {
-            ModelState m = fit.model;
-            m.correction.latency = x_star;
-            ModelRun r;
-            if (absl::Status s = run_model(m, r); !s.ok()) return s;
-            const double v = Profile(r).value;
-            if (v < best_value) {
-              best_value = v;
-              tau = x_star;
-              fit.run = std::move(r);
-            }
-          }
-        }
-      }
-      fit.model.correction.latency = tau;
-      fit.fitted.push_back({"latencyMs", tau * 1e3, tau_sigma * 1e3, "ms"});
-      // Laplace's approximation of its evidence under the prior latency_sigma_s
-      // (candidates.h `occam`).
-      fit.occam = std::max(0.0, 2.0 * std::log(opt.latency_sigma_s / std::max(tau_sigma, 1e-6))) +
-                  std::pow((tau - tau0) / opt.latency_sigma_s, 2);
-      std::string grid_text;
-      for (size_t k = 0; k < taus.size(); ++k) {
-        absl::StrAppend(&grid_text,
-                        absl::StrFormat(" %.0f:%.1f", taus[k] * 1e3, value[k] - best_value));
-      }
-      fit.notes.push_back(
-          absl::StrCat("filter likelihood around it (ms: -2 log L above the best):", grid_text));
-      return fit;
-    }
-    case Effect::kRandomWalkDrift: {
-      // Common (gyro 0) or of one gyro (session.h SessionOptions::random_walk_by_gyro).
-      if (candidate.gyro > 0 && FindGyroMutable(config, candidate.gyro) == nullptr) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-      }
-      auto set_intensity = [&](ModelState& m, double q) {
-        if (candidate.gyro == 0) {
-          m.config.random_walk = q;
-          return;
-        }
-        auto& by_gyro = m.options.random_walk_by_gyro;
-        for (auto& [id, value] : by_gyro) {
-          if (id == candidate.gyro) {
-            value = q;
-            return;
-          }
-        }
-        by_gyro.emplace_back(candidate.gyro, q);
-      };
-      double q0 = ctx.model->config.random_walk;
-      for (const auto& [id, value] : ctx.model->options.random_walk_by_gyro) {
-        if (id == candidate.gyro) q0 = value;
-      }
-      fit.time.kind = "random_walk";
-      const double base = q0 > 0.0 ? q0 : DegPerHourSqrtHourToSi(kRandomWalkFloorDegHSqrtH);
-      std::vector<double> grid, value;
-      ModelRun best_run;
-      double best = 0.0;
-      int best_k = -1;
-      for (int k = 0; k < kRandomWalkGridPoints; ++k) {
-        // Never beyond what a configuration may hold (docs/service.md "Limits").
-        const double q = std::min(base * std::pow(2.0, q0 > 0.0 ? k + 1 : k),
-                                  DegPerHourSqrtHourToSi(kConfigLimits.random_walk.max));
-        ModelState m = fit.model;
-        set_intensity(m, q);
-        ModelRun r;
-        if (absl::Status s = run_model(m, r); !s.ok()) return s;
-        const double d = Profile(r).value;
-        grid.push_back(q);
-        value.push_back(d);
-        if (best_k < 0 || d < best) {
-          best = d;
-          best_k = k;
-          best_run = std::move(r);
-        }
-      }
-      set_intensity(fit.model, grid[best_k]);
-      fit.run = std::move(best_run);
-      fit.parameters = 1;
-      // Its evidence: the intensity integrated over the grid, each point equally likely a
-      // priori (a log-uniform prior over 2 .. 32 times the configured intensity).
-      for (double d : value) fit.prior_points.emplace_back(1.0 / value.size(), d);
-      // Parabola in log q through the best point and its neighbours for the reported intensity.
-      double q_hat = grid[best_k];
-      if (best_k > 0 && best_k + 1 < static_cast<int>(grid.size())) {
-        const double y0 = value[best_k - 1], y1 = value[best_k], y2 = value[best_k + 1];
-        const double curvature = y0 - 2 * y1 + y2;
-        if (curvature > 0) {
-          const double offset = 0.5 * (y0 - y2) / curvature;  // in grid steps (factor 2)
-          q_hat = grid[best_k] * std::pow(2.0, std::clamp(offset, -1.0, 1.0));
-        }
-      }
-      fit.fitted.push_back(
-          {"randomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q_hat), 0.0, "deg/h/sqrt(h)"});
-      fit.fitted.push_back(
-          {"configuredRandomWalkDegHSqrtH", SiToDegPerHourSqrtHour(q0), 0.0, "deg/h/sqrt(h)"});
-      std::string grid_text;
-      for (size_t k = 0; k < grid.size(); ++k) {
-        absl::StrAppend(&grid_text, absl::StrFormat(" %.4g:%.1f", SiToDegPerHourSqrtHour(grid[k]),
-                                                    value[k] - value[best_k]));
-      }
-      fit.notes.push_back(absl::StrCat(
-          "likelihood over the intensity grid (deg/h/sqrt(h): -2 log L above the best):",
-          grid_text));
-      return fit;
-    }
-    case Effect::kDriftStep:
-      if (absl::Status s = FitDriftStep(candidate, ctx, fit); !s.ok()) return s;
-      return fit;
-    case Effect::kReadoutDistortion:
-      if (absl::Status s = FitReadoutCandidate(candidate, ctx, fit); !s.ok()) return s;
-      return fit;
-    case Effect::kSunDrift:
-      if (absl::Status s = FitSunCandidate(candidate, ctx, fit); !s.ok()) return s;
-      return fit;
-  }
-  return absl::InternalError("unknown effect");
+  const EffectFit fit_effect = FitOf(candidate.effect);
+  if (fit_effect == nullptr) return absl::InternalError("unknown effect");
+  RETURN_IF_ERROR(fit_effect(candidate, ctx, fit));
+  return fit;
 }
 
 }  // namespace esg::estimator::discovery

@@ -328,7 +328,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   g->model_sigma = DriftCoefficients::FromVector(sigma);
   // The misalignment states too, held the same way, for the competing readout jump (D43).
   if (!(g->misalignment_sigma > 0.0)) g->misalignment_sigma = ArcsecToRad(kHeldSigmaArcsec);
-  OnsetSearch search{candidate, fit, CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction)};
+  OnsetSearch search{candidate, fit,
+                     CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction)};
   search.step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
   const std::vector<TelemetryFrame>& frames = search.frames;
   const int n = static_cast<int>(frames.size());
@@ -358,7 +359,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   for (size_t j = kOnsetRefine - 1; j < grid_frames.size(); j += kOnsetRefine) {
     RETURN_IF_ERROR(search.Evaluate(grid_frames[j]));
   }
-  if (search.best_frame < 0) {  // a recording too short for the coarse grid: every onset of the finer
+  // A recording too short for the coarse grid: every onset of the finer.
+  if (search.best_frame < 0) {
     for (int f : grid_frames) RETURN_IF_ERROR(search.Evaluate(f));
   }
   if (search.best_frame < 1) {  // nothing to search: no step fitted
