@@ -22,6 +22,8 @@
 #include "estimator/simulator.h"
 #include "formats/aem.h"
 #include "formats/recording_csv.h"
+#include "google/protobuf/io/coded_stream.h"
+#include "google/protobuf/io/zero_copy_stream_impl_lite.h"
 #include "proto/convert.h"
 #include "server/checkpoint_codec.h"
 #include "tests/testing/checkpoint_versions.h"
@@ -29,6 +31,19 @@
 namespace {
 
 using namespace esg;
+
+// A message's wire bytes with its map entries in key order: the same seed file on every run
+// (the default serialization writes a map in its hash order).
+std::string DeterministicBytes(const google::protobuf::MessageLite& message) {
+  std::string out;
+  {
+    google::protobuf::io::StringOutputStream sink(&out);
+    google::protobuf::io::CodedOutputStream coded(&sink);
+    coded.SetSerializationDeterministic(true);
+    message.SerializeToCodedStream(&coded);
+  }
+  return out;
+}
 
 void Write(const std::string& path, const std::string& content) {
   std::ofstream out(path, std::ios::binary | std::ios::trunc);
@@ -200,7 +215,7 @@ int main(int argc, char** argv) {
   // Telemetry frames in the protobuf wire form.
   for (int i = 0; i < 9; ++i) {
     Write(absl::StrCat(out, "/telemetry_frame/frame", i, ".pb"),
-          proto_convert::FrameToProto(frames[i], "RDK-1", i + 1).SerializeAsString());
+          DeterministicBytes(proto_convert::FrameToProto(frames[i], "RDK-1", i + 1)));
   }
 
   // The configuration as ConfigToJson writes it.
