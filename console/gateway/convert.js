@@ -3,6 +3,7 @@
 // never guessed from its value:
 //   - field names as in the .proto files (snake_case), every scalar and repeated field present
 //     (proto3 defaults included, repeated fields possibly []), absent message fields omitted;
+//     except a drift model's keyed `coefficients`, left out when empty as `esg --json` does;
 //   - google.protobuf.Timestamp <-> ISO-8601 UTC string with milliseconds
 //     ("2026-01-01T00:00:00.000Z"); parsing keeps up to nanoseconds;
 //   - int64 as JSON numbers (proto-loader is set up with longs: Number), enums as their names;
@@ -10,6 +11,7 @@
 'use strict';
 
 const TIMESTAMP = 'google.protobuf.Timestamp';
+const DRIFT_MODEL = 'esg.v1.GyroDriftModel';
 
 class ConvertError extends Error {}
 
@@ -90,6 +92,11 @@ class Converter {
       } else {
         out[field.name] = scalarToJson(field.type, value);
       }
+    }
+    // A drift model's keyed coefficients are left out when it has none, as `esg --json` leaves
+    // them out: its JSON is the one from before the field existed (docs/formats.md).
+    if (typeName === DRIFT_MODEL && Array.isArray(out.coefficients) && out.coefficients.length === 0) {
+      delete out.coefficients;
     }
     return out;
   }
