@@ -34,8 +34,14 @@ grep -qE '^  model \(10\) .* error after the gap +[0-9.]+ arcmin' "$out" || fail
 grep -q 'source: inertial hold' "$out" || fail "the prediction's source is not named"
 grep -q 'held inertially fixed' "$out" || fail "the hold is not explained"
 grep -qE '^Alerts raised: [0-9]+$' "$out" || fail "no alerts section"
-grep -qE 'above its threshold of [0-9.e-]+( arcsec)? \((once|[0-9]+ times)\)\.$' "$out" ||
-  fail "no alert as a sentence"
+# The demo's flight raises no alert today (its one alert had come from a jump of the simulated
+# attitude in the 18 h slew, now continuous, docs/scenario.md);
+# any alert it raises is printed as a sentence (the format itself is checked below).
+alerts=$(sed -nE 's/^Alerts raised: ([0-9]+)$/\1/p' "$out")
+if [ "$alerts" -gt 0 ]; then
+  grep -qE '(above|below) its threshold of [0-9.e-]+( arcsec)? \((once|[0-9]+ times)\)\.$' "$out" ||
+    fail "$alerts alerts raised, none printed as a sentence"
+fi
 if grep -qE 'Built target|[0-9]+%|SESSION_STATE_|ALERT_[A-Z]+_|ATTITUDE_SOURCE_' "$out"; then
   fail "build output, progress or an enum value name in the summary"
 fi
