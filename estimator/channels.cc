@@ -98,7 +98,6 @@ absl::Status ValidateFrameChannels(const Channels& channels) {
 
 absl::Status CheckDeclaredChannels(const Channels& channels,
                                    const std::vector<ChannelConfig>& declared) {
-  RETURN_IF_ERROR(ValidateFrameChannels(channels));
   for (const ChannelValue& c : channels) {
     const ChannelConfig* config = nullptr;
     for (const ChannelConfig& d : declared) {

@@ -66,8 +66,10 @@ absl::Status ValidateFrameChannels(const Channels& channels);
 
 // Against the declarations (the ingest and the offline verbs): InvalidArgument
 // `channels["T_gyro2"]: not declared in the configuration (declared: T_gyro1, heater_1)` or
-// `channels["T_gyro2"]: 412 K is outside its valid range [250, 350] K`. Runs
-// ValidateFrameChannels first.
+// `channels["T_gyro2"]: 412 K is outside its valid range [250, 350] K`. The channels are a
+// reader's (FrameFromProto, the recording CSV, a column mapping), which ValidateFrameChannels
+// already accepted: a declared name is a valid one, and a value that is not finite is outside
+// every range.
 absl::Status CheckDeclaredChannels(const Channels& channels,
                                    const std::vector<ChannelConfig>& declared);
 

@@ -32,7 +32,7 @@ struct StarTrackerReading {
 };
 
 // One auxiliary housekeeping channel's value in a frame, in the unit its declaration states
-// (spacecraft_config.h ChannelConfig; docs/formats.md "Channels").
+// (channels.h ChannelConfig; docs/formats.md "Channels").
 struct ChannelValue {
   std::string name;
   double value = 0.0;
