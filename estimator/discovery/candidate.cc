@@ -32,6 +32,16 @@ GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
   return nullptr;
 }
 
+void ReleaseHeldCoefficients(SpacecraftConfig& config, int gyro, int first, int count,
+                             double sigma) {
+  GyroConfig* g = FindGyroMutable(config, gyro);
+  DriftVector s = g->model_sigma.AsVector();
+  for (int i = first; i < first + count; ++i) {
+    if (!(s(i) > 0.0)) s(i) = sigma;
+  }
+  g->model_sigma = DriftCoefficients::FromVector(s);
+}
+
 const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id) {
   for (const GyroEstimate& g : gyros) {
     if (g.id == id) return &g;

@@ -105,6 +105,12 @@ struct CandidateFit {
 GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id);
 const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id);
 
+// Gives the drift coefficients first .. first + count - 1 of gyro `gyro` (configured) that the
+// model holds (sigma 0) the prior `sigma` [rad/s], so that the filter calibrates them (or, with
+// a tiny sigma, so that they are in the filter's layout to be released later).
+void ReleaseHeldCoefficients(SpacecraftConfig& config, int gyro, int first, int count,
+                             double sigma);
+
 // The residual random walk of eq. (11) `m` holds for gyro `id` [rad/s/sqrt(s)] and the prior
 // 1-sigma of each gyro's residual drift at the start [rad/s], as its session sets them (session.h
 // ResidualRandomWalk, InitialResidualDriftSigma); 0 when the model has no random walk.

@@ -455,18 +455,6 @@ absl::Status RunCandidateModel(const FitContext& ctx, CandidateFit& fit, const M
   return absl::OkStatus();
 }
 
-// Gives the coefficients first .. first + count - 1 of `gyro` that the model holds (sigma 0) the
-// prior `sigma` [rad/s], so that the filter calibrates them.
-void ReleaseHeldCoefficients(SpacecraftConfig& config, int gyro, int first, int count,
-                             double sigma) {
-  GyroConfig* g = FindGyroMutable(config, gyro);
-  DriftVector s = g->model_sigma.AsVector();
-  for (int i = first; i < first + count; ++i) {
-    if (!(s(i) > 0.0)) s(i) = sigma;
-  }
-  g->model_sigma = DriftCoefficients::FromVector(s);
-}
-
 // The constant drift effects of the library (a rotor displacement, the fourth harmonic, unequal
 // stiffness): the gyro's coefficients of eq. (1)/(10) that the effect frees, calibrated; the
 // run with them fixed at their fitted values (fixed_run).

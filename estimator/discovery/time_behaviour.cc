@@ -321,11 +321,8 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   }
   // The step d (case axes) enters eq. (10) as C1 -> C1 - d: (h h^T - I)(-d) = d - (h.d) h, the
   // part of d across the spin axis (the part along it moves nothing).
-  DriftVector sigma = g->model_sigma.AsVector();
-  for (int i = kThetaC1; i < kThetaC1 + 3; ++i) {
-    if (!(sigma(i) > 0.0)) sigma(i) = DegPerHourToRadPerSec(kHeldSigmaDegH);
-  }
-  g->model_sigma = DriftCoefficients::FromVector(sigma);
+  ReleaseHeldCoefficients(fit.model.config, candidate.gyro, kThetaC1, 3,
+                          DegPerHourToRadPerSec(kHeldSigmaDegH));
   // The misalignment states too, held the same way, for the competing readout jump (D43).
   if (!(g->misalignment_sigma > 0.0)) g->misalignment_sigma = ArcsecToRad(kHeldSigmaArcsec);
   OnsetSearch search{candidate, fit,
