@@ -435,6 +435,11 @@ class EstimationSession {
 
   // session_propagation.cc
   absl::Status Propagate(const TelemetryFrame& frame);
+  // The steps of Propagate and of FromCheckpoint, each a function stating what it reads and what
+  // it writes or refuses (defined in session_propagation.cc and session_checkpoint.cc; nested in
+  // the session so that they reach its state without declaring each step here).
+  struct PropagationSteps;
+  struct CheckpointRestore;
 
   // session_update.cc
   absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
