@@ -392,6 +392,20 @@ std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDri
     const double var = d.magnitude > 0.0 ? (d.c / d.magnitude).dot(d.cov * (d.c / d.magnitude))
                                          : d.cov.trace() / 2.0;
     d.below = d.bound - d.magnitude > 3.0 * std::sqrt(std::max(var, 0.0));
+    // The turn rates on either side of the onset: an interval ending at or before it is before.
+    double turn_before = 0.0, time_before = 0.0, turn_after = 0.0, time_after = 0.0;
+    for (int k = 1; k < n; ++k) {
+      const double dt = p.tau[k] - p.tau[k - 1];
+      if (!(dt > 0.0)) continue;
+      const bool before = p.tau[k] <= onset_tau;
+      (before ? turn_before : turn_after) += track.points[k].turn;
+      (before ? time_before : time_after) += dt;
+    }
+    d.turn_rate_after = time_after > 0.0 ? turn_after / time_after : 0.0;
+    d.turn_rate_before = time_before > 0.0 ? turn_before / time_before : d.turn_rate_after;
+    d.slow_reading_change = kSlowReadingErrorRad * std::abs(d.turn_rate_after - d.turn_rate_before);
+    d.may_be_slow_reading_error =
+        d.magnitude - 3.0 * std::sqrt(std::max(var, 0.0)) <= d.slow_reading_change;
     return d;
   };
   const Fit line = WeightedFit(p, Regressors(p, -1, std::nullopt, false));

@@ -148,6 +148,20 @@ class ReadingFaultMonitor {
     absl::Time onset;
     bool beyond = false;     // beyond_chi2 >= decision_chi2
     bool below = false;      // |c| below the bound by 3 sigma along c
+    // The reading's mean turn rate over the window's intervals before and after the onset
+    // [rad/s] (both the window's mean when the change began before the window). A reading error
+    // that changes only as the reading turns (an unconfigured misalignment of the gyro's case, a
+    // readout scale error: kSlowReadingErrorRad per radian) gives a rate error of at most
+    // kSlowReadingErrorRad times the turn rate, so where the turn rate changes at the onset
+    // (a slew's end, an attitude-mode switch) such an error changes the rate by at least
+    // kSlowReadingErrorRad |after - before| when it is that large (slow_reading_change [rad/s]);
+    // the scalar turn does not tell a change of the turn's direction alone, which can change it
+    // too. may_be_slow_reading_error: |c| minus 3 sigma along c is within slow_reading_change,
+    // the change as large as such an error gives there.
+    double turn_rate_before = 0.0;
+    double turn_rate_after = 0.0;
+    double slow_reading_change = 0.0;
+    bool may_be_slow_reading_error = false;
     // Neither: undecided, more steps after the onset will tell (the estimate's sigma falls as
     // the steps after it to the power 1.5).
   };

@@ -537,6 +537,22 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
         }
         change_detector_.Clear();
         drift_change_gyro_ = 0;
+        // Where the reading's turn rate changes at the onset, a reading error that changes as
+        // the reading turns (an unconfigured case misalignment, a readout scale error) changes
+        // the rate too: the alert says so when the change is no larger than such an error gives.
+        const std::string turn_note =
+            dc.has_value() && dc->may_be_slow_reading_error
+                ? absl::StrFormat(
+                      "; its onset is at a change of the gyro's turn rate (%.3g to %.3g deg/s), "
+                      "where a reading error that changes as the reading turns (an unconfigured "
+                      "case misalignment or a readout scale error of up to %.0f arcsec) changes "
+                      "the rate by up to %.3f deg/h: this may be such an error rather than a "
+                      "drift change (configure gyros[].misalignmentSigmaArcsec, or run esg "
+                      "diagnose over the span)",
+                      RadToDeg(dc->turn_rate_before), RadToDeg(dc->turn_rate_after),
+                      RadToArcsec(kSlowReadingErrorRad),
+                      RadPerSecToDegPerHour(dc->slow_reading_change))
+                : std::string();
         report.events.push_back(Event{
             Event::Kind::kDriftChanged, frame.time, absl::StrFormat("gyro %d", ids[k]),
             RadPerSecToDegPerHour(change_rad_s),
@@ -544,13 +560,13 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
             absl::StrFormat(
                 "drift of gyro %d changed by %.3f +- %.3f deg/h at %s (%s the limit %.3g deg/h "
                 "with the model's uncertainty: not a fault): %s; its drift coefficients are "
-                "re-opened and recalibrated, nothing excluded",
+                "re-opened and recalibrated, nothing excluded%s",
                 ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
                 FormatUtc(dc.has_value() ? dc->onset : frame.time),
                 dc.has_value() && dc->below ? "below" : "not shown beyond",
                 RadPerSecToDegPerHour(dc.has_value() ? dc->bound
                                                      : config_.filter.drift_change_limit),
-                named)});
+                named, turn_note)});
       }
     }
   }

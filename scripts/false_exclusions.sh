@@ -131,7 +131,12 @@ if excluded:
     first = next(e for e in out["events"] if e["kind"] in ("WORKING_PAIR_FAULT", "RESERVE_PAIR_FAULT"))
     line += f"; excluded {excluded} at {first['time']}: {first['message'][:240]}"
 if drift_changed:
+    # The alert says when its onset is at a change of the gyro's turn rate that a reading error
+    # turning with the gyro (an unconfigured misalignment, a scale error) explains as well.
+    at_turn = [e for e in drift_changed if "change of the gyro's turn rate" in e["message"]]
     line += f"; DRIFT_CHANGED x{len(drift_changed)}"
+    if at_turn:
+        line += f" ({len(at_turn)} at a turn-rate change)"
 print(line)
 PY
   flock "$work/lock" cat "$dir/line"

@@ -226,6 +226,67 @@ TEST(ReadingFaultMonitor, ADriftChangeIsMeasuredAndJudgedAgainstTheLimit) {
   }
 }
 
+TEST(ReadingFaultMonitor, ARateChangeWhereTheTurnStopsMayBeASlowReadingError) {
+  // The reading turns 6 deg a step (0.1 deg/s, the paper's calibration profile) until step 300
+  // and then holds. A case misalignment of 1 arcmin moves the rebuild by 1 arcmin per radian of
+  // turn: a rate error of 0.105 deg/h while it turns, none after, so the rate "changes" by 0.105
+  // deg/h at the stop. A slow reading error of up to 2 arcmin (kSlowReadingErrorRad) gives up to
+  // 0.21 deg/h there: the change may be one. A drift step of 0.6 deg/h at the same stop, or of
+  // 0.2 deg/h while the turn goes on unchanged, is larger than such an error can give there.
+  const double turn_step = 6.0 * kRadPerDeg;
+  const double stop = 300 * kStep;
+  auto turn_at = [=](double t) { return t <= stop ? turn_step : 0.0; };
+  const double misalignment_rad = 60.0 * kRadPerArcsec;
+  struct Case {
+    const char* name;
+    Truth run;
+    bool may_be;
+  };
+  std::vector<Case> cases;
+  {
+    Truth run;
+    run.turn_at = turn_at;
+    run.offset = [=](double t) {
+      return Vector2d(misalignment_rad * turn_step * std::min(t, stop) / kStep, 0.0);
+    };
+    cases.push_back({"1 arcmin misalignment, the turn stops", run, true});
+  }
+  {
+    Truth run;
+    run.turn_at = turn_at;
+    run.rate = [=](double t) { return t < stop ? DegH(0.0, 0.0) : DegH(0.0, 0.6); };
+    cases.push_back({"drift step 0.6 deg/h where the turn stops", run, false});
+  }
+  {
+    Truth run;
+    run.turn = turn_step;
+    run.rate = [=](double t) { return t < stop ? DegH(0.0, 0.0) : DegH(0.0, 0.2); };
+    cases.push_back({"drift step 0.2 deg/h, the turn unchanged", run, false});
+  }
+  for (const Case& c : cases) {
+    for (unsigned seed = 1; seed <= 5; ++seed) {
+      const Outcome o = Simulate(c.run, 312, seed);
+      ASSERT_TRUE(o.last_change.has_value()) << c.name;
+      const auto& d = *o.last_change;
+      EXPECT_EQ(d.may_be_slow_reading_error, c.may_be)
+          << c.name << ", seed " << seed << ": change " << RadPerSecToDegPerHour(d.magnitude)
+          << " deg/h, a slow reading error gives up to "
+          << RadPerSecToDegPerHour(d.slow_reading_change) << " deg/h";
+      if (c.run.turn_at) {
+        // The onset is estimated within a few steps of the stop (a change of 0.1 deg/h is a few
+        // arcsec a step against 5 arcsec of noise): mostly turning before it, mostly at rest
+        // after it.
+        EXPECT_GT(RadToDeg(d.turn_rate_before), 0.06) << c.name << ", seed " << seed;
+        EXPECT_LE(RadToDeg(d.turn_rate_before), 0.1 + 1e-12) << c.name << ", seed " << seed;
+        EXPECT_LT(RadToDeg(d.turn_rate_after), 0.04) << c.name << ", seed " << seed;
+      } else {
+        EXPECT_NEAR(RadToDeg(d.turn_rate_after), 0.1, 1e-9) << c.name << ", seed " << seed;
+        EXPECT_LT(RadPerSecToDegPerHour(d.slow_reading_change), 1e-9) << c.name << ", seed " << seed;
+      }
+    }
+  }
+}
+
 TEST(ReadingFaultMonitor, AVerdictTwoGyrosShareOnTheStarTrackerIsNobodys) {
   ReadingFaultMonitor monitor;
   Eigen::Matrix<double, 3, 2> T = Eigen::Matrix<double, 3, 2>::Zero();
