@@ -15,7 +15,7 @@ namespace esg::estimator {
 
 namespace {
 
-constexpr std::array<std::pair<BasisKind, std::string_view>, 7> kKindNames = {{
+constexpr std::array<std::pair<BasisKind, std::string_view>, 8> kKindNames = {{
     {BasisKind::kSpinAxisHarmonic, "spin_axis_harmonic"},
     {BasisKind::kBodyRate, "body_rate"},
     {BasisKind::kBodyRateProduct, "body_rate_product"},
@@ -23,6 +23,7 @@ constexpr std::array<std::pair<BasisKind, std::string_view>, 7> kKindNames = {{
     {BasisKind::kRamp, "ramp"},
     {BasisKind::kRampHarmonic, "ramp_harmonic"},
     {BasisKind::kSuspensionVoltage, "suspension_voltage"},
+    {BasisKind::kExponentialDecay, "exponential_decay"},
 }};
 
 bool InAxisRange(int i) { return i >= 1 && i <= 3; }
@@ -123,6 +124,16 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
     case BasisKind::kRamp:
       RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
       break;
+    case BasisKind::kExponentialDecay:
+      if (!(t.time_constant >= kMinDecayTimeConstantS &&
+            t.time_constant <= kMaxDecayTimeConstantS)) {
+        return bad("timeConstantS",
+                   absl::StrFormat("%g s is outside [%g, %g] s (a minute to a year)",
+                                   t.time_constant, kMinDecayTimeConstantS,
+                                   kMaxDecayTimeConstantS));
+      }
+      RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
+      break;
   }
   if (t.kind == BasisKind::kRampHarmonic) RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
   return absl::OkStatus();
@@ -152,6 +163,10 @@ double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
     }
     case BasisKind::kSuspensionVoltage:
       return in.u_k_v.has_value() ? (*in.u_k_v)(t.index[0] - 1) : 0.0;
+    case BasisKind::kExponentialDecay: {
+      const double since_s = absl::ToDoubleSeconds(in.time - t.epoch);
+      return since_s < 0.0 ? 0.0 : std::exp(-since_s / t.time_constant);
+    }
   }
   return 0.0;
 }
@@ -194,6 +209,9 @@ std::string BasisTermLabel(const BasisTerm& t) {
     case BasisKind::kSuspensionVoltage:
       s = absl::StrCat("voltage[", t.index[0], "]");
       break;
+    case BasisKind::kExponentialDecay:
+      s = absl::StrFormat("exp(-t/%.3gh)", t.time_constant / kSecondsPerHour);
+      break;
   }
   return absl::StrCat(s, " -> ", std::string(1, AxisLetter(t.axis)));
 }
@@ -211,6 +229,7 @@ std::string_view BasisScalarJsonUnit(BasisKind kind) {
       return "V";
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
+    case BasisKind::kExponentialDecay:
       return "1";
   }
   return "1";
@@ -231,6 +250,7 @@ double BasisValueToJson(BasisKind kind) {
     case BasisKind::kSuspensionVoltage:
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
+    case BasisKind::kExponentialDecay:
       return drift;
   }
   return drift;
@@ -248,6 +268,7 @@ double BasisReferenceSize(BasisKind kind) {
     case BasisKind::kRampHarmonic:
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
+    case BasisKind::kExponentialDecay:
       return 1.0;
   }
   return 1.0;

@@ -18,6 +18,10 @@
 //   ramp                    t - epoch                                     s
 //   ramp_harmonic           (t - epoch) h_k[i]^2 (a C2-like term growing)   s
 //   suspension_voltage      dU_k[i], the suspension offset voltage        V
+//   exponential_decay       exp(-(t - epoch) / tau) from the epoch on,    1
+//                           0 before it (a transient switched on at the epoch
+//                           that decays with time constant tau: a warm-up, epoch
+//                           at the recording's start; docs/formats.md "BasisTerm")
 //
 // A configuration holds terms per gyro (GyroConfig::basis_terms); a term with sigma > 0 is a
 // filter state (calibrated), otherwise held at its value.
@@ -44,6 +48,7 @@ enum class BasisKind {
   kRamp,
   kRampHarmonic,
   kSuspensionVoltage,
+  kExponentialDecay,
 };
 
 // "spin_axis_harmonic", ... (the names of the table above; the JSON's `kind`).
@@ -56,6 +61,10 @@ inline constexpr int kMaxOrbitalHarmonic = 4;
 // the paper's 8 Hz) to a year (the sun's apparent motion, the slowest periodic cause of a drift).
 inline constexpr double kMinOrbitalPeriodS = 60.0;
 inline constexpr double kMaxOrbitalPeriodS = 366.0 * 86400.0;
+// An exponential decay's time constant [s]: a minute (a few star-tracker samples see it) to a
+// year (beyond it the transient is a constant drift over any recording).
+inline constexpr double kMinDecayTimeConstantS = 60.0;
+inline constexpr double kMaxDecayTimeConstantS = 366.0 * 86400.0;
 
 struct BasisTerm {
   BasisKind kind = BasisKind::kSpinAxisHarmonic;
@@ -67,7 +76,9 @@ struct BasisTerm {
   int harmonic = 1;    // kOrbitalHarmonic: n, 1..kMaxOrbitalHarmonic
   bool sine = false;   // kOrbitalHarmonic: sin (true) or cos (false)
   double period = 0;   // kOrbitalHarmonic: [s], > 0
-  absl::Time epoch = absl::UnixEpoch();  // kOrbitalHarmonic: phase zero; kRamp*: s = 0
+  double time_constant = 0;  // kExponentialDecay: tau [s], > 0
+  // kOrbitalHarmonic: phase zero; kRamp*: s = 0; kExponentialDecay: s = 1, 0 before it.
+  absl::Time epoch = absl::UnixEpoch();
   double value = 0.0;  // coefficient [rad/s per unit of s]
   double sigma = 0.0;  // prior 1-sigma [rad/s per unit of s]; > 0: estimated
 };
@@ -95,7 +106,8 @@ Eigen::Vector3d BasisDrift_k(const BasisTerm& term, const BasisInputs& in);
 Eigen::Vector3d BasisDriftSum_k(const std::vector<BasisTerm>& terms, const BasisInputs& in);
 
 // Short identifier, stable across runs: "h1^2*h3 -> x", "rate[2] -> z", "orbit cos 1 -> y",
-// "ramp -> x", "ramp*h2^2 -> x", "voltage[1] -> z", "rate[1]*rate[3] -> y".
+// "ramp -> x", "ramp*h2^2 -> x", "voltage[1] -> z", "rate[1]*rate[3] -> y",
+// "exp(-t/4.1h) -> y".
 std::string BasisTermLabel(const BasisTerm& term);
 
 // Unit of s in the JSON (deg/s for rates, h for ramps) and the factor from SI to it: the

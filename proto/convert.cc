@@ -309,6 +309,7 @@ absl::StatusOr<estimator::BasisTerm> BasisTermFromProto(const esg::v1::BasisTerm
   t.harmonic = proto.harmonic() != 0 ? proto.harmonic() : 1;
   t.sine = proto.sine();
   t.period = proto.period_s();
+  t.time_constant = proto.time_constant_s();
   if (proto.has_epoch()) {
     absl::StatusOr<absl::Time> epoch = TimeFromProto(proto.epoch());
     if (!epoch.ok()) return FieldError(absl::StrCat(prefix, ".epoch"), epoch.status().message());
@@ -333,6 +334,7 @@ esg::v1::BasisTerm BasisTermToProto(const estimator::BasisTerm& t) {
   proto.set_harmonic(t.harmonic);
   proto.set_sine(t.sine);
   proto.set_period_s(t.period);
+  if (t.kind == estimator::BasisKind::kExponentialDecay) proto.set_time_constant_s(t.time_constant);
   *proto.mutable_epoch() = TimeToProto(t.epoch);
   const double to_json = estimator::BasisValueToJson(t.kind);
   proto.set_value_deg_h(Tidy(t.value * to_json));

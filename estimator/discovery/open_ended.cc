@@ -784,6 +784,13 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
             "%.4f deg/h per V",
             "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
         break;
+      case BasisKind::kExponentialDecay:
+        text = absl::StrFormat(
+            "case-fixed drift along %s (case axes), %.4f deg/h at its onset, decaying with tau = "
+            "%.2f h",
+            Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json,
+            t0.time_constant / kSecondsPerHour);
+        break;
     }
   }
   return absl::StrFormat("gyro %d: %s%s", group.gyro, text, DescribeAlternatives(group));

@@ -163,6 +163,62 @@ TEST(BasisTermsConfig, ErrorsNameTheGyroTheTermAndTheField) {
   EXPECT_THAT(ValidateConfig(c), IsOk());
 }
 
+// An exponential decay's time constant: a minute to a year, finite; its epoch where frame times
+// may be (docs/formats.md "BasisTerm"); the field is named in the error.
+TEST(BasisTermsConfig, ExponentialDecayNeedsATimeConstantInRange) {
+  SpacecraftConfig c = testing::PaperConfig();
+  BasisTerm decay;
+  decay.kind = BasisKind::kExponentialDecay;
+  decay.axis = 3;
+  decay.time_constant = 4.0 * 3600.0;
+  decay.epoch = absl::FromUnixSeconds(1551398400);
+  decay.value = DegPerHourToRadPerSec(0.1);
+  decay.sigma = DegPerHourToRadPerSec(0.2);
+  c.gyros[1].basis_terms = {decay};
+  EXPECT_THAT(ValidateConfig(c), IsOk());
+  for (double tau_s : {0.0, -3600.0, 59.0, 367.0 * 86400.0,
+                       std::numeric_limits<double>::quiet_NaN(),
+                       std::numeric_limits<double>::infinity()}) {
+    BasisTerm bad = decay;
+    bad.time_constant = tau_s;
+    c.gyros[1].basis_terms = {bad};
+    EXPECT_THAT(ValidateConfig(c),
+                StatusIs(absl::StatusCode::kInvalidArgument,
+                         StartsWith("gyros[1].basisTerms[0].timeConstantS: ")))
+        << tau_s;
+  }
+  BasisTerm early = decay;
+  early.epoch = absl::UnixEpoch() - absl::Hours(1);
+  c.gyros[1].basis_terms = {early};
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[1].basisTerms[0].epoch: ")));
+}
+
+// s = exp(-(t - epoch) / tau) from the epoch on, 0 before it, along e_m (basis_term.h).
+TEST(BasisTermsConfig, ExponentialDecayRegressorStartsAtItsEpochAndDecays) {
+  BasisTerm decay;
+  decay.kind = BasisKind::kExponentialDecay;
+  decay.axis = 2;
+  decay.time_constant = 4.0 * 3600.0;
+  decay.epoch = absl::FromUnixSeconds(1551398400);
+  decay.value = DegPerHourToRadPerSec(0.1);
+  BasisInputs in;
+  in.time = decay.epoch - absl::Seconds(1);
+  EXPECT_EQ(BasisScalar(decay, in), 0.0);
+  in.time = decay.epoch;
+  EXPECT_EQ(BasisScalar(decay, in), 1.0);
+  in.time = decay.epoch + absl::Hours(4);
+  EXPECT_NEAR(BasisScalar(decay, in), std::exp(-1.0), 1e-15);
+  in.time = decay.epoch + absl::Hours(8);
+  const Eigen::Vector3d dw_k = BasisDrift_k(decay, in);
+  EXPECT_NEAR(dw_k.y(), DegPerHourToRadPerSec(0.1) * std::exp(-2.0), 1e-20);
+  EXPECT_EQ(dw_k.x(), 0.0);
+  EXPECT_EQ(dw_k.z(), 0.0);
+  EXPECT_EQ(BasisTermLabel(decay), "exp(-t/4h) -> y");
+  EXPECT_EQ(BasisKindName(BasisKind::kExponentialDecay), "exponential_decay");
+  EXPECT_THAT(ParseBasisKind("exponential_decay"), IsOk());
+}
+
 TEST(BasisTermsConfig, ReadoutDistortionMustBeSymmetricAndSmall) {
   SpacecraftConfig c = testing::PaperConfig();
   Eigen::Matrix3d D;

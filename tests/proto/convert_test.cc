@@ -188,7 +188,11 @@ estimator::SpacecraftConfig RichConfig() {
   BasisTerm voltage = term(BasisKind::kSuspensionVoltage, 2);
   voltage.index = {1, 1};
   voltage.sigma = 1e-7;
-  c.gyros[0].basis_terms = {harmonic, rate, product, orbit, ramp, ramp_h, voltage};
+  BasisTerm decay = term(BasisKind::kExponentialDecay, 1);
+  decay.time_constant = 14760.5;
+  decay.epoch = absl::FromUnixSeconds(1551398400);
+  decay.sigma = 3e-7;
+  c.gyros[0].basis_terms = {harmonic, rate, product, orbit, ramp, ramp_h, voltage, decay};
   Eigen::Matrix3d D;
   D << 1e-3, -2e-4, 3e-5, -2e-4, -5e-4, 7e-4, 3e-5, 7e-4, 2.5e-3;
   c.gyros[1].readout_distortion = D;
@@ -233,6 +237,7 @@ void ExpectConfigsEqual(const estimator::SpacecraftConfig& a, const estimator::S
       EXPECT_EQ(x.harmonic, y.harmonic) << term;
       EXPECT_EQ(x.sine, y.sine) << term;
       EXPECT_EQ(x.period, y.period) << term;
+      EXPECT_EQ(x.time_constant, y.time_constant) << term;
       EXPECT_EQ(x.epoch, y.epoch) << term;
       ExpectNear(x.value, y.value, term + " value");
       ExpectNear(x.sigma, y.sigma, term + " sigma");
@@ -338,6 +343,40 @@ TEST(ConfigJson, BasisTermsAndReadoutDistortionRoundTripInJsonUnits) {
   EXPECT_THAT(written, HasSubstr("\"index\": [1]"));
   EXPECT_THAT(written, HasSubstr("\"epoch\": \"2019-03-01T06:00:00Z\""));
   EXPECT_THAT(written, HasSubstr("\"readoutDistortion\": [0.001, 0.0002, 0, 0.0002, -0.001, 0, 0, 0, 0]"));
+  absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
+  ASSERT_THAT(back, IsOk()) << written;
+  ExpectConfigsEqual(*c, *back);
+  EXPECT_EQ(ConfigToJson(*back), written);
+  // Only an exponential decay carries its time constant (docs/formats.md "BasisTerm"): the JSON
+  // of the other kinds is as before.
+  EXPECT_THAT(written, Not(HasSubstr("timeConstantS")));
+}
+
+// An exponential decay (a warm-up from an onset, docs/formats.md "BasisTerm"): its time constant
+// in seconds, its onset the epoch, its coefficient in deg/h (s has unit 1); written back to the
+// same JSON.
+TEST(ConfigJson, ExponentialDecayRoundTripsWithItsTimeConstant) {
+  const std::string json = DesignJsonWith(
+      "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1], \"c2DegH\": [0.1,0.1,0.1]}},\n"
+      "    {\"id\": 2,",
+      "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1], \"c2DegH\": [0.1,0.1,0.1]},\n"
+      "     \"basisTerms\": [\n"
+      "       {\"kind\": \"exponential_decay\", \"axis\": 2, \"timeConstantS\": 14400,"
+      " \"epoch\": \"2019-03-01T06:00:00Z\", \"valueDegH\": 0.1, \"sigmaDegH\": 0.2}]},\n"
+      "    {\"id\": 2,");
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(json);
+  ASSERT_THAT(c, IsOk());
+  ASSERT_EQ(c->gyros[0].basis_terms.size(), 1u);
+  const estimator::BasisTerm& t = c->gyros[0].basis_terms[0];
+  EXPECT_EQ(t.kind, estimator::BasisKind::kExponentialDecay);
+  EXPECT_EQ(t.axis, 2);
+  EXPECT_EQ(t.time_constant, 14400.0);
+  EXPECT_EQ(t.epoch, absl::FromUnixSeconds(1551398400 + 6 * 3600));
+  EXPECT_NEAR(t.value, DegHToRadS(0.1), 1e-20);
+  EXPECT_NEAR(t.sigma, DegHToRadS(0.2), 1e-20);
+  const std::string written = ConfigToJson(*c);
+  EXPECT_THAT(written, HasSubstr("\"kind\": \"exponential_decay\""));
+  EXPECT_THAT(written, HasSubstr("\"timeConstantS\": 14400"));
   absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
   ASSERT_THAT(back, IsOk()) << written;
   ExpectConfigsEqual(*c, *back);
@@ -451,6 +490,10 @@ INSTANTIATE_TEST_SUITE_P(
                       "\"spin_axis_harmonic\", \"axis\": 1, \"valueDegH\": 12}],",
                       "gyros[2].basisTerms[0].valueDegH: 12 deg/h is 12 deg/h at a unit "
                       "regressor, outside [-10, 10]"},
+        BadConfigCase{"ExponentialDecayWithoutTimeConstant", "\"model\":      {\"k0DegH\": 0.25},",
+                      "\"model\": {\"k0DegH\": 0.25}, \"basisTerms\": [{\"kind\": "
+                      "\"exponential_decay\", \"axis\": 1, \"valueDegH\": 0.1}],",
+                      "gyros[2].basisTerms[0].timeConstantS: 0 s is outside [60, 3.16224e+07] s"},
         BadConfigCase{"ReadoutDistortionWrongLength", "\"model\":      {\"k0DegH\": 0.25},",
                       "\"model\": {\"k0DegH\": 0.25}, \"readoutDistortion\": [0, 0, 0],",
                       "gyros[2].readoutDistortion: expected 9 values (D row-major) or none, got 3"},
