@@ -9,7 +9,10 @@
 
 namespace esg::estimator {
 
-absl::StatusOr<Eigen::Vector3d> SunDirection_in(absl::Time utc) {
+namespace {
+
+// The Earth's heliocentric position in J2000 axes [au] (eraEpv00) at the UTC instant utc.
+absl::StatusOr<Eigen::Vector3d> EarthFromSun_in_au(absl::Time utc) {
   if (utc == absl::InfinitePast() || utc == absl::InfiniteFuture()) {
     return absl::InvalidArgumentError(
         absl::StrCat("sun direction: time ", FormatUtc(utc), " is not a finite instant"));
@@ -37,7 +40,21 @@ absl::StatusOr<Eigen::Vector3d> SunDirection_in(absl::Time utc) {
   double pvh[2][3], pvb[2][3];
   eraEpv00(tt1, tt2, pvh, pvb);
   const Eigen::Vector3d earth_from_sun_au(pvh[0][0], pvh[0][1], pvh[0][2]);
-  return Eigen::Vector3d(-earth_from_sun_au.normalized());
+  return earth_from_sun_au;
+}
+
+}  // namespace
+
+absl::StatusOr<Eigen::Vector3d> SunDirection_in(absl::Time utc) {
+  absl::StatusOr<Eigen::Vector3d> earth_from_sun_au = EarthFromSun_in_au(utc);
+  if (!earth_from_sun_au.ok()) return earth_from_sun_au.status();
+  return Eigen::Vector3d(-earth_from_sun_au->normalized());
+}
+
+absl::StatusOr<Eigen::Vector3d> SunPosition_in_km(absl::Time utc) {
+  absl::StatusOr<Eigen::Vector3d> earth_from_sun_au = EarthFromSun_in_au(utc);
+  if (!earth_from_sun_au.ok()) return earth_from_sun_au.status();
+  return Eigen::Vector3d(-*earth_from_sun_au * kAstronomicalUnitKm);
 }
 
 }  // namespace esg::estimator

@@ -28,6 +28,15 @@ inline constexpr int kSunLastYear = 2100;
 // kSunLastYear.
 absl::StatusOr<Eigen::Vector3d> SunDirection_in(absl::Time utc);
 
+// The astronomical unit [km] (IAU 2012 B2, exact).
+inline constexpr double kAstronomicalUnitKm = 149597870.7;
+
+// The sun's position from the Earth's centre in inertial (J2000) axes at the UTC instant utc
+// [km]: the opposite of eraEpv00's heliocentric Earth, geometric (no light time: the sun moves
+// 0.0057 deg in the 8.3 min light takes, which does not change an eclipse's geometry by more than
+// a second). The same errors as SunDirection_in.
+absl::StatusOr<Eigen::Vector3d> SunPosition_in_km(absl::Time utc);
+
 }  // namespace esg::estimator
 
 #endif  // ESG_ESTIMATOR_SUN_DIRECTION_H_

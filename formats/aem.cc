@@ -15,29 +15,11 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/time/civil_time.h"
-#include "erfa.h"
 
 namespace esg::storage {
 namespace {
 
 constexpr double kUnitTolerance = 1e-6;
-
-absl::Status LineError(int line, absl::string_view what, absl::string_view reason) {
-  return absl::InvalidArgumentError(absl::StrCat("line ", line, ": ", what, ": ", reason));
-}
-
-// A non-negative decimal of 1 to 9 digits (so it fits an int; longer runs are refused before
-// they could overflow).
-bool ParseDigits(absl::string_view s, int* out) {
-  if (s.empty() || s.size() > 9) return false;
-  int v = 0;
-  for (char c : s) {
-    if (c < '0' || c > '9') return false;
-    v = v * 10 + (c - '0');
-  }
-  *out = v;
-  return true;
-}
 
 const std::set<std::string>& HeaderKeywords() {
   static const auto* k = new std::set<std::string>{"CCSDS_AEM_VERS", "CREATION_DATE", "ORIGINATOR",
@@ -55,128 +37,13 @@ const std::set<std::string>& MetadataKeywords() {
   return *k;
 }
 
-const std::set<std::string>& TimeSystems() {
-  static const auto* k = new std::set<std::string>{
-      "GMST", "GPS", "MET", "MRT", "SCLK", "TAI", "TCB", "TDB", "TCG", "TT", "UT1", "UTC"};
-  return *k;
-}
-
 bool IsSpacecraftBodyFrame(absl::string_view frame) {
   if (!absl::StartsWith(frame, "SC_BODY_")) return false;
   int n = 0;
-  return ParseDigits(frame.substr(8), &n);
-}
-
-// A TAI calendar reading (parsed by ParseCcsdsTime as if it were UTC: `label`) as the UTC
-// instant, with the leap seconds of ERFA's table (eraTaiutc; liberfa's table ends with the leap
-// second of 2016-12-31, and ERFA calls years more than 5 after its release "dubious": they are
-// converted with the last TAI-UTC, 37 s). An instant inside an inserted leap second comes out as
-// the UTC text 23:59:60.x would (ParseCcsdsTime), i.e. x after the next midnight: absl::Time has
-// no leap seconds (docs/formats.md, "Time"). Whole seconds go through ERFA, the fraction is added
-// exactly, so microseconds survive.
-absl::StatusOr<absl::Time> TaiToUtc(absl::Time label) {
-  const absl::TimeZone utc = absl::UTCTimeZone();
-  const absl::CivilSecond tai = absl::ToCivilSecond(label, utc);
-  const absl::Duration fraction = label - absl::FromCivil(tai, utc);
-  if (tai.year() < 1960) return absl::InvalidArgumentError("TAI before 1960 has no UTC");
-  double tai1 = 0.0, tai2 = 0.0;
-  if (eraDtf2d("TAI", static_cast<int>(tai.year()), tai.month(), tai.day(), tai.hour(),
-               tai.minute(), tai.second(), &tai1, &tai2) < 0) {
-    return absl::InvalidArgumentError("not a TAI date and time");
-  }
-  double utc1 = 0.0, utc2 = 0.0;
-  if (eraTaiutc(tai1, tai2, &utc1, &utc2) < 0) {
-    return absl::InvalidArgumentError("TAI outside ERFA's TAI-UTC table");
-  }
-  int year = 0, month = 0, day = 0;
-  int hmsf[4] = {0, 0, 0, 0};
-  if (eraD2dtf("UTC", 9, utc1, utc2, &year, &month, &day, hmsf) < 0) {
-    return absl::InvalidArgumentError("TAI outside ERFA's TAI-UTC table");
-  }
-  return absl::FromCivil(absl::CivilSecond(year, month, day, hmsf[0], hmsf[1], 0), utc) +
-         absl::Seconds(hmsf[2]) + absl::Nanoseconds(hmsf[3]) + fraction;
-}
-
-// An epoch of a segment whose TIME_SYSTEM is `time_system` (UTC or TAI; the others are refused
-// before any epoch is read) as UTC.
-absl::StatusOr<absl::Time> ParseEpoch(absl::string_view text, absl::string_view time_system) {
-  absl::StatusOr<absl::Time> t = ParseCcsdsTime(text);
-  if (!t.ok() || time_system != "TAI") return t;
-  // Second 60 exists only in UTC: ParseCcsdsTime reads it as the next minute's second 0.
-  const absl::string_view s = absl::StripAsciiWhitespace(text);
-  const size_t colon = s.rfind(':');
-  if (colon != absl::string_view::npos && absl::StartsWith(s.substr(colon + 1), "60")) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("'", text, "' has second 60, which only UTC has (TIME_SYSTEM = TAI)"));
-  }
-  absl::StatusOr<absl::Time> utc = TaiToUtc(*t);
-  if (!utc.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("'", text, "': ", utc.status().message()));
-  }
-  return utc;
+  return ParseKvnDigits(frame.substr(8), &n);
 }
 
 }  // namespace
-
-absl::StatusOr<absl::Time> ParseCcsdsTime(absl::string_view text) {
-  absl::string_view s = absl::StripAsciiWhitespace(text);
-  if (!s.empty() && s.back() == 'Z') s.remove_suffix(1);
-  const size_t t_pos = s.find('T');
-  auto bad = [&](absl::string_view why) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("'", text, "' is not a CCSDS ASCII time (", why, ")"));
-  };
-  if (t_pos == absl::string_view::npos) return bad("no 'T'");
-  const absl::string_view date = s.substr(0, t_pos);
-  const absl::string_view clock = s.substr(t_pos + 1);
-  const std::vector<absl::string_view> d = absl::StrSplit(date, '-');
-  int year = 0, month = 0, day = 0, doy = 0;
-  absl::CivilDay civil_day;
-  if (d.size() == 3 && d[0].size() == 4 && d[1].size() == 2 && d[2].size() == 2 &&
-      ParseDigits(d[0], &year) && ParseDigits(d[1], &month) && ParseDigits(d[2], &day)) {
-    civil_day = absl::CivilDay(year, month, day);
-    if (civil_day.month() != month || civil_day.day() != day || month < 1 || day < 1) {
-      return bad("invalid date");
-    }
-  } else if (d.size() == 2 && d[0].size() == 4 && d[1].size() == 3 && ParseDigits(d[0], &year) &&
-             ParseDigits(d[1], &doy)) {
-    civil_day = absl::CivilDay(year, 1, 1) + (doy - 1);
-    if (doy < 1 || civil_day.year() != year) return bad("invalid day of year");
-  } else {
-    return bad("date is neither YYYY-MM-DD nor YYYY-DDD");
-  }
-  const std::vector<absl::string_view> c = absl::StrSplit(clock, ':');
-  int hour = 0, minute = 0;
-  if (c.size() != 3 || c[0].size() != 2 || c[1].size() != 2 || !ParseDigits(c[0], &hour) ||
-      !ParseDigits(c[1], &minute) || hour > 23 || minute > 59) {
-    return bad("time of day is not hh:mm:ss");
-  }
-  absl::string_view sec_text = c[2];
-  const size_t dot = sec_text.find('.');
-  int sec = 0;
-  if (!ParseDigits(sec_text.substr(0, dot), &sec) || sec_text.substr(0, dot).size() != 2 ||
-      sec > 60) {
-    return bad("seconds");
-  }
-  absl::Duration fraction = absl::ZeroDuration();
-  if (dot != absl::string_view::npos) {
-    const absl::string_view frac = sec_text.substr(dot + 1);
-    if (frac.empty() || frac.size() > 18) return bad("fraction of a second");
-    int64_t digits = 0;
-    for (char ch : frac) {
-      if (ch < '0' || ch > '9') return bad("fraction of a second");
-      digits = digits * 10 + (ch - '0');
-    }
-    fraction = absl::Nanoseconds(static_cast<double>(digits) * std::pow(10.0, 9.0 - frac.size()));
-  }
-  const absl::CivilSecond cs(civil_day.year(), civil_day.month(), civil_day.day(), hour, minute,
-                             0);
-  return absl::FromCivil(cs, absl::UTCTimeZone()) + absl::Seconds(sec) + fraction;
-}
-
-std::string FormatCcsdsTime(absl::Time time) {
-  return absl::FormatTime("%Y-%m-%dT%H:%M:%E6S", time, absl::UTCTimeZone());
-}
 
 absl::StatusOr<std::string> WriteAem(const AemHeader& header,
                                      const std::vector<AemSample>& samples) {
@@ -291,62 +158,53 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
     const bool v1 = file.version == "1.0";
     if (v1) required.push_back("ATTITUDE_DIR");
     for (const std::string& k : required) {
-      if (!m.count(k)) return LineError(line, k, "required metadata keyword missing");
+      if (!m.count(k)) return KvnLineError(line, k, "required metadata keyword missing");
     }
     if (v1) {
       const std::string& dir = m.at("ATTITUDE_DIR");
-      if (dir != "A2B" && dir != "B2A") return LineError(line, "ATTITUDE_DIR", "must be A2B or B2A");
+      if (dir != "A2B" && dir != "B2A") return KvnLineError(line, "ATTITUDE_DIR", "must be A2B or B2A");
     } else {
       for (const char* k : {"ATTITUDE_DIR", "QUATERNION_TYPE"}) {
-        if (m.count(k)) return LineError(line, k, "not allowed in ADM version 2.0");
+        if (m.count(k)) return KvnLineError(line, k, "not allowed in ADM version 2.0");
       }
     }
     const bool a_body = IsSpacecraftBodyFrame(m.at("REF_FRAME_A"));
     const bool b_body = IsSpacecraftBodyFrame(m.at("REF_FRAME_B"));
     if (a_body == b_body) {
-      return LineError(line, "REF_FRAME_A/REF_FRAME_B",
+      return KvnLineError(line, "REF_FRAME_A/REF_FRAME_B",
                        absl::StrCat("exactly one must be a spacecraft body frame (SC_BODY_n), got ",
                                     m.at("REF_FRAME_A"), " and ", m.at("REF_FRAME_B")));
     }
     const std::string& time_system = m.at("TIME_SYSTEM");
-    if (!TimeSystems().count(time_system)) {
-      return LineError(segment.metadata_lines.at("TIME_SYSTEM"), "TIME_SYSTEM",
-                       absl::StrCat("unknown value ", time_system));
-    }
-    if (time_system != "UTC" && time_system != "TAI") {
-      // Every instant of the project is UTC; a spacecraft clock (SCLK) or mission time (MET, MRT)
-      // needs a correlation the file does not carry, and the other scales are not converted.
-      return LineError(segment.metadata_lines.at("TIME_SYSTEM"), "TIME_SYSTEM",
-                       absl::StrCat(time_system,
-                                    " is not read: the epochs must be UTC, or TAI (converted to "
-                                    "UTC with the leap seconds); convert the file to UTC first"));
+    if (absl::Status s = CheckKvnTimeSystem(time_system); !s.ok()) {
+      return KvnLineError(segment.metadata_lines.at("TIME_SYSTEM"), "TIME_SYSTEM", s.message());
     }
     if (m.at("ATTITUDE_TYPE") != "QUATERNION") {
-      return LineError(line, "ATTITUDE_TYPE",
+      return KvnLineError(line, "ATTITUDE_TYPE",
                        absl::StrCat(m.at("ATTITUDE_TYPE"), " is not supported by this reader"));
     }
     if (v1) {
       auto it = m.find("QUATERNION_TYPE");
       if (it == m.end()) {
-        return LineError(line, "QUATERNION_TYPE", "required for quaternions in version 1.0");
+        return KvnLineError(line, "QUATERNION_TYPE", "required for quaternions in version 1.0");
       }
       if (it->second != "FIRST" && it->second != "LAST") {
-        return LineError(line, "QUATERNION_TYPE", "must be FIRST or LAST");
+        return KvnLineError(line, "QUATERNION_TYPE", "must be FIRST or LAST");
       }
     }
-    auto start = ParseEpoch(m.at("START_TIME"), time_system);
-    if (!start.ok()) return LineError(line, "START_TIME", start.status().message());
-    auto stop = ParseEpoch(m.at("STOP_TIME"), time_system);
-    if (!stop.ok()) return LineError(line, "STOP_TIME", stop.status().message());
-    if (*stop < *start) return LineError(line, "STOP_TIME", "before START_TIME");
+    auto start = ParseKvnEpoch(m.at("START_TIME"), time_system);
+    if (!start.ok()) return KvnLineError(line, "START_TIME", start.status().message());
+    auto stop = ParseKvnEpoch(m.at("STOP_TIME"), time_system);
+    if (!stop.ok()) return KvnLineError(line, "STOP_TIME", stop.status().message());
+    if (*stop < *start) return KvnLineError(line, "STOP_TIME", "before START_TIME");
     segment.start_time = *start;
     segment.stop_time = *stop;
     for (const char* k : {"USEABLE_START_TIME", "USEABLE_STOP_TIME"}) {
       auto it = m.find(k);
       if (it == m.end()) continue;
-      auto t = ParseEpoch(it->second, time_system);
-      if (!t.ok()) return LineError(line, k, t.status().message());
-      if (*t < *start || *t > *stop) return LineError(line, k, "outside START_TIME..STOP_TIME");
+      auto t = ParseKvnEpoch(it->second, time_system);
+      if (!t.ok()) return KvnLineError(line, k, t.status().message());
+      if (*t < *start || *t > *stop) return KvnLineError(line, k, "outside START_TIME..STOP_TIME");
     }
     return absl::OkStatus();
   };
@@ -357,7 +215,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
     if (line.empty()) continue;
     if (absl::StartsWith(line, "COMMENT")) {
       if (where == Where::kData && !segment.samples.empty()) {
-        return LineError(line_number, "COMMENT", "not allowed between data lines");
+        return KvnLineError(line_number, "COMMENT", "not allowed between data lines");
       }
       const absl::string_view text = absl::StripAsciiWhitespace(line.substr(7));
       if (where == Where::kMeta) segment.comments.emplace_back(text);
@@ -365,16 +223,16 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
         const std::vector<absl::string_view> f =
             absl::StrSplit(text, absl::ByAnyChar(" \t"), absl::SkipEmpty());
         if (f.size() != 5) {
-          return LineError(line_number, "SIGMA_ARCSEC",
+          return KvnLineError(line_number, "SIGMA_ARCSEC",
                            absl::StrCat("expected an epoch and 3 values, got ", f.size() - 1,
                                         " fields"));
         }
-        auto epoch = ParseEpoch(f[1], segment.metadata.at("TIME_SYSTEM"));
-        if (!epoch.ok()) return LineError(line_number, "SIGMA_ARCSEC", epoch.status().message());
+        auto epoch = ParseKvnEpoch(f[1], segment.metadata.at("TIME_SYSTEM"));
+        if (!epoch.ok()) return KvnLineError(line_number, "SIGMA_ARCSEC", epoch.status().message());
         Eigen::Vector3d sigma;
         for (int i = 0; i < 3; ++i) {
           if (!absl::SimpleAtod(f[i + 2], &sigma[i]) || !std::isfinite(sigma[i])) {
-            return LineError(line_number, "SIGMA_ARCSEC",
+            return KvnLineError(line_number, "SIGMA_ARCSEC",
                              absl::StrCat("'", f[i + 2], "' is not a number"));
           }
         }
@@ -384,7 +242,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
     }
     if (where == Where::kData) {
       if (line == "DATA_STOP") {
-        if (segment.samples.empty()) return LineError(line_number, "DATA_STOP", "no data lines");
+        if (segment.samples.empty()) return KvnLineError(line_number, "DATA_STOP", "no data lines");
         for (AemSample& s : segment.samples) {
           auto it = sigmas.find(s.epoch);
           if (it != sigmas.end()) s.sigma_arcsec = it->second;
@@ -399,24 +257,24 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
       const std::vector<absl::string_view> f =
           absl::StrSplit(line, absl::ByAnyChar(" \t,"), absl::SkipEmpty());
       if (f.size() != 5) {
-        return LineError(line_number, "data",
+        return KvnLineError(line_number, "data",
                          absl::StrCat("expected an epoch and 4 quaternion components, got ",
                                       f.size(), " fields"));
       }
-      auto epoch = ParseEpoch(f[0], segment.metadata.at("TIME_SYSTEM"));
-      if (!epoch.ok()) return LineError(line_number, "epoch", epoch.status().message());
+      auto epoch = ParseKvnEpoch(f[0], segment.metadata.at("TIME_SYSTEM"));
+      if (!epoch.ok()) return KvnLineError(line_number, "epoch", epoch.status().message());
       double v[4];
       for (int i = 0; i < 4; ++i) {
         if (!absl::SimpleAtod(f[i + 1], &v[i]) || !std::isfinite(v[i])) {
-          return LineError(line_number, "quaternion", absl::StrCat("'", f[i + 1], "' is not a number"));
+          return KvnLineError(line_number, "quaternion", absl::StrCat("'", f[i + 1], "' is not a number"));
         }
       }
       if (!segment.samples.empty() && *epoch <= segment.samples.back().epoch) {
-        return LineError(line_number, "epoch",
+        return KvnLineError(line_number, "epoch",
                          absl::StrCat(f[0], " is not after the previous epoch"));
       }
       if (*epoch < segment.start_time || *epoch > segment.stop_time) {
-        return LineError(line_number, "epoch",
+        return KvnLineError(line_number, "epoch",
                          absl::StrCat(f[0], " is outside START_TIME..STOP_TIME"));
       }
       const bool scalar_first = file.version == "1.0" &&
@@ -424,7 +282,7 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
       Eigen::Quaterniond q = scalar_first ? Eigen::Quaterniond(v[0], v[1], v[2], v[3])
                                           : Eigen::Quaterniond(v[3], v[0], v[1], v[2]);
       if (std::abs(q.norm() - 1.0) > kUnitTolerance) {
-        return LineError(line_number, "quaternion", absl::StrCat("norm ", q.norm(), " is not 1"));
+        return KvnLineError(line_number, "quaternion", absl::StrCat("norm ", q.norm(), " is not 1"));
       }
       // Rotation from frame A to frame B; q_in_b when A is inertial (B2A in version 1 swaps).
       bool a_inertial = !IsSpacecraftBodyFrame(segment.metadata.at("REF_FRAME_A"));
@@ -436,11 +294,11 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
     }
     if (line == "META_START") {
       if (where != Where::kHeader || first_keyword) {
-        return LineError(line_number, "META_START", "unexpected here");
+        return KvnLineError(line_number, "META_START", "unexpected here");
       }
       if (file.segments.empty()) {
         for (const char* k : {"CREATION_DATE", "ORIGINATOR"}) {
-          if (!file.header.count(k)) return LineError(line_number, k, "required header keyword missing");
+          if (!file.header.count(k)) return KvnLineError(line_number, k, "required header keyword missing");
         }
       }
       where = Where::kMeta;
@@ -449,62 +307,58 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text) {
       continue;
     }
     if (line == "META_STOP") {
-      if (where != Where::kMeta) return LineError(line_number, "META_STOP", "without META_START");
+      if (where != Where::kMeta) return KvnLineError(line_number, "META_STOP", "without META_START");
       if (absl::Status s = finish_metadata(line_number); !s.ok()) return s;
       where = Where::kBetween;
       continue;
     }
     if (line == "DATA_START") {
-      if (where != Where::kBetween) return LineError(line_number, "DATA_START", "not after META_STOP");
+      if (where != Where::kBetween) return KvnLineError(line_number, "DATA_START", "not after META_STOP");
       where = Where::kData;
       continue;
     }
-    // KEYWORD = value
-    const size_t eq = line.find('=');
-    if (eq == absl::string_view::npos) {
-      return LineError(line_number, "line", absl::StrCat("'", line, "' is not `KEYWORD = value`"));
-    }
-    const std::string key(absl::StripAsciiWhitespace(line.substr(0, eq)));
-    const std::string value(absl::StripAsciiWhitespace(line.substr(eq + 1)));
-    if (value.empty()) return LineError(line_number, key, "empty value");
+    absl::StatusOr<KvnKeyValue> kv = SplitKvnLine(line, line_number);
+    if (!kv.ok()) return kv.status();
+    const std::string& key = kv->key;
+    const std::string& value = kv->value;
     if (first_keyword) {
       if (key != "CCSDS_AEM_VERS") {
-        return LineError(line_number, key, "the first keyword must be CCSDS_AEM_VERS");
+        return KvnLineError(line_number, key, "the first keyword must be CCSDS_AEM_VERS");
       }
       if (value != "1.0" && value != "2.0") {
-        return LineError(line_number, key, absl::StrCat("unsupported version ", value));
+        return KvnLineError(line_number, key, absl::StrCat("unsupported version ", value));
       }
       file.version = value;
       first_keyword = false;
       seen.insert(key);
       continue;
     }
-    if (!seen.insert(key).second) return LineError(line_number, key, "repeated");
+    if (!seen.insert(key).second) return KvnLineError(line_number, key, "repeated");
     if (where == Where::kHeader) {
       if (!file.segments.empty() || !HeaderKeywords().count(key)) {
-        return LineError(line_number, key, "not a header keyword");
+        return KvnLineError(line_number, key, "not a header keyword");
       }
       if (key == "CREATION_DATE") {
         if (auto t = ParseCcsdsTime(value); !t.ok()) {
-          return LineError(line_number, key, t.status().message());
+          return KvnLineError(line_number, key, t.status().message());
         }
       }
       file.header[key] = value;
     } else if (where == Where::kMeta) {
       if (!MetadataKeywords().count(key)) {
-        return LineError(line_number, key, "not a metadata keyword");
+        return KvnLineError(line_number, key, "not a metadata keyword");
       }
       segment.metadata[key] = value;
       segment.metadata_lines[key] = line_number;
     } else {
-      return LineError(line_number, key, "unexpected between META_STOP and DATA_START");
+      return KvnLineError(line_number, key, "unexpected between META_STOP and DATA_START");
     }
   }
-  if (first_keyword) return LineError(line_number, "CCSDS_AEM_VERS", "missing");
-  if (where == Where::kMeta) return LineError(meta_start_line, "META_START", "no META_STOP");
-  if (where == Where::kBetween) return LineError(line_number, "DATA_START", "missing");
-  if (where == Where::kData) return LineError(line_number, "DATA_STOP", "missing");
-  if (file.segments.empty()) return LineError(line_number, "META_START", "no segment");
+  if (first_keyword) return KvnLineError(line_number, "CCSDS_AEM_VERS", "missing");
+  if (where == Where::kMeta) return KvnLineError(meta_start_line, "META_START", "no META_STOP");
+  if (where == Where::kBetween) return KvnLineError(line_number, "DATA_START", "missing");
+  if (where == Where::kData) return KvnLineError(line_number, "DATA_STOP", "missing");
+  if (file.segments.empty()) return KvnLineError(line_number, "META_START", "no segment");
   return file;
 }
 
@@ -517,7 +371,7 @@ absl::StatusOr<std::vector<AemSample>> ParseAemPlan(absl::string_view text,
     const std::string& name = segment.metadata.at("OBJECT_NAME");
     const std::string& id = segment.metadata.at("OBJECT_ID");
     if (name != spacecraft_id && id != spacecraft_id) {
-      return LineError(segment.metadata_lines.at("OBJECT_NAME"), "OBJECT_NAME",
+      return KvnLineError(segment.metadata_lines.at("OBJECT_NAME"), "OBJECT_NAME",
                        absl::StrCat("'", absl::CHexEscape(name), "' (OBJECT_ID '",
                                     absl::CHexEscape(id), "') is not spacecraft '",
                                     absl::CHexEscape(spacecraft_id),

@@ -28,6 +28,7 @@
 #include "Eigen/Geometry"
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "formats/ccsds_kvn.h"
 
 namespace esg::storage {
 
@@ -106,11 +107,6 @@ absl::StatusOr<AemFile> ParseAem(absl::string_view text);
 // the segment's OBJECT_NAME and both values. The samples of every segment in file order (UTC).
 absl::StatusOr<std::vector<AemSample>> ParseAemPlan(absl::string_view text,
                                                     absl::string_view spacecraft_id);
-
-// CCSDS ASCII time code A ("YYYY-MM-DDThh:mm:ss[.d...]") or B ("YYYY-DDDThh:mm:ss[.d...]"), an
-// optional trailing `Z`, UTC. InvalidArgument otherwise.
-absl::StatusOr<absl::Time> ParseCcsdsTime(absl::string_view text);
-std::string FormatCcsdsTime(absl::Time time);
 
 }  // namespace esg::storage
 

@@ -1,0 +1,71 @@
+// A spacecraft's orbit as flight dynamics delivers it (docs/physics.md, "The orbit"; the file is
+// a CCSDS OEM, formats/oem.h): arcs of states (position and velocity in inertial J2000 axes from
+// the Earth's centre, [km] and [km/s]), each valid over the span it covers, interpolated between
+// states by the cubic Hermite polynomial of the two neighbouring positions and velocities.
+//
+// The interpolation's error between states h apart is at most |d^4 r/dt^4| h^4 / 384; on a near-
+// circular orbit |d^4 r/dt^4| = |r| w^4 with w = |v| / |r|, so an arc is refused where that bound
+// exceeds kMaxInterpolationErrorKm (a low orbit's states may then be up to about 420 s apart:
+// 1 km is 0.13 s of the shadow's edge passing). Pure computation.
+#ifndef ESG_ESTIMATOR_ORBIT_H_
+#define ESG_ESTIMATOR_ORBIT_H_
+
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "estimator/time_interval.h"
+
+namespace esg::estimator {
+
+inline constexpr double kMaxInterpolationErrorKm = 1.0;
+// A position closer to the Earth's centre than this is refused (the polar radius, WGS 84) [km].
+inline constexpr double kEarthPolarRadiusKm = 6356.752;
+
+struct OrbitState {
+  absl::Time time;
+  Eigen::Vector3d r_in_km = Eigen::Vector3d::Zero();
+  Eigen::Vector3d v_in_km_s = Eigen::Vector3d::Zero();
+};
+
+// States in time order, valid over [from, to] (inside the states' span).
+struct OrbitArc {
+  std::vector<OrbitState> states;
+  absl::Time from;
+  absl::Time to;
+};
+
+class Orbit {
+ public:
+  // InvalidArgument naming the field ("arcs[1].states[4].r_in_km: ...") for an arc with fewer
+  // than 2 states, times not strictly increasing, a number not finite, a position inside the
+  // Earth, [from, to] empty or outside its states, or states too far apart for the interpolation
+  // (the bound above, with the interval and the bound in the message); "arcs" when there are
+  // none. Where arcs overlap, a later one is used (a newer delivery replaces an older
+  // prediction).
+  static absl::StatusOr<Orbit> FromArcs(std::vector<OrbitArc> arcs);
+
+  // The interpolated state at t; OutOfRange naming t and the coverage when no arc covers it.
+  absl::StatusOr<OrbitState> StateAt(absl::Time t) const;
+
+  // The parts of [from, to] that no arc covers, in time order.
+  std::vector<TimeInterval> Gaps(absl::Time from, absl::Time to) const;
+
+  const std::vector<OrbitArc>& arcs() const { return arcs_; }
+
+ private:
+  explicit Orbit(std::vector<OrbitArc> arcs) : arcs_(std::move(arcs)) {}
+  std::vector<OrbitArc> arcs_;
+};
+
+// The cubic Hermite interpolation between states a and b at t (a.time <= t <= b.time).
+OrbitState InterpolateHermite(const OrbitState& a, const OrbitState& b, absl::Time t);
+
+// The bound above on the interpolation error between a and b [km].
+double HermiteErrorBoundKm(const OrbitState& a, const OrbitState& b);
+
+}  // namespace esg::estimator
+
+#endif  // ESG_ESTIMATOR_ORBIT_H_
