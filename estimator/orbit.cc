@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
 
 #include "absl/status/status.h"
@@ -35,6 +36,13 @@ double HermiteErrorBoundKm(const OrbitState& a, const OrbitState& b) {
     bound = std::max(bound, r * std::pow(w * h, 4) / 384.0);
   }
   return bound;
+}
+
+double KeplerPeriodS(const OrbitState& state) {
+  const double inverse_a = 2.0 / state.r_in_km.norm() - state.v_in_km_s.squaredNorm() / kEarthGmKm3S2;
+  if (!(inverse_a > 0.0)) return std::numeric_limits<double>::infinity();
+  const double a_km = 1.0 / inverse_a;
+  return 2.0 * M_PI * std::sqrt(a_km * a_km * a_km / kEarthGmKm3S2);
 }
 
 absl::StatusOr<Orbit> Orbit::FromArcs(std::vector<OrbitArc> arcs) {

@@ -66,6 +66,14 @@ OrbitState InterpolateHermite(const OrbitState& a, const OrbitState& b, absl::Ti
 // The bound above on the interpolation error between a and b [km].
 double HermiteErrorBoundKm(const OrbitState& a, const OrbitState& b);
 
+// The Earth's gravitational parameter GM [km^3/s^2] (WGS 84).
+inline constexpr double kEarthGmKm3S2 = 398600.4418;
+
+// The period of the Keplerian ellipse through `state` [s]: 2 pi sqrt(a^3 / GM), the semi-major
+// axis a from the vis-viva equation 1 / a = 2 / |r| - |v|^2 / GM. Infinite when the state is not
+// bound (|v|^2 >= 2 GM / |r|).
+double KeplerPeriodS(const OrbitState& state);
+
 }  // namespace esg::estimator
 
 #endif  // ESG_ESTIMATOR_ORBIT_H_

@@ -231,7 +231,7 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
       opt.orbital_period_s > 0.0 ? opt.orbital_period_s : RecordingOrbitalPeriod(context.regimes());
   o.epoch = context.frames().front().time;
   std::string sun_note;
-  o.sun = SunRegressorsOf(*series, model.config, selected.run.gyros, &sun_note);
+  o.sun = SunRegressorsOf(*series, model.config, selected.run.gyros, &sun_note, opt.orbit.get());
   // A face a selection round took already (readout_candidate.h FitSunCandidate) is held in the
   // model: its regressors are left out.
   for (SunRegressors& r : o.sun) {
@@ -332,7 +332,8 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     f.effect = kEffectBasisTerm;
     f.gyro = g.gyro;
     f.description = g.sun_face >= 0 ? absl::StrFormat("gyro %d: %s%s", g.gyro,
-                                                      DescribeSunGroup(g), DescribeAlternatives(g))
+                                                      DescribeSunGroup(g, opt.orbit != nullptr),
+                                                      DescribeAlternatives(g))
                                     : DescribeGroup(g, o);
     f.time.kind = TimeKind(g);
     const GyroConfig* gc = extended.config.FindGyro(g.gyro);

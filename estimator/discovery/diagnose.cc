@@ -51,6 +51,18 @@ absl::Status CheckInput(const SpacecraftConfig& config, const std::vector<Teleme
         "orbital period: %g s is outside [%g, %g] s (or 0: from the recording)", period_s,
         kMinOrbitalPeriodS, kMaxOrbitalPeriodS));
   }
+  if (options.orbit != nullptr) {
+    const std::vector<TimeInterval> gaps =
+        options.orbit->Gaps(frames.front().time, frames.back().time);
+    if (!gaps.empty()) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "orbit: does not cover the recording (%s to %s): no state from %s to %s%s; deliver an "
+          "orbit that covers the whole recording",
+          FormatUtc(frames.front().time), FormatUtc(frames.back().time), FormatUtc(gaps[0].from),
+          FormatUtc(gaps[0].to),
+          gaps.size() > 1 ? absl::StrFormat(" and %d more gaps", gaps.size() - 1) : ""));
+    }
+  }
   int st_frames = 0;
   for (const TelemetryFrame& f : frames)
     st_frames += f.star_tracker.has_value() && f.star_tracker->valid;
@@ -163,9 +175,20 @@ void Conclude(bool model_findings, bool unexplained_found, const ProfiledDevianc
 
 absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
                                          const std::vector<TelemetryFrame>& frames,
-                                         const DiagnoseOptions& options,
+                                         const DiagnoseOptions& requested,
                                          const DiagnoseProgressFn& progress) {
-  if (absl::Status s = CheckInput(config, frames, options); !s.ok()) return s;
+  if (absl::Status s = CheckInput(config, frames, requested); !s.ok()) return s;
+  // With an orbit and no period given, the orbital-phase harmonics take the orbit's period at
+  // the recording's middle (the Keplerian period through that state).
+  DiagnoseOptions options = requested;
+  if (options.orbit != nullptr && options.orbital_period_s == 0.0) {
+    const absl::StatusOr<OrbitState> middle =
+        options.orbit->StateAt(frames.front().time + (frames.back().time - frames.front().time) / 2);
+    const double period_s = middle.ok() ? KeplerPeriodS(*middle) : 0.0;
+    if (period_s >= kMinOrbitalPeriodS && period_s <= kMaxOrbitalPeriodS) {
+      options.orbital_period_s = period_s;
+    }
+  }
   auto user = UserModel(config, options);
   if (!user.ok()) return user.status();
   DiagnosisContext context(frames, options, progress);

@@ -6,11 +6,13 @@
 #define ESG_ESTIMATOR_DISCOVERY_OPTIONS_H_
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "estimator/discovery/regimes.h"
 #include "estimator/discovery/report.h"
+#include "estimator/orbit.h"
 
 namespace esg::estimator::discovery {
 
@@ -53,6 +55,12 @@ struct DiagnoseOptions {
   // recording's orbital-orientation spans (regimes.h); a recording without such spans (inertial
   // holds, the calibration profile's rotations) then has no orbital-phase regressors.
   double orbital_period_s = 0.0;
+  // The spacecraft's orbit when flight dynamics delivered one (`esg diagnose --orbit FILE`,
+  // estimator/orbit.h): the sun's illumination of the body faces is then zero in the Earth's
+  // shadow (eclipse.h; docs/discovery.md, "A drift that follows the sun"), and the orbital-phase
+  // harmonics take the orbit's period when orbital_period_s is 0. It must cover the recording
+  // (Diagnose refuses it otherwise, naming the gaps). Null: no orbit, the sun always shines.
+  std::shared_ptr<const Orbit> orbit;
   // Held-out spans: at most this many, each at most max_gap_hours long.
   int max_gaps = 4;
   double max_gap_hours = 4.0;

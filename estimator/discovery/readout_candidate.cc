@@ -112,7 +112,7 @@ absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
                                                   : 0.0;
   o.epoch = ctx.frames->front().time;
   std::string sun_note;
-  o.sun = SunRegressorsOf(*series, model.config, ctx.model_run->gyros, &sun_note);
+  o.sun = SunRegressorsOf(*series, model.config, ctx.model_run->gyros, &sun_note, opt.orbit.get());
   const SunRegressors* regressors = FindSunRegressors(o.sun, candidate.gyro);
   if (regressors == nullptr) {
     if (!sun_note.empty()) fit.notes.push_back(sun_note);
@@ -178,7 +178,7 @@ absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
   fit.fitted = SunParameters(g);
   fit.time.kind = kTimeFollowsSun;
   fit.description =
-      absl::StrFormat("gyro %d: %s%s", candidate.gyro, DescribeSunGroup(g),
+      absl::StrFormat("gyro %d: %s%s", candidate.gyro, DescribeSunGroup(g, opt.orbit != nullptr),
                       DescribeAlternatives(g));
   fit.notes.push_back(absl::StrFormat(
       "the gyro's deviation from the model regressed on the sun's families (docs/discovery.md, "

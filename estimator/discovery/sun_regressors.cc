@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "absl/strings/str_format.h"
+#include "estimator/eclipse.h"
 #include "estimator/sun_direction.h"
 #include "estimator/units.h"
 
@@ -78,10 +80,52 @@ absl::StatusOr<std::vector<Vector3d>> SunAlongSeries_in(const DeviationSeries& s
   return out;
 }
 
+absl::StatusOr<std::vector<double>> SunlitAlongSeries(const DeviationSeries& series,
+                                                      const Orbit& orbit) {
+  std::vector<double> out;
+  if (series.steps.empty()) return out;
+  const absl::Time t0 =
+      series.steps.front().inputs.time - absl::Seconds(0.5 * series.steps.front().dt);
+  const absl::Time t1 = series.steps.back().inputs.time + absl::Seconds(0.5 * series.steps.back().dt);
+  const int n = 2 + static_cast<int>(absl::ToDoubleSeconds(t1 - t0) / kSunTableStepS);
+  std::vector<Vector3d> table_km;
+  for (int i = 0; i < n; ++i) {
+    auto s = SunPosition_in_km(t0 + absl::Seconds(i * kSunTableStepS));
+    if (!s.ok()) return s.status();
+    table_km.push_back(*s);
+  }
+  auto sunlit = [&](absl::Time t) -> absl::StatusOr<double> {
+    absl::StatusOr<OrbitState> state = orbit.StateAt(t);
+    if (!state.ok()) return state.status();
+    const double x = absl::ToDoubleSeconds(t - t0) / kSunTableStepS;
+    const int i = std::clamp(static_cast<int>(std::floor(x)), 0, n - 2);
+    const double f = std::clamp(x - i, 0.0, 1.0);
+    return SunlitFraction(state->r_in_km, (1.0 - f) * table_km[i] + f * table_km[i + 1]);
+  };
+  for (const TrajectoryStep& step : series.steps) {
+    const absl::Duration half = absl::Seconds(0.5 * step.dt);
+    double sum = 0.0;
+    for (const auto& [offset, weight] :
+         {std::pair{-half, 1.0}, std::pair{absl::ZeroDuration(), 4.0}, std::pair{half, 1.0}}) {
+      absl::StatusOr<double> nu = sunlit(step.inputs.time + offset);
+      if (!nu.ok()) return nu.status();
+      sum += weight * *nu;
+    }
+    out.push_back(sum / 6.0);
+  }
+  return out;
+}
+
 absl::StatusOr<SunRegressors> ComputeSunRegressors(const DeviationSeries& series,
-                                                   const Matrix3d& C_b_k) {
+                                                   const Matrix3d& C_b_k, const Orbit* orbit) {
   auto sun_in = SunAlongSeries_in(series);
   if (!sun_in.ok()) return sun_in.status();
+  std::vector<double> nu(series.steps.size(), 1.0);
+  if (orbit != nullptr) {
+    absl::StatusOr<std::vector<double>> lit = SunlitAlongSeries(series, *orbit);
+    if (!lit.ok()) return lit.status();
+    nu = *std::move(lit);
+  }
   SunRegressors out;
   out.gyro = series.gyro;
   out.lag_hours = SunLagGridHours();
@@ -96,7 +140,7 @@ absl::StatusOr<SunRegressors> ComputeSunRegressors(const DeviationSeries& series
   out.values.resize(kSunFaces);
   for (int face = 0; face < kSunFaces; ++face) {
     std::vector<double> u;
-    for (const Vector3d& s : s_b) u.push_back(FaceIllumination(s, face));
+    for (size_t i = 0; i < s_b.size(); ++i) u.push_back(nu[i] * FaceIllumination(s_b[i], face));
     for (double lag_h : out.lag_hours) {
       out.values[face].push_back(LaggedIllumination(u, dt, HoursToSeconds(lag_h)));
     }

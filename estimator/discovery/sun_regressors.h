@@ -14,7 +14,10 @@
 //
 //     tau dy/dt = u_f - y,   y(t_0) = u_f(t_0) (the face in equilibrium at the start),
 //
-// stepped exactly for u_f constant over a substep: y <- u + (y - u) exp(-dt / tau). The drift is
+// stepped exactly for u_f constant over a substep: y <- u + (y - u) exp(-dt / tau). With the
+// spacecraft's orbit (orbit.h) u_f is multiplied by the fraction nu of the sun's disc the
+// spacecraft sees (eclipse.h: 0 in the Earth's umbra), averaged over each substep by Simpson's
+// rule; without it nu = 1. The drift is
 // a y(t), a a vector in case axes (deg/h at full illumination). tau is not known: it is profiled
 // over a grid of 41 values log-spaced from 0.1 h to 10 h (20 per decade, neighbours 12% apart),
 // as the onset of a drift step is. Pure computation.
@@ -27,6 +30,7 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "estimator/discovery/deviation.h"
+#include "estimator/orbit.h"
 
 namespace esg::estimator::discovery {
 
@@ -57,10 +61,20 @@ struct SunRegressors {
 // InvalidArgument when the recording lies outside the ephemeris's years (sun_direction.h).
 absl::StatusOr<std::vector<Eigen::Vector3d>> SunAlongSeries_in(const DeviationSeries& series);
 
+// The fraction nu of the sun's disc seen from the orbit at the series' substeps, each averaged
+// over its substep by Simpson's rule (start, midpoint, end). The sun's position is computed every
+// 600 s and interpolated linearly (it moves 0.007 deg and 0.1% of its distance's yearly change in
+// that time). Errors: OutOfRange from the orbit where it does not cover a substep;
+// SunPosition_in_km's.
+absl::StatusOr<std::vector<double>> SunlitAlongSeries(const DeviationSeries& series,
+                                                      const Orbit& orbit);
+
 // The regressors of `series` (whose mounting is C_b_k, with the model's misalignment, as
-// MeasureDeviations used it), for the lags of SunLagGridHours. Errors: SunAlongSeries_in's.
+// MeasureDeviations used it), for the lags of SunLagGridHours; with `orbit` (may be null) the
+// illumination is zero in the Earth's shadow. Errors: SunAlongSeries_in's, SunlitAlongSeries'.
 absl::StatusOr<SunRegressors> ComputeSunRegressors(const DeviationSeries& series,
-                                                   const Eigen::Matrix3d& C_b_k);
+                                                   const Eigen::Matrix3d& C_b_k,
+                                                   const Orbit* orbit = nullptr);
 
 // The regressors of `gyro` in `sun`, nullptr when it has none.
 const SunRegressors* FindSunRegressors(const std::vector<SunRegressors>& sun, int gyro);

@@ -36,10 +36,10 @@ bool IsConstant(const std::string& label) { return label == "1"; }
 std::vector<SunRegressors> SunRegressorsOf(const std::vector<DeviationSeries>& series,
                                            const SpacecraftConfig& config,
                                            const std::vector<GyroEstimate>& estimates,
-                                           std::string* note) {
+                                           std::string* note, const Orbit* orbit) {
   std::vector<SunRegressors> out;
   for (const DeviationSeries& s : series) {
-    auto r = ComputeSunRegressors(s, ModelMounting_b_k(config, estimates, s.gyro));
+    auto r = ComputeSunRegressors(s, ModelMounting_b_k(config, estimates, s.gyro), orbit);
     if (!r.ok()) {
       if (note != nullptr) {
         *note = absl::StrCat("no sun regressors: ", r.status().message());
@@ -104,7 +104,7 @@ Matrix3d SunAmplitudeCovariance_k(const SelectedGroup& group) {
   return P;
 }
 
-std::string DescribeSunGroup(const SelectedGroup& group) {
+std::string DescribeSunGroup(const SelectedGroup& group, bool shadowed) {
   const double deg_h = RadPerSecToDegPerHour(1.0);
   const Vector3d a = SunAmplitude_k(group);
   const Matrix3d P = SunAmplitudeCovariance_k(group);
@@ -114,10 +114,13 @@ std::string DescribeSunGroup(const SelectedGroup& group) {
   std::string text = absl::StrFormat(
       "drift along (%.2f, %.2f, %.2f) (case axes) follows the sun on body face %s with a %.2g h "
       "lag (95%% interval %.2g-%.2g h), %.4f +- %.4f deg/h at full illumination: the face's "
-      "illumination max(0, n . s_b), s_b the sun's direction in body axes, through a first-order "
-      "thermal lag",
+      "illumination max(0, n . s_b)%s, s_b the sun's direction in body axes, through a "
+      "first-order thermal lag",
       u.x(), u.y(), u.z(), SunFaceName(group.sun_face), lag.best, lag.lower, lag.upper,
-      a.norm() * deg_h, size_sigma * deg_h);
+      a.norm() * deg_h, size_sigma * deg_h,
+      shadowed ? " times the fraction of the sun's disc seen from the orbit (0 in the Earth's "
+                 "shadow)"
+               : "");
   std::vector<std::string> cannot;
   for (const auto& [label, against] : group.alternatives) {
     if (IsOrbital(label) && cannot.size() < 2 &&

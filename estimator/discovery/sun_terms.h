@@ -28,12 +28,13 @@ namespace esg::estimator::discovery {
 inline constexpr const char* kTimeFollowsSun = "follows_sun";
 
 // The sun's regressors of each series, the mounting that of `config` with the misalignment of
-// `estimates` (as MeasureDeviations used it). A recording outside the ephemeris's years has none:
-// `note` then says why.
+// `estimates` (as MeasureDeviations used it); with `orbit` (may be null) the illumination is zero
+// in the Earth's shadow. A recording outside the ephemeris's years, or not covered by the orbit,
+// has none: `note` then says why.
 std::vector<SunRegressors> SunRegressorsOf(const std::vector<DeviationSeries>& series,
                                            const SpacecraftConfig& config,
                                            const std::vector<GyroEstimate>& estimates,
-                                           std::string* note);
+                                           std::string* note, const Orbit* orbit = nullptr);
 
 // A selected sun group's lag [h]: the best of the grid, and the 95% interval where its 2 ln B
 // stays within 3.84 (chi-square(1) 95%) of its maximum, linear in log(lag) between the grid's
@@ -53,8 +54,9 @@ Eigen::Matrix3d SunAmplitudeCovariance_k(const SelectedGroup& group);
 // "drift along (x, y, z) (case axes) follows the sun on body face -y with a 1.4 h lag (95%
 // interval a-b h), A +- s deg/h at full illumination ..." (without the gyro and the list of
 // alternatives, open_ended.h DescribeAlternatives), naming what the recording cannot tell it
-// from: an orbital harmonic, a constant.
-std::string DescribeSunGroup(const SelectedGroup& group);
+// from: an orbital harmonic, a constant. `shadowed`: the illumination was zero in the Earth's
+// shadow (the orbit was given, sun_regressors.h), which the words say.
+std::string DescribeSunGroup(const SelectedGroup& group, bool shadowed = false);
 
 // The finding's parameters: sunDriftDegH[0..2] (case axes, deg/h at full illumination),
 // sunDriftSizeDegH, sunLagHours (1-sigma: half its interval), sunLagLowerHours, sunLagUpperHours,
