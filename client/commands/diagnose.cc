@@ -18,10 +18,12 @@
 #include <iostream>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
 #include "client/commands/commands.h"
@@ -35,7 +37,9 @@
 #include "estimator/discovery/apply_findings.h"
 #include "estimator/channels.h"
 #include "estimator/frame_gap.h"
+#include "estimator/orbit.h"
 #include "formats/column_mapping.h"
+#include "formats/oem.h"
 #include "formats/recording_csv.h"
 #include "proto/convert.h"
 #include "proto/diagnosis_json.h"
@@ -58,7 +62,23 @@ struct DiagnoseCliOptions {
   double integration_rate_hz = 0.2;
   std::string effects;
   double orbital_period_min = 0.0;  // 0: from the recording
+  std::string orbit_path;           // CCSDS OEM of the spacecraft's orbit (formats/oem.h)
 };
+
+// The orbit of `spacecraft_id` in the OEM at `path`; InvalidArgument "--orbit PATH: line N: ..."
+// (storage::ParseOemOrbit's rules), NotFound when the file cannot be read.
+absl::StatusOr<std::shared_ptr<const estimator::Orbit>> ReadOrbit(const std::string& path,
+                                                                 const std::string& spacecraft_id) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat("--orbit ", path, ": cannot read"));
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  absl::StatusOr<estimator::Orbit> orbit = storage::ParseOemOrbit(buffer.str(), spacecraft_id);
+  if (!orbit.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("--orbit ", path, ": ", orbit.status().message()));
+  }
+  return std::make_shared<const estimator::Orbit>(*std::move(orbit));
+}
 
 std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
   std::vector<disc::Effect> out;
@@ -169,6 +189,15 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
   options.integration_rate_hz = o.integration_rate_hz;
   options.effects = *effects;
   options.orbital_period_s = 60.0 * o.orbital_period_min;
+  if (!o.orbit_path.empty()) {
+    absl::StatusOr<std::shared_ptr<const estimator::Orbit>> orbit =
+        ReadOrbit(o.orbit_path, config->spacecraft_id);
+    if (!orbit.ok()) {
+      std::fprintf(stderr, "esg: %s\n", std::string(orbit.status().message()).c_str());
+      return 2;
+    }
+    options.orbit = *std::move(orbit);
+  }
   StageProgress progress("diagnose");
   auto report = disc::Diagnose(*config, recording->frames, options,
                                [&](double f, const std::string& stage) { progress(f, stage); });
@@ -208,6 +237,11 @@ int RunDiagnoseVerb(const DiagnoseCliOptions& o, const ServerDiagnoseOptions& se
       return ReportBadArgument("diagnose",
                                "--spacecraft: diagnoses the server's archive; --config, "
                                "--recording, --columns and --out are for a recording offline");
+    }
+    if (!o.orbit_path.empty()) {
+      return ReportBadArgument("diagnose",
+                               "--orbit: read for a recording diagnosed offline (--config, "
+                               "--recording); esgd does not take an orbit yet");
     }
     ServerDiagnoseOptions request = server;
     if (model_given) request.model = o.model;  // else the session's model
@@ -275,6 +309,10 @@ void RegisterDiagnose(CLI::App& app, GlobalOptions& global, int* exit_code) {
                   "open-ended stage (default: the period of the recording's orbital-orientation "
                   "spans; a recording without them has no such terms)")
       ->check(CLI::Range(1.0, 1e5));
+  cmd->add_option("--orbit", o->orbit_path,
+                  "offline: the spacecraft's orbit, a CCSDS OEM covering the recording "
+                  "(docs/formats.md): the sun's illumination is then zero in the Earth's shadow, "
+                  "and the orbital-phase terms take its period unless --orbital-period is given");
   cmd->callback([o, server, model, &global, exit_code] {
     *exit_code = RunDiagnoseVerb(*o, *server, model->count() > 0, global);
   });
