@@ -83,6 +83,9 @@ struct CandidateFit {
   // the finding's description (open_ended.h DescribeGroup).
   Eigen::Matrix3d readout_distortion = Eigen::Matrix3d::Zero();
   std::string description;
+  // A warm-up (time_behaviour.h FitWarmUp): the basis terms that add it to a configuration, at
+  // their fitted values with the prior they were freed with (the finding's Finding::basis_terms).
+  std::vector<BasisTerm> basis_terms;
   // The sun candidate (readout_candidate.h FitSunCandidate): its terms at the best lag against a
   // drift that returns to its mean on the gyro's deviation (wander.h CompareConstantEffect, on the
   // series it regressed): 2 ln B of the terms, of the stationary drift, and of the terms on top

@@ -287,6 +287,9 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
         !added(CandidateName({Effect::kDriftStep, id}))) {
       out.push_back({Effect::kDriftStep, id});
     }
+    if (Effective(effects, Effect::kWarmUp) && !added(CandidateName({Effect::kWarmUp, id}))) {
+      out.push_back({Effect::kWarmUp, id});
+    }
   }
   const bool walk_added = std::any_of(model.added.begin(), model.added.end(), [](const auto& a) {
     return a.rfind(EffectId(Effect::kRandomWalkDrift), 0) == 0;
@@ -787,6 +790,8 @@ EffectFit FitOf(Effect effect) {
       return &FitReadoutCandidate;
     case Effect::kSunDrift:
       return &FitSunCandidate;
+    case Effect::kWarmUp:
+      return &FitWarmUp;
   }
   return nullptr;
 }

@@ -20,6 +20,12 @@
 //                                 grid of onsets, refined near its maximum (3 parameters, the
 //                                 onset integrated over a uniform prior; fitted by
 //                                 time_behaviour.h)
+//   warm_up (gyro g)              a case-fixed drift decaying exponentially from the recording's
+//                                 start, A exp(-t / tau): three exponential_decay basis terms
+//                                 freed with prior c_sigma, tau profiled on a log grid refined
+//                                 near its maximum (3 parameters, tau integrated over a prior
+//                                 uniform in ln tau; time_behaviour.h FitWarmUp), reported as a
+//                                 basis term
 //   readout_distortion (gyro g)   not of the library: the open-ended basis's readout group, a
 //                                 symmetric traceless distortion of g's readout (5 parameters,
 //                                 regressed on the deviation, held; Laplace's Occam term;

@@ -38,8 +38,13 @@ enum class Effect {
   // illumination through a thermal lag), a candidate of every round (readout_candidate.h
   // FitSunCandidate); its finding is a kEffectBasisTerm.
   kSunDrift,
+  // A time behaviour with its own nonlinear parameter: a case-fixed drift decaying exponentially
+  // from the recording's start (a warm-up), its time constant searched (time_behaviour.h
+  // FitWarmUp); its finding is a kEffectBasisTerm (three exponential_decay terms).
+  kWarmUp,
 };
-const char* EffectId(Effect e);  // "rotor_displacement", ..., "readout_distortion", "sun_drift"
+// "rotor_displacement", ..., "readout_distortion", "sun_drift", "warm_up"
+const char* EffectId(Effect e);
 // The effect whose EffectId is `id`, or nullopt.
 std::optional<Effect> EffectFromId(absl::string_view id);
 inline constexpr const char* kVerdictNone = "none";
@@ -91,7 +96,10 @@ struct Evidence {
 // recording (the effects of eq. (1), (8)-(10), mountings, the star tracker), switched on at an
 // onset (a drift step), or a random walk whose intensity was raised.
 struct TimeBehaviour {
-  std::string kind = "constant";  // "constant", "step" or "random_walk"
+  // "constant", "step", "random_walk", "warm_up" (an exponential decay from the start, its time
+  // constant in the finding's parameters tauHours, tauLowerHours, tauUpperHours) or a basis
+  // term's kind (basis_stage.cc TimeKind).
+  std::string kind = "constant";
   // For "step": the onset maximising the likelihood and its interval where -2 log L stays within
   // the chi-square(1) 95% quantile (3.84) of its minimum; the interval is clipped to the onsets
   // searched (docs/discovery.md).

@@ -13,6 +13,7 @@
 #include "estimator/discovery/basis_stage.h"
 #include "estimator/discovery/point_prediction.h"
 #include "estimator/discovery/sun_terms.h"
+#include "estimator/discovery/time_behaviour.h"
 #include "estimator/discovery/wander.h"
 #include "estimator/statistics.h"
 #include "estimator/status_macros.h"
@@ -57,6 +58,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
   for (size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
   auto cost = [](const Candidate& c) {
     if (c.effect == Effect::kDriftStep) return 12;
+    if (c.effect == Effect::kWarmUp) return 11;  // 7 + 4 time constants, full runs
     if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
@@ -436,6 +438,11 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
     finding.effect = kEffectBasisTerm;
     finding.description = f.description;
   }
+  if (f.candidate.effect == Effect::kWarmUp) {  // three exponential_decay terms of the basis
+    finding.effect = kEffectBasisTerm;
+    finding.description = f.description;
+    finding.basis_terms = f.basis_terms;
+  }
   finding.gyro = f.candidate.gyro;
   finding.parameters = f.fitted;
   finding.time = f.time;
@@ -493,6 +500,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
             "test"
       : f.time.kind == kTimeFollowsSun
           ? "a drift that follows the sun: its coefficients constant in time, held from the start"
+      : f.time.kind == kTimeWarmUp
+          ? "a warm-up: a transient decaying from the start, its evidence integrated over the "
+            "time constant, not the constant-effect test"
           : "constant in time, as a physical effect of the library is";
   finding.evidence.notes.push_back(absl::StrFormat(
       "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (%s)",
@@ -629,7 +639,7 @@ void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
     });
   }
   for (const Candidate& c : st.candidates) {
-    const bool time_behaviour = c.effect == Effect::kDriftStep ||
+    const bool time_behaviour = c.effect == Effect::kDriftStep || c.effect == Effect::kWarmUp ||
                                 (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
     (time_behaviour ? st.timed : st.constant).push_back(c);
   }

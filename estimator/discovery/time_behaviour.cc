@@ -380,6 +380,180 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   return DescribeStep(search, profile);
 }
 
+namespace {
+
+// The warm-up's search over tau (docs/discovery.md, "Time behaviour"): kTauCoarse time constants
+// equally spaced in ln tau across [kWarmUpMinTauHours, kWarmUpMaxTauHours] (factors of 1.9), then
+// kTauRefine times the two points half a spacing either side of the best so far.
+constexpr int kTauCoarse = 7;
+constexpr int kTauRefine = 2;
+constexpr int kWarmUpTerms = 3;  // one exponential_decay term per case axis
+
+// The model with the warm-up's three terms (time constant tau_h, epoch t0) appended to the gyro's
+// basis, freed with the prior sigma [rad/s].
+ModelState WithWarmUp(const ModelState& model, int gyro, absl::Time t0, double tau_h,
+                      double sigma) {
+  ModelState m = model;
+  GyroConfig* g = FindGyroMutable(m.config, gyro);
+  for (int axis = 1; axis <= kWarmUpTerms; ++axis) {
+    BasisTerm t;
+    t.kind = BasisKind::kExponentialDecay;
+    t.axis = axis;
+    t.time_constant = tau_h * kSecondsPerHour;
+    t.epoch = t0;
+    t.value = 0.0;
+    t.sigma = sigma;
+    g->basis_terms.push_back(t);
+  }
+  return m;
+}
+
+}  // namespace
+
+// The search as a sequence: the coarse grid of time constants, its refinements, the profile's
+// prior weights and interval, and the best run's amplitude described.
+absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  fit.time.kind = kTimeWarmUp;
+  const int first_term = static_cast<int>(g->basis_terms.size());
+  if (first_term + kWarmUpTerms > kMaxBasisTermsPerGyro || ctx.frames->size() < 2) {
+    fit.parameters = 0;
+    fit.run = *ctx.model_run;
+    fit.notes.push_back(absl::StrFormat(
+        "no warm-up fitted: gyro %d's basis holds %d terms, at most %d (three more needed)",
+        candidate.gyro, first_term, kMaxBasisTermsPerGyro));
+    return absl::OkStatus();
+  }
+  const std::vector<TelemetryFrame> frames =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
+  const absl::Time t0 = frames.front().time;
+  const double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  const double log_min = std::log(kWarmUpMinTauHours), log_max = std::log(kWarmUpMaxTauHours);
+  const double spacing = (log_max - log_min) / (kTauCoarse - 1);
+
+  std::map<double, double> value;  // ln(tau / h) -> profiled -2 log L
+  double best_log = 0.0, best_value = 0.0;
+  bool any = false;
+  ModelRun best_run;
+  auto evaluate = [&](double log_tau) -> absl::Status {
+    log_tau = std::clamp(log_tau, log_min, log_max);
+    for (const auto& [x, v] : value) {
+      if (std::abs(x - log_tau) < 1e-9) return absl::OkStatus();
+    }
+    const ModelState m =
+        WithWarmUp(fit.model, candidate.gyro, t0, std::exp(log_tau), sigma);
+    auto run = RunModel(m.config, m.options, frames);
+    ++fit.runs;
+    if (!run.ok()) return run.status();
+    const double v = Profile(*run).value;
+    value[log_tau] = v;
+    if (!any || v < best_value) {
+      any = true;
+      best_value = v;
+      best_log = log_tau;
+      best_run = *std::move(run);
+    }
+    return absl::OkStatus();
+  };
+  for (int k = 0; k < kTauCoarse; ++k) RETURN_IF_ERROR(evaluate(log_min + k * spacing));
+  for (int r = 1; r <= kTauRefine; ++r) {
+    const double half = spacing / std::pow(2.0, r);
+    const double centre = best_log;
+    if (centre - half >= log_min - 1e-12) RETURN_IF_ERROR(evaluate(centre - half));
+    if (centre + half <= log_max + 1e-12) RETURN_IF_ERROR(evaluate(centre + half));
+  }
+
+  // The evidence's prior points: tau integrated over a prior uniform in ln tau across the span
+  // searched, by the trapezoid rule on the time constants evaluated (each run is already the
+  // amplitude's marginal likelihood, freed with its prior).
+  std::vector<std::pair<double, double>> profile(value.begin(), value.end());
+  const double span = log_max - log_min;
+  size_t best = 0;
+  for (size_t j = 0; j < profile.size(); ++j) {
+    const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
+    const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
+    fit.prior_points.emplace_back(0.5 * (left + right) / span, profile[j].second);
+    if (profile[j].second < profile[best].second) best = j;
+  }
+  // The interval: where -2 log L stays within the chi-square(1) 95% quantile of its minimum,
+  // linear in ln tau between the time constants evaluated, clipped to the span searched.
+  const double level = profile[best].second + kOnsetIntervalDrop;
+  auto crossing = [&](size_t inside, size_t outside) {
+    const auto [x0, y0] = profile[inside];
+    const auto [x1, y1] = profile[outside];
+    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
+  };
+  double lower = profile.front().first, upper = profile.back().first;
+  bool lower_open = true, upper_open = true;
+  for (size_t j = best; j > 0; --j) {
+    if (profile[j - 1].second > level) {
+      lower = crossing(j, j - 1);
+      lower_open = false;
+      break;
+    }
+  }
+  for (size_t j = best; j + 1 < profile.size(); ++j) {
+    if (profile[j + 1].second > level) {
+      upper = crossing(j, j + 1);
+      upper_open = false;
+      break;
+    }
+  }
+  const double tau_h = std::exp(profile[best].first);
+  const double lower_h = std::exp(lower), upper_h = std::exp(upper);
+
+  fit.model = WithWarmUp(fit.model, candidate.gyro, t0, tau_h, sigma);
+  fit.run = std::move(best_run);
+  fit.parameters = kWarmUpTerms;
+  fit.time.onset = t0;
+  const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro);
+  Vector3d a = Vector3d::Zero(), a_sigma = Vector3d::Zero();
+  if (e != nullptr && static_cast<int>(e->basis_terms.size()) >= first_term + kWarmUpTerms &&
+      static_cast<int>(e->basis_sigma.size()) >= first_term + kWarmUpTerms) {
+    for (int i = 0; i < kWarmUpTerms; ++i) {
+      a(i) = e->basis_terms[first_term + i].value;
+      a_sigma(i) = e->basis_sigma[first_term + i];
+    }
+  }
+  const GyroConfig* gw = FindGyroMutable(fit.model.config, candidate.gyro);
+  for (int i = 0; i < kWarmUpTerms; ++i) {
+    BasisTerm t = gw->basis_terms[first_term + i];
+    t.value = a(i);
+    fit.basis_terms.push_back(t);
+  }
+  AddVectorParameters("warmUpDegH", a, a_sigma, DegH(1.0), "deg/h", fit.fitted);
+  const double size = a.norm();
+  const double size_sigma =
+      size > 0 ? std::sqrt((a.cwiseProduct(a_sigma)).squaredNorm()) / size : a_sigma.norm();
+  fit.fitted.push_back({"warmUpSizeDegH", DegH(size), DegH(size_sigma), "deg/h"});
+  fit.fitted.push_back({"tauHours", tau_h, 0.5 * (upper_h - lower_h), "h"});
+  fit.fitted.push_back({"tauLowerHours", lower_h, 0.0, "h"});
+  fit.fitted.push_back({"tauUpperHours", upper_h, 0.0, "h"});
+  const Vector3d direction = size > 0 ? Vector3d(a / size) : Vector3d::Zero();
+  fit.description = absl::StrFormat(
+      "warm-up of gyro %d: a case-fixed drift along (%.2f, %.2f, %.2f) (case axes), %.3f +- "
+      "%.3f deg/h at the recording's start, decaying with tau = %.1f h (95%% %.1f-%.1f h%s; "
+      "an exponential transient from the start, tau searched over %.1f-%.0f h)",
+      candidate.gyro, direction.x(), direction.y(), direction.z(), DegH(size), DegH(size_sigma),
+      tau_h, lower_h, upper_h,
+      lower_open || upper_open ? ", clipped: the interval reaches an end of the span searched"
+                               : "",
+      kWarmUpMinTauHours, kWarmUpMaxTauHours);
+  std::string profile_text;
+  for (const auto& [x, v] : profile) {
+    absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", std::exp(x), v - best_value));
+  }
+  fit.notes.push_back(absl::StrCat(
+      "likelihood over the time constant (h: -2 log L above the best; ", profile.size(),
+      " time constants, integrated over a prior uniform in ln tau):", profile_text));
+  return absl::OkStatus();
+}
+
 void DescribeVoltageTrend(const SpacecraftConfig& config, const std::vector<TelemetryFrame>& frames,
                           int gyro, CandidateFit& fit) {
   // A robust line per suspension axis of the offset voltage against time; eq. (3) is linear in

@@ -24,6 +24,23 @@ namespace esg::estimator::discovery {
 absl::Status FitDriftStep(const Candidate& candidate, const FitContext& context,
                           CandidateFit& fit);
 
+// The time behaviour of a warm-up finding (report.h TimeBehaviour::kind).
+inline constexpr const char* kTimeWarmUp = "warm_up";
+
+// A warm-up of `candidate.gyro` (docs/discovery.md, "Time behaviour"): a case-fixed drift A e^(-t /
+// tau) from the recording's start, as three exponential_decay basis terms (basis_term.h, one per
+// case axis, epoch the first frame) freed with the prior c_sigma_deg_h, the filter calibrating A;
+// tau profiled over log-spaced time constants from kWarmUpMinTauHours to kWarmUpMaxTauHours,
+// refined twice near the best, its evidence integrated over a prior uniform in ln tau across that
+// span, its interval where -2 log L stays within 3.84 of its minimum. Fills `fit` (model with the
+// terms at the best tau, run, parameters warmUpDegH[0..2], warmUpSizeDegH, tauHours,
+// tauLowerHours, tauUpperHours, description, basis_terms, notes). A gyro whose basis has no room
+// for three more terms gets no fit (parameters 0, a note). Errors: InvalidArgument for a gyro
+// that is not configured; those of RunModel.
+inline constexpr double kWarmUpMinTauHours = 0.5;
+inline constexpr double kWarmUpMaxTauHours = 24.0;
+absl::Status FitWarmUp(const Candidate& candidate, const FitContext& context, CandidateFit& fit);
+
 // The trend of a gyro's suspension offset voltages through eq. (3): a robust line per case axis
 // [mV/h], the displacement rate it implies [um/h] with its 1-sigma (from the line's residual
 // scatter), and a chi-square(3) test of "no trend". Evidence only (a growing displacement is not

@@ -153,6 +153,18 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                           f.time.onset_lower_hours, f.time.onset_upper_hours);
             detail += text;
           }
+          if (f.time.kind == "warm_up") {
+            const Parameter* tau = FindParameter(f.parameters, "tauHours");
+            const Parameter* lo = FindParameter(f.parameters, "tauLowerHours");
+            const Parameter* hi = FindParameter(f.parameters, "tauUpperHours");
+            const Parameter* size = FindParameter(f.parameters, "warmUpSizeDegH");
+            if (tau != nullptr && lo != nullptr && hi != nullptr && size != nullptr) {
+              char text[160];
+              std::snprintf(text, sizeof text, " tau %.2f h [%.2f, %.2f] size %.4f+-%.4f deg/h",
+                            tau->value, lo->value, hi->value, size->value, size->sigma);
+              detail += text;
+            }
+          }
         }
         const bool ok = ::esg::testing::DiscoveryVerdictCorrect(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
         correct[truth] += ok ? 1 : 0;

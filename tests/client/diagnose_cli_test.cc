@@ -259,10 +259,12 @@ TEST(DiagnoseCli, BadArgumentsExitTwoNamingTheOption) {
                       dir.File("rec.csv") + "' --effects rotor_displacment");
   EXPECT_EQ(effect.exit_code, 2);
   EXPECT_THAT(effect.err, HasSubstr("--effects"));
-  // The message lists every effect the diagnosis tries, the sun's and the readout group's too.
+  // The message lists every effect the diagnosis tries, the sun's, the readout group's and the
+  // warm-up's too.
   for (const char* id : {"rotor_displacement", "fourth_harmonic", "unequal_stiffness",
                          "gyro_misalignment", "star_tracker_misalignment", "star_tracker_latency",
-                         "random_walk_drift", "drift_step", "readout_distortion", "sun_drift"}) {
+                         "random_walk_drift", "drift_step", "readout_distortion", "sun_drift",
+                         "warm_up"}) {
     EXPECT_THAT(effect.err, HasSubstr(id));
   }
   RunResult no_config = RunEsg(dir, "diagnose --recording '" + dir.File("rec.csv") + "'");

@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "absl/strings/str_format.h"
+#include "estimator/discovery/apply_findings.h"
 #include "estimator/discovery/candidates.h"
 #include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/model_run.h"
@@ -367,11 +368,15 @@ TEST(Diagnose, NothingMissingGivesNone) {
   EXPECT_EQ(report->before.residual_rms_arcsec, report->after.residual_rms_arcsec);
   EXPECT_FALSE(report->mismatch.found);
   // Every candidate of the library the model lacks was tried once (3 gyros x 3, k0 being free, + 3
-  // common, + a drift step and a random walk per gyro), and the basis's readout group and sun
-  // families per gyro (readout_candidate.h), and none is significant.
-  EXPECT_EQ(report->candidates.size(), 24u);
-  for (const CandidateScore& c : report->candidates)
+  // common, + a drift step, a warm-up and a random walk per gyro), and the basis's readout group
+  // and sun families per gyro (readout_candidate.h), and none is significant: no warm-up either.
+  EXPECT_EQ(report->candidates.size(), 27u);
+  int warm_ups = 0;
+  for (const CandidateScore& c : report->candidates) {
     EXPECT_FALSE(c.significant) << c.effect << " " << c.gyro;
+    warm_ups += c.effect == "warm_up" ? 1 : 0;
+  }
+  EXPECT_EQ(warm_ups, 3);
   EXPECT_GE(report->before.gaps.size(), 2u);  // held-out spans in the hold and the rotation
 }
 
@@ -486,6 +491,53 @@ TEST(Diagnose, DriftStepIsFoundWithItsOnsetAndSize) {
   }
   EXPECT_THAT(f.explanation, HasSubstr(absl::StrFormat("in gyro %d at ", gyro)));
   EXPECT_THAT(f.explanation, HasSubstr("drift step of"));
+  EXPECT_LT(report->after.residual_rms_arcsec, report->before.residual_rms_arcsec);
+}
+
+// A warm-up (docs/discovery.md, "Time behaviour"): a case-fixed drift of 0.1 deg/h decaying from
+// the start with tau = 4 h (discovery_scenarios.h) is found in its gyro as three exponential_decay
+// terms, tau's 95% interval holding 4 h, the amplitude within 3 of its stated sigma of the truth
+// per case axis; `esg model apply` adds the terms to a configuration that validates. Seed 2
+// (gyro 3), fixed before the first run.
+TEST(Diagnose, WarmUpIsFoundWithItsTimeConstantAndAmplitude) {
+  const uint64_t seed = 2;
+  auto report = DiagnoseScenario("warm_up", seed);
+  ASSERT_THAT(report, IsOk());
+  const int gyro = ::esg::testing::AffectedGyro(seed);
+  std::string evidence;
+  for (const Finding& f : report->findings) {
+    evidence += "\n" + f.effect + ": " + f.explanation;
+    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
+  }
+  SCOPED_TRACE(evidence);
+  ASSERT_FALSE(report->findings.empty());
+  const Finding& f = report->findings.front();
+  EXPECT_EQ(f.effect, kEffectBasisTerm);
+  EXPECT_EQ(f.gyro, gyro);
+  EXPECT_EQ(f.time.kind, kTimeWarmUp);
+  EXPECT_THAT(f.explanation, HasSubstr(absl::StrFormat("warm-up of gyro %d: ", gyro)));
+  const Parameter* lower = FindParameter(f, "tauLowerHours");
+  const Parameter* upper = FindParameter(f, "tauUpperHours");
+  ASSERT_NE(lower, nullptr);
+  ASSERT_NE(upper, nullptr);
+  EXPECT_LE(lower->value, ::esg::testing::kWarmUpTauHours);
+  EXPECT_GE(upper->value, ::esg::testing::kWarmUpTauHours);
+  const Eigen::Vector3d truth_deg_h = ::esg::testing::WarmUpAmplitudeDegH();
+  for (int i = 0; i < 3; ++i) {
+    const Parameter* a = FindParameter(f, absl::StrFormat("warmUpDegH[%d]", i));
+    ASSERT_NE(a, nullptr);
+    ASSERT_GT(a->sigma, 0.0);
+    EXPECT_NEAR(a->value, truth_deg_h(i), 3.0 * a->sigma) << "component " << i;
+  }
+  ASSERT_EQ(f.basis_terms.size(), 3u);
+  for (const BasisTerm& t : f.basis_terms) EXPECT_EQ(t.kind, BasisKind::kExponentialDecay);
+  const SpacecraftConfig config = ::esg::testing::DiscoveryScenario("warm_up", seed, kHours).config;
+  const AppliedFindings applied = WithFindings(config, *report);
+  const GyroConfig* g = applied.config.FindGyro(gyro);
+  ASSERT_NE(g, nullptr);
+  ASSERT_GE(g->basis_terms.size(), 3u);
+  EXPECT_EQ(g->basis_terms.front().kind, BasisKind::kExponentialDecay);
+  EXPECT_THAT(ValidateConfig(applied.config), IsOk());
   EXPECT_LT(report->after.residual_rms_arcsec, report->before.residual_rms_arcsec);
 }
 

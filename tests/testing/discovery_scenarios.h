@@ -86,9 +86,15 @@ inline std::vector<std::string> DiscoveryEffects() {
 }
 
 // The time behaviours of docs/discovery.md ("Time behaviour") and a fault outside the library.
+// "warm_up": a case-fixed drift of 0.1 deg/h along (0.6, -0.64, 0.48) decaying from the start
+// with a time constant of 4 h (simulator.h TransientDrift).
 inline std::vector<std::string> DiscoveryTimeBehaviours() {
-  return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump"};
+  return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up"};
 }
+
+// The warm-up scenario's truth: amplitude [deg/h, case axes] and time constant [h].
+inline Eigen::Vector3d WarmUpAmplitudeDegH() { return Eigen::Vector3d(0.06, -0.064, 0.048); }
+inline constexpr double kWarmUpTauHours = 4.0;
 
 // Physics outside the library (docs/discovery.md, "The open-ended stage"): what the basis
 // explains, "orbital_drift" (a case-fixed drift cycling with the orbit, amplitude 0.05 deg/h),
@@ -222,6 +228,12 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.time_constant_s = SunLagHoursOf(seed) * 3600.0;
     s.gyros[g].sun_face_drift = d;
   }
+  if (effect == "warm_up") {
+    TransientDrift d;
+    d.amplitude_k_rad_s = x * WarmUpAmplitudeDegH() * deg_h;
+    d.time_constant_s = kWarmUpTauHours * 3600.0;
+    s.gyros[g].transient_drift = d;
+  }
   if (effect == "drift_step") {
     GyroFault f;
     f.time = 0.4 * s.duration;
@@ -260,6 +272,7 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "orbital_drift") return basis("orbital_cycle", "");
   if (truth == "sun_face_drift") return basis("follows_sun", "sunLagHours");
   if (truth == "growing_displacement") return basis("linear", "");
+  if (truth == "warm_up") return basis("warm_up", "tauHours");
   if (truth == "readout_scale") return basis("", "readout");
   if (truth == "switching_drift" || truth == "hidden_driver") {
     return r.verdict == kVerdictUnexplained && !r.findings.empty() &&
