@@ -20,6 +20,130 @@ namespace esg::estimator {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
+namespace {
+
+// Appends a checkpoint's values: a time as (1, unix seconds, nanoseconds), or (-1, 0, 0) for
+// absl::InfinitePast(); a vector's components; a monitor's exported state after its count.
+class CheckpointWriter {
+ public:
+  explicit CheckpointWriter(std::vector<double>& values) : v_(values) {}
+
+  void Put(double x) { v_.push_back(x); }
+  void Time(absl::Time t) {
+    if (t == absl::InfinitePast()) {
+      v_.push_back(-1.0);
+      v_.push_back(0.0);
+      v_.push_back(0.0);
+      return;
+    }
+    const int64_t ns = absl::ToUnixNanos(t);
+    v_.push_back(1.0);
+    v_.push_back(static_cast<double>(ns / 1000000000));
+    v_.push_back(static_cast<double>(ns % 1000000000));
+  }
+  template <typename Vector>
+  void Vec(const Vector& x) {
+    for (int i = 0; i < x.size(); ++i) v_.push_back(x(i));
+  }
+  void Block(const std::vector<double>& state) {
+    v_.push_back(static_cast<double>(state.size()));
+    v_.insert(v_.end(), state.begin(), state.end());
+  }
+
+ private:
+  std::vector<double>& v_;
+};
+
+// Reads a checkpoint's values in order. A read past the end gives 0 and marks the read short; the
+// first value that is not what its field allows is kept as bad_value(), which marks the
+// checkpoint corrupt: an integer field must hold a finite integer in int's range (a plain cast of
+// anything else would be undefined behaviour), a flag 0 or 1, a real a finite number, a time
+// (1, seconds, nanoseconds) or (-1, 0, 0).
+class CheckpointReader {
+ public:
+  explicit CheckpointReader(const std::vector<double>& values) : v_(values) {}
+
+  double Get() {
+    if (pos_ >= v_.size()) {
+      short_read_ = true;
+      return 0.0;
+    }
+    return v_[pos_++];
+  }
+  // Keeps the first bad value, naming the index of the value read last.
+  void MarkBad(double x, const char* what) {
+    if (bad_value_.empty()) {
+      bad_value_ = absl::StrFormat("checkpoint: value %d = %.10g: %s", pos_ - 1, x, what);
+    }
+  }
+  int Int() {
+    const double x = Get();
+    if (!(std::abs(x) <= session_internal::kMaxCount) || x != std::floor(x)) {
+      MarkBad(x, "an integer field is not an integer in [-1e9, 1e9]");
+      return 0;
+    }
+    return static_cast<int>(x);
+  }
+  bool Flag() {
+    const double x = Get();
+    if (x != 0.0 && x != 1.0) MarkBad(x, "a flag field is not 0 or 1 (an integer)");
+    return x == 1.0;
+  }
+  double Real() {
+    const double x = Get();
+    if (!std::isfinite(x)) MarkBad(x, "a real field is not finite");
+    return x;
+  }
+  absl::Time Time() {
+    const double flag = Get();
+    if (flag != -1.0 && flag != 1.0) MarkBad(flag, "a time's flag is not -1 or 1 (an integer)");
+    const double sec = Get();
+    if (!(std::abs(sec) <= 1e12) || sec != std::floor(sec)) {
+      MarkBad(sec, "a time's seconds are not an integer in range");
+    }
+    const double nsec = Get();
+    if (!(std::abs(nsec) < 1e9) || nsec != std::floor(nsec)) {
+      MarkBad(nsec, "a time's nanoseconds are not an integer in (-1e9, 1e9)");
+    }
+    if (flag != 1.0 || !bad_value_.empty()) return absl::InfinitePast();
+    return absl::FromUnixSeconds(static_cast<int64_t>(sec)) +
+           absl::Nanoseconds(static_cast<int64_t>(nsec));
+  }
+  template <typename Vector>
+  void Vec(Vector& x) {
+    for (int i = 0; i < x.size(); ++i) x(i) = Real();
+  }
+  // A block a monitor exports and restores itself (ExportState, RestoreState): its count, then
+  // that many values. Refused (DataLoss) when the count runs past the end ("checkpoint: truncated
+  // (`what`)") or the monitor refuses the values (`prefix` and its message).
+  template <typename Monitor>
+  absl::Status Block(Monitor& monitor, const char* what, const char* prefix) {
+    const int n = Int();
+    if (short_read_ || n < 0 || static_cast<size_t>(n) > v_.size() - pos_) {
+      return absl::DataLossError(absl::StrCat("checkpoint: truncated (", what, ")"));
+    }
+    if (absl::Status st = monitor.RestoreState(absl::MakeConstSpan(v_).subspan(pos_, n));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat(prefix, st.message()));
+    }
+    pos_ += n;
+    return absl::OkStatus();
+  }
+
+  bool short_read() const { return short_read_; }
+  // Every value read, and no more.
+  bool AtEnd() const { return !short_read_ && pos_ == v_.size(); }
+  const std::string& bad_value() const { return bad_value_; }
+
+ private:
+  const std::vector<double>& v_;
+  size_t pos_ = 0;
+  bool short_read_ = false;
+  std::string bad_value_;
+};
+
+}  // namespace
+
 // Checkpoint layout, all doubles; a time is three values (1, unix seconds, nanoseconds), or
 // (-1, 0, 0) for absl::InfinitePast().
 // Version 1 (read only):
@@ -77,415 +201,357 @@ using Eigen::VectorXd;
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
   c.version = 8;
-  std::vector<double>& v = c.values;
-  auto put_time = [&](absl::Time t) {
-    if (t == absl::InfinitePast()) {
-      v.push_back(-1.0);
-      v.push_back(0.0);
-      v.push_back(0.0);
-      return;
-    }
-    const int64_t ns = absl::ToUnixNanos(t);
-    v.push_back(1.0);
-    v.push_back(static_cast<double>(ns / 1000000000));
-    v.push_back(static_cast<double>(ns % 1000000000));
-  };
-  auto put_vec = [&](const auto& x) {
-    for (int i = 0; i < x.size(); ++i) v.push_back(x(i));
-  };
-  v.push_back(initialized_ ? 1 : 0);
-  v.push_back(use_star_tracker_ ? 1 : 0);
-  put_time(last_time_);
-  put_time(last_update_time_);
-  put_time(start_time_);
-  put_time(convergence_mark_time_);
-  v.push_back(working_pair_[0]);
-  v.push_back(working_pair_[1]);
-  v.push_back(reserve_pair_[0]);
-  v.push_back(reserve_pair_[1]);
-  v.push_back(static_cast<double>(state_));
-  v.push_back(steps_without_star_tracker_);
-  v.push_back(consecutive_rejections_);
-  v.push_back(converged_ ? 1 : 0);
-  v.push_back(static_cast<double>(convergence_mark_sigma_.size()));
-  put_vec(convergence_mark_sigma_);
-  v.push_back(static_cast<double>(gyros_.size()));
+  CheckpointWriter w(c.values);
+  w.Put(initialized_ ? 1 : 0);
+  w.Put(use_star_tracker_ ? 1 : 0);
+  w.Time(last_time_);
+  w.Time(last_update_time_);
+  w.Time(start_time_);
+  w.Time(convergence_mark_time_);
+  w.Put(working_pair_[0]);
+  w.Put(working_pair_[1]);
+  w.Put(reserve_pair_[0]);
+  w.Put(reserve_pair_[1]);
+  w.Put(static_cast<double>(state_));
+  w.Put(steps_without_star_tracker_);
+  w.Put(consecutive_rejections_);
+  w.Put(converged_ ? 1 : 0);
+  w.Put(static_cast<double>(convergence_mark_sigma_.size()));
+  w.Vec(convergence_mark_sigma_);
+  w.Put(static_cast<double>(gyros_.size()));
   for (const GyroState& g : gyros_) {
-    v.push_back(g.id);
-    put_vec(g.h_in);
-    put_vec(g.t1);
-    put_vec(g.residual_drift);
-    v.push_back(static_cast<double>(g.theta.size()));  // version 8
-    put_vec(g.theta);
-    put_vec(g.phi_b);
-    v.push_back(g.faulty ? 1 : 0);
-    v.push_back(g.has_reading ? 1 : 0);
-    put_vec(g.h_k_last);
+    w.Put(g.id);
+    w.Vec(g.h_in);
+    w.Vec(g.t1);
+    w.Vec(g.residual_drift);
+    w.Put(static_cast<double>(g.theta.size()));  // version 8
+    w.Vec(g.theta);
+    w.Vec(g.phi_b);
+    w.Put(g.faulty ? 1 : 0);
+    w.Put(g.has_reading ? 1 : 0);
+    w.Vec(g.h_k_last);
   }
-  v.push_back(static_cast<double>(P_.rows()));
+  w.Put(static_cast<double>(P_.rows()));
   for (int i = 0; i < P_.rows(); ++i) {
-    for (int j = 0; j < P_.cols(); ++j) v.push_back(P_(i, j));
+    for (int j = 0; j < P_.cols(); ++j) w.Put(P_(i, j));
   }
   for (int i = 0; i < P0_.rows(); ++i) {
-    for (int j = 0; j < P0_.cols(); ++j) v.push_back(P0_(i, j));
+    for (int j = 0; j < P0_.cols(); ++j) w.Put(P0_(i, j));
   }
   // Version 2.
-  v.push_back(star_tracker_voted_faulty_ ? 1 : 0);
-  v.push_back(star_tracker_accepted_ ? 1 : 0);
-  v.push_back(consecutive_accepted_);
-  const std::vector<double> monitor = consistency_.ExportState();
-  v.push_back(static_cast<double>(monitor.size()));
-  v.insert(v.end(), monitor.begin(), monitor.end());
+  w.Put(star_tracker_voted_faulty_ ? 1 : 0);
+  w.Put(star_tracker_accepted_ ? 1 : 0);
+  w.Put(consecutive_accepted_);
+  w.Block(consistency_.ExportState());
   // Version 3.
-  const std::vector<double> widening = widening_.ExportState();
-  v.push_back(static_cast<double>(widening.size()));
-  v.insert(v.end(), widening.begin(), widening.end());
-  v.push_back(suspect_gyro_);
-  put_time(suspect_time_);
+  w.Block(widening_.ExportState());
+  w.Put(suspect_gyro_);
+  w.Time(suspect_time_);
   // Version 4.
-  v.push_back(latency_s_);
-  put_vec(previous_mean_rate_b_);
-  v.push_back(previous_interval_s_);
-  const std::vector<double> detector = change_detector_.ExportState();
-  v.push_back(static_cast<double>(detector.size()));
-  v.insert(v.end(), detector.begin(), detector.end());
+  w.Put(latency_s_);
+  w.Vec(previous_mean_rate_b_);
+  w.Put(previous_interval_s_);
+  w.Block(change_detector_.ExportState());
   // Version 5.
-  put_vec(st_mount_b_);
-  put_vec(st_mount_var_b_);
-  put_vec(st_mount_noise_var_b_);
-  v.push_back(st_realignments_);
-  const std::vector<double> mount = mount_monitor_.ExportState();
-  v.push_back(static_cast<double>(mount.size()));
-  v.insert(v.end(), mount.begin(), mount.end());
+  w.Vec(st_mount_b_);
+  w.Vec(st_mount_var_b_);
+  w.Vec(st_mount_noise_var_b_);
+  w.Put(st_realignments_);
+  w.Block(mount_monitor_.ExportState());
   // Version 6.
   for (const GyroState& g : gyros_) {
-    v.push_back(static_cast<double>(g.basis.size()));
-    for (const BasisTerm& t : g.basis) v.push_back(t.value);
-    v.push_back(g.u_k_v.has_value() ? 1 : 0);
-    put_vec(g.u_k_v.value_or(Eigen::Vector3d::Zero()));
+    w.Put(static_cast<double>(g.basis.size()));
+    for (const BasisTerm& t : g.basis) w.Put(t.value);
+    w.Put(g.u_k_v.has_value() ? 1 : 0);
+    w.Vec(g.u_k_v.value_or(Eigen::Vector3d::Zero()));
   }
   // Version 7.
   for (const GyroState& g : gyros_) {
-    v.push_back(static_cast<double>(g.exclusion.reason));
-    put_time(g.exclusion.time);
-    v.push_back(g.exclusion.value);
-    v.push_back(g.exclusion.threshold);
-    v.push_back(g.exclusion.source);
+    w.Put(static_cast<double>(g.exclusion.reason));
+    w.Time(g.exclusion.time);
+    w.Put(g.exclusion.value);
+    w.Put(g.exclusion.threshold);
+    w.Put(g.exclusion.source);
   }
-  const std::vector<double> reading = reading_monitor_.ExportState();
-  v.push_back(static_cast<double>(reading.size()));
-  v.insert(v.end(), reading.begin(), reading.end());
-  v.push_back(static_cast<double>(abrupt_.size()));
+  w.Block(reading_monitor_.ExportState());
+  w.Put(static_cast<double>(abrupt_.size()));
   for (const auto& [id, a] : abrupt_) {
-    v.push_back(id);
-    put_time(a.time);
-    v.push_back(static_cast<double>(a.verdict));
-    v.push_back(static_cast<double>(a.source));
-    v.push_back(a.value);
-    v.push_back(a.threshold);
-    v.push_back(a.statistic);
+    w.Put(id);
+    w.Time(a.time);
+    w.Put(static_cast<double>(a.verdict));
+    w.Put(static_cast<double>(a.source));
+    w.Put(a.value);
+    w.Put(a.threshold);
+    w.Put(a.statistic);
   }
-  v.push_back(unverified_gyro_);
-  put_time(unverified_time_);
-  v.push_back(drift_change_gyro_);
-  put_time(drift_change_named_);
+  w.Put(unverified_gyro_);
+  w.Time(unverified_time_);
+  w.Put(drift_change_gyro_);
+  w.Time(drift_change_named_);
   for (const GyroState& g : gyros_) {
-    v.push_back(static_cast<double>(g.motion_in.cols()));
+    w.Put(static_cast<double>(g.motion_in.cols()));
     for (int r = 0; r < g.motion_in.rows(); ++r) {
-      for (int c2 = 0; c2 < g.motion_in.cols(); ++c2) v.push_back(g.motion_in(r, c2));
+      for (int c2 = 0; c2 < g.motion_in.cols(); ++c2) w.Put(g.motion_in(r, c2));
     }
   }
   return c;
 }
 
-absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
-    const SpacecraftConfig& config, const SessionOptions& options,
-    const SessionCheckpoint& checkpoint) {
-  if (checkpoint.version < 1 || checkpoint.version > 8) {
-    return absl::DataLossError(
-        absl::StrCat("checkpoint version ", checkpoint.version, " is unknown"));
+// The steps of FromCheckpoint, one per block of the layout above, in its order; then the checks of
+// what was read as a whole. A value a field does not allow is marked in the reader (reported after
+// the blocks, CheckpointReader::bad_value); what makes the rest unreadable is refused at once.
+struct EstimationSession::CheckpointRestore {
+  // Version 1's session fields, initialized to the convergence record. Refuses a convergence
+  // record longer than 1000.
+  static absl::Status ReadSessionFields(CheckpointReader& r, EstimationSession& s) {
+    s.initialized_ = r.Flag();
+    s.use_star_tracker_ = r.Flag();
+    s.last_time_ = r.Time();
+    s.last_update_time_ = r.Time();
+    s.start_time_ = r.Time();
+    s.convergence_mark_time_ = r.Time();
+    s.working_pair_ = {r.Int(), r.Int()};
+    s.reserve_pair_ = {r.Int(), r.Int()};
+    s.state_ = static_cast<SessionState>(r.Int());
+    s.steps_without_star_tracker_ = r.Int();
+    s.consecutive_rejections_ = r.Int();
+    s.converged_ = r.Flag();
+    const int n_mark = r.Int();
+    if (n_mark < 0 || n_mark > 1000) return absl::DataLossError("checkpoint: bad convergence record");
+    s.convergence_mark_sigma_ = VectorXd::Zero(n_mark);
+    r.Vec(s.convergence_mark_sigma_);
+    return absl::OkStatus();
   }
-  auto created = Create(config, options);
-  if (!created.ok()) return created.status();
-  EstimationSession s = std::move(*created);
-  const std::vector<double>& v = checkpoint.values;
-  size_t pos = 0;
-  bool short_read = false;
-  auto get = [&]() {
-    if (pos >= v.size()) {
-      short_read = true;
-      return 0.0;
+
+  // The running gyros: their count, then per gyro its id, spin axis, tangent basis, residual
+  // drift, fixed coefficients (from version 8 preceded by their count; versions 1-7 hold the 13
+  // of eq. (1), (10)), misalignment, flags and last reading. Refuses a count above kMaxGyros, a
+  // gyro not in the configuration, and a count of fixed coefficients other than the model's.
+  static absl::Status ReadGyros(CheckpointReader& r, const SpacecraftConfig& config, int version,
+                                EstimationSession& s) {
+    const int n_gyros = r.Int();
+    if (n_gyros < 0 || n_gyros > kMaxGyros) return absl::DataLossError("checkpoint: bad gyro count");
+    for (int i = 0; i < n_gyros; ++i) {
+      GyroState g;
+      g.id = r.Int();
+      const GyroConfig* gc = config.FindGyro(g.id);
+      if (gc == nullptr) {
+        return absl::DataLossError(
+            absl::StrCat("checkpoint: gyro ", g.id, " is not in the configuration"));
+      }
+      g.C_b_k_config = gc->C_b_k;
+      g.basis = gc->basis_terms;  // values from version 6 on
+      r.Vec(g.h_in);
+      r.Vec(g.t1);
+      r.Vec(g.residual_drift);
+      const int theta_count = version >= 8 ? r.Int() : 13;
+      if (r.bad_value().empty() && !r.short_read() && theta_count != g.theta.size()) {
+        return absl::DataLossError(absl::StrFormat(
+            "checkpoint: gyro %d holds %d fixed drift coefficients, this build's model has %d "
+            "(a fixed term added or removed since it was written, estimator/model_terms.h)",
+            g.id, theta_count, static_cast<int>(g.theta.size())));
+      }
+      r.Vec(g.theta);
+      r.Vec(g.phi_b);
+      g.faulty = r.Flag();
+      g.has_reading = r.Flag();
+      r.Vec(g.h_k_last);
+      s.gyros_.push_back(std::move(g));
     }
-    return v[pos++];
-  };
-  // The first value that is not what its field allows; it marks the checkpoint corrupt. An
-  // integer field must hold a finite integer in int's range (a plain cast of anything else
-  // would be undefined behaviour), a flag 0 or 1, a real a finite number.
-  std::string bad_value;
-  auto mark_bad = [&](double x, const char* what) {
-    if (bad_value.empty()) {
-      bad_value = absl::StrFormat("checkpoint: value %d = %.10g: %s", pos - 1, x, what);
-    }
-  };
-  auto get_int = [&]() {
-    const double x = get();
-    if (!(std::abs(x) <= session_internal::kMaxCount) || x != std::floor(x)) {
-      mark_bad(x, "an integer field is not an integer in [-1e9, 1e9]");
-      return 0;
-    }
-    return static_cast<int>(x);
-  };
-  auto get_flag = [&]() {
-    const double x = get();
-    if (x != 0.0 && x != 1.0) mark_bad(x, "a flag field is not 0 or 1 (an integer)");
-    return x == 1.0;
-  };
-  auto get_real = [&]() {
-    const double x = get();
-    if (!std::isfinite(x)) mark_bad(x, "a real field is not finite");
-    return x;
-  };
-  auto get_time = [&]() {
-    const double flag = get();
-    if (flag != -1.0 && flag != 1.0) mark_bad(flag, "a time's flag is not -1 or 1 (an integer)");
-    const double sec = get();
-    if (!(std::abs(sec) <= 1e12) || sec != std::floor(sec)) {
-      mark_bad(sec, "a time's seconds are not an integer in range");
-    }
-    const double nsec = get();
-    if (!(std::abs(nsec) < 1e9) || nsec != std::floor(nsec)) {
-      mark_bad(nsec, "a time's nanoseconds are not an integer in (-1e9, 1e9)");
-    }
-    if (flag != 1.0 || !bad_value.empty()) return absl::InfinitePast();
-    return absl::FromUnixSeconds(static_cast<int64_t>(sec)) +
-           absl::Nanoseconds(static_cast<int64_t>(nsec));
-  };
-  auto get_vec = [&](auto& x) {
-    for (int i = 0; i < x.size(); ++i) x(i) = get_real();
-  };
-  s.initialized_ = get_flag();
-  s.use_star_tracker_ = get_flag();
-  s.last_time_ = get_time();
-  s.last_update_time_ = get_time();
-  s.start_time_ = get_time();
-  s.convergence_mark_time_ = get_time();
-  s.working_pair_ = {get_int(), get_int()};
-  s.reserve_pair_ = {get_int(), get_int()};
-  s.state_ = static_cast<SessionState>(get_int());
-  s.steps_without_star_tracker_ = get_int();
-  s.consecutive_rejections_ = get_int();
-  s.converged_ = get_flag();
-  const int n_mark = get_int();
-  if (n_mark < 0 || n_mark > 1000) return absl::DataLossError("checkpoint: bad convergence record");
-  s.convergence_mark_sigma_ = VectorXd::Zero(n_mark);
-  get_vec(s.convergence_mark_sigma_);
-  const int n_gyros = get_int();
-  if (n_gyros < 0 || n_gyros > kMaxGyros) return absl::DataLossError("checkpoint: bad gyro count");
-  for (int i = 0; i < n_gyros; ++i) {
-    GyroState g;
-    g.id = get_int();
-    const GyroConfig* gc = config.FindGyro(g.id);
-    if (gc == nullptr) {
-      return absl::DataLossError(absl::StrCat("checkpoint: gyro ", g.id, " is not in the configuration"));
-    }
-    g.C_b_k_config = gc->C_b_k;
-    g.basis = gc->basis_terms;  // values from version 6 on
-    get_vec(g.h_in);
-    get_vec(g.t1);
-    get_vec(g.residual_drift);
-    // Versions 1-7 hold the 13 coefficients of eq. (1), (10); version 8 says how many.
-    const int theta_count = checkpoint.version >= 8 ? get_int() : 13;
-    if (bad_value.empty() && !short_read && theta_count != g.theta.size()) {
+    return absl::OkStatus();
+  }
+
+  // The state layout (not stored: it follows from the configuration, the model and the gyros
+  // read), then n, P and P0 (n x n each, row by row). Refuses an n other than the layout's size.
+  static absl::Status ReadCovariances(CheckpointReader& r, const SpacecraftConfig& config,
+                                      const ModelSpec& model, EstimationSession& s) {
+    s.layout_ = LayoutFor(config, model, s.gyros_);
+    const int n = r.Int();
+    if (n != s.layout_.size()) {
       return absl::DataLossError(absl::StrFormat(
-          "checkpoint: gyro %d holds %d fixed drift coefficients, this build's model has %d "
-          "(a fixed term added or removed since it was written, estimator/model_terms.h)",
-          g.id, theta_count, static_cast<int>(g.theta.size())));
+          "checkpoint: covariance size %d does not fit the configuration and model %s (%d states)",
+          n, model.Name(), s.layout_.size()));
     }
-    get_vec(g.theta);
-    get_vec(g.phi_b);
-    g.faulty = get_flag();
-    g.has_reading = get_flag();
-    get_vec(g.h_k_last);
-    s.gyros_.push_back(std::move(g));
-  }
-  s.layout_ = LayoutFor(config, options.model, s.gyros_);
-  const int n = get_int();
-  if (n != s.layout_.size()) {
-    return absl::DataLossError(absl::StrFormat(
-        "checkpoint: covariance size %d does not fit the configuration and model %s (%d states)", n,
-        options.model.Name(), s.layout_.size()));
-  }
-  s.P_ = MatrixXd::Zero(n, n);
-  s.P0_ = MatrixXd::Zero(n, n);
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) s.P_(i, j) = get_real();
-  }
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) s.P0_(i, j) = get_real();
-  }
-  if (checkpoint.version >= 2) {
-    s.star_tracker_voted_faulty_ = get_flag();
-    s.star_tracker_accepted_ = get_flag();
-    s.consecutive_accepted_ = get_int();
-    const int n_monitor = get_int();
-    if (short_read || n_monitor < 0 || static_cast<size_t>(n_monitor) > v.size() - pos) {
-      return absl::DataLossError("checkpoint: truncated (consistency monitor)");
+    s.P_ = MatrixXd::Zero(n, n);
+    s.P0_ = MatrixXd::Zero(n, n);
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < n; ++j) s.P_(i, j) = r.Real();
     }
-    if (absl::Status st =
-            s.consistency_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_monitor));
+    for (int i = 0; i < n; ++i) {
+      for (int j = 0; j < n; ++j) s.P0_(i, j) = r.Real();
+    }
+    return absl::OkStatus();
+  }
+
+  // Version 2: the star tracker's anchoring (D19) and the consistency monitor. Refuses a monitor
+  // block that is truncated or that the monitor refuses.
+  static absl::Status ReadAnchorAndConsistency(CheckpointReader& r, EstimationSession& s) {
+    s.star_tracker_voted_faulty_ = r.Flag();
+    s.star_tracker_accepted_ = r.Flag();
+    s.consecutive_accepted_ = r.Int();
+    return r.Block(s.consistency_, "consistency monitor", "checkpoint: consistency monitor: ");
+  }
+
+  // Version 3: the process-noise widening and the isolation's suspect (D24). Refuses a widening
+  // block that is truncated or that the widening refuses.
+  static absl::Status ReadWideningAndSuspect(CheckpointReader& r, EstimationSession& s) {
+    if (absl::Status st = r.Block(s.widening_, "process-noise widening", "checkpoint: ");
         !st.ok()) {
-      return absl::DataLossError(absl::StrCat("checkpoint: consistency monitor: ", st.message()));
+      return st;
     }
-    pos += n_monitor;
+    s.suspect_gyro_ = r.Int();
+    s.suspect_time_ = r.Time();
+    return absl::OkStatus();
   }
-  if (checkpoint.version >= 3) {
-    const int n_widening = get_int();
-    if (short_read || n_widening < 0 || static_cast<size_t>(n_widening) > v.size() - pos) {
-      return absl::DataLossError("checkpoint: truncated (process-noise widening)");
-    }
-    if (absl::Status st =
-            s.widening_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_widening));
-        !st.ok()) {
-      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
-    }
-    pos += n_widening;
-    s.suspect_gyro_ = get_int();
-    s.suspect_time_ = get_time();
+
+  // Version 4: the star-tracker latency, the body-rate extrapolation (a negative interval is a bad
+  // value) and the accumulated star-tracker test (D33). Refuses a test block that is truncated
+  // or that the test refuses.
+  static absl::Status ReadLatencyRateAndDetector(CheckpointReader& r, EstimationSession& s) {
+    s.latency_s_ = r.Real();
+    r.Vec(s.previous_mean_rate_b_);
+    s.previous_interval_s_ = r.Real();
+    if (s.previous_interval_s_ < 0.0) r.MarkBad(s.previous_interval_s_, "an interval is negative");
+    return r.Block(s.change_detector_, "gyro change detector", "checkpoint: ");
   }
-  if (checkpoint.version >= 4) {
-    s.latency_s_ = get_real();
-    get_vec(s.previous_mean_rate_b_);
-    s.previous_interval_s_ = get_real();
-    if (s.previous_interval_s_ < 0.0) mark_bad(s.previous_interval_s_, "an interval is negative");
-    const int n_detector = get_int();
-    if (short_read || n_detector < 0 || static_cast<size_t>(n_detector) > v.size() - pos) {
-      return absl::DataLossError("checkpoint: truncated (gyro change detector)");
-    }
-    if (absl::Status st =
-            s.change_detector_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_detector));
-        !st.ok()) {
-      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
-    }
-    pos += n_detector;
-  }
-  if (checkpoint.version >= 5) {
-    get_vec(s.st_mount_b_);
-    get_vec(s.st_mount_var_b_);
-    get_vec(s.st_mount_noise_var_b_);
+
+  // Version 5: the star-tracker mount correction (D34; a negative variance or count is a bad
+  // value) and the mount-shift test. Refuses a test block that is truncated or that the test
+  // refuses.
+  static absl::Status ReadMount(CheckpointReader& r, EstimationSession& s) {
+    r.Vec(s.st_mount_b_);
+    r.Vec(s.st_mount_var_b_);
+    r.Vec(s.st_mount_noise_var_b_);
     for (const Eigen::Vector3d& var : {s.st_mount_var_b_, s.st_mount_noise_var_b_}) {
-      if (!(var.minCoeff() >= 0.0)) mark_bad(var.minCoeff(), "a variance is negative");
+      if (!(var.minCoeff() >= 0.0)) r.MarkBad(var.minCoeff(), "a variance is negative");
     }
-    s.st_realignments_ = get_int();
-    if (s.st_realignments_ < 0) mark_bad(s.st_realignments_, "a count is negative");
-    const int n_mount = get_int();
-    if (short_read || n_mount < 0 || static_cast<size_t>(n_mount) > v.size() - pos) {
-      return absl::DataLossError("checkpoint: truncated (star-tracker mount)");
-    }
-    if (absl::Status st =
-            s.mount_monitor_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_mount));
-        !st.ok()) {
-      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
-    }
-    pos += n_mount;
+    s.st_realignments_ = r.Int();
+    if (s.st_realignments_ < 0) r.MarkBad(s.st_realignments_, "a count is negative");
+    return r.Block(s.mount_monitor_, "star-tracker mount", "checkpoint: ");
   }
-  if (checkpoint.version >= 6) {
+
+  // Version 6: per gyro its basis terms' values and held suspension voltages. Refuses a count of
+  // terms other than the configuration's.
+  static absl::Status ReadBasisValues(CheckpointReader& r, EstimationSession& s) {
     for (GyroState& g : s.gyros_) {
-      const int b = get_int();
-      if (short_read || b != static_cast<int>(g.basis.size())) {
+      const int b = r.Int();
+      if (r.short_read() || b != static_cast<int>(g.basis.size())) {
         return absl::DataLossError(absl::StrFormat(
             "checkpoint: gyro %d has %d basis terms, the configuration %d", g.id, b,
             g.basis.size()));
       }
-      for (BasisTerm& t : g.basis) t.value = get_real();
-      const bool has_u = get_flag();
+      for (BasisTerm& t : g.basis) t.value = r.Real();
+      const bool has_u = r.Flag();
       Eigen::Vector3d u_k_v;
-      get_vec(u_k_v);
+      r.Vec(u_k_v);
       if (has_u) g.u_k_v = u_k_v;
     }
+    return absl::OkStatus();
   }
-  if (checkpoint.version >= 7) {
+
+  // Version 7: per gyro its exclusion (D94; an unknown reason or track, or a reason that does
+  // not match the excluded flag, is a bad value), the reading-fault monitor, the recent verdicts,
+  // the unverified gyro and the drift change being measured, and per gyro its motion since the
+  // last update. Refuses a monitor block that is truncated or that the monitor refuses, a bad
+  // count of verdicts, and a motion whose columns are not the layout's drivers.
+  static absl::Status ReadReadingFaults(CheckpointReader& r, EstimationSession& s) {
+    ReadExclusions(r, s);
+    if (absl::Status st = r.Block(s.reading_monitor_, "reading-fault monitor", "checkpoint: ");
+        !st.ok()) {
+      return st;
+    }
+    if (absl::Status st = ReadVerdicts(r, s); !st.ok()) return st;
+    s.unverified_gyro_ = r.Int();
+    s.unverified_time_ = r.Time();
+    s.drift_change_gyro_ = r.Int();
+    s.drift_change_named_ = r.Time();
+    if (s.drift_change_gyro_ != 0 && s.Find(s.drift_change_gyro_) == nullptr) {
+      r.MarkBad(s.drift_change_gyro_, "the drift change being measured names a gyro not running");
+    }
+    return ReadMotion(r, s);
+  }
+
+  static void ReadExclusions(CheckpointReader& r, EstimationSession& s) {
     for (GyroState& g : s.gyros_) {
-      const int reason = get_int();
+      const int reason = r.Int();
       if (reason < static_cast<int>(ExclusionReason::kNone) ||
           reason > static_cast<int>(ExclusionReason::kEarlier)) {
-        mark_bad(reason, "an exclusion reason is unknown");
+        r.MarkBad(reason, "an exclusion reason is unknown");
       }
       g.exclusion.reason = static_cast<ExclusionReason>(reason);
-      g.exclusion.time = get_time();
-      g.exclusion.value = get_real();
-      g.exclusion.threshold = get_real();
-      g.exclusion.source = get_int();
+      g.exclusion.time = r.Time();
+      g.exclusion.value = r.Real();
+      g.exclusion.threshold = r.Real();
+      g.exclusion.source = r.Int();
       if (g.exclusion.source < -1 || g.exclusion.source > 1) {
-        mark_bad(g.exclusion.source, "an exclusion's track is not -1, 0 or 1");
+        r.MarkBad(g.exclusion.source, "an exclusion's track is not -1, 0 or 1");
       }
       if ((g.exclusion.reason != ExclusionReason::kNone) != g.faulty) {
-        mark_bad(reason, "an exclusion reason does not match the gyro's excluded flag");
+        r.MarkBad(reason, "an exclusion reason does not match the gyro's excluded flag");
       }
     }
-    const int n_reading = get_int();
-    if (short_read || n_reading < 0 || static_cast<size_t>(n_reading) > v.size() - pos) {
-      return absl::DataLossError("checkpoint: truncated (reading-fault monitor)");
-    }
-    if (absl::Status st =
-            s.reading_monitor_.RestoreState(absl::MakeConstSpan(v).subspan(pos, n_reading));
-        !st.ok()) {
-      return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
-    }
-    pos += n_reading;
-    const int n_abrupt = get_int();
-    if (short_read || n_abrupt < 0 || n_abrupt > kMaxGyros) {
+  }
+
+  // The count of recent verdicts (refused above kMaxGyros), then each: gyro id (a gyro not
+  // running is a bad value), time, verdict, source, value, threshold, statistic.
+  static absl::Status ReadVerdicts(CheckpointReader& r, EstimationSession& s) {
+    const int n_abrupt = r.Int();
+    if (r.short_read() || n_abrupt < 0 || n_abrupt > kMaxGyros) {
       return absl::DataLossError("checkpoint: bad count of reading verdicts");
     }
     for (int k = 0; k < n_abrupt; ++k) {
-      const int id = get_int();
+      const int id = r.Int();
       AbruptRecord a;
-      a.time = get_time();
-      const int verdict = get_int();
-      const int source = get_int();
+      a.time = r.Time();
+      const int verdict = r.Int();
+      const int source = r.Int();
       if (verdict < static_cast<int>(ReadingVerdict::kJump) ||
           verdict > static_cast<int>(ReadingVerdict::kErratic)) {
-        mark_bad(verdict, "a reading verdict is unknown");
+        r.MarkBad(verdict, "a reading verdict is unknown");
       }
-      if (source != 0 && source != 1) mark_bad(source, "a reading source is not 0 or 1");
+      if (source != 0 && source != 1) r.MarkBad(source, "a reading source is not 0 or 1");
       a.verdict = static_cast<ReadingVerdict>(verdict);
       a.source = static_cast<ReadingFaultMonitor::Source>(source);
-      a.value = get_real();
-      a.threshold = get_real();
-      a.statistic = get_real();
-      if (s.Find(id) == nullptr) mark_bad(id, "a reading verdict names a gyro not running");
+      a.value = r.Real();
+      a.threshold = r.Real();
+      a.statistic = r.Real();
+      if (s.Find(id) == nullptr) r.MarkBad(id, "a reading verdict names a gyro not running");
       s.abrupt_[id] = a;
     }
-    s.unverified_gyro_ = get_int();
-    s.unverified_time_ = get_time();
-    s.drift_change_gyro_ = get_int();
-    s.drift_change_named_ = get_time();
-    if (s.drift_change_gyro_ != 0 && s.Find(s.drift_change_gyro_) == nullptr) {
-      mark_bad(s.drift_change_gyro_, "the drift change being measured names a gyro not running");
-    }
+    return absl::OkStatus();
+  }
+
+  // Per gyro the columns of its motion (0, or its spin-axis driver count in the layout: refused
+  // otherwise), then 3 x that many values, row by row.
+  static absl::Status ReadMotion(CheckpointReader& r, EstimationSession& s) {
     for (int i = 0; i < s.gyro_count(); ++i) {
-      const int cols = get_int();
-      if (short_read || (cols != 0 && cols != s.layout_.SpinAxisDriverCount(i))) {
+      const int cols = r.Int();
+      if (r.short_read() || (cols != 0 && cols != s.layout_.SpinAxisDriverCount(i))) {
         return absl::DataLossError(absl::StrFormat(
             "checkpoint: gyro %d's motion has %d drivers, the layout %d", s.gyros_[i].id, cols,
             s.layout_.SpinAxisDriverCount(i)));
       }
       s.gyros_[i].motion_in = MatrixXd::Zero(cols == 0 ? 0 : 3, cols);
-      for (int r = 0; r < s.gyros_[i].motion_in.rows(); ++r) {
-        for (int c2 = 0; c2 < cols; ++c2) s.gyros_[i].motion_in(r, c2) = get_real();
+      for (int r2 = 0; r2 < s.gyros_[i].motion_in.rows(); ++r2) {
+        for (int c2 = 0; c2 < cols; ++c2) s.gyros_[i].motion_in(r2, c2) = r.Real();
       }
     }
-  } else {
+    return absl::OkStatus();
+  }
+
+  // Before version 7: each excluded gyro gets the reason kEarlier at the last update time.
+  static void ExclusionsBeforeVersion7(EstimationSession& s) {
     for (GyroState& g : s.gyros_) {
       if (!g.faulty) continue;
       g.exclusion.reason = ExclusionReason::kEarlier;
       g.exclusion.time = s.last_update_time_;
     }
   }
-  if (short_read || pos != v.size()) {
-    return absl::DataLossError("checkpoint: truncated or oversized");
-  }
-  // An uninitialised session (no valid star-tracker attitude yet) has no state to check.
-  if (s.initialized_) {
+
+  // An initialised session's P and P0 (an uninitialised one, no valid star-tracker attitude yet,
+  // has no state to check): refuses an invalid covariance (CheckCovariance) and a prior variance
+  // that is not a positive normal number.
+  static absl::Status CheckCovariances(const EstimationSession& s) {
     if (absl::Status st = CheckCovariance(s.P_); !st.ok()) {
       return absl::DataLossError(absl::StrCat("checkpoint: ", st.message()));
     }
@@ -504,44 +570,103 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
             s.P0_(i, i)));
       }
     }
+    return absl::OkStatus();
   }
-  // Every index the session dereferences must name a gyro it has: a corrupt checkpoint is
-  // DataLoss, never a crash.
-  if (!bad_value.empty()) return absl::DataLossError(bad_value);
-  const int state_value = static_cast<int>(s.state_);
-  if (state_value < static_cast<int>(SessionState::kNoData) ||
-      state_value > static_cast<int>(SessionState::kFaulted)) {
-    return absl::DataLossError(absl::StrCat("checkpoint: unknown session state ", state_value));
-  }
-  if (checkpoint.version < 7 && s.state_ == SessionState::kFaulted) {
-    // Before version 7 FAULTED also meant "a gyro of the working pair was isolated and the
-    // output moved to a clean pair" (docs/decisions.md D30, D94): with a usable pair left the
-    // session resumes in its progress state, degraded.
-    int usable = 0;
-    for (const GyroState& g : s.gyros_) usable += g.faulty ? 0 : 1;
-    if (usable >= 2) {
-      s.state_ = s.steps_without_star_tracker_ >= 3 ? SessionState::kAutonomous
-                 : s.converged_                     ? SessionState::kConverged
-                                                    : SessionState::kCalibrating;
+
+  // The session state and the step counters: refuses an unknown state and a negative counter.
+  // Before version 7 FAULTED also meant "a gyro of the working pair was isolated and the output
+  // moved to a clean pair" (docs/decisions.md D30, D94): with a usable pair left the session
+  // resumes in its progress state, degraded.
+  static absl::Status CheckStateAndCounters(int version, EstimationSession& s) {
+    const int state_value = static_cast<int>(s.state_);
+    if (state_value < static_cast<int>(SessionState::kNoData) ||
+        state_value > static_cast<int>(SessionState::kFaulted)) {
+      return absl::DataLossError(absl::StrCat("checkpoint: unknown session state ", state_value));
     }
-  }
-  if (s.steps_without_star_tracker_ < 0 || s.consecutive_rejections_ < 0 ||
-      s.consecutive_accepted_ < 0) {
-    return absl::DataLossError("checkpoint: negative step counter");
-  }
-  // An initialised session's pairs name two of its running gyros; an uninitialised one starts on
-  // its pairs at the first star-tracker fix, so they name two configured gyros (a pair naming
-  // gyro 0 indexed a frame's gyros at -1 there).
-  for (const auto& [name, pair] : {std::pair<const char*, std::array<int, 2>>{"working", s.working_pair_},
-                                   {"reserve", s.reserve_pair_}}) {
-    const bool named = s.initialized_
-                           ? s.Find(pair[0]) != nullptr && s.Find(pair[1]) != nullptr
-                           : config.FindGyro(pair[0]) != nullptr && config.FindGyro(pair[1]) != nullptr;
-    if (pair[0] == pair[1] || !named) {
-      return absl::DataLossError(absl::StrCat("checkpoint: ", name, " pair [", pair[0], ",",
-                                              pair[1], "] does not name two of its gyros"));
+    if (version < 7 && s.state_ == SessionState::kFaulted) {
+      int usable = 0;
+      for (const GyroState& g : s.gyros_) usable += g.faulty ? 0 : 1;
+      if (usable >= 2) {
+        s.state_ = s.steps_without_star_tracker_ >= 3 ? SessionState::kAutonomous
+                   : s.converged_                     ? SessionState::kConverged
+                                                      : SessionState::kCalibrating;
+      }
     }
+    if (s.steps_without_star_tracker_ < 0 || s.consecutive_rejections_ < 0 ||
+        s.consecutive_accepted_ < 0) {
+      return absl::DataLossError("checkpoint: negative step counter");
+    }
+    return absl::OkStatus();
   }
+
+  // The working and reserve pairs: an initialised session's pairs name two of its running gyros;
+  // an uninitialised one starts on its pairs at the first star-tracker fix, so they name two
+  // configured gyros (a pair naming gyro 0 indexed a frame's gyros at -1 there). Refused
+  // otherwise.
+  static absl::Status CheckPairs(const SpacecraftConfig& config, const EstimationSession& s) {
+    for (const auto& [name, pair] :
+         {std::pair<const char*, std::array<int, 2>>{"working", s.working_pair_},
+          {"reserve", s.reserve_pair_}}) {
+      const bool named =
+          s.initialized_
+              ? s.Find(pair[0]) != nullptr && s.Find(pair[1]) != nullptr
+              : config.FindGyro(pair[0]) != nullptr && config.FindGyro(pair[1]) != nullptr;
+      if (pair[0] == pair[1] || !named) {
+        return absl::DataLossError(absl::StrCat("checkpoint: ", name, " pair [", pair[0], ",",
+                                                pair[1], "] does not name two of its gyros"));
+      }
+    }
+    return absl::OkStatus();
+  }
+};
+
+absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
+    const SpacecraftConfig& config, const SessionOptions& options,
+    const SessionCheckpoint& checkpoint) {
+  using Steps = CheckpointRestore;
+  const int version = checkpoint.version;
+  if (version < 1 || version > 8) {
+    return absl::DataLossError(absl::StrCat("checkpoint version ", version, " is unknown"));
+  }
+  auto created = Create(config, options);
+  if (!created.ok()) return created.status();
+  EstimationSession s = std::move(*created);
+  // The blocks in the layout's order, each read by its version on; a session restored from an
+  // earlier version keeps what Create set for the later blocks (the layout comment above).
+  CheckpointReader r(checkpoint.values);
+  if (absl::Status st = Steps::ReadSessionFields(r, s); !st.ok()) return st;
+  if (absl::Status st = Steps::ReadGyros(r, config, version, s); !st.ok()) return st;
+  if (absl::Status st = Steps::ReadCovariances(r, config, options.model, s); !st.ok()) return st;
+  if (version >= 2) {
+    if (absl::Status st = Steps::ReadAnchorAndConsistency(r, s); !st.ok()) return st;
+  }
+  if (version >= 3) {
+    if (absl::Status st = Steps::ReadWideningAndSuspect(r, s); !st.ok()) return st;
+  }
+  if (version >= 4) {
+    if (absl::Status st = Steps::ReadLatencyRateAndDetector(r, s); !st.ok()) return st;
+  }
+  if (version >= 5) {
+    if (absl::Status st = Steps::ReadMount(r, s); !st.ok()) return st;
+  }
+  if (version >= 6) {
+    if (absl::Status st = Steps::ReadBasisValues(r, s); !st.ok()) return st;
+  }
+  if (version >= 7) {
+    if (absl::Status st = Steps::ReadReadingFaults(r, s); !st.ok()) return st;
+  } else {
+    Steps::ExclusionsBeforeVersion7(s);
+  }
+  if (!r.AtEnd()) return absl::DataLossError("checkpoint: truncated or oversized");
+
+  // What was read, as a whole. Every index the session dereferences must name a gyro it has: a
+  // corrupt checkpoint is DataLoss, never a crash.
+  if (s.initialized_) {
+    if (absl::Status st = Steps::CheckCovariances(s); !st.ok()) return st;
+  }
+  if (!r.bad_value().empty()) return absl::DataLossError(r.bad_value());
+  if (absl::Status st = Steps::CheckStateAndCounters(version, s); !st.ok()) return st;
+  if (absl::Status st = Steps::CheckPairs(config, s); !st.ok()) return st;
   return s;
 }
 
