@@ -508,7 +508,7 @@ absl::StatusOr<Scenario> ParseTop(const json& root) {
       {"description", "gyros", "starTracker", "readoutNoiseArcsec", "randomWalkDegHSqrtH",
        "profile", "profileSeed", "inclinationDeg", "orbitPeriodMin", "raanDeg", "argLatitudeDeg",
        "sunDirection", "spinPeriodMin", "segmentHours", "slewMin", "inertialQuaternion",
-       "mixedOrbitalHours", "mixedCalibrationHours", "mixedInertialHours"}));
+       "mixedOrbitalHours", "mixedCalibrationHours", "mixedInertialHours", "earthShadow"}));
   Scenario s;
   estimator::ProfileOptions& po = s.profile_options;
   for (auto it = root.begin(); it != root.end(); ++it) {
@@ -560,6 +560,8 @@ absl::StatusOr<Scenario> ParseTop(const json& root) {
     } else if (k == "argLatitudeDeg") {
       ASSIGN_OR_RETURN(double deg, Number(x, k, -360.0, 360.0));
       po.orbital.arg_latitude0 = estimator::DegToRad(deg);
+    } else if (k == "earthShadow") {
+      ASSIGN_OR_RETURN(s.earth_shadow, Bool(x, k));
     } else if (k == "sunDirection") {
       ASSIGN_OR_RETURN(Vector3d sun, NonZeroVec3(x, k));
       po.calibration.sun_in = sun.normalized();
@@ -687,6 +689,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
   st.outlier_burst = from.outlier_burst;
   st.frozen = from.frozen;
   st.misalignment_jump = from.misalignment_jump;
+  if (scenario.earth_shadow) spec->earth_shadow = scenario.profile_options.orbital;
   return absl::OkStatus();
 }
 

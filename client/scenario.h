@@ -62,6 +62,10 @@ struct Scenario {
   estimator::StarTrackerTruth star_tracker;  // noise unset = configuration's
   std::optional<double> readout_noise;       // all gyros [rad]
   std::optional<double> random_walk;         // all gyros [rad/s/sqrt(s)]
+  // "earthShadow": the sun-face drifts see the Earth's shadow from the circular orbit of the
+  // scenario's orbital elements (profile_options.orbital: inclinationDeg, orbitPeriodMin, raanDeg,
+  // argLatitudeDeg, the orbital profile's), which `esg simulate --orbit-out` writes.
+  bool earth_shadow = false;
 };
 
 // Parses scenario JSON (docs/scenario.md). InvalidArgument "scenario: ..." for malformed JSON,

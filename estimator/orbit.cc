@@ -38,6 +38,21 @@ double HermiteErrorBoundKm(const OrbitState& a, const OrbitState& b) {
   return bound;
 }
 
+OrbitState CircularOrbitState(double inclination_rad, double raan_rad, double period_s,
+                              double arg_latitude0_rad, absl::Time epoch, double t_s) {
+  const double n = 2.0 * M_PI / period_s;
+  const double r_km = std::cbrt(kEarthGmKm3S2 / (n * n));
+  const Eigen::Vector3d x_p(std::cos(raan_rad), std::sin(raan_rad), 0.0);
+  const Eigen::Vector3d y_p(-std::sin(raan_rad) * std::cos(inclination_rad),
+                            std::cos(raan_rad) * std::cos(inclination_rad), std::sin(inclination_rad));
+  const double u = arg_latitude0_rad + n * t_s;
+  OrbitState s;
+  s.time = epoch + absl::Seconds(t_s);
+  s.r_in_km = r_km * (std::cos(u) * x_p + std::sin(u) * y_p);
+  s.v_in_km_s = r_km * n * (-std::sin(u) * x_p + std::cos(u) * y_p);
+  return s;
+}
+
 double KeplerPeriodS(const OrbitState& state) {
   const double inverse_a = 2.0 / state.r_in_km.norm() - state.v_in_km_s.squaredNorm() / kEarthGmKm3S2;
   if (!(inverse_a > 0.0)) return std::numeric_limits<double>::infinity();

@@ -69,6 +69,14 @@ double HermiteErrorBoundKm(const OrbitState& a, const OrbitState& b);
 // The Earth's gravitational parameter GM [km^3/s^2] (WGS 84).
 inline constexpr double kEarthGmKm3S2 = 398600.4418;
 
+// The state t_s seconds after `epoch` on a circular orbit (the simulator's, docs/scenario.md):
+// radius from the period by Kepler's third law, r = (GM (period / 2 pi)^2)^(1/3); position
+// r (cos u x_p + sin u y_p) with x_p = Rz(raan) x (towards the ascending node) and
+// y_p = Rz(raan) Rx(inclination) y, u = arg_latitude0 + 2 pi t_s / period; the velocity its
+// derivative. The orbit the orbital attitude profile points at (attitude_profile.h Orbital:
+// its body z axis is -r).
+OrbitState CircularOrbitState(double inclination_rad, double raan_rad, double period_s,
+                              double arg_latitude0_rad, absl::Time epoch, double t_s);
 // The period of the Keplerian ellipse through `state` [s]: 2 pi sqrt(a^3 / GM), the semi-major
 // axis a from the vis-viva equation 1 / a = 2 / |r| - |v|^2 / GM. Infinite when the state is not
 // bound (|v|^2 >= 2 GM / |r|).

@@ -8,6 +8,8 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "estimator/eclipse.h"
+#include "estimator/orbit.h"
 #include "estimator/random.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator_truth.h"
@@ -207,30 +209,49 @@ struct GyroState {
 
 // The sun's direction in inertial axes at nodes kSunNodeSpacingS apart from the simulation start,
 // interpolated linearly between them and normalised (SunFaceDrift).
+// With an Earth-shadow orbit, the sun's position [km] at the same nodes gives the fraction of
+// its disc seen from the orbit, which scales the direction: the illumination max(0, n . s_b) is
+// linear in it.
 class SunNodes {
  public:
-  static absl::StatusOr<SunNodes> Make(absl::Time start, double duration_s) {
+  static absl::StatusOr<SunNodes> Make(absl::Time start, double duration_s,
+                                       const std::optional<OrbitalOptions>& earth_shadow) {
     SunNodes nodes;
+    nodes.start_ = start;
+    nodes.earth_shadow_ = earth_shadow;
     const int64_t n = static_cast<int64_t>(std::ceil(duration_s / kSunNodeSpacingS)) + 2;
     nodes.s_in_.reserve(n);
     for (int64_t i = 0; i < n; ++i) {
-      ASSIGN_OR_RETURN(Vector3d s_in,
-                       SunDirection_in(start + absl::Seconds(kSunNodeSpacingS * i)));
+      const absl::Time t = start + absl::Seconds(kSunNodeSpacingS * i);
+      ASSIGN_OR_RETURN(Vector3d s_in, SunDirection_in(t));
       nodes.s_in_.push_back(s_in);
+      if (earth_shadow) {
+        ASSIGN_OR_RETURN(Vector3d sun_km, SunPosition_in_km(t));
+        nodes.sun_in_km_.push_back(sun_km);
+      }
     }
     return nodes;
   }
 
-  // [1], inertial axes, at t seconds since the start (0 <= t <= duration).
+  // [1], inertial axes, at t seconds since the start (0 <= t <= duration): the unit vector to the
+  // sun, times the fraction of the sun's disc seen from the Earth-shadow orbit when there is one.
   Vector3d At(double t) const {
     const double x = std::clamp(t / kSunNodeSpacingS, 0.0, static_cast<double>(s_in_.size() - 2));
     const size_t i = static_cast<size_t>(x);
     const double f = x - static_cast<double>(i);
-    return ((1.0 - f) * s_in_[i] + f * s_in_[i + 1]).normalized();
+    const Vector3d s_in = ((1.0 - f) * s_in_[i] + f * s_in_[i + 1]).normalized();
+    if (!earth_shadow_) return s_in;
+    const OrbitalOptions& o = *earth_shadow_;
+    const OrbitState state =
+        CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0, start_, t);
+    return SunlitFraction(state.r_in_km, (1.0 - f) * sun_in_km_[i] + f * sun_in_km_[i + 1]) * s_in;
   }
 
  private:
+  absl::Time start_;
+  std::optional<OrbitalOptions> earth_shadow_;
   std::vector<Vector3d> s_in_;
+  std::vector<Vector3d> sun_in_km_;
 };
 
 bool InAnyWindow(const std::vector<std::pair<double, double>>& windows, double t) {
@@ -402,6 +423,23 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
     return absl::InvalidArgumentError(
         absl::StrFormat("integration_rate_hz: %g Hz over %g s gives more than %g steps",
                         spec.integration_rate_hz, spec.duration, kMaxSteps));
+  }
+  if (spec.earth_shadow) {
+    const OrbitalOptions& o = *spec.earth_shadow;
+    if (!std::isfinite(o.inclination) || !std::isfinite(o.raan) ||
+        !std::isfinite(o.arg_latitude0) || !std::isfinite(o.period) || !(o.period > 0.0)) {
+      return absl::InvalidArgumentError(
+          "earth_shadow: the orbit's period must be positive and its angles finite");
+    }
+    const double r_km = CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0,
+                                           spec.start, 0.0)
+                            .r_in_km.norm();
+    if (r_km < kEarthEquatorialRadiusKm + 100.0) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "earth_shadow: a period of %.1f min gives an orbit %.0f km from the Earth's centre, "
+          "less than 100 km above its equator",
+          o.period / 60.0, r_km));
+    }
   }
   for (int id = 1; id <= kMaxGyros; ++id) {
     const GyroTruth& g = spec.gyros[id - 1];
@@ -606,7 +644,7 @@ absl::Status SetUpGyroEffects(const SimulationSpec& spec, const Matrix3d& C_in_b
   }
   if (truth.sun_face_drift) {
     if (!sun_nodes) {
-      ASSIGN_OR_RETURN(SunNodes nodes, SunNodes::Make(spec.start, spec.duration));
+      ASSIGN_OR_RETURN(SunNodes nodes, SunNodes::Make(spec.start, spec.duration, spec.earth_shadow));
       sun_nodes = std::move(nodes);
     }
     g.has_sun = true;

@@ -155,7 +155,9 @@ struct TransientDrift {
 // length h, u is taken at the step midpoint and y stepped exactly for it:
 // y(t + h) = u + (y(t) - u) exp(-h / tau). The sun's direction is computed every 600 s from the
 // simulated UTC and interpolated linearly between (normalised; the sun moves 0.007 deg in 600 s,
-// the interpolation is off by under 1e-8 rad).
+// the interpolation is off by under 1e-8 rad). With SimulationSpec::earth_shadow the illumination
+// is u(t) times the fraction of the sun's disc seen from that orbit (estimator/eclipse.h: 0 in
+// the Earth's umbra).
 struct SunFaceDrift {
   Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes, at y = 1 [rad/s]
   int face_axis = 0;                // body axis of the face's outward normal: 0 x, 1 y, 2 z
@@ -254,6 +256,10 @@ struct SimulationSpec {
   double telemetry_step = 60.0;  // [s]
   double integration_rate_hz = 8.0;
   uint64_t seed = 1;
+  // The circular orbit the spacecraft flies (attitude_profile.h OrbitalOptions, orbit.h
+  // CircularOrbitState, epoch `start`) when the sun-face drifts see the Earth's shadow from it;
+  // nullopt: the sun always shines.
+  std::optional<OrbitalOptions> earth_shadow;
 };
 
 struct GyroTruthSample {

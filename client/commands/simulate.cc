@@ -24,9 +24,12 @@
 #include "client/progress.h"
 #include "client/scenario.h"
 #include "estimator/model_terms.h"
+#include "estimator/orbit.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
+#include "formats/ccsds_kvn.h"
+#include "formats/oem.h"
 #include "formats/recording_csv.h"
 #include "nlohmann/json.hpp"
 #include "proto/convert.h"
@@ -48,8 +51,33 @@ struct SimulateOptions {
   double telemetry_step = 60.0;
   double integration_rate_hz = 8.0;
   std::string truth_path;
+  std::string orbit_out_path;
   OutputFormat format = OutputFormat::kTable;
 };
+
+// The circular orbit of `orbital` (the scenario's orbital elements, orbit.h CircularOrbitState)
+// as a CCSDS OEM of `spacecraft_id` (formats/oem.h): states every 60 s from a minute before
+// `start` to a minute after `start + duration_s`, so that it covers the whole recording.
+absl::StatusOr<std::string> OrbitOem(const estimator::OrbitalOptions& orbital,
+                                     const std::string& spacecraft_id, absl::Time start,
+                                     double duration_s) {
+  std::vector<estimator::OrbitState> states;
+  for (double t = -60.0; t <= duration_s + 60.0 + 1e-9; t += 60.0) {
+    states.push_back(estimator::CircularOrbitState(orbital.inclination, orbital.raan,
+                                                   orbital.period, orbital.arg_latitude0, start, t));
+  }
+  storage::OemHeader header;
+  header.object_name = spacecraft_id;
+  header.object_id = spacecraft_id;
+  header.creation_date = start;
+  header.comments = {absl::StrFormat(
+      "circular orbit simulated by esg simulate: inclination %.4g deg, period %.6g min, raan "
+      "%.4g deg, argument of latitude %.4g deg at %s",
+      estimator::RadToDeg(orbital.inclination), orbital.period / 60.0,
+      estimator::RadToDeg(orbital.raan), estimator::RadToDeg(orbital.arg_latitude0),
+      storage::FormatCcsdsTime(start))};
+  return storage::WriteOem(header, states);
+}
 
 std::string Num(double x) { return absl::StrFormat("%.17g", x); }
 
@@ -371,6 +399,17 @@ int RunSimulate(const SimulateOptions& o) {
       return 1;
     }
   }
+  if (!o.orbit_out_path.empty()) {
+    absl::StatusOr<std::string> oem = OrbitOem(scenario.profile_options.orbital,
+                                               spec.config.spacecraft_id, start, spec.duration);
+    if (!oem.ok()) return Fail("--orbit-out", oem.status());
+    std::ofstream out(o.orbit_out_path, std::ios::binary);
+    out << *oem;
+    if (!out.good()) {
+      std::cerr << "esg simulate: --orbit-out " << o.orbit_out_path << ": cannot write\n";
+      return 1;
+    }
+  }
 
   std::vector<int> running;
   for (int id = 1; id <= kMaxGyros; ++id) {
@@ -425,6 +464,10 @@ void RegisterSimulate(CLI::App& app, GlobalOptions& global, int* exit_code) {
       ->capture_default_str();
   sub->add_option("--truth", options->truth_path,
                   "also write the truth CSV (true q_in_b, h_in per gyro, true coefficients)");
+  sub->add_option("--orbit-out", options->orbit_out_path,
+                  "also write the orbit flown as a CCSDS OEM (the scenario's inclinationDeg, "
+                  "orbitPeriodMin, raanDeg, argLatitudeDeg; docs/scenario.md), covering the "
+                  "recording, for esg diagnose --orbit");
   AddFormatOption(sub, &options->format);
   sub->callback([options, exit_code]() { *exit_code = RunSimulate(*options); });
 }
