@@ -90,6 +90,68 @@ TEST(SessionBasis, FreeCaseFixedTermsCalibrateToMinusTheDisplacementC1) {
               worst_ratio);
 }
 
+// A warm-up, dw_k = A exp(-t / tau) from the start (simulator.h TransientDrift), in gyro 1 of the
+// paper's flight (C2 part of the displacements 0, their C1 as three free case-fixed terms per gyro
+// as above): three free exponential_decay terms of gyro 1 with the true tau (basis_term.h; epoch
+// the first frame) calibrate to A, each within 3 sigma, sigma well below the 0.2 deg/h prior. A
+// session stopped half-way, checkpointed and resumed (session.h FromCheckpoint) ends with the same
+// terms, bit for bit: the checkpoint carries the terms' values, the configuration the rest.
+TEST(SessionBasis, FreeExponentialDecayTermsCalibrateAWarmUpAndResumeFromACheckpoint) {
+  SimulationSpec spec = PaperFlight(7, 8.0);
+  for (GyroTruth& g : spec.gyros) g.c20_per_m = 0.0;
+  const Eigen::Vector3d A = DegPerHourToRadPerSec(1.0) * Eigen::Vector3d(0.1, -0.08, 0.06);
+  const double tau_s = 3.0 * 3600.0;
+  TransientDrift warm_up;
+  warm_up.amplitude_k_rad_s = A;
+  warm_up.time_constant_s = tau_s;
+  spec.gyros[0].transient_drift = warm_up;
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const std::vector<TelemetryFrame>& frames = sim->recording.frames;
+  SpacecraftConfig config = testing::PaperConfig(/*estimate_c=*/false);
+  const double prior = DegPerHourToRadPerSec(0.1);
+  for (GyroConfig& g : config.gyros) g.basis_terms = CaseFixedTerms(Eigen::Vector3d::Zero(), prior);
+  for (int m = 1; m <= 3; ++m) {
+    BasisTerm t;
+    t.kind = BasisKind::kExponentialDecay;
+    t.axis = m;
+    t.time_constant = tau_s;
+    t.epoch = frames.front().time;
+    t.sigma = DegPerHourToRadPerSec(0.2);
+    config.gyros[0].basis_terms.push_back(t);
+  }
+  ASSERT_THAT(ValidateConfig(config), IsOk());
+  const SessionOptions options = Options("10+11");
+  auto whole = EstimationSession::Create(config, options);
+  auto first = EstimationSession::Create(config, options);
+  ASSERT_THAT(whole, IsOk());
+  ASSERT_THAT(first, IsOk());
+  const size_t half = frames.size() / 2;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    ASSERT_THAT(whole->AddFrame(frames[i]), IsOk());
+    if (i < half) ASSERT_THAT(first->AddFrame(frames[i]), IsOk());
+  }
+  auto resumed = EstimationSession::FromCheckpoint(config, options, first->ExportCheckpoint());
+  ASSERT_THAT(resumed, IsOk());
+  for (size_t i = half; i < frames.size(); ++i) ASSERT_THAT(resumed->AddFrame(frames[i]), IsOk());
+  const GyroEstimate e = whole->Gyros().front();
+  const GyroEstimate r = resumed->Gyros().front();
+  ASSERT_EQ(e.id, 1);
+  ASSERT_EQ(e.basis_terms.size(), 6u);
+  ASSERT_EQ(r.basis_terms.size(), 6u);
+  for (int m = 0; m < 3; ++m) {
+    const double value = e.basis_terms[3 + m].value, sigma = e.basis_sigma[3 + m];
+    EXPECT_EQ(e.basis_terms[3 + m].kind, BasisKind::kExponentialDecay);
+    EXPECT_NEAR(value, A(m), 3.0 * sigma)
+        << "axis " << m + 1 << ": " << RadPerSecToDegPerHour(value) << " +- "
+        << RadPerSecToDegPerHour(sigma) << " deg/h, truth " << RadPerSecToDegPerHour(A(m));
+    EXPECT_GT(sigma, 0.0);
+    EXPECT_LT(sigma, 0.3 * DegPerHourToRadPerSec(0.2)) << "axis " << m + 1;
+    EXPECT_EQ(r.basis_terms[3 + m].value, value) << "axis " << m + 1;
+    EXPECT_EQ(r.basis_sigma[3 + m], sigma) << "axis " << m + 1;
+  }
+}
+
 // A held term propagates like the eq. (10) term it equals: C1 = c held, against C1 = 0 and three
 // held degree-0 terms of values -c ((h h^T - I) c and -c differ only along h, which does not move
 // the spin axis). Same attitude output at every frame to 1e-12.
