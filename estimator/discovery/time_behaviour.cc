@@ -387,6 +387,12 @@ namespace {
 // kTauRefine times the two points half a spacing either side of the best so far.
 constexpr int kTauCoarse = 7;
 constexpr int kTauRefine = 2;
+// While the warm-up is significant at the time constants searched (as the step's onset search
+// goes on only then), the two time constants that bracket each end of the interval are bisected
+// in ln tau down to kTauResolution apart, at most kTauIntervalRuns runs: linear interpolation
+// between points further apart puts the end inside a convex profile, the interval too narrow.
+constexpr double kTauResolution = 0.02;  // in ln tau: 2% of tau
+constexpr int kTauIntervalRuns = 10;
 constexpr int kWarmUpTerms = 3;  // one exponential_decay term per case axis
 
 // The model with the warm-up's three terms (time constant tau_h, epoch t0) appended to the gyro's
@@ -466,6 +472,33 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
     const double centre = best_log;
     if (centre - half >= log_min - 1e-12) RETURN_IF_ERROR(evaluate(centre - half));
     if (centre + half <= log_max + 1e-12) RETURN_IF_ERROR(evaluate(centre + half));
+  }
+  // The interval's ends resolved (kTauResolution) while the warm-up is significant.
+  if (Profile(*ctx.model_run).value - best_value > EvidenceThreshold(opt.alpha, 1)) {
+    for (int extra = 0; extra < kTauIntervalRuns; ++extra) {
+      const std::vector<std::pair<double, double>> points(value.begin(), value.end());
+      size_t top = 0;
+      for (size_t j = 0; j < points.size(); ++j) {
+        if (points[j].second < points[top].second) top = j;
+      }
+      const double level = points[top].second + kOnsetIntervalDrop;
+      // The widest bracket of an end: the last point inside the level and the first beyond it.
+      double widest = 0.0, middle = 0.0;
+      size_t j = top;
+      while (j > 0 && points[j - 1].second <= level) --j;
+      if (j > 0 && points[j].first - points[j - 1].first > widest) {
+        widest = points[j].first - points[j - 1].first;
+        middle = 0.5 * (points[j].first + points[j - 1].first);
+      }
+      j = top;
+      while (j + 1 < points.size() && points[j + 1].second <= level) ++j;
+      if (j + 1 < points.size() && points[j + 1].first - points[j].first > widest) {
+        widest = points[j + 1].first - points[j].first;
+        middle = 0.5 * (points[j].first + points[j + 1].first);
+      }
+      if (!(widest > kTauResolution)) break;
+      RETURN_IF_ERROR(evaluate(middle));
+    }
   }
 
   // The evidence's prior points: tau integrated over a prior uniform in ln tau across the span
