@@ -53,12 +53,17 @@ struct EstimationCore::FilterCommit {
 // The filter's group commit on PostgreSQL, as ingest's (CommitterLoop) but without a thread of
 // its own: the first waiting job's thread commits every job queued at that moment in one
 // transaction, each job in its own savepoint (Storage::CommitFilterEffectsGroup), and hands each
-// job its own result; jobs that arrive meanwhile wait and form the next group. A job's result is
+// job its own result; jobs that arrive meanwhile wait and form the next group. The first job
+// of a group waits up to filter_commit_window for others to join it (D109). A job's result is
 // thus what committing it alone would give: OK only once its effects are durable, its lost lease
 // or refused record its own failure, never the others'.
 absl::StatusOr<std::vector<int64_t>> EstimationCore::CommitFilterJob(
     const storage::FilterEffects& effects) {
-  if (!group_filter_commits_) return storage_->CommitFilterEffects(effects);
+  if (!group_filter_commits_) {
+    filter_transactions_.fetch_add(1, std::memory_order_relaxed);
+    filter_jobs_committed_.fetch_add(1, std::memory_order_relaxed);
+    return storage_->CommitFilterEffects(effects);
+  }
   FilterCommit mine;
   mine.core = this;
   mine.effects = &effects;
@@ -73,15 +78,31 @@ absl::StatusOr<std::vector<int64_t>> EstimationCore::CommitFilterJob(
           &mine));
       continue;
     }
+    // The group's leader: the jobs that finish within filter_commit_window of this one join
+    // its transaction (docs/decisions.md D109), up to every thread of the pool waiting; the
+    // window only delays the estimates' publication, never an ack (acks follow ingest's commit).
+    filter_committing_ = true;
+    if (options_.filter_commit_window > absl::ZeroDuration()) {
+      filter_commit_mu_.AwaitWithTimeout(
+          absl::Condition(
+              +[](EstimationCore* c) ABSL_EXCLUSIVE_LOCKS_REQUIRED(c->filter_commit_mu_) {
+                return static_cast<int>(c->filter_commit_queue_.size()) >=
+                       c->options_.filter_commit_group;
+              },
+              this),
+          options_.filter_commit_window);
+    }
     std::vector<FilterCommit*> group;
     group.swap(filter_commit_queue_);
-    filter_committing_ = true;
     filter_commit_mu_.Unlock();
     std::vector<const storage::FilterEffects*> jobs;
     jobs.reserve(group.size());
     for (const FilterCommit* c : group) jobs.push_back(c->effects);
     std::vector<absl::StatusOr<std::vector<int64_t>>> results =
         storage_->CommitFilterEffectsGroup(jobs);
+    filter_transactions_.fetch_add(1, std::memory_order_relaxed);
+    filter_jobs_committed_.fetch_add(static_cast<int64_t>(group.size()),
+                                     std::memory_order_relaxed);
     filter_commit_mu_.Lock();
     for (size_t j = 0; j < group.size(); ++j) {
       group[j]->result = std::move(results[j]);

@@ -48,6 +48,7 @@
 #ifndef ESG_SERVER_ESTIMATION_CORE_H_
 #define ESG_SERVER_ESTIMATION_CORE_H_
 
+#include <atomic>
 #include <cstdint>
 #include <deque>
 #include <functional>
@@ -106,6 +107,11 @@ struct CoreOptions {
   // The filter commits on a connection of its own (storage.h "Connections"), so ingest's commits
   // never wait for a group (docs/deploy.md "Capacity", BM_FleetAtOneHertz). SQLite: unused.
   int filter_commit_group = 0;
+  // With the group commit: how long the first job of a group waits for others to finish and join
+  // its transaction (or until filter_commit_group jobs wait). Delays the publication of the
+  // estimates by at most this much, never an acknowledgement, which follows ingest's own commit
+  // (docs/decisions.md D109). Zero: a group is what waits when the previous commit ends.
+  absl::Duration filter_commit_window = absl::Milliseconds(25);
   // Occurrences of the same (reason, subsystem) within this measurement-time window collapse into
   // one alert (repeat_count); an alert without a new occurrence for this long is cleared.
   absl::Duration alert_collapse_window = absl::Minutes(30);
@@ -330,6 +336,16 @@ class EstimationCore {
   ServiceMetrics& metrics() { return metrics_; }
   const CoreOptions& options() const { return options_; }
   storage::Storage& storage() { return *storage_; }
+  // The filter's commits so far: transactions begun for filter jobs (a group counts once, each
+  // job alone once) and the jobs they carried; for tests and the benchmark (D109).
+  struct FilterCommitCounts {
+    int64_t transactions = 0;
+    int64_t jobs = 0;
+  };
+  FilterCommitCounts filter_commit_counts() const {
+    return {filter_transactions_.load(std::memory_order_relaxed),
+            filter_jobs_committed_.load(std::memory_order_relaxed)};
+  }
 
  private:
   struct Setup;
@@ -587,6 +603,8 @@ class EstimationCore {
   absl::Mutex filter_commit_mu_;
   std::vector<FilterCommit*> filter_commit_queue_ ABSL_GUARDED_BY(filter_commit_mu_);
   bool filter_committing_ ABSL_GUARDED_BY(filter_commit_mu_) = false;
+  std::atomic<int64_t> filter_transactions_{0};
+  std::atomic<int64_t> filter_jobs_committed_{0};
   absl::Mutex apply_slots_mu_;
   int apply_slots_free_ ABSL_GUARDED_BY(apply_slots_mu_) = 0;
 
