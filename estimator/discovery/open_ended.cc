@@ -11,6 +11,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/discovery/deviation_filter.h"
+#include "estimator/spacecraft_config.h"
 #include "estimator/statistics.h"
 #include "estimator/utc_time.h"
 
@@ -307,6 +308,16 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
       const std::vector<double>* sun = SunValues(options, series.gyro, c);
       c.rms = sun != nullptr ? TabulatedRms(series, *sun) : ScalarRms(series, c);
       if (!(c.rms > kAbsentRms)) return;
+      // A term whose prior (drift_sigma at the regressor's RMS) exceeds the configuration's
+      // limit on a term's sigma at its kind's reference size (spacecraft_config.h
+      // kConfigLimits.basis_sigma) could only matter at a size the recording never reaches (a
+      // body rate of arcseconds per second in an inertial hold), and a model holding it is
+      // refused: absent too. Sun columns are held as reading corrections, not basis terms.
+      if (sun == nullptr && options.drift_sigma / c.rms * BasisValueToJson(c.term.kind) *
+                                    BasisReferenceSize(c.term.kind) >
+                                kConfigLimits.basis_sigma.max) {
+        return;
+      }
     }
     out.groups.back().columns.push_back(static_cast<int>(out.columns.size()));
     out.columns.push_back(std::move(c));
@@ -392,7 +403,7 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
     add_column(col);
   }
   if (const SunRegressors* sun = FindSunRegressors(options.sun, series.gyro)) {
-    for (int face = 0; face < kSunFaces; ++face) {
+    for (int face = 0; face < static_cast<int>(sun->values.size()); ++face) {
       // A face held in the model already (sun_terms.h HeldSunFaces) has no regressors.
       if (face >= static_cast<int>(sun->values.size()) || sun->values[face].empty()) continue;
       for (int lag = 0; lag < static_cast<int>(sun->lag_hours.size()); ++lag) {
