@@ -275,7 +275,7 @@ Eigen::Vector3d CorrectReadout(const GyroConfig& gc, const Eigen::Vector3d& h_me
 double InitialResidualDriftSigma(const SessionOptions& options);
 
 // Everything needed to resume exactly (bit for bit) where a session stopped. ExportCheckpoint
-// writes version 7; FromCheckpoint reads versions 1 to 7.
+// writes version 8; FromCheckpoint reads versions 1 to 8.
 struct SessionCheckpoint {
   int version = 1;
   std::vector<double> values;  // opaque, versioned layout written by ExportCheckpoint
@@ -361,14 +361,15 @@ class EstimationSession {
                                                        const AttitudeProfile* planned,
                                                        absl::Time planned_start) const;
 
-  // Version 7: everything a session restored from it needs to continue bit for bit as this one
+  // Version 8: everything a session restored from it needs to continue bit for bit as this one
   // would (same reports, state and covariance), at any point, including before initialisation.
   // The values and their order (stored by the server) are listed in session_checkpoint.cc.
   SessionCheckpoint ExportCheckpoint() const;
-  // Reads versions 1 to 7 (version 1 lacks the consistency monitor and the star-tracker
-  // anchoring flags, version 2 the process-noise widening, version 3 the estimated latency,
-  // version 4 the star-tracker mount, version 5 the basis terms' values and the suspension
-  // voltages, version 6 the exclusion reasons and the reading-fault monitor:
+  // Reads versions 1 to 8 (each lacks what the next added: version 1 lacks the consistency
+  // monitor and the star-tracker anchoring flags, version 2 the process-noise widening, version 3
+  // the estimated latency, version 4 the star-tracker mount, version 5 the basis terms' values
+  // and the suspension voltages, version 6 the exclusion reasons and the reading-fault monitor,
+  // version 7 the count of fixed drift coefficients before each gyro's theta:
   // session_checkpoint.cc; a session from versions 1-6 that was FAULTED with a usable pair left
   // resumes in its progress state, degraded). DataLoss, with a message starting "checkpoint", if
   // the version is unknown, the values are truncated or oversized, a field holds a value it
@@ -443,6 +444,10 @@ class EstimationSession {
 
   // session_update.cc
   absl::Status MeasurementUpdate(const TelemetryFrame& frame, StepReport& report);
+  // The steps of MeasurementUpdate and the decisions of IsolateWithThreePairs, each a function
+  // stating what it reads and writes (defined in session_update.cc, nested like the two above).
+  struct UpdateSteps;
+  struct IsolationSteps;
   // Fault isolation with the three pairs of the running gyros `ids` (all with a reading) and the
   // star tracker when `st_present` (q_st, covariance S_st in inertial axes): DecideIsolation of
   // fault_detection.h, applied (exclusion, output pair, events). Clears st_available when the star

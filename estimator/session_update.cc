@@ -37,11 +37,464 @@ using session_internal::kImmediateIsolationStrength;
 using session_internal::kNoiseFloor;
 using session_internal::Count;
 
+namespace {
+
+// Whether every healthy pair the eq. (12) test formed agrees with the star tracker within its
+// allowed angle (the working pair always, the reserve pair when formed): the condition for a
+// filter reset to re-anchor to the star tracker (D19).
+bool StarTrackerAgreesWithPairs(const MismatchTest& mt) {
+  return mt.available[kMismatch13] && mt.angle[kMismatch13] < mt.allowed[kMismatch13] &&
+         (!mt.available[kMismatch23] || mt.angle[kMismatch23] < mt.allowed[kMismatch23]);
+}
+
+// The measurements of one update (eq. (13)): z_st (2 per healthy gyro, the first n_st rows) then
+// z_avt (one per healthy pair, the last n_avt rows, avt_pairs naming the pair's gyro ids), their
+// rows of H over the whole state, the noise covariance R = G diag(noise) G^T and the innovation
+// covariance S = H P H^T + R.
+struct Measurements {
+  int n_st = 0;
+  int n_avt = 0;
+  MatrixXd H;
+  VectorXd z;
+  MatrixXd R;
+  MatrixXd S;
+  std::vector<std::pair<int, int>> avt_pairs;
+};
+
+// eq. (14) on each z_avt row: a row within k_d sigma is kept (appended to `keep`) when
+// `apply_avt`, one beyond it is reported (GYRO_DATA_REJECTED) and never kept. Reads the rows and
+// S; writes `keep` and the report's events.
+void TestAutonomousRows(const TelemetryFrame& frame, const Measurements& mz, double kd,
+                        bool apply_avt, StepReport& report, std::vector<int>& keep) {
+  for (int k = 0; k < mz.n_avt; ++k) {
+    const int i = mz.n_st + k;
+    const double sigma = std::sqrt(mz.S(i, i));
+    // eq. (14) on z_avt.
+    if (std::abs(mz.z(i)) <= kd * sigma) {
+      if (apply_avt) keep.push_back(i);
+    } else {
+      report.events.push_back(Event{
+          Event::Kind::kGyroDataRejected, frame.time,
+          absl::StrFormat("gyros %d,%d", mz.avt_pairs[k].first, mz.avt_pairs[k].second),
+          std::abs(mz.z(i)), kd * sigma, "1",
+          absl::StrFormat("eq. (14): autonomous measurement z_avt = %.3g exceeds k_d sigma_z = %.3g",
+                          mz.z(i), kd * sigma)});
+    }
+  }
+}
+
+// The rows `keep` of the measurement (H, z) and of its noise covariance R, in that order: what
+// the Joseph update applies.
+struct KeptRows {
+  MatrixXd H;
+  VectorXd z;
+  MatrixXd R;
+};
+
+KeptRows SelectRows(const Measurements& mz, const std::vector<int>& keep, int n) {
+  const int mk = static_cast<int>(keep.size());
+  KeptRows k;
+  k.H.resize(mk, n);
+  k.R.resize(mk, mk);
+  k.z.resize(mk);
+  for (int i = 0; i < mk; ++i) {
+    k.H.row(i) = mz.H.row(keep[i]);
+    k.z(i) = mz.z(keep[i]);
+    for (int j = 0; j < mk; ++j) k.R(i, j) = mz.R(keep[i], keep[j]);
+  }
+  return k;
+}
+
+// The attitude error a star-tracker update estimated (StepReport::attitude_error_b_arcsec) and its
+// 1-sigma, about the body axes [arcsec]. Reads the output pair's attitude before and after the
+// update, the Jacobian J of the attitude before it (dtheta_in against the state errors, the error
+// convention of conventions.h) and P before and after.
+struct AttitudeError {
+  Vector3d error_b_arcsec;
+  Vector3d sigma_b_arcsec;
+};
+
+AttitudeError AttitudeErrorOfUpdate(const Quaterniond& q_in_b_before,
+                                    const Quaterniond& q_in_b_after, const MatrixXd& J_before,
+                                    const MatrixXd& P_before, const MatrixXd& P_after) {
+  // q_in_b(after) = q_in_b(before) (x) Exp(dtheta_b): the correction about the body axes, which
+  // is also C_b_in Log(q_in_b(after) (x) q_in_b(before)^-1) (a rotation leaves its own axis
+  // fixed, so C_b_in before or after the update gives the same vector).
+  const Vector3d dtheta_b = LogQuaternion(q_in_b_before.conjugate() * q_in_b_after);
+  // Its covariance: J (P_before - P_after) J^T, the attitude covariance the update removed
+  // (sigma_before^2 - sigma_after^2 per axis, with J held at the prior state so that the readout
+  // noise term of the two attitude covariances cancels exactly), rotated to the body axes.
+  const Matrix3d C_b_in = q_in_b_before.toRotationMatrix().transpose();
+  const Matrix3d removed_b =
+      C_b_in * (J_before * (P_before - P_after) * J_before.transpose()) * C_b_in.transpose();
+  AttitudeError e;
+  for (int k = 0; k < 3; ++k) {
+    e.error_b_arcsec(k) = RadToArcsec(dtheta_b(k));
+    e.sigma_b_arcsec(k) = RadToArcsec(std::sqrt(std::max(removed_b(k, k), 0.0)));
+  }
+  return e;
+}
+
+}  // namespace
+
+// The steps of MeasurementUpdate, in its order; each says what it reads and what it writes.
+struct EstimationSession::UpdateSteps {
+  // Whether gyro g's measurements enter this step: running, not excluded, not the withheld gyro,
+  // with a reading in the frame.
+  static bool HasReading(const TelemetryFrame& frame, int withheld_gyro, const GyroState& g) {
+    return !g.faulty && g.id != withheld_gyro && frame.gyros[g.id - 1].has_value();
+  }
+
+  // The ids of the running, not excluded gyros with a reading (gyros_ order).
+  static std::vector<int> FreshIds(const EstimationSession& s, const TelemetryFrame& frame,
+                                   int withheld_gyro) {
+    std::vector<int> fresh;
+    for (const GyroState& g : s.gyros_) {
+      if (HasReading(frame, withheld_gyro, g)) fresh.push_back(g.id);
+    }
+    return fresh;
+  }
+
+  // The indices into gyros_ of the gyros whose measurements enter the update (HasReading).
+  static std::vector<int> HealthyIndices(const EstimationSession& s, const TelemetryFrame& frame,
+                                         int withheld_gyro) {
+    std::vector<int> healthy;  // gyro indices
+    for (int i = 0; i < s.gyro_count(); ++i) {
+      if (HasReading(frame, withheld_gyro, s.gyros_[i])) healthy.push_back(i);
+    }
+    return healthy;
+  }
+
+  // eq. (12) with what is available: the working pair and the reserve pair (when formed, their
+  // gyros having a reading) and the star tracker q_st (when `st_available`, covariance S_st).
+  // Reads the pairs, the gyros' readings and P (through PairQuaternion); writes nothing.
+  static MismatchTest MismatchOfPairs(const EstimationSession& s, const TelemetryFrame& frame,
+                                      int withheld_gyro, bool st_available,
+                                      const Quaterniond& q_st, const Matrix3d& S_st) {
+    const double kd = s.config_.filter.innovation_kd;
+    Matrix3d S1, S2;
+    std::optional<Quaterniond> q1, q2;
+    const GyroState* a1 = s.Find(s.working_pair_[0]);
+    const GyroState* b1 = s.Find(s.working_pair_[1]);
+    const GyroState* a2 = s.Find(s.reserve_pair_[0]);
+    const GyroState* b2 = s.Find(s.reserve_pair_[1]);
+    auto has_reading = [&](const GyroState& g) { return HasReading(frame, withheld_gyro, g); };
+    const bool reserve_usable = s.reserve_pair_ != s.working_pair_ && a2 && b2 &&
+                                has_reading(*a2) && has_reading(*b2);
+    if (a1 && b1 && has_reading(*a1) && has_reading(*b1)) {
+      q1 = s.PairQuaternion(a1->id, b1->id, a1->h_k_last, b1->h_k_last, &S1);
+    }
+    if (reserve_usable) q2 = s.PairQuaternion(a2->id, b2->id, a2->h_k_last, b2->h_k_last, &S2);
+    // Allowed angle of each mismatch (eq. (12)): the configured one, or k_d times the mismatch's
+    // sigma along its direction. The two pairs share the reference gyro; the sum of their
+    // covariances bounds that of their mismatch.
+    auto allowed = [&](const std::optional<Quaterniond>& a, const Quaterniond* b, const Matrix3d& S) {
+      if (!a.has_value() || b == nullptr) return 0.0;
+      return AllowedMismatchAngle(*a, *b, S, kd, s.config_.filter.fault_threshold);
+    };
+    const std::array<double, 3> allowed_angles = {
+        allowed(q1, q2 ? &*q2 : nullptr, S1 + S2), allowed(q1, st_available ? &q_st : nullptr, S1 + S_st),
+        allowed(q2, st_available ? &q_st : nullptr, S2 + S_st)};
+    return TestMismatch(q1 ? &*q1 : nullptr, q2 ? &*q2 : nullptr, st_available ? &q_st : nullptr,
+                        allowed_angles);
+  }
+
+  // D94: a pair eq. (12) names faulty whose gyro shows no abrupt change of its readings (no
+  // recent verdict in `abrupt`) disagrees by a drift the model lacks: nothing is excluded, a
+  // FAULT_AMBIGUOUS event is raised and the gyro is withheld at this step when WithholdUnverified
+  // says so (writes withheld_gyro); the decision becomes "no fault, output unchanged".
+  static void DowngradeWithoutAbruptChange(EstimationSession& s, const TelemetryFrame& frame,
+                                           const MismatchTest& mt, FaultDecision& decision,
+                                           StepReport& report, int& withheld_gyro) {
+    const int m = decision.evidence;
+    report.events.push_back(Event{
+        Event::Kind::kFaultAmbiguous, frame.time,
+        absl::StrFormat("gyro %d", decision.excluded_gyro), RadToArcsec(mt.angle[m]),
+        RadToArcsec(mt.allowed[m]), "arcsec",
+        absl::StrFormat("eq. (12) names the %s pair, but the readings of gyro %d show no "
+                        "abrupt change (a jump, frozen or erratic readings, a drift change "
+                        "beyond %.3g deg/h): a drift the model lacks, not a fault; gyro %d is "
+                        "not excluded (its measurements are withheld at the first step it is "
+                        "named, applied from the second)",
+                        decision.faulty == Subsystem::kWorkingPair ? "working" : "reserve",
+                        decision.excluded_gyro,
+                        RadPerSecToDegPerHour(s.config_.filter.drift_change_limit),
+                        decision.excluded_gyro)});
+    if (s.WithholdUnverified(decision.excluded_gyro, frame.time)) {
+      withheld_gyro = decision.excluded_gyro;
+    }
+    decision.faulty = Subsystem::kNone;
+    decision.excluded_gyro = 0;
+    decision.output_pair = s.working_pair_;
+    decision.output_switched = false;
+  }
+
+  // The decision of eq. (12) (DecideFault of fault_detection.h) applied and reported: a gyro with
+  // a recent abrupt verdict is excluded with it (or, without one, downgraded as above); the
+  // working pair's, reserve pair's or star tracker's fault event; the output moves to the
+  // decision's pair; a star tracker named faulty is rejected at this step (clears st_available)
+  // and counted voted faulty in the streak.
+  static void ApplyFaultDecision(EstimationSession& s, const TelemetryFrame& frame,
+                                 const MismatchTest& mt, StepReport& report, bool& st_available,
+                                 int& withheld_gyro) {
+    // The decision is fault_detection's (DecideFault); here it is applied and reported.
+    FaultDecision decision = DecideFault(mt, s.working_pair_, s.reserve_pair_);
+    // D94: a pair named faulty whose gyro shows no abrupt change of its readings disagrees by a
+    // drift the model lacks: nothing is excluded, the gyro is withheld at this step.
+    std::optional<AbruptRecord> abrupt;
+    if (decision.excluded_gyro != 0) abrupt = s.RecentAbrupt(decision.excluded_gyro, frame.time);
+    if (decision.excluded_gyro != 0 && !abrupt.has_value()) {
+      DowngradeWithoutAbruptChange(s, frame, mt, decision, report, withheld_gyro);
+    }
+    auto event = [&](Event::Kind kind, std::string subsystem, std::string message) {
+      const int m = decision.evidence;
+      Event ev{kind, frame.time, std::move(subsystem), RadToArcsec(mt.angle[m]),
+               RadToArcsec(mt.allowed[m]), "arcsec", std::move(message)};
+      report.events.push_back(std::move(ev));
+    };
+    if (decision.excluded_gyro != 0) s.MarkExcluded(decision.excluded_gyro, ExclusionFrom(*abrupt));
+    switch (decision.faulty) {
+      case Subsystem::kNone:
+        break;
+      case Subsystem::kWorkingPair:
+        event(Event::Kind::kWorkingPairFault,
+              absl::StrFormat("working_pair[%d,%d]", s.working_pair_[0], s.working_pair_[1]),
+              absl::StrFormat("eq. (12): working pair disagrees with reserve pair and star tracker; "
+                              "output switched to reserve pair [%d,%d], gyro %d excluded: %s",
+                              decision.output_pair[0], decision.output_pair[1],
+                              decision.excluded_gyro,
+                              ExclusionFrom(*abrupt).Describe()));
+        break;
+      case Subsystem::kReservePair:
+        event(Event::Kind::kReservePairFault,
+              absl::StrFormat("reserve_pair[%d,%d]", s.reserve_pair_[0], s.reserve_pair_[1]),
+              absl::StrFormat("eq. (12): reserve pair disagrees with working pair and star tracker; "
+                              "gyro %d excluded: %s",
+                              decision.excluded_gyro, ExclusionFrom(*abrupt).Describe()));
+        break;
+      case Subsystem::kStarTracker:
+        event(Event::Kind::kStarTrackerFault, "star_tracker",
+              "eq. (12): star tracker disagrees with both gyro pairs; its measurements are rejected");
+        break;
+    }
+    s.working_pair_ = decision.output_pair;
+    if (decision.reject_star_tracker) {
+      st_available = false;
+      s.star_tracker_voted_faulty_ = true;
+    }
+  }
+
+  // The measurements of eq. (13) for the gyros `healthy` (indices): z_st, the star tracker's
+  // differences against each (when n_st > 0, with the star tracker's own attitude C_in_b_st as
+  // the body attitude of the rebuild), then z_avt, one per healthy pair (n_avt); noise sources
+  // the star-tracker rotation (3, body axes) and the readout (2 per gyro, case tangent plane).
+  // Reads the gyros, the layout and P; writes nothing.
+  static Measurements BuildMeasurements(const EstimationSession& s, const std::vector<int>& healthy,
+                                        int n_st, int n_avt, const Matrix3d& C_in_b_st, int n) {
+    const double sigma_r = std::max(s.config_.readout_noise, kNoiseFloor);
+    const int m = n_st + n_avt;
+    const int n_noise = 3 + 2 * static_cast<int>(s.gyros_.size());
+    Measurements mz;
+    mz.n_st = n_st;
+    mz.n_avt = n_avt;
+    mz.H = MatrixXd::Zero(m, n);
+    mz.z = VectorXd::Zero(m);
+    MatrixXd G = MatrixXd::Zero(m, n_noise);
+    VectorXd noise_var(n_noise);
+    noise_var.head<3>() = s.StarTrackerVarianceB();
+    noise_var.tail(n_noise - 3).setConstant(sigma_r * sigma_r);
+    auto noise_col = [](int gyro_index) { return 3 + 2 * gyro_index; };
+
+    int row = 0;
+    for (int i : healthy) {
+      if (n_st == 0) break;
+      const StarTrackerRows rows = s.GyroStarTrackerRows(i, C_in_b_st);
+      const StarTrackerDifference& d = rows.d;
+      mz.z.segment<2>(row) = d.z;
+      mz.H.middleRows<2>(row) = rows.H;
+      G.block<2, 3>(row, 0) = d.G_st;
+      G.block<2, 2>(row, noise_col(i)) = d.G_readout;
+      row += 2;
+    }
+    for (size_t ka = 0; ka < healthy.size() && n_avt > 0; ++ka) {
+      for (size_t kb = ka + 1; kb < healthy.size(); ++kb) {
+        const int ia = healthy[ka], ib = healthy[kb];
+        const GyroState& a = s.gyros_[ia];
+        const GyroState& b = s.gyros_[ib];
+        const AutonomousDifference d = MakeAutonomousDifference(
+            a.h_in, a.T(), a.C_b_k(), a.h_k_last, b.h_in, b.T(), b.C_b_k(), b.h_k_last);
+        mz.z(row) = d.z;
+        mz.H.block<1, 2>(row, s.layout_.SpinAxis(ia)) = d.H_h_a;
+        mz.H.block<1, 2>(row, s.layout_.SpinAxis(ib)) = d.H_h_b;
+        if (s.layout_.HasPhi(ia)) mz.H.block<1, 3>(row, s.layout_.Phi(ia)) = d.H_phi_a;
+        if (s.layout_.HasPhi(ib)) mz.H.block<1, 3>(row, s.layout_.Phi(ib)) = d.H_phi_b;
+        G.block<1, 2>(row, noise_col(ia)) = d.G_readout_a;
+        G.block<1, 2>(row, noise_col(ib)) = d.G_readout_b;
+        mz.avt_pairs.emplace_back(a.id, b.id);
+        ++row;
+      }
+    }
+    mz.R = G * noise_var.asDiagonal() * G.transpose();
+    mz.S = mz.H * s.P_ * mz.H.transpose() + mz.R;
+    return mz;
+  }
+
+  // eq. (14) on z2..z5 (the star-tracker rows, when there are any) and on each z_avt. Writes the
+  // report's innovations and their sigmas, the star-tracker test's ratio, NIS and log det S,
+  // star_tracker_used (all rows pass), and the rejection events; returns the rows the update
+  // applies: the star-tracker rows when they pass, else the passing z_avt rows.
+  static std::vector<int> TestInnovations(const EstimationSession& s, const TelemetryFrame& frame,
+                                          const Measurements& mz, const std::vector<int>& healthy,
+                                          StepReport& report) {
+    const double kd = s.config_.filter.innovation_kd;
+    const int n_st = mz.n_st, n_avt = mz.n_avt;
+    std::vector<int> keep;
+    report.autonomous_innovation = mz.z.tail(n_avt);
+    report.autonomous_innovation_sigma = mz.S.diagonal().tail(n_avt).cwiseSqrt();
+    if (n_st > 0) {
+      report.star_tracker_innovation = mz.z.head(n_st);
+      report.star_tracker_innovation_sigma = mz.S.diagonal().head(n_st).cwiseSqrt();
+      // eq. (14) on z2..z5.
+      const InnovationTest t = TestInnovation(mz.z.head(n_st), mz.S.topLeftCorner(n_st, n_st), kd);
+      report.star_tracker_test_ratio = t.worst_ratio;
+      report.star_tracker_nis = t.nis;
+      report.star_tracker_log_det_s = t.log_det_s;
+      if (t.passed) {
+        for (int i = 0; i < n_st; ++i) keep.push_back(i);
+        report.star_tracker_used = true;
+      } else {
+        const GyroState* g = &s.gyros_[healthy[t.worst_index / 2]];
+        report.events.push_back(Event{
+            Event::Kind::kStarTrackerInnovation, frame.time, "star_tracker",
+            RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold), "arcsec",
+            absl::StrFormat("eq. (14): star-tracker difference for gyro %d exceeds k_d sigma_z "
+                            "(|z| = %.1f arcsec > %.1f); star-tracker data rejected, output autonomous",
+                            g->id, RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold))});
+      }
+    }
+    // With the star-tracker differences applied, z_avt adds nothing: the angle between the rebuilt
+    // axes h_et equals the measured theta_S, so z_avt = -(h_et_a - h_a).h_b - h_a.(h_et_b - h_b) to
+    // first order, a linear function of z_st with the same noise, and the joint S would be singular.
+    // It is tested by eq. (14) every step and applied only when the output runs autonomous.
+    TestAutonomousRows(frame, mz, kd, !report.star_tracker_used, report, keep);
+    return keep;
+  }
+
+  // The star tracker's step counters after the innovation test: a used star tracker clears the
+  // streaks of steps without it and of rejections and its voted-faulty flag, counts accepted
+  // steps (kResetAfterRejections in a row: accepted since the filter started) and notes the
+  // mount monitor's applied step; otherwise counts the steps without it and, when it was
+  // present (`st_present`), the rejections.
+  static void CountStarTrackerStep(EstimationSession& s, bool used, bool st_present) {
+    if (used) {
+      s.mount_monitor_.NoteApplied(s.body_rate_b_);
+      s.steps_without_star_tracker_ = 0;
+      s.consecutive_rejections_ = 0;
+      s.star_tracker_voted_faulty_ = false;
+      Count(s.consecutive_accepted_);
+      if (s.consecutive_accepted_ >= kResetAfterRejections) s.star_tracker_accepted_ = true;
+    } else {
+      s.consecutive_accepted_ = 0;
+      Count(s.steps_without_star_tracker_);
+      if (st_present) Count(s.consecutive_rejections_);
+    }
+  }
+
+  // Whether a filter reset may re-anchor to the star tracker. Until the star tracker has been
+  // accepted for kResetAfterRejections steps in a row since the filter started, the pairs'
+  // inertial axes rest on the star-tracker sample of initialisation: their disagreement with the
+  // star tracker may be that sample's fault (an outlier), and the guard does not apply (D19).
+  // The filter is widened before it is reset (noise_widening.h, D20): while the widening can
+  // still grow, the rejections are left to it. Reads the flags and the widening.
+  static bool ResetAllowed(const EstimationSession& s, bool st_agrees_with_pairs) {
+    const bool widening_exhausted =
+        !s.options_.adaptive_noise || s.widening_.at_max();
+    return !s.star_tracker_accepted_ ||
+           (widening_exhausted && !s.star_tracker_voted_faulty_ && st_agrees_with_pairs);
+  }
+
+  // docs/decisions.md D19: never re-anchor to a star tracker that eq. (12) voted faulty in this
+  // streak, nor to one the healthy pairs disagree with; the filter keeps running on the gyros.
+  // Writes the STAR_TRACKER_FAULT event saying why the reset is withheld.
+  static void ReportResetWithheld(const EstimationSession& s, const TelemetryFrame& frame,
+                                  bool st_agrees_with_pairs, StepReport& report) {
+    report.events.push_back(Event{
+        Event::Kind::kStarTrackerFault, frame.time, "star_tracker",
+        static_cast<double>(s.consecutive_rejections_), static_cast<double>(kResetAfterRejections),
+        "steps",
+        absl::StrFormat("star-tracker data rejected for %d steps in a row; filter reset withheld: %s",
+                        s.consecutive_rejections_,
+                        s.star_tracker_voted_faulty_
+                            ? "eq. (12) voted the star tracker faulty in this streak"
+                        : !st_agrees_with_pairs
+                            ? "the healthy gyro pairs disagree with the star tracker (eq. (12))"
+                            : "the process noise is widened first (FILTER_WIDENED)")});
+  }
+
+  // The star tracker has been present and rejected for kResetAfterRejections steps: a star
+  // tracker that is wrong that long flags itself invalid, a filter whose model misses part of
+  // the drift does not, so the filter is taken to be wrong (docs/decisions.md); the star
+  // tracker is adopted only when eq. (12) did not vote it faulty in this streak and the healthy
+  // pairs agree with it at this step (D19). Writes the spin axes and their covariance
+  // (SpinAxesFromStarTracker), clears the change detector and the reading-fault monitor, raises
+  // FILTER_RESET and clears the streaks.
+  static void ResetToStarTracker(EstimationSession& s, const TelemetryFrame& frame,
+                                 const Matrix3d& C_in_b_st, StepReport& report) {
+    s.SpinAxesFromStarTracker(C_in_b_st);
+    s.change_detector_.Clear();
+    s.reading_monitor_.Clear();
+    report.events.push_back(Event{
+        Event::Kind::kFilterReset, frame.time, "filter",
+        static_cast<double>(s.consecutive_rejections_), static_cast<double>(kResetAfterRejections),
+        "steps",
+        absl::StrFormat("star-tracker data rejected for %d steps in a row: spin axes "
+                        "re-initialised from the star tracker (is the drift model missing a term?)",
+                        s.consecutive_rejections_)});
+    s.consecutive_rejections_ = 0;
+    s.steps_without_star_tracker_ = 0;
+  }
+
+  // The Joseph update (ekf.h) with the rows `keep`, the feedback of its estimate into the nominal
+  // state (ApplyCorrection), and, for a star-tracker update with the output pair formed before
+  // and after it, the attitude error it estimated (report.attitude_error_b_arcsec and its
+  // sigma). Writes P and the nominal state.
+  static absl::Status Update(EstimationSession& s, const Measurements& mz,
+                             const std::vector<int>& keep, int n, StepReport& report) {
+    const KeptRows k = SelectRows(mz, keep, n);
+    // The output attitude before the update, for the attitude error estimate of a star-tracker
+    // update (StepReport::attitude_error_b_arcsec): its Jacobian J (dtheta_in against the state
+    // errors, with the error convention of conventions.h) and P before the update.
+    const std::array<int, 2> output_pair = s.AttitudePair();
+    const GyroState* out_a = s.Find(output_pair[0]);
+    const GyroState* out_b = s.Find(output_pair[1]);
+    std::optional<Quaterniond> q_in_b_before;
+    MatrixXd J_before, P_before;
+    if (report.star_tracker_used && out_a != nullptr && out_b != nullptr && out_a->has_reading &&
+        out_b->has_reading) {
+      Matrix3d S_in_before;
+      q_in_b_before = s.PairQuaternion(out_a->id, out_b->id, out_a->h_k_last, out_b->h_k_last,
+                                       &S_in_before, &J_before);
+      P_before = s.P_;
+    }
+    VectorXd dx;
+    if (absl::Status st = JosephUpdate(k.H, k.z, k.R, s.P_, dx); !st.ok()) return st;
+    s.ApplyCorrection(dx);
+    if (!q_in_b_before.has_value()) return absl::OkStatus();
+    const std::optional<Quaterniond> q_in_b_after =
+        s.PairQuaternion(out_a->id, out_b->id, out_a->h_k_last, out_b->h_k_last, nullptr);
+    if (!q_in_b_after.has_value()) return absl::OkStatus();
+    const AttitudeError e =
+        AttitudeErrorOfUpdate(*q_in_b_before, *q_in_b_after, J_before, P_before, s.P_);
+    report.attitude_error_b_arcsec = e.error_b_arcsec;
+    report.attitude_error_sigma_b_arcsec = e.sigma_b_arcsec;
+    return absl::OkStatus();
+  }
+};
+
 absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, StepReport& report) {
+  using Steps = UpdateSteps;
   report.measurement_step = true;
   const int n = state_size();
-  const double kd = config_.filter.innovation_kd;
-  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
 
   const auto& st = frame.star_tracker;
   const bool st_present = use_star_tracker_ && st.has_value() && st->valid;
@@ -54,9 +507,6 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   // A gyro the three-pair isolation suspects while the model is known inconsistent is not
   // excluded but its measurements are withheld at this step (D21).
   int withheld_gyro = 0;
-  auto has_reading = [&](const GyroState& g) {
-    return !g.faulty && g.id != withheld_gyro && frame.gyros[g.id - 1].has_value();
-  };
 
   // The corrected star-tracker attitude and its covariance in inertial axes (eq. (12) and the
   // star-tracker rebuild of eq. (13)).
@@ -65,112 +515,23 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   // Whether every healthy pair formed at this step agrees with the star tracker within its
   // eq. (12) allowed angle: the condition for a filter reset to re-anchor to it.
   bool st_agrees_with_pairs = false;
-  std::vector<int> fresh;  // ids of the running, not excluded gyros with a reading
-  for (const GyroState& g : gyros_) {
-    if (has_reading(g)) fresh.push_back(g.id);
-  }
+  const std::vector<int> fresh = Steps::FreshIds(*this, frame, withheld_gyro);
   // The tracks of every gyro's readings (D94): the only evidence that lets a gyro be excluded.
   // Not in diagnosis runs (detect_drift_change off), which exclude nothing.
   if (options_.detect_drift_change) TrackReadings(frame, st_available, q_st, fresh);
+  // The fault test: with three gyros reading, the three-pair isolation; otherwise (or when a
+  // pair cannot be formed) eq. (12) with the working pair, the reserve pair and the star tracker.
   bool isolated = false;
   if (fresh.size() == 3) {
     isolated = IsolateWithThreePairs(frame, {fresh[0], fresh[1], fresh[2]}, st_available, q_st,
                                      S_st, report, st_available, st_agrees_with_pairs,
                                      withheld_gyro);
   }
-  // eq. (12) with what is available: working pair, reserve pair, star tracker.
   if (!isolated) {
-    Matrix3d S1, S2;
-    std::optional<Quaterniond> q1, q2;
-    const GyroState* a1 = Find(working_pair_[0]);
-    const GyroState* b1 = Find(working_pair_[1]);
-    const GyroState* a2 = Find(reserve_pair_[0]);
-    const GyroState* b2 = Find(reserve_pair_[1]);
-    const bool reserve_usable = reserve_pair_ != working_pair_ && a2 && b2 && has_reading(*a2) &&
-                                has_reading(*b2);
-    if (a1 && b1 && has_reading(*a1) && has_reading(*b1)) {
-      q1 = PairQuaternion(a1->id, b1->id, a1->h_k_last, b1->h_k_last, &S1);
-    }
-    if (reserve_usable) q2 = PairQuaternion(a2->id, b2->id, a2->h_k_last, b2->h_k_last, &S2);
-    // Allowed angle of each mismatch (eq. (12)): the configured one, or k_d times the mismatch's
-    // sigma along its direction. The two pairs share the reference gyro; the sum of their
-    // covariances bounds that of their mismatch.
-    auto allowed = [&](const std::optional<Quaterniond>& a, const Quaterniond* b, const Matrix3d& S) {
-      if (!a.has_value() || b == nullptr) return 0.0;
-      return AllowedMismatchAngle(*a, *b, S, kd, config_.filter.fault_threshold);
-    };
-    const std::array<double, 3> allowed_angles = {
-        allowed(q1, q2 ? &*q2 : nullptr, S1 + S2), allowed(q1, st_available ? &q_st : nullptr, S1 + S_st),
-        allowed(q2, st_available ? &q_st : nullptr, S2 + S_st)};
-    const MismatchTest mt = TestMismatch(q1 ? &*q1 : nullptr, q2 ? &*q2 : nullptr,
-                                         st_available ? &q_st : nullptr, allowed_angles);
-    st_agrees_with_pairs = mt.available[kMismatch13] && mt.angle[kMismatch13] < mt.allowed[kMismatch13] &&
-                           (!mt.available[kMismatch23] || mt.angle[kMismatch23] < mt.allowed[kMismatch23]);
-    // The decision is fault_detection's (DecideFault); here it is applied and reported.
-    FaultDecision decision = DecideFault(mt, working_pair_, reserve_pair_);
-    // D94: a pair named faulty whose gyro shows no abrupt change of its readings disagrees by a
-    // drift the model lacks: nothing is excluded, the gyro is withheld at this step.
-    std::optional<AbruptRecord> abrupt;
-    if (decision.excluded_gyro != 0) abrupt = RecentAbrupt(decision.excluded_gyro, frame.time);
-    if (decision.excluded_gyro != 0 && !abrupt.has_value()) {
-      const int m = decision.evidence;
-      report.events.push_back(Event{
-          Event::Kind::kFaultAmbiguous, frame.time,
-          absl::StrFormat("gyro %d", decision.excluded_gyro), RadToArcsec(mt.angle[m]),
-          RadToArcsec(mt.allowed[m]), "arcsec",
-          absl::StrFormat("eq. (12) names the %s pair, but the readings of gyro %d show no "
-                          "abrupt change (a jump, frozen or erratic readings, a drift change "
-                          "beyond %.3g deg/h): a drift the model lacks, not a fault; gyro %d is "
-                          "not excluded (its measurements are withheld at the first step it is "
-                          "named, applied from the second)",
-                          decision.faulty == Subsystem::kWorkingPair ? "working" : "reserve",
-                          decision.excluded_gyro,
-                          RadPerSecToDegPerHour(config_.filter.drift_change_limit),
-                          decision.excluded_gyro)});
-      if (WithholdUnverified(decision.excluded_gyro, frame.time)) {
-        withheld_gyro = decision.excluded_gyro;
-      }
-      decision.faulty = Subsystem::kNone;
-      decision.excluded_gyro = 0;
-      decision.output_pair = working_pair_;
-      decision.output_switched = false;
-    }
-    auto event = [&](Event::Kind kind, std::string subsystem, std::string message) {
-      const int m = decision.evidence;
-      Event ev{kind, frame.time, std::move(subsystem), RadToArcsec(mt.angle[m]),
-               RadToArcsec(mt.allowed[m]), "arcsec", std::move(message)};
-      report.events.push_back(std::move(ev));
-    };
-    if (decision.excluded_gyro != 0) MarkExcluded(decision.excluded_gyro, ExclusionFrom(*abrupt));
-    switch (decision.faulty) {
-      case Subsystem::kNone:
-        break;
-      case Subsystem::kWorkingPair:
-        event(Event::Kind::kWorkingPairFault,
-              absl::StrFormat("working_pair[%d,%d]", working_pair_[0], working_pair_[1]),
-              absl::StrFormat("eq. (12): working pair disagrees with reserve pair and star tracker; "
-                              "output switched to reserve pair [%d,%d], gyro %d excluded: %s",
-                              decision.output_pair[0], decision.output_pair[1],
-                              decision.excluded_gyro,
-                              ExclusionFrom(*abrupt).Describe()));
-        break;
-      case Subsystem::kReservePair:
-        event(Event::Kind::kReservePairFault,
-              absl::StrFormat("reserve_pair[%d,%d]", reserve_pair_[0], reserve_pair_[1]),
-              absl::StrFormat("eq. (12): reserve pair disagrees with working pair and star tracker; "
-                              "gyro %d excluded: %s",
-                              decision.excluded_gyro, ExclusionFrom(*abrupt).Describe()));
-        break;
-      case Subsystem::kStarTracker:
-        event(Event::Kind::kStarTrackerFault, "star_tracker",
-              "eq. (12): star tracker disagrees with both gyro pairs; its measurements are rejected");
-        break;
-    }
-    working_pair_ = decision.output_pair;
-    if (decision.reject_star_tracker) {
-      st_available = false;
-      star_tracker_voted_faulty_ = true;
-    }
+    const MismatchTest mt =
+        Steps::MismatchOfPairs(*this, frame, withheld_gyro, st_available, q_st, S_st);
+    st_agrees_with_pairs = StarTrackerAgreesWithPairs(mt);
+    Steps::ApplyFaultDecision(*this, frame, mt, report, st_available, withheld_gyro);
   }
 
   // A star tracker the pairs voted faulty with a constant rotation against them is re-referenced
@@ -180,211 +541,27 @@ absl::Status EstimationSession::MeasurementUpdate(const TelemetryFrame& frame, S
   }
 
   // Measurements (eq. (13)): z_st (2 per healthy gyro) then z_avt (per healthy pair).
-  std::vector<int> healthy;  // gyro indices
-  for (int i = 0; i < gyro_count(); ++i) {
-    if (has_reading(gyros_[i])) healthy.push_back(i);
-  }
+  const std::vector<int> healthy = Steps::HealthyIndices(*this, frame, withheld_gyro);
   const int n_st = st_available ? 2 * static_cast<int>(healthy.size()) : 0;
   const int n_avt = options_.use_autonomous_measurements
                         ? static_cast<int>(healthy.size() * (healthy.size() - 1) / 2)
                         : 0;
-  const int m = n_st + n_avt;
-  if (m == 0) return absl::OkStatus();
-  // Noise sources: star-tracker rotation (3, body axes), readout (2 per gyro, case tangent plane).
-  const int n_noise = 3 + 2 * static_cast<int>(gyros_.size());
-  MatrixXd H = MatrixXd::Zero(m, n);
-  VectorXd z = VectorXd::Zero(m);
-  MatrixXd G = MatrixXd::Zero(m, n_noise);
-  VectorXd noise_var(n_noise);
-  noise_var.head<3>() = StarTrackerVarianceB();
-  noise_var.tail(n_noise - 3).setConstant(sigma_r * sigma_r);
-  auto noise_col = [](int gyro_index) { return 3 + 2 * gyro_index; };
+  if (n_st + n_avt == 0) return absl::OkStatus();
+  const Measurements mz = Steps::BuildMeasurements(*this, healthy, n_st, n_avt, C_in_b_st, n);
+  const std::vector<int> keep = Steps::TestInnovations(*this, frame, mz, healthy, report);
+  Steps::CountStarTrackerStep(*this, report.star_tracker_used, st_present);
 
-  // Body attitude for the star-tracker rebuild is the star tracker's own (C_in_b_st above).
-  int row = 0;
-  for (int i : healthy) {
-    if (!st_available) break;
-    const StarTrackerRows rows = GyroStarTrackerRows(i, C_in_b_st);
-    const StarTrackerDifference& d = rows.d;
-    z.segment<2>(row) = d.z;
-    H.middleRows<2>(row) = rows.H;
-    G.block<2, 3>(row, 0) = d.G_st;
-    G.block<2, 2>(row, noise_col(i)) = d.G_readout;
-    row += 2;
-  }
-  std::vector<std::pair<int, int>> avt_pairs;  // gyro ids
-  for (size_t ka = 0; ka < healthy.size() && n_avt > 0; ++ka) {
-    for (size_t kb = ka + 1; kb < healthy.size(); ++kb) {
-      const int ia = healthy[ka], ib = healthy[kb];
-      const GyroState& a = gyros_[ia];
-      const GyroState& b = gyros_[ib];
-      const AutonomousDifference d = MakeAutonomousDifference(
-          a.h_in, a.T(), a.C_b_k(), a.h_k_last, b.h_in, b.T(), b.C_b_k(), b.h_k_last);
-      z(row) = d.z;
-      H.block<1, 2>(row, layout_.SpinAxis(ia)) = d.H_h_a;
-      H.block<1, 2>(row, layout_.SpinAxis(ib)) = d.H_h_b;
-      if (layout_.HasPhi(ia)) H.block<1, 3>(row, layout_.Phi(ia)) = d.H_phi_a;
-      if (layout_.HasPhi(ib)) H.block<1, 3>(row, layout_.Phi(ib)) = d.H_phi_b;
-      G.block<1, 2>(row, noise_col(ia)) = d.G_readout_a;
-      G.block<1, 2>(row, noise_col(ib)) = d.G_readout_b;
-      avt_pairs.emplace_back(a.id, b.id);
-      ++row;
-    }
-  }
-  MatrixXd R = G * noise_var.asDiagonal() * G.transpose();
-  MatrixXd S = H * P_ * H.transpose() + R;
-
-  std::vector<int> keep;
-  report.autonomous_innovation = z.tail(n_avt);
-  report.autonomous_innovation_sigma = S.diagonal().tail(n_avt).cwiseSqrt();
-  if (n_st > 0) {
-    report.star_tracker_innovation = z.head(n_st);
-    report.star_tracker_innovation_sigma = S.diagonal().head(n_st).cwiseSqrt();
-    // eq. (14) on z2..z5.
-    const InnovationTest t = TestInnovation(z.head(n_st), S.topLeftCorner(n_st, n_st), kd);
-    report.star_tracker_test_ratio = t.worst_ratio;
-    report.star_tracker_nis = t.nis;
-    report.star_tracker_log_det_s = t.log_det_s;
-    if (t.passed) {
-      for (int i = 0; i < n_st; ++i) keep.push_back(i);
-      report.star_tracker_used = true;
-    } else {
-      const GyroState* g = &gyros_[healthy[t.worst_index / 2]];
-      report.events.push_back(Event{
-          Event::Kind::kStarTrackerInnovation, frame.time, "star_tracker",
-          RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold), "arcsec",
-          absl::StrFormat("eq. (14): star-tracker difference for gyro %d exceeds k_d sigma_z "
-                          "(|z| = %.1f arcsec > %.1f); star-tracker data rejected, output autonomous",
-                          g->id, RadToArcsec(t.worst_value), RadToArcsec(t.worst_threshold))});
-    }
-  }
-  // With the star-tracker differences applied, z_avt adds nothing: the angle between the rebuilt
-  // axes h_et equals the measured theta_S, so z_avt = -(h_et_a - h_a).h_b - h_a.(h_et_b - h_b) to
-  // first order, a linear function of z_st with the same noise, and the joint S would be singular.
-  // It is tested by eq. (14) every step and applied only when the output runs autonomous.
-  const bool apply_avt = !report.star_tracker_used;
-  for (int k = 0; k < n_avt; ++k) {
-    const int i = n_st + k;
-    const double sigma = std::sqrt(S(i, i));
-    // eq. (14) on z_avt.
-    if (std::abs(z(i)) <= kd * sigma) {
-      if (apply_avt) keep.push_back(i);
-    } else {
-      report.events.push_back(Event{
-          Event::Kind::kGyroDataRejected, frame.time,
-          absl::StrFormat("gyros %d,%d", avt_pairs[k].first, avt_pairs[k].second),
-          std::abs(z(i)), kd * sigma, "1",
-          absl::StrFormat("eq. (14): autonomous measurement z_avt = %.3g exceeds k_d sigma_z = %.3g",
-                          z(i), kd * sigma)});
-    }
-  }
-  if (report.star_tracker_used) {
-    mount_monitor_.NoteApplied(body_rate_b_);
-    steps_without_star_tracker_ = 0;
-    consecutive_rejections_ = 0;
-    star_tracker_voted_faulty_ = false;
-    Count(consecutive_accepted_);
-    if (consecutive_accepted_ >= kResetAfterRejections) star_tracker_accepted_ = true;
-  } else {
-    consecutive_accepted_ = 0;
-    Count(steps_without_star_tracker_);
-    if (st_present) Count(consecutive_rejections_);
-  }
-  // Until the star tracker has been accepted for kResetAfterRejections steps in a row since the
-  // filter started, the pairs' inertial axes rest on the star-tracker sample of initialisation:
-  // their disagreement with the star tracker may be that sample's fault (an outlier), and the
-  // guard does not apply (D19).
-  // The filter is widened before it is reset (noise_widening.h, D20): while the widening can
-  // still grow, the rejections are left to it.
-  const bool widening_exhausted =
-      !options_.adaptive_noise || widening_.at_max();
-  const bool reset_allowed =
-      !star_tracker_accepted_ ||
-      (widening_exhausted && !star_tracker_voted_faulty_ && st_agrees_with_pairs);
+  // The filter reset after kResetAfterRejections rejected steps, or why it is withheld (D19, D20).
+  const bool reset_allowed = Steps::ResetAllowed(*this, st_agrees_with_pairs);
   if (consecutive_rejections_ == kResetAfterRejections && !reset_allowed) {
-    // docs/decisions.md D19: never re-anchor to a star tracker that eq. (12) voted faulty in this
-    // streak, nor to one the healthy pairs disagree with; the filter keeps running on the gyros.
-    report.events.push_back(Event{
-        Event::Kind::kStarTrackerFault, frame.time, "star_tracker",
-        static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
-        "steps",
-        absl::StrFormat("star-tracker data rejected for %d steps in a row; filter reset withheld: %s",
-                        consecutive_rejections_,
-                        star_tracker_voted_faulty_
-                            ? "eq. (12) voted the star tracker faulty in this streak"
-                        : !st_agrees_with_pairs
-                            ? "the healthy gyro pairs disagree with the star tracker (eq. (12))"
-                            : "the process noise is widened first (FILTER_WIDENED)")});
+    Steps::ReportResetWithheld(*this, frame, st_agrees_with_pairs, report);
   }
   if (consecutive_rejections_ >= kResetAfterRejections && reset_allowed) {
-    // The star tracker has been present and rejected for kResetAfterRejections steps: a star
-    // tracker that is wrong that long flags itself invalid, a filter whose model misses part of
-    // the drift does not, so the filter is taken to be wrong (docs/decisions.md); the star
-    // tracker is adopted only when eq. (12) did not vote it faulty in this streak and the healthy
-    // pairs agree with it at this step (D19).
-    SpinAxesFromStarTracker(C_in_b_st);
-    change_detector_.Clear();
-    reading_monitor_.Clear();
-    report.events.push_back(Event{
-        Event::Kind::kFilterReset, frame.time, "filter",
-        static_cast<double>(consecutive_rejections_), static_cast<double>(kResetAfterRejections),
-        "steps",
-        absl::StrFormat("star-tracker data rejected for %d steps in a row: spin axes "
-                        "re-initialised from the star tracker (is the drift model missing a term?)",
-                        consecutive_rejections_)});
-    consecutive_rejections_ = 0;
-    steps_without_star_tracker_ = 0;
+    Steps::ResetToStarTracker(*this, frame, C_in_b_st, report);
     return CheckCovariance(P_);
   }
   if (keep.empty()) return absl::OkStatus();
-  const int mk = static_cast<int>(keep.size());
-  MatrixXd Hk(mk, n), Rk(mk, mk);
-  VectorXd zk(mk);
-  for (int i = 0; i < mk; ++i) {
-    Hk.row(i) = H.row(keep[i]);
-    zk(i) = z(keep[i]);
-    for (int j = 0; j < mk; ++j) Rk(i, j) = R(keep[i], keep[j]);
-  }
-  // The output attitude before the update, for the attitude error estimate of a star-tracker
-  // update (StepReport::attitude_error_b_arcsec): its Jacobian J (dtheta_in against the state
-  // errors, with the error convention of conventions.h) and P before the update.
-  const std::array<int, 2> output_pair = AttitudePair();
-  const GyroState* out_a = Find(output_pair[0]);
-  const GyroState* out_b = Find(output_pair[1]);
-  std::optional<Quaterniond> q_in_b_before;
-  MatrixXd J_before, P_before;
-  if (report.star_tracker_used && out_a != nullptr && out_b != nullptr && out_a->has_reading &&
-      out_b->has_reading) {
-    Matrix3d S_in_before;
-    q_in_b_before = PairQuaternion(out_a->id, out_b->id, out_a->h_k_last, out_b->h_k_last,
-                                   &S_in_before, &J_before);
-    P_before = P_;
-  }
-  VectorXd dx;
-  if (absl::Status s = JosephUpdate(Hk, zk, Rk, P_, dx); !s.ok()) return s;
-  ApplyCorrection(dx);
-  if (!q_in_b_before.has_value()) return absl::OkStatus();
-  const std::optional<Quaterniond> q_in_b_after =
-      PairQuaternion(out_a->id, out_b->id, out_a->h_k_last, out_b->h_k_last, nullptr);
-  if (!q_in_b_after.has_value()) return absl::OkStatus();
-  // q_in_b(after) = q_in_b(before) (x) Exp(dtheta_b): the correction about the body axes, which
-  // is also C_b_in Log(q_in_b(after) (x) q_in_b(before)^-1) (a rotation leaves its own axis
-  // fixed, so C_b_in before or after the update gives the same vector).
-  const Vector3d dtheta_b = LogQuaternion(q_in_b_before->conjugate() * *q_in_b_after);
-  // Its covariance: J (P_before - P_after) J^T, the attitude covariance the update removed
-  // (sigma_before^2 - sigma_after^2 per axis, with J held at the prior state so that the readout
-  // noise term of the two attitude covariances cancels exactly), rotated to the body axes.
-  const Matrix3d C_b_in = q_in_b_before->toRotationMatrix().transpose();
-  const Matrix3d removed_b =
-      C_b_in * (J_before * (P_before - P_) * J_before.transpose()) * C_b_in.transpose();
-  Vector3d error_b_arcsec, sigma_b_arcsec;
-  for (int k = 0; k < 3; ++k) {
-    error_b_arcsec(k) = RadToArcsec(dtheta_b(k));
-    sigma_b_arcsec(k) = RadToArcsec(std::sqrt(std::max(removed_b(k, k), 0.0)));
-  }
-  report.attitude_error_b_arcsec = error_b_arcsec;
-  report.attitude_error_sigma_b_arcsec = sigma_b_arcsec;
-  return absl::OkStatus();
+  return Steps::Update(*this, mz, keep, n, report);
 }
 
 bool EstimationSession::ModelKnownNotToFit() const {
