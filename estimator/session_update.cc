@@ -19,6 +19,7 @@
 #include "estimator/ekf.h"
 #include "estimator/fault_detection.h"
 #include "estimator/measurements.h"
+#include "estimator/reading_fault_monitor.h"
 #include "estimator/rotation.h"
 #include "estimator/session_internal.h"
 #include "estimator/units.h"
@@ -133,6 +134,137 @@ AttitudeError AttitudeErrorOfUpdate(const Quaterniond& q_in_b_before,
     e.sigma_b_arcsec(k) = RadToArcsec(std::sqrt(std::max(removed_b(k, k), 0.0)));
   }
   return e;
+}
+
+// The attitudes of the three pairs of the three-pair isolation (pair k is the pair without gyro
+// ids[k], fault_detection.h), each with its covariance S in inertial axes and the linearisation of
+// its error against the state (J) and the readout noise (G).
+struct ThreePairs {
+  std::array<Quaterniond, 3> q;
+  std::array<Matrix3d, 3> S;
+  std::array<MatrixXd, 3> J, G;
+};
+
+// The pair mismatches of eq. (12) in the isolation test: each pair against the star tracker
+// (q_st, covariance S_st, when `st_present`) and each two pairs against each other, with their
+// allowed angles (k_d times the mismatch's sigma along its direction, or the configured
+// threshold). Reads the pairs, P and the readout noise sigma_r; writes the test's pair_star_* and
+// pair_pair_* fields.
+void PairMismatches(const ThreePairs& pairs, bool st_present, const Quaterniond& q_st,
+                    const Matrix3d& S_st, const MatrixXd& P, double sigma_r, double kd,
+                    double configured, IsolationTest& test) {
+  const auto& q = pairs.q;
+  for (int k = 0; k < 3 && st_present; ++k) {
+    // A pair and the star tracker are independent: S_k + S_st.
+    test.pair_star_angle[k] = RotationAngle(q[k], q_st);
+    test.pair_star_allowed[k] = AllowedMismatchAngle(q[k], q_st, pairs.S[k] + S_st, kd, configured);
+  }
+  for (int m = 0; m < 3; ++m) {
+    // The two pairs that share gyro ids[m]: their errors share that gyro's state and reading, so
+    // the mismatch covariance is that of the difference of their linearised errors
+    // (MismatchCovariance), not S_k + S_l.
+    const int k = (m + 1) % 3, l = (m + 2) % 3;
+    const Matrix3d Sigma =
+        MismatchCovariance(pairs.J[k], pairs.G[k], pairs.J[l], pairs.G[l], P, sigma_r * sigma_r);
+    test.pair_pair_angle[m] = RotationAngle(q[k], q[l]);
+    test.pair_pair_allowed[m] = AllowedMismatchAngle(q[k], q[l], Sigma, kd, configured);
+  }
+}
+
+// What every decision of one three-pair isolation reads: the frame, the three gyros, whether the
+// star tracker is present, the test, its decision and the evidence text; and the report the
+// decisions write their events to.
+struct IsolationContext {
+  const TelemetryFrame& frame;
+  const std::array<int, 3>& ids;
+  bool st_present;
+  const IsolationTest& test;
+  const IsolationDecision& d;
+  const std::string& evidence;
+  StepReport& report;
+};
+
+// The exceeded mismatch with the largest angle-to-allowed ratio (best, -1 when none): the
+// event's value/threshold.
+struct StrongestMismatch {
+  double value = 0.0;
+  double threshold = 0.0;
+  double best = -1.0;
+};
+
+StrongestMismatch StrongestExceeded(const IsolationTest& test, const IsolationDecision& d) {
+  StrongestMismatch s;
+  auto consider = [&](double angle, double allowed, bool exceeded) {
+    if (exceeded && allowed > 0.0 && angle / allowed > s.best) {
+      s.best = angle / allowed;
+      s.value = angle;
+      s.threshold = allowed;
+    }
+  };
+  for (int k = 0; k < 3; ++k) {
+    consider(test.pair_star_angle[k], test.pair_star_allowed[k], d.pair_star_exceeded[k]);
+    consider(test.pair_pair_angle[k], test.pair_pair_allowed[k], d.pair_pair_exceeded[k]);
+  }
+  return s;
+}
+
+// Isolation::kAmbiguous: nothing is excluded; a gyro whose own star-tracker difference fails,
+// when it is the only one, is withheld (writes withheld_gyro: that gyro, else 0); a
+// FAULT_AMBIGUOUS event names the candidates.
+void OnAmbiguous(const IsolationContext& c, const StrongestMismatch& sm, int& withheld_gyro) {
+  // A gyro whose own star-tracker difference fails is kept out of this step's update, so
+  // that a fault not yet isolated is not absorbed into the spin axes.
+  int failed = 0;
+  for (int k = 0; k < 3; ++k) {
+    if (c.d.gyro_star_failed[k]) {
+      ++failed;
+      withheld_gyro = c.ids[k];
+    }
+  }
+  if (failed != 1) withheld_gyro = 0;
+  std::string candidates;
+  for (int cand : c.d.candidates) {
+    if (!candidates.empty()) candidates += ", ";
+    candidates += cand == 0 ? std::string("star tracker") : absl::StrFormat("gyro %d", cand);
+  }
+  c.report.events.push_back(Event{
+      Event::Kind::kFaultAmbiguous, c.frame.time, "gyros and star tracker",
+      RadToArcsec(sm.value), RadToArcsec(sm.threshold), "arcsec",
+      absl::StrCat("fault isolation with three pairs (eq. (12)): mismatches exceeded but the "
+                   "fault is ambiguous (",
+                   candidates.empty() ? std::string("no single subsystem explains them")
+                                      : absl::StrCat("candidates: ", candidates),
+                   "); nothing excluded. Evidence: ", c.evidence)});
+}
+
+// Healthy pairs after the isolation's decision: the pair without the excluded gyro, or all
+// three; true when the star tracker is present, not named, and agrees with each of them.
+bool StarTrackerAgreesAfterIsolation(bool st_present, const IsolationDecision& d) {
+  bool agrees = st_present && d.result != Isolation::kStarTracker;
+  for (int k = 0; k < 3 && agrees; ++k) {
+    if (d.result == Isolation::kGyro && k != d.faulty_index) continue;
+    agrees = !d.pair_star_exceeded[k];
+  }
+  return agrees;
+}
+
+// The note a DRIFT_CHANGED alert ends with when the change's onset is at a change of the gyro's
+// turn rate: a reading error that changes as the reading turns (an unconfigured case
+// misalignment, a readout scale error) changes the rate too, and the alert says so when the
+// change is no larger than such an error gives. Empty otherwise.
+std::string TurnRateNote(const std::optional<ReadingFaultMonitor::DriftChange>& dc) {
+  return dc.has_value() && dc->may_be_slow_reading_error
+             ? absl::StrFormat(
+                   "; its onset is at a change of the gyro's turn rate (%.3g to %.3g deg/s), "
+                   "where a reading error that changes as the reading turns (an unconfigured "
+                   "case misalignment or a readout scale error of up to %.0f arcsec) changes "
+                   "the rate by up to %.3f deg/h: this may be such an error rather than a "
+                   "drift change (configure gyros[].misalignmentSigmaArcsec, or run esg "
+                   "diagnose over the span)",
+                   RadToDeg(dc->turn_rate_before), RadToDeg(dc->turn_rate_after),
+                   RadToArcsec(kSlowReadingErrorRad),
+                   RadPerSecToDegPerHour(dc->slow_reading_change))
+             : std::string();
 }
 
 }  // namespace
@@ -572,322 +704,339 @@ const char* EstimationSession::ModelMisfitEvidence() const {
   return widening_.widened() ? "the filter runs widened, FILTER_WIDENED" : "MODEL_INCONSISTENT";
 }
 
-bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
-                                              bool st_present, const Quaterniond& q_st,
-                                              const Matrix3d& S_st, StepReport& report,
-                                              bool& st_available, bool& st_agrees_with_pairs,
-                                              int& withheld_gyro) {
-  const double kd = config_.filter.innovation_kd;
-  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
-  // Pair k is the pair without gyro ids[k] (fault_detection.h).
-  std::array<Quaterniond, 3> q;
-  std::array<Matrix3d, 3> S;
-  std::array<MatrixXd, 3> J, G;
-  for (int k = 0; k < 3; ++k) {
-    const std::array<int, 2> p = PairWithout(ids, k);
-    const GyroState* a = Find(p[0]);
-    const GyroState* b = Find(p[1]);
-    const auto qk = PairQuaternion(p[0], p[1], a->h_k_last, b->h_k_last, &S[k], &J[k], &G[k]);
-    if (!qk.has_value()) return false;
-    q[k] = *qk;
+// The decisions of IsolateWithThreePairs, in its order; each says what it reads and what it
+// writes.
+struct EstimationSession::IsolationSteps {
+  // The three pairs' attitudes (pair k without gyro ids[k]) from the gyros' last readings, with
+  // their covariances and linearisations; nullopt when one cannot be formed. Reads the gyros and P.
+  static std::optional<ThreePairs> PairAttitudes(const EstimationSession& s,
+                                                 const std::array<int, 3>& ids) {
+    ThreePairs pairs;
+    for (int k = 0; k < 3; ++k) {
+      const std::array<int, 2> p = PairWithout(ids, k);
+      const GyroState* a = s.Find(p[0]);
+      const GyroState* b = s.Find(p[1]);
+      const auto qk = s.PairQuaternion(p[0], p[1], a->h_k_last, b->h_k_last, &pairs.S[k],
+                                       &pairs.J[k], &pairs.G[k]);
+      if (!qk.has_value()) return std::nullopt;
+      pairs.q[k] = *qk;
+    }
+    return pairs;
   }
-  IsolationTest test;
-  test.gyro_ids = ids;
-  test.star_available = st_present;
-  const double configured = config_.filter.fault_threshold;
-  for (int k = 0; k < 3 && st_present; ++k) {
-    // A pair and the star tracker are independent: S_k + S_st.
-    test.pair_star_angle[k] = RotationAngle(q[k], q_st);
-    test.pair_star_allowed[k] = AllowedMismatchAngle(q[k], q_st, S[k] + S_st, kd, configured);
-  }
-  for (int m = 0; m < 3; ++m) {
-    // The two pairs that share gyro ids[m]: their errors share that gyro's state and reading, so
-    // the mismatch covariance is that of the difference of their linearised errors
-    // (MismatchCovariance), not S_k + S_l.
-    const int k = (m + 1) % 3, l = (m + 2) % 3;
-    const Matrix3d Sigma = MismatchCovariance(J[k], G[k], J[l], G[l], P_, sigma_r * sigma_r);
-    test.pair_pair_angle[m] = RotationAngle(q[k], q[l]);
-    test.pair_pair_allowed[m] = AllowedMismatchAngle(q[k], q[l], Sigma, kd, configured);
-  }
-  if (st_present) {
-    // Each gyro's own star-tracker difference (eq. (13)) with its exact covariance (D22).
+
+  // Each gyro's own star-tracker difference (eq. (13)) against the corrected star tracker q_st,
+  // with its exact covariance (D22): writes the test's gyro_star_* fields (NIS, fail level k_d^2).
+  // Reads the gyros, P and the star tracker's noise.
+  static void GyroStarTests(const EstimationSession& s, const std::array<int, 3>& ids,
+                            const Quaterniond& q_st, double kd, double sigma_r,
+                            IsolationTest& test) {
     test.gyro_star_available = true;
     test.gyro_star_fail = kd * kd;
     const Matrix3d C_in_b_st = q_st.toRotationMatrix();
-    const Vector3d st_var = StarTrackerVarianceB();
+    const Vector3d st_var = s.StarTrackerVarianceB();
     for (int k = 0; k < 3; ++k) {
-      const StarTrackerRows rows = GyroStarTrackerRows(IndexOf(ids[k]), C_in_b_st);
+      const StarTrackerRows rows = s.GyroStarTrackerRows(s.IndexOf(ids[k]), C_in_b_st);
       const StarTrackerDifference& sd = rows.d;
       const MatrixXd& H = rows.H;
-      const Eigen::Matrix2d S_g = H * P_ * H.transpose() +
+      const Eigen::Matrix2d S_g = H * s.P_ * H.transpose() +
                                   sd.G_st * st_var.asDiagonal() * sd.G_st.transpose() +
                                   sigma_r * sigma_r * sd.G_readout * sd.G_readout.transpose();
       test.gyro_star_nis[k] = sd.z.dot(S_g.ldlt().solve(sd.z));
     }
   }
-  const IsolationDecision d = DecideIsolation(test, working_pair_);
-  const std::string evidence = IsolationEvidence(test, d);
+
   // Excludes gyro ids[k]: the output moves to a pair without it (the working pair when it does not
   // hold it), the cold spare is recommended; `named_by` says what named it, `value`/`threshold`
-  // in `unit` are the event's evidence.
-  auto exclude = [&](int k, double value, double threshold, const char* unit,
-                     const std::string& named_by, const std::string& details,
-                     const Exclusion& why) {
-    const int gyro = ids[k];
-    MarkExcluded(gyro, why);
+  // in `unit` are the event's evidence. Writes the gyro's exclusion (MarkExcluded), the working
+  // and reserve pairs, and the WORKING_PAIR_FAULT or RESERVE_PAIR_FAULT event.
+  static void Exclude(EstimationSession& s, const IsolationContext& c, int k, double value,
+                      double threshold, const char* unit, const std::string& named_by,
+                      const std::string& details, const Exclusion& why) {
+    const int gyro = c.ids[k];
+    s.MarkExcluded(gyro, why);
     // A configured gyro that is not running is a cold spare.
     std::string spare;
-    for (const GyroConfig& gc : config_.gyros) {
-      if (Find(gc.id) == nullptr) spare += absl::StrFormat("%s%d", spare.empty() ? "" : ", ", gc.id);
+    for (const GyroConfig& gc : s.config_.gyros) {
+      if (s.Find(gc.id) == nullptr) {
+        spare += absl::StrFormat("%s%d", spare.empty() ? "" : ", ", gc.id);
+      }
     }
-    const bool in_working = working_pair_[0] == gyro || working_pair_[1] == gyro;
-    const std::array<int, 2> output = in_working ? PairWithout(ids, k) : working_pair_;
-    report.events.push_back(Event{
-        in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, frame.time,
+    const bool in_working = s.working_pair_[0] == gyro || s.working_pair_[1] == gyro;
+    const std::array<int, 2> output = in_working ? PairWithout(c.ids, k) : s.working_pair_;
+    c.report.events.push_back(Event{
+        in_working ? Event::Kind::kWorkingPairFault : Event::Kind::kReservePairFault, c.frame.time,
         absl::StrFormat("gyro %d", gyro), value, threshold, unit,
         absl::StrFormat("%s: gyro %d faulty: %s; %s; gyro %d excluded, output on pair [%d,%d] "
                         "(valid, degraded); only two gyros remain, switch on the cold spare%s to "
                         "restore isolation. Evidence: %s",
                         named_by, gyro, details, why.Describe(), gyro, output[0], output[1],
-                        spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), evidence)});
-    working_pair_ = output;
-    reserve_pair_ = output;  // no second pair is left
-  };
+                        spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), c.evidence)});
+    s.working_pair_ = output;
+    s.reserve_pair_ = output;  // no second pair is left
+  }
+
+  // Feeds the per-gyro accumulated test (D33) with this step's star-tracker NIS of each gyro;
+  // when it names a gyro, only once the consistency monitor has tested the model and while
+  // nothing says it does not fit (D21), and no drift change is being measured already, the gyro's
+  // drift is taken to have changed (D94): writes drift_change_gyro_ and drift_change_named_.
+  static void NameDriftChange(EstimationSession& s, const IsolationContext& c) {
+    const bool star_tracker_suspected =
+        s.star_tracker_voted_faulty_ || c.d.result == Isolation::kStarTracker ||
+        std::find(c.d.candidates.begin(), c.d.candidates.end(), 0) != c.d.candidates.end();
+    const auto change = s.change_detector_.Add(c.ids, c.test.gyro_star_nis, star_tracker_suspected);
+    if (change.has_value() && s.consistency_.tests() > 0 && !s.ModelKnownNotToFit() &&
+        s.drift_change_gyro_ == 0) {
+      // D94: the gyro's drift changed; by how much is measured on its track from now on, until
+      // the change is clearly beyond the limit (excluded) or below it (DRIFT_CHANGED).
+      s.drift_change_gyro_ = change->gyro_id;
+      s.drift_change_named_ = c.frame.time;
+    }
+  }
+
+  // A drift change below the limit, or not shown beyond it after kDriftChangeDecisionSteps
+  // (`dc` the track's estimate, nullopt when it has none): the gyro's drift coefficients are
+  // re-opened (ReopenDrift), its spin-axis covariance grown by the displacement the old drift
+  // made since the onset, the change detector cleared, drift_change_gyro_ cleared, and a
+  // DRIFT_CHANGED event raised; nothing is excluded.
+  static void AcceptDriftChange(EstimationSession& s, const IsolationContext& c, int k,
+                                const std::optional<ReadingFaultMonitor::DriftChange>& dc,
+                                const std::string& named) {
+    const std::array<int, 3>& ids = c.ids;
+    const double change_rad_s = dc.has_value() ? dc->magnitude : 0.0;
+    const double sigma_rad_s = dc.has_value() ? std::sqrt(std::max(dc->cov.trace(), 0.0)) : 0.0;
+    s.ReopenDrift(ids[k], change_rad_s);
+    if (dc.has_value() && c.frame.time > dc->onset) {
+      // Between the onset and now the filter carried the old drift: the gyro's spin axis
+      // moved against the model by the change integrated over that time, which its
+      // measurements pulled into the spin axis and the other states only in part. Its
+      // spin-axis covariance grows by that displacement's second moment, (|c|^2 + tr cov_c)
+      // dt^2 per tangent axis, so the re-opened coefficients are not fitted against a spin
+      // axis the filter wrongly holds as known.
+      const double dt_s = absl::ToDoubleSeconds(c.frame.time - dc->onset);
+      const double var_rad2 =
+          (change_rad_s * change_rad_s + std::max(dc->cov.trace(), 0.0)) * dt_s * dt_s;
+      const int sa = s.layout_.SpinAxis(s.IndexOf(ids[k]));
+      for (int a = 0; a < StateLayout::kSpinAxisSize; ++a) s.P_(sa + a, sa + a) += var_rad2;
+    }
+    s.change_detector_.Clear();
+    s.drift_change_gyro_ = 0;
+    // Where the reading's turn rate changes at the onset, a reading error that changes as
+    // the reading turns (an unconfigured case misalignment, a readout scale error) changes
+    // the rate too: the alert says so when the change is no larger than such an error gives.
+    const std::string turn_note = TurnRateNote(dc);
+    c.report.events.push_back(Event{
+        Event::Kind::kDriftChanged, c.frame.time, absl::StrFormat("gyro %d", ids[k]),
+        RadPerSecToDegPerHour(change_rad_s),
+        RadPerSecToDegPerHour(s.config_.filter.drift_change_limit), "deg/h",
+        absl::StrFormat(
+            "drift of gyro %d changed by %.3f +- %.3f deg/h at %s (%s the limit %.3g deg/h "
+            "with the model's uncertainty: not a fault): %s; its drift coefficients are "
+            "re-opened and recalibrated, nothing excluded%s",
+            ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
+            FormatUtc(dc.has_value() ? dc->onset : c.frame.time),
+            dc.has_value() && dc->below ? "below" : "not shown beyond",
+            RadPerSecToDegPerHour(dc.has_value() ? dc->bound
+                                                 : s.config_.filter.drift_change_limit),
+            named, turn_note)});
+  }
+
   // The per-gyro accumulated test (D33): a gyro whose own star-tracker differences fail over the
   // window while the other two pass is excluded, whatever the single step's mismatches say;
   // only once the consistency monitor has tested the model and while nothing says it does not
   // fit (D21): a drift term the model lacks can be larger in one gyro and fail its differences
   // alone, and is announced by the monitor's and the widening's own alerts.
-  if (st_present && options_.detect_drift_change) {
-    const bool star_tracker_suspected =
-        star_tracker_voted_faulty_ || d.result == Isolation::kStarTracker ||
-        std::find(d.candidates.begin(), d.candidates.end(), 0) != d.candidates.end();
-    const auto change = change_detector_.Add(ids, test.gyro_star_nis, star_tracker_suspected);
-    if (change.has_value() && consistency_.tests() > 0 && !ModelKnownNotToFit() &&
-        drift_change_gyro_ == 0) {
-      // D94: the gyro's drift changed; by how much is measured on its track from now on, until
-      // the change is clearly beyond the limit (excluded) or below it (DRIFT_CHANGED).
-      drift_change_gyro_ = change->gyro_id;
-      drift_change_named_ = frame.time;
+  // The gyro named (NameDriftChange) has its drift change measured on its track
+  // (EstimateDriftChange): beyond the limit it is excluded (true returned, st_agrees_with_pairs
+  // set for the pair left); below it, or not shown beyond it once kDriftChangeDecisionSteps
+  // have passed, AcceptDriftChange; otherwise the measuring goes on. False: nothing excluded.
+  static bool AccumulatedTest(EstimationSession& s, const IsolationContext& c,
+                              bool& st_agrees_with_pairs) {
+    NameDriftChange(s, c);
+    const std::array<int, 3>& ids = c.ids;
+    const int k = static_cast<int>(std::find(ids.begin(), ids.end(), s.drift_change_gyro_) -
+                                   ids.begin());
+    if (s.drift_change_gyro_ == 0 || k >= 3) return false;
+    const auto dc =
+        s.reading_monitor_.EstimateDriftChange(ids[k], ReadingFaultMonitor::Source::kStarTracker);
+    const bool waited =
+        c.frame.time - s.drift_change_named_ >=
+        absl::Seconds(kDriftChangeDecisionSteps * s.config_.filter.measurement_step);
+    const std::string named = absl::StrFormat(
+        "named at %s by its own star-tracker differences summed over %d steps (the other gyros' "
+        "passing), its track measured over the last %d steps",
+        FormatUtc(s.drift_change_named_),
+        s.change_detector_.options().window_steps, s.reading_monitor_.options().window_steps);
+    if (dc.has_value() && dc->beyond) {
+      Exclusion why;
+      why.reason = ExclusionReason::kDriftBeyondLimit;
+      why.time = dc->onset;
+      why.value = RadPerSecToDegPerHour(dc->magnitude);
+      why.threshold = RadPerSecToDegPerHour(dc->bound);
+      s.drift_change_gyro_ = 0;
+      Exclude(s, c, k, why.value, why.threshold, "deg/h",
+              "accumulated star-tracker test (eq. (13) differences of each gyro, D33) and the "
+              "gyro's track (D94)",
+              named, why);
+      st_agrees_with_pairs = c.st_present && !c.d.pair_star_exceeded[k];
+      return true;
     }
-    const int k = static_cast<int>(std::find(ids.begin(), ids.end(), drift_change_gyro_) - ids.begin());
-    if (drift_change_gyro_ != 0 && k < 3) {
-      const auto dc =
-          reading_monitor_.EstimateDriftChange(ids[k], ReadingFaultMonitor::Source::kStarTracker);
-      const bool waited = frame.time - drift_change_named_ >=
-                          absl::Seconds(kDriftChangeDecisionSteps * config_.filter.measurement_step);
-      const std::string named = absl::StrFormat(
-          "named at %s by its own star-tracker differences summed over %d steps (the other gyros' "
-          "passing), its track measured over the last %d steps",
-          FormatUtc(drift_change_named_),
-          change_detector_.options().window_steps, reading_monitor_.options().window_steps);
-      if (dc.has_value() && dc->beyond) {
-        Exclusion why;
-        why.reason = ExclusionReason::kDriftBeyondLimit;
-        why.time = dc->onset;
-        why.value = RadPerSecToDegPerHour(dc->magnitude);
-        why.threshold = RadPerSecToDegPerHour(dc->bound);
-        drift_change_gyro_ = 0;
-        exclude(k, why.value, why.threshold, "deg/h",
-                "accumulated star-tracker test (eq. (13) differences of each gyro, D33) and the "
-                "gyro's track (D94)",
-                named, why);
-        st_agrees_with_pairs = st_present && !d.pair_star_exceeded[k];
-        return true;
-      }
-      if (!dc.has_value() || dc->below || waited) {
-        const double change_rad_s = dc.has_value() ? dc->magnitude : 0.0;
-        const double sigma_rad_s = dc.has_value() ? std::sqrt(std::max(dc->cov.trace(), 0.0)) : 0.0;
-        ReopenDrift(ids[k], change_rad_s);
-        if (dc.has_value() && frame.time > dc->onset) {
-          // Between the onset and now the filter carried the old drift: the gyro's spin axis
-          // moved against the model by the change integrated over that time, which its
-          // measurements pulled into the spin axis and the other states only in part. Its
-          // spin-axis covariance grows by that displacement's second moment, (|c|^2 + tr cov_c)
-          // dt^2 per tangent axis, so the re-opened coefficients are not fitted against a spin
-          // axis the filter wrongly holds as known.
-          const double dt_s = absl::ToDoubleSeconds(frame.time - dc->onset);
-          const double var_rad2 =
-              (change_rad_s * change_rad_s + std::max(dc->cov.trace(), 0.0)) * dt_s * dt_s;
-          const int s = layout_.SpinAxis(IndexOf(ids[k]));
-          for (int a = 0; a < StateLayout::kSpinAxisSize; ++a) P_(s + a, s + a) += var_rad2;
-        }
-        change_detector_.Clear();
-        drift_change_gyro_ = 0;
-        // Where the reading's turn rate changes at the onset, a reading error that changes as
-        // the reading turns (an unconfigured case misalignment, a readout scale error) changes
-        // the rate too: the alert says so when the change is no larger than such an error gives.
-        const std::string turn_note =
-            dc.has_value() && dc->may_be_slow_reading_error
-                ? absl::StrFormat(
-                      "; its onset is at a change of the gyro's turn rate (%.3g to %.3g deg/s), "
-                      "where a reading error that changes as the reading turns (an unconfigured "
-                      "case misalignment or a readout scale error of up to %.0f arcsec) changes "
-                      "the rate by up to %.3f deg/h: this may be such an error rather than a "
-                      "drift change (configure gyros[].misalignmentSigmaArcsec, or run esg "
-                      "diagnose over the span)",
-                      RadToDeg(dc->turn_rate_before), RadToDeg(dc->turn_rate_after),
-                      RadToArcsec(kSlowReadingErrorRad),
-                      RadPerSecToDegPerHour(dc->slow_reading_change))
-                : std::string();
-        report.events.push_back(Event{
-            Event::Kind::kDriftChanged, frame.time, absl::StrFormat("gyro %d", ids[k]),
-            RadPerSecToDegPerHour(change_rad_s),
-            RadPerSecToDegPerHour(config_.filter.drift_change_limit), "deg/h",
-            absl::StrFormat(
-                "drift of gyro %d changed by %.3f +- %.3f deg/h at %s (%s the limit %.3g deg/h "
-                "with the model's uncertainty: not a fault): %s; its drift coefficients are "
-                "re-opened and recalibrated, nothing excluded%s",
-                ids[k], RadPerSecToDegPerHour(change_rad_s), RadPerSecToDegPerHour(sigma_rad_s),
-                FormatUtc(dc.has_value() ? dc->onset : frame.time),
-                dc.has_value() && dc->below ? "below" : "not shown beyond",
-                RadPerSecToDegPerHour(dc.has_value() ? dc->bound
-                                                     : config_.filter.drift_change_limit),
-                named, turn_note)});
-      }
-    }
+    if (!dc.has_value() || dc->below || waited) AcceptDriftChange(s, c, k, dc, named);
+    return false;
   }
-  // The exceeded mismatch with the largest angle-to-allowed ratio: the event's value/threshold.
-  double value = 0.0, threshold = 0.0, best = -1.0;
-  auto consider = [&](double angle, double allowed, bool exceeded) {
-    if (exceeded && allowed > 0.0 && angle / allowed > best) {
-      best = angle / allowed;
-      value = angle;
-      threshold = allowed;
+
+  // Isolation::kGyro: the pairs name gyro d.excluded_gyro. D94: only an abrupt change of the
+  // gyro's readings (a jump, frozen or erratic readings, a drift change beyond the limit)
+  // excludes it; without one the gyro is withheld (WithholdUnverified) and named suspect, a
+  // FAULT_AMBIGUOUS event raised. With one, D24: evidence below kImmediateIsolationStrength
+  // excludes only when the previous measurement step named the same gyro (else withheld and
+  // named suspect); otherwise Exclude. Writes withheld_gyro, suspect_gyro_ and suspect_time_.
+  static void OnGyroNamed(EstimationSession& s, const IsolationContext& c,
+                          const StrongestMismatch& sm, int& withheld_gyro) {
+    const IsolationDecision& d = c.d;
+    const IsolationTest& test = c.test;
+    // D94: only an abrupt change of the gyro's readings (a jump, frozen or erratic readings, a
+    // drift change beyond the limit) excludes it; mismatches that grow with a drift the model
+    // lacks, however it behaves in time, withhold the gyro at this step and no more. With
+    // such a verdict the exclusion stands even while the model is known not to fit (D21
+    // guarded against the drift; the verdict tells the two apart).
+    const std::optional<AbruptRecord> abrupt = s.RecentAbrupt(d.excluded_gyro, c.frame.time);
+    if (!abrupt.has_value()) {
+      if (s.WithholdUnverified(d.excluded_gyro, c.frame.time)) withheld_gyro = d.excluded_gyro;
+      // The pairs named it at this step all the same: D24's confirmation counts it (a jump's
+      // verdict may come at the step after, when the pairs name the gyro again).
+      s.suspect_gyro_ = d.excluded_gyro;
+      s.suspect_time_ = c.frame.time;
+      c.report.events.push_back(Event{
+          Event::Kind::kFaultAmbiguous, c.frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
+          RadToArcsec(sm.value), RadToArcsec(sm.threshold), "arcsec",
+          absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d, but "
+                          "its readings show no abrupt change (a jump, frozen or erratic "
+                          "readings, a drift change beyond %.3g deg/h): a drift the model "
+                          "lacks%s, not a fault; gyro %d is not excluded (its measurements are "
+                          "withheld at the first step it is named, applied from the second). "
+                          "Evidence: %s",
+                          d.excluded_gyro,
+                          RadPerSecToDegPerHour(s.config_.filter.drift_change_limit),
+                          s.ModelKnownNotToFit()
+                              ? absl::StrCat(" (", s.ModelMisfitEvidence(), ")")
+                              : std::string(),
+                          d.excluded_gyro, c.evidence)});
+      return;
     }
-  };
-  for (int k = 0; k < 3; ++k) {
-    consider(test.pair_star_angle[k], test.pair_star_allowed[k], d.pair_star_exceeded[k]);
-    consider(test.pair_pair_angle[k], test.pair_pair_allowed[k], d.pair_pair_exceeded[k]);
+    // D24: evidence below twice the allowed angles (or a gyro's own star-tracker chi-square
+    // below 4 k_d^2) excludes only when the previous measurement step named the same gyro;
+    // until then the gyro is withheld. A readout jump of arcminutes exceeds at once.
+    const double strength =
+        d.decided_by_gyro_star
+            ? std::sqrt(test.gyro_star_nis[d.faulty_index] / test.gyro_star_fail)
+            : sm.best;
+    const bool confirmed =
+        s.suspect_gyro_ == d.excluded_gyro && s.suspect_time_ == s.last_update_time_;
+    if (strength < kImmediateIsolationStrength && !confirmed) {
+      s.suspect_gyro_ = d.excluded_gyro;
+      s.suspect_time_ = c.frame.time;
+      withheld_gyro = d.excluded_gyro;
+      c.report.events.push_back(Event{
+          Event::Kind::kFaultAmbiguous, c.frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
+          RadToArcsec(sm.value), RadToArcsec(sm.threshold), "arcsec",
+          absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d with "
+                          "evidence %.2f times its threshold (below %.1f): gyro %d is withheld at "
+                          "this step and excluded if the next measurement step names it again. "
+                          "Evidence: %s",
+                          d.excluded_gyro, strength, kImmediateIsolationStrength,
+                          d.excluded_gyro, c.evidence)});
+      return;
+    }
+    const std::array<int, 2> kept = PairWithout(c.ids, d.faulty_index);
+    Exclude(s, c, d.faulty_index, RadToArcsec(sm.value), RadToArcsec(sm.threshold), "arcsec",
+            "fault isolation with three pairs (eq. (12))",
+            d.decided_by_gyro_star
+                ? absl::StrFormat("its own star-tracker difference fails while those of gyros "
+                                  "%d and %d pass",
+                                  kept[0], kept[1])
+                : absl::StrFormat("the pairs holding it disagree with pair [%d,%d]%s", kept[0],
+                                  kept[1],
+                                  c.st_present ? " and the star tracker, which agree with each other"
+                                               : ""),
+            ExclusionFrom(*abrupt));
   }
-  std::optional<AbruptRecord> abrupt;
+
+  // Isolation::kStarTracker: the three pairs agree with each other and not with the star
+  // tracker. D21: while the model is known not to fit they may share the model's error (a drift
+  // the model lacks in every gyro): FAULT_AMBIGUOUS, the star tracker stays subject to eq. (14)
+  // only. Otherwise STAR_TRACKER_FAULT: its measurements are rejected at this step (clears
+  // st_available) and it is counted voted faulty in the streak.
+  static void OnStarTrackerNamed(EstimationSession& s, const IsolationContext& c,
+                                 const StrongestMismatch& sm, bool& st_available) {
+    if (s.ModelKnownNotToFit()) {
+      // D21: while the model is known not to fit, three pairs that agree with each other and
+      // not with the star tracker may share the model's error (a drift the model lacks in
+      // every gyro); the star tracker stays subject to eq. (14) only.
+      c.report.events.push_back(Event{
+          Event::Kind::kFaultAmbiguous, c.frame.time, "star_tracker", RadToArcsec(sm.value),
+          RadToArcsec(sm.threshold), "arcsec",
+          absl::StrFormat("fault isolation with three pairs (eq. (12)) points at the star "
+                          "tracker, but the configured model does not explain the data (%s): "
+                          "its measurements are kept, subject to eq. (14). Evidence: %s",
+                          s.ModelMisfitEvidence(),
+                          c.evidence)});
+      return;
+    }
+    c.report.events.push_back(Event{
+        Event::Kind::kStarTrackerFault, c.frame.time, "star_tracker", RadToArcsec(sm.value),
+        RadToArcsec(sm.threshold), "arcsec",
+        absl::StrCat("fault isolation with three pairs (eq. (12)): the star tracker disagrees "
+                     "with all three gyro pairs, which agree with each other; its measurements "
+                     "are rejected. Evidence: ",
+                     c.evidence)});
+    st_available = false;
+    s.star_tracker_voted_faulty_ = true;
+  }
+};
+
+bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const std::array<int, 3>& ids,
+                                              bool st_present, const Quaterniond& q_st,
+                                              const Matrix3d& S_st, StepReport& report,
+                                              bool& st_available, bool& st_agrees_with_pairs,
+                                              int& withheld_gyro) {
+  using Steps = IsolationSteps;
+  const double kd = config_.filter.innovation_kd;
+  const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
+  // The test: the pairs' mismatches with each other and the star tracker, each gyro's own
+  // star-tracker difference; then fault_detection's decision and its evidence text.
+  const std::optional<ThreePairs> pairs = Steps::PairAttitudes(*this, ids);
+  if (!pairs.has_value()) return false;
+  IsolationTest test;
+  test.gyro_ids = ids;
+  test.star_available = st_present;
+  PairMismatches(*pairs, st_present, q_st, S_st, P_, sigma_r, kd, config_.filter.fault_threshold,
+                 test);
+  if (st_present) Steps::GyroStarTests(*this, ids, q_st, kd, sigma_r, test);
+  const IsolationDecision d = DecideIsolation(test, working_pair_);
+  const std::string evidence = IsolationEvidence(test, d);
+  const IsolationContext c{frame, ids, st_present, test, d, evidence, report};
+
+  // The accumulated test and the drift change it names: an exclusion there ends the step.
+  if (st_present && options_.detect_drift_change &&
+      Steps::AccumulatedTest(*this, c, st_agrees_with_pairs)) {
+    return true;
+  }
+  // The single step's decision.
+  const StrongestMismatch sm = StrongestExceeded(test, d);
   switch (d.result) {
     case Isolation::kNone:
       break;
-    case Isolation::kGyro: {
-      // D94: only an abrupt change of the gyro's readings (a jump, frozen or erratic readings, a
-      // drift change beyond the limit) excludes it; mismatches that grow with a drift the model
-      // lacks, however it behaves in time, withhold the gyro at this step and no more. With
-      // such a verdict the exclusion stands even while the model is known not to fit (D21
-      // guarded against the drift; the verdict tells the two apart).
-      abrupt = RecentAbrupt(d.excluded_gyro, frame.time);
-      if (!abrupt.has_value()) {
-        if (WithholdUnverified(d.excluded_gyro, frame.time)) withheld_gyro = d.excluded_gyro;
-        // The pairs named it at this step all the same: D24's confirmation counts it (a jump's
-        // verdict may come at the step after, when the pairs name the gyro again).
-        suspect_gyro_ = d.excluded_gyro;
-        suspect_time_ = frame.time;
-        report.events.push_back(Event{
-            Event::Kind::kFaultAmbiguous, frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
-            RadToArcsec(value), RadToArcsec(threshold), "arcsec",
-            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d, but "
-                            "its readings show no abrupt change (a jump, frozen or erratic "
-                            "readings, a drift change beyond %.3g deg/h): a drift the model "
-                            "lacks%s, not a fault; gyro %d is not excluded (its measurements are "
-                            "withheld at the first step it is named, applied from the second). "
-                            "Evidence: %s",
-                            d.excluded_gyro, RadPerSecToDegPerHour(config_.filter.drift_change_limit),
-                            ModelKnownNotToFit()
-                                ? absl::StrCat(" (", ModelMisfitEvidence(), ")")
-                                : std::string(),
-                            d.excluded_gyro, evidence)});
-        break;
-      }
-      // D24: evidence below twice the allowed angles (or a gyro's own star-tracker chi-square
-      // below 4 k_d^2) excludes only when the previous measurement step named the same gyro;
-      // until then the gyro is withheld. A readout jump of arcminutes exceeds at once.
-      const double strength =
-          d.decided_by_gyro_star
-              ? std::sqrt(test.gyro_star_nis[d.faulty_index] / test.gyro_star_fail)
-              : best;
-      const bool confirmed = suspect_gyro_ == d.excluded_gyro && suspect_time_ == last_update_time_;
-      if (strength < kImmediateIsolationStrength && !confirmed) {
-        suspect_gyro_ = d.excluded_gyro;
-        suspect_time_ = frame.time;
-        withheld_gyro = d.excluded_gyro;
-        report.events.push_back(Event{
-            Event::Kind::kFaultAmbiguous, frame.time, absl::StrFormat("gyro %d", d.excluded_gyro),
-            RadToArcsec(value), RadToArcsec(threshold), "arcsec",
-            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at gyro %d with "
-                            "evidence %.2f times its threshold (below %.1f): gyro %d is withheld at "
-                            "this step and excluded if the next measurement step names it again. "
-                            "Evidence: %s",
-                            d.excluded_gyro, strength, kImmediateIsolationStrength,
-                            d.excluded_gyro, evidence)});
-        break;
-      }
-      const std::array<int, 2> kept = PairWithout(ids, d.faulty_index);
-      exclude(d.faulty_index, RadToArcsec(value), RadToArcsec(threshold), "arcsec",
-              "fault isolation with three pairs (eq. (12))",
-              d.decided_by_gyro_star
-                  ? absl::StrFormat("its own star-tracker difference fails while those of gyros "
-                                    "%d and %d pass",
-                                    kept[0], kept[1])
-                  : absl::StrFormat("the pairs holding it disagree with pair [%d,%d]%s", kept[0],
-                                    kept[1],
-                                    st_present ? " and the star tracker, which agree with each other"
-                                               : ""),
-              ExclusionFrom(*abrupt));
+    case Isolation::kGyro:
+      Steps::OnGyroNamed(*this, c, sm, withheld_gyro);
       break;
-    }
     case Isolation::kStarTracker:
-      if (ModelKnownNotToFit()) {
-        // D21: while the model is known not to fit, three pairs that agree with each other and
-        // not with the star tracker may share the model's error (a drift the model lacks in
-        // every gyro); the star tracker stays subject to eq. (14) only.
-        report.events.push_back(Event{
-            Event::Kind::kFaultAmbiguous, frame.time, "star_tracker", RadToArcsec(value),
-            RadToArcsec(threshold), "arcsec",
-            absl::StrFormat("fault isolation with three pairs (eq. (12)) points at the star "
-                            "tracker, but the configured model does not explain the data (%s): "
-                            "its measurements are kept, subject to eq. (14). Evidence: %s",
-                            ModelMisfitEvidence(),
-                            evidence)});
-        break;
-      }
-      report.events.push_back(Event{
-          Event::Kind::kStarTrackerFault, frame.time, "star_tracker", RadToArcsec(value),
-          RadToArcsec(threshold), "arcsec",
-          absl::StrCat("fault isolation with three pairs (eq. (12)): the star tracker disagrees "
-                       "with all three gyro pairs, which agree with each other; its measurements "
-                       "are rejected. Evidence: ",
-                       evidence)});
-      st_available = false;
-      star_tracker_voted_faulty_ = true;
+      Steps::OnStarTrackerNamed(*this, c, sm, st_available);
       break;
-    case Isolation::kAmbiguous: {
-      // A gyro whose own star-tracker difference fails is kept out of this step's update, so
-      // that a fault not yet isolated is not absorbed into the spin axes.
-      int failed = 0;
-      for (int k = 0; k < 3; ++k) {
-        if (d.gyro_star_failed[k]) {
-          ++failed;
-          withheld_gyro = ids[k];
-        }
-      }
-      if (failed != 1) withheld_gyro = 0;
-      std::string candidates;
-      for (int c : d.candidates) {
-        if (!candidates.empty()) candidates += ", ";
-        candidates += c == 0 ? std::string("star tracker") : absl::StrFormat("gyro %d", c);
-      }
-      report.events.push_back(Event{
-          Event::Kind::kFaultAmbiguous, frame.time, "gyros and star tracker", RadToArcsec(value),
-          RadToArcsec(threshold), "arcsec",
-          absl::StrCat("fault isolation with three pairs (eq. (12)): mismatches exceeded but the "
-                       "fault is ambiguous (",
-                       candidates.empty() ? std::string("no single subsystem explains them")
-                                          : absl::StrCat("candidates: ", candidates),
-                       "); nothing excluded. Evidence: ", evidence)});
+    case Isolation::kAmbiguous:
+      OnAmbiguous(c, sm, withheld_gyro);
       break;
-    }
   }
-  // Healthy pairs after the decision: the pair without the excluded gyro, or all three.
-  st_agrees_with_pairs = st_present && d.result != Isolation::kStarTracker;
-  for (int k = 0; k < 3 && st_agrees_with_pairs; ++k) {
-    if (d.result == Isolation::kGyro && k != d.faulty_index) continue;
-    st_agrees_with_pairs = !d.pair_star_exceeded[k];
-  }
+  st_agrees_with_pairs = StarTrackerAgreesAfterIsolation(st_present, d);
   return true;
 }
 
