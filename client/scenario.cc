@@ -260,13 +260,18 @@ absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const s
   RETURN_IF_ERROR(ParseAmplitudeAndTime(v, path, "timeConstantHours", &d.amplitude_k_rad_s,
                                         &d.time_constant_s, "face"));
   const std::string p = Key(path, "face");
-  if (!v.contains("face")) return Invalid(p, "required (+x, -x, +y, -y, +z or -z)");
+  if (!v.contains("face")) return Invalid(p, "required (+x, -x, +y, -y, +z, -z or sunlit)");
   const json& f = v["face"];
   const std::string face = f.is_string() ? f.get<std::string>() : f.dump();
+  if (face == "sunlit") {
+    d.face_axis = estimator::kSunlitFaceAxis;
+    return d;
+  }
   if (!f.is_string() || face.size() != 2 || (face[0] != '+' && face[0] != '-') ||
       face[1] < 'x' || face[1] > 'z') {
     return Invalid(p, absl::StrCat("expected one of +x, -x, +y, -y, +z, -z (the body face whose "
-                                   "outward normal is that axis), got ",
+                                   "outward normal is that axis) or sunlit (the fraction of the "
+                                   "sun's disc seen from the orbit, with earthShadow), got ",
                                    f.is_string() ? absl::StrCat("'", face, "'") : face));
   }
   d.face_sign = face[0] == '+' ? 1 : -1;
@@ -602,6 +607,13 @@ absl::StatusOr<Scenario> ParseTop(const json& root) {
                    absl::StrFormat("%g min is longer than segmentHours (%g h)",
                                    slew / estimator::kSecondsPerMinute,
                                    estimator::SecondsToHours(po.calibration.segment_duration)));
+  }
+  for (size_t i = 0; i < s.gyros.size(); ++i) {
+    const auto& sun = s.gyros[i].sun_face_drift;
+    if (sun && sun->face_axis == estimator::kSunlitFaceAxis && !s.earth_shadow) {
+      return Invalid(absl::StrCat("gyros[", i, "].sunFaceDrift.face"),
+                     "sunlit needs \"earthShadow\": true (the orbit whose shadow it follows)");
+    }
   }
   return s;
 }

@@ -190,6 +190,8 @@ struct GyroState {
 
   // The face's illumination max(0, +-s_b[axis]) for the sun s_b in body axes.
   double SunIllumination(const Vector3d& s_b) const {
+    // s_b is scaled by the sunlit fraction when the spacecraft flies an orbit (SunNodes::At).
+    if (sun_face_axis == kSunlitFaceAxis) return std::min(1.0, s_b.norm());
     return std::max(0.0, sun_face_sign * s_b(sun_face_axis));
   }
 
@@ -385,9 +387,14 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
   if (g.sun_face_drift) {
     const SunFaceDrift& d = *g.sun_face_drift;
     RETURN_IF_ERROR(FiniteVector(d.amplitude_k_rad_s, f + ".sun_face_drift.amplitude_k_rad_s"));
-    if (d.face_axis < 0 || d.face_axis > 2) {
+    if (d.face_axis < 0 || d.face_axis > kSunlitFaceAxis) {
       return absl::InvalidArgumentError(absl::StrFormat(
-          "%s.sun_face_drift.face_axis: must be 0 (x), 1 (y) or 2 (z), got %d", f, d.face_axis));
+          "%s.sun_face_drift.face_axis: must be 0 (x), 1 (y), 2 (z) or %d (sunlit), got %d", f,
+          kSunlitFaceAxis, d.face_axis));
+    }
+    if (d.face_axis == kSunlitFaceAxis && !spec.earth_shadow) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          f, ".sun_face_drift.face_axis: the sunlit fraction needs the orbit (earth_shadow)"));
     }
     if (d.face_sign != 1 && d.face_sign != -1) {
       return absl::InvalidArgumentError(absl::StrFormat(

@@ -158,9 +158,13 @@ struct TransientDrift {
 // the interpolation is off by under 1e-8 rad). With SimulationSpec::earth_shadow the illumination
 // is u(t) times the fraction of the sun's disc seen from that orbit (estimator/eclipse.h: 0 in
 // the Earth's umbra).
+inline constexpr int kSunlitFaceAxis = 3;
 struct SunFaceDrift {
   Eigen::Vector3d amplitude_k_rad_s = Eigen::Vector3d::Zero();  // case axes, at y = 1 [rad/s]
-  int face_axis = 0;                // body axis of the face's outward normal: 0 x, 1 y, 2 z
+  // Body axis of the face's outward normal: 0 x, 1 y, 2 z; or kSunlitFaceAxis: no face, u(t) the
+  // fraction of the sun's disc seen from the SimulationSpec::earth_shadow orbit (required then),
+  // a drift that follows the eclipses whatever the attitude.
+  int face_axis = 0;
   int face_sign = 1;                // +1: the face towards +axis, -1: towards -axis
   double time_constant_s = 3600.0;  // [s], > 0
 };

@@ -154,9 +154,12 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
   if (e.sun_face_drift) {
     out << absl::StrFormat("# g%d_sun_face_drift_amplitude_deg_h: %s\n", n,
                            VecDegH(e.sun_face_drift->amplitude_k_rad_s));
-    out << absl::StrFormat("# g%d_sun_face_drift_face: %c%c\n", n,
-                           e.sun_face_drift->face_sign > 0 ? '+' : '-',
-                           "xyz"[e.sun_face_drift->face_axis]);
+    out << absl::StrFormat(
+        "# g%d_sun_face_drift_face: %s\n", n,
+        e.sun_face_drift->face_axis == estimator::kSunlitFaceAxis
+            ? std::string("sunlit")
+            : absl::StrFormat("%c%c", e.sun_face_drift->face_sign > 0 ? '+' : '-',
+                              "xyz"[e.sun_face_drift->face_axis]));
     out << absl::StrFormat("# g%d_sun_face_drift_time_constant_h: %.15g\n", n,
                            estimator::SecondsToHours(e.sun_face_drift->time_constant_s));
   }

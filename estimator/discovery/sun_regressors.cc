@@ -25,10 +25,12 @@ constexpr int kLagsPerDecade = 20;
 }  // namespace
 
 std::string SunFaceName(int face) {
+  if (face == kSunlitFamily) return "sunlit";
   return std::string(face % 2 == 0 ? "+" : "-") + std::string(1, "xyz"[std::clamp(face / 2, 0, 2)]);
 }
 
 Vector3d SunFaceNormal_b(int face) {
+  if (face == kSunlitFamily) return Vector3d::Zero();
   return (face % 2 == 0 ? 1.0 : -1.0) * Vector3d::Unit(std::clamp(face / 2, 0, 2));
 }
 
@@ -137,10 +139,12 @@ absl::StatusOr<SunRegressors> ComputeSunRegressors(const DeviationSeries& series
     // s_b = C_b_k C_k_in s_in, C_k_in = C_in_k^T.
     s_b.push_back(C_b_k * (step.C_in_k.transpose() * (*sun_in)[i]));
   }
-  out.values.resize(kSunFaces);
-  for (int face = 0; face < kSunFaces; ++face) {
+  out.values.resize(orbit != nullptr ? kSunFaces + 1 : kSunFaces);
+  for (int face = 0; face < static_cast<int>(out.values.size()); ++face) {
     std::vector<double> u;
-    for (size_t i = 0; i < s_b.size(); ++i) u.push_back(nu[i] * FaceIllumination(s_b[i], face));
+    for (size_t i = 0; i < s_b.size(); ++i) {
+      u.push_back(face == kSunlitFamily ? nu[i] : nu[i] * FaceIllumination(s_b[i], face));
+    }
     for (double lag_h : out.lag_hours) {
       out.values[face].push_back(LaggedIllumination(u, dt, HoursToSeconds(lag_h)));
     }

@@ -36,8 +36,13 @@ namespace esg::estimator::discovery {
 
 // Faces 0..5: +x, -x, +y, -y, +z, -z (body axes).
 inline constexpr int kSunFaces = 6;
-std::string SunFaceName(int face);            // "+x", ..., "-z"
-Eigen::Vector3d SunFaceNormal_b(int face);    // the outward normal, body axes [1]
+// With the orbit, one family more: the sunlit fraction nu itself (1 in sunlight, 0 in the Earth's
+// umbra), whatever the attitude: a drift that changes with the eclipses (heaters switching, the
+// whole spacecraft cooling in the shadow) rather than with one face's illumination. Its index
+// follows the faces'; it has no normal.
+inline constexpr int kSunlitFamily = kSunFaces;
+std::string SunFaceName(int face);            // "+x", ..., "-z"; "sunlit" for kSunlitFamily
+Eigen::Vector3d SunFaceNormal_b(int face);    // the outward normal, body axes [1]; 0 for sunlit
 double FaceIllumination(const Eigen::Vector3d& s_b, int face);  // max(0, n_f . s_b) [1]
 
 // The lag grid [h]: 0.1 h to 10 h, 41 values log-spaced.
@@ -49,7 +54,8 @@ std::vector<double> LaggedIllumination(const std::vector<double>& u, const std::
                                        double tau_s);
 
 // One gyro's sun regressors: values[face][lag][step], the lagged illumination of each face at each
-// substep of the gyro's deviation series (TrajectoryStep, its midpoint) for each lag of lag_hours.
+// substep of the gyro's deviation series (TrajectoryStep, its midpoint) for each lag of lag_hours;
+// with the orbit also values[kSunlitFamily], the lagged sunlit fraction.
 struct SunRegressors {
   int gyro = 0;
   std::vector<double> lag_hours;
@@ -79,7 +85,8 @@ absl::StatusOr<SunRegressors> ComputeSunRegressors(const DeviationSeries& series
 // The regressors of `gyro` in `sun`, nullptr when it has none.
 const SunRegressors* FindSunRegressors(const std::vector<SunRegressors>& sun, int gyro);
 
-// The label of a face's group at one lag: "sun -y lag 1.26 h".
+// The label of a face's group at one lag: "sun -y lag 1.26 h" ("sun sunlit lag 1.26 h" for the
+// sunlit fraction).
 std::string SunGroupLabel(int face, double lag_hours);
 
 // The signature (deviation.h Signature) of the drift s[i] e_m, s given at every substep of the

@@ -111,16 +111,27 @@ std::string DescribeSunGroup(const SelectedGroup& group, bool shadowed) {
   const Vector3d u = a.normalized();
   const double size_sigma = std::sqrt(std::max(0.0, u.dot(P * u)));
   const LagInterval lag = SunLagInterval(group);
-  std::string text = absl::StrFormat(
-      "drift along (%.2f, %.2f, %.2f) (case axes) follows the sun on body face %s with a %.2g h "
-      "lag (95%% interval %.2g-%.2g h), %.4f +- %.4f deg/h at full illumination: the face's "
-      "illumination max(0, n . s_b)%s, s_b the sun's direction in body axes, through a "
-      "first-order thermal lag",
-      u.x(), u.y(), u.z(), SunFaceName(group.sun_face), lag.best, lag.lower, lag.upper,
-      a.norm() * deg_h, size_sigma * deg_h,
-      shadowed ? " times the fraction of the sun's disc seen from the orbit (0 in the Earth's "
-                 "shadow)"
-               : "");
+  std::string text =
+      group.sun_face == kSunlitFamily
+          ? absl::StrFormat(
+                "drift along (%.2f, %.2f, %.2f) (case axes) follows the eclipses of the orbit "
+                "with a %.2g h lag (95%% interval %.2g-%.2g h), %.4f +- %.4f deg/h in sunlight "
+                "against the Earth's shadow: the fraction of the sun's disc seen from the orbit "
+                "(1 in sunlight, 0 in the umbra), whatever the attitude, through a first-order "
+                "thermal lag (heaters or the whole spacecraft cooling in the shadow, not one "
+                "face's illumination)",
+                u.x(), u.y(), u.z(), lag.best, lag.lower, lag.upper, a.norm() * deg_h,
+                size_sigma * deg_h)
+          : absl::StrFormat(
+                "drift along (%.2f, %.2f, %.2f) (case axes) follows the sun on body face %s with "
+                "a %.2g h lag (95%% interval %.2g-%.2g h), %.4f +- %.4f deg/h at full "
+                "illumination: the face's illumination max(0, n . s_b)%s, s_b the sun's "
+                "direction in body axes, through a first-order thermal lag",
+                u.x(), u.y(), u.z(), SunFaceName(group.sun_face), lag.best, lag.lower, lag.upper,
+                a.norm() * deg_h, size_sigma * deg_h,
+                shadowed ? " times the fraction of the sun's disc seen from the orbit (0 in the "
+                           "Earth's shadow)"
+                         : "");
   std::vector<std::string> cannot;
   for (const auto& [label, against] : group.alternatives) {
     if (IsOrbital(label) && cannot.size() < 2 &&
@@ -204,7 +215,7 @@ std::string HeldSunGroupName(int gyro, const std::string& label) {
 
 std::vector<int> HeldSunFaces(const ModelState& model, int gyro) {
   std::vector<int> out;
-  for (int face = 0; face < kSunFaces; ++face) {
+  for (int face = 0; face <= kSunlitFamily; ++face) {
     const std::string prefix = HeldSunGroupName(gyro, absl::StrCat("sun ", SunFaceName(face), " "));
     for (const std::string& added : model.added) {
       if (absl::StartsWith(added, prefix)) {

@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/model_terms.h"
+#include "estimator/simulator.h"
 #include "estimator/rotation.h"
 #include "estimator/sun_direction.h"
 #include "estimator/units.h"
@@ -210,6 +211,54 @@ TEST(Scenario, ParsesAndSimulatesTheRateDependentDriftAndTheWarmUpTransient) {
 // |u''| (60 s)^2 / 8 = 6e-4 for the orbital profile's 1.1e-3 rad/s, and under 4e-4 where u meets
 // its kink at 0 (a slope change of at most 1.1e-3 /s, lagged over 60 s of tau = 0.5 h): 2e-3
 // allowed.
+// "earthShadow" with a "sunlit" drift: the truth's illumination is the fraction of the sun's disc
+// seen from the circular orbit of the scenario's elements, so it is 0 in the Earth's shadow for
+// the fraction of each orbit the geometry gives: (1 / pi) acos(sqrt(h^2 + 2 R h) / (r cos beta)),
+// h the height above the equatorial radius R and beta the sun's angle above the orbit's plane.
+TEST(Scenario, TheSunlitDriftIsDarkInTheEarthsShadowForTheTimeTheGeometryGives) {
+  auto s = ParseScenarioJson(R"({
+    "profile": "inertial", "earthShadow": true,
+    "inclinationDeg": 51.6, "orbitPeriodMin": 94.6, "raanDeg": 340,
+    "gyros": [{"id": 2, "sunFaceDrift": {"amplitudeDegH": [0, 0.1, 0], "face": "sunlit",
+                                        "timeConstantHours": 0.5}}]
+  })");
+  ASSERT_THAT(s, IsOk());
+  ASSERT_TRUE(s->earth_shadow);
+  EXPECT_EQ(s->gyros[0].sun_face_drift->face_axis, est::kSunlitFaceAxis);
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  ASSERT_TRUE(spec.earth_shadow.has_value());
+  // Four whole orbits: as many eclipses as the fraction counts.
+  spec.duration = 4.0 * spec.earth_shadow->period;
+  spec.telemetry_step = 10.0;
+  auto profile = MakeScenarioProfile(*s, "", spec.duration);
+  ASSERT_THAT(profile, IsOk());
+  spec.profile = *profile;
+  auto result = est::Simulate(spec);
+  ASSERT_THAT(result, IsOk());
+  int dark = 0, lit = 0;
+  for (const est::TruthSample& t : result->truth) {
+    const double u = t.gyros[1]->sun_illumination;
+    ASSERT_GE(u, 0.0);
+    ASSERT_LE(u, 1.0);
+    dark += u < 0.5;
+    lit += u == 1.0;
+  }
+  // The orbit's normal and the sun at the run's middle give beta.
+  const est::OrbitalOptions& o = *spec.earth_shadow;
+  const Vector3d normal(std::sin(o.raan) * std::sin(o.inclination),
+                       -std::cos(o.raan) * std::sin(o.inclination), std::cos(o.inclination));
+  const Vector3d sun = *est::SunDirection_in(spec.start + absl::Seconds(spec.duration / 2));
+  const double beta = std::asin(normal.dot(sun));
+  const double n = 2.0 * M_PI / o.period;
+  const double r = std::cbrt(398600.4418 / (n * n)), R = 6378.137, h = r - R;
+  const double expected = std::acos(std::sqrt(h * h + 2.0 * R * h) / (r * std::cos(beta))) / M_PI;
+  const double frames = static_cast<double>(result->truth.size());
+  EXPECT_NEAR(dark / frames, expected, 0.01) << "beta " << beta * 180.0 / M_PI << " deg";
+  EXPECT_GT(lit / frames, 1.0 - expected - 0.02);
+}
+
 TEST(Scenario, ParsesAndSimulatesTheSunDrivenThermalDrift) {
   auto s = ParseScenarioJson(R"({
     "profile": "orbital", "orbitPeriodMin": 95,
@@ -486,11 +535,14 @@ TEST(Scenario, ErrorsNameTheKey) {
       {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1]}}]})",
        "gyros[0].transientDrift.timeConstantHours: required"},
       {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1}}]})",
-       "gyros[0].sunFaceDrift.face: required (+x, -x, +y, -y, +z or -z)"},
+       "gyros[0].sunFaceDrift.face: required (+x, -x, +y, -y, +z, -z or sunlit)"},
+      {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1, "face": "sunlit"}}]})",
+       "gyros[0].sunFaceDrift.face: sunlit needs \"earthShadow\": true (the orbit whose shadow it follows)"},
+      {R"({"earthShadow": 1})", "earthShadow: expected true or false, got number"},
       {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1, "face": "y"}}]})",
-       "gyros[0].sunFaceDrift.face: expected one of +x, -x, +y, -y, +z, -z (the body face whose outward normal is that axis), got 'y'"},
+       "gyros[0].sunFaceDrift.face: expected one of +x, -x, +y, -y, +z, -z (the body face whose outward normal is that axis) or sunlit (the fraction of the sun's disc seen from the orbit, with earthShadow), got 'y'"},
       {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 1, "face": 2}}]})",
-       "gyros[0].sunFaceDrift.face: expected one of +x, -x, +y, -y, +z, -z (the body face whose outward normal is that axis), got 2"},
+       "gyros[0].sunFaceDrift.face: expected one of +x, -x, +y, -y, +z, -z (the body face whose outward normal is that axis) or sunlit (the fraction of the sun's disc seen from the orbit, with earthShadow), got 2"},
       {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "face": "+x"}}]})",
        "gyros[0].sunFaceDrift.timeConstantHours: required"},
       {R"({"gyros": [{"id": 1, "sunFaceDrift": {"amplitudeDegH": [0, 0, 0.1], "face": "+x", "timeConstantHours": 0}}]})",

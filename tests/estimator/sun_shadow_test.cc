@@ -105,6 +105,29 @@ TEST(SunShadow, AFaceTowardsTheSunCoolsThroughEachEclipse) {
   EXPECT_LT(lowest, 0.01);
 }
 
+TEST(SunShadow, TheSunlitFamilyIsTheLaggedSunlitFractionAndOnlyWithTheOrbit) {
+  const DeviationSeries series = Series(3.0);
+  const Orbit orbit = SunPlaneOrbit(-60, 3 * 3600 + 60);
+  const absl::StatusOr<SunRegressors> without = ComputeSunRegressors(series, Eigen::Matrix3d::Identity());
+  const absl::StatusOr<SunRegressors> with =
+      ComputeSunRegressors(series, Eigen::Matrix3d::Identity(), &orbit);
+  ASSERT_TRUE(without.ok() && with.ok());
+  EXPECT_EQ(without->values.size(), static_cast<size_t>(kSunFaces));
+  ASSERT_EQ(with->values.size(), static_cast<size_t>(kSunFaces + 1));
+  EXPECT_EQ(SunFaceName(kSunlitFamily), "sunlit");
+  EXPECT_EQ(SunFaceNormal_b(kSunlitFamily), Vector3d::Zero());
+  const absl::StatusOr<std::vector<double>> nu = SunlitAlongSeries(series, orbit);
+  ASSERT_TRUE(nu.ok());
+  std::vector<double> dt(series.steps.size(), 10.0);
+  for (size_t lag = 0; lag < with->lag_hours.size(); lag += 10) {
+    const std::vector<double> expected = LaggedIllumination(*nu, dt, 3600.0 * with->lag_hours[lag]);
+    ASSERT_EQ(with->values[kSunlitFamily][lag].size(), expected.size());
+    for (size_t i = 0; i < expected.size(); ++i) {
+      ASSERT_DOUBLE_EQ(with->values[kSunlitFamily][lag][i], expected[i]) << "lag " << lag;
+    }
+  }
+}
+
 TEST(SunShadow, AnOrbitThatDoesNotCoverTheSeriesIsRefused) {
   const DeviationSeries series = Series(3.0);
   EXPECT_THAT(SunlitAlongSeries(series, SunPlaneOrbit(0, 3600)),
