@@ -75,6 +75,16 @@ write('aem', 'CCSDS AEM in KVN (CCSDS 504.0-B-2 and -B-1), formats/aem.h',
        'QUATERNION_TYPE = FIRST', 'QUATERNION_TYPE = LAST', 'INTERPOLATION_METHOD = LINEAR',
        'INTERPOLATION_DEGREE = ', '2019-03-01T00:00:00.000000', '2019-060T00:00:00', 'Z', ' = ',
        '\n', '0.707106781186548', '1.000000000000000', '-0.5', '1e308', 'nan'])
+write('oem', 'CCSDS OEM in KVN (CCSDS 502.0-B-2 and -3), formats/oem.h',
+      ['CCSDS_OEM_VERS = 2.0', 'CCSDS_OEM_VERS = 1.0', 'CCSDS_OEM_VERS = 3.0', 'CREATION_DATE = ',
+       'ORIGINATOR = ', 'MESSAGE_ID = ', 'CLASSIFICATION = ', 'META_START', 'META_STOP',
+       'COMMENT ', 'OBJECT_NAME = ', 'OBJECT_ID = ', 'CENTER_NAME = EARTH', 'REF_FRAME = EME2000',
+       'REF_FRAME = GCRF', 'REF_FRAME = ICRF', 'REF_FRAME = ITRF2000', 'REF_FRAME_EPOCH = ',
+       'TIME_SYSTEM = UTC', 'TIME_SYSTEM = TAI', 'START_TIME = ', 'USEABLE_START_TIME = ',
+       'USEABLE_STOP_TIME = ', 'STOP_TIME = ', 'INTERPOLATION = HERMITE',
+       'INTERPOLATION_DEGREE = 3', 'COVARIANCE_START', 'COVARIANCE_STOP', 'EPOCH = ',
+       'COV_REF_FRAME = RTN', '2019-03-01T00:00:00.000000', '2019-060T00:01:00', 'Z', ' = ',
+       '\n', '6878.137000', '-2352.191207', '4.728554669', '0.000000000', '1e308', 'nan', '1e-3'])
 write('token_file', 'bearer-token file of esgd (server/auth.h)',
       ['read', 'write', 'read,write', 'write,read', ' ', '\t', '\n', '#', '\r\n', 'alice',
        'token-1', '0123456789abcdef0123456789abcdef', ','])

@@ -17,10 +17,12 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/calibration_model.h"
+#include "estimator/orbit.h"
 #include "estimator/rotation.h"
 #include "estimator/session.h"
 #include "estimator/simulator.h"
 #include "formats/aem.h"
+#include "formats/oem.h"
 #include "formats/recording_csv.h"
 #include "google/protobuf/io/coded_stream.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
@@ -255,6 +257,25 @@ int main(int argc, char** argv) {
     return 1;
   }
   Write(out + "/aem/two_segments.aem", *aem);
+
+  // An OEM of a circular 94.6 min orbit over the first two hours, states every 60 s.
+  std::vector<estimator::OrbitState> states;
+  for (int i = 0; i <= 120; ++i) {
+    states.push_back(estimator::CircularOrbitState(estimator::DegToRad(51.6),
+                                                   estimator::DegToRad(340.0), 94.6 * 60.0, 0.0,
+                                                   absl::FromUnixSeconds(1551398400), 60.0 * i));
+  }
+  storage::OemHeader oem_header;
+  oem_header.object_name = "RDK-1";
+  oem_header.object_id = "2019-001A";
+  oem_header.creation_date = absl::FromUnixSeconds(1551398400);
+  oem_header.comments = {"seed of the OEM fuzz target"};
+  absl::StatusOr<std::string> oem = storage::WriteOem(oem_header, states);
+  if (!oem.ok()) {
+    std::fprintf(stderr, "%s\n", oem.status().ToString().c_str());
+    return 1;
+  }
+  Write(out + "/oem/circular.oem", *oem);
 
   // Server checkpoints along the flight, every session version.
   estimator::SessionOptions options;

@@ -23,7 +23,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-TARGETS=(recording_csv column_mapping config_json telemetry_frame checkpoint aem token_file scenario)
+TARGETS=(recording_csv column_mapping config_json telemetry_frame checkpoint aem oem token_file scenario)
 
 install_fuzz_deps() {
   bash scripts/install-deps.sh
