@@ -64,7 +64,7 @@ write('scenario', 'scenario JSON of the simulator (docs/scenario.md)',
              'outlierBurst outlierRate profile profileSeed raanDeg randomWalkDegHSqrtH '
              'reading_frozen readings_missing readoutNoiseArcsec readout_jump rotorDisplacementUm '
              'running starTracker startHours sunDirection switchOnHours timeHours voltageNoiseMv '
-             'inertial orbital mixed segmentHours slewMin spinPeriodMin'))
+             'inertial orbital mixed segmentHours slewMin spinPeriodMin earthShadow sunlit'))
 write('aem', 'CCSDS AEM in KVN (CCSDS 504.0-B-2 and -B-1), formats/aem.h',
       ['CCSDS_AEM_VERS = 2.0', 'CCSDS_AEM_VERS = 1.0', 'CREATION_DATE = ', 'ORIGINATOR = ',
        'MESSAGE_ID = ', 'META_START', 'META_STOP', 'DATA_START', 'DATA_STOP', 'COMMENT ',
