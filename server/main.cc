@@ -38,6 +38,7 @@ struct Flags {
   std::string max_clock_lead = "5m";
   std::string estimate_retention = "720h";
   std::string lease_duration = "15s";
+  std::string filter_commit_window = "25ms";
   int64_t queued_mb_per_caller = 0;
   int64_t queued_mb = 0;
   double auto_diagnosis_hours = 0.0;
@@ -71,6 +72,15 @@ void AddServingFlags(CLI::App& app, esg::server::ServerOptions& options, Flags& 
       ->capture_default_str();
   app.add_option("--workers", options.core.worker_threads,
                  "Filter worker threads (0: one per core, at least 2)")
+      ->capture_default_str();
+  app.add_option("--filter-commit-group", options.core.filter_commit_group,
+                 "PostgreSQL: filter jobs of different spacecraft committed in one transaction, "
+                 "each in its own savepoint, at most this many (above --workers; 0: each job "
+                 "alone; docs/deploy.md \"Capacity\")")
+      ->capture_default_str();
+  app.add_option("--filter-commit-window", flags.filter_commit_window,
+                 "With --filter-commit-group: how long the first job of a group waits for others "
+                 "to join it, e.g. 25ms, 0 (delays the estimates, never an ack)")
       ->capture_default_str();
   app.add_option("--reorder-window", flags.reorder_window,
                  "How late a frame may arrive (before the last accepted one) and still be applied "
@@ -187,6 +197,19 @@ bool ApplyFlags(const Flags& flags, esg::server::ServerOptions& options) {
       options.core.lease_duration < absl::Seconds(1)) {
     std::fprintf(stderr, "--lease-duration: '%s' is not a duration >= 1s (e.g. 15s, 1m)\n",
                  flags.lease_duration.c_str());
+    return false;
+  }
+  if (!absl::ParseDuration(flags.filter_commit_window, &options.core.filter_commit_window) ||
+      options.core.filter_commit_window < absl::ZeroDuration() ||
+      options.core.filter_commit_window > absl::Seconds(1)) {
+    std::fprintf(stderr,
+                 "--filter-commit-window: '%s' is not a duration from 0 to 1s (e.g. 25ms, 0)\n",
+                 flags.filter_commit_window.c_str());
+    return false;
+  }
+  if (options.core.filter_commit_group < 0 || options.core.filter_commit_group > 256) {
+    std::fprintf(stderr, "--filter-commit-group: %d is not from 0 to 256\n",
+                 options.core.filter_commit_group);
     return false;
   }
   options.synchronous = flags.sync == "normal" ? esg::storage::Synchronous::kNormal

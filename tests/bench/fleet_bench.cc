@@ -9,7 +9,10 @@
 // commit). With the group commit the transaction ids count each job's savepoint too, so
 // xact_commit_per_applied_frame counts the commits themselves (pg_stat_database, read-only
 // transactions included). Argument 2 is the filter's group commit
-// (CoreOptions::filter_commit_group): 64, or 0 for one commit per filter job as before it.
+// (CoreOptions::filter_commit_group): 64, or 0 for one commit per filter job as before it;
+// argument 3 its window in milliseconds (CoreOptions::filter_commit_window, docs/decisions.md
+// D109). filter_commits_per_applied_frame counts the filter's own transactions (a group once,
+// EstimationCore::filter_commit_counts), filter_jobs_per_commit the jobs each carried.
 // One iteration each (wall time):
 //   <dir>/tests/bench/esg_bench --benchmark_filter=BM_FleetAtOneHertz
 #include <libpq-fe.h>
@@ -100,6 +103,7 @@ void BM_FleetAtOneHertz(benchmark::State& state) {
   server::ServerOptions options;
   options.core.node_id = "bench";
   options.core.filter_commit_group = static_cast<int>(state.range(1));
+  options.core.filter_commit_window = absl::Milliseconds(state.range(2));
   testing::LoopbackServer server(options, *db);
   auto stub = server.Stub();
   const std::vector<esg::v1::TelemetryFrame>& frames = OneHertzFrames();
@@ -202,12 +206,16 @@ void BM_FleetAtOneHertz(benchmark::State& state) {
     const int64_t applied_before = applied();
     const int64_t xid_before = NextXid(*db);
     const int64_t committed_before = CommittedTransactions(*db);
+    const server::EstimationCore::FilterCommitCounts filter_before =
+        server.core().filter_commit_counts();
     const Clock::time_point measured_from = Clock::now();
     std::this_thread::sleep_until(measured_from + std::chrono::seconds(kMeasuredSeconds));
     const Clock::time_point snapshot_start = Clock::now();
     const int64_t applied_after = applied();
     const int64_t xid_after = NextXid(*db);
     const int64_t committed_after = CommittedTransactions(*db);
+    const server::EstimationCore::FilterCommitCounts filter_after =
+        server.core().filter_commit_counts();
     const double snapshot_s = std::chrono::duration<double>(Clock::now() - snapshot_start).count();
     const double seconds = std::chrono::duration<double>(Clock::now() - measured_from).count();
     for (std::thread& t : streams) t.join();
@@ -228,6 +236,13 @@ void BM_FleetAtOneHertz(benchmark::State& state) {
     state.counters["commits_per_s"] = static_cast<double>(xid_after - xid_before - 1) / seconds;
     state.counters["commits_per_applied_frame"] =
         applied_frames > 0 ? static_cast<double>(xid_after - xid_before - 1) / applied_frames : 0;
+    const int64_t filter_commits = filter_after.transactions - filter_before.transactions;
+    state.counters["filter_commits_per_applied_frame"] =
+        applied_frames > 0 ? static_cast<double>(filter_commits) / applied_frames : 0;
+    state.counters["filter_jobs_per_commit"] =
+        filter_commits > 0
+            ? static_cast<double>(filter_after.jobs - filter_before.jobs) / filter_commits
+            : 0;
     std::sort(latencies_ms.begin(), latencies_ms.end());
     if (!latencies_ms.empty()) {
       auto at = [&](double p) {
@@ -238,13 +253,18 @@ void BM_FleetAtOneHertz(benchmark::State& state) {
       state.counters["ack_p99_ms"] = at(0.99);
     }
   }
-  state.SetLabel(state.range(1) > 0 ? "filter group commit" : "one commit per filter job");
+  state.SetLabel(state.range(1) > 0 ? absl::StrFormat("filter group commit, window %d ms",
+                                                       state.range(2))
+                                     : std::string("one commit per filter job"));
 }
 BENCHMARK(BM_FleetAtOneHertz)
-    ->Args({500, 0})
-    ->Args({500, 64})
-    ->Args({2000, 0})
-    ->Args({2000, 64})
+    ->ArgNames({"spacecraft", "group", "window_ms"})
+    ->Args({500, 0, 0})
+    ->Args({500, 64, 0})
+    ->Args({500, 64, 25})
+    ->Args({2000, 0, 0})
+    ->Args({2000, 64, 0})
+    ->Args({2000, 64, 25})
     ->Iterations(1)
     ->Unit(benchmark::kSecond)
     ->UseRealTime();
