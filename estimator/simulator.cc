@@ -413,6 +413,29 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
   return absl::OkStatus();
 }
 
+namespace {
+
+// The Earth-shadow orbit: a positive period, finite angles, and a radius (Kepler's third law)
+// at least 100 km above the equator.
+absl::Status ValidateEarthShadow(const OrbitalOptions& o, absl::Time start) {
+  if (!std::isfinite(o.inclination) || !std::isfinite(o.raan) || !std::isfinite(o.arg_latitude0) ||
+      !std::isfinite(o.period) || !(o.period > 0.0)) {
+    return absl::InvalidArgumentError(
+        "earth_shadow: the orbit's period must be positive and its angles finite");
+  }
+  const double r_km =
+      CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0, start, 0.0).r_in_km.norm();
+  if (r_km < kEarthEquatorialRadiusKm + 100.0) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "earth_shadow: a period of %.1f min gives an orbit %.0f km from the Earth's centre, less "
+        "than 100 km above its equator",
+        o.period / 60.0, r_km));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
   RETURN_IF_ERROR(ValidateConfig(spec.config));
   if (spec.profile == nullptr) {
@@ -431,23 +454,7 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
         absl::StrFormat("integration_rate_hz: %g Hz over %g s gives more than %g steps",
                         spec.integration_rate_hz, spec.duration, kMaxSteps));
   }
-  if (spec.earth_shadow) {
-    const OrbitalOptions& o = *spec.earth_shadow;
-    if (!std::isfinite(o.inclination) || !std::isfinite(o.raan) ||
-        !std::isfinite(o.arg_latitude0) || !std::isfinite(o.period) || !(o.period > 0.0)) {
-      return absl::InvalidArgumentError(
-          "earth_shadow: the orbit's period must be positive and its angles finite");
-    }
-    const double r_km = CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0,
-                                           spec.start, 0.0)
-                            .r_in_km.norm();
-    if (r_km < kEarthEquatorialRadiusKm + 100.0) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "earth_shadow: a period of %.1f min gives an orbit %.0f km from the Earth's centre, "
-          "less than 100 km above its equator",
-          o.period / 60.0, r_km));
-    }
-  }
+  if (spec.earth_shadow) RETURN_IF_ERROR(ValidateEarthShadow(*spec.earth_shadow, spec.start));
   for (int id = 1; id <= kMaxGyros; ++id) {
     const GyroTruth& g = spec.gyros[id - 1];
     const std::string f = absl::StrFormat("gyros[%d] (gyro %d)", id - 1, id);
