@@ -443,6 +443,7 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
   const double spacing = (log_max - log_min) / (kTauCoarse - 1);
 
   std::map<double, double> value;  // ln(tau / h) -> profiled -2 log L
+  std::map<double, Vector3d> amplitude;  // ln(tau / h) -> the run's final A [rad/s, case axes]
   double best_log = 0.0, best_value = 0.0;
   bool any = false;
   ModelRun best_run;
@@ -458,6 +459,12 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
     if (!run.ok()) return run.status();
     const double v = Profile(*run).value;
     value[log_tau] = v;
+    Vector3d a_k = Vector3d::Zero();
+    if (const GyroEstimate* e = FindEstimate(run->gyros, candidate.gyro);
+        e != nullptr && static_cast<int>(e->basis_terms.size()) >= first_term + kWarmUpTerms) {
+      for (int i = 0; i < kWarmUpTerms; ++i) a_k(i) = e->basis_terms[first_term + i].value;
+    }
+    amplitude[log_tau] = a_k;
     if (!any || v < best_value) {
       any = true;
       best_value = v;
@@ -558,6 +565,30 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
     BasisTerm t = gw->basis_terms[first_term + i];
     t.value = a(i);
     fit.basis_terms.push_back(t);
+  }
+  // The filter's sigma of A is at the best tau; A moves with tau, so its sigma adds the spread
+  // tau's uncertainty gives (the delta method on the profile: dA/d ln tau from the time constants
+  // evaluated at the interval's ends, times the 1-sigma of ln tau, the 95% half-width / 1.96).
+  {
+    auto inside = [&](const auto& point) {
+      return point.first >= lower - 1e-12 && point.first <= upper + 1e-12;
+    };
+    auto lo = std::find_if(amplitude.begin(), amplitude.end(), inside);
+    auto hi = std::find_if(amplitude.rbegin(), amplitude.rend(), inside);
+    if (lo != amplitude.end() && hi != amplitude.rend() && hi->first > lo->first) {
+      const Vector3d slope = (hi->second - lo->second) / (hi->first - lo->first);
+      const double sigma_log_tau = 0.5 * (upper - lower) / 1.959963984540054;
+      const Vector3d from_tau = slope.cwiseAbs() * sigma_log_tau;
+      a_sigma = (a_sigma.cwiseAbs2() + from_tau.cwiseAbs2()).cwiseSqrt();
+      fit.notes.push_back(absl::StrFormat(
+          "the amplitude's 1-sigma includes tau's uncertainty: dA/d ln tau = %s deg/h (from "
+          "tau = %.2f h to %.2f h), times the 1-sigma of ln tau %.3f, adds %s deg/h",
+          absl::StrFormat("(%.4f, %.4f, %.4f)", DegH(slope.x()), DegH(slope.y()),
+                          DegH(slope.z())),
+          std::exp(lo->first), std::exp(hi->first), sigma_log_tau,
+          absl::StrFormat("(%.4f, %.4f, %.4f)", DegH(from_tau.x()), DegH(from_tau.y()),
+                          DegH(from_tau.z()))));
+    }
   }
   AddVectorParameters("warmUpDegH", a, a_sigma, DegH(1.0), "deg/h", fit.fitted);
   const double size = a.norm();

@@ -15,6 +15,7 @@
 // (scripts/confusion_matrix.sh). Takes a few minutes.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
@@ -159,9 +160,21 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
             const Parameter* hi = FindParameter(f.parameters, "tauUpperHours");
             const Parameter* size = FindParameter(f.parameters, "warmUpSizeDegH");
             if (tau != nullptr && lo != nullptr && hi != nullptr && size != nullptr) {
-              char text[160];
-              std::snprintf(text, sizeof text, " tau %.2f h [%.2f, %.2f] size %.4f+-%.4f deg/h",
-                            tau->value, lo->value, hi->value, size->value, size->sigma);
+              // The largest error of a component of A against the scenario's truth, in its sigma.
+              double worst = 0.0;
+              for (int i = 0; i < 3; ++i) {
+                const Parameter* a =
+                    FindParameter(f.parameters, "warmUpDegH[" + std::to_string(i) + "]");
+                if (a != nullptr && a->sigma > 0) {
+                  worst = std::max(worst, std::abs(a->value -
+                                                   ::esg::testing::WarmUpAmplitudeDegH()(i)) /
+                                              a->sigma);
+                }
+              }
+              char text[200];
+              std::snprintf(text, sizeof text,
+                            " tau %.2f h [%.2f, %.2f] size %.4f+-%.4f deg/h max|dA_i|/sigma_i %.2f",
+                            tau->value, lo->value, hi->value, size->value, size->sigma, worst);
               detail += text;
             }
           }
