@@ -914,11 +914,16 @@ absl::StatusOr<bool> PreferBasisToTimeBehaviour(RoundState& st, int round,
 // levels or driven by a quantity the telemetry does not carry, is neither (wander.h). When a
 // stationary drift describes the gyro's deviation decisively better than both, nothing is
 // taken: the mismatch is left unexplained, located to the gyro, and described.
+// A warm-up at the top is checked so only after the point-prediction guard refused it
+// (`refused_warm_up`, SelectionRound): a true warm-up, a decay, is also described well by a
+// stationary drift relaxing to its mean, so the check before the guard would leave it unexplained.
 absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected,
-                                   DiagnosisContext& context) {
+                                   DiagnosisContext& context, bool refused_warm_up = false) {
   if (st.significant.empty()) return absl::OkStatus();
   const Candidate& c = st.fits[st.significant.front().index].candidate;
-  if (c.gyro <= 0 || (c.effect != Effect::kDriftStep && c.effect != Effect::kRandomWalkDrift)) {
+  const bool warm_up = refused_warm_up && c.effect == Effect::kWarmUp;
+  if (c.gyro <= 0 ||
+      (c.effect != Effect::kDriftStep && c.effect != Effect::kRandomWalkDrift && !warm_up)) {
     return absl::OkStatus();
   }
   RETURN_IF_ERROR(BehaviourOf(st, selected, context, c.gyro));
@@ -1045,6 +1050,23 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   RETURN_IF_ERROR(PreferStationaryDrift(st, selected, context));
   ASSIGN_OR_RETURN(Choice choice, ChooseGuarded(st.significant, st.scored, st.fits, st.failed,
                                                 st.inhomogeneous_only, round, selected, context));
+  // A warm-up that topped the round but predicts the held-out spans worse (the guard refused it)
+  // is a drift of its gyro that changes otherwise than by one decay: as for a step or a walk at
+  // the top, nothing is taken when a drift that returns to its mean describes that gyro's
+  // deviation decisively better (else the round would go on to a constant effect of another
+  // gyro, fitted to the spill-over of that drift).
+  if (!st.significant.empty() && choice.chosen != st.significant.front().index &&
+      st.fits[st.significant.front().index].candidate.effect == Effect::kWarmUp &&
+      std::any_of(choice.worsened.begin(), choice.worsened.end(), [&](const auto& w) {
+        return w.first == st.significant.front().index;
+      })) {
+    RETURN_IF_ERROR(PreferStationaryDrift(st, selected, context, /*refused_warm_up=*/true));
+    if (st.significant.empty()) {
+      choice.chosen = -1;
+      choice.contenders.clear();
+      choice.guard_held_out.reset();
+    }
+  }
   for (const Scored& s : st.scored) {
     result.rows.push_back(Row(s, st.fits[s.index], round, choice.chosen));
   }

@@ -246,6 +246,57 @@ TEST(DiagnoseCli, DriftStepReportPlotsTheOnset) {
   EXPECT_TRUE(std::filesystem::exists(dir.File("report/onset_profile.dat")));
 }
 
+// A warm-up of gyro 2 (the scenario's transientDrift, docs/scenario.md: 0.15 deg/h decaying with
+// tau = 3 h from the start) is found with --effects warm_up as three exponential_decay terms of
+// gyro 2, tau's 95% interval holding 3 h; model.json carries them (timeConstantS) and esg
+// calibrate reads it: the kind round-trips through the diagnosis's JSON and the configuration's.
+TEST(DiagnoseCli, WarmUpIsWrittenToTheModelAsExponentialDecayTerms) {
+  TempDir dir;
+  WriteFile(dir.File("config.json"), kConfig);
+  WriteFile(dir.File("scenario.json"), R"({
+    "description": "gyro 2 warms up",
+    "profile": "mixed", "profileSeed": 3,
+    "gyros": [{"id": 2, "transientDrift": {"amplitudeDegH": [0.09, -0.09, 0.08],
+                                           "timeConstantHours": 3}}]
+  })");
+  RunResult sim = RunEsg(dir, "simulate --config '" + dir.File("config.json") + "' --scenario '" +
+                                  dir.File("scenario.json") + "' --hours 12 --seed 5 --out '" +
+                                  dir.File("rec.csv") + "'");
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  RunResult r = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
+                                dir.File("rec.csv") +
+                                "' --effects warm_up --max-effects 1 --json --out '" +
+                                dir.File("report") + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json doc = nlohmann::json::parse(r.out);
+  ASSERT_EQ(doc.at("verdict"), "basis_term") << r.out;
+  const auto& f = doc.at("findings").at(0);
+  EXPECT_EQ(f.at("gyro"), 2);
+  EXPECT_EQ(f.at("timeBehaviour").at("kind"), "warm_up");
+  double lower = 0.0, upper = 0.0;
+  for (const auto& p : f.at("parameters")) {
+    if (p.at("name") == "tauLowerHours") lower = p.at("value");
+    if (p.at("name") == "tauUpperHours") upper = p.at("value");
+  }
+  EXPECT_LE(lower, 3.0) << f.at("explanation");
+  EXPECT_GE(upper, 3.0) << f.at("explanation");
+  ASSERT_EQ(f.at("modelTerms").size(), 3u);
+  for (const auto& t : f.at("modelTerms")) {
+    EXPECT_EQ(t.at("kind"), "exponential_decay");
+    EXPECT_GT(t.at("timeConstantS").get<double>(), 0.0);
+  }
+  const nlohmann::json model = nlohmann::json::parse(ReadFile(dir.File("report/model.json")));
+  int decays = 0;
+  for (const auto& g : model.at("gyros")) {
+    if (!g.contains("basisTerms")) continue;
+    for (const auto& t : g.at("basisTerms")) decays += t.at("kind") == "exponential_decay";
+  }
+  EXPECT_EQ(decays, 3);
+  RunResult cal = RunEsg(dir, "calibrate --config '" + dir.File("report/model.json") +
+                                  "' --recording '" + dir.File("rec.csv") + "' --json");
+  EXPECT_EQ(cal.exit_code, 0) << cal.err;
+}
+
 TEST(DiagnoseCli, BadArgumentsExitTwoNamingTheOption) {
   TempDir dir;
   WriteFile(dir.File("config.json"), kConfig);
