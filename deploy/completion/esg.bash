@@ -103,12 +103,12 @@ _esg() {
     completion) COMPREPLY=($(compgen -W "bash" -- "$cur")); return ;;
     version) return ;;
     simulate) opts="--config --profile --scenario --hours --seed --out --write-config --start
-                    --telemetry-step --integration-rate --truth $format" ;;
+                    --telemetry-step --integration-rate --truth --orbit-out $format" ;;
     calibrate) opts="--config --recording --columns --model --kd --consistency-window $format" ;;
     gap) opts="--config --recording --columns --model --kd --consistency-window --gap-start
                --series-csv $format" ;;
     diagnose) opts="--config --recording --columns --spacecraft --from --to --out --model --alpha
-                    --max-effects --threads --integration-rate --effects --orbital-period $format" ;;
+                    --max-effects --threads --integration-rate --effects --orbital-period --orbit $format" ;;
     diagnoses)
       case "$sub" in
         "") COMPREPLY=($(compgen -W "list show cancel-auto" -- "$cur")); return ;;
