@@ -22,6 +22,36 @@ constexpr double kFirstLagHours = 0.1;
 constexpr double kLastLagHours = 10.0;
 constexpr int kLagsPerDecade = 20;
 
+// A vector of the sun's computed at nodes kSunTableStepS apart from t0, one node past t1, and
+// interpolated linearly between them (clamped to the table's ends).
+class SunTable {
+ public:
+  static absl::StatusOr<SunTable> Make(absl::Time t0, absl::Time t1,
+                                       absl::StatusOr<Vector3d> (*at)(absl::Time)) {
+    SunTable table;
+    table.t0_ = t0;
+    const int n = 2 + static_cast<int>(absl::ToDoubleSeconds(t1 - t0) / kSunTableStepS);
+    for (int i = 0; i < n; ++i) {
+      absl::StatusOr<Vector3d> v = at(t0 + absl::Seconds(i * kSunTableStepS));
+      if (!v.ok()) return v.status();
+      table.nodes_.push_back(*v);
+    }
+    return table;
+  }
+
+  Vector3d At(absl::Time t) const {
+    const int n = static_cast<int>(nodes_.size());
+    const double x = absl::ToDoubleSeconds(t - t0_) / kSunTableStepS;
+    const int i = std::clamp(static_cast<int>(std::floor(x)), 0, n - 2);
+    const double f = std::clamp(x - i, 0.0, 1.0);
+    return (1.0 - f) * nodes_[i] + f * nodes_[i + 1];
+  }
+
+ private:
+  absl::Time t0_;
+  std::vector<Vector3d> nodes_;
+};
+
 }  // namespace
 
 std::string SunFaceName(int face) {
@@ -64,20 +94,11 @@ std::vector<double> LaggedIllumination(const std::vector<double>& u, const std::
 absl::StatusOr<std::vector<Vector3d>> SunAlongSeries_in(const DeviationSeries& series) {
   std::vector<Vector3d> out;
   if (series.steps.empty()) return out;
-  const absl::Time t0 = series.steps.front().inputs.time;
-  const absl::Time t1 = series.steps.back().inputs.time;
-  const int n = 2 + static_cast<int>(absl::ToDoubleSeconds(t1 - t0) / kSunTableStepS);
-  std::vector<Vector3d> table;
-  for (int i = 0; i < n; ++i) {
-    auto s = SunDirection_in(t0 + absl::Seconds(i * kSunTableStepS));
-    if (!s.ok()) return s.status();
-    table.push_back(*s);
-  }
+  absl::StatusOr<SunTable> table = SunTable::Make(
+      series.steps.front().inputs.time, series.steps.back().inputs.time, &SunDirection_in);
+  if (!table.ok()) return table.status();
   for (const TrajectoryStep& step : series.steps) {
-    const double x = absl::ToDoubleSeconds(step.inputs.time - t0) / kSunTableStepS;
-    const int i = std::clamp(static_cast<int>(std::floor(x)), 0, n - 2);
-    const double f = std::clamp(x - i, 0.0, 1.0);
-    out.push_back(((1.0 - f) * table[i] + f * table[i + 1]).normalized());
+    out.push_back(table->At(step.inputs.time).normalized());
   }
   return out;
 }
@@ -86,23 +107,15 @@ absl::StatusOr<std::vector<double>> SunlitAlongSeries(const DeviationSeries& ser
                                                       const Orbit& orbit) {
   std::vector<double> out;
   if (series.steps.empty()) return out;
-  const absl::Time t0 =
-      series.steps.front().inputs.time - absl::Seconds(0.5 * series.steps.front().dt);
-  const absl::Time t1 = series.steps.back().inputs.time + absl::Seconds(0.5 * series.steps.back().dt);
-  const int n = 2 + static_cast<int>(absl::ToDoubleSeconds(t1 - t0) / kSunTableStepS);
-  std::vector<Vector3d> table_km;
-  for (int i = 0; i < n; ++i) {
-    auto s = SunPosition_in_km(t0 + absl::Seconds(i * kSunTableStepS));
-    if (!s.ok()) return s.status();
-    table_km.push_back(*s);
-  }
+  absl::StatusOr<SunTable> sun_km = SunTable::Make(
+      series.steps.front().inputs.time - absl::Seconds(0.5 * series.steps.front().dt),
+      series.steps.back().inputs.time + absl::Seconds(0.5 * series.steps.back().dt),
+      &SunPosition_in_km);
+  if (!sun_km.ok()) return sun_km.status();
   auto sunlit = [&](absl::Time t) -> absl::StatusOr<double> {
     absl::StatusOr<OrbitState> state = orbit.StateAt(t);
     if (!state.ok()) return state.status();
-    const double x = absl::ToDoubleSeconds(t - t0) / kSunTableStepS;
-    const int i = std::clamp(static_cast<int>(std::floor(x)), 0, n - 2);
-    const double f = std::clamp(x - i, 0.0, 1.0);
-    return SunlitFraction(state->r_in_km, (1.0 - f) * table_km[i] + f * table_km[i + 1]);
+    return SunlitFraction(state->r_in_km, sun_km->At(t));
   };
   for (const TrajectoryStep& step : series.steps) {
     const absl::Duration half = absl::Seconds(0.5 * step.dt);
