@@ -60,18 +60,21 @@ double KeplerPeriodS(const OrbitState& state) {
   return 2.0 * M_PI * std::sqrt(a_km * a_km * a_km / kEarthGmKm3S2);
 }
 
-absl::StatusOr<Orbit> Orbit::FromArcs(std::vector<OrbitArc> arcs) {
+absl::StatusOr<Orbit> Orbit::FromArcs(std::vector<OrbitArc> arcs,
+                                      const std::vector<std::string>& arc_names) {
   if (arcs.empty()) return absl::InvalidArgumentError("arcs: an orbit needs at least one arc");
   for (size_t i = 0; i < arcs.size(); ++i) {
     const OrbitArc& arc = arcs[i];
-    const std::string at = absl::StrCat("arcs[", i, "]");
+    // What an error calls the arc, up to its field: "arcs[1]." or the caller's name.
+    const std::string at =
+        i < arc_names.size() ? arc_names[i] : absl::StrCat("arcs[", i, "].");
     if (arc.states.size() < 2) {
       return absl::InvalidArgumentError(
-          absl::StrCat(at, ".states: an arc needs at least 2 states, got ", arc.states.size()));
+          absl::StrCat(at, "states: an arc needs at least 2 states, got ", arc.states.size()));
     }
     for (size_t j = 0; j < arc.states.size(); ++j) {
       const OrbitState& s = arc.states[j];
-      const std::string state = absl::StrCat(at, ".states[", j, "]");
+      const std::string state = absl::StrCat(at, "states[", j, "]");
       if (!s.r_in_km.allFinite()) return absl::InvalidArgumentError(state + ".r_in_km: not finite");
       if (!s.v_in_km_s.allFinite()) {
         return absl::InvalidArgumentError(state + ".v_in_km_s: not finite");
@@ -101,7 +104,7 @@ absl::StatusOr<Orbit> Orbit::FromArcs(std::vector<OrbitArc> arcs) {
     if (!(arc.from <= arc.to) || arc.from < arc.states.front().time ||
         arc.to > arc.states.back().time) {
       return absl::InvalidArgumentError(absl::StrCat(
-          at, ".from/to: ", FormatUtc(arc.from), " to ", FormatUtc(arc.to),
+          at, "from/to: ", FormatUtc(arc.from), " to ", FormatUtc(arc.to),
           " is empty or not inside its states' span ", FormatUtc(arc.states.front().time), " to ",
           FormatUtc(arc.states.back().time)));
     }

@@ -44,8 +44,10 @@ class Orbit {
   // Earth, [from, to] empty or outside its states, or states too far apart for the interpolation
   // (the bound above, with the interval and the bound in the message); "arcs" when there are
   // none. Where arcs overlap, a later one is used (a newer delivery replaces an older
-  // prediction).
-  static absl::StatusOr<Orbit> FromArcs(std::vector<OrbitArc> arcs);
+  // prediction). `arc_names[i]`, when given, replaces "arcs[i]." at the head of an error about
+  // arc i (a file's reader names its segment and line).
+  static absl::StatusOr<Orbit> FromArcs(std::vector<OrbitArc> arcs,
+                                        const std::vector<std::string>& arc_names = {});
 
   // The interpolated state at t; OutOfRange naming t and the coverage when no arc covers it.
   absl::StatusOr<OrbitState> StateAt(absl::Time t) const;

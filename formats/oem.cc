@@ -321,6 +321,7 @@ absl::StatusOr<estimator::Orbit> ParseOemOrbit(absl::string_view text,
   absl::StatusOr<OemFile> file = ParseOem(text);
   if (!file.ok()) return file.status();
   std::vector<estimator::OrbitArc> arcs;
+  std::vector<std::string> names;  // what the orbit's errors call each segment
   for (size_t i = 0; i < file->segments.size(); ++i) {
     const OemSegment& segment = file->segments[i];
     const int line = segment.metadata_lines.at("OBJECT_NAME");
@@ -342,17 +343,10 @@ absl::StatusOr<estimator::Orbit> ParseOemOrbit(absl::string_view text,
       return absl::InvalidArgumentError(absl::StrCat(
           "segment ", i + 1, " (line ", line, "): its useable span holds no two states"));
     }
-    // The orbit's checks one arc at a time, so that an error names the segment.
-    absl::StatusOr<estimator::Orbit> one = estimator::Orbit::FromArcs({arc});
-    if (!one.ok()) {
-      std::string message(one.status().message());
-      if (absl::StartsWith(message, "arcs[0].")) message = message.substr(8);
-      return absl::InvalidArgumentError(
-          absl::StrCat("segment ", i + 1, " (line ", line, "): ", message));
-    }
     arcs.push_back(std::move(arc));
+    names.push_back(absl::StrCat("segment ", i + 1, " (line ", line, "): "));
   }
-  return estimator::Orbit::FromArcs(std::move(arcs));
+  return estimator::Orbit::FromArcs(std::move(arcs), names);
 }
 
 absl::StatusOr<std::string> WriteOem(const OemHeader& header,
