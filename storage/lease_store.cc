@@ -116,15 +116,17 @@ absl::StatusOr<std::vector<std::string>> LeaseStore::RenewAll(
     absl::StrAppend(&fenced, i == 0 ? "" : " OR ", "(spacecraft_id = ?", 2 + 3 * i,
                     " AND owner = ?", 3 + 3 * i, " AND epoch = ?", 4 + 3 * i, ")");
   }
-  // The rows are locked first in spacecraft-id order (bytewise: the "C" collation, as
-  // std::map orders the fences), the order in which a fenced commit of several sessions
-  // (Storage::ArchiveFrames) locks them: an UPDATE alone locks in table order, which deadlocks
-  // with such a commit holding one row and asking for another (PostgreSQL then aborts one side,
-  // and for the commit that is a storage fault failing every stream in it).
+  // A renewal changes only the expiry, which is not a key column (the unique index
+  // session_leases_fence makes owner and epoch key columns: postgres_schema.cc), so its row
+  // locks are FOR NO KEY UPDATE, which a fenced commit's FOR KEY SHARE (CheckHeld) does not
+  // conflict with: the round never waits for a commit holding a fence (a filter group holds 64
+  // of them for its whole transaction) and no commit waits for the round. The rows are still
+  // locked in spacecraft-id order (bytewise: the "C" collation, as std::map orders the fences),
+  // so two rounds, or a round and a release, take them in the same order.
   // Both statements take the same bindings (?1, the new expiry, is unused by the lock).
   const std::string lock_sql =
       absl::StrCat("SELECT spacecraft_id FROM session_leases WHERE ", fenced,
-                   " ORDER BY spacecraft_id COLLATE \"C\" FOR UPDATE");
+                   " ORDER BY spacecraft_id COLLATE \"C\" FOR NO KEY UPDATE");
   const std::string sql = absl::StrCat("UPDATE session_leases SET expires_unix_ns = ?1 WHERE ",
                                        fenced, " RETURNING spacecraft_id");
   std::vector<const std::pair<const std::string, LeaseFence>*> leases;
@@ -189,11 +191,14 @@ absl::StatusOr<SessionLease> LeaseStore::Get(absl::string_view spacecraft_id) {
 absl::Status LeaseStore::CheckHeld(Transaction& txn, absl::string_view spacecraft_id,
                                    const LeaseFence& fence) {
   RETURN_IF_ERROR(CheckPostgres());
-  // FOR SHARE: a takeover's UPDATE of the row waits until this transaction ends, and this one
-  // waits for a takeover under way, then reads the committed owner.
+  // FOR KEY SHARE: a takeover (Acquire) writes a new epoch, a key column through the unique
+  // index session_leases_fence (postgres_schema.cc), so its row lock is FOR UPDATE and waits
+  // until this transaction ends, and this one waits for a takeover under way, then reads the
+  // committed owner. A renewal or a release writes only the expiry (FOR NO KEY UPDATE): neither
+  // waits for this lock nor this one for them.
   ASSIGN_OR_RETURN(Statement * st,
                    txn.Prepare("SELECT owner, epoch FROM session_leases "
-                               "WHERE spacecraft_id = ?1 FOR SHARE"));
+                               "WHERE spacecraft_id = ?1 FOR KEY SHARE"));
   st->BindText(1, spacecraft_id);
   ASSIGN_OR_RETURN(bool row, st->Step());
   const std::string owner = row ? st->ColumnText(0) : std::string();

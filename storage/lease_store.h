@@ -74,7 +74,8 @@ class LeaseStore {
   // over is renewed, as by Renew. On an error nothing is renewed (the transaction rolls back;
   // Unavailable for a lost connection or a lock conflict: try again). An empty `fences` renews
   // nothing and returns no spacecraft. Same as calling Renew for each lease, with one commit
-  // instead of one per lease (and a few statements instead of one per lease).
+  // instead of one per lease (and a few statements instead of one per lease). Does not wait for
+  // the write transactions holding these leases' fences (CheckHeld), nor they for it.
   absl::StatusOr<std::vector<std::string>> RenewAll(const std::map<std::string, LeaseFence>& fences,
                                                     absl::Time now, absl::Duration duration);
 
@@ -87,7 +88,8 @@ class LeaseStore {
 
   // Inside a write transaction: OK if (owner, epoch) still holds the lease, locking the row
   // until the transaction ends (a takeover waits for it, and the transaction sees a takeover
-  // committed before); Aborted "spacecraft 'X': this server (node M) no longer holds its
+  // committed before; a renewal or a release of the lease neither waits for it nor holds it
+  // up: they change only the expiry); Aborted "spacecraft 'X': this server (node M) no longer holds its
   // session (taken over by node N, epoch E)" otherwise, which LeaseLostSpacecraft recognizes
   // (also when a commit passes it up). The expiry is not checked: a lease is taken over only
   // by writing a new owner or epoch.

@@ -212,6 +212,17 @@ CREATE TRIGGER estimates_notify AFTER INSERT OR UPDATE ON estimates
   FOR EACH ROW EXECUTE FUNCTION esg_estimates_notify();
 )sql";
 
+// Makes owner and epoch key columns of session_leases (PostgreSQL's row locks: an UPDATE that
+// changes a column of a unique index takes FOR UPDATE, one that changes only other columns FOR
+// NO KEY UPDATE). A takeover, which writes a new epoch, then waits for a commit holding the
+// lease's fence FOR KEY SHARE (LeaseStore::CheckHeld), and a renewal, which writes only the
+// expiry, does not (lease_store.cc). Unique already through the primary key. Part of the current
+// schema; added to a database created before it existed (no version change: the tables and
+// their rows are the same).
+constexpr absl::string_view kLeaseFenceIndex = R"sql(
+CREATE UNIQUE INDEX session_leases_fence ON session_leases (spacecraft_id, owner, epoch);
+)sql";
+
 // Version 9 (schema.h) in PostgreSQL types: the attitude error estimate of each step.
 constexpr absl::string_view kEstimateAttitudeErrorColumns = R"sql(
 ALTER TABLE estimates ADD COLUMN attitude_error_x_arcsec DOUBLE PRECISION;
@@ -305,6 +316,7 @@ absl::Status MigratePostgresTo(Database& db, int target_version) {
     ASSIGN_OR_RETURN(Statement * insert, txn.Prepare("INSERT INTO esg_schema (version) VALUES (7)"));
     RETURN_IF_ERROR(insert->Run());
     RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
+    RETURN_IF_ERROR(txn.Execute(kLeaseFenceIndex));
     version = 7;
   } else {
     ASSIGN_OR_RETURN(Statement * trigger,
@@ -314,6 +326,14 @@ absl::Status MigratePostgresTo(Database& db, int target_version) {
     const bool present = row && trigger->ColumnInt64(0) > 0;
     trigger->Reset();
     if (!present) RETURN_IF_ERROR(txn.Execute(kEstimatesTrigger));
+    // Looked up first: CREATE INDEX IF NOT EXISTS would lock the table against writes (other
+    // servers' commits) before finding the index there.
+    ASSIGN_OR_RETURN(Statement * index,
+                     txn.Prepare("SELECT to_regclass('session_leases_fence') IS NOT NULL"));
+    ASSIGN_OR_RETURN(row, index->Step());
+    const bool indexed = row && index->ColumnInt64(0) != 0;
+    index->Reset();
+    if (!indexed) RETURN_IF_ERROR(txn.Execute(kLeaseFenceIndex));
   }
   for (; version < target_version; ++version) RETURN_IF_ERROR(txn.Execute(Upgrade(version)));
   ASSIGN_OR_RETURN(Statement * update, txn.Prepare("UPDATE esg_schema SET version = ?1"));

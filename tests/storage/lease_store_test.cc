@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "absl/synchronization/notification.h"
 #include "absl/time/clock.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -231,13 +232,33 @@ TEST_P(LeaseStoreTest, AGroupCommitWithOneLeaseLostCommitsTheOthers) {
   }
 }
 
-// A renewal round and a commit fenced by several of the same server's leases (the committer's
-// group commit, Storage::ArchiveFrames) lock the same lease rows. Both take them in spacecraft-id
-// order, so neither waits for a row the other will want next: no deadlock, which PostgreSQL would
-// resolve by aborting one side (for the commit a storage fault failing every stream in it). The
-// leases are made in reverse id order, so a renewal locking in table order would take D-B
-// before D-A: held here while the commit holds D-A and asks for D-B.
-TEST_P(LeaseStoreTest, ARenewalRoundAndAFencedCommitOfTheSameLeasesDoNotDeadlock) {
+// Whether the backend `pid` of the database `observer` is connected to waits for a lock now (a
+// new transaction per call, so pg_stat_activity is read afresh).
+bool WaitsForALock(Storage& observer, int pid) {
+  absl::StatusOr<Transaction> look = observer.database().Begin(TransactionMode::kDeferred);
+  EXPECT_THAT(look, IsOk());
+  if (!look.ok()) return false;
+  absl::StatusOr<Statement*> st = look->Prepare(
+      "SELECT count(*) FROM pg_stat_activity WHERE pid = ?1 AND wait_event_type = 'Lock'");
+  EXPECT_THAT(st, IsOk());
+  if (!st.ok()) return false;
+  (*st)->BindInt64(1, pid);
+  EXPECT_THAT((*st)->Step(), IsOk());
+  const bool waiting = (*st)->ColumnInt64(0) == 1;
+  (*st)->Reset();
+  EXPECT_THAT(look->Commit(), IsOk());
+  return waiting;
+}
+
+// A renewal round and a commit fenced by several of the same server's leases (the filter's group
+// commit, Storage::ArchiveFrames) need the same lease rows, the renewal to change their expiry,
+// the commit to check their fences (FOR KEY SHARE). The renewal changes no key column, so it
+// neither waits for the commit nor makes it wait: it finishes while the commit's transaction is
+// open, and the commit goes on to the next lease and commits (before, the renewal locked the
+// rows FOR UPDATE, waited for each row a commit held, and ingest's commits waited for the rows
+// it held: issue 43). The leases are made in reverse id order, so a renewal locking in table
+// order would take D-B before D-A.
+TEST_P(LeaseStoreTest, ARenewalRoundNeitherWaitsForAFencedCommitOfTheSameLeasesNorHoldsItUp) {
   const std::string uri = NewDatabase();
   absl::StatusOr<std::unique_ptr<Storage>> committer = Storage::Open(uri);
   ASSERT_THAT(committer, IsOk());
@@ -250,33 +271,31 @@ TEST_P(LeaseStoreTest, ARenewalRoundAndAFencedCommitOfTheSameLeasesDoNotDeadlock
   ASSERT_THAT((*committer)->leases().Acquire("D-B", "a", T(0), kLease), IsOk());
   ASSERT_THAT((*committer)->leases().Acquire("D-A", "a", T(0), kLease), IsOk());
 
-  // The commit locks D-A (FOR SHARE) and keeps its transaction open.
+  // The commit checks D-A's fence and keeps its transaction open.
   Database& db = (*committer)->database();
   absl::StatusOr<Transaction> txn = db.Begin(TransactionMode::kImmediate);
   ASSERT_THAT(txn, IsOk());
   ASSERT_THAT((*committer)->leases().CheckHeld(*txn, "D-A", fences.at("D-A")), IsOk());
 
-  // The renewal round starts and waits for D-A.
+  // The renewal round runs to its end; had it waited for D-A's lock, it would stay waiting until
+  // the commit below, and the observer would see it waiting.
   absl::StatusOr<std::vector<std::string>> lost;
-  std::thread renewal([&] { lost = (*renewer)->leases().RenewAll(fences, T(5), kLease); });
+  absl::Notification renewed;
+  std::thread renewal([&] {
+    lost = (*renewer)->leases().RenewAll(fences, T(5), kLease);
+    renewed.Notify();
+  });
   const int renewer_pid = (*renewer)->ConnectionPid();
-  bool waiting = false;
-  for (int i = 0; i < 500 && !waiting; ++i) {
-    absl::StatusOr<Transaction> look = (*observer)->database().Begin(TransactionMode::kDeferred);
-    ASSERT_THAT(look, IsOk());
-    absl::StatusOr<Statement*> st = look->Prepare(
-        "SELECT count(*) FROM pg_stat_activity WHERE pid = ?1 AND wait_event_type = 'Lock'");
-    ASSERT_THAT(st, IsOk());
-    (*st)->BindInt64(1, renewer_pid);
-    ASSERT_THAT((*st)->Step(), IsOk());
-    waiting = (*st)->ColumnInt64(0) == 1;
-    (*st)->Reset();
-    ASSERT_THAT(look->Commit(), IsOk());
-    if (!waiting) absl::SleepFor(absl::Milliseconds(10));
+  bool waited = false;
+  while (!renewed.WaitForNotificationWithTimeout(absl::Milliseconds(10))) {
+    if (WaitsForALock(**observer, renewer_pid)) {
+      waited = true;
+      break;
+    }
   }
-  ASSERT_TRUE(waiting) << "the renewal never waited for the commit's lock on D-A";
+  EXPECT_FALSE(waited) << "the renewal round waited for the commit's lock on D-A";
 
-  // The commit goes on to D-B, which the waiting renewal must not hold, and commits.
+  // The commit goes on to D-B, renewed meanwhile, and commits.
   EXPECT_THAT((*committer)->leases().CheckHeld(*txn, "D-B", fences.at("D-B")), IsOk());
   EXPECT_THAT(txn->Commit(), IsOk());
   renewal.join();
@@ -286,7 +305,47 @@ TEST_P(LeaseStoreTest, ARenewalRoundAndAFencedCommitOfTheSameLeasesDoNotDeadlock
     absl::StatusOr<SessionLease> lease = (*committer)->leases().Get(id);
     ASSERT_THAT(lease, IsOk());
     EXPECT_EQ(lease->expires, T(5) + kLease) << id;
+    EXPECT_EQ(lease->epoch, 1) << id;
   }
+}
+
+// The fence still holds against a takeover: another server taking an expired lease over waits
+// for a commit that checked the lease's fence (so that commit's writes land before the new owner
+// starts), and the old owner's next commit is refused.
+TEST_P(LeaseStoreTest, ATakeoverWaitsForACommitHoldingTheFenceAndThenRefusesTheOldOwner) {
+  const std::string uri = NewDatabase();
+  absl::StatusOr<std::unique_ptr<Storage>> old_owner = Storage::Open(uri);
+  ASSERT_THAT(old_owner, IsOk());
+  if (GetParam() == testing::Backend::kSqlite) return;  // no leases (above)
+  absl::StatusOr<std::unique_ptr<Storage>> new_owner = Storage::Open(uri);
+  ASSERT_THAT(new_owner, IsOk());
+  absl::StatusOr<std::unique_ptr<Storage>> observer = Storage::Open(uri);
+  ASSERT_THAT(observer, IsOk());
+  ASSERT_THAT((*old_owner)->leases().Acquire("W-1", "a", T(0), kLease), IsOk());
+
+  // a's commit checks its fence and keeps its transaction open past the expiry.
+  Database& db = (*old_owner)->database();
+  absl::StatusOr<Transaction> txn = db.Begin(TransactionMode::kImmediate);
+  ASSERT_THAT(txn, IsOk());
+  ASSERT_THAT((*old_owner)->leases().CheckHeld(*txn, "W-1", {"a", 1}), IsOk());
+
+  absl::StatusOr<SessionLease> taken;
+  std::thread takeover([&] { taken = (*new_owner)->leases().Acquire("W-1", "b", T(30), kLease); });
+  const int taker_pid = (*new_owner)->ConnectionPid();
+  bool waiting = false;
+  for (int i = 0; i < 500 && !waiting; ++i) {
+    waiting = WaitsForALock(**observer, taker_pid);
+    if (!waiting) absl::SleepFor(absl::Milliseconds(10));
+  }
+  EXPECT_TRUE(waiting) << "the takeover did not wait for the commit holding W-1's fence";
+  EXPECT_THAT(txn->Commit(), IsOk());
+  takeover.join();
+  ASSERT_THAT(taken, IsOk());
+  EXPECT_EQ(taken->owner, "b");
+  EXPECT_EQ(taken->epoch, 2);
+  // a's next commit is refused.
+  EXPECT_THAT((*old_owner)->ArchiveFrames({Frame("W-1", 1)}, {}, {{"W-1", {"a", 1}}}),
+              StatusIs(absl::StatusCode::kAborted, HasSubstr("taken over by node b")));
 }
 
 }  // namespace
