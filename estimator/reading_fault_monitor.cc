@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "Eigen/Cholesky"
+#include "Eigen/Geometry"
 #include "Eigen/LU"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -156,6 +157,8 @@ std::vector<ReadingFaultMonitor::Result> ReadingFaultMonitor::AddStep(
     p.noise_in = s.noise_in;
     p.drift_bound = s.drift_bound;
     p.turn = s.turn;
+    p.turn_in = s.turn_in;
+    p.turn_in_known = s.turn_in_known;
     if (track.points.empty() || !track.has_posterior || track.drivers_ref.size() != s.drivers.size() ||
         (s.drivers.size() > 0 && (s.motion_jacobian_in.rows() != 3 ||
                                   s.motion_jacobian_in.cols() != s.drivers.size()))) {
@@ -392,18 +395,34 @@ std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDri
     const double var = d.magnitude > 0.0 ? (d.c / d.magnitude).dot(d.cov * (d.c / d.magnitude))
                                          : d.cov.trace() / 2.0;
     d.below = d.bound - d.magnitude > 3.0 * std::sqrt(std::max(var, 0.0));
-    // The turn rates on either side of the onset: an interval ending at or before it is before.
+    // The turns on either side of the onset: an interval ending at or before it is before.
     double turn_before = 0.0, time_before = 0.0, turn_after = 0.0, time_after = 0.0;
+    Vector3d turn_in_before = Vector3d::Zero(), turn_in_after = Vector3d::Zero();
+    bool axes_known = true;
     for (int k = 1; k < n; ++k) {
       const double dt = p.tau[k] - p.tau[k - 1];
       if (!(dt > 0.0)) continue;
       const bool before = p.tau[k] <= onset_tau;
       (before ? turn_before : turn_after) += track.points[k].turn;
+      (before ? turn_in_before : turn_in_after) += track.points[k].turn_in;
       (before ? time_before : time_after) += dt;
+      axes_known = axes_known && track.points[k].turn_in_known;
     }
     d.turn_rate_after = time_after > 0.0 ? turn_after / time_after : 0.0;
     d.turn_rate_before = time_before > 0.0 ? turn_before / time_before : d.turn_rate_after;
-    d.slow_reading_change = kSlowReadingErrorRad * std::abs(d.turn_rate_after - d.turn_rate_before);
+    const Vector3d w_after_in = time_after > 0.0 ? Vector3d(turn_in_after / time_after) : Vector3d::Zero();
+    const Vector3d w_before_in =
+        time_before > 0.0 ? Vector3d(turn_in_before / time_before) : w_after_in;
+    if (axes_known) {
+      d.slow_reading_change = kSlowReadingErrorRad * (w_after_in - w_before_in).norm();
+      const double sin_axes = w_before_in.cross(w_after_in).norm();
+      d.turn_axis_change = w_before_in.norm() > 0.0 && w_after_in.norm() > 0.0
+                               ? std::atan2(sin_axes, w_before_in.dot(w_after_in))
+                               : 0.0;
+    } else {
+      d.slow_reading_change =
+          kSlowReadingErrorRad * std::abs(d.turn_rate_after - d.turn_rate_before);
+    }
     d.may_be_slow_reading_error =
         d.magnitude - 3.0 * std::sqrt(std::max(var, 0.0)) <= d.slow_reading_change;
     return d;
@@ -599,6 +618,48 @@ absl::Status ReadingFaultMonitor::RestoreState(absl::Span<const double> state) {
   if (pos != state.size()) return fail("state oversized");
   tracks_ = std::move(tracks);
   last_step_ = last_step;
+  return absl::OkStatus();
+}
+
+std::vector<double> ReadingFaultMonitor::ExportTurnAxes() const {
+  std::vector<double> v;
+  for (const auto& [key, t] : tracks_) {
+    for (const Point& p : t.points) {
+      for (int i = 0; i < 3; ++i) v.push_back(p.turn_in(i));
+      v.push_back(p.turn_in_known ? 1.0 : 0.0);
+    }
+  }
+  return v;
+}
+
+absl::Status ReadingFaultMonitor::RestoreTurnAxes(absl::Span<const double> state) {
+  size_t points = 0;
+  for (const auto& [key, t] : tracks_) points += t.points.size();
+  if (state.size() != 4 * points) {
+    return absl::DataLossError(absl::StrFormat(
+        "reading fault monitor: %d turn values for %d points (4 each)", state.size(), points));
+  }
+  // Checked whole before any point changes.
+  for (size_t k = 0; k < points; ++k) {
+    for (int i = 0; i < 3; ++i) {
+      if (!std::isfinite(state[4 * k + i]) || std::abs(state[4 * k + i]) > 1e6) {
+        return absl::DataLossError(absl::StrFormat(
+            "reading fault monitor: turn axis %g is not a finite rotation", state[4 * k + i]));
+      }
+    }
+    if (state[4 * k + 3] != 0.0 && state[4 * k + 3] != 1.0) {
+      return absl::DataLossError(absl::StrFormat(
+          "reading fault monitor: turn axis flag %g is not 0 or 1", state[4 * k + 3]));
+    }
+  }
+  size_t k = 0;
+  for (auto& [key, t] : tracks_) {
+    for (Point& p : t.points) {
+      p.turn_in = Vector3d(state[4 * k], state[4 * k + 1], state[4 * k + 2]);
+      p.turn_in_known = state[4 * k + 3] == 1.0;
+      ++k;
+    }
+  }
   return absl::OkStatus();
 }
 

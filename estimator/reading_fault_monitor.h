@@ -93,7 +93,9 @@ class ReadingFaultMonitor {
   // One gyro's sample at a measurement step: the prior rebuild residual h_et_in - h_prior
   // (inertial, in the tangent plane [rad]), its noise covariance N (inertial [rad^2]), the
   // tangent basis T (3 x 2) of the current spin axis, the drift bound for the interval since the
-  // last sample [rad/s] and the reading's turn over it [rad].
+  // last sample [rad/s], the reading's turn over it [rad] and that turn as a rotation vector in
+  // inertial axes (the body rate carried to inertial axes times the interval [rad]; |turn_in| =
+  // turn, or zero with turn_in_known false when no attitude gives its axis).
   // Where the rebuild's attitude comes from: the star tracker, or the pair of the two other
   // running gyros (free of the star tracker; its noise the three gyros' readout noise, its drift
   // bound the three gyros'). A gyro has one window per source; a verdict of either counts.
@@ -106,6 +108,8 @@ class ReadingFaultMonitor {
     Eigen::Matrix<double, 3, 2> T = Eigen::Matrix<double, 3, 2>::Zero();
     double drift_bound = 0.0;
     double turn = 0.0;
+    Eigen::Vector3d turn_in = Eigen::Vector3d::Zero();
+    bool turn_in_known = false;
     // The model's drivers (the filter's estimates of what moves the spin axis: residual drift,
     // coefficients, basis terms) and the motion over the interval against them, 3 x drivers
     // [rad per unit]: the track measures the motion against the model as it was when the track
@@ -150,16 +154,21 @@ class ReadingFaultMonitor {
     bool below = false;      // |c| below the bound by 3 sigma along c
     // The reading's mean turn rate over the window's intervals before and after the onset
     // [rad/s] (both the window's mean when the change began before the window). A reading error
-    // that changes only as the reading turns (an unconfigured misalignment of the gyro's case, a
-    // readout scale error: kSlowReadingErrorRad per radian) gives a rate error of at most
-    // kSlowReadingErrorRad times the turn rate, so where the turn rate changes at the onset
-    // (a slew's end, an attitude-mode switch) such an error changes the rate by at least
-    // kSlowReadingErrorRad |after - before| when it is that large (slow_reading_change [rad/s]);
-    // the scalar turn does not tell a change of the turn's direction alone, which can change it
-    // too. may_be_slow_reading_error: |c| minus 3 sigma along c is within slow_reading_change,
-    // the change as large as such an error gives there.
+    // that changes only as the reading turns (an unconfigured misalignment delta of the gyro's
+    // case, a readout scale error: kSlowReadingErrorRad per radian) gives a rate error of at
+    // most kSlowReadingErrorRad times the turn rate: for a misalignment, the rebuild's error
+    // delta_in x h_in moves at (w_in x delta_in) x h_in, linear in the body rate w_in. So where
+    // the turn changes at the onset (a slew's end, an attitude-mode switch, the turn's axis
+    // moving at the same rate) such an error changes the mean rate by up to
+    // kSlowReadingErrorRad |w_after - w_before|, the mean body rates in inertial axes before and
+    // after the onset (slow_reading_change [rad/s]); turn_axis_change the angle between them
+    // [rad] (0 when either is zero). A window holding a point without the turn's axis (restored
+    // from a checkpoint before version 9) uses the scalar rates, |after - before|.
+    // may_be_slow_reading_error: |c| minus 3 sigma along c is within slow_reading_change, the
+    // change as large as such an error gives there.
     double turn_rate_before = 0.0;
     double turn_rate_after = 0.0;
+    double turn_axis_change = 0.0;
     double slow_reading_change = 0.0;
     bool may_be_slow_reading_error = false;
     // Neither: undecided, more steps after the onset will tell (the estimate's sigma falls as
@@ -200,6 +209,12 @@ class ReadingFaultMonitor {
   // object unchanged) if the values do not fit.
   std::vector<double> ExportState() const;
   absl::Status RestoreState(absl::Span<const double> state);
+  // The turns' axes of the window's points (checkpoint version 9, after ExportState's block):
+  // per track in ExportState's order, per point, turn_in (3) and turn_in_known. RestoreTurnAxes
+  // after RestoreState; DataLoss naming the field (the object unchanged) when the count is not
+  // 4 per point or a value does not fit. Points restored without it have no axis.
+  std::vector<double> ExportTurnAxes() const;
+  absl::Status RestoreTurnAxes(absl::Span<const double> state);
 
  private:
   struct Point {
@@ -208,6 +223,8 @@ class ReadingFaultMonitor {
     Eigen::Matrix3d noise_in = Eigen::Matrix3d::Zero();
     double drift_bound = 0.0;
     double turn = 0.0;
+    Eigen::Vector3d turn_in = Eigen::Vector3d::Zero();
+    bool turn_in_known = false;
   };
   struct Track {
     std::deque<Point> points;

@@ -210,6 +210,18 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
                         ? 0.0
                         : session_internal::Seconds(frame.time - last_update_time_);
   const double turn = body_rate_b_.norm() * dt;
+  // The turn as a rotation vector in inertial axes (its axis tells a change of the turn's
+  // direction at the same rate, reading_fault_monitor.h DriftChange): the body rate carried by
+  // the star tracker's attitude, or the working pair's without it.
+  std::optional<Quaterniond> q_in_b;
+  if (st_present) {
+    q_in_b = q_st;
+  } else if (const GyroState* a = Find(working_pair_[0]), *b = Find(working_pair_[1]);
+             a != nullptr && b != nullptr) {
+    q_in_b = PairQuaternion(a->id, b->id, a->h_k_last, b->h_k_last, nullptr);
+  }
+  const Vector3d turn_in =
+      q_in_b.has_value() ? Vector3d(q_in_b->toRotationMatrix() * body_rate_b_ * dt) : Vector3d::Zero();
   std::vector<double> bound(gyros_.size(), 0.0);
   for (int id : fresh) bound[IndexOf(id)] = DriftBound(IndexOf(id));
   std::vector<ReadingFaultMonitor::Sample> samples;
@@ -233,6 +245,8 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
       s.motion_jacobian_in = g.motion_in;
       s.drift_bound = bound[i];
       s.turn = turn;
+      s.turn_in = turn_in;
+      s.turn_in_known = q_in_b.has_value();
       samples.push_back(s);
     }
   }
@@ -269,6 +283,8 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
       s.motion_jacobian_in = g.motion_in;
       s.drift_bound = bound[i] + bound[IndexOf(a.id)] + bound[IndexOf(b.id)] / sin_theta;
       s.turn = turn;
+      s.turn_in = turn_in;
+      s.turn_in_known = q_in_b.has_value();
       samples.push_back(s);
     }
   }

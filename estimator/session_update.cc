@@ -251,20 +251,21 @@ bool StarTrackerAgreesAfterIsolation(bool st_present, const IsolationDecision& d
 // The note a DRIFT_CHANGED alert ends with when the change's onset is at a change of the gyro's
 // turn rate: a reading error that changes as the reading turns (an unconfigured case
 // misalignment, a readout scale error) changes the rate too, and the alert says so when the
-// change is no larger than such an error gives. Empty otherwise.
+// change is no larger than such an error gives; a change of the turn's axis is named from 1 degree
+// on. Empty otherwise.
 std::string TurnRateNote(const std::optional<ReadingFaultMonitor::DriftChange>& dc) {
-  return dc.has_value() && dc->may_be_slow_reading_error
-             ? absl::StrFormat(
-                   "; its onset is at a change of the gyro's turn rate (%.3g to %.3g deg/s), "
-                   "where a reading error that changes as the reading turns (an unconfigured "
-                   "case misalignment or a readout scale error of up to %.0f arcsec) changes "
-                   "the rate by up to %.3f deg/h: this may be such an error rather than a "
-                   "drift change (configure gyros[].misalignmentSigmaArcsec, or run esg "
-                   "diagnose over the span)",
-                   RadToDeg(dc->turn_rate_before), RadToDeg(dc->turn_rate_after),
-                   RadToArcsec(kSlowReadingErrorRad),
-                   RadPerSecToDegPerHour(dc->slow_reading_change))
-             : std::string();
+  if (!dc.has_value() || !dc->may_be_slow_reading_error) return std::string();
+  const double axis_deg = RadToDeg(dc->turn_axis_change);
+  return absl::StrFormat(
+      "; its onset is at a change of the gyro's turn rate (%.3g to %.3g deg/s%s), "
+      "where a reading error that changes as the reading turns (an unconfigured "
+      "case misalignment or a readout scale error of up to %.0f arcsec) changes "
+      "the rate by up to %.3f deg/h: this may be such an error rather than a "
+      "drift change (configure gyros[].misalignmentSigmaArcsec, or run esg "
+      "diagnose over the span)",
+      RadToDeg(dc->turn_rate_before), RadToDeg(dc->turn_rate_after),
+      axis_deg >= 1.0 ? absl::StrFormat(", its axis turned by %.0f deg", axis_deg) : "",
+      RadToArcsec(kSlowReadingErrorRad), RadPerSecToDegPerHour(dc->slow_reading_change));
 }
 
 }  // namespace

@@ -38,6 +38,9 @@ struct Truth {
   double turn = 0.0;  // the reading's turn per step [rad]
   // The turn over the step ending at t [rad], when it varies (a slew); else `turn`.
   std::function<double(double)> turn_at;
+  // The turn over the step ending at t as a rotation vector in inertial axes [rad], when the
+  // session knows its axis; its norm is the turn.
+  std::function<Vector3d(double)> turn_in_at;
 };
 
 struct Outcome {
@@ -70,6 +73,11 @@ Outcome Simulate(const Truth& run, int steps, unsigned seed) {
     s.noise_in = N;
     s.drift_bound = kLimit;
     s.turn = run.turn_at ? run.turn_at(t) : run.turn;
+    if (run.turn_in_at) {
+      s.turn_in = run.turn_in_at(t);
+      s.turn_in_known = true;
+      s.turn = s.turn_in.norm();
+    }
     for (const auto& r : monitor.AddStep(t0 + absl::Seconds(t), {s})) {
       if (r.verdict != ReadingVerdict::kNone) out.verdicts.emplace_back(k, r.verdict);
     }
@@ -287,6 +295,63 @@ TEST(ReadingFaultMonitor, ARateChangeWhereTheTurnStopsMayBeASlowReadingError) {
   }
 }
 
+TEST(ReadingFaultMonitor, ATurnAboutANewAxisAtTheSameRateMayBeASlowReadingError) {
+  // The spacecraft turns 6 deg a step about inertial x until step 300, then at the same rate
+  // about y. A case misalignment delta (1 arcmin, along the spin axis z here) moves the rebuild
+  // at (w x delta) x h: (-w eps, 0) while turning about x, (0, -w eps) about y, so the rate
+  // "changes" by sqrt(2) 0.105 deg/h with the scalar turn rate unchanged. The turn's axis tells
+  // it: a slow reading error of up to 2 arcmin gives up to 2 arcmin |w_after - w_before| = 0.30
+  // deg/h there. A drift step of 0.6 deg/h at the same change is larger than that.
+  const double w_step = 6.0 * kRadPerDeg;  // [rad per step]
+  const double change = 300 * kStep;
+  auto turn_in_at = [=](double t) {
+    return t <= change ? Vector3d(w_step, 0.0, 0.0) : Vector3d(0.0, w_step, 0.0);
+  };
+  const double eps = 60.0 * kRadPerArcsec;
+  auto misaligned = [=](double t) {
+    const double before = std::min(t, change) / kStep, after = std::max(t - change, 0.0) / kStep;
+    return Vector2d(-eps * w_step * before, -eps * w_step * after);
+  };
+  struct Case {
+    const char* name;
+    Truth run;
+    bool may_be;
+  };
+  std::vector<Case> cases;
+  {
+    Truth run;
+    run.turn_in_at = turn_in_at;
+    run.offset = misaligned;
+    cases.push_back({"1 arcmin misalignment, the turn's axis turns by 90 deg", run, true});
+  }
+  {
+    Truth run;
+    run.turn_in_at = turn_in_at;
+    run.rate = [=](double t) { return t < change ? DegH(0.0, 0.0) : DegH(0.6, 0.0); };
+    cases.push_back({"drift step 0.6 deg/h where the turn's axis turns", run, false});
+  }
+  for (const Case& c : cases) {
+    for (unsigned seed = 1; seed <= 5; ++seed) {
+      const Outcome o = Simulate(c.run, 312, seed);
+      ASSERT_TRUE(o.last_change.has_value()) << c.name;
+      const auto& d = *o.last_change;
+      EXPECT_EQ(d.may_be_slow_reading_error, c.may_be)
+          << c.name << ", seed " << seed << ": change " << RadPerSecToDegPerHour(d.magnitude)
+          << " deg/h, a slow reading error gives up to "
+          << RadPerSecToDegPerHour(d.slow_reading_change) << " deg/h";
+      // The scalar rate is the same on both sides. The axes are 90 deg apart, less where the
+      // estimated onset is a step or two off the change and one side's mean mixes both turns.
+      EXPECT_NEAR(RadToDeg(d.turn_rate_before), 0.1, 1e-9) << c.name << ", seed " << seed;
+      EXPECT_NEAR(RadToDeg(d.turn_rate_after), 0.1, 1e-9) << c.name << ", seed " << seed;
+      EXPECT_GT(RadToDeg(d.turn_axis_change), 60.0) << c.name << ", seed " << seed;
+      EXPECT_LE(RadToDeg(d.turn_axis_change), 90.0 + 1e-9) << c.name << ", seed " << seed;
+      const double full = kSlowReadingErrorRad * std::sqrt(2.0) * w_step / kStep;
+      EXPECT_GT(d.slow_reading_change, 0.8 * full) << c.name << ", seed " << seed;
+      EXPECT_LE(d.slow_reading_change, full * (1.0 + 1e-12)) << c.name << ", seed " << seed;
+    }
+  }
+}
+
 TEST(ReadingFaultMonitor, AVerdictTwoGyrosShareOnTheStarTrackerIsNobodys) {
   ReadingFaultMonitor monitor;
   Eigen::Matrix<double, 3, 2> T = Eigen::Matrix<double, 3, 2>::Zero();
@@ -339,6 +404,45 @@ TEST(ReadingFaultMonitor, StateRoundTripsAndRefusesWhatDoesNotFit) {
   nan.back() = std::nan("");
   EXPECT_EQ(b.RestoreState(nan).code(), absl::StatusCode::kDataLoss);
   EXPECT_EQ(b.ExportState(), state);  // unchanged by the refusals
+}
+
+TEST(ReadingFaultMonitor, TurnAxesRoundTripAndRefuseWhatDoesNotFit) {
+  ReadingFaultMonitor a;
+  Eigen::Matrix<double, 3, 2> T = Eigen::Matrix<double, 3, 2>::Zero();
+  T(0, 0) = T(1, 1) = 1.0;
+  const absl::Time t0 = absl::FromUnixSeconds(1551398400);
+  for (int k = 1; k <= 5; ++k) {
+    ReadingFaultMonitor::Sample s;
+    s.gyro_id = 1;
+    s.T = T;
+    s.prior_residual_in = Vector3d(k * 1e-6, 0.0, 0.0);
+    s.noise_in = kNoise * kNoise * T * T.transpose();
+    s.drift_bound = kLimit;
+    s.turn_in = Vector3d(0.01 * k, -0.02, 0.0);
+    s.turn = s.turn_in.norm();
+    s.turn_in_known = k != 3;
+    a.AddStep(t0 + absl::Seconds(60 * k), {s});
+    a.SetPosterior(1, Source::kStarTracker, Vector3d::Zero());
+  }
+  const std::vector<double> axes = a.ExportTurnAxes();
+  ASSERT_EQ(axes.size(), 5u * 4u);
+  EXPECT_EQ(axes[2 * 4 + 3], 0.0);  // the third point's axis unknown
+  EXPECT_EQ(axes[4 * 4 + 0], 0.05);
+  ReadingFaultMonitor b;
+  ASSERT_TRUE(b.RestoreState(a.ExportState()).ok());
+  // Restored without the axes (a checkpoint before version 9): every point's axis unknown.
+  for (size_t k = 0; k < 5; ++k) EXPECT_EQ(b.ExportTurnAxes()[4 * k + 3], 0.0);
+  ASSERT_TRUE(b.RestoreTurnAxes(axes).ok());
+  EXPECT_EQ(b.ExportTurnAxes(), axes);
+  std::vector<double> short_axes(axes.begin(), axes.end() - 4);
+  EXPECT_EQ(b.RestoreTurnAxes(short_axes).code(), absl::StatusCode::kDataLoss);
+  std::vector<double> bad_flag = axes;
+  bad_flag[3] = 0.5;
+  EXPECT_EQ(b.RestoreTurnAxes(bad_flag).code(), absl::StatusCode::kDataLoss);
+  std::vector<double> nan = axes;
+  nan[0] = std::nan("");
+  EXPECT_EQ(b.RestoreTurnAxes(nan).code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(b.ExportTurnAxes(), axes);  // unchanged by the refusals
 }
 
 }  // namespace
