@@ -96,6 +96,7 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
       if (degree > kMaxHarmonicDegree) {
         return bad("exponents", absl::StrFormat("degree %d above %d", degree, kMaxHarmonicDegree));
       }
+      RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));  // the switch-on (D110)
       break;
     }
     case BasisKind::kBodyRateProduct:
@@ -142,6 +143,9 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
 double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
   switch (t.kind) {
     case BasisKind::kSpinAxisHarmonic: {
+      // Switched on at the epoch (D110: a step of a coefficient of eq. (1), (10)); the default
+      // epoch, 1970, precedes every frame.
+      if (in.time < t.epoch) return 0.0;
       double s = 1.0;
       for (int i = 0; i < 3; ++i) s *= std::pow(in.h_k(i), t.exponents[i]);
       return s;

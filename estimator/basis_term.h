@@ -11,7 +11,9 @@
 //   kind                    s                                             unit of s
 //   spin_axis_harmonic      h1^a h2^b h3^c, a + b + c <= 4                1
 //                           (degree 0 is a case-fixed drift; eq. (1), (10) are combinations of
-//                           degrees 0-4)
+//                           degrees 0-4), from the epoch on, 0 before it (the default
+//                           epoch, 1970, precedes every frame; a later one is a step of
+//                           a coefficient of eq. (1), (10) at the epoch, D110)
 //   body_rate               w_k[i], the body rate in case axes            rad/s
 //   body_rate_product       w_k[i] w_k[j]                                 (rad/s)^2
 //   orbital_harmonic        cos or sin of n 2 pi (t - epoch) / period      1
@@ -77,7 +79,8 @@ struct BasisTerm {
   bool sine = false;   // kOrbitalHarmonic: sin (true) or cos (false)
   double period = 0;   // kOrbitalHarmonic: [s], > 0
   double time_constant = 0;  // kExponentialDecay: tau [s], > 0
-  // kOrbitalHarmonic: phase zero; kRamp*: s = 0; kExponentialDecay: s = 1, 0 before it.
+  // kOrbitalHarmonic: phase zero; kRamp*: s = 0; kExponentialDecay: s = 1, 0 before it;
+  // kSpinAxisHarmonic: switched on (0 before it).
   absl::Time epoch = absl::UnixEpoch();
   double value = 0.0;  // coefficient [rad/s per unit of s]
   double sigma = 0.0;  // prior 1-sigma [rad/s per unit of s]; > 0: estimated
@@ -107,7 +110,7 @@ Eigen::Vector3d BasisDriftSum_k(const std::vector<BasisTerm>& terms, const Basis
 
 // Short identifier, stable across runs: "h1^2*h3 -> x", "rate[2] -> z", "orbit cos 1 -> y",
 // "ramp -> x", "ramp*h2^2 -> x", "voltage[1] -> z", "rate[1]*rate[3] -> y",
-// "exp(-t/4.1h) -> y".
+// "exp(-t/4.1h) -> y" (a harmonic's switch-on epoch is not in its label).
 std::string BasisTermLabel(const BasisTerm& term);
 
 // Unit of s in the JSON (deg/s for rates, h for ramps) and the factor from SI to it: the

@@ -140,6 +140,7 @@ struct GyroState {
   double sun_tau = 1.0;  // [s]
   double sun_y = 0.0;    // lagged illumination y at the current propagation time [1]
   bool has_extra_drift = false;  // any of orbital, switching, hidden, rate, transient, sun
+  std::optional<CoefficientStep> coefficient_step;
 
   Rng readout_rng;
   Rng voltage_rng;
@@ -193,6 +194,14 @@ struct GyroState {
     // s_b is scaled by the sunlit fraction when the spacecraft flies an orbit (SunNodes::At).
     if (sun_face_axis == kSunlitFaceAxis) return std::min(1.0, s_b.norm());
     return std::max(0.0, sun_face_sign * s_b(sun_face_axis));
+  }
+
+  // The coefficient step's drift at time t for the spin axis h_k.
+  Vector3d CoefficientStepDrift_k(double t, const Vector3d& h_k) const {
+    if (!coefficient_step || t < coefficient_step->time_s) return Vector3d::Zero();
+    simulator_truth::PrintedDrift step;
+    step.coefficients = coefficient_step->delta;
+    return simulator_truth::TrueDriftRate_k(step, h_k);  // eq. (1), (10) as printed
   }
 
   // Fault drift step in case axes at time t.
@@ -382,6 +391,16 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
       return absl::InvalidArgumentError(absl::StrFormat(
           "%s.transient_drift.start_s: must be finite and >= 0, got %g", f,
           g.transient_drift->start_s));
+    }
+  }
+  if (g.coefficient_step) {
+    const CoefficientStep& c = *g.coefficient_step;
+    if (!(c.time_s >= 0.0) || !std::isfinite(c.time_s)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.coefficient_step.time_s: must be finite and >= 0, got %g", f, c.time_s));
+    }
+    if (!c.delta.AsVector().allFinite()) {
+      return absl::InvalidArgumentError(absl::StrCat(f, ".coefficient_step.delta: must be finite"));
     }
   }
   if (g.sun_face_drift) {
@@ -649,6 +668,7 @@ absl::Status SetUpGyroEffects(const SimulationSpec& spec, const Matrix3d& C_in_b
     g.rate_gain_k = truth.rate_drift->gain_k;
     effects.rate_drift = truth.rate_drift;
   }
+  g.coefficient_step = truth.coefficient_step;
   if (truth.transient_drift) {
     g.has_transient = true;
     g.transient_amplitude_k = truth.transient_drift->amplitude_k_rad_s;
@@ -726,6 +746,7 @@ class TruthIntegrator {
                         ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_mid), h_k)
                         : simulator_truth::TrueDriftRate_k(g.drift, h_k);
     if (g.fault) dw_k += g.FaultDrift_k(t_mid);
+    if (g.coefficient_step) dw_k += g.CoefficientStepDrift_k(t_mid, h_k);
     if (g.has_extra_drift) {
       dw_k += g.OrbitalDrift_k(t_mid) + g.SwitchingLevel(t_mid) * g.switching_amplitude_k +
               g.hidden_x * g.hidden_amplitude_k + g.RateDrift_k(w_b) + g.TransientDrift_k(t_mid);
@@ -768,7 +789,8 @@ GyroTruthSample GyroTruthAt(const GyroState& g, double t_m, const Matrix3d& C_b_
   const Vector3d dw_model_k =
       g.displacement_grows ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_m), gt.h_k)
                            : simulator_truth::TrueDriftRate_k(g.drift, gt.h_k);
-  gt.dw_k = dw_model_k + g.FaultDrift_k(t_m) + g.C_k_b * (C_b_in * g.dw_rw_in);
+  gt.dw_k = dw_model_k + g.FaultDrift_k(t_m) + g.CoefficientStepDrift_k(t_m, gt.h_k) +
+            g.C_k_b * (C_b_in * g.dw_rw_in);
   if (g.has_extra_drift) {
     gt.dw_orbital_k_rad_s = g.OrbitalDrift_k(t_m);
     gt.switching_level = g.SwitchingLevel(t_m);

@@ -11,7 +11,8 @@
 //   never calls the filter's drift model estimator/drift_model.h): eq. (1) and (10) with the
 //   coefficients `drift` (default the config model), plus eq. (8) + (9) for the rotor
 //   displacement (lambda = Delta / |Delta|, C10 = c10_per_m |Delta|, C20 = c20_per_m |Delta|);
-//   plus a fault drift step (case axes) after its time; plus the random-walk drift vector dw_rw_in
+//   plus a fault drift step (case axes) after its time; plus a step of the coefficients
+//   (CoefficientStep) after its time; plus the random-walk drift vector dw_rw_in
 //   (inertial axes), which starts at zero and takes an independent N(0, q h I) step after every
 //   integration step of length h (q = random_walk^2), so its increment over any interval T
 //   between telemetry frames is N(0, q T I), independent of other intervals.
@@ -147,6 +148,14 @@ struct TransientDrift {
   double start_s = 0.0;  // [s since the simulation start], >= 0
 };
 
+// A step of the drift coefficients of eq. (1), (10) at a time (docs/discovery.md, "Time
+// behaviour"): from time_s on, dw_k gains the printed eq. (1), (10) drift of the coefficients
+// `delta` (simulator_truth.h TrueDriftRate_k), 0 before.
+struct CoefficientStep {
+  double time_s = 0.0;      // [s since the simulation start], >= 0
+  DriftCoefficients delta;  // [rad/s]
+};
+
 // A thermal drift driven by the sun on one face of the body (a gyro heated through the panel the
 // sun shines on): the face's illumination u(t) = max(0, face_sign s_b(t)[face_axis]), s_b the
 // unit vector to the sun (estimator/sun_direction.h) in body axes of the true attitude, drives
@@ -214,6 +223,7 @@ struct GyroTruth {
   std::optional<SwitchingDrift> switching_drift;
   std::optional<HiddenDriverDrift> hidden_driver_drift;
   std::optional<RateDrift> rate_drift;
+  std::optional<CoefficientStep> coefficient_step;
   std::optional<TransientDrift> transient_drift;
   std::optional<SunFaceDrift> sun_face_drift;
 };

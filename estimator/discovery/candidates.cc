@@ -290,6 +290,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     if (Effective(effects, Effect::kWarmUp) && !added(CandidateName({Effect::kWarmUp, id}))) {
       out.push_back({Effect::kWarmUp, id});
     }
+    if (Effective(effects, Effect::kCoefficientStep) &&
+        !added(CandidateName({Effect::kCoefficientStep, id}))) {
+      out.push_back({Effect::kCoefficientStep, id});
+    }
   }
   const bool walk_added = std::any_of(model.added.begin(), model.added.end(), [](const auto& a) {
     return a.rfind(EffectId(Effect::kRandomWalkDrift), 0) == 0;
@@ -792,6 +796,8 @@ EffectFit FitOf(Effect effect) {
       return &FitSunCandidate;
     case Effect::kWarmUp:
       return &FitWarmUp;
+    case Effect::kCoefficientStep:
+      return &FitCoefficientStep;
   }
   return nullptr;
 }

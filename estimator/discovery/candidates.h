@@ -26,6 +26,13 @@
 //                                 near its maximum (3 parameters, tau integrated over a prior
 //                                 uniform in ln tau; time_behaviour.h FitWarmUp), reported as a
 //                                 basis term
+//   coefficient_step (gyro g)     a step at an onset T of one group of g's drift coefficients of
+//                                 the model in use (k0; C2, mu, nu where the model holds them;
+//                                 C1's is drift_step): the group released at T with prior
+//                                 c_sigma, T searched as the drift step's (1 or 3 parameters, the
+//                                 onset and the group integrated over uniform priors;
+//                                 time_behaviour.h FitCoefficientStep, D110), reported as a basis
+//                                 term (spin_axis_harmonic terms switched on at T)
 //   readout_distortion (gyro g)   not of the library: the open-ended basis's readout group, a
 //                                 symmetric traceless distortion of g's readout (5 parameters,
 //                                 regressed on the deviation, held; Laplace's Occam term;

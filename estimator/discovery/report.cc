@@ -34,6 +34,8 @@ const char* EffectId(Effect e) {
       return "sun_drift";
     case Effect::kWarmUp:
       return "warm_up";
+    case Effect::kCoefficientStep:
+      return "coefficient_step";
   }
   return "?";
 }
@@ -49,7 +51,8 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
   for (Effect e : {Effect::kRotorDisplacement, Effect::kFourthHarmonic, Effect::kUnequalStiffness,
                    Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
-                   Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kWarmUp}) {
+                   Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kWarmUp,
+                   Effect::kCoefficientStep}) {
     if (id == EffectId(e)) return e;
   }
   return std::nullopt;

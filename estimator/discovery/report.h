@@ -42,8 +42,12 @@ enum class Effect {
   // from the recording's start (a warm-up), its time constant searched (time_behaviour.h
   // FitWarmUp); its finding is a kEffectBasisTerm (three exponential_decay terms).
   kWarmUp,
+  // A step of one group of a gyro's drift coefficients of eq. (1), (10) (k0, C2, mu or nu; C1's
+  // is kDriftStep) at an onset searched (time_behaviour.h FitCoefficientStep, D110); its finding
+  // is a kEffectBasisTerm (spin_axis_harmonic terms switched on at the onset).
+  kCoefficientStep,
 };
-// "rotor_displacement", ..., "readout_distortion", "sun_drift", "warm_up"
+// "rotor_displacement", ..., "readout_distortion", "sun_drift", "warm_up", "coefficient_step"
 const char* EffectId(Effect e);
 // The effect whose EffectId is `id`, or nullopt.
 std::optional<Effect> EffectFromId(absl::string_view id);

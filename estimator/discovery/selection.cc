@@ -59,6 +59,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
   auto cost = [](const Candidate& c) {
     if (c.effect == Effect::kDriftStep) return 12;
     if (c.effect == Effect::kWarmUp) return 11;  // 7 + 4 time constants, full runs
+    if (c.effect == Effect::kCoefficientStep) return 12;  // the drift step's onsets per group
     if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
@@ -438,7 +439,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
     finding.effect = kEffectBasisTerm;
     finding.description = f.description;
   }
-  if (f.candidate.effect == Effect::kWarmUp) {  // three exponential_decay terms of the basis
+  // Three exponential_decay terms of the basis; spin_axis_harmonic terms switched on at a
+  // coefficient step's onset (D110).
+  if (f.candidate.effect == Effect::kWarmUp || f.candidate.effect == Effect::kCoefficientStep) {
     finding.effect = kEffectBasisTerm;
     finding.description = f.description;
     finding.basis_terms = f.basis_terms;
@@ -503,6 +506,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
       : f.time.kind == kTimeWarmUp
           ? "a warm-up: a transient decaying from the start, its evidence integrated over the "
             "time constant, not the constant-effect test"
+      : f.time.kind == kTimeCoefficientStep
+          ? "a step of drift coefficients: no change before its onset, its evidence integrated "
+            "over the onset and the coefficient group, not the constant-effect test"
           : "constant in time, as a physical effect of the library is";
   finding.evidence.notes.push_back(absl::StrFormat(
       "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (%s)",
@@ -640,6 +646,7 @@ void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
   }
   for (const Candidate& c : st.candidates) {
     const bool time_behaviour = c.effect == Effect::kDriftStep || c.effect == Effect::kWarmUp ||
+                                c.effect == Effect::kCoefficientStep ||
                                 (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
     (time_behaviour ? st.timed : st.constant).push_back(c);
   }
@@ -720,7 +727,8 @@ void PreferReadoutJump(RoundState& st, const SelectedModel& selected, RoundResul
   if (st.significant.empty()) return;
   const Scored& top = st.significant.front();
   const Candidate& c = st.fits[top.index].candidate;
-  const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift;
+  const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift ||
+                         c.effect == Effect::kCoefficientStep;
   const CandidateFit* jump = nullptr;
   double onset_cost = 0.0;
   for (const Scored& x : st.scored) {
@@ -923,7 +931,8 @@ absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected
   const Candidate& c = st.fits[st.significant.front().index].candidate;
   const bool warm_up = refused_warm_up && c.effect == Effect::kWarmUp;
   if (c.gyro <= 0 ||
-      (c.effect != Effect::kDriftStep && c.effect != Effect::kRandomWalkDrift && !warm_up)) {
+      (c.effect != Effect::kDriftStep && c.effect != Effect::kRandomWalkDrift &&
+       c.effect != Effect::kCoefficientStep && !warm_up)) {
     return absl::OkStatus();
   }
   RETURN_IF_ERROR(BehaviourOf(st, selected, context, c.gyro));

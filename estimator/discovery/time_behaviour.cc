@@ -70,6 +70,9 @@ struct OnsetSearch {
   CandidateFit& fit;
   std::vector<TelemetryFrame> frames;
   double step_sigma = 0.0;  // the step's prior 1-sigma [rad/s]
+  // The coefficients released at the onset (drift_model.h theta): C1 for a drift step.
+  int first = kThetaC1;
+  int count = 3;
   ModelRun prefix;
   std::map<int, SessionCheckpoint> checkpoints;
   std::map<int, double> value;  // onset frame -> profiled -2 log L
@@ -99,12 +102,13 @@ struct OnsetSearch {
     return run;
   }
 
-  // One onset: continue from the checkpoint with the C1 states released at the onset frame.
+  // One onset: continue from the checkpoint with the released states (C1 for a drift step)
+  // released at the onset frame.
   absl::Status Evaluate(int f) {
     if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
     SessionOptions options = fit.model.options;
     options.coefficient_releases.push_back(
-        {candidate.gyro, kThetaC1, 3, frames[f].time, step_sigma});
+        {candidate.gyro, first, count, frames[f].time, step_sigma});
     ASSIGN_OR_RETURN(ModelRun run, RunFrom(f, options));
     const double v = Profile(run).value;
     value[f] = v;
@@ -261,21 +265,26 @@ absl::Status FitReadoutJump(OnsetSearch& search, const OnsetProfile& p,
   return absl::OkStatus();
 }
 
-// The fit's time behaviour, the step (C1 after it, the run's final estimate, against C1 at the
-// onset, the checkpoint's), the onset with its interval and the profile's note; the best onset's
-// model and run become the fit's.
-absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
-  CandidateFit& fit = search.fit;
+// The fit's onset with its interval (TimeBehaviour of a step).
+void DescribeOnset(const OnsetSearch& search, const OnsetProfile& p, CandidateFit& fit) {
   const std::vector<TelemetryFrame>& frames = search.frames;
   const absl::Time t0 = frames.front().time;
-  const double onset_hours = p.points[p.best].first;
   fit.time.onset = frames[search.best_frame - 1].time;
-  fit.time.onset_hours = onset_hours;
+  fit.time.onset_hours = p.points[p.best].first;
   fit.time.onset_lower_hours = p.lower;
   fit.time.onset_upper_hours = p.upper;
   fit.time.onset_lower = t0 + absl::Hours(p.lower);
   fit.time.onset_upper = t0 + absl::Hours(p.upper);
   fit.time.onsets_searched = static_cast<int>(search.value.size());
+}
+
+// The fit's time behaviour, the step (C1 after it, the run's final estimate, against C1 at the
+// onset, the checkpoint's), the onset with its interval and the profile's note; the best onset's
+// model and run become the fit's.
+absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
+  CandidateFit& fit = search.fit;
+  const double onset_hours = p.points[p.best].first;
+  DescribeOnset(search, p, fit);
 
   auto at_onset = EstimationSession::FromCheckpoint(fit.model.config, search.best_options,
                                                     search.checkpoints[search.best_frame]);
@@ -307,6 +316,63 @@ absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
   return absl::OkStatus();
 }
 
+// The onsets of the first two grids, k D / (kOnsetCoarse kOnsetRefine), k = 1 .. before the
+// last frame (D the recording's length); empty for a recording too short for them.
+std::vector<int> GridFrames(const std::vector<TelemetryFrame>& frames) {
+  const int n = static_cast<int>(frames.size());
+  std::vector<int> grid_frames;
+  if (n < 2) return grid_frames;
+  const absl::Time t0 = frames.front().time;
+  const absl::Duration length = frames.back().time - t0;
+  const int fine = kOnsetCoarse * kOnsetRefine;
+  for (int k = 1; k < fine; ++k)
+    grid_frames.push_back(FrameAtOrAfter(frames, t0 + length * k / fine));
+  grid_frames.erase(std::unique(grid_frames.begin(), grid_frames.end()), grid_frames.end());
+  while (!grid_frames.empty() && grid_frames.back() >= n - 1) grid_frames.pop_back();
+  return grid_frames;
+}
+
+// The prefix run without the step, with checkpoints before the onsets of `grid_frames`.
+absl::Status RunPrefix(OnsetSearch& search, const std::vector<int>& grid_frames) {
+  CandidateFit& fit = search.fit;
+  ModelRunOptions prefix_options;
+  prefix_options.checkpoint_frames = grid_frames;
+  auto prefix = RunModel(fit.model.config, fit.model.options, search.frames, prefix_options);
+  ++fit.runs;
+  if (!prefix.ok()) return prefix.status();
+  for (size_t j = 0; j < prefix->checkpoints.size(); ++j) {
+    search.checkpoints[grid_frames[j]] = std::move(prefix->checkpoints[j]);
+  }
+  search.prefix = *std::move(prefix);
+  return absl::OkStatus();
+}
+
+// The coarse grid, the finer grid within one coarse spacing of its best onset, and the
+// refinements while the step is significant (`base_value` the model's -2 log L without it).
+// False when no onset could be searched.
+absl::StatusOr<bool> SearchOnsets(OnsetSearch& search, const std::vector<int>& grid_frames,
+                                  double base_value, double alpha) {
+  const std::vector<TelemetryFrame>& frames = search.frames;
+  const absl::Duration length = frames.back().time - frames.front().time;
+  for (size_t j = kOnsetRefine - 1; j < grid_frames.size(); j += kOnsetRefine) {
+    RETURN_IF_ERROR(search.Evaluate(grid_frames[j]));
+  }
+  // A recording too short for the coarse grid: every onset of the finer.
+  if (search.best_frame < 0) {
+    for (int f : grid_frames) RETURN_IF_ERROR(search.Evaluate(f));
+  }
+  if (search.best_frame < 1) return false;
+  // Refinement 1: the finer grid within one coarse spacing of the best coarse onset.
+  const absl::Duration spacing = length / kOnsetCoarse;
+  for (int f : grid_frames) {
+    if (absl::AbsDuration(frames[f].time - frames[search.best_frame].time) <= spacing) {
+      RETURN_IF_ERROR(search.Evaluate(f));
+    }
+  }
+  RETURN_IF_ERROR(search.Refine(length / (kOnsetCoarse * kOnsetRefine), base_value, alpha));
+  return true;
+}
+
 }  // namespace
 
 // The search as a sequence: the gyro's C1 (and misalignment) made releasable, the run without the
@@ -329,55 +395,258 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
                      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction)};
   search.step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
   const std::vector<TelemetryFrame>& frames = search.frames;
-  const int n = static_cast<int>(frames.size());
-  const absl::Time t0 = frames.front().time;
-  const absl::Duration length = frames.back().time - t0;
   fit.parameters = 3;
   fit.time.kind = "step";
 
-  // Prefix run without the step, with checkpoints before the onsets of the first two grids.
-  std::vector<int> grid_frames;
-  const int fine = kOnsetCoarse * kOnsetRefine;
-  for (int k = 1; k < fine; ++k)
-    grid_frames.push_back(FrameAtOrAfter(frames, t0 + length * k / fine));
-  grid_frames.erase(std::unique(grid_frames.begin(), grid_frames.end()), grid_frames.end());
-  while (!grid_frames.empty() && grid_frames.back() >= n - 1) grid_frames.pop_back();
+  const std::vector<int> grid_frames = GridFrames(frames);
   if (grid_frames.empty()) return absl::OkStatus();  // too short: parameters stay 0
-  ModelRunOptions prefix_options;
-  prefix_options.checkpoint_frames = grid_frames;
-  auto prefix = RunModel(fit.model.config, fit.model.options, frames, prefix_options);
-  ++fit.runs;
-  if (!prefix.ok()) return prefix.status();
-  for (size_t j = 0; j < prefix->checkpoints.size(); ++j) {
-    search.checkpoints[grid_frames[j]] = std::move(prefix->checkpoints[j]);
-  }
-  search.prefix = *std::move(prefix);
-
-  for (size_t j = kOnsetRefine - 1; j < grid_frames.size(); j += kOnsetRefine) {
-    RETURN_IF_ERROR(search.Evaluate(grid_frames[j]));
-  }
-  // A recording too short for the coarse grid: every onset of the finer.
-  if (search.best_frame < 0) {
-    for (int f : grid_frames) RETURN_IF_ERROR(search.Evaluate(f));
-  }
-  if (search.best_frame < 1) {  // nothing to search: no step fitted
+  RETURN_IF_ERROR(RunPrefix(search, grid_frames));
+  ASSIGN_OR_RETURN(const bool searched,
+                   SearchOnsets(search, grid_frames, Profile(*ctx.model_run).value, opt.alpha));
+  if (!searched) {  // nothing to search: no step fitted
     fit.parameters = 0;
     fit.run = *ctx.model_run;
     return absl::OkStatus();
   }
-  // Refinement 1: the finer grid within one coarse spacing of the best coarse onset.
-  {
-    const absl::Duration spacing = length / kOnsetCoarse;
-    for (int f : grid_frames) {
-      if (absl::AbsDuration(frames[f].time - frames[search.best_frame].time) <= spacing) {
-        RETURN_IF_ERROR(search.Evaluate(f));
-      }
-    }
-  }
-  RETURN_IF_ERROR(search.Refine(length / fine, Profile(*ctx.model_run).value, opt.alpha));
   const OnsetProfile profile = ProfileOnsets(search, fit);
   RETURN_IF_ERROR(FitReadoutJump(search, profile, opt));
   return DescribeStep(search, profile);
+}
+
+std::vector<BasisTerm> CoefficientStepTerms(int first, const Eigen::VectorXd& step_rad_s,
+                                            absl::Time onset, double sigma) {
+  // Each coefficient's regressor of eq. (1), (10) (drift_model.h DriftRegressor) as monomials
+  // h1^a h2^b h3^c along a case axis m with a sign, up to its part along h, which moves nothing:
+  // k0, C1, C2 have dw = (h h^T - I) g(h) = -(g(h) across h), g = k0 h^3 + C1 + C2 h^2; mu, nu
+  // as printed in eq. (1) (x = h1 (mu12 h2^2 - mu31 h3^2) + h2 h3 nu23, cyclic).
+  struct Monomial {
+    int axis;
+    std::array<int, 3> exponents;
+    double sign;
+  };
+  auto monomials = [](int theta) -> std::vector<Monomial> {
+    if (theta == kThetaK0) return {{1, {3, 0, 0}, -1}, {2, {0, 3, 0}, -1}, {3, {0, 0, 3}, -1}};
+    if (theta >= kThetaC1 && theta < kThetaC1 + 3) return {{theta - kThetaC1 + 1, {0, 0, 0}, -1}};
+    if (theta >= kThetaC2 && theta < kThetaC2 + 3) {
+      std::array<int, 3> e = {0, 0, 0};
+      e[theta - kThetaC2] = 2;
+      return {{theta - kThetaC2 + 1, e, -1}};
+    }
+    switch (theta) {
+      case kThetaMu + 0:  // mu12: x h1 h2^2, y -h2 h1^2
+        return {{1, {1, 2, 0}, 1}, {2, {2, 1, 0}, -1}};
+      case kThetaMu + 1:  // mu23: y h2 h3^2, z -h3 h2^2
+        return {{2, {0, 1, 2}, 1}, {3, {0, 2, 1}, -1}};
+      case kThetaMu + 2:  // mu31: z h3 h1^2, x -h1 h3^2
+        return {{3, {2, 0, 1}, 1}, {1, {1, 0, 2}, -1}};
+      case kThetaNu + 0:  // nu23: x h2 h3
+        return {{1, {0, 1, 1}, 1}};
+      case kThetaNu + 1:  // nu31: y h3 h1
+        return {{2, {1, 0, 1}, 1}};
+      case kThetaNu + 2:  // nu12: z h1 h2
+        return {{3, {1, 1, 0}, 1}};
+      default:
+        return {};
+    }
+  };
+  std::vector<BasisTerm> terms;
+  for (int j = 0; j < step_rad_s.size(); ++j) {
+    for (const Monomial& m : monomials(first + j)) {
+      BasisTerm t;
+      t.kind = BasisKind::kSpinAxisHarmonic;
+      t.axis = m.axis;
+      t.exponents = m.exponents;
+      t.epoch = onset;
+      t.value = m.sign * step_rad_s(j);
+      t.sigma = sigma;
+      terms.push_back(t);
+    }
+  }
+  return terms;
+}
+
+std::vector<CoefficientGroup> StepGroupsInUse(const GyroConfig& gyro) {
+  const DriftVector value = gyro.model.AsVector(), sigma = gyro.model_sigma.AsVector();
+  auto in_use = [&](int first, int count) {
+    for (int i = first; i < first + count; ++i) {
+      if (value(i) != 0.0 || sigma(i) > 0.0) return true;
+    }
+    return false;
+  };
+  std::vector<CoefficientGroup> out = {{"k0", "k0StepDegH", kThetaK0, 1}};  // every model's
+  if (in_use(kThetaC2, 3)) out.push_back({"C2", "c2StepDegH", kThetaC2, 3});
+  if (in_use(kThetaMu, 3)) out.push_back({"mu", "muStepDegH", kThetaMu, 3});
+  if (in_use(kThetaNu, 3)) out.push_back({"nu", "nuStepDegH", kThetaNu, 3});
+  return out;
+}
+
+namespace {
+
+// One group's search and what it gives: the onset profile (its prior points and interval), the
+// best onset's run and options, the step with its 1-sigma, and the evidence integrated over the
+// onsets against the model without the step.
+struct GroupStep {
+  CoefficientGroup group;
+  CandidateFit scratch;  // the profile's prior points and onset profile
+  OnsetProfile profile;
+  int best_frame = -1;
+  ModelRun run;
+  SessionOptions options;
+  Eigen::VectorXd step, step_sigma;  // [rad/s]
+  double evidence = 0.0;             // 2 ln B over the onsets
+  absl::Time onset_time;
+};
+
+// The step of the group at the best onset: the estimate after it (the run's final) less the
+// one at the onset (the checkpoint's); its 1-sigma combines both estimates' sigmas (the
+// estimate before the onset enters the one after it through the prior only).
+absl::Status StepOf(OnsetSearch& search, GroupStep& g) {
+  auto at_onset = EstimationSession::FromCheckpoint(search.fit.model.config, search.best_options,
+                                                    search.checkpoints[search.best_frame]);
+  if (!at_onset.ok()) return at_onset.status();
+  const std::vector<GyroEstimate> before_all = at_onset->Gyros();
+  const GyroEstimate* before = FindEstimate(before_all, search.candidate.gyro);
+  const GyroEstimate* after = FindEstimate(search.best_run.gyros, search.candidate.gyro);
+  g.step = Eigen::VectorXd::Zero(g.group.count);
+  g.step_sigma = Eigen::VectorXd::Zero(g.group.count);
+  if (before == nullptr || after == nullptr) return absl::OkStatus();
+  const DriftVector b = before->coefficients.AsVector(), a = after->coefficients.AsVector();
+  const DriftVector sb = before->sigma.AsVector(), sa = after->sigma.AsVector();
+  for (int j = 0; j < g.group.count; ++j) {
+    const int i = g.group.first + j;
+    g.step(j) = a(i) - b(i);
+    g.step_sigma(j) = std::hypot(sa(i), sb(i));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+// The search as a sequence: the groups of the model in use made releasable, one run without the
+// step with checkpoints shared by the groups, each group's onset search and profile, the group
+// of the largest evidence, its step described and its basis terms.
+absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ctx,
+                                CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  const std::vector<CoefficientGroup> groups = StepGroupsInUse(*g);
+  for (const CoefficientGroup& group : groups) {
+    ReleaseHeldCoefficients(fit.model.config, candidate.gyro, group.first, group.count,
+                            DegPerHourToRadPerSec(kHeldSigmaDegH));
+  }
+  fit.time.kind = kTimeCoefficientStep;
+  fit.parameters = 0;
+  fit.run = *ctx.model_run;
+  const std::vector<TelemetryFrame> frames =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
+  const std::vector<int> grid_frames = GridFrames(frames);
+  if (grid_frames.empty()) return absl::OkStatus();  // too short: no step fitted
+  const double base_value = Profile(*ctx.model_run).value;
+
+  std::vector<GroupStep> steps;
+  std::map<int, SessionCheckpoint> checkpoints;
+  ModelRun prefix;
+  for (const CoefficientGroup& group : groups) {
+    OnsetSearch search{candidate, fit, frames};
+    search.step_sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+    search.first = group.first;
+    search.count = group.count;
+    if (checkpoints.empty()) {
+      RETURN_IF_ERROR(RunPrefix(search, grid_frames));
+    } else {  // the run without the step is the same for every group
+      search.checkpoints = checkpoints;
+      search.prefix = prefix;
+    }
+    ASSIGN_OR_RETURN(const bool searched,
+                     SearchOnsets(search, grid_frames, base_value, opt.alpha));
+    checkpoints = search.checkpoints;
+    prefix = search.prefix;
+    if (!searched) continue;
+    GroupStep step;
+    step.group = group;
+    step.profile = ProfileOnsets(search, step.scratch);
+    std::vector<std::pair<double, double>> points;
+    for (const auto& [w, v] : step.scratch.prior_points) points.emplace_back(w, base_value - v);
+    step.evidence = EvidenceOverPrior(points);
+    RETURN_IF_ERROR(StepOf(search, step));
+    step.best_frame = search.best_frame;
+    step.onset_time = frames[search.best_frame - 1].time;
+    DescribeOnset(search, step.profile, step.scratch);
+    step.run = std::move(search.best_run);
+    step.options = search.best_options;
+    steps.push_back(std::move(step));
+  }
+  if (steps.empty()) return absl::OkStatus();
+
+  // The evidence: the groups equally likely a priori, each one's onsets integrated over the
+  // uniform prior (its prior points weighted by 1 / the number of groups); the finding is the
+  // group of the largest evidence.
+  size_t best = 0;
+  for (size_t k = 0; k < steps.size(); ++k) {
+    for (const auto& [w, v] : steps[k].scratch.prior_points) {
+      fit.prior_points.emplace_back(w / static_cast<double>(groups.size()), v);
+    }
+    if (steps[k].evidence > steps[best].evidence) best = k;
+  }
+  GroupStep& s = steps[best];
+  fit.parameters = s.group.count;
+  fit.time = s.scratch.time;
+  fit.time.kind = kTimeCoefficientStep;
+  fit.onset_profile = s.scratch.onset_profile;
+  fit.model.options = s.options;
+  fit.run = std::move(s.run);
+
+  const double deg_h = DegH(1.0);
+  std::string sizes;
+  for (int j = 0; j < s.group.count; ++j) {
+    const std::string name = s.group.count == 1 ? std::string(s.group.json_name)
+                                                : absl::StrFormat("%s[%d]", s.group.json_name, j);
+    fit.fitted.push_back({name, s.step(j) * deg_h, s.step_sigma(j) * deg_h, "deg/h"});
+    absl::StrAppend(&sizes, j == 0 ? "" : ", ",
+                    absl::StrFormat("%+.4f +- %.4f", s.step(j) * deg_h, s.step_sigma(j) * deg_h));
+  }
+  const OnsetProfile& p = s.profile;
+  const double onset_hours = p.points[p.best].first;
+  fit.fitted.push_back({"onsetHours", onset_hours, 0.5 * (p.upper - p.lower), "h"});
+  fit.fitted.push_back({"onsetLowerHours", p.lower, 0.0, "h"});
+  fit.fitted.push_back({"onsetUpperHours", p.upper, 0.0, "h"});
+
+  const double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  const std::vector<BasisTerm> terms = CoefficientStepTerms(s.group.first, s.step, s.onset_time,
+                                                            sigma);
+  const int held = static_cast<int>(g->basis_terms.size());
+  if (held + static_cast<int>(terms.size()) <= kMaxBasisTermsPerGyro) {
+    fit.basis_terms = terms;
+  } else {
+    fit.notes.push_back(absl::StrFormat(
+        "no basis terms for the step: gyro %d's basis holds %d terms, at most %d (%d more needed)",
+        candidate.gyro, held, kMaxBasisTermsPerGyro, terms.size()));
+  }
+  fit.description = absl::StrFormat(
+      "a step of %s of gyro %d (eq. %s) at %.2f h from the start (95%% %.2f-%.2f h): %s%s deg/h "
+      "(%s after the step less before it)",
+      s.group.name, candidate.gyro, s.group.first == kThetaK0 || s.group.first >= kThetaMu
+                                        ? "(1)"
+                                        : "(10)",
+      onset_hours, p.lower, p.upper, s.group.count == 1 ? "" : "(",
+      absl::StrCat(sizes, s.group.count == 1 ? "" : ")"), s.group.name);
+  for (const GroupStep& other : steps) {
+    std::string profile_text;
+    for (const auto& [h, v] : other.profile.points) {
+      absl::StrAppend(&profile_text,
+                      absl::StrFormat(" %.2f:%.1f", h, v - other.profile.points[other.profile.best].second));
+    }
+    fit.notes.push_back(absl::StrFormat(
+        "a step of %s: 2 ln B = %.1f integrated over %d onsets, the best at %.2f h; likelihood "
+        "over the onset (h from the start: -2 log L above the best):%s",
+        other.group.name, other.evidence, other.profile.points.size(),
+        other.profile.points[other.profile.best].first, profile_text));
+  }
+  return absl::OkStatus();
 }
 
 namespace {

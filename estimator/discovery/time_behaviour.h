@@ -8,8 +8,12 @@
 
 #include <vector>
 
+#include "Eigen/Core"
 #include "absl/status/status.h"
+#include "absl/time/time.h"
+#include "estimator/basis_term.h"
 #include "estimator/discovery/candidate.h"
+#include "estimator/drift_model.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/telemetry.h"
 
@@ -26,6 +30,44 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& context,
 
 // The time behaviour of a warm-up finding (report.h TimeBehaviour::kind).
 inline constexpr const char* kTimeWarmUp = "warm_up";
+
+// A group of drift coefficients of eq. (1), (10) (drift_model.h theta[first .. first + count)),
+// its name and its step's parameter name in a finding ("k0StepDegH", "c2StepDegH[0..2]", ...).
+struct CoefficientGroup {
+  const char* name = "k0";
+  const char* json_name = "k0StepDegH";
+  int first = kThetaK0;
+  int count = 1;
+};
+
+// The groups a coefficient step of `gyro` may take (D110): k0, every model's, and C2, mu, nu
+// where the gyro's model holds one of their coefficients (a value or a prior); C1's step is the
+// drift step's.
+std::vector<CoefficientGroup> StepGroupsInUse(const GyroConfig& gyro);
+
+// The basis terms of a step of the coefficients theta[first .. first + step.size()) by
+// `step_rad_s` [rad/s] at `onset` (D110): spin_axis_harmonic terms switched on at the onset,
+// whose drift across h equals that of the step of eq. (1), (10) at every h (k0: three terms
+// h_m^3 along m, each -dk0; C1: 1 along m, -dC1m; C2: h_m^2 along m, -dC2m; mu: two terms each,
+// nu: one, as printed), at those values, freed with the prior `sigma` [rad/s].
+std::vector<BasisTerm> CoefficientStepTerms(int first, const Eigen::VectorXd& step_rad_s,
+                                            absl::Time onset, double sigma);
+
+// The time behaviour of a coefficient-step finding.
+inline constexpr const char* kTimeCoefficientStep = "coefficient_step";
+
+// A step of one group of `candidate.gyro`'s drift coefficients at an onset (docs/discovery.md,
+// "Time behaviour"; D110): for each group of StepGroupsInUse, the onset searched as the drift
+// step's (time_behaviour.h FitDriftStep, the same grids and refinement, one run without the step
+// with checkpoints shared by the groups), the group's states released at the onset with the prior
+// c_sigma_deg_h; the evidence integrates the onset over a uniform prior and the groups over equal
+// prior weights, the finding is the group of the largest evidence. Fills `fit` (the best onset's
+// run and options, parameters k0StepDegH or <group>StepDegH[0..2] with 1-sigma, onsetHours,
+// onsetLowerHours, onsetUpperHours, the onset's time behaviour, description, basis_terms from
+// CoefficientStepTerms, notes with each group's profile). Errors: InvalidArgument for a gyro that
+// is not configured; those of RunModel.
+absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& context,
+                                CandidateFit& fit);
 
 // A warm-up of `candidate.gyro` (docs/discovery.md, "Time behaviour"): a case-fixed drift A e^(-t /
 // tau) from the recording's start, as three exponential_decay basis terms (basis_term.h, one per

@@ -154,6 +154,30 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                           f.time.onset_lower_hours, f.time.onset_upper_hours);
             detail += text;
           }
+          if (f.time.kind == "coefficient_step") {
+            // The onset with its interval; each step's parameter, and for k0_step its error
+            // against the truth in its sigma.
+            char onset[120];
+            std::snprintf(onset, sizeof onset, " onset %.2f h [%.2f, %.2f]", f.time.onset_hours,
+                          f.time.onset_lower_hours, f.time.onset_upper_hours);
+            detail += onset;
+            if (truth == "k0_step") {
+              const Parameter* k0 = FindParameter(f.parameters, "k0StepDegH");
+              if (k0 != nullptr && k0->sigma > 0) {
+                char text[80];
+                std::snprintf(text, sizeof text, " error %.2f sigma",
+                              (k0->value - ::esg::testing::kK0StepDegH) / k0->sigma);
+                detail += text;
+              }
+            }
+            for (const Parameter& p : f.parameters) {
+              if (p.name.find("StepDegH") == std::string::npos) continue;
+              char text[120];
+              std::snprintf(text, sizeof text, " %s %.4f+-%.4f deg/h", p.name.c_str(), p.value,
+                            p.sigma);
+              detail += text;
+            }
+          }
           if (f.time.kind == "warm_up") {
             const Parameter* tau = FindParameter(f.parameters, "tauHours");
             const Parameter* lo = FindParameter(f.parameters, "tauLowerHours");

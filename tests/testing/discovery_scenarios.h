@@ -87,10 +87,17 @@ inline std::vector<std::string> DiscoveryEffects() {
 
 // The time behaviours of docs/discovery.md ("Time behaviour") and a fault outside the library.
 // "warm_up": a case-fixed drift of 0.1 deg/h along (0.6, -0.64, 0.48) decaying from the start
-// with a time constant of 4 h (simulator.h TransientDrift).
+// with a time constant of 4 h (simulator.h TransientDrift). "k0_step": k0 of eq. (1) steps by
+// kK0StepDegH at 40% of the recording (simulator.h CoefficientStep; a step of C1 is the
+// drift_step scenario's case-fixed drift, C1 -> C1 - d).
 inline std::vector<std::string> DiscoveryTimeBehaviours() {
-  return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up"};
+  return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up",
+          "k0_step"};
 }
+
+// The k0_step scenario's step of k0 [deg/h] and its onset [fraction of the recording].
+inline constexpr double kK0StepDegH = 0.1;
+inline constexpr double kK0StepOnsetFraction = 0.4;
 
 // The warm-up scenario's truth: amplitude [deg/h, case axes] and time constant [h].
 inline Eigen::Vector3d WarmUpAmplitudeDegH() { return Eigen::Vector3d(0.06, -0.064, 0.048); }
@@ -234,6 +241,12 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.time_constant_s = kWarmUpTauHours * 3600.0;
     s.gyros[g].transient_drift = d;
   }
+  if (effect == "k0_step") {
+    CoefficientStep c;
+    c.time_s = kK0StepOnsetFraction * s.duration;
+    c.delta.k0 = x * kK0StepDegH * deg_h;
+    s.gyros[g].coefficient_step = c;
+  }
   if (effect == "drift_step") {
     GyroFault f;
     f.time = 0.4 * s.duration;
@@ -273,6 +286,7 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "sun_face_drift") return basis("follows_sun", "sunLagHours");
   if (truth == "growing_displacement") return basis("linear", "");
   if (truth == "warm_up") return basis("warm_up", "tauHours");
+  if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
   if (truth == "readout_scale") return basis("", "readout");
   if (truth == "switching_drift" || truth == "hidden_driver") {
     return r.verdict == kVerdictUnexplained && !r.findings.empty() &&
