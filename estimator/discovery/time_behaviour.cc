@@ -646,6 +646,10 @@ absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ct
         other.group.name, other.evidence, other.profile.points.size(),
         other.profile.points[other.profile.best].first, profile_text));
   }
+  fit.notes.push_back(absl::StrFormat(
+      "%d filter runs for %d group%s: one without the step, the others continued from its "
+      "checkpoints (each the part of a run after its onset)",
+      fit.runs, groups.size(), groups.size() == 1 ? "" : "s"));
   return absl::OkStatus();
 }
 

@@ -88,11 +88,12 @@ inline std::vector<std::string> DiscoveryEffects() {
 // The time behaviours of docs/discovery.md ("Time behaviour") and a fault outside the library.
 // "warm_up": a case-fixed drift of 0.1 deg/h along (0.6, -0.64, 0.48) decaying from the start
 // with a time constant of 4 h (simulator.h TransientDrift). "k0_step": k0 of eq. (1) steps by
-// kK0StepDegH at 40% of the recording (simulator.h CoefficientStep; a step of C1 is the
-// drift_step scenario's case-fixed drift, C1 -> C1 - d).
+// kK0StepDegH at 40% of the recording (simulator.h CoefficientStep). "c1_step": C1 of eq. (10)
+// steps by -(0.02, -0.03, 0.02) deg/h at 40% (simulator.h CoefficientStep, the printed C1 term),
+// the drift_step scenario's case-fixed drift d written as C1 -> C1 - d: expected `drift_step`.
 inline std::vector<std::string> DiscoveryTimeBehaviours() {
   return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up",
-          "k0_step"};
+          "k0_step", "c1_step"};
 }
 
 // The k0_step scenario's step of k0 [deg/h] and its onset [fraction of the recording].
@@ -247,6 +248,12 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     c.delta.k0 = x * kK0StepDegH * deg_h;
     s.gyros[g].coefficient_step = c;
   }
+  if (effect == "c1_step") {
+    CoefficientStep c;
+    c.time_s = 0.4 * s.duration;
+    c.delta.C1 = -x * Eigen::Vector3d(0.02, -0.03, 0.02) * deg_h;
+    s.gyros[g].coefficient_step = c;
+  }
   if (effect == "drift_step") {
     GyroFault f;
     f.time = 0.4 * s.duration;
@@ -320,7 +327,9 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   const bool per_gyro = truth == "rotor_displacement" || truth == "fourth_harmonic" ||
                         truth == "unequal_stiffness" || truth == "gyro_misalignment" ||
                         truth == "drift_step" || truth == "random_walk_one_gyro";
-  if (truth == "drift_step" || truth == "random_walk_one_gyro" || truth == "random_walk_15x") {
+  if (truth == "c1_step") effect = "drift_step";  // C1's step is the drift step
+  if (truth == "drift_step" || truth == "c1_step" || truth == "random_walk_one_gyro" ||
+      truth == "random_walk_15x") {
     return r.findings.size() == 1 && r.findings.front().effect == effect &&
            r.findings.front().gyro == want_gyro;
   }
