@@ -133,7 +133,7 @@ absl::StatusOr<std::vector<std::string>> LeaseStore::RenewAll(
   leases.reserve(fences.size());
   for (const auto& lease : fences) leases.push_back(&lease);
   std::set<std::string> renewed;
-  ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
+  ASSIGN_OR_RETURN(Transaction txn, BeginRenewal());
   for (size_t first = 0; first < leases.size(); first += kBatch) {
     for (const std::string* text : {&lock_sql, &sql}) {
       ASSIGN_OR_RETURN(Statement * st, txn.Prepare(*text));
@@ -157,6 +157,17 @@ absl::StatusOr<std::vector<std::string>> LeaseStore::RenewAll(
     if (renewed.count(spacecraft_id) == 0) lost.push_back(spacecraft_id);
   }
   return lost;
+}
+
+absl::StatusOr<Transaction> LeaseStore::BeginRenewal() {
+  // A connection of its own sits idle between rounds, possibly through a restart of the
+  // database server: its first BEGIN then finds the connection lost (having done nothing) and
+  // the next one reconnects.
+  {
+    absl::StatusOr<Transaction> txn = renewal_db_->Begin(TransactionMode::kImmediate);
+    if (renewal_db_ == db_ || !absl::IsUnavailable(txn.status())) return txn;
+  }
+  return renewal_db_->Begin(TransactionMode::kImmediate);
 }
 
 absl::Status LeaseStore::Release(absl::string_view spacecraft_id, const LeaseFence& fence) {

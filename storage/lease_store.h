@@ -51,7 +51,11 @@ std::optional<absl::Time> LeaseHeldUntil(const absl::Status& status);
 // an SQLite file: sqlite_db.h "Owner lock").
 class LeaseStore {
  public:
-  explicit LeaseStore(Database* db) : db_(db) {}
+  explicit LeaseStore(Database* db) : db_(db), renewal_db_(db) {}
+
+  // RenewAll runs on `db` (not owned, outliving this store) instead of the main connection;
+  // called once, before any other call (Storage::OpenPostgres).
+  void SetRenewalDatabase(Database* db) { renewal_db_ = db; }
 
   // Takes the lease of `spacecraft_id` for `owner` until now + duration if it is free, expired
   // at `now`, or already `owner`'s (a restarted server with the same node id takes its own lease
@@ -75,7 +79,8 @@ class LeaseStore {
   // Unavailable for a lost connection or a lock conflict: try again). An empty `fences` renews
   // nothing and returns no spacecraft. Same as calling Renew for each lease, with one commit
   // instead of one per lease (and a few statements instead of one per lease). Does not wait for
-  // the write transactions holding these leases' fences (CheckHeld), nor they for it.
+  // the write transactions holding these leases' fences (CheckHeld), nor they for it; runs on
+  // the connection of SetRenewalDatabase (Storage::OpenPostgres: one of its own).
   absl::StatusOr<std::vector<std::string>> RenewAll(const std::map<std::string, LeaseFence>& fences,
                                                     absl::Time now, absl::Duration duration);
 
@@ -98,11 +103,14 @@ class LeaseStore {
 
  private:
   absl::Status CheckPostgres() const;
+  // The renewal round's transaction on renewal_db_.
+  absl::StatusOr<Transaction> BeginRenewal();
   // Sets the expiry of (owner, epoch)'s lease; false when the lease is no longer theirs.
   absl::StatusOr<bool> SetExpiry(absl::string_view spacecraft_id, const LeaseFence& fence,
                                  absl::Time expires);
 
-  Database* db_;  // not owned
+  Database* db_;          // not owned
+  Database* renewal_db_;  // not owned; db_ unless SetRenewalDatabase
 };
 
 }  // namespace esg::storage

@@ -66,6 +66,8 @@ absl::StatusOr<std::unique_ptr<Storage>> Storage::OpenPostgres(const std::string
   ASSIGN_OR_RETURN(std::unique_ptr<Storage> storage, FromDatabase(std::move(db)));
   // The filter's connection, opened after the migration so that it sees the current schema.
   ASSIGN_OR_RETURN(storage->filter_db_, PostgresDatabase::Open(uri, options));
+  ASSIGN_OR_RETURN(storage->renewal_db_, PostgresDatabase::Open(uri, options));
+  storage->leases_.SetRenewalDatabase(storage->renewal_db_.get());
   return storage;
 }
 
@@ -89,6 +91,11 @@ int Storage::ConnectionPid() {
 int Storage::FilterConnectionPid() {
   if (filter_db_ == nullptr) return ConnectionPid();
   return static_cast<PostgresDatabase&>(*filter_db_).BackendPid();
+}
+
+int Storage::RenewalConnectionPid() {
+  if (renewal_db_ == nullptr) return ConnectionPid();
+  return static_cast<PostgresDatabase&>(*renewal_db_).BackendPid();
 }
 
 absl::Status Storage::ArchiveFrames(

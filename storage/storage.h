@@ -14,14 +14,15 @@
 //   CommitConfiguration  a configuration with the fresh checkpoint of its session (and the
 //                        clearing of a quarantine alert it ends).
 // Each is ONE transaction (IMMEDIATE with SQLite): on any error none of it is visible.
-// Connections: SQLite, one for everything. PostgreSQL, two: the filter's commits
-// (CommitFilterEffects, CommitFilterEffectsGroup) run on a connection of their own, so that a
-// filter transaction never holds up the group commit of frames and the acknowledgements waiting
-// for it; everything else (ArchiveFrames, CommitConfiguration, the stores' reads and writes)
-// runs on the main one. Both are opened with the same options (synchronous_commit=on), so the
-// durability contract is the same on either, and a filter transaction checks its lease fence
-// inside itself as before (a server taking the lease over waits for the fence's row lock until
-// the filter's transaction ends).
+// Connections: SQLite, one for everything. PostgreSQL, three: the filter's commits
+// (CommitFilterEffects, CommitFilterEffectsGroup) run on a connection of their own, and so does
+// the lease renewal round (LeaseStore::RenewAll), so that neither a filter transaction nor a
+// renewal of every lease of the server holds up the group commit of frames and the
+// acknowledgements waiting for it; everything else (ArchiveFrames, CommitConfiguration, the
+// stores' reads and writes) runs on the main one. All are opened with the same options
+// (synchronous_commit=on), so the durability contract is the same on each, and a filter
+// transaction checks its lease fence inside itself as before (a server taking the lease over
+// waits for the fence's row lock until the filter's transaction ends).
 #ifndef ESG_STORAGE_STORAGE_H_
 #define ESG_STORAGE_STORAGE_H_
 
@@ -198,6 +199,9 @@ class Storage {
   // CommitFilterEffectsGroup), the sender_pid of the notifications the filter's commits cause
   // (its alerts and estimates). With SQLite the same as ConnectionPid().
   int FilterConnectionPid();
+  // PostgreSQL: the server process of the lease renewal's connection (LeaseStore::RenewAll).
+  // With SQLite the same as ConnectionPid().
+  int RenewalConnectionPid();
 
   Database& database() { return *db_; }
   ConfigStore& configs() { return configs_; }
@@ -221,8 +225,9 @@ class Storage {
   Database& filter_database() { return filter_db_ != nullptr ? *filter_db_ : *db_; }
 
   std::unique_ptr<Database> db_;
-  // PostgreSQL only (null with SQLite): the filter's own connection.
+  // PostgreSQL only (null with SQLite): the filter's own connection, and the lease renewal's.
   std::unique_ptr<Database> filter_db_;
+  std::unique_ptr<Database> renewal_db_;
   ConfigStore configs_;
   TelemetryArchive archive_;
   CoefficientStore coefficients_;

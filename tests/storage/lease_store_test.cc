@@ -279,13 +279,14 @@ TEST_P(LeaseStoreTest, ARenewalRoundNeitherWaitsForAFencedCommitOfTheSameLeasesN
 
   // The renewal round runs to its end; had it waited for D-A's lock, it would stay waiting until
   // the commit below, and the observer would see it waiting.
+  // (The pid is read before the round: it takes the connection's lock.)
+  const int renewer_pid = (*renewer)->RenewalConnectionPid();
   absl::StatusOr<std::vector<std::string>> lost;
   absl::Notification renewed;
   std::thread renewal([&] {
     lost = (*renewer)->leases().RenewAll(fences, T(5), kLease);
     renewed.Notify();
   });
-  const int renewer_pid = (*renewer)->ConnectionPid();
   bool waited = false;
   while (!renewed.WaitForNotificationWithTimeout(absl::Milliseconds(10))) {
     if (WaitsForALock(**observer, renewer_pid)) {
@@ -307,6 +308,64 @@ TEST_P(LeaseStoreTest, ARenewalRoundNeitherWaitsForAFencedCommitOfTheSameLeasesN
     EXPECT_EQ(lease->expires, T(5) + kLease) << id;
     EXPECT_EQ(lease->epoch, 1) << id;
   }
+}
+
+// The renewal round runs on a connection of its own: while it waits (here for a row another
+// server's takeover holds locked; in service for its own 2,000 rows), the same Storage's
+// frames commit and their acknowledgements go out. On the main connection the commit would
+// wait until the round ended.
+TEST_P(LeaseStoreTest, FramesCommitWhileTheRenewalRoundWaitsForALock) {
+  const std::string uri = NewDatabase();
+  absl::StatusOr<std::unique_ptr<Storage>> server = Storage::Open(uri);
+  ASSERT_THAT(server, IsOk());
+  if (GetParam() == testing::Backend::kSqlite) return;  // no leases (above)
+  absl::StatusOr<std::unique_ptr<Storage>> other = Storage::Open(uri);
+  ASSERT_THAT(other, IsOk());
+  absl::StatusOr<std::unique_ptr<Storage>> observer = Storage::Open(uri);
+  ASSERT_THAT(observer, IsOk());
+  const std::map<std::string, LeaseFence> fences = {{"N-A", {"a", 1}}, {"N-B", {"a", 1}}};
+  for (const auto& [id, fence] : fences) {
+    ASSERT_THAT((*server)->leases().Acquire(id, fence.owner, T(0), kLease), IsOk());
+  }
+  // (Read before the round: the pid takes the connection's lock.)
+  const int renewal_pid = (*server)->RenewalConnectionPid();
+  ASSERT_NE(renewal_pid, (*server)->ConnectionPid());
+
+  // Another server's transaction holds N-A's row as a takeover does (FOR UPDATE).
+  absl::StatusOr<Transaction> takeover = (*other)->database().Begin(TransactionMode::kImmediate);
+  ASSERT_THAT(takeover, IsOk());
+  absl::StatusOr<Statement*> lock = takeover->Prepare(
+      "SELECT owner FROM session_leases WHERE spacecraft_id = 'N-A' FOR UPDATE");
+  ASSERT_THAT(lock, IsOk());
+  ASSERT_THAT((*lock)->Step(), IsOk());
+  (*lock)->Reset();
+
+  absl::StatusOr<std::vector<std::string>> lost;
+  std::thread renewal([&] { lost = (*server)->leases().RenewAll(fences, T(5), kLease); });
+  bool waiting = false;
+  for (int i = 0; i < 500 && !waiting; ++i) {
+    waiting = WaitsForALock(**observer, renewal_pid);
+    if (!waiting) absl::SleepFor(absl::Milliseconds(10));
+  }
+  EXPECT_TRUE(waiting) << "the renewal round never waited for N-A";
+
+  // A fenced frame of N-B commits meanwhile. Had it waited for the round, it would wait until
+  // the takeover's transaction below ends: the 20 s bound only keeps the test from hanging.
+  absl::Status archived = absl::UnknownError("not returned");
+  absl::Notification done;
+  std::thread frames([&] {
+    archived = (*server)->ArchiveFrames({Frame("N-B", 1)}, {}, {{"N-B", fences.at("N-B")}});
+    done.Notify();
+  });
+  const bool before_the_round_ended = done.WaitForNotificationWithTimeout(absl::Seconds(20));
+  EXPECT_TRUE(before_the_round_ended) << "the frames' commit waited for the renewal round";
+  EXPECT_TRUE(WaitsForALock(**observer, renewal_pid));
+  EXPECT_THAT(takeover->Commit(), IsOk());
+  frames.join();
+  renewal.join();
+  EXPECT_THAT(archived, IsOk());
+  ASSERT_THAT(lost, IsOk());
+  EXPECT_TRUE(lost->empty());
 }
 
 // The fence still holds against a takeover: another server taking an expired lease over waits
