@@ -414,7 +414,20 @@ std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDri
     const Vector3d w_before_in =
         time_before > 0.0 ? Vector3d(turn_in_before / time_before) : w_after_in;
     if (axes_known) {
-      d.slow_reading_change = kSlowReadingErrorRad * (w_after_in - w_before_in).norm();
+      // The fitted rates on either side are weighted means of the intervals' rates, so their
+      // change is at most the largest change between an interval before and one after.
+      double largest = 0.0;
+      for (int k = 1; k < n; ++k) {
+        const double dtk = p.tau[k] - p.tau[k - 1];
+        if (!(dtk > 0.0) || p.tau[k] > onset_tau) continue;
+        for (int m = 1; m < n; ++m) {
+          const double dtm = p.tau[m] - p.tau[m - 1];
+          if (!(dtm > 0.0) || p.tau[m] <= onset_tau) continue;
+          largest = std::max(largest,
+                             (track.points[m].turn_in / dtm - track.points[k].turn_in / dtk).norm());
+        }
+      }
+      d.slow_reading_change = kSlowReadingErrorRad * largest;
       const double sin_axes = w_before_in.cross(w_after_in).norm();
       d.turn_axis_change = w_before_in.norm() > 0.0 && w_after_in.norm() > 0.0
                                ? std::atan2(sin_axes, w_before_in.dot(w_after_in))

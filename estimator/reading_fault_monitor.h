@@ -159,10 +159,12 @@ class ReadingFaultMonitor {
     // most kSlowReadingErrorRad times the turn rate: for a misalignment, the rebuild's error
     // delta_in x h_in moves at (w_in x delta_in) x h_in, linear in the body rate w_in. So where
     // the turn changes at the onset (a slew's end, an attitude-mode switch, the turn's axis
-    // moving at the same rate) such an error changes the mean rate by up to
-    // kSlowReadingErrorRad |w_after - w_before|, the mean body rates in inertial axes before and
-    // after the onset (slow_reading_change [rad/s]); turn_axis_change the angle between them
-    // [rad] (0 when either is zero). A window holding a point without the turn's axis (restored
+    // moving at the same rate) such an error changes the fitted rate by up to
+    // kSlowReadingErrorRad max |w_m - w_k| over the intervals k before and m after the onset,
+    // w the interval's mean body rate in inertial axes (slow_reading_change [rad/s]; the fitted
+    // rates are weighted means of the intervals'; a misalignment turning with the body within
+    // the window is left out); turn_axis_change the angle between the mean rates before and
+    // after [rad] (0 when either is zero). A window holding a point without the turn's axis (restored
     // from a checkpoint before version 9) uses the scalar rates, |after - before|.
     // may_be_slow_reading_error: |c| minus 3 sigma along c is within slow_reading_change, the
     // change as large as such an error gives there.
