@@ -4,9 +4,13 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/escaping.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "absl/time/civil_time.h"
 #include "absl/time/clock.h"
+#include "estimator/channel_signal.h"
+#include "estimator/channels.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
 #include "estimator/utc_time.h"
@@ -15,7 +19,7 @@ namespace esg::estimator {
 
 namespace {
 
-constexpr std::array<std::pair<BasisKind, std::string_view>, 8> kKindNames = {{
+constexpr std::array<std::pair<BasisKind, std::string_view>, 9> kKindNames = {{
     {BasisKind::kSpinAxisHarmonic, "spin_axis_harmonic"},
     {BasisKind::kBodyRate, "body_rate"},
     {BasisKind::kBodyRateProduct, "body_rate_product"},
@@ -24,6 +28,13 @@ constexpr std::array<std::pair<BasisKind, std::string_view>, 8> kKindNames = {{
     {BasisKind::kRampHarmonic, "ramp_harmonic"},
     {BasisKind::kSuspensionVoltage, "suspension_voltage"},
     {BasisKind::kExponentialDecay, "exponential_decay"},
+    {BasisKind::kChannel, "channel"},
+}};
+
+constexpr std::array<std::pair<ChannelForm, std::string_view>, 3> kFormNames = {{
+    {ChannelForm::kValue, "value"},
+    {ChannelForm::kLag, "lag"},
+    {ChannelForm::kDerivative, "derivative"},
 }};
 
 bool InAxisRange(int i) { return i >= 1 && i <= 3; }
@@ -72,6 +83,35 @@ absl::StatusOr<BasisKind> ParseBasisKind(std::string_view name) {
     absl::StrAppend(&known, known.empty() ? "" : ", ", std::string(n));
   return absl::InvalidArgumentError(
       absl::StrFormat("unknown basis kind \"%s\" (known: %s)", name, known));
+}
+
+std::string_view ChannelFormName(ChannelForm form) {
+  for (const auto& [f, name] : kFormNames) {
+    if (f == form) return name;
+  }
+  return "unknown";
+}
+
+absl::StatusOr<ChannelForm> ParseChannelForm(std::string_view name) {
+  for (const auto& [f, n] : kFormNames) {
+    if (n == name) return f;
+  }
+  return absl::InvalidArgumentError(absl::StrFormat(
+      "unknown channel form \"%s\" (known: value, lag, derivative)",
+      absl::CHexEscape(absl::string_view(name.data(), name.size()))));
+}
+
+absl::Status CheckBasisChannel(const BasisTerm& t, const std::vector<std::string>& declared,
+                               std::string_view prefix) {
+  if (t.kind != BasisKind::kChannel) return absl::OkStatus();
+  if (std::find(declared.begin(), declared.end(), t.channel) != declared.end()) {
+    return absl::OkStatus();
+  }
+  return absl::InvalidArgumentError(absl::StrCat(
+      std::string(prefix), ".channel: \"",
+      absl::CHexEscape(t.channel.substr(0, kMaxChannelNameLength)),
+      "\" is not declared in channels (declared: ",
+      declared.empty() ? std::string("none") : absl::StrJoin(declared, ", "), ")"));
 }
 
 absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
@@ -135,6 +175,19 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
       }
       RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
       break;
+    case BasisKind::kChannel:
+      RETURN_IF_ERROR(ValidateChannelName(t.channel, absl::StrCat(std::string(prefix), ".channel")));
+      if (!std::isfinite(t.reference)) return bad("referenceValue", "must be finite");
+      if (t.form != ChannelForm::kValue &&
+          !(t.time_constant >= kMinDecayTimeConstantS &&
+            t.time_constant <= kMaxDecayTimeConstantS)) {
+        return bad("timeConstantS",
+                   absl::StrFormat("%g s is outside [%g, %g] s (a minute to a year) for the %s "
+                                   "form",
+                                   t.time_constant, kMinDecayTimeConstantS,
+                                   kMaxDecayTimeConstantS, ChannelFormName(t.form)));
+      }
+      break;
   }
   if (t.kind == BasisKind::kRampHarmonic) RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
   return absl::OkStatus();
@@ -171,6 +224,8 @@ double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
       const double since_s = absl::ToDoubleSeconds(in.time - t.epoch);
       return since_s < 0.0 ? 0.0 : std::exp(-since_s / t.time_constant);
     }
+    case BasisKind::kChannel:
+      return in.channels != nullptr ? in.channels->Scalar(t, in.time) : 0.0;
   }
   return 0.0;
 }
@@ -216,6 +271,12 @@ std::string BasisTermLabel(const BasisTerm& t) {
     case BasisKind::kExponentialDecay:
       s = absl::StrFormat("exp(-t/%.3gh)", t.time_constant / kSecondsPerHour);
       break;
+    case BasisKind::kChannel:
+      s = t.form == ChannelForm::kValue
+              ? t.channel
+              : absl::StrFormat("%slag(%s, %.3gh)", t.form == ChannelForm::kDerivative ? "d/dt " : "",
+                                t.channel, t.time_constant / kSecondsPerHour);
+      break;
   }
   return absl::StrCat(s, " -> ", std::string(1, AxisLetter(t.axis)));
 }
@@ -231,6 +292,8 @@ std::string_view BasisScalarJsonUnit(BasisKind kind) {
       return "h";
     case BasisKind::kSuspensionVoltage:
       return "V";
+    case BasisKind::kChannel:
+      return "channel unit";
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
     case BasisKind::kExponentialDecay:
@@ -255,6 +318,7 @@ double BasisValueToJson(BasisKind kind) {
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
     case BasisKind::kExponentialDecay:
+    case BasisKind::kChannel:  // s in the channel's unit (per hour for the derivative) already
       return drift;
   }
   return drift;
@@ -273,6 +337,7 @@ double BasisReferenceSize(BasisKind kind) {
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
     case BasisKind::kExponentialDecay:
+    case BasisKind::kChannel:  // 1 unit of the channel (1 K)
       return 1.0;
   }
   return 1.0;

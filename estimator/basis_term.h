@@ -24,6 +24,10 @@
 //                           0 before it (a transient switched on at the epoch
 //                           that decays with time constant tau: a warm-up, epoch
 //                           at the recording's start; docs/formats.md "BasisTerm")
+//   channel                 a declared housekeeping channel x (channels.h):  u, the channel's
+//                           value x - reference, its first-order lag            unit (u/h for
+//                           y - reference (time constant tau) or the lag's      the derivative)
+//                           derivative dy/dt (channel_signal.h)
 //
 // A configuration holds terms per gyro (GyroConfig::basis_terms); a term with sigma > 0 is a
 // filter state (calibrated), otherwise held at its value.
@@ -51,7 +55,17 @@ enum class BasisKind {
   kRampHarmonic,
   kSuspensionVoltage,
   kExponentialDecay,
+  kChannel,
 };
+
+// How a term of kind kChannel reads its channel (channel_signal.h): its held value, its
+// first-order lag of time constant tau, or that lag's time derivative.
+enum class ChannelForm { kValue, kLag, kDerivative };
+// "value", "lag", "derivative" (the JSON's `channelForm`).
+std::string_view ChannelFormName(ChannelForm form);
+absl::StatusOr<ChannelForm> ParseChannelForm(std::string_view name);
+
+class ChannelSignals;  // channel_signal.h
 
 // "spin_axis_harmonic", ... (the names of the table above; the JSON's `kind`).
 std::string_view BasisKindName(BasisKind kind);
@@ -78,7 +92,12 @@ struct BasisTerm {
   int harmonic = 1;    // kOrbitalHarmonic: n, 1..kMaxOrbitalHarmonic
   bool sine = false;   // kOrbitalHarmonic: sin (true) or cos (false)
   double period = 0;   // kOrbitalHarmonic: [s], > 0
-  double time_constant = 0;  // kExponentialDecay: tau [s], > 0
+  double time_constant = 0;  // kExponentialDecay; kChannel lag and derivative: tau [s], > 0
+  // kChannel: the declared channel's name, how the term reads it, and the channel's value at
+  // which the value and lag forms give s = 0 [the channel's unit].
+  std::string channel;
+  ChannelForm form = ChannelForm::kValue;
+  double reference = 0.0;
   // kOrbitalHarmonic: phase zero; kRamp*: s = 0; kExponentialDecay: s = 1, 0 before it;
   // kSpinAxisHarmonic: switched on (0 before it).
   absl::Time epoch = absl::UnixEpoch();
@@ -92,13 +111,20 @@ struct BasisInputs {
   Eigen::Vector3d h_k = Eigen::Vector3d::UnitZ();  // spin axis, case axes [1]
   Eigen::Vector3d w_k = Eigen::Vector3d::Zero();   // body rate in case axes [rad/s]
   std::optional<Eigen::Vector3d> u_k_v;            // suspension offset voltages [V]
+  // The held channels and their lags (kChannel); null: a channel term gives 0.
+  const ChannelSignals* channels = nullptr;
 };
 
 // InvalidArgument naming the field (prefix, e.g. "gyros[1].basisTerms[0]") when the term's
 // indices, degree, harmonic, period or numbers are out of range or not finite.
 absl::Status ValidateBasisTerm(const BasisTerm& term, std::string_view prefix);
 
-// s of the table above. A voltage term without voltages gives 0.
+// kChannel: `term.channel` must be one of `declared` (the configuration's channels), with the
+// field named: "<prefix>.channel: \"T_x\" is not declared in channels (declared: ...)".
+absl::Status CheckBasisChannel(const BasisTerm& term, const std::vector<std::string>& declared,
+                               std::string_view prefix);
+
+// s of the table above. A voltage term without voltages, a channel term without channels, gives 0.
 double BasisScalar(const BasisTerm& term, const BasisInputs& in);
 
 // d(dw_k)/d(value) = s e_m, 3 x 1 [rad/s per unit of value]; and the term's drift value * s e_m.

@@ -195,6 +195,11 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
   session.widening_ = NoiseWidening(config.filter.measurement_step, options.widening);
   session.change_detector_ = GyroChangeDetector(options.drift_change);
   session.mount_monitor_ = StarTrackerMountMonitor(options.star_tracker_mount);
+  std::vector<BasisTerm> terms;
+  for (const GyroConfig& g : config.gyros) {
+    terms.insert(terms.end(), g.basis_terms.begin(), g.basis_terms.end());
+  }
+  session.channel_signals_ = ChannelSignals(config.channels, terms);
   return session;
 }
 
@@ -333,6 +338,7 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
     if (absl::Status s = Initialize(frame); !s.ok()) return s;
     star_tracker_accepted_ = false;  // anchored on this one sample so far (docs/decisions.md D19)
     last_time_ = frame.time;
+    channel_signals_.Advance(frame);
     report.state = state_;
     report.attitude = OutputAttitude(frame.time);
     return report;
@@ -342,6 +348,7 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
   next.ApplyCoefficientReleases(frame.time);
   if (absl::Status s = next.Propagate(frame); !s.ok()) return s;
   next.last_time_ = frame.time;
+  next.channel_signals_.Advance(frame);
   const double since_update = Seconds(frame.time - next.last_update_time_);
   if (since_update >= config_.filter.measurement_step - 1e-3) {
     if (absl::Status s = next.MeasurementUpdate(frame, report); !s.ok()) return s;

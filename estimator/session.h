@@ -63,6 +63,7 @@
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
 #include "estimator/calibration_model.h"
+#include "estimator/channel_signal.h"
 #include "estimator/consistency_monitor.h"
 #include "estimator/mismatch_location.h"
 #include "estimator/drift_model.h"
@@ -623,6 +624,10 @@ class EstimationSession {
   // over the corrections), st_mount_noise_var_b_ the part of it counted as star-tracker noise
   // (when some gyro's misalignment is not a state). In the checkpoint from version 5.
   StarTrackerMountMonitor mount_monitor_;
+  // The held channels and lags the basis terms of kind channel read (channel_signal.h), advanced
+  // at every frame after its interval is integrated; empty without such terms. In the checkpoint
+  // from version 9.
+  ChannelSignals channel_signals_;
   Eigen::Vector3d st_mount_b_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d st_mount_var_b_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d st_mount_noise_var_b_ = Eigen::Vector3d::Zero();

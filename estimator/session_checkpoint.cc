@@ -196,11 +196,15 @@ class CheckpointReader {
 //   was added to (or removed from) the model no longer restores (DataLoss naming the counts; the
 //   server rebuilds the session from its archive) instead of reading the next field as a
 //   coefficient. Versions 1-7 hold 13.
+// Version 9 (written when the configuration has a basis term of kind channel; otherwise version 8
+//   is written, unchanged): version 8's values, then c (a count) and the held channels' and
+//   lags' state (c values, ChannelSignals::ExportState). A session restored from version 8 with
+//   channel terms starts them without held values (s = 0 until a frame carries the channel).
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = 8;
+  c.version = channel_signals_.empty() ? 8 : 9;
   CheckpointWriter w(c.values);
   w.Put(initialized_ ? 1 : 0);
   w.Put(use_star_tracker_ ? 1 : 0);
@@ -294,6 +298,7 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
       for (int c2 = 0; c2 < g.motion_in.cols(); ++c2) w.Put(g.motion_in(r, c2));
     }
   }
+  if (c.version >= 9) w.Block(channel_signals_.ExportState());
   return c;
 }
 
@@ -428,6 +433,12 @@ struct EstimationSession::CheckpointRestore {
     s.st_realignments_ = r.Int();
     if (s.st_realignments_ < 0) r.MarkBad(s.st_realignments_, "a count is negative");
     return r.Block(s.mount_monitor_, "star-tracker mount", "checkpoint: ");
+  }
+
+  // Version 9: the held channels and lags of the channel terms; refuses a count other than the
+  // configuration's terms need.
+  static absl::Status ReadChannelSignals(CheckpointReader& r, EstimationSession& s) {
+    return r.Block(s.channel_signals_, "channel signals", "checkpoint: ");
   }
 
   // Version 6: per gyro its basis terms' values and held suspension voltages. Refuses a count of
@@ -625,7 +636,7 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SessionCheckpoint& checkpoint) {
   using Steps = CheckpointRestore;
   const int version = checkpoint.version;
-  if (version < 1 || version > 8) {
+  if (version < 1 || version > 9) {
     return absl::DataLossError(absl::StrCat("checkpoint version ", version, " is unknown"));
   }
   auto created = Create(config, options);
@@ -656,6 +667,9 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     if (absl::Status st = Steps::ReadReadingFaults(r, s); !st.ok()) return st;
   } else {
     Steps::ExclusionsBeforeVersion7(s);
+  }
+  if (version >= 9) {
+    if (absl::Status st = Steps::ReadChannelSignals(r, s); !st.ok()) return st;
   }
   if (!r.AtEnd()) return absl::DataLossError("checkpoint: truncated or oversized");
 

@@ -235,13 +235,15 @@ struct EstimationSession::PropagationSteps {
   // substeps, taken at their midpoints (second order in dt for the slowly varying drift): the
   // readings interpolated between the ends, the attitude pair (ia, ib) carrying case-frame drift
   // to inertial axes, eq. (1)/(10) with theta, the residual drift of eq. (11) when `rw`, and the
-  // basis terms at their current values (BasisDrift). Returns per gyro the sums the transition
+  // basis terms at their current values (BasisDrift; a channel term reads `channels`, held since
+  // the previous frame). Returns per gyro the sums the transition
   // needs: M[i] = sum of C_in_k B dt and M_basis[i], the free basis terms' columns carried to
   // inertial axes likewise, sum of C_in_k s e_m dt.
   static void IntegrateSpinAxes(std::vector<GyroState>& gyros, const StateLayout& layout,
                                 const ReadingEnds& ends, int ia, int ib, absl::Time begin,
                                 double span, int substeps, bool rw, const Vector3d& interval_rate_b,
-                                std::vector<DriftColumns>& M, std::vector<MatrixXd>& M_basis) {
+                                const ChannelSignals& channels, std::vector<DriftColumns>& M,
+                                std::vector<MatrixXd>& M_basis) {
     const double dt = span / substeps;
     std::vector<Matrix3d> C_b_k(gyros.size());
     M.assign(gyros.size(), DriftColumns::Zero());
@@ -273,6 +275,7 @@ struct EstimationSession::PropagationSteps {
           in.h_k = h_k[i];
           in.w_k = C_b_k[i].transpose() * interval_rate_b;
           in.u_k_v = g.u_k_v;
+          in.channels = &channels;
           BasisDrift(g.basis, layout, static_cast<int>(i), in, C_in_k, dt, dw_in, M_basis[i]);
         }
         g.h_in = StepSpinAxis(g.h_in, dw_in, dt);
@@ -374,7 +377,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   std::vector<DriftColumns> M;
   std::vector<MatrixXd> M_basis;
   Steps::IntegrateSpinAxes(gyros_, layout_, ends, ia, ib, last_time_, span, *substeps, rw,
-                           interval_rate_b, M, M_basis);
+                           interval_rate_b, channel_signals_, M, M_basis);
   const std::vector<MatrixXd> E = Steps::Transition(gyros_, layout_, rw, span, ends, M, M_basis);
   TransitionCovariance(P_, layout_, E);
   if (rw) {
@@ -427,6 +430,7 @@ absl::StatusOr<std::vector<PredictedSample>> EstimationSession::Predict(
     // propagated covariance.
     if (absl::Status st = s.Propagate(frame); !st.ok()) return st;
     s.last_time_ = t;
+    s.channel_signals_.Advance(frame);
     for (GyroState& g : s.gyros_) {
       g.h_k_last = (g.C_b_k().transpose() * C_b_in * g.h_in).normalized();
     }

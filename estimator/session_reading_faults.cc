@@ -136,6 +136,7 @@ Eigen::Matrix2d EstimationSession::ModelRateCovariance(int i) const {
       in.h_k = g.h_k_last;
       in.w_k = g.C_b_k().transpose() * body_rate_b_;
       in.u_k_v = g.u_k_v;
+      in.channels = &channel_signals_;
       const Matrix3d C_in_k_perp =
           C_in_k * (Matrix3d::Identity() - g.h_k_last * g.h_k_last.transpose());
       const std::vector<int>& free_basis = layout_.FreeBasisTerms(i);

@@ -8,6 +8,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "estimator/channels.h"
 #include "estimator/eclipse.h"
 #include "estimator/orbit.h"
 #include "estimator/random.h"
@@ -34,6 +35,8 @@ constexpr uint64_t kVoltageOffset = 1;
 constexpr uint64_t kRandomWalkOffset = 2;
 constexpr uint64_t kSwitchingOffset = 3;
 constexpr uint64_t kHiddenDriverOffset = 4;
+constexpr uint64_t kChannelDriverOffset = 5;
+constexpr uint64_t kChannelNoiseOffset = 6;
 
 // Largest |D_ij| of a readout distortion (keeps I + D far from singular).
 constexpr double kMaxReadoutDistortion = 0.1;
@@ -139,6 +142,11 @@ struct GyroState {
   double sun_face_sign = 1.0;
   double sun_tau = 1.0;  // [s]
   double sun_y = 0.0;    // lagged illumination y at the current propagation time [1]
+  // The channel drift (ChannelDrift): x the driver at the current propagation time [1], y the
+  // lagged temperature there [the channel's unit].
+  std::optional<ChannelDrift> channel;
+  double channel_x = 0.0;
+  double channel_y = 0.0;
   bool has_extra_drift = false;  // any of orbital, switching, hidden, rate, transient, sun
   std::optional<CoefficientStep> coefficient_step;
 
@@ -147,6 +155,8 @@ struct GyroState {
   Rng rw_rng;
   Rng switching_rng;
   Rng hidden_rng;
+  Rng channel_rng;
+  Rng channel_noise_rng;
 
   GyroState(int gyro_id, uint64_t seed)
       : id(gyro_id),
@@ -154,7 +164,12 @@ struct GyroState {
         voltage_rng(DeriveSeed(seed, GyroStream(gyro_id, kVoltageOffset))),
         rw_rng(DeriveSeed(seed, GyroStream(gyro_id, kRandomWalkOffset))),
         switching_rng(DeriveSeed(seed, GyroStream(gyro_id, kSwitchingOffset))),
-        hidden_rng(DeriveSeed(seed, GyroStream(gyro_id, kHiddenDriverOffset))) {}
+        hidden_rng(DeriveSeed(seed, GyroStream(gyro_id, kHiddenDriverOffset))),
+        channel_rng(DeriveSeed(seed, GyroStream(gyro_id, kChannelDriverOffset))),
+        channel_noise_rng(DeriveSeed(seed, GyroStream(gyro_id, kChannelNoiseOffset))) {}
+
+  // The channel's true temperature T = mean + spread x [the channel's unit].
+  double ChannelValue() const { return channel->mean + channel->spread * channel_x; }
 
   // Delta(t) [m], case axes.
   Vector3d Displacement_k(double t) const { return displacement0_k + displacement_rate_k * t; }
@@ -401,6 +416,30 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
     }
     if (!c.delta.AsVector().allFinite()) {
       return absl::InvalidArgumentError(absl::StrCat(f, ".coefficient_step.delta: must be finite"));
+    }
+  }
+  if (g.channel_drift) {
+    const ChannelDrift& c = *g.channel_drift;
+    const std::string p = f + ".channel_drift";
+    RETURN_IF_ERROR(ValidateChannelName(c.channel, p + ".channel"));
+    RETURN_IF_ERROR(FiniteVector(c.gain_k_rad_s_per_unit, p + ".gain_k_rad_s_per_unit"));
+    RETURN_IF_ERROR(Positive(c.spread, p + ".spread"));
+    RETURN_IF_ERROR(Positive(c.correlation_time_s, p + ".correlation_time_s"));
+    if (!std::isfinite(c.mean)) return absl::InvalidArgumentError(p + ".mean: must be finite");
+    if (!(c.noise >= 0.0) || !std::isfinite(c.noise)) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("%s.noise: must be finite and >= 0, got %g", p, c.noise));
+    }
+    if (!(c.lag_s >= 0.0) || !std::isfinite(c.lag_s)) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("%s.lag_s: must be finite and >= 0, got %g", p, c.lag_s));
+    }
+    const bool declared = std::any_of(spec.config.channels.begin(), spec.config.channels.end(),
+                                      [&](const ChannelConfig& d) { return d.name == c.channel; });
+    if (c.telemetered && !declared) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          p, ".channel: \"", c.channel,
+          "\" is not declared in the configuration's channels (a telemetered channel must be)"));
     }
   }
   if (g.sun_face_drift) {
@@ -690,6 +729,12 @@ absl::Status SetUpGyroEffects(const SimulationSpec& spec, const Matrix3d& C_in_b
     g.sun_y = g.SunIllumination(C_in_b0.transpose() * sun_nodes->At(0.0));
     effects.sun_face_drift = truth.sun_face_drift;
   }
+  if (truth.channel_drift) {
+    g.channel = truth.channel_drift;
+    g.channel_x = g.channel_rng.Normal();  // stationary start: x(0) ~ N(0, 1)
+    g.channel_y = g.ChannelValue();        // the lag in equilibrium at the start
+    effects.channel_drift = truth.channel_drift;
+  }
   g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden || g.has_rate ||
                       g.has_transient || g.has_sun;
   return absl::OkStatus();
@@ -758,6 +803,20 @@ class TruthIntegrator {
       dw_k += (u + (g.sun_y - u) * std::exp(-0.5 * h / g.sun_tau)) * g.sun_amplitude_k;
       g.sun_y = u + (g.sun_y - u) * std::exp(-h / g.sun_tau);
     }
+    if (g.channel) {
+      // T held over the step at its start; y at the midpoint for the drift, at the end for the
+      // next step (exact for T held); without a lag y is T.
+      const ChannelDrift& c = *g.channel;
+      const double T = g.ChannelValue();
+      const double y_mid =
+          c.lag_s > 0.0 ? T + (g.channel_y - T) * std::exp(-0.5 * h / c.lag_s) : T;
+      dw_k += (y_mid - c.mean) * c.gain_k_rad_s_per_unit;
+      g.channel_y = c.lag_s > 0.0 ? T + (g.channel_y - T) * std::exp(-h / c.lag_s) : T;
+      const double a = std::exp(-h / c.correlation_time_s);
+      g.channel_x = a * g.channel_x + std::sqrt(-std::expm1(-2.0 * h / c.correlation_time_s)) *
+                                          g.channel_rng.Normal();
+      if (c.lag_s == 0.0) g.channel_y = g.ChannelValue();
+    }
     const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
     g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
     g.dw_in_prev = dw_in;
@@ -807,6 +866,12 @@ GyroTruthSample GyroTruthAt(const GyroState& g, double t_m, const Matrix3d& C_b_
     gt.dw_k += gt.dw_orbital_k_rad_s + gt.dw_switching_k_rad_s + gt.dw_hidden_k_rad_s +
                gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s + gt.dw_sun_k_rad_s;
   }
+  if (g.channel) {
+    gt.channel_value = g.ChannelValue();
+    gt.channel_lagged = g.channel_y;
+    gt.dw_channel_k_rad_s = (g.channel_y - g.channel->mean) * g.channel->gain_k_rad_s_per_unit;
+    gt.dw_k += gt.dw_channel_k_rad_s;
+  }
   return gt;
 }
 
@@ -849,6 +914,11 @@ void SampleGyros(std::vector<GyroState>& gyros, double t_m, const SimulationSpec
   for (GyroState& g : gyros) {
     const GyroTruthSample gt = GyroTruthAt(g, t_m, C_b_in, *spec.profile, sun_nodes);
     GyroReading reading = ReadGyro(g, gt, t_m, spec.config.suspension);
+    if (g.channel) {
+      // The channel's reading (one draw, always); carried whether the gyro's reading is.
+      const double noise = g.channel->noise * g.channel_noise_rng.Normal();
+      if (g.channel->telemetered) frame.channels.Set(g.channel->channel, gt.channel_value + noise);
+    }
     if (t_m < g.switch_on_time) continue;
     truth.gyros[g.id - 1] = gt;
     if (g.InFaultWindow(GyroFault::Kind::kReadingsMissing, t_m)) continue;

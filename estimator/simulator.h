@@ -64,6 +64,7 @@
 #include <functional>
 #include <limits>
 #include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -178,6 +179,28 @@ struct SunFaceDrift {
   double time_constant_s = 3600.0;  // [s], > 0
 };
 
+// A drift that follows a housekeeping temperature the frames carry (issue 38; docs/physics.md "A
+// drift that follows a housekeeping channel"): the temperature T(t) = mean + spread x(t), x a
+// stationary Ornstein-Uhlenbeck process of unit variance and correlation time correlation_time_s
+// (stepped exactly as HiddenDriverDrift's, its own random stream), drives the drift
+//
+//     dw_k = gain_k (y(t) - mean),   y = T (lag_s = 0) or tau dy/dt = T - y (lag_s = tau > 0),
+//
+// y(0) = T(0), stepped exactly for T held over an integration step. Each frame carries T with
+// white noise of 1-sigma `noise` as channel `channel` (SimulationSpec::config must declare it)
+// unless `telemetered` is false: the same drift with its cause absent from the recording (noise
+// drawn all the same).
+struct ChannelDrift {
+  std::string channel = "T_gyro";
+  double mean = 293.15;                // [the channel's unit, K]
+  double spread = 2.0;                 // 1-sigma of T about the mean, > 0
+  double correlation_time_s = 3.0 * 3600.0;  // [s], > 0
+  double noise = 0.02;                 // per frame, 1-sigma, >= 0
+  Eigen::Vector3d gain_k_rad_s_per_unit = Eigen::Vector3d::Zero();  // case axes [rad/s per K]
+  double lag_s = 0.0;                  // [s], >= 0; 0: the drift follows T itself
+  bool telemetered = true;
+};
+
 struct GyroTruth {
   // Whether the gyro runs. Default (nullopt): it runs when it is configured and belongs to the
   // working or the reserve pair; so with the usual pairs {1,2}, {1,3} gyros 1-3 run and gyro 4,
@@ -226,6 +249,7 @@ struct GyroTruth {
   std::optional<CoefficientStep> coefficient_step;
   std::optional<TransientDrift> transient_drift;
   std::optional<SunFaceDrift> sun_face_drift;
+  std::optional<ChannelDrift> channel_drift;
 };
 
 // n consecutive star-tracker outliers (see the file comment for their axis).
@@ -295,6 +319,11 @@ struct GyroTruthSample {
   double sun_illumination = 0.0;
   double sun_lagged_illumination = 0.0;
   Eigen::Vector3d dw_sun_k_rad_s = Eigen::Vector3d::Zero();  // y * amplitude [rad/s]
+  // The channel drift: the true temperature T(t), its lag y(t) [the channel's unit] (0 without
+  // it) and gain (y - mean) [rad/s].
+  double channel_value = 0.0;
+  double channel_lagged = 0.0;
+  Eigen::Vector3d dw_channel_k_rad_s = Eigen::Vector3d::Zero();
 };
 
 // One gyro's effects beyond the paper's models as simulated: the settings in effect (the orbital
@@ -311,6 +340,7 @@ struct GyroEffectsTruth {
   std::optional<RateDrift> rate_drift;
   std::optional<TransientDrift> transient_drift;
   std::optional<SunFaceDrift> sun_face_drift;
+  std::optional<ChannelDrift> channel_drift;
 };
 
 struct TruthSample {

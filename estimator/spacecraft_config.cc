@@ -244,6 +244,16 @@ absl::Status ValidateConfig(const SpacecraftConfig& config) {
   RETURN_IF_ERROR(
       CheckLimit(f.drift_change_limit, L.drift_change_limit, "filter.driftChangeLimitDegH"));
   RETURN_IF_ERROR(ValidateChannelConfigs(config.channels));
+  // A channel term reads a declared channel (basis_term.h kChannel).
+  std::vector<std::string> declared;
+  for (const ChannelConfig& c : config.channels) declared.push_back(c.name);
+  for (size_t i = 0; i < config.gyros.size(); ++i) {
+    const std::vector<BasisTerm>& terms = config.gyros[i].basis_terms;
+    for (size_t k = 0; k < terms.size(); ++k) {
+      RETURN_IF_ERROR(CheckBasisChannel(
+          terms[k], declared, absl::StrFormat("gyros[%d].basisTerms[%d]", i, k)));
+    }
+  }
   return absl::OkStatus();
 }
 

@@ -310,6 +310,15 @@ absl::StatusOr<estimator::BasisTerm> BasisTermFromProto(const esg::v1::BasisTerm
   t.sine = proto.sine();
   t.period = proto.period_s();
   t.time_constant = proto.time_constant_s();
+  t.channel = proto.channel();
+  if (!proto.channel_form().empty()) {
+    absl::StatusOr<estimator::ChannelForm> form = estimator::ParseChannelForm(proto.channel_form());
+    if (!form.ok()) {
+      return FieldError(absl::StrCat(prefix, ".channelForm"), form.status().message());
+    }
+    t.form = *form;
+  }
+  t.reference = proto.reference_value();
   if (proto.has_epoch()) {
     absl::StatusOr<absl::Time> epoch = TimeFromProto(proto.epoch());
     if (!epoch.ok()) return FieldError(absl::StrCat(prefix, ".epoch"), epoch.status().message());
@@ -335,6 +344,12 @@ esg::v1::BasisTerm BasisTermToProto(const estimator::BasisTerm& t) {
   proto.set_sine(t.sine);
   proto.set_period_s(t.period);
   if (t.kind == estimator::BasisKind::kExponentialDecay) proto.set_time_constant_s(t.time_constant);
+  if (t.kind == estimator::BasisKind::kChannel) {
+    proto.set_channel(t.channel);
+    proto.set_channel_form(std::string(estimator::ChannelFormName(t.form)));
+    proto.set_reference_value(t.reference);
+    if (t.form != estimator::ChannelForm::kValue) proto.set_time_constant_s(t.time_constant);
+  }
   *proto.mutable_epoch() = TimeToProto(t.epoch);
   const double to_json = estimator::BasisValueToJson(t.kind);
   proto.set_value_deg_h(Tidy(t.value * to_json));

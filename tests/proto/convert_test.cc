@@ -1012,6 +1012,103 @@ TEST(ConfigJson, AConfigurationWithoutChannelsPrintsAsBefore) {
   EXPECT_THAT(json, HasSubstr("\"driftChangeLimitDegH\": 1\n  }\n}"));
 }
 
+// A basis term of kind channel (docs/formats.md "BasisTerm"): it names a declared channel, its
+// form and the reference value, and the lag's time constant; written back to the same JSON, and
+// only a channel term carries the channel's fields.
+std::string WithChannelTerm(absl::string_view term) {
+  return DesignJsonWith(
+      "\"model\":      {\"k0DegH\": 0.25},",
+      absl::StrCat("\"model\": {\"k0DegH\": 0.25}, \"basisTerms\": [", term, "],"));
+}
+constexpr char kTGyro2[] =
+    "\"randomWalkDegHSqrtH\": 0.002, \"channels\": [{\"name\": \"T_gyro2\", \"unit\": \"K\", "
+    "\"validMin\": 250, \"validMax\": 350, \"maxAgeS\": 600}]";
+
+TEST(ConfigJson, ChannelTermRoundTripsWithItsChannelFormReferenceAndLag) {
+  const std::string json = absl::StrReplaceAll(
+      WithChannelTerm(R"({"kind": "channel", "axis": 2, "channel": "T_gyro2", "channelForm": "lag",)"
+                      R"( "timeConstantS": 2400, "referenceValue": 293.15, "valueDegH": 0.004,)"
+                      R"( "sigmaDegH": 0.01})"),
+      {{"\"randomWalkDegHSqrtH\": 0.002", kTGyro2}});
+  absl::StatusOr<estimator::SpacecraftConfig> c = ParseConfigJson(json);
+  ASSERT_THAT(c, IsOk());
+  ASSERT_EQ(c->gyros[2].basis_terms.size(), 1u);
+  const estimator::BasisTerm& t = c->gyros[2].basis_terms[0];
+  EXPECT_EQ(t.kind, estimator::BasisKind::kChannel);
+  EXPECT_EQ(t.channel, "T_gyro2");
+  EXPECT_EQ(t.form, estimator::ChannelForm::kLag);
+  EXPECT_EQ(t.time_constant, 2400.0);
+  EXPECT_EQ(t.reference, 293.15);
+  // deg/h per K: the JSON's unit of s is the channel's.
+  EXPECT_NEAR(t.value, DegHToRadS(0.004), 1e-22);
+  EXPECT_NEAR(t.sigma, DegHToRadS(0.01), 1e-22);
+  const std::string written = ConfigToJson(*c);
+  EXPECT_THAT(written, HasSubstr("\"channel\": \"T_gyro2\""));
+  EXPECT_THAT(written, HasSubstr("\"channelForm\": \"lag\""));
+  EXPECT_THAT(written, HasSubstr("\"referenceValue\": 293.15"));
+  EXPECT_THAT(written, HasSubstr("\"timeConstantS\": 2400"));
+  absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
+  ASSERT_THAT(back, IsOk()) << written;
+  ExpectConfigsEqual(*c, *back);
+  EXPECT_EQ(back->gyros[2].basis_terms[0].channel, "T_gyro2");
+  EXPECT_EQ(back->gyros[2].basis_terms[0].form, estimator::ChannelForm::kLag);
+  EXPECT_EQ(back->gyros[2].basis_terms[0].reference, 293.15);
+  EXPECT_EQ(ConfigToJson(*back), written);
+  // Through the proto message as the service stores it.
+  const esg::v1::BasisTerm proto = BasisTermToProto(t);
+  EXPECT_EQ(proto.channel(), "T_gyro2");
+  EXPECT_EQ(proto.channel_form(), "lag");
+  absl::StatusOr<estimator::BasisTerm> from = BasisTermFromProto(proto, "t");
+  ASSERT_THAT(from, IsOk());
+  EXPECT_EQ(from->channel, "T_gyro2");
+  EXPECT_EQ(from->time_constant, 2400.0);
+  EXPECT_EQ(from->reference, 293.15);
+  // A value-form term carries no time constant; other kinds carry no channel fields.
+  absl::StatusOr<estimator::SpacecraftConfig> value = ParseConfigJson(absl::StrReplaceAll(
+      WithChannelTerm(R"({"kind": "channel", "axis": 1, "channel": "T_gyro2", "valueDegH": 0.004},)"
+                      R"({"kind": "ramp", "axis": 1})"),
+      {{"\"randomWalkDegHSqrtH\": 0.002", kTGyro2}}));
+  ASSERT_THAT(value, IsOk());
+  EXPECT_EQ(value->gyros[2].basis_terms[0].form, estimator::ChannelForm::kValue);
+  const std::string value_json = ConfigToJson(*value);
+  EXPECT_THAT(value_json, Not(HasSubstr("timeConstantS")));
+  EXPECT_THAT(value_json, HasSubstr("\"channelForm\": \"value\""));
+  EXPECT_EQ(BasisTermToJson(value->gyros[2].basis_terms[1]).find("channel"), std::string::npos);
+}
+
+TEST(ConfigJson, BadChannelTermsNameTheField) {
+  auto parse = [](absl::string_view term, bool declared) {
+    std::string json = WithChannelTerm(term);
+    if (declared) json = absl::StrReplaceAll(json, {{"\"randomWalkDegHSqrtH\": 0.002", kTGyro2}});
+    return ParseConfigJson(json);
+  };
+  EXPECT_THAT(parse(R"({"kind": "channel", "axis": 1, "channel": "T_gyro3"})", true),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2].basisTerms[0].channel: \"T_gyro3\" is not declared in "
+                                 "channels (declared: T_gyro2)")));
+  EXPECT_THAT(parse(R"({"kind": "channel", "axis": 1, "channel": "T_gyro2"})", false),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2].basisTerms[0].channel: \"T_gyro2\" is not declared in "
+                                 "channels (declared: none)")));
+  EXPECT_THAT(parse(R"({"kind": "channel", "axis": 1})", true),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2].basisTerms[0].channel: empty name")));
+  EXPECT_THAT(parse(R"({"kind": "channel", "axis": 1, "channel": "T_gyro2", "channelForm": "lag"})",
+                    true),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2].basisTerms[0].timeConstantS: 0 s is outside [60, ")));
+  EXPECT_THAT(parse(R"({"kind": "channel", "axis": 1, "channel": "T_gyro2",)"
+                    R"( "channelForm": "derivative", "timeConstantS": 1e9})",
+                    true),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2].basisTerms[0].timeConstantS: 1e+09 s is outside")));
+  EXPECT_THAT(parse(R"({"kind": "channel", "axis": 1, "channel": "T_gyro2", "channelForm": "lagged"})",
+                    true),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("gyros[2].basisTerms[0].channelForm: unknown channel form "
+                                 "\"lagged\"")));
+}
+
 TEST(ConfigJson, BadChannelDeclarationsNameTheField) {
   auto with = [](absl::string_view channel) {
     return ParseConfigJson(DesignJsonWith(
