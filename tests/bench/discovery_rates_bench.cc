@@ -8,7 +8,11 @@
 // A false alarm is any finding (verdict other than `none`). Prints every recording's verdict to
 // stderr, and the count, the rate and its exact (Clopper-Pearson) one-sided 95% upper bound.
 // ESG_FALSE_ALARM_EFFECT names another scenario to read its diagnoses the same way.
-// Run: scripts/false_alarm_rate.sh.
+// ESG_FALSE_ALARM_ORBIT=1 gives each diagnosis the spacecraft's orbit, as `esg diagnose --orbit`
+// does (a circular orbit of the scenario's orbital elements, orbit.h CircularOrbitState, states
+// every 60 s over the recording): the sun's regressors then see the Earth's shadow and the
+// `sunlit` family is tried.
+// Run: scripts/false_alarm_rate.sh (ORBIT=1 for the orbit).
 //
 // BM_DiscoveryPower: per effect of the scenarios, ESG_POWER_SEEDS (default 5) recordings at each
 // size factor of ESG_POWER_SCALES (default 0.125,0.25,0.5,1; 1 = the confusion matrix's size),
@@ -26,6 +30,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <sstream>
 #include <string>
@@ -33,7 +38,9 @@
 #include <vector>
 
 #include "benchmark/benchmark.h"
+#include "estimator/attitude_profile.h"
 #include "estimator/discovery/diagnose.h"
+#include "estimator/orbit.h"
 #include "estimator/simulator.h"
 #include "tests/testing/discovery_scenarios.h"
 
@@ -88,6 +95,22 @@ absl::StatusOr<DiagnosisReport> DiagnoseScenario(const std::string& effect, uint
   if (!sim.ok()) return sim.status();
   DiagnoseOptions options;
   options.threads = 1;
+  if (EnvInt("ESG_FALSE_ALARM_ORBIT", 0) != 0) {
+    // The orbit of the scenario's orbital segments (tests/testing/discovery_scenarios.h
+    // MostlyOrbitalProfile: the default elements, argument of latitude 0.37 seed at the start).
+    OrbitalOptions o;
+    o.arg_latitude0 = 0.37 * static_cast<double>(seed);
+    OrbitArc arc;
+    for (double t = -60.0; t <= spec.duration + 60.0 + 1e-9; t += 60.0) {
+      arc.states.push_back(
+          CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0, spec.start, t));
+    }
+    arc.from = arc.states.front().time;
+    arc.to = arc.states.back().time;
+    absl::StatusOr<Orbit> orbit = Orbit::FromArcs({std::move(arc)});
+    if (!orbit.ok()) return orbit.status();
+    options.orbit = std::make_shared<const Orbit>(*std::move(orbit));
+  }
   if (const char* rate = std::getenv("ESG_DISCOVERY_INTEGRATION_RATE")) {
     options.integration_rate_hz = std::atof(rate);
   }
