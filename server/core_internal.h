@@ -64,9 +64,11 @@ void DescribeApplication(const estimator::SpacecraftConfig& config,
 std::string EncodeWindowCheckpoint(const ServerCheckpoint& apply,
                                    const estimator::EstimationSession& session);
 
+// One per configured spacecraft (shared by its ingest and state sides). The wire form of the
+// configuration is not kept: GetSession converts `config` when asked (ConfigToProto), which
+// saves its copy in every session (docs/performance.md "Sessions per node").
 struct EstimationCore::Setup {
   estimator::SpacecraftConfig config;
-  esg::v1::SpacecraftConfig proto;
   estimator::ModelSpec model;
   std::string model_name;
   std::string config_json;

@@ -55,7 +55,8 @@ SessionSummary EstimationCore::Summarize(Spacecraft& sc) {
     summary.star_tracker_rejections = sc.apply.star_tracker_rejections;
     if (sc.setup != nullptr) {
       summary.configured = SessionSummary::Configured{
-          sc.setup->model_name, sc.setup->proto, sc.setup->config.reserve_pair};
+          sc.setup->model_name, proto_convert::ConfigToProto(sc.setup->config),
+          sc.setup->config.reserve_pair};
     }
     summary.last_compute_time = sc.last_compute_time;
     summary.session = sc.session;

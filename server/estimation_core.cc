@@ -149,7 +149,6 @@ void EstimationCore::SetupFromStoredConfig(const storage::ConfigRecord& record, 
   }
   r.setup = std::make_shared<Setup>();
   r.setup->config = *config;
-  r.setup->proto = proto_convert::ConfigToProto(*config);
   r.setup->config_json = record.config_json;
   for (const auto& g : config->gyros) {
     if (g.id >= 1 && g.id <= estimator::kMaxGyros) r.setup->configured[g.id - 1] = true;
@@ -503,7 +502,6 @@ absl::StatusOr<EstimationCore::Configuration> EstimationCore::PrepareConfigurati
   c.fresh = std::move(fresh);
   auto setup = std::make_shared<Setup>();
   setup->config = config;
-  setup->proto = proto_convert::ConfigToProto(config);
   setup->model = model;
   setup->model_name = model.Name();
   setup->config_json = proto_convert::ConfigToJson(config);
