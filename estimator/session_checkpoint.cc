@@ -49,6 +49,12 @@ class CheckpointWriter {
     v_.push_back(static_cast<double>(state.size()));
     v_.insert(v_.end(), state.begin(), state.end());
   }
+  // The block's values, then their count: the checkpoint's last field, so that cutting it off
+  // (its count is the last value) leaves the previous version's values.
+  void TrailingBlock(const std::vector<double>& state) {
+    v_.insert(v_.end(), state.begin(), state.end());
+    v_.push_back(static_cast<double>(state.size()));
+  }
 
  private:
   std::vector<double>& v_;
@@ -130,6 +136,26 @@ class CheckpointReader {
     return absl::OkStatus();
   }
 
+  // A block written by CheckpointWriter::TrailingBlock, the checkpoint's last field: its count is
+  // the last value. Refused (DataLoss) when that count is not an integer that fits before it and
+  // after what was read ("checkpoint: truncated (`what`)") or the monitor refuses the values.
+  template <typename Monitor>
+  absl::Status TrailingBlock(Monitor& monitor, const char* what, const char* prefix) {
+    const double count = v_.empty() ? -1.0 : v_.back();
+    if (short_read_ || v_.size() <= pos_ || !(count >= 0.0) || count != std::floor(count) ||
+        count > static_cast<double>(v_.size() - pos_ - 1)) {
+      return absl::DataLossError(absl::StrCat("checkpoint: truncated (", what, ")"));
+    }
+    const size_t n = static_cast<size_t>(count);
+    if (absl::Status st = monitor.RestoreState(absl::MakeConstSpan(v_).subspan(pos_, n));
+        !st.ok()) {
+      return absl::DataLossError(absl::StrCat(prefix, st.message()));
+    }
+    pos_ += n;
+    Get();  // the count
+    return absl::OkStatus();
+  }
+
   bool short_read() const { return short_read_; }
   // Every value read, and no more.
   bool AtEnd() const { return !short_read_ && pos_ == v_.size(); }
@@ -200,11 +226,17 @@ class CheckpointReader {
 //   is written, unchanged): version 8's values, then c (a count) and the held channels' and
 //   lags' state (c values, ChannelSignals::ExportState). A session restored from version 8 with
 //   channel terms starts them without held values (s = 0 until a frame carries the channel).
+// Version 10 (written): version 9's values, the channels' block always (c = 0 without channel
+//   terms), then the turns' axes of the reading-fault monitor's points (x values,
+//   ReadingFaultMonitor::ExportTurnAxes) and x, last (CheckpointWriter::TrailingBlock: the values
+//   before it are version 9's). A session restored from an earlier version has points without
+//   the turn's axis: until they leave the monitor's window, a drift change's note compares the
+//   scalar turn rates (reading_fault_monitor.h DriftChange).
 //   A field added to the session later goes after these, with a new version.
 // The state layout itself is not stored: it follows from the configuration and the model.
 SessionCheckpoint EstimationSession::ExportCheckpoint() const {
   SessionCheckpoint c;
-  c.version = channel_signals_.empty() ? 8 : 9;
+  c.version = 10;
   CheckpointWriter w(c.values);
   w.Put(initialized_ ? 1 : 0);
   w.Put(use_star_tracker_ ? 1 : 0);
@@ -298,7 +330,8 @@ SessionCheckpoint EstimationSession::ExportCheckpoint() const {
       for (int c2 = 0; c2 < g.motion_in.cols(); ++c2) w.Put(g.motion_in(r, c2));
     }
   }
-  if (c.version >= 9) w.Block(channel_signals_.ExportState());
+  w.Block(channel_signals_.ExportState());         // version 9
+  w.TrailingBlock(reading_monitor_.ExportTurnAxes());  // version 10
   return c;
 }
 
@@ -439,6 +472,16 @@ struct EstimationSession::CheckpointRestore {
   // configuration's terms need.
   static absl::Status ReadChannelSignals(CheckpointReader& r, EstimationSession& s) {
     return r.Block(s.channel_signals_, "channel signals", "checkpoint: ");
+  }
+
+  // Version 10: the turns' axes of the reading-fault monitor's points (a trailing block),
+  // restored into the monitor read with version 7's fields.
+  static absl::Status ReadTurnAxes(CheckpointReader& r, EstimationSession& s) {
+    struct TurnAxes {
+      ReadingFaultMonitor& monitor;
+      absl::Status RestoreState(absl::Span<const double> v) { return monitor.RestoreTurnAxes(v); }
+    } axes{s.reading_monitor_};
+    return r.TrailingBlock(axes, "turn axes", "checkpoint: ");
   }
 
   // Version 6: per gyro its basis terms' values and held suspension voltages. Refuses a count of
@@ -636,7 +679,7 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
     const SessionCheckpoint& checkpoint) {
   using Steps = CheckpointRestore;
   const int version = checkpoint.version;
-  if (version < 1 || version > 9) {
+  if (version < 1 || version > 10) {
     return absl::DataLossError(absl::StrCat("checkpoint version ", version, " is unknown"));
   }
   auto created = Create(config, options);
@@ -670,6 +713,9 @@ absl::StatusOr<EstimationSession> EstimationSession::FromCheckpoint(
   }
   if (version >= 9) {
     if (absl::Status st = Steps::ReadChannelSignals(r, s); !st.ok()) return st;
+  }
+  if (version >= 10) {
+    if (absl::Status st = Steps::ReadTurnAxes(r, s); !st.ok()) return st;
   }
   if (!r.AtEnd()) return absl::DataLossError("checkpoint: truncated or oversized");
 

@@ -1,6 +1,6 @@
 // Fuzz target: checkpoint decoding and session restore, as the server does it at start-up for
 // each spacecraft (server/estimation_core.cc): DecodeCheckpoint (server formats 1 to 3), the
-// model it names, EstimationSession::FromCheckpoint (session versions 1 to 8) on the example
+// model it names, EstimationSession::FromCheckpoint (session versions 1 to 10) on the example
 // configuration deploy/examples/rdk1.json (propagated at 1 Hz), then the restored session at work.
 // Property: a blob is refused with DataLoss, or decodes to a checkpoint that encodes to a fixed
 // point; its session is refused with DataLoss "checkpoint...", or restores to a session that

@@ -2,7 +2,7 @@
 // simulated flight of deploy/examples/rdk1.json as a recording CSV, as a user's export read
 // through deploy/examples/columns_user_export.json, as telemetry frames in the protobuf wire
 // form, as an AEM, and the session's server checkpoints at several points of the flight (before
-// the first frame, before initialisation, converged) in every session version (1 to 7) and every
+// the first frame, before initialisation, converged) in every session version (1 to 10) and every
 // server format (3 as written, 2 and 1 as read). Some frames carry housekeeping channels, and a
 // configuration declares them. Usage: fuzz_make_seeds <out dir>. The
 // hand-written seeds live beside them.
@@ -297,7 +297,8 @@ int main(int argc, char** argv) {
     }
     const estimator::SessionCheckpoint full = session->ExportCheckpoint();
     const std::vector<double> version7_layout = esg::testing::AsVersion7(full).values;
-    for (int version = 1; version <= 8; ++version) {
+    const std::vector<double> version8_layout = esg::testing::AsVersion8(full).values;
+    for (int version = 1; version <= 10; ++version) {
       server::ServerCheckpoint c;
       c.model = "10+11";
       c.applied_time = applied > 0 ? frames[applied - 1].time : absl::InfinitePast();
@@ -309,6 +310,10 @@ int main(int argc, char** argv) {
       if (version <= 7) {
         c.session->values = version7_layout;
         c.session->values.resize(VersionLength(version7_layout, version));
+      } else if (version <= 9) {
+        // Version 9 without channel terms: version 8 and an empty channels' block.
+        c.session->values = version8_layout;
+        if (version == 9) c.session->values.push_back(0.0);
       }
       if (!estimator::EstimationSession::FromCheckpoint(*config, options, *c.session).ok()) {
         std::fprintf(stderr, "cut %zu version %d does not restore\n", cut, version);

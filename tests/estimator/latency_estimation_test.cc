@@ -139,7 +139,7 @@ TEST(LatencyEstimation, TheEstimatedLatencyResumesBitForBitFromACheckpoint) {
   const size_t cut = frames.size() / 2;
   for (size_t k = 0; k < cut; ++k) ASSERT_THAT(straight.AddFrame(frames[k]), IsOk());
   const SessionCheckpoint checkpoint = straight.ExportCheckpoint();
-  EXPECT_EQ(checkpoint.version, 8);
+  EXPECT_EQ(checkpoint.version, 10);
   auto restored = EstimationSession::FromCheckpoint(config, Model("10+11"), checkpoint);
   ASSERT_THAT(restored, IsOk());
   EXPECT_EQ(restored->StarTrackerLatency().latency_s, straight.StarTrackerLatency().latency_s);

@@ -211,7 +211,7 @@ TEST(SessionBasis, FreeChannelLagTermsCalibrateADriftFollowingATemperatureAndRes
     ASSERT_THAT(blind->AddFrame(without), IsOk());
   }
   const SessionCheckpoint checkpoint = first->ExportCheckpoint();
-  EXPECT_EQ(checkpoint.version, 9);
+  EXPECT_EQ(checkpoint.version, 10);
   auto resumed = EstimationSession::FromCheckpoint(config, options, checkpoint);
   ASSERT_THAT(resumed, IsOk());
   for (size_t i = half; i < frames.size(); ++i) ASSERT_THAT(resumed->AddFrame(frames[i]), IsOk());
