@@ -356,7 +356,10 @@ std::string OnsetScript(const Context& c, const disc::Finding& f, int gyro_index
   const std::string interval_title = "95% onset interval (within 3.84 of the best)";
   absl::StrAppend(&gp,
                   absl::StrFormat("set multiplot layout 3,1 title %s\n",
-                                  Quote(absl::StrFormat("Drift step in gyro %d: when it started %s",
+                                  Quote(absl::StrFormat("%s in gyro %d: when it started %s",
+                                                        t.kind == "step"          ? "Drift step"
+                                                        : t.kind == "transient" ? "Transient"
+                                                                                : "Coefficient step",
                                                         f.gyro, c.start))),
                   "");
   double top = 0.0;
@@ -575,7 +578,12 @@ absl::StatusOr<std::vector<DiagnosisPlot>> WriteDiagnosisPlots(const disc::Diagn
        "mismatch sits in."});
 
   for (const disc::Finding& f : r.findings) {
-    if (f.time.kind != "step" || f.time.onset_profile.empty()) continue;
+    // A drift step's onset, a coefficient step's or a transient's (the same search).
+    if ((f.time.kind != "step" && f.time.kind != "coefficient_step" &&
+         f.time.kind != "transient") ||
+        f.time.onset_profile.empty()) {
+      continue;
+    }
     const auto it = std::find(r.gyros.begin(), r.gyros.end(), f.gyro);
     if (it == r.gyros.end()) continue;
     std::string profile = "# onset hours, -2 log L above the best\n";
@@ -584,7 +592,7 @@ absl::StatusOr<std::vector<DiagnosisPlot>> WriteDiagnosisPlots(const disc::Diagn
     if (absl::Status s = WriteText(dir / "onset_profile.dat", profile); !s.ok()) return s;
     absl::StrAppend(&gp, OnsetScript(c, f, static_cast<int>(it - r.gyros.begin()), before, after));
     plots.push_back(
-        {"onset.png", "drift step onset",
+        {"onset.png", absl::StrCat(f.time.kind == "step" ? "drift step" : f.time.kind == "transient" ? "transient" : "coefficient step", " onset"),
          absl::StrFormat(
              "When gyro %d's drift stepped: -2 log L against the onset is zero at the best "
              "onset and the 95%% interval (shaded) is where it stays below 3.84; at the bottom "

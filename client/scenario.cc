@@ -253,6 +253,46 @@ absl::StatusOr<estimator::TransientDrift> ParseTransientDrift(const json& v,
   return d;
 }
 
+// {"startHours": t0, "k0DegH": dk0, "c1DegH": [..], ...}: a step of the drift coefficients of
+// eq. (1), (10) at t0 (required), by the keys of estimator/model_terms.h (at least one; the
+// others step by 0).
+absl::StatusOr<estimator::CoefficientStep> ParseCoefficientStep(const json& v,
+                                                                const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  std::set<std::string> keys = {"startHours"};
+  for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
+    keys.insert(std::string(key.json_key));
+  }
+  RETURN_IF_ERROR(CheckKeys(v, path, keys));
+  if (!v.contains("startHours")) return Invalid(Key(path, "startHours"), "required");
+  estimator::CoefficientStep step;
+  ASSIGN_OR_RETURN(double hours, Number(v["startHours"], Key(path, "startHours"), 0.0, kMaxHours));
+  step.time_s = estimator::HoursToSeconds(hours);
+  estimator::DriftVector delta = estimator::DriftVector::Zero();
+  bool any = false;
+  for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
+    const std::string k(key.json_key);
+    if (!v.contains(k)) continue;
+    any = true;
+    const std::string p = Key(path, k);
+    if (key.components == 0) {
+      ASSIGN_OR_RETURN(double deg_h, Number(v[k], p, -kMaxDriftDegH, kMaxDriftDegH));
+      delta(key.first_theta_index) = estimator::DegPerHourToRadPerSec(deg_h);
+    } else {
+      ASSIGN_OR_RETURN(std::vector<double> deg_h,
+                       Numbers(v[k], p, key.components, -kMaxDriftDegH, kMaxDriftDegH));
+      for (int i = 0; i < key.components; ++i) {
+        delta(key.first_theta_index + i) = estimator::DegPerHourToRadPerSec(deg_h[i]);
+      }
+    }
+  }
+  if (!any) {
+    return Invalid(path, "names no coefficient (k0DegH, c1DegH, c2DegH, muDegH or nuDegH)");
+  }
+  step.delta = estimator::DriftCoefficients::FromVector(delta);
+  return step;
+}
+
 // {"amplitudeDegH": [x, y, z], "face": "+x" | "-x" | "+y" | "-y" | "+z" | "-z",
 // "timeConstantHours": tau}, all required.
 absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const std::string& path) {
@@ -308,7 +348,7 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       "misalignmentArcsec", "randomWalkDegHSqrtH", "readoutNoiseArcsec", "voltageNoiseMv",
       "initialSpinAxis", "fault", "switchOnHours", "orbitalDrift", "rotorDisplacementRateUmH",
       "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift", "rateDrift",
-      "transientDrift", "sunFaceDrift"};
+      "transientDrift", "sunFaceDrift", "coefficientStep"};
   for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
     keys.insert(std::string(key.json_key));
   }
@@ -397,6 +437,8 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       ASSIGN_OR_RETURN(g.transient_drift, ParseTransientDrift(x, p));
     } else if (k == "sunFaceDrift") {
       ASSIGN_OR_RETURN(g.sun_face_drift, ParseSunFaceDrift(x, p));
+    } else if (k == "coefficientStep") {
+      ASSIGN_OR_RETURN(g.coefficient_step, ParseCoefficientStep(x, p));
     }
   }
   return g;
@@ -688,6 +730,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.rate_drift) g.rate_drift = s.rate_drift;
     if (s.transient_drift) g.transient_drift = s.transient_drift;
     if (s.sun_face_drift) g.sun_face_drift = s.sun_face_drift;
+    if (s.coefficient_step) g.coefficient_step = s.coefficient_step;
   }
   estimator::StarTrackerTruth& st = spec->star_tracker;
   const estimator::StarTrackerTruth& from = scenario.star_tracker;

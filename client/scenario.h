@@ -51,6 +51,7 @@ struct ScenarioGyro {
   std::optional<estimator::RateDrift> rate_drift;
   std::optional<estimator::TransientDrift> transient_drift;
   std::optional<estimator::SunFaceDrift> sun_face_drift;
+  std::optional<estimator::CoefficientStep> coefficient_step;
 };
 
 struct Scenario {

@@ -54,10 +54,10 @@ json EvidenceJson(const Evidence& e) {
 }
 
 // How the finding behaves in time (report.h TimeBehaviour); the onset and its interval for a
-// step.
+// step, of the drift or of drift coefficients, and for a transient from an onset.
 json TimeBehaviourJson(const estimator::discovery::TimeBehaviour& t) {
   json j{{"kind", t.kind}};
-  if (t.kind == "step") {
+  if (t.kind == "step" || t.kind == "coefficient_step" || t.kind == "transient") {
     j["onset"] = FormatUtc(t.onset);
     j["onsetHours"] = Number(t.onset_hours);
     j["onsetLower"] = FormatUtc(t.onset_lower);

@@ -302,6 +302,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
       !walk_added) {
     out.push_back({Effect::kRandomWalkDrift, 0});
     for (int id : gyros) {
+    if (Effective(effects, Effect::kTransient) &&
+        !added(CandidateName({Effect::kTransient, id}))) {
+      out.push_back({Effect::kTransient, id});
+    }
       if (model.config.FindGyro(id) != nullptr) out.push_back({Effect::kRandomWalkDrift, id});
     }
   }
@@ -808,6 +812,8 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
   CandidateFit fit;
   fit.candidate = candidate;
   fit.model = *ctx.model;
+    case Effect::kTransient:
+      return &FitTransient;
   fit.model.added.push_back(CandidateName(candidate));
   const EffectFit fit_effect = FitOf(candidate.effect);
   if (fit_effect == nullptr) return absl::InternalError("unknown effect");

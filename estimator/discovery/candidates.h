@@ -33,6 +33,12 @@
 //                                 onset and the group integrated over uniform priors;
 //                                 time_behaviour.h FitCoefficientStep, D110), reported as a basis
 //                                 term (spin_axis_harmonic terms switched on at T)
+//   transient (gyro g)            a case-fixed drift A exp(-(t - T) / tau) from an onset T: the
+//                                 warm-up's three exponential_decay terms with their epoch at T,
+//                                 T searched as the drift step's at the middle tau, then tau at
+//                                 the best T (3 parameters, T and tau integrated over uniform
+//                                 priors, separated; time_behaviour.h FitTransient), reported
+//                                 as a basis term
 //   readout_distortion (gyro g)   not of the library: the open-ended basis's readout group, a
 //                                 symmetric traceless distortion of g's readout (5 parameters,
 //                                 regressed on the deviation, held; Laplace's Occam term;

@@ -36,6 +36,8 @@ const char* EffectId(Effect e) {
       return "warm_up";
     case Effect::kCoefficientStep:
       return "coefficient_step";
+    case Effect::kTransient:
+      return "transient";
   }
   return "?";
 }
@@ -52,7 +54,7 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
                    Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
                    Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kWarmUp,
-                   Effect::kCoefficientStep}) {
+                   Effect::kCoefficientStep, Effect::kTransient}) {
     if (id == EffectId(e)) return e;
   }
   return std::nullopt;

@@ -61,6 +61,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
     if (c.effect == Effect::kWarmUp) return 11;  // 7 + 4 time constants, full runs
     if (c.effect == Effect::kCoefficientStep) return 12;  // the drift step's onsets per group
     if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
+    if (c.effect == Effect::kTransient) return 14;  // the step's onsets, then 10 time constants
     if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
@@ -418,7 +419,10 @@ CandidateScore Row(const Scored& s, const CandidateFit& f, int round, int chosen
   row.homogeneous = s.homogeneous;
   row.selected = s.index == chosen;
   row.time_behaviour = f.time.kind;
-  if (f.time.kind == "step") row.onset_hours = f.time.onset_hours;
+  if (f.time.kind == "step" || f.time.kind == kTimeCoefficientStep ||
+      f.time.kind == kTimeTransient) {
+    row.onset_hours = f.time.onset_hours;
+  }
   return row;
 }
 
@@ -441,7 +445,8 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   }
   // Three exponential_decay terms of the basis; spin_axis_harmonic terms switched on at a
   // coefficient step's onset (D110).
-  if (f.candidate.effect == Effect::kWarmUp || f.candidate.effect == Effect::kCoefficientStep) {
+  if (f.candidate.effect == Effect::kWarmUp || f.candidate.effect == Effect::kCoefficientStep ||
+      f.candidate.effect == Effect::kTransient) {
     finding.effect = kEffectBasisTerm;
     finding.description = f.description;
     finding.basis_terms = f.basis_terms;
@@ -517,6 +522,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
 }
 
 // At most this many constant effects of a round fail their physics checks before the round goes
+      : f.time.kind == kTimeTransient
+          ? "a transient from an onset: no change before it, its evidence integrated over the "
+            "onset and the time constant, not the constant-effect test"
 // on without checking further ones.
 constexpr int kMaxFailedChecks = 3;
 
@@ -658,6 +666,7 @@ absl::Status FitStage(RoundState& st, const std::vector<Candidate>& stage, int r
                       const std::vector<int>& gyros, const SelectedModel& selected,
                       DiagnosisContext& context) {
   auto fitted = FitCandidates(stage, round, static_cast<int>(st.fits.size()),
+                                c.effect == Effect::kTransient ||
                               static_cast<int>(st.candidates.size()), gyros, selected, context);
   if (context.Stopped()) return DiagnosisContext::Cancelled();
   for (auto& f : fitted) {
@@ -728,7 +737,7 @@ void PreferReadoutJump(RoundState& st, const SelectedModel& selected, RoundResul
   const Scored& top = st.significant.front();
   const Candidate& c = st.fits[top.index].candidate;
   const bool timed_top = c.effect == Effect::kDriftStep || c.effect == Effect::kRandomWalkDrift ||
-                         c.effect == Effect::kCoefficientStep;
+                         c.effect == Effect::kCoefficientStep || c.effect == Effect::kTransient;
   const CandidateFit* jump = nullptr;
   double onset_cost = 0.0;
   for (const Scored& x : st.scored) {
@@ -929,7 +938,9 @@ absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected
                                    DiagnosisContext& context, bool refused_warm_up = false) {
   if (st.significant.empty()) return absl::OkStatus();
   const Candidate& c = st.fits[st.significant.front().index].candidate;
-  const bool warm_up = refused_warm_up && c.effect == Effect::kWarmUp;
+  // A transient from an onset decays as a warm-up does: the same rule.
+  const bool warm_up =
+      refused_warm_up && (c.effect == Effect::kWarmUp || c.effect == Effect::kTransient);
   if (c.gyro <= 0 ||
       (c.effect != Effect::kDriftStep && c.effect != Effect::kRandomWalkDrift &&
        c.effect != Effect::kCoefficientStep && !warm_up)) {
@@ -1059,13 +1070,14 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
   RETURN_IF_ERROR(PreferStationaryDrift(st, selected, context));
   ASSIGN_OR_RETURN(Choice choice, ChooseGuarded(st.significant, st.scored, st.fits, st.failed,
                                                 st.inhomogeneous_only, round, selected, context));
-  // A warm-up that topped the round but predicts the held-out spans worse (the guard refused it)
-  // is a drift of its gyro that changes otherwise than by one decay: as for a step or a walk at
-  // the top, nothing is taken when a drift that returns to its mean describes that gyro's
-  // deviation decisively better (else the round would go on to a constant effect of another
-  // gyro, fitted to the spill-over of that drift).
+  // A warm-up (or a transient from an onset) that topped the round but predicts the held-out
+  // spans worse (the guard refused it) is a drift of its gyro that changes otherwise than by one
+  // decay: as for a step or a walk at the top, nothing is taken when a drift that returns to its
+  // mean describes that gyro's deviation decisively better (else the round would go on to a
+  // constant effect of another gyro, fitted to the spill-over of that drift).
   if (!st.significant.empty() && choice.chosen != st.significant.front().index &&
-      st.fits[st.significant.front().index].candidate.effect == Effect::kWarmUp &&
+      (st.fits[st.significant.front().index].candidate.effect == Effect::kWarmUp ||
+       st.fits[st.significant.front().index].candidate.effect == Effect::kTransient) &&
       std::any_of(choice.worsened.begin(), choice.worsened.end(), [&](const auto& w) {
         return w.first == st.significant.front().index;
       })) {

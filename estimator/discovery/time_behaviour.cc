@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
+#include <optional>
 #include <iterator>
 #include <map>
 #include <vector>
@@ -73,6 +75,15 @@ struct OnsetSearch {
   // The coefficients released at the onset (drift_model.h theta): C1 for a drift step.
   int first = kThetaC1;
   int count = 3;
+  // A transient from an onset (FitTransient) releases nothing: the run from onset frame f has
+  // the configuration this gives (its terms switched on at the onset), and the run without it
+  // `base_config` (the same terms, inert); unset, both are the model's.
+  std::function<SpacecraftConfig(int f)> config_at;
+  std::optional<SpacecraftConfig> base_config;
+
+  const SpacecraftConfig& BaseConfig() const {
+    return base_config.has_value() ? *base_config : fit.model.config;
+  }
   ModelRun prefix;
   std::map<int, SessionCheckpoint> checkpoints;
   std::map<int, double> value;  // onset frame -> profiled -2 log L
@@ -87,7 +98,8 @@ struct OnsetSearch {
     ModelRunOptions ro;
     ro.start = &checkpoints[f];
     ro.start_frame = f;
-    auto tail = RunModel(fit.model.config, options, frames, ro);
+    auto tail = config_at ? RunModel(config_at(f), options, frames, ro)
+                          : RunModel(fit.model.config, options, frames, ro);
     ++fit.runs;
     if (!tail.ok()) return tail.status();
     ModelRun run;
@@ -107,8 +119,10 @@ struct OnsetSearch {
   absl::Status Evaluate(int f) {
     if (value.count(f) || !checkpoints.count(f)) return absl::OkStatus();
     SessionOptions options = fit.model.options;
-    options.coefficient_releases.push_back(
-        {candidate.gyro, first, count, frames[f].time, step_sigma});
+    if (!config_at) {
+      options.coefficient_releases.push_back(
+          {candidate.gyro, first, count, frames[f].time, step_sigma});
+    }
     ASSIGN_OR_RETURN(ModelRun run, RunFrom(f, options));
     const double v = Profile(run).value;
     value[f] = v;
@@ -152,7 +166,7 @@ struct OnsetSearch {
       ro.start_frame = from->first;
       ro.stop_frame = new_frames.back();
       ro.checkpoint_frames = new_frames;
-      auto more = RunModel(fit.model.config, fit.model.options, frames, ro);
+      auto more = RunModel(BaseConfig(), fit.model.options, frames, ro);
       ++fit.runs;
       if (!more.ok()) return more.status();
       for (size_t j = 0; j < more->checkpoints.size(); ++j) {
@@ -337,7 +351,7 @@ absl::Status RunPrefix(OnsetSearch& search, const std::vector<int>& grid_frames)
   CandidateFit& fit = search.fit;
   ModelRunOptions prefix_options;
   prefix_options.checkpoint_frames = grid_frames;
-  auto prefix = RunModel(fit.model.config, fit.model.options, search.frames, prefix_options);
+  auto prefix = RunModel(search.BaseConfig(), fit.model.options, search.frames, prefix_options);
   ++fit.runs;
   if (!prefix.ok()) return prefix.status();
   for (size_t j = 0; j < prefix->checkpoints.size(); ++j) {
@@ -888,6 +902,243 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
   fit.notes.push_back(absl::StrCat(
       "likelihood over the time constant (h: -2 log L above the best; ", profile.size(),
       " time constants, integrated over a prior uniform in ln tau):", profile_text));
+  return absl::OkStatus();
+}
+
+// The search as a sequence: the gyro's basis with three inert exponential_decay terms for the
+// run without the transient and its checkpoints, the onset searched at the middle time constant,
+// the time constant searched at the best onset, the evidence, and the transient described.
+absl::Status FitTransient(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  fit.time.kind = kTimeTransient;
+  fit.parameters = 0;
+  fit.run = *ctx.model_run;
+  const int first_term = static_cast<int>(g->basis_terms.size());
+  if (first_term + kWarmUpTerms > kMaxBasisTermsPerGyro) {
+    fit.notes.push_back(absl::StrFormat(
+        "no transient fitted: gyro %d's basis holds %d terms, at most %d (three more needed)",
+        candidate.gyro, first_term, kMaxBasisTermsPerGyro));
+    return absl::OkStatus();
+  }
+  const double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h);
+  const double log_min = std::log(kWarmUpMinTauHours), log_max = std::log(kWarmUpMaxTauHours);
+  const double spacing = (log_max - log_min) / (kTauCoarse - 1);
+  const double log_tau0 = log_min + spacing * (kTauCoarse / 2);  // the grid's middle, 3.5 h
+  double log_tau = log_tau0;
+
+  OnsetSearch search{candidate, fit,
+                     CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction)};
+  const std::vector<TelemetryFrame>& frames = search.frames;
+  const std::vector<int> grid_frames = GridFrames(frames);
+  if (grid_frames.empty()) return absl::OkStatus();  // too short: no transient fitted
+  const ModelState model = fit.model;
+  // Before its onset a term is 0: the terms switched on after the last frame leave the run
+  // without the transient as it is, and give its checkpoints the layout of the runs with it.
+  search.base_config =
+      WithWarmUp(model, candidate.gyro, frames.back().time + absl::Hours(1),
+                 std::exp(log_tau0), sigma)
+          .config;
+  // The modelled drift changes from frames[f - 1].time on, as a release at frame f's does.
+  search.config_at = [&](int f) {
+    return WithWarmUp(model, candidate.gyro, frames[f - 1].time, std::exp(log_tau), sigma).config;
+  };
+  RETURN_IF_ERROR(RunPrefix(search, grid_frames));
+  ASSIGN_OR_RETURN(const bool searched, SearchOnsets(search, grid_frames,
+                                                     Profile(*ctx.model_run).value, opt.alpha));
+  if (!searched) return absl::OkStatus();
+  CandidateFit onsets;
+  const OnsetProfile p = ProfileOnsets(search, onsets);
+  const int onset_frame = search.best_frame;
+
+  // The time constant at the best onset, on the warm-up's grid refined twice near its best.
+  std::map<double, double> value;  // ln(tau / h) -> -2 log L
+  std::map<double, Vector3d> amplitude, amplitude_sigma;
+  auto amplitude_of = [&](const ModelRun& run, double lt) {
+    const GyroEstimate* e = FindEstimate(run.gyros, candidate.gyro);
+    Vector3d a = Vector3d::Zero(), s = Vector3d::Zero();
+    if (e != nullptr && static_cast<int>(e->basis_terms.size()) >= first_term + kWarmUpTerms &&
+        static_cast<int>(e->basis_sigma.size()) >= first_term + kWarmUpTerms) {
+      for (int i = 0; i < kWarmUpTerms; ++i) {
+        a(i) = e->basis_terms[first_term + i].value;
+        s(i) = e->basis_sigma[first_term + i];
+      }
+    }
+    amplitude[lt] = a;
+    amplitude_sigma[lt] = s;
+  };
+  value[log_tau0] = search.value[onset_frame];
+  amplitude_of(search.best_run, log_tau0);
+  double best_log = log_tau0;
+  ModelRun best_run = std::move(search.best_run);
+  auto evaluate = [&](double lt) -> absl::Status {
+    lt = std::clamp(lt, log_min, log_max);
+    for (const auto& [x, v] : value) {
+      if (std::abs(x - lt) < 1e-9) return absl::OkStatus();
+    }
+    log_tau = lt;
+    ASSIGN_OR_RETURN(ModelRun run, search.RunFrom(onset_frame, fit.model.options));
+    const double v = Profile(run).value;
+    value[lt] = v;
+    amplitude_of(run, lt);
+    if (v < value[best_log]) {
+      best_log = lt;
+      best_run = std::move(run);
+    }
+    return absl::OkStatus();
+  };
+  for (int k = 0; k < kTauCoarse; ++k) RETURN_IF_ERROR(evaluate(log_min + k * spacing));
+  for (int r = 1; r <= kTauRefine; ++r) {
+    const double half = spacing / std::pow(2.0, r);
+    const double centre = best_log;
+    if (centre - half >= log_min - 1e-12) RETURN_IF_ERROR(evaluate(centre - half));
+    if (centre + half <= log_max + 1e-12) RETURN_IF_ERROR(evaluate(centre + half));
+  }
+  // The interval's ends resolved as the warm-up's (kTauResolution, at most kTauIntervalRuns
+  // more runs) while the transient is significant: the chord between coarse points lies above
+  // the convex profile.
+  if (Profile(*ctx.model_run).value - value[best_log] > EvidenceThreshold(opt.alpha, 1)) {
+    for (int extra = 0; extra < kTauIntervalRuns; ++extra) {
+      const std::vector<std::pair<double, double>> points(value.begin(), value.end());
+      size_t top = 0;
+      for (size_t j = 0; j < points.size(); ++j) {
+        if (points[j].second < points[top].second) top = j;
+      }
+      const double level = points[top].second + kOnsetIntervalDrop;
+      double widest = 0.0, middle = 0.0;
+      size_t j = top;
+      while (j > 0 && points[j - 1].second <= level) --j;
+      if (j > 0 && points[j].first - points[j - 1].first > widest) {
+        widest = points[j].first - points[j - 1].first;
+        middle = 0.5 * (points[j].first + points[j - 1].first);
+      }
+      j = top;
+      while (j + 1 < points.size() && points[j + 1].second <= level) ++j;
+      if (j + 1 < points.size() && points[j + 1].first - points[j].first > widest) {
+        widest = points[j + 1].first - points[j].first;
+        middle = 0.5 * (points[j].first + points[j + 1].first);
+      }
+      if (!(widest > kTauResolution)) break;
+      RETURN_IF_ERROR(evaluate(middle));
+    }
+  }
+  log_tau = best_log;
+
+  // tau's interval: -2 log L within 3.84 of its minimum, linear in ln tau between the time
+  // constants evaluated, clipped to the span searched.
+  const std::vector<std::pair<double, double>> tau_profile(value.begin(), value.end());
+  size_t best = 0;
+  for (size_t j = 0; j < tau_profile.size(); ++j) {
+    if (tau_profile[j].second < tau_profile[best].second) best = j;
+  }
+  const double level = tau_profile[best].second + kOnsetIntervalDrop;
+  auto crossing = [&](size_t inside, size_t outside) {
+    const auto [x0, y0] = tau_profile[inside];
+    const auto [x1, y1] = tau_profile[outside];
+    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
+  };
+  double lower = tau_profile.front().first, upper = tau_profile.back().first;
+  for (size_t j = best; j > 0; --j) {
+    if (tau_profile[j - 1].second > level) {
+      lower = crossing(j, j - 1);
+      break;
+    }
+  }
+  for (size_t j = best; j + 1 < tau_profile.size(); ++j) {
+    if (tau_profile[j + 1].second > level) {
+      upper = crossing(j, j + 1);
+      break;
+    }
+  }
+
+  // The evidence over onset and tau, separated: the onset's prior points (at the middle time
+  // constant) each shifted by -2 ln R, R the likelihood integrated over a prior uniform in ln tau
+  // at the best onset relative to its value at the middle time constant (exact when the
+  // likelihood is a product of a function of the onset and one of tau).
+  double min_value = tau_profile[best].second;
+  double sum = 0.0;
+  const double span = log_max - log_min;
+  for (size_t j = 0; j < tau_profile.size(); ++j) {
+    const double left = j > 0 ? tau_profile[j].first - tau_profile[j - 1].first : 0.0;
+    const double right =
+        j + 1 < tau_profile.size() ? tau_profile[j + 1].first - tau_profile[j].first : 0.0;
+    sum += 0.5 * (left + right) / span * std::exp(-0.5 * (tau_profile[j].second - min_value));
+  }
+  const double log_r = -0.5 * (min_value - value[log_tau0]) + std::log(sum);
+  for (const auto& [w, v] : onsets.prior_points) fit.prior_points.emplace_back(w, v - 2.0 * log_r);
+
+  const double tau_h = std::exp(best_log);
+  const double lower_h = std::exp(lower), upper_h = std::exp(upper);
+  fit.parameters = kWarmUpTerms;
+  DescribeOnset(search, p, fit);
+  fit.time.kind = kTimeTransient;
+  fit.onset_profile = onsets.onset_profile;
+  fit.model = WithWarmUp(model, candidate.gyro, frames[onset_frame - 1].time, tau_h, sigma);
+  fit.run = std::move(best_run);
+  // A's sigma: the filter's at the best tau, and the spread tau's uncertainty gives (the delta
+  // method: dA / d ln tau between the time constants beside the best, times the 95% half-width
+  // of ln tau / 1.96), as the warm-up's.
+  const Vector3d a = amplitude[best_log];
+  Vector3d a_sigma = amplitude_sigma[best_log];
+  {
+    auto at = value.find(best_log);
+    auto lo = at == value.begin() ? at : std::prev(at);
+    auto hi = std::next(at) == value.end() ? at : std::next(at);
+    if (hi->first > lo->first) {
+      const Vector3d slope = (amplitude[hi->first] - amplitude[lo->first]) / (hi->first - lo->first);
+      const double s_log_tau = 0.5 * (upper - lower) / 1.96;
+      for (int i = 0; i < 3; ++i) a_sigma(i) = std::hypot(a_sigma(i), slope(i) * s_log_tau);
+    }
+  }
+  const GyroConfig* gw = FindGyroMutable(fit.model.config, candidate.gyro);
+  for (int i = 0; i < kWarmUpTerms; ++i) {
+    BasisTerm t = gw->basis_terms[first_term + i];
+    t.value = a(i);
+    fit.basis_terms.push_back(t);
+  }
+  AddVectorParameters("transientDegH", a, a_sigma, DegH(1.0), "deg/h", fit.fitted);
+  const double size = a.norm();
+  const double size_sigma =
+      size > 0 ? std::sqrt((a.cwiseProduct(a_sigma)).squaredNorm()) / size : a_sigma.norm();
+  fit.fitted.push_back({"transientSizeDegH", DegH(size), DegH(size_sigma), "deg/h"});
+  fit.fitted.push_back({"tauHours", tau_h, 0.5 * (upper_h - lower_h), "h"});
+  fit.fitted.push_back({"tauLowerHours", lower_h, 0.0, "h"});
+  fit.fitted.push_back({"tauUpperHours", upper_h, 0.0, "h"});
+  const double onset_hours = p.points[p.best].first;
+  fit.fitted.push_back({"onsetHours", onset_hours, 0.5 * (p.upper - p.lower), "h"});
+  fit.fitted.push_back({"onsetLowerHours", p.lower, 0.0, "h"});
+  fit.fitted.push_back({"onsetUpperHours", p.upper, 0.0, "h"});
+  const Vector3d direction = size > 0 ? Vector3d(a / size) : Vector3d::Zero();
+  fit.description = absl::StrFormat(
+      "transient of gyro %d: a case-fixed drift along (%.2f, %.2f, %.2f) (case axes), %.3f +- "
+      "%.3f deg/h at its onset %.2f h from the start (95%% %.2f-%.2f h), decaying with tau = "
+      "%.1f h (95%% %.1f-%.1f h; an exponential transient from an onset, tau searched over "
+      "%.1f-%.0f h)",
+      candidate.gyro, direction.x(), direction.y(), direction.z(), DegH(size), DegH(size_sigma),
+      onset_hours, p.lower, p.upper, tau_h, lower_h, upper_h, kWarmUpMinTauHours,
+      kWarmUpMaxTauHours);
+  std::string onset_text, tau_text;
+  for (const auto& [h, v] : p.points) {
+    absl::StrAppend(&onset_text, absl::StrFormat(" %.2f:%.1f", h, v - p.points[p.best].second));
+  }
+  for (const auto& [x, v] : tau_profile) {
+    absl::StrAppend(&tau_text, absl::StrFormat(" %.2f:%.1f", std::exp(x), v - min_value));
+  }
+  fit.notes.push_back(absl::StrFormat(
+      "likelihood over the onset at tau = %.2f h (h from the start: -2 log L above the best; %d "
+      "onsets):%s",
+      std::exp(log_tau0), p.points.size(), onset_text));
+  fit.notes.push_back(absl::StrFormat(
+      "likelihood over the time constant at the best onset (h: -2 log L above the best; %d time "
+      "constants, integrated over a prior uniform in ln tau, 2 ln R = %.1f against %.2f h):%s",
+      tau_profile.size(), 2.0 * log_r, std::exp(log_tau0), tau_text));
+  fit.notes.push_back(absl::StrFormat(
+      "%d filter runs: one without the transient, the others continued from its checkpoints",
+      fit.runs));
   return absl::OkStatus();
 }
 

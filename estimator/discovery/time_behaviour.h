@@ -53,6 +53,22 @@ std::vector<CoefficientGroup> StepGroupsInUse(const GyroConfig& gyro);
 std::vector<BasisTerm> CoefficientStepTerms(int first, const Eigen::VectorXd& step_rad_s,
                                             absl::Time onset, double sigma);
 
+// The time behaviour of a transient-from-an-onset finding.
+inline constexpr const char* kTimeTransient = "transient";
+
+// An exponential transient of `candidate.gyro` from an onset (docs/discovery.md, "Time
+// behaviour"): a case-fixed drift A e^(-(t - T) / tau) from T on, 0 before, as the warm-up's
+// three exponential_decay terms with their epoch at T, freed with the prior c_sigma_deg_h. T is
+// searched as the drift step's onset at the middle time constant of the warm-up's grid (every
+// run continued from a checkpoint of one run with the terms inert), then tau on the warm-up's
+// grid at the best T. The evidence integrates T over a uniform prior and tau over a prior uniform
+// in ln tau, separated (at the best T). Fills `fit` (model, run, parameters transientDegH[0..2],
+// transientSizeDegH, tauHours, tauLowerHours, tauUpperHours, onsetHours, onsetLowerHours,
+// onsetUpperHours, the onset's time behaviour, description, basis_terms, notes). A gyro whose
+// basis has no room for three more terms gets no fit. Errors: InvalidArgument for a gyro that
+// is not configured; those of RunModel.
+absl::Status FitTransient(const Candidate& candidate, const FitContext& context, CandidateFit& fit);
+
 // The time behaviour of a coefficient-step finding.
 inline constexpr const char* kTimeCoefficientStep = "coefficient_step";
 

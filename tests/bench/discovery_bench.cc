@@ -156,6 +156,32 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                           f.time.onset_lower_hours, f.time.onset_upper_hours);
             detail += text;
           }
+          if (f.time.kind == "transient") {
+            const Parameter* tau = FindParameter(f.parameters, "tauHours");
+            const Parameter* lo = FindParameter(f.parameters, "tauLowerHours");
+            const Parameter* hi = FindParameter(f.parameters, "tauUpperHours");
+            const bool inside = f.time.onset_lower_hours <= 0.4 * 30.0 &&
+                                0.4 * 30.0 <= f.time.onset_upper_hours;
+            if (truth == "transient") step_onset_inside[truth] += inside;
+            double worst = 0.0;  // the largest error of a component of A in its sigma
+            for (int i = 0; i < 3; ++i) {
+              const Parameter* a =
+                  FindParameter(f.parameters, "transientDegH[" + std::to_string(i) + "]");
+              if (a != nullptr && a->sigma > 0) {
+                worst = std::max(worst, std::abs(a->value - ::esg::testing::WarmUpAmplitudeDegH()(i)) /
+                                            a->sigma);
+              }
+            }
+            if (tau != nullptr && lo != nullptr && hi != nullptr) {
+              char text[200];
+              std::snprintf(text, sizeof text,
+                            " onset %.2f h [%.2f, %.2f] tau %.2f h [%.2f, %.2f] A error <= %.2f "
+                            "sigma",
+                            f.time.onset_hours, f.time.onset_lower_hours,
+                            f.time.onset_upper_hours, tau->value, lo->value, hi->value, worst);
+              detail += text;
+            }
+          }
           if (f.time.kind == "coefficient_step") {
             // The onset with its interval; each step's parameter, and for k0_step its error
             // against the truth in its sigma.
@@ -244,7 +270,7 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
       "and `random_walk_15x` (random_walk_drift common to all) are correct with exactly that one "
       "finding; `readout_jump` = a fault outside the library, correct when unexplained)\n",
       seeds);
-  for (const char* row : {"drift_step", "c1_step", "k0_step"}) {
+  for (const char* row : {"drift_step", "c1_step", "k0_step", "transient"}) {
     if (!table.count(row)) continue;
     std::printf("%s: the true onset (12.0 h) inside the stated onset interval in %d of %d\n", row,
                 step_onset_inside[row], seeds);

@@ -297,6 +297,60 @@ TEST(DiagnoseCli, WarmUpIsWrittenToTheModelAsExponentialDecayTerms) {
   EXPECT_EQ(cal.exit_code, 0) << cal.err;
 }
 
+// A step of gyro 2's k0 (the scenario's coefficientStep, docs/scenario.md: +0.1 deg/h at 5 h of
+// 12 h) is found with --effects coefficient_step as a step of k0 at an onset whose 95% interval
+// holds 5 h; model.json carries it as three spin_axis_harmonic terms switched on at the onset
+// (their epoch, D110) and esg calibrate reads it.
+TEST(DiagnoseCli, CoefficientStepIsWrittenToTheModelAsSwitchedOnHarmonics) {
+  TempDir dir;
+  WriteFile(dir.File("config.json"), kConfig);
+  WriteFile(dir.File("scenario.json"), R"({
+    "description": "gyro 2's k0 steps",
+    "profile": "mixed", "profileSeed": 3,
+    "gyros": [{"id": 2, "coefficientStep": {"startHours": 5, "k0DegH": 0.1}}]
+  })");
+  RunResult sim = RunEsg(dir, "simulate --config '" + dir.File("config.json") + "' --scenario '" +
+                                  dir.File("scenario.json") + "' --hours 12 --seed 5 --out '" +
+                                  dir.File("rec.csv") + "'");
+  ASSERT_EQ(sim.exit_code, 0) << sim.err;
+  RunResult r = RunEsg(dir, "diagnose --config '" + dir.File("config.json") + "' --recording '" +
+                                dir.File("rec.csv") +
+                                "' --effects coefficient_step --max-effects 1 --json --out '" +
+                                dir.File("report") + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const nlohmann::json doc = nlohmann::json::parse(r.out);
+  ASSERT_EQ(doc.at("verdict"), "basis_term") << r.out;
+  const auto& f = doc.at("findings").at(0);
+  EXPECT_EQ(f.at("gyro"), 2);
+  const auto& time = f.at("timeBehaviour");
+  EXPECT_EQ(time.at("kind"), "coefficient_step");
+  EXPECT_LE(time.at("onsetLowerHours").get<double>(), 5.0) << f.at("explanation");
+  EXPECT_GE(time.at("onsetUpperHours").get<double>(), 5.0) << f.at("explanation");
+  bool k0 = false;
+  for (const auto& p : f.at("parameters")) k0 = k0 || p.at("name") == "k0StepDegH";
+  EXPECT_TRUE(k0) << f.at("explanation");
+  ASSERT_EQ(f.at("modelTerms").size(), 3u);
+  const auto& epoch = f.at("modelTerms").at(0).at("epoch");
+  EXPECT_NE(epoch, "1970-01-01T00:00:00Z");  // switched on at the onset, not always on
+  for (const auto& t : f.at("modelTerms")) {
+    EXPECT_EQ(t.at("kind"), "spin_axis_harmonic");
+    EXPECT_EQ(t.at("epoch"), epoch);
+  }
+  const nlohmann::json model = nlohmann::json::parse(ReadFile(dir.File("report/model.json")));
+  int switched = 0;
+  for (const auto& g : model.at("gyros")) {
+    if (!g.contains("basisTerms")) continue;
+    for (const auto& t : g.at("basisTerms")) {
+      switched += t.at("kind") == "spin_axis_harmonic" && t.at("epoch") == epoch;
+    }
+  }
+  EXPECT_EQ(switched, 3);
+  ExpectPlotsReferencedAndDrawn(dir, {"onset.png"});
+  RunResult cal = RunEsg(dir, "calibrate --config '" + dir.File("report/model.json") +
+                                  "' --recording '" + dir.File("rec.csv") + "' --json");
+  EXPECT_EQ(cal.exit_code, 0) << cal.err;
+}
+
 TEST(DiagnoseCli, BadArgumentsExitTwoNamingTheOption) {
   TempDir dir;
   WriteFile(dir.File("config.json"), kConfig);
@@ -315,7 +369,7 @@ TEST(DiagnoseCli, BadArgumentsExitTwoNamingTheOption) {
   for (const char* id : {"rotor_displacement", "fourth_harmonic", "unequal_stiffness",
                          "gyro_misalignment", "star_tracker_misalignment", "star_tracker_latency",
                          "random_walk_drift", "drift_step", "readout_distortion", "sun_drift",
-                         "warm_up"}) {
+                         "warm_up", "coefficient_step", "transient"}) {
     EXPECT_THAT(effect.err, HasSubstr(id));
   }
   RunResult no_config = RunEsg(dir, "diagnose --recording '" + dir.File("rec.csv") + "'");

@@ -203,6 +203,32 @@ TEST(Scenario, ParsesAndSimulatesTheRateDependentDriftAndTheWarmUpTransient) {
   EXPECT_GT(est::RadPerSecToDegPerHour(largest_rate_drift), 0.01);
 }
 
+// A step of the drift coefficients (docs/scenario.md coefficientStep): its time and each
+// coefficient's step parsed into SI in theta layout, the others 0, and carried into the
+// simulation's truth.
+TEST(Scenario, ParsesAndAppliesTheCoefficientStep) {
+  auto s = ParseScenarioJson(R"({
+    "gyros": [{"id": 2, "coefficientStep": {"startHours": 0.25, "k0DegH": 0.1,
+                                            "nuDegH": [0.01, -0.02, 0.03]}}]
+  })");
+  ASSERT_THAT(s, IsOk());
+  ASSERT_EQ(s->gyros.size(), 1u);
+  ASSERT_TRUE(s->gyros[0].coefficient_step.has_value());
+  const est::CoefficientStep& c = *s->gyros[0].coefficient_step;
+  EXPECT_EQ(c.time_s, 900.0);
+  EXPECT_NEAR(c.delta.k0, est::DegPerHourToRadPerSec(0.1), 1e-18);
+  EXPECT_NEAR(c.delta.nu(1), est::DegPerHourToRadPerSec(-0.02), 1e-18);
+  EXPECT_TRUE(c.delta.C1.isZero(0.0));
+  EXPECT_TRUE(c.delta.C2.isZero(0.0));
+  EXPECT_TRUE(c.delta.mu.isZero(0.0));
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  ASSERT_TRUE(spec.gyros[1].coefficient_step.has_value());
+  EXPECT_EQ(spec.gyros[1].coefficient_step->time_s, 900.0);
+  EXPECT_FALSE(spec.gyros[0].coefficient_step.has_value());
+}
+
 // A sun-driven thermal drift: parsed into SI and a face, and simulated as its formula says. The
 // face's illumination u = max(0, s_b[x]) is recomputed here from each truth sample's attitude and
 // the sun's direction at its time, and its lag tau dy/dt = u - y, y(0) = u(0), integrated on the
@@ -553,6 +579,14 @@ TEST(Scenario, ErrorsNameTheKey) {
        "gyros[0].transientDrift.startHours: -1 is outside [0, 100000]"},
       {R"({"gyros": [{"id": 1, "transientDrift": {"amplitudeDegH": [0, 0, 0.1], "timeConstantHours": 3, "tau": 3}}]})",
        "gyros[0].transientDrift.tau: unknown key"},
+      {R"({"gyros": [{"id": 1, "coefficientStep": {"k0DegH": 0.1}}]})",
+       "gyros[0].coefficientStep.startHours: required"},
+      {R"({"gyros": [{"id": 1, "coefficientStep": {"startHours": 3}}]})",
+       "gyros[0].coefficientStep: names no coefficient"},
+      {R"({"gyros": [{"id": 1, "coefficientStep": {"startHours": 3, "c2DegH": [0.1, 0.2]}}]})",
+       "gyros[0].coefficientStep.c2DegH"},
+      {R"({"gyros": [{"id": 1, "coefficientStep": {"startHours": 3, "k0": 0.1}}]})",
+       "gyros[0].coefficientStep.k0: unknown key"},
       {R"({"profile": "tumbling"})", "profile: unknown profile 'tumbling'"},
       {R"({"inclinationDeg": 200})", "inclinationDeg: 200 is outside [0, 180]"},
       {R"({"segmentHours": 0.1, "slewMin": 10})", "slewMin: 10 min is longer than segmentHours"},

@@ -91,9 +91,10 @@ inline std::vector<std::string> DiscoveryEffects() {
 // kK0StepDegH at 40% of the recording (simulator.h CoefficientStep). "c1_step": C1 of eq. (10)
 // steps by -(0.02, -0.03, 0.02) deg/h at 40% (simulator.h CoefficientStep, the printed C1 term),
 // the drift_step scenario's case-fixed drift d written as C1 -> C1 - d: expected `drift_step`.
+// "transient": the warm_up scenario's drift and time constant from 40% of the recording on.
 inline std::vector<std::string> DiscoveryTimeBehaviours() {
   return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up",
-          "k0_step", "c1_step"};
+          "k0_step", "c1_step", "transient"};
 }
 
 // The k0_step scenario's step of k0 [deg/h] and its onset [fraction of the recording].
@@ -236,10 +237,11 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.time_constant_s = SunLagHoursOf(seed) * 3600.0;
     s.gyros[g].sun_face_drift = d;
   }
-  if (effect == "warm_up") {
+  if (effect == "warm_up" || effect == "transient") {
     TransientDrift d;
     d.amplitude_k_rad_s = x * WarmUpAmplitudeDegH() * deg_h;
     d.time_constant_s = kWarmUpTauHours * 3600.0;
+    if (effect == "transient") d.start_s = 0.4 * s.duration;
     s.gyros[g].transient_drift = d;
   }
   if (effect == "k0_step") {
@@ -294,6 +296,7 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "growing_displacement") return basis("linear", "");
   if (truth == "warm_up") return basis("warm_up", "tauHours");
   if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
+  if (truth == "transient") return basis("transient", "tauHours");
   if (truth == "readout_scale") return basis("", "readout");
   if (truth == "switching_drift" || truth == "hidden_driver") {
     return r.verdict == kVerdictUnexplained && !r.findings.empty() &&
