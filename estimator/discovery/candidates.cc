@@ -294,6 +294,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
         !added(CandidateName({Effect::kCoefficientStep, id}))) {
       out.push_back({Effect::kCoefficientStep, id});
     }
+    if (Effective(effects, Effect::kTransient) &&
+        !added(CandidateName({Effect::kTransient, id}))) {
+      out.push_back({Effect::kTransient, id});
+    }
   }
   const bool walk_added = std::any_of(model.added.begin(), model.added.end(), [](const auto& a) {
     return a.rfind(EffectId(Effect::kRandomWalkDrift), 0) == 0;
@@ -302,10 +306,6 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
       !walk_added) {
     out.push_back({Effect::kRandomWalkDrift, 0});
     for (int id : gyros) {
-    if (Effective(effects, Effect::kTransient) &&
-        !added(CandidateName({Effect::kTransient, id}))) {
-      out.push_back({Effect::kTransient, id});
-    }
       if (model.config.FindGyro(id) != nullptr) out.push_back({Effect::kRandomWalkDrift, id});
     }
   }
@@ -802,6 +802,8 @@ EffectFit FitOf(Effect effect) {
       return &FitWarmUp;
     case Effect::kCoefficientStep:
       return &FitCoefficientStep;
+    case Effect::kTransient:
+      return &FitTransient;
   }
   return nullptr;
 }
@@ -812,8 +814,6 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
   CandidateFit fit;
   fit.candidate = candidate;
   fit.model = *ctx.model;
-    case Effect::kTransient:
-      return &FitTransient;
   fit.model.added.push_back(CandidateName(candidate));
   const EffectFit fit_effect = FitOf(candidate.effect);
   if (fit_effect == nullptr) return absl::InternalError("unknown effect");

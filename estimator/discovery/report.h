@@ -46,14 +46,14 @@ enum class Effect {
   // is kDriftStep) at an onset searched (time_behaviour.h FitCoefficientStep, D110); its finding
   // is a kEffectBasisTerm (spin_axis_harmonic terms switched on at the onset).
   kCoefficientStep,
-};
-// "rotor_displacement", ..., "sun_drift", "warm_up", "coefficient_step", "transient"
-const char* EffectId(Effect e);
-// The effect whose EffectId is `id`, or nullopt.
   // An exponential transient from an onset later than the recording's start (a warm-up after a
   // switch-on or a mode change), its onset and time constant searched (time_behaviour.h
   // FitTransient); its finding is a kEffectBasisTerm (three exponential_decay terms).
   kTransient,
+};
+// "rotor_displacement", ..., "sun_drift", "warm_up", "coefficient_step", "transient"
+const char* EffectId(Effect e);
+// The effect whose EffectId is `id`, or nullopt.
 std::optional<Effect> EffectFromId(absl::string_view id);
 inline constexpr const char* kVerdictNone = "none";
 inline constexpr const char* kVerdictUnexplained = "unexplained";

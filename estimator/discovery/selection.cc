@@ -60,8 +60,8 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
     if (c.effect == Effect::kDriftStep) return 12;
     if (c.effect == Effect::kWarmUp) return 11;  // 7 + 4 time constants, full runs
     if (c.effect == Effect::kCoefficientStep) return 12;  // the drift step's onsets per group
-    if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     if (c.effect == Effect::kTransient) return 14;  // the step's onsets, then 10 time constants
+    if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
@@ -511,6 +511,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
       : f.time.kind == kTimeWarmUp
           ? "a warm-up: a transient decaying from the start, its evidence integrated over the "
             "time constant, not the constant-effect test"
+      : f.time.kind == kTimeTransient
+          ? "a transient from an onset: no change before it, its evidence integrated over the "
+            "onset and the time constant, not the constant-effect test"
       : f.time.kind == kTimeCoefficientStep
           ? "a step of drift coefficients: no change before its onset, its evidence integrated "
             "over the onset and the coefficient group, not the constant-effect test"
@@ -522,9 +525,6 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
 }
 
 // At most this many constant effects of a round fail their physics checks before the round goes
-      : f.time.kind == kTimeTransient
-          ? "a transient from an onset: no change before it, its evidence integrated over the "
-            "onset and the time constant, not the constant-effect test"
 // on without checking further ones.
 constexpr int kMaxFailedChecks = 3;
 
@@ -655,6 +655,7 @@ void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
   for (const Candidate& c : st.candidates) {
     const bool time_behaviour = c.effect == Effect::kDriftStep || c.effect == Effect::kWarmUp ||
                                 c.effect == Effect::kCoefficientStep ||
+                                c.effect == Effect::kTransient ||
                                 (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
     (time_behaviour ? st.timed : st.constant).push_back(c);
   }
@@ -666,7 +667,6 @@ absl::Status FitStage(RoundState& st, const std::vector<Candidate>& stage, int r
                       const std::vector<int>& gyros, const SelectedModel& selected,
                       DiagnosisContext& context) {
   auto fitted = FitCandidates(stage, round, static_cast<int>(st.fits.size()),
-                                c.effect == Effect::kTransient ||
                               static_cast<int>(st.candidates.size()), gyros, selected, context);
   if (context.Stopped()) return DiagnosisContext::Cancelled();
   for (auto& f : fitted) {
