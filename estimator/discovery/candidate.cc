@@ -50,6 +50,9 @@ const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id)
 }
 
 std::string CandidateName(const Candidate& c) {
+  if (c.effect == Effect::kChannelDrift) {
+    return absl::StrCat(EffectId(c.effect), "[", c.gyro, ":", c.channel, "]");
+  }
   if (c.gyro > 0) return absl::StrCat(EffectId(c.effect), "[", c.gyro, "]");
   return EffectId(c.effect);
 }

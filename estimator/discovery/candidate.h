@@ -35,6 +35,7 @@ struct ModelState {
 struct Candidate {
   Effect effect;
   int gyro = 0;  // 0 for effects common to the spacecraft
+  std::string channel;  // kChannelDrift: the declared channel it follows
 };
 std::string CandidateName(const Candidate& c);  // "rotor_displacement[2]"
 

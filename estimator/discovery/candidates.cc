@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
+#include "estimator/discovery/channel_candidate.h"
 #include "estimator/discovery/readout_candidate.h"
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/statistics.h"
@@ -262,6 +263,13 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     if (Effective(effects, Effect::kSunDrift) &&
         static_cast<int>(HeldSunFaces(model, id).size()) < kSunFaces) {
       out.push_back({Effect::kSunDrift, id});
+    }
+    // A drift that follows each declared channel (channel_candidate.h); none without channels.
+    if (Effective(effects, Effect::kChannelDrift)) {
+      for (const std::string& channel : CandidateChannels(model.config)) {
+        const Candidate c{Effect::kChannelDrift, id, channel};
+        if (!added(CandidateName(c))) out.push_back(c);
+      }
     }
   }
   // A rotation common to every gyro is already in the model when every running gyro's
@@ -798,6 +806,8 @@ EffectFit FitOf(Effect effect) {
       return &FitReadoutCandidate;
     case Effect::kSunDrift:
       return &FitSunCandidate;
+    case Effect::kChannelDrift:
+      return &FitChannelCandidate;
     case Effect::kWarmUp:
       return &FitWarmUp;
     case Effect::kCoefficientStep:

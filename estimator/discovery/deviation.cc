@@ -121,6 +121,19 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
       coefficients = e.coefficients;
       C_b_k = ExpMatrix(e.misalignment_b) * gc->C_b_k;  // session.h: C_b_k = Exp(phi) C_b_k
     }
+    // Channel terms (basis_term.h kChannel) at the run's estimates (the filter calibrates them),
+    // their regressors from the channels held and lagged as the filter does (channel_signal.h).
+    bool any_channel = false;
+    for (size_t k = 0; k < basis_terms.size(); ++k) {
+      if (basis_terms[k].kind != BasisKind::kChannel) continue;
+      any_channel = true;
+      for (const GyroEstimate& e : estimates) {
+        if (e.id == id && e.basis_terms.size() == basis_terms.size()) {
+          basis_terms[k].value = e.basis_terms[k].value;
+        }
+      }
+    }
+    ChannelSignals channels(config.channels, any_channel ? basis_terms : std::vector<BasisTerm>());
     const DriftFunction model = ModelDrift(coefficients, basis_terms);
     auto reading = [&](int i) -> const std::optional<GyroReading>& { return frames[i].gyros[id - 1]; };
     // A reading as the model's filter uses it: corrected for the configured readout distortion.
@@ -148,7 +161,16 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
     };
     u_last_v = voltages_v(samples.front());
     size_t next_sample = 0;
+    if (!channels.empty()) {
+      for (int i = 0; i < samples.front(); ++i) channels.Advance(frames[i]);
+    }
     for (int i = samples.front(); i <= samples.back(); ++i) {
+      const ChannelSignals* held = nullptr;
+      if (!channels.empty()) {
+        channels.Advance(frames[i]);
+        d.channel_states.push_back(std::make_shared<const ChannelSignals>(channels));
+        held = d.channel_states.back().get();
+      }
       const Vector3d h_i = reading(i).has_value() ? h_of(i) : h_last;
       if (auto u = voltages_v(i)) u_last_v = u;
       if (next_sample < samples.size() && samples[next_sample] == i) {
@@ -178,6 +200,7 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
         step.inputs.time = frames[i].time + absl::Seconds(f * span);
         step.inputs.h_k = SlerpUnit(h_i, h_j, f);
         step.inputs.w_k = C_b_k.transpose() * w_b;
+        step.inputs.channels = held;
         if (u_i.has_value() && u_j.has_value()) {
           step.inputs.u_k_v = (1.0 - f) * *u_i + f * *u_j;
         } else {

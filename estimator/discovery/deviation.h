@@ -22,6 +22,7 @@
 #define ESG_ESTIMATOR_DISCOVERY_DEVIATION_H_
 
 #include <functional>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -30,6 +31,7 @@
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
+#include "estimator/channel_signal.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
 #include "estimator/spacecraft_config.h"
@@ -60,6 +62,10 @@ struct DeviationSeries {
   std::vector<TrajectoryStep> steps;
   std::vector<int> sample_end;
   double duration_s = 0.0;  // from the first to the last sample
+  // With channel terms in the model (basis_term.h kChannel): the held channels and lags over each
+  // frame interval, as the filter advances them (channel_signal.h); the steps' inputs point into
+  // these. Empty otherwise.
+  std::vector<std::shared_ptr<const ChannelSignals>> channel_states;
 };
 
 // A drift in case axes [rad/s] at a substep.

@@ -32,6 +32,8 @@ const char* EffectId(Effect e) {
       return "readout_distortion";
     case Effect::kSunDrift:
       return "sun_drift";
+    case Effect::kChannelDrift:
+      return "channel_drift";
     case Effect::kWarmUp:
       return "warm_up";
     case Effect::kCoefficientStep:
@@ -53,7 +55,7 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
   for (Effect e : {Effect::kRotorDisplacement, Effect::kFourthHarmonic, Effect::kUnequalStiffness,
                    Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
-                   Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kWarmUp,
+                   Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kChannelDrift, Effect::kWarmUp,
                    Effect::kCoefficientStep, Effect::kTransient}) {
     if (id == EffectId(e)) return e;
   }

@@ -38,6 +38,10 @@ enum class Effect {
   // illumination through a thermal lag), a candidate of every round (readout_candidate.h
   // FitSunCandidate); its finding is a kEffectBasisTerm.
   kSunDrift,
+  // Not of the library: a drift that follows a housekeeping channel the configuration declares
+  // (its value, lag or derivative; channel_candidate.h FitChannelCandidate), a candidate of every
+  // round per gyro and channel; its finding is a kEffectBasisTerm (three channel terms).
+  kChannelDrift,
   // A time behaviour with its own nonlinear parameter: a case-fixed drift decaying exponentially
   // from the recording's start (a warm-up), its time constant searched (time_behaviour.h
   // FitWarmUp); its finding is a kEffectBasisTerm (three exponential_decay terms).

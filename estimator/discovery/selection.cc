@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/basis_stage.h"
+#include "estimator/discovery/channel_candidate.h"
 #include "estimator/discovery/point_prediction.h"
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/discovery/time_behaviour.h"
@@ -63,6 +64,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
     if (c.effect == Effect::kTransient) return 14;  // the step's onsets, then 10 time constants
     if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
+    if (c.effect == Effect::kChannelDrift) return kChannelCandidateRuns;  // full runs
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
   std::stable_sort(order.begin(), order.end(),
@@ -439,6 +441,11 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
     finding.description = f.description;
     finding.readout_distortion = f.readout_distortion;
   }
+  if (f.candidate.effect == Effect::kChannelDrift) {  // three channel terms of the basis
+    finding.effect = kEffectBasisTerm;
+    finding.description = f.description;
+    finding.basis_terms = f.basis_terms;
+  }
   if (f.candidate.effect == Effect::kSunDrift) {  // the basis's sun families
     finding.effect = kEffectBasisTerm;
     finding.description = f.description;
@@ -508,6 +515,10 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
             "test"
       : f.time.kind == kTimeFollowsSun
           ? "a drift that follows the sun: its coefficients constant in time, held from the start"
+      : f.time.kind == kTimeFollowsChannel
+          ? "a drift that follows a housekeeping channel: its coefficients constant, the channel "
+            "changing in time; its evidence integrated over the forms and the lag, not the "
+            "constant-effect test"
       : f.time.kind == kTimeWarmUp
           ? "a warm-up: a transient decaying from the start, its evidence integrated over the "
             "time constant, not the constant-effect test"

@@ -210,6 +210,33 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
               detail += text;
             }
           }
+          if (f.time.kind == "follows_channel" && !f.basis_terms.empty()) {
+            // The channel and form; each gain component with its sigma and its error against
+            // the scenario's truth in sigma; the lag and its interval.
+            const BasisTerm& t = f.basis_terms.front();
+            detail += " " + t.channel + " " + std::string(ChannelFormName(t.form));
+            for (int i = 0; i < 3; ++i) {
+              const Parameter* a =
+                  FindParameter(f.parameters, "channelGainDegH[" + std::to_string(i) + "]");
+              if (a == nullptr) continue;
+              char text[120];
+              std::snprintf(text, sizeof text, " a%d %.4f+-%.4f (%.1f sigma)", i, a->value,
+                            a->sigma,
+                            a->sigma > 0
+                                ? (a->value - ::esg::testing::ChannelGainDegHPerK()(i)) / a->sigma
+                                : 0.0);
+              detail += text;
+            }
+            const Parameter* lag = FindParameter(f.parameters, "channelLagHours");
+            const Parameter* lo = FindParameter(f.parameters, "channelLagLowerHours");
+            const Parameter* hi = FindParameter(f.parameters, "channelLagUpperHours");
+            if (lag != nullptr && lo != nullptr && hi != nullptr) {
+              char text[100];
+              std::snprintf(text, sizeof text, " lag %.0f min [%.0f, %.0f]", lag->value * 60.0,
+                            lo->value * 60.0, hi->value * 60.0);
+              detail += text;
+            }
+          }
           if (f.time.kind == "warm_up") {
             const Parameter* tau = FindParameter(f.parameters, "tauHours");
             const Parameter* lo = FindParameter(f.parameters, "tauLowerHours");

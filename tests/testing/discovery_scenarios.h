@@ -7,6 +7,7 @@
 #ifndef ESG_TESTS_TESTING_DISCOVERY_SCENARIOS_H_
 #define ESG_TESTS_TESTING_DISCOVERY_SCENARIOS_H_
 
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -131,6 +132,24 @@ inline std::vector<std::string> DiscoveryCombinedClasses() {
 // the seed: SunFaceOf, SunLagHoursOf).
 inline std::vector<std::string> DiscoverySunClasses() { return {"sun_face_drift"}; }
 
+// A drift that follows a housekeeping channel (docs/discovery.md, "A drift that follows a
+// housekeeping channel"; simulator.h ChannelDrift): one gyro's drift of (-0.015, 0.015, 0.0125)
+// deg/h per K times its temperature's departure from 293.15 K, the temperature wandering by 2 K
+// (1-sigma, an Ornstein-Uhlenbeck process of 3 h correlation time) and telemetered every frame
+// as channel T_gyro<g> with 0.02 K noise: "channel_value" (the drift follows the temperature),
+// "channel_lag" (through a first-order lag of 40 min), and "channel_removed" (channel_lag's
+// drift with the channel absent from the recording and the configuration: it must stay
+// `unexplained`, located to the gyro).
+inline std::vector<std::string> DiscoveryChannelClasses() {
+  return {"channel_value", "channel_lag", "channel_removed"};
+}
+inline Eigen::Vector3d ChannelGainDegHPerK() { return Eigen::Vector3d(-0.015, 0.015, 0.0125); }
+inline constexpr double kChannelLagHours = 40.0 / 60.0;
+inline constexpr double kChannelMeanK = 293.15;
+inline std::string ChannelNameOf(uint64_t seed) {
+  return "T_gyro" + std::to_string(1 + static_cast<int>(seed % 3));
+}
+
 // The sun scenario's face (0..5: +x, -x, +y, -y, +z, -z) and lag [h] for a seed.
 inline int SunFaceOf(uint64_t seed) { return static_cast<int>(seed % 6); }
 inline double SunLagHoursOf(uint64_t seed) {
@@ -237,6 +256,24 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.time_constant_s = SunLagHoursOf(seed) * 3600.0;
     s.gyros[g].sun_face_drift = d;
   }
+  if (effect == "channel_value" || effect == "channel_lag" || effect == "channel_removed") {
+    ChannelDrift c;
+    c.channel = ChannelNameOf(seed);
+    c.mean = kChannelMeanK;
+    c.gain_k_rad_s_per_unit = x * ChannelGainDegHPerK() * deg_h;
+    c.lag_s = effect == "channel_value" ? 0.0 : kChannelLagHours * 3600.0;
+    c.telemetered = effect != "channel_removed";
+    s.gyros[g].channel_drift = c;
+    if (c.telemetered) {
+      ChannelConfig declared;
+      declared.name = c.channel;
+      declared.unit = "K";
+      declared.valid_min = 250.0;
+      declared.valid_max = 350.0;
+      declared.max_age = absl::Minutes(10);
+      s.config.channels.push_back(declared);
+    }
+  }
   if (effect == "warm_up" || effect == "transient") {
     TransientDrift d;
     d.amplitude_k_rad_s = x * WarmUpAmplitudeDegH() * deg_h;
@@ -298,7 +335,30 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
   if (truth == "transient") return basis("transient", "tauHours");
   if (truth == "readout_scale") return basis("", "readout");
-  if (truth == "switching_drift" || truth == "hidden_driver") {
+  if (truth == "channel_value" || truth == "channel_lag") {
+    // The right channel and form, each component of the gain within 3 sigma of the truth, and
+    // the lag's 95% interval holding the true lag.
+    if (!basis("follows_channel", "channelGainDegH")) return false;
+    const Finding& f = r.findings.front();
+    const bool lagged = truth == "channel_lag";
+    if (f.basis_terms.empty() || f.basis_terms.front().channel != "T_gyro" + std::to_string(gyro) ||
+        f.basis_terms.front().form !=
+            (lagged ? estimator::ChannelForm::kLag : estimator::ChannelForm::kValue)) {
+      return false;
+    }
+    for (int i = 0; i < 3; ++i) {
+      const Parameter* a = FindParameter(f.parameters, "channelGainDegH[" + std::to_string(i) + "]");
+      if (a == nullptr || !(std::abs(a->value - ChannelGainDegHPerK()(i)) <= 3.0 * a->sigma)) {
+        return false;
+      }
+    }
+    if (!lagged) return true;
+    const Parameter* lo = FindParameter(f.parameters, "channelLagLowerHours");
+    const Parameter* hi = FindParameter(f.parameters, "channelLagUpperHours");
+    return lo != nullptr && hi != nullptr && lo->value <= kChannelLagHours &&
+           kChannelLagHours <= hi->value;
+  }
+  if (truth == "switching_drift" || truth == "hidden_driver" || truth == "channel_removed") {
     return r.verdict == kVerdictUnexplained && !r.findings.empty() &&
            r.findings.back().effect == kVerdictUnexplained &&
            r.mismatch.found && (r.mismatch.gyro == gyro || r.mismatch.gyro == 0);

@@ -1,0 +1,409 @@
+#include "estimator/discovery/channel_candidate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <iterator>
+#include <limits>
+#include <map>
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "estimator/basis_term.h"
+#include "estimator/status_macros.h"
+#include "estimator/units.h"
+
+namespace esg::estimator::discovery {
+
+namespace {
+
+using Eigen::Vector3d;
+
+constexpr int kTerms = 3;
+// The chi-square(1) 95% quantile: the lag's interval is where -2 log L stays within it.
+constexpr double kIntervalDrop = 3.841458820694124;
+
+double DegH(double x) { return RadPerSecToDegPerHour(x); }
+
+// The channel's mean and standard deviation over the frames that carry it; count 0 when none.
+struct ChannelSpread {
+  int count = 0;
+  double mean = 0.0, sd = 0.0;
+};
+ChannelSpread SpreadOf(const std::vector<TelemetryFrame>& frames, const std::string& name) {
+  ChannelSpread s;
+  double sum = 0.0, sum2 = 0.0;
+  for (const TelemetryFrame& f : frames) {
+    const double* x = f.channels.Find(name);
+    if (x == nullptr) continue;
+    ++s.count;
+    sum += *x;
+  }
+  if (s.count == 0) return s;
+  s.mean = sum / s.count;
+  for (const TelemetryFrame& f : frames) {
+    if (const double* x = f.channels.Find(name)) sum2 += (*x - s.mean) * (*x - s.mean);
+  }
+  s.sd = s.count > 1 ? std::sqrt(sum2 / (s.count - 1)) : 0.0;
+  return s;
+}
+
+// `model` with gyro's three channel terms of `form` (tau [s] for the lag and derivative) freed
+// with prior `sigma` [rad/s per unit], then, with `offset_sigma` > 0, three case-fixed drifts
+// (spin_axis_harmonic of degree 0) freed with it [rad/s]: the drift where the channel is at its
+// mean, which the channel's own reference cannot tell from a constant drift.
+ModelState WithChannelTerms(const ModelState& model, int gyro, const std::string& channel,
+                            ChannelForm form, double tau_s, double reference, double sigma,
+                            double offset_sigma) {
+  ModelState m = model;
+  GyroConfig* g = FindGyroMutable(m.config, gyro);
+  for (int axis = 1; axis <= kTerms && offset_sigma > 0.0; ++axis) {
+    BasisTerm t;
+    t.kind = BasisKind::kSpinAxisHarmonic;
+    t.axis = axis;
+    t.sigma = offset_sigma;
+    g->basis_terms.push_back(t);
+  }
+  for (int axis = 1; axis <= kTerms; ++axis) {
+    BasisTerm t;
+    t.kind = BasisKind::kChannel;
+    t.axis = axis;
+    t.channel = channel;
+    t.form = form;
+    t.time_constant = form == ChannelForm::kValue ? 0.0 : tau_s;
+    t.reference = form == ChannelForm::kDerivative ? 0.0 : reference;
+    t.sigma = sigma;
+    g->basis_terms.push_back(t);
+  }
+  return m;
+}
+
+// -2 ln of the prior-weighted likelihood over points (weight, -2 log L): the form's integrated
+// -2 log L.
+double Integrated(const std::vector<std::pair<double, double>>& points) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& [w, v] : points) best = std::min(best, v);
+  double sum = 0.0;
+  for (const auto& [w, v] : points) sum += w * std::exp(-0.5 * (v - best));
+  return best - 2.0 * std::log(sum);
+}
+
+// The parabola through the best point of `lag` and its two neighbours (in ln tau): its vertex and
+// its curvature a (-2 log L = a (x - vertex)^2 + c); not ok at an end of the grid or without a
+// positive curvature.
+struct Parabola {
+  bool ok = false;
+  double vertex = 0.0, curvature = 0.0;
+};
+template <typename Map>
+Parabola VertexOf(const Map& lag, typename Map::const_iterator best) {
+  Parabola p;
+  if (best == lag.begin() || std::next(best) == lag.end()) return p;
+  const auto& [x0, r0] = *std::prev(best);
+  const auto& [x2, r2] = *std::next(best);
+  const double x1 = best->first, y0 = r0.value, y1 = best->second.value, y2 = r2.value;
+  const double a = ((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0);
+  if (!(a > 0.0)) return p;
+  p.ok = true;
+  p.curvature = a;
+  // The vertex: where the parabola's slope, (y1 - y0) / (x1 - x0) + a (2 x - x0 - x1), is zero.
+  p.vertex = std::clamp(0.5 * (x0 + x1) - (y1 - y0) / (x1 - x0) / (2.0 * a), x0, x2);
+  return p;
+}
+
+}  // namespace
+
+std::vector<std::string> CandidateChannels(const SpacecraftConfig& config) {
+  std::vector<std::string> names;
+  for (const ChannelConfig& c : config.channels) names.push_back(c.name);
+  return names;
+}
+
+absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& ctx,
+                                 CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
+  }
+  fit.time.kind = kTimeFollowsChannel;
+  fit.run = *ctx.model_run;
+  const int first_term = static_cast<int>(g->basis_terms.size());
+  const ChannelSpread spread = SpreadOf(*ctx.frames, candidate.channel);
+  // A copy: fit.model is replaced below.
+  std::optional<ChannelConfig> declared;
+  for (const ChannelConfig& c : fit.model.config.channels) {
+    if (c.name == candidate.channel) declared = c;
+  }
+  if (!declared.has_value() || spread.count < 2 || !(spread.sd > 0.0) ||
+      first_term + 2 * kTerms > kMaxBasisTermsPerGyro) {
+    fit.parameters = 0;
+    fit.notes.push_back(absl::StrFormat(
+        "no drift following %s fitted: %s", candidate.channel,
+        !declared.has_value()      ? "the channel is not declared"
+        : spread.count < 2         ? "the recording carries fewer than two of its values"
+        : !(spread.sd > 0.0)       ? "its value does not change over the recording"
+                                   : "the gyro's basis holds too many terms for three more"));
+    return absl::OkStatus();
+  }
+  const std::vector<TelemetryFrame> frames =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
+  // The prior: c_sigma of drift per 1-sigma of the channel [rad/s per unit].
+  const double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h) / spread.sd;
+  const double reference = spread.mean;
+  // The constant drift at the channel's mean, unless the gyro's C1 (eq. (8), the same case-fixed
+  // drift) is free already.
+  const bool offset = !(g->model_sigma.C1.maxCoeff() > 0.0);
+  const double offset_sigma = offset ? DegPerHourToRadPerSec(opt.c_sigma_deg_h) : 0.0;
+  const int terms = offset ? 2 * kTerms : kTerms;
+  // The channel terms follow the offsets (WithChannelTerms).
+  const int channel_first = first_term + (offset ? kTerms : 0);
+
+  struct Run {
+    double value = 0.0;  // profiled -2 log L
+    Vector3d a = Vector3d::Zero(), a_sigma = Vector3d::Zero();
+    Vector3d b = Vector3d::Zero(), b_sigma = Vector3d::Zero();  // the offsets [rad/s]
+    ModelRun run;
+  };
+  auto run_form = [&](ChannelForm form, double tau_s, Run& out) -> absl::Status {
+    const ModelState m = WithChannelTerms(fit.model, candidate.gyro, candidate.channel, form,
+                                          tau_s, reference, sigma, offset_sigma);
+    auto run = RunModel(m.config, m.options, frames);
+    ++fit.runs;
+    if (!run.ok()) return run.status();
+    out.value = Profile(*run).value;
+    if (const GyroEstimate* e = FindEstimate(run->gyros, candidate.gyro);
+        e != nullptr && static_cast<int>(e->basis_terms.size()) >= first_term + terms &&
+        static_cast<int>(e->basis_sigma.size()) >= first_term + terms) {
+      for (int i = 0; i < kTerms; ++i) {
+        out.a(i) = e->basis_terms[channel_first + i].value;
+        out.a_sigma(i) = e->basis_sigma[channel_first + i];
+        if (offset) {
+          out.b(i) = e->basis_terms[first_term + i].value;
+          out.b_sigma(i) = e->basis_sigma[first_term + i];
+        }
+      }
+    }
+    out.run = *std::move(run);
+    return absl::OkStatus();
+  };
+
+  Run value_run, derivative_run;
+  RETURN_IF_ERROR(run_form(ChannelForm::kValue, 0.0, value_run));
+  const double smoothing_s = HoursToSeconds(kChannelDerivativeSmoothingHours);
+  RETURN_IF_ERROR(run_form(ChannelForm::kDerivative, smoothing_s, derivative_run));
+  const double log_min = std::log(kChannelLagMinHours), log_max = std::log(kChannelLagMaxHours);
+  const double spacing = (log_max - log_min) / (kChannelLagCoarse - 1);
+  std::map<double, Run> lag;  // ln(tau / h) -> run
+  auto evaluate = [&](double log_tau) -> absl::Status {
+    log_tau = std::clamp(log_tau, log_min, log_max);
+    for (const auto& [x, r] : lag) {
+      if (std::abs(x - log_tau) < 1e-9) return absl::OkStatus();
+    }
+    Run r;
+    RETURN_IF_ERROR(run_form(ChannelForm::kLag, HoursToSeconds(std::exp(log_tau)), r));
+    lag.emplace(log_tau, std::move(r));
+    return absl::OkStatus();
+  };
+  auto best_lag = [&]() {
+    auto best = lag.begin();
+    for (auto it = lag.begin(); it != lag.end(); ++it) {
+      if (it->second.value < best->second.value) best = it;
+    }
+    return best;
+  };
+  for (int k = 0; k < kChannelLagCoarse; ++k) RETURN_IF_ERROR(evaluate(log_min + k * spacing));
+  for (int r = 1; r <= kChannelLagRefine; ++r) {
+    const double half = spacing / std::pow(2.0, r);
+    const double centre = best_lag()->first;
+    if (centre - half >= log_min - 1e-12) RETURN_IF_ERROR(evaluate(centre - half));
+    if (centre + half <= log_max + 1e-12) RETURN_IF_ERROR(evaluate(centre + half));
+  }
+  // Near its minimum -2 log L is a parabola in ln tau (the lag is well determined by a wandering
+  // channel: its profile falls by hundreds within a quarter of a grid spacing): the vertex of the
+  // parabola through the best time constant and its neighbours, run, up to kChannelLagVertexRuns
+  // times while it moves by more than 0.005 in ln tau.
+  for (int it = 0; it < kChannelLagVertexRuns; ++it) {
+    const Parabola p = VertexOf(lag, best_lag());
+    if (!p.ok) break;
+    bool known = false;
+    for (const auto& [x, r] : lag) known = known || std::abs(x - p.vertex) < 0.005;
+    if (known) break;
+    RETURN_IF_ERROR(evaluate(p.vertex));
+  }
+
+  // The lag's points with their prior weights (uniform in ln tau, trapezoid rule), each form a
+  // third of the prior.
+  const double span = log_max - log_min;
+  std::vector<std::pair<double, double>> lag_points;
+  std::vector<std::pair<double, double>> profile;
+  for (const auto& [x, r] : lag) profile.emplace_back(x, r.value);
+  for (size_t j = 0; j < profile.size(); ++j) {
+    const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
+    const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
+    lag_points.emplace_back(0.5 * (left + right) / span, profile[j].second);
+  }
+  fit.prior_points.emplace_back(1.0 / 3.0, value_run.value);
+  fit.prior_points.emplace_back(1.0 / 3.0, derivative_run.value);
+  for (const auto& [w, v] : lag_points) fit.prior_points.emplace_back(w / 3.0, v);
+
+  // The form reported: the largest evidence of the three (the lag's integrated over tau).
+  const double lag_integrated = Integrated(lag_points);
+  ChannelForm form = ChannelForm::kValue;
+  double form_value = value_run.value;
+  if (derivative_run.value < form_value) {
+    form = ChannelForm::kDerivative;
+    form_value = derivative_run.value;
+  }
+  if (lag_integrated < form_value) {
+    form = ChannelForm::kLag;
+    form_value = lag_integrated;
+  }
+  const auto best = best_lag();
+  double tau_h = 0.0, lower_h = 0.0, upper_h = 0.0;
+  bool clipped = false;
+  Run* chosen = &value_run;
+  if (form == ChannelForm::kDerivative) chosen = &derivative_run;
+  Vector3d a_sigma = Vector3d::Zero();
+  if (form == ChannelForm::kLag) {
+    chosen = &best->second;
+    const Parabola parabola = VertexOf(lag, best);
+    size_t top = 0;
+    for (size_t j = 0; j < profile.size(); ++j) {
+      if (profile[j].second < profile[top].second) top = j;
+    }
+    const double level = profile[top].second + kIntervalDrop;
+    auto crossing = [&](size_t inside, size_t outside) {
+      const auto [x0, y0] = profile[inside];
+      const auto [x1, y1] = profile[outside];
+      return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
+    };
+    double lower = profile.front().first, upper = profile.back().first;
+    bool lower_open = true, upper_open = true;
+    for (size_t j = top; j > 0; --j) {
+      if (profile[j - 1].second > level) {
+        lower = crossing(j, j - 1);
+        lower_open = false;
+        break;
+      }
+    }
+    for (size_t j = top; j + 1 < profile.size(); ++j) {
+      if (profile[j + 1].second > level) {
+        upper = crossing(j, j + 1);
+        upper_open = false;
+        break;
+      }
+    }
+    if (parabola.ok) {
+      // The interval of the parabola: -2 log L within 3.84 of its minimum.
+      const double half = std::sqrt(kIntervalDrop / parabola.curvature);
+      lower = std::max(log_min, parabola.vertex - half);
+      upper = std::min(log_max, parabola.vertex + half);
+      lower_open = parabola.vertex - half < log_min;
+      upper_open = parabola.vertex + half > log_max;
+    }
+    clipped = lower_open || upper_open;
+    tau_h = std::exp(parabola.ok ? parabola.vertex : profile[top].first);
+    lower_h = std::exp(lower);
+    upper_h = std::exp(upper);
+    // The gain moves with tau: its sigma adds the spread tau's uncertainty gives (the delta method
+    // on the profile, da/d ln tau between the time constants inside the interval, times the
+    // 1-sigma of ln tau, the 95% half-width / 1.96), as the warm-up's amplitude does.
+    auto inside = [&](const auto& point) {
+      return point.first >= lower - 1e-12 && point.first <= upper + 1e-12;
+    };
+    auto lo = std::find_if(lag.begin(), lag.end(), inside);
+    auto hi = std::find_if(lag.rbegin(), lag.rend(), inside);
+    if (lo != lag.end() && hi != lag.rend() && hi->first > lo->first) {
+      const Vector3d slope = (hi->second.a - lo->second.a) / (hi->first - lo->first);
+      const double sigma_log_tau = 0.5 * (upper - lower) / 1.959963984540054;
+      a_sigma = (slope.cwiseAbs() * sigma_log_tau).cwiseAbs2();
+    }
+  }
+  a_sigma = (chosen->a_sigma.cwiseAbs2() + a_sigma).cwiseSqrt();
+  const Vector3d a = chosen->a;
+  const double tau_s = form == ChannelForm::kLag          ? HoursToSeconds(tau_h)
+                       : form == ChannelForm::kDerivative ? smoothing_s
+                                                          : 0.0;
+  fit.model = WithChannelTerms(fit.model, candidate.gyro, candidate.channel, form, tau_s,
+                               reference, sigma, offset_sigma);
+  const Vector3d b = chosen->b, b_sigma = chosen->b_sigma;
+  fit.run = std::move(chosen->run);
+  fit.parameters = terms;
+  const GyroConfig* gw = FindGyroMutable(fit.model.config, candidate.gyro);
+  // The channel terms first (Finding::basis_terms.front() names the channel), then the offsets.
+  for (int i = 0; i < kTerms; ++i) {
+    BasisTerm t = gw->basis_terms[channel_first + i];
+    t.value = a(i);
+    fit.basis_terms.push_back(t);
+  }
+  for (int i = 0; i < kTerms && offset; ++i) {
+    BasisTerm t = gw->basis_terms[first_term + i];
+    t.value = b(i);
+    fit.basis_terms.push_back(t);
+  }
+  for (int i = 0; i < kTerms && offset; ++i) {
+    fit.fitted.push_back(
+        {absl::StrFormat("channelOffsetDegH[%d]", i), DegH(b(i)), DegH(b_sigma(i)), "deg/h"});
+  }
+  // Parameters in deg/h per unit of the channel (per unit per hour for the derivative).
+  const std::string unit = form == ChannelForm::kDerivative
+                               ? absl::StrCat("deg/h per ", declared->unit, "/h")
+                               : absl::StrCat("deg/h per ", declared->unit);
+  for (int i = 0; i < kTerms; ++i) {
+    fit.fitted.push_back(
+        {absl::StrFormat("channelGainDegH[%d]", i), DegH(a(i)), DegH(a_sigma(i)), unit});
+  }
+  const double size = a.norm();
+  const double size_sigma =
+      size > 0 ? std::sqrt((a.cwiseProduct(a_sigma)).squaredNorm()) / size : a_sigma.norm();
+  fit.fitted.push_back({"channelGainSizeDegH", DegH(size), DegH(size_sigma), unit});
+  fit.fitted.push_back({"channelReference", reference, 0.0, declared->unit});
+  if (form == ChannelForm::kLag) {
+    fit.fitted.push_back({"channelLagHours", tau_h, 0.5 * (upper_h - lower_h), "h"});
+    fit.fitted.push_back({"channelLagLowerHours", lower_h, 0.0, "h"});
+    fit.fitted.push_back({"channelLagUpperHours", upper_h, 0.0, "h"});
+  }
+  const Vector3d direction = size > 0 ? Vector3d(a / size) : Vector3d::Zero();
+  const std::string what =
+      form == ChannelForm::kValue ? candidate.channel
+      : form == ChannelForm::kLag ? candidate.channel
+                                  : absl::StrCat("the rate of change of ", candidate.channel);
+  std::string lag_text;
+  if (form == ChannelForm::kLag) {
+    lag_text = absl::StrFormat(" with a %.0f min lag (95%% %.0f-%.0f min%s)", tau_h * 60.0,
+                               lower_h * 60.0, upper_h * 60.0,
+                               clipped ? ", clipped: the interval reaches an end of the lags "
+                                         "searched"
+                                       : "");
+  }
+  fit.description = absl::StrFormat(
+      "gyro %d drift along (%.2f, %.2f, %.2f) (case axes) follows %s at %.4f +- %.4f %s%s "
+      "(%s at %s = %.6g %s, its mean over the recording)",
+      candidate.gyro, direction.x(), direction.y(), direction.z(), what, DegH(size),
+      DegH(size_sigma), unit, lag_text,
+      offset ? absl::StrFormat("plus a case-fixed drift (%.4f, %.4f, %.4f) deg/h", DegH(b.x()),
+                               DegH(b.y()), DegH(b.z()))
+             : std::string("zero"),
+      candidate.channel, reference, declared->unit);
+  fit.notes.push_back(absl::StrFormat(
+      "-2 log L of the forms: value %.1f, derivative (of a %.0f min lag) %.1f, lag integrated "
+      "over tau %.1f (best %.2f h: %.1f); the three forms equally likely a priori, tau uniform in "
+      "ln tau over %.1f-%.0f h; terms freed with %.4f deg/h per %s (c_sigma per 1-sigma of the "
+      "channel, %.4g %s)",
+      value_run.value, kChannelDerivativeSmoothingHours * 60.0, derivative_run.value,
+      lag_integrated, std::exp(best->first), best->second.value, kChannelLagMinHours,
+      kChannelLagMaxHours, DegH(sigma), declared->unit, spread.sd, declared->unit));
+  std::string profile_text;
+  for (const auto& [x, v] : profile) {
+    absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", std::exp(x), v - best->second.value));
+  }
+  fit.notes.push_back(
+      absl::StrCat("likelihood over the lag (h: -2 log L above the best):", profile_text));
+  return absl::OkStatus();
+}
+
+}  // namespace esg::estimator::discovery
