@@ -37,4 +37,5 @@ if [[ $frames -gt 0 ]]; then fleet_args+=(--recording "$flight" --frames "$frame
 "$fleet" "${fleet_args[@]}"
 sleep 2
 after=$(rss)
-echo "sessions $n: esgd resident set ${before} KiB before, ${after} KiB after: $(( (after - before) / n )) KiB per session"
+per_session=$(awk -v a="$after" -v b="$before" -v n="$n" 'BEGIN {printf "%.1f", (a - b) / n}')
+echo "sessions $n: esgd resident set ${before} KiB before, ${after} KiB after: ${per_session} KiB per session"

@@ -64,14 +64,14 @@ void DescribeApplication(const estimator::SpacecraftConfig& config,
 std::string EncodeWindowCheckpoint(const ServerCheckpoint& apply,
                                    const estimator::EstimationSession& session);
 
-// One per configured spacecraft (shared by its ingest and state sides). The wire form of the
-// configuration is not kept: GetSession converts `config` when asked (ConfigToProto), which
-// saves its copy in every session (docs/performance.md "Sessions per node").
+// One per configured spacecraft (shared by its ingest and state sides). Neither the wire form
+// of the configuration nor its JSON is kept: GetSession converts `config` when asked
+// (ConfigToProto) and a reconfiguration compares ConfigToJson of both, which saves two copies in
+// every session (docs/performance.md "Sessions per node").
 struct EstimationCore::Setup {
   estimator::SpacecraftConfig config;
   estimator::ModelSpec model;
   std::string model_name;
-  std::string config_json;
   std::array<bool, estimator::kMaxGyros> configured{};
 };
 

@@ -149,7 +149,6 @@ void EstimationCore::SetupFromStoredConfig(const storage::ConfigRecord& record, 
   }
   r.setup = std::make_shared<Setup>();
   r.setup->config = *config;
-  r.setup->config_json = record.config_json;
   for (const auto& g : config->gyros) {
     if (g.id >= 1 && g.id <= estimator::kMaxGyros) r.setup->configured[g.id - 1] = true;
   }
@@ -504,7 +503,6 @@ absl::StatusOr<EstimationCore::Configuration> EstimationCore::PrepareConfigurati
   setup->config = config;
   setup->model = model;
   setup->model_name = model.Name();
-  setup->config_json = proto_convert::ConfigToJson(config);
   for (const auto& g : config.gyros) setup->configured[g.id - 1] = true;
   c.setup = setup;
 
@@ -513,7 +511,7 @@ absl::StatusOr<EstimationCore::Configuration> EstimationCore::PrepareConfigurati
   c.cp.last_sequence = 0;
   c.cp.compute_time = absl::Now();
   c.record.spacecraft_id = config.spacecraft_id;
-  c.record.config_json = setup->config_json;
+  c.record.config_json = proto_convert::ConfigToJson(config);
   c.record.updated_time = c.cp.compute_time;
   return c;
 }
@@ -617,7 +615,10 @@ absl::Status EstimationCore::ReplaceSessionIfChanged(Spacecraft& sc, Configurati
   absl::MutexLock state(&sc.state_mu);
   const Setup& setup = *c.setup;
   const bool quarantined = !sc.apply.quarantine_reason.empty();
-  const bool same = sc.setup != nullptr && sc.setup->config_json == setup.config_json &&
+  // Both in the JSON this program writes (a stored configuration of an older one compares by
+  // what it says, not by how it was written).
+  const bool same = sc.setup != nullptr &&
+                    proto_convert::ConfigToJson(sc.setup->config) == c.record.config_json &&
                     sc.setup->model_name == setup.model_name;
   if (same && !(quarantined && replace)) return absl::OkStatus();
   if (!sc.highest_accepted.empty() && !replace) {
