@@ -326,6 +326,14 @@ TEST(Service, ReconfigurationNeedsReplaceOnceTelemetryExistsAndThenReappliesTheA
   ASSERT_TRUE(configure(ConfigureRequestFor(run.config), &r).ok());
   EXPECT_FALSE(r.created());
   EXPECT_EQ(r.session().frames_applied(), 40);
+  // The same model with a configuration that differs in one value (a gyro's misalignment
+  // sigma; the session keeps no copy of the configuration's JSON to compare with): refused
+  // without replace.
+  auto retuned = ConfigureRequestFor(run.config);
+  ASSERT_GT(retuned.config().gyros_size(), 0);
+  retuned.mutable_config()->mutable_gyros(0)->set_misalignment_sigma_arcsec(
+      retuned.config().gyros(0).misalignment_sigma_arcsec() + 1.0);
+  ExpectCode(configure(retuned, &r), grpc::StatusCode::FAILED_PRECONDITION, "replace");
   // A different model without replace: refused; with replace: the archive is applied again.
   auto changed = ConfigureRequestFor(run.config, "1+11");
   ExpectCode(configure(changed, &r), grpc::StatusCode::FAILED_PRECONDITION, "replace");
