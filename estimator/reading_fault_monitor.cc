@@ -228,19 +228,22 @@ ReadingFaultMonitor::Projected ReadingFaultMonitor::Project(const Track& track) 
   return p;
 }
 
-ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source source,
-                                                       const Track& track) const {
-  Result r;
-  r.gyro_id = gyro_id;
-  r.source = source;
-  const int n = static_cast<int>(track.points.size());
-  if (n < 2) return r;
-  const Projected p = Project(track);
-  const double dt = p.tau[n - 1] - p.tau[n - 2];
-  if (!(dt > 0.0)) return r;
+// One window's judgement (Judge), in its order: beyond any drift, a jump, erratic. The drift
+// alternatives the jump and the erratic tests compare with are computed when first needed, and
+// once.
+struct ReadingFaultMonitor::Judgement {
+  const ReadingFaultOptions& options;
+  const std::vector<double>& erratic_threshold;
+  const Track& track;
+  Projected p;
+  int n = 0;
+  Fit line;
+  std::optional<double> smooth_rss;
+  std::optional<double> slew_rss;
 
-  // kBeyond: the last increment against the rate of the points before it.
-  {
+  // kBeyond: the last increment against the rate of the points before it. `dt` > 0 is the last
+  // interval.
+  std::optional<Result> Beyond(double dt) const {
     Vector2d b = Vector2d::Zero();
     Matrix2d cov_b = Matrix2d::Zero();
     if (n >= 3) {
@@ -249,10 +252,10 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       before.W.pop_back();
       before.cov.pop_back();
       before.tau.pop_back();
-      const Fit line = WeightedFit(before, Regressors(before, -1, std::nullopt, false));
-      if (std::isfinite(line.rss)) {
-        b = line.beta.segment<2>(2);
-        cov_b = line.cov.block<2, 2>(2, 2);
+      const Fit before_line = WeightedFit(before, Regressors(before, -1, std::nullopt, false));
+      if (std::isfinite(before_line.rss)) {
+        b = before_line.beta.segment<2>(2);
+        cov_b = before_line.cov.block<2, 2>(2, 2);
       }
     }
     const Vector2d c = ((p.y[n - 1] - p.y[n - 2]) - b * dt) / dt;
@@ -260,23 +263,21 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
     const Point& last_point = track.points.back();
     const double bound = last_point.drift_bound + kSlowReadingErrorRad * last_point.turn / dt;
     const double chi2 = BeyondBallChi2(c, S, bound);
-    if (chi2 >= options_.decision_chi2) {
-      r.verdict = ReadingVerdict::kBeyond;
-      r.value = c.norm();
-      r.threshold = bound;
-      r.statistic = chi2;
-      return r;
-    }
+    if (!(chi2 >= options.decision_chi2)) return std::nullopt;
+    Result r;
+    r.verdict = ReadingVerdict::kBeyond;
+    r.value = c.norm();
+    r.threshold = bound;
+    r.statistic = chi2;
+    return r;
   }
-  if (n < 4) return r;
-  const Fit line = WeightedFit(p, Regressors(p, -1, std::nullopt, false));
+
   // Every drift alternative over the window: a steady change (quadratic) and a rate change at
   // any sample time. The best of them is the smooth curve a drift gives. They cost a fit per
   // sample and decide only when the line leaves something to explain (a jump that beats it, or
   // scatter about it beyond the noise; each alternative contains the line, so fits at least as
   // well): computed then, and once.
-  std::optional<double> smooth_rss;
-  const auto smooth = [&]() {
+  double Smooth() {
     if (!smooth_rss.has_value()) {
       smooth_rss = WeightedFit(p, Regressors(p, -1, std::nullopt, true)).rss;
       for (int j = 1; j <= n - 2; ++j) {
@@ -285,7 +286,8 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       }
     }
     return *smooth_rss;
-  };
+  }
+
   // A slow reading error delta (kSlowReadingErrorRad: an unconfigured misalignment, a scale
   // error, the filter's own misalignment error) displaces a rebuild by (R delta) x h, R the
   // attitude: over an interval in which the reading turns by theta it moves the rebuild by at
@@ -295,7 +297,7 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
   // best line with a step whose size is within its allowance (its part beyond the allowance
   // along its own direction below k_d^2, BeyondBallChi2) joins the drift alternatives. A step
   // beyond every allowance is left to the jump test.
-  const auto slew_steps = [&](const Projected& q) {
+  double SlewSteps(const Projected& q) const {
     double best = std::numeric_limits<double>::infinity();
     for (int j = 1; j < n; ++j) {
       const double allowance = kSlowReadingErrorRad * std::min(track.points[j].turn, 2.0);
@@ -303,41 +305,49 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       const Fit step = WeightedFit(q, Regressors(q, j, std::nullopt, false));
       if (!std::isfinite(step.rss)) continue;
       if (BeyondBallChi2(step.beta.segment<2>(4), step.cov.block<2, 2>(4, 4), allowance) <
-          options_.decision_chi2) {
+          options.decision_chi2) {
         best = std::min(best, step.rss);
       }
     }
     return best;
-  };
-  std::optional<double> slew_rss;
+  }
+
   // kJump: a jump at point jump_at (two or three points after it) against every drift
   // alternative, with the onset also inside the interval before the jump; at least two points
   // before it for the line.
-  for (int jump_at = n - 2; jump_at >= std::max(2, n - 3) && std::isfinite(line.rss); --jump_at) {
-    const Fit jump = WeightedFit(p, Regressors(p, jump_at, std::nullopt, false));
-    if (!std::isfinite(jump.rss)) continue;
-    const double over_line = line.rss - jump.rss;
-    if (!(over_line >= options_.decision_chi2)) continue;
-    double drift_rss = smooth();
-    for (int m = 1; m <= 3; ++m) {
-      const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
-      drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
+  std::optional<Result> Jump() {
+    for (int jump_at = n - 2; jump_at >= std::max(2, n - 3) && std::isfinite(line.rss); --jump_at) {
+      const Fit jump = WeightedFit(p, Regressors(p, jump_at, std::nullopt, false));
+      if (!std::isfinite(jump.rss)) continue;
+      const double over_line = line.rss - jump.rss;
+      if (!(over_line >= options.decision_chi2)) continue;
+      double drift_rss = Smooth();
+      for (int m = 1; m <= 3; ++m) {
+        const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
+        drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
+      }
+      if (!slew_rss.has_value()) slew_rss = SlewSteps(p);  // the same for both jump points
+      drift_rss = std::min(drift_rss, *slew_rss);
+      const double over_drift = drift_rss - jump.rss;
+      if (over_drift >= options.decision_chi2) {
+        Result r;
+        r.verdict = ReadingVerdict::kJump;
+        r.value = jump.beta.segment<2>(4).norm();
+        r.threshold = options.decision_chi2;
+        r.statistic = over_drift;
+        return r;
+      }
     }
-    if (!slew_rss.has_value()) slew_rss = slew_steps(p);  // the same for both jump points
-    drift_rss = std::min(drift_rss, *slew_rss);
-    const double over_drift = drift_rss - jump.rss;
-    if (over_drift >= options_.decision_chi2) {
-      r.verdict = ReadingVerdict::kJump;
-      r.value = jump.beta.segment<2>(4).norm();
-      r.threshold = options_.decision_chi2;
-      r.statistic = over_drift;
-      return r;
-    }
+    return std::nullopt;
   }
+
   // kErratic: scatter about the smooth curve, far beyond the noise. A drift change within the
   // window must not read as scatter.
-  if (!(line.rss <= erratic_threshold_[n]) && std::isfinite(smooth()) &&
-      smooth() > erratic_threshold_[n]) {
+  std::optional<Result> Erratic() {
+    const double threshold = erratic_threshold[n];
+    if (line.rss <= threshold || !std::isfinite(Smooth()) || !(Smooth() > threshold)) {
+      return std::nullopt;
+    }
     // A slow reading error (an unconfigured misalignment or scale error, kSlowReadingErrorRad
     // per radian of turn) moves a rebuild along the turn: smooth, but during a slew (the rate
     // rising, holding, falling) none of the fitted curves follows it. Its size over each interval
@@ -348,19 +358,41 @@ ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source sourc
       q.cov[j] += a * a * Matrix2d::Identity();
       q.W[j] = q.cov[j].inverse();
     }
-    double allowed = std::min(WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss,
-                              slew_steps(q));
-    for (int j = 1; j <= n - 2 && allowed > erratic_threshold_[n]; ++j) {
+    double allowed =
+        std::min(WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss, SlewSteps(q));
+    for (int j = 1; j <= n - 2 && allowed > threshold; ++j) {
       allowed = std::min(allowed, WeightedFit(q, Regressors(q, -1, q.tau[j], false)).rss);
     }
-    if (allowed > erratic_threshold_[n]) {
-      r.verdict = ReadingVerdict::kErratic;
-      r.value = allowed;
-      r.threshold = erratic_threshold_[n];
-      r.statistic = allowed;
-    }
+    if (!(allowed > threshold)) return std::nullopt;
+    Result r;
+    r.verdict = ReadingVerdict::kErratic;
+    r.value = allowed;
+    r.threshold = threshold;
+    r.statistic = allowed;
+    return r;
   }
-  return r;
+};
+
+ReadingFaultMonitor::Result ReadingFaultMonitor::Judge(int gyro_id, Source source,
+                                                       const Track& track) const {
+  Result none;
+  none.gyro_id = gyro_id;
+  none.source = source;
+  const int n = static_cast<int>(track.points.size());
+  if (n < 2) return none;
+  Judgement j{options_, erratic_threshold_, track, Project(track), n};
+  const double dt = j.p.tau[n - 1] - j.p.tau[n - 2];
+  if (!(dt > 0.0)) return none;
+  std::optional<Result> verdict = j.Beyond(dt);
+  if (!verdict.has_value() && n >= 4) {
+    j.line = WeightedFit(j.p, Regressors(j.p, -1, std::nullopt, false));
+    verdict = j.Jump();
+    if (!verdict.has_value()) verdict = j.Erratic();
+  }
+  if (!verdict.has_value()) return none;
+  verdict->gyro_id = gyro_id;
+  verdict->source = source;
+  return *verdict;
 }
 
 std::optional<ReadingFaultMonitor::DriftChange> ReadingFaultMonitor::EstimateDriftChange(

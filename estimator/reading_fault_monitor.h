@@ -238,6 +238,8 @@ class ReadingFaultMonitor {
   };
   static Projected Project(const Track& track);
   static int Key(int gyro_id, Source source) { return 2 * gyro_id + static_cast<int>(source); }
+  // A window's verdict: beyond any drift, else a jump, else erratic (Judgement's steps).
+  struct Judgement;
   Result Judge(int gyro_id, Source source, const Track& track) const;
 
   ReadingFaultOptions options_;
