@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/basis_term.h"
+#include "estimator/discovery/profile_interval.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
 
@@ -23,7 +24,7 @@ using Eigen::Vector3d;
 
 constexpr int kTerms = 3;
 // The chi-square(1) 95% quantile: the lag's interval is where -2 log L stays within it.
-constexpr double kIntervalDrop = 3.841458820694124;
+constexpr double kIntervalDrop = kProfileIntervalDrop;
 
 double DegH(double x) { return RadPerSecToDegPerHour(x); }
 
@@ -271,32 +272,10 @@ absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& c
   if (form == ChannelForm::kLag) {
     chosen = &best->second;
     const Parabola parabola = VertexOf(lag, best);
-    size_t top = 0;
-    for (size_t j = 0; j < profile.size(); ++j) {
-      if (profile[j].second < profile[top].second) top = j;
-    }
-    const double level = profile[top].second + kIntervalDrop;
-    auto crossing = [&](size_t inside, size_t outside) {
-      const auto [x0, y0] = profile[inside];
-      const auto [x1, y1] = profile[outside];
-      return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
-    };
-    double lower = profile.front().first, upper = profile.back().first;
-    bool lower_open = true, upper_open = true;
-    for (size_t j = top; j > 0; --j) {
-      if (profile[j - 1].second > level) {
-        lower = crossing(j, j - 1);
-        lower_open = false;
-        break;
-      }
-    }
-    for (size_t j = top; j + 1 < profile.size(); ++j) {
-      if (profile[j + 1].second > level) {
-        upper = crossing(j, j + 1);
-        upper_open = false;
-        break;
-      }
-    }
+    const size_t top = ProfileMinimum(profile);
+    const LevelInterval in = IntervalAtLevel(profile, top, profile[top].second + kIntervalDrop);
+    double lower = in.lower, upper = in.upper;
+    bool lower_open = in.lower_open, upper_open = in.upper_open;
     if (parabola.ok) {
       // The interval of the parabola: -2 log L within 3.84 of its minimum.
       const double half = std::sqrt(kIntervalDrop / parabola.curvature);

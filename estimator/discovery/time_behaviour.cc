@@ -13,6 +13,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "estimator/discovery/profile_interval.h"
 #include "estimator/statistics.h"
 #include "estimator/drift_model.h"
 #include "estimator/status_macros.h"
@@ -52,7 +53,7 @@ constexpr int kOnsetRefine = 4;
 constexpr double kHeldSigmaDegH = 1e-6;
 constexpr double kHeldSigmaArcsec = 1e-6;
 // chi-square(1) 95% quantile: the onset interval is where -2 log L stays within it of its minimum.
-constexpr double kOnsetIntervalDrop = 3.841458820694124;
+constexpr double kOnsetIntervalDrop = kProfileIntervalDrop;
 // The readout-jump alternative (D43) is profiled over at most this many of the step's onsets
 // inside its interval, nearest the best first.
 constexpr size_t kReadoutOnsets = 8;
@@ -213,26 +214,10 @@ OnsetProfile ProfileOnsets(const OnsetSearch& search, CandidateFit& fit) {
   for (size_t j = 0; j < profile.size(); ++j) {
     if (profile[j].second < profile[p.best].second) p.best = j;
   }
-  const double level = profile[p.best].second + kOnsetIntervalDrop;
-  auto crossing = [&](size_t inside, size_t outside) {
-    const auto [x0, y0] = profile[inside];
-    const auto [x1, y1] = profile[outside];
-    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
-  };
-  p.lower = profile.front().first;
-  p.upper = profile.back().first;
-  for (size_t j = p.best; j > 0; --j) {
-    if (profile[j - 1].second > level) {
-      p.lower = crossing(j, j - 1);
-      break;
-    }
-  }
-  for (size_t j = p.best; j + 1 < profile.size(); ++j) {
-    if (profile[j + 1].second > level) {
-      p.upper = crossing(j, j + 1);
-      break;
-    }
-  }
+  const LevelInterval in =
+      IntervalAtLevel(profile, p.best, profile[p.best].second + kOnsetIntervalDrop);
+  p.lower = in.lower;
+  p.upper = in.upper;
   return p;
 }
 
@@ -770,28 +755,10 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
   // The interval's ends resolved (kTauResolution) while the warm-up is significant.
   if (Profile(*ctx.model_run).value - best_value > EvidenceThreshold(opt.alpha, 1)) {
     for (int extra = 0; extra < kTauIntervalRuns; ++extra) {
-      const std::vector<std::pair<double, double>> points(value.begin(), value.end());
-      size_t top = 0;
-      for (size_t j = 0; j < points.size(); ++j) {
-        if (points[j].second < points[top].second) top = j;
-      }
-      const double level = points[top].second + kOnsetIntervalDrop;
-      // The widest bracket of an end: the last point inside the level and the first beyond it.
-      double widest = 0.0, middle = 0.0;
-      size_t j = top;
-      while (j > 0 && points[j - 1].second <= level) --j;
-      if (j > 0 && points[j].first - points[j - 1].first > widest) {
-        widest = points[j].first - points[j - 1].first;
-        middle = 0.5 * (points[j].first + points[j - 1].first);
-      }
-      j = top;
-      while (j + 1 < points.size() && points[j + 1].second <= level) ++j;
-      if (j + 1 < points.size() && points[j + 1].first - points[j].first > widest) {
-        widest = points[j + 1].first - points[j].first;
-        middle = 0.5 * (points[j].first + points[j + 1].first);
-      }
-      if (!(widest > kTauResolution)) break;
-      RETURN_IF_ERROR(evaluate(middle));
+      const std::optional<double> middle = WidestEndBracketMiddle(
+          ProfilePoints(value.begin(), value.end()), kOnsetIntervalDrop, kTauResolution);
+      if (!middle.has_value()) break;
+      RETURN_IF_ERROR(evaluate(*middle));
     }
   }
 
@@ -809,28 +776,10 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
   }
   // The interval: where -2 log L stays within the chi-square(1) 95% quantile of its minimum,
   // linear in ln tau between the time constants evaluated, clipped to the span searched.
-  const double level = profile[best].second + kOnsetIntervalDrop;
-  auto crossing = [&](size_t inside, size_t outside) {
-    const auto [x0, y0] = profile[inside];
-    const auto [x1, y1] = profile[outside];
-    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
-  };
-  double lower = profile.front().first, upper = profile.back().first;
-  bool lower_open = true, upper_open = true;
-  for (size_t j = best; j > 0; --j) {
-    if (profile[j - 1].second > level) {
-      lower = crossing(j, j - 1);
-      lower_open = false;
-      break;
-    }
-  }
-  for (size_t j = best; j + 1 < profile.size(); ++j) {
-    if (profile[j + 1].second > level) {
-      upper = crossing(j, j + 1);
-      upper_open = false;
-      break;
-    }
-  }
+  const LevelInterval in =
+      IntervalAtLevel(profile, best, profile[best].second + kOnsetIntervalDrop);
+  const double lower = in.lower, upper = in.upper;
+  const bool lower_open = in.lower_open, upper_open = in.upper_open;
   const double tau_h = std::exp(profile[best].first);
   const double lower_h = std::exp(lower), upper_h = std::exp(upper);
 
@@ -1003,57 +952,21 @@ absl::Status FitTransient(const Candidate& candidate, const FitContext& ctx, Can
   // the convex profile.
   if (Profile(*ctx.model_run).value - value[best_log] > EvidenceThreshold(opt.alpha, 1)) {
     for (int extra = 0; extra < kTauIntervalRuns; ++extra) {
-      const std::vector<std::pair<double, double>> points(value.begin(), value.end());
-      size_t top = 0;
-      for (size_t j = 0; j < points.size(); ++j) {
-        if (points[j].second < points[top].second) top = j;
-      }
-      const double level = points[top].second + kOnsetIntervalDrop;
-      double widest = 0.0, middle = 0.0;
-      size_t j = top;
-      while (j > 0 && points[j - 1].second <= level) --j;
-      if (j > 0 && points[j].first - points[j - 1].first > widest) {
-        widest = points[j].first - points[j - 1].first;
-        middle = 0.5 * (points[j].first + points[j - 1].first);
-      }
-      j = top;
-      while (j + 1 < points.size() && points[j + 1].second <= level) ++j;
-      if (j + 1 < points.size() && points[j + 1].first - points[j].first > widest) {
-        widest = points[j + 1].first - points[j].first;
-        middle = 0.5 * (points[j].first + points[j + 1].first);
-      }
-      if (!(widest > kTauResolution)) break;
-      RETURN_IF_ERROR(evaluate(middle));
+      const std::optional<double> middle = WidestEndBracketMiddle(
+          ProfilePoints(value.begin(), value.end()), kOnsetIntervalDrop, kTauResolution);
+      if (!middle.has_value()) break;
+      RETURN_IF_ERROR(evaluate(*middle));
     }
   }
   log_tau = best_log;
 
   // tau's interval: -2 log L within 3.84 of its minimum, linear in ln tau between the time
   // constants evaluated, clipped to the span searched.
-  const std::vector<std::pair<double, double>> tau_profile(value.begin(), value.end());
-  size_t best = 0;
-  for (size_t j = 0; j < tau_profile.size(); ++j) {
-    if (tau_profile[j].second < tau_profile[best].second) best = j;
-  }
-  const double level = tau_profile[best].second + kOnsetIntervalDrop;
-  auto crossing = [&](size_t inside, size_t outside) {
-    const auto [x0, y0] = tau_profile[inside];
-    const auto [x1, y1] = tau_profile[outside];
-    return y1 > y0 ? x0 + (x1 - x0) * (level - y0) / (y1 - y0) : x1;
-  };
-  double lower = tau_profile.front().first, upper = tau_profile.back().first;
-  for (size_t j = best; j > 0; --j) {
-    if (tau_profile[j - 1].second > level) {
-      lower = crossing(j, j - 1);
-      break;
-    }
-  }
-  for (size_t j = best; j + 1 < tau_profile.size(); ++j) {
-    if (tau_profile[j + 1].second > level) {
-      upper = crossing(j, j + 1);
-      break;
-    }
-  }
+  const ProfilePoints tau_profile(value.begin(), value.end());
+  const size_t best = ProfileMinimum(tau_profile);
+  const LevelInterval in =
+      IntervalAtLevel(tau_profile, best, tau_profile[best].second + kOnsetIntervalDrop);
+  const double lower = in.lower, upper = in.upper;
 
   // The evidence over onset and tau, separated: the onset's prior points (at the middle time
   // constant) each shifted by -2 ln R, R the likelihood integrated over a prior uniform in ln tau
