@@ -76,6 +76,12 @@ namespace esg::estimator {
 // On the paper's calibration profile (a turn of 6 deg a minute) it adds 0.21 deg/h to the bound.
 inline constexpr double kSlowReadingErrorRad = 2.0 * 60.0 * kRadPerArcsec;
 
+// The largest turn of a reading over one interval the monitor keeps [rad]: beyond any real one
+// (a spacecraft turning at 1 rad/s for 11 days between two measurement steps). A larger or
+// overflowing turn (a corrupt body rate restored from a checkpoint) is kept as this, so the
+// monitor's state stays finite and its checkpoint restores.
+inline constexpr double kMaxTurnRad = 1e6;
+
 struct ReadingFaultOptions {
   int window_steps = 20;        // W: increments in the window (W + 1 samples)
   double decision_chi2 = 25.0;  // k_d^2: each likelihood ratio and the beyond test

@@ -210,7 +210,9 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
   const double dt = last_update_time_ == absl::InfinitePast()
                         ? 0.0
                         : session_internal::Seconds(frame.time - last_update_time_);
-  const double turn = body_rate_b_.norm() * dt;
+  const double turn_measured = body_rate_b_.norm() * dt;
+  const bool turn_kept = turn_measured <= kMaxTurnRad;  // false for inf and NaN too
+  const double turn = turn_kept ? turn_measured : kMaxTurnRad;
   // The turn as a rotation vector in inertial axes (its axis tells a change of the turn's
   // direction at the same rate, reading_fault_monitor.h DriftChange): the body rate carried by
   // the star tracker's attitude, or the working pair's without it.
@@ -221,6 +223,7 @@ void EstimationSession::TrackReadings(const TelemetryFrame& frame, bool st_prese
              a != nullptr && b != nullptr) {
     q_in_b = PairQuaternion(a->id, b->id, a->h_k_last, b->h_k_last, nullptr);
   }
+  if (!turn_kept) q_in_b.reset();  // the axis of a turn not kept is not known either
   const Vector3d turn_in =
       q_in_b.has_value() ? Vector3d(q_in_b->toRotationMatrix() * body_rate_b_ * dt) : Vector3d::Zero();
   std::vector<double> bound(gyros_.size(), 0.0);

@@ -781,6 +781,34 @@ TEST(SessionCheckpoint, StepCountsRestoredAtTheirLimitStayThereAndTheCheckpointR
                                  "[-1e9, 1e9]")));
 }
 
+// Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 9): a checkpoint whose previous
+// mean body rate (version 4) was 1e300 about each axis restored; the next frame extrapolated the
+// body rate from it, the reading-fault monitor kept the turn |w| dt = inf, and the session's own
+// checkpoint did not restore ("turn inf is not finite"). The monitor now keeps a turn of at most
+// kMaxTurnRad, its axis unknown. Input: fuzz/corpus/checkpoint/regression-turn-overflow.bin.
+TEST(SessionCheckpoint, ABodyRateRestoredAt1e300KeepsTheTurnFiniteAndTheCheckpointRestores) {
+  const Scenario s = AllPhases();
+  const size_t cut = FrameAt(s, 0.5);
+  const Prefix p = RunPrefix(s, Options(), cut);
+  ASSERT_TRUE(p.session.initialized());
+  SessionCheckpoint c = p.session.ExportCheckpoint();
+  // Version 2's three flags and the consistency monitor's block, version 3's widening block,
+  // suspect gyro and time, then version 4's latency and the previous mean rate (3).
+  size_t pos = Version1Length(c) + 3;
+  pos += 1 + static_cast<size_t>(c.values.at(pos));
+  pos += 1 + static_cast<size_t>(c.values.at(pos));
+  pos += 1 + 3 + 1;
+  for (int i = 0; i < 3; ++i) c.values.at(pos + i) = 1e300;
+  c.values.at(pos + 3) = 60.0;  // previous_interval_s: the rate is extrapolated from it
+  absl::StatusOr<EstimationSession> restored =
+      EstimationSession::FromCheckpoint(s.spec.config, Options(), c);
+  ASSERT_THAT(restored, IsOk());
+  (void)restored->AddFrame(s.frames[cut]);  // any status
+  EXPECT_THAT(EstimationSession::FromCheckpoint(s.spec.config, Options(),
+                                                restored->ExportCheckpoint()),
+              IsOk());
+}
+
 // Found by fuzz/fuzz_checkpoint.cc (docs/fuzzing.md, finding 4): an uninitialised session's
 // checkpoint whose working pair named gyro 0 restored (pairs were checked only once initialised),
 // and the first frame with a star-tracker fix read the frame's gyro at index -1.
