@@ -287,7 +287,14 @@ absl::StatusOr<estimator::CoefficientStep> ParseCoefficientStep(const json& v,
     }
   }
   if (!any) {
-    return Invalid(path, "names no coefficient (k0DegH, c1DegH, c2DegH, muDegH or nuDegH)");
+    std::vector<std::string> keys;
+    for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
+      keys.emplace_back(key.json_key);
+    }
+    const std::string last = keys.back();
+    keys.pop_back();
+    return Invalid(path, absl::StrCat("names no coefficient (", absl::StrJoin(keys, ", "), " or ",
+                                      last, ")"));
   }
   step.delta = estimator::DriftCoefficients::FromVector(delta);
   return step;

@@ -98,4 +98,30 @@ double OffsetVoltageFromDisplacement(double displacement, double amplifier_gain,
   return displacement * reference_voltage / (amplifier_gain * gap);
 }
 
+std::vector<CoefficientMonomial> CoefficientMonomials(int i) {
+  if (i == kThetaK0) return {{1, {3, 0, 0}, -1}, {2, {0, 3, 0}, -1}, {3, {0, 0, 3}, -1}};
+  if (i >= kThetaC1 && i < kThetaC1 + 3) return {{i - kThetaC1 + 1, {0, 0, 0}, -1}};
+  if (i >= kThetaC2 && i < kThetaC2 + 3) {
+    std::array<int, 3> e = {0, 0, 0};
+    e[i - kThetaC2] = 2;
+    return {{i - kThetaC2 + 1, e, -1}};
+  }
+  switch (i) {
+    case kThetaMu + 0:  // mu12: x h1 h2^2, y -h2 h1^2
+      return {{1, {1, 2, 0}, 1}, {2, {2, 1, 0}, -1}};
+    case kThetaMu + 1:  // mu23: y h2 h3^2, z -h3 h2^2
+      return {{2, {0, 1, 2}, 1}, {3, {0, 2, 1}, -1}};
+    case kThetaMu + 2:  // mu31: z h3 h1^2, x -h1 h3^2
+      return {{3, {2, 0, 1}, 1}, {1, {1, 0, 2}, -1}};
+    case kThetaNu + 0:  // nu23: x h2 h3
+      return {{1, {0, 1, 1}, 1}};
+    case kThetaNu + 1:  // nu31: y h3 h1
+      return {{2, {1, 0, 1}, 1}};
+    case kThetaNu + 2:  // nu12: z h1 h2
+      return {{3, {1, 1, 0}, 1}};
+    default:
+      return {};
+  }
+}
+
 }  // namespace esg::estimator

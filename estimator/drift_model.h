@@ -14,6 +14,9 @@
 #ifndef ESG_ESTIMATOR_DRIFT_MODEL_H_
 #define ESG_ESTIMATOR_DRIFT_MODEL_H_
 
+#include <array>
+#include <vector>
+
 #include "Eigen/Core"
 
 namespace esg::estimator {
@@ -54,6 +57,18 @@ Eigen::Vector3d DriftRate_k(const DriftCoefficients& coefficients, const Eigen::
 
 // d(dw_k)/d(theta), 3 x 13; DriftRate_k(c, h) == DriftRegressor(h) * c.AsVector().
 DriftRegressorMatrix DriftRegressor(const Eigen::Vector3d& h_k);
+
+// Coefficient theta[i]'s regressor as monomials h1^a h2^b h3^c along case axis `axis` (1..3) with
+// a sign, up to its part along h, which moves nothing (the basis's spin_axis_harmonic terms,
+// basis_term.h): k0, C1, C2 have dw = (h h^T - I) g(h) = -(g(h) across h), g = k0 h^3 + C1 +
+// C2 h^2; mu, nu as printed in eq. (1) (x = h1 (mu12 h2^2 - mu31 h3^2) + h2 h3 nu23, cyclic).
+// Empty for an index outside theta.
+struct CoefficientMonomial {
+  int axis = 1;
+  std::array<int, 3> exponents = {0, 0, 0};
+  double sign = 1.0;
+};
+std::vector<CoefficientMonomial> CoefficientMonomials(int i);
 
 // Rotor displacement -> C1, C2 (eq. (8)-(10), docs/physics.md): with lambda the unit displacement
 // direction in case axes, C1 = (C10 + C20) lambda and C2 = -5 C20 lambda, where C10 and C20

@@ -16,6 +16,7 @@
 #include "estimator/discovery/profile_interval.h"
 #include "estimator/statistics.h"
 #include "estimator/drift_model.h"
+#include "estimator/model_terms.h"
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
 
@@ -414,43 +415,11 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
 
 std::vector<BasisTerm> CoefficientStepTerms(int first, const Eigen::VectorXd& step_rad_s,
                                             absl::Time onset, double sigma) {
-  // Each coefficient's regressor of eq. (1), (10) (drift_model.h DriftRegressor) as monomials
-  // h1^a h2^b h3^c along a case axis m with a sign, up to its part along h, which moves nothing:
-  // k0, C1, C2 have dw = (h h^T - I) g(h) = -(g(h) across h), g = k0 h^3 + C1 + C2 h^2; mu, nu
-  // as printed in eq. (1) (x = h1 (mu12 h2^2 - mu31 h3^2) + h2 h3 nu23, cyclic).
-  struct Monomial {
-    int axis;
-    std::array<int, 3> exponents;
-    double sign;
-  };
-  auto monomials = [](int theta) -> std::vector<Monomial> {
-    if (theta == kThetaK0) return {{1, {3, 0, 0}, -1}, {2, {0, 3, 0}, -1}, {3, {0, 0, 3}, -1}};
-    if (theta >= kThetaC1 && theta < kThetaC1 + 3) return {{theta - kThetaC1 + 1, {0, 0, 0}, -1}};
-    if (theta >= kThetaC2 && theta < kThetaC2 + 3) {
-      std::array<int, 3> e = {0, 0, 0};
-      e[theta - kThetaC2] = 2;
-      return {{theta - kThetaC2 + 1, e, -1}};
-    }
-    switch (theta) {
-      case kThetaMu + 0:  // mu12: x h1 h2^2, y -h2 h1^2
-        return {{1, {1, 2, 0}, 1}, {2, {2, 1, 0}, -1}};
-      case kThetaMu + 1:  // mu23: y h2 h3^2, z -h3 h2^2
-        return {{2, {0, 1, 2}, 1}, {3, {0, 2, 1}, -1}};
-      case kThetaMu + 2:  // mu31: z h3 h1^2, x -h1 h3^2
-        return {{3, {2, 0, 1}, 1}, {1, {1, 0, 2}, -1}};
-      case kThetaNu + 0:  // nu23: x h2 h3
-        return {{1, {0, 1, 1}, 1}};
-      case kThetaNu + 1:  // nu31: y h3 h1
-        return {{2, {1, 0, 1}, 1}};
-      case kThetaNu + 2:  // nu12: z h1 h2
-        return {{3, {1, 1, 0}, 1}};
-      default:
-        return {};
-    }
-  };
+  // Each coefficient's regressor of eq. (1), (10) as monomials (drift_model.h
+  // CoefficientMonomials).
   std::vector<BasisTerm> terms;
   for (int j = 0; j < step_rad_s.size(); ++j) {
-    for (const Monomial& m : monomials(first + j)) {
+    for (const CoefficientMonomial& m : CoefficientMonomials(first + j)) {
       BasisTerm t;
       t.kind = BasisKind::kSpinAxisHarmonic;
       t.axis = m.axis;
@@ -472,10 +441,19 @@ std::vector<CoefficientGroup> StepGroupsInUse(const GyroConfig& gyro) {
     }
     return false;
   };
-  std::vector<CoefficientGroup> out = {{"k0", "k0StepDegH", kThetaK0, 1}};  // every model's
-  if (in_use(kThetaC2, 3)) out.push_back({"C2", "c2StepDegH", kThetaC2, 3});
-  if (in_use(kThetaMu, 3)) out.push_back({"mu", "muStepDegH", kThetaMu, 3});
-  if (in_use(kThetaNu, 3)) out.push_back({"nu", "nuStepDegH", kThetaNu, 3});
+  // The fixed terms' table (model_terms.h), in theta order: k0 every model's; C1 is the drift
+  // step's; the others where in use. The step's name is the key's with "Step" before its unit.
+  std::vector<CoefficientGroup> out;
+  for (const FixedTermKey& key : FixedTermKeys()) {
+    if (key.first_theta_index == kThetaC1) continue;
+    if (key.first_theta_index != kThetaK0 && !in_use(key.first_theta_index, key.components)) {
+      continue;
+    }
+    std::string json_name(key.json_key);
+    const size_t unit_at = json_name.find("DegH");
+    json_name.insert(unit_at == std::string::npos ? json_name.size() : unit_at, "Step");
+    out.push_back({std::string(key.symbol), json_name, key.first_theta_index, key.components});
+  }
   return out;
 }
 

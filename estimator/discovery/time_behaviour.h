@@ -6,6 +6,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_TIME_BEHAVIOUR_H_
 #define ESG_ESTIMATOR_DISCOVERY_TIME_BEHAVIOUR_H_
 
+#include <string>
 #include <vector>
 
 #include "Eigen/Core"
@@ -34,8 +35,8 @@ inline constexpr const char* kTimeWarmUp = "warm_up";
 // A group of drift coefficients of eq. (1), (10) (drift_model.h theta[first .. first + count)),
 // its name and its step's parameter name in a finding ("k0StepDegH", "c2StepDegH[0..2]", ...).
 struct CoefficientGroup {
-  const char* name = "k0";
-  const char* json_name = "k0StepDegH";
+  std::string name = "k0";
+  std::string json_name = "k0StepDegH";
   int first = kThetaK0;
   int count = 1;
 };
