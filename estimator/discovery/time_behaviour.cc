@@ -446,13 +446,12 @@ std::vector<CoefficientGroup> StepGroupsInUse(const GyroConfig& gyro) {
   std::vector<CoefficientGroup> out;
   for (const FixedTermKey& key : FixedTermKeys()) {
     if (key.first_theta_index == kThetaC1) continue;
-    if (key.first_theta_index != kThetaK0 && !in_use(key.first_theta_index, key.components)) {
-      continue;
-    }
+    const int count = std::max(key.components, 1);  // a scalar key has no components
+    if (key.first_theta_index != kThetaK0 && !in_use(key.first_theta_index, count)) continue;
     std::string json_name(key.json_key);
     const size_t unit_at = json_name.find("DegH");
     json_name.insert(unit_at == std::string::npos ? json_name.size() : unit_at, "Step");
-    out.push_back({std::string(key.symbol), json_name, key.first_theta_index, key.components});
+    out.push_back({std::string(key.symbol), json_name, key.first_theta_index, count});
   }
   return out;
 }
