@@ -32,6 +32,14 @@ GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id) {
   return nullptr;
 }
 
+absl::StatusOr<GyroConfig*> CandidateGyro(SpacecraftConfig& c, int gyro) {
+  GyroConfig* g = FindGyroMutable(c, gyro);
+  if (g == nullptr) {
+    return absl::InvalidArgumentError(absl::StrCat("candidate gyro ", gyro, " is not configured"));
+  }
+  return g;
+}
+
 void ReleaseHeldCoefficients(SpacecraftConfig& config, int gyro, int first, int count,
                              double sigma) {
   GyroConfig* g = FindGyroMutable(config, gyro);

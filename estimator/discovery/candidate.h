@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "absl/status/statusor.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/options.h"
 #include "estimator/discovery/regimes.h"
@@ -107,6 +108,8 @@ struct CandidateFit {
 // Gyro `id` of a configuration to change, and a run's final estimate of gyro `id`; nullptr when
 // absent.
 GyroConfig* FindGyroMutable(SpacecraftConfig& c, int id);
+// The candidate's gyro in `c`; InvalidArgument "candidate gyro N is not configured" when absent.
+absl::StatusOr<GyroConfig*> CandidateGyro(SpacecraftConfig& c, int gyro);
 const GyroEstimate* FindEstimate(const std::vector<GyroEstimate>& gyros, int id);
 
 // Gives the drift coefficients first .. first + count - 1 of gyro `gyro` (configured) that the

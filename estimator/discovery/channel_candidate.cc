@@ -125,11 +125,7 @@ std::vector<std::string> CandidateChannels(const SpacecraftConfig& config) {
 absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& ctx,
                                  CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
-  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
-  if (g == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-  }
+  ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   fit.time.kind = kTimeFollowsChannel;
   fit.run = *ctx.model_run;
   const int first_term = static_cast<int>(g->basis_terms.size());

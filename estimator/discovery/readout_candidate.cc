@@ -15,6 +15,7 @@
 #include "estimator/discovery/wander.h"
 #include "estimator/units.h"
 #include "estimator/statistics.h"
+#include "estimator/status_macros.h"
 
 namespace esg::estimator::discovery {
 
@@ -30,11 +31,7 @@ constexpr double kReadoutStepP = 0.01;
 absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& ctx,
                                  CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
-  GyroConfig* gc = FindGyroMutable(fit.model.config, candidate.gyro);
-  if (gc == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-  }
+  ASSIGN_OR_RETURN(GyroConfig* gc, CandidateGyro(fit.model.config, candidate.gyro));
   const ModelState& model = *ctx.model;
   const OpenEndedOptions o = ModelOpenEndedOptions(model, opt);
   // Gauss-Newton: the deviation is linear in E about the model it is measured from; a few

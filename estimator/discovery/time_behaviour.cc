@@ -380,11 +380,7 @@ absl::StatusOr<bool> SearchOnsets(OnsetSearch& search, const std::vector<int>& g
 // readout jump, and the step described.
 absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
-  GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
-  if (g == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-  }
+  ASSIGN_OR_RETURN(GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   // The step d (case axes) enters eq. (10) as C1 -> C1 - d: (h h^T - I)(-d) = d - (h.d) h, the
   // part of d across the spin axis (the part along it moves nothing).
   ReleaseHeldCoefficients(fit.model.config, candidate.gyro, kThetaC1, 3,
@@ -504,11 +500,7 @@ absl::Status StepOf(OnsetSearch& search, GroupStep& g) {
 absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ctx,
                                 CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
-  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
-  if (g == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-  }
+  ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   const std::vector<CoefficientGroup> groups = StepGroupsInUse(*g);
   for (const CoefficientGroup& group : groups) {
     ReleaseHeldCoefficients(fit.model.config, candidate.gyro, group.first, group.count,
@@ -669,11 +661,7 @@ ModelState WithWarmUp(const ModelState& model, int gyro, absl::Time t0, double t
 // prior weights and interval, and the best run's amplitude described.
 absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
-  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
-  if (g == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-  }
+  ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   fit.time.kind = kTimeWarmUp;
   const int first_term = static_cast<int>(g->basis_terms.size());
   if (first_term + kWarmUpTerms > kMaxBasisTermsPerGyro || ctx.frames->size() < 2) {
@@ -836,11 +824,7 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
 // the time constant searched at the best onset, the evidence, and the transient described.
 absl::Status FitTransient(const Candidate& candidate, const FitContext& ctx, CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
-  const GyroConfig* g = FindGyroMutable(fit.model.config, candidate.gyro);
-  if (g == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("candidate gyro ", candidate.gyro, " is not configured"));
-  }
+  ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   fit.time.kind = kTimeTransient;
   fit.parameters = 0;
   fit.run = *ctx.model_run;
