@@ -9,6 +9,7 @@ import { objectProvider, TELEMETRY_TYPE } from './objects.js';
 import { planViewProvider } from './planView.js';
 import { installRevisions } from './revisions.js';
 import { setNotifier, telemetryProvider } from './telemetry.js';
+import { installRoundTimeTicks } from './ticks.js';
 import { makeSpacecraftTree } from './tree.js';
 import { unavailableViewProvider } from './unavailableView.js';
 
@@ -51,5 +52,8 @@ export default function EsgConsolePlugin() {
     openmct.objectViews.addProvider(diagnosisViewProvider());
     openmct.objectViews.addProvider(unavailableViewProvider());
     openmct.objectViews.addProvider(planViewProvider());
+
+    // Open MCT's plots with their time ticks at round times.
+    installRoundTimeTicks(openmct);
   };
 }
