@@ -11,7 +11,9 @@
 //   - the ticks are the multiples of a round step (ROUND_STEPS) within that range, the smallest
 //     step that gives at most 6 ticks (fewer on a narrow plot);
 //   - Open MCT's labels and vertical grid lines stay in the page, hidden (visibility, so its
-//     layout is unchanged); ours carry its CSS classes, so they look the same.
+//     layout is unchanged); ours carry its CSS classes, so they look the same, but a label is as
+//     wide as its text (Open MCT's are a fifth of the plot's width, which cuts a date on a plot
+//     of the summary layout).
 // Nothing inside node_modules is changed. The page watches the DOM (one MutationObserver) and
 // redraws a plot's ticks on the next animation frame after Open MCT redraws its own.
 
@@ -33,7 +35,6 @@ export const ROUND_STEPS = [
 const MONDAY = 4 * DAY;
 const MAX_TICKS = 6;
 const MIN_TICK_PX = 80;
-const EDGE_PX = 40;
 
 function oneTwoFive(target, unit, fromExponent) {
   for (let k = fromExponent; ; k++) {
@@ -136,11 +137,6 @@ function updatePlot(plot) {
       const { text, full } = tickLabel(t, step);
       const label = div('gl-plot-tick gl-plot-x-tick-label', { 'aria-label': full, title: full });
       label.style.left = `${percent(t)}%`;
-      // A label near an edge is written from its tick inwards rather than centred on it, so the
-      // axis does not cut it.
-      const px = (percent(t) / 100) * axis.clientWidth;
-      if (px < EDGE_PX) Object.assign(label.style, { marginLeft: '0', textAlign: 'left' });
-      else if (axis.clientWidth - px < EDGE_PX) Object.assign(label.style, { marginLeft: '-20%', textAlign: 'right' });
       label.textContent = text;
       labels.appendChild(label);
       const line = div('gl-plot-hash hash-v');
@@ -150,6 +146,13 @@ function updatePlot(plot) {
     }
     axis.appendChild(labels);
     area.appendChild(grid);
+    // A label centred on its tick that the axis would cut is written from its tick inwards.
+    for (const label of labels.children) {
+      const px = (parseFloat(label.style.left) / 100) * axis.clientWidth;
+      const half = label.offsetWidth / 2;
+      if (px < half) label.style.transform = 'none';
+      else if (axis.clientWidth - px < half) label.style.transform = 'translateX(-100%)';
+    }
     plot.dataset.esgRoundTime = key;
   }
   grid.style.display = gridShown ? '' : 'none';
@@ -159,6 +162,9 @@ const STYLE = `
 .gl-plot[data-esg-round-time] .gl-plot-x > .js-ticks,
 .gl-plot[data-esg-round-time] .gl-plot-display-area > .js-ticks > .hash-v { visibility: hidden; }
 .gl-plot-x > .gl-plot-tick-wrapper[data-esg-round-ticks] { position: absolute; inset: 0; }
+.gl-plot-x > [data-esg-round-ticks] > .gl-plot-x-tick-label {
+  width: auto; margin-left: 0; transform: translateX(-50%); overflow: visible;
+}
 `;
 
 // Whether a DOM change may move a plot's time ticks: Open MCT's ticks redrawn (their text, place

@@ -87,59 +87,65 @@ after(async () => {
   fs.rmSync(tmp, { recursive: true, force: true });
 });
 
-// The time-axis tick labels and vertical grid lines the page shows (visible ones only), each
-// with its position in percent of the plot's width from the left.
+// The time-axis tick labels and vertical grid lines each plot on the page shows (visible ones
+// only), each with its position in percent of the plot's width from the left.
 function visibleTicks() {
   return page.evaluate(() => {
     const shown = (el) => el.checkVisibility({ visibilityProperty: true });
-    const plot = document.querySelector('.gl-plot');
-    if (!plot) return { labels: [], grid: [] };
-    const labels = [...plot.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')].filter(shown)
-      .map((el) => ({ text: el.textContent.trim(), full: el.getAttribute('aria-label'), left: parseFloat(el.style.left) }));
-    const grid = [...plot.querySelectorAll('.gl-plot-display-area .gl-plot-hash.hash-v')].filter(shown)
-      .map((el) => 100 - parseFloat(el.style.right));
-    return { labels, grid };
+    return [...document.querySelectorAll('.gl-plot')].map((plot) => ({
+      labels: [...plot.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')].filter(shown)
+        .map((el) => ({ text: el.textContent.trim(), full: el.getAttribute('aria-label'), left: parseFloat(el.style.left) })),
+      grid: [...plot.querySelectorAll('.gl-plot-display-area .gl-plot-hash.hash-v')].filter(shown)
+        .map((el) => 100 - parseFloat(el.style.right)),
+    }));
   });
 }
 
-// Opens a plot over [start, end] and checks its ticks; returns them.
-async function checkTicks(browsePath, start, end, what) {
+// Opens an object over [start, end] and waits until `plots` plots show time ticks.
+async function open(browsePath, start, end, plots = 1) {
   await page.evaluate((hash) => { window.location.hash = hash; },
     `#/browse/${browsePath}?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
-  await page.waitForSelector('.gl-plot canvas', { timeout: 20_000 });
-  await page.waitForFunction(() => [...document.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')]
-    .filter((el) => el.checkVisibility({ visibilityProperty: true })).length >= 2, { timeout: 20_000 });
-  await sleep(500); // the plot settles on its bounds
-  const { labels, grid } = await visibleTicks();
+  await page.waitForFunction((n) => {
+    const all = [...document.querySelectorAll('.gl-plot')];
+    return all.length >= n && all.every((plot) => [...plot.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')]
+      .filter((el) => el.checkVisibility({ visibilityProperty: true })).length >= 2);
+  }, { timeout: 20_000 }, plots);
+  await sleep(500); // the plots settle on their bounds
+}
+
+// Checks the ticks a plot shows over the time range [start, end] it spans; returns the step.
+function checkTicks({ labels, grid }, start, end, what) {
   // Open MCT's utc format: "2026-11-26 08:00:00.000Z".
-  const times = labels.map((l) => Date.parse(l.full.replace(' ', 'T')));
-  const where = `${what}: ${labels.map((l) => l.full).join(', ')}`;
+  const times = labels.map((x) => Date.parse(x.full.replace(' ', 'T')));
+  const where = `${what}: ${labels.map((x) => x.full).join(', ')}`;
   assert.ok(times.length >= 2 && times.every(Number.isFinite), where);
   const step = times[1] - times[0];
   assert.ok(ROUND_STEPS.includes(step), `step ${step / 1000} s is not a round one; ${where}`);
   const origin = step % (7 * DAY) === 0 ? MONDAY : 0;
   times.forEach((t, i) => {
-    assert.equal((t - origin) % step, 0, `tick ${l(labels[i])} is not a multiple of ${step / 1000} s; ${where}`);
+    const tick = labels[i].full;
+    assert.equal((t - origin) % step, 0, `tick ${tick} is not a multiple of ${step / 1000} s; ${where}`);
     if (i > 0) assert.equal(t - times[i - 1], step, `uneven ticks; ${where}`);
-    assert.ok(t >= start && t <= end, `tick ${l(labels[i])} outside the bounds; ${where}`);
-    // The label stands at its time on the axis (the plot spans the bounds), to 0.1 % of its width.
+    assert.ok(t >= start && t <= end, `tick ${tick} outside the plot's range; ${where}`);
+    // The label stands at its time on the axis, to 0.1 % of its width.
     const expected = (100 * (t - start)) / (end - start);
-    assert.ok(Math.abs(labels[i].left - expected) < 0.1, `tick ${l(labels[i])} at ${labels[i].left} %, its time at ${expected} %`);
+    assert.ok(Math.abs(labels[i].left - expected) < 0.1, `tick ${tick} at ${labels[i].left} %, its time at ${expected} %; ${what}`);
     // The text shown is part of the full time (the date at midnight, else the time of day).
-    assert.ok(labels[i].full.includes(labels[i].text), `label "${labels[i].text}" of ${labels[i].full}`);
+    assert.ok(labels[i].full.includes(labels[i].text), `label "${labels[i].text}" of ${tick}`);
   });
-  // No round tick of the step is left out within the bounds.
+  // No round tick of the step is left out within the range.
   assert.ok(times[0] - step < start && times[times.length - 1] + step > end, `ticks missing at an end; ${where}`);
   // The vertical grid lines at the same places as the labels.
   assert.equal(grid.length, labels.length, `grid lines ${grid.join(', ')}; ${where}`);
-  grid.forEach((g, i) => assert.ok(Math.abs(g - labels[i].left) < 0.1, `grid line ${g} % against label ${labels[i].left} %`));
+  grid.forEach((g, i) => assert.ok(Math.abs(g - labels[i].left) < 0.1, `grid line ${g} % against label ${labels[i].left} %; ${what}`));
   process.stdout.write(`# ${what}: step ${step / 1000} s, ticks ${labels.map((x) => x.text).join(' ')}\n`);
-  return { step, labels };
+  return step;
 }
 
-const l = (label) => label.full;
 // Bounds off round times (the flight ends on the hour).
 const OFFSET = -37_250;
+const PREDICTION = 'esg:root/esg:sc~RDK-1/esg:predplot~RDK-1';
+const K0 = 'esg:root/esg:sc~RDK-1/esg:coefs~RDK-1~1/esg:coefplot~RDK-1~1~k0';
 
 const SPANS = [
   { name: '20 min', ms: 20 * MINUTE },
@@ -152,7 +158,8 @@ test('the prediction plot has time ticks at round times over 20 min, 6 h and 2 d
     // Across the last frame: recorded readings, then the inertial hold.
     const start = last - span.ms / 2 + OFFSET;
     const end = last + span.ms / 2 + OFFSET;
-    await checkTicks('esg:root/esg:sc~RDK-1/esg:predplot~RDK-1', start, end, `prediction, ${span.name}`);
+    await open(PREDICTION, start, end);
+    checkTicks((await visibleTicks())[0], start, end, `prediction, ${span.name}`);
     await shot(`prediction_${span.name.replace(' ', '')}`);
   }
 });
@@ -161,8 +168,40 @@ test('a coefficient history plot has time ticks at round times over 20 min, 6 h 
   for (const span of SPANS) {
     const start = last - span.ms + OFFSET;
     const end = last + OFFSET;
-    await checkTicks('esg:root/esg:sc~RDK-1/esg:coefs~RDK-1~1/esg:coefplot~RDK-1~1~k0', start, end,
-      `k0 gyro 1, ${span.name}`);
+    await open(K0, start, end);
+    checkTicks((await visibleTicks())[0], start, end, `k0 gyro 1, ${span.name}`);
     await shot(`k0_${span.name.replace(' ', '')}`);
   }
+});
+
+test("zoomed in, a plot's ticks follow: round times over the zoomed range, a finer step", async () => {
+  let start = last - 6 * HOUR + OFFSET;
+  let end = last + OFFSET;
+  await open(K0, start, end);
+  const steps = [checkTicks((await visibleTicks())[0], start, end, 'k0 gyro 1, 6 h')];
+  for (const zoom of [1, 2]) {
+    // Open MCT's zoom button takes a fifth of the range off each end (MctPlot zoom('in', 0.2)).
+    await page.$eval('.gl-plot .js-zoom .icon-plus', (button) => button.click());
+    const cut = 0.2 * (end - start);
+    start += cut;
+    end -= cut;
+    await page.waitForFunction((s) => [...document.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')]
+      .filter((el) => el.checkVisibility({ visibilityProperty: true }))
+      .every((el) => Date.parse(el.getAttribute('aria-label').replace(' ', 'T')) >= s), { timeout: 10_000 }, start);
+    await sleep(300);
+    steps.push(checkTicks((await visibleTicks())[0], start, end, `k0 gyro 1, zoomed in ${zoom}x`));
+  }
+  assert.ok(steps[2] < steps[0], `steps ${steps.join(', ')} ms`);
+  await shot('k0_zoomed');
+});
+
+test('every plot of the summary layout has time ticks at round times', async () => {
+  const start = last - 6 * HOUR + OFFSET;
+  const end = last + OFFSET;
+  // The attitude 1-sigma envelope, k0 of the three running gyros and their innovations.
+  await open('esg:root/esg:sc~RDK-1/esg:summary~RDK-1', start, end, 7);
+  const plots = await visibleTicks();
+  assert.equal(plots.length, 7);
+  plots.forEach((plot, i) => checkTicks(plot, start, end, `summary plot ${i + 1}`));
+  await shot('summary');
 });
