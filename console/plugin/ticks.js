@@ -9,7 +9,7 @@
 //     full UTC time and its position in percent of the width; two give the range), so zooming,
 //     panning and the time conductor are followed as Open MCT follows them;
 //   - the ticks are the multiples of a round step (ROUND_STEPS) within that range, the smallest
-//     step that gives at most 6 ticks (fewer on a narrow plot);
+//     step that puts at most 8 ticks on the plot with their labels apart (fewer on a narrow plot);
 //   - Open MCT's labels and vertical grid lines stay in the page, hidden (visibility, so its
 //     layout is unchanged); ours carry its CSS classes, so they look the same, but a label is as
 //     wide as its text (Open MCT's are a fifth of the plot's width, which cuts a date on a plot
@@ -33,8 +33,8 @@ export const ROUND_STEPS = [
 
 // Multiples of a week start on Mondays: 1970-01-05 (UTC) was one.
 const MONDAY = 4 * DAY;
-const MAX_TICKS = 6;
-const MIN_TICK_PX = 80;
+const MAX_TICKS = 8;
+const LABEL_GAP_PX = 12;
 
 function oneTwoFive(target, unit, fromExponent) {
   for (let k = fromExponent; ; k++) {
@@ -53,13 +53,37 @@ export function roundStep(span, count) {
   return step !== undefined ? step : oneTwoFive(target, DAY, 1);
 }
 
-// The multiples of a round step within [min, max] (UTC ms); weeks from Mondays.
-export function roundTicks(min, max, count) {
-  const step = roundStep(max - min, count);
+// The multiples of a round step within [min, max] (UTC ms); weeks from Mondays. The range is read
+// back from the page to about a millionth of its length: a multiple within a hundred-thousandth
+// of it outside is an end of the range, kept.
+export function ticksOfStep(min, max, step) {
   const origin = step % (7 * DAY) === 0 ? MONDAY : 0;
+  const slack = (max - min) * 1e-5;
   const ticks = [];
-  for (let t = origin + Math.ceil((min - origin) / step) * step; t <= max; t += step) ticks.push(t);
-  return { step, ticks };
+  for (let t = origin + Math.ceil((min - slack - origin) / step) * step; t <= max + slack; t += step) ticks.push(t);
+  return ticks;
+}
+
+// Where a label of `width` px stands on an axis of `axisWidth` px, its tick at `x` px: centred on
+// the tick, or written from the tick inwards where centring would cut it.
+function labelBox(x, width, axisWidth) {
+  if (x < width / 2) return { left: x, right: x + width };
+  if (axisWidth - x < width / 2) return { left: x - width, right: x };
+  return { left: x - width / 2, right: x + width / 2 };
+}
+
+// The ticks of a plot's time axis over [min, max] (UTC ms), `axisWidth` px wide: the smallest
+// round step with at most MAX_TICKS - 1 steps in the range whose labels (textWidth(text) px wide)
+// stand apart. Returns {step, ticks: [{t, text, full}]}.
+export function chooseTicks(min, max, axisWidth, textWidth) {
+  for (let step = roundStep(max - min, MAX_TICKS - 1); ; step = roundStep(step + 1, 1)) {
+    const ticks = ticksOfStep(min, max, step).map((t) => ({ t, ...tickLabel(t, step) }));
+    const boxes = ticks.map(({ t, text }) =>
+      labelBox(((t - min) / (max - min)) * axisWidth, textWidth(text), axisWidth));
+    if (ticks.length <= 1 || boxes.every((b, i) => i === 0 || boxes[i - 1].right + LABEL_GAP_PX <= b.left)) {
+      return { step, ticks };
+    }
+  }
 }
 
 // "2026-11-26 08:00:00.000Z", Open MCT's utc format.
@@ -112,6 +136,20 @@ function removeOurs(plot) {
   delete plot.dataset.esgRoundTime;
 }
 
+let measure = null;
+
+// The width in px of a label's text in the font of Open MCT's time-axis labels.
+function textWidth(axis) {
+  const theirs = axis.querySelector(':scope > .js-ticks .gl-plot-x-tick-label');
+  measure = measure || document.createElement('canvas').getContext('2d');
+  measure.font = theirs ? getComputedStyle(theirs).font : '11px sans-serif';
+  const font = measure.font;
+  return (text) => {
+    measure.font = font;
+    return measure.measureText(text).width;
+  };
+}
+
 function updatePlot(plot) {
   const axis = plot.querySelector('.gl-plot-x');
   const area = plot.querySelector('.gl-plot-display-area');
@@ -120,21 +158,20 @@ function updatePlot(plot) {
     removeOurs(plot);
     return;
   }
-  const count = Math.max(2, Math.min(MAX_TICKS, Math.floor(axis.clientWidth / MIN_TICK_PX)));
+  const axisWidth = axis.clientWidth;
   // Open MCT's vertical grid lines: shown or not (its grid button, a compact plot) as ours.
   const theirGrid = [...area.querySelectorAll(':scope > .js-ticks')].find((el) => el.querySelector('.hash-v'));
   const gridShown = !theirGrid || theirGrid.style.display !== 'none';
-  const key = `${range.min}|${range.max}|${count}`;
+  const key = `${range.min}|${range.max}|${axisWidth}`;
   let labels = axis.querySelector(`:scope > [${OURS}]`);
   let grid = area.querySelector(`:scope > [${OURS}]`);
   if (plot.dataset.esgRoundTime !== key || !labels || !grid) {
     removeOurs(plot);
-    const { step, ticks } = roundTicks(range.min, range.max, count);
+    const { ticks } = chooseTicks(range.min, range.max, axisWidth, textWidth(axis));
     const percent = (t) => (100 * (t - range.min)) / (range.max - range.min);
     labels = div('gl-plot-tick-wrapper', { [OURS]: '' });
     grid = div('u-contents', { [OURS]: '' });
-    for (const t of ticks) {
-      const { text, full } = tickLabel(t, step);
+    for (const { t, text, full } of ticks) {
       const label = div('gl-plot-tick gl-plot-x-tick-label', { 'aria-label': full, title: full });
       label.style.left = `${percent(t)}%`;
       label.textContent = text;
@@ -146,12 +183,10 @@ function updatePlot(plot) {
     }
     axis.appendChild(labels);
     area.appendChild(grid);
-    // A label centred on its tick that the axis would cut is written from its tick inwards.
     for (const label of labels.children) {
-      const px = (parseFloat(label.style.left) / 100) * axis.clientWidth;
-      const half = label.offsetWidth / 2;
-      if (px < half) label.style.transform = 'none';
-      else if (axis.clientWidth - px < half) label.style.transform = 'translateX(-100%)';
+      const x = (parseFloat(label.style.left) / 100) * axisWidth;
+      const box = labelBox(x, label.offsetWidth, axisWidth);
+      label.style.transform = `translateX(${box.left - x}px)`;
     }
     plot.dataset.esgRoundTime = key;
   }
@@ -163,7 +198,7 @@ const STYLE = `
 .gl-plot[data-esg-round-time] .gl-plot-display-area > .js-ticks > .hash-v { visibility: hidden; }
 .gl-plot-x > .gl-plot-tick-wrapper[data-esg-round-ticks] { position: absolute; inset: 0; }
 .gl-plot-x > [data-esg-round-ticks] > .gl-plot-x-tick-label {
-  width: auto; margin-left: 0; transform: translateX(-50%); overflow: visible;
+  width: auto; margin-left: 0; overflow: visible;
 }
 `;
 

@@ -195,13 +195,15 @@ test("zoomed in, a plot's ticks follow: round times over the zoomed range, a fin
   await shot('k0_zoomed');
 });
 
-test('every plot of the summary layout has time ticks at round times', async () => {
-  const start = last - 6 * HOUR + OFFSET;
-  const end = last + OFFSET;
-  // The attitude 1-sigma envelope, k0 of the three running gyros and their innovations.
-  await open('esg:root/esg:sc~RDK-1/esg:summary~RDK-1', start, end, 7);
-  const plots = await visibleTicks();
-  assert.equal(plots.length, 7);
-  plots.forEach((plot, i) => checkTicks(plot, start, end, `summary plot ${i + 1}`));
-  await shot('summary');
+test('every plot of the summary layout has time ticks at round times, at least two on each', async () => {
+  for (const hours of [6, 10]) {
+    const start = last - hours * HOUR + OFFSET;
+    const end = last + OFFSET;
+    // The attitude 1-sigma envelope, k0 of the three running gyros and their innovations.
+    await open('esg:root/esg:sc~RDK-1/esg:summary~RDK-1', start, end, 7);
+    const plots = await visibleTicks();
+    assert.equal(plots.length, 7);
+    plots.forEach((plot, i) => checkTicks(plot, start, end, `summary plot ${i + 1}, ${hours} h`));
+    await shot(`summary_${hours}h`);
+  }
 });
