@@ -110,6 +110,15 @@ std::string DiagnosisMarkdown(const disc::DiagnosisReport& r,
                              behaviour, c.parameters, c.delta_deviance, c.penalty, c.score,
                              c.p_value, c.significant ? "yes" : "", c.selected ? "**yes**" : ""));
   }
+  bool refused_heading = false;
+  for (const auto& c : r.candidates) {
+    if (c.not_fitted.empty()) continue;
+    if (!refused_heading) absl::StrAppend(&md, "\nNot fitted:\n\n");
+    refused_heading = true;
+    absl::StrAppend(&md, absl::StrFormat("- round %d, %s%s: %s\n", c.round + 1, c.effect,
+                                         c.gyro > 0 ? absl::StrCat(" of gyro ", c.gyro) : "",
+                                         c.not_fitted));
+  }
   absl::StrAppend(&md,
                   "\n## Regimes\n\n| start | end | hours from the start | regime | rate, "
                   "deg/s |\n|---|---|---|---|---|\n");

@@ -185,6 +185,7 @@ json CandidateJson(const CandidateScore& c) {
   j["selected"] = c.selected;
   j["timeBehaviour"] = c.time_behaviour;
   if (c.onset_hours >= 0) j["onsetHours"] = Number(c.onset_hours);
+  if (!c.not_fitted.empty()) j["notFitted"] = c.not_fitted;
   return j;
 }
 

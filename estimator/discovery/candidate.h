@@ -65,6 +65,9 @@ struct CandidateFit {
   int parameters = 0;
   std::vector<Parameter> fitted;
   std::vector<std::string> notes;
+  // Why a candidate searched gave no fit (parameters 0) when a rule refused what the search found
+  // (time_behaviour.cc StepWithoutItsGain); shown in the table of candidates tried.
+  std::string not_fitted;
   int runs = 0;  // filter runs spent
   // Time behaviour (report.h TimeBehaviour). A step and a random walk are exempt from the
   // constant-effect homogeneity test (selection.h): they describe a change in time themselves.

@@ -228,6 +228,9 @@ struct CandidateScore {
   // random walk describe a change in time and are exempt from the homogeneity test.
   std::string time_behaviour = "constant";
   double onset_hours = -1.0;  // best onset of a step, hours since the first frame
+  // Why the search's result was refused (a step that does not carry its likelihood gain,
+  // docs/discovery.md "A step must carry its gain"); empty when it was fitted or found nothing.
+  std::string not_fitted;
 };
 
 // Time series for the report's plots.

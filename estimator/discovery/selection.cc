@@ -421,6 +421,7 @@ CandidateScore Row(const Scored& s, const CandidateFit& f, int round, int chosen
   row.homogeneous = s.homogeneous;
   row.selected = s.index == chosen;
   row.time_behaviour = f.time.kind;
+  row.not_fitted = f.not_fitted;
   if (f.time.kind == "step" || f.time.kind == kTimeCoefficientStep ||
       f.time.kind == kTimeTransient) {
     row.onset_hours = f.time.onset_hours;

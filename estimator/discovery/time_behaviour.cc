@@ -13,6 +13,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "estimator/discovery/profile_interval.h"
 #include "estimator/statistics.h"
 #include "estimator/drift_model.h"
@@ -265,6 +266,31 @@ absl::Status FitReadoutJump(OnsetSearch& search, const OnsetProfile& p,
   return absl::OkStatus();
 }
 
+// Whether a step found by releasing coefficients at its onset carries its likelihood gain
+// (docs/discovery.md, "A step must carry its gain"): the step's Wald statistic
+// sum_j (step_j / sigma_j)^2 (the components' correlation neglected) against the chi-square
+// bound of `count` degrees of freedom at the diagnosis's level alpha. Releasing a state's
+// variance at T also widens the covariance there: after a star-tracker outage, say, that alone
+// lowers -2 log L where the model's covariance was too small, with a step indistinguishable
+// from zero. Such a gain is the model's inconsistency, not a step. Returns an empty string when
+// the step carries its gain, else the note that says why it was not fitted.
+std::string StepWithoutItsGain(const std::string& name, const Eigen::VectorXd& step,
+                               const Eigen::VectorXd& sigma, double alpha, double gain) {
+  double wald = 0.0;
+  for (int j = 0; j < step.size(); ++j) {
+    if (sigma(j) > 0.0) wald += (step(j) / sigma(j)) * (step(j) / sigma(j));
+  }
+  const double bound = ChiSquareQuantile(1.0 - alpha, static_cast<double>(step.size()));
+  if (wald >= bound) return "";
+  return absl::StrFormat(
+      "a step of %s not fitted: -2 log L improves by %.1f at the best onset, but the step is "
+      "indistinguishable from zero (Wald chi-square %.2f for %d parameter%s, below its %.0f%% bound "
+      "%.2f): the gain comes from the variance released at the onset (the model's covariance too "
+      "small there), not from a change of the coefficient%s",
+      name, gain, wald, step.size(), step.size() == 1 ? "" : "s", 100.0 * (1.0 - alpha), bound,
+      step.size() == 1 ? "" : "s");
+}
+
 // The fit's onset with its interval (TimeBehaviour of a step).
 void DescribeOnset(const OnsetSearch& search, const OnsetProfile& p, CandidateFit& fit) {
   const std::vector<TelemetryFrame>& frames = search.frames;
@@ -281,7 +307,8 @@ void DescribeOnset(const OnsetSearch& search, const OnsetProfile& p, CandidateFi
 // The fit's time behaviour, the step (C1 after it, the run's final estimate, against C1 at the
 // onset, the checkpoint's), the onset with its interval and the profile's note; the best onset's
 // model and run become the fit's.
-absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
+absl::StatusOr<bool> DescribeStep(OnsetSearch& search, const OnsetProfile& p, double alpha,
+                                  double base_value) {
   CandidateFit& fit = search.fit;
   const double onset_hours = p.points[p.best].first;
   DescribeOnset(search, p, fit);
@@ -294,6 +321,16 @@ absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
   const GyroEstimate* after = FindEstimate(search.best_run.gyros, search.candidate.gyro);
   if (before != nullptr && after != nullptr) {
     const Vector3d d = -(after->coefficients.C1 - before->coefficients.C1);
+    // The step's 1-sigma for the test combines both estimates', as a coefficient step's does.
+    const Vector3d wald_sigma = (after->sigma.C1.array().square() +
+                                 before->sigma.C1.array().square()).sqrt().matrix();
+    const std::string refused = StepWithoutItsGain("C1", d, wald_sigma, alpha,
+                                                   base_value - search.best_value);
+    if (!refused.empty()) {
+      fit.notes.push_back(refused);
+      fit.not_fitted = refused;
+      return false;
+    }
     const Vector3d d_sigma = after->sigma.C1;
     AddVectorParameters("driftStepDegH", d, d_sigma, DegH(1.0), "deg/h", fit.fitted);
     const double size = d.norm();
@@ -313,7 +350,7 @@ absl::Status DescribeStep(OnsetSearch& search, const OnsetProfile& p) {
       search.value.size(), " onsets, integrated over a uniform prior):", profile_text));
   fit.model.options = search.best_options;
   fit.run = std::move(search.best_run);
-  return absl::OkStatus();
+  return true;
 }
 
 // The onsets of the first two grids, k D / (kOnsetCoarse kOnsetRefine), k = 1 .. before the
@@ -397,8 +434,9 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   const std::vector<int> grid_frames = GridFrames(frames);
   if (grid_frames.empty()) return absl::OkStatus();  // too short: parameters stay 0
   RETURN_IF_ERROR(RunPrefix(search, grid_frames));
+  const double base_value = Profile(*ctx.model_run).value;
   ASSIGN_OR_RETURN(const bool searched,
-                   SearchOnsets(search, grid_frames, Profile(*ctx.model_run).value, opt.alpha));
+                   SearchOnsets(search, grid_frames, base_value, opt.alpha));
   if (!searched) {  // nothing to search: no step fitted
     fit.parameters = 0;
     fit.run = *ctx.model_run;
@@ -406,7 +444,13 @@ absl::Status FitDriftStep(const Candidate& candidate, const FitContext& ctx, Can
   }
   const OnsetProfile profile = ProfileOnsets(search, fit);
   RETURN_IF_ERROR(FitReadoutJump(search, profile, opt));
-  return DescribeStep(search, profile);
+  ASSIGN_OR_RETURN(const bool carried, DescribeStep(search, profile, opt.alpha, base_value));
+  if (!carried) {  // the gain is not the step's: no step fitted
+    fit.parameters = 0;
+    fit.prior_points.clear();
+    fit.run = *ctx.model_run;
+  }
+  return absl::OkStatus();
 }
 
 std::vector<BasisTerm> CoefficientStepTerms(int first, const Eigen::VectorXd& step_rad_s,
@@ -516,6 +560,7 @@ absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ct
   const double base_value = Profile(*ctx.model_run).value;
 
   std::vector<GroupStep> steps;
+  std::vector<std::string> refused_notes;  // groups whose step does not carry its gain
   std::map<int, SessionCheckpoint> checkpoints;
   ModelRun prefix;
   for (const CoefficientGroup& group : groups) {
@@ -541,6 +586,13 @@ absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ct
     for (const auto& [w, v] : step.scratch.prior_points) points.emplace_back(w, base_value - v);
     step.evidence = EvidenceOverPrior(points);
     RETURN_IF_ERROR(StepOf(search, step));
+    const std::string refused =
+        StepWithoutItsGain(std::string(group.name), step.step, step.step_sigma, opt.alpha,
+                           base_value - search.best_value);
+    if (!refused.empty()) {
+      refused_notes.push_back(refused);
+      continue;
+    }
     step.best_frame = search.best_frame;
     step.onset_time = frames[search.best_frame - 1].time;
     DescribeOnset(search, step.profile, step.scratch);
@@ -548,7 +600,11 @@ absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ct
     step.options = search.best_options;
     steps.push_back(std::move(step));
   }
-  if (steps.empty()) return absl::OkStatus();
+  fit.notes.insert(fit.notes.end(), refused_notes.begin(), refused_notes.end());
+  if (steps.empty()) {
+    fit.not_fitted = absl::StrJoin(refused_notes, "; ");
+    return absl::OkStatus();
+  }
 
   // The evidence: the groups equally likely a priori, each one's onsets integrated over the
   // uniform prior (its prior points weighted by 1 / the number of groups); the finding is the

@@ -43,6 +43,7 @@
 #include "estimator/orbit.h"
 #include "estimator/simulator.h"
 #include "tests/testing/discovery_scenarios.h"
+#include "tests/testing/scenario_orbit.h"
 
 namespace esg::estimator::discovery {
 namespace {
@@ -96,20 +97,9 @@ absl::StatusOr<DiagnosisReport> DiagnoseScenario(const std::string& effect, uint
   DiagnoseOptions options;
   options.threads = 1;
   if (EnvInt("ESG_FALSE_ALARM_ORBIT", 0) != 0) {
-    // The orbit of the scenario's orbital segments (tests/testing/discovery_scenarios.h
-    // MostlyOrbitalProfile: the default elements, argument of latitude 0.37 seed at the start).
-    OrbitalOptions o;
-    o.arg_latitude0 = 0.37 * static_cast<double>(seed);
-    OrbitArc arc;
-    for (double t = -60.0; t <= spec.duration + 60.0 + 1e-9; t += 60.0) {
-      arc.states.push_back(
-          CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0, spec.start, t));
-    }
-    arc.from = arc.states.front().time;
-    arc.to = arc.states.back().time;
-    absl::StatusOr<Orbit> orbit = Orbit::FromArcs({std::move(arc)});
+    auto orbit = ::esg::testing::ScenarioOrbit(spec, seed);
     if (!orbit.ok()) return orbit.status();
-    options.orbit = std::make_shared<const Orbit>(*std::move(orbit));
+    options.orbit = *std::move(orbit);
   }
   if (const char* rate = std::getenv("ESG_DISCOVERY_INTEGRATION_RATE")) {
     options.integration_rate_hz = std::atof(rate);

@@ -22,6 +22,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/discovery_scenarios.h"
+#include "tests/testing/scenario_orbit.h"
 
 namespace esg::estimator::discovery {
 namespace {
@@ -321,6 +322,38 @@ TEST(DiagnoseVerdict, AMountMisalignmentCyclingWithTheOrbitGetsNoFindingThatWors
     EXPECT_FALSE(r.consistency.passed) << text;
     EXPECT_THAT(r.consistency.summary, HasSubstr("what remains is unexplained")) << text;
   }
+}
+
+// A step must carry its gain (docs/discovery.md): on this effect-free recording with its orbit
+// (the false-alarm bench's seed 1141, ESG_FALSE_ALARM_ORBIT=1), releasing gyro 1's k0 at the
+// end of a star-tracker outage (5.85 h) lowered -2 log L by 42.6 with a step of -0.0067 +-
+// 0.0077 deg/h: the released variance widened a covariance too small there, no coefficient
+// changed. The search's result is refused (the row says why) and the verdict is `none`.
+TEST(DiagnoseVerdict, AStepIndistinguishableFromZeroIsNotFittedWhateverItsLikelihoodGain) {
+  const uint64_t seed = 1141;
+  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("none", seed, 30.0);
+  auto sim = Simulate(spec);
+  ASSERT_TRUE(sim.ok()) << sim.status();
+  DiagnoseOptions options;
+  auto orbit = ::esg::testing::ScenarioOrbit(spec, seed);
+  ASSERT_TRUE(orbit.ok()) << orbit.status();
+  options.orbit = *orbit;
+  auto report = Diagnose(spec.config, sim->recording.frames, options);
+  ASSERT_TRUE(report.ok()) << report.status();
+  std::string findings;
+  for (const Finding& f : report->findings) findings += "\n" + f.effect + ": " + f.explanation;
+  SCOPED_TRACE(findings);
+  EXPECT_EQ(report->verdict, kVerdictNone);
+  bool refused = false;
+  for (const CandidateScore& c : report->candidates) {
+    if (c.effect != "coefficient_step" || c.gyro != 1 || c.not_fitted.empty()) continue;
+    refused = true;
+    EXPECT_EQ(c.parameters, 0);
+    EXPECT_FALSE(c.significant);
+    EXPECT_THAT(c.not_fitted, HasSubstr("a step of k0 not fitted"));
+    EXPECT_THAT(c.not_fitted, HasSubstr("indistinguishable from zero"));
+  }
+  EXPECT_TRUE(refused) << "gyro 1's coefficient step was not refused by its Wald test";
 }
 
 }  // namespace
