@@ -16,6 +16,7 @@ const assert = require('node:assert/strict');
 const fs = require('node:fs');
 const os = require('node:os');
 const path = require('node:path');
+const { pathToFileURL } = require('node:url');
 const puppeteer = require('puppeteer-core');
 const { REPO, startEsgd, startGateway, stop, esg } = require('./helpers');
 
@@ -38,6 +39,11 @@ const ROUND_STEPS = [
 ];
 // Weeks begin on Mondays (UTC); 1970-01-05 was one.
 const MONDAY = 4 * DAY;
+// Below a second and beyond two weeks: 1, 2 or 5 times a power of ten of milliseconds or days.
+const oneTwoFive = (n) => /^[125]0*$/.test(String(n));
+const isRound = (step) => ROUND_STEPS.includes(step) || (step < SECOND && oneTwoFive(step)) ||
+  (step > 14 * DAY && step % DAY === 0 && oneTwoFive(step / DAY));
+const TICKS = pathToFileURL(path.join(__dirname, '..', 'plugin', 'ticks.js')).href;
 
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'esg-console-ticks-'));
 let esgd;
@@ -120,7 +126,7 @@ function checkTicks({ labels, grid }, start, end, what) {
   const where = `${what}: ${labels.map((x) => x.full).join(', ')}`;
   assert.ok(times.length >= 2 && times.every(Number.isFinite), where);
   const step = times[1] - times[0];
-  assert.ok(ROUND_STEPS.includes(step), `step ${step / 1000} s is not a round one; ${where}`);
+  assert.ok(isRound(step), `step ${step / 1000} s is not a round one; ${where}`);
   const origin = step % (7 * DAY) === 0 ? MONDAY : 0;
   times.forEach((t, i) => {
     const tick = labels[i].full;
@@ -205,5 +211,29 @@ test('every plot of the summary layout has time ticks at round times, at least t
     assert.equal(plots.length, 7);
     plots.forEach((plot, i) => checkTicks(plot, start, end, `summary plot ${i + 1}, ${hours} h`));
     await shot(`summary_${hours}h`);
+  }
+});
+
+// The step rule of console/plugin/ticks.js alone (no page), over spans the plots above do not
+// reach: a plot 1000 px wide, labels 6.5 px a character.
+test('the step rule from 1.5 s to 400 days: round steps, at most 8 ticks, weeks on Mondays', async () => {
+  const { chooseTicks } = await import(TICKS);
+  const start = Date.UTC(2026, 10, 26, 7, 13, 17, 250);
+  const expected = { 1.5e3: 500, 45e3: 10 * SECOND, 1.2e6: 5 * MINUTE, 2.16e7: HOUR, 1.728e8: 12 * HOUR,
+    1.0368e9: 2 * DAY, 3.456e9: 7 * DAY, 3.456e10: 100 * DAY };
+  for (const [span, step] of Object.entries(expected).map(([k, v]) => [Number(k), v])) {
+    const chosen = chooseTicks(start, start + span, 1000, (text) => 6.5 * text.length);
+    const times = chosen.ticks.map((x) => x.t);
+    const where = `span ${span / 1000} s: step ${chosen.step / 1000} s, ${chosen.ticks.map((x) => x.text).join(' ')}`;
+    assert.equal(chosen.step, step, where);
+    assert.ok(isRound(step) && times.length >= 2 && times.length <= 8, where);
+    const origin = step % (7 * DAY) === 0 ? MONDAY : 0;
+    times.forEach((t, i) => {
+      assert.equal((t - origin) % step, 0, where);
+      assert.ok(t >= start && t <= start + span, where);
+      if (i > 0) assert.equal(t - times[i - 1], step, where);
+      if (origin) assert.equal(new Date(t).getUTCDay(), 1, `${new Date(t).toISOString()} is not a Monday`);
+    });
+    process.stdout.write(`# ${where}\n`);
   }
 });
