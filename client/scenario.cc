@@ -8,9 +8,11 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/channels.h"
 #include "estimator/model_terms.h"
 #include "estimator/rotation.h"
 #include "estimator/status_macros.h"
@@ -40,6 +42,11 @@ constexpr double kMaxDisplacementRateUmH = 20.0;
 constexpr double kMaxDistortionPpm = 1e5;  // 10 %
 constexpr double kMinCorrelationHours = 1e-3;
 constexpr double kMaxRateGainDegHPerDegS = 100.0;  // 100 deg/h of drift at 1 deg/s
+constexpr double kMaxChannelValue = 1e6;             // a channel's mean, spread, noise, heater step
+// A channel drift's lag: the range of the filter's channel term (estimator/basis_term.h), 60 s to
+// 366 d.
+constexpr double kMinChannelTauMinutes = 1.0;
+constexpr double kMaxChannelTauMinutes = 366.0 * 24.0 * 60.0;
 
 absl::Status Invalid(const std::string& path, const std::string& reason) {
   return absl::InvalidArgumentError(absl::StrCat(path, ": ", reason));
@@ -326,6 +333,116 @@ absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const s
   return d;
 }
 
+// {"channel": name, "gainDegH": [x, y, z], "form": "value" | "lag" | "derivative",
+// "timeConstantMinutes": tau, "unit", "mean", "spread", "correlationHours", "noise",
+// "telemetered", "heater": {...}}: a drift that follows a housekeeping temperature
+// (estimator/simulator.h ChannelDrift; docs/scenario.md). channel and gainDegH are required, tau
+// for lag and derivative (and refused for value); the unit goes to *unit.
+absl::StatusOr<estimator::ChannelDrift> ParseChannelDrift(const json& v, const std::string& path,
+                                                          std::string* unit) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path,
+                            {"channel", "unit", "mean", "spread", "correlationHours", "noise",
+                             "form", "timeConstantMinutes", "gainDegH", "telemetered",
+                             "heater"}));
+  for (const char* key : {"channel", "gainDegH"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  estimator::ChannelDrift d;
+  ASSIGN_OR_RETURN(d.channel, String(v["channel"], Key(path, "channel")));
+  RETURN_IF_ERROR(estimator::ValidateChannelName(d.channel, Key(path, "channel")));
+  ASSIGN_OR_RETURN(Vector3d gain, Vec3(v["gainDegH"], Key(path, "gainDegH"), -kMaxDriftDegH,
+                                       kMaxDriftDegH));
+  d.gain_k_rad_s_per_unit = DegHToSi(gain);
+  if (v.contains("unit")) {
+    ASSIGN_OR_RETURN(*unit, String(v["unit"], Key(path, "unit")));
+    bool printable =
+        !unit->empty() && unit->size() <= static_cast<size_t>(estimator::kMaxChannelUnitLength);
+    for (char ch : *unit) printable = printable && absl::ascii_isprint(ch);
+    if (!printable) {
+      return Invalid(Key(path, "unit"),
+                     absl::StrCat("must be 1..", estimator::kMaxChannelUnitLength,
+                                  " printable ASCII characters (\"1\" for a dimensionless "
+                                  "channel)"));
+    }
+  }
+  if (v.contains("mean")) {
+    ASSIGN_OR_RETURN(d.mean, Number(v["mean"], Key(path, "mean"), -kMaxChannelValue,
+                                    kMaxChannelValue));
+  }
+  if (v.contains("spread")) {
+    ASSIGN_OR_RETURN(d.spread, Number(v["spread"], Key(path, "spread"), 0.0, kMaxChannelValue));
+    if (!(d.spread > 0.0)) return Invalid(Key(path, "spread"), "must be > 0");
+  }
+  if (v.contains("correlationHours")) {
+    ASSIGN_OR_RETURN(double hours, Number(v["correlationHours"], Key(path, "correlationHours"),
+                                          kMinCorrelationHours, kMaxHours));
+    d.correlation_time_s = estimator::HoursToSeconds(hours);
+  }
+  if (v.contains("noise")) {
+    ASSIGN_OR_RETURN(d.noise, Number(v["noise"], Key(path, "noise"), 0.0, kMaxChannelValue));
+  }
+  std::string form = "value";
+  if (v.contains("form")) {
+    ASSIGN_OR_RETURN(form, String(v["form"], Key(path, "form")));
+    if (form != "value" && form != "lag" && form != "derivative") {
+      return Invalid(Key(path, "form"), absl::StrCat("unknown form '", form,
+                                                     "'; valid forms are value, lag, derivative"));
+    }
+  }
+  const std::string tau_key = Key(path, "timeConstantMinutes");
+  if (form == "value") {
+    if (v.contains("timeConstantMinutes")) {
+      return Invalid(tau_key, "not used by form value (the drift follows the channel itself)");
+    }
+  } else {
+    if (!v.contains("timeConstantMinutes")) {
+      return Invalid(tau_key, absl::StrCat("required for form ", form));
+    }
+    ASSIGN_OR_RETURN(double minutes, Number(v["timeConstantMinutes"], tau_key,
+                                            kMinChannelTauMinutes, kMaxChannelTauMinutes));
+    d.lag_s = minutes * estimator::kSecondsPerMinute;
+    d.derivative = form == "derivative";
+  }
+  if (v.contains("telemetered")) {
+    ASSIGN_OR_RETURN(d.telemetered, Bool(v["telemetered"], Key(path, "telemetered")));
+  }
+  if (v.contains("heater")) {
+    const json& h = v["heater"];
+    const std::string hp = Key(path, "heater");
+    RETURN_IF_ERROR(CheckObject(h, hp));
+    RETURN_IF_ERROR(CheckKeys(h, hp, {"periodHours", "onFraction", "step", "channel"}));
+    for (const char* key : {"periodHours", "step"}) {
+      if (!h.contains(key)) return Invalid(Key(hp, key), "required");
+    }
+    estimator::ChannelHeater heater;
+    ASSIGN_OR_RETURN(double hours, Number(h["periodHours"], Key(hp, "periodHours"),
+                                          kMinCorrelationHours, kMaxHours));
+    heater.period_s = estimator::HoursToSeconds(hours);
+    ASSIGN_OR_RETURN(heater.step,
+                     Number(h["step"], Key(hp, "step"), -kMaxChannelValue, kMaxChannelValue));
+    if (h.contains("onFraction")) {
+      ASSIGN_OR_RETURN(heater.on_fraction, Number(h["onFraction"], Key(hp, "onFraction"), 0.0, 1.0));
+      if (!(heater.on_fraction > 0.0 && heater.on_fraction < 1.0)) {
+        return Invalid(Key(hp, "onFraction"),
+                       absl::StrFormat("%g: must be strictly between 0 and 1 (a heater that "
+                                       "cycles)",
+                                       heater.on_fraction));
+      }
+    }
+    if (h.contains("channel")) {
+      ASSIGN_OR_RETURN(heater.channel, String(h["channel"], Key(hp, "channel")));
+      RETURN_IF_ERROR(estimator::ValidateChannelName(heater.channel, Key(hp, "channel")));
+      if (heater.channel == d.channel) {
+        return Invalid(Key(hp, "channel"),
+                       absl::StrCat("\"", heater.channel, "\" is the temperature's channel too"));
+      }
+    }
+    d.heater = heater;
+  }
+  return d;
+}
+
 // [Dxx, Dyy, Dzz, Dxy, Dyz, Dzx] in ppm -> the symmetric D [1].
 absl::StatusOr<Eigen::Matrix3d> ParseDistortionPpm(const json& v, const std::string& path) {
   if (!v.is_array() || v.size() != 6) {
@@ -355,7 +472,7 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       "misalignmentArcsec", "randomWalkDegHSqrtH", "readoutNoiseArcsec", "voltageNoiseMv",
       "initialSpinAxis", "fault", "switchOnHours", "orbitalDrift", "rotorDisplacementRateUmH",
       "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift", "rateDrift",
-      "transientDrift", "sunFaceDrift", "coefficientStep"};
+      "transientDrift", "sunFaceDrift", "coefficientStep", "channelDrift"};
   for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
     keys.insert(std::string(key.json_key));
   }
@@ -446,6 +563,8 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       ASSIGN_OR_RETURN(g.sun_face_drift, ParseSunFaceDrift(x, p));
     } else if (k == "coefficientStep") {
       ASSIGN_OR_RETURN(g.coefficient_step, ParseCoefficientStep(x, p));
+    } else if (k == "channelDrift") {
+      ASSIGN_OR_RETURN(g.channel_drift, ParseChannelDrift(x, p, &g.channel_unit));
     }
   }
   return g;
@@ -657,6 +776,27 @@ absl::StatusOr<Scenario> ParseTop(const json& root) {
                                    slew / estimator::kSecondsPerMinute,
                                    estimator::SecondsToHours(po.calibration.segment_duration)));
   }
+  // Each channel a channel drift writes (its temperature, its heater's state) written by one
+  // drift only: two would set one channel to two values in a frame.
+  std::vector<std::pair<std::string, std::string>> written;  // channel, its key path
+  for (size_t i = 0; i < s.gyros.size(); ++i) {
+    const auto& c = s.gyros[i].channel_drift;
+    if (!c) continue;
+    const std::string p = absl::StrCat("gyros[", i, "].channelDrift");
+    std::vector<std::pair<std::string, std::string>> own = {{c->channel, Key(p, "channel")}};
+    if (c->heater && !c->heater->channel.empty()) {
+      own.emplace_back(c->heater->channel, Key(p, "heater.channel"));
+    }
+    for (const auto& [name, path] : own) {
+      for (const auto& [other, other_path] : written) {
+        if (name == other) {
+          return Invalid(path, absl::StrCat("\"", name, "\" is written by ", other_path,
+                                            " too (a channel has one value per frame)"));
+        }
+      }
+    }
+    written.insert(written.end(), own.begin(), own.end());
+  }
   for (size_t i = 0; i < s.gyros.size(); ++i) {
     const auto& sun = s.gyros[i].sun_face_drift;
     if (sun && sun->face_axis == estimator::kSunlitFaceAxis && !s.earth_shadow) {
@@ -738,6 +878,30 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.transient_drift) g.transient_drift = s.transient_drift;
     if (s.sun_face_drift) g.sun_face_drift = s.sun_face_drift;
     if (s.coefficient_step) g.coefficient_step = s.coefficient_step;
+    if (s.channel_drift) {
+      g.channel_drift = s.channel_drift;
+      // A telemetered channel the configuration lacks is declared, so the recording's `ch:`
+      // columns are valid for it and --write-config writes the declaration.
+      const auto declare = [&](const estimator::ChannelConfig& c) {
+        const bool declared =
+            std::any_of(spec->config.channels.begin(), spec->config.channels.end(),
+                        [&](const estimator::ChannelConfig& d) { return d.name == c.name; });
+        if (!declared) spec->config.channels.push_back(c);
+      };
+      if (s.channel_drift->telemetered) {
+        declare(ScenarioChannelConfig(*s.channel_drift, s.channel_unit));
+        const auto& heater = s.channel_drift->heater;
+        if (heater && !heater->channel.empty()) {
+          estimator::ChannelConfig state;
+          state.name = heater->channel;
+          state.unit = "1";
+          state.valid_min = 0.0;
+          state.valid_max = 1.0;
+          state.max_age = absl::Minutes(10);
+          declare(state);
+        }
+      }
+    }
   }
   estimator::StarTrackerTruth& st = spec->star_tracker;
   const estimator::StarTrackerTruth& from = scenario.star_tracker;
@@ -753,6 +917,19 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
   st.misalignment_jump = from.misalignment_jump;
   if (scenario.earth_shadow) spec->earth_shadow = scenario.profile_options.orbital;
   return absl::OkStatus();
+}
+
+estimator::ChannelConfig ScenarioChannelConfig(const estimator::ChannelDrift& drift,
+                                               const std::string& unit) {
+  const double half_range = 10.0 * drift.spread + 10.0 * drift.noise +
+                            (drift.heater ? std::abs(drift.heater->step) : 0.0);
+  estimator::ChannelConfig c;
+  c.name = drift.channel;
+  c.unit = unit;
+  c.valid_min = std::floor(drift.mean - half_range);
+  c.valid_max = std::ceil(drift.mean + half_range);
+  c.max_age = absl::Minutes(10);
+  return c;
 }
 
 absl::Status CheckScenarioAgainstProfile(const Scenario& scenario,

@@ -52,6 +52,8 @@ struct ScenarioGyro {
   std::optional<estimator::TransientDrift> transient_drift;
   std::optional<estimator::SunFaceDrift> sun_face_drift;
   std::optional<estimator::CoefficientStep> coefficient_step;
+  std::optional<estimator::ChannelDrift> channel_drift;
+  std::string channel_unit = "K";  // the channel's unit when the scenario declares it
 };
 
 struct Scenario {
@@ -79,9 +81,17 @@ absl::StatusOr<Scenario> ReadScenarioFile(const std::string& path);
 
 // Applies the gyro and star-tracker changes to spec (its config must be set): the top-level
 // readout noise and random walk go to every gyro first, then each gyro entry; coefficient values
-// replace the configuration model's one by one. InvalidArgument when an entry names a gyro that
+// replace the configuration model's one by one. A telemetered channel drift's channel (and its
+// heater's) the configuration does not declare is declared in spec->config (ScenarioChannelConfig),
+// so that --write-config writes it. InvalidArgument when an entry names a gyro that
 // is not in the configuration. The profile fields are not applied here (see MakeScenarioProfile).
 absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* spec);
+
+// The declaration a scenario adds for a channel drift's temperature the configuration lacks: the
+// scenario's unit, valid range mean +- (10 spread + |heater step| + 10 noise) rounded outwards to
+// whole units, values held for 10 min.
+estimator::ChannelConfig ScenarioChannelConfig(const estimator::ChannelDrift& drift,
+                                               const std::string& unit);
 
 // Checks what needs the attitude profile: a gyro's orbitalDrift without periodMin needs a profile
 // with an orbital period. InvalidArgument "gyros[i].orbitalDrift.periodMin: ..." otherwise.

@@ -168,8 +168,23 @@ struct GyroState {
         channel_rng(DeriveSeed(seed, GyroStream(gyro_id, kChannelDriverOffset))),
         channel_noise_rng(DeriveSeed(seed, GyroStream(gyro_id, kChannelNoiseOffset))) {}
 
-  // The channel's true temperature T = mean + spread x [the channel's unit].
-  double ChannelValue() const { return channel->mean + channel->spread * channel_x; }
+  // Whether the channel drift's heater is on at t [s since the start].
+  bool HeaterOn(double t) const {
+    if (!channel || !channel->heater) return false;
+    const ChannelHeater& h = *channel->heater;
+    return std::fmod(t, h.period_s) < h.on_fraction * h.period_s;
+  }
+  // The channel's true temperature at t, T = mean + spread x (+ the heater's step while it is on)
+  // [the channel's unit], x at the current propagation time.
+  double ChannelValue(double t) const {
+    return channel->mean + channel->spread * channel_x +
+           (HeaterOn(t) ? channel->heater->step : 0.0);
+  }
+  // The drift's signal for y, the lag at the same time as T: y - mean, or dy/dt = (T - y) / tau
+  // per hour for the derivative.
+  double ChannelSignal(double T, double y) const {
+    return channel->derivative ? (T - y) / channel->lag_s * kSecondsPerHour : y - channel->mean;
+  }
 
   // Delta(t) [m], case axes.
   Vector3d Displacement_k(double t) const { return displacement0_k + displacement_rate_k * t; }
@@ -434,12 +449,43 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
       return absl::InvalidArgumentError(
           absl::StrFormat("%s.lag_s: must be finite and >= 0, got %g", p, c.lag_s));
     }
-    const bool declared = std::any_of(spec.config.channels.begin(), spec.config.channels.end(),
-                                      [&](const ChannelConfig& d) { return d.name == c.channel; });
-    if (c.telemetered && !declared) {
+    if (c.derivative && !(c.lag_s > 0.0)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s.lag_s: the derivative is the lag's, so it must be > 0, got %g", p, c.lag_s));
+    }
+    const auto declared = [&](const std::string& name) {
+      return std::any_of(spec.config.channels.begin(), spec.config.channels.end(),
+                         [&](const ChannelConfig& d) { return d.name == name; });
+    };
+    if (c.telemetered && !declared(c.channel)) {
       return absl::InvalidArgumentError(absl::StrCat(
           p, ".channel: \"", c.channel,
           "\" is not declared in the configuration's channels (a telemetered channel must be)"));
+    }
+    if (c.heater) {
+      const ChannelHeater& h = *c.heater;
+      const std::string hp = p + ".heater";
+      RETURN_IF_ERROR(Positive(h.period_s, hp + ".period_s"));
+      if (!(h.on_fraction > 0.0 && h.on_fraction < 1.0)) {
+        return absl::InvalidArgumentError(
+            absl::StrFormat("%s.on_fraction: must be in (0, 1), got %g", hp, h.on_fraction));
+      }
+      if (!std::isfinite(h.step)) {
+        return absl::InvalidArgumentError(hp + ".step: must be finite");
+      }
+      if (!h.channel.empty()) {
+        RETURN_IF_ERROR(ValidateChannelName(h.channel, hp + ".channel"));
+        if (h.channel == c.channel) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              hp, ".channel: \"", h.channel, "\" is the temperature's channel too"));
+        }
+        if (c.telemetered && !declared(h.channel)) {
+          return absl::InvalidArgumentError(
+              absl::StrCat(hp, ".channel: \"", h.channel,
+                           "\" is not declared in the configuration's channels (a telemetered "
+                           "channel must be)"));
+        }
+      }
     }
   }
   if (g.sun_face_drift) {
@@ -732,7 +778,7 @@ absl::Status SetUpGyroEffects(const SimulationSpec& spec, const Matrix3d& C_in_b
   if (truth.channel_drift) {
     g.channel = truth.channel_drift;
     g.channel_x = g.channel_rng.Normal();  // stationary start: x(0) ~ N(0, 1)
-    g.channel_y = g.ChannelValue();        // the lag in equilibrium at the start
+    g.channel_y = g.ChannelValue(0.0);     // the lag in equilibrium at the start
     effects.channel_drift = truth.channel_drift;
   }
   g.has_extra_drift = g.has_orbital || g.has_switching || g.has_hidden || g.has_rate ||
@@ -807,15 +853,15 @@ class TruthIntegrator {
       // T held over the step at its start; y at the midpoint for the drift, at the end for the
       // next step (exact for T held); without a lag y is T.
       const ChannelDrift& c = *g.channel;
-      const double T = g.ChannelValue();
+      const double T = g.ChannelValue(t_mid - 0.5 * h);
       const double y_mid =
           c.lag_s > 0.0 ? T + (g.channel_y - T) * std::exp(-0.5 * h / c.lag_s) : T;
-      dw_k += (y_mid - c.mean) * c.gain_k_rad_s_per_unit;
+      dw_k += g.ChannelSignal(T, y_mid) * c.gain_k_rad_s_per_unit;
       g.channel_y = c.lag_s > 0.0 ? T + (g.channel_y - T) * std::exp(-h / c.lag_s) : T;
       const double a = std::exp(-h / c.correlation_time_s);
       g.channel_x = a * g.channel_x + std::sqrt(-std::expm1(-2.0 * h / c.correlation_time_s)) *
                                           g.channel_rng.Normal();
-      if (c.lag_s == 0.0) g.channel_y = g.ChannelValue();
+      if (c.lag_s == 0.0) g.channel_y = g.ChannelValue(t_mid + 0.5 * h);
     }
     const Vector3d dw_in = C_in_b * (g.C_b_k * dw_k) + g.dw_rw_in;
     g.h_in = FastStepSpinAxis(g.h_in, dw_in, h);
@@ -867,9 +913,10 @@ GyroTruthSample GyroTruthAt(const GyroState& g, double t_m, const Matrix3d& C_b_
                gt.dw_rate_k_rad_s + gt.dw_transient_k_rad_s + gt.dw_sun_k_rad_s;
   }
   if (g.channel) {
-    gt.channel_value = g.ChannelValue();
+    gt.channel_value = g.ChannelValue(t_m);
     gt.channel_lagged = g.channel_y;
-    gt.dw_channel_k_rad_s = (g.channel_y - g.channel->mean) * g.channel->gain_k_rad_s_per_unit;
+    gt.dw_channel_k_rad_s =
+        g.ChannelSignal(gt.channel_value, g.channel_y) * g.channel->gain_k_rad_s_per_unit;
     gt.dw_k += gt.dw_channel_k_rad_s;
   }
   return gt;
@@ -917,7 +964,12 @@ void SampleGyros(std::vector<GyroState>& gyros, double t_m, const SimulationSpec
     if (g.channel) {
       // The channel's reading (one draw, always); carried whether the gyro's reading is.
       const double noise = g.channel->noise * g.channel_noise_rng.Normal();
-      if (g.channel->telemetered) frame.channels.Set(g.channel->channel, gt.channel_value + noise);
+      if (g.channel->telemetered) {
+        frame.channels.Set(g.channel->channel, gt.channel_value + noise);
+        if (g.channel->heater && !g.channel->heater->channel.empty()) {
+          frame.channels.Set(g.channel->heater->channel, g.HeaterOn(t_m) ? 1.0 : 0.0);
+        }
+      }
     }
     if (t_m < g.switch_on_time) continue;
     truth.gyros[g.id - 1] = gt;

@@ -186,10 +186,20 @@ struct SunFaceDrift {
 //
 //     dw_k = gain_k (y(t) - mean),   y = T (lag_s = 0) or tau dy/dt = T - y (lag_s = tau > 0),
 //
-// y(0) = T(0), stepped exactly for T held over an integration step. Each frame carries T with
-// white noise of 1-sigma `noise` as channel `channel` (SimulationSpec::config must declare it)
-// unless `telemetered` is false: the same drift with its cause absent from the recording (noise
-// drawn all the same).
+// y(0) = T(0), stepped exactly for T held over an integration step. With `derivative` the drift
+// follows the lag's rate of change instead, dw_k = gain_k dy/dt = gain_k (T - y) / tau [per hour]
+// (the basis term's derivative form, estimator/channel_signal.h; lag_s = tau > 0 required, gain
+// per unit per hour). A heater adds `step` to T while it is on, the first on_fraction of each
+// period from the start (no random draw). Each frame carries T with white noise of 1-sigma
+// `noise` as channel `channel` (SimulationSpec::config must declare it), and the heater's state
+// (1 on, 0 off) as its channel when it names one, unless `telemetered` is false: the same drift
+// with its cause absent from the recording (noise drawn all the same).
+struct ChannelHeater {
+  double period_s = 4.0 * 3600.0;  // [s], > 0
+  double on_fraction = 0.5;        // (0, 1)
+  double step = 1.0;               // T's rise while on [the channel's unit], finite
+  std::string channel;             // the heater state's channel; empty: not telemetered
+};
 struct ChannelDrift {
   std::string channel = "T_gyro";
   double mean = 293.15;                // [the channel's unit, K]
@@ -198,6 +208,8 @@ struct ChannelDrift {
   double noise = 0.02;                 // per frame, 1-sigma, >= 0
   Eigen::Vector3d gain_k_rad_s_per_unit = Eigen::Vector3d::Zero();  // case axes [rad/s per K]
   double lag_s = 0.0;                  // [s], >= 0; 0: the drift follows T itself
+  bool derivative = false;             // the drift follows dy/dt (lag_s > 0)
+  std::optional<ChannelHeater> heater;
   bool telemetered = true;
 };
 
@@ -320,7 +332,7 @@ struct GyroTruthSample {
   double sun_lagged_illumination = 0.0;
   Eigen::Vector3d dw_sun_k_rad_s = Eigen::Vector3d::Zero();  // y * amplitude [rad/s]
   // The channel drift: the true temperature T(t), its lag y(t) [the channel's unit] (0 without
-  // it) and gain (y - mean) [rad/s].
+  // it) and gain (y - mean), or gain dy/dt for the derivative [rad/s].
   double channel_value = 0.0;
   double channel_lagged = 0.0;
   Eigen::Vector3d dw_channel_k_rad_s = Eigen::Vector3d::Zero();
