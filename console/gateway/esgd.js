@@ -17,6 +17,9 @@ const SERVICE = 'esg.v1.EstimationService';
 // prediction of 100 000 samples takes about 2 s on a loaded server; paging a month of
 // coefficient history about as long).
 const CALL_DEADLINE_MS = 120_000;
+// A streamed answer (PredictAttitudeStream) is read as fast as the browser reads it: its deadline
+// is for the whole answer, a slow browser's too (100 000 samples are some 60 MB of JSON).
+const STREAM_DEADLINE_MS = 600_000;
 
 // esgd's largest responses (a prediction at its 100 000-sample limit) are about 17 MB; esg
 // itself accepts 64 MiB.
@@ -185,6 +188,36 @@ class Esgd {
     });
     this.calls.add(call);
     return call;
+  }
+
+  // A finite server stream (PredictAttitudeStream) read as it arrives: returns an async iterator
+  // of its messages converted to JSON, which rejects with the gRPC error (err.code, err.details)
+  // if the call fails. grpc-js reads ahead of its reader up to 16 messages (its object-mode
+  // buffer); here one: a message is asked of esgd only once the one before was taken, so a
+  // reader that stops (a browser that stops reading) holds one or two messages, not 16 (a
+  // prediction chunk is 2000 samples). Leaving the iteration early (return(), a throw in a
+  // for-await body) cancels the call.
+  streamed(method, request, authorization, owner, deadlineMs = STREAM_DEADLINE_MS) {
+    const call = this.client[method](request, Esgd.metadata(authorization, request),
+      { deadline: Date.now() + deadlineMs });
+    if (call._readableState) call._readableState.highWaterMark = 1;
+    this.calls.add(call);
+    if (owner) owner.add(call);
+    const type = this.responseType(method);
+    const convert = this.convert;
+    let ended = false;
+    async function* messages() {
+      try {
+        for await (const message of call) yield convert.toJson(type, message);
+        ended = true;
+      } catch (err) {
+        ended = true;
+        throw explained(method, err);
+      } finally {
+        if (!ended) call.cancel();
+      }
+    }
+    return messages();
   }
 
   // The stored part of a subscription: every message up to the replay marker, then the call is

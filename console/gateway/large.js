@@ -11,15 +11,23 @@
 'use strict';
 
 const { once } = require('node:events');
+const crypto = require('node:crypto');
+const fs = require('node:fs');
+const os = require('node:os');
+const path = require('node:path');
 const { ApiError } = require('./errors');
 
 const MAX_HISTORY = 50000;
 const PER_OPERATOR = 4;
 const WAITING = 32;
+// A SpooledText keeps up to this much in memory, then goes to a file read back this much at a time.
+const SPOOL_MEMORY_BYTES = 256 * 1024;
+const SPOOL_READ_BYTES = 64 * 1024;
 
 // An answer {"<field>": [...items], ...tail()} written page by page. `pages` is an async
-// iterator of arrays of JSON-able items; `tail()` (after the last page) gives the fields that
-// follow the array; `done()` runs once the answer is written or failed.
+// iterator of arrays of JSON-able items; `tail()` (after the last page; may return a promise)
+// gives the fields that follow the array, in their order, a SpooledText written as a JSON string
+// from where it was kept; `done()` runs once the answer is written or failed.
 class StreamedJson {
   constructor(field, pages, { tail = () => ({}), done = () => {} } = {}) {
     this.field = field;
@@ -59,8 +67,79 @@ class StreamedJson {
       await write(first ? text : `,${text}`);
       first = false;
     }
-    const extra = JSON.stringify(this.tail());
-    res.end(`]${extra === '{}' ? '' : `,${extra.slice(1, -1)}`}}`);
+    await write(']');
+    for (const [key, value] of Object.entries(await this.tail())) {
+      if (value instanceof SpooledText) {
+        await write(`,${JSON.stringify(key)}:"`);
+        await value.writeTo(write);
+        await write('"');
+      } else {
+        await write(`,${JSON.stringify(key)}:${JSON.stringify(value)}`);
+      }
+    }
+    res.end('}');
+  }
+}
+
+// A string that arrives in pieces alongside a streamed answer but is written after it (a
+// prediction's AEM text follows its samples): kept as the JSON-escaped text of its pieces, in
+// memory up to `memoryBytes`, beyond that in a file of the system's temporary directory that is
+// removed as soon as it is open (it goes away with the gateway too). close() it when done.
+class SpooledText {
+  constructor(memoryBytes = SPOOL_MEMORY_BYTES) {
+    this.memoryBytes = memoryBytes;
+    this.parts = [];
+    this.bytes = 0;
+    this.file = null;
+    this.closed = false;
+  }
+
+  async append(text) {
+    if (!text) return;
+    const escaped = Buffer.from(JSON.stringify(text).slice(1, -1), 'utf8');
+    if (!this.file && this.bytes + escaped.length <= this.memoryBytes) {
+      this.parts.push(escaped);
+      this.bytes += escaped.length;
+      return;
+    }
+    if (!this.file) {
+      const name = path.join(os.tmpdir(), `esg-gateway-${process.pid}-${crypto.randomBytes(8).toString('hex')}`);
+      const file = await fs.promises.open(name, 'wx+', 0o600);
+      await fs.promises.unlink(name);
+      if (this.closed) { // closed while the file was being opened
+        await file.close();
+        throw new Error('the answer was closed');
+      }
+      this.file = file;
+      for (const part of this.parts) await this.file.write(part);
+      this.parts = [];
+    }
+    await this.file.write(escaped);
+    this.bytes += escaped.length;
+  }
+
+  // Writes the escaped text (without its quotes) through `write` (an async function of a chunk),
+  // SPOOL_READ_BYTES at a time.
+  async writeTo(write) {
+    if (!this.file) {
+      for (const part of this.parts) await write(part);
+      return;
+    }
+    for (let at = 0; at < this.bytes;) {
+      const buffer = Buffer.alloc(Math.min(SPOOL_READ_BYTES, this.bytes - at));
+      const { bytesRead } = await this.file.read(buffer, 0, buffer.length, at);
+      if (bytesRead === 0) throw new Error('the kept text ended early');
+      await write(buffer.subarray(0, bytesRead));
+      at += bytesRead;
+    }
+  }
+
+  async close() {
+    this.closed = true;
+    this.parts = [];
+    const file = this.file;
+    this.file = null;
+    if (file) await file.close();
   }
 }
 
@@ -113,4 +192,4 @@ class LargeAnswers {
   }
 }
 
-module.exports = { StreamedJson, LargeAnswers, MAX_HISTORY, PER_OPERATOR, WAITING };
+module.exports = { StreamedJson, SpooledText, LargeAnswers, MAX_HISTORY, PER_OPERATOR, WAITING };

@@ -10,7 +10,7 @@ const { timeParam, boolParam, intParam, intValue, numberParam, jsonBody } = requ
 const { ConvertError } = require('./convert');
 const { grpc } = require('./esgd');
 const { PREDICT_BODY_BYTES, ACKNOWLEDGE_BODY_BYTES } = require('./limits');
-const { StreamedJson, LargeAnswers, MAX_HISTORY } = require('./large');
+const { StreamedJson, SpooledText, LargeAnswers, MAX_HISTORY } = require('./large');
 
 // A streamed history's pages (large.js): what one request holds at a time. Smaller than esgd's
 // largest: 1000 snapshots are about 0.8 MB of JSON, and four parallel 20-day histories cost the
@@ -25,6 +25,10 @@ const DIAGNOSIS_PAGE = 100;
 // The most per-step estimates one request returns (a fortnight at 60 s steps); a next_page_token
 // goes on from there.
 const MAX_ESTIMATES = 20000;
+
+// A prediction refused by esgd's prediction slots (RESOURCE_EXHAUSTED) before its first chunk is
+// asked again after these waits (1.5 s in all), then answered 429 with esgd's message.
+const PREDICT_RETRY_MS = [100, 200, 400, 800];
 
 const EPOCH = { seconds: 0, nanos: 0 };
 const HOUR_S = 3600;
@@ -58,6 +62,9 @@ const MAX_PAGE_TOKEN = 1024;
 // tokens: the TokenCheck api.js checks each request's token with. large: the LargeAnswers
 // (large.js) whose slots the history and estimate requests take.
 function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
+  // PredictResponse's fields after `samples`, in their order in the .proto.
+  const PREDICT_TAIL = esgd.convert.descriptor('esg.v1.PredictResponse').field
+    .map((f) => f.name).filter((name) => name !== 'samples');
   const call = (ctx, method, request) => esgd.unary(method, request, ctx.authorization, ctx.owner);
   const pages = (ctx, method, request, field, limit) =>
     esgd.pageAll(method, request, field, ctx.authorization, ctx.owner, limit);
@@ -108,6 +115,79 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
     return new StreamedJson(field, rest(), {
       tail: () => (next ? { next_page_token: next } : {}),
       done: release,
+    });
+  }
+
+  // A prediction's answer, the JSON of PredictAttitude's PredictResponse, written from
+  // PredictAttitudeStream as its chunks arrive (docs/console-gateway.md "Large answers") in a
+  // slot of the operator's large answers: the samples chunk by chunk, each chunk asked of esgd
+  // once the one before went to the socket and drained; then the fields PredictResponse has
+  // after its samples, from the chunks (recorded_samples and the times from the first, the
+  // source from the last, the assumptions joined with "; " as esgd joins them, the AEM pieces
+  // concatenated, kept aside meanwhile in a SpooledText). An error before the first chunk is
+  // answered with its own status as PredictAttitude's was; after it, the connection is ended.
+  // An esgd without the stream (UNIMPLEMENTED) is asked PredictAttitude, answered whole.
+  async function predictAnswer(ctx, request) {
+    const release = await largeSlot(ctx, 'predict');
+    let chunks;
+    let first;
+    try {
+      for (let attempt = 0; ; attempt++) {
+        chunks = esgd.streamed('PredictAttitudeStream', request, ctx.authorization, ctx.owner);
+        try {
+          first = await chunks.next();
+          break;
+        } catch (err) {
+          // esgd's prediction slots (per caller, in total) are given back when a cancelled stream's
+          // chunk in the making is done, some time after the browser that read it went away and
+          // gave this request its gateway slot: asked again a few times before it is answered.
+          if (err.code !== grpc.status.RESOURCE_EXHAUSTED || attempt === PREDICT_RETRY_MS.length ||
+              ctx.req.socket.destroyed) throw err;
+          await new Promise((resolve) => setTimeout(resolve, PREDICT_RETRY_MS[attempt]));
+        }
+      }
+    } catch (err) {
+      if (!isUnimplemented(err)) {
+        release();
+        throw err;
+      }
+      try {
+        return await call(ctx, 'PredictAttitude', request);
+      } finally {
+        release();
+      }
+    }
+    const aem = new SpooledText();
+    const fields = {
+      aem_text: aem,
+      attitude_source: 'ATTITUDE_SOURCE_RECORDED',
+      recorded_samples: 0,
+      assumption: [],
+    };
+    async function* samples() {
+      for (let next = first, n = 0; !next.done; next = await chunks.next(), n++) {
+        const chunk = next.value;
+        if (n === 0) {
+          fields.recorded_samples = chunk.recorded_samples;
+          if (chunk.last_applied_time) fields.last_applied_time = chunk.last_applied_time;
+          if (chunk.last_archived_time) fields.last_archived_time = chunk.last_archived_time;
+        }
+        fields.attitude_source = chunk.attitude_source;
+        if (chunk.assumption) fields.assumption.push(chunk.assumption);
+        await aem.append(chunk.aem_text);
+        yield chunk.samples;
+      }
+    }
+    return new StreamedJson('samples', samples(), {
+      // In PredictResponse's order of fields, as its JSON (convert.js) has them.
+      tail: () => Object.fromEntries(PREDICT_TAIL
+        .filter((name) => fields[name] !== undefined)
+        .map((name) => [name, name === 'assumption' ? fields.assumption.join('; ') : fields[name]])),
+      done: () => {
+        release();
+        aem.close().catch(() => {});
+        chunks.return().catch(() => {});
+      },
     });
   }
 
@@ -221,7 +301,9 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
         to: timeParam(ctx.query, 'to'),
       }, 'estimates', MAX_ESTIMATES, ESTIMATE_STREAM_PAGE)],
 
-    ['GET', '/api/spacecraft/:id/predict', async (ctx) => call(ctx, 'PredictAttitude', {
+    // PredictAttitudeStream written as its chunks arrive (predictAnswer), the JSON of
+    // PredictAttitude's answer.
+    ['GET', '/api/spacecraft/:id/predict', async (ctx) => predictAnswer(ctx, {
       spacecraft_id: ctx.params.id,
       from: timeParam(ctx.query, 'from'),
       to: timeParam(ctx.query, 'to'),
@@ -242,7 +324,7 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
         throw badRequest(`body.spacecraft_id: '${request.spacecraft_id}' differs from the path's '${ctx.params.id}'`);
       }
       request.spacecraft_id = ctx.params.id;
-      return call(ctx, 'PredictAttitude', request);
+      return predictAnswer(ctx, request);
     }, { body: PREDICT_BODY_BYTES }],
 
     ['GET', '/api/spacecraft/:id/alerts', async (ctx) => alertList(ctx, ctx.params.id)],

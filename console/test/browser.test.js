@@ -1211,6 +1211,10 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
     await viewer.close();
   }
   await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`);
+  // The page showed the automatic diagnosis's report, which has an Apply button too: wait for
+  // this one's report before its button (the old report's matched, then went with its view).
+  await page.waitForFunction((title) => [...document.querySelectorAll('.esg-diagnosis h2')]
+    .map((h) => h.textContent).join('|') === title, { timeout: 20_000 }, `Diagnosis ${diagnosis.id} of ${SC}`);
   await page.waitForSelector('.esg-apply-button', { timeout: 20_000 });
   // What it would set, as esgd says (the same lines as esg diagnoses show).
   const offered = await page.$$eval('.esg-apply li', (lis) => lis.map((li) => li.textContent));
