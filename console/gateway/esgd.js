@@ -223,8 +223,15 @@ class Esgd {
   // The stored part of a subscription: every message up to the replay marker, then the call is
   // cancelled. Used by the REST alert lists and the fleet view.
   replay(method, request, authorization, owner) {
+    const messages = [];
+    return this.replayEach(method, request, authorization, owner, (message) => messages.push(message))
+      .then(() => messages);
+  }
+
+  // The same, each message handed to onMessage(json) as it arrives instead of collected;
+  // resolves once the replay marker arrived.
+  replayEach(method, request, authorization, owner, onMessage) {
     return new Promise((resolve, reject) => {
-      const messages = [];
       let done = false;
       const call = this.subscribe(method, { ...request, replay_marker: true }, authorization, {
         deadline: Date.now() + CALL_DEADLINE_MS,
@@ -233,9 +240,9 @@ class Esgd {
           if (message.replay_complete) {
             done = true;
             call.cancel();
-            resolve(messages);
+            resolve();
           } else {
-            messages.push(message);
+            onMessage(message);
           }
         },
         onEnd: (err) => {

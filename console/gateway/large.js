@@ -23,21 +23,27 @@ const WAITING = 32;
 // A SpooledText keeps up to this much in memory, then goes to a file read back this much at a time.
 const SPOOL_MEMORY_BYTES = 256 * 1024;
 const SPOOL_READ_BYTES = 64 * 1024;
+// A streamed answer up to this size goes out whole, with its Content-Length.
+const SMALL_ANSWER_BYTES = 64 * 1024;
 
 // An answer {"<field>": [...items], ...tail()} written page by page. `pages` is an async
-// iterator of arrays of JSON-able items; `tail()` (after the last page; may return a promise)
+// iterator of arrays of JSON-able items (with `raw`, of their JSON texts); `tail()` (after the
+// last page; may return a promise)
 // gives the fields that follow the array, in their order, a SpooledText written as a JSON string
 // from where it was kept; `done()` runs once the answer is written or failed.
 class StreamedJson {
-  constructor(field, pages, { tail = () => ({}), done = () => {} } = {}) {
+  constructor(field, pages, { tail = () => ({}), done = () => {}, raw = false } = {}) {
     this.field = field;
     this.pages = pages;
+    this.raw = raw;
     this.tail = tail;
     this.done = done;
   }
 
-  // Writes the answer; rejects (after the headers went out: the caller destroys the socket) if
-  // a page fails or the client goes away.
+  // Writes the answer; rejects if a page fails or the client goes away (after the headers went
+  // out the caller destroys the socket; before, it answers the error). The first SMALL_ANSWER_BYTES
+  // are held before the headers: an answer that ends within them goes out whole with its
+  // Content-Length, as the gateway's other answers do; a larger one goes on chunked.
   async send(res) {
     try {
       await this.write(res);
@@ -47,14 +53,24 @@ class StreamedJson {
   }
 
   async write(res) {
-    res.writeHead(200, {
+    const headers = {
       'Content-Type': 'application/json; charset=utf-8',
       'Cache-Control': 'no-store',
       'X-Content-Type-Options': 'nosniff',
-    });
+    };
+    let held = [];
+    let heldBytes = 0;
     let first = true;
     const write = async (text) => {
       if (res.destroyed) throw new Error('the client went away');
+      if (held) {
+        held.push(text);
+        heldBytes += typeof text === 'string' ? Buffer.byteLength(text) : text.length;
+        if (heldBytes <= SMALL_ANSWER_BYTES) return;
+        res.writeHead(200, headers);
+        text = Buffer.concat(held.map((t) => (typeof t === 'string' ? Buffer.from(t) : t)));
+        held = null;
+      }
       if (!res.write(text)) {
         await Promise.race([once(res, 'drain'), once(res, 'close')]);
         if (res.destroyed) throw new Error('the client went away');
@@ -63,7 +79,7 @@ class StreamedJson {
     await write(`{${JSON.stringify(this.field)}:[`);
     for await (const page of this.pages) {
       if (page.length === 0) continue;
-      const text = page.map((item) => JSON.stringify(item)).join(',');
+      const text = (this.raw ? page : page.map((item) => JSON.stringify(item))).join(',');
       await write(first ? text : `,${text}`);
       first = false;
     }
@@ -77,7 +93,14 @@ class StreamedJson {
         await write(`,${JSON.stringify(key)}:${JSON.stringify(value)}`);
       }
     }
-    res.end('}');
+    if (!held) {
+      res.end('}');
+      return;
+    }
+    held.push('}');
+    const body = Buffer.concat(held.map((t) => (typeof t === 'string' ? Buffer.from(t) : t)));
+    res.writeHead(200, { ...headers, 'Content-Length': body.length });
+    res.end(body);
   }
 }
 

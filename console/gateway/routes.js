@@ -20,6 +20,8 @@ const HISTORY_STREAM_PAGE = 1000;
 const ESTIMATE_STREAM_PAGE = 1000;
 const ESTIMATE_PAGE = 5000;
 const SESSION_PAGE = 500;
+// Alerts of an alert list written at a time (some 0.5 MB of JSON).
+const ALERT_PAGE = 1000;
 const DIAGNOSIS_PAGE = 100;
 
 // The most per-step estimates one request returns (a fortnight at 60 s steps); a next_page_token
@@ -191,11 +193,35 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
     });
   }
 
+  // An alert list: SubscribeAlerts replayed up to its marker, each alert once in its latest state
+  // at the place it first appeared (latestStates), in a slot of the operator's large answers. The
+  // whole replay is read before the answer starts (a live change during it can still change an
+  // alert written earlier), kept as each alert's JSON text (a third of the object's memory), then
+  // written ALERT_PAGE alerts at a time as the socket drains, never as one string.
   async function alertList(ctx, spacecraftId) {
     const since = timeParam(ctx.query, 'since') || EPOCH;
-    const alerts = await esgd.replay('SubscribeAlerts', { spacecraft_id: spacecraftId, since },
-      ctx.authorization, ctx.owner);
-    return { alerts: latestStates(alerts) };
+    const release = await largeSlot(ctx, 'alerts');
+    const latest = new Map();
+    try {
+      await esgd.replayEach('SubscribeAlerts', { spacecraft_id: spacecraftId, since },
+        ctx.authorization, ctx.owner,
+        (alert) => latest.set(`${alert.spacecraft_id}\u0000${alert.sequence}`, JSON.stringify(alert)));
+    } catch (err) {
+      release();
+      throw err;
+    }
+    async function* pages() {
+      let page = [];
+      for (const text of latest.values()) {
+        page.push(text);
+        if (page.length === ALERT_PAGE) {
+          yield page;
+          page = [];
+        }
+      }
+      yield page;
+    }
+    return new StreamedJson('alerts', pages(), { raw: true, done: () => { latest.clear(); release(); } });
   }
 
   // Newest per-step estimate's last star-tracker time over the day before the session's last

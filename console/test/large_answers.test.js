@@ -21,6 +21,7 @@ const path = require('node:path');
 const { REPO, startEsgd, startGateway, stop, esg, request } = require('./helpers');
 const { Esgd } = require('../gateway/esgd');
 const { toHttp } = require('../gateway/errors');
+const { latestStates } = require('../gateway/routes');
 
 const CONFIG = path.join(REPO, 'deploy', 'examples', 'rdk1.json');
 const SCENARIO = path.join(REPO, 'deploy', 'examples', 'scenarios', 'paper_calibration.json');
@@ -84,6 +85,14 @@ before(async () => {
   const cli = (...args) => esg(['--server', esgd.address, '--token', alice, ...args]);
   await cli('configure', '--config', CONFIG, '--model', '10+11');
   await cli('replay', '--recording', flight, '--wait');
+  // A second spacecraft with gyro faults, for alerts (the flight above raises none).
+  const faultyConfig = path.join(tmp, 'rdkf.json');
+  fs.writeFileSync(faultyConfig, fs.readFileSync(CONFIG, 'utf8').replace('"spacecraftId": "RDK-1"', '"spacecraftId": "RDK-F"'));
+  const faulty = path.join(tmp, 'faulty.csv');
+  await esg(['simulate', '--config', faultyConfig, '--profile', 'calibration', '--scenario',
+    path.join(REPO, 'deploy', 'examples', 'scenarios', 'gyro_faults.json'), '--hours', '10', '--seed', '2', '--out', faulty]);
+  await cli('configure', '--config', faultyConfig, '--model', '10+11');
+  await cli('replay', '--recording', faulty, '--wait');
   gateway = await startGateway(['--esgd', esgd.address]);
 });
 
@@ -449,4 +458,39 @@ test('a prediction takes an operator\'s large-answer slot; a client that goes aw
   } finally {
     client.close();
   }
+});
+
+test('an alert list is a large answer: the JSON it was, written in pages, waiting for a slot', async () => {
+  // The previous gateway's answer: the replay collected whole, each alert once in its latest state.
+  const client = new Esgd({ address: esgd.address });
+  let whole;
+  try {
+    whole = latestStates(await client.replay('SubscribeAlerts', { spacecraft_id: '', since: { seconds: 0, nanos: 0 } },
+      asBob.Authorization));
+  } finally {
+    client.close();
+  }
+  assert.ok(whole.length > 0, 'the flight has alerts');
+  const all = await api('/api/alerts', { headers: asBob });
+  assert.equal(all.status, 200);
+  assert.equal(all.text, JSON.stringify({ alerts: whole }));
+  const one = await api('/api/spacecraft/RDK-F/alerts', { headers: asBob });
+  assert.equal(one.text, JSON.stringify({ alerts: whole.filter((a) => a.spacecraft_id === 'RDK-F') }));
+  const none = await api(`/api/spacecraft/RDK-F/alerts?since=${iso(Date.now() + 86400_000)}`, { headers: asBob });
+  assert.equal(none.text, '{"alerts":[]}');
+  assert.equal((await api('/api/spacecraft/NOPE/alerts', { headers: asBob })).status, 404);
+  console.log(`${whole.length} alerts in the list`);
+
+  // Bob's four slots held by paused predictions: his alert list waits, alice's does not.
+  const last = await lastFrameMs();
+  const from = last - 24 * 3600_000;
+  const query = `/api/spacecraft/RDK-1/predict?from=${iso(from)}&to=${iso(from + 99_999 * 1728)}&step_s=1.728`;
+  const paused = await Promise.all([0, 1, 2, 3].map(() => pausedGet(query, asBob, 64 * 1024)));
+  const waiting = api('/api/alerts', { headers: asBob });
+  const early = await Promise.race([waiting.then(() => 'answered'),
+    new Promise((resolve) => setTimeout(() => resolve('waiting'), 1000))]);
+  assert.equal(early, 'waiting');
+  assert.equal((await api('/api/alerts', { headers: asAlice })).text, all.text);
+  for (const p of paused) p.req.destroy();
+  assert.equal((await waiting).text, all.text);
 });
