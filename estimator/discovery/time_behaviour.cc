@@ -267,28 +267,47 @@ absl::Status FitReadoutJump(OnsetSearch& search, const OnsetProfile& p,
 }
 
 // Whether a step found by releasing coefficients at its onset carries its likelihood gain
-// (docs/discovery.md, "A step must carry its gain"): the step's Wald statistic
-// sum_j (step_j / sigma_j)^2 (the components' correlation neglected) against the chi-square
-// bound of `count` degrees of freedom at the diagnosis's level alpha. Releasing a state's
-// variance at T also widens the covariance there: after a star-tracker outage, say, that alone
-// lowers -2 log L where the model's covariance was too small, with a step indistinguishable
-// from zero. Such a gain is the model's inconsistency, not a step. Returns an empty string when
-// the step carries its gain, else the note that says why it was not fitted.
-std::string StepWithoutItsGain(const std::string& name, const Eigen::VectorXd& step,
-                               const Eigen::VectorXd& sigma, double alpha, double gain) {
-  double wald = 0.0;
-  for (int j = 0; j < step.size(); ++j) {
-    if (sigma(j) > 0.0) wald += (step(j) / sigma(j)) * (step(j) / sigma(j));
+// (docs/discovery.md, "A step must carry its gain"). Releasing a state's variance at T does two
+// things: it lets the filter estimate a step, and it widens the covariance at T. Where the
+// model's covariance is too small there (after a star-tracker outage, say), the widening alone
+// lowers -2 log L, with no coefficient changed. So the step found must carry the gain itself: a
+// run of the model without any release, the step `step_rad_s` (the group's estimate after the
+// onset less the one at it) held at that value from the onset as switched-on basis terms
+// (CoefficientStepTerms, sigma 0), must improve -2 log L on the run without the step by at least
+// the chi-square bound of `count` degrees of freedom at level alpha (a likelihood ratio with the
+// group's coefficients estimated). One run more per step found. Returns an empty string when it
+// does (or when the gyro's basis has no room for the terms: the evidence alone decides), else
+// the note that says why nothing was fitted.
+absl::StatusOr<std::string> StepWithoutItsGain(OnsetSearch& search, const std::string& name,
+                                               int first, const Eigen::VectorXd& step_rad_s,
+                                               absl::Time onset, double alpha, double gain) {
+  SpacecraftConfig held = search.BaseConfig();
+  ASSIGN_OR_RETURN(GyroConfig * g, CandidateGyro(held, search.candidate.gyro));
+  const std::vector<BasisTerm> terms = CoefficientStepTerms(first, step_rad_s, onset, 0.0);
+  if (g->basis_terms.size() + terms.size() > static_cast<size_t>(kMaxBasisTermsPerGyro)) {
+    return std::string();
   }
-  const double bound = ChiSquareQuantile(1.0 - alpha, static_cast<double>(step.size()));
-  if (wald >= bound) return "";
+  g->basis_terms.insert(g->basis_terms.end(), terms.begin(), terms.end());
+  auto run = RunModel(held, search.fit.model.options, search.frames);
+  ++search.fit.runs;
+  if (!run.ok()) return run.status();
+  const double held_gain = Profile(search.prefix).value - Profile(*run).value;
+  const int count = static_cast<int>(step_rad_s.size());
+  const double bound = ChiSquareQuantile(1.0 - alpha, static_cast<double>(count));
+  if (held_gain >= bound) {
+    search.fit.notes.push_back(absl::StrFormat(
+        "held from its onset without the release, the step of %s improves -2 log L by %.1f (the "
+        "%.0f%% chi-square bound %.2f for %d parameter%s): it carries its gain",
+        name, held_gain, 100.0 * (1.0 - alpha), bound, count, count == 1 ? "" : "s"));
+    return std::string();
+  }
   return absl::StrFormat(
-      "a step of %s not fitted: -2 log L improves by %.1f at the best onset, but the step is "
-      "indistinguishable from zero (Wald chi-square %.2f for %d parameter%s, below its %.0f%% bound "
-      "%.2f): the gain comes from the variance released at the onset (the model's covariance too "
-      "small there), not from a change of the coefficient%s",
-      name, gain, wald, step.size(), step.size() == 1 ? "" : "s", 100.0 * (1.0 - alpha), bound,
-      step.size() == 1 ? "" : "s");
+      "a step of %s not fitted: -2 log L improves by %.1f with the coefficient%s released at the "
+      "best onset, but by %.1f with the step found held from it (below the %.0f%% chi-square bound "
+      "%.2f for %d parameter%s): the gain comes from the variance released at the onset (the "
+      "model's covariance too small there), not from a change of the coefficient%s",
+      name, gain, count == 1 ? "" : "s", held_gain, 100.0 * (1.0 - alpha), bound, count,
+      count == 1 ? "" : "s", count == 1 ? "" : "s");
 }
 
 // The fit's onset with its interval (TimeBehaviour of a step).
@@ -321,11 +340,9 @@ absl::StatusOr<bool> DescribeStep(OnsetSearch& search, const OnsetProfile& p, do
   const GyroEstimate* after = FindEstimate(search.best_run.gyros, search.candidate.gyro);
   if (before != nullptr && after != nullptr) {
     const Vector3d d = -(after->coefficients.C1 - before->coefficients.C1);
-    // The step's 1-sigma for the test combines both estimates', as a coefficient step's does.
-    const Vector3d wald_sigma = (after->sigma.C1.array().square() +
-                                 before->sigma.C1.array().square()).sqrt().matrix();
-    const std::string refused = StepWithoutItsGain("C1", d, wald_sigma, alpha,
-                                                   base_value - search.best_value);
+    ASSIGN_OR_RETURN(const std::string refused,
+                     StepWithoutItsGain(search, "C1", kThetaC1, -d, fit.time.onset, alpha,
+                                        base_value - search.best_value));
     if (!refused.empty()) {
       fit.notes.push_back(refused);
       fit.not_fitted = refused;
@@ -586,9 +603,10 @@ absl::Status FitCoefficientStep(const Candidate& candidate, const FitContext& ct
     for (const auto& [w, v] : step.scratch.prior_points) points.emplace_back(w, base_value - v);
     step.evidence = EvidenceOverPrior(points);
     RETURN_IF_ERROR(StepOf(search, step));
-    const std::string refused =
-        StepWithoutItsGain(std::string(group.name), step.step, step.step_sigma, opt.alpha,
-                           base_value - search.best_value);
+    ASSIGN_OR_RETURN(const std::string refused,
+                     StepWithoutItsGain(search, group.name, group.first, step.step,
+                                        frames[search.best_frame - 1].time, opt.alpha,
+                                        base_value - search.best_value));
     if (!refused.empty()) {
       refused_notes.push_back(refused);
       continue;
