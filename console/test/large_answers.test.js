@@ -383,8 +383,8 @@ test('a 100 000-sample prediction with its AEM is streamed: the gateway stays fl
     `${afterwards.toFixed(0)} MiB 2 s after a 100 000-sample prediction with AEM of ` +
     `${mb.toFixed(1)} MB of JSON (AEM ${aemMb.toFixed(1)} MB) answered in ${seconds.toFixed(1)} s`);
   // Asked whole (PredictAttitude, before) the gateway held the message, its JSON object and its
-  // JSON text at once: measured 115 to 757 MiB, and 697 MiB 2 s later. Streamed it holds a chunk
-  // or two and what V8 has not collected yet (measured 102 to 194 MiB).
+  // JSON text at once: measured 66 to 577 MiB, and 516 MiB 2 s later. Streamed it holds a chunk
+  // or two and what V8 has not collected yet (measured 191 to 213 MiB).
   assert.ok(peak - baseline < 150, `gateway grew by ${(peak - baseline).toFixed(0)} MiB`);
 
   // Four in parallel.
@@ -402,6 +402,7 @@ test('a 100 000-sample prediction with its AEM is streamed: the gateway stays fl
   four.length = 0;
   console.log(`gateway RSS ${base4.toFixed(0)} MiB before, ${peak4.toFixed(0)} MiB at most while four ` +
     `such predictions were answered in parallel in ${seconds4.toFixed(1)} s`);
+  // Asked whole: 516 to 1575 MiB; streamed: 171 to 292 MiB.
   assert.ok(peak4 - base4 < 250, `gateway grew by ${(peak4 - base4).toFixed(0)} MiB`);
 });
 
