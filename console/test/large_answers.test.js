@@ -446,11 +446,16 @@ test('a prediction takes an operator\'s large-answer slot; a client that goes aw
   // gateway answers 429 with esgd's refusal, as PredictAttitude's was answered.
   const client = new Esgd({ address: esgd.address });
   try {
-    const request = { spacecraft_id: 'RDK-1', from: ts(from), to: ts(to), step_s: 1.728 };
+    // With the AEM (0.6 MB chunks) a stream that is not read stops in esgd within a chunk or two.
+    const request = { spacecraft_id: 'RDK-1', from: ts(from), to: ts(to), step_s: 1.728, aem: true };
     const held = [0, 1, 2, 3].map(() => client.streamed('PredictAttitudeStream', request, asBob.Authorization));
     for (const h of held) assert.equal((await h.next()).done, false);
+    const smallRequest = { spacecraft_id: 'RDK-1', from: ts(last - 600_000), to: ts(last), step_s: 10 };
+    const unary = await unaryPredict(smallRequest);
+    assert.ok(unary.error, 'esgd answered a fifth prediction of bob\'s');
     const refused = await api(small, { headers: asBob });
-    const unary = await unaryPredict({ spacecraft_id: 'RDK-1', from: ts(last - 600_000), to: ts(last), step_s: 10 });
+    // Still held after the gateway's answer (it asks again for 1.5 s before answering).
+    assert.ok((await unaryPredict(smallRequest)).error, 'a held stream of bob\'s ended');
     assert.equal(refused.status, 429);
     assert.equal(refused.status, unary.error.httpStatus);
     assert.equal(refused.json.error.code, unary.error.body.error.code);
