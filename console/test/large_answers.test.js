@@ -500,3 +500,40 @@ test('an alert list is a large answer: the JSON it was, written in pages, waitin
   for (const p of paused) p.req.destroy();
   assert.equal((await waiting).text, all.text);
 });
+
+test('an esgd without PredictAttitudeStream is asked PredictAttitude, as before', async () => {
+  // A stand-in esgd of an older version: GetSession (the token check) and PredictAttitude only.
+  const grpc = require('@grpc/grpc-js');
+  const protoLoader = require('@grpc/proto-loader');
+  const definition = protoLoader.loadSync('esg/v1/estimation_service.proto', {
+    includeDirs: [path.join(REPO, 'proto')], keepCase: true, longs: Number, enums: String, defaults: true, arrays: true,
+  });
+  const service = grpc.loadPackageDefinition(definition).esg.v1.EstimationService.service;
+  const response = {
+    samples: [{ time: { seconds: 1551398400, nanos: 0 }, q_in_b: [1, 0, 0, 0], sigma_arcsec: [1, 2, 3], spin_axes: [] }],
+    aem_text: '', attitude_source: 'ATTITUDE_SOURCE_INERTIAL_HOLD', recorded_samples: 0,
+    last_applied_time: { seconds: 1551398000, nanos: 0 }, assumption: 'inertial hold after ...',
+  };
+  const server = new grpc.Server();
+  server.addService({ GetSession: service.GetSession, PredictAttitude: service.PredictAttitude }, {
+    GetSession: (call, callback) => callback({ code: grpc.status.INVALID_ARGUMENT, details: 'spacecraft_id: empty' }),
+    PredictAttitude: (call, callback) => callback(null, response),
+  });
+  const port = await new Promise((resolve, reject) => server.bindAsync('127.0.0.1:0',
+    grpc.ServerCredentials.createInsecure(), (err, p) => (err ? reject(err) : resolve(p))));
+  const old = await startGateway(['--esgd', `127.0.0.1:${port}`]);
+  try {
+    const answer = await request(new URL('/api/spacecraft/OLD-1/predict?from=2019-03-01T00:00:00Z&to=2019-03-01T00:00:00Z&step_s=1',
+      old.url));
+    assert.equal(answer.status, 200, answer.text);
+    const converter = new Esgd({ address: `127.0.0.1:${port}` });
+    try {
+      assert.equal(answer.text, JSON.stringify(converter.convert.toJson('esg.v1.PredictResponse', response)));
+    } finally {
+      converter.close();
+    }
+  } finally {
+    await stop(old.child);
+    server.forceShutdown();
+  }
+});
