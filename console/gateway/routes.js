@@ -264,18 +264,27 @@ function makeRoutes(esgd, tokens, large = new LargeAnswers()) {
     })],
 
     ['GET', '/api/fleet', async (ctx) => {
-      const [sessions, alerts] = await Promise.all([
+      // Every alert's latest state at its first place (latestStates), kept only while it is open
+      // (not cleared, not revised, of a known severity): the replay of every stored alert is
+      // read, the closed ones, most of them, are not held.
+      const latestOpen = new Map();
+      const [sessions] = await Promise.all([
         pages(ctx, 'ListSessions', { page_size: SESSION_PAGE }, 'sessions'),
-        esgd.replay('SubscribeAlerts', { spacecraft_id: '', since: EPOCH }, ctx.authorization,
-          ctx.owner),
+        esgd.replayEach('SubscribeAlerts', { spacecraft_id: '', since: EPOCH }, ctx.authorization,
+          ctx.owner, (alert) => {
+            const severity = alert.severity.replace(/^ALERT_SEVERITY_/, '');
+            const isOpen = !alert.cleared && !alert.revised_time && SEVERITIES.includes(severity);
+            latestOpen.set(`${alert.spacecraft_id}\u0000${alert.sequence}`, isOpen ? alert : null);
+          }),
       ]);
       const open = new Map(sessions.map((s) => [s.spacecraft_id,
         Object.fromEntries(SEVERITIES.map((name) => [name, 0]))]));
       const worst = new Map();
-      for (const alert of latestStates(alerts)) {
+      for (const alert of latestOpen.values()) {
+        if (!alert) continue;
         const counts = open.get(alert.spacecraft_id);
         const severity = alert.severity.replace(/^ALERT_SEVERITY_/, '');
-        if (!counts || alert.cleared || alert.revised_time || !(severity in counts)) continue;
+        if (!counts) continue;
         counts[severity]++;
         if (worseAlert(alert, worst.get(alert.spacecraft_id))) worst.set(alert.spacecraft_id, alert);
       }

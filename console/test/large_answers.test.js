@@ -486,6 +486,20 @@ test('an alert list is a large answer: the JSON it was, written in pages, waitin
   assert.equal(none.text, '{"alerts":[]}');
   assert.equal((await api('/api/spacecraft/NOPE/alerts', { headers: asBob })).status, 404);
   console.log(`${whole.length} alerts in the list`);
+  // The fleet counts the same latest states (it keeps only the open ones while it reads).
+  const fleet = await api('/api/fleet', { headers: asBob });
+  assert.equal(fleet.status, 200);
+  const rank = (a) => ['INFO', 'WARNING', 'DISTRESS', 'CRITICAL'].indexOf(a.severity.replace(/^ALERT_SEVERITY_/, ''));
+  for (const entry of fleet.json.fleet) {
+    const open = whole.filter((a) => a.spacecraft_id === entry.session.spacecraft_id && !a.cleared && !a.revised_time);
+    const counts = { INFO: 0, WARNING: 0, DISTRESS: 0, CRITICAL: 0 };
+    for (const a of open) counts[a.severity.replace(/^ALERT_SEVERITY_/, '')]++;
+    assert.deepEqual(entry.open_alerts, counts, entry.session.spacecraft_id);
+    const worst = open.reduce((w, a) => (!w || rank(a) > rank(w) ||
+      (rank(a) === rank(w) && (a.measurement_time || '') > (w.measurement_time || '')) ? a : w), null);
+    assert.deepEqual(entry.worst_alert, worst, entry.session.spacecraft_id);
+  }
+  assert.ok(fleet.json.fleet.some((e) => e.worst_alert), 'an open alert in the fleet');
 
   // Bob's four slots held by paused predictions: his alert list waits, alice's does not.
   const last = await lastFrameMs();
