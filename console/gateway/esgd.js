@@ -220,8 +220,9 @@ class Esgd {
     return messages();
   }
 
-  // The stored part of a subscription: every message up to the replay marker, then the call is
-  // cancelled. Used by the REST alert lists and the fleet view.
+  // The stored part of a subscription: every message up to the replay marker, collected, then
+  // the call is cancelled. The routes read it as it arrives (replayEach); the tests compare with
+  // this whole.
   replay(method, request, authorization, owner) {
     const messages = [];
     return this.replayEach(method, request, authorization, owner, (message) => messages.push(message))
