@@ -279,6 +279,24 @@ absl::StatusOr<esg::v1::CancelAutoDiagnosisResponse> EsgClient::CancelAutoDiagno
       });
 }
 
+absl::StatusOr<esg::v1::OrbitDelivery> EsgClient::UploadOrbit(
+    const esg::v1::UploadOrbitRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::OrbitDelivery>(
+      NewContext(true, call, request.spacecraft_id()),
+      [&](grpc::ClientContext* c, esg::v1::OrbitDelivery* r) {
+        return stub_->UploadOrbit(c, request, r);
+      });
+}
+
+absl::StatusOr<esg::v1::ListOrbitsResponse> EsgClient::ListOrbits(
+    const esg::v1::ListOrbitsRequest& request, const CallOptions& call) {
+  return Unary<esg::v1::ListOrbitsResponse>(
+      NewContext(true, call, request.spacecraft_id()),
+      [&](grpc::ClientContext* c, esg::v1::ListOrbitsResponse* r) {
+        return stub_->ListOrbits(c, request, r);
+      });
+}
+
 absl::StatusOr<esg::v1::ReadmitGyroResponse> EsgClient::ReadmitGyro(
     const esg::v1::ReadmitGyroRequest& request, const CallOptions& call) {
   return Unary<esg::v1::ReadmitGyroResponse>(

@@ -174,6 +174,10 @@ class EsgClient {
   // Cancels the service's automatic diagnosis (docs/service.md "Automatic diagnosis").
   absl::StatusOr<esg::v1::CancelAutoDiagnosisResponse> CancelAutoDiagnosis(
       const esg::v1::CancelAutoDiagnosisRequest& request, const CallOptions& call = {});
+  absl::StatusOr<esg::v1::OrbitDelivery> UploadOrbit(const esg::v1::UploadOrbitRequest& request,
+                                                     const CallOptions& call = {});
+  absl::StatusOr<esg::v1::ListOrbitsResponse> ListOrbits(const esg::v1::ListOrbitsRequest& request,
+                                                         const CallOptions& call = {});
 
   // Opens a telemetry stream (no deadline) for the frames of `spacecraft_id`: routed by it, and
   // esgd refuses a frame of another spacecraft on it. Errors show up in TelemetryStream::Finish.

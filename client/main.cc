@@ -82,6 +82,7 @@ int main(int argc, char** argv) {
   esg::client::RegisterGap(app, global, &exit_code);
   esg::client::RegisterDiagnose(app, global, &exit_code);
   esg::client::RegisterDiagnoses(app, global, &exit_code);
+  esg::client::RegisterOrbit(app, global, &exit_code);
   esg::client::RegisterConfigure(app, global, &exit_code);
   esg::client::RegisterReplay(app, global, &exit_code);
   esg::client::RegisterStatus(app, global, &exit_code);

@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
+#include "estimator/status_macros.h"
 #include "formats/ccsds_kvn.h"
 
 namespace esg::storage {
@@ -316,24 +317,30 @@ absl::StatusOr<OemFile> ParseOem(absl::string_view text) {
   return file;
 }
 
-absl::StatusOr<estimator::Orbit> ParseOemOrbit(absl::string_view text,
-                                               absl::string_view spacecraft_id) {
+namespace {
+
+// The arcs of one delivery (its segments' useable spans, in file order) appended to `arcs`, and
+// what the orbit's errors call each (`prefix` then "segment n (line m): ") to `names`.
+absl::Status AppendOemArcs(absl::string_view text, absl::string_view spacecraft_id,
+                           absl::string_view prefix, std::vector<estimator::OrbitArc>& arcs,
+                           std::vector<std::string>& names) {
   absl::StatusOr<OemFile> file = ParseOem(text);
-  if (!file.ok()) return file.status();
-  std::vector<estimator::OrbitArc> arcs;
-  std::vector<std::string> names;  // what the orbit's errors call each segment
+  if (!file.ok()) {
+    return absl::Status(file.status().code(), absl::StrCat(prefix, file.status().message()));
+  }
   for (size_t i = 0; i < file->segments.size(); ++i) {
     const OemSegment& segment = file->segments[i];
     const int line = segment.metadata_lines.at("OBJECT_NAME");
     const std::string& name = segment.metadata.at("OBJECT_NAME");
     const std::string& id = segment.metadata.at("OBJECT_ID");
     if (name != spacecraft_id && id != spacecraft_id) {
-      return KvnLineError(line, "OBJECT_NAME",
+      const absl::Status error = KvnLineError(line, "OBJECT_NAME",
                           absl::StrCat("'", absl::CHexEscape(name), "' (OBJECT_ID '",
                                        absl::CHexEscape(id), "') is not spacecraft '",
                                        absl::CHexEscape(spacecraft_id),
                                        "': the orbit is of another spacecraft (OBJECT_NAME or "
                                        "OBJECT_ID must be the spacecraft id)"));
+      return absl::Status(error.code(), absl::StrCat(prefix, error.message()));
     }
     estimator::OrbitArc arc;
     arc.states = segment.states;
@@ -341,12 +348,34 @@ absl::StatusOr<estimator::Orbit> ParseOemOrbit(absl::string_view text,
     arc.to = std::min(segment.useable_stop, segment.states.back().time);
     if (arc.to < arc.from) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "segment ", i + 1, " (line ", line, "): its useable span holds no two states"));
+          prefix, "segment ", i + 1, " (line ", line, "): its useable span holds no two states"));
     }
     arcs.push_back(std::move(arc));
-    names.push_back(absl::StrCat("segment ", i + 1, " (line ", line, "): "));
+    names.push_back(absl::StrCat(prefix, "segment ", i + 1, " (line ", line, "): "));
   }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<estimator::Orbit> ParseOemOrbit(absl::string_view text,
+                                               absl::string_view spacecraft_id) {
+  std::vector<estimator::OrbitArc> arcs;
+  std::vector<std::string> names;  // what the orbit's errors call each segment
+  RETURN_IF_ERROR(AppendOemArcs(text, spacecraft_id, "", arcs, names));
   return estimator::Orbit::FromArcs(std::move(arcs), names);
+}
+
+absl::StatusOr<estimator::Orbit> OrbitFromDeliveries(const std::vector<std::string>& texts,
+                                                     const std::vector<std::string>& names,
+                                                     absl::string_view spacecraft_id) {
+  std::vector<estimator::OrbitArc> arcs;
+  std::vector<std::string> arc_names;
+  for (size_t i = 0; i < texts.size(); ++i) {
+    const std::string prefix = i < names.size() ? names[i] : absl::StrCat("delivery ", i + 1, ": ");
+    RETURN_IF_ERROR(AppendOemArcs(texts[i], spacecraft_id, prefix, arcs, arc_names));
+  }
+  return estimator::Orbit::FromArcs(std::move(arcs), arc_names);
 }
 
 absl::StatusOr<std::string> WriteOem(const OemHeader& header,

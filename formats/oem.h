@@ -57,6 +57,14 @@ absl::StatusOr<OemFile> ParseOem(absl::string_view text);
 absl::StatusOr<estimator::Orbit> ParseOemOrbit(absl::string_view text,
                                                absl::string_view spacecraft_id);
 
+// The orbit of `spacecraft_id` from several deliveries (the service's stored uploads), each read
+// as ParseOemOrbit reads one, their arcs in the order given: a later delivery is used where they
+// overlap. Errors as ParseOemOrbit's, headed by the delivery's name (`names[i]`, e.g.
+// "orbit 12: "; "delivery i: " when not given).
+absl::StatusOr<estimator::Orbit> OrbitFromDeliveries(const std::vector<std::string>& texts,
+                                                     const std::vector<std::string>& names,
+                                                     absl::string_view spacecraft_id);
+
 struct OemHeader {
   std::string object_name;
   std::string object_id;

@@ -240,6 +240,7 @@ json DiagnosisJsonValue(const DiagnosisReport& r, bool include_series) {
            {"frames", r.frames},
            {"filterRuns", r.filter_runs}};
   if (r.consistency.checked) doc["consistency"] = ConsistencyJson(r.consistency);
+  if (!r.orbit.empty()) doc["orbit"] = r.orbit;
   if (include_series) {
     auto residuals = [](const std::vector<estimator::discovery::ResidualPoint>& v) {
       json a = json::array();

@@ -319,6 +319,12 @@ absl::StatusOr<esg::v1::DiagnosisResult> EstimationCore::RunDiagnosis(
         window_field, "no decodable archived telemetry of '", sc->id, "' in [",
         FormatUtc(interval.from), ", ", FormatUtc(interval.to), "]"));
   }
+  // The spacecraft's orbit from its stored deliveries (docs/service.md "Orbits"), when they
+  // cover the span: the sun's regressors then see the Earth's shadow.
+  ASSIGN_OR_RETURN(const StoredOrbit stored_orbit,
+                   OrbitFor(sc->id, frames.front().time, frames.back().time));
+  options.orbit = stored_orbit.orbit;
+  options.orbit_source = stored_orbit.note;
   ASSIGN_OR_RETURN(estimator::discovery::DiagnosisReport report,
                    estimator::discovery::Diagnose(setup->config, frames, options, progress));
   // A diagnosis cancelled while it ran is not stored, even when it completed meanwhile.

@@ -69,6 +69,7 @@
 #include "esg/v1/estimation_service.pb.h"
 #include "estimator/calibration_model.h"
 #include "estimator/frame_gap.h"
+#include "estimator/orbit.h"
 #include "estimator/session.h"
 #include "estimator/spacecraft_config.h"
 #include "server/alert_collapse.h"
@@ -90,6 +91,13 @@ class PredictionStream;
 struct DiagnosisOrigin {
   std::string requested_by;
   int64_t answers_alert = 0;
+};
+
+// The orbit a diagnosis takes from the spacecraft's stored deliveries (core_orbits.cc): null
+// when none covers the whole span, and a note that says which deliveries were used, or why none.
+struct StoredOrbit {
+  std::shared_ptr<const estimator::Orbit> orbit;
+  std::string note;
 };
 
 struct CoreOptions {
@@ -295,6 +303,17 @@ class EstimationCore {
   absl::StatusOr<esg::v1::DiagnosisResult> GetDiagnosis(
       const esg::v1::GetDiagnosisRequest& request);
   absl::StatusOr<esg::v1::Alert> Acknowledge(const esg::v1::AcknowledgeRequest& request);
+
+  // ---- Orbits (core_orbits.cc; docs/service.md "Orbits") ----
+  // Stores a delivery after reading it as `esg diagnose --orbit` reads a file; `uploaded_by`
+  // the caller. InvalidArgument naming the field (spacecraft_id, "oem: line N: KEYWORD: ...").
+  absl::StatusOr<esg::v1::OrbitDelivery> UploadOrbit(const esg::v1::UploadOrbitRequest& request,
+                                                     const std::string& uploaded_by);
+  absl::StatusOr<esg::v1::ListOrbitsResponse> ListOrbits(const esg::v1::ListOrbitsRequest& request);
+  // The orbit of the deliveries meeting [from, to], later uploads used where they overlap, when
+  // they cover it whole; else none and the note says why.
+  absl::StatusOr<StoredOrbit> OrbitFor(const std::string& spacecraft_id, absl::Time from,
+                                       absl::Time to);
 
   // ---- Operator actions (operator_actions.cc; docs/service.md "Applying a diagnosis",
   // "Readmitting a gyro") ----

@@ -526,6 +526,26 @@ grpc::ServerUnaryReactor* EstimationServiceImpl::ListDiagnoses(
                response, [&] { return core_->ListDiagnoses(*request); });
 }
 
+grpc::ServerUnaryReactor* EstimationServiceImpl::UploadOrbit(
+    grpc::CallbackServerContext* context, const esg::v1::UploadOrbitRequest* request,
+    esg::v1::OrbitDelivery* response) {
+  // Stored under the caller's name (the token's; the peer without tokens), as an operator
+  // action is (docs/service.md "Orbits").
+  absl::StatusOr<std::string> caller = Caller(context, Role::kWrite);
+  absl::Status admitted = caller.status();
+  if (admitted.ok()) admitted = CheckCallScope(*context, request->spacecraft_id());
+  const std::string uploaded_by = caller.ok() ? *caller : std::string();
+  return Unary(&calls_, context, admitted, response,
+               [&] { return core_->UploadOrbit(*request, uploaded_by); });
+}
+
+grpc::ServerUnaryReactor* EstimationServiceImpl::ListOrbits(
+    grpc::CallbackServerContext* context, const esg::v1::ListOrbitsRequest* request,
+    esg::v1::ListOrbitsResponse* response) {
+  return Unary(&calls_, context, Authorize(context, Role::kRead, request->spacecraft_id()),
+               response, [&] { return core_->ListOrbits(*request); });
+}
+
 grpc::ServerUnaryReactor* EstimationServiceImpl::GetDiagnosis(
     grpc::CallbackServerContext* context, const esg::v1::GetDiagnosisRequest* request,
     esg::v1::DiagnosisResult* response) {

@@ -116,6 +116,12 @@ class EstimationServiceImpl final : public esg::v1::EstimationService::CallbackS
   grpc::ServerUnaryReactor* CancelAutoDiagnosis(
       grpc::CallbackServerContext* context, const esg::v1::CancelAutoDiagnosisRequest* request,
       esg::v1::CancelAutoDiagnosisResponse* response) override;
+  grpc::ServerUnaryReactor* UploadOrbit(grpc::CallbackServerContext* context,
+                                        const esg::v1::UploadOrbitRequest* request,
+                                        esg::v1::OrbitDelivery* response) override;
+  grpc::ServerUnaryReactor* ListOrbits(grpc::CallbackServerContext* context,
+                                       const esg::v1::ListOrbitsRequest* request,
+                                       esg::v1::ListOrbitsResponse* response) override;
 
   // The limiters: running calls, for tests and diagnostics (a test may hold permits itself).
   CallLimiter& prediction_limiter() { return predictions_; }

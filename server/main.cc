@@ -151,6 +151,9 @@ void AddLimitFlags(CLI::App& app, esg::server::ServerOptions& options, Flags& fl
                  "Diagnoses kept per spacecraft (beyond: the oldest are deleted, the "
                  "service's own before the operators')")
       ->capture_default_str();
+  app.add_option("--max-stored-orbits", options.max_stored_orbits,
+                 "Orbit deliveries kept per spacecraft (beyond: the oldest uploads are deleted)")
+      ->capture_default_str();
   flags.auto_diagnosis_hours = absl::ToDoubleHours(options.auto_diagnosis.span);
   app.add_option("--auto-diagnosis-hours", flags.auto_diagnosis_hours,
                  "Span of the service's own diagnosis of a MODEL_INCONSISTENT alert, hours of "

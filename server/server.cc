@@ -73,6 +73,7 @@ absl::Status CheckLimits(const ServerOptions& o) {
       {"max_queued_bytes_per_caller", o.calls.max_queued_bytes_per_caller},
       {"max_queued_bytes", o.calls.max_queued_bytes},
       {"max_stored_diagnoses", o.max_stored_diagnoses},
+      {"max_stored_orbits", o.max_stored_orbits},
       {"max_streams_per_connection", o.max_streams_per_connection},
       {"max_sync_threads", o.max_sync_threads},
   };
@@ -274,7 +275,8 @@ void LogStarted(const ServerOptions& options, int port, const std::string& datab
                            options.calls.max_exports, " in total; unread subscription messages ",
                            ByteText(options.calls.max_queued_bytes_per_caller), " per caller, ",
                            ByteText(options.calls.max_queued_bytes), " in total; ",
-                           options.max_stored_diagnoses, " stored diagnoses per spacecraft; "
+                           options.max_stored_diagnoses, " stored diagnoses and ",
+                           options.max_stored_orbits, " orbit deliveries per spacecraft; "
                            "automatic diagnosis ", options.auto_diagnosis.span > absl::ZeroDuration()
                                ? absl::StrCat("over ", absl::FormatDuration(options.auto_diagnosis.span))
                                : std::string("off"), "; "
@@ -300,6 +302,7 @@ absl::StatusOr<std::unique_ptr<EsgServer>> EsgServer::Start(const ServerOptions&
   db_options.vfs = options.db_vfs;
   ASSIGN_OR_RETURN(s->storage_, storage::Storage::Open(options.db_path, db_options));
   s->storage_->diagnoses().set_max_per_spacecraft(options.max_stored_diagnoses);
+  s->storage_->orbits().set_max_per_spacecraft(options.max_stored_orbits);
   ASSIGN_OR_RETURN(const CoreOptions core_options, CoreOptionsFor(options, postgres));
   ASSIGN_OR_RETURN(s->core_, EstimationCore::Start(s->storage_.get(), core_options));
   s->service_ = std::make_unique<EstimationServiceImpl>(

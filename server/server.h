@@ -49,6 +49,9 @@ struct ServerOptions {
   // Diagnoses stored per spacecraft (storage/diagnosis_store.h): beyond it the oldest are
   // deleted. About 9 KB each: 1000 hold some 9 MB per spacecraft.
   int64_t max_stored_diagnoses = 1000;
+  // Orbit deliveries stored per spacecraft (storage/orbit_store.h): beyond it the oldest are
+  // deleted. A day's OEM at 60 s is about 150 KB: 400 hold some 60 MB per spacecraft.
+  int64_t max_stored_orbits = 400;
   // The service's own diagnosis of MODEL_INCONSISTENT alerts (server/auto_diagnosis.h): the span
   // it diagnoses (esgd --auto-diagnosis-hours; zero: none).
   AutoDiagnosisOptions auto_diagnosis;

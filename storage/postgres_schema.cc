@@ -244,15 +244,17 @@ absl::string_view Upgrade(int version) {
       new std::string(DiagnosisOriginMigration(Dialect::kPostgres));
   static const std::string* const cancels =
       new std::string(AutoDiagnosisCancelsMigration(Dialect::kPostgres));
+  static const std::string* const orbits = new std::string(OrbitsMigration(Dialect::kPostgres));
   static constexpr absl::string_view kFrozen[] = {kCoefficientBasisTermsColumn,
                                                   kEstimateAttitudeErrorColumns};
-  static_assert(7 + std::size(kFrozen) + 4 == kCurrentSchemaVersion);
+  static_assert(7 + std::size(kFrozen) + 5 == kCurrentSchemaVersion);
   const int n = version - 7;
   if (n < static_cast<int>(std::size(kFrozen))) return kFrozen[n];
   const int built = n - static_cast<int>(std::size(kFrozen));
   if (built == 0) return *keyed_values;
   if (built == 1) return *readmissions;
-  return built == 2 ? absl::string_view(*origin) : absl::string_view(*cancels);
+  if (built == 2) return *origin;
+  return built == 3 ? absl::string_view(*cancels) : absl::string_view(*orbits);
 }
 
 // Key of the advisory lock that serializes schema changes between servers ("esg-schema").

@@ -32,6 +32,8 @@
 //      the MODEL_INCONSISTENT alert an automatic diagnosis answers; 0 otherwise).
 //  13  auto_diagnosis_cancels (an operator's cancel of the automatic diagnosis of a spacecraft,
 //      per configuration version: none runs again under that version; diagnosis_store.h).
+//  14  orbits (uploaded orbit deliveries, CCSDS OEM text as received, with the span they cover;
+//      orbit_store.h).
 //                                                                    <- kCurrentSchemaVersion
 // Migration N -> N+1 is one function, applied in order, each in its own IMMEDIATE transaction
 // together with the new user_version, so a crash mid-migration leaves the previous version
@@ -60,7 +62,7 @@
 
 namespace esg::storage {
 
-inline constexpr int kCurrentSchemaVersion = 13;
+inline constexpr int kCurrentSchemaVersion = 14;
 
 // The DDL of version 11 in the dialect's types (SQLite INTEGER, PostgreSQL BIGINT).
 std::string ReadmissionsMigration(Dialect dialect);
@@ -70,6 +72,9 @@ std::string DiagnosisOriginMigration(Dialect dialect);
 
 // The DDL of version 13 in the dialect's types: operators' cancels of the automatic diagnosis.
 std::string AutoDiagnosisCancelsMigration(Dialect dialect);
+
+// The DDL of version 14 in the dialect's types: uploaded orbit deliveries.
+std::string OrbitsMigration(Dialect dialect);
 
 // The DDL of version 8, the same in both dialects.
 inline constexpr absl::string_view kCoefficientBasisTermsColumn =

@@ -49,6 +49,7 @@ Storage::Storage(std::unique_ptr<Database> db)
       alerts_(db_.get()),
       sessions_(db_.get()),
       diagnoses_(db_.get()),
+      orbits_(db_.get()),
       reorder_(db_.get()),
       estimates_(db_.get()),
       leases_(db_.get()) {}

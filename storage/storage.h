@@ -44,6 +44,7 @@
 #include "storage/database.h"
 #include "storage/estimate_store.h"
 #include "storage/lease_store.h"
+#include "storage/orbit_store.h"
 #include "storage/records.h"
 #include "storage/postgres_db.h"
 #include "storage/reorder_store.h"
@@ -210,6 +211,7 @@ class Storage {
   AlertStore& alerts() { return alerts_; }
   SessionStore& sessions() { return sessions_; }
   DiagnosisStore& diagnoses() { return diagnoses_; }
+  OrbitStore& orbits() { return orbits_; }
   ReorderStore& reorder() { return reorder_; }
   EstimateStore& estimates() { return estimates_; }
   LeaseStore& leases() { return leases_; }
@@ -234,6 +236,7 @@ class Storage {
   AlertStore alerts_;
   SessionStore sessions_;
   DiagnosisStore diagnoses_;
+  OrbitStore orbits_;
   ReorderStore reorder_;
   EstimateStore estimates_;
   LeaseStore leases_;

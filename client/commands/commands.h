@@ -38,6 +38,8 @@ void RegisterHistory(CLI::App& app, GlobalOptions& global, int* exit_code);
 void RegisterEstimates(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg diagnoses list|show` (ListDiagnoses).
 void RegisterDiagnoses(CLI::App& app, GlobalOptions& global, int* exit_code);
+// `esg orbit upload|list` (UploadOrbit, ListOrbits; server_orbits.cc).
+void RegisterOrbit(CLI::App& app, GlobalOptions& global, int* exit_code);
 // `esg export history|telemetry` (ExportCoefficientHistory, ExportTelemetry; server_export.h).
 void RegisterExport(CLI::App& app, GlobalOptions& global, int* exit_code);
 // server_operator.cc: `esg model apply` (ApplyDiagnosis) and `esg gyro readmit` (ReadmitGyro).

@@ -197,6 +197,7 @@ int RunDiagnose(const DiagnoseCliOptions& o) {
       return 2;
     }
     options.orbit = *std::move(orbit);
+    options.orbit_source = absl::StrCat("the OEM file ", o.orbit_path);
   }
   StageProgress progress("diagnose");
   auto report = disc::Diagnose(*config, recording->frames, options,
@@ -241,7 +242,8 @@ int RunDiagnoseVerb(const DiagnoseCliOptions& o, const ServerDiagnoseOptions& se
     if (!o.orbit_path.empty()) {
       return ReportBadArgument("diagnose",
                                "--orbit: read for a recording diagnosed offline (--config, "
-                               "--recording); esgd does not take an orbit yet");
+                               "--recording); the server takes the orbit it stores (esg orbit "
+                               "upload --spacecraft ID --oem FILE)");
     }
     ServerDiagnoseOptions request = server;
     if (model_given) request.model = o.model;  // else the session's model

@@ -27,11 +27,11 @@ _esg() {
   fi
 
   local verbs="simulate calibrate gap diagnose diagnoses configure replay status predict alerts history
-    estimates export model gyro help version completion"
+    estimates export model gyro orbit help version completion"
   local global="--server --token --tls-ca --tls-cert --tls-key --help --version"
   local format="-o --format --json"
 
-  # The verb (and the sub-verb of diagnoses, export, model and gyro) on the line so far; global options may
+  # The verb (and the sub-verb of diagnoses, export, model, gyro and orbit) on the line so far; global options may
   # come first.
   local verb="" sub="" i
   local -a connection=()
@@ -46,7 +46,7 @@ _esg() {
         if [[ -z "$verb" ]]; then
           verb="${words[i]}"
         elif [[ ( "$verb" == diagnoses || "$verb" == export || "$verb" == model ||
-                  "$verb" == gyro ) && -z "$sub" ]]; then
+                  "$verb" == gyro || "$verb" == orbit ) && -z "$sub" ]]; then
           sub="${words[i]}"
         fi
         ;;
@@ -71,7 +71,7 @@ _esg() {
       return
       ;;
     --config | --recording | --columns | --scenario | --write-config | --truth | --series-csv | \
-      --aem | --planned | --tls-ca | --tls-cert | --tls-key)
+      --aem | --planned | --oem | --orbit | --tls-ca | --tls-cert | --tls-key)
       COMPREPLY=($(compgen -f -- "$cur"))
       return
       ;;
@@ -143,6 +143,13 @@ _esg() {
       case "$sub" in
         "") COMPREPLY=($(compgen -W "readmit" -- "$cur")); return ;;
         readmit) opts="--spacecraft --gyro --operator $format" ;;
+      esac
+      ;;
+    orbit)
+      case "$sub" in
+        "") COMPREPLY=($(compgen -W "upload list" -- "$cur")); return ;;
+        upload) opts="--spacecraft --oem $format" ;;
+        list) opts="--spacecraft $format" ;;
       esac
       ;;
   esac

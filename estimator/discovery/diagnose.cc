@@ -196,6 +196,12 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   DiagnosisReport report;
   report.first_frame_time = frames.front().time;
   report.frames = static_cast<int>(frames.size());
+  if (options.orbit != nullptr) {
+    report.orbit = absl::StrCat(options.orbit_source.empty() ? "an orbit" : options.orbit_source,
+                                ": used (the Earth's shadow in the sun's regressors)");
+  } else {
+    report.orbit = options.orbit_source;
+  }
   report.gyros = RunningGyros(config, frames);
   if (report.gyros.size() < 2) {
     return absl::InvalidArgumentError(

@@ -61,6 +61,10 @@ struct DiagnoseOptions {
   // harmonics take the orbit's period when orbital_period_s is 0. It must cover the recording
   // (Diagnose refuses it otherwise, naming the gaps). Null: no orbit, the sun always shines.
   std::shared_ptr<const Orbit> orbit;
+  // Where the orbit came from ("the OEM file F", "orbit deliveries 3, 4"), or, with no orbit,
+  // why none was used (the service's stored deliveries do not cover the span): the report's
+  // `orbit` line. Empty: nothing to say.
+  std::string orbit_source;
   // Held-out spans: at most this many, each at most max_gap_hours long.
   int max_gaps = 4;
   double max_gap_hours = 4.0;

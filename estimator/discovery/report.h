@@ -302,6 +302,9 @@ struct DiagnosisReport {
   absl::Time first_frame_time;
   int frames = 0;
   int filter_runs = 0;
+  // The orbit the diagnosis had (DiagnoseOptions::orbit_source): "<source>: used", or why none
+  // was used; empty when nothing was said.
+  std::string orbit;
   std::vector<int> gyros;  // running gyros
   ModelConsistency consistency;
 };

@@ -5,6 +5,9 @@
 // 3 sigma of the truth, saying the shadow was used; without the orbit the drift is unexplained.
 // An OEM of another spacecraft, one that does
 // not cover the recording, or --orbit with the server's archive exit 2 naming the option.
+// On the service (docs/service.md "Orbits"): `esg orbit upload` stores the OEM on a real esgd,
+// `esg orbit list` lists it, and `esg diagnose --spacecraft` says it used it; another
+// spacecraft's OEM is refused naming its line, exit 1, and a missing file is exit 2.
 #include <cmath>
 #include <string>
 
@@ -12,6 +15,8 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "tests/client/cli_test_support.h"
+#include "tests/testing/daemon.h"
 #include "tests/testing/run_process.h"
 #include "tests/testing/temp_dir.h"
 
@@ -138,6 +143,55 @@ TEST(OrbitCli, AnOrbitThatDoesNotFitTheRecordingExitsTwoNamingIt) {
   RunResult server = RunEsg(dir, "diagnose --spacecraft RDK-1 --orbit '" + dir.File("orbit.oem") + "'");
   EXPECT_EQ(server.exit_code, 2);
   EXPECT_THAT(server.err, HasSubstr("--orbit"));
+}
+
+TEST(OrbitCli, AnUploadedOrbitIsListedAndTakenByTheServersDiagnosis) {
+  TempDir dir;
+  WriteFile(dir.File("scenario.json"), kScenario);
+  ASSERT_EQ(RunEsg(dir, "simulate --config '" + Config() + "' --scenario '" +
+                            dir.File("scenario.json") + "' --hours 3 --seed 1 --out '" +
+                            dir.File("rec.csv") + "' --orbit-out '" + dir.File("orbit.oem") + "'")
+                .exit_code,
+            0);
+  ::esg::testing::Daemon daemon(dir.File("esg.db"), dir.File("esgd.log"));
+  ASSERT_GT(daemon.port(), 0);
+  ASSERT_EQ(Esg(dir, daemon, "configure --config '" + Config() + "'").exit_code, 0);
+  RunResult replay = Esg(dir, daemon, "replay --recording '" + dir.File("rec.csv") + "' --wait");
+  ASSERT_EQ(replay.exit_code, 0) << replay.err;
+
+  RunResult upload =
+      Esg(dir, daemon, "orbit upload --spacecraft RDK-1 --oem '" + dir.File("orbit.oem") + "'");
+  ASSERT_EQ(upload.exit_code, 0) << upload.err;
+  EXPECT_THAT(upload.out, HasSubstr("stored orbit delivery #1 "));
+  RunResult list = Esg(dir, daemon, "orbit list --spacecraft RDK-1 --format json");
+  ASSERT_EQ(list.exit_code, 0) << list.err;
+  const nlohmann::json listed = nlohmann::json::parse(list.out);
+  ASSERT_EQ(listed.size(), 1u);
+  EXPECT_EQ(listed[0]["id"], "1");  // int64 in the proto JSON mapping
+  EXPECT_GT(std::stoll(listed[0]["states"].get<std::string>()), 100);
+
+  WriteFile(dir.File("other.oem"),
+            absl::StrReplaceAll(ReadFile(dir.File("orbit.oem")),
+                                {{"OBJECT_NAME = RDK-1", "OBJECT_NAME = SAT-9"},
+                                 {"OBJECT_ID = RDK-1", "OBJECT_ID = 2020-007B"}}));
+  RunResult other =
+      Esg(dir, daemon, "orbit upload --spacecraft RDK-1 --oem '" + dir.File("other.oem") + "'");
+  EXPECT_EQ(other.exit_code, 1);
+  EXPECT_THAT(other.err, HasSubstr("INVALID_ARGUMENT: oem: line 7: OBJECT_NAME: 'SAT-9'"));
+  RunResult missing =
+      Esg(dir, daemon, "orbit upload --spacecraft RDK-1 --oem '" + dir.File("absent.oem") + "'");
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_THAT(missing.err, HasSubstr("--oem"));
+  EXPECT_EQ(nlohmann::json::parse(
+                Esg(dir, daemon, "orbit list --spacecraft RDK-1 --format json").out)
+                .size(),
+            1u);
+
+  RunResult diagnosed = Esg(dir, daemon, "diagnose --spacecraft RDK-1 --format json");
+  ASSERT_EQ(diagnosed.exit_code, 0) << diagnosed.err;
+  const nlohmann::json result = nlohmann::json::parse(diagnosed.out);
+  EXPECT_EQ(result["report"].value("orbit", ""),
+            "orbit delivery 1: used (the Earth's shadow in the sun's regressors)");
 }
 
 }  // namespace
