@@ -972,6 +972,63 @@ absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected
   return absl::OkStatus();
 }
 
+// A transient from an onset is one decay (docs/discovery.md, "A transient from an onset"): with it
+// in the model, what is left of its gyro's drift must not return to its mean. When a stationary
+// drift still describes the gyro's deviation from the model with the transient decisively better
+// than one step or a raised walk (ReturnsToItsMean), the decay is one excursion of a drift that
+// wanders, not a transient: nothing is taken, and the mismatch is left unexplained, located to the
+// gyro, as PreferStationaryDrift leaves it. Otherwise the comparison is a note of the finding.
+absl::Status TransientLeavesNoWanderingDrift(RoundState& st, Choice& choice,
+                                             const SelectedModel& selected,
+                                             DiagnosisContext& context) {
+  if (choice.chosen < 0) return absl::OkStatus();
+  const CandidateFit& f = st.fits[choice.chosen];
+  if (f.candidate.effect != Effect::kTransient || f.candidate.gyro <= 0) return absl::OkStatus();
+  SelectedModel with;
+  with.model = f.model;
+  // The gyro's basis terms at the run's estimates: the model holds the transient's terms at their
+  // prior mean (0), and the deviation takes the configured value of a term other than a
+  // channel's (deviation.h), so without this it would measure the drift the transient fits too.
+  for (GyroConfig& g : with.model.config.gyros) {
+    if (g.id != f.candidate.gyro) continue;
+    for (const GyroEstimate& e : f.run.gyros) {
+      if (e.id != g.id || e.basis_terms.size() != g.basis_terms.size()) continue;
+      for (size_t k = 0; k < g.basis_terms.size(); ++k) {
+        g.basis_terms[k].value = e.basis_terms[k].value;
+      }
+    }
+  }
+  with.run = f.run;
+  with.fit = Profile(with.run);
+  with.held_out = selected.held_out;
+  with.held_out_current = false;
+  ASSIGN_OR_RETURN(const DriftBehaviourEvidence left,
+                   CompareDriftBehavioursOf(with, context, f.candidate.gyro));
+  const std::string versus = absl::StrFormat(
+      "with %s in the model, on gyro %d's deviation a drift that returns to its mean has 2 ln "
+      "B = %.1f, one step %.1f, a raised walk %.1f",
+      CandidateName(f.candidate), f.candidate.gyro, left.stationary, left.step, left.walk);
+  if (!ReturnsToItsMean(left, EvidenceThreshold(context.options().alpha, 1))) {
+    st.constant_notes.emplace_back(choice.chosen,
+                                   absl::StrCat(versus, ": the transient leaves no drift that "
+                                                        "returns to its mean"));
+    return absl::OkStatus();
+  }
+  st.wander_note = absl::StrCat(
+      CandidateName(f.candidate), " fits one decay of gyro ", f.candidate.gyro,
+      "'s drift, but with it ", ReturnsToItsMeanText(left), "; ", CandidateName(f.candidate),
+      " is not taken: a transient is one decay, and what it leaves still returns to its mean");
+  st.wander_where =
+      WanderLocation(f.candidate.gyro, context.frames(), ReturnsToItsMeanBound(left));
+  st.wander_evidence = left.stationary;
+  st.significant.clear();
+  st.inhomogeneous_only = true;
+  choice.chosen = -1;
+  choice.contenders.clear();
+  choice.guard_held_out.reset();
+  return absl::OkStatus();
+}
+
 // Nothing taken: why, in `result`.
 void DescribeUnresolved(RoundState& st, const Choice& choice, const SelectedModel& selected,
                         RoundResult& result) {
@@ -1100,6 +1157,7 @@ absl::StatusOr<RoundResult> SelectionRound(int round, const std::vector<int>& gy
       choice.guard_held_out.reset();
     }
   }
+  RETURN_IF_ERROR(TransientLeavesNoWanderingDrift(st, choice, selected, context));
   for (const Scored& s : st.scored) {
     result.rows.push_back(Row(s, st.fits[s.index], round, choice.chosen));
   }
