@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "formats/oem.h"
 #include "fuzz/fuzz_util.h"
 
@@ -58,6 +59,23 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     bool covered = false;
     for (const estimator::OrbitArc& arc : orbit->arcs()) covered |= arc.from <= far && far <= arc.to;
     if (!covered) fuzz::CheckCleanError(outside.status(), absl::StatusCode::kOutOfRange);
+  }
+  // The service's stored deliveries (storage::OrbitFromDeliveries): the same text delivered twice
+  // gives an orbit exactly when one delivery does (the later replaces the earlier where they
+  // overlap), with the same arcs' span; a refusal names the delivery.
+  const std::string text(fuzz::AsAbslText(data, size));
+  absl::StatusOr<estimator::Orbit> twice =
+      storage::OrbitFromDeliveries({text, text}, {"first: ", "second: "}, name);
+  ESG_FUZZ_CHECK(twice.ok() == orbit.ok(), twice.status().ToString());
+  if (!twice.ok()) {
+    fuzz::CheckCleanError(twice.status(), absl::StatusCode::kInvalidArgument);
+    ESG_FUZZ_CHECK(absl::StartsWith(twice.status().message(), "first: ") ||
+                       absl::StartsWith(twice.status().message(), "second: "),
+                   twice.status().ToString());
+  } else {
+    ESG_FUZZ_CHECK(twice->Gaps(orbit->arcs().front().from, orbit->arcs().back().to).size() <=
+                       orbit->Gaps(orbit->arcs().front().from, orbit->arcs().back().to).size(),
+                   "two copies cover what one does");
   }
 
   for (const storage::OemSegment& segment : file->segments) {
