@@ -46,6 +46,25 @@ constexpr char kScenario[] = R"({
 
 std::string Config() { return std::string(ESG_SOURCE_DIR) + "/deploy/examples/rdk1.json"; }
 
+// `esg simulate` of the scenario above for `hours` (seed 1) into dir's `recording`, its orbit
+// into dir's `oem`; the exit code.
+int Simulate(const TempDir& dir, int hours, const std::string& recording, const std::string& oem) {
+  WriteFile(dir.File("scenario.json"), kScenario);
+  return RunEsg(dir, "simulate --config '" + Config() + "' --scenario '" +
+                         dir.File("scenario.json") + "' --hours " + std::to_string(hours) +
+                         " --seed 1 --out '" + dir.File(recording) + "' --orbit-out '" +
+                         dir.File(oem) + "'")
+      .exit_code;
+}
+
+// dir's orbit.oem as another spacecraft's (SAT-9) in dir's other.oem.
+void WriteOtherSpacecraftsOem(const TempDir& dir) {
+  WriteFile(dir.File("other.oem"),
+            absl::StrReplaceAll(ReadFile(dir.File("orbit.oem")),
+                                {{"OBJECT_NAME = RDK-1", "OBJECT_NAME = SAT-9"},
+                                 {"OBJECT_ID = RDK-1", "OBJECT_ID = 2020-007B"}}));
+}
+
 double Parameter(const nlohmann::json& finding, const std::string& name, bool sigma = false) {
   for (const auto& p : finding["parameters"]) {
     if (p["name"] == name) return sigma ? p.value("sigma", 0.0) : p["value"].get<double>();
@@ -108,24 +127,12 @@ TEST(OrbitCli, TheShadowedSunDriftIsNamedWithItsLagFromTheSimulatedOrbit) {
 
 TEST(OrbitCli, AnOrbitThatDoesNotFitTheRecordingExitsTwoNamingIt) {
   TempDir dir;
-  WriteFile(dir.File("scenario.json"), kScenario);
-  ASSERT_EQ(RunEsg(dir, "simulate --config '" + Config() + "' --scenario '" +
-                            dir.File("scenario.json") + "' --hours 3 --seed 1 --out '" +
-                            dir.File("rec.csv") + "' --orbit-out '" + dir.File("orbit.oem") + "'")
-                .exit_code,
-            0);
-  ASSERT_EQ(RunEsg(dir, "simulate --config '" + Config() + "' --scenario '" +
-                            dir.File("scenario.json") + "' --hours 1 --seed 1 --out '" +
-                            dir.File("short.csv") + "' --orbit-out '" + dir.File("short.oem") + "'")
-                .exit_code,
-            0);
+  ASSERT_EQ(Simulate(dir, 3, "rec.csv", "orbit.oem"), 0);
+  ASSERT_EQ(Simulate(dir, 1, "short.csv", "short.oem"), 0);
   const std::string diagnose =
       "diagnose --config '" + Config() + "' --recording '" + dir.File("rec.csv") + "' --orbit ";
   // Another spacecraft's orbit: refused on its OBJECT_NAME line.
-  WriteFile(dir.File("other.oem"),
-            absl::StrReplaceAll(ReadFile(dir.File("orbit.oem")),
-                                {{"OBJECT_NAME = RDK-1", "OBJECT_NAME = SAT-9"},
-                                 {"OBJECT_ID = RDK-1", "OBJECT_ID = 2020-007B"}}));
+  WriteOtherSpacecraftsOem(dir);
   RunResult other = RunEsg(dir, diagnose + "'" + dir.File("other.oem") + "'");
   EXPECT_EQ(other.exit_code, 2);
   EXPECT_THAT(other.err, HasSubstr("--orbit"));
@@ -147,12 +154,7 @@ TEST(OrbitCli, AnOrbitThatDoesNotFitTheRecordingExitsTwoNamingIt) {
 
 TEST(OrbitCli, AnUploadedOrbitIsListedAndTakenByTheServersDiagnosis) {
   TempDir dir;
-  WriteFile(dir.File("scenario.json"), kScenario);
-  ASSERT_EQ(RunEsg(dir, "simulate --config '" + Config() + "' --scenario '" +
-                            dir.File("scenario.json") + "' --hours 3 --seed 1 --out '" +
-                            dir.File("rec.csv") + "' --orbit-out '" + dir.File("orbit.oem") + "'")
-                .exit_code,
-            0);
+  ASSERT_EQ(Simulate(dir, 3, "rec.csv", "orbit.oem"), 0);
   ::esg::testing::Daemon daemon(dir.File("esg.db"), dir.File("esgd.log"));
   ASSERT_GT(daemon.port(), 0);
   ASSERT_EQ(Esg(dir, daemon, "configure --config '" + Config() + "'").exit_code, 0);
@@ -170,10 +172,7 @@ TEST(OrbitCli, AnUploadedOrbitIsListedAndTakenByTheServersDiagnosis) {
   EXPECT_EQ(listed[0]["id"], "1");  // int64 in the proto JSON mapping
   EXPECT_GT(std::stoll(listed[0]["states"].get<std::string>()), 100);
 
-  WriteFile(dir.File("other.oem"),
-            absl::StrReplaceAll(ReadFile(dir.File("orbit.oem")),
-                                {{"OBJECT_NAME = RDK-1", "OBJECT_NAME = SAT-9"},
-                                 {"OBJECT_ID = RDK-1", "OBJECT_ID = 2020-007B"}}));
+  WriteOtherSpacecraftsOem(dir);
   RunResult other =
       Esg(dir, daemon, "orbit upload --spacecraft RDK-1 --oem '" + dir.File("other.oem") + "'");
   EXPECT_EQ(other.exit_code, 1);
