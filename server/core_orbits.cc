@@ -1,5 +1,6 @@
 // The spacecraft's orbit deliveries (docs/service.md "Orbits"): UploadOrbit, ListOrbits, and the
 // orbit a diagnosis takes from them.
+#include <algorithm>
 #include <memory>
 #include <string>
 #include <utility>
@@ -109,9 +110,8 @@ absl::StatusOr<StoredOrbit> EstimationCore::OrbitFor(const std::string& spacecra
   absl::StatusOr<estimator::Orbit> orbit =
       storage::OrbitFromDeliveries(texts, names, spacecraft_id);
   if (!orbit.ok()) {
-    // Each delivery was checked on upload; together they can still fail (a later delivery's arc
-    // leaving states of an earlier one too far apart is not possible, but the bound is the
-    // orbit's to state): the diagnosis runs without and says why.
+    // Each delivery was read on upload, so this is not expected; should the orbit's checks of
+    // the deliveries together refuse them, the diagnosis runs without and says why.
     out.note = absl::StrCat(source, " not used: ", orbit.status().message());
     return out;
   }
