@@ -10,11 +10,11 @@
 #include "absl/strings/str_join.h"
 #include "absl/time/clock.h"
 #include "estimator/status_macros.h"
+#include "estimator/utc_time.h"
 #include "formats/oem.h"
 #include "proto/convert.h"
 #include "server/estimation_core.h"
 #include "server/log.h"
-#include "estimator/utc_time.h"
 #include "storage/orbit_store.h"
 
 namespace esg::server {
