@@ -139,12 +139,21 @@ inline std::vector<std::string> DiscoverySunClasses() { return {"sun_face_drift"
 // as channel T_gyro<g> with 0.02 K noise: "channel_value" (the drift follows the temperature),
 // "channel_lag" (through a first-order lag of 40 min), and "channel_removed" (channel_lag's
 // drift with the channel absent from the recording and the configuration: it must stay
-// `unexplained`, located to the gyro).
+// `unexplained`, located to the gyro), "channel_derivative" (the drift follows the rate of change
+// of the temperature, smoothed by a 10 min lag, the candidate's derivative: the same gain in
+// deg/h per K/h) and "channel_heater" (channel_lag with a heater on for the first 2 h of every
+// 4 h raising the temperature by 1.5 K, its state telemetered as channel heater_<g> beside the
+// temperature: the drift must be named by the temperature, not the heater).
 inline std::vector<std::string> DiscoveryChannelClasses() {
-  return {"channel_value", "channel_lag", "channel_removed"};
+  return {"channel_value", "channel_lag", "channel_removed", "channel_derivative",
+          "channel_heater"};
 }
 inline Eigen::Vector3d ChannelGainDegHPerK() { return Eigen::Vector3d(-0.015, 0.015, 0.0125); }
 inline constexpr double kChannelLagHours = 40.0 / 60.0;
+// The derivative's smoothing: the channel candidate's (estimator/discovery/channel_candidate.h
+// kChannelDerivativeSmoothingHours).
+inline constexpr double kChannelDerivativeLagHours = 10.0 / 60.0;
+inline constexpr double kChannelHeaterStepK = 1.5;
 inline constexpr double kChannelMeanK = 293.15;
 inline std::string ChannelNameOf(uint64_t seed) {
   return "T_gyro" + std::to_string(1 + static_cast<int>(seed % 3));
@@ -256,13 +265,26 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.time_constant_s = SunLagHoursOf(seed) * 3600.0;
     s.gyros[g].sun_face_drift = d;
   }
-  if (effect == "channel_value" || effect == "channel_lag" || effect == "channel_removed") {
+  if (effect == "channel_value" || effect == "channel_lag" || effect == "channel_removed" ||
+      effect == "channel_derivative" || effect == "channel_heater") {
     ChannelDrift c;
     c.channel = ChannelNameOf(seed);
     c.mean = kChannelMeanK;
+    // Per K/h for the derivative.
     c.gain_k_rad_s_per_unit = x * ChannelGainDegHPerK() * deg_h;
-    c.lag_s = effect == "channel_value" ? 0.0 : kChannelLagHours * 3600.0;
+    c.lag_s = effect == "channel_value"        ? 0.0
+              : effect == "channel_derivative" ? kChannelDerivativeLagHours * 3600.0
+                                               : kChannelLagHours * 3600.0;
+    c.derivative = effect == "channel_derivative";
     c.telemetered = effect != "channel_removed";
+    if (effect == "channel_heater") {
+      ChannelHeater h;
+      h.period_s = 4.0 * 3600.0;
+      h.on_fraction = 0.5;
+      h.step = kChannelHeaterStepK;
+      h.channel = "heater_" + std::to_string(g + 1);
+      c.heater = h;
+    }
     s.gyros[g].channel_drift = c;
     if (c.telemetered) {
       ChannelConfig declared;
@@ -272,6 +294,15 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
       declared.valid_max = 350.0;
       declared.max_age = absl::Minutes(10);
       s.config.channels.push_back(declared);
+      if (c.heater) {
+        ChannelConfig state;
+        state.name = c.heater->channel;
+        state.unit = "1";
+        state.valid_min = 0.0;
+        state.valid_max = 1.0;
+        state.max_age = absl::Minutes(10);
+        s.config.channels.push_back(state);
+      }
     }
   }
   if (effect == "warm_up" || effect == "transient") {
@@ -335,15 +366,18 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
   if (truth == "transient") return basis("transient", "tauHours");
   if (truth == "readout_scale") return basis("", "readout");
-  if (truth == "channel_value" || truth == "channel_lag") {
+  if (truth == "channel_value" || truth == "channel_lag" || truth == "channel_derivative" ||
+      truth == "channel_heater") {
     // The right channel and form, each component of the gain within 3 sigma of the truth, and
     // the lag's 95% interval holding the true lag.
     if (!basis("follows_channel", "channelGainDegH")) return false;
     const Finding& f = r.findings.front();
-    const bool lagged = truth == "channel_lag";
+    const bool lagged = truth == "channel_lag" || truth == "channel_heater";
+    const estimator::ChannelForm form = lagged                          ? estimator::ChannelForm::kLag
+                                        : truth == "channel_derivative" ? estimator::ChannelForm::kDerivative
+                                                                        : estimator::ChannelForm::kValue;
     if (f.basis_terms.empty() || f.basis_terms.front().channel != "T_gyro" + std::to_string(gyro) ||
-        f.basis_terms.front().form !=
-            (lagged ? estimator::ChannelForm::kLag : estimator::ChannelForm::kValue)) {
+        f.basis_terms.front().form != form) {
       return false;
     }
     for (int i = 0; i < 3; ++i) {
