@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "estimator/status_macros.h"
+#include "storage/read_rows.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
@@ -76,16 +77,6 @@ AlertRecord ReadRow(const Statement& st) {
   r.revised_time =
       st.ColumnIsNull(18) ? absl::InfinitePast() : UnixNanosToTime(st.ColumnInt64(18));
   return r;
-}
-
-absl::StatusOr<std::vector<AlertRecord>> ReadAll(Statement* st) {
-  std::vector<AlertRecord> out;
-  while (true) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(ReadRow(*st));
-  }
-  return out;
 }
 
 absl::StatusOr<AlertRecord> GetIn(Transaction& txn, absl::string_view spacecraft_id,
@@ -199,12 +190,12 @@ absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spa
     ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSinceAll));
     st->BindInt64(1, TimeToUnixNanos(since)).BindInt64(2, limit);
     st->BindInt64(9, include_revised ? 1 : 0);
-    return ReadAll(st);
+    return ReadRows(st, ReadRow);
   }
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSinceOne));
   st->BindText(1, spacecraft_id).BindInt64(2, TimeToUnixNanos(since)).BindInt64(3, limit);
   st->BindInt64(9, include_revised ? 1 : 0);
-  return ReadAll(st);
+  return ReadRows(st, ReadRow);
 }
 
 absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spacecraft_id,
@@ -225,7 +216,7 @@ absl::StatusOr<std::vector<AlertRecord>> AlertStore::Since(absl::string_view spa
   }
   st->BindInt64(4, TimeToUnixNanos(after.measurement_time)).BindInt64(5, after.sequence);
   st->BindInt64(9, include_revised ? 1 : 0);
-  return ReadAll(st);
+  return ReadRows(st, ReadRow);
 }
 
 absl::StatusOr<AlertRecord> AlertStore::Get(absl::string_view spacecraft_id, int64_t sequence) {

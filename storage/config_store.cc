@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "estimator/status_macros.h"
+#include "storage/read_rows.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
@@ -21,16 +22,6 @@ ConfigRecord ReadRow(const Statement& st) {
   r.updated_time = UnixNanosToTime(st.ColumnInt64(2));
   r.config_json = st.ColumnText(3);
   return r;
-}
-
-absl::StatusOr<std::vector<ConfigRecord>> ReadAll(Statement* st) {
-  std::vector<ConfigRecord> out;
-  while (true) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(ReadRow(*st));
-  }
-  return out;
 }
 
 }  // namespace
@@ -89,7 +80,7 @@ absl::StatusOr<std::vector<ConfigRecord>> ConfigStore::List() {
                                " FROM spacecraft_configs AS c WHERE version = "
                                "(SELECT MAX(version) FROM spacecraft_configs "
                                "WHERE spacecraft_id = c.spacecraft_id) ORDER BY spacecraft_id")));
-  return ReadAll(st);
+  return ReadRows(st, ReadRow);
 }
 
 absl::StatusOr<std::vector<ConfigRecord>> ConfigStore::History(absl::string_view spacecraft_id) {
@@ -99,7 +90,7 @@ absl::StatusOr<std::vector<ConfigRecord>> ConfigStore::History(absl::string_view
                                             " FROM spacecraft_configs WHERE spacecraft_id = ?1 "
                                             "ORDER BY version")));
   st->BindText(1, spacecraft_id);
-  return ReadAll(st);
+  return ReadRows(st, ReadRow);
 }
 
 }  // namespace esg::storage

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "estimator/status_macros.h"
+#include "storage/read_rows.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
@@ -118,13 +119,7 @@ absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::List(absl::string_v
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectBySpacecraft));
   st->BindText(1, spacecraft_id);
-  std::vector<DiagnosisRecord> out;
-  while (true) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(ReadRow(*st));
-  }
-  return out;
+  return ReadRows(st, ReadRow);
 }
 
 absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::ListSummaries(
@@ -135,13 +130,7 @@ absl::StatusOr<std::vector<DiagnosisRecord>> DiagnosisStore::ListSummaries(
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kDeferred));
   ASSIGN_OR_RETURN(Statement * st, txn.Prepare(kSelectSummaries));
   st->BindText(1, spacecraft_id).BindInt64(2, after_id).BindInt64(3, limit);
-  std::vector<DiagnosisRecord> out;
-  while (true) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(ReadRow(*st));
-  }
-  return out;
+  return ReadRows(st, ReadRow);
 }
 
 absl::StatusOr<DiagnosisRecord> DiagnosisStore::Get(int64_t id) {

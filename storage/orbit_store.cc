@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "estimator/status_macros.h"
+#include "storage/read_rows.h"
 #include "storage/schema.h"
 
 namespace esg::storage {
@@ -21,16 +22,6 @@ OrbitRecord ReadRow(const Statement& st) {
   r.uploaded_by = st.ColumnText(6);
   r.oem_text = st.ColumnText(7);
   return r;
-}
-
-absl::StatusOr<std::vector<OrbitRecord>> ReadAll(Statement* st) {
-  std::vector<OrbitRecord> out;
-  while (true) {
-    ASSIGN_OR_RETURN(bool row, st->Step());
-    if (!row) break;
-    out.push_back(ReadRow(*st));
-  }
-  return out;
 }
 
 }  // namespace
@@ -84,7 +75,7 @@ absl::StatusOr<std::vector<OrbitRecord>> OrbitStore::ListSummaries(
                                "upload_time_unix_ns, states, uploaded_by, '' FROM orbits "
                                "WHERE spacecraft_id = ?1 ORDER BY id"));
   st->BindText(1, spacecraft_id);
-  return ReadAll(st);
+  return ReadRows(st, ReadRow);
 }
 
 absl::StatusOr<std::vector<OrbitRecord>> OrbitStore::Covering(absl::string_view spacecraft_id,
@@ -98,7 +89,7 @@ absl::StatusOr<std::vector<OrbitRecord>> OrbitStore::Covering(absl::string_view 
   st->BindText(1, spacecraft_id)
       .BindInt64(2, TimeToUnixNanos(from))
       .BindInt64(3, TimeToUnixNanos(to));
-  return ReadAll(st);
+  return ReadRows(st, ReadRow);
 }
 
 }  // namespace esg::storage
