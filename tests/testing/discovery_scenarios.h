@@ -44,11 +44,18 @@ inline estimator::SpacecraftConfig DiscoveryConfig() {
   return c;
 }
 
+// The orbit the scenarios fly with `seed`: the default elements, argument of latitude 0.37 seed
+// at the start (MostlyOrbitalProfile's orbital segments; scenario_orbit.h ScenarioOrbit).
+inline estimator::OrbitalOptions ScenarioOrbitalOptions(uint64_t seed) {
+  estimator::OrbitalOptions o;
+  o.arg_latitude0 = 0.37 * static_cast<double>(seed);
+  return o;
+}
+
 // Orbital, inertial hold, orbital, rotation, orbital in the proportions 8:3:8:3:8 of `hours`.
 inline estimator::ProfilePtr MostlyOrbitalProfile(double hours, uint64_t seed) {
   using namespace esg::estimator;
-  OrbitalOptions o;
-  o.arg_latitude0 = 0.37 * static_cast<double>(seed);
+  const OrbitalOptions o = ScenarioOrbitalOptions(seed);
   std::vector<ProfileSegment> segments;
   const double unit = hours * 3600.0 / 30.0;
   auto orbital = [&](double offset) {

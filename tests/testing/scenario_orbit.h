@@ -1,7 +1,7 @@
 // The orbit of a discovery scenario's orbital segments (tests/testing/discovery_scenarios.h
-// MostlyOrbitalProfile: the default orbital elements, argument of latitude 0.37 seed at the
-// start), as `esg diagnose --orbit` would be given it: circular-orbit states every 60 s from a
-// minute before the recording to a minute after it (orbit.h CircularOrbitState, FromArcs).
+// ScenarioOrbitalOptions), as `esg diagnose --orbit` would be given it: circular-orbit states
+// every 60 s from a minute before the recording to a minute after it (orbit.h
+// CircularOrbitState, FromArcs).
 #pragma once
 
 #include <cstdint>
@@ -12,13 +12,13 @@
 #include "estimator/attitude_profile.h"
 #include "estimator/orbit.h"
 #include "estimator/simulator.h"
+#include "tests/testing/discovery_scenarios.h"
 
 namespace esg::testing {
 
 inline absl::StatusOr<std::shared_ptr<const estimator::Orbit>> ScenarioOrbit(
     const estimator::SimulationSpec& spec, uint64_t seed) {
-  estimator::OrbitalOptions o;
-  o.arg_latitude0 = 0.37 * static_cast<double>(seed);
+  const estimator::OrbitalOptions o = ScenarioOrbitalOptions(seed);
   estimator::OrbitArc arc;
   for (double t = -60.0; t <= spec.duration + 60.0 + 1e-9; t += 60.0) {
     arc.states.push_back(estimator::CircularOrbitState(o.inclination, o.raan, o.period,
