@@ -26,14 +26,15 @@ ConfigRecord ReadRow(const Statement& st) {
 
 }  // namespace
 
-absl::StatusOr<int64_t> ConfigStore::Put(const ConfigRecord& record) {
+absl::StatusOr<int64_t> ConfigStore::Put(const ConfigRecord& record, const SameConfig& same) {
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
-  ASSIGN_OR_RETURN(int64_t version, Put(txn, record));
+  ASSIGN_OR_RETURN(int64_t version, Put(txn, record, same));
   RETURN_IF_ERROR(txn.Commit());
   return version;
 }
 
-absl::StatusOr<int64_t> ConfigStore::Put(Transaction& txn, const ConfigRecord& record) {
+absl::StatusOr<int64_t> ConfigStore::Put(Transaction& txn, const ConfigRecord& record,
+                                         const SameConfig& same) {
   RETURN_IF_ERROR(ValidateSpacecraftId(record.spacecraft_id, "config.spacecraft_id"));
   RETURN_IF_ERROR(ValidateStorableTime(record.updated_time, "config.updated_time"));
   ASSIGN_OR_RETURN(Statement * latest,
@@ -44,7 +45,8 @@ absl::StatusOr<int64_t> ConfigStore::Put(Transaction& txn, const ConfigRecord& r
   int64_t version = 0;
   if (row) {
     version = latest->ColumnInt64(0);
-    if (latest->ColumnText(1) == record.config_json) return version;
+    const std::string stored = latest->ColumnText(1);
+    if (same ? same(stored, record.config_json) : stored == record.config_json) return version;
   }
   latest->Reset();
   ASSIGN_OR_RETURN(Statement * insert,

@@ -288,7 +288,7 @@ absl::StatusOr<std::vector<int64_t>> Storage::CommitConfiguration(
   }
   ASSIGN_OR_RETURN(Transaction txn, db_->Begin(TransactionMode::kImmediate));
   if (change.fence.has_value()) RETURN_IF_ERROR(leases_.CheckHeld(txn, id, *change.fence));
-  RETURN_IF_ERROR(InBatch(configs_.Put(txn, change.config).status(), "config"));
+  RETURN_IF_ERROR(InBatch(configs_.Put(txn, change.config, change.same_config).status(), "config"));
   RETURN_IF_ERROR(sessions_.PutCheckpoint(txn, change.checkpoint));
   if (change.new_session) {
     RETURN_IF_ERROR(reorder_.DropCheckpointsFrom(txn, id, absl::InfinitePast()));

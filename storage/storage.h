@@ -103,6 +103,8 @@ struct FilterEffects {
 // What a configuration writes (server/estimation_core.cc Configure).
 struct ConfigurationChange {
   ConfigRecord config;
+  // Whether the latest stored version is this one (ConfigStore::Put); nullptr: byte-identical.
+  ConfigStore::SameConfig same_config;
   CheckpointRecord checkpoint;          // the new session's, same spacecraft
   std::vector<AlertRecord> new_alerts;  // e.g. a quarantine alert stored raised and cleared
   std::vector<AlertClear> clears;       // e.g. the quarantine alert the configuration ends

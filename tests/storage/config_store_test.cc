@@ -3,6 +3,8 @@
 
 #include <memory>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -72,6 +74,41 @@ TEST_P(ConfigStoreTest, RePuttingTheLatestJsonAddsNoVersion) {
   // Going back to an earlier content is a change, hence a new version.
   ASSERT_THAT(configs.Put(Config("RDK-1", "{\"a\":1}", 100)), IsOkAndHolds(2));
   EXPECT_THAT(configs.Put(Config("RDK-1", "{}", 101)), IsOkAndHolds(3));
+}
+
+// With a comparison of its own (the server's: the parsed values), a text that says the same as the
+// latest version's stores no version and leaves that text as it was; one that does not is a
+// new version. The comparison sees the latest stored text and the new one.
+TEST_P(ConfigStoreTest, ASameConfigComparisonDecidesWhatIsANewVersion) {
+  absl::StatusOr<std::unique_ptr<Storage>> storage = Storage::Open(NewDatabase());
+  ASSERT_THAT(storage, IsOk());
+  ConfigStore& configs = (*storage)->configs();
+  // The same when equal ignoring spaces.
+  std::vector<std::pair<std::string, std::string>> seen;
+  const ConfigStore::SameConfig same = [&seen](absl::string_view stored, absl::string_view fresh) {
+    seen.emplace_back(stored, fresh);
+    auto squeeze = [](absl::string_view s) {
+      std::string out;
+      for (char c : s) {
+        if (c != ' ') out.push_back(c);
+      }
+      return out;
+    };
+    return squeeze(stored) == squeeze(fresh);
+  };
+  ASSERT_THAT(configs.Put(Config("RDK-1", R"({"a": 1})", 0), same), IsOkAndHolds(1));
+  EXPECT_THAT(seen, IsEmpty());  // nothing stored yet to compare with
+  EXPECT_THAT(configs.Put(Config("RDK-1", R"({"a":1})", 5), same), IsOkAndHolds(1));
+  EXPECT_THAT(seen, ElementsAre(std::pair<std::string, std::string>(R"({"a": 1})", R"({"a":1})")));
+  absl::StatusOr<ConfigRecord> latest = configs.Get("RDK-1");
+  ASSERT_THAT(latest, IsOk());
+  EXPECT_EQ(latest->config_json, R"({"a": 1})");
+  EXPECT_EQ(latest->updated_time, T(0));
+  // Without it the texts differ: a new version.
+  EXPECT_THAT(configs.Put(Config("RDK-1", R"({"a":1})", 6)), IsOkAndHolds(2));
+  // A change is a new version with it too.
+  EXPECT_THAT(configs.Put(Config("RDK-1", R"({"a": 2})", 7), same), IsOkAndHolds(3));
+  EXPECT_THAT(configs.History("RDK-1"), IsOkAndHolds(::testing::SizeIs(3)));
 }
 
 TEST_P(ConfigStoreTest, ListReturnsTheLatestOfEachSpacecraftById) {
