@@ -3,6 +3,7 @@
 #include "server/estimation_core.h"
 
 #include <algorithm>
+#include <string_view>
 #include <utility>
 
 #include "absl/strings/escaping.h"
@@ -516,12 +517,31 @@ absl::StatusOr<EstimationCore::Configuration> EstimationCore::PrepareConfigurati
   return c;
 }
 
+namespace {
+
+// Whether a stored configuration's JSON holds the same values as a new one: both parsed and
+// written afresh (ConfigToJson), so the same values given another way (a coefficient by its field
+// or keyed, keys in another order, other whitespace, the form an older esgd wrote) are the same
+// configuration and store no new version. A stored text that no longer parses is not the same.
+bool SameConfiguration(absl::string_view stored_json, absl::string_view new_json) {
+  if (stored_json == new_json) return true;
+  absl::StatusOr<estimator::SpacecraftConfig> stored =
+      proto_convert::ParseConfigJson(std::string_view(stored_json.data(), stored_json.size()));
+  absl::StatusOr<estimator::SpacecraftConfig> fresh =
+      proto_convert::ParseConfigJson(std::string_view(new_json.data(), new_json.size()));
+  return stored.ok() && fresh.ok() &&
+         proto_convert::ConfigToJson(*stored) == proto_convert::ConfigToJson(*fresh);
+}
+
+}  // namespace
+
 absl::Status EstimationCore::StoreConfiguration(Configuration& c) {
   const absl::Time commit_start = absl::Now();
   const absl::Status status = [&]() -> absl::Status {
     c.cp.state_blob = EncodeCheckpoint(c.checkpoint);
     storage::ConfigurationChange change;
     change.config = c.record;
+    change.same_config = SameConfiguration;
     change.checkpoint = c.cp;
     change.new_session = c.new_session;
     change.revised_alerts = c.revised_alerts;
