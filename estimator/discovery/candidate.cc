@@ -9,10 +9,20 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "estimator/statistics.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
+
+void AddVectorParameters(const std::string& name, const Eigen::Vector3d& value,
+                         const Eigen::Vector3d& sigma,
+                         double scale, const std::string& unit, std::vector<Parameter>& out) {
+  for (int i = 0; i < 3; ++i) {
+    out.push_back(
+        Parameter{absl::StrFormat("%s[%d]", name, i), value(i) * scale, sigma(i) * scale, unit});
+  }
+}
 
 std::pair<int, int> FixedTermsOf(Effect effect) {
   const absl::string_view id = EffectId(effect);

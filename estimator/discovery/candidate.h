@@ -127,6 +127,12 @@ void ReleaseHeldCoefficients(SpacecraftConfig& config, int gyro, int first, int 
 double ModelRandomWalk(const ModelState& m, int id);
 double ModelInitialDriftSigma(const ModelState& m);
 
+// Appends the components of `value` and of its 1-sigma `sigma`, each times `scale`, to `out` as
+// the parameters "<name>[0]" .. "<name>[2]" in `unit`.
+void AddVectorParameters(const std::string& name, const Eigen::Vector3d& value,
+                         const Eigen::Vector3d& sigma, double scale, const std::string& unit,
+                         std::vector<Parameter>& out);
+
 // Profiled deviance of a run (ComputeDeviance, then the common noise scale phi = nis / m
 // profiled out: N ln(phi) + sum log det S + N), and phi.
 struct ProfiledDeviance {

@@ -156,14 +156,6 @@ Vector3d DisplacementUm(const SuspensionConfig& s, const Vector3d& u_mv) {
   return d;
 }
 
-void AddVectorParameters(const std::string& name, const Vector3d& value, const Vector3d& sigma,
-                         double scale, const std::string& unit, std::vector<Parameter>& out) {
-  for (int i = 0; i < 3; ++i) {
-    out.push_back(
-        Parameter{absl::StrFormat("%s[%d]", name, i), value(i) * scale, sigma(i) * scale, unit});
-  }
-}
-
 bool Effective(const std::vector<Effect>& effects, Effect e) {
   return effects.empty() || std::find(effects.begin(), effects.end(), e) != effects.end();
 }
