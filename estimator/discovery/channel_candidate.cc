@@ -114,58 +114,35 @@ Parabola VertexOf(const Map& lag, typename Map::const_iterator best) {
   return p;
 }
 
-}  // namespace
+// One run of a form: its profiled -2 log L, the channel terms' gain a [rad/s per unit] and the
+// offsets b [rad/s] with their 1-sigma, and the run.
+struct FormRun {
+  double value = 0.0;  // profiled -2 log L
+  Vector3d a = Vector3d::Zero(), a_sigma = Vector3d::Zero();
+  Vector3d b = Vector3d::Zero(), b_sigma = Vector3d::Zero();  // the offsets [rad/s]
+  ModelRun run;
+};
 
-std::vector<std::string> CandidateChannels(const SpacecraftConfig& config) {
-  std::vector<std::string> names;
-  for (const ChannelConfig& c : config.channels) names.push_back(c.name);
-  return names;
-}
+// What every form's run shares (the recording, the priors, where the terms sit in the gyro's
+// basis) and the lag's runs by ln(tau / h). `candidate` and `fit` outlive it; every run adds one
+// to fit.runs.
+struct ChannelSearch {
+  const Candidate& candidate;
+  CandidateFit& fit;
+  std::vector<TelemetryFrame> frames;
+  double sigma = 0.0;         // the gain's prior [rad/s per unit]
+  double reference = 0.0;     // the channel's mean [its unit]
+  bool offset = false;        // whether three case-fixed drifts come with the channel terms
+  double offset_sigma = 0.0;  // their prior [rad/s]
+  int first_term = 0;         // the first of the terms in the gyro's basis
+  int terms = 0;              // how many
+  int channel_first = 0;      // the first channel term (after the offsets)
+  double log_min = 0.0, log_max = 0.0, spacing = 0.0;  // the lag's grid in ln(tau / h)
+  std::map<double, FormRun> lag;  // ln(tau / h) -> run
 
-absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& ctx,
-                                 CandidateFit& fit) {
-  const DiagnoseOptions& opt = *ctx.options;
-  ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
-  fit.time.kind = kTimeFollowsChannel;
-  fit.run = *ctx.model_run;
-  const int first_term = static_cast<int>(g->basis_terms.size());
-  const ChannelSpread spread = SpreadOf(*ctx.frames, candidate.channel);
-  // A copy: fit.model is replaced below.
-  std::optional<ChannelConfig> declared;
-  for (const ChannelConfig& c : fit.model.config.channels) {
-    if (c.name == candidate.channel) declared = c;
-  }
-  if (!declared.has_value() || spread.count < 2 || !(spread.sd > 0.0) ||
-      first_term + 2 * kTerms > kMaxBasisTermsPerGyro) {
-    fit.parameters = 0;
-    fit.notes.push_back(absl::StrFormat(
-        "no drift following %s fitted: %s", candidate.channel,
-        !declared.has_value()      ? "the channel is not declared"
-        : spread.count < 2         ? "the recording carries fewer than two of its values"
-        : !(spread.sd > 0.0)       ? "its value does not change over the recording"
-                                   : "the gyro's basis holds too many terms for three more"));
-    return absl::OkStatus();
-  }
-  const std::vector<TelemetryFrame> frames =
-      CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction);
-  // The prior: c_sigma of drift per 1-sigma of the channel [rad/s per unit].
-  const double sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h) / spread.sd;
-  const double reference = spread.mean;
-  // The constant drift at the channel's mean, unless the gyro's C1 (eq. (8), the same case-fixed
-  // drift) is free already.
-  const bool offset = !(g->model_sigma.C1.maxCoeff() > 0.0);
-  const double offset_sigma = offset ? DegPerHourToRadPerSec(opt.c_sigma_deg_h) : 0.0;
-  const int terms = offset ? 2 * kTerms : kTerms;
-  // The channel terms follow the offsets (WithChannelTerms).
-  const int channel_first = first_term + (offset ? kTerms : 0);
-
-  struct Run {
-    double value = 0.0;  // profiled -2 log L
-    Vector3d a = Vector3d::Zero(), a_sigma = Vector3d::Zero();
-    Vector3d b = Vector3d::Zero(), b_sigma = Vector3d::Zero();  // the offsets [rad/s]
-    ModelRun run;
-  };
-  auto run_form = [&](ChannelForm form, double tau_s, Run& out) -> absl::Status {
+  // The model with the terms of `form` (tau [s] for the lag and derivative), run over the
+  // recording.
+  absl::Status RunForm(ChannelForm form, double tau_s, FormRun& out) {
     const ModelState m = WithChannelTerms(fit.model, candidate.gyro, candidate.channel, form,
                                           tau_s, reference, sigma, offset_sigma);
     auto run = RunModel(m.config, m.options, frames);
@@ -186,148 +163,184 @@ absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& c
     }
     out.run = *std::move(run);
     return absl::OkStatus();
-  };
+  }
 
-  Run value_run, derivative_run;
-  RETURN_IF_ERROR(run_form(ChannelForm::kValue, 0.0, value_run));
-  const double smoothing_s = HoursToSeconds(kChannelDerivativeSmoothingHours);
-  RETURN_IF_ERROR(run_form(ChannelForm::kDerivative, smoothing_s, derivative_run));
-  const double log_min = std::log(kChannelLagMinHours), log_max = std::log(kChannelLagMaxHours);
-  const double spacing = (log_max - log_min) / (kChannelLagCoarse - 1);
-  std::map<double, Run> lag;  // ln(tau / h) -> run
-  auto evaluate = [&](double log_tau) -> absl::Status {
+  // The lag form at ln(tau / h) (clamped to the grid; skipped when evaluated already).
+  absl::Status EvaluateLag(double log_tau) {
     log_tau = std::clamp(log_tau, log_min, log_max);
     for (const auto& [x, r] : lag) {
       if (std::abs(x - log_tau) < 1e-9) return absl::OkStatus();
     }
-    Run r;
-    RETURN_IF_ERROR(run_form(ChannelForm::kLag, HoursToSeconds(std::exp(log_tau)), r));
+    FormRun r;
+    RETURN_IF_ERROR(RunForm(ChannelForm::kLag, HoursToSeconds(std::exp(log_tau)), r));
     lag.emplace(log_tau, std::move(r));
     return absl::OkStatus();
-  };
-  auto best_lag = [&]() {
+  }
+
+  // The lag of the smallest -2 log L (the first of equals).
+  std::map<double, FormRun>::iterator BestLag() {
     auto best = lag.begin();
     for (auto it = lag.begin(); it != lag.end(); ++it) {
       if (it->second.value < best->second.value) best = it;
     }
     return best;
-  };
-  for (int k = 0; k < kChannelLagCoarse; ++k) RETURN_IF_ERROR(evaluate(log_min + k * spacing));
-  for (int r = 1; r <= kChannelLagRefine; ++r) {
-    const double half = spacing / std::pow(2.0, r);
-    const double centre = best_lag()->first;
-    if (centre - half >= log_min - 1e-12) RETURN_IF_ERROR(evaluate(centre - half));
-    if (centre + half <= log_max + 1e-12) RETURN_IF_ERROR(evaluate(centre + half));
   }
-  // Near its minimum -2 log L is a parabola in ln tau (the lag is well determined by a wandering
-  // channel: its profile falls by hundreds within a quarter of a grid spacing): the vertex of the
-  // parabola through the best time constant and its neighbours, run, up to kChannelLagVertexRuns
-  // times while it moves by more than 0.005 in ln tau.
+};
+
+// Why no drift following the channel can be fitted (not declared, too few values, constant, no
+// room in the gyro's basis); empty when one can.
+std::string WhyNoChannelFit(const std::optional<ChannelConfig>& declared,
+                            const ChannelSpread& spread, int first_term) {
+  if (declared.has_value() && spread.count >= 2 && spread.sd > 0.0 &&
+      first_term + 2 * kTerms <= kMaxBasisTermsPerGyro) {
+    return std::string();
+  }
+  return !declared.has_value()  ? "the channel is not declared"
+         : spread.count < 2     ? "the recording carries fewer than two of its values"
+         : !(spread.sd > 0.0)   ? "its value does not change over the recording"
+                                : "the gyro's basis holds too many terms for three more";
+}
+
+// The lag's search: the coarse grid, twice the two points half a spacing either side of the best,
+// then the vertex of the parabola through the best time constant and its neighbours (near its
+// minimum -2 log L is a parabola in ln tau: the lag is well determined by a wandering channel,
+// its profile falls by hundreds within a quarter of a grid spacing), run up to
+// kChannelLagVertexRuns times while it moves by more than 0.005 in ln tau.
+absl::Status SearchLags(ChannelSearch& s) {
+  for (int k = 0; k < kChannelLagCoarse; ++k) {
+    RETURN_IF_ERROR(s.EvaluateLag(s.log_min + k * s.spacing));
+  }
+  for (int r = 1; r <= kChannelLagRefine; ++r) {
+    const double half = s.spacing / std::pow(2.0, r);
+    const double centre = s.BestLag()->first;
+    if (centre - half >= s.log_min - 1e-12) RETURN_IF_ERROR(s.EvaluateLag(centre - half));
+    if (centre + half <= s.log_max + 1e-12) RETURN_IF_ERROR(s.EvaluateLag(centre + half));
+  }
   for (int it = 0; it < kChannelLagVertexRuns; ++it) {
-    const Parabola p = VertexOf(lag, best_lag());
+    const Parabola p = VertexOf(s.lag, s.BestLag());
     if (!p.ok) break;
     bool known = false;
-    for (const auto& [x, r] : lag) known = known || std::abs(x - p.vertex) < 0.005;
+    for (const auto& [x, r] : s.lag) known = known || std::abs(x - p.vertex) < 0.005;
     if (known) break;
-    RETURN_IF_ERROR(evaluate(p.vertex));
+    RETURN_IF_ERROR(s.EvaluateLag(p.vertex));
   }
+  return absl::OkStatus();
+}
 
-  // The lag's points with their prior weights (uniform in ln tau, trapezoid rule), each form a
-  // third of the prior.
-  const double span = log_max - log_min;
+// The evidence's prior points in `fit`, each form a third of the prior: the value's and the
+// derivative's runs, and the lag's points with their weights (uniform in ln tau, trapezoid rule).
+// Returns the lag's profile (ln(tau / h), -2 log L) and sets `lag_integrated` to its -2 log L
+// integrated over tau.
+ProfilePoints AddFormPriorPoints(const ChannelSearch& s, double value_form, double derivative_form,
+                                 double& lag_integrated, CandidateFit& fit) {
+  const double span = s.log_max - s.log_min;
   std::vector<std::pair<double, double>> lag_points;
-  std::vector<std::pair<double, double>> profile;
-  for (const auto& [x, r] : lag) profile.emplace_back(x, r.value);
+  ProfilePoints profile;
+  for (const auto& [x, r] : s.lag) profile.emplace_back(x, r.value);
   for (size_t j = 0; j < profile.size(); ++j) {
     const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
     const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
     lag_points.emplace_back(0.5 * (left + right) / span, profile[j].second);
   }
-  fit.prior_points.emplace_back(1.0 / 3.0, value_run.value);
-  fit.prior_points.emplace_back(1.0 / 3.0, derivative_run.value);
+  fit.prior_points.emplace_back(1.0 / 3.0, value_form);
+  fit.prior_points.emplace_back(1.0 / 3.0, derivative_form);
   for (const auto& [w, v] : lag_points) fit.prior_points.emplace_back(w / 3.0, v);
+  lag_integrated = Integrated(lag_points);
+  return profile;
+}
 
-  // The form reported: the largest evidence of the three (the lag's integrated over tau).
-  const double lag_integrated = Integrated(lag_points);
+// The form reported: the largest evidence of the three (the lag's integrated over tau), the
+// value's on a tie.
+ChannelForm ChooseForm(double value_form, double derivative_form, double lag_integrated) {
   ChannelForm form = ChannelForm::kValue;
-  double form_value = value_run.value;
-  if (derivative_run.value < form_value) {
+  double form_value = value_form;
+  if (derivative_form < form_value) {
     form = ChannelForm::kDerivative;
-    form_value = derivative_run.value;
+    form_value = derivative_form;
   }
-  if (lag_integrated < form_value) {
-    form = ChannelForm::kLag;
-    form_value = lag_integrated;
-  }
-  const auto best = best_lag();
+  if (lag_integrated < form_value) form = ChannelForm::kLag;
+  return form;
+}
+
+// The lag form's time constant and its 95% interval [h] (the parabola's where it has one, else
+// the profile's), whether the interval reaches an end of the lags searched, and the variance the
+// gain's sigma gains from tau's uncertainty [(rad/s per unit)^2].
+struct LagEstimate {
   double tau_h = 0.0, lower_h = 0.0, upper_h = 0.0;
   bool clipped = false;
-  Run* chosen = &value_run;
-  if (form == ChannelForm::kDerivative) chosen = &derivative_run;
-  Vector3d a_sigma = Vector3d::Zero();
-  if (form == ChannelForm::kLag) {
-    chosen = &best->second;
-    const Parabola parabola = VertexOf(lag, best);
-    const size_t top = ProfileMinimum(profile);
-    const LevelInterval in = IntervalAtLevel(profile, top, profile[top].second + kIntervalDrop);
-    double lower = in.lower, upper = in.upper;
-    bool lower_open = in.lower_open, upper_open = in.upper_open;
-    if (parabola.ok) {
-      // The interval of the parabola: -2 log L within 3.84 of its minimum.
-      const double half = std::sqrt(kIntervalDrop / parabola.curvature);
-      lower = std::max(log_min, parabola.vertex - half);
-      upper = std::min(log_max, parabola.vertex + half);
-      lower_open = parabola.vertex - half < log_min;
-      upper_open = parabola.vertex + half > log_max;
-    }
-    clipped = lower_open || upper_open;
-    tau_h = std::exp(parabola.ok ? parabola.vertex : profile[top].first);
-    lower_h = std::exp(lower);
-    upper_h = std::exp(upper);
-    // The gain moves with tau: its sigma adds the spread tau's uncertainty gives (the delta method
-    // on the profile, da/d ln tau between the time constants inside the interval, times the
-    // 1-sigma of ln tau, the 95% half-width / 1.96), as the warm-up's amplitude does.
-    auto inside = [&](const auto& point) {
-      return point.first >= lower - 1e-12 && point.first <= upper + 1e-12;
-    };
-    auto lo = std::find_if(lag.begin(), lag.end(), inside);
-    auto hi = std::find_if(lag.rbegin(), lag.rend(), inside);
-    if (lo != lag.end() && hi != lag.rend() && hi->first > lo->first) {
-      const Vector3d slope = (hi->second.a - lo->second.a) / (hi->first - lo->first);
-      const double sigma_log_tau = 0.5 * (upper - lower) / 1.959963984540054;
-      a_sigma = (slope.cwiseAbs() * sigma_log_tau).cwiseAbs2();
-    }
+  Vector3d gain_variance_from_tau = Vector3d::Zero();
+};
+LagEstimate EstimateLag(const ChannelSearch& s, const ProfilePoints& profile,
+                        std::map<double, FormRun>::const_iterator best) {
+  LagEstimate out;
+  const Parabola parabola = VertexOf(s.lag, best);
+  const size_t top = ProfileMinimum(profile);
+  const LevelInterval in = IntervalAtLevel(profile, top, profile[top].second + kIntervalDrop);
+  double lower = in.lower, upper = in.upper;
+  bool lower_open = in.lower_open, upper_open = in.upper_open;
+  if (parabola.ok) {
+    // The interval of the parabola: -2 log L within 3.84 of its minimum.
+    const double half = std::sqrt(kIntervalDrop / parabola.curvature);
+    lower = std::max(s.log_min, parabola.vertex - half);
+    upper = std::min(s.log_max, parabola.vertex + half);
+    lower_open = parabola.vertex - half < s.log_min;
+    upper_open = parabola.vertex + half > s.log_max;
   }
-  a_sigma = (chosen->a_sigma.cwiseAbs2() + a_sigma).cwiseSqrt();
-  const Vector3d a = chosen->a;
-  const double tau_s = form == ChannelForm::kLag          ? HoursToSeconds(tau_h)
-                       : form == ChannelForm::kDerivative ? smoothing_s
-                                                          : 0.0;
-  fit.model = WithChannelTerms(fit.model, candidate.gyro, candidate.channel, form, tau_s,
-                               reference, sigma, offset_sigma);
-  const Vector3d b = chosen->b, b_sigma = chosen->b_sigma;
-  fit.run = std::move(chosen->run);
-  fit.parameters = terms;
-  const GyroConfig* gw = FindGyroMutable(fit.model.config, candidate.gyro);
-  // The channel terms first (Finding::basis_terms.front() names the channel), then the offsets.
+  out.clipped = lower_open || upper_open;
+  out.tau_h = std::exp(parabola.ok ? parabola.vertex : profile[top].first);
+  out.lower_h = std::exp(lower);
+  out.upper_h = std::exp(upper);
+  // The gain moves with tau: its sigma adds the spread tau's uncertainty gives (the delta method
+  // on the profile, da/d ln tau between the time constants inside the interval, times the
+  // 1-sigma of ln tau, the 95% half-width / 1.96), as the warm-up's amplitude does.
+  auto inside = [&](const auto& point) {
+    return point.first >= lower - 1e-12 && point.first <= upper + 1e-12;
+  };
+  auto lo = std::find_if(s.lag.begin(), s.lag.end(), inside);
+  auto hi = std::find_if(s.lag.rbegin(), s.lag.rend(), inside);
+  if (lo != s.lag.end() && hi != s.lag.rend() && hi->first > lo->first) {
+    const Vector3d slope = (hi->second.a - lo->second.a) / (hi->first - lo->first);
+    const double sigma_log_tau = 0.5 * (upper - lower) / 1.959963984540054;
+    out.gain_variance_from_tau = (slope.cwiseAbs() * sigma_log_tau).cwiseAbs2();
+  }
+  return out;
+}
+
+// The chosen form's run as the fit's: the model with its terms (tau [s]), its run, and the terms
+// at the values the run estimated, the channel terms first (Finding::basis_terms.front() names
+// the channel), then the offsets.
+void AdoptForm(ChannelSearch& s, ChannelForm form, double tau_s, FormRun& chosen) {
+  CandidateFit& fit = s.fit;
+  fit.model = WithChannelTerms(fit.model, s.candidate.gyro, s.candidate.channel, form, tau_s,
+                               s.reference, s.sigma, s.offset_sigma);
+  fit.run = std::move(chosen.run);
+  fit.parameters = s.terms;
+  const GyroConfig* gw = FindGyroMutable(fit.model.config, s.candidate.gyro);
   for (int i = 0; i < kTerms; ++i) {
-    BasisTerm t = gw->basis_terms[channel_first + i];
-    t.value = a(i);
+    BasisTerm t = gw->basis_terms[s.channel_first + i];
+    t.value = chosen.a(i);
     fit.basis_terms.push_back(t);
   }
-  for (int i = 0; i < kTerms && offset; ++i) {
-    BasisTerm t = gw->basis_terms[first_term + i];
-    t.value = b(i);
+  for (int i = 0; i < kTerms && s.offset; ++i) {
+    BasisTerm t = gw->basis_terms[s.first_term + i];
+    t.value = chosen.b(i);
     fit.basis_terms.push_back(t);
   }
-  for (int i = 0; i < kTerms && offset; ++i) {
+}
+
+// The fit's parameters and description: the offsets, the gain in deg/h per unit of the channel
+// (per unit per hour for the derivative) with its 1-sigma `a_sigma`, the reference, the lag.
+void DescribeChannelFit(const ChannelSearch& s, const ChannelConfig& declared, ChannelForm form,
+                        const FormRun& chosen, const Vector3d& a_sigma, const LagEstimate& lag,
+                        CandidateFit& fit) {
+  const Vector3d a = chosen.a, b = chosen.b, b_sigma = chosen.b_sigma;
+  for (int i = 0; i < kTerms && s.offset; ++i) {
     fit.fitted.push_back(
         {absl::StrFormat("channelOffsetDegH[%d]", i), DegH(b(i)), DegH(b_sigma(i)), "deg/h"});
   }
-  // Parameters in deg/h per unit of the channel (per unit per hour for the derivative).
   const std::string unit = form == ChannelForm::kDerivative
-                               ? absl::StrCat("deg/h per ", declared->unit, "/h")
-                               : absl::StrCat("deg/h per ", declared->unit);
+                               ? absl::StrCat("deg/h per ", declared.unit, "/h")
+                               : absl::StrCat("deg/h per ", declared.unit);
   for (int i = 0; i < kTerms; ++i) {
     fit.fitted.push_back(
         {absl::StrFormat("channelGainDegH[%d]", i), DegH(a(i)), DegH(a_sigma(i)), unit});
@@ -336,48 +349,130 @@ absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& c
   const double size_sigma =
       size > 0 ? std::sqrt((a.cwiseProduct(a_sigma)).squaredNorm()) / size : a_sigma.norm();
   fit.fitted.push_back({"channelGainSizeDegH", DegH(size), DegH(size_sigma), unit});
-  fit.fitted.push_back({"channelReference", reference, 0.0, declared->unit});
+  fit.fitted.push_back({"channelReference", s.reference, 0.0, declared.unit});
   if (form == ChannelForm::kLag) {
-    fit.fitted.push_back({"channelLagHours", tau_h, 0.5 * (upper_h - lower_h), "h"});
-    fit.fitted.push_back({"channelLagLowerHours", lower_h, 0.0, "h"});
-    fit.fitted.push_back({"channelLagUpperHours", upper_h, 0.0, "h"});
+    fit.fitted.push_back({"channelLagHours", lag.tau_h, 0.5 * (lag.upper_h - lag.lower_h), "h"});
+    fit.fitted.push_back({"channelLagLowerHours", lag.lower_h, 0.0, "h"});
+    fit.fitted.push_back({"channelLagUpperHours", lag.upper_h, 0.0, "h"});
   }
   const Vector3d direction = size > 0 ? Vector3d(a / size) : Vector3d::Zero();
+  const std::string& channel = s.candidate.channel;
   const std::string what =
-      form == ChannelForm::kValue ? candidate.channel
-      : form == ChannelForm::kLag ? candidate.channel
-                                  : absl::StrCat("the rate of change of ", candidate.channel);
+      form == ChannelForm::kValue ? channel
+      : form == ChannelForm::kLag ? channel
+                                  : absl::StrCat("the rate of change of ", channel);
   std::string lag_text;
   if (form == ChannelForm::kLag) {
-    lag_text = absl::StrFormat(" with a %.0f min lag (95%% %.0f-%.0f min%s)", tau_h * 60.0,
-                               lower_h * 60.0, upper_h * 60.0,
-                               clipped ? ", clipped: the interval reaches an end of the lags "
-                                         "searched"
-                                       : "");
+    lag_text = absl::StrFormat(" with a %.0f min lag (95%% %.0f-%.0f min%s)", lag.tau_h * 60.0,
+                               lag.lower_h * 60.0, lag.upper_h * 60.0,
+                               lag.clipped ? ", clipped: the interval reaches an end of the lags "
+                                             "searched"
+                                           : "");
   }
   fit.description = absl::StrFormat(
       "gyro %d drift along (%.2f, %.2f, %.2f) (case axes) follows %s at %.4f +- %.4f %s%s "
       "(%s at %s = %.6g %s, its mean over the recording)",
-      candidate.gyro, direction.x(), direction.y(), direction.z(), what, DegH(size),
+      s.candidate.gyro, direction.x(), direction.y(), direction.z(), what, DegH(size),
       DegH(size_sigma), unit, lag_text,
-      offset ? absl::StrFormat("plus a case-fixed drift (%.4f, %.4f, %.4f) deg/h", DegH(b.x()),
-                               DegH(b.y()), DegH(b.z()))
-             : std::string("zero"),
-      candidate.channel, reference, declared->unit);
+      s.offset ? absl::StrFormat("plus a case-fixed drift (%.4f, %.4f, %.4f) deg/h", DegH(b.x()),
+                                 DegH(b.y()), DegH(b.z()))
+               : std::string("zero"),
+      channel, s.reference, declared.unit);
+}
+
+// The notes of the three forms' -2 log L and of the lag's profile.
+void AddFormNotes(const ChannelSearch& s, const ChannelConfig& declared,
+                  const ChannelSpread& spread, double value_form, double derivative_form,
+                  double lag_integrated, const ProfilePoints& profile,
+                  std::map<double, FormRun>::const_iterator best, CandidateFit& fit) {
   fit.notes.push_back(absl::StrFormat(
       "-2 log L of the forms: value %.1f, derivative (of a %.0f min lag) %.1f, lag integrated "
       "over tau %.1f (best %.2f h: %.1f); the three forms equally likely a priori, tau uniform in "
       "ln tau over %.1f-%.0f h; terms freed with %.4f deg/h per %s (c_sigma per 1-sigma of the "
       "channel, %.4g %s)",
-      value_run.value, kChannelDerivativeSmoothingHours * 60.0, derivative_run.value,
-      lag_integrated, std::exp(best->first), best->second.value, kChannelLagMinHours,
-      kChannelLagMaxHours, DegH(sigma), declared->unit, spread.sd, declared->unit));
+      value_form, kChannelDerivativeSmoothingHours * 60.0, derivative_form, lag_integrated,
+      std::exp(best->first), best->second.value, kChannelLagMinHours, kChannelLagMaxHours,
+      DegH(s.sigma), declared.unit, spread.sd, declared.unit));
   std::string profile_text;
   for (const auto& [x, v] : profile) {
-    absl::StrAppend(&profile_text, absl::StrFormat(" %.2f:%.1f", std::exp(x), v - best->second.value));
+    absl::StrAppend(&profile_text,
+                    absl::StrFormat(" %.2f:%.1f", std::exp(x), v - best->second.value));
   }
   fit.notes.push_back(
       absl::StrCat("likelihood over the lag (h: -2 log L above the best):", profile_text));
+}
+
+}  // namespace
+
+std::vector<std::string> CandidateChannels(const SpacecraftConfig& config) {
+  std::vector<std::string> names;
+  for (const ChannelConfig& c : config.channels) names.push_back(c.name);
+  return names;
+}
+
+// The fit as a sequence: whether the channel can carry a drift, the value and derivative forms
+// run once, the lag searched, the forms' prior points, the form of the largest evidence, its lag
+// and interval, its run adopted, and the fit described.
+absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& ctx,
+                                 CandidateFit& fit) {
+  const DiagnoseOptions& opt = *ctx.options;
+  ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
+  fit.time.kind = kTimeFollowsChannel;
+  fit.run = *ctx.model_run;
+  const int first_term = static_cast<int>(g->basis_terms.size());
+  const ChannelSpread spread = SpreadOf(*ctx.frames, candidate.channel);
+  // A copy: fit.model is replaced below.
+  std::optional<ChannelConfig> declared;
+  for (const ChannelConfig& c : fit.model.config.channels) {
+    if (c.name == candidate.channel) declared = c;
+  }
+  if (const std::string why = WhyNoChannelFit(declared, spread, first_term); !why.empty()) {
+    fit.parameters = 0;
+    fit.notes.push_back(
+        absl::StrFormat("no drift following %s fitted: %s", candidate.channel, why));
+    return absl::OkStatus();
+  }
+  ChannelSearch s{candidate, fit,
+                  CorrectStarTracker(*ctx.frames, *ctx.rates, fit.model.correction)};
+  // The prior: c_sigma of drift per 1-sigma of the channel [rad/s per unit].
+  s.sigma = DegPerHourToRadPerSec(opt.c_sigma_deg_h) / spread.sd;
+  s.reference = spread.mean;
+  // The constant drift at the channel's mean, unless the gyro's C1 (eq. (8), the same case-fixed
+  // drift) is free already.
+  s.offset = !(g->model_sigma.C1.maxCoeff() > 0.0);
+  s.offset_sigma = s.offset ? DegPerHourToRadPerSec(opt.c_sigma_deg_h) : 0.0;
+  s.first_term = first_term;
+  s.terms = s.offset ? 2 * kTerms : kTerms;
+  // The channel terms follow the offsets (WithChannelTerms).
+  s.channel_first = first_term + (s.offset ? kTerms : 0);
+  s.log_min = std::log(kChannelLagMinHours);
+  s.log_max = std::log(kChannelLagMaxHours);
+  s.spacing = (s.log_max - s.log_min) / (kChannelLagCoarse - 1);
+
+  FormRun value_run, derivative_run;
+  RETURN_IF_ERROR(s.RunForm(ChannelForm::kValue, 0.0, value_run));
+  const double smoothing_s = HoursToSeconds(kChannelDerivativeSmoothingHours);
+  RETURN_IF_ERROR(s.RunForm(ChannelForm::kDerivative, smoothing_s, derivative_run));
+  RETURN_IF_ERROR(SearchLags(s));
+  double lag_integrated = 0.0;
+  const ProfilePoints profile =
+      AddFormPriorPoints(s, value_run.value, derivative_run.value, lag_integrated, fit);
+  const ChannelForm form = ChooseForm(value_run.value, derivative_run.value, lag_integrated);
+  const auto best = s.BestLag();
+  FormRun* chosen = form == ChannelForm::kLag          ? &best->second
+                    : form == ChannelForm::kDerivative ? &derivative_run
+                                                       : &value_run;
+  LagEstimate lag;
+  if (form == ChannelForm::kLag) lag = EstimateLag(s, profile, best);
+  const Vector3d a_sigma =
+      (chosen->a_sigma.cwiseAbs2() + lag.gain_variance_from_tau).cwiseSqrt();
+  const double tau_s = form == ChannelForm::kLag          ? HoursToSeconds(lag.tau_h)
+                       : form == ChannelForm::kDerivative ? smoothing_s
+                                                          : 0.0;
+  AdoptForm(s, form, tau_s, *chosen);
+  DescribeChannelFit(s, *declared, form, *chosen, a_sigma, lag, fit);
+  AddFormNotes(s, *declared, spread, value_run.value, derivative_run.value, lag_integrated,
+               profile, best, fit);
   return absl::OkStatus();
 }
 
