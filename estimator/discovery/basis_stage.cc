@@ -214,26 +214,21 @@ ModelState WithBasisTerms(const ModelState& model, const BasisStageResult& stage
   return out;
 }
 
-absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
-                                               DiagnosisContext& context,
-                                               const std::vector<int>& gyros, int round) {
-  BasisStageResult out;
+namespace {
+
+// The open-ended stage's options for `model` (ModelOpenEndedOptions), with the recording's
+// orbital period (the options' own when given), the epoch, the sun's regressors less the faces a
+// selection round took already (readout_candidate.h FitSunCandidate: held in the model), and each
+// gyro's room for basis terms. `sun_note` says why the sun has no regressors, if so.
+OpenEndedOptions StageOptions(const ModelState& model, const SelectedModel& selected,
+                              const DiagnosisContext& context,
+                              const std::vector<DeviationSeries>& series, std::string& sun_note) {
   const DiagnoseOptions& opt = context.options();
-  const ModelState& model = selected.model;
-  const std::vector<TelemetryFrame> corrected =
-      CorrectStarTracker(context.frames(), context.rates(), model.correction);
-  auto series = MeasureDeviations(model.config, selected.run.gyros, corrected, context.rates(),
-                                  selected.run, gyros);
-  if (!series.ok()) return series.status();
-  out.options = ModelOpenEndedOptions(model, opt);
-  OpenEndedOptions& o = out.options;
+  OpenEndedOptions o = ModelOpenEndedOptions(model, opt);
   o.orbital_period_s =
       opt.orbital_period_s > 0.0 ? opt.orbital_period_s : RecordingOrbitalPeriod(context.regimes());
   o.epoch = context.frames().front().time;
-  std::string sun_note;
-  o.sun = SunRegressorsOf(*series, model.config, selected.run.gyros, &sun_note, opt.orbit.get());
-  // A face a selection round took already (readout_candidate.h FitSunCandidate) is held in the
-  // model: its regressors are left out.
+  o.sun = SunRegressorsOf(series, model.config, selected.run.gyros, &sun_note, opt.orbit.get());
   for (SunRegressors& r : o.sun) {
     for (int face : HeldSunFaces(model, r.gyro)) {
       if (face < static_cast<int>(r.values.size())) r.values[face].clear();
@@ -243,13 +238,12 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     o.column_budget.emplace_back(
         g.id, std::max(0, kMaxBasisTermsPerGyro - static_cast<int>(g.basis_terms.size())));
   }
-  std::vector<double> random_walk, w0;
-  for (const DeviationSeries& s : *series) {
-    random_walk.push_back(ModelRandomWalk(model, s.gyro));
-    w0.push_back(ModelInitialDriftSigma(model));
-  }
-  out.stage = RunOpenEnded(*series, random_walk, w0, o);
-  const OpenEndedResult& stage = out.stage;
+  return o;
+}
+
+// The residual drift before and after the stage's terms, per gyro and time, in deg/h.
+std::vector<ResidualDriftPoint> ResidualDriftPoints(const OpenEndedResult& stage) {
+  std::vector<ResidualDriftPoint> out;
   for (const ResidualDrift& r : stage.residual_drift) {
     for (size_t k = 0; k < r.hours.size(); ++k) {
       ResidualDriftPoint p;
@@ -260,28 +254,44 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
         p.after_deg_h[i] = RadPerSecToDegPerHour(r.after_k[k](i));
       }
       p.sigma_deg_h = RadPerSecToDegPerHour(r.sigma[k]);
-      out.residual_drift.push_back(p);
+      out.push_back(p);
     }
   }
+  return out;
+}
+
+// What the remaining deviation resembles most, in words, and the sun's note.
+std::string Resembles(const OpenEndedResult& stage, const std::string& sun_note) {
+  std::string out;
   if (!stage.best_label.empty()) {
-    out.resembles = absl::StrFormat(
+    out = absl::StrFormat(
         "of the open-ended basis (docs/discovery.md), the remaining deviation resembles most "
         "\"%s\" in gyro %d: 2 ln B = %.1f against the threshold %.1f of %d regressor groups",
         stage.best_label, stage.best_gyro, stage.best_evidence, stage.best_threshold,
         stage.groups_tested);
   }
-  if (!sun_note.empty()) absl::StrAppend(&out.resembles, "; ", sun_note);
-  if (stage.selected.empty()) return out;
+  if (!sun_note.empty()) absl::StrAppend(&out, "; ", sun_note);
+  return out;
+}
 
-  // The model with the selected terms, refitted by the filter.
-  std::vector<int> first_term(stage.selected.size(), 0);  // index in the gyro's basis_terms
-  double sun_occam = 0.0;
+// The selected groups as additions to `model`: each sun group a correction of the readings
+// (sun_terms.h, its Occam term added to `sun_occam`), each other group its drift terms (value 0,
+// their prior) and its readout distortion. Returns each group's first term's index in its gyro's
+// basis_terms once the terms are added.
+std::vector<int> AddSelectedGroups(const ModelState& model, const SelectedModel& selected,
+                                   DiagnosisContext& context,
+                                   const std::vector<DeviationSeries>& series,
+                                   const std::vector<TelemetryFrame>& corrected,
+                                   BasisStageResult& out, double& sun_occam) {
+  const OpenEndedResult& stage = out.stage;
+  std::vector<int> first_term(stage.selected.size(), 0);
   for (size_t i = 0; i < stage.selected.size(); ++i) {
     const SelectedGroup& g = stage.selected[i];
     const GyroConfig* gc = model.config.FindGyro(g.gyro);
     if (gc == nullptr) continue;
     if (g.sun_face >= 0) {  // held as a correction of the readings (sun_terms.h)
-      out.added_shifts.push_back(HeldSunDrift(g, *series, o.sun, corrected, context, selected));
+      out.added_shifts.push_back(
+          HeldSunDrift(g, series, out.options.sun, corrected, context, selected));
       sun_occam += ReadoutOccam(g);
       continue;
     }
@@ -298,6 +308,113 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     }
     if (!E.isZero(0.0)) out.added_distortions.emplace_back(g.gyro, E);
   }
+  return first_term;
+}
+
+// The finding of selected group `g` (its drift columns from `first_term` on in the refitted
+// filter's `estimate`, may be null), numbered `round`.
+Finding GroupFinding(SelectedGroup g, const GyroEstimate* estimate, int first_term,
+                     const ModelState& model, const ModelState& extended,
+                     const DiagnosisContext& context, const BasisStageResult& out, int round) {
+  const DiagnoseOptions& opt = context.options();
+  int term = first_term;
+  for (FittedColumn& c : g.columns) {
+    if (c.column.readout || g.sun_face >= 0) continue;
+    if (estimate != nullptr && term < static_cast<int>(estimate->basis_terms.size()) &&
+        term < static_cast<int>(estimate->basis_sigma.size())) {
+      c.value = estimate->basis_terms[term].value;
+      c.sigma = estimate->basis_sigma[term];
+    }
+    ++term;
+  }
+  Finding f;
+  f.effect = kEffectBasisTerm;
+  f.gyro = g.gyro;
+  f.description = g.sun_face >= 0 ? absl::StrFormat("gyro %d: %s%s", g.gyro,
+                                                    DescribeSunGroup(g, opt.orbit != nullptr),
+                                                    DescribeAlternatives(g))
+                                  : DescribeGroup(g, out.options);
+  f.time.kind = TimeKind(g);
+  const GyroConfig* gc = extended.config.FindGyro(g.gyro);
+  if (!g.columns.empty() && g.columns.front().column.readout) {
+    f.parameters = ReadoutParameters(g);
+    if (gc != nullptr) f.readout_distortion = gc->readout_distortion;
+  }
+  if (g.sun_face >= 0) {
+    f.parameters = SunParameters(g);
+    f.evidence.notes.push_back(absl::StrFormat(
+        "the drift that follows the sun is held in the refit at the regression's values, as a "
+        "correction of gyro %d's readings (the filter has no state for the thermal lag); its "
+        "values and sigmas are the regression's, and the refit's 2 ln B is its improvement of "
+        "-2 log L less the Occam term of the held coefficients (%.1f)",
+        g.gyro, ReadoutOccam(g)));
+  }
+  for (const FittedColumn& c : g.columns) {
+    if (c.column.readout || g.sun_face >= 0) continue;
+    const auto [value, unit] = JsonValue(c.column, c.value);
+    const auto [sigma, unused] = JsonValue(c.column, c.sigma);
+    f.parameters.push_back(Parameter{absl::StrCat("basis[", c.column.label, "]"), value,
+                                     std::abs(sigma), unit});
+    BasisTerm t = c.column.term;
+    t.value = c.value;
+    t.sigma = c.prior_sigma;
+    f.basis_terms.push_back(t);
+  }
+  f.evidence.delta_deviance = g.evidence;
+  f.evidence.evidence = g.evidence;
+  f.evidence.parameters = static_cast<int>(g.columns.size());
+  f.evidence.p_value = EvidenceBound(g.evidence);
+  f.evidence.threshold = g.threshold;
+  f.evidence.round = round;
+  f.evidence.notes.push_back(absl::StrFormat(
+      "found by the open-ended stage: the gyro's deviation from the model regressed on the "
+      "basis (docs/discovery.md), 2 ln B = %.1f against 2 ln(M / alpha) = %.1f with M = %d "
+      "regressor groups; refitted by the filter with every selected term: 2 ln B = %.1f",
+      g.evidence, g.threshold, g.groups_tested, out.refit_evidence));
+  if (!g.columns.empty() && !g.columns.front().column.readout &&
+      g.columns.front().column.term.kind == BasisKind::kRamp) {
+    DescribeGrowingDisplacement(model.config, context.frames(), g, f);
+  }
+  if (!g.columns.empty() && !g.columns.front().column.readout &&
+      g.columns.front().column.term.kind == BasisKind::kSuspensionVoltage) {
+    DescribeVoltageDrivenDrift(model.config, context.frames(), opt.alpha, f);
+  }
+  f.explanation = ExplainFinding(f);
+  return f;
+}
+
+}  // namespace
+
+// The stage as a sequence: the model's deviations measured, the open-ended regression run on
+// them, what the rest resembles, the selected groups added to the model and refitted by the
+// filter, and, when the refit confirms them, one finding per group and the extended model.
+absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
+                                               DiagnosisContext& context,
+                                               const std::vector<int>& gyros, int round) {
+  BasisStageResult out;
+  const ModelState& model = selected.model;
+  const std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(context.frames(), context.rates(), model.correction);
+  auto series = MeasureDeviations(model.config, selected.run.gyros, corrected, context.rates(),
+                                  selected.run, gyros);
+  if (!series.ok()) return series.status();
+  std::string sun_note;
+  out.options = StageOptions(model, selected, context, *series, sun_note);
+  std::vector<double> random_walk, w0;
+  for (const DeviationSeries& s : *series) {
+    random_walk.push_back(ModelRandomWalk(model, s.gyro));
+    w0.push_back(ModelInitialDriftSigma(model));
+  }
+  out.stage = RunOpenEnded(*series, random_walk, w0, out.options);
+  const OpenEndedResult& stage = out.stage;
+  out.residual_drift = ResidualDriftPoints(stage);
+  out.resembles = Resembles(stage, sun_note);
+  if (stage.selected.empty()) return out;
+
+  // The model with the selected terms, refitted by the filter.
+  double sun_occam = 0.0;
+  const std::vector<int> first_term =
+      AddSelectedGroups(model, selected, context, *series, corrected, out, sun_occam);
   const ModelState extended = WithBasisTerms(model, out);
   auto run = context.CheckedRun(extended, /*held_out=*/false);
   if (!run.ok()) return run.status();
@@ -316,72 +433,9 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
   // Findings, with the refitted filter's values of the terms (GyroEstimate::basis_terms, in the
   // configuration's order).
   for (size_t i = 0; i < stage.selected.size(); ++i) {
-    SelectedGroup g = stage.selected[i];
-    const GyroEstimate* estimate = FindEstimate(run->gyros, g.gyro);
-    int term = first_term[i];
-    for (FittedColumn& c : g.columns) {
-      if (c.column.readout || g.sun_face >= 0) continue;
-      if (estimate != nullptr && term < static_cast<int>(estimate->basis_terms.size()) &&
-          term < static_cast<int>(estimate->basis_sigma.size())) {
-        c.value = estimate->basis_terms[term].value;
-        c.sigma = estimate->basis_sigma[term];
-      }
-      ++term;
-    }
-    Finding f;
-    f.effect = kEffectBasisTerm;
-    f.gyro = g.gyro;
-    f.description = g.sun_face >= 0 ? absl::StrFormat("gyro %d: %s%s", g.gyro,
-                                                      DescribeSunGroup(g, opt.orbit != nullptr),
-                                                      DescribeAlternatives(g))
-                                    : DescribeGroup(g, o);
-    f.time.kind = TimeKind(g);
-    const GyroConfig* gc = extended.config.FindGyro(g.gyro);
-    if (!g.columns.empty() && g.columns.front().column.readout) {
-      f.parameters = ReadoutParameters(g);
-      if (gc != nullptr) f.readout_distortion = gc->readout_distortion;
-    }
-    if (g.sun_face >= 0) {
-      f.parameters = SunParameters(g);
-      f.evidence.notes.push_back(absl::StrFormat(
-          "the drift that follows the sun is held in the refit at the regression's values, as a "
-          "correction of gyro %d's readings (the filter has no state for the thermal lag); its "
-          "values and sigmas are the regression's, and the refit's 2 ln B is its improvement of "
-          "-2 log L less the Occam term of the held coefficients (%.1f)",
-          g.gyro, ReadoutOccam(g)));
-    }
-    for (const FittedColumn& c : g.columns) {
-      if (c.column.readout || g.sun_face >= 0) continue;
-      const auto [value, unit] = JsonValue(c.column, c.value);
-      const auto [sigma, unused] = JsonValue(c.column, c.sigma);
-      f.parameters.push_back(Parameter{absl::StrCat("basis[", c.column.label, "]"), value,
-                                       std::abs(sigma), unit});
-      BasisTerm t = c.column.term;
-      t.value = c.value;
-      t.sigma = c.prior_sigma;
-      f.basis_terms.push_back(t);
-    }
-    f.evidence.delta_deviance = g.evidence;
-    f.evidence.evidence = g.evidence;
-    f.evidence.parameters = static_cast<int>(g.columns.size());
-    f.evidence.p_value = EvidenceBound(g.evidence);
-    f.evidence.threshold = g.threshold;
-    f.evidence.round = round;
-    f.evidence.notes.push_back(absl::StrFormat(
-        "found by the open-ended stage: the gyro's deviation from the model regressed on the "
-        "basis (docs/discovery.md), 2 ln B = %.1f against 2 ln(M / alpha) = %.1f with M = %d "
-        "regressor groups; refitted by the filter with every selected term: 2 ln B = %.1f",
-        g.evidence, g.threshold, g.groups_tested, out.refit_evidence));
-    if (!g.columns.empty() && !g.columns.front().column.readout &&
-        g.columns.front().column.term.kind == BasisKind::kRamp) {
-      DescribeGrowingDisplacement(model.config, context.frames(), g, f);
-    }
-    if (!g.columns.empty() && !g.columns.front().column.readout &&
-        g.columns.front().column.term.kind == BasisKind::kSuspensionVoltage) {
-      DescribeVoltageDrivenDrift(model.config, context.frames(), opt.alpha, f);
-    }
-    f.explanation = ExplainFinding(f);
-    out.findings.push_back(std::move(f));
+    const SelectedGroup& g = stage.selected[i];
+    out.findings.push_back(GroupFinding(g, FindEstimate(run->gyros, g.gyro), first_term[i], model,
+                                        extended, context, out, round));
   }
   SelectedModel next;
   next.model = extended;
