@@ -171,15 +171,11 @@ void Conclude(bool model_findings, bool unexplained_found, const ProfiledDevianc
       PartlyExplainedSummary(report.consistency, report.before, report.after, remains);
 }
 
-}  // namespace
-
-absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
-                                         const std::vector<TelemetryFrame>& frames,
-                                         const DiagnoseOptions& requested,
-                                         const DiagnoseProgressFn& progress) {
-  if (absl::Status s = CheckInput(config, frames, requested); !s.ok()) return s;
-  // With an orbit and no period given, the orbital-phase harmonics take the orbit's period at
-  // the recording's middle (the Keplerian period through that state).
+// The options with the orbit's period: with an orbit and no period given, the orbital-phase
+// harmonics take the orbit's period at the recording's middle (the Keplerian period through that
+// state), when it is a plausible one.
+DiagnoseOptions WithOrbitalPeriod(const DiagnoseOptions& requested,
+                                  const std::vector<TelemetryFrame>& frames) {
   DiagnoseOptions options = requested;
   if (options.orbit != nullptr && options.orbital_period_s == 0.0) {
     const absl::StatusOr<OrbitState> middle =
@@ -189,10 +185,13 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
       options.orbital_period_s = period_s;
     }
   }
-  auto user = UserModel(config, options);
-  if (!user.ok()) return user.status();
-  DiagnosisContext context(frames, options, progress);
-  if (context.Stop()) return DiagnosisContext::Cancelled();
+  return options;
+}
+
+// The report's recording: its first frame, its size, the orbit used and the running gyros.
+DiagnosisReport StartReport(const SpacecraftConfig& config,
+                            const std::vector<TelemetryFrame>& frames,
+                            const DiagnoseOptions& options) {
   DiagnosisReport report;
   report.first_frame_time = frames.front().time;
   report.frames = static_cast<int>(frames.size());
@@ -203,18 +202,14 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
     report.orbit = options.orbit_source;
   }
   report.gyros = RunningGyros(config, frames);
-  if (report.gyros.size() < 2) {
-    return absl::InvalidArgumentError(
-        "recording: fewer than two configured gyros report in half of the frames");
-  }
-  context.Say(0.0, "regimes");
-  context.MeasureRecording(config);
-  report.regimes = context.regimes();
+  return report;
+}
 
-  // The user's model: full run and held-out run in parallel.
-  context.Say(0.02, "user model");
-  SelectedModel selected;
-  selected.model = *user;
+// The user's model (selected.model): its full run and, with gaps, its held-out run, in parallel;
+// fills selected.run and selected.fit, and `held_out` with the held-out run's summary.
+absl::Status RunUserModel(DiagnosisContext& context, const std::vector<RegimeSpan>& regimes,
+                          const std::vector<TelemetryFrame>& frames, SelectedModel& selected,
+                          HeldOutResult& held_out) {
   std::optional<absl::StatusOr<ModelRun>> base_full, base_held;
   if (context.Stop()) return DiagnosisContext::Cancelled();
   context.ForEach(2, [&](int i) {
@@ -230,10 +225,96 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   if (!base_full->ok()) return base_full->status();
   selected.run = std::move(**base_full);
   selected.fit = Profile(selected.run);
-  HeldOutResult base_held_out;
   if (base_held.has_value()) {
     if (!base_held->ok()) return base_held->status();
-    base_held_out = SummariseHeldOut(**base_held, context.gaps(), report.regimes, frames);
+    held_out = SummariseHeldOut(**base_held, context.gaps(), regimes, frames);
+  }
+  return absl::OkStatus();
+}
+
+// What the extended model leaves: its held-out prediction, the mismatches located against the
+// user's run, and what remains unexplained (a span whose residual excess stands out, held-out
+// prediction beyond the filter's uncertainty, or noise beyond the configured one).
+struct Assessment {
+  HeldOutResult final_held_out;
+  Mismatches mismatches;
+  std::optional<Unexplained> remaining;
+};
+
+// The assessment of `selected` (its full run current; its held-out prediction run unless
+// current), against the user's `base_run` and `base_held_out`. `selection`'s unresolved reason
+// says why the candidates that fit were not taken, when they were not.
+absl::Status Assess(const SelectedModel& selected, const ForwardSelection& selection,
+                    const ModelRun& base_run, const HeldOutResult& base_held_out,
+                    const std::vector<RegimeSpan>& regimes,
+                    const std::vector<TelemetryFrame>& frames, DiagnosisContext& context,
+                    Assessment& a) {
+  if (context.Stop()) return DiagnosisContext::Cancelled();
+  context.Say(0.9, "held-out prediction with the findings");
+  a.final_held_out = base_held_out;
+  if (selected.held_out_current) {
+    a.final_held_out = selected.held_out;
+  } else if (!selection.findings.empty() && !context.gaps().empty()) {
+    auto held = context.CheckedRun(selected.model, /*held_out=*/true);
+    if (!held.ok()) return held.status();
+    a.final_held_out = SummariseHeldOut(*held, context.gaps(), regimes, frames);
+  }
+  const double alpha = context.options().alpha;
+  a.mismatches = LocateMismatches(base_run, selected.run, regimes, frames, alpha);
+  a.remaining = FindUnexplained(a.mismatches.remaining, selection.unresolved,
+                                selection.unresolved_gyro, selection.unresolved_where,
+                                a.final_held_out, selected.fit, !selection.findings.empty(),
+                                alpha);
+  return absl::OkStatus();
+}
+
+// A single finding's held-out evidence, when the selection left it unset: the user's and the
+// extended model's held-out prediction.
+void AddHeldOutEvidence(const HeldOutResult& base_held_out, const HeldOutResult& final_held_out,
+                        DiagnosisReport& report) {
+  if (report.findings.size() != 1 || report.findings.front().evidence.held_out_nees_after >= 0) {
+    return;
+  }
+  Evidence& e = report.findings.front().evidence;
+  e.held_out_nees_before = base_held_out.nees;
+  e.held_out_nees_after = final_held_out.nees;
+  e.held_out_deviance_before = base_held_out.deviance;
+  e.held_out_deviance_after = final_held_out.deviance;
+  e.held_out_dof = final_held_out.dof;
+}
+
+}  // namespace
+
+// The diagnosis as a sequence: the input checked, the recording's regimes, the user's model run,
+// the forward selection over the library, what it leaves assessed, the open-ended stage on what
+// remains, the other gyros whose drift returns to its mean, and the verdict.
+absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
+                                         const std::vector<TelemetryFrame>& frames,
+                                         const DiagnoseOptions& requested,
+                                         const DiagnoseProgressFn& progress) {
+  if (absl::Status s = CheckInput(config, frames, requested); !s.ok()) return s;
+  const DiagnoseOptions options = WithOrbitalPeriod(requested, frames);
+  auto user = UserModel(config, options);
+  if (!user.ok()) return user.status();
+  DiagnosisContext context(frames, options, progress);
+  if (context.Stop()) return DiagnosisContext::Cancelled();
+  DiagnosisReport report = StartReport(config, frames, options);
+  if (report.gyros.size() < 2) {
+    return absl::InvalidArgumentError(
+        "recording: fewer than two configured gyros report in half of the frames");
+  }
+  context.Say(0.0, "regimes");
+  context.MeasureRecording(config);
+  report.regimes = context.regimes();
+
+  // The user's model: full run and held-out run in parallel.
+  context.Say(0.02, "user model");
+  SelectedModel selected;
+  selected.model = *user;
+  HeldOutResult base_held_out;
+  if (absl::Status s = RunUserModel(context, report.regimes, frames, selected, base_held_out);
+      !s.ok()) {
+    return s;
   }
   const ModelRun base_run = selected.run;
   const ProfiledDeviance base_fit = selected.fit;
@@ -248,43 +329,29 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
   ForwardSelection& selection = *chosen;
   report.candidates = std::move(selection.rows);
 
-  // The extended model: its held-out prediction (its full run is selected.run), and what remains
-  // (a span whose residual excess stands out, held-out prediction beyond the filter's
-  // uncertainty, or noise beyond the configured one). `selection`'s unresolved reason says why
-  // the candidates that fit were not taken, when they were not.
-  HeldOutResult final_held_out = base_held_out;
-  Mismatches mismatches;
-  std::optional<Unexplained> remaining;
-  auto assess = [&]() -> absl::Status {
-    if (context.Stop()) return DiagnosisContext::Cancelled();
-    context.Say(0.9, "held-out prediction with the findings");
-    final_held_out = base_held_out;
-    if (selected.held_out_current) {
-      final_held_out = selected.held_out;
-    } else if (!selection.findings.empty() && !context.gaps().empty()) {
-      auto held = context.CheckedRun(selected.model, /*held_out=*/true);
-      if (!held.ok()) return held.status();
-      final_held_out = SummariseHeldOut(*held, context.gaps(), report.regimes, frames);
-    }
-    mismatches = LocateMismatches(base_run, selected.run, report.regimes, frames, options.alpha);
-    remaining = FindUnexplained(mismatches.remaining, selection.unresolved,
-                                selection.unresolved_gyro, selection.unresolved_where,
-                                final_held_out, selected.fit, !selection.findings.empty(),
-                                options.alpha);
-    return absl::OkStatus();
-  };
-  if (absl::Status s = assess(); !s.ok()) return s;
+  // The extended model: its held-out prediction (its full run is selected.run), and what remains.
+  Assessment a;
+  a.final_held_out = base_held_out;
+  if (absl::Status s = Assess(selected, selection, base_run, base_held_out, report.regimes,
+                              frames, context, a);
+      !s.ok()) {
+    return s;
+  }
 
   // What the library left: the open-ended stage (what_is_left.h).
   std::string resembles;
-  if (remaining.has_value() && options.open_ended) {
+  if (a.remaining.has_value() && options.open_ended) {
     context.Say(0.92, "open-ended stage");
-    auto left = ExplainWhatSelectionLeft(selected, context, report.gyros, final_held_out,
+    auto left = ExplainWhatSelectionLeft(selected, context, report.gyros, a.final_held_out,
                                          selection);
     if (!left.ok()) return left.status();
     resembles = std::move(left->resembles);
     if (left->taken) {
-      if (absl::Status s = assess(); !s.ok()) return s;
+      if (absl::Status s = Assess(selected, selection, base_run, base_held_out, report.regimes,
+                                  frames, context, a);
+          !s.ok()) {
+        return s;
+      }
     }
   }
   report.findings = std::move(selection.findings);
@@ -293,41 +360,34 @@ absl::StatusOr<DiagnosisReport> Diagnose(const SpacecraftConfig& config,
 
   // Another gyro whose drift returns to its mean is its own `unexplained` finding, listed before
   // the verdict's (which stays last, with the report's mismatch).
-  if (remaining.has_value()) outdone_gyros.erase(remaining->finding.gyro);
+  if (a.remaining.has_value()) outdone_gyros.erase(a.remaining->finding.gyro);
   std::vector<Finding> wandering;
   if (!outdone_gyros.empty()) {
     auto found = OtherGyrosReturningToTheirMean(
-        selected, context, outdone_gyros, final_held_out, !report.findings.empty(),
+        selected, context, outdone_gyros, a.final_held_out, !report.findings.empty(),
         static_cast<int>(report.gyros.size()), options.alpha);
     if (!found.ok()) return found.status();
     wandering = std::move(*found);
   }
 
-  report.after = Summarise(selected.model, selected.run, selected.fit, final_held_out, options);
+  report.after = Summarise(selected.model, selected.run, selected.fit, a.final_held_out, options);
   report.residuals_after = ResidualSeries(selected.run, frames);
-  report.held_out_after = final_held_out.points;
-  if (report.findings.size() == 1 && report.findings.front().evidence.held_out_nees_after < 0) {
-    Evidence& e = report.findings.front().evidence;
-    e.held_out_nees_before = base_held_out.nees;
-    e.held_out_nees_after = final_held_out.nees;
-    e.held_out_deviance_before = base_held_out.deviance;
-    e.held_out_deviance_after = final_held_out.deviance;
-    e.held_out_dof = final_held_out.dof;
-  }
-  report.mismatch = mismatches.base;
+  report.held_out_after = a.final_held_out.points;
+  AddHeldOutEvidence(base_held_out, a.final_held_out, report);
+  report.mismatch = a.mismatches.base;
   const bool model_findings = !report.findings.empty();
   for (Finding& f : wandering) report.findings.push_back(std::move(f));
-  if (remaining.has_value()) {
+  if (a.remaining.has_value()) {
     for (const std::string* note :
          {&selection.unresolved_note, &selection.stand_in_note, &selection.later_unresolved}) {
-      if (!note->empty()) remaining->finding.evidence.notes.push_back(*note);
+      if (!note->empty()) a.remaining->finding.evidence.notes.push_back(*note);
     }
-    if (!resembles.empty()) remaining->finding.evidence.notes.push_back(resembles);
-    report.findings.push_back(remaining->finding);
-    if (!model_findings) report.mismatch = remaining->where;
+    if (!resembles.empty()) a.remaining->finding.evidence.notes.push_back(resembles);
+    report.findings.push_back(a.remaining->finding);
+    if (!model_findings) report.mismatch = a.remaining->where;
   }
-  Conclude(model_findings, remaining.has_value() || !wandering.empty(), base_fit, selected,
-           base_held_out, final_held_out, mismatches.remaining, options.alpha, report);
+  Conclude(model_findings, a.remaining.has_value() || !wandering.empty(), base_fit, selected,
+           base_held_out, a.final_held_out, a.mismatches.remaining, options.alpha, report);
   report.filter_runs = context.filter_runs();
   context.Say(1.0, "done");
   return report;
