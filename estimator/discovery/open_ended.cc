@@ -293,49 +293,79 @@ class Alternatives {
   std::map<int, std::pair<std::string, double>> sun_best_;  // face -> its best lag
 };
 
-}  // namespace
+// A gyro's basis as it is built: groups opened one after another, the columns added until the
+// next one belonging to the last; a column whose regressor is absent from the recording is left
+// out, and so is a group left empty.
+class BasisBuilder {
+ public:
+  BasisBuilder(const DeviationSeries& series, const OpenEndedOptions& options)
+      : series_(series), options_(options) {}
 
-GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options) {
-  GyroBasis out;
   // Opens a group; columns added until the next one belong to it. Empty groups are dropped.
-  auto open_group = [&](std::string label) {
-    if (!out.groups.empty() && out.groups.back().columns.empty()) out.groups.pop_back();
-    out.groups.push_back(BasisGroup{std::move(label), {}});
-  };
-  auto add_column = [&](BasisColumn c) {
-    c.group = static_cast<int>(out.groups.size()) - 1;
+  void OpenGroup(std::string label) {
+    DropEmptyGroup();
+    out_.groups.push_back(BasisGroup{std::move(label), {}});
+  }
+  BasisGroup& Group() { return out_.groups.back(); }
+
+  void AddColumn(BasisColumn c) {
+    c.group = static_cast<int>(out_.groups.size()) - 1;
     if (!c.readout) {
-      const std::vector<double>* sun = SunValues(options, series.gyro, c);
-      c.rms = sun != nullptr ? TabulatedRms(series, *sun) : ScalarRms(series, c);
+      const std::vector<double>* sun = SunValues(options_, series_.gyro, c);
+      c.rms = sun != nullptr ? TabulatedRms(series_, *sun) : ScalarRms(series_, c);
       if (!(c.rms > kAbsentRms)) return;
       // A term whose prior (drift_sigma at the regressor's RMS) exceeds the configuration's
       // limit on a term's sigma at its kind's reference size (spacecraft_config.h
       // kConfigLimits.basis_sigma) could only matter at a size the recording never reaches (a
       // body rate of arcseconds per second in an inertial hold), and a model holding it is
       // refused: absent too. Sun columns are held as reading corrections, not basis terms.
-      if (sun == nullptr && options.drift_sigma / c.rms * BasisValueToJson(c.term.kind) *
+      if (sun == nullptr && options_.drift_sigma / c.rms * BasisValueToJson(c.term.kind) *
                                     BasisReferenceSize(c.term.kind) >
                                 kConfigLimits.basis_sigma.max) {
         return;
       }
     }
-    out.groups.back().columns.push_back(static_cast<int>(out.columns.size()));
-    out.columns.push_back(std::move(c));
-  };
+    out_.groups.back().columns.push_back(static_cast<int>(out_.columns.size()));
+    out_.columns.push_back(std::move(c));
+  }
+
   // One scalar regressor along each case axis.
-  auto add_axes = [&](BasisTerm t) {
+  void AddAxes(BasisTerm t) {
     for (int m = 1; m <= 3; ++m) {
       t.axis = m;
       BasisColumn c;
       c.term = t;
       c.label = BasisTermLabel(t);
-      add_column(c);
+      AddColumn(c);
     }
-  };
-  auto scalar_label = [](BasisTerm t) {
+  }
+
+  // A group of its own (named by the term's scalar) with the term along each case axis.
+  void AddScalarGroup(const BasisTerm& t) {
     const std::string label = BasisTermLabel(t);
-    return label.substr(0, label.find(" ->"));
-  };
+    OpenGroup(label.substr(0, label.find(" ->")));
+    AddAxes(t);
+  }
+
+  GyroBasis Take() {
+    DropEmptyGroup();
+    return std::move(out_);
+  }
+
+ private:
+  void DropEmptyGroup() {
+    if (!out_.groups.empty() && out_.groups.back().columns.empty()) out_.groups.pop_back();
+  }
+
+  const DeviationSeries& series_;
+  const OpenEndedOptions& options_;
+  GyroBasis out_;
+};
+
+// The drift terms of the basis: the spin-axis harmonics h1^a h2^b h3^c (c <= 1) up to
+// kMaxHarmonicDegree, the body rates and their products, the orbital harmonics (with a period),
+// a ramp and a C2-like term growing in time, and the suspension voltages.
+void AddDriftGroups(const OpenEndedOptions& options, BasisBuilder& b) {
   BasisTerm t;
   t.epoch = options.epoch;
   t.kind = BasisKind::kSpinAxisHarmonic;
@@ -343,102 +373,240 @@ GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& 
     for (int degree = 0; degree + c <= kMaxHarmonicDegree; ++degree) {
       for (int a = degree; a >= 0; --a) {
         t.exponents = {a, degree - a, c};
-        open_group(scalar_label(t));
-        add_axes(t);
+        b.AddScalarGroup(t);
       }
     }
   }
   t.kind = BasisKind::kBodyRate;
   for (int i = 1; i <= 3; ++i) {
     t.index = {i, i};
-    open_group(scalar_label(t));
-    add_axes(t);
+    b.AddScalarGroup(t);
   }
   t.kind = BasisKind::kBodyRateProduct;
   for (int i = 1; i <= 3; ++i) {
     for (int j = i; j <= 3; ++j) {
       t.index = {i, j};
-      open_group(scalar_label(t));
-      add_axes(t);
+      b.AddScalarGroup(t);
     }
   }
   if (options.orbital_period_s > 0.0) {
     t.kind = BasisKind::kOrbitalHarmonic;
     t.period = options.orbital_period_s;
     for (int n = 1; n <= 2; ++n) {
-      open_group(absl::StrCat("orbit ", n));
+      b.OpenGroup(absl::StrCat("orbit ", n));
       t.harmonic = n;
       for (bool sine : {false, true}) {
         t.sine = sine;
-        add_axes(t);
+        b.AddAxes(t);
       }
     }
   }
   t.kind = BasisKind::kRamp;
-  open_group("ramp");
-  add_axes(t);
+  b.OpenGroup("ramp");
+  b.AddAxes(t);
   // A C2-like term growing in time (eq. (9) with C2 proportional to time): t h_m^2 e_m.
   t.kind = BasisKind::kRampHarmonic;
-  open_group("ramp*h_m^2");
+  b.OpenGroup("ramp*h_m^2");
   for (int m = 1; m <= 3; ++m) {
     t.index = {m, m};
     t.axis = m;
     BasisColumn c;
     c.term = t;
     c.label = BasisTermLabel(t);
-    add_column(c);
+    b.AddColumn(c);
   }
   t.kind = BasisKind::kSuspensionVoltage;
   for (int i = 1; i <= 3; ++i) {
     t.index = {i, i};
-    open_group(scalar_label(t));
-    add_axes(t);
+    b.AddScalarGroup(t);
   }
-  open_group("readout");
+}
+
+// The readout distortion's patterns (one group), the sun's families (a group per lit face and
+// lag; a face held in the model already, sun_terms.h HeldSunFaces, has no regressors), and the
+// nuisance groups of the drift steps the model holds for the gyro.
+void AddReadoutSunAndStepGroups(const DeviationSeries& series, const OpenEndedOptions& options,
+                                BasisBuilder& b) {
+  b.OpenGroup("readout");
   for (int i = 0; i < kReadoutPatterns; ++i) {
     BasisColumn col;
     col.readout = true;
     col.readout_index = i;
     col.label = ReadoutPatternLabel(i);
-    add_column(col);
+    b.AddColumn(col);
   }
   if (const SunRegressors* sun = FindSunRegressors(options.sun, series.gyro)) {
     for (int face = 0; face < static_cast<int>(sun->values.size()); ++face) {
-      // A face held in the model already (sun_terms.h HeldSunFaces) has no regressors.
       if (face >= static_cast<int>(sun->values.size()) || sun->values[face].empty()) continue;
       for (int lag = 0; lag < static_cast<int>(sun->lag_hours.size()); ++lag) {
         const std::string label = SunGroupLabel(face, sun->lag_hours[lag]);
-        open_group(label);
-        out.groups.back().sun_face = face;
-        out.groups.back().sun_lag = lag;
+        b.OpenGroup(label);
+        b.Group().sun_face = face;
+        b.Group().sun_lag = lag;
         for (int m = 1; m <= 3; ++m) {
           BasisColumn c;
           c.sun_face = face;
           c.sun_lag = lag;
           c.term.axis = m;
           c.label = absl::StrCat(label, " -> ", std::string(1, "xyz"[m - 1]));
-          add_column(c);
+          b.AddColumn(c);
         }
       }
     }
   }
   for (const auto& [gyro, time] : options.steps) {
     if (gyro != series.gyro) continue;
-    open_group(absl::StrCat("before the drift step at ", FormatUtc(time)));
-    out.groups.back().nuisance = true;
+    b.OpenGroup(absl::StrCat("before the drift step at ", FormatUtc(time)));
+    b.Group().nuisance = true;
     for (int m = 1; m <= 3; ++m) {
       BasisColumn c;
       c.nuisance = true;
       c.before = time;
       c.term.axis = m;
-      c.label = absl::StrCat(out.groups.back().label, " -> ", std::string(1, "xyz"[m - 1]));
-      add_column(c);
+      c.label = absl::StrCat(b.Group().label, " -> ", std::string(1, "xyz"[m - 1]));
+      b.AddColumn(c);
     }
   }
-  if (!out.groups.empty() && out.groups.back().columns.empty()) out.groups.pop_back();
-  return out;
 }
 
+// The best group of one round over every gyro: its gyro's index, the group, its 2 ln B, the fit
+// with it, and for a sun family its evidence at each lag and its lag-averaged drift; `tested`
+// the number of groups (a sun family counts once) compared.
+struct RoundBest {
+  int tested = 0;
+  int gyro = -1;
+  int group = -1;
+  double evidence = -std::numeric_limits<double>::infinity();
+  RegressionFit fit;
+  std::vector<double> profile;
+  std::pair<Vector3d, Matrix3d> averaged;
+};
+
+// The columns gyro `d` may still take: its budget (OpenEndedOptions::column_budget, unlimited
+// when absent) less the drift columns of its active groups.
+int RemainingBudget(const GyroData& d, const OpenEndedOptions& options) {
+  int budget = std::numeric_limits<int>::max();
+  for (const auto& [gyro, n] : options.column_budget) {
+    if (gyro == d.series->gyro) budget = n;
+  }
+  for (int k : d.active) {
+    for (int c : d.basis.groups[k].columns) {
+      budget -= d.basis.columns[c].readout || d.basis.columns[c].nuisance ? 0 : 1;
+    }
+  }
+  return budget;
+}
+
+// Every group of gyro `g` not active yet, fitted beside the active ones: each sun family of an
+// inactive face as one (FitFamily), each other group within the budget; the best kept in `best`.
+void CompareGroupsOf(std::vector<GyroData>& gyros, size_t g, const OpenEndedOptions& options,
+                     RoundBest& best) {
+  GyroData& d = gyros[g];
+  const int budget = RemainingBudget(d, options);
+  std::map<int, std::vector<int>> families;  // sun face -> its groups, by lag
+  for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+    const int face = d.basis.groups[k].sun_face;
+    if (face >= 0 && !FaceActive(d, face)) families[face].push_back(k);
+  }
+  for (const auto& [face, family] : families) {
+    ++best.tested;
+    RoundCandidate c = FitFamily(d, family);
+    if (c.evidence > best.evidence) {
+      best.evidence = c.evidence;
+      best.gyro = static_cast<int>(g);
+      best.group = c.group;
+      best.fit = std::move(c.fit);
+      best.profile = std::move(c.lag_evidence);
+      best.averaged = {c.averaged_k, c.averaged_covariance_k};
+    }
+  }
+  for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+    if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
+    if (d.basis.groups[k].sun_face >= 0) continue;  // in its family above
+    int drift_columns = 0;
+    for (int c : d.basis.groups[k].columns) drift_columns += d.basis.columns[c].readout ? 0 : 1;
+    if (drift_columns > budget) continue;
+    ++best.tested;
+    std::vector<int> groups = d.active;
+    groups.push_back(k);
+    RegressionFit f = Fit(d, groups);
+    const double evidence = d.fit.deviance - f.deviance;
+    if (evidence > best.evidence) {
+      best.evidence = evidence;
+      best.gyro = static_cast<int>(g);
+      best.group = k;
+      best.fit = std::move(f);
+      best.profile.clear();
+    }
+  }
+}
+
+// The round's best group taken: active in its gyro with its fit, and as a selected group.
+SelectedGroup TakeGroup(GyroData& d, RoundBest& best, double threshold,
+                        const OpenEndedOptions& options) {
+  d.active.push_back(best.group);
+  d.fit = best.fit;
+  SelectedGroup s;
+  s.gyro = d.series->gyro;
+  s.label = d.basis.groups[best.group].label;
+  s.evidence = best.evidence;
+  s.threshold = threshold;
+  s.groups_tested = best.tested;
+  s.sun_face = d.basis.groups[best.group].sun_face;
+  if (s.sun_face >= 0) {
+    if (const SunRegressors* sun = FindSunRegressors(options.sun, s.gyro)) {
+      s.lag_hours = sun->lag_hours;
+    }
+    s.lag_evidence = std::move(best.profile);
+    s.lag_averaged_k = best.averaged.first;
+    s.lag_averaged_covariance_k = best.averaged.second;
+  }
+  return s;
+}
+
+// A gyro's final values: each of its selected groups filled (FillGroup) with its alternatives
+// (each inactive group in its place), its deviance after, and its residual drift before and after.
+void FinishGyro(GyroData& d, const OpenEndedOptions& options, OpenEndedResult& result) {
+  const std::vector<int> cols = ColumnsOf(d, d.active);
+  for (size_t i = 0; i < d.active.size(); ++i) {
+    if (d.basis.groups[d.active[i]].nuisance) continue;
+    for (SelectedGroup& s : result.selected) {
+      if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
+      FillGroup(d, cols, d.fit, d.active[i], s);
+      Alternatives alternatives(options.ambiguity);
+      for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
+        if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
+        const int face = d.basis.groups[k].sun_face;
+        if (face >= 0 && (face == s.sun_face || FaceActive(d, face))) continue;
+        std::vector<int> groups = d.active;
+        groups[i] = k;
+        alternatives.Add(d.basis.groups[k], Fit(d, groups).deviance - d.fit.deviance);
+      }
+      alternatives.AppendTo(s.alternatives);
+    }
+  }
+  result.deviance_after += d.fit.deviance;
+  std::vector<Vector2d> z_after = d.series->y;
+  for (size_t j = 0; j < cols.size(); ++j) {
+    const std::vector<Vector2d>& x = d.signature[cols[j]];
+    for (size_t k = 0; k < z_after.size(); ++k) z_after[k] -= d.fit.mean(j) * x[k];
+  }
+  ResidualDrift r;
+  SmoothInCaseAxes(*d.series, d.w0_sigma, d.series->y, z_after, r);
+  result.residual_drift.push_back(std::move(r));
+}
+
+}  // namespace
+
+GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options) {
+  BasisBuilder b(series, options);
+  AddDriftGroups(options, b);
+  AddReadoutSunAndStepGroups(series, options, b);
+  return b.Take();
+}
+
+// The stage as a sequence: each gyro's basis and its fit without terms, then rounds while the
+// best group of a round clears its threshold, then each gyro's final values.
 OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
                              const std::vector<double>& random_walk,
                              const std::vector<double>& w0_sigma,
@@ -451,117 +619,21 @@ OpenEndedResult RunOpenEnded(const std::vector<DeviationSeries>& series,
     result.deviance_before += gyros[g].fit.deviance;
   }
   for (int round = 0; round < options.max_terms; ++round) {
-    int M = 0, best_g = -1, best_k = -1;
-    double best = -std::numeric_limits<double>::infinity();
-    RegressionFit best_fit;
-    std::vector<double> best_profile;  // a sun family's 2 ln B at each lag
-    std::pair<Vector3d, Matrix3d> best_averaged;  // its lag-averaged drift and covariance
-    for (size_t g = 0; g < gyros.size(); ++g) {
-      GyroData& d = gyros[g];
-      int budget = std::numeric_limits<int>::max();
-      for (const auto& [gyro, n] : options.column_budget) {
-        if (gyro == d.series->gyro) budget = n;
-      }
-      for (int k : d.active) {
-        for (int c : d.basis.groups[k].columns) {
-          budget -= d.basis.columns[c].readout || d.basis.columns[c].nuisance ? 0 : 1;
-        }
-      }
-      std::map<int, std::vector<int>> families;  // sun face -> its groups, by lag
-      for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
-        const int face = d.basis.groups[k].sun_face;
-        if (face >= 0 && !FaceActive(d, face)) families[face].push_back(k);
-      }
-      for (const auto& [face, family] : families) {
-        ++M;
-        RoundCandidate c = FitFamily(d, family);
-        if (c.evidence > best) {
-          best = c.evidence;
-          best_g = static_cast<int>(g);
-          best_k = c.group;
-          best_fit = std::move(c.fit);
-          best_profile = std::move(c.lag_evidence);
-          best_averaged = {c.averaged_k, c.averaged_covariance_k};
-        }
-      }
-      for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
-        if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
-        if (d.basis.groups[k].sun_face >= 0) continue;  // in its family above
-        int drift_columns = 0;
-        for (int c : d.basis.groups[k].columns) drift_columns += d.basis.columns[c].readout ? 0 : 1;
-        if (drift_columns > budget) continue;
-        ++M;
-        std::vector<int> groups = d.active;
-        groups.push_back(k);
-        RegressionFit f = Fit(d, groups);
-        const double evidence = d.fit.deviance - f.deviance;
-        if (evidence > best) {
-          best = evidence;
-          best_g = static_cast<int>(g);
-          best_k = k;
-          best_fit = std::move(f);
-          best_profile.clear();
-        }
-      }
-    }
-    if (round == 0) result.groups_tested = M;
-    if (best_g < 0) break;
-    const double threshold = EvidenceThreshold(options.alpha, M);
-    GyroData& d = gyros[best_g];
+    RoundBest best;
+    for (size_t g = 0; g < gyros.size(); ++g) CompareGroupsOf(gyros, g, options, best);
+    if (round == 0) result.groups_tested = best.tested;
+    if (best.gyro < 0) break;
+    const double threshold = EvidenceThreshold(options.alpha, best.tested);
+    GyroData& d = gyros[best.gyro];
     result.best_gyro = d.series->gyro;
-    result.best_label = d.basis.groups[best_k].label;
-    result.best_evidence = best;
+    result.best_label = d.basis.groups[best.group].label;
+    result.best_evidence = best.evidence;
     result.best_threshold = threshold;
-    if (!(best > threshold)) break;
-    d.active.push_back(best_k);
-    d.fit = best_fit;
-    SelectedGroup s;
-    s.gyro = d.series->gyro;
-    s.label = d.basis.groups[best_k].label;
-    s.evidence = best;
-    s.threshold = threshold;
-    s.groups_tested = M;
-    s.sun_face = d.basis.groups[best_k].sun_face;
-    if (s.sun_face >= 0) {
-      if (const SunRegressors* sun = FindSunRegressors(options.sun, s.gyro)) {
-        s.lag_hours = sun->lag_hours;
-      }
-      s.lag_evidence = std::move(best_profile);
-      s.lag_averaged_k = best_averaged.first;
-      s.lag_averaged_covariance_k = best_averaged.second;
-    }
-    result.selected.push_back(s);
+    if (!(best.evidence > threshold)) break;
+    result.selected.push_back(TakeGroup(d, best, threshold, options));
   }
   // Final values, the alternatives of each selected group, and the residual drift.
-  for (GyroData& d : gyros) {
-    const std::vector<int> cols = ColumnsOf(d, d.active);
-    for (size_t i = 0; i < d.active.size(); ++i) {
-      if (d.basis.groups[d.active[i]].nuisance) continue;
-      for (SelectedGroup& s : result.selected) {
-        if (s.gyro != d.series->gyro || s.label != d.basis.groups[d.active[i]].label) continue;
-        FillGroup(d, cols, d.fit, d.active[i], s);
-        Alternatives alternatives(options.ambiguity);
-        for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
-          if (Contains(d.active, k) || d.basis.groups[k].nuisance) continue;
-          const int face = d.basis.groups[k].sun_face;
-          if (face >= 0 && (face == s.sun_face || FaceActive(d, face))) continue;
-          std::vector<int> groups = d.active;
-          groups[i] = k;
-          alternatives.Add(d.basis.groups[k], Fit(d, groups).deviance - d.fit.deviance);
-        }
-        alternatives.AppendTo(s.alternatives);
-      }
-    }
-    result.deviance_after += d.fit.deviance;
-    std::vector<Vector2d> z_after = d.series->y;
-    for (size_t j = 0; j < cols.size(); ++j) {
-      const std::vector<Vector2d>& x = d.signature[cols[j]];
-      for (size_t k = 0; k < z_after.size(); ++k) z_after[k] -= d.fit.mean(j) * x[k];
-    }
-    ResidualDrift r;
-    SmoothInCaseAxes(*d.series, d.w0_sigma, d.series->y, z_after, r);
-    result.residual_drift.push_back(std::move(r));
-  }
+  for (GyroData& d : gyros) FinishGyro(d, options, result);
   return result;
 }
 
