@@ -152,12 +152,18 @@ BodyRates MeasureBodyRates(const SpacecraftConfig& config,
   return out;
 }
 
-std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
-                                    const BodyRates& rates, const RegimeOptions& options) {
-  std::vector<RegimeSpan> spans;
-  const int n = static_cast<int>(frames.size());
-  if (n == 0) return spans;
-  // Rate per frame: star tracker where available, else gyros (docs/discovery.md, "Locate").
+namespace {
+
+// Each frame's regime by the window centred on it, with the window's median rate [rad/s] and its
+// mean rotation axis (body axes; zero where unknown).
+struct FrameClasses {
+  std::vector<Regime> label;
+  std::vector<double> rate_of;
+  std::vector<Vector3d> axis_of;
+};
+
+// Rate per frame: star tracker where available, else gyros (docs/discovery.md, "Locate").
+std::vector<std::optional<Vector3d>> FrameRates(const BodyRates& rates, int n) {
   std::vector<std::optional<Vector3d>> w(n);
   for (int i = 0; i < n; ++i) {
     if (rates.star_tracker_valid[i]) {
@@ -166,73 +172,109 @@ std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
       w[i] = rates.gyro[i];
     }
   }
-  // Classify each frame by the window centred on it (two pointers over time).
-  std::vector<Regime> label(n, Regime::kSlew);
-  std::vector<double> rate_of(n, 0.0);
-  std::vector<Vector3d> axis_of(n, Vector3d::Zero());
+  return w;
+}
+
+// Frame i's class from the rates of its window [lo, hi]: a slew (unknown) with fewer than three
+// rates, an inertial hold below hold_rate, a slew when the rate is not steady in magnitude or
+// axis, else an orbital orientation or a rotation by its period.
+void ClassifyFrame(const std::vector<std::optional<Vector3d>>& w, int lo, int hi, int i,
+                   const RegimeOptions& options, FrameClasses& c) {
+  std::vector<double> mags;
+  std::vector<Vector3d> vecs;
+  for (int j = lo; j <= hi; ++j) {
+    if (!w[j]) continue;
+    mags.push_back(w[j]->norm());
+    vecs.push_back(*w[j]);
+  }
+  if (mags.size() < 3) return;  // no rate: slew (unknown) until neighbours decide
+  const double med = Median(mags);
+  c.rate_of[i] = med;
+  if (med < options.hold_rate) {
+    c.label[i] = Regime::kInertialHold;
+    return;
+  }
+  // Robust steadiness: the central 80% of magnitudes within +-steady_magnitude of the median,
+  // and the mean resultant of the unit axes (outlier steps excluded by magnitude).
+  std::vector<double> dev;
+  Vector3d resultant = Vector3d::Zero();
+  int used = 0;
+  for (size_t k = 0; k < mags.size(); ++k) {
+    dev.push_back(std::abs(mags[k] - med) / med);
+    if (std::abs(mags[k] - med) <= 0.5 * med) {
+      resultant += vecs[k] / mags[k];
+      ++used;
+    }
+  }
+  std::sort(dev.begin(), dev.end());
+  const double spread = dev[static_cast<size_t>(0.8 * (dev.size() - 1))];
+  const double steadiness = used > 0 ? resultant.norm() / used : 0.0;
+  c.axis_of[i] = used > 0 ? resultant.normalized() : Vector3d::Zero();
+  if (spread > options.steady_magnitude || steadiness < options.steady_axis) {
+    c.label[i] = Regime::kSlew;
+    return;
+  }
+  const double period = 2.0 * kPi / med;
+  c.label[i] = (period >= options.orbital_period_min && period <= options.orbital_period_max)
+                   ? Regime::kOrbital
+                   : Regime::kRotation;
+}
+
+// Classify each frame by the window centred on it (two pointers over time).
+FrameClasses ClassifyFrames(const std::vector<TelemetryFrame>& frames,
+                            const std::vector<std::optional<Vector3d>>& w,
+                            const RegimeOptions& options) {
+  const int n = static_cast<int>(frames.size());
+  FrameClasses c;
+  c.label.assign(n, Regime::kSlew);
+  c.rate_of.assign(n, 0.0);
+  c.axis_of.assign(n, Vector3d::Zero());
   const absl::Duration half = absl::Seconds(options.window / 2.0);
   int lo = 0, hi = 0;
   for (int i = 0; i < n; ++i) {
     while (frames[lo].time < frames[i].time - half) ++lo;
     while (hi + 1 < n && frames[hi + 1].time <= frames[i].time + half) ++hi;
-    std::vector<double> mags;
-    std::vector<Vector3d> vecs;
-    for (int j = lo; j <= hi; ++j) {
-      if (!w[j]) continue;
-      mags.push_back(w[j]->norm());
-      vecs.push_back(*w[j]);
-    }
-    if (mags.size() < 3) continue;  // no rate: slew (unknown) until neighbours decide
-    const double med = Median(mags);
-    rate_of[i] = med;
-    if (med < options.hold_rate) {
-      label[i] = Regime::kInertialHold;
-      continue;
-    }
-    // Robust steadiness: the central 80% of magnitudes within +-steady_magnitude of the median,
-    // and the mean resultant of the unit axes (outlier steps excluded by magnitude).
-    std::vector<double> dev;
-    Vector3d resultant = Vector3d::Zero();
-    int used = 0;
-    for (size_t k = 0; k < mags.size(); ++k) {
-      dev.push_back(std::abs(mags[k] - med) / med);
-      if (std::abs(mags[k] - med) <= 0.5 * med) {
-        resultant += vecs[k] / mags[k];
-        ++used;
-      }
-    }
-    std::sort(dev.begin(), dev.end());
-    const double spread = dev[static_cast<size_t>(0.8 * (dev.size() - 1))];
-    const double steadiness = used > 0 ? resultant.norm() / used : 0.0;
-    axis_of[i] = used > 0 ? resultant.normalized() : Vector3d::Zero();
-    if (spread > options.steady_magnitude || steadiness < options.steady_axis) {
-      label[i] = Regime::kSlew;
-      continue;
-    }
-    const double period = 2.0 * kPi / med;
-    label[i] = (period >= options.orbital_period_min && period <= options.orbital_period_max)
-                   ? Regime::kOrbital
-                   : Regime::kRotation;
+    ClassifyFrame(w, lo, hi, i, options, c);
   }
-  // Run-length spans.
-  struct Run {
-    Regime regime;
-    int first, last;
-  };
+  return c;
+}
+
+// A run of frames of one regime, [first, last].
+struct Run {
+  Regime regime;
+  int first, last;
+};
+
+// Run-length runs of the frames' labels.
+std::vector<Run> RunsOf(const std::vector<Regime>& label) {
   std::vector<Run> runs;
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < static_cast<int>(label.size()); ++i) {
     if (runs.empty() || runs.back().regime != label[i]) {
       runs.push_back({label[i], i, i});
     } else {
       runs.back().last = i;
     }
   }
+  return runs;
+}
+
+// Fold short runs (shorter than min_span): between two runs of one regime into that regime (unless
+// the rotation axis changed across it: a slew between two rotations about different body axes),
+// otherwise into a slew; neighbours of one regime merged; until nothing moves.
+void FoldShortRuns(const std::vector<TelemetryFrame>& frames,
+                   const std::vector<Vector3d>& axis_of, const RegimeOptions& options,
+                   std::vector<Run>& runs) {
+  const int n = static_cast<int>(frames.size());
   auto duration = [&](const Run& r) {
     return absl::ToDoubleSeconds(frames[r.last].time - frames[r.first].time) +
            (r.last + 1 < n ? absl::ToDoubleSeconds(frames[r.last + 1].time - frames[r.last].time)
                            : 0.0);
   };
-  // Fold short runs: between two runs of one regime into that regime, otherwise into a slew.
+  auto run_axis = [&](const Run& r) {
+    Vector3d a = Vector3d::Zero();
+    for (int i = r.first; i <= r.last; ++i) a += axis_of[i];
+    return a.norm() > 0 ? a.normalized() : a;
+  };
   bool changed = true;
   while (changed && runs.size() > 1) {
     changed = false;
@@ -240,13 +282,6 @@ std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
       if (duration(runs[k]) >= options.min_span) continue;
       const bool has_prev = k > 0, has_next = k + 1 < runs.size();
       Regime to = Regime::kSlew;
-      // A short interruption between two runs of one regime belongs to it, unless the rotation
-      // axis changed across it (a slew between two rotations about different body axes).
-      auto run_axis = [&](const Run& r) {
-        Vector3d a = Vector3d::Zero();
-        for (int i = r.first; i <= r.last; ++i) a += axis_of[i];
-        return a.norm() > 0 ? a.normalized() : a;
-      };
       if (has_prev && has_next && runs[k - 1].regime == runs[k + 1].regime &&
           (runs[k - 1].regime == Regime::kInertialHold ||
            run_axis(runs[k - 1]).dot(run_axis(runs[k + 1])) > std::cos(options.max_axis_change))) {
@@ -275,23 +310,38 @@ std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
     }
     if (!any_short_non_slew) break;
   }
-  for (const Run& r : runs) {
-    RegimeSpan s;
-    s.regime = r.regime;
-    s.first_frame = r.first;
-    s.last_frame = r.last;
-    s.start = frames[r.first].time;
-    s.end = frames[r.last].time;
-    std::vector<double> mags;
-    Vector3d axis = Vector3d::Zero();
-    for (int i = r.first; i <= r.last; ++i) {
-      if (rate_of[i] > 0) mags.push_back(rate_of[i]);
-      axis += axis_of[i];
-    }
-    s.mean_rate = Median(mags);
-    if (s.regime != Regime::kInertialHold && axis.norm() > 0) s.axis_b = axis.normalized();
-    spans.push_back(s);
+}
+
+// A run as a span: its times, median rate and mean axis (none for an inertial hold).
+RegimeSpan SpanOf(const Run& r, const std::vector<TelemetryFrame>& frames, const FrameClasses& c) {
+  RegimeSpan s;
+  s.regime = r.regime;
+  s.first_frame = r.first;
+  s.last_frame = r.last;
+  s.start = frames[r.first].time;
+  s.end = frames[r.last].time;
+  std::vector<double> mags;
+  Vector3d axis = Vector3d::Zero();
+  for (int i = r.first; i <= r.last; ++i) {
+    if (c.rate_of[i] > 0) mags.push_back(c.rate_of[i]);
+    axis += c.axis_of[i];
   }
+  s.mean_rate = Median(mags);
+  if (s.regime != Regime::kInertialHold && axis.norm() > 0) s.axis_b = axis.normalized();
+  return s;
+}
+
+}  // namespace
+
+std::vector<RegimeSpan> FindRegimes(const std::vector<TelemetryFrame>& frames,
+                                    const BodyRates& rates, const RegimeOptions& options) {
+  std::vector<RegimeSpan> spans;
+  const int n = static_cast<int>(frames.size());
+  if (n == 0) return spans;
+  const FrameClasses c = ClassifyFrames(frames, FrameRates(rates, n), options);
+  std::vector<Run> runs = RunsOf(c.label);
+  FoldShortRuns(frames, c.axis_of, options, runs);
+  for (const Run& r : runs) spans.push_back(SpanOf(r, frames, c));
   return spans;
 }
 
