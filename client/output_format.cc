@@ -11,6 +11,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "google/protobuf/descriptor.h"
+#include "google/protobuf/descriptor.pb.h"
 #include "google/protobuf/util/json_util.h"
 #include "google/protobuf/util/time_util.h"
 
@@ -30,18 +31,26 @@ std::string TimestampText(const Message& m) {
   return FormatUtc(t);
 }
 
+// Whether a field of a message holds nothing: no entries, or not set (proto3: its default).
+bool Empty(const Message& message, const FieldDescriptor* field) {
+  const Reflection* reflection = message.GetReflection();
+  return field->is_repeated() ? reflection->FieldSize(message, field) == 0
+                              : !reflection->HasField(message, field);
+}
+
 // Rewrites the Timestamp fields of `json` (MessageToJsonString's form of `message`) with
-// FormatUtc, and leaves out a GyroDriftModel's keyed coefficients when it has none (its JSON as
-// before the field existed, docs/formats.md), recursing into nested and repeated messages. Maps
-// of messages are left alone (the service's messages have none with timestamps).
+// FormatUtc, and leaves out a deprecated field that holds nothing (a GyroDriftModel's fields of
+// the release before its keyed coefficients, docs/formats.md), recursing into nested and
+// repeated messages. Maps of messages are left alone (the service's messages have none with
+// timestamps).
 void TidyJson(const Message& message, Json& json) {
   if (!json.is_object()) return;
   const Descriptor* descriptor = message.GetDescriptor();
-  if (descriptor->full_name() == "esg.v1.GyroDriftModel") {
-    auto keyed = json.find("coefficients");
-    if (keyed != json.end() && keyed->is_array() && keyed->empty()) json.erase(keyed);
-  }
   const Reflection* reflection = message.GetReflection();
+  for (int i = 0; i < descriptor->field_count(); ++i) {
+    const FieldDescriptor* field = descriptor->field(i);
+    if (field->options().deprecated() && Empty(message, field)) json.erase(field->json_name());
+  }
   for (int i = 0; i < descriptor->field_count(); ++i) {
     const FieldDescriptor* field = descriptor->field(i);
     if (field->cpp_type() != FieldDescriptor::CPPTYPE_MESSAGE || field->is_map()) continue;

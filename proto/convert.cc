@@ -11,6 +11,7 @@
 #include <fstream>
 #include <sstream>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/ascii.h"
@@ -24,6 +25,7 @@
 #include "estimator/status_macros.h"
 #include "estimator/units.h"
 #include "google/protobuf/descriptor.h"
+#include "google/protobuf/descriptor.pb.h"
 #include "google/protobuf/message.h"
 #include "google/protobuf/repeated_field.h"
 #include "google/protobuf/util/json_util.h"
@@ -210,6 +212,29 @@ class JsonPrettyPrinter {
     out_.append(in_.data() + start, pos_ - start);
   }
 
+  // True when the object starting at pos_ ('{') holds at most two members and no object or
+  // array: a keyed coefficient, {"term": "c1x", "valueDegH": 0.02}, printed on one line.
+  bool SmallObject() const {
+    bool in_string = false;
+    int commas = 0;
+    for (size_t i = pos_ + 1; i < in_.size(); ++i) {
+      const char c = in_[i];
+      if (in_string) {
+        if (c == '\\') ++i;
+        else if (c == '"') in_string = false;
+      } else if (c == '"') {
+        in_string = true;
+      } else if (c == '[' || c == '{') {
+        return false;
+      } else if (c == ',') {
+        ++commas;
+      } else if (c == '}') {
+        return commas <= 1;
+      }
+    }
+    return false;
+  }
+
   // True when the array starting at pos_ ('[') holds no object or array.
   bool FlatArray() const {
     bool in_string = false;
@@ -229,12 +254,13 @@ class JsonPrettyPrinter {
     return true;
   }
 
-  void Value(int depth) {
+  // `in_array`: the value is an element of an array.
+  void Value(int depth, bool in_array = false) {
     if (pos_ >= in_.size()) return;
     const char c = in_[pos_];
     if (c == '{' || c == '[') {
       const char close = c == '{' ? '}' : ']';
-      const bool flat = c == '[' && FlatArray();
+      const bool flat = c == '[' ? FlatArray() : in_array && SmallObject();
       out_ += c;
       ++pos_;
       if (in_[pos_] == close) {
@@ -255,7 +281,7 @@ class JsonPrettyPrinter {
           ++pos_;    // ':'
           out_ += ": ";
         }
-        Value(depth + 1);
+        Value(depth + 1, c == '[');
         if (in_[pos_] == ',') {
           ++pos_;
           continue;
@@ -470,27 +496,39 @@ double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
 
 void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double deg_h,
                            esg::v1::GyroDriftModel* model) {
-  const google::protobuf::FieldDescriptor* f = DriftModelField(term);
-  if (f == nullptr) {
-    // A term without a field of its own is written keyed.
-    for (esg::v1::DriftCoefficient& c : *model->mutable_coefficients()) {
-      if (absl::string_view(c.term()) == term.storage_key) {
-        c.set_value_deg_h(deg_h);
-        return;
+  // Coefficients the message gives by their deprecated fields are keyed first, so that no term
+  // is given both ways.
+  bool by_field = false;
+  for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) {
+    by_field |= GivenByField(*model, t);
+  }
+  if (by_field) {
+    std::array<double, estimator::kNumDriftCoefficients> deg_h_of{};
+    for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) {
+      deg_h_of[t.theta_index] = DriftModelTermDegH(*model, t);
+    }
+    const google::protobuf::Reflection* reflection = model->GetReflection();
+    for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) {
+      if (!GivenByField(*model, t) || KeyedEntry(*model, t) != nullptr) continue;
+      esg::v1::DriftCoefficient* c = model->add_coefficients();
+      c->set_term(std::string(t.storage_key));
+      c->set_value_deg_h(deg_h_of[t.theta_index]);
+    }
+    for (const estimator::FixedTermDescriptor& t : estimator::kFixedTerms) {
+      if (const google::protobuf::FieldDescriptor* f = DriftModelField(t)) {
+        reflection->ClearField(model, f);
       }
     }
-    esg::v1::DriftCoefficient* c = model->add_coefficients();
-    c->set_term(std::string(term.storage_key));
-    c->set_value_deg_h(deg_h);
-    return;
   }
-  const google::protobuf::Reflection* reflection = model->GetReflection();
-  if (!f->is_repeated()) {
-    reflection->SetDouble(model, f, deg_h);
-    return;
+  for (esg::v1::DriftCoefficient& c : *model->mutable_coefficients()) {
+    if (absl::string_view(c.term()) == term.storage_key) {
+      c.set_value_deg_h(deg_h);
+      return;
+    }
   }
-  while (reflection->FieldSize(*model, f) <= term.component) reflection->AddDouble(model, f, 0.0);
-  reflection->SetRepeatedDouble(model, f, term.component, deg_h);
+  esg::v1::DriftCoefficient* c = model->add_coefficients();
+  c->set_term(std::string(term.storage_key));
+  c->set_value_deg_h(deg_h);
 }
 
 absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
@@ -679,6 +717,28 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
   return proto;
 }
 
+namespace {
+
+// What always_print_primitive_fields prints for each deprecated field of GyroDriftModel left empty
+// ("<jsonName>":0, or "<jsonName>":[], followed by the comma before the keyed coefficients, its
+// last field), each mapped to nothing.
+const std::vector<std::pair<std::string, std::string>>& EmptyDeprecatedDriftFields() {
+  static const auto* const cuts = [] {
+    auto* c = new std::vector<std::pair<std::string, std::string>>;
+    const google::protobuf::Descriptor* d = esg::v1::GyroDriftModel::descriptor();
+    for (int i = 0; i < d->field_count(); ++i) {
+      const google::protobuf::FieldDescriptor* f = d->field(i);
+      if (!f->options().deprecated()) continue;
+      c->emplace_back(absl::StrCat("\"", f->json_name(), "\":", f->is_repeated() ? "[]" : "0", ","),
+                      "");
+    }
+    return c;
+  }();
+  return *cuts;
+}
+
+}  // namespace
+
 absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json) {
   // protobuf's parser keeps one value of a repeated key and flattens nested arrays.
   if (absl::Status strict = CheckStrictJson(json); !strict.ok()) {
@@ -709,11 +769,9 @@ std::string ConfigToJson(const estimator::SpacecraftConfig& config) {
   if (!google::protobuf::util::MessageToJsonString(ConfigToProto(config), &json, options).ok()) {
     return std::string();
   }
-  // A drift model without keyed coefficients prints as it did before the field existed: the
-  // service compares the stored text to tell a changed configuration from the same one sent again
-  // (storage/config_store.cc, server/estimation_core.cc). The field is GyroDriftModel's last,
-  // printed last.
-  json = absl::StrReplaceAll(json, {{",\"coefficients\":[]}", "}"}});
+  // A drift model's deprecated fields (the form of the release before its keyed coefficients)
+  // are never written: ConfigToProto leaves them empty, and their printed defaults are cut.
+  json = absl::StrReplaceAll(json, EmptyDeprecatedDriftFields());
   // A configuration without channels prints as it did before the field existed: the service
   // compares the stored text to tell a changed configuration from the same one sent again
   // (storage/config_store.cc, server/estimation_core.cc), so an empty "channels" must not make an

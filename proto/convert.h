@@ -66,8 +66,10 @@ esg::v1::SpacecraftConfig ConfigToProto(const estimator::SpacecraftConfig& confi
 // or flatten the array (proto/strict_json.h).
 absl::StatusOr<estimator::SpacecraftConfig> ParseConfigJson(std::string_view json);
 
-// Pretty-printed JSON ending in a newline (2-space indent, arrays of numbers on one line,
-// lowerCamelCase names, every field printed including zeros) that ParseConfigJson reads back.
+// Pretty-printed JSON ending in a newline (2-space indent, arrays of numbers and each keyed drift
+// coefficient on one line, lowerCamelCase names, every field printed including zeros, except the
+// deprecated fields of a drift model: its coefficients are keyed, DriftModelToProto) that
+// ParseConfigJson reads back.
 // Doubles are printed so that they parse back to the same double. Empty only if protobuf fails to
 // print, which a message built by ConfigToProto cannot make it do.
 std::string ConfigToJson(const estimator::SpacecraftConfig& config);
@@ -101,7 +103,8 @@ absl::Status WriteConfigFile(const std::string& path, const estimator::Spacecraf
 // not range-checked here.
 absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::GyroDriftModel& proto,
                                                                  std::string_view field);
-// Rounded to 15 significant digits like ConfigToProto.
+// Every coefficient keyed (GyroDriftModel.coefficients), in the table's order, none in the
+// deprecated fields; rounded to 15 significant digits like ConfigToProto.
 esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& coefficients);
 
 // One coefficient of a GyroDriftModel as on the wire [deg/h], found by its descriptor
@@ -110,8 +113,9 @@ esg::v1::GyroDriftModel DriftModelToProto(const estimator::DriftCoefficients& co
 // an entry the message does not hold reads 0 (an empty vector is zero).
 double DriftModelTermDegH(const esg::v1::GyroDriftModel& model,
                           const estimator::FixedTermDescriptor& term);
-// Sets it in its field, first filling the field's missing entries before it with 0; a term
-// without a field of its own (one added to the table after the fields) in its keyed entry.
+// Sets it in its keyed entry (added after the others when the message has none). Coefficients
+// the message gives by their deprecated fields are first moved to keyed entries, so that no term
+// is given both ways.
 void SetDriftModelTermDegH(const estimator::FixedTermDescriptor& term, double deg_h,
                            esg::v1::GyroDriftModel* model);
 

@@ -51,17 +51,23 @@ def coefficient_rows(truth, snapshots):
     for s in snapshots:
         latest[s['gyroId']] = s  # in time order: the last one wins
     gyros = sorted(g for g in latest if g in truth)
-    terms = [('k0', 'k0', 'k0DegH', None)]
-    for name, key, json_key in (('C1', 'c1', 'c1DegH'), ('C2', 'c2', 'c2DegH')):
+    # (label, truth key, component, the term's key of the keyed coefficients, docs/formats.md)
+    terms = [('k0', 'k0', None, 'k0')]
+    for name, key in (('C1', 'c1'), ('C2', 'c2')):
         for i, axis in enumerate('xyz'):
-            terms.append((f'{name} {axis}', key, json_key, i))
+            terms.append((f'{name} {axis}', key, i, f'{key}{axis}'))
+
+    def keyed(model, term):
+        return next((c['valueDegH'] for c in model.get('coefficients', []) if c['term'] == term),
+                    0.0)
+
     rows = []
-    for label, key, json_key, i in terms:
+    for label, key, i, term in terms:
         cells = []
         for g in gyros:
             model, sigma = latest[g]['model'], latest[g]['sigma']
-            pick = (lambda v: v) if i is None else (lambda v, i=i: v[i])
-            cells.append((pick(truth[g][key]), pick(model[json_key]), pick(sigma[json_key])))
+            true = truth[g][key] if i is None else truth[g][key][i]
+            cells.append((true, keyed(model, term), keyed(sigma, term)))
         rows.append((label, cells))
     return gyros, rows
 

@@ -3,7 +3,8 @@
 // never guessed from its value:
 //   - field names as in the .proto files (snake_case), every scalar and repeated field present
 //     (proto3 defaults included, repeated fields possibly []), absent message fields omitted;
-//     except a drift model's keyed `coefficients`, left out when empty as `esg --json` does;
+//     except a deprecated field holding its default (a drift model's fields of the release
+//     before its keyed `coefficients`), left out as `esg --json` leaves it out;
 //   - google.protobuf.Timestamp <-> ISO-8601 UTC string with milliseconds
 //     ("2026-01-01T00:00:00.000Z"); parsing keeps up to nanoseconds;
 //   - int64 as JSON numbers (proto-loader is set up with longs: Number), enums as their names;
@@ -11,9 +12,18 @@
 'use strict';
 
 const TIMESTAMP = 'google.protobuf.Timestamp';
-const DRIFT_MODEL = 'esg.v1.GyroDriftModel';
 
 class ConvertError extends Error {}
+
+// Whether a field holds its proto3 default: no entries, no message, 0, false or ''. A deprecated
+// field at its default was not given (docs/formats.md: esgd writes the keyed coefficients, the
+// fields of the release before are read only).
+function isDefault(field, value, repeated) {
+  if (value === null || value === undefined) return true;
+  if (repeated) return Array.isArray(value) && value.length === 0;
+  if (field.type === 'TYPE_MESSAGE') return false;
+  return value === 0 || value === false || value === '';
+}
 
 // Resolves a field's typeName (relative, as protobufjs writes it) against the package scope of
 // the message that declares it, the way protoc does: innermost scope first.
@@ -79,6 +89,7 @@ class Converter {
     for (const field of this.descriptor(typeName).field) {
       const value = message[field.name];
       const repeated = field.label === 'LABEL_REPEATED';
+      if (field.options && field.options.deprecated && isDefault(field, value, repeated)) continue;
       if (field.type === 'TYPE_MESSAGE') {
         const sub = resolveType(this.definition, scope, field.typeName);
         if (repeated) {
@@ -92,11 +103,6 @@ class Converter {
       } else {
         out[field.name] = scalarToJson(field.type, value);
       }
-    }
-    // A drift model's keyed coefficients are left out when it has none, as `esg --json` leaves
-    // them out: its JSON is the one from before the field existed (docs/formats.md).
-    if (typeName === DRIFT_MODEL && Array.isArray(out.coefficients) && out.coefficients.length === 0) {
-      delete out.coefficients;
     }
     return out;
   }

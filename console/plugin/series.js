@@ -9,9 +9,10 @@ const TIME = { key: 'utc', source: 'utc', name: 'Time (UTC)', format: 'utc', hin
 // module cannot read the C++ table). Each row: label, the GyroDriftModel JSON key and the
 // component in it (-1: the key holds a number), the term's key, what the term is; case frame k,
 // deg/h. Each entry also has its telemetry key (the label in lower case) and get(model), the value
-// from a GyroDriftModel message (proto field names: "c1DegH" is read as c1_deg_h): its keyed entry
-// in `coefficients` (docs/formats.md) if the message has one, otherwise its field; 0 when the
-// message has neither (a term added after the fields has none).
+// from a GyroDriftModel message: its keyed entry in `coefficients` (docs/formats.md; what esgd
+// writes), otherwise its deprecated field as the release before wrote it (proto field names:
+// "c1DegH" is read as c1_deg_h); 0 when the message has neither (a term added after the fields
+// has none).
 export const COEFFICIENTS = [
   ['k0', 'k0DegH', -1, 'k0', '4th shape harmonic'],
   ['C11', 'c1DegH', 0, 'c1x', 'rotor displacement (1st harmonic)'],
@@ -31,8 +32,8 @@ export const COEFFICIENTS = [
   const get = (m) => {
     const keyed = (m.coefficients || []).find((c) => c.term === term);
     if (keyed) return keyed.value_deg_h;
-    if (m[field] === undefined) return 0;
-    return component < 0 ? m[field] : m[field][component];
+    const value = m[field] === undefined || component < 0 ? m[field] : m[field][component];
+    return value === undefined ? 0 : value;
   };
   return { key: label.toLowerCase(), label, jsonKey, component, term, meaning, get };
 });

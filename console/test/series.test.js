@@ -1,6 +1,7 @@
 // The console's reading of a GyroDriftModel (console/plugin/series.js COEFFICIENTS get): a
-// coefficient from its field, or from its keyed entry in `coefficients` (docs/formats.md), as esgd
-// sends either in proto field names; 0 when the message has neither. No esgd needed.
+// coefficient from its keyed entry in `coefficients` (docs/formats.md; what esgd writes), or from
+// its deprecated field (what the release before wrote), in proto field names; 0 when the message
+// has neither. No esgd needed.
 //   node --test console/test/series.test.js
 'use strict';
 
@@ -11,7 +12,8 @@ const { pathToFileURL } = require('node:url');
 
 const SERIES = pathToFileURL(path.join(__dirname, '..', 'plugin', 'series.js')).href;
 
-// A GyroDriftModel as esgd writes it (the gateway prints defaults): every field, no keyed entry.
+// A GyroDriftModel as the release before wrote it (the gateway printed defaults): every field, no
+// keyed entry.
 function fieldModel() {
   return {
     k0_deg_h: 0.25, c1_deg_h: [0.01, -0.02, 0.03], c2_deg_h: [0.04, -0.05, 0.06],
@@ -44,4 +46,37 @@ test('every coefficient keyed, none in fields, reads the same values', async () 
   const m = { coefficients: keyed.reverse() };
   assert.deepEqual(COEFFICIENTS.map((c) => c.get(m)), FIELD_VALUES);
   assert.deepEqual(COEFFICIENTS.map((c) => c.get({ coefficients: [] })), FIELD_VALUES.map(() => 0));
+});
+
+test('an empty vector field (none given that way) reads 0, not undefined', async () => {
+  const { COEFFICIENTS } = await import(SERIES);
+  const m = { k0_deg_h: 0, c1_deg_h: [], c2_deg_h: [], mu_deg_h: [], nu_deg_h: [], coefficients: [] };
+  assert.deepEqual(COEFFICIENTS.map((c) => c.get(m)), FIELD_VALUES.map(() => 0));
+});
+
+// The gateway's JSON of a drift model (console/gateway/convert.js, from the real .proto files):
+// the keyed coefficients esgd writes, the deprecated fields left out while they hold nothing (as
+// `esg --json` leaves them out); a model of the release before keeps its fields, and reads the same.
+test('the gateway writes a drift model keyed and leaves its empty deprecated fields out', () => {
+  const { Esgd } = require('../gateway/esgd.js');
+  const esgd = new Esgd({ address: '127.0.0.1:1' });
+  try {
+    const keyed = esgd.convert.toJson('esg.v1.GyroDriftModel', {
+      k0_deg_h: 0, c1_deg_h: [], c2_deg_h: [], mu_deg_h: [], nu_deg_h: [],
+      coefficients: [{ term: 'k0', value_deg_h: 0.25 }, { term: 'c1y', value_deg_h: -0.5 }],
+    });
+    assert.deepEqual(keyed, {
+      coefficients: [{ term: 'k0', value_deg_h: 0.25 }, { term: 'c1y', value_deg_h: -0.5 }],
+    });
+    const older = esgd.convert.toJson('esg.v1.GyroDriftModel', {
+      k0_deg_h: 0.25, c1_deg_h: [0, -0.5, 0], c2_deg_h: [], mu_deg_h: [], nu_deg_h: [],
+      coefficients: [],
+    });
+    assert.deepEqual(older, { k0_deg_h: 0.25, c1_deg_h: [0, -0.5, 0], coefficients: [] });
+    // A field that is not deprecated keeps its default (every field present, docs/console-gateway.md).
+    const snapshot = esgd.convert.toJson('esg.v1.CoefficientSnapshot', { gyro_id: 0 });
+    assert.equal(snapshot.gyro_id, 0);
+  } finally {
+    esgd.close();
+  }
 });

@@ -24,6 +24,7 @@
 #include "esg/v1/attitude.pb.h"
 #include "esg/v1/estimation_service.pb.h"
 #include "gmock/gmock.h"
+#include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 #include "tests/client/cli_test_support.h"
@@ -168,22 +169,23 @@ TEST(OutputFormat, ProtoJsonIsTheCanonicalMappingWithMillisecondTimes) {
   EXPECT_EQ(ProtoToJson(list)["sessions"][0]["lastFrameTime"], "2019-03-01T00:00:01.000Z");
 }
 
-// A drift model's keyed coefficients (docs/formats.md) are printed when it has some, and left out
-// when it has none, as before the field existed; its fields are printed either way.
-TEST(OutputFormat, ADriftModelsKeyedCoefficientsArePrintedOnlyWhenItHasSome) {
+// A drift model's deprecated fields (the release before's form, docs/formats.md) are left out of
+// esg's JSON when they hold nothing, so a keyed model (what esgd writes) prints its keyed
+// coefficients only; a model of the release before prints the fields it holds.
+TEST(OutputFormat, ADriftModelsEmptyDeprecatedFieldsAreLeftOut) {
   esg::v1::CoefficientSnapshot snapshot;
-  snapshot.mutable_model()->set_k0_deg_h(0.25);
   esg::v1::DriftCoefficient* keyed = snapshot.mutable_sigma()->add_coefficients();
   keyed->set_term("c1y");
   keyed->set_value_deg_h(0.5);
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(R"({"k0DegH": 0.25, "c1DegH": [0, 1, 0]})",
+                                                          snapshot.mutable_model())
+                  .ok());
   const Json doc = ProtoToJson(snapshot);
-  EXPECT_EQ(doc["model"]["k0DegH"], 0.25);
-  EXPECT_EQ(doc["model"]["nuDegH"], Json::array());
-  EXPECT_FALSE(doc["model"].contains("coefficients"));
-  ASSERT_TRUE(doc["sigma"].contains("coefficients"));
-  EXPECT_EQ(doc["sigma"]["coefficients"],
-            Json::parse(R"([{"term": "c1y", "valueDegH": 0.5}])"));
-  EXPECT_EQ(doc["sigma"]["k0DegH"], 0.0);
+  EXPECT_EQ(doc["sigma"], Json::parse(R"({"coefficients": [{"term": "c1y", "valueDegH": 0.5}]})"));
+  EXPECT_EQ(doc["model"],
+            Json::parse(R"({"k0DegH": 0.25, "c1DegH": [0, 1, 0], "coefficients": []})"));
+  // A field that is not deprecated is printed at its default.
+  EXPECT_EQ(doc["gyroId"], 0);
 }
 
 TEST(OutputFormat, CsvHasAHeaderFlattensAndQuotes) {

@@ -25,7 +25,9 @@
 #include "gmock/gmock.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
+#include "estimator/model_terms.h"
 #include "nlohmann/json.hpp"
+#include "proto/convert.h"
 #include "storage/storage.h"
 #include "tests/client/cli_test_support.h"
 #include "tests/testing/run_process.h"
@@ -42,6 +44,11 @@ using ::esg::testing::RunResult;
 using ::esg::testing::TempDir;
 using ::testing::HasSubstr;
 using Json = nlohmann::json;
+
+// One coefficient of a drift model as esgd sends it, by its index in theta.
+double C(const esg::v1::GyroDriftModel& model, int theta_index) {
+  return proto_convert::DriftModelTermDegH(model, estimator::kFixedTerms[theta_index]);
+}
 
 void Write(const std::string& path, const std::string& text) {
   std::ofstream out(path);
@@ -411,13 +418,13 @@ TEST(ApplyDiagnosis, TheDocsRotorDisplacementIsDiagnosedAppliedAndCalibratedByTh
     if (g.id() == 2) gyro2 = &g;
   }
   ASSERT_NE(gyro2, nullptr);
-  ASSERT_EQ(gyro2->model_sigma().c1_deg_h_size(), 3);
-  ASSERT_EQ(gyro2->model_sigma().c2_deg_h_size(), 3);
+  // Every coefficient keyed, as esgd writes a drift model (docs/formats.md).
+  ASSERT_EQ(gyro2->model_sigma().coefficients_size(), estimator::kNumDriftCoefficients);
   for (int k = 0; k < 3; ++k) {
-    EXPECT_NEAR(gyro2->model_sigma().c1_deg_h(k), 0.1, 1e-12);  // the diagnosis's prior
-    EXPECT_NEAR(gyro2->model_sigma().c2_deg_h(k), 0.1, 1e-12);
+    EXPECT_NEAR(C(gyro2->model_sigma(), estimator::kThetaC1 + k), 0.1, 1e-12);  // the prior
+    EXPECT_NEAR(C(gyro2->model_sigma(), estimator::kThetaC2 + k), 0.1, 1e-12);
   }
-  EXPECT_NEAR(gyro2->model().c1_deg_h(0), fitted_c11, 1e-9);
+  EXPECT_NEAR(C(gyro2->model(), estimator::kThetaC1), fitted_c11, 1e-9);
   // The re-run's history of gyro 2 starts at the archive's first frame and carries C11 as a
   // calibrated coefficient (1-sigma > 0; held it would be 0), near the truth 0.052 deg/h
   // (C10 + C20 = 0.065 deg/h per um times 0.8 um).
@@ -426,12 +433,10 @@ TEST(ApplyDiagnosis, TheDocsRotorDisplacementIsDiagnosedAppliedAndCalibratedByTh
   // The whole current history is the re-run's: its first snapshot, 12 h before the latest, has C11
   // free already (the session before held it: 1-sigma 0).
   EXPECT_GE(latest.measurement_time().seconds() - first.measurement_time().seconds(), 11 * 3600);
-  ASSERT_EQ(first.sigma().c1_deg_h_size(), 3);
-  EXPECT_GT(first.sigma().c1_deg_h(0), 0.0);
-  ASSERT_EQ(latest.sigma().c1_deg_h_size(), 3);
-  EXPECT_GT(latest.sigma().c1_deg_h(0), 0.0);
-  EXPECT_LT(latest.sigma().c1_deg_h(0), 0.1);  // the archive narrowed the prior
-  EXPECT_NEAR(latest.model().c1_deg_h(0), 0.052, 0.01);
+  EXPECT_GT(C(first.sigma(), estimator::kThetaC1), 0.0);
+  EXPECT_GT(C(latest.sigma(), estimator::kThetaC1), 0.0);
+  EXPECT_LT(C(latest.sigma(), estimator::kThetaC1), 0.1);  // the archive narrowed the prior
+  EXPECT_NEAR(C(latest.model(), estimator::kThetaC1), 0.052, 0.01);
 
   // The configuration changed since: the same diagnosis again is refused.
   ExpectRefused(Apply(*stub, "DISC-CLI", id), grpc::StatusCode::FAILED_PRECONDITION, "diagnosis_id",

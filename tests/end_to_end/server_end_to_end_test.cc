@@ -31,6 +31,7 @@ using ::esg::testing::SimulateRun;
 using ::esg::testing::SimulatedRun;
 using ::esg::testing::StreamFrames;
 using ::esg::testing::TempDir;
+using ::esg::testing::TermDegH;
 
 // The same frames through a session in this process (the filter is deterministic).
 struct OfflineRun {
@@ -90,11 +91,13 @@ void ExpectFinalEstimatesEqualOffline(const std::vector<esg::v1::CoefficientSnap
     // Records are SI, the columns and the message deg/h and arcsec: equal up to the conversions.
     const auto deg_h = [](double x) { return estimator::RadPerSecToDegPerHour(x); };
     const auto arcsec = [](double x) { return estimator::RadToArcsec(x); };
-    EXPECT_DOUBLE_EQ(s.model().k0_deg_h(), deg_h(v[estimator::kThetaK0]));
-    EXPECT_DOUBLE_EQ(s.sigma().k0_deg_h(), deg_h(sigma[estimator::kThetaK0]));
+    EXPECT_DOUBLE_EQ(TermDegH(s.model(), estimator::kThetaK0), deg_h(v[estimator::kThetaK0]));
+    EXPECT_DOUBLE_EQ(TermDegH(s.sigma(), estimator::kThetaK0), deg_h(sigma[estimator::kThetaK0]));
     for (int i = 0; i < 3; ++i) {
-      EXPECT_DOUBLE_EQ(s.model().c1_deg_h(i), deg_h(v[estimator::kThetaC1 + i]));
-      EXPECT_DOUBLE_EQ(s.model().c2_deg_h(i), deg_h(v[estimator::kThetaC2 + i]));
+      EXPECT_DOUBLE_EQ(TermDegH(s.model(), estimator::kThetaC1 + i),
+                       deg_h(v[estimator::kThetaC1 + i]));
+      EXPECT_DOUBLE_EQ(TermDegH(s.model(), estimator::kThetaC2 + i),
+                       deg_h(v[estimator::kThetaC2 + i]));
       EXPECT_DOUBLE_EQ(s.misalignment_arcsec(i),
                        arcsec(v[storage::kCoefficientMisalignment + i]));
       EXPECT_DOUBLE_EQ(s.misalignment_sigma_arcsec(i),
@@ -142,7 +145,7 @@ TEST(EndToEnd, StreamedCalibrationEqualsAnOfflineRunExactly) {
                                 offline.session->Gyros().size());
   ExpectFinalEstimatesEqualOffline(history, offline);
   // Calibration did something: k0's sigma fell well below its 0.3 deg/h prior.
-  EXPECT_LT(history.back().sigma().k0_deg_h(), 0.1);
+  EXPECT_LT(TermDegH(history.back().sigma(), estimator::kThetaK0), 0.1);
 }
 
 // A drift term beyond eq. (1), (10) configured for calibration (what `esg diagnose` adds): the

@@ -39,7 +39,7 @@ std::string ReadSource(const std::string& path) {
 // (proto/esg/v1/spacecraft_config.proto).
 constexpr uint64_t kSqliteFrozen = 0x4008a1848832b2a6ull;
 constexpr uint64_t kPostgresFrozen = 0xbbd72b994f5f6f3bull;
-constexpr uint64_t kProtoFrozen = 0x27a026345bb22eb6ull;
+constexpr uint64_t kProtoFrozen = 0x540ae03dbee0716dull;
 
 // The coefficient of `c` a descriptor names, by its symbol and component (drift_model.h).
 double ByName(const DriftCoefficients& c, const FixedTermDescriptor& term) {

@@ -17,6 +17,7 @@
 #include "absl/time/time.h"
 #include "estimator/model_terms.h"
 #include "gmock/gmock.h"
+#include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
 #include "tests/testing/status_matchers.h"
 #include "tests/testing/temp_dir.h"
@@ -28,6 +29,30 @@ using ::esg::testing::IsOk;
 using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
 using ::testing::Not;
+
+// The release before's form of a drift model: the coefficient in its deprecated field (found by
+// the descriptor's JSON key, so this names no field), the vector's other entries 0 until set.
+void SetByField(const estimator::FixedTermDescriptor& term, double deg_h,
+                esg::v1::GyroDriftModel* model) {
+  const google::protobuf::FieldDescriptor* f =
+      model->GetDescriptor()->FindFieldByCamelcaseName(std::string(term.json_key));
+  ASSERT_NE(f, nullptr) << term.json_key;
+  const google::protobuf::Reflection* reflection = model->GetReflection();
+  if (!f->is_repeated()) {
+    reflection->SetDouble(model, f, deg_h);
+    return;
+  }
+  while (reflection->FieldSize(*model, f) <= term.component) reflection->AddDouble(model, f, 0.0);
+  reflection->SetRepeatedDouble(model, f, term.component, deg_h);
+}
+
+// Whether the term's deprecated field holds anything.
+bool GivenByAField(const esg::v1::GyroDriftModel& model, const estimator::FixedTermDescriptor& term) {
+  const google::protobuf::FieldDescriptor* f =
+      model.GetDescriptor()->FindFieldByCamelcaseName(std::string(term.json_key));
+  const google::protobuf::Reflection* reflection = model.GetReflection();
+  return f->is_repeated() ? reflection->FieldSize(model, f) > 0 : reflection->HasField(model, f);
+}
 
 // Independent of units.h on purpose: the expected values are computed from first principles.
 constexpr double kPi = std::numbers::pi;
@@ -274,6 +299,7 @@ TEST(ConfigJson, NegativeZeroIsWrittenAsZeroAndTheWrittenJsonIsAFixedPoint) {
   const std::string written = ConfigToJson(*config);
   EXPECT_THAT(written, Not(HasSubstr("-0,")));
   EXPECT_THAT(written, Not(HasSubstr("-0]")));
+  EXPECT_THAT(written, Not(HasSubstr("-0}")));  // a keyed coefficient
   absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
   ASSERT_TRUE(back.ok()) << back.status();
   EXPECT_EQ(ConfigToJson(*back), written);
@@ -283,7 +309,7 @@ TEST(ConfigJson, RoundTripConfigJsonConfigIsEqual) {
   const estimator::SpacecraftConfig original = RichConfig();
   ASSERT_THAT(estimator::ValidateConfig(original), IsOk());
   const std::string json = ConfigToJson(original);
-  EXPECT_THAT(json, HasSubstr("\"k0DegH\""));
+  EXPECT_THAT(json, HasSubstr("{\"term\": \"k0\", \"valueDegH\": "));
   EXPECT_THAT(json, HasSubstr("\"caseToBody\""));
   EXPECT_THAT(json, HasSubstr("\"randomWalkDegHSqrtH\""));
   absl::StatusOr<estimator::SpacecraftConfig> parsed = ParseConfigJson(json);
@@ -392,8 +418,11 @@ TEST(ConfigJson, WrittenConfigIsCompleteEvenForZeros) {
   EXPECT_THAT(json, HasSubstr("\"faultThresholdArcsec\": 0"));
   EXPECT_THAT(json, HasSubstr("\"amplifierGain\": 200"));
   EXPECT_THAT(json, HasSubstr("\"gapUm\": 30\n"));
-  EXPECT_THAT(json, HasSubstr("\"k0DegH\": 0.12,"));
-  EXPECT_THAT(json, HasSubstr("\"muDegH\": [0, 0, 0]"));
+  // Every drift coefficient keyed, zeros too, one to a line; no deprecated field.
+  EXPECT_THAT(json, HasSubstr("\n          {\"term\": \"k0\", \"valueDegH\": 0.12},\n"));
+  EXPECT_THAT(json, HasSubstr("{\"term\": \"mu23\", \"valueDegH\": 0}"));
+  EXPECT_THAT(json, Not(HasSubstr("DegH\": [")));
+  EXPECT_THAT(json, Not(HasSubstr("k0DegH")));
   EXPECT_THAT(json, HasSubstr("\"caseToBody\": [1, 0, 0, 0, 1, 0, 0, 0, 1]"));
 }
 
@@ -807,27 +836,36 @@ TEST(DriftModel, ProtoRoundTripConvertsDegPerHour) {
   c.k0 = DegHToRadS(0.12);
   c.C1 = Eigen::Vector3d(DegHToRadS(0.1), 0.0, DegHToRadS(-0.05));
   const esg::v1::GyroDriftModel proto = DriftModelToProto(c);
-  EXPECT_NEAR(proto.k0_deg_h(), 0.12, 1e-15);
-  EXPECT_NEAR(proto.c1_deg_h(2), -0.05, 1e-15);
-  ASSERT_EQ(proto.mu_deg_h_size(), 3);
+  // Every coefficient keyed, in the table's order, zeros too; no field.
+  ASSERT_EQ(proto.coefficients_size(), estimator::kNumDriftCoefficients);
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    EXPECT_EQ(proto.coefficients(term.theta_index).term(), term.storage_key);
+    EXPECT_FALSE(GivenByAField(proto, term)) << term.label;
+  }
+  EXPECT_NEAR(DriftModelTermDegH(proto, estimator::kFixedTerms[estimator::kThetaK0]), 0.12, 1e-15);
+  EXPECT_NEAR(DriftModelTermDegH(proto, estimator::kFixedTerms[estimator::kThetaC1 + 2]), -0.05,
+              1e-15);
   absl::StatusOr<estimator::DriftCoefficients> back = DriftModelFromProto(proto, "sigma");
   ASSERT_THAT(back, IsOk());
   EXPECT_TRUE(back->AsVector().isApprox(c.AsVector(), 1e-15));
-  esg::v1::GyroDriftModel bad = proto;
-  bad.add_nu_deg_h(0.0);
+  // A deprecated field of the release before is still checked: 4 values of a vector.
+  esg::v1::GyroDriftModel bad;
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(R"({"nuDegH": [0, 0, 0, 0]})", &bad).ok());
   EXPECT_THAT(DriftModelFromProto(bad, "sigma"),
               StatusIs(absl::StatusCode::kInvalidArgument,
                        HasSubstr("sigma.nuDegH: expected 3 values, got 4")));
 }
 
-// A GyroDriftModel whose 13 coefficients are distinct, given by its fields (as the service writes
-// it); each value has more digits than the 15 DriftModelToProto keeps, so a read that rounded would
-// show.
+// A GyroDriftModel whose 13 coefficients are distinct, given by its deprecated fields (as the
+// release before wrote it); each value has more digits than the 15 DriftModelToProto keeps, so a
+// read that rounded would show.
+double DistinctDegH(const estimator::FixedTermDescriptor& term) {
+  return (term.theta_index + 1) * (term.theta_index % 2 ? -1.0 : 1.0) / 7.0;
+}
 esg::v1::GyroDriftModel DistinctFieldModel() {
   esg::v1::GyroDriftModel proto;
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
-    SetDriftModelTermDegH(term, (term.theta_index + 1) * (term.theta_index % 2 ? -1.0 : 1.0) / 7.0,
-                          &proto);
+    SetByField(term, DistinctDegH(term), &proto);
   }
   return proto;
 }
@@ -853,8 +891,9 @@ TEST(DriftModel, KeyedCoefficientsReadAsTheirFieldsDo) {
 
   // k0, C2 and nu keyed; C1 and mu in their fields.
   esg::v1::GyroDriftModel mixed;
-  *mixed.mutable_c1_deg_h() = fields.c1_deg_h();
-  *mixed.mutable_mu_deg_h() = fields.mu_deg_h();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    if (term.symbol == "C1" || term.symbol == "mu") SetByField(term, DistinctDegH(term), &mixed);
+  }
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
     if (term.symbol != "k0" && term.symbol != "C2" && term.symbol != "nu") continue;
     esg::v1::DriftCoefficient* c = mixed.add_coefficients();
@@ -885,37 +924,54 @@ TEST(ConfigJson, KeyedCoefficientsReadAsTheFieldsOfTheExample) {
   EXPECT_EQ(keyed->gyros[2].model.AsVector(), fields->gyros[2].model.AsVector());
   EXPECT_EQ(keyed->gyros[2].model_sigma.AsVector(), fields->gyros[2].model_sigma.AsVector());
   EXPECT_EQ(keyed->gyros[2].model.k0, DegHToRadS(0.25));
-  // Written back, the fields are used, as before the keyed form, and no empty keyed list.
-  EXPECT_EQ(ConfigToJson(*keyed), ConfigToJson(*fields));
-  EXPECT_THAT(ConfigToJson(*keyed), Not(HasSubstr("coefficients")));
-  EXPECT_THAT(ConfigToJson(*keyed), HasSubstr("\"nuDegH\": [0, 0, 0]"));
+  // Written back, both are the same text, every coefficient keyed (zeros too) and no field.
+  const std::string written = ConfigToJson(*keyed);
+  EXPECT_EQ(written, ConfigToJson(*fields));
+  EXPECT_THAT(written, HasSubstr("{\"term\": \"nu12\", \"valueDegH\": 0}"));
+  EXPECT_THAT(written, Not(HasSubstr("nuDegH")));
+  absl::StatusOr<estimator::SpacecraftConfig> back = ParseConfigJson(written);
+  ASSERT_THAT(back, IsOk());
+  EXPECT_EQ(back->gyros[2].model.AsVector(), fields->gyros[2].model.AsVector());
+  EXPECT_EQ(back->gyros[2].model_sigma.AsVector(), fields->gyros[2].model_sigma.AsVector());
 }
 
 // A term added to the table after the proto's fields (here one made up, past the 13 of theta) is
-// written keyed, and read back from there; the 13 of today are written in their fields, so what
-// the service writes is unchanged.
+// written keyed like the 13, and read back from there.
 TEST(DriftModel, ATermWithoutAFieldOfItsOwnIsWrittenAndReadKeyed) {
   const estimator::FixedTermDescriptor later = {
       "k1", "k1", "k1DegH", -1, "deg/h", "k", estimator::kNumDriftCoefficients, "k1",
       "a term added later", estimator::kModelPart10, ""};
-  esg::v1::GyroDriftModel proto = DistinctFieldModel();
+  esg::v1::GyroDriftModel proto = DriftModelToProto(
+      estimator::DriftCoefficients::FromVector(estimator::DriftVector::Constant(1e-6)));
+  ASSERT_EQ(proto.coefficients_size(), estimator::kNumDriftCoefficients);
+  const esg::v1::GyroDriftModel before = proto;
   EXPECT_EQ(DriftModelTermDegH(proto, later), 0.0);
   SetDriftModelTermDegH(later, 0.375, &proto);
-  ASSERT_EQ(proto.coefficients_size(), 1);
-  EXPECT_EQ(proto.coefficients(0).term(), "k1");
+  ASSERT_EQ(proto.coefficients_size(), estimator::kNumDriftCoefficients + 1);
+  EXPECT_EQ(proto.coefficients(estimator::kNumDriftCoefficients).term(), "k1");
   EXPECT_EQ(DriftModelTermDegH(proto, later), 0.375);
   SetDriftModelTermDegH(later, -0.5, &proto);
-  ASSERT_EQ(proto.coefficients_size(), 1);
+  ASSERT_EQ(proto.coefficients_size(), estimator::kNumDriftCoefficients + 1);
   EXPECT_EQ(DriftModelTermDegH(proto, later), -0.5);
   // The 13 coefficients are where they were.
-  const esg::v1::GyroDriftModel fields = DistinctFieldModel();
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
-    EXPECT_EQ(DriftModelTermDegH(proto, term), DriftModelTermDegH(fields, term)) << term.label;
+    EXPECT_EQ(DriftModelTermDegH(proto, term), DriftModelTermDegH(before, term)) << term.label;
   }
-  EXPECT_EQ(DriftModelToProto(estimator::DriftCoefficients::FromVector(
-                                  estimator::DriftVector::Constant(1e-6)))
-                .coefficients_size(),
-            0);
+}
+
+// Setting a coefficient of a model given by its deprecated fields (the release before's form)
+// keys every coefficient first: no term is then given both ways, and the others keep their values.
+TEST(DriftModel, SettingACoefficientOfAModelGivenByItsFieldsKeysThemAll) {
+  esg::v1::GyroDriftModel proto = DistinctFieldModel();
+  const estimator::FixedTermDescriptor& c1y = estimator::kFixedTerms[estimator::kThetaC1 + 1];
+  SetDriftModelTermDegH(c1y, 2.5, &proto);
+  ASSERT_EQ(proto.coefficients_size(), estimator::kNumDriftCoefficients);
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    EXPECT_FALSE(GivenByAField(proto, term)) << term.label;
+    EXPECT_EQ(DriftModelTermDegH(proto, term), &term == &c1y ? 2.5 : DistinctDegH(term))
+        << term.label;
+  }
+  EXPECT_THAT(DriftModelFromProto(proto, "model"), IsOk());
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -157,5 +157,64 @@ TEST(ConfigVersion, TheSameValuesInAnotherFormAreNoNewVersionAndAChangeIs) {
   EXPECT_THAT(History(server, id), SizeIs(3));
 }
 
+// A database written before the keyed form (its configuration stored with every coefficient by
+// field) opens, and esgd reports the same values: the session's configuration (written keyed, no
+// field) and the coefficient history, as before the restart.
+TEST(ConfigVersion, ADatabaseWrittenBeforeTheKeyedFormOpensWithTheSameValues) {
+  TempDir dir;
+  const std::string db = dir.File("esg.db");
+  const esg::testing::SimulatedRun run = esg::testing::SimulateRun("CFGV-2", 1.0, 5);
+  esg::v1::HistoryResponse before;
+  {
+    LoopbackServer server({}, db);
+    ASSERT_TRUE(Configure(server, Rewritten(run.config, AllByField), "", false).ok());
+    ASSERT_EQ(esg::testing::StreamFrames(*server.Stub(), run.frames).acks.size(),
+              run.frames.size());
+    ASSERT_TRUE(server.core().WaitApplied("CFGV-2", absl::Seconds(60)).ok());
+    grpc::ClientContext context;
+    esg::v1::HistoryRequest request;
+    request.set_spacecraft_id("CFGV-2");
+    ASSERT_TRUE(server.Stub()->GetCoefficientHistory(&context, request, &before).ok());
+    ASSERT_GT(before.snapshots_size(), 0);
+  }
+  StoreTextAsLatest(db, "CFGV-2", OlderStoredText(run.config));
+
+  LoopbackServer server({}, db);
+  const esg::v1::SessionInfo info = esg::testing::Session(*server.Stub(), "CFGV-2");
+  EXPECT_TRUE(info.quarantine_reason().empty()) << info.quarantine_reason();
+  absl::StatusOr<estimator::SpacecraftConfig> reported =
+      proto_convert::ConfigFromProto(info.config());
+  ASSERT_TRUE(reported.ok()) << reported.status();
+  EXPECT_EQ(proto_convert::ConfigToJson(*reported), proto_convert::ConfigToJson(run.config));
+  ASSERT_EQ(info.config().gyros_size(), static_cast<int>(run.config.gyros.size()));
+  for (const esg::v1::GyroConfig& g : info.config().gyros()) {
+    for (const esg::v1::GyroDriftModel* m : {&g.model(), &g.model_sigma()}) {
+      ASSERT_EQ(m->coefficients_size(), estimator::kNumDriftCoefficients) << "gyro " << g.id();
+      esg::v1::GyroDriftModel keyed_only;
+      *keyed_only.mutable_coefficients() = m->coefficients();
+      EXPECT_EQ(m->SerializeAsString(), keyed_only.SerializeAsString()) << "gyro " << g.id();
+    }
+  }
+  grpc::ClientContext context;
+  esg::v1::HistoryRequest request;
+  request.set_spacecraft_id("CFGV-2");
+  esg::v1::HistoryResponse after;
+  ASSERT_TRUE(server.Stub()->GetCoefficientHistory(&context, request, &after).ok());
+  ASSERT_EQ(after.snapshots_size(), before.snapshots_size());
+  for (int i = 0; i < after.snapshots_size(); ++i) {
+    for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+      EXPECT_EQ(proto_convert::DriftModelTermDegH(after.snapshots(i).model(), term),
+                proto_convert::DriftModelTermDegH(before.snapshots(i).model(), term))
+          << "snapshot " << i << " " << term.label;
+      EXPECT_EQ(proto_convert::DriftModelTermDegH(after.snapshots(i).sigma(), term),
+                proto_convert::DriftModelTermDegH(before.snapshots(i).sigma(), term))
+          << "snapshot " << i << " " << term.label;
+    }
+  }
+  // The configuration sent again as the release before wrote it is the same version.
+  ASSERT_TRUE(Configure(server, Rewritten(run.config, AllByField), "", false).ok());
+  EXPECT_THAT(History(server, "CFGV-2"), SizeIs(1));
+}
+
 }  // namespace
 }  // namespace esg::server

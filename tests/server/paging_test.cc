@@ -86,7 +86,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
     total_bytes += page.ByteSizeLong();
     EXPECT_LE(page.snapshots_size(), 5000);
     for (const esg::v1::CoefficientSnapshot& s : page.snapshots()) {
-      ASSERT_DOUBLE_EQ(s.model().k0_deg_h(), static_cast<double>(expected_k0)) << "page " << pages;
+      ASSERT_DOUBLE_EQ(TermDegH(s.model(), estimator::kThetaK0), static_cast<double>(expected_k0)) << "page " << pages;
       ASSERT_EQ(s.gyro_id(), expected_k0 % kGyros + 1);
       ++expected_k0;
     }
@@ -123,7 +123,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
   sized.set_gyro_id(2);
   ASSERT_TRUE(HistoryPage(*stub, sized, &page).ok());
   ASSERT_EQ(page.snapshots_size(), 7);
-  EXPECT_DOUBLE_EQ(page.snapshots(6).model().k0_deg_h(), 6 * kGyros + 1);
+  EXPECT_DOUBLE_EQ(TermDegH(page.snapshots(6).model(), estimator::kThetaK0), 6 * kGyros + 1);
   const std::string gyro2_token = page.next_page_token();
   ASSERT_FALSE(gyro2_token.empty());
 
@@ -156,7 +156,7 @@ TEST(Paging, ThirtyDaysOfHistoryPageByPageUnderTheDefaultMessageLimit) {
     ++chunks;
     EXPECT_LE(chunk.snapshots_size(), 1000);
     for (const esg::v1::CoefficientSnapshot& s : chunk.snapshots()) {
-      ASSERT_DOUBLE_EQ(s.model().k0_deg_h(), static_cast<double>(exported));
+      ASSERT_DOUBLE_EQ(TermDegH(s.model(), estimator::kThetaK0), static_cast<double>(exported));
       ++exported;
     }
   }
@@ -192,7 +192,7 @@ TEST(Paging, AHistoryTokenStaysValidAcrossARestart) {
   const grpc::Status status = HistoryPage(*server.Stub(), request, &page);
   ASSERT_TRUE(status.ok()) << status.error_message();
   ASSERT_EQ(page.snapshots_size(), 1000);
-  EXPECT_DOUBLE_EQ(page.snapshots(0).model().k0_deg_h(), 1000.0);  // the record after the first page
+  EXPECT_DOUBLE_EQ(TermDegH(page.snapshots(0).model(), estimator::kThetaK0), 1000.0);  // the record after the first page
 }
 
 TEST(Paging, DiagnosesAreListedAsSummariesAndReadOneByOne) {

@@ -71,6 +71,11 @@ inline SimulatedRun SimulateRun(const std::string& id, double hours, uint64_t se
   return SimulateCalibrationRun(id, spec);
 }
 
+// One coefficient of a drift model as esgd sends it, by its index in theta (drift_model.h).
+inline double TermDegH(const esg::v1::GyroDriftModel& model, int theta_index) {
+  return proto_convert::DriftModelTermDegH(model, estimator::kFixedTerms[theta_index]);
+}
+
 inline esg::v1::ConfigureRequest ConfigureRequestFor(const estimator::SpacecraftConfig& config,
                                                      const std::string& model = "") {
   esg::v1::ConfigureRequest request;

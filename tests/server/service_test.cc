@@ -103,7 +103,9 @@ TEST(Service, IngestAcksEveryFrameDurablyAndAppliesThem) {
               snapshots.snapshots(i).measurement_time().seconds());
   }
   // The prior sigma of k0 (0.3 deg/h) shrank under calibration.
-  EXPECT_LT(snapshots.snapshots(snapshots.snapshots_size() - 1).sigma().k0_deg_h(), 0.3);
+  EXPECT_LT(esg::testing::TermDegH(snapshots.snapshots(snapshots.snapshots_size() - 1).sigma(),
+                                   estimator::kThetaK0),
+            0.3);
 }
 
 TEST(Service, MalformedFramesAreRejectedNamingTheFieldAndTheStreamGoesOn) {
