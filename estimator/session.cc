@@ -178,6 +178,11 @@ absl::StatusOr<EstimationSession> EstimationSession::Create(const SpacecraftConf
   if (!m.HasFixedTerms() && !m.random_walk) {
     return absl::InvalidArgumentError("model: no term selected (use 1, 10, 11 or e.g. 10+11)");
   }
+  if (options.substeps == SessionOptions::Substeps::kMotionBounded &&
+      !(options.max_substep_turn_deg > 0.0 && options.max_substep_turn_deg <= 10.0)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "max_substep_turn_deg: %g deg is outside (0, 10] deg", options.max_substep_turn_deg));
+  }
   EstimationSession session;
   session.config_ = config;
   session.options_ = options;

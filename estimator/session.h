@@ -260,6 +260,16 @@ struct SessionOptions {
     bool misalignment = false;
   };
   std::vector<CoefficientRelease> coefficient_releases;
+  // How Propagate sizes the integration substeps between two frames (docs/physics.md,
+  // "Propagation"; docs/decisions.md D120). kFixedRate: filter.integrationRateHz (the paper's
+  // 8 Hz). kMotionBounded: the fewest substeps that keep, over each, within
+  // max_substep_turn_deg: the body's turn between the frames (the attitude pair's attitudes),
+  // each reading's turn, each spin axis's turn by its drift, and the phase of a basis term that
+  // varies with time; never more than kFixedRate takes, and kFixedRate's count over an interval
+  // that holds a basis term's switch-on or for a gyro with a channel term.
+  enum class Substeps { kFixedRate, kMotionBounded };
+  Substeps substeps = Substeps::kFixedRate;
+  double max_substep_turn_deg = 0.5;  // kMotionBounded: (0, 10] deg
 };
 
 // The residual random-walk intensity of eq. (11) a session with `options` gives gyro `gyro_id`
@@ -337,6 +347,8 @@ class EstimationSession {
   std::array<int, 2> working_pair() const { return working_pair_; }
   const SpacecraftConfig& config() const { return config_; }
   const SessionOptions& options() const { return options_; }
+  // The integration substeps the last propagation took (SessionOptions::substeps); 0 before any.
+  int last_propagation_substeps() const { return last_propagation_substeps_; }
   // The model-consistency monitor. In the checkpoint from version 2 (a session restored from
   // version 1 starts it with empty windows).
   const ConsistencyMonitor& consistency_monitor() const { return consistency_; }
@@ -607,6 +619,7 @@ class EstimationSession {
   // Predict integrates with substeps sized to the motion of the readings instead of the
   // configured rate (exact for an inertial hold, see Predict).
   bool adaptive_integration_ = false;
+  int last_propagation_substeps_ = 0;
   // Relative-sigma history for the convergence test: (time, max ratio change reference).
   absl::Time convergence_mark_time_ = absl::InfinitePast();
   Eigen::VectorXd convergence_mark_sigma_;

@@ -1,6 +1,7 @@
 // Propagation (EstimationSession::Propagate, Predict): the nominal spin axes integrated at the
-// integration rate with the drift of eq. (1)/(10) (drift_model.h), the configured basis terms
-// beyond them (basis_term.h) and the residual drift of eq. (11), dh_in/dt = (C_in_k dw_k) x h_in
+// integration rate, or in substeps bounded by the motion over the interval (D120), with the
+// drift of eq. (1)/(10) (drift_model.h), the configured basis terms beyond them (basis_term.h)
+// and the residual drift of eq. (11), dh_in/dt = (C_in_k dw_k) x h_in
 // (docs/physics.md, spin_axis.h), and the covariance transition of the spin-axis errors with the
 // integrated random walk of eq. (11) as process noise. Prediction across a gap runs the same
 // propagation on the readings a planned attitude implies.
@@ -14,6 +15,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/attitude_profile.h"
 #include "estimator/basis_term.h"
+#include "estimator/drift_model.h"
 #include "estimator/rotation.h"
 #include "estimator/session.h"
 #include "estimator/session_internal.h"
@@ -68,20 +70,40 @@ BodyRates BodyRatesOver(const Quaterniond& q_begin, const Quaterniond& q_end, do
   return r;
 }
 
-// The number of substeps over the interval: the configured integration rate (the paper's 8 Hz);
-// with `adaptive` (prediction) sized to the motion of the readings instead, one per 0.1 deg
-// (the drift depends on time only through them). Counted in double: the span is the caller's (a
+// How the substeps of one interval are sized (SessionOptions::Substeps, and Predict's own).
+enum class SubstepRule {
+  kFixedRate,      // the configured integration rate (the paper's 8 Hz)
+  kReadingTurn,    // prediction (D15): one per 0.1 deg of the readings' turn
+  kMotionBounded,  // D120: the largest angle that moves over the interval, bounded per substep
+};
+
+// The number of substeps over the interval. kFixedRate: span x the configured integration rate.
+// kReadingTurn (prediction): sized to the motion of the readings instead, one per 0.1 deg (the
+// drift depends on time only through them). kMotionBounded: one per `max_substep_turn_rad` of
+// the larger of the readings' turn and `motion_rad` (the body's turn, the spin axes' drift turn,
+// the basis terms' phase over the interval; MotionOver), at most kFixedRate's count: the midpoint
+// rule's relative error for a drift turning by phi over a substep is phi^2 / 24 (3e-6 at the
+// default 0.5 deg, the diagnosis's bound, discovery/deviation.cc), so the integral of C_in_k B dt
+// over the interval stays within phi^2 / 24 of its value. Counted in double: the span is the caller's (a
 // library user may send a frame years after the previous one, or at absl::InfiniteFuture), so
 // the count is checked before it becomes an int; refused (OutOfRange) beyond int's range.
-absl::StatusOr<int> SubstepCount(const ReadingEnds& ends, double span, bool adaptive,
-                                 double integration_rate_hz, absl::Time frame_time) {
+absl::StatusOr<int> SubstepCount(const ReadingEnds& ends, double span, SubstepRule rule,
+                                 double integration_rate_hz, double motion_rad,
+                                 double max_substep_turn_rad, absl::Time frame_time) {
   double max_turn = 0.0;  // largest angle a reading turns over the interval [rad]
   for (size_t i = 0; i < ends.begin.size(); ++i) {
     max_turn =
         std::max(max_turn, std::acos(std::clamp(ends.begin[i].dot(ends.end[i]), -1.0, 1.0)));
   }
-  const double substeps_wanted = adaptive ? std::ceil(max_turn / (0.1 * kRadPerDeg))
-                                          : std::ceil(span * integration_rate_hz - 1e-9);
+  const double fixed_rate_substeps = std::ceil(span * integration_rate_hz - 1e-9);
+  double substeps_wanted = fixed_rate_substeps;
+  if (rule == SubstepRule::kReadingTurn) {
+    substeps_wanted = std::ceil(max_turn / (0.1 * kRadPerDeg));
+  } else if (rule == SubstepRule::kMotionBounded) {
+    // NaN-safe: a motion that is not finite falls back to the fixed rate.
+    const double bounded = std::ceil(std::max(max_turn, motion_rad) / max_substep_turn_rad);
+    if (bounded < fixed_rate_substeps) substeps_wanted = bounded;
+  }
   if (!(substeps_wanted <= static_cast<double>(std::numeric_limits<int>::max()))) {
     return absl::OutOfRangeError(absl::StrFormat(
         "frame time %s: propagating %g s at filter.integrationRateHz %g needs %g steps, more "
@@ -90,6 +112,40 @@ absl::StatusOr<int> SubstepCount(const ReadingEnds& ends, double span, bool adap
         std::numeric_limits<int>::max()));
   }
   return std::max(1, static_cast<int>(substeps_wanted));
+}
+
+// The largest angle [rad] a basis term's regressor turns through over [begin, begin + span] by
+// time alone (its other inputs, the readings and the body rate, are bounded by the turns): an
+// orbital harmonic's phase 2 pi n span / period, an exponential decay's span / tau. Infinity
+// (the fixed rate) when a term switches on inside the interval (a spin-axis harmonic's or a
+// decay's epoch: the midpoint rule places a step to within half a substep) or reads a channel
+// (held values that expire, lags of their own: channel_signal.h).
+double BasisPhaseOver(const std::vector<BasisTerm>& basis, absl::Time begin, double span) {
+  const absl::Time end = begin + absl::Seconds(span);
+  double phase_rad = 0.0;
+  for (const BasisTerm& t : basis) {
+    switch (t.kind) {
+      case BasisKind::kOrbitalHarmonic:
+        phase_rad = std::max(phase_rad, 2.0 * kPi * t.harmonic * span / t.period);
+        break;
+      case BasisKind::kExponentialDecay:
+        if (t.epoch > begin && t.epoch < end) return std::numeric_limits<double>::infinity();
+        if (end > t.epoch) phase_rad = std::max(phase_rad, span / t.time_constant);
+        break;
+      case BasisKind::kSpinAxisHarmonic:
+        if (t.epoch > begin && t.epoch < end) return std::numeric_limits<double>::infinity();
+        break;
+      case BasisKind::kChannel:
+        return std::numeric_limits<double>::infinity();
+      case BasisKind::kBodyRate:
+      case BasisKind::kBodyRateProduct:
+      case BasisKind::kRamp:  // linear in time: the midpoint rule is exact for it alone
+      case BasisKind::kRampHarmonic:
+      case BasisKind::kSuspensionVoltage:
+        break;
+    }
+  }
+  return phase_rad;
 }
 
 // Gyro i's rows of the transition over the interval, Phi = I + E (2 x its spin-axis drivers):
@@ -302,6 +358,39 @@ struct EstimationSession::PropagationSteps {
     }
   }
 
+  // The largest angle [rad] that moves over the interval [begin, begin + span], besides the
+  // readings (SubstepCount): the body's turn `body_turn_rad` (the attitude pair's attitudes at
+  // both ends), each spin axis's turn by its drift, |dw_k| span with the drift of eq. (1)/(10),
+  // the basis terms and eq. (11)'s residual drift taken at the larger of both ends (an upper
+  // bound of its part perpendicular to the axis, which alone moves it), and each basis term's
+  // phase by time (BasisPhaseOver).
+  static double MotionOver(const std::vector<GyroState>& gyros, const ReadingEnds& ends,
+                           double body_turn_rad, absl::Time begin, double span, bool rw,
+                           const Vector3d& interval_rate_b, const ChannelSignals& channels) {
+    double motion_rad = body_turn_rad;
+    for (size_t i = 0; i < gyros.size(); ++i) {
+      const GyroState& g = gyros[i];
+      double drift_rad_s = 0.0;
+      for (const Vector3d* h_k : {&ends.begin[i], &ends.end[i]}) {
+        Vector3d dw_k = DriftRegressor(*h_k) * g.theta;  // eq. (1)/(10)
+        if (!g.basis.empty()) {
+          BasisInputs in;
+          in.time = h_k == &ends.begin[i] ? begin : begin + absl::Seconds(span);
+          in.h_k = *h_k;
+          in.w_k = g.C_b_k().transpose() * interval_rate_b;
+          in.u_k_v = g.u_k_v;
+          in.channels = &channels;
+          dw_k += BasisDriftSum_k(g.basis, in);
+        }
+        drift_rad_s = std::max(drift_rad_s, dw_k.norm());
+      }
+      if (rw) drift_rad_s += g.residual_drift.norm();  // eq. (11)
+      motion_rad = std::max(motion_rad, drift_rad_s * span);
+      motion_rad = std::max(motion_rad, BasisPhaseOver(g.basis, begin, span));
+    }
+    return motion_rad;
+  }
+
   // After the integration, per gyro: its tangent basis kept perpendicular to the moved axis (a
   // change of order 1e-5 rad), its transition rows E[i] (SpinAxisTransitionRows), the spin axis's
   // motion against its drivers since the last measurement update, inertial, accumulated
@@ -344,6 +433,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
   // drift is integrated across the interval, and the mean is what its two ends measure); zero
   // when no pair has fresh readings at both ends.
   Vector3d interval_rate_b = Vector3d::Zero();
+  double body_turn_rad = 0.0;  // the attitude pair's turn between the interval's ends
   const double previous_interval_s = previous_interval_s_;
   previous_interval_s_ = 0.0;  // set again below when this interval's mean rate is measured
   if (!gyros_[ia].has_reading || !gyros_[ib].has_reading) {
@@ -361,6 +451,7 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
         const BodyRates rates =
             BodyRatesOver(*q_begin, *q_end, span, previous_mean_rate_b_, previous_interval_s);
         interval_rate_b = rates.mean_b;
+        body_turn_rad = rates.mean_b.norm() * span;
         rate_extrapolation_b_ = rates.extrapolation_b;
         body_rate_b_ = rates.end_b;
         previous_mean_rate_b_ = rates.mean_b;
@@ -371,9 +462,20 @@ absl::Status EstimationSession::Propagate(const TelemetryFrame& frame) {
 
   // The spin axes integrated over the interval, then the covariance carried by the transition
   // with the process noise of eq. (11) and of the widening.
-  const absl::StatusOr<int> substeps = SubstepCount(
-      ends, span, adaptive_integration_, config_.filter.integration_rate_hz, frame.time);
+  SubstepRule rule = SubstepRule::kFixedRate;
+  double motion_rad = 0.0;
+  if (adaptive_integration_) {
+    rule = SubstepRule::kReadingTurn;
+  } else if (options_.substeps == SessionOptions::Substeps::kMotionBounded) {
+    rule = SubstepRule::kMotionBounded;
+    motion_rad = Steps::MotionOver(gyros_, ends, body_turn_rad, last_time_, span, rw,
+                                   interval_rate_b, channel_signals_);
+  }
+  const absl::StatusOr<int> substeps =
+      SubstepCount(ends, span, rule, config_.filter.integration_rate_hz, motion_rad,
+                   options_.max_substep_turn_deg * kRadPerDeg, frame.time);
   if (!substeps.ok()) return substeps.status();
+  last_propagation_substeps_ = *substeps;
   std::vector<DriftColumns> M;
   std::vector<MatrixXd> M_basis;
   Steps::IntegrateSpinAxes(gyros_, layout_, ends, ia, ib, last_time_, span, *substeps, rw,

@@ -42,7 +42,8 @@
 // ESG_FAULT_MATRIX_SEEDS=1,2,3 runs every cell over those seeds (default: kCiSeeds);
 // ESG_FAULT_MATRIX_ALL=1 runs every cell, also those that do not pass today (kPassingToday lists
 // what CI runs); ESG_FAULT_MATRIX_VERBOSE=1 also prints the first 12 events from the fault on with
-// their evidence. Each run prints one line "cell NAME seed S: PASS|FAIL ..." with what was
+// their evidence; ESG_FAULT_MATRIX_SUBSTEPS=motion runs the filter with motion-bounded substeps
+// (D120) instead of the fixed 8 Hz. Each run prints one line "cell NAME seed S: PASS|FAIL ..." with what was
 // observed; scripts/fault_matrix.sh tabulates them.
 #include <algorithm>
 #include <array>
@@ -210,6 +211,14 @@ bool Verbose() {
 bool RunAllCells() {
   const char* all = std::getenv("ESG_FAULT_MATRIX_ALL");
   return all != nullptr && std::string(all) == "1";
+}
+
+// ESG_FAULT_MATRIX_SUBSTEPS=motion runs the sessions with substeps bounded by the motion
+// (SessionOptions::Substeps::kMotionBounded, D120) instead of the fixed rate, for comparing the
+// two (scripts/fault_matrix.sh prints each cell's isolations with their times).
+bool SubstepsMotionBounded() {
+  const char* substeps = std::getenv("ESG_FAULT_MATRIX_SUBSTEPS");
+  return substeps != nullptr && std::string(substeps) == "motion";
 }
 
 std::vector<Cell> CellsToRun() {
@@ -399,6 +408,7 @@ Observed RunSession(const SpacecraftConfig& config, const SimulationSpec& spec,
   Observed obs;
   SessionOptions options;
   options.model = *ParseModel("10+11");
+  if (SubstepsMotionBounded()) options.substeps = SessionOptions::Substeps::kMotionBounded;
   auto created = EstimationSession::Create(config, options);
   EXPECT_THAT(created, IsOk());
   if (!created.ok()) return obs;
