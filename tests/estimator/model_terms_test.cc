@@ -228,8 +228,9 @@ std::string WithoutFrozenText(const std::string& content, std::vector<std::strin
 // Every other file reads the table (model_terms.h). Frozen text names the terms as released and
 // is pinned unchanged here, so it never takes a new term: the schema history (the DDL of old
 // versions in storage/schema.cc and storage/postgres_schema.cc) and GyroDriftModel's fields of
-// the 13 coefficients (proto/esg/v1/spacecraft_config.proto; a new term is keyed on the wire,
-// GyroDriftModel.coefficients, which proto/convert.cc reads and writes from the table).
+// the 13 coefficients (proto/esg/v1/spacecraft_config.proto; deprecated, read for one release:
+// every coefficient is keyed on the wire, GyroDriftModel.coefficients, which proto/convert.cc
+// reads and writes from the table, docs/decisions.md D107).
 TEST(ModelTerms, ANewFixedTermIsWrittenInFiveFilesOnly) {
   const std::set<std::string> per_term = {
       "estimator/model_terms.h", "estimator/drift_model.h", "estimator/drift_model.cc",
@@ -256,6 +257,24 @@ TEST(ModelTerms, ANewFixedTermIsWrittenInFiveFilesOnly) {
     }
   }
   EXPECT_THAT(found, ::testing::ContainerEq(per_term));
+  // The proto's frozen fields are the release before's form: one deprecated field per JSON key of
+  // the table, none written (a field not deprecated would be a second form to write a term in).
+  std::vector<std::string> proto_frozen;
+  WithoutFrozenText(ReadSource("proto/esg/v1/spacecraft_config.proto"), &proto_frozen);
+  ASSERT_EQ(proto_frozen.size(), 1u);
+  const std::regex field(R"((double|repeated double) (\w+) = \d+( \[deprecated = true\])?;)");
+  std::vector<std::string> fields, deprecated;
+  for (std::sregex_iterator it(proto_frozen[0].begin(), proto_frozen[0].end(), field), done;
+       it != done; ++it) {
+    fields.push_back((*it)[2].str());
+    if ((*it)[3].matched) deprecated.push_back((*it)[2].str());
+  }
+  std::vector<std::string> expected_fields;
+  for (const FixedTermKey& key : FixedTermKeys()) {
+    expected_fields.push_back(FixedTermFieldName(key.json_key));
+  }
+  EXPECT_THAT(fields, ::testing::ElementsAreArray(expected_fields));
+  EXPECT_EQ(deprecated, fields);
   // The frozen parts, as released: version 1-9's DDL and coefficient columns (SQLite), version
   // 7's DDL (PostgreSQL): a change here changes what an old database is taken to be; the proto's
   // fields of the 13 coefficients: a change here changes the wire.
