@@ -470,7 +470,7 @@ Observed RunSession(const SpacecraftConfig& config, const SimulationSpec& spec,
       if (!(sigma(i) > 0.0)) continue;
       const double ratio = std::abs(est(i) - tru(i)) / sigma(i);
       const std::string name =
-          absl::StrFormat("gyro %d %s %.1f sigma", g.id, kCoefficientNames[i], ratio);
+          absl::StrFormat("gyro %d %s %.3f sigma", g.id, kCoefficientNames[i], ratio);
       if (ratio > obs.worst_sigma) {
         obs.worst_sigma = ratio;
         obs.worst = name;
