@@ -359,5 +359,30 @@ TEST(DiagnoseVerdict, AStepThatDoesNotCarryItsGainIsNotFittedWhateverTheReleaseG
   EXPECT_TRUE(refused) << "gyro 1's coefficient step was not refused by the held-step run";
 }
 
+// Housekeeping channels that drive nothing (the scenario none_with_channels: the three gyros'
+// temperatures wandering by 2 K and gyro 1's heater state, declared and telemetered, no effect):
+// each channel is tried as a cause of each running gyro's drift, and none is taken.
+TEST(DiagnoseVerdict, HousekeepingChannelsThatDriveNothingAreTriedAndNoneIsTaken) {
+  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("none_with_channels", 1001, 30.0);
+  ASSERT_EQ(spec.config.channels.size(), 4u);
+  auto sim = Simulate(spec);
+  ASSERT_TRUE(sim.ok()) << sim.status();
+  auto report = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
+  ASSERT_TRUE(report.ok()) << report.status();
+  const DiagnosisReport& r = *report;
+  int channel_candidates = 0;
+  std::string text = absl::StrCat("verdict ", r.verdict);
+  for (const CandidateScore& c : r.candidates) {
+    if (c.effect.rfind("channel_drift", 0) != 0) continue;
+    ++channel_candidates;
+    absl::StrAppend(&text, "\n", c.effect, "[", c.gyro, "] 2lnB ", c.score,
+                    c.significant ? " significant" : "");
+  }
+  for (const Finding& f : r.findings) absl::StrAppend(&text, "\n", f.effect, "[", f.gyro, "]");
+  // Three running gyros, four channels each.
+  EXPECT_GE(channel_candidates, 12) << text;
+  EXPECT_EQ(r.verdict, kVerdictNone) << text;
+}
+
 }  // namespace
 }  // namespace esg::estimator::discovery

@@ -173,6 +173,18 @@ inline double SunLagHoursOf(uint64_t seed) {
   return kLags[(seed / 3) % 4];
 }
 
+// Declares a channel the scenario telemeters: its unit, valid range and a 10 min maximum age.
+inline void DeclareScenarioChannel(estimator::SpacecraftConfig& config, const std::string& name,
+                                   const std::string& unit, double valid_min, double valid_max) {
+  estimator::ChannelConfig declared;
+  declared.name = name;
+  declared.unit = unit;
+  declared.valid_min = valid_min;
+  declared.valid_max = valid_max;
+  declared.max_age = absl::Minutes(10);
+  config.channels.push_back(declared);
+}
+
 // The gyro carrying a per-gyro effect for a seed: 1, 2 or 3.
 inline int AffectedGyro(uint64_t seed) { return 1 + static_cast<int>(seed % 3); }
 
@@ -294,22 +306,8 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     }
     s.gyros[g].channel_drift = c;
     if (c.telemetered) {
-      ChannelConfig declared;
-      declared.name = c.channel;
-      declared.unit = "K";
-      declared.valid_min = 250.0;
-      declared.valid_max = 350.0;
-      declared.max_age = absl::Minutes(10);
-      s.config.channels.push_back(declared);
-      if (c.heater) {
-        ChannelConfig state;
-        state.name = c.heater->channel;
-        state.unit = "1";
-        state.valid_min = 0.0;
-        state.valid_max = 1.0;
-        state.max_age = absl::Minutes(10);
-        s.config.channels.push_back(state);
-      }
+      DeclareScenarioChannel(s.config, c.channel, "K", 250.0, 350.0);
+      if (c.heater) DeclareScenarioChannel(s.config, c.heater->channel, "1", 0.0, 1.0);
     }
   }
   if (effect == "warm_up" || effect == "transient") {
@@ -338,6 +336,29 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     f.value = x * Eigen::Vector3d(0.02, -0.03, 0.02) * deg_h;
     s.gyros[g].fault = f;
   }
+  if (effect == "none_with_channels") {
+    // No effect, with housekeeping channels that drive nothing: each running gyro's temperature
+    // T_gyro<k> wanders as in the channel scenarios (2 K, 3 h correlation time, 0.02 K noise),
+    // telemetered and declared, with a zero gain; gyro 1's heater cycles as in channel_heater,
+    // its state telemetered as heater_1. Four channels, each tried as a cause and none one.
+    for (int k = 0; k < 3; ++k) {
+      ChannelDrift c;
+      c.channel = "T_gyro" + std::to_string(k + 1);
+      c.mean = kChannelMeanK;
+      c.lag_s = kChannelLagHours * 3600.0;
+      if (k == 0) {
+        ChannelHeater h;
+        h.period_s = 4.0 * 3600.0;
+        h.on_fraction = 0.5;
+        h.step = kChannelHeaterStepK;
+        h.channel = "heater_1";
+        c.heater = h;
+      }
+      s.gyros[k].channel_drift = c;
+      DeclareScenarioChannel(s.config, c.channel, "K", 250.0, 350.0);
+      if (c.heater) DeclareScenarioChannel(s.config, c.heater->channel, "1", 0.0, 1.0);
+    }
+  }
   return s;
 }
 
@@ -352,7 +373,7 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
     }
     return false;
   };
-  if (truth == "none") return r.verdict == kVerdictNone;
+  if (truth == "none" || truth == "none_with_channels") return r.verdict == kVerdictNone;
   // The open-ended stage's classes: a basis term of the right gyro with the right behaviour
   // first; the classes the basis cannot explain stay `unexplained`, located to the gyro.
   auto basis = [&](const std::string& kind, const std::string& parameter) {
