@@ -137,22 +137,16 @@ json Vec(const Eigen::Vector3d& v, double scale) {
 const double kDegH = RadPerSecToDegPerHour(1.0);
 const double kArcsec = RadToArcsec(1.0);
 
-// The coefficients as the configuration JSON writes them (deg/h): per key of
-// estimator/model_terms.h a number, or an array of its components.
+// The coefficients as the configuration JSON writes them (deg/h, docs/formats.md): every term of
+// estimator/model_terms.h keyed, {"coefficients": [{"term": "k0", "valueDegH": ...}, ...]}.
 json ModelJson(const estimator::DriftCoefficients& c) {
   const estimator::DriftVector theta = c.AsVector();
-  json out = json::object();
-  for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
-    const int first = key.first_theta_index;
-    json& entry = out[std::string(key.json_key)];
-    if (key.components == 0) {
-      entry = theta(first) * kDegH;
-    } else {
-      entry = json::array();
-      for (int i = first; i < first + key.components; ++i) entry.push_back(theta(i) * kDegH);
-    }
+  json keyed = json::array();
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    keyed.push_back(json{{"term", std::string(term.storage_key)},
+                         {"valueDegH", theta(term.theta_index) * kDegH}});
   }
-  return out;
+  return json{{"coefficients", keyed}};
 }
 
 // The gyro's basis terms as the configuration JSON writes them (deg/h per JSON unit of s), with

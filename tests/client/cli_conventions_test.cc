@@ -470,6 +470,16 @@ TEST(CliConventions, OfflineVerbsPrintJsonAndCsvWithMillisecondTimes) {
   const std::string inputs = " --config " + Quote(Rdk1()) + " --recording " + rec;
   doc = ExpectJson(RunEsg(dir, "calibrate --format json" + inputs), "calibrate", nullptr);
   EXPECT_EQ(doc["gyros"].size(), 3u);
+  // The calibrated drift model as the configuration writes it: every coefficient keyed
+  // (docs/formats.md), k0 first, and no field of the release before.
+  for (const char* model : {"model", "modelSigma"}) {
+    const nlohmann::json& m = doc["gyros"][0][model];
+    ASSERT_EQ(m.size(), 1u) << m.dump();
+    ASSERT_EQ(m["coefficients"].size(), 13u) << m.dump();
+    EXPECT_EQ(m["coefficients"][0]["term"], "k0");
+    EXPECT_TRUE(m["coefficients"][0]["valueDegH"].is_number());
+  }
+  EXPECT_GT(doc["gyros"][0]["modelSigma"]["coefficients"][0]["valueDegH"].get<double>(), 0.0);
   ExpectCsv(RunEsg(dir, "calibrate --format csv" + inputs), "calibrate", "spacecraftId", 3);
   ExpectJson(RunEsg(dir, "gap --format json --gap-start 3" + inputs), "gap", nullptr);
   EXPECT_GT(ExpectTimesInFormat(RunEsg(dir, "gap --gap-start 3" + inputs).out, "gap (table)"), 0);
