@@ -84,9 +84,10 @@ enum class SubstepRule {
 // the basis terms' phase over the interval; MotionOver), at most kFixedRate's count: the midpoint
 // rule's relative error for a drift turning by phi over a substep is phi^2 / 24 (3e-6 at the
 // default 0.5 deg, the diagnosis's bound, discovery/deviation.cc), so the integral of C_in_k B dt
-// over the interval stays within phi^2 / 24 of its value. Counted in double: the span is the caller's (a
-// library user may send a frame years after the previous one, or at absl::InfiniteFuture), so
-// the count is checked before it becomes an int; refused (OutOfRange) beyond int's range.
+// over the interval stays within phi^2 / 24 of its value. Counted in double: the span is the
+// caller's (a library user may send a frame years after the previous one, or at
+// absl::InfiniteFuture), so the count is checked before it becomes an int; refused (OutOfRange)
+// beyond int's range.
 absl::StatusOr<int> SubstepCount(const ReadingEnds& ends, double span, SubstepRule rule,
                                  double integration_rate_hz, double motion_rad,
                                  double max_substep_turn_rad, absl::Time frame_time) {

@@ -1,7 +1,7 @@
 // Calibration speed (issue: EKF): 24 h of 60 s telemetry, 8 Hz integration, model 10+11, three
 // running gyros, one core; the same at other rates, with motion-bounded substeps (D120), and the
-// cost of one measurement step. Target under 1 s (real-time factor 86,400). The recording is simulated
-// once outside the timed loop.
+// cost of one measurement step. Target under 1 s (real-time factor 86,400). The recording is
+// simulated once outside the timed loop.
 #include <algorithm>
 #include <cmath>
 
@@ -42,8 +42,8 @@ void BM_Calibrate24hModel10Plus11(benchmark::State& state) {
     if (!result.ok()) state.SkipWithError(std::string(result.status().message()).c_str());
   }
   state.counters["frames"] = static_cast<double>(flight.recording.frames.size());
-  state.counters["realtime_factor"] = benchmark::Counter(
-      HoursToSeconds(24.0), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["realtime_factor"] =
+      benchmark::Counter(HoursToSeconds(24.0), benchmark::Counter::kIsIterationInvariantRate);
 }
 BENCHMARK(BM_Calibrate24hModel10Plus11)->Unit(benchmark::kMillisecond)->MinTime(3.0);
 
@@ -135,7 +135,11 @@ void BM_Calibrate24hMotionBounded(benchmark::State& state) {
   Calibrate24hAgainst8Hz(state, testing::PaperConfig(), options);
   state.counters["max_substep_turn_deg"] = options.max_substep_turn_deg;
 }
-BENCHMARK(BM_Calibrate24hMotionBounded)->Arg(5)->Arg(20)->Unit(benchmark::kMillisecond)->MinTime(3.0);
+BENCHMARK(BM_Calibrate24hMotionBounded)
+    ->Arg(5)
+    ->Arg(20)
+    ->Unit(benchmark::kMillisecond)
+    ->MinTime(3.0);
 
 // The cost of one frame at the floor: a session calibrated over the first 24 h less a minute
 // adds the last frame, a measurement step (propagation in one substep: motion-bounded at 10 deg,

@@ -1,9 +1,10 @@
-// Integration substeps bounded by the motion over an interval (SessionOptions::Substeps::
-// kMotionBounded, docs/decisions.md D120) against the fixed 8 Hz reference: on a short flight of
-// every simulator profile (inertial, orbital, calibration, mixed, and slews: inertial holds joined
-// by fast eigen-axis slews) the attitude at every frame and the free coefficients at the end within
-// 0.01 of the 8 Hz run's 1-sigma, with the same events at the same frames; the substep count
-// across a jump of a gyro's readings and across a 7-day gap without telemetry.
+// Integration substeps of the propagation (estimator/session_propagation.cc) bounded by the
+// motion over an interval (SessionOptions::Substeps::kMotionBounded, docs/decisions.md D120)
+// against the fixed 8 Hz reference: on a short flight of every simulator profile (inertial,
+// orbital, calibration, mixed, and slews: inertial holds joined by fast eigen-axis slews) the
+// attitude at every frame and the free coefficients at the end within 0.01 of the 8 Hz run's
+// 1-sigma, with the same events at the same frames; the substep count across a jump of a gyro's
+// readings and across a 7-day gap without telemetry.
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -57,7 +58,7 @@ struct FilterRun {
 };
 
 FilterRun Calibrate(const SpacecraftConfig& config, const SessionOptions& options,
-              const std::vector<TelemetryFrame>& frames) {
+                    const std::vector<TelemetryFrame>& frames) {
   FilterRun run;
   auto created = EstimationSession::Create(config, options);
   EXPECT_THAT(created, IsOk());
@@ -90,8 +91,10 @@ TEST_P(SubstepsAgreement, AttitudeAndCoefficientsWithinOneHundredthSigmaOf8Hz) {
   ASSERT_THAT(sim, IsOk());
   const SpacecraftConfig config = testing::PaperConfig();
   const std::vector<TelemetryFrame>& frames = sim->recording.frames;
-  const FilterRun reference = Calibrate(config, Options(SessionOptions::Substeps::kFixedRate), frames);
-  const FilterRun bounded = Calibrate(config, Options(SessionOptions::Substeps::kMotionBounded), frames);
+  const FilterRun reference =
+      Calibrate(config, Options(SessionOptions::Substeps::kFixedRate), frames);
+  const FilterRun bounded =
+      Calibrate(config, Options(SessionOptions::Substeps::kMotionBounded), frames);
   ASSERT_EQ(reference.reports.size(), frames.size());
   ASSERT_EQ(bounded.reports.size(), frames.size());
 
@@ -132,7 +135,8 @@ TEST_P(SubstepsAgreement, AttitudeAndCoefficientsWithinOneHundredthSigmaOf8Hz) {
     for (int c = 0; c < kNumDriftCoefficients; ++c) {
       if (!(sigma(c) > 0.0)) continue;
       ++free_coefficients;
-      worst_coefficient_sigma = std::max(worst_coefficient_sigma, std::abs(got(c) - ref(c)) / sigma(c));
+      worst_coefficient_sigma =
+          std::max(worst_coefficient_sigma, std::abs(got(c) - ref(c)) / sigma(c));
     }
   }
   EXPECT_GT(free_coefficients, 0);
@@ -165,8 +169,8 @@ TEST(SubstepsBound, AReadingJumpAndASevenDayGapTakeBoundedSubsteps) {
   EstimationSession session = *std::move(created);
   std::vector<TelemetryFrame> frames = sim->recording.frames;
   const size_t jump_at = frames.size() / 2;
-  const Eigen::Matrix3d jump = ExpQuaternion(DegToRad(2.0) * Eigen::Vector3d::UnitX())
-                                   .toRotationMatrix();
+  const Eigen::Matrix3d jump =
+      ExpQuaternion(DegToRad(2.0) * Eigen::Vector3d::UnitX()).toRotationMatrix();
   for (size_t k = jump_at; k < frames.size(); ++k) {
     if (frames[k].gyros[0].has_value()) frames[k].gyros[0]->h_k = jump * frames[k].gyros[0]->h_k;
   }
@@ -186,8 +190,8 @@ TEST(SubstepsBound, AReadingJumpAndASevenDayGapTakeBoundedSubsteps) {
   // those of the last frame turned by a body rotation of 170 deg.
   TelemetryFrame after_gap = frames.back();
   after_gap.time = frames.back().time + kMaxFrameGap;
-  const Eigen::Matrix3d turn = ExpQuaternion(DegToRad(170.0) * Eigen::Vector3d(1, 1, 0).normalized())
-                                   .toRotationMatrix();
+  const Eigen::Matrix3d turn =
+      ExpQuaternion(DegToRad(170.0) * Eigen::Vector3d(1, 1, 0).normalized()).toRotationMatrix();
   for (auto& reading : after_gap.gyros) {
     if (reading.has_value()) reading->h_k = turn * reading->h_k;
   }
@@ -197,16 +201,17 @@ TEST(SubstepsBound, AReadingJumpAndASevenDayGapTakeBoundedSubsteps) {
   for (const GyroEstimate& g : session.Gyros()) {
     // The model's drift bounded by the sum of its coefficients' magnitudes (|h| = 1), plus the
     // residual drift of eq. (11).
-    drift_rad_s = std::max(drift_rad_s, g.coefficients.AsVector().cwiseAbs().sum() +
-                                            g.residual_drift.norm());
+    drift_rad_s =
+        std::max(drift_rad_s, g.coefficients.AsVector().cwiseAbs().sum() + g.residual_drift.norm());
   }
   const double gap_s = absl::ToDoubleSeconds(kMaxFrameGap);
   const double bound = std::ceil(std::max(kPi, drift_rad_s * gap_s) / bound_rad);
   EXPECT_GE(gap_substeps, 1);
   EXPECT_LE(gap_substeps, bound);
   EXPECT_LT(gap_substeps, gap_s * config.filter.integration_rate_hz);
-  std::printf("reading jump of 2 deg: %d substeps; 7-day gap: %d substeps (bound %.0f, 8 Hz %.0f)\n",
-              jump_substeps, gap_substeps, bound, gap_s * config.filter.integration_rate_hz);
+  std::printf(
+      "reading jump of 2 deg: %d substeps; 7-day gap: %d substeps (bound %.0f, 8 Hz %.0f)\n",
+      jump_substeps, gap_substeps, bound, gap_s * config.filter.integration_rate_hz);
 }
 
 TEST(SubstepsBound, ATurnBoundOutsideItsRangeIsRefused) {
