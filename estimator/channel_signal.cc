@@ -32,9 +32,21 @@ ChannelSignals::ChannelSignals(const std::vector<ChannelConfig>& declared,
   }
 }
 
+namespace {
+
+// The slope of the line from the held value to the next one [unit/s] (Ahead).
+double LineSlope(absl::Time t0, double x0, const std::pair<absl::Time, double>& next) {
+  return (next.second - x0) / absl::ToDoubleSeconds(next.first - t0);
+}
+
+}  // namespace
+
 std::optional<double> ChannelSignals::HeldAt(const Held& h, absl::Time t) {
   if (!h.time.has_value()) return std::nullopt;
   const absl::Duration age = t - *h.time;
+  if (h.next.has_value() && age >= absl::ZeroDuration() && t <= h.next->first) {
+    return h.value + LineSlope(*h.time, h.value, *h.next) * absl::ToDoubleSeconds(age);
+  }
   if (age < absl::ZeroDuration() || age > h.max_age) return std::nullopt;
   return h.value;
 }
@@ -43,6 +55,14 @@ std::optional<double> ChannelSignals::LagAt(const Held& held, const Lag& lag, do
                                             absl::Time t) {
   if (!lag.time.has_value()) return std::nullopt;
   if (!held.time.has_value() || t <= *lag.time) return lag.y;
+  if (held.next.has_value() && *lag.time >= *held.time && t <= held.next->first) {
+    // On the line to the next value (the file comment's second solution).
+    const double m = LineSlope(*held.time, held.value, *held.next);
+    const double x_a = held.value + m * absl::ToDoubleSeconds(*lag.time - *held.time);
+    const double x_t = held.value + m * absl::ToDoubleSeconds(t - *held.time);
+    const double dt = absl::ToDoubleSeconds(t - *lag.time);
+    return x_t - m * tau_s + (lag.y - x_a + m * tau_s) * std::exp(-dt / tau_s);
+  }
   // The input holds held.value until it expires; the lag is held after.
   const absl::Time until = std::min(t, *held.time + held.max_age);
   if (until <= *lag.time) return lag.y;
@@ -67,8 +87,23 @@ double ChannelSignals::Scalar(const BasisTerm& term, absl::Time time) const {
   return (*x - *y) / term.time_constant * kSecondsPerHour;  // per hour
 }
 
+void ChannelSignals::Ahead(const TelemetryFrame& next) {
+  for (auto& [name, held] : channels_) {
+    held.next.reset();
+    const double* x = next.channels.Find(name);
+    if (x == nullptr || !held.time.has_value() || next.time <= *held.time ||
+        next.time < latest_ || next.time - *held.time > held.max_age) {
+      continue;
+    }
+    held.next = std::make_pair(next.time, *x);
+  }
+}
+
 void ChannelSignals::Advance(const TelemetryFrame& frame) {
-  if (frame.time < latest_) return;
+  if (frame.time < latest_) {
+    for (auto& [name, held] : channels_) held.next.reset();
+    return;
+  }
   latest_ = frame.time;
   for (auto& [key, lag] : lags_) {
     const Held& held = channels_.at(key.first);
@@ -78,6 +113,7 @@ void ChannelSignals::Advance(const TelemetryFrame& frame) {
     }
   }
   for (auto& [name, held] : channels_) {
+    held.next.reset();
     const double* x = frame.channels.Find(name);
     if (x == nullptr) continue;
     held.time = frame.time;

@@ -3,11 +3,20 @@
 // its first-order lag and the lag's derivative, as deterministic functions of the channel's held
 // series (channels.h ChannelHold's rule: the last value carried up to the channel's maxAgeS).
 //
-// Over the interval between frames (t_{k-1}, t_k] the held value x is the one frames up to
-// t_{k-1} carried; the frame at t_k takes effect after it (Advance). The lag y of time constant
-// tau solves tau dy/dt = x - y exactly for x constant over the interval:
+// Over the interval between frames (t_{k-1}, t_k] the value x is the one frames up to t_{k-1}
+// carried, held; the frame at t_k takes effect after it (Advance). When the frame at t_k is known
+// while the interval is integrated (Ahead: a session propagating to the frame it is adding), x
+// is instead the straight line from the last value x_0 (at t_0) to the frame's x_1 (at t_1), as
+// long as t_1 - t_0 is within maxAgeS: a sample is the channel at its time, and a value held for
+// a frame lags the channel by half a frame on average (a 30 s delay against a 10 min lag makes the
+// derivative's regression slope e^(-30/600) = 0.95 of the truth's). The lag y of time constant
+// tau solves tau dy/dt = x - y exactly, for x held:
 //
 //     y(t) = x + (y(t_a) - x) exp(-(t_a' - t_a) / tau),   t_a' = min(t, time x expires)
+//
+// and for x(t) = x(t_a) + m (t - t_a) on the line (m its slope):
+//
+//     y(t) = x(t) - m tau + (y(t_a) - x(t_a) + m tau) exp(-(t - t_a) / tau)
 //
 // so y holds where the channel has no value (none yet, or older than its maxAgeS); y starts at the
 // channel's first value (in equilibrium with it). The regressors, in the channel's unit u:
@@ -52,9 +61,16 @@ class ChannelSignals {
   // to the next frame's time. 0 for a channel not tracked.
   double Scalar(const BasisTerm& term, absl::Time time) const;
 
-  // Closes the interval at frame.time: each lag stepped to it with the held value, then the
-  // frame's values of the tracked channels taken. Frames in increasing time; an older one is
-  // ignored.
+  // The frame that will close the interval (before Advance of it): its values of the tracked
+  // channels are the ends of the lines the interval interpolates on (the file comment). A frame
+  // not after the last one, and a channel it does not carry or whose line would span more than
+  // the channel's maxAgeS, leave that channel held. Advance clears what Ahead set; without Ahead
+  // (a prediction past the last frame) values are held.
+  void Ahead(const TelemetryFrame& next);
+
+  // Closes the interval at frame.time: each lag stepped to it (on the line Ahead set, else with
+  // the held value), then the frame's values of the tracked channels taken. Frames in increasing
+  // time; an older one is ignored.
   void Advance(const TelemetryFrame& frame);
 
   // The state as doubles (for the session's checkpoint) and back: per tracked channel in name
@@ -69,12 +85,15 @@ class ChannelSignals {
     absl::Duration max_age;
     std::optional<absl::Time> time;  // of the frame that carried `value`
     double value = 0.0;
+    // The next frame's value and time (Ahead), the line's far end; not part of the state.
+    std::optional<std::pair<absl::Time, double>> next;
   };
   struct Lag {
     std::optional<absl::Time> time;  // y is y(time)
     double y = 0.0;
   };
-  // The held value of `h` at `t`, nullopt when none or expired.
+  // The value of `h` at `t` (on the line to `next` when set, else held), nullopt when none or
+  // expired.
   static std::optional<double> HeldAt(const Held& h, absl::Time t);
   // The lag of `held` advanced from lag.time to `t` (not stored).
   static std::optional<double> LagAt(const Held& held, const Lag& lag, double tau_s, absl::Time t);

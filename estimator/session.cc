@@ -351,6 +351,8 @@ absl::StatusOr<StepReport> EstimationSession::AddFrame(const TelemetryFrame& raw
   // Transactional step: work on a copy, commit only on success.
   EstimationSession next = *this;
   next.ApplyCoefficientReleases(frame.time);
+  // The frame's channel values end the lines the interval's channel terms read (channel_signal.h).
+  next.channel_signals_.Ahead(frame);
   if (absl::Status s = next.Propagate(frame); !s.ok()) return s;
   next.last_time_ = frame.time;
   next.channel_signals_.Advance(frame);

@@ -154,12 +154,18 @@ void AddTrajectory(const GyroConfig& gc, const GyroModel& m,
   u_last_v = voltages_v(samples.front());
   size_t next_sample = 0;
   if (!channels.empty()) {
-    for (int i = 0; i < samples.front(); ++i) channels.Advance(frames[i]);
+    for (int i = 0; i < samples.front(); ++i) {
+      channels.Advance(frames[i]);
+      channels.Ahead(frames[i + 1]);
+    }
   }
   for (int i = samples.front(); i <= samples.back(); ++i) {
     const ChannelSignals* held = nullptr;
     if (!channels.empty()) {
       channels.Advance(frames[i]);
+      // The next frame's values end the lines the steps up to it read, as the filter's
+      // propagation to that frame does (channel_signal.h Ahead).
+      if (i < samples.back()) channels.Ahead(frames[i + 1]);
       d.channel_states.push_back(std::make_shared<const ChannelSignals>(channels));
       held = d.channel_states.back().get();
     }

@@ -77,6 +77,63 @@ TEST(ChannelSignals, LagOfAStepIsTheFirstOrderResponseAndItsDerivativeTheLagsSlo
   }
 }
 
+// With the next frame known (Ahead), the value between two frames is on the line between their
+// values; without it (a prediction past the last frame) it is held; a line longer than maxAgeS is
+// not drawn.
+TEST(ChannelSignals, ValueBetweenFramesIsOnTheLineToTheNextFrameWhenItIsKnown) {
+  const BasisTerm value = Term(ChannelForm::kValue, 0.0, 290.0);
+  ChannelSignals s({Declared(absl::Minutes(10))}, {value});
+  s.Advance(Frame(0, 295.0));
+  s.Ahead(Frame(60, 298.0));
+  EXPECT_NEAR(s.Scalar(value, kT0 + absl::Seconds(20)), 6.0, 1e-12);
+  EXPECT_NEAR(s.Scalar(value, kT0 + absl::Seconds(60)), 8.0, 1e-12);
+  s.Advance(Frame(60, 298.0));
+  EXPECT_EQ(s.Scalar(value, kT0 + absl::Seconds(90)), 8.0);  // held: nothing ahead
+  // The next value 11 min after the last one (maxAgeS 10 min): held, then expired.
+  s.Ahead(Frame(60 + 660, 300.0));
+  EXPECT_EQ(s.Scalar(value, kT0 + absl::Seconds(120)), 8.0);
+  EXPECT_EQ(s.Scalar(value, kT0 + absl::Seconds(60 + 601)), 0.0);
+  // A frame without the channel leaves it held.
+  s.Advance(Frame(120, std::nullopt));
+  s.Ahead(Frame(180, std::nullopt));
+  EXPECT_EQ(s.Scalar(value, kT0 + absl::Seconds(150)), 8.0);
+}
+
+// A channel rising at r = 3 K/h sampled every 60 s: with each frame known while its interval is
+// integrated, the lag is the exact response to the ramp, y = x - r tau once the start has decayed,
+// and its derivative r at every instant; held, the lag trails by half a frame more and its
+// derivative, at a frame, is below r (the staircase's step not yet followed).
+TEST(ChannelSignals, LagOfARampSampledByFramesIsExactOnTheLineAndTrailsWhenHeld) {
+  const double tau = 600.0, r_per_s = 3.0 / 3600.0;
+  const BasisTerm lag = Term(ChannelForm::kLag, tau);
+  const BasisTerm rate = Term(ChannelForm::kDerivative, tau);
+  ChannelSignals line({Declared(absl::Minutes(5))}, {lag, rate});
+  ChannelSignals held({Declared(absl::Minutes(5))}, {lag, rate});
+  auto x = [&](double t) { return 290.0 + r_per_s * t; };
+  // Equilibrium with the ramp at t = 0 (y = x - r tau) is reached by running from -30 tau.
+  for (double t = -30 * tau; t <= 0.0; t += 60.0) {
+    line.Ahead(Frame(t, x(t)));
+    line.Advance(Frame(t, x(t)));
+    held.Advance(Frame(t, x(t)));
+  }
+  for (double t = 0.0; t < 3600.0; t += 60.0) {
+    line.Ahead(Frame(t + 60.0, x(t + 60.0)));
+    for (double u : {15.0, 30.0, 59.0}) {
+      const absl::Time at = kT0 + absl::Seconds(t + u);
+      EXPECT_NEAR(line.Scalar(lag, at), x(t + u) - r_per_s * tau, 1e-9) << t + u;
+      EXPECT_NEAR(line.Scalar(rate, at), 3.0, 1e-9) << t + u;
+    }
+    line.Advance(Frame(t + 60.0, x(t + 60.0)));
+    held.Advance(Frame(t + 60.0, x(t + 60.0)));
+  }
+  // Held: at a frame, just after its value is taken, the lag trails the line's by about half a
+  // frame of the ramp (r x 30 s = 0.025 K), and the derivative at an instant before the next
+  // frame is below 3 K/h by more than 1%.
+  const absl::Time end = kT0 + absl::Seconds(3600.0);
+  EXPECT_NEAR(line.Scalar(lag, end) - held.Scalar(lag, end), r_per_s * 30.0, 0.005);
+  EXPECT_LT(held.Scalar(rate, end + absl::Seconds(59)), 0.99 * 3.0);
+}
+
 TEST(ChannelSignals, LagStartsAtTheFirstValueAndHoldsWhenTheValueExpires) {
   const double tau = 600.0;
   const BasisTerm lag = Term(ChannelForm::kLag, tau, 10.0);
