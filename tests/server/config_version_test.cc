@@ -2,7 +2,8 @@
 // spacecraft's configuration when its values change, not when the same values come again in
 // another form: a drift coefficient by its field or keyed (GyroDriftModel.coefficients, docs/
 // decisions.md D107), other key order or whitespace, the text an older esgd stored. Real esgd on
-// 127.0.0.1 over a real SQLite file, restarted on it.
+// 127.0.0.1 over a real SQLite file, restarted on it; the same on PostgreSQL (the fixture's
+// shared test server).
 #include <string>
 #include <vector>
 
@@ -14,6 +15,7 @@
 #include "proto/convert.h"
 #include "storage/storage.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/postgres_server.h"
 
 namespace esg::server {
 namespace {
@@ -116,9 +118,8 @@ std::vector<storage::ConfigRecord> History(LoopbackServer& server, const std::st
   return history.ok() ? *history : std::vector<storage::ConfigRecord>{};
 }
 
-TEST(ConfigVersion, TheSameValuesInAnotherFormAreNoNewVersionAndAChangeIs) {
-  TempDir dir;
-  const std::string db = dir.File("esg.db");
+// `db`: an SQLite file's path or a PostgreSQL URI (LoopbackServer and Storage::Open take both).
+void SameValuesInAnotherFormAreNoNewVersion(const std::string& db) {
   const std::string id = "CFGV-1";
   const estimator::SpacecraftConfig config = ServerTestConfig(id);
   {
@@ -157,12 +158,24 @@ TEST(ConfigVersion, TheSameValuesInAnotherFormAreNoNewVersionAndAChangeIs) {
   EXPECT_THAT(History(server, id), SizeIs(3));
 }
 
+TEST(ConfigVersion, TheSameValuesInAnotherFormAreNoNewVersionAndAChangeIs) {
+  TempDir dir;
+  SameValuesInAnotherFormAreNoNewVersion(dir.File("esg.db"));
+}
+
+TEST(ConfigVersionPostgres, TheSameValuesInAnotherFormAreNoNewVersionAndAChangeIs) {
+  std::string error;
+  esg::testing::PostgresServer* pg = esg::testing::PostgresServer::Shared(&error);
+  ASSERT_NE(pg, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = pg->CreateDatabase();
+  ASSERT_TRUE(uri.ok()) << uri.status();
+  SameValuesInAnotherFormAreNoNewVersion(*uri);
+}
+
 // A database written before the keyed form (its configuration stored with every coefficient by
 // field) opens, and esgd reports the same values: the session's configuration (written keyed, no
 // field) and the coefficient history, as before the restart.
-TEST(ConfigVersion, ADatabaseWrittenBeforeTheKeyedFormOpensWithTheSameValues) {
-  TempDir dir;
-  const std::string db = dir.File("esg.db");
+void DatabaseWrittenBeforeOpensWithTheSameValues(const std::string& db) {
   const esg::testing::SimulatedRun run = esg::testing::SimulateRun("CFGV-2", 1.0, 5);
   esg::v1::HistoryResponse before;
   {
@@ -214,6 +227,20 @@ TEST(ConfigVersion, ADatabaseWrittenBeforeTheKeyedFormOpensWithTheSameValues) {
   // The configuration sent again as the release before wrote it is the same version.
   ASSERT_TRUE(Configure(server, Rewritten(run.config, AllByField), "", false).ok());
   EXPECT_THAT(History(server, "CFGV-2"), SizeIs(1));
+}
+
+TEST(ConfigVersion, ADatabaseWrittenBeforeTheKeyedFormOpensWithTheSameValues) {
+  TempDir dir;
+  DatabaseWrittenBeforeOpensWithTheSameValues(dir.File("esg.db"));
+}
+
+TEST(ConfigVersionPostgres, ADatabaseWrittenBeforeTheKeyedFormOpensWithTheSameValues) {
+  std::string error;
+  esg::testing::PostgresServer* pg = esg::testing::PostgresServer::Shared(&error);
+  ASSERT_NE(pg, nullptr) << "the PostgreSQL test server cannot start: " << error;
+  absl::StatusOr<std::string> uri = pg->CreateDatabase();
+  ASSERT_TRUE(uri.ok()) << uri.status();
+  DatabaseWrittenBeforeOpensWithTheSameValues(*uri);
 }
 
 }  // namespace
