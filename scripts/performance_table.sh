@@ -14,7 +14,7 @@ bench="$build/tests/bench/esg_bench"
 [[ -x "$bench" ]] || { echo "no $bench: cmake --build $build --target esg_bench" >&2; exit 2; }
 json=$(mktemp)
 trap 'rm -f "$json"' EXIT
-filter='^BM_(Simulate24hFourGyrosCalibration|Calibrate24hModel10Plus11|Calibrate24hAtIntegrationRate|MeasurementStep|Predict6hAt60s|PredictSixHoursAt60s|IngestThroughGrpc/[01]/|EchoStream|StorageArchiveFrames/100/1/|StorageFilterEffects/1/1/|Diagnose30h/2/)'
+filter='^BM_(Simulate24hFourGyrosCalibration|Calibrate24hModel10Plus11|Calibrate24hAtIntegrationRate|Calibrate24hMotionBounded|MeasurementStep|SessionCopy|Predict6hAt60s|PredictSixHoursAt60s|IngestThroughGrpc/[01]/|EchoStream|StorageArchiveFrames/100/1/|StorageFilterEffects/1/1/|Diagnose30h/2/)'
 load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 "$bench" --benchmark_filter="$filter" --benchmark_repetitions="$reps" \
   --benchmark_enable_random_interleaving=true --benchmark_format=json \
