@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <utility>
 #include <vector>
@@ -212,9 +213,11 @@ class JsonPrettyPrinter {
     out_.append(in_.data() + start, pos_ - start);
   }
 
-  // True when the object starting at pos_ ('{') holds at most two members and no object or
-  // array: a keyed coefficient, {"term": "c1x", "valueDegH": 0.02}, printed on one line.
-  bool SmallObject() const {
+  // True when the object or array starting at pos_ holds no object or array and at most
+  // `max_commas` commas before its `close`: an array of scalars, or (max_commas 1) a keyed
+  // coefficient, {"term": "c1x", "valueDegH": 0.02}; either is printed on one line. Text that
+  // ends first is flat for an array, not for an object.
+  bool Flat(char close, int max_commas) const {
     bool in_string = false;
     int commas = 0;
     for (size_t i = pos_ + 1; i < in_.size(); ++i) {
@@ -228,30 +231,11 @@ class JsonPrettyPrinter {
         return false;
       } else if (c == ',') {
         ++commas;
-      } else if (c == '}') {
-        return commas <= 1;
+      } else if (c == close) {
+        return commas <= max_commas;
       }
     }
-    return false;
-  }
-
-  // True when the array starting at pos_ ('[') holds no object or array.
-  bool FlatArray() const {
-    bool in_string = false;
-    for (size_t i = pos_ + 1; i < in_.size(); ++i) {
-      const char c = in_[i];
-      if (in_string) {
-        if (c == '\\') ++i;
-        else if (c == '"') in_string = false;
-      } else if (c == '"') {
-        in_string = true;
-      } else if (c == '[' || c == '{') {
-        return false;
-      } else if (c == ']') {
-        return true;
-      }
-    }
-    return true;
+    return close == ']';
   }
 
   // `in_array`: the value is an element of an array.
@@ -260,7 +244,8 @@ class JsonPrettyPrinter {
     const char c = in_[pos_];
     if (c == '{' || c == '[') {
       const char close = c == '{' ? '}' : ']';
-      const bool flat = c == '[' ? FlatArray() : in_array && SmallObject();
+      const bool flat = c == '[' ? Flat(']', std::numeric_limits<int>::max())
+                                 : in_array && Flat('}', 1);
       out_ += c;
       ++pos_;
       if (in_[pos_] == close) {
