@@ -528,17 +528,57 @@ absl::StatusOr<estimator::DriftCoefficients> DriftModelFromProto(const esg::v1::
 
 namespace {
 
+// Where the message gave a coefficient, as a message names it: "<field>.coefficients[2].valueDegH"
+// when keyed (GyroDriftModel.coefficients), else its deprecated field "<field>.c1DegH[2]" (also
+// for a term given by neither, which reads as 0).
+std::string DriftTermPath(const esg::v1::GyroDriftModel& proto,
+                          const estimator::FixedTermDescriptor& term, absl::string_view field) {
+  for (int i = 0; i < proto.coefficients_size(); ++i) {
+    if (absl::string_view(proto.coefficients(i).term()) == term.storage_key) {
+      return absl::StrCat(field, ".coefficients[", i, "].valueDegH");
+    }
+  }
+  return absl::StrCat(field, ".", estimator::FixedTermJsonName(term));
+}
+
 // SigmaKeptPositive for every coefficient of a modelSigma.
 absl::Status DriftSigmasKeptPositive(const esg::v1::GyroDriftModel& proto,
                                      const estimator::DriftCoefficients& c,
                                      absl::string_view field) {
   const estimator::DriftVector theta = c.AsVector();
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
-    RETURN_IF_ERROR(SigmaKeptPositive(
-        DriftModelTermDegH(proto, term), theta[term.theta_index],
-        absl::StrCat(field, ".", estimator::FixedTermJsonName(term))));
+    RETURN_IF_ERROR(SigmaKeptPositive(DriftModelTermDegH(proto, term), theta[term.theta_index],
+                                      DriftTermPath(proto, term, field)));
   }
   return absl::OkStatus();
+}
+
+// The paths the configuration wrote its keyed coefficients at, by the field path ValidateConfig
+// names a coefficient with ("gyros[1].model.c1DegH[2]" -> "gyros[1].model.coefficients[0].
+// valueDegH").
+using KeyedPaths = std::vector<std::pair<std::string, std::string>>;
+
+void AddKeyedPaths(const esg::v1::GyroDriftModel& proto, absl::string_view field,
+                   KeyedPaths* paths) {
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    if (KeyedEntry(proto, term) == nullptr) continue;
+    paths->emplace_back(absl::StrCat(field, ".", estimator::FixedTermJsonName(term)),
+                        DriftTermPath(proto, term, field));
+  }
+}
+
+// ValidateConfig's refusal ("<field path>: <reason>") naming a coefficient by its field, as the
+// user wrote it: the keyed path when it was given keyed, so that the message points at the line
+// of the file (or the entry of the request) to correct.
+absl::Status AtPathWritten(const absl::Status& status, const KeyedPaths& paths) {
+  for (const auto& [field_path, keyed_path] : paths) {
+    const std::string prefix = absl::StrCat(field_path, ": ");
+    if (absl::StartsWith(status.message(), prefix)) {
+      return absl::Status(status.code(),
+                          absl::StrCat(keyed_path, ": ", status.message().substr(prefix.size())));
+    }
+  }
+  return status;
 }
 
 }  // namespace
@@ -559,6 +599,7 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
   using estimator::ArcsecToRad;
   estimator::SpacecraftConfig config;
   config.spacecraft_id = proto.spacecraft_id();
+  KeyedPaths keyed_paths;
   for (int i = 0; i < proto.gyros_size(); ++i) {
     const esg::v1::GyroConfig& g = proto.gyros(i);
     const std::string prefix = absl::StrFormat("gyros[%d]", i);
@@ -577,6 +618,8 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
                      DriftModelFromProto(g.model_sigma(), absl::StrCat(prefix, ".modelSigma")));
     RETURN_IF_ERROR(DriftSigmasKeptPositive(g.model_sigma(), gyro.model_sigma,
                                             absl::StrCat(prefix, ".modelSigma")));
+    AddKeyedPaths(g.model(), absl::StrCat(prefix, ".model"), &keyed_paths);
+    AddKeyedPaths(g.model_sigma(), absl::StrCat(prefix, ".modelSigma"), &keyed_paths);
     gyro.misalignment_sigma = ArcsecToRad(g.misalignment_sigma_arcsec());
     RETURN_IF_ERROR(SigmaKeptPositive(g.misalignment_sigma_arcsec(), gyro.misalignment_sigma,
                                       absl::StrCat(prefix, ".misalignmentSigmaArcsec")));
@@ -650,7 +693,9 @@ absl::StatusOr<estimator::SpacecraftConfig> ConfigFromProto(const esg::v1::Space
     config.channels.push_back(std::move(channel));
   }
 
-  RETURN_IF_ERROR(estimator::ValidateConfig(config));
+  if (absl::Status s = estimator::ValidateConfig(config); !s.ok()) {
+    return AtPathWritten(s, keyed_paths);
+  }
   return config;
 }
 

@@ -83,6 +83,11 @@ constexpr char kDesignJson[] = R"json({
   "randomWalkDegHSqrtH": 0.002
 })json";
 
+// Gyro 3's model and modelSigma as kDesignJson writes them (the one place they are so).
+constexpr char kGyro3Sigma[] =
+    "{\"k0DegH\": 0.25},\n     \"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1], "
+    "\"c2DegH\": [0.1,0.1,0.1]}}";
+
 std::string DesignJsonWith(absl::string_view from, absl::string_view to) {
   std::string json = kDesignJson;
   const std::string replaced = absl::StrReplaceAll(json, {{from, to}});
@@ -488,21 +493,25 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfigCase{"CaseToBodyWrongLength", "[1,0,0, 0,0,-1, 0,1,0]", "[1,0,0, 0,0,-1, 0,1]",
                       "gyros[2].caseToBody: expected 9 values (C_b_k row-major), got 8"},
         BadConfigCase{"VectorWrongLength", "\"c1DegH\": [0.05,-0.02,0.01]",
-                      "\"c1DegH\": [0.05,-0.02]", "gyros[1].model.c1DegH: expected 3 values, got 2"},
+                      "\"c1DegH\": [0.05,-0.02]",
+                      "gyros[1].model.c1DegH: expected 3 values, got 2"},
         BadConfigCase{"NoiseWrongLength", "[5, 5, 30]", "[5, 5, 30, 1]",
                       "starTracker.noiseArcsec: expected 3 values, got 4"},
         BadConfigCase{"UnknownField", "\"id\": 1,", "\"id\": 1, \"k0\": 0.1,",
                       "gyros[0].k0: unknown field"},
         BadConfigCase{"UnknownTopLevelField", "\"readoutNoiseArcsec\": 3",
-                      "\"readoutNoiseArcsec\": 3, \"readoutNoise\": 3", "readoutNoise: unknown field"},
+                      "\"readoutNoiseArcsec\": 3, \"readoutNoise\": 3",
+                      "readoutNoise: unknown field"},
         BadConfigCase{"DuplicateGyroId", "\"id\": 3,", "\"id\": 2,",
                       "gyros[2].id: gyro 2 is configured twice"},
-        BadConfigCase{"GyroIdOutOfRange", "\"id\": 3,", "\"id\": 5,", "gyros[2].id: 5 is outside 1..4"},
+        BadConfigCase{"GyroIdOutOfRange", "\"id\": 3,", "\"id\": 5,",
+                      "gyros[2].id: 5 is outside 1..4"},
         BadConfigCase{"PairNamesMissingGyro", "\"reservePair\": [1, 3]", "\"reservePair\": [1, 4]",
                       "reservePair: gyro 4 is not among the configured gyros"},
         BadConfigCase{"PairWrongLength", "\"workingPair\": [1, 2]", "\"workingPair\": [1, 2, 3]",
                       "workingPair: expected 2 gyro ids, got 3"},
-        BadConfigCase{"NegativeSigma", "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1]",
+        BadConfigCase{"NegativeSigma",
+                      "\"modelSigma\": {\"k0DegH\": 0.3,  \"c1DegH\": [0.1,0.1,0.1]",
                       "\"modelSigma\": {\"k0DegH\": -0.3,  \"c1DegH\": [0.1,0.1,0.1]",
                       "gyros[0].modelSigma.k0DegH: -0.3 is outside [0, 10] deg/h"},
         BadConfigCase{"NegativeNoise", "[5, 5, 30]", "[5, -5, 30]", "starTracker.noiseArcsec"},
@@ -568,9 +577,33 @@ INSTANTIATE_TEST_SUITE_P(
                       "\"coefficients\": [{\"term\": \"c1y\", \"valueDegH\": 0.1}]},",
                       "gyros[2].model.coefficients[0].term: term \"c1y\" is also given by "
                       "gyros[2].model.c1DegH; give it once"},
+        // A keyed coefficient out of range is named where it was written, not by its field.
         BadConfigCase{"KeyedCoefficientTooLarge", "\"model\":      {\"k0DegH\": 0.25},",
-                      "\"model\": {\"coefficients\": [{\"term\": \"nu31\", \"valueDegH\": -11}]},",
-                      "gyros[2].model.nuDegH[1]: -11 is outside [-10, 10] deg/h"},
+                      "\"model\": {\"coefficients\": [{\"term\": \"k0\", \"valueDegH\": 0.25}, "
+                      "{\"term\": \"c1y\", \"valueDegH\": 0.1}, "
+                      "{\"term\": \"nu31\", \"valueDegH\": -11}]},",
+                      "gyros[2].model.coefficients[2].valueDegH: -11 is outside [-10, 10] deg/h"},
+        BadConfigCase{
+            "KeyedSigmaNegative", kGyro3Sigma,
+            "{\"k0DegH\": 0.25},\n     \"modelSigma\": {\"coefficients\": [{\"term\": "
+            "\"k0\", \"valueDegH\": 0.3}, {\"term\": \"c2z\", \"valueDegH\": -0.1}]}}",
+            "gyros[2].modelSigma.coefficients[1].valueDegH: -0.1 is outside [0, 10] deg/h"},
+        BadConfigCase{
+            "KeyedSigmaTooSmallForAVariance", kGyro3Sigma,
+            "{\"k0DegH\": 0.25},\n     \"modelSigma\": {\"coefficients\": [{\"term\": "
+            "\"mu12\", \"valueDegH\": 1e-160}]}}",
+            "gyros[2].modelSigma.coefficients[0].valueDegH: 1e-160 deg/h is a prior sigma "
+            "below about"},
+        BadConfigCase{
+            "KeyedSigmaUnderflowingToZero", kGyro3Sigma,
+            "{\"k0DegH\": 0.25},\n     \"modelSigma\": {\"coefficients\": [{\"term\": "
+            "\"mu12\", \"valueDegH\": 5e-324}]}}",
+            "gyros[2].modelSigma.coefficients[0].valueDegH: 4.94066e-324 is a prior sigma "
+            "too small to be represented in SI units"},
+        // The same refusals of the deprecated fields name the field.
+        BadConfigCase{"SigmaTooSmallForAVarianceByItsField", kGyro3Sigma,
+                      "{\"k0DegH\": 0.25},\n     \"modelSigma\": {\"muDegH\": [1e-160, 0, 0]}}",
+                      "gyros[2].modelSigma.muDegH[0]: 1e-160 deg/h is a prior sigma below about"},
         BadConfigCase{"WrongJsonType", "\"k0DegH\": 0.25", "\"k0DegH\": \"fast\"",
                       "gyros[2].model.k0DegH: invalid value \"fast\""},
         BadConfigCase{"WrongJsonTypeInArray", "\"workingPair\": [1, 2]",

@@ -9,7 +9,9 @@
 //     hold no control or bidirectional formatting character;
 //   - a status message echoing a 1 MB value stays bounded (INVALID_ARGUMENT, not
 //     RESOURCE_EXHAUSTED);
-//   - refused tokens are throttled per address, and a valid token still passes meanwhile.
+//   - refused tokens are throttled per address, and a valid token still passes meanwhile;
+//   - a drift coefficient out of range or of an unknown term is named where the request gave it:
+//     its keyed entry, or the deprecated field that still reads.
 #include <chrono>
 #include <cstdint>
 #include <filesystem>
@@ -205,6 +207,63 @@ TEST(HostileInput, PriorSigmaThatUnderflowsIsRefused) {
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << sigma;
     EXPECT_THAT(status.error_message(), HasSubstr("gyros[0].basisTerms[0].sigmaDegH: ")) << sigma;
   }
+}
+
+// ConfigureSpacecraft names a drift coefficient the way the request wrote it: a keyed one
+// (GyroDriftModel.coefficients, as every writer now sends) by its entry, one given by a
+// deprecated field (read for one release) by that field.
+TEST(HostileInput, ADriftCoefficientIsNamedWhereTheRequestGaveIt) {
+  LoopbackServer server;
+  auto stub = server.Stub();
+  const auto configure = [&](const esg::v1::ConfigureRequest& request) {
+    grpc::ClientContext ctx;
+    esg::v1::ConfigureResponse r;
+    return stub->ConfigureSpacecraft(&ctx, request, &r);
+  };
+  const esg::v1::ConfigureRequest keyed = ConfigureRequestFor(RunH().config);
+  ASSERT_EQ(keyed.config().gyros(1).model().coefficients(2).term(), "c1y");
+  esg::v1::ConfigureRequest request = keyed;
+  request.mutable_config()
+      ->mutable_gyros(1)
+      ->mutable_model()
+      ->mutable_coefficients(2)
+      ->set_value_deg_h(11.0);
+  grpc::Status status = configure(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(),
+              HasSubstr("gyros[1].model.coefficients[2].valueDegH: 11 is outside [-10, 10] deg/h"));
+  request = keyed;
+  request.mutable_config()
+      ->mutable_gyros(1)
+      ->mutable_model_sigma()
+      ->mutable_coefficients(4)
+      ->set_value_deg_h(-0.1);
+  status = configure(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(
+      status.error_message(),
+      HasSubstr("gyros[1].modelSigma.coefficients[4].valueDegH: -0.1 is outside [0, 10] deg/h"));
+  request = keyed;
+  request.mutable_config()->mutable_gyros(1)->mutable_model()->mutable_coefficients(0)->set_term(
+      "k9");
+  status = configure(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(),
+              HasSubstr("gyros[1].model.coefficients[0].term: unknown term \"k9\""));
+  // The deprecated field c1_deg_h ("c1DegH" in JSON), set by reflection as an older client would.
+  request = keyed;
+  esg::v1::GyroDriftModel* model = request.mutable_config()->mutable_gyros(1)->mutable_model();
+  model->clear_coefficients();
+  const google::protobuf::FieldDescriptor* c1 = model->GetDescriptor()->FindFieldByName("c1_deg_h");
+  ASSERT_NE(c1, nullptr);
+  for (double v : {0.0, 11.0, 0.0}) model->GetReflection()->AddDouble(model, c1, v);
+  status = configure(request);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(),
+              HasSubstr("gyros[1].model.c1DegH[1]: 11 is outside [-10, 10] deg/h"));
+  // The request unaltered is accepted: each refusal above was of the value changed.
+  status = configure(keyed);
+  EXPECT_TRUE(status.ok()) << status.error_message();
 }
 
 // A frame an older esgd archived with u_k_mv = 1e308: re-applying the archive (a replaced
