@@ -261,14 +261,15 @@ struct SessionOptions {
   };
   std::vector<CoefficientRelease> coefficient_releases;
   // How Propagate sizes the integration substeps between two frames (docs/physics.md,
-  // "Propagation"; docs/decisions.md D120). kFixedRate: filter.integrationRateHz (the paper's
-  // 8 Hz). kMotionBounded: the fewest substeps that keep, over each, within
-  // max_substep_turn_deg: the body's turn between the frames (the attitude pair's attitudes),
-  // each reading's turn, each spin axis's turn by its drift, and the phase of a basis term that
-  // varies with time; never more than kFixedRate takes, and kFixedRate's count over an interval
-  // that holds a basis term's switch-on or for a gyro with a channel term.
+  // "Propagation"; docs/decisions.md D120, D125). kMotionBounded (the default, D125): the fewest
+  // substeps that keep, over each, within max_substep_turn_deg: the body's turn between the
+  // frames (the attitude pair's attitudes), each reading's turn, each spin axis's turn by its
+  // drift, and the phase of a basis term that varies with time; never more than kFixedRate
+  // takes, and kFixedRate's count over an interval that holds a basis term's switch-on or for a
+  // gyro with a channel term. kFixedRate: filter.integrationRateHz (the paper's 8 Hz), the
+  // reference the motion-bounded substeps are measured against.
   enum class Substeps { kFixedRate, kMotionBounded };
-  Substeps substeps = Substeps::kFixedRate;
+  Substeps substeps = Substeps::kMotionBounded;
   double max_substep_turn_deg = 0.5;  // kMotionBounded: (0, 10] deg
 };
 

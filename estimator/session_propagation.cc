@@ -101,9 +101,11 @@ absl::StatusOr<int> SubstepCount(const ReadingEnds& ends, double span, SubstepRu
   if (rule == SubstepRule::kReadingTurn) {
     substeps_wanted = std::ceil(max_turn / (0.1 * kRadPerDeg));
   } else if (rule == SubstepRule::kMotionBounded) {
-    // NaN-safe: a motion that is not finite falls back to the fixed rate.
+    // A motion that is not finite (NaN from a span of absl::InfiniteFuture times a rate of 0)
+    // falls back to the fixed rate, which refuses such a span below. std::max would drop a NaN
+    // second argument and leave the readings' turn alone.
     const double bounded = std::ceil(std::max(max_turn, motion_rad) / max_substep_turn_rad);
-    if (bounded < fixed_rate_substeps) substeps_wanted = bounded;
+    if (std::isfinite(motion_rad) && bounded < fixed_rate_substeps) substeps_wanted = bounded;
   }
   if (!(substeps_wanted <= static_cast<double>(std::numeric_limits<int>::max()))) {
     return absl::OutOfRangeError(absl::StrFormat(

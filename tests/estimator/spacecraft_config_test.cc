@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -433,36 +434,79 @@ TEST(ConfigLimits, CaseToBodyMustBeAProperRotation) {
 
 // ---------------------------------------------------------------------------------------------
 // The session does not rely on its caller to bound a frame gap: a step count beyond int is
-// refused (it used to overflow static_cast<int>: undefined behaviour).
+// refused (it used to overflow static_cast<int>: undefined behaviour). At the fixed rate a
+// 100-year gap is 2.5e10 steps; with the motion-bounded substeps (the default, D125) it is the
+// turns' count and is propagated, while a frame at absl::InfiniteFuture is refused in both.
 
-TEST(SessionStepCount, AGapTooLongToCountInAnIntIsOutOfRangeAndLeavesTheSessionUnchanged) {
+// The session after the first two frames of a 10-minute calibration flight, with `substeps`.
+struct TwoFrames {
   SimulationSpec spec;
-  spec.config = testing::PaperConfig();
-  spec.duration = 600.0;
-  spec.seed = 5;
-  spec.profile = *MakeNamedProfile("calibration", spec.duration, spec.seed);
-  absl::StatusOr<SimulationResult> sim = Simulate(spec);
-  ASSERT_THAT(sim, IsOk());
-  const std::vector<TelemetryFrame>& frames = sim->recording.frames;
-  ASSERT_GE(frames.size(), 3u);
+  std::vector<TelemetryFrame> frames;
+  std::optional<EstimationSession> session;
+};
+TwoFrames AfterTwoFrames(SessionOptions::Substeps substeps) {
+  TwoFrames t;
+  t.spec.config = testing::PaperConfig();
+  t.spec.duration = 600.0;
+  t.spec.seed = 5;
+  t.spec.profile = *MakeNamedProfile("calibration", t.spec.duration, t.spec.seed);
+  absl::StatusOr<SimulationResult> sim = Simulate(t.spec);
+  EXPECT_THAT(sim, IsOk());
+  if (!sim.ok()) return t;
+  t.frames = sim->recording.frames;
+  EXPECT_GE(t.frames.size(), 3u);
   SessionOptions options;
   options.model = *ParseModel("10+11");
-  absl::StatusOr<EstimationSession> session = EstimationSession::Create(spec.config, options);
-  ASSERT_THAT(session, IsOk());
-  ASSERT_THAT(session->AddFrame(frames[0]), IsOk());
-  ASSERT_THAT(session->AddFrame(frames[1]), IsOk());
-  const auto before = session->ExportCheckpoint().values;
+  options.substeps = substeps;
+  absl::StatusOr<EstimationSession> session = EstimationSession::Create(t.spec.config, options);
+  EXPECT_THAT(session, IsOk());
+  if (!session.ok() || t.frames.size() < 3) return t;
+  EXPECT_THAT(session->AddFrame(t.frames[0]), IsOk());
+  EXPECT_THAT(session->AddFrame(t.frames[1]), IsOk());
+  t.session = *std::move(session);
+  return t;
+}
+
+TEST(SessionStepCount, AGapTooLongToCountInAnIntIsOutOfRangeAndLeavesTheSessionUnchanged) {
+  TwoFrames t = AfterTwoFrames(SessionOptions::Substeps::kFixedRate);
+  ASSERT_TRUE(t.session.has_value());
+  EstimationSession& session = *t.session;
+  const auto before = session.ExportCheckpoint().values;
 
   // 100 years at 8 Hz: 2.5e10 steps.
-  TelemetryFrame far = frames[2];
-  far.time = frames[1].time + absl::Hours(24 * 365 * 100);
-  EXPECT_THAT(session->AddFrame(far),
+  TelemetryFrame far = t.frames[2];
+  far.time = t.frames[1].time + absl::Hours(24 * 365 * 100);
+  EXPECT_THAT(session.AddFrame(far),
               StatusIs(absl::StatusCode::kOutOfRange,
                        AllOf(HasSubstr("filter.integrationRateHz 8"), HasSubstr("steps"))));
   far.time = absl::InfiniteFuture();
-  EXPECT_THAT(session->AddFrame(far), StatusIs(absl::StatusCode::kOutOfRange, HasSubstr("steps")));
-  EXPECT_EQ(session->ExportCheckpoint().values, before);
-  EXPECT_THAT(session->AddFrame(frames[2]), IsOk());  // still usable
+  EXPECT_THAT(session.AddFrame(far), StatusIs(absl::StatusCode::kOutOfRange, HasSubstr("steps")));
+  EXPECT_EQ(session.ExportCheckpoint().values, before);
+  EXPECT_THAT(session.AddFrame(t.frames[2]), IsOk());  // still usable
+}
+
+// Motion-bounded: the span at absl::InfiniteFuture gives a motion that is not finite, which
+// falls back to the fixed rate's count and is refused as above (it used to be dropped by
+// std::max, the count taken from the readings' turn alone, and the propagation failed with a
+// covariance that is not finite); a 100-year gap is propagated in fewer substeps than int holds.
+TEST(SessionStepCount, MotionBoundedRefusesAnInfiniteSpanAndPropagatesACenturyGap) {
+  TwoFrames t = AfterTwoFrames(SessionOptions::Substeps::kMotionBounded);
+  ASSERT_TRUE(t.session.has_value());
+  EstimationSession& session = *t.session;
+  const auto before = session.ExportCheckpoint().values;
+
+  TelemetryFrame far = t.frames[2];
+  far.time = absl::InfiniteFuture();
+  EXPECT_THAT(session.AddFrame(far), StatusIs(absl::StatusCode::kOutOfRange, HasSubstr("steps")));
+  EXPECT_EQ(session.ExportCheckpoint().values, before);
+  EXPECT_THAT(session.AddFrame(t.frames[2]), IsOk());  // still usable
+
+  far.time = t.frames[2].time + absl::Hours(24 * 365 * 100);
+  EXPECT_THAT(session.AddFrame(far), IsOk());
+  EXPECT_GE(session.last_propagation_substeps(), 1);
+  for (const GyroEstimate& g : session.Gyros()) {
+    EXPECT_TRUE(g.sigma.AsVector().allFinite()) << "gyro " << g.id;
+  }
 }
 
 }  // namespace
