@@ -191,12 +191,9 @@ absl::Status ParseTime(const json& j, TimeMapping* time) {
   if (j.contains("epoch")) {
     absl::StatusOr<std::string> epoch = GetString(j["epoch"], "time.epoch");
     if (!epoch.ok()) return epoch.status();
-    std::string error;
-    if (!absl::ParseTime(absl::RFC3339_full, *epoch, &time->epoch, &error)) {
-      return FieldError("time.epoch", absl::StrFormat("'%s' is not an RFC 3339 time such as "
-                                                      "1970-01-01T00:00:00Z (%s)",
-                                                      *epoch, error));
-    }
+    absl::StatusOr<absl::Time> epoch_time = estimator::ParseUtc(*epoch, "time.epoch");
+    if (!epoch_time.ok()) return epoch_time.status();
+    time->epoch = *epoch_time;
   }
   if (time->format == TimeFormat::kPattern) {
     absl::StatusOr<std::string> pattern = GetString(j["pattern"], "time.pattern");
@@ -849,15 +846,11 @@ absl::StatusOr<estimator::Recording> ParseMappedRecordingCsv(std::string_view st
     if (t0_text.empty()) {
       problems.Add(line_no, t0.Where(), "empty (every row needs its time)");
     } else if (tm.format == TimeFormat::kRfc3339) {
-      absl::Time t;
-      std::string error;
-      if (absl::ParseTime(absl::RFC3339_full, t0_text, &t, &error)) {
-        time = t;
+      // The column is named by the problem's place.
+      if (absl::StatusOr<absl::Time> t = estimator::ParseUtc(t0_text, ""); t.ok()) {
+        time = *t;
       } else {
-        problems.Add(
-            line_no, t0.Where(),
-            absl::StrCat(Quote(t0_text), " is not an RFC 3339 time such as 2019-03-01T00:00:00Z (",
-                         error, ")"));
+        problems.Add(line_no, t0.Where(), std::string(t.status().message()));
       }
     } else if (tm.format == TimeFormat::kPattern) {
       absl::Time t;

@@ -266,16 +266,14 @@ absl::StatusOr<estimator::Recording> ParseRecordingCsv(std::string_view std_text
 
     // Time.
     const absl::string_view time_text = fields[field_index[kTimeColumn]];
-    absl::Time time;
-    std::string time_error;
+    // The column is named by the problem's place.
+    const absl::StatusOr<absl::Time> parsed = estimator::ParseUtc(time_text, "");
     if (time_text.empty()) {
       problems.Add(line_no, names[kTimeColumn], "empty (every row needs its time)");
-    } else if (!absl::ParseTime(absl::RFC3339_full, time_text, &time, &time_error)) {
-      problems.Add(line_no, names[kTimeColumn],
-                   absl::StrCat(Quote(time_text),
-                                " is not an RFC 3339 time such as 2019-03-01T00:00:00Z (",
-                                time_error, ")"));
+    } else if (!parsed.ok()) {
+      problems.Add(line_no, names[kTimeColumn], std::string(parsed.status().message()));
     } else {
+      const absl::Time time = *parsed;
       if (previous_time.has_value() && time <= *previous_time) {
         problems.Add(line_no, names[kTimeColumn],
                      absl::StrFormat("%s is not after %s of line %d (times must increase)",

@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -28,6 +30,7 @@
 #include "estimator/model_terms.h"
 #include "estimator/offline.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 #include "formats/column_mapping.h"
 #include "formats/recording_csv.h"
 #include "nlohmann/json.hpp"
@@ -393,16 +396,17 @@ int RunCalibrate(const CommonOptions& o) {
   return 0;
 }
 
-// --gap-start: an RFC 3339 time or hours from the first frame.
-std::optional<absl::Time> ParseGapStart(const std::string& text, absl::Time first) {
+// --gap-start: hours from the first frame, or an RFC 3339 time (estimator::ParseUtc, whose
+// refusal is completed with the other form).
+absl::StatusOr<absl::Time> ParseGapStart(const std::string& text, absl::Time first) {
   double hours = 0.0;
   if (absl::SimpleAtod(text, &hours) && std::isfinite(hours)) {
     return first + absl::Seconds(estimator::HoursToSeconds(hours));
   }
-  absl::Time t;
-  std::string err;
-  if (absl::ParseTime(absl::RFC3339_full, text, &t, &err)) return t;
-  return std::nullopt;
+  absl::StatusOr<absl::Time> t = estimator::ParseUtc(text, "--gap-start");
+  if (t.ok()) return t;
+  return absl::InvalidArgumentError(absl::StrCat(
+      t.status().message(), ", nor a number of hours from the first frame (e.g. 1.5)"));
 }
 
 struct GapOptions {
@@ -415,9 +419,8 @@ int RunGap(const GapOptions& o) {
   auto in = Load(o.common);
   if (!in) return 2;
   const auto gap_start = ParseGapStart(o.gap_start, in->recording.frames.front().time);
-  if (!gap_start) {
-    std::fprintf(stderr, "esg gap: --gap-start '%s': neither an RFC 3339 time nor hours from the start\n",
-                 o.gap_start.c_str());
+  if (!gap_start.ok()) {
+    std::fprintf(stderr, "esg gap: %s\n", std::string(gap_start.status().message()).c_str());
     return 2;
   }
   Progress progress("gap");

@@ -152,8 +152,8 @@ int RunList(const AlertsOptions& o, const GlobalOptions& global) {
   request.set_spacecraft_id(o.spacecraft_id);
   absl::Time since = absl::InfinitePast();  // clamped to 0001-01-01: every stored alert
   if (!o.since.empty()) {
-    const std::optional<absl::Time> t = ParseUtc(o.since);
-    if (!t) return ReportBadArgument(kVerb, "--since '" + o.since + "': not an RFC 3339 time");
+    const std::optional<absl::Time> t = TimeOption(kVerb, "--since", o.since);
+    if (!t) return kExitBadArguments;
     since = *t;
   }
   *request.mutable_since() = proto_convert::TimeToProto(since);

@@ -9,6 +9,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
+#include "estimator/utc_time.h"
 #include "proto/convert.h"
 
 namespace esg::client {
@@ -66,11 +67,12 @@ std::optional<std::string> OperatorName(const char* verb, const std::string& giv
   return std::nullopt;
 }
 
-std::optional<absl::Time> ParseUtc(const std::string& text) {
-  absl::Time t;
-  std::string error;
-  if (!absl::ParseTime(absl::RFC3339_full, text, &t, &error)) return std::nullopt;
-  return t;
+std::optional<absl::Time> TimeOption(const char* verb, const char* option,
+                                     const std::string& text) {
+  absl::StatusOr<absl::Time> time = estimator::ParseUtc(text, option);
+  if (time.ok()) return *time;
+  ReportBadArgument(verb, std::string(time.status().message()));
+  return std::nullopt;
 }
 
 std::optional<OutputFormat> FormatWithCsvFlag(const char* verb, bool csv, OutputFormat format) {

@@ -45,25 +45,30 @@ int ReportRpcError(const char* verb, const absl::Status& status, const GlobalOpt
 int ReportBadArgument(const char* verb, const std::string& message);
 
 // Times are printed with FormatUtc of output_format.h (RFC 3339 UTC, `Z`, milliseconds).
-// RFC 3339 ("2019-03-01T00:00:00Z", "...+03:00", fractional seconds allowed); nullopt otherwise.
-std::optional<absl::Time> ParseUtc(const std::string& text);
+// The value of a time option (--from, --to, --since, --start): RFC 3339 read by the one parser,
+// estimator::ParseUtc ("2019-03-01T00:00:00Z", "...+03:00", fractional seconds allowed). Anything
+// else is nullopt after ReportBadArgument in its wording, naming the option:
+//   esg predict: --from: 'yesterday' is not an RFC 3339 time such as 2019-03-01T00:00:00Z
+// (the verb exits 2).
+std::optional<absl::Time> TimeOption(const char* verb, const char* option, const std::string& text);
 
 // Sets request->from and request->to from the --from and --to option values (an empty value
 // leaves that bound unset): the span [--from, --to], both ends inclusive, as the service reads
 // it (docs/cli.md "Time spans"). Returns kExitOk, or ReportBadArgument's code naming the option
-// whose value is not an RFC 3339 time, or --to before --from (the request is then not to be sent).
+// whose value is not an RFC 3339 time (TimeOption), or --to before --from (the request is then
+// not to be sent).
 template <typename Request>
 int SetTimeSpan(const char* verb, const std::string& from, const std::string& to,
                 Request* request) {
   std::optional<absl::Time> from_time;
   if (!from.empty()) {
-    from_time = ParseUtc(from);
-    if (!from_time) return ReportBadArgument(verb, "--from '" + from + "': not an RFC 3339 time");
+    from_time = TimeOption(verb, "--from", from);
+    if (!from_time) return kExitBadArguments;
     *request->mutable_from() = proto_convert::TimeToProto(*from_time);
   }
   if (!to.empty()) {
-    const std::optional<absl::Time> t = ParseUtc(to);
-    if (!t) return ReportBadArgument(verb, "--to '" + to + "': not an RFC 3339 time");
+    const std::optional<absl::Time> t = TimeOption(verb, "--to", to);
+    if (!t) return kExitBadArguments;
     if (from_time && *t < *from_time) {
       return ReportBadArgument(verb, "--to '" + to + "': is before --from '" + from + "'");
     }

@@ -40,7 +40,9 @@
 #include "client/commands/server_common.h"
 #include "client/output_format.h"
 #include "estimator/rotation.h"
+#include "estimator/utc_time.h"
 #include "formats/aem.h"
+#include "formats/csv_lines.h"
 #include "proto/attitude_source_words.h"
 #include "proto/convert.h"
 
@@ -89,12 +91,14 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
     for (const storage::AemSample& s : *plan) add(s.epoch, s.q_in_b);
     return out;
   }
+  // The line reader of the recording CSVs (formats/csv_lines.h): lines numbered as an editor
+  // numbers them, blank ones skipped, a byte order mark dropped.
+  storage::CsvLines lines(text);
   int line_number = 0;
+  absl::string_view raw;
   bool header = true;
-  for (absl::string_view raw : absl::StrSplit(text, '\n')) {
-    ++line_number;
+  while (lines.Next(&line_number, &raw)) {
     const absl::string_view line = absl::StripAsciiWhitespace(raw);
-    if (line.empty()) continue;
     const std::vector<std::string> f = absl::StrSplit(line, ',');
     auto error = [&](const std::string& what) {
       return absl::InvalidArgumentError(
@@ -117,8 +121,8 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
       }
       continue;
     }
-    const std::optional<absl::Time> t = ParseUtc(std::string(absl::StripAsciiWhitespace(f[0])));
-    if (!t) return error(absl::StrCat("time '", f[0], "': not an RFC 3339 time"));
+    const absl::StatusOr<absl::Time> t = estimator::ParseUtc(f[0], "time");
+    if (!t.ok()) return error(std::string(t.status().message()));
     estimator::ScalarFirst q;
     for (int i = 0; i < 4; ++i) {
       if (!absl::SimpleAtod(absl::StripAsciiWhitespace(f[i + 1]), &q[i]) || !std::isfinite(q[i])) {
@@ -134,10 +138,12 @@ absl::StatusOr<std::vector<esg::v1::AttitudeSample>> ReadPlanned(const std::stri
 }
 
 int RunPredict(const PredictOptions& o, const GlobalOptions& global) {
-  const std::optional<absl::Time> from = o.from.empty() ? absl::Now() : ParseUtc(o.from);
-  if (!from) return ReportBadArgument(kVerb, "--from '" + o.from + "': not an RFC 3339 time");
-  const std::optional<absl::Time> to = o.to.empty() ? *from + kDefaultSpan : ParseUtc(o.to);
-  if (!to) return ReportBadArgument(kVerb, "--to '" + o.to + "': not an RFC 3339 time");
+  const std::optional<absl::Time> from =
+      o.from.empty() ? absl::Now() : TimeOption(kVerb, "--from", o.from);
+  if (!from) return kExitBadArguments;
+  const std::optional<absl::Time> to =
+      o.to.empty() ? *from + kDefaultSpan : TimeOption(kVerb, "--to", o.to);
+  if (!to) return kExitBadArguments;
   if (*to < *from) {
     return ReportBadArgument(kVerb,
                              "--to " + FormatUtc(*to) + ": before --from " + FormatUtc(*from));

@@ -28,6 +28,7 @@
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
+#include "estimator/utc_time.h"
 #include "formats/ccsds_kvn.h"
 #include "formats/oem.h"
 #include "formats/recording_csv.h"
@@ -341,13 +342,8 @@ int RunSimulate(const SimulateOptions& o) {
     return BadArgument(
         absl::StrFormat("--integration-rate: must be > 0 Hz, got %g", o.integration_rate_hz));
   }
-  absl::Time start;
-  std::string parse_error;
-  if (!absl::ParseTime(absl::RFC3339_full, o.start, &start, &parse_error)) {
-    return BadArgument(
-        absl::StrCat("--start: '", o.start,
-                     "' is not an RFC 3339 time (e.g. 2019-03-01T00:00:00Z): ", parse_error));
-  }
+  const absl::StatusOr<absl::Time> start = estimator::ParseUtc(o.start, "--start");
+  if (!start.ok()) return BadArgument(std::string(start.status().message()));
 
   absl::StatusOr<estimator::SpacecraftConfig> config = proto_convert::ReadConfigFile(o.config_path);
   if (!config.ok()) return Fail("--config", config.status());
@@ -361,7 +357,7 @@ int RunSimulate(const SimulateOptions& o) {
 
   estimator::SimulationSpec spec;
   spec.config = *std::move(config);
-  spec.start = start;
+  spec.start = *start;
   spec.duration = estimator::HoursToSeconds(o.hours);
   spec.telemetry_step = o.telemetry_step;
   spec.integration_rate_hz = o.integration_rate_hz;
@@ -404,7 +400,7 @@ int RunSimulate(const SimulateOptions& o) {
   }
   if (!o.orbit_out_path.empty()) {
     absl::StatusOr<std::string> oem = OrbitOem(scenario.profile_options.orbital,
-                                               spec.config.spacecraft_id, start, spec.duration);
+                                               spec.config.spacecraft_id, *start, spec.duration);
     if (!oem.ok()) return Fail("--orbit-out", oem.status());
     std::ofstream out(o.orbit_out_path, std::ios::binary);
     out << *oem;

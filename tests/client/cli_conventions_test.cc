@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <cstdlib>
+#include <fstream>
 #include <regex>
 #include <set>
 #include <string>
@@ -277,6 +278,75 @@ TEST(CliConventions, FormatIsValidatedAndJsonIsItsShortForm) {
   EXPECT_THAT(r.err, HasSubstr("--format"));
   r = RunEsg(dir, "status --format json --json");
   EXPECT_EQ(r.exit_code, 2) << "--json and --format exclude each other";
+}
+
+// Every verb that takes a time reads it with the one parser (estimator::ParseUtc) and refuses a
+// bad one in its wording, naming the option, with exit 2 before anything else is done: the server
+// verbs are pointed at an address where nothing listens, so a time checked after connecting
+// would exit 1 (UNAVAILABLE) instead.
+TEST(CliConventions, EveryTimeOptionRefusesABadTimeNamingTheOption) {
+  TempDir dir;
+  const std::string rec = Quote(dir.File("rec.csv"));
+  RunResult r =
+      RunEsg(dir, "simulate --config " + Quote(Rdk1()) + " --hours 1 --seed 3 --out " + rec);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string bad = "2019-03-01T25:00:00Z";
+  const std::string refusal =
+      ": '" + bad + "' is not an RFC 3339 time such as 2019-03-01T00:00:00Z";
+  const std::string offline =
+      " --config " + Quote(Rdk1()) + " --hours 1 --seed 3 --out " + Quote(dir.File("x.csv"));
+  struct Case {
+    std::string verb, args, option;
+  };
+  const std::vector<Case> cases = {
+      {"simulate", offline + " --start ", "--start"},
+      {"gap", " --config " + Quote(Rdk1()) + " --recording " + rec + " --gap-start ",
+       "--gap-start"},
+      {"predict", " --spacecraft RDK-1 --from ", "--from"},
+      {"predict", " --spacecraft RDK-1 --from 2019-03-01T00:00:00Z --to ", "--to"},
+      {"alerts", " --spacecraft RDK-1 --since ", "--since"},
+      {"history", " --spacecraft RDK-1 --from ", "--from"},
+      {"history", " --spacecraft RDK-1 --to ", "--to"},
+      {"estimates", " --spacecraft RDK-1 --from ", "--from"},
+      {"estimates", " --spacecraft RDK-1 --to ", "--to"},
+      {"export history", " --spacecraft RDK-1 --from ", "--from"},
+      {"export history", " --spacecraft RDK-1 --to ", "--to"},
+      {"export telemetry", " --spacecraft RDK-1 --out x.csv --from ", "--from"},
+      {"export telemetry", " --spacecraft RDK-1 --out x.csv --to ", "--to"},
+      {"diagnose", " --spacecraft RDK-1 --from ", "--from"},
+      {"diagnose", " --spacecraft RDK-1 --to ", "--to"},
+  };
+  for (const Case& c : cases) {
+    r = RunEsg(dir, "--server 127.0.0.1:1 " + c.verb + c.args + bad);
+    EXPECT_EQ(r.exit_code, 2) << c.verb << " " << c.option << ": " << r.err;
+    EXPECT_THAT(r.err, HasSubstr("esg " + c.verb + ": " + c.option + refusal)) << c.option;
+  }
+  // --gap-start also takes hours, and says so.
+  r = RunEsg(dir, "gap --config " + Quote(Rdk1()) + " --recording " + rec + " --gap-start soon");
+  EXPECT_THAT(r.err, HasSubstr("esg gap: --gap-start: 'soon' is not an RFC 3339 time such as "
+                               "2019-03-01T00:00:00Z, nor a number of hours from the first frame"));
+  // A time inside a file is read by the same parser and named by its place; the planned CSV's
+  // lines by the recording CSVs' line reader (a byte order mark dropped, blank lines counted).
+  const std::string planned = dir.File("plan.csv");
+  {
+    std::ofstream out(planned);
+    out << "\xEF\xBB\xBFtime,q0,q1,q2,q3\n2019-03-01T00:00:00Z,1,0,0,0\n\nnoon,1,0,0,0\n";
+  }
+  r = RunEsg(dir,
+             "--server 127.0.0.1:1 predict --spacecraft RDK-1 --from 2019-03-01T00:00:00Z "
+             "--planned " +
+                 Quote(planned));
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("line 4: time: 'noon' is not an RFC 3339 time such as "
+                               "2019-03-01T00:00:00Z"));
+  // A good time in another offset is the same instant: the simulated recording starts there.
+  r = RunEsg(dir, "simulate --config " + Quote(Rdk1()) +
+                      " --hours 1 --seed 3 --start "
+                      "2019-03-01T03:00:00+03:00 --out " +
+                      Quote(dir.File("same.csv")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(esg::testing::ReadFile(dir.File("same.csv")),
+            esg::testing::ReadFile(dir.File("rec.csv")));
 }
 
 // One esgd with RDK-1 configured and a 6 h recording replayed, shared by the server tests.

@@ -206,7 +206,7 @@ TEST_F(EstimatesCli, UnknownSpacecraftAndBadTimesAreRefused) {
               HasSubstr("esg estimates: NOT_FOUND: spacecraft_id: 'NOPE-1' is not configured"));
   r = Esg(*dir_, *daemon_, "estimates --spacecraft CLI-EST --from yesterday");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_THAT(r.err, HasSubstr("--from 'yesterday'"));
+  EXPECT_THAT(r.err, HasSubstr("--from: 'yesterday' is not an RFC 3339 time"));
   r = Esg(*dir_, *daemon_,
           "estimates --spacecraft CLI-EST --from 2019-03-02T00:00:00Z --to 2019-03-01T00:00:00Z");
   EXPECT_EQ(r.exit_code, 2) << "refused before the call, as every verb's span (docs/cli.md)";

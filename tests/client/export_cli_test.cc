@@ -244,7 +244,8 @@ TEST_F(ExportCli, BadArgumentsExitTwoNamingTheOptionAndRefusalsExitOne) {
   EXPECT_THAT(r.err, HasSubstr("--out"));
   r = Esg(dir, "export telemetry --spacecraft RDK-1 --from yesterday --out x.csv");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_THAT(r.err, HasSubstr("esg export telemetry: --from 'yesterday': not an RFC 3339 time"));
+  EXPECT_THAT(r.err, HasSubstr("esg export telemetry: --from: 'yesterday' is not an RFC 3339 time "
+                               "such as 2019-03-01T00:00:00Z"));
   r = Esg(dir,
           "export telemetry --spacecraft RDK-1 --from 2019-03-01T02:00:00Z "
           "--to 2019-03-01T01:00:00Z --out x.csv");
