@@ -172,16 +172,18 @@ void PairMismatches(const ThreePairs& pairs, bool st_present, const Quaterniond&
 }
 
 // What every decision of one three-pair isolation reads: the frame, the three gyros, whether the
-// star tracker is present, the test, its decision and the evidence text; and the report the
-// decisions write their events to.
+// star tracker is present, the test and its decision; and the report the decisions write their
+// events to.
 struct IsolationContext {
   const TelemetryFrame& frame;
   const std::array<int, 3>& ids;
   bool st_present;
   const IsolationTest& test;
   const IsolationDecision& d;
-  const std::string& evidence;
   StepReport& report;
+  // The evidence text of an event (fault_detection.h IsolationEvidence), formed when an event is
+  // written: most steps write none, and forming it at every step cost 4% of a diagnosis.
+  std::string Evidence() const { return IsolationEvidence(test, d); }
 };
 
 // The exceeded mismatch with the largest angle-to-allowed ratio (best, -1 when none): the
@@ -234,7 +236,7 @@ void OnAmbiguous(const IsolationContext& c, const StrongestMismatch& sm, int& wi
                    "fault is ambiguous (",
                    candidates.empty() ? std::string("no single subsystem explains them")
                                       : absl::StrCat("candidates: ", candidates),
-                   "); nothing excluded. Evidence: ", c.evidence)});
+                   "); nothing excluded. Evidence: ", c.Evidence())});
 }
 
 // Healthy pairs after the isolation's decision: the pair without the excluded gyro, or all
@@ -771,7 +773,7 @@ struct EstimationSession::IsolationSteps {
                         "(valid, degraded); only two gyros remain, switch on the cold spare%s to "
                         "restore isolation. Evidence: %s",
                         named_by, gyro, details, why.Describe(), gyro, output[0], output[1],
-                        spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), c.evidence)});
+                        spare.empty() ? "" : absl::StrCat(" (gyro ", spare, ")"), c.Evidence())});
     s.working_pair_ = output;
     s.reserve_pair_ = output;  // no second pair is left
   }
@@ -921,7 +923,7 @@ struct EstimationSession::IsolationSteps {
                           s.ModelKnownNotToFit()
                               ? absl::StrCat(" (", s.ModelMisfitEvidence(), ")")
                               : std::string(),
-                          d.excluded_gyro, c.evidence)});
+                          d.excluded_gyro, c.Evidence())});
       return;
     }
     // D24: evidence below twice the allowed angles (or a gyro's own star-tracker chi-square
@@ -945,7 +947,7 @@ struct EstimationSession::IsolationSteps {
                           "this step and excluded if the next measurement step names it again. "
                           "Evidence: %s",
                           d.excluded_gyro, strength, kImmediateIsolationStrength,
-                          d.excluded_gyro, c.evidence)});
+                          d.excluded_gyro, c.Evidence())});
       return;
     }
     const std::array<int, 2> kept = PairWithout(c.ids, d.faulty_index);
@@ -980,7 +982,7 @@ struct EstimationSession::IsolationSteps {
                           "tracker, but the configured model does not explain the data (%s): "
                           "its measurements are kept, subject to eq. (14). Evidence: %s",
                           s.ModelMisfitEvidence(),
-                          c.evidence)});
+                          c.Evidence())});
       return;
     }
     c.report.events.push_back(Event{
@@ -989,7 +991,7 @@ struct EstimationSession::IsolationSteps {
         absl::StrCat("fault isolation with three pairs (eq. (12)): the star tracker disagrees "
                      "with all three gyro pairs, which agree with each other; its measurements "
                      "are rejected. Evidence: ",
-                     c.evidence)});
+                     c.Evidence())});
     st_available = false;
     s.star_tracker_voted_faulty_ = true;
   }
@@ -1014,8 +1016,7 @@ bool EstimationSession::IsolateWithThreePairs(const TelemetryFrame& frame, const
                  test);
   if (st_present) Steps::GyroStarTests(*this, ids, q_st, kd, sigma_r, test);
   const IsolationDecision d = DecideIsolation(test, working_pair_);
-  const std::string evidence = IsolationEvidence(test, d);
-  const IsolationContext c{frame, ids, st_present, test, d, evidence, report};
+  const IsolationContext c{frame, ids, st_present, test, d, report};
 
   // The accumulated test and the drift change it names: an exclusion there ends the step.
   if (st_present && options_.detect_drift_change &&
