@@ -633,13 +633,37 @@ absl::StatusOr<estimator::StarTrackerMisalignmentJump> ParseMisalignmentJump(
   return jump;
 }
 
+// {"arcsec": [x, y, z], "periodMin": P, "phaseDeg": p}: the mount turning by
+// arcsec sin(2 pi t / P + p), body axes (simulator.h StarTrackerMisalignmentCycle).
+absl::StatusOr<estimator::StarTrackerMisalignmentCycle> ParseMisalignmentCycle(
+    const json& v, const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"arcsec", "periodMin", "phaseDeg"}));
+  for (const char* key : {"arcsec", "periodMin"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  estimator::StarTrackerMisalignmentCycle cycle;
+  ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(v["arcsec"], Key(path, "arcsec"),
+                                         -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+  cycle.amplitude_b = estimator::kRadPerArcsec * arcsec;
+  ASSIGN_OR_RETURN(double minutes,
+                   Number(v["periodMin"], Key(path, "periodMin"), 0.0, kMaxHours * 60.0));
+  if (!(minutes > 0.0)) return Invalid(Key(path, "periodMin"), "must be > 0");
+  cycle.period_s = minutes * 60.0;
+  if (v.contains("phaseDeg")) {
+    ASSIGN_OR_RETURN(double deg, Number(v["phaseDeg"], Key(path, "phaseDeg"), -360.0, 360.0));
+    cycle.phase_rad = estimator::DegToRad(deg);
+  }
+  return cycle;
+}
+
 absl::Status ParseStarTracker(const json& v, const std::string& path,
                               estimator::StarTrackerTruth* st) {
   RETURN_IF_ERROR(CheckObject(v, path));
   RETURN_IF_ERROR(CheckKeys(v, path,
                             {"noiseArcsec", "latencyMs", "misalignmentArcsec", "outlierRate",
                              "outlierArcmin", "outages", "invalidRate", "outlierBurst", "frozen",
-                             "misalignmentJump"}));
+                             "misalignmentJump", "misalignmentCycle"}));
   for (auto it = v.begin(); it != v.end(); ++it) {
     const std::string& k = it.key();
     const json& x = it.value();
@@ -669,6 +693,8 @@ absl::Status ParseStarTracker(const json& v, const std::string& path,
       ASSIGN_OR_RETURN(st->outlier_burst, ParseOutlierBurst(x, p));
     } else if (k == "misalignmentJump") {
       ASSIGN_OR_RETURN(st->misalignment_jump, ParseMisalignmentJump(x, p));
+    } else if (k == "misalignmentCycle") {
+      ASSIGN_OR_RETURN(st->misalignment_cycle, ParseMisalignmentCycle(x, p));
     }
   }
   return absl::OkStatus();
@@ -915,6 +941,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
   st.outlier_burst = from.outlier_burst;
   st.frozen = from.frozen;
   st.misalignment_jump = from.misalignment_jump;
+  st.misalignment_cycle = from.misalignment_cycle;
   if (scenario.earth_shadow) spec->earth_shadow = scenario.profile_options.orbital;
   return absl::OkStatus();
 }

@@ -644,6 +644,15 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
     RETURN_IF_ERROR(
         FiniteVector(st.misalignment_jump->rotation_b, "star_tracker.misalignment_jump.rotation_b"));
   }
+  if (st.misalignment_cycle) {
+    RETURN_IF_ERROR(FiniteVector(st.misalignment_cycle->amplitude_b,
+                                 "star_tracker.misalignment_cycle.amplitude_b"));
+    RETURN_IF_ERROR(
+        Positive(st.misalignment_cycle->period_s, "star_tracker.misalignment_cycle.period_s"));
+    if (!std::isfinite(st.misalignment_cycle->phase_rad)) {
+      return absl::InvalidArgumentError("star_tracker.misalignment_cycle.phase_rad: must be finite");
+    }
+  }
   if (!std::isfinite(st.latency)) {
     return absl::InvalidArgumentError("star_tracker.latency: must be finite");
   }
@@ -1015,6 +1024,11 @@ class StarTrackerSampler {
     const Quaterniond q_true_lagged =
         st_.latency == 0.0 ? truth.q_in_b : profile_.Attitude(t_m - st_.latency);
     Quaterniond q_meas = q_true_lagged * q_misalignment_;
+    if (st_.misalignment_cycle) {
+      const StarTrackerMisalignmentCycle& c = *st_.misalignment_cycle;
+      q_meas = q_meas * ExpQuaternion(c.amplitude_b *
+                                      std::sin(2.0 * kPi * t_m / c.period_s + c.phase_rad));
+    }
     if (st_.misalignment_jump && t_m >= st_.misalignment_jump->time) q_meas = q_meas * q_jump_;
     q_meas = q_meas * ExpQuaternion(noise_.cwiseProduct(n));
     if (burst_left_ > 0 && t_m >= st_.outlier_burst->time) {

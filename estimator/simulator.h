@@ -40,8 +40,9 @@
 //   fault repeats the whole reading (h_k and voltages) of the first frame of its window in every
 //   frame of the window; a readings_missing fault leaves the gyro's field empty in its window; a
 //   gyro with a switch-on time has no field (and no truth sample) before it.
-// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(jump_b)
-//   (x) Exp(n) [(x) Exp(o)], n = (noise_x N, noise_y N, noise_z N) about body axes, jump_b the
+// - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(cycle_b(t))
+//   (x) Exp(jump_b) (x) Exp(n) [(x) Exp(o)], cycle_b(t) the misalignment cycling with the orbit
+//   (StarTrackerMisalignmentCycle, zero without one), n = (noise_x N, noise_y N, noise_z N) about body axes, jump_b the
 //   misalignment jump (zero before its time), o an outlier with probability
 //   outlier_probability: uniformly random axis, angle uniform in [outlier_size, 3 outlier_size].
 //   The samples of an outlier burst carry instead o = angle * a_perp, a_perp the same per-frame
@@ -272,6 +273,14 @@ struct StarTrackerOutlierBurst {
   double angle = 0.0;  // [rad], > 0; the angle of each outlier
 };
 
+// The star tracker's mount turning with the orbit (a thermo-elastic misalignment): an extra
+// rotation amplitude_b sin(2 pi t / period_s + phase_rad), body axes, t since the simulation start.
+struct StarTrackerMisalignmentCycle {
+  Eigen::Vector3d amplitude_b = Eigen::Vector3d::Zero();  // rotation vector amplitude [rad]
+  double period_s = 5400.0;                               // [s], > 0
+  double phase_rad = 0.0;
+};
+
 // A star-tracker mounting change: an extra rotation from time on (see the file comment).
 struct StarTrackerMisalignmentJump {
   double time = 0.0;                                     // [s since the simulation start]
@@ -294,6 +303,7 @@ struct StarTrackerTruth {
   // Frozen output [start, end) in seconds since the simulation start (see the file comment).
   std::vector<std::pair<double, double>> frozen;
   std::optional<StarTrackerMisalignmentJump> misalignment_jump;
+  std::optional<StarTrackerMisalignmentCycle> misalignment_cycle;
 };
 
 struct SimulationSpec {

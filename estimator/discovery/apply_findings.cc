@@ -96,6 +96,11 @@ void ApplyOtherEffect(Effect effect, const Finding& f, const std::string& name, 
       }
       break;
     }
+    case Effect::kStarTrackerCycle:
+      out.not_applied.push_back(absl::StrCat(
+          name,
+          ": the configuration holds no star-tracker mounting, nor a rotation of it in time"));
+      break;
     case Effect::kStarTrackerMisalignment:
       out.not_applied.push_back(absl::StrCat(
           name,

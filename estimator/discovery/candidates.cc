@@ -14,6 +14,7 @@
 #include "estimator/calibration_model.h"
 #include "estimator/discovery/channel_candidate.h"
 #include "estimator/discovery/readout_candidate.h"
+#include "estimator/discovery/star_tracker_cycle.h"
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
@@ -278,6 +279,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
   if (Effective(effects, Effect::kStarTrackerLatency) &&
       !added(EffectId(Effect::kStarTrackerLatency))) {
     out.push_back({Effect::kStarTrackerLatency, 0});
+  }
+  if (Effective(effects, Effect::kStarTrackerCycle) &&
+      !added(EffectId(Effect::kStarTrackerCycle))) {
+    out.push_back({Effect::kStarTrackerCycle, 0});
   }
   // Time behaviour: a drift switched on during the recording, per gyro; a random walk raised in
   // every gyro or in one (once one is raised, no other is offered).
@@ -806,6 +811,8 @@ EffectFit FitOf(Effect effect) {
       return &FitCoefficientStep;
     case Effect::kTransient:
       return &FitTransient;
+    case Effect::kStarTrackerCycle:
+      return &FitStarTrackerCycle;
   }
   return nullptr;
 }

@@ -8,6 +8,10 @@
 //   star_tracker_misalignment     one rotation m common to all gyros: first estimated as the
 //                                 information-weighted mean of free per-gyro misalignments, then
 //                                 the star tracker corrected by q_st (x) Exp(-m) (3 parameters)
+//   star_tracker_orbital_         the star tracker's mount turning with the orbital phase,
+//   misalignment                  m(t) = c cos(phi) + s sin(phi), common to all gyros: regressed
+//                                 on every gyro's deviation at once, then the star tracker
+//                                 corrected by it (6 parameters; star_tracker_cycle.h)
 //   star_tracker_latency          one delay tau: q_st corrected by the body rate over tau
 //                                 (model_run.h); tau by prediction-error least squares on the
 //                                 innovations' finite-difference sensitivity (1 parameter)

@@ -6,6 +6,7 @@
 
 #include "estimator/statistics.h"
 #include "estimator/rotation.h"
+#include "estimator/units.h"
 
 namespace esg::estimator::discovery {
 
@@ -13,19 +14,25 @@ using Eigen::Matrix3d;
 using Eigen::Quaterniond;
 using Eigen::Vector3d;
 
+Vector3d StarTrackerCorrection::MisalignmentAt(absl::Time time) const {
+  if (cycle_period_s == 0.0) return misalignment_b;
+  const double phi = 2.0 * kPi * absl::ToDoubleSeconds(time - cycle_epoch) / cycle_period_s;
+  return misalignment_b + cycle_cos_b * std::cos(phi) + cycle_sin_b * std::sin(phi);
+}
+
 std::vector<TelemetryFrame> CorrectStarTracker(const std::vector<TelemetryFrame>& frames,
                                                const BodyRates& rates,
                                                const StarTrackerCorrection& correction) {
   std::vector<TelemetryFrame> out = frames;
   if (correction.IsZero()) return out;
-  const Quaterniond q_mis = ExpQuaternion(-correction.misalignment_b);
   for (size_t i = 0; i < out.size(); ++i) {
     auto& st = out[i].star_tracker;
     if (!st.has_value()) continue;
     const Vector3d w_b = i < rates.best.size() ? rates.best[i] : Vector3d::Zero();
-    // q_in_b(t) = q_st(t) (x) Exp(-m) (x) Exp(w_b tau)  (model_run.h).
-    st->q_in_b =
-        (st->q_in_b.normalized() * q_mis * ExpQuaternion(w_b * correction.latency)).normalized();
+    // q_in_b(t) = q_st(t) (x) Exp(-m(t)) (x) Exp(w_b tau)  (model_run.h).
+    st->q_in_b = (st->q_in_b.normalized() * ExpQuaternion(-correction.MisalignmentAt(out[i].time)) *
+                  ExpQuaternion(w_b * correction.latency))
+                     .normalized();
   }
   for (const ReadingShift& shift : correction.reading_shifts) {
     if (shift.dh_k == nullptr || shift.gyro < 1) continue;

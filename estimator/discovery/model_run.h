@@ -40,8 +40,18 @@ struct StarTrackerCorrection {
   double latency = 0.0;                                      // [s], positive: stamped late
   Eigen::Vector3d misalignment_b = Eigen::Vector3d::Zero();  // [rad]
   std::vector<ReadingShift> reading_shifts;
+  // The star tracker's mount turning with the orbit (star_tracker_cycle.h): a further
+  // misalignment cycle_cos_b cos(phi) + cycle_sin_b sin(phi), phi = 2 pi (t - cycle_epoch) /
+  // cycle_period_s, body axes [rad]; none while cycle_period_s is 0.
+  double cycle_period_s = 0.0;
+  absl::Time cycle_epoch = absl::UnixEpoch();
+  Eigen::Vector3d cycle_cos_b = Eigen::Vector3d::Zero();
+  Eigen::Vector3d cycle_sin_b = Eigen::Vector3d::Zero();
+  // The star tracker's misalignment at `time` [rad, body axes]: misalignment_b and the cycle.
+  Eigen::Vector3d MisalignmentAt(absl::Time time) const;
   bool IsZero() const {
-    return latency == 0.0 && misalignment_b.isZero(0.0) && reading_shifts.empty();
+    return latency == 0.0 && misalignment_b.isZero(0.0) && reading_shifts.empty() &&
+           cycle_period_s == 0.0;
   }
 };
 

@@ -766,15 +766,38 @@ SunFamilyFit FitSunFamilies(const DeviationSeries& series, double random_walk, d
 double ReadoutOccam(const SelectedGroup& group) {
   const int n = static_cast<int>(group.columns.size());
   if (n == 0 || group.covariance.rows() != n) return 0.0;
-  VectorXd a(n), p0(n);
+  VectorXd a(n), prior_sigma(n);
   for (int i = 0; i < n; ++i) {
     a(i) = group.columns[i].value;
-    p0(i) = group.columns[i].prior_sigma * group.columns[i].prior_sigma;
+    prior_sigma(i) = group.columns[i].prior_sigma;
   }
-  const Eigen::LDLT<Eigen::MatrixXd> P(group.covariance);
+  return LaplaceOccam(a, group.covariance, prior_sigma);
+}
+
+double LaplaceOccam(const VectorXd& a, const Eigen::MatrixXd& P, const VectorXd& prior_sigma) {
+  const int n = static_cast<int>(a.size());
+  if (n == 0 || P.rows() != n || prior_sigma.size() != n) return 0.0;
+  const VectorXd p0 = prior_sigma.array().square();
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(P);
   double log_det_p = 0.0;
-  for (int i = 0; i < n; ++i) log_det_p += std::log(std::max(P.vectorD()(i), 1e-300));
+  for (int i = 0; i < n; ++i) log_det_p += std::log(std::max(ldlt.vectorD()(i), 1e-300));
   return p0.array().log().sum() - log_det_p + a.cwiseQuotient(p0).dot(a);
+}
+
+WhitenedSeries WhitenSeries(const DeviationSeries& series, double random_walk, double w0_sigma,
+                            const OpenEndedOptions& options,
+                            const std::vector<std::vector<Vector2d>>& extra) {
+  WhitenedSeries out;
+  const DeviationFilter filter(series, random_walk, w0_sigma);
+  out.y_w = filter.Whiten(series.y);
+  const GyroBasis basis = EnumerateBasis(series, options);
+  for (const BasisColumn& col : basis.columns) {
+    if (!col.nuisance) continue;
+    out.nuisance_w.push_back(filter.Whiten(ColumnSignature(series, col)));
+    out.nuisance_prior.push_back(options.drift_sigma / col.rms);
+  }
+  for (const std::vector<Vector2d>& x : extra) out.extra_w.push_back(filter.Whiten(x));
+  return out;
 }
 
 std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& options) {

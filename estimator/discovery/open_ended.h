@@ -220,6 +220,25 @@ SunFamilyFit FitSunFamilies(const DeviationSeries& series, double random_walk, d
 // Laplace's Occam term of a group's coefficients, ln det(P0 / P) + a^T P0^-1 a (prior covariance
 // P0 from the columns' prior_sigma, posterior P its covariance, a the columns' values).
 double ReadoutOccam(const SelectedGroup& group);
+// The same term for coefficients a with posterior covariance P and independent priors of 1-sigma
+// prior_sigma.
+double LaplaceOccam(const Eigen::VectorXd& a, const Eigen::MatrixXd& P,
+                    const Eigen::VectorXd& prior_sigma);
+
+// One gyro's series whitened by its reduced filter (deviation_filter.h), with its nuisance
+// columns (OpenEndedOptions::steps: in every model) and the signatures `extra` whitened alike:
+// what a regression whose coefficients several gyros share stacks, gyro by gyro
+// (star_tracker_cycle.h). The gyros' series are independent given the coefficients, so their
+// whitened rows stack into one Gaussian linear model.
+struct WhitenedSeries {
+  Eigen::VectorXd y_w;
+  std::vector<Eigen::VectorXd> nuisance_w;
+  std::vector<double> nuisance_prior;  // 1-sigma of each nuisance coefficient
+  std::vector<Eigen::VectorXd> extra_w;
+};
+WhitenedSeries WhitenSeries(const DeviationSeries& series, double random_walk, double w0_sigma,
+                            const OpenEndedOptions& options,
+                            const std::vector<std::vector<Eigen::Vector2d>>& extra);
 
 // What a selected group says in words: case-fixed drift along (x, y, z), varying with the orbital
 // phase, growing, proportional to the body rate, ..., with sizes in deg/h, and the alternatives

@@ -40,6 +40,8 @@ const char* EffectId(Effect e) {
       return "coefficient_step";
     case Effect::kTransient:
       return "transient";
+    case Effect::kStarTrackerCycle:
+      return "star_tracker_orbital_misalignment";
   }
   return "?";
 }
@@ -56,7 +58,7 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
                    Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
                    Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kChannelDrift, Effect::kWarmUp,
-                   Effect::kCoefficientStep, Effect::kTransient}) {
+                   Effect::kCoefficientStep, Effect::kTransient, Effect::kStarTrackerCycle}) {
     if (id == EffectId(e)) return e;
   }
   return std::nullopt;
@@ -165,6 +167,19 @@ std::string ExplainFinding(const Finding& f) {
         "the star tracker is misaligned to the body by %s arcsec (rotation vector, body "
         "axes), common to all gyros; %s",
         VectorText(ps, "misalignmentArcsec", 1), stats);
+  }
+  if (f.effect == "star_tracker_orbital_misalignment") {
+    const Parameter* a = FindParameter(ps, "cycleAmplitudeArcsec");
+    const Parameter* minor = FindParameter(ps, "cycleMinorArcsec");
+    const Parameter* period = FindParameter(ps, "cyclePeriodMin");
+    return absl::StrFormat(
+        "the star tracker's mount turns with the orbit (period %.1f min): by %.1f +- %.1f arcsec "
+        "about body axis %s at its largest (%.1f arcsec about the axis across it), common to all "
+        "gyros (a thermo-elastic misalignment); rotation c cos(phi) + s sin(phi), phi the orbital "
+        "phase from the first frame, c = %s, s = %s arcsec (body axes); %s",
+        period ? period->value : 0.0, a ? a->value : 0.0, a ? a->sigma : 0.0,
+        VectorText(ps, "cycleAxis", 2), minor ? minor->value : 0.0,
+        VectorText(ps, "cycleCosArcsec", 1), VectorText(ps, "cycleSinArcsec", 1), stats);
   }
   if (f.effect == "star_tracker_latency") {
     const Parameter* tau = FindParameter(ps, "latencyMs");

@@ -54,8 +54,13 @@ enum class Effect {
   // switch-on or a mode change), its onset and time constant searched (time_behaviour.h
   // FitTransient); its finding is a kEffectBasisTerm (three exponential_decay terms).
   kTransient,
+  // The star tracker's side (star_tracker_cycle.h): its mount's misalignment turning with the
+  // orbital phase (a thermo-elastic misalignment), common to all gyros, six coefficients
+  // regressed on every gyro's deviation at once; tried before gyro terms are taken.
+  kStarTrackerCycle,
 };
-// "rotor_displacement", ..., "sun_drift", "warm_up", "coefficient_step", "transient"
+// "rotor_displacement", ..., "sun_drift", "warm_up", "coefficient_step", "transient",
+// "star_tracker_orbital_misalignment"
 const char* EffectId(Effect e);
 // The effect whose EffectId is `id`, or nullopt.
 std::optional<Effect> EffectFromId(absl::string_view id);

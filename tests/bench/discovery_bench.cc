@@ -98,6 +98,11 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
     if (rows != "library") {
       for (const std::string& t : ::esg::testing::DiscoveryTimeBehaviours()) truths.push_back(t);
     }
+    if (rows != "time") {
+      for (const std::string& t : ::esg::testing::DiscoveryStarTrackerClasses()) {
+        truths.push_back(t);
+      }
+    }
   }
   const std::vector<std::string> verdicts = {"none",
                                              "rotor_displacement",
@@ -106,6 +111,7 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
                                              "gyro_misalignment",
                                              "star_tracker_misalignment",
                                              "star_tracker_latency",
+                                             "star_tracker_orbital_misalignment",
                                              "random_walk_drift",
                                              "drift_step",
                                              "basis_term",
@@ -262,7 +268,32 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
             }
           }
         }
-        const bool ok = ::esg::testing::DiscoveryVerdictCorrect(truth, ::esg::testing::AffectedGyro(100 + seed), *report);
+        if (truth == "star_tracker_cycle" && !report->findings.empty()) {
+          // The largest error of a cos or sin component against the truth, in its sigma.
+          const Finding& f = report->findings.front();
+          const double phase = ::esg::testing::StarTrackerCyclePhaseRad(100 + seed);
+          const Eigen::Vector3d a =
+              ::esg::testing::kStarTrackerCycleArcsec * ::esg::testing::StarTrackerCycleAxis();
+          double worst = 0.0;
+          for (int i = 0; i < 3; ++i) {
+            const Parameter* c = FindParameter(f.parameters, "cycleCosArcsec[" + std::to_string(i) + "]");
+            const Parameter* s = FindParameter(f.parameters, "cycleSinArcsec[" + std::to_string(i) + "]");
+            if (c != nullptr && c->sigma > 0) {
+              worst = std::max(worst, std::abs(c->value - a(i) * std::sin(phase)) / c->sigma);
+            }
+            if (s != nullptr && s->sigma > 0) {
+              worst = std::max(worst, std::abs(s->value - a(i) * std::cos(phase)) / s->sigma);
+            }
+          }
+          const Parameter* amp = FindParameter(f.parameters, "cycleAmplitudeArcsec");
+          char text[160];
+          std::snprintf(text, sizeof text, " amplitude %.2f+-%.2f arcsec max|dc,ds|/sigma %.2f",
+                        amp != nullptr ? amp->value : 0.0, amp != nullptr ? amp->sigma : 0.0,
+                        worst);
+          detail += text;
+        }
+        const bool ok = ::esg::testing::DiscoveryVerdictCorrect(
+            truth, ::esg::testing::AffectedGyro(100 + seed), *report, 100 + seed);
         correct[truth] += ok ? 1 : 0;
         if (report->before.gap_drift_rate_deg_h > 0) {
           gap_ratio_sum[truth] +=

@@ -119,7 +119,9 @@ TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
               {"id": 3, "switchOnHours": 6}],
     "starTracker": {"outlierBurst": {"timeHours": 4, "count": 5, "arcmin": 3},
                     "frozen": [{"startHours": 5, "endHours": 5.5}],
-                    "misalignmentJump": {"timeHours": 7, "arcsec": [120, 0, -60]}}
+                    "misalignmentJump": {"timeHours": 7, "arcsec": [120, 0, -60]},
+                    "misalignmentCycle": {"arcsec": [18, -15, 19], "periodMin": 94,
+                                          "phaseDeg": 30}}
   })");
   ASSERT_THAT(s, IsOk());
   est::SimulationSpec spec;
@@ -145,6 +147,12 @@ TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
   EXPECT_EQ(st.misalignment_jump->time, 7 * 3600.0);
   EXPECT_LT((st.misalignment_jump->rotation_b - est::ArcsecToRad(1.0) * Vector3d(120, 0, -60)).norm(),
             1e-20);
+  ASSERT_TRUE(st.misalignment_cycle.has_value());
+  EXPECT_LT((st.misalignment_cycle->amplitude_b - est::ArcsecToRad(1.0) * Vector3d(18, -15, 19))
+                .norm(),
+            1e-20);
+  EXPECT_EQ(st.misalignment_cycle->period_s, 94 * 60.0);
+  EXPECT_NEAR(st.misalignment_cycle->phase_rad, est::DegToRad(30.0), 1e-15);
   // The spec simulates with every one of them.
   spec.profile = *MakeScenarioProfile(*s, "", 8 * 3600.0);
   spec.duration = 8 * 3600.0;
@@ -525,6 +533,12 @@ TEST(Scenario, ErrorsNameTheKey) {
        "starTracker.misalignmentJump.arcsec: expected an array of 3 numbers, got 2 values"},
       {R"({"starTracker": {"misalignmentJump": {"arcsec": [1, 2, 3]}}})",
        "starTracker.misalignmentJump.timeHours: required"},
+      {R"({"starTracker": {"misalignmentCycle": {"arcsec": [1, 2, 3]}}})",
+       "starTracker.misalignmentCycle.periodMin: required"},
+      {R"({"starTracker": {"misalignmentCycle": {"arcsec": [1, 2, 3], "periodMin": 0}}})",
+       "starTracker.misalignmentCycle.periodMin: must be > 0"},
+      {R"({"starTracker": {"misalignmentCycle": {"arcsec": [1, 2, 3], "periodMin": 90, "phase": 1}}})",
+       "starTracker.misalignmentCycle.phase: unknown key"},
       {R"({"gyros": [{"id": 1, "orbitalDrift": {"periodMin": 90}}]})",
        "gyros[0].orbitalDrift.amplitudeDegH: required"},
       {R"({"gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0, 0, 0.01], "periodMin": 0}}]})",

@@ -139,6 +139,20 @@ inline std::vector<std::string> DiscoveryCombinedClasses() {
 // the seed: SunFaceOf, SunLagHoursOf).
 inline std::vector<std::string> DiscoverySunClasses() { return {"sun_face_drift"}; }
 
+// The star tracker's side (docs/discovery.md, "The star tracker's side"): "star_tracker_cycle",
+// the star tracker's mount turning with the orbit (a thermo-elastic misalignment) by
+// kStarTrackerCycleArcsec about StarTrackerCycleAxis(), sin(2 pi t / P + phase) with P the
+// profile's orbital period and the phase by the seed (simulator.h StarTrackerMisalignmentCycle):
+// expected `star_tracker_orbital_misalignment`, every component within 3 sigma.
+inline std::vector<std::string> DiscoveryStarTrackerClasses() { return {"star_tracker_cycle"}; }
+inline constexpr double kStarTrackerCycleArcsec = 30.0;
+inline Eigen::Vector3d StarTrackerCycleAxis() {
+  return Eigen::Vector3d(0.6, -0.5, 0.62).normalized();
+}
+inline double StarTrackerCyclePhaseRad(uint64_t seed) {
+  return 0.4 + 0.7 * static_cast<double>(seed);
+}
+
 // A drift that follows a housekeeping channel (docs/discovery.md, "A drift that follows a
 // housekeeping channel"; simulator.h ChannelDrift): one gyro's drift of (-0.015, 0.015, 0.0125)
 // deg/h per K times its temperature's departure from 293.15 K, the temperature wandering by 2 K
@@ -232,6 +246,13 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
         x * Eigen::Vector3d(ArcsecToRad(20), ArcsecToRad(-25), ArcsecToRad(10));
   }
   if (effect == "star_tracker_latency") s.star_tracker.latency = x * 0.3;
+  if (effect == "star_tracker_cycle") {
+    StarTrackerMisalignmentCycle c;
+    c.amplitude_b = x * ArcsecToRad(kStarTrackerCycleArcsec) * StarTrackerCycleAxis();
+    c.period_s = s.profile->OrbitalPeriod().value_or(5400.0);
+    c.phase_rad = StarTrackerCyclePhaseRad(seed);
+    s.star_tracker.misalignment_cycle = c;
+  }
   if (effect == "random_walk_drift") {
     for (GyroTruth& t : s.gyros) t.random_walk = x * DegPerHourSqrtHourToSi(0.006);
   }
@@ -364,8 +385,30 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
 
 // The verdict of `r` is right for scenario `truth` whose per-gyro effect is in `gyro` (the
 // confusion matrix of docs/discovery.md).
+// The star_tracker_cycle scenario's finding against its truth for `seed`: each component of the
+// fitted cos and sin amplitudes (parameters cycleCosArcsec[i], cycleSinArcsec[i], the rotation
+// c cos(phi) + s sin(phi), phi the orbital phase since the first frame, the simulation's start)
+// within 3 sigma of amplitude_b sin(phase) and amplitude_b cos(phase).
+inline bool StarTrackerCycleWithinThreeSigma(const estimator::discovery::Finding& f,
+                                             uint64_t seed) {
+  using estimator::discovery::FindParameter;
+  using estimator::discovery::Parameter;
+  const double phase = StarTrackerCyclePhaseRad(seed);
+  const Eigen::Vector3d a = kStarTrackerCycleArcsec * StarTrackerCycleAxis();
+  for (int i = 0; i < 3; ++i) {
+    const Parameter* c = FindParameter(f.parameters, "cycleCosArcsec[" + std::to_string(i) + "]");
+    const Parameter* s = FindParameter(f.parameters, "cycleSinArcsec[" + std::to_string(i) + "]");
+    if (c == nullptr || s == nullptr) return false;
+    if (!(std::abs(c->value - a(i) * std::sin(phase)) <= 3.0 * c->sigma)) return false;
+    if (!(std::abs(s->value - a(i) * std::cos(phase)) <= 3.0 * s->sigma)) return false;
+  }
+  return true;
+}
+
+// `seed` is the scenario's (only the star_tracker_cycle row reads it: its phase).
 inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
-                                    const estimator::discovery::DiagnosisReport& r) {
+                                    const estimator::discovery::DiagnosisReport& r,
+                                    uint64_t seed = 0) {
   using namespace esg::estimator::discovery;
   auto has = [&](const std::string& effect, int g) {
     for (const Finding& f : r.findings) {
@@ -426,6 +469,16 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
            r.mismatch.found && (r.mismatch.gyro == gyro || r.mismatch.gyro == 0);
   }
   if (truth == "readout_jump") return r.verdict == kVerdictUnexplained;
+  if (truth == "star_tracker_cycle") {
+    // The first finding the star tracker's, every component of its cos and sin amplitudes within
+    // 3 sigma of the truth: amplitude_b sin(phi + phase) = amplitude_b sin(phase) cos(phi) +
+    // amplitude_b cos(phase) sin(phi), phi the orbital phase from the first frame.
+    if (r.findings.empty() || r.findings.front().effect != "star_tracker_orbital_misalignment" ||
+        r.findings.front().gyro != 0) {
+      return false;
+    }
+    return StarTrackerCycleWithinThreeSigma(r.findings.front(), seed);
+  }
   // Exactly two findings: the library's effect, then the switching drift `unexplained` in its
   // gyro.
   auto effect_then_wander = [&](const std::string& effect, int effect_gyro) {
