@@ -58,7 +58,8 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
                    Effect::kGyroMisalignment, Effect::kStarTrackerMisalignment,
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
                    Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kChannelDrift, Effect::kWarmUp,
-                   Effect::kCoefficientStep, Effect::kTransient, Effect::kStarTrackerCycle}) {
+                   Effect::kCoefficientStep, Effect::kTransient,
+                   Effect::kStarTrackerCycle}) {
     if (id == EffectId(e)) return e;
   }
   return std::nullopt;

@@ -1,6 +1,7 @@
 #include "estimator/discovery/star_tracker_cycle.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 #include <utility>
@@ -63,7 +64,7 @@ MatrixXd ClusteredCovariance(const VectorXd& y, const std::vector<const VectorXd
   for (int r = 0; r < static_cast<int>(y.size()); ++r) {
     const int c = cluster_of_row[r];
     if (c >= static_cast<int>(u.size())) u.resize(c + 1, VectorXd::Zero(k));
-    for (int j = 0; j < k; ++j) u[c](j) += (*X[j])(r)*e(r);
+    for (int j = 0; j < k; ++j) u[c](j) += (*X[j])(r) * e(r);
   }
   MatrixXd M = MatrixXd::Zero(k, k);
   int g = 0;
@@ -169,7 +170,8 @@ double MajorSigma(const VectorXd& x, const MatrixXd& P) {
   return std::sqrt(std::max(0.0, gradient.dot(P * gradient)));
 }
 
-void AddCycleParameters(const StarTrackerCorrection& c, const MatrixXd& P, std::vector<Parameter>& out) {
+void AddCycleParameters(const StarTrackerCorrection& c, const MatrixXd& P,
+                        std::vector<Parameter>& out) {
   const double arcsec = RadToArcsec(1.0);
   Vector3d cos_sigma, sin_sigma;
   for (int i = 0; i < 3; ++i) {
@@ -259,7 +261,8 @@ absl::Status FitStarTrackerCycle(const Candidate& candidate, const FitContext& c
   VectorXd x(kCycleCoefficients);
   x << correction.cycle_cos_b, correction.cycle_sin_b;
   fit.parameters = kCycleCoefficients;
-  fit.occam = LaplaceOccam(x, regression.covariance, VectorXd::Constant(kCycleCoefficients, prior_rad));
+  fit.occam =
+      LaplaceOccam(x, regression.covariance, VectorXd::Constant(kCycleCoefficients, prior_rad));
   AddCycleParameters(correction, regression.covariance, fit.fitted);
   fit.notes.push_back(absl::StrFormat(
       "every gyro's deviation from the model regressed at once on the star tracker's rotation "

@@ -362,7 +362,8 @@ TEST(DiagnoseVerdict, AMountTurningWithTheOrbitIsFoundAsTheStarTrackersWithItsAm
   EXPECT_LE(std::abs(amplitude->value - ::esg::testing::kStarTrackerCycleArcsec),
             3.0 * amplitude->sigma)
       << text;
-  EXPECT_THAT(r.findings.front().explanation, HasSubstr("the star tracker's mount turns with the orbit"));
+  EXPECT_THAT(r.findings.front().explanation,
+              HasSubstr("the star tracker's mount turns with the orbit"));
   for (const Finding& f : r.findings) {
     EXPECT_NE(f.effect, "random_walk_drift") << text;
     EXPECT_NE(f.effect, kVerdictUnexplained) << text;
