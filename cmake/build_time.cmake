@@ -93,6 +93,14 @@ function(esg_precompiled_headers)
   esg_pch_reuse(esg_pch_exe estimator_tests proto_tests formats_tests storage_tests
     client_tests server_tests end_to_end_tests nginx_routing_tests failover_tests testing_tests
     esg_bench)
+  # The executables' header is built with -pthread (gRPC's usage requirements bring it); the test
+  # binaries that link no gRPC take it too, or gcc falls back to parsing the headers ("not used
+  # because `_REENTRANT' not defined").
+  foreach(target formats_tests storage_tests testing_tests)
+    if(TARGET ${target})
+      target_compile_options(${target} PRIVATE -pthread)
+    endif()
+  endforeach()
 endfunction()
 
 # The order of ctest -j: ctest starts the tests of highest cost first, from the times of the last
