@@ -186,6 +186,11 @@ double RecordingOrbitalPeriod(const std::vector<RegimeSpan>& regimes) {
   return periods[periods.size() / 2];
 }
 
+double CandidateOrbitalPeriod(const FitContext& ctx) {
+  if (ctx.options->orbital_period_s > 0.0) return ctx.options->orbital_period_s;
+  return ctx.regimes != nullptr ? RecordingOrbitalPeriod(*ctx.regimes) : 0.0;
+}
+
 OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOptions& opt) {
   OpenEndedOptions o;
   o.alpha = opt.alpha;

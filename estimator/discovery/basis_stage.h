@@ -87,6 +87,10 @@ OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOp
 // (regimes.h), 0 without one.
 double RecordingOrbitalPeriod(const std::vector<RegimeSpan>& regimes);
 
+// The orbital period a candidate's fit uses [s]: DiagnoseOptions::orbital_period_s (given, or the
+// orbit's), else RecordingOrbitalPeriod of the context's regimes, 0 without either.
+double CandidateOrbitalPeriod(const FitContext& ctx);
+
 // A readout group's distortion as the report's parameters: the six entries of the traceless E
 // (basis[readout E_xx] .. basis[readout E_zx]) with their 1-sigma, in ppm.
 std::vector<Parameter> ReadoutParameters(const SelectedGroup& group);

@@ -104,9 +104,7 @@ absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
                                   *ctx.model_run, {candidate.gyro});
   if (!series.ok()) return series.status();
   OpenEndedOptions o = ModelOpenEndedOptions(model, opt);
-  o.orbital_period_s = opt.orbital_period_s > 0.0 ? opt.orbital_period_s
-                       : ctx.regimes != nullptr   ? RecordingOrbitalPeriod(*ctx.regimes)
-                                                  : 0.0;
+  o.orbital_period_s = CandidateOrbitalPeriod(ctx);
   o.epoch = ctx.frames->front().time;
   std::string sun_note;
   o.sun = SunRegressorsOf(*series, model.config, ctx.model_run->gyros, &sun_note, opt.orbit.get());

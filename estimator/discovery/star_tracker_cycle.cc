@@ -219,9 +219,7 @@ absl::Status FitStarTrackerCycle(const Candidate& candidate, const FitContext& c
                                  CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
   const ModelState& model = *ctx.model;
-  const double period_s = opt.orbital_period_s > 0.0 ? opt.orbital_period_s
-                          : ctx.regimes != nullptr   ? RecordingOrbitalPeriod(*ctx.regimes)
-                                                     : 0.0;
+  const double period_s = CandidateOrbitalPeriod(ctx);
   if (!(period_s > 0.0)) {
     fit.notes.push_back(
         "no orbital period is known (no --orbital-period, no orbit, no orbital-orientation span "
@@ -236,20 +234,21 @@ absl::Status FitStarTrackerCycle(const Candidate& candidate, const FitContext& c
   const ModelRun* from_run = ctx.model_run;
   CycleRegression regression;
   double first_evidence = 0.0;
+  // The frames as the model with the cycle so far corrects them (the first: the context's
+  // model); the cycle changes the star tracker's correction only, never the configuration.
+  std::vector<TelemetryFrame> corrected =
+      CorrectStarTracker(*ctx.frames, *ctx.rates, model.correction);
   for (int iteration = 0; iteration < kCycleIterations; ++iteration) {
-    // The deviation of the model with the cycle so far (the first: the context's model).
-    const std::vector<TelemetryFrame> corrected = CorrectStarTracker(
-        *ctx.frames, *ctx.rates, iteration == 0 ? model.correction : correction);
-    auto series = MeasureDeviations(iteration == 0 ? model.config : fit.model.config,
-                                    from_run->gyros, corrected, *ctx.rates, *from_run, ctx.gyros);
+    auto series = MeasureDeviations(model.config, from_run->gyros, corrected, *ctx.rates,
+                                    *from_run, ctx.gyros);
     if (!series.ok()) return series.status();
     regression = RegressCycle(*series, model, from_run->gyros, period_s, o, prior_rad);
     if (!regression.fitted) return absl::OkStatus();
     if (iteration == 0) first_evidence = regression.evidence;
     correction.cycle_cos_b += regression.mean.head<3>();
     correction.cycle_sin_b += regression.mean.tail<3>();
-    auto run = RunModel(fit.model.config, fit.model.options,
-                        CorrectStarTracker(*ctx.frames, *ctx.rates, correction));
+    corrected = CorrectStarTracker(*ctx.frames, *ctx.rates, correction);
+    auto run = RunModel(fit.model.config, fit.model.options, corrected);
     ++fit.runs;
     if (!run.ok()) return run.status();
     fit.run = std::move(*run);
