@@ -48,9 +48,10 @@ async function startEsgd(args) {
   return { child, address: `127.0.0.1:${match[1]}`, stderr };
 }
 
-async function startGateway(args) {
+// nodeArgs: node's own options before the script (e.g. a heap limit).
+async function startGateway(args, nodeArgs = []) {
   const { child, match, stderr } = await startProcess(process.execPath,
-    [GATEWAY, '--listen', '127.0.0.1:0', ...args], /console: listening on (\S+)\n/);
+    [...nodeArgs, GATEWAY, '--listen', '127.0.0.1:0', ...args], /console: listening on (\S+)\n/);
   return { child, url: match[1], stderr };
 }
 
