@@ -39,6 +39,7 @@ constexpr double kMaxVoltageNoiseMv = 1000.0;
 constexpr double kMaxHours = 1e5;
 constexpr int64_t kMaxBurstCount = 100000;
 constexpr double kMaxDisplacementRateUmH = 20.0;
+constexpr double kMaxDisplacementTurnHours = 8784.0;  // a leap year
 constexpr double kMaxDistortionPpm = 1e5;  // 10 %
 constexpr double kMinCorrelationHours = 1e-3;
 constexpr double kMaxRateGainDegHPerDegS = 100.0;  // 100 deg/h of drift at 1 deg/s
@@ -199,6 +200,25 @@ absl::StatusOr<estimator::OrbitalDrift> ParseOrbitalDrift(const json& v, const s
     o.phase_rad = estimator::DegToRad(deg);
   }
   return o;
+}
+
+// {"axis": [x, y, z], "periodH": P}: the rotor displacement turning right-handed about the case
+// axis (any non-zero length, normalised) once every P hours (simulator.h DisplacementTurn).
+absl::StatusOr<estimator::DisplacementTurn> ParseDisplacementTurn(const json& v,
+                                                                  const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"axis", "periodH"}));
+  for (const char* key : {"axis", "periodH"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  estimator::DisplacementTurn turn;
+  ASSIGN_OR_RETURN(Vector3d axis, NonZeroVec3(v["axis"], Key(path, "axis")));
+  turn.axis_k = axis.normalized();
+  ASSIGN_OR_RETURN(double hours,
+                   Number(v["periodH"], Key(path, "periodH"), 0.0, kMaxDisplacementTurnHours));
+  if (!(hours > 0.0)) return Invalid(Key(path, "periodH"), "must be > 0");
+  turn.period_s = estimator::HoursToSeconds(hours);
+  return turn;
 }
 
 // {"amplitudeDegH": [x,y,z], "<time_key>": hours} -> amplitude [rad/s] and time [s], both
@@ -471,8 +491,8 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
       "id", "running", "rotorDisplacementUm", "c10DegHPerUm", "c20DegHPerUm",
       "misalignmentArcsec", "randomWalkDegHSqrtH", "readoutNoiseArcsec", "voltageNoiseMv",
       "initialSpinAxis", "fault", "switchOnHours", "orbitalDrift", "rotorDisplacementRateUmH",
-      "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift", "rateDrift",
-      "transientDrift", "sunFaceDrift", "coefficientStep", "channelDrift"};
+      "rotorDisplacementTurn", "readoutDistortionPpm", "switchingDrift", "hiddenDriverDrift",
+      "rateDrift", "transientDrift", "sunFaceDrift", "coefficientStep", "channelDrift"};
   for (const estimator::FixedTermKey& key : estimator::FixedTermKeys()) {
     keys.insert(std::string(key.json_key));
   }
@@ -543,6 +563,8 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
                        Vec3(x, p, -kMaxDisplacementRateUmH, kMaxDisplacementRateUmH));
       g.rotor_displacement_rate_k_m_s =
           estimator::kMetresPerUm * um_h / estimator::kSecondsPerHour;
+    } else if (k == "rotorDisplacementTurn") {
+      ASSIGN_OR_RETURN(g.rotor_displacement_turn, ParseDisplacementTurn(x, p));
     } else if (k == "readoutDistortionPpm") {
       ASSIGN_OR_RETURN(g.readout_distortion_k, ParseDistortionPpm(x, p));
     } else if (k == "switchingDrift") {
@@ -566,6 +588,11 @@ absl::StatusOr<ScenarioGyro> ParseGyro(const json& v, const std::string& path) {
     } else if (k == "channelDrift") {
       ASSIGN_OR_RETURN(g.channel_drift, ParseChannelDrift(x, p, &g.channel_unit));
     }
+  }
+  if (g.rotor_displacement_turn &&
+      (!g.rotor_displacement_k || g.rotor_displacement_k->isZero(0.0))) {
+    return Invalid(Key(path, "rotorDisplacementTurn"),
+                   "needs a non-zero rotorDisplacementUm (the displacement that turns)");
   }
   return g;
 }
@@ -897,6 +924,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
     if (s.rotor_displacement_rate_k_m_s) {
       g.rotor_displacement_rate_k_m_s = *s.rotor_displacement_rate_k_m_s;
     }
+    if (s.rotor_displacement_turn) g.rotor_displacement_turn = s.rotor_displacement_turn;
     if (s.readout_distortion_k) g.readout_distortion_k = *s.readout_distortion_k;
     if (s.switching_drift) g.switching_drift = s.switching_drift;
     if (s.hidden_driver_drift) g.hidden_driver_drift = s.hidden_driver_drift;

@@ -45,6 +45,7 @@ struct ScenarioGyro {
   // Effects beyond the paper's models (estimator/simulator.h), SI.
   std::optional<estimator::OrbitalDrift> orbital_drift;
   std::optional<Eigen::Vector3d> rotor_displacement_rate_k_m_s;  // [m/s]
+  std::optional<estimator::DisplacementTurn> rotor_displacement_turn;  // axis normalised
   std::optional<Eigen::Matrix3d> readout_distortion_k;           // [1], symmetric
   std::optional<estimator::SwitchingDrift> switching_drift;
   std::optional<estimator::HiddenDriverDrift> hidden_driver_drift;

@@ -109,12 +109,15 @@ struct GyroState {
   double switch_on_time = -std::numeric_limits<double>::infinity();  // [s]
   std::optional<GyroReading> held_reading;  // the frozen reading inside a kReadingFrozen window
 
-  // Effects beyond the paper's models (GyroTruth). With a displacement rate the printed drift is
-  // rebuilt from Delta(t) (model coefficients, c10_per_m and c20_per_m kept for it).
-  bool displacement_grows = false;
+  // Effects beyond the paper's models (GyroTruth). With a displacement rate or turn the printed
+  // drift is rebuilt from Delta(t) (model coefficients, c10_per_m and c20_per_m kept for it).
+  bool displacement_varies = false;  // a rate, a turn or both
   DriftCoefficients model;
   Vector3d displacement0_k = Vector3d::Zero();  // [m]
   Vector3d displacement_rate_k = Vector3d::Zero();  // [m/s]
+  bool displacement_turns = false;
+  Vector3d turn_axis_k = Vector3d::UnitZ();  // unit, case axes [1]
+  double turn_period_s = 1.0;                // [s]
   double c10_per_m = 0.0, c20_per_m = 0.0;
   bool has_orbital = false;
   Vector3d orbital_amplitude_k = Vector3d::Zero();  // [rad/s]
@@ -186,11 +189,19 @@ struct GyroState {
     return channel->derivative ? (T - y) / channel->lag_s * kSecondsPerHour : y - channel->mean;
   }
 
-  // Delta(t) [m], case axes.
-  Vector3d Displacement_k(double t) const { return displacement0_k + displacement_rate_k * t; }
+  // Delta(t) [m], case axes: Delta0 + rate t, turned right-handed by 2 pi t / P about the turn's
+  // axis a when it turns (Rodrigues: v cos phi + (a x v) sin phi + a (a . v) (1 - cos phi)).
+  Vector3d Displacement_k(double t) const {
+    const Vector3d grown_k = displacement0_k + displacement_rate_k * t;
+    if (!displacement_turns) return grown_k;
+    const double phi_rad = 2.0 * kPi * (t / turn_period_s);
+    const double c = std::cos(phi_rad);
+    return c * grown_k + std::sin(phi_rad) * turn_axis_k.cross(grown_k) +
+           ((1.0 - c) * turn_axis_k.dot(grown_k)) * turn_axis_k;
+  }
 
-  // The printed drift of eq. (1), (10) and eq. (8) + (9) at time t: with a growing displacement,
-  // eq. (8), (9) are evaluated with Delta(t).
+  // The printed drift of eq. (1), (10) and eq. (8) + (9) at time t: with a growing or turning
+  // displacement, eq. (8), (9) are evaluated with Delta(t).
   simulator_truth::PrintedDrift PrintedDriftAt(double t) const {
     return simulator_truth::FromGyroTruth(model, Displacement_k(t), c10_per_m, c20_per_m);
   }
@@ -385,6 +396,27 @@ absl::Status ValidateGyroEffects(const SimulationSpec& spec, const GyroTruth& g,
         "%s.rotor_displacement_rate_k_m_s: the displacement reaches the suspension gap %g m "
         "within the run (at its end (%g, %g, %g) m)",
         f, spec.config.suspension.gap, end_k.x(), end_k.y(), end_k.z()));
+  }
+  if (g.rotor_displacement_turn) {
+    const DisplacementTurn& turn = *g.rotor_displacement_turn;
+    const std::string ft = f + ".rotor_displacement_turn";
+    if (!turn.axis_k.allFinite() || turn.axis_k.norm() < 1e-12) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(ft, ".axis_k: must be a finite non-zero vector"));
+    }
+    RETURN_IF_ERROR(Positive(turn.period_s, ft + ".period_s"));
+    if (g.rotor_displacement_k.isZero(0.0)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(ft, ": needs a non-zero rotor_displacement_k (a turn of no displacement)"));
+    }
+    // The turn keeps |Delta0 + rate t|, which is convex in t: below the gap at both ends means
+    // below it throughout, and then every component of the turned displacement is too.
+    const double longest_m = std::max(g.rotor_displacement_k.norm(), end_k.norm());
+    if (longest_m >= spec.config.suspension.gap) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s: the turning displacement's length %g m reaches the suspension gap %g m", ft,
+          longest_m, spec.config.suspension.gap));
+    }
   }
   const Matrix3d& D = g.readout_distortion_k;
   if (!D.allFinite() || (D - D.transpose()).cwiseAbs().maxCoeff() != 0.0 ||
@@ -712,13 +744,19 @@ absl::Status SetUpGyroEffects(const SimulationSpec& spec, const Matrix3d& C_in_b
   const GyroTruth& truth = spec.gyros[g.id - 1];
   const GyroConfig& gc = *spec.config.FindGyro(g.id);
   g.displacement0_k = truth.rotor_displacement_k;
-  if (!truth.rotor_displacement_rate_k_m_s.isZero(0.0)) {
-    g.displacement_grows = true;
+  if (!truth.rotor_displacement_rate_k_m_s.isZero(0.0) || truth.rotor_displacement_turn) {
+    g.displacement_varies = true;
     g.model = truth.drift.value_or(gc.model);
     g.displacement_rate_k = truth.rotor_displacement_rate_k_m_s;
     g.c10_per_m = truth.c10_per_m;
     g.c20_per_m = truth.c20_per_m;
     effects.rotor_displacement_rate_k_m_s = truth.rotor_displacement_rate_k_m_s;
+  }
+  if (truth.rotor_displacement_turn) {
+    g.displacement_turns = true;
+    g.turn_axis_k = truth.rotor_displacement_turn->axis_k.normalized();
+    g.turn_period_s = truth.rotor_displacement_turn->period_s;
+    effects.rotor_displacement_turn = DisplacementTurn{g.turn_axis_k, g.turn_period_s};
   }
   if (truth.orbital_drift) {
     OrbitalDrift o = *truth.orbital_drift;
@@ -842,7 +880,7 @@ class TruthIntegrator {
                        const Vector3d& w_b, const Vector3d& s_b) {
     const Vector3d h_mid = g.h_in + (0.5 * h) * g.dw_in_prev.cross(g.h_in);
     const Vector3d h_k = g.C_k_b * (C_in_b.transpose() * h_mid);
-    Vector3d dw_k = g.displacement_grows
+    Vector3d dw_k = g.displacement_varies
                         ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_mid), h_k)
                         : simulator_truth::TrueDriftRate_k(g.drift, h_k);
     if (g.fault) dw_k += g.FaultDrift_k(t_mid);
@@ -900,9 +938,9 @@ GyroTruthSample GyroTruthAt(const GyroState& g, double t_m, const Matrix3d& C_b_
   gt.h_k = (g.C_k_b * (C_b_in * g.h_in)).normalized();
   gt.C_b_k = g.C_b_k;
   gt.rotor_displacement_k_m = g.Displacement_k(t_m);
-  const Vector3d dw_model_k =
-      g.displacement_grows ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_m), gt.h_k)
-                           : simulator_truth::TrueDriftRate_k(g.drift, gt.h_k);
+  const Vector3d dw_model_k = g.displacement_varies
+                                  ? simulator_truth::TrueDriftRate_k(g.PrintedDriftAt(t_m), gt.h_k)
+                                  : simulator_truth::TrueDriftRate_k(g.drift, gt.h_k);
   gt.dw_k = dw_model_k + g.FaultDrift_k(t_m) + g.CoefficientStepDrift_k(t_m, gt.h_k) +
             g.C_k_b * (C_b_in * g.dw_rw_in);
   if (g.has_extra_drift) {
@@ -949,7 +987,7 @@ GyroReading ReadGyro(GyroState& g, const GyroTruthSample& gt, double t_m,
   GyroReading reading;
   reading.h_k = h_meas.normalized();
   Vector3d u_offset_k = g.u_offset_k;
-  if (g.displacement_grows) {
+  if (g.displacement_varies) {
     // eq. (3) inverse at Delta(t_m), per suspension axis.
     for (int axis = 0; axis < 3; ++axis) {
       u_offset_k(axis) = OffsetVoltageFromDisplacement(

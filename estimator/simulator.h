@@ -18,7 +18,8 @@
 //   between telemetry frames is N(0, q T I), independent of other intervals.
 // - Effects beyond the paper's models (GyroTruth, each off by default), added to dw_k in case
 //   axes: an orbital drift A cos(2 pi t / P + phase); a rotor displacement growing as
-//   Delta(t) = Delta0 + rate t, with eq. (8) + (9) evaluated at Delta(t) (lambda = Delta(t) /
+//   Delta(t) = Delta0 + rate t, and/or turning about a case axis a as Delta(t) = R(a, 2 pi t / P)
+//   (Delta0 + rate t), with eq. (8) + (9) evaluated at Delta(t) (lambda = Delta(t) /
 //   |Delta(t)|, C10 = c10_per_m |Delta(t)|, C20 = c20_per_m |Delta(t)|) and the voltages of
 //   eq. (3) at Delta(t); a switching drift +-A (random telegraph process, switch times drawn for
 //   the whole run at the start); a hidden-driver drift B x(t), x an Ornstein-Uhlenbeck process
@@ -214,6 +215,14 @@ struct ChannelDrift {
   bool telemetered = true;
 };
 
+// A rotor displacement turning about a case axis (e.g. a suspension bias following a rotating
+// thermal gradient): Delta(t) = R(axis_k, 2 pi t / period_s) (rotor_displacement_k + rate t),
+// R(a, phi) the right-handed rotation by phi about the unit axis a (case axes), t since the start.
+struct DisplacementTurn {
+  Eigen::Vector3d axis_k = Eigen::Vector3d::UnitZ();  // [1], unit, case axes
+  double period_s = 86400.0;                          // one full turn [s], > 0
+};
+
 struct GyroTruth {
   // Whether the gyro runs. Default (nullopt): it runs when it is configured and belongs to the
   // working or the reserve pair; so with the usual pairs {1,2}, {1,3} gyros 1-3 run and gyro 4,
@@ -252,6 +261,11 @@ struct GyroTruth {
   // rotor_displacement_rate_k_m_s t. The drift of eq. (8) + (9) and the voltages of eq. (3)
   // follow Delta(t). Delta(t) must stay inside the suspension gap over the run.
   Eigen::Vector3d rotor_displacement_rate_k_m_s = Eigen::Vector3d::Zero();
+  // The displacement turning about a case axis (DisplacementTurn; with a rate, the growing
+  // displacement turns). Needs a non-zero rotor_displacement_k; the axis is normalised. Since the
+  // turn moves the displacement's components, |rotor_displacement_k + rate t| (the length, which
+  // the turn keeps) must stay below the suspension gap over the run.
+  std::optional<DisplacementTurn> rotor_displacement_turn;
   // Symmetric distortion D of the spin-axis readout [1] (scale-factor errors on the diagonal,
   // non-orthogonality of the direction-cosine pick-off off it): the reading, before readout
   // noise, is normalise((I + D) h_k). |D_ij| < 0.1.
@@ -353,6 +367,7 @@ struct GyroTruthSample {
 struct GyroEffectsTruth {
   std::optional<OrbitalDrift> orbital_drift;  // period_s always set
   Eigen::Vector3d rotor_displacement_rate_k_m_s = Eigen::Vector3d::Zero();
+  std::optional<DisplacementTurn> rotor_displacement_turn;  // axis_k normalised
   Eigen::Matrix3d readout_distortion_k = Eigen::Matrix3d::Zero();
   std::optional<SwitchingDrift> switching_drift;
   double switching_initial_level = 0.0;  // +1 or -1 at t = 0 (0 without a switching drift)
@@ -382,7 +397,7 @@ struct SimulationResult {
   // the displacement folded in as eq. (10) terms: C1 += (C10 + C20) lambda, C2 += -5 C20 lambda
   // (simulator_truth::EquivalentCoefficients), so DriftRate_k(true_coefficients, h_k) is the
   // simulated deterministic drift.
-  // With a rotor displacement rate, the coefficients of the displacement at the start.
+  // With a rotor displacement rate or turn, the coefficients of the displacement at the start.
   std::array<std::optional<DriftCoefficients>, kMaxGyros> true_coefficients;
   // Per gyro (index id - 1; default-constructed when the gyro is off).
   std::array<GyroEffectsTruth, kMaxGyros> effects;

@@ -96,6 +96,12 @@ std::string Vec15(const Eigen::Vector3d& v) {
   return absl::StrCat("[", absl::StrJoin({Num15(v.x()), Num15(v.y()), Num15(v.z())}, ", "), "]");
 }
 
+// Whether the rotor displacement changes over the run (a rate, a turn or both): the truth file
+// then has its columns.
+bool DisplacementVaries(const estimator::GyroEffectsTruth& e) {
+  return !e.rotor_displacement_rate_k_m_s.isZero(0.0) || e.rotor_displacement_turn.has_value();
+}
+
 // Metadata lines of gyro g's effects beyond the paper's models (docs/scenario.md, "Truth file").
 void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsTruth& e) {
   const int n = g + 1;
@@ -111,6 +117,12 @@ void WriteEffectMetadata(std::ostream& out, int g, const estimator::GyroEffectsT
     out << absl::StrFormat("# g%d_rotor_displacement_rate_um_h: %s\n", n,
                            Vec15(e.rotor_displacement_rate_k_m_s * estimator::kSecondsPerHour /
                                estimator::kMetresPerUm));
+  }
+  if (e.rotor_displacement_turn) {
+    out << absl::StrFormat("# g%d_rotor_displacement_turn_axis: %s\n", n,
+                           Vec15(e.rotor_displacement_turn->axis_k));
+    out << absl::StrFormat("# g%d_rotor_displacement_turn_period_h: %.15g\n", n,
+                           estimator::SecondsToHours(e.rotor_displacement_turn->period_s));
   }
   if (!e.readout_distortion_k.isZero(0.0)) {
     const Eigen::Matrix3d ppm = e.readout_distortion_k / 1e-6;
@@ -219,7 +231,7 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
   for (int g = 0; g < kMaxGyros; ++g) {
     const estimator::GyroEffectsTruth& e = result.effects[g];
     const int n = g + 1;
-    if (!e.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+    if (DisplacementVaries(e)) {
       out << absl::StrFormat(",g%d_displacement_x_um,g%d_displacement_y_um,g%d_displacement_z_um",
                              n, n, n);
     }
@@ -272,7 +284,7 @@ absl::Status WriteTruthCsv(const std::string& path, const estimator::SimulationR
     for (int g = 0; g < kMaxGyros; ++g) {
       const estimator::GyroEffectsTruth& e = result.effects[g];
       const std::optional<estimator::GyroTruthSample>& s = t.gyros[g];
-      if (!e.rotor_displacement_rate_k_m_s.isZero(0.0)) {
+      if (DisplacementVaries(e)) {
         if (s) {
           const Eigen::Vector3d um = s->rotor_displacement_k_m / estimator::kMetresPerUm;
           out << "," << Num(um.x()) << "," << Num(um.y()) << "," << Num(um.z());

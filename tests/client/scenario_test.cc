@@ -442,6 +442,48 @@ TEST(Scenario, ParsesAndAppliesTheDriftEffects) {
                        HasSubstr("gyros[0].orbitalDrift.periodMin: required")));
 }
 
+// rotorDisplacementTurn: the axis normalised whatever its length (before or after
+// rotorDisplacementUm in the object), the period in hours to seconds, copied into the truth with
+// the rate beside it; the simulated displacement turns right-handed about it (a quarter turn of
+// (1, 0, 0) um about case z is (0, 1, 0) um).
+TEST(Scenario, ParsesAndAppliesTheRotorDisplacementTurn) {
+  auto s = ParseScenarioJson(R"({
+    "gyros": [{"id": 2, "rotorDisplacementTurn": {"axis": [0, 0, 4], "periodH": 4},
+               "rotorDisplacementUm": [1, 0, 0]},
+              {"id": 3, "rotorDisplacementUm": [0, 0.5, 0], "rotorDisplacementRateUmH": [0, 0.1, 0],
+               "rotorDisplacementTurn": {"axis": [1, -1, 0.5], "periodH": 8784}}]
+  })");
+  ASSERT_THAT(s, IsOk());
+  ASSERT_EQ(s->gyros.size(), 2u);
+  ASSERT_TRUE(s->gyros[0].rotor_displacement_turn.has_value());
+  EXPECT_EQ(s->gyros[0].rotor_displacement_turn->axis_k, Vector3d::UnitZ());
+  EXPECT_EQ(s->gyros[0].rotor_displacement_turn->period_s, 4 * 3600.0);
+  const Vector3d axis3 = s->gyros[1].rotor_displacement_turn->axis_k;
+  EXPECT_NEAR(axis3.norm(), 1.0, 1e-15);
+  EXPECT_LT((axis3 - Vector3d(1, -1, 0.5) / 1.5).norm(), 1e-15);
+  EXPECT_EQ(s->gyros[1].rotor_displacement_turn->period_s, 8784 * 3600.0);
+
+  est::SimulationSpec spec;
+  spec.config = Config();
+  ASSERT_THAT(ApplyScenario(*s, &spec), IsOk());
+  EXPECT_FALSE(spec.gyros[0].rotor_displacement_turn.has_value());
+  ASSERT_TRUE(spec.gyros[1].rotor_displacement_turn.has_value());
+  EXPECT_EQ(spec.gyros[1].rotor_displacement_turn->axis_k, Vector3d::UnitZ());
+  EXPECT_EQ(spec.gyros[1].rotor_displacement_turn->period_s, 4 * 3600.0);
+  EXPECT_EQ(spec.gyros[2].rotor_displacement_turn->axis_k, axis3);
+  EXPECT_EQ(spec.gyros[2].rotor_displacement_rate_k_m_s, 1e-6 / 3600.0 * Vector3d(0, 0.1, 0));
+  auto profile = MakeScenarioProfile(*s, "calibration", 3600.0);
+  ASSERT_THAT(profile, IsOk());
+  spec.profile = *profile;
+  spec.duration = 3600.0;
+  auto result = est::Simulate(spec);
+  ASSERT_THAT(result, IsOk());
+  ASSERT_TRUE(result->truth.back().gyros[1].has_value());
+  EXPECT_LT(
+      (result->truth.back().gyros[1]->rotor_displacement_k_m - 1e-6 * Vector3d(0, 1, 0)).norm(),
+      1e-18);
+}
+
 TEST(Scenario, GyroNotInConfigurationIsAnError) {
   auto s = ParseScenarioJson(R"({"gyros": [{"id": 4, "running": true}]})");
   ASSERT_THAT(s, IsOk());
@@ -551,6 +593,37 @@ TEST(Scenario, ErrorsNameTheKey) {
        "gyros[0].rotorDisplacementRateUmH[2]: 30 is outside [-20, 20]"},
       {R"({"gyros": [{"id": 1, "rotorDisplacementRateUmH": 0.1}]})",
        "gyros[0].rotorDisplacementRateUmH: expected an array of 3 numbers"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 0], "periodH": 24}}]})",
+       "gyros[0].rotorDisplacementTurn.axis: must not be the zero vector"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": 0}}]})",
+       "gyros[0].rotorDisplacementTurn.periodH: must be > 0"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": -2}}]})",
+       "gyros[0].rotorDisplacementTurn.periodH: -2 is outside [0, 8784]"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": 9000}}]})",
+       "gyros[0].rotorDisplacementTurn.periodH: 9000 is outside [0, 8784]"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": 24, "phaseDeg": 3}}]})",
+       "gyros[0].rotorDisplacementTurn.phaseDeg: unknown key"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 1]}}]})",
+       "gyros[0].rotorDisplacementTurn.periodH: required"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"periodH": 24}}]})",
+       "gyros[0].rotorDisplacementTurn.axis: required"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 1], "periodH": 24}}]})",
+       "gyros[0].rotorDisplacementTurn.axis: expected an array of 3 numbers"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [1, 0, 0], "rotorDisplacementTurn": 24}]})",
+       "gyros[0].rotorDisplacementTurn: expected an object"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": 24}}]})",
+       "gyros[0].rotorDisplacementTurn: needs a non-zero rotorDisplacementUm"},
+      {R"({"gyros": [{"id": 1, "rotorDisplacementUm": [0, 0, 0],
+                      "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": 24}}]})",
+       "gyros[0].rotorDisplacementTurn: needs a non-zero rotorDisplacementUm"},
       {R"({"gyros": [{"id": 1, "readoutDistortionPpm": [1, 2, 3]}]})",
        "gyros[0].readoutDistortionPpm: expected an array of 6 numbers"},
       {R"({"gyros": [{"id": 1, "readoutDistortionPpm": [1, 2, 3, 4, 5, 2e5]}]})",

@@ -153,6 +153,54 @@ TEST(SimulateCli, TruthFileRecordsTheDriftEffects) {
   EXPECT_THAT(bad.err, HasSubstr("gyros[0].orbitalDrift.periodMin: required"));
 }
 
+// A rotor displacement turning about a case axis is recorded in the truth file: the axis
+// (normalised) and the period as metadata, and the displacement columns turning with it, a quarter
+// turn at 6 h of a 24 h period taking (1.4, 0, 0) um to (0, 1.4, 0) um; a turn without a
+// displacement is refused naming the JSON key.
+TEST(SimulateCli, TruthFileRecordsTheDisplacementTurn) {
+  TempDir dir;
+  WriteFile(dir.File("turn.json"),
+            R"({"profile": "calibration",
+                "gyros": [{"id": 1, "rotorDisplacementUm": [1.4, 0, 0],
+                           "rotorDisplacementTurn": {"axis": [0, 0, 2], "periodH": 24}}]})");
+  RunResult r = RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" +
+                                dir.File("turn.json") + "' --hours 6 --seed 5 --out '" +
+                                dir.File("rec.csv") + "' --truth '" + dir.File("truth.csv") + "'");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string truth = ReadFile(dir.File("truth.csv"));
+  EXPECT_THAT(truth, HasSubstr("# g1_rotor_displacement_turn_axis: [0, 0, 1]\n"));
+  EXPECT_THAT(truth, HasSubstr("# g1_rotor_displacement_turn_period_h: 24\n"));
+  EXPECT_THAT(truth, ::testing::Not(HasSubstr("rotor_displacement_rate_um_h")));
+  EXPECT_THAT(truth, HasSubstr("st_outlier,st_outlier_arcsec,g1_displacement_x_um,"
+                               "g1_displacement_y_um,g1_displacement_z_um\n"));
+  // The last row (6 h): its last three fields are the displacement [um].
+  std::vector<std::string> rows;
+  std::istringstream lines(truth);
+  for (std::string line; std::getline(lines, line);) {
+    if (!line.empty() && line[0] != '#') rows.push_back(line);
+  }
+  ASSERT_EQ(rows.size(), 362u);  // the header and 361 frames
+  ASSERT_EQ(rows.back().rfind("2019-03-01T06:00:00Z,", 0), 0u) << rows.back();
+  std::vector<std::string> fields;
+  std::istringstream row(rows.back());
+  for (std::string field; std::getline(row, field, ',');) fields.push_back(field);
+  ASSERT_GE(fields.size(), 3u);
+  const size_t n = fields.size();
+  EXPECT_NEAR(std::stod(fields[n - 3]), 0.0, 1e-12);
+  EXPECT_NEAR(std::stod(fields[n - 2]), 1.4, 1e-12);
+  EXPECT_NEAR(std::stod(fields[n - 1]), 0.0, 1e-12);
+
+  WriteFile(
+      dir.File("no_displacement.json"),
+      R"({"gyros": [{"id": 1, "rotorDisplacementTurn": {"axis": [0, 0, 1], "periodH": 24}}]})");
+  RunResult bad = RunEsg(dir, "simulate --config '" + Rdk1() + "' --scenario '" +
+                                  dir.File("no_displacement.json") +
+                                  "' --hours 1 --seed 1 --out '" + dir.File("x.csv") + "'");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.err,
+              HasSubstr("gyros[0].rotorDisplacementTurn: needs a non-zero rotorDisplacementUm"));
+}
+
 TEST(SimulateCli, DocumentedScenarioExamplesRun) {
   const std::filesystem::path scenarios =
       std::filesystem::path(ESG_SOURCE_DIR) / "deploy/examples/scenarios";

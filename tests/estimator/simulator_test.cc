@@ -1066,6 +1066,190 @@ TEST(Simulator, RotorDisplacementGrowsLinearlyInDriftAndVoltages) {
                                       HasSubstr("gyros[1] (gyro 2).rotor_displacement_rate_k_m_s")));
 }
 
+// eq. (3) inverse per suspension axis [V] of the displacement d_k [m].
+Vector3d OffsetVoltages_k(const SuspensionConfig& s, const Vector3d& d_k) {
+  Vector3d u;
+  for (int axis = 0; axis < 3; ++axis) {
+    u(axis) =
+        OffsetVoltageFromDisplacement(d_k(axis), s.amplifier_gain, s.reference_voltage, s.gap);
+  }
+  return u;
+}
+
+// The paper's drift of gyro `id`'s configured model plus eq. (8) + (9) at the displacement
+// delta_k [m] (lambda and sizes computed here), at the spin axis h_k.
+Vector3d ModelPlusDisplacementDrift_k(const SimulationSpec& spec, int id, const Vector3d& delta_k,
+                                      const Vector3d& h_k) {
+  PaperDrift p;
+  const DriftCoefficients& c = spec.config.FindGyro(id)->model;
+  p.k0 = c.k0;
+  p.C11 = c.C1(0), p.C12 = c.C1(1), p.C13 = c.C1(2);
+  p.C21 = c.C2(0), p.C22 = c.C2(1), p.C23 = c.C2(2);
+  const Vector3d lambda = delta_k.normalized();
+  p.l1 = lambda(0), p.l2 = lambda(1), p.l3 = lambda(2);
+  p.C10 = spec.gyros[id - 1].c10_per_m * delta_k.norm();
+  p.C20 = spec.gyros[id - 1].c20_per_m * delta_k.norm();
+  return PaperDrift_k(p, h_k);
+}
+
+// Delta(t) = R(z, 2 pi t / 24 h) Delta0, Delta0 = (1.4, 0, 0) um: the truth's displacement is the
+// right-handed turn (at 6 h, a quarter turn, (0, 1.4, 0) um), the voltages are eq. (3) of Delta(t)
+// (voltage noise off), the drift is eq. (8) + (9) at Delta(t) (the test's printed formulas), and
+// the spin axis follows RK4 of that drift while a fixed Delta0 misses it by far. With a rate and
+// a tilted axis the growing displacement turns (against Eigen's AngleAxis). A turn of no
+// displacement, a zero or non-finite axis, a period <= 0 and a length reaching the gap are
+// refused, naming the field.
+TEST(Simulator, RotorDisplacementTurnsAboutACaseAxis) {
+  SimulationSpec spec = TestSpec(6.0);
+  spec.config.random_walk = 0.0;
+  const Vector3d delta0 = kMetresPerUm * Vector3d(1.4, 0, 0);
+  const double period_s = HoursToSeconds(24.0);
+  spec.gyros[1].rotor_displacement_k = delta0;
+  // Any non-zero length: the simulator normalises the axis.
+  spec.gyros[1].rotor_displacement_turn = DisplacementTurn{Vector3d(0, 0, 2.5), period_s};
+  spec.gyros[1].voltage_noise = 0.0;
+  spec.gyros[1].c10_per_m = DegPerHourToRadPerSec(0.3) / kMetresPerUm;
+  spec.gyros[1].c20_per_m = DegPerHourToRadPerSec(0.1) / kMetresPerUm;
+  const SimulationResult r = RunSimulation(spec);
+  ASSERT_EQ(r.truth.size(), 361u);
+  ASSERT_TRUE(r.effects[1].rotor_displacement_turn.has_value());
+  EXPECT_EQ(r.effects[1].rotor_displacement_turn->axis_k, Vector3d::UnitZ());
+  EXPECT_EQ(r.effects[1].rotor_displacement_turn->period_s, period_s);
+  EXPECT_FALSE(r.effects[0].rotor_displacement_turn.has_value());
+
+  // A quarter turn at 6 h takes case x to case y.
+  EXPECT_LT(
+      (r.truth.back().gyros[1]->rotor_displacement_k_m - kMetresPerUm * Vector3d(0, 1.4, 0)).norm(),
+      1e-12 * delta0.norm());
+  const SuspensionConfig& s = spec.config.suspension;
+  const double u_size = OffsetVoltages_k(s, delta0).norm();
+  for (size_t m = 0; m < r.truth.size(); ++m) {
+    const double t = 60.0 * m;
+    const double phi = 2.0 * kPi * t / period_s;
+    const Vector3d delta = delta0.norm() * Vector3d(std::cos(phi), std::sin(phi), 0.0);
+    const GyroTruthSample& gt = *r.truth[m].gyros[1];
+    EXPECT_LT((gt.rotor_displacement_k_m - delta).norm(), 1e-12 * delta0.norm()) << t;
+    const Vector3d u = *r.recording.frames[m].gyros[1]->u_k_mv * kVoltsPerMv;
+    EXPECT_LT((u - OffsetVoltages_k(s, delta)).norm(), 1e-12 * u_size) << t;
+    const Vector3d expected = ModelPlusDisplacementDrift_k(spec, 2, delta, gt.h_k);
+    EXPECT_LT((gt.dw_k - expected).norm(), 1e-12 * expected.norm()) << t;
+  }
+  // At 6 h the voltages moved from x to y by the full eq. (3) size.
+  const Vector3d u_end = *r.recording.frames.back().gyros[1]->u_k_mv * kVoltsPerMv;
+  EXPECT_LT(std::abs(u_end.x()), 1e-12 * u_size);
+  EXPECT_NEAR(u_end.y(), OffsetVoltages_k(s, delta0).x(), 1e-12 * u_size);
+  // The reported coefficients are those of Delta0.
+  const Vector3d dC1 = r.true_coefficients[1]->C1 - spec.config.FindGyro(2)->model.C1;
+  EXPECT_NEAR(dC1.normalized().dot(delta0.normalized()), 1.0, 1e-12);
+
+  // The spin axis against RK4 of the printed drift at Delta(t).
+  const double reference_step = 0.25;
+  const double max_drift = DegPerHourToRadPerSec(4.0);
+  const double tol = IntegrationTolerance(spec, max_drift, reference_step);
+  auto integrate = [&](bool turning) {
+    return IntegrateTimeVaryingDrift(
+        *spec.profile,
+        [&](double t, const Vector3d& h_k) {
+          const double phi = turning ? 2.0 * kPi * t / period_s : 0.0;
+          const Vector3d delta = delta0.norm() * Vector3d(std::cos(phi), std::sin(phi), 0.0);
+          return ModelPlusDisplacementDrift_k(spec, 2, delta, h_k);
+        },
+        r.truth[0].gyros[1]->C_b_k, r.truth[0].gyros[1]->h_in, spec.telemetry_step, r.truth.size(),
+        reference_step);
+  };
+  for (const TruthSample& t : r.truth) EXPECT_LT(t.gyros[1]->dw_k.norm(), max_drift);
+  EXPECT_LT(MaxAngle(integrate(true), r.truth, 1), tol);
+  EXPECT_GT(MaxAngle(integrate(false), r.truth, 1), 1000.0 * tol);
+
+  // Growing and turning together, about a tilted axis.
+  SimulationSpec both = spec;
+  const Vector3d rate = kMetresPerUm / kSecondsPerHour * Vector3d(0.1, -0.05, 0.2);  // [m/s]
+  const Vector3d axis = Vector3d(1.0, -2.0, 0.5).normalized();
+  const double period_both_s = HoursToSeconds(5.0);
+  both.gyros[1].rotor_displacement_rate_k_m_s = rate;
+  both.gyros[1].rotor_displacement_turn = DisplacementTurn{axis, period_both_s};
+  const SimulationResult rb = RunSimulation(both);
+  ASSERT_EQ(rb.truth.size(), 361u);
+  for (size_t m = 0; m < rb.truth.size(); m += 15) {
+    const double t = 60.0 * m;
+    const Vector3d delta =
+        Eigen::AngleAxisd(2.0 * kPi * t / period_both_s, axis).toRotationMatrix() *
+        (delta0 + rate * t);
+    const GyroTruthSample& gt = *rb.truth[m].gyros[1];
+    EXPECT_LT((gt.rotor_displacement_k_m - delta).norm(), 1e-12 * delta.norm()) << t;
+    const Vector3d u = *rb.recording.frames[m].gyros[1]->u_k_mv * kVoltsPerMv;
+    EXPECT_LT((u - OffsetVoltages_k(s, delta)).norm(), 1e-12 * u_size) << t;
+    const Vector3d expected = ModelPlusDisplacementDrift_k(both, 2, delta, gt.h_k);
+    EXPECT_LT((gt.dw_k - expected).norm(), 1e-12 * expected.norm()) << t;
+  }
+  EXPECT_EQ(rb.effects[1].rotor_displacement_rate_k_m_s, rate);
+
+  auto expect_invalid = [](const SimulationSpec& bad, const std::string& field) {
+    EXPECT_THAT(Simulate(bad), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr(field)));
+  };
+  const std::string f = "gyros[1] (gyro 2).rotor_displacement_turn";
+  {
+    SimulationSpec bad = spec;
+    bad.gyros[1].rotor_displacement_k = Vector3d::Zero();
+    expect_invalid(bad, f + ": needs a non-zero rotor_displacement_k");
+  }
+  {
+    SimulationSpec bad = spec;
+    bad.gyros[1].rotor_displacement_turn->axis_k = Vector3d::Zero();
+    expect_invalid(bad, f + ".axis_k: must be a finite non-zero vector");
+    bad.gyros[1].rotor_displacement_turn->axis_k = Vector3d(0, std::nan(""), 1);
+    expect_invalid(bad, f + ".axis_k: must be a finite non-zero vector");
+  }
+  for (double period : {0.0, -3600.0, std::numeric_limits<double>::infinity(), std::nan("")}) {
+    SimulationSpec bad = spec;
+    bad.gyros[1].rotor_displacement_turn->period_s = period;
+    expect_invalid(bad, f + ".period_s: must be finite and > 0");
+  }
+  {
+    // Each component inside the gap (accepted without a turn), the length not: refused, as the
+    // turn brings the length onto a case axis.
+    SimulationSpec bad = spec;
+    bad.gyros[1].rotor_displacement_k = 0.8 * s.gap * Vector3d(1, 1, 0);
+    expect_invalid(bad, f + ": the turning displacement's length");
+    bad.gyros[1].rotor_displacement_turn.reset();
+    EXPECT_THAT(Simulate(bad), IsOk());
+  }
+}
+
+// A turn draws no random number: against the same displaced rotor without a turn, the other gyros
+// and the star tracker are bit for bit the same, the turned gyro's first reading (before anything
+// has turned) too, and its voltages differ by exactly eq. (3) of the turn (the same noise draws).
+TEST(Simulator, RotorDisplacementTurnDrawsNoRandomNumbers) {
+  SimulationSpec fixed = TestSpec(3.0);
+  const Vector3d delta0 = kMetresPerUm * Vector3d(0.8, -0.6, 0.3);
+  fixed.gyros[1].rotor_displacement_k = delta0;
+  SimulationSpec turning = fixed;
+  const double period_s = HoursToSeconds(6.0);
+  turning.gyros[1].rotor_displacement_turn = DisplacementTurn{Vector3d::UnitX(), period_s};
+  const SimulationResult rf = RunSimulation(fixed);
+  const SimulationResult rt = RunSimulation(turning);
+  ASSERT_EQ(rf.truth.size(), rt.truth.size());
+  const SuspensionConfig& s = fixed.config.suspension;
+  double max_voltage_move = 0.0;
+  for (size_t m = 0; m < rt.truth.size(); ++m) {
+    const TelemetryFrame& a = rf.recording.frames[m];
+    const TelemetryFrame& b = rt.recording.frames[m];
+    for (int g : {0, 2}) {
+      EXPECT_EQ(a.gyros[g]->h_k, b.gyros[g]->h_k) << m;
+      EXPECT_EQ(*a.gyros[g]->u_k_mv, *b.gyros[g]->u_k_mv) << m;
+    }
+    EXPECT_EQ(a.star_tracker->q_in_b.coeffs(), b.star_tracker->q_in_b.coeffs()) << m;
+    const Vector3d moved = OffsetVoltages_k(s, rt.truth[m].gyros[1]->rotor_displacement_k_m) -
+                           OffsetVoltages_k(s, delta0);
+    const Vector3d du = (*b.gyros[1]->u_k_mv - *a.gyros[1]->u_k_mv) * kVoltsPerMv;
+    EXPECT_LT((du - moved).norm(), 1e-13) << m;  // [V]; the noise is 1e-3 V
+    max_voltage_move = std::max(max_voltage_move, moved.norm());
+  }
+  EXPECT_EQ(rf.recording.frames[0].gyros[1]->h_k, rt.recording.frames[0].gyros[1]->h_k);
+  EXPECT_GT(max_voltage_move, 0.01);  // the turn does move the voltages [V]
+  EXPECT_GT(rt.truth.back().gyros[1]->h_in.cross(rf.truth.back().gyros[1]->h_in).norm(), 1e-6);
+}
+
 // With zero readout noise the reading is normalise((I + D) h_true) exactly (to rounding).
 TEST(Simulator, ReadoutDistortionIsApplied) {
   SimulationSpec spec = TestSpec(2.0);
