@@ -19,7 +19,7 @@ namespace esg::estimator {
 
 namespace {
 
-constexpr std::array<std::pair<BasisKind, std::string_view>, 9> kKindNames = {{
+constexpr std::array<std::pair<BasisKind, std::string_view>, 10> kKindNames = {{
     {BasisKind::kSpinAxisHarmonic, "spin_axis_harmonic"},
     {BasisKind::kBodyRate, "body_rate"},
     {BasisKind::kBodyRateProduct, "body_rate_product"},
@@ -29,6 +29,7 @@ constexpr std::array<std::pair<BasisKind, std::string_view>, 9> kKindNames = {{
     {BasisKind::kSuspensionVoltage, "suspension_voltage"},
     {BasisKind::kExponentialDecay, "exponential_decay"},
     {BasisKind::kChannel, "channel"},
+    {BasisKind::kCyclingHarmonic, "cycling_harmonic"},
 }};
 
 constexpr std::array<std::pair<ChannelForm, std::string_view>, 3> kFormNames = {{
@@ -123,6 +124,12 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
   if (!std::isfinite(t.value)) return bad("value", "must be finite");
   if (!std::isfinite(t.sigma) || t.sigma < 0.0) return bad("sigma", "must be finite and >= 0");
   switch (t.kind) {
+    case BasisKind::kCyclingHarmonic:
+      if (!(t.period >= kMinOrbitalPeriodS && t.period <= kMaxOrbitalPeriodS)) {
+        return bad("periodS", absl::StrFormat("%g s is outside [%g, %g] s (a minute to a year)",
+                                              t.period, kMinOrbitalPeriodS, kMaxOrbitalPeriodS));
+      }
+      [[fallthrough]];
     case BasisKind::kSpinAxisHarmonic: {
       int degree = 0;
       for (int e : t.exponents) {
@@ -136,7 +143,8 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
       if (degree > kMaxHarmonicDegree) {
         return bad("exponents", absl::StrFormat("degree %d above %d", degree, kMaxHarmonicDegree));
       }
-      RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));  // the switch-on (D110)
+      // The switch-on (D110); a cycling harmonic's phase zero.
+      RETURN_IF_ERROR(CheckEpoch(t.epoch, prefix));
       break;
     }
     case BasisKind::kBodyRateProduct:
@@ -226,6 +234,13 @@ double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
     }
     case BasisKind::kChannel:
       return in.channels != nullptr ? in.channels->Scalar(t, in.time) : 0.0;
+    case BasisKind::kCyclingHarmonic: {
+      double s = 1.0;
+      for (int i = 0; i < 3; ++i) s *= std::pow(in.h_k(i), t.exponents[i]);
+      const double phase =
+          2.0 * kPi * std::fmod(absl::ToDoubleSeconds(in.time - t.epoch), t.period) / t.period;
+      return s * (t.sine ? std::sin(phase) : std::cos(phase));
+    }
   }
   return 0.0;
 }
@@ -277,6 +292,12 @@ std::string BasisTermLabel(const BasisTerm& t) {
               : absl::StrFormat("%slag(%s, %.3gh)", t.form == ChannelForm::kDerivative ? "d/dt " : "",
                                 t.channel, t.time_constant / kSecondsPerHour);
       break;
+    case BasisKind::kCyclingHarmonic: {
+      const std::string monomial = Monomial(t.exponents);
+      s = absl::StrFormat("%scycle %s %.3gh", monomial == "1" ? "" : monomial + "*",
+                          t.sine ? "sin" : "cos", t.period / kSecondsPerHour);
+      break;
+    }
   }
   return absl::StrCat(s, " -> ", std::string(1, AxisLetter(t.axis)));
 }
@@ -297,6 +318,7 @@ std::string_view BasisScalarJsonUnit(BasisKind kind) {
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
     case BasisKind::kExponentialDecay:
+    case BasisKind::kCyclingHarmonic:
       return "1";
   }
   return "1";
@@ -318,6 +340,7 @@ double BasisValueToJson(BasisKind kind) {
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
     case BasisKind::kExponentialDecay:
+    case BasisKind::kCyclingHarmonic:
     case BasisKind::kChannel:  // s in the channel's unit (per hour for the derivative) already
       return drift;
   }
@@ -337,6 +360,7 @@ double BasisReferenceSize(BasisKind kind) {
     case BasisKind::kSpinAxisHarmonic:
     case BasisKind::kOrbitalHarmonic:
     case BasisKind::kExponentialDecay:
+    case BasisKind::kCyclingHarmonic:
     case BasisKind::kChannel:  // 1 unit of the channel (1 K)
       return 1.0;
   }

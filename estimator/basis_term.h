@@ -24,6 +24,10 @@
 //                           0 before it (a transient switched on at the epoch
 //                           that decays with time constant tau: a warm-up, epoch
 //                           at the recording's start; docs/formats.md "BasisTerm")
+//   cycling_harmonic        h1^a h2^b h3^c times cos or sin of              1
+//                           2 pi (t - epoch) / period, a + b + c <= 4 (a
+//                           coefficient of eq. (1), (10) cycling: C1, C2 of
+//                           a rotor displacement turning, degrees 0 and 2)
 //   channel                 a declared housekeeping channel x (channels.h):  u, the channel's
 //                           value x - reference, its first-order lag            unit (u/h for
 //                           y - reference (time constant tau) or the lag's      the derivative)
@@ -56,6 +60,7 @@ enum class BasisKind {
   kSuspensionVoltage,
   kExponentialDecay,
   kChannel,
+  kCyclingHarmonic,
 };
 
 // How a term of kind kChannel reads its channel (channel_signal.h): its held value, its
@@ -85,20 +90,20 @@ inline constexpr double kMaxDecayTimeConstantS = 366.0 * 86400.0;
 struct BasisTerm {
   BasisKind kind = BasisKind::kSpinAxisHarmonic;
   int axis = 1;  // m, the case axis of the drift direction e_m, 1..3
-  // kSpinAxisHarmonic: (a, b, c), each >= 0, sum <= kMaxHarmonicDegree.
+  // kSpinAxisHarmonic, kCyclingHarmonic: (a, b, c), each >= 0, sum <= kMaxHarmonicDegree.
   std::array<int, 3> exponents = {0, 0, 0};
   // kBodyRate, kRampHarmonic, kSuspensionVoltage: i = index[0]; kBodyRateProduct: i, j (1..3).
   std::array<int, 2> index = {1, 1};
   int harmonic = 1;    // kOrbitalHarmonic: n, 1..kMaxOrbitalHarmonic
-  bool sine = false;   // kOrbitalHarmonic: sin (true) or cos (false)
-  double period = 0;   // kOrbitalHarmonic: [s], > 0
+  bool sine = false;   // kOrbitalHarmonic, kCyclingHarmonic: sin (true) or cos (false)
+  double period = 0;   // kOrbitalHarmonic, kCyclingHarmonic: [s], > 0
   double time_constant = 0;  // kExponentialDecay; kChannel lag and derivative: tau [s], > 0
   // kChannel: the declared channel's name, how the term reads it, and the channel's value at
   // which the value and lag forms give s = 0 [the channel's unit].
   std::string channel;
   ChannelForm form = ChannelForm::kValue;
   double reference = 0.0;
-  // kOrbitalHarmonic: phase zero; kRamp*: s = 0; kExponentialDecay: s = 1, 0 before it;
+  // kOrbitalHarmonic, kCyclingHarmonic: phase zero; kRamp*: s = 0; kExponentialDecay: s = 1, 0 before it;
   // kSpinAxisHarmonic: switched on (0 before it).
   absl::Time epoch = absl::UnixEpoch();
   double value = 0.0;  // coefficient [rad/s per unit of s]
@@ -136,7 +141,8 @@ Eigen::Vector3d BasisDriftSum_k(const std::vector<BasisTerm>& terms, const Basis
 
 // Short identifier, stable across runs: "h1^2*h3 -> x", "rate[2] -> z", "orbit cos 1 -> y",
 // "ramp -> x", "ramp*h2^2 -> x", "voltage[1] -> z", "rate[1]*rate[3] -> y",
-// "exp(-t/4.1h) -> y" (a harmonic's switch-on epoch is not in its label).
+// "exp(-t/4.1h) -> y", "h2^2*cycle cos 24.3h -> y" (a harmonic's switch-on epoch is not in its
+// label).
 std::string BasisTermLabel(const BasisTerm& term);
 
 // Unit of s in the JSON (deg/s for rates, h for ramps) and the factor from SI to it: the

@@ -131,6 +131,9 @@ double BasisPhaseOver(const std::vector<BasisTerm>& basis, absl::Time begin, dou
       case BasisKind::kOrbitalHarmonic:
         phase_rad = std::max(phase_rad, 2.0 * kPi * t.harmonic * span / t.period);
         break;
+      case BasisKind::kCyclingHarmonic:
+        phase_rad = std::max(phase_rad, 2.0 * kPi * span / t.period);
+        break;
       case BasisKind::kExponentialDecay:
         if (t.epoch > begin && t.epoch < end) return std::numeric_limits<double>::infinity();
         if (end > t.epoch) phase_rad = std::max(phase_rad, span / t.time_constant);

@@ -91,10 +91,10 @@ std::optional<std::vector<disc::Effect>> ParseEffects(const std::string& text) {
   return out;
 }
 
-// Every effect id the diagnosis tries (report.h Effect, kStarTrackerCycle last), comma-separated.
+// Every effect id the diagnosis tries (report.h Effect, kLastEffect last), comma-separated.
 std::string KnownEffectIds() {
   std::vector<std::string> ids;
-  for (int e = 0; e <= static_cast<int>(disc::Effect::kStarTrackerCycle); ++e) {
+  for (int e = 0; e <= static_cast<int>(disc::kLastEffect); ++e) {
     ids.push_back(disc::EffectId(static_cast<disc::Effect>(e)));
   }
   return absl::StrJoin(ids, ", ");

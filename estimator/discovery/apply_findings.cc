@@ -9,6 +9,7 @@
 #include "absl/strings/str_join.h"
 #include "estimator/discovery/candidate.h"
 #include "estimator/discovery/sun_terms.h"
+#include "estimator/discovery/turning_displacement.h"
 #include "estimator/model_terms.h"
 #include "estimator/units.h"
 
@@ -29,6 +30,16 @@ std::string BasisFindingLine(const Finding& f, const std::string& name) {
   if (!f.readout_distortion.isZero(0.0)) absl::StrAppend(&line, ", readoutDistortion set");
   absl::StrAppend(&line, ", at the fitted values, freed with the diagnosis's prior");
   return line;
+}
+
+// Whether the finding holds a parameter of a fixed term `effect` frees (model_terms.h).
+bool HoldsFixedTermOf(const Finding& f, absl::string_view effect) {
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    if (term.effect == effect && FindParameter(f.parameters, FixedTermJsonName(term)) != nullptr) {
+      return true;
+    }
+  }
+  return false;
 }
 
 // The drift coefficients a finding frees (`freed`), set in gyro `g`'s model at their fitted
@@ -141,6 +152,16 @@ void ApplyFinding(const Finding& f, const DiagnosisReport& report, const Diagnos
   }
   if (f.effect == kEffectBasisTerm) {
     out.applied.push_back(BasisFindingLine(f, name));
+    // A turning displacement that freed C1, C2 where the model held them (turning_displacement.h)
+    // carries their values as rotor_displacement's parameters: its constant part.
+    const std::optional<FreedCoefficients> freed =
+        FreedDriftCoefficients(Effect::kRotorDisplacement, options);
+    if (f.time.kind == kTimeTurning && g != nullptr && freed.has_value() &&
+        HoldsFixedTermOf(f, EffectId(Effect::kRotorDisplacement))) {
+      Finding constant = f;
+      constant.effect = EffectId(Effect::kRotorDisplacement);
+      ApplyFreedCoefficients(constant, name, *freed, *g, out);
+    }
     return;
   }
   if (f.effect == kVerdictUnexplained) {

@@ -18,6 +18,7 @@
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
+#include "estimator/discovery/turning_displacement.h"
 #include "estimator/drift_model.h"
 #include "estimator/model_terms.h"
 #include "estimator/rotation.h"
@@ -302,6 +303,10 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
     if (Effective(effects, Effect::kTransient) &&
         !added(CandidateName({Effect::kTransient, id}))) {
       out.push_back({Effect::kTransient, id});
+    }
+    if (Effective(effects, Effect::kTurningDisplacement) &&
+        !added(CandidateName({Effect::kTurningDisplacement, id}))) {
+      out.push_back({Effect::kTurningDisplacement, id});
     }
   }
   const bool walk_added = std::any_of(model.added.begin(), model.added.end(), [](const auto& a) {
@@ -813,6 +818,8 @@ EffectFit FitOf(Effect effect) {
       return &FitTransient;
     case Effect::kStarTrackerCycle:
       return &FitStarTrackerCycle;
+    case Effect::kTurningDisplacement:
+      return &FitTurningDisplacement;
   }
   return nullptr;
 }
@@ -824,6 +831,10 @@ absl::StatusOr<CandidateFit> FitCandidate(const Candidate& candidate, const FitC
   fit.candidate = candidate;
   fit.model = *ctx.model;
   fit.model.added.push_back(CandidateName(candidate));
+  // A fit that returns without a run of its own (nothing to fit: no sun regressors, no orbital
+  // period, ...) leaves the model's: its row in the table of candidates then shows no change
+  // rather than the model's whole -2 log L as its gain.
+  if (ctx.model_run != nullptr) fit.run = *ctx.model_run;
   const EffectFit fit_effect = FitOf(candidate.effect);
   if (fit_effect == nullptr) return absl::InternalError("unknown effect");
   RETURN_IF_ERROR(fit_effect(candidate, ctx, fit));

@@ -897,6 +897,11 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
             Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json,
             t0.time_constant / kSecondsPerHour);
         break;
+      case BasisKind::kCyclingHarmonic:  // not a group of the basis (turning_displacement.h)
+        text = absl::StrFormat("drift along %s (case axes) as %s, %.4f deg/h",
+                               Vec(v.normalized(), 1.0, "%.2f"), BasisTermLabel(t0),
+                               v.norm() * to_json);
+        break;
       case BasisKind::kChannel:  // not a group of the basis (channel_candidate.h); for -Wswitch
         text = absl::StrFormat("drift along %s (case axes) follows %s, %.4f deg/h per unit",
                                Vec(v.normalized(), 1.0, "%.2f"), BasisTermLabel(t0),

@@ -122,11 +122,12 @@ absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
   // the basis (a ramp, an orbital harmonic, a case-fixed drift, ...) describes the deviation with
   // more evidence, the stage would select that group first, and the sun is not the description.
   if (sun.best_other_evidence > g.evidence) {
-    fit.notes.push_back(absl::StrFormat(
+    fit.not_fitted = absl::StrFormat(
         "the sun's best face (%s, 2 ln B = %.1f averaged over the lags) is not the open-ended "
         "basis's first choice on gyro %d's deviation: \"%s\" has 2 ln B = %.1f",
         SunFaceName(g.sun_face), g.evidence, candidate.gyro, sun.best_other_label,
-        sun.best_other_evidence));
+        sun.best_other_evidence);
+    fit.notes.push_back(fit.not_fitted);
     return absl::OkStatus();
   }
   // A drift that returns to its mean (switching at random, driven by a quantity the telemetry

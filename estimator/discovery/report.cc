@@ -42,6 +42,8 @@ const char* EffectId(Effect e) {
       return "transient";
     case Effect::kStarTrackerCycle:
       return "star_tracker_orbital_misalignment";
+    case Effect::kTurningDisplacement:
+      return "turning_displacement";
   }
   return "?";
 }
@@ -59,7 +61,7 @@ std::optional<Effect> EffectFromId(absl::string_view id) {
                    Effect::kStarTrackerLatency, Effect::kRandomWalkDrift, Effect::kDriftStep,
                    Effect::kReadoutDistortion, Effect::kSunDrift, Effect::kChannelDrift, Effect::kWarmUp,
                    Effect::kCoefficientStep, Effect::kTransient,
-                   Effect::kStarTrackerCycle}) {
+                   Effect::kStarTrackerCycle, Effect::kTurningDisplacement}) {
     if (id == EffectId(e)) return e;
   }
   return std::nullopt;

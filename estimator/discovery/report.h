@@ -58,9 +58,15 @@ enum class Effect {
   // orbital phase (a thermo-elastic misalignment), common to all gyros, six coefficients
   // regressed on every gyro's deviation at once; tried before gyro terms are taken.
   kStarTrackerCycle,
+  // A rotor displacement turning about an axis (turning_displacement.h): C1 and C2 of eq. (10)
+  // turning with it, twelve cycling_harmonic terms at a period searched; its finding is a
+  // kEffectBasisTerm of time behaviour "turning".
+  kTurningDisplacement,
 };
+// The last of Effect (they are numbered from 0 without gaps).
+inline constexpr Effect kLastEffect = Effect::kTurningDisplacement;
 // "rotor_displacement", ..., "sun_drift", "warm_up", "coefficient_step", "transient",
-// "star_tracker_orbital_misalignment"
+// "star_tracker_orbital_misalignment", "turning_displacement"
 const char* EffectId(Effect e);
 // The effect whose EffectId is `id`, or nullopt.
 std::optional<Effect> EffectFromId(absl::string_view id);

@@ -15,6 +15,7 @@
 #include "estimator/discovery/point_prediction.h"
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/discovery/time_behaviour.h"
+#include "estimator/discovery/turning_displacement.h"
 #include "estimator/discovery/wander.h"
 #include "estimator/statistics.h"
 #include "estimator/status_macros.h"
@@ -64,6 +65,7 @@ std::vector<std::optional<absl::StatusOr<CandidateFit>>> FitCandidates(
     if (c.effect == Effect::kTransient) return 14;  // the step's onsets, then 10 time constants
     if (c.effect == Effect::kReadoutDistortion) return 2;  // a regression and a run
     if (c.effect == Effect::kSunDrift) return 3;  // six faces' regressions and a run
+    if (c.effect == Effect::kTurningDisplacement) return 3;  // a period's regressions and a run
     if (c.effect == Effect::kChannelDrift) return kChannelCandidateRuns;  // full runs
     return c.effect == Effect::kRandomWalkDrift ? 5 : (c.gyro == 0 ? 3 : 1);
   };
@@ -227,6 +229,24 @@ absl::StatusOr<std::string> PreferRandomWalk(const std::vector<Scored>& scored,
                                                  : DegPerHourSqrtHourToSi(walk.fitted[0].value)),
       CandidateName(walk.candidate), gain, threshold);
   if (!(gain > threshold)) {
+    // A turning displacement is a change in time itself, as a walk is, and a walk raised enough
+    // follows any slow change: the nested test both ways. When the walk adds nothing
+    // significant on top of the turn either, the two describe the same drift and the larger
+    // evidence decides (the walk's intensity was fitted without the turn, so it absorbs it).
+    if (det.candidate.effect == Effect::kTurningDisplacement) {
+      const double walk_gain = Profile(det.run).value - Profile(*run).value - rw->penalty;
+      if (!(walk_gain > threshold) && significant.front().score > rw->score) {
+        return absl::StrFormat(
+            "on top of a random walk raised to %.4f deg/h/sqrt(h) (%s) it adds 2 ln B = %.1f, "
+            "and the walk adds %.1f on top of it (threshold %.1f): the two describe the same "
+            "drift, and the turn's evidence is the larger (2 ln B %.1f against %.1f)",
+            SiToDegPerHourSqrtHour(walk.fitted.empty()
+                                       ? walk.model.config.random_walk
+                                       : DegPerHourSqrtHourToSi(walk.fitted[0].value)),
+            CandidateName(walk.candidate), gain, walk_gain, threshold,
+            significant.front().score, rw->score);
+      }
+    }
     significant.assign(1, *rw);
     note = absl::StrFormat(
         "%s fits part of it but adds nothing significant on top of the raised random walk "
@@ -454,7 +474,8 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
   // Three exponential_decay terms of the basis; spin_axis_harmonic terms switched on at a
   // coefficient step's onset (D110).
   if (f.candidate.effect == Effect::kWarmUp || f.candidate.effect == Effect::kCoefficientStep ||
-      f.candidate.effect == Effect::kTransient) {
+      f.candidate.effect == Effect::kTransient ||
+      f.candidate.effect == Effect::kTurningDisplacement) {
     finding.effect = kEffectBasisTerm;
     finding.description = f.description;
     finding.basis_terms = f.basis_terms;
@@ -529,6 +550,9 @@ Finding MakeFinding(const Scored& s, const std::vector<CandidateFit>& fits, int 
       : f.time.kind == kTimeCoefficientStep
           ? "a step of drift coefficients: no change before its onset, its evidence integrated "
             "over the onset and the coefficient group, not the constant-effect test"
+      : f.time.kind == kTimeTurning
+          ? "a turning displacement: C1 and C2 cycling with a period, its evidence integrated "
+            "over the period, not the constant-effect test"
           : "constant in time, as a physical effect of the library is";
   finding.evidence.notes.push_back(absl::StrFormat(
       "improvement per quarter of the recording (-2 log L): %.1f, %.1f, %.1f, %.1f (%s)",
@@ -560,29 +584,33 @@ absl::StatusOr<PhysicsCheck> CheckConstantEffect(const CandidateFit& fit,
   PhysicsCheck out;
   const Candidate& c = fit.candidate;
   const DiagnoseOptions& options = context.options();
-  if (c.effect == Effect::kSunDrift && fit.wander_compared) {
-    // The sun's terms at the best lag, compared on the deviation the candidate regressed, by the
-    // open-ended stage's rule for its terms (GyrosOutdoneByAStationaryDrift): a group of the
+  if ((c.effect == Effect::kSunDrift || c.effect == Effect::kTurningDisplacement) &&
+      fit.wander_compared) {
+    // The sun's terms at the best lag (a turning displacement's at the best period), compared on
+    // the deviation the candidate regressed, by the open-ended stage's rule for its terms (GyrosOutdoneByAStationaryDrift): a group of the
     // basis whose gyro's deviation a drift that returns to its mean describes better is not
     // taken. (The library's rule for its constant effects, decisively better and nothing on top,
     // let the sun's terms of a switching drift through: what a stationary drift leaves of a
     // switching one is not white, and a lagged illumination fits part of it.)
     const double threshold = EvidenceThreshold(options.alpha, family);
+    const bool sun = c.effect == Effect::kSunDrift;
+    const char* terms = sun ? "the sun's terms" : "the turning terms (less the period's Occam term)";
+    const char* what = sun ? "a drift that follows the sun" : "a turning rotor displacement";
     out.fails = fit.wander_stationary > fit.wander_effect;
     out.note =
         out.fails
             ? absl::StrFormat(
                   "%s fits part of gyro %d's drift, but on the gyro's deviation a drift that "
-                  "returns to its mean describes it better (2 ln B = %.1f against %.1f; the "
-                  "sun's terms add 2 ln B = %.1f on top of it, threshold %.1f): not taken as a "
-                  "drift that follows the sun",
-                  CandidateName(c), c.gyro, fit.wander_stationary, fit.wander_effect,
-                  fit.wander_on_top, threshold)
+                  "returns to its mean describes it better (2 ln B = %.1f against %.1f; "
+                  "%s add 2 ln B = %.1f on top of it, threshold %.1f): not taken as %s",
+                  CandidateName(c), c.gyro, fit.wander_stationary, fit.wander_effect, terms,
+                  fit.wander_on_top, threshold, what)
             : absl::StrFormat(
-                  "on gyro %d's deviation the sun's terms have 2 ln B = %.1f, more than a drift "
-                  "that returns to its mean (2 ln B = %.1f; the terms add %.1f on top of it, "
-                  "threshold %.1f): a drift that follows the sun, not a wandering drift",
-                  c.gyro, fit.wander_effect, fit.wander_stationary, fit.wander_on_top, threshold);
+                  "on gyro %d's deviation %s have 2 ln B = %.1f, more than a drift that returns "
+                  "to its mean (2 ln B = %.1f; the terms add %.1f on top of it, threshold %.1f): "
+                  "%s, not a wandering drift",
+                  c.gyro, terms, fit.wander_effect, fit.wander_stationary, fit.wander_on_top,
+                  threshold, what);
     return out;
   }
   if (!options.open_ended || c.gyro <= 0 ||
@@ -668,6 +696,7 @@ void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
     const bool time_behaviour = c.effect == Effect::kDriftStep || c.effect == Effect::kWarmUp ||
                                 c.effect == Effect::kCoefficientStep ||
                                 c.effect == Effect::kTransient ||
+                                c.effect == Effect::kTurningDisplacement ||
                                 (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
     (time_behaviour ? st.timed : st.constant).push_back(c);
   }

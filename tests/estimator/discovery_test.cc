@@ -371,20 +371,23 @@ TEST(Diagnose, NothingMissingGivesNone) {
   EXPECT_FALSE(report->mismatch.found);
   // Every candidate of the library the model lacks was tried once (3 gyros x 3, k0 being free, + 4
   // common: the star tracker's misalignment, latency and orbital misalignment, the common random
-  // walk; + a drift step, a warm-up, a coefficient step, a transient and a random walk per gyro),
-  // and the basis's readout group and sun families per gyro (readout_candidate.h), and none is
-  // significant: no warm-up, coefficient step or transient either.
-  EXPECT_EQ(report->candidates.size(), 34u);
-  int warm_ups = 0, coefficient_steps = 0, transients = 0;
+  // walk; + a drift step, a warm-up, a coefficient step, a transient, a turning displacement and
+  // a random walk per gyro), and the basis's readout group and sun families per gyro
+  // (readout_candidate.h), and none is significant: no warm-up, coefficient step, transient or
+  // turning displacement either.
+  EXPECT_EQ(report->candidates.size(), 37u);
+  int warm_ups = 0, coefficient_steps = 0, transients = 0, turning = 0;
   for (const CandidateScore& c : report->candidates) {
     EXPECT_FALSE(c.significant) << c.effect << " " << c.gyro;
     warm_ups += c.effect == "warm_up" ? 1 : 0;
     coefficient_steps += c.effect == "coefficient_step" ? 1 : 0;
     transients += c.effect == "transient" ? 1 : 0;
+    turning += c.effect == "turning_displacement" ? 1 : 0;
   }
   EXPECT_EQ(warm_ups, 3);
   EXPECT_EQ(coefficient_steps, 3);
   EXPECT_EQ(transients, 3);
+  EXPECT_EQ(turning, 3);
   EXPECT_GE(report->before.gaps.size(), 2u);  // held-out spans in the hold and the rotation
 }
 

@@ -220,6 +220,54 @@ TEST(BasisTermsConfig, ExponentialDecayRegressorStartsAtItsEpochAndDecays) {
   EXPECT_THAT(ParseBasisKind("exponential_decay"), IsOk());
 }
 
+// A cycling harmonic, h1^a h2^b h3^c times cos or sin of 2 pi (t - epoch) / period (basis_term.h):
+// the turning part of C1 or C2 of a rotor displacement that turns (eq. (10)); its period a minute
+// to a year and its degree at most 4, the field named in the error.
+TEST(BasisTermsConfig, CyclingHarmonicIsAHarmonicTimesItsPhaseAndChecksPeriodAndDegree) {
+  BasisTerm cycle;
+  cycle.kind = BasisKind::kCyclingHarmonic;
+  cycle.axis = 1;
+  cycle.exponents = {2, 0, 0};
+  cycle.period = 24.0 * 3600.0;
+  cycle.epoch = absl::FromUnixSeconds(1551398400);
+  cycle.value = DegPerHourToRadPerSec(0.1);
+  BasisInputs in;
+  in.h_k = Eigen::Vector3d(0.6, 0.0, 0.8);
+  in.time = cycle.epoch + absl::Hours(3);  // an eighth of the period
+  EXPECT_NEAR(BasisScalar(cycle, in), 0.36 * std::cos(kPi / 4.0), 1e-15);
+  cycle.sine = true;
+  in.time = cycle.epoch + absl::Hours(30);  // 1.25 periods
+  EXPECT_NEAR(BasisScalar(cycle, in), 0.36, 1e-12);
+  in.time = cycle.epoch - absl::Hours(6);  // before the epoch: the phase runs backwards
+  EXPECT_NEAR(BasisScalar(cycle, in), -0.36, 1e-12);
+  const Eigen::Vector3d dw_k = BasisDrift_k(cycle, in);
+  EXPECT_NEAR(dw_k.x(), -0.36 * DegPerHourToRadPerSec(0.1), 1e-20);
+  EXPECT_EQ(dw_k.y(), 0.0);
+  EXPECT_EQ(BasisTermLabel(cycle), "h1^2*cycle sin 24h -> x");
+  cycle.exponents = {0, 0, 0};
+  EXPECT_EQ(BasisTermLabel(cycle), "cycle sin 24h -> x");
+  EXPECT_EQ(BasisKindName(BasisKind::kCyclingHarmonic), "cycling_harmonic");
+  EXPECT_THAT(ParseBasisKind("cycling_harmonic"), IsOk());
+
+  SpacecraftConfig c = testing::PaperConfig();
+  c.gyros[0].basis_terms = {cycle};
+  EXPECT_THAT(ValidateConfig(c), IsOk());
+  for (double period_s : {0.0, -3600.0, 59.0, 367.0 * 86400.0,
+                          std::numeric_limits<double>::quiet_NaN()}) {
+    BasisTerm bad = cycle;
+    bad.period = period_s;
+    c.gyros[0].basis_terms = {bad};
+    EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                            StartsWith("gyros[0].basisTerms[0].periodS: ")))
+        << period_s;
+  }
+  BasisTerm deep = cycle;
+  deep.exponents = {3, 2, 0};
+  c.gyros[0].basis_terms = {deep};
+  EXPECT_THAT(ValidateConfig(c), StatusIs(absl::StatusCode::kInvalidArgument,
+                                          StartsWith("gyros[0].basisTerms[0].exponents: ")));
+}
+
 TEST(BasisTermsConfig, ReadoutDistortionMustBeSymmetricAndSmall) {
   SpacecraftConfig c = testing::PaperConfig();
   Eigen::Matrix3d D;

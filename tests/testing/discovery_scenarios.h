@@ -102,7 +102,15 @@ inline std::vector<std::string> DiscoveryEffects() {
 // "transient": the warm_up scenario's drift and time constant from 40% of the recording on.
 inline std::vector<std::string> DiscoveryTimeBehaviours() {
   return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up",
-          "k0_step", "c1_step", "transient"};
+          "k0_step", "c1_step", "transient", "turning_displacement"};
+}
+
+// The turning_displacement scenario (docs/discovery.md, "A turning rotor displacement"): the
+// rotor_displacement scenario's 1.4 um displacement turning about a case axis (by the seed:
+// TurnAxisOf) once every kTurnPeriodHours (simulator.h DisplacementTurn).
+inline constexpr double kTurnPeriodHours = 24.0;
+inline Eigen::Vector3d TurnAxisOf(uint64_t seed) {
+  return Eigen::Vector3d::Unit(static_cast<int>((seed / 3) % 3));
 }
 
 // The k0_step scenario's step of k0 [deg/h] and its onset [fraction of the recording].
@@ -273,6 +281,13 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     o.phase_rad = 0.3 * static_cast<double>(seed);
     s.gyros[g].orbital_drift = o;
   }
+  if (effect == "turning_displacement") {
+    s.gyros[g].rotor_displacement_k = displacement;
+    DisplacementTurn turn;
+    turn.axis_k = TurnAxisOf(seed);
+    turn.period_s = kTurnPeriodHours * 3600.0;
+    s.gyros[g].rotor_displacement_turn = turn;
+  }
   if (effect == "growing_displacement") {
     // 0 at the start, the rotor_displacement scenario's 1.4 um at the end.
     s.gyros[g].rotor_displacement_rate_k_m_s = displacement / s.duration;
@@ -436,6 +451,36 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "warm_up") return basis("warm_up", "tauHours");
   if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
   if (truth == "transient") return basis("transient", "tauHours");
+  if (truth == "turning_displacement") {
+    // The right gyro turning, after its constant displacement where that was taken first (a turn
+    // about an axis the displacement has a part along leaves a constant part): the findings are
+    // those two at most, the turning one's period interval holds the true period, and its axis is
+    // within 30 deg of the true one (either sense: the axis is reported from the fitted turn).
+    const Finding* turning = nullptr;
+    for (const Finding& f : r.findings) {
+      if (f.gyro != gyro) return false;
+      if (f.effect == kEffectBasisTerm && f.time.kind == "turning" && turning == nullptr) {
+        turning = &f;
+      } else if (f.effect != "rotor_displacement") {
+        return false;
+      }
+    }
+    if (turning == nullptr) return false;
+    const Finding& f = *turning;
+    const Parameter* lo = FindParameter(f.parameters, "turnPeriodLowerHours");
+    const Parameter* hi = FindParameter(f.parameters, "turnPeriodUpperHours");
+    if (lo == nullptr || hi == nullptr || lo->value > kTurnPeriodHours ||
+        hi->value < kTurnPeriodHours) {
+      return false;
+    }
+    Eigen::Vector3d axis;
+    for (int i = 0; i < 3; ++i) {
+      const Parameter* a = FindParameter(f.parameters, "turnAxis[" + std::to_string(i) + "]");
+      if (a == nullptr) return false;
+      axis(i) = a->value;
+    }
+    return std::abs(axis.dot(TurnAxisOf(seed))) >= std::cos(30.0 * estimator::kPi / 180.0);
+  }
   if (truth == "readout_scale") return basis("", "readout");
   if (truth == "channel_value" || truth == "channel_lag" || truth == "channel_derivative" ||
       truth == "channel_heater") {
