@@ -2,6 +2,8 @@
 // this browser tab (sessionStorage). Text form: the CSV of `esg predict --planned`, one
 // `time,q0,q1,q2,q3` line per sample (q_in_b, scalar first; an optional header line), so the same
 // file serves the console and the CLI.
+import { parseRfc3339 } from './time.js';
+
 const PREFIX = 'esg.plan.';
 
 export function parsePlan(text) {
@@ -11,8 +13,10 @@ export function parsePlan(text) {
     const fields = line.split(',').map((f) => f.trim());
     if (i === 0 && Number.isNaN(Number(fields[1]))) return; // header
     if (fields.length !== 5) throw new Error(`line ${i + 1}: expected time,q0,q1,q2,q3`);
-    const ms = Date.parse(fields[0]);
-    if (!Number.isFinite(ms)) throw new Error(`line ${i + 1}: '${fields[0]}' is not an RFC 3339 time`);
+    const ms = parseRfc3339(fields[0]);
+    if (!Number.isFinite(ms)) {
+      throw new Error(`line ${i + 1}: '${fields[0]}' is not an RFC 3339 time such as 2019-03-01T00:00:00Z`);
+    }
     const q = fields.slice(1).map(Number);
     if (q.some((x) => !Number.isFinite(x))) throw new Error(`line ${i + 1}: q0..q3 must be numbers`);
     samples.push({ time: new Date(ms).toISOString(), q_in_b: q });

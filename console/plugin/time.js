@@ -30,3 +30,19 @@ export function conductorOptions(sessions) {
     ]
   };
 }
+
+// An RFC 3339 time as the service and esg read it (docs/cli.md, "Time spans"): a date, 'T' or a
+// blank, hh:mm:ss, an optional fraction, and 'Z' or an offset. Its milliseconds since 1970, or NaN
+// for anything else: a date alone, a time without its zone (which Date.parse would read in the
+// browser's own time zone), a day the month does not have (which Date.parse rolls over).
+export function parseRfc3339(text) {
+  const m = /^\s*(\d{4})-(\d{2})-(\d{2})[Tt ](\d{2}):(\d{2}):(\d{2})(\.\d+)?([Zz]|[+-]\d{2}:\d{2})\s*$/
+    .exec(String(text));
+  if (!m) return NaN;
+  const [y, mo, d, h, mi, s] = m.slice(1, 7).map(Number);
+  if (mo < 1 || mo > 12 || h > 23 || mi > 59 || s > 59) return NaN;
+  const day = new Date(Date.UTC(y, mo - 1, d));
+  if (day.getUTCFullYear() !== y || day.getUTCMonth() !== mo - 1 || day.getUTCDate() !== d) return NaN;
+  const fraction = m[7] ? m[7].slice(0, 4) : '';  // milliseconds: Date's resolution
+  return Date.parse(`${m[1]}-${m[2]}-${m[3]}T${m[4]}:${m[5]}:${m[6]}${fraction}${m[8].toUpperCase()}`);
+}
