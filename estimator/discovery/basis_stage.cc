@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/deviation.h"
+#include "estimator/discovery/rate_coupling.h"
 #include "estimator/discovery/sun_terms.h"
 #include "estimator/statistics.h"
 #include "estimator/discovery/time_behaviour.h"
@@ -442,6 +443,8 @@ absl::StatusOr<BasisStageResult> RunBasisStage(const SelectedModel& selected,
     out.findings.push_back(GroupFinding(g, FindEstimate(run->gyros, g.gyro), first_term[i], model,
                                         extended, context, out, round));
   }
+  // Three body-rate groups of one gyro that are one isotropic coupling: one finding.
+  MergeIsotropicRateCoupling(out.findings);
   SelectedModel next;
   next.model = extended;
   next.run = std::move(*run);

@@ -130,8 +130,13 @@ inline constexpr double kWarmUpTauHours = 4.0;
 // Ornstein-Uhlenbeck process of 3 h correlation time).
 inline std::vector<std::string> DiscoveryBasisClasses() {
   return {"orbital_drift", "growing_displacement", "readout_scale", "switching_drift",
-          "hidden_driver"};
+          "hidden_driver", "rate_coupling"};
 }
+
+// The rate_coupling class (docs/discovery.md, "One physical term, one finding"): a drift of one
+// gyro proportional to the body rate in its case axes with one coefficient, dw_k = k w_k
+// (simulator.h RateDrift, gain k I), k = kRateCouplingDegHPerDegS.
+inline constexpr double kRateCouplingDegHPerDegS = 0.68;
 
 // A drift that returns to its mean beside an effect of the library (docs/discovery.md, "Time
 // behaviour"): "switching_and_st_misalignment" (the switching drift of `switching_drift` and the
@@ -280,6 +285,12 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     o.amplitude_k_rad_s = x * Eigen::Vector3d(0.03, -0.03, 0.025) * deg_h;
     o.phase_rad = 0.3 * static_cast<double>(seed);
     s.gyros[g].orbital_drift = o;
+  }
+  if (effect == "rate_coupling") {
+    RateDrift d;
+    // [deg/h per deg/s] -> [rad/s per rad/s]: (deg/h) / (deg/s) = 1/3600.
+    d.gain_k = x * kRateCouplingDegHPerDegS / 3600.0 * Eigen::Matrix3d::Identity();
+    s.gyros[g].rate_drift = d;
   }
   if (effect == "turning_displacement") {
     s.gyros[g].rotor_displacement_k = displacement;
@@ -451,6 +462,19 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "warm_up") return basis("warm_up", "tauHours");
   if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
   if (truth == "transient") return basis("transient", "tauHours");
+  if (truth == "rate_coupling") {
+    // One isotropic coupling in the right gyro, k within 3 sigma of the truth; every finding in
+    // that gyro (other groups of the basis may stand beside it).
+    bool found = false;
+    for (const Finding& f : r.findings) {
+      if (f.gyro != gyro) return false;
+      const Parameter* k = FindParameter(f.parameters, "rateCouplingDegHPerDegS");
+      if (k != nullptr && std::abs(k->value - kRateCouplingDegHPerDegS) <= 3.0 * k->sigma) {
+        found = true;
+      }
+    }
+    return found;
+  }
   if (truth == "turning_displacement") {
     // The right gyro turning, after its constant displacement where that was taken first (a turn
     // about an axis the displacement has a part along leaves a constant part): the findings are
