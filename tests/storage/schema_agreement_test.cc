@@ -63,7 +63,18 @@ std::string Kind(std::string type) {
   return it != kKinds.end() ? it->second : type;
 }
 
-// With `typed`, each column as "name kind null|not-null".
+// A row "name.type.notnull" (names and types hold no '.') as its name, or with `typed` as
+// "name kind null|not-null".
+std::string Column(const std::string& row, bool typed) {
+  const size_t a = row.find('.'), b = row.rfind('.');
+  std::string column = row.substr(0, a);
+  if (typed) {
+    column += " " + Kind(row.substr(a + 1, b - a - 1)) +
+              (row.substr(b + 1) == "1" ? " not-null" : " null");
+  }
+  return column;
+}
+
 Layout SqliteLayout(Database& db, bool typed) {
   Layout layout;
   for (const std::string& table :
@@ -72,14 +83,7 @@ Layout SqliteLayout(Database& db, bool typed) {
     for (const std::string& row :
          Rows(db, "SELECT name, type, \"notnull\" OR pk FROM pragma_table_info('" + table +
                       "') ORDER BY cid")) {
-      // name.type.notnull: names and types hold no '.'.
-      const size_t a = row.find('.'), b = row.rfind('.');
-      std::string column = row.substr(0, a);
-      if (typed) {
-        column += " " + Kind(row.substr(a + 1, b - a - 1)) +
-                  (row.substr(b + 1) == "1" ? " not-null" : " null");
-      }
-      layout[table].push_back(column);
+      layout[table].push_back(Column(row, typed));
     }
   }
   return layout;
@@ -94,32 +98,37 @@ Layout PostgresLayout(Database& db, bool typed) {
          Rows(db, "SELECT column_name, data_type, CASE WHEN is_nullable = 'NO' THEN 1 ELSE 0 END "
                   "FROM information_schema.columns WHERE table_schema = current_schema() AND "
                   "table_name = '" + table + "' ORDER BY ordinal_position")) {
-      const size_t a = row.find('.'), b = row.rfind('.');
-      std::string column = row.substr(0, a);
-      if (typed) {
-        column += " " + Kind(row.substr(a + 1, b - a - 1)) +
-                  (row.substr(b + 1) == "1" ? " not-null" : " null");
-      }
-      layout[table].push_back(column);
+      layout[table].push_back(Column(row, typed));
     }
   }
   return layout;
 }
 
-TEST(SchemaAgreement, BothEnginesHaveTheSameTablesAndColumnsInOrder) {
-  ::esg::testing::TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> sqlite = Storage::Open(dir.File("esg.db"));
-  ASSERT_THAT(sqlite, IsOk());
-  std::string error;
-  ::esg::testing::PostgresServer* server = ::esg::testing::PostgresServer::Shared(&error);
-  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
-  absl::StatusOr<std::string> uri = server->CreateDatabase();
-  ASSERT_THAT(uri, IsOk());
-  absl::StatusOr<std::unique_ptr<Storage>> postgres = Storage::Open(*uri);
-  ASSERT_THAT(postgres, IsOk());
+// A fresh database of each engine: SQLite in a temporary directory, PostgreSQL on the test
+// server.
+class SchemaAgreement : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    absl::StatusOr<std::unique_ptr<Storage>> sqlite = Storage::Open(dir_.File("esg.db"));
+    ASSERT_THAT(sqlite, IsOk());
+    sqlite_ = *std::move(sqlite);
+    std::string error;
+    ::esg::testing::PostgresServer* server = ::esg::testing::PostgresServer::Shared(&error);
+    ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
+    absl::StatusOr<std::string> uri = server->CreateDatabase();
+    ASSERT_THAT(uri, IsOk());
+    absl::StatusOr<std::unique_ptr<Storage>> postgres = Storage::Open(*uri);
+    ASSERT_THAT(postgres, IsOk());
+    postgres_ = *std::move(postgres);
+  }
 
-  const Layout a = SqliteLayout((*sqlite)->database(), /*typed=*/false);
-  const Layout b = PostgresLayout((*postgres)->database(), /*typed=*/false);
+  ::esg::testing::TempDir dir_;
+  std::unique_ptr<Storage> sqlite_, postgres_;
+};
+
+TEST_F(SchemaAgreement, BothEnginesHaveTheSameTablesAndColumnsInOrder) {
+  const Layout a = SqliteLayout(sqlite_->database(), /*typed=*/false);
+  const Layout b = PostgresLayout(postgres_->database(), /*typed=*/false);
   ASSERT_GE(a.size(), 5u) << "the SQLite schema was not read";
   // PostgreSQL's own tables, each for a stated reason: the schema version (SQLite keeps it in
   // PRAGMA user_version) and the session leases (only a database several servers share has
@@ -146,19 +155,9 @@ TEST(SchemaAgreement, BothEnginesHaveTheSameTablesAndColumnsInOrder) {
 // holds, the storage probe's time in ns, is an integer on both (SQLite keeps an integer bound to
 // an ANY column as an integer). Changing it would need a migration rebuilding the table for no
 // change in what it stores.
-TEST(SchemaAgreement, EachColumnHasTheSameKindOfValueAndNullabilityOnBothEngines) {
-  ::esg::testing::TempDir dir;
-  absl::StatusOr<std::unique_ptr<Storage>> sqlite = Storage::Open(dir.File("esg.db"));
-  ASSERT_THAT(sqlite, IsOk());
-  std::string error;
-  ::esg::testing::PostgresServer* server = ::esg::testing::PostgresServer::Shared(&error);
-  ASSERT_NE(server, nullptr) << "the PostgreSQL test server cannot start: " << error;
-  absl::StatusOr<std::string> uri = server->CreateDatabase();
-  ASSERT_THAT(uri, IsOk());
-  absl::StatusOr<std::unique_ptr<Storage>> postgres = Storage::Open(*uri);
-  ASSERT_THAT(postgres, IsOk());
-  const Layout a = SqliteLayout((*sqlite)->database(), /*typed=*/true);
-  const Layout b = PostgresLayout((*postgres)->database(), /*typed=*/true);
+TEST_F(SchemaAgreement, EachColumnHasTheSameKindOfValueAndNullabilityOnBothEngines) {
+  const Layout a = SqliteLayout(sqlite_->database(), /*typed=*/true);
+  const Layout b = PostgresLayout(postgres_->database(), /*typed=*/true);
   ASSERT_GE(a.size(), 5u) << "the SQLite schema was not read";
   const std::map<std::string, std::pair<std::string, std::string>> known = {
       {"service_state", {"value ANY null", "value integer null"}}};
