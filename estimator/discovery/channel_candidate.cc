@@ -81,37 +81,15 @@ ModelState WithChannelTerms(const ModelState& model, int gyro, const std::string
   return m;
 }
 
-// -2 ln of the prior-weighted likelihood over points (weight, -2 log L): the form's integrated
-// -2 log L.
-double Integrated(const std::vector<std::pair<double, double>>& points) {
-  double best = std::numeric_limits<double>::infinity();
-  for (const auto& [w, v] : points) best = std::min(best, v);
-  double sum = 0.0;
-  for (const auto& [w, v] : points) sum += w * std::exp(-0.5 * (v - best));
-  return best - 2.0 * std::log(sum);
-}
-
 // The parabola through the best point of `lag` and its two neighbours (in ln tau): its vertex and
 // its curvature a (-2 log L = a (x - vertex)^2 + c); not ok at an end of the grid or without a
 // positive curvature.
-struct Parabola {
-  bool ok = false;
-  double vertex = 0.0, curvature = 0.0;
-};
 template <typename Map>
 Parabola VertexOf(const Map& lag, typename Map::const_iterator best) {
-  Parabola p;
-  if (best == lag.begin() || std::next(best) == lag.end()) return p;
+  if (best == lag.begin() || std::next(best) == lag.end()) return Parabola{};
   const auto& [x0, r0] = *std::prev(best);
   const auto& [x2, r2] = *std::next(best);
-  const double x1 = best->first, y0 = r0.value, y1 = best->second.value, y2 = r2.value;
-  const double a = ((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0);
-  if (!(a > 0.0)) return p;
-  p.ok = true;
-  p.curvature = a;
-  // The vertex: where the parabola's slope, (y1 - y0) / (x1 - x0) + a (2 x - x0 - x1), is zero.
-  p.vertex = std::clamp(0.5 * (x0 + x1) - (y1 - y0) / (x1 - x0) / (2.0 * a), x0, x2);
-  return p;
+  return ParabolaThrough(x0, r0.value, best->first, best->second.value, x2, r2.value);
 }
 
 // One run of a form: its profiled -2 log L, the channel terms' gain a [rad/s per unit] and the
@@ -237,15 +215,12 @@ ProfilePoints AddFormPriorPoints(const ChannelSearch& s, double value_form, doub
   std::vector<std::pair<double, double>> lag_points;
   ProfilePoints profile;
   for (const auto& [x, r] : s.lag) profile.emplace_back(x, r.value);
-  for (size_t j = 0; j < profile.size(); ++j) {
-    const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
-    const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
-    lag_points.emplace_back(0.5 * (left + right) / span, profile[j].second);
-  }
+  const std::vector<double> weights = TrapezoidWeights(profile, span);
+  for (size_t j = 0; j < profile.size(); ++j) lag_points.emplace_back(weights[j], profile[j].second);
   fit.prior_points.emplace_back(1.0 / 3.0, value_form);
   fit.prior_points.emplace_back(1.0 / 3.0, derivative_form);
   for (const auto& [w, v] : lag_points) fit.prior_points.emplace_back(w / 3.0, v);
-  lag_integrated = Integrated(lag_points);
+  lag_integrated = IntegratedDeviance(lag_points);
   return profile;
 }
 
@@ -418,7 +393,6 @@ absl::Status FitChannelCandidate(const Candidate& candidate, const FitContext& c
   const DiagnoseOptions& opt = *ctx.options;
   ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   fit.time.kind = kTimeFollowsChannel;
-  fit.run = *ctx.model_run;
   const int first_term = static_cast<int>(g->basis_terms.size());
   const ChannelSpread spread = SpreadOf(*ctx.frames, candidate.channel);
   // A copy: fit.model is replaced below.

@@ -30,6 +30,16 @@ constexpr int kMinSamples = 10;
 
 }  // namespace
 
+double RegressorRms(const DeviationSeries& series, const ScalarFunction& s) {
+  double sum = 0.0, time = 0.0;
+  for (const TrajectoryStep& st : series.steps) {
+    const double v = s(st.inputs);
+    sum += v * v * st.dt;
+    time += st.dt;
+  }
+  return time > 0.0 ? std::sqrt(sum / time) : 0.0;
+}
+
 std::vector<Vector2d> Signature(const DeviationSeries& series, const DriftFunction& drift_k) {
   std::vector<Vector2d> out(series.sample_end.size(), Vector2d::Zero());
   Vector3d sum = Vector3d::Zero();

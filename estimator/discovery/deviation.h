@@ -75,6 +75,12 @@ using DriftFunction = std::function<Eigen::Vector3d(const BasisInputs&)>;
 // each sample, projected on (u1, u2) [rad per unit of the drift].
 std::vector<Eigen::Vector2d> Signature(const DeviationSeries& series, const DriftFunction& drift_k);
 
+// A scalar regressor at a substep (basis_term.h BasisScalar, ...) [its unit], and its RMS over
+// the series' substeps, time-weighted (0 for a series without substeps): the scale its prior is
+// stated at.
+using ScalarFunction = std::function<double(const BasisInputs&)>;
+double RegressorRms(const DeviationSeries& series, const ScalarFunction& s);
+
 // The signature of a readout distortion E (a reading h_meas = (I + E) h_k normalised, E symmetric):
 // the measured inertial axis moves by C_in_k (I - h h^T) E h_k at each sample, relative to
 // sample 0 [rad per unit of E].

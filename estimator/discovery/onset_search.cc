@@ -135,11 +135,10 @@ OnsetProfile ProfileOnsets(const OnsetSearch& search, CandidateFit& fit) {
   if (profile.size() == 1) {
     fit.prior_points.emplace_back(1.0, profile.front().second);
   } else {
-    const double span_h = profile.back().first - profile.front().first;
+    const std::vector<double> weights =
+        TrapezoidWeights(profile, profile.back().first - profile.front().first);
     for (size_t j = 0; j < profile.size(); ++j) {
-      const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
-      const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
-      fit.prior_points.emplace_back(0.5 * (left + right) / span_h, profile[j].second);
+      fit.prior_points.emplace_back(weights[j], profile[j].second);
     }
   }
   for (size_t j = 0; j < profile.size(); ++j) {

@@ -161,13 +161,7 @@ double ColumnScalar(const BasisColumn& c, const BasisInputs& in) {
 }
 
 double ScalarRms(const DeviationSeries& s, const BasisColumn& c) {
-  double sum = 0.0, time = 0.0;
-  for (const TrajectoryStep& st : s.steps) {
-    const double v = ColumnScalar(c, st.inputs);
-    sum += v * v * st.dt;
-    time += st.dt;
-  }
-  return time > 0.0 ? std::sqrt(sum / time) : 0.0;
+  return RegressorRms(s, [&c](const BasisInputs& in) { return ColumnScalar(c, in); });
 }
 
 std::vector<Vector2d> ColumnSignature(const DeviationSeries& s, const BasisColumn& c) {

@@ -1,6 +1,39 @@
 #include "estimator/discovery/profile_interval.h"
 
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
 namespace esg::estimator::discovery {
+
+Parabola ParabolaThrough(double x0, double y0, double x1, double y1, double x2, double y2) {
+  Parabola p;
+  const double a = ((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0);
+  if (!(a > 0.0)) return p;
+  p.ok = true;
+  p.curvature = a;
+  // The vertex: where the parabola's slope, (y1 - y0) / (x1 - x0) + a (2 x - x0 - x1), is zero.
+  p.vertex = std::clamp(0.5 * (x0 + x1) - (y1 - y0) / (x1 - x0) / (2.0 * a), x0, x2);
+  return p;
+}
+
+std::vector<double> TrapezoidWeights(const ProfilePoints& profile, double span) {
+  std::vector<double> weights;
+  for (size_t j = 0; j < profile.size(); ++j) {
+    const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
+    const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
+    weights.push_back(0.5 * (left + right) / span);
+  }
+  return weights;
+}
+
+double IntegratedDeviance(const std::vector<std::pair<double, double>>& points) {
+  double best = std::numeric_limits<double>::infinity();
+  for (const auto& [w, v] : points) best = std::min(best, v);
+  double sum = 0.0;
+  for (const auto& [w, v] : points) sum += w * std::exp(-0.5 * (v - best));
+  return best - 2.0 * std::log(sum);
+}
 
 size_t ProfileMinimum(const ProfilePoints& profile) {
   size_t best = 0;

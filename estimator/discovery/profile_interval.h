@@ -17,6 +17,22 @@ using ProfilePoints = std::vector<std::pair<double, double>>;
 // The drop of -2 log L that bounds a 95% interval of one parameter: chi2inv(0.95, 1).
 inline constexpr double kProfileIntervalDrop = 3.841458820694124;
 
+// The parabola y = a (x - vertex)^2 + c through three points x0 < x1 < x2 (a profile's best point
+// and its neighbours): `ok` when it has a minimum (a > 0), its vertex clamped to [x0, x2], a its
+// curvature.
+struct Parabola {
+  bool ok = false;
+  double vertex = 0.0, curvature = 0.0;
+};
+Parabola ParabolaThrough(double x0, double y0, double x1, double y1, double x2, double y2);
+
+// The weights of the trapezoid rule on the points of `profile` (increasing in the parameter) for
+// a prior uniform across `span`: 0.5 (left gap + right gap) / span each.
+std::vector<double> TrapezoidWeights(const ProfilePoints& profile, double span);
+// -2 ln of the prior-weighted likelihood over points (weight, -2 log L): the parameter
+// integrated over its prior.
+double IntegratedDeviance(const std::vector<std::pair<double, double>>& points);
+
 // The first point of the smallest -2 log L.
 size_t ProfileMinimum(const ProfilePoints& profile);
 

@@ -144,13 +144,10 @@ absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
                                            Eigen::Vector3d::Unit(c.column.term.axis - 1)));
       prior.push_back(c.prior_sigma);
     }
-    std::vector<absl::Time> steps;
-    for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
-      if (!r.misalignment && r.gyro_id == candidate.gyro) steps.push_back(r.time);
-    }
     const ConstantEffectEvidence e = CompareConstantEffect(
         series->front(), ModelRandomWalk(model, candidate.gyro), ModelInitialDriftSigma(model),
-        DegPerHourToRadPerSec(opt.c_sigma_deg_h), steps, columns, prior);
+        DegPerHourToRadPerSec(opt.c_sigma_deg_h), HeldSteps(model, candidate.gyro), columns,
+        prior);
     fit.wander_compared = true;
     fit.wander_effect = e.effect;
     fit.wander_stationary = e.stationary;

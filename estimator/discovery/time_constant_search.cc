@@ -98,14 +98,4 @@ double AddDecayParameters(const std::string& name, const Eigen::Vector3d& a,
   return size;
 }
 
-std::vector<double> TrapezoidWeights(const ProfilePoints& profile, double span) {
-  std::vector<double> weights;
-  for (size_t j = 0; j < profile.size(); ++j) {
-    const double left = j > 0 ? profile[j].first - profile[j - 1].first : 0.0;
-    const double right = j + 1 < profile.size() ? profile[j + 1].first - profile[j].first : 0.0;
-    weights.push_back(0.5 * (left + right) / span);
-  }
-  return weights;
-}
-
 }  // namespace esg::estimator::discovery

@@ -60,9 +60,6 @@ double AddDecayParameters(const std::string& name, const Eigen::Vector3d& a,
                           const Eigen::Vector3d& a_sigma, double tau_h, double lower_h,
                           double upper_h, double& size_sigma, CandidateFit& fit);
 
-// The weights of the trapezoid rule on the points of `profile` (increasing in the parameter) for
-// a prior uniform across `span`: 0.5 (left gap + right gap) / span each.
-std::vector<double> TrapezoidWeights(const ProfilePoints& profile, double span);
 
 }  // namespace esg::estimator::discovery
 

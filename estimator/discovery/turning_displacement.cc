@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <iterator>
 #include <map>
 #include <optional>
@@ -63,19 +64,27 @@ std::vector<BasisTerm> TurnTerms(double period_s, absl::Time epoch) {
 
 // The term's regressor s, RMS over the series' substeps (time-weighted).
 double TermRms(const DeviationSeries& s, const BasisTerm& t) {
-  double sum = 0.0, time = 0.0;
-  for (const TrajectoryStep& st : s.steps) {
-    const double v = BasisScalar(t, st.inputs);
-    sum += v * v * st.dt;
-    time += st.dt;
+  return RegressorRms(s, [&t](const BasisInputs& in) { return BasisScalar(t, in); });
+}
+
+// The terms' signatures on the series, list by list, and their prior 1-sigma (term.sigma).
+std::vector<std::vector<Vector2d>> TermSignatures(
+    const DeviationSeries& s, std::initializer_list<const std::vector<BasisTerm>*> lists,
+    std::vector<double>* prior = nullptr) {
+  std::vector<std::vector<Vector2d>> out;
+  for (const std::vector<BasisTerm>* terms : lists) {
+    for (const BasisTerm& t : *terms) {
+      out.push_back(Signature(
+          s, [&t](const BasisInputs& in) -> Vector3d { return BasisRegressor_k(t, in); }));
+      if (prior != nullptr) prior->push_back(t.sigma);
+    }
   }
-  return time > 0.0 ? std::sqrt(sum / time) : 0.0;
+  return out;
 }
 
 // The terms kept at a period (their regressor does not vanish: TermIndex order, a subset) and
 // each one's prior 1-sigma, c_sigma at its regressor's RMS [rad/s per unit of s].
 struct TurnColumns {
-  std::vector<int> index;
   std::vector<BasisTerm> terms;
   VectorXd prior;
 };
@@ -87,7 +96,6 @@ TurnColumns ColumnsAt(const DeviationSeries& s, double period_s, absl::Time epoc
   for (int j = 0; j < kTurnTerms; ++j) {
     const double rms = TermRms(s, all[j]);
     if (!(rms >= kMinRegressorRms)) continue;
-    out.index.push_back(j);
     out.terms.push_back(all[j]);
     out.terms.back().sigma = drift_sigma / rms;
     prior.push_back(out.terms.back().sigma);
@@ -132,14 +140,8 @@ struct TurnSearch {
     const TurnColumns c =
         ColumnsAt(*series, HoursToSeconds(std::exp(log_p)), epoch, options.drift_sigma);
     if (c.terms.empty()) return 0.0;
-    std::vector<std::vector<Vector2d>> signatures;
-    for (const std::vector<BasisTerm>* terms : {&c.terms, &constant}) {
-      for (const BasisTerm& t : *terms) {
-        signatures.push_back(Signature(*series, [&t](const BasisInputs& in) -> Vector3d {
-          return BasisRegressor_k(t, in);
-        }));
-      }
-    }
+    const std::vector<std::vector<Vector2d>> signatures =
+        TermSignatures(*series, {&c.terms, &constant});
     const WhitenedSeries w = WhitenSeries(*series, random_walk, w0_sigma, options, signatures);
     const int k = static_cast<int>(c.terms.size());
     std::vector<const VectorXd*> all, base;
@@ -192,17 +194,16 @@ struct TurnSearch {
   }
 };
 
-// The vertex of the parabola through the best point and its neighbours (in ln P), or the best
-// point itself at an end of the grid or without a maximum there.
+// The vertex of the parabola through the best point and its neighbours (in ln P; a maximum of
+// 2 ln B, a minimum of -2 ln B), or the best point itself at an end of the grid or without a
+// maximum there.
 double Vertex(const std::map<double, double>& evidence,
               std::map<double, double>::const_iterator best) {
   if (best == evidence.begin() || std::next(best) == evidence.end()) return best->first;
   const auto& [x0, y0] = *std::prev(best);
   const auto& [x2, y2] = *std::next(best);
-  const double x1 = best->first, y1 = best->second;
-  const double a = ((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0);
-  if (!(a < 0.0)) return x1;
-  return std::clamp(0.5 * (x0 + x1) - (y1 - y0) / (x1 - x0) / (2.0 * a), x0, x2);
+  const Parabola p = ParabolaThrough(x0, -y0, best->first, -best->second, x2, -y2);
+  return p.ok ? p.vertex : best->first;
 }
 
 // -2 ln of the regression's Bayes factor averaged over the period's prior (uniform in ln P,
@@ -210,15 +211,11 @@ double Vertex(const std::map<double, double>& evidence,
 double PeriodOccam(const TurnSearch& s) {
   const ProfilePoints p = s.Profile();
   const double span = s.log_max - s.log_min;
-  const double best = s.Best()->second;
   if (p.size() < 2 || !(span > 0.0)) return 0.0;
-  double sum = 0.0;
-  for (size_t j = 0; j < p.size(); ++j) {
-    const double left = j > 0 ? p[j].first - p[j - 1].first : 0.0;
-    const double right = j + 1 < p.size() ? p[j + 1].first - p[j].first : 0.0;
-    sum += 0.5 * (left + right) / span * std::exp(0.5 * (-p[j].second - best));
-  }
-  return std::max(0.0, -2.0 * std::log(sum));
+  const std::vector<double> weights = TrapezoidWeights(p, span);
+  std::vector<std::pair<double, double>> points;
+  for (size_t j = 0; j < p.size(); ++j) points.emplace_back(weights[j], p[j].second);
+  return std::max(0.0, IntegratedDeviance(points) + s.Best()->second);
 }
 
 // The long-run variance of the whitened residual over its variance, per component (u1, u2 rows
@@ -309,7 +306,6 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
   const ModelState& model = *ctx.model;
   ASSIGN_OR_RETURN(const GyroConfig* g, CandidateGyro(fit.model.config, candidate.gyro));
   fit.time.kind = kTimeTurning;
-  fit.run = *ctx.model_run;
   const int first_term = static_cast<int>(g->basis_terms.size());
   const double span_h =
       absl::ToDoubleHours(ctx.frames->back().time - ctx.frames->front().time);
@@ -400,26 +396,14 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
   // check (selection.cc CheckConstantEffect), as the sun's terms are; the turn's evidence less
   // its period's Occam term, the stationary drift's integrated over its grid.
   {
-    std::vector<std::vector<Vector2d>> signatures;
-    std::vector<double> prior;
     // The candidate's whole model: the turning terms and the constant part (freed by the
     // candidate or free in the model).
-    for (const std::vector<BasisTerm>* terms :
-         {&regression_columns.terms, &std::as_const(s.constant)}) {
-      for (const BasisTerm& t : *terms) {
-        signatures.push_back(Signature(series.front(), [&t](const BasisInputs& in) -> Vector3d {
-          return BasisRegressor_k(t, in);
-        }));
-        prior.push_back(t.sigma);
-      }
-    }
-    std::vector<absl::Time> steps;
-    for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
-      if (!r.misalignment && r.gyro_id == candidate.gyro) steps.push_back(r.time);
-    }
+    std::vector<double> prior;
+    const std::vector<std::vector<Vector2d>> signatures =
+        TermSignatures(series.front(), {&regression_columns.terms, &s.constant}, &prior);
     const ConstantEffectEvidence w = CompareConstantEffect(
         series.front(), s.random_walk, s.w0_sigma, DegPerHourToRadPerSec(opt.c_sigma_deg_h),
-        steps, signatures, prior);
+        HeldSteps(model, candidate.gyro), signatures, prior);
     fit.wander_compared = true;
     fit.wander_effect = w.effect - fit.occam;
     fit.wander_stationary = w.stationary;
@@ -459,20 +443,17 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
   ASSIGN_OR_RETURN(const PeriodRun below, run_at(log_p - delta));
   ASSIGN_OR_RETURN(const PeriodRun above, run_at(log_p + delta));
   // -2 log L = a (x - vertex)^2 + c through the three.
-  const double curvature =
-      (below.value - 2.0 * at_best.value + above.value) / (2.0 * delta * delta);
+  const Parabola parabola = ParabolaThrough(log_p - delta, below.value, log_p, at_best.value,
+                                            log_p + delta, above.value);
   double log_period = log_p;
   LevelInterval period_interval = interval;
-  if (curvature > 0.0) {
-    const double vertex =
-        std::clamp(log_p - (above.value - below.value) / (4.0 * curvature * delta),
-                   log_p - delta, log_p + delta);
-    const double half = std::sqrt(kProfileIntervalDrop / curvature);
-    period_interval.lower = vertex - half;
-    period_interval.upper = vertex + half;
+  if (parabola.ok) {
+    const double half = std::sqrt(kProfileIntervalDrop / parabola.curvature);
+    period_interval.lower = parabola.vertex - half;
+    period_interval.upper = parabola.vertex + half;
     period_interval.lower_open = period_interval.lower < s.log_min;
     period_interval.upper_open = period_interval.upper > s.log_max;
-    log_period = vertex;
+    log_period = parabola.vertex;
   }
   PeriodRun chosen = std::move(at_best);
   if (std::abs(log_period - log_p) > 0.1 * delta) {

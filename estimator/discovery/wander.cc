@@ -20,6 +20,14 @@ using Eigen::Vector2d;
 using Eigen::Vector3d;
 using Eigen::VectorXd;
 
+std::vector<absl::Time> HeldSteps(const ModelState& m, int gyro) {
+  std::vector<absl::Time> steps;
+  for (const SessionOptions::CoefficientRelease& r : m.options.coefficient_releases) {
+    if (!r.misalignment && r.gyro_id == gyro) steps.push_back(r.time);
+  }
+  return steps;
+}
+
 namespace {
 
 constexpr std::array<double, 5> kWalkFactors = {2.0, 4.0, 8.0, 16.0, 32.0};
@@ -93,15 +101,6 @@ std::vector<double> StationaryDeviances(const DeviationSeries& series, double ra
     }
   }
   return deviances;
-}
-
-// The drift steps model `m` holds for gyro `gyro` (coefficient releases; not misalignments).
-std::vector<absl::Time> HeldSteps(const ModelState& m, int gyro) {
-  std::vector<absl::Time> steps;
-  for (const SessionOptions::CoefficientRelease& r : m.options.coefficient_releases) {
-    if (!r.misalignment && r.gyro_id == gyro) steps.push_back(r.time);
-  }
-  return steps;
 }
 
 absl::StatusOr<DeviationSeries> SeriesOf(const SelectedModel& selected,

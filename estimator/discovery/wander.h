@@ -113,6 +113,10 @@ absl::StatusOr<std::vector<Finding>> OtherGyrosReturningToTheirMean(
 struct ConstantEffectEvidence {
   double effect = 0.0, stationary = 0.0, on_top = 0.0;
 };
+// The drift steps model `m` holds for gyro `gyro` (coefficient releases, not misalignments): the
+// `steps` of CompareConstantEffect.
+std::vector<absl::Time> HeldSteps(const ModelState& m, int gyro);
+
 ConstantEffectEvidence CompareConstantEffect(
     const DeviationSeries& series, double random_walk, double w0_sigma, double step_sigma,
     const std::vector<absl::Time>& steps,
