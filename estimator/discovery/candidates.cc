@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "Eigen/Eigenvalues"
+#include "Eigen/LU"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/calibration_model.h"
@@ -36,10 +37,17 @@ namespace {
 // unit line lambda and (a, b) by generalised least squares under the full 6 x 6 covariance of
 // (C1, C2) (coefficients held, with 0 variance, are left out); chi2 the minimum of r^T Sigma^-1 r
 // over lambda and (a, b), on dof = (free components) - 4 degrees of freedom.
+// The sigmas are the inverse Fisher information of (two angles of lambda in its tangent plane, a,
+// b) at the minimum; lambda_sigma is the root of the two angles' summed variances (rad), the RMS
+// angle between the fitted and the true line. determined is false where that information is
+// singular (a and b both 0, or too few free components): then no sigma is stated.
 struct CollinearFit {
   Vector3d lambda = Vector3d::UnitX();
   double a = 0.0, b = 0.0, chi2 = 0.0;
   int dof = 0;
+  bool determined = false;
+  double lambda_sigma = 0.0;
+  Eigen::Matrix2d ab_covariance = Eigen::Matrix2d::Zero();
 };
 
 CollinearFit FitCollinear(const Vector3d& C1, const Vector3d& C2,
@@ -118,6 +126,25 @@ CollinearFit FitCollinear(const Vector3d& C1, const Vector3d& C2,
     out.b = -out.b;
   }
   out.dof = std::max(0, m - 4);
+  // Fisher information of (alpha, beta, a, b), lambda(alpha, beta) = normalised(lambda + alpha u
+  // + beta v) with u, v orthonormal across lambda: d[C1; C2] = [a u, a v, lambda, 0; b u, b v, 0,
+  // lambda].
+  const Vector3d u = out.lambda.unitOrthogonal(), v = out.lambda.cross(u);
+  Eigen::Matrix<double, 6, 4> J = Eigen::Matrix<double, 6, 4>::Zero();
+  J.block<3, 1>(0, 0) = out.a * u;
+  J.block<3, 1>(3, 0) = out.b * u;
+  J.block<3, 1>(0, 1) = out.a * v;
+  J.block<3, 1>(3, 1) = out.b * v;
+  J.block<3, 1>(0, 2) = out.lambda;
+  J.block<3, 1>(3, 3) = out.lambda;
+  const Eigen::Matrix4d information = J.transpose() * W * J;
+  const Eigen::FullPivLU<Eigen::Matrix4d> lu(information);
+  if (m >= 4 && lu.rank() == 4) {
+    const Eigen::Matrix4d parameters = lu.inverse();
+    out.determined = true;
+    out.lambda_sigma = std::sqrt(std::max(0.0, parameters(0, 0) + parameters(1, 1)));
+    out.ab_covariance = parameters.block<2, 2>(2, 2);
+  }
   return out;
 }
 
@@ -356,10 +383,24 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   const double line_angle_deg = RadToDeg(std::acos(std::clamp(cos_line, -1.0, 1.0)));
   const double chi2 = line.chi2;
   const double p_collinear = line.dof > 0 ? ChiSquareSurvival(chi2, line.dof) : 1.0;
+  // (C10, C20) = T (a, b), T = [1, 1/5; 0, -1/5]: their covariance is T Cov(a, b) T^T.
+  Eigen::Matrix2d T;
+  T << 1.0, 0.2, 0.0, -0.2;
+  const Eigen::Matrix2d c_covariance = T * line.ab_covariance * T.transpose();
+  const double sigma_C10 = line.determined ? std::sqrt(std::max(0.0, c_covariance(0, 0))) : 0.0;
+  const double sigma_C20 = line.determined ? std::sqrt(std::max(0.0, c_covariance(1, 1))) : 0.0;
   fit.fitted.push_back({"lineAngleDeg", line_angle_deg, 0.0, "deg"});
-  fit.fitted.push_back({"c10DegH", DegH(C10), 0.0, "deg/h"});
-  fit.fitted.push_back({"c20DegH", DegH(C20), 0.0, "deg/h"});
+  fit.fitted.push_back({"c10DegH", DegH(C10), DegH(sigma_C10), "deg/h"});
+  fit.fitted.push_back({"c20DegH", DegH(C20), DegH(sigma_C20), "deg/h"});
   AddVectorParameters("lambda", lambda, Vector3d::Zero(), 1.0, "1", fit.fitted);
+  if (line.determined) {
+    fit.fitted.push_back({"lambdaSigmaDeg", RadToDeg(line.lambda_sigma), 0.0, "deg"});
+  }
+  // One physical term (issue's "one physical term, one finding"): the six coefficients are one
+  // displacement when the collinearity is not rejected at kCollinearityP.
+  fit.fitted.push_back({"collinearityChi2", chi2, 0.0, "1"});
+  fit.fitted.push_back({"collinearityDof", static_cast<double>(line.dof), 0.0, "1"});
+  fit.fitted.push_back({"collinearityP", p_collinear, 0.0, "1"});
   fit.notes.push_back(absl::StrFormat(
       "C1 and C2 lie %.1f deg apart as lines (C1.C2 %s 0); a displaced rotor makes them collinear "
       "(eq. (8)-(10)): collinear fit C10 = %.4f deg/h, C20 = %.4f deg/h along lambda = [%.2f %.2f "

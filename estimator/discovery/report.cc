@@ -137,15 +137,43 @@ std::string ExplainFinding(const Finding& f) {
   if (f.effect == "rotor_displacement") {
     const Parameter* angle = FindParameter(ps, "lineAngleDeg");
     const Parameter* size = FindParameter(ps, "displacementSizeUm");
+    const Parameter* chi2 = FindParameter(ps, "collinearityChi2");
+    const Parameter* dof = FindParameter(ps, "collinearityDof");
+    const Parameter* p = FindParameter(ps, "collinearityP");
+    const Parameter* c10 = FindParameter(ps, "c10DegH");
+    const Parameter* c20 = FindParameter(ps, "c20DegH");
+    const Parameter* lambda_sigma = FindParameter(ps, "lambdaSigmaDeg");
+    const std::string voltages =
+        size ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))",
+                               size->value)
+             : "";
+    const std::string test =
+        chi2 && dof && p ? absl::StrFormat("chi2 = %.1f on %.0f dof, p = %.2g", chi2->value,
+                                           dof->value, p->value)
+                         : "";
+    // One physical term: C1 and C2 collinear within their covariance are one displacement.
+    if (p && dof && c10 && c20 && lambda_sigma && dof->value > 0 &&
+        p->value > kCollinearityP) {
+      return absl::StrFormat(
+          "gyro %d: one displaced rotor (eq. (8)-(10)) along lambda = %s%s (case axes), C10 = "
+          "%.4f +- %.4f deg/h, C20 = %.4f +- %.4f deg/h: the six terms of C1 and C2 found (%s) "
+          "are this one displacement, collinear within their covariance (%s; collinearity not "
+          "rejected at %.2g)%s; %s",
+          f.gyro, VectorText(ps, "lambda", 2),
+          lambda_sigma ? absl::StrFormat(" +- %.1f deg", lambda_sigma->value) : "", c10->value,
+          c10->sigma, c20->value, c20->sigma, FreedTermsText(ps, f.effect), test, kCollinearityP,
+          voltages, stats);
+    }
     return absl::StrFormat(
         "gyro %d drifts with odd harmonics of a displaced rotor (eq. (8)-(10)): %s, %.0f deg "
-        "apart as lines%s; %s",
+        "apart as lines%s%s; %s",
         f.gyro, FreedTermsText(ps, f.effect), angle ? angle->value : 0.0,
-        size
-            ? absl::StrFormat("; suspension offset voltages imply a %.2f um displacement (eq. (3))",
-                              size->value)
+        p && dof && dof->value > 0
+            ? absl::StrFormat("; not collinear as one displacement makes them (%s, below %.2g): "
+                              "more acts on C1 and C2 than one displaced rotor",
+                              test, kCollinearityP)
             : "",
-        stats);
+        voltages, stats);
   }
   if (f.effect == "fourth_harmonic") {
     const Parameter* k0 = FindParameter(ps, "k0DegH");

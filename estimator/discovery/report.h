@@ -65,6 +65,12 @@ enum class Effect {
 };
 // The last of Effect (they are numbered from 0 without gaps).
 inline constexpr Effect kLastEffect = Effect::kTurningDisplacement;
+
+// A rotor displacement's C1 and C2 (eq. (8)-(10)) are reported as one displacement (lambda, C10,
+// C20) when their collinearity is not rejected at this level (chi-square of (C1, C2) off their
+// common line, docs/discovery.md "One physical term, one finding"); the same level as the
+// isotropy of a rate coupling (rate_coupling.h).
+inline constexpr double kCollinearityP = 0.01;
 // "rotor_displacement", ..., "sun_drift", "warm_up", "coefficient_step", "transient",
 // "star_tracker_orbital_misalignment", "turning_displacement"
 const char* EffectId(Effect e);

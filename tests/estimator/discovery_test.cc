@@ -5,6 +5,7 @@
 // after, `none` on a recording the model explains, `unexplained` for a fault the library does not
 // hold, two effects in one recording; and the pieces: distribution functions, regimes from the body
 // rate, the model-free latency estimate, the star-tracker correction.
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <random>
@@ -414,6 +415,29 @@ TEST(Diagnose, ConcealedRotorDisplacementInOneGyroIsFoundAndExplained) {
   }
   // A displaced rotor: C1 and C2 collinear, along the displacement the voltages show (eq. (3)).
   EXPECT_LT(FindParameter(f, "lineAngleDeg")->value, 10.0);
+  // One physical term: lambda, C10 and C20 of eq. (8)-(9) within 3 sigma of the truth's, where
+  // C1 = (C10 + C20) lambda and C2 = -5 C20 lambda with C1 . lambda > 0.
+  const Eigen::Vector3d lambda_true = truth.C1.normalized();
+  const double C20_true = RadPerSecToDegPerHour(-truth.C2.dot(lambda_true) / 5.0);
+  const double C10_true = RadPerSecToDegPerHour(truth.C1.dot(lambda_true)) - C20_true;
+  const Parameter* c10 = FindParameter(f, "c10DegH");
+  const Parameter* c20 = FindParameter(f, "c20DegH");
+  const Parameter* lambda_sigma = FindParameter(f, "lambdaSigmaDeg");
+  ASSERT_NE(c10, nullptr);
+  ASSERT_NE(c20, nullptr);
+  ASSERT_NE(lambda_sigma, nullptr);
+  EXPECT_GT(c10->sigma, 0.0);
+  EXPECT_NEAR(c10->value, C10_true, 3.0 * c10->sigma);
+  EXPECT_NEAR(c20->value, C20_true, 3.0 * c20->sigma);
+  Eigen::Vector3d lambda;
+  for (int i = 0; i < 3; ++i) {
+    lambda(i) = FindParameter(f, absl::StrFormat("lambda[%d]", i))->value;
+  }
+  const double lambda_error_deg =
+      RadToDeg(std::acos(std::clamp(lambda.normalized().dot(lambda_true), -1.0, 1.0)));
+  EXPECT_LT(lambda_error_deg, 3.0 * lambda_sigma->value);
+  EXPECT_GT(FindParameter(f, "collinearityP")->value, kCollinearityP);
+  EXPECT_THAT(f.explanation, HasSubstr("one displaced rotor (eq. (8)-(10)) along lambda"));
   EXPECT_LT(FindParameter(f, "lambdaToVoltageAngleDeg")->value, 10.0);
   EXPECT_NEAR(FindParameter(f, "displacementSizeUm")->value, std::sqrt(0.64 + 1.0 + 0.36), 0.05);
   // The paper's measure: held-out attitude drift at least 2x smaller with the effect added.
