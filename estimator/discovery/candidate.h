@@ -53,6 +53,13 @@ struct FitContext {
   const std::vector<RegimeSpan>* regimes = nullptr;
 };
 
+// Drift coefficients theta[first .. first + count) of eq. (1), (10) (drift_model.h) that a
+// coefficient step stepped; count 0: none (a case-fixed drift, as a drift step's).
+struct SteppedCoefficients {
+  int first = 0;
+  int count = 0;
+};
+
 struct CandidateFit {
   Candidate candidate;
   ModelState model;  // the model with the effect added
@@ -69,6 +76,8 @@ struct CandidateFit {
   // (time_behaviour.cc StepWithoutItsGain); shown in the table of candidates tried.
   std::string not_fitted;
   int runs = 0;  // filter runs spent
+  // A coefficient step's group (coefficient_step.h); count 0 for every other candidate.
+  SteppedCoefficients stepped;
   // Time behaviour (report.h TimeBehaviour). A step and a random walk are exempt from the
   // constant-effect homogeneity test (selection.h): they describe a change in time themselves.
   TimeBehaviour time;

@@ -219,6 +219,7 @@ size_t AddGroupPriorPoints(const std::vector<GroupStep>& steps, size_t group_cou
 void DescribeGroupStep(const Candidate& candidate, const GyroConfig& gyro, double c_sigma_deg_h,
                        GroupStep& s, CandidateFit& fit) {
   fit.parameters = s.group.count;
+  fit.stepped = {s.group.first, s.group.count};
   fit.time = s.scratch.time;
   fit.time.kind = kTimeCoefficientStep;
   fit.onset_profile = s.scratch.onset_profile;

@@ -803,11 +803,14 @@ void PreferReadoutJump(RoundState& st, const SelectedModel& selected, RoundResul
   result.readout_jump_evidence = jump_score;
 }
 
-// st.behaviour for `gyro`, computed once.
+// st.behaviour for the gyro of `top`, the round's top candidate, computed once.
 absl::Status BehaviourOf(RoundState& st, const SelectedModel& selected,
-                         DiagnosisContext& context, int gyro) {
+                         DiagnosisContext& context, const CandidateFit& top) {
   if (st.behaviour.has_value()) return absl::OkStatus();
-  ASSIGN_OR_RETURN(st.behaviour, CompareDriftBehavioursOf(selected, context, gyro));
+  // "One step" in the candidate's own form: a coefficient step's coefficients stepping, else a
+  // case-fixed drift (wander.h).
+  ASSIGN_OR_RETURN(st.behaviour,
+                   CompareDriftBehavioursOf(selected, context, top.candidate.gyro, top.stepped));
   return absl::OkStatus();
 }
 
@@ -944,7 +947,7 @@ absl::StatusOr<bool> PreferBasisToTimeBehaviour(RoundState& st, int round,
       in_gyro = true;
     }
     if (in_gyro) {
-      RETURN_IF_ERROR(BehaviourOf(st, selected, context, top.candidate.gyro));
+      RETURN_IF_ERROR(BehaviourOf(st, selected, context, top));
       if (st.behaviour->stationary > basis_evidence) {
         describes = false;
         absl::StrAppend(&held_note, absl::StrFormat(
@@ -987,7 +990,7 @@ absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected
        c.effect != Effect::kCoefficientStep && !warm_up)) {
     return absl::OkStatus();
   }
-  RETURN_IF_ERROR(BehaviourOf(st, selected, context, c.gyro));
+  RETURN_IF_ERROR(BehaviourOf(st, selected, context, st.fits[st.significant.front().index]));
   if (!ReturnsToItsMean(*st.behaviour, EvidenceThreshold(context.options().alpha, 1))) {
     return absl::OkStatus();
   }

@@ -12,6 +12,7 @@
 #include "estimator/discovery/location.h"
 #include "estimator/statistics.h"
 #include "estimator/drift_model.h"
+#include "estimator/model_terms.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -117,7 +118,8 @@ absl::StatusOr<DeviationSeries> SeriesOf(const SelectedModel& selected,
 
 DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, double random_walk,
                                               double w0_sigma, double step_sigma,
-                                              const std::vector<absl::Time>& steps) {
+                                              const std::vector<absl::Time>& steps,
+                                              SteppedCoefficients stepped) {
   DriftBehaviourEvidence out;
   out.gyro = series.gyro;
   const int n = static_cast<int>(series.y.size());
@@ -128,23 +130,34 @@ DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, dou
   const DeviationFilter base_filter(series, random_walk, w0_sigma);
   const double base = SeriesDeviance(base_filter, series.y, nuisance, nuisance_prior);
 
-  // Step: the signature of a drift e_m from sample j on is S_m(k) - S_m(j) for k >= j.
-  std::array<std::vector<Vector2d>, 3> cumulative;
-  for (int m = 0; m < 3; ++m) {
-    const Vector3d e_m = Vector3d::Unit(m);
-    cumulative[m] = Signature(series, [&](const BasisInputs&) -> Vector3d { return e_m; });
+  // Step: the signature of a drift r(h) from sample j on is S_r(k) - S_r(j) for k >= j, r the
+  // case axes e_m (a case-fixed drift) or the stepped coefficients' regressors, eq. (1), (10).
+  std::vector<std::vector<Vector2d>> cumulative;
+  if (stepped.count > 0) {
+    for (int i = stepped.first; i < stepped.first + stepped.count; ++i) {
+      cumulative.push_back(Signature(series, [i](const BasisInputs& in) -> Vector3d {
+        return DriftRegressor(in.h_k).col(i);  // d(dw_k)/d(theta_i)
+      }));
+    }
+    out.step_text = absl::StrCat("one step of ", kFixedTerms[stepped.first].symbol);
+  } else {
+    for (int m = 0; m < 3; ++m) {
+      const Vector3d e_m = Vector3d::Unit(m);
+      cumulative.push_back(Signature(series, [&](const BasisInputs&) -> Vector3d { return e_m; }));
+    }
   }
+  const int columns_per_step = static_cast<int>(cumulative.size());
   const int first = std::max(1, n / 20), last = std::min(n - 2, n - n / 20);
   const int stride = std::max(1, (last - first + 1 + kMaxOnsets - 1) / kMaxOnsets);
   std::vector<double> step_deviance;
   double best_step = std::numeric_limits<double>::infinity();
-  VectorXd step_prior(static_cast<int>(nuisance.size()) + 3);
-  step_prior << nuisance_prior, VectorXd::Constant(3, step_sigma);
+  VectorXd step_prior(static_cast<int>(nuisance.size()) + columns_per_step);
+  step_prior << nuisance_prior, VectorXd::Constant(columns_per_step, step_sigma);
   for (int j = first; j <= last; j += stride) {
     std::vector<std::vector<Vector2d>> columns = nuisance;
-    for (int m = 0; m < 3; ++m) {
+    for (const std::vector<Vector2d>& s_r : cumulative) {
       std::vector<Vector2d> c(n, Vector2d::Zero());
-      for (int k = j; k < n; ++k) c[k] = cumulative[m][k] - cumulative[m][j];
+      for (int k = j; k < n; ++k) c[k] = s_r[k] - s_r[j];
       columns.push_back(std::move(c));
     }
     const double d = SeriesDeviance(base_filter, series.y, columns, step_prior);
@@ -204,14 +217,15 @@ ConstantEffectEvidence CompareConstantEffect(
 
 absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedModel& selected,
                                                                 const DiagnosisContext& context,
-                                                                int gyro) {
+                                                                int gyro,
+                                                                SteppedCoefficients stepped) {
   auto series = SeriesOf(selected, context, gyro);
   if (!series.ok()) return series.status();
   const ModelState& model = selected.model;
   return CompareDriftBehaviours(*series, ModelRandomWalk(model, gyro),
                                 ModelInitialDriftSigma(model),
                                 DegPerHourToRadPerSec(context.options().c_sigma_deg_h),
-                                HeldSteps(model, gyro));
+                                HeldSteps(model, gyro), stepped);
 }
 
 absl::StatusOr<CommonWalkCheck> CheckCommonWalk(const SelectedModel& selected,
@@ -262,11 +276,11 @@ std::string ReturnsToItsMeanText(const DriftBehaviourEvidence& e) {
   return absl::StrFormat(
       "the drift of gyro %d returns to its mean: a stationary random drift (correlation time "
       "about %.1f h, 1-sigma about %.2f deg/h per axis) describes its deviation with 2 ln B = "
-      "%.1f, decisively better than one step (%.1f, best onset %.2f h) or a raised random walk "
+      "%.1f, decisively better than %s (%.1f, best onset %.2f h) or a raised random walk "
       "(%.1f), as a drift switching at random between levels or one driven by a quantity the "
       "telemetry does not carry would",
-      e.gyro, e.correlation_hours, e.sigma_deg_h, e.stationary, e.step, e.step_onset_hours,
-      e.walk);
+      e.gyro, e.correlation_hours, e.sigma_deg_h, e.stationary, e.step_text, e.step,
+      e.step_onset_hours, e.walk);
 }
 
 std::string WandersBeyondTheWalkText(const DriftBehaviourEvidence& e) {
@@ -274,10 +288,10 @@ std::string WandersBeyondTheWalkText(const DriftBehaviourEvidence& e) {
       "the drift of gyro %d wanders beyond the configured random walk: a stationary random "
       "drift (correlation time about %.1f h, 1-sigma about %.2f deg/h per axis; 2 ln B = %.1f) "
       "and a random walk raised %.0f times (2 ln B = %.1f) describe its deviation about equally "
-      "well (within %.0f, the ranking's decisive margin), one step decisively less well (%.1f, "
+      "well (within %.0f, the ranking's decisive margin), %s decisively less well (%.1f, "
       "best onset %.2f h): whether it returns to its mean is not decided on this recording",
       e.gyro, e.correlation_hours, e.sigma_deg_h, e.stationary, e.walk_factor, e.walk,
-      kDecisiveDeviance, e.step, e.step_onset_hours);
+      kDecisiveDeviance, e.step_text, e.step, e.step_onset_hours);
 }
 
 Mismatch WanderLocation(int gyro, const std::vector<TelemetryFrame>& frames, double p_value) {

@@ -9,7 +9,9 @@
 //
 //   step        a case-fixed drift switched on at an onset: 3 coefficients, prior 0.1 deg/h each
 //               (the library's drift step), the onset uniform over the samples between 5% and
-//               95% of the series (at most 120 onsets);
+//               95% of the series (at most 120 onsets); or, for a step of drift coefficients of
+//               eq. (1), (10) (a coefficient step), a step of those coefficients: their
+//               regressors (DriftRegressor) switched on at the onset, each with the same prior;
 //   walk        the random walk of eq. (11) raised 2, 4, 8, 16, 32 times (the library's grid);
 //   stationary  a first-order Gauss-Markov drift on top of the configured walk, correlation time
 //               0.5, 1, 2, 4, 8 h x stationary 1-sigma 0.01, 0.02, 0.04, 0.08, 0.16 deg/h per axis.
@@ -26,6 +28,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/time/time.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/discovery/context.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/held_out.h"
@@ -38,6 +41,8 @@ struct DriftBehaviourEvidence {
   int gyro = 0;
   double step = 0.0, walk = 0.0, stationary = 0.0;  // 2 ln B of each against the configured walk
   double step_onset_hours = 0.0;   // the best onset [h since the series' first sample]
+  // What "one step" was: "one step" (case-fixed) or "one step of <symbol>" (of coefficients).
+  std::string step_text = "one step";
   double walk_factor = 0.0;        // the best grid point: times the configured intensity
   double correlation_hours = 0.0;  // the best stationary grid point
   double sigma_deg_h = 0.0;
@@ -45,15 +50,18 @@ struct DriftBehaviourEvidence {
 
 // `random_walk` [rad/s/sqrt(s)] and `w0_sigma` [rad/s] as the model's session holds them;
 // `step_sigma` the prior 1-sigma of a step's coefficients [rad/s]; `steps` the times of the
-// drift steps the model holds for the series' gyro.
+// drift steps the model holds for the series' gyro. `stepped` the drift coefficients whose step
+// is the "one step" (candidate.h; count 0: a case-fixed drift).
 DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, double random_walk,
                                               double w0_sigma, double step_sigma,
-                                              const std::vector<absl::Time>& steps);
+                                              const std::vector<absl::Time>& steps,
+                                              SteppedCoefficients stepped = {});
 
 // The comparison on gyro `gyro`'s deviation from the selected model.
 absl::StatusOr<DriftBehaviourEvidence> CompareDriftBehavioursOf(const SelectedModel& selected,
                                                                 const DiagnosisContext& context,
-                                                                int gyro);
+                                                                int gyro,
+                                                                SteppedCoefficients stepped = {});
 
 // The library's random walk of every gyro must be common (docs/discovery.md, "Physics checks
 // that decide"): on each gyro of `gyros`, its own deviation from `selected` must make a raised

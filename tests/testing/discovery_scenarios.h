@@ -100,9 +100,34 @@ inline std::vector<std::string> DiscoveryEffects() {
 // steps by -(0.02, -0.03, 0.02) deg/h at 40% (simulator.h CoefficientStep, the printed C1 term),
 // the drift_step scenario's case-fixed drift d written as C1 -> C1 - d: expected `drift_step`.
 // "transient": the warm_up scenario's drift and time constant from 40% of the recording on.
+// "c2_step", "mu_step", "nu_step": the user's model holds that coefficient of the affected gyro
+// at its bench value (CoefficientBenchDegH), which is true until 40% of the recording, where it
+// steps by CoefficientStepDegH (simulator.h CoefficientStep): expected a coefficient step of that
+// group, each component within 3 sigma.
 inline std::vector<std::string> DiscoveryTimeBehaviours() {
   return {"drift_step", "random_walk_one_gyro", "random_walk_15x", "readout_jump", "warm_up",
-          "k0_step", "c1_step", "transient", "turning_displacement"};
+          "k0_step", "c1_step", "c2_step", "mu_step", "nu_step", "transient",
+          "turning_displacement"};
+}
+
+// The coefficient groups the *_step scenarios step, with the finding's parameter of the step.
+inline bool IsCoefficientStepScenario(const std::string& effect) {
+  return effect == "k0_step" || effect == "c2_step" || effect == "mu_step" || effect == "nu_step";
+}
+inline std::string CoefficientStepParameter(const std::string& effect) {
+  return effect.substr(0, effect.find('_')) + "StepDegH";
+}
+// The held bench value of C2, mu or nu (deg/h; mu = (mu12, mu23, mu31), nu = (nu23, nu31,
+// nu12) as eq. (1) prints them) and the step (deg/h).
+inline Eigen::Vector3d CoefficientBenchDegH(const std::string& effect) {
+  if (effect == "c2_step") return Eigen::Vector3d(0.02, -0.03, 0.025);
+  if (effect == "mu_step") return Eigen::Vector3d(0.015, 0.01, -0.02);
+  return Eigen::Vector3d(-0.01, 0.02, 0.015);  // nu_step
+}
+inline Eigen::Vector3d CoefficientStepDegH(const std::string& effect) {
+  if (effect == "c2_step") return Eigen::Vector3d(0.04, -0.05, 0.03);
+  if (effect == "mu_step") return Eigen::Vector3d(-0.04, 0.05, 0.03);
+  return Eigen::Vector3d(0.05, -0.03, -0.04);  // nu_step
 }
 
 // The turning_displacement scenario (docs/discovery.md, "A turning rotor displacement"): the
@@ -370,6 +395,19 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     c.delta.k0 = x * kK0StepDegH * deg_h;
     s.gyros[g].coefficient_step = c;
   }
+  if (effect == "c2_step" || effect == "mu_step" || effect == "nu_step") {
+    // The model holds the group at its bench value, true until the step.
+    const Eigen::Vector3d bench = CoefficientBenchDegH(effect) * deg_h;
+    Eigen::Vector3d DriftCoefficients::*group = effect == "c2_step"   ? &DriftCoefficients::C2
+                                                : effect == "mu_step" ? &DriftCoefficients::mu
+                                                                      : &DriftCoefficients::nu;
+    s.config.gyros[g].model.*group = bench;
+    s.gyros[g].drift = s.config.gyros[g].model;
+    CoefficientStep c;
+    c.time_s = kK0StepOnsetFraction * s.duration;
+    c.delta.*group = x * CoefficientStepDegH(effect) * deg_h;
+    s.gyros[g].coefficient_step = c;
+  }
   if (effect == "c1_step") {
     CoefficientStep c;
     c.time_s = 0.4 * s.duration;
@@ -460,7 +498,23 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   if (truth == "sun_face_drift") return basis("follows_sun", "sunLagHours");
   if (truth == "growing_displacement") return basis("linear", "");
   if (truth == "warm_up") return basis("warm_up", "tauHours");
-  if (truth == "k0_step") return basis("coefficient_step", "k0StepDegH");
+  if (IsCoefficientStepScenario(truth)) {
+    // A step of the right group, each component within 3 sigma of the truth.
+    const std::string name = CoefficientStepParameter(truth);
+    if (!basis("coefficient_step", name)) return false;
+    const std::vector<Parameter>& ps = r.findings.front().parameters;
+    if (truth == "k0_step") {
+      const Parameter* p = FindParameter(ps, name);
+      return p != nullptr && std::abs(p->value - kK0StepDegH) <= 3.0 * p->sigma;
+    }
+    for (int i = 0; i < 3; ++i) {
+      const Parameter* p = FindParameter(ps, name + "[" + std::to_string(i) + "]");
+      if (p == nullptr || !(std::abs(p->value - CoefficientStepDegH(truth)(i)) <= 3.0 * p->sigma)) {
+        return false;
+      }
+    }
+    return true;
+  }
   if (truth == "transient") return basis("transient", "tauHours");
   if (truth == "rate_coupling") {
     // One isotropic coupling in the right gyro, k within 3 sigma of the truth; every finding in
