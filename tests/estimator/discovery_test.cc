@@ -50,13 +50,24 @@ const Parameter* FindParameter(const Finding& f, const std::string& name) {
 }
 
 absl::StatusOr<DiagnosisReport> DiagnoseScenario(const std::string& effect, uint64_t seed,
-                                                 SimulationResult* sim_out = nullptr) {
+                                                 SimulationResult* sim_out = nullptr,
+                                                 const DiagnoseOptions& options = {}) {
   const SimulationSpec spec = DiscoveryScenario(effect, seed, kHours);
   auto sim = Simulate(spec);
   if (!sim.ok()) return sim.status();
-  auto report = Diagnose(spec.config, sim->recording.frames, DiagnoseOptions{});
+  auto report = Diagnose(spec.config, sim->recording.frames, options);
   if (sim_out != nullptr) *sim_out = std::move(*sim);
   return report;
+}
+
+// Every finding's effect, explanation and notes, one per line: what a failing test shows.
+std::string FindingsText(const DiagnosisReport& report) {
+  std::string text;
+  for (const Finding& f : report.findings) {
+    text += "\n" + f.effect + ": " + f.explanation;
+    for (const std::string& note : f.evidence.notes) text += "\n  " + note;
+  }
+  return text;
 }
 
 TEST(DiscoveryStatistics, ChiSquareQuantilesMatchTables) {
@@ -479,12 +490,7 @@ TEST(Diagnose, FaultOutsideTheLibraryIsUnexplainedNotForced) {
   const uint64_t seed = 2;
   auto report = DiagnoseScenario("readout_jump", seed);
   ASSERT_THAT(report, IsOk());
-  std::string evidence;
-  for (const Finding& f : report->findings) {
-    evidence += "\n" + f.effect + ": " + f.explanation;
-    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
-  }
-  SCOPED_TRACE(evidence);
+  SCOPED_TRACE(FindingsText(*report));
   EXPECT_EQ(report->verdict, "unexplained");
   ASSERT_FALSE(report->findings.empty());
   EXPECT_EQ(report->findings.back().gyro, ::esg::testing::AffectedGyro(seed));
@@ -539,12 +545,7 @@ TEST(Diagnose, WarmUpIsFoundWithItsTimeConstantAndAmplitude) {
   auto report = DiagnoseScenario("warm_up", seed);
   ASSERT_THAT(report, IsOk());
   const int gyro = ::esg::testing::AffectedGyro(seed);
-  std::string evidence;
-  for (const Finding& f : report->findings) {
-    evidence += "\n" + f.effect + ": " + f.explanation;
-    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
-  }
-  SCOPED_TRACE(evidence);
+  SCOPED_TRACE(FindingsText(*report));
   ASSERT_FALSE(report->findings.empty());
   const Finding& f = report->findings.front();
   EXPECT_EQ(f.effect, kEffectBasisTerm);
@@ -613,12 +614,7 @@ TEST(Diagnose, K0StepIsFoundWithItsOnsetAndSize) {
   auto report = DiagnoseScenario("k0_step", seed);
   ASSERT_THAT(report, IsOk());
   const int gyro = ::esg::testing::AffectedGyro(seed);
-  std::string evidence;
-  for (const Finding& f : report->findings) {
-    evidence += "\n" + f.effect + ": " + f.explanation;
-    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
-  }
-  SCOPED_TRACE(evidence);
+  SCOPED_TRACE(FindingsText(*report));
   ASSERT_FALSE(report->findings.empty());
   const Finding& f = report->findings.front();
   EXPECT_EQ(f.effect, kEffectBasisTerm);
@@ -657,21 +653,13 @@ TEST(Diagnose, K0StepIsFoundWithItsOnsetAndSize) {
 // short.
 TEST(Diagnose, C2StepIsFoundAsAStepOfC2NotAsADriftThatReturnsToItsMean) {
   const uint64_t seed = 2;
-  const SimulationSpec spec = DiscoveryScenario("c2_step", seed, kHours);
-  auto sim = Simulate(spec);
-  ASSERT_THAT(sim, IsOk());
   DiagnoseOptions options;
   options.effects = {Effect::kCoefficientStep, Effect::kDriftStep, Effect::kWarmUp,
                      Effect::kRandomWalkDrift};
-  auto report = Diagnose(spec.config, sim->recording.frames, options);
+  auto report = DiagnoseScenario("c2_step", seed, nullptr, options);
   ASSERT_THAT(report, IsOk());
   const int gyro = ::esg::testing::AffectedGyro(seed);
-  std::string evidence;
-  for (const Finding& f : report->findings) {
-    evidence += "\n" + f.effect + ": " + f.explanation;
-    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
-  }
-  SCOPED_TRACE(evidence);
+  SCOPED_TRACE(FindingsText(*report));
   ASSERT_FALSE(report->findings.empty());
   const Finding& f = report->findings.front();
   EXPECT_EQ(f.effect, kEffectBasisTerm);
@@ -699,21 +687,13 @@ TEST(Diagnose, C2StepIsFoundAsAStepOfC2NotAsADriftThatReturnsToItsMean) {
 // rows are the confusion bench's), so that the test stays short.
 TEST(Diagnose, TransientFromAnOnsetIsFoundWithItsOnsetAndTimeConstant) {
   const uint64_t seed = 2;
-  const SimulationSpec spec = DiscoveryScenario("transient", seed, kHours);
-  auto sim = Simulate(spec);
-  ASSERT_THAT(sim, IsOk());
   DiagnoseOptions options;
   options.effects = {Effect::kTransient, Effect::kWarmUp, Effect::kDriftStep,
                      Effect::kCoefficientStep};
-  auto report = Diagnose(spec.config, sim->recording.frames, options);
+  auto report = DiagnoseScenario("transient", seed, nullptr, options);
   ASSERT_THAT(report, IsOk());
   const int gyro = ::esg::testing::AffectedGyro(seed);
-  std::string evidence;
-  for (const Finding& f : report->findings) {
-    evidence += "\n" + f.effect + ": " + f.explanation;
-    for (const std::string& note : f.evidence.notes) evidence += "\n  " + note;
-  }
-  SCOPED_TRACE(evidence);
+  SCOPED_TRACE(FindingsText(*report));
   ASSERT_FALSE(report->findings.empty());
   const Finding& f = report->findings.front();
   EXPECT_EQ(f.effect, kEffectBasisTerm);
