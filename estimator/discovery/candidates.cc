@@ -396,8 +396,8 @@ void DescribeRotorDisplacement(const SpacecraftConfig& config,
   if (line.determined) {
     fit.fitted.push_back({"lambdaSigmaDeg", RadToDeg(line.lambda_sigma), 0.0, "deg"});
   }
-  // One physical term (issue's "one physical term, one finding"): the six coefficients are one
-  // displacement when the collinearity is not rejected at kCollinearityP.
+  // One physical term (docs/discovery.md, "One physical term, one finding"): the six
+  // coefficients are one displacement when the collinearity is not rejected at kCollinearityP.
   fit.fitted.push_back({"collinearityChi2", chi2, 0.0, "1"});
   fit.fitted.push_back({"collinearityDof", static_cast<double>(line.dof), 0.0, "1"});
   fit.fitted.push_back({"collinearityP", p_collinear, 0.0, "1"});

@@ -155,14 +155,13 @@ std::string ExplainFinding(const Finding& f) {
     if (p && dof && c10 && c20 && lambda_sigma && dof->value > 0 &&
         p->value > kCollinearityP) {
       return absl::StrFormat(
-          "gyro %d: one displaced rotor (eq. (8)-(10)) along lambda = %s%s (case axes), C10 = "
-          "%.4f +- %.4f deg/h, C20 = %.4f +- %.4f deg/h: the six terms of C1 and C2 found (%s) "
-          "are this one displacement, collinear within their covariance (%s; collinearity not "
-          "rejected at %.2g)%s; %s",
-          f.gyro, VectorText(ps, "lambda", 2),
-          lambda_sigma ? absl::StrFormat(" +- %.1f deg", lambda_sigma->value) : "", c10->value,
-          c10->sigma, c20->value, c20->sigma, FreedTermsText(ps, f.effect), test, kCollinearityP,
-          voltages, stats);
+          "gyro %d: one displaced rotor (eq. (8)-(10)) along lambda = %s +- %.1f deg (case "
+          "axes), C10 = %.4f +- %.4f deg/h, C20 = %.4f +- %.4f deg/h: the six terms of C1 and C2 "
+          "found (%s) are this one displacement, collinear within their covariance (%s; "
+          "collinearity not rejected at %.2g)%s; %s",
+          f.gyro, VectorText(ps, "lambda", 2), lambda_sigma->value, c10->value, c10->sigma,
+          c20->value, c20->sigma, FreedTermsText(ps, f.effect), test, kCollinearityP, voltages,
+          stats);
     }
     return absl::StrFormat(
         "gyro %d drifts with odd harmonics of a displaced rotor (eq. (8)-(10)): %s, %.0f deg "

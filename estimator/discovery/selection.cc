@@ -981,7 +981,8 @@ absl::StatusOr<bool> PreferBasisToTimeBehaviour(RoundState& st, int round,
 absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected,
                                    DiagnosisContext& context, bool refused_warm_up = false) {
   if (st.significant.empty()) return absl::OkStatus();
-  const Candidate& c = st.fits[st.significant.front().index].candidate;
+  const CandidateFit& top = st.fits[st.significant.front().index];
+  const Candidate& c = top.candidate;
   // A transient from an onset decays as a warm-up does: the same rule.
   const bool warm_up =
       refused_warm_up && (c.effect == Effect::kWarmUp || c.effect == Effect::kTransient);
@@ -990,7 +991,7 @@ absl::Status PreferStationaryDrift(RoundState& st, const SelectedModel& selected
        c.effect != Effect::kCoefficientStep && !warm_up)) {
     return absl::OkStatus();
   }
-  RETURN_IF_ERROR(BehaviourOf(st, selected, context, st.fits[st.significant.front().index]));
+  RETURN_IF_ERROR(BehaviourOf(st, selected, context, top));
   if (!ReturnsToItsMean(*st.behaviour, EvidenceThreshold(context.options().alpha, 1))) {
     return absl::OkStatus();
   }

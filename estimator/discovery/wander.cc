@@ -104,6 +104,13 @@ std::vector<double> StationaryDeviances(const DeviationSeries& series, double ra
   return deviances;
 }
 
+// The signature of drift coefficient theta_i on the series: its regressor of eq. (1), (10),
+// d(dw_k)/d(theta_i) at the reading.
+std::vector<Vector2d> CoefficientSignature(const DeviationSeries& series, int i) {
+  return Signature(series,
+                   [i](const BasisInputs& in) -> Vector3d { return DriftRegressor(in.h_k).col(i); });
+}
+
 absl::StatusOr<DeviationSeries> SeriesOf(const SelectedModel& selected,
                                          const DiagnosisContext& context, int gyro) {
   const std::vector<TelemetryFrame> corrected =
@@ -135,9 +142,7 @@ DriftBehaviourEvidence CompareDriftBehaviours(const DeviationSeries& series, dou
   std::vector<std::vector<Vector2d>> cumulative;
   if (stepped.count > 0) {
     for (int i = stepped.first; i < stepped.first + stepped.count; ++i) {
-      cumulative.push_back(Signature(series, [i](const BasisInputs& in) -> Vector3d {
-        return DriftRegressor(in.h_k).col(i);  // d(dw_k)/d(theta_i)
-      }));
+      cumulative.push_back(CoefficientSignature(series, i));
     }
     out.step_text = absl::StrCat("one step of ", kFixedTerms[stepped.first].symbol);
   } else {
@@ -373,9 +378,7 @@ absl::StatusOr<ConstantEffectEvidence> CompareConstantEffectOf(const SelectedMod
     const DriftVector held = g->model_sigma.AsVector();
     for (int i = freed->first; i < freed->first + freed->count; ++i) {
       if (held(i) > 0.0) continue;
-      columns.push_back(Signature(*series, [i](const BasisInputs& in) -> Vector3d {
-        return DriftRegressor(in.h_k).col(i);  // eq. (1), (10): d(dw_k)/d(theta_i)
-      }));
+      columns.push_back(CoefficientSignature(*series, i));
       prior.push_back(freed->sigma);
     }
   }
