@@ -88,10 +88,23 @@ async function tableRows() {
   });
 }
 
+// A table's rows come from an answer that waits behind the operator's earlier large answers
+// (the views opened before it: 4 run at a time per operator), so it is given 60 s; once the CI
+// machine took more than 20 s. A timeout says what the table had and what the page said.
 async function waitForTableRows(min = 1) {
-  await page.waitForFunction((n) =>
-    document.querySelectorAll('.c-telemetry-table__body tr.noselect').length >= n,
-  { timeout: 20_000 }, min);
+  try {
+    await page.waitForFunction((n) =>
+      document.querySelectorAll('.c-telemetry-table__body tr.noselect').length >= n,
+    { timeout: 60_000 }, min);
+  } catch (err) {
+    const seen = await page.evaluate(() => ({
+      rows: document.querySelectorAll('.c-telemetry-table__body tr.noselect').length,
+      bounds: window.openmct.time.bounds(),
+      notices: [...document.querySelectorAll('.c-message, .esg-unavailable')].map((e) => e.textContent.trim()),
+    }));
+    throw new Error(`${err.message}: ${seen.rows} rows of ${min} (bounds ${new Date(seen.bounds.start).toISOString()}` +
+      ` to ${new Date(seen.bounds.end).toISOString()}; notices: ${JSON.stringify(seen.notices)})`);
+  }
   return tableRows();
 }
 

@@ -86,7 +86,11 @@ function esg(args) {
 }
 
 // One HTTP(S) request; resolves with {status, headers, text, json} (json: the parsed body when
-// it is JSON). options: {method, headers, body (object or string), ca}.
+// it is JSON). options: {method, headers, body (object or string), ca}. Each request on a
+// connection of its own (agent: false): Node 20's global agent keeps connections alive, and a
+// request sent on one just as the gateway closed it idle (its 5 s keep-alive timeout) failed
+// with "socket hang up" (seen on a loaded machine). A browser retries such a request; a test
+// client does not need the reuse.
 function request(url, options = {}) {
   return new Promise((resolve, reject) => {
     const target = new URL(url);
@@ -99,6 +103,7 @@ function request(url, options = {}) {
         ...(options.headers || {}) },
       ca: options.ca,
       servername: options.servername,
+      agent: false,
     }, (res) => {
       const chunks = [];
       res.on('data', (c) => chunks.push(c));
