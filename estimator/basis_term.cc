@@ -66,6 +66,29 @@ std::string Monomial(const std::array<int, 3>& e) {
   return text.empty() ? "1" : text;
 }
 
+// h_1^a h_2^b h_3^c of a spin-axis term (eq. (1)'s products of direction cosines; degree up to
+// kMaxHarmonicDegree). std::pow(double, int) is libm's pow of two doubles, 12% of a diagnosis's
+// CPU (perf record of esg_bench BM_Diagnose30h/1): the exponents 0 and 1 are taken without it
+// (the same bits: pow is within 0.52 ulp, so it returns a representable result, 1 or h,
+// exactly), the others from the inputs' table when it is there (TabulateSpinAxisPowers: pow's
+// own values, computed once per substep instead of once per term). h * h would differ from pow
+// in rare ties, which changed the last digits of rejected candidates' deviances in the docs'
+// worked example.
+double SpinAxisProduct(const BasisInputs& in, const std::array<int, 3>& exponents) {
+  double s = 1.0;
+  for (int i = 0; i < 3; ++i) {
+    const int e = exponents[i];
+    if (e == 1) {
+      s *= in.h_k(i);
+    } else if (e >= 2 && e <= kMaxHarmonicDegree && in.h_powers.has_value()) {
+      s *= (*in.h_powers)[i][e - 2];
+    } else if (e != 0) {
+      s *= std::pow(in.h_k(i), e);
+    }
+  }
+  return s;
+}
+
 }  // namespace
 
 std::string_view BasisKindName(BasisKind kind) {
@@ -201,15 +224,20 @@ absl::Status ValidateBasisTerm(const BasisTerm& t, std::string_view prefix) {
   return absl::OkStatus();
 }
 
+void TabulateSpinAxisPowers(BasisInputs& in) {
+  auto& table = in.h_powers.emplace();
+  for (int i = 0; i < 3; ++i) {
+    for (int e = 2; e <= kMaxHarmonicDegree; ++e) table[i][e - 2] = std::pow(in.h_k(i), e);
+  }
+}
+
 double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
   switch (t.kind) {
     case BasisKind::kSpinAxisHarmonic: {
       // Switched on at the epoch (D110: a step of a coefficient of eq. (1), (10)); the default
       // epoch, 1970, precedes every frame.
       if (in.time < t.epoch) return 0.0;
-      double s = 1.0;
-      for (int i = 0; i < 3; ++i) s *= std::pow(in.h_k(i), t.exponents[i]);
-      return s;
+      return SpinAxisProduct(in, t.exponents);
     }
     case BasisKind::kBodyRate:
       return in.w_k(t.index[0] - 1);
@@ -235,8 +263,7 @@ double BasisScalar(const BasisTerm& t, const BasisInputs& in) {
     case BasisKind::kChannel:
       return in.channels != nullptr ? in.channels->Scalar(t, in.time) : 0.0;
     case BasisKind::kCyclingHarmonic: {
-      double s = 1.0;
-      for (int i = 0; i < 3; ++i) s *= std::pow(in.h_k(i), t.exponents[i]);
+      const double s = SpinAxisProduct(in, t.exponents);
       const double phase =
           2.0 * kPi * std::fmod(absl::ToDoubleSeconds(in.time - t.epoch), t.period) / t.period;
       return s * (t.sine ? std::sin(phase) : std::cos(phase));

@@ -118,7 +118,14 @@ struct BasisInputs {
   std::optional<Eigen::Vector3d> u_k_v;            // suspension offset voltages [V]
   // The held channels and their lags (kChannel); null: a channel term gives 0.
   const ChannelSignals* channels = nullptr;
+  // h_k's components to the powers 2 to kMaxHarmonicDegree, h_powers[i][e - 2] =
+  // std::pow(h_k(i), e), for inputs a spin-axis term is evaluated at many times (a deviation
+  // series' substeps, under every candidate): TabulateSpinAxisPowers. Empty: taken per term.
+  std::optional<std::array<std::array<double, kMaxHarmonicDegree - 1>, 3>> h_powers;
 };
+
+// Fills in.h_powers from in.h_k (the same bits as the per-term powers).
+void TabulateSpinAxisPowers(BasisInputs& in);
 
 // InvalidArgument naming the field (prefix, e.g. "gyros[1].basisTerms[0]") when the term's
 // indices, degree, harmonic, period or numbers are out of range or not finite.

@@ -207,6 +207,7 @@ void AddTrajectory(const GyroConfig& gc, const GyroModel& m,
       step.dt = span / substeps;
       step.inputs.time = frames[i].time + absl::Seconds(f * span);
       step.inputs.h_k = SlerpUnit(h_i, h_j, f);
+      TabulateSpinAxisPowers(step.inputs);  // evaluated under every candidate
       step.inputs.w_k = C_b_k.transpose() * w_b;
       step.inputs.channels = held;
       if (u_i.has_value() && u_j.has_value()) {

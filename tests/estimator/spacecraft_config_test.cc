@@ -268,6 +268,46 @@ TEST(BasisTermsConfig, CyclingHarmonicIsAHarmonicTimesItsPhaseAndChecksPeriodAnd
                                           StartsWith("gyros[0].basisTerms[0].exponents: ")));
 }
 
+// A spin-axis term's regressor is h_1^a h_2^b h_3^c: with the powers tabulated once per substep
+// (TabulateSpinAxisPowers, as a deviation series does) and without, it is the product of
+// std::pow of each component, bit for bit, for every exponent combination up to the largest
+// degree and for components of either sign.
+TEST(BasisTermsConfig, SpinAxisTermsAreTheSameBitsWithTheirPowersTabulated) {
+  const std::vector<Eigen::Vector3d> axes = {
+      Eigen::Vector3d(0.6, 0.0, 0.8), Eigen::Vector3d(-0.3, 0.7, -0.2).normalized(),
+      Eigen::Vector3d(0.123456789, -0.987654321, 0.5).normalized(), Eigen::Vector3d::UnitZ()};
+  int compared = 0;
+  for (const BasisKind kind : {BasisKind::kSpinAxisHarmonic, BasisKind::kCyclingHarmonic}) {
+    for (int a = 0; a <= kMaxHarmonicDegree; ++a) {
+      for (int b = 0; a + b <= kMaxHarmonicDegree; ++b) {
+        for (int c = 0; a + b + c <= kMaxHarmonicDegree; ++c) {
+          BasisTerm t;
+          t.kind = kind;
+          t.exponents = {a, b, c};
+          t.period = 5400.0;
+          for (const Eigen::Vector3d& h : axes) {
+            BasisInputs in;
+            in.time = absl::FromUnixSeconds(1551398400);
+            in.h_k = h;
+            const double phase = kind == BasisKind::kCyclingHarmonic
+                                     ? std::cos(2.0 * kPi * std::fmod(1551398400.0, 5400.0) / 5400.0)
+                                     : 1.0;
+            const double expected =
+                std::pow(h(0), a) * std::pow(h(1), b) * std::pow(h(2), c) * phase;
+            const double direct = BasisScalar(t, in);
+            TabulateSpinAxisPowers(in);
+            ASSERT_TRUE(in.h_powers.has_value());
+            EXPECT_EQ(BasisScalar(t, in), direct) << BasisTermLabel(t) << " at " << h.transpose();
+            EXPECT_EQ(direct, expected) << BasisTermLabel(t) << " at " << h.transpose();
+            ++compared;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_EQ(compared, 2 * 35 * 4);  // 35 monomials of degree <= 4 in three variables
+}
+
 TEST(BasisTermsConfig, ReadoutDistortionMustBeSymmetricAndSmall) {
   SpacecraftConfig c = testing::PaperConfig();
   Eigen::Matrix3d D;
