@@ -4,7 +4,8 @@
 #
 #   bash scripts/fuzz.sh build                 install clang-14 + libFuzzer if missing, build
 #   bash scripts/fuzz.sh smoke [SECONDS]       build, run every target SECONDS (default 25) from
-#                                              its seed corpus; fails on any crash or violation
+#                                              its seed corpus, ESG_JOBS (default 2) at a time;
+#                                              fails on any crash or violation
 #   bash scripts/fuzz.sh long [RUNS] [TARGET...]  build those targets, run each (default all) for RUNS
 #                                              executions (default 10000000), one at a time at
 #                                              nice 10; corpus kept in build-fuzz/long/corpus/
@@ -106,11 +107,19 @@ case "${1:-}" in
     work=build-fuzz/smoke
     rm -rf "$work"
     mkdir -p "$work"
+    # The targets run ESG_JOBS at a time (default 2, one per core): each is one process of one
+    # thread, and each keeps its own scratch corpus and log.
+    jobs=${ESG_JOBS:-2}
+    for t in "${TARGETS[@]}"; do
+      while [ "$(jobs -rp | wc -l)" -ge "$jobs" ]; do wait -n || true; done
+      ( code=0; run "$t" "$work" -max_total_time="$seconds" || code=$?; echo "$code" >"$work/$t.code" ) &
+    done
+    wait
     failed=()
     printf 'target\texecutions\texec/s\tcov\tft\tcorpus\tresult\n'
     for t in "${TARGETS[@]}"; do
       result=clean
-      run "$t" "$work" -max_total_time="$seconds" || { result=FAILED; failed+=("$t"); }
+      [ "$(cat "$work/$t.code" 2>/dev/null)" = 0 ] || { result=FAILED; failed+=("$t"); }
       printf '%s\t%s\t%s\n' "$t" "$(stats "$work/$t.log")" "$result"
     done
     if [ ${#failed[@]} -ne 0 ]; then
