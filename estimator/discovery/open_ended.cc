@@ -1,11 +1,12 @@
 #include "estimator/discovery/open_ended.h"
 
 #include <algorithm>
-#include <cmath>
-#include <map>
-#include <tuple>
 #include <array>
+#include <cmath>
 #include <limits>
+#include <map>
+#include <memory>
+#include <tuple>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -160,13 +161,19 @@ double ColumnScalar(const BasisColumn& c, const BasisInputs& in) {
   return BasisScalar(c.term, in);
 }
 
-double ScalarRms(const DeviationSeries& s, const BasisColumn& c) {
-  return RegressorRms(s, [&c](const BasisInputs& in) { return ColumnScalar(c, in); });
+// The column's scalar regressor at each substep of the series.
+std::shared_ptr<const std::vector<double>> ScalarTable(const DeviationSeries& s,
+                                                       const BasisColumn& c) {
+  auto table = std::make_shared<std::vector<double>>();
+  table->reserve(s.steps.size());
+  for (const TrajectoryStep& st : s.steps) table->push_back(ColumnScalar(c, st.inputs));
+  return table;
 }
 
 std::vector<Vector2d> ColumnSignature(const DeviationSeries& s, const BasisColumn& c) {
   if (c.readout) return ReadoutSignature(s, ReadoutPattern(c.readout_index));
   const Vector3d e_m = Vector3d::Unit(c.term.axis - 1);
+  if (c.scalar_table != nullptr) return TabulatedSignature(s, *c.scalar_table, e_m);
   return Signature(s, [&c, &e_m](const BasisInputs& in) -> Vector3d {
     return ColumnScalar(c, in) * e_m;
   });
@@ -216,15 +223,27 @@ void PrepareGyro(const DeviationSeries& series, double random_walk, double w0_si
   d.y_w = filter.Whiten(series.y);
   d.basis = EnumerateBasis(series, options);
   d.prior.resize(d.basis.columns.size());
+  // A tabulated regressor's columns (a term's three axes, a sun face's at one lag) are
+  // consecutive: their signatures are computed together, in one pass over the substeps.
+  const std::vector<double>* last_table = nullptr;
+  std::array<std::vector<Vector2d>, 3> last_signatures;
   for (size_t c = 0; c < d.basis.columns.size(); ++c) {
     const BasisColumn& col = d.basis.columns[c];
     const std::vector<double>* sun = SunValues(options, series.gyro, col);
-    d.signature.push_back(sun != nullptr ? TabulatedSignature(series, *sun,
-                                                              Vector3d::Unit(col.term.axis - 1))
-                                         : ColumnSignature(series, col));
+    const std::vector<double>* table = sun != nullptr ? sun : col.scalar_table.get();
+    if (col.readout || table == nullptr || col.term.axis < 1 || col.term.axis > 3) {
+      d.signature.push_back(ColumnSignature(series, col));
+    } else {
+      if (table != last_table) {
+        last_signatures = TabulatedSignatures(series, *table);
+        last_table = table;
+      }
+      d.signature.push_back(last_signatures[col.term.axis - 1]);
+    }
     d.x_w.push_back(filter.Whiten(d.signature.back()));
     d.prior(c) = col.readout ? options.readout_sigma : options.drift_sigma / col.rms;
   }
+  for (BasisColumn& col : d.basis.columns) col.scalar_table.reset();
   for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
     if (d.basis.groups[k].nuisance) d.active.push_back(k);
   }
@@ -306,7 +325,8 @@ class BasisBuilder {
     c.group = static_cast<int>(out_.groups.size()) - 1;
     if (!c.readout) {
       const std::vector<double>* sun = SunValues(options_, series_.gyro, c);
-      c.rms = sun != nullptr ? TabulatedRms(series_, *sun) : ScalarRms(series_, c);
+      if (sun == nullptr && c.scalar_table == nullptr) c.scalar_table = ScalarTable(series_, c);
+      c.rms = TabulatedRms(series_, sun != nullptr ? *sun : *c.scalar_table);
       if (!(c.rms > kAbsentRms)) return;
       // A term whose prior (drift_sigma at the regressor's RMS) exceeds the configuration's
       // limit on a term's sigma at its kind's reference size (spacecraft_config.h
@@ -323,13 +343,16 @@ class BasisBuilder {
     out_.columns.push_back(std::move(c));
   }
 
-  // One scalar regressor along each case axis.
+  // One scalar regressor along each case axis, tabulated once.
   void AddAxes(BasisTerm t) {
+    std::shared_ptr<const std::vector<double>> table;
     for (int m = 1; m <= 3; ++m) {
       t.axis = m;
       BasisColumn c;
       c.term = t;
       c.label = BasisTermLabel(t);
+      if (table == nullptr) table = ScalarTable(series_, c);
+      c.scalar_table = table;
       AddColumn(c);
     }
   }
@@ -781,16 +804,24 @@ double LaplaceOccam(const VectorXd& a, const Eigen::MatrixXd& P, const VectorXd&
 WhitenedSeries WhitenSeries(const DeviationSeries& series, double random_walk, double w0_sigma,
                             const OpenEndedOptions& options,
                             const std::vector<std::vector<Vector2d>>& extra) {
-  WhitenedSeries out;
-  const DeviationFilter filter(series, random_walk, w0_sigma);
-  out.y_w = filter.Whiten(series.y);
+  return SeriesWhitener(series, random_walk, w0_sigma, options).With(extra);
+}
+
+SeriesWhitener::SeriesWhitener(const DeviationSeries& series, double random_walk,
+                               double w0_sigma, const OpenEndedOptions& options)
+    : filter_(std::make_shared<const DeviationFilter>(series, random_walk, w0_sigma)) {
+  base_.y_w = filter_->Whiten(series.y);
   const GyroBasis basis = EnumerateBasis(series, options);
   for (const BasisColumn& col : basis.columns) {
     if (!col.nuisance) continue;
-    out.nuisance_w.push_back(filter.Whiten(ColumnSignature(series, col)));
-    out.nuisance_prior.push_back(options.drift_sigma / col.rms);
+    base_.nuisance_w.push_back(filter_->Whiten(ColumnSignature(series, col)));
+    base_.nuisance_prior.push_back(options.drift_sigma / col.rms);
   }
-  for (const std::vector<Vector2d>& x : extra) out.extra_w.push_back(filter.Whiten(x));
+}
+
+WhitenedSeries SeriesWhitener::With(const std::vector<std::vector<Vector2d>>& extra) const {
+  WhitenedSeries out = base_;
+  for (const std::vector<Vector2d>& x : extra) out.extra_w.push_back(filter_->Whiten(x));
   return out;
 }
 

@@ -34,6 +34,7 @@
 #define ESG_ESTIMATOR_DISCOVERY_OPEN_ENDED_H_
 
 #include <limits>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -43,6 +44,7 @@
 #include "absl/time/time.h"
 #include "estimator/basis_term.h"
 #include "estimator/discovery/deviation.h"
+#include "estimator/discovery/deviation_filter.h"
 #include "estimator/discovery/sun_regressors.h"
 #include "estimator/units.h"
 
@@ -91,6 +93,12 @@ struct BasisColumn {
   // sun_lag, along case axis term.axis; -1 otherwise.
   int sun_face = -1;
   int sun_lag = -1;
+  // A drift column that is not the sun's: its regressor s at each substep of the series it was
+  // enumerated on, computed once and shared by the term's three axes (the scalar does not depend
+  // on the axis), from which its RMS and its signature are taken (sun_regressors.h
+  // TabulatedRms, TabulatedSignature: the same bits as evaluating s substep by substep). Released
+  // once the signatures are computed; null for a readout entry, a sun column, or after release.
+  std::shared_ptr<const std::vector<double>> scalar_table;
 };
 
 // The readout distortion's unit patterns, an orthonormal basis (Frobenius inner product) of the
@@ -239,6 +247,21 @@ struct WhitenedSeries {
 WhitenedSeries WhitenSeries(const DeviationSeries& series, double random_walk, double w0_sigma,
                             const OpenEndedOptions& options,
                             const std::vector<std::vector<Eigen::Vector2d>>& extra);
+
+// WhitenSeries in two steps, for a search that whitens new signatures on one series many times
+// (turning_displacement.h, a grid of periods): the series' filter, y and its nuisance columns are
+// whitened once at construction; With(extra) gives what WhitenSeries(..., extra) gives, the same
+// bits. The series must outlive the whitener.
+class SeriesWhitener {
+ public:
+  SeriesWhitener(const DeviationSeries& series, double random_walk, double w0_sigma,
+                 const OpenEndedOptions& options);
+  WhitenedSeries With(const std::vector<std::vector<Eigen::Vector2d>>& extra) const;
+
+ private:
+  std::shared_ptr<const DeviationFilter> filter_;
+  WhitenedSeries base_;  // extra_w empty
+};
 
 // What a selected group says in words: case-fixed drift along (x, y, z), varying with the orbital
 // phase, growing, proportional to the body rate, ..., with sizes in deg/h, and the alternatives

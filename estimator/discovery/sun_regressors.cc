@@ -192,6 +192,27 @@ std::vector<Eigen::Vector2d> TabulatedSignature(const DeviationSeries& series,
   return out;
 }
 
+std::array<std::vector<Eigen::Vector2d>, 3> TabulatedSignatures(const DeviationSeries& series,
+                                                                const std::vector<double>& s) {
+  std::array<std::vector<Eigen::Vector2d>, 3> out;
+  for (std::vector<Eigen::Vector2d>& o : out) {
+    o.assign(series.sample_end.size(), Eigen::Vector2d::Zero());
+  }
+  const std::array<Vector3d, 3> e = {Vector3d::UnitX(), Vector3d::UnitY(), Vector3d::UnitZ()};
+  std::array<Vector3d, 3> sum = {Vector3d::Zero(), Vector3d::Zero(), Vector3d::Zero()};
+  size_t step = 0;
+  for (size_t k = 0; k < series.sample_end.size(); ++k) {
+    for (; step < static_cast<size_t>(series.sample_end[k]) && step < s.size(); ++step) {
+      const TrajectoryStep& st = series.steps[step];
+      for (int m = 0; m < 3; ++m) sum[m] += (st.C_in_k * (s[step] * e[m])).cross(st.h_in) * st.dt;
+    }
+    for (int m = 0; m < 3; ++m) {
+      out[m][k] = Eigen::Vector2d(series.u1.dot(sum[m]), series.u2.dot(sum[m]));
+    }
+  }
+  return out;
+}
+
 double TabulatedRms(const DeviationSeries& series, const std::vector<double>& s) {
   double sum = 0.0, time = 0.0;
   for (size_t i = 0; i < series.steps.size() && i < s.size(); ++i) {

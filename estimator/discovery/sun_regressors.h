@@ -24,6 +24,7 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_SUN_REGRESSORS_H_
 #define ESG_ESTIMATOR_DISCOVERY_SUN_REGRESSORS_H_
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -95,6 +96,10 @@ std::vector<Eigen::Vector2d> TabulatedSignature(const DeviationSeries& series,
                                                 const std::vector<double>& s,
                                                 const Eigen::Vector3d& e_m);
 double TabulatedRms(const DeviationSeries& series, const std::vector<double>& s);
+// TabulatedSignature along each case axis x, y, z (index 0, 1, 2), the same bits, in one pass
+// over the substeps: what a regressor's three columns need.
+std::array<std::vector<Eigen::Vector2d>, 3> TabulatedSignatures(const DeviationSeries& series,
+                                                                const std::vector<double>& s);
 
 // The motion of the spin axis the drift s[i] a_k caused, integral (C_in_k a_k s) x h_in dt from the
 // series' first sample, in inertial axes at every substep's end [rad].

@@ -5,6 +5,7 @@
 #include <initializer_list>
 #include <iterator>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -130,6 +131,17 @@ struct TurnSearch {
   // The displacement's constant part (C1, C2 across h) with the library's prior of C1, C2: in
   // both regressions, so 2 ln B is the turning part's.
   std::vector<BasisTerm> constant;
+  // The same at every period, so computed once (Prepare): the series whitened with its nuisance
+  // columns, and the constant part's signatures whitened.
+  std::shared_ptr<const SeriesWhitener> whitener;
+  std::vector<VectorXd> constant_w;
+
+  // Fills whitener and constant_w once series, random_walk, w0_sigma, options and constant are
+  // set.
+  void Prepare() {
+    whitener = std::make_shared<const SeriesWhitener>(*series, random_walk, w0_sigma, options);
+    constant_w = whitener->With(TermSignatures(*series, {&constant})).extra_w;
+  }
   double log_min = 0.0, log_max = 0.0;  // ln(P / h)
   std::map<double, double> evidence;    // ln(P / h) -> the regression's 2 ln B
 
@@ -140,9 +152,8 @@ struct TurnSearch {
     const TurnColumns c =
         ColumnsAt(*series, HoursToSeconds(std::exp(log_p)), epoch, options.drift_sigma);
     if (c.terms.empty()) return 0.0;
-    const std::vector<std::vector<Vector2d>> signatures =
-        TermSignatures(*series, {&c.terms, &constant});
-    const WhitenedSeries w = WhitenSeries(*series, random_walk, w0_sigma, options, signatures);
+    WhitenedSeries w = whitener->With(TermSignatures(*series, {&c.terms}));
+    w.extra_w.insert(w.extra_w.end(), constant_w.begin(), constant_w.end());
     const int k = static_cast<int>(c.terms.size());
     std::vector<const VectorXd*> all, base;
     std::vector<double> base_prior;
@@ -349,6 +360,7 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
   s.w0_sigma = ModelInitialDriftSigma(model);
   s.options = ModelOpenEndedOptions(model, opt);
   s.epoch = ctx.frames->front().time;
+  s.Prepare();
   s.log_min = std::log(kTurnMinPeriodHours);
   s.log_max = std::log(kTurnMaxSpans * span_h);
   const double spacing = std::log(2.0) / kTurnGridPerFactorTwo;

@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "estimator/basis_term.h"
 #include "estimator/discovery/candidates.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/diagnose.h"
@@ -181,6 +182,76 @@ absl::StatusOr<OpenEndedResult> SunStage(const std::string& effect, uint64_t see
   if (o.sun.size() != 3) return absl::InternalError(note);
   const std::vector<double> rw(3, config.random_walk), w0(3, DegPerHourToRadPerSec(0.01));
   return RunOpenEnded(*series, rw, w0, o);
+}
+
+// The tabulated signatures the open-ended stage takes its columns from (open_ended.h
+// BasisColumn::scalar_table, sun_regressors.h TabulatedSignatures) are the same bits as the
+// signature of the term evaluated substep by substep (deviation.h Signature) and as one axis at
+// a time: the basis computes each regressor once for its three axes, and its columns must not
+// change by it. On a 6 h recording's deviation: a spin-axis harmonic, an orbital harmonic and a
+// sun face's lagged illumination.
+TEST(SunRegressors, ATermsTabulatedSignaturesAreItsSignaturesBitForBit) {
+  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("none", 101, 6.0);
+  auto sim = Simulate(spec);
+  ASSERT_TRUE(sim.ok()) << sim.status();
+  SpacecraftConfig config = spec.config;
+  config.filter.fault_threshold = kPi;
+  config.filter.integration_rate_hz = 0.2;
+  SessionOptions options;
+  options.model.parts = kAllModelParts;
+  const auto& frames = sim->recording.frames;
+  auto run = RunModel(config, options, frames);
+  ASSERT_TRUE(run.ok()) << run.status();
+  auto series = MeasureDeviations(config, run->gyros, frames, MeasureBodyRates(config, frames),
+                                  *run, {2});
+  ASSERT_TRUE(series.ok()) << series.status();
+  const DeviationSeries& d = series->front();
+  ASSERT_GT(d.steps.size(), d.sample_end.size());
+
+  BasisTerm harmonic;
+  harmonic.kind = BasisKind::kSpinAxisHarmonic;
+  harmonic.exponents = {2, 1, 0};
+  BasisTerm orbital;
+  orbital.kind = BasisKind::kOrbitalHarmonic;
+  orbital.harmonic = 1;
+  orbital.period = 5640.0;
+  orbital.sine = true;
+  orbital.epoch = frames.front().time;
+  for (const BasisTerm& term : {harmonic, orbital}) {
+    std::vector<double> table;
+    for (const TrajectoryStep& st : d.steps) table.push_back(BasisScalar(term, st.inputs));
+    const auto together = TabulatedSignatures(d, table);
+    for (int m = 1; m <= 3; ++m) {
+      BasisTerm t = term;
+      t.axis = m;
+      const std::vector<Eigen::Vector2d> evaluated =
+          Signature(d, [&t](const BasisInputs& in) -> Eigen::Vector3d {
+            return BasisScalar(t, in) * Eigen::Vector3d::Unit(t.axis - 1);
+          });
+      const std::vector<Eigen::Vector2d> one_axis =
+          TabulatedSignature(d, table, Eigen::Vector3d::Unit(m - 1));
+      ASSERT_EQ(evaluated.size(), d.sample_end.size());
+      ASSERT_EQ(together[m - 1].size(), evaluated.size());
+      for (size_t k = 0; k < evaluated.size(); ++k) {
+        ASSERT_EQ(one_axis[k], evaluated[k]) << BasisTermLabel(t) << " sample " << k;
+        ASSERT_EQ(together[m - 1][k], evaluated[k]) << BasisTermLabel(t) << " sample " << k;
+      }
+    }
+    EXPECT_NE(together[0].back(), Eigen::Vector2d::Zero()) << BasisTermLabel(term);
+  }
+  std::string note;
+  const std::vector<SunRegressors> sun = SunRegressorsOf(*series, config, run->gyros, &note);
+  ASSERT_EQ(sun.size(), 1u) << note;
+  const std::vector<double>* lit = nullptr;  // the face lit most, at the longest lag
+  for (const auto& face : sun.front().values) {
+    if (lit == nullptr || TabulatedRms(d, face.back()) > TabulatedRms(d, *lit)) lit = &face.back();
+  }
+  ASSERT_GT(TabulatedRms(d, *lit), 0.0);
+  const auto together = TabulatedSignatures(d, *lit);
+  for (int m = 0; m < 3; ++m) {
+    const std::vector<Eigen::Vector2d> one = TabulatedSignature(d, *lit, Eigen::Vector3d::Unit(m));
+    for (size_t k = 0; k < one.size(); ++k) ASSERT_EQ(together[m][k], one[k]) << m << " " << k;
+  }
 }
 
 // The first group the stage selects is the sun on the right face of the right gyro, its lag
