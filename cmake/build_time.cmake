@@ -13,6 +13,10 @@
 #   esg_pch_core  libraries without gRPC (estimator, discovery, formats, storage)
 #   esg_pch_grpc  libraries with gRPC (proto, server, client)
 #   esg_pch_exe   the test binaries and the benchmarks (-fPIE, GoogleTest's macros)
+# The test files keep the build type's -O2. At -Og they compiled a third faster, but the linker
+# keeps the first copy of an inline function or template instance it meets, and the test objects
+# come before the libraries: the filter's Eigen kernels ran at -Og in the test binaries and the
+# diagnosing tests took up to 1.7 times as long (docs/decisions.md D128).
 # CLI11 is left out: its header-only validators are namespace-scope objects whose code every file
 # that includes the header generates (about 2 s of the 3.3 s an empty file takes with it), so in
 # a precompiled header it would cost each file that does not use it more than it saves.
@@ -86,41 +90,19 @@ function(esg_precompiled_headers)
   endif()
   set(ESG_PCH_EXE_HEADERS ${exe_headers})
   esg_pch_owner(esg_pch_exe ON ESG_PCH_EXE_HEADERS ${exe_libs})
-  # The test binaries' own code is compiled with -Og (esg_test_optimization below), and gcc takes a
-  # precompiled header only with the optimization it was built with: the benchmarks, at -O2, get
-  # one of their own.
-  esg_test_optimization(esg_pch_exe)
-  if(ESG_BUILD_BENCH)
-    esg_pch_owner(esg_pch_bench ON ESG_PCH_EXE_HEADERS ${exe_libs})
-  endif()
 
   esg_pch_reuse(esg_pch_core esg_estimator esg_discovery esg_formats esg_storage)
   esg_pch_reuse(esg_pch_grpc esg_proto esg_proto_convert esg_diagnosis_json esg_server_lib
     esg_client_lib)
-  esg_pch_reuse(esg_pch_exe ${ESG_TEST_BINARIES})
-  esg_pch_reuse(esg_pch_bench esg_bench)
+  esg_pch_reuse(esg_pch_exe estimator_tests proto_tests formats_tests storage_tests
+    client_tests server_tests end_to_end_tests nginx_routing_tests failover_tests testing_tests
+    esg_bench)
   # The executables' header is built with -pthread (gRPC's usage requirements bring it); the test
   # binaries that link no gRPC take it too, or gcc falls back to parsing the headers ("not used
   # because `_REENTRANT' not defined").
   foreach(target formats_tests storage_tests testing_tests)
     if(TARGET ${target})
       target_compile_options(${target} PRIVATE -pthread)
-    endif()
-  endforeach()
-endfunction()
-
-# The test binaries' own code (the test files, not the libraries they test, which keep the build
-# type's -O2) is compiled with -Og: the tests spend their time in the libraries, and gcc's -O2
-# code generation is most of a test file's compile time. Measured on two test files with their
-# precompiled header built at the same level (docs/performance.md "Build and test time"):
-# cli_conventions_test.cc 40.9 s at -O2, 26.1 s at -Og; operations_kit_test.cc 32.3 s, 23.3 s.
-# A Debug build keeps -O0.
-set(ESG_TEST_BINARIES estimator_tests proto_tests formats_tests storage_tests client_tests
-  server_tests end_to_end_tests nginx_routing_tests failover_tests testing_tests)
-function(esg_test_optimization)
-  foreach(target IN LISTS ARGN)
-    if(TARGET ${target})
-      target_compile_options(${target} PRIVATE $<$<NOT:$<CONFIG:Debug>>:-Og>)
     endif()
   endforeach()
 endfunction()

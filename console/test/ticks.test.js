@@ -107,15 +107,28 @@ function visibleTicks() {
   });
 }
 
-// Opens an object over [start, end] and waits until `plots` plots show time ticks.
+// Opens an object over [start, end] and waits until `plots` plots show time ticks. The first
+// open of the run waited more than 20 s once (a full ctest run, the test alone on the machine;
+// 18 s for the whole file when run again), so it is given 60 s; a timeout says what the page had.
 async function open(browsePath, start, end, plots = 1) {
   await page.evaluate((hash) => { window.location.hash = hash; },
     `#/browse/${browsePath}?tc.mode=fixed&tc.startBound=${start}&tc.endBound=${end}&tc.timeSystem=utc`);
-  await page.waitForFunction((n) => {
-    const all = [...document.querySelectorAll('.gl-plot')];
-    return all.length >= n && all.every((plot) => [...plot.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')]
-      .filter((el) => el.checkVisibility({ visibilityProperty: true })).length >= 2);
-  }, { timeout: 20_000 }, plots);
+  try {
+    await page.waitForFunction((n) => {
+      const all = [...document.querySelectorAll('.gl-plot')];
+      return all.length >= n && all.every((plot) => [...plot.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label')]
+        .filter((el) => el.checkVisibility({ visibilityProperty: true })).length >= 2);
+    }, { timeout: 60_000 }, plots);
+  } catch (err) {
+    const seen = await page.evaluate(() => ({
+      hash: window.location.hash,
+      ticks: [...document.querySelectorAll('.gl-plot')].map((plot) =>
+        plot.querySelectorAll('.gl-plot-x .gl-plot-x-tick-label').length),
+      notices: [...document.querySelectorAll('.c-message, .esg-unavailable')].map((e) => e.textContent.trim()),
+    }));
+    throw new Error(`${err.message}: ${seen.ticks.length} plots of ${plots}, tick labels ` +
+      `${JSON.stringify(seen.ticks)} (at ${seen.hash}; notices: ${JSON.stringify(seen.notices)})`);
+  }
   await sleep(500); // the plots settle on their bounds
 }
 

@@ -76,26 +76,13 @@ TEST(OpenEndedRegression, ClosedFormEqualsTheDirectMarginalLikelihoodAtItsDisper
 // The stage alone on the user's model of an effect-free recording: no group reaches the
 // threshold 2 ln(M / alpha).
 TEST(OpenEnded, EffectFreeRecordingSelectsNothing) {
-  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("none", 101, kHours);
-  auto sim = Simulate(spec);
-  ASSERT_TRUE(sim.ok()) << sim.status();
-  SpacecraftConfig config = spec.config;
-  config.filter.fault_threshold = kPi;
-  config.filter.integration_rate_hz = 0.2;
-  SessionOptions options;
-  options.model.parts = kAllModelParts;
-  options.model.random_walk = true;
-  const auto& frames = sim->recording.frames;
-  auto run = RunModel(config, options, frames);
-  ASSERT_TRUE(run.ok()) << run.status();
-  auto series = MeasureDeviations(config, run->gyros, frames, MeasureBodyRates(config, frames),
-                                  *run, {1, 2, 3});
-  ASSERT_TRUE(series.ok()) << series.status();
+  auto m = ::esg::testing::MeasureUserModelDeviations("none", 101, kHours, {1, 2, 3});
+  ASSERT_TRUE(m.ok()) << m.status();
   OpenEndedOptions o;
   o.orbital_period_s = 5640.0;
-  o.epoch = frames.front().time;
-  const std::vector<double> rw(3, config.random_walk), w0(3, DegPerHourToRadPerSec(0.01));
-  const OpenEndedResult r = RunOpenEnded(*series, rw, w0, o);
+  o.epoch = m->frames.front().time;
+  const std::vector<double> rw(3, m->config.random_walk), w0(3, DegPerHourToRadPerSec(0.01));
+  const OpenEndedResult r = RunOpenEnded(m->series, rw, w0, o);
   EXPECT_TRUE(r.selected.empty());
   EXPECT_GT(r.groups_tested, 100);
   EXPECT_LT(r.best_evidence, r.best_threshold);

@@ -159,29 +159,17 @@ constexpr double kHours = 30.0;
 // open_ended_test.cc): the basis with the sun's regressors of every running gyro.
 absl::StatusOr<OpenEndedResult> SunStage(const std::string& effect, uint64_t seed,
                                          SimulationSpec& spec) {
-  spec = ::esg::testing::DiscoveryScenario(effect, seed, kHours);
-  auto sim = Simulate(spec);
-  if (!sim.ok()) return sim.status();
-  SpacecraftConfig config = spec.config;
-  config.filter.fault_threshold = kPi;
-  config.filter.integration_rate_hz = 0.2;
-  SessionOptions options;
-  options.model.parts = kAllModelParts;
-  options.model.random_walk = true;
-  const auto& frames = sim->recording.frames;
-  auto run = RunModel(config, options, frames);
-  if (!run.ok()) return run.status();
-  auto series = MeasureDeviations(config, run->gyros, frames, MeasureBodyRates(config, frames),
-                                  *run, {1, 2, 3});
-  if (!series.ok()) return series.status();
+  auto m = ::esg::testing::MeasureUserModelDeviations(effect, seed, kHours, {1, 2, 3});
+  if (!m.ok()) return m.status();
+  spec = m->spec;
   OpenEndedOptions o;
   o.orbital_period_s = 5640.0;
-  o.epoch = frames.front().time;
+  o.epoch = m->frames.front().time;
   std::string note;
-  o.sun = SunRegressorsOf(*series, config, run->gyros, &note);
+  o.sun = SunRegressorsOf(m->series, m->config, m->run.gyros, &note);
   if (o.sun.size() != 3) return absl::InternalError(note);
-  const std::vector<double> rw(3, config.random_walk), w0(3, DegPerHourToRadPerSec(0.01));
-  return RunOpenEnded(*series, rw, w0, o);
+  const std::vector<double> rw(3, m->config.random_walk), w0(3, DegPerHourToRadPerSec(0.01));
+  return RunOpenEnded(m->series, rw, w0, o);
 }
 
 // The tabulated signatures the open-ended stage takes its columns from (open_ended.h
@@ -191,21 +179,10 @@ absl::StatusOr<OpenEndedResult> SunStage(const std::string& effect, uint64_t see
 // change by it. On a 6 h recording's deviation: a spin-axis harmonic, an orbital harmonic and a
 // sun face's lagged illumination.
 TEST(SunRegressors, ATermsTabulatedSignaturesAreItsSignaturesBitForBit) {
-  const SimulationSpec spec = ::esg::testing::DiscoveryScenario("none", 101, 6.0);
-  auto sim = Simulate(spec);
-  ASSERT_TRUE(sim.ok()) << sim.status();
-  SpacecraftConfig config = spec.config;
-  config.filter.fault_threshold = kPi;
-  config.filter.integration_rate_hz = 0.2;
-  SessionOptions options;
-  options.model.parts = kAllModelParts;
-  const auto& frames = sim->recording.frames;
-  auto run = RunModel(config, options, frames);
-  ASSERT_TRUE(run.ok()) << run.status();
-  auto series = MeasureDeviations(config, run->gyros, frames, MeasureBodyRates(config, frames),
-                                  *run, {2});
-  ASSERT_TRUE(series.ok()) << series.status();
-  const DeviationSeries& d = series->front();
+  auto m = ::esg::testing::MeasureUserModelDeviations("none", 101, 6.0, {2});
+  ASSERT_TRUE(m.ok()) << m.status();
+  const DeviationSeries& d = m->series.front();
+  const auto& frames = m->frames;
   ASSERT_GT(d.steps.size(), d.sample_end.size());
 
   BasisTerm harmonic;
@@ -240,7 +217,7 @@ TEST(SunRegressors, ATermsTabulatedSignaturesAreItsSignaturesBitForBit) {
     EXPECT_NE(together[0].back(), Eigen::Vector2d::Zero()) << BasisTermLabel(term);
   }
   std::string note;
-  const std::vector<SunRegressors> sun = SunRegressorsOf(*series, config, run->gyros, &note);
+  const std::vector<SunRegressors> sun = SunRegressorsOf(m->series, m->config, m->run.gyros, &note);
   ASSERT_EQ(sun.size(), 1u) << note;
   const std::vector<double>* lit = nullptr;  // the face lit most, at the longest lag
   for (const auto& face : sun.front().values) {

@@ -11,7 +11,11 @@
 #include <string>
 #include <vector>
 
+#include "absl/status/statusor.h"
 #include "estimator/attitude_profile.h"
+#include "estimator/discovery/deviation.h"
+#include "estimator/discovery/model_run.h"
+#include "estimator/discovery/regimes.h"
 #include "estimator/discovery/report.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
@@ -639,6 +643,43 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   }
   return r.verdict == effect &&
          (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == want_gyro));
+}
+
+// A recording of `effect` at `seed` over `hours`, the user's model run on it as the open-ended
+// stage's tests run it (all parts of eq. (1), (10) free, the random walk of eq. (11) when
+// `random_walk`, eq. (12) opened to pi, 0.2 Hz integration), and the deviation series of `gyros`
+// (estimator/discovery/deviation.h).
+struct UserModelDeviations {
+  estimator::SimulationSpec spec;
+  estimator::SpacecraftConfig config;
+  std::vector<estimator::TelemetryFrame> frames;
+  estimator::discovery::ModelRun run;
+  std::vector<estimator::discovery::DeviationSeries> series;
+};
+inline absl::StatusOr<UserModelDeviations> MeasureUserModelDeviations(
+    const std::string& effect, uint64_t seed, double hours, const std::vector<int>& gyros,
+    bool random_walk = true) {
+  using namespace esg::estimator;
+  UserModelDeviations out;
+  out.spec = DiscoveryScenario(effect, seed, hours);
+  auto sim = Simulate(out.spec);
+  if (!sim.ok()) return sim.status();
+  out.frames = std::move(sim->recording.frames);
+  out.config = out.spec.config;
+  out.config.filter.fault_threshold = kPi;
+  out.config.filter.integration_rate_hz = 0.2;
+  SessionOptions options;
+  options.model.parts = kAllModelParts;
+  options.model.random_walk = random_walk;
+  auto run = discovery::RunModel(out.config, options, out.frames);
+  if (!run.ok()) return run.status();
+  out.run = *std::move(run);
+  auto series = discovery::MeasureDeviations(out.config, out.run.gyros, out.frames,
+                                             discovery::MeasureBodyRates(out.config, out.frames),
+                                             out.run, gyros);
+  if (!series.ok()) return series.status();
+  out.series = *std::move(series);
+  return out;
 }
 
 }  // namespace esg::testing
