@@ -179,10 +179,10 @@ absl::StatusOr<OpenEndedResult> SunStage(const std::string& effect, uint64_t see
 // change by it. On a 6 h recording's deviation: a spin-axis harmonic, an orbital harmonic and a
 // sun face's lagged illumination.
 TEST(SunRegressors, ATermsTabulatedSignaturesAreItsSignaturesBitForBit) {
-  auto m = ::esg::testing::MeasureUserModelDeviations("none", 101, 6.0, {2});
-  ASSERT_TRUE(m.ok()) << m.status();
-  const DeviationSeries& d = m->series.front();
-  const auto& frames = m->frames;
+  auto measured = ::esg::testing::MeasureUserModelDeviations("none", 101, 6.0, {2});
+  ASSERT_TRUE(measured.ok()) << measured.status();
+  const DeviationSeries& d = measured->series.front();
+  const auto& frames = measured->frames;
   ASSERT_GT(d.steps.size(), d.sample_end.size());
 
   BasisTerm harmonic;
@@ -217,7 +217,8 @@ TEST(SunRegressors, ATermsTabulatedSignaturesAreItsSignaturesBitForBit) {
     EXPECT_NE(together[0].back(), Eigen::Vector2d::Zero()) << BasisTermLabel(term);
   }
   std::string note;
-  const std::vector<SunRegressors> sun = SunRegressorsOf(m->series, m->config, m->run.gyros, &note);
+  const std::vector<SunRegressors> sun =
+      SunRegressorsOf(measured->series, measured->config, measured->run.gyros, &note);
   ASSERT_EQ(sun.size(), 1u) << note;
   const std::vector<double>* lit = nullptr;  // the face lit most, at the longest lag
   for (const auto& face : sun.front().values) {
