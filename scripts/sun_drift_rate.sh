@@ -5,8 +5,10 @@
 # body face through a thermal lag, the face, the lag and the gyro by the seed), seeds from
 # FIRST_SEED (default 101), one line each: right when a sun finding names the gyro and the face,
 # holds the true lag in its interval and the amplitude within 3 sigma per case axis; then the
-# count. EFFECT=none diagnoses effect-free recordings instead (any sun finding is false). Uses
-# estimator_tests of BUILD_DIR (default build), which it builds.
+# count. EFFECT=eclipse_drift: the same drift following the eclipses of the scenario's orbit (the
+# `sunlit` family), diagnosed with that orbit. EFFECT=none diagnoses effect-free recordings
+# instead (any sun finding is false). Uses estimator_tests of BUILD_DIR (default build), which it
+# builds.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD_DIR="${BUILD_DIR:-build}"

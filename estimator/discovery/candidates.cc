@@ -260,7 +260,7 @@ LatencyEstimate LatencyFromRates(const std::vector<TelemetryFrame>& frames, cons
 }
 
 std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
-                                      const std::vector<Effect>& effects) {
+                                      const std::vector<Effect>& effects, bool with_orbit) {
   std::vector<Candidate> out;
   auto added = [&](const std::string& name) {
     return std::find(model.added.begin(), model.added.end(), name) != model.added.end();
@@ -282,7 +282,7 @@ std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector
       out.push_back({Effect::kReadoutDistortion, id});
     }
     if (Effective(effects, Effect::kSunDrift) &&
-        static_cast<int>(HeldSunFaces(model, id).size()) < kSunFaces) {
+        static_cast<int>(HeldSunFaces(model, id).size()) < SunFamilies(with_orbit)) {
       out.push_back({Effect::kSunDrift, id});
     }
     // A drift that follows each declared channel (channel_candidate.h); none without channels.
@@ -497,9 +497,10 @@ VoltageAgreement CheckDisplacementAgainstVoltages(const SpacecraftConfig& config
   return out;
 }
 
-int CandidateComparisons(const Candidate& candidate, const ModelState& model) {
+int CandidateComparisons(const Candidate& candidate, const ModelState& model, bool with_orbit) {
   if (candidate.effect != Effect::kSunDrift) return 1;
-  return std::max(1, kSunFaces - static_cast<int>(HeldSunFaces(model, candidate.gyro).size()));
+  return std::max(1, SunFamilies(with_orbit) -
+                         static_cast<int>(HeldSunFaces(model, candidate.gyro).size()));
 }
 
 namespace {

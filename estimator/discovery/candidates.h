@@ -74,14 +74,16 @@
 namespace esg::estimator::discovery {
 
 // The candidates `model` lacks among `effects` (all of the library when empty), for the running
-// gyros.
+// gyros; `with_orbit`: the diagnosis has the orbit, so the sun's families include `sunlit`
+// (sun_regressors.h SunFamilies), and a gyro's sun is offered while any of them is not held.
 std::vector<Candidate> ListCandidates(const ModelState& model, const std::vector<int>& gyros,
-                                      const std::vector<Effect>& effects);
+                                      const std::vector<Effect>& effects, bool with_orbit);
 
 // The comparisons a candidate makes in a round's family M of the threshold 2 ln(M / alpha): a
-// sun candidate one per face it may try (the faces `model` does not hold for its gyro; each
-// face's lags are one comparison, their Bayes factors averaged: D101), any other candidate 1.
-int CandidateComparisons(const Candidate& candidate, const ModelState& model);
+// sun candidate one per family it may try (the faces, and `sunlit` `with_orbit`, that `model`
+// does not hold for its gyro; each family's lags are one comparison, their Bayes factors
+// averaged: D101), any other candidate 1.
+int CandidateComparisons(const Candidate& candidate, const ModelState& model, bool with_orbit);
 
 // Fits one candidate (1 to 5 filter runs, sequential; candidates run in parallel).
 // Errors: InvalidArgument for a gyro that is not configured; those of RunModel.

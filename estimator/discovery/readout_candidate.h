@@ -49,7 +49,8 @@ absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& c
 //      the best lag against that stationary drift on the same deviation (wander.h
 //      CompareConstantEffect): CandidateFit::wander_*.
 //
-// The round counts the candidate once per face it may try (candidates.h CandidateComparisons).
+// The round counts the candidate once per family it may try, `sunlit` with the orbit (candidates.h
+// CandidateComparisons).
 // Found, it is reported as a basis term (kEffectBasisTerm, time behaviour kTimeFollowsSun) with
 // sun_terms.h SunParameters and DescribeSunGroup. A recording outside the ephemeris's years gives
 // no fit (parameters 0, a note). Errors: InvalidArgument for a gyro that is not configured; those

@@ -686,7 +686,8 @@ struct RoundState {
 // The round's candidates, split into its two stages, and M.
 void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
                          const SelectedModel& selected, const DiagnoseOptions& options) {
-  st.candidates = ListCandidates(selected.model, gyros, options.effects);
+  const bool with_orbit = options.orbit != nullptr;
+  st.candidates = ListCandidates(selected.model, gyros, options.effects, with_orbit);
   if (!options.open_ended) {  // the basis's readout group and sun families belong to it
     std::erase_if(st.candidates, [](const Candidate& c) {
       return c.effect == Effect::kReadoutDistortion || c.effect == Effect::kSunDrift;
@@ -700,7 +701,9 @@ void ListRoundCandidates(RoundState& st, const std::vector<int>& gyros,
                                 (c.effect == Effect::kRandomWalkDrift && c.gyro > 0);
     (time_behaviour ? st.timed : st.constant).push_back(c);
   }
-  for (const Candidate& c : st.candidates) st.family += CandidateComparisons(c, selected.model);
+  for (const Candidate& c : st.candidates) {
+    st.family += CandidateComparisons(c, selected.model, with_orbit);
+  }
 }
 
 // Fits a stage's candidates into st.fits.

@@ -42,6 +42,8 @@ inline constexpr int kSunFaces = 6;
 // whole spacecraft cooling in the shadow) rather than with one face's illumination. Its index
 // follows the faces'; it has no normal.
 inline constexpr int kSunlitFamily = kSunFaces;
+// The families a gyro's sun regressors have: the six faces, and `sunlit` with the orbit.
+inline constexpr int SunFamilies(bool with_orbit) { return kSunFaces + (with_orbit ? 1 : 0); }
 std::string SunFaceName(int face);            // "+x", ..., "-z"; "sunlit" for kSunlitFamily
 Eigen::Vector3d SunFaceNormal_b(int face);    // the outward normal, body axes [1]; 0 for sunlit
 double FaceIllumination(const Eigen::Vector3d& s_b, int face);  // max(0, n_f . s_b) [1]

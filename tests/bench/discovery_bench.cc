@@ -30,6 +30,7 @@
 #include "estimator/simulator.h"
 #include "estimator/units.h"
 #include "tests/testing/discovery_scenarios.h"
+#include "tests/testing/scenario_orbit.h"
 
 namespace esg::estimator::discovery {
 namespace {
@@ -132,6 +133,14 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
         const SimulationResult sim = *Simulate(spec);
         DiagnoseOptions options;  // default threads, lent as esg diagnose does
         options.run_parallel = RunOnThreads;
+        if (spec.earth_shadow) {  // the orbit the recording flies, as esg diagnose --orbit
+          auto orbit = ::esg::testing::ScenarioOrbit(spec, 100 + seed);
+          if (!orbit.ok()) {
+            state.SkipWithError(std::string(orbit.status().message()).c_str());
+            return;
+          }
+          options.orbit = *std::move(orbit);
+        }
         const auto start = std::chrono::steady_clock::now();
         auto report = Diagnose(spec.config, sim.recording.frames, options);
         seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

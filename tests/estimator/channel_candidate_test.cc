@@ -32,13 +32,13 @@ ChannelConfig Temperature(const std::string& name) {
 TEST(ChannelCandidate, NoneWithoutChannelsAndOnePerGyroAndDeclaredChannelOtherwise) {
   ModelState without;
   without.config = ::esg::testing::DiscoveryConfig();
-  const std::vector<Candidate> before = ListCandidates(without, {1, 2, 3}, {});
+  const std::vector<Candidate> before = ListCandidates(without, {1, 2, 3}, {}, false);
   EXPECT_TRUE(std::none_of(before.begin(), before.end(), [](const Candidate& c) {
     return c.effect == Effect::kChannelDrift;
   }));
   ModelState with = without;
   with.config.channels = {Temperature("T_gyro2"), Temperature("heater_1")};
-  const std::vector<Candidate> after = ListCandidates(with, {1, 2, 3}, {});
+  const std::vector<Candidate> after = ListCandidates(with, {1, 2, 3}, {}, false);
   std::vector<std::string> names, others;
   for (const Candidate& c : after) {
     if (c.effect == Effect::kChannelDrift) {
@@ -57,11 +57,11 @@ TEST(ChannelCandidate, NoneWithoutChannelsAndOnePerGyroAndDeclaredChannelOtherwi
   // Once taken, a gyro's channel is not offered again; --effects without it offers none.
   with.added.push_back("channel_drift[2:T_gyro2]");
   int offered = 0;
-  for (const Candidate& c : ListCandidates(with, {1, 2, 3}, {})) {
+  for (const Candidate& c : ListCandidates(with, {1, 2, 3}, {}, false)) {
     offered += CandidateName(c) == "channel_drift[2:T_gyro2]" ? 1 : 0;
   }
   EXPECT_EQ(offered, 0);
-  for (const Candidate& c : ListCandidates(with, {1, 2, 3}, {Effect::kRotorDisplacement})) {
+  for (const Candidate& c : ListCandidates(with, {1, 2, 3}, {Effect::kRotorDisplacement}, false)) {
     EXPECT_NE(c.effect, Effect::kChannelDrift);
   }
   EXPECT_EQ(EffectFromId("channel_drift"), Effect::kChannelDrift);

@@ -178,8 +178,14 @@ inline std::vector<std::string> DiscoveryCombinedClasses() {
 // A drift that follows the sun (docs/discovery.md, "A drift that follows the sun"):
 // "sun_face_drift", a thermal drift of one gyro of (0.06, -0.04, 0.05) deg/h at full illumination
 // of one body face through a first-order lag (simulator.h SunFaceDrift; the face and the lag by
-// the seed: SunFaceOf, SunLagHoursOf).
-inline std::vector<std::string> DiscoverySunClasses() { return {"sun_face_drift"}; }
+// the seed: SunFaceOf, SunLagHoursOf); "eclipse_drift", the same drift following the eclipses
+// instead of a face: the fraction of the sun's disc seen from the scenario's orbit
+// (SimulationSpec::earth_shadow = ScenarioOrbitalOptions) through the seed's lag, whatever the
+// attitude. A recording with earth_shadow is diagnosed with that orbit (scenario_orbit.h
+// ScenarioOrbit), as `esg diagnose --orbit` would be.
+inline std::vector<std::string> DiscoverySunClasses() {
+  return {"sun_face_drift", "eclipse_drift"};
+}
 
 // The star tracker's side (docs/discovery.md, "The star tracker's side"): "star_tracker_cycle",
 // the star tracker's mount turning with the orbit (a thermo-elastic misalignment) by
@@ -352,11 +358,16 @@ inline estimator::SimulationSpec DiscoveryScenario(const std::string& effect, ui
     d.correlation_time_s = 3.0 * 3600.0;
     s.gyros[g].hidden_driver_drift = d;
   }
-  if (effect == "sun_face_drift") {
+  if (effect == "sun_face_drift" || effect == "eclipse_drift") {
     SunFaceDrift d;
     d.amplitude_k_rad_s = x * Eigen::Vector3d(0.06, -0.04, 0.05) * deg_h;
-    d.face_axis = SunFaceOf(seed) / 2;
-    d.face_sign = SunFaceOf(seed) % 2 == 0 ? 1 : -1;
+    if (effect == "eclipse_drift") {
+      d.face_axis = kSunlitFaceAxis;
+      s.earth_shadow = ScenarioOrbitalOptions(seed);
+    } else {
+      d.face_axis = SunFaceOf(seed) / 2;
+      d.face_sign = SunFaceOf(seed) % 2 == 0 ? 1 : -1;
+    }
     d.time_constant_s = SunLagHoursOf(seed) * 3600.0;
     s.gyros[g].sun_face_drift = d;
   }
@@ -500,6 +511,15 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
   };
   if (truth == "orbital_drift") return basis("orbital_cycle", "");
   if (truth == "sun_face_drift") return basis("follows_sun", "sunLagHours");
+  if (truth == "eclipse_drift") {  // the sunlit family: no face, its normal zero
+    if (!basis("follows_sun", "sunLagHours")) return false;
+    for (int i = 0; i < 3; ++i) {
+      const Parameter* n =
+          FindParameter(r.findings.front().parameters, "sunFaceNormalB[" + std::to_string(i) + "]");
+      if (n == nullptr || n->value != 0.0) return false;
+    }
+    return true;
+  }
   if (truth == "growing_displacement") return basis("linear", "");
   if (truth == "warm_up") return basis("warm_up", "tauHours");
   if (IsCoefficientStepScenario(truth)) {
