@@ -103,9 +103,35 @@ async function waitForTableRows(min = 1) {
       notices: [...document.querySelectorAll('.c-message, .esg-unavailable')].map((e) => e.textContent.trim()),
     }));
     throw new Error(`${err.message}: ${seen.rows} rows of ${min} (bounds ${new Date(seen.bounds.start).toISOString()}` +
-      ` to ${new Date(seen.bounds.end).toISOString()}; notices: ${JSON.stringify(seen.notices)})`);
+      ` to ${new Date(seen.bounds.end).toISOString()}; notices: ${JSON.stringify(seen.notices)})` +
+      `\n${apiRequestsReport()}`);
   }
   return tableRows();
+}
+
+// The page's requests to the gateway's API, each with its outcome, and the gateway's log: what a
+// timed-out wait prints, so that a view left without data says which answer it lacked.
+const apiRequests = new Map(); // puppeteer request -> {url, started, outcome}
+function watchApiRequests() {
+  const isApi = (r) => new URL(r.url()).pathname.startsWith('/api/');
+  page.on('request', (r) => {
+    if (isApi(r)) apiRequests.set(r, { url: r.url(), started: Date.now(), outcome: 'pending' });
+  });
+  page.on('requestfinished', (r) => {
+    const e = apiRequests.get(r);
+    if (e) e.outcome = `${r.response() ? r.response().status() : 'no response'} after ${Date.now() - e.started} ms`;
+  });
+  page.on('requestfailed', (r) => {
+    const e = apiRequests.get(r);
+    if (e) e.outcome = `failed (${(r.failure() || {}).errorText}) after ${Date.now() - e.started} ms`;
+  });
+}
+function apiRequestsReport() {
+  const now = Date.now();
+  const lines = [...apiRequests.values()].slice(-40).map((e) =>
+    `  ${e.outcome === 'pending' ? `pending for ${now - e.started} ms` : e.outcome}: ${e.url}`);
+  const log = gateway.stderr().split('\n').slice(-40).map((l) => `  | ${l}`);
+  return `the page's last API requests:\n${lines.join('\n')}\nthe gateway's log (last lines):\n${log.join('\n')}`;
 }
 
 // Open MCT's utc format: "2019-03-02 06:00:00.000Z".
@@ -146,6 +172,7 @@ before(async () => {
   page = await browser.newPage();
   await page.setViewport({ width: 1500, height: 900 });
   page.on('pageerror', (err) => process.stdout.write(`# page error: ${err.message}\n`));
+  watchApiRequests();
 });
 
 after(async () => {
@@ -1260,7 +1287,13 @@ test('a diagnosis is applied to the model from its report after a confirmation, 
   await open('esg:root/esg:fleet');
   await page.waitForSelector('table.esg-fleet', { timeout: 20_000 });
   await open(`esg:root/esg:sc~${SC}/esg:diags~${SC}/esg:diag~${SC}~${diagnosis.id}`);
-  await page.waitForSelector('.esg-apply-button:not([disabled])', { timeout: 20_000 });
+  // The report is fetched while esgd re-runs the archive under the applied configuration (the
+  // apply's own work), so it is given 60 s; a timeout says which answers the page lacked.
+  try {
+    await page.waitForSelector('.esg-apply-button:not([disabled])', { timeout: 60_000 });
+  } catch (err) {
+    throw new Error(`${err.message}\n${apiRequestsReport()}`);
+  }
   await clickApply();
   await page.waitForSelector('#esg-apply-dialog');
   await page.click('#esg-apply-ok');
