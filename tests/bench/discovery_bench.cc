@@ -133,13 +133,11 @@ void BM_DiscoveryConfusionMatrix(benchmark::State& state) {
         const SimulationResult sim = *Simulate(spec);
         DiagnoseOptions options;  // default threads, lent as esg diagnose does
         options.run_parallel = RunOnThreads;
-        if (spec.earth_shadow) {  // the orbit the recording flies, as esg diagnose --orbit
-          auto orbit = ::esg::testing::ScenarioOrbit(spec, 100 + seed);
-          if (!orbit.ok()) {
-            state.SkipWithError(std::string(orbit.status().message()).c_str());
-            return;
-          }
-          options.orbit = *std::move(orbit);
+        // the orbit the recording flies, as esg diagnose --orbit
+        if (absl::Status s = ::esg::testing::AddScenarioOrbit(spec, 100 + seed, options);
+            !s.ok()) {
+          state.SkipWithError(std::string(s.message()).c_str());
+          return;
         }
         const auto start = std::chrono::steady_clock::now();
         auto report = Diagnose(spec.config, sim.recording.frames, options);

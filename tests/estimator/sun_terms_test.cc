@@ -92,17 +92,8 @@ const Parameter* Find(const Finding& f, const std::string& name) {
 // (eclipse_drift), as `esg diagnose --orbit` would be given it.
 absl::StatusOr<DiagnoseOptions> SunDiagnoseOptions(const SimulationSpec& spec, uint64_t seed) {
   DiagnoseOptions options;
-  if (spec.earth_shadow) {
-    auto orbit = ::esg::testing::ScenarioOrbit(spec, seed);
-    if (!orbit.ok()) return orbit.status();
-    options.orbit = *std::move(orbit);
-  }
+  if (absl::Status s = ::esg::testing::AddScenarioOrbit(spec, seed, options); !s.ok()) return s;
   return options;
-}
-
-// The sun family a scenario's drift follows: the seed's face, or `sunlit` (eclipse_drift).
-int SunFamilyOf(const std::string& effect, uint64_t seed) {
-  return effect == "eclipse_drift" ? kSunlitFamily : ::esg::testing::SunFaceOf(seed);
 }
 
 // The diagnosis of a sun_face_drift (or eclipse_drift) recording of `seed` at `hours`.
@@ -138,7 +129,7 @@ std::string Findings(const DiagnosisReport& r) {
 // when nothing).
 std::string SunFindingWrong(const SunDiagnosis& d, uint64_t seed) {
   const int gyro = ::esg::testing::AffectedGyro(seed);
-  const int face = SunFamilyOf(d.effect, seed);
+  const int face = ::esg::testing::SunFamilyOf(d.effect, seed);
   const double lag_h = ::esg::testing::SunLagHoursOf(seed);
   const DiagnosisReport& r = d.report;
   const Finding* sun = nullptr;
@@ -398,7 +389,7 @@ void ExpectSunCandidateRight(const std::string& effect, uint64_t seed, bool para
   EXPECT_GT(r->evidence, r->threshold) << absl::StrJoin(fit.notes, "\n");
   Finding f;
   f.parameters = fit.fitted;
-  const Eigen::Vector3d n_b = SunFaceNormal_b(SunFamilyOf(effect, seed));
+  const Eigen::Vector3d n_b = SunFaceNormal_b(::esg::testing::SunFamilyOf(effect, seed));
   for (int i = 0; i < 3; ++i) {
     const Parameter* p = Find(f, absl::StrCat("sunFaceNormalB[", i, "]"));
     ASSERT_NE(p, nullptr);
@@ -475,7 +466,7 @@ TEST(SunDiagnosis, DISABLED_ManySeeds) {
     }
     std::printf("seed %llu gyro %d face %s lag %.1f h: %s [%s]%s\n",
                 static_cast<unsigned long long>(seed), ::esg::testing::AffectedGyro(seed),
-                SunFaceName(SunFamilyOf(effect, seed)).c_str(),
+                SunFaceName(::esg::testing::SunFamilyOf(effect, seed)).c_str(),
                 ::esg::testing::SunLagHoursOf(seed), line.empty() ? "right" : line.c_str(),
                 Findings(d->report).c_str(), sun_text.c_str());
     std::fflush(stdout);

@@ -17,6 +17,7 @@
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
 #include "estimator/discovery/report.h"
+#include "estimator/discovery/sun_regressors.h"
 #include "estimator/rotation.h"
 #include "estimator/simulator.h"
 #include "estimator/units.h"
@@ -230,6 +231,11 @@ inline std::string ChannelNameOf(uint64_t seed) {
 
 // The sun scenario's face (0..5: +x, -x, +y, -y, +z, -z) and lag [h] for a seed.
 inline int SunFaceOf(uint64_t seed) { return static_cast<int>(seed % 6); }
+// The sun family (sun_regressors.h) a sun scenario's drift follows: the seed's face, or
+// kSunlitFamily (the eclipses) for "eclipse_drift".
+inline int SunFamilyOf(const std::string& effect, uint64_t seed) {
+  return effect == "eclipse_drift" ? estimator::discovery::kSunlitFamily : SunFaceOf(seed);
+}
 inline double SunLagHoursOf(uint64_t seed) {
   constexpr double kLags[4] = {0.5, 1.4, 3.0, 0.8};
   return kLags[(seed / 3) % 4];

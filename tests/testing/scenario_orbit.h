@@ -8,8 +8,10 @@
 #include <memory>
 #include <utility>
 
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "estimator/attitude_profile.h"
+#include "estimator/discovery/options.h"
 #include "estimator/orbit.h"
 #include "estimator/simulator.h"
 #include "tests/testing/discovery_scenarios.h"
@@ -29,6 +31,18 @@ inline absl::StatusOr<std::shared_ptr<const estimator::Orbit>> ScenarioOrbit(
   absl::StatusOr<estimator::Orbit> orbit = estimator::Orbit::FromArcs({std::move(arc)});
   if (!orbit.ok()) return orbit.status();
   return std::make_shared<const estimator::Orbit>(*std::move(orbit));
+}
+
+// Gives the diagnosis the scenario's orbit when the recording flies through the Earth's shadow
+// (spec.earth_shadow: "eclipse_drift"), as `esg diagnose --orbit` would be given it; leaves
+// options.orbit as it is otherwise. Errors: those of ScenarioOrbit.
+inline absl::Status AddScenarioOrbit(const estimator::SimulationSpec& spec, uint64_t seed,
+                                     estimator::discovery::DiagnoseOptions& options) {
+  if (!spec.earth_shadow) return absl::OkStatus();
+  absl::StatusOr<std::shared_ptr<const estimator::Orbit>> orbit = ScenarioOrbit(spec, seed);
+  if (!orbit.ok()) return orbit.status();
+  options.orbit = *std::move(orbit);
+  return absl::OkStatus();
 }
 
 }  // namespace esg::testing
