@@ -200,6 +200,7 @@ OpenEndedOptions ModelOpenEndedOptions(const ModelState& model, const DiagnoseOp
   for (const SessionOptions::CoefficientRelease& r : model.options.coefficient_releases) {
     if (!r.misalignment) o.steps.emplace_back(r.gyro_id, r.time);
   }
+  o.free_coefficients = FreeCoefficientsOf(model.config);
   return o;
 }
 

@@ -12,6 +12,8 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "estimator/discovery/deviation_filter.h"
+#include "estimator/drift_model.h"
+#include "estimator/model_terms.h"
 #include "estimator/spacecraft_config.h"
 #include "estimator/statistics.h"
 #include "estimator/utc_time.h"
@@ -170,14 +172,23 @@ std::shared_ptr<const std::vector<double>> ScalarTable(const DeviationSeries& s,
   return table;
 }
 
+}  // namespace
+
 std::vector<Vector2d> ColumnSignature(const DeviationSeries& s, const BasisColumn& c) {
   if (c.readout) return ReadoutSignature(s, ReadoutPattern(c.readout_index));
+  if (c.theta >= 0) {  // eq. (1), (10): d(dw_k)/d(theta_i)
+    return Signature(s, [&c](const BasisInputs& in) -> Vector3d {
+      return DriftRegressor(in.h_k).col(c.theta);
+    });
+  }
   const Vector3d e_m = Vector3d::Unit(c.term.axis - 1);
   if (c.scalar_table != nullptr) return TabulatedSignature(s, *c.scalar_table, e_m);
   return Signature(s, [&c, &e_m](const BasisInputs& in) -> Vector3d {
     return ColumnScalar(c, in) * e_m;
   });
 }
+
+namespace {
 
 // The smoothed drift of z in case axes at each sample [rad/s], the walk intensity chosen by
 // likelihood among kSmoothingIntensities.
@@ -212,6 +223,13 @@ void SmoothInCaseAxes(const DeviationSeries& s, double w0_sigma,
   }
 }
 
+// A column's prior 1-sigma: its own (a free coefficient of the model), the readout's, or the
+// drift's at the regressor's RMS.
+double ColumnPrior(const BasisColumn& col, const OpenEndedOptions& options) {
+  if (col.prior_sigma > 0.0) return col.prior_sigma;
+  return col.readout ? options.readout_sigma : options.drift_sigma / col.rms;
+}
+
 // Whitens the series and the columns of its basis (EnumerateBasis), with their priors, and fits
 // the base model (the nuisance groups).
 void PrepareGyro(const DeviationSeries& series, double random_walk, double w0_sigma,
@@ -231,7 +249,7 @@ void PrepareGyro(const DeviationSeries& series, double random_walk, double w0_si
     const BasisColumn& col = d.basis.columns[c];
     const std::vector<double>* sun = SunValues(options, series.gyro, col);
     const std::vector<double>* table = sun != nullptr ? sun : col.scalar_table.get();
-    if (col.readout || table == nullptr || col.term.axis < 1 || col.term.axis > 3) {
+    if (col.readout || col.theta >= 0 || table == nullptr) {
       d.signature.push_back(ColumnSignature(series, col));
     } else {
       if (table != last_table) {
@@ -241,7 +259,7 @@ void PrepareGyro(const DeviationSeries& series, double random_walk, double w0_si
       d.signature.push_back(last_signatures[col.term.axis - 1]);
     }
     d.x_w.push_back(filter.Whiten(d.signature.back()));
-    d.prior(c) = col.readout ? options.readout_sigma : options.drift_sigma / col.rms;
+    d.prior(c) = ColumnPrior(col, options);
   }
   for (BasisColumn& col : d.basis.columns) col.scalar_table.reset();
   for (int k = 0; k < static_cast<int>(d.basis.groups.size()); ++k) {
@@ -323,7 +341,7 @@ class BasisBuilder {
 
   void AddColumn(BasisColumn c) {
     c.group = static_cast<int>(out_.groups.size()) - 1;
-    if (!c.readout) {
+    if (!c.readout && c.theta < 0) {
       const std::vector<double>* sun = SunValues(options_, series_.gyro, c);
       if (sun == nullptr && c.scalar_table == nullptr) c.scalar_table = ScalarTable(series_, c);
       c.rms = TabulatedRms(series_, sun != nullptr ? *sun : *c.scalar_table);
@@ -471,6 +489,24 @@ void AddReadoutSunAndStepGroups(const DeviationSeries& series, const OpenEndedOp
       }
     }
   }
+  bool free_group = false;
+  for (const OpenEndedOptions::FreeCoefficient& f : options.free_coefficients) {
+    if (f.gyro != series.gyro || f.theta < 0 || f.theta >= kNumDriftCoefficients ||
+        !(f.sigma > 0.0)) {
+      continue;
+    }
+    if (!free_group) {
+      b.OpenGroup("the model's free coefficients");
+      b.Group().nuisance = true;
+      free_group = true;
+    }
+    BasisColumn c;
+    c.nuisance = true;
+    c.theta = f.theta;
+    c.prior_sigma = f.sigma;
+    c.label = absl::StrCat("the model's ", kFixedTerms[f.theta].label);
+    b.AddColumn(c);
+  }
   for (const auto& [gyro, time] : options.steps) {
     if (gyro != series.gyro) continue;
     b.OpenGroup(absl::StrCat("before the drift step at ", FormatUtc(time)));
@@ -614,6 +650,17 @@ void FinishGyro(GyroData& d, const OpenEndedOptions& options, OpenEndedResult& r
 }
 
 }  // namespace
+
+std::vector<OpenEndedOptions::FreeCoefficient> FreeCoefficientsOf(const SpacecraftConfig& config) {
+  std::vector<OpenEndedOptions::FreeCoefficient> out;
+  for (const GyroConfig& g : config.gyros) {
+    const DriftVector sigma = g.model_sigma.AsVector();
+    for (int i = 0; i < kNumDriftCoefficients; ++i) {
+      if (sigma(i) > 0.0) out.push_back({g.id, i, sigma(i)});
+    }
+  }
+  return out;
+}
 
 GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options) {
   BasisBuilder b(series, options);
@@ -815,7 +862,7 @@ SeriesWhitener::SeriesWhitener(const DeviationSeries& series, double random_walk
   for (const BasisColumn& col : basis.columns) {
     if (!col.nuisance) continue;
     base_.nuisance_w.push_back(filter_->Whiten(ColumnSignature(series, col)));
-    base_.nuisance_prior.push_back(options.drift_sigma / col.rms);
+    base_.nuisance_prior.push_back(ColumnPrior(col, options));
   }
 }
 

@@ -46,6 +46,7 @@
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/deviation_filter.h"
 #include "estimator/discovery/sun_regressors.h"
+#include "estimator/spacecraft_config.h"
 #include "estimator/units.h"
 
 namespace esg::estimator::discovery {
@@ -73,7 +74,23 @@ struct OpenEndedOptions {
   std::vector<std::pair<int, int>> column_budget;
   // The sun's regressors of each gyro (sun_regressors.h); a gyro not listed has no sun groups.
   std::vector<SunRegressors> sun;
+  // The coefficients of eq. (1), (10) each gyro's model leaves free (gyro id, theta index of
+  // drift_model.h, the configuration's prior 1-sigma [rad/s]). The deviation is measured from the
+  // model at their final values, which took part of whatever drift the model lacks (a drift
+  // with a mean shares it with k0); each is therefore refitted beside every group, a nuisance
+  // column with its configured prior, so that a group's coefficients and evidence are those of a
+  // model that fits both at once.
+  struct FreeCoefficient {
+    int gyro = 0;
+    int theta = 0;
+    double sigma = 0.0;
+  };
+  std::vector<FreeCoefficient> free_coefficients;
 };
+
+// The free coefficients of every gyro of `config` (model_sigma > 0), for
+// OpenEndedOptions::free_coefficients.
+std::vector<OpenEndedOptions::FreeCoefficient> FreeCoefficientsOf(const SpacecraftConfig& config);
 
 // One regressor of the basis for one gyro.
 struct BasisColumn {
@@ -86,9 +103,13 @@ struct BasisColumn {
   // A drift column's regressor s, RMS over the recording's substeps (time-weighted) [SI unit of
   // s]; its prior is OpenEndedOptions::drift_sigma / rms. 0 for a readout entry.
   double rms = 0.0;
-  // A nuisance regressor (OpenEndedOptions::steps): e_m before `before`, in every model.
+  // A nuisance regressor, in every model: e_m before `before` (OpenEndedOptions::steps), or a
+  // free coefficient of the model, theta index `theta` (OpenEndedOptions::free_coefficients),
+  // its regressor DriftRegressor's column and its prior `prior_sigma`.
   bool nuisance = false;
   absl::Time before = absl::InfinitePast();
+  int theta = -1;
+  double prior_sigma = 0.0;
   // A sun column: the lagged illumination of face sun_face (sun_regressors.h) at lag index
   // sun_lag, along case axis term.axis; -1 otherwise.
   int sun_face = -1;
@@ -123,6 +144,11 @@ struct GyroBasis {
   std::vector<BasisColumn> columns;
   std::vector<BasisGroup> groups;
 };
+
+// A column's signature on the series it was enumerated on [rad per unit of its coefficient]
+// (deviation.h Signature; ReadoutSignature for a readout entry).
+std::vector<Eigen::Vector2d> ColumnSignature(const DeviationSeries& series,
+                                             const BasisColumn& column);
 
 // The basis for a gyro's series (regressors that vanish on the recording are left out).
 GyroBasis EnumerateBasis(const DeviationSeries& series, const OpenEndedOptions& options);

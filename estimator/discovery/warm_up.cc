@@ -202,6 +202,19 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
       grid, [&](double log_tau) { return search.Evaluate(log_tau); }, search.value,
       [&] { return search.best_log; }, Profile(*ctx.model_run).value, opt.alpha));
   const TauProfile p = ProfileTimeConstants(search, grid, fit);
+  if (p.best + 1 == p.points.size()) {
+    // exp(-t / tau) = 1 - t / tau + ...: at the longest time constant searched the recording
+    // shows no decay, only a drift changing linearly, which a warm-up does not describe.
+    fit.parameters = 0;
+    fit.run = *ctx.model_run;
+    fit.prior_points.clear();
+    fit.not_fitted = absl::StrFormat(
+        "no warm-up fitted: the best time constant, %.1f h, is the longest searched (%.1f-%.0f "
+        "h), where the recording cannot tell a decay from a drift changing linearly",
+        std::exp(p.points[p.best].first), kWarmUpMinTauHours, kWarmUpMaxTauHours);
+    fit.notes.push_back(fit.not_fitted);
+    return absl::OkStatus();
+  }
   Vector3d a_sigma;
   const Vector3d a = AdoptBest(search, std::exp(p.points[p.best].first), a_sigma);
   AddTauSpread(search.amplitude, p, a_sigma, fit);

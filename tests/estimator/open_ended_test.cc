@@ -73,6 +73,48 @@ TEST(OpenEndedRegression, ClosedFormEqualsTheDirectMarginalLikelihoodAtItsDisper
               1e-8);
 }
 
+// The coefficients the model leaves free (model (1): k0 of each gyro, prior 0.3 deg/h) are one
+// nuisance group of each gyro's basis, in every model: a column per coefficient, its regressor
+// the coefficient's column of eq. (1) along the measured trajectory, its prior the configured
+// 1-sigma; a coefficient the model holds (sigma 0) has none.
+TEST(OpenEnded, TheModelsFreeCoefficientsAreANuisanceGroupWithTheirConfiguredPriors) {
+  auto m = ::esg::testing::MeasureUserModelDeviations("none", 101, 6.0, {1});
+  ASSERT_TRUE(m.ok()) << m.status();
+  SpacecraftConfig config = m->config;
+  config.gyros[0].model_sigma.C1 = Eigen::Vector3d(0.0, DegPerHourToRadPerSec(0.1), 0.0);
+  OpenEndedOptions o;
+  o.free_coefficients = FreeCoefficientsOf(config);
+  ASSERT_EQ(o.free_coefficients.size(), 5u);  // k0 of the four gyros, C12 of gyro 1
+  const DeviationSeries& series = m->series.front();
+  const GyroBasis basis = EnumerateBasis(series, o);
+  const BasisGroup* group = nullptr;
+  for (const BasisGroup& g : basis.groups) {
+    if (g.label == "the model's free coefficients") group = &g;
+  }
+  ASSERT_NE(group, nullptr);
+  EXPECT_TRUE(group->nuisance);
+  ASSERT_EQ(group->columns.size(), 2u);
+  const BasisColumn& k0 = basis.columns[group->columns[0]];
+  const BasisColumn& c12 = basis.columns[group->columns[1]];
+  EXPECT_TRUE(k0.nuisance);
+  EXPECT_EQ(k0.theta, kThetaK0);
+  EXPECT_EQ(k0.prior_sigma, DegPerHourToRadPerSec(0.3));
+  EXPECT_EQ(c12.theta, kThetaC1 + 1);
+  EXPECT_EQ(c12.prior_sigma, DegPerHourToRadPerSec(0.1));
+  // Its signature is the coefficient's drift integrated along the measured trajectory.
+  const std::vector<Eigen::Vector2d> x = ColumnSignature(series, k0);
+  const std::vector<Eigen::Vector2d> expected = Signature(series, [](const BasisInputs& in) {
+    return Eigen::Vector3d(DriftRegressor(in.h_k).col(kThetaK0));
+  });
+  ASSERT_EQ(x.size(), expected.size());
+  for (size_t k = 0; k < x.size(); ++k) EXPECT_EQ(x[k], expected[k]) << k;
+  EXPECT_GT(expected.back().norm(), 0.0);
+  // Without free coefficients, no such group.
+  for (const BasisGroup& g : EnumerateBasis(series, OpenEndedOptions{}).groups) {
+    EXPECT_NE(g.label, "the model's free coefficients");
+  }
+}
+
 // The stage alone on the user's model of an effect-free recording: no group reaches the
 // threshold 2 ln(M / alpha).
 TEST(OpenEnded, EffectFreeRecordingSelectsNothing) {
@@ -81,6 +123,7 @@ TEST(OpenEnded, EffectFreeRecordingSelectsNothing) {
   OpenEndedOptions o;
   o.orbital_period_s = 5640.0;
   o.epoch = m->frames.front().time;
+  o.free_coefficients = FreeCoefficientsOf(m->config);
   const std::vector<double> rw(3, m->config.random_walk), w0(3, DegPerHourToRadPerSec(0.01));
   const OpenEndedResult r = RunOpenEnded(m->series, rw, w0, o);
   EXPECT_TRUE(r.selected.empty());
