@@ -6,7 +6,7 @@
 # AEM) include no store; and the libraries' link lines say the same: each library links
 # only libraries of lower layers, esg_estimator Eigen, Abseil and ERFA (the sun's direction)
 # only, esg_discovery the estimator only, esg_formats and the CLI's library neither SQLite nor
-# libpq.
+# libpq; and no function in estimator/ or server/ is over 120 lines without saying why.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 fail=0
@@ -136,5 +136,25 @@ for lib in esg_formats esg_client_lib; do
     esac
   done
 done
+# Functions over 120 lines in estimator/ and server/ (docs/conventions.md, "Code"): each says why
+# at its head, a comment line "// Over 120 lines because" among the 12 lines above its start.
+if ! command -v ctags-universal >/dev/null 2>&1; then
+  echo "ctags-universal (Debian package universal-ctags) is needed to measure functions" >&2
+  fail=1
+else
+  while read -r length file start name; do
+    head=$(sed -n "$((start > 12 ? start - 12 : 1)),$((start - 1))p" "$file")
+    if ! grep -q "// Over 120 lines because" <<<"$head"; then
+      echo "$file:$start: $name is $length lines (over 120) without its reason at its head" >&2
+      fail=1
+    fi
+  done < <(ctags-universal --languages=C++ --kinds-C++=f --fields=+ne -R -f - estimator server |
+    awk -F'\t' '{ start = ""; end = ""
+      for (i = 4; i <= NF; i++) {
+        if ($i ~ /^line:/) start = substr($i, 6)
+        if ($i ~ /^end:/) end = substr($i, 5)
+      }
+      if (start != "" && end != "" && end - start + 1 > 120) print end - start + 1, $2, start, $1 }')
+fi
 [ "$fail" -eq 0 ] || exit 1
-echo "architecture check: the filter is free of I/O and of the discovery; the discovery of the layers above and of back-arrows; the formats of the stores; every link line points to a lower layer"
+echo "architecture check: the filter is free of I/O and of the discovery; the discovery of the layers above and of back-arrows; the formats of the stores; every link line points to a lower layer; no function over 120 lines without its reason"

@@ -14,6 +14,7 @@ packages=(
   chromium fonts-liberation
   nginx
   python3 python3-yaml
+  universal-ctags  # measures functions' lengths (scripts/check-architecture.sh)
   prometheus  # promtool: checks deploy/prometheus/esgd-alerts.yml (tests/server/operations_kit_test.cc)
 )
 # The console's npm packages (console/package-lock.json, from the npm registry; Node 20 is on the

@@ -306,11 +306,229 @@ void DescribeTurn(const Candidate& candidate, const TurnParts& p, double period_
       DegH(c1_sigma), DegH(c2), DegH(c2_sigma));
 }
 
+// Why no turning displacement can be fitted to the gyro on a recording of span_h hours (its basis
+// full, or the recording too short to tell a turn from a trend), else empty.
+std::string TurnNotFittable(int first_term, double span_h) {
+  if (first_term + kTurnTerms > kMaxBasisTermsPerGyro) {
+    return "the gyro's basis holds too many terms for twelve more";
+  }
+  if (kTurnMaxSpans * span_h < 2.0 * kTurnMinPeriodHours) {
+    return absl::StrFormat("the recording's %.1f h cannot tell a turn from a trend", span_h);
+  }
+  return "";
+}
+
+// The regression's search over the period: a grid uniform in ln P from kTurnMinPeriodHours to
+// kTurnMaxSpans recording spans, then the parabola's vertex near the best, at most
+// kTurnVertexSteps times.
+void SearchPeriods(double span_h, TurnSearch& s) {
+  s.log_min = std::log(kTurnMinPeriodHours);
+  s.log_max = std::log(kTurnMaxSpans * span_h);
+  const double spacing = std::log(2.0) / kTurnGridPerFactorTwo;
+  const int points = 1 + static_cast<int>(std::ceil((s.log_max - s.log_min) / spacing));
+  for (int k = 0; k < points; ++k) {
+    s.Evaluate(s.log_min + (s.log_max - s.log_min) * k / (points - 1));
+  }
+  for (int it = 0; it < kTurnVertexSteps; ++it) {
+    const double vertex = Vertex(s.evidence, s.Best());
+    bool known = false;
+    for (const auto& [x, e] : s.evidence) known = known || std::abs(x - vertex) < 1e-3;
+    if (known) break;
+    s.Evaluate(vertex);
+  }
+}
+
+// The regression's profile over the period, scaled by the whitened residual's long-run variance
+// ratio kappa at the best period log_p (a quasi-likelihood: rows correlated in time carry less
+// information than the regression counts), its minimum and its 95% interval.
+struct RegressionProfile {
+  ProfilePoints points;  // ln(P / h), -2 ln B / kappa
+  size_t top = 0;
+  LevelInterval interval;
+  double kappa = 1.0;
+};
+RegressionProfile ProfilePeriods(const TurnSearch& s, double log_p) {
+  RegressionProfile out;
+  VectorXd residual_w;
+  s.Regress(log_p, &residual_w);
+  out.kappa = LongRunVarianceRatio(residual_w);
+  out.points = s.Profile();
+  for (auto& [x, v] : out.points) v /= out.kappa;
+  out.top = ProfileMinimum(out.points);
+  out.interval =
+      IntervalAtLevel(out.points, out.top, out.points[out.top].second + kProfileIntervalDrop);
+  return out;
+}
+
+// A drift that returns to its mean (switching at random, driven by a quantity the telemetry does
+// not carry) is partly fitted by any regressor that changes in time: the turning terms at the
+// best period against the stationary drift on the same deviation, for the round's physics check
+// (selection.cc CheckConstantEffect), as the sun's terms are; the turn's evidence less its
+// period's Occam term (fit.occam), the stationary drift's integrated over its grid. The
+// candidate's whole model: the turning terms and the constant part (freed by the candidate or
+// free in the model).
+void CompareWithAStationaryDrift(const TurnSearch& s, const TurnColumns& columns,
+                                 const ModelState& model, int gyro, double c_sigma_deg_h,
+                                 CandidateFit& fit) {
+  std::vector<double> prior;
+  const std::vector<std::vector<Vector2d>> signatures =
+      TermSignatures(*s.series, {&columns.terms, &s.constant}, &prior);
+  const ConstantEffectEvidence w = CompareConstantEffect(
+      *s.series, s.random_walk, s.w0_sigma, DegPerHourToRadPerSec(c_sigma_deg_h),
+      HeldSteps(model, gyro), signatures, prior);
+  fit.wander_compared = true;
+  fit.wander_effect = w.effect - fit.occam;
+  fit.wander_stationary = w.stationary;
+  fit.wander_on_top = w.on_top - fit.occam;
+}
+
+// The filter's run with the twelve terms at one period: its profiled -2 log L, the terms, the run.
+struct PeriodRun {
+  double value = 0.0;
+  TurnColumns columns;
+  ModelRun run;
+};
+
+// The period refined by the filter: its -2 log L at the regression's best period log_p and half
+// the regression's interval either side (at least 1%: `delta`), the parabola's vertex run when it
+// moves, and the 95% interval where the parabola rises by 3.84. The regression's profile locates
+// the period; the filter, which estimates every other state with the terms, decides it (on the
+// suite's seeds the regression's best was up to 0.7% off the true period with an interval a third
+// as wide). `base` is the candidate's model without the terms; each run counts in fit.runs.
+struct RefinedPeriod {
+  PeriodRun chosen;
+  double log_period = 0.0;
+  LevelInterval interval;
+  double delta = 0.0;
+};
+absl::StatusOr<RefinedPeriod> RefinePeriodByFilter(const TurnSearch& s, const ModelState& base,
+                                                   int gyro,
+                                                   const std::vector<TelemetryFrame>& corrected,
+                                                   double log_p, const LevelInterval& interval,
+                                                   CandidateFit& fit) {
+  auto run_at = [&](double log_period) -> absl::StatusOr<PeriodRun> {
+    PeriodRun out;
+    out.columns = ColumnsAt(*s.series, HoursToSeconds(std::exp(log_period)), s.epoch,
+                            s.options.drift_sigma);
+    SpacecraftConfig config = base.config;
+    GyroConfig* gc = FindGyroMutable(config, gyro);
+    for (const BasisTerm& t : out.columns.terms) gc->basis_terms.push_back(t);
+    auto run = RunModel(config, base.options, corrected);
+    ++fit.runs;
+    if (!run.ok()) return run.status();
+    out.value = Profile(*run).value;
+    out.run = *std::move(run);
+    return out;
+  };
+  RefinedPeriod out;
+  out.delta = std::max(0.5 * (interval.upper - interval.lower), 0.01);
+  const double delta = out.delta;
+  ASSIGN_OR_RETURN(PeriodRun at_best, run_at(log_p));
+  ASSIGN_OR_RETURN(const PeriodRun below, run_at(log_p - delta));
+  ASSIGN_OR_RETURN(const PeriodRun above, run_at(log_p + delta));
+  // -2 log L = a (x - vertex)^2 + c through the three.
+  const Parabola parabola = ParabolaThrough(log_p - delta, below.value, log_p, at_best.value,
+                                            log_p + delta, above.value);
+  out.log_period = log_p;
+  out.interval = interval;
+  if (parabola.ok) {
+    const double half = std::sqrt(kProfileIntervalDrop / parabola.curvature);
+    out.interval.lower = parabola.vertex - half;
+    out.interval.upper = parabola.vertex + half;
+    out.interval.lower_open = out.interval.lower < s.log_min;
+    out.interval.upper_open = out.interval.upper > s.log_max;
+    out.log_period = parabola.vertex;
+  }
+  out.chosen = std::move(at_best);
+  if (std::abs(out.log_period - log_p) > 0.1 * delta) {
+    ASSIGN_OR_RETURN(PeriodRun at_vertex, run_at(out.log_period));
+    if (at_vertex.value <= out.chosen.value) out.chosen = std::move(at_vertex);
+    else out.log_period = log_p;
+  }
+  return out;
+}
+
+// The chosen period's twelve terms into the fit's model (after the gyro's first_term existing
+// ones), its run adopted, and the terms at the run's estimates into fit.basis_terms; returns them
+// as C1 and C2 turning parts.
+TurnParts AdoptTurn(PeriodRun chosen, int gyro, int first_term, int released,
+                    CandidateFit& fit) {
+  const TurnColumns& columns = chosen.columns;
+  GyroConfig* gw = FindGyroMutable(fit.model.config, gyro);
+  for (const BasisTerm& t : columns.terms) gw->basis_terms.push_back(t);
+  fit.run = std::move(chosen.run);
+  fit.parameters = static_cast<int>(columns.terms.size()) + released;
+  TurnParts parts;
+  const GyroEstimate* e = FindEstimate(fit.run.gyros, gyro);
+  for (size_t j = 0; j < columns.terms.size(); ++j) {
+    BasisTerm t = columns.terms[j];
+    const size_t at = first_term + j;
+    double value = 0.0, sigma = t.sigma;
+    if (e != nullptr && e->basis_terms.size() > at && e->basis_sigma.size() > at) {
+      value = e->basis_terms[at].value;
+      sigma = e->basis_sigma[at];
+    }
+    t.value = value;
+    fit.basis_terms.push_back(t);
+    // The term's drift e_m value s is -(C1 + C2 h^2) across h: C1_m (or C2_m) = -value.
+    const int m = t.axis - 1;
+    const bool c2 = t.exponents[m] == 2;
+    Vector3d& part = t.sine ? (c2 ? parts.c2_sin : parts.c1_sin) : (c2 ? parts.c2_cos : parts.c1_cos);
+    Vector3d& part_sigma = t.sine ? (c2 ? parts.c2_sin_sigma : parts.c1_sin_sigma)
+                                  : (c2 ? parts.c2_cos_sigma : parts.c1_cos_sigma);
+    part(m) = -value;
+    part_sigma(m) = sigma;
+  }
+  return parts;
+}
+
+// The constant part the candidate freed with the turn, as rotor_displacement's parameters (their
+// names, apply_findings.h) and in the description.
+void DescribeConstantPart(const GyroEstimate& e, CandidateFit& fit) {
+  const DriftVector value = e.coefficients.AsVector(), sigma = e.sigma.AsVector();
+  for (const FixedTermDescriptor& term : kFixedTerms) {
+    if (term.effect != EffectId(Effect::kRotorDisplacement)) continue;
+    fit.fitted.push_back({FixedTermJsonName(term), DegH(value(term.theta_index)),
+                          DegH(sigma(term.theta_index)), std::string(term.unit)});
+  }
+  const Vector3d c1 = e.coefficients.C1, c2 = e.coefficients.C2;
+  absl::StrAppend(&fit.description,
+                  absl::StrFormat("; its constant part, freed with it: C1 = (%.4f, %.4f, %.4f), "
+                                  "C2 = (%.4f, %.4f, %.4f) deg/h",
+                                  DegH(c1.x()), DegH(c1.y()), DegH(c1.z()), DegH(c2.x()),
+                                  DegH(c2.y()), DegH(c2.z())));
+}
+
+// The notes: how the period was searched and refined, and the regression's profile.
+void AddPeriodNotes(const TurnSearch& s, const RegressionProfile& r, double log_p,
+                    double best_evidence, const RefinedPeriod& refined, double c_sigma_deg_h,
+                    CandidateFit& fit) {
+  std::string profile_text;
+  for (const auto& [x, v] : r.points) {
+    absl::StrAppend(&profile_text,
+                    absl::StrFormat(" %.1f:%.1f", std::exp(x), v - r.points[r.top].second));
+  }
+  fit.notes.push_back(absl::StrFormat(
+      "the gyro's deviation regressed on the twelve turning terms at %zu periods of %.0f-%.0f h "
+      "(uniform in ln P): best %.1f h, 2 ln B %.1f; the terms freed at it with %.2f deg/h at "
+      "each regressor's RMS and run by the filter there and %.1f%% either side (%d runs), the "
+      "period %.2f h at the vertex of its -2 log L; the period's Occam term %.1f (the "
+      "regression's profile; its interval divided by %.2f, the whitened residual's long-run "
+      "variance ratio)",
+      s.evidence.size(), kTurnMinPeriodHours, std::exp(s.log_max), std::exp(log_p),
+      best_evidence, c_sigma_deg_h, 100.0 * (std::exp(refined.delta) - 1.0), fit.runs,
+      std::exp(refined.log_period), fit.occam, r.kappa));
+  fit.notes.push_back(
+      absl::StrCat("likelihood over the period (h: -2 ln B above the best, scaled):",
+                   profile_text));
+}
+
 }  // namespace
 
 // The fit as a sequence: room in the basis and a long enough recording, the deviation, the
-// period's grid and vertex by regression, the twelve terms at the best period run by the filter,
-// the period's Occam term, and the fit described.
+// period's grid and vertex by regression (refused at an end of the periods searched), the
+// comparison with a stationary drift, the twelve terms run by the filter at the best period and
+// either side, the terms adopted, and the fit described.
 absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext& ctx,
                                     CandidateFit& fit) {
   const DiagnoseOptions& opt = *ctx.options;
@@ -320,13 +538,7 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
   const int first_term = static_cast<int>(g->basis_terms.size());
   const double span_h =
       absl::ToDoubleHours(ctx.frames->back().time - ctx.frames->front().time);
-  std::string why;
-  if (first_term + kTurnTerms > kMaxBasisTermsPerGyro) {
-    why = "the gyro's basis holds too many terms for twelve more";
-  } else if (kTurnMaxSpans * span_h < 2.0 * kTurnMinPeriodHours) {
-    why = absl::StrFormat("the recording's %.1f h cannot tell a turn from a trend", span_h);
-  }
-  if (!why.empty()) {
+  if (const std::string why = TurnNotFittable(first_term, span_h); !why.empty()) {
     fit.notes.push_back(absl::StrCat("no turning displacement fitted: ", why));
     return absl::OkStatus();
   }
@@ -361,20 +573,7 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
   s.options = ModelOpenEndedOptions(model, opt);
   s.epoch = ctx.frames->front().time;
   s.Prepare();
-  s.log_min = std::log(kTurnMinPeriodHours);
-  s.log_max = std::log(kTurnMaxSpans * span_h);
-  const double spacing = std::log(2.0) / kTurnGridPerFactorTwo;
-  const int points = 1 + static_cast<int>(std::ceil((s.log_max - s.log_min) / spacing));
-  for (int k = 0; k < points; ++k) {
-    s.Evaluate(s.log_min + (s.log_max - s.log_min) * k / (points - 1));
-  }
-  for (int it = 0; it < kTurnVertexSteps; ++it) {
-    const double vertex = Vertex(s.evidence, s.Best());
-    bool known = false;
-    for (const auto& [x, e] : s.evidence) known = known || std::abs(x - vertex) < 1e-3;
-    if (known) break;
-    s.Evaluate(vertex);
-  }
+  SearchPeriods(span_h, s);
   const auto best = s.Best();
   const double log_p = best->first;
   if (best == s.evidence.begin() || std::next(best) == s.evidence.end()) {
@@ -386,155 +585,28 @@ absl::Status FitTurningDisplacement(const Candidate& candidate, const FitContext
     fit.notes.push_back(fit.not_fitted);
     return absl::OkStatus();
   }
-  // The period's interval: the profile's drop scaled by the residual's long-run variance ratio
-  // (a quasi-likelihood: rows correlated in time carry less information than the regression
-  // counts).
-  VectorXd residual_w;
-  s.Regress(log_p, &residual_w);
-  const double kappa = LongRunVarianceRatio(residual_w);
-  ProfilePoints profile = s.Profile();
-  for (auto& [x, v] : profile) v /= kappa;
-  const size_t top = ProfileMinimum(profile);
-  const LevelInterval interval =
-      IntervalAtLevel(profile, top, profile[top].second + kProfileIntervalDrop);
-
+  const RegressionProfile profile = ProfilePeriods(s, log_p);
   // The twelve terms (those whose regressor does not vanish) at the regression's best period.
   const TurnColumns regression_columns =
       ColumnsAt(series.front(), HoursToSeconds(std::exp(log_p)), s.epoch, s.options.drift_sigma);
   fit.occam = PeriodOccam(s);
-  // A drift that returns to its mean (switching at random, driven by a quantity the telemetry
-  // does not carry) is partly fitted by any regressor that changes in time: the turning terms at
-  // the best period against the stationary drift on the same deviation, for the round's physics
-  // check (selection.cc CheckConstantEffect), as the sun's terms are; the turn's evidence less
-  // its period's Occam term, the stationary drift's integrated over its grid.
-  {
-    // The candidate's whole model: the turning terms and the constant part (freed by the
-    // candidate or free in the model).
-    std::vector<double> prior;
-    const std::vector<std::vector<Vector2d>> signatures =
-        TermSignatures(series.front(), {&regression_columns.terms, &s.constant}, &prior);
-    const ConstantEffectEvidence w = CompareConstantEffect(
-        series.front(), s.random_walk, s.w0_sigma, DegPerHourToRadPerSec(opt.c_sigma_deg_h),
-        HeldSteps(model, candidate.gyro), signatures, prior);
-    fit.wander_compared = true;
-    fit.wander_effect = w.effect - fit.occam;
-    fit.wander_stationary = w.stationary;
-    fit.wander_on_top = w.on_top - fit.occam;
-  }
+  CompareWithAStationaryDrift(s, regression_columns, model, candidate.gyro, opt.c_sigma_deg_h,
+                              fit);
   if (released > 0) {
     ReleaseHeldCoefficients(fit.model.config, candidate.gyro, freed->first, freed->count,
                             freed->sigma);
   }
-  // The period refined by the filter: its -2 log L at the regression's best period and half its
-  // interval either side (at least 1%), the parabola's vertex run when it moves, and the 95%
-  // interval where the parabola rises by 3.84. The regression's profile locates the period; the
-  // filter, which estimates every other state with the terms, decides it (on the suite's seeds
-  // the regression's best was up to 0.7% off the true period with an interval a third as wide).
   const ModelState base = fit.model;
-  struct PeriodRun {
-    double value = 0.0;  // profiled -2 log L
-    TurnColumns columns;
-    ModelRun run;
-  };
-  auto run_at = [&](double log_period) -> absl::StatusOr<PeriodRun> {
-    PeriodRun out;
-    out.columns = ColumnsAt(series.front(), HoursToSeconds(std::exp(log_period)), s.epoch,
-                            s.options.drift_sigma);
-    SpacecraftConfig config = base.config;
-    GyroConfig* gc = FindGyroMutable(config, candidate.gyro);
-    for (const BasisTerm& t : out.columns.terms) gc->basis_terms.push_back(t);
-    auto run = RunModel(config, base.options, corrected);
-    ++fit.runs;
-    if (!run.ok()) return run.status();
-    out.value = Profile(*run).value;
-    out.run = *std::move(run);
-    return out;
-  };
-  const double delta = std::max(0.5 * (interval.upper - interval.lower), 0.01);
-  ASSIGN_OR_RETURN(PeriodRun at_best, run_at(log_p));
-  ASSIGN_OR_RETURN(const PeriodRun below, run_at(log_p - delta));
-  ASSIGN_OR_RETURN(const PeriodRun above, run_at(log_p + delta));
-  // -2 log L = a (x - vertex)^2 + c through the three.
-  const Parabola parabola = ParabolaThrough(log_p - delta, below.value, log_p, at_best.value,
-                                            log_p + delta, above.value);
-  double log_period = log_p;
-  LevelInterval period_interval = interval;
-  if (parabola.ok) {
-    const double half = std::sqrt(kProfileIntervalDrop / parabola.curvature);
-    period_interval.lower = parabola.vertex - half;
-    period_interval.upper = parabola.vertex + half;
-    period_interval.lower_open = period_interval.lower < s.log_min;
-    period_interval.upper_open = period_interval.upper > s.log_max;
-    log_period = parabola.vertex;
-  }
-  PeriodRun chosen = std::move(at_best);
-  if (std::abs(log_period - log_p) > 0.1 * delta) {
-    ASSIGN_OR_RETURN(PeriodRun at_vertex, run_at(log_period));
-    if (at_vertex.value <= chosen.value) chosen = std::move(at_vertex);
-    else log_period = log_p;
-  }
-  const TurnColumns& columns = chosen.columns;
-  GyroConfig* gw = FindGyroMutable(fit.model.config, candidate.gyro);
-  for (const BasisTerm& t : columns.terms) gw->basis_terms.push_back(t);
-  fit.run = std::move(chosen.run);
-  fit.parameters = static_cast<int>(columns.terms.size()) + released;
-
-  TurnParts parts;
+  ASSIGN_OR_RETURN(RefinedPeriod refined,
+                   RefinePeriodByFilter(s, base, candidate.gyro, corrected, log_p,
+                                        profile.interval, fit));
+  const TurnParts parts =
+      AdoptTurn(std::move(refined.chosen), candidate.gyro, first_term, released, fit);
+  DescribeTurn(candidate, parts, std::exp(refined.log_period), refined.interval,
+               refined.interval.lower_open || refined.interval.upper_open, fit);
   const GyroEstimate* e = FindEstimate(fit.run.gyros, candidate.gyro);
-  for (size_t j = 0; j < columns.terms.size(); ++j) {
-    BasisTerm t = columns.terms[j];
-    const size_t at = first_term + j;
-    double value = 0.0, sigma = t.sigma;
-    if (e != nullptr && e->basis_terms.size() > at && e->basis_sigma.size() > at) {
-      value = e->basis_terms[at].value;
-      sigma = e->basis_sigma[at];
-    }
-    t.value = value;
-    fit.basis_terms.push_back(t);
-    // The term's drift e_m value s is -(C1 + C2 h^2) across h: C1_m (or C2_m) = -value.
-    const int m = t.axis - 1;
-    const bool c2 = t.exponents[m] == 2;
-    Vector3d& part = t.sine ? (c2 ? parts.c2_sin : parts.c1_sin) : (c2 ? parts.c2_cos : parts.c1_cos);
-    Vector3d& part_sigma = t.sine ? (c2 ? parts.c2_sin_sigma : parts.c1_sin_sigma)
-                                  : (c2 ? parts.c2_cos_sigma : parts.c1_cos_sigma);
-    part(m) = -value;
-    part_sigma(m) = sigma;
-  }
-  DescribeTurn(candidate, parts, std::exp(log_period), period_interval,
-               period_interval.lower_open || period_interval.upper_open, fit);
-  if (released > 0 && e != nullptr) {
-    // The constant part as rotor_displacement's parameters (their names, apply_findings.h).
-    const DriftVector value = e->coefficients.AsVector(), sigma = e->sigma.AsVector();
-    for (const FixedTermDescriptor& term : kFixedTerms) {
-      if (term.effect != EffectId(Effect::kRotorDisplacement)) continue;
-      fit.fitted.push_back({FixedTermJsonName(term), DegH(value(term.theta_index)),
-                            DegH(sigma(term.theta_index)), std::string(term.unit)});
-    }
-    const Vector3d c1 = e->coefficients.C1, c2 = e->coefficients.C2;
-    absl::StrAppend(&fit.description,
-                    absl::StrFormat("; its constant part, freed with it: C1 = (%.4f, %.4f, %.4f), "
-                                    "C2 = (%.4f, %.4f, %.4f) deg/h",
-                                    DegH(c1.x()), DegH(c1.y()), DegH(c1.z()), DegH(c2.x()),
-                                    DegH(c2.y()), DegH(c2.z())));
-  }
-  std::string profile_text;
-  for (const auto& [x, v] : profile) {
-    absl::StrAppend(&profile_text,
-                    absl::StrFormat(" %.1f:%.1f", std::exp(x), v - profile[top].second));
-  }
-  fit.notes.push_back(absl::StrFormat(
-      "the gyro's deviation regressed on the twelve turning terms at %zu periods of %.0f-%.0f h "
-      "(uniform in ln P): best %.1f h, 2 ln B %.1f; the terms freed at it with %.2f deg/h at "
-      "each regressor's RMS and run by the filter there and %.1f%% either side (%d runs), the "
-      "period %.2f h at the vertex of its -2 log L; the period's Occam term %.1f (the "
-      "regression's profile; its interval divided by %.2f, the whitened residual's long-run "
-      "variance ratio)",
-      s.evidence.size(), kTurnMinPeriodHours, std::exp(s.log_max), std::exp(log_p),
-      best->second, opt.c_sigma_deg_h, 100.0 * (std::exp(delta) - 1.0), fit.runs,
-      std::exp(log_period), fit.occam, kappa));
-  fit.notes.push_back(
-      absl::StrCat("likelihood over the period (h: -2 ln B above the best, scaled):",
-                   profile_text));
+  if (released > 0 && e != nullptr) DescribeConstantPart(*e, fit);
+  AddPeriodNotes(s, profile, log_p, best->second, refined, opt.c_sigma_deg_h, fit);
   return absl::OkStatus();
 }
 
