@@ -58,8 +58,19 @@ async function timed(label, fn) {
 }
 
 // Open an object of the console by its Open MCT path (the part after #/browse/).
+// Navigates by the URL's hash. Open MCT writes the time conductor's state into the hash after a
+// change of bounds, with the path it showed then, so a navigation made in between can be
+// overwritten: the page stays on the view before, and a table opened so never asks for its data
+// (seen as "0 rows of 10" under load). The hash is set again until it holds the path asked for
+// 250 ms after being set.
 async function open(browsePath, query = '') {
-  await page.evaluate((hash) => { window.location.hash = hash; }, `#/browse/${browsePath}${query}`);
+  const target = `#/browse/${browsePath}`;
+  for (let attempt = 0; attempt < 20; attempt++) {
+    await page.evaluate((hash) => { window.location.hash = hash; }, `${target}${query}`);
+    await sleep(250);
+    if ((await page.evaluate(() => window.location.hash)).split('?')[0] === target) return;
+  }
+  throw new Error(`the page did not stay on ${target}: it shows ${await page.evaluate(() => window.location.hash)}`);
 }
 
 // height: a taller window for a long view (the diagnosis report scrolls inside Open MCT's pane,
@@ -373,6 +384,9 @@ test('summary layout of the faulty spacecraft: health panel, envelope, k0 bands,
   } finally {
     await page.setViewport({ width: 1500, height: 900 });
     await page.evaluate((b) => window.openmct.time.setBounds(b), saved);
+    // Open MCT then writes the bounds into the URL's hash; the next test navigates after that.
+    await page.waitForFunction((start) => window.location.hash.includes(`tc.startBound=${start}`),
+      { timeout: 20_000 }, saved.start);
   }
 });
 
