@@ -5,10 +5,7 @@
 
 #include "estimator/attitude_profile.h"
 #include "estimator/discovery/candidates.h"
-#include "estimator/discovery/model_run.h"
-#include "estimator/discovery/regimes.h"
 #include "estimator/simulator.h"
-#include "estimator/units.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/discovery_scenarios.h"
@@ -37,28 +34,9 @@ TEST(WarmUp, ADriftGrowingLinearlyIsNoWarmUp) {
   const int gyro = 2;
   spec.gyros[gyro - 1].rotor_displacement_rate_k_m_s =
       0.3 * Eigen::Vector3d(0.8e-6, -1.0e-6, 0.6e-6) / spec.duration;
-  auto sim = Simulate(spec);
-  ASSERT_THAT(sim, IsOk());
-  ModelState model;
-  model.config = spec.config;
-  model.config.filter.fault_threshold = kPi;
-  model.config.filter.integration_rate_hz = 0.2;
-  model.options.model.parts = kAllModelParts;
-  model.options.model.random_walk = true;
-  const std::vector<TelemetryFrame>& frames = sim->recording.frames;
-  const BodyRates rates = MeasureBodyRates(model.config, frames);
-  auto run = RunModel(model.config, model.options, frames);
-  ASSERT_THAT(run, IsOk());
-  const DiagnoseOptions options;
-  const std::vector<RegimeSpan> regimes = FindRegimes(frames, rates);
-  FitContext ctx;
-  ctx.frames = &frames;
-  ctx.rates = &rates;
-  ctx.model = &model;
-  ctx.model_run = &*run;
-  ctx.options = &options;
-  ctx.gyros = {1, 2, 3};
-  ctx.regimes = &regimes;
+  auto fitting = ::esg::testing::PrepareCandidateFit(spec);
+  ASSERT_THAT(fitting, IsOk());
+  const FitContext ctx = (*fitting)->Context();
   auto fit = FitCandidate({Effect::kWarmUp, gyro}, ctx);
   ASSERT_THAT(fit, IsOk());
   std::string notes;

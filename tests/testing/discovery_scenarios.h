@@ -8,13 +8,16 @@
 #define ESG_TESTS_TESTING_DISCOVERY_SCENARIOS_H_
 
 #include <cmath>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "estimator/attitude_profile.h"
+#include "estimator/discovery/candidate.h"
 #include "estimator/discovery/deviation.h"
 #include "estimator/discovery/model_run.h"
+#include "estimator/discovery/options.h"
 #include "estimator/discovery/regimes.h"
 #include "estimator/discovery/report.h"
 #include "estimator/discovery/sun_regressors.h"
@@ -706,6 +709,50 @@ inline absl::StatusOr<UserModelDeviations> MeasureUserModelDeviations(
   if (!series.ok()) return series.status();
   out.series = *std::move(series);
   return out;
+}
+
+// What a candidate's fit (candidate.h FitContext) is given in a round on the user's model, on the
+// recording of `spec`: the model as the open-ended stage's tests run it (MeasureUserModelDeviations
+// above, with the random walk), its run, the body rates and the regimes, `options`, and the gyros
+// 1-3. Context() points into this object, so it is made once (PrepareCandidateFit) and not moved.
+struct CandidateFitting {
+  estimator::discovery::ModelState model;
+  std::vector<estimator::TelemetryFrame> frames;
+  estimator::discovery::BodyRates rates;
+  estimator::discovery::ModelRun run;
+  std::vector<estimator::discovery::RegimeSpan> regimes;
+  estimator::discovery::DiagnoseOptions options;
+  estimator::discovery::FitContext Context() const {
+    estimator::discovery::FitContext ctx;
+    ctx.frames = &frames;
+    ctx.rates = &rates;
+    ctx.model = &model;
+    ctx.model_run = &run;
+    ctx.options = &options;
+    ctx.gyros = {1, 2, 3};
+    ctx.regimes = &regimes;
+    return ctx;
+  }
+};
+inline absl::StatusOr<std::unique_ptr<const CandidateFitting>> PrepareCandidateFit(
+    const estimator::SimulationSpec& spec, estimator::discovery::DiagnoseOptions options = {}) {
+  using namespace esg::estimator;
+  auto out = std::make_unique<CandidateFitting>();
+  auto sim = Simulate(spec);
+  if (!sim.ok()) return sim.status();
+  out->frames = std::move(sim->recording.frames);
+  out->model.config = spec.config;
+  out->model.config.filter.fault_threshold = kPi;
+  out->model.config.filter.integration_rate_hz = 0.2;
+  out->model.options.model.parts = kAllModelParts;
+  out->model.options.model.random_walk = true;
+  out->rates = discovery::MeasureBodyRates(out->model.config, out->frames);
+  auto run = discovery::RunModel(out->model.config, out->model.options, out->frames);
+  if (!run.ok()) return run.status();
+  out->run = *std::move(run);
+  out->regimes = discovery::FindRegimes(out->frames, out->rates);
+  out->options = std::move(options);
+  return std::unique_ptr<const CandidateFitting>(std::move(out));
 }
 
 }  // namespace esg::testing
