@@ -204,7 +204,8 @@ absl::Status FitWarmUp(const Candidate& candidate, const FitContext& ctx, Candid
   const TauProfile p = ProfileTimeConstants(search, grid, fit);
   if (p.best + 1 == p.points.size()) {
     // exp(-t / tau) = 1 - t / tau + ...: at the longest time constant searched the recording
-    // shows no decay, only a drift changing linearly, which a warm-up does not describe.
+    // shows no decay, only a drift changing linearly, which a warm-up does not describe
+    // (docs/decisions.md D130).
     fit.parameters = 0;
     fit.run = *ctx.model_run;
     fit.prior_points.clear();
