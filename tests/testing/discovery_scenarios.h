@@ -674,10 +674,22 @@ inline bool DiscoveryVerdictCorrect(const std::string& truth, int gyro,
          (!per_gyro || (!r.findings.empty() && r.findings.front().gyro == want_gyro));
 }
 
-// A recording of `effect` at `seed` over `hours`, the user's model run on it as the open-ended
-// stage's tests run it (all parts of eq. (1), (10) free, the random walk of eq. (11) when
-// `random_walk`, eq. (12) opened to pi, 0.2 Hz integration), and the deviation series of `gyros`
-// (estimator/discovery/deviation.h).
+// The user's model of `spec` as the open-ended stage's tests run it: all parts of eq. (1), (10)
+// free, the random walk of eq. (11) when `random_walk`, eq. (12) opened to pi, 0.2 Hz
+// integration.
+inline estimator::discovery::ModelState UserModelOf(const estimator::SimulationSpec& spec,
+                                                    bool random_walk = true) {
+  estimator::discovery::ModelState model;
+  model.config = spec.config;
+  model.config.filter.fault_threshold = estimator::kPi;
+  model.config.filter.integration_rate_hz = 0.2;
+  model.options.model.parts = estimator::kAllModelParts;
+  model.options.model.random_walk = random_walk;
+  return model;
+}
+
+// A recording of `effect` at `seed` over `hours`, the user's model run on it (UserModelOf), and
+// the deviation series of `gyros` (estimator/discovery/deviation.h).
 struct UserModelDeviations {
   estimator::SimulationSpec spec;
   estimator::SpacecraftConfig config;
@@ -694,13 +706,9 @@ inline absl::StatusOr<UserModelDeviations> MeasureUserModelDeviations(
   auto sim = Simulate(out.spec);
   if (!sim.ok()) return sim.status();
   out.frames = std::move(sim->recording.frames);
-  out.config = out.spec.config;
-  out.config.filter.fault_threshold = kPi;
-  out.config.filter.integration_rate_hz = 0.2;
-  SessionOptions options;
-  options.model.parts = kAllModelParts;
-  options.model.random_walk = random_walk;
-  auto run = discovery::RunModel(out.config, options, out.frames);
+  const discovery::ModelState model = UserModelOf(out.spec, random_walk);
+  out.config = model.config;
+  auto run = discovery::RunModel(out.config, model.options, out.frames);
   if (!run.ok()) return run.status();
   out.run = *std::move(run);
   auto series = discovery::MeasureDeviations(out.config, out.run.gyros, out.frames,
@@ -712,9 +720,8 @@ inline absl::StatusOr<UserModelDeviations> MeasureUserModelDeviations(
 }
 
 // What a candidate's fit (candidate.h FitContext) is given in a round on the user's model, on the
-// recording of `spec`: the model as the open-ended stage's tests run it (MeasureUserModelDeviations
-// above, with the random walk), its run, the body rates and the regimes, `options`, and the gyros
-// 1-3. Context() points into this object, so it is made once (PrepareCandidateFit) and not moved.
+// recording of `spec`: the model (UserModelOf, with the random walk), its run, the body rates and
+// the regimes, `options`, and the gyros 1-3. Context() points into this object, so it is made once (PrepareCandidateFit) and not moved.
 struct CandidateFitting {
   estimator::discovery::ModelState model;
   std::vector<estimator::TelemetryFrame> frames;
@@ -741,11 +748,7 @@ inline absl::StatusOr<std::unique_ptr<const CandidateFitting>> PrepareCandidateF
   auto sim = Simulate(spec);
   if (!sim.ok()) return sim.status();
   out->frames = std::move(sim->recording.frames);
-  out->model.config = spec.config;
-  out->model.config.filter.fault_threshold = kPi;
-  out->model.config.filter.integration_rate_hz = 0.2;
-  out->model.options.model.parts = kAllModelParts;
-  out->model.options.model.random_walk = true;
+  out->model = UserModelOf(spec);
   out->rates = discovery::MeasureBodyRates(out->model.config, out->frames);
   auto run = discovery::RunModel(out->model.config, out->model.options, out->frames);
   if (!run.ok()) return run.status();
