@@ -285,10 +285,11 @@ void FillGroup(const GyroData& d, const std::vector<int>& cols, const Regression
   }
 }
 
-std::string Vec(const Vector3d& v, double scale, const char* fmt = "%.4f") {
-  return absl::StrCat("(", absl::StrFormat(fmt, v(0) * scale), ", ",
-                      absl::StrFormat(fmt, v(1) * scale), ", ", absl::StrFormat(fmt, v(2) * scale),
-                      ")");
+// "(x, y, z)" of v * scale with `digits` decimals (a precision argument, not a format string
+// built at run time: absl::StrFormat checks its format at compile time).
+std::string Vec(const Vector3d& v, double scale, int digits = 4) {
+  return absl::StrFormat("(%.*f, %.*f, %.*f)", digits, v(0) * scale, digits, v(1) * scale, digits,
+                         v(2) * scale);
 }
 
 
@@ -906,11 +907,11 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
         const int degree = t0.exponents[0] + t0.exponents[1] + t0.exponents[2];
         text = degree == 0
                    ? absl::StrFormat("case-fixed drift along %s (case axes), %.4f deg/h",
-                                     Vec(v.normalized(), 1.0, "%.2f"), v.norm() * deg_h)
+                                     Vec(v.normalized(), 1.0, 2), v.norm() * deg_h)
                    : absl::StrFormat(
                          "drift that depends on the spin-axis direction in case axes as %s (a "
                          "harmonic of degree %d), along %s, %.4f deg/h at h = 1",
-                         group.label, degree, Vec(v.normalized(), 1.0, "%.2f"), v.norm() * deg_h);
+                         group.label, degree, Vec(v.normalized(), 1.0, 2), v.norm() * deg_h);
         break;
       }
       case BasisKind::kOrbitalHarmonic: {
@@ -928,7 +929,7 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
         text = absl::StrFormat(
             "case-fixed drift along %s (case axes) varying with the orbital phase (period %.1f "
             "min, harmonic %d), amplitude %.4f deg/h: %s cos + %s sin deg/h",
-            Vec(peak, 1.0, "%.2f"), options.orbital_period_s / 60.0, t0.harmonic,
+            Vec(peak, 1.0, 2), options.orbital_period_s / 60.0, t0.harmonic,
             amplitude * deg_h, Vec(cos_v, deg_h), Vec(sin_v, deg_h));
         break;
       }
@@ -936,7 +937,7 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
         text = absl::StrFormat(
             "case-fixed drift growing linearly in time along %s (case axes), %.4f deg/h per "
             "hour (zero at the recording's start)",
-            Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
+            Vec(v.normalized(), 1.0, 2), v.norm() * to_json);
         break;
       case BasisKind::kRampHarmonic:
         text = absl::StrFormat(
@@ -947,36 +948,36 @@ std::string DescribeGroup(const SelectedGroup& group, const OpenEndedOptions& op
         text = absl::StrFormat(
             "drift proportional to the body rate about case axis %c, along %s, %.4f deg/h per "
             "deg/s",
-            "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
+            "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, 2), v.norm() * to_json);
         break;
       case BasisKind::kBodyRateProduct:
         text = absl::StrFormat(
             "drift proportional to the product of the body rates about case axes %c and %c, "
             "along %s, %.3g deg/h per (deg/s)^2",
-            "xyz"[t0.index[0] - 1], "xyz"[t0.index[1] - 1], Vec(v.normalized(), 1.0, "%.2f"),
+            "xyz"[t0.index[0] - 1], "xyz"[t0.index[1] - 1], Vec(v.normalized(), 1.0, 2),
             v.norm() * to_json);
         break;
       case BasisKind::kSuspensionVoltage:
         text = absl::StrFormat(
             "drift proportional to the suspension offset voltage of case axis %c, along %s, "
             "%.4f deg/h per V",
-            "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json);
+            "xyz"[t0.index[0] - 1], Vec(v.normalized(), 1.0, 2), v.norm() * to_json);
         break;
       case BasisKind::kExponentialDecay:
         text = absl::StrFormat(
             "case-fixed drift along %s (case axes), %.4f deg/h at its onset, decaying with tau = "
             "%.2f h",
-            Vec(v.normalized(), 1.0, "%.2f"), v.norm() * to_json,
+            Vec(v.normalized(), 1.0, 2), v.norm() * to_json,
             t0.time_constant / kSecondsPerHour);
         break;
       case BasisKind::kCyclingHarmonic:  // not a group of the basis (turning_displacement.h)
         text = absl::StrFormat("drift along %s (case axes) as %s, %.4f deg/h",
-                               Vec(v.normalized(), 1.0, "%.2f"), BasisTermLabel(t0),
+                               Vec(v.normalized(), 1.0, 2), BasisTermLabel(t0),
                                v.norm() * to_json);
         break;
       case BasisKind::kChannel:  // not a group of the basis (channel_candidate.h); for -Wswitch
         text = absl::StrFormat("drift along %s (case axes) follows %s, %.4f deg/h per unit",
-                               Vec(v.normalized(), 1.0, "%.2f"), BasisTermLabel(t0),
+                               Vec(v.normalized(), 1.0, 2), BasisTermLabel(t0),
                                v.norm() * to_json);
         break;
     }
