@@ -144,7 +144,7 @@ GyroModel GyroModelOf(const GyroConfig& gc, const std::vector<GyroEstimate>& est
 // each; the reading held where one is missing, the suspension voltages interpolated), with the
 // channels' states as the filter holds and lags them (channel_signal.h).
 void AddTrajectory(const GyroConfig& gc, const GyroModel& m,
-                   const std::vector<TelemetryFrame>& frames,
+                   const std::vector<TelemetryFrame>& frames, const BodyRates& rates,
                    const std::vector<Quaterniond>& q_in_b, const std::vector<int>& samples,
                    ChannelSignals& channels, DeviationSeries& d) {
   const int id = d.gyro;
@@ -199,7 +199,15 @@ void AddTrajectory(const GyroConfig& gc, const GyroModel& m,
     if (qa.dot(qb) < 0.0) qb.coeffs() *= -1.0;
     const Vector3d turn_b = LogQuaternion(qa.conjugate() * qb);
     const int substeps = std::max(1, static_cast<int>(std::ceil(turn_b.norm() / kMaxSubstepTurn)));
-    const Vector3d w_b = span > 0.0 ? Vector3d(turn_b / span) : Vector3d::Zero();
+    // The body rate of the regressors (basis_term.h kBodyRate): from two other gyros' spin axes
+    // where they give it, whose noise the deviation does not carry (regimes.h
+    // BodyRates::gyro_step_without); else the attitude's turn.
+    const std::optional<Vector3d>& other =
+        static_cast<size_t>(i) < rates.gyro_step_without.size()
+            ? rates.gyro_step_without[i][id - 1]
+            : std::nullopt;
+    const Vector3d step_b = other.has_value() ? *other : turn_b;
+    const Vector3d w_b = span > 0.0 ? Vector3d(step_b / span) : Vector3d::Zero();
     const std::optional<Vector3d> u_i = u_last_v, u_j = voltages_v(j);
     for (int s = 0; s < substeps; ++s) {
       const double f = (s + 0.5) / substeps;
@@ -291,7 +299,7 @@ absl::StatusOr<std::vector<DeviationSeries>> MeasureDeviations(
     }
     DeviationSeries d;
     d.gyro = id;
-    AddTrajectory(*gc, m, frames, q_in_b, samples, channels, d);
+    AddTrajectory(*gc, m, frames, rates, q_in_b, samples, channels, d);
     ProjectDeviations(config, m.C_b_k, ModelDrift(m.coefficients, m.basis_terms), q_in_b, samples,
                       d);
     d.duration_s = HoursToSeconds(d.hours.back() - d.hours.front());

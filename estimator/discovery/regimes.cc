@@ -31,12 +31,15 @@ std::array<std::optional<Vector3d>, kMaxGyros> BodySpinAxes(const SpacecraftConf
 
 // Rotation vector of q_b1_b2 (body at frame a to body at frame b) from two inertially fixed spin
 // axes seen in both frames: v(a) = C_b1_b2 v(b). nullopt without two well separated gyros.
+// `without` (a gyro index, or -1) is left out of the pair.
 std::optional<Vector3d> GyroStepRotation(const std::array<std::optional<Vector3d>, kMaxGyros>& a,
-                                         const std::array<std::optional<Vector3d>, kMaxGyros>& b) {
+                                         const std::array<std::optional<Vector3d>, kMaxGyros>& b,
+                                         int without = -1) {
   int best_i = -1, best_j = -1;
   double best = 0.1;  // sin of the angle between the axes, at least ~6 deg
   for (int i = 0; i < kMaxGyros; ++i) {
     for (int j = i + 1; j < kMaxGyros; ++j) {
+      if (i == without || j == without) continue;
       if (!a[i] || !a[j] || !b[i] || !b[j]) continue;
       const double s = a[i]->cross(*a[j]).norm();
       if (s > best) {
@@ -121,11 +124,15 @@ BodyRates MeasureBodyRates(const SpacecraftConfig& config,
   std::vector<std::optional<Vector3d>> gyro_steps(n > 0 ? n - 1 : 0), st_steps(n > 0 ? n - 1 : 0);
   std::array<std::optional<Vector3d>, kMaxGyros> prev_axes;
   std::optional<Quaterniond> prev_q;
+  out.gyro_step_without.assign(n > 0 ? n - 1 : 0, {});
   for (size_t i = 0; i < n; ++i) {
     const auto axes = BodySpinAxes(config, frames[i]);
     const auto q = ValidStarTracker(frames[i]);
     if (i > 0) {
       gyro_steps[i - 1] = GyroStepRotation(prev_axes, axes);
+      for (int k = 0; k < kMaxGyros; ++k) {
+        out.gyro_step_without[i - 1][k] = GyroStepRotation(prev_axes, axes, k);
+      }
       if (q && prev_q) st_steps[i - 1] = LogQuaternion(prev_q->conjugate() * *q);
     }
     prev_axes = axes;

@@ -8,6 +8,8 @@
 #ifndef ESG_ESTIMATOR_DISCOVERY_REGIMES_H_
 #define ESG_ESTIMATOR_DISCOVERY_REGIMES_H_
 
+#include <array>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,6 +39,13 @@ struct BodyRates {
   // Rotation vector of q_b(i)_b(i+1) from the gyros, per step i -> i+1 (size frames - 1) [rad].
   std::vector<Eigen::Vector3d> gyro_step;
   std::vector<bool> gyro_step_valid;
+  // The same step rotation from two gyros other than gyro k (index k - 1), per step, for the
+  // regressors of gyro k's deviation: the deviation carries the star tracker's noise and gyro k's
+  // readout noise at each sample, and a body rate differenced from the star tracker carries the
+  // same star-tracker noise (its integral over the recording is that noise itself), so a rate
+  // regressor fitted it (errors in variables; docs/discovery.md "The open-ended stage"). nullopt
+  // without two well separated other gyros in both frames.
+  std::vector<std::array<std::optional<Eigen::Vector3d>, kMaxGyros>> gyro_step_without;
 };
 
 BodyRates MeasureBodyRates(const SpacecraftConfig& config,

@@ -14,6 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "estimator/discovery/apply_findings.h"
 #include "estimator/discovery/candidates.h"
+#include "estimator/discovery/deviation.h"
 #include "estimator/discovery/diagnose.h"
 #include "estimator/discovery/model_run.h"
 #include "estimator/discovery/regimes.h"
@@ -162,6 +163,62 @@ TEST(DiscoveryRegimes, FindsOrbitalHoldAndRotationFromTheData) {
   EXPECT_EQ(spans.back().last_frame, static_cast<int>(frames.size()) - 1);
   for (size_t k = 1; k < spans.size(); ++k)
     EXPECT_EQ(spans[k].first_frame, spans[k - 1].last_frame + 1);
+}
+
+// The body rate of gyro k's regressors (basis_term.h kBodyRate) comes from two other gyros'
+// spin axes, never from gyro k's readings or the star tracker, whose noise gyro k's deviation
+// carries (errors in variables: on an orbital profile a body-rate column differenced from the
+// star tracker fitted the star tracker's noise at 2 ln B ~ 1600 on effect-free gyros). Perturbing
+// every star-tracker sample and every reading of gyro 1 by ~10 arcsec changes gyro 1's
+// deviations but not one body rate of its trajectory.
+TEST(DiscoveryDeviation, TheBodyRateOfAGyrosRegressorsCarriesNoneOfItsDeviationsNoise) {
+  SimulationSpec spec = DiscoveryScenario("none", 4, 4.0);
+  spec.profile = *Orbital(OrbitalOptions{});
+  auto sim = Simulate(spec);
+  ASSERT_THAT(sim, IsOk());
+  const std::vector<TelemetryFrame>& frames = sim->recording.frames;
+  SessionOptions options;
+  options.model.parts = kModelPart1;
+  options.model.random_walk = true;
+  auto run = RunModel(spec.config, options, frames);
+  ASSERT_THAT(run, IsOk());
+  std::vector<TelemetryFrame> perturbed = frames;
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> arcsec(0.0, ArcsecToRad(10.0));
+  auto turn = [&] { return ExpQuaternion(Eigen::Vector3d(arcsec(rng), arcsec(rng), arcsec(rng))); };
+  for (TelemetryFrame& f : perturbed) {
+    if (f.star_tracker.has_value()) {
+      f.star_tracker->q_in_b = (f.star_tracker->q_in_b * turn()).normalized();
+    }
+    if (f.gyros[0].has_value()) f.gyros[0]->h_k = (turn() * f.gyros[0]->h_k).normalized();
+  }
+  auto rates_of = [&](const std::vector<TelemetryFrame>& fs) {
+    return MeasureBodyRates(spec.config, fs);
+  };
+  auto before = MeasureDeviations(spec.config, run->gyros, frames, rates_of(frames), *run, {1});
+  auto after = MeasureDeviations(spec.config, run->gyros, perturbed, rates_of(perturbed), *run, {1});
+  ASSERT_THAT(before, IsOk());
+  ASSERT_THAT(after, IsOk());
+  // The rate of each frame step, once per step (a step's substeps share it; their number follows
+  // the star tracker's turn, which the perturbation changes).
+  auto step_rates = [](const DeviationSeries& d) {
+    std::vector<Eigen::Vector3d> w;
+    for (const TrajectoryStep& s : d.steps) {
+      if (w.empty() || s.inputs.w_k != w.back()) w.push_back(s.inputs.w_k);
+    }
+    return w;
+  };
+  const std::vector<Eigen::Vector3d> w_before = step_rates(before->front());
+  const std::vector<Eigen::Vector3d> w_after = step_rates(after->front());
+  ASSERT_GT(w_before.size(), 200u);
+  ASSERT_EQ(w_after.size(), w_before.size());
+  for (size_t i = 0; i < w_before.size(); ++i) EXPECT_EQ(w_after[i], w_before[i]) << "step " << i;
+  // The perturbation reached the deviations.
+  double moved = 0.0;
+  for (size_t k = 0; k < before->front().y.size(); ++k) {
+    moved = std::max(moved, (after->front().y[k] - before->front().y[k]).norm());
+  }
+  EXPECT_GT(moved, ArcsecToRad(10.0));
 }
 
 TEST(DiscoveryLatency, ModelFreeEstimateFromRateChanges) {
