@@ -260,8 +260,9 @@ async function unaryPredict(request) {
   }
 }
 
-// What each of some held streams (async iterators of Esgd.streamed) does now: a message, its
-// end, its error, or nothing within 2 s (still held). Reads one message of each that has one.
+// How each of some held streams (async iterators of Esgd.streamed) goes on when read: the
+// messages it still gives, then its end, its error, or nothing within 2 s (still held). Reads
+// each to one of those.
 async function heldStates(held) {
   const states = await Promise.all(held.map(async (h) => {
     const started = Date.now();

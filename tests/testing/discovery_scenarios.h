@@ -721,7 +721,8 @@ inline absl::StatusOr<UserModelDeviations> MeasureUserModelDeviations(
 
 // What a candidate's fit (candidate.h FitContext) is given in a round on the user's model, on the
 // recording of `spec`: the model (UserModelOf, with the random walk), its run, the body rates and
-// the regimes, `options`, and the gyros 1-3. Context() points into this object, so it is made once (PrepareCandidateFit) and not moved.
+// the regimes, `options`, and the gyros 1-3. Context() points into this object, so it is made
+// once (PrepareCandidateFit) and not moved.
 struct CandidateFitting {
   estimator::discovery::ModelState model;
   std::vector<estimator::TelemetryFrame> frames;
