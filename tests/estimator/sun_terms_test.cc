@@ -465,6 +465,15 @@ TEST(SunDiagnosis, DISABLED_ManySeeds) {
                 SunFaceName(::esg::testing::SunFamilyOf(effect, seed)).c_str(),
                 ::esg::testing::SunLagHoursOf(seed), line.empty() ? "right" : line.c_str(),
                 Findings(d->report).c_str(), sun_text.c_str());
+    // A miss: the candidates of the affected gyro in each round, to see what the sun lost to.
+    if (!line.empty()) {
+      for (const CandidateScore& c : d->report.candidates) {
+        if (c.gyro != ::esg::testing::AffectedGyro(seed)) continue;
+        std::printf("  round %d %s: 2 ln B %.1f%s%s%s\n", c.round, c.effect.c_str(), c.score,
+                    c.significant ? " significant" : "", c.selected ? " selected" : "",
+                    c.not_fitted.empty() ? "" : absl::StrCat(" (", c.not_fitted, ")").c_str());
+      }
+    }
     std::fflush(stdout);
   }
   std::printf("%s: %d of %d right\n", effect.c_str(), right, n);
