@@ -12,7 +12,8 @@
 #      quarter of it; esgd on a SQLite file takes the same recording, and the stored history
 #      (`esg history -o json`, `esg export history`) and the console's table carry k2.
 # Takes about 20 minutes on two cores (the build). Leaves its tree in ESG_TRIAL_DIR (default: a new
-# directory under /tmp) for a look; prints "new_term_trial: passed" or the first failure.
+# directory under /tmp) for a look; run again with the same ESG_TRIAL_DIR, it rebuilds only the
+# files that changed. Prints "new_term_trial: passed" or the first failure.
 #   bash scripts/new_term_trial.sh
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -20,14 +21,28 @@ work=${ESG_TRIAL_DIR:-$(mktemp -d /tmp/esg-new-term.XXXXXX)}
 patch=$root/scripts/new_term/sixth_harmonic.patch
 fail() { echo "new_term_trial: failed: $*" >&2; exit 1; }
 
-mkdir -p "$work/src"
-git -C "$root" archive HEAD | tar -x -C "$work/src"
-cd "$work/src"
+# The committed tree with the patch applied, in $work/next; then copied into $work/src file by
+# file where it differs, so that a second run in the same ESG_TRIAL_DIR rebuilds only what changed.
+rm -rf "$work/next"
+mkdir -p "$work/next" "$work/src"
+git -C "$root" archive HEAD | tar -x -C "$work/next"
+cd "$work/next"
 files=$(git apply --numstat "$patch" | wc -l)
 echo "new_term_trial: the patch touches $files files:"
 git apply --numstat "$patch" | awk '{print "  " $3 " (+" $1 " -" $2 ")"}'
 [ "$files" -le 6 ] || fail "the term needs $files files, more than 6"
 git apply "$patch"
+(cd "$work/src" && find . -path ./build -prune -o -type f -print) | while read -r f; do
+  [ -e "$work/next/$f" ] || rm -f "$work/src/$f"
+done
+(cd "$work/next" && find . -type f) | while read -r f; do
+  if ! cmp -s "$work/next/$f" "$work/src/$f"; then
+    mkdir -p "$(dirname "$work/src/$f")"
+    cp "$work/next/$f" "$work/src/$f"
+  fi
+done
+rm -rf "$work/next"
+cd "$work/src"
 
 echo "new_term_trial: building in $work/src/build (log: $work/build.log)"
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=Release >"$work/build.log" 2>&1

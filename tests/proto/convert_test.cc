@@ -30,12 +30,18 @@ using ::esg::testing::StatusIs;
 using ::testing::HasSubstr;
 using ::testing::Not;
 
-// The release before's form of a drift model: the coefficient in its deprecated field (found by
-// the descriptor's JSON key, so this names no field), the vector's other entries 0 until set.
+// The term's deprecated field (found by the descriptor's JSON key, so this names no field), or
+// null for a term added to the table after the release before (it is keyed only).
+const google::protobuf::FieldDescriptor* FieldOf(const estimator::FixedTermDescriptor& term) {
+  return esg::v1::GyroDriftModel::descriptor()->FindFieldByCamelcaseName(
+      std::string(term.json_key));
+}
+
+// The release before's form of a drift model: the coefficient in its deprecated field, the
+// vector's other entries 0 until set.
 void SetByField(const estimator::FixedTermDescriptor& term, double deg_h,
                 esg::v1::GyroDriftModel* model) {
-  const google::protobuf::FieldDescriptor* f =
-      model->GetDescriptor()->FindFieldByCamelcaseName(std::string(term.json_key));
+  const google::protobuf::FieldDescriptor* f = FieldOf(term);
   ASSERT_NE(f, nullptr) << term.json_key;
   const google::protobuf::Reflection* reflection = model->GetReflection();
   if (!f->is_repeated()) {
@@ -48,8 +54,8 @@ void SetByField(const estimator::FixedTermDescriptor& term, double deg_h,
 
 // Whether the term's deprecated field holds anything.
 bool GivenByAField(const esg::v1::GyroDriftModel& model, const estimator::FixedTermDescriptor& term) {
-  const google::protobuf::FieldDescriptor* f =
-      model.GetDescriptor()->FindFieldByCamelcaseName(std::string(term.json_key));
+  const google::protobuf::FieldDescriptor* f = FieldOf(term);
+  if (f == nullptr) return false;
   const google::protobuf::Reflection* reflection = model.GetReflection();
   return f->is_repeated() ? reflection->FieldSize(model, f) > 0 : reflection->HasField(model, f);
 }
@@ -890,17 +896,21 @@ TEST(DriftModel, ProtoRoundTripConvertsDegPerHour) {
 }
 
 // A GyroDriftModel whose 13 coefficients are distinct, given by its deprecated fields (as the
-// release before wrote it); each value has more digits than the 15 DriftModelToProto keeps, so a
-// read that rounded would show.
+// release before wrote it: a term added to the table later is not in it, 0); each value has more
+// digits than the 15 DriftModelToProto keeps, so a read that rounded would show.
 double DistinctDegH(const estimator::FixedTermDescriptor& term) {
   return (term.theta_index + 1) * (term.theta_index % 2 ? -1.0 : 1.0) / 7.0;
 }
 esg::v1::GyroDriftModel DistinctFieldModel() {
   esg::v1::GyroDriftModel proto;
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
-    SetByField(term, DistinctDegH(term), &proto);
+    if (FieldOf(term) != nullptr) SetByField(term, DistinctDegH(term), &proto);
   }
   return proto;
+}
+// The value DistinctFieldModel gives the term.
+double DistinctFieldDegH(const estimator::FixedTermDescriptor& term) {
+  return FieldOf(term) != nullptr ? DistinctDegH(term) : 0.0;
 }
 
 // The keyed form (GyroDriftModel.coefficients) reads as the fields do: every coefficient keyed, in
@@ -998,10 +1008,14 @@ TEST(DriftModel, SettingACoefficientOfAModelGivenByItsFieldsKeysThemAll) {
   esg::v1::GyroDriftModel proto = DistinctFieldModel();
   const estimator::FixedTermDescriptor& c1y = estimator::kFixedTerms[estimator::kThetaC1 + 1];
   SetDriftModelTermDegH(c1y, 2.5, &proto);
-  ASSERT_EQ(proto.coefficients_size(), estimator::kNumDriftCoefficients);
+  int with_field = 0;
+  for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
+    with_field += FieldOf(term) != nullptr ? 1 : 0;
+  }
+  ASSERT_EQ(proto.coefficients_size(), with_field);
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
     EXPECT_FALSE(GivenByAField(proto, term)) << term.label;
-    EXPECT_EQ(DriftModelTermDegH(proto, term), &term == &c1y ? 2.5 : DistinctDegH(term))
+    EXPECT_EQ(DriftModelTermDegH(proto, term), &term == &c1y ? 2.5 : DistinctFieldDegH(term))
         << term.label;
   }
   EXPECT_THAT(DriftModelFromProto(proto, "model"), IsOk());

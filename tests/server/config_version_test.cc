@@ -27,7 +27,8 @@ using ::esg::testing::TempDir;
 using ::testing::SizeIs;
 
 // Every coefficient of `model` by its field (the form of the release before the keyed list),
-// through the descriptors' JSON keys, so this names no field.
+// through the descriptors' JSON keys, so this names no field. A term added to the table after
+// that release has no field; the release could not hold it, so it must be 0 here.
 void AllByField(esg::v1::GyroDriftModel* model) {
   std::vector<double> deg_h;
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
@@ -38,7 +39,10 @@ void AllByField(esg::v1::GyroDriftModel* model) {
   for (const estimator::FixedTermDescriptor& term : estimator::kFixedTerms) {
     const google::protobuf::FieldDescriptor* field =
         model->GetDescriptor()->FindFieldByCamelcaseName(std::string(term.json_key));
-    ASSERT_NE(field, nullptr) << term.json_key;
+    if (field == nullptr) {
+      EXPECT_EQ(deg_h[term.theta_index], 0.0) << term.json_key << " has no field to be written in";
+      continue;
+    }
     if (field->is_repeated()) {
       reflection->AddDouble(model, field, deg_h[term.theta_index]);
     } else {
