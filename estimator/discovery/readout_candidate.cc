@@ -120,8 +120,11 @@ absl::Status FitSunCandidate(const Candidate& candidate, const FitContext& ctx,
   if (g.sun_face < 0 || g.columns.empty()) return absl::OkStatus();
   // The sun enters a round as the open-ended basis's choice for the gyro: when another group of
   // the basis (a ramp, an orbital harmonic, a case-fixed drift, ...) describes the deviation with
-  // more evidence, the stage would select that group first, and the sun is not the description.
-  if (sun.best_other_evidence > g.evidence) {
+  // decisively more evidence (replacing it by the sun loses o.ambiguity or more), the stage would
+  // select that group first, and the sun is not the description. Within o.ambiguity the recording
+  // cannot tell the two apart (a constant illumination and a case-fixed drift: a face the sun
+  // lights at a constant level): the sun is an alternative to that group and is fitted.
+  if (sun.best_other_evidence >= g.evidence + o.ambiguity) {
     fit.not_fitted = absl::StrFormat(
         "the sun's best face (%s, 2 ln B = %.1f averaged over the lags) is not the open-ended "
         "basis's first choice on gyro %d's deviation: \"%s\" has 2 ln B = %.1f",

@@ -37,7 +37,9 @@ absl::Status FitReadoutCandidate(const Candidate& candidate, const FitContext& c
 //   1. the gyro's deviation from the current model (deviation.h) regressed on the sun's families
 //      of the faces the model does not hold (open_ended.h FitSunFamilies): each face's Bayes
 //      factor averaged over the 41 lags (D101), the face with the most evidence taken, only
-//      when no other group of the basis has more evidence there (the stage's first choice);
+//      when no other group of the basis has decisively more evidence there (by the stage's
+//      ambiguity, 2 ln B = 6: the sun is the stage's first choice or cannot be told apart from
+//      it, D132);
 //   2. its drift at the best lag held in the model as a correction of the gyro's readings
 //      (sun_terms.h SunReadingShift), the model refitted by the filter;
 //   3. its evidence 2 ln B = the refit's improvement of -2 log L less `occam`: Laplace's Occam
