@@ -11,6 +11,7 @@
 #include "Eigen/Cholesky"
 #include "Eigen/Geometry"
 #include "Eigen/LU"
+#include "absl/container/inlined_vector.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "estimator/statistics.h"
@@ -38,10 +39,10 @@ ReadingFaultMonitor::Result Saturated(ReadingFaultMonitor::Result r) {
 
 // Regressors of the line, optionally with a jump at point `jump_at` or a rate change at time
 // `onset` (relative to the last point), or with a quadratic term: k (2 or 3) per point, no
-// allocation beyond the one vector.
+// allocation for a window of up to 32 points (the default is 21).
 struct Regressors {
   int k = 2;
-  std::vector<std::array<double, 3>> f;
+  absl::InlinedVector<std::array<double, 3>, 32> f;
   Regressors(const ReadingFaultMonitor::Projected& p, int jump_at, std::optional<double> onset,
              bool quadratic) {
     k = 2 + (quadratic || jump_at >= 0 || onset.has_value() ? 1 : 0);
@@ -55,9 +56,9 @@ struct Regressors {
   }
 };
 
-// Weighted least squares of y_j = (f_j^T (x) I_2) beta over the points, f_j the scalar
-// regressors of point j (k of them, at most 3): beta (2k), its covariance and the weighted
-// residual sum. The normal equations are summed block by block (N_ml = sum f_m f_l W_j,
+// Weighted least squares of y_j = (f_j^T (x) I_2) beta over the points (the first `count` of
+// them when given), f_j the scalar regressors of point j (k of them, at most 3): beta (2k), its
+// covariance and the weighted residual sum. The normal equations are summed block by block (N_ml = sum f_m f_l W_j,
 // r_m = sum f_m W_j y_j) and RSS = sum y^T W y - r^T beta, so a fit costs O(n k^2) 2 x 2 products
 // and no allocation: the monitor fits about 2 W of them per gyro and step.
 using FitMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 6, 6>;
@@ -68,13 +69,15 @@ struct Fit {
   double rss = std::numeric_limits<double>::infinity();
 };
 
-Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const Regressors& regs) {
+Fit WeightedFit(const ReadingFaultMonitor::Projected& p, const Regressors& regs,
+                std::optional<size_t> count = std::nullopt) {
   const int k = regs.k;
   const auto& f = regs.f;
   FitMatrix N = FitMatrix::Zero(2 * k, 2 * k);
   FitVector r = FitVector::Zero(2 * k);
   double yWy = 0.0;
-  for (size_t j = 0; j < p.y.size(); ++j) {
+  const size_t points = count.value_or(p.y.size());
+  for (size_t j = 0; j < points; ++j) {
     const Vector2d Wy = p.W[j] * p.y[j];
     yWy += p.y[j].dot(Wy);
     for (int m = 0; m < k; ++m) {
@@ -228,9 +231,44 @@ ReadingFaultMonitor::Projected ReadingFaultMonitor::Project(const Track& track) 
   return p;
 }
 
+namespace {
+
+// The smallest weighted residual sum of a family of fits, computed one fit at a time and only as
+// far as a question needs: whether the family's minimum is small enough for a test is answered as
+// soon as one fit makes the running minimum so (it only falls), and what has been fitted is kept
+// for the next question. `fit(i)` gives member i's residual sum (a fit of rank too low:
+// infinity). The running minimum folds as std::min does, in the members' order, so the full
+// minimum is the same value, bit for bit, as a loop over all of them gives.
+class LazyMinimum {
+ public:
+  LazyMinimum(int members, double start) : members_(members), minimum_(start) {}
+  // Whether `holds` is true of min(start, members); fits members until it knows. `holds` must stay
+  // true for any smaller minimum (a test that the minimum is at most something).
+  template <typename Holds, typename Fit>
+  bool Reaches(const Holds& holds, const Fit& fit) {
+    while (!holds(minimum_) && next_ < members_) minimum_ = std::min(minimum_, fit(next_++));
+    return holds(minimum_);
+  }
+  // min(start, every member).
+  template <typename Fit>
+  double All(const Fit& fit) {
+    while (next_ < members_) minimum_ = std::min(minimum_, fit(next_++));
+    return minimum_;
+  }
+
+ private:
+  int members_;
+  int next_ = 0;
+  double minimum_;
+};
+
+}  // namespace
+
 // One window's judgement (Judge), in its order: beyond any drift, a jump, erratic. The drift
-// alternatives the jump and the erratic tests compare with are computed when first needed, and
-// once.
+// alternatives the jump and the erratic tests compare with are fitted when first needed, each
+// once, and only as many as decide: a jump is declared only when every alternative fits worse
+// than it by k_d^2, so the first alternative within k_d^2 of it ends the comparison (the verdict
+// and, when a jump is declared, its statistic are what fitting all of them gives).
 struct ReadingFaultMonitor::Judgement {
   const ReadingFaultOptions& options;
   const std::vector<double>& erratic_threshold;
@@ -238,8 +276,10 @@ struct ReadingFaultMonitor::Judgement {
   Projected p;
   int n = 0;
   Fit line;
-  std::optional<double> smooth_rss;
-  std::optional<double> slew_rss;
+  // The smooth curves a drift gives (Smooth): the quadratic, then a rate change at sample j = 1
+  // .. n - 2; and the lines with a step within its allowance (SlewSteps), at j = 1 .. n - 1.
+  std::optional<LazyMinimum> smooth;
+  std::optional<LazyMinimum> slew;
 
   // kBeyond: the last increment against the rate of the points before it. `dt` > 0 is the last
   // interval.
@@ -247,12 +287,8 @@ struct ReadingFaultMonitor::Judgement {
     Vector2d b = Vector2d::Zero();
     Matrix2d cov_b = Matrix2d::Zero();
     if (n >= 3) {
-      Projected before = p;
-      before.y.pop_back();
-      before.W.pop_back();
-      before.cov.pop_back();
-      before.tau.pop_back();
-      const Fit before_line = WeightedFit(before, Regressors(before, -1, std::nullopt, false));
+      // The line through every point but the last (its times still relative to the last).
+      const Fit before_line = WeightedFit(p, Regressors(p, -1, std::nullopt, false), n - 1);
       if (std::isfinite(before_line.rss)) {
         b = before_line.beta.segment<2>(2);
         cov_b = before_line.cov.block<2, 2>(2, 2);
@@ -276,16 +312,15 @@ struct ReadingFaultMonitor::Judgement {
   // any sample time. The best of them is the smooth curve a drift gives. They cost a fit per
   // sample and decide only when the line leaves something to explain (a jump that beats it, or
   // scatter about it beyond the noise; each alternative contains the line, so fits at least as
-  // well): computed then, and once.
-  double Smooth() {
-    if (!smooth_rss.has_value()) {
-      smooth_rss = WeightedFit(p, Regressors(p, -1, std::nullopt, true)).rss;
-      for (int j = 1; j <= n - 2; ++j) {
-        const double kink = WeightedFit(p, Regressors(p, -1, p.tau[j], false)).rss;
-        smooth_rss = std::min(*smooth_rss, kink);
-      }
+  // well): fitted then, and only as far as the question asked needs.
+  LazyMinimum& Smooth() {
+    if (!smooth.has_value()) {
+      smooth.emplace(n - 2, WeightedFit(p, Regressors(p, -1, std::nullopt, true)).rss);
     }
-    return *smooth_rss;
+    return *smooth;
+  }
+  double SmoothKink(int i) const {  // member i: the rate change at sample i + 1
+    return WeightedFit(p, Regressors(p, -1, p.tau[i + 1], false)).rss;
   }
 
   // A slow reading error delta (kSlowReadingErrorRad: an unconfigured misalignment, a scale
@@ -296,38 +331,48 @@ struct ReadingFaultMonitor::Judgement {
   // drift may come with a step at any point j of the window no larger than that allowance: the
   // best line with a step whose size is within its allowance (its part beyond the allowance
   // along its own direction below k_d^2, BeyondBallChi2) joins the drift alternatives. A step
-  // beyond every allowance is left to the jump test.
-  double SlewSteps(const Projected& q) const {
-    double best = std::numeric_limits<double>::infinity();
-    for (int j = 1; j < n; ++j) {
-      const double allowance = kSlowReadingErrorRad * std::min(track.points[j].turn, 2.0);
-      if (!(allowance > 0.0)) continue;
-      const Fit step = WeightedFit(q, Regressors(q, j, std::nullopt, false));
-      if (!std::isfinite(step.rss)) continue;
-      if (BeyondBallChi2(step.beta.segment<2>(4), step.cov.block<2, 2>(4, 4), allowance) <
-          options.decision_chi2) {
-        best = std::min(best, step.rss);
-      }
+  // beyond every allowance is left to the jump test (infinity: not an alternative).
+  double SlewStep(const Projected& q, int j) const {
+    const double allowance = kSlowReadingErrorRad * std::min(track.points[j].turn, 2.0);
+    if (!(allowance > 0.0)) return std::numeric_limits<double>::infinity();
+    const Fit step = WeightedFit(q, Regressors(q, j, std::nullopt, false));
+    if (!std::isfinite(step.rss)) return std::numeric_limits<double>::infinity();
+    if (BeyondBallChi2(step.beta.segment<2>(4), step.cov.block<2, 2>(4, 4), allowance) <
+        options.decision_chi2) {
+      return step.rss;
     }
-    return best;
+    return std::numeric_limits<double>::infinity();
+  }
+  LazyMinimum SlewSteps() const {
+    return LazyMinimum(n - 1, std::numeric_limits<double>::infinity());
   }
 
   // kJump: a jump at point jump_at (two or three points after it) against every drift
   // alternative, with the onset also inside the interval before the jump; at least two points
-  // before it for the line.
+  // before it for the line. Declared when every alternative's residual sum exceeds the jump's
+  // by k_d^2: the first one within it ends the comparison for that jump point.
   std::optional<Result> Jump() {
+    const auto kink = [this](int i) { return SmoothKink(i); };
+    const auto slew_step = [this](int i) { return SlewStep(p, i + 1); };
     for (int jump_at = n - 2; jump_at >= std::max(2, n - 3) && std::isfinite(line.rss); --jump_at) {
       const Fit jump = WeightedFit(p, Regressors(p, jump_at, std::nullopt, false));
       if (!std::isfinite(jump.rss)) continue;
       const double over_line = line.rss - jump.rss;
       if (!(over_line >= options.decision_chi2)) continue;
-      double drift_rss = Smooth();
-      for (int m = 1; m <= 3; ++m) {
+      // Not declared once an alternative is within k_d^2 of the jump: the minimum only falls,
+      // and so does its difference from jump.rss (a NaN minimum is never within, and never
+      // declared).
+      const auto within = [&](double rss) { return rss - jump.rss < options.decision_chi2; };
+      if (Smooth().Reaches(within, kink)) continue;
+      double drift_rss = Smooth().All(kink);
+      for (int m = 1; m <= 3 && !within(drift_rss); ++m) {
         const double onset = p.tau[jump_at - 1] + (p.tau[jump_at] - p.tau[jump_at - 1]) * m / 4.0;
         drift_rss = std::min(drift_rss, WeightedFit(p, Regressors(p, -1, onset, false)).rss);
       }
-      if (!slew_rss.has_value()) slew_rss = SlewSteps(p);  // the same for both jump points
-      drift_rss = std::min(drift_rss, *slew_rss);
+      if (within(drift_rss)) continue;
+      if (!slew.has_value()) slew = SlewSteps();  // the same for both jump points
+      if (slew->Reaches(within, slew_step)) continue;
+      drift_rss = std::min(drift_rss, slew->All(slew_step));
       const double over_drift = drift_rss - jump.rss;
       if (over_drift >= options.decision_chi2) {
         Result r;
@@ -345,9 +390,13 @@ struct ReadingFaultMonitor::Judgement {
   // window must not read as scatter.
   std::optional<Result> Erratic() {
     const double threshold = erratic_threshold[n];
-    if (line.rss <= threshold || !std::isfinite(Smooth()) || !(Smooth() > threshold)) {
-      return std::nullopt;
-    }
+    if (line.rss <= threshold) return std::nullopt;
+    // Every smooth curve above the threshold (any at or below it, or NaN first: none).
+    const auto kink = [this](int i) { return SmoothKink(i); };
+    const auto at_most = [threshold](double rss) { return rss <= threshold; };
+    if (Smooth().Reaches(at_most, kink)) return std::nullopt;
+    const double smooth_rss = Smooth().All(kink);
+    if (!std::isfinite(smooth_rss) || !(smooth_rss > threshold)) return std::nullopt;
     // A slow reading error (an unconfigured misalignment or scale error, kSlowReadingErrorRad
     // per radian of turn) moves a rebuild along the turn: smooth, but during a slew (the rate
     // rising, holding, falling) none of the fitted curves follows it. Its size over each interval
@@ -358,10 +407,18 @@ struct ReadingFaultMonitor::Judgement {
       q.cov[j] += a * a * Matrix2d::Identity();
       q.W[j] = q.cov[j].inverse();
     }
-    double allowed =
-        std::min(WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss, SlewSteps(q));
+    // The smallest residual sum of the smooth curves and the lines with a step within its
+    // allowance on q, fitted until one is at or below the threshold.
+    double allowed = WeightedFit(q, Regressors(q, -1, std::nullopt, true)).rss;
     for (int j = 1; j <= n - 2 && allowed > threshold; ++j) {
       allowed = std::min(allowed, WeightedFit(q, Regressors(q, -1, q.tau[j], false)).rss);
+    }
+    LazyMinimum q_slew = SlewSteps();
+    const auto slew_step = [this, &q](int i) { return SlewStep(q, i + 1); };
+    if (allowed > threshold && !q_slew.Reaches(at_most, slew_step)) {
+      allowed = std::min(allowed, q_slew.All(slew_step));
+    } else {
+      allowed = std::min(allowed, threshold);
     }
     if (!(allowed > threshold)) return std::nullopt;
     Result r;
