@@ -219,11 +219,12 @@ ReadingFaultMonitor::Projected ReadingFaultMonitor::Project(const Track& track) 
   // Relative to the last point (every model has an intercept): the track itself grows without
   // bound over a long flight, the residual sums should not lose digits to it.
   const Eigen::Vector3d origin = track.points.back().x_in;
+  // A floor keeps the weight finite (0.01 arcsec): a configured noise of zero.
+  static const double kFloorVariance = std::pow(0.01 * kRadPerArcsec, 2);
   for (const Point& q : track.points) {
     p.y.push_back(track.T.transpose() * (q.x_in - origin));
     Matrix2d cov = track.T.transpose() * q.noise_in * track.T;
-    // A floor keeps the weight finite (0.01 arcsec): a configured noise of zero.
-    cov = 0.5 * (cov + cov.transpose()) + std::pow(0.01 * kRadPerArcsec, 2) * Matrix2d::Identity();
+    cov = 0.5 * (cov + cov.transpose()) + kFloorVariance * Matrix2d::Identity();
     p.cov.push_back(cov);
     p.W.push_back(cov.inverse());
     p.tau.push_back(absl::ToDoubleSeconds(q.time - last));

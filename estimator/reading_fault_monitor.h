@@ -62,6 +62,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "absl/container/inlined_vector.h"
 #include "absl/status/status.h"
 #include "absl/time/time.h"
 #include "absl/types/span.h"
@@ -206,11 +207,13 @@ class ReadingFaultMonitor {
 
   // A window projected on the tangent plane: y_j = T^T x_j, weights W_j = (T^T N_j T)^-1 (cov
   // their inverse), times tau_j [s] relative to the last point.
+  // A window's points in the track's tangent plane, inline up to 32 (the default window is 21):
+  // the monitor projects every window at every step.
   struct Projected {
-    std::vector<Eigen::Vector2d> y;
-    std::vector<Eigen::Matrix2d> W;
-    std::vector<Eigen::Matrix2d> cov;
-    std::vector<double> tau;
+    absl::InlinedVector<Eigen::Vector2d, 32> y;
+    absl::InlinedVector<Eigen::Matrix2d, 32> W;
+    absl::InlinedVector<Eigen::Matrix2d, 32> cov;
+    absl::InlinedVector<double, 32> tau;
   };
 
   // State for the session checkpoint; RestoreState returns DataLoss naming the field (the

@@ -5,8 +5,8 @@
 #include "estimator/session.h"
 
 #include <algorithm>
+#include <array>
 #include <optional>
-#include <vector>
 
 #include "absl/strings/str_format.h"
 #include "estimator/measurements.h"
@@ -23,14 +23,6 @@ using Eigen::Vector3d;
 using Matrix32 = Eigen::Matrix<double, 3, 2>;
 
 using session_internal::kNoiseFloor;
-
-namespace {
-
-// Numerical-Jacobian step for the pair attitude [rad]: TRIAD is smooth, central differences
-// have truncation error ~eps^2 (1e-14 rad) and rounding ~1e-16/eps (1e-9 relative).
-constexpr double kJacobianStep = 1e-7;
-
-}  // namespace
 
 Eigen::Matrix<double, 3, 2> EstimationSession::GyroState::T() const {
   Matrix32 T;
@@ -53,65 +45,58 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   if (ia < 0 || ib < 0) return std::nullopt;
   const GyroState* ga = &gyros_[ia];
   const GyroState* gb = &gyros_[ib];
-  auto attitude = [&](const Vector3d& h_in_a, const Vector3d& h_in_b, const Matrix3d& C_a,
-                      const Matrix3d& C_b, const Vector3d& hk_a,
-                      const Vector3d& hk_b) -> std::optional<Quaterniond> {
-    auto q = PairAttitude(h_in_a, h_in_b, C_a * hk_a, C_b * hk_b);
-    if (!q.ok()) return std::nullopt;
-    return *q;
-  };
   const Matrix3d C_a = ga->C_b_k(), C_b = gb->C_b_k();
-  const auto q0 = attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, h_k_b);
-  if (!q0.has_value() || covariance_in == nullptr) return q0;
+  const auto q0 = PairAttitude(ga->h_in, gb->h_in, C_a * h_k_a, C_b * h_k_b);
+  if (!q0.ok()) return std::nullopt;
+  if (covariance_in == nullptr) return *q0;
 
   // Attitude error dtheta_in (q_true = Exp(dtheta_in) q_est) against the state errors of the two
-  // gyros and their readout noise, by one-sided differences (error ~ step, 1e-7 relative: this
-  // feeds a 1-sigma envelope; prediction evaluates it at every output sample).
-  const int n = state_size();
-  MatrixXd J = MatrixXd::Zero(3, n);
-  Eigen::Matrix<double, 3, 4> J_r = Eigen::Matrix<double, 3, 4>::Zero();
-  const double e = kJacobianStep;
-  const Quaterniond q0_conj = q0->conjugate();
-  auto diff = [&](const std::optional<Quaterniond>& qp) {
-    if (!qp) return Vector3d::Zero().eval();
-    return (LogQuaternion(*qp * q0_conj) / e).eval();
+  // gyros and their readout noise, to first order (TriadLinearisation, triad.h): a spin-axis
+  // error moves the inertial triad, a misalignment or a readout error the body triad, and
+  // dtheta_in = omega_in - C_in_b omega_b. Only the two gyros' columns are nonzero: at most 2 + 3
+  // each (spin axis, misalignment phi when the layout has it).
+  const Vector3d h_b_a = C_a * h_k_a, h_b_b = C_b * h_k_b;
+  const TriadLinearisation inertial(ga->h_in, gb->h_in), body(h_b_a, h_b_b);
+  const Matrix3d C_in_b = q0->toRotationMatrix();
+  const Vector3d none = Vector3d::Zero();
+  constexpr int kMaxColumns = 10;
+  Eigen::Matrix<double, 3, kMaxColumns> J_columns;
+  std::array<int, kMaxColumns> cols{};
+  int m = 0;
+  auto add = [&](int col, const Vector3d& dtheta_in) {
+    cols[m] = col;
+    J_columns.col(m++) = dtheta_in;
   };
   const Matrix32 Ta = ga->T(), Tb = gb->T();
-  for (int i = 0; i < 2; ++i) {
-    J.col(layout_.SpinAxis(ia) + i) =
-        diff(attitude((ga->h_in + e * Ta.col(i)).normalized(), gb->h_in, C_a, C_b, h_k_a, h_k_b));
-    J.col(layout_.SpinAxis(ib) + i) =
-        diff(attitude(ga->h_in, (gb->h_in + e * Tb.col(i)).normalized(), C_a, C_b, h_k_a, h_k_b));
-  }
-  for (int i = 0; i < 3; ++i) {
-    const Matrix3d R = ExpMatrix(e * Vector3d::Unit(i));
-    if (layout_.HasPhi(ia)) {
-      J.col(layout_.Phi(ia) + i) = diff(attitude(ga->h_in, gb->h_in, R * C_a, C_b, h_k_a, h_k_b));
+  for (int i = 0; i < 2; ++i) add(layout_.SpinAxis(ia) + i, inertial.RotationOf(Ta.col(i), none));
+  if (layout_.HasPhi(ia)) {
+    for (int i = 0; i < 3; ++i) {
+      add(layout_.Phi(ia) + i,
+          -C_in_b * body.RotationOf(Vector3d::Unit(i).cross(h_b_a), none));
     }
-    if (layout_.HasPhi(ib)) {
-      J.col(layout_.Phi(ib) + i) = diff(attitude(ga->h_in, gb->h_in, C_a, R * C_b, h_k_a, h_k_b));
+  }
+  for (int i = 0; i < 2; ++i) add(layout_.SpinAxis(ib) + i, inertial.RotationOf(none, Tb.col(i)));
+  if (layout_.HasPhi(ib)) {
+    for (int i = 0; i < 3; ++i) {
+      add(layout_.Phi(ib) + i,
+          -C_in_b * body.RotationOf(none, Vector3d::Unit(i).cross(h_b_b)));
     }
   }
   const Matrix32 Ua = TangentBasis(h_k_a), Ub = TangentBasis(h_k_b);
+  Eigen::Matrix<double, 3, 4> J_r;
   for (int i = 0; i < 2; ++i) {
-    J_r.col(i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, (h_k_a + e * Ua.col(i)).normalized(), h_k_b));
-    J_r.col(2 + i) = diff(attitude(ga->h_in, gb->h_in, C_a, C_b, h_k_a, (h_k_b + e * Ub.col(i)).normalized()));
+    J_r.col(i) = -C_in_b * body.RotationOf(C_a * Ua.col(i), none);
+    J_r.col(2 + i) = -C_in_b * body.RotationOf(none, C_b * Ub.col(i));
   }
-  // Only the columns of the two gyros are nonzero: J P J^T over those blocks.
-  std::vector<int> cols;
-  for (int g : {ia, ib}) {
-    for (int k = 0; k < 2; ++k) cols.push_back(layout_.SpinAxis(g) + k);
-    if (layout_.HasPhi(g)) {
-      for (int k = 0; k < 3; ++k) cols.push_back(layout_.Phi(g) + k);
-    }
-  }
-  const int m = static_cast<int>(cols.size());
-  Eigen::MatrixXd Js(3, m), Ps(m, m);
+  const auto Js = J_columns.leftCols(m);
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxColumns, kMaxColumns> Ps(m, m);
   for (int i = 0; i < m; ++i) {
-    Js.col(i) = J.col(cols[i]);
     for (int j = 0; j < m; ++j) Ps(i, j) = P_(cols[i], cols[j]);
   }
-  if (jacobian_state != nullptr) *jacobian_state = J;
+  if (jacobian_state != nullptr) {
+    *jacobian_state = MatrixXd::Zero(3, state_size());
+    for (int i = 0; i < m; ++i) jacobian_state->col(cols[i]) = Js.col(i);
+  }
   if (jacobian_readout != nullptr) {
     *jacobian_readout = MatrixXd::Zero(3, 2 * gyro_count());
     jacobian_readout->block<3, 2>(0, 2 * ia) = J_r.leftCols<2>();
@@ -119,7 +104,7 @@ std::optional<Quaterniond> EstimationSession::PairQuaternion(int a, int b, const
   }
   const double sigma_r = std::max(config_.readout_noise, kNoiseFloor);
   *covariance_in = Js * Ps * Js.transpose() + sigma_r * sigma_r * J_r * J_r.transpose();
-  return q0;
+  return *q0;
 }
 
 std::array<int, 2> EstimationSession::AttitudePair() const {

@@ -55,4 +55,16 @@ absl::StatusOr<Eigen::Quaterniond> PairAttitude(const Vector3d& h_in_a, const Ve
   return Eigen::Quaterniond(C_in_b).normalized();
 }
 
+TriadLinearisation::TriadLinearisation(const Vector3d& a, const Vector3d& b)
+    : t1_(a.normalized()), b_(b.normalized()) {
+  const Vector3d cross = t1_.cross(b_);
+  const double sin_theta = cross.norm();
+  t3_over_sin_ = t1_.cross(cross / sin_theta) / sin_theta;
+}
+
+Vector3d TriadLinearisation::RotationOf(const Vector3d& da, const Vector3d& db) const {
+  const double along = (da.cross(b_) + t1_.cross(db)).dot(t3_over_sin_);
+  return t1_.cross(da) + along * t1_;
+}
+
 }  // namespace esg::estimator

@@ -24,6 +24,23 @@ absl::StatusOr<Eigen::Quaterniond> PairAttitude(const Eigen::Vector3d& h_in_a,
                                                 const Eigen::Vector3d& h_b_a,
                                                 const Eigen::Vector3d& h_b_b);
 
+// The first-order rotation of the TRIAD frame of two unit vectors a, b (t1 = a, t2 = unit(a x b),
+// t3 = t1 x t2, as PairAttitude forms it in each frame) when a moves by da and b by db, both
+// tangent (da . a = 0, db . b = 0): the omega with dt_i = omega x t_i, in the axes a and b are
+// given in. Across a `delta` of both frames, C_in_b = T_in T_b^T moves by
+// Exp(omega_in - C_in_b omega_b) C_in_b, so this is PairAttitude's Jacobian without differencing:
+//   omega = t1 x da + t1 ((da x b + t1 x db) . t3) / |a x b|
+// (the part across t1 moves t1; the part along t1 is how far t2 turns towards t3).
+// Precondition: |a x b| > 1e-6, as PairAttitude requires.
+class TriadLinearisation {
+ public:
+  TriadLinearisation(const Eigen::Vector3d& a, const Eigen::Vector3d& b);
+  Eigen::Vector3d RotationOf(const Eigen::Vector3d& da, const Eigen::Vector3d& db) const;
+
+ private:
+  Eigen::Vector3d t1_, b_, t3_over_sin_;
+};
+
 }  // namespace esg::estimator
 
 #endif  // ESG_ESTIMATOR_TRIAD_H_

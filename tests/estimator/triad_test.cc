@@ -2,6 +2,8 @@
 // attitude from noiseless spin axes; every pair of three gyros agrees; collinear axes are an error.
 #include "estimator/triad.h"
 
+#include <array>
+
 #include "estimator/random.h"
 #include "estimator/rotation.h"
 #include "gmock/gmock.h"
@@ -78,6 +80,51 @@ TEST(PairAttitude, ReferenceGyroIsMatchedExactlyWithNoisySecondGyro) {
   ASSERT_THAT(q, IsOk());
   EXPECT_LT((q->toRotationMatrix() * h_b_a - h_in_a).norm(), 1e-12);
   EXPECT_THAT(*q, ::testing::Not(IsNearQuaternion(q_in_b, 1e-6)));
+}
+
+// A unit vector of the plane normal to the unit vector v.
+Vector3d TangentOf(const Vector3d& v, Rng& rng) {
+  const Vector3d r = rng.Normal3();
+  return (r - r.dot(v) * v).normalized();
+}
+
+// TriadLinearisation against central differences of PairAttitude: moving each of the four
+// vectors along a random tangent, the attitude error Log(q(+eps) q(-eps)^-1) / (2 eps) equals
+// omega_in - C_in_b omega_b. Central differences of the smooth TRIAD are exact to ~1e-9 here;
+// a sign, a frame or the along-t1 part wrong is an error of order one.
+TEST(TriadLinearisation, IsTheFirstOrderChangeOfPairAttitude) {
+  Rng rng(43);
+  const double eps = 1e-5;
+  for (int trial = 0; trial < 50; ++trial) {
+    const Vector3d a_in = rng.Normal3().normalized(), b_in = rng.Normal3().normalized();
+    const Quaterniond q_in_b = RandomQuaternion(rng);
+    const Matrix3d C_in_b = q_in_b.toRotationMatrix();
+    const Vector3d a_b = C_in_b.transpose() * a_in, b_b = C_in_b.transpose() * b_in;
+    const TriadLinearisation inertial(a_in, b_in), body(a_b, b_b);
+    const Vector3d none = Vector3d::Zero();
+    for (int moved = 0; moved < 4; ++moved) {
+      std::array<Vector3d, 4> v = {a_in, b_in, a_b, b_b};
+      const Vector3d d = TangentOf(v[moved], rng);
+      auto attitude = [&](double step) {
+        std::array<Vector3d, 4> w = v;
+        w[moved] = (v[moved] + step * d).normalized();
+        return *PairAttitude(w[0], w[1], w[2], w[3]);
+      };
+      const Vector3d numeric =
+          LogQuaternion(attitude(eps) * attitude(-eps).conjugate()) / (2 * eps);
+      Vector3d analytic;
+      switch (moved) {
+        case 0: analytic = inertial.RotationOf(d, none); break;
+        case 1: analytic = inertial.RotationOf(none, d); break;
+        case 2: analytic = -C_in_b * body.RotationOf(d, none); break;
+        default: analytic = -C_in_b * body.RotationOf(none, d); break;
+      }
+      const double sin_theta = a_in.cross(b_in).norm();
+      EXPECT_LT((analytic - numeric).norm(), 1e-6 / sin_theta)
+          << "trial " << trial << ", vector " << moved << ": analytic " << analytic.transpose()
+          << ", numeric " << numeric.transpose();
+    }
+  }
 }
 
 TEST(PairAttitude, CollinearAxesAreAnError) {
