@@ -327,19 +327,16 @@ absl::StatusOr<estimator::CoefficientStep> ParseCoefficientStep(const json& v,
   return step;
 }
 
-// {"amplitudeDegH": [x, y, z], "face": "+x" | "-x" | "+y" | "-y" | "+z" | "-z",
-// "timeConstantHours": tau}, all required.
-absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const std::string& path) {
-  estimator::SunFaceDrift d;
-  RETURN_IF_ERROR(ParseAmplitudeAndTime(v, path, "timeConstantHours", &d.amplitude_k_rad_s,
-                                        &d.time_constant_s, "face"));
+// v["face"]: "+x" | "-x" | "+y" | "-y" | "+z" | "-z" (the body face whose outward normal is that
+// axis) or "sunlit" (no face: the sunlit fraction of the orbit), required, into *axis, *sign.
+absl::Status ParseSunFace(const json& v, const std::string& path, int* axis, int* sign) {
   const std::string p = Key(path, "face");
   if (!v.contains("face")) return Invalid(p, "required (+x, -x, +y, -y, +z, -z or sunlit)");
   const json& f = v["face"];
   const std::string face = f.is_string() ? f.get<std::string>() : f.dump();
   if (face == "sunlit") {
-    d.face_axis = estimator::kSunlitFaceAxis;
-    return d;
+    *axis = estimator::kSunlitFaceAxis;
+    return absl::OkStatus();
   }
   if (!f.is_string() || face.size() != 2 || (face[0] != '+' && face[0] != '-') ||
       face[1] < 'x' || face[1] > 'z') {
@@ -348,8 +345,17 @@ absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const s
                                    "sun's disc seen from the orbit, with earthShadow), got ",
                                    f.is_string() ? absl::StrCat("'", face, "'") : face));
   }
-  d.face_sign = face[0] == '+' ? 1 : -1;
-  d.face_axis = face[1] - 'x';
+  *sign = face[0] == '+' ? 1 : -1;
+  *axis = face[1] - 'x';
+  return absl::OkStatus();
+}
+
+// {"amplitudeDegH": [x, y, z], "face": F, "timeConstantHours": tau}, all required.
+absl::StatusOr<estimator::SunFaceDrift> ParseSunFaceDrift(const json& v, const std::string& path) {
+  estimator::SunFaceDrift d;
+  RETURN_IF_ERROR(ParseAmplitudeAndTime(v, path, "timeConstantHours", &d.amplitude_k_rad_s,
+                                        &d.time_constant_s, "face"));
+  RETURN_IF_ERROR(ParseSunFace(v, path, &d.face_axis, &d.face_sign));
   return d;
 }
 
@@ -684,13 +690,33 @@ absl::StatusOr<estimator::StarTrackerMisalignmentCycle> ParseMisalignmentCycle(
   return cycle;
 }
 
+// {"arcsec": [x, y, z], "face": F, "timeConstantHours": tau}, all required: the mount turning by
+// arcsec y(t), body axes, y the face's lagged illumination (simulator.h StarTrackerSunMount).
+absl::StatusOr<estimator::StarTrackerSunMount> ParseSunMount(const json& v,
+                                                             const std::string& path) {
+  RETURN_IF_ERROR(CheckObject(v, path));
+  RETURN_IF_ERROR(CheckKeys(v, path, {"arcsec", "face", "timeConstantHours"}));
+  for (const char* key : {"arcsec", "timeConstantHours"}) {
+    if (!v.contains(key)) return Invalid(Key(path, key), "required");
+  }
+  estimator::StarTrackerSunMount mount;
+  ASSIGN_OR_RETURN(Vector3d arcsec, Vec3(v["arcsec"], Key(path, "arcsec"),
+                                         -kMaxMisalignmentArcsec, kMaxMisalignmentArcsec));
+  mount.rotation_b = estimator::kRadPerArcsec * arcsec;
+  ASSIGN_OR_RETURN(double hours, Number(v["timeConstantHours"], Key(path, "timeConstantHours"),
+                                        kMinCorrelationHours, kMaxHours));
+  mount.time_constant_s = estimator::HoursToSeconds(hours);
+  RETURN_IF_ERROR(ParseSunFace(v, path, &mount.face_axis, &mount.face_sign));
+  return mount;
+}
+
 absl::Status ParseStarTracker(const json& v, const std::string& path,
                               estimator::StarTrackerTruth* st) {
   RETURN_IF_ERROR(CheckObject(v, path));
   RETURN_IF_ERROR(CheckKeys(v, path,
                             {"noiseArcsec", "latencyMs", "misalignmentArcsec", "outlierRate",
                              "outlierArcmin", "outages", "invalidRate", "outlierBurst", "frozen",
-                             "misalignmentJump", "misalignmentCycle"}));
+                             "misalignmentJump", "misalignmentCycle", "sunMount"}));
   for (auto it = v.begin(); it != v.end(); ++it) {
     const std::string& k = it.key();
     const json& x = it.value();
@@ -722,6 +748,8 @@ absl::Status ParseStarTracker(const json& v, const std::string& path,
       ASSIGN_OR_RETURN(st->misalignment_jump, ParseMisalignmentJump(x, p));
     } else if (k == "misalignmentCycle") {
       ASSIGN_OR_RETURN(st->misalignment_cycle, ParseMisalignmentCycle(x, p));
+    } else if (k == "sunMount") {
+      ASSIGN_OR_RETURN(st->sun_mount, ParseSunMount(x, p));
     }
   }
   return absl::OkStatus();
@@ -970,6 +998,7 @@ absl::Status ApplyScenario(const Scenario& scenario, estimator::SimulationSpec* 
   st.frozen = from.frozen;
   st.misalignment_jump = from.misalignment_jump;
   st.misalignment_cycle = from.misalignment_cycle;
+  st.sun_mount = from.sun_mount;
   if (scenario.earth_shadow) spec->earth_shadow = scenario.profile_options.orbital;
   return absl::OkStatus();
 }

@@ -13,6 +13,8 @@
 #include "estimator/orbit.h"
 #include "estimator/random.h"
 #include "estimator/rotation.h"
+#include "estimator/simulator_star_tracker.h"
+#include "estimator/simulator_sun.h"
 #include "estimator/simulator_truth.h"
 #include "estimator/status_macros.h"
 #include "estimator/sun_direction.h"
@@ -22,13 +24,13 @@ namespace esg::estimator {
 using Eigen::Matrix3d;
 using Eigen::Quaterniond;
 using Eigen::Vector3d;
+using simulator_internal::StarTrackerSampler;
+using simulator_internal::SunNodes;
 
 namespace {
 
 // Random-stream ids (DeriveSeed). Gyro streams: kGyroStreamBase + 16 * id + offset.
-constexpr uint64_t kStarTrackerNoiseStream = 1;
-constexpr uint64_t kStarTrackerOutlierStream = 2;
-constexpr uint64_t kStarTrackerInvalidStream = 3;
+// The star tracker's streams are 1-3 (simulator_star_tracker.h).
 constexpr uint64_t kGyroStreamBase = 100;
 constexpr uint64_t kReadoutOffset = 0;
 constexpr uint64_t kVoltageOffset = 1;
@@ -37,10 +39,6 @@ constexpr uint64_t kSwitchingOffset = 3;
 constexpr uint64_t kHiddenDriverOffset = 4;
 constexpr uint64_t kChannelDriverOffset = 5;
 constexpr uint64_t kChannelNoiseOffset = 6;
-
-// Spacing of the sun directions the simulator computes and interpolates between [s]
-// (SunFaceDrift).
-constexpr double kSunNodeSpacingS = 600.0;
 
 uint64_t GyroStream(int id, uint64_t offset) { return kGyroStreamBase + 16 * id + offset; }
 
@@ -194,8 +192,7 @@ struct GyroState {
   // The face's illumination max(0, +-s_b[axis]) for the sun s_b in body axes.
   double SunIllumination(const Vector3d& s_b) const {
     // s_b is scaled by the sunlit fraction when the spacecraft flies an orbit (SunNodes::At).
-    if (sun_face_axis == kSunlitFaceAxis) return std::min(1.0, s_b.norm());
-    return std::max(0.0, sun_face_sign * s_b(sun_face_axis));
+    return simulator_internal::FaceIllumination(s_b, sun_face_axis, sun_face_sign);
   }
 
   // The coefficient step's drift at time t for the spin axis h_k.
@@ -219,58 +216,6 @@ struct GyroState {
     return fault && fault->kind == kind && t >= fault->time && t < fault->end;
   }
 };
-
-// The sun's direction in inertial axes at nodes kSunNodeSpacingS apart from the simulation start,
-// interpolated linearly between them and normalised (SunFaceDrift).
-// With an Earth-shadow orbit, the sun's position [km] at the same nodes gives the fraction of
-// its disc seen from the orbit, which scales the direction: the illumination max(0, n . s_b) is
-// linear in it.
-class SunNodes {
- public:
-  static absl::StatusOr<SunNodes> Make(absl::Time start, double duration_s,
-                                       const std::optional<OrbitalOptions>& earth_shadow) {
-    SunNodes nodes;
-    nodes.start_ = start;
-    nodes.earth_shadow_ = earth_shadow;
-    const int64_t n = static_cast<int64_t>(std::ceil(duration_s / kSunNodeSpacingS)) + 2;
-    nodes.s_in_.reserve(n);
-    for (int64_t i = 0; i < n; ++i) {
-      const absl::Time t = start + absl::Seconds(kSunNodeSpacingS * i);
-      ASSIGN_OR_RETURN(Vector3d s_in, SunDirection_in(t));
-      nodes.s_in_.push_back(s_in);
-      if (earth_shadow) {
-        ASSIGN_OR_RETURN(Vector3d sun_km, SunPosition_in_km(t));
-        nodes.sun_in_km_.push_back(sun_km);
-      }
-    }
-    return nodes;
-  }
-
-  // [1], inertial axes, at t seconds since the start (0 <= t <= duration): the unit vector to the
-  // sun, times the fraction of the sun's disc seen from the Earth-shadow orbit when there is one.
-  Vector3d At(double t) const {
-    const double x = std::clamp(t / kSunNodeSpacingS, 0.0, static_cast<double>(s_in_.size() - 2));
-    const size_t i = static_cast<size_t>(x);
-    const double f = x - static_cast<double>(i);
-    const Vector3d s_in = ((1.0 - f) * s_in_[i] + f * s_in_[i + 1]).normalized();
-    if (!earth_shadow_) return s_in;
-    const OrbitalOptions& o = *earth_shadow_;
-    const OrbitState state =
-        CircularOrbitState(o.inclination, o.raan, o.period, o.arg_latitude0, start_, t);
-    return SunlitFraction(state.r_in_km, (1.0 - f) * sun_in_km_[i] + f * sun_in_km_[i + 1]) * s_in;
-  }
-
- private:
-  absl::Time start_;
-  std::optional<OrbitalOptions> earth_shadow_;
-  std::vector<Vector3d> s_in_;
-  std::vector<Vector3d> sun_in_km_;
-};
-
-bool InAnyWindow(const std::vector<std::pair<double, double>>& windows, double t) {
-  return std::any_of(windows.begin(), windows.end(),
-                     [&](const auto& w) { return t >= w.first && t < w.second; });
-}
 
 // h_in turned by the rotation vector a = dw_in dt (dh/dt = dw x h), by Rodrigues' formula
 // h + (sin t / t) a x h + ((1 - cos t) / t^2) a x (a x h), t = |a|. For the tiny angles of drift
@@ -658,95 +603,6 @@ void SampleGyros(std::vector<GyroState>& gyros, double t_m, const SimulationSpec
   }
 }
 
-// The star tracker across the run: noise, misalignment and its jump, latency, outliers (random
-// and a burst), invalid flags, outages and frozen windows. Every stream draws the same amount per
-// frame whatever is used.
-class StarTrackerSampler {
- public:
-  explicit StarTrackerSampler(const SimulationSpec& spec)
-      : st_(spec.star_tracker),
-        profile_(*spec.profile),
-        noise_(st_.noise.value_or(spec.config.star_tracker.noise)),
-        q_misalignment_(ExpQuaternion(st_.misalignment_b)),
-        q_jump_(st_.misalignment_jump ? ExpQuaternion(st_.misalignment_jump->rotation_b)
-                                      : Quaterniond::Identity()),
-        burst_left_(st_.outlier_burst ? st_.outlier_burst->count : 0),
-        noise_rng_(DeriveSeed(spec.seed, kStarTrackerNoiseStream)),
-        outlier_rng_(DeriveSeed(spec.seed, kStarTrackerOutlierStream)),
-        invalid_rng_(DeriveSeed(spec.seed, kStarTrackerInvalidStream)) {}
-
-  // The reading at t_m into frame (none in an outage), its outlier and frozen truth into truth.
-  void Sample(double t_m, TelemetryFrame& frame, TruthSample& truth) {
-    const Vector3d n = noise_rng_.Normal3();
-    const double outlier_draw = outlier_rng_.Uniform();
-    const Vector3d outlier_axis = outlier_rng_.UnitVector();
-    const double outlier_angle = st_.outlier_size * outlier_rng_.Uniform(1.0, 3.0);
-    const double invalid_draw = invalid_rng_.Uniform();
-    const bool in_outage = InAnyWindow(st_.outages, t_m);
-    const bool in_frozen = InAnyWindow(st_.frozen, t_m);
-    if (!in_frozen) held_.reset();
-    if (in_outage) return;
-    const Quaterniond q_true_lagged =
-        st_.latency == 0.0 ? truth.q_in_b : profile_.Attitude(t_m - st_.latency);
-    Quaterniond q_meas = q_true_lagged * q_misalignment_;
-    if (st_.misalignment_cycle) {
-      const StarTrackerMisalignmentCycle& c = *st_.misalignment_cycle;
-      q_meas = q_meas * ExpQuaternion(c.amplitude_b *
-                                      std::sin(2.0 * kPi * t_m / c.period_s + c.phase_rad));
-    }
-    if (st_.misalignment_jump && t_m >= st_.misalignment_jump->time) q_meas = q_meas * q_jump_;
-    q_meas = q_meas * ExpQuaternion(noise_.cwiseProduct(n));
-    if (burst_left_ > 0 && t_m >= st_.outlier_burst->time) {
-      // Cross-boresight: the frame's random axis without its body-z component.
-      Vector3d axis(outlier_axis.x(), outlier_axis.y(), 0.0);
-      axis = axis.norm() > 1e-12 ? Vector3d(axis.normalized()) : Vector3d::UnitX();
-      q_meas = q_meas * ExpQuaternion(st_.outlier_burst->angle * axis);
-      truth.star_tracker_outlier = true;
-      truth.star_tracker_outlier_angle = st_.outlier_burst->angle;
-      --burst_left_;
-    } else if (outlier_draw < st_.outlier_probability) {
-      q_meas = q_meas * ExpQuaternion(outlier_angle * outlier_axis);
-      truth.star_tracker_outlier = true;
-      truth.star_tracker_outlier_angle = outlier_angle;
-    }
-    StarTrackerReading reading;
-    reading.q_in_b = Canonical(q_meas.normalized());
-    reading.valid = !(invalid_draw < st_.invalid_probability);
-    if (in_frozen) HoldOrRepeat(reading, truth);
-    frame.star_tracker = reading;
-  }
-
- private:
-  // Inside a frozen window: the first reading is held with its outlier truth, later ones repeat
-  // it (and are marked frozen in truth).
-  void HoldOrRepeat(StarTrackerReading& reading, TruthSample& truth) {
-    if (held_) {
-      reading = *held_;
-      truth.star_tracker_outlier = held_outlier_;
-      truth.star_tracker_outlier_angle = held_outlier_angle_;
-      truth.star_tracker_frozen = true;
-    } else {
-      held_ = reading;
-      held_outlier_ = truth.star_tracker_outlier;
-      held_outlier_angle_ = truth.star_tracker_outlier_angle;
-    }
-  }
-
-  const StarTrackerTruth& st_;
-  const AttitudeProfile& profile_;
-  const Vector3d noise_;
-  const Quaterniond q_misalignment_;
-  const Quaterniond q_jump_;
-  int burst_left_;
-  // The sample repeated inside a frozen window, with its outlier truth.
-  std::optional<StarTrackerReading> held_;
-  bool held_outlier_ = false;
-  double held_outlier_angle_ = 0.0;
-  Rng noise_rng_;
-  Rng outlier_rng_;
-  Rng invalid_rng_;
-};
-
 }  // namespace
 
 absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
@@ -757,9 +613,14 @@ absl::StatusOr<SimulationResult> Simulate(const SimulationSpec& spec,
   const int64_t num_frames = NumFrames(spec);
 
   SimulationResult result = StartResult(spec, num_frames);
-  std::optional<SunNodes> sun_nodes;  // made when a gyro has a SunFaceDrift
+  // Made when a gyro has a SunFaceDrift or the star tracker's mount follows the sun.
+  std::optional<SunNodes> sun_nodes;
   ASSIGN_OR_RETURN(std::vector<GyroState> gyros, SetUpGyros(spec, result, sun_nodes));
-  StarTrackerSampler star_tracker(spec);
+  if (spec.star_tracker.sun_mount && !sun_nodes) {
+    ASSIGN_OR_RETURN(SunNodes nodes, SunNodes::Make(spec.start, spec.duration, spec.earth_shadow));
+    sun_nodes = std::move(nodes);
+  }
+  StarTrackerSampler star_tracker(spec, sun_nodes ? &*sun_nodes : nullptr);
   TruthIntegrator integrator(profile, sun_nodes, gyros);
 
   const int64_t progress_every = std::max<int64_t>(1, num_frames / 100);

@@ -42,8 +42,10 @@
 //   frame of the window; a readings_missing fault leaves the gyro's field empty in its window; a
 //   gyro with a switch-on time has no field (and no truth sample) before it.
 // - Star tracker: q_meas = q_in_b_true(t - latency) (x) Exp(misalignment_b) (x) Exp(cycle_b(t))
-//   (x) Exp(jump_b) (x) Exp(n) [(x) Exp(o)], cycle_b(t) the misalignment cycling with the orbit
-//   (StarTrackerMisalignmentCycle, zero without one), n = (noise_x N, noise_y N, noise_z N) about body axes, jump_b the
+//   (x) Exp(mount_b(t)) (x) Exp(jump_b) (x) Exp(n) [(x) Exp(o)], cycle_b(t) the misalignment
+//   cycling with the orbit (StarTrackerMisalignmentCycle, zero without one), mount_b(t) the
+//   mount's turn following the sun (StarTrackerSunMount, zero without one),
+//   n = (noise_x N, noise_y N, noise_z N) about body axes, jump_b the
 //   misalignment jump (zero before its time), o an outlier with probability
 //   outlier_probability: uniformly random axis, angle uniform in [outlier_size, 3 outlier_size].
 //   The samples of an outlier burst carry instead o = angle * a_perp, a_perp the same per-frame
@@ -295,6 +297,20 @@ struct StarTrackerMisalignmentCycle {
   double phase_rad = 0.0;
 };
 
+// The star tracker's mount heated by the sun on one body face (a thermo-elastic misalignment that
+// follows the illumination, not the orbital phase): an extra rotation rotation_b y(t), body axes,
+// y the face's lagged illumination as SunFaceDrift's (u(t) = max(0, face_sign s_b(t)[face_axis])
+// of the true attitude, scaled by the sunlit fraction with SimulationSpec::earth_shadow;
+// tau dy/dt = u - y, y(0) = u(0)), stepped exactly for u taken at the midpoint of steps of at
+// most 10 s between the star tracker's samples. face_axis kSunlitFaceAxis: no face, the sunlit
+// fraction of the earth_shadow orbit (required then).
+struct StarTrackerSunMount {
+  Eigen::Vector3d rotation_b = Eigen::Vector3d::Zero();  // at full illumination (y = 1) [rad]
+  int face_axis = 0;                                     // 0 x, 1 y, 2 z, or kSunlitFaceAxis
+  int face_sign = 1;                                     // +1 or -1
+  double time_constant_s = 3600.0;                       // [s], > 0
+};
+
 // A star-tracker mounting change: an extra rotation from time on (see the file comment).
 struct StarTrackerMisalignmentJump {
   double time = 0.0;                                     // [s since the simulation start]
@@ -318,6 +334,7 @@ struct StarTrackerTruth {
   std::vector<std::pair<double, double>> frozen;
   std::optional<StarTrackerMisalignmentJump> misalignment_jump;
   std::optional<StarTrackerMisalignmentCycle> misalignment_cycle;
+  std::optional<StarTrackerSunMount> sun_mount;
 };
 
 struct SimulationSpec {

@@ -252,37 +252,43 @@ absl::Status ValidateChannelDrift(const SimulationSpec& spec, const GyroTruth& g
   return absl::OkStatus();
 }
 
-// The drift following the sun on a face (or the sunlit fraction, which needs the orbit), over a
-// run where the sun is known.
-absl::Status ValidateSunFaceDrift(const SimulationSpec& spec, const GyroTruth& g,
-                                  const std::string& f) {
-  if (g.sun_face_drift) {
-    const SunFaceDrift& d = *g.sun_face_drift;
-    RETURN_IF_ERROR(FiniteVector(d.amplitude_k_rad_s, f + ".sun_face_drift.amplitude_k_rad_s"));
-    if (d.face_axis < 0 || d.face_axis > kSunlitFaceAxis) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "%s.sun_face_drift.face_axis: must be 0 (x), 1 (y), 2 (z) or %d (sunlit), got %d", f,
-          kSunlitFaceAxis, d.face_axis));
-    }
-    if (d.face_axis == kSunlitFaceAxis && !spec.earth_shadow) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          f, ".sun_face_drift.face_axis: the sunlit fraction needs the orbit (earth_shadow)"));
-    }
-    if (d.face_sign != 1 && d.face_sign != -1) {
+// A sun-driven effect's face (or the sunlit fraction, which needs the orbit), sign and time
+// constant, over a run where the sun is known; f names the effect ("gyros[1].sun_face_drift").
+absl::Status ValidateSunFace(const SimulationSpec& spec, int face_axis, int face_sign,
+                             double time_constant_s, const std::string& f) {
+  if (face_axis < 0 || face_axis > kSunlitFaceAxis) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s.face_axis: must be 0 (x), 1 (y), 2 (z) or %d (sunlit), got %d", f,
+                        kSunlitFaceAxis, face_axis));
+  }
+  if (face_axis == kSunlitFaceAxis && !spec.earth_shadow) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(f, ".face_axis: the sunlit fraction needs the orbit (earth_shadow)"));
+  }
+  if (face_sign != 1 && face_sign != -1) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s.face_sign: must be +1 or -1, got %d", f, face_sign));
+  }
+  RETURN_IF_ERROR(Positive(time_constant_s, f + ".time_constant_s"));
+  for (const double t : {0.0, spec.duration}) {
+    const auto s_in = SunDirection_in(spec.start + absl::Seconds(t));
+    if (!s_in.ok()) {
       return absl::InvalidArgumentError(
-          absl::StrFormat("%s.sun_face_drift.face_sign: must be +1 or -1, got %d", f, d.face_sign));
-    }
-    RETURN_IF_ERROR(Positive(d.time_constant_s, f + ".sun_face_drift.time_constant_s"));
-    for (const double t : {0.0, spec.duration}) {
-      const auto s_in = SunDirection_in(spec.start + absl::Seconds(t));
-      if (!s_in.ok()) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            f, ".sun_face_drift: the run (start and duration) must lie where the sun is known: ",
-            s_in.status().message()));
-      }
+          absl::StrCat(f, ": the run (start and duration) must lie where the sun is known: ",
+                       s_in.status().message()));
     }
   }
   return absl::OkStatus();
+}
+
+// The drift following the sun on a face.
+absl::Status ValidateSunFaceDrift(const SimulationSpec& spec, const GyroTruth& g,
+                                  const std::string& f) {
+  if (!g.sun_face_drift) return absl::OkStatus();
+  const SunFaceDrift& d = *g.sun_face_drift;
+  RETURN_IF_ERROR(FiniteVector(d.amplitude_k_rad_s, f + ".sun_face_drift.amplitude_k_rad_s"));
+  return ValidateSunFace(spec, d.face_axis, d.face_sign, d.time_constant_s,
+                         f + ".sun_face_drift");
 }
 
 // The effects of GyroTruth beyond the paper's models; f names the gyro.
@@ -376,8 +382,9 @@ absl::Status ValidateGyroTruth(const SimulationSpec& spec, int id, const std::st
 }
 
 // The star tracker's truth: noise, outliers, invalid frames, outages, frozen spans, a burst, a
-// misalignment that jumps or cycles, the latency and the misalignment.
-absl::Status ValidateStarTrackerTruth(const StarTrackerTruth& st) {
+// misalignment that jumps, cycles or follows the sun, the latency and the misalignment.
+absl::Status ValidateStarTrackerTruth(const SimulationSpec& spec) {
+  const StarTrackerTruth& st = spec.star_tracker;
   if (st.noise) {
     if (!st.noise->allFinite() || (st.noise->array() < 0.0).any()) {
       return absl::InvalidArgumentError("star_tracker.noise: values must be finite and >= 0");
@@ -404,6 +411,11 @@ absl::Status ValidateStarTrackerTruth(const StarTrackerTruth& st) {
     }
     RETURN_IF_ERROR(FiniteVector(st.misalignment_jump->rotation_b,
                                  "star_tracker.misalignment_jump.rotation_b"));
+  }
+  if (st.sun_mount) {
+    RETURN_IF_ERROR(FiniteVector(st.sun_mount->rotation_b, "star_tracker.sun_mount.rotation_b"));
+    RETURN_IF_ERROR(ValidateSunFace(spec, st.sun_mount->face_axis, st.sun_mount->face_sign,
+                                    st.sun_mount->time_constant_s, "star_tracker.sun_mount"));
   }
   if (st.misalignment_cycle) {
     RETURN_IF_ERROR(FiniteVector(st.misalignment_cycle->amplitude_b,
@@ -447,7 +459,7 @@ absl::Status ValidateSimulationSpec(const SimulationSpec& spec) {
     const std::string f = absl::StrFormat("gyros[%d] (gyro %d)", id - 1, id);
     RETURN_IF_ERROR(ValidateGyroTruth(spec, id, f));
   }
-  return ValidateStarTrackerTruth(spec.star_tracker);
+  return ValidateStarTrackerTruth(spec);
 }
 
 }  // namespace esg::estimator

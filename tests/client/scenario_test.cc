@@ -121,7 +121,9 @@ TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
                     "frozen": [{"startHours": 5, "endHours": 5.5}],
                     "misalignmentJump": {"timeHours": 7, "arcsec": [120, 0, -60]},
                     "misalignmentCycle": {"arcsec": [18, -15, 19], "periodMin": 94,
-                                          "phaseDeg": 30}}
+                                          "phaseDeg": 30},
+                    "sunMount": {"arcsec": [20, -10, 5], "face": "-y",
+                                 "timeConstantHours": 1.5}}
   })");
   ASSERT_THAT(s, IsOk());
   est::SimulationSpec spec;
@@ -153,6 +155,12 @@ TEST(Scenario, ParsesAndAppliesTheFaultMatrixFaults) {
             1e-20);
   EXPECT_EQ(st.misalignment_cycle->period_s, 94 * 60.0);
   EXPECT_NEAR(st.misalignment_cycle->phase_rad, est::DegToRad(30.0), 1e-15);
+  ASSERT_TRUE(st.sun_mount.has_value());
+  EXPECT_LT((st.sun_mount->rotation_b - est::ArcsecToRad(1.0) * Vector3d(20, -10, 5)).norm(),
+            1e-20);
+  EXPECT_EQ(st.sun_mount->face_axis, 1);
+  EXPECT_EQ(st.sun_mount->face_sign, -1);
+  EXPECT_EQ(st.sun_mount->time_constant_s, 1.5 * 3600.0);
   // The spec simulates with every one of them.
   spec.profile = *MakeScenarioProfile(*s, "", 8 * 3600.0);
   spec.duration = 8 * 3600.0;
@@ -581,6 +589,12 @@ TEST(Scenario, ErrorsNameTheKey) {
        "starTracker.misalignmentCycle.periodMin: must be > 0"},
       {R"({"starTracker": {"misalignmentCycle": {"arcsec": [1, 2, 3], "periodMin": 90, "phase": 1}}})",
        "starTracker.misalignmentCycle.phase: unknown key"},
+      {R"({"starTracker": {"sunMount": {"arcsec": [1, 2, 3], "face": "+x"}}})",
+       "starTracker.sunMount.timeConstantHours: required"},
+      {R"({"starTracker": {"sunMount": {"arcsec": [1, 2, 3], "timeConstantHours": 1}}})",
+       "starTracker.sunMount.face: required"},
+      {R"({"starTracker": {"sunMount": {"arcsec": [1, 2, 3], "face": "x", "timeConstantHours": 1}}})",
+       "starTracker.sunMount.face: expected one of +x"},
       {R"({"gyros": [{"id": 1, "orbitalDrift": {"periodMin": 90}}]})",
        "gyros[0].orbitalDrift.amplitudeDegH: required"},
       {R"({"gyros": [{"id": 1, "orbitalDrift": {"amplitudeDegH": [0, 0, 0.01], "periodMin": 0}}]})",
